@@ -79,7 +79,10 @@ class Identifiability:
         for (grp, partners), comps in agg.items():
             conv = " (convention: the robot parameter is held nominal)" if any(
                 p in partners for p in ("tracker", "reflector", "probe")) else ""
-            lines.append(f"{grp}.{{{','.join(comps)}}} held at nominal: confounded with {partners}{conv}")
+            if partners == "nothing":
+                lines.append(f"{grp}.{{{','.join(comps)}}} held at nominal: not observable with this set-up")
+            else:
+                lines.append(f"{grp}.{{{','.join(comps)}}} held at nominal: confounded with {partners}{conv}")
         return lines
 
     def summary(self) -> str:

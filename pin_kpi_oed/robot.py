@@ -226,8 +226,14 @@ def load_robot(spec: str | os.PathLike, tool_frame: str | None = None) -> Robot:
         text = path.read_text()
     except (OSError, UnicodeDecodeError) as exc:
         raise RobotLoadError(f"{path}: cannot read URDF ({exc})") from None
-    if "<robot" not in text:
-        raise RobotLoadError(f"{path}: not a URDF file (no <robot> element)")
+    import xml.etree.ElementTree as ET
+
+    try:
+        root = ET.fromstring(text)
+    except ET.ParseError as exc:
+        raise RobotLoadError(f"{path}: malformed URDF (XML error: {exc})") from None
+    if root.tag != "robot":
+        raise RobotLoadError(f"{path}: not a URDF file (root element <{root.tag}>, expected <robot>)")
     try:
         full = pin.buildModelFromUrdf(str(path))
     except Exception as exc:  # Pinocchio raises ValueError/RuntimeError with long texts

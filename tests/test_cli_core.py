@@ -1,0 +1,108 @@
+"""CLI of the core: info, evaluate, and one-line errors on bad input (no traceback)."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from pin_kpi_oed.robot import load_robot
+
+from .conftest import REPO
+
+
+def run(*args: str, cwd=None) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "pin_kpi_oed", *args], capture_output=True, text=True,
+                          cwd=cwd or REPO, timeout=300)
+
+
+def assert_clean_error(res: subprocess.CompletedProcess, *needles: str) -> None:
+    assert res.returncode != 0
+    assert "Traceback" not in res.stderr
+    lines = [ln for ln in res.stderr.strip().splitlines() if ln.strip()]
+    assert len(lines) == 1, res.stderr
+    for n in needles:
+        assert n in lines[0], lines[0]
+
+
+def test_info_prints_rank_and_explains_on_axis_reflector():
+    res = run("info", "ur10", "--reflector", "0.05,0.02,0.05")
+    assert res.returncode == 0, res.stderr
+    assert "identifiable (rank): 27" in res.stdout
+    res = run("info", "ur10", "--reflector", "0,0,0.1")
+    assert "identifiable (rank): 25" in res.stdout
+    assert "rank drops by 2" in res.stdout
+
+
+BRANCHED = """<robot name="branched">
+  <link name="base"/><link name="a"/><link name="b"/><link name="c"/>
+  <joint name="j1" type="revolute"><parent link="base"/><child link="a"/><axis xyz="0 0 1"/>
+    <limit lower="-1" upper="1" effort="1" velocity="1"/></joint>
+  <joint name="j2" type="revolute"><parent link="base"/><child link="b"/><axis xyz="0 1 0"/>
+    <origin xyz="0 0 1"/><limit lower="-1" upper="1" effort="1" velocity="1"/></joint>
+  <joint name="j3" type="revolute"><parent link="a"/><child link="c"/><axis xyz="0 1 0"/>
+    <origin xyz="1 0 0"/><limit lower="-1" upper="1" effort="1" velocity="1"/></joint>
+</robot>
+"""
+
+
+@pytest.mark.parametrize("content,tool,needle", [
+    (None, None, "no such URDF file"),
+    ("<robot name='x'><link name='a'>", None, "malformed URDF"),
+    ("hello world", None, "malformed URDF"),
+    ("<sdf version='1.6'/>", None, "not a URDF"),
+    (BRANCHED, "c", "not a serial arm"),
+])
+def test_bad_urdf_gives_one_line(tmp_path, content, tool, needle):
+    path = tmp_path / "robot.urdf"
+    if content is not None:
+        path.write_text(content)
+    args = ["info", str(path)] + (["--tool", tool] if tool else [])
+    assert_clean_error(run(*args), needle, str(path))
+
+
+def test_unknown_tool_frame():
+    assert_clean_error(run("info", "kr15", "--tool", "flange9"), "unknown tool frame 'flange9'")
+
+
+def _design_json(tmp_path, q_meas, q_work=None):
+    rb = load_robot("kr15")
+    d = {"robot": "kr15", "tracker_T_base": np.eye(4).tolist(), "reflector_m": [0.05, 0.02, 0.05],
+         "noise": {"sigma_xyz_m": [1e-6] * 3}, "q_meas": q_meas,
+         "q_work": q_work if q_work is not None else [rb.neutral().tolist()]}
+    d["tracker_T_base"][0][3] = 3.0
+    path = tmp_path / "design.json"
+    path.write_text(json.dumps(d))
+    return path
+
+
+def test_evaluate_scores_every_criterion(tmp_path):
+    rb = load_robot("kr15")
+    Q = rb.random_q(np.random.default_rng(0), 40).tolist()
+    out = tmp_path / "scores.json"
+    res = run("evaluate", str(_design_json(tmp_path, Q)), "--json", str(out))
+    assert res.returncode == 0, res.stderr
+    d = json.loads(out.read_text())
+    assert set(d["criteria"]) >= {"kpi", "param", "D", "E", "cond", "O1", "O2", "O3", "O4", "O5"}
+    assert d["criteria"]["kpi"] == pytest.approx(d["trace_cs_m2"])
+    assert d["rank"] == 27
+
+
+def test_evaluate_rejects_out_of_limits_and_nan(tmp_path):
+    rb = load_robot("kr15")
+    Q = rb.random_q(np.random.default_rng(0), 40)
+    Q[3, 1] = 2.5
+    assert_clean_error(run("evaluate", str(_design_json(tmp_path, Q.tolist()))), "joint_a2", "outside its limits")
+    Q[3, 1] = 0.0
+    Qs = Q.tolist()
+    Qs[5][2] = float("nan")
+    assert_clean_error(run("evaluate", str(_design_json(tmp_path, Qs))), "joint_a3", "not finite")
+
+
+def test_evaluate_too_few_measurements(tmp_path):
+    rb = load_robot("kr15")
+    Q = rb.random_q(np.random.default_rng(0), 5).tolist()
+    assert_clean_error(run("evaluate", str(_design_json(tmp_path, Q))), "measure at least 9")
