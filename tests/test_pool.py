@@ -1,0 +1,60 @@
+"""Pool selection, the approximate-design certificate and the equivalence theorem."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from pin_kpi_oed import identifiability as idf
+from pin_kpi_oed.errors import InputError
+from pin_kpi_oed.pool import approximate_design, detmax, efficiency, exact_phi, select
+
+from .conftest import make_model
+
+
+@pytest.fixture(scope="module")
+def pool():
+    model = make_model("kr15")
+    ident = idf.analyse(model)
+    b = ident.base
+    rng = np.random.default_rng(0)
+    Q = model.robot.random_q(rng, 600)
+    p0 = np.zeros(model.n_params)
+    Fp = model.weighted_jacobian(p0, Q)[:, :, b]
+    E = model.kpi_jacobian(p0, model.robot.neutral()[None])[:, b]
+    return Fp, E
+
+
+def test_relaxation_satisfies_equivalence_theorem_and_bounds_every_design(pool):
+    Fp, E = pool
+    ap = approximate_design(Fp, E, tol=1e-3)
+    assert ap.max_d_ratio <= 1.0 + 1e-3 + 1e-9
+    assert abs(ap.weights.sum() - 1.0) < 1e-12 and (ap.weights >= 0).all()
+    assert ap.lower_bound <= ap.phi
+    m = 40
+    idx, _ = select(Fp, m, E)
+    rng = np.random.default_rng(1)
+    for design in [idx] + [rng.choice(len(Fp), m, replace=False) for _ in range(20)]:
+        eff = efficiency(exact_phi(Fp, design, E), ap, m)
+        assert 0 < eff <= 1.0  # no m-point design beats the certificate
+    assert efficiency(exact_phi(Fp, idx, E), ap, m) > 0.9
+
+
+@pytest.mark.parametrize("kind", ["kpi", "param", "D"])
+def test_selection_no_worse_than_detmax(pool, kind):
+    Fp, E = pool
+    K = {"kpi": E, "param": np.eye(Fp.shape[-1]), "D": None}[kind]
+    m = 40
+    idx, _ = select(Fp, m, K)
+    assert len(set(idx.tolist())) == m
+    ours = exact_phi(Fp, idx, K)
+    base = np.median([exact_phi(Fp, detmax(Fp, m, K, seed=s), K) for s in range(5)])  # typical DETMAX run
+    rnd = exact_phi(Fp, np.random.default_rng(2).choice(len(Fp), m, replace=False), K)
+    assert ours <= base + 1e-3 * abs(base)
+    assert ours < rnd
+
+
+def test_too_large_m_is_an_error(pool):
+    Fp, E = pool
+    with pytest.raises(InputError, match="pool of 600"):
+        select(Fp, 601, E)
