@@ -18,7 +18,7 @@ def pool():
     ident = idf.analyse(model)
     b = ident.base
     rng = np.random.default_rng(0)
-    Q = model.robot.random_q(rng, 600)
+    Q = model.robot.random_q(rng, 300)
     p0 = np.zeros(model.n_params)
     Fp = model.weighted_jacobian(p0, Q)[:, :, b]
     E = model.kpi_jacobian(p0, model.robot.neutral()[None])[:, b]
@@ -48,7 +48,7 @@ def test_selection_no_worse_than_detmax(pool, kind):
     idx, _ = select(Fp, m, K)
     assert len(set(idx.tolist())) == m
     ours = exact_phi(Fp, idx, K)
-    base = np.median([exact_phi(Fp, detmax(Fp, m, K, seed=s), K) for s in range(5)])  # typical DETMAX run
+    base = np.median([exact_phi(Fp, detmax(Fp, m, K, seed=s), K) for s in range(3)])  # typical DETMAX run
     rnd = exact_phi(Fp, np.random.default_rng(2).choice(len(Fp), m, replace=False), K)
     assert ours <= base + 1e-3 * abs(base)
     assert ours < rnd
@@ -56,5 +56,5 @@ def test_selection_no_worse_than_detmax(pool, kind):
 
 def test_too_large_m_is_an_error(pool):
     Fp, E = pool
-    with pytest.raises(InputError, match="pool of 600"):
-        select(Fp, 601, E)
+    with pytest.raises(InputError, match="pool of 300"):
+        select(Fp, 301, E)
