@@ -164,7 +164,7 @@ def analyse(model: TrackerModel, Q: np.ndarray | None = None, prefer: list[str] 
         conv = (not setup[i]) and any(setup[L.index(p)] for p in partners)
         dropped.append({"name": L.names[i], "confounded_with": partners, "convention": bool(conv)})
     # null space over the free parameters (for KPI checks), unscaled
-    _, s, Vt = np.linalg.svd(F[:, free] / np.where(norms[free] > 0, norms[free], 1.0), full_matrices=True)
+    _, s, Vt = np.linalg.svd(F[:, free] / np.where(norms[free] > 0, norms[free], 1.0), full_matrices=False)
     null_free = Vt[rank:].T / np.where(norms[free] > 0, norms[free], 1.0)[:, None]
     N = np.zeros((L.n, null_free.shape[1]))
     N[free] = null_free
