@@ -16,13 +16,11 @@ Run:  python benchmarks/bench_identify.py   (or ``main()``)
 
 from __future__ import annotations
 
-import sys
 import time
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-import numpy as np  # noqa: E402
+import numpy as np
 
 TARGETS_S = {60: 0.050, 1000: 0.5}
 SIZES = (60, 100, 250, 500, 1000, 2000)

@@ -12,19 +12,17 @@ Run:  python examples/identify_simulated.py [--robot kr15] [--n 80] [--seed 0] [
 from __future__ import annotations
 
 import argparse
-import sys
 import tempfile
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-import numpy as np  # noqa: E402
+import numpy as np
 
-from pin_kpi_oed import NoiseModel, TrackerModel, load_robot  # noqa: E402
-from pin_kpi_oed.export import export_result_urdf  # noqa: E402
-from pin_kpi_oed.identify import format_validation, identify, validate  # noqa: E402
-from pin_kpi_oed.io import atomic_write_json  # noqa: E402
-from pin_kpi_oed.simulate import Tolerances, default_tracker_pose, random_truth, simulate  # noqa: E402
+from pin_kpi_oed import NoiseModel, TrackerModel, load_robot
+from pin_kpi_oed.export import export_result_urdf
+from pin_kpi_oed.identify import format_validation, identify, validate
+from pin_kpi_oed.io import atomic_write_json
+from pin_kpi_oed.simulate import Tolerances, default_tracker_pose, random_truth, simulate
 
 
 def main(argv: list[str] | None = None) -> int:

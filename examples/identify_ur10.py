@@ -19,18 +19,16 @@ Run:  python examples/identify_ur10.py [--series DIR] [--seed 0] [--out DIR]
 from __future__ import annotations
 
 import argparse
-import sys
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
 
-import numpy as np  # noqa: E402
+import numpy as np
 
-from pin_kpi_oed import NoiseModel, TrackerModel, load_robot  # noqa: E402
-from pin_kpi_oed.identify import format_validation, identify, validate  # noqa: E402
-from pin_kpi_oed.io import MeasurementSet, atomic_write_json  # noqa: E402
-from pin_kpi_oed.ipa import import_ipa, read_ipa_flange_transform  # noqa: E402
+from pin_kpi_oed import NoiseModel, TrackerModel, load_robot
+from pin_kpi_oed.identify import format_validation, identify, validate
+from pin_kpi_oed.io import MeasurementSet, atomic_write_json
+from pin_kpi_oed.ipa import import_ipa, read_ipa_flange_transform
 
 SERIES_C = ROOT.parent / "shared" / "data" / "ipa_ur10" / "Series_C"
 SPLIT_SEED = 0  # documented seed of the random 50/50 split
