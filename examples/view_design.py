@@ -1,0 +1,61 @@
+"""Preview a measurement design before running it on the robot: a meshcat page and the report figures.
+
+Run:
+    python examples/view_design.py                 # designs the KR 15 cell first (pin-kpi-oed design)
+    python examples/view_design.py design.json     # any design JSON (pin-kpi-oed design --json)
+    python examples/view_design.py design.json --open
+
+Writes ``view_design.html`` (a self-contained meshcat page: open it in a browser, offline; the
+Animations panel steps the robot through the poses, the scene tree toggles capsules and ghosts) and
+three PNGs (ellipsoid projections, designs compared, clearance / incidence per pose) in the current
+folder. The same from the command line: ``pin-kpi-oed view design.json --html view.html --figures .``
+"""
+
+import json
+import os
+import sys
+import tempfile
+from pathlib import Path
+
+from pin_kpi_oed import viewer
+from pin_kpi_oed.figures import design_figures
+
+quick = os.environ.get("PIN_KPI_OED_QUICK") == "1"  # the examples test runs a smaller problem
+args = [a for a in sys.argv[1:] if not a.startswith("--")]
+if args:
+    design_json = Path(args[0])
+else:
+    design_json = Path(tempfile.mkdtemp()) / "design.json"
+    try:  # the KPI design of the shipped KR 15 cell (issue 4)
+        from pin_kpi_oed.cli import main as cli
+
+        m = 30 if quick else 60
+        rc = cli(["design", "--cell", "kr15", "--criteria", "random,param,kpi", "--measurements", str(m),
+                  "--seed", "0", "--json", str(design_json)])
+    except Exception as exc:  # the design optimiser is not available: preview random designs instead
+        print(f"design step not available ({exc}); using a stand-in")
+        rc = 1
+    if rc != 0 or not design_json.exists():
+        design_json.write_text(json.dumps(viewer.stand_in_design("kr15", m=20 if quick else 40, seed=0)))
+        print("stand-in design: random configurations, not optimised (pin_kpi_oed.viewer.stand_in_design)")
+
+df = viewer.load_design(design_json)
+for note in df.notes:
+    print("note:", note)
+scene = viewer.build_scene(df)  # drawn into an in-process recorder: no server, no ports
+page = scene.write_html("view_design.html")
+print(f"wrote {page} ({page.stat().st_size / 1e6:.1f} MB): {df.robot.name}, {len(df.designs)} designs, "
+      f"ellipsoids x{viewer.fmt_factor(scene.scale)}")
+t = df.q_work.shape[0]
+for d in df.designs:
+    clr = viewer.pose_clearance(df, d.q_meas)
+    inc = df.incidence_deg(d.q_meas)
+    print(f"  {d.label:<16} tr(C_s) = {d.trace_cs_m2 * 1e12:8.4g} um^2   TCP sigma = "
+          f"{(d.trace_cs_m2 / t) ** 0.5 * 1e6:6.3f} um   min clearance {clr.min() * 1e3:6.1f} mm   "
+          f"max incidence {inc.max():5.1f} deg")
+for name, path in design_figures(df, ".", prefix="view_design").items():
+    print(f"wrote {path}")
+if "--open" in sys.argv:
+    import webbrowser
+
+    webbrowser.open(page.resolve().as_uri())

@@ -1,0 +1,129 @@
+"""Report figures (issue 8): PNGs written atomically, ellipse geometry, design figures; progress bars."""
+
+from __future__ import annotations
+
+import io
+import os
+
+import numpy as np
+import pytest
+
+from pin_kpi_oed import figures
+from pin_kpi_oed.errors import InputError
+
+from .test_viewer import make_design
+
+
+def _png_size(path) -> tuple[int, int]:
+    from PIL import Image
+
+    with Image.open(path) as im:
+        im.verify()
+    with Image.open(path) as im:
+        return im.size
+
+
+@pytest.fixture(scope="module")
+def design() -> dict:
+    return make_design(m=14, cov_for=("random", "param", "kpi"))
+
+
+def test_ellipse_is_the_shadow_of_the_ellipsoid():
+    rng = np.random.default_rng(1)
+    A = rng.normal(size=(3, 3))
+    C = A @ A.T * 1e-12
+    k = 7.814727903251178
+    P = figures.ellipse_points(C[:2, :2], k, n=721)
+    # every point on the boundary x^T C2^-1 x = k
+    q = np.einsum("ni,ij,nj->n", P, np.linalg.inv(C[:2, :2]), P)
+    np.testing.assert_allclose(q, k, rtol=1e-9)
+    # its extent along x equals that of the 3-D ellipsoid (support function sqrt(k C_xx))
+    assert np.abs(P[:, 0]).max() == pytest.approx(np.sqrt(k * C[0, 0]), rel=1e-4)
+
+
+def test_plots_write_pngs_atomically(tmp_path):
+    rng = np.random.default_rng(0)
+    covs = {}
+    for name, s in (("random", 3.0), ("param", 2.0), ("kpi", 1.0)):
+        A = rng.normal(size=(6, 6)) * s * 1e-6
+        covs[name] = A @ A.T  # two working configurations
+    p1 = figures.plot_ellipsoid_projections(covs, tmp_path / "ell.png", labels={"random": "heuristic"})
+    w, h = _png_size(p1)
+    assert w > 1000 and h > 700  # 2 rows x 3 planes
+    p2 = figures.plot_design_bars({k: float(np.trace(v)) for k, v in covs.items()}, tmp_path / "bars.png", n_work=2)
+    p3 = figures.plot_pose_quality({"kpi": np.array([0.01, 0.2, -0.001, np.inf])},
+                                   {"kpi": np.array([10.0, 31.0, 5.0, 29.0])}, tmp_path / "poses.png")
+    for p in (p2, p3):
+        assert _png_size(p)[0] > 500
+    # overwrite in place; no temporary file left behind
+    before = p2.stat().st_mtime_ns
+    figures.plot_design_bars({"random": 2e-12, "kpi": 1e-12}, p2)
+    assert p2.stat().st_mtime_ns >= before
+    assert sorted(os.listdir(tmp_path)) == ["bars.png", "ell.png", "poses.png"]
+
+
+def test_failed_write_leaves_the_old_file(tmp_path, monkeypatch):
+    target = tmp_path / "bars.png"
+    target.write_bytes(b"old")
+
+    def boom(*a, **k):
+        raise OSError("disk full")
+
+    monkeypatch.setattr(figures.os, "replace", boom)
+    with pytest.raises(OSError, match="disk full"):
+        figures.plot_design_bars({"kpi": 1e-12}, target)
+    assert target.read_bytes() == b"old" and os.listdir(tmp_path) == ["bars.png"]
+
+
+def test_bad_input(tmp_path):
+    with pytest.raises(InputError, match="does not exist"):
+        figures.plot_design_bars({"kpi": 1e-12}, tmp_path / "missing" / "x.png")
+    with pytest.raises(InputError, match="is a folder"):
+        figures.plot_design_bars({"kpi": 1e-12}, tmp_path)
+    with pytest.raises(InputError, match=r"\(3t, 3t\)"):
+        figures.plot_ellipsoid_projections({"kpi": np.eye(4)}, tmp_path / "e.png")
+    with pytest.raises(InputError, match="finite"):
+        figures.plot_design_bars({"kpi": float("nan")}, tmp_path / "b.png")
+    with pytest.raises(InputError, match="unit"):
+        figures.plot_ellipsoid_projections({"kpi": np.eye(3)}, tmp_path / "e.png", unit="in")
+
+
+def test_design_figures_from_a_design_json(design, tmp_path):
+    out = figures.design_figures(design, tmp_path, prefix="kr15")
+    assert set(out) == {"ellipsoids", "bars", "poses"}
+    for p in out.values():
+        assert p.parent == tmp_path and p.name.startswith("kr15_") and _png_size(p)[0] > 500
+    # per-pose values given in the file are used as they are
+    design["designs"][0]["clearance_m"] = [0.05] * 14
+    design["designs"][0]["incidence_deg"] = [12.0] * 14
+    out = figures.design_figures(design, tmp_path, prefix="given")
+    assert out["poses"].exists()
+
+
+def test_progress_is_silent_off_a_terminal(monkeypatch, capsys):
+    from pin_kpi_oed.progress import enabled, progress
+
+    monkeypatch.delenv("PIN_KPI_OED_PROGRESS", raising=False)
+    assert sum(progress(range(5), desc="quiet")) == 10
+    with progress(total=3, desc="quiet") as bar:
+        bar.update(3)
+    cap = capsys.readouterr()
+    assert cap.err == "" and cap.out == ""  # pytest's captured stderr is not a TTY
+
+    class Tty(io.StringIO):
+        def isatty(self):
+            return True
+
+    tty = Tty()
+    assert enabled(tty)
+    list(progress(range(4), desc="shown", file=tty, mininterval=0))
+    assert "shown" in tty.getvalue()
+    tty2 = Tty()
+    list(progress(range(4), desc="off", file=tty2, disable=True))
+    assert tty2.getvalue() == ""
+    monkeypatch.setenv("PIN_KPI_OED_PROGRESS", "0")
+    assert not enabled(tty)
+    monkeypatch.setenv("PIN_KPI_OED_PROGRESS", "1")
+    buf = io.StringIO()
+    list(progress(range(3), desc="forced", file=buf, mininterval=0))
+    assert "forced" in buf.getvalue()

@@ -1,0 +1,484 @@
+"""Meshcat preview (issue 8): the scene's objects, the design-file reader, the CLI, and a real
+render of the static page in headless Chromium.
+
+The design JSON is built here (``make_design``) from ``load_robot('kr15')``, random configurations
+and the covariance functions of the core, so these tests do not depend on the design optimiser.
+"""
+
+from __future__ import annotations
+
+import copy
+import json
+import os
+import re
+import shutil
+import subprocess
+import tempfile
+from concurrent.futures import ThreadPoolExecutor
+from pathlib import Path
+
+import numpy as np
+import pinocchio as pin
+import pytest
+
+from pin_kpi_oed.covariance import kpi_covariance
+from pin_kpi_oed.errors import InputError, PinKpiOedError
+from pin_kpi_oed.identifiability import analyse
+from pin_kpi_oed.measurement import NoiseModel, TrackerModel
+from pin_kpi_oed.robot import load_robot
+from pin_kpi_oed import viewer
+
+CRITERIA = ("random", "param", "kpi")
+
+
+# ----------------------------------------------------------------------------- fixture generator
+def make_design(m: int = 16, seed: int = 0, cov_for: tuple[str, ...] = ("random", "kpi")) -> dict:
+    """A design JSON (dict) as issue 4 writes it, from random KR 15 configurations.
+
+    ``random``: one random set; ``param`` / ``kpi``: the best of a few random sets by tr(C_p) / tr(C_s).
+    ``cov_s_m2`` is written only for the criteria in ``cov_for`` (the viewer recomputes the others).
+    """
+    rb = load_robot("kr15")
+    W_T_tracker = pin.SE3(pin.rpy.rpyToMatrix(0.0, 0.0, np.radians(120.0)), np.array([2.6, -2.2, 1.3]))
+    W_T_base = pin.SE3(np.eye(3), np.array([0.0, 0.0, 0.5]))
+    tracker_T_base = W_T_tracker.inverse() * W_T_base
+    noise = NoiseModel(sigma_xyz_m=(1e-6, 1e-6, 1e-6))
+    model = TrackerModel(rb, tracker_T_base=tracker_T_base, reflector_m=np.array([0.06, 0.0, 0.12]),
+                         tcp_m=np.array([0.0, 0.0, 0.2]), noise=noise)
+    q_work = np.radians([[0.0, -41.0, 14.0, 0.0, 114.0, 0.0]])
+    ident = analyse(model)
+    b = ident.base
+    p0 = np.zeros(model.n_params)
+    E = model.kpi_jacobian(p0, q_work)[:, b]
+    rng = np.random.default_rng(seed)
+    sets = [rb.random_q(rng, m) for _ in range(6)]
+    Fs = [model.weighted_jacobian(p0, S)[:, :, b].reshape(-1, b.size) for S in sets]
+    Cs = [kpi_covariance(F, E) for F in Fs]
+    trp = [np.trace(np.linalg.inv(F.T @ F)) for F in Fs]
+    pick = {"random": 0, "param": int(np.argmin(trp)), "kpi": int(np.argmin([np.trace(C) for C in Cs]))}
+    designs = []
+    for crit in CRITERIA:
+        i = pick[crit]
+        e = {"criterion": crit, "q_meas": sets[i].tolist(), "trace_cs_m2": float(np.trace(Cs[i])),
+             "min_clearance_m": 0.01, "max_incidence_deg": 29.0, "status": "test fixture"}
+        if crit in cov_for:
+            e["cov_s_m2"] = Cs[i].tolist()
+        designs.append(e)
+    caps = viewer.capsules_from_urdf(rb)
+    return {
+        "robot": {"name": "kr15", "urdf_path": rb.urdf_path, "tool_frame": "tool0"},
+        "tracker_T_base": tracker_T_base.homogeneous.tolist(),
+        "reflector_m": [0.06, 0.0, 0.12],
+        "tcp_m": [0.0, 0.0, 0.2],
+        "noise": noise.to_dict(),
+        "q_work": q_work.tolist(),
+        "capsules": [{"name": c.link, "link": c.link, "a_m": c.a.tolist(), "b_m": c.b.tolist(),
+                      "radius_m": c.radius} for c in caps],
+        "obstacles": [{"name": "car_body", "a_m": [1.3, -1.6, 0.6], "b_m": [1.3, 1.6, 0.6], "radius_m": 0.5},
+                      {"name": "pedestal", "a_m": [0, 0, 0], "b_m": [0, 0, 0.22], "radius_m": 0.28}],
+        "half_spaces": [{"name": "wall", "normal": [1.0, 0.0, 0.0], "offset_m": -0.45},
+                        {"name": "floor", "normal": [0.0, 0.0, 1.0], "offset_m": 0.0}],
+        "cell": {"W_T_base": W_T_base.homogeneous.tolist(), "skip_pairs": [["link_2", "link_4"],
+                                                                           ["link_4", "link_6"]]},
+        "designs": designs,
+    }
+
+
+@pytest.fixture(scope="module")
+def design_dict() -> dict:
+    return make_design()
+
+
+@pytest.fixture(scope="module")
+def design_path(tmp_path_factory, design_dict) -> Path:
+    p = tmp_path_factory.mktemp("design") / "design.json"
+    p.write_text(json.dumps(design_dict))
+    return p
+
+
+@pytest.fixture(scope="module")
+def scene(design_path):
+    return viewer.build_scene(viewer.load_design(design_path))
+
+
+# ----------------------------------------------------------------------------- the scene's objects
+def test_scene_holds_the_expected_objects(scene):
+    rec = scene.recorder
+    df = scene.design
+    paths = set(rec.object_paths())
+    # cell: half-spaces, obstacles, tracker, beam
+    for p in ("cell/half_spaces/floor", "cell/half_spaces/wall", "cell/obstacles/car_body", "cell/obstacles/pedestal",
+              "tracker/head", "tracker/body", "beam"):
+        assert f"/meshcat/{p}" in paths, p
+    # robot through Pinocchio's MeshcatVisualizer: the URDF's 7 cylinders + the reflector; 7 capsules
+    from pinocchio.visualize import MeshcatVisualizer
+
+    assert isinstance(scene.viz, MeshcatVisualizer)
+    visuals = sorted(p for p in paths if p.startswith("/meshcat/robot/visuals/"))
+    assert len(visuals) == 8 and "/meshcat/robot/visuals/reflector" in visuals
+    assert rec.object_dict("/meshcat/robot/visuals/link_2_0")["object"]["geometries"][0]["type"] == "CylinderGeometry"
+    caps = [p for p in paths if p.startswith("/meshcat/robot/collisions/")]
+    assert len(caps) == len(df.capsules) == 7
+    # capsules: present but hidden (a toggle in the viewer); visuals shown
+    assert rec.properties("/meshcat/robot/collisions") == {"visible": False}
+    assert rec.properties("/meshcat/robot/visuals") == {"visible": True}
+    # ghosts: every measurement configuration of every design; the last design's shown
+    for d in df.designs:
+        ghosts = {p.split("/")[4] for p in paths if p.startswith(f"/meshcat/ghosts/{d.key}/")}
+        assert len(ghosts) == d.q_meas.shape[0] == 16
+        assert rec.properties(f"/meshcat/ghosts/{d.key}") == {"visible": d.criterion == "kpi"}
+    # ellipsoids: one per design at the working configuration, in the design's colour, 95 %, magnified
+    assert [e.design for e in scene.ellipsoids] == list(CRITERIA)
+    colours = set()
+    for e in scene.ellipsoids:
+        obj = rec.object_dict(e.path)
+        colour = obj["object"]["materials"][0]["color"]
+        assert colour == viewer.DESIGN_COLOURS[e.design]
+        colours.add(colour)
+        geom_scale = np.diag(np.array(obj["object"]["object"]["matrix"]).reshape(4, 4))[:3]
+        np.testing.assert_allclose(np.sort(geom_scale), np.sort(e.radii_m * scene.scale), rtol=1e-9)
+        d = df.design(e.design)
+        r_ref, _ = viewer.confidence_ellipsoid(d.cov_s_m2[:3, :3], 0.95)  # rotation does not change the radii
+        np.testing.assert_allclose(np.sort(e.radii_m), np.sort(r_ref), rtol=1e-9)
+        np.testing.assert_allclose(np.sort(e.radii_m / np.sqrt(np.linalg.eigvalsh(d.cov_s_m2[:3, :3]))),
+                                   np.sqrt(7.8147279) * np.ones(3), rtol=1e-6)
+    assert len(colours) == 3 and 0xF57821 not in colours
+    # side by side, centred on the nominal TCP, far enough apart not to overlap
+    c = np.array([e.centre_world for e in scene.ellipsoids])
+    np.testing.assert_allclose(c.mean(axis=0), df.tcp_world()[0], atol=1e-9)
+    rmax = max(e.radii_m.max() for e in scene.ellipsoids) * scene.scale
+    assert np.min(np.linalg.norm(np.diff(c, axis=0), axis=1)) > 2 * rmax
+    # magnification: a 1-2-5 number making the largest ellipsoid a few cm (visible)
+    assert 0.02 < rmax < 0.5 and re.fullmatch(r"[125]0*", str(int(scene.scale)))
+    assert {"/meshcat/ellipsoids/tcp/w0", "/meshcat/ellipsoids/label/w0"} <= paths
+    # the animation steps through every measurement configuration, design after design
+    anims = [c for c in rec.commands if c["type"] == "set_animation"]
+    assert len(anims) == 1 and anims[0]["options"]["play"] is False
+    clips = {a["path"]: a["clip"] for a in anims[0]["animations"]}
+    n_poses = sum(d.q_meas.shape[0] for d in df.designs)
+    assert scene.animation_poses[0] == ("random", 0) and len(scene.animation_poses) == n_poses
+    for p in ("/meshcat/robot/visuals/link_6_0", caps[0], "/meshcat/beam"):
+        keys = {t["name"]: t["keys"] for t in clips[p]["tracks"]}
+        assert len(keys[".position"]) == 2 * n_poses
+    assert ".scale" in {t["name"] for t in clips["/meshcat/beam"]["tracks"]}
+
+
+def test_robot_and_beam_placed_by_pinocchio(scene):
+    """The robot's nodes carry Pinocchio's placements at q_work; the beam joins tracker and reflector."""
+    import umsgpack
+
+    df = scene.design
+    rb = df.robot
+    data = rb.model.createData()
+    pin.framesForwardKinematics(rb.model, data, df.q_work[0])
+    node = scene.recorder.node("/meshcat/robot/visuals/reflector")
+    T = np.array(umsgpack.unpackb(node.transform)["matrix"]).reshape(4, 4).T
+    refl_base = data.oMf[rb.tool_frame_id].act(df.model.reflector_m)
+    np.testing.assert_allclose(T[:3, 3], refl_base, atol=1e-9)  # robot node frame = base frame
+    Tr = np.array(umsgpack.unpackb(scene.recorder.node("/meshcat/robot").transform)["matrix"]).reshape(4, 4).T
+    np.testing.assert_allclose(Tr, df.world_T_base.homogeneous, atol=1e-12)
+    Tb = np.array(umsgpack.unpackb(scene.recorder.node("/meshcat/beam").transform)["matrix"]).reshape(4, 4).T
+    a, b = df.world_T_tracker.translation, df.reflector_world(df.q_work[:1])[0]
+    np.testing.assert_allclose(Tb[:3, 3], 0.5 * (a + b), atol=1e-9)
+    np.testing.assert_allclose(np.linalg.norm(Tb[:3, 1]), np.linalg.norm(b - a), rtol=1e-9)
+
+
+def test_static_html_is_self_contained(scene):
+    page = scene.static_html()
+    assert "new MeshCat.Viewer" in page and len(page) > 500_000  # meshcat's viewer inlined
+    assert not re.search(r"<script[^>]+src=|<link[^>]+href=", page), "the page must not load anything"
+    assert page.count("viewer.handle_command_bytearray") >= len(scene.recorder.object_paths())
+    assert f"&times;{viewer.fmt_factor(scene.scale)}" in page  # the legend shows the magnification
+    # the animation is sent after the objects it animates
+    cmds = re.findall(r'data:application/octet-binary;base64,([A-Za-z0-9+/=]+)', page)
+    import base64
+
+    import umsgpack
+
+    kinds = [umsgpack.unpackb(base64.b64decode(c))["type"] for c in cmds]
+    assert kinds[-1] == "set_animation" and kinds.count("set_animation") == 1
+
+
+def test_primitives_when_the_urdf_has_no_visuals(tmp_path, design_dict):
+    """A URDF without visual geometry: the robot is drawn from its capsules."""
+    text = Path(load_robot("kr15").urdf_path).read_text()
+    bare = re.sub(r"<visual>.*?</visual>", "", text, flags=re.S)
+    urdf = tmp_path / "bare.urdf"
+    urdf.write_text(bare)
+    d = copy.deepcopy(design_dict)
+    d["designs"] = [e for e in d["designs"] if "cov_s_m2" in e]
+    d["robot"] = {"urdf_path": str(urdf), "tool_frame": "tool0"}
+    sc = viewer.build_scene(viewer.load_design(d), ghosts=False, animate=False)
+    vis = [p for p in sc.recorder.object_paths() if p.startswith("/meshcat/robot/visuals/")]
+    assert len(vis) == 7 + 1  # one capsule per link + the reflector
+    assert any("no visual geometry" in n for n in sc.design.notes)
+    # and without capsules either: a stick figure
+    d.pop("capsules")
+    d["robot"] = {"urdf_path": str(urdf), "tool_frame": "tool0"}
+    bare2 = re.sub(r"<collision>.*?</collision>", "", bare, flags=re.S)
+    urdf.write_text(bare2)
+    sc = viewer.build_scene(viewer.load_design(d), ghosts=False, animate=False)
+    assert any("/stick_" in p for p in sc.recorder.object_paths())
+
+
+# ----------------------------------------------------------------------------- the design reader
+def test_missing_covariance_is_recomputed(design_path):
+    df = viewer.load_design(design_path)
+    d = df.design("param")
+    assert d.cov_source == "computed" and df.design("kpi").cov_source == "file"
+    assert any("recomputed" in n for n in df.notes)
+    ident = analyse(df.model)
+    ref = viewer.design_covariance(df.model, d.q_meas, df.q_work, ident)
+    np.testing.assert_allclose(d.cov_s_m2, ref, rtol=1e-10)
+    np.testing.assert_allclose(d.trace_cs_m2, np.trace(ref), rtol=1e-9)
+    # the file's own C_s and the recomputed one agree (same formula)
+    k = df.design("kpi")
+    np.testing.assert_allclose(k.cov_s_m2, viewer.design_covariance(df.model, k.q_meas, df.q_work, ident), rtol=1e-8)
+    # cell-style fields: W_T_base from "cell", capsules in link frames, half-spaces, skip pairs
+    np.testing.assert_allclose(df.world_T_base.translation, [0, 0, 0.5])
+    assert [h.name for h in df.half_spaces] == ["wall", "floor"] and df.half_spaces[0].offset == -0.45
+    assert ("link_2", "link_4") in df.skip_pairs
+
+
+def test_clearance_matches_a_brute_force_check(design_path):
+    df = viewer.load_design(design_path)
+    Q = df.designs[0].q_meas[:4]
+    clr = viewer.pose_clearance(df, Q)
+    D, names = viewer.pair_distances(df, Q, self_collision=True)
+    # brute force: dense points on the capsule axes
+    s = np.linspace(0, 1, 401)[:, None]
+    for k, q in enumerate(Q):
+        segs = viewer._capsule_world(df, q)
+        for p, (link, other) in enumerate(names):
+            i = next(j for j, c in enumerate(df.capsules) if c.link == link)
+            A = segs[i][0] + s * (segs[i][1] - segs[i][0])
+            if other in [h.name for h in df.half_spaces]:
+                h = next(h for h in df.half_spaces if h.name == other)
+                ref = (A @ h.normal - h.offset).min() - df.capsules[i].radius
+            else:
+                o = next((o.capsule() for o in df.obstacles if o.name == other), None)
+                if o is None:
+                    j = next(j for j, c in enumerate(df.capsules) if c.link == other)
+                    o = viewer.Capsule(*segs[j], df.capsules[j].radius)
+                B = o.a + s * (o.b - o.a)
+                ref = np.min(np.linalg.norm(A[:, None] - B[None], axis=2)) - df.capsules[i].radius - o.radius
+            assert D[k, p] == pytest.approx(ref, abs=3e-3)
+    assert np.all(clr >= D.min(axis=1) - 1e-12)
+
+
+@pytest.mark.parametrize("mutate, message", [
+    (lambda d: d.pop("robot"), "missing field 'robot'"),
+    (lambda d: d["designs"][1].pop("q_meas"), "designs[1] (param): missing field 'q_meas'"),
+    (lambda d: d["designs"][0].update(q_meas=[[0.0] * 5]), "designs[0].q_meas: 5 joint values"),
+    (lambda d: d["capsules"][2].update(link="link_99"), "unknown link 'link_99'"),
+    (lambda d: d["half_spaces"][0].update(normal=[0, 0, 0]), "half_spaces[0].normal: zero vector"),
+    (lambda d: d.update(tracker_T_base=[[1, 0], [0, 1]]), "tracker_T_base"),
+    (lambda d: d.update(designs=[]), "no designs"),
+])
+def test_bad_design_files_name_the_field(mutate, message, design_dict):
+    d = copy.deepcopy(design_dict)
+    mutate(d)
+    with pytest.raises(PinKpiOedError) as exc:
+        viewer.load_design(d)
+    assert message in str(exc.value) and "\n" not in str(exc.value)
+
+
+def test_unreadable_files(tmp_path):
+    with pytest.raises(InputError, match="no such file"):
+        viewer.load_design(tmp_path / "missing.json")
+    bad = tmp_path / "bad.json"
+    bad.write_text("{not json")
+    with pytest.raises(InputError, match="bad.json: not valid JSON"):
+        viewer.load_design(bad)
+
+
+def test_nice_factor_and_ellipsoid():
+    assert viewer.nice_factor(41_000) == 50_000 and viewer.nice_factor(13_000) == 10_000
+    assert viewer.nice_factor(1.6) == 2.0 and viewer.fmt_factor(20000) == "20 000"
+    C = np.diag([4.0, 1.0, 9.0]) * 1e-12
+    r, V = viewer.confidence_ellipsoid(C, 0.95)
+    np.testing.assert_allclose(np.sort(r), np.sqrt(7.814727903) * np.array([1, 2, 3]) * 1e-6, rtol=1e-8)
+    assert np.linalg.det(V) == pytest.approx(1.0)
+
+
+# ----------------------------------------------------------------------------- CLI
+def test_cli_view_writes_the_static_page(design_path, tmp_path, capsys):
+    from pin_kpi_oed.cli import main
+
+    out = tmp_path / "view.html"
+    assert main(["view", str(design_path), "--html", str(out), "--no-open", "--criteria", "random,kpi",
+                 "--figures", str(tmp_path)]) == 0
+    page = out.read_text()
+    assert "KPI (A on C_s)" in page and "heuristic" in page and "A on C_p" not in page
+    text = capsys.readouterr().out
+    assert "x" in text and "wrote" in text and (tmp_path / "design_poses.png").exists()
+    assert main(["view", str(tmp_path / "nope.json"), "--html", str(out), "--no-open"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "nope.json: no such file" in err[0]
+    assert main(["view", str(design_path), "--html", str(tmp_path / "no_dir" / "x.html"), "--no-open"]) == 2
+    assert main(["view", str(design_path), "--html", str(out), "--no-open", "--pose", "kpi:99"]) == 2
+    assert "no measurement configuration 99 of design 'kpi'" in capsys.readouterr().err
+    assert main(["view", str(design_path), "--html", str(out), "--no-open", "--pose", "kpi:3"]) == 0
+    assert "a.seek(" in out.read_text()
+
+
+def test_stand_in_design_loads_and_builds():
+    d = viewer.stand_in_design("kr15", m=12, seed=1, n_sets=3)
+    df = viewer.load_design(d)
+    assert [x.criterion for x in df.designs] == ["random", "kpi"] and df.designs[1].label == "best-of-random"
+    assert df.designs[1].trace_cs_m2 <= df.designs[0].trace_cs_m2
+    assert np.all(viewer.pose_clearance(df, df.designs[1].q_meas) > 0)
+    assert np.all(df.incidence_deg(df.designs[1].q_meas) <= 30.0)
+    assert viewer.pose_clearance(df, df.q_work)[0] > 0  # the working configuration is clear of the car
+
+
+# ----------------------------------------------------------------------------- headless Chromium
+def find_browser() -> str | None:
+    for name in ("chromium", "chromium-browser", "google-chrome", "google-chrome-stable"):
+        path = shutil.which(name)
+        if path:
+            return path
+    return "/usr/bin/chromium" if os.path.exists("/usr/bin/chromium") else None
+
+
+def screenshot(browser: str, html: Path, png: Path, timeout_ms: int) -> None:
+    """Render ``html`` in headless Chromium (offline: every request goes to a dead proxy) into ``png``."""
+    with tempfile.TemporaryDirectory() as profile:
+        cmd = [browser, "--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
+               "--disable-background-networking", "--disable-component-update", "--disable-sync",
+               "--disable-extensions", "--hide-scrollbars", "--enable-unsafe-swiftshader",
+               "--proxy-server=127.0.0.1:9", "--proxy-bypass-list=<-loopback>",
+               f"--user-data-dir={profile}", f"--screenshot={png}", "--window-size=1024,768",
+               f"--timeout={timeout_ms}", html.resolve().as_uri()]
+        run_browser(cmd, timeout_s=timeout_ms / 1000 + 60)
+
+
+def run_browser(cmd: list[str], timeout_s: float) -> None:
+    """Run the browser in its own process group; on a hang, stop that group (only what we started)."""
+    import signal
+
+    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
+    try:
+        proc.wait(timeout=timeout_s)
+    except subprocess.TimeoutExpired:
+        os.killpg(proc.pid, signal.SIGKILL)
+        proc.wait()
+
+
+def load_rgb(png: Path) -> np.ndarray:
+    from PIL import Image
+
+    return np.asarray(Image.open(png).convert("RGB")).astype(int)
+
+
+@pytest.mark.skipif(find_browser() is None, reason="no Chromium/Chrome browser on PATH or at /usr/bin/chromium "
+                    "(Debian: apt-get install chromium; .ci/run installs it)")
+def test_static_page_renders_robot_and_ellipsoids_in_chromium(design_path, tmp_path):
+    """Render the static page four times (all; without the ellipsoids; without the robot; paused at a
+    measurement configuration) and check that the pixels that change are where the scene's camera
+    projects the ellipsoids and the robot, that each ellipsoid shows its design's colour, and that
+    the animation moves the robot to the measurement configuration."""
+    browser = find_browser()
+    df = viewer.load_design(design_path)
+    tcp = df.tcp_world()[0]
+    base = df.world_T_base.translation
+    target = 0.5 * (tcp + base + [0, 0, 0.6])
+    sc = viewer.build_scene(df, ghosts=False, camera=(target, target + np.array([2.2, 1.6, 1.2])))
+    W, H = 1024, 768
+    pages = {}
+    pages["all"] = sc.static_html(legend=False)
+    sc.set_visible("ellipsoids", False)
+    pages["no_ellipsoids"] = sc.static_html(legend=False)
+    sc.set_visible("ellipsoids", True)
+    sc.set_visible("robot", False)
+    pages["no_robot"] = sc.static_html(legend=False)
+    sc.set_visible("robot", True)
+    step = ("kpi", 5)  # the animation paused at the 6th pose of the KPI design
+    pages["pose"] = sc.static_html(legend=False, pose=step)
+    for k, page in pages.items():
+        (tmp_path / f"{k}.html").write_text(page)
+
+    def shoot(k: str, timeout_ms: int) -> np.ndarray | None:
+        png = tmp_path / f"{k}.png"
+        png.unlink(missing_ok=True)
+        screenshot(browser, tmp_path / f"{k}.html", png, timeout_ms)
+        return load_rgb(png) if png.exists() else None
+
+    def rendered(img: np.ndarray | None) -> bool:
+        # the scene is drawn when the robot's orange is on screen or (robot hidden) the floor's grey is
+        if img is None or img.shape[:2] != (H, W):
+            return False
+        orange = (img[..., 0] > 180) & (img[..., 1] > 60) & (img[..., 1] < 150) & (img[..., 2] < 80)
+        grey = (np.abs(img - [184, 184, 176]).sum(-1) < 60)
+        return orange.sum() > 300 or grey.sum() > 5000
+
+    imgs: dict[str, np.ndarray | None] = {}
+    for timeout_ms in (5000, 15000):  # a loaded machine may need longer for the first frame
+        todo = [k for k in pages if not rendered(imgs.get(k))]
+        if not todo:
+            break
+        with ThreadPoolExecutor(len(todo)) as ex:
+            for k, img in zip(todo, ex.map(lambda k: shoot(k, timeout_ms), todo)):
+                imgs[k] = img
+    for k in pages:
+        assert rendered(imgs[k]), f"{k}: Chromium did not render the scene (WebGL?)"
+    A, B, C = imgs["all"], imgs["no_ellipsoids"], imgs["no_robot"]
+
+    # --- ellipsoids: changed pixels around the projected centres, in the designs' colours
+    diff_e = np.abs(A - B).sum(-1) > 40
+    assert diff_e.sum() > 300, "the ellipsoids are not visible"
+    yy, xx = np.mgrid[0:H, 0:W]
+    ys, xs = np.nonzero(diff_e)
+    px = sc.project(np.array([e.centre_world for e in sc.ellipsoids] + [e.tcp_world for e in sc.ellipsoids]), W, H)
+    f = (H / 2) / np.tan(np.radians(37.5))
+    depth = [np.dot(e.centre_world - sc.camera_position, (sc.camera_target - sc.camera_position) /
+                    np.linalg.norm(sc.camera_target - sc.camera_position)) for e in sc.ellipsoids]
+    palette = {d.criterion: np.array([(d.colour >> 16) & 255, (d.colour >> 8) & 255, d.colour & 255])
+               for d in df.designs}
+    for i, e in enumerate(sc.ellipsoids):
+        r_px = f * e.radii_m.max() * sc.scale / depth[i]
+        cx, cy = px[i]
+        assert 0 < cx < W and 0 < cy < H
+        near = diff_e & ((xx - cx) ** 2 + (yy - cy) ** 2 <= (1.2 * r_px + 3) ** 2)
+        assert near.sum() > 0.3 * np.pi * (0.5 * r_px) ** 2, f"{e.design}: ellipsoid not drawn at its place"
+        # its colour: the shaded design colour (hue) is closer to its own than to the others'
+        rgb = A[near].astype(float)
+        rgb = rgb[rgb.max(axis=1) > 40]
+        chroma = rgb / np.linalg.norm(rgb, axis=1, keepdims=True)
+        dist = {k: np.median(np.linalg.norm(chroma - v / np.linalg.norm(v), axis=1)) for k, v in palette.items()}
+        assert min(dist, key=dist.get) == e.design, (e.design, dist)
+    # nothing changes far away from the ellipsoids (their label sits just above them)
+    span = np.abs(px[:, 0] - px[:, 0].mean()).max() + 200
+    far = (np.abs(xs - px[:, 0].mean()) > span) | (ys > px[:, 1].max() + 150)
+    assert far.sum() < 0.02 * xs.size
+
+    # --- robot: changed pixels cover the projected joint origins, orange dominates
+    diff_r = np.abs(A - C).sum(-1) > 40
+    assert diff_r.sum() > 3000, "the robot is not visible"
+    rb = df.robot
+    data = rb.model.createData()
+    pin.framesForwardKinematics(rb.model, data, df.q_work[0])
+    pts = [(df.world_T_base * data.oMi[j]).translation for j in rb.joint_ids[1:]]
+    pts.append((df.world_T_base * data.oMf[rb.tool_frame_id]).translation)
+    from scipy.ndimage import binary_dilation
+
+    grown = binary_dilation(diff_r, iterations=6)
+    hits = [grown[int(round(y)), int(round(x))] for x, y in sc.project(np.array(pts), W, H)
+            if 0 <= x < W and 0 <= y < H]
+    assert len(hits) >= 5 and np.mean(hits) >= 0.8, hits
+    rgb = A[diff_r]
+    orange = (rgb[:, 0] > rgb[:, 1] + 40) & (rgb[:, 1] > rgb[:, 2] + 20)
+    assert orange.mean() > 0.4
+
+    # --- stepping: paused at a measurement configuration, the robot is drawn there (not at q_work)
+    D = imgs["pose"]
+    diff_p = binary_dilation(np.abs(D - C).sum(-1) > 40, iterations=6)
+    q = df.design(step[0]).q_meas[step[1]]
+    pin.framesForwardKinematics(rb.model, data, q)
+    pts_k = [(df.world_T_base * data.oMi[j]).translation for j in rb.joint_ids[1:]]
+    pts_k.append((df.world_T_base * data.oMf[rb.tool_frame_id]).translation)
+    uv = sc.project(np.array(pts_k), W, H)
+    inside = [(x, y) for x, y in uv if 0 <= x < W and 0 <= y < H]
+    assert len(inside) >= 4 and np.mean([diff_p[int(y), int(x)] for x, y in inside]) >= 0.8
+    moved = np.abs(D - A).sum(-1) > 40
+    assert moved.sum() > 1000, "the robot did not move to the measurement configuration"
