@@ -1,0 +1,277 @@
+"""Cells and collision constraints: loader, exact gradients (FD, in penetration too), Coal agreement,
+the independent dense check, pruning, aggregation, and named errors for bad cells."""
+
+from __future__ import annotations
+
+import copy
+import json
+
+import numpy as np
+import pytest
+import yaml
+
+from pin_kpi_oed.cell import CELL_DIR, cell_from_dict, load_cell
+from pin_kpi_oed.collision import (INCID, AggregatedConstraints, CollisionModel, FeasibilityChecker, coal_capsule,
+                                   point_segment_distance, random_feasible, segment_closest)
+from pin_kpi_oed.errors import InfeasibleError, InputError, PinKpiOedError
+
+
+def _cell_dict(name: str = "kr15") -> dict:
+    return yaml.safe_load((CELL_DIR / f"{name}.yaml").read_text())
+
+
+@pytest.fixture(scope="module")
+def kr15():
+    return load_cell("kr15")
+
+
+@pytest.fixture(scope="module")
+def coll15(kr15):
+    return CollisionModel(kr15)
+
+
+@pytest.fixture(scope="module")
+def coll15_all(kr15):
+    return CollisionModel(kr15, prune=False)
+
+
+def _mixed_configs(coll: CollisionModel, n: int, seed: int) -> np.ndarray:
+    """Random configurations, at least half of them with a penetrating capsule pair (d < 0, segments apart)."""
+    rng = np.random.default_rng(seed)
+    Q = coll.robot.random_q(rng, 4000)
+    g = coll.evaluate(Q, with_grad=False)
+    pair_rows = np.flatnonzero(coll.info.kind == 0)
+    pen = np.flatnonzero((g[:, pair_rows] < -0.01).any(axis=1))
+    free = np.flatnonzero(~(g[:, pair_rows] < 0).any(axis=1))
+    assert pen.size >= n // 2 and free.size >= n - n // 2
+    return np.vstack([Q[pen[: n // 2]], Q[free[: n - n // 2]]])
+
+
+# ---------------------------------------------------------------------------------------------- kernels
+def test_segment_closest_matches_brute_force_and_coal():
+    import coal
+
+    rng = np.random.default_rng(1)
+    A1, B1, A2, B2 = (rng.normal(size=(200, 3)) for _ in range(4))
+    B2[:20] = A2[:20] + 0.7 * (B1[:20] - A1[:20])  # parallel segments
+    B1[20:30] = A1[20:30]  # degenerate (point) segments
+    s, t, w1, w2 = segment_closest(A1, B1, A2, B2)
+    d = np.linalg.norm(w2 - w1, axis=1)
+    u = np.linspace(0, 1, 4001)
+    P1 = A1[:, None] + u[None, :, None] * (B1 - A1)[:, None]  # points along segment 1, exact distance to 2
+    brute = point_segment_distance(P1, A2[:, None], B2[:, None]).min(axis=1)
+    assert np.all(d <= brute + 1e-12) and np.all(brute - d < 1e-5)
+    assert np.all((s >= 0) & (s <= 1) & (t >= 0) & (t <= 1))
+    req = coal.DistanceRequest()
+    for i in range(30, 60):  # signed capsule distance, also in penetration
+        r1, r2 = 0.3, 0.4
+        c1, T1 = coal_capsule(A1[i], B1[i], r1)
+        c2, T2 = coal_capsule(A2[i], B2[i], r2)
+        res = coal.DistanceResult()
+        assert coal.distance(c1, T1, c2, T2, req, res) == pytest.approx(d[i] - r1 - r2, abs=1e-9)
+
+
+# ---------------------------------------------------------------------------------------------- cells
+def test_shipped_cells_load_and_serialise():
+    for name in ("kr15", "kr300", "kr500"):
+        cell = load_cell(name)
+        d = cell.to_dict()
+        json.dumps(d)  # plain numbers only
+        assert d["robot"]["tool_frame"] == "tool0" and len(d["robot_capsules"]) == 7
+        assert {h["name"] for h in d["obstacles"]["half_spaces"]} == {"wall", "floor"}
+        assert any(o["name"] == "car_body" for o in d["obstacles"]["capsules"])
+        assert cell.q_work.shape == (1, 6) and cell.incidence_max_deg == 30.0
+        T = np.array(d["tracker_T_base"])
+        assert np.allclose(T[:3, :3].T @ T[:3, :3], np.eye(3))
+        # reflector off the A6 axis (TCP estimable)
+        assert np.hypot(cell.reflector_m[0], cell.reflector_m[1]) > 0.03
+
+
+def test_capsules_from_urdf_are_the_collision_cylinders(kr15):
+    caps = {c.name: c for c in kr15.robot_capsules}
+    assert caps["link_2"].radius == pytest.approx(0.13)
+    assert np.allclose(caps["link_2"].a, [0, 0, 0]) and np.allclose(caps["link_2"].b, [0.65, 0, 0])
+    assert np.linalg.norm(caps["link_1"].b - caps["link_1"].a) == pytest.approx(np.hypot(0.3, 0.675))
+
+
+def test_cell_from_path_with_relative_urdf(tmp_path):
+    d = _cell_dict()
+    d["robot"] = "../../../urdf/kr15.urdf"
+    sub = tmp_path / "a" / "b" / "c"
+    sub.mkdir(parents=True)
+    (tmp_path / "urdf").mkdir()
+    (tmp_path / "urdf" / "kr15.urdf").write_text((CELL_DIR.parents[2] / "urdf" / "kr15.urdf").read_text())
+    path = sub / "cell.yaml"
+    path.write_text(yaml.safe_dump(d))
+    cell = load_cell(path)
+    assert cell.robot.urdf_path.endswith("kr15.urdf") and cell.robot.nq == 6
+
+
+# ---------------------------------------------------------------------------------------------- gradients
+def _fd_check(coll, Q, h=1e-6):
+    g, G = coll.evaluate(Q)
+    for k in range(Q.shape[1]):
+        Qp, Qm = Q.copy(), Q.copy()
+        Qp[:, k] += h
+        Qm[:, k] -= h
+        fd = (coll.evaluate(Qp, with_grad=False) - coll.evaluate(Qm, with_grad=False)) / (2 * h)
+        err = np.abs(fd - G[:, :, k])
+        assert err.max() < 2e-6, (k, np.unravel_index(err.argmax(), err.shape), err.max())
+    return g
+
+
+@pytest.mark.parametrize("name", ["kr15", "kr300"])
+def test_every_constraint_gradient_matches_finite_differences(name):
+    cell = load_cell(name)
+    coll = CollisionModel(cell, prune=False)
+    Q = _mixed_configs(coll, 16, seed=3)
+    g = _fd_check(coll, Q)
+    assert (g[:, coll.info.kind == 0] < -0.01).any()  # penetration rows were checked
+    names = coll.info.names
+    assert any(n.startswith("beam|") for n in names) and any("@" in n for n in names) and "incidence" in names
+
+
+def test_sparsity_pattern_is_exact(coll15_all):
+    """Entries outside a row's declared joints are zero: each row depends on one configuration's joints."""
+    Q = coll15_all.robot.random_q(np.random.default_rng(5), 20)
+    _, G = coll15_all.evaluate(Q)
+    mask = np.zeros((coll15_all.n_rows, coll15_all.n), bool)
+    mask[coll15_all.jac_rows, coll15_all.jac_cols] = True
+    assert np.abs(G[:, ~mask]).max() < 1e-12
+
+
+def test_coal_backend_agrees_with_closed_form(coll15_all):
+    Q = _mixed_configs(coll15_all, 6, seed=7)
+    g1, G1 = coll15_all.evaluate(Q)
+    g2, G2 = coll15_all.evaluate(Q, backend="coal")
+    assert np.abs(g1 - g2).max() < 1e-9
+    assert np.abs(G1 - G2).max() < 1e-7
+
+
+def test_aggregated_constraints(coll15):
+    Q = _mixed_configs(coll15, 10, seed=11)
+    ks = AggregatedConstraints(coll15, "ks", 2e-3)
+    g = coll15.evaluate(Q, with_grad=False)
+    dist = coll15.info.kind != INCID
+    c = ks.evaluate(Q, with_grad=False)
+    dmin = g[:, dist].min(axis=1)
+    assert np.all(c[:, 0] <= dmin + 1e-15) and np.all(c[:, 0] >= dmin - 2e-3 * np.log(dist.sum()) - 1e-15)
+    assert np.allclose(c[:, 1], g[:, ~dist][:, 0])
+    _fd_check(ks, Q)
+    mn = AggregatedConstraints(coll15, "min")
+    assert np.allclose(mn.evaluate(Q, with_grad=False)[:, 0], dmin)
+    with pytest.raises(InputError):
+        AggregatedConstraints(coll15, "softmax")
+
+
+def test_pruned_rows_never_active(kr15, coll15, coll15_all):
+    pruned = [i for i, n in enumerate(coll15_all.info.names) if n not in set(coll15.info.names)]
+    assert pruned, "the KR 15 cell has rows that can never be active"
+    Q = kr15.robot.random_q(np.random.default_rng(2), 20000)
+    g = coll15_all.evaluate(Q, with_grad=False)
+    assert g[:, pruned].min() > 0
+
+
+# ---------------------------------------------------------------------------------------------- independent check
+def test_independent_check_agrees_with_coal_and_fast_path(kr15, coll15_all):
+    Q = _mixed_configs(coll15_all, 20, seed=13)
+    rep = FeasibilityChecker(kr15).check(Q)
+    g = coll15_all.evaluate(Q, with_grad=False)
+    dist = coll15_all.info.kind != INCID
+    fast_min = g[:, dist].min(axis=1)
+    # the checker also covers the fixed base capsule (constant, >= 40 mm here): same minimum otherwise
+    both = fast_min < 0.03
+    assert both.sum() >= 10
+    assert np.allclose(rep.clearance_m[both], fast_min[both], atol=1e-8)
+    inc = np.degrees(np.arccos(np.clip(g[:, ~dist][:, 0] + coll15_all.cos_max, -1, 1)))
+    assert np.allclose(rep.incidence_deg, inc, atol=1e-8)
+    ok_fast = coll15_all.feasible(Q)
+    assert np.array_equal(rep.feasible, ok_fast)
+    assert 0 < rep.share_colliding < 1 and not rep.all_feasible
+    assert rep.violations() and json.dumps(rep.to_dict())
+
+
+def test_random_design_is_feasible_by_the_independent_check(kr15, coll15):
+    Q, ns = random_feasible(coll15, 30, np.random.default_rng(0), 100000)
+    assert Q.shape == (30, 6) and ns >= 30
+    rep = FeasibilityChecker(kr15).check(Q)
+    assert rep.all_feasible and rep.min_clearance_m >= 0 and rep.max_incidence_deg <= 30.0
+
+
+# ---------------------------------------------------------------------------------------------- bad input
+def test_unknown_link_name_is_named():
+    d = _cell_dict()
+    d["robot_capsules"] = [{"name": "arm", "link": "link_9", "a_m": [0, 0, 0], "b_m": [1, 0, 0], "radius_m": 0.1}]
+    with pytest.raises(InputError, match="link_9"):
+        cell_from_dict(d, "bad.yaml")
+    d = _cell_dict()
+    d["skip_pairs"].append(["link_2", "lnk_5"])
+    with pytest.raises(InputError, match="lnk_5"):
+        cell_from_dict(d, "bad.yaml")
+    d = _cell_dict()
+    d["beam"]["skip"] = ["carbody"]
+    with pytest.raises(InputError, match="carbody"):
+        cell_from_dict(d, "bad.yaml")
+
+
+def test_tracker_inside_obstacle_is_named():
+    d = _cell_dict()
+    d["tracker"]["xyz_m"] = [1.3, 0.0, 0.6]
+    with pytest.raises(InputError, match="inside obstacle 'car_body'"):
+        CollisionModel(cell_from_dict(d, "bad.yaml"))
+
+
+def test_working_configuration_in_collision_is_named(coll15):
+    rng = np.random.default_rng(4)
+    Q = coll15.robot.random_q(rng, 500)
+    g = coll15.evaluate(Q, with_grad=False)
+    robot_rows = [i for i, n in enumerate(coll15.info.names) if n.startswith("robot:")]
+    q_bad = Q[np.flatnonzero(g[:, robot_rows].min(axis=1) < -0.05)[0]]
+    d = _cell_dict()
+    d["working_configurations_deg"] = [np.degrees(q_bad).tolist()]
+    with pytest.raises(InputError, match="working configuration 0 is in collision"):
+        CollisionModel(cell_from_dict(d, "bad.yaml"))
+
+
+def test_working_configuration_out_of_sight_is_named(kr15, coll15):
+    refl = coll15._endpoints(kr15.q_work)[1][0, coll15.beam]  # reflector at the working configuration
+    W_refl = kr15.W_T_base.act(refl)
+    mid = 0.5 * (W_refl + kr15.W_T_tracker.translation)
+    d = _cell_dict()
+    d["obstacles"]["capsules"].append({"name": "screen", "a_m": mid.tolist(), "b_m": mid.tolist(), "radius_m": 0.2})
+    with pytest.raises(InputError, match="out of the tracker's sight.*screen"):
+        CollisionModel(cell_from_dict(d, "bad.yaml"))
+
+
+def test_no_feasible_random_pose_is_reported():
+    d = _cell_dict()
+    d["incidence_max_deg"] = 0.2
+    d["max_random_tries"] = 3000
+    cell = cell_from_dict(d, "tight.yaml")
+    coll = CollisionModel(cell)
+    with pytest.raises(InfeasibleError, match="no feasible random pose found.*3000 tries"):
+        random_feasible(coll, 10, np.random.default_rng(0), cell.max_random_tries)
+
+
+@pytest.mark.parametrize("edit, match", [
+    (lambda d: d.pop("tracker"), "tracker"),
+    (lambda d: d.update(colour="red"), "colour"),
+    (lambda d: d.update(reflector_m=[0, 0]), "reflector_m"),
+    (lambda d: d["obstacles"]["half_spaces"].append({"name": "x", "normal": [0, 0, 0], "offset_m": 0}), "normal"),
+    (lambda d: d.update(working_configurations_deg=[[0, 0, 0, 0, 0, 400]]), "outside its limits"),
+    (lambda d: d.update(joint_bounds={"lower_deg": [0] * 6, "upper_deg": [0] * 6}), "empty"),
+])
+def test_bad_fields_are_named(edit, match):
+    d = copy.deepcopy(_cell_dict())
+    edit(d)
+    with pytest.raises(PinKpiOedError, match=match):
+        cell_from_dict(d, "bad.yaml")
+
+
+def test_missing_and_invalid_files(tmp_path):
+    with pytest.raises(InputError, match="no such cell file"):
+        load_cell(tmp_path / "nope.yaml")
+    p = tmp_path / "bad.yaml"
+    p.write_text("robot: [unclosed\n")
+    with pytest.raises(InputError, match="invalid YAML"):
+        load_cell(p)
