@@ -76,8 +76,8 @@ def cmd_demo(args: argparse.Namespace) -> int:
         run_design = None
     if run_design is not None:
         ns = argparse.Namespace(cell="kr15", criteria="random,param,kpi", measurements=60, seed=args.seed,
-                                json=args.json, no_collision=False, starts=None, certificate=False,
-                                max_iter=None, quiet=False)
+                                json=args.json, no_collision=False, starts=None, certificate=True, pool_size=5000,
+                                start="pool", max_iter=None, quiet=False)
         return run_design(ns)
     from .evaluate import random_design_report
 

@@ -14,13 +14,11 @@ only) and reports the share of poses that collide.
 from __future__ import annotations
 
 import argparse
-import json
 import math
-import os
-from pathlib import Path
 
 
 from .errors import InputError
+from .io import atomic_write_json
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -39,6 +37,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--starts", type=int, default=None, help="Ipopt starts per criterion (default 2)")
     p.add_argument("--max-iter", dest="max_iter", type=int, default=None, help="Ipopt iteration limit (default 500)")
     p.add_argument("--quiet", action="store_true", help="print the table only")
+    p.add_argument("--start", choices=["pool", "random"], default="pool",
+                   help="first Ipopt start: pool selection (default) or the heuristic design")
+    p.add_argument("--certificate", action="store_true",
+                   help="bound tr(C_s) by the approximate-design relaxation over a feasible pool; report efficiencies")
+    p.add_argument("--pool-size", dest="pool_size", type=int, default=5000,
+                   help="feasible candidates of the certificate's pool (default 5000)")
     p.set_defaults(func=run)
 
 
@@ -59,11 +63,12 @@ def parse_criteria(text: str) -> list[str]:
     return names
 
 
-def table(results: list, reference=None) -> str:
-    """The design table (one row per :class:`~pin_kpi_oed.design.DesignResult`)."""
+def table(results: list, reference=None, certificate=None) -> str:
+    """The design table (one row per :class:`~pin_kpi_oed.design.DesignResult`; efficiency with a certificate)."""
     ref = reference or results[0]
     head = (f"{'criterion':<10}{'tr(C_s) mm^2':>14}{'TCP sigma um':>14}{'vs heur. %':>11}{'min clr mm':>11}"
-            f"{'max inc deg':>12}{'iters':>7}{'time s':>8}  check")
+            f"{'max inc deg':>12}{'iters':>7}{'time s':>8}" + (f"{'effic. %':>10}" if certificate else "")
+            + "  check")
     lines = [head, "-" * len(head)]
     for r in results:
         imp = r.improvement_over(ref) if math.isfinite(r.trace_cs_m2) else float("nan")
@@ -73,7 +78,9 @@ def table(results: list, reference=None) -> str:
             chk = f"{100 * r.share_infeasible:.0f}% infeas."
         lines.append(f"{r.criterion:<10}{r.trace_cs_m2 * 1e6:>14.4e}{r.tcp_sigma_m * 1e6:>14.4f}{imp:>11.1f}"
                      f"{r.min_clearance_m * 1e3:>11.1f}{r.max_incidence_deg:>12.1f}{it:>7}"
-                     f"{r.solve_time_s:>8.2f}  {chk}")
+                     f"{r.solve_time_s:>8.2f}"
+                     + (f"{100 * certificate.efficiency(r.trace_cs_m2):>10.1f}" if certificate else "")
+                     + f"  {chk}")
     return "\n".join(lines)
 
 
@@ -101,27 +108,6 @@ def design_json(cell, problem, results: list, m: int, seed: int, collision: bool
         "q_meas": main.q_meas.tolist(),
         "q_meas_criterion": main.criterion,
     }
-
-
-def _write_json(path: str, obj: dict) -> None:
-    try:
-        from .io import atomic_write_json
-    except ImportError:  # pragma: no cover - io.py is part of the package
-        import tempfile
-
-        target = Path(path)
-        fd, tmp = tempfile.mkstemp(dir=target.parent or ".", prefix=f".{target.name}.", suffix=".tmp")
-        try:
-            with os.fdopen(fd, "w") as fh:
-                json.dump(obj, fh, indent=2)
-                fh.write("\n")
-            os.replace(tmp, target)
-        except BaseException:
-            if os.path.exists(tmp):
-                os.unlink(tmp)
-            raise
-        return
-    atomic_write_json(path, obj)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -153,9 +139,20 @@ def run(args: argparse.Namespace) -> int:
               f"{problem.base.size} identifiable parameters; constraint rows per configuration: "
               + ", ".join(f"{k} {v}" for k, v in rows.items() if v)
               + f" (aggregated to {problem.cons.n_rows} for Ipopt); {starts} start(s) per criterion")
-    results = run_designs(cell, criteria, m, seed, collision, starts, ipopt_options(max_iter=max_iter), problem)
+    results = run_designs(cell, criteria, m, seed, collision, starts, ipopt_options(max_iter=max_iter), problem,
+                          start=getattr(args, "start", "pool") or "pool")
+    cert = None
+    if getattr(args, "certificate", False):
+        from .certificate import certify
+
+        cert = certify(problem, m, pool_size=getattr(args, "pool_size", 5000) or 5000, seed=seed,
+                       extra=[r.q_meas for r in results if r.feasible])
     shown = [r for r in results if r.criterion in criteria] or results
-    print(table(shown, results[0]))
+    print(table(shown, results[0], cert))
+    if cert is not None:
+        print(f"certificate: every {m}-pose design from the {cert.pool_size} feasible candidates (random pool + "
+              f"the designs' poses) has tr(C_s) >= {cert.lower_bound_trace_cs_m2 * 1e6:.4e} mm^2 "
+              f"(equivalence theorem: max d/phi = {cert.approx.max_d_ratio:.4f})")
     if not quiet:
         rnd = results[0]
         print(f"heuristic: {rnd.samples} uniform random poses drawn for {m} feasible ones "
@@ -165,7 +162,13 @@ def run(args: argparse.Namespace) -> int:
             if not r.feasible:
                 print(f"  {r.criterion}: {', '.join(r.check.get('violations', [])[:3])}")
     if getattr(args, "json", None):
-        _write_json(args.json, design_json(cell, problem, results, m, seed, collision))
+        doc = design_json(cell, problem, results, m, seed, collision)
+        if cert is not None:
+            doc["lower_bound_trace_cs_m2"] = cert.lower_bound_trace_cs_m2
+            doc["certificate"] = cert.to_dict()
+            for d, r in zip(doc["designs"], results):
+                d["efficiency"] = cert.efficiency(r.trace_cs_m2)
+        atomic_write_json(args.json, doc)
         if not quiet:
             print(f"wrote {args.json}")
     return 0

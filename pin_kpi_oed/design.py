@@ -52,6 +52,7 @@ import numpy as np
 
 from .cell import Cell
 from .collision import AggregatedConstraints, CollisionModel, FeasibilityChecker, FeasibilityReport, random_feasible
+from .pool import select as pool_select
 from .criteria import CRITERIA, DesignCriterion
 from .errors import IdentifiabilityError, InputError, SolverError
 from .identifiability import analyse, check_kpi
@@ -494,8 +495,8 @@ def design_ipopt(problem: DesignProblem, criterion: str, m: int, seed: int = 0, 
 
 
 def run_designs(cell: Cell, criteria: list[str], m: int | None = None, seed: int = 0, collision: bool = True,
-                n_starts: int = 1, options: dict | None = None, problem: DesignProblem | None = None
-                ) -> list[DesignResult]:
+                n_starts: int = 1, options: dict | None = None, problem: DesignProblem | None = None,
+                start: str = "pool", pool_size: int = 1000) -> list[DesignResult]:
     """Compute the heuristic and optimum designs of a cell.
 
     Args:
@@ -508,6 +509,11 @@ def run_designs(cell: Cell, criteria: list[str], m: int | None = None, seed: int
         n_starts: starts per optimised criterion.
         options: Ipopt options.
         problem: a prepared :class:`DesignProblem` (else built).
+        start: first start of every optimisation: ``pool`` (default) = the pool selection of m
+            poses for the criterion from ``pool_size`` feasible random candidates
+            (:mod:`pin_kpi_oed.pool`; A-type criteria select for themselves, the others by
+            D-optimality), or ``random`` = the heuristic design. Further starts are random.
+        pool_size: feasible candidates of the pool start.
 
     Returns:
         The results, ``random`` first, then the criteria in the given order.
@@ -520,10 +526,22 @@ def run_designs(cell: Cell, criteria: list[str], m: int | None = None, seed: int
     if m < problem.min_measurements():
         raise InputError(f"{m} measurements cannot identify {problem.base.size} parameters: use at least "
                          f"{problem.min_measurements()}")
+    if start not in ("pool", "random"):
+        raise InputError(f"start must be 'pool' or 'random', got '{start}'")
     rnd = design_random(problem, m, seed)
     out = [rnd]
+    Q_pool = Fp = None
+    if start == "pool" and any(c != "random" for c in criteria):
+        Q_pool, _ = problem.random_design(max(pool_size, 2 * m), seed=np.random.SeedSequence([seed, 1]),
+                                          max_tries=max(problem.cell.max_random_tries, 200 * pool_size))
+        Fp = problem.model.weighted_jacobian(problem.p0, Q_pool)[:, :, problem.base]
     for c in criteria:
         if c == "random":
             continue
-        out.append(design_ipopt(problem, c, m, seed, n_starts, start=rnd.q_meas, options=options))
+        Q0 = rnd.q_meas
+        if Fp is not None:
+            K = {"kpi": problem.E, "param": np.eye(problem.base.size)}.get(c)
+            idx, _ = pool_select(Fp, m, K)
+            Q0 = Q_pool[idx]
+        out.append(design_ipopt(problem, c, m, seed, n_starts, start=Q0, options=options))
     return out

@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .covariance import kpi_covariance, param_covariance
+from .covariance import param_covariance
 from .criteria import evaluate_all
 from .errors import IdentifiabilityError, InputError
 from .identifiability import analyse, check_kpi

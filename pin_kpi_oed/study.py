@@ -26,12 +26,12 @@ import time
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
 import numpy as np
 import pinocchio as pin
 
-from .errors import InfeasibleError, InputError, PinKpiOedError
+from .errors import InfeasibleError, PinKpiOedError
 from .io import atomic_write_json, atomic_write_text
 from .progress import progress
 

@@ -1,0 +1,181 @@
+"""Sim-to-real gap diagnosis: withheld effects (a few seeds), no effect, bad input, K-fold, CLI."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from pin_kpi_oed.cli import main as cli_main
+from pin_kpi_oed.diagnosis import diagnose
+from pin_kpi_oed.effects import EFFECT_NAMES, parse_effects_spec, size_effect, visible_rms
+from pin_kpi_oed.io import MeasurementSet, write_measurements
+from pin_kpi_oed.measurement import NoiseModel, TrackerModel
+from pin_kpi_oed.robot import load_robot
+from pin_kpi_oed.simulate import Tolerances, default_tracker_pose, random_truth, simulate
+
+SIGMA = 1e-5
+REFL = np.array([0.05, 0.02, 0.10])
+
+
+@pytest.fixture(scope="module")
+def ur10():
+    return load_robot("ur10")
+
+
+def make_case(rb, effect, seed, n, k=5.0, temperature=True):
+    """UR10 data with ``effect`` sized so its visible part is k × σ (per-axis RMS); (nominal model, train, test)."""
+    rng = np.random.default_rng(100 + seed)
+    truth = TrackerModel(rb, tracker_T_base=default_tracker_pose(rb), reflector_m=REFL, noise=NoiseModel((SIGMA,) * 3))
+    p = random_truth(truth, Tolerances(tracker_translation_m=0.01, tracker_rotation_rad=0.01), seed=seed)
+    m = 2 * n
+    Q = rb.random_q(rng, m)
+    aux = {"temperature_c": 20 + 5 * rng.random(m)} if temperature else {}
+    effects = []
+    if effect:
+        (eff, th), = parse_effects_spec(f"{effect}=1", rb, rng)
+        ms = MeasurementSet(rb.joint_names, Q, np.zeros((m, 3)), temperature_c=aux.get("temperature_c"))
+        th = size_effect(truth, p, Q, ms, eff, th, k * SIGMA)
+        assert abs(visible_rms(truth, p, Q, ms, [(eff, th)]) / (k * SIGMA) - 1) < 1e-3
+        effects = [(eff, th)]
+    data = simulate(truth, Q, p, effects=effects, aux=aux, seed=seed)
+    nominal = TrackerModel(rb, reflector_m=REFL, noise=NoiseModel((SIGMA,) * 3))
+    return nominal, data.subset(np.arange(n)), data.subset(np.arange(n, m))
+
+
+@pytest.fixture(scope="module")
+def compliance_case(ur10, tmp_path_factory):
+    nominal, tr, te = make_case(ur10, "joint_compliance", 0, 250, k=4.0)
+    figs = tmp_path_factory.mktemp("figs")
+    return nominal, tr, te, diagnose(nominal, tr, te, figures_dir=figs), figs
+
+
+def test_compliance_named_and_gap_closed(compliance_case):
+    _, _, _, rep, figs = compliance_case
+    assert rep.gap_detected
+    assert rep.dominant_effect == "joint_compliance"
+    assert rep.selected_effects[0] == "joint_compliance"
+    assert rep.heldout_after["rms_m"] <= 1.1 * rep.noise_floor_m
+    assert rep.gap_closed_fraction > 0.9
+    top = rep.effects[0]
+    assert top.name == "joint_compliance" and top.significant
+    # ranked by held-out reduction
+    red = [e.heldout_rms_before_m - e.heldout_rms_after_m for e in rep.effects if e.status == "ok"]
+    assert red == sorted(red, reverse=True)
+    # effects that have nothing to fit are not significant
+    assert not rep.effect("thermal_expansion").significant and not rep.effect("joint_scale").significant
+    # where: gravity / reach show up among the strongest associations
+    assert rep.where["strongest"]
+    assert len(rep.where["regions"]) == 8
+    # figures: PNG files
+    pngs = sorted(figs.glob("*.png"))
+    assert len(pngs) >= 3 and all(p.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" for p in pngs)
+    assert not list(figs.glob(".*.tmp"))
+
+
+def test_report_dict_is_json(compliance_case):
+    rep = compliance_case[3]
+    d = rep.to_dict()
+    text = json.dumps(d, allow_nan=False)
+    back = json.loads(text)
+    for key in ("gap_detected", "dominant_effect", "effects", "noise_floor_m", "heldout_before", "heldout_after",
+                "gap_closed_fraction", "where", "unobservable", "selection"):
+        assert key in back
+    assert back["dominant_effect"] in list(EFFECT_NAMES) + ["none"]
+    for e in back["effects"]:
+        for key in ("name", "heldout_rms_before_m", "heldout_rms_after_m", "gap_closed_fraction", "significant"):
+            assert key in e
+    assert any("range" in n for n in back["unobservable"])
+    s = rep.summary()
+    assert "dominant effect: joint_compliance" in s and "not observable" in s
+
+
+@pytest.mark.parametrize("effect,seed", [("gear_harmonic", 1), ("backlash", 2), ("thermal_expansion", 3),
+                                         ("joint_scale", 4)])
+def test_withheld_effect_named(ur10, effect, seed):
+    nominal, tr, te = make_case(ur10, effect, seed, 250, k=3.0)
+    rep = diagnose(nominal, tr, te)
+    assert rep.gap_detected
+    assert rep.dominant_effect == effect
+    assert rep.effect(effect).heldout_rms_after_m <= 1.1 * rep.noise_floor_m
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_no_effect_no_gap(ur10, seed):
+    nominal, tr, te = make_case(ur10, None, seed, 250)
+    rep = diagnose(nominal, tr, te)
+    assert not rep.gap_detected
+    assert rep.dominant_effect == "none"
+    assert rep.heldout_before["rms_m"] <= 1.1 * rep.noise_floor_m
+
+
+def test_validation_from_other_tracker_placement(compliance_case):
+    nominal, tr, te, _, _ = compliance_case
+    moved = MeasurementSet(te.joint_names, te.q, te.position_m + np.array([0.03, -0.01, 0.0]), sigma_m=te.sigma_m,
+                           temperature_c=te.temperature_c)
+    rep = diagnose(nominal, tr, moved)
+    assert rep.validation_mismatch
+    assert rep.dominant_effect == "none"
+    assert "another robot or tracker placement" in rep.mismatch["message"]
+    assert len(rep.effects) == len(EFFECT_NAMES)  # the rest of the report is still produced
+
+
+def test_some_rows_from_elsewhere_are_named_and_left_out(compliance_case):
+    nominal, tr, te, _, _ = compliance_case
+    pos = te.position_m.copy()
+    pos[[3, 7, 11]] += 0.05
+    bad = MeasurementSet(te.joint_names, te.q, pos, sigma_m=te.sigma_m, temperature_c=te.temperature_c)
+    rep = diagnose(nominal, tr, bad)
+    assert not rep.validation_mismatch
+    assert rep.mismatch["rows"] == [4, 8, 12]
+    assert rep.n_heldout == len(te) - 3
+    assert rep.dominant_effect == "joint_compliance"
+
+
+def test_missing_temperature_and_too_few_rows(ur10):
+    nominal, tr, te = make_case(ur10, "joint_compliance", 5, 25, k=6.0, temperature=False)
+    rep = diagnose(nominal, tr, te)
+    th = rep.effect("thermal_expansion")
+    assert th.status == "skipped" and "temperature" in th.note
+    gh = rep.effect("gear_harmonic")
+    assert gh.status == "skipped" and "too few training rows" in gh.note
+    assert rep.effect("joint_compliance").status == "ok"
+    assert rep.dominant_effect == "joint_compliance"
+    assert any("temperature" in n for n in rep.notes)
+
+
+def test_kfold_on_one_file(compliance_case):
+    nominal, tr, _, _, _ = compliance_case
+    rep = diagnose(nominal, tr, kfold=3, effects=["joint_compliance", "joint_scale"])
+    assert rep.mode == "kfold" and rep.k_folds == 3 and rep.n_heldout == len(tr)
+    assert rep.dominant_effect == "joint_compliance"
+    exact = diagnose(nominal, tr, kfold=3, effects=["joint_compliance", "joint_scale"], exact_kfold=True)
+    assert np.isclose(exact.heldout_before["rms_m"], rep.heldout_before["rms_m"], rtol=1e-4)
+    assert np.isclose(exact.heldout_after["rms_m"], rep.heldout_after["rms_m"], rtol=1e-4)
+    with pytest.raises(Exception, match="either"):
+        diagnose(nominal, tr)
+
+
+def test_cli_diagnose(compliance_case, tmp_path, capsys):
+    _, tr, te, _, _ = compliance_case
+    write_measurements(tr, tmp_path / "a.csv")
+    write_measurements(te, tmp_path / "b.csv")
+    out = tmp_path / "r.json"
+    rc = cli_main(["diagnose", "--robot", "ur10", "--train", str(tmp_path / "a.csv"), "--validate",
+                   str(tmp_path / "b.csv"), "--reflector", "0.05,0.02,0.1", "--json", str(out), "--effects",
+                   "joint_compliance,backlash", "--quiet"])
+    assert rc == 0
+    d = json.loads(out.read_text())
+    assert d["dominant_effect"] == "joint_compliance" and d["gap_detected"] is True
+    assert "dominant_effect=joint_compliance" in capsys.readouterr().out
+    # a file without sigma columns needs --sigma: one-line error, exit code 2
+    nosig = MeasurementSet(tr.joint_names, tr.q, tr.position_m)
+    write_measurements(nosig, tmp_path / "c.csv")
+    rc = cli_main(["diagnose", "--robot", "ur10", "--train", str(tmp_path / "c.csv"), "--kfold", "3"])
+    err = capsys.readouterr().err
+    assert rc == 2 and "--sigma" in err and len(err.strip().splitlines()) == 1
+    rc = cli_main(["diagnose", "--robot", "ur10", "--train", str(tmp_path / "a.csv"), "--kfold", "3",
+                   "--effects", "tracker_scale"])
+    err = capsys.readouterr().err
+    assert rc == 2 and "cannot be observed" in err
