@@ -89,6 +89,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     s.add_argument("--tol-reflector", default="0", help="sigma of the reflector offset error (m)")
     s.add_argument("--pose6d", action="store_true", help="also simulate 6-DoF probe orientations (rx, ry, rz)")
     s.add_argument("--sigma-rot", default="1e-4", help="orientation noise of --pose6d (rad)")
+    s.add_argument("--effects", default=None,
+                   help="unmodelled effects of the 'real' robot, e.g. joint_compliance=2e-6,gear_harmonic=5e-5 "
+                        "(name=SIZE: random +-SIZE per parameter; name=v1:v2:... exact values; see "
+                        "pin_kpi_oed.effects.parse_effects_spec). A tracker range-scale error is not offered: "
+                        "it equals a uniform scaling of the robot and no data can reveal it")
+    s.add_argument("--temperature", default="20,25",
+                   help="temperature column: uniform between T0,T1 (degC), read by thermal_expansion")
     s.set_defaults(func=run_simulate)
 
     # ---- identify ------------------------------------------------------------------
@@ -165,7 +172,14 @@ def run_simulate(args: argparse.Namespace) -> int:
     truth = random_truth(model, tol, seed=args.seed)
     rng = np.random.default_rng(args.seed + 1)
     Q = robot.random_q(rng, args.n + args.n_test)
-    ms = simulate(model, Q, truth, seed=args.seed + 2)
+    effects = []
+    if args.effects:
+        from .effects import parse_effects_spec
+
+        effects = parse_effects_spec(args.effects, robot, np.random.default_rng(args.seed + 3))
+    t0, t1 = _floats(args.temperature, 2, "--temperature")
+    aux = {"temperature_c": np.random.default_rng(args.seed + 4).uniform(t0, t1, len(Q))}
+    ms = simulate(model, Q, truth, effects=effects, aux=aux, seed=args.seed + 2)
     train = ms.subset(slice(0, args.n))
     write_measurements(train, args.out)
     if args.n_test:
@@ -175,7 +189,7 @@ def run_simulate(args: argparse.Namespace) -> int:
     print(f"simulated {args.n} measurements -> {args.out}"
           + (f", {args.n_test} held-out -> {args.test_out}" if args.n_test else "")
           + f" (robot {robot.name}, tool {robot.tool_frame}, noise sigma {np.array(noise.sigma_xyz_m) * 1e6} µm, "
-            f"seed {args.seed})")
+            f"seed {args.seed}" + (f", effects: {', '.join(e.name for e, _ in effects)}" if effects else "") + ")")
     return 0
 
 
