@@ -1,0 +1,24 @@
+"""The 90-notional-arm study (paper section 3.3.2) on a few arms: per arm heuristic, A on C_p, A on C_s.
+
+The full study: ``pin-kpi-oed study notional90 --out out/notional90`` (resumable; --scheduler for Dask).
+
+Run: python examples/study_notional.py [--arms 2] [--out study_out]
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+
+from pin_kpi_oed.study import format_notional_summary, notional_study
+
+QUICK = os.environ.get("PIN_KPI_OED_QUICK") == "1"
+
+ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+ap.add_argument("--arms", type=int, default=2)
+ap.add_argument("--measurements", type=int, default=20 if QUICK else 60)
+ap.add_argument("--out", default="study_out")
+a = ap.parse_args()
+
+summary = notional_study(a.out, m=a.measurements, seed=0, arms=a.arms, workers=1)
+print(format_notional_summary(summary))
