@@ -17,7 +17,6 @@ Run:  python benchmarks/bench_identify.py   (or ``main()``)
 from __future__ import annotations
 
 import time
-from pathlib import Path
 
 
 import numpy as np

@@ -16,20 +16,12 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import InputError, PinKpiOedError
+from .cliutil import parse_floats
+from .errors import PinKpiOedError
 
-TOPICS = ("cli_design", "cli_identify", "cli_diagnose", "cli_view", "cli_study", "cli_certificate")
+TOPICS = ("cli_design", "cli_identify", "cli_diagnose", "cli_view", "cli_study")
 
 
-def parse_vec(text: str, n: int, what: str) -> np.ndarray:
-    """Parse ``"x,y,z"`` into n floats (SI units), naming the option on error."""
-    try:
-        v = np.array([float(s) for s in text.split(",")])
-    except ValueError:
-        raise InputError(f"{what}: expected {n} comma-separated numbers, got '{text}'") from None
-    if v.size != n or not np.all(np.isfinite(v)):
-        raise InputError(f"{what}: expected {n} finite comma-separated numbers, got '{text}'")
-    return v
 
 
 def cmd_info(args: argparse.Namespace) -> int:
@@ -39,7 +31,7 @@ def cmd_info(args: argparse.Namespace) -> int:
     from .robot import load_robot
 
     robot = load_robot(args.robot, args.tool)
-    refl = parse_vec(args.reflector, 3, "--reflector")
+    refl = parse_floats(args.reflector, 3, "--reflector")
     model = TrackerModel(robot, reflector_m=refl)
     ident = analyse(model, seed=args.seed)
     if args.json:

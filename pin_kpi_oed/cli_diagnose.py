@@ -19,21 +19,12 @@ import math
 
 import numpy as np
 
+from .cliutil import parse_floats as _floats
 from .errors import InputError
 
 __all__ = ["register", "run"]
 
 
-def _floats(text: str, sizes: tuple[int, ...], what: str) -> np.ndarray:
-    try:
-        v = np.array([float(s) for s in str(text).replace(" ", "").split(",") if s != ""])
-    except ValueError:
-        raise InputError(f"{what}: expected {' or '.join(map(str, sizes))} comma-separated numbers (SI units), "
-                         f"got '{text}'") from None
-    if v.size not in sizes or not np.all(np.isfinite(v)):
-        raise InputError(f"{what}: expected {' or '.join(map(str, sizes))} finite comma-separated numbers, "
-                         f"got '{text}'")
-    return v
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:

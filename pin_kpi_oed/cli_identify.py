@@ -23,21 +23,12 @@ import math
 import numpy as np
 import pinocchio as pin
 
+from .cliutil import parse_floats as _floats
 from .errors import InputError
 
 __all__ = ["register", "run_simulate", "run_identify", "run_import_ipa"]
 
 
-def _floats(text: str, n: int | tuple[int, ...], what: str) -> np.ndarray:
-    ns = (n,) if isinstance(n, int) else n
-    try:
-        v = np.array([float(s) for s in str(text).replace(" ", "").split(",") if s != ""])
-    except ValueError:
-        raise InputError(f"{what}: expected {' or '.join(map(str, ns))} comma-separated numbers, "
-                         f"got '{text}'") from None
-    if v.size not in ns or not np.all(np.isfinite(v)):
-        raise InputError(f"{what}: expected {' or '.join(map(str, ns))} finite comma-separated numbers, got '{text}'")
-    return v
 
 
 def _positive(text: str, what: str) -> float:

@@ -68,10 +68,8 @@ stated in every report.
 
 from __future__ import annotations
 
-import io as _stdio
 import math
 import os
-import secrets
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -362,8 +360,6 @@ class _Engine:
 
     def __init__(self, model: TrackerModel, folds: list, full_train: MeasurementSet, heldout_idx: list,
                  weights: str, identify_options: dict, fold_rows: list | None = None, exact_kfold: bool = False):
-        from .identify import identify  # noqa: F401 - fail early with a clear import error
-
         self.model = model
         self.folds = folds  # [(train, test)]
         self.full_train = full_train
@@ -652,29 +648,10 @@ def _where(model: TrackerModel, p: np.ndarray, data: MeasurementSet, order: np.n
 
 
 # --------------------------------------------------------------------------- figures
-def _atomic_write_bytes(path: Path, data: bytes) -> None:
-    directory = path.parent
-    if not directory.is_dir():
-        raise InputError(f"cannot write '{path}': directory '{directory}' does not exist")
-    tmp = directory / f".{path.name}.{secrets.token_hex(6)}.tmp"
-    try:
-        with open(tmp, "wb") as fh:
-            fh.write(data)
-            fh.flush()
-            os.fsync(fh.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        try:
-            os.unlink(tmp)
-        except OSError:
-            pass
-        raise
-
-
 def _save_fig(fig: Any, path: Path) -> None:
-    buf = _stdio.BytesIO()
-    fig.savefig(buf, format="png", dpi=110)
-    _atomic_write_bytes(path, buf.getvalue())
+    from .figures import save_png
+
+    save_png(fig, path, dpi=110)
 
 
 def _figures(folder: Path, where: dict, regs: dict, R: np.ndarray, report_effects: list, floor: float,

@@ -18,7 +18,6 @@ from __future__ import annotations
 
 import io
 import os
-import tempfile
 from pathlib import Path
 from typing import Any, Mapping, Sequence
 
@@ -55,29 +54,12 @@ def save_png(fig: Any, path: str | os.PathLike, dpi: int = 150) -> Path:
     Raises:
         InputError: the target folder does not exist, or ``path`` is a folder.
     """
-    target = Path(path)
-    folder = target.parent if str(target.parent) else Path(".")
-    if not folder.is_dir():
-        raise InputError(f"cannot write '{target}': folder '{folder}' does not exist")
-    if target.is_dir():
-        raise InputError(f"cannot write '{target}': it is a folder")
+    from .io import atomic_write_bytes
+
     buf = io.BytesIO()
     fig.savefig(buf, format="png", dpi=dpi)
-    fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".tmp", dir=folder)
-    try:
-        with os.fdopen(fd, "wb") as f:
-            f.write(buf.getvalue())
-            f.flush()
-            os.fsync(f.fileno())
-        os.chmod(tmp, 0o644)
-        os.replace(tmp, target)
-    except BaseException:
-        try:
-            os.unlink(tmp)
-        except OSError:
-            pass
-        raise
-    return target
+    atomic_write_bytes(path, buf.getvalue())
+    return Path(path)
 
 
 def _blocks(C: np.ndarray) -> np.ndarray:

@@ -707,7 +707,6 @@ def _data_rank_check(F: np.ndarray, names: list[str], m: int, nh: int) -> None:
     """Raise if the data do not determine every unknown (pivoted QR of the scaled Jacobian)."""
     import scipy.linalg as sla
 
-    nx = F.shape[1]
     norms = np.linalg.norm(F, axis=0)
     if np.any(norms == 0):
         k = int(np.flatnonzero(norms == 0)[0])

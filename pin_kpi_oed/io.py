@@ -323,19 +323,18 @@ def _fsync_dir(directory: Path) -> None:
         os.close(fd)
 
 
-def atomic_write_text(path: str | os.PathLike[str], text: str, encoding: str = "utf-8") -> None:
-    """Write ``text`` to ``path`` atomically.
+def atomic_write_bytes(path: str | os.PathLike[str], data: bytes) -> None:
+    """Write ``data`` to ``path`` atomically (the one atomic writer of the package).
 
-    The text is written to a new temporary file in the same directory (created
-    with the usual umask-dependent permissions), flushed and fsync-ed, then
-    renamed over ``path`` with :func:`os.replace`. If anything fails, the
-    temporary file is removed and ``path`` is left as it was. Newlines are
-    written as given (no translation).
+    The bytes go to a new temporary file in the same directory (created with the
+    usual umask-dependent permissions, or the old file's mode when it exists),
+    are flushed and fsync-ed, then renamed over ``path`` with :func:`os.replace`:
+    readers see the old or the new file, never a partial one. If anything fails,
+    the temporary file is removed and ``path`` is left as it was.
 
     Args:
         path: Target file.
-        text: Full content.
-        encoding: Text encoding.
+        data: Full content.
 
     Raises:
         InputError: If the target directory does not exist or ``path`` is a directory.
@@ -347,7 +346,6 @@ def atomic_write_text(path: str | os.PathLike[str], text: str, encoding: str = "
         raise InputError(f"cannot write '{target}': directory '{directory}' does not exist")
     if target.is_dir():
         raise InputError(f"cannot write '{target}': it is a directory")
-    data = text.encode(encoding)
     while True:
         tmp = directory / f".{target.name}.{secrets.token_hex(6)}.tmp"
         try:
@@ -373,6 +371,16 @@ def atomic_write_text(path: str | os.PathLike[str], text: str, encoding: str = "
             pass
         raise
     _fsync_dir(directory)
+
+
+def atomic_write_text(path: str | os.PathLike[str], text: str, encoding: str = "utf-8") -> None:
+    """Write ``text`` to ``path`` atomically (see :func:`atomic_write_bytes`); newlines as given.
+
+    Raises:
+        InputError: If the target directory does not exist or ``path`` is a directory.
+        OSError: On other file-system failures (disk full, permissions).
+    """
+    atomic_write_bytes(path, text.encode(encoding))
 
 
 def _json_default(obj: Any) -> Any:

@@ -88,7 +88,6 @@ from __future__ import annotations
 
 import math
 import os
-import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Sequence
@@ -503,22 +502,10 @@ def write_urdf(geom: KukaGeometry, path: str | os.PathLike[str]) -> Path:
     Returns:
         The destination path.
     """
+    from .io import atomic_write_text
+
     dest = Path(path)
     dest.parent.mkdir(parents=True, exist_ok=True)
-    text = urdf_text(geom)
-    fd, tmp = tempfile.mkstemp(prefix=f".{dest.name}.", suffix=".tmp", dir=dest.parent)
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8", newline="\n") as fh:
-            fh.write(text)
-            fh.flush()
-            os.fsync(fh.fileno())
-        os.chmod(tmp, 0o644)
-        os.replace(tmp, dest)
-    except BaseException:
-        try:
-            os.unlink(tmp)
-        except FileNotFoundError:
-            pass
-        raise
+    atomic_write_text(dest, urdf_text(geom))
     return dest
 

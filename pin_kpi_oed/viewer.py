@@ -1316,7 +1316,6 @@ def build_scene(design: DesignFile | str | os.PathLike | Mapping, vis: Any = Non
     fwd = target - position
     side = np.cross(fwd, [0.0, 0.0, 1.0])
     side = side / np.linalg.norm(side) if np.linalg.norm(side) > 1e-9 else np.array([0.0, 1.0, 0.0])
-    up = np.cross(side, fwd / np.linalg.norm(fwd))
     views: list[EllipsoidView] = []
     nd = len(df.designs)
     for j, tcp in enumerate(df.tcp_world()):

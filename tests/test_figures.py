@@ -78,7 +78,7 @@ def test_failed_write_leaves_the_old_file(tmp_path, monkeypatch):
 def test_bad_input(tmp_path):
     with pytest.raises(InputError, match="does not exist"):
         figures.plot_design_bars({"kpi": 1e-12}, tmp_path / "missing" / "x.png")
-    with pytest.raises(InputError, match="is a folder"):
+    with pytest.raises(InputError, match="is a directory"):
         figures.plot_design_bars({"kpi": 1e-12}, tmp_path)
     with pytest.raises(InputError, match=r"\(3t, 3t\)"):
         figures.plot_ellipsoid_projections({"kpi": np.eye(4)}, tmp_path / "e.png")
