@@ -289,6 +289,7 @@ def _write_csv(path: Path, rows: list[dict]) -> None:
 
 
 def _plot_notional(rows: list[dict], path: Path) -> None:
+    """Figure-8-like: improvement of the KPI design per arm, over the (a2, d4) grid, vs heuristic and vs A on C_p."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -296,16 +297,24 @@ def _plot_notional(rows: list[dict], path: Path) -> None:
 
     from .figures import save_png
 
-    fig, axes = plt.subplots(1, 2, figsize=(11, 4.2), constrained_layout=True)
+    a2 = sorted({r["a2_m"] for r in rows})
+    d4 = sorted({r["d4_m"] for r in rows})
+    fig, axes = plt.subplots(1, 2, figsize=(12, 4.6), constrained_layout=True)
     for ax, key, title in ((axes[0], "improvement_vs_heuristic", "KPI design vs heuristic"),
                            (axes[1], "improvement_vs_param", "KPI design vs A on C_p")):
-        v = np.array([r[key] for r in rows]) * 100
-        ax.hist(v, bins=15, color="tab:blue", alpha=0.8)
-        ax.axvline(v.mean(), color="k", ls="--", label=f"mean {v.mean():.1f} %")
-        ax.set_xlabel("improvement of tr(C_s) (%)")
-        ax.set_ylabel("arms")
-        ax.set_title(title)
-        ax.legend()
+        grid = np.full((len(d4), len(a2)), np.nan)
+        for r in rows:
+            grid[d4.index(r["d4_m"]), a2.index(r["a2_m"])] = 100 * r[key]
+        im = ax.imshow(grid, origin="lower", cmap="viridis", aspect="auto")
+        for (i, j), v in np.ndenumerate(grid):
+            if np.isfinite(v):
+                ax.text(j, i, f"{v:.0f}", ha="center", va="center", fontsize=7, color="w")
+        ax.set_xticks(range(len(a2)), [f"{1e3 * v:.0f}" for v in a2], rotation=90)
+        ax.set_yticks(range(len(d4)), [f"{1e3 * v:.0f}" for v in d4])
+        ax.set_xlabel("segment two a2 (mm)")
+        ax.set_ylabel("segment four d4 (mm)")
+        ax.set_title(f"{title}: mean {np.nanmean(grid):.1f} %")
+        fig.colorbar(im, ax=ax, label="reduction of tr(C_s) (%)")
     save_png(fig, path)
     plt.close(fig)
 
