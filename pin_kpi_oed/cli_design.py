@@ -19,6 +19,7 @@ import math
 
 from .errors import InputError
 from .io import atomic_write_json
+from .setup import model_to_dict
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -88,11 +89,7 @@ def design_json(cell, problem, results: list, m: int, seed: int, collision: bool
     """The JSON document of a design run (SI units; readable by ``pin-kpi-oed evaluate``)."""
     main = next((r for r in results if r.criterion == "kpi"), results[-1])
     return {
-        "robot": {"name": cell.robot.name, "urdf_path": cell.robot.urdf_path, "tool_frame": cell.robot.tool_frame},
-        "tracker_T_base": cell.tracker_T_base.homogeneous.tolist(),
-        "reflector_m": cell.reflector_m.tolist(),
-        "tcp_m": cell.tcp_m.tolist(),
-        "noise": cell.noise.to_dict(),
+        **model_to_dict(problem.model),  # robot, tracker_T_base, reflector_m, tcp_m, noise (as `evaluate` reads them)
         "q_work": cell.q_work.tolist(),
         "joint_names": list(cell.robot.joint_names),
         "capsules": [c.to_dict() for c in cell.robot_capsules],

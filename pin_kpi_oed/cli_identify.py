@@ -43,17 +43,11 @@ def _positive(text: str, what: str) -> float:
 
 def _check_outputs(*paths: str | None) -> None:
     """Fail before anything is written if an output's folder is missing or the path is a folder."""
-    from pathlib import Path
+    from .io import check_writable
 
     for p in paths:
-        if not p:
-            continue
-        t = Path(p)
-        d = t.parent if str(t.parent) else Path(".")
-        if not d.is_dir():
-            raise InputError(f"cannot write '{t}': directory '{d}' does not exist")
-        if t.is_dir():
-            raise InputError(f"cannot write '{t}': it is a directory")
+        if p:
+            check_writable(p)
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:

@@ -198,6 +198,14 @@ class Effect:
                              f"({', '.join(self.param_names()[:3])}...), got {th.size}")
         return th
 
+    def _per_joint_offset(self, theta: np.ndarray, B: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Δq_j = θ_k · B_j for one parameter per joint in ``self.joints``: (Δq (m, n), dΔq/dθ (m, n, k))."""
+        th = self._theta(theta)
+        m, n = B.shape
+        D = np.zeros((m, n, th.size))
+        D[:, self.joints, np.arange(th.size)] = B[:, self.joints]
+        return D @ th, D
+
     def to_dict(self) -> dict:
         """Plain description for JSON."""
         return {"name": self.name, "unit": self.unit, "description": self.description,
@@ -247,14 +255,8 @@ class _GravityEffect(Effect):
         raise NotImplementedError
 
     def joint_offset(self, theta, Q, aux=None):
-        th = self._theta(theta)
         Q = np.atleast_2d(np.asarray(Q, float))
-        m, n = Q.shape
-        B = self._basis(self.torque(Q, aux))  # (m, n)
-        D = np.zeros((m, n, th.size))
-        for k, j in enumerate(self.joints):
-            D[:, j, k] = B[:, j]
-        return D @ th, D
+        return self._per_joint_offset(theta, self._basis(self.torque(Q, aux)))
 
 
 class JointCompliance(_GravityEffect):
@@ -337,13 +339,7 @@ class JointScale(Effect):
         return [f"{self.name}.{self.robot.joint_names[j]}" for j in self.joints]
 
     def joint_offset(self, theta, Q, aux=None):
-        th = self._theta(theta)
-        Q = np.atleast_2d(np.asarray(Q, float))
-        m, n = Q.shape
-        D = np.zeros((m, n, th.size))
-        for k, j in enumerate(self.joints):
-            D[:, j, k] = Q[:, j]
-        return D @ th, D
+        return self._per_joint_offset(theta, np.atleast_2d(np.asarray(Q, float)))
 
 
 class ThermalExpansion(Effect):

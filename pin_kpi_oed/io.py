@@ -323,6 +323,21 @@ def _fsync_dir(directory: Path) -> None:
         os.close(fd)
 
 
+def check_writable(path: str | os.PathLike[str]) -> Path:
+    """Check that ``path`` can be written: its directory exists and it is not a directory.
+
+    Raises:
+        InputError: naming the path and what is wrong.
+    """
+    target = Path(path)
+    directory = target.parent if str(target.parent) else Path(".")
+    if not directory.is_dir():
+        raise InputError(f"cannot write '{target}': directory '{directory}' does not exist")
+    if target.is_dir():
+        raise InputError(f"cannot write '{target}': it is a directory")
+    return target
+
+
 def atomic_write_bytes(path: str | os.PathLike[str], data: bytes) -> None:
     """Write ``data`` to ``path`` atomically (the one atomic writer of the package).
 
@@ -340,12 +355,8 @@ def atomic_write_bytes(path: str | os.PathLike[str], data: bytes) -> None:
         InputError: If the target directory does not exist or ``path`` is a directory.
         OSError: On other file-system failures (disk full, permissions).
     """
-    target = Path(path)
+    target = check_writable(path)
     directory = target.parent if str(target.parent) else Path(".")
-    if not directory.is_dir():
-        raise InputError(f"cannot write '{target}': directory '{directory}' does not exist")
-    if target.is_dir():
-        raise InputError(f"cannot write '{target}': it is a directory")
     while True:
         tmp = directory / f".{target.name}.{secrets.token_hex(6)}.tmp"
         try:
