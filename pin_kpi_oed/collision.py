@@ -1,5 +1,9 @@
 """Collision, line-of-sight and incidence constraints with exact gradients (paper eqs. 4, 20–24b).
 
+The paper counts n(n−1)/2 − (n−1) pairs for n one-capsule links (eq. 22) and differentiates the
+segment distance (eq. 23); here the pairs are listed explicitly (skip lists, pruning) and the
+gradient is the witness-point form below.
+
 Every constraint is written ``g(q) ≥ 0`` for one measurement configuration q:
 
 * **capsule pairs** (eq. 20): ``d = d_P(b₁, b₂) − r₁ − r₂ − c ≥ 0`` where d_P is the distance of

@@ -15,7 +15,11 @@ or, from the constrained least-squares problem (13), the KKT form of eq. (19)::
 
     C_v = [I 0] [[F₁ᵀF₁, F₂ᵀ], [F₂, 0]]⁻¹ [I 0]ᵀ,    C_s = lower-right block of C_v.
 
-Both are implemented; the tests check they agree.
+Both are implemented; the tests check they agree. The constrained least-squares problem
+(eq. 13a–13b) with F₁, F₂ of eq. 14 needs the regularity conditions (CQ) rank F₂ = n₂ and (PD)
+rank [F₁; F₂] = n_v (eq. 15): (CQ) holds by construction (F₂ = [E, −I]), (PD) is what
+:mod:`pin_kpi_oed.identifiability` secures by choosing identifiable parameters. The Lemma
+(eqs. 17–18) gives Δv = [I 0] K⁻¹ [F₁ᵀ Σ⁻¹; 0] Δη, whose covariance is eq. 19.
 """
 
 from __future__ import annotations

@@ -1,4 +1,6 @@
-"""Optimum experimental design with collision avoidance, solved by IPOPT (paper eqs. 24a–24e).
+"""Optimum experimental design with collision avoidance, solved by IPOPT (paper eqs. 7a–7b, 24a–24e).
+
+The general OED problem min φ(C(q)) s.t. ψ(q) ≥ 0 (eq. 7) with the paper's choices (eq. 24).
 
 The design problem for m measurement configurations Q = (q₁ … q_m) is::
 

@@ -17,6 +17,8 @@ robot parameter is confounded with a set-up parameter, the *robot* parameter is
 the one held at its nominal value. Every dropped parameter is reported with
 the kept parameters it is confounded with.
 
+This is what makes the regularity condition (PD) of the paper (eq. 15) hold.
+
 KPI estimability: a KPI s with sensitivity E is estimable under this
 convention iff E n = 0 for every null direction n of F that leaves the
 reflector and probe unchanged (those directions only re-label which physical

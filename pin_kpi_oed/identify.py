@@ -1,5 +1,8 @@
 r"""Parameter identification from measured data (paper eqs. 5–6), with effects and validation.
 
+Identification removes the systematic error TCP(p, q) − TCP(p_true, q) ≠ 0 (eq. 2) as far as the
+model can represent it; :func:`validate` measures what remains on held-out data.
+
 Problem
 -------
 Given m measurements (q_i, η_i) of a :class:`~pin_kpi_oed.io.MeasurementSet`, find the

@@ -24,7 +24,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .covariance import kpi_covariance
+from .covariance import kpi_covariance, param_covariance
 from .errors import InputError
 from .identifiability import analyse
 from .identify import identify, validate
@@ -124,11 +124,14 @@ class RealDataValidation:
     Attributes:
         methods: criterion names (``kpi``, ``D``, ``random``).
         mean_error_m: per method, the mean error at the working poses for each split, (n_split,) m.
+        predicted_sigma_m: per method, the predicted RMS position std at the working poses
+            sqrt(tr(K C_p Kᵀ)/n_work) of each split, from the noise model (m): what the design controls.
         n_meas, n_work, n_splits: sizes.
     """
 
     methods: list[str]
     mean_error_m: dict[str, np.ndarray]
+    predicted_sigma_m: dict[str, np.ndarray]
     n_meas: int
     n_work: int
     n_splits: int
@@ -138,17 +141,21 @@ class RealDataValidation:
         """Plain JSON-able dict (SI units)."""
         return {"n_meas": self.n_meas, "n_work": self.n_work, "n_splits": self.n_splits, "seed": self.seed,
                 "methods": {k: {"mean_error_m": float(v.mean()), "std_over_splits_m": float(v.std(ddof=1)),
-                                "per_split_m": v.tolist()} for k, v in self.mean_error_m.items()}}
+                                "per_split_m": v.tolist(),
+                                "predicted_sigma_m": float(self.predicted_sigma_m[k].mean())}
+                            for k, v in self.mean_error_m.items()}}
 
     def summary(self) -> str:
         """Readable table (mm)."""
         lines = [f"real data: {self.n_splits} splits, {self.n_work} working poses held out, "
                  f"{self.n_meas} calibration poses per design (seed {self.seed})",
-                 f"{'design':<10}{'mean error at working poses (mm)':>36}{'wins vs random':>16}"]
+                 f"{'design':<10}{'mean error at working poses (mm)':>36}{'wins vs random':>16}"
+                 f"{'predicted sigma (mm)':>22}"]
         rnd = self.mean_error_m.get("random")
         for k, v in self.mean_error_m.items():
             wins = "" if rnd is None or k == "random" else f"{int(np.sum(v < rnd))}/{v.size}"
-            lines.append(f"{k:<10}{v.mean() * 1e3:>24.4f} +- {v.std(ddof=1) * 1e3:.4f}{wins:>16}")
+            lines.append(f"{k:<10}{v.mean() * 1e3:>24.4f} +- {v.std(ddof=1) * 1e3:.4f}{wins:>16}"
+                         f"{self.predicted_sigma_m[k].mean() * 1e3:>22.4f}")
         return "\n".join(lines)
 
 
@@ -181,6 +188,7 @@ def real_data_validation(model: TrackerModel, data: MeasurementSet, n_meas: int 
     p0 = np.zeros(design_model.n_params)
     Fp_all = design_model.weighted_jacobian(p0, data.q)[:, :, b]
     out: dict[str, list[float]] = {k: [] for k in methods}
+    pred: dict[str, list[float]] = {k: [] for k in methods}
     rng = np.random.default_rng(seed)
     for _ in progress(range(n_splits), desc="splits", disable=not show_progress):
         perm = rng.permutation(len(data))
@@ -195,8 +203,10 @@ def real_data_validation(model: TrackerModel, data: MeasurementSet, n_meas: int 
                 chosen = pool[idx]
             res = identify(model, data.subset(chosen), use_orientation=False, raise_on_failure=False)
             out[meth].append(validate(res, data.subset(work))["mean_m"])
-    return RealDataValidation(list(methods), {k: np.array(v) for k, v in out.items()}, n_meas, n_work, n_splits,
-                              seed)
+            C_p = param_covariance(Fp_all[chosen].reshape(-1, b.size))
+            pred[meth].append(float(np.sqrt(np.trace(K @ C_p @ K.T) / n_work)))
+    return RealDataValidation(list(methods), {k: np.array(v) for k, v in out.items()},
+                              {k: np.array(v) for k, v in pred.items()}, n_meas, n_work, n_splits, seed)
 
 
 def _se3(T: np.ndarray):
