@@ -19,6 +19,7 @@ import math
 
 from .errors import InputError
 from .io import atomic_write_json
+from .evaluate import score_design
 from .setup import model_to_dict
 
 
@@ -101,7 +102,8 @@ def design_json(cell, problem, results: list, m: int, seed: int, collision: bool
         "collision_avoidance": collision,
         "identifiable": [problem.ident.names[i] for i in problem.base],
         "constraint_rows_per_configuration": problem.coll.info.count(),
-        "designs": [r.to_dict() for r in results],
+        "designs": [{**r.to_dict(), "cov_s_m2": score_design(problem.model, r.q_meas, cell.q_work).cov_s_m2.tolist()}
+                    for r in results],
         "q_meas": main.q_meas.tolist(),
         "q_meas_criterion": main.criterion,
     }
