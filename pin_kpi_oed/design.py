@@ -55,6 +55,7 @@ import numpy as np
 from .cell import Cell
 from .collision import AggregatedConstraints, CollisionModel, FeasibilityChecker, FeasibilityReport, random_feasible
 from .pool import select as pool_select
+from .progress import progress
 from .criteria import CRITERIA, DesignCriterion
 from .errors import IdentifiabilityError, InputError, SolverError
 from .identifiability import analyse, check_kpi
@@ -470,7 +471,7 @@ def design_ipopt(problem: DesignProblem, criterion: str, m: int, seed: int = 0, 
     seeds = np.random.SeedSequence(seed).spawn(max(n_starts, 1))
     runs = []
     t_total = 0.0
-    for k in range(max(n_starts, 1)):
+    for k in progress(range(max(n_starts, 1)), desc=f"{criterion} starts", disable=n_starts <= 1):
         if k == 0:
             Q0 = start if start is not None else problem.random_design(m, seed)[0]
         else:
