@@ -78,7 +78,7 @@ import os
 import secrets
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Sequence
+from typing import Any, Callable, Sequence
 
 import numpy as np
 
@@ -433,6 +433,48 @@ def _fmt_rows(rows: list[int], lines: list[int], idx: Sequence[int]) -> str:
     return ", ".join(f"row {rows[i]} (line {lines[i]})" for i in idx)
 
 
+def parse_numeric_table(rows: Sequence[Sequence[str]], lines: Sequence[int], header: Sequence[str], src: str,
+                        parse: Callable[[str], float] = float, found: str = "",
+                        skip: Sequence[str] = ()) -> np.ndarray:
+    """Parse the cells of a table into floats, naming the file, column, row and value of any bad cell.
+
+    Args:
+        rows: the cells of each data row (strings).
+        lines: the file line number of each row (for messages).
+        header: column names.
+        src: file name for messages.
+        parse: cell parser (``float``, or one for decimal commas); raises ValueError on bad cells.
+        found: description of the columns found, added to a wrong-cell-count message.
+        skip: columns not parsed (left NaN), e.g. timestamps.
+
+    Returns:
+        (len(rows), len(header)) array.
+
+    Raises:
+        InputError: a row with the wrong number of cells, a cell that is not a number, NaN or inf.
+    """
+    ncol = len(header)
+    cols = [c for c, name in enumerate(header) if name not in set(skip)]
+    data = np.full((len(rows), ncol), np.nan)
+    for r, (cells, line) in enumerate(zip(rows, lines)):
+        if len(cells) != ncol:
+            raise InputError(f"{src}: row {r + 1} (line {line}) has {len(cells)} cells, the header has {ncol}"
+                             + (f" ({found})" if found else ""))
+        for c in cols:
+            cell = cells[c]
+            try:
+                v = parse(cell)
+            except ValueError:
+                shown = repr(cell) if cell.strip() else "an empty cell"
+                raise InputError(f"{src}: column '{header[c]}', row {r + 1} (line {line}): {shown} is not a number"
+                                 ) from None
+            if not math.isfinite(v):
+                raise InputError(f"{src}: column '{header[c]}', row {r + 1} (line {line}): value {cell.strip()!r} "
+                                 "is not finite (NaN/inf)")
+            data[r, c] = v
+    return data
+
+
 def _parse_float(cell: str) -> float:
     return float(cell.strip())
 
@@ -553,27 +595,7 @@ def read_measurements(
     m = len(rows)
     if m == 0:
         raise InputError(f"{src}: no measurement rows after the header")
-    ncol = len(header)
-    data = np.empty((m, ncol))
-    for r, (cells, line) in enumerate(zip(rows, row_lines)):
-        if len(cells) != ncol:
-            raise InputError(
-                f"{src}: row {r + 1} (line {line}) has {len(cells)} cells, the header has {ncol} ({found})"
-            )
-        for c, cell in enumerate(cells):
-            try:
-                v = _parse_float(cell)
-            except ValueError:
-                shown = repr(cell) if cell.strip() else "an empty cell"
-                raise InputError(
-                    f"{src}: column '{header[c]}', row {r + 1} (line {line}): {shown} is not a number"
-                ) from None
-            if not math.isfinite(v):
-                raise InputError(
-                    f"{src}: column '{header[c]}', row {r + 1} (line {line}): value {cell.strip()!r} "
-                    "is not finite (NaN/inf)"
-                )
-            data[r, c] = v
+    data = parse_numeric_table(rows, row_lines, header, src, _parse_float, found)
     row_nums = list(range(1, m + 1))
 
     def col(name: str) -> np.ndarray:

@@ -77,7 +77,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from pin_kpi_oed.errors import InputError
-from pin_kpi_oed.io import MeasurementSet
+from pin_kpi_oed.io import MeasurementSet, parse_numeric_table
 
 __all__ = [
     "UR10_JOINT_NAMES",
@@ -197,26 +197,7 @@ def import_ipa(path: str | os.PathLike[str]) -> MeasurementSet:
     if not rows:
         raise InputError(f"{src}: no measurement rows after the header")
 
-    numeric_cols = [c for c in header if c != _TIMESTAMP]
-    ncol = len(header)
-    m = len(rows)
-    data = np.empty((m, ncol))
-    for r, (cells, line) in enumerate(zip(rows, lines)):
-        if len(cells) != ncol:
-            raise InputError(f"{src}: row {r + 1} (line {line}) has {len(cells)} cells, the header has {ncol}")
-        for name in numeric_cols:
-            c = idx[name]
-            try:
-                v = _parse_decimal_comma(cells[c])
-            except ValueError:
-                raise InputError(
-                    f"{src}: column '{name}', row {r + 1} (line {line}): {cells[c]!r} is not a number"
-                ) from None
-            if not math.isfinite(v):
-                raise InputError(
-                    f"{src}: column '{name}', row {r + 1} (line {line}): value {cells[c]!r} is not finite"
-                )
-            data[r, c] = v
+    data = parse_numeric_table(rows, lines, header, src, _parse_decimal_comma, skip=(_TIMESTAMP,))
 
     def cols(names: tuple[str, ...]) -> np.ndarray:
         return data[:, [idx[n] for n in names]].copy()
