@@ -475,6 +475,20 @@ def parse_numeric_table(rows: Sequence[Sequence[str]], lines: Sequence[int], hea
     return data
 
 
+def check_positive_sigma(sigma: np.ndarray, names: Sequence[str], lines: Sequence[int], src: str,
+                         unit: str = "m") -> None:
+    """Raise if a standard deviation is not > 0, naming the file, column, row and value.
+
+    Raises:
+        InputError: the first offending cell.
+    """
+    bad = np.argwhere(sigma <= 0)
+    if bad.size:
+        r, a = bad[0]
+        raise InputError(f"{src}: column '{names[a]}', row {r + 1} (line {lines[r]}): "
+                         f"standard deviation {float(sigma[r, a])!r} {unit} must be > 0")
+
+
 def _parse_float(cell: str) -> float:
     return float(cell.strip())
 
@@ -622,13 +636,7 @@ def read_measurements(
 
     # ---- value checks ----------------------------------------------------- #
     if sigma is not None:
-        bad = np.argwhere(sigma <= 0)
-        if bad.size:
-            r, a = bad[0]
-            raise InputError(
-                f"{src}: column '{sigma_names[a]}', row {r + 1} (line {row_lines[r]}): "
-                f"standard deviation {float(sigma[r, a])!r} m must be > 0"
-            )
+        check_positive_sigma(sigma, sigma_names, row_lines, src)
     if payload is not None and np.any(payload < 0):
         r = int(np.flatnonzero(payload < 0)[0])
         raise InputError(

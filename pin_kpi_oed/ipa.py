@@ -77,7 +77,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from pin_kpi_oed.errors import InputError
-from pin_kpi_oed.io import MeasurementSet, parse_numeric_table
+from pin_kpi_oed.io import MeasurementSet, check_positive_sigma, parse_numeric_table
 
 __all__ = [
     "UR10_JOINT_NAMES",
@@ -207,13 +207,7 @@ def import_ipa(path: str | os.PathLike[str]) -> MeasurementSet:
 
     def positive(names: tuple[str, ...]) -> np.ndarray:
         arr = cols(names)
-        bad = np.argwhere(arr <= 0)
-        if bad.size:
-            r, a = bad[0]
-            raise InputError(
-                f"{src}: column '{names[a]}', row {r + 1} (line {lines[r]}): standard deviation "
-                f"{rows[r][idx[names[a]]]!r} must be > 0"
-            )
+        check_positive_sigma(arr, names, lines, src, unit="mm")
         return arr
 
     q = cols(UR10_JOINT_NAMES)
