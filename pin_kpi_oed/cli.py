@@ -54,8 +54,10 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
     from .evaluate import evaluate_file
 
     out = evaluate_file(Path(args.design), Path(args.json) if args.json else None)
+    units = {"kpi": "m^2 (tr C_s)", "param": "m^2 + rad^2 (tr C_p, mixed units)", "E": "m^2 or rad^2 (max eig C_p)",
+             "cond": "(dimensionless)"}
     for k, v in out["criteria"].items():
-        print(f"{k:<7}{v: .6g}")
+        print(f"{k:<7}{v: .6g}  {units.get(k, '(dimensionless, log scale)')}")
     print(f"tr(C_s) = {out['trace_cs_m2'] * 1e6:.6g} mm^2   TCP sigma = {out['tcp_sigma_m'] * 1e6:.3f} um")
     return 0
 
