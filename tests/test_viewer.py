@@ -11,7 +11,6 @@ import copy
 import json
 import os
 import re
-import shutil
 import subprocess
 import tempfile
 from concurrent.futures import ThreadPoolExecutor
@@ -333,12 +332,7 @@ def test_stand_in_design_loads_and_builds():
 
 
 # ----------------------------------------------------------------------------- headless Chromium
-def find_browser() -> str | None:
-    for name in ("chromium", "chromium-browser", "google-chrome", "google-chrome-stable"):
-        path = shutil.which(name)
-        if path:
-            return path
-    return "/usr/bin/chromium" if os.path.exists("/usr/bin/chromium") else None
+find_browser = viewer.find_browser
 
 
 def screenshot(browser: str, html: Path, png: Path, timeout_ms: int) -> None:
