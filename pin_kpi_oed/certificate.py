@@ -23,7 +23,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .pool import ApproximateDesign, approximate_design, exact_phi, select
+from .pool import ApproximateDesign, exact_phi, select
 
 
 @dataclass
@@ -91,4 +91,4 @@ def pool_start(problem, m: int, pool_size: int = 2000, seed: int = 0) -> np.ndar
     return cert.Q_pool[cert.pool_selection]
 
 
-__all__ = ["Certificate", "certify", "pool_start", "approximate_design"]
+__all__ = ["Certificate", "certify", "pool_start"]

@@ -64,19 +64,12 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
 
 def cmd_demo(args: argparse.Namespace) -> int:
     """``pin-kpi-oed demo``: the main job on the embedded default cell (KR 15)."""
-    try:
-        from .cli_design import run as run_design  # full design comparison once available
-    except ImportError:
-        run_design = None
-    if run_design is not None:
-        ns = argparse.Namespace(cell="kr15", criteria="random,param,kpi", measurements=60, seed=args.seed,
-                                json=args.json, no_collision=False, starts=None, certificate=True, pool_size=5000,
-                                start="pool", max_iter=None, quiet=False)
-        return run_design(ns)
-    from .evaluate import random_design_report
+    from .cli_design import run as run_design
 
-    print(random_design_report("kr15", 60, args.seed))
-    return 0
+    ns = argparse.Namespace(cell="kr15", criteria="random,param,kpi", measurements=60, seed=args.seed,
+                            json=args.json, no_collision=False, starts=None, certificate=True, pool_size=5000,
+                            start="pool", max_iter=None, quiet=False)
+    return run_design(ns)
 
 
 def build_parser() -> argparse.ArgumentParser:

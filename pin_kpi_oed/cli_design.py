@@ -102,7 +102,7 @@ def design_json(cell, problem, results: list, m: int, seed: int, collision: bool
         "collision_avoidance": collision,
         "identifiable": [problem.ident.names[i] for i in problem.base],
         "constraint_rows_per_configuration": problem.coll.info.count(),
-        "designs": [{**r.to_dict(), "cov_s_m2": score_design(problem.model, r.q_meas, cell.q_work).cov_s_m2.tolist()}
+        "designs": [{**r.to_dict(), "cov_s_m2": score_design(problem.model, r.q_meas, cell.q_work, problem.ident).cov_s_m2.tolist()}
                     for r in results],
         "q_meas": main.q_meas.tolist(),
         "q_meas_criterion": main.criterion,

@@ -17,7 +17,7 @@ import numpy as np
 from .covariance import param_covariance
 from .criteria import evaluate_all
 from .errors import IdentifiabilityError, InputError
-from .identifiability import analyse, check_kpi
+from .identifiability import Identifiability, analyse, check_kpi
 from .io import atomic_write_json
 from .measurement import TrackerModel
 from .setup import model_from_dict, model_to_dict
@@ -52,8 +52,11 @@ class DesignScore:
                 "identifiable": self.identifiable}
 
 
-def score_design(model: TrackerModel, Q_meas: np.ndarray, Q_work: np.ndarray) -> DesignScore:
+def score_design(model: TrackerModel, Q_meas: np.ndarray, Q_work: np.ndarray,
+                 ident: Identifiability | None = None) -> DesignScore:
     """Score measurement configurations ``Q_meas`` for the KPI at ``Q_work``.
+
+    ``ident``: the identifiability analysis of ``model`` if already at hand (else computed).
 
     Raises:
         InputError: configurations outside the joint limits or not finite.
@@ -61,7 +64,7 @@ def score_design(model: TrackerModel, Q_meas: np.ndarray, Q_work: np.ndarray) ->
     """
     Q_meas = model.robot.check_q(Q_meas, "q_meas")
     Q_work = model.robot.check_q(Q_work, "q_work")
-    ident = analyse(model)
+    ident = ident or analyse(model)
     p0 = np.zeros(model.n_params)
     E_full = model.kpi_jacobian(p0, Q_work)
     check_kpi(ident, model, E_full, "the TCP at q_work")
@@ -103,22 +106,3 @@ def evaluate_file(path: Path, out: Path | None = None) -> dict:
     if out is not None:
         atomic_write_json(out, res)
     return res
-
-
-def random_design_report(robot: str = "kr15", m: int = 60, seed: int = 0) -> str:
-    """Text report of a random m-pose design of a robot with a default tracker set-up."""
-    import pinocchio as pin
-
-    from .robot import load_robot
-
-    rb = load_robot(robot)
-    model = TrackerModel(rb, tracker_T_base=pin.SE3(pin.rpy.rpyToMatrix(0, 0, np.pi), np.array([3.0, 0.0, -0.5])),
-                         reflector_m=np.array([0.05, 0.0, 0.05]))
-    rng = np.random.default_rng(seed)
-    score = score_design(model, rb.random_q(rng, m), rb.neutral()[None])
-    C = score.cov_s_m2 * 1e12
-    lines = [f"{robot}: random design, {m} measurements, seed {seed}, sigma = 1 um per axis",
-             f"identifiable parameters: {score.rank}",
-             f"tr(C_s) = {score.trace_cs_m2 * 1e12:.4g} um^2   TCP sigma = {score.tcp_sigma_m * 1e6:.4g} um",
-             "C_s (um^2):"] + ["  " + " ".join(f"{x:10.4g}" for x in row) for row in C]
-    return "\n".join(lines)

@@ -179,7 +179,7 @@ def analyse(model: TrackerModel, Q: np.ndarray | None = None, prefer: list[str] 
 def _notes(model: TrackerModel) -> list[str]:
     """Plain-words notes on the set-up: a reflector on the last joint axis."""
     rb = model.robot
-    lin, ang = model._joint_axes() if not hasattr(model, "_axes") else model._axes
+    _, ang = model.joint_axes
     if np.linalg.norm(ang[-1]) < 0.5:
         return []
     Mt = rb.model.frames[rb.tool_frame_id].placement

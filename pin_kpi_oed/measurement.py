@@ -189,8 +189,14 @@ class TrackerModel:
         return [self._model.jointPlacements[j].copy() for j in self.robot.joint_ids]
 
     # ------------------------------------------------------------------ kinematics
-    def _joint_axes(self) -> tuple[np.ndarray, np.ndarray]:
-        """Local motion axes of the joints from Pinocchio: (linear (n, 3), angular (n, 3))."""
+    @property
+    def joint_axes(self) -> tuple[np.ndarray, np.ndarray]:
+        """Local motion axes of the joints from Pinocchio: (linear (n, 3), angular (n, 3)); computed once."""
+        if not hasattr(self, "_axes"):
+            self._axes = self._compute_joint_axes()
+        return self._axes
+
+    def _compute_joint_axes(self) -> tuple[np.ndarray, np.ndarray]:
         model, data = self.robot.model, self.robot.model.createData()
         q0 = pin.neutral(model)
         pin.computeJointJacobians(model, data, q0)
@@ -222,10 +228,8 @@ class TrackerModel:
         m, n = Q.shape
         if n != self.robot.nq:
             raise InputError(f"configurations must have {self.robot.nq} joint values, got {n}")
-        if not hasattr(self, "_axes"):
-            self._axes = self._joint_axes()
-            self._revolute = np.linalg.norm(self._axes[1], axis=1) > 0.5
-        lin, ang = self._axes
+        lin, ang = self.joint_axes
+        revolute = np.linalg.norm(ang, axis=1) > 0.5
         R_A = np.empty((m, n, 3, 3))
         t_A = np.empty((m, n, 3))
         twist = np.empty((m, 6, n))
@@ -236,7 +240,7 @@ class TrackerModel:
             t = t + R @ Mj.translation
             R = R @ Mj.rotation
             R_A[:, k], t_A[:, k] = R, t
-            if self._revolute[k]:
+            if revolute[k]:
                 a = ang[k]
                 K = skew(a)
                 s, c = np.sin(Q[:, k])[:, None, None], np.cos(Q[:, k])[:, None, None]

@@ -193,7 +193,7 @@ def _exchange(Fp: np.ndarray, chosen: np.ndarray, K: np.ndarray | None, ridge: f
                 gain = np.einsum("nas,nas->n", G, X)  # tr reduction
             gain = np.where(in_set, -np.inf, gain)
             best = int(np.argmax(gain))
-            new_phi = phi_minus - gain[best] if K is not None else phi_minus - gain[best]
+            new_phi = phi_minus - gain[best]
             if new_phi < cur * (1 - 1e-10) - 1e-300:
                 in_set[out], in_set[best] = False, True
                 chosen[pos] = best

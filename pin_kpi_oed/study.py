@@ -115,22 +115,21 @@ class Task:
 
 def run_task(task: Task, out_dir: str) -> dict:
     """Compute a task's designs and write ``out_dir/tasks/<key>.json`` atomically. Returns the record."""
-    os.environ.setdefault("OMP_NUM_THREADS", "1")
     from .cell import cell_from_dict, load_cell
-    from .design import run_designs
+    from .design import DesignProblem, run_designs
     from .evaluate import score_design
 
     t0 = time.perf_counter()
     rec: dict[str, Any] = task.to_dict()
     try:
         cell = cell_from_dict(task.cell, source=task.key) if isinstance(task.cell, dict) else load_cell(task.cell)
+        problem = DesignProblem(cell, collision=task.collision)
         results = run_designs(cell, list(task.criteria), task.m, task.seed, collision=task.collision,
-                              n_starts=task.n_starts)
-        model = cell.tracker_model()
+                              n_starts=task.n_starts, problem=problem)
         rec["designs"] = []
         for r in results:
             d = {k: v for k, v in r.to_dict().items() if k not in ("starts", "check")}
-            d["cov_s_m2"] = score_design(model, r.q_meas, cell.q_work).cov_s_m2.tolist()
+            d["cov_s_m2"] = score_design(problem.model, r.q_meas, cell.q_work, problem.ident).cov_s_m2.tolist()
             rec["designs"].append(d)
         rec["q_work"] = cell.q_work.tolist()
         rec["ok"] = True
