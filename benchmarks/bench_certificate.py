@@ -10,10 +10,10 @@ import tracemalloc
 import numpy as np
 import pinocchio as pin
 
-from pin_kpi_oed.identifiability import analyse
-from pin_kpi_oed.measurement import TrackerModel
-from pin_kpi_oed.pool import detmax, efficiency, exact_phi, select
-from pin_kpi_oed.robot import load_robot
+from pin_kpi_oed.oed.identifiability import analyse
+from pin_kpi_oed.model.measurement import TrackerModel
+from pin_kpi_oed.oed.pool import detmax, efficiency, exact_phi, select
+from pin_kpi_oed.model.robot import load_robot
 
 
 def main(n: int = 10_000, m: int = 60) -> None:

@@ -8,10 +8,10 @@ from __future__ import annotations
 import numpy as np
 import pinocchio as pin
 
-from pin_kpi_oed.criteria import DesignCriterion
-from pin_kpi_oed.identifiability import analyse
-from pin_kpi_oed.measurement import TrackerModel
-from pin_kpi_oed.robot import load_robot
+from pin_kpi_oed.oed.criteria import DesignCriterion
+from pin_kpi_oed.oed.identifiability import analyse
+from pin_kpi_oed.model.measurement import TrackerModel
+from pin_kpi_oed.model.robot import load_robot
 
 from .common import median_time, report
 

@@ -17,8 +17,8 @@ os.environ.setdefault("OMP_NUM_THREADS", "1")
 import statistics  # noqa: E402
 import time  # noqa: E402
 
-from pin_kpi_oed.cell import load_cell  # noqa: E402
-from pin_kpi_oed.design import DesignProblem, design_ipopt, ipopt_options, solve_ipopt  # noqa: E402
+from pin_kpi_oed.cell.cell import load_cell  # noqa: E402
+from pin_kpi_oed.design.optimize import DesignProblem, design_ipopt, ipopt_options, solve_ipopt  # noqa: E402
 
 TARGET_S = 5.0
 

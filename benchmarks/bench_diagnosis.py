@@ -24,11 +24,11 @@ TARGET_S = 60.0
 
 
 def _data(n_total: int, seed: int = 0):
-    from pin_kpi_oed.effects import parse_effects_spec, size_effect
-    from pin_kpi_oed.io import MeasurementSet
-    from pin_kpi_oed.measurement import NoiseModel, TrackerModel
-    from pin_kpi_oed.robot import load_robot
-    from pin_kpi_oed.simulate import Tolerances, default_tracker_pose, random_truth, simulate
+    from pin_kpi_oed.effects.library import parse_effects_spec, size_effect
+    from pin_kpi_oed.data.measurements import MeasurementSet
+    from pin_kpi_oed.model.measurement import NoiseModel, TrackerModel
+    from pin_kpi_oed.model.robot import load_robot
+    from pin_kpi_oed.identification.simulate import Tolerances, default_tracker_pose, random_truth, simulate
 
     rb = load_robot("ur10")
     refl = np.array([0.05, 0.02, 0.10])
@@ -45,7 +45,7 @@ def _data(n_total: int, seed: int = 0):
 
 
 def main() -> None:
-    from pin_kpi_oed.diagnosis import diagnose
+    from pin_kpi_oed.diagnosis.diagnose import diagnose
 
     print("== diagnosis (UR10, 2,000 measurements, 5 candidate effects, joint compliance withheld)")
     model, data = _data(2000)

@@ -1,7 +1,7 @@
 """Identification speed: 60 measurements ≤ 50 ms, 1,000 ≤ 0.5 s, linear in the number of measurements.
 
 Simulated KR 15 data (σ = 10 µm, random geometric errors, unknown tracker pose; seeds fixed), full
-:func:`pin_kpi_oed.identify.identify` call: checks, tracker registration, Levenberg–Marquardt with the
+:func:`pin_kpi_oed.identification.identify.identify` call: checks, tracker registration, Levenberg–Marquardt with the
 analytic Jacobian over the 27 identifiable parameters, covariance and predicted TCP std at every
 measured configuration. "cold" = a call that recomputes the identifiability analysis (cached per
 robot and set-up, ~10 ms), "warm" = median of repeated calls on the same set-up; the very first call of
@@ -27,7 +27,7 @@ SIZES = (60, 100, 250, 500, 1000, 2000)
 
 def _case(m: int, seed: int = 0):
     from pin_kpi_oed import NoiseModel, TrackerModel, load_robot
-    from pin_kpi_oed.simulate import Tolerances, default_tracker_pose, random_truth, simulate
+    from pin_kpi_oed.identification.simulate import Tolerances, default_tracker_pose, random_truth, simulate
 
     robot = load_robot("kr15")
     noise = NoiseModel(sigma_xyz_m=(1e-5,) * 3)
@@ -40,7 +40,7 @@ def _case(m: int, seed: int = 0):
 
 def main(repeats: int = 7) -> dict:
     """Run the benchmark, print figures and ratios to the targets, return them."""
-    from pin_kpi_oed.identify import _IDENT_CACHE, identify
+    from pin_kpi_oed.identification.identify import _IDENT_CACHE, identify
 
     rows = {}
     model, data = _case(60, seed=99)

@@ -8,7 +8,7 @@ import shutil
 import time
 from pathlib import Path
 
-from pin_kpi_oed.study import format_notional_summary, notional_study
+from pin_kpi_oed.studies.study import format_notional_summary, notional_study
 
 
 def main(out: str = "out/bench_notional90", scaling_arms: int = 6) -> None:

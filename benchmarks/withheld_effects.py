@@ -1,11 +1,11 @@
 """Withheld-effects study: is the right effect named when the diagnosis is never told which one is there?
 
-For every effect of :mod:`pin_kpi_oed.effects` alone, and for data with no effect, over 20
+For every effect of :mod:`pin_kpi_oed.effects.library` alone, and for data with no effect, over 20
 seeds each: a UR10 with random geometric errors (0.5 mm / 1 mrad per placement component),
 measured by a laser tracker (σ = 10 µm per axis) at random configurations, 500 training and
 500 held-out measurements with a temperature column (20–25 °C, uniform). Each effect's size
 is drawn so that the part of it a geometric calibration cannot absorb is k × σ (per-axis
-RMS), k ~ U(2, 10) (:func:`pin_kpi_oed.effects.visible_rms`). The diagnosis sees only the
+RMS), k ~ U(2, 10) (:func:`pin_kpi_oed.effects.library.visible_rms`). The diagnosis sees only the
 files and tries every candidate.
 
 Targets (issue 5): right ``dominant_effect`` in >= 95 % of the runs of each effect; for
@@ -34,11 +34,11 @@ REFLECTOR = (0.05, 0.02, 0.10)
 
 def make_case(effect: str | None, seed: int, n: int, robot_name: str = "ur10"):
     """Simulated training and held-out sets with ``effect`` (or none) of a random visible size."""
-    from pin_kpi_oed.effects import parse_effects_spec, size_effect, visible_rms
-    from pin_kpi_oed.io import MeasurementSet
-    from pin_kpi_oed.measurement import NoiseModel, TrackerModel
-    from pin_kpi_oed.robot import load_robot
-    from pin_kpi_oed.simulate import Tolerances, default_tracker_pose, random_truth, simulate
+    from pin_kpi_oed.effects.library import parse_effects_spec, size_effect, visible_rms
+    from pin_kpi_oed.data.measurements import MeasurementSet
+    from pin_kpi_oed.model.measurement import NoiseModel, TrackerModel
+    from pin_kpi_oed.model.robot import load_robot
+    from pin_kpi_oed.identification.simulate import Tolerances, default_tracker_pose, random_truth, simulate
 
     rb = load_robot(robot_name)
     rng = np.random.default_rng(1000 + seed)
@@ -64,7 +64,7 @@ def make_case(effect: str | None, seed: int, n: int, robot_name: str = "ur10"):
 
 def run_one(args: tuple) -> dict:
     effect, seed, n = args
-    from pin_kpi_oed.diagnosis import diagnose
+    from pin_kpi_oed.diagnosis.diagnose import diagnose
 
     nominal, train, val, k = make_case(effect, seed, n)
     t0 = time.perf_counter()
@@ -86,7 +86,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--effects", default=None, help="comma-separated subset (default: all + none)")
     ap.add_argument("--json", default=None, help="write every run's outcome here")
     a = ap.parse_args(argv)
-    from pin_kpi_oed.effects import EFFECT_NAMES
+    from pin_kpi_oed.effects.library import EFFECT_NAMES
 
     names = a.effects.split(",") if a.effects else list(EFFECT_NAMES) + ["none"]
     tasks = [(None if e == "none" else e, s, a.n) for e in names for s in range(a.seeds)]
@@ -123,7 +123,7 @@ def main(argv: list[str] | None = None) -> int:
           f"{'MET' if ok_all else 'MISSED'}; {len(runs)} runs in {time.perf_counter() - t0:.0f} s, "
           f"median {np.median([r['time_s'] for r in runs]):.1f} s per diagnosis")
     if a.json:
-        from pin_kpi_oed.io import atomic_write_json
+        from pin_kpi_oed.data.measurements import atomic_write_json
 
         atomic_write_json(a.json, {"runs": runs, "noise_m": NOISE_M, "n": a.n, "seeds": a.seeds})
     return 0 if ok_all else 1

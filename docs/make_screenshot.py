@@ -4,7 +4,7 @@
     .venv/bin/python docs/make_screenshot.py design.json      # screenshot an existing design JSON
 
 Steps: ``pin-kpi-oed design --cell kr15 --criteria random,param,kpi --measurements 60 --seed 0 --json``
-(or the JSON given), the scene of :func:`pin_kpi_oed.viewer.build_scene` written as a static page, and a
+(or the JSON given), the scene of :func:`pin_kpi_oed.viz.viewer.build_scene` written as a static page, and a
 1280x800 screenshot of it in headless Chromium (software WebGL). Needs Chromium (``apt-get install chromium``).
 If the design step fails, a stand-in design of random configurations is shown and the script says so.
 """
@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
-from pin_kpi_oed import viewer
+from pin_kpi_oed.viz import viewer
 
 DOCS = Path(__file__).resolve().parent
 OUT = DOCS / "kr15_design.png"
@@ -31,7 +31,7 @@ def design_file(tmp: Path) -> tuple[Path, bool]:
         return Path(sys.argv[1]), True
     path = tmp / "design.json"
     try:
-        from pin_kpi_oed.cli import main as cli
+        from pin_kpi_oed.cli.main import main as cli
 
         rc = cli(["design", "--cell", "kr15", "--criteria", "random,param,kpi", "--measurements", "60", "--seed", "0",
                   "--json", str(path)])

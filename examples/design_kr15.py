@@ -11,9 +11,9 @@ from __future__ import annotations
 import argparse
 import os
 
-from pin_kpi_oed.cell import load_cell
-from pin_kpi_oed.certificate import certify
-from pin_kpi_oed.design import DesignProblem, run_designs
+from pin_kpi_oed.cell.cell import load_cell
+from pin_kpi_oed.oed.certificate import certify
+from pin_kpi_oed.design.optimize import DesignProblem, run_designs
 
 QUICK = os.environ.get("PIN_KPI_OED_QUICK") == "1"
 

@@ -18,12 +18,12 @@ import os
 
 import numpy as np
 
-from pin_kpi_oed.diagnosis import diagnose
-from pin_kpi_oed.effects import parse_effects_spec, range_scale_parameters, size_effect, visible_rms
-from pin_kpi_oed.io import MeasurementSet, atomic_write_json, read_measurements, write_measurements
-from pin_kpi_oed.measurement import NoiseModel, TrackerModel
-from pin_kpi_oed.robot import load_robot
-from pin_kpi_oed.simulate import Tolerances, default_tracker_pose, random_truth, simulate
+from pin_kpi_oed.diagnosis.diagnose import diagnose
+from pin_kpi_oed.effects.library import parse_effects_spec, range_scale_parameters, size_effect, visible_rms
+from pin_kpi_oed.data.measurements import MeasurementSet, atomic_write_json, read_measurements, write_measurements
+from pin_kpi_oed.model.measurement import NoiseModel, TrackerModel
+from pin_kpi_oed.model.robot import load_robot
+from pin_kpi_oed.identification.simulate import Tolerances, default_tracker_pose, random_truth, simulate
 
 QUICK = os.environ.get("PIN_KPI_OED_QUICK") == "1"
 N = 250 if QUICK else 800  # training = held-out measurements

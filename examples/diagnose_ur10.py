@@ -2,7 +2,7 @@
 
 For each series: calibrate on a random half, validate on the other (disjoint) half, run the
 diagnosis with the library's candidate effects, then once more with an exploratory
-joint-angle error table (:class:`pin_kpi_oed.effects.JointAngleTable`), and collect the
+joint-angle error table (:class:`pin_kpi_oed.effects.library.JointAngleTable`), and collect the
 evidence on what the remaining error is:
 
 * repeatability: Series B measures many configurations twice a few rows apart; their
@@ -28,13 +28,13 @@ from pathlib import Path
 
 import numpy as np
 
-from pin_kpi_oed.diagnosis import diagnose
-from pin_kpi_oed.effects import EFFECT_NAMES, JointAngleTable, position_dq
-from pin_kpi_oed.identify import ResidualModel, identify
-from pin_kpi_oed.io import MeasurementSet, atomic_write_json
-from pin_kpi_oed.ipa import import_ipa
-from pin_kpi_oed.measurement import NoiseModel, TrackerModel
-from pin_kpi_oed.robot import load_robot
+from pin_kpi_oed.diagnosis.diagnose import diagnose
+from pin_kpi_oed.effects.library import EFFECT_NAMES, JointAngleTable, position_dq
+from pin_kpi_oed.identification.identify import ResidualModel, identify
+from pin_kpi_oed.data.measurements import MeasurementSet, atomic_write_json
+from pin_kpi_oed.data.ipa import import_ipa
+from pin_kpi_oed.model.measurement import NoiseModel, TrackerModel
+from pin_kpi_oed.model.robot import load_robot
 
 QUICK = os.environ.get("PIN_KPI_OED_QUICK") == "1"
 DATA = Path(__file__).resolve().parents[2] / "shared" / "data" / "ipa_ur10"

@@ -26,9 +26,9 @@ ROOT = Path(__file__).resolve().parents[1]
 import numpy as np
 
 from pin_kpi_oed import NoiseModel, TrackerModel, load_robot
-from pin_kpi_oed.identify import format_validation, identify, validate
-from pin_kpi_oed.io import MeasurementSet, atomic_write_json
-from pin_kpi_oed.ipa import import_ipa, read_ipa_flange_transform
+from pin_kpi_oed.identification.identify import format_validation, identify, validate
+from pin_kpi_oed.data.measurements import MeasurementSet, atomic_write_json
+from pin_kpi_oed.data.ipa import import_ipa, read_ipa_flange_transform
 
 SERIES_C = ROOT.parent / "shared" / "data" / "ipa_ur10" / "Series_C"
 SPLIT_SEED = 0  # documented seed of the random 50/50 split
@@ -68,7 +68,7 @@ def main(argv: list[str] | None = None) -> int:
     ok = va["mean_m"] <= 0.45e-3
     print(f"  target held-out mean ≤ 0.45 mm: {'met' if ok else 'NOT met'}")
     if a.out:
-        from pin_kpi_oed.export import export_result_urdf
+        from pin_kpi_oed.identification.export import export_result_urdf
 
         out = Path(a.out)
         atomic_write_json(out / "result.json", {"result": after.to_dict(), "baseline": before.to_dict(),

@@ -6,11 +6,11 @@ Run: python examples/kpi_covariance.py
 import numpy as np
 import pinocchio as pin
 
-from pin_kpi_oed.covariance import kpi_covariance, kpi_covariance_kkt
-from pin_kpi_oed.criteria import evaluate_all
-from pin_kpi_oed.identifiability import analyse, check_kpi
-from pin_kpi_oed.measurement import NoiseModel, TrackerModel
-from pin_kpi_oed.robot import load_robot
+from pin_kpi_oed.oed.covariance import kpi_covariance, kpi_covariance_kkt
+from pin_kpi_oed.oed.criteria import evaluate_all
+from pin_kpi_oed.oed.identifiability import analyse, check_kpi
+from pin_kpi_oed.model.measurement import NoiseModel, TrackerModel
+from pin_kpi_oed.model.robot import load_robot
 
 robot = load_robot("kr15")  # or a URDF path, or "ur10", "panda", ...
 model = TrackerModel(

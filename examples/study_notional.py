@@ -10,7 +10,7 @@ from __future__ import annotations
 import argparse
 import os
 
-from pin_kpi_oed.study import format_notional_summary, notional_study
+from pin_kpi_oed.studies.study import format_notional_summary, notional_study
 
 QUICK = os.environ.get("PIN_KPI_OED_QUICK") == "1"
 

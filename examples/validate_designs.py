@@ -16,11 +16,11 @@ from pathlib import Path
 
 import numpy as np
 from pin_kpi_oed import NoiseModel, TrackerModel, load_robot
-from pin_kpi_oed.cell import load_cell
-from pin_kpi_oed.design import run_designs
-from pin_kpi_oed.io import atomic_write_json
-from pin_kpi_oed.ipa import import_ipa
-from pin_kpi_oed.validation import monte_carlo, real_data_validation
+from pin_kpi_oed.cell.cell import load_cell
+from pin_kpi_oed.design.optimize import run_designs
+from pin_kpi_oed.data.measurements import atomic_write_json
+from pin_kpi_oed.data.ipa import import_ipa
+from pin_kpi_oed.studies.validation import monte_carlo, real_data_validation
 
 SERIES_C = Path(__file__).resolve().parents[2] / "shared" / "data" / "ipa_ur10" / "Series_C"
 QUICK = os.environ.get("PIN_KPI_OED_QUICK") == "1"

@@ -17,8 +17,8 @@ import sys
 import tempfile
 from pathlib import Path
 
-from pin_kpi_oed import viewer
-from pin_kpi_oed.figures import design_figures
+from pin_kpi_oed.viz import viewer
+from pin_kpi_oed.viz.figures import design_figures
 
 quick = os.environ.get("PIN_KPI_OED_QUICK") == "1"  # the examples test runs a smaller problem
 args = [a for a in sys.argv[1:] if not a.startswith("--")]
@@ -27,7 +27,7 @@ if args:
 else:
     design_json = Path(tempfile.mkdtemp()) / "design.json"
     try:  # the KPI design of the shipped KR 15 cell (issue 4)
-        from pin_kpi_oed.cli import main as cli
+        from pin_kpi_oed.cli.main import main as cli
 
         m = 30 if quick else 60
         rc = cli(["design", "--cell", "kr15", "--criteria", "random,param,kpi", "--measurements", str(m),
@@ -37,7 +37,7 @@ else:
         rc = 1
     if rc != 0 or not design_json.exists():
         design_json.write_text(json.dumps(viewer.stand_in_design("kr15", m=20 if quick else 40, seed=0)))
-        print("stand-in design: random configurations, not optimised (pin_kpi_oed.viewer.stand_in_design)")
+        print("stand-in design: random configurations, not optimised (pin_kpi_oed.viz.viewer.stand_in_design)")
 
 df = viewer.load_design(design_json)
 for note in df.notes:

@@ -14,11 +14,11 @@ import os as _os
 for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
     _os.environ.setdefault(_var, "1")
 
-from .errors import (IdentifiabilityError, InfeasibleError, InputError, PinKpiOedError, RobotLoadError,
+from pin_kpi_oed.errors import (IdentifiabilityError, InfeasibleError, InputError, PinKpiOedError, RobotLoadError,
                      SolverError)
-from .robot import Robot, load_robot
-from .parameters import ParameterLayout
-from .measurement import NoiseModel, TrackerModel
+from pin_kpi_oed.model.robot import Robot, load_robot
+from pin_kpi_oed.model.parameters import ParameterLayout
+from pin_kpi_oed.model.measurement import NoiseModel, TrackerModel
 
 __version__ = "0.1.0"
 

@@ -2,6 +2,6 @@
 
 import sys
 
-from .cli import main
+from pin_kpi_oed.cli.main import main
 
 sys.exit(main())

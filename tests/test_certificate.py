@@ -9,9 +9,9 @@ import sys
 import numpy as np
 import pytest
 
-from pin_kpi_oed.cell import load_cell
-from pin_kpi_oed.certificate import certify
-from pin_kpi_oed.design import DesignProblem
+from pin_kpi_oed.cell.cell import load_cell
+from pin_kpi_oed.oed.certificate import certify
+from pin_kpi_oed.design.optimize import DesignProblem
 
 from .conftest import REPO
 
@@ -29,7 +29,7 @@ def test_certificate_bounds_pool_designs_and_pool_is_feasible(problem):
     assert 0.5 < cert.efficiency(cert.pool_selection_trace_cs_m2) <= 1.0
     assert problem.checker.check(cert.Q_pool[cert.pool_selection]).all_feasible
     rng = np.random.default_rng(0)
-    from pin_kpi_oed.pool import exact_phi
+    from pin_kpi_oed.oed.pool import exact_phi
 
     Fp = problem.model.weighted_jacobian(problem.p0, cert.Q_pool)[:, :, problem.base]
     for _ in range(10):  # any m-subset of the pool respects the bound

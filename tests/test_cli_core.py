@@ -9,7 +9,7 @@ import sys
 import numpy as np
 import pytest
 
-from pin_kpi_oed.robot import load_robot
+from pin_kpi_oed.model.robot import load_robot
 
 from .conftest import REPO
 

@@ -6,11 +6,11 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from pin_kpi_oed import covariance as cov
-from pin_kpi_oed import identifiability as idf
-from pin_kpi_oed.criteria import CRITERIA, DesignCriterion
+from pin_kpi_oed.oed import covariance as cov
+from pin_kpi_oed.oed import identifiability as idf
+from pin_kpi_oed.oed.criteria import CRITERIA, DesignCriterion
 from pin_kpi_oed.errors import IdentifiabilityError, InputError
-from pin_kpi_oed.measurement import NoiseModel
+from pin_kpi_oed.model.measurement import NoiseModel
 
 from .conftest import make_model
 

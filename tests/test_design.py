@@ -8,8 +8,8 @@ import json
 import numpy as np
 import pytest
 
-from pin_kpi_oed.cell import load_cell
-from pin_kpi_oed.design import (DesignProblem, DesignResult, _NLP, design_ipopt, ipopt_options, run_designs,
+from pin_kpi_oed.cell.cell import load_cell
+from pin_kpi_oed.design.optimize import (DesignProblem, DesignResult, _NLP, design_ipopt, ipopt_options, run_designs,
                                 solve_ipopt)
 from pin_kpi_oed.errors import InputError
 
@@ -95,7 +95,7 @@ def test_bad_requests_are_named(problem):
 
 
 def test_cli_design_writes_the_json(tmp_path, capsys):
-    from pin_kpi_oed import cli_design
+    from pin_kpi_oed.cli import design as cli_design
 
     out = tmp_path / "design.json"
     ns = argparse.Namespace(cell="kr15", criteria="random,kpi", measurements=M, seed=0, json=str(out),
@@ -117,21 +117,21 @@ def test_cli_design_writes_the_json(tmp_path, capsys):
             assert key in x
         assert np.array(x["q_meas"]).shape == (M, 6)
     # the file is a valid input of `pin-kpi-oed evaluate` (set-up + q_meas + q_work)
-    from pin_kpi_oed.evaluate import evaluate_file
+    from pin_kpi_oed.oed.evaluate import evaluate_file
 
     ev = evaluate_file(out)
     assert ev["trace_cs_m2"] == pytest.approx(d["designs"][1]["trace_cs_m2"], rel=1e-9)
 
 
 def test_cli_rejects_unknown_criterion():
-    from pin_kpi_oed import cli_design
+    from pin_kpi_oed.cli import design as cli_design
 
     with pytest.raises(InputError, match="unknown criterion 'foo'"):
         cli_design.parse_criteria("random,foo")
 
 
 def test_cli_registers_design_subcommand():
-    from pin_kpi_oed import cli_design
+    from pin_kpi_oed.cli import design as cli_design
 
     parser = argparse.ArgumentParser()
     sub = parser.add_subparsers(dest="command")

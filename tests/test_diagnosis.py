@@ -7,13 +7,13 @@ import json
 import numpy as np
 import pytest
 
-from pin_kpi_oed.cli import main as cli_main
-from pin_kpi_oed.diagnosis import diagnose
-from pin_kpi_oed.effects import EFFECT_NAMES, parse_effects_spec, size_effect, visible_rms
-from pin_kpi_oed.io import MeasurementSet, write_measurements
-from pin_kpi_oed.measurement import NoiseModel, TrackerModel
-from pin_kpi_oed.robot import load_robot
-from pin_kpi_oed.simulate import Tolerances, default_tracker_pose, random_truth, simulate
+from pin_kpi_oed.cli.main import main as cli_main
+from pin_kpi_oed.diagnosis.diagnose import diagnose
+from pin_kpi_oed.effects.library import EFFECT_NAMES, parse_effects_spec, size_effect, visible_rms
+from pin_kpi_oed.data.measurements import MeasurementSet, write_measurements
+from pin_kpi_oed.model.measurement import NoiseModel, TrackerModel
+from pin_kpi_oed.model.robot import load_robot
+from pin_kpi_oed.identification.simulate import Tolerances, default_tracker_pose, random_truth, simulate
 
 SIGMA = 1e-5
 REFL = np.array([0.05, 0.02, 0.10])

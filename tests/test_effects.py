@@ -6,13 +6,13 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from pin_kpi_oed.effects import (EFFECT_NAMES, UNOBSERVABLE_NOTES, Backlash, GearHarmonic, JointCompliance,
+from pin_kpi_oed.effects.library import (EFFECT_NAMES, UNOBSERVABLE_NOTES, Backlash, GearHarmonic, JointCompliance,
                                  JointScale, ThermalExpansion, candidate_effects, effect_jacobian, gravity_torque,
                                  make_effect, parse_effects_spec, predict_with_effects, range_scale_parameters)
 from pin_kpi_oed.errors import InputError
-from pin_kpi_oed.io import MeasurementSet
-from pin_kpi_oed.measurement import TrackerModel
-from pin_kpi_oed.robot import load_robot
+from pin_kpi_oed.data.measurements import MeasurementSet
+from pin_kpi_oed.model.measurement import TrackerModel
+from pin_kpi_oed.model.robot import load_robot
 
 from .conftest import make_model
 
@@ -215,7 +215,7 @@ def test_effects_on_kuka_and_shapes():
 
 
 def test_joint_angle_table(ur10):
-    from pin_kpi_oed.effects import JointAngleTable, SubsetEffect
+    from pin_kpi_oed.effects.library import JointAngleTable, SubsetEffect
 
     rng = np.random.default_rng(9)
     Q = ur10.random_q(rng, 40)

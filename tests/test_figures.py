@@ -8,7 +8,7 @@ import os
 import numpy as np
 import pytest
 
-from pin_kpi_oed import figures
+from pin_kpi_oed.viz import figures
 from pin_kpi_oed.errors import InputError
 
 from .test_viewer import make_design

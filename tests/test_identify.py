@@ -12,12 +12,12 @@ import pytest
 
 from pin_kpi_oed import NoiseModel, TrackerModel, load_robot
 from pin_kpi_oed.errors import IdentifiabilityError, InputError, PinKpiOedError, SolverError
-from pin_kpi_oed.export import calibrated_urdf_text, check_urdf_fk, export_result_urdf, write_calibrated_urdf
-from pin_kpi_oed.identifiability import analyse
-from pin_kpi_oed.identify import (ResidualModel, _jl_inv, format_validation, identify, predict, register_points,
+from pin_kpi_oed.identification.export import calibrated_urdf_text, check_urdf_fk, export_result_urdf, write_calibrated_urdf
+from pin_kpi_oed.oed.identifiability import analyse
+from pin_kpi_oed.identification.identify import (ResidualModel, _jl_inv, format_validation, identify, predict, register_points,
                                   validate)
-from pin_kpi_oed.io import MeasurementSet, read_measurements, write_measurements
-from pin_kpi_oed.simulate import Tolerances, default_tracker_pose, random_truth, simulate
+from pin_kpi_oed.data.measurements import MeasurementSet, read_measurements, write_measurements
+from pin_kpi_oed.identification.simulate import Tolerances, default_tracker_pose, random_truth, simulate
 
 SIGMA = 1e-5  # tracker noise (m) of the simulated round trips
 REFLECTOR = np.array([0.03, 0.02, 0.08])
@@ -94,7 +94,7 @@ def _z_scores(res, truth_model, truth):
 
 
 def _argparser():
-    from pin_kpi_oed.cli_identify import register
+    from pin_kpi_oed.cli.identify import register
 
     ap = argparse.ArgumentParser(prog="pin-kpi-oed")
     sp = ap.add_subparsers(dest="cmd", required=True)

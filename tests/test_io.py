@@ -1,4 +1,4 @@
-"""Tests of pin_kpi_oed.io (measurement CSV files, atomic writes) and pin_kpi_oed.ipa."""
+"""Tests of pin_kpi_oed.data.measurements (measurement CSV files, atomic writes) and pin_kpi_oed.data.ipa."""
 
 from __future__ import annotations
 
@@ -11,9 +11,9 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-import pin_kpi_oed.io as pio
+import pin_kpi_oed.data.measurements as pio
 from pin_kpi_oed.errors import InputError, PinKpiOedError
-from pin_kpi_oed.io import (
+from pin_kpi_oed.data.measurements import (
     MeasurementSet,
     atomic_write_json,
     atomic_write_text,
@@ -403,7 +403,7 @@ def test_subset_mask_and_errors() -> None:
 # --------------------------------------------------------------------------- #
 @needs_ipa
 def test_ipa_series_c() -> None:
-    from pin_kpi_oed.ipa import UR10_JOINT_NAMES, import_ipa
+    from pin_kpi_oed.data.ipa import UR10_JOINT_NAMES, import_ipa
 
     ms = import_ipa(IPA_DIR / "Series_C" / "measurements_random_poses.csv")
     assert len(ms) == 2773
@@ -427,7 +427,7 @@ def test_ipa_series_c() -> None:
 
 @needs_ipa
 def test_ipa_series_a_time() -> None:
-    from pin_kpi_oed.ipa import import_ipa
+    from pin_kpi_oed.data.ipa import import_ipa
 
     ms = import_ipa(IPA_DIR / "Series_A")
     assert len(ms) == 11911 and ms.sigma_m is None
@@ -447,7 +447,7 @@ def test_ipa_series_a_time() -> None:
 def test_ipa_euler_convention(series: str) -> None:
     """The angle between two measured orientations must match the nominal UR10 FK
     (it does not depend on the unknown tracker or probe frames)."""
-    from pin_kpi_oed.ipa import import_ipa
+    from pin_kpi_oed.data.ipa import import_ipa
 
     ms = import_ipa(IPA_DIR / series)
     alpha = [math.pi / 2, 0, 0, math.pi / 2, -math.pi / 2, 0]  # UR10 CB3 nominal DH
@@ -469,7 +469,7 @@ def test_ipa_euler_convention(series: str) -> None:
 
 @needs_ipa
 def test_ipa_round_trip_through_csv(tmp_path: Path) -> None:
-    from pin_kpi_oed.ipa import UR10_JOINT_NAMES, import_ipa
+    from pin_kpi_oed.data.ipa import UR10_JOINT_NAMES, import_ipa
 
     ms = import_ipa(IPA_DIR / "Series_D" / "measurements_iso_cubes.csv")
     f = tmp_path / "d.csv"
@@ -483,7 +483,7 @@ def test_ipa_round_trip_through_csv(tmp_path: Path) -> None:
 
 @needs_ipa
 def test_ipa_flange_transform() -> None:
-    from pin_kpi_oed.ipa import read_ipa_flange_transform
+    from pin_kpi_oed.data.ipa import read_ipa_flange_transform
 
     T = read_ipa_flange_transform(IPA_DIR / "Series_C")
     assert T.shape == (4, 4)
@@ -495,7 +495,7 @@ def test_ipa_flange_transform() -> None:
 
 
 def test_ipa_bad_inputs(tmp_path: Path) -> None:
-    from pin_kpi_oed.ipa import UR10_JOINT_NAMES, import_ipa, read_ipa_flange_transform
+    from pin_kpi_oed.data.ipa import UR10_JOINT_NAMES, import_ipa, read_ipa_flange_transform
 
     header = ["Timestamp", *UR10_JOINT_NAMES, "measurement_temperature", "measurement_x", "measurement_y",
               "measurement_z"]

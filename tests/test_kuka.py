@@ -1,4 +1,4 @@
-"""Tests of the KUKA-like URDF generator (pin_kpi_oed.kuka) and the shipped URDFs.
+"""Tests of the KUKA-like URDF generator (pin_kpi_oed.model.kuka) and the shipped URDFs.
 
 Reference values are the tables of shared/reference/kuka_kinematics.md (mm, deg),
 copied here on purpose so that a change in the generator is caught.
@@ -14,7 +14,7 @@ import pinocchio as pin
 import pytest
 from scipy.optimize import minimize_scalar
 
-from pin_kpi_oed import kuka
+from pin_kpi_oed.model import kuka
 from pin_kpi_oed.errors import InputError
 
 URDF_DIR = Path(__file__).resolve().parents[1] / "urdf"

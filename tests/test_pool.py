@@ -5,9 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from pin_kpi_oed import identifiability as idf
+from pin_kpi_oed.oed import identifiability as idf
 from pin_kpi_oed.errors import InputError
-from pin_kpi_oed.pool import approximate_design, detmax, efficiency, exact_phi, select
+from pin_kpi_oed.oed.pool import approximate_design, detmax, efficiency, exact_phi, select
 
 from .conftest import make_model
 

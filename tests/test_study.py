@@ -11,7 +11,7 @@ import time
 
 import pytest
 
-from pin_kpi_oed import study
+from pin_kpi_oed.studies import study
 
 from .conftest import REPO
 

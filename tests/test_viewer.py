@@ -20,12 +20,12 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from pin_kpi_oed.covariance import kpi_covariance
+from pin_kpi_oed.oed.covariance import kpi_covariance
 from pin_kpi_oed.errors import InputError, PinKpiOedError
-from pin_kpi_oed.identifiability import analyse
-from pin_kpi_oed.measurement import NoiseModel, TrackerModel
-from pin_kpi_oed.robot import load_robot
-from pin_kpi_oed import viewer
+from pin_kpi_oed.oed.identifiability import analyse
+from pin_kpi_oed.model.measurement import NoiseModel, TrackerModel
+from pin_kpi_oed.model.robot import load_robot
+from pin_kpi_oed.viz import viewer
 
 CRITERIA = ("random", "param", "kpi")
 
@@ -302,7 +302,7 @@ def test_nice_factor_and_ellipsoid():
 
 # ----------------------------------------------------------------------------- CLI
 def test_cli_view_writes_the_static_page(design_path, tmp_path, capsys):
-    from pin_kpi_oed.cli import main
+    from pin_kpi_oed.cli.main import main
 
     out = tmp_path / "view.html"
     assert main(["view", str(design_path), "--html", str(out), "--no-open", "--criteria", "random,kpi",

@@ -1,7 +1,7 @@
 """Regenerate the shipped KUKA-like URDFs (kr15, kr300, kr500) next to this script.
 
 Usage: ``.venv/bin/python urdf/regenerate.py``. The files are written atomically
-by :func:`pin_kpi_oed.kuka.write_urdf`; their values are documented stand-ins.
+by :func:`pin_kpi_oed.model.kuka.write_urdf`; their values are documented stand-ins.
 """
 
 from __future__ import annotations
@@ -12,7 +12,7 @@ from pathlib import Path
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE.parent))
 
-from pin_kpi_oed.kuka import KR15, KR300, KR500, write_urdf  # noqa: E402
+from pin_kpi_oed.model.kuka import KR15, KR300, KR500, write_urdf  # noqa: E402
 
 
 def main() -> None:

@@ -1,0 +1,506 @@
+"""Measurement cells: the robot, its tracker and its surroundings, read from YAML.
+
+A *cell* is everything the design optimiser needs besides the criterion
+(paper sections 2.2 and 3.2): the robot and its tool frame, the reflector and
+the KPI point on the tool, the laser tracker's pose and noise, the joint
+bounds, the robot's capsules, the obstacles, the laser beam, the incidence
+limit (eq. 4, default 30°) and the working configurations q_work (the KPIs).
+
+Frames. Obstacles, half-spaces, the robot base and the tracker are given in
+one *cell* (world) frame W; the robot's capsules in their link frames. The
+measurement model needs the pose of the robot base in the tracker frame,
+
+    tracker_T_base = (W_T_tracker)⁻¹ · W_T_base .
+
+Capsules (eq. 20–21). A capsule is a segment [a, b] with a radius r: the set of
+points within r of the segment. Robot capsules default to the URDF's collision
+cylinders read as capsules of the same radius along the cylinder axis
+(``robot_capsules: urdf``); the KUKA URDFs of ``urdf/`` have one per link.
+A half-space ``{x : n·x ≥ offset}`` is the free side of a plane (wall, floor).
+
+Schema (SI units; angles may be given in degrees with a ``_deg`` key instead of
+``_rad``)::
+
+    name: kr15_fms
+    robot: kr15                      # shipped name or URDF path (relative to this file)
+    tool_frame: tool0
+    base:    {xyz_m: [x, y, z], rpy_rad: [r, p, y]}      # robot base in the cell frame
+    tracker: {xyz_m: [...], rpy_deg: [...]}              # tracker frame in the cell frame
+    reflector_m: [x, y, z]           # reflector in the tool frame
+    tcp_m: [x, y, z]                 # KPI point (TCP) in the tool frame
+    noise: {sigma_xyz_m: [sx, sy, sz]}                   # or {range_a_m: a, range_b: b}
+    joint_bounds: {lower_deg: [...], upper_deg: [...]}   # optional override of the URDF limits
+    robot_capsules: urdf             # or a list of {name, link, a_m, b_m, radius_m} (link frame)
+    extra_capsules: []               # more robot capsules, same fields (e.g. a tool)
+    obstacles:
+      capsules:    [{name, a_m, b_m, radius_m}]          # cell frame
+      half_spaces: [{name, normal, offset_m}]            # free side n·x >= offset
+    skip_pairs: [[base_link, link_2], [link_1, pedestal]]   # capsule/link/obstacle names
+    beam: {radius_m: 0.005, skip: []}                    # laser beam capsule tracker -> reflector
+    incidence_max_deg: 30
+    clearance_m: 0.0                 # required distance between any two capsules
+    working_configurations_deg: [[a1, ..., a6]]
+    measurements: 60
+    max_random_tries: 200000         # rejection-sampling budget of the heuristic design
+
+Names in ``skip_pairs`` and ``beam.skip`` may be capsule names, link names
+(every capsule of that link), obstacle or half-space names; ``beam.skip`` is meant for a tool
+capsule that carries the reflector (the beam starts inside it). Adjacent links (a joint's
+parent and child) are skipped automatically; the skip list is for pairs that
+are adjacent *by construction* (enclosing capsules that overlap in every
+configuration, a robot mounted on its pedestal).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pinocchio as pin
+
+from pin_kpi_oed.errors import InputError, RobotLoadError
+from pin_kpi_oed.model.measurement import NoiseModel, TrackerModel
+from pin_kpi_oed.model.robot import Robot, load_robot
+
+#: Folder of the cells shipped with the package.
+CELL_DIR = Path(__file__).resolve().parent / "cells"
+SHIPPED_CELLS = ("kr15", "kr300", "kr500")
+
+
+@dataclass
+class CapsuleSpec:
+    """A capsule: segment [a, b] and radius (m).
+
+    Attributes:
+        name: unique name (robot capsules: ``<link>`` or ``<link>_<k>``).
+        a: first end point (m) — link frame for robot capsules, cell frame for obstacles.
+        b: second end point (m).
+        radius: radius (m).
+        link: robot link name (None for obstacles).
+    """
+
+    name: str
+    a: np.ndarray
+    b: np.ndarray
+    radius: float
+    link: str | None = None
+
+    def to_dict(self) -> dict:
+        """Plain numbers (m)."""
+        d = {"name": self.name, "a_m": [float(x) for x in self.a], "b_m": [float(x) for x in self.b],
+             "radius_m": float(self.radius)}
+        if self.link is not None:
+            d["link"] = self.link
+        return d
+
+
+@dataclass
+class HalfSpace:
+    """The free side ``{x : normal·x ≥ offset}`` of a plane (cell frame).
+
+    Attributes:
+        name: unique name.
+        normal: unit normal pointing into the free side.
+        offset: offset (m).
+    """
+
+    name: str
+    normal: np.ndarray
+    offset: float
+
+    def to_dict(self) -> dict:
+        """Plain numbers (m)."""
+        return {"name": self.name, "normal": [float(x) for x in self.normal], "offset_m": float(self.offset)}
+
+
+@dataclass
+class Cell:
+    """A measurement cell (see the module docstring for the file format).
+
+    Attributes:
+        name: cell name.
+        source: file the cell was read from ("" if built in code).
+        robot: the loaded robot.
+        W_T_base: robot base pose in the cell frame.
+        W_T_tracker: tracker pose in the cell frame.
+        reflector_m: reflector in the tool frame (m).
+        tcp_m: KPI point in the tool frame (m).
+        noise: tracker noise model.
+        q_lower, q_upper: joint bounds of the design (rad).
+        robot_capsules: robot capsules (link frames).
+        obstacles: obstacle capsules (cell frame).
+        half_spaces: half-spaces (cell frame).
+        skip_pairs: user pairs of names never checked against each other.
+        beam_radius_m: radius of the laser-beam capsule (m).
+        beam_skip: names the beam is not checked against.
+        incidence_max_deg: largest incidence angle of the beam on the reflector (deg).
+        clearance_m: required clearance of every capsule pair (m).
+        q_work: working configurations (t, n) rad.
+        measurements: default number of measurement configurations.
+        max_random_tries: rejection-sampling budget of the heuristic design.
+    """
+
+    name: str
+    source: str
+    robot: Robot
+    W_T_base: pin.SE3
+    W_T_tracker: pin.SE3
+    reflector_m: np.ndarray
+    tcp_m: np.ndarray
+    noise: NoiseModel
+    q_lower: np.ndarray
+    q_upper: np.ndarray
+    robot_capsules: list[CapsuleSpec]
+    obstacles: list[CapsuleSpec] = field(default_factory=list)
+    half_spaces: list[HalfSpace] = field(default_factory=list)
+    skip_pairs: list[tuple[str, str]] = field(default_factory=list)
+    beam_radius_m: float = 0.005
+    beam_skip: list[str] = field(default_factory=list)
+    incidence_max_deg: float = 30.0
+    clearance_m: float = 0.0
+    q_work: np.ndarray = field(default_factory=lambda: np.zeros((0, 6)))
+    measurements: int = 60
+    max_random_tries: int = 200_000
+
+    # ------------------------------------------------------------------ derived
+    @property
+    def tracker_T_base(self) -> pin.SE3:
+        """Pose of the robot base in the tracker frame, (W_T_tracker)⁻¹ W_T_base."""
+        return self.W_T_tracker.inverse() * self.W_T_base
+
+    @property
+    def tracker_in_base(self) -> np.ndarray:
+        """Tracker origin (beam start) in the robot base frame (m)."""
+        return (self.W_T_base.inverse() * self.W_T_tracker).translation.copy()
+
+    def tracker_model(self) -> TrackerModel:
+        """The measurement model of the cell (nominal parameters; robot bounds replaced by the cell's)."""
+        return TrackerModel(self.robot, tracker_T_base=self.tracker_T_base, reflector_m=self.reflector_m.copy(),
+                            tcp_m=self.tcp_m.copy(), noise=self.noise)
+
+    def link_names(self) -> list[str]:
+        """Names of the robot's links (body frames)."""
+        return [f.name for f in self.robot.model.frames if f.type == pin.FrameType.BODY]
+
+    def to_dict(self) -> dict:
+        """The cell in plain numbers (SI units, cell frame for obstacles)."""
+        return {
+            "name": self.name,
+            "source": self.source,
+            "robot": {"name": self.robot.name, "urdf_path": self.robot.urdf_path, "tool_frame": self.robot.tool_frame},
+            "W_T_base": self.W_T_base.homogeneous.tolist(),
+            "W_T_tracker": self.W_T_tracker.homogeneous.tolist(),
+            "tracker_T_base": self.tracker_T_base.homogeneous.tolist(),
+            "reflector_m": self.reflector_m.tolist(),
+            "tcp_m": self.tcp_m.tolist(),
+            "noise": self.noise.to_dict(),
+            "joint_names": list(self.robot.joint_names),
+            "q_lower_rad": self.q_lower.tolist(),
+            "q_upper_rad": self.q_upper.tolist(),
+            "robot_capsules": [c.to_dict() for c in self.robot_capsules],
+            "obstacles": {"capsules": [c.to_dict() for c in self.obstacles],
+                          "half_spaces": [h.to_dict() for h in self.half_spaces]},
+            "skip_pairs": [list(p) for p in self.skip_pairs],
+            "beam": {"radius_m": self.beam_radius_m, "skip": list(self.beam_skip)},
+            "incidence_max_deg": self.incidence_max_deg,
+            "clearance_m": self.clearance_m,
+            "q_work": self.q_work.tolist(),
+            "measurements": self.measurements,
+            "max_random_tries": self.max_random_tries,
+        }
+
+    def summary(self) -> str:
+        """Short readable description."""
+        return (f"cell {self.name}: robot {self.robot.name} ({self.robot.tool_frame}), "
+                f"{len(self.robot_capsules)} robot capsules, {len(self.obstacles)} obstacle capsules, "
+                f"{len(self.half_spaces)} half-spaces, {self.q_work.shape[0]} working configuration(s), "
+                f"incidence <= {self.incidence_max_deg:g} deg")
+
+
+# ---------------------------------------------------------------------- parsing helpers
+def _where(src: str, key: str) -> str:
+    return f"{src}: {key}" if src else key
+
+
+def _vec(v: Any, n: int, what: str) -> np.ndarray:
+    try:
+        a = np.asarray(v, dtype=float).reshape(-1)
+    except (TypeError, ValueError):
+        raise InputError(f"{what}: expected {n} numbers, got {v!r}") from None
+    if a.size != n or not np.all(np.isfinite(a)):
+        raise InputError(f"{what}: expected {n} finite numbers, got {v!r}")
+    return a
+
+
+def _angles(d: dict, stem: str, n: int | None, what: str, required: bool = True) -> np.ndarray | None:
+    """Read ``<stem>_rad`` or ``<stem>_deg`` (converted to rad)."""
+    if f"{stem}_rad" in d and f"{stem}_deg" in d:
+        raise InputError(f"{what}: give either '{stem}_rad' or '{stem}_deg', not both")
+    for key, scale in ((f"{stem}_rad", 1.0), (f"{stem}_deg", math.pi / 180.0)):
+        if key in d:
+            try:
+                a = np.asarray(d[key], dtype=float)
+            except (TypeError, ValueError):
+                raise InputError(f"{what}.{key}: expected numbers, got {d[key]!r}") from None
+            if not np.all(np.isfinite(a)) or (n is not None and a.shape[-1:] != (n,)):
+                raise InputError(f"{what}.{key}: expected {n} finite numbers per entry, got {d[key]!r}")
+            return a * scale
+    if required:
+        raise InputError(f"{what}: missing '{stem}_rad' (or '{stem}_deg')")
+    return None
+
+
+def _pose(d: Any, what: str) -> pin.SE3:
+    if d is None:
+        return pin.SE3.Identity()
+    if not isinstance(d, dict):
+        raise InputError(f"{what}: expected a mapping with xyz_m and rpy_rad/rpy_deg, got {d!r}")
+    unknown = set(d) - {"xyz_m", "rpy_rad", "rpy_deg"}
+    if unknown:
+        raise InputError(f"{what}: unknown field(s) {', '.join(sorted(unknown))} (expected xyz_m, rpy_rad or rpy_deg)")
+    xyz = _vec(d.get("xyz_m", [0, 0, 0]), 3, f"{what}.xyz_m")
+    rpy = _angles(d, "rpy", 3, what, required=False)
+    rpy = np.zeros(3) if rpy is None else rpy
+    return pin.SE3(pin.rpy.rpyToMatrix(*rpy), xyz)
+
+
+def _capsule(d: Any, what: str, need_link: bool) -> CapsuleSpec:
+    if not isinstance(d, dict):
+        raise InputError(f"{what}: expected a mapping with name, a_m, b_m, radius_m, got {d!r}")
+    for key in ("name", "a_m", "b_m", "radius_m") + (("link",) if need_link else ()):
+        if key not in d:
+            raise InputError(f"{what}: missing field '{key}'")
+    r = float(d["radius_m"])
+    if not (math.isfinite(r) and r >= 0):
+        raise InputError(f"{what}.radius_m: must be a finite number >= 0, got {d['radius_m']!r}")
+    return CapsuleSpec(str(d["name"]), _vec(d["a_m"], 3, f"{what}.a_m"), _vec(d["b_m"], 3, f"{what}.b_m"), r,
+                       str(d["link"]) if need_link else None)
+
+
+def capsules_from_urdf(robot: Robot, where: str = "robot_capsules") -> list[CapsuleSpec]:
+    """Robot capsules from the URDF collision geometry, in link frames.
+
+    A cylinder of radius r and length l becomes the capsule of radius r whose
+    segment is the cylinder axis (length l); a sphere a capsule of length 0;
+    a capsule stays a capsule.
+
+    Raises:
+        InputError: a collision geometry that is neither (mesh, box), naming the link.
+    """
+    import coal
+
+    try:
+        gm = pin.buildGeomFromUrdf(robot.model, robot.urdf_path, pin.GeometryType.COLLISION)
+    except Exception as exc:  # meshes without package dirs, etc.
+        first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+        raise InputError(f"{where}: cannot read the collision geometry of {robot.urdf_path} ({first}); "
+                         "list the robot capsules explicitly in the cell file") from None
+    out: list[CapsuleSpec] = []
+    count: dict[str, int] = {}
+    for go in gm.geometryObjects:
+        link = robot.model.frames[go.parentFrame].name
+        g = go.geometry
+        if isinstance(g, (coal.Cylinder, coal.Capsule)):
+            h = float(g.halfLength)
+        elif isinstance(g, coal.Sphere):
+            h = 0.0
+        else:
+            raise InputError(f"{where}: the collision geometry of link '{link}' in {robot.urdf_path} is a "
+                             f"{type(g).__name__}, not a cylinder/capsule/sphere; list its capsules explicitly")
+        # geometry placement is in the parent *joint* frame: express it in the link (body) frame
+        M = robot.model.frames[go.parentFrame].placement.inverse() * go.placement
+        a = M.act(np.array([0.0, 0.0, -h]))
+        b = M.act(np.array([0.0, 0.0, h]))
+        k = count.get(link, 0)
+        count[link] = k + 1
+        out.append(CapsuleSpec(link if k == 0 else f"{link}_{k}", a, b, float(g.radius), link))
+    if not out:
+        raise InputError(f"{where}: {robot.urdf_path} has no collision geometry; list the robot capsules "
+                         "explicitly in the cell file")
+    return out
+
+
+_KNOWN_KEYS = {"name", "description", "robot", "tool_frame", "base", "tracker", "reflector_m", "tcp_m", "noise",
+               "joint_bounds", "robot_capsules", "extra_capsules", "obstacles", "skip_pairs", "beam",
+               "incidence_max_deg", "clearance_m", "working_configurations_rad", "working_configurations_deg",
+               "measurements", "max_random_tries"}
+
+
+def cell_from_dict(d: dict, source: str = "", base_dir: Path | None = None) -> Cell:
+    """Build a :class:`Cell` from the parsed YAML mapping (see the module docstring).
+
+    Args:
+        d: the mapping.
+        source: file name used in error messages.
+        base_dir: folder for relative URDF paths.
+
+    Returns:
+        The cell (names validated against the robot).
+
+    Raises:
+        InputError: a missing, unknown or invalid field, or an unknown link/obstacle name (named).
+        RobotLoadError: the robot cannot be loaded.
+    """
+    if not isinstance(d, dict):
+        raise InputError(f"{source or 'cell'}: expected a YAML mapping at the top level")
+    unknown = set(d) - _KNOWN_KEYS
+    if unknown:
+        raise InputError(f"{_where(source, 'cell')}: unknown field(s) {', '.join(sorted(unknown))}")
+    if "robot" not in d:
+        raise InputError(f"{_where(source, 'robot')}: missing field (shipped name or URDF path)")
+    spec = str(d["robot"])
+    if base_dir is not None and spec.lower() not in ("kr15", "kr300", "kr500", "ur3", "ur5", "ur10", "panda"):
+        p = Path(spec)
+        if not p.is_absolute():
+            spec = str((base_dir / p).resolve())
+    try:
+        robot = load_robot(spec, d.get("tool_frame"))
+    except RobotLoadError as exc:
+        raise RobotLoadError(f"{_where(source, 'robot')}: {exc}") from None
+    n = robot.nq
+    W_T_base = _pose(d.get("base"), _where(source, "base"))
+    if "tracker" not in d:
+        raise InputError(f"{_where(source, 'tracker')}: missing field (tracker pose xyz_m, rpy_rad)")
+    W_T_tracker = _pose(d["tracker"], _where(source, "tracker"))
+    if "reflector_m" not in d:
+        raise InputError(f"{_where(source, 'reflector_m')}: missing field (reflector in the tool frame, m)")
+    reflector = _vec(d["reflector_m"], 3, _where(source, "reflector_m"))
+    tcp = _vec(d.get("tcp_m", [0.0, 0.0, 0.0]), 3, _where(source, "tcp_m"))
+    try:
+        noise = NoiseModel.from_dict(d.get("noise") or {})
+    except InputError as exc:
+        raise InputError(f"{_where(source, 'noise')}: {exc}") from None
+
+    lo, hi = robot.q_lower.copy(), robot.q_upper.copy()
+    jb = d.get("joint_bounds")
+    if jb is not None:
+        w = _where(source, "joint_bounds")
+        if not isinstance(jb, dict):
+            raise InputError(f"{w}: expected a mapping with lower_rad/upper_rad (or _deg)")
+        lo2 = _angles(jb, "lower", n, w, required=False)
+        hi2 = _angles(jb, "upper", n, w, required=False)
+        lo = lo if lo2 is None else lo2
+        hi = hi if hi2 is None else hi2
+        bad = np.flatnonzero(~(lo < hi))
+        if bad.size:
+            j = bad[0]
+            raise InputError(f"{w}: joint {robot.joint_names[j]} bounds [{lo[j]:.4g}, {hi[j]:.4g}] rad are empty")
+    robot.q_lower, robot.q_upper = lo.copy(), hi.copy()
+
+    links = {f.name for f in robot.model.frames if f.type == pin.FrameType.BODY}
+    rc = d.get("robot_capsules", "urdf")
+    if rc == "urdf" or rc is None:
+        caps = capsules_from_urdf(robot, _where(source, "robot_capsules"))
+    elif isinstance(rc, list):
+        caps = [_capsule(c, _where(source, f"robot_capsules[{i}]"), True) for i, c in enumerate(rc)]
+    else:
+        raise InputError(f"{_where(source, 'robot_capsules')}: expected 'urdf' or a list of capsules, got {rc!r}")
+    caps += [_capsule(c, _where(source, f"extra_capsules[{i}]"), True)
+             for i, c in enumerate(d.get("extra_capsules") or [])]
+    for i, c in enumerate(caps):
+        if c.link not in links:
+            raise InputError(f"{_where(source, 'robot_capsules')}: capsule '{c.name}' is on unknown link '{c.link}' "
+                             f"(links of {robot.name}: {', '.join(sorted(links))})")
+
+    obs = d.get("obstacles") or {}
+    if not isinstance(obs, dict):
+        raise InputError(f"{_where(source, 'obstacles')}: expected a mapping with 'capsules' and 'half_spaces'")
+    unknown = set(obs) - {"capsules", "half_spaces"}
+    if unknown:
+        raise InputError(f"{_where(source, 'obstacles')}: unknown field(s) {', '.join(sorted(unknown))}")
+    obstacles = [_capsule(c, _where(source, f"obstacles.capsules[{i}]"), False)
+                 for i, c in enumerate(obs.get("capsules") or [])]
+    halfs = []
+    for i, h in enumerate(obs.get("half_spaces") or []):
+        w = _where(source, f"obstacles.half_spaces[{i}]")
+        if not isinstance(h, dict) or not {"name", "normal", "offset_m"} <= set(h):
+            raise InputError(f"{w}: expected a mapping with name, normal, offset_m")
+        nrm = _vec(h["normal"], 3, f"{w}.normal")
+        if np.linalg.norm(nrm) < 1e-9:
+            raise InputError(f"{w}.normal: must not be zero")
+        halfs.append(HalfSpace(str(h["name"]), nrm / np.linalg.norm(nrm), float(h["offset_m"])))
+
+    names = [c.name for c in caps] + [o.name for o in obstacles] + [h.name for h in halfs]
+    dup = sorted({x for x in names if names.count(x) > 1})
+    if dup:
+        raise InputError(f"{_where(source, 'cell')}: duplicate capsule/obstacle name(s) {', '.join(dup)}")
+    known = set(names) | {c.link for c in caps}
+
+    def _check_name(x: Any, what: str) -> str:
+        x = str(x)
+        if x not in known:
+            kind = "link or obstacle" if x not in links else "link without capsules"
+            raise InputError(f"{what}: unknown {kind} name '{x}' (known: {', '.join(sorted(known))})")
+        return x
+
+    skips = []
+    for i, pr in enumerate(d.get("skip_pairs") or []):
+        w = _where(source, f"skip_pairs[{i}]")
+        if not isinstance(pr, (list, tuple)) or len(pr) != 2:
+            raise InputError(f"{w}: expected a pair of names, got {pr!r}")
+        skips.append((_check_name(pr[0], w), _check_name(pr[1], w)))
+    beam = d.get("beam") or {}
+    if not isinstance(beam, dict):
+        raise InputError(f"{_where(source, 'beam')}: expected a mapping with radius_m and skip")
+    beam_r = float(beam.get("radius_m", 0.005))
+    if not (math.isfinite(beam_r) and beam_r >= 0):
+        raise InputError(f"{_where(source, 'beam.radius_m')}: must be >= 0, got {beam.get('radius_m')!r}")
+    beam_skip = [_check_name(x, _where(source, "beam.skip")) for x in beam.get("skip") or []]
+
+    inc = float(d.get("incidence_max_deg", 30.0))
+    if not (0 < inc <= 180):
+        raise InputError(f"{_where(source, 'incidence_max_deg')}: must be in (0, 180] deg, got {inc}")
+    clr = float(d.get("clearance_m", 0.0))
+    if not (math.isfinite(clr) and clr >= 0):
+        raise InputError(f"{_where(source, 'clearance_m')}: must be >= 0 m, got {clr}")
+    qw = _angles(d, "working_configurations", n, _where(source, "cell"))
+    qw = np.atleast_2d(qw)
+    robot.check_q(qw, _where(source, "working_configurations"))
+    m = int(d.get("measurements", 60))
+    tries = int(d.get("max_random_tries", 200_000))
+    if m < 1 or tries < 1:
+        raise InputError(f"{_where(source, 'measurements')}: measurements and max_random_tries must be >= 1")
+    return Cell(name=str(d.get("name", Path(source).stem if source else "cell")), source=source, robot=robot,
+                W_T_base=W_T_base, W_T_tracker=W_T_tracker, reflector_m=reflector, tcp_m=tcp, noise=noise,
+                q_lower=lo, q_upper=hi, robot_capsules=caps, obstacles=obstacles, half_spaces=halfs,
+                skip_pairs=skips, beam_radius_m=beam_r, beam_skip=beam_skip, incidence_max_deg=inc,
+                clearance_m=clr, q_work=qw, measurements=m, max_random_tries=tries)
+
+
+def resolve_cell(spec: str | Path) -> Path:
+    """Path of a cell: a shipped name (``kr15``, ``kr300``, ``kr500``) or a YAML path."""
+    key = str(spec)
+    if key.lower() in SHIPPED_CELLS:
+        return CELL_DIR / f"{key.lower()}.yaml"
+    return Path(key)
+
+
+def load_cell(spec: str | Path) -> Cell:
+    """Load a cell from a shipped name or a YAML file.
+
+    Args:
+        spec: ``kr15``, ``kr300``, ``kr500`` or a path to a YAML cell file.
+
+    Returns:
+        The :class:`Cell`.
+
+    Raises:
+        InputError: missing/unreadable file, invalid YAML, or an invalid field (named with the file).
+        RobotLoadError: the robot of the cell cannot be loaded.
+    """
+    import yaml
+
+    path = resolve_cell(spec)
+    if not path.exists():
+        raise InputError(f"{path}: no such cell file (shipped cells: {', '.join(SHIPPED_CELLS)})")
+    try:
+        d = yaml.safe_load(path.read_text())
+    except (OSError, UnicodeDecodeError) as exc:
+        raise InputError(f"{path}: cannot read the cell file ({exc})") from None
+    except yaml.YAMLError as exc:
+        first = str(exc).strip().splitlines()[0]
+        raise InputError(f"{path}: invalid YAML ({first})") from None
+    return cell_from_dict(d, str(path), path.resolve().parent)

@@ -1,0 +1,989 @@
+"""Collision, line-of-sight and incidence constraints with exact gradients (paper eqs. 4, 20–24b).
+
+The paper counts n(n−1)/2 − (n−1) pairs for n one-capsule links (eq. 22) and differentiates the
+segment distance (eq. 23); here the pairs are listed explicitly (skip lists, pruning) and the
+gradient is the witness-point form below.
+
+Every constraint is written ``g(q) ≥ 0`` for one measurement configuration q:
+
+* **capsule pairs** (eq. 20): ``d = d_P(b₁, b₂) − r₁ − r₂ − c ≥ 0`` where d_P is the distance of
+  the two segments (eq. 21) and c the cell's clearance. Pairs: non-adjacent robot capsules
+  (self-collision), robot capsules and obstacle capsules, and the **laser beam** — a thin capsule
+  from the tracker to the reflector — against the robot's capsules and the obstacles;
+* **half-spaces** ``{x : nᵀx ≥ o}`` (wall, floor; section 3.2): per capsule end point e,
+  ``nᵀe − o − r − c ≥ 0`` (a capsule lies in a half-space iff both end points do, so this is
+  exact and smooth, two rows per capsule);
+* **incidence** (eq. 4): ``cos β − cos β_max ≥ 0`` with cos β = zᵀg, z the reflector axis and g
+  the unit beam towards the tracker (:meth:`TrackerModel.incidence_cos`).
+
+Distances and gradients. The segment distance is computed in closed form for all pairs and
+all m configurations at once (the clamped closest-point algorithm of Lumelsky / Ericson); it
+gives the witness points w₁ = A₁ + s(B₁ − A₁), w₂ = A₂ + t(B₂ − A₂) and the unit normal
+n = (w₂ − w₁)/‖w₂ − w₁‖. By Danskin's theorem (the minimiser (s, t) is optimal, its feasible
+set [0,1]² does not depend on q), the gradient is that of the distance of the two
+*material* witness points::
+
+    ∂d/∂q = nᵀ ( ∂w₂/∂q − ∂w₁/∂q ),   ∂w/∂q = (1 − s) ∂A/∂q + s ∂B/∂q,
+
+and for a point x carried by joint k, ∂x/∂q_j = v_j + ω_j × x for j ≤ k ((v_j, ω_j) the
+world twist of joint j, Pinocchio's WORLD Jacobian column). This holds in penetration too
+(d < 0 while the segments are apart); only intersecting segments (d_P = 0) have no gradient.
+The same distances from Coal (``coal.distance``, witness points on the surfaces) are
+available with ``backend="coal"``; the tests check the two agree to 1e-9 m.
+
+Sparsity. A row depends on the joints that move one of its two elements but not both rigidly
+together: a pair of robot capsules on joints k₁ < k₂ depends on q_{k₁+1} … q_{k₂} only.
+
+Pruning (exact, before optimisation): a robot capsule on joint k ≥ 2 stays within
+R_k = Σ_{j=3..k} ‖M_j.t‖ + ‖x‖ + r of the origin of joint 2, which moves on a circle about
+joint 1's axis; robot–obstacle and robot–half-space rows whose lower bound over the
+(sampled, chord error added) circle is positive can never be active and are dropped.
+
+Independent check. :class:`FeasibilityChecker` re-evaluates a design densely (every pair,
+no pruning, no batching) with Pinocchio's forward kinematics, a ``pin.GeometryModel`` of
+Coal capsules and half-spaces (``pin.computeDistances``), per-pose Coal beam capsules and the
+incidence angle from ``oMf[tool]`` — none of the optimiser's code path.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+import pinocchio as pin
+
+from pin_kpi_oed.cell.cell import Cell
+from pin_kpi_oed.errors import InfeasibleError, InputError
+from pin_kpi_oed.model.measurement import TrackerModel
+
+# row kinds
+PAIR, HALF, INCID = 0, 1, 2
+
+
+# ---------------------------------------------------------------------------- geometry kernels
+def segment_closest(A1: np.ndarray, B1: np.ndarray, A2: np.ndarray, B2: np.ndarray, eps: float = 1e-14
+                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Closest points of segment pairs [A1, B1], [A2, B2], batched over leading axes.
+
+    Args:
+        A1, B1, A2, B2: end points, (..., 3) m.
+        eps: squared length below which a segment is a point (m²).
+
+    Returns:
+        (s, t, w1, w2): parameters in [0, 1], (...), and witness points w1 = A1 + s(B1 − A1),
+        w2 = A2 + t(B2 − A2), (..., 3).
+    """
+    d1, d2, r = B1 - A1, B2 - A2, A1 - A2
+    a = np.einsum("...i,...i->...", d1, d1)
+    e = np.einsum("...i,...i->...", d2, d2)
+    f = np.einsum("...i,...i->...", d2, r)
+    c = np.einsum("...i,...i->...", d1, r)
+    b = np.einsum("...i,...i->...", d1, d2)
+    pa, pe = a <= eps, e <= eps
+    a_s, e_s = np.where(pa, 1.0, a), np.where(pe, 1.0, e)
+    denom = a * e - b * b
+    gen = denom > 1e-12 * np.maximum(a * e, 1e-300)
+    s = np.where(gen, np.clip((b * f - c * e) / np.where(gen, denom, 1.0), 0.0, 1.0), 0.0)
+    t = (b * s + f) / e_s
+    lo, hi = t < 0.0, t > 1.0
+    s = np.where(lo, np.clip(-c / a_s, 0.0, 1.0), np.where(hi, np.clip((b - c) / a_s, 0.0, 1.0), s))
+    t = np.clip(t, 0.0, 1.0)
+    # degenerate segments (points)
+    s = np.where(pa, 0.0, np.where(pe, np.clip(-c / a_s, 0.0, 1.0), s))
+    t = np.where(pe, 0.0, np.where(pa, np.clip(f / e_s, 0.0, 1.0), t))
+    w1 = A1 + s[..., None] * d1
+    w2 = A2 + t[..., None] * d2
+    return s, t, w1, w2
+
+
+def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Cross product over the last axis (broadcast), faster than ``np.cross`` for small arrays."""
+    a0, a1, a2 = a[..., 0], a[..., 1], a[..., 2]
+    b0, b1, b2 = b[..., 0], b[..., 1], b[..., 2]
+    return np.stack([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0], axis=-1)
+
+
+def point_segment_distance(p: np.ndarray, A: np.ndarray, B: np.ndarray) -> np.ndarray:
+    """Distance of points p to segments [A, B] (broadcast, m)."""
+    d = B - A
+    L2 = np.einsum("...i,...i->...", d, d)
+    u = np.clip(np.einsum("...i,...i->...", p - A, d) / np.where(L2 > 0, L2, 1.0), 0.0, 1.0)
+    return np.linalg.norm(p - (A + u[..., None] * d), axis=-1)
+
+
+# ---------------------------------------------------------------------------- batched kinematics
+class _ChainFK:
+    """Batched forward kinematics of the joint frames of a serial Pinocchio model (nominal geometry)."""
+
+    def __init__(self, model: pin.Model, joint_ids: list[int]):
+        self.model = model
+        self.joint_ids = list(joint_ids)
+        data = model.createData()
+        q0 = pin.neutral(model)
+        pin.computeJointJacobians(model, data, q0)
+        lin, ang = [], []
+        for k, j in enumerate(self.joint_ids):
+            S = data.oMi[j].actInv(pin.Motion(data.J[:, k]))
+            lin.append(S.linear.copy())
+            ang.append(S.angular.copy())
+        self.lin, self.ang = np.array(lin), np.array(ang)
+        self.revolute = np.linalg.norm(self.ang, axis=1) > 0.5
+        self.placements = [model.jointPlacements[j] for j in self.joint_ids]
+        K = np.zeros((len(self.joint_ids), 3, 3))
+        for k, a in enumerate(self.ang):
+            K[k] = np.array([[0, -a[2], a[1]], [a[2], 0, -a[0]], [-a[1], a[0], 0]])
+        self.K, self.KK = K, K @ K
+
+    def __call__(self, Q: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Joint frames and world twists for configurations Q (m, n).
+
+        Returns:
+            R (m, n+1, 3, 3), t (m, n+1, 3) — index 0 is the base (universe), k the frame of the
+            k-th actuated joint after its motion; V, W (m, n, 3): world twist (linear part at the
+            world origin, angular part) of each joint.
+        """
+        m, n = Q.shape
+        R = np.empty((m, n + 1, 3, 3))
+        t = np.empty((m, n + 1, 3))
+        V = np.empty((m, n, 3))
+        W = np.empty((m, n, 3))
+        R[:, 0], t[:, 0] = np.eye(3), 0.0
+        Rc = np.broadcast_to(np.eye(3), (m, 3, 3))
+        tc = np.zeros((m, 3))
+        for k, M in enumerate(self.placements):
+            tc = tc + Rc @ M.translation
+            Rc = Rc @ M.rotation
+            if self.revolute[k]:
+                s, c = np.sin(Q[:, k])[:, None, None], np.cos(Q[:, k])[:, None, None]
+                w = Rc @ self.ang[k]
+                W[:, k] = w
+                V[:, k] = _cross(tc, w)
+                Rc = Rc @ (np.eye(3) + s * self.K[k] + (1.0 - c) * self.KK[k])
+            else:
+                u = Rc @ self.lin[k]
+                V[:, k], W[:, k] = u, 0.0
+                tc = tc + u * Q[:, k:k + 1]
+            R[:, k + 1], t[:, k + 1] = Rc, tc
+        return R, t, V, W
+
+
+# ---------------------------------------------------------------------------- the optimiser's model
+@dataclass
+class ConstraintRows:
+    """Description of the constraint rows of one configuration.
+
+    Attributes:
+        names: readable name of each row (``link_4|car_body``, ``link_2@floor:b``, ``incidence``).
+        kind: PAIR, HALF or INCID per row.
+        deps: 0-based joint indices each row depends on (structural non-zeros of its gradient).
+        units: ``"m"`` (distances) or ``"cos"`` (incidence).
+    """
+
+    names: list[str]
+    kind: np.ndarray
+    deps: list[np.ndarray]
+    units: list[str] = field(default_factory=list)
+
+    @property
+    def n(self) -> int:
+        """Number of rows per configuration."""
+        return len(self.names)
+
+    def count(self) -> dict[str, int]:
+        """Rows per category (self-collision, obstacle, half-space, beam, incidence)."""
+        out = {"self": 0, "obstacle": 0, "half_space": 0, "beam": 0, "incidence": 0}
+        for nm, k in zip(self.names, self.kind):
+            if k == INCID:
+                out["incidence"] += 1
+            elif nm.startswith("beam"):
+                out["beam"] += 1
+            elif k == HALF:
+                out["half_space"] += 1
+            elif nm.startswith("robot:"):
+                out["self"] += 1
+            else:
+                out["obstacle"] += 1
+        return out
+
+
+class CollisionModel:
+    """All constraints g(q) ≥ 0 of a cell, evaluated for m configurations in one batched call.
+
+    Args:
+        cell: the measurement cell.
+        collision: include capsule, half-space and beam rows (False: incidence only).
+        incidence: include the incidence row.
+        prune: drop robot–obstacle and robot–half-space rows that can never be active.
+        model: the cell's measurement model (built if None).
+
+    Raises:
+        InputError: a fixed robot capsule collides with an obstacle (not in skip_pairs), the
+            tracker is inside an obstacle, or the working configurations collide / are out of sight.
+    """
+
+    def __init__(self, cell: Cell, collision: bool = True, incidence: bool = True, prune: bool = True,
+                 model: TrackerModel | None = None):
+        self.cell = cell
+        self.robot = cell.robot
+        self.model = model if model is not None else cell.tracker_model()
+        self.p0 = np.zeros(self.model.n_params)
+        rm = self.robot.model
+        self.n = self.robot.nq
+        self.fk = _ChainFK(rm, self.robot.joint_ids)
+        jpos = {j: k + 1 for k, j in enumerate(self.robot.joint_ids)}  # pinocchio joint id -> chain index
+        self.cos_max = float(np.cos(np.radians(cell.incidence_max_deg)))
+        base_T_W = cell.W_T_base.inverse()
+
+        # ---- segment table: robot capsules, obstacles, beam
+        names, joint, A, B, rad, link = [], [], [], [], [], []
+        for c in cell.robot_capsules:
+            fid = rm.getFrameId(c.link, pin.FrameType.BODY)
+            fr = rm.frames[fid]
+            jid = int(fr.parentJoint)
+            names.append(c.name)
+            link.append(c.link)
+            joint.append(jpos.get(jid, 0))
+            A.append(fr.placement.act(c.a))
+            B.append(fr.placement.act(c.b))
+            rad.append(c.radius)
+        self.n_robot = len(names)
+        for o in cell.obstacles:
+            names.append(o.name)
+            link.append(None)
+            joint.append(-1)  # static, base frame
+            A.append(base_T_W.act(o.a))
+            B.append(base_T_W.act(o.b))
+            rad.append(o.radius)
+        self.n_obst = len(cell.obstacles)
+        tool = rm.frames[self.robot.tool_frame_id]
+        self.refl_joint = jpos[int(tool.parentJoint)]
+        self.refl_local = tool.placement.act(self.model.reflector_m)
+        self.tracker = cell.tracker_in_base.copy()
+        names.append("beam")
+        link.append(None)
+        joint.append(-2)
+        A.append(self.tracker)
+        B.append(np.zeros(3))
+        rad.append(cell.beam_radius_m)
+        self.seg_names, self.seg_link = names, link
+        self.seg_joint = np.array(joint)
+        self.A_loc, self.B_loc = np.array(A), np.array(B)
+        self.radius = np.array(rad)
+        self.beam = len(names) - 1
+        self.halfspaces = []
+        for h in cell.half_spaces:
+            nb = base_T_W.rotation @ h.normal
+            ob = h.offset - h.normal @ cell.W_T_base.translation
+            self.halfspaces.append((nb, float(ob)))
+
+        self._check_static()
+        self.rows_all = self._build_rows(collision, incidence, prune=False)
+        self.rows = self._build_rows(collision, incidence, prune) if prune else self.rows_all
+        self._set_rows(self.rows)
+        if collision:
+            self._check_working()
+
+    # ------------------------------------------------------------------ set-up
+    def _skipped(self, a: int, b: int) -> bool:
+        """Whether segments a and b are in the user's skip list (by capsule, link or obstacle name)."""
+        ka = {self.seg_names[a], self.seg_link[a]} - {None}
+        kb = {self.seg_names[b], self.seg_link[b]} - {None}
+        for x, y in self.cell.skip_pairs:
+            if (x in ka and y in kb) or (x in kb and y in ka):
+                return True
+        return False
+
+    def _beam_skipped(self, a: int) -> bool:
+        keys = {self.seg_names[a], self.seg_link[a]} - {None}
+        return any(x in keys for x in self.cell.beam_skip)
+
+    def _adjacent(self, ja: int, jb: int) -> bool:
+        return ja == jb or abs(ja - jb) == 1
+
+    def _build_rows(self, collision: bool, incidence: bool, prune: bool) -> dict:
+        nr, n = self.n_robot, self.n
+        pairs, hs, names, deps = [], [], [], []
+        rob = range(nr)
+        obst = range(nr, nr + self.n_obst)
+        bound = self._prune_bounds() if prune else None
+        clr = self.cell.clearance_m
+        if collision:
+            for a in rob:
+                for b in rob:
+                    if b <= a:
+                        continue
+                    ja, jb = self.seg_joint[a], self.seg_joint[b]
+                    if self._adjacent(ja, jb) or self._skipped(a, b):
+                        continue
+                    lo, hi = sorted((ja, jb))
+                    pairs.append((a, b))
+                    names.append(f"robot:{self.seg_names[a]}|{self.seg_names[b]}")
+                    deps.append(np.arange(lo, hi))
+            for a in rob:
+                ja = self.seg_joint[a]
+                if ja == 0:
+                    continue  # fixed capsules: checked once in _check_static
+                for o in obst:
+                    if self._skipped(a, o):
+                        continue
+                    if bound is not None and bound["obst"][a, o - nr] > clr + 1e-9:
+                        continue
+                    pairs.append((a, o))
+                    names.append(f"{self.seg_names[a]}|{self.seg_names[o]}")
+                    deps.append(np.arange(ja))
+            bj = self.refl_joint
+            for a in list(rob) + list(obst):
+                if self._beam_skipped(a):
+                    continue
+                pairs.append((self.beam, a))
+                names.append(f"beam|{self.seg_names[a]}")
+                deps.append(np.arange(max(bj, self.seg_joint[a])))
+            for a in rob:
+                ja = self.seg_joint[a]
+                if ja == 0:
+                    continue
+                for h, hsp in enumerate(self.cell.half_spaces):
+                    if self._skipped_half(a, hsp.name):
+                        continue
+                    if bound is not None and bound["half"][a, h] > clr + 1e-9:
+                        continue
+                    for e in (0, 1):
+                        hs.append((a, h, e))
+                        names.append(f"{self.seg_names[a]}@{hsp.name}:{'ab'[e]}")
+                        deps.append(np.arange(ja))
+            for h, hsp in enumerate(self.cell.half_spaces):
+                if hsp.name in self.cell.beam_skip:
+                    continue
+                hs.append((self.beam, h, 1))
+                names.append(f"beam@{hsp.name}")
+                deps.append(np.arange(bj))
+        kinds = [PAIR] * len(pairs) + [HALF] * len(hs)
+        units = ["m"] * len(kinds)
+        if incidence:
+            names.append("incidence")
+            deps.append(np.arange(n))
+            kinds.append(INCID)
+            units.append("cos")
+        # rows were appended pairs first (robot, obstacle, beam), then half-spaces, then incidence
+        return {"pairs": np.array(pairs, int).reshape(-1, 2), "half": np.array(hs, int).reshape(-1, 3),
+                "incidence": incidence, "rows": ConstraintRows(names, np.array(kinds, int), deps, units)}
+
+    def _skipped_half(self, a: int, hname: str) -> bool:
+        keys = {self.seg_names[a], self.seg_link[a]} - {None}
+        return any((x in keys and y == hname) or (y in keys and x == hname) for x, y in self.cell.skip_pairs)
+
+    def _set_rows(self, rows: dict) -> None:
+        self.pairs, self.half = rows["pairs"], rows["half"]
+        self.with_incidence = rows["incidence"]
+        self.info: ConstraintRows = rows["rows"]
+        self.units, self.names = list(self.info.units), list(self.info.names)
+        # Jacobian structure of one configuration: (row, joint) for each structural non-zero
+        r, c = [], []
+        for i, d in enumerate(self.info.deps):
+            r += [i] * len(d)
+            c += list(d)
+        self.jac_rows, self.jac_cols = np.array(r, int), np.array(c, int)
+
+    def _prune_bounds(self) -> dict:
+        """Lower bounds over all configurations of robot–obstacle and robot–half-space clearances.
+
+        Joint 2's origin moves on a circle about joint 1's axis (q1 within its bounds, sampled every
+        0.25°, chord error added); every capsule of joint k ≥ 2 stays within R_k of it. Capsules
+        of joint 1 are swept exactly at the samples. Returns arrays (n_robot, n_obst), (n_robot, n_half).
+        """
+        nr = self.n_robot
+        out_o = np.full((nr, self.n_obst), -np.inf)
+        out_h = np.full((nr, len(self.halfspaces)), -np.inf)
+        if self.n < 2 or not self.fk.revolute[0]:
+            return {"obst": out_o, "half": out_h}
+        q1 = np.arange(self.robot.q_lower[0], self.robot.q_upper[0], np.radians(0.25))
+        q1 = np.append(q1, self.robot.q_upper[0])
+        Q = np.zeros((q1.size, self.n))
+        Q[:, 0] = q1
+        R, t, _, _ = self.fk(Q)
+        step = np.radians(0.25)
+        o2 = t[:, 1] + R[:, 1] @ self.fk.placements[1].translation  # joint-2 origin on its circle
+        axis_pt = t[:, 1][0]
+        rho2 = np.linalg.norm(np.cross(o2[0] - axis_pt, R[0, 1] @ self.fk.ang[0]))
+        obsA = self.A_loc[nr:nr + self.n_obst]
+        obsB = self.B_loc[nr:nr + self.n_obst]
+        obsr = self.radius[nr:nr + self.n_obst]
+        for a in range(nr):
+            k = self.seg_joint[a]
+            if k < 1:
+                continue
+            if k == 1:
+                Aw = t[:, 1] + np.einsum("mij,j->mi", R[:, 1], self.A_loc[a])
+                Bw = t[:, 1] + np.einsum("mij,j->mi", R[:, 1], self.B_loc[a])
+                rho = max(np.linalg.norm(Aw[0] - axis_pt), np.linalg.norm(Bw[0] - axis_pt))
+                err = rho * step / 2
+                for o in range(self.n_obst):
+                    _, _, w1, w2 = segment_closest(Aw, Bw, np.broadcast_to(obsA[o], Aw.shape),
+                                                   np.broadcast_to(obsB[o], Bw.shape))
+                    d = np.linalg.norm(w2 - w1, axis=-1) - self.radius[a] - obsr[o] - err
+                    out_o[a, o] = d.min()
+                for h, (nv, off) in enumerate(self.halfspaces):
+                    d = np.minimum(Aw @ nv, Bw @ nv) - off - self.radius[a] - err
+                    out_h[a, h] = d.min()
+                continue
+            Rk = sum(np.linalg.norm(self.fk.placements[j].translation) for j in range(2, k))
+            Rk += max(np.linalg.norm(self.A_loc[a]), np.linalg.norm(self.B_loc[a])) + self.radius[a]
+            err = rho2 * step / 2
+            for o in range(self.n_obst):
+                d = point_segment_distance(o2, obsA[o], obsB[o]) - obsr[o] - Rk - err
+                out_o[a, o] = d.min()
+            for h, (nv, off) in enumerate(self.halfspaces):
+                out_h[a, h] = (o2 @ nv).min() - off - Rk - err
+        return {"obst": out_o, "half": out_h}
+
+    def _check_static(self) -> None:
+        """Fixed robot capsules vs obstacles/half-spaces, and the tracker outside every obstacle."""
+        nr, cell = self.n_robot, self.cell
+        T = self.tracker
+        for o in range(nr, nr + self.n_obst):
+            d = point_segment_distance(T, self.A_loc[o], self.B_loc[o]) - self.radius[o] - cell.beam_radius_m
+            if d < 0 and not self._beam_skipped(o):
+                where = np.round(cell.W_T_tracker.translation, 3)
+                raise InputError(f"{cell.source or cell.name}: the tracker at {where} m (cell frame) is inside "
+                                 f"obstacle '{self.seg_names[o]}' "
+                                 f"({d * 1e3:.0f} mm clearance); move the tracker or the obstacle")
+        for hsp, (nv, off) in zip(cell.half_spaces, self.halfspaces):
+            if T @ nv - off - cell.beam_radius_m < 0:
+                raise InputError(f"{cell.source or cell.name}: the tracker is outside the free side of "
+                                 f"half-space '{hsp.name}'; move the tracker")
+        for a in range(nr):
+            if self.seg_joint[a] != 0:
+                continue
+            for o in range(nr, nr + self.n_obst):
+                if self._skipped(a, o):
+                    continue
+                _, _, w1, w2 = segment_closest(self.A_loc[a], self.B_loc[a], self.A_loc[o], self.B_loc[o])
+                d = np.linalg.norm(w2 - w1) - self.radius[a] - self.radius[o]
+                if d < cell.clearance_m:
+                    raise InputError(f"{cell.source or cell.name}: fixed robot capsule '{self.seg_names[a]}' "
+                                     f"collides with obstacle '{self.seg_names[o]}' ({d * 1e3:.0f} mm); move the "
+                                     f"obstacle or add [{self.seg_names[a]}, {self.seg_names[o]}] to skip_pairs")
+            for hsp, (nv, off) in zip(cell.half_spaces, self.halfspaces):
+                if self._skipped_half(a, hsp.name):
+                    continue
+                d = min(self.A_loc[a] @ nv, self.B_loc[a] @ nv) - off - self.radius[a]
+                if d < cell.clearance_m:
+                    raise InputError(f"{cell.source or cell.name}: fixed robot capsule '{self.seg_names[a]}' "
+                                     f"crosses half-space '{hsp.name}' ({d * 1e3:.0f} mm); move the robot base")
+
+    def _check_working(self) -> None:
+        """Every working configuration must be collision-free and in the tracker's line of sight."""
+        cell = self.cell
+        saved = (self.pairs, self.half, self.with_incidence, self.info, self.jac_rows, self.jac_cols)
+        self._set_rows(self.rows_all)
+        try:
+            g = self.evaluate(cell.q_work, with_grad=False)
+        finally:
+            self.pairs, self.half, self.with_incidence, self.info, self.jac_rows, self.jac_cols = saved
+        names = self.rows_all["rows"].names
+        kinds = self.rows_all["rows"].kind
+        for i in range(g.shape[0]):
+            for r in np.flatnonzero(g[i] < 0):
+                if kinds[r] == INCID:
+                    continue  # the reflector need not face the tracker while working
+                nm = names[r]
+                what = "is out of the tracker's sight: the laser beam is blocked" if nm.startswith("beam") \
+                    else "is in collision"
+                raise InputError(f"{cell.source or cell.name}: working configuration {i} {what} ({nm}, "
+                                 f"{g[i, r] * 1e3:.1f} mm)")
+
+    # ------------------------------------------------------------------ evaluation
+    @property
+    def n_rows(self) -> int:
+        """Constraint rows per configuration."""
+        return self.info.n
+
+    def _masks(self) -> tuple[np.ndarray, np.ndarray]:
+        """(S, n) masks: joint j moves end point A / B of segment s."""
+        if not hasattr(self, "_mask_cache"):
+            jj = self.seg_joint.copy()
+            jj[self.beam] = self.refl_joint
+            mB = (np.arange(self.n)[None, :] < jj[:, None]).astype(float)
+            mA = mB.copy()
+            mA[self.beam] = 0.0  # the beam starts at the (static) tracker
+            self._mask_cache = (mA, mB)
+        return self._mask_cache
+
+    def endpoints(self, Q: np.ndarray, with_grad: bool = False
+                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray | None, np.ndarray | None]:
+        """End points of every segment (base frame) and optionally their Jacobians w.r.t. q.
+
+        Returns:
+            EA, EB (m, S, 3) m; JA, JB (m, S, 3, n) or None.
+        """
+        EA, EB, V, W = self._endpoints(np.atleast_2d(np.asarray(Q, float)))
+        if not with_grad:
+            return EA, EB, None, None
+        mA, mB = self._masks()
+        JA = (V[:, None] + _cross(W[:, None], EA[:, :, None])) * mA[None, :, :, None]  # (m, S, n, 3)
+        JB = (V[:, None] + _cross(W[:, None], EB[:, :, None])) * mB[None, :, :, None]
+        return EA, EB, np.swapaxes(JA, 2, 3), np.swapaxes(JB, 2, 3)
+
+    def _endpoints(self, Q: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        R, t, V, W = self.fk(Q)
+        j = np.where(self.seg_joint >= 0, self.seg_joint, 0)
+        j[self.beam] = self.refl_joint
+        Rj, tj = R[:, j], t[:, j]  # (m, S, 3, 3)
+        EA = tj + np.einsum("msij,sj->msi", Rj, self.A_loc)
+        EB = tj + np.einsum("msij,sj->msi", Rj, self.B_loc)
+        static = self.seg_joint < 0
+        EA[:, static] = self.A_loc[static]
+        EB[:, static] = self.B_loc[static]
+        EB[:, self.beam] = tj[:, self.beam] + Rj[:, self.beam] @ self.refl_local
+        return EA, EB, V, W
+
+    def evaluate(self, Q: np.ndarray, with_grad: bool = True, backend: str = "numpy"
+                 ) -> np.ndarray | tuple[np.ndarray, np.ndarray]:
+        """Constraint values g(Q) ≥ 0 and gradients for all configurations at once.
+
+        The gradient of a pair row uses ∂d/∂q_j = nᵀ ∂w₂/∂q_j − nᵀ ∂w₁/∂q_j with, for a witness point
+        w = (1 − s) A + s B of a segment whose end points are carried by joints (k_A, k_B),
+        nᵀ ∂w/∂q_j = (1 − s) [nᵀv_j + ω_jᵀ(A × n)]·[j ≤ k_A] + s [nᵀv_j + ω_jᵀ(B × n)]·[j ≤ k_B]
+        (triple product; no per-point Jacobian is formed).
+
+        Args:
+            Q: configurations (m, n) rad.
+            with_grad: also return the gradients.
+            backend: ``"numpy"`` (closed-form batched segment distances) or ``"coal"``
+                (witness points from ``coal.distance`` per pair and configuration, for verification).
+
+        Returns:
+            g (m, rows) — metres for distances, cosine for the incidence row — and, with
+            ``with_grad``, G (m, rows, n) = ∂g/∂q (dense; zero outside ``info.deps``).
+        """
+        Q = np.atleast_2d(np.asarray(Q, float))
+        m, n = Q.shape
+        EA, EB, V, W = self._endpoints(Q)
+        clr = self.cell.clearance_m
+        gs, Gs = [], []
+        mA, mB = self._masks()
+        if len(self.pairs):
+            i1, i2 = self.pairs[:, 0], self.pairs[:, 1]
+            A1, B1, A2, B2 = EA[:, i1], EB[:, i1], EA[:, i2], EB[:, i2]
+            if backend == "coal":
+                s, t, w1, w2 = self._coal_witness(EA, EB, i1, i2)
+            else:
+                s, t, w1, w2 = segment_closest(A1, B1, A2, B2)
+            diff = w2 - w1
+            dseg = np.sqrt(np.einsum("mpa,mpa->mp", diff, diff))
+            gs.append(dseg - self.radius[i1] - self.radius[i2] - clr)
+            if with_grad:
+                nrm = diff / np.where(dseg > 0, dseg, 1.0)[..., None]
+                VT, WT = np.swapaxes(V, 1, 2), np.swapaxes(W, 1, 2)  # (m, 3, n)
+                nv = nrm @ VT  # (m, P, n)
+
+                def side(P: np.ndarray, u: np.ndarray, mask: np.ndarray) -> np.ndarray:
+                    return u[..., None] * (nv + _cross(P, nrm) @ WT) * mask[None]
+
+                Gs.append(side(A2, 1.0 - t, mA[i2]) + side(B2, t, mB[i2])
+                          - side(A1, 1.0 - s, mA[i1]) - side(B1, s, mB[i1]))
+        if len(self.half):
+            a, h, e = self.half[:, 0], self.half[:, 1], self.half[:, 2]
+            Nh = np.array([self.halfspaces[k][0] for k in h]).reshape(-1, 3)
+            Oh = np.array([self.halfspaces[k][1] for k in h])
+            P = np.where(e[None, :, None] == 0, EA[:, a], EB[:, a])
+            gs.append(np.einsum("mpa,pa->mp", P, Nh) - Oh - self.radius[a] - clr)
+            if with_grad:
+                mask = np.where(e[:, None] == 0, mA[a], mB[a])
+                Gs.append((Nh @ np.swapaxes(V, 1, 2) + _cross(P, Nh[None]) @ np.swapaxes(W, 1, 2)) * mask[None])
+        if self.with_incidence:
+            if with_grad:
+                c, dc = self.model.incidence_cos(self.p0, Q, with_grad=True)
+                Gs.append(dc[:, None, :])
+            else:
+                c = self.model.incidence_cos(self.p0, Q)
+            gs.append((c - self.cos_max)[:, None])
+        g = np.concatenate(gs, axis=1) if gs else np.zeros((m, 0))
+        if not with_grad:
+            return g
+        G = np.concatenate(Gs, axis=1) if Gs else np.zeros((m, 0, n))
+        return g, G
+
+    def _coal_witness(self, EA: np.ndarray, EB: np.ndarray, i1: np.ndarray, i2: np.ndarray
+                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Witness points on the segments from ``coal.distance`` of the capsule pairs."""
+        import coal
+
+        m, P = EA.shape[0], i1.size
+        s, t = np.zeros((m, P)), np.zeros((m, P))
+        w1, w2 = np.zeros((m, P, 3)), np.zeros((m, P, 3))
+        req = coal.DistanceRequest()
+        for i in range(m):
+            for p in range(P):
+                out = []
+                for k in (i1[p], i2[p]):
+                    a, b = EA[i, k], EB[i, k]
+                    shape, T = coal_capsule(a, b, self.radius[k])
+                    out.append((shape, T, a, b))
+                res = coal.DistanceResult()
+                coal.distance(out[0][0], out[0][1], out[1][0], out[1][1], req, res)
+                for (shape, T, a, b), wp, sp, wo in ((out[0], res.getNearestPoint1(), s, w1),
+                                                     (out[1], res.getNearestPoint2(), t, w2)):
+                    d = b - a
+                    L2 = d @ d
+                    u = float(np.clip((wp - a) @ d / L2, 0, 1)) if L2 > 0 else 0.0
+                    sp[i, p] = u
+                    wo[i, p] = a + u * d
+        return s, t, w1, w2
+
+    def feasible(self, Q: np.ndarray, tol: float = 0.0) -> np.ndarray:
+        """Per configuration: every row ≥ −tol and within the joint bounds (fast path), (m,) bool."""
+        Q = np.atleast_2d(np.asarray(Q, float))
+        g = self.evaluate(Q, with_grad=False)
+        ok = np.all(g >= -tol, axis=1) if g.shape[1] else np.ones(Q.shape[0], bool)
+        return ok & np.all((Q >= self.robot.q_lower) & (Q <= self.robot.q_upper), axis=1)
+
+
+class AggregatedConstraints:
+    """Per-configuration aggregation of the distance rows of a :class:`CollisionModel`.
+
+    Each configuration keeps two rows: the Kreisselmeier–Steinhauser aggregate of all its
+    distance rows (capsule pairs, half-spaces, beam) and the incidence row::
+
+        c(q) = d_min − ℓ · log Σ_p exp(−(d_p − d_min)/ℓ),      ∂c/∂q = Σ_p w_p ∂d_p/∂q,
+        w_p = exp(−(d_p − d_min)/ℓ) / Σ_k exp(−(d_k − d_min)/ℓ)  (softmax weights).
+
+    c is smooth and its gradient is exact (the softmax-weighted exact distance gradients);
+    ``min_p d_p − ℓ ln N ≤ c ≤ min_p d_p``, so ``c ≥ 0`` implies every ``d_p ≥ 0``: the aggregate is
+    conservative (by less than ℓ when one pair is more than ~5ℓ closer than the others) and never
+    admits a collision. ``mode="min"`` uses min_p d_p itself (exact value, gradient of the closest
+    pair, not differentiable where two pairs tie). ``mode="none"`` keeps every row.
+
+    Args:
+        coll: the full constraint model.
+        mode: ``"ks"``, ``"min"`` or ``"none"``.
+        length_m: KS smoothing length ℓ (m).
+    """
+
+    def __init__(self, coll: CollisionModel, mode: str = "ks", length_m: float = 2e-3):
+        if mode not in ("ks", "min", "none"):
+            raise InputError(f"unknown constraint aggregation '{mode}' (ks, min, none)")
+        self.coll, self.mode, self.length = coll, mode, float(length_m)
+        self.n, self.robot, self.cell = coll.n, coll.robot, coll.cell
+        kind = coll.info.kind
+        self.dist = np.flatnonzero(kind != INCID)
+        self.inc = np.flatnonzero(kind == INCID)
+        if mode == "none":
+            self.n_rows, self.units = coll.n_rows, list(coll.info.units)
+            self.jac_rows, self.jac_cols = coll.jac_rows, coll.jac_cols
+            self.names = list(coll.info.names)
+            return
+        deps = [set(), set()]
+        for r in self.dist:
+            deps[0].update(int(j) for j in coll.info.deps[r])
+        for r in self.inc:
+            deps[1].update(int(j) for j in coll.info.deps[r])
+        rows, cols, units, names = [], [], [], []
+        k = 0
+        for part, idx, unit, name in ((0, self.dist, "m", f"{mode}(clearances)"), (1, self.inc, "cos", "incidence")):
+            if idx.size == 0:
+                continue
+            d = sorted(deps[part])
+            rows += [k] * len(d)
+            cols += d
+            units.append(unit)
+            names.append(name)
+            k += 1
+        self.n_rows, self.units, self.names = k, units, names
+        self.jac_rows, self.jac_cols = np.array(rows, int), np.array(cols, int)
+
+    def evaluate(self, Q: np.ndarray, with_grad: bool = True) -> np.ndarray | tuple[np.ndarray, np.ndarray]:
+        """Aggregated rows (m, n_rows) and, with ``with_grad``, their gradients (m, n_rows, n)."""
+        out = self.coll.evaluate(Q, with_grad=with_grad)
+        if self.mode == "none":
+            return out
+        g, G = out if with_grad else (out, None)
+        m = g.shape[0]
+        vals, grads = [], []
+        if self.dist.size:
+            gd = g[:, self.dist]
+            k = np.argmin(gd, axis=1)
+            dmin = gd[np.arange(m), k]
+            if self.mode == "min":
+                vals.append(dmin)
+                if with_grad:
+                    grads.append(G[np.arange(m), self.dist[k]])
+            else:
+                e = np.exp(-(gd - dmin[:, None]) / self.length)
+                s = e.sum(axis=1)
+                vals.append(dmin - self.length * np.log(s))
+                if with_grad:
+                    grads.append(np.einsum("mr,mrn->mn", e / s[:, None], G[:, self.dist]))
+        if self.inc.size:
+            vals.append(g[:, self.inc[0]])
+            if with_grad:
+                grads.append(G[:, self.inc[0]])
+        ga = np.stack(vals, axis=1) if vals else np.zeros((m, 0))
+        if not with_grad:
+            return ga
+        return ga, (np.stack(grads, axis=1) if grads else np.zeros((m, 0, self.n)))
+
+
+def coal_capsule(a: np.ndarray, b: np.ndarray, radius: float):
+    """A Coal capsule whose segment is [a, b] (m), and its transform (local z along b − a).
+
+    Returns:
+        (coal.Capsule, coal.Transform3s).
+    """
+    import coal
+
+    d = np.asarray(b, float) - np.asarray(a, float)
+    L = float(np.linalg.norm(d))
+    R = np.eye(3)
+    if L > 1e-12:
+        R = pin.Quaternion.FromTwoVectors(np.array([0.0, 0.0, 1.0]), d / L).matrix()
+    T = coal.Transform3s(R, 0.5 * (np.asarray(a, float) + np.asarray(b, float)))
+    return coal.Capsule(float(radius), L), T
+
+
+# ---------------------------------------------------------------------------- independent check
+@dataclass
+class FeasibilityReport:
+    """Dense, independent feasibility check of a design.
+
+    Attributes:
+        collision_free: per pose, every capsule pair and half-space clear (m,).
+        visible: per pose, laser beam unobstructed and incidence within the limit (m,).
+        within_bounds: per pose, joint values within the cell's bounds (m,).
+        clearance_m: per pose, smallest clearance over every checked pair (incl. the beam) (m,).
+        incidence_deg: per pose, incidence angle (m,).
+        worst: per pose, name of the pair with the smallest clearance.
+        n_pairs: pairs checked per pose (robot–robot, robot–obstacle, robot–half-space, beam).
+    """
+
+    collision_free: np.ndarray
+    visible: np.ndarray
+    within_bounds: np.ndarray
+    clearance_m: np.ndarray
+    incidence_deg: np.ndarray
+    worst: list[str]
+    n_pairs: int
+
+    @property
+    def feasible(self) -> np.ndarray:
+        """Per pose: collision-free, visible and within bounds."""
+        return self.collision_free & self.visible & self.within_bounds
+
+    @property
+    def all_feasible(self) -> bool:
+        """Whether every pose is feasible."""
+        return bool(np.all(self.feasible))
+
+    @property
+    def share_colliding(self) -> float:
+        """Share of poses in collision (capsules or half-spaces), 0…1."""
+        return float(np.mean(~self.collision_free)) if self.collision_free.size else 0.0
+
+    @property
+    def share_infeasible(self) -> float:
+        """Share of poses failing any check, 0…1."""
+        return float(np.mean(~self.feasible)) if self.collision_free.size else 0.0
+
+    @property
+    def min_clearance_m(self) -> float:
+        """Smallest clearance of the design (m)."""
+        return float(self.clearance_m.min()) if self.clearance_m.size else float("inf")
+
+    @property
+    def max_incidence_deg(self) -> float:
+        """Largest incidence angle of the design (deg)."""
+        return float(self.incidence_deg.max()) if self.incidence_deg.size else 0.0
+
+    def violations(self, limit: int = 5) -> list[str]:
+        """Readable descriptions of the first infeasible poses."""
+        out = []
+        for i in np.flatnonzero(~self.feasible)[:limit]:
+            why = []
+            if not self.within_bounds[i]:
+                why.append("outside the joint bounds")
+            if not self.collision_free[i] or self.clearance_m[i] < 0:
+                why.append(f"{self.worst[i]} at {self.clearance_m[i] * 1e3:.1f} mm")
+            if not self.visible[i] and self.clearance_m[i] >= 0:
+                why.append(f"incidence {self.incidence_deg[i]:.1f} deg")
+            out.append(f"pose {i}: " + ", ".join(why))
+        return out
+
+    def to_dict(self) -> dict:
+        """Plain numbers."""
+        return {"all_feasible": self.all_feasible, "n_poses": int(self.collision_free.size),
+                "n_colliding": int(np.sum(~self.collision_free)), "n_invisible": int(np.sum(~self.visible)),
+                "n_out_of_bounds": int(np.sum(~self.within_bounds)), "share_colliding": self.share_colliding,
+                "min_clearance_m": self.min_clearance_m, "max_incidence_deg": self.max_incidence_deg,
+                "pairs_per_pose": self.n_pairs, "violations": self.violations()}
+
+
+class FeasibilityChecker:
+    """Independent dense check: Pinocchio FK + Coal on a ``pin.GeometryModel``, every pair.
+
+    Args:
+        cell: the measurement cell.
+    """
+
+    def __init__(self, cell: Cell):
+        import coal
+
+        self.cell = cell
+        rb = cell.robot
+        self.model = rb.model
+        self.data = rb.model.createData()
+        gm = pin.GeometryModel()
+        base_T_W = cell.W_T_base.inverse()
+        self.robot_ids, self.robot_joint, self.labels = [], [], []
+        for c in cell.robot_capsules:
+            fid = rb.model.getFrameId(c.link, pin.FrameType.BODY)
+            fr = rb.model.frames[fid]
+            shape, T = coal_capsule(fr.placement.act(c.a), fr.placement.act(c.b), c.radius)
+            go = pin.GeometryObject(c.name, int(fr.parentJoint), fid, pin.SE3(T.getRotation(), T.getTranslation()),
+                                    shape)
+            self.robot_ids.append(gm.addGeometryObject(go))
+            self.robot_joint.append(int(fr.parentJoint))
+            self.labels.append((c.name, c.link))
+        self.obst_ids = []
+        for o in cell.obstacles:
+            shape, T = coal_capsule(base_T_W.act(o.a), base_T_W.act(o.b), o.radius)
+            go = pin.GeometryObject(o.name, 0, 0, pin.SE3(T.getRotation(), T.getTranslation()), shape)
+            self.obst_ids.append(gm.addGeometryObject(go))
+            self.labels.append((o.name, None))
+        self.half_ids = []
+        for h in cell.half_spaces:
+            # coal.Halfspace(n, d) is the solid {x : n·x <= d}; the free side is n·x >= offset
+            go = pin.GeometryObject(h.name, 0, 0, pin.SE3(base_T_W), coal.Halfspace(h.normal, h.offset))
+            self.half_ids.append(gm.addGeometryObject(go))
+            self.labels.append((h.name, None))
+        parents = [int(p) for p in rb.model.parents]
+
+        def adjacent(j1: int, j2: int) -> bool:
+            return j1 == j2 or parents[j1] == j2 or parents[j2] == j1
+
+        def skipped(i: int, k: int) -> bool:
+            a = {x for x in self.labels[i] if x}
+            b = {x for x in self.labels[k] if x}
+            return any((x in a and y in b) or (x in b and y in a) for x, y in cell.skip_pairs)
+
+        pairs = []
+        for x, i in enumerate(self.robot_ids):
+            for y, k in enumerate(self.robot_ids):
+                if y > x and not adjacent(self.robot_joint[x], self.robot_joint[y]) and not skipped(i, k):
+                    pairs.append((i, k))
+            for k in self.obst_ids + self.half_ids:
+                if not skipped(i, k):
+                    pairs.append((i, k))
+        for i, k in pairs:
+            gm.addCollisionPair(pin.CollisionPair(i, k))
+        self.gm = gm
+        self.gd = pin.GeometryData(gm)
+        self.pairs = pairs
+        beam_targets = []
+        for i in self.robot_ids + self.obst_ids + self.half_ids:
+            if not any(x in {y for y in self.labels[i] if y} for x in cell.beam_skip):
+                beam_targets.append(i)
+        self.beam_targets = beam_targets
+        self.tool_id = rb.tool_frame_id
+        self.tracker = cell.tracker_in_base
+        self.reflector = np.asarray(cell.reflector_m, float)
+
+    def check(self, Q: np.ndarray, tol: float = 1e-7) -> FeasibilityReport:
+        """Check every pose of a design.
+
+        Args:
+            Q: configurations (m, n) rad.
+            tol: tolerance on clearances (m) and joint bounds (rad) for rounding.
+
+        Returns:
+            The :class:`FeasibilityReport`.
+        """
+        import coal
+
+        cell = self.cell
+        Q = np.atleast_2d(np.asarray(Q, float))
+        m = Q.shape[0]
+        req = coal.DistanceRequest()
+        cos_max = np.cos(np.radians(cell.incidence_max_deg))
+        cf, vis, clr, inc, worst = np.ones(m, bool), np.ones(m, bool), np.zeros(m), np.zeros(m), []
+        bounds = np.all((Q >= cell.q_lower - tol) & (Q <= cell.q_upper + tol), axis=1)
+        for i, q in enumerate(Q):
+            pin.framesForwardKinematics(self.model, self.data, q)
+            pin.updateGeometryPlacements(self.model, self.data, self.gm, self.gd)
+            pin.computeDistances(self.gm, self.gd)
+            best, who = np.inf, ""
+            for k, (a, b) in enumerate(self.pairs):
+                d = self.gd.distanceResults[k].min_distance - cell.clearance_m
+                if d < best:
+                    best, who = d, f"{self.gm.geometryObjects[a].name}|{self.gm.geometryObjects[b].name}"
+            cf[i] = best >= -tol
+            oMt = self.data.oMf[self.tool_id]
+            refl = oMt.act(self.reflector)
+            beam, Tb = coal_capsule(self.tracker, refl, cell.beam_radius_m)
+            bbest, bwho = np.inf, ""
+            for gid in self.beam_targets:
+                res = coal.DistanceResult()
+                go = self.gm.geometryObjects[gid]
+                Mg = self.gd.oMg[gid]
+                d = coal.distance(beam, Tb, go.geometry, coal.Transform3s(Mg.rotation, Mg.translation), req, res)
+                d -= cell.clearance_m
+                if d < bbest:
+                    bbest, bwho = d, f"beam|{go.name}"
+            g = self.tracker - refl
+            c = float(oMt.rotation[:, 2] @ g / np.linalg.norm(g))
+            inc[i] = float(np.degrees(np.arccos(np.clip(c, -1.0, 1.0))))
+            vis[i] = bbest >= -tol and c >= cos_max - 1e-9
+            if bbest < best:
+                best, who = bbest, bwho
+            clr[i] = best
+            worst.append(who)
+        return FeasibilityReport(cf, vis, bounds, clr, inc, worst, len(self.pairs) + len(self.beam_targets))
+
+
+def check_design(cell: Cell, Q: np.ndarray) -> FeasibilityReport:
+    """Independent dense feasibility check of configurations ``Q`` in ``cell`` (see :class:`FeasibilityChecker`)."""
+    return FeasibilityChecker(cell).check(Q)
+
+
+def random_feasible(coll: CollisionModel, m: int, rng: np.random.Generator, max_tries: int,
+                    batch: int = 2000) -> tuple[np.ndarray, int]:
+    """Heuristic design: configurations uniform within the joint bounds, rejection-sampled until feasible.
+
+    Args:
+        coll: the constraint model (its rows decide feasibility).
+        m: number of configurations wanted.
+        rng: random generator.
+        max_tries: sampling budget.
+        batch: configurations drawn per batched evaluation.
+
+    Returns:
+        (Q (m, n) rad, number of samples drawn until the m-th feasible one).
+
+    Raises:
+        InfeasibleError: fewer than m feasible poses in ``max_tries`` samples (naming the most
+            often violated constraint).
+    """
+    lo, hi = coll.robot.q_lower, coll.robot.q_upper
+    found: list[np.ndarray] = []
+    drawn = 0
+    viol = np.zeros(coll.n_rows, int)
+    while drawn < max_tries and len(found) < m:
+        k = min(batch, max_tries - drawn)
+        Q = rng.uniform(lo, hi, size=(k, coll.n))
+        g = coll.evaluate(Q, with_grad=False)
+        ok = np.all(g >= 0, axis=1) if g.shape[1] else np.ones(k, bool)
+        viol += np.sum(g < 0, axis=0)
+        idx = np.flatnonzero(ok)
+        need = m - len(found)
+        if idx.size >= need:
+            drawn += int(idx[need - 1]) + 1
+            found.extend(Q[idx[:need]])
+            break
+        drawn += k
+        found.extend(Q[idx])
+    if len(found) < m:
+        top = [coll.info.names[r] for r in np.argsort(-viol)[:3] if viol[r] > 0]
+        raise InfeasibleError(f"{coll.cell.source or coll.cell.name}: no feasible random pose found "
+                              f"({len(found)} of {m} needed) in {max_tries} tries; most often "
+                              f"violated: {', '.join(top) or 'none'}; relax the cell (obstacles, incidence limit, "
+                              f"joint bounds) or raise max_random_tries")
+    return np.array(found[:m]), drawn

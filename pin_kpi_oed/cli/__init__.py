@@ -1,0 +1,4 @@
+"""The ``pin-kpi-oed`` command line: a thin layer over the API (one module per topic)."""
+from pin_kpi_oed.cli.main import main
+
+__all__ = ["main"]

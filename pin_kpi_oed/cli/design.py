@@ -1,0 +1,173 @@
+"""``pin-kpi-oed design``: heuristic and optimum measurement designs of a cell, as a table and JSON.
+
+Example::
+
+    pin-kpi-oed design --cell kr15 --criteria random,param,kpi --measurements 60 --seed 0 --json design.json
+
+prints, per design: the criterion, tr(C_s) (mm²), the TCP σ = sqrt(tr(C_s)/t) (µm), the
+improvement of tr(C_s) over the heuristic design (%), the smallest clearance (mm) and largest
+incidence angle (°) found by the independent check, Ipopt iterations and solve time (s).
+``--no-collision`` drops the collision and line-of-sight constraints (joint bounds and incidence
+only) and reports the share of poses that collide.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+
+
+from pin_kpi_oed.errors import InputError
+from pin_kpi_oed.data.measurements import atomic_write_json
+from pin_kpi_oed.oed.evaluate import score_design
+from pin_kpi_oed.model.serialize import model_to_dict
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    """Add the ``design`` subcommand to the CLI's subparsers."""
+    p = subparsers.add_parser("design", help="heuristic and optimum (IPOPT) measurement designs of a cell",
+                              description=__doc__.splitlines()[0])
+    p.add_argument("--cell", default="kr15", help="shipped cell (kr15, kr300, kr500) or a cell YAML file")
+    p.add_argument("--criteria", default="random,param,kpi",
+                   help="comma-separated: random, param (A on C_p), kpi (A on C_s), D, E, cond, O1..O5")
+    p.add_argument("--measurements", type=int, default=None, help="number of measurement configurations "
+                   "(default: the cell's)")
+    p.add_argument("--seed", type=int, default=0, help="seed of the heuristic design and of the starts")
+    p.add_argument("--json", default=None, help="write the designs to this JSON file")
+    p.add_argument("--no-collision", dest="no_collision", action="store_true",
+                   help="optimise without collision/line-of-sight constraints (report the colliding share)")
+    p.add_argument("--starts", type=int, default=None, help="Ipopt starts per criterion (default 2)")
+    p.add_argument("--max-iter", dest="max_iter", type=int, default=None, help="Ipopt iteration limit (default 500)")
+    p.add_argument("--quiet", action="store_true", help="print the table only")
+    p.add_argument("--start", choices=["pool", "random"], default="pool",
+                   help="first Ipopt start: pool selection (default) or the heuristic design")
+    p.add_argument("--certificate", action="store_true",
+                   help="bound tr(C_s) by the approximate-design relaxation over a feasible pool; report efficiencies")
+    p.add_argument("--pool-size", dest="pool_size", type=int, default=5000,
+                   help="feasible candidates of the certificate's pool (default 5000)")
+    p.set_defaults(func=run)
+
+
+def parse_criteria(text: str) -> list[str]:
+    """Split and validate the ``--criteria`` list.
+
+    Raises:
+        InputError: empty list or unknown name.
+    """
+    from pin_kpi_oed.oed.criteria import CRITERIA
+
+    names = [c.strip() for c in str(text).split(",") if c.strip()]
+    if not names:
+        raise InputError("--criteria: give at least one of random, " + ", ".join(CRITERIA))
+    for c in names:
+        if c != "random" and c not in CRITERIA:
+            raise InputError(f"--criteria: unknown criterion '{c}' (known: random, {', '.join(CRITERIA)})")
+    return names
+
+
+def table(results: list, reference=None, certificate=None) -> str:
+    """The design table (one row per :class:`~pin_kpi_oed.design.optimize.DesignResult`; efficiency with a certificate)."""
+    ref = reference or results[0]
+    head = (f"{'criterion':<10}{'tr(C_s) mm^2':>14}{'TCP sigma um':>14}{'vs heur. %':>11}{'min clr mm':>11}"
+            f"{'max inc deg':>12}{'iters':>7}{'time s':>8}" + (f"{'effic. %':>10}" if certificate else "")
+            + "  check")
+    lines = [head, "-" * len(head)]
+    for r in results:
+        imp = r.improvement_over(ref) if math.isfinite(r.trace_cs_m2) else float("nan")
+        it = f"{r.iterations:d}" if r.criterion != "random" else "-"
+        chk = "ok" if r.feasible else f"{100 * r.share_colliding:.0f}% coll."
+        if not r.feasible and r.share_colliding == 0:
+            chk = f"{100 * r.share_infeasible:.0f}% infeas."
+        lines.append(f"{r.criterion:<10}{r.trace_cs_m2 * 1e6:>14.4e}{r.tcp_sigma_m * 1e6:>14.4f}{imp:>11.1f}"
+                     f"{r.min_clearance_m * 1e3:>11.1f}{r.max_incidence_deg:>12.1f}{it:>7}"
+                     f"{r.solve_time_s:>8.2f}"
+                     + (f"{100 * certificate.efficiency(r.trace_cs_m2):>10.1f}" if certificate else "")
+                     + f"  {chk}")
+    return "\n".join(lines)
+
+
+def design_json(cell, problem, results: list, m: int, seed: int, collision: bool) -> dict:
+    """The JSON document of a design run (SI units; readable by ``pin-kpi-oed evaluate``)."""
+    main = next((r for r in results if r.criterion == "kpi"), results[-1])
+    return {
+        **model_to_dict(problem.model),  # robot, tracker_T_base, reflector_m, tcp_m, noise (as `evaluate` reads them)
+        "q_work": cell.q_work.tolist(),
+        "joint_names": list(cell.robot.joint_names),
+        "capsules": [c.to_dict() for c in cell.robot_capsules],
+        "obstacles": [o.to_dict() for o in cell.obstacles],
+        "half_spaces": [h.to_dict() for h in cell.half_spaces],
+        "cell": cell.to_dict(),
+        "measurements": m,
+        "seed": seed,
+        "collision_avoidance": collision,
+        "identifiable": [problem.ident.names[i] for i in problem.base],
+        "constraint_rows_per_configuration": problem.coll.info.count(),
+        "designs": [{**r.to_dict(), "cov_s_m2": score_design(problem.model, r.q_meas, cell.q_work, problem.ident).cov_s_m2.tolist()}
+                    for r in results],
+        "q_meas": main.q_meas.tolist(),
+        "q_meas_criterion": main.criterion,
+    }
+
+
+def run(args: argparse.Namespace) -> int:
+    """Handler of ``pin-kpi-oed design`` (returns the exit code).
+
+    Raises:
+        PinKpiOedError: bad cell, unknown criterion, infeasible cell, solver failure (one-line message).
+    """
+    from pin_kpi_oed.cell.cell import load_cell
+    from pin_kpi_oed.design.optimize import DesignProblem, ipopt_options, run_designs
+
+    criteria = parse_criteria(getattr(args, "criteria", "random,param,kpi"))
+    cell = load_cell(getattr(args, "cell", "kr15"))
+    m = getattr(args, "measurements", None) or cell.measurements
+    if m < 1:
+        raise InputError(f"--measurements: must be >= 1, got {m}")
+    seed = int(getattr(args, "seed", 0) or 0)
+    collision = not getattr(args, "no_collision", False)
+    starts = getattr(args, "starts", None) or 2
+    max_iter = getattr(args, "max_iter", None) or 500
+    quiet = bool(getattr(args, "quiet", False))
+    if starts < 1 or max_iter < 1:
+        raise InputError("--starts and --max-iter must be >= 1")
+    problem = DesignProblem(cell, collision=collision)
+    if not quiet:
+        rows = problem.coll.info.count()
+        print(cell.summary())
+        print(f"{m} measurements, seed {seed}, {'with' if collision else 'WITHOUT'} collision avoidance; "
+              f"{problem.base.size} identifiable parameters; constraint rows per configuration: "
+              + ", ".join(f"{k} {v}" for k, v in rows.items() if v)
+              + f" (aggregated to {problem.cons.n_rows} for Ipopt); {starts} start(s) per criterion")
+    results = run_designs(cell, criteria, m, seed, collision, starts, ipopt_options(max_iter=max_iter), problem,
+                          start=getattr(args, "start", "pool") or "pool")
+    cert = None
+    if getattr(args, "certificate", False):
+        from pin_kpi_oed.oed.certificate import certify
+
+        cert = certify(problem, m, pool_size=getattr(args, "pool_size", 5000) or 5000, seed=seed,
+                       extra=[r.q_meas for r in results if r.feasible])
+    shown = [r for r in results if r.criterion in criteria] or results
+    print(table(shown, results[0], cert))
+    if cert is not None:
+        print(f"certificate: every {m}-pose design from the {cert.pool_size} feasible candidates (random pool + "
+              f"the designs' poses) has tr(C_s) >= {cert.lower_bound_trace_cs_m2 * 1e6:.4e} mm^2 "
+              f"(equivalence theorem: max d/phi = {cert.approx.max_d_ratio:.4f})")
+    if not quiet:
+        rnd = results[0]
+        print(f"heuristic: {rnd.samples} uniform random poses drawn for {m} feasible ones "
+              f"({100.0 * m / max(rnd.samples or 1, 1):.2f} % accepted); tr(C_s) in the tracker frame, "
+              f"sigma = {cell.noise.sigma_xyz_m[0] * 1e6:g} um per axis; check = independent dense check")
+        for r in results:
+            if not r.feasible:
+                print(f"  {r.criterion}: {', '.join(r.check.get('violations', [])[:3])}")
+    if getattr(args, "json", None):
+        doc = design_json(cell, problem, results, m, seed, collision)
+        if cert is not None:
+            doc["lower_bound_trace_cs_m2"] = cert.lower_bound_trace_cs_m2
+            doc["certificate"] = cert.to_dict()
+            for d, r in zip(doc["designs"], results):
+                d["efficiency"] = cert.efficiency(r.trace_cs_m2)
+        atomic_write_json(args.json, doc)
+        if not quiet:
+            print(f"wrote {args.json}")
+    return 0

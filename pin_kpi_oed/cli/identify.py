@@ -1,0 +1,280 @@
+"""CLI subcommands ``simulate``, ``identify`` and ``import-ipa`` of ``pin-kpi-oed``.
+
+``register(subparsers)`` adds the three subcommands; each sets ``func`` to its handler
+``run_*(args) -> int`` (0 on success). Errors are :class:`~pin_kpi_oed.errors.PinKpiOedError`
+with one-line messages (``cli.py`` prints them and exits with code 2). Every output file is
+written atomically, and only after everything it depends on has been computed and checked.
+
+Examples::
+
+    pin-kpi-oed simulate --robot kr15 --n 80 --n-test 200 --seed 1 --out train.csv --test-out test.csv \\
+        --reflector 0.03,0.02,0.08 --noise 1e-5 --truth-json truth.json
+    pin-kpi-oed identify --robot kr15 --data train.csv --validate test.csv --reflector 0.03,0.02,0.08 \\
+        --json result.json --urdf-out calibrated.urdf
+    pin-kpi-oed import-ipa ../shared/data/ipa_ur10/Series_C --position-only --split 0.5 --seed 0 \\
+        --train c_train.csv --test c_test.csv
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+
+import numpy as np
+import pinocchio as pin
+
+from pin_kpi_oed.cli.util import parse_floats as _floats
+from pin_kpi_oed.errors import InputError
+
+__all__ = ["register", "run_simulate", "run_identify", "run_import_ipa"]
+
+
+
+
+def _positive(text: str, what: str) -> float:
+    try:
+        v = float(text)
+    except ValueError:
+        raise InputError(f"{what}: expected a number, got '{text}'") from None
+    if not (math.isfinite(v) and v > 0):
+        raise InputError(f"{what}: must be positive and finite, got {text}")
+    return v
+
+
+def _check_outputs(*paths: str | None) -> None:
+    """Fail before anything is written if an output's folder is missing or the path is a folder."""
+    from pin_kpi_oed.data.measurements import check_writable
+
+    for p in paths:
+        if p:
+            check_writable(p)
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    """Add the ``simulate``, ``identify`` and ``import-ipa`` subcommands."""
+    # ---- simulate ----------------------------------------------------------------
+    s = subparsers.add_parser("simulate", help="simulate tracker measurements of a robot with random geometric errors",
+                              description="Simulate laser-tracker measurements (CSV, SI units) of a 'true' robot: "
+                                          "random geometric errors from tolerances, tracker pose, reflector, noise.")
+    s.add_argument("--robot", required=True, help="URDF path or name (kr15, kr300, kr500, ur3, ur5, ur10, panda)")
+    s.add_argument("--tool", default=None, help="tool frame (default tool0)")
+    s.add_argument("--n", type=int, default=80, help="number of training measurements (default 80)")
+    s.add_argument("--n-test", type=int, default=0, help="number of held-out measurements (default 0)")
+    s.add_argument("--out", required=True, help="training CSV file")
+    s.add_argument("--test-out", default=None, help="held-out CSV file (with --n-test)")
+    s.add_argument("--truth-json", default=None, help="write the true parameters, tracker pose and reflector here")
+    s.add_argument("--seed", type=int, default=0, help="seed of every random draw (default 0)")
+    s.add_argument("--reflector", default="0.03,0.02,0.08", help="reflector offset in the tool frame, x,y,z (m)")
+    s.add_argument("--tracker", default=None,
+                   help="pose of the robot base in the tracker frame x,y,z[,roll,pitch,yaw] (m, rad); "
+                        "default: a tracker reach + 1.5 m away")
+    s.add_argument("--noise", default="1e-5", help="tracker noise sigma (m), 1 or 3 values (default 1e-5)")
+    s.add_argument("--tol-translation", default="5e-4", help="sigma of the joint-placement translation errors (m)")
+    s.add_argument("--tol-rotation", default="1e-3", help="sigma of the joint-placement rotation errors (rad)")
+    s.add_argument("--tol-reflector", default="0", help="sigma of the reflector offset error (m)")
+    s.add_argument("--pose6d", action="store_true", help="also simulate 6-DoF probe orientations (rx, ry, rz)")
+    s.add_argument("--sigma-rot", default="1e-4", help="orientation noise of --pose6d (rad)")
+    s.add_argument("--effects", default=None,
+                   help="unmodelled effects of the 'real' robot, e.g. joint_compliance=2e-6,gear_harmonic=5e-5 "
+                        "(name=SIZE: random +-SIZE per parameter; name=v1:v2:... exact values; see "
+                        "pin_kpi_oed.effects.library.parse_effects_spec). A tracker range-scale error is not offered: "
+                        "it equals a uniform scaling of the robot and no data can reveal it")
+    s.add_argument("--temperature", default="20,25",
+                   help="temperature column: uniform between T0,T1 (degC), read by thermal_expansion")
+    s.set_defaults(func=run_simulate)
+
+    # ---- identify ------------------------------------------------------------------
+    i = subparsers.add_parser("identify", help="identify geometric parameters from measurements, validate, export URDF",
+                              description="Weighted nonlinear least squares (Levenberg-Marquardt, analytic Jacobian) "
+                                          "over the identifiable parameters; tracker pose guessed by point-set "
+                                          "registration. With --validate: position errors on held-out data before "
+                                          "(nominal robot + fitted tracker pose and reflector) and after calibration.")
+    i.add_argument("--robot", required=True, help="URDF path or name (kr15, kr300, kr500, ur3, ur5, ur10, panda)")
+    i.add_argument("--tool", default=None, help="tool frame (default tool0)")
+    i.add_argument("--data", required=True, help="measurement CSV (joint columns, x, y, z in m, ...)")
+    i.add_argument("--validate", default=None, help="held-out measurement CSV (nothing is re-fitted on it)")
+    i.add_argument("--reflector", default="0,0,0", help="nominal reflector offset in the tool frame x,y,z (m)")
+    i.add_argument("--json", default=None, help="write the result (parameters, covariance, tracker pose, ...) here")
+    i.add_argument("--urdf-out", default=None, help="write the calibrated URDF here")
+    i.add_argument("--sigma", default=None,
+                   help="tracker noise sigma (m), 1 or 3 values; overrides the file's sigma columns. Without it "
+                        "and without sigma columns the weights are uniform and the covariance is scaled by the "
+                        "reduced chi2")
+    i.add_argument("--sigma-rot", default="1e-4", help="orientation noise of 6-D data (rad, default 1e-4)")
+    i.add_argument("--position-only", action="store_true", help="ignore rx, ry, rz columns")
+    i.add_argument("--loss", default="linear", choices=["linear", "soft_l1", "huber", "cauchy"],
+                   help="loss: linear (Levenberg-Marquardt) or robust (outliers flagged)")
+    i.add_argument("--fix", default=None, help="parameters held at nominal, comma-separated names or globs "
+                                               "(e.g. 'reflector.*' or 'tracker.*')")
+    i.add_argument("--max-nfev", type=int, default=None, help="maximum number of residual evaluations")
+    i.add_argument("--quiet", action="store_true", help="print only the validation lines")
+    i.set_defaults(func=run_identify)
+
+    # ---- import-ipa -------------------------------------------------------------------
+    p = subparsers.add_parser("import-ipa", help="convert IPA UR10 laser-tracker files to the measurement CSV format",
+                              description="Import an IPA UR10 series (';', decimal commas, mm, degrees) into the SI "
+                                          "measurement CSV format, optionally split at random into train/test.")
+    p.add_argument("src", help="IPA series folder (e.g. Series_C) or its measurements_*.csv")
+    p.add_argument("--out", default=None, help="CSV of all measurements")
+    p.add_argument("--split", type=float, default=None, help="share of the training part, e.g. 0.5")
+    p.add_argument("--seed", type=int, default=0, help="seed of the random split (default 0)")
+    p.add_argument("--train", default=None, help="training CSV (with --split)")
+    p.add_argument("--test", default=None, help="held-out CSV (with --split)")
+    p.add_argument("--position-only", action="store_true", help="drop the orientation (rx, ry, rz)")
+    p.add_argument("--keep-sigma", action="store_true",
+                   help="keep the std columns as sigma (they are the scatter of the tracker's averaged reading, "
+                        "not its accuracy: by default they are dropped and the fit weights uniformly)")
+    p.set_defaults(func=run_import_ipa)
+
+
+# --------------------------------------------------------------------------- #
+def run_simulate(args: argparse.Namespace) -> int:
+    """Handler of ``pin-kpi-oed simulate``."""
+    from pin_kpi_oed.data.measurements import atomic_write_json, write_measurements
+    from pin_kpi_oed.model.measurement import NoiseModel, TrackerModel
+    from pin_kpi_oed.model.robot import load_robot
+    from pin_kpi_oed.identification.simulate import Tolerances, default_tracker_pose, random_truth, simulate, truth_to_dict
+
+    if args.n < 1 or args.n_test < 0:
+        raise InputError(f"--n must be >= 1 and --n-test >= 0, got {args.n} and {args.n_test}")
+    if args.n_test and not args.test_out:
+        raise InputError("--n-test needs --test-out FILE")
+    _check_outputs(args.out, args.test_out, args.truth_json)
+    robot = load_robot(args.robot, args.tool)
+    noise = NoiseModel(sigma_xyz_m=tuple(_floats(args.noise, (1, 3), "--noise")),
+                       sigma_rot_rad=_positive(args.sigma_rot, "--sigma-rot"))
+    if args.tracker:
+        v = _floats(args.tracker, (3, 6), "--tracker")
+        rpy = v[3:] if v.size == 6 else np.zeros(3)
+        T = pin.SE3(pin.rpy.rpyToMatrix(rpy), v[:3])
+    else:
+        T = default_tracker_pose(robot)
+    model = TrackerModel(robot, tracker_T_base=T, reflector_m=_floats(args.reflector, 3, "--reflector"), noise=noise,
+                         pose6d=args.pose6d)
+    tol = Tolerances(joint_translation_m=float(_floats(args.tol_translation, 1, "--tol-translation")[0]),
+                     joint_rotation_rad=float(_floats(args.tol_rotation, 1, "--tol-rotation")[0]),
+                     reflector_m=float(_floats(args.tol_reflector, 1, "--tol-reflector")[0]))
+    truth = random_truth(model, tol, seed=args.seed)
+    rng = np.random.default_rng(args.seed + 1)
+    Q = robot.random_q(rng, args.n + args.n_test)
+    effects = []
+    if args.effects:
+        from pin_kpi_oed.effects.library import parse_effects_spec
+
+        effects = parse_effects_spec(args.effects, robot, np.random.default_rng(args.seed + 3))
+    t0, t1 = _floats(args.temperature, 2, "--temperature")
+    aux = {"temperature_c": np.random.default_rng(args.seed + 4).uniform(t0, t1, len(Q))}
+    ms = simulate(model, Q, truth, effects=effects, aux=aux, seed=args.seed + 2)
+    train = ms.subset(slice(0, args.n))
+    write_measurements(train, args.out)
+    if args.n_test:
+        write_measurements(ms.subset(slice(args.n, None)), args.test_out)
+    if args.truth_json:
+        atomic_write_json(args.truth_json, truth_to_dict(model, truth, tol, args.seed))
+    print(f"simulated {args.n} measurements -> {args.out}"
+          + (f", {args.n_test} held-out -> {args.test_out}" if args.n_test else "")
+          + f" (robot {robot.name}, tool {robot.tool_frame}, noise sigma {np.array(noise.sigma_xyz_m) * 1e6} µm, "
+            f"seed {args.seed}" + (f", effects: {', '.join(e.name for e, _ in effects)}" if effects else "") + ")")
+    return 0
+
+
+def run_identify(args: argparse.Namespace) -> int:
+    """Handler of ``pin-kpi-oed identify``."""
+    from pin_kpi_oed.identification.export import calibrated_urdf_text, check_urdf_fk
+    from pin_kpi_oed.errors import SolverError
+    from pin_kpi_oed.identification.identify import format_validation, identify, validate
+    from pin_kpi_oed.data.measurements import atomic_write_json, atomic_write_text, read_measurements
+    from pin_kpi_oed.model.measurement import NoiseModel, TrackerModel
+    from pin_kpi_oed.model.robot import load_robot
+    from pathlib import Path
+
+    _check_outputs(args.json, args.urdf_out)
+    robot = load_robot(args.robot, args.tool)
+    reach = robot.reach()
+    train = read_measurements(args.data, joint_names=robot.joint_names, reach_m=reach)
+    test = read_measurements(args.validate, joint_names=robot.joint_names, reach_m=reach) if args.validate else None
+    reflector = _floats(args.reflector, 3, "--reflector")
+    if np.linalg.norm(reflector) > reach:
+        raise InputError(f"--reflector {args.reflector}: {np.linalg.norm(reflector):.4g} m from the tool frame, more "
+                         f"than the robot's reach ({reach:.3g} m): give it in m")
+    sigma_rot = _positive(args.sigma_rot, "--sigma-rot")
+    if args.sigma is not None:
+        noise = NoiseModel(sigma_xyz_m=tuple(_floats(args.sigma, (1, 3), "--sigma")), sigma_rot_rad=sigma_rot)
+        weights, scale = "noise", False
+    else:
+        noise = NoiseModel(sigma_xyz_m=(1e-5,) * 3, sigma_rot_rad=sigma_rot)
+        weights, scale = "auto", train.sigma_m is None
+    model = TrackerModel(robot, reflector_m=reflector, noise=noise)
+    if args.fix:
+        model.layout.fix(args.fix)
+    kw = dict(weights=weights, scale_covariance=scale, use_orientation=not args.position_only, loss=args.loss,
+              max_nfev=args.max_nfev)
+    result = identify(model, train, **kw)
+    out = {"result": result.to_dict(), "data": str(args.data), "validate": args.validate}
+    lines = []
+    if test is not None:
+        before = identify(model, train, setup_only=True, **kw)
+        vb, va = validate(before, test), validate(result, test)
+        out["validation"] = {"before": {k: v for k, v in vb.items()}, "after": {k: v for k, v in va.items()},
+                             "before_means": "nominal robot + fitted tracker pose and reflector",
+                             "after_means": "geometric calibration"}
+        lines = [format_validation(vb, "before (nominal geometry + fitted tracker pose and reflector)"),
+                 format_validation(va, "after  (geometric calibration)                              ")]
+    # everything is computed and checked before the first file is written
+    urdf_text = None
+    if args.urdf_out:
+        placements = result.model.joint_placements(result.p)
+        out_dir = Path(args.urdf_out).parent
+        urdf_text = calibrated_urdf_text(robot, placements, comment=f"calibrated by pin_kpi_oed from {args.data}",
+                                         out_dir=out_dir if str(out_dir) else ".")
+        dp, dr = check_urdf_fk(urdf_text, robot, placements)
+        if dp > 1e-9 or dr > 1e-9:
+            raise SolverError(f"the calibrated URDF reproduces the identified FK only to {dp:.3g} m; nothing written")
+        out["urdf_check_max_error_m"] = dp
+    if not args.quiet:
+        print(result.summary())
+    for ln in lines:
+        print(ln)
+    if args.json:
+        atomic_write_json(args.json, out)
+    if urdf_text is not None:
+        atomic_write_text(args.urdf_out, urdf_text)
+    written = [f for f in (args.json, args.urdf_out) if f]
+    if written and not args.quiet:
+        print("wrote " + ", ".join(written))
+    return 0
+
+
+def run_import_ipa(args: argparse.Namespace) -> int:
+    """Handler of ``pin-kpi-oed import-ipa``."""
+    from pin_kpi_oed.data.measurements import MeasurementSet, write_measurements
+    from pin_kpi_oed.data.ipa import import_ipa
+
+    if args.out is None and args.split is None:
+        raise InputError("import-ipa: give --out FILE and/or --split FRACTION --train FILE --test FILE")
+    if args.split is not None and not (args.train and args.test):
+        raise InputError("import-ipa: --split needs both --train FILE and --test FILE")
+    if args.split is None and (args.train or args.test):
+        raise InputError("import-ipa: --train/--test need --split FRACTION (e.g. 0.5)")
+    _check_outputs(args.out, args.train, args.test)
+    ms = import_ipa(args.src)
+    ms = MeasurementSet(joint_names=ms.joint_names, q=ms.q, position_m=ms.position_m,
+                        rotvec_rad=None if args.position_only else ms.rotvec_rad,
+                        sigma_m=ms.sigma_m if args.keep_sigma else None, temperature_c=ms.temperature_c,
+                        payload_kg=ms.payload_kg, time_s=ms.time_s, source=ms.source, extra=ms.extra)
+    jobs = []
+    if args.out:
+        jobs.append((ms, args.out))
+    if args.split is not None:
+        tr, te = ms.split(args.split, seed=args.seed)
+        jobs += [(tr, args.train), (te, args.test)]
+    for obj, path in jobs:
+        write_measurements(obj, path)
+    msg = f"imported {len(ms)} measurements from {ms.source}"
+    if args.out:
+        msg += f" -> {args.out}"
+    if args.split is not None:
+        msg += (f"; split {args.split:g}/{1 - args.split:g} with seed {args.seed}: {len(tr)} -> {args.train}, "
+                f"{len(te)} -> {args.test}")
+    print(msg)
+    return 0

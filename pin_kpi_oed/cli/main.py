@@ -1,0 +1,120 @@
+"""The ``pin-kpi-oed`` command line: a thin layer over the Python API.
+
+Subcommands of the core live here (``info``, ``evaluate``, ``demo``); each
+topic module ``cli_<topic>.py`` adds its own with ``register(subparsers)``.
+Every :class:`~pin_kpi_oed.errors.PinKpiOedError` becomes one line on stderr
+and exit code 2, never a traceback.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from pin_kpi_oed.cli.util import parse_floats
+from pin_kpi_oed.errors import PinKpiOedError
+
+TOPICS = ("design", "identify", "diagnose", "view", "study")
+
+
+
+
+def cmd_info(args: argparse.Namespace) -> int:
+    """``pin-kpi-oed info ROBOT``: joints, limits, parameter count, identifiable rank."""
+    from pin_kpi_oed.oed.identifiability import analyse
+    from pin_kpi_oed.model.measurement import TrackerModel
+    from pin_kpi_oed.model.robot import load_robot
+
+    robot = load_robot(args.robot, args.tool)
+    refl = parse_floats(args.reflector, 3, "--reflector")
+    model = TrackerModel(robot, reflector_m=refl)
+    ident = analyse(model, seed=args.seed)
+    if args.json:
+        out = {"robot": robot.summary(), "reflector_m": refl.tolist(), "identifiability": ident.to_dict()}
+        print(json.dumps(out, indent=2))
+        return 0
+    print(f"robot: {robot.name}  ({robot.urdf_path})")
+    print(f"tool frame: {robot.tool_frame}" + (f"   locked joints: {', '.join(robot.locked_joints)}"
+                                               if robot.locked_joints else ""))
+    print(f"{'joint':<22}{'lower (deg)':>12}{'upper (deg)':>12}")
+    for n, lo, hi in zip(robot.joint_names, robot.q_lower, robot.q_upper):
+        print(f"{n:<22}{np.degrees(lo):>12.1f}{np.degrees(hi):>12.1f}")
+    print(f"reflector in {robot.tool_frame}: {', '.join(f'{x * 1e3:.1f}' for x in refl)} mm")
+    print(ident.summary())
+    return 0
+
+
+def cmd_evaluate(args: argparse.Namespace) -> int:
+    """``pin-kpi-oed evaluate DESIGN.json``: score given measurement configurations under every criterion."""
+    from pin_kpi_oed.oed.evaluate import evaluate_file
+
+    out = evaluate_file(Path(args.design), Path(args.json) if args.json else None)
+    units = {"kpi": "m^2 (tr C_s)", "param": "m^2 + rad^2 (tr C_p, mixed units)", "E": "m^2 or rad^2 (max eig C_p)",
+             "cond": "(dimensionless)"}
+    for k, v in out["criteria"].items():
+        print(f"{k:<7}{v: .6g}  {units.get(k, '(dimensionless, log scale)')}")
+    print(f"tr(C_s) = {out['trace_cs_m2'] * 1e6:.6g} mm^2   TCP sigma = {out['tcp_sigma_m'] * 1e6:.3f} um")
+    return 0
+
+
+def cmd_demo(args: argparse.Namespace) -> int:
+    """``pin-kpi-oed demo``: the main job on the embedded default cell (KR 15)."""
+    from pin_kpi_oed.cli.design import run as run_design
+
+    ns = argparse.Namespace(cell="kr15", criteria="random,param,kpi", measurements=60, seed=args.seed,
+                            json=args.json, no_collision=False, starts=None, certificate=True, pool_size=5000,
+                            start="pool", max_iter=None, quiet=False)
+    return run_design(ns)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The argument parser with every available subcommand."""
+    parser = argparse.ArgumentParser(prog="pin-kpi-oed", description=__doc__.splitlines()[0])
+    sub = parser.add_subparsers(dest="command", required=True)
+    p = sub.add_parser("info", help="joints, limits, parameter count and identifiable rank of a robot")
+    p.add_argument("robot", help="URDF path or name (kr15, kr300, kr500, ur3, ur5, ur10, panda)")
+    p.add_argument("--tool", default=None, help="tool frame (default tool0)")
+    p.add_argument("--reflector", default="0.05,0.0,0.05", help="reflector offset x,y,z in the tool frame (m)")
+    p.add_argument("--seed", type=int, default=0, help="seed of the random excitation")
+    p.add_argument("--json", action="store_true", help="print JSON instead of text")
+    p.set_defaults(func=cmd_info)
+    p = sub.add_parser("evaluate", help="score measurement configurations (JSON in) under every criterion")
+    p.add_argument("design", help="JSON with robot, tracker_T_base, reflector_m, noise, q_meas, q_work")
+    p.add_argument("--json", default=None, help="write the scores to this JSON file")
+    p.set_defaults(func=cmd_evaluate)
+    p = sub.add_parser("demo", help="the main job on the embedded default cell (KR 15)")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--json", default=None, help="write the result JSON here")
+    p.set_defaults(func=cmd_demo)
+    for topic in TOPICS:
+        try:
+            mod = importlib.import_module(f"pin_kpi_oed.cli.{topic}")
+        except ImportError as exc:
+            if f"pin_kpi_oed.cli.{topic}" in str(exc):
+                continue
+            raise
+        mod.register(sub)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Entry point of ``pin-kpi-oed``; returns the exit code."""
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        return int(args.func(args) or 0)
+    except PinKpiOedError as exc:
+        print(f"pin-kpi-oed {args.command}: error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

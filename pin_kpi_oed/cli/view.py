@@ -1,0 +1,114 @@
+"""``pin-kpi-oed view DESIGN_JSON``: meshcat preview of a design (see :mod:`pin_kpi_oed.viz.viewer`).
+
+    pin-kpi-oed view design.json                       # live meshcat viewer in the browser (Ctrl-C to stop)
+    pin-kpi-oed view design.json --html out.html       # self-contained static page, opened in the browser
+    pin-kpi-oed view design.json --html out.html --no-open
+    pin-kpi-oed view design.json --figures figs/ --no-open --html out.html
+    pin-kpi-oed view design.json --html pose.html --pose kpi:5   # page opens paused at the KPI design's pose 5
+"""
+
+from __future__ import annotations
+
+import argparse
+import signal
+import sys
+import time
+from pathlib import Path
+
+from pin_kpi_oed.errors import InputError
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    """Add the ``view`` subcommand."""
+    p = subparsers.add_parser(
+        "view", help="meshcat preview of a design: cell, poses, laser beam, KPI confidence ellipsoids",
+        description="Show a design JSON (pin-kpi-oed design --json) in meshcat: the cell, the robot stepping "
+                    "through the measurement configurations (Animations panel) and all of them ghosted, its "
+                    "capsules (toggle), the laser beam and the TCP's confidence ellipsoid of every design at "
+                    "each working configuration, magnified by the factor shown.")
+    p.add_argument("design", metavar="DESIGN_JSON", help="design JSON (robot, tracker_T_base, q_work, designs, ...)")
+    p.add_argument("--html", default=None, metavar="OUT.html",
+                   help="write a self-contained static page (opens offline) instead of starting a live viewer")
+    p.add_argument("--no-open", action="store_true", help="do not open a browser")
+    p.add_argument("--criteria", default=None, help="comma-separated designs to show (default all)")
+    p.add_argument("--scale", type=float, default=None,
+                   help="magnification of the ellipsoids (default: a 1-2-5 number making them visible)")
+    p.add_argument("--level", type=float, default=0.95, help="confidence level of the ellipsoids (default 0.95)")
+    p.add_argument("--no-ghosts", action="store_true", help="do not draw the measurement configurations at once")
+    p.add_argument("--capsules", action="store_true", help="show the robot's capsules initially")
+    p.add_argument("--pose", default=None, metavar="CRITERION:K",
+                   help="open the static page with the robot at measurement configuration K (0-based) of a design")
+    p.add_argument("--figures", default=None, metavar="DIR",
+                   help="also write the report figures (ellipsoid projections, designs, poses) as PNG to DIR")
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    """Handler of ``view``; returns the exit code (errors raise PinKpiOedError, printed by cli.main)."""
+    from pin_kpi_oed.viz.viewer import build_scene, fmt_factor, load_design, serve
+
+    if not (0.0 < args.level < 1.0):
+        raise InputError(f"--level must be in (0, 1), got {args.level}")
+    if args.scale is not None and not args.scale > 0:
+        raise InputError(f"--scale must be > 0, got {args.scale}")
+    if args.html is not None and not Path(args.html).resolve().parent.is_dir():
+        raise InputError(f"--html {args.html}: folder {Path(args.html).parent} does not exist")
+    criteria = [c.strip() for c in args.criteria.split(",") if c.strip()] if args.criteria else None
+    df = load_design(args.design, criteria=criteria)
+    for n in df.notes:
+        print(f"note: {n}", file=sys.stderr)
+    scene = build_scene(df, scale=args.scale, level=args.level, ghosts=not args.no_ghosts,
+                        capsules_visible=args.capsules)
+    print(f"{df.robot.name}: {len(df.designs)} design(s), {df.q_work.shape[0]} working configuration(s); "
+          f"{int(round(args.level * 100))} % TCP ellipsoids magnified x{fmt_factor(scene.scale)}")
+    t = df.q_work.shape[0]
+    for d in df.designs:
+        print(f"  {d.label:<18} {d.q_meas.shape[0]:>4} poses  tr(C_s) = {d.trace_cs_m2 * 1e12:10.4g} um^2  "
+              f"TCP sigma = {(max(d.trace_cs_m2, 0.0) / t) ** 0.5 * 1e6:8.4g} um  colour #{d.colour:06x}"
+              + ("  (C_s recomputed)" if d.cov_source == "computed" else ""))
+    if args.figures:
+        from pin_kpi_oed.viz.figures import design_figures
+
+        out = Path(args.figures)
+        if not out.is_dir():
+            raise InputError(f"--figures {out}: no such folder")
+        for k, p in design_figures(df, out).items():
+            print(f"wrote {p}")
+    pose = None
+    if args.pose:
+        crit, _, k = args.pose.rpartition(":")
+        if not crit or not k.isdigit():
+            raise InputError(f"--pose: expected CRITERION:K (e.g. kpi:0), got '{args.pose}'")
+        pose = (crit, int(k))
+        scene.pose_time(*pose)  # raises on an unknown design or index
+        if args.html is None:
+            raise InputError("--pose needs --html (the live viewer has its own time slider)")
+    if args.html is not None:
+        from pin_kpi_oed.data.measurements import atomic_write_text
+
+        atomic_write_text(args.html, scene.static_html(pose=pose))
+        print(f"wrote {args.html} (self-contained; open it in any browser, offline)")
+        if not args.no_open:
+            import webbrowser
+
+            webbrowser.open(Path(args.html).resolve().as_uri(), new=2)
+        return 0
+
+    def _stop(signum, frame):  # SIGTERM ends like Ctrl-C, so that meshcat's atexit stops its server
+        raise KeyboardInterrupt
+
+    old = signal.signal(signal.SIGTERM, _stop)
+    live = None
+    try:
+        live = serve(scene, open_browser=not args.no_open)
+        print(f"meshcat viewer at {live.url()}  (Ctrl-C to stop)", flush=True)
+        while True:
+            time.sleep(3600)
+    except KeyboardInterrupt:
+        return 0
+    finally:
+        signal.signal(signal.SIGTERM, old)
+        proc = getattr(getattr(live, "window", None), "server_proc", None)
+        if proc is not None and proc.poll() is None:
+            proc.kill()
+            proc.wait()

@@ -1,0 +1,1 @@
+"""File formats and containers: measurement sets (CSV), importers, atomic writes."""

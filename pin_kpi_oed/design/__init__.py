@@ -1,0 +1,1 @@
+"""KPI optimum experimental design solved by IPOPT (eq. 24)."""

@@ -1,0 +1,550 @@
+"""Optimum experimental design with collision avoidance, solved by IPOPT (paper eqs. 7a–7b, 24a–24e).
+
+The general OED problem min φ(C(q)) s.t. ψ(q) ≥ 0 (eq. 7) with the paper's choices (eq. 24).
+
+The design problem for m measurement configurations Q = (q₁ … q_m) is::
+
+    min_Q   φ(C(Q)) / φ(C(Q₀))                          (24a; e.g. φ = tr C_s, the KPI criterion)
+    s.t.    q_lo ≤ q_i ≤ q_hi                           (joint bounds, as variable bounds)
+            g(q_i) ≥ δ            for every i           (24b: capsule pairs, half-spaces, laser beam,
+                                                         incidence; :mod:`pin_kpi_oed.cell.collision`)
+
+with C_p = (FᵀF)⁻¹ over the identifiable parameters, F = Σ⁻¹ ∂h/∂p (24d), C_s = E C_p Eᵀ with
+E = ∂TCP/∂p at the working configurations (24c, 24e), and δ a small buffer (0.1 mm, 1e-5 in cos β)
+so that Ipopt's constraint tolerance can never turn into a collision of the final check.
+
+Formulation choices that make it fast (``benchmarks/bench_design.py`` measures them). A naive
+formulation — one Ipopt row per capsule pair and configuration (60 rows × 60 configurations for the
+KR 15 cell) — spends ~90 % of its time inside Ipopt: with a limited-memory Hessian each iteration
+factorises the KKT system and back-solves it for every quasi-Newton correction pair, so the cost
+per iteration grows with the number of rows (≈ 60 ms at 3,600 rows against ≈ 10 ms at 120), and
+the barrier terms of thousands of nearly-active rows slow the progress. Here:
+
+* **pruning**: rows that can never be active (distance bounds over the whole joint range) are dropped;
+* **aggregation per configuration with exact gradients**: each configuration keeps one smooth
+  Kreisselmeier–Steinhauser row over its distance rows, c = d_min − ℓ log Σ exp(−(d_p − d_min)/ℓ)
+  (ℓ = 2 mm), whose gradient is the exact softmax-weighted sum of the pairs' exact gradients, plus
+  its incidence row; c ≤ min_p d_p, so c ≥ 0 never admits a collision (conservative by < ℓ·ln N,
+  typically < 1 mm); 2 rows per configuration instead of ~60;
+* **sparse, block-diagonal Jacobian**: each row depends on one configuration only;
+* **one batched call** evaluates all rows of all configurations (and one the criterion), cached by x:
+  Ipopt asks for the constraints and then the Jacobian at the same point;
+* **objective scaled by its value at the start** (tr C_s ≈ 1e-12 m²; log criteria shifted instead),
+  exact gradient dφ/dQ from :class:`~pin_kpi_oed.oed.criteria.DesignCriterion`;
+* **feasible start**: the heuristic design (uniform random, rejection-sampled), so Ipopt starts
+  interior; **multi-start** from further seeded random feasible designs;
+* limited-memory Hessian (6 pairs, yᵀy/sᵀy initialisation), adaptive barrier update, tolerances
+  relative to the scaled objective (:func:`ipopt_options`), ``OMP_NUM_THREADS=1`` for MUMPS' BLAS.
+
+The run also stops when the lowest objective of all iterates has improved by less than 0.1 % over
+50 iterations (status ``Stalled``); on the KR 15 cell the result is within ~3 % of a run to
+tol = 1e-6 that takes ten times longer. If Ipopt stops without success (or stalls), the best
+feasible iterate seen (tracked in the ``intermediate`` callback from Ipopt's current iterate and
+constraint values) is returned with the status. Every returned design is re-checked by the
+independent dense :class:`~pin_kpi_oed.cell.collision.FeasibilityChecker`.
+"""
+
+from __future__ import annotations
+
+import os
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from pin_kpi_oed.cell.cell import Cell
+from pin_kpi_oed.cell.collision import AggregatedConstraints, CollisionModel, FeasibilityChecker, FeasibilityReport, random_feasible
+from pin_kpi_oed.oed.pool import select as pool_select
+from pin_kpi_oed.progress import progress
+from pin_kpi_oed.oed.criteria import CRITERIA, DesignCriterion
+from pin_kpi_oed.errors import IdentifiabilityError, InputError, SolverError
+from pin_kpi_oed.oed.identifiability import analyse, check_kpi
+
+os.environ.setdefault("OMP_NUM_THREADS", "1")
+
+#: Criteria whose value is a positive quantity (scaled by the start value); the others are logs (shifted).
+_RATIO_CRITERIA = ("kpi", "param", "E", "cond")
+
+#: Stagnation test: stop when the lowest (scaled) objective of all iterates improved by less than
+#: STALL_TOL (0.1 % of the start value for ratio criteria, 1e-3 in log units otherwise) over
+#: STALL_WINDOW iterations; the best feasible iterate is then returned.
+STALL_WINDOW = 50
+STALL_TOL = 1e-3
+
+#: Buffers of the optimiser's constraints above the feasibility threshold (m for distances, cos β).
+CLEARANCE_BUFFER_M = 1e-4
+COS_BUFFER = 1e-5
+
+_IPOPT_STATUS = {0: "Solve_Succeeded", 1: "Solved_To_Acceptable_Level", 2: "Infeasible_Problem_Detected",
+                 3: "Search_Direction_Becomes_Too_Small", 4: "Diverging_Iterates", 5: "User_Requested_Stop",
+                 6: "Feasible_Point_Found", -1: "Maximum_Iterations_Exceeded", -2: "Restoration_Failed",
+                 -3: "Error_In_Step_Computation", -4: "Maximum_CpuTime_Exceeded", -5: "Maximum_WallTime_Exceeded",
+                 -10: "Not_Enough_Degrees_Of_Freedom", -11: "Invalid_Problem_Definition",
+                 -12: "Invalid_Option", -13: "Invalid_Number_Detected", -100: "Unrecoverable_Exception",
+                 -101: "NonIpopt_Exception_Thrown", -102: "Insufficient_Memory", -199: "Internal_Error"}
+
+
+@dataclass
+class DesignResult:
+    """One measurement design and its scores.
+
+    Attributes:
+        criterion: ``random`` (heuristic) or a name of :data:`~pin_kpi_oed.oed.criteria.CRITERIA`.
+        q_meas: configurations (m, n) rad.
+        trace_cs_m2: tr(C_s) at the working configurations (m²).
+        tcp_sigma_m: sqrt(tr(C_s)/t), RMS 3-D TCP standard deviation per working configuration (m).
+        trace_cp: tr(C_p) over the identifiable parameters (mixed m², rad²).
+        value: the criterion's own value (tr(C_s) for random).
+        min_clearance_m: smallest clearance over every pair checked by the independent check (m).
+        max_incidence_deg: largest incidence angle (deg).
+        feasible: every pose collision-free, visible and within bounds (independent check).
+        share_colliding: share of poses in collision (0…1).
+        share_infeasible: share of poses failing any check (0…1).
+        solve_time_s: wall time (s): Ipopt (all starts) or the rejection sampling for random.
+        iterations: Ipopt iterations of the returned start (0 for random).
+        status: Ipopt status of the returned start (``sampled`` for random); suffixed with
+            ``; best feasible iterate`` when the fallback was used.
+        collision_avoidance: whether the collision constraints were imposed.
+        samples: random poses drawn (heuristic design) or None.
+        n_constraints: constraint rows of the NLP (0 for random).
+        starts: per start: objective (scaled), iterations, time, status.
+        check: the independent check (plain dict).
+    """
+
+    criterion: str
+    q_meas: np.ndarray
+    trace_cs_m2: float
+    tcp_sigma_m: float
+    trace_cp: float
+    value: float
+    min_clearance_m: float
+    max_incidence_deg: float
+    feasible: bool
+    share_colliding: float
+    share_infeasible: float
+    solve_time_s: float
+    iterations: int
+    status: str
+    collision_avoidance: bool = True
+    samples: int | None = None
+    n_constraints: int = 0
+    starts: list[dict] = field(default_factory=list)
+    check: dict = field(default_factory=dict)
+
+    def improvement_over(self, reference: "DesignResult") -> float:
+        """Relative reduction of tr(C_s) w.r.t. ``reference`` (%)."""
+        return 100.0 * (1.0 - self.trace_cs_m2 / reference.trace_cs_m2)
+
+    def to_dict(self) -> dict:
+        """Plain JSON-able dict (SI units)."""
+        return {"criterion": self.criterion, "q_meas": self.q_meas.tolist(), "trace_cs_m2": self.trace_cs_m2,
+                "tcp_sigma_m": self.tcp_sigma_m, "trace_cp": self.trace_cp, "value": self.value,
+                "min_clearance_m": self.min_clearance_m, "max_incidence_deg": self.max_incidence_deg,
+                "feasible": self.feasible, "share_colliding": self.share_colliding,
+                "share_infeasible": self.share_infeasible, "solve_time_s": self.solve_time_s,
+                "iterations": self.iterations, "status": self.status,
+                "collision_avoidance": self.collision_avoidance, "samples": self.samples,
+                "n_constraints": self.n_constraints, "starts": self.starts, "check": self.check}
+
+    def summary(self) -> str:
+        """One readable line."""
+        extra = f", {self.samples} samples" if self.samples is not None else f", {self.iterations} iterations"
+        return (f"{self.criterion}: tr(C_s) = {self.trace_cs_m2 * 1e6:.4g} mm^2, TCP sigma = "
+                f"{self.tcp_sigma_m * 1e6:.3f} um, min clearance {self.min_clearance_m * 1e3:.1f} mm, "
+                f"max incidence {self.max_incidence_deg:.1f} deg, {'feasible' if self.feasible else 'INFEASIBLE'} "
+                f"({100 * self.share_colliding:.0f} % colliding){extra}, {self.solve_time_s:.2f} s, {self.status}")
+
+    def __str__(self) -> str:
+        return self.summary()
+
+
+class DesignProblem:
+    """Everything fixed across designs of one cell: model, identifiable set, KPI sensitivity, constraints.
+
+    Args:
+        cell: the measurement cell.
+        collision: impose the collision and line-of-sight constraints (False: joint bounds and
+            incidence only, the paper's "without collision avoidance").
+        prune: drop constraint rows that can never be active.
+        aggregate: per-configuration aggregation of the distance rows for the optimiser: ``"ks"``
+            (smooth, conservative, exact gradient), ``"min"`` or ``"none"`` (every row; the naive formulation).
+        ks_length_m: KS smoothing length (m).
+
+    Raises:
+        IdentifiabilityError: the TCP at the working configurations is not estimable.
+        InputError: invalid cell geometry (see :class:`~pin_kpi_oed.cell.collision.CollisionModel`).
+    """
+
+    def __init__(self, cell: Cell, collision: bool = True, prune: bool = True, aggregate: str = "ks",
+                 ks_length_m: float = 2e-3):
+        self.cell = cell
+        self.collision = collision
+        self.model = cell.tracker_model()
+        self.p0 = np.zeros(self.model.n_params)
+        self.ident = analyse(self.model)
+        E_full = self.model.kpi_jacobian(self.p0, cell.q_work)
+        check_kpi(self.ident, self.model, E_full, f"{cell.name}: the TCP at the working configuration")
+        self.base = self.ident.base
+        self.E = E_full[:, self.base]
+        self.coll = CollisionModel(cell, collision=collision, prune=prune, model=self.model)
+        self.cons = AggregatedConstraints(self.coll, aggregate, ks_length_m)
+        # the heuristic design is always collision-free (it is the practical baseline and every start)
+        self.coll_full = self.coll if collision else CollisionModel(cell, collision=True, prune=prune,
+                                                                     model=self.model)
+        self.checker = FeasibilityChecker(cell)
+        self._kpi = DesignCriterion(self.model, self.base, "kpi", self.E)
+        self._param = DesignCriterion(self.model, self.base, "param", self.E)
+
+    @property
+    def n(self) -> int:
+        """Joints per configuration."""
+        return self.cell.robot.nq
+
+    def criterion(self, name: str) -> DesignCriterion:
+        """The design criterion ``name`` on this problem.
+
+        Raises:
+            InputError: unknown name.
+        """
+        if name not in CRITERIA:
+            raise InputError(f"unknown criterion '{name}' (known: random, {', '.join(CRITERIA)})")
+        return DesignCriterion(self.model, self.base, name, self.E)
+
+    def min_measurements(self) -> int:
+        """Fewest configurations that can identify the base parameters."""
+        return int(np.ceil(self.base.size / self.model.nh))
+
+    def random_design(self, m: int, seed: int | np.random.SeedSequence = 0, max_tries: int | None = None
+                      ) -> tuple[np.ndarray, int]:
+        """Heuristic design: m uniform random configurations rejection-sampled until feasible (all
+        constraints, also when the optimiser runs without collision avoidance).
+
+        Returns:
+            (Q (m, n) rad, samples drawn).
+
+        Raises:
+            InfeasibleError: no (or too few) feasible poses in ``max_tries`` samples.
+        """
+        rng = np.random.default_rng(seed)
+        return random_feasible(self.coll_full, m, rng, max_tries or self.cell.max_random_tries)
+
+    def result(self, criterion: str, Q: np.ndarray, value: float, solve_time: float, iterations: int,
+               status: str, samples: int | None = None, n_constraints: int = 0, starts: list | None = None,
+               report: FeasibilityReport | None = None) -> DesignResult:
+        """Score a design and run the independent check."""
+        try:
+            cs = self._kpi.value(Q)
+            cp = self._param.value(Q)
+        except IdentifiabilityError:
+            cs = cp = float("inf")
+        rep = report or self.checker.check(Q)
+        t = self.cell.q_work.shape[0]
+        return DesignResult(criterion=criterion, q_meas=np.array(Q), trace_cs_m2=float(cs),
+                            tcp_sigma_m=float(np.sqrt(cs / t)), trace_cp=float(cp), value=float(value),
+                            min_clearance_m=rep.min_clearance_m, max_incidence_deg=rep.max_incidence_deg,
+                            feasible=rep.all_feasible, share_colliding=rep.share_colliding,
+                            share_infeasible=rep.share_infeasible, solve_time_s=float(solve_time),
+                            iterations=int(iterations), status=status, collision_avoidance=self.collision,
+                            samples=samples, n_constraints=n_constraints, starts=starts or [],
+                            check=rep.to_dict())
+
+
+class _NLP:
+    """cyipopt problem: scaled criterion, batched cached constraints, block-sparse Jacobian."""
+
+    def __init__(self, crit: DesignCriterion, cons: AggregatedConstraints, m: int, f0: float):
+        self.crit, self.cons, self.m, self.n = crit, cons, m, cons.n
+        self.ratio = crit.name in _RATIO_CRITERIA
+        self.f0 = f0
+        R = cons.n_rows
+        off_r = (np.arange(m) * R)[:, None]
+        off_c = (np.arange(m) * self.n)[:, None]
+        self.jr = (off_r + cons.jac_rows[None, :]).ravel()
+        self.jc = (off_c + cons.jac_cols[None, :]).ravel()
+        self._gkey = self._fkey = None
+        self.best_x: np.ndarray | None = None
+        self.best_f = np.inf
+        self.iterations = 0
+        self.problem = None
+        self.n_f = self.n_g = 0
+        self.t_f = self.t_g = 0.0
+        self.history: list[float] = []
+        self.obj_low = np.inf
+        self.stall_window, self.stall_tol, self.stalled = STALL_WINDOW, STALL_TOL, False
+
+    def _Q(self, x: np.ndarray) -> np.ndarray:
+        return x.reshape(self.m, self.n)
+
+    def _eval_f(self, x: np.ndarray) -> None:
+        key = x.tobytes()
+        if key != self._fkey:
+            t0 = time.perf_counter()
+            v, G = self.crit.value_and_grad(self._Q(x))
+            if self.ratio:
+                self._f, self._df = v / self.f0, G.ravel() / self.f0
+            else:
+                self._f, self._df = v - self.f0, G.ravel()
+            self._fkey = key
+            self.n_f += 1
+            self.t_f += time.perf_counter() - t0
+
+    def _eval_g(self, x: np.ndarray) -> None:
+        key = x.tobytes()
+        if key != self._gkey:
+            t0 = time.perf_counter()
+            g, G = self.cons.evaluate(self._Q(x), with_grad=True)
+            self._g = g.ravel()
+            self._J = G[:, self.cons.jac_rows, self.cons.jac_cols].ravel()
+            self._gkey = key
+            self.n_g += 1
+            self.t_g += time.perf_counter() - t0
+
+    def objective(self, x: np.ndarray) -> float:
+        try:
+            self._eval_f(x)
+        except IdentifiabilityError:
+            return 1e20  # singular information matrix: Ipopt backtracks
+        return self._f
+
+    def gradient(self, x: np.ndarray) -> np.ndarray:
+        self._eval_f(x)
+        return self._df
+
+    def constraints(self, x: np.ndarray) -> np.ndarray:
+        self._eval_g(x)
+        return self._g
+
+    def jacobianstructure(self) -> tuple[np.ndarray, np.ndarray]:
+        return self.jr, self.jc
+
+    def jacobian(self, x: np.ndarray) -> np.ndarray:
+        self._eval_g(x)
+        return self._J
+
+    def intermediate(self, alg_mod, iter_count, obj_value, inf_pr, inf_du, mu, d_norm, regularization_size,
+                     alpha_du, alpha_pr, ls_trials) -> bool:
+        self.iterations = int(iter_count)
+        if alg_mod == 0 and self.problem is not None:
+            it = self.problem.get_current_iterate()
+            gmin = float(it["g"].min()) if it is not None and it["g"].size else 0.0
+            # aggregated rows are conservative: g >= 0 implies every pair and the incidence are feasible
+            if it is not None and gmin >= 0.0 and obj_value < self.best_f:
+                self.best_f = float(obj_value)
+                self.best_x = np.array(it["x"], float)
+            self.obj_low = min(self.obj_low, float(obj_value))
+        self.history.append(self.obj_low)
+        w = self.stall_window
+        if w and len(self.history) > w and np.isfinite(self.history[-w - 1]):
+            if self.history[-w - 1] - self.obj_low < self.stall_tol * max(1.0, abs(self.obj_low)):
+                self.stalled = True
+                return False  # stagnation: stop (Ipopt status User_Requested_Stop)
+        return True
+
+
+def ipopt_options(max_iter: int = 500, tol: float = 1e-3, acceptable_tol: float = 1e-2, acceptable_iter: int = 10,
+                  acceptable_obj_change_tol: float = 1e-3, history: int = 6) -> dict:
+    """Ipopt options of the design solver.
+
+    The objective is scaled to 1 at the start, so ``tol`` = 1e-3 on Ipopt's scaled KKT error is a
+    relative criterion; "acceptable" termination needs the KKT error below ``acceptable_tol`` and a
+    relative objective change below ``acceptable_obj_change_tol`` (0.1 %) for ``acceptable_iter``
+    consecutive iterations. Ipopt's last iterate may then violate a constraint by up to 1 cm
+    (``acceptable_constr_viol_tol``): :func:`solve_ipopt` returns the best *feasible* iterate instead.
+    The quasi-Newton matrix is initialised with yᵀy/sᵀy (``scalar2``), which keeps the first steps
+    short: with the default sᵀy/sᵀs, 240-configuration designs took steps of ~1 rad that left the
+    feasible set for dozens of iterations. ``benchmarks/bench_design.py`` compares the result with a
+    run to tol = 1e-6.
+    """
+    return {"hessian_approximation": "limited-memory", "limited_memory_max_history": history,
+            "limited_memory_initialization": "scalar2",
+            "mu_strategy": "adaptive", "tol": tol, "acceptable_tol": acceptable_tol,
+            "acceptable_iter": acceptable_iter, "acceptable_obj_change_tol": acceptable_obj_change_tol,
+            "acceptable_constr_viol_tol": 1e-2, "max_iter": max_iter, "print_level": 0,
+            "sb": "yes", "linear_solver": "mumps"}
+
+
+def solve_ipopt(problem: DesignProblem, criterion: str, Q0: np.ndarray, options: dict | None = None,
+                stall_window: int = STALL_WINDOW) -> dict:
+    """One Ipopt run of the design problem from the start ``Q0``.
+
+    Args:
+        problem: the cell's design problem.
+        criterion: criterion name.
+        Q0: start (m, n) rad, normally feasible (the heuristic design).
+        options: Ipopt options (default :func:`ipopt_options`).
+        stall_window: iterations of the stagnation test (0 disables it).
+
+    Returns:
+        dict with ``Q``, ``f`` (scaled objective), ``value`` (the criterion), ``iterations``, ``time_s``,
+        ``eval_time_s`` (our callbacks),
+        ``status`` (Ipopt status name, ``; best feasible iterate`` appended when the fallback was used),
+        ``n_constraints``, ``feasible`` (fast path, every row).
+
+    Raises:
+        SolverError: the criterion cannot be scaled at the start, or Ipopt could not run.
+    """
+    import cyipopt
+
+    crit = problem.criterion(criterion)
+    cons = problem.cons
+    m, n = Q0.shape
+    try:
+        f0 = crit.value(Q0)
+    except IdentifiabilityError as exc:
+        raise SolverError(f"the start design of the {criterion} design does not identify the parameters ({exc})"
+                          ) from None
+    if criterion in _RATIO_CRITERIA and not (np.isfinite(f0) and f0 > 0):
+        raise SolverError(f"criterion {criterion} is {f0} at the start design: cannot scale it")
+    nlp = _NLP(crit, cons, m, f0)
+    lb = np.tile(problem.cell.q_lower, m)
+    ub = np.tile(problem.cell.q_upper, m)
+    cl1 = np.array([CLEARANCE_BUFFER_M if u == "m" else COS_BUFFER for u in cons.units])
+    cl = np.tile(cl1, m)
+    cu = np.full(cl.size, 2e19)
+    x0 = np.clip(Q0.ravel(), lb, ub)
+    t0 = time.perf_counter()
+    prob = cyipopt.Problem(n=x0.size, m=cl.size, problem_obj=nlp, lb=lb, ub=ub, cl=cl, cu=cu)
+    nlp.problem = prob
+    nlp.stall_window = stall_window
+    for k, v in (options or ipopt_options()).items():
+        prob.add_option(k, v)
+    if problem.coll.feasible(x0.reshape(m, n)).all():  # the (heuristic) start is the first feasible iterate
+        nlp.best_x, nlp.best_f = x0.copy(), nlp.objective(x0)
+    try:
+        x, info = prob.solve(x0)
+    except Exception as exc:  # cyipopt raises on invalid options or failing callbacks
+        raise SolverError(f"Ipopt failed on the {criterion} design: {exc}") from None
+    finally:
+        prob.close()
+    dt = time.perf_counter() - t0
+    code = int(info["status"])
+    status = _IPOPT_STATUS.get(code, str(code))
+    if nlp.stalled and code == 5:
+        status = "Stalled"
+    x = np.clip(np.asarray(x, float), lb, ub)
+    ok = bool(problem.coll.feasible(x.reshape(m, n)).all())
+    f = nlp.objective(x)
+    fallback = False
+    if nlp.best_x is not None and (not ok or nlp.stalled or (code not in (0, 1) and nlp.best_f < f)):
+        x, f, ok, fallback = np.clip(nlp.best_x, lb, ub), nlp.best_f, True, True
+    value = f * f0 if nlp.ratio else f + f0
+    return {"Q": x.reshape(m, n), "f": float(f), "value": float(value), "iterations": nlp.iterations, "time_s": dt,
+            "eval_time_s": nlp.t_f + nlp.t_g, "status": status + ("; best feasible iterate" if fallback else ""),
+            "feasible": ok, "n_constraints": int(cl.size),
+            "evaluations": {"objective": nlp.n_f, "constraints": nlp.n_g}}
+
+
+def design_random(problem: DesignProblem, m: int, seed: int = 0) -> DesignResult:
+    """The heuristic design (uniform random, rejection-sampled) as a :class:`DesignResult`."""
+    t0 = time.perf_counter()
+    Q, ns = problem.random_design(m, seed)
+    dt = time.perf_counter() - t0
+    res = problem.result("random", Q, problem._kpi.value(Q), dt, 0, "sampled", samples=ns)
+    return res
+
+
+def design_ipopt(problem: DesignProblem, criterion: str, m: int, seed: int = 0, n_starts: int = 1,
+                 start: np.ndarray | None = None, options: dict | None = None) -> DesignResult:
+    """Optimum design for ``criterion`` by Ipopt, multi-start, re-checked independently.
+
+    Args:
+        problem: the cell's design problem.
+        criterion: a name of :data:`~pin_kpi_oed.oed.criteria.CRITERIA` (``kpi`` = A on C_s, ``param`` = A on C_p).
+        m: number of measurement configurations.
+        seed: seed of the starts; start 0 is the heuristic design of this seed (or ``start``).
+        n_starts: number of starts (further starts: random feasible designs of seeds spawned from ``seed``).
+        start: explicit first start (m, n) rad, e.g. the heuristic design already computed.
+        options: Ipopt options (default :func:`ipopt_options`).
+
+    Returns:
+        The best design over the starts that passes the independent check (else the best design,
+        flagged infeasible).
+
+    Raises:
+        InputError: unknown criterion or too few measurements.
+        InfeasibleError: no feasible random start found.
+    """
+    problem.criterion(criterion)
+    if m < problem.min_measurements():
+        raise InputError(f"{m} measurements cannot identify {problem.base.size} parameters: use at least "
+                         f"{problem.min_measurements()}")
+    seeds = np.random.SeedSequence(seed).spawn(max(n_starts, 1))
+    runs = []
+    t_total = 0.0
+    for k in progress(range(max(n_starts, 1)), desc=f"{criterion} starts", disable=n_starts <= 1):
+        if k == 0:
+            Q0 = start if start is not None else problem.random_design(m, seed)[0]
+        else:
+            Q0 = problem.random_design(m, seeds[k])[0]
+        r = solve_ipopt(problem, criterion, Q0, options)
+        t_total += r["time_s"]
+        runs.append(r)
+    order = sorted(range(len(runs)), key=lambda i: (not runs[i]["feasible"], runs[i]["value"]))
+    chosen, report = None, None
+    for i in order:
+        rep = problem.checker.check(runs[i]["Q"])
+        if rep.all_feasible:
+            chosen, report = i, rep
+            break
+    if chosen is None:
+        chosen = order[0]
+    r = runs[chosen]
+    starts = [{"value": x["value"], "objective_scaled": x["f"], "iterations": x["iterations"], "time_s": x["time_s"],
+               "eval_time_s": x["eval_time_s"],
+               "status": x["status"], "feasible_fast_path": x["feasible"], "evaluations": x["evaluations"]}
+              for x in runs]
+    return problem.result(criterion, r["Q"], r["value"], t_total, r["iterations"], r["status"],
+                          n_constraints=r["n_constraints"], starts=starts, report=report)
+
+
+def run_designs(cell: Cell, criteria: list[str], m: int | None = None, seed: int = 0, collision: bool = True,
+                n_starts: int = 1, options: dict | None = None, problem: DesignProblem | None = None,
+                start: str = "pool", pool_size: int = 1000) -> list[DesignResult]:
+    """Compute the heuristic and optimum designs of a cell.
+
+    Args:
+        cell: the measurement cell.
+        criteria: ``random`` and/or criterion names; the heuristic design is always computed
+            (it is the start of every optimisation and the reference of the improvements).
+        m: measurements (default the cell's).
+        seed: seed of the heuristic design and of the starts.
+        collision: impose the collision constraints.
+        n_starts: starts per optimised criterion.
+        options: Ipopt options.
+        problem: a prepared :class:`DesignProblem` (else built).
+        start: first start of every optimisation: ``pool`` (default) = the pool selection of m
+            poses for the criterion from ``pool_size`` feasible random candidates
+            (:mod:`pin_kpi_oed.oed.pool`; A-type criteria select for themselves, the others by
+            D-optimality), or ``random`` = the heuristic design. Further starts are random.
+        pool_size: feasible candidates of the pool start.
+
+    Returns:
+        The results, ``random`` first, then the criteria in the given order.
+    """
+    unknown = [c for c in criteria if c != "random" and c not in CRITERIA]
+    if unknown:
+        raise InputError(f"unknown criterion '{unknown[0]}' (known: random, {', '.join(CRITERIA)})")
+    m = m or cell.measurements
+    problem = problem or DesignProblem(cell, collision=collision)
+    if m < problem.min_measurements():
+        raise InputError(f"{m} measurements cannot identify {problem.base.size} parameters: use at least "
+                         f"{problem.min_measurements()}")
+    if start not in ("pool", "random"):
+        raise InputError(f"start must be 'pool' or 'random', got '{start}'")
+    rnd = design_random(problem, m, seed)
+    out = [rnd]
+    Q_pool = Fp = None
+    if start == "pool" and any(c != "random" for c in criteria):
+        Q_pool, _ = problem.random_design(max(pool_size, 2 * m), seed=np.random.SeedSequence([seed, 1]),
+                                          max_tries=max(problem.cell.max_random_tries, 200 * pool_size))
+        Fp = problem.model.weighted_jacobian(problem.p0, Q_pool)[:, :, problem.base]
+    for c in criteria:
+        if c == "random":
+            continue
+        Q0 = rnd.q_meas
+        if Fp is not None:
+            K = {"kpi": problem.E, "param": np.eye(problem.base.size)}.get(c)
+            idx, _ = pool_select(Fp, m, K)
+            Q0 = Q_pool[idx]
+        out.append(design_ipopt(problem, c, m, seed, n_starts, start=Q0, options=options))
+    return out

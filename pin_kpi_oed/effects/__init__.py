@@ -1,0 +1,1 @@
+"""Non-geometric error effects (compliance, gear harmonics, thermal, ...) that extend the geometric model."""

@@ -1,0 +1,209 @@
+r"""Calibrated URDF export: identified joint placements written back into the URDF.
+
+Pinocchio folds the placements of the fixed joints that precede an actuated joint k
+(e.g. ``world_joint`` before the first joint, or any fixed joint between two links)
+into its joint placement::
+
+    M_k = F_k · O_k,      F_k = O_{f1} · O_{f2} ⋯ (fixed joints between joint k's parent joint and joint k)
+
+with O_k the ``<origin xyz rpy>`` of joint k in the URDF. The identified placement
+M_k' = M_k · exp6(δ_k) is written back as the new origin of joint k, leaving every
+fixed joint untouched::
+
+    O_k' = F_k⁻¹ · M_k' = O_k · M_k⁻¹ · M_k'
+
+so the reloaded model has exactly the identified forward kinematics. Rotations are written
+as URDF roll-pitch-yaw (``pin.rpy.matrixToRpy``) and every number with 17 significant
+digits (``repr``). Before anything is written, the text is reloaded with Pinocchio and its
+tool-frame forward kinematics compared with the identified model at seeded random
+configurations; the file is written atomically (:func:`pin_kpi_oed.data.measurements.atomic_write_text`)
+only if the largest difference is ≤ ``tol_m`` (default 1e-9 m) and ≤ ``tol_m`` rad.
+"""
+
+from __future__ import annotations
+
+import os
+import xml.etree.ElementTree as ET
+from pathlib import Path
+from typing import Sequence
+
+import numpy as np
+import pinocchio as pin
+
+from pin_kpi_oed.errors import InputError, RobotLoadError, SolverError
+from pin_kpi_oed.data.measurements import atomic_write_text
+from pin_kpi_oed.model.robot import Robot
+
+__all__ = ["calibrated_urdf_text", "check_urdf_fk", "write_calibrated_urdf", "export_result_urdf"]
+
+
+def _fmt(v: float) -> str:
+    v = float(v)
+    return "0" if v == 0.0 else repr(v)
+
+
+def _parse_origin(joint: ET.Element) -> pin.SE3:
+    o = joint.find("origin")
+    xyz = np.zeros(3)
+    rpy = np.zeros(3)
+    if o is not None:
+        if o.get("xyz"):
+            xyz = np.array([float(s) for s in o.get("xyz").split()])
+        if o.get("rpy"):
+            rpy = np.array([float(s) for s in o.get("rpy").split()])
+    return pin.SE3(pin.rpy.rpyToMatrix(rpy), xyz)
+
+
+def _absolutise_meshes(root: ET.Element, src_dir: Path, dst_dir: Path) -> None:
+    """Relative mesh file names are resolved from the source URDF's folder (the copy lives elsewhere)."""
+    if src_dir.resolve() == dst_dir.resolve():
+        return
+    for mesh in root.iter("mesh"):
+        fn = mesh.get("filename")
+        if fn and "://" not in fn and not os.path.isabs(fn):
+            mesh.set("filename", str((src_dir / fn).resolve()))
+
+
+def calibrated_urdf_text(robot: Robot, placements: Sequence[pin.SE3], comment: str | None = None,
+                         out_dir: str | os.PathLike | None = None) -> str:
+    """URDF text of ``robot`` with the actuated joints' placements replaced.
+
+    Args:
+        robot: the robot (its URDF file is the template; its model gives the nominal M_k).
+        placements: identified joint placements M_k', one per actuated joint, base to tip
+            (e.g. :meth:`TrackerModel.joint_placements`).
+        comment: optional text put in an XML comment at the top of the robot element.
+        out_dir: folder the file will live in (relative mesh paths are made absolute).
+
+    Returns:
+        The URDF text.
+
+    Raises:
+        RobotLoadError: the URDF cannot be parsed or lacks an actuated joint.
+        InputError: wrong number of placements.
+    """
+    if len(placements) != robot.nq:
+        raise InputError(f"expected {robot.nq} joint placements, got {len(placements)}")
+    path = Path(robot.urdf_path)
+    try:
+        parser = ET.XMLParser(target=ET.TreeBuilder(insert_comments=True))
+        root = ET.fromstring(path.read_text(), parser=parser)
+    except (OSError, ET.ParseError) as exc:
+        raise RobotLoadError(f"{path}: cannot parse the URDF for export ({exc})") from None
+    joints = {j.get("name"): j for j in root.findall("joint")}
+    for k, (name, jid) in enumerate(zip(robot.joint_names, robot.joint_ids)):
+        el = joints.get(name)
+        if el is None:
+            raise RobotLoadError(f"{path}: joint '{name}' not found in the URDF")
+        O = _parse_origin(el)
+        M_nom = robot.model.jointPlacements[jid]
+        new = O * M_nom.inverse() * pin.SE3(placements[k])  # O_k' = F_k^-1 M_k'
+        R = new.rotation
+        U, _, Vt = np.linalg.svd(R)
+        new = pin.SE3(U @ Vt, new.translation)
+        rpy = pin.rpy.matrixToRpy(new.rotation)
+        o = el.find("origin")
+        if o is None:
+            o = ET.SubElement(el, "origin")
+        o.set("xyz", " ".join(_fmt(v) for v in new.translation))
+        o.set("rpy", " ".join(_fmt(v) for v in rpy))
+    if out_dir is not None:
+        _absolutise_meshes(root, path.parent, Path(out_dir))
+    if comment:
+        root.insert(0, ET.Comment(" " + comment.replace("--", "- -") + " "))
+    return '<?xml version="1.0"?>\n' + ET.tostring(root, encoding="unicode") + "\n"
+
+
+def _reduced(model: pin.Model, robot: Robot) -> pin.Model:
+    if not robot.locked_joints:
+        return model
+    ids = [model.getJointId(n) for n in robot.locked_joints if model.existJointName(n)]
+    return pin.buildReducedModel(model, ids, pin.neutral(model)) if ids else model
+
+
+def check_urdf_fk(text: str, robot: Robot, placements: Sequence[pin.SE3], n: int = 50, seed: int = 0
+                  ) -> tuple[float, float]:
+    """Largest tool-frame FK difference between a URDF text and ``robot`` with ``placements``.
+
+    Args:
+        text: URDF text.
+        robot: the reference robot.
+        placements: its joint placements to compare against.
+        n: number of seeded random configurations (plus the neutral one).
+        seed: seed of the configurations.
+
+    Returns:
+        (max position difference (m), max rotation difference (rad)).
+
+    Raises:
+        RobotLoadError: Pinocchio cannot load the text or the tool frame / joints differ.
+    """
+    try:
+        full = pin.buildModelFromXML(text)
+    except Exception as exc:  # Pinocchio raises various types with long texts
+        raise RobotLoadError(f"the calibrated URDF does not load in Pinocchio ({str(exc).splitlines()[0]})") from None
+    new = _reduced(full, robot)
+    if not new.existFrame(robot.tool_frame):
+        raise RobotLoadError(f"the calibrated URDF lacks the tool frame '{robot.tool_frame}'")
+    names = [new.names[j] for j in range(1, new.njoints)]
+    if names != list(robot.joint_names):
+        raise RobotLoadError(f"the calibrated URDF has joints {names}, expected {robot.joint_names}")
+    ref = robot.model.copy()
+    for k, j in enumerate(robot.joint_ids):
+        ref.jointPlacements[j] = pin.SE3(placements[k])
+    d_ref, d_new = ref.createData(), new.createData()
+    f_ref, f_new = robot.tool_frame_id, new.getFrameId(robot.tool_frame)
+    Q = np.vstack([robot.neutral(), robot.random_q(np.random.default_rng(seed), n)])
+    dp = dr = 0.0
+    for q in Q:
+        pin.framesForwardKinematics(ref, d_ref, q)
+        pin.framesForwardKinematics(new, d_new, q)
+        A, B = d_ref.oMf[f_ref], d_new.oMf[f_new]
+        dp = max(dp, float(np.linalg.norm(A.translation - B.translation)))
+        dr = max(dr, float(np.linalg.norm(pin.log3(A.rotation.T @ B.rotation))))
+    return dp, dr
+
+
+def write_calibrated_urdf(robot: Robot, placements: Sequence[pin.SE3], path: str | os.PathLike,
+                          comment: str | None = None, tol_m: float = 1e-9) -> float:
+    """Write the calibrated URDF atomically after checking it reproduces the identified FK.
+
+    Args:
+        robot: the robot whose URDF is the template.
+        placements: identified joint placements, base to tip.
+        path: output file.
+        comment: optional XML comment (e.g. tracker pose and reflector).
+        tol_m: largest accepted FK difference (m; also used in rad for the orientation).
+
+    Returns:
+        The largest tool-frame position difference found (m).
+
+    Raises:
+        SolverError: the reloaded URDF differs by more than ``tol_m`` (nothing is written).
+        InputError: the output directory does not exist.
+    """
+    target = Path(path)
+    text = calibrated_urdf_text(robot, placements, comment, out_dir=target.parent if str(target.parent) else ".")
+    dp, dr = check_urdf_fk(text, robot, placements)
+    if dp > tol_m or dr > tol_m:
+        raise SolverError(f"the calibrated URDF reproduces the identified FK only to {dp:.3g} m / {dr:.3g} rad "
+                          f"(> {tol_m:g}); nothing written to {target}")
+    atomic_write_text(target, text)
+    return dp
+
+
+def export_result_urdf(result, path: str | os.PathLike, tol_m: float = 1e-9) -> float:
+    """Write the calibrated URDF of an :class:`~pin_kpi_oed.identification.identify.IdentificationResult`.
+
+    The tracker pose and reflector offset go into an XML comment (they are not part of the
+    robot); the result JSON holds them as numbers.
+
+    Returns:
+        The largest tool-frame position difference of the check (m).
+    """
+    model = result.model
+    T = np.asarray(result.tracker_T_base)
+    comment = (f"calibrated by pin_kpi_oed from {result.n_measurements} measurements; tool frame "
+               f"{model.robot.tool_frame}; reflector_m {np.array2string(np.asarray(result.reflector_m), precision=9)}; "
+               f"tracker_T_base translation {np.array2string(T[:3, 3], precision=9)} m")
+    return write_calibrated_urdf(model.robot, model.joint_placements(result.p), path, comment=comment, tol_m=tol_m)

@@ -1,0 +1,203 @@
+r"""Simulated laser-tracker measurements from a "true" robot.
+
+A truth is a raw parameter vector p* of a :class:`~pin_kpi_oed.model.measurement.TrackerModel`
+(geometric errors of every joint placement, the tracker pose ``tracker_T_base·exp6(δ_t)``,
+the reflector offset ``r0 + δ_r``), optionally with effects (``docs/ARCHITECTURE.md``,
+"Effect interface") and their parameters θ*. A measurement at configuration q_i is
+
+.. math::
+
+    η_i = h\bigl(p^*, q_i + \textstyle\sum Δq(θ^*, q_i, aux)\bigr) + \sum Δy(θ^*, q_i, aux) + ε_i,
+    \qquad ε_i \sim N(0, \operatorname{diag} σ_i^2)
+
+with σ_i from the model's :class:`~pin_kpi_oed.model.measurement.NoiseModel` (per-axis, or
+a + b·range); a 6-D probe's orientation is ``R_meas = exp3(ε_rot) R_model`` with
+ε_rot ~ N(0, σ_rot² I). Geometric errors are drawn from tolerances (normal, standard
+deviation = tolerance). Every random draw takes a seed.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+from typing import Any, Sequence
+
+import numpy as np
+import pinocchio as pin
+from scipy.spatial.transform import Rotation
+
+from pin_kpi_oed.errors import InputError
+from pin_kpi_oed.identification.identify import predict
+from pin_kpi_oed.data.measurements import MeasurementSet
+from pin_kpi_oed.model.measurement import NoiseModel, TrackerModel
+from pin_kpi_oed.model.robot import Robot
+
+__all__ = ["Tolerances", "random_truth", "default_tracker_pose", "simulate", "truth_to_dict"]
+
+
+@dataclass
+class Tolerances:
+    """Standard deviations of the simulated geometric errors (SI).
+
+    Attributes:
+        joint_translation_m: per joint-placement translation component (m).
+        joint_rotation_rad: per joint-placement rotation component (rad).
+        tracker_translation_m: deviation of the tracker pose from its nominal value (m).
+        tracker_rotation_rad: same, rotation (rad).
+        reflector_m: deviation of the reflector offset from its nominal value (m).
+        probe_rotation_rad: deviation of the probe orientation (6-D only, rad).
+    """
+
+    joint_translation_m: float = 5e-4
+    joint_rotation_rad: float = 1e-3
+    tracker_translation_m: float = 0.0
+    tracker_rotation_rad: float = 0.0
+    reflector_m: float = 0.0
+    probe_rotation_rad: float = 0.0
+
+    def __post_init__(self) -> None:
+        for k, v in asdict(self).items():
+            if not (np.isfinite(v) and v >= 0):
+                raise InputError(f"tolerance {k} must be a finite value >= 0, got {v}")
+
+    def sigma_vector(self, model: TrackerModel) -> np.ndarray:
+        """Standard deviation of every raw parameter of ``model`` (m or rad)."""
+        L = model.layout
+        s = np.zeros(L.n)
+        for j in range(L.n_joints):
+            sl = L.joint_slice(j)
+            s[sl.start:sl.start + 3] = self.joint_translation_m
+            s[sl.start + 3:sl.stop] = self.joint_rotation_rad
+        s[L.tracker.start:L.tracker.start + 3] = self.tracker_translation_m
+        s[L.tracker.start + 3:L.tracker.stop] = self.tracker_rotation_rad
+        s[L.reflector] = self.reflector_m
+        s[L.probe] = self.probe_rotation_rad
+        return s
+
+
+def random_truth(model: TrackerModel, tol: Tolerances | None = None, seed: int = 0,
+                 only: np.ndarray | Sequence[int] | None = None) -> np.ndarray:
+    """Draw a true raw parameter vector p* ~ N(0, diag(tol²)).
+
+    Args:
+        model: the nominal measurement model.
+        tol: tolerances (default :class:`Tolerances`).
+        seed: seed of :func:`numpy.random.default_rng`.
+        only: indices (or a boolean mask) of the parameters to perturb (e.g. the identifiable
+            ones, ``analyse(model).base``); the others stay 0. Default: all.
+
+    Returns:
+        p*, shape (n_params,) (m, rad).
+    """
+    tol = tol or Tolerances()
+    s = tol.sigma_vector(model)
+    p = np.random.default_rng(seed).normal(0.0, 1.0, model.n_params) * s
+    if only is not None:
+        keep = np.zeros(model.n_params, bool)
+        keep[np.asarray(only)] = True
+        p = np.where(keep, p, 0.0)
+    return p
+
+
+def default_tracker_pose(robot: Robot, distance_m: float | None = None, yaw_rad: float = 2.6,
+                         height_m: float = 0.3) -> pin.SE3:
+    """A plausible tracker_T_base: the tracker stands ``distance_m`` (default reach + 1.5 m) from the base.
+
+    The tracker's frame is rotated by ``yaw_rad`` about the vertical (its axes are arbitrary
+    in practice) and slightly tilted; the returned pose is that of the robot base in the
+    tracker frame (m, rad).
+    """
+    d = robot.reach() + 1.5 if distance_m is None else float(distance_m)
+    base_T_tracker = pin.SE3(pin.rpy.rpyToMatrix(0.01, -0.02, yaw_rad), np.array([d, 0.4, height_m]))
+    return base_T_tracker.inverse()
+
+
+def simulate(model: TrackerModel, Q: np.ndarray, truth_p: np.ndarray | None = None,
+             effects: Sequence[tuple[Any, np.ndarray]] = (), aux: MeasurementSet | dict | None = None,
+             noise: NoiseModel | None = None, seed: int = 0, record_sigma: bool = True,
+             outliers: tuple[float, float] | None = None, source: str = "simulated") -> MeasurementSet:
+    """Simulate tracker measurements of a true robot at configurations ``Q``.
+
+    Args:
+        model: nominal measurement model (robot, tracker pose, reflector, noise; ``pose6d``
+            adds probe orientations as rotation vectors).
+        Q: configurations, (m, n) rad.
+        truth_p: true raw parameters p* (default zeros: the nominal robot).
+        effects: ``[(effect, theta), ...]`` unmodelled effects and their true parameters.
+        aux: auxiliary columns the effects read: a :class:`MeasurementSet` (its temperature,
+            payload, time, extra are copied) or a dict with keys ``temperature_c``,
+            ``payload_kg``, ``time_s`` ((m,) arrays) and ``extra`` (dict).
+        noise: noise model (default ``model.noise``).
+        seed: seed of the noise (and outlier) draws.
+        record_sigma: write the per-axis σ into ``sigma_m`` (the identification then uses it).
+        outliers: ``(fraction, magnitude_m)``: that share of the measurements gets an extra
+            error of the given size in a random direction; their rows are marked 1 in
+            ``extra['is_outlier']``.
+        source: the ``source`` label of the set.
+
+    Returns:
+        The :class:`MeasurementSet` (SI units, tracker frame).
+
+    Raises:
+        InputError: wrong shapes, configurations outside the joint limits, bad aux columns.
+    """
+    robot = model.robot
+    Q = robot.check_q(Q, "simulate: Q")
+    m = Q.shape[0]
+    p = np.zeros(model.n_params) if truth_p is None else np.asarray(truth_p, float)
+    if p.shape != (model.n_params,):
+        raise InputError(f"simulate: truth_p must have {model.n_params} entries, got shape {p.shape}")
+    noise = noise or model.noise
+    if isinstance(aux, MeasurementSet):
+        cols = {"temperature_c": aux.temperature_c, "payload_kg": aux.payload_kg, "time_s": aux.time_s,
+                "extra": dict(aux.extra)}
+    else:
+        cols = dict(aux or {})
+        unknown = set(cols) - {"temperature_c", "payload_kg", "time_s", "extra"}
+        if unknown:
+            raise InputError(f"simulate: unknown aux column(s) {sorted(unknown)} "
+                             "(use temperature_c, payload_kg, time_s, extra)")
+    ms = MeasurementSet(joint_names=list(robot.joint_names), q=Q, position_m=np.zeros((m, 3)),
+                        temperature_c=cols.get("temperature_c"), payload_kg=cols.get("payload_kg"),
+                        time_s=cols.get("time_s"), source=source, extra=dict(cols.get("extra") or {}))
+    eff = [e for e, _ in effects]
+    thetas = [np.asarray(t, float) for _, t in effects]
+    Y = predict(model, p, Q, eff, thetas, ms)
+    rng = np.random.default_rng(seed)
+    S = noise.sigma(Y[:, :3])
+    pos = Y[:, :3] + rng.normal(size=(m, 3)) * S
+    rotvec = None
+    if model.pose6d:
+        R = Rotation.from_rotvec(Y[:, 3:])
+        rotvec = (Rotation.from_rotvec(rng.normal(size=(m, 3)) * noise.sigma_rot_rad) * R).as_rotvec()
+    extra = dict(ms.extra)
+    if outliers is not None:
+        frac, mag = float(outliers[0]), float(outliers[1])
+        if not (0 <= frac < 1 and mag >= 0):
+            raise InputError(f"simulate: outliers must be (fraction in [0, 1), magnitude >= 0 m), got {outliers}")
+        k = int(round(frac * m))
+        idx = rng.choice(m, size=k, replace=False)
+        d = rng.normal(size=(k, 3))
+        pos[idx] += mag * d / np.linalg.norm(d, axis=1, keepdims=True)
+        flag = np.zeros(m)
+        flag[idx] = 1.0
+        extra["is_outlier"] = flag
+    return MeasurementSet(joint_names=list(robot.joint_names), q=Q, position_m=pos, rotvec_rad=rotvec,
+                          sigma_m=S if record_sigma else None, temperature_c=ms.temperature_c,
+                          payload_kg=ms.payload_kg, time_s=ms.time_s, source=source, extra=extra)
+
+
+def truth_to_dict(model: TrackerModel, truth_p: np.ndarray, tol: Tolerances | None = None, seed: int | None = None
+                  ) -> dict:
+    """JSON-able description of a simulated truth (SI units)."""
+    p = np.asarray(truth_p, float)
+    return {
+        "robot": model.robot.name,
+        "tool_frame": model.robot.tool_frame,
+        "p_raw": {n: float(v) for n, v in zip(model.layout.names, p)},
+        "tracker_T_base": model.tracker_pose(p).homogeneous,
+        "reflector_m": model.reflector(p),
+        "joint_placements": [M.homogeneous for M in model.joint_placements(p)],
+        "noise": model.noise.to_dict(),
+        "tolerances": asdict(tol) if tol is not None else None,
+        "seed": seed,
+    }

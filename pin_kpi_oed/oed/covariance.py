@@ -1,0 +1,99 @@
+"""Parameter covariance C_p and KPI covariance C_s (paper eqs. 19, 24c, 25).
+
+With F₁ = Σ⁻¹ dh/dp the weighted Jacobian over the identifiable parameters
+(stacked over the m measurements) and an optional Gaussian prior
+P = diag(1/σ_prior²) (MAP estimate), the information matrix is
+
+    M = F₁ᵀ F₁ + P,        C_p = M⁻¹.
+
+The KPI s = TCP(p, q_work) (eq. 12) has sensitivity E = ds/dp (F₂ = [E, −I] in
+eq. 24e, with v = (p, s)), and its covariance by linear error propagation is
+
+    C_s = E C_p Eᵀ                                   (explicit form, Appendix)
+
+or, from the constrained least-squares problem (13), the KKT form of eq. (19)::
+
+    C_v = [I 0] [[F₁ᵀF₁, F₂ᵀ], [F₂, 0]]⁻¹ [I 0]ᵀ,    C_s = lower-right block of C_v.
+
+Both are implemented; the tests check they agree. The constrained least-squares problem
+(eq. 13a–13b) with F₁, F₂ of eq. 14 needs the regularity conditions (CQ) rank F₂ = n₂ and (PD)
+rank [F₁; F₂] = n_v (eq. 15): (CQ) holds by construction (F₂ = [E, −I]), (PD) is what
+:mod:`pin_kpi_oed.oed.identifiability` secures by choosing identifiable parameters. The Lemma
+(eqs. 17–18) gives Δv = [I 0] K⁻¹ [F₁ᵀ Σ⁻¹; 0] Δη, whose covariance is eq. 19.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import scipy.linalg as sla
+
+from pin_kpi_oed.errors import IdentifiabilityError
+
+
+def information(F: np.ndarray, prior_sigma: np.ndarray | None = None) -> np.ndarray:
+    """Information matrix M = FᵀF + diag(1/σ_prior²).
+
+    Args:
+        F: weighted Jacobian, (rows, nb) or (m, nh, nb).
+        prior_sigma: prior standard deviation per column (m or rad); inf = no prior.
+    """
+    F2 = F.reshape(-1, F.shape[-1])
+    M = F2.T @ F2
+    if prior_sigma is not None:
+        M = M + np.diag(1.0 / np.asarray(prior_sigma, float) ** 2)
+    return M
+
+
+def param_covariance(F: np.ndarray, prior_sigma: np.ndarray | None = None, names: list[str] | None = None
+                     ) -> np.ndarray:
+    """C_p = (FᵀF + P)⁻¹ (eq. 19 upper-left block).
+
+    Raises:
+        IdentifiabilityError: the information matrix is singular (parameters not identifiable
+            from these measurements), naming the weakest parameter direction.
+    """
+    M = information(F, prior_sigma)
+    try:
+        c, low = sla.cho_factor(M)
+        return sla.cho_solve((c, low), np.eye(M.shape[0]))
+    except np.linalg.LinAlgError:
+        w, V = np.linalg.eigh(M)
+        k = int(np.argmax(np.abs(V[:, 0])))
+        who = names[k] if names else f"column {k}"
+        raise IdentifiabilityError(
+            f"the information matrix is singular (smallest eigenvalue {w[0]:.3g}): the measurements do not "
+            f"determine '{who}'; add measurement configurations that move it, or fix it as known") from None
+
+
+def kpi_covariance(F: np.ndarray, E: np.ndarray, prior_sigma: np.ndarray | None = None) -> np.ndarray:
+    """C_s = E C_p Eᵀ, the KPI covariance by the explicit formula (m²).
+
+    Args:
+        F: weighted Jacobian over the identifiable parameters.
+        E: KPI sensitivity ds/dp over the same parameters, (n_s, nb).
+    """
+    C_p = param_covariance(F, prior_sigma)
+    return E @ C_p @ E.T
+
+
+def kpi_covariance_kkt(F: np.ndarray, E: np.ndarray, prior_sigma: np.ndarray | None = None
+                       ) -> tuple[np.ndarray, np.ndarray]:
+    """C_p and C_s from the KKT system of the constrained least-squares problem (eq. 19).
+
+    Variables v = (p, s), F₁ = [F, 0], F₂ = [E, −I] (the constraint s = TCP(p, q_work)).
+
+    Returns:
+        (C_p, C_s).
+    """
+    F2d = F.reshape(-1, F.shape[-1])
+    nb, ns = F2d.shape[1], E.shape[0]
+    nv = nb + ns
+    F1 = np.hstack([F2d, np.zeros((F2d.shape[0], ns))])
+    F2 = np.hstack([E, -np.eye(ns)])
+    H = F1.T @ F1
+    if prior_sigma is not None:
+        H[:nb, :nb] += np.diag(1.0 / np.asarray(prior_sigma, float) ** 2)
+    K = np.block([[H, F2.T], [F2, np.zeros((ns, ns))]])
+    rhs = np.vstack([np.eye(nv), np.zeros((ns, nv))])
+    C_v = np.linalg.solve(K, rhs)[:nv]
+    return C_v[:nb, :nb], C_v[nb:, nb:]

@@ -1,0 +1,229 @@
+"""Identifiability: the base (identifiable) parameter set and KPI estimability.
+
+The weighted Jacobian F of a rich random excitation (many configurations
+within the joint limits) is rank deficient: some parameter combinations move
+no measurement. A 6R arm measured at one reflector has 45 raw parameters and
+rank 27 = 4·6 + 6 − 3: per joint, the translation along and the rotation about
+its axis commute with the joint motion and are absorbed by the next placement;
+joint 1's placement is absorbed by the tracker pose; the last joint's two by
+the reflector offset.
+
+Selection (QR with ordered pivoting): columns are scaled to unit norm and
+visited in a preference order; a column is kept when its component orthogonal
+to the columns kept so far exceeds ``tol``. The rank is cross-checked with
+SciPy's QR with column pivoting. **Convention** (the paper's, implicitly):
+measurement-set-up parameters (tracker, reflector, probe) come first, so when a
+robot parameter is confounded with a set-up parameter, the *robot* parameter is
+the one held at its nominal value. Every dropped parameter is reported with
+the kept parameters it is confounded with.
+
+This is what makes the regularity condition (PD) of the paper (eq. 15) hold.
+
+KPI estimability: a KPI s with sensitivity E is estimable under this
+convention iff E n = 0 for every null direction n of F that leaves the
+reflector and probe unchanged (those directions only re-label which physical
+point is the tool frame, which the convention fixes). A TCP in the robot base
+frame fails when the tracker pose is unknown (joint 1 ↔ tracker), and a TCP
+away from a reflector that sits on the last joint axis fails (the tool's
+rotation about that axis is invisible).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+import scipy.linalg as sla
+
+from pin_kpi_oed.errors import IdentifiabilityError
+from pin_kpi_oed.model.measurement import TrackerModel
+
+
+@dataclass
+class Identifiability:
+    """Result of the identifiability analysis.
+
+    Attributes:
+        names: raw parameter names.
+        base: indices of the identifiable parameters (vector order).
+        rank: rank of the free columns of F.
+        n_raw: number of raw parameters.
+        n_free: number of parameters not fixed by the user.
+        dropped: one entry per free but non-identifiable parameter:
+            ``{"name", "confounded_with": [...], "convention": bool}``.
+        notes: plain-words explanations (e.g. reflector on the last joint axis).
+        null_space: basis of the null space of F over all raw parameters, (n_raw, k) (unscaled).
+    """
+
+    names: list[str]
+    base: np.ndarray
+    rank: int
+    n_raw: int
+    n_free: int
+    dropped: list[dict] = field(default_factory=list)
+    notes: list[str] = field(default_factory=list)
+    null_space: np.ndarray | None = None
+
+    @property
+    def base_names(self) -> list[str]:
+        """Names of the identifiable parameters."""
+        return [self.names[i] for i in self.base]
+
+    def groups_text(self) -> list[str]:
+        """Confounded groups in plain words, one line per (held group, partners) pair."""
+        agg: dict[tuple[str, str], list[str]] = {}
+        for d in self.dropped:
+            grp = d["name"].split(".")[0]
+            partners = sorted({c.split(".")[0] for c in d["confounded_with"]})
+            key = (grp, ", ".join(partners) if partners else "nothing")
+            agg.setdefault(key, []).append(d["name"].split(".")[1])
+        lines = []
+        for (grp, partners), comps in agg.items():
+            conv = " (convention: the robot parameter is held nominal)" if any(
+                p in partners for p in ("tracker", "reflector", "probe")) else ""
+            if partners == "nothing":
+                lines.append(f"{grp}.{{{','.join(comps)}}} held at nominal: not observable with this set-up")
+            else:
+                lines.append(f"{grp}.{{{','.join(comps)}}} held at nominal: confounded with {partners}{conv}")
+        return lines
+
+    def summary(self) -> str:
+        """Readable multi-line summary."""
+        out = [f"raw parameters: {self.n_raw}, free: {self.n_free}, identifiable (rank): {self.rank}"]
+        out += ["  " + s for s in self.groups_text()]
+        out += ["  note: " + s for s in self.notes]
+        return "\n".join(out)
+
+    def to_dict(self) -> dict:
+        """Plain JSON-able dict."""
+        return {"n_raw": self.n_raw, "n_free": self.n_free, "rank": self.rank,
+                "identifiable": self.base_names, "dropped": self.dropped, "groups": self.groups_text(),
+                "notes": self.notes}
+
+
+def excitation(model: TrackerModel, n: int = 200, seed: int = 0) -> np.ndarray:
+    """Rich random excitation: ``n`` configurations uniform within the joint limits (rad)."""
+    return model.robot.random_q(np.random.default_rng(seed), n)
+
+
+def analyse(model: TrackerModel, Q: np.ndarray | None = None, prefer: list[str] | None = None,
+            tol: float = 1e-7, seed: int = 0) -> Identifiability:
+    """Find the identifiable parameter set.
+
+    Args:
+        model: measurement model (its layout's ``fixed`` parameters are excluded).
+        Q: excitation configurations (rad); default 200 random ones (``seed``).
+        prefer: name patterns to keep first (overrides the convention's order; e.g.
+            ``["joint_a1.*"]`` keeps joint 1's placement instead of the tracker pose).
+        tol: relative threshold on the orthogonal residual of a unit-norm column.
+        seed: seed of the default excitation.
+
+    Returns:
+        The :class:`Identifiability`.
+    """
+    L = model.layout
+    if Q is None:
+        Q = excitation(model, seed=seed)
+    p0 = np.zeros(L.n)
+    F = model.weighted_jacobian(p0, Q).reshape(-1, L.n)
+    free = np.flatnonzero(~L.fixed)
+    norms = np.linalg.norm(F, axis=0)
+    zero = [i for i in free if norms[i] <= 1e-12 * max(norms.max(), 1e-300)]
+    cand = [i for i in free if i not in zero]
+    Fs = F[:, cand] / norms[cand]
+    # rank by SciPy's pivoted QR
+    _, R, _ = sla.qr(Fs, mode="economic", pivoting=True)
+    d = np.abs(np.diag(R))
+    rank = int(np.sum(d > tol * d[0])) if d.size else 0
+    # ordered selection: user preference, then set-up parameters, then robot base-to-tip
+    setup = L.is_setup()
+    pref = L.select(prefer) if prefer else np.zeros(L.n, bool)
+    order = sorted(range(len(cand)), key=lambda c: (not pref[cand[c]], not setup[cand[c]], cand[c]))
+    basis: list[np.ndarray] = []
+    kept: list[int] = []
+    for c in order:
+        v = Fs[:, c].copy()
+        for b in basis:  # modified Gram-Schmidt, twice for stability
+            v -= (b @ v) * b
+        for b in basis:
+            v -= (b @ v) * b
+        nv = np.linalg.norm(v)
+        if nv > 1e-6 and len(kept) < rank:
+            basis.append(v / nv)
+            kept.append(c)
+    kept_idx = sorted(cand[c] for c in kept)
+    # confounding partners of each dropped parameter
+    B = F[:, kept_idx] / norms[kept_idx]
+    dropped = []
+    for i in [i for i in free if i not in kept_idx]:
+        if i in zero:
+            dropped.append({"name": L.names[i], "confounded_with": [], "convention": False,
+                            "reason": "moves no measurement"})
+            continue
+        x, *_ = np.linalg.lstsq(B, F[:, i] / norms[i], rcond=None)
+        big = np.argsort(-np.abs(x))
+        partners = [L.names[kept_idx[k]] for k in big[:4] if abs(x[k]) > 1e-3 * np.abs(x).max()]
+        conv = (not setup[i]) and any(setup[L.index(p)] for p in partners)
+        dropped.append({"name": L.names[i], "confounded_with": partners, "convention": bool(conv)})
+    # null space over the free parameters (for KPI checks), unscaled
+    _, s, Vt = np.linalg.svd(F[:, free] / np.where(norms[free] > 0, norms[free], 1.0), full_matrices=False)
+    null_free = Vt[rank:].T / np.where(norms[free] > 0, norms[free], 1.0)[:, None]
+    N = np.zeros((L.n, null_free.shape[1]))
+    N[free] = null_free
+    notes = _notes(model)
+    if len(kept_idx) != rank:
+        notes.append(f"ordered selection kept {len(kept_idx)} columns but the pivoted QR rank is {rank}")
+    return Identifiability(L.names, np.array(kept_idx, int), rank, L.n, len(free), dropped, notes, N)
+
+
+def _notes(model: TrackerModel) -> list[str]:
+    """Plain-words notes on the set-up: a reflector on the last joint axis."""
+    rb = model.robot
+    _, ang = model.joint_axes
+    if np.linalg.norm(ang[-1]) < 0.5:
+        return []
+    Mt = rb.model.frames[rb.tool_frame_id].placement
+    # last joint axis expressed in the tool frame, through the tool-frame point Mt^-1 * 0
+    axis = Mt.rotation.T @ ang[-1]
+    origin = Mt.actInv(np.zeros(3))
+    r = model.reflector_m - origin
+    dist = np.linalg.norm(r - (r @ axis) * axis)
+    if dist < 1e-3 and not model.pose6d:
+        return [f"the reflector is {dist * 1e3:.2f} mm from the axis of {rb.joint_names[-1]}: the tool's rotation "
+                f"about that axis does not move it, so two more directions are lost (rank drops by 2) and a TCP "
+                f"off that axis is not estimable; mount the reflector off the axis (a few cm) or use a 6-DoF probe"]
+    return []
+
+
+def check_kpi(ident: Identifiability, model: TrackerModel, E: np.ndarray, what: str = "KPI", tol: float = 1e-6
+              ) -> None:
+    """Raise if the KPI with sensitivity ``E`` (n_s, n_raw) is not estimable under the convention.
+
+    Raises:
+        IdentifiabilityError: naming the offending direction and what to change.
+    """
+    L = model.layout
+    N = ident.null_space
+    if N is None or N.shape[1] == 0:
+        return
+    setup_point = np.zeros(L.n, bool)
+    setup_point[L.reflector] = True
+    setup_point[L.probe] = True
+    C = N[setup_point]
+    if C.size:
+        Z = sla.null_space(C)
+        N = N @ Z
+    if N.shape[1] == 0:
+        return
+    N = N / np.linalg.norm(N, axis=0)
+    scale = np.linalg.norm(E) + 1e-300
+    EN = E @ N
+    worst = int(np.argmax(np.linalg.norm(EN, axis=0)))
+    if np.linalg.norm(EN[:, worst]) > tol * scale:
+        n = N[:, worst]
+        top = [L.names[k] for k in np.argsort(-np.abs(n))[:4]]
+        hint = ("express the KPI in the tracker frame (the robot base frame is not observable when the tracker pose "
+                "is unknown), or fix the tracker pose as known") if any(t.startswith("tracker") for t in top) else (
+                "move the reflector off the last joint axis, use a 6-DoF probe, or put the TCP at the reflector")
+        raise IdentifiabilityError(f"{what} is not estimable: it moves along the unobservable direction "
+                                   f"{' / '.join(top)}; {hint}")

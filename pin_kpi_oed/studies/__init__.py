@@ -1,0 +1,1 @@
+"""The paper's studies (KUKA cells, 90 notional arms) and Monte-Carlo / real-data validation."""

@@ -1,0 +1,1 @@
+"""Visualisation at the edge: meshcat scene, static HTML, matplotlib figures."""

@@ -1,0 +1,311 @@
+"""Report figures (matplotlib, Agg, PNG): ellipsoid projections, design comparison, pose quality.
+
+* :func:`plot_ellipsoid_projections`: the TCP's confidence ellipsoid of each design projected on
+  the xy, xz and yz planes, one row per working configuration (as the paper's Figure 7, heuristic
+  vs KPI design). The curve drawn is the *shadow* of the 3-D ellipsoid {x : xᵀC⁻¹x <= χ²₃(level)}
+  on the plane, i.e. the ellipse of the 2×2 marginal covariance with the same χ²₃ bound.
+* :func:`plot_design_bars`: tr(C_s) (µm²) and the RMS TCP σ (µm) of each design, with the change
+  relative to the heuristic.
+* :func:`plot_pose_quality`: per measurement pose, the clearance (mm) and the laser incidence (°).
+* :func:`design_figures`: the three from a design JSON (:func:`pin_kpi_oed.viz.viewer.load_design`).
+
+Figures are drawn on :class:`matplotlib.figure.Figure` with the Agg canvas (no pyplot, no display,
+thread-safe) and written atomically (a temporary file in the target folder, then renamed).
+Values are SI in the arguments and converted for display only (the axis labels say the unit).
+"""
+
+from __future__ import annotations
+
+import io
+import os
+from pathlib import Path
+from typing import Any, Mapping, Sequence
+
+import numpy as np
+
+from pin_kpi_oed.errors import InputError
+
+#: Default colours by criterion (matplotlib's tab10, no orange: the robot's colour in the viewer).
+COLOURS = {"random": "#1f77b4", "heuristic": "#1f77b4", "param": "#9467bd", "kpi": "#2ca02c"}
+_EXTRA = ("#17becf", "#e377c2", "#7f7f7f", "#bcbd22", "#8c564b", "#393b79", "#637939")
+UNITS = {"m": 1.0, "mm": 1e3, "um": 1e6}
+UNIT_LABEL = {"m": "m", "mm": "mm", "um": "µm"}
+
+
+def _colours(names: Sequence[str], colours: Mapping[str, str] | None) -> dict[str, str]:
+    out, extra = {}, iter(_EXTRA * 4)
+    for n in names:
+        out[n] = (colours or {}).get(n) or COLOURS.get(n) or next(extra)
+    return out
+
+
+def _figure(w: float, h: float):
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=(w, h), dpi=100, layout="constrained")
+    FigureCanvasAgg(fig)
+    return fig
+
+
+def save_png(fig: Any, path: str | os.PathLike, dpi: int = 150) -> Path:
+    """Render ``fig`` to PNG and write it atomically; returns the path.
+
+    Raises:
+        InputError: the target folder does not exist, or ``path`` is a folder.
+    """
+    from pin_kpi_oed.data.measurements import atomic_write_bytes
+
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=dpi)
+    atomic_write_bytes(path, buf.getvalue())
+    return Path(path)
+
+
+def _blocks(C: np.ndarray) -> np.ndarray:
+    """(3t, 3t) or (t, 3, 3) or (3, 3) -> (t, 3, 3) diagonal blocks."""
+    C = np.asarray(C, float)
+    if C.ndim == 3 and C.shape[1:] == (3, 3):
+        return C
+    if C.ndim == 2 and C.shape[0] == C.shape[1] and C.shape[0] % 3 == 0:
+        t = C.shape[0] // 3
+        return np.array([C[3 * j:3 * j + 3, 3 * j:3 * j + 3] for j in range(t)])
+    raise InputError(f"covariance must be (3t, 3t) or (t, 3, 3) (m^2), got shape {C.shape}")
+
+
+def ellipse_points(C2: np.ndarray, k: float, n: int = 181) -> np.ndarray:
+    """Points (n, 2) of the ellipse {x : xᵀ C2⁻¹ x = k}."""
+    w, V = np.linalg.eigh(0.5 * (C2 + C2.T))
+    a = np.linspace(0, 2 * np.pi, n)
+    circle = np.stack([np.cos(a), np.sin(a)], axis=1)
+    return circle * np.sqrt(k * np.clip(w, 0.0, None)) @ V.T
+
+
+def plot_ellipsoid_projections(covs: Mapping[str, np.ndarray], path: str | os.PathLike, *,
+                               colours: Mapping[str, str] | None = None, labels: Mapping[str, str] | None = None,
+                               level: float = 0.95, unit: str = "um", frame: str = "tracker frame",
+                               title: str | None = None, max_rows: int = 3) -> Path:
+    """Projections of the TCP confidence ellipsoids on the xy, xz and yz planes (as the paper's Figure 7).
+
+    Args:
+        covs: per design, C_s (3t × 3t or t × 3 × 3, m²).
+        path: PNG to write.
+        colours, labels: per design (defaults by criterion name).
+        level: confidence level (χ²₃ bound of the 3-D ellipsoid).
+        unit: ``um``, ``mm`` or ``m`` for the axes.
+        frame: name of the frame the covariances are expressed in (axis labels).
+        title: figure title.
+        max_rows: at most this many working configurations (rows).
+    """
+    from scipy.special import chdtri
+
+    if not covs:
+        raise InputError("no covariance to plot")
+    if unit not in UNITS:
+        raise InputError(f"unit must be one of {', '.join(UNITS)}, got '{unit}'")
+    names = list(covs)
+    blocks = {n: _blocks(covs[n]) for n in names}
+    t = min(b.shape[0] for b in blocks.values())
+    rows = min(t, max_rows)
+    col = _colours(names, colours)
+    lab = {n: (labels or {}).get(n, n) for n in names}
+    k = float(chdtri(3, 1.0 - level))  # chi-square quantile, 3 degrees of freedom
+    s = UNITS[unit]
+    u = UNIT_LABEL[unit]
+    fig = _figure(10.5, 3.4 * rows + 0.5)
+    axes = fig.subplots(rows, 3, squeeze=False)
+    planes = [((0, 1), "xy"), ((0, 2), "xz"), ((1, 2), "yz")]
+    for r in range(rows):
+        lim = 0.0
+        for c, ((i, j), pname) in enumerate(planes):
+            ax = axes[r, c]
+            for n in names:
+                C2 = blocks[n][r][np.ix_([i, j], [i, j])] * s ** 2
+                P = ellipse_points(C2, k)
+                ax.plot(P[:, 0], P[:, 1], color=col[n], lw=2, label=lab[n])
+                ax.fill(P[:, 0], P[:, 1], color=col[n], alpha=0.12)
+                lim = max(lim, float(np.abs(P).max()))
+            ax.plot([0], [0], marker="+", color="k", ms=8)
+            ax.set_aspect("equal", adjustable="box")
+            ax.grid(True, alpha=0.3)
+            ax.set_xlabel(f"{'xyz'[i]} ({u})")
+            ax.set_ylabel(f"{'xyz'[j]} ({u})")
+            ax.set_title(f"{pname} plane" + (f", working configuration {r}" if t > 1 else ""), fontsize=10)
+        for c in range(3):
+            axes[r, c].set_xlim(-1.1 * lim, 1.1 * lim)
+            axes[r, c].set_ylim(-1.1 * lim, 1.1 * lim)
+    axes[0, 0].legend(loc="upper left", fontsize=8, framealpha=0.8)
+    fig.suptitle(title or f"TCP {int(round(level * 100))} % confidence ellipsoids, projected ({frame})", fontsize=12)
+    return save_png(fig, path)
+
+
+def _baseline(names: Sequence[str], baseline: str | None) -> str | None:
+    if baseline is not None:
+        return baseline if baseline in names else None
+    for b in ("random", "heuristic"):
+        if b in names:
+            return b
+    return None
+
+
+def plot_design_bars(traces_m2: Mapping[str, float], path: str | os.PathLike, *, n_work: int = 1,
+                     colours: Mapping[str, str] | None = None, labels: Mapping[str, str] | None = None,
+                     baseline: str | None = None, title: str | None = None) -> Path:
+    """Bar chart comparing designs: tr(C_s) (µm²) and RMS TCP σ = sqrt(tr(C_s)/t) (µm).
+
+    Each bar is annotated with its change relative to ``baseline`` (default the ``random`` /
+    ``heuristic`` design when present).
+
+    Args:
+        traces_m2: per design, tr(C_s) (m²).
+        path: PNG to write.
+        n_work: number t of working configurations (for the RMS σ).
+    """
+    if not traces_m2:
+        raise InputError("no design to plot")
+    names = list(traces_m2)
+    tr = np.array([float(traces_m2[n]) for n in names])
+    if not np.all(np.isfinite(tr)) or np.any(tr < 0):
+        raise InputError(f"tr(C_s) must be finite and >= 0 (m^2), got {tr.tolist()}")
+    col = _colours(names, colours)
+    lab = [(labels or {}).get(n, n) for n in names]
+    base = _baseline(names, baseline)
+    sig = np.sqrt(tr / max(n_work, 1)) * 1e6
+    fig = _figure(max(6.0, 1.6 * len(names) + 3.0), 3.8)
+    ax1, ax2 = fig.subplots(1, 2)
+    x = np.arange(len(names))
+    for ax, vals, ylabel in ((ax1, tr * 1e12, "tr(C$_s$) (µm²)"), (ax2, sig, "RMS TCP σ (µm)")):
+        bars = ax.bar(x, vals, color=[col[n] for n in names])
+        ax.set_xticks(x, lab, rotation=20 if max(len(s) for s in lab) > 10 else 0, ha="right"
+                      if max(len(s) for s in lab) > 10 else "center")
+        ax.set_ylabel(ylabel)
+        ax.grid(True, axis="y", alpha=0.3)
+        ax.set_ylim(0, 1.18 * max(vals.max(), 1e-30))
+        for i, b in enumerate(bars):
+            txt = f"{vals[i]:.3g}"
+            if base is not None and names[i] != base:
+                ref = vals[names.index(base)]
+                if ref > 0:
+                    txt += f"\n({100 * (vals[i] / ref - 1):+.0f} %)"
+            ax.annotate(txt, (b.get_x() + b.get_width() / 2, b.get_height()), ha="center", va="bottom", fontsize=8,
+                        xytext=(0, 2), textcoords="offset points")
+    fig.suptitle(title or "Designs compared" + (f" (change vs {base})" if base else ""), fontsize=12)
+    return save_png(fig, path)
+
+
+def plot_pose_quality(clearance_m: Mapping[str, np.ndarray], incidence_deg: Mapping[str, np.ndarray],
+                      path: str | os.PathLike, *, colours: Mapping[str, str] | None = None,
+                      labels: Mapping[str, str] | None = None, incidence_limit_deg: float | None = 30.0,
+                      min_clearance_m: float = 0.0, title: str | None = None) -> Path:
+    """Per measurement pose: clearance (mm) and laser incidence angle (°), one row per design.
+
+    Poses below ``min_clearance_m`` or above ``incidence_limit_deg`` are drawn in red.
+
+    Args:
+        clearance_m: per design, the smallest clearance of each pose (m); ``inf`` = nothing to compare.
+        incidence_deg: per design, the incidence angle of each pose (deg).
+        path: PNG to write.
+    """
+    names = list(dict.fromkeys(list(clearance_m) + list(incidence_deg)))
+    if not names:
+        raise InputError("no design to plot")
+    col = _colours(names, colours)
+    fig = _figure(10.0, 2.3 * len(names) + 0.8)
+    axes = fig.subplots(len(names), 2, squeeze=False)
+    for r, n in enumerate(names):
+        lab = (labels or {}).get(n, n)
+        ax = axes[r, 0]
+        c = np.asarray(clearance_m.get(n, []), float) * 1e3
+        if c.size:
+            finite = np.isfinite(c)
+            x = np.arange(c.size)
+            bad = finite & (c < min_clearance_m * 1e3)
+            ax.bar(x[finite & ~bad], c[finite & ~bad], color=col[n])
+            ax.bar(x[bad], c[bad], color="#d62728")
+            ax.axhline(min_clearance_m * 1e3, color="k", lw=1, ls="--")
+            ax.set_title(f"{lab}: clearance, min {np.min(c[finite]) if finite.any() else np.inf:.0f} mm", fontsize=10)
+        else:
+            ax.set_title(f"{lab}: clearance not available", fontsize=10)
+        ax.set_ylabel("clearance (mm)")
+        ax.grid(True, axis="y", alpha=0.3)
+        ax = axes[r, 1]
+        a = np.asarray(incidence_deg.get(n, []), float)
+        if a.size:
+            x = np.arange(a.size)
+            bad = incidence_limit_deg is not None and a > incidence_limit_deg
+            bad = np.asarray(bad) if np.ndim(bad) else np.zeros(a.size, bool)
+            ax.bar(x[~bad], a[~bad], color=col[n])
+            ax.bar(x[bad], a[bad], color="#d62728")
+            if incidence_limit_deg is not None:
+                ax.axhline(incidence_limit_deg, color="k", lw=1, ls="--")
+            ax.set_title(f"{lab}: laser incidence, max {a.max():.1f}°", fontsize=10)
+        else:
+            ax.set_title(f"{lab}: incidence not available", fontsize=10)
+        ax.set_ylabel("incidence (°)")
+        ax.grid(True, axis="y", alpha=0.3)
+    for ax in axes[-1]:
+        ax.set_xlabel("measurement pose")
+    fig.suptitle(title or "Measurement poses: clearance and laser incidence", fontsize=12)
+    return save_png(fig, path)
+
+
+def _per_pose(info: Mapping, keys: Sequence[str], m: int) -> np.ndarray | None:
+    for k in keys:
+        v = info.get(k)
+        if isinstance(v, (list, tuple)) and len(v) == m:
+            try:
+                return np.asarray(v, float)
+            except (TypeError, ValueError):
+                return None
+    return None
+
+
+def design_figures(design: Any, out_dir: str | os.PathLike, prefix: str = "design", level: float = 0.95,
+                   frame: str = "world") -> dict[str, Path]:
+    """The three figures of a design file, written to ``out_dir``.
+
+    Per-pose clearance / incidence come from the design entries (``clearance_m`` / ``incidence_deg``
+    lists) when present, else from :func:`pin_kpi_oed.viz.viewer.pose_clearance` and the tracker model.
+
+    Args:
+        design: a :class:`~pin_kpi_oed.viz.viewer.DesignFile`, a design JSON path or dict.
+        out_dir: existing folder.
+        prefix: file-name prefix.
+        level: confidence level of the ellipsoids.
+        frame: ``world`` (the cell frame, z up) or ``tracker`` for the ellipsoid projections.
+
+    Returns:
+        ``{"ellipsoids": path, "bars": path, "poses": path}``.
+    """
+    from pin_kpi_oed.viz.viewer import DesignFile, load_design, pose_clearance
+
+    df = design if isinstance(design, DesignFile) else load_design(design)
+    out = Path(out_dir)
+    if not out.is_dir():
+        raise InputError(f"cannot write figures to '{out}': no such folder")
+    R = df.world_T_tracker.rotation if frame == "world" else np.eye(3)
+    covs, traces, clear, inc, colours, labels = {}, {}, {}, {}, {}, {}
+    for d in df.designs:
+        blocks = _blocks(d.cov_s_m2)
+        covs[d.criterion] = np.array([R @ B @ R.T for B in blocks])
+        traces[d.criterion] = d.trace_cs_m2
+        m = d.q_meas.shape[0]
+        c = _per_pose(d.info, ("clearance_m", "pose_clearance_m", "clearances_m"), m)
+        clear[d.criterion] = c if c is not None else pose_clearance(df, d.q_meas)
+        a = _per_pose(d.info, ("incidence_deg", "pose_incidence_deg"), m)
+        inc[d.criterion] = a if a is not None else df.incidence_deg(d.q_meas)
+        colours[d.criterion] = f"#{d.colour:06x}"
+        labels[d.criterion] = d.label
+    name = df.robot.name
+    paths = {
+        "ellipsoids": plot_ellipsoid_projections(
+            covs, out / f"{prefix}_ellipsoids.png", colours=colours, labels=labels, level=level,
+            frame="cell frame" if frame == "world" else "tracker frame",
+            title=f"{name}: TCP {int(round(level * 100))} % confidence ellipsoids, projected"),
+        "bars": plot_design_bars(traces, out / f"{prefix}_designs.png", n_work=df.q_work.shape[0], colours=colours,
+                                 labels=labels, title=f"{name}: designs compared"),
+        "poses": plot_pose_quality(clear, inc, out / f"{prefix}_poses.png", colours=colours, labels=labels,
+                                   incidence_limit_deg=df.incidence_limit_deg,
+                                   title=f"{name}: clearance and laser incidence per pose"),
+    }
+    return paths
