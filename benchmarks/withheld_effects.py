@@ -123,7 +123,7 @@ def main(argv: list[str] | None = None) -> int:
           f"{'MET' if ok_all else 'MISSED'}; {len(runs)} runs in {time.perf_counter() - t0:.0f} s, "
           f"median {np.median([r['time_s'] for r in runs]):.1f} s per diagnosis")
     if a.json:
-        from pin_kpi_oed.data.measurements import atomic_write_json
+        from pin_kpi_oed.data.atomic import atomic_write_json
 
         atomic_write_json(a.json, {"runs": runs, "noise_m": NOISE_M, "n": a.n, "seeds": a.seeds})
     return 0 if ok_all else 1

@@ -31,7 +31,8 @@ import numpy as np
 from pin_kpi_oed.diagnosis.diagnose import diagnose
 from pin_kpi_oed.effects.library import EFFECT_NAMES, JointAngleTable, position_dq
 from pin_kpi_oed.identification.identify import ResidualModel, identify
-from pin_kpi_oed.data.measurements import MeasurementSet, atomic_write_json
+from pin_kpi_oed.data.measurements import MeasurementSet
+from pin_kpi_oed.data.atomic import atomic_write_json
 from pin_kpi_oed.data.ipa import import_ipa
 from pin_kpi_oed.model.measurement import NoiseModel, TrackerModel
 from pin_kpi_oed.model.robot import load_robot

@@ -27,7 +27,8 @@ import numpy as np
 
 from pin_kpi_oed import NoiseModel, TrackerModel, load_robot
 from pin_kpi_oed.identification.identify import format_validation, identify, validate
-from pin_kpi_oed.data.measurements import MeasurementSet, atomic_write_json
+from pin_kpi_oed.data.measurements import MeasurementSet
+from pin_kpi_oed.data.atomic import atomic_write_json
 from pin_kpi_oed.data.ipa import import_ipa, read_ipa_flange_transform
 
 SERIES_C = ROOT.parent / "shared" / "data" / "ipa_ur10" / "Series_C"

@@ -18,7 +18,7 @@ import numpy as np
 from pin_kpi_oed import NoiseModel, TrackerModel, load_robot
 from pin_kpi_oed.cell.cell import load_cell
 from pin_kpi_oed.design.optimize import run_designs
-from pin_kpi_oed.data.measurements import atomic_write_json
+from pin_kpi_oed.data.atomic import atomic_write_json
 from pin_kpi_oed.data.ipa import import_ipa
 from pin_kpi_oed.studies.validation import monte_carlo, real_data_validation
 

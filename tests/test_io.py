@@ -11,15 +11,11 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
+import pin_kpi_oed.data.atomic as patomic
 import pin_kpi_oed.data.measurements as pio
 from pin_kpi_oed.errors import InputError, PinKpiOedError
-from pin_kpi_oed.data.measurements import (
-    MeasurementSet,
-    atomic_write_json,
-    atomic_write_text,
-    read_measurements,
-    write_measurements,
-)
+from pin_kpi_oed.data.measurements import MeasurementSet, read_measurements, write_measurements
+from pin_kpi_oed.data.atomic import atomic_write_json, atomic_write_text
 
 JOINTS = ["j1", "j2", "j3"]
 IPA_DIR = Path(__file__).resolve().parents[2] / "shared" / "data" / "ipa_ur10"
@@ -307,7 +303,7 @@ def test_atomic_write_keeps_old_file_if_disk_step_fails(tmp_path: Path, monkeypa
     def fail(*args, **kwargs):
         raise OSError("disk on fire")
 
-    monkeypatch.setattr(pio.os, where, fail)
+    monkeypatch.setattr(patomic.os, where, fail)
     with pytest.raises(OSError, match="disk on fire"):
         atomic_write_text(f, "x" * 100_000)
     monkeypatch.undo()

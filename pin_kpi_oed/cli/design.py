@@ -18,7 +18,7 @@ import math
 
 
 from pin_kpi_oed.errors import InputError
-from pin_kpi_oed.data.measurements import atomic_write_json
+from pin_kpi_oed.data.atomic import atomic_write_json
 from pin_kpi_oed.oed.evaluate import score_design
 from pin_kpi_oed.model.serialize import model_to_dict
 

@@ -65,7 +65,8 @@ def run(args: argparse.Namespace) -> int:
 
     from pin_kpi_oed.diagnosis.diagnose import diagnose
     from pin_kpi_oed.effects.library import EFFECT_NAMES
-    from pin_kpi_oed.data.measurements import atomic_write_json, read_measurements
+    from pin_kpi_oed.data.measurements import read_measurements
+    from pin_kpi_oed.data.atomic import atomic_write_json
     from pin_kpi_oed.model.measurement import NoiseModel, TrackerModel
     from pin_kpi_oed.model.robot import load_robot
 

@@ -43,7 +43,7 @@ def _positive(text: str, what: str) -> float:
 
 def _check_outputs(*paths: str | None) -> None:
     """Fail before anything is written if an output's folder is missing or the path is a folder."""
-    from pin_kpi_oed.data.measurements import check_writable
+    from pin_kpi_oed.data.atomic import check_writable
 
     for p in paths:
         if p:
@@ -130,7 +130,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 # --------------------------------------------------------------------------- #
 def run_simulate(args: argparse.Namespace) -> int:
     """Handler of ``pin-kpi-oed simulate``."""
-    from pin_kpi_oed.data.measurements import atomic_write_json, write_measurements
+    from pin_kpi_oed.data.measurements import write_measurements
+    from pin_kpi_oed.data.atomic import atomic_write_json
     from pin_kpi_oed.model.measurement import NoiseModel, TrackerModel
     from pin_kpi_oed.model.robot import load_robot
     from pin_kpi_oed.identification.simulate import Tolerances, default_tracker_pose, random_truth, simulate, truth_to_dict
@@ -183,7 +184,8 @@ def run_identify(args: argparse.Namespace) -> int:
     from pin_kpi_oed.identification.export import calibrated_urdf_text, check_urdf_fk
     from pin_kpi_oed.errors import SolverError
     from pin_kpi_oed.identification.identify import format_validation, identify, validate
-    from pin_kpi_oed.data.measurements import atomic_write_json, atomic_write_text, read_measurements
+    from pin_kpi_oed.data.measurements import read_measurements
+    from pin_kpi_oed.data.atomic import atomic_write_json, atomic_write_text
     from pin_kpi_oed.model.measurement import NoiseModel, TrackerModel
     from pin_kpi_oed.model.robot import load_robot
     from pathlib import Path

@@ -84,7 +84,7 @@ def run(args: argparse.Namespace) -> int:
         if args.html is None:
             raise InputError("--pose needs --html (the live viewer has its own time slider)")
     if args.html is not None:
-        from pin_kpi_oed.data.measurements import atomic_write_text
+        from pin_kpi_oed.data.atomic import atomic_write_text
 
         atomic_write_text(args.html, scene.static_html(pose=pose))
         print(f"wrote {args.html} (self-contained; open it in any browser, offline)")

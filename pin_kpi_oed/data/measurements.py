@@ -72,16 +72,15 @@ from __future__ import annotations
 
 import csv
 import io as _stdio
-import json
 import math
 import os
-import secrets
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable, Sequence
 
 import numpy as np
 
+from pin_kpi_oed.data.atomic import atomic_write_text
 from pin_kpi_oed.errors import InputError
 
 __all__ = [
@@ -96,8 +95,6 @@ __all__ = [
     "MeasurementSet",
     "read_measurements",
     "write_measurements",
-    "atomic_write_text",
-    "atomic_write_json",
 ]
 
 POSITION_COLUMNS: tuple[str, str, str] = ("x", "y", "z")
@@ -304,126 +301,6 @@ class MeasurementSet:
             train_idx = np.concatenate([f for j, f in enumerate(folds) if j != i])
             out.append((self.subset(np.sort(train_idx)), self.subset(np.sort(test_idx))))
         return out
-
-
-# --------------------------------------------------------------------------- #
-# Atomic writes
-# --------------------------------------------------------------------------- #
-def _fsync_dir(directory: Path) -> None:
-    """Best-effort fsync of a directory so a rename survives a crash (POSIX)."""
-    try:
-        fd = os.open(directory, os.O_RDONLY)
-    except OSError:
-        return
-    try:
-        os.fsync(fd)
-    except OSError:
-        pass
-    finally:
-        os.close(fd)
-
-
-def check_writable(path: str | os.PathLike[str]) -> Path:
-    """Check that ``path`` can be written: its directory exists and it is not a directory.
-
-    Raises:
-        InputError: naming the path and what is wrong.
-    """
-    target = Path(path)
-    directory = target.parent if str(target.parent) else Path(".")
-    if not directory.is_dir():
-        raise InputError(f"cannot write '{target}': directory '{directory}' does not exist")
-    if target.is_dir():
-        raise InputError(f"cannot write '{target}': it is a directory")
-    return target
-
-
-def atomic_write_bytes(path: str | os.PathLike[str], data: bytes) -> None:
-    """Write ``data`` to ``path`` atomically (the one atomic writer of the package).
-
-    The bytes go to a new temporary file in the same directory (created with the
-    usual umask-dependent permissions, or the old file's mode when it exists),
-    are flushed and fsync-ed, then renamed over ``path`` with :func:`os.replace`:
-    readers see the old or the new file, never a partial one. If anything fails,
-    the temporary file is removed and ``path`` is left as it was.
-
-    Args:
-        path: Target file.
-        data: Full content.
-
-    Raises:
-        InputError: If the target directory does not exist or ``path`` is a directory.
-        OSError: On other file-system failures (disk full, permissions).
-    """
-    target = check_writable(path)
-    directory = target.parent if str(target.parent) else Path(".")
-    while True:
-        tmp = directory / f".{target.name}.{secrets.token_hex(6)}.tmp"
-        try:
-            fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666)
-            break
-        except FileExistsError:  # pragma: no cover - 48 random bits
-            continue
-    try:
-        with os.fdopen(fd, "wb") as fh:
-            fh.write(data)
-            fh.flush()
-            os.fsync(fh.fileno())
-        if target.exists():
-            try:
-                os.chmod(tmp, target.stat().st_mode & 0o7777)
-            except OSError:
-                pass
-        os.replace(tmp, target)
-    except BaseException:
-        try:
-            os.unlink(tmp)
-        except OSError:
-            pass
-        raise
-    _fsync_dir(directory)
-
-
-def atomic_write_text(path: str | os.PathLike[str], text: str, encoding: str = "utf-8") -> None:
-    """Write ``text`` to ``path`` atomically (see :func:`atomic_write_bytes`); newlines as given.
-
-    Raises:
-        InputError: If the target directory does not exist or ``path`` is a directory.
-        OSError: On other file-system failures (disk full, permissions).
-    """
-    atomic_write_bytes(path, text.encode(encoding))
-
-
-def _json_default(obj: Any) -> Any:
-    if isinstance(obj, np.ndarray):
-        return obj.tolist()
-    if isinstance(obj, np.generic):
-        return obj.item()
-    if isinstance(obj, os.PathLike):
-        return os.fspath(obj)
-    if isinstance(obj, (set, frozenset)):
-        return sorted(obj)
-    raise TypeError(f"Object of type {type(obj).__name__} is not JSON serializable")
-
-
-def atomic_write_json(path: str | os.PathLike[str], obj: Any) -> None:
-    """Write ``obj`` as indented JSON (``indent=2``, trailing newline) atomically.
-
-    NumPy arrays become (nested) lists, NumPy scalars Python numbers, paths
-    strings, sets sorted lists. Non-finite floats are written as ``NaN`` /
-    ``Infinity`` (Python's :mod:`json` reads them back). Serialisation happens
-    before anything is written, so a failure leaves ``path`` untouched.
-
-    Args:
-        path: Target file.
-        obj: JSON-serialisable object (possibly containing NumPy values).
-
-    Raises:
-        TypeError: If ``obj`` holds a value that cannot be converted.
-        InputError: As :func:`atomic_write_text`.
-    """
-    text = json.dumps(obj, indent=2, default=_json_default)
-    atomic_write_text(path, text + "\n")
 
 
 # --------------------------------------------------------------------------- #

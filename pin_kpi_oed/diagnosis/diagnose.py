@@ -80,6 +80,7 @@ from scipy import stats as _st
 
 from pin_kpi_oed.effects.library import (EFFECT_NAMES, UNOBSERVABLE_NOTES, Effect, SubsetEffect, candidate_effects, gravity_torque,
                       loaded_joints)
+from pin_kpi_oed.data.atomic import to_jsonable
 from pin_kpi_oed.errors import InputError, PinKpiOedError
 from pin_kpi_oed.data.measurements import MeasurementSet
 from pin_kpi_oed.model.measurement import TrackerModel
@@ -239,15 +240,15 @@ class DiagnosisReport:
             "robot": self.robot, "tool_frame": self.tool_frame, "mode": self.mode, "k_folds": self.k_folds,
             "n_train": self.n_train, "n_heldout": self.n_heldout, "alpha": self.alpha, "weights": self.weights,
             "noise_floor_m": _f(self.noise_floor_m), "expected_rms_m": _f(self.expected_rms_m),
-            "gap_detected": bool(self.gap_detected), "gap_test": _clean(self.gap_test),
+            "gap_detected": bool(self.gap_detected), "gap_test": to_jsonable(self.gap_test),
             "dominant_effect": self.dominant_effect, "selected_effects": list(self.selected_effects),
-            "heldout_before": _clean(self.heldout_before), "heldout_after": _clean(self.heldout_after),
-            "gap_closed_fraction": _f(self.gap_closed_fraction), "remaining_gap": _clean(self.remaining_gap),
+            "heldout_before": to_jsonable(self.heldout_before), "heldout_after": to_jsonable(self.heldout_after),
+            "gap_closed_fraction": _f(self.gap_closed_fraction), "remaining_gap": to_jsonable(self.remaining_gap),
             "effects": [e.to_dict() for e in self.effects],
-            "selection": [_clean(s) for s in self.selection],
-            "where": _clean(self.where), "validation_mismatch": bool(self.validation_mismatch),
-            "mismatch": _clean(self.mismatch), "notes": list(self.notes), "unobservable": list(self.unobservable),
-            "figures": [str(f) for f in self.figures], "geometry": _clean(self.geometry), "time_s": self.time_s,
+            "selection": [to_jsonable(s) for s in self.selection],
+            "where": to_jsonable(self.where), "validation_mismatch": bool(self.validation_mismatch),
+            "mismatch": to_jsonable(self.mismatch), "notes": list(self.notes), "unobservable": list(self.unobservable),
+            "figures": [str(f) for f in self.figures], "geometry": to_jsonable(self.geometry), "time_s": self.time_s,
         }
 
     def summary(self) -> str:
@@ -309,23 +310,6 @@ def _um(x: Any) -> str:
 
 def _pct(x: Any) -> str:
     return "-" if x is None or not np.isfinite(x) else f"{100 * x:.0f}%"
-
-
-def _clean(obj: Any) -> Any:
-    """Recursively JSON-safe: NumPy -> Python, NaN/inf -> None."""
-    if isinstance(obj, dict):
-        return {str(k): _clean(v) for k, v in obj.items()}
-    if isinstance(obj, (list, tuple)):
-        return [_clean(v) for v in obj]
-    if isinstance(obj, np.ndarray):
-        return _clean(obj.tolist())
-    if isinstance(obj, (bool, np.bool_)):
-        return bool(obj)
-    if isinstance(obj, (int, np.integer)):
-        return int(obj)
-    if isinstance(obj, (float, np.floating)):
-        return _f(obj)
-    return obj
 
 
 # --------------------------------------------------------------------------- fitting

@@ -16,7 +16,7 @@ so the reloaded model has exactly the identified forward kinematics. Rotations a
 as URDF roll-pitch-yaw (``pin.rpy.matrixToRpy``) and every number with 17 significant
 digits (``repr``). Before anything is written, the text is reloaded with Pinocchio and its
 tool-frame forward kinematics compared with the identified model at seeded random
-configurations; the file is written atomically (:func:`pin_kpi_oed.data.measurements.atomic_write_text`)
+configurations; the file is written atomically (:func:`pin_kpi_oed.data.atomic.atomic_write_text`)
 only if the largest difference is ≤ ``tol_m`` (default 1e-9 m) and ≤ ``tol_m`` rad.
 """
 
@@ -31,7 +31,7 @@ import numpy as np
 import pinocchio as pin
 
 from pin_kpi_oed.errors import InputError, RobotLoadError, SolverError
-from pin_kpi_oed.data.measurements import atomic_write_text
+from pin_kpi_oed.data.atomic import atomic_write_text
 from pin_kpi_oed.model.robot import Robot
 
 __all__ = ["calibrated_urdf_text", "check_urdf_fk", "write_calibrated_urdf", "export_result_urdf"]

@@ -502,7 +502,7 @@ def write_urdf(geom: KukaGeometry, path: str | os.PathLike[str]) -> Path:
     Returns:
         The destination path.
     """
-    from pin_kpi_oed.data.measurements import atomic_write_text
+    from pin_kpi_oed.data.atomic import atomic_write_text
 
     dest = Path(path)
     dest.parent.mkdir(parents=True, exist_ok=True)

@@ -32,7 +32,7 @@ import numpy as np
 import pinocchio as pin
 
 from pin_kpi_oed.errors import InfeasibleError, PinKpiOedError
-from pin_kpi_oed.data.measurements import atomic_write_json, atomic_write_text
+from pin_kpi_oed.data.atomic import atomic_write_json, atomic_write_text
 from pin_kpi_oed.progress import progress
 
 #: Version of the task files: a restarted study recomputes tasks written by another version.

@@ -54,7 +54,7 @@ def save_png(fig: Any, path: str | os.PathLike, dpi: int = 150) -> Path:
     Raises:
         InputError: the target folder does not exist, or ``path`` is a folder.
     """
-    from pin_kpi_oed.data.measurements import atomic_write_bytes
+    from pin_kpi_oed.data.atomic import atomic_write_bytes
 
     buf = io.BytesIO()
     fig.savefig(buf, format="png", dpi=dpi)

@@ -932,7 +932,7 @@ class Scene:
 
     def write_html(self, path: str | os.PathLike, legend: bool = True) -> Path:
         """Write the static page atomically; returns the path."""
-        from pin_kpi_oed.data.measurements import atomic_write_text
+        from pin_kpi_oed.data.atomic import atomic_write_text
 
         atomic_write_text(path, self.static_html(legend))
         return Path(path)
