@@ -1,0 +1,82 @@
+"""Thread control (issue 16): the BLAS limit holds even when NumPy was imported before the package."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+import textwrap
+
+import pytest
+
+from pin_kpi_oed.errors import InputError
+from pin_kpi_oed.threads import get_max_threads, limited_threads, set_max_threads
+
+
+def _run(code: str, env_threads: str | None = None) -> str:
+    import os
+
+    env = dict(os.environ)
+    for var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "PIN_KPI_OED_THREADS"):
+        env.pop(var, None)
+    if env_threads is not None:
+        env["PIN_KPI_OED_THREADS"] = env_threads
+    res = subprocess.run([sys.executable, "-c", textwrap.dedent(code)], capture_output=True, text=True, env=env,
+                         timeout=120)
+    assert res.returncode == 0, res.stderr
+    return res.stdout.strip()
+
+
+PROBE = """
+    import numpy as np                      # the user's script imports NumPy first
+    from threadpoolctl import threadpool_info, threadpool_limits
+    threadpool_limits(limits=2)             # and has (or gets by default) more than one BLAS thread
+    def blas_threads():
+        return max(i["num_threads"] for i in threadpool_info() if i["user_api"] == "blas")
+    before = blas_threads()
+    from pin_kpi_oed.threads import limited_threads
+    with limited_threads():
+        inside = blas_threads()
+    after = blas_threads()
+    print(before, inside, after)
+"""
+
+
+def test_limit_holds_when_numpy_was_imported_first() -> None:
+    out = _run(PROBE)
+    before, inside, after = (int(x) for x in out.split())
+    assert before == 2, "the probe could not give BLAS two threads: the test would prove nothing"
+    assert inside == 1
+    assert after == before, "the limit must be lifted on exit"
+
+
+def test_user_can_allow_more_threads_by_environment() -> None:
+    out = _run(PROBE.replace("threadpool_limits(limits=2)", "threadpool_limits(limits=1)"), env_threads="2")
+    before, inside, _ = (int(x) for x in out.split())
+    assert before == 1 and inside == 2
+
+
+def test_set_max_threads_validates_and_resets() -> None:
+    try:
+        set_max_threads(3)
+        assert get_max_threads() == 3
+        with pytest.raises(InputError, match="threads"):
+            set_max_threads(0)
+        with pytest.raises(InputError, match="threads"):
+            set_max_threads("two")  # type: ignore[arg-type]
+    finally:
+        set_max_threads(None)
+    assert get_max_threads() >= 1
+
+
+def test_nested_contexts_are_cheap_and_restore() -> None:
+    from threadpoolctl import threadpool_info
+
+    def blas():
+        return [i["num_threads"] for i in threadpool_info() if i["user_api"] == "blas"]
+
+    before = blas()
+    with limited_threads():
+        with limited_threads():
+            assert all(n == 1 for n in blas())
+        assert all(n == 1 for n in blas())
+    assert blas() == before
