@@ -116,7 +116,7 @@ class Task:
 def run_task(task: Task, out_dir: str) -> dict:
     """Compute a task's designs and write ``out_dir/tasks/<key>.json`` atomically. Returns the record."""
     from pin_kpi_oed.cell.cell import cell_from_dict, load_cell
-    from pin_kpi_oed.design.optimize import DesignProblem, run_designs
+    from pin_kpi_oed.design.optimize import DesignOptions, DesignProblem, run_designs
     from pin_kpi_oed.oed.evaluate import score_design
 
     t0 = time.perf_counter()
@@ -124,8 +124,8 @@ def run_task(task: Task, out_dir: str) -> dict:
     try:
         cell = cell_from_dict(task.cell, source=task.key) if isinstance(task.cell, dict) else load_cell(task.cell)
         problem = DesignProblem(cell, collision=task.collision)
-        results = run_designs(cell, list(task.criteria), task.m, task.seed, collision=task.collision,
-                              n_starts=task.n_starts, problem=problem)
+        results = run_designs(cell, list(task.criteria), task.m, task.seed,
+                              DesignOptions(collision=task.collision, n_starts=task.n_starts), problem)
         rec["designs"] = []
         for r in results:
             d = {k: v for k, v in r.to_dict().items() if k not in ("starts", "check")}
