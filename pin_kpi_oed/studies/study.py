@@ -40,13 +40,41 @@ TASK_VERSION = 1
 
 
 # ---------------------------------------------------------------------- inverse kinematics
+@dataclass(frozen=True)
+class IkOptions:
+    """Numerical knobs of :func:`solve_ik`.
+
+    Attributes:
+        tol: stop when the pose error ‖log6‖ is below this (m and rad).
+        max_iter: iteration limit.
+        damping: damping of the least-squares step (m², rad²).
+    """
+
+    tol: float = 1e-10
+    max_iter: int = 500
+    damping: float = 1e-8
+
+
 def solve_ik(model: pin.Model, frame_id: int, oMdes: pin.SE3, q0: np.ndarray, lower: np.ndarray,
-             upper: np.ndarray, tol: float = 1e-10, max_iter: int = 500, damping: float = 1e-8) -> np.ndarray:
+             upper: np.ndarray, options: IkOptions | None = None) -> np.ndarray:
     """Closed-loop inverse kinematics of a frame pose (Pinocchio's CLIK, damped least squares).
+
+    Args:
+        model: the Pinocchio model.
+        frame_id: the frame to place.
+        oMdes: its desired pose in the model's world frame.
+        q0: start configuration (rad, m for prismatic joints).
+        lower, upper: joint bounds the iterates are clipped to.
+        options: tolerances (default :class:`IkOptions`).
+
+    Returns:
+        The configuration, within the bounds.
 
     Raises:
         InfeasibleError: no solution within the joint bounds from ``q0``.
     """
+    opts = options or IkOptions()
+    tol, max_iter, damping = opts.tol, opts.max_iter, opts.damping
     data = model.createData()
     q = np.array(q0, float)
     for _ in range(max_iter):
