@@ -51,12 +51,12 @@ def main(repeats: int = 5) -> None:
     for seed in range(repeats):
         (start, ns), t_rand, _ = _timed(lambda: problem.random_design(60, seed))
         r, w, c = _timed(lambda: solve_ipopt(problem, "kpi", start))
-        rep = problem.checker.check(r["Q"])
+        rep = problem.checker.check(r.Q)
         assert rep.all_feasible, rep.violations()
         walls.append(w)
         cpus.append(c)
-        its.append(r["iterations"])
-        vals.append(r["f"])
+        its.append(r.nit)
+        vals.append(r.f)
         totals.append(w + t_rand)
     med = statistics.median(walls)
     _line(f"KPI design, 60 meas., 1 start (median of {repeats} seeds) wall", f"{med:8.3f} s", TARGET_S, med)
@@ -73,18 +73,18 @@ def main(repeats: int = 5) -> None:
     naive = DesignProblem(cell, aggregate="none")
     for label, prob in (("naive: one Ipopt row per pair", naive), ("aggregated: 2 rows per configuration", problem)):
         r, w, c = _timed(lambda: solve_ipopt(prob, "kpi", start, ipopt_options(max_iter=40), stall_window=0))
-        per = w / max(r["iterations"], 1)
-        _line(f"{label} ({r['n_constraints']} rows)",
-              f"{per * 1e3:8.1f} ms/iteration (Ipopt {100 * (1 - r['eval_time_s'] / w):3.0f} %, callbacks "
-              f"{100 * r['eval_time_s'] / w:3.0f} %)")
+        per = w / max(r.nit, 1)
+        _line(f"{label} ({r.n_constraints} rows)",
+              f"{per * 1e3:8.1f} ms/iteration (Ipopt {100 * (1 - r.eval_time_s / w):3.0f} %, callbacks "
+              f"{100 * r.eval_time_s / w:3.0f} %)")
 
     # --- objective reached vs a long, tight run from the same start
     long_opts = ipopt_options(max_iter=2000, tol=1e-6, acceptable_tol=1e-6, acceptable_iter=50)
     r_def, w_def, _ = _timed(lambda: solve_ipopt(problem, "kpi", start))
     r_long, w_long, _ = _timed(lambda: solve_ipopt(problem, "kpi", start, long_opts, stall_window=0))
     _line("default stopping vs tol 1e-6 / 2000 iterations (seed 0)",
-          f"f {r_def['f']:.4f} in {r_def['iterations']} it. ({w_def:.2f} s) vs f {r_long['f']:.4f} in "
-          f"{r_long['iterations']} it. ({w_long:.2f} s): {100 * (r_def['f'] / r_long['f'] - 1):+.1f} %")
+          f"f {r_def.f:.4f} in {r_def.nit} it. ({w_def:.2f} s) vs f {r_long.f:.4f} in "
+          f"{r_long.nit} it. ({w_long:.2f} s): {100 * (r_def.f / r_long.f - 1):+.1f} %")
 
     # --- growth with the number of measurements
     base_t = None
@@ -94,8 +94,8 @@ def main(repeats: int = 5) -> None:
         base_t = w if m == 60 else base_t
         ratio = f"   x{w / base_t:.2f} of 60" if base_t else ""
         _line(f"KPI design, {m} measurements (seed 0)",
-              f"{w:8.3f} s  CPU {c:6.3f} s  {r['iterations']:4d} it.  {w / max(r['iterations'], 1) * 1e3:6.1f} "
-              f"ms/it.  f {r['f']:.3f}{ratio}")
+              f"{w:8.3f} s  CPU {c:6.3f} s  {r.nit:4d} it.  {w / max(r.nit, 1) * 1e3:6.1f} "
+              f"ms/it.  f {r.f:.3f}{ratio}")
 
 
 if __name__ == "__main__":

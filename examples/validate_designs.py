@@ -38,7 +38,7 @@ def main() -> int:
 
     # the KPI design of the KR 15 cell (60 poses), then simulated identifications of it
     cell = load_cell("kr15")
-    kpi = run_designs(cell, ["kpi"], 30 if QUICK else 60, a.seed, n_starts=1)[-1]
+    kpi = run_designs(cell, ["kpi"], 30 if QUICK else 60, a.seed)[-1]
     model = cell.tracker_model()
     model.noise = NoiseModel(sigma_xyz_m=(1e-5,) * 3)  # a 10 um tracker (ratios do not depend on sigma)
     mc = monte_carlo(model, kpi.q_meas, cell.q_work, n_rep=a.reps, seed=a.seed)

@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 
 from pin_kpi_oed.cell.cell import load_cell
-from pin_kpi_oed.design.optimize import (DesignProblem, DesignResult, _NLP, design_ipopt, ipopt_options, run_designs,
-                                solve_ipopt)
+from pin_kpi_oed.design.optimize import (DesignOptions, DesignProblem, DesignResult, _NLP, design_ipopt, ipopt_options,
+                                         run_designs, solve_ipopt)
 from pin_kpi_oed.errors import InputError
 
 M = 14  # small designs keep the suite fast (27 identifiable parameters need >= 9 poses)
@@ -53,7 +53,7 @@ def test_nlp_structure_and_gradients(problem, start):
 
 
 def test_small_design_improves_and_is_feasible(problem, start):
-    r0 = problem.result("random", start, problem.criterion("kpi").value(start), 0.0, 0, "sampled")
+    r0 = problem.result("random", start, problem.criterion("kpi").value(start), status="sampled")
     res = design_ipopt(problem, "kpi", M, seed=0, n_starts=1, start=start, options=ipopt_options(max_iter=60))
     assert isinstance(res, DesignResult)
     assert res.feasible and res.min_clearance_m >= 0 and res.max_incidence_deg <= 30.0 + 1e-9
@@ -67,20 +67,20 @@ def test_small_design_improves_and_is_feasible(problem, start):
 
 def test_fallback_returns_best_feasible_iterate(problem, start):
     r = solve_ipopt(problem, "kpi", start, ipopt_options(max_iter=3))
-    assert r["status"].startswith("Maximum_Iterations_Exceeded") and r["feasible"]
-    assert problem.coll.feasible(r["Q"]).all() and r["f"] <= 1.0 + 1e-12
+    assert r.status == "max_iter" and r.solver_status.startswith("Maximum_Iterations_Exceeded") and r.success
+    assert problem.coll.feasible(r.Q).all() and r.f <= 1.0 + 1e-12
 
 
 def test_naive_formulation_gives_the_same_kind_of_design(start):
     naive = DesignProblem(load_cell("kr15"), aggregate="none")
     r = solve_ipopt(naive, "kpi", start, ipopt_options(max_iter=15))
-    assert r["n_constraints"] == M * naive.coll.n_rows and r["feasible"] and r["f"] < 1.0
+    assert r.n_constraints == M * naive.coll.n_rows and r.success and r.f < 1.0
 
 
 def test_run_designs_without_collision_reports_colliding_share():
     cell = load_cell("kr15")
-    res = run_designs(cell, ["random", "kpi"], m=M, seed=1, collision=False, n_starts=1,
-                      options=ipopt_options(max_iter=40))
+    res = run_designs(cell, ["random", "kpi"], m=M, seed=1,
+                      options=DesignOptions(collision=False, ipopt=ipopt_options(max_iter=40)))
     rnd, kpi = res
     assert rnd.criterion == "random" and rnd.feasible and rnd.samples >= M  # the heuristic is always collision-free
     assert not kpi.collision_avoidance and 0.0 <= kpi.share_colliding <= 1.0
@@ -120,7 +120,7 @@ def test_cli_design_writes_the_json(tmp_path, capsys):
     from pin_kpi_oed.oed.evaluate import evaluate_file
 
     ev = evaluate_file(out)
-    assert ev["trace_cs_m2"] == pytest.approx(d["designs"][1]["trace_cs_m2"], rel=1e-9)
+    assert ev.trace_cs_m2 == pytest.approx(d["designs"][1]["trace_cs_m2"], rel=1e-9)
 
 
 def test_cli_rejects_unknown_criterion():
@@ -145,7 +145,7 @@ def test_cli_registers_design_subcommand():
 @pytest.mark.parametrize("name", ["kr15", "kr300", "kr500"])
 def test_paper_claims_on_kuka_cells(name):
     """60 measurements: KPI design >= 40 % below the heuristic and >= 10 % below the A-on-C_p design, all feasible."""
-    res = run_designs(load_cell(name), ["random", "param", "kpi"], m=60, seed=0, n_starts=2)
+    res = run_designs(load_cell(name), ["random", "param", "kpi"], m=60, seed=0, options=DesignOptions(n_starts=2))
     rnd, par, kpi = res
     assert all(r.feasible for r in res)
     assert kpi.improvement_over(rnd) >= 40.0

@@ -57,3 +57,29 @@ def test_killed_study_resumes_without_losing_or_corrupting_work(tmp_path):
     for name, text in before.items():
         assert (tasks / name).read_text() == text
     assert not list(tmp_path.rglob("*.tmp"))
+
+
+def test_monte_carlo_predicts_with_the_model_prior():
+    """The predicted C_s of the Monte-Carlo validation includes the model's prior (MAP), as identification does."""
+    import numpy as np
+
+    from pin_kpi_oed.oed import identifiability as idf
+    from pin_kpi_oed.studies.validation import monte_carlo
+
+    from .conftest import make_model
+
+    model = make_model("kr15")
+    model.layout.set_prior(["joint_a2.*", "joint_a3.*"], 2e-6)
+    rng = np.random.default_rng(4)
+    Q, Qw = model.robot.random_q(rng, 12), model.robot.random_q(rng, 1)
+    mc = monte_carlo(model, Q, Qw, n_rep=10, seed=0, show_progress=False)
+    b = idf.analyse(model).base
+    p0 = np.zeros(model.n_params)
+    F = model.weighted_jacobian(p0, Q)[:, :, b].reshape(-1, b.size)
+    E = model.kpi_jacobian(p0, Qw)[:, b]
+    P = np.diag(model.layout.prior_sigma[b] ** -2.0)  # inf -> 0: no prior on the other parameters
+    with_prior = E @ np.linalg.inv(F.T @ F + P) @ E.T
+    without = E @ np.linalg.inv(F.T @ F) @ E.T
+    assert np.trace(with_prior) < 0.9 * np.trace(without)  # the prior matters here ...
+    assert np.abs(mc.predicted_cov_m2 - with_prior).max() < 1e-6 * np.abs(with_prior).max()  # ... and is used
+    assert mc.nit == 10 and mc.time_s > 0 and mc.to_dict()["success"] == (mc.failures == 0)

@@ -17,10 +17,11 @@ import argparse
 import math
 
 
-from pin_kpi_oed.errors import InputError
 from pin_kpi_oed.data.atomic import atomic_write_json
-from pin_kpi_oed.oed.evaluate import score_design
+from pin_kpi_oed.errors import InputError
 from pin_kpi_oed.model.serialize import model_to_dict
+from pin_kpi_oed.oed.criteria import CRITERIA, check_names
+from pin_kpi_oed.oed.evaluate import score_design
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -29,7 +30,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                               description=__doc__.splitlines()[0])
     p.add_argument("--cell", default="kr15", help="shipped cell (kr15, kr300, kr500) or a cell YAML file")
     p.add_argument("--criteria", default="random,param,kpi",
-                   help="comma-separated: random, param (A on C_p), kpi (A on C_s), D, E, cond, O1..O5")
+                   help="comma-separated: random (heuristic) and registered criteria: " + ", ".join(CRITERIA))
     p.add_argument("--measurements", type=int, default=None, help="number of measurement configurations "
                    "(default: the cell's)")
     p.add_argument("--seed", type=int, default=0, help="seed of the heuristic design and of the starts")
@@ -54,15 +55,13 @@ def parse_criteria(text: str) -> list[str]:
     Raises:
         InputError: empty list or unknown name.
     """
-    from pin_kpi_oed.oed.criteria import CRITERIA
-
     names = [c.strip() for c in str(text).split(",") if c.strip()]
     if not names:
         raise InputError("--criteria: give at least one of random, " + ", ".join(CRITERIA))
-    for c in names:
-        if c != "random" and c not in CRITERIA:
-            raise InputError(f"--criteria: unknown criterion '{c}' (known: random, {', '.join(CRITERIA)})")
-    return names
+    try:
+        return check_names(names)
+    except InputError as exc:
+        raise InputError(f"--criteria: {exc}") from None
 
 
 def table(results: list, reference=None, certificate=None) -> str:
@@ -116,7 +115,7 @@ def run(args: argparse.Namespace) -> int:
         PinKpiOedError: bad cell, unknown criterion, infeasible cell, solver failure (one-line message).
     """
     from pin_kpi_oed.cell.cell import load_cell
-    from pin_kpi_oed.design.optimize import DesignProblem, ipopt_options, run_designs
+    from pin_kpi_oed.design.optimize import DesignOptions, DesignProblem, ipopt_options, run_designs
 
     criteria = parse_criteria(getattr(args, "criteria", "random,param,kpi"))
     cell = load_cell(getattr(args, "cell", "kr15"))
@@ -138,8 +137,9 @@ def run(args: argparse.Namespace) -> int:
               f"{problem.base.size} identifiable parameters; constraint rows per configuration: "
               + ", ".join(f"{k} {v}" for k, v in rows.items() if v)
               + f" (aggregated to {problem.cons.n_rows} for Ipopt); {starts} start(s) per criterion")
-    results = run_designs(cell, criteria, m, seed, collision, starts, ipopt_options(max_iter=max_iter), problem,
-                          start=getattr(args, "start", "pool") or "pool")
+    opts = DesignOptions(collision=collision, n_starts=starts, ipopt=ipopt_options(max_iter=max_iter),
+                         start=getattr(args, "start", "pool") or "pool")
+    results = run_designs(cell, criteria, m, seed, opts, problem)
     cert = None
     if getattr(args, "certificate", False):
         from pin_kpi_oed.oed.certificate import certify

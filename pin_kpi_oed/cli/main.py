@@ -53,12 +53,8 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
     """``pin-kpi-oed evaluate DESIGN.json``: score given measurement configurations under every criterion."""
     from pin_kpi_oed.oed.evaluate import evaluate_file
 
-    out = evaluate_file(Path(args.design), Path(args.json) if args.json else None)
-    units = {"kpi": "m^2 (tr C_s)", "param": "m^2 + rad^2 (tr C_p, mixed units)", "E": "m^2 or rad^2 (max eig C_p)",
-             "cond": "(dimensionless)"}
-    for k, v in out["criteria"].items():
-        print(f"{k:<7}{v: .6g}  {units.get(k, '(dimensionless, log scale)')}")
-    print(f"tr(C_s) = {out['trace_cs_m2'] * 1e6:.6g} mm^2   TCP sigma = {out['tcp_sigma_m'] * 1e6:.3f} um")
+    score = evaluate_file(Path(args.design), Path(args.json) if args.json else None)
+    print(score.summary())
     return 0
 
 

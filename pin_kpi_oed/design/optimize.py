@@ -37,7 +37,7 @@ the barrier terms of thousands of nearly-active rows slow the progress. Here:
   relative to the scaled objective (:func:`ipopt_options`), ``OMP_NUM_THREADS=1`` for MUMPS' BLAS.
 
 The run also stops when the lowest objective of all iterates has improved by less than 0.1 % over
-50 iterations (status ``Stalled``); on the KR 15 cell the result is within ~3 % of a run to
+50 iterations (status ``stalled``); on the KR 15 cell the result is within ~3 % of a run to
 tol = 1e-6 that takes ten times longer. If Ipopt stops without success (or stalls), the best
 feasible iterate seen (tracked in the ``intermediate`` callback from Ipopt's current iterate and
 constraint values) is returned with the status. Every returned design is re-checked by the
@@ -49,21 +49,21 @@ from __future__ import annotations
 import os
 import time
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
 from pin_kpi_oed.cell.cell import Cell
-from pin_kpi_oed.cell.collision import AggregatedConstraints, CollisionModel, FeasibilityChecker, FeasibilityReport, random_feasible
+from pin_kpi_oed.cell.collision import (AggregatedConstraints, CollisionModel, FeasibilityChecker, FeasibilityReport,
+                                        random_feasible)
+from pin_kpi_oed.errors import IdentifiabilityError, InputError, SolverError
+from pin_kpi_oed.oed.criteria import DesignCriterion, check_names, get_criterion
+from pin_kpi_oed.oed.identifiability import analyse, check_kpi
 from pin_kpi_oed.oed.pool import select as pool_select
 from pin_kpi_oed.progress import progress
-from pin_kpi_oed.oed.criteria import CRITERIA, DesignCriterion
-from pin_kpi_oed.errors import IdentifiabilityError, InputError, SolverError
-from pin_kpi_oed.oed.identifiability import analyse, check_kpi
+from pin_kpi_oed.results import Result
 
 os.environ.setdefault("OMP_NUM_THREADS", "1")
-
-#: Criteria whose value is a positive quantity (scaled by the start value); the others are logs (shifted).
-_RATIO_CRITERIA = ("kpi", "param", "E", "cond")
 
 #: Stagnation test: stop when the lowest (scaled) objective of all iterates improved by less than
 #: STALL_TOL (0.1 % of the start value for ratio criteria, 1e-3 in log units otherwise) over
@@ -83,31 +83,42 @@ _IPOPT_STATUS = {0: "Solve_Succeeded", 1: "Solved_To_Acceptable_Level", 2: "Infe
                  -12: "Invalid_Option", -13: "Invalid_Number_Detected", -100: "Unrecoverable_Exception",
                  -101: "NonIpopt_Exception_Thrown", -102: "Insufficient_Memory", -199: "Internal_Error"}
 
+#: Ipopt return codes in the package's status words (anything else: ``failed``).
+_STATUS_WORD = {0: "converged", 1: "acceptable", -1: "max_iter", -4: "max_time", -5: "max_time"}
 
-@dataclass
-class DesignResult:
-    """One measurement design and its scores.
+
+@dataclass(kw_only=True)
+class DesignResult(Result):
+    """One measurement design and its scores (a :class:`~pin_kpi_oed.results.Result`).
+
+    The common result fields:
+
+    * ``success``: every pose collision-free, visible and within bounds by the independent check
+      (also readable as ``feasible``);
+    * ``status``: ``sampled`` (heuristic design) or, for the returned Ipopt start, ``converged``,
+      ``acceptable``, ``stalled``, ``max_iter``, ``max_time`` or ``failed``;
+    * ``message``: Ipopt's status, the best-feasible-iterate fallback, violations of the independent check;
+    * ``nit``: Ipopt iterations of the returned start, 0 for random (also ``iterations``);
+    * ``nfev``: objective evaluations of the returned start;
+    * ``time_s``: wall time (s), Ipopt over all starts or the rejection sampling (also ``solve_time_s``).
 
     Attributes:
-        criterion: ``random`` (heuristic) or a name of :data:`~pin_kpi_oed.oed.criteria.CRITERIA`.
+        criterion: ``random`` (heuristic) or a registered criterion name (:data:`~pin_kpi_oed.oed.criteria.CRITERIA`).
         q_meas: configurations (m, n) rad.
         trace_cs_m2: tr(C_s) at the working configurations (m²).
         tcp_sigma_m: sqrt(tr(C_s)/t), RMS 3-D TCP standard deviation per working configuration (m).
         trace_cp: tr(C_p) over the identifiable parameters (mixed m², rad²).
-        value: the criterion's own value (tr(C_s) for random).
+        value: the criterion's own value (tr(C_s) for random), in its unit.
         min_clearance_m: smallest clearance over every pair checked by the independent check (m).
         max_incidence_deg: largest incidence angle (deg).
-        feasible: every pose collision-free, visible and within bounds (independent check).
         share_colliding: share of poses in collision (0…1).
         share_infeasible: share of poses failing any check (0…1).
-        solve_time_s: wall time (s): Ipopt (all starts) or the rejection sampling for random.
-        iterations: Ipopt iterations of the returned start (0 for random).
-        status: Ipopt status of the returned start (``sampled`` for random); suffixed with
-            ``; best feasible iterate`` when the fallback was used.
+        solver_status: Ipopt's status name of the returned start (``sampled`` for random), suffixed
+            with ``; best feasible iterate`` when the fallback was used.
         collision_avoidance: whether the collision constraints were imposed.
         samples: random poses drawn (heuristic design) or None.
         n_constraints: constraint rows of the NLP (0 for random).
-        starts: per start: objective (scaled), iterations, time, status.
+        starts: per start: :meth:`IpoptRun.start_dict`.
         check: the independent check (plain dict).
     """
 
@@ -119,43 +130,124 @@ class DesignResult:
     value: float
     min_clearance_m: float
     max_incidence_deg: float
-    feasible: bool
     share_colliding: float
     share_infeasible: float
-    solve_time_s: float
-    iterations: int
-    status: str
+    solver_status: str = ""
     collision_avoidance: bool = True
     samples: int | None = None
     n_constraints: int = 0
     starts: list[dict] = field(default_factory=list)
     check: dict = field(default_factory=dict)
 
+    @property
+    def feasible(self) -> bool:
+        """Every pose passes the independent check (= ``success``)."""
+        return self.success
+
+    @property
+    def iterations(self) -> int:
+        """Ipopt iterations of the returned start (= ``nit``)."""
+        return self.nit
+
+    @property
+    def solve_time_s(self) -> float:
+        """Wall time (s) (= ``time_s``)."""
+        return self.time_s
+
     def improvement_over(self, reference: "DesignResult") -> float:
         """Relative reduction of tr(C_s) w.r.t. ``reference`` (%)."""
         return 100.0 * (1.0 - self.trace_cs_m2 / reference.trace_cs_m2)
 
     def to_dict(self) -> dict:
-        """Plain JSON-able dict (SI units)."""
-        return {"criterion": self.criterion, "q_meas": self.q_meas.tolist(), "trace_cs_m2": self.trace_cs_m2,
-                "tcp_sigma_m": self.tcp_sigma_m, "trace_cp": self.trace_cp, "value": self.value,
-                "min_clearance_m": self.min_clearance_m, "max_incidence_deg": self.max_incidence_deg,
-                "feasible": self.feasible, "share_colliding": self.share_colliding,
-                "share_infeasible": self.share_infeasible, "solve_time_s": self.solve_time_s,
-                "iterations": self.iterations, "status": self.status,
+        """Plain JSON-able dict (SI units): the common result keys, the scores, and the keys of earlier
+        versions (``feasible``, ``iterations``, ``solve_time_s``)."""
+        return {**self.result_dict(), "criterion": self.criterion, "q_meas": self.q_meas.tolist(),
+                "trace_cs_m2": self.trace_cs_m2, "tcp_sigma_m": self.tcp_sigma_m, "trace_cp": self.trace_cp,
+                "value": self.value, "min_clearance_m": self.min_clearance_m,
+                "max_incidence_deg": self.max_incidence_deg, "feasible": self.feasible,
+                "share_colliding": self.share_colliding, "share_infeasible": self.share_infeasible,
+                "solve_time_s": self.time_s, "iterations": self.nit, "solver_status": self.solver_status,
                 "collision_avoidance": self.collision_avoidance, "samples": self.samples,
                 "n_constraints": self.n_constraints, "starts": self.starts, "check": self.check}
 
     def summary(self) -> str:
         """One readable line."""
-        extra = f", {self.samples} samples" if self.samples is not None else f", {self.iterations} iterations"
+        extra = f", {self.samples} samples" if self.samples is not None else f", {self.nit} iterations"
         return (f"{self.criterion}: tr(C_s) = {self.trace_cs_m2 * 1e6:.4g} mm^2, TCP sigma = "
                 f"{self.tcp_sigma_m * 1e6:.3f} um, min clearance {self.min_clearance_m * 1e3:.1f} mm, "
                 f"max incidence {self.max_incidence_deg:.1f} deg, {'feasible' if self.feasible else 'INFEASIBLE'} "
-                f"({100 * self.share_colliding:.0f} % colliding){extra}, {self.solve_time_s:.2f} s, {self.status}")
+                f"({100 * self.share_colliding:.0f} % colliding){extra}, {self.time_s:.2f} s, {self.status} "
+                f"({self.solver_status})")
 
-    def __str__(self) -> str:
-        return self.summary()
+
+@dataclass(kw_only=True)
+class IpoptRun(Result):
+    """One Ipopt run of the design problem (a :class:`~pin_kpi_oed.results.Result`).
+
+    ``success``: the returned design satisfies every optimiser row (fast path; the independent check
+    comes later); ``status``: ``converged``, ``acceptable``, ``stalled``, ``max_iter``, ``max_time`` or
+    ``failed``; ``nit``: Ipopt iterations; ``nfev``: objective evaluations; ``time_s``: wall time (s).
+
+    Attributes:
+        Q: the returned configurations (m, n) rad.
+        f: scaled objective (φ/φ₀ for ratio criteria, φ − φ₀ otherwise).
+        value: the criterion φ.
+        eval_time_s: time spent in our callbacks (s).
+        n_constraints: constraint rows of the NLP.
+        n_constraint_evals: constraint (and Jacobian) evaluations.
+        solver_status: Ipopt's status name (``Stalled`` for the stagnation stop), with
+            ``; best feasible iterate`` appended when the fallback was used.
+        fallback: the best feasible iterate was returned instead of Ipopt's last one.
+    """
+
+    Q: np.ndarray
+    f: float
+    value: float
+    eval_time_s: float = 0.0
+    n_constraints: int = 0
+    n_constraint_evals: int = 0
+    solver_status: str = ""
+    fallback: bool = False
+
+    def start_dict(self) -> dict:
+        """The per-start record of :attr:`DesignResult.starts` (common keys + the figures of one start)."""
+        return {**self.result_dict(), "value": self.value, "objective_scaled": self.f, "iterations": self.nit,
+                "eval_time_s": self.eval_time_s, "solver_status": self.solver_status,
+                "feasible_fast_path": self.success,
+                "evaluations": {"objective": self.nfev, "constraints": self.n_constraint_evals}}
+
+    def to_dict(self) -> dict:
+        """Plain JSON-able dict (SI units)."""
+        return {**self.start_dict(), "q_meas": self.Q.tolist(), "n_constraints": self.n_constraints,
+                "fallback": self.fallback}
+
+
+@dataclass
+class DesignOptions:
+    """Knobs of :func:`run_designs`.
+
+    Attributes:
+        collision: impose the collision constraints (used when no prepared problem is given).
+        n_starts: Ipopt starts per optimised criterion.
+        ipopt: Ipopt options (default :func:`ipopt_options`).
+        start: first start of every optimisation: ``pool`` = the pool selection of m poses for the
+            criterion (:meth:`~pin_kpi_oed.oed.criteria.Criterion.pool_form`; criteria without one
+            select by D-optimality) from ``pool_size`` feasible random candidates, or ``random`` =
+            the heuristic design. Further starts are random.
+        pool_size: feasible candidates of the pool start.
+    """
+
+    collision: bool = True
+    n_starts: int = 1
+    ipopt: dict | None = None
+    start: str = "pool"
+    pool_size: int = 1000
+
+    def __post_init__(self) -> None:
+        if self.start not in ("pool", "random"):
+            raise InputError(f"start must be 'pool' or 'random', got '{self.start}'")
+        if self.n_starts < 1 or self.pool_size < 1:
+            raise InputError(f"n_starts ({self.n_starts}) and pool_size ({self.pool_size}) must be >= 1")
 
 
 class DesignProblem:
@@ -201,18 +293,22 @@ class DesignProblem:
         return self.cell.robot.nq
 
     def criterion(self, name: str) -> DesignCriterion:
-        """The design criterion ``name`` on this problem.
+        """The registered design criterion ``name`` on this problem.
 
         Raises:
             InputError: unknown name.
         """
-        if name not in CRITERIA:
-            raise InputError(f"unknown criterion '{name}' (known: random, {', '.join(CRITERIA)})")
         return DesignCriterion(self.model, self.base, name, self.E)
 
     def min_measurements(self) -> int:
         """Fewest configurations that can identify the base parameters."""
         return int(np.ceil(self.base.size / self.model.nh))
+
+    def check_measurements(self, m: int) -> None:
+        """Raise InputError when m configurations cannot identify the base parameters."""
+        if m < self.min_measurements():
+            raise InputError(f"{m} measurements cannot identify {self.base.size} parameters: use at least "
+                             f"{self.min_measurements()}")
 
     def random_design(self, m: int, seed: int | np.random.SeedSequence = 0, max_tries: int | None = None
                       ) -> tuple[np.ndarray, int]:
@@ -228,10 +324,18 @@ class DesignProblem:
         rng = np.random.default_rng(seed)
         return random_feasible(self.coll_full, m, rng, max_tries or self.cell.max_random_tries)
 
-    def result(self, criterion: str, Q: np.ndarray, value: float, solve_time: float, iterations: int,
-               status: str, samples: int | None = None, n_constraints: int = 0, starts: list | None = None,
-               report: FeasibilityReport | None = None) -> DesignResult:
-        """Score a design and run the independent check."""
+    def result(self, criterion: str, Q: np.ndarray, value: float, report: FeasibilityReport | None = None,
+               **solver: Any) -> DesignResult:
+        """Score a design (tr C_s, tr C_p) and run the independent check.
+
+        Args:
+            criterion: ``random`` or the criterion name.
+            Q: the configurations (m, n) rad.
+            value: the criterion's value.
+            report: the independent check if already run (else run here).
+            **solver: further :class:`DesignResult` fields from the solver (``status``, ``message``,
+                ``nit``, ``nfev``, ``time_s``, ``solver_status``, ``samples``, ``n_constraints``, ``starts``).
+        """
         try:
             cs = self._kpi.value(Q)
             cp = self._param.value(Q)
@@ -239,14 +343,15 @@ class DesignProblem:
             cs = cp = float("inf")
         rep = report or self.checker.check(Q)
         t = self.cell.q_work.shape[0]
+        message = solver.pop("message", "")
+        if not rep.all_feasible:
+            message = (message + "; " if message else "") + "independent check: " + ", ".join(rep.violations(3))
         return DesignResult(criterion=criterion, q_meas=np.array(Q), trace_cs_m2=float(cs),
                             tcp_sigma_m=float(np.sqrt(cs / t)), trace_cp=float(cp), value=float(value),
                             min_clearance_m=rep.min_clearance_m, max_incidence_deg=rep.max_incidence_deg,
-                            feasible=rep.all_feasible, share_colliding=rep.share_colliding,
-                            share_infeasible=rep.share_infeasible, solve_time_s=float(solve_time),
-                            iterations=int(iterations), status=status, collision_avoidance=self.collision,
-                            samples=samples, n_constraints=n_constraints, starts=starts or [],
-                            check=rep.to_dict())
+                            success=rep.all_feasible, share_colliding=rep.share_colliding,
+                            share_infeasible=rep.share_infeasible, collision_avoidance=self.collision,
+                            check=rep.to_dict(), message=message, **solver)
 
 
 class _NLP:
@@ -254,7 +359,7 @@ class _NLP:
 
     def __init__(self, crit: DesignCriterion, cons: AggregatedConstraints, m: int, f0: float):
         self.crit, self.cons, self.m, self.n = crit, cons, m, cons.n
-        self.ratio = crit.name in _RATIO_CRITERIA
+        self.ratio = crit.is_ratio
         self.f0 = f0
         R = cons.n_rows
         off_r = (np.arange(m) * R)[:, None]
@@ -364,21 +469,19 @@ def ipopt_options(max_iter: int = 500, tol: float = 1e-3, acceptable_tol: float 
 
 
 def solve_ipopt(problem: DesignProblem, criterion: str, Q0: np.ndarray, options: dict | None = None,
-                stall_window: int = STALL_WINDOW) -> dict:
+                stall_window: int = STALL_WINDOW) -> IpoptRun:
     """One Ipopt run of the design problem from the start ``Q0``.
 
     Args:
         problem: the cell's design problem.
-        criterion: criterion name.
+        criterion: a registered criterion name.
         Q0: start (m, n) rad, normally feasible (the heuristic design).
         options: Ipopt options (default :func:`ipopt_options`).
         stall_window: iterations of the stagnation test (0 disables it).
 
     Returns:
-        dict with ``Q``, ``f`` (scaled objective), ``value`` (the criterion), ``iterations``, ``time_s``,
-        ``eval_time_s`` (our callbacks),
-        ``status`` (Ipopt status name, ``; best feasible iterate`` appended when the fallback was used),
-        ``n_constraints``, ``feasible`` (fast path, every row).
+        The run (:class:`IpoptRun`): the configurations, the scaled objective and the criterion's value,
+        status, iterations, evaluations, times.
 
     Raises:
         SolverError: the criterion cannot be scaled at the start, or Ipopt could not run.
@@ -386,21 +489,9 @@ def solve_ipopt(problem: DesignProblem, criterion: str, Q0: np.ndarray, options:
     import cyipopt
 
     crit = problem.criterion(criterion)
-    cons = problem.cons
     m, n = Q0.shape
-    try:
-        f0 = crit.value(Q0)
-    except IdentifiabilityError as exc:
-        raise SolverError(f"the start design of the {criterion} design does not identify the parameters ({exc})"
-                          ) from None
-    if criterion in _RATIO_CRITERIA and not (np.isfinite(f0) and f0 > 0):
-        raise SolverError(f"criterion {criterion} is {f0} at the start design: cannot scale it")
-    nlp = _NLP(crit, cons, m, f0)
-    lb = np.tile(problem.cell.q_lower, m)
-    ub = np.tile(problem.cell.q_upper, m)
-    cl1 = np.array([CLEARANCE_BUFFER_M if u == "m" else COS_BUFFER for u in cons.units])
-    cl = np.tile(cl1, m)
-    cu = np.full(cl.size, 2e19)
+    nlp = _NLP(crit, problem.cons, m, _start_value(crit, Q0))
+    lb, ub, cl, cu = _nlp_bounds(problem, m)
     x0 = np.clip(Q0.ravel(), lb, ub)
     t0 = time.perf_counter()
     prob = cyipopt.Problem(n=x0.size, m=cl.size, problem_obj=nlp, lb=lb, ub=ub, cl=cl, cu=cu)
@@ -416,22 +507,54 @@ def solve_ipopt(problem: DesignProblem, criterion: str, Q0: np.ndarray, options:
         raise SolverError(f"Ipopt failed on the {criterion} design: {exc}") from None
     finally:
         prob.close()
-    dt = time.perf_counter() - t0
-    code = int(info["status"])
-    status = _IPOPT_STATUS.get(code, str(code))
-    if nlp.stalled and code == 5:
-        status = "Stalled"
-    x = np.clip(np.asarray(x, float), lb, ub)
+    return _finish_run(problem, nlp, np.asarray(x, float), int(info["status"]), (lb, ub),
+                       time.perf_counter() - t0, cl.size)
+
+
+def _start_value(crit: DesignCriterion, Q0: np.ndarray) -> float:
+    """φ at the start (the objective's scale or shift).
+
+    Raises:
+        SolverError: the start does not identify the parameters, or a ratio criterion is not positive there.
+    """
+    try:
+        f0 = crit.value(Q0)
+    except IdentifiabilityError as exc:
+        raise SolverError(f"the start design of the {crit.name} design does not identify the parameters ({exc})"
+                          ) from None
+    if crit.is_ratio and not (np.isfinite(f0) and f0 > 0):
+        raise SolverError(f"criterion {crit.name} is {f0} at the start design: cannot scale it")
+    return f0
+
+
+def _nlp_bounds(problem: DesignProblem, m: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Variable bounds (joint limits, rad) and constraint bounds (buffers, m or cos β) of m configurations."""
+    lb = np.tile(problem.cell.q_lower, m)
+    ub = np.tile(problem.cell.q_upper, m)
+    cl1 = np.array([CLEARANCE_BUFFER_M if u == "m" else COS_BUFFER for u in problem.cons.units])
+    cl = np.tile(cl1, m)
+    return lb, ub, cl, np.full(cl.size, 2e19)
+
+
+def _finish_run(problem: DesignProblem, nlp: _NLP, x: np.ndarray, code: int, bounds: tuple[np.ndarray, np.ndarray],
+                dt: float, n_constraints: int) -> IpoptRun:
+    """Ipopt's last iterate or, if it is infeasible, stalled or worse, the best feasible iterate, as a run."""
+    lb, ub = bounds
+    m, n = nlp.m, nlp.n
+    name = "Stalled" if nlp.stalled and code == 5 else _IPOPT_STATUS.get(code, str(code))
+    word = "stalled" if nlp.stalled and code == 5 else _STATUS_WORD.get(code, "failed")
+    x = np.clip(x, lb, ub)
     ok = bool(problem.coll.feasible(x.reshape(m, n)).all())
     f = nlp.objective(x)
     fallback = False
     if nlp.best_x is not None and (not ok or nlp.stalled or (code not in (0, 1) and nlp.best_f < f)):
         x, f, ok, fallback = np.clip(nlp.best_x, lb, ub), nlp.best_f, True, True
-    value = f * f0 if nlp.ratio else f + f0
-    return {"Q": x.reshape(m, n), "f": float(f), "value": float(value), "iterations": nlp.iterations, "time_s": dt,
-            "eval_time_s": nlp.t_f + nlp.t_g, "status": status + ("; best feasible iterate" if fallback else ""),
-            "feasible": ok, "n_constraints": int(cl.size),
-            "evaluations": {"objective": nlp.n_f, "constraints": nlp.n_g}}
+    value = f * nlp.f0 if nlp.ratio else f + nlp.f0
+    solver_status = name + ("; best feasible iterate" if fallback else "")
+    return IpoptRun(Q=x.reshape(m, n), f=float(f), value=float(value), eval_time_s=nlp.t_f + nlp.t_g,
+                    n_constraints=int(n_constraints), n_constraint_evals=nlp.n_g, solver_status=solver_status,
+                    fallback=fallback, success=ok, status=word, nit=nlp.iterations, nfev=nlp.n_f, time_s=dt,
+                    message=f"Ipopt: {name}" + ("; best feasible iterate returned" if fallback else ""))
 
 
 def design_random(problem: DesignProblem, m: int, seed: int = 0) -> DesignResult:
@@ -439,8 +562,8 @@ def design_random(problem: DesignProblem, m: int, seed: int = 0) -> DesignResult
     t0 = time.perf_counter()
     Q, ns = problem.random_design(m, seed)
     dt = time.perf_counter() - t0
-    res = problem.result("random", Q, problem._kpi.value(Q), dt, 0, "sampled", samples=ns)
-    return res
+    return problem.result("random", Q, problem._kpi.value(Q), time_s=dt, status="sampled", solver_status="sampled",
+                          samples=ns, message=f"{ns} uniform random poses drawn for {m} feasible ones")
 
 
 def design_ipopt(problem: DesignProblem, criterion: str, m: int, seed: int = 0, n_starts: int = 1,
@@ -449,7 +572,7 @@ def design_ipopt(problem: DesignProblem, criterion: str, m: int, seed: int = 0, 
 
     Args:
         problem: the cell's design problem.
-        criterion: a name of :data:`~pin_kpi_oed.oed.criteria.CRITERIA` (``kpi`` = A on C_s, ``param`` = A on C_p).
+        criterion: a registered criterion name (``kpi`` = A on C_s, ``param`` = A on C_p, ...).
         m: number of measurement configurations.
         seed: seed of the starts; start 0 is the heuristic design of this seed (or ``start``).
         n_starts: number of starts (further starts: random feasible designs of seeds spawned from ``seed``).
@@ -464,87 +587,75 @@ def design_ipopt(problem: DesignProblem, criterion: str, m: int, seed: int = 0, 
         InputError: unknown criterion or too few measurements.
         InfeasibleError: no feasible random start found.
     """
-    problem.criterion(criterion)
-    if m < problem.min_measurements():
-        raise InputError(f"{m} measurements cannot identify {problem.base.size} parameters: use at least "
-                         f"{problem.min_measurements()}")
+    get_criterion(criterion)
+    problem.check_measurements(m)
     seeds = np.random.SeedSequence(seed).spawn(max(n_starts, 1))
-    runs = []
-    t_total = 0.0
+    runs: list[IpoptRun] = []
     for k in progress(range(max(n_starts, 1)), desc=f"{criterion} starts", disable=n_starts <= 1):
         if k == 0:
             Q0 = start if start is not None else problem.random_design(m, seed)[0]
         else:
             Q0 = problem.random_design(m, seeds[k])[0]
-        r = solve_ipopt(problem, criterion, Q0, options)
-        t_total += r["time_s"]
-        runs.append(r)
-    order = sorted(range(len(runs)), key=lambda i: (not runs[i]["feasible"], runs[i]["value"]))
-    chosen, report = None, None
+        runs.append(solve_ipopt(problem, criterion, Q0, options))
+    r, report = _best_checked_run(problem, runs)
+    return problem.result(criterion, r.Q, r.value, report=report, time_s=sum(x.time_s for x in runs), nit=r.nit,
+                          nfev=r.nfev, status=r.status, solver_status=r.solver_status, message=r.message,
+                          n_constraints=r.n_constraints, starts=[x.start_dict() for x in runs])
+
+
+def _best_checked_run(problem: DesignProblem, runs: list[IpoptRun]) -> tuple[IpoptRun, FeasibilityReport | None]:
+    """The best run (by value) that passes the independent check, with its report; else the best run and None."""
+    order = sorted(range(len(runs)), key=lambda i: (not runs[i].success, runs[i].value))
     for i in order:
-        rep = problem.checker.check(runs[i]["Q"])
+        rep = problem.checker.check(runs[i].Q)
         if rep.all_feasible:
-            chosen, report = i, rep
-            break
-    if chosen is None:
-        chosen = order[0]
-    r = runs[chosen]
-    starts = [{"value": x["value"], "objective_scaled": x["f"], "iterations": x["iterations"], "time_s": x["time_s"],
-               "eval_time_s": x["eval_time_s"],
-               "status": x["status"], "feasible_fast_path": x["feasible"], "evaluations": x["evaluations"]}
-              for x in runs]
-    return problem.result(criterion, r["Q"], r["value"], t_total, r["iterations"], r["status"],
-                          n_constraints=r["n_constraints"], starts=starts, report=report)
+            return runs[i], rep
+    return runs[order[0]], None
 
 
-def run_designs(cell: Cell, criteria: list[str], m: int | None = None, seed: int = 0, collision: bool = True,
-                n_starts: int = 1, options: dict | None = None, problem: DesignProblem | None = None,
-                start: str = "pool", pool_size: int = 1000) -> list[DesignResult]:
+def run_designs(cell: Cell, criteria: list[str], m: int | None = None, seed: int = 0,
+                options: DesignOptions | None = None, problem: DesignProblem | None = None) -> list[DesignResult]:
     """Compute the heuristic and optimum designs of a cell.
 
     Args:
         cell: the measurement cell.
-        criteria: ``random`` and/or criterion names; the heuristic design is always computed
+        criteria: ``random`` and/or registered criterion names; the heuristic design is always computed
             (it is the start of every optimisation and the reference of the improvements).
         m: measurements (default the cell's).
-        seed: seed of the heuristic design and of the starts.
-        collision: impose the collision constraints.
-        n_starts: starts per optimised criterion.
-        options: Ipopt options.
+        seed: seed of the heuristic design, the pool and the starts.
+        options: the knobs (:class:`DesignOptions`: collision, starts, Ipopt options, first start, pool size).
         problem: a prepared :class:`DesignProblem` (else built).
-        start: first start of every optimisation: ``pool`` (default) = the pool selection of m
-            poses for the criterion from ``pool_size`` feasible random candidates
-            (:mod:`pin_kpi_oed.oed.pool`; A-type criteria select for themselves, the others by
-            D-optimality), or ``random`` = the heuristic design. Further starts are random.
-        pool_size: feasible candidates of the pool start.
 
     Returns:
         The results, ``random`` first, then the criteria in the given order.
+
+    Raises:
+        InputError: unknown criterion or too few measurements.
     """
-    unknown = [c for c in criteria if c != "random" and c not in CRITERIA]
-    if unknown:
-        raise InputError(f"unknown criterion '{unknown[0]}' (known: random, {', '.join(CRITERIA)})")
+    opts = options or DesignOptions()
+    check_names(criteria)
     m = m or cell.measurements
-    problem = problem or DesignProblem(cell, collision=collision)
-    if m < problem.min_measurements():
-        raise InputError(f"{m} measurements cannot identify {problem.base.size} parameters: use at least "
-                         f"{problem.min_measurements()}")
-    if start not in ("pool", "random"):
-        raise InputError(f"start must be 'pool' or 'random', got '{start}'")
+    problem = problem or DesignProblem(cell, collision=opts.collision)
+    problem.check_measurements(m)
     rnd = design_random(problem, m, seed)
     out = [rnd]
-    Q_pool = Fp = None
-    if start == "pool" and any(c != "random" for c in criteria):
-        Q_pool, _ = problem.random_design(max(pool_size, 2 * m), seed=np.random.SeedSequence([seed, 1]),
-                                          max_tries=max(problem.cell.max_random_tries, 200 * pool_size))
-        Fp = problem.model.weighted_jacobian(problem.p0, Q_pool)[:, :, problem.base]
+    pool = None
+    if opts.start == "pool" and any(c != "random" for c in criteria):
+        pool = _start_pool(problem, m, seed, opts.pool_size)
     for c in criteria:
         if c == "random":
             continue
         Q0 = rnd.q_meas
-        if Fp is not None:
-            K = {"kpi": problem.E, "param": np.eye(problem.base.size)}.get(c)
-            idx, _ = pool_select(Fp, m, K)
-            Q0 = Q_pool[idx]
-        out.append(design_ipopt(problem, c, m, seed, n_starts, start=Q0, options=options))
+        if pool is not None:
+            Q_pool, Fp = pool
+            K = get_criterion(c).pool_form(problem.E, problem.base.size)
+            Q0 = Q_pool[pool_select(Fp, m, K).indices]
+        out.append(design_ipopt(problem, c, m, seed, opts.n_starts, start=Q0, options=opts.ipopt))
     return out
+
+
+def _start_pool(problem: DesignProblem, m: int, seed: int, pool_size: int) -> tuple[np.ndarray, np.ndarray]:
+    """Feasible random candidates for the pool start (seeded from ``seed``) and their weighted Jacobians."""
+    Q_pool, _ = problem.random_design(max(pool_size, 2 * m), seed=np.random.SeedSequence([seed, 1]),
+                                      max_tries=max(problem.cell.max_random_tries, 200 * pool_size))
+    return Q_pool, problem.model.weighted_jacobian(problem.p0, Q_pool)[:, :, problem.base]

@@ -12,26 +12,35 @@ is (φ*/m)/tr C_s(ξ). The pool is a finite sample of the feasible set, so a
 continuous (IPOPT) design can exceed 100 % by the margin by which the pool
 misses the best poses; with 10,000 candidates that margin is small, and the
 report states it rather than hiding it.
-
-The same pool gives a good *starting point* for IPOPT: the pool selection
-(rounding + exchange), which is already feasible.
 """
 
 from __future__ import annotations
 
+import time
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
-from pin_kpi_oed.oed.pool import ApproximateDesign, exact_phi, select
+from pin_kpi_oed.oed.pool import ApproximateDesign, select
+from pin_kpi_oed.results import Result
+
+if TYPE_CHECKING:
+    from pin_kpi_oed.design.optimize import DesignProblem
+
+__all__ = ["Certificate", "certify"]
 
 
-@dataclass
-class Certificate:
-    """A lower bound of tr(C_s) for m-point designs of a cell.
+@dataclass(kw_only=True)
+class Certificate(Result):
+    """A lower bound of tr(C_s) for m-point designs of a cell (a :class:`~pin_kpi_oed.results.Result`).
+
+    ``success`` / ``status`` / ``nit`` are the relaxation's (equivalence-theorem gap below the
+    tolerance; multiplicative iterations); ``time_s`` covers sampling, relaxation and selection.
 
     Attributes:
         lower_bound_trace_cs_m2: φ*/m, the certified bound (m²).
+        m: number of measurements the bound is for.
         pool_size: feasible candidates in the pool; samples: random configurations drawn.
         approx: the relaxation (weights, equivalence-theorem ratio).
         pool_selection: indices of the m-point pool selection; pool_selection_trace_cs_m2 its tr(C_s).
@@ -52,15 +61,15 @@ class Certificate:
         return float(self.lower_bound_trace_cs_m2 / trace_cs_m2)
 
     def to_dict(self) -> dict:
-        """Plain JSON-able dict (SI units)."""
-        return {"lower_bound_trace_cs_m2": self.lower_bound_trace_cs_m2, "m": self.m, "pool_size": self.pool_size,
-                "samples": self.samples, "relaxation": self.approx.to_dict(),
+        """Plain JSON-able dict (SI units): the common result keys and the certificate's figures."""
+        return {**self.result_dict(), "lower_bound_trace_cs_m2": self.lower_bound_trace_cs_m2, "m": self.m,
+                "pool_size": self.pool_size, "samples": self.samples, "relaxation": self.approx.to_dict(),
                 "pool_selection_trace_cs_m2": self.pool_selection_trace_cs_m2,
                 "pool_selection_efficiency": self.efficiency(self.pool_selection_trace_cs_m2)}
 
 
-def certify(problem, m: int, pool_size: int = 5000, seed: int = 0, max_tries_per_candidate: int = 200,
-            extra: list[np.ndarray] | None = None) -> Certificate:
+def certify(problem: "DesignProblem", m: int, pool_size: int = 5000, seed: int = 0,
+            max_tries_per_candidate: int = 200, extra: list[np.ndarray] | None = None) -> Certificate:
     """Sample a feasible pool for a design problem, solve the relaxation, select m poses.
 
     Args:
@@ -73,22 +82,23 @@ def certify(problem, m: int, pool_size: int = 5000, seed: int = 0, max_tries_per
             designs: the bound then also covers every design built from them (and an optimised
             design can no longer exceed 100 % efficiency by using poses the random pool missed).
 
+    Returns:
+        The certificate (bound of tr(C_s), m², for the KPI criterion, eq. 24a).
+
     Raises:
         InfeasibleError: not enough feasible poses found (from the sampler).
     """
+    t0 = time.perf_counter()
     Q, samples = problem.random_design(pool_size, seed=seed, max_tries=max(problem.cell.max_random_tries,
                                                                           max_tries_per_candidate * pool_size))
     if extra:
         Q = np.vstack([Q] + [np.atleast_2d(x) for x in extra])
     Fp = problem.model.weighted_jacobian(problem.p0, Q)[:, :, problem.base]
-    idx, approx = select(Fp, m, problem.E)
-    return Certificate(approx.lower_bound / m, m, Q.shape[0], samples, approx, idx, exact_phi(Fp, idx, problem.E), Q)
-
-
-def pool_start(problem, m: int, pool_size: int = 2000, seed: int = 0) -> np.ndarray:
-    """A feasible starting design for IPOPT: the KPI pool selection of m poses, (m, n) rad."""
-    cert = certify(problem, m, pool_size, seed)
-    return cert.Q_pool[cert.pool_selection]
-
-
-__all__ = ["Certificate", "certify", "pool_start"]
+    sel = select(Fp, m, problem.E)
+    approx = sel.approx
+    return Certificate(lower_bound_trace_cs_m2=approx.lower_bound / m, m=m, pool_size=Q.shape[0], samples=samples,
+                       approx=approx, pool_selection=sel.indices, pool_selection_trace_cs_m2=sel.phi, Q_pool=Q,
+                       success=approx.success, status=approx.status, nit=approx.nit,
+                       message=f"tr(C_s) >= {approx.lower_bound / m:.4g} m^2 for every {m}-pose design from "
+                               f"{Q.shape[0]} feasible candidates ({approx.message})",
+                       time_s=time.perf_counter() - t0)

@@ -24,10 +24,18 @@ rank [F₁; F₂] = n_v (eq. 15): (CQ) holds by construction (F₂ = [E, −I]),
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
 import scipy.linalg as sla
 
 from pin_kpi_oed.errors import IdentifiabilityError
+
+if TYPE_CHECKING:
+    from pin_kpi_oed.model.measurement import TrackerModel
+
+__all__ = ["information", "prior_of", "param_covariance", "covariances", "kpi_covariance", "design_covariances",
+           "kpi_covariance_kkt"]
 
 
 def information(F: np.ndarray, prior_sigma: np.ndarray | None = None) -> np.ndarray:
@@ -42,6 +50,20 @@ def information(F: np.ndarray, prior_sigma: np.ndarray | None = None) -> np.ndar
     if prior_sigma is not None:
         M = M + np.diag(1.0 / np.asarray(prior_sigma, float) ** 2)
     return M
+
+
+def prior_of(model: "TrackerModel", base: np.ndarray) -> np.ndarray | None:
+    """Prior standard deviations of the identifiable parameters from the model's layout.
+
+    Args:
+        model: the measurement model (its ``layout.prior_sigma``, m or rad, ``inf`` = no prior).
+        base: indices of the identifiable parameters.
+
+    Returns:
+        (nb,) prior σ (m or rad), or None when no identifiable parameter has a prior.
+    """
+    prior = model.layout.prior_sigma[base]
+    return prior if np.isfinite(prior).any() else None
 
 
 def param_covariance(F: np.ndarray, prior_sigma: np.ndarray | None = None, names: list[str] | None = None
@@ -65,15 +87,54 @@ def param_covariance(F: np.ndarray, prior_sigma: np.ndarray | None = None, names
             f"determine '{who}'; add measurement configurations that move it, or fix it as known") from None
 
 
-def kpi_covariance(F: np.ndarray, E: np.ndarray, prior_sigma: np.ndarray | None = None) -> np.ndarray:
-    """C_s = E C_p Eᵀ, the KPI covariance by the explicit formula (m²).
+def covariances(F: np.ndarray, E: np.ndarray, prior_sigma: np.ndarray | None = None,
+                names: list[str] | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """C_p = (FᵀF + P)⁻¹ and C_s = E C_p Eᵀ, the KPI covariance by the explicit formula (eq. 19, m²).
+
+    The one place where C_s is assembled from a design's Jacobian.
 
     Args:
-        F: weighted Jacobian over the identifiable parameters.
+        F: weighted Jacobian over the identifiable parameters, (rows, nb) or (m, nh, nb).
         E: KPI sensitivity ds/dp over the same parameters, (n_s, nb).
+        prior_sigma: prior standard deviations (m or rad), (nb,), or None.
+        names: parameter names for the error message.
+
+    Returns:
+        (C_p (nb, nb), C_s (n_s, n_s) m²).
+
+    Raises:
+        IdentifiabilityError: as :func:`param_covariance`.
     """
-    C_p = param_covariance(F, prior_sigma)
-    return E @ C_p @ E.T
+    C_p = param_covariance(F, prior_sigma, names)
+    return C_p, E @ C_p @ E.T
+
+
+def kpi_covariance(F: np.ndarray, E: np.ndarray, prior_sigma: np.ndarray | None = None) -> np.ndarray:
+    """C_s = E C_p Eᵀ, the KPI covariance by the explicit formula (eq. 19, m²); see :func:`covariances`."""
+    return covariances(F, E, prior_sigma)[1]
+
+
+def design_covariances(model: "TrackerModel", base: np.ndarray, Q_meas: np.ndarray, E: np.ndarray,
+                       p: np.ndarray | None = None, names: list[str] | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """C_p and C_s of measurement configurations, F and the prior taken from the model (eqs. 19, 24c–24d).
+
+    Args:
+        model: the measurement model (weighted Jacobian, ``layout.prior_sigma``).
+        base: indices of the identifiable parameters.
+        Q_meas: measurement configurations, (m, n) rad.
+        E: KPI sensitivity over the base parameters, (n_s, nb).
+        p: linearisation point (raw parameters), default nominal.
+        names: base parameter names for the error message.
+
+    Returns:
+        (C_p, C_s (n_s, n_s) m²), with the model's prior (MAP) where it has one.
+
+    Raises:
+        IdentifiabilityError: the measurements do not identify the parameters.
+    """
+    p = np.zeros(model.n_params) if p is None else p
+    F = model.weighted_jacobian(p, Q_meas)[:, :, base].reshape(-1, base.size)
+    return covariances(F, E, prior_of(model, base), names)
 
 
 def kpi_covariance_kkt(F: np.ndarray, E: np.ndarray, prior_sigma: np.ndarray | None = None

@@ -1,4 +1,4 @@
-"""Design criteria φ(q_meas) and their exact gradients w.r.t. the measurement configurations.
+"""Design criteria φ as objects: value, exact gradient, unit, label, pool-selection form (paper eqs. 8–10, 19, 24a).
 
 All criteria are written *to be minimised*. With F the weighted Jacobian over
 the identifiable parameters (eq. 24d), M = FᵀF + P its information matrix,
@@ -8,7 +8,7 @@ C_p = M⁻¹, E the KPI sensitivity at the working configurations (eq. 24e) and
 ==========  =====================================  ==================================
 name        φ                                      meaning
 ==========  =====================================  ==================================
-``kpi``     tr(C_s) = tr(E C_p Eᵀ)  (m²)           A on C_s: the paper's KPI criterion (eq. 24a)
+``kpi``     tr(C_s) = tr(E C_p Eᵀ)  (m²)           A on C_s: the paper's KPI criterion (eqs. 19, 24a)
 ``param``   tr(C_p)                                A on C_p: the paper's state of the art
 ``D``       −log det M                             D-optimality (eq. 10, Daney)
 ``E``       λ_max(C_p) = 1/λ_min(M)                E-optimality
@@ -20,55 +20,119 @@ name        φ                                      meaning
 ``O5``      log Σ 1/μ_i                            Sun–Hollerbach O5 = 1/Σ(1/μ_i)
 ==========  =====================================  ==================================
 
+**One class per criterion.** Each criterion is a subclass of :class:`Criterion` carrying its
+``name``, ``label``, ``unit``, whether it ``is_ratio`` (a positive quantity the design solver scales
+by its start value; the others are logarithms, shifted instead), whether it ``needs_kpi`` (the
+sensitivity E), its value and exact gradient dφ/dF (:meth:`Criterion.value_and_grad_F`) and its
+pool-selection form (:meth:`Criterion.pool_form`). The registry :data:`CRITERIA` maps names to
+instances; every user (the IPOPT design, the pool start, ``evaluate``, the CLI, the validation)
+looks criteria up there. **Adding a criterion** = writing one subclass and calling
+:func:`register` on it (from this file or from outside the package)::
+
+    class WorstTcpVariance(Criterion):
+        name, label, unit, is_ratio, needs_kpi = "cs_max", "largest eigenvalue of C_s", "m^2", True, True
+        def value_and_grad_F(self, F, E=None, prior_sigma=None): ...
+
+    register(WorstTcpVariance())
+
 Gradients: dφ/dF is closed form (e.g. −2 F M⁻¹EᵀE M⁻¹ for tr C_s, and
 dμ_i = u_iᵀ dF v_i for singular-value criteria), chained with dF/dq from
-:meth:`TrackerModel.weighted_jacobian_dq`.
+:meth:`TrackerModel.weighted_jacobian_dq` by :class:`DesignCriterion`.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from collections.abc import Iterable
+from dataclasses import dataclass, field
+from typing import ClassVar
 
 import numpy as np
 
-from pin_kpi_oed.oed.covariance import information
 from pin_kpi_oed.errors import IdentifiabilityError, InputError
 from pin_kpi_oed.model.measurement import TrackerModel
+from pin_kpi_oed.oed.covariance import information, prior_of
 
-CRITERIA: dict[str, str] = {
-    "kpi": "A on C_s: tr of the TCP covariance (m^2) - the paper's KPI criterion",
-    "param": "A on C_p: tr of the parameter covariance - the paper's state of the art",
-    "D": "D-optimality: -log det(F^T F)",
-    "E": "E-optimality: largest eigenvalue of C_p",
-    "cond": "condition number of F",
-    "O1": "observability index O1 (Borm-Menq), as -log",
-    "O2": "observability index O2 (inverse condition number), as -log",
-    "O3": "observability index O3 (minimum singular value), as -log",
-    "O4": "observability index O4 (noise amplification, Nahvi), as -log",
-    "O5": "observability index O5 (Sun-Hollerbach), as -log",
-}
+__all__ = ["Criterion", "CovarianceCriterion", "SingularValueCriterion", "CRITERIA", "register", "unregister",
+           "get_criterion", "check_names", "DesignCriterion", "evaluate_all"]
 
 
-def criterion_from_F(name: str, F: np.ndarray, E: np.ndarray | None = None,
-                     prior_sigma: np.ndarray | None = None) -> tuple[float, np.ndarray]:
-    """Value φ and gradient dφ/dF of a criterion.
+class Criterion:
+    """Base class of a design criterion φ(F), to be minimised.
 
-    Args:
-        name: one of :data:`CRITERIA`.
-        F: weighted Jacobian over the identifiable parameters, (rows, nb).
-        E: KPI sensitivity over the same parameters, (n_s, nb) (needed by ``kpi``).
-        prior_sigma: optional prior standard deviations (MAP), (nb,).
+    Subclasses set the class attributes and implement :meth:`value_and_grad_F`; optionally
+    :meth:`pool_form` (with ``has_pool_form = True``) when the criterion can select poses from a pool.
 
-    Returns:
-        (φ, dφ/dF with the shape of F).
-
-    Raises:
-        InputError: unknown criterion name.
-        IdentifiabilityError: singular information matrix.
+    Attributes:
+        name: registry key, as typed on the command line (``--criteria``).
+        label: one readable line (what it measures, where it comes from).
+        unit: unit of the value (``m^2``, ``1`` for dimensionless, ``log`` for logarithmic indices).
+        is_ratio: the value is a positive quantity (the design solver divides by its start value);
+            otherwise it is a logarithm (the solver subtracts its start value).
+        needs_kpi: the value needs the KPI sensitivity E (working configurations).
+        has_pool_form: :meth:`pool_form` is this criterion's own pool-selection form (A- or D-type);
+            otherwise a pool selection for it falls back to D-optimality.
     """
-    if name not in CRITERIA:
-        raise InputError(f"unknown criterion '{name}' (known: {', '.join(CRITERIA)})")
-    if name in ("kpi", "param", "D", "E"):
+
+    name: ClassVar[str] = ""
+    label: ClassVar[str] = ""
+    unit: ClassVar[str] = ""
+    is_ratio: ClassVar[bool] = False
+    needs_kpi: ClassVar[bool] = False
+    has_pool_form: ClassVar[bool] = False
+
+    def value_and_grad_F(self, F: np.ndarray, E: np.ndarray | None = None,
+                         prior_sigma: np.ndarray | None = None) -> tuple[float, np.ndarray]:
+        """Value φ and exact gradient dφ/dF.
+
+        Args:
+            F: weighted Jacobian over the identifiable parameters, (rows, nb).
+            E: KPI sensitivity over the same parameters, (n_s, nb), m per parameter unit.
+            prior_sigma: prior standard deviations (MAP), (nb,), or None.
+
+        Returns:
+            (φ in :attr:`unit`, dφ/dF with the shape of F).
+
+        Raises:
+            IdentifiabilityError: the design does not identify the parameters.
+            InputError: E missing for a criterion that needs it.
+        """
+        raise NotImplementedError
+
+    def value(self, F: np.ndarray, E: np.ndarray | None = None, prior_sigma: np.ndarray | None = None) -> float:
+        """φ(F) (see :meth:`value_and_grad_F`)."""
+        return self.value_and_grad_F(F, E, prior_sigma)[0]
+
+    def pool_form(self, E: np.ndarray | None, nb: int) -> np.ndarray | None:
+        """The criterion's form for pool selection (:mod:`pin_kpi_oed.oed.pool`).
+
+        Args:
+            E: KPI sensitivity over the identifiable parameters, (n_s, nb), or None.
+            nb: number of identifiable parameters.
+
+        Returns:
+            K of the A-type form φ(w) = tr(K M(w)⁻¹ Kᵀ), or None for the D-type form −log det M(w)
+            (the default, also the fallback of criteria without a pool form).
+        """
+        return None
+
+    def _need_E(self, E: np.ndarray | None) -> np.ndarray:
+        if E is None:
+            raise InputError(f"the {self.name} criterion needs the working configurations (KPI sensitivity E)")
+        return E
+
+    def __repr__(self) -> str:
+        return f"<criterion {self.name}: {self.label} [{self.unit}]>"
+
+
+# ---------------------------------------------------------------------- covariance-based criteria
+class CovarianceCriterion(Criterion):
+    """A criterion of the parameter covariance C_p = (FᵀF + P)⁻¹ (eq. 19), through one Cholesky factor.
+
+    Subclasses implement :meth:`from_covariance`.
+    """
+
+    def value_and_grad_F(self, F: np.ndarray, E: np.ndarray | None = None,
+                         prior_sigma: np.ndarray | None = None) -> tuple[float, np.ndarray]:
         M = information(F, prior_sigma)
         try:
             L = np.linalg.cholesky(M)
@@ -76,101 +140,288 @@ def criterion_from_F(name: str, F: np.ndarray, E: np.ndarray | None = None,
             raise IdentifiabilityError("singular information matrix: the design does not identify the "
                                        "parameters; use more or more varied configurations") from None
         Linv = np.linalg.solve(L, np.eye(M.shape[0]))
-        C = Linv.T @ Linv
-        if name == "kpi":
-            if E is None:
-                raise InputError("the kpi criterion needs the working configurations (KPI sensitivity E)")
-            CE = C @ E.T
-            return float(np.sum(E * CE.T)), -2.0 * F @ (CE @ CE.T)
-        if name == "param":
-            return float(np.trace(C)), -2.0 * F @ (C @ C)
-        if name == "D":
-            return float(-2.0 * np.sum(np.log(np.diag(L)))), -2.0 * F @ C
+        return self.from_covariance(F, E, M, L, Linv.T @ Linv)
+
+    def from_covariance(self, F: np.ndarray, E: np.ndarray | None, M: np.ndarray, L: np.ndarray, C: np.ndarray
+                        ) -> tuple[float, np.ndarray]:
+        """φ and dφ/dF from the information M, its Cholesky factor L and C = M⁻¹."""
+        raise NotImplementedError
+
+
+class KpiTrace(CovarianceCriterion):
+    """A on C_s: φ = tr(C_s) = tr(E C_p Eᵀ), the TCP covariance at the working configurations (eqs. 19, 24a, 24c).
+
+    dφ/dF = −2 F C_p Eᵀ E C_p.
+    """
+
+    name, label, unit = "kpi", "A on C_s: tr of the TCP covariance (m^2) - the paper's KPI criterion", "m^2"
+    is_ratio, needs_kpi, has_pool_form = True, True, True
+
+    def from_covariance(self, F, E, M, L, C):
+        E = self._need_E(E)
+        CE = C @ E.T
+        return float(np.sum(E * CE.T)), -2.0 * F @ (CE @ CE.T)
+
+    def pool_form(self, E, nb):
+        return self._need_E(E)
+
+
+class ParamTrace(CovarianceCriterion):
+    """A on C_p: φ = tr(C_p), the paper's state of the art (A-optimality on the parameters).
+
+    Mixed units (m² and rad²). dφ/dF = −2 F C_p².
+    """
+
+    name, label, unit = "param", "A on C_p: tr of the parameter covariance - the paper's state of the art", \
+        "m^2 + rad^2 (mixed)"
+    is_ratio, has_pool_form = True, True
+
+    def from_covariance(self, F, E, M, L, C):
+        return float(np.trace(C)), -2.0 * F @ (C @ C)
+
+    def pool_form(self, E, nb):
+        return np.eye(nb)
+
+
+class DOptimality(CovarianceCriterion):
+    """D-optimality: φ = −log det M (eq. 10, Daney). dφ/dF = −2 F C_p."""
+
+    name, label, unit = "D", "D-optimality: -log det(F^T F)", "log"
+    has_pool_form = True
+
+    def from_covariance(self, F, E, M, L, C):
+        return float(-2.0 * np.sum(np.log(np.diag(L)))), -2.0 * F @ C
+
+    def pool_form(self, E, nb):
+        return None
+
+
+class EOptimality(CovarianceCriterion):
+    """E-optimality: φ = λ_max(C_p) = 1/λ_min(M). dφ/dF = −(2/λ_min²) (F v) vᵀ, v the eigenvector of λ_min."""
+
+    name, label, unit = "E", "E-optimality: largest eigenvalue of C_p", "m^2 or rad^2"
+    is_ratio = True
+
+    def from_covariance(self, F, E, M, L, C):
         w, V = np.linalg.eigh(M)
         v = V[:, 0]
         return float(1.0 / w[0]), -(2.0 / w[0] ** 2) * np.outer(F @ v, v)
-    U, mu, Vt = np.linalg.svd(F, full_matrices=False)
-    if mu[-1] <= 1e-12 * mu[0]:
-        raise IdentifiabilityError("rank-deficient Jacobian: the design does not identify the parameters")
-    r = mu.size
-    # dφ/dμ for each criterion
-    dmu = np.zeros(r)
-    if name == "cond":
-        val = mu[0] / mu[-1]
+
+
+# ---------------------------------------------------------------------- singular-value criteria
+class SingularValueCriterion(Criterion):
+    """A criterion of the singular values μ₁ ≥ … ≥ μ_r of F (observability indices, eqs. 8–9).
+
+    The prior is not used (the indices are defined on F). Subclasses implement
+    :meth:`from_singular_values`; the gradient is dφ/dF = Σ_i (∂φ/∂μ_i) u_i v_iᵀ.
+    """
+
+    def value_and_grad_F(self, F: np.ndarray, E: np.ndarray | None = None,
+                         prior_sigma: np.ndarray | None = None) -> tuple[float, np.ndarray]:
+        U, mu, Vt = np.linalg.svd(F, full_matrices=False)
+        if mu[-1] <= 1e-12 * mu[0]:
+            raise IdentifiabilityError("rank-deficient Jacobian: the design does not identify the parameters")
+        val, dmu = self.from_singular_values(mu, F.shape[0])
+        return float(val), (U * dmu) @ Vt
+
+    def from_singular_values(self, mu: np.ndarray, rows: int) -> tuple[float, np.ndarray]:
+        """φ and ∂φ/∂μ from the singular values (descending) and the number of rows of F."""
+        raise NotImplementedError
+
+
+class ConditionNumber(SingularValueCriterion):
+    """Condition number μ₁/μ_r of F (eq. 9)."""
+
+    name, label, unit, is_ratio = "cond", "condition number of F", "1", True
+
+    def from_singular_values(self, mu, rows):
+        dmu = np.zeros(mu.size)
         dmu[0], dmu[-1] = 1.0 / mu[-1], -mu[0] / mu[-1] ** 2
-    elif name == "O1":
-        m_meas = F.shape[0]
-        val = -(np.sum(np.log(mu)) / r - 0.5 * np.log(m_meas))
-        dmu[:] = -1.0 / (r * mu)
-    elif name == "O2":
-        val = -(np.log(mu[-1]) - np.log(mu[0]))
+        return mu[0] / mu[-1], dmu
+
+
+class O1(SingularValueCriterion):
+    """Borm–Menq O1 = (μ₁⋯μ_r)^{1/r}/√m (eq. 8), maximised: φ = −log O1."""
+
+    name, label, unit = "O1", "observability index O1 (Borm-Menq), as -log", "log"
+
+    def from_singular_values(self, mu, rows):
+        r = mu.size
+        return -(np.sum(np.log(mu)) / r - 0.5 * np.log(rows)), -1.0 / (r * mu)
+
+
+class O2(SingularValueCriterion):
+    """O2 = μ_r/μ₁ (inverse condition number, eq. 9), maximised: φ = −log O2."""
+
+    name, label, unit = "O2", "observability index O2 (inverse condition number), as -log", "log"
+
+    def from_singular_values(self, mu, rows):
+        dmu = np.zeros(mu.size)
         dmu[0], dmu[-1] = 1.0 / mu[0], -1.0 / mu[-1]
-    elif name == "O3":
-        val = -np.log(mu[-1])
+        return -(np.log(mu[-1]) - np.log(mu[0])), dmu
+
+
+class O3(SingularValueCriterion):
+    """O3 = μ_r (minimum singular value), maximised: φ = −log O3."""
+
+    name, label, unit = "O3", "observability index O3 (minimum singular value), as -log", "log"
+
+    def from_singular_values(self, mu, rows):
+        dmu = np.zeros(mu.size)
         dmu[-1] = -1.0 / mu[-1]
-    elif name == "O4":
-        val = -(2 * np.log(mu[-1]) - np.log(mu[0]))
+        return -np.log(mu[-1]), dmu
+
+
+class O4(SingularValueCriterion):
+    """O4 = μ_r²/μ₁ (noise amplification index, Nahvi), maximised: φ = −log O4."""
+
+    name, label, unit = "O4", "observability index O4 (noise amplification, Nahvi), as -log", "log"
+
+    def from_singular_values(self, mu, rows):
+        dmu = np.zeros(mu.size)
         dmu[0], dmu[-1] = 1.0 / mu[0], -2.0 / mu[-1]
-    else:  # O5
+        return -(2 * np.log(mu[-1]) - np.log(mu[0])), dmu
+
+
+class O5(SingularValueCriterion):
+    """O5 = 1/Σ(1/μ_i) (Sun–Hollerbach), maximised: φ = log Σ 1/μ_i."""
+
+    name, label, unit = "O5", "observability index O5 (Sun-Hollerbach), as -log", "log"
+
+    def from_singular_values(self, mu, rows):
         s = np.sum(1.0 / mu)
-        val = np.log(s)
-        dmu[:] = -1.0 / (mu ** 2 * s)
-    return float(val), (U * dmu) @ Vt
+        return np.log(s), -1.0 / (mu ** 2 * s)
 
 
+# ---------------------------------------------------------------------- registry
+#: The registry: criterion name -> instance, in registration order (the order of ``evaluate``'s output).
+CRITERIA: dict[str, Criterion] = {}
+
+
+def register(criterion: Criterion | type[Criterion], replace: bool = False) -> Criterion:
+    """Add a criterion to :data:`CRITERIA` (usable by the design, the pool start, ``evaluate`` and the CLI).
+
+    Args:
+        criterion: an instance (or a class, instantiated without arguments).
+        replace: allow replacing a registered criterion of the same name.
+
+    Returns:
+        The registered instance.
+
+    Raises:
+        InputError: no name, a name clashing with ``random`` (the heuristic design) or an existing
+            criterion (unless ``replace``).
+    """
+    crit = criterion() if isinstance(criterion, type) else criterion
+    if not isinstance(crit, Criterion) or not crit.name:
+        raise InputError(f"{criterion!r}: a criterion is a Criterion subclass with a non-empty name")
+    if crit.name == "random" or (crit.name in CRITERIA and not replace):
+        raise InputError(f"criterion name '{crit.name}' is already taken")
+    CRITERIA[crit.name] = crit
+    return crit
+
+
+def unregister(name: str) -> None:
+    """Remove a criterion from :data:`CRITERIA` (no error if absent)."""
+    CRITERIA.pop(name, None)
+
+
+def get_criterion(criterion: str | Criterion) -> Criterion:
+    """The criterion object of a name (an instance is returned as is).
+
+    Raises:
+        InputError: unknown name, listing the known ones.
+    """
+    if isinstance(criterion, Criterion):
+        return criterion
+    try:
+        return CRITERIA[criterion]
+    except (KeyError, TypeError):
+        raise InputError(f"unknown criterion '{criterion}' (known: random, {', '.join(CRITERIA)})") from None
+
+
+def check_names(names: Iterable[str]) -> list[str]:
+    """Validate design names: ``random`` (the heuristic design) or registered criteria.
+
+    Raises:
+        InputError: the first unknown name, listing the known ones.
+    """
+    names = list(names)
+    for n in names:
+        if n != "random":
+            get_criterion(n)
+    return names
+
+
+for _cls in (KpiTrace, ParamTrace, DOptimality, EOptimality, ConditionNumber, O1, O2, O3, O4, O5):
+    register(_cls)
+
+
+# ---------------------------------------------------------------------- criteria of configurations
 @dataclass
 class DesignCriterion:
-    """A criterion as a function of the measurement configurations.
+    """A criterion as a function of the measurement configurations Q (chains dφ/dF with dF/dQ).
 
     Attributes:
-        model: the measurement model (evaluated at the nominal parameters ``p``).
+        model: the measurement model (evaluated at the linearisation point ``p``).
         base: indices of the identifiable parameters.
-        name: criterion name (see :data:`CRITERIA`).
+        criterion: a registered name or a :class:`Criterion` instance.
         E: KPI sensitivity over the base parameters, (3t, nb), or None.
         p: linearisation point (raw parameters); default nominal.
+
+    Raises:
+        InputError: unknown criterion name.
     """
 
     model: TrackerModel
     base: np.ndarray
-    name: str = "kpi"
+    criterion: str | Criterion = "kpi"
     E: np.ndarray | None = None
     p: np.ndarray | None = None
+    crit: Criterion = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
         if self.p is None:
             self.p = np.zeros(self.model.n_params)
-        if self.name not in CRITERIA:
-            raise InputError(f"unknown criterion '{self.name}' (known: {', '.join(CRITERIA)})")
-        prior = self.model.layout.prior_sigma[self.base]
-        self.prior = prior if np.isfinite(prior).any() else None
+        self.crit = get_criterion(self.criterion)
+        self.prior = prior_of(self.model, self.base)
+
+    @property
+    def name(self) -> str:
+        """The criterion's name."""
+        return self.crit.name
+
+    @property
+    def is_ratio(self) -> bool:
+        """Whether the criterion is a positive quantity (see :attr:`Criterion.is_ratio`)."""
+        return self.crit.is_ratio
 
     def value(self, Q: np.ndarray) -> float:
         """φ(Q) for configurations Q, (m, n) rad."""
         F = self.model.weighted_jacobian(self.p, Q)[:, :, self.base].reshape(-1, self.base.size)
-        return criterion_from_F(self.name, F, self.E, self.prior)[0]
+        return self.crit.value(F, self.E, self.prior)
 
     def value_and_grad(self, Q: np.ndarray) -> tuple[float, np.ndarray]:
-        """φ(Q) and dφ/dQ, (m, n)."""
+        """φ(Q) and dφ/dQ, (m, n) (per rad)."""
         F, dF = self.model.weighted_jacobian_dq(self.p, Q)
         Fb = F[:, :, self.base]
         m, nh, nb = Fb.shape
-        val, G = criterion_from_F(self.name, Fb.reshape(-1, nb), self.E, self.prior)
+        val, G = self.crit.value_and_grad_F(Fb.reshape(-1, nb), self.E, self.prior)
         grad = np.einsum("mac,mack->mk", G.reshape(m, nh, nb), dF[:, :, self.base, :])
         return val, grad
 
 
 def evaluate_all(model: TrackerModel, base: np.ndarray, Q: np.ndarray, E: np.ndarray | None) -> dict[str, float]:
-    """Every criterion for one design (NaN where undefined, e.g. kpi without E)."""
+    """Every registered criterion for one design (NaN where undefined, e.g. kpi without E; inf if singular)."""
     F = model.weighted_jacobian(np.zeros(model.n_params), Q)[:, :, base].reshape(-1, base.size)
-    prior = model.layout.prior_sigma[base]
-    prior = prior if np.isfinite(prior).any() else None
+    prior = prior_of(model, base)
     out = {}
-    for name in CRITERIA:
-        if name == "kpi" and E is None:
+    for name, crit in CRITERIA.items():
+        if crit.needs_kpi and E is None:
             out[name] = float("nan")
             continue
         try:
-            out[name] = criterion_from_F(name, F, E, prior)[0]
+            out[name] = crit.value(F, E, prior)
         except IdentifiabilityError:
             out[name] = float("inf")
     return out

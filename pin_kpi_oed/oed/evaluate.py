@@ -9,31 +9,35 @@ compute the identifiable set, C_p, the KPI covariance C_s = E C_p Eᵀ
 from __future__ import annotations
 
 import json
+import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
-from pin_kpi_oed.oed.covariance import param_covariance
-from pin_kpi_oed.oed.criteria import evaluate_all
-from pin_kpi_oed.errors import IdentifiabilityError, InputError
-from pin_kpi_oed.oed.identifiability import Identifiability, analyse, check_kpi
 from pin_kpi_oed.data.atomic import atomic_write_json
+from pin_kpi_oed.errors import IdentifiabilityError, InputError
 from pin_kpi_oed.model.measurement import TrackerModel
 from pin_kpi_oed.model.serialize import model_from_dict, model_to_dict
+from pin_kpi_oed.oed.covariance import design_covariances
+from pin_kpi_oed.oed.criteria import CRITERIA, evaluate_all
+from pin_kpi_oed.oed.identifiability import Identifiability, analyse, check_kpi
+from pin_kpi_oed.results import Result
 
 
-@dataclass
-class DesignScore:
-    """Scores of one measurement design.
+@dataclass(kw_only=True)
+class DesignScore(Result):
+    """Scores of one measurement design (a :class:`~pin_kpi_oed.results.Result`: ``status`` ``scored``).
 
     Attributes:
         trace_cs_m2: tr(C_s) over all working configurations (m²).
         tcp_sigma_m: sqrt(tr(C_s)/t): RMS TCP standard deviation per working configuration (m).
         cov_s_m2: C_s (3t × 3t, m², tracker frame).
         trace_cp: tr(C_p) (mixed units m² and rad²).
-        criteria: every criterion value.
+        criteria: every registered criterion's value (units: :attr:`Criterion.unit`).
         rank: identifiable rank; n_meas: number of measurements.
+        identifiable: names of the identifiable parameters.
+        setup: the set-up dict (robot, tracker, reflector, noise) when scored from a file, else empty.
     """
 
     trace_cs_m2: float
@@ -44,24 +48,43 @@ class DesignScore:
     rank: int
     n_meas: int
     identifiable: list[str] = field(default_factory=list)
+    setup: dict = field(default_factory=dict)
 
     def to_dict(self) -> dict:
-        """Plain JSON-able dict (SI units)."""
-        return {"trace_cs_m2": self.trace_cs_m2, "tcp_sigma_m": self.tcp_sigma_m, "cov_s_m2": self.cov_s_m2.tolist(),
-                "trace_cp": self.trace_cp, "criteria": self.criteria, "rank": self.rank, "n_meas": self.n_meas,
-                "identifiable": self.identifiable}
+        """Plain JSON-able dict (SI units): the common result keys, the scores, ``setup`` when known."""
+        out = {"setup": self.setup} if self.setup else {}
+        return {**out, **self.result_dict(), "trace_cs_m2": self.trace_cs_m2, "tcp_sigma_m": self.tcp_sigma_m,
+                "cov_s_m2": self.cov_s_m2.tolist(), "trace_cp": self.trace_cp, "criteria": self.criteria,
+                "rank": self.rank, "n_meas": self.n_meas, "identifiable": self.identifiable}
+
+    def summary(self) -> str:
+        """Every criterion with its unit and label, then tr(C_s) (mm²) and the TCP σ (µm)."""
+        lines = []
+        for k, v in self.criteria.items():
+            crit = CRITERIA.get(k)
+            lines.append(f"{k:<7}{v: .6g}  [{crit.unit if crit else '?'}] {crit.label if crit else ''}".rstrip())
+        lines.append(f"tr(C_s) = {self.trace_cs_m2 * 1e6:.6g} mm^2   TCP sigma = {self.tcp_sigma_m * 1e6:.3f} um")
+        return "\n".join(lines)
 
 
 def score_design(model: TrackerModel, Q_meas: np.ndarray, Q_work: np.ndarray,
                  ident: Identifiability | None = None) -> DesignScore:
     """Score measurement configurations ``Q_meas`` for the KPI at ``Q_work``.
 
-    ``ident``: the identifiability analysis of ``model`` if already at hand (else computed).
+    Args:
+        model: the measurement model (nominal parameters; its prior, if any, enters C_p).
+        Q_meas: measurement configurations, (m, n) rad.
+        Q_work: working configurations, (t, n) rad.
+        ident: the identifiability analysis of ``model`` if already at hand (else computed).
+
+    Returns:
+        The scores (C_s from :func:`pin_kpi_oed.oed.covariance.design_covariances`, eq. 19).
 
     Raises:
         InputError: configurations outside the joint limits or not finite.
         IdentifiabilityError: too few or degenerate measurements, or a non-estimable KPI.
     """
+    t0 = time.perf_counter()
     Q_meas = model.robot.check_q(Q_meas, "q_meas")
     Q_work = model.robot.check_q(Q_work, "q_work")
     ident = ident or analyse(model)
@@ -73,20 +96,27 @@ def score_design(model: TrackerModel, Q_meas: np.ndarray, Q_work: np.ndarray,
                                    f"for {ident.rank} identifiable parameters: measure at least "
                                    f"{int(np.ceil(ident.rank / model.nh))} configurations")
     b = ident.base
-    F = model.weighted_jacobian(p0, Q_meas)[:, :, b].reshape(-1, b.size)
-    prior = model.layout.prior_sigma[b]
-    prior = prior if np.isfinite(prior).any() else None
-    C_p = param_covariance(F, prior, ident.base_names)
     E = E_full[:, b]
-    C_s = E @ C_p @ E.T
+    C_p, C_s = design_covariances(model, b, Q_meas, E, p0, ident.base_names)
     t = Q_work.shape[0]
     crit = evaluate_all(model, b, Q_meas, E)
-    return DesignScore(float(np.trace(C_s)), float(np.sqrt(np.trace(C_s) / t)), C_s, float(np.trace(C_p)), crit,
-                       ident.rank, Q_meas.shape[0], ident.base_names)
+    return DesignScore(trace_cs_m2=float(np.trace(C_s)), tcp_sigma_m=float(np.sqrt(np.trace(C_s) / t)), cov_s_m2=C_s,
+                       trace_cp=float(np.trace(C_p)), criteria=crit, rank=ident.rank, n_meas=Q_meas.shape[0],
+                       identifiable=ident.base_names, success=True, status="scored",
+                       message=f"{Q_meas.shape[0]} measurements, {ident.rank} identifiable parameters, "
+                               f"{t} working configuration(s)",
+                       time_s=time.perf_counter() - t0)
 
 
-def evaluate_file(path: Path, out: Path | None = None) -> dict:
+def evaluate_file(path: Path, out: Path | None = None) -> DesignScore:
     """Read a design JSON (set-up + ``q_meas`` + ``q_work``), score it, optionally write the scores.
+
+    Args:
+        path: the design JSON (e.g. written by ``pin-kpi-oed design``).
+        out: where to write the scores as JSON (``setup`` + :meth:`DesignScore.to_dict`), or None.
+
+    Returns:
+        The scores, with ``setup`` filled.
 
     Raises:
         InputError: unreadable JSON or a missing field (named with the file).
@@ -102,7 +132,7 @@ def evaluate_file(path: Path, out: Path | None = None) -> dict:
         if key not in d:
             raise InputError(f"{path}: missing field '{key}' (list of joint configurations, rad)")
     score = score_design(model, np.asarray(d["q_meas"], float), np.asarray(d["q_work"], float))
-    res = {"setup": model_to_dict(model), **score.to_dict()}
+    score.setup = model_to_dict(model)
     if out is not None:
-        atomic_write_json(out, res)
-    return res
+        atomic_write_json(out, score.to_dict())
+    return score

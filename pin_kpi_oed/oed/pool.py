@@ -35,11 +35,13 @@ the baseline the relaxation must match or beat.
 
 from __future__ import annotations
 
+import time
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from pin_kpi_oed.errors import IdentifiabilityError, InputError
+from pin_kpi_oed.results import Result
 
 
 def _phi(M: np.ndarray, K: np.ndarray | None) -> float:
@@ -64,16 +66,19 @@ def _d(Fp: np.ndarray, M: np.ndarray, K: np.ndarray | None) -> np.ndarray:
     return np.einsum("nas,nas->n", G, G)
 
 
-@dataclass
-class ApproximateDesign:
-    """Result of the relaxation.
+@dataclass(kw_only=True)
+class ApproximateDesign(Result):
+    """Result of the relaxation (a :class:`~pin_kpi_oed.results.Result`).
+
+    ``success`` / ``status`` ``converged``: the equivalence-theorem gap is below the tolerance;
+    ``max_iter`` otherwise (the bound is valid either way, only looser). ``nit``: multiplicative
+    iterations.
 
     Attributes:
         weights: optimal measure on the pool, (N,), sums to 1.
         phi: φ(w) of the (normalised) measure.
         lower_bound: certified φ* ≥ φ(w)²/max d (A-type) or φ(w) − (max d − nb) (D) — per unit measure.
         max_d_ratio: max_i d_i / φ(w) (A) or max_i d_i / nb (D): 1 at the optimum (equivalence theorem).
-        iterations: multiplicative iterations.
         support: indices with weight > 1e-4 / N.
     """
 
@@ -81,13 +86,42 @@ class ApproximateDesign:
     phi: float
     lower_bound: float
     max_d_ratio: float
-    iterations: int
     support: np.ndarray = field(default_factory=lambda: np.zeros(0, int))
+
+    @property
+    def iterations(self) -> int:
+        """Multiplicative iterations (= ``nit``)."""
+        return self.nit
+
+    def to_dict(self) -> dict:
+        """Plain JSON-able dict (the common result keys and the certificate's figures)."""
+        return {**self.result_dict(), "phi": self.phi, "lower_bound": self.lower_bound,
+                "equivalence_max_d_ratio": self.max_d_ratio, "iterations": self.nit,
+                "support_size": int(self.support.size)}
+
+
+@dataclass(kw_only=True)
+class PoolSelection(Result):
+    """m candidates chosen from a pool (a :class:`~pin_kpi_oed.results.Result`; ``nit``: exchange sweeps).
+
+    Attributes:
+        indices: the chosen candidates, (m,) distinct.
+        phi: φ of the exact design (information not normalised): tr(K M⁻¹ Kᵀ) or −log det M.
+        approx: the relaxation with its certificate.
+    """
+
+    indices: np.ndarray
+    phi: float
+    approx: ApproximateDesign
+
+    def efficiency(self) -> float:
+        """Efficiency of the selection against the relaxation's certificate (A-type, ≤ 1)."""
+        return efficiency(self.phi, self.approx, self.indices.size)
 
     def to_dict(self) -> dict:
         """Plain JSON-able dict."""
-        return {"phi": self.phi, "lower_bound": self.lower_bound, "equivalence_max_d_ratio": self.max_d_ratio,
-                "iterations": self.iterations, "support_size": int(self.support.size)}
+        return {**self.result_dict(), "indices": self.indices.tolist(), "phi": self.phi,
+                "relaxation": self.approx.to_dict()}
 
 
 def _multiplicative(Fp: np.ndarray, w: np.ndarray, K: np.ndarray | None, tol: float, max_iter: int
@@ -129,6 +163,7 @@ def approximate_design(Fp: np.ndarray, K: np.ndarray | None = None, tol: float =
     Raises:
         IdentifiabilityError: the whole pool does not identify the parameters.
     """
+    t0 = time.perf_counter()
     N, nh, nb = Fp.shape
     w = np.full(N, 1.0 / N)
     if not np.isfinite(_phi(_info_w(Fp, w), K)):
@@ -156,12 +191,17 @@ def approximate_design(Fp: np.ndarray, K: np.ndarray | None = None, tol: float =
         bound, ratio = phi ** 2 / d.max(), d.max() / phi
     else:
         bound, ratio = phi - (d.max() - nb), d.max() / nb
-    return ApproximateDesign(w, phi, bound, float(ratio), total, np.flatnonzero(w > 1e-4 / N))
+    ok = bool(ratio - 1.0 < tol)
+    return ApproximateDesign(weights=w, phi=phi, lower_bound=bound, max_d_ratio=float(ratio),
+                             support=np.flatnonzero(w > 1e-4 / N), nit=total, success=ok,
+                             status="converged" if ok else "max_iter",
+                             message=f"equivalence theorem: max d/phi = {ratio:.5f} after {total} iterations",
+                             time_s=time.perf_counter() - t0)
 
 
 def _exchange(Fp: np.ndarray, chosen: np.ndarray, K: np.ndarray | None, ridge: float, max_sweeps: int = 50
-              ) -> np.ndarray:
-    """Fedorov exchange with Woodbury updates: swap points while φ decreases. Returns chosen indices."""
+              ) -> tuple[np.ndarray, int]:
+    """Fedorov exchange with Woodbury updates: swap points while φ decreases. Returns (chosen indices, sweeps)."""
     N, nh, nb = Fp.shape
     chosen = list(chosen)
     in_set = np.zeros(N, bool)
@@ -174,7 +214,8 @@ def _exchange(Fp: np.ndarray, chosen: np.ndarray, K: np.ndarray | None, ridge: f
 
     M = info_of(chosen)
     cur = _phi(M, K)
-    for _ in range(max_sweeps):
+    sweeps = 0
+    for sweeps in range(1, max_sweeps + 1):
         improved = False
         for pos in range(len(chosen)):
             out = chosen[pos]
@@ -202,44 +243,63 @@ def _exchange(Fp: np.ndarray, chosen: np.ndarray, K: np.ndarray | None, ridge: f
                 improved = True
         if not improved:
             break
-    return np.array(chosen)
+    return np.array(chosen), sweeps
 
 
 def select(Fp: np.ndarray, m: int, K: np.ndarray | None = None, tol: float = 1e-3, n_starts: int = 2,
-           seed: int = 0) -> tuple[np.ndarray, ApproximateDesign]:
+           seed: int = 0) -> PoolSelection:
     """Choose m distinct candidates: relaxation, rounding to the largest weights, exchange.
 
     The exchange runs from the rounded relaxation and from ``n_starts`` seeded subsets of the
     candidates the relaxation favours; the best exact design is returned.
 
+    Args:
+        Fp: weighted Jacobians of the candidates over the identifiable parameters, (N, nh, nb).
+        m: number of candidates to choose.
+        K: A-type criterion matrix (:meth:`~pin_kpi_oed.oed.criteria.Criterion.pool_form`); None = D-optimality.
+        tol: equivalence-theorem tolerance of the relaxation.
+        n_starts: seeded exchange starts besides the rounded relaxation.
+        seed: seed of those starts.
+
     Returns:
-        (indices of the chosen candidates, the approximate design with its certificate).
+        The selection (``indices``, exact ``phi``) with the approximate design and its certificate;
+        ``success`` is the relaxation's.
 
     Raises:
         InputError: m larger than the pool.
+        IdentifiabilityError: the pool does not identify the parameters.
     """
+    t0 = time.perf_counter()
     N = Fp.shape[0]
     if m > N:
         raise InputError(f"cannot choose {m} measurements from a pool of {N} candidates")
     approx = approximate_design(Fp, K, tol=tol)
-    # exchange among the informative candidates: the support and the largest directional derivatives
+    cand, starts = _exchange_starts(Fp, m, K, approx, n_starts, seed)
+    sub = Fp[cand]
+    best, best_phi, sweeps = starts[0], np.inf, 0
+    for s0 in starts:
+        ridge = 0.0 if np.isfinite(_phi(_info(sub, s0), K)) else 1e-12
+        idx, nsw = _exchange(sub, s0, K, ridge)
+        sweeps += nsw
+        val = _phi(_info(sub, idx), K)
+        if val < best_phi:
+            best, best_phi = idx, val
+    return PoolSelection(indices=cand[best], phi=float(best_phi), approx=approx, success=approx.success,
+                         status=approx.status, nit=sweeps, time_s=time.perf_counter() - t0,
+                         message=f"{m} of {N} candidates; {approx.message}")
+
+
+def _exchange_starts(Fp: np.ndarray, m: int, K: np.ndarray | None, approx: ApproximateDesign, n_starts: int,
+                     seed: int) -> tuple[np.ndarray, list[np.ndarray]]:
+    """The exchange's candidate subset (support + largest directional derivatives) and its starts in it:
+    the rounded relaxation and ``n_starts`` seeded subsets of the candidates the relaxation favours."""
     M = _info_w(Fp, approx.weights)
     d = _d(Fp, M, K)
     cand = np.union1d(np.argsort(-d)[:max(2000, 4 * m)], approx.support)
     start = np.searchsorted(cand, np.argsort(-approx.weights)[:m])
-    sub = Fp[cand]
-    # the rounded start, and a few seeded starts drawn from the candidates the relaxation favours
     rng = np.random.default_rng(seed)
     favoured = np.argsort(-(approx.weights[cand] + 1e-12 * d[cand]))[:min(cand.size, 3 * m)]
-    starts = [start] + [rng.choice(favoured, size=m, replace=False) for _ in range(n_starts)]
-    best, best_phi = start, np.inf
-    for s0 in starts:
-        ridge = 0.0 if np.isfinite(_phi(_info(sub, s0), K)) else 1e-12
-        idx = _exchange(sub, s0, K, ridge)
-        val = _phi(_info(sub, idx), K)
-        if val < best_phi:
-            best, best_phi = idx, val
-    return cand[best], approx
+    return cand, [start] + [rng.choice(favoured, size=m, replace=False) for _ in range(n_starts)]
 
 
 def _info(Fp: np.ndarray, idx: np.ndarray) -> np.ndarray:
@@ -252,7 +312,7 @@ def detmax(Fp: np.ndarray, m: int, K: np.ndarray | None = None, seed: int = 0) -
     rng = np.random.default_rng(seed)
     start = rng.choice(Fp.shape[0], size=m, replace=False)
     ridge = 0.0 if np.isfinite(_phi(_info(Fp, start), K)) else 1e-12
-    return _exchange(Fp, start, K, ridge)
+    return _exchange(Fp, start, K, ridge)[0]
 
 
 def exact_phi(Fp: np.ndarray, idx: np.ndarray, K: np.ndarray | None = None) -> float:

@@ -40,13 +40,41 @@ TASK_VERSION = 1
 
 
 # ---------------------------------------------------------------------- inverse kinematics
+@dataclass(frozen=True)
+class IkOptions:
+    """Numerical knobs of :func:`solve_ik`.
+
+    Attributes:
+        tol: stop when the pose error ‖log6‖ is below this (m and rad).
+        max_iter: iteration limit.
+        damping: damping of the least-squares step (m², rad²).
+    """
+
+    tol: float = 1e-10
+    max_iter: int = 500
+    damping: float = 1e-8
+
+
 def solve_ik(model: pin.Model, frame_id: int, oMdes: pin.SE3, q0: np.ndarray, lower: np.ndarray,
-             upper: np.ndarray, tol: float = 1e-10, max_iter: int = 500, damping: float = 1e-8) -> np.ndarray:
+             upper: np.ndarray, options: IkOptions | None = None) -> np.ndarray:
     """Closed-loop inverse kinematics of a frame pose (Pinocchio's CLIK, damped least squares).
+
+    Args:
+        model: the Pinocchio model.
+        frame_id: the frame to place.
+        oMdes: its desired pose in the model's world frame.
+        q0: start configuration (rad, m for prismatic joints).
+        lower, upper: joint bounds the iterates are clipped to.
+        options: tolerances (default :class:`IkOptions`).
+
+    Returns:
+        The configuration, within the bounds.
 
     Raises:
         InfeasibleError: no solution within the joint bounds from ``q0``.
     """
+    opts = options or IkOptions()
+    tol, max_iter, damping = opts.tol, opts.max_iter, opts.damping
     data = model.createData()
     q = np.array(q0, float)
     for _ in range(max_iter):
@@ -116,7 +144,7 @@ class Task:
 def run_task(task: Task, out_dir: str) -> dict:
     """Compute a task's designs and write ``out_dir/tasks/<key>.json`` atomically. Returns the record."""
     from pin_kpi_oed.cell.cell import cell_from_dict, load_cell
-    from pin_kpi_oed.design.optimize import DesignProblem, run_designs
+    from pin_kpi_oed.design.optimize import DesignOptions, DesignProblem, run_designs
     from pin_kpi_oed.oed.evaluate import score_design
 
     t0 = time.perf_counter()
@@ -124,8 +152,8 @@ def run_task(task: Task, out_dir: str) -> dict:
     try:
         cell = cell_from_dict(task.cell, source=task.key) if isinstance(task.cell, dict) else load_cell(task.cell)
         problem = DesignProblem(cell, collision=task.collision)
-        results = run_designs(cell, list(task.criteria), task.m, task.seed, collision=task.collision,
-                              n_starts=task.n_starts, problem=problem)
+        results = run_designs(cell, list(task.criteria), task.m, task.seed,
+                              DesignOptions(collision=task.collision, n_starts=task.n_starts), problem)
         rec["designs"] = []
         for r in results:
             d = {k: v for k, v in r.to_dict().items() if k not in ("starts", "check")}

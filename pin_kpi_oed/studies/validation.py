@@ -20,24 +20,30 @@ result. Repeated over seeded splits, reported as mean ± standard deviation.
 
 from __future__ import annotations
 
+import time
 from dataclasses import dataclass, field
 
 import numpy as np
 
-from pin_kpi_oed.oed.covariance import kpi_covariance, param_covariance
-from pin_kpi_oed.errors import InputError
-from pin_kpi_oed.oed.identifiability import analyse
-from pin_kpi_oed.identification.identify import identify, validate
 from pin_kpi_oed.data.measurements import MeasurementSet
+from pin_kpi_oed.errors import InputError
+from pin_kpi_oed.identification.identify import identify, validate
+from pin_kpi_oed.identification.simulate import Tolerances, random_truth, simulate
 from pin_kpi_oed.model.measurement import TrackerModel
+from pin_kpi_oed.oed.covariance import covariances, design_covariances, prior_of
+from pin_kpi_oed.oed.criteria import get_criterion
+from pin_kpi_oed.oed.identifiability import analyse
 from pin_kpi_oed.oed.pool import select
 from pin_kpi_oed.progress import progress
-from pin_kpi_oed.identification.simulate import Tolerances, random_truth, simulate
+from pin_kpi_oed.results import Result
 
 
-@dataclass
-class MonteCarloResult:
+@dataclass(kw_only=True)
+class MonteCarloResult(Result):
     """Predicted vs realised TCP covariance over simulated identification experiments.
+
+    A :class:`~pin_kpi_oed.results.Result`: ``success`` when every identification converged
+    (``status`` ``completed``, else ``failures``), ``nit`` = repetitions, ``time_s`` the wall time.
 
     Attributes:
         n_rep: repetitions; n_meas: measurements per experiment.
@@ -59,8 +65,8 @@ class MonteCarloResult:
     failures: int = 0
 
     def to_dict(self) -> dict:
-        """Plain JSON-able dict (SI units)."""
-        return {"n_rep": self.n_rep, "n_meas": self.n_meas, "predicted_trace_cs_m2": float(np.trace(
+        """Plain JSON-able dict (SI units): the common result keys and the comparison."""
+        return {**self.result_dict(), "n_rep": self.n_rep, "n_meas": self.n_meas, "predicted_trace_cs_m2": float(np.trace(
             self.predicted_cov_m2)), "empirical_trace_m2": float(np.trace(self.empirical_cov_m2)),
             "trace_ratio": self.trace_ratio, "bias_m": self.bias_m.tolist(), "failures": self.failures,
             "predicted_cov_m2": self.predicted_cov_m2.tolist(), "empirical_cov_m2": self.empirical_cov_m2.tolist()}
@@ -91,6 +97,7 @@ def monte_carlo(model: TrackerModel, Q_meas: np.ndarray, Q_work: np.ndarray, n_r
     Raises:
         InputError: n_rep < 10.
     """
+    t0 = time.perf_counter()
     if n_rep < 10:
         raise InputError(f"n_rep must be at least 10 for a covariance estimate, got {n_rep}")
     Q_meas = model.robot.check_q(Q_meas, "q_meas")
@@ -98,8 +105,7 @@ def monte_carlo(model: TrackerModel, Q_meas: np.ndarray, Q_work: np.ndarray, n_r
     ident = analyse(model)
     b = ident.base
     p0 = np.zeros(model.n_params)
-    F = model.weighted_jacobian(p0, Q_meas)[:, :, b].reshape(-1, b.size)
-    C_s = kpi_covariance(F, model.kpi_jacobian(p0, Q_work)[:, b])
+    _, C_s = design_covariances(model, b, Q_meas, model.kpi_jacobian(p0, Q_work)[:, b], p0, ident.base_names)
     errs, failures = [], 0
     seeds = np.random.SeedSequence(seed).spawn(n_rep)
     for k in progress(range(n_rep), desc="Monte-Carlo", disable=not show_progress):
@@ -113,20 +119,26 @@ def monte_carlo(model: TrackerModel, Q_meas: np.ndarray, Q_work: np.ndarray, n_r
         errs.append(s_hat - model.kpi(p_true, Q_work).ravel())
     E = np.array(errs)
     C_emp = np.cov(E.T)
-    return MonteCarloResult(n_rep, Q_meas.shape[0], C_s, C_emp, float(np.trace(C_emp) / np.trace(C_s)),
-                            E.mean(axis=0), E, failures)
+    ratio = float(np.trace(C_emp) / np.trace(C_s))
+    return MonteCarloResult(n_rep=n_rep, n_meas=Q_meas.shape[0], predicted_cov_m2=C_s, empirical_cov_m2=C_emp,
+                            trace_ratio=ratio, bias_m=E.mean(axis=0), errors_m=E, failures=failures,
+                            success=failures == 0, status="completed" if failures == 0 else "failures",
+                            message=f"trace ratio realised/predicted {ratio:.3f}; {failures} of {n_rep} "
+                                    "identifications did not converge", nit=n_rep, time_s=time.perf_counter() - t0)
 
 
-@dataclass
-class RealDataValidation:
+@dataclass(kw_only=True)
+class RealDataValidation(Result):
     """Real position errors at held-out working poses for designs chosen by several criteria.
+
+    A :class:`~pin_kpi_oed.results.Result` (``status`` ``completed``, ``nit`` = splits, ``time_s``).
 
     Attributes:
         methods: criterion names (``kpi``, ``D``, ``random``).
         mean_error_m: per method, the mean error at the working poses for each split, (n_split,) m.
         predicted_sigma_m: per method, the predicted RMS position std at the working poses
             sqrt(tr(K C_p Kᵀ)/n_work) of each split, from the noise model (m): what the design controls.
-        n_meas, n_work, n_splits: sizes.
+        n_meas, n_work, n_splits: sizes; seed: seed of the splits.
     """
 
     methods: list[str]
@@ -139,7 +151,8 @@ class RealDataValidation:
 
     def to_dict(self) -> dict:
         """Plain JSON-able dict (SI units)."""
-        return {"n_meas": self.n_meas, "n_work": self.n_work, "n_splits": self.n_splits, "seed": self.seed,
+        return {**self.result_dict(), "n_meas": self.n_meas, "n_work": self.n_work, "n_splits": self.n_splits,
+                "seed": self.seed,
                 "methods": {k: {"mean_error_m": float(v.mean()), "std_over_splits_m": float(v.std(ddof=1)),
                                 "per_split_m": v.tolist(),
                                 "predicted_sigma_m": float(self.predicted_sigma_m[k].mean())}
@@ -166,47 +179,68 @@ def real_data_validation(model: TrackerModel, data: MeasurementSet, n_meas: int 
 
     The KPI is the measured point (the reflector) at the working poses, so its sensitivity is the
     measurement Jacobian there. The design model uses the tracker pose and reflector fitted to the
-    whole pool with the nominal robot (set-up only), which is available before any calibration.
+    whole pool with the nominal robot (set-up only), which is available before any calibration, and
+    the model's priors; the predicted σ is from C_s (:func:`~pin_kpi_oed.oed.covariance.covariances`, eq. 19).
 
     Args:
-        model: nominal measurement model (robot, reflector guess, noise).
+        model: nominal measurement model (robot, reflector guess, noise, priors).
         data: the measured poses (position only is used).
         n_meas: calibration poses per design; n_work: working poses held out per split.
-        n_splits: number of seeded splits; methods: ``kpi``, ``D``, ``param``, ``random``.
+        n_splits: number of seeded splits.
+        methods: ``random`` and criteria with a pool-selection form (``kpi``, ``D``, ``param``, ...).
+        seed: seed of the splits and of the random designs.
+        show_progress: progress bar on a terminal.
 
     Raises:
-        InputError: too few rows for the split.
+        InputError: too few rows for the split, or a method that cannot select poses from a pool.
     """
+    t0 = time.perf_counter()
     if len(data) < n_meas + n_work + 10:
         raise InputError(f"{data.source}: {len(data)} rows are too few for {n_work} working and {n_meas} "
                          "calibration poses")
-    setup = identify(model, data, setup_only=True, use_orientation=False)
-    design_model = TrackerModel(model.robot, tracker_T_base=_se3(setup.tracker_T_base), reflector_m=setup.reflector_m,
-                                noise=model.noise)
+    crits = {k: get_criterion(k) for k in methods if k != "random"}
+    for k, c in crits.items():
+        if not c.has_pool_form:
+            raise InputError(f"method '{k}': the criterion has no pool-selection form (use kpi, param, D or random)")
+    design_model = _design_model(model, data)
     ident = analyse(design_model)
     b = ident.base
     p0 = np.zeros(design_model.n_params)
     Fp_all = design_model.weighted_jacobian(p0, data.q)[:, :, b]
+    prior = prior_of(design_model, b)
     out: dict[str, list[float]] = {k: [] for k in methods}
     pred: dict[str, list[float]] = {k: [] for k in methods}
     rng = np.random.default_rng(seed)
     for _ in progress(range(n_splits), desc="splits", disable=not show_progress):
         perm = rng.permutation(len(data))
         work, pool = perm[:n_work], perm[n_work:]
-        K = design_model.jacobian(p0, data.q[work])[:, :3, :][:, :, b].reshape(-1, b.size)
+        E_work = design_model.jacobian(p0, data.q[work])[:, :3, :][:, :, b].reshape(-1, b.size)
         for meth in methods:
             if meth == "random":
                 chosen = rng.choice(pool, n_meas, replace=False)
             else:
-                Kc = {"kpi": K, "D": None, "param": np.eye(b.size)}[meth]
-                idx, _ = select(Fp_all[pool], n_meas, Kc)
-                chosen = pool[idx]
+                chosen = pool[select(Fp_all[pool], n_meas, crits[meth].pool_form(E_work, b.size)).indices]
             res = identify(model, data.subset(chosen), use_orientation=False, raise_on_failure=False)
             out[meth].append(validate(res, data.subset(work))["mean_m"])
-            C_p = param_covariance(Fp_all[chosen].reshape(-1, b.size))
-            pred[meth].append(float(np.sqrt(np.trace(K @ C_p @ K.T) / n_work)))
-    return RealDataValidation(list(methods), {k: np.array(v) for k, v in out.items()},
-                              {k: np.array(v) for k, v in pred.items()}, n_meas, n_work, n_splits, seed)
+            _, C_s = covariances(Fp_all[chosen], E_work, prior)
+            pred[meth].append(float(np.sqrt(np.trace(C_s) / n_work)))
+    return RealDataValidation(methods=list(methods), mean_error_m={k: np.array(v) for k, v in out.items()},
+                              predicted_sigma_m={k: np.array(v) for k, v in pred.items()}, n_meas=n_meas,
+                              n_work=n_work, n_splits=n_splits, seed=seed, success=True, status="completed",
+                              message=f"{n_splits} splits, methods {', '.join(methods)}", nit=n_splits,
+                              time_s=time.perf_counter() - t0)
+
+
+def _design_model(model: TrackerModel, data: MeasurementSet) -> TrackerModel:
+    """The position-only model of the design: set-up (tracker pose, reflector) fitted with the nominal robot,
+    the noise and the priors (by parameter name) of ``model``."""
+    setup = identify(model, data, setup_only=True, use_orientation=False)
+    dm = TrackerModel(model.robot, tracker_T_base=_se3(setup.tracker_T_base), reflector_m=setup.reflector_m,
+                      noise=model.noise)
+    for i, name in enumerate(dm.layout.names):
+        if name in model.layout.names:
+            dm.layout.prior_sigma[i] = model.layout.prior_sigma[model.layout.index(name)]
+    return dm
 
 
 def _se3(T: np.ndarray):
