@@ -490,7 +490,8 @@ class SelectionPath:
 def forward_select(b: np.ndarray, A: np.ndarray, groups: Sequence[np.ndarray], fold: np.ndarray, *,
                    max_groups: int = 60, min_rel_gain: float = 5e-3, ridge: float = 1e-8,
                    row_sigma: np.ndarray | None = None, rows_per_measurement: int = 3,
-                   desc: str = "term selection", show_progress: bool | None = None) -> SelectionPath:
+                   group_max: Sequence[float] | None = None, desc: str = "term selection",
+                   show_progress: bool | None = None) -> SelectionPath:
     """Greedy forward selection of column groups minimising the K-fold held-out sum of squares (Gram updates).
 
     Args:
@@ -503,6 +504,9 @@ def forward_select(b: np.ndarray, A: np.ndarray, groups: Sequence[np.ndarray], f
         ridge: ridge on the unit-scaled columns.
         row_sigma: σ of every row (n,) m, to report the held-out RMS in metres (default 1).
         rows_per_measurement: rows of one measurement (3: x, y, z) for the RMS per measurement.
+        group_max: largest plausible amplitude √(Σ x²) of each group's coefficients (unscaled units);
+            a candidate whose fold fits need a larger one for itself or for a group already selected
+            is refused (near-collinear terms cancelling each other). Default: no bound.
         desc: progress-bar label; show_progress: False = no bar (None: on a terminal).
 
     Returns:
@@ -541,12 +545,16 @@ def forward_select(b: np.ndarray, A: np.ndarray, groups: Sequence[np.ndarray], f
             sse_m += float(np.sum((r * sig[te_rows[k]]) ** 2))
         return sse, float(np.sqrt(sse_m / n_meas))
 
+    gmax = np.full(len(groups), np.inf) if group_max is None else np.asarray(group_max, float)
+    chosen_pos: list[tuple[np.ndarray, float]] = []  # (positions in S, bound) of the selected groups
+
     by_size: dict[int, list[int]] = {}
     for g, c in enumerate(cols):
         by_size.setdefault(c.size, []).append(g)
 
     def scores(S: np.ndarray, remaining: np.ndarray) -> np.ndarray:
         tot = np.zeros(len(groups))
+        bad = np.zeros(len(groups), bool)
         rem = set(remaining.tolist())
         for k in range(K):
             cf = sla.cho_factor(Gtr[k][np.ix_(S, S)] + ridge * np.eye(S.size))
@@ -574,8 +582,15 @@ def forward_select(b: np.ndarray, A: np.ndarray, groups: Sequence[np.ndarray], f
                 c += np.einsum("gi,gij,gj->g", xg, Gte[k][C[:, :, None], C[:, None, :]], xg)
                 c += float(xS @ GteSS @ xS)
                 tot[gl] += c
+                # plausibility: the candidate's and the selected groups' amplitudes in this fold's fit
+                over = np.sqrt(np.sum((xg / sc[C]) ** 2, axis=1)) > gmax[gl]
+                for pos, mx in chosen_pos:
+                    v = (xS[pos][None, :] + dS[:, pos]) / sc[S[pos]]
+                    over |= np.sqrt(np.sum(v ** 2, axis=1)) > mx
+                bad[np.asarray(gl)[over]] = True
         out = np.full(len(groups), np.inf)
-        out[remaining] = tot[remaining]
+        ok = remaining[~bad[remaining]]
+        out[ok] = tot[ok]
         return out
 
     S = np.arange(p0)
@@ -590,6 +605,9 @@ def forward_select(b: np.ndarray, A: np.ndarray, groups: Sequence[np.ndarray], f
                 stop = "every candidate selected"
                 break
             sc_ = scores(S, remaining)
+            if not np.isfinite(sc_).any():
+                stop = "every remaining candidate needs an implausible amplitude"
+                break
             g = int(np.argmin(sc_))
             S_new = np.concatenate([S, cols[g]])
             sse, rms = cv_exact(S_new)
@@ -598,6 +616,8 @@ def forward_select(b: np.ndarray, A: np.ndarray, groups: Sequence[np.ndarray], f
                         f"below {min_rel_gain:.2%}")
                 break
             selected.append(g)
+            if np.isfinite(gmax[g]):
+                chosen_pos.append((np.arange(S.size, S_new.size), float(gmax[g])))
             S = S_new
             best = sse
             path_sse.append(sse)
@@ -622,7 +642,7 @@ class SelectionResult(Result):
             :func:`fit_stations`; ``theta`` their refitted parameters (rad).
         fit: the refit (:class:`StationFit`, geometry + set-ups + selected effects), or None.
         n_candidates: number of candidate groups scored; ``left_out``: groups left out as invisible.
-        folds, seed, max_terms, min_rel_gain, ridge, prior_rad: the settings.
+        folds, seed, max_terms, min_rel_gain, ridge, prior_rad, min_lever_m: the settings.
         stop: why the selection stopped.
     """
 
@@ -639,6 +659,7 @@ class SelectionResult(Result):
     min_rel_gain: float = 5e-3
     ridge: float = 1e-8
     prior_rad: float | None = None
+    min_lever_m: float = MIN_LEVER_M
     stop: str = ""
 
     def to_dict(self) -> dict:
@@ -647,7 +668,7 @@ class SelectionResult(Result):
         d = self.result_dict()
         d.update(terms=self.terms, cv_rms_m=self.cv_rms_m, n_candidates=self.n_candidates, left_out=self.left_out,
                  folds=self.folds, seed=self.seed, max_terms=self.max_terms, min_rel_gain=self.min_rel_gain,
-                 ridge=self.ridge, prior_rad=self.prior_rad, stop=self.stop,
+                 ridge=self.ridge, prior_rad=self.prior_rad, min_lever_m=self.min_lever_m, stop=self.stop,
                  effects=[{**e.to_dict(), "theta": t} for e, t in zip(self.effects, self.theta)])
         return to_jsonable(d)
 
@@ -659,8 +680,9 @@ class SelectionResult(Result):
         for i, t in enumerate(self.terms, 1):
             out.append(f"  {i:2d}. {t['text']}  [held-out RMS {t['cv_rms_m'] * 1e3:.4f} mm]")
         if self.left_out:
-            out.append(f"  left out (move the reflector < {MIN_LEVER_M * 1e3:g} mm per rad): "
-                       f"{', '.join(self.left_out[:6])}{' ...' if len(self.left_out) > 6 else ''}")
+            heads = dict.fromkeys(g.split(" order ")[0] for g in self.left_out)
+            out.append(f"  {len(self.left_out)} groups left out (they move the reflector less than "
+                       f"{self.min_lever_m * 1e3:g} mm per rad): {', '.join(heads)}")
         return "\n".join(out)
 
 
@@ -698,7 +720,7 @@ def select_terms(fit: StationFit | IdentificationResult, data: MeasurementSet | 
                  candidates: Sequence[Effect] | None = None, max_order: int = DEFAULT_MAX_ORDER, folds: int = 5,
                  seed: int = 0, min_rel_gain: float = 5e-3, max_terms: int = 60, ridge: float = 1e-8,
                  prior_rad: float | None = None, refit: bool = True, min_lever_m: float = MIN_LEVER_M,
-                 show_progress: bool | None = None) -> SelectionResult:
+                 max_amplitude_rad: float | None = None, show_progress: bool | None = None) -> SelectionResult:
     """Choose, by K-fold held-out error, which transferable terms a fitted model lacks, and refit them.
 
     See the module docstring for the method. The candidate groups are those of ``candidates``
@@ -718,6 +740,10 @@ def select_terms(fit: StationFit | IdentificationResult, data: MeasurementSet | 
         prior_rad: σ (rad) of the Gaussian prior of the refit (None: plain least squares).
         refit: refit the selected terms nonlinearly with the geometry and the set-ups.
         min_lever_m: leave out groups moving the reflector less than this per rad (RMS, m/rad).
+        max_amplitude_rad: refuse a step whose fold fits need a group amplitude above this (rad);
+            default each candidate effect's ``plausible_max`` (2 mrad for the transmission error and
+            link bending). Over a narrow angle range neighbouring high orders are nearly collinear and
+            can "fit" with large cancelling amplitudes that hold nowhere else.
         show_progress: False: no progress bar (None: a bar on a terminal).
 
     Returns:
@@ -753,8 +779,10 @@ def select_terms(fit: StationFit | IdentificationResult, data: MeasurementSet | 
             else:
                 groups.append((ei, gi, label, c0 + idx))
         c0 += e.n_params
+    gmax = [cands[g[0]].plausible_max if max_amplitude_rad is None else max_amplitude_rad for g in groups]
     path = forward_select(b, A, [C[:, g[3]] for g in groups], fold, max_groups=max_terms,
-                          min_rel_gain=min_rel_gain, ridge=ridge, row_sigma=sig, show_progress=show_progress)
+                          min_rel_gain=min_rel_gain, ridge=ridge, row_sigma=sig, group_max=gmax,
+                          show_progress=show_progress)
     chosen = [groups[g] for g in path.selected]
     # effect objects of the selected groups, in candidate order; start values from the linear solution
     effects, theta0 = [], []
@@ -788,7 +816,7 @@ def select_terms(fit: StationFit | IdentificationResult, data: MeasurementSet | 
                            time_s=time.perf_counter() - t0, terms=terms, cv_rms_m=path.cv_rms_m, effects=effects,
                            theta=[np.asarray(t, float) for t in theta], fit=final, n_candidates=len(groups),
                            left_out=left_out, folds=folds, seed=seed, max_terms=max_terms, min_rel_gain=min_rel_gain,
-                           ridge=ridge, prior_rad=prior_rad, stop=path.stop)
+                           ridge=ridge, prior_rad=prior_rad, min_lever_m=min_lever_m, stop=path.stop)
 
 
 # --------------------------------------------------------------------------- coverage

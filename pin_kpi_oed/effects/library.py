@@ -21,6 +21,18 @@ name                  model                                            parameter
 ``joint_scale``       Δq_j = s_j · q_j  (transmission-ratio error)     one per joint         1 (rad/rad)
 ===================== ================================================ ===================== ==========
 
+Opt-in effects (:data:`OPT_IN_EFFECTS`, by name through :func:`make_effect` and
+:func:`parse_effects_spec`, not default candidates): ``transmission_error``
+(:mod:`pin_kpi_oed.effects.periodic`, :class:`GearHarmonic` with orders 1 … 40 or chosen
+(joint, order) pairs), ``link_bending`` (:mod:`pin_kpi_oed.effects.coupled`, cos/sin of the
+arm-plane links' angles q2, q2+q3, q2+q3+q4 on those joints) and ``drift``
+(:mod:`pin_kpi_oed.effects.drift`, a tracker-frame offset linear or quadratic in time per
+station; ``setup_specific``: re-fitted at every registration, never transferred). Which
+transmission and bending terms a data set needs is chosen by held-out error in
+:mod:`pin_kpi_oed.diagnosis.selection`. Every effect answers :meth:`Effect.groups` (parameters
+selected together, e.g. a cos/sin pair), :meth:`Effect.restrict` and :meth:`Effect.describe`
+(plain words with units).
+
 Each effect also has a ``plausible_max`` (largest plausible |θ|): the diagnosis holds at 0 the
 parameters the data cannot determine better than that, and names them. An exploratory,
 opt-in :class:`JointAngleTable` (``joint_angle_table``: a piecewise-linear joint-angle error
