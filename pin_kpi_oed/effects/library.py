@@ -21,6 +21,18 @@ name                  model                                            parameter
 ``joint_scale``       Δq_j = s_j · q_j  (transmission-ratio error)     one per joint         1 (rad/rad)
 ===================== ================================================ ===================== ==========
 
+Opt-in effects (:data:`OPT_IN_EFFECTS`, by name through :func:`make_effect` and
+:func:`parse_effects_spec`, not default candidates): ``transmission_error``
+(:mod:`pin_kpi_oed.effects.periodic`, :class:`GearHarmonic` with orders 1 … 40 or chosen
+(joint, order) pairs), ``link_bending`` (:mod:`pin_kpi_oed.effects.coupled`, cos/sin of the
+arm-plane links' angles q2, q2+q3, q2+q3+q4 on those joints) and ``drift``
+(:mod:`pin_kpi_oed.effects.drift`, a tracker-frame offset linear or quadratic in time per
+station; ``setup_specific``: re-fitted at every registration, never transferred). Which
+transmission and bending terms a data set needs is chosen by held-out error in
+:mod:`pin_kpi_oed.diagnosis.selection`. Every effect answers :meth:`Effect.groups` (parameters
+selected together, e.g. a cos/sin pair), :meth:`Effect.restrict` and :meth:`Effect.describe`
+(plain words with units).
+
 Each effect also has a ``plausible_max`` (largest plausible |θ|): the diagnosis holds at 0 the
 parameters the data cannot determine better than that, and names them. An exploratory,
 opt-in :class:`JointAngleTable` (``joint_angle_table``: a piecewise-linear joint-angle error
@@ -73,7 +85,8 @@ from pin_kpi_oed.model.robot import Robot
 
 __all__ = [
     "Effect", "SubsetEffect", "JointAngleTable", "JointCompliance", "GearHarmonic", "Backlash", "ThermalExpansion",
-    "JointScale", "EFFECTS", "EFFECT_NAMES", "UNOBSERVABLE_NOTES", "range_scale_parameters", "make_effect",
+    "JointScale", "EFFECTS", "EFFECT_NAMES", "OPT_IN_EFFECTS", "ALL_EFFECT_NAMES", "effect_class", "joint_label",
+    "UNOBSERVABLE_NOTES", "range_scale_parameters", "make_effect",
     "candidate_effects", "parse_effects_spec", "gravity_torque", "loaded_joints", "position_dq", "sum_joint_offsets",
     "sum_tool_offsets", "predict_with_effects", "effect_jacobian", "visible_rms", "size_effect",
 ]
@@ -156,6 +169,9 @@ class Effect:
     #: Largest plausible |θ| (unit of θ): a parameter the data cannot pin down better than this is
     #: not determined by them (the diagnosis holds it at 0).
     plausible_max: float = np.inf
+    #: True for effects of one measurement set-up (e.g. drift of the tracker within a session): they
+    #: are re-fitted with the tracker pose at every registration and never transferred to another set-up.
+    setup_specific: bool = False
 
     def __init__(self, robot: Robot):
         self.robot = robot
@@ -206,10 +222,27 @@ class Effect:
         D[:, self.joints, np.arange(th.size)] = B[:, self.joints]
         return D @ th, D
 
+    def groups(self) -> list[tuple[str, list[int]]]:
+        """Parameters that belong together (selected or dropped as one): ``[(label, [indices]), ...]``.
+
+        Default: every parameter its own group. Periodic effects group a cos/sin pair.
+        """
+        return [(n, [i]) for i, n in enumerate(self.param_names())]
+
+    def restrict(self, groups: Sequence[int]) -> "Effect":
+        """The same effect with only the parameter groups ``groups`` (indices into :meth:`groups`)."""
+        gr = self.groups()
+        return SubsetEffect(self, sorted(i for g in groups for i in gr[g][1]))
+
+    def describe(self, theta: np.ndarray) -> list[str]:
+        """Plain-words lines, one per parameter group, with physical units."""
+        th = self._theta(theta)
+        return [f"{n} = {v:.4g} {self.unit}".rstrip() for n, v in zip(self.param_names(), th)]
+
     def to_dict(self) -> dict:
         """Plain description for JSON."""
         return {"name": self.name, "unit": self.unit, "description": self.description,
-                "param_names": self.param_names()}
+                "param_names": self.param_names(), "setup_specific": bool(self.setup_specific)}
 
     def __repr__(self) -> str:
         return f"{type(self).__name__}({self.robot.name}, k={self.n_params})"
@@ -283,39 +316,83 @@ class Backlash(_GravityEffect):
         return np.sign(tau)
 
 
+def joint_label(robot: Robot, j: int) -> str:
+    """Display name of joint j (``shoulder_lift_joint`` -> ``shoulder_lift``)."""
+    n = robot.joint_names[j]
+    return n[:-len("_joint")] if n.endswith("_joint") and len(n) > len("_joint") else n
+
+
 class GearHarmonic(Effect):
-    """Gear / encoder eccentricity: first and second harmonics of each joint's own angle (rad)."""
+    """Gear / encoder eccentricity: harmonics of each joint's own angle (rad).
+
+    Δq_j = Σ_o a_jo sin(o q_j) + b_jo cos(o q_j) over the (joint, order) pairs: by default
+    every given joint with ``orders`` (1, 2); ``pairs`` picks (joint, order) pairs one by one
+    (e.g. the orders a selection found, :class:`pin_kpi_oed.effects.periodic.TransmissionError`).
+    Parameters come in (sin, cos) pairs, one group per pair.
+    """
 
     name = "gear_harmonic"
     unit = "rad"
     plausible_max = 1e-2
     description = "joint-angle errors a sin q + b cos q + c sin 2q + d cos 2q of each joint's own angle"
 
-    def __init__(self, robot: Robot, joints: Sequence[str] | None = None, orders: Sequence[int] = (1, 2)):
+    def __init__(self, robot: Robot, joints: Sequence[str] | None = None, orders: Sequence[int] = (1, 2),
+                 pairs: Sequence[tuple[str | int, int]] | None = None):
         super().__init__(robot)
-        names = robot.joint_names if joints is None else list(joints)
-        unknown = [j for j in names if j not in robot.joint_names]
-        if unknown:
-            raise InputError(f"{self.name}: unknown joint(s) {unknown} (joints: {', '.join(robot.joint_names)})")
         rev = robot.is_revolute
-        self.joints = np.array([robot.joint_names.index(j) for j in names if rev[robot.joint_names.index(j)]], int)
-        self.orders = tuple(int(o) for o in orders)
+        if pairs is None:
+            names = robot.joint_names if joints is None else list(joints)
+            unknown = [j for j in names if j not in robot.joint_names]
+            if unknown:
+                raise InputError(f"{self.name}: unknown joint(s) {unknown} (joints: {', '.join(robot.joint_names)})")
+            jj = [robot.joint_names.index(j) for j in names if rev[robot.joint_names.index(j)]]
+            pairs = [(j, o) for j in jj for o in orders]
+        self.pairs: list[tuple[int, int]] = []
+        for j, o in pairs:
+            if isinstance(j, str):
+                if j not in robot.joint_names:
+                    raise InputError(f"{self.name}: unknown joint '{j}' (joints: {', '.join(robot.joint_names)})")
+                j = robot.joint_names.index(j)
+            if not (0 <= int(j) < robot.nq) or not rev[int(j)]:
+                raise InputError(f"{self.name}: joint {j} is not a revolute joint of {robot.name}")
+            if not (float(o) == int(o) >= 1):
+                raise InputError(f"{self.name}: the order must be an integer >= 1 (cycles per revolution), got {o}")
+            self.pairs.append((int(j), int(o)))
+        if len(set(self.pairs)) != len(self.pairs):
+            raise InputError(f"{self.name}: a (joint, order) pair is given twice")
+        self.joints = np.array(sorted({j for j, _ in self.pairs}), int)
+        self.orders = tuple(sorted({o for _, o in self.pairs}))
 
     def param_names(self, robot=None):
-        return [f"{self.name}.{self.robot.joint_names[j]}.{f}{o}" for j in self.joints for o in self.orders
-                for f in ("sin", "cos")]
+        return [f"{self.name}.{self.robot.joint_names[j]}.{f}{o}" for j, o in self.pairs for f in ("sin", "cos")]
+
+    def groups(self):
+        return [(f"{joint_label(self.robot, j)} order {o}", [2 * i, 2 * i + 1]) for i, (j, o) in enumerate(self.pairs)]
+
+    def restrict(self, groups):
+        return type(self)(self.robot, pairs=[self.pairs[g] for g in groups])
+
+    def describe(self, theta):
+        """``"shoulder_lift: 18 cycles per revolution, 120 µrad amplitude (phase 35°)"`` per pair.
+
+        a sin(o q) + b cos(o q) = A sin(o q + φ), A = √(a² + b²), φ = atan2(b, a).
+        """
+        th = self._theta(theta)
+        out = []
+        for i, (j, o) in enumerate(self.pairs):
+            a, b = th[2 * i], th[2 * i + 1]
+            out.append(f"{joint_label(self.robot, j)}: {o} cycle{'s' if o != 1 else ''} per revolution, "
+                       f"{np.hypot(a, b) * 1e6:.0f} µrad amplitude (phase {np.degrees(np.arctan2(b, a)):.0f}°)")
+        return out
 
     def joint_offset(self, theta, Q, aux=None):
         th = self._theta(theta)
         Q = np.atleast_2d(np.asarray(Q, float))
         m, n = Q.shape
         D = np.zeros((m, n, th.size))
-        k = 0
-        for j in self.joints:
-            for o in self.orders:
-                D[:, j, k] = np.sin(o * Q[:, j])
-                D[:, j, k + 1] = np.cos(o * Q[:, j])
-                k += 2
+        for i, (j, o) in enumerate(self.pairs):
+            D[:, j, 2 * i] = np.sin(o * Q[:, j])
+            D[:, j, 2 * i + 1] = np.cos(o * Q[:, j])
         return D @ th, D
 
 
@@ -515,66 +592,103 @@ EFFECTS: dict[str, type[Effect]] = {
     "thermal_expansion": ThermalExpansion,
     "joint_scale": JointScale,
 }
+#: The default candidates of a diagnosis.
 EFFECT_NAMES: tuple[str, ...] = tuple(EFFECTS)
 
+#: Opt-in effects, by name -> ``module:Class`` (imported on first use): not default candidates of a
+#: diagnosis because they have many parameters whose terms are chosen from the data
+#: (:mod:`pin_kpi_oed.diagnosis.selection`) or belong to one set-up (``drift``).
+OPT_IN_EFFECTS: dict[str, str] = {
+    "transmission_error": "pin_kpi_oed.effects.periodic:TransmissionError",
+    "link_bending": "pin_kpi_oed.effects.coupled:LinkBending",
+    "drift": "pin_kpi_oed.effects.drift:Drift",
+}
+#: Every effect name :func:`make_effect` knows.
+ALL_EFFECT_NAMES: tuple[str, ...] = EFFECT_NAMES + tuple(OPT_IN_EFFECTS)
 
-def make_effect(name: str, robot: Robot, **options: Any) -> Effect:
-    """Build an effect by name (``joint_compliance``, ``gear_harmonic``, ``backlash``,
-    ``thermal_expansion``, ``joint_scale``).
+
+def effect_class(name: str) -> type[Effect]:
+    """The effect class registered under ``name`` (default or opt-in).
 
     Raises:
         InputError: unknown name (the message lists the known ones).
     """
     key = str(name).strip()
-    if key not in EFFECTS:
-        raise InputError(f"unknown effect '{name}' (known: {', '.join(EFFECT_NAMES)}; a tracker range-scale error "
-                         "is not among them because it cannot be observed)")
-    return EFFECTS[key](robot, **options)
+    if key in EFFECTS:
+        return EFFECTS[key]
+    if key in OPT_IN_EFFECTS:
+        import importlib
+
+        mod, cls = OPT_IN_EFFECTS[key].split(":")
+        return getattr(importlib.import_module(mod), cls)
+    raise InputError(f"unknown effect '{name}' (known: {', '.join(ALL_EFFECT_NAMES)}; a tracker range-scale error "
+                     "is not among them because it cannot be observed)")
+
+
+def make_effect(name: str, robot: Robot, **options: Any) -> Effect:
+    """Build an effect by name (:data:`ALL_EFFECT_NAMES`: ``joint_compliance``, ``gear_harmonic``, ``backlash``,
+    ``thermal_expansion``, ``joint_scale``, and the opt-in ``transmission_error``, ``link_bending``, ``drift``).
+
+    Raises:
+        InputError: unknown name (the message lists the known ones).
+    """
+    return effect_class(name)(robot, **options)
 
 
 def candidate_effects(robot: Robot, names: Sequence[str] | None = None, t_ref_c: float = 20.0) -> list[Effect]:
-    """The candidate effects of a diagnosis (all of the library by default)."""
+    """The candidate effects of a diagnosis (:data:`EFFECT_NAMES` by default; opt-in names may be given)."""
     out = []
     for n in (names or EFFECT_NAMES):
         out.append(make_effect(n, robot, t_ref_c=t_ref_c) if n == "thermal_expansion" else make_effect(n, robot))
     return out
 
 
-_SPEC_ITEM = re.compile(r"^\s*([A-Za-z_]+)\s*=\s*(.+?)\s*$")
+_SPEC_ITEM = re.compile(r"^\s*([A-Za-z_]+)\s*(?:\[([^\]]*)\])?\s*=\s*(.+?)\s*$")
+_SPEC_SPLIT = re.compile(r",(?![^\[]*\])")  # commas outside [...]
 
 
 def parse_effects_spec(spec: str, robot: Robot, rng: np.random.Generator | int | None = None
                        ) -> list[tuple[Effect, np.ndarray]]:
     """Parse ``"joint_compliance=2e-6,gear_harmonic=5e-5"`` into ``[(effect, theta), ...]`` for the simulator.
 
-    Each item is ``name=VALUE``:
+    Each item is ``name=VALUE`` or ``name[OPTIONS]=VALUE``:
 
     * ``VALUE`` one number = the size: every parameter is drawn as
       ``±VALUE · U(0.5, 1)`` (random sign, from ``rng``); for one-parameter effects
       (``thermal_expansion``) the number is the parameter itself (α in 1/K);
     * ``VALUE`` ``v1:v2:...:vk`` = the k parameters exactly, in
-      :meth:`Effect.param_names` order.
+      :meth:`Effect.param_names` order;
+    * ``OPTIONS`` (opt-in effects) chooses the terms, read by the class's ``from_spec``:
+      ``transmission_error[shoulder_lift_joint:7,elbow_joint:18]`` ((joint, order) pairs),
+      ``link_bending[elbow_joint:q2+q3]`` ((joint, angle) pairs), ``drift[degree=2]``.
 
     Units of θ: joint_compliance rad/(N·m), gear_harmonic rad, backlash rad,
-    thermal_expansion 1/K, joint_scale 1 (rad/rad).
+    thermal_expansion 1/K, joint_scale 1 (rad/rad), transmission_error rad, link_bending rad,
+    drift m/s (and m/s²).
 
     Raises:
         InputError: unknown effect, an effect given twice, a value that is not a finite
-            number, or the wrong number of explicit values.
+            number, the wrong number of explicit values, or options an effect does not take.
     """
     rng = rng if isinstance(rng, np.random.Generator) else np.random.default_rng(rng)
     if spec is None or not str(spec).strip():
         return []
     out: list[tuple[Effect, np.ndarray]] = []
     seen: set[str] = set()
-    for item in str(spec).split(","):
+    for item in _SPEC_SPLIT.split(str(spec)):
         if not item.strip():
             continue
         mt = _SPEC_ITEM.match(item)
         if not mt:
             raise InputError(f"--effects: '{item.strip()}' is not NAME=VALUE (e.g. joint_compliance=2e-6)")
-        name, val = mt.group(1), mt.group(2)
-        eff = make_effect(name, robot)
+        name, opts, val = mt.group(1), mt.group(2), mt.group(3)
+        if opts is None:
+            eff = make_effect(name, robot)
+        else:
+            cls = effect_class(name)
+            if not hasattr(cls, "from_spec"):
+                raise InputError(f"--effects: {name} takes no [options]")
+            eff = cls.from_spec(robot, opts)
         if name in seen:
             raise InputError(f"--effects: effect '{name}' given twice")
         seen.add(name)

@@ -1,0 +1,346 @@
+"""Effects that transfer (transmission error, link bending, drift) and their sparse selection by held-out error."""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+import pytest
+
+from pin_kpi_oed.data.measurements import MeasurementSet
+from pin_kpi_oed.diagnosis.selection import (SelectionResult, coverage, fit_stations, forward_select,
+                                             measurement_folds, register_setup, select_terms)
+from pin_kpi_oed.effects.coupled import LinkBending
+from pin_kpi_oed.effects.drift import Drift
+from pin_kpi_oed.effects.library import (ALL_EFFECT_NAMES, EFFECT_NAMES, JointCompliance, effect_jacobian,
+                                         gravity_torque, make_effect, parse_effects_spec, predict_with_effects,
+                                         size_effect)
+from pin_kpi_oed.effects.periodic import TransmissionError
+from pin_kpi_oed.errors import IdentifiabilityError, InputError
+from pin_kpi_oed.identification.identify import identify
+from pin_kpi_oed.identification.simulate import Tolerances, default_tracker_pose, random_truth, simulate
+from pin_kpi_oed.model.measurement import NoiseModel, TrackerModel
+from pin_kpi_oed.model.robot import load_robot
+
+from .conftest import SHARED
+
+SIG = 2e-5  # m, per axis
+FLOOR = np.sqrt(3) * SIG  # 3-D RMS of the noise alone
+
+
+@pytest.fixture(scope="module")
+def ur10():
+    return load_robot("ur10")
+
+
+@pytest.fixture(scope="module")
+def model(ur10):
+    return TrackerModel(ur10, tracker_T_base=default_tracker_pose(ur10), reflector_m=np.array([0.0, 0.0, 0.1]),
+                        noise=NoiseModel(sigma_xyz_m=(SIG,) * 3))
+
+
+def _aux(robot, Q, t=None, station=None):
+    ms = MeasurementSet(joint_names=robot.joint_names, q=Q, position_m=np.ones((len(Q), 3)), time_s=t)
+    if station is not None:
+        ms.station = np.asarray(station)
+    return ms
+
+
+# --------------------------------------------------------------------------- effects: values and derivatives
+def _new_effects(robot, Q):
+    t = np.linspace(0.0, 3600.0, len(Q))
+    return [
+        (TransmissionError(robot, max_order=3), None),
+        (TransmissionError(robot, pairs=[("shoulder_lift_joint", 7), ("elbow_joint", 18)]), None),
+        (LinkBending(robot), None),
+        (LinkBending(robot, complement_compliance=False), None),
+        (Drift(robot, degree=2, t_ref_s=1800.0), _aux(robot, Q, t)),
+    ]
+
+
+def test_new_effects_jacobian_matches_finite_differences(model):
+    """∂Y/∂θ through the kinematics (effect_jacobian) against central differences of the prediction."""
+    rb = model.robot
+    rng = np.random.default_rng(3)
+    Q = rb.random_q(rng, 12)
+    p = random_truth(model, seed=2)
+    for eff, aux in _new_effects(rb, Q):
+        aux = aux if aux is not None else _aux(rb, Q)
+        k = eff.n_params
+        scale = 1e-7 if eff.name == "drift" else 1e-3
+        th = rng.normal(size=k) * scale
+        J = effect_jacobian(model, p, Q, aux, [(eff, th)])
+        assert J.shape == (len(Q), 3, k)
+        h = 1e-9 if eff.name == "drift" else 1e-6
+        for i in range(k):
+            e = np.zeros(k)
+            e[i] = h
+            fd = (predict_with_effects(model, p, Q, aux, [(eff, th + e)])[:, :3]
+                  - predict_with_effects(model, p, Q, aux, [(eff, th - e)])[:, :3]) / (2 * h)
+            assert np.allclose(fd, J[:, :, i], rtol=1e-5, atol=1e-9 * max(1.0, np.abs(J).max())), (eff.name, i)
+
+
+def test_transmission_error_values_and_words(ur10):
+    Q = ur10.random_q(np.random.default_rng(4), 30)
+    te = TransmissionError(ur10, pairs=[("shoulder_lift_joint", 18), ("elbow_joint", 7)])
+    assert te.param_names() == ["transmission_error.shoulder_lift_joint.sin18",
+                                "transmission_error.shoulder_lift_joint.cos18",
+                                "transmission_error.elbow_joint.sin7", "transmission_error.elbow_joint.cos7"]
+    th = np.array([1e-4, -5e-5, 0.0, 2e-4])
+    dQ, _ = te.joint_offset(th, Q)
+    assert np.allclose(dQ[:, 1], 1e-4 * np.sin(18 * Q[:, 1]) - 5e-5 * np.cos(18 * Q[:, 1]))
+    assert np.allclose(dQ[:, 2], 2e-4 * np.cos(7 * Q[:, 2]))
+    assert np.all(dQ[:, [0, 3, 4, 5]] == 0)
+    # periodic: the same error on wrapped angles
+    assert np.allclose(te.joint_offset(th, Q + 2 * np.pi)[0], dQ)
+    words = te.describe(th)
+    assert words[0].startswith("shoulder_lift: 18 cycles per revolution, 112 µrad amplitude")
+    assert words[1].startswith("elbow: 7 cycles per revolution, 200 µrad amplitude (phase 90°)")
+    full = TransmissionError(ur10)
+    assert full.n_params == 6 * 40 * 2 and len(full.groups()) == 240
+    sub = full.restrict([3, 40 + 17])
+    assert sub.pairs == [(0, 4), (1, 18)] and isinstance(sub, TransmissionError)
+    with pytest.raises(InputError, match="order"):
+        TransmissionError(ur10, pairs=[("elbow_joint", 0)])
+    with pytest.raises(InputError, match="unknown joint"):
+        TransmissionError(ur10, pairs=[("knee", 3)])
+
+
+def test_link_bending_values_and_compliance_complement(ur10):
+    lb = LinkBending(ur10, complement_compliance=False)
+    assert lb.labels == ["q2", "q2+q3", "q2+q3+q4"] and lb.n_params == 18 and len(lb.groups()) == 9
+    Q = ur10.random_q(np.random.default_rng(5), 200)
+    th = np.zeros(18)
+    i = lb.param_names().index("link_bending.elbow_joint.cos(q2)")
+    j = lb.param_names().index("link_bending.wrist_1_joint.sin(q2+q3+q4)")
+    th[i], th[j] = 3e-4, -1e-4
+    dQ, D = lb.joint_offset(th, Q)
+    assert np.allclose(dQ[:, 2], 3e-4 * np.cos(Q[:, 1]))
+    assert np.allclose(dQ[:, 3], -1e-4 * np.sin(Q[:, 1] + Q[:, 2] + Q[:, 3]))
+    assert np.all(dQ[:, [0, 1, 4, 5]] == 0)
+    # the URDF gravity torque of wrist_1 is exactly one link_bending column: with the full basis the
+    # joint_compliance columns lie in link_bending's span; the complement removes that duplicate
+    tau = gravity_torque(ur10, Q)
+    jc = JointCompliance(ur10)
+    lbc = LinkBending(ur10)
+    assert lbc.n_params == 15
+    assert "link_bending.wrist_1_joint.sin(q2+q3+q4)" not in lbc.param_names()
+
+    def stacked(cols_per_joint):  # (m, n) joint-space columns -> one long column each
+        return np.stack([c.ravel() for c in cols_per_joint], 1)
+
+    comp_cols = []
+    for k in jc.joints:
+        c = np.zeros((len(Q), ur10.nq))
+        c[:, k] = tau[:, k]
+        comp_cols.append(c)
+    lb_full = stacked([D[:, :, m] for m in range(18)])
+    _, Dc = lbc.joint_offset(np.zeros(15), Q)
+    lb_comp = stacked([Dc[:, :, m] for m in range(15)])
+    C = stacked(comp_cols)
+    assert np.linalg.matrix_rank(np.hstack([lb_full, C]), tol=1e-8) < 18 + C.shape[1]  # duplicates
+    assert np.linalg.matrix_rank(np.hstack([lb_comp, C]), tol=1e-8) == 15 + C.shape[1]  # none
+    words = lb.restrict([lb.groups().index(("elbow in q2", [6, 7]))]).describe([3e-4, 0.0])
+    assert words == ["elbow: 300 µrad amplitude in the angle q2 (phase 90°)"]
+    with pytest.raises(InputError, match="arm-plane"):
+        LinkBending(ur10, terms=[("shoulder_pan_joint", 0, "cos")])
+
+
+def test_drift_values_station_and_setup_flag(ur10):
+    Q = ur10.random_q(np.random.default_rng(6), 8)
+    t = np.arange(8) * 100.0
+    st = np.array(["A"] * 4 + ["B"] * 4)
+    aux = _aux(ur10, Q, t, st)
+    d = Drift.from_data(ur10, aux, degree=1)
+    assert d.setup_specific and d.stations == ["A", "B"] and np.allclose(d.t_ref_s, [150.0, 550.0])
+    assert d.param_names()[:3] == ["drift.A.x_m_per_s", "drift.A.y_m_per_s", "drift.A.z_m_per_s"]
+    th = np.array([0, 0, 1e-6, 2e-6, 0, 0])
+    dY, _ = d.tool_offset(th, Q, aux)
+    assert np.allclose(dY[:4, 2], 1e-6 * (t[:4] - 150.0)) and np.allclose(dY[4:, 0], 2e-6 * (t[4:] - 550.0))
+    assert np.all(dY[:4, :2] == 0) and np.all(dY[4:, 1:] == 0)
+    assert d.describe(th)[0] == "station A: drift 3.6 mm per hour (x +0, y +0, z +3.6 mm/h)"
+    assert d.check(_aux(ur10, Q)) is not None  # no time column: skipped with a note
+    with pytest.raises(InputError, match="station"):
+        Drift(ur10, stations=["A"]).tool_offset(np.zeros(3), Q, aux)
+    with pytest.raises(InputError, match="degree"):
+        Drift(ur10, degree=3)
+
+
+def test_registry_and_spec(ur10):
+    assert set(ALL_EFFECT_NAMES) - set(EFFECT_NAMES) == {"transmission_error", "link_bending", "drift"}
+    assert "transmission_error" not in EFFECT_NAMES  # opt-in: not a default diagnosis candidate
+    assert make_effect("transmission_error", ur10, max_order=2).n_params == 24
+    (te, th), (lb, th2), (dr, th3) = parse_effects_spec(
+        "transmission_error[shoulder_lift_joint:7, elbow_joint:18]=1e-4:2e-4:3e-4:4e-4,"
+        "link_bending[elbow_joint:q2+q3]=5e-5,drift[degree=2]=1e-8", ur10, 0)
+    assert te.pairs == [(1, 7), (2, 18)] and np.allclose(th, [1e-4, 2e-4, 3e-4, 4e-4])
+    assert lb.param_names() == ["link_bending.elbow_joint.cos(q2+q3)", "link_bending.elbow_joint.sin(q2+q3)"]
+    assert np.all(np.abs(th2) <= 5e-5) and np.all(np.abs(th2) >= 2.5e-5)
+    assert dr.degree == 2 and th3.size == 6
+    with pytest.raises(InputError, match="joint:order"):
+        parse_effects_spec("transmission_error[elbow_joint]=1e-4", ur10)
+    with pytest.raises(InputError, match="takes no"):
+        parse_effects_spec("backlash[x]=1e-4", ur10)
+    with pytest.raises(InputError, match="unknown angle"):
+        parse_effects_spec("link_bending[elbow_joint:q9]=1e-4", ur10)
+
+
+def test_coverage():
+    src = np.array([[0.0, 1.0], [0.5, 1.0], [3.1, 1.0]])
+    tgt = np.array([[0.02, 1.0], [-3.15, 1.0], [1.5, 2.0]])
+    per, both = coverage(src, tgt, 0.05)
+    # -3.15 wraps to 3.133, within 0.05 of 3.1; 1.5 is far from every source angle
+    assert np.allclose(per, [2 / 3, 2 / 3]) and np.isclose(both, 2 / 3)
+
+
+# --------------------------------------------------------------------------- the selection engine
+def test_forward_select_scores_equal_explicit_refits():
+    """The Schur/Gram scoring picks the group whose explicit K-fold refit has the lowest held-out SSE."""
+    rng = np.random.default_rng(7)
+    n, p0 = 300, 4
+    A = rng.normal(size=(n, p0))
+    groups = [rng.normal(size=(n, 2)) for _ in range(12)] + [rng.normal(size=(n, 1))]
+    b = A @ rng.normal(size=p0) + groups[5] @ [0.8, -0.5] + 0.3 * groups[12][:, 0] + 0.05 * rng.normal(size=n)
+    fold = measurement_folds(n, 4, 0)
+
+    def explicit(cols):
+        X = np.hstack(cols)
+        sc = np.linalg.norm(X, axis=0)
+        sse = 0.0
+        for k in range(4):
+            tr, te = fold != k, fold == k
+            x = np.linalg.lstsq(X[tr] / sc, b[tr], rcond=None)[0]
+            r = b[te] - X[te] / sc @ x
+            sse += r @ r
+        return sse
+
+    path = forward_select(b, A, groups, fold, max_groups=3, min_rel_gain=1e-3, rows_per_measurement=1,
+                          show_progress=False)
+    sse = [explicit([A] + [groups[g] for g in path.selected[:1]] + [groups[h]]) for h in range(len(groups))]
+    assert path.selected[:2] == [5, 12]
+    assert path.selected[1] == int(np.argmin([s if h != 5 else np.inf for h, s in enumerate(sse)]))
+    assert np.isclose(path.cv_sse[1], explicit([A, groups[5]]), rtol=1e-6)
+    assert np.isclose(path.cv_sse[2], explicit([A, groups[5], groups[12]]), rtol=1e-6)
+    assert path.cv_sse[0] > path.cv_sse[1] > path.cv_sse[2]
+
+
+# --------------------------------------------------------------------------- simulated recovery and transfer
+TRUE_PAIRS = [("shoulder_lift_joint", 7), ("elbow_joint", 18)]
+
+
+def _truth_effect(model, Q, rms_m):
+    te = TransmissionError(model.robot, pairs=TRUE_PAIRS)
+    th = size_effect(model, np.zeros(model.n_params), Q, None, te, np.array([1.0, 0.6, -0.8, 0.5]), rms_m)
+    return te, th
+
+
+def _uniform(ur10, rng, n, box=None):
+    lo, hi = ur10.q_lower.copy(), ur10.q_upper.copy()
+    lo[:] = np.maximum(lo, -np.pi)
+    hi[:] = np.minimum(hi, np.pi)
+    for j, (a, b) in (box or {}).items():
+        lo[j], hi[j] = a, b
+    return rng.uniform(lo, hi, size=(n, ur10.nq))
+
+
+def _stats(R):
+    e = np.linalg.norm(R, axis=1)
+    return float(np.sqrt(np.mean(e ** 2)))
+
+
+def test_selection_recovers_withheld_transmission_error(model):
+    ur10 = model.robot
+    rng = np.random.default_rng(11)
+    Q = _uniform(ur10, rng, 900)
+    truth = random_truth(model, Tolerances(joint_translation_m=2e-4, joint_rotation_rad=5e-4), seed=1)
+    te, th = _truth_effect(model, Q, 7 * SIG)
+    data = simulate(model, Q, truth, [(te, th)], seed=2, record_sigma=False)
+    geo = identify(model, data)
+    assert geo.rms_m > 3 * FLOOR  # the geometric model leaves the effect
+    t0 = time.perf_counter()
+    sel = select_terms(geo, data, max_order=40, show_progress=False)
+    assert time.perf_counter() - t0 < 30
+    assert isinstance(sel, SelectionResult) and sel.success
+    chosen = {(t["effect"], t["group"]) for t in sel.terms}
+    assert chosen == {("transmission_error", "shoulder_lift order 7"), ("transmission_error", "elbow order 18")}
+    assert sel.cv_rms_m[-1] <= 1.1 * FLOOR < sel.cv_rms_m[0]
+    # the refit recovers the amplitudes and predicts fresh data to the noise floor
+    amp_true = {"shoulder_lift order 7": np.hypot(*th[:2]), "elbow order 18": np.hypot(*th[2:])}
+    for t in sel.terms:
+        assert abs(t["amplitude_rad"] - amp_true[t["group"]]) < 0.05 * amp_true[t["group"]]
+        assert "cycles per revolution" in t["text"] and "µrad amplitude" in t["text"]
+    fresh = simulate(model, _uniform(ur10, rng, 300), truth, [(te, th)], seed=3, record_sigma=False)
+    assert _stats(sel.fit.residuals(fresh)) <= 1.1 * FLOOR
+    # the effects are ready for identify
+    res = identify(model, data, effects=sel.effects)
+    assert res.rms_m <= 1.1 * FLOOR
+    d = sel.to_dict()
+    assert d["status"] == "selected" and len(d["terms"]) == 2 and "transmission_error" in sel.summary()
+
+
+def test_selection_transfers_to_another_region_and_tracker_pose(model):
+    """Train in one region of joint space, validate in another after the tracker moved (60 rows re-register)."""
+    ur10 = model.robot
+    rng = np.random.default_rng(21)
+    truth = random_truth(model, Tolerances(joint_translation_m=2e-4, joint_rotation_rad=5e-4), seed=5)
+    Q_a = _uniform(ur10, rng, 900, {0: (-2.8, -0.2), 1: (-2.9, -1.6), 2: (0.3, 2.6)})
+    Q_b = _uniform(ur10, rng, 400, {0: (0.2, 2.8), 1: (-1.5, -0.3), 2: (-2.6, -0.3)})
+    te, th = _truth_effect(model, np.vstack([Q_a, Q_b]), 7 * SIG)
+    train = simulate(model, Q_a, truth, [(te, th)], seed=6, record_sigma=False)
+    moved = TrackerModel(ur10, tracker_T_base=default_tracker_pose(ur10, yaw_rad=0.7, height_m=-0.2),
+                         reflector_m=model.reflector_m, noise=model.noise)
+    target = simulate(moved, Q_b, truth, [(te, th)], seed=7, record_sigma=False)
+    per, _ = coverage(Q_a, Q_b)
+    assert per[0] == 0 and per[1] == 0 and per[2] == 0  # the second region is unseen on joints 1-3
+    geo = fit_stations(model, train)
+    sel = select_terms(geo, max_order=40, show_progress=False)
+    assert {t["group"] for t in sel.terms[:2]} == {"shoulder_lift order 7", "elbow order 18"}
+    idx = np.random.default_rng(0).permutation(len(target))
+    reg, held = target.subset(idx[:60]), target.subset(idx[60:])
+    r_geo = _stats(geo.residuals(held, register_setup(geo, reg)))
+    r_sel = _stats(sel.fit.residuals(held, register_setup(sel.fit, reg)))
+    assert r_sel < 0.5 * r_geo
+    assert r_sel < 2.0 * FLOOR
+    with pytest.raises(IdentifiabilityError, match="rows"):
+        register_setup(sel.fit, target.subset(idx[:2]))
+
+
+def test_drift_recovered_and_refitted_at_registration(model):
+    ur10 = model.robot
+    rng = np.random.default_rng(31)
+    Q = _uniform(ur10, rng, 400)
+    t = np.sort(rng.uniform(0.0, 3600.0, 400))
+    v_true = np.array([2e-8, -1e-8, 1e-7])  # m/s: 0.36 mm per hour in z
+    drift = Drift(ur10, t_ref_s=1800.0)
+    data = simulate(model, Q, None, [(drift, v_true)], aux={"time_s": t}, seed=8, record_sigma=False)
+    fit = fit_stations(model, data, setup_effects=[[Drift.from_data(ur10, data)]])
+    v = fit.stations[0].thetas[0]
+    assert np.allclose(v, v_true, atol=3e-9)  # σ/(√n · std(t)) ≈ 1e-9 m/s
+    assert "mm per hour" in fit.describe()[0]
+    assert _stats(fit.residuals()) < 1.1 * FLOOR
+    # identify takes the effect too (Effect interface)
+    res = identify(model, data, effects=[Drift.from_data(ur10, data)])
+    assert np.allclose(res.theta[0], v_true, atol=3e-9)
+    # a new session drifts differently: registration re-fits it, the robot is held
+    v2 = np.array([0.0, 5e-8, -5e-8])
+    moved = TrackerModel(ur10, tracker_T_base=default_tracker_pose(ur10, yaw_rad=1.0), reflector_m=model.reflector_m,
+                         noise=model.noise)
+    data2 = simulate(moved, Q[:200], None, [(drift, v2)], aux={"time_s": t[:200]}, seed=9, record_sigma=False)
+    st = register_setup(fit, data2, setup_effects=[Drift.from_data(ur10, data2)])
+    assert np.allclose(st.thetas[0], v2, atol=6e-9)
+    assert np.allclose(st.p[fit.robot_index], fit.stations[0].p[fit.robot_index])  # robot held
+
+
+@pytest.mark.skipif(not (SHARED / "data" / "ipa_ur10" / "Series_C").is_dir(), reason="IPA UR10 data not available")
+def test_selection_on_series_c_is_fast():
+    from pin_kpi_oed.data.ipa import import_ipa
+
+    full = import_ipa(SHARED / "data" / "ipa_ur10" / "Series_C")
+    data = MeasurementSet(full.joint_names, full.q, full.position_m, source=full.source)
+    m = TrackerModel(load_robot("ur10"), reflector_m=np.array([0.0, 0.0, 0.109]),
+                     noise=NoiseModel(sigma_xyz_m=(1e-4,) * 3))
+    geo = identify(m, data)
+    t0 = time.perf_counter()
+    sel = select_terms(geo, data, max_order=40, refit=False, show_progress=False)
+    assert time.perf_counter() - t0 < 60
+    assert sel.cv_rms_m[-1] < 0.15e-3 < 0.4e-3 < sel.cv_rms_m[0]
