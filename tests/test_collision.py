@@ -11,8 +11,9 @@ import pytest
 import yaml
 
 from pin_kpi_oed.cell.cell import CELL_DIR, cell_from_dict, load_cell
-from pin_kpi_oed.cell.collision import (INCID, AggregatedConstraints, CollisionModel, FeasibilityChecker, coal_capsule,
-                                   point_segment_distance, random_feasible, segment_closest)
+from pin_kpi_oed.cell.collision import (INCID, AggregatedConstraints, CollisionModel, point_segment_distance,
+                                        random_feasible, segment_closest)
+from pin_kpi_oed.cell.feasibility import FeasibilityChecker, coal_capsule
 from pin_kpi_oed.errors import InfeasibleError, InputError, PinKpiOedError
 
 
