@@ -128,8 +128,10 @@ class FeasibilityChecker:
         cell: the measurement cell.
 
     Attributes:
-        names: name of every checked pair (``a|b``), then of every beam target (``beam|x``): the
-            columns of :meth:`distances`.
+        pair_names: (name, name) of every checked capsule / half-space pair.
+        beam_names: name of every capsule / half-space the beam is checked against.
+        names: ``a|b`` for every pair, then ``beam|x`` for every beam target: the columns of
+            :meth:`distances`.
         n_pairs: number of capsule / half-space pairs (the first columns of :meth:`distances`).
     """
 
@@ -153,8 +155,9 @@ class FeasibilityChecker:
         self.reflector = np.asarray(cell.reflector_m, float)
         go = self.gm.geometryObjects
         self.n_pairs = len(self.pairs)
-        self.names = ([f"{go[a].name}|{go[b].name}" for a, b in self.pairs]
-                      + [f"beam|{go[i].name}" for i in self.beam_targets])
+        self.pair_names = [(go[a].name, go[b].name) for a, b in self.pairs]
+        self.beam_names = [go[i].name for i in self.beam_targets]
+        self.names = [f"{a}|{b}" for a, b in self.pair_names] + [f"beam|{x}" for x in self.beam_names]
 
     # ------------------------------------------------------------------ set-up
     def _add_robot_capsules(self) -> tuple[list[int], list[int]]:

@@ -1,4 +1,4 @@
-"""``pin-kpi-oed view DESIGN_JSON``: meshcat preview of a design (see :mod:`pin_kpi_oed.viz.viewer`).
+"""``pin-kpi-oed view DESIGN_JSON``: meshcat preview of a design (see :mod:`pin_kpi_oed.viz.scene`).
 
     pin-kpi-oed view design.json                       # live meshcat viewer in the browser (Ctrl-C to stop)
     pin-kpi-oed view design.json --html out.html       # self-contained static page, opened in the browser
@@ -45,7 +45,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Handler of ``view``; returns the exit code (errors raise PinKpiOedError, printed by cli.main)."""
-    from pin_kpi_oed.viz.viewer import build_scene, fmt_factor, load_design, serve
+    from pin_kpi_oed.design.design_file import load_design
+    from pin_kpi_oed.viz.ellipsoids import fmt_factor
+    from pin_kpi_oed.viz.render import serve
+    from pin_kpi_oed.viz.scene import SceneOptions, build_scene
 
     if not (0.0 < args.level < 1.0):
         raise InputError(f"--level must be in (0, 1), got {args.level}")
@@ -57,14 +60,15 @@ def run(args: argparse.Namespace) -> int:
     df = load_design(args.design, criteria=criteria)
     for n in df.notes:
         print(f"note: {n}", file=sys.stderr)
-    scene = build_scene(df, scale=args.scale, level=args.level, ghosts=not args.no_ghosts,
-                        capsules_visible=args.capsules)
+    scene = build_scene(df, SceneOptions(scale=args.scale, level=args.level, ghosts=not args.no_ghosts,
+                                         capsules_visible=args.capsules))
     print(f"{df.robot.name}: {len(df.designs)} design(s), {df.q_work.shape[0]} working configuration(s); "
           f"{int(round(args.level * 100))} % TCP ellipsoids magnified x{fmt_factor(scene.scale)}")
     t = df.q_work.shape[0]
     for d in df.designs:
-        print(f"  {d.label:<18} {d.q_meas.shape[0]:>4} poses  tr(C_s) = {d.trace_cs_m2 * 1e12:10.4g} um^2  "
-              f"TCP sigma = {(max(d.trace_cs_m2, 0.0) / t) ** 0.5 * 1e6:8.4g} um  colour #{d.colour:06x}"
+        print(f"  {d.label:<18} {d.q_meas.shape[0]:>4} poses  tr(C_s) = {d.trace_cs_m2 * 1e6:.4e} mm^2  "
+              f"TCP sigma = {(max(d.trace_cs_m2, 0.0) / t) ** 0.5 * 1e6:8.4g} um  "
+              f"colour #{scene.colours[d.criterion]:06x}"
               + ("  (C_s recomputed)" if d.cov_source == "computed" else ""))
     if args.figures:
         from pin_kpi_oed.viz.figures import design_figures
@@ -84,9 +88,7 @@ def run(args: argparse.Namespace) -> int:
         if args.html is None:
             raise InputError("--pose needs --html (the live viewer has its own time slider)")
     if args.html is not None:
-        from pin_kpi_oed.data.atomic import atomic_write_text
-
-        atomic_write_text(args.html, scene.static_html(pose=pose))
+        scene.write_html(args.html, pose=pose)
         print(f"wrote {args.html} (self-contained; open it in any browser, offline)")
         if not args.no_open:
             import webbrowser
