@@ -6,6 +6,11 @@ the KPI point on the tool, the laser tracker's pose and noise, the joint
 bounds, the robot's capsules, the obstacles, the laser beam, the incidence
 limit (eq. 4, default 30°) and the working configurations q_work (the KPIs).
 
+:class:`Cell` is the one cell model of the package: the optimiser's constraints
+(:mod:`pin_kpi_oed.cell.collision`), the independent check
+(:mod:`pin_kpi_oed.cell.feasibility`) and the design files the viewer shows
+(:mod:`pin_kpi_oed.design.design_file`) all use it.
+
 Frames. Obstacles, half-spaces, the robot base and the tracker are given in
 one *cell* (world) frame W; the robot's capsules in their link frames. The
 measurement model needs the pose of the robot base in the tracker frame,
