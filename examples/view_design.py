@@ -17,8 +17,11 @@ import sys
 import tempfile
 from pathlib import Path
 
-from pin_kpi_oed.viz import viewer
+from pin_kpi_oed.design.design_file import load_design
+from pin_kpi_oed.design.stand_in import stand_in_design
+from pin_kpi_oed.viz.ellipsoids import fmt_factor
 from pin_kpi_oed.viz.figures import design_figures
+from pin_kpi_oed.viz.scene import build_scene
 
 quick = os.environ.get("PIN_KPI_OED_QUICK") == "1"  # the examples test runs a smaller problem
 args = [a for a in sys.argv[1:] if not a.startswith("--")]
@@ -36,21 +39,21 @@ else:
         print(f"design step not available ({exc}); using a stand-in")
         rc = 1
     if rc != 0 or not design_json.exists():
-        design_json.write_text(json.dumps(viewer.stand_in_design("kr15", m=20 if quick else 40, seed=0)))
-        print("stand-in design: random configurations, not optimised (pin_kpi_oed.viz.viewer.stand_in_design)")
+        design_json.write_text(json.dumps(stand_in_design("kr15", m=20 if quick else 40, seed=0)))
+        print("stand-in design: random configurations, not optimised (pin_kpi_oed.design.stand_in)")
 
-df = viewer.load_design(design_json)
+df = load_design(design_json)
 for note in df.notes:
     print("note:", note)
-scene = viewer.build_scene(df)  # drawn into an in-process recorder: no server, no ports
+scene = build_scene(df)  # drawn into an in-process recorder: no server, no ports
 page = scene.write_html("view_design.html")
 print(f"wrote {page} ({page.stat().st_size / 1e6:.1f} MB): {df.robot.name}, {len(df.designs)} designs, "
-      f"ellipsoids x{viewer.fmt_factor(scene.scale)}")
+      f"ellipsoids x{fmt_factor(scene.scale)}")
 t = df.q_work.shape[0]
 for d in df.designs:
-    clr = viewer.pose_clearance(df, d.q_meas)
+    clr = df.pose_clearance(d.q_meas)  # the independent check of the design's cell, the beam included
     inc = df.incidence_deg(d.q_meas)
-    print(f"  {d.label:<16} tr(C_s) = {d.trace_cs_m2 * 1e12:8.4g} um^2   TCP sigma = "
+    print(f"  {d.label:<16} tr(C_s) = {d.trace_cs_m2 * 1e6:.4e} mm^2   TCP sigma = "
           f"{(d.trace_cs_m2 / t) ** 0.5 * 1e6:6.3f} um   min clearance {clr.min() * 1e3:6.1f} mm   "
           f"max incidence {inc.max():5.1f} deg")
 for name, path in design_figures(df, ".", prefix="view_design").items():

@@ -8,8 +8,9 @@ import os
 import numpy as np
 import pytest
 
-from pin_kpi_oed.viz import figures
+from pin_kpi_oed.design.design_file import load_design
 from pin_kpi_oed.errors import InputError
+from pin_kpi_oed.viz import figures
 
 from .test_viewer import make_design
 
@@ -93,11 +94,21 @@ def test_design_figures_from_a_design_json(design, tmp_path):
     assert set(out) == {"ellipsoids", "bars", "poses"}
     for p in out.values():
         assert p.parent == tmp_path and p.name.startswith("kr15_") and _png_size(p)[0] > 500
+    # what the pose figure shows: the independent check's clearance and the model's incidence ...
+    df = load_design(design)
+    v = figures.design_figure_data(df)
+    for d in df.designs:
+        np.testing.assert_allclose(v.clearance_m[d.criterion], df.checker.check(d.q_meas).clearance_m, rtol=0)
+        np.testing.assert_allclose(v.incidence_deg[d.criterion], df.checker.check(d.q_meas).incidence_deg, atol=1e-8)
+        # ... and the ellipsoids in the cell frame: C_world = R C_tracker R^T (same eigenvalues)
+        C = d.cov_s_m2[:3, :3]
+        np.testing.assert_allclose(np.linalg.eigvalsh(v.covs_m2[d.criterion][0]), np.linalg.eigvalsh(C), rtol=1e-9)
+    assert v.colours == {"random": "#1f77b4", "param": "#9467bd", "kpi": "#2ca02c"}
     # per-pose values given in the file are used as they are
     design["designs"][0]["clearance_m"] = [0.05] * 14
     design["designs"][0]["incidence_deg"] = [12.0] * 14
-    out = figures.design_figures(design, tmp_path, prefix="given")
-    assert out["poses"].exists()
+    v = figures.design_figure_data(load_design(design))
+    assert v.clearance_m["random"].tolist() == [0.05] * 14 and v.incidence_deg["random"].tolist() == [12.0] * 14
 
 
 def test_progress_is_silent_off_a_terminal(monkeypatch, capsys):

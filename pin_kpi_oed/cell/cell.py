@@ -6,6 +6,11 @@ the KPI point on the tool, the laser tracker's pose and noise, the joint
 bounds, the robot's capsules, the obstacles, the laser beam, the incidence
 limit (eq. 4, default 30°) and the working configurations q_work (the KPIs).
 
+:class:`Cell` is the one cell model of the package: the optimiser's constraints
+(:mod:`pin_kpi_oed.cell.collision`), the independent check
+(:mod:`pin_kpi_oed.cell.feasibility`) and the design files the viewer shows
+(:mod:`pin_kpi_oed.design.design_file`) all use it.
+
 Frames. Obstacles, half-spaces, the robot base and the tracker are given in
 one *cell* (world) frame W; the robot's capsules in their link frames. The
 measurement model needs the pose of the robot base in the tracker frame,
@@ -63,7 +68,7 @@ import pinocchio as pin
 
 from pin_kpi_oed.errors import InputError, RobotLoadError
 from pin_kpi_oed.model.measurement import NoiseModel, TrackerModel
-from pin_kpi_oed.model.robot import Robot, load_robot
+from pin_kpi_oed.model.robot import ERD_ROBOTS, SHIPPED_ROBOTS, Robot, load_robot
 
 #: Folder of the cells shipped with the package.
 CELL_DIR = Path(__file__).resolve().parent / "cells"
@@ -180,10 +185,6 @@ class Cell:
         """The measurement model of the cell (nominal parameters; robot bounds replaced by the cell's)."""
         return TrackerModel(self.robot, tracker_T_base=self.tracker_T_base, reflector_m=self.reflector_m.copy(),
                             tcp_m=self.tcp_m.copy(), noise=self.noise)
-
-    def link_names(self) -> list[str]:
-        """Names of the robot's links (body frames)."""
-        return [f.name for f in self.robot.model.frames if f.type == pin.FrameType.BODY]
 
     def to_dict(self) -> dict:
         """The cell in plain numbers (SI units, cell frame for obstacles)."""
@@ -329,21 +330,8 @@ _KNOWN_KEYS = {"name", "description", "robot", "tool_frame", "base", "tracker", 
                "measurements", "max_random_tries"}
 
 
-def cell_from_dict(d: dict, source: str = "", base_dir: Path | None = None) -> Cell:
-    """Build a :class:`Cell` from the parsed YAML mapping (see the module docstring).
-
-    Args:
-        d: the mapping.
-        source: file name used in error messages.
-        base_dir: folder for relative URDF paths.
-
-    Returns:
-        The cell (names validated against the robot).
-
-    Raises:
-        InputError: a missing, unknown or invalid field, or an unknown link/obstacle name (named).
-        RobotLoadError: the robot cannot be loaded.
-    """
+def _check_top_level(d: Any, source: str) -> None:
+    """The file is a mapping of known fields naming a robot."""
     if not isinstance(d, dict):
         raise InputError(f"{source or 'cell'}: expected a YAML mapping at the top level")
     unknown = set(d) - _KNOWN_KEYS
@@ -351,16 +339,23 @@ def cell_from_dict(d: dict, source: str = "", base_dir: Path | None = None) -> C
         raise InputError(f"{_where(source, 'cell')}: unknown field(s) {', '.join(sorted(unknown))}")
     if "robot" not in d:
         raise InputError(f"{_where(source, 'robot')}: missing field (shipped name or URDF path)")
+
+
+def _read_robot(d: dict, source: str, base_dir: Path | None) -> Robot:
+    """The robot: a shipped name or a URDF path (relative to ``base_dir``)."""
     spec = str(d["robot"])
-    if base_dir is not None and spec.lower() not in ("kr15", "kr300", "kr500", "ur3", "ur5", "ur10", "panda"):
+    if base_dir is not None and spec.lower() not in SHIPPED_ROBOTS + tuple(ERD_ROBOTS):
         p = Path(spec)
         if not p.is_absolute():
             spec = str((base_dir / p).resolve())
     try:
-        robot = load_robot(spec, d.get("tool_frame"))
+        return load_robot(spec, d.get("tool_frame"))
     except RobotLoadError as exc:
         raise RobotLoadError(f"{_where(source, 'robot')}: {exc}") from None
-    n = robot.nq
+
+
+def _read_tracker_setup(d: dict, source: str) -> tuple[pin.SE3, pin.SE3, np.ndarray, np.ndarray, NoiseModel]:
+    """(W_T_base, W_T_tracker, reflector in the tool frame (m), TCP in the tool frame (m), noise)."""
     W_T_base = _pose(d.get("base"), _where(source, "base"))
     if "tracker" not in d:
         raise InputError(f"{_where(source, 'tracker')}: missing field (tracker pose xyz_m, rpy_rad)")
@@ -373,24 +368,31 @@ def cell_from_dict(d: dict, source: str = "", base_dir: Path | None = None) -> C
         noise = NoiseModel.from_dict(d.get("noise") or {})
     except InputError as exc:
         raise InputError(f"{_where(source, 'noise')}: {exc}") from None
+    return W_T_base, W_T_tracker, reflector, tcp, noise
 
+
+def _read_joint_bounds(d: dict, robot: Robot, source: str) -> tuple[np.ndarray, np.ndarray]:
+    """Joint bounds of the design (rad): the URDF's, or the cell's ``joint_bounds`` override."""
     lo, hi = robot.q_lower.copy(), robot.q_upper.copy()
     jb = d.get("joint_bounds")
-    if jb is not None:
-        w = _where(source, "joint_bounds")
-        if not isinstance(jb, dict):
-            raise InputError(f"{w}: expected a mapping with lower_rad/upper_rad (or _deg)")
-        lo2 = _angles(jb, "lower", n, w, required=False)
-        hi2 = _angles(jb, "upper", n, w, required=False)
-        lo = lo if lo2 is None else lo2
-        hi = hi if hi2 is None else hi2
-        bad = np.flatnonzero(~(lo < hi))
-        if bad.size:
-            j = bad[0]
-            raise InputError(f"{w}: joint {robot.joint_names[j]} bounds [{lo[j]:.4g}, {hi[j]:.4g}] rad are empty")
-    robot.q_lower, robot.q_upper = lo.copy(), hi.copy()
+    if jb is None:
+        return lo, hi
+    w = _where(source, "joint_bounds")
+    if not isinstance(jb, dict):
+        raise InputError(f"{w}: expected a mapping with lower_rad/upper_rad (or _deg)")
+    lo2 = _angles(jb, "lower", robot.nq, w, required=False)
+    hi2 = _angles(jb, "upper", robot.nq, w, required=False)
+    lo = lo if lo2 is None else lo2
+    hi = hi if hi2 is None else hi2
+    bad = np.flatnonzero(~(lo < hi))
+    if bad.size:
+        j = bad[0]
+        raise InputError(f"{w}: joint {robot.joint_names[j]} bounds [{lo[j]:.4g}, {hi[j]:.4g}] rad are empty")
+    return lo, hi
 
-    links = {f.name for f in robot.model.frames if f.type == pin.FrameType.BODY}
+
+def _read_robot_capsules(d: dict, robot: Robot, source: str) -> list[CapsuleSpec]:
+    """Robot capsules (link frames): the URDF's collision cylinders or a list, plus ``extra_capsules``."""
     rc = d.get("robot_capsules", "urdf")
     if rc == "urdf" or rc is None:
         caps = capsules_from_urdf(robot, _where(source, "robot_capsules"))
@@ -400,11 +402,16 @@ def cell_from_dict(d: dict, source: str = "", base_dir: Path | None = None) -> C
         raise InputError(f"{_where(source, 'robot_capsules')}: expected 'urdf' or a list of capsules, got {rc!r}")
     caps += [_capsule(c, _where(source, f"extra_capsules[{i}]"), True)
              for i, c in enumerate(d.get("extra_capsules") or [])]
-    for i, c in enumerate(caps):
+    links = body_names(robot)
+    for c in caps:
         if c.link not in links:
             raise InputError(f"{_where(source, 'robot_capsules')}: capsule '{c.name}' is on unknown link '{c.link}' "
                              f"(links of {robot.name}: {', '.join(sorted(links))})")
+    return caps
 
+
+def _read_obstacles(d: dict, source: str) -> tuple[list[CapsuleSpec], list[HalfSpace]]:
+    """Obstacle capsules and half-spaces (cell frame)."""
     obs = d.get("obstacles") or {}
     if not isinstance(obs, dict):
         raise InputError(f"{_where(source, 'obstacles')}: expected a mapping with 'capsules' and 'half_spaces'")
@@ -422,47 +429,110 @@ def cell_from_dict(d: dict, source: str = "", base_dir: Path | None = None) -> C
         if np.linalg.norm(nrm) < 1e-9:
             raise InputError(f"{w}.normal: must not be zero")
         halfs.append(HalfSpace(str(h["name"]), nrm / np.linalg.norm(nrm), float(h["offset_m"])))
+    return obstacles, halfs
 
-    names = [c.name for c in caps] + [o.name for o in obstacles] + [h.name for h in halfs]
-    dup = sorted({x for x in names if names.count(x) > 1})
-    if dup:
-        raise InputError(f"{_where(source, 'cell')}: duplicate capsule/obstacle name(s) {', '.join(dup)}")
-    known = set(names) | {c.link for c in caps}
 
-    def _check_name(x: Any, what: str) -> str:
+class _Names:
+    """The names ``skip_pairs`` and ``beam.skip`` may use: capsules, their links, obstacles, half-spaces."""
+
+    def __init__(self, caps: list[CapsuleSpec], obstacles: list[CapsuleSpec], halfs: list[HalfSpace],
+                 links: set[str], source: str):
+        names = [c.name for c in caps] + [o.name for o in obstacles] + [h.name for h in halfs]
+        dup = sorted({x for x in names if names.count(x) > 1})
+        if dup:
+            raise InputError(f"{_where(source, 'cell')}: duplicate capsule/obstacle name(s) {', '.join(dup)}")
+        self.known = set(names) | {c.link for c in caps}
+        self.links = links
+
+    def check(self, x: Any, what: str) -> str:
+        """``x`` as a known name.
+
+        Raises:
+            InputError: an unknown name (or a link without capsules), naming ``what``.
+        """
         x = str(x)
-        if x not in known:
-            kind = "link or obstacle" if x not in links else "link without capsules"
-            raise InputError(f"{what}: unknown {kind} name '{x}' (known: {', '.join(sorted(known))})")
+        if x not in self.known:
+            kind = "link or obstacle" if x not in self.links else "link without capsules"
+            raise InputError(f"{what}: unknown {kind} name '{x}' (known: {', '.join(sorted(self.known))})")
         return x
 
+
+def _read_skip_pairs(d: dict, names: _Names, source: str) -> list[tuple[str, str]]:
+    """Pairs of names never checked against each other."""
     skips = []
     for i, pr in enumerate(d.get("skip_pairs") or []):
         w = _where(source, f"skip_pairs[{i}]")
         if not isinstance(pr, (list, tuple)) or len(pr) != 2:
             raise InputError(f"{w}: expected a pair of names, got {pr!r}")
-        skips.append((_check_name(pr[0], w), _check_name(pr[1], w)))
+        skips.append((names.check(pr[0], w), names.check(pr[1], w)))
+    return skips
+
+
+def _read_beam(d: dict, names: _Names, source: str) -> tuple[float, list[str]]:
+    """(beam radius (m), names the beam is not checked against)."""
     beam = d.get("beam") or {}
     if not isinstance(beam, dict):
         raise InputError(f"{_where(source, 'beam')}: expected a mapping with radius_m and skip")
     beam_r = float(beam.get("radius_m", 0.005))
     if not (math.isfinite(beam_r) and beam_r >= 0):
         raise InputError(f"{_where(source, 'beam.radius_m')}: must be >= 0, got {beam.get('radius_m')!r}")
-    beam_skip = [_check_name(x, _where(source, "beam.skip")) for x in beam.get("skip") or []]
+    return beam_r, [names.check(x, _where(source, "beam.skip")) for x in beam.get("skip") or []]
 
+
+def _read_limits(d: dict, source: str) -> tuple[float, float, int, int]:
+    """(incidence limit (deg), clearance (m), measurements, random-design budget)."""
     inc = float(d.get("incidence_max_deg", 30.0))
     if not (0 < inc <= 180):
         raise InputError(f"{_where(source, 'incidence_max_deg')}: must be in (0, 180] deg, got {inc}")
     clr = float(d.get("clearance_m", 0.0))
     if not (math.isfinite(clr) and clr >= 0):
         raise InputError(f"{_where(source, 'clearance_m')}: must be >= 0 m, got {clr}")
-    qw = _angles(d, "working_configurations", n, _where(source, "cell"))
-    qw = np.atleast_2d(qw)
-    robot.check_q(qw, _where(source, "working_configurations"))
     m = int(d.get("measurements", 60))
     tries = int(d.get("max_random_tries", 200_000))
     if m < 1 or tries < 1:
         raise InputError(f"{_where(source, 'measurements')}: measurements and max_random_tries must be >= 1")
+    return inc, clr, m, tries
+
+
+def _read_working_configurations(d: dict, robot: Robot, source: str) -> np.ndarray:
+    """Working configurations (t, n) rad, within the joint bounds."""
+    qw = np.atleast_2d(_angles(d, "working_configurations", robot.nq, _where(source, "cell")))
+    robot.check_q(qw, _where(source, "working_configurations"))
+    return qw
+
+
+def body_names(robot: Robot) -> set[str]:
+    """Names of the robot's links (Pinocchio BODY frames): where capsules can be attached."""
+    return {f.name for f in robot.model.frames if f.type == pin.FrameType.BODY}
+
+
+def cell_from_dict(d: dict, source: str = "", base_dir: Path | None = None) -> Cell:
+    """Build a :class:`Cell` from the parsed YAML mapping (see the module docstring).
+
+    Args:
+        d: the mapping.
+        source: file name used in error messages.
+        base_dir: folder for relative URDF paths.
+
+    Returns:
+        The cell (names validated against the robot). The robot's joint bounds are set to the cell's.
+
+    Raises:
+        InputError: a missing, unknown or invalid field, or an unknown link/obstacle name (named).
+        RobotLoadError: the robot cannot be loaded.
+    """
+    _check_top_level(d, source)
+    robot = _read_robot(d, source, base_dir)
+    W_T_base, W_T_tracker, reflector, tcp, noise = _read_tracker_setup(d, source)
+    lo, hi = _read_joint_bounds(d, robot, source)
+    robot.q_lower, robot.q_upper = lo.copy(), hi.copy()
+    caps = _read_robot_capsules(d, robot, source)
+    obstacles, halfs = _read_obstacles(d, source)
+    names = _Names(caps, obstacles, halfs, body_names(robot), source)
+    skips = _read_skip_pairs(d, names, source)
+    beam_r, beam_skip = _read_beam(d, names, source)
+    inc, clr, m, tries = _read_limits(d, source)
+    qw = _read_working_configurations(d, robot, source)
     return Cell(name=str(d.get("name", Path(source).stem if source else "cell")), source=source, robot=robot,
                 W_T_base=W_T_base, W_T_tracker=W_T_tracker, reflector_m=reflector, tcp_m=tcp, noise=noise,
                 q_lower=lo, q_upper=hi, robot_capsules=caps, obstacles=obstacles, half_spaces=halfs,

@@ -1,4 +1,4 @@
-"""``pin-kpi-oed view DESIGN_JSON``: meshcat preview of a design (see :mod:`pin_kpi_oed.viz.viewer`).
+"""``pin-kpi-oed view DESIGN_JSON``: meshcat preview of a design (see :mod:`pin_kpi_oed.viz.scene`).
 
     pin-kpi-oed view design.json                       # live meshcat viewer in the browser (Ctrl-C to stop)
     pin-kpi-oed view design.json --html out.html       # self-contained static page, opened in the browser
@@ -14,8 +14,13 @@ import signal
 import sys
 import time
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from pin_kpi_oed.errors import InputError
+
+if TYPE_CHECKING:
+    from pin_kpi_oed.design.design_file import DesignFile
+    from pin_kpi_oed.viz.scene import Scene
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -43,56 +48,57 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run)
 
 
-def run(args: argparse.Namespace) -> int:
-    """Handler of ``view``; returns the exit code (errors raise PinKpiOedError, printed by cli.main)."""
-    from pin_kpi_oed.viz.viewer import build_scene, fmt_factor, load_design, serve
-
+def _check_args(args: argparse.Namespace) -> None:
+    """Raises InputError on a bad --level, --scale or --html folder."""
     if not (0.0 < args.level < 1.0):
         raise InputError(f"--level must be in (0, 1), got {args.level}")
     if args.scale is not None and not args.scale > 0:
         raise InputError(f"--scale must be > 0, got {args.scale}")
     if args.html is not None and not Path(args.html).resolve().parent.is_dir():
         raise InputError(f"--html {args.html}: folder {Path(args.html).parent} does not exist")
-    criteria = [c.strip() for c in args.criteria.split(",") if c.strip()] if args.criteria else None
-    df = load_design(args.design, criteria=criteria)
-    for n in df.notes:
-        print(f"note: {n}", file=sys.stderr)
-    scene = build_scene(df, scale=args.scale, level=args.level, ghosts=not args.no_ghosts,
-                        capsules_visible=args.capsules)
-    print(f"{df.robot.name}: {len(df.designs)} design(s), {df.q_work.shape[0]} working configuration(s); "
-          f"{int(round(args.level * 100))} % TCP ellipsoids magnified x{fmt_factor(scene.scale)}")
+
+
+def _print_designs(df: DesignFile, scene: Scene, level: float) -> None:
+    """One line per design: poses, tr(C_s) (mm², as ``pin-kpi-oed design``), TCP sigma (µm), colour."""
+    from pin_kpi_oed.viz.ellipsoids import fmt_factor
+
     t = df.q_work.shape[0]
+    print(f"{df.robot.name}: {len(df.designs)} design(s), {t} working configuration(s); "
+          f"{int(round(level * 100))} % TCP ellipsoids magnified x{fmt_factor(scene.scale)}")
     for d in df.designs:
-        print(f"  {d.label:<18} {d.q_meas.shape[0]:>4} poses  tr(C_s) = {d.trace_cs_m2 * 1e12:10.4g} um^2  "
-              f"TCP sigma = {(max(d.trace_cs_m2, 0.0) / t) ** 0.5 * 1e6:8.4g} um  colour #{d.colour:06x}"
+        print(f"  {d.label:<18} {d.q_meas.shape[0]:>4} poses  tr(C_s) = {d.trace_cs_m2 * 1e6:.4e} mm^2  "
+              f"TCP sigma = {(max(d.trace_cs_m2, 0.0) / t) ** 0.5 * 1e6:8.4g} um  "
+              f"colour #{scene.colours[d.criterion]:06x}"
               + ("  (C_s recomputed)" if d.cov_source == "computed" else ""))
-    if args.figures:
-        from pin_kpi_oed.viz.figures import design_figures
 
-        out = Path(args.figures)
-        if not out.is_dir():
-            raise InputError(f"--figures {out}: no such folder")
-        for k, p in design_figures(df, out).items():
-            print(f"wrote {p}")
-    pose = None
-    if args.pose:
-        crit, _, k = args.pose.rpartition(":")
-        if not crit or not k.isdigit():
-            raise InputError(f"--pose: expected CRITERION:K (e.g. kpi:0), got '{args.pose}'")
-        pose = (crit, int(k))
-        scene.pose_time(*pose)  # raises on an unknown design or index
-        if args.html is None:
-            raise InputError("--pose needs --html (the live viewer has its own time slider)")
-    if args.html is not None:
-        from pin_kpi_oed.data.atomic import atomic_write_text
 
-        atomic_write_text(args.html, scene.static_html(pose=pose))
-        print(f"wrote {args.html} (self-contained; open it in any browser, offline)")
-        if not args.no_open:
-            import webbrowser
+def _write_figures(df: DesignFile, folder: str) -> None:
+    """The report figures as PNG in an existing folder."""
+    from pin_kpi_oed.viz.figures import design_figures
 
-            webbrowser.open(Path(args.html).resolve().as_uri(), new=2)
-        return 0
+    out = Path(folder)
+    if not out.is_dir():
+        raise InputError(f"--figures {out}: no such folder")
+    for p in design_figures(df, out).values():
+        print(f"wrote {p}")
+
+
+def _pose(args: argparse.Namespace, scene: Scene) -> tuple[str, int] | None:
+    """The --pose CRITERION:K to open the page at (checked against the scene's animation)."""
+    if not args.pose:
+        return None
+    crit, _, k = args.pose.rpartition(":")
+    if not crit or not k.isdigit():
+        raise InputError(f"--pose: expected CRITERION:K (e.g. kpi:0), got '{args.pose}'")
+    scene.pose_time(crit, int(k))  # raises on an unknown design or index
+    if args.html is None:
+        raise InputError("--pose needs --html (the live viewer has its own time slider)")
+    return crit, int(k)
+
+
+def _serve_until_stopped(scene: Scene, open_browser: bool) -> int:
+    """Replay the scene into a live meshcat server and wait for Ctrl-C (or SIGTERM); stops the server."""
+    from pin_kpi_oed.viz.render import serve
 
     def _stop(signum, frame):  # SIGTERM ends like Ctrl-C, so that meshcat's atexit stops its server
         raise KeyboardInterrupt
@@ -100,7 +106,7 @@ def run(args: argparse.Namespace) -> int:
     old = signal.signal(signal.SIGTERM, _stop)
     live = None
     try:
-        live = serve(scene, open_browser=not args.no_open)
+        live = serve(scene, open_browser=open_browser)
         print(f"meshcat viewer at {live.url()}  (Ctrl-C to stop)", flush=True)
         while True:
             time.sleep(3600)
@@ -112,3 +118,30 @@ def run(args: argparse.Namespace) -> int:
         if proc is not None and proc.poll() is None:
             proc.kill()
             proc.wait()
+
+
+def run(args: argparse.Namespace) -> int:
+    """Handler of ``view``; returns the exit code (errors raise PinKpiOedError, printed by cli.main)."""
+    from pin_kpi_oed.design.design_file import load_design
+    from pin_kpi_oed.viz.scene import SceneOptions, build_scene
+
+    _check_args(args)
+    criteria = [c.strip() for c in args.criteria.split(",") if c.strip()] if args.criteria else None
+    df = load_design(args.design, criteria=criteria)
+    for n in df.notes:
+        print(f"note: {n}", file=sys.stderr)
+    scene = build_scene(df, SceneOptions(scale=args.scale, level=args.level, ghosts=not args.no_ghosts,
+                                         capsules_visible=args.capsules))
+    _print_designs(df, scene, args.level)
+    if args.figures:
+        _write_figures(df, args.figures)
+    pose = _pose(args, scene)
+    if args.html is None:
+        return _serve_until_stopped(scene, open_browser=not args.no_open)
+    scene.write_html(args.html, pose=pose)
+    print(f"wrote {args.html} (self-contained; open it in any browser, offline)")
+    if not args.no_open:
+        import webbrowser
+
+        webbrowser.open(Path(args.html).resolve().as_uri(), new=2)
+    return 0

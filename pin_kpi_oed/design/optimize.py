@@ -41,7 +41,7 @@ The run also stops when the lowest objective of all iterates has improved by les
 tol = 1e-6 that takes ten times longer. If Ipopt stops without success (or stalls), the best
 feasible iterate seen (tracked in the ``intermediate`` callback from Ipopt's current iterate and
 constraint values) is returned with the status. Every returned design is re-checked by the
-independent dense :class:`~pin_kpi_oed.cell.collision.FeasibilityChecker`.
+independent dense :class:`~pin_kpi_oed.cell.feasibility.FeasibilityChecker`.
 """
 
 from __future__ import annotations
@@ -54,8 +54,8 @@ from typing import Any
 import numpy as np
 
 from pin_kpi_oed.cell.cell import Cell
-from pin_kpi_oed.cell.collision import (AggregatedConstraints, CollisionModel, FeasibilityChecker, FeasibilityReport,
-                                        random_feasible)
+from pin_kpi_oed.cell.collision import AggregatedConstraints, CollisionModel, random_feasible
+from pin_kpi_oed.cell.feasibility import FeasibilityChecker, FeasibilityReport
 from pin_kpi_oed.errors import IdentifiabilityError, InputError, SolverError
 from pin_kpi_oed.oed.criteria import DesignCriterion, check_names, get_criterion
 from pin_kpi_oed.oed.identifiability import analyse, check_kpi

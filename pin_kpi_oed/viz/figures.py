@@ -4,10 +4,10 @@
   the xy, xz and yz planes, one row per working configuration (as the paper's Figure 7, heuristic
   vs KPI design). The curve drawn is the *shadow* of the 3-D ellipsoid {x : xᵀC⁻¹x <= χ²₃(level)}
   on the plane, i.e. the ellipse of the 2×2 marginal covariance with the same χ²₃ bound.
-* :func:`plot_design_bars`: tr(C_s) (µm²) and the RMS TCP σ (µm) of each design, with the change
+* :func:`plot_design_bars`: tr(C_s) (mm², as ``pin-kpi-oed design``) and the RMS TCP σ (µm) of each design, with the change
   relative to the heuristic.
 * :func:`plot_pose_quality`: per measurement pose, the clearance (mm) and the laser incidence (°).
-* :func:`design_figures`: the three from a design JSON (:func:`pin_kpi_oed.viz.viewer.load_design`).
+* :func:`design_figures`: the three from a design JSON (:func:`pin_kpi_oed.design.design_file.load_design`).
 
 Figures are drawn on :class:`matplotlib.figure.Figure` with the Agg canvas (no pyplot, no display,
 thread-safe) and written atomically (a temporary file in the target folder, then renamed).
@@ -18,25 +18,24 @@ from __future__ import annotations
 
 import io
 import os
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Mapping, Sequence
 
 import numpy as np
 
 from pin_kpi_oed.errors import InputError
+from pin_kpi_oed.viz.style import design_colours, hex_colour
 
-#: Default colours by criterion (matplotlib's tab10, no orange: the robot's colour in the viewer).
-COLOURS = {"random": "#1f77b4", "heuristic": "#1f77b4", "param": "#9467bd", "kpi": "#2ca02c"}
-_EXTRA = ("#17becf", "#e377c2", "#7f7f7f", "#bcbd22", "#8c564b", "#393b79", "#637939")
 UNITS = {"m": 1.0, "mm": 1e3, "um": 1e6}
 UNIT_LABEL = {"m": "m", "mm": "mm", "um": "µm"}
 
 
 def _colours(names: Sequence[str], colours: Mapping[str, str] | None) -> dict[str, str]:
-    out, extra = {}, iter(_EXTRA * 4)
-    for n in names:
-        out[n] = (colours or {}).get(n) or COLOURS.get(n) or next(extra)
-    return out
+    """Colour of each design: the given one, else the scene's (:func:`pin_kpi_oed.viz.style.design_colours`)."""
+    given = colours or {}
+    default = design_colours([n for n in names if not given.get(n)])
+    return {n: given.get(n) or hex_colour(default[n]) for n in names}
 
 
 def _figure(w: float, h: float):
@@ -151,7 +150,7 @@ def _baseline(names: Sequence[str], baseline: str | None) -> str | None:
 def plot_design_bars(traces_m2: Mapping[str, float], path: str | os.PathLike, *, n_work: int = 1,
                      colours: Mapping[str, str] | None = None, labels: Mapping[str, str] | None = None,
                      baseline: str | None = None, title: str | None = None) -> Path:
-    """Bar chart comparing designs: tr(C_s) (µm²) and RMS TCP σ = sqrt(tr(C_s)/t) (µm).
+    """Bar chart comparing designs: tr(C_s) (mm²) and RMS TCP σ = sqrt(tr(C_s)/t) (µm).
 
     Each bar is annotated with its change relative to ``baseline`` (default the ``random`` /
     ``heuristic`` design when present).
@@ -174,7 +173,7 @@ def plot_design_bars(traces_m2: Mapping[str, float], path: str | os.PathLike, *,
     fig = _figure(max(6.0, 1.6 * len(names) + 3.0), 3.8)
     ax1, ax2 = fig.subplots(1, 2)
     x = np.arange(len(names))
-    for ax, vals, ylabel in ((ax1, tr * 1e12, "tr(C$_s$) (µm²)"), (ax2, sig, "RMS TCP σ (µm)")):
+    for ax, vals, ylabel in ((ax1, tr * 1e6, "tr(C$_s$) (mm²)"), (ax2, sig, "RMS TCP σ (µm)")):
         bars = ax.bar(x, vals, color=[col[n] for n in names])
         ax.set_xticks(x, lab, rotation=20 if max(len(s) for s in lab) > 10 else 0, ha="right"
                       if max(len(s) for s in lab) > 10 else "center")
@@ -260,15 +259,56 @@ def _per_pose(info: Mapping, keys: Sequence[str], m: int) -> np.ndarray | None:
     return None
 
 
-def design_figures(design: Any, out_dir: str | os.PathLike, prefix: str = "design", level: float = 0.95,
-                   frame: str = "world") -> dict[str, Path]:
-    """The three figures of a design file, written to ``out_dir``.
+@dataclass
+class DesignFigureData:
+    """What the three figures of a design file show, per design (criterion).
 
-    Per-pose clearance / incidence come from the design entries (``clearance_m`` / ``incidence_deg``
-    lists) when present, else from :func:`pin_kpi_oed.viz.viewer.pose_clearance` and the tracker model.
+    Attributes:
+        covs_m2: C_s blocks (t, 3, 3) m², in the frame the figure names.
+        traces_m2: tr(C_s) (m²).
+        clearance_m: per pose, smallest clearance (m): the file's ``clearance_m`` list, else the
+            independent check of the file's cell (:meth:`~pin_kpi_oed.design.design_file.DesignFile.pose_clearance`).
+        incidence_deg: per pose, laser incidence (deg): the file's ``incidence_deg`` list, else the model's.
+        colours: ``#rrggbb``; labels: readable names.
+    """
+
+    covs_m2: dict[str, np.ndarray]
+    traces_m2: dict[str, float]
+    clearance_m: dict[str, np.ndarray]
+    incidence_deg: dict[str, np.ndarray]
+    colours: dict[str, str]
+    labels: dict[str, str]
+
+
+def design_figure_data(df: Any, frame: str = "world") -> DesignFigureData:
+    """The values :func:`design_figures` plots, from a :class:`~pin_kpi_oed.design.design_file.DesignFile`.
 
     Args:
-        design: a :class:`~pin_kpi_oed.viz.viewer.DesignFile`, a design JSON path or dict.
+        df: the design file.
+        frame: ``world`` (the cell frame, z up) or ``tracker`` for the covariances.
+    """
+    R = df.world_T_tracker.rotation if frame == "world" else np.eye(3)
+    colours = design_colours([d.criterion for d in df.designs])
+    out = DesignFigureData({}, {}, {}, {}, {}, {})
+    for d in df.designs:
+        m = d.q_meas.shape[0]
+        out.covs_m2[d.criterion] = np.array([R @ B @ R.T for B in _blocks(d.cov_s_m2)])
+        out.traces_m2[d.criterion] = d.trace_cs_m2
+        c = _per_pose(d.info, ("clearance_m", "pose_clearance_m", "clearances_m"), m)
+        out.clearance_m[d.criterion] = c if c is not None else df.pose_clearance(d.q_meas)
+        a = _per_pose(d.info, ("incidence_deg", "pose_incidence_deg"), m)
+        out.incidence_deg[d.criterion] = a if a is not None else df.incidence_deg(d.q_meas)
+        out.colours[d.criterion] = hex_colour(colours[d.criterion])
+        out.labels[d.criterion] = d.label
+    return out
+
+
+def design_figures(design: Any, out_dir: str | os.PathLike, prefix: str = "design", level: float = 0.95,
+                   frame: str = "world") -> dict[str, Path]:
+    """The three figures of a design file, written to ``out_dir`` (values: :func:`design_figure_data`).
+
+    Args:
+        design: a :class:`~pin_kpi_oed.design.design_file.DesignFile`, a design JSON path or dict.
         out_dir: existing folder.
         prefix: file-name prefix.
         level: confidence level of the ellipsoids.
@@ -276,36 +316,26 @@ def design_figures(design: Any, out_dir: str | os.PathLike, prefix: str = "desig
 
     Returns:
         ``{"ellipsoids": path, "bars": path, "poses": path}``.
+
+    Raises:
+        InputError: ``out_dir`` is not a folder, or the design file cannot be read.
     """
-    from pin_kpi_oed.viz.viewer import DesignFile, load_design, pose_clearance
+    from pin_kpi_oed.design.design_file import DesignFile, load_design
 
     df = design if isinstance(design, DesignFile) else load_design(design)
     out = Path(out_dir)
     if not out.is_dir():
         raise InputError(f"cannot write figures to '{out}': no such folder")
-    R = df.world_T_tracker.rotation if frame == "world" else np.eye(3)
-    covs, traces, clear, inc, colours, labels = {}, {}, {}, {}, {}, {}
-    for d in df.designs:
-        blocks = _blocks(d.cov_s_m2)
-        covs[d.criterion] = np.array([R @ B @ R.T for B in blocks])
-        traces[d.criterion] = d.trace_cs_m2
-        m = d.q_meas.shape[0]
-        c = _per_pose(d.info, ("clearance_m", "pose_clearance_m", "clearances_m"), m)
-        clear[d.criterion] = c if c is not None else pose_clearance(df, d.q_meas)
-        a = _per_pose(d.info, ("incidence_deg", "pose_incidence_deg"), m)
-        inc[d.criterion] = a if a is not None else df.incidence_deg(d.q_meas)
-        colours[d.criterion] = f"#{d.colour:06x}"
-        labels[d.criterion] = d.label
+    v = design_figure_data(df, frame)
     name = df.robot.name
-    paths = {
+    return {
         "ellipsoids": plot_ellipsoid_projections(
-            covs, out / f"{prefix}_ellipsoids.png", colours=colours, labels=labels, level=level,
+            v.covs_m2, out / f"{prefix}_ellipsoids.png", colours=v.colours, labels=v.labels, level=level,
             frame="cell frame" if frame == "world" else "tracker frame",
             title=f"{name}: TCP {int(round(level * 100))} % confidence ellipsoids, projected"),
-        "bars": plot_design_bars(traces, out / f"{prefix}_designs.png", n_work=df.q_work.shape[0], colours=colours,
-                                 labels=labels, title=f"{name}: designs compared"),
-        "poses": plot_pose_quality(clear, inc, out / f"{prefix}_poses.png", colours=colours, labels=labels,
-                                   incidence_limit_deg=df.incidence_limit_deg,
+        "bars": plot_design_bars(v.traces_m2, out / f"{prefix}_designs.png", n_work=df.q_work.shape[0],
+                                 colours=v.colours, labels=v.labels, title=f"{name}: designs compared"),
+        "poses": plot_pose_quality(v.clearance_m, v.incidence_deg, out / f"{prefix}_poses.png", colours=v.colours,
+                                   labels=v.labels, incidence_limit_deg=df.incidence_limit_deg,
                                    title=f"{name}: clearance and laser incidence per pose"),
     }
-    return paths

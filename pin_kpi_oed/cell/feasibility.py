@@ -1,0 +1,286 @@
+"""Independent dense feasibility check of a design (Pinocchio forward kinematics + Coal).
+
+:class:`FeasibilityChecker` re-evaluates configurations of a :class:`~pin_kpi_oed.cell.cell.Cell`
+densely — every capsule pair, no pruning, no batching — with Pinocchio's forward kinematics, a
+``pin.GeometryModel`` of Coal capsules and half-spaces (``pin.computeDistances``), per-pose Coal
+capsules for the laser beam and the incidence angle (eq. 4) from ``oMf[tool]``: none of the
+optimiser's code path (:mod:`pin_kpi_oed.cell.collision`). The design optimiser reports its
+designs through it, and the viewer's clearances are its distances.
+
+Pairs checked: robot capsules of non-adjacent joints (a joint's parent and child are adjacent),
+every robot capsule against every obstacle capsule and half-space, and the beam (tracker →
+reflector) against every robot capsule, obstacle and half-space; the cell's ``skip_pairs`` and
+``beam_skip`` are honoured (by capsule, link, obstacle or half-space name). Distances are signed
+(negative = penetration depth), in metres, for the capsules as solids (radii subtracted).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import pinocchio as pin
+
+from pin_kpi_oed.cell.cell import Cell
+
+
+def coal_capsule(a: np.ndarray, b: np.ndarray, radius: float):
+    """A Coal capsule whose segment is [a, b] (m), and its transform (local z along b − a).
+
+    Args:
+        a, b: end points of the segment (m).
+        radius: radius (m).
+
+    Returns:
+        (coal.Capsule, coal.Transform3s).
+    """
+    import coal
+
+    d = np.asarray(b, float) - np.asarray(a, float)
+    L = float(np.linalg.norm(d))
+    R = np.eye(3)
+    if L > 1e-12:
+        R = pin.Quaternion.FromTwoVectors(np.array([0.0, 0.0, 1.0]), d / L).matrix()
+    T = coal.Transform3s(R, 0.5 * (np.asarray(a, float) + np.asarray(b, float)))
+    return coal.Capsule(float(radius), L), T
+
+
+@dataclass
+class FeasibilityReport:
+    """Dense, independent feasibility check of a design.
+
+    Attributes:
+        collision_free: per pose, every capsule pair and half-space clear (m,).
+        visible: per pose, laser beam unobstructed and incidence within the limit (m,).
+        within_bounds: per pose, joint values within the cell's bounds (m,).
+        clearance_m: per pose, smallest clearance over every checked pair (incl. the beam) minus the
+            cell's required clearance (m,) m; ``inf`` when nothing is checked.
+        incidence_deg: per pose, incidence angle (m,) deg.
+        worst: per pose, name of the pair with the smallest clearance.
+        n_pairs: pairs checked per pose (robot–robot, robot–obstacle, robot–half-space, beam).
+    """
+
+    collision_free: np.ndarray
+    visible: np.ndarray
+    within_bounds: np.ndarray
+    clearance_m: np.ndarray
+    incidence_deg: np.ndarray
+    worst: list[str]
+    n_pairs: int
+
+    @property
+    def feasible(self) -> np.ndarray:
+        """Per pose: collision-free, visible and within bounds."""
+        return self.collision_free & self.visible & self.within_bounds
+
+    @property
+    def all_feasible(self) -> bool:
+        """Whether every pose is feasible."""
+        return bool(np.all(self.feasible))
+
+    @property
+    def share_colliding(self) -> float:
+        """Share of poses in collision (capsules or half-spaces), 0…1."""
+        return float(np.mean(~self.collision_free)) if self.collision_free.size else 0.0
+
+    @property
+    def share_infeasible(self) -> float:
+        """Share of poses failing any check, 0…1."""
+        return float(np.mean(~self.feasible)) if self.collision_free.size else 0.0
+
+    @property
+    def min_clearance_m(self) -> float:
+        """Smallest clearance of the design (m)."""
+        return float(self.clearance_m.min()) if self.clearance_m.size else float("inf")
+
+    @property
+    def max_incidence_deg(self) -> float:
+        """Largest incidence angle of the design (deg)."""
+        return float(self.incidence_deg.max()) if self.incidence_deg.size else 0.0
+
+    def violations(self, limit: int = 5) -> list[str]:
+        """Readable descriptions of the first infeasible poses."""
+        out = []
+        for i in np.flatnonzero(~self.feasible)[:limit]:
+            why = []
+            if not self.within_bounds[i]:
+                why.append("outside the joint bounds")
+            if not self.collision_free[i] or self.clearance_m[i] < 0:
+                why.append(f"{self.worst[i]} at {self.clearance_m[i] * 1e3:.1f} mm")
+            if not self.visible[i] and self.clearance_m[i] >= 0:
+                why.append(f"incidence {self.incidence_deg[i]:.1f} deg")
+            out.append(f"pose {i}: " + ", ".join(why))
+        return out
+
+    def to_dict(self) -> dict:
+        """Plain numbers."""
+        return {"all_feasible": self.all_feasible, "n_poses": int(self.collision_free.size),
+                "n_colliding": int(np.sum(~self.collision_free)), "n_invisible": int(np.sum(~self.visible)),
+                "n_out_of_bounds": int(np.sum(~self.within_bounds)), "share_colliding": self.share_colliding,
+                "min_clearance_m": self.min_clearance_m, "max_incidence_deg": self.max_incidence_deg,
+                "pairs_per_pose": self.n_pairs, "violations": self.violations()}
+
+
+class FeasibilityChecker:
+    """Independent dense check: Pinocchio FK + Coal on a ``pin.GeometryModel``, every pair.
+
+    Args:
+        cell: the measurement cell.
+
+    Attributes:
+        pair_names: (name, name) of every checked capsule / half-space pair.
+        beam_names: name of every capsule / half-space the beam is checked against.
+        names: ``a|b`` for every pair, then ``beam|x`` for every beam target: the columns of
+            :meth:`distances`.
+        n_pairs: number of capsule / half-space pairs (the first columns of :meth:`distances`).
+    """
+
+    def __init__(self, cell: Cell):
+        self.cell = cell
+        rb = cell.robot
+        self.model = rb.model
+        self.data = rb.model.createData()
+        self.gm = pin.GeometryModel()
+        self.labels: list[tuple[str, str | None]] = []  # (name, link) of every geometry object
+        self.robot_ids, self.robot_joint = self._add_robot_capsules()
+        self.obst_ids, self.half_ids = self._add_obstacles()
+        self.pairs = self._collision_pairs()
+        for i, k in self.pairs:
+            self.gm.addCollisionPair(pin.CollisionPair(i, k))
+        self.gd = pin.GeometryData(self.gm)
+        self.beam_targets = [i for i in self.robot_ids + self.obst_ids + self.half_ids
+                             if not any(x in self._keys(i) for x in cell.beam_skip)]
+        self.tool_id = rb.tool_frame_id
+        self.tracker = cell.tracker_in_base
+        self.reflector = np.asarray(cell.reflector_m, float)
+        go = self.gm.geometryObjects
+        self.n_pairs = len(self.pairs)
+        self.pair_names = [(go[a].name, go[b].name) for a, b in self.pairs]
+        self.beam_names = [go[i].name for i in self.beam_targets]
+        self.names = [f"{a}|{b}" for a, b in self.pair_names] + [f"beam|{x}" for x in self.beam_names]
+
+    # ------------------------------------------------------------------ set-up
+    def _add_robot_capsules(self) -> tuple[list[int], list[int]]:
+        """Robot capsules as geometry objects on their joints; returns (geometry ids, joint ids)."""
+        ids, joints = [], []
+        model = self.model
+        for c in self.cell.robot_capsules:
+            fid = model.getFrameId(c.link, pin.FrameType.BODY)
+            fr = model.frames[fid]
+            shape, T = coal_capsule(fr.placement.act(c.a), fr.placement.act(c.b), c.radius)
+            go = pin.GeometryObject(c.name, int(fr.parentJoint), fid, pin.SE3(T.getRotation(), T.getTranslation()),
+                                    shape)
+            ids.append(self.gm.addGeometryObject(go))
+            joints.append(int(fr.parentJoint))
+            self.labels.append((c.name, c.link))
+        return ids, joints
+
+    def _add_obstacles(self) -> tuple[list[int], list[int]]:
+        """Obstacle capsules and half-spaces, fixed in the base frame; returns their geometry ids."""
+        import coal
+
+        base_T_W = self.cell.W_T_base.inverse()
+        obst, half = [], []
+        for o in self.cell.obstacles:
+            shape, T = coal_capsule(base_T_W.act(o.a), base_T_W.act(o.b), o.radius)
+            go = pin.GeometryObject(o.name, 0, 0, pin.SE3(T.getRotation(), T.getTranslation()), shape)
+            obst.append(self.gm.addGeometryObject(go))
+            self.labels.append((o.name, None))
+        for h in self.cell.half_spaces:
+            # coal.Halfspace(n, d) is the solid {x : n·x <= d}; the free side is n·x >= offset
+            go = pin.GeometryObject(h.name, 0, 0, pin.SE3(base_T_W), coal.Halfspace(h.normal, h.offset))
+            half.append(self.gm.addGeometryObject(go))
+            self.labels.append((h.name, None))
+        return obst, half
+
+    def _keys(self, i: int) -> set[str]:
+        """Names a skip entry may use for geometry object i (its own name, its link)."""
+        return {x for x in self.labels[i] if x}
+
+    def _skipped(self, i: int, k: int) -> bool:
+        a, b = self._keys(i), self._keys(k)
+        return any((x in a and y in b) or (x in b and y in a) for x, y in self.cell.skip_pairs)
+
+    def _collision_pairs(self) -> list[tuple[int, int]]:
+        """Non-adjacent robot capsule pairs, robot capsules against obstacles and half-spaces, minus skips."""
+        parents = [int(p) for p in self.model.parents]
+
+        def adjacent(j1: int, j2: int) -> bool:
+            return j1 == j2 or parents[j1] == j2 or parents[j2] == j1
+
+        pairs = []
+        for x, i in enumerate(self.robot_ids):
+            for y, k in enumerate(self.robot_ids):
+                if y > x and not adjacent(self.robot_joint[x], self.robot_joint[y]) and not self._skipped(i, k):
+                    pairs.append((i, k))
+            for k in self.obst_ids + self.half_ids:
+                if not self._skipped(i, k):
+                    pairs.append((i, k))
+        return pairs
+
+    # ------------------------------------------------------------------ evaluation
+    def _pose(self, q: np.ndarray) -> tuple[np.ndarray, float]:
+        """Signed distances (m, radii subtracted) of every pair and beam target at q, and cos(incidence)."""
+        import coal
+
+        pin.framesForwardKinematics(self.model, self.data, q)
+        pin.updateGeometryPlacements(self.model, self.data, self.gm, self.gd)
+        pin.computeDistances(self.gm, self.gd)
+        d = np.empty(len(self.names))
+        for k in range(self.n_pairs):
+            d[k] = self.gd.distanceResults[k].min_distance
+        oMt = self.data.oMf[self.tool_id]
+        refl = oMt.act(self.reflector)
+        beam, Tb = coal_capsule(self.tracker, refl, self.cell.beam_radius_m)
+        req = coal.DistanceRequest()
+        for k, gid in enumerate(self.beam_targets):
+            Mg = self.gd.oMg[gid]
+            d[self.n_pairs + k] = coal.distance(beam, Tb, self.gm.geometryObjects[gid].geometry,
+                                                coal.Transform3s(Mg.rotation, Mg.translation), req,
+                                                coal.DistanceResult())
+        g = self.tracker - refl
+        return d, float(oMt.rotation[:, 2] @ g / np.linalg.norm(g))
+
+    def distances(self, Q: np.ndarray) -> np.ndarray:
+        """Signed distances of every checked pair and beam target (columns named by :attr:`names`).
+
+        Args:
+            Q: configurations (m, n) rad.
+
+        Returns:
+            (m, len(names)) m; negative = penetration. The cell's required clearance is not subtracted.
+        """
+        Q = np.atleast_2d(np.asarray(Q, float))
+        return np.array([self._pose(q)[0] for q in Q]).reshape(Q.shape[0], len(self.names))
+
+    def check(self, Q: np.ndarray, tol: float = 1e-7) -> FeasibilityReport:
+        """Check every pose of a design.
+
+        Args:
+            Q: configurations (m, n) rad.
+            tol: tolerance on clearances (m) and joint bounds (rad) for rounding.
+
+        Returns:
+            The :class:`FeasibilityReport`.
+        """
+        cell = self.cell
+        Q = np.atleast_2d(np.asarray(Q, float))
+        m, P = Q.shape[0], self.n_pairs
+        cos_max = np.cos(np.radians(cell.incidence_max_deg))
+        cf, vis, clr, inc, worst = np.ones(m, bool), np.ones(m, bool), np.zeros(m), np.zeros(m), []
+        bounds = np.all((Q >= cell.q_lower - tol) & (Q <= cell.q_upper + tol), axis=1)
+        for i, q in enumerate(Q):
+            d, c = self._pose(q)
+            d = d - cell.clearance_m
+            k = int(np.argmin(d[:P])) if P else -1
+            best = d[k] if P else np.inf
+            cf[i] = best >= -tol
+            kb = P + int(np.argmin(d[P:])) if d.size > P else -1
+            bbest = d[kb] if kb >= 0 else np.inf
+            inc[i] = float(np.degrees(np.arccos(np.clip(c, -1.0, 1.0))))
+            vis[i] = bbest >= -tol and c >= cos_max - 1e-9
+            if bbest < best:
+                best, k = bbest, kb
+            clr[i] = best
+            worst.append(self.names[k] if k >= 0 else "")
+        return FeasibilityReport(cf, vis, bounds, clr, inc, worst, len(self.names))

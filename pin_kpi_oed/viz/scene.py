@@ -1,0 +1,613 @@
+"""Meshcat scene of a design file: cell, poses, laser beam and the TCP's confidence ellipsoids.
+
+Engineers check measurement poses by eye before running them on a real robot.
+:func:`build_scene` turns a :class:`~pin_kpi_oed.design.design_file.DesignFile` (or what
+:func:`~pin_kpi_oed.design.design_file.load_design` reads) into a meshcat scene:
+
+* the cell: floor / wall (half-spaces, drawn as thin slabs on the forbidden side of their
+  boundary plane), obstacle capsules and spheres, the laser tracker;
+* the robot, drawn from its URDF visuals through Pinocchio's
+  :class:`pinocchio.visualize.MeshcatVisualizer` (meshes where the URDF has them, URDF primitives
+  otherwise, and the cell's capsules - or a stick figure - when the URDF has no visual geometry),
+  standing at the first working configuration;
+* an animation (meshcat's *Animations* panel: play / time slider) that steps the robot and the
+  laser beam through every measurement configuration, design after design;
+  ``ghosts/<design>/<k>``: all measurement configurations at once, ghosted in the design's colour;
+* ``robot/collisions``: the robot's capsules (hidden; tick the box to show them);
+* ``beam``: the laser beam from the tracker to the reflector;
+* ``ellipsoids/<design>/w<j>``: at each working configuration, the TCP's 95 % confidence
+  ellipsoid of every design, side by side in the design's colour, magnified by a displayed
+  factor (``ellipsoids/label``, the page's legend) so that µm-level ellipsoids are visible; a
+  black dot marks the nominal TCP.
+
+The scene is drawn into a :class:`~pin_kpi_oed.viz.recorder.SceneRecorder` (in process, no
+server); :meth:`Scene.static_html` is the self-contained page, :mod:`pin_kpi_oed.viz.render`
+screenshots it or replays it into a live meshcat server. Frames: the scene's world frame is the
+cell frame. Units SI; the legend shows tr(C_s) in mm² and σ in µm, as ``pin-kpi-oed design``.
+"""
+
+from __future__ import annotations
+
+import html as html_mod
+import os
+import warnings
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Mapping, Sequence
+
+import numpy as np
+import pinocchio as pin
+
+from pin_kpi_oed.design.design_file import DesignEntry, DesignFile, load_design
+from pin_kpi_oed.errors import InputError
+from pin_kpi_oed.viz.ellipsoids import DEFAULT_LEVEL, confidence_ellipsoid, fmt_factor, nice_factor
+from pin_kpi_oed.viz.recorder import SceneRecorder, import_meshcat
+from pin_kpi_oed.viz.robot_geometry import (add_reflector, capsule_geometry, is_primitive, slug, stick_geometry,
+                                            visual_model)
+from pin_kpi_oed.viz.style import BEAM_COLOUR, ROBOT_RGBA, design_colours, rgb
+
+#: Vertical field of view (deg) of meshcat's default perspective camera (viewer/dist/main.min.js).
+MESHCAT_FOV_DEG = 75.0
+
+
+@dataclass
+class SceneOptions:
+    """How to draw a design file.
+
+    Attributes:
+        scale: magnification of the ellipsoids; default a 1-2-5 number making the largest semi-axis
+            about ``ellipsoid_size``.
+        level: confidence level of the ellipsoids.
+        ghosts: draw every measurement configuration at once (translucent, design colour).
+        capsules_visible: show the robot's capsules initially (they can be toggled in the viewer).
+        animate: add the animation stepping through the measurement configurations.
+        camera: (target, position) in the world frame (m); default :func:`default_camera`.
+        ellipsoid_size: displayed size (m) of the largest semi-axis; default 6 % of the reach.
+        ghost_opacity: opacity of the ghosts (0…1).
+        frames_per_pose: animation frames each pose is held; fps: animation frames per second.
+        background: ``white`` (light grey gradient) or ``meshcat`` (meshcat's default blue).
+        ghosts_visible: criteria whose ghosts are shown initially (the others can be ticked in the
+            viewer); default the last design only (usually the KPI design), to keep the picture readable.
+    """
+
+    scale: float | None = None
+    level: float = DEFAULT_LEVEL
+    ghosts: bool = True
+    capsules_visible: bool = False
+    animate: bool = True
+    camera: tuple[Sequence[float], Sequence[float]] | None = None
+    ellipsoid_size: float | None = None
+    ghost_opacity: float = 0.1
+    frames_per_pose: int = 8
+    fps: int = 8
+    background: str = "white"
+    ghosts_visible: Sequence[str] | None = None
+
+
+@dataclass
+class EllipsoidView:
+    """One displayed ellipsoid.
+
+    Attributes:
+        design: criterion; work_index: working configuration.
+        tcp_world: world position of the nominal TCP (m); centre_world: displayed centre (side by side, m).
+        radii_m: semi-axes (m, unscaled); axes: principal axes (world frame, columns).
+        colour: 0xRRGGBB; path: scene path.
+    """
+
+    design: str
+    work_index: int
+    tcp_world: np.ndarray
+    centre_world: np.ndarray
+    radii_m: np.ndarray
+    axes: np.ndarray
+    colour: int
+    path: str
+
+
+@dataclass
+class Scene:
+    """A built meshcat scene.
+
+    Attributes:
+        vis: the meshcat visualiser (its window a :class:`SceneRecorder` unless given).
+        viz: Pinocchio's MeshcatVisualizer of the robot.
+        design: the design file shown.
+        scale: magnification of the ellipsoids; level: their confidence level.
+        ellipsoids: every ellipsoid drawn.
+        camera_target, camera_position: world frame (m).
+        frames_per_pose, fps: animation timing (each pose is held ``frames_per_pose`` frames).
+        animation_poses: (criterion, k) of every animation step, in order.
+        colours: colour (0xRRGGBB) of every design.
+    """
+
+    vis: Any
+    viz: Any
+    design: DesignFile
+    scale: float
+    level: float
+    ellipsoids: list[EllipsoidView]
+    camera_target: np.ndarray
+    camera_position: np.ndarray
+    frames_per_pose: int
+    fps: int
+    animation_poses: list[tuple[str, int]]
+    colours: dict[str, int] = field(default_factory=dict)
+
+    @property
+    def recorder(self) -> SceneRecorder | None:
+        """The in-process recorder (None when drawn into a live visualiser)."""
+        w = self.vis.window
+        return w if isinstance(w, SceneRecorder) else None
+
+    def set_visible(self, path: str, visible: bool) -> None:
+        """Show or hide a scene node (``robot``, ``ellipsoids``, ``ghosts``, ``robot/collisions`` ...)."""
+        self.vis[path].set_property("visible", bool(visible))
+
+    def legend_html(self) -> str:
+        """An HTML legend (designs, colours, tr(C_s) in mm², TCP σ in µm, magnification) for the static page."""
+        rows = []
+        t = self.design.q_work.shape[0]
+        for d in self.design.designs:
+            sig = np.sqrt(max(d.trace_cs_m2, 0.0) / t) * 1e6
+            rows.append(f"<div><span style='display:inline-block;width:12px;height:12px;"
+                        f"background:#{self.colours[d.criterion]:06x};margin-right:6px;vertical-align:middle'></span>"
+                        f"{html_mod.escape(d.label)}: {d.q_meas.shape[0]} poses, tr(C<sub>s</sub>) = "
+                        f"{d.trace_cs_m2 * 1e6:.4e} mm&sup2;, TCP &sigma; = {sig:.3g} &micro;m</div>")
+        return ("<div id='pko-legend' style='position:fixed;left:8px;bottom:8px;padding:6px 10px;"
+                "background:rgba(255,255,255,0.85);font:13px sans-serif;color:#111;border-radius:4px;"
+                "pointer-events:none'>"
+                f"<div><b>{html_mod.escape(self.design.robot.name)}</b> &mdash; "
+                f"{int(round(self.level * 100))} % confidence ellipsoids of the TCP, magnified "
+                f"&times;{fmt_factor(self.scale)} (left to right: designs below)</div>" + "".join(rows)
+                + "<div style='color:#555'>Controls &rarr; Animations: step through the measurement poses; "
+                "Scene &rarr; meshcat/robot/collisions: capsules; meshcat/ghosts: all poses.</div></div>")
+
+    def pose_time(self, criterion: str, k: int) -> float:
+        """Animation time (s) at which the robot holds measurement configuration ``k`` of a design.
+
+        Raises:
+            InputError: no such design or configuration in the animation.
+        """
+        try:
+            i = self.animation_poses.index((criterion, int(k)))
+        except ValueError:
+            raise InputError(f"no measurement configuration {k} of design '{criterion}' in the animation") from None
+        return (i * self.frames_per_pose + 0.5 * (self.frames_per_pose - 1)) / self.fps
+
+    def static_html(self, legend: bool = True, pose: tuple[str, int] | None = None) -> str:
+        """The self-contained static page (meshcat's ``static_html()``, plus the legend overlay).
+
+        Args:
+            legend: overlay the legend (designs, colours, tr(C_s), magnification).
+            pose: open the page with the robot at measurement configuration ``(criterion, k)``
+                (the animation paused there) instead of the first working configuration.
+        """
+        extra = self.legend_html() if legend else ""
+        if pose is not None:
+            t = self.pose_time(*pose)
+            extra += ("<script>(function seek() { const a = viewer.animator; if (!a.actions.length) "
+                      "{ requestAnimationFrame(seek); return; } a.play(); a.pause(); a.seek(%r); })();</script>" % t)
+        if self.recorder is not None:
+            return self.recorder.get_scene(title=f"pin-kpi-oed: {self.design.robot.name} design", extra_body=extra)
+        return self.vis.static_html().replace("</body>", extra + "\n</body>", 1)
+
+    def write_html(self, path: str | os.PathLike, legend: bool = True, pose: tuple[str, int] | None = None) -> Path:
+        """Write the static page atomically (see :meth:`static_html`); returns the path."""
+        from pin_kpi_oed.data.atomic import atomic_write_text
+
+        atomic_write_text(path, self.static_html(legend, pose))
+        return Path(path)
+
+    def project(self, points: np.ndarray, width: int, height: int) -> np.ndarray:
+        """Pixel coordinates (k, 2) (x right, y down) of world points in a ``width`` × ``height`` page,
+        through meshcat's default camera (75° vertical field of view) placed by this scene."""
+        P = np.atleast_2d(points)
+        fwd = self.camera_target - self.camera_position
+        fwd = fwd / np.linalg.norm(fwd)
+        right = np.cross(fwd, [0.0, 0.0, 1.0])
+        right /= np.linalg.norm(right)
+        up = np.cross(right, fwd)
+        rel = P - self.camera_position
+        depth = rel @ fwd
+        f = (height / 2) / np.tan(np.radians(MESHCAT_FOV_DEG) / 2)
+        x = width / 2 + f * (rel @ right) / depth
+        y = height / 2 - f * (rel @ up) / depth
+        return np.stack([x, y], axis=1)
+
+
+# ============================================================================ placement helpers
+def _plane_frame(n: np.ndarray) -> np.ndarray:
+    """Rotation whose z axis is n and whose y axis is as vertical as possible (x horizontal)."""
+    z = n / np.linalg.norm(n)
+    up = np.array([0.0, 0.0, 1.0]) - z[2] * z
+    if np.linalg.norm(up) < 1e-6:
+        up = np.array([0.0, 1.0, 0.0]) - z[1] * z
+    y = up / np.linalg.norm(up)
+    return np.column_stack([np.cross(y, z), y, z])
+
+
+def _rot_y_to(d: np.ndarray) -> np.ndarray:
+    """Rotation taking the y axis (three.js cylinders) to direction d."""
+    L = np.linalg.norm(d)
+    return pin.Quaternion.FromTwoVectors(np.array([0.0, 1.0, 0.0]), d / L).toRotationMatrix() if L > 1e-12 \
+        else np.eye(3)
+
+
+def _beam_matrix(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Transform of a unit-length y-cylinder onto the segment a-b."""
+    T = np.eye(4)
+    T[:3, :3] = _rot_y_to(b - a) @ np.diag([1.0, max(np.linalg.norm(b - a), 1e-9), 1.0])
+    T[:3, 3] = 0.5 * (a + b)
+    return T
+
+
+def _homogeneous(R: np.ndarray | None = None, t: np.ndarray | None = None) -> np.ndarray:
+    """4×4 transform from a rotation and a translation (defaults identity / zero)."""
+    T = np.eye(4)
+    if R is not None:
+        T[:3, :3] = R
+    if t is not None:
+        T[:3, 3] = t
+    return T
+
+
+def _placements(model, data, gmodel, gdata, q, world: pin.SE3):
+    """(geometry object, world placement) of every object of ``gmodel`` at configuration q (Pinocchio FK)."""
+    pin.forwardKinematics(model, data, np.asarray(q, float))
+    pin.updateGeometryPlacements(model, data, gmodel, gdata)
+    return [(g, world * gdata.oMg[i]) for i, g in enumerate(gmodel.geometryObjects)]
+
+
+def _text_png(lines: Sequence[tuple[str, str]], dpi: int = 150) -> tuple[bytes, float]:
+    """A transparent PNG of coloured text lines [(text, '#rrggbb')]; returns (png, width / height)."""
+    import io
+    import struct
+
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    n = len(lines)
+    fig = Figure(figsize=(4.0, 0.3 * n), dpi=dpi)
+    FigureCanvasAgg(fig)
+    for i, (text, colour) in enumerate(lines):
+        fig.text(0.0, 1.0 - (i + 1) / n, text, color=colour, fontsize=14, fontweight="bold", va="bottom", ha="left")
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", transparent=True, bbox_inches="tight", pad_inches=0.04)
+    png = buf.getvalue()
+    w, h = struct.unpack(">II", png[16:24])  # IHDR
+    return png, w / h
+
+
+def _place_camera(vis: Any, target: np.ndarray, position: np.ndarray) -> None:
+    """Look at ``target`` from ``position`` (world frame).
+
+    Meshcat's orbit controls always look at (and orbit about) the three.js origin, so the scene
+    (``/meshcat``, and meshcat's ``/Grid`` and ``/Axes``) is shifted by ``-target`` and the camera placed
+    at ``position - target`` (in the camera's y-up frame: (x, z, -y)).
+    """
+    T = _homogeneous(t=-np.asarray(target, float))
+    for path in ("/meshcat", "/Grid", "/Axes"):
+        vis[path].set_transform(T)
+    off = np.asarray(position, float) - np.asarray(target, float)
+    vis["/Cameras/default/rotated/<object>"].set_property("position", [float(off[0]), float(off[2]), float(-off[1])])
+
+
+def default_camera(df: DesignFile) -> tuple[np.ndarray, np.ndarray]:
+    """A camera (target, position), world frame (m), that frames the robot and the working configurations."""
+    base = df.world_T_base.translation
+    reach = df.robot.reach()
+    tcp = df.tcp_world()
+    target = 0.4 * (base + np.array([0.0, 0.0, 0.3 * reach])) + 0.6 * tcp.mean(axis=0)
+    fwd = tcp.mean(axis=0) - base
+    fwd[2] = 0.0
+    if np.linalg.norm(fwd) < 1e-6:
+        fwd = np.array([1.0, 0.0, 0.0])
+    fwd /= np.linalg.norm(fwd)
+    az = np.arctan2(fwd[1], fwd[0]) + np.radians(30.0)
+    el = np.radians(32.0)
+    dist = 1.5 * reach
+    pos = target + dist * np.array([np.cos(az) * np.cos(el), np.sin(az) * np.cos(el), np.sin(el)])
+    return target, pos
+
+
+def _anim_set(node, M: pin.SE3, scale: np.ndarray) -> None:
+    """Position / quaternion (/ scale) keyframe of an animated node."""
+    q = pin.Quaternion(M.rotation)
+    clip = node.get_clip()
+    clip.set_property(node.current_frame, "position", "vector3", [float(x) for x in M.translation])
+    clip.set_property(node.current_frame, "quaternion", "quaternion", [float(q.x), float(q.y), float(q.z), float(q.w)])
+    if not np.allclose(scale, 1.0):
+        clip.set_property(node.current_frame, "scale", "vector3", [float(x) for x in scale])
+
+
+def _world_ellipsoids(df: DesignFile, level: float
+                      ) -> list[tuple[int, int, DesignEntry, np.ndarray, np.ndarray]]:
+    """(design index, work index, design, semi-axes (m), axes (world)) for every design and working configuration."""
+    Rw = df.world_T_tracker.rotation
+    out = []
+    for di, d in enumerate(df.designs):
+        for j in range(df.q_work.shape[0]):
+            C = d.cov_s_m2[3 * j:3 * j + 3, 3 * j:3 * j + 3]
+            radii, axes = confidence_ellipsoid(Rw @ C @ Rw.T, level)
+            out.append((di, j, d, radii, axes))
+    return out
+
+
+# ============================================================================ the drawing steps
+class _SceneBuilder:
+    """Draws a design file into a meshcat visualiser, one step per part of the scene."""
+
+    def __init__(self, df: DesignFile, vis: Any, opts: SceneOptions):
+        import meshcat.geometry as mg
+
+        self.mg, self.df, self.vis, self.opts = mg, df, vis, opts
+        self.colours = design_colours([d.criterion for d in df.designs])
+        self.model, visual, notes = visual_model(df.robot)
+        df.notes.extend(n for n in notes if n not in df.notes)
+        self.reach = df.robot.reach()
+        self.visual, self.ghost_geom = self._robot_geometries(visual)
+        add_reflector(self.model, self.visual, df.robot, df.model.reflector_m)
+        self.collision = capsule_geometry(self.model, df.capsules) if df.capsules else None
+        self.data = self.model.createData()
+        self.W, self.Wt = df.world_T_base, df.world_T_tracker
+        floors = [h.offset for h in df.half_spaces if h.normal[2] > 0.9]
+        self.has_floor = bool(floors)
+        self.floor_z = max(floors, default=min(0.0, self.W.translation[2]))
+        self.viz = None
+
+    def _robot_geometries(self, visual: pin.GeometryModel | None) -> tuple[pin.GeometryModel, pin.GeometryModel]:
+        """(visual geometry, ghost geometry): the URDF visuals, else the capsules or a stick figure; ghosts
+        reuse the visuals when they are primitives (cheap), else the capsules or a stick figure."""
+        df, model = self.df, self.model
+        if visual is None:
+            visual = capsule_geometry(model, df.capsules, "link") if df.capsules else \
+                stick_geometry(model, df.robot.tool_frame_id, self.reach)
+            for g in visual.geometryObjects:
+                g.meshColor = ROBOT_RGBA.copy()
+            return visual, visual
+        if is_primitive(visual):
+            return visual, visual
+        if df.capsules:
+            return visual, capsule_geometry(model, df.capsules, "ghost")
+        return visual, stick_geometry(model, df.robot.tool_frame_id, self.reach)
+
+    def background_and_camera(self) -> tuple[np.ndarray, np.ndarray]:
+        """Background colours and the camera; returns (target, position), world frame (m)."""
+        vis = self.vis
+        if self.opts.background == "white":
+            vis["/Background"].set_property("top_color", [0.98, 0.98, 0.98])
+            vis["/Background"].set_property("bottom_color", [0.78, 0.80, 0.83])
+        if self.opts.camera is None:
+            target, position = default_camera(self.df)
+        else:
+            target, position = (np.asarray(c, float) for c in self.opts.camera)
+        _place_camera(vis, target, position)
+        return np.asarray(target, float), np.asarray(position, float)
+
+    def half_spaces(self) -> None:
+        """Each half-space as a thin slab just below its boundary plane (walls from the floor up)."""
+        mg, centre = self.mg, self.W.translation.copy()
+        for h in self.df.half_spaces:
+            size, th = 8.0 * max(1.0, self.reach / 1.5), 0.02
+            foot = centre - (h.normal @ centre - h.offset) * h.normal  # projection of the base on the plane
+            R = _plane_frame(h.normal)
+            dims = [size, size, th]
+            if abs(h.normal[2]) < 0.9 and self.has_floor:  # a wall: from the floor up
+                height = max(2.5, 1.6 * self.reach)
+                dims = [size, height, th]
+                foot = foot + (self.floor_z + 0.5 * height - foot[2]) / max(R[2, 1], 1e-6) * R[:, 1]
+            colour, opacity = (0xB8B8B0, 1.0) if h.normal[2] > 0.9 else (0xC9CED6, 0.55)
+            node = self.vis["cell/half_spaces"][slug(h.name)]
+            node.set_object(mg.Box(dims), mg.MeshLambertMaterial(color=colour, opacity=opacity))
+            # 1 cm below the plane: no z-fighting with the grid
+            node.set_transform(_homogeneous(R, foot - (0.5 * th + 0.01) * h.normal))
+
+    def obstacles(self) -> None:
+        """Obstacle capsules (spheres when of length 0)."""
+        from pinocchio.visualize.meshcat_visualizer import createCapsule
+
+        mg = self.mg
+        for o in self.df.obstacles:
+            node = self.vis["cell/obstacles"][slug(o.name)]
+            mat = mg.MeshPhongMaterial(color=0x8899AA, opacity=0.8)
+            L = float(np.linalg.norm(o.b - o.a))
+            node.set_object(createCapsule(max(L, 1e-6), o.radius) if L > 1e-9 else mg.Sphere(o.radius), mat)
+            R = pin.Quaternion.FromTwoVectors(np.array([0.0, 0.0, 1.0]), (o.b - o.a) / L).toRotationMatrix() \
+                if L > 1e-9 else None
+            node.set_transform(_homogeneous(R, 0.5 * (o.a + o.b)))
+
+    def tracker(self) -> None:
+        """The tracker: head at its frame origin, body, a stand down to the floor, its axes."""
+        mg, Wt = self.mg, self.Wt
+        tr = self.vis["tracker"]
+        tr["head"].set_object(mg.Sphere(0.09), mg.MeshPhongMaterial(color=0x333333))
+        tr["head"].set_transform(_homogeneous(t=Wt.translation))
+        tr["body"].set_object(mg.Box([0.16, 0.16, 0.16]), mg.MeshPhongMaterial(color=0xDDDDDD))
+        tr["body"].set_transform(_homogeneous(Wt.rotation, Wt.translation - 0.13 * Wt.rotation[:, 2]))
+        h_stand = Wt.translation[2] - 0.21 - self.floor_z
+        if h_stand > 0.05:
+            tr["stand"].set_object(mg.Cylinder(h_stand, 0.025), mg.MeshPhongMaterial(color=0x555555))
+            tr["stand"].set_transform(_homogeneous(_rot_y_to(np.array([0.0, 0.0, 1.0])),
+                                                   [Wt.translation[0], Wt.translation[1],
+                                                    self.floor_z + 0.5 * h_stand]))
+        tr["axes"].set_object(mg.triad(0.25))
+        tr["axes"].set_transform(Wt.homogeneous.copy())
+
+    def robot(self) -> None:
+        """The robot through Pinocchio's meshcat visualiser, at the first working configuration."""
+        from pinocchio.visualize import MeshcatVisualizer
+
+        vis = self.vis
+        self.viz = viz = MeshcatVisualizer(self.model, self.collision, self.visual)
+        viz.initViewer(viewer=vis)
+        viz.loadViewerModel(rootNodeName="robot")
+        vis["robot"].set_transform(self.W.homogeneous)  # world placement of the robot
+        if self.collision is not None:
+            viz.display_collisions = True  # keep the capsules placed, hidden until toggled
+            vis["robot/collisions"].set_property("visible", bool(self.opts.capsules_visible))
+        viz.display(self.df.q_work[0])
+
+    def _ghost(self, q: np.ndarray, root: str, rgba) -> None:
+        """A translucent copy of the robot at q under ``root`` (own colour), via Pinocchio's loader."""
+        viz = self.viz
+        saved = viz.viewerVisualGroupName
+        viz.viewerVisualGroupName = root
+        try:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                for g in self.ghost_geom.geometryObjects:
+                    viz.loadViewerGeometryObject(g, pin.GeometryType.VISUAL, np.asarray(rgba, float))
+            gdata = self.ghost_geom.createData()
+            for g, M in _placements(self.model, self.data, self.ghost_geom, gdata, q, self.W):
+                T = M.homogeneous
+                T[:3, :3] = T[:3, :3] @ np.diag(g.meshScale)
+                self.vis[f"{root}/{g.name}"].set_transform(T)
+        finally:
+            viz.viewerVisualGroupName = saved
+
+    def working_ghosts(self) -> None:
+        """Working configurations other than the first: light grey ghosts."""
+        for j in range(1, self.df.q_work.shape[0]):
+            self._ghost(self.df.q_work[j], f"working/w{j}", [0.9, 0.9, 0.9, 0.35])
+
+    def beam(self) -> None:
+        """The laser beam at the first working configuration."""
+        refl0 = self.df.reflector_world(self.df.q_work[:1])[0]
+        self.vis["beam"].set_object(self.mg.Cylinder(1.0, 0.004), self.mg.MeshBasicMaterial(color=BEAM_COLOUR))
+        self.vis["beam"].set_transform(_beam_matrix(self.Wt.translation, refl0))
+
+    def design_ghosts(self) -> None:
+        """Every measurement configuration of every design, ghosted in the design's colour."""
+        df, opts = self.df, self.opts
+        for d in df.designs:
+            rgba = [*rgb(self.colours[d.criterion]), opts.ghost_opacity]
+            for k, q in enumerate(d.q_meas):
+                self._ghost(q, f"ghosts/{slug(d.criterion)}/{k:03d}", rgba)
+        shown = set(opts.ghosts_visible) if opts.ghosts_visible is not None else \
+            {df.designs[-1].criterion} if df.designs else set()
+        for d in df.designs:
+            self.vis[f"ghosts/{slug(d.criterion)}"].set_property("visible", d.criterion in shown)
+
+    def ellipsoids(self, target: np.ndarray, position: np.ndarray) -> tuple[float, list[EllipsoidView]]:
+        """The ellipsoids of every design side by side at each working configuration, and their label.
+
+        Returns:
+            (magnification, the ellipsoids drawn).
+        """
+        df, opts, mg = self.df, self.opts, self.mg
+        ells = _world_ellipsoids(df, opts.level)
+        rmax = max((float(e[3].max()) for e in ells), default=0.0)
+        scale = opts.scale
+        if scale is None:
+            size = opts.ellipsoid_size if opts.ellipsoid_size is not None else 0.06 * self.reach
+            scale = nice_factor(size / rmax) if rmax > 0 else 1.0
+        fwd = target - position
+        side = np.cross(fwd, [0.0, 0.0, 1.0])
+        side = side / np.linalg.norm(side) if np.linalg.norm(side) > 1e-9 else np.array([0.0, 1.0, 0.0])
+        views: list[EllipsoidView] = []
+        nd = len(df.designs)
+        for j, tcp in enumerate(df.tcp_world()):
+            rj = max((float(e[3].max()) for e in ells if e[1] == j), default=0.0) * scale
+            spacing = 2.3 * rj + 0.01
+            dot = self.vis["ellipsoids/tcp"][f"w{j}"]
+            dot.set_object(mg.Sphere(max(0.006, 0.15 * rj)), mg.MeshPhongMaterial(color=0x111111))
+            dot.set_transform(_homogeneous(t=tcp))
+            for (di, jj, d, radii, axes) in ells:
+                if jj != j:
+                    continue
+                c = tcp + (di - (nd - 1) / 2) * spacing * side
+                path = f"ellipsoids/{slug(d.criterion)}/w{j}"
+                colour = self.colours[d.criterion]
+                self.vis[path].set_object(mg.Ellipsoid(list(np.maximum(radii * scale, 1e-5))),
+                                          mg.MeshLambertMaterial(color=colour))
+                self.vis[path].set_transform(_homogeneous(axes, c))
+                views.append(EllipsoidView(d.criterion, j, tcp, c, radii, axes, colour, "/meshcat/" + path))
+            self._label(j, tcp, rj, float(scale), side, fwd)
+        return float(scale), views
+
+    def _label(self, j: int, tcp: np.ndarray, rj: float, scale: float, side: np.ndarray, fwd: np.ndarray) -> None:
+        """Label above the ellipsoids of working configuration j (level, magnification, designs), facing the camera."""
+        mg = self.mg
+        lines = [(f"{int(round(self.opts.level * 100))} % ellipsoids x{fmt_factor(scale)}", "#111111")]
+        lines += [(d.label, f"#{self.colours[d.criterion]:06x}") for d in self.df.designs]
+        png, aspect = _text_png(lines)
+        h = max(0.1, 0.6 * rj * len(lines))
+        w = h * aspect
+        # front faces only (the back face of the thin box would show the text mirrored through it),
+        # drawn over the robot (no depth test) so that the legend is never hidden
+        mat = mg.MeshBasicMaterial(map=mg.ImageTexture(mg.PngImage(png)), transparent=True, side=0, depthTest=False,
+                                   depthWrite=False)
+        lab = self.vis["ellipsoids/label"][f"w{j}"]
+        lab.set_object(mg.Box([w, h, 1e-4]), mat)
+        back = -fwd / np.linalg.norm(fwd)
+        R = np.column_stack([side, np.cross(back, side), back])
+        lab.set_transform(_homogeneous(R, tcp + (rj + 0.6 * h + 0.02) * R[:, 1]))
+
+    def animation(self) -> list[tuple[str, int]]:
+        """Keyframes stepping the robot, its capsules and the beam through every measurement configuration,
+        design after design; returns the (criterion, k) of every step."""
+        from meshcat.animation import Animation
+
+        df, opts = self.df, self.opts
+        fpp = opts.frames_per_pose
+        anim = Animation(default_framerate=opts.fps)
+        vdata = self.visual.createData()
+        cdata = self.collision.createData() if self.collision is not None else None
+        poses: list[tuple[str, int]] = []
+        frame = 0
+        trk = self.Wt.translation
+        for d in df.designs:
+            refl = df.reflector_world(d.q_meas)
+            for k, q in enumerate(d.q_meas):
+                poses.append((d.criterion, k))
+                for fr in (frame, frame + fpp - 1):
+                    with anim.at_frame(self.vis, fr) as f:
+                        for g, M in _placements(self.model, self.data, self.visual, vdata, q, pin.SE3.Identity()):
+                            _anim_set(f[f"robot/visuals/{g.name}"], M, g.meshScale)
+                        if self.collision is not None:
+                            for g, M in _placements(self.model, self.data, self.collision, cdata, q,
+                                                    pin.SE3.Identity()):
+                                _anim_set(f[f"robot/collisions/{g.name}"], M, g.meshScale)
+                        Tb = _beam_matrix(trk, refl[k])
+                        Mb = pin.SE3(_rot_y_to(refl[k] - trk), Tb[:3, 3])
+                        _anim_set(f["beam"], Mb, np.array([1.0, np.linalg.norm(refl[k] - trk), 1.0]))
+                frame += fpp
+        self.vis.set_animation(anim, play=False, repetitions=1)
+        return poses
+
+
+def build_scene(design: DesignFile | str | os.PathLike | Mapping, options: SceneOptions | None = None,
+                vis: Any = None) -> Scene:
+    """Build the meshcat scene of a design file (see the module docstring for its nodes).
+
+    Args:
+        design: a :class:`DesignFile`, or what :func:`load_design` reads.
+        options: how to draw it (:class:`SceneOptions`; default all defaults).
+        vis: a meshcat Visualizer to draw into; default one on a :class:`SceneRecorder`.
+
+    Returns:
+        The :class:`Scene`.
+
+    Raises:
+        PinKpiOedError: the design file cannot be read (see :func:`load_design`).
+    """
+    meshcat = import_meshcat()
+    opts = options or SceneOptions()
+    df = design if isinstance(design, DesignFile) else load_design(design)
+    if vis is None:
+        vis = meshcat.Visualizer(window=SceneRecorder())
+    b = _SceneBuilder(df, vis, opts)
+    target, position = b.background_and_camera()
+    b.half_spaces()
+    b.obstacles()
+    b.tracker()
+    b.robot()
+    b.working_ghosts()
+    b.beam()
+    if opts.ghosts:
+        b.design_ghosts()
+    scale, views = b.ellipsoids(target, position)
+    poses = b.animation() if opts.animate and df.designs else []
+    return Scene(vis, b.viz, df, scale, float(opts.level), views, target, position, opts.frames_per_pose, opts.fps,
+                 poses, b.colours)
