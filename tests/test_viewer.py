@@ -23,7 +23,8 @@ import pytest
 from pin_kpi_oed.oed.covariance import kpi_covariance
 from pin_kpi_oed.errors import InputError, PinKpiOedError
 from pin_kpi_oed.oed.identifiability import analyse
-from pin_kpi_oed.model.measurement import NoiseModel, TrackerModel
+from pin_kpi_oed.model.noise import NoiseModel
+from pin_kpi_oed.model.tracker import TrackerModel
 from pin_kpi_oed.model.robot import load_robot
 from pin_kpi_oed.viz import viewer
 

@@ -62,7 +62,8 @@ import numpy as np
 import pinocchio as pin
 
 from pin_kpi_oed.errors import InputError, RobotLoadError
-from pin_kpi_oed.model.measurement import NoiseModel, TrackerModel
+from pin_kpi_oed.model.noise import NoiseModel
+from pin_kpi_oed.model.tracker import TrackerModel
 from pin_kpi_oed.model.robot import Robot, load_robot
 
 #: Folder of the cells shipped with the package.

@@ -27,7 +27,7 @@ TOPICS = ("design", "identify", "diagnose", "view", "study")
 def cmd_info(args: argparse.Namespace) -> int:
     """``pin-kpi-oed info ROBOT``: joints, limits, parameter count, identifiable rank."""
     from pin_kpi_oed.oed.identifiability import analyse
-    from pin_kpi_oed.model.measurement import TrackerModel
+    from pin_kpi_oed.model.tracker import TrackerModel
     from pin_kpi_oed.model.robot import load_robot
 
     robot = load_robot(args.robot, args.tool)

@@ -33,7 +33,7 @@ import numpy as np
 
 from pin_kpi_oed.oed.covariance import information
 from pin_kpi_oed.errors import IdentifiabilityError, InputError
-from pin_kpi_oed.model.measurement import TrackerModel
+from pin_kpi_oed.model.tracker import TrackerModel
 
 CRITERIA: dict[str, str] = {
     "kpi": "A on C_s: tr of the TCP covariance (m^2) - the paper's KPI criterion",

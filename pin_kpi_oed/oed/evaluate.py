@@ -19,7 +19,7 @@ from pin_kpi_oed.oed.criteria import evaluate_all
 from pin_kpi_oed.errors import IdentifiabilityError, InputError
 from pin_kpi_oed.oed.identifiability import Identifiability, analyse, check_kpi
 from pin_kpi_oed.data.atomic import atomic_write_json
-from pin_kpi_oed.model.measurement import TrackerModel
+from pin_kpi_oed.model.tracker import TrackerModel
 from pin_kpi_oed.model.serialize import model_from_dict, model_to_dict
 
 

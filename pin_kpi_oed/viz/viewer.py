@@ -53,7 +53,8 @@ import numpy as np
 import pinocchio as pin
 
 from pin_kpi_oed.errors import InfeasibleError, InputError, PinKpiOedError, RobotLoadError
-from pin_kpi_oed.model.measurement import NoiseModel, TrackerModel
+from pin_kpi_oed.model.noise import NoiseModel
+from pin_kpi_oed.model.tracker import TrackerModel
 from pin_kpi_oed.model.robot import Robot, load_robot
 
 #: Colours (0xRRGGBB) of the usual design criteria; the robot itself is orange, so none of these is.
