@@ -40,8 +40,8 @@ from pin_kpi_oed.errors import InputError, RobotLoadError
 __all__ = ["skew", "se3_from_matrix", "joint_motion_axes", "revolute_mask", "joint_unit", "ChainFrames",
            "Kinematics", "Chain", "placement_jacobian", "point_velocity"]
 
-#: Angular-axis norm above which a 1-DoF joint is revolute (the axes are unit vectors or zero).
-_AXIS_NORM = 0.5
+#: Tolerance on the motion axes of a pure revolute (unit angular, zero linear part) or prismatic joint.
+_AXIS_TOL = 1e-9
 
 
 def skew(v: np.ndarray) -> np.ndarray:
@@ -100,9 +100,10 @@ def joint_motion_axes(model: pin.Model, joint_ids: Sequence[int]) -> tuple[np.nd
     """
     data = model.createData()
     pin.computeJointJacobians(model, data, pin.neutral(model))
+    J = np.asarray(data.J).reshape(6, model.nv)  # eigenpy returns a 1-D array when nv == 1
     lin, ang = [], []
     for j in joint_ids:
-        S = data.oMi[j].actInv(pin.Motion(data.J[:, model.joints[j].idx_v]))
+        S = data.oMi[j].actInv(pin.Motion(J[:, model.joints[j].idx_v]))
         lin.append(S.linear.copy())
         ang.append(S.angular.copy())
     return np.array(lin).reshape(-1, 3), np.array(ang).reshape(-1, 3)
@@ -122,9 +123,10 @@ def revolute_mask(model: pin.Model, joint_ids: Sequence[int]) -> np.ndarray:
         RobotLoadError: a joint that is neither a pure rotation nor a pure translation (e.g. helical).
     """
     lin, ang = joint_motion_axes(model, joint_ids)
-    rev = np.linalg.norm(ang, axis=1) > _AXIS_NORM
-    pri = np.linalg.norm(lin, axis=1) > _AXIS_NORM
-    bad = np.flatnonzero(rev == pri)
+    nl, na = np.linalg.norm(lin, axis=1), np.linalg.norm(ang, axis=1)
+    rev = (np.abs(na - 1.0) < _AXIS_TOL) & (nl < _AXIS_TOL)
+    pri = (np.abs(nl - 1.0) < _AXIS_TOL) & (na < _AXIS_TOL)
+    bad = np.flatnonzero(~(rev | pri))
     if bad.size:
         j = list(joint_ids)[int(bad[0])]
         raise RobotLoadError(f"joint '{model.names[j]}' ({model.joints[j].shortname()}) is neither revolute nor "
