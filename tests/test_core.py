@@ -60,6 +60,7 @@ def test_jacobian_q_derivatives_match_finite_differences(name, pose6d):
         assert np.abs(dF[..., k] - dF_fd).max() < 1e-7 * np.abs(dF).max()
         assert np.abs(dc[:, k] - dc_fd).max() < 1e-7
         assert np.abs(Ydq[..., k] - dy_fd).max() < 1e-7
+    assert np.array_equal(model.prediction_dq(p, Q), Ydq)  # the cheap path the effects use
 
 
 def test_batched_kinematics_matches_pinocchio():
