@@ -23,8 +23,8 @@ A device implements, for m configurations Q (m, n):
 ``setup_spec()``            set-up groups ``((name, kind), ...)``, kinds of :data:`GROUP_KINDS`
 ``frame_group``             the group of ``sensor_pose``'s error (a ``pose`` group)
 ``target_groups``           the groups describing the measured target on the tool (their null
-                            directions only re-label the tool point: :func:`~pin_kpi_oed.oed.\
-identifiability.check_kpi`)
+                            directions only re-label the tool point, see ``check_kpi`` in
+                            :mod:`pin_kpi_oed.oed.identifiability`)
 ``nh``                      rows per measurement
 =========================  ==========================================================================
 

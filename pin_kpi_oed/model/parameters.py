@@ -1,6 +1,6 @@
-"""Geometric error parameters p of a laser-tracker calibration.
+"""Geometric error parameters p of a calibration: the robot's joint placements, then the device's set-up.
 
-The raw parameter vector stacks, in this order:
+The raw parameter vector stacks, in this order (laser tracker):
 
 * for every actuated joint j, a 6-vector δ_j of its URDF placement error, applied
   as a *right perturbation* ``M_j ← M_j · exp6(δ_j)`` with

@@ -105,6 +105,7 @@ class Robot:
         q_lower: lower joint limits (rad for revolute, m for prismatic joints), shape (n,).
         q_upper: upper joint limits (rad or m), shape (n,).
         locked_joints: names of joints locked at neutral (end-effector branches).
+        revolute: revolute (True) / prismatic (False) mask of the joints; computed from the model if None.
     """
 
     model: pin.Model
@@ -118,6 +119,7 @@ class Robot:
     q_lower: np.ndarray
     q_upper: np.ndarray
     locked_joints: list[str] = field(default_factory=list)
+    revolute: np.ndarray | None = field(default=None, repr=False, compare=False)
 
     @property
     def nq(self) -> int:
@@ -132,9 +134,9 @@ class Robot:
     @property
     def is_revolute(self) -> np.ndarray:
         """Boolean mask of revolute joints (the others are prismatic)."""
-        if getattr(self, "_revolute", None) is None:
-            self._revolute = revolute_mask(self.model, self.joint_ids)
-        return self._revolute.copy()
+        if self.revolute is None:
+            self.revolute = revolute_mask(self.model, self.joint_ids)
+        return self.revolute.copy()
 
     @property
     def joint_units(self) -> list[str]:
@@ -340,7 +342,7 @@ def load_robot(spec: str | os.PathLike, tool_frame: str | None = None) -> Robot:
         raise RobotLoadError(f"{path}: {exc}") from None
     lower, upper = _joint_limits(model, joint_ids, revolute, path)
     name = str(spec) if is_robot_name(spec) else path.stem
-    robot = Robot(
+    return Robot(
         model=model,
         data=model.createData(),
         urdf_path=str(path),
@@ -352,9 +354,8 @@ def load_robot(spec: str | os.PathLike, tool_frame: str | None = None) -> Robot:
         q_lower=lower,
         q_upper=upper,
         locked_joints=locked,
+        revolute=revolute,
     )
-    robot._revolute = revolute
-    return robot
 
 
 def _joint_limits(model: pin.Model, joint_ids: list[int], revolute: np.ndarray, path: Path
