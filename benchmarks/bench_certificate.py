@@ -11,7 +11,7 @@ import numpy as np
 import pinocchio as pin
 
 from pin_kpi_oed.oed.identifiability import analyse
-from pin_kpi_oed.model.measurement import TrackerModel
+from pin_kpi_oed.model.tracker import TrackerModel
 from pin_kpi_oed.oed.pool import detmax, exact_phi, select
 from pin_kpi_oed.model.robot import load_robot
 

@@ -10,7 +10,7 @@ import pinocchio as pin
 
 from pin_kpi_oed.oed.criteria import CRITERIA, DesignCriterion
 from pin_kpi_oed.oed.identifiability import analyse
-from pin_kpi_oed.model.measurement import TrackerModel
+from pin_kpi_oed.model.tracker import TrackerModel
 from pin_kpi_oed.model.robot import load_robot
 
 from .common import median_time, report

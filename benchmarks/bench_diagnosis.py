@@ -26,7 +26,8 @@ TARGET_S = 60.0
 def _data(n_total: int, seed: int = 0):
     from pin_kpi_oed.effects.library import parse_effects_spec, size_effect
     from pin_kpi_oed.data.measurements import MeasurementSet
-    from pin_kpi_oed.model.measurement import NoiseModel, TrackerModel
+    from pin_kpi_oed.model.noise import NoiseModel
+    from pin_kpi_oed.model.tracker import TrackerModel
     from pin_kpi_oed.model.robot import load_robot
     from pin_kpi_oed.identification.simulate import Tolerances, default_tracker_pose, random_truth, simulate
 

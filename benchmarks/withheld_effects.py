@@ -36,7 +36,8 @@ def make_case(effect: str | None, seed: int, n: int, robot_name: str = "ur10"):
     """Simulated training and held-out sets with ``effect`` (or none) of a random visible size."""
     from pin_kpi_oed.effects.library import parse_effects_spec, size_effect, visible_rms
     from pin_kpi_oed.data.measurements import MeasurementSet
-    from pin_kpi_oed.model.measurement import NoiseModel, TrackerModel
+    from pin_kpi_oed.model.noise import NoiseModel
+    from pin_kpi_oed.model.tracker import TrackerModel
     from pin_kpi_oed.model.robot import load_robot
     from pin_kpi_oed.identification.simulate import Tolerances, default_tracker_pose, random_truth, simulate
 

@@ -22,7 +22,8 @@ from pin_kpi_oed.diagnosis.diagnose import diagnose
 from pin_kpi_oed.effects.library import parse_effects_spec, range_scale_parameters, size_effect, visible_rms
 from pin_kpi_oed.data.measurements import MeasurementSet, read_measurements, write_measurements
 from pin_kpi_oed.data.atomic import atomic_write_json
-from pin_kpi_oed.model.measurement import NoiseModel, TrackerModel
+from pin_kpi_oed.model.noise import NoiseModel
+from pin_kpi_oed.model.tracker import TrackerModel
 from pin_kpi_oed.model.robot import load_robot
 from pin_kpi_oed.identification.simulate import Tolerances, default_tracker_pose, random_truth, simulate
 

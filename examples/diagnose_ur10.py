@@ -34,7 +34,8 @@ from pin_kpi_oed.identification.identify import ResidualModel, identify
 from pin_kpi_oed.data.measurements import MeasurementSet
 from pin_kpi_oed.data.atomic import atomic_write_json
 from pin_kpi_oed.data.ipa import import_ipa
-from pin_kpi_oed.model.measurement import NoiseModel, TrackerModel
+from pin_kpi_oed.model.noise import NoiseModel
+from pin_kpi_oed.model.tracker import TrackerModel
 from pin_kpi_oed.model.robot import load_robot
 
 QUICK = os.environ.get("PIN_KPI_OED_QUICK") == "1"

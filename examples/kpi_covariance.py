@@ -9,7 +9,8 @@ import pinocchio as pin
 from pin_kpi_oed.oed.covariance import kpi_covariance, kpi_covariance_kkt
 from pin_kpi_oed.oed.criteria import evaluate_all
 from pin_kpi_oed.oed.identifiability import analyse, check_kpi
-from pin_kpi_oed.model.measurement import NoiseModel, TrackerModel
+from pin_kpi_oed.model.noise import NoiseModel
+from pin_kpi_oed.model.tracker import TrackerModel
 from pin_kpi_oed.model.robot import load_robot
 
 robot = load_robot("kr15")  # or a URDF path, or "ur10", "panda", ...

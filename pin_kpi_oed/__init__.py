@@ -18,9 +18,12 @@ from pin_kpi_oed.errors import (IdentifiabilityError, InfeasibleError, InputErro
                      SolverError)
 from pin_kpi_oed.model.robot import Robot, load_robot
 from pin_kpi_oed.model.parameters import ParameterLayout
-from pin_kpi_oed.model.measurement import NoiseModel, TrackerModel
+from pin_kpi_oed.model.device import MeasurementModel
+from pin_kpi_oed.model.noise import NoiseModel
+from pin_kpi_oed.model.tracker import TrackerModel
 
 __version__ = "0.1.0"
 
 __all__ = ["IdentifiabilityError", "InfeasibleError", "InputError", "PinKpiOedError", "RobotLoadError",
-           "SolverError", "Robot", "load_robot", "ParameterLayout", "NoiseModel", "TrackerModel"]
+           "SolverError", "Robot", "load_robot", "ParameterLayout", "MeasurementModel", "NoiseModel",
+           "TrackerModel"]

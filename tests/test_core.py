@@ -10,7 +10,7 @@ from pin_kpi_oed.oed import covariance as cov
 from pin_kpi_oed.oed import identifiability as idf
 from pin_kpi_oed.oed.criteria import CRITERIA, DesignCriterion
 from pin_kpi_oed.errors import IdentifiabilityError, InputError
-from pin_kpi_oed.model.measurement import NoiseModel
+from pin_kpi_oed.model.noise import NoiseModel
 
 from .conftest import make_model
 
@@ -60,6 +60,7 @@ def test_jacobian_q_derivatives_match_finite_differences(name, pose6d):
         assert np.abs(dF[..., k] - dF_fd).max() < 1e-7 * np.abs(dF).max()
         assert np.abs(dc[:, k] - dc_fd).max() < 1e-7
         assert np.abs(Ydq[..., k] - dy_fd).max() < 1e-7
+    assert np.array_equal(model.prediction_dq(p, Q), Ydq)  # the cheap path the effects use
 
 
 def test_batched_kinematics_matches_pinocchio():
@@ -69,7 +70,7 @@ def test_batched_kinematics_matches_pinocchio():
     Q = model.robot.random_q(rng, 6)
     point = np.array([0.1, -0.02, 0.03])
     kin = model.kinematics(p, Q, point)
-    pm = model._model
+    pm = model.pinocchio_model(p)
     data = pm.createData()
     for i, q in enumerate(Q):
         pin.computeJointJacobians(pm, data, q)

@@ -11,7 +11,8 @@ from pin_kpi_oed.cli.main import main as cli_main
 from pin_kpi_oed.diagnosis.diagnose import diagnose
 from pin_kpi_oed.effects.library import EFFECT_NAMES, parse_effects_spec, size_effect, visible_rms
 from pin_kpi_oed.data.measurements import MeasurementSet, write_measurements
-from pin_kpi_oed.model.measurement import NoiseModel, TrackerModel
+from pin_kpi_oed.model.noise import NoiseModel
+from pin_kpi_oed.model.tracker import TrackerModel
 from pin_kpi_oed.model.robot import load_robot
 from pin_kpi_oed.identification.simulate import Tolerances, default_tracker_pose, random_truth, simulate
 

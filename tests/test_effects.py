@@ -11,7 +11,7 @@ from pin_kpi_oed.effects.library import (EFFECT_NAMES, UNOBSERVABLE_NOTES, Backl
                                  make_effect, parse_effects_spec, predict_with_effects, range_scale_parameters)
 from pin_kpi_oed.errors import InputError
 from pin_kpi_oed.data.measurements import MeasurementSet
-from pin_kpi_oed.model.measurement import TrackerModel
+from pin_kpi_oed.model.tracker import TrackerModel
 from pin_kpi_oed.model.robot import load_robot
 
 from .conftest import make_model

@@ -333,3 +333,33 @@ def test_write_urdf_atomic(tmp_path):
     assert sorted(p.name for p in dest.parent.iterdir()) == ["arm.urdf"]  # no temporary file left
     model = pin.buildModelFromUrdf(str(dest))
     assert model.name == kuka.KR15.name
+
+
+# --- linear track ----------------------------------------------------------------------------------------
+def test_shipped_track_urdf_is_generator_output():
+    assert (URDF_DIR / "kr15_track.urdf").read_text(encoding="utf-8") == kuka.urdf_text(kuka.KR15, kuka.KR15_TRACK)
+
+
+def test_track_urdf_structure():
+    path = URDF_DIR / "kr15_track.urdf"
+    model = pin.buildModelFromUrdf(str(path))
+    assert model.name == "kuka_kr15_2_track"
+    jid = model.getJointId("joint_e1")
+    assert jid == 1 and model.joints[jid].shortname() == "JointModelPY"
+    assert model.names[int(model.parents[model.getJointId("joint_a1")])] == "joint_e1"
+    assert (model.lowerPositionLimit[0], model.upperPositionLimit[0]) == (0.0, 6.4)
+    assert np.allclose(model.jointPlacements[jid].translation, [0.0, 0.0, 0.7])
+    geom = pin.buildGeomFromUrdf(model, str(path), pin.GeometryType.COLLISION)
+    rail = next(g for g in geom.geometryObjects if model.frames[g.parentFrame].name == "track_rail")
+    # the rail runs along y from -0.5 to 6.9 m, its axis 0.15 m above the rail frame
+    ends = [rail.placement.act(np.array([0.0, 0.0, s * rail.geometry.halfLength])) for s in (-1, 1)]
+    assert np.allclose(sorted(ends, key=lambda e: e[1]), [[0.0, -0.5, 0.15], [0.0, 6.9, 0.15]], atol=1e-12)
+    base = model.inertias[jid]
+    assert base.mass == kuka.KR15_TRACK.carriage_mass_kg
+
+
+@pytest.mark.parametrize("field,value", [("upper_m", 0.0), ("velocity_m_s", 0.0), ("rail_radius_m", float("nan")),
+                                         ("joint_name", "joint_a1"), ("overhang_m", -1.0)])
+def test_track_validation(field, value):
+    with pytest.raises(InputError, match=field):
+        kuka.LinearTrack(**{field: value})

@@ -19,7 +19,8 @@ from pin_kpi_oed.effects.periodic import TransmissionError
 from pin_kpi_oed.errors import IdentifiabilityError, InputError
 from pin_kpi_oed.identification.identify import identify
 from pin_kpi_oed.identification.simulate import Tolerances, default_tracker_pose, random_truth, simulate
-from pin_kpi_oed.model.measurement import NoiseModel, TrackerModel
+from pin_kpi_oed.model.noise import NoiseModel
+from pin_kpi_oed.model.tracker import TrackerModel
 from pin_kpi_oed.model.robot import load_robot
 
 from .conftest import SHARED

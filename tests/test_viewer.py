@@ -22,7 +22,8 @@ from pin_kpi_oed.cell.collision import INCID, CollisionModel
 from pin_kpi_oed.design.design_file import load_design
 from pin_kpi_oed.design.stand_in import stand_in_design
 from pin_kpi_oed.errors import InputError, PinKpiOedError
-from pin_kpi_oed.model.measurement import NoiseModel, TrackerModel
+from pin_kpi_oed.model.noise import NoiseModel
+from pin_kpi_oed.model.tracker import TrackerModel
 from pin_kpi_oed.model.robot import load_robot
 from pin_kpi_oed.oed.covariance import kpi_covariance
 from pin_kpi_oed.oed.identifiability import analyse

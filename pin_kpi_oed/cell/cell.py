@@ -67,8 +67,9 @@ import numpy as np
 import pinocchio as pin
 
 from pin_kpi_oed.errors import InputError, RobotLoadError
-from pin_kpi_oed.model.measurement import NoiseModel, TrackerModel
-from pin_kpi_oed.model.robot import ERD_ROBOTS, SHIPPED_ROBOTS, Robot, load_robot
+from pin_kpi_oed.model.noise import NoiseModel
+from pin_kpi_oed.model.robot import Robot, is_robot_name, load_robot
+from pin_kpi_oed.model.tracker import TrackerModel
 
 #: Folder of the cells shipped with the package.
 CELL_DIR = Path(__file__).resolve().parent / "cells"
@@ -344,7 +345,7 @@ def _check_top_level(d: Any, source: str) -> None:
 def _read_robot(d: dict, source: str, base_dir: Path | None) -> Robot:
     """The robot: a shipped name or a URDF path (relative to ``base_dir``)."""
     spec = str(d["robot"])
-    if base_dir is not None and spec.lower() not in SHIPPED_ROBOTS + tuple(ERD_ROBOTS):
+    if base_dir is not None and not is_robot_name(spec):
         p = Path(spec)
         if not p.is_absolute():
             spec = str((base_dir / p).resolve())

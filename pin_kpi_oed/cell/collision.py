@@ -53,7 +53,8 @@ import pinocchio as pin
 from pin_kpi_oed.cell.cell import Cell
 from pin_kpi_oed.cell.feasibility import coal_capsule
 from pin_kpi_oed.errors import InfeasibleError, InputError
-from pin_kpi_oed.model.measurement import TrackerModel
+from pin_kpi_oed.model.kinematics import Chain
+from pin_kpi_oed.model.tracker import TrackerModel
 
 # row kinds
 PAIR, HALF, INCID = 0, 1, 2
@@ -108,62 +109,6 @@ def point_segment_distance(p: np.ndarray, A: np.ndarray, B: np.ndarray) -> np.nd
     L2 = np.einsum("...i,...i->...", d, d)
     u = np.clip(np.einsum("...i,...i->...", p - A, d) / np.where(L2 > 0, L2, 1.0), 0.0, 1.0)
     return np.linalg.norm(p - (A + u[..., None] * d), axis=-1)
-
-
-# ---------------------------------------------------------------------------- batched kinematics
-class _ChainFK:
-    """Batched forward kinematics of the joint frames of a serial Pinocchio model (nominal geometry)."""
-
-    def __init__(self, model: pin.Model, joint_ids: list[int]):
-        self.model = model
-        self.joint_ids = list(joint_ids)
-        data = model.createData()
-        q0 = pin.neutral(model)
-        pin.computeJointJacobians(model, data, q0)
-        lin, ang = [], []
-        for k, j in enumerate(self.joint_ids):
-            S = data.oMi[j].actInv(pin.Motion(data.J[:, k]))
-            lin.append(S.linear.copy())
-            ang.append(S.angular.copy())
-        self.lin, self.ang = np.array(lin), np.array(ang)
-        self.revolute = np.linalg.norm(self.ang, axis=1) > 0.5
-        self.placements = [model.jointPlacements[j] for j in self.joint_ids]
-        K = np.zeros((len(self.joint_ids), 3, 3))
-        for k, a in enumerate(self.ang):
-            K[k] = np.array([[0, -a[2], a[1]], [a[2], 0, -a[0]], [-a[1], a[0], 0]])
-        self.K, self.KK = K, K @ K
-
-    def __call__(self, Q: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """Joint frames and world twists for configurations Q (m, n).
-
-        Returns:
-            R (m, n+1, 3, 3), t (m, n+1, 3) — index 0 is the base (universe), k the frame of the
-            k-th actuated joint after its motion; V, W (m, n, 3): world twist (linear part at the
-            world origin, angular part) of each joint.
-        """
-        m, n = Q.shape
-        R = np.empty((m, n + 1, 3, 3))
-        t = np.empty((m, n + 1, 3))
-        V = np.empty((m, n, 3))
-        W = np.empty((m, n, 3))
-        R[:, 0], t[:, 0] = np.eye(3), 0.0
-        Rc = np.broadcast_to(np.eye(3), (m, 3, 3))
-        tc = np.zeros((m, 3))
-        for k, M in enumerate(self.placements):
-            tc = tc + Rc @ M.translation
-            Rc = Rc @ M.rotation
-            if self.revolute[k]:
-                s, c = np.sin(Q[:, k])[:, None, None], np.cos(Q[:, k])[:, None, None]
-                w = Rc @ self.ang[k]
-                W[:, k] = w
-                V[:, k] = _cross(tc, w)
-                Rc = Rc @ (np.eye(3) + s * self.K[k] + (1.0 - c) * self.KK[k])
-            else:
-                u = Rc @ self.lin[k]
-                V[:, k], W[:, k] = u, 0.0
-                tc = tc + u * Q[:, k:k + 1]
-            R[:, k + 1], t[:, k + 1] = Rc, tc
-        return R, t, V, W
 
 
 # ---------------------------------------------------------------------------- the optimiser's model
@@ -228,7 +173,7 @@ class CollisionModel:
         self.p0 = np.zeros(self.model.n_params)
         rm = self.robot.model
         self.n = self.robot.nq
-        self.fk = _ChainFK(rm, self.robot.joint_ids)
+        self.fk = Chain(rm, self.robot.joint_ids)
         jpos = {j: k + 1 for k, j in enumerate(self.robot.joint_ids)}  # pinocchio joint id -> chain index
         self.cos_max = float(np.cos(np.radians(cell.incidence_max_deg)))
         base_T_W = cell.W_T_base.inverse()
@@ -399,7 +344,8 @@ class CollisionModel:
         q1 = np.append(q1, self.robot.q_upper[0])
         Q = np.zeros((q1.size, self.n))
         Q[:, 0] = q1
-        R, t, _, _ = self.fk(Q)
+        fr = self.fk.frames(Q)
+        R, t = fr.R, fr.t
         step = np.radians(0.25)
         o2 = t[:, 1] + R[:, 1] @ self.fk.placements[1].translation  # joint-2 origin on its circle
         axis_pt = t[:, 1][0]
@@ -524,7 +470,8 @@ class CollisionModel:
         return EA, EB, np.swapaxes(JA, 2, 3), np.swapaxes(JB, 2, 3)
 
     def _endpoints(self, Q: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        R, t, V, W = self.fk(Q)
+        fr = self.fk.frames(Q)
+        R, t, V, W = fr.R, fr.t, fr.V, fr.W
         j = np.where(self.seg_joint >= 0, self.seg_joint, 0)
         j[self.beam] = self.refl_joint
         Rj, tj = R[:, j], t[:, j]  # (m, S, 3, 3)

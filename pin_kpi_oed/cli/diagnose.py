@@ -67,7 +67,8 @@ def run(args: argparse.Namespace) -> int:
     from pin_kpi_oed.effects.library import EFFECT_NAMES
     from pin_kpi_oed.data.measurements import read_measurements
     from pin_kpi_oed.data.atomic import atomic_write_json
-    from pin_kpi_oed.model.measurement import NoiseModel, TrackerModel
+    from pin_kpi_oed.model.noise import NoiseModel
+    from pin_kpi_oed.model.tracker import TrackerModel
     from pin_kpi_oed.model.robot import load_robot
 
     if args.json:

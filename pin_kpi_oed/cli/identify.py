@@ -132,7 +132,8 @@ def run_simulate(args: argparse.Namespace) -> int:
     """Handler of ``pin-kpi-oed simulate``."""
     from pin_kpi_oed.data.measurements import write_measurements
     from pin_kpi_oed.data.atomic import atomic_write_json
-    from pin_kpi_oed.model.measurement import NoiseModel, TrackerModel
+    from pin_kpi_oed.model.noise import NoiseModel
+    from pin_kpi_oed.model.tracker import TrackerModel
     from pin_kpi_oed.model.robot import load_robot
     from pin_kpi_oed.identification.simulate import Tolerances, default_tracker_pose, random_truth, simulate, truth_to_dict
 
@@ -186,7 +187,8 @@ def run_identify(args: argparse.Namespace) -> int:
     from pin_kpi_oed.identification.identify import format_validation, identify, validate
     from pin_kpi_oed.data.measurements import read_measurements
     from pin_kpi_oed.data.atomic import atomic_write_json, atomic_write_text
-    from pin_kpi_oed.model.measurement import NoiseModel, TrackerModel
+    from pin_kpi_oed.model.noise import NoiseModel
+    from pin_kpi_oed.model.tracker import TrackerModel
     from pin_kpi_oed.model.robot import load_robot
     from pathlib import Path
 

@@ -14,8 +14,6 @@ import json
 import sys
 from pathlib import Path
 
-import numpy as np
-
 from pin_kpi_oed.cli.util import parse_floats
 from pin_kpi_oed.errors import PinKpiOedError
 
@@ -27,7 +25,7 @@ TOPICS = ("design", "identify", "diagnose", "view", "study")
 def cmd_info(args: argparse.Namespace) -> int:
     """``pin-kpi-oed info ROBOT``: joints, limits, parameter count, identifiable rank."""
     from pin_kpi_oed.oed.identifiability import analyse
-    from pin_kpi_oed.model.measurement import TrackerModel
+    from pin_kpi_oed.model.tracker import TrackerModel
     from pin_kpi_oed.model.robot import load_robot
 
     robot = load_robot(args.robot, args.tool)
@@ -41,9 +39,7 @@ def cmd_info(args: argparse.Namespace) -> int:
     print(f"robot: {robot.name}  ({robot.urdf_path})")
     print(f"tool frame: {robot.tool_frame}" + (f"   locked joints: {', '.join(robot.locked_joints)}"
                                                if robot.locked_joints else ""))
-    print(f"{'joint':<22}{'lower (deg)':>12}{'upper (deg)':>12}")
-    for n, lo, hi in zip(robot.joint_names, robot.q_lower, robot.q_upper):
-        print(f"{n:<22}{np.degrees(lo):>12.1f}{np.degrees(hi):>12.1f}")
+    print("\n".join(robot.limits_table()))
     print(f"reflector in {robot.tool_frame}: {', '.join(f'{x * 1e3:.1f}' for x in refl)} mm")
     print(ident.summary())
     return 0
@@ -73,7 +69,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="pin-kpi-oed", description=__doc__.splitlines()[0])
     sub = parser.add_subparsers(dest="command", required=True)
     p = sub.add_parser("info", help="joints, limits, parameter count and identifiable rank of a robot")
-    p.add_argument("robot", help="URDF path or name (kr15, kr300, kr500, ur3, ur5, ur10, panda)")
+    p.add_argument("robot", help="URDF path or name (kr15, kr300, kr500, kr15_track, ur3, ur5, ur10, panda)")
     p.add_argument("--tool", default=None, help="tool frame (default tool0)")
     p.add_argument("--reflector", default="0.05,0.0,0.05", help="reflector offset x,y,z in the tool frame (m)")
     p.add_argument("--seed", type=int, default=0, help="seed of the random excitation")

@@ -41,7 +41,7 @@ import pinocchio as pin
 from pin_kpi_oed.cell.cell import Cell, CapsuleSpec, HalfSpace, capsules_from_urdf
 from pin_kpi_oed.cell.feasibility import FeasibilityChecker
 from pin_kpi_oed.errors import InputError, PinKpiOedError
-from pin_kpi_oed.model.measurement import TrackerModel
+from pin_kpi_oed.model.tracker import TrackerModel
 from pin_kpi_oed.model.robot import Robot
 from pin_kpi_oed.model.serialize import model_from_dict, se3_from_matrix
 

@@ -12,7 +12,7 @@ import pinocchio as pin
 from pin_kpi_oed.cell.cell import capsules_from_urdf
 from pin_kpi_oed.design.design_file import load_design
 from pin_kpi_oed.errors import InfeasibleError
-from pin_kpi_oed.model.measurement import NoiseModel
+from pin_kpi_oed.model.noise import NoiseModel
 from pin_kpi_oed.model.robot import Robot, load_robot
 
 

@@ -83,7 +83,7 @@ from pin_kpi_oed.effects.library import (EFFECT_NAMES, UNOBSERVABLE_NOTES, Effec
 from pin_kpi_oed.data.atomic import to_jsonable
 from pin_kpi_oed.errors import InputError, PinKpiOedError
 from pin_kpi_oed.data.measurements import MeasurementSet
-from pin_kpi_oed.model.measurement import TrackerModel
+from pin_kpi_oed.model.tracker import TrackerModel
 
 __all__ = ["DiagnosisReport", "EffectResult", "diagnose", "MISMATCH_FACTOR", "heldout_stats"]
 
@@ -540,7 +540,7 @@ def _regressors(model: TrackerModel, p: np.ndarray, data: MeasurementSet, order:
     """Candidate regressors per held-out measurement: name -> (values, unit)."""
     rb = model.robot
     Q = np.asarray(data.q, float)[:, [data.joint_names.index(j) for j in rb.joint_names]]
-    kin = model.kinematics(p, Q, model.reflector(p), need_twist=False)
+    kin = model.kinematics(p, Q, model.reflector(p))
     P = kin.p
     out: dict[str, tuple[np.ndarray, str]] = {
         "tcp_x_base": (P[:, 0], "m"), "tcp_y_base": (P[:, 1], "m"), "tcp_z_base": (P[:, 2], "m"),
@@ -612,7 +612,7 @@ def _where(model: TrackerModel, p: np.ndarray, data: MeasurementSet, order: np.n
     strongest = [{"name": d["name"], "eta2": d["eta2"], "p_value": d["p_value"]} for d in items
                  if d["p_value"] < alpha][:3]
     P = model.kinematics(p, np.asarray(data.q, float)[:, [data.joint_names.index(j) for j in model.robot.joint_names]],
-                         model.reflector(p), need_twist=False).p
+                         model.reflector(p)).p
     med = np.median(P, axis=0)
     regions = []
     e = np.linalg.norm(R, axis=1)

@@ -79,7 +79,7 @@ from pin_kpi_oed.effects.library import Effect
 from pin_kpi_oed.effects.periodic import DEFAULT_MAX_ORDER, TransmissionError
 from pin_kpi_oed.errors import IdentifiabilityError, InputError, SolverError
 from pin_kpi_oed.identification.identify import IdentificationResult, ResidualModel, identify, predict, register_points
-from pin_kpi_oed.model.measurement import TrackerModel
+from pin_kpi_oed.model.tracker import TrackerModel
 from pin_kpi_oed.progress import progress
 from pin_kpi_oed.results import Result
 

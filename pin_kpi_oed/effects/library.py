@@ -771,11 +771,11 @@ def predict_with_effects(model: Any, p: np.ndarray, Q: np.ndarray, aux: Any,
 
 
 def position_dq(model: Any, p: np.ndarray, Q: np.ndarray) -> np.ndarray:
-    """dy/dq of the reflector positions (tracker frame), (m, 3, n), without the costly d²h/dp dq."""
-    p = np.asarray(p, float)
-    if hasattr(model, "_point_jacobian"):
-        return model._point_jacobian(p, Q, model.reflector(p), with_dq=False, with_reflector=True)[3]
-    return model.jacobian_dq(p, Q)[3]
+    """dy/dq of the reflector positions (tracker frame), (m, 3, n), without the costly d²h/dp dq.
+
+    :meth:`~pin_kpi_oed.model.device.MeasurementModel.prediction_dq` of the model.
+    """
+    return model.prediction_dq(np.asarray(p, float), Q)
 
 
 def visible_rms(model: Any, p: np.ndarray, Q: np.ndarray, aux: Any,

@@ -33,7 +33,7 @@ with the weighted residual of measurement i (position rows, then orientation row
   joint-angle errors Δq(θ, Q, aux) and additive tracker-frame offsets Δy(θ, Q, aux).
 
 Jacobian (analytic, exact at any x): with J_h = ∂h/∂p from
-:meth:`~pin_kpi_oed.model.measurement.TrackerModel.jacobian` (right Jacobians of exp6 included),
+:meth:`~pin_kpi_oed.model.tracker.TrackerModel.jacobian` (right Jacobians of exp6 included),
 (v_k, ω_k) the world twist of joint k and p the reflector in the base frame,
 
 .. math::
@@ -60,7 +60,7 @@ y_i (tracker frame)::
 
 and, for a 6-D probe, the probe orientation by the chordal mean
 ``R_probe = proj_SO3(Σ_i (R_T R_tool,i)ᵀ R_meas,i)``. The identification then runs on a
-working :class:`~pin_kpi_oed.model.measurement.TrackerModel` whose nominal tracker pose is this
+working :class:`~pin_kpi_oed.model.tracker.TrackerModel` whose nominal tracker pose is this
 guess, so the tracker parameters stay small. ``IdentificationResult.model`` and ``.p`` are
 that working model and its raw parameter vector: ``result.model.predict(result.p, Q)``
 reproduces the fit (without effects).
@@ -101,7 +101,8 @@ from pin_kpi_oed.oed.covariance import param_covariance
 from pin_kpi_oed.errors import IdentifiabilityError, InputError, SolverError
 from pin_kpi_oed.oed.identifiability import Identifiability, analyse
 from pin_kpi_oed.data.measurements import MeasurementSet
-from pin_kpi_oed.model.measurement import TrackerModel, skew
+from pin_kpi_oed.model.kinematics import skew
+from pin_kpi_oed.model.tracker import TrackerModel
 from pin_kpi_oed.model.parameters import ParameterLayout
 
 __all__ = [
@@ -267,11 +268,7 @@ def align_data(robot, data: MeasurementSet) -> np.ndarray:
         if bad.any():
             i = int(np.argwhere(bad)[0][0])
             raise InputError(f"{src}: {name} of measurement {i + 1} is not finite (NaN/inf)")
-    big = np.abs(Q) > 2 * np.pi + 0.1
-    if big.any():
-        i, j = np.argwhere(big)[0]
-        raise InputError(f"{src}: joint {robot.joint_names[j]} of measurement {i + 1} is {Q[i, j]:.6g}, beyond "
-                         "2π rad: looks like degrees; convert to rad")
+    robot.check_units(Q, src, first_row=1)
     if data.rotvec_rad is not None and np.any(np.linalg.norm(data.rotvec_rad, axis=1) > 2 * np.pi + 0.1):
         raise InputError(f"{src}: rotation vectors longer than 2π rad: looks like degrees; convert to rad")
     if data.sigma_m is not None and np.any(data.sigma_m <= 0):
@@ -418,7 +415,7 @@ class ResidualModel:
         t = self._terms(p, th, Q)
         Qe = Q if t is None else Q + t[0]
         model = self.model
-        kin = model.kinematics(p, Qe, model.reflector(p), need_twist=False)
+        kin = model.kinematics(p, Qe, model.reflector(p))
         T = model.tracker_pose(p)
         Yp = kin.p @ T.rotation.T + T.translation
         if t is not None:
@@ -456,7 +453,7 @@ class ResidualModel:
         J[:, :, :self.nb] = model.jacobian(p, Qe)[:, :, self.base]
         RT = model.tracker_pose(p).rotation
         if self.k:
-            kin = model.kinematics(p, Qe, model.reflector(p), need_twist=True)
+            kin = model.kinematics(p, Qe, model.reflector(p))
             v, w = kin.twist[:, :3, :], kin.twist[:, 3:, :]
             pdot = v + np.cross(w, kin.p[:, :, None], axis=1)
             Ydq = np.einsum("ab,mbn->man", RT, pdot)
@@ -819,7 +816,7 @@ def identify(model: TrackerModel, data: MeasurementSet, *, effects: Sequence[Any
     else:
         dQ0, dY0 = 0.0, 0.0
     if register and not tracker_known:
-        kin = wm.kinematics(p_start, Q + dQ0, wm.reflector(p_start), need_twist=False)
+        kin = wm.kinematics(p_start, Q + dQ0, wm.reflector(p_start))
         R, t = register_points(kin.p, data.position_m - dY0, None if sigma is None else 1.0 / np.mean(sigma ** 2, 1))
         wm.tracker_T_base = pin.SE3(R, t)
         if pose6d:

@@ -1,6 +1,6 @@
 r"""Simulated laser-tracker measurements from a "true" robot.
 
-A truth is a raw parameter vector p* of a :class:`~pin_kpi_oed.model.measurement.TrackerModel`
+A truth is a raw parameter vector p* of a :class:`~pin_kpi_oed.model.tracker.TrackerModel`
 (geometric errors of every joint placement, the tracker pose ``tracker_T_base·exp6(δ_t)``,
 the reflector offset ``r0 + δ_r``), optionally with effects (``docs/ARCHITECTURE.md``,
 "Effect interface") and their parameters θ*. A measurement at configuration q_i is
@@ -10,7 +10,7 @@ the reflector offset ``r0 + δ_r``), optionally with effects (``docs/ARCHITECTUR
     η_i = h\bigl(p^*, q_i + \textstyle\sum Δq(θ^*, q_i, aux)\bigr) + \sum Δy(θ^*, q_i, aux) + ε_i,
     \qquad ε_i \sim N(0, \operatorname{diag} σ_i^2)
 
-with σ_i from the model's :class:`~pin_kpi_oed.model.measurement.NoiseModel` (per-axis, or
+with σ_i from the model's :class:`~pin_kpi_oed.model.noise.NoiseModel` (per-axis, or
 a + b·range); a 6-D probe's orientation is ``R_meas = exp3(ε_rot) R_model`` with
 ε_rot ~ N(0, σ_rot² I). Geometric errors are drawn from tolerances (normal, standard
 deviation = tolerance). Every random draw takes a seed.
@@ -28,7 +28,8 @@ from scipy.spatial.transform import Rotation
 from pin_kpi_oed.errors import InputError
 from pin_kpi_oed.identification.identify import predict
 from pin_kpi_oed.data.measurements import MeasurementSet
-from pin_kpi_oed.model.measurement import NoiseModel, TrackerModel
+from pin_kpi_oed.model.noise import NoiseModel
+from pin_kpi_oed.model.tracker import TrackerModel
 from pin_kpi_oed.model.robot import Robot
 
 __all__ = ["Tolerances", "random_truth", "default_tracker_pose", "simulate", "truth_to_dict"]

@@ -75,6 +75,15 @@ link_2/link_4 and link_4/link_6 for all three arms; link_1/link_3 and
 link_3/link_5 too for KR 300 and KR 500): a self-collision check needs a list
 of pairs to ignore.
 
+Linear track
+------------
+:class:`LinearTrack` puts the arm on a linear track (KUKA's external axis E1): a fixed
+``track_rail`` root link with the rail as one collision cylinder along its +y axis, and a
+prismatic joint ``joint_e1`` (axis +y, limits in m, m/s and N) from the rail to ``base_link``,
+whose origin is ``carriage_height_m`` above the rail frame (carriage and riser). Every other
+joint, link and frame is the arm's. :data:`KR15_TRACK` (0 ... 6.4 m, 2 m/s, stand-in values)
+gives the shipped ``urdf/kr15_track.urdf`` (``load_robot("kr15_track")``).
+
 Inertias
 --------
 ``total_mass_kg`` is split over ``link_1`` ... ``link_6`` in the proportions
@@ -103,6 +112,8 @@ __all__ = [
     "KR15",
     "KR300",
     "KR500",
+    "LinearTrack",
+    "KR15_TRACK",
     "urdf_text",
     "notional_arm",
     "notional_arms",
@@ -289,6 +300,63 @@ KR500 = KukaGeometry(
 )
 
 
+
+@dataclass(frozen=True)
+class LinearTrack:
+    """A linear track under the arm: a prismatic joint along the rail frame's +y axis (stand-in values).
+
+    Attributes:
+        lower_m: lower travel limit (m).
+        upper_m: upper travel limit (m).
+        velocity_m_s: speed limit (m/s).
+        effort_n: force limit (N).
+        carriage_height_m: height of the arm's base plane above the rail frame (carriage + riser, m).
+        rail_radius_m: radius of the rail's collision capsule (m); its axis runs
+            ``rail_radius_m`` above the rail frame's origin, from ``lower_m - overhang_m`` to
+            ``upper_m + overhang_m`` along y.
+        overhang_m: rail length beyond the travel limits at each end (m).
+        carriage_mass_kg: mass of the carriage and the arm's base, carried by ``base_link`` (kg).
+        joint_name: name of the prismatic joint.
+        rail_link: name of the fixed root link carrying the rail.
+
+    Raises:
+        InputError: non-finite values, empty travel, or non-positive sizes / limits.
+    """
+
+    lower_m: float = 0.0
+    upper_m: float = 6.4
+    velocity_m_s: float = 2.0
+    effort_n: float = 10000.0
+    carriage_height_m: float = 0.7
+    rail_radius_m: float = 0.15
+    overhang_m: float = 0.5
+    carriage_mass_kg: float = 250.0
+    joint_name: str = "joint_e1"
+    rail_link: str = "track_rail"
+
+    def __post_init__(self) -> None:
+        for attr in ("lower_m", "upper_m", "velocity_m_s", "effort_n", "carriage_height_m", "rail_radius_m",
+                     "overhang_m", "carriage_mass_kg"):
+            value = getattr(self, attr)
+            if not (isinstance(value, (int, float)) and math.isfinite(value)):
+                raise InputError(f"LinearTrack: {attr} = {value!r} is not a finite number")
+        if not self.lower_m < self.upper_m:
+            raise InputError(f"LinearTrack: travel lower_m..upper_m = [{self.lower_m}, {self.upper_m}] m is empty")
+        for attr in ("velocity_m_s", "effort_n", "carriage_height_m", "rail_radius_m", "carriage_mass_kg"):
+            if getattr(self, attr) <= 0.0:
+                raise InputError(f"LinearTrack: {attr} = {getattr(self, attr)!r} must be > 0")
+        if self.overhang_m < 0.0:
+            raise InputError(f"LinearTrack: overhang_m = {self.overhang_m!r} must be >= 0")
+        for attr in ("joint_name", "rail_link"):
+            v = getattr(self, attr)
+            if not v or any(c in v for c in "<>&\"' ") or v in JOINT_NAMES + LINK_NAMES + ("tool0",):
+                raise InputError(f"LinearTrack: {attr} must be a new XML-safe name, got {v!r}")
+
+
+#: The KR 15 on a 6.4 m track (0 ... 6.4 m, 2 m/s, 10 kN; 0.7 m carriage; stand-in values).
+KR15_TRACK = LinearTrack()
+
+
 # --- geometry helpers -----------------------------------------------------------
 def _segments(geom: KukaGeometry) -> dict[str, tuple[np.ndarray, np.ndarray]]:
     """Capsule segment end points of every link, in the link's own frame (m)."""
@@ -309,13 +377,15 @@ def _segments(geom: KukaGeometry) -> dict[str, tuple[np.ndarray, np.ndarray]]:
 def _cylinder_pose(p0: np.ndarray, p1: np.ndarray) -> tuple[np.ndarray, tuple[float, float, float], float]:
     """Centre, URDF rpy and length of a cylinder whose axis (local z) is p0 -> p1.
 
-    Only segments in the x-z plane of the link occur, so a rotation about y
-    suffices: R_y(pitch) maps z to (sin pitch, 0, cos pitch).
+    Segments in the x-z plane of the link use a rotation about y: R_y(pitch) maps z to
+    (sin pitch, 0, cos pitch); a segment along +y (the track's rail) uses R_x(-π/2).
     """
     d = p1 - p0
     length = float(np.linalg.norm(d))
+    if abs(d[0]) <= 1e-12 and abs(d[2]) <= 1e-12 and d[1] > 0.0:
+        return 0.5 * (p0 + p1), (-math.pi / 2.0, 0.0, 0.0), length
     if abs(d[1]) > 1e-12:
-        raise InputError("capsule segments must lie in the x-z plane of their link")
+        raise InputError("capsule segments must lie in the x-z plane of their link (or along +y)")
     pitch = math.atan2(d[0], d[2])
     return 0.5 * (p0 + p1), (0.0, pitch, 0.0), length
 
@@ -344,18 +414,43 @@ def _v(values: Sequence[float]) -> str:
 
 
 # --- public API ---------------------------------------------------------------------
-def urdf_text(geom: KukaGeometry) -> str:
-    """Return the URDF text of a KUKA-like 6R arm.
+def _link_text(name: str, p0: np.ndarray, p1: np.ndarray, radius: float, material: str,
+               mass: float | None) -> list[str]:
+    """A URDF link with one cylinder p0 -> p1 (visual and collision) and, with ``mass``, its inertia."""
+    centre, rpy, length = _cylinder_pose(p0, p1)
+    geometry = f'<cylinder radius="{_f(radius)}" length="{_f(length)}"/>'
+    origin = f'<origin xyz="{_v(centre)}" rpy="{_v(rpy)}"/>'
+    out = [f'  <link name="{name}">']
+    if mass is not None:
+        com, inertia = _cylinder_inertia(mass, radius, p0, p1)
+        out += ["    <inertial>",
+                f'      <origin xyz="{_v(com)}" rpy="0 0 0"/>',
+                f'      <mass value="{_f(mass)}"/>',
+                f'      <inertia ixx="{_f(inertia[0, 0])}" ixy="{_f(inertia[0, 1])}" ixz="{_f(inertia[0, 2])}" '
+                f'iyy="{_f(inertia[1, 1])}" iyz="{_f(inertia[1, 2])}" izz="{_f(inertia[2, 2])}"/>',
+                "    </inertial>"]
+    out += ["    <visual>", f"      {origin}", f"      <geometry>{geometry}</geometry>",
+            f'      <material name="{material}"/>', "    </visual>",
+            "    <collision>", f"      {origin}", f"      <geometry>{geometry}</geometry>", "    </collision>",
+            "  </link>"]
+    return out
+
+
+def urdf_text(geom: KukaGeometry, track: LinearTrack | None = None) -> str:
+    """Return the URDF text of a KUKA-like 6R arm, optionally on a linear track.
 
     The text is deterministic (same geometry, same bytes). Joints are
     ``joint_a1`` ... ``joint_a6`` (revolute, limits in rad, rad/s, N m) plus
     the fixed ``joint_a6-tool0``; links are ``base_link``, ``link_1`` ...
     ``link_6`` and ``tool0``. Each link except ``tool0`` has one cylinder in
     ``<visual>`` and one in ``<collision>`` (read downstream as a capsule);
-    inertias are stand-ins, not KUKA data.
+    inertias are stand-ins, not KUKA data. With ``track``, the root link is the
+    rail (``track.rail_link``) and the prismatic ``track.joint_name`` (limits in
+    m, m/s, N) carries ``base_link`` (module docstring, "Linear track").
 
     Args:
         geom: Arm geometry (m, rad, kg).
+        track: the linear track under the arm, or None (arm on a fixed base).
 
     Returns:
         The URDF document as a string (UTF-8 compatible, ends with a newline).
@@ -365,12 +460,16 @@ def urdf_text(geom: KukaGeometry) -> str:
     out: list[str] = []
     w = out.append
     w('<?xml version="1.0"?>')
-    w(f'<robot name="{geom.name}">')
+    w(f'<robot name="{geom.name if track is None else geom.name + "_track"}">')
     w("  <!--")
     w("    Generated by pin_kpi_oed.model.kuka (do not edit; run urdf/regenerate.py).")
     w("    KUKA-like 6R arm, classic 6R offset layout, ROS-Industrial joint frames.")
     w(f"    d1={_f(geom.d1)} a1={_f(geom.a1)} a2={_f(geom.a2)} a3={_f(geom.a3)} "
       f"d4={_f(geom.d4)} d6={_f(geom.d6)} m; wrist-centre reach {geom.reach_m:.4f} m.")
+    if track is not None:
+        w(f"    On a linear track: prismatic {track.joint_name} along +y of {track.rail_link}, "
+          f"{_f(track.lower_m)} ... {_f(track.upper_m)} m, {_f(track.velocity_m_s)} m/s; "
+          f"base plane {_f(track.carriage_height_m)} m above the rail frame.")
     w("    All values are stand-ins from third-party public sources, not a KUKA datasheet.")
     w("    Inertias are plausible stand-ins (solid cylinders), NOT KUKA data.")
     w("    Collision cylinders are read as capsules of the same radius (segment = axis).")
@@ -378,35 +477,30 @@ def urdf_text(geom: KukaGeometry) -> str:
     w('  <material name="kuka_orange"><color rgba="0.96 0.47 0.13 1"/></material>')
     w('  <material name="kuka_black"><color rgba="0.12 0.12 0.12 1"/></material>')
 
+    if track is not None:
+        z = track.rail_radius_m
+        ends = (np.array([0.0, track.lower_m - track.overhang_m, z]),
+                np.array([0.0, track.upper_m + track.overhang_m, z]))
+        out += _link_text(track.rail_link, *ends, track.rail_radius_m, "kuka_black", None)
     for k, link in enumerate(LINK_NAMES):
         p0, p1 = seg[link]
-        centre, rpy, length = _cylinder_pose(p0, p1)
-        radius = geom.capsule_radii[link]
         material = "kuka_black" if link in ("base_link", "link_6") else "kuka_orange"
-        geometry = f'<cylinder radius="{_f(radius)}" length="{_f(length)}"/>'
-        origin = f'<origin xyz="{_v(centre)}" rpy="{_v(rpy)}"/>'
-        w(f'  <link name="{link}">')
         if k > 0:
-            com, inertia = _cylinder_inertia(masses[k - 1], radius, p0, p1)
-            w("    <inertial>")
-            w(f'      <origin xyz="{_v(com)}" rpy="0 0 0"/>')
-            w(f'      <mass value="{_f(masses[k - 1])}"/>')
-            w(
-                f'      <inertia ixx="{_f(inertia[0, 0])}" ixy="{_f(inertia[0, 1])}" ixz="{_f(inertia[0, 2])}" '
-                f'iyy="{_f(inertia[1, 1])}" iyz="{_f(inertia[1, 2])}" izz="{_f(inertia[2, 2])}"/>'
-            )
-            w("    </inertial>")
-        w("    <visual>")
-        w(f"      {origin}")
-        w(f"      <geometry>{geometry}</geometry>")
-        w(f'      <material name="{material}"/>')
-        w("    </visual>")
-        w("    <collision>")
-        w(f"      {origin}")
-        w(f"      <geometry>{geometry}</geometry>")
-        w("    </collision>")
-        w("  </link>")
+            mass: float | None = masses[k - 1]
+        else:
+            mass = track.carriage_mass_kg if track is not None else None
+        out += _link_text(link, p0, p1, geom.capsule_radii[link], material, mass)
     w('  <link name="tool0"/>')
+
+    if track is not None:
+        w(f'  <joint name="{track.joint_name}" type="prismatic">')
+        w(f'    <origin xyz="0 0 {_f(track.carriage_height_m)}" rpy="0 0 0"/>')
+        w(f'    <parent link="{track.rail_link}"/>')
+        w(f'    <child link="{LINK_NAMES[0]}"/>')
+        w('    <axis xyz="0 1 0"/>')
+        w(f'    <limit lower="{_f(track.lower_m)}" upper="{_f(track.upper_m)}" '
+          f'velocity="{_f(track.velocity_m_s)}" effort="{_f(track.effort_n)}"/>')
+        w("  </joint>")
 
     joint_origins = (
         (0.0, 0.0, 0.0),
@@ -488,8 +582,8 @@ def notional_arms() -> list[KukaGeometry]:
     return [notional_arm(lam, mu) for lam in lambdas for mu in mus]
 
 
-def write_urdf(geom: KukaGeometry, path: str | os.PathLike[str]) -> Path:
-    """Write ``urdf_text(geom)`` to ``path`` atomically.
+def write_urdf(geom: KukaGeometry, path: str | os.PathLike[str], track: LinearTrack | None = None) -> Path:
+    """Write ``urdf_text(geom, track)`` to ``path`` atomically.
 
     The text goes to a temporary file in the target directory, is flushed and
     fsync'ed, then moved over ``path`` with :func:`os.replace`, so readers see
@@ -498,6 +592,7 @@ def write_urdf(geom: KukaGeometry, path: str | os.PathLike[str]) -> Path:
     Args:
         geom: Arm geometry (m, rad, kg).
         path: Destination file; its parent directory is created if missing.
+        track: the linear track under the arm, or None.
 
     Returns:
         The destination path.
@@ -506,6 +601,6 @@ def write_urdf(geom: KukaGeometry, path: str | os.PathLike[str]) -> Path:
 
     dest = Path(path)
     dest.parent.mkdir(parents=True, exist_ok=True)
-    atomic_write_text(dest, urdf_text(geom))
+    atomic_write_text(dest, urdf_text(geom, track))
     return dest
 

@@ -15,9 +15,14 @@ Joints that hang off the end effector (gripper fingers, as on the Panda) are
 locked at their neutral value; any other branch makes the model non-serial
 and is refused with :class:`~pin_kpi_oed.errors.RobotLoadError`.
 
+Joints are revolute (values in rad) or prismatic (values in m, e.g. a linear track); the type
+comes from Pinocchio (:func:`~pin_kpi_oed.model.kinematics.revolute_mask`). Limits, unit checks
+and printed tables follow each joint's type: a continuous revolute joint falls back to ±2π rad,
+a prismatic joint must have finite limits in the URDF (metres).
+
 Robots are given either as a URDF path or as a name: ``kr15``, ``kr300``,
-``kr500`` (shipped in ``urdf/``) or an ``example-robot-data`` robot
-(``ur3``, ``ur5``, ``ur10``, ``panda``).
+``kr500``, ``kr15_track`` (the KR 15 on a 6.4 m linear track; shipped in ``urdf/``) or an
+``example-robot-data`` robot (``ur3``, ``ur5``, ``ur10``, ``panda``).
 """
 
 from __future__ import annotations
@@ -33,6 +38,7 @@ import numpy as np
 import pinocchio as pin
 
 from pin_kpi_oed.errors import InputError, RobotLoadError
+from pin_kpi_oed.model.kinematics import joint_unit, revolute_mask
 
 #: Folder of the URDFs shipped with the package (KUKA arms).
 URDF_DIR = Path(__file__).resolve().parents[2] / "urdf"
@@ -45,7 +51,17 @@ ERD_ROBOTS: dict[str, tuple[str, str]] = {
     "panda": ("panda_description/urdf/panda.urdf", "panda_hand_tcp"),
 }
 
-SHIPPED_ROBOTS = ("kr15", "kr300", "kr500")
+SHIPPED_ROBOTS = ("kr15", "kr300", "kr500", "kr15_track")
+
+#: Joint values beyond these magnitudes are in the wrong unit: degrees (revolute) or mm (prismatic).
+UNIT_GUARD = {"rad": 2.0 * np.pi + 0.1, "m": 100.0}
+#: What a value beyond :data:`UNIT_GUARD` looks like, per unit.
+_LOOKS_LIKE = {"rad": "degrees", "m": "mm"}
+
+
+def is_robot_name(spec: str) -> bool:
+    """Whether ``spec`` is a robot name (shipped or example-robot-data) rather than a URDF path."""
+    return str(spec).lower() in SHIPPED_ROBOTS + tuple(ERD_ROBOTS)
 
 
 def erd_root() -> Path:
@@ -86,9 +102,10 @@ class Robot:
         tool_frame_id: its Pinocchio frame index.
         joint_ids: Pinocchio joint indices of the actuated joints, base to tip.
         joint_names: their URDF names.
-        q_lower: lower joint limits (rad or m), shape (n,).
+        q_lower: lower joint limits (rad for revolute, m for prismatic joints), shape (n,).
         q_upper: upper joint limits (rad or m), shape (n,).
         locked_joints: names of joints locked at neutral (end-effector branches).
+        revolute: revolute (True) / prismatic (False) mask of the joints; computed from the model if None.
     """
 
     model: pin.Model
@@ -102,6 +119,7 @@ class Robot:
     q_lower: np.ndarray
     q_upper: np.ndarray
     locked_joints: list[str] = field(default_factory=list)
+    revolute: np.ndarray | None = field(default=None, repr=False, compare=False)
 
     @property
     def nq(self) -> int:
@@ -116,15 +134,25 @@ class Robot:
     @property
     def is_revolute(self) -> np.ndarray:
         """Boolean mask of revolute joints (the others are prismatic)."""
-        return np.array([self.model.joints[j].shortname().startswith("JointModelR") for j in self.joint_ids])
+        if self.revolute is None:
+            self.revolute = revolute_mask(self.model, self.joint_ids)
+        return self.revolute.copy()
+
+    @property
+    def joint_units(self) -> list[str]:
+        """SI unit of each joint value: ``"rad"`` (revolute) or ``"m"`` (prismatic)."""
+        return [joint_unit(bool(r)) for r in self.is_revolute]
 
     def reach(self) -> float:
-        """Rough reach (m): sum of joint-placement and tool offsets along the chain."""
+        """Rough reach (m): sum of joint-placement and tool offsets along the chain, plus the travel of
+        prismatic joints (largest |limit|)."""
         total = sum(float(np.linalg.norm(self.model.jointPlacements[j].translation)) for j in self.joint_ids[1:])
-        return total + float(np.linalg.norm(self.model.frames[self.tool_frame_id].placement.translation))
+        travel = sum(max(abs(float(lo)), abs(float(hi)))
+                     for lo, hi, r in zip(self.q_lower, self.q_upper, self.is_revolute) if not r)
+        return total + travel + float(np.linalg.norm(self.model.frames[self.tool_frame_id].placement.translation))
 
     def neutral(self) -> np.ndarray:
-        """A configuration inside the limits: neutral clipped to the bounds (rad)."""
+        """A configuration inside the limits: neutral clipped to the bounds (rad / m)."""
         return np.clip(pin.neutral(self.model), self.q_lower, self.q_upper)
 
     def random_q(self, rng: np.random.Generator, n: int = 1) -> np.ndarray:
@@ -137,18 +165,20 @@ class Robot:
         return self.data.oMf[self.tool_frame_id].copy()
 
     def check_q(self, q: np.ndarray, what: str = "q", tol: float = 1e-9) -> np.ndarray:
-        """Validate configurations: shape (m, nq) or (nq,), finite, within the joint limits.
+        """Validate configurations: shape (m, nq) or (nq,), finite, in SI units, within the joint limits.
 
         Args:
             q: joint values (rad for revolute, m for prismatic joints).
             what: name used in error messages (e.g. the file or field).
-            tol: tolerance on the limits (rad).
+            tol: tolerance on the limits (rad or m).
 
         Returns:
             The configurations as a float array of shape (m, nq).
 
         Raises:
-            InputError: wrong shape, NaN/inf, or a value outside the joint limits (named).
+            InputError: wrong shape, NaN/inf, a value beyond :data:`UNIT_GUARD` for its joint type
+                ("looks like degrees" / "looks like mm"), or a value outside the joint limits (named,
+                with the joint's unit).
         """
         Q = np.atleast_2d(np.asarray(q, dtype=float))
         if Q.ndim != 2 or Q.shape[1] != self.nq:
@@ -158,25 +188,66 @@ class Robot:
         if bad.any():
             i, j = np.argwhere(bad)[0]
             raise InputError(f"{what}: configuration {i}, joint {self.joint_names[j]} is {Q[i, j]} (not finite)")
+        units = self.joint_units
         lo = Q < self.q_lower - tol
         hi = Q > self.q_upper + tol
         if lo.any() or hi.any():
             i, j = np.argwhere(lo | hi)[0]
+            u = units[j]
             raise InputError(
-                f"{what}: configuration {i}, joint {self.joint_names[j]} = {Q[i, j]:.6g} rad is outside its limits "
-                f"[{self.q_lower[j]:.6g}, {self.q_upper[j]:.6g}] rad")
+                f"{what}: configuration {i}, joint {self.joint_names[j]} = {Q[i, j]:.6g} {u} is outside its limits "
+                f"[{self.q_lower[j]:.6g}, {self.q_upper[j]:.6g}] {u}")
         return Q
 
+    def check_units(self, q: np.ndarray, what: str = "q", first_row: int = 0) -> None:
+        """Reject joint values in the wrong unit: beyond 2π + 0.1 rad (revolute: degrees) or 100 m
+        (prismatic: mm) in magnitude (:data:`UNIT_GUARD`). For data read from files, before
+        :meth:`check_q`.
+
+        Args:
+            q: joint values, (m, nq) (rad / m).
+            what: name used in error messages (e.g. the file).
+            first_row: number of the first row in messages (1 for "measurement 1").
+
+        Raises:
+            InputError: naming the measurement, joint, value and what it looks like.
+        """
+        Q = np.atleast_2d(np.asarray(q, dtype=float))
+        units = self.joint_units
+        guard = np.array([UNIT_GUARD[u] for u in units])
+        big = np.abs(Q) > guard
+        if big.any():
+            i, j = np.argwhere(big)[0]
+            u = units[j]
+            raise InputError(f"{what}: joint {self.joint_names[j]} of measurement {i + first_row} is {Q[i, j]:.6g}, "
+                             f"beyond {guard[j]:.4g} {u}: looks like {_LOOKS_LIKE[u]}; convert to {u}")
+
+    def limits_table(self) -> list[str]:
+        """The joint limits as printable lines, each in its joint's display unit (deg for revolute, m for
+        prismatic joints), with a header line."""
+        lines = [f"{'joint':<22}{'type':<11}{'lower':>10}{'upper':>10}  unit"]
+        for n, lo, hi, r in zip(self.joint_names, self.q_lower, self.q_upper, self.is_revolute):
+            if r:
+                lines.append(f"{n:<22}{'revolute':<11}{np.degrees(lo):>10.1f}{np.degrees(hi):>10.1f}  deg")
+            else:
+                lines.append(f"{n:<22}{'prismatic':<11}{lo:>10.3f}{hi:>10.3f}  m")
+        return lines
+
     def summary(self) -> dict:
-        """Plain-number description (joints, limits in rad, tool frame) for printing or JSON."""
+        """Plain-number description (joints with type and SI limits, tool frame) for printing or JSON.
+
+        Each joint has ``type`` (``revolute``/``prismatic``), ``unit`` and its limits as
+        ``lower_rad``/``upper_rad`` (revolute) or ``lower_m``/``upper_m`` (prismatic).
+        """
+        joints = []
+        for n, lo, hi, u in zip(self.joint_names, self.q_lower, self.q_upper, self.joint_units):
+            joints.append({"name": n, "type": "revolute" if u == "rad" else "prismatic", "unit": u,
+                           f"lower_{u}": float(lo), f"upper_{u}": float(hi)})
         return {
             "name": self.name,
             "urdf_path": self.urdf_path,
             "tool_frame": self.tool_frame,
-            "joints": [
-                {"name": n, "lower_rad": float(lo), "upper_rad": float(hi)}
-                for n, lo, hi in zip(self.joint_names, self.q_lower, self.q_upper)
-            ],
+            "joints": joints,
             "locked_joints": list(self.locked_joints),
         }
 
@@ -206,7 +277,7 @@ def load_robot(spec: str | os.PathLike, tool_frame: str | None = None) -> Robot:
     """Load a serial arm from a URDF path or a robot name.
 
     Args:
-        spec: URDF path, a shipped name (``kr15``, ``kr300``, ``kr500``) or an
+        spec: URDF path, a shipped name (``kr15``, ``kr300``, ``kr500``, ``kr15_track``) or an
             example-robot-data name (``ur3``, ``ur5``, ``ur10``, ``panda``).
         tool_frame: tool frame name; default ``tool0`` where the URDF has one
             (``panda_hand_tcp`` for the Panda).
@@ -215,8 +286,9 @@ def load_robot(spec: str | os.PathLike, tool_frame: str | None = None) -> Robot:
         The :class:`Robot`.
 
     Raises:
-        RobotLoadError: missing or malformed URDF, unknown tool frame, or a
-            non-serial model (free-flyer, multi-DoF joint, branch).
+        RobotLoadError: missing or malformed URDF, unknown tool frame, a
+            non-serial model (free-flyer, multi-DoF joint, branch), a joint that is neither
+            revolute nor prismatic, or a prismatic joint without finite limits (m).
     """
     path, default_tool = resolve_robot(str(spec))
     if not path.exists():
@@ -264,12 +336,12 @@ def load_robot(spec: str | os.PathLike, tool_frame: str | None = None) -> Robot:
     model = pin.buildReducedModel(full, extra, pin.neutral(full)) if extra else full
 
     joint_ids = list(range(1, model.njoints))
-    lower = np.array(model.lowerPositionLimit, dtype=float)
-    upper = np.array(model.upperPositionLimit, dtype=float)
-    # continuous joints or absurd limits: fall back to +-2 pi
-    lower = np.where(np.isfinite(lower) & (lower > -1e3), lower, -2 * np.pi)
-    upper = np.where(np.isfinite(upper) & (upper < 1e3), upper, 2 * np.pi)
-    name = str(spec) if str(spec).lower() in SHIPPED_ROBOTS + tuple(ERD_ROBOTS) else path.stem
+    try:
+        revolute = revolute_mask(model, joint_ids)
+    except RobotLoadError as exc:
+        raise RobotLoadError(f"{path}: {exc}") from None
+    lower, upper = _joint_limits(model, joint_ids, revolute, path)
+    name = str(spec) if is_robot_name(spec) else path.stem
     return Robot(
         model=model,
         data=model.createData(),
@@ -282,4 +354,25 @@ def load_robot(spec: str | os.PathLike, tool_frame: str | None = None) -> Robot:
         q_lower=lower,
         q_upper=upper,
         locked_joints=locked,
+        revolute=revolute,
     )
+
+
+def _joint_limits(model: pin.Model, joint_ids: list[int], revolute: np.ndarray, path: Path
+                  ) -> tuple[np.ndarray, np.ndarray]:
+    """Joint limits per type: revolute in rad (continuous / absurd limits -> ±2π), prismatic in m (finite).
+
+    Raises:
+        RobotLoadError: a prismatic joint without finite limits, or with lower >= upper.
+    """
+    lower = np.array([model.lowerPositionLimit[model.joints[j].idx_q] for j in joint_ids], dtype=float)
+    upper = np.array([model.upperPositionLimit[model.joints[j].idx_q] for j in joint_ids], dtype=float)
+    # continuous revolute joints or absurd limits: fall back to +-2 pi
+    lo_bad = ~np.isfinite(lower) | (lower <= -1e3)
+    hi_bad = ~np.isfinite(upper) | (upper >= 1e3)
+    for k in np.flatnonzero(~revolute & (lo_bad | hi_bad | ~(lower < upper))):
+        raise RobotLoadError(f"{path}: prismatic joint '{model.names[joint_ids[k]]}' needs finite limits in m "
+                             f"(<limit lower=... upper=...>), got [{lower[k]:.6g}, {upper[k]:.6g}]")
+    lower = np.where(revolute & lo_bad, -2 * np.pi, lower)
+    upper = np.where(revolute & hi_bad, 2 * np.pi, upper)
+    return lower, upper

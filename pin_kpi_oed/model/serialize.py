@@ -18,11 +18,14 @@ from __future__ import annotations
 from typing import Any
 
 import numpy as np
-import pinocchio as pin
 
 from pin_kpi_oed.errors import InputError
-from pin_kpi_oed.model.measurement import NoiseModel, TrackerModel
+from pin_kpi_oed.model.kinematics import se3_from_matrix
+from pin_kpi_oed.model.noise import NoiseModel
 from pin_kpi_oed.model.robot import load_robot
+from pin_kpi_oed.model.tracker import TrackerModel
+
+__all__ = ["model_from_dict", "model_to_dict", "se3_from_matrix"]
 
 
 def _vec(d: dict, key: str, n: int, default: Any = None, where: str = "set-up") -> np.ndarray:
@@ -33,22 +36,6 @@ def _vec(d: dict, key: str, n: int, default: Any = None, where: str = "set-up") 
     if a.size != n or not np.all(np.isfinite(a)):
         raise InputError(f"{where}: field '{key}' must be {n} finite numbers, got {v!r}")
     return a.reshape(-1)
-
-
-def se3_from_matrix(T: Any, where: str = "tracker_T_base") -> pin.SE3:
-    """A 4×4 homogeneous matrix (m) -> pin.SE3, checking it is a rigid transform.
-
-    Raises:
-        InputError: not 4×4, not finite, or the rotation block is not orthonormal.
-    """
-    M = np.asarray(T, dtype=float)
-    if M.shape != (4, 4) or not np.all(np.isfinite(M)):
-        raise InputError(f"{where}: expected a finite 4x4 matrix, got shape {M.shape}")
-    R = M[:3, :3]
-    if np.abs(R.T @ R - np.eye(3)).max() > 1e-6 or np.linalg.det(R) < 0:
-        raise InputError(f"{where}: the rotation block is not a proper rotation matrix")
-    U, _, Vt = np.linalg.svd(R)
-    return pin.SE3(U @ Vt, M[:3, 3].copy())
 
 
 def model_from_dict(d: dict, where: str = "set-up") -> TrackerModel:

@@ -32,7 +32,7 @@ import scipy.linalg as sla
 from pin_kpi_oed.errors import IdentifiabilityError
 
 if TYPE_CHECKING:
-    from pin_kpi_oed.model.measurement import TrackerModel
+    from pin_kpi_oed.model.tracker import TrackerModel
 
 __all__ = ["information", "prior_of", "param_covariance", "covariances", "kpi_covariance", "design_covariances",
            "kpi_covariance_kkt"]

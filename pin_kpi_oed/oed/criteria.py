@@ -49,7 +49,7 @@ from typing import ClassVar
 import numpy as np
 
 from pin_kpi_oed.errors import IdentifiabilityError, InputError
-from pin_kpi_oed.model.measurement import TrackerModel
+from pin_kpi_oed.model.tracker import TrackerModel
 from pin_kpi_oed.oed.covariance import information, prior_of
 
 __all__ = ["Criterion", "CovarianceCriterion", "SingularValueCriterion", "CRITERIA", "register", "unregister",

@@ -17,7 +17,7 @@ import numpy as np
 
 from pin_kpi_oed.data.atomic import atomic_write_json
 from pin_kpi_oed.errors import IdentifiabilityError, InputError
-from pin_kpi_oed.model.measurement import TrackerModel
+from pin_kpi_oed.model.tracker import TrackerModel
 from pin_kpi_oed.model.serialize import model_from_dict, model_to_dict
 from pin_kpi_oed.oed.covariance import design_covariances
 from pin_kpi_oed.oed.criteria import CRITERIA, evaluate_all

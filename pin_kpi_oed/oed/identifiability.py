@@ -12,7 +12,7 @@ Selection (QR with ordered pivoting): columns are scaled to unit norm and
 visited in a preference order; a column is kept when its component orthogonal
 to the columns kept so far exceeds ``tol``. The rank is cross-checked with
 SciPy's QR with column pivoting. **Convention** (the paper's, implicitly):
-measurement-set-up parameters (tracker, reflector, probe) come first, so when a
+measurement-set-up parameters (the device's groups: tracker, reflector, probe) come first, so when a
 robot parameter is confounded with a set-up parameter, the *robot* parameter is
 the one held at its nominal value. Every dropped parameter is reported with
 the kept parameters it is confounded with.
@@ -21,8 +21,8 @@ This is what makes the regularity condition (PD) of the paper (eq. 15) hold.
 
 KPI estimability: a KPI s with sensitivity E is estimable under this
 convention iff E n = 0 for every null direction n of F that leaves the
-reflector and probe unchanged (those directions only re-label which physical
-point is the tool frame, which the convention fixes). A TCP in the robot base
+device's target groups (reflector and probe) unchanged (those directions only
+re-label which physical point is the tool frame, which the convention fixes). A TCP in the robot base
 frame fails when the tracker pose is unknown (joint 1 ↔ tracker), and a TCP
 away from a reflector that sits on the last joint axis fails (the tool's
 rotation about that axis is invisible).
@@ -36,7 +36,7 @@ import numpy as np
 import scipy.linalg as sla
 
 from pin_kpi_oed.errors import IdentifiabilityError
-from pin_kpi_oed.model.measurement import TrackerModel
+from pin_kpi_oed.model.device import MeasurementModel
 
 
 @dataclass
@@ -53,6 +53,7 @@ class Identifiability:
             ``{"name", "confounded_with": [...], "convention": bool}``.
         notes: plain-words explanations (e.g. reflector on the last joint axis).
         null_space: basis of the null space of F over all raw parameters, (n_raw, k) (unscaled).
+        setup_groups: the measurement device's set-up groups (e.g. ``tracker``, ``reflector``).
     """
 
     names: list[str]
@@ -63,6 +64,7 @@ class Identifiability:
     dropped: list[dict] = field(default_factory=list)
     notes: list[str] = field(default_factory=list)
     null_space: np.ndarray | None = None
+    setup_groups: tuple[str, ...] = ()
 
     @property
     def base_names(self) -> list[str]:
@@ -80,7 +82,7 @@ class Identifiability:
         lines = []
         for (grp, partners), comps in agg.items():
             conv = " (convention: the robot parameter is held nominal)" if any(
-                p in partners for p in ("tracker", "reflector", "probe")) else ""
+                p in partners for p in self.setup_groups) else ""
             if partners == "nothing":
                 lines.append(f"{grp}.{{{','.join(comps)}}} held at nominal: not observable with this set-up")
             else:
@@ -101,12 +103,12 @@ class Identifiability:
                 "notes": self.notes}
 
 
-def excitation(model: TrackerModel, n: int = 200, seed: int = 0) -> np.ndarray:
+def excitation(model: MeasurementModel, n: int = 200, seed: int = 0) -> np.ndarray:
     """Rich random excitation: ``n`` configurations uniform within the joint limits (rad)."""
     return model.robot.random_q(np.random.default_rng(seed), n)
 
 
-def analyse(model: TrackerModel, Q: np.ndarray | None = None, prefer: list[str] | None = None,
+def analyse(model: MeasurementModel, Q: np.ndarray | None = None, prefer: list[str] | None = None,
             tol: float = 1e-7, seed: int = 0) -> Identifiability:
     """Find the identifiable parameter set.
 
@@ -170,32 +172,14 @@ def analyse(model: TrackerModel, Q: np.ndarray | None = None, prefer: list[str] 
     null_free = Vt[rank:].T / np.where(norms[free] > 0, norms[free], 1.0)[:, None]
     N = np.zeros((L.n, null_free.shape[1]))
     N[free] = null_free
-    notes = _notes(model)
+    notes = model.identifiability_notes()
     if len(kept_idx) != rank:
         notes.append(f"ordered selection kept {len(kept_idx)} columns but the pivoted QR rank is {rank}")
-    return Identifiability(L.names, np.array(kept_idx, int), rank, L.n, len(free), dropped, notes, N)
+    return Identifiability(L.names, np.array(kept_idx, int), rank, L.n, len(free), dropped, notes, N,
+                           L.setup_groups)
 
 
-def _notes(model: TrackerModel) -> list[str]:
-    """Plain-words notes on the set-up: a reflector on the last joint axis."""
-    rb = model.robot
-    _, ang = model.joint_axes
-    if np.linalg.norm(ang[-1]) < 0.5:
-        return []
-    Mt = rb.model.frames[rb.tool_frame_id].placement
-    # last joint axis expressed in the tool frame, through the tool-frame point Mt^-1 * 0
-    axis = Mt.rotation.T @ ang[-1]
-    origin = Mt.actInv(np.zeros(3))
-    r = model.reflector_m - origin
-    dist = np.linalg.norm(r - (r @ axis) * axis)
-    if dist < 1e-3 and not model.pose6d:
-        return [f"the reflector is {dist * 1e3:.2f} mm from the axis of {rb.joint_names[-1]}: the tool's rotation "
-                f"about that axis does not move it, so two more directions are lost (rank drops by 2) and a TCP "
-                f"off that axis is not estimable; mount the reflector off the axis (a few cm) or use a 6-DoF probe"]
-    return []
-
-
-def check_kpi(ident: Identifiability, model: TrackerModel, E: np.ndarray, what: str = "KPI", tol: float = 1e-6
+def check_kpi(ident: Identifiability, model: MeasurementModel, E: np.ndarray, what: str = "KPI", tol: float = 1e-6
               ) -> None:
     """Raise if the KPI with sensitivity ``E`` (n_s, n_raw) is not estimable under the convention.
 
@@ -207,8 +191,8 @@ def check_kpi(ident: Identifiability, model: TrackerModel, E: np.ndarray, what: 
     if N is None or N.shape[1] == 0:
         return
     setup_point = np.zeros(L.n, bool)
-    setup_point[L.reflector] = True
-    setup_point[L.probe] = True
+    for g in model.target_groups:
+        setup_point[L.group_slice(g)] = True
     C = N[setup_point]
     if C.size:
         Z = sla.null_space(C)
@@ -221,9 +205,11 @@ def check_kpi(ident: Identifiability, model: TrackerModel, E: np.ndarray, what: 
     worst = int(np.argmax(np.linalg.norm(EN, axis=0)))
     if np.linalg.norm(EN[:, worst]) > tol * scale:
         n = N[:, worst]
-        top = [L.names[k] for k in np.argsort(-np.abs(n))[:4]]
-        hint = ("express the KPI in the tracker frame (the robot base frame is not observable when the tracker pose "
-                "is unknown), or fix the tracker pose as known") if any(t.startswith("tracker") for t in top) else (
-                "move the reflector off the last joint axis, use a 6-DoF probe, or put the TCP at the reflector")
+        top_idx = np.argsort(-np.abs(n))[:4]
+        top = [L.names[k] for k in top_idx]
+        dev, target = model.frame_group, model.target_groups[0]
+        hint = (f"express the KPI in the {dev} frame (the robot base frame is not observable when the {dev} pose "
+                f"is unknown), or fix the {dev} pose as known") if any(L.group[k] == dev for k in top_idx) else (
+                f"move the {target} off the last joint axis, use a 6-DoF probe, or put the TCP at the {target}")
         raise IdentifiabilityError(f"{what} is not estimable: it moves along the unobservable direction "
                                    f"{' / '.join(top)}; {hint}")

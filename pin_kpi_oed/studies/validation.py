@@ -29,7 +29,7 @@ from pin_kpi_oed.data.measurements import MeasurementSet
 from pin_kpi_oed.errors import InputError
 from pin_kpi_oed.identification.identify import identify, validate
 from pin_kpi_oed.identification.simulate import Tolerances, random_truth, simulate
-from pin_kpi_oed.model.measurement import TrackerModel
+from pin_kpi_oed.model.tracker import TrackerModel
 from pin_kpi_oed.oed.covariance import covariances, design_covariances, prior_of
 from pin_kpi_oed.oed.criteria import get_criterion
 from pin_kpi_oed.oed.identifiability import analyse
