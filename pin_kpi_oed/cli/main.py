@@ -19,7 +19,7 @@ import numpy as np
 from pin_kpi_oed.cli.util import parse_floats
 from pin_kpi_oed.errors import PinKpiOedError
 
-TOPICS = ("design", "identify", "diagnose", "view", "study")
+TOPICS = ("design", "identify", "transfer", "diagnose", "view", "study")
 
 
 
