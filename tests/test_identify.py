@@ -21,7 +21,9 @@ from pin_kpi_oed.identification.simulate import Tolerances, default_tracker_pose
 
 SIGMA = 1e-5  # tracker noise (m) of the simulated round trips
 REFLECTOR = np.array([0.03, 0.02, 0.08])
-IPA_C = Path(__file__).resolve().parents[2] / "shared" / "data" / "ipa_ur10" / "Series_C"
+_HERE = Path(__file__).resolve()
+IPA_C = next((p / "shared" / "data" / "ipa_ur10" / "Series_C" for p in (_HERE.parents[2], _HERE.parents[3])
+              if (p / "shared" / "data" / "ipa_ur10").is_dir()), _HERE.parents[2] / "shared" / "data" / "ipa_ur10" / "Series_C")
 needs_ipa = pytest.mark.skipif(not IPA_C.is_dir(), reason=f"IPA data not found at {IPA_C}")
 
 
