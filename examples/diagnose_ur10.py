@@ -29,6 +29,7 @@ from pathlib import Path
 import numpy as np
 
 from pin_kpi_oed.diagnosis.diagnose import diagnose
+from pin_kpi_oed.viz.diagnosis_plots import diagnosis_figures
 from pin_kpi_oed.effects.library import EFFECT_NAMES, JointAngleTable, position_dq
 from pin_kpi_oed.identification.identify import ResidualModel, identify
 from pin_kpi_oed.data.measurements import MeasurementSet
@@ -100,7 +101,9 @@ def run_series(rb, series: str, figures: Path) -> dict:
     train, test = ms.split(0.5, seed=0)
     model = TrackerModel(rb, reflector_m=REFLECTOR, noise=NOISE)
     print(f"\n===== {series}: {len(train)} training / {len(test)} held-out measurements (random disjoint halves)")
-    rep = diagnose(model, train, test, weights="noise", figures_dir=None if QUICK else figures / series)
+    rep = diagnose(model, train, test, weights="noise")
+    if not QUICK:
+        rep.figures = diagnosis_figures(rep, figures / series)
     print(rep.summary())
     table = JointAngleTable.from_data(rb, train, step_rad=TABLE_STEP, joints=rb.joint_names[:5])
     rep_t = diagnose(model, train, test, weights="noise", effects=list(EFFECT_NAMES) + [table])

@@ -347,6 +347,8 @@ class IdentificationResult(Result):
         station_models, station_p: per station, the working model and its raw parameter vector.
         station_rows: per station, the indices of its measurements.
         P: the global raw parameter vector; ``param_names`` its names.
+        station_set: the working models and layout of every station (for
+            :class:`~pin_kpi_oed.identification.problem.ResidualModel` on other rows: ``p_ref=P``).
         reflector_per_station: each station had its own reflector.
         source: where the data came from.
     """
@@ -385,6 +387,7 @@ class IdentificationResult(Result):
     station_rows: list = field(default_factory=list, repr=False)
     P: np.ndarray | None = field(default=None, repr=False)
     param_names: list = field(default_factory=list, repr=False)
+    station_set: StationSet | None = field(default=None, repr=False)
     reflector_per_station: bool = False
     source: str = ""
 
@@ -961,7 +964,7 @@ def identify(model: TrackerModel, data: MeasurementSet, options: IdentifyOptions
         covariance_scaled=bool(opts.scale_covariance), sigma_source=inp.sigma_source,
         stations=list(stations.labels), setups=setups, station_models=list(stations.models),
         station_p=[stations.station_p(P_hat, s) for s in range(len(stations.labels))],
-        station_rows=list(prob.rows), P=P_hat, param_names=list(stations.layout.names),
+        station_rows=list(prob.rows), P=P_hat, param_names=list(stations.layout.names), station_set=stations,
         reflector_per_station=bool(opts.reflector_per_station), source=data.source,
         time_s=time.perf_counter() - t_start)
 

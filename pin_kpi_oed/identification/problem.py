@@ -347,7 +347,10 @@ class ResidualModel:
             raise InputError(f"{data.source or 'data'}: a 6-D model needs rx, ry, rz columns")
         self.R_meas = Rotation.from_rotvec(data.rotvec_rad).as_matrix() if stations.pose6d else None
         self.rows = self._station_rows(data)
-        self.aux = [data if r.size == self.m else data.subset(r) for r in self.rows]
+        whole = len(self.rows) == 1  # one station: every row, no copies
+        self.aux = [data if whole else data.subset(r) for r in self.rows]
+        self._take = [slice(None) if whole else r for r in self.rows]
+        self._Qs = [self.Q[t] for t in self._take]
         self.sigma = model.noise.sigma(self.Y) if sigma is None else np.broadcast_to(sigma, (self.m, 3)).copy()
         self.sigma_rot = float(model.noise.sigma_rot_rad)
         self.base = np.asarray(base, int)
@@ -390,12 +393,11 @@ class ResidualModel:
         m, n = self.Q.shape
         for e, th in self.held + list(zip(self.effects, [np.zeros(k) for k in self.sizes])):
             k = np.asarray(th).size
-            s = 0
-            rows = self.rows[s]
-            a, da = e.joint_offset(th, self.Q[rows], self.aux[s])
-            b, db = e.tool_offset(th, self.Q[rows], self.aux[s], self.stations.models[s],
-                                  self.stations.station_p(self.p_ref, s))
-            mr = rows.size
+            Qs = self._Qs[0]
+            a, da = e.joint_offset(th, Qs, self.aux[0])
+            b, db = e.tool_offset(th, Qs, self.aux[0], self.stations.models[0],
+                                  self.stations.station_p(self.p_ref, 0))
+            mr = Qs.shape[0]
             if np.shape(a) != (mr, n) or np.shape(da) != (mr, n, k):
                 raise InputError(f"effect '{e.name}': joint_offset returned shapes {np.shape(a)}, {np.shape(da)}, "
                                  f"expected {(mr, n)}, {(mr, n, k)}")
@@ -439,9 +441,10 @@ class ResidualModel:
         pairs = self._pairs(th)
         rpos = np.empty((self.m, 3))
         rrot = np.empty((self.m, 3)) if self.nh == 6 else None
-        for s, rows in enumerate(self.rows):
+        for s, rows in enumerate(self._take):
             model, p = self.stations.models[s], self.stations.station_p(P, s)
-            Y = predict_with_effects(model, p, self.Q[rows], self.aux[s], pairs)
+            Qs = self._Qs[s]
+            Y = predict_with_effects(model, p, Qs, self.aux[s], pairs) if pairs else model.predict(p, Qs)
             rpos[rows] = Y[:, :3] - self.Y[rows]
             if rrot is not None:
                 R_model = Rotation.from_rotvec(Y[:, 3:]).as_matrix()
@@ -488,9 +491,9 @@ class ResidualModel:
         nh_ = self.nh
         J = np.zeros((self.m, nh_, self.nx))
         n_held = len(self.held)
-        for s, rows in enumerate(self.rows):
+        for s, rows in enumerate(self._take):
             model, p = self.stations.models[s], self.stations.station_p(P, s)
-            Qs = self.Q[rows]
+            Qs = self._Qs[s]
             if pairs:
                 dQ, dq_ders = sum_joint_offsets(pairs, Qs, self.aux[s])
                 Qe = Qs + dQ
@@ -499,12 +502,13 @@ class ResidualModel:
             Jh = model.jacobian(p, Qe)
             cols = self._xcol[s]
             use = cols >= 0
-            Js = np.zeros((rows.size, nh_, self.nx))
+            Js = J if isinstance(rows, slice) else np.zeros((Qs.shape[0], nh_, self.nx))
             Js[:, :, cols[use]] = Jh[:, :, use]
             if self.k:
                 _, dy_ders = sum_tool_offsets(pairs, Qs, self.aux[s], model, p)
                 Js[:, :, self.nb:] = self._effect_columns(model, p, s, Qe, dq_ders[n_held:], dy_ders[n_held:])
-            J[rows] = Js
+            if Js is not J:
+                J[rows] = Js
         if nh_ == 6:
             _, rrot = self.evaluate(x)
             J[:, 3:, :] = jl_inv(rrot) @ J[:, 3:, :]
