@@ -312,6 +312,24 @@ def kr15_data():
     return robot, tm, nominal, simulate(tm, robot.random_q(np.random.default_rng(1), 60), truth, seed=2)
 
 
+def test_options_object_and_result_vocabulary(kr15_data):
+    from pin_kpi_oed.identification.identify import IdentifyOptions
+    from pin_kpi_oed.results import Result
+
+    robot, tm, nominal, data = kr15_data
+    opts = IdentifyOptions(scale_covariance=True)
+    a = identify(nominal, data, opts)
+    b = identify(nominal, data, opts, scale_covariance=False)  # a keyword overrides the options object
+    assert isinstance(a, Result) and a.success and a.status == "converged" and a.nit == a.iterations > 0
+    assert np.allclose(a.std, b.std * np.sqrt(a.chi2_reduced)) and not np.allclose(a.std, b.std)
+    d = a.to_dict()
+    assert d["success"] is True and d["status"] == "converged" and d["nfev"] == a.nfev > 0
+    with pytest.raises(InputError, match="unknown option.*lossy"):
+        identify(nominal, data, lossy="l3")
+    with pytest.raises(InputError, match="unknown loss"):
+        IdentifyOptions(loss="l3")
+
+
 def test_bad_missing_joint_column(kr15_data, tmp_path):
     robot, tm, nominal, data = kr15_data
     bad = MeasurementSet(joint_names=["joint_a1", "joint_a2", "joint_a3", "joint_a4", "joint_a5", "a6"], q=data.q,

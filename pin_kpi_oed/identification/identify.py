@@ -519,13 +519,16 @@ class IdentificationResult(Result):
             out.append(f"  orientation residuals: RMS {np.sqrt(np.mean(a ** 2)):.4f} mrad, max {a.max():.4f} mrad")
         if self.outliers.size:
             rows = ", ".join(str(i + 1) for i in self.outliers[:10])
-            out.append(f"  outliers flagged: {self.outliers.size} (rows {rows}{' ...' if self.outliers.size > 10 else ''})")
+            more = " ..." if self.outliers.size > 10 else ""
+            out.append(f"  outliers flagged: {self.outliers.size} (rows {rows}{more})")
         for lab, rows in zip(self.stations, self.station_rows):
             su = self.setups[lab]
             T = su.tracker_T_base
             rpy = pin.rpy.matrixToRpy(T[:3, :3])
-            pre = f"  station {lab} ({rows.size} rows, RMS {np.sqrt(np.mean(e[rows] ** 2)):.4f} mm): " if S > 1 else "  "
-            out.append(f"{pre}tracker_T_base: xyz {np.round(T[:3, 3], 6).tolist()} m, rpy {np.round(rpy, 6).tolist()} rad")
+            pre = f"  station {lab} ({rows.size} rows, RMS {np.sqrt(np.mean(e[rows] ** 2)):.4f} mm): " if S > 1 \
+                else "  "
+            out.append(f"{pre}tracker_T_base: xyz {np.round(T[:3, 3], 6).tolist()} m, "
+                       f"rpy {np.round(rpy, 6).tolist()} rad")
             if S == 1 or self.reflector_per_station or lab == self.stations[0]:
                 out.append(f"  reflector in {self.model.robot.tool_frame}"
                            f"{f' (station {lab})' if self.reflector_per_station and S > 1 else ''}: "
