@@ -21,6 +21,7 @@ import math
 
 import numpy as np
 
+from pin_kpi_oed.cli.identify import add_register_args
 from pin_kpi_oed.cli.util import parse_floats as _floats
 from pin_kpi_oed.errors import InputError
 
@@ -46,13 +47,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     g = d.add_mutually_exclusive_group(required=True)
     g.add_argument("--validate", default=None, help="held-out measurement CSV, disjoint from --train")
     g.add_argument("--kfold", type=int, default=None, help="K-fold cross-validation on --train alone (K >= 2)")
-    r = d.add_mutually_exclusive_group()
-    r.add_argument("--register-rows", type=int, default=None,
-                   help="--validate is from another session: re-fit the set-up (tracker pose, reflector; robot held) "
-                        "on N seeded random rows of it (--seed) and score only the others")
-    r.add_argument("--register-data", default=None,
-                   help="--validate is from another session: re-fit the set-up on this CSV's rows and score every "
-                        "row of --validate")
+    add_register_args(d)
     d.add_argument("--reflector", default="0,0,0", help="nominal reflector offset in the tool frame x,y,z (m)")
     d.add_argument("--sigma", default=None,
                    help="tracker noise sigma per axis (m), 1 or 3 values; overrides the files' sigma columns "

@@ -199,16 +199,21 @@ def run_simulate(args: argparse.Namespace) -> int:
     return 0
 
 
-def _add_validation_args(p: argparse.ArgumentParser, validate_help: str) -> None:
-    """``--validate``, ``--register-rows``, ``--register-data``, ``--seed`` (shared by identify and diagnose)."""
-    p.add_argument("--validate", default=None, help=validate_help)
+def add_register_args(p: argparse.ArgumentParser) -> None:
+    """``--register-rows`` / ``--register-data`` (transfer validation; shared by identify and diagnose)."""
     g = p.add_mutually_exclusive_group()
     g.add_argument("--register-rows", type=int, default=None,
-                   help="validation from another session: re-fit the set-up (tracker pose, reflector; robot held) on "
-                        "N seeded random rows of --validate and score only the others")
+                   help="--validate is from another session: re-fit the set-up (tracker pose, reflector; robot held) "
+                        "on N seeded random rows of it (--seed) and score only the others")
     g.add_argument("--register-data", default=None,
-                   help="validation from another session: re-fit the set-up on this CSV's rows (robot held) and "
+                   help="--validate is from another session: re-fit the set-up on this CSV's rows (robot held) and "
                         "score every row of --validate")
+
+
+def _add_validation_args(p: argparse.ArgumentParser, validate_help: str) -> None:
+    """``--validate``, ``--register-rows``, ``--register-data``, ``--seed``."""
+    p.add_argument("--validate", default=None, help=validate_help)
+    add_register_args(p)
     p.add_argument("--seed", type=int, default=0, help="seed of every random choice (default 0)")
 
 

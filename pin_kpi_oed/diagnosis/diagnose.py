@@ -724,13 +724,9 @@ class DiagnoseOptions:
         Raises:
             InputError: an unknown option name.
         """
-        import dataclasses
+        from pin_kpi_oed.identification.identify import resolve_options
 
-        known = {f.name for f in dataclasses.fields(cls)}
-        unknown = sorted(set(overrides) - known)
-        if unknown:
-            raise InputError(f"diagnose: unknown option(s) {', '.join(unknown)} (options: {', '.join(sorted(known))})")
-        return dataclasses.replace(options or cls(), **overrides)
+        return resolve_options(cls, options, overrides, "diagnose")
 
 
 def _check_joints(model: TrackerModel, data: MeasurementSet, what: str) -> None:

@@ -284,16 +284,21 @@ class IdentifyOptions:
 
     @classmethod
     def resolve(cls, options: "IdentifyOptions | None", overrides: dict) -> "IdentifyOptions":
-        """``options`` (or the defaults) with the keyword ``overrides`` applied.
+        """``options`` (or the defaults) with the keyword ``overrides`` applied (:func:`resolve_options`)."""
+        return resolve_options(cls, options, overrides, "identify")
 
-        Raises:
-            InputError: an unknown option name.
-        """
-        known = {f.name for f in dataclasses.fields(cls)}
-        unknown = sorted(set(overrides) - known)
-        if unknown:
-            raise InputError(f"identify: unknown option(s) {', '.join(unknown)} (options: {', '.join(sorted(known))})")
-        return dataclasses.replace(options or cls(), **overrides)
+
+def resolve_options(cls: type, options: Any, overrides: dict, what: str) -> Any:
+    """An options dataclass ``options`` (or ``cls()``) with the keyword ``overrides`` applied.
+
+    Raises:
+        InputError: an unknown option name (the message lists the known ones).
+    """
+    known = {f.name for f in dataclasses.fields(cls)}
+    unknown = sorted(set(overrides) - known)
+    if unknown:
+        raise InputError(f"{what}: unknown option(s) {', '.join(unknown)} (options: {', '.join(sorted(known))})")
+    return dataclasses.replace(options or cls(), **overrides)
 
 
 # --------------------------------------------------------------------------- #
