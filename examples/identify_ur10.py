@@ -31,7 +31,9 @@ from pin_kpi_oed.data.measurements import MeasurementSet
 from pin_kpi_oed.data.atomic import atomic_write_json
 from pin_kpi_oed.data.ipa import import_ipa, read_ipa_flange_transform
 
-SERIES_C = ROOT.parent / "shared" / "data" / "ipa_ur10" / "Series_C"
+_IPA = next((p / "shared" / "data" / "ipa_ur10" for p in (ROOT.parent, ROOT.parent.parent)
+             if (p / "shared" / "data" / "ipa_ur10").is_dir()), ROOT.parent / "shared" / "data" / "ipa_ur10")
+SERIES_C = _IPA / "Series_C"
 SPLIT_SEED = 0  # documented seed of the random 50/50 split
 
 

@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 
 import numpy as np
+import pinocchio as pin
 import pytest
 
 from pin_kpi_oed.cli.main import main as cli_main
@@ -15,6 +16,7 @@ from pin_kpi_oed.model.noise import NoiseModel
 from pin_kpi_oed.model.tracker import TrackerModel
 from pin_kpi_oed.model.robot import load_robot
 from pin_kpi_oed.identification.simulate import Tolerances, default_tracker_pose, random_truth, simulate
+from pin_kpi_oed.viz.diagnosis_plots import diagnosis_figures
 
 SIGMA = 1e-5
 REFL = np.array([0.05, 0.02, 0.10])
@@ -49,7 +51,9 @@ def make_case(rb, effect, seed, n, k=5.0, temperature=True):
 def compliance_case(ur10, tmp_path_factory):
     nominal, tr, te = make_case(ur10, "joint_compliance", 0, 250, k=4.0)
     figs = tmp_path_factory.mktemp("figs")
-    return nominal, tr, te, diagnose(nominal, tr, te, figures_dir=figs), figs
+    rep = diagnose(nominal, tr, te)
+    rep.figures = diagnosis_figures(rep, figs)
+    return nominal, tr, te, rep, figs
 
 
 def test_compliance_named_and_gap_closed(compliance_case):
@@ -120,6 +124,36 @@ def test_validation_from_other_tracker_placement(compliance_case):
     assert rep.dominant_effect == "none"
     assert "another robot or tracker placement" in rep.mismatch["message"]
     assert len(rep.effects) == len(EFFECT_NAMES)  # the rest of the report is still produced
+
+
+def test_transfer_validation_reregisters_the_setup(compliance_case, tmp_path, capsys):
+    """Validation from another session (tracker moved by metres and turned): re-registered on 40 rows, the
+    rest scored; without the registration it is a mismatch."""
+    nominal, tr, te, rep0, _ = compliance_case
+    R = pin.rpy.rpyToMatrix(0.05, -0.03, 1.2)
+    t = np.array([1.5, -2.0, 0.3])
+    moved = MeasurementSet(te.joint_names, te.q, te.position_m @ R.T + t, sigma_m=te.sigma_m,
+                           temperature_c=te.temperature_c, source="moved.csv")
+    rep = diagnose(nominal, tr, moved, register_rows=40, seed=2, effects=["joint_compliance", "joint_scale"])
+    assert rep.mode == "transfer" and not rep.validation_mismatch
+    reg, scored = rep.registration["rows"], rep.registration["scored_rows"]
+    assert len(reg) == 40 and rep.n_heldout == len(te) - 40 == len(scored) and not set(reg) & set(scored)
+    assert rep.dominant_effect == "joint_compliance"
+    assert rep.heldout_after["rms_m"] <= 1.15 * rep.noise_floor_m
+    assert "re-registered" in rep.summary() and rep.to_dict()["registration"]["seed"] == 2
+    assert rep.success and rep.status == "gap" and rep.nfev > 2
+    # the CLI: same on files; JSON names the registration rows
+    write_measurements(tr, tmp_path / "a.csv")
+    write_measurements(moved, tmp_path / "moved.csv")
+    assert cli_main(["diagnose", "--robot", "ur10", "--train", str(tmp_path / "a.csv"), "--validate",
+                     str(tmp_path / "moved.csv"), "--register-rows", "40", "--seed", "2", "--reflector",
+                     "0.05,0.02,0.1", "--effects", "joint_compliance", "--json", str(tmp_path / "r.json"),
+                     "--quiet"]) == 0
+    d = json.loads((tmp_path / "r.json").read_text())
+    assert d["registration"]["rows"] == reg and d["dominant_effect"] == "joint_compliance" and d["mode"] == "transfer"
+    assert cli_main(["diagnose", "--robot", "ur10", "--train", str(tmp_path / "a.csv"), "--kfold", "3",
+                     "--register-rows", "40"]) == 2
+    assert "need --validate" in capsys.readouterr().err
 
 
 def test_some_rows_from_elsewhere_are_named_and_left_out(compliance_case):

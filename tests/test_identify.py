@@ -21,7 +21,9 @@ from pin_kpi_oed.identification.simulate import Tolerances, default_tracker_pose
 
 SIGMA = 1e-5  # tracker noise (m) of the simulated round trips
 REFLECTOR = np.array([0.03, 0.02, 0.08])
-IPA_C = Path(__file__).resolve().parents[2] / "shared" / "data" / "ipa_ur10" / "Series_C"
+_HERE = Path(__file__).resolve()
+IPA_C = next((p / "shared" / "data" / "ipa_ur10" / "Series_C" for p in (_HERE.parents[2], _HERE.parents[3])
+              if (p / "shared" / "data" / "ipa_ur10").is_dir()), _HERE.parents[2] / "shared" / "data" / "ipa_ur10" / "Series_C")
 needs_ipa = pytest.mark.skipif(not IPA_C.is_dir(), reason=f"IPA data not found at {IPA_C}")
 
 
@@ -308,6 +310,24 @@ def kr15_data():
     robot, tm, nominal = _setup("kr15")
     truth = random_truth(tm, _tol(), seed=81)
     return robot, tm, nominal, simulate(tm, robot.random_q(np.random.default_rng(1), 60), truth, seed=2)
+
+
+def test_options_object_and_result_vocabulary(kr15_data):
+    from pin_kpi_oed.identification.identify import IdentifyOptions
+    from pin_kpi_oed.results import Result
+
+    robot, tm, nominal, data = kr15_data
+    opts = IdentifyOptions(scale_covariance=True)
+    a = identify(nominal, data, opts)
+    b = identify(nominal, data, opts, scale_covariance=False)  # a keyword overrides the options object
+    assert isinstance(a, Result) and a.success and a.status == "converged" and a.nit == a.iterations > 0
+    assert np.allclose(a.std, b.std * np.sqrt(a.chi2_reduced)) and not np.allclose(a.std, b.std)
+    d = a.to_dict()
+    assert d["success"] is True and d["status"] == "converged" and d["nfev"] == a.nfev > 0
+    with pytest.raises(InputError, match="unknown option.*lossy"):
+        identify(nominal, data, lossy="l3")
+    with pytest.raises(InputError, match="unknown loss"):
+        IdentifyOptions(loss="l3")
 
 
 def test_bad_missing_joint_column(kr15_data, tmp_path):

@@ -18,7 +18,9 @@ from pin_kpi_oed.data.measurements import MeasurementSet, read_measurements, wri
 from pin_kpi_oed.data.atomic import atomic_write_json, atomic_write_text
 
 JOINTS = ["j1", "j2", "j3"]
-IPA_DIR = Path(__file__).resolve().parents[2] / "shared" / "data" / "ipa_ur10"
+_HERE = Path(__file__).resolve()
+IPA_DIR = next((p / "shared" / "data" / "ipa_ur10" for p in (_HERE.parents[2], _HERE.parents[3])
+                if (p / "shared" / "data" / "ipa_ur10").is_dir()), _HERE.parents[2] / "shared" / "data" / "ipa_ur10")
 needs_ipa = pytest.mark.skipif(not IPA_DIR.is_dir(), reason=f"IPA data not found at {IPA_DIR}")
 
 
@@ -105,6 +107,69 @@ def test_isotropic_sigma_and_joint_order(tmp_path: Path) -> None:
     np.testing.assert_array_equal(ms.q, [[0.1, 0.2, 0.3], [0.4, 0.5, 0.6]])
     np.testing.assert_array_equal(ms.sigma_m, [[1e-5] * 3, [2e-5] * 3])
     np.testing.assert_array_equal(ms.extra["note"], [7, 8])
+
+
+def test_station_column_round_trip_text_and_integer_labels(tmp_path: Path) -> None:
+    ms = _full_set(6)
+    ms = MeasurementSet(**{**ms.__dict__, "station": ["B", "B", " 1 ", "1", "C, left", "B"]})
+    assert ms.station.tolist() == ["B", "B", "1", "1", "C, left", "B"]  # labels are text, stripped
+    assert ms.station_labels() == ["B", "1", "C, left"]
+    assert {k: v.tolist() for k, v in ms.station_rows().items()} == {"B": [0, 1, 5], "1": [2, 3], "C, left": [4]}
+    f = tmp_path / "st.csv"
+    write_measurements(ms, f)
+    header = f.read_text().splitlines()[0].split(",")
+    assert header[header.index("time") + 1] == "station"
+    back = read_measurements(f, joint_names=JOINTS)
+    assert back.station.tolist() == ms.station.tolist() and np.array_equal(back.q, ms.q)
+    assert back.subset([4, 2]).station.tolist() == ["C, left", "1"]
+    assert [len(t) for t, _ in back.kfold(2)] == [3, 3] and back.split(0.5)[0].station is not None
+    # an integer column is read as text labels; an empty label is refused with its row
+    header, rows = _good_rows()
+    f2 = _write_csv(tmp_path / "int.csv", header + ["station"], [r + [k % 2 + 1] for k, r in enumerate(rows)])
+    assert read_measurements(f2, joint_names=JOINTS).station.tolist() == ["1", "2", "1", "2"]
+    f3 = _write_csv(tmp_path / "empty.csv", header + ["station"], [r + [lab] for r, lab in zip(rows, "AA A")])
+    _raises(f3, "empty.csv", "column 'station', row 3", "empty station label", joint_names=JOINTS)
+
+
+def test_concat_measurements_stations(tmp_path: Path) -> None:
+    a, b = _full_set(4, seed=1), _full_set(3, seed=2)
+    a.source, b.source = "/x/B.csv", "/y/C.csv"
+    both = pio.concat_measurements([a, b])
+    assert both.station.tolist() == ["B"] * 4 + ["C"] * 3 and len(both) == 7
+    assert np.array_equal(both.q[4:], b.q) and both.source == "/x/B.csv+/y/C.csv"
+    labelled = MeasurementSet(**{**b.__dict__, "station": ["s1", "s2", "s1"], "rotvec_rad": None})
+    mixed = pio.concat_measurements([a, labelled])
+    assert mixed.station_labels() == ["B", "s1", "s2"] and mixed.rotvec_rad is None  # kept only if all have it
+    twin = MeasurementSet(**{**b.__dict__, "source": "/z/B.csv"})
+    with pytest.raises(InputError, match="station 'B' like /x/B.csv"):
+        pio.concat_measurements([a, twin])
+    other = MeasurementSet(joint_names=["k1", "k2", "k3"], q=b.q, position_m=b.position_m, source="o.csv")
+    with pytest.raises(InputError, match="o.csv: joint columns k1, k2, k3 differ"):
+        pio.concat_measurements([a, other])
+
+
+def test_stations_unit_guard_per_station(tmp_path: Path) -> None:
+    """Two tracker placements far apart: each station's points are compact, the file is not 'in mm'."""
+    rng = np.random.default_rng(0)
+    q = rng.uniform(-1, 1, (40, 3))
+    pos = np.vstack([rng.normal([30.0, 0, 0], 0.3, (20, 3)), rng.normal([-30.0, 0, 0], 0.3, (20, 3))])
+    ms = MeasurementSet(JOINTS, q, pos, station=["near"] * 20 + ["far"] * 20)
+    write_measurements(ms, tmp_path / "two.csv")
+    assert read_measurements(tmp_path / "two.csv", joint_names=JOINTS, reach_m=1.0).station_labels() == ["near", "far"]
+    write_measurements(MeasurementSet(JOINTS, q, pos), tmp_path / "one.csv")
+    _raises(tmp_path / "one.csv", "looks like mm", joint_names=JOINTS, reach_m=1.0)
+
+
+def test_positions_optional_for_predictions(tmp_path: Path) -> None:
+    f = _write_csv(tmp_path / "q.csv", JOINTS, [[0.1, 0.2, 0.3], [0.4, 0.5, 0.6]])
+    _raises(f, "missing position column(s) x, y, z")
+    ms = read_measurements(f, joint_names=JOINTS, require_position=False)
+    assert not ms.has_position and np.array_equal(ms.q, [[0.1, 0.2, 0.3], [0.4, 0.5, 0.6]])
+    f2 = _write_csv(tmp_path / "xy.csv", JOINTS + ["x", "y"], [[0.1, 0.2, 0.3, 1, 2]])
+    _raises(f2, "missing position column(s) z", require_position=False)  # partial x, y, z is still an error
+    with pytest.raises(InputError, match="no measured positions"):
+        write_measurements(ms, tmp_path / "out.csv")
+    assert not (tmp_path / "out.csv").exists()
 
 
 # --------------------------------------------------------------------------- #

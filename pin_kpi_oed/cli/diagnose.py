@@ -10,6 +10,8 @@ Examples::
     pin-kpi-oed diagnose --robot ur10 --train train.csv --validate test.csv --reflector 0.05,0.02,0.1 \\
         --json report.json --figures figs/
     pin-kpi-oed diagnose --robot ur10 --train all.csv --kfold 5 --sigma 1e-5 --json report.json
+    pin-kpi-oed diagnose --robot ur10 --train C.csv --validate D.csv --register-rows 60 --seed 0 \\
+        --reflector 0,0,0.109 --sigma 1e-4                 # another session: set-up re-registered first
 """
 
 from __future__ import annotations
@@ -19,6 +21,7 @@ import math
 
 import numpy as np
 
+from pin_kpi_oed.cli.identify import add_register_args
 from pin_kpi_oed.cli.util import parse_floats as _floats
 from pin_kpi_oed.errors import InputError
 
@@ -38,10 +41,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                     "(it equals a uniform scaling of the robot); the report says so.")
     d.add_argument("--robot", required=True, help="URDF path or name (kr15, kr300, kr500, ur3, ur5, ur10, panda)")
     d.add_argument("--tool", default=None, help="tool frame (default tool0)")
-    d.add_argument("--train", required=True, help="training measurement CSV (joint columns, x, y, z in m, ...)")
+    d.add_argument("--train", required=True, action="append",
+                   help="training measurement CSV (joint columns, x, y, z in m, ...); repeat for several files "
+                        "(each its own station unless it has a 'station' column)")
     g = d.add_mutually_exclusive_group(required=True)
     g.add_argument("--validate", default=None, help="held-out measurement CSV, disjoint from --train")
     g.add_argument("--kfold", type=int, default=None, help="K-fold cross-validation on --train alone (K >= 2)")
+    add_register_args(d)
     d.add_argument("--reflector", default="0,0,0", help="nominal reflector offset in the tool frame x,y,z (m)")
     d.add_argument("--sigma", default=None,
                    help="tracker noise sigma per axis (m), 1 or 3 values; overrides the files' sigma columns "
@@ -52,7 +58,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     d.add_argument("--alpha", type=float, default=0.01, help="significance level of the tests (default 0.01)")
     d.add_argument("--t-ref", type=float, default=None,
                    help="reference temperature of thermal_expansion (degC; default the training mean)")
-    d.add_argument("--seed", type=int, default=0, help="seed of the K-fold split (default 0)")
+    d.add_argument("--seed", type=int, default=0, help="seed of the K-fold split and the registration rows (default 0)")
     d.add_argument("--json", default=None, help="write the report (JSON, SI units) here")
     d.add_argument("--figures", default=None, help="write PNG figures of the residuals into this folder")
     d.add_argument("--quiet", action="store_true", help="print only the one-line verdict")
@@ -63,13 +69,14 @@ def run(args: argparse.Namespace) -> int:
     """Handler of ``pin-kpi-oed diagnose``; returns 0 when the report was produced."""
     from pathlib import Path
 
+    from pin_kpi_oed.cli.identify import read_data_files, read_validation
+    from pin_kpi_oed.data.atomic import atomic_write_json
     from pin_kpi_oed.diagnosis.diagnose import diagnose
     from pin_kpi_oed.effects.library import EFFECT_NAMES
-    from pin_kpi_oed.data.measurements import read_measurements
-    from pin_kpi_oed.data.atomic import atomic_write_json
     from pin_kpi_oed.model.noise import NoiseModel
     from pin_kpi_oed.model.tracker import TrackerModel
     from pin_kpi_oed.model.robot import load_robot
+    from pin_kpi_oed.viz.diagnosis_plots import diagnosis_figures
 
     if args.json:
         t = Path(args.json)
@@ -91,8 +98,8 @@ def run(args: argparse.Namespace) -> int:
                              "a tracker range-scale error is not among them: it cannot be observed)")
     robot = load_robot(args.robot, args.tool)
     reach = robot.reach()
-    train = read_measurements(args.train, joint_names=robot.joint_names, reach_m=reach)
-    val = read_measurements(args.validate, joint_names=robot.joint_names, reach_m=reach) if args.validate else None
+    train = read_data_files(args.train, robot, "--train")
+    val, reg = read_validation(args, robot)
     reflector = _floats(args.reflector, (3,), "--reflector")
     if np.linalg.norm(reflector) > reach:
         raise InputError(f"--reflector {args.reflector}: {np.linalg.norm(reflector):.4g} m from the tool frame, more "
@@ -103,17 +110,20 @@ def run(args: argparse.Namespace) -> int:
             raise InputError(f"--sigma {args.sigma}: must be positive, in m (e.g. 1e-5 for 10 µm)")
         noise, weights = NoiseModel(sigma_xyz_m=tuple(s)), "noise"
     else:
-        missing = [f for f, ms in ((args.train, train), (args.validate, val)) if ms is not None and ms.sigma_m is None]
+        missing = [f for f, ms in ((", ".join(args.train), train), (args.validate, val), (args.register_data, reg))
+                   if ms is not None and ms.sigma_m is None]
         if missing:
             raise InputError(f"{missing[0]}: no sigma columns, so the noise is unknown: give --sigma S (m), the "
                              "tracker's standard deviation per axis (e.g. 1e-5)")
         noise, weights = NoiseModel(), "data"
     model = TrackerModel(robot, reflector_m=reflector, noise=noise)
     rep = diagnose(model, train, val, kfold=args.kfold, effects=effects, weights=weights, alpha=args.alpha,
-                   seed=args.seed, figures_dir=args.figures, t_ref_c=args.t_ref)
+                   seed=args.seed, t_ref_c=args.t_ref, register_rows=args.register_rows, register_data=reg)
+    if args.figures:
+        rep.figures = diagnosis_figures(rep, args.figures)
     if args.json:
         out = rep.to_dict()
-        out["train"] = str(args.train)
+        out["train"] = list(args.train)
         out["validate"] = args.validate
         atomic_write_json(args.json, out)
     if args.quiet:

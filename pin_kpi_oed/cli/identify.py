@@ -10,7 +10,10 @@ Examples::
     pin-kpi-oed simulate --robot kr15 --n 80 --n-test 200 --seed 1 --out train.csv --test-out test.csv \\
         --reflector 0.03,0.02,0.08 --noise 1e-5 --truth-json truth.json
     pin-kpi-oed identify --robot kr15 --data train.csv --validate test.csv --reflector 0.03,0.02,0.08 \\
-        --json result.json --urdf-out calibrated.urdf
+        --json result.json --urdf-out calibrated.urdf --model-out model.json
+    pin-kpi-oed identify --robot ur10 --data B.csv --data C.csv --data D.csv --reflector 0,0,0.109 --sigma 1e-4 \\
+        --model-out bcd.json                                  # three stations, one robot
+    pin-kpi-oed identify --robot ur10 --data C.csv --validate D.csv --register-rows 60 --seed 0 --reflector 0,0,0.109
     pin-kpi-oed import-ipa ../shared/data/ipa_ur10/Series_C --position-only --split 0.5 --seed 0 \\
         --train c_train.csv --test c_test.csv
 """
@@ -19,6 +22,7 @@ from __future__ import annotations
 
 import argparse
 import math
+from typing import Any
 
 import numpy as np
 import pinocchio as pin
@@ -87,15 +91,29 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     i = subparsers.add_parser("identify", help="identify geometric parameters from measurements, validate, export URDF",
                               description="Weighted nonlinear least squares (Levenberg-Marquardt, analytic Jacobian) "
                                           "over the identifiable parameters; tracker pose guessed by point-set "
-                                          "registration. With --validate: position errors on held-out data before "
-                                          "(nominal robot + fitted tracker pose and reflector) and after calibration.")
+                                          "registration, one per station (file or 'station' column), the robot "
+                                          "shared. With --validate: position errors on held-out data before "
+                                          "(nominal robot + fitted tracker pose and reflector) and after calibration; "
+                                          "with --register-rows/--register-data the set-up is first re-registered "
+                                          "on some rows of another session and only the rest are scored.")
     i.add_argument("--robot", required=True, help="URDF path or name (kr15, kr300, kr500, ur3, ur5, ur10, panda)")
     i.add_argument("--tool", default=None, help="tool frame (default tool0)")
-    i.add_argument("--data", required=True, help="measurement CSV (joint columns, x, y, z in m, ...)")
-    i.add_argument("--validate", default=None, help="held-out measurement CSV (nothing is re-fitted on it)")
+    i.add_argument("--data", required=True, action="append",
+                   help="measurement CSV (joint columns, x, y, z in m, ...); repeat for several files: each file is "
+                        "its own station (tracker placement) unless it has a 'station' column")
+    i.add_argument("--reflector-per-station", action="store_true",
+                   help="every station has its own reflector offset (default: one reflector for all stations)")
+    _add_validation_args(i, "held-out measurement CSV (nothing is re-fitted on it unless --register-rows/"
+                            "--register-data re-register the set-up)")
     i.add_argument("--reflector", default="0,0,0", help="nominal reflector offset in the tool frame x,y,z (m)")
+    i.add_argument("--effects", default=None,
+                   help="effects identified with the geometry, comma-separated names of the effect library (e.g. "
+                        "joint_compliance,gear_harmonic); stored in --model-out")
     i.add_argument("--json", default=None, help="write the result (parameters, covariance, tracker pose, ...) here")
-    i.add_argument("--urdf-out", default=None, help="write the calibrated URDF here")
+    i.add_argument("--urdf-out", default=None, help="write the calibrated URDF here (geometry only)")
+    i.add_argument("--model-out", default=None,
+                   help="write the calibrated model file here (geometry, effects, set-up per station, noise; "
+                        "for pin-kpi-oed register / predict)")
     i.add_argument("--sigma", default=None,
                    help="tracker noise sigma (m), 1 or 3 values; overrides the file's sigma columns. Without it "
                         "and without sigma columns the weights are uniform and the covariance is scaled by the "
@@ -116,7 +134,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                                           "measurement CSV format, optionally split at random into train/test.")
     p.add_argument("src", help="IPA series folder (e.g. Series_C) or its measurements_*.csv")
     p.add_argument("--out", default=None, help="CSV of all measurements")
-    p.add_argument("--split", type=float, default=None, help="share of the training part, e.g. 0.5")
+    p.add_argument("--split", type=float, default=None,
+                   help="share of the training part, e.g. 0.5, or (a whole number >= 1) its number of rows, e.g. 60: "
+                        "the same seeded rows as --register-rows 60 --seed S of identify/diagnose")
     p.add_argument("--seed", type=int, default=0, help="seed of the random split (default 0)")
     p.add_argument("--train", default=None, help="training CSV (with --split)")
     p.add_argument("--test", default=None, help="held-out CSV (with --split)")
@@ -180,23 +200,109 @@ def run_simulate(args: argparse.Namespace) -> int:
     return 0
 
 
+def add_register_args(p: argparse.ArgumentParser) -> None:
+    """``--register-rows`` / ``--register-data`` (transfer validation; shared by identify and diagnose)."""
+    g = p.add_mutually_exclusive_group()
+    g.add_argument("--register-rows", type=int, default=None,
+                   help="--validate is from another session: re-fit the set-up (tracker pose, reflector; robot held) "
+                        "on N seeded random rows of it (--seed) and score only the others")
+    g.add_argument("--register-data", default=None,
+                   help="--validate is from another session: re-fit the set-up on this CSV's rows (robot held) and "
+                        "score every row of --validate")
+
+
+def _add_validation_args(p: argparse.ArgumentParser, validate_help: str) -> None:
+    """``--validate``, ``--register-rows``, ``--register-data``, ``--seed``."""
+    p.add_argument("--validate", default=None, help=validate_help)
+    add_register_args(p)
+    p.add_argument("--seed", type=int, default=0, help="seed of every random choice (default 0)")
+
+
+def read_data_files(paths: list[str], robot: Any, what: str = "--data") -> Any:
+    """Read one or several measurement CSVs; several are joined, each its own station unless it has a
+    'station' column (:func:`pin_kpi_oed.data.measurements.concat_measurements`)."""
+    from pin_kpi_oed.data.measurements import concat_measurements, read_measurements
+
+    reach = robot.reach()
+    sets = [read_measurements(p, joint_names=robot.joint_names, reach_m=reach) for p in paths]
+    return sets[0] if len(sets) == 1 else concat_measurements(sets)
+
+
+def read_validation(args: argparse.Namespace, robot: Any) -> tuple[Any, Any]:
+    """(validation set or None, registration set or None) of ``--validate`` / ``--register-*``.
+
+    Raises:
+        InputError: --register-rows/--register-data without --validate.
+    """
+    from pin_kpi_oed.data.measurements import read_measurements
+
+    if (args.register_rows is not None or args.register_data) and not args.validate:
+        raise InputError("--register-rows/--register-data re-register the set-up on rows of another session: they "
+                         "need --validate FILE")
+    reach = robot.reach()
+    test = read_measurements(args.validate, joint_names=robot.joint_names, reach_m=reach) if args.validate else None
+    reg = read_measurements(args.register_data, joint_names=robot.joint_names, reach_m=reach) \
+        if args.register_data else None
+    return test, reg
+
+
+def _effects(spec: str | None, robot: Any, train: Any) -> list:
+    if not spec:
+        return []
+    from pin_kpi_oed.effects.library import EFFECT_NAMES, candidate_effects
+
+    names = [e.strip() for e in spec.split(",") if e.strip()]
+    unknown = [e for e in names if e not in EFFECT_NAMES]
+    if unknown:
+        raise InputError(f"--effects: unknown effect(s) {', '.join(unknown)} (known: {', '.join(EFFECT_NAMES)})")
+    t_ref = float(np.mean(train.temperature_c)) if train.temperature_c is not None else 20.0
+    return candidate_effects(robot, names, t_ref_c=t_ref)
+
+
+def _validation(model: Any, train: Any, opts: Any, result: Any, test: Any, reg: Any,
+                args: argparse.Namespace) -> tuple[dict, list[str]]:
+    """Held-out errors before (nominal robot + fitted set-up) and after calibration, on the validation file."""
+    from pin_kpi_oed.identification.identify import format_validation, identify, validate
+    from pin_kpi_oed.identification.transfer import validate_transfer
+
+    before = identify(model, train, opts, setup_only=True)
+    if args.register_rows is None and reg is None:
+        vb, va = validate(before, test), validate(result, test)
+        head = []
+        out = {}
+    else:
+        kw = dict(register_rows=args.register_rows, register_data=reg, seed=args.seed)
+        vb = validate_transfer(before.calibrated_model(), test, **kw)
+        va = validate_transfer(result.calibrated_model(), test, **kw)
+        r = va["registration"]
+        how = (f"{r['n']} seeded random rows (seed {args.seed}) of {args.validate}" if reg is None
+               else f"the {r['n']} rows of {args.register_data}")
+        head = [f"transfer to {args.validate}: set-up (tracker pose, reflector) re-registered on {how} with the robot "
+                f"held; scored on the other {va['n']} rows (row numbers in the JSON: validation.registration.rows)"]
+        out = {"registration": r, "scored_rows": va["scored_rows"]}
+    out.update({"before": vb, "after": va, "before_means": "nominal robot + fitted tracker pose and reflector",
+                "after_means": "calibration (geometry" + (" + effects)" if result.effects else ")")})
+    lines = head + [format_validation(vb, "before (nominal geometry + fitted tracker pose and reflector)"),
+                    format_validation(va, "after  (calibration)                                        ")]
+    return out, lines
+
+
 def run_identify(args: argparse.Namespace) -> int:
     """Handler of ``pin-kpi-oed identify``."""
-    from pin_kpi_oed.identification.export import calibrated_urdf_text, check_urdf_fk
-    from pin_kpi_oed.errors import SolverError
-    from pin_kpi_oed.identification.identify import format_validation, identify, validate
-    from pin_kpi_oed.data.measurements import read_measurements
     from pin_kpi_oed.data.atomic import atomic_write_json, atomic_write_text
+    from pin_kpi_oed.errors import SolverError
+    from pin_kpi_oed.identification.export import calibrated_urdf_text, check_urdf_fk, result_urdf_comment
+    from pin_kpi_oed.identification.identify import IdentifyOptions, identify
     from pin_kpi_oed.model.noise import NoiseModel
     from pin_kpi_oed.model.tracker import TrackerModel
     from pin_kpi_oed.model.robot import load_robot
     from pathlib import Path
 
-    _check_outputs(args.json, args.urdf_out)
+    _check_outputs(args.json, args.urdf_out, args.model_out)
     robot = load_robot(args.robot, args.tool)
     reach = robot.reach()
-    train = read_measurements(args.data, joint_names=robot.joint_names, reach_m=reach)
-    test = read_measurements(args.validate, joint_names=robot.joint_names, reach_m=reach) if args.validate else None
+    train = read_data_files(args.data, robot)
+    test, reg = read_validation(args, robot)
     reflector = _floats(args.reflector, 3, "--reflector")
     if np.linalg.norm(reflector) > reach:
         raise InputError(f"--reflector {args.reflector}: {np.linalg.norm(reflector):.4g} m from the tool frame, more "
@@ -211,30 +317,26 @@ def run_identify(args: argparse.Namespace) -> int:
     model = TrackerModel(robot, reflector_m=reflector, noise=noise)
     if args.fix:
         model.layout.fix(args.fix)
-    kw = dict(weights=weights, scale_covariance=scale, use_orientation=not args.position_only, loss=args.loss,
-              max_nfev=args.max_nfev)
-    result = identify(model, train, **kw)
-    out = {"result": result.to_dict(), "data": str(args.data), "validate": args.validate}
+    effects = _effects(args.effects, robot, train)
+    opts = IdentifyOptions(weights=weights, scale_covariance=scale, use_orientation=not args.position_only,
+                           loss=args.loss, max_nfev=args.max_nfev, reflector_per_station=args.reflector_per_station)
+    result = identify(model, train, opts, effects=effects)
+    out = {"result": result.to_dict(), "data": list(args.data), "validate": args.validate}
     lines = []
     if test is not None:
-        before = identify(model, train, setup_only=True, **kw)
-        vb, va = validate(before, test), validate(result, test)
-        out["validation"] = {"before": {k: v for k, v in vb.items()}, "after": {k: v for k, v in va.items()},
-                             "before_means": "nominal robot + fitted tracker pose and reflector",
-                             "after_means": "geometric calibration"}
-        lines = [format_validation(vb, "before (nominal geometry + fitted tracker pose and reflector)"),
-                 format_validation(va, "after  (geometric calibration)                              ")]
+        out["validation"], lines = _validation(model, train, opts, result, test, reg, args)
     # everything is computed and checked before the first file is written
     urdf_text = None
     if args.urdf_out:
         placements = result.model.joint_placements(result.p)
         out_dir = Path(args.urdf_out).parent
-        urdf_text = calibrated_urdf_text(robot, placements, comment=f"calibrated by pin_kpi_oed from {args.data}",
+        urdf_text = calibrated_urdf_text(robot, placements, comment=result_urdf_comment(result, ", ".join(args.data)),
                                          out_dir=out_dir if str(out_dir) else ".")
         dp, dr = check_urdf_fk(urdf_text, robot, placements)
         if dp > 1e-9 or dr > 1e-9:
             raise SolverError(f"the calibrated URDF reproduces the identified FK only to {dp:.3g} m; nothing written")
         out["urdf_check_max_error_m"] = dp
+    model_dict = result.calibrated_model().to_dict() if args.model_out else None
     if not args.quiet:
         print(result.summary())
     for ln in lines:
@@ -243,7 +345,9 @@ def run_identify(args: argparse.Namespace) -> int:
         atomic_write_json(args.json, out)
     if urdf_text is not None:
         atomic_write_text(args.urdf_out, urdf_text)
-    written = [f for f in (args.json, args.urdf_out) if f]
+    if model_dict is not None:
+        atomic_write_json(args.model_out, model_dict)
+    written = [f for f in (args.json, args.urdf_out, args.model_out) if f]
     if written and not args.quiet:
         print("wrote " + ", ".join(written))
     return 0
@@ -270,7 +374,13 @@ def run_import_ipa(args: argparse.Namespace) -> int:
     if args.out:
         jobs.append((ms, args.out))
     if args.split is not None:
-        tr, te = ms.split(args.split, seed=args.seed)
+        frac = args.split
+        if frac >= 1:
+            if frac != int(frac) or int(frac) >= len(ms):
+                raise InputError(f"import-ipa: --split {args.split:g}: a number of rows must be a whole number below "
+                                 f"the {len(ms)} measurements (or give a share in (0, 1))")
+            frac = int(frac) / len(ms)
+        tr, te = ms.split(frac, seed=args.seed)
         jobs += [(tr, args.train), (te, args.test)]
     for obj, path in jobs:
         write_measurements(obj, path)
@@ -278,7 +388,7 @@ def run_import_ipa(args: argparse.Namespace) -> int:
     if args.out:
         msg += f" -> {args.out}"
     if args.split is not None:
-        msg += (f"; split {args.split:g}/{1 - args.split:g} with seed {args.seed}: {len(tr)} -> {args.train}, "
+        msg += (f"; split with seed {args.seed}: {len(tr)} -> {args.train}, "
                 f"{len(te)} -> {args.test}")
     print(msg)
     return 0

@@ -172,8 +172,38 @@ def import_ipa(path: str | os.PathLike[str]) -> MeasurementSet:
     src = str(p)
     if not p.is_file():
         raise InputError(f"IPA measurement file '{src}' does not exist")
-    text = _read_text(p)
-    reader = csv.reader(_stdio.StringIO(text, newline=""), delimiter=";")
+    header, rows, lines = _read_ipa_table(p, src)
+    idx = {name: i for i, name in enumerate(header)}
+    data = parse_numeric_table(rows, lines, header, src, _parse_decimal_comma, skip=(_TIMESTAMP,))
+
+    def cols(names: tuple[str, ...]) -> np.ndarray:
+        return data[:, [idx[n] for n in names]].copy()
+
+    rotvec = None
+    if all(n in idx for n in _ROT):
+        rotvec = Rotation.from_euler(IPA_EULER_SEQ, cols(_ROT), degrees=True).as_rotvec()
+    sigma_m = None
+    if all(n in idx for n in _POS_STD):
+        sigma_m = cols(_POS_STD)
+        check_positive_sigma(sigma_m, _POS_STD, lines, src, unit="mm")
+        sigma_m = sigma_m * _MM
+    return MeasurementSet(
+        joint_names=list(UR10_JOINT_NAMES),
+        q=cols(UR10_JOINT_NAMES),
+        position_m=cols(_POS) * _MM,
+        rotvec_rad=rotvec,
+        sigma_m=sigma_m,
+        temperature_c=data[:, idx[_TEMP]].copy() if _TEMP in idx else None,
+        payload_kg=None,
+        time_s=_time_column(rows, lines, idx, src),
+        source=src,
+        extra=_extra_columns(data, header, idx, lines, src),
+    )
+
+
+def _read_ipa_table(p: Path, src: str) -> tuple[list[str], list[list[str]], list[int]]:
+    """The header and the data rows (cells as text) with their line numbers; the required columns checked."""
+    reader = csv.reader(_stdio.StringIO(_read_text(p), newline=""), delimiter=";")
     header: list[str] | None = None
     rows: list[list[str]] = []
     lines: list[int] = []
@@ -187,75 +217,51 @@ def import_ipa(path: str | os.PathLike[str]) -> MeasurementSet:
         lines.append(reader.line_num)
     if header is None:
         raise InputError(f"{src}: empty file, expected the IPA header (Timestamp;Goal x;...)")
-    found = "; ".join(header)
     if len(header) == 1 and "," in header[0]:
         raise InputError(f"{src}: header is not ';'-separated ({header[0][:60]!r}); not an IPA file?")
-    idx = {name: i for i, name in enumerate(header)}
-    missing = [c for c in UR10_JOINT_NAMES + _POS if c not in idx]
+    missing = [c for c in UR10_JOINT_NAMES + _POS if c not in header]
     if missing:
-        raise InputError(f"{src}: missing column(s) {', '.join(missing)}; columns found: {found}")
+        raise InputError(f"{src}: missing column(s) {', '.join(missing)}; columns found: {'; '.join(header)}")
     if not rows:
         raise InputError(f"{src}: no measurement rows after the header")
+    return header, rows, lines
 
-    data = parse_numeric_table(rows, lines, header, src, _parse_decimal_comma, skip=(_TIMESTAMP,))
 
-    def cols(names: tuple[str, ...]) -> np.ndarray:
-        return data[:, [idx[n] for n in names]].copy()
+def _time_column(rows: list[list[str]], lines: list[int], idx: dict[str, int], src: str) -> np.ndarray | None:
+    """Seconds since the first row when every timestamp is a proper YYYYMMDDhhmmss (Series A), else None."""
+    if _TIMESTAMP not in idx:
+        return None
+    stamps = [_clean(r[idx[_TIMESTAMP]]) for r in rows]
+    if not all(_TIMESTAMP_RE.match(s) for s in stamps):
+        return None
+    try:
+        dt = [datetime.strptime(s, "%Y%m%d%H%M%S") for s in stamps]
+    except ValueError as exc:
+        bad = next(i for i, s in enumerate(stamps) if not _valid_stamp(s))
+        raise InputError(
+            f"{src}: column 'Timestamp', row {bad + 1} (line {lines[bad]}): {stamps[bad]!r} "
+            f"is not a valid YYYYMMDDhhmmss time ({exc})"
+        ) from None
+    return np.array([(t - dt[0]).total_seconds() for t in dt], dtype=float)
 
-    def all_present(names: tuple[str, ...]) -> bool:
-        return all(n in idx for n in names)
 
-    def positive(names: tuple[str, ...]) -> np.ndarray:
-        arr = cols(names)
-        check_positive_sigma(arr, names, lines, src, unit="mm")
-        return arr
-
-    q = cols(UR10_JOINT_NAMES)
-    position_m = cols(_POS) * _MM
-    rotvec = None
-    if all_present(_ROT):
-        rotvec = Rotation.from_euler(IPA_EULER_SEQ, cols(_ROT), degrees=True).as_rotvec()
-    sigma_m = positive(_POS_STD) * _MM if all_present(_POS_STD) else None
-    temperature = data[:, idx[_TEMP]].copy() if _TEMP in idx else None
-
-    time_s = None
-    if _TIMESTAMP in idx:
-        stamps = [_clean(r[idx[_TIMESTAMP]]) for r in rows]
-        if all(_TIMESTAMP_RE.match(s) for s in stamps):
-            try:
-                dt = [datetime.strptime(s, "%Y%m%d%H%M%S") for s in stamps]
-            except ValueError as exc:
-                bad = next(i for i, s in enumerate(stamps) if not _valid_stamp(s))
-                raise InputError(
-                    f"{src}: column 'Timestamp', row {bad + 1} (line {lines[bad]}): {stamps[bad]!r} "
-                    f"is not a valid YYYYMMDDhhmmss time ({exc})"
-                ) from None
-            time_s = np.array([(t - dt[0]).total_seconds() for t in dt], dtype=float)
-
+def _extra_columns(data: np.ndarray, header: list[str], idx: dict[str, int], lines: list[int], src: str
+                   ) -> dict[str, np.ndarray]:
+    """Goal pose, Euler-angle std (rad) and unknown numeric columns (see the module docstring)."""
     extra: dict[str, np.ndarray] = {}
     for name, key in _GOAL.items():
         if name in idx:
             extra[key] = data[:, idx[name]].copy()
-    if all_present(_ROT_STD):
-        rot_std = np.deg2rad(positive(_ROT_STD))
+    if all(n in idx for n in _ROT_STD):
+        rot_std = data[:, [idx[n] for n in _ROT_STD]]
+        check_positive_sigma(rot_std, _ROT_STD, lines, src, unit="deg")
+        rot_std = np.deg2rad(rot_std)
         for a, key in enumerate(("sigma_euler_rx", "sigma_euler_ry", "sigma_euler_rz")):
             extra[key] = rot_std[:, a].copy()
     for name in header:
         if name not in _KNOWN:
             extra[name] = data[:, idx[name]].copy()
-
-    return MeasurementSet(
-        joint_names=list(UR10_JOINT_NAMES),
-        q=q,
-        position_m=position_m,
-        rotvec_rad=rotvec,
-        sigma_m=sigma_m,
-        temperature_c=temperature,
-        payload_kg=None,
-        time_s=time_s,
-        source=src,
-        extra=extra,
-    )
+    return extra
 
 
 def _valid_stamp(s: str) -> bool:

@@ -29,11 +29,26 @@ CSV format
   ``temperature``                 °C        optional: ambient/robot temperature
   ``payload``                     kg        optional: payload mass
   ``time``                        s         optional: time stamp (any origin)
+  ``station``                     (text)    optional: label of the measurement set-up
+                                            (tracker placement) the row was taken
+                                            from, text or integer (``B``, ``1``);
+                                            compared as text after stripping spaces.
+                                            Rows of one station share one tracker
+                                            pose (and reflector); see below
   anything else                   (any)     kept as a numeric "extra" column
   ==============================  ========  ========================================
 
 * Every cell must be a finite number (``nan``, ``inf`` or an empty cell are
-  errors); standard deviations must be > 0 and payloads >= 0.
+  errors), except the ``station`` cells, which are labels (never empty);
+  standard deviations must be > 0 and payloads >= 0.
+* Stations: a file without a ``station`` column is one station. Several files
+  of one calibration (``identify --data B.csv --data C.csv``) are each their
+  own station (labelled by the file name without extension) unless they carry
+  a ``station`` column; :func:`concat_measurements` joins them. Identification
+  fits one tracker pose per station and the robot's parameters shared by all.
+* ``x, y, z`` may be left out only where positions are not needed
+  (``read_measurements(..., require_position=False)``, e.g. ``pin-kpi-oed
+  predict`` on joint values alone); they are then NaN in the set.
 * Joint columns: if ``joint_names`` is passed to :func:`read_measurements`,
   exactly those columns are the joints (in that order) and every other
   unrecognised column goes to :attr:`MeasurementSet.extra`; without it, every
@@ -56,7 +71,7 @@ Example::
 
 :func:`write_measurements` writes the joint columns, then ``x,y,z``, then
 ``rx,ry,rz``, ``sigma_x,sigma_y,sigma_z``, ``temperature``, ``payload``,
-``time`` (each only if present) and finally the extra columns, with
+``time``, ``station`` (each only if present) and finally the extra columns, with
 shortest-round-trip float formatting (``repr``), so that reading the file back
 gives bit-identical arrays. Per-axis sigma is always written as
 ``sigma_x,sigma_y,sigma_z`` (never the isotropic ``sigma``).
@@ -71,6 +86,7 @@ half-written one.
 from __future__ import annotations
 
 import csv
+import dataclasses
 import io as _stdio
 import math
 import os
@@ -92,9 +108,11 @@ __all__ = [
     "PAYLOAD_COLUMN",
     "TIME_COLUMN",
     "RESERVED_COLUMNS",
+    "STATION_COLUMN",
     "MeasurementSet",
     "read_measurements",
     "write_measurements",
+    "concat_measurements",
 ]
 
 POSITION_COLUMNS: tuple[str, str, str] = ("x", "y", "z")
@@ -104,11 +122,12 @@ SIGMA_AXIS_COLUMNS: tuple[str, str, str] = ("sigma_x", "sigma_y", "sigma_z")
 TEMPERATURE_COLUMN = "temperature"
 PAYLOAD_COLUMN = "payload"
 TIME_COLUMN = "time"
+STATION_COLUMN = "station"
 RESERVED_COLUMNS: frozenset[str] = frozenset(
     POSITION_COLUMNS
     + ROTVEC_COLUMNS
     + SIGMA_AXIS_COLUMNS
-    + (SIGMA_COLUMN, TEMPERATURE_COLUMN, PAYLOAD_COLUMN, TIME_COLUMN)
+    + (SIGMA_COLUMN, TEMPERATURE_COLUMN, PAYLOAD_COLUMN, TIME_COLUMN, STATION_COLUMN)
 )
 
 #: Joint values (rad) or rotation-vector components beyond this look like degrees.
@@ -149,10 +168,13 @@ class MeasurementSet:
         time_s: Time stamp per measurement, (m,), s; or ``None``.
         source: Path of the file the set was read from ("" if built in memory).
         extra: Further numeric columns, name -> (m,) array (units as in the file).
+        station: Label of the measurement set-up (tracker placement) of every row,
+            (m,) text; ``None`` = one station for all rows.
 
     Raises:
-        InputError: At construction, if an array has the wrong shape or the
-            joint names are not unique / do not match the columns of ``q``.
+        InputError: At construction, if an array has the wrong shape, the
+            joint names are not unique / do not match the columns of ``q``, or a
+            station label is empty.
     """
 
     joint_names: list[str]
@@ -165,6 +187,7 @@ class MeasurementSet:
     time_s: np.ndarray | None = None
     source: str = ""
     extra: dict[str, np.ndarray] = field(default_factory=dict)
+    station: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         self.joint_names = [str(n) for n in self.joint_names]
@@ -195,10 +218,41 @@ class MeasurementSet:
                 raise InputError(f"MeasurementSet field extra[{k!r}] is None, expected an array of shape {(m,)}")
             extra[str(k)] = _opt_array(v, (m,), f"extra[{k!r}]")
         self.extra = extra
+        if self.station is not None:
+            labels = np.array([str(v).strip() for v in np.asarray(self.station, dtype=object).reshape(-1)],
+                              dtype=object)
+            if labels.shape != (m,):
+                raise InputError(f"MeasurementSet field 'station' has shape {labels.shape}, expected {(m,)}")
+            empty = np.flatnonzero(labels == "")
+            if empty.size:
+                raise InputError(f"{self.source or 'MeasurementSet'}: column 'station', row {int(empty[0]) + 1}: "
+                                 "empty station label")
+            self.station = labels
 
     def __len__(self) -> int:
         """Number of measurements ``m``."""
         return int(self.q.shape[0])
+
+    @property
+    def has_position(self) -> bool:
+        """Whether every row has a measured position (False for files read without ``x, y, z``)."""
+        return bool(np.all(np.isfinite(self.position_m)))
+
+    def station_labels(self, default: str = "") -> list[str]:
+        """Station labels in order of first appearance (``[default]`` without a station column)."""
+        if self.station is None:
+            return [default]
+        return list(dict.fromkeys(self.station.tolist()))
+
+    def station_rows(self, default: str = "") -> dict[str, np.ndarray]:
+        """Row indices of every station, label -> (k,) int, in order of first appearance."""
+        if self.station is None:
+            return {default: np.arange(len(self))}
+        return {lab: np.flatnonzero(self.station == lab) for lab in self.station_labels()}
+
+    def with_station(self, label: str) -> "MeasurementSet":
+        """A copy whose rows all belong to station ``label``."""
+        return dataclasses.replace(self, station=np.full(len(self), str(label), dtype=object))
 
     def subset(self, idx: Sequence[int] | np.ndarray | slice) -> "MeasurementSet":
         """Measurements selected by ``idx``, as a new set (arrays are copies).
@@ -242,6 +296,7 @@ class MeasurementSet:
             time_s=take(self.time_s),
             source=self.source,
             extra={k: take(v) for k, v in self.extra.items()},
+            station=None if self.station is None else self.station[idx].copy(),
         )
 
     def split(self, fraction: float, seed: int | None = 0) -> tuple["MeasurementSet", "MeasurementSet"]:
@@ -370,47 +425,18 @@ def _parse_float(cell: str) -> float:
     return float(cell.strip())
 
 
-def read_measurements(
-    path: str | os.PathLike[str],
-    joint_names: list[str] | None = None,
-    reach_m: float | None = None,
-) -> MeasurementSet:
-    """Read and validate a measurement CSV file (format: see the module docstring).
-
-    Row numbers in error messages count data rows from 1 (the header is not
-    counted); the file line number is given too.
-
-    Args:
-        path: CSV file.
-        joint_names: Expected joint columns (e.g. the actuated joints of the
-            URDF), in model order. ``None``: every unrecognised column is a joint.
-        reach_m: Robot reach (m); if given, enables the reach-based mm guard.
-
-    Returns:
-        The measurements, in file order, in SI units.
-
-    Raises:
-        InputError: If the file is missing or unreadable, the header lacks joint
-            or x/y/z columns, a column is duplicated, a row has the wrong number
-            of cells, a cell is not a finite number, a standard deviation is
-            <= 0 or a payload < 0, the values look like mm or degrees, or two
-            rows are duplicates. The message names the file, column, row and value.
-    """
-    p = Path(path)
-    src = str(p)
+def _read_table(p: Path, src: str) -> tuple[list[str], int, list[list[str]], list[int]]:
+    """Step 1: the header and the data rows (cells as text) with their file line numbers."""
     if not p.exists():
         raise InputError(f"measurement file '{src}' does not exist")
     if p.is_dir():
         raise InputError(f"measurement file '{src}' is a directory, expected a CSV file")
-    if reach_m is not None and not (math.isfinite(float(reach_m)) and float(reach_m) > 0):
-        raise InputError(f"reach_m must be a positive number of metres, got {reach_m!r}")
     try:
         text = p.read_text(encoding="utf-8-sig")
     except UnicodeDecodeError as exc:
         raise InputError(f"{src}: not a UTF-8 text file ({exc})") from None
     except OSError as exc:
         raise InputError(f"{src}: cannot read file ({exc.strerror})") from None
-
     reader = csv.reader(_stdio.StringIO(text, newline=""))
     header: list[str] | None = None
     header_line = 0
@@ -432,6 +458,27 @@ def read_measurements(
             f"{src}: header '{header[0][:60]}' looks ';'-separated; this reader expects ',' "
             "(use pin_kpi_oed.data.ipa.import_ipa for IPA files, or convert the file)"
         )
+    if not rows:
+        raise InputError(f"{src}: no measurement rows after the header")
+    return header, header_line, rows, row_lines
+
+
+@dataclass
+class _Columns:
+    """Step 2: which header column holds what (names checked, groups complete)."""
+
+    seen: dict[str, int]
+    joints: list[str]
+    extra: list[str]
+    position: bool
+    rotvec: bool
+    sigma_names: tuple[str, ...]
+    found: str
+
+
+def _check_header(header: list[str], header_line: int, src: str, joint_names: list[str] | None,
+                  require_position: bool) -> _Columns:
+    """Step 2: unique non-empty names; x, y, z (unless optional); complete rx/ry/rz and sigma groups; joints."""
     seen: dict[str, int] = {}
     for i, name in enumerate(header):
         if not name:
@@ -442,9 +489,8 @@ def read_measurements(
             )
         seen[name] = i
     found = ", ".join(header)
-
     missing_xyz = [c for c in POSITION_COLUMNS if c not in seen]
-    if missing_xyz:
+    if missing_xyz and (require_position or len(missing_xyz) != 3):
         raise InputError(
             f"{src}: missing position column(s) {', '.join(missing_xyz)} (m, tracker frame); "
             f"columns found: {found}"
@@ -462,6 +508,8 @@ def read_measurements(
         )
     if sig_axes and SIGMA_COLUMN in seen:
         raise InputError(f"{src}: give either 'sigma' or 'sigma_x, sigma_y, sigma_z', not both")
+    sigma_names: tuple[str, ...] = SIGMA_AXIS_COLUMNS if sig_axes else (
+        (SIGMA_COLUMN,) * 3 if SIGMA_COLUMN in seen else ())
 
     if joint_names is None:
         joints = [c for c in header if c not in RESERVED_COLUMNS]
@@ -481,66 +529,79 @@ def read_measurements(
                 f"{src}: missing joint column(s) {', '.join(missing)} (rad); columns found: {found}"
             )
         extra_names = [c for c in header if c not in RESERVED_COLUMNS and c not in set(joints)]
+    return _Columns(seen, joints, extra_names, not missing_xyz, bool(rot_present), sigma_names, found)
 
-    # ---- parse every cell ------------------------------------------------- #
-    m = len(rows)
-    if m == 0:
-        raise InputError(f"{src}: no measurement rows after the header")
-    data = parse_numeric_table(rows, row_lines, header, src, _parse_float, found)
-    row_nums = list(range(1, m + 1))
 
-    def col(name: str) -> np.ndarray:
-        return data[:, seen[name]].copy()
+def _build_set(data: np.ndarray, rows: list[list[str]], cols: _Columns, src: str) -> MeasurementSet:
+    """Step 3: the parsed table as a :class:`MeasurementSet` (station labels taken as text)."""
+    seen = cols.seen
 
-    def cols(names: Sequence[str]) -> np.ndarray:
+    def col(name: str) -> np.ndarray | None:
+        return data[:, seen[name]].copy() if name in seen else None
+
+    def block(names: Sequence[str]) -> np.ndarray:
         return data[:, [seen[n] for n in names]].copy()
 
-    q = cols(joints)
-    pos = cols(POSITION_COLUMNS)
-    rotvec = cols(ROTVEC_COLUMNS) if rot_present else None
-    if sig_axes:
-        sigma = cols(SIGMA_AXIS_COLUMNS)
-        sigma_names: Sequence[str] = SIGMA_AXIS_COLUMNS
-    elif SIGMA_COLUMN in seen:
-        sigma = np.repeat(col(SIGMA_COLUMN)[:, None], 3, axis=1)
-        sigma_names = (SIGMA_COLUMN,) * 3
-    else:
-        sigma = None
-        sigma_names = ()
-    temperature = col(TEMPERATURE_COLUMN) if TEMPERATURE_COLUMN in seen else None
-    payload = col(PAYLOAD_COLUMN) if PAYLOAD_COLUMN in seen else None
-    time = col(TIME_COLUMN) if TIME_COLUMN in seen else None
+    m = data.shape[0]
+    station = None
+    if STATION_COLUMN in seen:
+        station = np.array([r[seen[STATION_COLUMN]].strip() for r in rows], dtype=object)
+        empty = np.flatnonzero(station == "")
+        if empty.size:
+            raise InputError(f"{src}: column 'station', row {int(empty[0]) + 1}: empty station label "
+                             "(give every row a label, e.g. B or 1)")
+    return MeasurementSet(
+        joint_names=cols.joints,
+        q=block(cols.joints),
+        position_m=block(POSITION_COLUMNS) if cols.position else np.full((m, 3), np.nan),
+        rotvec_rad=block(ROTVEC_COLUMNS) if cols.rotvec else None,
+        sigma_m=block(cols.sigma_names) if cols.sigma_names else None,
+        temperature_c=col(TEMPERATURE_COLUMN),
+        payload_kg=col(PAYLOAD_COLUMN),
+        time_s=col(TIME_COLUMN),
+        source=src,
+        extra={n: col(n) for n in cols.extra},
+        station=station,
+    )
 
-    # ---- value checks ----------------------------------------------------- #
-    if sigma is not None:
-        check_positive_sigma(sigma, sigma_names, row_lines, src)
-    if payload is not None and np.any(payload < 0):
-        r = int(np.flatnonzero(payload < 0)[0])
+
+def _check_values(ms: MeasurementSet, cols: _Columns, row_lines: list[int], src: str) -> None:
+    """Step 4: standard deviations > 0, payloads >= 0."""
+    if ms.sigma_m is not None:
+        check_positive_sigma(ms.sigma_m, cols.sigma_names, row_lines, src)
+    if ms.payload_kg is not None and np.any(ms.payload_kg < 0):
+        r = int(np.flatnonzero(ms.payload_kg < 0)[0])
         raise InputError(
-            f"{src}: column 'payload', row {r + 1} (line {row_lines[r]}): payload {float(payload[r])!r} kg must be >= 0"
+            f"{src}: column 'payload', row {r + 1} (line {row_lines[r]}): payload {float(ms.payload_kg[r])!r} kg "
+            "must be >= 0"
         )
 
-    # ---- unit guard ------------------------------------------------------- #
-    dist = np.linalg.norm(pos, axis=1)
-    med = float(np.median(dist))
-    limit = MAX_MEDIAN_DISTANCE_M if reach_m is None else max(MAX_MEDIAN_DISTANCE_M, REACH_FACTOR * float(reach_m))
-    if med > limit:
-        r = int(np.argmax(dist))
-        raise InputError(
-            f"{src}: columns x, y, z: median distance from the tracker {med:.6g} m exceeds {limit:g} m "
-            f"(e.g. row {r + 1} (line {row_lines[r]}): {dist[r]:.6g}); looks like mm/degrees; convert to m/rad"
-        )
-    if reach_m is not None:
-        spread = np.linalg.norm(pos - np.median(pos, axis=0), axis=1)
-        med_spread = float(np.median(spread))
-        if med_spread > REACH_FACTOR * float(reach_m):
-            r = int(np.argmax(spread))
+
+def _check_units(ms: MeasurementSet, cols: _Columns, row_lines: list[int], src: str, reach_m: float | None) -> None:
+    """Step 5: the unit guard (mm instead of m, degrees instead of rad, sigma in mm/µm)."""
+    pos = ms.position_m
+    if cols.position:
+        dist = np.linalg.norm(pos, axis=1)
+        med = float(np.median(dist))
+        limit = MAX_MEDIAN_DISTANCE_M if reach_m is None else max(MAX_MEDIAN_DISTANCE_M, REACH_FACTOR * float(reach_m))
+        if med > limit:
+            r = int(np.argmax(dist))
             raise InputError(
-                f"{src}: columns x, y, z: median distance of the points from their median point "
-                f"{med_spread:.6g} m exceeds {REACH_FACTOR:g} x reach ({float(reach_m):g} m) "
-                f"(e.g. row {r + 1} (line {row_lines[r]})); looks like mm/degrees; convert to m/rad"
+                f"{src}: columns x, y, z: median distance from the tracker {med:.6g} m exceeds {limit:g} m "
+                f"(e.g. row {r + 1} (line {row_lines[r]}): {dist[r]:.6g}); looks like mm/degrees; convert to m/rad"
             )
-    for arr, names in ((q, joints), (rotvec, ROTVEC_COLUMNS)):
+    if reach_m is not None and cols.position:
+        for rows in ms.station_rows().values():  # each station has its own tracker frame
+            spread = np.linalg.norm(pos[rows] - np.median(pos[rows], axis=0), axis=1)
+            med_spread = float(np.median(spread))
+            if med_spread > REACH_FACTOR * float(reach_m):
+                r = int(rows[np.argmax(spread)])
+                raise InputError(
+                    f"{src}: columns x, y, z: median distance of the points from their median point "
+                    f"{med_spread:.6g} m exceeds {REACH_FACTOR:g} x reach ({float(reach_m):g} m) "
+                    f"(e.g. row {r + 1} (line {row_lines[r]})); looks like mm/degrees; convert to m/rad"
+                )
+    for arr, names in ((ms.q, cols.joints), (ms.rotvec_rad, ROTVEC_COLUMNS)):
         if arr is None:
             continue
         big = np.abs(arr) > ANGLE_LIMIT_RAD
@@ -550,18 +611,24 @@ def read_measurements(
                 f"{src}: column '{names[c]}', row {r + 1} (line {row_lines[r]}): value {float(arr[r, c])!r} "
                 f"exceeds 2π+0.1 rad in magnitude; looks like mm/degrees; convert to m/rad"
             )
-    if sigma is not None:
+    if ms.sigma_m is not None:
+        sigma = ms.sigma_m
         med_sigma = float(np.median(sigma))
         if med_sigma > MAX_MEDIAN_SIGMA_M:
             r = int(np.argmax(sigma.max(axis=1)))
             raise InputError(
-                f"{src}: column(s) {', '.join(dict.fromkeys(sigma_names))}: median standard deviation "
+                f"{src}: column(s) {', '.join(dict.fromkeys(cols.sigma_names))}: median standard deviation "
                 f"{med_sigma:.6g} m exceeds {MAX_MEDIAN_SIGMA_M:g} m (e.g. row {r + 1} (line {row_lines[r]}): "
                 f"{sigma[r].max():.6g}); looks like mm/degrees; convert to m/rad"
             )
 
-    # ---- duplicates ------------------------------------------------------- #
-    key_parts = [q, pos] + ([rotvec] if rotvec is not None else [])
+
+def _check_duplicates(ms: MeasurementSet, row_lines: list[int], src: str) -> None:
+    """Step 6: no two rows with identical joint values and identical measurement."""
+    m = len(ms)
+    row_nums = list(range(1, m + 1))
+    key_parts = [ms.q] + ([ms.position_m] if ms.has_position else []) + \
+        ([ms.rotvec_rad] if ms.rotvec_rad is not None else [])
     keys = np.hstack(key_parts) + 0.0  # +0.0 folds -0.0 into 0.0
     first: dict[bytes, int] = {}
     dups: dict[int, list[int]] = {}
@@ -577,23 +644,111 @@ def read_measurements(
             verb = "is a duplicate of" if len(copies) == 1 else "are duplicates of"
             parts.append(f"{_fmt_rows(row_nums, row_lines, copies)} {verb} {_fmt_rows(row_nums, row_lines, [orig])}")
         more = f" (and {len(dups) - 5} more groups)" if len(dups) > 5 else ""
+        what = "same joint values and same x, y, z" if ms.has_position else "same joint values"
         raise InputError(
-            f"{src}: duplicate measurements (same joint values and same x, y, z"
-            f"{', rx, ry, rz' if rotvec is not None else ''}): " + "; ".join(parts) + more
+            f"{src}: duplicate measurements ({what}"
+            f"{', rx, ry, rz' if ms.rotvec_rad is not None else ''}): " + "; ".join(parts) + more
         )
 
-    return MeasurementSet(
-        joint_names=joints,
-        q=q,
-        position_m=pos,
-        rotvec_rad=rotvec,
-        sigma_m=sigma,
-        temperature_c=temperature,
-        payload_kg=payload,
-        time_s=time,
-        source=src,
-        extra={n: col(n) for n in extra_names},
-    )
+
+def read_measurements(
+    path: str | os.PathLike[str],
+    joint_names: list[str] | None = None,
+    reach_m: float | None = None,
+    require_position: bool = True,
+) -> MeasurementSet:
+    """Read and validate a measurement CSV file (format: see the module docstring).
+
+    Steps: read the table, check the header, parse every cell (file, column, row
+    and value named on error), build the set, check values, units and duplicates.
+    Row numbers in error messages count data rows from 1 (the header is not
+    counted); the file line number is given too.
+
+    Args:
+        path: CSV file.
+        joint_names: Expected joint columns (e.g. the actuated joints of the
+            URDF), in model order. ``None``: every unrecognised column is a joint.
+        reach_m: Robot reach (m); if given, enables the reach-based mm guard.
+        require_position: False accepts a file without ``x, y, z`` (positions
+            NaN, :attr:`MeasurementSet.has_position` False), e.g. for predictions.
+
+    Returns:
+        The measurements, in file order, in SI units.
+
+    Raises:
+        InputError: If the file is missing or unreadable, the header lacks joint
+            or x/y/z columns, a column is duplicated, a row has the wrong number
+            of cells, a cell is not a finite number (or a station label is empty),
+            a standard deviation is <= 0 or a payload < 0, the values look like mm
+            or degrees, or two rows are duplicates. The message names the file,
+            column, row and value.
+    """
+    p = Path(path)
+    src = str(p)
+    if reach_m is not None and not (math.isfinite(float(reach_m)) and float(reach_m) > 0):
+        raise InputError(f"reach_m must be a positive number of metres, got {reach_m!r}")
+    header, header_line, rows, row_lines = _read_table(p, src)
+    cols = _check_header(header, header_line, src, joint_names, require_position)
+    data = parse_numeric_table(rows, row_lines, header, src, _parse_float, cols.found, skip=(STATION_COLUMN,))
+    ms = _build_set(data, rows, cols, src)
+    _check_values(ms, cols, row_lines, src)
+    _check_units(ms, cols, row_lines, src, reach_m)
+    _check_duplicates(ms, row_lines, src)
+    return ms
+
+
+def concat_measurements(sets: Sequence[MeasurementSet], labels: Sequence[str] | None = None,
+                        source: str | None = None) -> MeasurementSet:
+    """Join measurement sets row-wise (e.g. several files of one calibration), keeping their stations.
+
+    A set without a station column becomes one station, labelled ``labels[i]`` (default: the
+    file name of its ``source`` without extension). Columns are kept only when every set has
+    them (rx/ry/rz, sigma, temperature, payload, time, extra columns); the others are dropped.
+
+    Args:
+        sets: the sets, with the same joint names (any order is not allowed: same order).
+        labels: station label of each set that has no station column.
+        source: ``source`` of the result (default: the sources joined by ``+``).
+
+    Returns:
+        One :class:`MeasurementSet` with a ``station`` column.
+
+    Raises:
+        InputError: no sets, different joint names, or two sets without a station column
+            that would get the same label.
+    """
+    sets = list(sets)
+    if not sets:
+        raise InputError("concat_measurements: no measurement sets given")
+    joints = list(sets[0].joint_names)
+    for s in sets[1:]:
+        if list(s.joint_names) != joints:
+            raise InputError(f"{s.source or 'measurement set'}: joint columns {', '.join(s.joint_names)} differ from "
+                             f"{sets[0].source or 'the first set'}'s {', '.join(joints)}")
+    auto: dict[str, str] = {}
+    stations = []
+    for i, s in enumerate(sets):
+        if s.station is not None:
+            stations.append(s.station)
+            continue
+        lab = str(labels[i]) if labels is not None else (Path(s.source).stem if s.source else f"station{i + 1}")
+        if lab in auto:
+            raise InputError(f"{s.source or 'measurement set'}: would be station '{lab}' like {auto[lab]}; give the "
+                             "files distinct names or a 'station' column")
+        auto[lab] = s.source or f"set {i + 1}"
+        stations.append(np.full(len(s), lab, dtype=object))
+
+    def cat(attr: str) -> np.ndarray | None:
+        vals = [getattr(s, attr) for s in sets]
+        return None if any(v is None for v in vals) else np.concatenate(vals, axis=0)
+
+    common = [k for k in sets[0].extra if all(k in s.extra for s in sets)]
+    return MeasurementSet(joint_names=joints, q=cat("q"), position_m=cat("position_m"), rotvec_rad=cat("rotvec_rad"),
+                          sigma_m=cat("sigma_m"), temperature_c=cat("temperature_c"), payload_kg=cat("payload_kg"),
+                          time_s=cat("time_s"),
+                          source=source if source is not None else "+".join(s.source for s in sets if s.source),
+                          extra={k: np.concatenate([s.extra[k] for s in sets]) for k in common},
+                          station=np.concatenate(stations))
 
 
 # --------------------------------------------------------------------------- #
@@ -621,8 +776,8 @@ def write_measurements(ms: MeasurementSet, path: str | os.PathLike[str]) -> None
     """Write a measurement set as CSV (format: see the module docstring), atomically.
 
     Columns: joints, ``x,y,z``, then if present ``rx,ry,rz``,
-    ``sigma_x,sigma_y,sigma_z``, ``temperature``, ``payload``, ``time``, then
-    the extra columns. Floats use ``repr`` so a read-back is bit-identical.
+    ``sigma_x,sigma_y,sigma_z``, ``temperature``, ``payload``, ``time``,
+    ``station`` (text), then the extra columns. Floats use ``repr`` so a read-back is bit-identical.
 
     Args:
         ms: The measurements (SI units).
@@ -630,7 +785,7 @@ def write_measurements(ms: MeasurementSet, path: str | os.PathLike[str]) -> None
 
     Raises:
         InputError: If a joint/extra name is empty, padded with spaces, reserved
-            or used twice, or the target directory does not exist.
+            or used twice, the set has no positions, or the target directory does not exist.
     """
     target = str(path)
     _check_column_names(ms, target)
@@ -646,14 +801,21 @@ def write_measurements(ms: MeasurementSet, path: str | os.PathLike[str]) -> None
         if arr is not None:
             header.append(name)
             blocks.append(arr[:, None])
-    for name, arr in ms.extra.items():
-        header.append(name)
-        blocks.append(np.asarray(arr, dtype=float)[:, None])
-    table = np.hstack(blocks) if len(ms) else np.empty((0, len(header)))
+    n_before_station = len(header)
+    if ms.station is not None:
+        header.append(STATION_COLUMN)
+    extra_blocks = [np.asarray(arr, dtype=float)[:, None] for arr in ms.extra.values()]
+    header += list(ms.extra)
+    table = np.hstack(blocks + extra_blocks) if len(ms) else np.empty((0, len(header)))
+    if not ms.has_position:
+        raise InputError(f"cannot write '{target}': the set has no measured positions (x, y, z)")
 
     buf = _stdio.StringIO()
     writer = csv.writer(buf, lineterminator="\n")
     writer.writerow(header)
-    for row in table:
-        writer.writerow([_format_float(v) for v in row])
+    for i, row in enumerate(table):
+        cells = [_format_float(v) for v in row]
+        if ms.station is not None:
+            cells.insert(n_before_station, str(ms.station[i]))
+        writer.writerow(cells)
     atomic_write_text(path, buf.getvalue())

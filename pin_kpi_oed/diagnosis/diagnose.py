@@ -69,23 +69,22 @@ stated in every report.
 from __future__ import annotations
 
 import math
-import os
 import time
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Any, Sequence
 
 import numpy as np
 from scipy import stats as _st
 
-from pin_kpi_oed.effects.library import (EFFECT_NAMES, UNOBSERVABLE_NOTES, Effect, SubsetEffect, candidate_effects, gravity_torque,
-                      loaded_joints)
 from pin_kpi_oed.data.atomic import to_jsonable
-from pin_kpi_oed.errors import InputError, PinKpiOedError
 from pin_kpi_oed.data.measurements import MeasurementSet
+from pin_kpi_oed.effects.library import (EFFECT_NAMES, UNOBSERVABLE_NOTES, Effect, SubsetEffect, candidate_effects,
+                                         gravity_torque, loaded_joints)
+from pin_kpi_oed.errors import InputError, PinKpiOedError
 from pin_kpi_oed.model.tracker import TrackerModel
+from pin_kpi_oed.results import Result
 
-__all__ = ["DiagnosisReport", "EffectResult", "diagnose", "MISMATCH_FACTOR", "heldout_stats"]
+__all__ = ["DiagnosisReport", "DiagnoseOptions", "EffectResult", "diagnose", "MISMATCH_FACTOR", "heldout_stats"]
 
 #: Held-out residuals beyond this factor × max(training RMS, noise floor) are "far beyond any effect".
 MISMATCH_FACTOR = 20.0
@@ -170,12 +169,16 @@ class EffectResult:
 
 
 @dataclass
-class DiagnosisReport:
-    """Outcome of :func:`diagnose` (SI units; ``summary()`` prints mm / µm).
+class DiagnosisReport(Result):
+    """Outcome of :func:`diagnose` (SI units; ``summary()`` prints mm / µm); common fields of
+    :class:`~pin_kpi_oed.results.Result`: ``success`` (the report was produced), ``status``
+    (``gap``, ``no_gap`` or ``mismatch``), ``message`` (the verdict), ``nit`` (forward-selection
+    steps), ``nfev`` (identifications run), ``time_s``.
 
     Attributes:
         robot, tool_frame: the arm.
-        mode: ``split`` (train / validate) or ``kfold``; k_folds its K.
+        mode: ``split`` (train / validate), ``transfer`` (validation from another session, set-up
+            re-registered on some of its rows) or ``kfold``; k_folds its K.
         n_train, n_heldout: measurements used for fitting / scoring.
         noise_floor_m: RMS 3-D error of a perfect model, sqrt(mean Σ σ²) (m).
         expected_rms_m: the same plus the parameter-estimation uncertainty (m).
@@ -193,9 +196,12 @@ class DiagnosisReport:
         mismatch: details (factor, rows far beyond any effect).
         notes: plain-words notes (skipped effects, dropped parameters, ...).
         unobservable: what the data cannot reveal.
-        figures: PNG files written.
+        figures: PNG files written (by :func:`pin_kpi_oed.viz.diagnosis_plots.diagnosis_figures`).
         geometry: training fit of the geometric model (RMS, χ²_red, parameters, tracker).
-        time_s: wall-clock time.
+        registration: transfer mode: the registration rows (1-based row numbers of their file),
+            their file, number and seed, and the scored rows.
+        plot_data: what the figures need (not in ``to_dict``): ``residuals_m`` (held-out geometric
+            residuals, n × 3, m), ``regressors`` (name -> (values, unit)).
     """
 
     robot: str
@@ -225,7 +231,8 @@ class DiagnosisReport:
     unobservable: list = field(default_factory=lambda: list(UNOBSERVABLE_NOTES))
     figures: list = field(default_factory=list)
     geometry: dict = field(default_factory=dict)
-    time_s: float = 0.0
+    registration: dict = field(default_factory=dict)
+    plot_data: dict = field(default_factory=dict, repr=False)
 
     def effect(self, name: str) -> EffectResult:
         """The single-effect result of ``name``."""
@@ -237,6 +244,7 @@ class DiagnosisReport:
     def to_dict(self) -> dict:
         """Plain JSON-able dict (SI units)."""
         return {
+            **self.result_dict(),
             "robot": self.robot, "tool_frame": self.tool_frame, "mode": self.mode, "k_folds": self.k_folds,
             "n_train": self.n_train, "n_heldout": self.n_heldout, "alpha": self.alpha, "weights": self.weights,
             "noise_floor_m": _f(self.noise_floor_m), "expected_rms_m": _f(self.expected_rms_m),
@@ -248,7 +256,8 @@ class DiagnosisReport:
             "selection": [to_jsonable(s) for s in self.selection],
             "where": to_jsonable(self.where), "validation_mismatch": bool(self.validation_mismatch),
             "mismatch": to_jsonable(self.mismatch), "notes": list(self.notes), "unobservable": list(self.unobservable),
-            "figures": [str(f) for f in self.figures], "geometry": to_jsonable(self.geometry), "time_s": self.time_s,
+            "figures": [str(f) for f in self.figures], "geometry": to_jsonable(self.geometry),
+            "registration": to_jsonable(self.registration),
         }
 
     def summary(self) -> str:
@@ -259,6 +268,11 @@ class DiagnosisReport:
         out = [f"sim-to-real gap diagnosis of {self.robot} ({self.mode}"
                f"{f', K={self.k_folds}' if self.mode == 'kfold' else ''}: {self.n_train} training, "
                f"{self.n_heldout} held-out measurements; weights: {self.weights})"]
+        if self.registration:
+            r = self.registration
+            seed = f" (seed {r['seed']})" if r.get("seed") is not None else ""
+            out.append(f"  transfer: the set-up (tracker pose, reflector) is re-registered, robot held, on {r['n']} "
+                       f"rows of {r['source']}{seed}; only the other {self.n_heldout} rows are scored")
         out.append(f"  noise floor {self.noise_floor_m * um:.1f} µm RMS (3-D); held-out geometry only: mean "
                    f"{_um(b.get('mean_m'))}, RMS {_um(b.get('rms_m'))}, max {_um(b.get('max_m'))} µm")
         out.append(f"  gap test: chi2 = {g.get('chi2', float('nan')):.4g} on {g.get('dof')} dof, p = "
@@ -339,21 +353,37 @@ class _Scored:
         return np.sum((self.R / self.S) ** 2, axis=1)
 
 
-class _Engine:
-    """Fits and scores models on a fixed set of folds."""
+@dataclass
+class _Plan:
+    """How the data are split: folds (train, held-out) and the held-out rows' numbers in their file."""
 
-    def __init__(self, model: TrackerModel, folds: list, full_train: MeasurementSet, heldout_idx: list,
-                 weights: str, identify_options: dict, fold_rows: list | None = None, exact_kfold: bool = False):
+    mode: str
+    k: int
+    folds: list  # [(train, test)]
+    orders: list  # per fold: row indices of the held-out rows in ``heldout_source``
+    fold_rows: list | None  # K-fold: per fold (train rows, test rows) of the training file
+    heldout_source: MeasurementSet
+    registration: MeasurementSet | None = None
+    registration_info: dict = field(default_factory=dict)
+
+
+class _Engine:
+    """Fits and scores models on a fixed set of folds (with a set-up registration in transfer mode)."""
+
+    def __init__(self, model: TrackerModel, plan: _Plan, full_train: MeasurementSet, heldout_idx: list,
+                 weights: str, identify_options: dict, exact_kfold: bool = False):
         self.model = model
-        self.folds = folds  # [(train, test)]
+        self.plan = plan
+        self.folds = plan.folds
         self.full_train = full_train
         self.heldout_idx = heldout_idx  # per fold: rows of the test set kept for scoring
         self.weights = weights
         self.opts = dict(identify_options)
-        self.split = fold_rows is None
-        self.fold_rows = fold_rows  # K-fold: per fold (train rows, test rows) of full_train
+        self.split = plan.fold_rows is None
+        self.fold_rows = plan.fold_rows
         self.exact_kfold = exact_kfold
         self.unconverged: set[str] = set()
+        self.n_fits = 0
 
     def sigma(self, data: MeasurementSet) -> np.ndarray:
         use_data = data.sigma_m is not None and self.weights in ("auto", "data")
@@ -364,27 +394,48 @@ class _Engine:
 
         opts = {"raise_on_failure": False, **self.opts}
         res = identify(self.model, data, effects=list(effects), weights=self.weights, use_orientation=False, **opts)
+        self.n_fits += 1
         if not res.converged:
             self.unconverged.add(", ".join(e.name for e in effects) or "geometry")
         chi2 = float(np.sum(res.weighted_errors ** 2))
         return _Fit(res, chi2, 3 * len(data), len(res.names))
 
     def heldout(self, fit: _Fit, test: MeasurementSet) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        from pin_kpi_oed.identification.identify import ResidualModel, predict
+        """Held-out residuals (measured − predicted), σ and weighted prediction variance of ``fit`` on ``test``.
+
+        In transfer mode the fit's set-up is first re-registered on the registration rows
+        (robot and effects held); the variance then counts the robot and effect parameters only.
+        """
+        from pin_kpi_oed.identification.problem import ResidualModel
 
         res = fit.result
-        wm = res.model
-        Q = np.asarray(test.q, float)[:, [test.joint_names.index(j) for j in wm.robot.joint_names]]
-        Y = predict(wm, res.p, Q, res.effects, res.theta, test)[:, :3]
-        R = test.position_m - Y
         S = self.sigma(test)
-        try:
-            rm = ResidualModel(wm, test, res.identifiability.base, res.effects, sigma=S, p_ref=res.p, Q=Q)
-            F = rm.jacobian_full(res.values)[:, :3, :]  # weighted
-            V = np.einsum("mai,ij,maj->ma", F, res.covariance, F)
-        except PinKpiOedError:
-            V = np.zeros_like(R)
+        if self.plan.registration is not None:
+            rm, x, keep = self._registered(res, test, S)
+        else:
+            rm, x, keep = ResidualModel(res.station_set, test, res.identifiability.base, res.effects, sigma=S,
+                                        p_ref=res.P), res.values, np.arange(res.values.size)
+        R = -rm.evaluate(x)[0]
+        F = rm.jacobian_full(x)[:, :3, :]  # weighted
+        C = res.covariance[np.ix_(keep, keep)]
+        V = np.einsum("mai,ij,maj->ma", F, C, F)
         return R, S, np.clip(V, 0.0, None)
+
+    def _registered(self, res: Any, test: MeasurementSet, S: np.ndarray) -> tuple[Any, np.ndarray, np.ndarray]:
+        """Residual model of ``test`` at the set-up re-registered on the registration rows (robot held)."""
+        from pin_kpi_oed.identification.problem import ResidualModel
+        from pin_kpi_oed.identification.transfer import register_setup
+
+        rr = register_setup(res.calibrated_model(), self.plan.registration, station="transfer", weights=self.weights)
+        wm, p = rr.model.station_model("transfer")
+        nb = len(res.identifiability.base)
+        setup = set(res.model.layout.setup_groups)
+        robot = [i for i, n in enumerate(res.names[:nb]) if n.split(".")[0].split("@")[0] not in setup]
+        base = np.array([wm.layout.index(res.names[i]) for i in robot], int)
+        rm = ResidualModel(wm, test, base, res.effects, sigma=S, p_ref=p)
+        x = np.concatenate([p[base]] + [np.asarray(t, float) for t in res.theta])
+        keep = np.r_[np.asarray(robot, int), np.arange(nb, res.values.size)]
+        return rm, x, keep
 
     def _fold_linear(self, full: _Fit) -> list[tuple[np.ndarray, np.ndarray, np.ndarray]]:
         """K-fold held-out residuals by one Gauss-Newton step from the all-data fit per fold.
@@ -393,12 +444,12 @@ class _Engine:
         fold's training rows from the all-data solution x̂ reaches it to second order:
         δ_f = −(J_Tᵀ J_T)⁺ J_Tᵀ f_T, held-out residual f_test + J_test δ_f (weighted).
         """
-        from pin_kpi_oed.identification.identify import ResidualModel
+        from pin_kpi_oed.identification.problem import ResidualModel
 
         res = full.result
         data = self.full_train
         S = self.sigma(data)
-        rm = ResidualModel(res.model, data, res.identifiability.base, res.effects, sigma=S, p_ref=res.p)
+        rm = ResidualModel(res.station_set, data, res.identifiability.base, res.effects, sigma=S, p_ref=res.P)
         J = rm.jacobian_full(res.values)[:, :3, :]
         fw = rm.weighted_rows(res.values)[:, :3]  # (model − measured) / σ
         out = []
@@ -420,13 +471,13 @@ class _Engine:
 
     def score(self, effects: Sequence[Effect], full: _Fit | None = None) -> _Scored:
         full = full or self.fit(self.full_train, effects)
-        Rs, Ss, Vs = [], [], []
         if self.split:
             parts = [self.heldout(full, self.folds[0][1])]
         elif not self.exact_kfold:
             parts = self._fold_linear(full)
         else:
             parts = [self.heldout(self.fit(train, effects), test) for train, test in self.folds]
+        Rs, Ss, Vs = [], [], []
         for (R, S, V), keep in zip(parts, self.heldout_idx):
             Rs.append(R[keep])
             Ss.append(S[keep])
@@ -484,16 +535,15 @@ def _compare(ref: _Scored, new: _Scored, name: str, n_tests: int, alpha: float, 
 
 def _prune(engine: _Engine, ref: _Fit, effect: Effect, ref_effects: list) -> tuple[Effect | None, str]:
     """Drop the parameters of ``effect`` the training data cannot determine next to the reference model."""
-    from pin_kpi_oed.identification.identify import ResidualModel
+    from pin_kpi_oed.identification.problem import ResidualModel
 
     res = ref.result
     data = engine.full_train
-    wm = res.model
     S = engine.sigma(data)
     effs = list(ref_effects) + [effect]
     x = np.concatenate([res.values, np.zeros(effect.n_params)])
     try:
-        rm = ResidualModel(wm, data, res.identifiability.base, effs, sigma=S, p_ref=res.p)
+        rm = ResidualModel(res.station_set, data, res.identifiability.base, effs, sigma=S, p_ref=res.P)
         J = rm.jacobian_full(x)[:, :3, :].reshape(-1, x.size)
     except PinKpiOedError as exc:
         return None, f"{effect.name}: skipped ({exc})"
@@ -631,74 +681,52 @@ def _where(model: TrackerModel, p: np.ndarray, data: MeasurementSet, order: np.n
     return where, regs
 
 
-# --------------------------------------------------------------------------- figures
-def _save_fig(fig: Any, path: Path) -> None:
-    from pin_kpi_oed.viz.figures import save_png
+# --------------------------------------------------------------------------- steps of the diagnosis
+@dataclass
+class DiagnoseOptions:
+    """Knobs of :func:`diagnose` (SI units).
 
-    save_png(fig, path, dpi=110)
+    Attributes:
+        kfold: K-fold cross-validation on the training data alone (K ≥ 2), instead of a validation set.
+        effects: candidate effect names or objects (default: all of :data:`EFFECT_NAMES`).
+        weights: ``auto`` (sigma columns if present, else the noise model), ``data`` or ``noise``.
+        alpha: significance level of the gap test and of the effect tests.
+        seed: seed of the K-fold split and of the random registration rows.
+        max_selected: at most this many effects in forward selection (default: all).
+        t_ref_c: reference temperature of ``thermal_expansion`` (°C; default the training mean).
+        identify_options: extra keyword arguments (fields of
+            :class:`~pin_kpi_oed.identification.identify.IdentifyOptions`) of every identification.
+        exact_kfold: re-identify every model on every fold (K+1 fits per model); by default the
+            folds' fits are one Gauss-Newton step from the all-data fit (exact to second order,
+            K times faster).
+        register_rows: transfer mode: the validation data come from another session; re-register
+            the set-up on this many seeded random rows of them and score only the others.
+        register_data: transfer mode: re-register the set-up on these rows and score every
+            validation row.
+    """
 
+    kfold: int | None = None
+    effects: Sequence[str | Effect] | None = None
+    weights: str = "auto"
+    alpha: float = 0.01
+    seed: int = 0
+    max_selected: int | None = None
+    t_ref_c: float | None = None
+    identify_options: dict | None = None
+    exact_kfold: bool = False
+    register_rows: int | None = None
+    register_data: MeasurementSet | None = None
 
-def _figures(folder: Path, where: dict, regs: dict, R: np.ndarray, report_effects: list, floor: float,
-             before_rms: float, n_top: int = 4) -> list[str]:
-    import matplotlib
+    @classmethod
+    def resolve(cls, options: "DiagnoseOptions | None", overrides: dict) -> "DiagnoseOptions":
+        """``options`` (or the defaults) with the keyword ``overrides`` applied.
 
-    matplotlib.use("Agg", force=False)
-    import matplotlib.pyplot as plt
+        Raises:
+            InputError: an unknown option name.
+        """
+        from pin_kpi_oed.identification.identify import resolve_options
 
-    folder.mkdir(parents=True, exist_ok=True)
-    files = []
-    unit, f = ("mm", 1e3) if np.sqrt(np.mean(np.sum(R ** 2, 1))) > 1e-3 else ("µm", 1e6)
-    for item in where["regressors"][:n_top]:
-        name = item["name"]
-        x = regs[name][0]
-        fig, axes = plt.subplots(1, 3, figsize=(12, 3.4), sharey=True)
-        for a, ax in enumerate(axes):
-            ax.scatter(x, R[:, a] * f, s=4, alpha=0.35, color="tab:blue", lw=0)
-            xs = [(b["lo"] + b["hi"]) / 2 for b in item["bins"]]
-            ms = [b["mean_residual_m"][a] * f for b in item["bins"]]
-            ax.plot(xs, ms, "o-", color="tab:red", lw=1.5, ms=4, label="bin mean")
-            ax.axhline(0, color="k", lw=0.6)
-            ax.set_xlabel(f"{name} ({regs[name][1]})")
-            ax.set_title(f"residual {'xyz'[a]}")
-        axes[0].set_ylabel(f"held-out residual ({unit}, tracker frame)")
-        axes[0].legend(loc="best", fontsize=8)
-        fig.suptitle(f"held-out residuals vs {name}: eta2 = {item['eta2']:.3f}, p = {item['p_value']:.2g}")
-        fig.tight_layout()
-        path = folder / f"residuals_vs_{name}.png"
-        _save_fig(fig, path)
-        plt.close(fig)
-        files.append(str(path))
-    ok = [e for e in report_effects if e.status == "ok"]
-    if ok:
-        fig, ax = plt.subplots(figsize=(7, 3.6))
-        names = [e.name for e in ok]
-        vals = [e.heldout_rms_after_m * f for e in ok]
-        cols = ["tab:green" if e.significant else "tab:gray" for e in ok]
-        ax.barh(names, vals, color=cols)
-        ax.axvline(before_rms * f, color="tab:red", lw=1.5, label="geometry only")
-        ax.axvline(floor * f, color="k", ls="--", lw=1.2, label="noise floor")
-        ax.set_xlabel(f"held-out RMS error ({unit}); green = significant")
-        ax.invert_yaxis()
-        ax.legend(loc="lower right", fontsize=8)
-        fig.tight_layout()
-        path = folder / "effects_heldout_rms.png"
-        _save_fig(fig, path)
-        plt.close(fig)
-        files.append(str(path))
-    return files
-
-
-# --------------------------------------------------------------------------- main entry
-def _concat_sets(sets: list[MeasurementSet]) -> MeasurementSet:
-    def cat(attr):
-        vals = [getattr(s, attr) for s in sets]
-        if any(v is None for v in vals):
-            return None
-        return np.concatenate(vals, axis=0)
-
-    return MeasurementSet(joint_names=list(sets[0].joint_names), q=cat("q"), position_m=cat("position_m"),
-                          sigma_m=cat("sigma_m"), temperature_c=cat("temperature_c"), payload_kg=cat("payload_kg"),
-                          time_s=cat("time_s"), source=sets[0].source)
+        return resolve_options(cls, options, overrides, "diagnose")
 
 
 def _check_joints(model: TrackerModel, data: MeasurementSet, what: str) -> None:
@@ -708,157 +736,131 @@ def _check_joints(model: TrackerModel, data: MeasurementSet, what: str) -> None:
                          f"{model.robot.name} (columns: {', '.join(data.joint_names)})")
 
 
-def diagnose(model: TrackerModel, train: MeasurementSet, validate: MeasurementSet | None = None, *,
-             kfold: int | None = None, effects: Sequence[str | Effect] | None = None, weights: str = "auto",
-             alpha: float = 0.01, seed: int = 0, figures_dir: str | os.PathLike | None = None,
-             max_selected: int | None = None, t_ref_c: float | None = None,
-             identify_options: dict | None = None, exact_kfold: bool = False) -> DiagnosisReport:
-    """Diagnose the gap between a geometric model and measured data (see the module docstring).
-
-    Args:
-        model: measurement model: robot, nominal reflector offset in the tool frame, noise model
-            (σ when the data have no sigma columns or ``weights='noise'``). The tracker pose is
-            registered from the data.
-        train: measurements to fit on.
-        validate: held-out measurements (another file, disjoint from ``train``); or None with ``kfold``.
-        kfold: K-fold cross-validation on ``train`` alone (K ≥ 2).
-        effects: candidate effect names or objects (default: all of :data:`EFFECT_NAMES`).
-        weights: ``auto`` (sigma columns if present, else the noise model), ``data`` or ``noise``.
-        alpha: significance level of the gap test and of the effect tests.
-        seed: seed of the K-fold split.
-        figures_dir: write PNG figures of the residuals against the strongest regressors here.
-        max_selected: at most this many effects in forward selection (default: all).
-        t_ref_c: reference temperature of ``thermal_expansion`` (°C; default the training mean).
-        identify_options: extra keyword arguments for :func:`pin_kpi_oed.identification.identify.identify`.
-        exact_kfold: re-identify every model on every fold (K+1 fits per model); by default the
-            folds' fits are one Gauss-Newton step from the all-data fit (exact to second order,
-            K times faster).
-
-    Returns:
-        The :class:`DiagnosisReport`.
-
-    Raises:
-        InputError: neither or both of ``validate`` / ``kfold``, missing joint columns, a bad K,
-            an unknown effect name, or too few training rows for the geometric model.
-        IdentifiabilityError, SolverError: the geometric calibration itself is impossible.
-    """
-    t0 = time.perf_counter()
-    if (validate is None) == (kfold is None):
+def _check_options(model: TrackerModel, train: MeasurementSet, validate: MeasurementSet | None,
+                   opts: DiagnoseOptions) -> None:
+    """Step 0: one validation mode, a valid alpha and weights, the joint columns."""
+    if (validate is None) == (opts.kfold is None):
         raise InputError("diagnose: give either validation data (--validate) or a number of folds (--kfold), "
                          "not both and not neither")
-    if not 0 < alpha < 1:
-        raise InputError(f"diagnose: alpha must be in (0, 1), got {alpha}")
-    if weights not in ("auto", "data", "noise"):
-        raise InputError(f"diagnose: weights must be auto, data or noise, got '{weights}'")
+    if (opts.register_rows is not None or opts.register_data is not None) and validate is None:
+        raise InputError("diagnose: --register-rows/--register-data re-register the set-up on rows of another "
+                         "session: they need validation data (--validate)")
+    if opts.register_rows is not None and opts.register_data is not None:
+        raise InputError("diagnose: give --register-rows or --register-data, not both")
+    if not 0 < opts.alpha < 1:
+        raise InputError(f"diagnose: alpha must be in (0, 1), got {opts.alpha}")
+    if opts.weights not in ("auto", "data", "noise"):
+        raise InputError(f"diagnose: weights must be auto, data or noise, got '{opts.weights}'")
     _check_joints(model, train, "training data")
-    robot = model.robot
-    notes: list[str] = []
+    for d, what in ((validate, "validation data"), (opts.register_data, "registration data")):
+        if d is not None:
+            _check_joints(model, d, what)
+
+
+def _candidates(robot: Any, train: MeasurementSet, opts: DiagnoseOptions) -> list[Effect]:
+    """Step 1: the candidate effects (names are built for this robot; ``thermal_expansion`` at T_ref)."""
+    t_ref_c = opts.t_ref_c
     if t_ref_c is None:
         t_ref_c = float(np.mean(train.temperature_c)) if train.temperature_c is not None else 20.0
     cands: list[Effect] = []
-    for e in (effects if effects is not None else EFFECT_NAMES):
-        if isinstance(e, str):
-            cands += candidate_effects(robot, [e], t_ref_c=t_ref_c)
-        else:
-            cands.append(e)
+    for e in (opts.effects if opts.effects is not None else EFFECT_NAMES):
+        cands += candidate_effects(robot, [e], t_ref_c=t_ref_c) if isinstance(e, str) else [e]
+    return cands
 
+
+def _plan(train: MeasurementSet, validate: MeasurementSet | None, opts: DiagnoseOptions) -> _Plan:
+    """Step 2: the folds: train / validate, train / validate with a set-up registration, or K-fold."""
+    if validate is not None and opts.register_rows is None and opts.register_data is None:
+        return _Plan("split", 1, [(train, validate)], [np.arange(len(validate))], None, validate)
     if validate is not None:
-        _check_joints(model, validate, "validation data")
-        folds = [(train, validate)]
-        full_train = train
-        orders = [np.arange(len(validate))]
-        fold_rows = None
-        mode, K = "split", 1
-    else:
-        if isinstance(kfold, bool) or not isinstance(kfold, (int, np.integer)) or kfold < 2:
-            raise InputError(f"diagnose: --kfold must be an integer >= 2, got {kfold!r}")
-        if kfold > len(train) // 3:
-            raise InputError(f"diagnose: {len(train)} measurements are too few for {kfold} folds "
-                             f"(each fold needs at least 3 measurements)")
-        perm = np.random.default_rng(seed).permutation(len(train))
-        parts = np.array_split(perm, int(kfold))
-        folds, orders, fold_rows = [], [], []
-        for i, te in enumerate(parts):
-            tr = np.sort(np.concatenate([f for j, f in enumerate(parts) if j != i]))
-            te = np.sort(te)
-            folds.append((train.subset(tr), train.subset(te)))
-            orders.append(te)
-            fold_rows.append((tr, te))
-        full_train = train
-        mode, K = "kfold", int(kfold)
-    opts = dict(identify_options or {})
-    keep_all = [np.ones(len(te), bool) for _, te in folds]
-    eng = _Engine(model, folds, full_train, keep_all, weights, opts, fold_rows, exact_kfold)
+        from pin_kpi_oed.identification.transfer import registration_split
 
-    # ---- (a) geometric calibration and first held-out residuals ----------------
-    geo_fit = eng.fit(full_train, [])
-    geo = eng.score([], full=geo_fit)
-    res0 = geo_fit.result
-    train_rms = float(res0.rms_m)
-    weights_used = res0.sigma_source
-    geometry = {"train_rms_m": train_rms, "train_chi2_reduced": res0.chi2_reduced, "n_params": len(res0.names),
-                "tracker_T_base": res0.tracker_T_base, "reflector_m": res0.reflector_m,
-                "converged": res0.converged}
+        if opts.register_data is not None:
+            reg, reg_rows, scored = opts.register_data, np.arange(len(opts.register_data)), np.arange(len(validate))
+        else:
+            reg_rows, scored = registration_split(len(validate), opts.register_rows, opts.seed)
+            reg = validate.subset(reg_rows)
+        info = {"source": reg.source, "n": int(len(reg)), "rows": (reg_rows + 1).tolist(),
+                "seed": int(opts.seed) if opts.register_data is None else None,
+                "scored_source": validate.source, "scored_rows": (scored + 1).tolist()}
+        return _Plan("transfer", 1, [(train, validate.subset(scored))], [scored], None, validate, reg, info)
+    kfold = opts.kfold
+    if isinstance(kfold, bool) or not isinstance(kfold, (int, np.integer)) or kfold < 2:
+        raise InputError(f"diagnose: --kfold must be an integer >= 2, got {kfold!r}")
+    if kfold > len(train) // 3:
+        raise InputError(f"diagnose: {len(train)} measurements are too few for {kfold} folds "
+                         f"(each fold needs at least 3 measurements)")
+    perm = np.random.default_rng(opts.seed).permutation(len(train))
+    parts = np.array_split(perm, int(kfold))
+    folds, orders, fold_rows = [], [], []
+    for i, te in enumerate(parts):
+        tr = np.sort(np.concatenate([f for j, f in enumerate(parts) if j != i]))
+        te = np.sort(te)
+        folds.append((train.subset(tr), train.subset(te)))
+        orders.append(te)
+        fold_rows.append((tr, te))
+    return _Plan("kfold", int(kfold), folds, orders, fold_rows, train)
 
-    # ---- bad validation rows: far beyond any effect --------------------------------
+
+def _screen_mismatch(eng: _Engine, geo_fit: _Fit, geo: _Scored, plan: _Plan, notes: list[str]
+                     ) -> tuple[_Scored, dict, bool, np.ndarray]:
+    """Step 4: held-out rows far beyond any effect (another robot or tracker placement) are named; a
+    majority makes the validation a mismatch, a minority is left out of the effect analysis.
+
+    Returns:
+        (the geometric score without the rows left out, mismatch details, validation mismatch,
+        held-out row numbers in their file (0-based) of the rows kept).
+    """
+    train_rms = float(geo_fit.result.rms_m)
     floor_all = float(np.sqrt(np.mean(np.sum(geo.S ** 2, axis=1))))
     e0 = np.linalg.norm(geo.R, axis=1)
     limit = MISMATCH_FACTOR * max(train_rms, floor_all)
     far = e0 > limit
-    ho_data = _concat_sets([te for _, te in folds])
-    ho_order = np.concatenate(orders)
+    ho_order = np.concatenate(plan.orders)
     mismatch: dict = {"factor": MISMATCH_FACTOR, "limit_m": limit, "train_rms_m": train_rms,
                       "heldout_rms_m": float(np.sqrt(np.mean(e0 ** 2))), "rows": []}
-    validation_mismatch = False
-    if far.any():
-        rows = (ho_order[far] + 1).tolist()
-        mismatch["rows"] = rows
-        if far.mean() >= 0.5:
-            validation_mismatch = True
-            mismatch["message"] = (
-                f"{int(far.sum())} of {far.size} held-out rows have errors beyond {limit * 1e3:.3g} mm "
-                f"({MISMATCH_FACTOR:g}x the training RMS {train_rms * 1e3:.3g} mm; held-out RMS "
-                f"{mismatch['heldout_rms_m'] * 1e3:.4g} mm): far beyond any modelled effect - the validation data "
-                f"look like another robot or tracker placement; no effect is named")
-            notes.append(mismatch["message"])
-        else:
-            mismatch["message"] = (
-                f"{int(far.sum())} held-out row(s) have errors beyond {limit * 1e3:.3g} mm ({MISMATCH_FACTOR:g}x the "
-                f"training RMS), far beyond any modelled effect (another robot or tracker placement?): rows "
-                f"{', '.join(map(str, rows[:10]))}{' ...' if len(rows) > 10 else ''}; left out of the effect analysis")
-            notes.append(mismatch["message"])
-            # rebuild the held-out masks without those rows
-            off = 0
-            keep = []
-            for _, te in folds:
-                keep.append(~far[off:off + len(te)])
-                off += len(te)
-            eng.heldout_idx = keep
-            geo = eng.score([], full=geo_fit)
-            ho_order = np.concatenate([o[k] for o, k in zip(orders, keep)])
-            ho_data = _concat_sets([te.subset(k) for (_, te), k in zip(folds, keep)])
+    if not far.any():
+        return geo, mismatch, False, ho_order
+    rows = (ho_order[far] + 1).tolist()
+    mismatch["rows"] = rows
+    hint = "" if plan.mode == "transfer" else (" (a session with the tracker elsewhere? re-register the set-up "
+                                                "first: --register-rows N)")
+    if far.mean() >= 0.5:
+        mismatch["message"] = (
+            f"{int(far.sum())} of {far.size} held-out rows have errors beyond {limit * 1e3:.3g} mm "
+            f"({MISMATCH_FACTOR:g}x the training RMS {train_rms * 1e3:.3g} mm; held-out RMS "
+            f"{mismatch['heldout_rms_m'] * 1e3:.4g} mm): far beyond any modelled effect - the validation data "
+            f"look like another robot or tracker placement{hint}; no effect is named")
+        notes.append(mismatch["message"])
+        return geo, mismatch, True, ho_order
+    mismatch["message"] = (
+        f"{int(far.sum())} held-out row(s) have errors beyond {limit * 1e3:.3g} mm ({MISMATCH_FACTOR:g}x the "
+        f"training RMS), far beyond any modelled effect (another robot or tracker placement?): rows "
+        f"{', '.join(map(str, rows[:10]))}{' ...' if len(rows) > 10 else ''}; left out of the effect analysis")
+    notes.append(mismatch["message"])
+    off, keep = 0, []
+    for _, te in plan.folds:
+        keep.append(~far[off:off + len(te)])
+        off += len(te)
+    eng.heldout_idx = keep
+    return eng.score([], full=geo_fit), mismatch, False, np.concatenate([o[k] for o, k in zip(plan.orders, keep)])
 
-    # ---- (b) gap test -------------------------------------------------------------
-    gap = _gap_test(geo, alpha)
-    floor = gap["noise_floor_m"]
-    expected = float(np.sqrt(np.mean(np.sum(geo.S ** 2 * (1 + geo.V), axis=1))))
-    before = heldout_stats(geo.R)
 
-    # ---- (c) where ------------------------------------------------------------------
-    where, regs = _where(res0.model, res0.p, ho_data, ho_order, geo.R, geo.S, alpha)
+def _single_effects(eng: _Engine, geo_fit: _Fit, geo: _Scored, cands: list[Effect], alpha: float, floor: float,
+                    notes: list[str]) -> tuple[list[EffectResult], dict, dict, list[Effect]]:
+    """Step 6: every candidate alone with the geometry; skipped with a note when it cannot be used.
 
-    # ---- (d) which: every candidate alone --------------------------------------------
-    n_train_min = min(len(tr) for tr, _ in folds)
-    usable: list[Effect] = []
+    Returns:
+        (results ranked by held-out reduction, skipped last; scored models by name; the effects as
+        used (parameters the data cannot determine dropped) by name; the usable candidates).
+    """
+    n_train_min = min(len(tr) for tr, _ in eng.folds)
     singles: list[EffectResult] = []
-    scored_single: dict[str, _Scored] = {}
+    scored: dict[str, _Scored] = {}
     pruned: dict[str, Effect] = {}
+    usable: list[Effect] = []
     for eff in cands:
-        note = None
-        for data_ in [full_train] + [te for _, te in folds]:
-            note = eff.check(data_)
-            if note:
-                break
+        note = next((n for n in (eff.check(d) for d in [eng.full_train] + [te for _, te in eng.folds]) if n), None)
         if note:
             singles.append(EffectResult(eff.name, status="skipped", note=note))
             notes.append(note)
@@ -888,30 +890,36 @@ def diagnose(model: TrackerModel, train: MeasurementSet, validate: MeasurementSe
         if msg:
             r.note = msg
         singles.append(r)
-        scored_single[eff.name] = sc
+        scored[eff.name] = sc
         pruned[eff.name] = e2
         usable.append(eff)
     ranked = sorted([s for s in singles if s.status == "ok"], key=lambda s: -s.reduction_m) + \
         [s for s in singles if s.status != "ok"]
+    return ranked, scored, pruned, usable
 
-    # ---- forward selection ------------------------------------------------------------
+
+def _forward_selection(eng: _Engine, geo: _Scored, singles: list[EffectResult], scored: dict, pruned: dict,
+                       usable: list[Effect], alpha: float, floor: float, max_selected: int | None
+                       ) -> tuple[list[dict], list[str], _Scored]:
+    """Step 7: add, step by step, the significant effect that reduces the held-out error most.
+
+    Returns:
+        (the steps with every candidate scored, the selected names in order, the final model's score).
+    """
     selection: list[dict] = []
     selected: list[str] = []
-    current = geo
-    current_effects: list[Effect] = []
+    current, current_effects = geo, []
     step_results = {s.name: s for s in singles if s.status == "ok"}
-    remaining = [e for e in usable]
+    remaining = list(usable)
     limit_sel = len(usable) if max_selected is None else int(max_selected)
-    step = 0
     while remaining and len(selected) < limit_sel:
-        step += 1
-        if step == 1:
-            cand_res = {n: step_results[n] for n in (e.name for e in remaining)}
-            cand_sc = {n: scored_single[n] for n in cand_res}
+        if not selected:
+            cand_res = {e.name: step_results[e.name] for e in remaining}
+            cand_sc = {n: scored[n] for n in cand_res}
         else:
             cand_res, cand_sc = {}, {}
             for eff in remaining:
-                e2, msg = _prune(eng, current.full, eff, current_effects)
+                e2, _ = _prune(eng, current.full, eff, current_effects)
                 if e2 is None:
                     continue
                 try:
@@ -924,54 +932,122 @@ def diagnose(model: TrackerModel, train: MeasurementSet, validate: MeasurementSe
         if not cand_res:
             break
         order = sorted(cand_res.values(), key=lambda s: -s.reduction_m)
-        selection.append({"step": step, "base": list(selected),
+        selection.append({"step": len(selection) + 1, "base": list(selected),
                           "candidates": [{"name": c.name, "heldout_rms_after_m": c.heldout_rms_after_m,
                                           "f_pvalue": c.f_pvalue, "delta_bic": c.delta_bic,
                                           "heldout_pvalue": c.heldout_pvalue, "significant": c.significant}
                                          for c in order]})
         best = next((c for c in order if c.significant), None)
+        selection[-1]["chosen"] = None if best is None else best.name
         if best is None:
-            selection[-1]["chosen"] = None
             break
-        selection[-1]["chosen"] = best.name
         selected.append(best.name)
         current = cand_sc[best.name]
         current_effects = current.effects
         remaining = [e for e in remaining if e.name != best.name]
+    return selection, selected, current
 
-    after = heldout_stats(current.R)
-    remaining_gap = _gap_test(current, alpha)
-    rb, ra = before["rms_m"], after["rms_m"]
-    closed = (rb - ra) / (rb - floor) if rb is not None and rb - floor > 1e-3 * floor else float("nan")
-    gap_detected = bool(gap["gap_detected"])
-    dominant = "none"
-    if validation_mismatch:
-        dominant = "none"
-    elif gap_detected and selected:
-        dominant = selected[0]
-    elif gap_detected:
+
+def _verdict(gap: dict, remaining_gap: dict, selected: list[str], mismatch: bool, floor: float, rms_after: float,
+             notes: list[str]) -> str:
+    """Step 8: the dominant effect (or ``none``) and the notes that explain the verdict."""
+    detected = bool(gap["gap_detected"])
+    if mismatch:
+        return "none"
+    if detected and selected:
+        if remaining_gap["gap_detected"]:
+            notes.append(f"after {', '.join(selected)} a gap remains (RMS {rms_after * 1e6:.1f} µm vs noise floor "
+                         f"{floor * 1e6:.1f} µm): part of the error is not any modelled effect")
+        return selected[0]
+    if detected:
         notes.append("a gap is detected but no candidate effect explains a significant part of it on held-out data: "
                      "the remaining error is not any modelled effect")
     elif selected:
         notes.append(f"{selected[0]} passes the tests, but the held-out residuals are consistent with the noise "
                      "(no gap detected): not named as dominant")
-    if gap_detected and selected and remaining_gap["gap_detected"]:
-        notes.append(f"after {', '.join(selected)} a gap remains (RMS {ra * 1e6:.1f} µm vs noise floor "
-                     f"{floor * 1e6:.1f} µm): part of the error is not any modelled effect")
+    return "none"
+
+
+def diagnose(model: TrackerModel, train: MeasurementSet, validate: MeasurementSet | None = None,
+             options: DiagnoseOptions | None = None, **overrides: Any) -> DiagnosisReport:
+    """Diagnose the gap between a geometric model and measured data (see the module docstring).
+
+    Steps: check the options (0), candidate effects (1), folds (2), geometric calibration (3),
+    rows far beyond any effect (4), gap test and where (5), every effect alone (6), forward
+    selection (7), verdict (8). The figures are drawn from the report by
+    :func:`pin_kpi_oed.viz.diagnosis_plots.diagnosis_figures`.
+
+    Args:
+        model: measurement model: robot, nominal reflector offset in the tool frame, noise model
+            (σ when the data have no sigma columns or ``weights='noise'``). The tracker pose is
+            registered from the data (one per station).
+        train: measurements to fit on.
+        validate: held-out measurements (another file, disjoint from ``train``); or None with ``kfold``.
+        options: :class:`DiagnoseOptions`.
+        **overrides: fields of :class:`DiagnoseOptions` by name (``kfold=5``, ``register_rows=60``, ...).
+
+    Returns:
+        The :class:`DiagnosisReport`.
+
+    Raises:
+        InputError: neither or both of ``validate`` / ``kfold``, registration rows without
+            validation data, missing joint columns, a bad K, an unknown effect name or option, too
+            few training rows for the geometric model, or registration rows that cannot determine
+            the set-up.
+        IdentifiabilityError, SolverError: the geometric calibration itself is impossible.
+    """
+    t0 = time.perf_counter()
+    opts = DiagnoseOptions.resolve(options, overrides)
+    _check_options(model, train, validate, opts)
+    notes: list[str] = []
+    cands = _candidates(model.robot, train, opts)
+    plan = _plan(train, validate, opts)
+    eng = _Engine(model, plan, train, [np.ones(len(te), bool) for _, te in plan.folds], opts.weights,
+                  dict(opts.identify_options or {}), opts.exact_kfold)
+
+    # (3) geometric calibration and first held-out residuals
+    geo_fit = eng.fit(train, [])
+    geo = eng.score([], full=geo_fit)
+    res0 = geo_fit.result
+    geometry = {"train_rms_m": float(res0.rms_m), "train_chi2_reduced": res0.chi2_reduced,
+                "n_params": len(res0.names), "tracker_T_base": res0.tracker_T_base, "reflector_m": res0.reflector_m,
+                "stations": {k: v.to_dict() for k, v in res0.setups.items()}, "converged": res0.converged}
+    # (4) rows far beyond any effect
+    geo, mismatch, validation_mismatch, ho_order = _screen_mismatch(eng, geo_fit, geo, plan, notes)
+    ho_data = plan.heldout_source.subset(ho_order)
+    # (5) gap test, where
+    gap = _gap_test(geo, opts.alpha)
+    floor = gap["noise_floor_m"]
+    expected = float(np.sqrt(np.mean(np.sum(geo.S ** 2 * (1 + geo.V), axis=1))))
+    before = heldout_stats(geo.R)
+    where, regs = _where(res0.model, res0.p, ho_data, ho_order, geo.R, geo.S, opts.alpha)
+    # (6) every candidate alone, (7) forward selection
+    singles, scored, pruned, usable = _single_effects(eng, geo_fit, geo, cands, opts.alpha, floor, notes)
+    selection, selected, current = _forward_selection(eng, geo, singles, scored, pruned, usable, opts.alpha, floor,
+                                                      opts.max_selected)
+    after = heldout_stats(current.R)
+    remaining_gap = _gap_test(current, opts.alpha)
+    rb, ra = before["rms_m"], after["rms_m"]
+    closed = (rb - ra) / (rb - floor) if rb is not None and rb - floor > 1e-3 * floor else float("nan")
+    # (8) verdict
+    dominant = _verdict(gap, remaining_gap, selected, validation_mismatch, floor, ra, notes)
     for u in sorted(eng.unconverged):
         notes.append(f"the identification with {u} stopped at its evaluation limit before converging; its numbers "
                      "are those of the last iterate")
-    if weights_used == "data":
+    if res0.sigma_source == "data":
         notes.append("weights from the data's sigma columns: the gap test is only as good as they are")
-
-    rep = DiagnosisReport(
-        robot=robot.name, tool_frame=robot.tool_frame, mode=mode, k_folds=K, n_train=len(full_train),
-        n_heldout=int(geo.R.shape[0]), alpha=alpha, weights=weights_used, noise_floor_m=floor,
-        expected_rms_m=expected, gap_detected=gap_detected, gap_test=gap, dominant_effect=dominant,
-        selected_effects=selected, heldout_before=before, heldout_after=after, gap_closed_fraction=closed,
-        remaining_gap=remaining_gap, effects=ranked, selection=selection, where=where,
-        validation_mismatch=validation_mismatch, mismatch=mismatch, notes=notes, geometry=geometry)
-    if figures_dir is not None:
-        rep.figures = _figures(Path(figures_dir), where, regs, geo.R, ranked, floor, rb)
-    rep.time_s = time.perf_counter() - t0
-    return rep
+    status = "mismatch" if validation_mismatch else ("gap" if gap["gap_detected"] else "no_gap")
+    message = {"mismatch": "the validation data do not match the training set-up; no effect named",
+               "gap": f"gap detected; dominant effect: {dominant}",
+               "no_gap": "held-out residuals consistent with the noise"}[status]
+    return DiagnosisReport(
+        success=True, status=status, message=message, nit=len(selection), nfev=eng.n_fits,
+        robot=model.robot.name, tool_frame=model.robot.tool_frame, mode=plan.mode, k_folds=plan.k,
+        n_train=len(train), n_heldout=int(geo.R.shape[0]), alpha=opts.alpha, weights=res0.sigma_source,
+        noise_floor_m=floor, expected_rms_m=expected, gap_detected=bool(gap["gap_detected"]), gap_test=gap,
+        dominant_effect=dominant, selected_effects=selected, heldout_before=before, heldout_after=after,
+        gap_closed_fraction=closed, remaining_gap=remaining_gap, effects=singles, selection=selection, where=where,
+        validation_mismatch=validation_mismatch, mismatch=mismatch, notes=notes, geometry=geometry,
+        registration=dict(plan.registration_info),
+        plot_data={"residuals_m": geo.R, "regressors": regs},
+        time_s=time.perf_counter() - t0)

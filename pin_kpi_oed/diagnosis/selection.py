@@ -412,7 +412,7 @@ def register_setup(fit: StationFit, data: MeasurementSet, setup_effects: Sequenc
         from pin_kpi_oed.identification.identify import effect_terms
 
         dQ = effect_terms(fit.effects, fit.thetas, Q, data, ref.model, ref.p)[0]
-    kin = ref.model.kinematics(ref.p, Q + dQ, ref.model.reflector(ref.p), need_twist=False)
+    kin = ref.model.kinematics(ref.p, Q + dQ, ref.model.reflector(ref.p))
     R, t = register_points(kin.p, np.asarray(data.position_m, float))
     model = dataclasses.replace(ref.model, tracker_T_base=pin.SE3(R, t))
     p = ref.p.copy()

@@ -34,7 +34,14 @@ from pin_kpi_oed.errors import InputError, RobotLoadError, SolverError
 from pin_kpi_oed.data.atomic import atomic_write_text
 from pin_kpi_oed.model.robot import Robot
 
-__all__ = ["calibrated_urdf_text", "check_urdf_fk", "write_calibrated_urdf", "export_result_urdf"]
+__all__ = ["URDF_LIMITS_NOTE", "calibrated_urdf_text", "check_urdf_fk", "write_calibrated_urdf", "export_result_urdf",
+           "result_urdf_comment"]
+
+#: What a calibrated URDF cannot carry; written as an XML comment into every exported URDF.
+URDF_LIMITS_NOTE = ("This URDF carries the calibrated joint placements (geometry) only. It cannot carry the "
+                    "identified effects (joint-angle errors, compliance, thermal, ...), the tracker pose of each "
+                    "station, the reflector offset or the stations themselves: the model file "
+                    "(pin-kpi-oed identify --model-out model.json) holds them, and pin-kpi-oed predict uses it.")
 
 
 def _fmt(v: float) -> str:
@@ -192,18 +199,28 @@ def write_calibrated_urdf(robot: Robot, placements: Sequence[pin.SE3], path: str
     return dp
 
 
+def result_urdf_comment(result, source: str | None = None) -> str:
+    """XML comment of a calibrated URDF: where it comes from, the first station's set-up, and
+    :data:`URDF_LIMITS_NOTE` (what the file cannot carry)."""
+    T = np.asarray(result.tracker_T_base)
+    stations = list(getattr(result, "stations", []) or [])
+    return (f"calibrated by pin_kpi_oed from {source or result.n_measurements} "
+            f"({result.n_measurements} measurements{f', stations ' + ', '.join(stations) if len(stations) > 1 else ''}"
+            f"); tool frame {result.model.robot.tool_frame}; reflector_m "
+            f"{np.array2string(np.asarray(result.reflector_m), precision=9)}; tracker_T_base translation "
+            f"{np.array2string(T[:3, 3], precision=9)} m{f' (station {stations[0]})' if len(stations) > 1 else ''}. "
+            + URDF_LIMITS_NOTE)
+
+
 def export_result_urdf(result, path: str | os.PathLike, tol_m: float = 1e-9) -> float:
     """Write the calibrated URDF of an :class:`~pin_kpi_oed.identification.identify.IdentificationResult`.
 
     The tracker pose and reflector offset go into an XML comment (they are not part of the
-    robot); the result JSON holds them as numbers.
+    robot), with what the URDF cannot carry (:data:`URDF_LIMITS_NOTE`); the model file holds them.
 
     Returns:
         The largest tool-frame position difference of the check (m).
     """
     model = result.model
-    T = np.asarray(result.tracker_T_base)
-    comment = (f"calibrated by pin_kpi_oed from {result.n_measurements} measurements; tool frame "
-               f"{model.robot.tool_frame}; reflector_m {np.array2string(np.asarray(result.reflector_m), precision=9)}; "
-               f"tracker_T_base translation {np.array2string(T[:3, 3], precision=9)} m")
-    return write_calibrated_urdf(model.robot, model.joint_placements(result.p), path, comment=comment, tol_m=tol_m)
+    return write_calibrated_urdf(model.robot, model.joint_placements(result.p), path,
+                                 comment=result_urdf_comment(result), tol_m=tol_m)

@@ -1,0 +1,478 @@
+r"""Calibrated model files: everything a calibration found, to predict with it on another day.
+
+``pin-kpi-oed identify --model-out model.json`` writes, and :func:`load_model_file` reads, a
+versioned JSON file (``"format": "pin_kpi_oed.model/1"``, written atomically) that holds
+
+==================== ======================================================================
+key                  content (SI units: m, rad)
+==================== ======================================================================
+``format``           ``"pin_kpi_oed.model/1"`` (another format or version is refused)
+``robot``            ``spec`` (robot name or URDF path for :func:`load_robot`), ``name``,
+                     ``urdf_path``, ``tool_frame``, ``joint_names``, and the nominal joint
+                     placements (4×4) the calibration started from (checked on loading)
+``geometry``         ``joint_placement_errors``: the right perturbation δ_j of every joint
+                     placement, name -> value (``joint_a2.tx`` m, ``joint_a2.rx`` rad);
+                     ``joint_placements``: the calibrated placements M_j·exp6(δ_j), 4×4;
+                     ``parameters``: the estimated parameters (names, values, std, units,
+                     covariance), as the fit reported them
+``effects``          per effect: ``name``, ``kind`` (library class), ``options`` (constructor
+                     keyword arguments), ``param_names``, ``theta`` (its unit: ``unit``)
+``stations``         per station label: ``tracker_T_base`` (pose of the robot base in the
+                     tracker frame, 4×4), ``reflector_m`` (tool frame), ``probe_R`` (6-D),
+                     ``n_rows``, ``fitted_by`` (``identify`` or ``register``), ``source``,
+                     ``rms_m``
+``default_station``  the station used when none is named (the last registered one)
+``noise``            the noise model (:meth:`NoiseModel.to_dict`)
+``tcp_m``, ``pose6d`` KPI point in the tool frame; whether the model predicts orientations
+``fit``              fit statistics (measurements, RMS, reduced χ², iterations, ...)
+``history``          what produced the file, step by step (identify, register)
+==================== ======================================================================
+
+Prediction (:meth:`CalibratedModel.predict`): for station s with set-up (T_s, r_s) and the
+robot's δ and effects (θ), the reflector in the tracker frame is
+``y = T_s · oMtool(δ, q + ΣΔq(θ)) · r_s + ΣΔy(θ)``
+(:func:`pin_kpi_oed.effects.library.predict_with_effects`), the same model the fit used:
+a model file loaded back predicts what the fit predicted (to ~1e-15 m, tested).
+
+Effects are stored as their library class and constructor options. An effect class of the
+library (:data:`pin_kpi_oed.effects.library.EFFECTS`, ``joint_angle_table``, a subset of one)
+is stored from its attributes; any other effect can be stored if it has ``options() -> dict``
+(JSON-able keyword arguments of its constructor) and its class is in ``EFFECTS`` under its
+``name``. The calibrated URDF (``--urdf-out``) carries the geometry only.
+"""
+
+from __future__ import annotations
+
+import copy
+import json
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Sequence
+
+import numpy as np
+import pinocchio as pin
+
+from pin_kpi_oed.data.atomic import atomic_write_json, to_jsonable
+from pin_kpi_oed.data.measurements import MeasurementSet
+from pin_kpi_oed.effects.library import EFFECTS, JointAngleTable, SubsetEffect, predict_with_effects
+from pin_kpi_oed.errors import InputError, PinKpiOedError
+from pin_kpi_oed.model.noise import NoiseModel
+from pin_kpi_oed.model.tracker import TrackerModel
+from pin_kpi_oed.model.parameters import ParameterLayout
+from pin_kpi_oed.model.robot import ERD_ROBOTS, SHIPPED_ROBOTS, Robot, load_robot
+from pin_kpi_oed.model.serialize import se3_from_matrix
+
+__all__ = ["MODEL_FORMAT", "Setup", "CalibratedModel", "load_model_file", "effect_spec", "effect_from_spec"]
+
+#: Format tag of the model files this version writes and reads.
+MODEL_FORMAT = "pin_kpi_oed.model/1"
+_FORMAT_NAME = MODEL_FORMAT.split("/")[0]
+
+
+# --------------------------------------------------------------------------- effects <-> plain data
+def _joint_names(effect: Any, idx: Sequence[int]) -> list[str]:
+    return [effect.robot.joint_names[int(j)] for j in idx]
+
+
+_OPTIONS = {
+    "joint_compliance": lambda e: {"joints": _joint_names(e, e.joints)},
+    "backlash": lambda e: {"joints": _joint_names(e, e.joints)},
+    "joint_scale": lambda e: {"joints": _joint_names(e, e.joints)},
+    "gear_harmonic": lambda e: {"joints": _joint_names(e, e.joints), "orders": [int(o) for o in e.orders]},
+    "thermal_expansion": lambda e: {"t_ref_c": float(e.t_ref_c)},
+}
+
+
+def effect_spec(effect: Any) -> dict:
+    """Plain description of an effect from which :func:`effect_from_spec` rebuilds it.
+
+    Raises:
+        InputError: the effect is not of the library and has no ``options()``.
+    """
+    if isinstance(effect, SubsetEffect):
+        return {"name": effect.name, "kind": "subset", "base": effect_spec(effect.base),
+                "keep": [int(k) for k in effect.keep], "param_names": list(effect.param_names())}
+    if isinstance(effect, JointAngleTable):
+        opts = {"joints": _joint_names(effect, effect.joints), "knots": [np.asarray(k, float) for k in effect.knots]}
+        return {"name": effect.name, "kind": "joint_angle_table", "options": to_jsonable(opts),
+                "param_names": list(effect.param_names())}
+    name = getattr(effect, "name", type(effect).__name__)
+    cls = EFFECTS.get(name)
+    if callable(getattr(effect, "options", None)) and cls is not None and isinstance(effect, cls):
+        opts = effect.options()
+    elif cls is not None and type(effect) is cls and name in _OPTIONS:
+        opts = _OPTIONS[name](effect)
+    else:
+        raise InputError(f"effect '{name}' ({type(effect).__name__}) cannot be stored in a model file: it is not an "
+                         "effect of pin_kpi_oed.effects.library (or has no options() method)")
+    return {"name": name, "kind": name, "options": to_jsonable(opts), "param_names": list(effect.param_names())}
+
+
+def effect_from_spec(spec: dict, robot: Robot, where: str = "model file") -> Any:
+    """Rebuild an effect from :func:`effect_spec` output (its parameter names are checked).
+
+    Raises:
+        InputError: an unknown kind, bad options, or parameter names that differ from the stored ones.
+    """
+    kind = spec.get("kind")
+    try:
+        if kind == "subset":
+            eff = SubsetEffect(effect_from_spec(spec["base"], robot, where), [int(k) for k in spec["keep"]])
+        elif kind == "joint_angle_table":
+            o = spec["options"]
+            knots = [np.asarray(k, float) for k in o["knots"]]
+            eff = JointAngleTable(robot, o["joints"], [k[0] for k in knots], [k[-1] for k in knots],
+                                  step_rad=max(min(float(k[1] - k[0]) for k in knots), 1e-12))
+            eff.knots = knots
+        elif kind in EFFECTS:
+            eff = EFFECTS[kind](robot, **dict(spec.get("options") or {}))
+        else:
+            raise InputError(f"{where}: effect '{spec.get('name')}': unknown kind '{kind}' (known: "
+                             f"{', '.join(list(EFFECTS) + ['joint_angle_table', 'subset'])})")
+    except (KeyError, TypeError, ValueError, IndexError) as exc:
+        raise InputError(f"{where}: effect '{spec.get('name')}': bad options ({exc})") from None
+    names = list(eff.param_names())
+    if "param_names" in spec and names != list(spec["param_names"]):
+        raise InputError(f"{where}: effect '{spec.get('name')}' rebuilt with parameters {names[:3]}... but the file "
+                         f"lists {list(spec['param_names'])[:3]}...; the file does not match this version")
+    return eff
+
+
+# --------------------------------------------------------------------------- the model
+@dataclass
+class Setup:
+    """The measurement set-up of one station (SI units).
+
+    Attributes:
+        tracker_T_base: pose of the robot base in the tracker frame, 4×4 (m).
+        reflector_m: reflector offset in the tool frame, (3,) m.
+        probe_R: probe orientation in the tool frame (6-D only), 3×3; None otherwise.
+        n_rows: measurements the set-up was fitted on.
+        fitted_by: ``identify`` (fitted with the robot) or ``register`` (robot held).
+        source: file(s) the rows came from.
+        rms_m: RMS position error of those rows after the fit (m), or None.
+    """
+
+    tracker_T_base: np.ndarray
+    reflector_m: np.ndarray
+    probe_R: np.ndarray | None = None
+    n_rows: int = 0
+    fitted_by: str = "identify"
+    source: str = ""
+    rms_m: float | None = None
+
+    def __post_init__(self) -> None:
+        self.tracker_T_base = se3_from_matrix(self.tracker_T_base, "tracker_T_base").homogeneous.copy()
+        self.reflector_m = np.asarray(self.reflector_m, float).reshape(3)
+        if self.probe_R is not None:
+            self.probe_R = se3_from_matrix(np.block([[np.asarray(self.probe_R, float), np.zeros((3, 1))],
+                                                     [np.zeros((1, 3)), np.ones((1, 1))]]), "probe_R").rotation
+
+    def to_dict(self) -> dict:
+        """Plain numbers for JSON."""
+        return to_jsonable({"tracker_T_base": self.tracker_T_base, "reflector_m": self.reflector_m,
+                            "probe_R": self.probe_R, "n_rows": int(self.n_rows), "fitted_by": self.fitted_by,
+                            "source": self.source, "rms_m": self.rms_m})
+
+    @classmethod
+    def from_dict(cls, d: dict, where: str) -> "Setup":
+        """Inverse of :meth:`to_dict`.
+
+        Raises:
+            InputError: a missing or malformed field, named.
+        """
+        if not isinstance(d, dict) or "tracker_T_base" not in d or "reflector_m" not in d:
+            raise InputError(f"{where}: needs 'tracker_T_base' (4x4) and 'reflector_m' (3 numbers)")
+        refl = np.asarray(d["reflector_m"], float)
+        if refl.shape != (3,) or not np.all(np.isfinite(refl)):
+            raise InputError(f"{where}: 'reflector_m' must be 3 finite numbers (m), got {d['reflector_m']!r}")
+        T = se3_from_matrix(d["tracker_T_base"], f"{where}: tracker_T_base").homogeneous
+        R = d.get("probe_R")
+        if R is not None:
+            R = np.asarray(R, float)
+            if R.shape != (3, 3) or not np.all(np.isfinite(R)):
+                raise InputError(f"{where}: 'probe_R' must be a 3x3 rotation matrix")
+        return cls(T, refl, R, int(d.get("n_rows", 0)), str(d.get("fitted_by", "identify")),
+                   str(d.get("source", "")), d.get("rms_m"))
+
+
+@dataclass
+class CalibratedModel:
+    """A calibrated robot with the set-up of every station: predicts tracker readings.
+
+    Attributes:
+        robot: the arm (URDF, tool frame).
+        joint_p: joint-placement errors δ, (6 n,) in :class:`ParameterLayout` order (m, rad).
+        effects: effect objects (Effect interface); thetas: their parameters.
+        setups: station label -> :class:`Setup`.
+        noise: the noise model of the fit.
+        tcp_m: KPI point in the tool frame (m).
+        pose6d: predicts probe orientations too.
+        parameters: the estimated parameters of the fit: ``names``, ``values``, ``std``, ``covariance``.
+        fit: fit statistics (plain numbers).
+        default_station: station used when none is named (None: the only one, if there is one).
+        history: provenance, one dict per step (``identify``, ``register``).
+    """
+
+    robot: Robot
+    joint_p: np.ndarray
+    effects: list = field(default_factory=list)
+    thetas: list = field(default_factory=list)
+    setups: dict = field(default_factory=dict)
+    noise: NoiseModel = field(default_factory=NoiseModel)
+    tcp_m: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    pose6d: bool = False
+    parameters: dict = field(default_factory=dict)
+    fit: dict = field(default_factory=dict)
+    default_station: str | None = None
+    history: list = field(default_factory=list)
+
+    def __post_init__(self) -> None:
+        self.joint_p = np.asarray(self.joint_p, float).reshape(-1)
+        if self.joint_p.size != 6 * self.robot.nq:
+            raise InputError(f"joint_p must have {6 * self.robot.nq} entries (6 per joint), got {self.joint_p.size}")
+        self.thetas = [np.asarray(t, float).reshape(-1) for t in self.thetas]
+        if len(self.thetas) != len(self.effects):
+            raise InputError(f"{len(self.effects)} effects but {len(self.thetas)} parameter vectors")
+        self.tcp_m = np.asarray(self.tcp_m, float).reshape(3)
+
+    # ------------------------------------------------------------------ stations
+    @property
+    def stations(self) -> list[str]:
+        """Station labels."""
+        return list(self.setups)
+
+    def station(self, label: str | None = None) -> str:
+        """Resolve a station label (None: the default station, or the only one).
+
+        Raises:
+            InputError: unknown label, or no label given and no default among several stations.
+        """
+        if label is not None:
+            if str(label) not in self.setups:
+                raise InputError(f"unknown station '{label}' (stations of the model: {', '.join(self.setups)})")
+            return str(label)
+        if self.default_station is not None and self.default_station in self.setups:
+            return self.default_station
+        if len(self.setups) == 1:
+            return next(iter(self.setups))
+        raise InputError(f"the model has {len(self.setups)} stations ({', '.join(self.setups)}) and no default: "
+                         "name one (--station), give the data a 'station' column, or register the set-up first")
+
+    def station_model(self, label: str | None = None) -> tuple[TrackerModel, np.ndarray]:
+        """The measurement model of a station and its raw parameter vector (set-up errors zero).
+
+        Returns:
+            (model, p): ``model.predict(p, Q)`` is the geometric prediction (without effects).
+        """
+        st = self.setups[self.station(label)]
+        L = ParameterLayout(list(self.robot.joint_names), pose6d=self.pose6d and st.probe_R is not None)
+        model = TrackerModel(self.robot, tracker_T_base=pin.SE3(st.tracker_T_base), reflector_m=st.reflector_m,
+                             tcp_m=self.tcp_m, noise=self.noise, pose6d=L.pose6d,
+                             probe_R=np.eye(3) if st.probe_R is None else st.probe_R, layout=L)
+        p = np.zeros(L.n)
+        p[:6 * self.robot.nq] = self.joint_p
+        return model, p
+
+    def predict(self, Q: np.ndarray, aux: MeasurementSet | None = None, station: str | None = None,
+                orientation: bool = False) -> np.ndarray:
+        """Predicted reflector positions in the tracker frame of the station(s), (m, 3) m.
+
+        Args:
+            Q: configurations in the robot's joint order, (m, n) rad.
+            aux: the measurement rows (temperature, payload, time for the effects; its
+                ``station`` column picks each row's station when ``station`` is None).
+            station: station label for every row (default: ``aux``'s station column, else the
+                default station).
+            orientation: also return the probe orientation (rotation vector, rad): (m, 6).
+
+        Raises:
+            InputError: unknown station, wrong shape, joint values outside the limits.
+        """
+        Q = self.robot.check_q(np.atleast_2d(np.asarray(Q, float)), "predict: Q")
+        m = Q.shape[0]
+        if aux is not None and len(aux) != m:
+            raise InputError(f"predict: {len(aux)} rows of auxiliary data for {m} configurations")
+        if station is None and aux is not None and aux.station is not None:
+            labels = [self.station(lab) for lab in dict.fromkeys(aux.station.tolist())]
+            groups = [(lab, np.flatnonzero(aux.station == lab)) for lab in labels]
+        else:
+            groups = [(self.station(station), np.arange(m))]
+        pairs = list(zip(self.effects, self.thetas))
+        out = np.full((m, 6 if orientation else 3), np.nan)
+        for lab, rows in groups:
+            model, p = self.station_model(lab)
+            sub = aux if (aux is None or rows.size == m) else aux.subset(rows)
+            Y = predict_with_effects(model, p, Q[rows], sub, pairs)
+            if orientation and Y.shape[1] < 6:
+                raise InputError(f"station '{lab}' has no probe orientation: the model predicts positions only")
+            out[rows] = Y[:, :out.shape[1]]
+        return out
+
+    def with_setup(self, label: str, setup: Setup, default: bool = True, step: dict | None = None
+                   ) -> "CalibratedModel":
+        """A copy with station ``label`` set to ``setup`` (added or replaced)."""
+        new = copy.copy(self)
+        new.setups = dict(self.setups)
+        new.setups[str(label)] = setup
+        new.default_station = str(label) if default else self.default_station
+        new.history = list(self.history) + ([step] if step else [])
+        return new
+
+    # ------------------------------------------------------------------ files
+    def to_dict(self) -> dict:
+        """The model file content (plain numbers, SI units; see the module docstring).
+
+        Raises:
+            InputError: an effect that cannot be stored.
+        """
+        rb = self.robot
+        L = ParameterLayout(list(rb.joint_names))
+        nominal = [rb.model.jointPlacements[j] for j in rb.joint_ids]
+        calibrated = [M * pin.exp6(self.joint_p[L.joint_slice(k)]) for k, M in enumerate(nominal)]
+        return to_jsonable({
+            "format": MODEL_FORMAT,
+            "robot": {"spec": _robot_spec(rb), "name": rb.name, "urdf_path": str(rb.urdf_path),
+                      "tool_frame": rb.tool_frame, "joint_names": list(rb.joint_names),
+                      "nominal_joint_placements": [M.homogeneous for M in nominal]},
+            "tcp_m": self.tcp_m,
+            "pose6d": bool(self.pose6d),
+            "geometry": {"joint_placement_errors": {n: float(v) for n, v in zip(L.names, self.joint_p)},
+                         "joint_placements": [M.homogeneous for M in calibrated],
+                         "parameters": self.parameters},
+            "effects": [{**effect_spec(e), "theta": th, "unit": getattr(e, "unit", "")}
+                        for e, th in zip(self.effects, self.thetas)],
+            "stations": {lab: st.to_dict() for lab, st in self.setups.items()},
+            "default_station": self.default_station,
+            "noise": self.noise.to_dict(),
+            "fit": self.fit,
+            "history": self.history,
+        })
+
+    def save(self, path: str | os.PathLike) -> None:
+        """Write the model file atomically (everything is serialised before anything is written)."""
+        atomic_write_json(path, self.to_dict())
+
+    @classmethod
+    def from_dict(cls, d: Any, where: str = "model file") -> "CalibratedModel":
+        """Build the model from a model file's content.
+
+        Raises:
+            InputError: another format or version, a missing or malformed field (named),
+                a robot whose URDF no longer matches the calibrated one.
+        """
+        _check_format(d, where)
+        rob = d.get("robot")
+        if not isinstance(rob, dict) or not (rob.get("spec") or rob.get("urdf_path")):
+            raise InputError(f"{where}: field 'robot' must hold 'spec' (robot name or URDF path) and 'tool_frame'")
+        robot = _load_model_robot(rob, where)
+        geo = d.get("geometry") or {}
+        errs = geo.get("joint_placement_errors")
+        L = ParameterLayout(list(robot.joint_names))
+        if not isinstance(errs, dict):
+            raise InputError(f"{where}: field 'geometry.joint_placement_errors' is missing")
+        missing = [n for n in L.names[:6 * robot.nq] if n not in errs]
+        if missing:
+            raise InputError(f"{where}: geometry.joint_placement_errors lacks {', '.join(missing[:3])}")
+        joint_p = np.array([float(errs[n]) for n in L.names[:6 * robot.nq]])
+        if not np.all(np.isfinite(joint_p)):
+            raise InputError(f"{where}: geometry.joint_placement_errors has non-finite values")
+        effects, thetas = [], []
+        for i, spec in enumerate(d.get("effects") or []):
+            eff = effect_from_spec(spec, robot, f"{where}: effects[{i}]")
+            th = np.asarray(spec.get("theta", []), float).reshape(-1)
+            if th.size != len(eff.param_names()) or not np.all(np.isfinite(th)):
+                raise InputError(f"{where}: effects[{i}] ('{spec.get('name')}'): 'theta' must be "
+                                 f"{len(eff.param_names())} finite numbers")
+            effects.append(eff)
+            thetas.append(th)
+        st = d.get("stations")
+        if not isinstance(st, dict) or not st:
+            raise InputError(f"{where}: field 'stations' must name at least one station set-up")
+        setups = {str(k): Setup.from_dict(v, f"{where}: stations.{k}") for k, v in st.items()}
+        default = d.get("default_station")
+        if default is not None and str(default) not in setups:
+            raise InputError(f"{where}: default_station '{default}' is not among the stations "
+                             f"({', '.join(setups)})")
+        try:
+            noise = NoiseModel.from_dict(d.get("noise") or {})
+        except (TypeError, ValueError) as exc:
+            raise InputError(f"{where}: field 'noise': {exc}") from None
+        tcp = np.asarray(d.get("tcp_m", [0.0, 0.0, 0.0]), float)
+        if tcp.shape != (3,):
+            raise InputError(f"{where}: field 'tcp_m' must be 3 numbers (m)")
+        return cls(robot, joint_p, effects, thetas, setups, noise, tcp, bool(d.get("pose6d", False)),
+                   dict(geo.get("parameters") or {}), dict(d.get("fit") or {}),
+                   None if default is None else str(default), list(d.get("history") or []))
+
+
+def _robot_spec(robot: Robot) -> str:
+    """Portable robot spec: the known name when it resolves to the same URDF, else the URDF path."""
+    from pin_kpi_oed.model.robot import resolve_robot
+
+    key = str(robot.name).lower()
+    if key in SHIPPED_ROBOTS or key in ERD_ROBOTS:
+        try:
+            if Path(resolve_robot(key)[0]).resolve() == Path(robot.urdf_path).resolve():
+                return key
+        except PinKpiOedError:
+            pass
+    return str(robot.urdf_path)
+
+
+def _check_format(d: Any, where: str) -> None:
+    fmt = d.get("format") if isinstance(d, dict) else None
+    if fmt == MODEL_FORMAT:
+        return
+    if isinstance(fmt, str) and fmt.startswith(_FORMAT_NAME + "/"):
+        raise InputError(f"{where}: model file format '{fmt}' is not supported by this version of pin_kpi_oed "
+                         f"(it reads '{MODEL_FORMAT}')")
+    raise InputError(f"{where}: not a pin_kpi_oed model file (field 'format' is {fmt!r}, expected '{MODEL_FORMAT}'; "
+                     "write one with identify --model-out)")
+
+
+def _load_model_robot(rob: dict, where: str) -> Robot:
+    spec = str(rob.get("spec") or rob.get("urdf_path"))
+    try:
+        robot = load_robot(spec, rob.get("tool_frame"))
+    except PinKpiOedError as exc:
+        raise InputError(f"{where}: robot '{spec}': {exc}") from None
+    names = rob.get("joint_names")
+    if names is not None and list(names) != list(robot.joint_names):
+        raise InputError(f"{where}: the robot '{spec}' has joints {', '.join(robot.joint_names)}, the model file "
+                         f"{', '.join(map(str, names))}")
+    nominal = rob.get("nominal_joint_placements")
+    if nominal is not None:
+        A = np.asarray(nominal, float)
+        B = np.array([robot.model.jointPlacements[j].homogeneous for j in robot.joint_ids])
+        if A.shape != B.shape or np.abs(A - B).max() > 1e-9:
+            k = int(np.argmax(np.abs(A - B).reshape(len(B), -1).max(axis=1))) if A.shape == B.shape else 0
+            raise InputError(f"{where}: the URDF of robot '{spec}' differs from the one calibrated (joint "
+                             f"{robot.joint_names[k]}'s nominal placement changed): load the model with that URDF")
+    return robot
+
+
+def load_model_file(path: str | os.PathLike) -> CalibratedModel:
+    """Read a calibrated model file (``identify --model-out``, ``register --model-out``).
+
+    Args:
+        path: the JSON file.
+
+    Returns:
+        The :class:`CalibratedModel`.
+
+    Raises:
+        InputError: missing or unreadable file, not JSON, another format or version, a
+            missing or malformed field (named with the file).
+    """
+    p = Path(path)
+    if not p.is_file():
+        raise InputError(f"model file '{p}' does not exist")
+    try:
+        d = json.loads(p.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError) as exc:
+        raise InputError(f"{p}: cannot read the model file ({exc})") from None
+    except json.JSONDecodeError as exc:
+        raise InputError(f"{p}: not a JSON file (line {exc.lineno}: {exc.msg})") from None
+    return CalibratedModel.from_dict(d, str(p))

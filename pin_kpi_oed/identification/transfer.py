@@ -1,0 +1,323 @@
+r"""Transfer of a calibration to another day: re-register the set-up, predict, score.
+
+A calibration holds the robot (geometry + effects) and the set-up of the stations it was
+measured from. On another day the tracker stands elsewhere (and the reflector may have been
+re-mounted): :func:`register_setup` re-fits **only** the set-up — the tracker pose T (6) and,
+unless held, the reflector offset r (3) (and a 6-D probe's orientation) — on a few rows of the
+new session, with the robot held at its calibrated values:
+
+.. math::
+
+    \min_{T, r} \sum_i \bigl\lVert Σ_i^{-1}\bigl(T · \mathrm{oMtool}(δ, q_i + ΣΔq_i(θ)) · r
+        + ΣΔy_i(θ) − η_i\bigr)\bigr\rVert^2,
+
+from a Kabsch/Umeyama registration of the calibrated forward kinematics onto the measured
+points (:func:`pin_kpi_oed.identification.identify.register_points`), by Levenberg–Marquardt
+with the analytic Jacobian (:class:`~pin_kpi_oed.identification.problem.ResidualModel` with
+the effects *held*). :func:`validate_transfer` does what an engineer does: register on some
+rows (a seeded random subset of the validation file, or another file) and score the rest.
+
+A registration set that cannot determine the set-up is refused: fewer than 3 points, or a
+set-up Jacobian without full column rank (e.g. all rows at one configuration, or collinear
+points) — one line naming the file, the rows and the undetermined parameter.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import os
+import time
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+import pinocchio as pin
+from scipy.optimize import least_squares
+from scipy.spatial.transform import Rotation
+
+from pin_kpi_oed.data.atomic import atomic_write_text
+from pin_kpi_oed.data.measurements import MeasurementSet
+from pin_kpi_oed.effects.library import predict_with_effects
+from pin_kpi_oed.errors import InputError, SolverError
+from pin_kpi_oed.identification.identify import (MIN_STATION_ROWS, _proj_so3, default_station_label, error_stats,
+                                                 register_points)
+from pin_kpi_oed.identification.model_file import CalibratedModel, Setup
+from pin_kpi_oed.identification.problem import ResidualModel, StationSet, align_data
+from pin_kpi_oed.model.parameters import ParameterLayout
+from pin_kpi_oed.results import Result
+
+__all__ = ["RegistrationResult", "register_setup", "registration_split", "validate_transfer", "predict_table",
+           "write_predictions"]
+
+
+@dataclass
+class RegistrationResult(Result):
+    """Outcome of :func:`register_setup` (common fields of :class:`~pin_kpi_oed.results.Result`).
+
+    Attributes:
+        model: the calibrated model with the registered set-up(s) added (the last one the default).
+        stations: the registered station labels.
+        setups: label -> the registered :class:`Setup`.
+        rows: label -> indices (0-based) of the rows of the given data used.
+        errors_m: position error norm of every given row after the registration (m).
+        source: file the rows came from.
+    """
+
+    model: CalibratedModel = field(repr=False, default=None)  # type: ignore[assignment]
+    stations: list = field(default_factory=list)
+    setups: dict = field(default_factory=dict)
+    rows: dict = field(default_factory=dict)
+    errors_m: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    source: str = ""
+
+    @property
+    def rms_m(self) -> float:
+        """RMS position error of the registration rows (m)."""
+        return float(np.sqrt(np.mean(self.errors_m ** 2))) if self.errors_m.size else float("nan")
+
+    def summary(self) -> str:
+        """Readable lines (mm)."""
+        out = [f"registered {len(self.stations)} set-up(s) on {self.errors_m.size} rows of {self.source or 'data'} "
+               f"(robot held): RMS {self.rms_m * 1e3:.4f} mm, {self.nit} iterations, {self.time_s * 1e3:.0f} ms"]
+        for lab in self.stations:
+            st = self.setups[lab]
+            T = st.tracker_T_base
+            out.append(f"  station {lab} ({st.n_rows} rows, RMS {st.rms_m * 1e3:.4f} mm): tracker_T_base xyz "
+                       f"{np.round(T[:3, 3], 6).tolist()} m, rpy {np.round(pin.rpy.matrixToRpy(T[:3, :3]), 6).tolist()}"
+                       f" rad; reflector {np.round(st.reflector_m * 1e3, 4).tolist()} mm")
+        return "\n".join(out)
+
+    def to_dict(self) -> dict:
+        """Plain JSON-able dict (SI units)."""
+        return {**self.result_dict(), "stations": list(self.stations), "source": self.source,
+                "setups": {k: v.to_dict() for k, v in self.setups.items()},
+                "rows": {k: (np.asarray(v) + 1).tolist() for k, v in self.rows.items()}, "rms_m": self.rms_m}
+
+
+def _groups(model: CalibratedModel, data: MeasurementSet, station: str | None) -> dict[str, np.ndarray]:
+    if station is not None:
+        return {str(station): np.arange(len(data))}
+    return data.station_rows(default_station_label(data))
+
+
+def _register_one(model: CalibratedModel, data: MeasurementSet, Q: np.ndarray, label: str, hold_reflector: bool,
+                  weights: str, use_orientation: bool, tol: float, max_nfev: int | None) -> tuple[Setup, Any]:
+    """Kabsch start + Levenberg–Marquardt over one station's set-up with the robot held."""
+    src = data.source or "registration data"
+    m = len(data)
+    if m < MIN_STATION_ROWS:
+        raise InputError(f"{src}: station '{label}': {m} registration row(s) are too few to determine the set-up "
+                         f"(tracker pose: at least {MIN_STATION_ROWS} points)")
+    ref = model.setups.get(label)
+    if ref is None:  # a new station starts from the default (or first) station's reflector
+        default = model.default_station if model.default_station in model.setups else next(iter(model.setups))
+        ref = model.setups[default]
+    pose6d = bool(use_orientation and model.pose6d and data.rotvec_rad is not None and ref.probe_R is not None)
+    L = ParameterLayout(list(model.robot.joint_names), pose6d=pose6d)
+    cm = CalibratedModel(model.robot, model.joint_p, model.effects, model.thetas,
+                         {label: Setup(np.eye(4), ref.reflector_m, ref.probe_R if pose6d else None)},
+                         model.noise, model.tcp_m, pose6d)
+    wm, p = cm.station_model(label)
+    pairs = list(zip(model.effects, model.thetas))
+    X = predict_with_effects(wm, p, Q, data, pairs)[:, :3]  # base frame (tracker = identity)
+    use_sigma = data.sigma_m is not None and weights in ("auto", "data")
+    sigma = np.asarray(data.sigma_m, float) if use_sigma else None
+    R, t = register_points(X, data.position_m, None if sigma is None else 1.0 / np.mean(sigma ** 2, 1))
+    wm.tracker_T_base = pin.SE3(R, t)
+    if pose6d:
+        kin = wm.kinematics(p, Q, wm.reflector(p))
+        Rm = Rotation.from_rotvec(data.rotvec_rad).as_matrix()
+        wm.probe_R = _proj_so3(np.einsum("mba,bc,mcd->ad", kin.R_tool, R.T, Rm))
+    base = np.r_[np.arange(L.tracker.start, L.tracker.stop),
+                 [] if hold_reflector else np.arange(L.reflector.start, L.reflector.stop),
+                 np.arange(L.probe.start, L.probe.stop)].astype(int)
+    prob = ResidualModel(StationSet.single(wm, label), data, base, sigma=sigma, p_ref=p, Q=Q, held=pairs)
+    J0 = prob.jacobian_full(prob.x0()).reshape(-1, prob.nx)
+    if J0.shape[0] < prob.nx:
+        raise InputError(f"{src}: station '{label}': {m} registration rows give {J0.shape[0]} equations for the "
+                         f"{prob.nx} set-up parameters; add rows")
+    norms = np.linalg.norm(J0, axis=0)
+    _, s, Vt = np.linalg.svd(J0 / np.where(norms > 0, norms, 1.0), full_matrices=False)
+    if s[-1] < 1e-8 * s[0]:
+        who = prob.names[int(np.argmax(np.abs(Vt[-1])))]
+        raise InputError(f"{src}: station '{label}': the {m} registration rows do not determine the set-up "
+                         f"('{who}' is free: rank {int(np.sum(s >= 1e-8 * s[0]))} of {prob.nx}); use rows spread "
+                         "over the workspace" + ("" if hold_reflector else ", or hold the reflector"))
+    try:
+        sol = least_squares(prob.residual, prob.x0(), jac=prob.jacobian, method="lm", x_scale="jac", ftol=tol,
+                            xtol=tol, gtol=tol, max_nfev=max_nfev or 50 * prob.nx)
+    except (ValueError, np.linalg.LinAlgError) as exc:
+        raise SolverError(f"{src}: registration failed: {str(exc).splitlines()[0]}") from None
+    if not np.all(np.isfinite(sol.x)):
+        raise SolverError(f"{src}: registration diverged; check the joint order and units (m, rad)")
+    P, _ = prob.unpack(sol.x)
+    err = np.linalg.norm(prob.evaluate(sol.x)[0], axis=1)
+    R_probe = wm.probe_R @ pin.exp3(P[L.probe]) if pose6d else None
+    setup = Setup(wm.tracker_pose(P).homogeneous.copy(), wm.reflector(P), R_probe, m, "register", data.source,
+                  float(np.sqrt(np.mean(err ** 2))))
+    return setup, (sol, err)
+
+
+def register_setup(model: CalibratedModel, data: MeasurementSet, *, station: str | None = None,
+                   hold_reflector: bool = False, weights: str = "auto", use_orientation: bool = True,
+                   tol: float = 1e-12, max_nfev: int | None = None) -> RegistrationResult:
+    """Re-fit only the set-up (tracker pose, reflector) of a station on ``data``, the robot held.
+
+    Args:
+        model: the calibrated model (geometry + effects are held).
+        data: the registration rows (joint columns, x, y, z).
+        station: label of the (new or re-fitted) station for all rows; default the data's
+            ``station`` column (one set-up per label), else the file name without extension.
+        hold_reflector: keep the reflector offset (fit the tracker pose only).
+        weights: ``auto`` (sigma columns if present, else the model's noise), ``data`` or ``noise``.
+        use_orientation: use rx, ry, rz when both the model and the data have them.
+        tol: solver tolerances; max_nfev: evaluation limit (default 50 × unknowns).
+
+    Returns:
+        The :class:`RegistrationResult`; ``.model`` holds the new set-up(s), the last the default.
+
+    Raises:
+        InputError: missing joint columns, bad values, fewer than 3 rows, or rows that do not
+            determine the set-up (rank-deficient), naming the file, station and parameter.
+        SolverError: the registration diverged.
+    """
+    t0 = time.perf_counter()
+    if weights not in ("auto", "data", "noise"):
+        raise InputError(f"weights must be auto, data or noise, got '{weights}'")
+    if weights == "data" and data.sigma_m is None:
+        raise InputError(f"{data.source or 'registration data'}: weights='data' but the file has no sigma columns")
+    Q = align_data(model.robot, data)
+    new = model
+    setups: dict[str, Setup] = {}
+    rows_used: dict[str, np.ndarray] = {}
+    errors = np.zeros(len(data))
+    nit = nfev = 0
+    ok = True
+    for label, rows in _groups(model, data, station).items():
+        sub = data if rows.size == len(data) else data.subset(rows)
+        setup, (sol, err) = _register_one(model, sub, Q[rows], label, hold_reflector, weights, use_orientation, tol,
+                                          max_nfev)
+        errors[rows] = err
+        nit += int(sol.njev or 0)
+        nfev += int(sol.nfev)
+        ok &= bool(sol.status > 0)
+        setups[label] = setup
+        rows_used[label] = rows
+        new = new.with_setup(label, setup, default=True,
+                             step={"step": "register", "data": data.source, "station": label, "n_rows": int(rows.size),
+                                   "rms_m": setup.rms_m, "hold_reflector": bool(hold_reflector)})
+    return RegistrationResult(success=ok, status="converged" if ok else "max_nfev",
+                              message="set-up registered with the robot held", nit=nit, nfev=nfev,
+                              time_s=time.perf_counter() - t0, model=new, stations=list(setups), setups=setups,
+                              rows=rows_used, errors_m=errors, source=data.source)
+
+
+def registration_split(n: int, register_rows: int, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    """A seeded random choice of ``register_rows`` of ``n`` rows for registration; the rest are scored.
+
+    Returns:
+        (registration row indices, scored row indices), each sorted (0-based).
+
+    Raises:
+        InputError: fewer than 3 registration rows, or none left to score.
+    """
+    k = int(register_rows)
+    if k < MIN_STATION_ROWS:
+        raise InputError(f"--register-rows {k}: at least {MIN_STATION_ROWS} rows are needed to determine the set-up")
+    if k >= n:
+        raise InputError(f"--register-rows {k}: the validation data have only {n} rows, none would be left to score")
+    perm = np.random.default_rng(seed).permutation(n)
+    return np.sort(perm[:k]), np.sort(perm[k:])
+
+
+def validate_transfer(model: CalibratedModel, data: MeasurementSet, *, register_rows: int | None = None,
+                      register_data: MeasurementSet | None = None, seed: int = 0, hold_reflector: bool = False,
+                      weights: str = "auto") -> dict:
+    """Score a calibration on another session: register the set-up on some rows, score the rest.
+
+    Args:
+        model: the calibrated model.
+        data: the other session's measurements.
+        register_rows: register on this many seeded random rows of ``data``, score the others; or
+        register_data: register on these rows (another file) and score all of ``data``.
+        seed: seed of the random registration rows.
+        hold_reflector: keep the reflector offset of the model.
+        weights: as :func:`register_setup`.
+
+    Returns:
+        Statistics of the scored rows (:func:`error_stats`: ``n``, ``mean_m``, ``rms_m``, ``median_m``,
+        ``p95_m``, ``max_m``, ``errors_m``) plus ``registration``: ``source``, ``rows`` (1-based
+        row numbers of the registration rows in their file), ``n``, ``rms_m``, ``seed``, the
+        ``setup``; and ``scored_rows`` (1-based row numbers of ``data`` scored).
+
+    Raises:
+        InputError: neither or both of ``register_rows`` / ``register_data``, too few rows.
+    """
+    if (register_rows is None) == (register_data is None):
+        raise InputError("transfer validation: give either register_rows (--register-rows N) or register_data "
+                         "(--register-data FILE), not both and not neither")
+    label = "transfer"
+    if register_data is not None:
+        reg, held = register_data, data
+        reg_idx, held_idx = np.arange(len(reg)), np.arange(len(data))
+    else:
+        reg_idx, held_idx = registration_split(len(data), register_rows, seed)
+        reg, held = data.subset(reg_idx), data.subset(held_idx)
+    rr = register_setup(model, reg, station=label, hold_reflector=hold_reflector, weights=weights)
+    Q = align_data(model.robot, held)
+    Y = rr.model.predict(Q, held, station=label)
+    out = error_stats(np.linalg.norm(held.position_m - Y, axis=1))
+    out["registration"] = {"source": reg.source, "rows": (reg_idx + 1).tolist(), "n": int(len(reg)),
+                           "rms_m": rr.rms_m, "seed": int(seed) if register_data is None else None,
+                           "setup": rr.setups[label].to_dict(), "hold_reflector": bool(hold_reflector)}
+    out["scored_rows"] = (held_idx + 1).tolist()
+    return out
+
+
+def predict_table(model: CalibratedModel, data: MeasurementSet, station: str | None = None
+                  ) -> tuple[list[str], np.ndarray]:
+    """Per row of ``data``: predicted reflector x, y, z (m, tracker frame), measured x, y, z and error if present.
+
+    Args:
+        model: the calibrated model.
+        data: joint values (and measured positions, optional); its ``station`` column picks the
+            set-up per row unless ``station`` is given.
+        station: station label for every row (default: the data's column, else the model's default).
+
+    Returns:
+        (column names, table (m, k)): ``x_pred, y_pred, z_pred`` and, when the data have positions,
+        ``x, y, z, error`` (m; error = |measured − predicted|).
+
+    Raises:
+        InputError: the data's joint names do not match the model's robot, an unknown station,
+            values outside the joint limits.
+    """
+    names = list(model.robot.joint_names)
+    if list(data.joint_names) != names and sorted(data.joint_names) != sorted(names):
+        raise InputError(f"{data.source or 'data'}: joint columns {', '.join(data.joint_names)} do not match the "
+                         f"model's robot {model.robot.name} ({', '.join(names)})")
+    Q = align_data(model.robot, data, need_position=False)
+    Y = model.predict(Q, data, station=station)
+    cols = ["x_pred", "y_pred", "z_pred"]
+    table = [Y]
+    if data.has_position:
+        cols += ["x", "y", "z", "error"]
+        table += [data.position_m, np.linalg.norm(data.position_m - Y, axis=1)[:, None]]
+    return cols, np.hstack(table)
+
+
+def write_predictions(path: str | os.PathLike, data: MeasurementSet, cols: list[str], table: np.ndarray) -> None:
+    """Write a prediction table as CSV atomically: the joint columns of ``data``, a ``station`` column if it
+    has one, then ``cols`` (floats as ``repr``)."""
+    buf = io.StringIO()
+    w = csv.writer(buf, lineterminator="\n")
+    head = list(data.joint_names) + (["station"] if data.station is not None else []) + list(cols)
+    w.writerow(head)
+    for i in range(len(data)):
+        row = [repr(float(v)) for v in data.q[i]]
+        if data.station is not None:
+            row.append(str(data.station[i]))
+        row += [repr(float(v)) for v in table[i]]
+        w.writerow(row)
+    atomic_write_text(path, buf.getvalue())
