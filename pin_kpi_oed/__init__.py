@@ -6,14 +6,9 @@ robot -> parameters -> measurement -> identifiability / covariance -> criteria
 -> design -> identification -> diagnosis, with the CLI and visualisation at the edge.
 """
 
-import os as _os
-
-# The matrices here are small (tens of columns): BLAS threads only add contention (a 25-column
-# information matrix took 10 ms with 2 OpenBLAS threads on a loaded 2-core machine, 0.35 ms with one).
-# Only takes effect if NumPy is not imported yet and the user has not chosen.
-for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
-    _os.environ.setdefault(_var, "1")
-
+# BLAS / OpenMP threads are limited at run time around every entry point (threads.py, threadpoolctl),
+# whatever the caller imported first; environment variables are not used for that.
+from pin_kpi_oed.threads import get_max_threads, limited_threads, set_max_threads
 from pin_kpi_oed.errors import (IdentifiabilityError, InfeasibleError, InputError, PinKpiOedError, RobotLoadError,
                      SolverError)
 from pin_kpi_oed.model.robot import Robot, load_robot
@@ -24,6 +19,6 @@ from pin_kpi_oed.model.tracker import TrackerModel
 
 __version__ = "0.1.0"
 
-__all__ = ["IdentifiabilityError", "InfeasibleError", "InputError", "PinKpiOedError", "RobotLoadError",
+__all__ = ["get_max_threads", "limited_threads", "set_max_threads", "IdentifiabilityError", "InfeasibleError", "InputError", "PinKpiOedError", "RobotLoadError",
            "SolverError", "Robot", "load_robot", "ParameterLayout", "MeasurementModel", "NoiseModel",
            "TrackerModel"]

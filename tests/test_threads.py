@@ -80,3 +80,25 @@ def test_nested_contexts_are_cheap_and_restore() -> None:
             assert all(n == 1 for n in blas())
         assert all(n == 1 for n in blas())
     assert blas() == before
+
+
+def test_entry_points_run_single_threaded_with_numpy_imported_first() -> None:
+    out = _run("""
+        import numpy as np
+        from threadpoolctl import threadpool_info, threadpool_limits
+        threadpool_limits(limits=2)
+        import pin_kpi_oed.oed.pool as pool
+        seen = []
+        real = pool.approximate_design
+        def spy(*a, **k):
+            seen.append(max(i["num_threads"] for i in threadpool_info() if i["user_api"] == "blas"))
+            return real(*a, **k)
+        pool.approximate_design = spy
+        rng = np.random.default_rng(0)
+        F = rng.normal(size=(200, 3, 6))
+        pool.select(F, 12)
+        print(len(seen), max(seen))
+    """)
+    calls, worst = (int(x) for x in out.split())
+    assert calls >= 1, "the spy was never called: the test would prove nothing"
+    assert worst == 1

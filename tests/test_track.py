@@ -9,7 +9,7 @@ import pinocchio as pin
 import pytest
 
 from pin_kpi_oed.cell.cell import cell_from_dict
-from pin_kpi_oed.design.optimize import DesignProblem, ipopt_options, run_designs
+from pin_kpi_oed.design.optimize import DesignOptions, DesignProblem, ipopt_options, run_designs
 from pin_kpi_oed.errors import InputError, RobotLoadError
 from pin_kpi_oed.identification.identify import identify, validate
 from pin_kpi_oed.identification.simulate import Tolerances, default_tracker_pose, random_truth, simulate
@@ -144,8 +144,8 @@ def test_short_design_on_the_track():
     cell = cell_from_dict(_track_cell())
     problem = DesignProblem(cell)
     assert problem.base.size == 29
-    res = run_designs(cell, ["random", "kpi"], m=20, seed=0, start="pool", pool_size=200,
-                      options=ipopt_options(max_iter=40), problem=problem)
+    res = run_designs(cell, ["random", "kpi"], m=20, seed=0, problem=problem,
+                      options=DesignOptions(start="pool", pool_size=200, ipopt=ipopt_options(max_iter=40)))
     rnd, kpi = res
     assert kpi.feasible and rnd.feasible  # independent dense check (Pinocchio FK + Coal)
     assert kpi.trace_cs_m2 < 0.5 * rnd.trace_cs_m2

@@ -34,7 +34,7 @@ the barrier terms of thousands of nearly-active rows slow the progress. Here:
 * **feasible start**: the heuristic design (uniform random, rejection-sampled), so Ipopt starts
   interior; **multi-start** from further seeded random feasible designs;
 * limited-memory Hessian (6 pairs, yᵀy/sᵀy initialisation), adaptive barrier update, tolerances
-  relative to the scaled objective (:func:`ipopt_options`), ``OMP_NUM_THREADS=1`` for MUMPS' BLAS.
+  relative to the scaled objective (:func:`ipopt_options`), one BLAS/OpenMP thread (:mod:`pin_kpi_oed.threads`).
 
 The run also stops when the lowest objective of all iterates has improved by less than 0.1 % over
 50 iterations (status ``stalled``); on the KR 15 cell the result is within ~3 % of a run to
@@ -46,7 +46,6 @@ independent dense :class:`~pin_kpi_oed.cell.feasibility.FeasibilityChecker`.
 
 from __future__ import annotations
 
-import os
 import time
 from dataclasses import dataclass, field
 from typing import Any
@@ -62,8 +61,8 @@ from pin_kpi_oed.oed.identifiability import analyse, check_kpi
 from pin_kpi_oed.oed.pool import select as pool_select
 from pin_kpi_oed.progress import progress
 from pin_kpi_oed.results import Result
+from pin_kpi_oed.threads import limit_threads
 
-os.environ.setdefault("OMP_NUM_THREADS", "1")
 
 #: Stagnation test: stop when the lowest (scaled) objective of all iterates improved by less than
 #: STALL_TOL (0.1 % of the start value for ratio criteria, 1e-3 in log units otherwise) over
@@ -613,6 +612,7 @@ def _best_checked_run(problem: DesignProblem, runs: list[IpoptRun]) -> tuple[Ipo
     return runs[order[0]], None
 
 
+@limit_threads
 def run_designs(cell: Cell, criteria: list[str], m: int | None = None, seed: int = 0,
                 options: DesignOptions | None = None, problem: DesignProblem | None = None) -> list[DesignResult]:
     """Compute the heuristic and optimum designs of a cell.

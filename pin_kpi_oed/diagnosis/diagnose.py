@@ -83,6 +83,7 @@ from pin_kpi_oed.effects.library import (EFFECT_NAMES, UNOBSERVABLE_NOTES, Effec
 from pin_kpi_oed.errors import InputError, PinKpiOedError
 from pin_kpi_oed.model.tracker import TrackerModel
 from pin_kpi_oed.results import Result
+from pin_kpi_oed.threads import limit_threads
 
 __all__ = ["DiagnosisReport", "DiagnoseOptions", "EffectResult", "diagnose", "MISMATCH_FACTOR", "heldout_stats"]
 
@@ -968,6 +969,7 @@ def _verdict(gap: dict, remaining_gap: dict, selected: list[str], mismatch: bool
     return "none"
 
 
+@limit_threads
 def diagnose(model: TrackerModel, train: MeasurementSet, validate: MeasurementSet | None = None,
              options: DiagnoseOptions | None = None, **overrides: Any) -> DiagnosisReport:
     """Diagnose the gap between a geometric model and measured data (see the module docstring).

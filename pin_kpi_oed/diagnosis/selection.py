@@ -75,13 +75,14 @@ from scipy.optimize import least_squares
 
 from pin_kpi_oed.data.measurements import MeasurementSet
 from pin_kpi_oed.effects.coupled import LinkBending
-from pin_kpi_oed.effects.library import Effect
+from pin_kpi_oed.effects.library import Effect, sum_joint_offsets
 from pin_kpi_oed.effects.periodic import DEFAULT_MAX_ORDER, TransmissionError
 from pin_kpi_oed.errors import IdentifiabilityError, InputError, SolverError
 from pin_kpi_oed.identification.identify import IdentificationResult, ResidualModel, identify, predict, register_points
 from pin_kpi_oed.model.tracker import TrackerModel
 from pin_kpi_oed.progress import progress
 from pin_kpi_oed.results import Result
+from pin_kpi_oed.threads import limit_threads
 
 __all__ = [
     "Station", "StationFit", "SelectionPath", "SelectionResult", "fit_stations", "register_setup",
@@ -409,9 +410,7 @@ def register_setup(fit: StationFit, data: MeasurementSet, setup_effects: Sequenc
                                    "set-up unknowns; give more rows")
     dQ = np.zeros_like(Q)
     if fit.effects:
-        from pin_kpi_oed.identification.identify import effect_terms
-
-        dQ = effect_terms(fit.effects, fit.thetas, Q, data, ref.model, ref.p)[0]
+        dQ = sum_joint_offsets(list(zip(fit.effects, fit.thetas)), Q, data)[0]
     kin = ref.model.kinematics(ref.p, Q + dQ, ref.model.reflector(ref.p))
     R, t = register_points(kin.p, np.asarray(data.position_m, float))
     model = dataclasses.replace(ref.model, tracker_T_base=pin.SE3(R, t))
@@ -716,6 +715,7 @@ def _linear_system(fit: StationFit, candidates: Sequence[Effect]) -> tuple[np.nd
     return np.concatenate(bs), np.vstack(As), np.vstack(Cs), np.concatenate(sig), lever
 
 
+@limit_threads
 def select_terms(fit: StationFit | IdentificationResult, data: MeasurementSet | None = None, *,
                  candidates: Sequence[Effect] | None = None, max_order: int = DEFAULT_MAX_ORDER, folds: int = 5,
                  seed: int = 0, min_rel_gain: float = 5e-3, max_terms: int = 60, ridge: float = 1e-8,

@@ -127,6 +127,7 @@ from pin_kpi_oed.model.parameters import ParameterLayout
 from pin_kpi_oed.oed.covariance import param_covariance
 from pin_kpi_oed.oed.identifiability import Identifiability, analyse
 from pin_kpi_oed.results import Result
+from pin_kpi_oed.threads import limit_threads
 
 __all__ = [
     "ROBUST_LOSSES",
@@ -910,6 +911,7 @@ def _setups(prob: ResidualModel, P: np.ndarray, errors: np.ndarray, inp: _Inputs
     return out
 
 
+@limit_threads
 def identify(model: TrackerModel, data: MeasurementSet, options: IdentifyOptions | None = None, *,
              effects: Sequence[Any] = (), **overrides: Any) -> IdentificationResult:
     r"""Identify the robot's geometric parameters (and effect parameters θ) from measurements.

@@ -42,6 +42,7 @@ import numpy as np
 
 from pin_kpi_oed.errors import IdentifiabilityError, InputError
 from pin_kpi_oed.results import Result
+from pin_kpi_oed.threads import limit_threads
 
 
 def _phi(M: np.ndarray, K: np.ndarray | None) -> float:
@@ -246,6 +247,7 @@ def _exchange(Fp: np.ndarray, chosen: np.ndarray, K: np.ndarray | None, ridge: f
     return np.array(chosen), sweeps
 
 
+@limit_threads
 def select(Fp: np.ndarray, m: int, K: np.ndarray | None = None, tol: float = 1e-3, n_starts: int = 2,
            seed: int = 0) -> PoolSelection:
     """Choose m distinct candidates: relaxation, rounding to the largest weights, exchange.
