@@ -345,3 +345,40 @@ def test_selection_on_series_c_is_fast():
     sel = select_terms(geo, data, max_order=40, refit=False, show_progress=False)
     assert time.perf_counter() - t0 < 60
     assert sel.cv_rms_m[-1] < 0.15e-3 < 0.4e-3 < sel.cv_rms_m[0]
+
+
+# --------------------------------------------------------------------------- the diagnosis CLI with transfer effects
+def test_cli_diagnose_selects_withheld_transmission_error(model, tmp_path, capsys):
+    import json
+
+    from pin_kpi_oed.cli.main import main as cli_main
+    from pin_kpi_oed.data.measurements import write_measurements
+
+    ur10 = model.robot
+    rng = np.random.default_rng(21)
+    Q = _uniform(ur10, rng, 700)
+    te, th = _truth_effect(model, Q, 7 * SIG)
+    data = simulate(model, Q, None, [(te, th)], seed=22, record_sigma=False)
+    write_measurements(data.subset(np.arange(500)), tmp_path / "a.csv")
+    write_measurements(data.subset(np.arange(500, 700)), tmp_path / "b.csv")
+    out = tmp_path / "r.json"
+    rc = cli_main(["diagnose", "--robot", "ur10", "--train", str(tmp_path / "a.csv"), "--validate",
+                   str(tmp_path / "b.csv"), "--reflector", "0,0,0.1", "--sigma", str(SIG), "--json", str(out),
+                   "--effects", "transmission_error,joint_compliance", "--harmonics", "25"])
+    assert rc == 0
+    text = capsys.readouterr().out
+    d = json.loads(out.read_text())
+    chosen = {t["group"] for t in d["term_selection"]["terms"]}
+    assert chosen == {"shoulder_lift order 7", "elbow order 18"}
+    assert d["term_selection"]["max_order"] == 25
+    assert d["dominant_effect"] == "transmission_error"
+    assert d["heldout_after"]["rms_m"] < 1.2 * FLOOR < d["heldout_before"]["rms_m"]
+    assert "elbow: 18 cycles per revolution" in text and "µrad amplitude" in text
+    # unknown names and bad orders: one line, exit 2
+    rc = cli_main(["diagnose", "--robot", "ur10", "--train", str(tmp_path / "a.csv"), "--kfold", "3",
+                   "--sigma", str(SIG), "--effects", "transmission_eror"])
+    err = capsys.readouterr().err
+    assert rc == 2 and "transmission_eror" in err and "link_bending" in err and len(err.strip().splitlines()) == 1
+    rc = cli_main(["diagnose", "--robot", "ur10", "--train", str(tmp_path / "a.csv"), "--kfold", "3",
+                   "--sigma", str(SIG), "--effects", "transmission_error", "--harmonics", "0"])
+    assert rc == 2 and "--harmonics" in capsys.readouterr().err

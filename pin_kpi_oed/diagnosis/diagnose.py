@@ -200,6 +200,8 @@ class DiagnosisReport(Result):
         geometry: training fit of the geometric model (RMS, χ²_red, parameters, tracker).
         registration: transfer mode: the registration rows (1-based row numbers of their file),
             their file, number and seed, and the scored rows.
+        term_selection: the sparse selection of transferable terms (``transmission_error``,
+            ``link_bending`` candidates): chosen terms in plain words, held-out RMS path (m).
         plot_data: what the figures need (not in ``to_dict``): ``residuals_m`` (held-out geometric
             residuals, n × 3, m), ``regressors`` (name -> (values, unit)).
     """
@@ -232,6 +234,7 @@ class DiagnosisReport(Result):
     figures: list = field(default_factory=list)
     geometry: dict = field(default_factory=dict)
     registration: dict = field(default_factory=dict)
+    term_selection: dict = field(default_factory=dict)
     plot_data: dict = field(default_factory=dict, repr=False)
 
     def effect(self, name: str) -> EffectResult:
@@ -258,6 +261,7 @@ class DiagnosisReport(Result):
             "mismatch": to_jsonable(self.mismatch), "notes": list(self.notes), "unobservable": list(self.unobservable),
             "figures": [str(f) for f in self.figures], "geometry": to_jsonable(self.geometry),
             "registration": to_jsonable(self.registration),
+            "term_selection": to_jsonable(self.term_selection),
         }
 
     def summary(self) -> str:
@@ -290,6 +294,13 @@ class DiagnosisReport(Result):
         if reg:
             worst = max(reg, key=lambda r: r["rms_m"] or 0)
             out.append(f"  worst workspace region: {worst['region']} (RMS {_um(worst['rms_m'])} µm, n={worst['n']})")
+        ts = self.term_selection
+        if ts:
+            out.append(f"  term selection ({', '.join(ts['candidates'])}; orders 1..{ts['max_order']}, "
+                       f"{ts['folds']}-fold held-out RMS {_um(ts['cv_rms_m'][0])} -> {_um(ts['cv_rms_m'][-1])} µm): "
+                       f"{len(ts['terms'])} term(s) chosen" + (":" if ts["terms"] else ""))
+            for t in ts["terms"]:
+                out.append(f"    {t['text']}")
         out.append("  effects alone (ranked by held-out RMS reduction):")
         out.append(f"    {'effect':<19}{'k':>4}{'RMS after µm':>14}{'closed':>8}{'p_F':>10}{'dBIC':>10}"
                    f"{'p_heldout':>11}  significant")
@@ -703,6 +714,12 @@ class DiagnoseOptions:
             the set-up on this many seeded random rows of them and score only the others.
         register_data: transfer mode: re-register the set-up on these rows and score every
             validation row.
+        harmonics: highest Fourier order (cycles per revolution) of the ``transmission_error``
+            candidate; its terms (and those of ``link_bending``) are chosen by sparse forward
+            selection on K-fold held-out error (:func:`pin_kpi_oed.diagnosis.selection.select_terms`)
+            before they are scored like any other candidate.
+        transfer_prior_rad: σ (rad) of the Gaussian prior in the refit of the selected terms
+            (None: none).
     """
 
     kfold: int | None = None
@@ -716,6 +733,8 @@ class DiagnoseOptions:
     exact_kfold: bool = False
     register_rows: int | None = None
     register_data: MeasurementSet | None = None
+    harmonics: int = 40
+    transfer_prior_rad: float | None = None
 
     @classmethod
     def resolve(cls, options: "DiagnoseOptions | None", overrides: dict) -> "DiagnoseOptions":
@@ -757,13 +776,52 @@ def _check_options(model: TrackerModel, train: MeasurementSet, validate: Measure
             _check_joints(model, d, what)
 
 
+#: Candidates whose terms are chosen from the data by sparse selection (:func:`_select_transfer_terms`).
+SELECTED_TERM_EFFECTS: tuple[str, ...] = ("transmission_error", "link_bending")
+
+
+def _select_transfer_terms(geo_fit: Any, train: MeasurementSet, names: Sequence[str], opts: DiagnoseOptions,
+                           notes: list[str]) -> tuple[list[Effect], dict]:
+    """Step 3b: sparse forward selection of transmission-error orders / link-bending angles on the training data.
+
+    Returns:
+        (the selected effects, restricted to the chosen terms, to be scored like any candidate;
+        the report's ``term_selection`` dict with the terms in plain words).
+    """
+    from pin_kpi_oed.effects.coupled import LinkBending
+    from pin_kpi_oed.effects.periodic import TransmissionError
+    from pin_kpi_oed.diagnosis.selection import select_terms
+
+    if isinstance(opts.harmonics, bool) or not isinstance(opts.harmonics, (int, np.integer)) or opts.harmonics < 1:
+        raise InputError(f"diagnose: --harmonics must be an integer >= 1, got {opts.harmonics!r}")
+    robot = geo_fit.result.model.robot
+    cands: list[Effect] = []
+    if "transmission_error" in names:
+        cands.append(TransmissionError(robot, max_order=int(opts.harmonics)))
+    if "link_bending" in names:
+        cands.append(LinkBending(robot))
+    sel = select_terms(geo_fit.result, train, candidates=cands, seed=opts.seed, prior_rad=opts.transfer_prior_rad,
+                       refit=True, show_progress=False)
+    info = {"candidates": list(names), "max_order": int(opts.harmonics), "folds": sel.folds,
+            "cv_rms_m": [float(v) for v in sel.cv_rms_m], "stop": sel.stop, "n_candidate_groups": sel.n_candidates,
+            "left_out": list(sel.left_out), "terms": [dict(t) for t in sel.terms]}
+    if not sel.terms:
+        notes.append(f"term selection ({', '.join(names)}): no term lowers the {sel.folds}-fold held-out error")
+    return list(sel.effects), info
+
+
 def _candidates(robot: Any, train: MeasurementSet, opts: DiagnoseOptions) -> list[Effect]:
-    """Step 1: the candidate effects (names are built for this robot; ``thermal_expansion`` at T_ref)."""
+    """Step 1: the candidate effects (names are built for this robot; ``thermal_expansion`` at T_ref).
+
+    The names of :data:`SELECTED_TERM_EFFECTS` are left out here: their terms are chosen later.
+    """
     t_ref_c = opts.t_ref_c
     if t_ref_c is None:
         t_ref_c = float(np.mean(train.temperature_c)) if train.temperature_c is not None else 20.0
     cands: list[Effect] = []
     for e in (opts.effects if opts.effects is not None else EFFECT_NAMES):
+        if isinstance(e, str) and e in SELECTED_TERM_EFFECTS:
+            continue
         cands += candidate_effects(robot, [e], t_ref_c=t_ref_c) if isinstance(e, str) else [e]
     return cands
 
@@ -1012,6 +1070,12 @@ def diagnose(model: TrackerModel, train: MeasurementSet, validate: MeasurementSe
     geometry = {"train_rms_m": float(res0.rms_m), "train_chi2_reduced": res0.chi2_reduced,
                 "n_params": len(res0.names), "tracker_T_base": res0.tracker_T_base, "reflector_m": res0.reflector_m,
                 "stations": {k: v.to_dict() for k, v in res0.setups.items()}, "converged": res0.converged}
+    # (3b) transferable terms chosen by sparse selection, then scored like any candidate
+    term_names = [e for e in (opts.effects or ()) if isinstance(e, str) and e in SELECTED_TERM_EFFECTS]
+    term_selection: dict = {}
+    if term_names:
+        chosen, term_selection = _select_transfer_terms(geo_fit, train, term_names, opts, notes)
+        cands = cands + chosen
     # (4) rows far beyond any effect
     geo, mismatch, validation_mismatch, ho_order = _screen_mismatch(eng, geo_fit, geo, plan, notes)
     ho_data = plan.heldout_source.subset(ho_order)
@@ -1048,6 +1112,6 @@ def diagnose(model: TrackerModel, train: MeasurementSet, validate: MeasurementSe
         dominant_effect=dominant, selected_effects=selected, heldout_before=before, heldout_after=after,
         gap_closed_fraction=closed, remaining_gap=remaining_gap, effects=singles, selection=selection, where=where,
         validation_mismatch=validation_mismatch, mismatch=mismatch, notes=notes, geometry=geometry,
-        registration=dict(plan.registration_info),
+        registration=dict(plan.registration_info), term_selection=term_selection,
         plot_data={"residuals_m": geo.R, "regressors": regs},
         time_s=time.perf_counter() - t0)
