@@ -409,9 +409,9 @@ def register_setup(fit: StationFit, data: MeasurementSet, setup_effects: Sequenc
                                    "set-up unknowns; give more rows")
     dQ = np.zeros_like(Q)
     if fit.effects:
-        from pin_kpi_oed.identification.identify import effect_terms
+        from pin_kpi_oed.effects.library import sum_joint_offsets
 
-        dQ = effect_terms(fit.effects, fit.thetas, Q, data, ref.model, ref.p)[0]
+        dQ = sum_joint_offsets(list(zip(fit.effects, fit.thetas)), Q, data)[0]
     kin = ref.model.kinematics(ref.p, Q + dQ, ref.model.reflector(ref.p))
     R, t = register_points(kin.p, np.asarray(data.position_m, float))
     model = dataclasses.replace(ref.model, tracker_T_base=pin.SE3(R, t))
