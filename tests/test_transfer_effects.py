@@ -345,3 +345,89 @@ def test_selection_on_series_c_is_fast():
     sel = select_terms(geo, data, max_order=40, refit=False, show_progress=False)
     assert time.perf_counter() - t0 < 60
     assert sel.cv_rms_m[-1] < 0.15e-3 < 0.4e-3 < sel.cv_rms_m[0]
+
+
+# --------------------------------------------------------------------------- the diagnosis CLI with transfer effects
+def test_cli_diagnose_selects_withheld_transmission_error(model, tmp_path, capsys):
+    import json
+
+    from pin_kpi_oed.cli.main import main as cli_main
+    from pin_kpi_oed.data.measurements import write_measurements
+
+    ur10 = model.robot
+    rng = np.random.default_rng(21)
+    Q = _uniform(ur10, rng, 700)
+    te, th = _truth_effect(model, Q, 7 * SIG)
+    data = simulate(model, Q, None, [(te, th)], seed=22, record_sigma=False)
+    write_measurements(data.subset(np.arange(500)), tmp_path / "a.csv")
+    write_measurements(data.subset(np.arange(500, 700)), tmp_path / "b.csv")
+    out = tmp_path / "r.json"
+    rc = cli_main(["diagnose", "--robot", "ur10", "--train", str(tmp_path / "a.csv"), "--validate",
+                   str(tmp_path / "b.csv"), "--reflector", "0,0,0.1", "--sigma", str(SIG), "--json", str(out),
+                   "--effects", "transmission_error,joint_compliance", "--harmonics", "25"])
+    assert rc == 0
+    text = capsys.readouterr().out
+    d = json.loads(out.read_text())
+    chosen = {t["group"] for t in d["term_selection"]["terms"]}
+    assert chosen == {"shoulder_lift order 7", "elbow order 18"}
+    assert d["term_selection"]["max_order"] == 25
+    assert d["dominant_effect"] == "transmission_error"
+    assert d["heldout_after"]["rms_m"] < 1.2 * FLOOR < d["heldout_before"]["rms_m"]
+    assert "elbow: 18 cycles per revolution" in text and "µrad amplitude" in text
+    # unknown names and bad orders: one line, exit 2
+    rc = cli_main(["diagnose", "--robot", "ur10", "--train", str(tmp_path / "a.csv"), "--kfold", "3",
+                   "--sigma", str(SIG), "--effects", "transmission_eror"])
+    err = capsys.readouterr().err
+    assert rc == 2 and "transmission_eror" in err and "link_bending" in err and len(err.strip().splitlines()) == 1
+    rc = cli_main(["diagnose", "--robot", "ur10", "--train", str(tmp_path / "a.csv"), "--kfold", "3",
+                   "--sigma", str(SIG), "--effects", "transmission_error", "--harmonics", "0"])
+    assert rc == 2 and "--harmonics" in capsys.readouterr().err
+
+
+def test_diagnose_transfer_section_names_extrapolation(model, tmp_path, capsys):
+    """Train in one region of the shoulder/elbow, validate in another (tracker moved): "extrapolation" is named."""
+    import json
+
+    from pin_kpi_oed.cli.main import main as cli_main
+    from pin_kpi_oed.data.measurements import write_measurements
+
+    ur10 = model.robot
+    rng = np.random.default_rng(31)
+    Q_a = _uniform(ur10, rng, 400, box={1: (-2.4, -1.9), 2: (0.8, 1.3)})
+    Q_b = _uniform(ur10, rng, 200, box={1: (-1.2, -0.3), 2: (-1.5, -0.3)})
+    # withheld low-order transmission error: the geometry absorbs it in the narrow training region only
+    te = TransmissionError(ur10, pairs=[("shoulder_lift_joint", 2), ("elbow_joint", 3)])
+    th = size_effect(model, np.zeros(model.n_params), Q_a, None, te, np.array([1.0, 0.6, -0.8, 0.5]), 20 * SIG)
+    truth = random_truth(model, Tolerances(joint_translation_m=2e-4, joint_rotation_rad=5e-4), seed=4)
+    train = simulate(model, Q_a, truth, [(te, th)], seed=32, record_sigma=False)
+    import pinocchio as pin
+
+    shift = pin.SE3(np.array([[0.0, -1, 0], [1, 0, 0], [0, 0, 1]]), np.array([0.3, -0.2, 0.05]))
+    moved = TrackerModel(ur10, tracker_T_base=default_tracker_pose(ur10) * shift, reflector_m=model.reflector_m,
+                         noise=model.noise)
+    target = simulate(moved, Q_b, truth, [(te, th)], seed=33, record_sigma=False)
+    write_measurements(train, tmp_path / "a.csv")
+    write_measurements(target, tmp_path / "b.csv")
+    out = tmp_path / "r.json"
+    rc = cli_main(["diagnose", "--robot", "ur10", "--train", str(tmp_path / "a.csv"), "--validate",
+                   str(tmp_path / "b.csv"), "--register-rows", "40", "--reflector", "0,0,0.1", "--sigma", str(SIG),
+                   "--json", str(out), "--effects", "joint_compliance"])
+    assert rc == 0
+    text = capsys.readouterr().out
+    tf = json.loads(out.read_text())["transfer"]
+    assert "transfer gap: EXTRAPOLATION" in text, text
+    assert tf["classification"] == "extrapolation"
+    assert tf["coverage_all_joints"] < 0.5 and tf["coverage_per_joint"][1] == 0.0
+    sl = tf["joints"][1]
+    assert sl["train_max"] <= -1.9 + 1e-9 and sl["validate_min"] >= -1.2 - 1e-9
+    assert tf["rms_before_registration_m"] > 10 * tf["heldout_rms_m"]  # the tracker moved: registration needed
+    assert "transfer gap: EXTRAPOLATION" in text and "covered" in text
+    # the same region for train and validation, same tracker: inside the coverage, not "extrapolation"
+    Q_c = _uniform(ur10, rng, 200, box={1: (-2.4, -1.9), 2: (0.8, 1.3)})
+    write_measurements(simulate(model, Q_c, truth, [(te, th)], seed=34, record_sigma=False), tmp_path / "c.csv")
+    rc = cli_main(["diagnose", "--robot", "ur10", "--train", str(tmp_path / "a.csv"), "--validate",
+                   str(tmp_path / "c.csv"), "--reflector", "0,0,0.1", "--sigma", str(SIG), "--json", str(out),
+                   "--effects", "joint_compliance", "--quiet"])
+    assert rc == 0
+    tf = json.loads(out.read_text())["transfer"]
+    assert tf["coverage_all_joints"] > 0.5 and tf["classification"] == "unmodelled effect"

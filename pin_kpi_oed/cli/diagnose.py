@@ -54,7 +54,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         "(needed when the files have none)")
     d.add_argument("--effects", default=None,
                    help="candidate effects, comma-separated (default: joint_compliance, gear_harmonic, backlash, "
-                        "thermal_expansion, joint_scale)")
+                        "thermal_expansion, joint_scale); also transmission_error and link_bending (their terms "
+                        "are chosen by sparse selection on held-out error) and drift (linear in time/row order)")
+    d.add_argument("--harmonics", type=int, default=40,
+                   help="highest order (cycles per revolution) of the transmission_error candidate (default 40)")
     d.add_argument("--alpha", type=float, default=0.01, help="significance level of the tests (default 0.01)")
     d.add_argument("--t-ref", type=float, default=None,
                    help="reference temperature of thermal_expansion (degC; default the training mean)")
@@ -72,7 +75,7 @@ def run(args: argparse.Namespace) -> int:
     from pin_kpi_oed.cli.identify import read_data_files, read_validation
     from pin_kpi_oed.data.atomic import atomic_write_json
     from pin_kpi_oed.diagnosis.diagnose import diagnose
-    from pin_kpi_oed.effects.library import EFFECT_NAMES
+    from pin_kpi_oed.effects.library import ALL_EFFECT_NAMES
     from pin_kpi_oed.model.noise import NoiseModel
     from pin_kpi_oed.model.tracker import TrackerModel
     from pin_kpi_oed.model.robot import load_robot
@@ -87,14 +90,16 @@ def run(args: argparse.Namespace) -> int:
             raise InputError(f"cannot write '{t}': it is a directory")
     if args.figures and Path(args.figures).exists() and not Path(args.figures).is_dir():
         raise InputError(f"--figures {args.figures}: exists and is not a folder")
+    if args.harmonics < 1:
+        raise InputError(f"--harmonics must be >= 1, got {args.harmonics}")
     if not (math.isfinite(args.alpha) and 0 < args.alpha < 1):
         raise InputError(f"--alpha must be in (0, 1), got {args.alpha}")
     effects = None
     if args.effects:
         effects = [e.strip() for e in args.effects.split(",") if e.strip()]
-        unknown = [e for e in effects if e not in EFFECT_NAMES]
+        unknown = [e for e in effects if e not in ALL_EFFECT_NAMES]
         if unknown:
-            raise InputError(f"--effects: unknown effect(s) {', '.join(unknown)} (known: {', '.join(EFFECT_NAMES)}; "
+            raise InputError(f"--effects: unknown effect(s) {', '.join(unknown)} (known: {', '.join(ALL_EFFECT_NAMES)}; "
                              "a tracker range-scale error is not among them: it cannot be observed)")
     robot = load_robot(args.robot, args.tool)
     reach = robot.reach()
@@ -118,7 +123,8 @@ def run(args: argparse.Namespace) -> int:
         noise, weights = NoiseModel(), "data"
     model = TrackerModel(robot, reflector_m=reflector, noise=noise)
     rep = diagnose(model, train, val, kfold=args.kfold, effects=effects, weights=weights, alpha=args.alpha,
-                   seed=args.seed, t_ref_c=args.t_ref, register_rows=args.register_rows, register_data=reg)
+                   seed=args.seed, t_ref_c=args.t_ref, register_rows=args.register_rows, register_data=reg,
+                   harmonics=args.harmonics)
     if args.figures:
         rep.figures = diagnosis_figures(rep, args.figures)
     if args.json:

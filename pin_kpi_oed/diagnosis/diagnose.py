@@ -201,6 +201,12 @@ class DiagnosisReport(Result):
         geometry: training fit of the geometric model (RMS, χ²_red, parameters, tracker).
         registration: transfer mode: the registration rows (1-based row numbers of their file),
             their file, number and seed, and the scored rows.
+        transfer: with validation data: per-joint ranges of train and validation (rad), coverage
+            per joint and overall, held-out RMS inside / outside the coverage, before / after the
+            set-up registration (m), and the classification of the gap (``extrapolation``,
+            ``set-up change``, ``unmodelled effect``) with the numbers behind it.
+        term_selection: the sparse selection of transferable terms (``transmission_error``,
+            ``link_bending`` candidates): chosen terms in plain words, held-out RMS path (m).
         plot_data: what the figures need (not in ``to_dict``): ``residuals_m`` (held-out geometric
             residuals, n × 3, m), ``regressors`` (name -> (values, unit)).
     """
@@ -233,6 +239,8 @@ class DiagnosisReport(Result):
     figures: list = field(default_factory=list)
     geometry: dict = field(default_factory=dict)
     registration: dict = field(default_factory=dict)
+    term_selection: dict = field(default_factory=dict)
+    transfer: dict = field(default_factory=dict)
     plot_data: dict = field(default_factory=dict, repr=False)
 
     def effect(self, name: str) -> EffectResult:
@@ -259,6 +267,8 @@ class DiagnosisReport(Result):
             "mismatch": to_jsonable(self.mismatch), "notes": list(self.notes), "unobservable": list(self.unobservable),
             "figures": [str(f) for f in self.figures], "geometry": to_jsonable(self.geometry),
             "registration": to_jsonable(self.registration),
+            "term_selection": to_jsonable(self.term_selection),
+            "transfer": to_jsonable(self.transfer),
         }
 
     def summary(self) -> str:
@@ -291,6 +301,20 @@ class DiagnosisReport(Result):
         if reg:
             worst = max(reg, key=lambda r: r["rms_m"] or 0)
             out.append(f"  worst workspace region: {worst['region']} (RMS {_um(worst['rms_m'])} µm, n={worst['n']})")
+        tf = self.transfer
+        if tf:
+            out.append(f"  transfer gap: {tf['classification'].upper()}: {tf['reason']}")
+            out.append(f"    {'joint':<22}{'train range rad':>20}{'validation range rad':>24}{'covered':>9}")
+            for j in tf["joints"]:
+                out.append(f"    {j['joint']:<22}{j['train_min']:>9.3f} .. {j['train_max']:<7.3f}"
+                           f"{j['validate_min']:>11.3f} .. {j['validate_max']:<9.3f}{_pct(j['coverage']):>9}")
+        ts = self.term_selection
+        if ts:
+            out.append(f"  term selection ({', '.join(ts['candidates'])}; orders 1..{ts['max_order']}, "
+                       f"{ts['folds']}-fold held-out RMS {_um(ts['cv_rms_m'][0])} -> {_um(ts['cv_rms_m'][-1])} µm): "
+                       f"{len(ts['terms'])} term(s) chosen" + (":" if ts["terms"] else ""))
+            for t in ts["terms"]:
+                out.append(f"    {t['text']}")
         out.append("  effects alone (ranked by held-out RMS reduction):")
         out.append(f"    {'effect':<19}{'k':>4}{'RMS after µm':>14}{'closed':>8}{'p_F':>10}{'dBIC':>10}"
                    f"{'p_heldout':>11}  significant")
@@ -704,6 +728,12 @@ class DiagnoseOptions:
             the set-up on this many seeded random rows of them and score only the others.
         register_data: transfer mode: re-register the set-up on these rows and score every
             validation row.
+        harmonics: highest Fourier order (cycles per revolution) of the ``transmission_error``
+            candidate; its terms (and those of ``link_bending``) are chosen by sparse forward
+            selection on K-fold held-out error (:func:`pin_kpi_oed.diagnosis.selection.select_terms`)
+            before they are scored like any other candidate.
+        transfer_prior_rad: σ (rad) of the Gaussian prior in the refit of the selected terms
+            (None: none).
     """
 
     kfold: int | None = None
@@ -717,6 +747,8 @@ class DiagnoseOptions:
     exact_kfold: bool = False
     register_rows: int | None = None
     register_data: MeasurementSet | None = None
+    harmonics: int = 40
+    transfer_prior_rad: float | None = None
 
     @classmethod
     def resolve(cls, options: "DiagnoseOptions | None", overrides: dict) -> "DiagnoseOptions":
@@ -758,13 +790,127 @@ def _check_options(model: TrackerModel, train: MeasurementSet, validate: Measure
             _check_joints(model, d, what)
 
 
+#: Transfer classification thresholds: re-registration must cut the error by this factor and leave at most
+#: ``SETUP_TRAIN_FACTOR`` × the training RMS for "set-up change"; "extrapolation" when less than
+#: ``EXTRAPOLATION_COVERAGE`` of the validation rows are covered on every joint.
+SETUP_GAIN_FACTOR = 2.0
+SETUP_TRAIN_FACTOR = 1.5
+EXTRAPOLATION_COVERAGE = 0.5
+#: Angle tolerance of the coverage (rad).
+COVERAGE_TOL_RAD = 0.05
+
+
+def _transfer_section(geo_fit: Any, train: MeasurementSet, ho_data: MeasurementSet, R: np.ndarray,
+                      registered: bool) -> dict:
+    """Step 5b: where the transfer gap lies (validation data only).
+
+    Per-joint ranges (rad) of train and validation, the share of validation rows within
+    :data:`COVERAGE_TOL_RAD` of a training angle per joint and on every joint at once
+    (:func:`pin_kpi_oed.diagnosis.selection.coverage`), the held-out RMS (m) inside and outside that
+    coverage, and — with a registration — the RMS of the same rows predicted in the training set-up
+    (tracker pose, reflector of the training fit). Classification, first rule that holds:
+    ``set-up change`` (registration cuts the error ≥ :data:`SETUP_GAIN_FACTOR` × and leaves
+    ≤ :data:`SETUP_TRAIN_FACTOR` × the training RMS), ``extrapolation`` (fewer than
+    :data:`EXTRAPOLATION_COVERAGE` of the rows covered), else ``unmodelled effect``.
+
+    Args:
+        geo_fit: the geometric training fit; train: its data; ho_data: the scored validation rows;
+        R: their held-out residuals (n, 3) m (after registration if ``registered``).
+
+    Returns:
+        The report's ``transfer`` dict (SI units).
+    """
+    from pin_kpi_oed.diagnosis.selection import covered_rows
+    from pin_kpi_oed.identification.identify import predict
+    from pin_kpi_oed.identification.problem import align_data
+
+    res = geo_fit.result
+    robot = res.model.robot
+    Qt, Qv = align_data(robot, train), align_data(robot, ho_data)
+    cov = covered_rows(Qt, Qv, COVERAGE_TOL_RAD)
+    per_joint = cov.mean(axis=0)
+    inside = np.all(cov, axis=1)
+    overall = float(inside.mean())
+    e = np.linalg.norm(R, axis=1)
+    rms = float(np.sqrt(np.mean(e ** 2)))
+    rms_in = float(np.sqrt(np.mean(e[inside] ** 2))) if inside.any() else float("nan")
+    rms_out = float(np.sqrt(np.mean(e[~inside] ** 2))) if (~inside).any() else float("nan")
+    train_rms = float(res.rms_m)
+    unreg = float("nan")
+    if registered:
+        Y = predict(res.model, res.p, Qv, aux=ho_data)[:, :3]
+        unreg = float(np.sqrt(np.mean(np.sum((ho_data.position_m - Y) ** 2, axis=1))))
+    joints = [{"joint": n, "train_min": float(Qt[:, j].min()), "train_max": float(Qt[:, j].max()),
+               "validate_min": float(Qv[:, j].min()), "validate_max": float(Qv[:, j].max()),
+               "coverage": float(per_joint[j])} for j, n in enumerate(robot.joint_names)]
+    mm = 1e3
+    cov_txt = (f"{100 * overall:.0f}% of the validation rows within {COVERAGE_TOL_RAD} rad of a training angle on "
+               f"every joint; held-out RMS {rms * mm:.3f} mm (inside the coverage "
+               f"{'-' if np.isnan(rms_in) else f'{rms_in * mm:.3f}'}, outside "
+               f"{'-' if np.isnan(rms_out) else f'{rms_out * mm:.3f}'} mm); training RMS {train_rms * mm:.3f} mm")
+    reg_txt = (f"; in the training set-up {unreg * mm:.3f} mm before re-registration" if registered else "")
+    if registered and unreg >= SETUP_GAIN_FACTOR * rms and rms <= SETUP_TRAIN_FACTOR * train_rms:
+        cls = "set-up change"
+        why = (f"re-registering the set-up removes most of the error ({unreg * mm:.3f} -> {rms * mm:.3f} mm, the "
+               f"training RMS is {train_rms * mm:.3f} mm); {cov_txt}")
+    elif overall < EXTRAPOLATION_COVERAGE:
+        cls = "extrapolation"
+        why = f"validation configurations mostly outside the training coverage: {cov_txt}{reg_txt}"
+    else:
+        cls = "unmodelled effect"
+        why = f"validation mostly inside the training coverage, error above the training fit: {cov_txt}{reg_txt}"
+    return {"classification": cls, "reason": why, "joints": joints, "coverage_tol_rad": COVERAGE_TOL_RAD,
+            "coverage_per_joint": [float(c) for c in per_joint], "coverage_all_joints": overall,
+            "heldout_rms_m": rms, "heldout_rms_inside_m": rms_in, "heldout_rms_outside_m": rms_out,
+            "train_rms_m": train_rms, "rms_before_registration_m": unreg, "registered": bool(registered)}
+
+
+#: Candidates whose terms are chosen from the data by sparse selection (:func:`_select_transfer_terms`).
+SELECTED_TERM_EFFECTS: tuple[str, ...] = ("transmission_error", "link_bending")
+
+
+def _select_transfer_terms(geo_fit: Any, train: MeasurementSet, names: Sequence[str], opts: DiagnoseOptions,
+                           notes: list[str]) -> tuple[list[Effect], dict]:
+    """Step 3b: sparse forward selection of transmission-error orders / link-bending angles on the training data.
+
+    Returns:
+        (the selected effects, restricted to the chosen terms, to be scored like any candidate;
+        the report's ``term_selection`` dict with the terms in plain words).
+    """
+    from pin_kpi_oed.effects.coupled import LinkBending
+    from pin_kpi_oed.effects.periodic import TransmissionError
+    from pin_kpi_oed.diagnosis.selection import select_terms
+
+    if isinstance(opts.harmonics, bool) or not isinstance(opts.harmonics, (int, np.integer)) or opts.harmonics < 1:
+        raise InputError(f"diagnose: --harmonics must be an integer >= 1, got {opts.harmonics!r}")
+    robot = geo_fit.result.model.robot
+    cands: list[Effect] = []
+    if "transmission_error" in names:
+        cands.append(TransmissionError(robot, max_order=int(opts.harmonics)))
+    if "link_bending" in names:
+        cands.append(LinkBending(robot))
+    sel = select_terms(geo_fit.result, train, candidates=cands, seed=opts.seed, prior_rad=opts.transfer_prior_rad,
+                       refit=True, show_progress=False)
+    info = {"candidates": list(names), "max_order": int(opts.harmonics), "folds": sel.folds,
+            "cv_rms_m": [float(v) for v in sel.cv_rms_m], "stop": sel.stop, "n_candidate_groups": sel.n_candidates,
+            "left_out": list(sel.left_out), "terms": [dict(t) for t in sel.terms]}
+    if not sel.terms:
+        notes.append(f"term selection ({', '.join(names)}): no term lowers the {sel.folds}-fold held-out error")
+    return list(sel.effects), info
+
+
 def _candidates(robot: Any, train: MeasurementSet, opts: DiagnoseOptions) -> list[Effect]:
-    """Step 1: the candidate effects (names are built for this robot; ``thermal_expansion`` at T_ref)."""
+    """Step 1: the candidate effects (names are built for this robot; ``thermal_expansion`` at T_ref).
+
+    The names of :data:`SELECTED_TERM_EFFECTS` are left out here: their terms are chosen later.
+    """
     t_ref_c = opts.t_ref_c
     if t_ref_c is None:
         t_ref_c = float(np.mean(train.temperature_c)) if train.temperature_c is not None else 20.0
     cands: list[Effect] = []
     for e in (opts.effects if opts.effects is not None else EFFECT_NAMES):
+        if isinstance(e, str) and e in SELECTED_TERM_EFFECTS:
+            continue
         cands += candidate_effects(robot, [e], t_ref_c=t_ref_c) if isinstance(e, str) else [e]
     return cands
 
@@ -1014,6 +1160,12 @@ def diagnose(model: TrackerModel, train: MeasurementSet, validate: MeasurementSe
     geometry = {"train_rms_m": float(res0.rms_m), "train_chi2_reduced": res0.chi2_reduced,
                 "n_params": len(res0.names), "tracker_T_base": res0.tracker_T_base, "reflector_m": res0.reflector_m,
                 "stations": {k: v.to_dict() for k, v in res0.setups.items()}, "converged": res0.converged}
+    # (3b) transferable terms chosen by sparse selection, then scored like any candidate
+    term_names = [e for e in (opts.effects or ()) if isinstance(e, str) and e in SELECTED_TERM_EFFECTS]
+    term_selection: dict = {}
+    if term_names:
+        chosen, term_selection = _select_transfer_terms(geo_fit, train, term_names, opts, notes)
+        cands = cands + chosen
     # (4) rows far beyond any effect
     geo, mismatch, validation_mismatch, ho_order = _screen_mismatch(eng, geo_fit, geo, plan, notes)
     ho_data = plan.heldout_source.subset(ho_order)
@@ -1023,6 +1175,8 @@ def diagnose(model: TrackerModel, train: MeasurementSet, validate: MeasurementSe
     expected = float(np.sqrt(np.mean(np.sum(geo.S ** 2 * (1 + geo.V), axis=1))))
     before = heldout_stats(geo.R)
     where, regs = _where(res0.model, res0.p, ho_data, ho_order, geo.R, geo.S, opts.alpha)
+    transfer = (_transfer_section(geo_fit, train, ho_data, geo.R, plan.mode == "transfer")
+                if validate is not None else {})
     # (6) every candidate alone, (7) forward selection
     singles, scored, pruned, usable = _single_effects(eng, geo_fit, geo, cands, opts.alpha, floor, notes)
     selection, selected, current = _forward_selection(eng, geo, singles, scored, pruned, usable, opts.alpha, floor,
@@ -1050,6 +1204,6 @@ def diagnose(model: TrackerModel, train: MeasurementSet, validate: MeasurementSe
         dominant_effect=dominant, selected_effects=selected, heldout_before=before, heldout_after=after,
         gap_closed_fraction=closed, remaining_gap=remaining_gap, effects=singles, selection=selection, where=where,
         validation_mismatch=validation_mismatch, mismatch=mismatch, notes=notes, geometry=geometry,
-        registration=dict(plan.registration_info),
-        plot_data={"residuals_m": geo.R, "regressors": regs},
+        registration=dict(plan.registration_info), term_selection=term_selection,
+        transfer=transfer, plot_data={"residuals_m": geo.R, "regressors": regs},
         time_s=time.perf_counter() - t0)

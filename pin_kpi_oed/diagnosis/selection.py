@@ -86,7 +86,7 @@ from pin_kpi_oed.threads import limit_threads
 
 __all__ = [
     "Station", "StationFit", "SelectionPath", "SelectionResult", "fit_stations", "register_setup",
-    "transfer_candidates", "forward_select", "select_terms", "coverage", "measurement_folds",
+    "transfer_candidates", "forward_select", "select_terms", "coverage", "covered_rows", "measurement_folds",
 ]
 
 #: Candidate groups moving the reflector less than this per rad of their terms (RMS, m/rad) are left out.
@@ -831,6 +831,21 @@ def coverage(source_q: np.ndarray, target_q: np.ndarray, tol_rad: float = 0.05) 
     Returns:
         (fraction per joint (n,), fraction of target rows covered on every joint at once).
     """
+    covered = covered_rows(source_q, target_q, tol_rad)
+    return covered.mean(axis=0), float(np.all(covered, axis=1).mean())
+
+
+def covered_rows(source_q: np.ndarray, target_q: np.ndarray, tol_rad: float = 0.05) -> np.ndarray:
+    """Which target angles lie within ``tol_rad`` of a source angle of the same joint (wrapped mod 2π).
+
+    Args:
+        source_q: training configurations (m_s, n) rad.
+        target_q: validation configurations (m_t, n) rad.
+        tol_rad: tolerance (rad).
+
+    Returns:
+        (m_t, n) bool: covered per row and joint.
+    """
     S = np.mod(np.asarray(source_q, float) + np.pi, 2 * np.pi) - np.pi
     T = np.mod(np.asarray(target_q, float) + np.pi, 2 * np.pi) - np.pi
     covered = np.zeros(T.shape, bool)
@@ -840,4 +855,4 @@ def coverage(source_q: np.ndarray, target_q: np.ndarray, tol_rad: float = 0.05) 
         i = np.clip(np.searchsorted(s_ext, T[:, j]), 1, s_ext.size - 1)
         d = np.minimum(np.abs(T[:, j] - s_ext[i - 1]), np.abs(T[:, j] - s_ext[i]))
         covered[:, j] = d <= tol_rad
-    return covered.mean(axis=0), float(np.all(covered, axis=1).mean())
+    return covered
