@@ -134,15 +134,17 @@ def test_newton_parts_gradient_and_hessian_against_finite_differences(pool):
             np.testing.assert_allclose((gp - gm) / (2 * h), H[:, i], rtol=1e-4, atol=1e-6 * np.abs(H).max())
 
 
-@pytest.mark.parametrize("n", [1, 2, 3, 4])
-def test_small_spd_solve_against_numpy(n):
-    from pin_kpi_oed.oed.pool import _solve_small_spd
+@pytest.mark.parametrize("nh", [1, 2, 3, 4])
+def test_swap_gains_against_numpy(nh):
+    from pin_kpi_oed.oed.pool import _swap_gains
 
-    rng = np.random.default_rng(n)
-    A = rng.standard_normal((50, n, n + 2))
-    S = A @ A.transpose(0, 2, 1) + np.eye(n)
-    G = rng.standard_normal((50, n, 3))
-    np.testing.assert_allclose(_solve_small_spd(S, G), np.linalg.solve(S, G), rtol=1e-10, atol=1e-12)
+    rng = np.random.default_rng(nh)
+    V = rng.standard_normal((50, nh, 6))
+    G = rng.standard_normal((50, nh, 3))
+    S = np.eye(nh) + V @ V.transpose(0, 2, 1)
+    want = np.einsum("nas,nas->n", G, np.linalg.solve(S, G))
+    np.testing.assert_allclose(_swap_gains(V, G), want, rtol=1e-10)
+    np.testing.assert_allclose(_swap_gains(V, None), np.linalg.slogdet(S)[1], rtol=1e-10)
 
 
 def test_block_sum_against_reshape():

@@ -390,29 +390,37 @@ def _relax_multiplicative(Fp: np.ndarray, w: np.ndarray, K: np.ndarray | None, t
     return w, total
 
 
-def _solve_small_spd(S: np.ndarray, G: np.ndarray) -> np.ndarray:
-    """S⁻¹G for a stack of small SPD matrices S (N, n, n), G (N, n, k): closed-form inverse for n ≤ 3
-    (NumPy's batched solve costs more than the arithmetic there), ``np.linalg.solve`` otherwise."""
-    n = S.shape[-1]
-    if n == 1:
-        return G / S
-    if n == 2:
-        a, b, d = S[:, 0, 0], S[:, 0, 1], S[:, 1, 1]
-        inv = np.stack([np.stack([d, -b], -1), np.stack([-b, a], -1)], -2) / (a * d - b * b)[:, None, None]
-        return inv @ G
-    if n == 3:
-        a, b, c = S[:, 0, 0], S[:, 0, 1], S[:, 0, 2]
-        e, f, i = S[:, 1, 1], S[:, 1, 2], S[:, 2, 2]
-        A, B, C = e * i - f * f, c * f - b * i, b * f - c * e
-        E, F, I_ = a * i - c * c, b * c - a * f, a * e - b * b
-        det = a * A + b * B + c * C
-        inv = np.empty_like(S)
-        inv[:, 0, 0], inv[:, 0, 1], inv[:, 0, 2] = A, B, C
-        inv[:, 1, 0], inv[:, 1, 1], inv[:, 1, 2] = B, E, F
-        inv[:, 2, 0], inv[:, 2, 1], inv[:, 2, 2] = C, F, I_
-        inv /= det[:, None, None]
-        return np.einsum("nab,nbs->nas", inv, G)
-    return np.linalg.solve(S, G)
+def _swap_gains(V: np.ndarray, G: np.ndarray | None) -> np.ndarray:
+    """For each candidate i with S_i = I + V_i V_iᵀ: tr(G_iᵀ S_i⁻¹ G_i) (A-type), or log det S_i (G None: D).
+
+    V: (N, nh, nb), G: (N, nh, ns). For nh ≤ 3 the 3×3 (2×2, 1×1) algebra is written out on length-N
+    arrays — NumPy's batched ``solve`` / ``einsum`` on tiny matrices cost more than the arithmetic —
+    with tr(Gᵀ S⁻¹ G) = Σ_ab (S⁻¹)_ab (G Gᵀ)_ab; larger nh use ``np.linalg``.
+    """
+    nh = V.shape[1]
+    s = {(a, b): np.einsum("nk,nk->n", V[:, a], V[:, b]) + (a == b) for a in range(nh) for b in range(a, nh)}
+    if nh > 3:
+        S = np.empty((V.shape[0], nh, nh))
+        for (a, b), v in s.items():
+            S[:, a, b] = S[:, b, a] = v
+        if G is None:
+            return np.linalg.slogdet(S)[1]
+        return np.einsum("nas,nas->n", G, np.linalg.solve(S, G))
+    if nh == 1:
+        adj, det = {(0, 0): np.ones_like(s[0, 0])}, s[0, 0]
+    elif nh == 2:
+        adj, det = {(0, 0): s[1, 1], (0, 1): -s[0, 1], (1, 1): s[0, 0]}, s[0, 0] * s[1, 1] - s[0, 1] ** 2
+    else:
+        a_, b_, c_, e_, f_, i_ = s[0, 0], s[0, 1], s[0, 2], s[1, 1], s[1, 2], s[2, 2]
+        adj = {(0, 0): e_ * i_ - f_ * f_, (0, 1): c_ * f_ - b_ * i_, (0, 2): b_ * f_ - c_ * e_,
+               (1, 1): a_ * i_ - c_ * c_, (1, 2): b_ * c_ - a_ * f_, (2, 2): a_ * e_ - b_ * b_}
+        det = a_ * adj[0, 0] + b_ * adj[0, 1] + c_ * adj[0, 2]
+    if G is None:
+        return np.log(det)
+    out = np.zeros(V.shape[0])
+    for (a, b), v in adj.items():
+        out += (1.0 if a == b else 2.0) * v * np.einsum("ns,ns->n", G[:, a], G[:, b])
+    return out / det
 
 
 def _exchange(Fp: np.ndarray, chosen: np.ndarray, K: np.ndarray | None, ridge: float, max_sweeps: int = 50
@@ -432,7 +440,6 @@ def _exchange(Fp: np.ndarray, chosen: np.ndarray, K: np.ndarray | None, ridge: f
     cur = _phi(M, K)
     FpT = np.ascontiguousarray(Fp.transpose(0, 2, 1))
     F2 = Fp.reshape(N * nh, nb)
-    eye = np.eye(nh)
     sweeps = 0
     for sweeps in range(1, max_sweeps + 1):
         improved = False
@@ -445,16 +452,14 @@ def _exchange(Fp: np.ndarray, chosen: np.ndarray, K: np.ndarray | None, ridge: f
                 continue
             Linv = np.linalg.solve(L, np.eye(nb))
             V = (F2 @ Linv.T).reshape(N, nh, nb)  # F_i L⁻ᵀ: S_i = I + V_i V_iᵀ = I + F_i M⁻¹ F_iᵀ
-            S = np.einsum("nak,nbk->nab", V, V)
-            S += eye  # (N, nh, nh)
             if K is None:
                 phi_minus = float(-2.0 * np.sum(np.log(np.diag(L))))
-                gain = np.linalg.slogdet(S)[1]  # −Δφ
+                gain = _swap_gains(V, None)  # −Δφ = log det S_i
             else:
                 R = K @ Linv.T  # (ns, nb): K M⁻¹ Kᵀ = R Rᵀ
                 phi_minus = float(np.sum(R * R))
                 G = (F2 @ (Linv.T @ R.T)).reshape(N, nh, -1)  # F_i M⁻¹ Kᵀ, (N, nh, ns)
-                gain = np.einsum("nas,nas->n", G, _solve_small_spd(S, G))  # tr reduction
+                gain = _swap_gains(V, G)  # tr reduction
             gain[in_set] = -np.inf
             best = int(np.argmax(gain))
             new_phi = phi_minus - gain[best]
