@@ -172,4 +172,3 @@ def test_unknown_relaxation_method_is_an_error(pool):
     Fp, E = pool
     with pytest.raises(InputError, match="method"):
         approximate_design(Fp, E, method="simplex")
-
