@@ -27,3 +27,43 @@ def report(label: str, seconds: float, target: float | None = None) -> str:
         line += f"   target {target * 1e3:8.1f} ms   ratio {seconds / target:5.2f}  {ok}"
     print(line, flush=True)
     return line
+
+
+def figure(label: str, measured: float, target: float, unit: str = "s", baseline: float | None = None,
+           baseline_label: str = "", lower_is_better: bool = True) -> str:
+    """One line per figure: measured value, target, ratio to the target, verdict, and the baseline beaten.
+
+    Args:
+        label: what was measured (with the data size).
+        measured: the value (in ``unit``).
+        target: the target (same unit); ratio = measured / target.
+        unit: unit printed after the values.
+        baseline: the baseline's value measured in the same run (same unit), if any.
+        baseline_label: what the baseline is.
+        lower_is_better: False for figures that must reach at least the target (efficiencies).
+
+    Returns:
+        The printed line.
+    """
+    ok = measured <= target if lower_is_better else measured >= target
+    line = (f"{label:<58} {measured:10.4g} {unit:<4} target {'<=' if lower_is_better else '>='} {target:<8.4g} "
+            f"ratio {measured / target:6.3f}  {'OK  ' if ok else 'MISS'}")
+    if baseline is not None:
+        line += f"  | {baseline_label} {baseline:.4g} {unit} (x{measured / baseline:.3f})"
+    print(line, flush=True)
+    return line
+
+
+class BusyCore:
+    """Context: one extra process spinning on a core (the 'second core busy' condition of the targets)."""
+
+    def __enter__(self) -> "BusyCore":
+        import subprocess
+        import sys
+
+        self.proc = subprocess.Popen([sys.executable, "-c", "while True: pass"])
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.proc.kill()
+        self.proc.wait()

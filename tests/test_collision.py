@@ -300,3 +300,48 @@ def test_missing_and_invalid_files(tmp_path):
     p.write_text("robot: [unclosed\n")
     with pytest.raises(InputError, match="invalid YAML"):
         load_cell(p)
+
+
+def test_geometry_backend_equals_closed_form(coll15_all):
+    """One pin.computeDistances per configuration on a GeometryModel of the segments (Coal capsules, the beam
+    re-shaped per pose) gives the closed form's values and gradients, in penetration too."""
+    Q = _mixed_configs(coll15_all, 12, seed=3)
+    g1, G1 = coll15_all.evaluate(Q)
+    g2, G2 = coll15_all.evaluate(Q, backend="geometry")
+    assert (g1 < 0).any()
+    assert np.abs(g1 - g2).max() < 1e-9
+    assert np.abs(G1 - G2).max() < 1e-9
+    assert np.array_equal(coll15_all.evaluate(Q, with_grad=False, backend="geometry"), g2)
+
+
+def test_geometry_backend_band_and_aggregate(coll15):
+    """With a band only the near pairs get gradients (exact ones); the KS aggregate is unchanged."""
+    Q = _mixed_configs(coll15, 10, seed=4)
+    g1, G1 = coll15.evaluate(Q)
+    band = 0.05
+    g2, G2 = coll15.evaluate(Q, backend="geometry", band=band)
+    assert np.abs(g1 - g2).max() < 1e-9
+    pair = coll15.info.kind == 0
+    gp = g1[:, pair]
+    near = gp <= gp.min(axis=1, keepdims=True) + band + 1e-12
+    assert 0 < near.sum() < near.size
+    np.testing.assert_allclose(G2[:, pair][near], G1[:, pair][near], atol=1e-9)
+    assert np.all(G2[:, pair][~near] == 0.0)
+    for mode in ("ks", "min"):
+        a1 = AggregatedConstraints(coll15, mode, 2e-3).evaluate(Q)
+        a2 = AggregatedConstraints(coll15, mode, 2e-3, backend="geometry").evaluate(Q)
+        np.testing.assert_allclose(a2[0], a1[0], atol=1e-9)
+        np.testing.assert_allclose(a2[1], a1[1], atol=1e-8)
+    with pytest.raises(InputError, match="backend"):
+        AggregatedConstraints(coll15, "ks", backend="fcl")
+
+
+def test_beam_frames_map_z_onto_the_beam():
+    from pin_kpi_oed.cell.collision import _beam_frames
+
+    a = np.array([1.0, 2.0, 0.5])
+    B = np.array([[3.0, 2.0, 0.5], [1.0, 2.0, -3.0], [1.0, 2.0, 4.0], [0.2, -1.0, 2.0]])
+    R, c, h = _beam_frames(a, B)
+    for i in range(len(B)):
+        assert np.allclose(R[i].T @ R[i], np.eye(3), atol=1e-12) and np.linalg.det(R[i]) == pytest.approx(1.0)
+        assert np.allclose(c[i] + h[i] * R[i][:, 2], B[i]) and np.allclose(c[i] - h[i] * R[i][:, 2], a)

@@ -81,3 +81,94 @@ def test_selection_and_certificate_against_brute_force_on_a_tiny_pool(seed):
         bound = sel.approx.lower_bound / m if K is not None else sel.approx.lower_bound - nb * np.log(m)
         assert phis.min() >= bound, kind
         assert sel.success and sel.approx.max_d_ratio <= 1 + 1e-3 + 1e-9
+
+
+@pytest.mark.parametrize("kind", ["kpi", "D"])
+def test_newton_relaxation_matches_the_multiplicative_algorithm(pool, kind):
+    """Both methods reach the same optimum φ* (to the tolerance); the interior-point one in far fewer steps."""
+    Fp, E = pool
+    K = E if kind == "kpi" else None
+    nw = approximate_design(Fp, K, tol=1e-4, method="newton")
+    mu = approximate_design(Fp, K, tol=1e-4, method="multiplicative")
+    assert nw.success and mu.success
+    if K is not None:
+        assert nw.phi == pytest.approx(mu.phi, rel=2e-4)
+        assert nw.lower_bound <= mu.phi and mu.lower_bound <= nw.phi  # each bound holds for the other's design
+    else:
+        assert nw.phi == pytest.approx(mu.phi, abs=2e-3 * Fp.shape[-1])
+        assert nw.lower_bound <= mu.phi + 1e-12 and mu.lower_bound <= nw.phi + 1e-12
+    assert nw.nit < mu.nit / 10
+
+
+def test_capped_relaxation_bound_is_tighter_and_still_bounds_every_distinct_design(pool):
+    Fp, E = pool
+    m = 40
+    free = approximate_design(Fp, E, tol=1e-4)
+    capped = approximate_design(Fp, E, tol=1e-4, m=m)
+    assert capped.weights.max() <= 1.0 / m * (1 + 1e-9)
+    assert capped.lower_bound > free.lower_bound * 1.001  # the replication gap is removed
+    sel = select(Fp, m, E)
+    rng = np.random.default_rng(3)
+    for design in [sel.indices] + [rng.choice(len(Fp), m, replace=False) for _ in range(30)]:
+        assert capped.lower_bound / m <= exact_phi(Fp, design, E)
+    assert efficiency(sel.phi, capped, m) > 0.97
+
+
+def test_newton_parts_gradient_and_hessian_against_finite_differences(pool):
+    from pin_kpi_oed.oed.pool import _newton_parts
+
+    Fp, E = pool
+    F = Fp[:40]
+    k, nh, nb = F.shape
+    w = np.random.default_rng(0).random(k) + 0.5
+    w /= w.sum()
+    for K in (E / 1e-6, None):
+        phi, g, H = _newton_parts(F.reshape(-1, nb), k, nh, w, K)
+        h = 1e-6 * w.min()
+        for i in (0, 7, 31):
+            e = np.zeros(k)
+            e[i] = h
+            pp, gp, _ = _newton_parts(F.reshape(-1, nb), k, nh, w + e, K)
+            pm, gm, _ = _newton_parts(F.reshape(-1, nb), k, nh, w - e, K)
+            assert (pp - pm) / (2 * h) == pytest.approx(g[i], rel=1e-5)
+            np.testing.assert_allclose((gp - gm) / (2 * h), H[:, i], rtol=1e-4, atol=1e-6 * np.abs(H).max())
+
+
+@pytest.mark.parametrize("nh", [1, 2, 3, 4])
+def test_swap_gains_against_numpy(nh):
+    from pin_kpi_oed.oed.pool import _swap_gains
+
+    rng = np.random.default_rng(nh)
+    V = rng.standard_normal((50, nh, 6))
+    G = rng.standard_normal((50, nh, 3))
+    S = np.eye(nh) + V @ V.transpose(0, 2, 1)
+    want = np.einsum("nas,nas->n", G, np.linalg.solve(S, G))
+    np.testing.assert_allclose(_swap_gains(V, G), want, rtol=1e-10)
+    np.testing.assert_allclose(_swap_gains(V, None), np.linalg.slogdet(S)[1], rtol=1e-10)
+
+
+def test_block_sum_against_reshape():
+    from pin_kpi_oed.oed.pool import _block_sum
+
+    X = np.random.default_rng(0).standard_normal((12, 12))
+    np.testing.assert_allclose(_block_sum(X, 3), X.reshape(4, 3, 4, 3).sum(axis=(1, 3)), rtol=1e-14)
+
+
+def test_large_pool_reduction_keeps_the_certificate(pool):
+    """Column generation: the relaxation on 20× the pool (replicated with small perturbations) is solved on a
+    working set yet certified on every candidate."""
+    Fp, E = pool
+    rng = np.random.default_rng(5)
+    big = np.concatenate([Fp * (1 + 0.01 * rng.standard_normal((len(Fp), 1, 1))) for _ in range(20)])
+    ap = approximate_design(big, E, tol=1e-3, m=60)
+    from pin_kpi_oed.oed.pool import _d_all
+
+    phi, d = _d_all(big, ap.weights, E)
+    assert ap.success and np.mean(np.sort(d)[-60:]) / phi <= 1 + 1e-3
+    assert np.count_nonzero(ap.weights) < len(big) / 10
+
+
+def test_unknown_relaxation_method_is_an_error(pool):
+    Fp, E = pool
+    with pytest.raises(InputError, match="method"):
+        approximate_design(Fp, E, method="simplex")

@@ -102,3 +102,14 @@ def test_entry_points_run_single_threaded_with_numpy_imported_first() -> None:
     calls, worst = (int(x) for x in out.split())
     assert calls >= 1, "the spy was never called: the test would prove nothing"
     assert worst == 1
+
+
+def test_cli_threads_option_sets_the_limit_and_rejects_nonsense(monkeypatch):
+    from pin_kpi_oed import threads
+    from pin_kpi_oed.cli.main import main
+
+    monkeypatch.setattr(threads, "_max_threads", None)
+    assert main(["--threads", "2", "info", "kr15", "--json"]) == 0
+    assert threads.get_max_threads() == 2
+    assert main(["--threads", "0", "info", "kr15"]) == 2
+    threads.set_max_threads(None)

@@ -151,7 +151,7 @@ def run(args: argparse.Namespace) -> int:
     if cert is not None:
         print(f"certificate: every {m}-pose design from the {cert.pool_size} feasible candidates (random pool + "
               f"the designs' poses) has tr(C_s) >= {cert.lower_bound_trace_cs_m2 * 1e6:.4e} mm^2 "
-              f"(equivalence theorem: max d/phi = {cert.approx.max_d_ratio:.4f})")
+              f"(equivalence theorem: mean of the {m} largest d / phi = {cert.approx.max_d_ratio:.4f})")
     if not quiet:
         rnd = results[0]
         print(f"heuristic: {rnd.samples} uniform random poses drawn for {m} feasible ones "

@@ -67,6 +67,8 @@ def cmd_demo(args: argparse.Namespace) -> int:
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser with every available subcommand."""
     parser = argparse.ArgumentParser(prog="pin-kpi-oed", description=__doc__.splitlines()[0])
+    parser.add_argument("--threads", type=int, default=None,
+                        help="BLAS / OpenMP threads inside the package (default 1, or PIN_KPI_OED_THREADS)")
     sub = parser.add_subparsers(dest="command", required=True)
     p = sub.add_parser("info", help="joints, limits, parameter count and identifiable rank of a robot")
     p.add_argument("robot", help="URDF path or name (kr15, kr300, kr500, kr15_track, ur3, ur5, ur10, panda)")
@@ -99,6 +101,10 @@ def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     try:
+        if args.threads is not None:
+            from pin_kpi_oed.threads import set_max_threads
+
+            set_max_threads(args.threads)
         return int(args.func(args) or 0)
     except PinKpiOedError as exc:
         print(f"pin-kpi-oed {args.command}: error: {exc}", file=sys.stderr)

@@ -266,6 +266,7 @@ class DesignProblem:
         InputError: invalid cell geometry (see :class:`~pin_kpi_oed.cell.collision.CollisionModel`).
     """
 
+    @limit_threads  # the identifiability analysis (QR, lstsq) ran with every BLAS thread on a busy machine
     def __init__(self, cell: Cell, collision: bool = True, prune: bool = True, aggregate: str = "ks",
                  ks_length_m: float = 2e-3):
         self.cell = cell

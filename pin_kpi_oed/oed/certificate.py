@@ -3,11 +3,12 @@
 The design problem (24) is non-convex and IPOPT finds a local optimum. Its
 *approximate-design relaxation* over a large pool of feasible poses (random
 configurations rejection-sampled against every constraint of the cell) is
-convex: :func:`pin_kpi_oed.oed.pool.approximate_design` solves it and certifies
+convex: :func:`pin_kpi_oed.oed.pool.approximate_design` solves it (weights capped at 1/m) and certifies
 
-    tr C_s(ξ) ≥ φ*/m        for every m-point design ξ drawn from the pool,
+    tr C_s(ξ) ≥ φ*/m        for every m-point design ξ of distinct poses drawn from the pool,
 
-with φ* ≥ φ(w)²/max_i d_i (equivalence theorem). The *efficiency* of a design
+with φ* ≥ φ(w)²/mean_top_m(d) (equivalence theorem on the capped simplex; the mean of the m largest
+directional derivatives, never looser than the uncapped bound φ(w)²/max_i d_i). The *efficiency* of a design
 is (φ*/m)/tr C_s(ξ). The pool is a finite sample of the feasible set, so a
 continuous (IPOPT) design can exceed 100 % by the margin by which the pool
 misses the best poses; with 10,000 candidates that margin is small, and the
@@ -36,7 +37,7 @@ class Certificate(Result):
     """A lower bound of tr(C_s) for m-point designs of a cell (a :class:`~pin_kpi_oed.results.Result`).
 
     ``success`` / ``status`` / ``nit`` are the relaxation's (equivalence-theorem gap below the
-    tolerance; multiplicative iterations); ``time_s`` covers sampling, relaxation and selection.
+    tolerance; Newton steps of the relaxation); ``time_s`` covers sampling, relaxation and selection.
 
     Attributes:
         lower_bound_trace_cs_m2: φ*/m, the certified bound (m²).
