@@ -584,7 +584,8 @@ def _check_values(ms: MeasurementSet, cols: _Columns, row_lines: list[int], src:
         )
 
 
-def _check_units(ms: MeasurementSet, cols: _Columns, row_lines: list[int], src: str, reach_m: float | None) -> None:
+def _check_units(ms: MeasurementSet, cols: _Columns, row_lines: list[int], src: str, reach_m: float | None,
+                 joint_units: Sequence[str] | None = None) -> None:
     """Step 5: the unit guard (mm instead of m, degrees instead of rad, sigma in mm/µm)."""
     pos = ms.position_m
     if cols.position:
@@ -608,10 +609,11 @@ def _check_units(ms: MeasurementSet, cols: _Columns, row_lines: list[int], src: 
                     f"{med_spread:.6g} m exceeds {REACH_FACTOR:g} x reach ({float(reach_m):g} m) "
                     f"(e.g. row {r + 1} (line {row_lines[r]})); looks like mm/degrees; convert to m/rad or declare the units (--units mm,deg)"
                 )
-    for arr, names in ((ms.q, cols.joints), (ms.rotvec_rad, ROTVEC_COLUMNS)):
+    rev = np.array([u != "m" for u in joint_units]) if joint_units is not None else np.ones(len(cols.joints), bool)
+    for arr, names, mask in ((ms.q, cols.joints, rev), (ms.rotvec_rad, ROTVEC_COLUMNS, np.ones(3, bool))):
         if arr is None:
             continue
-        big = np.abs(arr) > ANGLE_LIMIT_RAD
+        big = (np.abs(arr) > ANGLE_LIMIT_RAD) & mask[None, :]  # prismatic joints (m) are not angles
         if np.any(big):
             r, c = np.argwhere(big)[0]
             raise InputError(
@@ -728,7 +730,7 @@ def read_measurements(
     data = parse_numeric_table(rows, row_lines, header, src, _parse_float, cols.found, skip=(STATION_COLUMN,))
     ms = _apply_units(_build_set(data, rows, cols, src), u, joint_units)
     _check_values(ms, cols, row_lines, src)
-    _check_units(ms, cols, row_lines, src, reach_m)
+    _check_units(ms, cols, row_lines, src, reach_m, joint_units)
     _check_duplicates(ms, row_lines, src)
     return ms
 
