@@ -121,3 +121,84 @@ def test_cli_identify_and_predict_take_units_and_columns(ur10_data, tmp_path, ca
     assert len(rows) == len(ms) and err.max() < 1e-4  # the nominal robot, σ = 10 µm: a good fit
     assert main(base + ["--units", "furlong"]) == 2
     assert "unknown unit 'furlong'" in capsys.readouterr().err
+
+
+# --------------------------------------------------------------------------- tracker-software export
+SAMPLE = """// pin_kpi_oed tracker point export
+// Frame: Tracker
+// Units: mm
+Collection,Group,Target,X,Y,Z,Timestamp
+Cell1,Robot,P0001,2143.0712,-1032.5531,415.2207,2026-11-22T10:15:03.250
+Cell1,Robot,P0002,2098.6617,-1104.0093,388.9410,2026-11-22T10:15:09.875
+
+Cell1,Robot,P0003,1987.1000,-998.2500,502.0001,2026-11-22T10:15:16.000
+"""
+JOINT_LOG = """Target,A1,A2,A3,A4,A5,A6,temperature
+P0003,30,-60,90,-45,60,10,21.5
+P0001,10,-80,100,-30,45,0,21.0
+P0002,20,-70,95,-40,50,5,21.2
+"""
+
+
+def test_tracker_export_sample_file_round_trips(tmp_path):
+    from pin_kpi_oed.data.tracker_export import import_tracker_export, read_point_export, write_tracker_export
+
+    robot = load_robot("ur10")
+    (tmp_path / "export.txt").write_text(SAMPLE)
+    (tmp_path / "joints.csv").write_text(JOINT_LOG)
+    exp = read_point_export(tmp_path / "export.txt")
+    assert exp.names == ["P0001", "P0002", "P0003"] and exp.units == "mm" and exp.frame == "Tracker"
+    assert np.allclose(exp.position_m[0], [2.1430712, -1.0325531, 0.4152207], rtol=0, atol=1e-15)
+    assert np.allclose(exp.time_s, [0.0, 6.625, 12.75])
+    cols = ",".join(f"{j}={a}" for j, a in zip(robot.joint_names, KUKA_NAMES))
+    ms, names = import_tracker_export(tmp_path / "export.txt", tmp_path / "joints.csv", robot.joint_names,
+                                      columns=cols)
+    assert names == exp.names  # the export's order; the joint log was in another order
+    assert np.allclose(np.degrees(ms.q[0]), [10, -80, 100, -30, 45, 0]) and np.allclose(ms.temperature_c, [21.0, 21.2, 21.5])
+    assert np.array_equal(ms.position_m, exp.position_m) and np.array_equal(ms.time_s, exp.time_s)
+    # write it back in the layout: the same text, point for point (4 decimals of mm, ms time stamps)
+    write_tracker_export(tmp_path / "again.txt", names, ms.position_m, ms.time_s, start="2026-11-22T10:15:03.250",
+                         collection="Cell1", group="Robot")
+    assert (tmp_path / "again.txt").read_text() == SAMPLE.replace("\n\n", "\n")
+    again = read_point_export(tmp_path / "again.txt")
+    assert np.array_equal(again.position_m, exp.position_m) and np.allclose(again.time_s, exp.time_s, atol=1e-9)
+    # the joined set is a valid measurement file of the package
+    write_measurements(ms, tmp_path / "meas.csv")
+    back = read_measurements(tmp_path / "meas.csv", joint_names=robot.joint_names, reach_m=robot.reach())
+    assert np.array_equal(back.q, ms.q) and np.array_equal(back.time_s, ms.time_s)
+
+
+def test_tracker_export_refusals(tmp_path):
+    from pin_kpi_oed.data.tracker_export import import_tracker_export, read_point_export
+
+    (tmp_path / "e.txt").write_text(SAMPLE)
+    with pytest.raises(InputError, match="says 'Units: mm' but m was given"):
+        read_point_export(tmp_path / "e.txt", units="m")
+    (tmp_path / "bad.txt").write_text(SAMPLE.replace("415.2207", "4l5.2207"))
+    with pytest.raises(InputError, match=r"column 'z', row 1 \(line 5\): '4l5.2207' is not a number"):
+        read_point_export(tmp_path / "bad.txt")
+    (tmp_path / "t.txt").write_text(SAMPLE.replace("2026-11-22T10:15:09.875", "yesterday"))
+    with pytest.raises(InputError, match="line 6: 'yesterday' is neither an ISO date-time"):
+        read_point_export(tmp_path / "t.txt")
+    (tmp_path / "n.txt").write_text(SAMPLE.replace("Target", "Punkt"))
+    with pytest.raises(InputError, match="missing column.*target.*--columns"):
+        read_point_export(tmp_path / "n.txt")
+    assert read_point_export(tmp_path / "n.txt", columns="target=Punkt").names[0] == "P0001"
+    robot = load_robot("ur10")
+    (tmp_path / "j.csv").write_text(JOINT_LOG.replace("P0002", "P0009"))
+    cols = ",".join(f"{j}={a}" for j, a in zip(robot.joint_names, KUKA_NAMES))
+    with pytest.raises(InputError, match="point.*P0002 have no joint values"):
+        import_tracker_export(tmp_path / "e.txt", tmp_path / "j.csv", robot.joint_names, columns=cols)
+
+
+def test_cli_import_tracker(tmp_path, capsys):
+    robot = load_robot("ur10")
+    (tmp_path / "export.txt").write_text(SAMPLE)
+    (tmp_path / "joints.csv").write_text(JOINT_LOG)
+    cols = ",".join(f"{j}={a}" for j, a in zip(robot.joint_names, KUKA_NAMES))
+    argv = ["import-tracker", str(tmp_path / "export.txt"), "--joints", str(tmp_path / "joints.csv"), "--robot",
+            "ur10", "--out", str(tmp_path / "m.csv"), "--quiet"]
+    assert main(argv) == 2 and "--columns" in capsys.readouterr().err
+    assert main(argv + ["--columns", cols]) == 0
+    ms = read_measurements(tmp_path / "m.csv", joint_names=robot.joint_names, reach_m=robot.reach())
+    assert len(ms) == 3 and np.allclose(ms.time_s, [0.0, 6.625, 12.75]) and ms.temperature_c[2] == 21.5

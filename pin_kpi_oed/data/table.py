@@ -30,7 +30,8 @@ import pandas as pd
 from pin_kpi_oed.errors import InputError
 
 __all__ = ["LENGTH_UNITS", "ANGLE_UNITS", "Units", "SI_UNITS", "parse_units", "parse_columns", "rename_header",
-           "read_text_table"]
+           "read_text_table",
+           "parse_text_table"]
 
 #: Length units accepted in a declaration and their factor to metres.
 LENGTH_UNITS: dict[str, float] = {"m": 1.0, "cm": 1e-2, "mm": 1e-3, "um": 1e-6, "µm": 1e-6, "in": 0.0254}
@@ -153,8 +154,11 @@ def parse_columns(text: str | Mapping[str, str] | None, what: str = "--columns")
     return out
 
 
-def rename_header(header: list[str], mapping: Mapping[str, str], src: str, what: str = "--columns") -> list[str]:
+def rename_header(header: list[str], mapping: Mapping[str, str], src: str, what: str = "--columns",
+                  strict: bool = True) -> list[str]:
     """Rename the file's columns by ``mapping`` ({file name: package name}).
+
+    ``strict=False`` ignores mapped names the file does not have (one mapping for several files).
 
     Raises:
         InputError: a mapped file column that is not in the header (the columns found are listed),
@@ -163,7 +167,7 @@ def rename_header(header: list[str], mapping: Mapping[str, str], src: str, what:
     if not mapping:
         return list(header)
     missing = [c for c in mapping if c not in header]
-    if missing:
+    if missing and strict:
         raise InputError(f"{src}: {what} maps column(s) {', '.join(missing)} that the file does not have; "
                          f"columns found: {', '.join(header)}")
     out = [mapping.get(c, c) for c in header]
@@ -201,6 +205,16 @@ def read_text_table(path: str | os.PathLike, src: str, kind: str = "file", sep: 
         raise InputError(f"{src}: not a UTF-8 text file ({exc})") from None
     except OSError as exc:
         raise InputError(f"{src}: cannot read file ({exc.strerror})") from None
+    return parse_text_table(text, src, kind, sep)
+
+
+def parse_text_table(text: str, src: str, kind: str = "file", sep: str = ","
+                     ) -> tuple[list[str], int, list[list[str]], list[int]]:
+    """:func:`read_text_table` on text already read (same returns; lines count in ``text``).
+
+    Raises:
+        InputError: text pandas cannot parse.
+    """
     if not text.strip():
         return [], 0, [], []
     long_rows: list[list[str]] = []
