@@ -235,3 +235,44 @@ def test_real_ur10_compensated_predictions_match_held_out_rows():
     moved = np.linalg.norm(forward(cm, res.q[ok], held.subset(np.flatnonzero(ok))) -
                            forward(cm, held.q[ok], held.subset(np.flatnonzero(ok))), axis=1)
     assert abs(moved.mean() - e[ok].mean()) < 1e-8
+
+
+# --------------------------------------------------------------------------- calibrated URDF with set-up frames
+def test_calibrated_urdf_carries_tracker_reflector_and_tcp_frames(world, tmp_path):
+    import yourdfpy
+
+    from pin_kpi_oed.identification.export import write_model_urdf
+
+    robot, _, _, _, cm, _, _ = world
+    out = tmp_path / "calibrated.urdf"
+    assert write_model_urdf(cm, out, tcp_m=np.array([0.0, 0.0, 0.2])) <= 1e-9
+    st = cm.station()
+    Q = robot.random_q(np.random.default_rng(21), 4)
+    Y = cm.predict(Q)  # reflector in the tracker frame (geometry only: this model has no effects)
+    # Pinocchio: the reflector frame seen from the tracker frame is what the model predicts
+    model = pin.buildModelFromUrdf(str(out))
+    data = model.createData()
+    ft, fr = model.getFrameId(f"tracker_{st}"), model.getFrameId(f"reflector_{st}")
+    for q, y in zip(Q, Y):
+        pin.framesForwardKinematics(model, data, q)
+        assert np.allclose((data.oMf[ft].inverse() * data.oMf[fr]).translation, y, atol=1e-9)
+    assert np.allclose(data.oMf[model.getFrameId("tcp")].translation,
+                       data.oMf[model.getFrameId(robot.tool_frame)].act(np.array([0.0, 0.0, 0.2])), atol=1e-12)
+    # yourdfpy (ROS-style tools) sees the same chain
+    urdf = yourdfpy.URDF.load(str(out), load_meshes=False, build_collision_scene_graph=False,
+                              load_collision_meshes=False)
+    urdf.update_cfg(dict(zip(robot.joint_names, Q[-1])))
+    T = urdf.get_transform(frame_to=f"reflector_{st}", frame_from=f"tracker_{st}")
+    assert np.allclose(T[:3, 3], Y[-1], atol=1e-9)
+
+
+def test_cli_identify_urdf_frames(world, tmp_path):
+    from pin_kpi_oed.data.measurements import write_measurements
+
+    robot, tm, truth, _, _, _, _ = world
+    data = simulate(tm, robot.random_q(np.random.default_rng(31), 80), truth, seed=4)
+    write_measurements(data, tmp_path / "B.csv")
+    assert main(["identify", "--robot", "ur10", "--data", str(tmp_path / "B.csv"), "--reflector", "0.03,0.02,0.08",
+                 "--sigma", "1e-5", "--urdf-out", str(tmp_path / "cal.urdf"), "--urdf-frames", "--quiet"]) == 0
+    model = pin.buildModelFromUrdf(str(tmp_path / "cal.urdf"))
+    assert model.existFrame("tracker_B") and model.existFrame("reflector_B") and model.nq == robot.nq

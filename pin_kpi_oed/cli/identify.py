@@ -112,6 +112,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         "joint_compliance,gear_harmonic); stored in --model-out")
     i.add_argument("--json", default=None, help="write the result (parameters, covariance, tracker pose, ...) here")
     i.add_argument("--urdf-out", default=None, help="write the calibrated URDF here (geometry only)")
+    i.add_argument("--urdf-frames", action="store_true", help="add the tracker (cell) frame and reflector/TCP of "
+                   "every station to the calibrated URDF as fixed frames (tracker_<station>, reflector_<station>)")
     i.add_argument("--model-out", default=None,
                    help="write the calibrated model file here (geometry, effects, set-up per station, noise; "
                         "for pin-kpi-oed register / predict)")
@@ -293,7 +295,8 @@ def run_identify(args: argparse.Namespace) -> int:
     """Handler of ``pin-kpi-oed identify``."""
     from pin_kpi_oed.data.atomic import atomic_write_json, atomic_write_text
     from pin_kpi_oed.errors import SolverError
-    from pin_kpi_oed.identification.export import calibrated_urdf_text, check_urdf_fk, result_urdf_comment
+    from pin_kpi_oed.identification.export import (calibrated_urdf_text, check_urdf_fk, model_frames,
+                                                   result_urdf_comment)
     from pin_kpi_oed.identification.identify import IdentifyOptions, identify
     from pin_kpi_oed.model.noise import NoiseModel
     from pin_kpi_oed.model.tracker import TrackerModel
@@ -333,7 +336,8 @@ def run_identify(args: argparse.Namespace) -> int:
         placements = result.model.joint_placements(result.p)
         out_dir = Path(args.urdf_out).parent
         urdf_text = calibrated_urdf_text(robot, placements, comment=result_urdf_comment(result, ", ".join(args.data)),
-                                         out_dir=out_dir if str(out_dir) else ".")
+                                         out_dir=out_dir if str(out_dir) else ".",
+                                         frames=model_frames(result.calibrated_model()) if args.urdf_frames else ())
         dp, dr = check_urdf_fk(urdf_text, robot, placements)
         if dp > 1e-9 or dr > 1e-9:
             raise SolverError(f"the calibrated URDF reproduces the identified FK only to {dp:.3g} m; nothing written")
