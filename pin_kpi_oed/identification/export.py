@@ -41,10 +41,11 @@ __all__ = ["ROOT", "FixedFrame", "model_frames", "write_model_urdf", "URDF_LIMIT
            "result_urdf_comment"]
 
 #: What a calibrated URDF cannot carry; written as an XML comment into every exported URDF.
-URDF_LIMITS_NOTE = ("This URDF carries the calibrated joint placements (geometry) only. It cannot carry the "
-                    "identified effects (joint-angle errors, compliance, thermal, ...), the tracker pose of each "
-                    "station, the reflector offset or the stations themselves: the model file "
-                    "(pin-kpi-oed identify --model-out model.json) holds them, and pin-kpi-oed predict uses it.")
+URDF_LIMITS_NOTE = ("This URDF carries the calibrated joint placements (geometry); the tracker pose and reflector "
+                    "of each station only as fixed frames when exported with them (identify --urdf-frames). It "
+                    "cannot carry the identified effects (joint-angle errors, compliance, thermal, ...): the model "
+                    "file (pin-kpi-oed identify --model-out model.json) holds everything, and pin-kpi-oed predict "
+                    "and compensate use it.")
 
 
 def _fmt(v: float) -> str:
