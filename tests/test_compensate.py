@@ -177,7 +177,12 @@ def test_cli_compensate_targets_in_mm_with_other_names(world, tmp_path, capsys):
     assert main([str(a) for a in base + ["--columns", "name=Point,x=X,y=Y,z=Z"]]) == 2
     err = capsys.readouterr().err
     assert "looks like mm" in err and "--units" in err and len(err.strip().splitlines()) == 1
-    assert main([str(a) for a in base + ["--columns", "name=Point,x=X,y=Y,z=Z", "--units", "mm"]]) == 0
+    assert main([str(a) for a in base + ["--columns", "name=Point,x=X,y=Y,z=Z", "--units", "mm", "--json",
+                                         tmp_path / "r.json"]]) == 0
+    import json
+    rep = json.loads((tmp_path / "r.json").read_text())
+    assert rep["success"] and rep["frame"] == "cell" and len(rep["correction_m"]) == 12
+    assert min(rep["correction_m"]) > 1e-4  # the nominal solutions miss by ~mm: the correction is reported
     rows = list(csv.DictReader(open(out)))
     assert [r["name"] for r in rows] == [f"T{i}" for i in range(12)] and all(r["status"] == "ok" for r in rows)
     Q = np.array([[float(r[j]) for j in robot.joint_names] for r in rows])
@@ -276,3 +281,23 @@ def test_cli_identify_urdf_frames(world, tmp_path):
                  "--sigma", "1e-5", "--urdf-out", str(tmp_path / "cal.urdf"), "--urdf-frames", "--quiet"]) == 0
     model = pin.buildModelFromUrdf(str(tmp_path / "cal.urdf"))
     assert model.existFrame("tracker_B") and model.existFrame("reflector_B") and model.nq == robot.nq
+
+
+def test_compensation_uses_the_model_effects(world):
+    """A model with effects (here the gear harmonic the calibration withheld, given to it) is compensated through
+    them: the calibrated prediction at the compensated joints is the target; without the effect it is not."""
+    import dataclasses
+
+    from pin_kpi_oed.effects.library import ThermalExpansion
+
+    robot, _, _, (eff, th), cm, _, truth_tcp = world
+    cm_eff = dataclasses.replace(cm, effects=[eff], thetas=[th])
+    Qt = robot.random_q(np.random.default_rng(41), 20) * 0.9
+    Yt = truth_tcp(Qt)
+    ts = TargetSet([str(i) for i in range(20)], Yt, None, None, list(robot.joint_names), _aux(robot, 20), "eff")
+    res = compensate(cm_eff, ts)
+    assert res.success and np.linalg.norm(cm_eff.predict(res.q) - Yt, axis=1).max() < 1e-8
+    assert np.linalg.norm(cm.predict(res.q) - Yt, axis=1).mean() > 1e-6  # the effect moved the solution
+    cm_t = dataclasses.replace(cm, effects=[ThermalExpansion(robot)], thetas=[np.zeros(1)])
+    with pytest.raises(InputError, match="temperature"):
+        compensate(cm_t, ts)  # the targets have no temperature column for the thermal effect
