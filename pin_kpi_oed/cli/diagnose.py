@@ -22,6 +22,7 @@ import math
 import numpy as np
 
 from pin_kpi_oed.cli.identify import add_register_args
+from pin_kpi_oed.cli.util import add_table_options, table_options
 from pin_kpi_oed.cli.util import parse_floats as _floats
 from pin_kpi_oed.errors import InputError
 
@@ -65,6 +66,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     d.add_argument("--json", default=None, help="write the report (JSON, SI units) here")
     d.add_argument("--figures", default=None, help="write PNG figures of the residuals into this folder")
     d.add_argument("--quiet", action="store_true", help="print only the one-line verdict")
+    add_table_options(d)
     d.set_defaults(func=run)
 
 
@@ -103,7 +105,7 @@ def run(args: argparse.Namespace) -> int:
                              "a tracker range-scale error is not among them: it cannot be observed)")
     robot = load_robot(args.robot, args.tool)
     reach = robot.reach()
-    train = read_data_files(args.train, robot, "--train")
+    train = read_data_files(args.train, robot, "--train", opts=table_options(args, robot))
     val, reg = read_validation(args, robot)
     reflector = _floats(args.reflector, (3,), "--reflector")
     if np.linalg.norm(reflector) > reach:

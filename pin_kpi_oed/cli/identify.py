@@ -27,6 +27,7 @@ from typing import Any
 import numpy as np
 import pinocchio as pin
 
+from pin_kpi_oed.cli.util import add_table_options, table_options
 from pin_kpi_oed.cli.util import parse_floats as _floats
 from pin_kpi_oed.errors import InputError
 
@@ -111,6 +112,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         "joint_compliance,gear_harmonic); stored in --model-out")
     i.add_argument("--json", default=None, help="write the result (parameters, covariance, tracker pose, ...) here")
     i.add_argument("--urdf-out", default=None, help="write the calibrated URDF here (geometry only)")
+    i.add_argument("--urdf-frames", action="store_true", help="add the tracker (cell) frame and reflector/TCP of "
+                   "every station to the calibrated URDF as fixed frames (tracker_<station>, reflector_<station>)")
     i.add_argument("--model-out", default=None,
                    help="write the calibrated model file here (geometry, effects, set-up per station, noise; "
                         "for pin-kpi-oed register / predict)")
@@ -126,6 +129,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                                                "(e.g. 'reflector.*' or 'tracker.*')")
     i.add_argument("--max-nfev", type=int, default=None, help="maximum number of residual evaluations")
     i.add_argument("--quiet", action="store_true", help="print only the validation lines")
+    add_table_options(i)
     i.set_defaults(func=run_identify)
 
     # ---- import-ipa -------------------------------------------------------------------
@@ -218,13 +222,13 @@ def _add_validation_args(p: argparse.ArgumentParser, validate_help: str) -> None
     p.add_argument("--seed", type=int, default=0, help="seed of every random choice (default 0)")
 
 
-def read_data_files(paths: list[str], robot: Any, what: str = "--data") -> Any:
+def read_data_files(paths: list[str], robot: Any, what: str = "--data", opts: dict | None = None) -> Any:
     """Read one or several measurement CSVs; several are joined, each its own station unless it has a
     'station' column (:func:`pin_kpi_oed.data.measurements.concat_measurements`)."""
     from pin_kpi_oed.data.measurements import concat_measurements, read_measurements
 
     reach = robot.reach()
-    sets = [read_measurements(p, joint_names=robot.joint_names, reach_m=reach) for p in paths]
+    sets = [read_measurements(p, joint_names=robot.joint_names, reach_m=reach, **(opts or {})) for p in paths]
     return sets[0] if len(sets) == 1 else concat_measurements(sets)
 
 
@@ -239,9 +243,9 @@ def read_validation(args: argparse.Namespace, robot: Any) -> tuple[Any, Any]:
     if (args.register_rows is not None or args.register_data) and not args.validate:
         raise InputError("--register-rows/--register-data re-register the set-up on rows of another session: they "
                          "need --validate FILE")
-    reach = robot.reach()
-    test = read_measurements(args.validate, joint_names=robot.joint_names, reach_m=reach) if args.validate else None
-    reg = read_measurements(args.register_data, joint_names=robot.joint_names, reach_m=reach) \
+    reach, kw = robot.reach(), table_options(args, robot)
+    test = read_measurements(args.validate, joint_names=robot.joint_names, reach_m=reach, **kw) if args.validate else None
+    reg = read_measurements(args.register_data, joint_names=robot.joint_names, reach_m=reach, **kw) \
         if args.register_data else None
     return test, reg
 
@@ -291,7 +295,8 @@ def run_identify(args: argparse.Namespace) -> int:
     """Handler of ``pin-kpi-oed identify``."""
     from pin_kpi_oed.data.atomic import atomic_write_json, atomic_write_text
     from pin_kpi_oed.errors import SolverError
-    from pin_kpi_oed.identification.export import calibrated_urdf_text, check_urdf_fk, result_urdf_comment
+    from pin_kpi_oed.identification.export import (calibrated_urdf_text, check_urdf_fk, model_frames,
+                                                   result_urdf_comment)
     from pin_kpi_oed.identification.identify import IdentifyOptions, identify
     from pin_kpi_oed.model.noise import NoiseModel
     from pin_kpi_oed.model.tracker import TrackerModel
@@ -301,7 +306,7 @@ def run_identify(args: argparse.Namespace) -> int:
     _check_outputs(args.json, args.urdf_out, args.model_out)
     robot = load_robot(args.robot, args.tool)
     reach = robot.reach()
-    train = read_data_files(args.data, robot)
+    train = read_data_files(args.data, robot, opts=table_options(args, robot))
     test, reg = read_validation(args, robot)
     reflector = _floats(args.reflector, 3, "--reflector")
     if np.linalg.norm(reflector) > reach:
@@ -331,7 +336,8 @@ def run_identify(args: argparse.Namespace) -> int:
         placements = result.model.joint_placements(result.p)
         out_dir = Path(args.urdf_out).parent
         urdf_text = calibrated_urdf_text(robot, placements, comment=result_urdf_comment(result, ", ".join(args.data)),
-                                         out_dir=out_dir if str(out_dir) else ".")
+                                         out_dir=out_dir if str(out_dir) else ".",
+                                         frames=model_frames(result.calibrated_model()) if args.urdf_frames else ())
         dp, dr = check_urdf_fk(urdf_text, robot, placements)
         if dp > 1e-9 or dr > 1e-9:
             raise SolverError(f"the calibrated URDF reproduces the identified FK only to {dp:.3g} m; nothing written")

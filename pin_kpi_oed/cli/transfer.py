@@ -20,6 +20,8 @@ import argparse
 
 import numpy as np
 
+from pin_kpi_oed.cli.util import add_table_options, table_options
+
 __all__ = ["register", "run_register", "run_predict"]
 
 
@@ -38,6 +40,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     r.add_argument("--hold-reflector", action="store_true", help="keep the model's reflector offset")
     r.add_argument("--json", default=None, help="write the registration result (set-up, rows, RMS) here")
     r.add_argument("--quiet", action="store_true", help="print nothing")
+    add_table_options(r)
     r.set_defaults(func=run_register)
 
     p = subparsers.add_parser("predict", help="predicted reflector positions of a calibrated model, per CSV row",
@@ -52,6 +55,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="station whose set-up to use (default: the data's 'station' column, else the model's "
                         "default station)")
     p.add_argument("--quiet", action="store_true", help="print nothing")
+    add_table_options(p)
     p.set_defaults(func=run_predict)
 
 
@@ -66,7 +70,8 @@ def run_register(args: argparse.Namespace) -> int:
         if f:
             check_writable(f)
     model = load_model_file(args.model)
-    data = read_measurements(args.data, joint_names=model.robot.joint_names, reach_m=model.robot.reach())
+    data = read_measurements(args.data, joint_names=model.robot.joint_names, reach_m=model.robot.reach(),
+                             **table_options(args, model.robot))
     res = register_setup(model, data, station=args.station, hold_reflector=args.hold_reflector)
     model_dict = res.model.to_dict()
     out = {**res.to_dict(), "model": args.model, "data": args.data} if args.json else None
@@ -89,7 +94,7 @@ def run_predict(args: argparse.Namespace) -> int:
     check_writable(args.out)
     model = load_model_file(args.model)
     data = read_measurements(args.data, joint_names=model.robot.joint_names, reach_m=model.robot.reach(),
-                             require_position=False)
+                             require_position=False, **table_options(args, model.robot))
     cols, table = predict_table(model, data, station=args.station)
     write_predictions(args.out, data, cols, table)
     if not args.quiet:

@@ -61,6 +61,12 @@ CSV format
   than about the reach), if any joint value or rotation-vector component
   exceeds ``2π + 0.1`` in magnitude (degrees), or if the median standard
   deviation exceeds 0.1 m (mm or µm).
+* Units and column names as they come: ``read_measurements(..., units="mm,deg",
+  columns="joint_a1=A1,x=X")`` (CLI: ``--units`` / ``--columns`` on every command that reads
+  measurements) renames the file's columns first and converts the numbers to SI after parsing
+  (lengths: x, y, z, sigma, prismatic joints; angles: rx, ry, rz, revolute joints). Without them
+  a file in mm / degrees or with other names is refused with one line that says which option
+  to use. The table is read with pandas (:mod:`pin_kpi_oed.data.table`).
 * Two rows with identical joint values and identical measurement (x, y, z and,
   if present, rx, ry, rz) are duplicates and rejected.
 
@@ -95,8 +101,10 @@ from pathlib import Path
 from typing import Any, Callable, Sequence
 
 import numpy as np
+import pandas as pd
 
 from pin_kpi_oed.data.atomic import atomic_write_text
+from pin_kpi_oed.data.table import Units, parse_columns, parse_units, read_text_table, rename_header
 from pin_kpi_oed.errors import InputError
 
 __all__ = [
@@ -370,6 +378,11 @@ def parse_numeric_table(rows: Sequence[Sequence[str]], lines: Sequence[int], hea
                         skip: Sequence[str] = ()) -> np.ndarray:
     """Parse the cells of a table into floats, naming the file, column, row and value of any bad cell.
 
+    The cells go into a :class:`pandas.DataFrame` and are converted column-block-wise by NumPy
+    (``astype(float)``: Python's correctly rounded parser, so ``repr`` floats read back bit-identical);
+    a custom ``parse`` (e.g. decimal commas) is mapped over the cells. Only when a conversion fails
+    are the cells scanned, in row-major order, for the first bad one.
+
     Args:
         rows: the cells of each data row (strings).
         lines: the file line number of each row (for messages).
@@ -386,24 +399,40 @@ def parse_numeric_table(rows: Sequence[Sequence[str]], lines: Sequence[int], hea
         InputError: a row with the wrong number of cells, a cell that is not a number, NaN or inf.
     """
     ncol = len(header)
-    cols = [c for c, name in enumerate(header) if name not in set(skip)]
-    data = np.full((len(rows), ncol), np.nan)
     for r, (cells, line) in enumerate(zip(rows, lines)):
         if len(cells) != ncol:
             raise InputError(f"{src}: row {r + 1} (line {line}) has {len(cells)} cells, the header has {ncol}"
                              + (f" ({found})" if found else ""))
-        for c in cols:
-            cell = cells[c]
-            try:
-                v = parse(cell)
-            except ValueError:
-                shown = repr(cell) if cell.strip() else "an empty cell"
-                raise InputError(f"{src}: column '{header[c]}', row {r + 1} (line {line}): {shown} is not a number"
-                                 ) from None
-            if not math.isfinite(v):
-                raise InputError(f"{src}: column '{header[c]}', row {r + 1} (line {line}): value {cell.strip()!r} "
-                                 "is not finite (NaN/inf)")
-            data[r, c] = v
+    cols = [c for c, name in enumerate(header) if name not in set(skip)]
+    data = np.full((len(rows), ncol), np.nan)
+    if not rows or not cols:
+        return data
+    text = pd.DataFrame(list(rows), dtype=object).iloc[:, cols]
+    try:
+        if parse is float or parse is _parse_float:
+            values = text.apply(lambda col: col.str.strip()).to_numpy().astype(float)
+        else:
+            values = text.apply(lambda col: col.map(parse)).to_numpy(dtype=float)
+    except (ValueError, TypeError):
+        values = None
+    if values is None:  # find the first cell that is not a number (row-major), to name it
+        for r, line in enumerate(lines):
+            for c in cols:
+                cell = rows[r][c]
+                try:
+                    parse(cell)
+                except ValueError:
+                    shown = repr(cell) if cell.strip() else "an empty cell"
+                    raise InputError(f"{src}: column '{header[c]}', row {r + 1} (line {line}): {shown} is not a "
+                                     "number") from None
+        raise InputError(f"{src}: cannot convert the table to numbers")  # pragma: no cover - parse is consistent
+    bad = ~np.isfinite(values)
+    if bad.any():
+        r, k = np.argwhere(bad)[0]
+        c = cols[k]
+        raise InputError(f"{src}: column '{header[c]}', row {r + 1} (line {lines[r]}): value {rows[r][c].strip()!r} "
+                         "is not finite (NaN/inf)")
+    data[:, cols] = values
     return data
 
 
@@ -426,32 +455,9 @@ def _parse_float(cell: str) -> float:
 
 
 def _read_table(p: Path, src: str) -> tuple[list[str], int, list[list[str]], list[int]]:
-    """Step 1: the header and the data rows (cells as text) with their file line numbers."""
-    if not p.exists():
-        raise InputError(f"measurement file '{src}' does not exist")
-    if p.is_dir():
-        raise InputError(f"measurement file '{src}' is a directory, expected a CSV file")
-    try:
-        text = p.read_text(encoding="utf-8-sig")
-    except UnicodeDecodeError as exc:
-        raise InputError(f"{src}: not a UTF-8 text file ({exc})") from None
-    except OSError as exc:
-        raise InputError(f"{src}: cannot read file ({exc.strerror})") from None
-    reader = csv.reader(_stdio.StringIO(text, newline=""))
-    header: list[str] | None = None
-    header_line = 0
-    rows: list[list[str]] = []
-    row_lines: list[int] = []
-    for cells in reader:
-        if not cells or all(not c.strip() for c in cells):
-            continue
-        if header is None:
-            header = [c.strip() for c in cells]
-            header_line = reader.line_num
-            continue
-        rows.append(cells)
-        row_lines.append(reader.line_num)
-    if header is None:
+    """Step 1: the header and the data rows (cells as text) with their file line numbers (pandas)."""
+    header, header_line, rows, row_lines = read_text_table(p, src, "measurement file")
+    if not header:
         raise InputError(f"{src}: empty file, expected a header row (joint names, x, y, z, ...)")
     if len(header) == 1 and ";" in header[0]:
         raise InputError(
@@ -493,7 +499,7 @@ def _check_header(header: list[str], header_line: int, src: str, joint_names: li
     if missing_xyz and (require_position or len(missing_xyz) != 3):
         raise InputError(
             f"{src}: missing position column(s) {', '.join(missing_xyz)} (m, tracker frame); "
-            f"columns found: {found}"
+            f"columns found: {found}; map other names with --columns x=X,..."
         )
     rot_present = [c for c in ROTVEC_COLUMNS if c in seen]
     if rot_present and len(rot_present) != 3:
@@ -526,7 +532,8 @@ def _check_header(header: list[str], header_line: int, src: str, joint_names: li
         missing = [j for j in joints if j not in seen]
         if missing:
             raise InputError(
-                f"{src}: missing joint column(s) {', '.join(missing)} (rad); columns found: {found}"
+                f"{src}: missing joint column(s) {', '.join(missing)} (rad); columns found: {found}; map other "
+                f"names with --columns {missing[0]}=NAME,..."
             )
         extra_names = [c for c in header if c not in RESERVED_COLUMNS and c not in set(joints)]
     return _Columns(seen, joints, extra_names, not missing_xyz, bool(rot_present), sigma_names, found)
@@ -577,7 +584,8 @@ def _check_values(ms: MeasurementSet, cols: _Columns, row_lines: list[int], src:
         )
 
 
-def _check_units(ms: MeasurementSet, cols: _Columns, row_lines: list[int], src: str, reach_m: float | None) -> None:
+def _check_units(ms: MeasurementSet, cols: _Columns, row_lines: list[int], src: str, reach_m: float | None,
+                 joint_units: Sequence[str] | None = None) -> None:
     """Step 5: the unit guard (mm instead of m, degrees instead of rad, sigma in mm/µm)."""
     pos = ms.position_m
     if cols.position:
@@ -588,7 +596,7 @@ def _check_units(ms: MeasurementSet, cols: _Columns, row_lines: list[int], src: 
             r = int(np.argmax(dist))
             raise InputError(
                 f"{src}: columns x, y, z: median distance from the tracker {med:.6g} m exceeds {limit:g} m "
-                f"(e.g. row {r + 1} (line {row_lines[r]}): {dist[r]:.6g}); looks like mm/degrees; convert to m/rad"
+                f"(e.g. row {r + 1} (line {row_lines[r]}): {dist[r]:.6g}); looks like mm/degrees; convert to m/rad or declare the units (--units mm,deg)"
             )
     if reach_m is not None and cols.position:
         for rows in ms.station_rows().values():  # each station has its own tracker frame
@@ -599,17 +607,18 @@ def _check_units(ms: MeasurementSet, cols: _Columns, row_lines: list[int], src: 
                 raise InputError(
                     f"{src}: columns x, y, z: median distance of the points from their median point "
                     f"{med_spread:.6g} m exceeds {REACH_FACTOR:g} x reach ({float(reach_m):g} m) "
-                    f"(e.g. row {r + 1} (line {row_lines[r]})); looks like mm/degrees; convert to m/rad"
+                    f"(e.g. row {r + 1} (line {row_lines[r]})); looks like mm/degrees; convert to m/rad or declare the units (--units mm,deg)"
                 )
-    for arr, names in ((ms.q, cols.joints), (ms.rotvec_rad, ROTVEC_COLUMNS)):
+    rev = np.array([u != "m" for u in joint_units]) if joint_units is not None else np.ones(len(cols.joints), bool)
+    for arr, names, mask in ((ms.q, cols.joints, rev), (ms.rotvec_rad, ROTVEC_COLUMNS, np.ones(3, bool))):
         if arr is None:
             continue
-        big = np.abs(arr) > ANGLE_LIMIT_RAD
+        big = (np.abs(arr) > ANGLE_LIMIT_RAD) & mask[None, :]  # prismatic joints (m) are not angles
         if np.any(big):
             r, c = np.argwhere(big)[0]
             raise InputError(
                 f"{src}: column '{names[c]}', row {r + 1} (line {row_lines[r]}): value {float(arr[r, c])!r} "
-                f"exceeds 2π+0.1 rad in magnitude; looks like mm/degrees; convert to m/rad"
+                f"exceeds 2π+0.1 rad in magnitude; looks like mm/degrees; convert to m/rad or declare the units (--units mm,deg)"
             )
     if ms.sigma_m is not None:
         sigma = ms.sigma_m
@@ -619,7 +628,7 @@ def _check_units(ms: MeasurementSet, cols: _Columns, row_lines: list[int], src: 
             raise InputError(
                 f"{src}: column(s) {', '.join(dict.fromkeys(cols.sigma_names))}: median standard deviation "
                 f"{med_sigma:.6g} m exceeds {MAX_MEDIAN_SIGMA_M:g} m (e.g. row {r + 1} (line {row_lines[r]}): "
-                f"{sigma[r].max():.6g}); looks like mm/degrees; convert to m/rad"
+                f"{sigma[r].max():.6g}); looks like mm/degrees; convert to m/rad or declare the units (--units mm,deg)"
             )
 
 
@@ -651,11 +660,30 @@ def _check_duplicates(ms: MeasurementSet, row_lines: list[int], src: str) -> Non
         )
 
 
+def _apply_units(ms: MeasurementSet, u: Units, joint_units: Sequence[str] | None) -> MeasurementSet:
+    """Step 3b: declared units to SI (lengths: x, y, z, sigma, prismatic joints; angles: rx, ry, rz, revolute
+    joints). Temperature (°C), payload (kg), time (s) and extra columns are not converted."""
+    if u.is_si:
+        return ms
+    n = len(ms.joint_names)
+    ju = list(joint_units) if joint_units is not None else ["rad"] * n
+    if len(ju) != n or any(x not in ("rad", "m") for x in ju):
+        raise InputError(f"joint_units must give 'rad' or 'm' for each of the {n} joints, got {ju}")
+    scale = np.array([u.angle_rad if x == "rad" else u.length_m for x in ju])
+    return dataclasses.replace(
+        ms, q=ms.q * scale, position_m=ms.position_m * u.length_m,
+        rotvec_rad=None if ms.rotvec_rad is None else ms.rotvec_rad * u.angle_rad,
+        sigma_m=None if ms.sigma_m is None else ms.sigma_m * u.length_m)
+
+
 def read_measurements(
     path: str | os.PathLike[str],
     joint_names: list[str] | None = None,
     reach_m: float | None = None,
     require_position: bool = True,
+    units: str | Units | None = None,
+    columns: str | dict[str, str] | None = None,
+    joint_units: Sequence[str] | None = None,
 ) -> MeasurementSet:
     """Read and validate a measurement CSV file (format: see the module docstring).
 
@@ -671,6 +699,13 @@ def read_measurements(
         reach_m: Robot reach (m); if given, enables the reach-based mm guard.
         require_position: False accepts a file without ``x, y, z`` (positions
             NaN, :attr:`MeasurementSet.has_position` False), e.g. for predictions.
+        units: declared units of the file's numbers, e.g. ``"mm,deg"``
+            (:func:`pin_kpi_oed.data.table.parse_units`); converted to SI on reading. None:
+            the file is SI and the unit guard refuses mm / degrees.
+        columns: column mapping ``"joint_a1=A1,x=X"`` (package name = file name), applied to the
+            header before anything else.
+        joint_units: ``"rad"`` or ``"m"`` per joint of ``joint_names`` (prismatic joints are
+            lengths under ``units``); default all ``"rad"``.
 
     Returns:
         The measurements, in file order, in SI units.
@@ -687,12 +722,15 @@ def read_measurements(
     src = str(p)
     if reach_m is not None and not (math.isfinite(float(reach_m)) and float(reach_m) > 0):
         raise InputError(f"reach_m must be a positive number of metres, got {reach_m!r}")
+    u = parse_units(units)
+    mapping = parse_columns(columns)
     header, header_line, rows, row_lines = _read_table(p, src)
+    header = rename_header(header, mapping, src)
     cols = _check_header(header, header_line, src, joint_names, require_position)
     data = parse_numeric_table(rows, row_lines, header, src, _parse_float, cols.found, skip=(STATION_COLUMN,))
-    ms = _build_set(data, rows, cols, src)
+    ms = _apply_units(_build_set(data, rows, cols, src), u, joint_units)
     _check_values(ms, cols, row_lines, src)
-    _check_units(ms, cols, row_lines, src, reach_m)
+    _check_units(ms, cols, row_lines, src, reach_m, joint_units)
     _check_duplicates(ms, row_lines, src)
     return ms
 

@@ -23,7 +23,9 @@ only if the largest difference is ≤ ``tol_m`` (default 1e-9 m) and ≤ ``tol_m
 from __future__ import annotations
 
 import os
+import re
 import xml.etree.ElementTree as ET
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Sequence
 
@@ -32,16 +34,18 @@ import pinocchio as pin
 
 from pin_kpi_oed.errors import InputError, RobotLoadError, SolverError
 from pin_kpi_oed.data.atomic import atomic_write_text
+from pin_kpi_oed.model.parameters import ParameterLayout
 from pin_kpi_oed.model.robot import Robot
 
-__all__ = ["URDF_LIMITS_NOTE", "calibrated_urdf_text", "check_urdf_fk", "write_calibrated_urdf", "export_result_urdf",
+__all__ = ["ROOT", "FixedFrame", "model_frames", "write_model_urdf", "URDF_LIMITS_NOTE", "calibrated_urdf_text", "check_urdf_fk", "write_calibrated_urdf", "export_result_urdf",
            "result_urdf_comment"]
 
 #: What a calibrated URDF cannot carry; written as an XML comment into every exported URDF.
-URDF_LIMITS_NOTE = ("This URDF carries the calibrated joint placements (geometry) only. It cannot carry the "
-                    "identified effects (joint-angle errors, compliance, thermal, ...), the tracker pose of each "
-                    "station, the reflector offset or the stations themselves: the model file "
-                    "(pin-kpi-oed identify --model-out model.json) holds them, and pin-kpi-oed predict uses it.")
+URDF_LIMITS_NOTE = ("This URDF carries the calibrated joint placements (geometry); the tracker pose and reflector "
+                    "of each station only as fixed frames when exported with them (identify --urdf-frames). It "
+                    "cannot carry the identified effects (joint-angle errors, compliance, thermal, ...): the model "
+                    "file (pin-kpi-oed identify --model-out model.json) holds everything, and pin-kpi-oed predict "
+                    "and compensate use it.")
 
 
 def _fmt(v: float) -> str:
@@ -71,8 +75,84 @@ def _absolutise_meshes(root: ET.Element, src_dir: Path, dst_dir: Path) -> None:
             mesh.set("filename", str((src_dir / fn).resolve()))
 
 
+#: Parent name of a :class:`FixedFrame` attached to the URDF's root link (the robot base frame).
+ROOT = "<root>"
+
+
+@dataclass(frozen=True)
+class FixedFrame:
+    """A fixed frame added to the calibrated URDF as a link with a fixed joint.
+
+    Attributes:
+        name: link name of the frame (the joint is ``<name>_joint``).
+        parent: URDF link it hangs from (:data:`ROOT`: the root link, i.e. the robot base frame).
+        placement: its pose in the parent link's frame (m, rad).
+    """
+
+    name: str
+    parent: str
+    placement: pin.SE3
+
+
+def _safe(label: str) -> str:
+    return re.sub(r"[^A-Za-z0-9_]", "_", str(label)) or "station"
+
+
+def model_frames(cm, tcp_m: np.ndarray | None = None, stations: Sequence[str] | None = None) -> list[FixedFrame]:
+    """The set-up frames of a calibrated model as fixed URDF frames (so ROS tools see the whole chain).
+
+    Per station s: ``tracker_<s>`` (the tracker / cell frame, child of the root link, placed at
+    tracker_T_base⁻¹) and ``reflector_<s>`` (child of the tool link at the reflector offset, rotated by
+    the probe orientation for a 6-D probe); and ``tcp`` (child of the tool link at ``tcp_m``, default
+    the model's ``tcp_m``) when it is not the tool frame itself.
+
+    Args:
+        cm: a :class:`~pin_kpi_oed.identification.model_file.CalibratedModel`.
+        tcp_m: TCP point in the tool frame (m).
+        stations: the stations to include (default all).
+
+    Returns:
+        The frames, in order.
+    """
+    tool = cm.robot.tool_frame
+    out = []
+    for lab in (stations if stations is not None else cm.stations):
+        st = cm.setups[cm.station(lab)]
+        out.append(FixedFrame(f"tracker_{_safe(lab)}", ROOT, pin.SE3(st.tracker_T_base).inverse()))
+        R = np.eye(3) if st.probe_R is None else np.asarray(st.probe_R)
+        out.append(FixedFrame(f"reflector_{_safe(lab)}", tool, pin.SE3(R, np.asarray(st.reflector_m, float))))
+    tcp = np.asarray(cm.tcp_m if tcp_m is None else tcp_m, float).reshape(3)
+    if np.any(tcp != 0) or tcp_m is not None:
+        out.append(FixedFrame("tcp", tool, pin.SE3(np.eye(3), tcp)))
+    return out
+
+
+def _add_frames(root: ET.Element, frames: Sequence[FixedFrame], path: Path) -> None:
+    links = [ln.get("name") for ln in root.findall("link")]
+    children = {j.find("child").get("link") for j in root.findall("joint") if j.find("child") is not None}
+    roots = [ln for ln in links if ln not in children]
+    if len(roots) != 1:
+        raise RobotLoadError(f"{path}: cannot add frames, the URDF has {len(roots)} root links")
+    taken = set(links) | {j.get("name") for j in root.findall("joint")}
+    for fr in frames:
+        parent = roots[0] if fr.parent == ROOT else fr.parent
+        if parent not in links:
+            raise RobotLoadError(f"{path}: cannot hang frame '{fr.name}' from '{parent}': no such link in the URDF")
+        if fr.name in taken or f"{fr.name}_joint" in taken:
+            raise InputError(f"{path}: frame name '{fr.name}' is already used in the URDF")
+        taken |= {fr.name, f"{fr.name}_joint"}
+        ET.SubElement(root, "link", name=fr.name)
+        j = ET.SubElement(root, "joint", name=f"{fr.name}_joint", type="fixed")
+        ET.SubElement(j, "parent", link=parent)
+        ET.SubElement(j, "child", link=fr.name)
+        M = pin.SE3(fr.placement)
+        ET.SubElement(j, "origin", xyz=" ".join(_fmt(v) for v in M.translation),
+                      rpy=" ".join(_fmt(v) for v in pin.rpy.matrixToRpy(M.rotation)))
+        links.append(fr.name)
+
+
 def calibrated_urdf_text(robot: Robot, placements: Sequence[pin.SE3], comment: str | None = None,
-                         out_dir: str | os.PathLike | None = None) -> str:
+                         out_dir: str | os.PathLike | None = None, frames: Sequence[FixedFrame] = ()) -> str:
     """URDF text of ``robot`` with the actuated joints' placements replaced.
 
     Args:
@@ -81,6 +161,7 @@ def calibrated_urdf_text(robot: Robot, placements: Sequence[pin.SE3], comment: s
             (e.g. :meth:`TrackerModel.joint_placements`).
         comment: optional text put in an XML comment at the top of the robot element.
         out_dir: folder the file will live in (relative mesh paths are made absolute).
+        frames: fixed frames to add (e.g. :func:`model_frames`: tracker / cell frame, reflector, TCP).
 
     Returns:
         The URDF text.
@@ -114,6 +195,8 @@ def calibrated_urdf_text(robot: Robot, placements: Sequence[pin.SE3], comment: s
             o = ET.SubElement(el, "origin")
         o.set("xyz", " ".join(_fmt(v) for v in new.translation))
         o.set("rpy", " ".join(_fmt(v) for v in rpy))
+    if frames:
+        _add_frames(root, frames, path)
     if out_dir is not None:
         _absolutise_meshes(root, path.parent, Path(out_dir))
     if comment:
@@ -224,3 +307,37 @@ def export_result_urdf(result, path: str | os.PathLike, tol_m: float = 1e-9) -> 
     model = result.model
     return write_calibrated_urdf(model.robot, model.joint_placements(result.p), path,
                                  comment=result_urdf_comment(result), tol_m=tol_m)
+
+
+def write_model_urdf(cm, path: str | os.PathLike, frames: bool = True, tcp_m: np.ndarray | None = None,
+                     tol_m: float = 1e-9) -> float:
+    """Write the calibrated URDF of a model file's :class:`CalibratedModel`, with its set-up frames.
+
+    Args:
+        cm: the calibrated model.
+        path: output file (written atomically after the FK check).
+        frames: add :func:`model_frames` (tracker / cell frame and reflector per station, TCP).
+        tcp_m: TCP point in the tool frame (m) for the ``tcp`` frame.
+        tol_m: largest accepted FK difference of the check (m, and rad).
+
+    Returns:
+        The largest tool-frame position difference of the check (m).
+
+    Raises:
+        SolverError: the reloaded URDF does not reproduce the calibrated FK (nothing written).
+    """
+    rb = cm.robot
+    L = ParameterLayout(list(rb.joint_names))
+    placements = [rb.model.jointPlacements[j] * pin.exp6(cm.joint_p[L.joint_slice(k)])
+                  for k, j in enumerate(rb.joint_ids)]
+    target = Path(path)
+    comment = ("calibrated by pin_kpi_oed (model file); frames tracker_<station> (tracker / cell frame), "
+               "reflector_<station>, tcp are fixed frames of the set-up. " + URDF_LIMITS_NOTE) if frames else None
+    text = calibrated_urdf_text(rb, placements, comment, out_dir=target.parent if str(target.parent) else ".",
+                                frames=model_frames(cm, tcp_m) if frames else ())
+    dp, dr = check_urdf_fk(text, rb, placements)
+    if dp > tol_m or dr > tol_m:
+        raise SolverError(f"the calibrated URDF reproduces the identified FK only to {dp:.3g} m / {dr:.3g} rad "
+                          f"(> {tol_m:g}); nothing written to {target}")
+    atomic_write_text(target, text)
+    return dp

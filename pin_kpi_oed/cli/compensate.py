@@ -1,0 +1,84 @@
+"""CLI subcommand ``compensate`` of ``pin-kpi-oed``: joint values for the real robot from a calibrated model.
+
+The controller keeps its nominal kinematics; ``compensate`` tells it other joint values so that the
+real TCP lands on the target according to the calibrated model (geometry + effects), by inverse
+kinematics on that model started from the nominal solution
+(:mod:`pin_kpi_oed.identification.compensate`). Per target it reports the predicted correction
+(mm) and flags targets that are unreachable or near a singularity.
+
+Examples::
+
+    pin-kpi-oed compensate --model model.json --targets targets.csv --out joints.csv            # cell frame
+    pin-kpi-oed compensate --model model.json --targets targets.csv --frame base --out joints.csv
+    pin-kpi-oed compensate --model model.json --program prog.csv --out prog_compensated.csv
+"""
+
+from __future__ import annotations
+
+import argparse
+
+from pin_kpi_oed.cli.util import add_table_options, parse_floats, table_options
+
+__all__ = ["register", "run"]
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    """Add the ``compensate`` subcommand."""
+    p = subparsers.add_parser(
+        "compensate", help="compensated joint values for Cartesian TCP targets or a joint-space program",
+        description="Inverse kinematics on the calibrated model (geometry + effects), started from the nominal "
+                    "solution: the joint values that put the real TCP on each target. --targets: CSV with x, y, z "
+                    "(m; rx, ry, rz rad optional; name; joint columns as start hints optional) in the cell frame "
+                    "(tracker frame of the station) or the robot base frame (--frame base). --program: CSV with "
+                    "the joint columns of a nominal program; each pose's nominal TCP pose (base frame) becomes the "
+                    "target. Writes the compensated joints, the nominal ones, the predicted correction (m), the "
+                    "residual and a status per target (ok / unreachable / near_singular).")
+    src = p.add_mutually_exclusive_group(required=True)
+    src.add_argument("--targets", default=None, help="CSV of Cartesian TCP targets (x, y, z; rx, ry, rz optional)")
+    src.add_argument("--program", default=None, help="CSV of a joint-space program (the robot's joint columns)")
+    p.add_argument("--model", required=True, help="calibrated model file (identify / register --model-out)")
+    p.add_argument("--out", required=True, help="write the compensated joints (CSV) here")
+    p.add_argument("--frame", choices=("cell", "base"), default="cell",
+                   help="frame of --targets: cell = tracker frame of the station (default), base = robot base frame")
+    p.add_argument("--station", default=None, help="station of the cell frame and default TCP (default: the model's)")
+    p.add_argument("--tcp", default=None,
+                   help="TCP point x,y,z in the tool frame (m); default the station's reflector (what was measured)")
+    p.add_argument("--position-only", action="store_true",
+                   help="with --program: hold the TCP position only, leave the orientation free")
+    p.add_argument("--seed", type=int, default=0, help="seed of the random restarts of the nominal IK")
+    p.add_argument("--json", default=None, help="write the full result (per target) as JSON here")
+    p.add_argument("--quiet", action="store_true", help="print nothing")
+    add_table_options(p)
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    """Handler of ``pin-kpi-oed compensate``."""
+    from pin_kpi_oed.data.atomic import atomic_write_json, check_writable
+    from pin_kpi_oed.data.targets import read_targets
+    from pin_kpi_oed.identification.compensate import (CompensationOptions, compensate, compensate_program,
+                                                       write_compensation)
+    from pin_kpi_oed.identification.model_file import load_model_file
+
+    for f in (args.out, args.json):
+        if f:
+            check_writable(f)
+    model = load_model_file(args.model)
+    robot = model.robot
+    kw = table_options(args)
+    tcp = parse_floats(args.tcp, 3, "--tcp") if args.tcp else None
+    opt = CompensationOptions(frame=args.frame, station=args.station, tcp_m=tcp, seed=args.seed)
+    if args.program:
+        prog = read_targets(args.program, robot.joint_names, program=True, revolute=robot.is_revolute, **kw)
+        res = compensate_program(model, prog, opt, orientation=not args.position_only)
+    else:
+        ts = read_targets(args.targets, robot.joint_names, revolute=robot.is_revolute, **kw)
+        res = compensate(model, ts, opt)
+    write_compensation(args.out, res)
+    if args.json:
+        atomic_write_json(args.json, {**res.to_dict(), "model": args.model,
+                                      "input": args.program or args.targets})
+    if not args.quiet:
+        print(res.summary())
+        print("wrote " + ", ".join(f for f in (args.out, args.json) if f))
+    return 0

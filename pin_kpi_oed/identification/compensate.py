@@ -1,0 +1,460 @@
+r"""Compensation ("program filtering"): joint values that put the real TCP on the target.
+
+The controller keeps its nominal kinematics. To make the real robot reach a Cartesian target,
+it must be told other joint values: those for which the **calibrated** model (geometry δ and
+effects θ of a :class:`~pin_kpi_oed.identification.model_file.CalibratedModel`) puts the TCP on
+the target. For target i (position t_i, optionally orientation R_i):
+
+1. nominal solution q⁰_i: inverse kinematics on the nominal robot (what the controller would
+   command), from the target's start configuration (a joint hint in the file), else from the
+   robot's neutral pose and then from seeded random starts;
+2. compensated solution q_i: inverse kinematics on the calibrated model started from q⁰_i::
+
+       F(q) = [ T_f · oMtool_δ(q + ΣΔq(θ, q)) · c + ΣΔy(θ, q) ,   R_T · R_tool_δ(q + ΣΔq) ]
+
+   with T_f the target frame (``cell``: the station's tracker frame, T_f = tracker_T_base of
+   the station; ``base``: the robot base frame, T_f = I) and c the TCP point in the tool frame
+   (default: the station's reflector, the point the calibration measured). The position of F is
+   computed by :func:`~pin_kpi_oed.effects.library.predict_with_effects`, the same function the
+   fit and :meth:`CalibratedModel.predict` use.
+3. predicted correction: ``|F(q⁰_i) − t_i|`` (m), how far the calibrated model says the nominal
+   solution misses the target, i.e. how far compensation moves the TCP.
+
+Both IK problems are solved by damped Gauss–Newton (Levenberg–Marquardt steps
+``Δq = Jᵀ(JJᵀ + λ²I)⁻¹ e``, steps limited to ``max_step_rad``, joint limits enforced by
+clipping). J is Pinocchio's frame Jacobian (``LOCAL_WORLD_ALIGNED``) of the calibrated (resp.
+nominal) model, shifted to the TCP point and rotated into the target frame; orientation rows
+are scaled by ``length_m`` (m/rad). The effects' dependence on q (∂ΔQ/∂q, ∂Δy/∂q, of the order
+of 10⁻⁴) is left out of J but not out of the residual, so the iteration converges to the exact
+solution of the calibrated model (linearly, at a rate of that order). A position-only target
+leaves the orientation free: the minimum-norm steps stay close to the nominal solution.
+
+Status per target: ``ok``; ``unreachable`` (the nominal or the calibrated IK ends farther from
+the target than ``reach_tol_m`` / ``reach_tol_rad``: outside the workspace, at a joint limit, or
+at a singularity where the calibrated pose needs a large joint motion — ``inv_cond`` tells which);
+``near_singular`` (reached, but the inverse condition number σ_min/σ_max of the scaled Jacobian
+is below ``singular_ratio``: small TCP corrections there need large joint motions).
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import os
+import time
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+import pinocchio as pin
+
+from pin_kpi_oed.data.atomic import atomic_write_text
+from pin_kpi_oed.data.measurements import MeasurementSet
+from pin_kpi_oed.data.targets import TargetSet
+from pin_kpi_oed.effects.library import predict_with_effects, sum_joint_offsets
+from pin_kpi_oed.errors import InputError
+from pin_kpi_oed.identification.model_file import CalibratedModel
+from pin_kpi_oed.model.kinematics import skew
+from pin_kpi_oed.model.parameters import ParameterLayout
+from pin_kpi_oed.model.tracker import TrackerModel
+from pin_kpi_oed.results import Result
+
+__all__ = ["FRAMES", "CompensationOptions", "PoseModel", "CompensationResult", "compensate", "compensate_program",
+           "write_compensation", "forward"]
+
+#: Frames a target can be given in.
+FRAMES = ("cell", "base")
+
+
+@dataclass
+class CompensationOptions:
+    """Knobs of :func:`compensate` (SI units).
+
+    Attributes:
+        frame: ``cell`` (tracker frame of the station) or ``base`` (robot base frame).
+        station: the station whose set-up defines the cell frame and default TCP (default: the
+            model's default station).
+        tcp_m: TCP point in the tool frame (m); default the station's reflector offset.
+        length_m: weight of the orientation rows (m per rad) in the IK norm and the condition number.
+        max_iter: iterations per IK start.
+        tol_m, tol_rad: convergence of the IK (position m, orientation rad).
+        reach_tol_m, reach_tol_rad: a final residual beyond these is ``unreachable``.
+        max_step_rad: largest joint step per iteration (rad or m).
+        damping: λ of the damped steps (m).
+        singular_ratio: inverse condition number below which a solution is ``near_singular``.
+        restarts: seeded random starts of the nominal IK when the first start fails.
+        seed: seed of those starts.
+    """
+
+    frame: str = "cell"
+    station: str | None = None
+    tcp_m: np.ndarray | None = None
+    length_m: float = 0.5
+    max_iter: int = 200
+    tol_m: float = 1e-9
+    tol_rad: float = 1e-9
+    reach_tol_m: float = 1e-6
+    reach_tol_rad: float = 1e-6
+    max_step_rad: float = 0.3
+    damping: float = 1e-6
+    singular_ratio: float = 1e-2
+    restarts: int = 10
+    seed: int = 0
+
+    def __post_init__(self) -> None:
+        if self.frame not in FRAMES:
+            raise InputError(f"frame must be one of {', '.join(FRAMES)}, got '{self.frame}'")
+        for k in ("length_m", "tol_m", "tol_rad", "reach_tol_m", "reach_tol_rad", "max_step_rad", "singular_ratio"):
+            v = float(getattr(self, k))
+            if not (np.isfinite(v) and v > 0):
+                raise InputError(f"compensation option {k} must be a positive number, got {v!r}")
+        if self.tcp_m is not None:
+            self.tcp_m = np.asarray(self.tcp_m, float).reshape(3)
+
+
+class PoseModel:
+    """TCP pose F(q) of a calibrated (or the nominal) robot in a target frame, and its Pinocchio Jacobian.
+
+    Args:
+        cm: the calibrated model.
+        frame: ``cell`` or ``base`` (see the module docstring).
+        station: station of the cell frame / default TCP.
+        tcp_m: TCP in the tool frame (m); default the station's reflector.
+        nominal: use the nominal geometry and no effects (what the controller computes).
+    """
+
+    def __init__(self, cm: CalibratedModel, frame: str = "cell", station: str | None = None,
+                 tcp_m: np.ndarray | None = None, nominal: bool = False):
+        self.robot = cm.robot
+        st = cm.setups[cm.station(station)]
+        self.T = pin.SE3(st.tracker_T_base) if frame == "cell" else pin.SE3.Identity()
+        self.tcp = np.asarray(st.reflector_m if tcp_m is None else tcp_m, float).reshape(3)
+        L = ParameterLayout(list(self.robot.joint_names))
+        self.tm = TrackerModel(self.robot, tracker_T_base=self.T, reflector_m=self.tcp, noise=cm.noise, layout=L)
+        self.p = np.zeros(L.n)
+        if not nominal:
+            self.p[:6 * self.robot.nq] = cm.joint_p
+        self.pairs = [] if nominal else list(zip(cm.effects, cm.thetas))
+        self.model = self.tm.pinocchio_model(self.p)
+        self.data = self.model.createData()
+        self.fid = self.robot.tool_frame_id
+
+    def joint_offsets(self, Q: np.ndarray, aux: Any) -> np.ndarray:
+        """ΣΔq of the effects at Q, (m, n) rad."""
+        return sum_joint_offsets(self.pairs, Q, aux)[0] if self.pairs else np.zeros_like(Q)
+
+    def pose(self, Q: np.ndarray, aux: Any = None) -> tuple[np.ndarray, np.ndarray]:
+        """TCP positions (m, 3) m and tool rotations (m, 3, 3) in the target frame at Q (rad)."""
+        Q = np.atleast_2d(np.asarray(Q, float))
+        pos = predict_with_effects(self.tm, self.p, Q, aux, self.pairs)[:, :3]
+        Qe = Q + self.joint_offsets(Q, aux)
+        R = np.empty((Q.shape[0], 3, 3))
+        for i, q in enumerate(Qe):
+            pin.framesForwardKinematics(self.model, self.data, q)
+            R[i] = self.T.rotation @ self.data.oMf[self.fid].rotation
+        return pos, R
+
+    def jacobian(self, q: np.ndarray) -> np.ndarray:
+        """(6, n) Jacobian of the TCP (linear velocity of the TCP point, angular velocity) in the target frame."""
+        pin.computeJointJacobians(self.model, self.data, q)
+        pin.updateFramePlacements(self.model, self.data)
+        J = pin.getFrameJacobian(self.model, self.data, self.fid, pin.LOCAL_WORLD_ALIGNED)
+        M = self.data.oMf[self.fid]
+        r = M.rotation @ self.tcp
+        Jv = J[:3] - skew(r) @ J[3:]
+        return np.vstack([self.T.rotation @ Jv, self.T.rotation @ J[3:]])
+
+
+def _rot_error(R_target: np.ndarray, R: np.ndarray) -> np.ndarray:
+    """ω with exp(ω)·R = R_target for every row, (m, 3) rad."""
+    return np.array([pin.log3(Rt @ Ri.T) for Rt, Ri in zip(R_target, R)])
+
+
+@dataclass
+class _IK:
+    Q: np.ndarray
+    err_m: np.ndarray
+    err_rad: np.ndarray
+    inv_cond: np.ndarray
+    nit: int
+
+
+def _wrap_clip(q: np.ndarray, lo: np.ndarray, hi: np.ndarray, revolute: np.ndarray) -> np.ndarray:
+    """A revolute joint pushed past a limit is moved by ∓2π when that lands inside the limits; then clip."""
+    q = q.copy()
+    tau = 2.0 * np.pi
+    up = revolute & (q > hi) & (q - tau >= lo)
+    down = revolute & (q < lo) & (q + tau <= hi)
+    q[up] -= tau
+    q[down] += tau
+    return np.clip(q, lo, hi)
+
+
+def _solve_ik(pm: PoseModel, pos_t: np.ndarray, R_t: np.ndarray | None, Q0: np.ndarray, aux: Any,
+              opt: CompensationOptions) -> _IK:
+    """Levenberg–Marquardt IK of every row from Q0 (batched residuals, per-row Pinocchio Jacobians).
+
+    Each row keeps its own damping λ_i (starting at ``opt.damping``): a step that lowers the
+    row's weighted error is taken and λ_i divided by 3, otherwise it is rejected and λ_i
+    multiplied by 5 — robust near singularities, Gauss–Newton (quadratic) elsewhere.
+    """
+    Q = np.array(Q0, float)
+    lo, hi = pm.robot.q_lower, pm.robot.q_upper
+    rows6 = R_t is not None
+    nr = 6 if rows6 else 3
+    rev = pm.robot.is_revolute
+    w = np.r_[np.ones(3), np.full(3, opt.length_m)] if rows6 else np.ones(3)
+
+    def errors(Qx: np.ndarray) -> np.ndarray:
+        pos, R = pm.pose(Qx, aux)
+        e = pos_t - pos
+        return np.hstack([e, _rot_error(R_t, R)]) if rows6 else e
+
+    lam = np.full(len(Q), float(opt.damping))
+    E = errors(Q)
+    nit = 0
+    for nit in range(1, opt.max_iter + 1):
+        todo = (np.linalg.norm(E[:, :3], axis=1) > opt.tol_m)
+        if rows6:
+            todo |= np.linalg.norm(E[:, 3:], axis=1) > opt.tol_rad
+        todo &= lam < 1e3
+        if not todo.any():
+            break
+        Qe = Q + pm.joint_offsets(Q, aux)
+        Qn = Q.copy()
+        for i in np.flatnonzero(todo):
+            J = pm.jacobian(Qe[i])[:nr] * w[:, None]
+            dq = J.T @ np.linalg.solve(J @ J.T + lam[i] ** 2 * np.eye(nr), E[i] * w)
+            s = np.abs(dq).max()
+            if s > opt.max_step_rad:
+                dq *= opt.max_step_rad / s
+            Qn[i] = _wrap_clip(Q[i] + dq, lo, hi, rev)
+        En = errors(Qn)
+        better = todo & (np.linalg.norm(En * w, axis=1) < np.linalg.norm(E * w, axis=1))
+        Q[better], E[better] = Qn[better], En[better]
+        lam[better] = np.maximum(lam[better] / 3.0, opt.damping)
+        lam[todo & ~better] *= 5.0
+    err_m = np.linalg.norm(E[:, :3], axis=1)
+    err_rad = np.linalg.norm(E[:, 3:], axis=1) if rows6 else np.zeros(len(Q))
+    Qe = Q + pm.joint_offsets(Q, aux)
+    inv_cond = np.empty(len(Q))
+    for i, q in enumerate(Qe):
+        sv = np.linalg.svd(pm.jacobian(q)[:nr] * w[:, None], compute_uv=False)
+        inv_cond[i] = sv[-1] / sv[0] if sv[0] > 0 else 0.0
+    return _IK(Q, err_m, err_rad, inv_cond, nit)
+
+
+@dataclass(kw_only=True)
+class CompensationResult(Result):
+    """Compensated joint values of every target (SI units).
+
+    Attributes:
+        names: target labels.
+        joint_names: the robot's joints (columns of ``q`` and ``q_nominal``).
+        q_nominal: nominal IK solutions (what the controller would command for the target), (m, n).
+        q: compensated joint values (send these), (m, n).
+        correction_m: predicted TCP correction |F_cal(q_nominal) − target|, (m,) m.
+        residual_m, residual_rad: calibrated-model distance of q's TCP from the target (m, rad).
+        inv_cond: inverse condition number of the scaled Jacobian at q.
+        status: per target ``ok`` / ``unreachable`` / ``near_singular`` (``status`` of the
+            result: ``ok`` if every target is ok, else a count).
+        frame: ``cell`` or ``base``; tcp_m: the TCP point (tool frame, m); station.
+    """
+
+    names: list[str] = field(default_factory=list)
+    joint_names: list[str] = field(default_factory=list)
+    q_nominal: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
+    q: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
+    correction_m: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    residual_m: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    residual_rad: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    inv_cond: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    target_status: list[str] = field(default_factory=list)
+    frame: str = "cell"
+    station: str = ""
+    tcp_m: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    orientation: bool = False
+
+    def summary(self) -> str:
+        """Counts, correction statistics (mm), and the targets that are not ok."""
+        c = self.correction_m * 1e3
+        ok = [s == "ok" for s in self.target_status]
+        lines = [f"compensated {len(self.names)} targets ({'position + orientation' if self.orientation else 'position'}"
+                 f", {self.frame} frame{' of station ' + self.station if self.frame == 'cell' else ''}): "
+                 f"{sum(ok)} ok, {self.target_status.count('near_singular')} near a singularity, "
+                 f"{self.target_status.count('unreachable')} unreachable"]
+        if c.size:
+            lines.append(f"predicted correction: mean {np.nanmean(c):.4f} mm, max {np.nanmax(c):.4f} mm; "
+                         f"largest residual {np.nanmax(self.residual_m) * 1e3:.2e} mm")
+        bad = [(n, s) for n, s in zip(self.names, self.target_status) if s != "ok"]
+        for n, s in bad[:10]:
+            lines.append(f"  target {n}: {s}")
+        if len(bad) > 10:
+            lines.append(f"  ... and {len(bad) - 10} more")
+        return "\n".join(lines)
+
+    def to_dict(self) -> dict:
+        from pin_kpi_oed.data.atomic import to_jsonable
+
+        return to_jsonable({**self.result_dict(), "names": self.names, "joint_names": self.joint_names,
+                            "q": self.q, "q_nominal": self.q_nominal, "correction_m": self.correction_m,
+                            "residual_m": self.residual_m, "residual_rad": self.residual_rad,
+                            "inv_cond": self.inv_cond, "target_status": self.target_status, "frame": self.frame,
+                            "station": self.station, "tcp_m": self.tcp_m, "orientation": self.orientation})
+
+
+def _nominal_ik(pm0: PoseModel, pos_t: np.ndarray, R_t: np.ndarray | None, Q_start: np.ndarray, aux: Any,
+                opt: CompensationOptions) -> _IK:
+    """Nominal IK from Q_start, then from seeded random starts for the rows that did not converge."""
+    ik = _solve_ik(pm0, pos_t, R_t, Q_start, aux, opt)
+    rng = np.random.default_rng(opt.seed)
+    for _ in range(opt.restarts):
+        bad = (ik.err_m > opt.reach_tol_m) | (ik.err_rad > opt.reach_tol_rad)
+        if not bad.any():
+            break
+        idx = np.flatnonzero(bad)
+        sub_aux = aux.subset(idx) if isinstance(aux, MeasurementSet) else aux
+        again = _solve_ik(pm0, pos_t[idx], None if R_t is None else R_t[idx], pm0.robot.random_q(rng, idx.size),
+                          sub_aux, opt)
+        better = again.err_m + opt.length_m * again.err_rad < ik.err_m[idx] + opt.length_m * ik.err_rad[idx]
+        for k, i in enumerate(idx):
+            if better[k]:
+                ik.Q[i], ik.err_m[i], ik.err_rad[i], ik.inv_cond[i] = (again.Q[k], again.err_m[k], again.err_rad[k],
+                                                                       again.inv_cond[k])
+        ik.nit += again.nit
+    return ik
+
+
+def compensate(cm: CalibratedModel, targets: TargetSet, options: CompensationOptions | None = None
+               ) -> CompensationResult:
+    """Joint values that put the calibrated robot's TCP on Cartesian targets (module docstring, steps 1–3).
+
+    Args:
+        cm: the calibrated model (geometry + effects + set-up).
+        targets: TCP positions (and orientations) in ``options.frame``; a joint hint per row
+            (``targets.q``) starts the nominal IK there.
+        options: :class:`CompensationOptions`.
+
+    Returns:
+        The :class:`CompensationResult` (``success``: every target reached).
+
+    Raises:
+        InputError: targets without positions, joint names that differ from the model's robot,
+            an effect that needs a column (temperature, payload, time) the targets lack.
+    """
+    opt = options or CompensationOptions()
+    t0 = time.perf_counter()
+    if targets.position_m is None:
+        raise InputError(f"{targets.source or 'targets'}: no TCP positions (x, y, z) to compensate")
+    _check_joints(cm, targets)
+    _check_effects(cm, targets.aux)
+    pm = PoseModel(cm, opt.frame, opt.station, opt.tcp_m)
+    pm0 = PoseModel(cm, opt.frame, opt.station, opt.tcp_m, nominal=True)
+    pos_t = np.asarray(targets.position_m, float)
+    R_t = None if targets.rotvec_rad is None else np.array([pin.exp3(v) for v in targets.rotvec_rad])
+    m = len(targets)
+    Q_start = targets.q if targets.q is not None else np.tile(cm.robot.neutral(), (m, 1))
+    Q_start = np.clip(Q_start, cm.robot.q_lower, cm.robot.q_upper)
+    nom = _nominal_ik(pm0, pos_t, R_t, Q_start, targets.aux, opt)
+    cal = _solve_ik(pm, pos_t, R_t, nom.Q, targets.aux, opt)
+    return _result(cm, targets, opt, pm, nom, cal, pos_t, t0)
+
+
+def compensate_program(cm: CalibratedModel, program: TargetSet, options: CompensationOptions | None = None,
+                       orientation: bool = True) -> CompensationResult:
+    """Compensate a joint-space program: nominal FK → target → calibrated IK from the program's pose.
+
+    The target of every program row is the TCP pose the nominal kinematics give for it (in the
+    base frame: the controller's view), orientation included unless ``orientation`` is False.
+
+    Args:
+        cm: the calibrated model.
+        program: the nominal program (``program.q``, rad / m).
+        options: :class:`CompensationOptions` (``frame`` is ignored: the program lives in the base frame).
+        orientation: also hold the tool orientation of each program pose.
+
+    Returns:
+        The :class:`CompensationResult` (``q_nominal`` = the program).
+
+    Raises:
+        InputError: a program without joint values, or with values outside the joint limits.
+    """
+    opt = options or CompensationOptions()
+    t0 = time.perf_counter()
+    if program.q is None:
+        raise InputError(f"{program.source or 'program'}: no joint columns")
+    _check_joints(cm, program)
+    _check_effects(cm, program.aux)
+    opt = CompensationOptions(**{**opt.__dict__, "frame": "base"})
+    Q0 = cm.robot.check_q(program.q, program.source or "program")
+    pm0 = PoseModel(cm, "base", opt.station, opt.tcp_m, nominal=True)
+    pm = PoseModel(cm, "base", opt.station, opt.tcp_m)
+    pos_t, R = pm0.pose(Q0, program.aux)
+    R_t = R if orientation else None
+    nom = _IK(Q0.copy(), np.zeros(len(Q0)), np.zeros(len(Q0)), np.ones(len(Q0)), 0)
+    cal = _solve_ik(pm, pos_t, R_t, Q0, program.aux, opt)
+    targets = TargetSet(program.names, pos_t, None, Q0, program.joint_names, program.aux, program.source)
+    res = _result(cm, targets, opt, pm, nom, cal, pos_t, t0)
+    res.orientation = bool(orientation)
+    return res
+
+
+def _check_joints(cm: CalibratedModel, ts: TargetSet) -> None:
+    if list(ts.joint_names) != list(cm.robot.joint_names):
+        raise InputError(f"{ts.source or 'targets'}: joints {', '.join(ts.joint_names)} differ from the model's "
+                         f"robot {cm.robot.name} ({', '.join(cm.robot.joint_names)})")
+
+
+def _check_effects(cm: CalibratedModel, aux: MeasurementSet) -> None:
+    for eff in cm.effects:
+        why = eff.check(aux) if hasattr(eff, "check") else None
+        if why:
+            raise InputError(f"{aux.source or 'targets'}: the model's effect '{eff.name}' needs data the file lacks: "
+                             f"{why}")
+
+
+def _result(cm: CalibratedModel, ts: TargetSet, opt: CompensationOptions, pm: PoseModel, nom: _IK, cal: _IK,
+            pos_t: np.ndarray, t0: float) -> CompensationResult:
+    pos_nom, _ = pm.pose(nom.Q, ts.aux)
+    correction = np.linalg.norm(pos_nom - pos_t, axis=1)
+    status = []
+    for i in range(len(ts)):
+        if (nom.err_m[i] > opt.reach_tol_m or nom.err_rad[i] > opt.reach_tol_rad
+                or cal.err_m[i] > opt.reach_tol_m or cal.err_rad[i] > opt.reach_tol_rad):
+            status.append("unreachable")
+        elif cal.inv_cond[i] < opt.singular_ratio:
+            status.append("near_singular")
+        else:
+            status.append("ok")
+    n_bad = sum(s != "ok" for s in status)
+    return CompensationResult(
+        success=n_bad == 0, status="ok" if n_bad == 0 else f"{n_bad} of {len(ts)} targets not ok",
+        message="" if n_bad == 0 else "see the per-target status (unreachable / near_singular)",
+        nit=int(nom.nit + cal.nit), time_s=time.perf_counter() - t0, names=list(ts.names),
+        joint_names=list(cm.robot.joint_names), q_nominal=nom.Q, q=cal.Q, correction_m=correction,
+        residual_m=cal.err_m, residual_rad=cal.err_rad, inv_cond=cal.inv_cond, target_status=status,
+        frame=opt.frame, station=cm.station(opt.station), tcp_m=pm.tcp, orientation=ts.rotvec_rad is not None)
+
+
+def write_compensation(path: str | os.PathLike, res: CompensationResult) -> None:
+    """Write the compensated joints as CSV, atomically (SI units).
+
+    Columns: ``name``, the joint columns (compensated, rad / m: send these), ``<joint>_nominal``,
+    ``correction_m``, ``residual_m``, ``residual_rad``, ``inv_cond``, ``status``.
+    """
+    buf = io.StringIO()
+    w = csv.writer(buf, lineterminator="\n")
+    w.writerow(["name"] + res.joint_names + [f"{j}_nominal" for j in res.joint_names]
+               + ["correction_m", "residual_m", "residual_rad", "inv_cond", "status"])
+    for i, n in enumerate(res.names):
+        w.writerow([n] + [repr(float(v)) for v in res.q[i]] + [repr(float(v)) for v in res.q_nominal[i]]
+                   + [repr(float(res.correction_m[i])), repr(float(res.residual_m[i])),
+                      repr(float(res.residual_rad[i])), repr(float(res.inv_cond[i])), res.target_status[i]])
+    atomic_write_text(path, buf.getvalue())
+
+
+def forward(cm: CalibratedModel, Q: np.ndarray, aux: Any = None, frame: str = "cell", station: str | None = None,
+            tcp_m: np.ndarray | None = None) -> np.ndarray:
+    """Where the calibrated model says the TCP goes for commanded joints Q: positions (m, 3) m in ``frame``."""
+    return PoseModel(cm, frame, station, tcp_m).pose(np.atleast_2d(np.asarray(Q, float)), aux)[0]
+

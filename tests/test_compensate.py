@@ -1,0 +1,303 @@
+"""Compensation: joint values from the calibrated model (Cartesian targets, joint-space programs, CLI)."""
+
+from __future__ import annotations
+
+import csv
+from pathlib import Path
+
+import numpy as np
+import pinocchio as pin
+import pytest
+
+from pin_kpi_oed import NoiseModel, TrackerModel, load_robot
+from pin_kpi_oed.cli.main import main
+from pin_kpi_oed.data.measurements import MeasurementSet
+from pin_kpi_oed.data.targets import TargetSet, read_targets
+from pin_kpi_oed.effects.library import parse_effects_spec, size_effect
+from pin_kpi_oed.errors import InputError
+from pin_kpi_oed.identification.compensate import (CompensationOptions, PoseModel, compensate, compensate_program,
+                                                   forward)
+from pin_kpi_oed.identification.identify import identify, predict, validate
+from pin_kpi_oed.identification.simulate import Tolerances, default_tracker_pose, random_truth, simulate
+from pin_kpi_oed.oed.identifiability import analyse
+
+SIGMA = 1e-5
+REFLECTOR = np.array([0.03, 0.02, 0.08])
+_here = Path(__file__).resolve()
+IPA = next((p / "shared" / "data" / "ipa_ur10" for p in (_here.parents[2], _here.parents[3])
+            if (p / "shared" / "data" / "ipa_ur10").is_dir()), _here.parents[2] / "shared" / "data" / "ipa_ur10")
+needs_ipa = pytest.mark.skipif(not IPA.is_dir(), reason=f"IPA data not found at {IPA}")
+
+
+def _aux(robot, m):
+    return MeasurementSet(robot.joint_names, np.zeros((m, robot.nq)), np.full((m, 3), np.nan))
+
+
+def _regular(Q):
+    """UR configurations away from the elbow (q3 = 0) and wrist (q5 = 0, ±π) singularities."""
+    Q = Q.copy()
+    Q[:, 2] = np.where(Q[:, 2] < 0, -1.0, 1.0) * np.clip(np.abs(Q[:, 2]), 0.6, 2.5)
+    Q[:, 4] = np.clip(np.abs(Q[:, 4]), 0.6, 2.5)
+    return Q
+
+
+@pytest.fixture(scope="module")
+def world():
+    """A UR10 with random (identifiable) geometric errors, a tracker-pose error and a withheld gear harmonic,
+    calibrated (geometry only) on 200 simulated tracker rows; 100 more rows held out."""
+    robot = load_robot("ur10")
+    tm = TrackerModel(robot, tracker_T_base=default_tracker_pose(robot), reflector_m=REFLECTOR,
+                      noise=NoiseModel((SIGMA,) * 3))
+    base = [i for i in analyse(tm).base if i < 6 * robot.nq]
+    truth = random_truth(tm, Tolerances(5e-4, 1e-3, 0.01, 0.01), seed=3, only=base + list(range(36, 42)))
+    rng = np.random.default_rng(1)
+    Q = robot.random_q(rng, 300)
+    (eff, th), = parse_effects_spec("gear_harmonic=5e-5", robot, rng)
+    th = size_effect(tm, truth, Q, MeasurementSet(robot.joint_names, Q, np.zeros((300, 3))), eff, th, 3 * SIGMA)
+    data = simulate(tm, Q, truth, effects=[(eff, th)], seed=2)
+    train, held = data.subset(np.arange(200)), data.subset(np.arange(200, 300))
+    res = identify(TrackerModel(robot, reflector_m=REFLECTOR, noise=tm.noise), train)
+    cm = res.calibrated_model()
+    held_err = validate(cm, held)
+
+    def truth_tcp(Qx):  # where the true robot's reflector goes (tracker frame), with the withheld effect
+        return predict(tm, truth, Qx, [eff], [th], _aux(robot, len(Qx)))[:, :3]
+
+    return robot, tm, truth, (eff, th), cm, held_err, truth_tcp
+
+
+def test_simulated_targets_reach_within_twice_the_held_out_error(world, capsys):
+    robot, tm, truth, _, cm, held_err, truth_tcp = world
+    Qt = robot.random_q(np.random.default_rng(5), 200) * 0.9
+    Yt = truth_tcp(Qt)  # 200 reachable Cartesian targets in the cell (tracker) frame
+    ts = TargetSet([f"P{i}" for i in range(200)], Yt, None, None, list(robot.joint_names), _aux(robot, 200), "sim")
+    res = compensate(cm, ts, CompensationOptions(frame="cell"))
+    assert res.success and res.target_status.count("ok") == 200
+    assert res.residual_m.max() < 1e-8  # the calibrated model puts the TCP on the target
+    e_comp = np.linalg.norm(truth_tcp(res.q) - Yt, axis=1)
+    e_nom = np.linalg.norm(truth_tcp(res.q_nominal) - Yt, axis=1)
+    with capsys.disabled():
+        print(f"\n[compensate] 200 targets: mean error nominal {e_nom.mean() * 1e3:.3f} mm, compensated "
+              f"{e_comp.mean() * 1e3:.4f} mm; calibration held-out mean {held_err['mean_m'] * 1e3:.4f} mm")
+    assert e_comp.mean() <= 2.0 * held_err["mean_m"]
+    assert e_nom.mean() > 20.0 * e_comp.mean()
+    # the predicted correction is what the nominal solution misses by, in the truth too (to the model error)
+    assert np.abs(res.correction_m - e_nom).max() < 5.0 * held_err["max_m"]
+
+
+def test_pose_model_matches_model_predict_and_finite_differences(world):
+    robot, _, _, _, cm, _, _ = world
+    Q = robot.random_q(np.random.default_rng(8), 5)
+    pm = PoseModel(cm, "cell")
+    assert np.abs(pm.pose(Q)[0] - cm.predict(Q)).max() < 1e-12
+    assert np.abs(forward(cm, Q) - cm.predict(Q)).max() < 1e-12
+    for nominal in (False, True):
+        pmx = PoseModel(cm, "base", tcp_m=np.array([0.01, -0.02, 0.15]), nominal=nominal)
+        q = Q[0]
+        J = pmx.jacobian(q)
+        h = 1e-6
+        for k in range(robot.nq):
+            dq = np.zeros(robot.nq)
+            dq[k] = h
+            (p1,), (R1,) = pmx.pose(q + dq)
+            (p0,), (R0,) = pmx.pose(q - dq)
+            assert np.allclose((p1 - p0) / (2 * h), J[:3, k], atol=1e-7)
+            assert np.allclose(pin.log3(R1 @ R0.T) / (2 * h), J[3:, k], atol=1e-7)
+
+
+def test_six_d_targets_in_the_base_frame(world):
+    robot, tm, truth, (eff, th), cm, held_err, _ = world
+    Qt = robot.random_q(np.random.default_rng(6), 40) * 0.9
+    truth_base = TrackerModel(robot, reflector_m=tm.reflector(truth), noise=tm.noise)
+    pt = truth.copy()
+    pt[tm.layout.tracker] = 0.0
+    Yb = predict(truth_base, pt, Qt, [eff], [th], _aux(robot, 40))[:, :3]  # true TCP in the base frame
+    pm_true = PoseModel(cm, "base")
+    Rb = np.array([pin.log3(R) for R in pm_true.pose(Qt)[1]])  # orientations the calibrated model can reach
+    ts = TargetSet([str(i) for i in range(40)], Yb, Rb, None, list(robot.joint_names), _aux(robot, 40), "six")
+    res = compensate(cm, ts, CompensationOptions(frame="base"))
+    ok = np.array([s == "ok" for s in res.target_status])
+    assert ok.sum() >= 30 and res.orientation
+    assert res.residual_m[ok].max() < 1e-8 and res.residual_rad[ok].max() < 1e-8
+    assert np.all(res.inv_cond[~ok] < 1e-2)  # every target is reachable: what is not ok is at a singularity
+    e = np.linalg.norm(predict(truth_base, pt, res.q, [eff], [th], _aux(robot, 40))[:, :3] - Yb, axis=1)
+    assert e[ok].mean() <= 2.0 * held_err["mean_m"]
+
+
+def test_program_compensation_holds_the_nominal_poses(world):
+    robot, tm, truth, (eff, th), cm, held_err, _ = world
+    Qp = _regular(robot.random_q(np.random.default_rng(9), 30) * 0.8)
+    prog = TargetSet([f"L{i}" for i in range(30)], None, None, Qp, list(robot.joint_names), _aux(robot, 30), "prog")
+    res = compensate_program(cm, prog)
+    ok = np.array([s == "ok" for s in res.target_status])
+    assert ok.sum() >= 27 and np.array_equal(res.q_nominal, Qp)
+    assert np.all(res.inv_cond[~ok] < 1e-2)  # what is not ok is at a singularity
+    assert res.residual_m[ok].max() < 1e-8 and res.residual_rad[ok].max() < 1e-8
+    # the intended TCP (nominal FK in the base frame) vs where the true robot goes
+    truth_base = TrackerModel(robot, reflector_m=tm.reflector(truth), noise=tm.noise)
+    pt = truth.copy()
+    pt[tm.layout.tracker] = 0.0
+    goal = PoseModel(cm, "base", tcp_m=tm.reflector(truth), nominal=True).pose(Qp)[0]
+    e_comp = np.linalg.norm(predict(truth_base, pt, res.q, [eff], [th], _aux(robot, 30))[:, :3] - goal, axis=1)
+    e_nom = np.linalg.norm(predict(truth_base, pt, Qp, [eff], [th], _aux(robot, 30))[:, :3] - goal, axis=1)
+    assert e_comp[ok].mean() < 0.1 * e_nom[ok].mean()
+
+
+def test_unreachable_and_singular_targets_are_reported(world):
+    robot, _, _, _, cm, _, _ = world
+    pm = PoseModel(cm, "base")
+    q_sing = np.array([0.3, -1.2, 1.4, -0.5, 0.0, 0.7])  # wrist 2 at 0: wrist singularity of the UR
+    p, R = pm.pose(q_sing[None])
+    ts = TargetSet(["far", "wrist"], np.vstack([[9.0, 0.0, 0.5], p]), np.vstack([[0.0, 0.0, 0.0], pin.log3(R[0])]),
+                   np.vstack([robot.neutral(), q_sing]), list(robot.joint_names), _aux(robot, 2), "bad")
+    res = compensate(cm, ts, CompensationOptions(frame="base", restarts=2))
+    assert res.target_status == ["unreachable", "near_singular"] and not res.success
+    assert "target far: unreachable" in res.summary() and "target wrist: near_singular" in res.summary()
+
+
+def _write(path: Path, header: list[str], rows) -> Path:
+    with open(path, "w", newline="") as fh:
+        w = csv.writer(fh)
+        w.writerow(header)
+        w.writerows(rows)
+    return path
+
+
+def test_cli_compensate_targets_in_mm_with_other_names(world, tmp_path, capsys):
+    robot, _, _, _, cm, _, truth_tcp = world
+    cm.save(tmp_path / "model.json")
+    Qt = robot.random_q(np.random.default_rng(11), 12) * 0.9
+    Yt = truth_tcp(Qt)
+    f = _write(tmp_path / "t.csv", ["Point", "X", "Y", "Z"], [[f"T{i}", *(y * 1e3)] for i, y in enumerate(Yt)])
+    out = tmp_path / "joints.csv"
+    base = ["compensate", "--model", tmp_path / "model.json", "--targets", f, "--out", out, "--quiet"]
+    assert main([str(a) for a in base]) == 2
+    err = capsys.readouterr().err
+    assert "missing position column(s) x, y, z" in err and "--columns" in err and len(err.strip().splitlines()) == 1
+    assert main([str(a) for a in base + ["--columns", "name=Point,x=X,y=Y,z=Z"]]) == 2
+    err = capsys.readouterr().err
+    assert "looks like mm" in err and "--units" in err and len(err.strip().splitlines()) == 1
+    assert main([str(a) for a in base + ["--columns", "name=Point,x=X,y=Y,z=Z", "--units", "mm", "--json",
+                                         tmp_path / "r.json"]]) == 0
+    import json
+    rep = json.loads((tmp_path / "r.json").read_text())
+    assert rep["success"] and rep["frame"] == "cell" and len(rep["correction_m"]) == 12
+    assert min(rep["correction_m"]) > 1e-4  # the nominal solutions miss by ~mm: the correction is reported
+    rows = list(csv.DictReader(open(out)))
+    assert [r["name"] for r in rows] == [f"T{i}" for i in range(12)] and all(r["status"] == "ok" for r in rows)
+    Q = np.array([[float(r[j]) for j in robot.joint_names] for r in rows])
+    assert np.linalg.norm(cm.predict(Q) - Yt, axis=1).max() < 1e-8
+    # a joint-space program (degrees, other names) through the same options
+    names = [f"A{k + 1}" for k in range(robot.nq)]
+    Qp = _regular(robot.random_q(np.random.default_rng(12), 5) * 0.8)
+    fp = _write(tmp_path / "p.csv", names, np.degrees(Qp).tolist())
+    cols = ",".join(f"{j}={a}" for j, a in zip(robot.joint_names, names))
+    assert main(["compensate", "--model", str(tmp_path / "model.json"), "--program", str(fp), "--out",
+                 str(tmp_path / "pc.csv"), "--columns", cols, "--units", "deg", "--quiet"]) == 0
+    rows = list(csv.DictReader(open(tmp_path / "pc.csv")))
+    Qn = np.array([[float(r[f"{j}_nominal"]) for j in robot.joint_names] for r in rows])
+    assert np.allclose(Qn, Qp, atol=1e-12)
+
+
+def test_read_targets_refusals(tmp_path):
+    joints = ["a", "b"]
+    f = _write(tmp_path / "t.csv", ["x", "y", "z", "rx"], [[1, 2, 3, 0.1]])
+    with pytest.raises(InputError, match="rx, ry, rz"):
+        read_targets(f, joints)
+    f = _write(tmp_path / "t2.csv", ["x", "y", "z", "a"], [[1, 2, 3, 0.1]])
+    with pytest.raises(InputError, match="all of a, b or none"):
+        read_targets(f, joints)
+    f = _write(tmp_path / "t3.csv", ["x", "y", "z", "rx", "ry", "rz"], [[1, 2, 3, 90, 0, 0]])
+    with pytest.raises(InputError, match="looks like degrees"):
+        read_targets(f, joints)
+    ts = read_targets(f, joints, units="deg")
+    assert np.allclose(ts.rotvec_rad, [[np.pi / 2, 0, 0]]) and ts.names == ["1"]
+
+
+@needs_ipa
+def test_real_ur10_compensated_predictions_match_held_out_rows():
+    """Second route to the model's held-out error: commanded joints -> where the compensation module says the TCP
+    goes, against the measured positions of held-out IPA rows; and the measured points compensated back."""
+    from pin_kpi_oed.data.ipa import import_ipa
+    from pin_kpi_oed.identification.transfer import registration_split
+
+    ms = import_ipa(IPA / "Series_C")
+    ms = MeasurementSet(ms.joint_names, ms.q, ms.position_m, temperature_c=ms.temperature_c, source="C.csv")
+    tr_idx, held_idx = registration_split(len(ms), len(ms) // 2, seed=0)
+    robot = load_robot("ur10")
+    model = TrackerModel(robot, reflector_m=np.array([0.0, 0.0, 0.109]), noise=NoiseModel(sigma_xyz_m=(1e-4,) * 3))
+    cm = identify(model, ms.subset(tr_idx)).calibrated_model()
+    held = ms.subset(held_idx)
+    v = validate(cm, held)
+    e = np.linalg.norm(forward(cm, held.q, held) - held.position_m, axis=1)
+    assert abs(e.mean() - v["mean_m"]) < 1e-12 and v["mean_m"] < 1e-3
+    ts = TargetSet([str(i) for i in range(len(held))], held.position_m, None, held.q, list(robot.joint_names),
+                   held, "held")
+    res = compensate(cm, ts)
+    ok = np.array([s == "ok" for s in res.target_status])
+    assert ok.mean() > 0.95
+    # the compensated joints differ from the commanded ones by what the model error amounts to in joint space
+    moved = np.linalg.norm(forward(cm, res.q[ok], held.subset(np.flatnonzero(ok))) -
+                           forward(cm, held.q[ok], held.subset(np.flatnonzero(ok))), axis=1)
+    assert abs(moved.mean() - e[ok].mean()) < 1e-8
+
+
+# --------------------------------------------------------------------------- calibrated URDF with set-up frames
+def test_calibrated_urdf_carries_tracker_reflector_and_tcp_frames(world, tmp_path):
+    import yourdfpy
+
+    from pin_kpi_oed.identification.export import write_model_urdf
+
+    robot, _, _, _, cm, _, _ = world
+    out = tmp_path / "calibrated.urdf"
+    assert write_model_urdf(cm, out, tcp_m=np.array([0.0, 0.0, 0.2])) <= 1e-9
+    st = cm.station()
+    Q = robot.random_q(np.random.default_rng(21), 4)
+    Y = cm.predict(Q)  # reflector in the tracker frame (geometry only: this model has no effects)
+    # Pinocchio: the reflector frame seen from the tracker frame is what the model predicts
+    model = pin.buildModelFromUrdf(str(out))
+    data = model.createData()
+    ft, fr = model.getFrameId(f"tracker_{st}"), model.getFrameId(f"reflector_{st}")
+    for q, y in zip(Q, Y):
+        pin.framesForwardKinematics(model, data, q)
+        assert np.allclose((data.oMf[ft].inverse() * data.oMf[fr]).translation, y, atol=1e-9)
+    assert np.allclose(data.oMf[model.getFrameId("tcp")].translation,
+                       data.oMf[model.getFrameId(robot.tool_frame)].act(np.array([0.0, 0.0, 0.2])), atol=1e-12)
+    # yourdfpy (ROS-style tools) sees the same chain
+    urdf = yourdfpy.URDF.load(str(out), load_meshes=False, build_collision_scene_graph=False,
+                              load_collision_meshes=False)
+    urdf.update_cfg(dict(zip(robot.joint_names, Q[-1])))
+    T = urdf.get_transform(frame_to=f"reflector_{st}", frame_from=f"tracker_{st}")
+    assert np.allclose(T[:3, 3], Y[-1], atol=1e-9)
+
+
+def test_cli_identify_urdf_frames(world, tmp_path):
+    from pin_kpi_oed.data.measurements import write_measurements
+
+    robot, tm, truth, _, _, _, _ = world
+    data = simulate(tm, robot.random_q(np.random.default_rng(31), 80), truth, seed=4)
+    write_measurements(data, tmp_path / "B.csv")
+    assert main(["identify", "--robot", "ur10", "--data", str(tmp_path / "B.csv"), "--reflector", "0.03,0.02,0.08",
+                 "--sigma", "1e-5", "--urdf-out", str(tmp_path / "cal.urdf"), "--urdf-frames", "--quiet"]) == 0
+    model = pin.buildModelFromUrdf(str(tmp_path / "cal.urdf"))
+    assert model.existFrame("tracker_B") and model.existFrame("reflector_B") and model.nq == robot.nq
+
+
+def test_compensation_uses_the_model_effects(world):
+    """A model with effects (here the gear harmonic the calibration withheld, given to it) is compensated through
+    them: the calibrated prediction at the compensated joints is the target; without the effect it is not."""
+    import dataclasses
+
+    from pin_kpi_oed.effects.library import ThermalExpansion
+
+    robot, _, _, (eff, th), cm, _, truth_tcp = world
+    cm_eff = dataclasses.replace(cm, effects=[eff], thetas=[th])
+    Qt = robot.random_q(np.random.default_rng(41), 20) * 0.9
+    Yt = truth_tcp(Qt)
+    ts = TargetSet([str(i) for i in range(20)], Yt, None, None, list(robot.joint_names), _aux(robot, 20), "eff")
+    res = compensate(cm_eff, ts)
+    assert res.success and np.linalg.norm(cm_eff.predict(res.q) - Yt, axis=1).max() < 1e-8
+    assert np.linalg.norm(cm.predict(res.q) - Yt, axis=1).mean() > 1e-6  # the effect moved the solution
+    cm_t = dataclasses.replace(cm, effects=[ThermalExpansion(robot)], thetas=[np.zeros(1)])
+    with pytest.raises(InputError, match="temperature"):
+        compensate(cm_t, ts)  # the targets have no temperature column for the thermal effect
