@@ -86,7 +86,8 @@ def test_program_orders_checks_and_repairs(kr15, poses):
     assert prog.success and prog.n_colliding == 0
     # independent re-check of every move at 0.25 deg steps, without the planner's checker
     fc = FeasibilityChecker(kr15)
-    path = np.vstack([prog.path, prog.path[:1]])
+    path = prog.path
+    assert np.array_equal(path[0], path[-1]) and prog.n_moves == len(path) - 1
     for a, b in zip(path[:-1], path[1:]):
         k = max(2, int(np.ceil(np.max(np.abs(b - a)) / np.radians(0.25))))
         S = a + np.linspace(0, 1, k + 1)[:, None] * (b - a)
@@ -96,4 +97,70 @@ def test_program_orders_checks_and_repairs(kr15, poses):
     v = joint_speeds(kr15.robot)
     assert prog.cycle_time_s == pytest.approx(path_time(path, v))
     assert prog.cycle_time_s < prog.as_designed_time_s
-    assert prog.waypoints[0].kind == "home" and sum(w.kind == "measure" for w in prog.waypoints) == len(poses)
+    assert prog.waypoints[0].kind == prog.waypoints[-1].kind == "home" and sum(w.kind == "measure" for w in prog.waypoints) == len(poses)
+
+
+# ---------------------------------------------------------------------------- exports
+from pin_kpi_oed.cli.main import main  # noqa: E402
+from pin_kpi_oed.model.robot import load_robot  # noqa: E402
+from pin_kpi_oed.program.export import FORMATS, ProgramInfo, parse_program, write_program  # noqa: E402
+
+
+def _info(robot) -> ProgramInfo:
+    return ProgramInfo(cell="test_cell", design="d.json (kpi)", robot=robot.name, joint_names=list(robot.joint_names),
+                       revolute=np.asarray(robot.is_revolute, bool), cycle_time_s=12.5, date="2026-01-01T00:00:00Z")
+
+
+@pytest.mark.parametrize("robot_name", ["kr15", "kr15_track"])
+@pytest.mark.parametrize("fmt", FORMATS)
+def test_every_format_round_trips_to_1e6_rad(robot_name, fmt):
+    rb = load_robot(robot_name)
+    rng = np.random.default_rng(7)
+    Q = rb.random_q(rng, 9)
+    kinds = ["home", "measure", "measure", "via", "measure", "measure", "via", "measure", "home"]
+    poses = [-1, 4, 0, -1, 2, 3, -1, 1, -1]
+    if fmt == "urscript" and robot_name == "kr15_track":
+        with pytest.raises(Exception, match="6 revolute joints and no prismatic"):
+            write_program(fmt, Q, kinds, poses, _info(rb))
+        return
+    texts = write_program(fmt, Q, kinds, poses, _info(rb))
+    head = next(iter(texts.values()))
+    for word in ("cell: test_cell", "design: d.json (kpi)", "units:", "date: 2026-01-01"):
+        assert word in head
+    back, measured = parse_program(fmt, texts, rb.is_revolute)
+    assert back.shape == Q.shape
+    np.testing.assert_allclose(back, Q, atol=1e-6, rtol=0)
+    assert measured == [4, 0, 2, 3, 1]
+
+
+@pytest.fixture(scope="module")
+def small_design(tmp_path_factory):
+    path = tmp_path_factory.mktemp("prog") / "d.json"
+    assert main(["design", "--cell", "kr15", "--criteria", "random", "--measurements", "12", "--seed", "2",
+                 "--quiet", "--json", str(path)]) == 0
+    return path
+
+
+def test_export_cli_writes_a_checked_program(small_design, tmp_path):
+    out = tmp_path / "prog.src"
+    js = tmp_path / "prog.json"
+    assert main(["export", str(small_design), "--format", "krl", "--out", str(out), "--json", str(js),
+                 "--quiet"]) == 0
+    texts = {".src": out.read_text(), ".dat": out.with_suffix(".dat").read_text()}
+    assert "DEF prog( )" in texts[".src"] and "DEFDAT prog PUBLIC" in texts[".dat"]
+    import json
+
+    doc = json.loads(js.read_text())
+    Q, measured = parse_program("krl", texts, np.ones(6, bool))
+    assert sorted(measured) == list(range(12)) and doc["n_colliding"] == 0
+    np.testing.assert_allclose(Q, [w["q"] for w in doc["waypoints"]], atol=1e-6)
+
+
+def test_export_cli_bad_input_exit_2_nothing_written(small_design, tmp_path, capsys):
+    out = tmp_path / "p.txt"
+    assert main(["export", str(small_design), "--format", "fanuc", "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert "unknown format 'fanuc'" in err and len(err.strip().splitlines()) == 1
+    assert not out.exists()
+    assert main(["export", str(small_design), "--format", "csv", "--out", str(tmp_path / "nodir" / "p.csv")]) == 2
+    assert list(tmp_path.iterdir()) == []

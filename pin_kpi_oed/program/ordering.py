@@ -54,7 +54,7 @@ class Program(Result):
     """An ordered measurement program (see the module docstring).
 
     Attributes:
-        waypoints: home, measurement poses and via poses in execution order.
+        waypoints: home, measurement poses and via poses in execution order, home again.
         order: design indices of the poses in execution order.
         speeds: joint speed limits used (rad/s or m/s).
         cycle_time_s: predicted motion time of the program (s).
@@ -249,7 +249,7 @@ def plan_program(cell: Cell, Q: np.ndarray, options: ProgramOptions | None = Non
                 break
             fast = False  # costs settled: one guided local search, checked again
     prog = _assemble(nodes, tour, edges)
-    path = np.array([w.q for w in prog] + [home])
+    path = np.array([w.q for w in prog])
     per_move = [tc.check(a, b, stop_early=False) for a, b in zip(path[:-1], path[1:])]
     designed = np.vstack([home, Q, home])
     as_designed = [tc.check(a, b) for a, b in zip(designed[:-1], designed[1:])]
@@ -267,7 +267,7 @@ def plan_program(cell: Cell, Q: np.ndarray, options: ProgramOptions | None = Non
 
 
 def _assemble(nodes: np.ndarray, tour: list[int], edges: dict) -> list[Waypoint]:
-    """Waypoints of a tour (home first, vias inserted in travel direction; the return to home is implicit)."""
+    """Waypoints of a tour: home, poses and vias (in travel direction), home again."""
     out: list[Waypoint] = []
     for a, b in zip(tour, tour[1:] + tour[:1]):
         out.append(Waypoint(nodes[a].copy(), "home" if a == 0 else "measure", a - 1 if a else -1))
@@ -275,4 +275,5 @@ def _assemble(nodes: np.ndarray, tour: list[int], edges: dict) -> list[Waypoint]
         if a > b:
             route = route[::-1]
         out.extend(Waypoint(np.asarray(v, float).copy(), "via") for v in route)
+    out.append(Waypoint(nodes[0].copy(), "home"))
     return out
