@@ -164,3 +164,36 @@ def test_export_cli_bad_input_exit_2_nothing_written(small_design, tmp_path, cap
     assert not out.exists()
     assert main(["export", str(small_design), "--format", "csv", "--out", str(tmp_path / "nodir" / "p.csv")]) == 2
     assert list(tmp_path.iterdir()) == []
+
+
+# ---------------------------------------------------------------------------- margins
+from pin_kpi_oed.design.margins import with_margins  # noqa: E402
+from pin_kpi_oed.errors import InputError  # noqa: E402
+
+
+def test_with_margins_tightens_only_the_optimisers_cell(kr15):
+    c = with_margins(kr15, 0.02, 1.5)
+    assert c.clearance_m == pytest.approx(kr15.clearance_m + 0.02) and c.incidence_max_deg == pytest.approx(28.5)
+    assert kr15.incidence_max_deg == 30.0 and with_margins(kr15, 0.0, 0.0) is kr15
+    with pytest.raises(InputError, match="--incidence-margin"):
+        with_margins(kr15, 0.0, 30.0)
+    with pytest.raises(InputError, match="--clearance-margin"):
+        with_margins(kr15, -0.01, 0.0)
+
+
+def test_design_margins_hold_in_the_true_check(tmp_path):
+    import json
+
+    path = tmp_path / "m.json"
+    assert main(["design", "--cell", "kr15", "--criteria", "kpi", "--measurements", "12", "--starts", "1",
+                 "--max-iter", "80", "--clearance-margin", "0.03", "--incidence-margin", "2", "--quiet",
+                 "--json", str(path)]) == 0
+    doc = json.loads(path.read_text())
+    assert doc["clearance_margin_m"] == 0.03 and doc["incidence_margin_deg"] == 2.0
+    assert doc["cell"]["clearance_m"] == 0.0 and doc["cell"]["incidence_max_deg"] == 30.0  # the true cell
+    for d in doc["designs"]:
+        Q = np.array(d["q_meas"])
+        rep = FeasibilityChecker(load_cell("kr15")).check(Q)  # independent, untightened
+        np.testing.assert_allclose(d["pose_clearance_m"], rep.clearance_m, atol=1e-9)
+        assert rep.clearance_m.min() >= 0.03 - 1e-4 and rep.incidence_deg.max() <= 28.0 + 1e-3
+        assert d["min_clearance_m"] == pytest.approx(rep.min_clearance_m)

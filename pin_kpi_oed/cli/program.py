@@ -7,7 +7,7 @@ Example::
 
 orders the design's poses for the least predicted cycle time (OR-Tools; move time = max_j |Δq_j|/v_j
 with the URDF speed limits), checks every move densely (≤ 1° joint steps, Coal, the cell's capsules
-plus the margin), routes colliding moves through safe via poses, prints the cycle time against the
+plus the margin: default half the design's ``--clearance-margin``, since the poses sit at that margin), routes colliding moves through safe via poses, prints the cycle time against the
 as-designed order and the true clearance / incidence of every pose (independent check), and writes
 the program atomically. Nothing is written when a move still collides (unless ``--force``) or the
 input is bad (one line, exit code 2).
@@ -35,7 +35,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--design-name", dest="design_name", default=None,
                    help="which design of the file (default: the file's q_meas design)")
     p.add_argument("--margin", type=float, default=None,
-                   help="clearance every move keeps (m; default: the design's clearance margin, else 0)")
+                   help="clearance every move keeps (m; default: half the design's --clearance-margin, which "
+                        "the poses keep; 0 for designs made without one)")
     p.add_argument("--speed-override", dest="speed_override", type=float, default=1.0,
                    help="share of the URDF joint speed limits used for the cycle time (0, 1]")
     p.add_argument("--dwell", type=float, default=0.5, help="wait at every measurement point (s)")
@@ -84,7 +85,8 @@ def run_export(args: argparse.Namespace) -> int:
     df = load_design(args.design)
     name = args.design_name or df.raw.get("q_meas_criterion") or df.designs[-1].criterion
     entry = df.design(name)
-    margin = args.margin if args.margin is not None else float(df.raw.get("clearance_margin_m", 0.0) or 0.0)
+    # poses sit at the design's margin (an active constraint): moves leaving them keep half of it
+    margin = args.margin if args.margin is not None else 0.5 * float(df.raw.get("clearance_margin_m", 0.0) or 0.0)
     if margin < 0:
         raise InputError(f"--margin: must be >= 0 m, got {margin}")
     prog = plan_program(df.cell, entry.q_meas, ProgramOptions(margin_m=margin, speed_override=args.speed_override,

@@ -201,7 +201,8 @@ def _route_edges(nodes: np.ndarray, tc: TransitionChecker, speeds: np.ndarray, v
             continue
         if not len(vias[0]):
             vias[0] = tc.safe_pool(vias[1], seed=vias[2])
-        route = tc.repair(nodes[key[0]], nodes[key[1]], vias[0], c)
+        qa, qb = nodes[key[0]], nodes[key[1]]
+        route = tc.repair(qa, qb, np.vstack([tc.structured_vias(qa, qb, nodes[0]), vias[0]]), c)
         edges[key] = route
         if route is None:
             cost[a, b] = cost[b, a] = PENALTY_S

@@ -12,8 +12,9 @@ is never clear. The beam and the incidence angle are not checked along a move:
 the tracker measures at the poses only.
 
 A colliding move is repaired by :meth:`TransitionChecker.repair`: through one safe intermediate
-pose (the working configurations and a seeded pool of collision-free configurations, cheapest
-first), else through two (a small lazy roadmap: every leg densely checked).
+pose (wrist-first / arm-first splits of the move, the home pose, retracted variants of the end
+poses, then a seeded pool of collision-free configurations; cheapest first), else through two
+(every leg densely checked).
 """
 
 from __future__ import annotations
@@ -150,13 +151,42 @@ class TransitionChecker:
                     break
         return np.array(out).reshape(-1, lo.size)
 
-    def repair(self, qa: np.ndarray, qb: np.ndarray, vias: np.ndarray, cost, max_one: int = 40,
-               max_legs: int = 8) -> list[np.ndarray] | None:
+    def structured_vias(self, qa: np.ndarray, qb: np.ndarray, home: np.ndarray | None = None) -> np.ndarray:
+        """Via candidates a programmer would try first for the move qa → qb.
+
+        Wrist first (qa's arm, qb's wrist) and arm first (qb's arm, qa's wrist); the home pose; and
+        qa, qb and their midpoint with the arm (the first three revolute joints after the first:
+        shoulder and elbow) of the home pose, i.e. retracted. Non-revolute joints keep qa's values
+        in the retracted candidates.
+
+        Returns:
+            (k, n) candidate configurations (not yet checked).
+        """
+        qa, qb = np.asarray(qa, float), np.asarray(qb, float)
+        rev = np.flatnonzero(self.cell.robot.is_revolute)
+        arm, wrist = rev[:3], rev[3:]
+        out = []
+        for x, y in ((qa, qb), (qb, qa)):
+            v = x.copy()
+            v[wrist] = y[wrist]
+            out.append(v)
+        if home is not None:
+            home = np.asarray(home, float)
+            out.append(home.copy())
+            for base in (qa, qb, 0.5 * (qa + qb)):
+                v = base.copy()
+                v[arm[1:]] = home[arm[1:]]
+                out.append(v)
+        return np.array(out)
+
+    def repair(self, qa: np.ndarray, qb: np.ndarray, vias: np.ndarray, cost, max_one: int = 24,
+               max_legs: int = 6) -> list[np.ndarray] | None:
         """A collision-free route qa → via(s) → qb through candidate via poses, cheapest first.
 
         Args:
             qa, qb: end configurations.
-            vias: candidate intermediate configurations (k, n), each collision-free.
+            vias: candidate intermediate configurations (k, n) (:meth:`structured_vias` first, then
+                a :meth:`safe_pool`); candidates too close to an obstacle are skipped.
             cost: ``cost(q1, q2)`` of a move (s).
             max_one: one-via candidates checked (cheapest first).
             max_legs: candidates per side of the two-via search.
@@ -164,14 +194,21 @@ class TransitionChecker:
         Returns:
             The intermediate configurations (one or two), or None when no route was found.
         """
+        vias = np.atleast_2d(vias)
+        if vias.size == 0:
+            return None
+        lo, hi = self.cell.q_lower, self.cell.q_upper
+        inside = np.all((vias >= lo) & (vias <= hi), axis=1)
+        vias = vias[inside]
+        ok = np.array([self.clearance(v) >= self.margin_m for v in vias], bool)
+        vias = vias[ok]
         if len(vias) == 0:
             return None
-        c1 = np.array([cost(qa, v) + cost(v, qb) for v in vias])
-        for k in np.argsort(c1)[:max_one]:
-            if self.check(qa, vias[k]).clear and self.check(vias[k], qb).clear:
-                return [vias[k]]
         ca = np.array([cost(qa, v) for v in vias])
         cb = np.array([cost(v, qb) for v in vias])
+        for k in np.argsort(ca + cb)[:max_one]:
+            if self.check(qa, vias[k]).clear and self.check(vias[k], qb).clear:
+                return [vias[k]]
         A = [k for k in np.argsort(ca)[:3 * max_legs] if self.check(qa, vias[k]).clear][:max_legs]
         B = [k for k in np.argsort(cb)[:3 * max_legs] if self.check(vias[k], qb).clear][:max_legs]
         legs = sorted(((ca[i] + cost(vias[i], vias[j]) + cb[j], i, j) for i in A for j in B if i != j))
