@@ -197,3 +197,77 @@ def test_design_margins_hold_in_the_true_check(tmp_path):
         np.testing.assert_allclose(d["pose_clearance_m"], rep.clearance_m, atol=1e-9)
         assert rep.clearance_m.min() >= 0.03 - 1e-4 and rep.incidence_deg.max() <= 28.0 + 1e-3
         assert d["min_clearance_m"] == pytest.approx(rep.min_clearance_m)
+
+
+# ---------------------------------------------------------------------------- user pool, sequential design
+def _write_poses(path, names, Q):
+    path.write_text(",".join(names) + "\n" + "\n".join(",".join(f"{x:.12f}" for x in q) for q in Q) + "\n")
+
+
+def test_design_from_a_user_pool(kr15, tmp_path):
+    import json
+
+    rng = np.random.default_rng(4)
+    Qf, _ = random_feasible(CollisionModel(kr15), 300, rng, 200_000)
+    Qc = np.vstack([Qf, kr15.robot.random_q(rng, 100)])  # plus 100 unchecked ones (mostly infeasible)
+    csv = tmp_path / "poses.csv"
+    _write_poses(csv, kr15.robot.joint_names, Qc)
+    out = tmp_path / "d.json"
+    assert main(["design", "--cell", "kr15", "--pool", str(csv), "--criteria", "random,kpi", "--measurements", "15",
+                 "--clearance-margin", "0", "--incidence-margin", "0", "--quiet", "--json", str(out)]) == 0
+    doc = json.loads(out.read_text())
+    rnd, kpi = doc["designs"]
+    for d in doc["designs"]:
+        Q = np.array(d["q_meas"])
+        dist = np.min(np.abs(Q[:, None, :] - Qc[None]).max(axis=2), axis=1)
+        assert dist.max() < 1e-9  # every selected pose is one of the user's
+        assert FeasibilityChecker(kr15).check(Q).all_feasible
+    assert kpi["trace_cs_m2"] < rnd["trace_cs_m2"]
+    assert 0.5 < kpi["efficiency"] <= 1.0 + 1e-9  # certificate over the user's feasible candidates
+
+
+def test_pool_and_given_bad_input_exit_2(kr15, tmp_path, capsys):
+    csv = tmp_path / "bad.csv"
+    _write_poses(csv, ["a1", "a2", "a3", "a4", "a5", "a6"], np.zeros((3, 6)))
+    out = tmp_path / "d.json"
+    for flag in ("--pool", "--given"):
+        assert main(["design", "--cell", "kr15", flag, str(csv), "--quiet", "--json", str(out)]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and flag in err[0] and "bad.csv" in err[0]
+    assert main(["design", "--cell", "kr15", "--target-sigma", "1e-6", "--quiet"]) == 2
+    assert "--target-sigma needs --given" in capsys.readouterr().err
+    assert not out.exists()
+
+
+def test_sequential_design_beats_random_and_answers_how_many_more(kr15, tmp_path):
+    import json
+
+    from pin_kpi_oed.design.optimize import DesignProblem
+    from pin_kpi_oed.oed.criteria import DesignCriterion
+
+    base = DesignProblem(kr15)
+    Q60, _ = base.random_design(60, seed=11)
+    given = tmp_path / "measured.csv"
+    _write_poses(given, kr15.robot.joint_names, Q60[:40])
+    out = tmp_path / "seq.json"
+    crit = DesignCriterion(base.model, base.base, "kpi", base.E)
+    sigma40 = float(np.sqrt(crit.value(Q60[:40])))
+    target = 0.8 * sigma40
+    assert main(["design", "--cell", "kr15", "--given", str(given), "--criteria", "kpi", "--measurements", "20",
+                 "--starts", "1", "--max-iter", "150", "--clearance-margin", "0", "--incidence-margin", "0",
+                 "--target-sigma", str(target), "--pool-size", "1500", "--quiet", "--json", str(out)]) == 0
+    doc = json.loads(out.read_text())
+    kpi = doc["designs"][-1]
+    Qnew = np.array(kpi["q_meas"])
+    # the 20 new poses on top of the 40 measured ones beat 60 random poses (tr C_s from scratch)
+    assert crit.value(np.vstack([Q60[:40], Qnew])) == pytest.approx(kpi["trace_cs_m2"], rel=1e-9)
+    assert kpi["trace_cs_m2"] < crit.value(Q60)
+    assert np.trace(np.array(kpi["cov_s_m2"])) == pytest.approx(kpi["trace_cs_m2"], rel=1e-6)
+    # "how many more": adding that many reaches the target, one fewer does not (t = 1 working configuration)
+    u = doc["poses_until"]
+    k = u["n_more"]
+    Qa = np.array(u["q_added"])
+    assert k == len(Qa) >= 1 and u["success"]
+    assert np.sqrt(crit.value(np.vstack([Q60[:40], Qa]))) <= target * (1 + 1e-9)
+    assert np.sqrt(crit.value(np.vstack([Q60[:40], Qa[:-1]]))) > target
+    assert FeasibilityChecker(kr15).check(Qa).all_feasible
