@@ -5,7 +5,8 @@ from __future__ import annotations
 import importlib
 import sys
 
-MODULES = ("bench_core", "bench_identify", "bench_design", "bench_diagnosis", "bench_certificate", "bench_study")
+MODULES = ("bench_core", "bench_identify", "bench_design", "bench_diagnosis", "bench_certificate", "bench_study",
+           "bench_program")
 
 if __name__ == "__main__":
     wanted = sys.argv[1:] or MODULES

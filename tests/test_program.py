@@ -271,3 +271,37 @@ def test_sequential_design_beats_random_and_answers_how_many_more(kr15, tmp_path
     assert np.sqrt(crit.value(np.vstack([Q60[:40], Qa]))) <= target * (1 + 1e-9)
     assert np.sqrt(crit.value(np.vstack([Q60[:40], Qa[:-1]]))) > target
     assert FeasibilityChecker(kr15).check(Qa).all_feasible
+
+
+# ---------------------------------------------------------------------------- cells from meshes
+from pin_kpi_oed.cell.meshes import _vertices, capsule_of, fit_capsule, geometry_model  # noqa: E402
+from pin_kpi_oed.cell.collision import point_segment_distance  # noqa: E402
+
+
+def test_fit_capsule_encloses_and_is_tight_on_a_cylinder():
+    rng = np.random.default_rng(1)
+    phi, z = rng.random(4000) * 2 * np.pi, rng.random(4000)
+    P = np.c_[0.1 * np.cos(phi), 0.1 * np.sin(phi), z]              # a cylinder surface r = 0.1, z in [0, 1]
+    R = np.linalg.qr(rng.normal(size=(3, 3)))[0]
+    P = P @ R.T + [0.3, -0.2, 0.5]
+    a, b, r = fit_capsule(P)
+    assert np.all(point_segment_distance(P, a[None], b[None]) <= r + 1e-12)
+    # within 4 %: the principal axis of 4,000 samples tilts by a few mrad
+    assert r == pytest.approx(0.1, rel=0.04) and np.linalg.norm(b - a) == pytest.approx(1.0, abs=0.02)
+    ab = (b - a) / np.linalg.norm(b - a)
+    assert abs(ab @ R[:, 2]) == pytest.approx(1.0, abs=1e-3)
+
+
+def test_ur10_capsules_enclose_its_collision_meshes():
+    rb = load_robot("ur10")
+    gm = geometry_model(rb)
+    assert len(gm.geometryObjects) >= 7
+    for go in gm.geometryObjects:
+        a, b, r = capsule_of(rb, go)
+        M = rb.model.frames[go.parentFrame].placement.inverse() * go.placement
+        V = _vertices(go) @ M.rotation.T + M.translation
+        assert np.all(point_segment_distance(V, a[None], b[None]) <= r + 1e-9), go.name
+    cell = load_cell("ur10")  # shipped, robot_capsules: urdf on mesh geometry
+    assert len(cell.robot_capsules) == len(gm.geometryObjects)
+    rep = FeasibilityChecker(cell).check(cell.q_work)
+    assert rep.collision_free.all()

@@ -33,7 +33,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     """Add the ``design`` subcommand to the CLI's subparsers."""
     p = subparsers.add_parser("design", help="heuristic and optimum (IPOPT) measurement designs of a cell",
                               description=__doc__.splitlines()[0])
-    p.add_argument("--cell", default="kr15", help="shipped cell (kr15, kr300, kr500) or a cell YAML file")
+    p.add_argument("--cell", default="kr15", help="shipped cell (kr15, kr300, kr500, ur10) or a cell YAML file")
     p.add_argument("--criteria", default="random,param,kpi",
                    help="comma-separated: random (heuristic) and registered criteria: " + ", ".join(CRITERIA))
     p.add_argument("--measurements", type=int, default=None, help="number of measurement configurations "
