@@ -305,3 +305,23 @@ def test_ur10_capsules_enclose_its_collision_meshes():
     assert len(cell.robot_capsules) == len(gm.geometryObjects)
     rep = FeasibilityChecker(cell).check(cell.q_work)
     assert rep.collision_free.all()
+
+
+def test_program_animation_holds_every_measurement_point(small_design, tmp_path):
+    from pin_kpi_oed.design.design_file import load_design
+    from pin_kpi_oed.viz.program_animation import animate_program
+    from pin_kpi_oed.viz.scene import SceneOptions, build_scene
+
+    df = load_design(small_design, criteria=["random"])
+    prog = plan_program(df.cell, df.design("random").q_meas, ProgramOptions(time_limit_s=0.3))
+    scene = build_scene(df, SceneOptions(ghosts=False, animate=False))
+    times = animate_program(scene, prog.path, [w.kind for w in prog.waypoints], step_deg=5.0, fps=10)
+    assert len(times) == 12 and np.all(np.diff(times) > 0)
+    # frames: hold 6 per pose + one per 5 deg of the largest joint move, so the last pose comes after
+    # (sum over moves of ceil(max |dq| / 5 deg)) / fps seconds of motion
+    path = prog.path
+    moves = sum(max(1, math.ceil(np.max(np.abs(b - a)) / math.radians(5.0))) for a, b in zip(path[:-1], path[1:]))
+    assert times[-1] < (moves + 6 * 12) / 10 and times[-1] > moves / 10 * 0.5
+    out = tmp_path / "p.html"
+    scene.write_html(out)
+    assert out.stat().st_size > 100_000

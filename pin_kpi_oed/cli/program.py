@@ -42,6 +42,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--dwell", type=float, default=0.5, help="wait at every measurement point (s)")
     p.add_argument("--seed", type=int, default=0, help="seed of the via-pose pool")
     p.add_argument("--json", default=None, help="also write the program (order, waypoints, checks) as JSON")
+    p.add_argument("--html", default=None, help="also write a self-contained page animating the program "
+                   "(moves, via poses, the beam at each measurement point)")
     p.add_argument("--force", action="store_true", help="write even if a move still collides")
     p.add_argument("--quiet", action="store_true", help="print nothing")
     p.set_defaults(func=run_export)
@@ -80,6 +82,10 @@ def run_export(args: argparse.Namespace) -> int:
 
     fmt = str(args.format).lower()
     files = _targets(fmt, args.out)
+    if getattr(args, "html", None):
+        from pin_kpi_oed.data.atomic import check_writable
+
+        check_writable(args.html)
     if args.dwell < 0:
         raise InputError(f"--dwell: must be >= 0 s, got {args.dwell}")
     df = load_design(args.design)
@@ -114,6 +120,23 @@ def run_export(args: argparse.Namespace) -> int:
         atomic_write_json(args.json, {**prog.to_dict(), "design": str(args.design), "criterion": name,
                                       "pose_clearance_m": rep.clearance_m, "pose_incidence_deg": rep.incidence_deg,
                                       "incidence_max_deg": df.cell.incidence_max_deg})
+    if getattr(args, "html", None):
+        _write_animation(args.design, name, prog, args.html)
     if not quiet:
-        print("wrote " + ", ".join(str(files[s]) for s in texts))
+        print("wrote " + ", ".join(str(files[s]) for s in texts) + (f", {args.html}" if getattr(args, "html", None)
+                                                                    else ""))
     return 0
+
+
+def _write_animation(design: str, name: str, prog, html: str) -> None:
+    """The design's meshcat scene (one design, ghosts only for a handful of poses) animating the program."""
+    from pin_kpi_oed.data.atomic import check_writable
+    from pin_kpi_oed.design.design_file import load_design
+    from pin_kpi_oed.viz.program_animation import animate_program
+    from pin_kpi_oed.viz.scene import SceneOptions, build_scene
+
+    check_writable(html)
+    df = load_design(design, criteria=[name])
+    scene = build_scene(df, SceneOptions(ghosts=len(prog.order) <= 8, animate=False))
+    animate_program(scene, prog.path, [w.kind for w in prog.waypoints])
+    scene.write_html(html)
