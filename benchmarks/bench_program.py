@@ -66,9 +66,55 @@ def row(cell: str, path: Path) -> dict:
             "roundtrip_rad": worst}
 
 
+def pool_candidates(path: Path, n: int = 100_000, seed: int = 0) -> None:
+    """n user candidates for the KR 15 cell: 1,000 feasible poses, each taught 100 times with 0.5 deg noise."""
+    from pin_kpi_oed.cell.cell import load_cell
+    from pin_kpi_oed.design.optimize import DesignProblem
+
+    cell = load_cell("kr15")
+    Q0, _ = DesignProblem(cell).random_design(n // 100, seed=seed, max_tries=10 ** 6)
+    rng = np.random.default_rng(seed)
+    Q = np.clip(np.repeat(Q0, 100, axis=0) + rng.normal(0.0, np.radians(0.5), (len(Q0) * 100, 6)),
+                cell.q_lower, cell.q_upper)
+    lines = [",".join(cell.robot.joint_names)] + [",".join(f"{x:.10f}" for x in q) for q in Q]
+    path.write_text("\n".join(lines) + "\n")
+
+
+def pool_run(csv: str) -> None:
+    """``design --pool`` on the candidates, timed by step; prints one line (run in a fresh process for its peak RSS)."""
+    import resource
+
+    from pin_kpi_oed.cell.cell import load_cell
+    from pin_kpi_oed.design.margins import with_margins
+    from pin_kpi_oed.design.optimize import DesignProblem
+    from pin_kpi_oed.design.user_pool import design_from_pool, read_poses
+
+    t0 = time.perf_counter()
+    cell = with_margins(load_cell("kr15"), 0.02, 1.0)
+    problem = DesignProblem(cell)
+    t1 = time.perf_counter()
+    Q = read_poses(csv, cell.robot)
+    t2 = time.perf_counter()
+    res, cert, n_ok = design_from_pool(problem, Q, ["random", "kpi"], 60, 0)
+    t3 = time.perf_counter()
+    rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+    print(f"pool: {len(Q)} candidates ({n_ok} feasible with the margins), m = 60: set-up {t1 - t0:.1f} s, read "
+          f"{t2 - t1:.1f} s, check + select {t3 - t2:.1f} s (total {t3 - t0:.1f} s), peak RSS {rss:.0f} MB; "
+          f"KPI tr(C_s) {res[-1].trace_cs_m2 * 1e6:.4e} mm^2 vs random {res[0].trace_cs_m2 * 1e6:.4e}, "
+          f"efficiency {100 * cert.efficiency(res[-1].trace_cs_m2):.1f} %")
+
+
 def main() -> None:
     folder = Path(os.environ.get("PKO_BENCH_DIR", "/tmp/pko_bench_program"))
     folder.mkdir(parents=True, exist_ok=True)
+    import subprocess
+    import sys
+
+    csv = folder / "pool_100k.csv"
+    if not csv.exists():
+        pool_candidates(csv)
+    subprocess.run([sys.executable, "-c", f"from benchmarks.bench_program import pool_run; pool_run({str(csv)!r})"],
+                   check=True)
     print("== measurement programs: KPI designs (margins 20 mm / 1 deg), moves checked with 10 mm margin")
     head = (f"{'cell':<7}{'poses':>6}{'moves':>6}{'vias':>5}{'coll.':>6}{'as-des. coll.':>14}{'cycle s':>9}"
             f"{'as-des. s':>10}{'shorter %':>10}{'pose clr mm':>12}{'max inc':>8}{'move clr mm':>12}"
