@@ -249,6 +249,8 @@ def plan_program(cell: Cell, Q: np.ndarray, options: ProgramOptions | None = Non
             if not fast:
                 break
             fast = False  # costs settled: one guided local search, checked again
+    _route_edges(nodes, tc, speeds, vias, edges, cost, tour)  # round limit hit: check what the last tour added
+    _hard_repair(nodes, tc, speeds, edges, tour, o)
     prog = _assemble(nodes, tour, edges)
     path = np.array([w.q for w in prog])
     per_move = [tc.check(a, b, stop_early=False) for a, b in zip(path[:-1], path[1:])]
@@ -265,6 +267,24 @@ def plan_program(cell: Cell, Q: np.ndarray, options: ProgramOptions | None = Non
                    as_designed_colliding=int(sum(not m.clear for m in as_designed)),
                    min_move_clearance_m=min((m.min_clearance_m for m in per_move), default=float("inf")),
                    margin_m=o.margin_m, n_rounds=rounds)
+
+
+def _hard_repair(nodes: np.ndarray, tc: TransitionChecker, speeds: np.ndarray, edges: dict, tour: list[int],
+                 o: ProgramOptions) -> None:
+    """Last attempt for moves of the final tour still without a route: a larger pool, more candidates."""
+    bad = [(a, b) for a, b in zip(tour, tour[1:] + tour[:1]) if edges.get((min(a, b), max(a, b)), []) is None]
+    if not bad:
+        return
+    pool = tc.safe_pool(8 * o.via_pool, seed=o.seed + 1)
+
+    def c(a, b):
+        return move_time(a, b, speeds)
+
+    for a, b in bad:
+        i, j = min(a, b), max(a, b)
+        qa, qb = nodes[i], nodes[j]
+        edges[(i, j)] = tc.repair(qa, qb, np.vstack([tc.structured_vias(qa, qb, nodes[0]), pool]), c,
+                                  max_one=8 * 24, max_legs=16)
 
 
 def _assemble(nodes: np.ndarray, tour: list[int], edges: dict) -> list[Waypoint]:
