@@ -20,7 +20,9 @@ measurement model needs the pose of the robot base in the tracker frame,
 Capsules (eq. 20–21). A capsule is a segment [a, b] with a radius r: the set of
 points within r of the segment. Robot capsules default to the URDF's collision
 cylinders read as capsules of the same radius along the cylinder axis
-(``robot_capsules: urdf``); the KUKA URDFs of ``urdf/`` have one per link.
+(``robot_capsules: urdf``); the KUKA URDFs of ``urdf/`` have one per link. Mesh and box
+collision geometry (e.g. the UR10's) becomes the enclosing capsule fitted to its vertices
+(:mod:`pin_kpi_oed.cell.meshes`); ``robot_capsules: urdf_visual`` fits the visual meshes instead.
 A half-space ``{x : n·x ≥ offset}`` is the free side of a plane (wall, floor).
 
 Schema (SI units; angles may be given in degrees with a ``_deg`` key instead of
@@ -35,7 +37,7 @@ Schema (SI units; angles may be given in degrees with a ``_deg`` key instead of
     tcp_m: [x, y, z]                 # KPI point (TCP) in the tool frame
     noise: {sigma_xyz_m: [sx, sy, sz]}                   # or {range_a_m: a, range_b: b}
     joint_bounds: {lower_deg: [...], upper_deg: [...]}   # optional override of the URDF limits
-    robot_capsules: urdf             # or a list of {name, link, a_m, b_m, radius_m} (link frame)
+    robot_capsules: urdf             # or urdf_visual, or a list of {name, link, a_m, b_m, radius_m} (link frame)
     extra_capsules: []               # more robot capsules, same fields (e.g. a tool)
     obstacles:
       capsules:    [{name, a_m, b_m, radius_m}]          # cell frame
@@ -73,7 +75,7 @@ from pin_kpi_oed.model.tracker import TrackerModel
 
 #: Folder of the cells shipped with the package.
 CELL_DIR = Path(__file__).resolve().parent / "cells"
-SHIPPED_CELLS = ("kr15", "kr300", "kr500")
+SHIPPED_CELLS = ("kr15", "kr300", "kr500", "ur10")
 
 
 @dataclass
@@ -282,45 +284,37 @@ def _capsule(d: Any, what: str, need_link: bool) -> CapsuleSpec:
                        str(d["link"]) if need_link else None)
 
 
-def capsules_from_urdf(robot: Robot, where: str = "robot_capsules") -> list[CapsuleSpec]:
-    """Robot capsules from the URDF collision geometry, in link frames.
+def capsules_from_urdf(robot: Robot, where: str = "robot_capsules", kind: str = "collision") -> list[CapsuleSpec]:
+    """Robot capsules from the URDF's collision (or visual) geometry, in link frames.
 
-    A cylinder of radius r and length l becomes the capsule of radius r whose
-    segment is the cylinder axis (length l); a sphere a capsule of length 0;
-    a capsule stays a capsule.
+    A cylinder of radius r and length l becomes the capsule of radius r whose segment is the
+    cylinder axis (length l); a sphere a capsule of length 0; a capsule stays a capsule; a mesh or
+    a box becomes the enclosing capsule fitted to its vertices (:mod:`pin_kpi_oed.cell.meshes`).
+
+    Args:
+        robot: the robot.
+        where: field name for messages.
+        kind: ``collision`` or ``visual`` geometry.
 
     Raises:
-        InputError: a collision geometry that is neither (mesh, box), naming the link.
+        InputError: unreadable geometry or no geometry at all, naming the URDF.
     """
-    import coal
+    from pin_kpi_oed.cell.meshes import capsule_of, geometry_model
 
     try:
-        gm = pin.buildGeomFromUrdf(robot.model, robot.urdf_path, pin.GeometryType.COLLISION)
-    except Exception as exc:  # meshes without package dirs, etc.
-        first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
-        raise InputError(f"{where}: cannot read the collision geometry of {robot.urdf_path} ({first}); "
-                         "list the robot capsules explicitly in the cell file") from None
+        gm = geometry_model(robot, kind)
+    except InputError as exc:
+        raise InputError(f"{where}: {str(exc).split(': ', 1)[-1]}") from None
     out: list[CapsuleSpec] = []
     count: dict[str, int] = {}
     for go in gm.geometryObjects:
         link = robot.model.frames[go.parentFrame].name
-        g = go.geometry
-        if isinstance(g, (coal.Cylinder, coal.Capsule)):
-            h = float(g.halfLength)
-        elif isinstance(g, coal.Sphere):
-            h = 0.0
-        else:
-            raise InputError(f"{where}: the collision geometry of link '{link}' in {robot.urdf_path} is a "
-                             f"{type(g).__name__}, not a cylinder/capsule/sphere; list its capsules explicitly")
-        # geometry placement is in the parent *joint* frame: express it in the link (body) frame
-        M = robot.model.frames[go.parentFrame].placement.inverse() * go.placement
-        a = M.act(np.array([0.0, 0.0, -h]))
-        b = M.act(np.array([0.0, 0.0, h]))
+        a, b, r = capsule_of(robot, go)
         k = count.get(link, 0)
         count[link] = k + 1
-        out.append(CapsuleSpec(link if k == 0 else f"{link}_{k}", a, b, float(g.radius), link))
+        out.append(CapsuleSpec(link if k == 0 else f"{link}_{k}", a, b, r, link))
     if not out:
-        raise InputError(f"{where}: {robot.urdf_path} has no collision geometry; list the robot capsules "
+        raise InputError(f"{where}: {robot.urdf_path} has no {kind} geometry; list the robot capsules "
                          "explicitly in the cell file")
     return out
 
@@ -397,10 +391,13 @@ def _read_robot_capsules(d: dict, robot: Robot, source: str) -> list[CapsuleSpec
     rc = d.get("robot_capsules", "urdf")
     if rc == "urdf" or rc is None:
         caps = capsules_from_urdf(robot, _where(source, "robot_capsules"))
+    elif rc == "urdf_visual":
+        caps = capsules_from_urdf(robot, _where(source, "robot_capsules"), kind="visual")
     elif isinstance(rc, list):
         caps = [_capsule(c, _where(source, f"robot_capsules[{i}]"), True) for i, c in enumerate(rc)]
     else:
-        raise InputError(f"{_where(source, 'robot_capsules')}: expected 'urdf' or a list of capsules, got {rc!r}")
+        raise InputError(f"{_where(source, 'robot_capsules')}: expected 'urdf', 'urdf_visual' or a list of capsules, "
+                         f"got {rc!r}")
     caps += [_capsule(c, _where(source, f"extra_capsules[{i}]"), True)
              for i, c in enumerate(d.get("extra_capsules") or [])]
     links = body_names(robot)
@@ -542,7 +539,7 @@ def cell_from_dict(d: dict, source: str = "", base_dir: Path | None = None) -> C
 
 
 def resolve_cell(spec: str | Path) -> Path:
-    """Path of a cell: a shipped name (``kr15``, ``kr300``, ``kr500``) or a YAML path."""
+    """Path of a cell: a shipped name (``kr15``, ``kr300``, ``kr500``, ``ur10``) or a YAML path."""
     key = str(spec)
     if key.lower() in SHIPPED_CELLS:
         return CELL_DIR / f"{key.lower()}.yaml"

@@ -439,6 +439,8 @@ class CollisionModel:
                 nm = names[r]
                 what = "is out of the tracker's sight: the laser beam is blocked" if nm.startswith("beam") \
                     else "is in collision"
+                if g[i, r] + cell.clearance_m >= 0:  # clear, but inside the required clearance (margins included)
+                    what = f"is closer than the required clearance of {cell.clearance_m * 1e3:g} mm (margins included)"
                 raise InputError(f"{cell.source or cell.name}: working configuration {i} {what} ({nm}, "
                                  f"{g[i, r] * 1e3:.1f} mm)")
 

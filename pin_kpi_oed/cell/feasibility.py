@@ -223,12 +223,8 @@ class FeasibilityChecker:
         """Signed distances (m, radii subtracted) of every pair and beam target at q, and cos(incidence)."""
         import coal
 
-        pin.framesForwardKinematics(self.model, self.data, q)
-        pin.updateGeometryPlacements(self.model, self.data, self.gm, self.gd)
-        pin.computeDistances(self.gm, self.gd)
         d = np.empty(len(self.names))
-        for k in range(self.n_pairs):
-            d[k] = self.gd.distanceResults[k].min_distance
+        d[:self.n_pairs] = self.pair_distances(q)
         oMt = self.data.oMf[self.tool_id]
         refl = oMt.act(self.reflector)
         beam, Tb = coal_capsule(self.tracker, refl, self.cell.beam_radius_m)
@@ -240,6 +236,24 @@ class FeasibilityChecker:
                                                 coal.DistanceResult())
         g = self.tracker - refl
         return d, float(oMt.rotation[:, 2] @ g / np.linalg.norm(g))
+
+    def pair_distances(self, q: np.ndarray) -> np.ndarray:
+        """Signed distances (m, radii subtracted) of the capsule / half-space pairs at one configuration.
+
+        The first :attr:`n_pairs` columns of :meth:`distances` (no beam, no incidence): what a move
+        between poses must keep clear (:mod:`pin_kpi_oed.program.transitions`).
+
+        Args:
+            q: configuration (n,) rad (m for prismatic joints).
+
+        Returns:
+            (n_pairs,) m; negative = penetration. The cell's required clearance is not subtracted.
+        """
+        pin.framesForwardKinematics(self.model, self.data, np.asarray(q, float))
+        pin.updateGeometryPlacements(self.model, self.data, self.gm, self.gd)
+        pin.computeDistances(self.gm, self.gd)
+        res = self.gd.distanceResults  # one access: indexing the property each time copies the vector
+        return np.array([r.min_distance for r in res])[:self.n_pairs]
 
     def distances(self, Q: np.ndarray) -> np.ndarray:
         """Signed distances of every checked pair and beam target (columns named by :attr:`names`).

@@ -7,7 +7,9 @@ Example::
 prints, per design: the criterion, tr(C_s) (mm²), the TCP σ = sqrt(tr(C_s)/t) (µm), the
 improvement of tr(C_s) over the heuristic design (%), the smallest clearance (mm) and largest
 incidence angle (°) found by the independent check, Ipopt iterations and solve time (s).
-``--no-collision`` drops the collision and line-of-sight constraints (joint bounds and incidence
+``--clearance-margin`` (default 0.02 m) and ``--incidence-margin`` (default 1°) tighten the cell the
+optimiser designs in; the table's clearance and incidence are the true ones (independent check of
+the cell as given; ``demo`` keeps the paper's zero margins). ``--no-collision`` drops the collision and line-of-sight constraints (joint bounds and incidence
 only) and reports the share of poses that collide.
 """
 
@@ -16,8 +18,11 @@ from __future__ import annotations
 import argparse
 import math
 
+import numpy as np
+
 
 from pin_kpi_oed.data.atomic import atomic_write_json
+from pin_kpi_oed.design.margins import DEFAULT_CLEARANCE_MARGIN_M, DEFAULT_INCIDENCE_MARGIN_DEG, with_margins
 from pin_kpi_oed.errors import InputError
 from pin_kpi_oed.model.serialize import model_to_dict
 from pin_kpi_oed.oed.criteria import CRITERIA, check_names
@@ -28,7 +33,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     """Add the ``design`` subcommand to the CLI's subparsers."""
     p = subparsers.add_parser("design", help="heuristic and optimum (IPOPT) measurement designs of a cell",
                               description=__doc__.splitlines()[0])
-    p.add_argument("--cell", default="kr15", help="shipped cell (kr15, kr300, kr500) or a cell YAML file")
+    p.add_argument("--cell", default="kr15", help="shipped cell (kr15, kr300, kr500, ur10) or a cell YAML file")
     p.add_argument("--criteria", default="random,param,kpi",
                    help="comma-separated: random (heuristic) and registered criteria: " + ", ".join(CRITERIA))
     p.add_argument("--measurements", type=int, default=None, help="number of measurement configurations "
@@ -46,6 +51,19 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="bound tr(C_s) by the approximate-design relaxation over a feasible pool; report efficiencies")
     p.add_argument("--pool-size", dest="pool_size", type=int, default=5000,
                    help="feasible candidates of the certificate's pool (default 5000)")
+    p.add_argument("--clearance-margin", dest="clearance_margin", type=float, default=DEFAULT_CLEARANCE_MARGIN_M,
+                   help="clearance the optimiser keeps on top of the cell's (m, default "
+                        f"{DEFAULT_CLEARANCE_MARGIN_M:g}; the check reports the true clearance)")
+    p.add_argument("--incidence-margin", dest="incidence_margin", type=float, default=DEFAULT_INCIDENCE_MARGIN_DEG,
+                   help="incidence angle the optimiser keeps below the cell's limit (deg, default "
+                        f"{DEFAULT_INCIDENCE_MARGIN_DEG:g}; the check reports the true angle)")
+    p.add_argument("--pool", default=None, help="select the poses from these candidates (CSV, joint columns in rad, "
+                   "up to 100,000 rows) instead of optimising; the selection's bound is the certificate")
+    p.add_argument("--given", default=None, help="poses already measured (CSV, joint columns in rad): design "
+                   "--measurements more on top of them (their information counts)")
+    p.add_argument("--target-sigma", dest="target_sigma", type=float, default=None,
+                   help="with --given: how many more poses until the predicted TCP sigma <= this (m), "
+                        "answered greedily over --pool-size feasible poses and verified by recomputing C_s")
     p.set_defaults(func=run)
 
 
@@ -108,6 +126,17 @@ def design_json(cell, problem, results: list, m: int, seed: int, collision: bool
     }
 
 
+def _true_checks(cell, results: list) -> list:
+    """Independent check of every design in the untightened cell; the results report its true values."""
+    from pin_kpi_oed.cell.feasibility import FeasibilityChecker
+
+    checker = FeasibilityChecker(cell)
+    reps = [checker.check(r.q_meas) for r in results]
+    for r, rep in zip(results, reps):
+        r.min_clearance_m, r.max_incidence_deg = rep.min_clearance_m, rep.max_incidence_deg
+    return reps
+
+
 def run(args: argparse.Namespace) -> int:
     """Handler of ``pin-kpi-oed design`` (returns the exit code).
 
@@ -116,6 +145,8 @@ def run(args: argparse.Namespace) -> int:
     """
     from pin_kpi_oed.cell.cell import load_cell
     from pin_kpi_oed.design.optimize import DesignOptions, DesignProblem, ipopt_options, run_designs
+    from pin_kpi_oed.design.sequential import SequentialProblem, poses_until
+    from pin_kpi_oed.design.user_pool import design_from_pool, read_poses
 
     criteria = parse_criteria(getattr(args, "criteria", "random,param,kpi"))
     cell = load_cell(getattr(args, "cell", "kr15"))
@@ -129,7 +160,22 @@ def run(args: argparse.Namespace) -> int:
     quiet = bool(getattr(args, "quiet", False))
     if starts < 1 or max_iter < 1:
         raise InputError("--starts and --max-iter must be >= 1")
-    problem = DesignProblem(cell, collision=collision)
+    true_cell = cell
+    margins = (float(getattr(args, "clearance_margin", 0.0) or 0.0), float(getattr(args, "incidence_margin", 0.0) or 0.0))
+    cell = with_margins(cell, *margins)  # the optimiser's cell; `true_cell` for the reported clearances
+    pool_file, given_file = getattr(args, "pool", None), getattr(args, "given", None)
+    target = getattr(args, "target_sigma", None)
+    if pool_file and given_file:
+        raise InputError("--pool and --given cannot be combined (select from the pool, or design on top of --given)")
+    if target is not None and not given_file:
+        raise InputError("--target-sigma needs --given (the poses already measured)")
+    if target is not None and not (target > 0):
+        raise InputError(f"--target-sigma: must be > 0 m, got {target}")
+    if given_file:
+        Q_given = read_poses(given_file, cell.robot, "--given")
+        problem = SequentialProblem(cell, Q_given, collision=collision)
+    else:
+        problem = DesignProblem(cell, collision=collision)
     if not quiet:
         rows = problem.coll.info.count()
         print(cell.summary())
@@ -139,9 +185,17 @@ def run(args: argparse.Namespace) -> int:
               + f" (aggregated to {problem.cons.n_rows} for Ipopt); {starts} start(s) per criterion")
     opts = DesignOptions(collision=collision, n_starts=starts, ipopt=ipopt_options(max_iter=max_iter),
                          start=getattr(args, "start", "pool") or "pool")
-    results = run_designs(cell, criteria, m, seed, opts, problem)
     cert = None
-    if getattr(args, "certificate", False):
+    if pool_file:
+        results, cert, n_ok = design_from_pool(problem, read_poses(pool_file, cell.robot, "--pool"), criteria, m, seed)
+        if not quiet:
+            print(f"--pool: {n_ok} feasible candidates in {pool_file}")
+    else:
+        results = run_designs(cell, criteria, m, seed, opts, problem)
+    true_checks = _true_checks(true_cell, results) if cell is not true_cell else None
+    if getattr(args, "certificate", False) and given_file:
+        print("certificate: not computed with --given (the bound does not include the measured poses)")
+    elif getattr(args, "certificate", False) and not pool_file:
         from pin_kpi_oed.oed.certificate import certify
 
         cert = certify(problem, m, pool_size=getattr(args, "pool_size", 5000) or 5000, seed=seed,
@@ -149,19 +203,48 @@ def run(args: argparse.Namespace) -> int:
     shown = [r for r in results if r.criterion in criteria] or results
     print(table(shown, results[0], cert))
     if cert is not None:
-        print(f"certificate: every {m}-pose design from the {cert.pool_size} feasible candidates (random pool + "
-              f"the designs' poses) has tr(C_s) >= {cert.lower_bound_trace_cs_m2 * 1e6:.4e} mm^2 "
+        print(f"certificate: every {m}-pose design from the {cert.pool_size} feasible candidates "
+              f"({'the user pool' if pool_file else 'random pool + the designs poses'}) has tr(C_s) >= "
+              f"{cert.lower_bound_trace_cs_m2 * 1e6:.4e} mm^2 "
               f"(equivalence theorem: mean of the {m} largest d / phi = {cert.approx.max_d_ratio:.4f})")
-    if not quiet:
+    if not quiet and not pool_file:
         rnd = results[0]
         print(f"heuristic: {rnd.samples} uniform random poses drawn for {m} feasible ones "
               f"({100.0 * m / max(rnd.samples or 1, 1):.2f} % accepted); tr(C_s) in the tracker frame, "
               f"sigma = {cell.noise.sigma_xyz_m[0] * 1e6:g} um per axis; check = independent dense check")
+    if not quiet:
         for r in results:
             if not r.feasible:
                 print(f"  {r.criterion}: {', '.join(r.check.get('violations', [])[:3])}")
+        if true_checks is not None:
+            print(f"margins: clearance {margins[0] * 1e3:g} mm, incidence {margins[1]:g} deg enforced by the optimiser; "
+                  f"min clr / max inc above are the TRUE values (cell clearance {true_cell.clearance_m * 1e3:g} mm, "
+                  f"incidence limit {true_cell.incidence_max_deg:g} deg)")
+    until = None
+    if target is not None:
+        pool_q, _ = problem.random_design(getattr(args, "pool_size", 5000) or 5000,
+                                          seed=np.random.SeedSequence([seed, 2]),
+                                          max_tries=max(cell.max_random_tries, 200 * (getattr(args, "pool_size", 5000) or 5000)))
+        until = poses_until(problem, float(target), pool_q)
+        print(until.summary())
     if getattr(args, "json", None):
-        doc = design_json(cell, problem, results, m, seed, collision)
+        doc = design_json(true_cell, problem, results, m, seed, collision)
+        doc["clearance_margin_m"], doc["incidence_margin_deg"] = margins
+        if given_file:  # tr(C_s) and C_s of every design include the measured poses
+            doc["given"] = {"file": str(given_file), "q": problem.Q_given.tolist(),
+                            "tcp_sigma_m": problem.sigma_tcp()}
+            for d, r in zip(doc["designs"], results):
+                d["cov_s_m2"] = score_design(problem.model, np.vstack([problem.Q_given, r.q_meas]), cell.q_work,
+                                             problem.ident).cov_s_m2.tolist()
+        if pool_file:
+            doc["pool_file"] = str(pool_file)
+        if until is not None:
+            doc["poses_until"] = {**until.result_dict(), "target_sigma_m": until.target_sigma_m,
+                                  "n_more": until.n_more, "sigma_now_m": until.sigma_now_m,
+                                  "sigma_verified_m": until.sigma_verified_m, "q_added": until.Q_added.tolist()}
+        if true_checks is not None:
+            for d, rep in zip(doc["designs"], true_checks):
+                d["pose_clearance_m"], d["pose_incidence_deg"] = rep.clearance_m.tolist(), rep.incidence_deg.tolist()
         if cert is not None:
             doc["lower_bound_trace_cs_m2"] = cert.lower_bound_trace_cs_m2
             doc["certificate"] = cert.to_dict()

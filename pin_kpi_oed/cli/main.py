@@ -17,7 +17,7 @@ from pathlib import Path
 from pin_kpi_oed.cli.util import parse_floats
 from pin_kpi_oed.errors import PinKpiOedError
 
-TOPICS = ("design", "identify", "transfer", "diagnose", "view", "study", "compensate", "tracker_export")
+TOPICS = ("design", "identify", "transfer", "diagnose", "view", "study", "compensate", "tracker_export", "program")
 
 
 

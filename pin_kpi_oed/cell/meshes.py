@@ -1,0 +1,121 @@
+"""Capsules fitted to meshes: robot capsules from a URDF's collision (or visual) meshes.
+
+For ``robot_capsules: urdf`` (collision geometry) or ``urdf_visual`` (visual geometry) in a cell
+file, every geometry object of the URDF becomes one enclosing capsule in its link frame:
+cylinders, capsules and spheres exactly (as before), meshes and boxes by :func:`fit_capsule` on
+their vertices. The fit is *enclosing* (every vertex inside, so the optimiser's and the check's
+capsules are conservative), its axis a principal axis of the vertices (of the three, the one giving the smallest capsule
+volume) through the centre of their bounding box across it, its radius the largest distance of a vertex
+from that axis, and its segment the shortest one whose spherical caps still cover the vertices
+beyond the ends.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pinocchio as pin
+
+from pin_kpi_oed.errors import InputError
+
+
+def fit_capsule(points: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
+    """The enclosing capsule of a point set (see the module docstring).
+
+    Args:
+        points: (k, 3) points (m).
+
+    Returns:
+        (a, b, radius): segment end points (m) and radius (m); every point within ``radius`` of [a, b].
+
+    Raises:
+        InputError: no points or non-finite points.
+    """
+    P = np.asarray(points, float).reshape(-1, 3)
+    if P.shape[0] == 0 or not np.all(np.isfinite(P)):
+        raise InputError("fit_capsule: need finite points")
+    c = P.mean(axis=0)
+    X = P - c
+    _, _, Vt = np.linalg.svd(X, full_matrices=False) if P.shape[0] > 1 else (None, None, np.eye(3))
+    best = None
+    for k, u in enumerate(Vt):
+        # the axis through the centre of the bounding box across it (tighter than the centroid)
+        o = sum(0.5 * (np.max(X @ w) + np.min(X @ w)) * w for j, w in enumerate(Vt) if j != k)
+        Xo = X - o
+        t = Xo @ u
+        rho = np.linalg.norm(Xo - t[:, None] * u, axis=1)
+        r = float(rho.max())
+        h = np.sqrt(np.maximum(r * r - rho * rho, 0.0))
+        ta, tb = float(np.min(t + h)), float(np.max(t - h))
+        if ta > tb:  # a sphere-like set: a ball around the middle
+            mid = 0.5 * (ta + tb)
+            ta = tb = mid
+            r = float(np.max(np.linalg.norm(Xo - mid * u, axis=1)))
+        vol = np.pi * r * r * (tb - ta) + 4.0 / 3.0 * np.pi * r ** 3
+        if best is None or vol < best[0]:
+            best = (vol, c + o + ta * u, c + o + tb * u, r)
+    return best[1], best[2], best[3]
+
+
+def _vertices(go: pin.GeometryObject) -> np.ndarray:
+    """Vertices of a mesh or box geometry object in its own frame (m)."""
+    import coal
+
+    g = go.geometry
+    if isinstance(g, coal.Box):
+        h = np.asarray(g.halfSide, float)
+        return np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)]) * h
+    import trimesh
+
+    mesh = trimesh.load(go.meshPath, force="mesh")
+    return np.asarray(mesh.vertices, float) * np.asarray(go.meshScale, float)
+
+
+def package_dirs(urdf_path: str | Path) -> list[str]:
+    """Folders to resolve ``package://`` URIs of a URDF: example-robot-data's share folder and the URDF's parents."""
+    from pin_kpi_oed.model.robot import erd_root
+
+    p = Path(urdf_path).resolve()
+    dirs = [str(d) for d in list(p.parents)[:3]]
+    try:
+        dirs.insert(0, str(erd_root().parents[1]))
+    except Exception:  # example-robot-data missing: local folders only
+        pass
+    return dirs
+
+
+def geometry_model(robot, kind: str = "collision") -> pin.GeometryModel:
+    """The URDF's collision or visual geometry with meshes resolved.
+
+    Raises:
+        InputError: unknown kind or unreadable geometry (naming the URDF).
+    """
+    types = {"collision": pin.GeometryType.COLLISION, "visual": pin.GeometryType.VISUAL}
+    if kind not in types:
+        raise InputError(f"robot_capsules: unknown geometry kind '{kind}' (collision or visual)")
+    try:
+        return pin.buildGeomFromUrdf(robot.model, robot.urdf_path, types[kind], package_dirs=package_dirs(robot.urdf_path))
+    except Exception as exc:
+        first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+        raise InputError(f"robot_capsules: cannot read the {kind} geometry of {robot.urdf_path} ({first}); "
+                         "list the robot capsules explicitly in the cell file") from None
+
+
+def capsule_of(robot, go: pin.GeometryObject) -> tuple[np.ndarray, np.ndarray, float]:
+    """One enclosing capsule (link frame of ``go.parentFrame``) of a geometry object: exact for
+    cylinders / capsules / spheres, fitted for meshes and boxes."""
+    import coal
+
+    g = go.geometry
+    # geometry placement is in the parent *joint* frame: express it in the link (body) frame
+    M = robot.model.frames[go.parentFrame].placement.inverse() * go.placement
+    if isinstance(g, (coal.Cylinder, coal.Capsule, coal.Sphere)):
+        h = 0.0 if isinstance(g, coal.Sphere) else float(g.halfLength)
+        return M.act(np.array([0.0, 0.0, -h])), M.act(np.array([0.0, 0.0, h])), float(g.radius)
+    if isinstance(g, coal.Box) or go.meshPath:
+        V = _vertices(go)
+        a, b, r = fit_capsule(V @ M.rotation.T + M.translation)
+        return a, b, r
+    raise InputError(f"robot_capsules: the geometry of link '{robot.model.frames[go.parentFrame].name}' in "
+                     f"{robot.urdf_path} is a {type(g).__name__}; list its capsules explicitly")

@@ -1,0 +1,187 @@
+"""Sequential design: m more poses on top of poses already measured, and "how many more until σ ≤ X".
+
+The information of the measured poses Q_g counts: every criterion is evaluated on the stacked
+weighted Jacobian [F(Q_g); F(Q)] (eq. 24d), so C_p = (F_gᵀF_g + FᵀF + prior)⁻¹ and C_s = E C_p Eᵀ
+(eq. 19) include them; IPOPT moves only the new poses Q (:class:`SequentialProblem`, a
+:class:`~pin_kpi_oed.design.optimize.DesignProblem` whose criteria are :class:`GivenDesignCriterion`).
+
+:func:`poses_until` answers "how many more poses until the predicted TCP σ = sqrt(tr C_s / t) at the
+working configurations is ≤ X": a greedy sequential design over a feasible pool (each step adds the
+candidate that lowers tr(C_s) most, rank-nh Woodbury updates for all candidates at once), stopped
+at the first count that reaches X; the answer is then verified by recomputing C_s from scratch (the
+KPI criterion on the stacked Jacobian of measured + chosen poses, no Woodbury updates).
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from pin_kpi_oed.cell.cell import Cell
+from pin_kpi_oed.design.optimize import DesignProblem
+from pin_kpi_oed.errors import IdentifiabilityError, InputError
+from pin_kpi_oed.oed.criteria import DesignCriterion
+from pin_kpi_oed.results import Result
+
+
+@dataclass
+class GivenDesignCriterion(DesignCriterion):
+    """A design criterion with the information of already measured poses (rows ``F_given``) added.
+
+    Attributes:
+        F_given: weighted Jacobian rows of the measured poses over the base parameters, (k·nh, nb).
+    """
+
+    F_given: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
+
+    def value(self, Q: np.ndarray) -> float:
+        """φ([F_given; F(Q)])."""
+        F = self.model.weighted_jacobian(self.p, Q)[:, :, self.base].reshape(-1, self.base.size)
+        return self.crit.value(np.vstack([self.F_given, F]), self.E, self.prior)
+
+    def value_and_grad(self, Q: np.ndarray) -> tuple[float, np.ndarray]:
+        """φ([F_given; F(Q)]) and dφ/dQ (m, n): only the new poses move."""
+        F, dF = self.model.weighted_jacobian_dq(self.p, Q)
+        Fb = F[:, :, self.base]
+        m, nh, nb = Fb.shape
+        k = self.F_given.shape[0]
+        val, G = self.crit.value_and_grad_F(np.vstack([self.F_given, Fb.reshape(-1, nb)]), self.E, self.prior)
+        grad = np.einsum("mac,mack->mk", G[k:].reshape(m, nh, nb), dF[:, :, self.base, :])
+        return val, grad
+
+
+class SequentialProblem(DesignProblem):
+    """A design problem whose criteria and scores include the information of measured poses.
+
+    Args:
+        cell: the cell.
+        Q_given: the measured configurations (k, n) rad.
+        **kwargs: as :class:`DesignProblem`.
+
+    Raises:
+        InputError: Q_given of the wrong width or outside the robot's joint limits.
+    """
+
+    def __init__(self, cell: Cell, Q_given: np.ndarray, **kwargs):
+        super().__init__(cell, **kwargs)
+        Q_given = np.atleast_2d(np.asarray(Q_given, float))
+        if Q_given.shape[1] != self.n:
+            raise InputError(f"--given: expected {self.n} joint values per pose, got {Q_given.shape[1]}")
+        self.Q_given = cell.robot.check_q(Q_given, "--given")
+        self.F_given = self.model.weighted_jacobian(self.p0, self.Q_given)[:, :, self.base].reshape(-1, self.base.size)
+        self._kpi = self.criterion("kpi")
+        self._param = self.criterion("param")
+
+    def criterion(self, name: str) -> GivenDesignCriterion:
+        """The registered criterion ``name`` with the measured poses' information."""
+        return GivenDesignCriterion(self.model, self.base, name, self.E, F_given=self.F_given)
+
+    def identifies(self) -> bool:
+        """Whether the measured poses alone identify the base parameters."""
+        return bool(np.linalg.matrix_rank(self.F_given) == self.base.size) if self.F_given.size else False
+
+    def min_measurements(self) -> int:
+        """Fewest new poses that can identify the base parameters together with the measured ones."""
+        if self.identifies():
+            return 1
+        return max(1, int(np.ceil((self.base.size - np.linalg.matrix_rank(self.F_given)) / self.model.nh)))
+
+    def sigma_tcp(self, Q_new: np.ndarray | None = None) -> float:
+        """Predicted TCP σ = sqrt(tr C_s / t) (m) of the measured poses plus ``Q_new`` (eq. 19)."""
+        t = self.cell.q_work.shape[0]
+        if Q_new is None or len(Q_new) == 0:
+            tr = self._kpi.crit.value(self.F_given, self.E, self._kpi.prior)
+        else:
+            tr = self._kpi.value(np.atleast_2d(Q_new))
+        return float(np.sqrt(tr / t))
+
+
+@dataclass(kw_only=True)
+class PosesUntil(Result):
+    """Answer of "how many more poses until the TCP σ ≤ target".
+
+    Attributes:
+        target_sigma_m: the target (m).
+        n_more: poses to add (−1 when the pool cannot reach the target within ``max_add``).
+        sigma_now_m: σ of the measured poses alone (m).
+        sigma_path_m: σ after each greedy addition (m).
+        sigma_verified_m: σ recomputed from scratch with the n_more chosen poses (m).
+        Q_added: the chosen poses (n_more, n) rad.
+    """
+
+    target_sigma_m: float
+    n_more: int
+    sigma_now_m: float
+    sigma_path_m: np.ndarray
+    sigma_verified_m: float
+    Q_added: np.ndarray
+
+    def summary(self) -> str:
+        """A readable line."""
+        if self.n_more < 0:
+            return (f"TCP sigma {self.sigma_now_m * 1e6:.3f} um now; {len(self.sigma_path_m)} more poses reach only "
+                    f"{self.sigma_path_m[-1] * 1e6:.3f} um > target {self.target_sigma_m * 1e6:.3f} um")
+        return (f"TCP sigma {self.sigma_now_m * 1e6:.3f} um now; {self.n_more} more pose(s) reach "
+                f"{self.sigma_verified_m * 1e6:.3f} um <= target {self.target_sigma_m * 1e6:.3f} um "
+                f"(verified by recomputing C_s with them)")
+
+
+def poses_until(problem: SequentialProblem, target_sigma_m: float, Q_pool: np.ndarray, max_add: int = 500
+                ) -> PosesUntil:
+    """Greedy sequential design over a feasible pool until the predicted TCP σ ≤ target (see module docstring).
+
+    Args:
+        problem: the sequential problem (its measured poses must identify the parameters).
+        target_sigma_m: target σ (m), > 0.
+        Q_pool: feasible candidate poses (N, n) rad.
+        max_add: most poses to add.
+
+    Returns:
+        The :class:`PosesUntil` answer (``success``: target reached and verified).
+
+    Raises:
+        InputError: a non-positive target.
+        IdentifiabilityError: the measured poses do not identify the parameters (a greedy step needs M⁻¹).
+    """
+    t0 = time.perf_counter()
+    if not (target_sigma_m > 0):
+        raise InputError(f"--target-sigma: must be > 0 m, got {target_sigma_m}")
+    if not problem.identifies():
+        raise IdentifiabilityError("--given: the measured poses do not identify the parameters; design "
+                                   f"at least {problem.min_measurements()} more with --measurements first")
+    t = problem.cell.q_work.shape[0]
+    E = problem.E
+    prior = problem._kpi.prior
+    M = problem.F_given.T @ problem.F_given
+    if prior is not None:
+        M = M + np.diag(1.0 / np.asarray(prior, float) ** 2)
+    Fp = problem.model.weighted_jacobian(problem.p0, Q_pool)[:, :, problem.base]  # (N, nh, nb)
+    Minv = np.linalg.inv(M)
+    nh = Fp.shape[1]
+    sig_now = float(np.sqrt(np.trace(E @ Minv @ E.T) / t))
+    chosen, path = [], []
+    sig = sig_now
+    avail = np.ones(Fp.shape[0], bool)
+    while sig > target_sigma_m and len(chosen) < max_add and avail.any():
+        A = np.einsum("iab,bc->iac", Fp, Minv)                       # F_i M⁻¹ (N, nh, nb)
+        S = np.eye(nh) + np.einsum("iab,icb->iac", A, Fp)           # I + F_i M⁻¹ F_iᵀ
+        B = np.einsum("kb,iab->ika", E, A)                           # E M⁻¹ F_iᵀ (N, nk, nh)
+        gain = np.einsum("ika,iak->i", B, np.linalg.solve(S, np.swapaxes(B, 1, 2)))
+        gain[~avail] = -np.inf
+        i = int(np.argmax(gain))
+        Minv = Minv - A[i].T @ np.linalg.solve(S[i], A[i])
+        avail[i] = False
+        chosen.append(i)
+        sig = float(np.sqrt(max(np.trace(E @ Minv @ E.T), 0.0) / t))
+        path.append(sig)
+    Q_add = Q_pool[chosen]
+    verified = problem.sigma_tcp(Q_add) if chosen else sig_now
+    ok = verified <= target_sigma_m * (1 + 1e-9)
+    n_more = len(chosen) if ok else -1
+    return PosesUntil(target_sigma_m=float(target_sigma_m), n_more=n_more, sigma_now_m=sig_now,
+                      sigma_path_m=np.array(path), sigma_verified_m=verified, Q_added=Q_add, success=bool(ok),
+                      status="reached" if ok else "not reached", nit=len(chosen), time_s=time.perf_counter() - t0,
+                      message="" if ok else f"the pool of {len(Q_pool)} feasible poses does not reach the target "
+                                            f"within {max_add} more poses")

@@ -1,0 +1,218 @@
+"""Dense collision checks of the joint-space moves between poses, and their repair through via poses.
+
+A move between two configurations is the straight line in joint space (what ``movej`` / ``PTP`` /
+``MoveAbsJ`` execute). :class:`TransitionChecker` samples it at joint steps of at most
+``step_rad`` (default 1°) for revolute and ``step_m`` (default 5 mm) for prismatic joints, end
+points included, and evaluates every capsule / half-space pair of the cell with the independent
+checker (:meth:`~pin_kpi_oed.cell.feasibility.FeasibilityChecker.pair_distances`: Pinocchio + Coal,
+the same capsules as the design, no pruning). A move is *clear* when every sample keeps
+``cell.clearance_m + margin_m``, or — when an end pose is itself closer than that (a design made
+without the margin) — never comes closer than its closer end pose; a move from a colliding pose
+is never clear. The beam and the incidence angle are not checked along a move:
+the tracker measures at the poses only.
+
+A colliding move is repaired by :meth:`TransitionChecker.repair`: through one safe intermediate
+pose (wrist-first / arm-first splits of the move, the home pose, retracted variants of the end
+poses, then a seeded pool of collision-free configurations; cheapest first), else through two
+(every leg densely checked).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from pin_kpi_oed.cell.cell import Cell
+from pin_kpi_oed.cell.feasibility import FeasibilityChecker
+from pin_kpi_oed.errors import InputError
+
+
+@dataclass
+class MoveCheck:
+    """Dense check of one joint-space move.
+
+    Attributes:
+        clear: every sample keeps the required clearance (the margin, or the end poses' if smaller).
+        min_clearance_m: smallest pair distance along the move minus the cell's required clearance (m).
+        n_samples: configurations evaluated.
+        worst_fraction: where along the move (0…1) the smallest clearance is.
+    """
+
+    clear: bool
+    min_clearance_m: float
+    n_samples: int
+    worst_fraction: float
+
+
+class TransitionChecker:
+    """Dense checks of joint-space moves in a cell (see the module docstring).
+
+    Args:
+        cell: the cell (its capsules, obstacles, half-spaces, skip pairs and required clearance).
+        margin_m: extra clearance every move must keep (m), on top of ``cell.clearance_m``.
+        step_rad: largest revolute joint step between samples (rad); at most 1° is the issue's contract.
+        step_m: largest prismatic joint step between samples (m).
+        checker: an existing :class:`FeasibilityChecker` of the cell (built if None).
+
+    Raises:
+        InputError: negative margin or non-positive steps.
+    """
+
+    def __init__(self, cell: Cell, margin_m: float = 0.0, step_rad: float = math.radians(1.0),
+                 step_m: float = 0.005, checker: FeasibilityChecker | None = None):
+        if not (margin_m >= 0 and step_rad > 0 and step_m > 0):
+            raise InputError(f"transition check: margin >= 0 and steps > 0 required, got margin {margin_m} m, "
+                             f"steps {step_rad} rad / {step_m} m")
+        self.cell = cell
+        self.margin_m = float(margin_m)
+        self.checker = checker or FeasibilityChecker(cell)
+        self.required_m = float(cell.clearance_m) + self.margin_m
+        rev = np.asarray(cell.robot.is_revolute, bool)
+        self.steps = np.where(rev, float(step_rad), float(step_m))
+        self.n_evaluations = 0
+        self._cache: dict[tuple[bytes, bytes, bool], MoveCheck] = {}
+
+    def samples(self, qa: np.ndarray, qb: np.ndarray) -> np.ndarray:
+        """Configurations along the straight joint move qa → qb, end points included, steps ≤ the limits."""
+        qa, qb = np.asarray(qa, float), np.asarray(qb, float)
+        k = max(1, int(math.ceil(float(np.max(np.abs(qb - qa) / self.steps)) - 1e-12)))
+        s = np.linspace(0.0, 1.0, k + 1)[:, None]
+        return qa + s * (qb - qa)
+
+    def clearance(self, q: np.ndarray) -> float:
+        """Smallest pair distance at q minus the cell's required clearance (m); ``inf`` with no pairs."""
+        self.n_evaluations += 1
+        d = self.checker.pair_distances(q)
+        return float(d.min()) - self.cell.clearance_m if d.size else math.inf
+
+    def check(self, qa: np.ndarray, qb: np.ndarray, stop_early: bool = True) -> MoveCheck:
+        """Densely check the move qa → qb.
+
+        Args:
+            qa, qb: end configurations (n,).
+            stop_early: stop at the first sample below the required clearance.
+
+        Returns:
+            The :class:`MoveCheck` (``min_clearance_m`` over the samples evaluated).
+        """
+        qa, qb = np.asarray(qa, float), np.asarray(qb, float)
+        key = (qa.tobytes(), qb.tobytes(), stop_early)
+        hit = self._cache.get(key) or self._cache.get((qb.tobytes(), qa.tobytes(), stop_early))
+        if hit is not None:
+            return hit
+        S = self.samples(qa, qb)
+        ends = [self.clearance(S[0]), self.clearance(S[-1])]
+        need = min(self.margin_m, min(ends)) - 1e-9  # never closer than the margin or than the end poses are
+        k = int(np.argmin(ends))
+        best, where, n = ends[k], float(k), 2
+        if min(ends) < -1e-9:
+            need = math.inf  # an end pose itself collides: the move cannot be clear
+        for i in sorted(range(1, len(S) - 1), key=lambda i: abs(i - len(S) / 2)):  # middle outwards
+            if stop_early and best < need:
+                break
+            c = self.clearance(S[i])
+            n += 1
+            if c < best:
+                best, where = c, i / (len(S) - 1)
+        self._cache[key] = out = MoveCheck(bool(best >= need), best, n, where)
+        return out
+
+    def path_check(self, path: np.ndarray) -> MoveCheck:
+        """Densely check a sequence of moves through the rows of ``path`` (no early stop)."""
+        path = np.atleast_2d(path)
+        checks = [self.check(a, b, stop_early=False) for a, b in zip(path[:-1], path[1:])]
+        if not checks:
+            return MoveCheck(True, math.inf, 0, 0.0)
+        k = int(np.argmin([c.min_clearance_m for c in checks]))
+        return MoveCheck(all(c.clear for c in checks), checks[k].min_clearance_m,
+                         sum(c.n_samples for c in checks), (k + checks[k].worst_fraction) / len(checks))
+
+    def safe_pool(self, n: int, seed: int = 0, max_tries: int | None = None) -> np.ndarray:
+        """Seeded collision-free configurations (clearance ≥ 2 × the move margin) to route through.
+
+        Args:
+            n: configurations wanted.
+            seed: seed of the uniform sampling within the cell's joint bounds.
+            max_tries: sampling budget (default 50 n).
+
+        Returns:
+            (k ≤ n, joints) configurations.
+        """
+        rng = np.random.default_rng(seed)
+        lo, hi = self.cell.q_lower, self.cell.q_upper
+        out = []
+        for _ in range(max_tries or 50 * n):
+            q = lo + rng.random(lo.size) * (hi - lo)
+            if self.clearance(q) >= 2.0 * self.margin_m + 0.01:
+                out.append(q)
+                if len(out) >= n:
+                    break
+        return np.array(out).reshape(-1, lo.size)
+
+    def structured_vias(self, qa: np.ndarray, qb: np.ndarray, home: np.ndarray | None = None) -> np.ndarray:
+        """Via candidates a programmer would try first for the move qa → qb.
+
+        Wrist first (qa's arm, qb's wrist) and arm first (qb's arm, qa's wrist); the home pose; and
+        qa, qb and their midpoint with the arm (the first three revolute joints after the first:
+        shoulder and elbow) of the home pose, i.e. retracted. Non-revolute joints keep qa's values
+        in the retracted candidates.
+
+        Returns:
+            (k, n) candidate configurations (not yet checked).
+        """
+        qa, qb = np.asarray(qa, float), np.asarray(qb, float)
+        rev = np.flatnonzero(self.cell.robot.is_revolute)
+        arm, wrist = rev[:3], rev[3:]
+        out = []
+        for x, y in ((qa, qb), (qb, qa)):
+            v = x.copy()
+            v[wrist] = y[wrist]
+            out.append(v)
+        if home is not None:
+            home = np.asarray(home, float)
+            out.append(home.copy())
+            for base in (qa, qb, 0.5 * (qa + qb)):
+                v = base.copy()
+                v[arm[1:]] = home[arm[1:]]
+                out.append(v)
+        return np.array(out)
+
+    def repair(self, qa: np.ndarray, qb: np.ndarray, vias: np.ndarray, cost, max_one: int = 24,
+               max_legs: int = 6) -> list[np.ndarray] | None:
+        """A collision-free route qa → via(s) → qb through candidate via poses, cheapest first.
+
+        Args:
+            qa, qb: end configurations.
+            vias: candidate intermediate configurations (k, n) (:meth:`structured_vias` first, then
+                a :meth:`safe_pool`); candidates too close to an obstacle are skipped.
+            cost: ``cost(q1, q2)`` of a move (s).
+            max_one: one-via candidates checked (cheapest first).
+            max_legs: candidates per side of the two-via search.
+
+        Returns:
+            The intermediate configurations (one or two), or None when no route was found.
+        """
+        vias = np.atleast_2d(vias)
+        if vias.size == 0:
+            return None
+        lo, hi = self.cell.q_lower, self.cell.q_upper
+        inside = np.all((vias >= lo) & (vias <= hi), axis=1)
+        vias = vias[inside]
+        ok = np.array([self.clearance(v) >= self.margin_m for v in vias], bool)
+        vias = vias[ok]
+        if len(vias) == 0:
+            return None
+        ca = np.array([cost(qa, v) for v in vias])
+        cb = np.array([cost(v, qb) for v in vias])
+        for k in np.argsort(ca + cb)[:max_one]:
+            if self.check(qa, vias[k]).clear and self.check(vias[k], qb).clear:
+                return [vias[k]]
+        A = [k for k in np.argsort(ca)[:3 * max_legs] if self.check(qa, vias[k]).clear][:max_legs]
+        B = [k for k in np.argsort(cb)[:3 * max_legs] if self.check(vias[k], qb).clear][:max_legs]
+        legs = sorted(((ca[i] + cost(vias[i], vias[j]) + cb[j], i, j) for i in A for j in B if i != j))
+        for _, i, j in legs:
+            if self.check(vias[i], vias[j]).clear:
+                return [vias[i], vias[j]]
+        return None

@@ -1,0 +1,77 @@
+"""Animate an ordered measurement program in a design's meshcat scene (``pin-kpi-oed export --html``).
+
+The robot (visual meshes and capsules) moves along every joint-space move of the program at
+``step_deg`` joint steps, stops at each measurement point for ``hold_frames`` frames with the laser
+beam drawn (the beam is hidden while moving), and passes the via poses without stopping. It
+replaces the scene's pose-by-pose animation (meshcat's *Animations* panel: play / time slider).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pinocchio as pin
+
+from pin_kpi_oed.viz.scene import Scene, _anim_set, _beam_matrix, _placements, _rot_y_to
+
+
+def animate_program(scene: Scene, path: np.ndarray, kinds: list[str], step_deg: float = 3.0, hold_frames: int = 6,
+                    fps: int = 24) -> list[float]:
+    """Replace the scene's animation with the program's moves.
+
+    Args:
+        scene: a scene of the design (:func:`pin_kpi_oed.viz.scene.build_scene`).
+        path: the program's targets in order (k, n) rad / m (home, poses, vias, home).
+        kinds: ``home`` / ``measure`` / ``via`` per target.
+        step_deg: largest joint step between animation frames (deg; prismatic joints: step_deg mm).
+        hold_frames: frames the robot holds each measurement point.
+        fps: animation frames per second.
+
+    Returns:
+        Animation time (s) of every measurement point, in order.
+    """
+    from meshcat.animation import Animation
+
+    viz, df = scene.viz, scene.design
+    model = viz.model
+    data = model.createData()
+    visual, collision = viz.visual_model, viz.collision_model
+    vdata = visual.createData()
+    cdata = collision.createData() if collision is not None else None
+    rev = np.asarray(df.robot.is_revolute, bool)
+    steps = np.where(rev, math.radians(step_deg), step_deg * 1e-3)
+    trk = df.world_T_tracker.translation
+    anim = Animation(default_framerate=fps)
+    times: list[float] = []
+    frame = 0
+
+    def key(q: np.ndarray, beam: bool) -> None:
+        with anim.at_frame(scene.vis, frame) as f:
+            for g, M in _placements(model, data, visual, vdata, q, pin.SE3.Identity()):
+                _anim_set(f[f"robot/visuals/{g.name}"], M, g.meshScale)
+            if collision is not None:
+                for g, M in _placements(model, data, collision, cdata, q, pin.SE3.Identity()):
+                    _anim_set(f[f"robot/collisions/{g.name}"], M, g.meshScale)
+            refl = df.reflector_world(q[None])[0]
+            Tb = _beam_matrix(trk, refl)
+            length = float(np.linalg.norm(refl - trk)) if beam else 1e-6
+            _anim_set(f["beam"], pin.SE3(_rot_y_to(refl - trk), Tb[:3, 3]), np.array([1.0, length, 1.0]))
+
+    path = np.atleast_2d(np.asarray(path, float))
+    for i in range(len(path)):
+        q = path[i]
+        if kinds[i] == "measure":
+            times.append((frame + 0.5 * hold_frames) / fps)
+            for _ in range(hold_frames):
+                key(q, True)
+                frame += 1
+        if i + 1 < len(path):
+            b = path[i + 1]
+            n = max(1, int(math.ceil(float(np.max(np.abs(b - q) / steps)))))
+            for s in np.linspace(0.0, 1.0, n + 1)[:-1]:
+                key(q + s * (b - q), False)
+                frame += 1
+    key(path[-1], False)
+    scene.vis.set_animation(anim, play=False, repetitions=1)
+    return times

@@ -1,0 +1,327 @@
+"""Measurement programs: move times, dense transition checks, ordering (OR-Tools), exports."""
+
+from __future__ import annotations
+
+import itertools
+import math
+
+import numpy as np
+import pytest
+
+from pin_kpi_oed.cell.cell import load_cell
+from pin_kpi_oed.cell.collision import CollisionModel, random_feasible
+from pin_kpi_oed.cell.feasibility import FeasibilityChecker
+from pin_kpi_oed.program.ordering import ProgramOptions, plan_program, solve_tour
+from pin_kpi_oed.program.timing import joint_speeds, move_time, path_time, time_matrix
+from pin_kpi_oed.program.transitions import TransitionChecker
+
+
+@pytest.fixture(scope="module")
+def kr15():
+    return load_cell("kr15")
+
+
+@pytest.fixture(scope="module")
+def poses(kr15):
+    """14 feasible (collision-free, visible) KR 15 poses, seeded."""
+    Q, _ = random_feasible(CollisionModel(kr15), 14, np.random.default_rng(3), 200_000)
+    return Q
+
+
+def test_speeds_from_urdf_and_move_time(kr15):
+    v = joint_speeds(kr15.robot)
+    # urdf/kr15.urdf <limit velocity=...> in rad/s: 156, 156, 156, 335, 355, 647 deg/s
+    np.testing.assert_allclose(np.degrees(v), [156, 156, 156, 335, 355, 647], rtol=1e-6)
+    qa, qb = np.zeros(6), np.radians([78.0, 0, 0, 0, 0, 647.0])
+    assert move_time(qa, qb, v) == pytest.approx(1.0)  # 647 deg at 647 deg/s beats 78 deg at 156 deg/s
+    assert move_time(qa, np.radians([156.0, 0, 0, 0, 0, 0]), v * 0.5) == pytest.approx(2.0)
+    T = time_matrix(np.vstack([qa, qb, -qb]), v)
+    assert T[1, 2] == pytest.approx(2.0) and T[0, 1] == pytest.approx(1.0) and np.allclose(T, T.T)
+    assert path_time(np.vstack([qa, qb, qa]), v) == pytest.approx(2.0)
+
+
+def test_solve_tour_finds_the_optimum_of_a_small_instance():
+    rng = np.random.default_rng(0)
+    P = rng.random((8, 2))
+    C = np.linalg.norm(P[:, None] - P[None], axis=2)
+    tour = solve_tour(C, time_limit_s=1.0)
+    assert sorted(tour) == list(range(8)) and tour[0] == 0
+
+    def length(t):
+        return sum(C[a, b] for a, b in zip(t, t[1:] + t[:1]))
+
+    best = min(length([0, *p]) for p in itertools.permutations(range(1, 8)))
+    assert length(tour) == pytest.approx(best, abs=8e-3)  # the solver sees costs rounded to 1e-3
+
+
+def test_dense_samples_never_step_more_than_one_degree(kr15):
+    tc = TransitionChecker(kr15)
+    qa, qb = np.zeros(6), np.radians([100.0, -30.0, 20.0, 250.0, 0.0, -10.0])
+    S = tc.samples(qa, qb)
+    assert np.max(np.abs(np.diff(S, axis=0))) <= math.radians(1.0) + 1e-12
+    np.testing.assert_allclose(S[0], qa) and np.testing.assert_allclose(S[-1], qb)
+    assert len(S) == 251
+
+
+def test_colliding_move_is_found_and_agrees_with_a_finer_independent_check(kr15, poses):
+    tc = TransitionChecker(kr15)
+    fc = FeasibilityChecker(kr15)
+    found = None
+    for a, b in itertools.combinations(range(len(poses)), 2):
+        if not tc.check(poses[a], poses[b]).clear:
+            found = (a, b)
+            break
+    assert found is not None, "14 random poses of the KR 15 cell always have a colliding straight move"
+    qa, qb = poses[found[0]], poses[found[1]]
+    fine = qa + np.linspace(0, 1, 2001)[:, None] * (qb - qa)
+    d = fc.distances(fine)[:, :fc.n_pairs].min(axis=1)
+    assert d.min() < 0  # the finer check sees the penetration too
+    full = tc.check(qa, qb, stop_early=False)
+    assert full.min_clearance_m == pytest.approx(d.min(), abs=0.02)
+
+
+def test_program_orders_checks_and_repairs(kr15, poses):
+    prog = plan_program(kr15, poses, ProgramOptions(margin_m=0.005, time_limit_s=0.5, via_pool=150))
+    assert sorted(prog.order) == list(range(len(poses)))
+    assert prog.success and prog.n_colliding == 0
+    # independent re-check of every move at 0.25 deg steps, without the planner's checker
+    fc = FeasibilityChecker(kr15)
+    path = prog.path
+    assert np.array_equal(path[0], path[-1]) and prog.n_moves == len(path) - 1
+    for a, b in zip(path[:-1], path[1:]):
+        k = max(2, int(np.ceil(np.max(np.abs(b - a)) / np.radians(0.25))))
+        S = a + np.linspace(0, 1, k + 1)[:, None] * (b - a)
+        d = fc.distances(S)[:, :fc.n_pairs].min(axis=1)
+        # the margin, or the end poses' own clearance when a pose is closer (1 deg sampling: 2 mm slack)
+        assert d.min() >= min(0.005, d[0], d[-1]) - 2e-3
+    v = joint_speeds(kr15.robot)
+    assert prog.cycle_time_s == pytest.approx(path_time(path, v))
+    assert prog.cycle_time_s < prog.as_designed_time_s
+    assert prog.waypoints[0].kind == prog.waypoints[-1].kind == "home" and sum(w.kind == "measure" for w in prog.waypoints) == len(poses)
+
+
+# ---------------------------------------------------------------------------- exports
+from pin_kpi_oed.cli.main import main  # noqa: E402
+from pin_kpi_oed.model.robot import load_robot  # noqa: E402
+from pin_kpi_oed.program.export import FORMATS, ProgramInfo, parse_program, write_program  # noqa: E402
+
+
+def _info(robot) -> ProgramInfo:
+    return ProgramInfo(cell="test_cell", design="d.json (kpi)", robot=robot.name, joint_names=list(robot.joint_names),
+                       revolute=np.asarray(robot.is_revolute, bool), cycle_time_s=12.5, date="2026-01-01T00:00:00Z")
+
+
+@pytest.mark.parametrize("robot_name", ["kr15", "kr15_track"])
+@pytest.mark.parametrize("fmt", FORMATS)
+def test_every_format_round_trips_to_1e6_rad(robot_name, fmt):
+    rb = load_robot(robot_name)
+    rng = np.random.default_rng(7)
+    Q = rb.random_q(rng, 9)
+    kinds = ["home", "measure", "measure", "via", "measure", "measure", "via", "measure", "home"]
+    poses = [-1, 4, 0, -1, 2, 3, -1, 1, -1]
+    if fmt == "urscript" and robot_name == "kr15_track":
+        with pytest.raises(Exception, match="6 revolute joints and no prismatic"):
+            write_program(fmt, Q, kinds, poses, _info(rb))
+        return
+    texts = write_program(fmt, Q, kinds, poses, _info(rb))
+    head = next(iter(texts.values()))
+    for word in ("cell: test_cell", "design: d.json (kpi)", "units:", "date: 2026-01-01"):
+        assert word in head
+    back, measured = parse_program(fmt, texts, rb.is_revolute)
+    assert back.shape == Q.shape
+    np.testing.assert_allclose(back, Q, atol=1e-6, rtol=0)
+    assert measured == [4, 0, 2, 3, 1]
+
+
+@pytest.fixture(scope="module")
+def small_design(tmp_path_factory):
+    path = tmp_path_factory.mktemp("prog") / "d.json"
+    assert main(["design", "--cell", "kr15", "--criteria", "random", "--measurements", "12", "--seed", "2",
+                 "--quiet", "--json", str(path)]) == 0
+    return path
+
+
+def test_export_cli_writes_a_checked_program(small_design, tmp_path):
+    out = tmp_path / "prog.src"
+    js = tmp_path / "prog.json"
+    assert main(["export", str(small_design), "--format", "krl", "--out", str(out), "--json", str(js),
+                 "--quiet"]) == 0
+    texts = {".src": out.read_text(), ".dat": out.with_suffix(".dat").read_text()}
+    assert "DEF prog( )" in texts[".src"] and "DEFDAT prog PUBLIC" in texts[".dat"]
+    import json
+
+    doc = json.loads(js.read_text())
+    Q, measured = parse_program("krl", texts, np.ones(6, bool))
+    assert sorted(measured) == list(range(12)) and doc["n_colliding"] == 0
+    np.testing.assert_allclose(Q, [w["q"] for w in doc["waypoints"]], atol=1e-6)
+
+
+def test_export_cli_bad_input_exit_2_nothing_written(small_design, tmp_path, capsys):
+    out = tmp_path / "p.txt"
+    assert main(["export", str(small_design), "--format", "fanuc", "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert "unknown format 'fanuc'" in err and len(err.strip().splitlines()) == 1
+    assert not out.exists()
+    assert main(["export", str(small_design), "--format", "csv", "--out", str(tmp_path / "nodir" / "p.csv")]) == 2
+    assert list(tmp_path.iterdir()) == []
+
+
+# ---------------------------------------------------------------------------- margins
+from pin_kpi_oed.design.margins import with_margins  # noqa: E402
+from pin_kpi_oed.errors import InputError  # noqa: E402
+
+
+def test_with_margins_tightens_only_the_optimisers_cell(kr15):
+    c = with_margins(kr15, 0.02, 1.5)
+    assert c.clearance_m == pytest.approx(kr15.clearance_m + 0.02) and c.incidence_max_deg == pytest.approx(28.5)
+    assert kr15.incidence_max_deg == 30.0 and with_margins(kr15, 0.0, 0.0) is kr15
+    with pytest.raises(InputError, match="--incidence-margin"):
+        with_margins(kr15, 0.0, 30.0)
+    with pytest.raises(InputError, match="--clearance-margin"):
+        with_margins(kr15, -0.01, 0.0)
+
+
+def test_design_margins_hold_in_the_true_check(tmp_path):
+    import json
+
+    path = tmp_path / "m.json"
+    assert main(["design", "--cell", "kr15", "--criteria", "kpi", "--measurements", "12", "--starts", "1",
+                 "--max-iter", "80", "--clearance-margin", "0.03", "--incidence-margin", "2", "--quiet",
+                 "--json", str(path)]) == 0
+    doc = json.loads(path.read_text())
+    assert doc["clearance_margin_m"] == 0.03 and doc["incidence_margin_deg"] == 2.0
+    assert doc["cell"]["clearance_m"] == 0.0 and doc["cell"]["incidence_max_deg"] == 30.0  # the true cell
+    for d in doc["designs"]:
+        Q = np.array(d["q_meas"])
+        rep = FeasibilityChecker(load_cell("kr15")).check(Q)  # independent, untightened
+        np.testing.assert_allclose(d["pose_clearance_m"], rep.clearance_m, atol=1e-9)
+        assert rep.clearance_m.min() >= 0.03 - 1e-4 and rep.incidence_deg.max() <= 28.0 + 1e-3
+        assert d["min_clearance_m"] == pytest.approx(rep.min_clearance_m)
+
+
+# ---------------------------------------------------------------------------- user pool, sequential design
+def _write_poses(path, names, Q):
+    path.write_text(",".join(names) + "\n" + "\n".join(",".join(f"{x:.12f}" for x in q) for q in Q) + "\n")
+
+
+def test_design_from_a_user_pool(kr15, tmp_path):
+    import json
+
+    rng = np.random.default_rng(4)
+    Qf, _ = random_feasible(CollisionModel(kr15), 300, rng, 200_000)
+    Qc = np.vstack([Qf, kr15.robot.random_q(rng, 100)])  # plus 100 unchecked ones (mostly infeasible)
+    csv = tmp_path / "poses.csv"
+    _write_poses(csv, kr15.robot.joint_names, Qc)
+    out = tmp_path / "d.json"
+    assert main(["design", "--cell", "kr15", "--pool", str(csv), "--criteria", "random,kpi", "--measurements", "15",
+                 "--clearance-margin", "0", "--incidence-margin", "0", "--quiet", "--json", str(out)]) == 0
+    doc = json.loads(out.read_text())
+    rnd, kpi = doc["designs"]
+    for d in doc["designs"]:
+        Q = np.array(d["q_meas"])
+        dist = np.min(np.abs(Q[:, None, :] - Qc[None]).max(axis=2), axis=1)
+        assert dist.max() < 1e-9  # every selected pose is one of the user's
+        assert FeasibilityChecker(kr15).check(Q).all_feasible
+    assert kpi["trace_cs_m2"] < rnd["trace_cs_m2"]
+    assert 0.5 < kpi["efficiency"] <= 1.0 + 1e-9  # certificate over the user's feasible candidates
+
+
+def test_pool_and_given_bad_input_exit_2(kr15, tmp_path, capsys):
+    csv = tmp_path / "bad.csv"
+    _write_poses(csv, ["a1", "a2", "a3", "a4", "a5", "a6"], np.zeros((3, 6)))
+    out = tmp_path / "d.json"
+    for flag in ("--pool", "--given"):
+        assert main(["design", "--cell", "kr15", flag, str(csv), "--quiet", "--json", str(out)]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and flag in err[0] and "bad.csv" in err[0]
+    assert main(["design", "--cell", "kr15", "--target-sigma", "1e-6", "--quiet"]) == 2
+    assert "--target-sigma needs --given" in capsys.readouterr().err
+    assert not out.exists()
+
+
+def test_sequential_design_beats_random_and_answers_how_many_more(kr15, tmp_path):
+    import json
+
+    from pin_kpi_oed.design.optimize import DesignProblem
+    from pin_kpi_oed.oed.criteria import DesignCriterion
+
+    base = DesignProblem(kr15)
+    Q60, _ = base.random_design(60, seed=11)
+    given = tmp_path / "measured.csv"
+    _write_poses(given, kr15.robot.joint_names, Q60[:40])
+    out = tmp_path / "seq.json"
+    crit = DesignCriterion(base.model, base.base, "kpi", base.E)
+    sigma40 = float(np.sqrt(crit.value(Q60[:40])))
+    target = 0.8 * sigma40
+    assert main(["design", "--cell", "kr15", "--given", str(given), "--criteria", "kpi", "--measurements", "20",
+                 "--starts", "1", "--max-iter", "150", "--clearance-margin", "0", "--incidence-margin", "0",
+                 "--target-sigma", str(target), "--pool-size", "1500", "--quiet", "--json", str(out)]) == 0
+    doc = json.loads(out.read_text())
+    kpi = doc["designs"][-1]
+    Qnew = np.array(kpi["q_meas"])
+    # the 20 new poses on top of the 40 measured ones beat 60 random poses (tr C_s from scratch)
+    assert crit.value(np.vstack([Q60[:40], Qnew])) == pytest.approx(kpi["trace_cs_m2"], rel=1e-9)
+    assert kpi["trace_cs_m2"] < crit.value(Q60)
+    assert np.trace(np.array(kpi["cov_s_m2"])) == pytest.approx(kpi["trace_cs_m2"], rel=1e-6)
+    # "how many more": adding that many reaches the target, one fewer does not (t = 1 working configuration)
+    u = doc["poses_until"]
+    k = u["n_more"]
+    Qa = np.array(u["q_added"])
+    assert k == len(Qa) >= 1 and u["success"]
+    assert np.sqrt(crit.value(np.vstack([Q60[:40], Qa]))) <= target * (1 + 1e-9)
+    assert np.sqrt(crit.value(np.vstack([Q60[:40], Qa[:-1]]))) > target
+    assert FeasibilityChecker(kr15).check(Qa).all_feasible
+
+
+# ---------------------------------------------------------------------------- cells from meshes
+from pin_kpi_oed.cell.meshes import _vertices, capsule_of, fit_capsule, geometry_model  # noqa: E402
+from pin_kpi_oed.cell.collision import point_segment_distance  # noqa: E402
+
+
+def test_fit_capsule_encloses_and_is_tight_on_a_cylinder():
+    rng = np.random.default_rng(1)
+    phi, z = rng.random(4000) * 2 * np.pi, rng.random(4000)
+    P = np.c_[0.1 * np.cos(phi), 0.1 * np.sin(phi), z]              # a cylinder surface r = 0.1, z in [0, 1]
+    R = np.linalg.qr(rng.normal(size=(3, 3)))[0]
+    P = P @ R.T + [0.3, -0.2, 0.5]
+    a, b, r = fit_capsule(P)
+    assert np.all(point_segment_distance(P, a[None], b[None]) <= r + 1e-12)
+    # within 4 %: the principal axis of 4,000 samples tilts by a few mrad
+    assert r == pytest.approx(0.1, rel=0.04) and np.linalg.norm(b - a) == pytest.approx(1.0, abs=0.02)
+    ab = (b - a) / np.linalg.norm(b - a)
+    assert abs(ab @ R[:, 2]) == pytest.approx(1.0, abs=1e-3)
+
+
+def test_ur10_capsules_enclose_its_collision_meshes():
+    rb = load_robot("ur10")
+    gm = geometry_model(rb)
+    assert len(gm.geometryObjects) >= 7
+    for go in gm.geometryObjects:
+        a, b, r = capsule_of(rb, go)
+        M = rb.model.frames[go.parentFrame].placement.inverse() * go.placement
+        V = _vertices(go) @ M.rotation.T + M.translation
+        assert np.all(point_segment_distance(V, a[None], b[None]) <= r + 1e-9), go.name
+    cell = load_cell("ur10")  # shipped, robot_capsules: urdf on mesh geometry
+    assert len(cell.robot_capsules) == len(gm.geometryObjects)
+    rep = FeasibilityChecker(cell).check(cell.q_work)
+    assert rep.collision_free.all()
+
+
+def test_program_animation_holds_every_measurement_point(small_design, tmp_path):
+    from pin_kpi_oed.design.design_file import load_design
+    from pin_kpi_oed.viz.program_animation import animate_program
+    from pin_kpi_oed.viz.scene import SceneOptions, build_scene
+
+    df = load_design(small_design, criteria=["random"])
+    prog = plan_program(df.cell, df.design("random").q_meas, ProgramOptions(time_limit_s=0.3))
+    scene = build_scene(df, SceneOptions(ghosts=False, animate=False))
+    times = animate_program(scene, prog.path, [w.kind for w in prog.waypoints], step_deg=5.0, fps=10)
+    assert len(times) == 12 and np.all(np.diff(times) > 0)
+    # frames: hold 6 per pose + one per 5 deg of the largest joint move, so the last pose comes after
+    # (sum over moves of ceil(max |dq| / 5 deg)) / fps seconds of motion
+    path = prog.path
+    moves = sum(max(1, math.ceil(np.max(np.abs(b - a)) / math.radians(5.0))) for a, b in zip(path[:-1], path[1:]))
+    assert times[-1] < (moves + 6 * 12) / 10 and times[-1] > moves / 10 * 0.5
+    out = tmp_path / "p.html"
+    scene.write_html(out)
+    assert out.stat().st_size > 100_000
