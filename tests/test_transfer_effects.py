@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 from pin_kpi_oed.data.measurements import MeasurementSet
-from pin_kpi_oed.diagnosis.selection import (SelectionResult, coverage, fit_stations, forward_select,
-                                             measurement_folds, register_setup, select_terms)
+from pin_kpi_oed.diagnosis.selection import (SelectionResult, coverage, forward_select, measurement_folds,
+                                             select_terms)
 from pin_kpi_oed.effects.coupled import LinkBending
 from pin_kpi_oed.effects.drift import Drift
 from pin_kpi_oed.effects.library import (ALL_EFFECT_NAMES, EFFECT_NAMES, JointCompliance, effect_jacobian,
@@ -17,7 +17,9 @@ from pin_kpi_oed.effects.library import (ALL_EFFECT_NAMES, EFFECT_NAMES, JointCo
                                          size_effect)
 from pin_kpi_oed.effects.periodic import TransmissionError
 from pin_kpi_oed.errors import IdentifiabilityError, InputError
-from pin_kpi_oed.identification.identify import identify
+from pin_kpi_oed.identification.identify import identify, validate
+from pin_kpi_oed.identification.problem import align_data
+from pin_kpi_oed.identification.transfer import register_setup
 from pin_kpi_oed.identification.simulate import Tolerances, default_tracker_pose, random_truth, simulate
 from pin_kpi_oed.model.noise import NoiseModel
 from pin_kpi_oed.model.tracker import TrackerModel
@@ -249,6 +251,13 @@ def _stats(R):
     return float(np.sqrt(np.mean(e ** 2)))
 
 
+def _transfer_rms(res, reg, held):
+    """Held-out RMS (m) of ``res`` on ``held`` after re-registering the set-up on ``reg`` (robot held)."""
+    rr = register_setup(res.calibrated_model(), reg, station="new")
+    Y = rr.model.predict(align_data(res.model.robot, held), held, station="new")
+    return _stats(held.position_m - Y)
+
+
 def test_selection_recovers_withheld_transmission_error(model):
     ur10 = model.robot
     rng = np.random.default_rng(11)
@@ -271,7 +280,7 @@ def test_selection_recovers_withheld_transmission_error(model):
         assert abs(t["amplitude_rad"] - amp_true[t["group"]]) < 0.05 * amp_true[t["group"]]
         assert "cycles per revolution" in t["text"] and "µrad amplitude" in t["text"]
     fresh = simulate(model, _uniform(ur10, rng, 300), truth, [(te, th)], seed=3, record_sigma=False)
-    assert _stats(sel.fit.residuals(fresh)) <= 1.1 * FLOOR
+    assert validate(sel.fit, fresh)["rms_m"] <= 1.1 * FLOOR
     # the effects are ready for identify
     res = identify(model, data, effects=sel.effects)
     assert res.rms_m <= 1.1 * FLOOR
@@ -293,17 +302,17 @@ def test_selection_transfers_to_another_region_and_tracker_pose(model):
     target = simulate(moved, Q_b, truth, [(te, th)], seed=7, record_sigma=False)
     per, _ = coverage(Q_a, Q_b)
     assert per[0] == 0 and per[1] == 0 and per[2] == 0  # the second region is unseen on joints 1-3
-    geo = fit_stations(model, train)
-    sel = select_terms(geo, max_order=40, show_progress=False)
+    geo = identify(model, train)
+    sel = select_terms(geo, train, max_order=40, show_progress=False)
     assert {t["group"] for t in sel.terms[:2]} == {"shoulder_lift order 7", "elbow order 18"}
     idx = np.random.default_rng(0).permutation(len(target))
     reg, held = target.subset(idx[:60]), target.subset(idx[60:])
-    r_geo = _stats(geo.residuals(held, register_setup(geo, reg)))
-    r_sel = _stats(sel.fit.residuals(held, register_setup(sel.fit, reg)))
+    r_geo = _transfer_rms(geo, reg, held)
+    r_sel = _transfer_rms(sel.fit, reg, held)
     assert r_sel < 0.5 * r_geo
     assert r_sel < 2.0 * FLOOR
-    with pytest.raises(IdentifiabilityError, match="rows"):
-        register_setup(sel.fit, target.subset(idx[:2]))
+    with pytest.raises(InputError, match="row"):
+        register_setup(sel.fit.calibrated_model(), target.subset(idx[:2]))
 
 
 def test_drift_recovered_and_refitted_at_registration(model):
@@ -314,22 +323,22 @@ def test_drift_recovered_and_refitted_at_registration(model):
     v_true = np.array([2e-8, -1e-8, 1e-7])  # m/s: 0.36 mm per hour in z
     drift = Drift(ur10, t_ref_s=1800.0)
     data = simulate(model, Q, None, [(drift, v_true)], aux={"time_s": t}, seed=8, record_sigma=False)
-    fit = fit_stations(model, data, setup_effects=[[Drift.from_data(ur10, data)]])
-    v = fit.stations[0].thetas[0]
-    assert np.allclose(v, v_true, atol=3e-9)  # σ/(√n · std(t)) ≈ 1e-9 m/s
-    assert "mm per hour" in fit.describe()[0]
-    assert _stats(fit.residuals()) < 1.1 * FLOOR
-    # identify takes the effect too (Effect interface)
     res = identify(model, data, effects=[Drift.from_data(ur10, data)])
-    assert np.allclose(res.theta[0], v_true, atol=3e-9)
+    assert np.allclose(res.theta[0], v_true, atol=3e-9)  # σ/(√n · std(t)) ≈ 1e-9 m/s
+    assert "mm per hour" in res.effects[0].describe(res.theta[0])[0]
+    assert res.rms_m < 1.1 * FLOOR
     # a new session drifts differently: registration re-fits it, the robot is held
     v2 = np.array([0.0, 5e-8, -5e-8])
     moved = TrackerModel(ur10, tracker_T_base=default_tracker_pose(ur10, yaw_rad=1.0), reflector_m=model.reflector_m,
                          noise=model.noise)
     data2 = simulate(moved, Q[:200], None, [(drift, v2)], aux={"time_s": t[:200]}, seed=9, record_sigma=False)
-    st = register_setup(fit, data2, setup_effects=[Drift.from_data(ur10, data2)])
-    assert np.allclose(st.thetas[0], v2, atol=6e-9)
-    assert np.allclose(st.p[fit.robot_index], fit.stations[0].p[fit.robot_index])  # robot held
+    cm = res.calibrated_model()
+    rr = register_setup(cm, data2, station="new", setup_effects=[Drift.from_data(ur10, data2)])
+    assert np.allclose(rr.setup_thetas[0], v2, atol=6e-9)
+    assert np.array_equal(rr.model.joint_p, cm.joint_p)  # robot held
+    assert rr.rms_m < 1.1 * FLOOR
+    # without the new session's drift the registration leaves it in the residuals
+    assert register_setup(cm, data2, station="new").rms_m > 1.3 * FLOOR
 
 
 @pytest.mark.skipif(not (SHARED / "data" / "ipa_ur10" / "Series_C").is_dir(), reason="IPA UR10 data not available")
@@ -431,3 +440,50 @@ def test_diagnose_transfer_section_names_extrapolation(model, tmp_path, capsys):
     assert rc == 0
     tf = json.loads(out.read_text())["transfer"]
     assert tf["coverage_all_joints"] > 0.5 and tf["classification"] == "unmodelled effect"
+
+
+# --------------------------------------------------------------------------- identify hooks used by the selection
+def test_residual_model_effect_prior_and_start_match_finite_differences(model):
+    """The prior rows θ/σ of rad-valued effects: residual and Jacobian agree with central differences."""
+    from pin_kpi_oed.identification.problem import ResidualModel
+
+    ur10 = model.robot
+    Q = _uniform(ur10, np.random.default_rng(3), 40)
+    data = simulate(model, Q, None, seed=4, record_sigma=False)
+    te = TransmissionError(ur10, pairs=[("shoulder_lift_joint", 3), ("elbow_joint", 5)])
+    base = np.arange(6 * ur10.nq, 6 * ur10.nq + 6)  # tracker pose
+    th0 = [np.array([1e-4, -2e-4, 3e-4, 5e-5])]
+    rm = ResidualModel(model, data, base, [te], effect_prior_sigma=1e-4, theta0=th0)
+    x = rm.x0()
+    assert np.allclose(x[base.size:], th0[0]) and rm.prior_idx.tolist() == list(range(6, 10))
+    f = rm.residual(x)
+    assert f.size == 3 * len(data) + 4 and np.allclose(f[-4:], th0[0] / 1e-4)
+    J = rm.jacobian(x)
+    h = 1e-7
+    Jfd = np.column_stack([(rm.residual(x + h * e) - rm.residual(x - h * e)) / (2 * h) for e in np.eye(x.size)])
+    assert np.max(np.abs(J - Jfd)) < 1e-5 * np.max(np.abs(J))
+    with pytest.raises(InputError, match="theta0"):
+        ResidualModel(model, data, base, [te], theta0=[np.zeros(3)])
+
+
+def test_identify_effect_prior_shrinks_and_held_effects_are_kept(model):
+    ur10 = model.robot
+    rng = np.random.default_rng(41)
+    Q = _uniform(ur10, rng, 300)
+    te = TransmissionError(ur10, pairs=[("elbow_joint", 18)])
+    th = np.array([1.5e-4, -1e-4])
+    data = simulate(model, Q, None, [(te, th)], seed=42, record_sigma=False)
+    free = identify(model, data, effects=[te])
+    assert np.allclose(free.theta[0], th, atol=1e-5)
+    tight = identify(model, data, effects=[te], effect_prior_rad=1e-7)
+    assert np.linalg.norm(tight.theta[0]) < 0.1 * np.linalg.norm(th)  # the prior dominates
+    assert "elbow" in tight.names[-1] and tight.std[-1] < 1e-7 < free.std[-1]  # the prior enters the covariance
+    with pytest.raises(InputError, match="effect_prior_rad"):
+        identify(model, data, effects=[te], effect_prior_rad=-1.0)
+    # held effects: applied with their θ, not estimated, carried into the model file and predictions
+    held = identify(model, data, held_effects=[(te, th)])
+    assert held.rms_m < 1.1 * FLOOR < identify(model, data).rms_m
+    assert not any("transmission" in n for n in held.names)
+    assert validate(held, data)["rms_m"] == pytest.approx(held.rms_m, rel=1e-6)
+    cm = held.calibrated_model()
+    assert [e.name for e in cm.effects] == ["transmission_error"] and np.allclose(cm.thetas[0], th)
