@@ -430,6 +430,15 @@ def test_diagnose_transfer_section_names_extrapolation(model, tmp_path, capsys):
     sl = tf["joints"][1]
     assert sl["train_max"] <= -1.9 + 1e-9 and sl["validate_min"] >= -1.2 - 1e-9
     assert tf["rms_before_registration_m"] > 10 * tf["heldout_rms_m"]  # the tracker moved: registration needed
+    # predicted TCP uncertainty at the validation configurations vs the observed error, and the poses to add
+    assert 0 < tf["predicted_sigma_train_m"] and tf["predicted_sigma_rms_m"] > 0
+    assert "predicted TCP sigma at the validation configurations" in tf["reason"]
+    pa = tf["poses_to_add"]
+    sl_range = next(r for r in pa["joint_ranges"] if r["joint"] == "shoulder_lift_joint")
+    assert -1.2 - 1e-9 <= sl_range["min"] < sl_range["max"] <= -0.3 + 1e-9  # the unseen shoulder range
+    assert len(pa["rows"]) == 10 and all(1 <= r <= len(target) for r in pa["rows"])
+    assert pa["rows_sigma_m"] == sorted(pa["rows_sigma_m"], reverse=True)
+    assert "to fix it: add training poses covering" in text
     assert "transfer gap: EXTRAPOLATION" in text and "covered" in text
     # the same region for train and validation, same tracker: inside the coverage, not "extrapolation"
     Q_c = _uniform(ur10, rng, 200, box={1: (-2.4, -1.9), 2: (0.8, 1.3)})
@@ -487,3 +496,46 @@ def test_identify_effect_prior_shrinks_and_held_effects_are_kept(model):
     assert validate(held, data)["rms_m"] == pytest.approx(held.rms_m, rel=1e-6)
     cm = held.calibrated_model()
     assert [e.name for e in cm.effects] == ["transmission_error"] and np.allclose(cm.thetas[0], th)
+
+
+def test_circular_range_wraps_like_the_coverage():
+    from pin_kpi_oed.diagnosis.transfer_gap import circular_range
+
+    lo, hi = circular_range(np.array([3.0, 3.1, -3.1, -3.0 + 2 * np.pi]))  # crosses ±π; one angle given +2π
+    assert lo == pytest.approx(3.0) and hi == pytest.approx(-3.0 + 2 * np.pi)
+    lo, hi = circular_range(np.array([-0.5, 0.2, 0.1 + 4 * np.pi]))
+    assert (lo, hi) == (pytest.approx(-0.5), pytest.approx(0.2))
+    assert np.isnan(circular_range(np.zeros(0))[0])
+
+
+def test_cli_term_prior_shrinks_the_selected_terms(model, tmp_path, capsys):
+    import json
+
+    from pin_kpi_oed.cli.main import main as cli_main
+    from pin_kpi_oed.data.measurements import write_measurements
+
+    ur10 = model.robot
+    rng = np.random.default_rng(23)
+    Q = _uniform(ur10, rng, 500)
+    te, th = _truth_effect(model, Q, 7 * SIG)
+    data = simulate(model, Q, None, [(te, th)], seed=24, record_sigma=False)
+    write_measurements(data.subset(np.arange(350)), tmp_path / "a.csv")
+    write_measurements(data.subset(np.arange(350, 500)), tmp_path / "b.csv")
+    amps = {}
+    for prior in (None, "1e-6"):
+        out = tmp_path / f"r{prior}.json"
+        args = ["diagnose", "--robot", "ur10", "--train", str(tmp_path / "a.csv"), "--validate",
+                str(tmp_path / "b.csv"), "--reflector", "0,0,0.1", "--sigma", str(SIG), "--json", str(out),
+                "--effects", "transmission_error", "--harmonics", "20", "--quiet"]
+        assert cli_main(args + (["--term-prior", prior] if prior else [])) == 0
+        d = json.loads(out.read_text())
+        amps[prior] = {t["group"]: t["amplitude_rad"] for t in d["term_selection"]["terms"]}
+        if prior:
+            assert d["term_selection"]["prior_rad"] == 1e-6
+    common = set(amps[None]) & set(amps["1e-6"])
+    assert common and all(amps["1e-6"][g] < 0.5 * amps[None][g] for g in common)
+    capsys.readouterr()
+    rc = cli_main(["diagnose", "--robot", "ur10", "--train", str(tmp_path / "a.csv"), "--kfold", "3", "--sigma",
+                   str(SIG), "--effects", "transmission_error", "--term-prior", "-1"])
+    err = capsys.readouterr().err
+    assert rc == 2 and "--term-prior" in err and len(err.strip().splitlines()) == 1

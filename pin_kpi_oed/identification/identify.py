@@ -257,7 +257,8 @@ class IdentifyOptions:
         effect_prior_rad: σ (rad) of a Gaussian prior θ_i ~ N(0, σ²) on every estimated effect
             parameter in rad (effects with ``unit == "rad"``): one row θ_i / σ in the cost and the
             covariance; it keeps a term the data barely determine (e.g. a harmonic fitted in one
-            region of joint space) near zero instead of letting it extrapolate. None: no prior.
+            region of joint space) near zero instead of letting it extrapolate. None: no prior. An
+            effect with its own ``prior_rad`` attribute (σ, rad) uses that instead.
         theta0: start values of the effects' θ (one array per effect; default zeros).
         held_effects: ``[(effect, θ), ...]`` applied with their parameters held (not estimated),
             e.g. the transferable effects of an earlier calibration; kept in the result and its model.
@@ -783,11 +784,19 @@ def _data_rank_check(F: np.ndarray, names: list[str], m: int, nh: int) -> None:
 
 
 def _effect_prior(effects: Sequence[Any], prior_rad: float | None, robot: Any) -> np.ndarray | None:
-    """σ per effect parameter of the prior ``effect_prior_rad``: on the rad-valued effects, inf elsewhere."""
-    if prior_rad is None:
+    """σ per effect parameter: an effect's own ``prior_rad`` attribute (a SubsetEffect: its base's), else
+    ``effect_prior_rad`` on the rad-valued effects; inf (no prior) elsewhere."""
+    sig, any_prior = [], prior_rad is not None
+    for e in effects:
+        own = getattr(e, "prior_rad", None)
+        if own is None:
+            own = getattr(getattr(e, "base", None), "prior_rad", None)
+        if own is not None:
+            any_prior = True
+        s = own if own is not None else (prior_rad if getattr(e, "unit", "") == "rad" else None)
+        sig.append(np.full(len(e.param_names(robot)), np.inf if s is None else float(s)))
+    if not any_prior:
         return None
-    sig = [np.full(len(e.param_names(robot)), prior_rad if getattr(e, "unit", "") == "rad" else np.inf)
-           for e in effects]
     return np.concatenate(sig) if sig else np.zeros(0)
 
 
