@@ -357,19 +357,23 @@ def test_selection_on_series_c_is_fast():
 
 
 # --------------------------------------------------------------------------- the diagnosis CLI with transfer effects
+def _write_withheld_split(model, tmp_path, seed, n, n_train):
+    """a.csv / b.csv: n rows with the withheld transmission error, the first n_train in a.csv."""
+    from pin_kpi_oed.data.measurements import write_measurements
+
+    Q = _uniform(model.robot, np.random.default_rng(seed), n)
+    te, th = _truth_effect(model, Q, 7 * SIG)
+    data = simulate(model, Q, None, [(te, th)], seed=seed + 1, record_sigma=False)
+    write_measurements(data.subset(np.arange(n_train)), tmp_path / "a.csv")
+    write_measurements(data.subset(np.arange(n_train, n)), tmp_path / "b.csv")
+
+
 def test_cli_diagnose_selects_withheld_transmission_error(model, tmp_path, capsys):
     import json
 
     from pin_kpi_oed.cli.main import main as cli_main
-    from pin_kpi_oed.data.measurements import write_measurements
 
-    ur10 = model.robot
-    rng = np.random.default_rng(21)
-    Q = _uniform(ur10, rng, 700)
-    te, th = _truth_effect(model, Q, 7 * SIG)
-    data = simulate(model, Q, None, [(te, th)], seed=22, record_sigma=False)
-    write_measurements(data.subset(np.arange(500)), tmp_path / "a.csv")
-    write_measurements(data.subset(np.arange(500, 700)), tmp_path / "b.csv")
+    _write_withheld_split(model, tmp_path, 21, 700, 500)
     out = tmp_path / "r.json"
     rc = cli_main(["diagnose", "--robot", "ur10", "--train", str(tmp_path / "a.csv"), "--validate",
                    str(tmp_path / "b.csv"), "--reflector", "0,0,0.1", "--sigma", str(SIG), "--json", str(out),
@@ -512,15 +516,8 @@ def test_cli_term_prior_shrinks_the_selected_terms(model, tmp_path, capsys):
     import json
 
     from pin_kpi_oed.cli.main import main as cli_main
-    from pin_kpi_oed.data.measurements import write_measurements
 
-    ur10 = model.robot
-    rng = np.random.default_rng(23)
-    Q = _uniform(ur10, rng, 500)
-    te, th = _truth_effect(model, Q, 7 * SIG)
-    data = simulate(model, Q, None, [(te, th)], seed=24, record_sigma=False)
-    write_measurements(data.subset(np.arange(350)), tmp_path / "a.csv")
-    write_measurements(data.subset(np.arange(350, 500)), tmp_path / "b.csv")
+    _write_withheld_split(model, tmp_path, 23, 500, 350)
     amps = {}
     for prior in (None, "1e-6"):
         out = tmp_path / f"r{prior}.json"
