@@ -536,3 +536,14 @@ def test_cli_term_prior_shrinks_the_selected_terms(model, tmp_path, capsys):
                    str(SIG), "--effects", "transmission_error", "--term-prior", "-1"])
     err = capsys.readouterr().err
     assert rc == 2 and "--term-prior" in err and len(err.strip().splitlines()) == 1
+
+
+@pytest.mark.parametrize("effect", ["transmission_error", "joint_compliance"])
+def test_withheld_effects_transfer_case_names_the_effect(effect):
+    """Quick version of ``python -m benchmarks.withheld_effects --mode transfer``: another region, tracker moved."""
+    from benchmarks.withheld_effects import run_transfer
+
+    r = run_transfer((effect, 0, 300))
+    assert r["dominant"] == effect, r
+    assert r["coverage"] < 0.5  # the validation region is mostly unseen
+    assert r["rms_after_m"] < 1.2 * r["floor_m"] < r["rms_before_m"]

@@ -129,7 +129,8 @@ def run(args: argparse.Namespace) -> int:
     model = TrackerModel(robot, reflector_m=reflector, noise=noise)
     rep = diagnose(model, train, val, kfold=args.kfold, effects=effects, weights=weights, alpha=args.alpha,
                    seed=args.seed, t_ref_c=args.t_ref, register_rows=args.register_rows, register_data=reg,
-                   harmonics=args.harmonics, transfer_prior_rad=args.term_prior)
+                   harmonics=args.harmonics, transfer_prior_rad=args.term_prior,
+                   show_progress=False if args.quiet else None)
     if args.figures:
         rep.figures = diagnosis_figures(rep, args.figures)
     if args.json:

@@ -737,6 +737,8 @@ class DiagnoseOptions:
             candidate; its terms (and those of ``link_bending``) are chosen by sparse forward
             selection on K-fold held-out error (:func:`pin_kpi_oed.diagnosis.selection.select_terms`)
             before they are scored like any other candidate.
+        show_progress: False: no progress bars; None: bars on a terminal (steps of the diagnosis,
+            the term selection).
         transfer_prior_rad: σ (rad) of a Gaussian prior on the parameters of the selected terms
             (``--term-prior``), in their refit and in every identification that scores them; it
             limits how far a term fitted in one region of joint space extrapolates (None: none).
@@ -755,6 +757,7 @@ class DiagnoseOptions:
     register_data: MeasurementSet | None = None
     harmonics: int = 40
     transfer_prior_rad: float | None = None
+    show_progress: bool | None = None
 
     @classmethod
     def resolve(cls, options: "DiagnoseOptions | None", overrides: dict) -> "DiagnoseOptions":
@@ -821,7 +824,7 @@ def _select_transfer_terms(geo_fit: Any, train: MeasurementSet, names: Sequence[
     if "link_bending" in names:
         cands.append(LinkBending(robot))
     sel = select_terms(geo_fit.result, train, candidates=cands, seed=opts.seed, prior_rad=opts.transfer_prior_rad,
-                       refit=True, show_progress=False)
+                       refit=True, show_progress=opts.show_progress)
     info = {"candidates": list(names), "max_order": int(opts.harmonics), "folds": sel.folds,
             "cv_rms_m": [float(v) for v in sel.cv_rms_m], "stop": sel.stop, "n_candidate_groups": sel.n_candidates,
             "left_out": list(sel.left_out), "terms": [dict(t) for t in sel.terms]}
@@ -931,7 +934,7 @@ def _screen_mismatch(eng: _Engine, geo_fit: _Fit, geo: _Scored, plan: _Plan, not
 
 
 def _single_effects(eng: _Engine, geo_fit: _Fit, geo: _Scored, cands: list[Effect], alpha: float, floor: float,
-                    notes: list[str]) -> tuple[list[EffectResult], dict, dict, list[Effect]]:
+                    notes: list[str], bar: Any = None) -> tuple[list[EffectResult], dict, dict, list[Effect]]:
     """Step 6: every candidate alone with the geometry; skipped with a note when it cannot be used.
 
     Returns:
@@ -944,6 +947,9 @@ def _single_effects(eng: _Engine, geo_fit: _Fit, geo: _Scored, cands: list[Effec
     pruned: dict[str, Effect] = {}
     usable: list[Effect] = []
     for eff in cands:
+        if bar is not None:
+            bar.set_postfix_str(eff.name)
+            bar.update()
         note = next((n for n in (eff.check(d) for d in [eng.full_train] + [te for _, te in eng.folds]) if n), None)
         if note:
             singles.append(EffectResult(eff.name, status="skipped", note=note))
@@ -983,8 +989,8 @@ def _single_effects(eng: _Engine, geo_fit: _Fit, geo: _Scored, cands: list[Effec
 
 
 def _forward_selection(eng: _Engine, geo: _Scored, singles: list[EffectResult], scored: dict, pruned: dict,
-                       usable: list[Effect], alpha: float, floor: float, max_selected: int | None
-                       ) -> tuple[list[dict], list[str], _Scored]:
+                       usable: list[Effect], alpha: float, floor: float, max_selected: int | None,
+                       bar: Any = None) -> tuple[list[dict], list[str], _Scored]:
     """Step 7: add, step by step, the significant effect that reduces the held-out error most.
 
     Returns:
@@ -997,6 +1003,9 @@ def _forward_selection(eng: _Engine, geo: _Scored, singles: list[EffectResult], 
     remaining = list(usable)
     limit_sel = len(usable) if max_selected is None else int(max_selected)
     while remaining and len(selected) < limit_sel:
+        if bar is not None:
+            bar.set_postfix_str(f"forward selection step {len(selection) + 1}")
+            bar.update()
         if not selected:
             cand_res = {e.name: step_results[e.name] for e in remaining}
             cand_sc = {n: scored[n] for n in cand_res}
@@ -1090,8 +1099,26 @@ def diagnose(model: TrackerModel, train: MeasurementSet, validate: MeasurementSe
     eng = _Engine(model, plan, train, [np.ones(len(te), bool) for _, te in plan.folds], opts.weights,
                   dict(opts.identify_options or {}), opts.exact_kfold)
 
+    from pin_kpi_oed.progress import progress
+
+    n_terms = sum(1 for e in (opts.effects or ()) if isinstance(e, str) and e in SELECTED_TERM_EFFECTS)
+    bar_cm = progress(total=2 + (1 if n_terms else 0) + len(cands) + n_terms + len(cands) + n_terms,
+                      desc="diagnose", unit="step", disable=opts.show_progress is False)
+    bar = bar_cm.__enter__()
+    try:
+        return _diagnose_steps(model, train, validate, opts, notes, cands, plan, eng, bar, t0)
+    finally:
+        bar_cm.__exit__(None, None, None)
+
+
+def _diagnose_steps(model: TrackerModel, train: MeasurementSet, validate: MeasurementSet | None,
+                    opts: DiagnoseOptions, notes: list[str], cands: list[Effect], plan: _Plan, eng: _Engine,
+                    bar: Any, t0: float) -> DiagnosisReport:
+    """Steps 3–8 of :func:`diagnose` (``bar``: the progress bar, one update per step / candidate)."""
     # (3) geometric calibration and first held-out residuals
+    bar.set_postfix_str("geometric calibration")
     geo_fit = eng.fit(train, [])
+    bar.update()
     geo = eng.score([], full=geo_fit)
     res0 = geo_fit.result
     geometry = {"train_rms_m": float(res0.rms_m), "train_chi2_reduced": res0.chi2_reduced,
@@ -1101,7 +1128,9 @@ def diagnose(model: TrackerModel, train: MeasurementSet, validate: MeasurementSe
     term_names = [e for e in (opts.effects or ()) if isinstance(e, str) and e in SELECTED_TERM_EFFECTS]
     term_selection: dict = {}
     if term_names:
+        bar.set_postfix_str("term selection")
         chosen, term_selection = _select_transfer_terms(geo_fit, train, term_names, opts, notes)
+        bar.update()
         cands = cands + chosen
     # (4) rows far beyond any effect
     geo, mismatch, validation_mismatch, ho_order = _screen_mismatch(eng, geo_fit, geo, plan, notes)
@@ -1113,9 +1142,9 @@ def diagnose(model: TrackerModel, train: MeasurementSet, validate: MeasurementSe
     before = heldout_stats(geo.R)
     where, regs = _where(res0.model, res0.p, ho_data, ho_order, geo.R, geo.S, opts.alpha)
     # (6) every candidate alone, (7) forward selection
-    singles, scored, pruned, usable = _single_effects(eng, geo_fit, geo, cands, opts.alpha, floor, notes)
+    singles, scored, pruned, usable = _single_effects(eng, geo_fit, geo, cands, opts.alpha, floor, notes, bar)
     selection, selected, current = _forward_selection(eng, geo, singles, scored, pruned, usable, opts.alpha, floor,
-                                                      opts.max_selected)
+                                                      opts.max_selected, bar)
     after = heldout_stats(current.R)
     remaining_gap = _gap_test(current, opts.alpha)
     # (7b) where the transfer gap lies (validation data only), with the final model's predicted uncertainty
