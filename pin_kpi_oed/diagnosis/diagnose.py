@@ -1156,7 +1156,9 @@ def _diagnose_steps(model: TrackerModel, train: MeasurementSet, validate: Measur
         transfer = transfer_section(res0, train, ho_data, ho_order, geo.R, predicted_sigma(geo.V, geo.S), floor,
                                     plan.mode == "transfer", current.R if fin else None,
                                     predicted_sigma(current.V, current.S) if fin else None,
-                                    ("geometry + " + ", ".join(selected)) if fin else "")
+                                    ("geometry + " + ", ".join(selected)) if fin else "",
+                                    min([float(current.full.result.rms_m)]
+                                        + ([float(term_selection["cv_rms_m"][-1])] if term_selection else [])))
     rb, ra = before["rms_m"], after["rms_m"]
     closed = (rb - ra) / (rb - floor) if rb is not None and rb - floor > 1e-3 * floor else float("nan")
     # (8) verdict
