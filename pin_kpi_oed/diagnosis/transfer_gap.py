@@ -139,7 +139,6 @@ def transfer_section(result: Any, train: MeasurementSet, ho_data: MeasurementSet
                        "n_uncovered": int(np.sum(~cov[:, j]))})
     sp_rms = _rms(use_sp)
     sp_in, sp_out = _rms(use_sp[inside]), _rms(use_sp[~inside])
-    sp_train = _rms(np.asarray(result.tcp_std_m, float))
     excess = float(np.sqrt(max(rms ** 2 - floor_m ** 2, 0.0)))
     um, mm = 1e6, 1e3
 
@@ -152,8 +151,7 @@ def transfer_section(result: Any, train: MeasurementSet, ho_data: MeasurementSet
     model_txt = f" ({final_label})" if final_label else ""
     pred_txt = (f"predicted TCP sigma at the validation configurations{model_txt} {sp_rms * um:.1f} µm RMS "
                 f"(inside {'-' if not np.isfinite(sp_in) else f'{sp_in * um:.1f}'}, outside "
-                f"{'-' if not np.isfinite(sp_out) else f'{sp_out * um:.1f}'} µm; at the training configurations "
-                f"{sp_train * um:.1f} µm) vs observed {rms * um:.1f} µm RMS ({excess * um:.1f} µm above the noise "
+                f"{'-' if not np.isfinite(sp_out) else f'{sp_out * um:.1f}'} µm) vs observed {rms * um:.1f} µm RMS ({excess * um:.1f} µm above the noise "
                 f"floor {floor_m * um:.1f} µm)")
     reg_txt = (f"; in the training set-up {f3(unreg)} mm before re-registration (the set-up changed too), the "
                f"training session itself is modelled to {f3(within)} mm" if registered else "")
@@ -189,5 +187,5 @@ def transfer_section(result: Any, train: MeasurementSet, ho_data: MeasurementSet
             "train_rms_m": train_rms, "within_session_rms_m": within, "rms_before_registration_m": unreg, "registered": bool(registered),
             "predicted_sigma_rms_m": sp_rms, "predicted_sigma_max_m": float(np.max(use_sp)) if use_sp.size else None,
             "predicted_sigma_inside_m": sp_in, "predicted_sigma_outside_m": sp_out,
-            "predicted_sigma_train_m": sp_train, "noise_floor_m": floor_m, "observed_excess_m": excess,
+            "noise_floor_m": floor_m, "observed_excess_m": excess,
             "poses_to_add": poses}
