@@ -1061,6 +1061,38 @@ def _verdict(gap: dict, remaining_gap: dict, selected: list[str], mismatch: bool
     return "none"
 
 
+#: Share of the selected transmission-error amplitude (squared) in orders 1–2 above which the terms are
+#: the gear_harmonic model (gear / encoder eccentricity) and named so.
+LOW_ORDER_SHARE = 0.9
+
+
+def _name_low_orders(dominant: str, term_selection: dict, candidate_names: list[str], notes: list[str]) -> str:
+    """Name selected transmission-error terms that are (almost) only orders 1–2 ``gear_harmonic``.
+
+    :class:`~pin_kpi_oed.effects.library.GearHarmonic` is the model Δq_j = Σ_{o=1,2} a sin(o q_j) + b cos(o q_j)
+    (eccentricity of a gear or encoder); a transmission error whose data-chosen terms carry at least
+    :data:`LOW_ORDER_SHARE` of their squared amplitude in orders 1–2 is that model, so the verdict names it
+    (the note says so). Higher orders (gear meshing) keep the name ``transmission_error``.
+    """
+    if dominant != "transmission_error" or "gear_harmonic" not in candidate_names or not term_selection:
+        return dominant
+    amp2 = {True: 0.0, False: 0.0}
+    for t in term_selection.get("terms", []):
+        if t.get("effect") != "transmission_error" or " order " not in t.get("group", ""):
+            continue
+        a = t.get("amplitude_rad")
+        if a is None or not np.isfinite(a):
+            continue
+        amp2[int(t["group"].rsplit(" order ", 1)[1]) <= 2] += float(a) ** 2
+    total = amp2[True] + amp2[False]
+    if total > 0 and amp2[True] / total >= LOW_ORDER_SHARE:
+        notes.append(f"the selected transmission-error terms carry {100 * amp2[True] / total:.0f}% of their squared "
+                     "amplitude in orders 1-2 of the joints: that is the gear_harmonic model (gear / encoder "
+                     "eccentricity), named so")
+        return "gear_harmonic"
+    return dominant
+
+
 @limit_threads
 def diagnose(model: TrackerModel, train: MeasurementSet, validate: MeasurementSet | None = None,
              options: DiagnoseOptions | None = None, **overrides: Any) -> DiagnosisReport:
@@ -1163,6 +1195,7 @@ def _diagnose_steps(model: TrackerModel, train: MeasurementSet, validate: Measur
     closed = (rb - ra) / (rb - floor) if rb is not None and rb - floor > 1e-3 * floor else float("nan")
     # (8) verdict
     dominant = _verdict(gap, remaining_gap, selected, validation_mismatch, floor, ra, notes)
+    dominant = _name_low_orders(dominant, term_selection, [e.name for e in cands], notes)
     for u in sorted(eng.unconverged):
         notes.append(f"the identification with {u} stopped at its evaluation limit before converging; its numbers "
                      "are those of the last iterate")
