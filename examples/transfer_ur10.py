@@ -9,8 +9,11 @@ Fourier pairs of orders 1–40 per joint and the arm-plane gravity terms) and re
 * within Series C: a seeded random half is held out (same session, nothing re-fitted);
 * directed pairs B→C, C→B, C→D, D→C and the two-series fits B+C→D, B+D→C, C+D→B: the set-up
   (tracker pose + reflector) is re-fitted on 60 seeded random rows of the target with the robot
-  held (:func:`~pin_kpi_oed.diagnosis.selection.register_setup`, an interim stand-in for the
-  ``register`` command), and the remaining target rows are predicted.
+  held (:func:`~pin_kpi_oed.identification.transfer.register_setup`, the ``register``
+  command), and the remaining target rows are predicted.
+
+Several source series are one :func:`~pin_kpi_oed.identification.identify.identify` with a
+``station`` column (robot shared, a tracker pose and reflector per series).
 
 Columns: held-out error (3-D, mm) mean / RMS / max of the geometric model, with the selected
 terms (plain least squares), and with the selected terms under a Gaussian prior of 100 µrad
@@ -38,9 +41,12 @@ import numpy as np
 
 from pin_kpi_oed.data.atomic import atomic_write_json
 from pin_kpi_oed.data.ipa import import_ipa
-from pin_kpi_oed.data.measurements import MeasurementSet
-from pin_kpi_oed.diagnosis.selection import coverage, fit_stations, register_setup, select_terms
+from pin_kpi_oed.data.measurements import MeasurementSet, concat_measurements
+from pin_kpi_oed.diagnosis.selection import coverage, refit_with, select_terms
 from pin_kpi_oed.effects.drift import Drift
+from pin_kpi_oed.identification.identify import IdentificationResult, identify
+from pin_kpi_oed.identification.problem import align_data
+from pin_kpi_oed.identification.transfer import register_setup
 from pin_kpi_oed.model.noise import NoiseModel
 from pin_kpi_oed.model.tracker import TrackerModel
 from pin_kpi_oed.model.robot import load_robot
@@ -95,13 +101,23 @@ def fmt(s: dict) -> str:
 def calibrate(model: TrackerModel, sources: list[MeasurementSet], max_order: int) -> dict:
     """Geometric fit, selection, refits (plain and with the prior); timings."""
     t0 = time.perf_counter()
-    geo = fit_stations(model, sources)
+    data = sources[0] if len(sources) == 1 else concat_measurements(sources, [s.source for s in sources])
+    geo = identify(model, data, raise_on_failure=False)
     t1 = time.perf_counter()
-    sel = select_terms(geo, max_order=max_order, seed=0)
+    sel = select_terms(geo, data, max_order=max_order, seed=0)
     t2 = time.perf_counter()
-    pri = fit_stations(model, sources, sel.effects, thetas0=sel.theta, prior_rad=PRIOR_RAD, start=geo)
+    pri = refit_with(geo, data, sel.effects, sel.theta, PRIOR_RAD) if sel.effects else geo
     return {"geo": geo, "sel": sel, "fits": {"geometric": geo, "selected": sel.fit or geo, "selected+prior": pri},
             "time_geo_s": t1 - t0, "time_select_s": t2 - t1, "time_total_s": time.perf_counter() - t0}
+
+
+def residuals(fit: IdentificationResult, held: MeasurementSet, reg: MeasurementSet | None = None) -> np.ndarray:
+    """Measured − predicted positions (m) of ``held``; with ``reg`` after re-registering the set-up on it."""
+    cm = fit.calibrated_model()
+    station = None
+    if reg is not None:
+        cm, station = register_setup(cm, reg, station="target").model, "target"
+    return held.position_m - cm.predict(align_data(cm.robot, held), held, station=station)
 
 
 def transfer(cal: dict, target: MeasurementSet, seeds: list[int]) -> dict:
@@ -111,7 +127,7 @@ def transfer(cal: dict, target: MeasurementSet, seeds: list[int]) -> dict:
         idx = np.random.default_rng(s).permutation(len(target))
         reg, held = target.subset(np.sort(idx[:N_REG])), target.subset(np.sort(idx[N_REG:]))
         for k, f in cal["fits"].items():
-            errs[k].append(norms_mm(f.residuals(held, register_setup(f, reg))))
+            errs[k].append(norms_mm(residuals(f, held, reg)))
     return {k: stats(v) for k, v in errs.items()}
 
 
@@ -144,7 +160,7 @@ def main(argv: list[str] | None = None) -> int:
     # within Series C: random halves (same session: nothing re-fitted)
     train, test = S["C"].split(0.5, seed=0)
     cal = calibrate(model, [train], a.max_order)
-    row = {k: stats([norms_mm(f.residuals(test))]) for k, f in cal["fits"].items()}
+    row = {k: stats([norms_mm(residuals(f, test))]) for k, f in cal["fits"].items()}
     per, allj = coverage(train.q[:, :5], test.q[:, :5])
     table.append({"case": "C halves", **row, "terms": len(cal["sel"].terms), "coverage": per[:5].tolist(),
                   "coverage_all": allj, "time_select_s": cal["time_select_s"], "time_total_s": cal["time_total_s"],
@@ -175,13 +191,14 @@ def main(argv: list[str] | None = None) -> int:
     # Series B drift within the session (row number as time): geometric halves with and without a drift term
     trB, teB = S["B"].split(0.5, seed=0)
     rb = model.robot
-    g = fit_stations(model, trB)
-    d = fit_stations(model, trB, setup_effects=[[Drift.from_data(rb, trB)]])
-    e0, e1 = norms_mm(g.residuals(teB)), norms_mm(d.residuals(teB))
+    g = identify(model, trB)
+    d = identify(model, trB, effects=[Drift.from_data(rb, trB)])
+    e0, e1 = norms_mm(residuals(g, teB)), norms_mm(residuals(d, teB))
+    words = d.effects[0].describe(d.theta[0])
     print(f"Series B halves, drift (row number as time, s): geometric {e0.mean():.3f} mm -> with drift "
-          f"{e1.mean():.3f} mm held-out mean; {d.describe()[0].replace('per hour', 'per 3600 rows')}")
+          f"{e1.mean():.3f} mm held-out mean; {words[0].replace('per hour', 'per 3600 rows')}")
     table.append({"case": "B halves drift", "geometric_mean_mm": float(e0.mean()), "drift_mean_mm": float(e1.mean()),
-                  "drift": d.describe()})
+                  "drift": words})
     if a.json:
         atomic_write_json(Path(a.json), {"prior_rad": PRIOR_RAD, "n_reg": N_REG, "reg_seeds": seeds,
                                          "max_order": a.max_order, "quick": QUICK, "table": table})

@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 from pin_kpi_oed.data.measurements import MeasurementSet
-from pin_kpi_oed.diagnosis.selection import (SelectionResult, coverage, fit_stations, forward_select,
-                                             measurement_folds, register_setup, select_terms)
+from pin_kpi_oed.diagnosis.selection import (SelectionResult, coverage, forward_select, measurement_folds,
+                                             select_terms)
 from pin_kpi_oed.effects.coupled import LinkBending
 from pin_kpi_oed.effects.drift import Drift
 from pin_kpi_oed.effects.library import (ALL_EFFECT_NAMES, EFFECT_NAMES, JointCompliance, effect_jacobian,
@@ -17,7 +17,9 @@ from pin_kpi_oed.effects.library import (ALL_EFFECT_NAMES, EFFECT_NAMES, JointCo
                                          size_effect)
 from pin_kpi_oed.effects.periodic import TransmissionError
 from pin_kpi_oed.errors import IdentifiabilityError, InputError
-from pin_kpi_oed.identification.identify import identify
+from pin_kpi_oed.identification.identify import identify, validate
+from pin_kpi_oed.identification.problem import align_data
+from pin_kpi_oed.identification.transfer import register_setup
 from pin_kpi_oed.identification.simulate import Tolerances, default_tracker_pose, random_truth, simulate
 from pin_kpi_oed.model.noise import NoiseModel
 from pin_kpi_oed.model.tracker import TrackerModel
@@ -249,6 +251,13 @@ def _stats(R):
     return float(np.sqrt(np.mean(e ** 2)))
 
 
+def _transfer_rms(res, reg, held):
+    """Held-out RMS (m) of ``res`` on ``held`` after re-registering the set-up on ``reg`` (robot held)."""
+    rr = register_setup(res.calibrated_model(), reg, station="new")
+    Y = rr.model.predict(align_data(res.model.robot, held), held, station="new")
+    return _stats(held.position_m - Y)
+
+
 def test_selection_recovers_withheld_transmission_error(model):
     ur10 = model.robot
     rng = np.random.default_rng(11)
@@ -271,7 +280,7 @@ def test_selection_recovers_withheld_transmission_error(model):
         assert abs(t["amplitude_rad"] - amp_true[t["group"]]) < 0.05 * amp_true[t["group"]]
         assert "cycles per revolution" in t["text"] and "µrad amplitude" in t["text"]
     fresh = simulate(model, _uniform(ur10, rng, 300), truth, [(te, th)], seed=3, record_sigma=False)
-    assert _stats(sel.fit.residuals(fresh)) <= 1.1 * FLOOR
+    assert validate(sel.fit, fresh)["rms_m"] <= 1.1 * FLOOR
     # the effects are ready for identify
     res = identify(model, data, effects=sel.effects)
     assert res.rms_m <= 1.1 * FLOOR
@@ -293,17 +302,17 @@ def test_selection_transfers_to_another_region_and_tracker_pose(model):
     target = simulate(moved, Q_b, truth, [(te, th)], seed=7, record_sigma=False)
     per, _ = coverage(Q_a, Q_b)
     assert per[0] == 0 and per[1] == 0 and per[2] == 0  # the second region is unseen on joints 1-3
-    geo = fit_stations(model, train)
-    sel = select_terms(geo, max_order=40, show_progress=False)
+    geo = identify(model, train)
+    sel = select_terms(geo, train, max_order=40, show_progress=False)
     assert {t["group"] for t in sel.terms[:2]} == {"shoulder_lift order 7", "elbow order 18"}
     idx = np.random.default_rng(0).permutation(len(target))
     reg, held = target.subset(idx[:60]), target.subset(idx[60:])
-    r_geo = _stats(geo.residuals(held, register_setup(geo, reg)))
-    r_sel = _stats(sel.fit.residuals(held, register_setup(sel.fit, reg)))
+    r_geo = _transfer_rms(geo, reg, held)
+    r_sel = _transfer_rms(sel.fit, reg, held)
     assert r_sel < 0.5 * r_geo
     assert r_sel < 2.0 * FLOOR
-    with pytest.raises(IdentifiabilityError, match="rows"):
-        register_setup(sel.fit, target.subset(idx[:2]))
+    with pytest.raises(InputError, match="row"):
+        register_setup(sel.fit.calibrated_model(), target.subset(idx[:2]))
 
 
 def test_drift_recovered_and_refitted_at_registration(model):
@@ -314,22 +323,22 @@ def test_drift_recovered_and_refitted_at_registration(model):
     v_true = np.array([2e-8, -1e-8, 1e-7])  # m/s: 0.36 mm per hour in z
     drift = Drift(ur10, t_ref_s=1800.0)
     data = simulate(model, Q, None, [(drift, v_true)], aux={"time_s": t}, seed=8, record_sigma=False)
-    fit = fit_stations(model, data, setup_effects=[[Drift.from_data(ur10, data)]])
-    v = fit.stations[0].thetas[0]
-    assert np.allclose(v, v_true, atol=3e-9)  # σ/(√n · std(t)) ≈ 1e-9 m/s
-    assert "mm per hour" in fit.describe()[0]
-    assert _stats(fit.residuals()) < 1.1 * FLOOR
-    # identify takes the effect too (Effect interface)
     res = identify(model, data, effects=[Drift.from_data(ur10, data)])
-    assert np.allclose(res.theta[0], v_true, atol=3e-9)
+    assert np.allclose(res.theta[0], v_true, atol=3e-9)  # σ/(√n · std(t)) ≈ 1e-9 m/s
+    assert "mm per hour" in res.effects[0].describe(res.theta[0])[0]
+    assert res.rms_m < 1.1 * FLOOR
     # a new session drifts differently: registration re-fits it, the robot is held
     v2 = np.array([0.0, 5e-8, -5e-8])
     moved = TrackerModel(ur10, tracker_T_base=default_tracker_pose(ur10, yaw_rad=1.0), reflector_m=model.reflector_m,
                          noise=model.noise)
     data2 = simulate(moved, Q[:200], None, [(drift, v2)], aux={"time_s": t[:200]}, seed=9, record_sigma=False)
-    st = register_setup(fit, data2, setup_effects=[Drift.from_data(ur10, data2)])
-    assert np.allclose(st.thetas[0], v2, atol=6e-9)
-    assert np.allclose(st.p[fit.robot_index], fit.stations[0].p[fit.robot_index])  # robot held
+    cm = res.calibrated_model()
+    rr = register_setup(cm, data2, station="new", setup_effects=[Drift.from_data(ur10, data2)])
+    assert np.allclose(rr.setup_thetas[0], v2, atol=6e-9)
+    assert np.array_equal(rr.model.joint_p, cm.joint_p)  # robot held
+    assert rr.rms_m < 1.1 * FLOOR
+    # without the new session's drift the registration leaves it in the residuals
+    assert register_setup(cm, data2, station="new").rms_m > 1.3 * FLOOR
 
 
 @pytest.mark.skipif(not (SHARED / "data" / "ipa_ur10" / "Series_C").is_dir(), reason="IPA UR10 data not available")
@@ -348,19 +357,23 @@ def test_selection_on_series_c_is_fast():
 
 
 # --------------------------------------------------------------------------- the diagnosis CLI with transfer effects
+def _write_withheld_split(model, tmp_path, seed, n, n_train):
+    """a.csv / b.csv: n rows with the withheld transmission error, the first n_train in a.csv."""
+    from pin_kpi_oed.data.measurements import write_measurements
+
+    Q = _uniform(model.robot, np.random.default_rng(seed), n)
+    te, th = _truth_effect(model, Q, 7 * SIG)
+    data = simulate(model, Q, None, [(te, th)], seed=seed + 1, record_sigma=False)
+    write_measurements(data.subset(np.arange(n_train)), tmp_path / "a.csv")
+    write_measurements(data.subset(np.arange(n_train, n)), tmp_path / "b.csv")
+
+
 def test_cli_diagnose_selects_withheld_transmission_error(model, tmp_path, capsys):
     import json
 
     from pin_kpi_oed.cli.main import main as cli_main
-    from pin_kpi_oed.data.measurements import write_measurements
 
-    ur10 = model.robot
-    rng = np.random.default_rng(21)
-    Q = _uniform(ur10, rng, 700)
-    te, th = _truth_effect(model, Q, 7 * SIG)
-    data = simulate(model, Q, None, [(te, th)], seed=22, record_sigma=False)
-    write_measurements(data.subset(np.arange(500)), tmp_path / "a.csv")
-    write_measurements(data.subset(np.arange(500, 700)), tmp_path / "b.csv")
+    _write_withheld_split(model, tmp_path, 21, 700, 500)
     out = tmp_path / "r.json"
     rc = cli_main(["diagnose", "--robot", "ur10", "--train", str(tmp_path / "a.csv"), "--validate",
                    str(tmp_path / "b.csv"), "--reflector", "0,0,0.1", "--sigma", str(SIG), "--json", str(out),
@@ -421,6 +434,15 @@ def test_diagnose_transfer_section_names_extrapolation(model, tmp_path, capsys):
     sl = tf["joints"][1]
     assert sl["train_max"] <= -1.9 + 1e-9 and sl["validate_min"] >= -1.2 - 1e-9
     assert tf["rms_before_registration_m"] > 10 * tf["heldout_rms_m"]  # the tracker moved: registration needed
+    # predicted TCP uncertainty at the validation configurations vs the observed error, and the poses to add
+    assert 0 < tf["predicted_sigma_rms_m"] <= tf["predicted_sigma_max_m"] and tf["predicted_sigma_inside_m"] is None
+    assert "predicted TCP sigma at the validation configurations" in tf["reason"]
+    pa = tf["poses_to_add"]
+    sl_range = next(r for r in pa["joint_ranges"] if r["joint"] == "shoulder_lift_joint")
+    assert -1.2 - 1e-9 <= sl_range["min"] < sl_range["max"] <= -0.3 + 1e-9  # the unseen shoulder range
+    assert len(pa["rows"]) == 10 and all(1 <= r <= len(target) for r in pa["rows"])
+    assert pa["rows_sigma_m"] == sorted(pa["rows_sigma_m"], reverse=True)
+    assert "to fix it: add training poses covering" in text
     assert "transfer gap: EXTRAPOLATION" in text and "covered" in text
     # the same region for train and validation, same tracker: inside the coverage, not "extrapolation"
     Q_c = _uniform(ur10, rng, 200, box={1: (-2.4, -1.9), 2: (0.8, 1.3)})
@@ -431,3 +453,114 @@ def test_diagnose_transfer_section_names_extrapolation(model, tmp_path, capsys):
     assert rc == 0
     tf = json.loads(out.read_text())["transfer"]
     assert tf["coverage_all_joints"] > 0.5 and tf["classification"] == "unmodelled effect"
+
+
+# --------------------------------------------------------------------------- identify hooks used by the selection
+def test_residual_model_effect_prior_and_start_match_finite_differences(model):
+    """The prior rows θ/σ of rad-valued effects: residual and Jacobian agree with central differences."""
+    from pin_kpi_oed.identification.problem import ResidualModel
+
+    ur10 = model.robot
+    Q = _uniform(ur10, np.random.default_rng(3), 40)
+    data = simulate(model, Q, None, seed=4, record_sigma=False)
+    te = TransmissionError(ur10, pairs=[("shoulder_lift_joint", 3), ("elbow_joint", 5)])
+    base = np.arange(6 * ur10.nq, 6 * ur10.nq + 6)  # tracker pose
+    th0 = [np.array([1e-4, -2e-4, 3e-4, 5e-5])]
+    rm = ResidualModel(model, data, base, [te], effect_prior_sigma=1e-4, theta0=th0)
+    x = rm.x0()
+    assert np.allclose(x[base.size:], th0[0]) and rm.prior_idx.tolist() == list(range(6, 10))
+    f = rm.residual(x)
+    assert f.size == 3 * len(data) + 4 and np.allclose(f[-4:], th0[0] / 1e-4)
+    J = rm.jacobian(x)
+    h = 1e-7
+    Jfd = np.column_stack([(rm.residual(x + h * e) - rm.residual(x - h * e)) / (2 * h) for e in np.eye(x.size)])
+    assert np.max(np.abs(J - Jfd)) < 1e-5 * np.max(np.abs(J))
+    with pytest.raises(InputError, match="theta0"):
+        ResidualModel(model, data, base, [te], theta0=[np.zeros(3)])
+
+
+def test_identify_effect_prior_shrinks_and_held_effects_are_kept(model):
+    ur10 = model.robot
+    rng = np.random.default_rng(41)
+    Q = _uniform(ur10, rng, 300)
+    te = TransmissionError(ur10, pairs=[("elbow_joint", 18)])
+    th = np.array([1.5e-4, -1e-4])
+    data = simulate(model, Q, None, [(te, th)], seed=42, record_sigma=False)
+    free = identify(model, data, effects=[te])
+    assert np.allclose(free.theta[0], th, atol=1e-5)
+    tight = identify(model, data, effects=[te], effect_prior_rad=1e-7)
+    assert np.linalg.norm(tight.theta[0]) < 0.1 * np.linalg.norm(th)  # the prior dominates
+    assert "elbow" in tight.names[-1] and tight.std[-1] < 1e-7 < free.std[-1]  # the prior enters the covariance
+    with pytest.raises(InputError, match="effect_prior_rad"):
+        identify(model, data, effects=[te], effect_prior_rad=-1.0)
+    # held effects: applied with their θ, not estimated, carried into the model file and predictions
+    held = identify(model, data, held_effects=[(te, th)])
+    assert held.rms_m < 1.1 * FLOOR < identify(model, data).rms_m
+    assert not any("transmission" in n for n in held.names)
+    assert validate(held, data)["rms_m"] == pytest.approx(held.rms_m, rel=1e-6)
+    cm = held.calibrated_model()
+    assert [e.name for e in cm.effects] == ["transmission_error"] and np.allclose(cm.thetas[0], th)
+
+
+def test_circular_range_wraps_like_the_coverage():
+    from pin_kpi_oed.diagnosis.transfer_gap import circular_range
+
+    lo, hi = circular_range(np.array([3.0, 3.1, -3.1, -3.0 + 2 * np.pi]))  # crosses ±π; one angle given +2π
+    assert lo == pytest.approx(3.0) and hi == pytest.approx(-3.0 + 2 * np.pi)
+    lo, hi = circular_range(np.array([-0.5, 0.2, 0.1 + 4 * np.pi]))
+    assert (lo, hi) == (pytest.approx(-0.5), pytest.approx(0.2))
+    assert np.isnan(circular_range(np.zeros(0))[0])
+
+
+def test_cli_term_prior_shrinks_the_selected_terms(model, tmp_path, capsys):
+    import json
+
+    from pin_kpi_oed.cli.main import main as cli_main
+
+    _write_withheld_split(model, tmp_path, 23, 500, 350)
+    amps = {}
+    for prior in (None, "1e-6"):
+        out = tmp_path / f"r{prior}.json"
+        args = ["diagnose", "--robot", "ur10", "--train", str(tmp_path / "a.csv"), "--validate",
+                str(tmp_path / "b.csv"), "--reflector", "0,0,0.1", "--sigma", str(SIG), "--json", str(out),
+                "--effects", "transmission_error", "--harmonics", "20", "--quiet"]
+        assert cli_main(args + (["--term-prior", prior] if prior else [])) == 0
+        d = json.loads(out.read_text())
+        amps[prior] = {t["group"]: t["amplitude_rad"] for t in d["term_selection"]["terms"]}
+        if prior:
+            assert d["term_selection"]["prior_rad"] == 1e-6
+    common = set(amps[None]) & set(amps["1e-6"])
+    assert common and all(amps["1e-6"][g] < 0.5 * amps[None][g] for g in common)
+    capsys.readouterr()
+    rc = cli_main(["diagnose", "--robot", "ur10", "--train", str(tmp_path / "a.csv"), "--kfold", "3", "--sigma",
+                   str(SIG), "--effects", "transmission_error", "--term-prior", "-1"])
+    err = capsys.readouterr().err
+    assert rc == 2 and "--term-prior" in err and len(err.strip().splitlines()) == 1
+
+
+@pytest.mark.parametrize("effect", ["transmission_error", "joint_compliance"])
+def test_withheld_effects_transfer_case_names_the_effect(effect):
+    """Quick version of ``python -m benchmarks.withheld_effects --mode transfer``: another region, tracker moved."""
+    from benchmarks.withheld_effects import run_transfer
+
+    r = run_transfer((effect, 0, 300))
+    assert r["dominant"] == effect, r
+    assert r["coverage"] < 0.5  # the validation region is mostly unseen
+    assert r["rms_after_m"] < 1.2 * r["floor_m"] < r["rms_before_m"]
+
+
+def test_low_order_transmission_terms_are_named_gear_harmonic():
+    from pin_kpi_oed.diagnosis.diagnose import _name_low_orders
+
+    def ts(*terms):
+        return {"terms": [{"effect": "transmission_error", "group": g, "amplitude_rad": a} for g, a in terms]}
+
+    cands = ["joint_compliance", "gear_harmonic", "transmission_error"]
+    notes: list[str] = []
+    low = ts(("elbow order 1", 3e-4), ("shoulder_pan order 2", 2e-4), ("wrist_2 order 40", 2e-5))
+    assert _name_low_orders("transmission_error", low, cands, notes) == "gear_harmonic"
+    assert "orders 1-2" in notes[-1]
+    high = ts(("elbow order 1", 1e-4), ("elbow order 18", 2e-4))
+    assert _name_low_orders("transmission_error", high, cands, []) == "transmission_error"
+    assert _name_low_orders("transmission_error", low, ["transmission_error"], []) == "transmission_error"
+    assert _name_low_orders("joint_compliance", low, cands, []) == "joint_compliance"

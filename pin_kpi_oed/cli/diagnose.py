@@ -59,6 +59,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         "are chosen by sparse selection on held-out error) and drift (linear in time/row order)")
     d.add_argument("--harmonics", type=int, default=40,
                    help="highest order (cycles per revolution) of the transmission_error candidate (default 40)")
+    d.add_argument("--term-prior", type=float, default=None, metavar="RAD",
+                   help="Gaussian prior sigma (rad) on every selected transmission_error / link_bending term, e.g. "
+                        "1e-4: keeps terms fitted in one region of joint space from extrapolating (default none)")
     d.add_argument("--alpha", type=float, default=0.01, help="significance level of the tests (default 0.01)")
     d.add_argument("--t-ref", type=float, default=None,
                    help="reference temperature of thermal_expansion (degC; default the training mean)")
@@ -94,6 +97,8 @@ def run(args: argparse.Namespace) -> int:
         raise InputError(f"--figures {args.figures}: exists and is not a folder")
     if args.harmonics < 1:
         raise InputError(f"--harmonics must be >= 1, got {args.harmonics}")
+    if args.term_prior is not None and not (math.isfinite(args.term_prior) and 0 < args.term_prior < 0.1):
+        raise InputError(f"--term-prior must be a positive angle in rad below 0.1 (e.g. 1e-4), got {args.term_prior}")
     if not (math.isfinite(args.alpha) and 0 < args.alpha < 1):
         raise InputError(f"--alpha must be in (0, 1), got {args.alpha}")
     effects = None
@@ -126,7 +131,8 @@ def run(args: argparse.Namespace) -> int:
     model = TrackerModel(robot, reflector_m=reflector, noise=noise)
     rep = diagnose(model, train, val, kfold=args.kfold, effects=effects, weights=weights, alpha=args.alpha,
                    seed=args.seed, t_ref_c=args.t_ref, register_rows=args.register_rows, register_data=reg,
-                   harmonics=args.harmonics)
+                   harmonics=args.harmonics, transfer_prior_rad=args.term_prior,
+                   show_progress=False if args.quiet else None)
     if args.figures:
         rep.figures = diagnosis_figures(rep, args.figures)
     if args.json:

@@ -201,10 +201,12 @@ class DiagnosisReport(Result):
         geometry: training fit of the geometric model (RMS, χ²_red, parameters, tracker).
         registration: transfer mode: the registration rows (1-based row numbers of their file),
             their file, number and seed, and the scored rows.
-        transfer: with validation data: per-joint ranges of train and validation (rad), coverage
-            per joint and overall, held-out RMS inside / outside the coverage, before / after the
-            set-up registration (m), and the classification of the gap (``extrapolation``,
-            ``set-up change``, ``unmodelled effect``) with the numbers behind it.
+        transfer: with validation data (:func:`pin_kpi_oed.diagnosis.transfer_gap.transfer_section`):
+            per-joint ranges of train and validation (rad, wrapped as the coverage), coverage per
+            joint and overall, held-out RMS inside / outside the coverage, before / after the
+            set-up registration (m), the predicted TCP σ at the validation configurations vs the
+            observed error, the classification of the gap (``extrapolation``, ``set-up change``,
+            ``unmodelled effect``) with the numbers behind it, and for extrapolation the poses to add.
         term_selection: the sparse selection of transferable terms (``transmission_error``,
             ``link_bending`` candidates): chosen terms in plain words, held-out RMS path (m).
         plot_data: what the figures need (not in ``to_dict``): ``residuals_m`` (held-out geometric
@@ -304,7 +306,10 @@ class DiagnosisReport(Result):
         tf = self.transfer
         if tf:
             out.append(f"  transfer gap: {tf['classification'].upper()}: {tf['reason']}")
-            out.append(f"    {'joint':<22}{'train range rad':>20}{'validation range rad':>24}{'covered':>9}")
+            if tf.get("poses_to_add", {}).get("text"):
+                out.append(f"    to fix it: {tf['poses_to_add']['text']}")
+            out.append(f"    {'joint':<22}{'train range rad':>20}{'validation range rad':>24}{'covered':>9}"
+                       "   (angles wrapped to [-pi, pi) as the coverage; smallest arc, may end beyond pi)")
             for j in tf["joints"]:
                 out.append(f"    {j['joint']:<22}{j['train_min']:>9.3f} .. {j['train_max']:<7.3f}"
                            f"{j['validate_min']:>11.3f} .. {j['validate_max']:<9.3f}{_pct(j['coverage']):>9}")
@@ -732,8 +737,11 @@ class DiagnoseOptions:
             candidate; its terms (and those of ``link_bending``) are chosen by sparse forward
             selection on K-fold held-out error (:func:`pin_kpi_oed.diagnosis.selection.select_terms`)
             before they are scored like any other candidate.
-        transfer_prior_rad: σ (rad) of the Gaussian prior in the refit of the selected terms
-            (None: none).
+        show_progress: False: no progress bars; None: bars on a terminal (steps of the diagnosis,
+            the term selection).
+        transfer_prior_rad: σ (rad) of a Gaussian prior on the parameters of the selected terms
+            (``--term-prior``), in their refit and in every identification that scores them; it
+            limits how far a term fitted in one region of joint space extrapolates (None: none).
     """
 
     kfold: int | None = None
@@ -749,6 +757,7 @@ class DiagnoseOptions:
     register_data: MeasurementSet | None = None
     harmonics: int = 40
     transfer_prior_rad: float | None = None
+    show_progress: bool | None = None
 
     @classmethod
     def resolve(cls, options: "DiagnoseOptions | None", overrides: dict) -> "DiagnoseOptions":
@@ -790,81 +799,6 @@ def _check_options(model: TrackerModel, train: MeasurementSet, validate: Measure
             _check_joints(model, d, what)
 
 
-#: Transfer classification thresholds: re-registration must cut the error by this factor and leave at most
-#: ``SETUP_TRAIN_FACTOR`` × the training RMS for "set-up change"; "extrapolation" when less than
-#: ``EXTRAPOLATION_COVERAGE`` of the validation rows are covered on every joint.
-SETUP_GAIN_FACTOR = 2.0
-SETUP_TRAIN_FACTOR = 1.5
-EXTRAPOLATION_COVERAGE = 0.5
-#: Angle tolerance of the coverage (rad).
-COVERAGE_TOL_RAD = 0.05
-
-
-def _transfer_section(geo_fit: Any, train: MeasurementSet, ho_data: MeasurementSet, R: np.ndarray,
-                      registered: bool) -> dict:
-    """Step 5b: where the transfer gap lies (validation data only).
-
-    Per-joint ranges (rad) of train and validation, the share of validation rows within
-    :data:`COVERAGE_TOL_RAD` of a training angle per joint and on every joint at once
-    (:func:`pin_kpi_oed.diagnosis.selection.coverage`), the held-out RMS (m) inside and outside that
-    coverage, and — with a registration — the RMS of the same rows predicted in the training set-up
-    (tracker pose, reflector of the training fit). Classification, first rule that holds:
-    ``set-up change`` (registration cuts the error ≥ :data:`SETUP_GAIN_FACTOR` × and leaves
-    ≤ :data:`SETUP_TRAIN_FACTOR` × the training RMS), ``extrapolation`` (fewer than
-    :data:`EXTRAPOLATION_COVERAGE` of the rows covered), else ``unmodelled effect``.
-
-    Args:
-        geo_fit: the geometric training fit; train: its data; ho_data: the scored validation rows;
-        R: their held-out residuals (n, 3) m (after registration if ``registered``).
-
-    Returns:
-        The report's ``transfer`` dict (SI units).
-    """
-    from pin_kpi_oed.diagnosis.selection import covered_rows
-    from pin_kpi_oed.identification.identify import predict
-    from pin_kpi_oed.identification.problem import align_data
-
-    res = geo_fit.result
-    robot = res.model.robot
-    Qt, Qv = align_data(robot, train), align_data(robot, ho_data)
-    cov = covered_rows(Qt, Qv, COVERAGE_TOL_RAD)
-    per_joint = cov.mean(axis=0)
-    inside = np.all(cov, axis=1)
-    overall = float(inside.mean())
-    e = np.linalg.norm(R, axis=1)
-    rms = float(np.sqrt(np.mean(e ** 2)))
-    rms_in = float(np.sqrt(np.mean(e[inside] ** 2))) if inside.any() else float("nan")
-    rms_out = float(np.sqrt(np.mean(e[~inside] ** 2))) if (~inside).any() else float("nan")
-    train_rms = float(res.rms_m)
-    unreg = float("nan")
-    if registered:
-        Y = predict(res.model, res.p, Qv, aux=ho_data)[:, :3]
-        unreg = float(np.sqrt(np.mean(np.sum((ho_data.position_m - Y) ** 2, axis=1))))
-    joints = [{"joint": n, "train_min": float(Qt[:, j].min()), "train_max": float(Qt[:, j].max()),
-               "validate_min": float(Qv[:, j].min()), "validate_max": float(Qv[:, j].max()),
-               "coverage": float(per_joint[j])} for j, n in enumerate(robot.joint_names)]
-    mm = 1e3
-    cov_txt = (f"{100 * overall:.0f}% of the validation rows within {COVERAGE_TOL_RAD} rad of a training angle on "
-               f"every joint; held-out RMS {rms * mm:.3f} mm (inside the coverage "
-               f"{'-' if np.isnan(rms_in) else f'{rms_in * mm:.3f}'}, outside "
-               f"{'-' if np.isnan(rms_out) else f'{rms_out * mm:.3f}'} mm); training RMS {train_rms * mm:.3f} mm")
-    reg_txt = (f"; in the training set-up {unreg * mm:.3f} mm before re-registration" if registered else "")
-    if registered and unreg >= SETUP_GAIN_FACTOR * rms and rms <= SETUP_TRAIN_FACTOR * train_rms:
-        cls = "set-up change"
-        why = (f"re-registering the set-up removes most of the error ({unreg * mm:.3f} -> {rms * mm:.3f} mm, the "
-               f"training RMS is {train_rms * mm:.3f} mm); {cov_txt}")
-    elif overall < EXTRAPOLATION_COVERAGE:
-        cls = "extrapolation"
-        why = f"validation configurations mostly outside the training coverage: {cov_txt}{reg_txt}"
-    else:
-        cls = "unmodelled effect"
-        why = f"validation mostly inside the training coverage, error above the training fit: {cov_txt}{reg_txt}"
-    return {"classification": cls, "reason": why, "joints": joints, "coverage_tol_rad": COVERAGE_TOL_RAD,
-            "coverage_per_joint": [float(c) for c in per_joint], "coverage_all_joints": overall,
-            "heldout_rms_m": rms, "heldout_rms_inside_m": rms_in, "heldout_rms_outside_m": rms_out,
-            "train_rms_m": train_rms, "rms_before_registration_m": unreg, "registered": bool(registered)}
-
-
 #: Candidates whose terms are chosen from the data by sparse selection (:func:`_select_transfer_terms`).
 SELECTED_TERM_EFFECTS: tuple[str, ...] = ("transmission_error", "link_bending")
 
@@ -890,10 +824,16 @@ def _select_transfer_terms(geo_fit: Any, train: MeasurementSet, names: Sequence[
     if "link_bending" in names:
         cands.append(LinkBending(robot))
     sel = select_terms(geo_fit.result, train, candidates=cands, seed=opts.seed, prior_rad=opts.transfer_prior_rad,
-                       refit=True, show_progress=False)
+                       refit=True, show_progress=opts.show_progress)
     info = {"candidates": list(names), "max_order": int(opts.harmonics), "folds": sel.folds,
             "cv_rms_m": [float(v) for v in sel.cv_rms_m], "stop": sel.stop, "n_candidate_groups": sel.n_candidates,
             "left_out": list(sel.left_out), "terms": [dict(t) for t in sel.terms]}
+    if opts.transfer_prior_rad is not None:
+        if not (np.isfinite(opts.transfer_prior_rad) and opts.transfer_prior_rad > 0):
+            raise InputError(f"diagnose: --term-prior must be a positive number of rad, got {opts.transfer_prior_rad}")
+        for e in sel.effects:
+            e.prior_rad = float(opts.transfer_prior_rad)  # identify's per-effect prior (effect_prior_rad)
+        info["prior_rad"] = float(opts.transfer_prior_rad)
     if not sel.terms:
         notes.append(f"term selection ({', '.join(names)}): no term lowers the {sel.folds}-fold held-out error")
     return list(sel.effects), info
@@ -994,7 +934,7 @@ def _screen_mismatch(eng: _Engine, geo_fit: _Fit, geo: _Scored, plan: _Plan, not
 
 
 def _single_effects(eng: _Engine, geo_fit: _Fit, geo: _Scored, cands: list[Effect], alpha: float, floor: float,
-                    notes: list[str]) -> tuple[list[EffectResult], dict, dict, list[Effect]]:
+                    notes: list[str], bar: Any = None) -> tuple[list[EffectResult], dict, dict, list[Effect]]:
     """Step 6: every candidate alone with the geometry; skipped with a note when it cannot be used.
 
     Returns:
@@ -1007,6 +947,9 @@ def _single_effects(eng: _Engine, geo_fit: _Fit, geo: _Scored, cands: list[Effec
     pruned: dict[str, Effect] = {}
     usable: list[Effect] = []
     for eff in cands:
+        if bar is not None:
+            bar.set_postfix_str(eff.name)
+            bar.update()
         note = next((n for n in (eff.check(d) for d in [eng.full_train] + [te for _, te in eng.folds]) if n), None)
         if note:
             singles.append(EffectResult(eff.name, status="skipped", note=note))
@@ -1046,8 +989,8 @@ def _single_effects(eng: _Engine, geo_fit: _Fit, geo: _Scored, cands: list[Effec
 
 
 def _forward_selection(eng: _Engine, geo: _Scored, singles: list[EffectResult], scored: dict, pruned: dict,
-                       usable: list[Effect], alpha: float, floor: float, max_selected: int | None
-                       ) -> tuple[list[dict], list[str], _Scored]:
+                       usable: list[Effect], alpha: float, floor: float, max_selected: int | None,
+                       bar: Any = None) -> tuple[list[dict], list[str], _Scored]:
     """Step 7: add, step by step, the significant effect that reduces the held-out error most.
 
     Returns:
@@ -1060,6 +1003,9 @@ def _forward_selection(eng: _Engine, geo: _Scored, singles: list[EffectResult], 
     remaining = list(usable)
     limit_sel = len(usable) if max_selected is None else int(max_selected)
     while remaining and len(selected) < limit_sel:
+        if bar is not None:
+            bar.set_postfix_str(f"forward selection step {len(selection) + 1}")
+            bar.update()
         if not selected:
             cand_res = {e.name: step_results[e.name] for e in remaining}
             cand_sc = {n: scored[n] for n in cand_res}
@@ -1115,6 +1061,38 @@ def _verdict(gap: dict, remaining_gap: dict, selected: list[str], mismatch: bool
     return "none"
 
 
+#: Share of the selected transmission-error amplitude (squared) in orders 1–2 above which the terms are
+#: the gear_harmonic model (gear / encoder eccentricity) and named so.
+LOW_ORDER_SHARE = 0.9
+
+
+def _name_low_orders(dominant: str, term_selection: dict, candidate_names: list[str], notes: list[str]) -> str:
+    """Name selected transmission-error terms that are (almost) only orders 1–2 ``gear_harmonic``.
+
+    :class:`~pin_kpi_oed.effects.library.GearHarmonic` is the model Δq_j = Σ_{o=1,2} a sin(o q_j) + b cos(o q_j)
+    (eccentricity of a gear or encoder); a transmission error whose data-chosen terms carry at least
+    :data:`LOW_ORDER_SHARE` of their squared amplitude in orders 1–2 is that model, so the verdict names it
+    (the note says so). Higher orders (gear meshing) keep the name ``transmission_error``.
+    """
+    if dominant != "transmission_error" or "gear_harmonic" not in candidate_names or not term_selection:
+        return dominant
+    amp2 = {True: 0.0, False: 0.0}
+    for t in term_selection.get("terms", []):
+        if t.get("effect") != "transmission_error" or " order " not in t.get("group", ""):
+            continue
+        a = t.get("amplitude_rad")
+        if a is None or not np.isfinite(a):
+            continue
+        amp2[int(t["group"].rsplit(" order ", 1)[1]) <= 2] += float(a) ** 2
+    total = amp2[True] + amp2[False]
+    if total > 0 and amp2[True] / total >= LOW_ORDER_SHARE:
+        notes.append(f"the selected transmission-error terms carry {100 * amp2[True] / total:.0f}% of their squared "
+                     "amplitude in orders 1-2 of the joints: that is the gear_harmonic model (gear / encoder "
+                     "eccentricity), named so")
+        return "gear_harmonic"
+    return dominant
+
+
 @limit_threads
 def diagnose(model: TrackerModel, train: MeasurementSet, validate: MeasurementSet | None = None,
              options: DiagnoseOptions | None = None, **overrides: Any) -> DiagnosisReport:
@@ -1153,8 +1131,26 @@ def diagnose(model: TrackerModel, train: MeasurementSet, validate: MeasurementSe
     eng = _Engine(model, plan, train, [np.ones(len(te), bool) for _, te in plan.folds], opts.weights,
                   dict(opts.identify_options or {}), opts.exact_kfold)
 
+    from pin_kpi_oed.progress import progress
+
+    n_terms = sum(1 for e in (opts.effects or ()) if isinstance(e, str) and e in SELECTED_TERM_EFFECTS)
+    bar_cm = progress(total=2 + (1 if n_terms else 0) + len(cands) + n_terms + len(cands) + n_terms,
+                      desc="diagnose", unit="step", disable=opts.show_progress is False)
+    bar = bar_cm.__enter__()
+    try:
+        return _diagnose_steps(model, train, validate, opts, notes, cands, plan, eng, bar, t0)
+    finally:
+        bar_cm.__exit__(None, None, None)
+
+
+def _diagnose_steps(model: TrackerModel, train: MeasurementSet, validate: MeasurementSet | None,
+                    opts: DiagnoseOptions, notes: list[str], cands: list[Effect], plan: _Plan, eng: _Engine,
+                    bar: Any, t0: float) -> DiagnosisReport:
+    """Steps 3–8 of :func:`diagnose` (``bar``: the progress bar, one update per step / candidate)."""
     # (3) geometric calibration and first held-out residuals
+    bar.set_postfix_str("geometric calibration")
     geo_fit = eng.fit(train, [])
+    bar.update()
     geo = eng.score([], full=geo_fit)
     res0 = geo_fit.result
     geometry = {"train_rms_m": float(res0.rms_m), "train_chi2_reduced": res0.chi2_reduced,
@@ -1164,7 +1160,9 @@ def diagnose(model: TrackerModel, train: MeasurementSet, validate: MeasurementSe
     term_names = [e for e in (opts.effects or ()) if isinstance(e, str) and e in SELECTED_TERM_EFFECTS]
     term_selection: dict = {}
     if term_names:
+        bar.set_postfix_str("term selection")
         chosen, term_selection = _select_transfer_terms(geo_fit, train, term_names, opts, notes)
+        bar.update()
         cands = cands + chosen
     # (4) rows far beyond any effect
     geo, mismatch, validation_mismatch, ho_order = _screen_mismatch(eng, geo_fit, geo, plan, notes)
@@ -1175,18 +1173,29 @@ def diagnose(model: TrackerModel, train: MeasurementSet, validate: MeasurementSe
     expected = float(np.sqrt(np.mean(np.sum(geo.S ** 2 * (1 + geo.V), axis=1))))
     before = heldout_stats(geo.R)
     where, regs = _where(res0.model, res0.p, ho_data, ho_order, geo.R, geo.S, opts.alpha)
-    transfer = (_transfer_section(geo_fit, train, ho_data, geo.R, plan.mode == "transfer")
-                if validate is not None else {})
     # (6) every candidate alone, (7) forward selection
-    singles, scored, pruned, usable = _single_effects(eng, geo_fit, geo, cands, opts.alpha, floor, notes)
+    singles, scored, pruned, usable = _single_effects(eng, geo_fit, geo, cands, opts.alpha, floor, notes, bar)
     selection, selected, current = _forward_selection(eng, geo, singles, scored, pruned, usable, opts.alpha, floor,
-                                                      opts.max_selected)
+                                                      opts.max_selected, bar)
     after = heldout_stats(current.R)
     remaining_gap = _gap_test(current, opts.alpha)
+    # (7b) where the transfer gap lies (validation data only), with the final model's predicted uncertainty
+    transfer = {}
+    if validate is not None:
+        from pin_kpi_oed.diagnosis.transfer_gap import predicted_sigma, transfer_section
+
+        fin = bool(selected)
+        transfer = transfer_section(res0, train, ho_data, ho_order, geo.R, predicted_sigma(geo.V, geo.S), floor,
+                                    plan.mode == "transfer", current.R if fin else None,
+                                    predicted_sigma(current.V, current.S) if fin else None,
+                                    ("geometry + " + ", ".join(selected)) if fin else "",
+                                    min([float(current.full.result.rms_m)]
+                                        + ([float(term_selection["cv_rms_m"][-1])] if term_selection else [])))
     rb, ra = before["rms_m"], after["rms_m"]
     closed = (rb - ra) / (rb - floor) if rb is not None and rb - floor > 1e-3 * floor else float("nan")
     # (8) verdict
     dominant = _verdict(gap, remaining_gap, selected, validation_mismatch, floor, ra, notes)
+    dominant = _name_low_orders(dominant, term_selection, [e.name for e in cands], notes)
     for u in sorted(eng.unconverged):
         notes.append(f"the identification with {u} stopped at its evaluation limit before converging; its numbers "
                      "are those of the last iterate")

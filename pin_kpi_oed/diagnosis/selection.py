@@ -37,8 +37,10 @@ candidate. It stops when the relative gain (CV_old − CV_new) / CV_old < ``min_
 (default 0.5 %) or after ``max_terms`` groups (default 60).
 
 Refit: the selected groups (as effect objects, :attr:`SelectionResult.effects`) are fitted
-jointly with the geometry and the set-up by Levenberg–Marquardt (:func:`fit_stations`), with
-an optional Gaussian prior θ ~ N(0, ``prior_rad``²) on their parameters: the penalty
+jointly with the geometry and every station's set-up by
+:func:`~pin_kpi_oed.identification.identify.identify` (one or several stations: the data's
+``station`` column), with an optional Gaussian prior θ ~ N(0, ``prior_rad``²) on their
+parameters (``effect_prior_rad``): the penalty
 (θ / prior_rad)² is added to the weighted χ² (the residuals are in units of σ, so a prior of
 σ_y / lever keeps a term from moving the reflector more than σ_y where the data do not pin
 it down). It limits how far a term fitted on one region of joint space extrapolates to
@@ -47,390 +49,41 @@ does.
 
 Transfer
 --------
-Another day, the tracker moved: :func:`register_setup` re-fits only the set-up (tracker pose,
-reflector, and the set-up-specific effects such as :class:`~pin_kpi_oed.effects.drift.Drift`)
-on a few rows of the new data with the robot (geometry and transferable effects) held, and
-:meth:`StationFit.predict` predicts the rest. :func:`coverage` says which share of the new
-rows lies within a tolerance of a training angle, joint by joint (angles wrapped to 2π).
-
-Interim helpers: :func:`fit_stations` (several stations with one robot) and
-:func:`register_setup` stand in for the multi-station ``identify`` and the ``register``
-command of the identification rebuild; they use its :class:`ResidualModel` for every
-residual and Jacobian. Layout priors of the working model are not used by them.
+Another day, the tracker moved: :func:`pin_kpi_oed.identification.transfer.register_setup`
+re-fits only the set-up (tracker pose, reflector, and the set-up-specific effects such as
+:class:`~pin_kpi_oed.effects.drift.Drift`) on a few rows of the new data with the robot
+(geometry and transferable effects) held. :func:`coverage` says which share of the new rows
+lies within a tolerance of a training angle, joint by joint (angles wrapped to 2π).
 
 Units: SI (m, rad, s); summaries print mm and µrad.
 """
 
 from __future__ import annotations
 
-import dataclasses
 import time
 from dataclasses import dataclass, field
 from typing import Any, Sequence
 
 import numpy as np
-import pinocchio as pin
 import scipy.linalg as sla
-from scipy.optimize import least_squares
 
 from pin_kpi_oed.data.measurements import MeasurementSet
 from pin_kpi_oed.effects.coupled import LinkBending
-from pin_kpi_oed.effects.library import Effect, sum_joint_offsets
+from pin_kpi_oed.effects.library import Effect
 from pin_kpi_oed.effects.periodic import DEFAULT_MAX_ORDER, TransmissionError
-from pin_kpi_oed.errors import IdentifiabilityError, InputError, SolverError
-from pin_kpi_oed.identification.identify import IdentificationResult, ResidualModel, identify, predict, register_points
-from pin_kpi_oed.model.tracker import TrackerModel
+from pin_kpi_oed.errors import InputError
+from pin_kpi_oed.identification.identify import IdentificationResult, identify
+from pin_kpi_oed.identification.problem import ResidualModel
 from pin_kpi_oed.progress import progress
 from pin_kpi_oed.results import Result
 from pin_kpi_oed.threads import limit_threads
 
 __all__ = [
-    "Station", "StationFit", "SelectionPath", "SelectionResult", "fit_stations", "register_setup",
-    "transfer_candidates", "forward_select", "select_terms", "coverage", "covered_rows", "measurement_folds",
+    "SelectionPath", "SelectionResult", "transfer_candidates", "forward_select", "select_terms", "coverage", "covered_rows", "measurement_folds",
 ]
 
 #: Candidate groups moving the reflector less than this per rad of their terms (RMS, m/rad) are left out.
 MIN_LEVER_M = 1e-3
-
-
-# --------------------------------------------------------------------------- stations and fits
-@dataclass
-class Station:
-    """One measurement set-up (tracker placement) and its data.
-
-    Attributes:
-        model: working measurement model of this set-up (its ``tracker_T_base`` is the reference of the
-            tracker parameters in ``p``).
-        p: raw parameter vector of ``model`` (robot parameters shared with the other stations).
-        data: the measurements of this station.
-        sigma: position σ per row (m, 3) m, or None = ``model.noise``.
-        effects: set-up-specific effects of this station (e.g. its drift); ``thetas`` their parameters.
-        name: label.
-    """
-
-    model: TrackerModel
-    p: np.ndarray
-    data: MeasurementSet
-    sigma: np.ndarray | None = None
-    effects: list[Effect] = field(default_factory=list)
-    thetas: list[np.ndarray] = field(default_factory=list)
-    name: str = ""
-
-    @classmethod
-    def from_result(cls, result: IdentificationResult, data: MeasurementSet, name: str = "") -> "Station":
-        """The station of a single-station identification (its working model, p and weights).
-
-        Set-up-specific effects of ``result`` become the station's own; the others are ignored here
-        (give them to :func:`fit_stations`).
-        """
-        own = [(e, t) for e, t in zip(result.effects, result.theta) if getattr(e, "setup_specific", False)]
-        sigma = np.asarray(data.sigma_m, float) if result.sigma_source == "data" else None
-        return cls(result.model, np.asarray(result.p, float).copy(), data, sigma, [e for e, _ in own],
-                   [np.asarray(t, float).copy() for _, t in own], name or (data.source or ""))
-
-
-@dataclass
-class StationFit:
-    """A robot calibrated on one or more stations: shared robot parameters and effects, one set-up each.
-
-    Attributes:
-        stations: the stations (their ``p`` share the robot entries).
-        base: estimated raw parameter indices (the identifiable set of one station).
-        effects: transferable effects (shared by every station); ``thetas`` their parameters.
-        prior_rad: σ of the Gaussian prior on the effects' rad parameters used in the fit (None: none).
-        cost: final ½ Σ f² (weighted, with the prior rows).
-        nfev: residual evaluations of the last fit; ``time_s`` its time (s).
-    """
-
-    stations: list[Station]
-    base: np.ndarray
-    effects: list[Effect] = field(default_factory=list)
-    thetas: list[np.ndarray] = field(default_factory=list)
-    prior_rad: float | None = None
-    cost: float = float("nan")
-    nfev: int = 0
-    time_s: float = 0.0
-
-    @property
-    def robot_index(self) -> np.ndarray:
-        """Estimated raw parameters that belong to the robot (shared by the stations)."""
-        L = self.stations[0].model.layout
-        return self.base[~L.is_setup()[self.base]]
-
-    @property
-    def setup_index(self) -> np.ndarray:
-        """Estimated raw parameters of a station's set-up (tracker, reflector)."""
-        L = self.stations[0].model.layout
-        return self.base[L.is_setup()[self.base]]
-
-    def _station(self, station: int | Station) -> Station:
-        return self.stations[station] if isinstance(station, (int, np.integer)) else station
-
-    def predict(self, Q: np.ndarray, aux: MeasurementSet | None = None, station: int | Station = 0) -> np.ndarray:
-        """Predicted reflector positions (m, 3) m in the station's tracker frame (geometry + every effect)."""
-        st = self._station(station)
-        eff = list(self.effects) + list(st.effects)
-        th = list(self.thetas) + list(st.thetas)
-        return predict(st.model, st.p, Q, eff, th, aux)[:, :3]
-
-    def residuals(self, data: MeasurementSet | None = None, station: int | Station = 0) -> np.ndarray:
-        """Measured − predicted positions (m, 3) m of ``data`` (default the station's own data)."""
-        st = self._station(station)
-        d = st.data if data is None else data
-        return np.asarray(d.position_m, float) - self.predict(_aligned_q(st.model, d), d, st)
-
-    def describe(self) -> list[str]:
-        """Plain-words lines of every effect (shared, then each station's own)."""
-        out = []
-        for e, t in zip(self.effects, self.thetas):
-            out += e.describe(t)
-        for st in self.stations:
-            for e, t in zip(st.effects, st.thetas):
-                out += e.describe(t)
-        return out
-
-
-def _aligned_q(model: TrackerModel, data: MeasurementSet) -> np.ndarray:
-    from pin_kpi_oed.identification.identify import align_data
-
-    return align_data(model.robot, data)
-
-
-def _problems(fit: StationFit, extra: Sequence[Effect] = ()) -> list[ResidualModel]:
-    """One residual model per station: shared effects (+ extra), then the station's own effects."""
-    out = []
-    for st in fit.stations:
-        eff = list(fit.effects) + list(extra) + list(st.effects)
-        out.append(ResidualModel(st.model, st.data, fit.base, eff, sigma=st.sigma, p_ref=st.p))
-    return out
-
-
-class _Layout:
-    """Global unknowns of a multi-station fit: [robot | shared θ | per station: set-up, own θ]."""
-
-    def __init__(self, fit: StationFit, k_shared: int, fixed_shared: bool = False, fixed_robot: bool = False):
-        L = fit.stations[0].model.layout
-        setup = L.is_setup()[fit.base]
-        self.rob_local = np.flatnonzero(~setup)  # positions within base
-        self.set_local = np.flatnonzero(setup)
-        self.nb = fit.base.size
-        self.k_shared = k_shared
-        self.k_own = [int(sum(e.n_params for e in st.effects)) for st in fit.stations]
-        self.fixed_shared, self.fixed_robot = fixed_shared, fixed_robot
-        self.nr = 0 if fixed_robot else self.rob_local.size
-        self.nk = 0 if fixed_shared else k_shared
-        self.offsets = []
-        o = self.nr + self.nk
-        for ko in self.k_own:
-            self.offsets.append(o)
-            o += self.set_local.size + ko
-        self.n = o
-
-    def station_columns(self, s: int) -> tuple[np.ndarray, np.ndarray]:
-        """(local columns of station s's ResidualModel x, global columns) of the unknowns it touches."""
-        loc, glo = [], []
-        if not self.fixed_robot:
-            loc.append(self.rob_local)
-            glo.append(np.arange(self.nr))
-        if not self.fixed_shared:
-            loc.append(self.nb + np.arange(self.k_shared))
-            glo.append(self.nr + np.arange(self.k_shared))
-        o = self.offsets[s]
-        loc.append(self.set_local)
-        glo.append(o + np.arange(self.set_local.size))
-        loc.append(self.nb + self.k_shared + np.arange(self.k_own[s]))
-        glo.append(o + self.set_local.size + np.arange(self.k_own[s]))
-        return np.concatenate(loc).astype(int), np.concatenate(glo).astype(int)
-
-
-def _station_x(prob: ResidualModel, st: Station, shared: Sequence[np.ndarray]) -> np.ndarray:
-    own = [np.asarray(t, float) for t in st.thetas]
-    return np.concatenate([st.p[prob.base]] + [np.asarray(t, float) for t in shared] + own)
-
-
-def _rad_prior_mask(effects: Sequence[Effect]) -> np.ndarray:
-    return np.concatenate([np.full(e.n_params, e.unit == "rad") for e in effects]) if effects else np.zeros(0, bool)
-
-
-def _solve_stations(fit: StationFit, lay: _Layout, prior_rad: float | None, max_nfev: int | None = None
-                    ) -> StationFit:
-    """Levenberg–Marquardt over the unknowns of ``lay``; returns the updated fit."""
-    t0 = time.perf_counter()
-    probs = _problems(fit)
-    sizes = [e.n_params for e in fit.effects]
-    k_sh = int(sum(sizes))
-    pmask = _rad_prior_mask(fit.effects) if (prior_rad is not None and not lay.fixed_shared) else np.zeros(k_sh, bool)
-    if prior_rad is not None and not (np.isfinite(prior_rad) and prior_rad > 0):
-        raise InputError(f"prior_rad must be a positive number of rad, got {prior_rad}")
-    p_idx = np.flatnonzero(pmask)
-    x_loc0 = [_station_x(pr, st, fit.thetas) for pr, st in zip(probs, fit.stations)]
-    cols = [lay.station_columns(s) for s in range(len(probs))]
-    x0 = np.zeros(lay.n)
-    for s, (loc, glo) in enumerate(cols):
-        x0[glo] = x_loc0[s][loc]
-    n_rows = sum(pr.m * 3 for pr in probs) + p_idx.size
-    if n_rows < lay.n:
-        raise IdentifiabilityError(f"{n_rows} equations for {lay.n} unknowns: measure more configurations")
-
-    def local(x: np.ndarray, s: int) -> np.ndarray:
-        xl = x_loc0[s].copy()
-        loc, glo = cols[s]
-        xl[loc] = x[glo]
-        return xl
-
-    def fun(x: np.ndarray) -> np.ndarray:
-        parts = [probs[s].weighted_rows(local(x, s))[:, :3].ravel() for s in range(len(probs))]
-        if p_idx.size:
-            parts.append(x[lay.nr + p_idx] / prior_rad)
-        return np.concatenate(parts)
-
-    def jac(x: np.ndarray) -> np.ndarray:
-        J = np.zeros((n_rows, lay.n))
-        r0 = 0
-        for s, pr in enumerate(probs):
-            Js = pr.jacobian_full(local(x, s))[:, :3, :].reshape(-1, pr.nx)
-            loc, glo = cols[s]
-            J[r0:r0 + Js.shape[0], glo] = Js[:, loc]
-            r0 += Js.shape[0]
-        if p_idx.size:
-            J[r0 + np.arange(p_idx.size), lay.nr + p_idx] = 1.0 / prior_rad
-        return J
-
-    try:
-        sol = least_squares(fun, x0, jac=jac, method="lm", x_scale="jac", ftol=1e-12, xtol=1e-12, gtol=1e-12,
-                            max_nfev=max_nfev or 50 * max(lay.n, 10))
-    except (ValueError, np.linalg.LinAlgError) as exc:
-        raise SolverError(f"station fit failed: {str(exc).splitlines()[0]}") from None
-    if not np.all(np.isfinite(sol.x)):
-        raise SolverError("station fit diverged (non-finite parameters)")
-    stations = []
-    thetas_sh = list(fit.thetas)
-    for s, (pr, st) in enumerate(zip(probs, fit.stations)):
-        p, th = pr.unpack(local(sol.x, s))
-        stations.append(dataclasses.replace(st, p=p, thetas=th[len(fit.effects):]))
-        if s == 0:
-            thetas_sh = th[:len(fit.effects)]
-    return dataclasses.replace(fit, stations=stations, thetas=thetas_sh, prior_rad=prior_rad, cost=float(sol.cost),
-                               nfev=int(sol.nfev), time_s=time.perf_counter() - t0)
-
-
-def fit_stations(model: TrackerModel, datasets: Sequence[MeasurementSet] | MeasurementSet,
-                 effects: Sequence[Effect] = (), *, thetas0: Sequence[np.ndarray] | None = None,
-                 setup_effects: Sequence[Sequence[Effect]] | None = None, prior_rad: float | None = None,
-                 start: StationFit | None = None, names: Sequence[str] | None = None) -> StationFit:
-    """Calibrate one robot on one or more stations: robot geometry and effects shared, a set-up each (interim).
-
-    Every station is first identified on its own (geometry, :func:`identify`: closed-form
-    registration of its tracker pose, Levenberg–Marquardt); then the robot parameters, the
-    ``effects`` and every station's set-up (tracker pose, reflector, its ``setup_effects``) are
-    fitted together by Levenberg–Marquardt on the weighted position residuals of all stations,
-    with the prior θ ~ N(0, prior_rad²) on the effects' rad parameters if given.
-
-    Args:
-        model: nominal measurement model (robot, nominal reflector, noise = the weights).
-        datasets: the measurements of each station (one set = one station).
-        effects: transferable effects (shared by the stations).
-        thetas0: their start values (default zeros).
-        setup_effects: per station, its set-up-specific effects (e.g. ``[Drift.from_data(robot, d)]``).
-        prior_rad: σ (rad) of the Gaussian prior on the effects' rad parameters; None = none.
-        start: a previous fit to start from (its stations, robot parameters); default a fresh start.
-        names: station labels (default the data's ``source``).
-
-    Returns:
-        The :class:`StationFit`.
-
-    Raises:
-        InputError, IdentifiabilityError, SolverError: as :func:`identify`; too few rows.
-    """
-    datasets = [datasets] if isinstance(datasets, MeasurementSet) else list(datasets)
-    if not datasets:
-        raise InputError("fit_stations: no measurements given")
-    setup_effects = [list(s) for s in setup_effects] if setup_effects is not None else [[] for _ in datasets]
-    if len(setup_effects) != len(datasets):
-        raise InputError(f"fit_stations: {len(setup_effects)} lists of set-up effects for {len(datasets)} stations")
-    if start is None:
-        stations, base = [], None
-        for i, d in enumerate(datasets):
-            r = identify(model, d)
-            st = Station.from_result(r, d, name=(names[i] if names else d.source or f"station {i + 1}"))
-            if base is None:
-                base = np.asarray(r.identifiability.base, int)
-            elif not np.array_equal(base, r.identifiability.base):
-                raise IdentifiabilityError("the stations' identifiable parameter sets differ; give one robot model")
-            stations.append(st)
-        if len(stations) > 1:  # start every station from the first station's robot
-            rob = ~stations[0].model.layout.is_setup()
-            for st in stations[1:]:
-                st.p[rob] = stations[0].p[rob]
-        fit = StationFit(stations, base)
-    else:
-        fit = dataclasses.replace(start, stations=[dataclasses.replace(s) for s in start.stations])
-    for st, own in zip(fit.stations, setup_effects):
-        if own:
-            st.effects = list(own)
-            st.thetas = [np.zeros(e.n_params) for e in own]
-    fit.effects = list(effects)
-    fit.thetas = [np.zeros(e.n_params) for e in effects] if thetas0 is None else \
-        [np.asarray(t, float).copy() for t in thetas0]
-    if len(fit.thetas) != len(fit.effects) or any(t.size != e.n_params for t, e in zip(fit.thetas, fit.effects)):
-        raise InputError("fit_stations: thetas0 must give one vector per effect, of its number of parameters")
-    k = int(sum(e.n_params for e in fit.effects))
-    if len(fit.stations) == 1 and not k and not any(st.effects for st in fit.stations) and start is None:
-        return fit  # the single-station geometric identification is the fit
-    return _solve_stations(fit, _Layout(fit, k), prior_rad)
-
-
-def register_setup(fit: StationFit, data: MeasurementSet, setup_effects: Sequence[Effect] = (),
-                   reference: int = 0, name: str = "") -> Station:
-    """Re-fit only the set-up on ``data`` (tracker pose, reflector, set-up-specific effects), robot held (interim).
-
-    The tracker pose starts from a closed-form registration (Kabsch) of the predicted
-    base-frame points (robot geometry and transferable effects of ``fit``) onto the measured
-    points; the reflector from the reference station's. Then Levenberg–Marquardt on the
-    weighted position residuals of ``data``.
-
-    Args:
-        fit: the calibrated robot.
-        data: the registration rows of the new set-up.
-        setup_effects: set-up-specific effects of the new set-up (e.g. ``Drift.from_data(robot, data)``).
-        reference: the station whose model (noise, nominal reflector) and reflector start are used.
-        name: label of the new station.
-
-    Returns:
-        The new :class:`Station` (use it with :meth:`StationFit.predict`).
-
-    Raises:
-        IdentifiabilityError: fewer rows than set-up unknowns, or rows that do not determine them.
-    """
-    ref = fit.stations[reference]
-    Q = _aligned_q(ref.model, data)
-    nset = fit.setup_index.size + int(sum(e.n_params for e in setup_effects))
-    if 3 * len(data) < nset + 1 or len(data) < 3:
-        raise IdentifiabilityError(f"registration: {len(data)} rows give {3 * len(data)} equations for {nset} "
-                                   "set-up unknowns; give more rows")
-    dQ = np.zeros_like(Q)
-    if fit.effects:
-        dQ = sum_joint_offsets(list(zip(fit.effects, fit.thetas)), Q, data)[0]
-    kin = ref.model.kinematics(ref.p, Q + dQ, ref.model.reflector(ref.p))
-    R, t = register_points(kin.p, np.asarray(data.position_m, float))
-    model = dataclasses.replace(ref.model, tracker_T_base=pin.SE3(R, t))
-    p = ref.p.copy()
-    p[model.layout.tracker] = 0.0
-    sigma = np.asarray(data.sigma_m, float) if (ref.sigma is not None and data.sigma_m is not None) else None
-    st = Station(model, p, data, sigma, list(setup_effects), [np.zeros(e.n_params) for e in setup_effects],
-                 name or data.source or "registered")
-    tmp = dataclasses.replace(fit, stations=[st])
-    out = _solve_stations(tmp, _Layout(tmp, int(sum(e.n_params for e in fit.effects)), fixed_shared=True,
-                                       fixed_robot=True), None)
-    J = out.stations[0]
-    prob = _problems(dataclasses.replace(out, stations=[J]))[0]
-    F = prob.jacobian_full(_station_x(prob, J, out.thetas))[:, :3, :].reshape(-1, prob.nx)
-    loc, _ = _Layout(tmp, int(sum(e.n_params for e in fit.effects)), True, True).station_columns(0)
-    s = np.linalg.svd(F[:, loc] / (np.linalg.norm(F[:, loc], axis=0) + 1e-300), compute_uv=False)
-    if s[-1] < 1e-8 * s[0]:
-        raise IdentifiabilityError(f"registration: the {len(data)} rows do not determine the set-up (tracker pose, "
-                                   "reflector); use rows spread over the workspace")
-    return J
 
 
 # --------------------------------------------------------------------------- candidates
@@ -638,8 +291,9 @@ class SelectionResult(Result):
             "cv_rms_m"}`` (amplitude = √(Σ θ²) of the refit, rad; cv_rms_m = held-out RMS after adding it).
         cv_rms_m: held-out 3-D RMS per measurement (m) before the first step and after each.
         effects: the selected terms as effect objects, ready for ``identify(..., effects=...)`` /
-            :func:`fit_stations`; ``theta`` their refitted parameters (rad).
-        fit: the refit (:class:`StationFit`, geometry + set-ups + selected effects), or None.
+            ``theta`` their refitted parameters (rad).
+        fit: the refit (:class:`~pin_kpi_oed.identification.identify.IdentificationResult`: geometry,
+            every station's set-up, the fit's effects and the selected ones), or None.
         n_candidates: number of candidate groups scored; ``left_out``: groups left out as invisible.
         folds, seed, max_terms, min_rel_gain, ridge, prior_rad, min_lever_m: the settings.
         stop: why the selection stopped.
@@ -649,7 +303,7 @@ class SelectionResult(Result):
     cv_rms_m: list[float] = field(default_factory=list)
     effects: list[Effect] = field(default_factory=list, repr=False)
     theta: list[np.ndarray] = field(default_factory=list, repr=False)
-    fit: StationFit | None = field(default=None, repr=False)
+    fit: IdentificationResult | None = field(default=None, repr=False)
     n_candidates: int = 0
     left_out: list[str] = field(default_factory=list)
     folds: int = 5
@@ -685,38 +339,34 @@ class SelectionResult(Result):
         return "\n".join(out)
 
 
-def _linear_system(fit: StationFit, candidates: Sequence[Effect]) -> tuple[np.ndarray, np.ndarray, np.ndarray,
-                                                                              np.ndarray, np.ndarray]:
-    """b, A (estimated unknowns of the fit), C (candidate columns), σ per row, lever per candidate column."""
-    lay = _Layout(fit, int(sum(e.n_params for e in fit.effects)))
-    probs = _problems(fit, extra=candidates)
-    k_sh = int(sum(e.n_params for e in fit.effects))
+def _sigma(fit: IdentificationResult, data: MeasurementSet) -> np.ndarray | None:
+    """Position σ per row the fit was weighted with: the data's sigma columns, or None (the noise model)."""
+    return np.asarray(data.sigma_m, float) if fit.sigma_source == "data" else None
+
+
+def _linear_system(fit: IdentificationResult, data: MeasurementSet, candidates: Sequence[Effect]
+                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """b, A (estimated unknowns of the fit), C (candidate columns), σ per row, lever per candidate column.
+
+    One :class:`ResidualModel` over every station of the fit, its estimated effects followed by the
+    candidates (θ = 0), its held effects held: A, C are the weighted position Jacobian's columns.
+    """
     k_c = int(sum(e.n_params for e in candidates))
-    bs, As, Cs, sig, lev = [], [], [], [], []
-    for s, (pr, st) in enumerate(zip(probs, fit.stations)):
-        x = np.concatenate([st.p[fit.base]] + [np.asarray(t, float) for t in fit.thetas] + [np.zeros(k_c)]
-                           + [np.asarray(t, float) for t in st.thetas])
-        J = pr.jacobian_full(x)[:, :3, :]
-        W = pr.W[:, :3]
-        bs.append(-pr.weighted_rows(x)[:, :3].ravel())
-        Jr = J.reshape(-1, pr.nx)
-        # columns of the fit's unknowns (skip the candidate block)
-        keep = np.r_[np.arange(pr.nb + k_sh), pr.nb + k_sh + k_c + np.arange(pr.nx - pr.nb - k_sh - k_c)]
-        Jfit = Jr[:, keep]
-        loc, glo = lay.station_columns(s)
-        A = np.zeros((Jr.shape[0], lay.n))
-        A[:, glo] = Jfit[:, loc]
-        As.append(A)
-        Cs.append(Jr[:, pr.nb + k_sh:pr.nb + k_sh + k_c])
-        sig.append((1.0 / W).ravel())
-        lev.append(J[:, :, pr.nb + k_sh:pr.nb + k_sh + k_c] / W[:, :, None])
-    Lev = np.concatenate(lev)  # (m, 3, k_c) unweighted, m per rad
-    lever = np.sqrt(np.mean(np.sum(Lev ** 2, axis=1), axis=0))
-    return np.concatenate(bs), np.vstack(As), np.vstack(Cs), np.concatenate(sig), lever
+    prob = ResidualModel(fit.station_set, data, np.asarray(fit.identifiability.base, int),
+                         list(fit.effects) + list(candidates), sigma=_sigma(fit, data), p_ref=fit.P, held=fit.held)
+    x = np.concatenate([np.asarray(fit.values, float), np.zeros(k_c)])
+    J = prob.jacobian_full(x)[:, :3, :]
+    W = prob.W[:, :3]
+    n_fit = x.size - k_c
+    Jr = J.reshape(-1, prob.nx)
+    b = -prob.weighted_rows(x)[:, :3].ravel()
+    lev = J[:, :, n_fit:] / W[:, :, None]  # (m, 3, k_c) unweighted, m per rad
+    lever = np.sqrt(np.mean(np.sum(lev ** 2, axis=1), axis=0))
+    return b, Jr[:, :n_fit], Jr[:, n_fit:], (1.0 / W).ravel(), lever
 
 
 @limit_threads
-def select_terms(fit: StationFit | IdentificationResult, data: MeasurementSet | None = None, *,
+def select_terms(fit: IdentificationResult, data: MeasurementSet, *,
                  candidates: Sequence[Effect] | None = None, max_order: int = DEFAULT_MAX_ORDER, folds: int = 5,
                  seed: int = 0, min_rel_gain: float = 5e-3, max_terms: int = 60, ridge: float = 1e-8,
                  prior_rad: float | None = None, refit: bool = True, min_lever_m: float = MIN_LEVER_M,
@@ -728,17 +378,18 @@ def select_terms(fit: StationFit | IdentificationResult, data: MeasurementSet | 
     :func:`transfer_candidates` with ``max_order``).
 
     Args:
-        fit: the fitted model to extend (a :class:`StationFit`, or a single-station
-            :class:`IdentificationResult` together with its ``data``).
-        data: the training measurements of ``fit`` when it is an ``IdentificationResult``.
+        fit: the fitted model to extend (:func:`~pin_kpi_oed.identification.identify.identify` on
+            ``data``; one station or several).
+        data: the training measurements of ``fit``.
         candidates: candidate effects (their groups are the candidates).
         max_order: highest Fourier order of the default candidates (cycles per revolution).
         folds: number of cross-validation folds (by measurement); seed: their seed.
         min_rel_gain: stop when the held-out SSE falls by less than this share.
         max_terms: cap on the number of selected groups.
         ridge: ridge on the unit-scaled columns of the selection.
-        prior_rad: σ (rad) of the Gaussian prior of the refit (None: plain least squares).
-        refit: refit the selected terms nonlinearly with the geometry and the set-ups.
+        prior_rad: σ (rad) of the Gaussian prior of the refit (``effect_prior_rad`` of identify;
+            None: plain least squares).
+        refit: refit the selected terms nonlinearly with the geometry and the set-ups (identify).
         min_lever_m: leave out groups moving the reflector less than this per rad (RMS, m/rad).
         max_amplitude_rad: refuse a step whose fold fits need a group amplitude above this (rad);
             default each candidate effect's ``plausible_max`` (2 mrad for the transmission error and
@@ -753,16 +404,12 @@ def select_terms(fit: StationFit | IdentificationResult, data: MeasurementSet | 
         InputError: ``data`` missing for an identification result, bad folds.
     """
     t0 = time.perf_counter()
-    if isinstance(fit, IdentificationResult):
-        if data is None:
-            raise InputError("select_terms: give the training data of the identification result")
-        fit = StationFit([Station.from_result(fit, data)], np.asarray(fit.identifiability.base, int),
-                         [e for e in fit.effects if not getattr(e, "setup_specific", False)],
-                         [t for e, t in zip(fit.effects, fit.theta) if not getattr(e, "setup_specific", False)])
-    robot = fit.stations[0].model.robot
+    if not isinstance(fit, IdentificationResult) or data is None:
+        raise InputError("select_terms: give an identification result and its training data")
+    robot = fit.model.robot
     cands = list(candidates) if candidates is not None else transfer_candidates(robot, max_order)
-    b, A, C, sig, lever = _linear_system(fit, cands)
-    m = sum(len(st.data) for st in fit.stations)
+    b, A, C, sig, lever = _linear_system(fit, data, cands)
+    m = len(data)
     if isinstance(folds, np.ndarray):
         fold_m = np.asarray(folds, int)
         folds = int(fold_m.max()) + 1
@@ -796,9 +443,8 @@ def select_terms(fit: StationFit | IdentificationResult, data: MeasurementSet | 
     final = None
     theta = theta0
     if refit and effects:
-        final = fit_stations(fit.stations[0].model, [st.data for st in fit.stations], effects, thetas0=theta0,
-                             prior_rad=prior_rad, start=fit)
-        theta = final.thetas
+        final = refit_with(fit, data, effects, theta0, prior_rad)
+        theta = final.theta[len(fit.effects):]
     # plain words per selected group, in selection order
     texts: dict[tuple[int, int], tuple[str, float]] = {}
     for eff, th in zip(effects, theta):
@@ -817,6 +463,36 @@ def select_terms(fit: StationFit | IdentificationResult, data: MeasurementSet | 
                            theta=[np.asarray(t, float) for t in theta], fit=final, n_candidates=len(groups),
                            left_out=left_out, folds=folds, seed=seed, max_terms=max_terms, min_rel_gain=min_rel_gain,
                            ridge=ridge, prior_rad=prior_rad, min_lever_m=min_lever_m, stop=path.stop)
+
+
+def refit_with(fit: IdentificationResult, data: MeasurementSet, effects: Sequence[Effect],
+               theta0: Sequence[np.ndarray] | None = None, prior_rad: float | None = None,
+               **options: Any) -> IdentificationResult:
+    """Identify ``fit``'s model again on ``data`` with ``effects`` added to its own (robot shared by the stations).
+
+    Starts from the fit's working model (nominal geometry, every tracker pose registered
+    afresh), its effects' θ and ``theta0`` for the new ones, with the same weights and
+    reflector-per-station choice; ``prior_rad`` is identify's ``effect_prior_rad`` (on every rad-valued effect).
+
+    Args:
+        fit: the fit to extend; data: its training data; effects: effects to add; theta0: their
+            start values (default zeros); prior_rad: σ (rad) of the Gaussian prior, None = none.
+        **options: further :class:`~pin_kpi_oed.identification.identify.IdentifyOptions` fields.
+
+    Returns:
+        The new :class:`~pin_kpi_oed.identification.identify.IdentificationResult` (effects: the
+        fit's, then ``effects``).
+    """
+    th0 = [np.asarray(t, float) for t in fit.theta] + (
+        [np.zeros(e.n_params) for e in effects] if theta0 is None else [np.asarray(t, float) for t in theta0])
+    kw = {"weights": "data" if fit.sigma_source == "data" else "noise",
+          "reflector_per_station": fit.reflector_per_station, "held_effects": fit.held, "theta0": th0,
+          "effect_prior_rad": prior_rad, "use_orientation": fit.residuals_rad is not None,
+          "raise_on_failure": False}
+    if len(fit.stations) == 1 and data.station is None:
+        kw["station"] = fit.stations[0]
+    kw.update(options)
+    return identify(fit.model, data, effects=list(fit.effects) + list(effects), **kw)
 
 
 # --------------------------------------------------------------------------- coverage

@@ -254,6 +254,14 @@ class IdentifyOptions:
         reflector_per_station: every station has its own reflector offset (and probe orientation).
         station: label of the data's one station when they have no ``station`` column
             (default: the file name without extension).
+        effect_prior_rad: σ (rad) of a Gaussian prior θ_i ~ N(0, σ²) on every estimated effect
+            parameter in rad (effects with ``unit == "rad"``): one row θ_i / σ in the cost and the
+            covariance; it keeps a term the data barely determine (e.g. a harmonic fitted in one
+            region of joint space) near zero instead of letting it extrapolate. None: no prior. An
+            effect with its own ``prior_rad`` attribute (σ, rad) uses that instead.
+        theta0: start values of the effects' θ (one array per effect; default zeros).
+        held_effects: ``[(effect, θ), ...]`` applied with their parameters held (not estimated),
+            e.g. the transferable effects of an earlier calibration; kept in the result and its model.
     """
 
     p0: np.ndarray | None = None
@@ -274,8 +282,14 @@ class IdentifyOptions:
     seed: int = 0
     reflector_per_station: bool = False
     station: str | None = None
+    effect_prior_rad: float | None = None
+    theta0: Sequence[np.ndarray] | None = None
+    held_effects: Sequence[tuple[Any, np.ndarray]] = ()
 
     def __post_init__(self) -> None:
+        if self.effect_prior_rad is not None and not (np.isfinite(self.effect_prior_rad)
+                                                      and self.effect_prior_rad > 0):
+            raise InputError(f"effect_prior_rad must be a positive number of rad, got {self.effect_prior_rad}")
         if self.loss not in ROBUST_LOSSES:
             raise InputError(f"unknown loss '{self.loss}' (choose from {', '.join(ROBUST_LOSSES)})")
         if self.weights not in ("auto", "data", "noise"):
@@ -396,6 +410,7 @@ class IdentificationResult(Result):
     station_set: StationSet | None = field(default=None, repr=False)
     reflector_per_station: bool = False
     source: str = ""
+    held: list = field(default_factory=list, repr=False)
 
     @property
     def converged(self) -> bool:
@@ -443,7 +458,13 @@ class IdentificationResult(Result):
         s = self._station_index(station)
         models = self.station_models or [self.model]
         ps = self.station_p or [self.p]
-        return predict(models[s], ps[s], Q, self.effects, self.theta, aux)
+        eff, th = self.all_effects()
+        return predict(models[s], ps[s], Q, eff, th, aux)
+
+    def all_effects(self) -> tuple[list, list[np.ndarray]]:
+        """(effects, θ) of the whole model: the held effects (``held_effects``), then the estimated ones."""
+        return ([e for e, _ in self.held] + list(self.effects),
+                [np.asarray(t, float) for _, t in self.held] + [np.asarray(t, float) for t in self.theta])
 
     def calibrated_model(self) -> CalibratedModel:
         """Everything the fit found as a :class:`CalibratedModel` (what ``--model-out`` writes)."""
@@ -457,8 +478,8 @@ class IdentificationResult(Result):
                "time_s": float(self.time_s), "rows_per_station": n_rows,
                "reflector_per_station": bool(self.reflector_per_station)}
         return CalibratedModel(
-            robot=self.model.robot, joint_p=np.asarray(self.p[:nj], float).copy(), effects=list(self.effects),
-            thetas=[np.asarray(t, float).copy() for t in self.theta], setups=dict(self.setups),
+            robot=self.model.robot, joint_p=np.asarray(self.p[:nj], float).copy(), effects=self.all_effects()[0],
+            thetas=[t.copy() for t in self.all_effects()[1]], setups=dict(self.setups),
             noise=self.model.noise, tcp_m=self.model.tcp_m, pose6d=bool(self.model.pose6d),
             parameters={"names": list(self.names), "values": self.values, "std": self.std,
                         "units": [_unit(n) for n in self.names], "covariance": self.covariance},
@@ -672,7 +693,8 @@ def _start(model: TrackerModel, data: MeasurementSet, inp: _Inputs, effects: Seq
                            pose6d=inp.pose6d, probe_R=np.asarray(model.probe_R, float), layout=L) for _ in range(S)]
     stations = StationSet(models, layout)
     if opts.register and not tracker_known:
-        pairs = [(e, np.zeros(len(e.param_names(robot)))) for e in effects]
+        th0 = list(opts.theta0) if opts.theta0 is not None else [np.zeros(len(e.param_names(robot))) for e in effects]
+        pairs = list(opts.held_effects) + list(zip(effects, th0))
         M_probe = []
         for s, rows in enumerate(inp.rows):
             wm = models[s]
@@ -761,10 +783,30 @@ def _data_rank_check(F: np.ndarray, names: list[str], m: int, nh: int) -> None:
                                    f"joint ranges, or fix the parameter as known")
 
 
+def _effect_prior(effects: Sequence[Any], prior_rad: float | None, robot: Any) -> np.ndarray | None:
+    """σ per effect parameter: an effect's own ``prior_rad`` attribute (a SubsetEffect: its base's), else
+    ``effect_prior_rad`` on the rad-valued effects; inf (no prior) elsewhere."""
+    sig, any_prior = [], prior_rad is not None
+    for e in effects:
+        own = getattr(e, "prior_rad", None)
+        if own is None:
+            own = getattr(getattr(e, "base", None), "prior_rad", None)
+        if own is not None:
+            any_prior = True
+        s = own if own is not None else (prior_rad if getattr(e, "unit", "") == "rad" else None)
+        sig.append(np.full(len(e.param_names(robot)), np.inf if s is None else float(s)))
+    if not any_prior:
+        return None
+    return np.concatenate(sig) if sig else np.zeros(0)
+
+
 def _problem(stations: StationSet, data: MeasurementSet, inp: _Inputs, effects: Sequence[Any], P: np.ndarray,
-             ident: Identifiability) -> ResidualModel:
+             ident: Identifiability, opts: IdentifyOptions | None = None) -> ResidualModel:
     """Step 3: the residual model over the identifiable parameters, with every data check."""
-    prob = ResidualModel(stations, data, np.asarray(ident.base, int), effects, sigma=inp.sigma, p_ref=P, Q=inp.Q)
+    opts = opts or IdentifyOptions()
+    prob = ResidualModel(stations, data, np.asarray(ident.base, int), effects, sigma=inp.sigma, p_ref=P, Q=inp.Q,
+                         held=opts.held_effects, effect_prior_sigma=_effect_prior(effects, opts.effect_prior_rad, stations.robot),
+                         theta0=opts.theta0)
     n_eq = prob.m * prob.nh
     if n_eq < prob.nx:
         raise IdentifiabilityError(
@@ -773,7 +815,13 @@ def _problem(stations: StationSet, data: MeasurementSet, inp: _Inputs, effects: 
             f"{int(np.ceil(prob.nx / prob.nh))} configurations (better 2–3× as many)")
     J0 = prob.jacobian_full(prob.x0())
     _check_stations(prob, J0, inp.src)
-    _data_rank_check(J0.reshape(-1, prob.nx), prob.names, prob.m, prob.nh)
+    Jr = J0.reshape(-1, prob.nx)
+    eff_prior = prob.prior_idx[prob.prior_idx >= prob.nb]  # an effect prior determines its parameter
+    if eff_prior.size:
+        Pm = np.zeros((eff_prior.size, prob.nx))
+        Pm[np.arange(eff_prior.size), eff_prior] = 1.0 / prob.prior_sigma[prob.prior_idx >= prob.nb]
+        Jr = np.vstack([Jr, Pm])
+    _data_rank_check(Jr, prob.names, prob.m, prob.nh)
     return prob
 
 
@@ -948,7 +996,7 @@ def identify(model: TrackerModel, data: MeasurementSet, options: IdentifyOptions
     inp = _check_inputs(model, data, opts)
     stations, P0, T_init = _start(model, data, inp, effects, opts)
     ident = _identifiable(stations, opts)
-    prob = _problem(stations, data, inp, effects, P0, ident)
+    prob = _problem(stations, data, inp, effects, P0, ident, opts)
     solution = _solve(prob, opts)
     fw, we, outliers = _settle_outliers(prob, solution, opts, inp.src)
     x = solution.x
@@ -976,7 +1024,7 @@ def identify(model: TrackerModel, data: MeasurementSet, options: IdentifyOptions
         station_p=[stations.station_p(P_hat, s) for s in range(len(stations.labels))],
         station_rows=list(prob.rows), P=P_hat, param_names=list(stations.layout.names), station_set=stations,
         reflector_per_station=bool(opts.reflector_per_station), source=data.source,
-        time_s=time.perf_counter() - t_start)
+        held=[(e, np.asarray(t, float)) for e, t in opts.held_effects], time_s=time.perf_counter() - t_start)
 
 
 # --------------------------------------------------------------------------- #

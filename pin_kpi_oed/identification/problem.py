@@ -323,13 +323,19 @@ class ResidualModel:
         p_ref: global raw parameter vector supplying the values of the others.
         effects: estimated effect objects; ``k`` their total number of parameters.
         held: ``[(effect, θ), ...]`` effects applied with fixed parameters (not estimated).
+        theta0: start values of the estimated θ (concatenated; default zeros).
         names: names of x.
+        prior_idx, prior_sigma: the unknowns with a Gaussian prior x_i ~ N(0, σ_i²) and their σ: the
+            base parameters with a finite layout prior, then the effect parameters given a finite
+            ``effect_prior_sigma`` (one row x_i / σ_i each, after the measurement rows).
         mask: measurement rows in use (outliers may be removed).
     """
 
     def __init__(self, stations: StationSet | TrackerModel, data: MeasurementSet, base: np.ndarray,
                  effects: Sequence[Any] = (), sigma: np.ndarray | None = None, p_ref: np.ndarray | None = None,
-                 Q: np.ndarray | None = None, held: Sequence[tuple[Any, np.ndarray]] = ()):
+                 Q: np.ndarray | None = None, held: Sequence[tuple[Any, np.ndarray]] = (),
+                 effect_prior_sigma: np.ndarray | float | None = None,
+                 theta0: Sequence[np.ndarray] | None = None):
         if isinstance(stations, TrackerModel):
             stations = StationSet.single(stations)
         self.stations = stations
@@ -361,8 +367,20 @@ class ResidualModel:
         self.k = int(sum(self.sizes))
         self.names = [self.layout.names[i] for i in self.base] + effect_param_names(self.effects, model.robot)
         ps = self.layout.prior_sigma[self.base]
-        self.prior_idx = np.flatnonzero(np.isfinite(ps))
-        self.prior_sigma = ps[self.prior_idx]
+        pe = np.full(self.k, np.inf)
+        if effect_prior_sigma is not None:
+            pe = np.broadcast_to(np.asarray(effect_prior_sigma, float), (self.k,)).copy()
+            if np.any(~(pe > 0)):
+                raise InputError(f"effect prior σ must be positive (inf = none), got {effect_prior_sigma}")
+        allp = np.concatenate([ps, pe])
+        self.prior_idx = np.flatnonzero(np.isfinite(allp))
+        self.prior_sigma = allp[self.prior_idx]
+        self.theta0 = np.zeros(self.k)
+        if theta0 is not None:
+            t0 = np.concatenate([np.asarray(t, float).ravel() for t in theta0]) if len(theta0) else np.zeros(0)
+            if t0.shape != (self.k,):
+                raise InputError(f"theta0: {t0.size} start values for {self.k} effect parameters")
+            self.theta0 = t0
         self.W = np.hstack([1.0 / self.sigma] + ([np.full((self.m, 3), 1.0 / self.sigma_rot)] if self.nh == 6 else []))
         self.mask = np.ones(self.m, bool)
         # column map of each station: its model's raw parameter k -> column of x (or −1)
@@ -425,8 +443,8 @@ class ResidualModel:
         return P, th
 
     def x0(self) -> np.ndarray:
-        """Start: the reference values of the base parameters and θ = 0."""
-        return np.concatenate([self.p_ref[self.base], np.zeros(self.k)])
+        """Start: the reference values of the base parameters and θ = ``theta0`` (default 0)."""
+        return np.concatenate([self.p_ref[self.base], self.theta0])
 
     def _pairs(self, th: list[np.ndarray]) -> list[tuple[Any, np.ndarray]]:
         return self.held + list(zip(self.effects, th))

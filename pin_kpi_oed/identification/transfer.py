@@ -17,6 +17,11 @@ with the analytic Jacobian (:class:`~pin_kpi_oed.identification.problem.Residual
 the effects *held*). :func:`validate_transfer` does what an engineer does: register on some
 rows (a seeded random subset of the validation file, or another file) and score the rest.
 
+Set-up-specific effects (``setup_specific = True``, e.g. :class:`~pin_kpi_oed.effects.drift.Drift`)
+describe one session, not the robot: they are not held (the new session's rows would have
+none of their parameters); ``setup_effects`` are fitted *with* the set-up instead, and the
+registered model carries them in place of the old ones.
+
 A registration set that cannot determine the set-up is refused: fewer than 3 points, or a
 set-up Jacobian without full column rank (e.g. all rows at one configuration, or collinear
 points) — one line naming the file, the rows and the undetermined parameter.
@@ -25,11 +30,12 @@ points) — one line naming the file, the rows and the undetermined parameter.
 from __future__ import annotations
 
 import csv
+import dataclasses
 import io
 import os
 import time
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, Sequence
 
 import numpy as np
 import pinocchio as pin
@@ -62,6 +68,7 @@ class RegistrationResult(Result):
         rows: label -> indices (0-based) of the rows of the given data used.
         errors_m: position error norm of every given row after the registration (m).
         source: file the rows came from.
+        setup_thetas: fitted parameters of the ``setup_effects`` of the registration (one array each).
     """
 
     model: CalibratedModel = field(repr=False, default=None)  # type: ignore[assignment]
@@ -70,6 +77,7 @@ class RegistrationResult(Result):
     rows: dict = field(default_factory=dict)
     errors_m: np.ndarray = field(default_factory=lambda: np.zeros(0))
     source: str = ""
+    setup_thetas: list = field(default_factory=list)
 
     @property
     def rms_m(self) -> float:
@@ -101,8 +109,15 @@ def _groups(model: CalibratedModel, data: MeasurementSet, station: str | None) -
     return data.station_rows(default_station_label(data))
 
 
+def transferable(model: CalibratedModel) -> list[tuple[Any, np.ndarray]]:
+    """``[(effect, θ), ...]`` of the model's robot effects (the set-up-specific ones left out)."""
+    return [(e, np.asarray(t, float)) for e, t in zip(model.effects, model.thetas)
+            if not getattr(e, "setup_specific", False)]
+
+
 def _register_one(model: CalibratedModel, data: MeasurementSet, Q: np.ndarray, label: str, hold_reflector: bool,
-                  weights: str, use_orientation: bool, tol: float, max_nfev: int | None) -> tuple[Setup, Any]:
+                  weights: str, use_orientation: bool, tol: float, max_nfev: int | None,
+                  setup_effects: Sequence[Any] = ()) -> tuple[Setup, Any]:
     """Kabsch start + Levenberg–Marquardt over one station's set-up with the robot held."""
     src = data.source or "registration data"
     m = len(data)
@@ -115,11 +130,11 @@ def _register_one(model: CalibratedModel, data: MeasurementSet, Q: np.ndarray, l
         ref = model.setups[default]
     pose6d = bool(use_orientation and model.pose6d and data.rotvec_rad is not None and ref.probe_R is not None)
     L = ParameterLayout(list(model.robot.joint_names), pose6d=pose6d)
-    cm = CalibratedModel(model.robot, model.joint_p, model.effects, model.thetas,
+    pairs = transferable(model)
+    cm = CalibratedModel(model.robot, model.joint_p, [e for e, _ in pairs], [t for _, t in pairs],
                          {label: Setup(np.eye(4), ref.reflector_m, ref.probe_R if pose6d else None)},
                          model.noise, model.tcp_m, pose6d)
     wm, p = cm.station_model(label)
-    pairs = list(zip(model.effects, model.thetas))
     X = predict_with_effects(wm, p, Q, data, pairs)[:, :3]  # base frame (tracker = identity)
     use_sigma = data.sigma_m is not None and weights in ("auto", "data")
     sigma = np.asarray(data.sigma_m, float) if use_sigma else None
@@ -132,7 +147,8 @@ def _register_one(model: CalibratedModel, data: MeasurementSet, Q: np.ndarray, l
     base = np.r_[np.arange(L.tracker.start, L.tracker.stop),
                  [] if hold_reflector else np.arange(L.reflector.start, L.reflector.stop),
                  np.arange(L.probe.start, L.probe.stop)].astype(int)
-    prob = ResidualModel(StationSet.single(wm, label), data, base, sigma=sigma, p_ref=p, Q=Q, held=pairs)
+    prob = ResidualModel(StationSet.single(wm, label), data, base, list(setup_effects), sigma=sigma, p_ref=p, Q=Q,
+                         held=pairs)
     J0 = prob.jacobian_full(prob.x0()).reshape(-1, prob.nx)
     if J0.shape[0] < prob.nx:
         raise InputError(f"{src}: station '{label}': {m} registration rows give {J0.shape[0]} equations for the "
@@ -151,17 +167,18 @@ def _register_one(model: CalibratedModel, data: MeasurementSet, Q: np.ndarray, l
         raise SolverError(f"{src}: registration failed: {str(exc).splitlines()[0]}") from None
     if not np.all(np.isfinite(sol.x)):
         raise SolverError(f"{src}: registration diverged; check the joint order and units (m, rad)")
-    P, _ = prob.unpack(sol.x)
+    P, th_own = prob.unpack(sol.x)
     err = np.linalg.norm(prob.evaluate(sol.x)[0], axis=1)
     R_probe = wm.probe_R @ pin.exp3(P[L.probe]) if pose6d else None
     setup = Setup(wm.tracker_pose(P).homogeneous.copy(), wm.reflector(P), R_probe, m, "register", data.source,
                   float(np.sqrt(np.mean(err ** 2))))
-    return setup, (sol, err)
+    return setup, (sol, err, th_own)
 
 
 def register_setup(model: CalibratedModel, data: MeasurementSet, *, station: str | None = None,
                    hold_reflector: bool = False, weights: str = "auto", use_orientation: bool = True,
-                   tol: float = 1e-12, max_nfev: int | None = None) -> RegistrationResult:
+                   tol: float = 1e-12, max_nfev: int | None = None, setup_effects: Sequence[Any] = ()
+                   ) -> RegistrationResult:
     """Re-fit only the set-up (tracker pose, reflector) of a station on ``data``, the robot held.
 
     Args:
@@ -173,9 +190,13 @@ def register_setup(model: CalibratedModel, data: MeasurementSet, *, station: str
         weights: ``auto`` (sigma columns if present, else the model's noise), ``data`` or ``noise``.
         use_orientation: use rx, ry, rz when both the model and the data have them.
         tol: solver tolerances; max_nfev: evaluation limit (default 50 × unknowns).
+        setup_effects: set-up-specific effects of the new session (e.g. ``Drift.from_data(robot, data)``)
+            fitted together with the set-up (one station only); the model's own set-up-specific
+            effects are replaced by them (they never transfer).
 
     Returns:
-        The :class:`RegistrationResult`; ``.model`` holds the new set-up(s), the last the default.
+        The :class:`RegistrationResult`; ``.model`` holds the new set-up(s), the last the default,
+        and the robot effects plus ``setup_effects`` (with their fitted θ, also in ``setup_thetas``).
 
     Raises:
         InputError: missing joint columns, bad values, fewer than 3 rows, or rows that do not
@@ -188,16 +209,22 @@ def register_setup(model: CalibratedModel, data: MeasurementSet, *, station: str
     if weights == "data" and data.sigma_m is None:
         raise InputError(f"{data.source or 'registration data'}: weights='data' but the file has no sigma columns")
     Q = align_data(model.robot, data)
+    groups = _groups(model, data, station)
+    setup_effects = list(setup_effects)
+    if setup_effects and len(groups) > 1:
+        raise InputError(f"{data.source or 'registration data'}: set-up effects are fitted for one station at a "
+                         f"time; the data have {len(groups)} ({', '.join(groups)}); give station=")
     new = model
+    own_thetas: list[np.ndarray] = []
     setups: dict[str, Setup] = {}
     rows_used: dict[str, np.ndarray] = {}
     errors = np.zeros(len(data))
     nit = nfev = 0
     ok = True
-    for label, rows in _groups(model, data, station).items():
+    for label, rows in groups.items():
         sub = data if rows.size == len(data) else data.subset(rows)
-        setup, (sol, err) = _register_one(model, sub, Q[rows], label, hold_reflector, weights, use_orientation, tol,
-                                          max_nfev)
+        setup, (sol, err, own_thetas) = _register_one(model, sub, Q[rows], label, hold_reflector, weights,
+                                                      use_orientation, tol, max_nfev, setup_effects)
         errors[rows] = err
         nit += int(sol.njev or 0)
         nfev += int(sol.nfev)
@@ -207,10 +234,14 @@ def register_setup(model: CalibratedModel, data: MeasurementSet, *, station: str
         new = new.with_setup(label, setup, default=True,
                              step={"step": "register", "data": data.source, "station": label, "n_rows": int(rows.size),
                                    "rms_m": setup.rms_m, "hold_reflector": bool(hold_reflector)})
+    if setup_effects or len(transferable(model)) != len(model.effects):
+        pairs = transferable(model) + list(zip(setup_effects, own_thetas))
+        new = dataclasses.replace(new, effects=[e for e, _ in pairs], thetas=[t for _, t in pairs])
     return RegistrationResult(success=ok, status="converged" if ok else "max_nfev",
                               message="set-up registered with the robot held", nit=nit, nfev=nfev,
                               time_s=time.perf_counter() - t0, model=new, stations=list(setups), setups=setups,
-                              rows=rows_used, errors_m=errors, source=data.source)
+                              rows=rows_used, errors_m=errors, source=data.source,
+                              setup_thetas=[np.asarray(t, float) for t in own_thetas])
 
 
 def registration_split(n: int, register_rows: int, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
