@@ -44,6 +44,7 @@ from pin_kpi_oed.errors import InputError, PinKpiOedError
 from pin_kpi_oed.model.tracker import TrackerModel
 from pin_kpi_oed.model.robot import Robot
 from pin_kpi_oed.model.serialize import model_from_dict, se3_from_matrix
+from pin_kpi_oed.validation.schema import validate_design_dict
 
 #: Readable names of the usual criteria (a design entry's own ``label`` wins).
 DESIGN_LABELS: dict[str, str] = {"random": "heuristic", "param": "A on C_p", "kpi": "KPI (A on C_s)"}
@@ -526,6 +527,7 @@ def load_design(source: str | os.PathLike | Mapping, criteria: Sequence[str] | N
         IdentifiabilityError: a C_s to recompute is not determined by the design's measurements.
     """
     d, where, base_dir = _read_json(source)
+    validate_design_dict(d, where)
     f = _Fields(d)
     notes: list[str] = []
     model = _read_model(f, where, base_dir, notes)
