@@ -24,6 +24,11 @@ from pin_kpi_oed.validation.units import check_sigma_m, check_sigma_rad
 
 __all__ = ["CELL_SCHEMA", "DESIGN_SCHEMA", "validate_cell_dict", "validate_design_dict"]
 
+#: largest plausible reflector / TCP offset from the tool frame (m)
+MAX_TOOL_OFFSET_M = 3.0
+#: largest plausible distance of the robot base or the tracker from the cell origin (m)
+MAX_CELL_M = 200.0
+
 _NUM = {"type": "number"}
 _VEC3 = {"type": "array", "items": _NUM, "minItems": 3, "maxItems": 3}
 _NUMS = {"type": "array", "items": _NUM, "minItems": 1}
@@ -164,6 +169,15 @@ def validate_cell_dict(d: Any, source: str = "") -> None:
                 x = float(np.asarray(jb[key], float)[np.argmax(a)])
                 raise InputError(f"{where}joint_bounds.{key}: {x:g} rad ({math.degrees(x):.0f}°) is beyond ±4π: "
                                  f"the values look like degrees; use joint_bounds.{key[:-4]}_deg or convert to rad")
+    for key, limit in (("reflector_m", MAX_TOOL_OFFSET_M), ("tcp_m", MAX_TOOL_OFFSET_M)):
+        if key in d and float(np.linalg.norm(np.asarray(d[key], float))) > limit:
+            raise InputError(f"{where}{key}: {float(np.linalg.norm(np.asarray(d[key], float))):.4g} m from the tool "
+                             f"frame, more than {limit:g} m: the values look like mm; give them in m")
+    for key in ("base", "tracker"):
+        xyz = (d.get(key) or {}).get("xyz_m")
+        if xyz is not None and float(np.linalg.norm(np.asarray(xyz, float))) > MAX_CELL_M:
+            raise InputError(f"{where}{key}.xyz_m: {float(np.linalg.norm(np.asarray(xyz, float))):.4g} m from the "
+                             f"cell origin, more than {MAX_CELL_M:g} m: the values look like mm; give them in m")
     wr = d.get("working_configurations_rad")
     if wr is not None and not _ragged(wr):
         a = np.abs(np.asarray(wr, float))
