@@ -16,7 +16,7 @@ from typing import Any, Callable
 
 from pin_kpi_oed.errors import InputError
 from pin_kpi_oed.validation.paths import check_outputs
-from pin_kpi_oed.validation.units import check_sigma_m, check_sigma_rad
+from pin_kpi_oed.validation.units import MAX_TOOL_OFFSET_M, check_offset_m, check_sigma_m, check_sigma_rad
 
 __all__ = ["accept_negative_numbers", "check_args", "RULES", "OUTPUTS", "INPUTS", "FOLDERS", "floats"]
 
@@ -75,6 +75,14 @@ def _sigma_rad(opt: str, v: Any) -> None:
         check_sigma_rad(floats(v, opt), opt)
 
 
+def _offset(opt: str, v: Any) -> None:
+    if v is not None:
+        a = floats(v, opt)
+        if len(a) != 3:
+            raise InputError(f"{opt}: expected x,y,z (m), got '{v}'")
+        check_offset_m(a, MAX_TOOL_OFFSET_M, opt)
+
+
 def _range(unit: str) -> Callable[[str, Any], None]:
     def rule(opt: str, v: Any) -> None:
         if v is None:
@@ -111,18 +119,18 @@ def _split(opt: str, v: Any) -> None:
 _SEED = {"seed": _int_at_least(0)}
 #: command -> {argparse dest: rule(option name, value)}
 RULES: dict[str, dict[str, Callable[[str, Any], None]]] = {
-    "info": dict(_SEED),
+    "info": {**_SEED, "reflector": _offset},
     "demo": dict(_SEED),
     "design": {**_SEED, "measurements": _int_at_least(1), "starts": _int_at_least(1), "max_iter": _int_at_least(1),
                "pool_size": _int_at_least(1)},
     "simulate": {**_SEED, "n": _int_at_least(1), "n_test": _int_at_least(0), "noise": _sigma_m,
                  "sigma_rot": _sigma_rad, "tol_translation": _nonneg_float, "tol_rotation": _nonneg_float,
-                 "tol_reflector": _nonneg_float, "temperature": _range("°C")},
+                 "tol_reflector": _nonneg_float, "temperature": _range("°C"), "reflector": _offset},
     "identify": {**_SEED, "register_rows": _int_at_least(1), "max_nfev": _int_at_least(1), "sigma": _sigma_m,
-                 "sigma_rot": _sigma_rad, "fix": _fix},
+                 "sigma_rot": _sigma_rad, "fix": _fix, "reflector": _offset},
     "import-ipa": {**_SEED, "split": _split},
     "diagnose": {**_SEED, "register_rows": _int_at_least(1), "kfold": _int_at_least(2), "sigma": _sigma_m,
-                 "alpha": _open_unit},
+                 "alpha": _open_unit, "reflector": _offset},
     "view": {"scale": _positive_float, "level": _open_unit},
     "study": {**_SEED, "measurements": _int_at_least(9), "seeds": _int_at_least(1), "arms": _int_at_least(1),
               "starts": _int_at_least(1), "workers": _int_at_least(1), "scheduler": _scheduler},

@@ -62,3 +62,48 @@ def check_robot_scale(reach_m: float, path: Any) -> None:
     if not math.isfinite(reach_m) or reach_m > MAX_REACH_M:
         raise RobotLoadError(f"{path}: the robot reaches {reach_m:.4g} m, more than {MAX_REACH_M:g} m: the URDF looks "
                              "like mm (URDF lengths are in m)")
+
+
+class captured_stderr:
+    """Capture what C/C++ code writes to file descriptor 2 (urdfdom's parser) instead of printing it.
+
+    Usage: ``with captured_stderr() as cap: ...``; then ``cap.text`` holds the captured text and
+    ``cap.first_line()`` its first meaningful line (e.g. urdfdom's reason for a refusal).
+    """
+
+    def __enter__(self) -> "captured_stderr":
+        import os
+        import sys
+        import tempfile
+
+        self.text = ""
+        try:
+            sys.stderr.flush()
+            self._fd = sys.stderr.fileno() if hasattr(sys.stderr, "fileno") else 2
+        except (OSError, ValueError, AttributeError):
+            self._fd = 2
+        self._tmp = tempfile.TemporaryFile()
+        try:
+            self._saved = os.dup(2)
+            os.dup2(self._tmp.fileno(), 2)
+        except OSError:  # pragma: no cover - no fd 2
+            self._saved = None
+        return self
+
+    def __exit__(self, *exc: Any) -> None:
+        import os
+
+        if self._saved is not None:
+            os.dup2(self._saved, 2)
+            os.close(self._saved)
+        self._tmp.seek(0)
+        self.text = self._tmp.read().decode(errors="replace")
+        self._tmp.close()
+
+    def first_line(self) -> str:
+        """The first non-empty captured line without urdfdom's ``Error:`` prefix ('' when none)."""
+        for ln in self.text.splitlines():
+            ln = ln.strip()
+            if ln:
+                return ln.removeprefix("Error:").strip()
+        return ""

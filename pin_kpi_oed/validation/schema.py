@@ -20,12 +20,10 @@ from typing import Any
 import numpy as np
 
 from pin_kpi_oed.errors import InputError
-from pin_kpi_oed.validation.units import check_sigma_m, check_sigma_rad
+from pin_kpi_oed.validation.units import MAX_TOOL_OFFSET_M, check_sigma_m, check_sigma_rad
 
 __all__ = ["CELL_SCHEMA", "DESIGN_SCHEMA", "validate_cell_dict", "validate_design_dict"]
 
-#: largest plausible reflector / TCP offset from the tool frame (m)
-MAX_TOOL_OFFSET_M = 3.0
 #: largest plausible distance of the robot base or the tracker from the cell origin (m)
 MAX_CELL_M = 200.0
 

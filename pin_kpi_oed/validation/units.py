@@ -14,11 +14,13 @@ import numpy as np
 
 from pin_kpi_oed.errors import InputError
 
-__all__ = ["SIGMA_MAX_M", "SIGMA_ROT_MAX_RAD", "check_sigma_m", "check_sigma_rad", "check_offset_m",
+__all__ = ["MAX_TOOL_OFFSET_M", "SIGMA_MAX_M", "SIGMA_ROT_MAX_RAD", "check_sigma_m", "check_sigma_rad", "check_offset_m",
            "check_angle_rad"]
 
 #: largest plausible measurement noise sigma (m): 1 cm; more means the value was given in mm
 SIGMA_MAX_M = 0.01
+#: largest plausible reflector / TCP offset from the tool frame (m); more means mm
+MAX_TOOL_OFFSET_M = 3.0
 #: largest plausible orientation noise sigma (rad): about 5.7°
 SIGMA_ROT_MAX_RAD = 0.1
 
@@ -80,7 +82,7 @@ def check_offset_m(v: Iterable[float], reach_m: float, what: str) -> np.ndarray:
     n = float(np.linalg.norm(a))
     if n > reach_m:
         raise InputError(f"{what}: {n:.4g} m from the tool frame, more than the robot's reach ({reach_m:.3g} m): "
-                         "give it in m")
+                         "give it in m (a reflector or TCP offset beyond a few metres is mm)")
     return a
 
 

@@ -81,6 +81,8 @@ def _cases() -> list[Case]:
         Case("urdf-zero-axis", "info {d}/zaxis.urdf", "zero length"),
         Case("urdf-swapped-limits", "info {d}/swap.urdf", "reversed"),
         Case("urdf-xacro", "info {d}/robot.xacro.urdf", "xacro"),
+        Case("urdf-broken-parent", "info {d}/broken.urdf", "parent link [nolink]"),
+        Case("cell-tracker-mm", "design --cell {d}/cell_tracker_mm.yaml", "tracker.xyz_m"),
         Case("identify-sigma-10", "identify --robot kr15 --data {d}/tr.csv --sigma 10", "give it in m"),
         Case("diagnose-sigma-15", "diagnose --robot kr15 --train {d}/tr.csv --validate {d}/te.csv --sigma 15",
              "give it in m"),
@@ -133,7 +135,86 @@ def _cases() -> list[Case]:
              "--n-test"),
     ]
     c += [Case(f"seed-negative-{cmd.split()[0]}", cmd + " --seed -1", "--seed") for cmd in COMMANDS_WITH_SEED]
-    return c
+    return c + _generated()
+
+
+#: command -> (valid arguments, {output option: a valid default when another is under test}, input paths)
+_OUT = {
+    "evaluate": ("evaluate {d}/d.json", {"--json": None}, ["{d}/d.json"]),
+    "demo": ("demo", {"--json": None}, []),
+    "design": ("design --cell {d}/cell.yaml", {"--json": None}, ["{d}/cell.yaml"]),
+    "simulate": ("simulate --robot kr15 --n-test 5", {"--out": "{d}/o1.csv", "--test-out": "{d}/o2.csv",
+                                                      "--truth-json": None}, []),
+    "identify": ("identify --robot kr15 --data {d}/tr.csv --validate {d}/te.csv",
+                 {"--json": None, "--urdf-out": None, "--model-out": None}, ["{d}/tr.csv", "{d}/te.csv"]),
+    "import-ipa": ("import-ipa {d}/tr.csv --split 0.5", {"--out": None, "--train": "{d}/o1.csv",
+                                                          "--test": "{d}/o2.csv"}, ["{d}/tr.csv"]),
+    "register": ("register --model {d}/m.json --data {d}/te.csv", {"--model-out": "{d}/o1.json", "--json": None},
+                 ["{d}/m.json", "{d}/te.csv"]),
+    "predict": ("predict --model {d}/m.json --data {d}/te.csv", {"--out": "{d}/o1.csv"}, ["{d}/m.json", "{d}/te.csv"]),
+    "diagnose": ("diagnose --robot kr15 --train {d}/tr.csv --validate {d}/te.csv", {"--json": None},
+                 ["{d}/tr.csv", "{d}/te.csv"]),
+    "view": ("view {d}/d.json --no-open", {"--html": "{d}/o1.html"}, ["{d}/d.json"]),
+}
+#: (command with valid arguments, option, bad value, expected text) for numeric options
+_NUMERIC = [
+    ("design", "--measurements", ["0", "-1", "ten"]), ("design", "--starts", ["0", "-2", "x"]),
+    ("design", "--max-iter", ["0", "-1", "1.5"]), ("design --certificate", "--pool-size", ["0", "-5", "many"]),
+    ("design", "--seed", ["-1", "-100", "1e3"]),
+    ("simulate --robot kr15 --out {d}/new.csv", "--n", ["0", "-1", "x"]),
+    ("simulate --robot kr15 --out {d}/new.csv", "--n-test", ["-1", "x"]),
+    ("simulate --robot kr15 --out {d}/new.csv", "--noise", ["0", "-1e-5", "10", "1", "nan", "inf", "x", "1,2"]),
+    ("simulate --robot kr15 --out {d}/new.csv", "--sigma-rot", ["0", "-1", "5", "nan"]),
+    ("simulate --robot kr15 --out {d}/new.csv", "--tol-translation", ["-1e-4", "nan", "x"]),
+    ("simulate --robot kr15 --out {d}/new.csv", "--tol-rotation", ["-1e-3", "inf"]),
+    ("simulate --robot kr15 --out {d}/new.csv", "--tol-reflector", ["-1"]),
+    ("simulate --robot kr15 --out {d}/new.csv", "--temperature", ["30,20", "20", "a,b", "nan,20"]),
+    ("simulate --robot kr15 --out {d}/new.csv", "--reflector", ["1,2", "a,b,c", "60,0,120"]),
+    ("simulate --robot kr15 --out {d}/new.csv", "--tracker", ["1,2", "x,0,0"]),
+    ("identify --robot kr15 --data {d}/tr.csv", "--sigma", ["0", "-1e-5", "10", "0.5", "nan", "x", "1,2"]),
+    ("identify --robot kr15 --data {d}/tr.csv", "--sigma-rot", ["0", "-1e-4", "3"]),
+    ("identify --robot kr15 --data {d}/tr.csv", "--reflector", ["a,b,c", "1,2", "30,20,80"]),
+    ("identify --robot kr15 --data {d}/tr.csv", "--max-nfev", ["0", "-1", "x"]),
+    ("identify --robot kr15 --data {d}/tr.csv --validate {d}/te.csv", "--register-rows", ["0", "-3", "2", "x"]),
+    ("identify --robot kr15 --data {d}/tr.csv", "--fix", ["*", "**", "?*", ","]),
+    ("identify --robot kr15 --data {d}/tr.csv", "--seed", ["-1"]),
+    ("identify --robot kr15 --data {d}/tr.csv", "--loss", ["l2"]),
+    ("diagnose --robot kr15 --train {d}/tr.csv --validate {d}/te.csv", "--sigma", ["0", "-1", "15", "x"]),
+    ("diagnose --robot kr15 --train {d}/tr.csv --validate {d}/te.csv", "--alpha", ["0", "1", "-0.1", "x"]),
+    ("diagnose --robot kr15 --train {d}/tr.csv", "--kfold", ["0", "1", "-2", "x"]),
+    ("diagnose --robot kr15 --train {d}/tr.csv --validate {d}/te.csv", "--reflector", ["60,0,120", "x"]),
+    ("import-ipa {d}/tr.csv --train {d}/a.csv --test {d}/b.csv", "--split", ["0", "-0.5", "x", "nan"]),
+    ("view {d}/d.json --no-open --html {d}/o.html", "--scale", ["0", "-1", "x"]),
+    ("view {d}/d.json --no-open --html {d}/o.html", "--level", ["0", "1", "1.5", "x"]),
+    ("study kuka --out {d}/st", "--measurements", ["0", "5", "x"]), ("study kuka --out {d}/st", "--seeds", ["0", "-1"]),
+    ("study notional90 --out {d}/st", "--arms", ["0", "-3"]), ("study kuka --out {d}/st", "--starts", ["0", "-1"]),
+    ("study kuka --out {d}/st", "--workers", ["0", "-1"]),
+    ("study kuka --out {d}/st", "--scheduler", ["foo", "http://x", "tcp://"]),
+    ("info kr15", "--reflector", ["a", "1,2"]), ("info kr15", "--seed", ["-1"]),
+]
+
+
+def _generated() -> list[Case]:
+    """Every output option onto an input / a folder / a missing folder / below a file / another output;
+    every numeric option at zero, negative, text, NaN and out-of-range values."""
+    out: list[Case] = []
+    for cmd, (base, outs, ins) in _OUT.items():
+        for opt in outs:
+            rest = " ".join(f"{o} {v}" for o, v in outs.items() if o != opt and v)
+            bad = [(f"onto-input{k}", p, "would destroy the input") for k, p in enumerate(ins)]
+            bad += [("folder", "{d}/sub", "is a folder"), ("missing-folder", "{d}/nodir/x.out", "does not exist"),
+                    ("below-a-file", "{d}/tr.csv/x.out", "does not exist")]
+            bad += [(f"same-as{o}", v, "its own file") for o, v in outs.items() if o != opt and v]
+            for tag, path, expect in bad:
+                out.append(Case(f"gen-out-{cmd}{opt}-{tag}", f"{base} {rest} {opt} {path}", expect))
+    for cmd, opt in (("diagnose --robot kr15 --train {d}/tr.csv --validate {d}/te.csv", "--figures"),
+                     ("view {d}/d.json --no-open --html {d}/o.html", "--figures"), ("study kuka", "--out")):
+        out += [Case(f"gen-dir-{cmd.split()[0]}{opt}-is-file", f"{cmd} {opt} {{d}}/tr.csv", "not a folder"),
+                Case(f"gen-dir-{cmd.split()[0]}{opt}-parent-missing", f"{cmd} {opt} {{d}}/nodir/f", "does not exist")]
+    for cmd, opt, values in _NUMERIC:
+        for v in values:
+            out.append(Case(f"gen-num-{cmd.split()[0]}{opt}={v}", f"{cmd} {opt} {v}", opt))
+    return out
 
 
 CASES: list[Case] = _cases()
@@ -149,6 +230,8 @@ def build_inputs(d: Path) -> None:
                      str(d / "tr.csv"), "--test-out", str(d / "te.csv")]) == 0
         assert main(["design", "--cell", "kr15", "--criteria", "random", "--measurements", "20", "--json",
                      str(d / "d.json"), "--quiet"]) == 0
+        assert main(["identify", "--robot", "kr15", "--data", str(d / "tr.csv"), "--model-out", str(d / "m.json"),
+                     "--quiet"]) == 0
     lines = (d / "tr.csv").read_text().splitlines()
     (d / "two.csv").write_text("\n".join(lines[:3]) + "\n")
     (d / "sub").mkdir(exist_ok=True)
@@ -168,8 +251,10 @@ def build_inputs(d: Path) -> None:
     variant("cell_typo.yaml", noise={"sigma_xyz": [1e-6, 1e-6, 1e-6]})
     variant("cell_refl_mm.yaml", reflector_m=[60.0, 0.0, 120.0])
     variant("cell_sixty.yaml", measurements="sixty")
+    variant("cell_tracker_mm.yaml", tracker={"xyz_m": [-200.0, -2300.0, 1400.0], "rpy_deg": [0.0, 0.0, 90.0]})
     variant("cell_ragged.yaml", working_configurations_deg=[[0, -70, 65, 0, 95, 0], [0, 1]])
     urdf = resolve_robot("kr15")[0].read_text()
+    (d / "broken.urdf").write_text(urdf.replace('<parent link="base_link"/>', '<parent link="nolink"/>', 1))
     (d / "zaxis.urdf").write_text(re.sub(r'<axis xyz="[^"]*"', '<axis xyz="0 0 0"', urdf, count=1))
     m = re.search(r'lower="([^"]+)" upper="([^"]+)"', urdf)
     (d / "swap.urdf").write_text(urdf[:m.start()] + f'lower="{m.group(2)}" upper="{m.group(1)}"' + urdf[m.end():])
