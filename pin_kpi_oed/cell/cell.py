@@ -72,6 +72,7 @@ from pin_kpi_oed.errors import InputError, RobotLoadError
 from pin_kpi_oed.model.noise import NoiseModel
 from pin_kpi_oed.model.robot import Robot, is_robot_name, load_robot
 from pin_kpi_oed.model.tracker import TrackerModel
+from pin_kpi_oed.validation.schema import validate_cell_dict
 
 #: Folder of the cells shipped with the package.
 CELL_DIR = Path(__file__).resolve().parent / "cells"
@@ -520,6 +521,7 @@ def cell_from_dict(d: dict, source: str = "", base_dir: Path | None = None) -> C
         RobotLoadError: the robot cannot be loaded.
     """
     _check_top_level(d, source)
+    validate_cell_dict(d, source)
     robot = _read_robot(d, source, base_dir)
     W_T_base, W_T_tracker, reflector, tcp, noise = _read_tracker_setup(d, source)
     lo, hi = _read_joint_bounds(d, robot, source)

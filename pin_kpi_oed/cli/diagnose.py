@@ -49,7 +49,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     g.add_argument("--validate", default=None, help="held-out measurement CSV, disjoint from --train")
     g.add_argument("--kfold", type=int, default=None, help="K-fold cross-validation on --train alone (K >= 2)")
     add_register_args(d)
-    d.add_argument("--reflector", default="0,0,0", help="nominal reflector offset in the tool frame x,y,z (m)")
+    d.add_argument("--reflector", default=None,
+                   help="nominal reflector offset in the tool frame x,y,z (m); default: estimated from --train")
     d.add_argument("--sigma", default=None,
                    help="tracker noise sigma per axis (m), 1 or 3 values; overrides the files' sigma columns "
                         "(needed when the files have none)")
@@ -112,7 +113,7 @@ def run(args: argparse.Namespace) -> int:
     reach = robot.reach()
     train = read_data_files(args.train, robot, "--train", opts=table_options(args, robot))
     val, reg = read_validation(args, robot)
-    reflector = _floats(args.reflector, (3,), "--reflector")
+    reflector = _floats(args.reflector, (3,), "--reflector") if args.reflector is not None else np.zeros(3)
     if np.linalg.norm(reflector) > reach:
         raise InputError(f"--reflector {args.reflector}: {np.linalg.norm(reflector):.4g} m from the tool frame, more "
                          f"than the robot's reach ({reach:.3g} m): give it in m")
@@ -128,6 +129,15 @@ def run(args: argparse.Namespace) -> int:
             raise InputError(f"{missing[0]}: no sigma columns, so the noise is unknown: give --sigma S (m), the "
                              "tracker's standard deviation per axis (e.g. 1e-5)")
         noise, weights = NoiseModel(), "data"
+    if args.reflector is None:  # issue 15: a reflector assumed at 0,0,0 hides parameters and fakes a gap
+        from pin_kpi_oed.identification.identify import IdentifyOptions
+        from pin_kpi_oed.identification.reflector_start import estimate_reflector
+
+        reflector = estimate_reflector(TrackerModel(robot, noise=noise, reflector_m=reflector), train,
+                                       IdentifyOptions(weights=weights, scale_covariance=False))
+        if not args.quiet:
+            print(f"nominal reflector offset estimated from --train: {np.round(reflector * 1e3, 1).tolist()} mm "
+                  f"(give --reflector x,y,z in m to set it)")
     model = TrackerModel(robot, reflector_m=reflector, noise=noise)
     rep = diagnose(model, train, val, kfold=args.kfold, effects=effects, weights=weights, alpha=args.alpha,
                    seed=args.seed, t_ref_c=args.t_ref, register_rows=args.register_rows, register_data=reg,

@@ -22,6 +22,8 @@ from __future__ import annotations
 
 import argparse
 import math
+import sys
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
@@ -106,7 +108,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="every station has its own reflector offset (default: one reflector for all stations)")
     _add_validation_args(i, "held-out measurement CSV (nothing is re-fitted on it unless --register-rows/"
                             "--register-data re-register the set-up)")
-    i.add_argument("--reflector", default="0,0,0", help="nominal reflector offset in the tool frame x,y,z (m)")
+    i.add_argument("--reflector", default=None,
+                   help="nominal reflector offset in the tool frame x,y,z (m); default: estimated from the data "
+                        "(set-up fit with the nominal geometry, rounded to 1 mm)")
     i.add_argument("--effects", default=None,
                    help="effects identified with the geometry, comma-separated names of the effect library (e.g. "
                         "joint_compliance,gear_harmonic); stored in --model-out")
@@ -123,8 +127,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         "reduced chi2")
     i.add_argument("--sigma-rot", default="1e-4", help="orientation noise of 6-D data (rad, default 1e-4)")
     i.add_argument("--position-only", action="store_true", help="ignore rx, ry, rz columns")
-    i.add_argument("--loss", default="linear", choices=["linear", "soft_l1", "huber", "cauchy"],
-                   help="loss: linear (Levenberg-Marquardt) or robust (outliers flagged)")
+    i.add_argument("--loss", default=None, choices=["linear", "soft_l1", "huber", "cauchy"],
+                   help="loss: linear (Levenberg-Marquardt) or robust (outliers flagged); default linear, switched "
+                        "to soft_l1 when outliers far beyond the noise are found")
+    i.add_argument("--accept-poor-fit", action="store_true",
+                   help="write the calibrated URDF/model and exit 0 even when the fit-quality gate finds the fit "
+                        "implausible (the verdict stays in the summary and the JSON)")
     i.add_argument("--fix", default=None, help="parameters held at nominal, comma-separated names or globs "
                                                "(e.g. 'reflector.*' or 'tracker.*')")
     i.add_argument("--max-nfev", type=int, default=None, help="maximum number of residual evaluations")
@@ -298,6 +306,8 @@ def run_identify(args: argparse.Namespace) -> int:
     from pin_kpi_oed.identification.export import (calibrated_urdf_text, check_urdf_fk, model_frames,
                                                    result_urdf_comment)
     from pin_kpi_oed.identification.identify import IdentifyOptions, identify
+    from pin_kpi_oed.identification.quality import assess_fit
+    from pin_kpi_oed.identification.reflector_start import estimate_reflector
     from pin_kpi_oed.model.noise import NoiseModel
     from pin_kpi_oed.model.tracker import TrackerModel
     from pin_kpi_oed.model.robot import load_robot
@@ -308,10 +318,6 @@ def run_identify(args: argparse.Namespace) -> int:
     reach = robot.reach()
     train = read_data_files(args.data, robot, opts=table_options(args, robot))
     test, reg = read_validation(args, robot)
-    reflector = _floats(args.reflector, 3, "--reflector")
-    if np.linalg.norm(reflector) > reach:
-        raise InputError(f"--reflector {args.reflector}: {np.linalg.norm(reflector):.4g} m from the tool frame, more "
-                         f"than the robot's reach ({reach:.3g} m): give it in m")
     sigma_rot = _positive(args.sigma_rot, "--sigma-rot")
     if args.sigma is not None:
         noise = NoiseModel(sigma_xyz_m=tuple(_floats(args.sigma, (1, 3), "--sigma")), sigma_rot_rad=sigma_rot)
@@ -319,20 +325,44 @@ def run_identify(args: argparse.Namespace) -> int:
     else:
         noise = NoiseModel(sigma_xyz_m=(1e-5,) * 3, sigma_rot_rad=sigma_rot)
         weights, scale = "auto", train.sigma_m is None
+    effects = _effects(args.effects, robot, train)
+    opts = IdentifyOptions(weights=weights, scale_covariance=scale, use_orientation=not args.position_only,
+                           loss=args.loss or "linear", max_nfev=args.max_nfev,
+                           reflector_per_station=args.reflector_per_station)
+    estimated = args.reflector is None
+    if estimated:
+        reflector = estimate_reflector(TrackerModel(robot, noise=noise, reflector_m=np.zeros(3)), train, opts)
+        if not args.quiet:
+            print(f"nominal reflector offset estimated from the data: {np.round(reflector * 1e3, 1).tolist()} mm "
+                  f"in {robot.tool_frame} (give --reflector x,y,z in m to set it)")
+    else:
+        reflector = _floats(args.reflector, 3, "--reflector")
+        if np.linalg.norm(reflector) > reach:
+            raise InputError(f"--reflector {args.reflector}: {np.linalg.norm(reflector):.4g} m from the tool frame, "
+                             f"more than the robot's reach ({reach:.3g} m): give it in m")
     model = TrackerModel(robot, reflector_m=reflector, noise=noise)
     if args.fix:
         model.layout.fix(args.fix)
-    effects = _effects(args.effects, robot, train)
-    opts = IdentifyOptions(weights=weights, scale_covariance=scale, use_orientation=not args.position_only,
-                           loss=args.loss, max_nfev=args.max_nfev, reflector_per_station=args.reflector_per_station)
     result = identify(model, train, opts, effects=effects)
-    out = {"result": result.to_dict(), "data": list(args.data), "validate": args.validate}
+    quality = assess_fit(result, nominal_reflector_m=reflector, reflector_estimated=estimated)
+    if args.loss is None and quality.large_outliers:
+        if not args.quiet:
+            print(f"{quality.large_outliers} outlier(s) far beyond the noise: refitted with the robust loss soft_l1 "
+                  "(give --loss linear to keep the plain fit)")
+        opts = replace(opts, loss="soft_l1")
+        result = identify(model, train, opts, effects=effects)
+    out = {"result": result.to_dict(), "data": list(args.data), "validate": args.validate,
+           "reflector_nominal_m": reflector.tolist(), "reflector_nominal_source": "estimated" if estimated else "given"}
     lines = []
     if test is not None:
         out["validation"], lines = _validation(model, train, opts, result, test, reg, args)
+    quality = assess_fit(result, out.get("validation"), nominal_reflector_m=reflector, reflector_estimated=estimated)
+    out["fit_quality"] = quality.to_dict()
+    lines.append(quality.line())
+    refuse = quality.poor and not args.accept_poor_fit
     # everything is computed and checked before the first file is written
     urdf_text = None
-    if args.urdf_out:
+    if args.urdf_out and not refuse:
         placements = result.model.joint_placements(result.p)
         out_dir = Path(args.urdf_out).parent
         urdf_text = calibrated_urdf_text(robot, placements, comment=result_urdf_comment(result, ", ".join(args.data)),
@@ -342,7 +372,7 @@ def run_identify(args: argparse.Namespace) -> int:
         if dp > 1e-9 or dr > 1e-9:
             raise SolverError(f"the calibrated URDF reproduces the identified FK only to {dp:.3g} m; nothing written")
         out["urdf_check_max_error_m"] = dp
-    model_dict = result.calibrated_model().to_dict() if args.model_out else None
+    model_dict = result.calibrated_model().to_dict() if args.model_out and not refuse else None
     if not args.quiet:
         print(result.summary())
     for ln in lines:
@@ -353,9 +383,16 @@ def run_identify(args: argparse.Namespace) -> int:
         atomic_write_text(args.urdf_out, urdf_text)
     if model_dict is not None:
         atomic_write_json(args.model_out, model_dict)
-    written = [f for f in (args.json, args.urdf_out, args.model_out) if f]
+    written = [f for f in (args.json, urdf_text is not None and args.urdf_out, model_dict is not None
+                           and args.model_out) if f]
     if written and not args.quiet:
         print("wrote " + ", ".join(written))
+    if refuse:
+        kept = [f for f in (args.urdf_out, args.model_out) if f]
+        print(f"pin-kpi-oed identify: error: {quality.line()}"
+              + (f"; {', '.join(kept)} not written" if kept else "") + " (--accept-poor-fit to use it anyway)",
+              file=sys.stderr)
+        return 2
     return 0
 
 

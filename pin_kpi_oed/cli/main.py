@@ -97,10 +97,17 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Entry point of ``pin-kpi-oed``; returns the exit code."""
-    parser = build_parser()
+    """Entry point of ``pin-kpi-oed``; returns the exit code.
+
+    Options are checked (ranges, units, output paths) before any work; a
+    :class:`PinKpiOedError` or an operating-system error becomes one line and exit code 2.
+    """
+    from pin_kpi_oed.validation.options import accept_negative_numbers, check_args
+
+    parser = accept_negative_numbers(build_parser())
     args = parser.parse_args(argv)
     try:
+        check_args(args)
         if args.threads is not None:
             from pin_kpi_oed.threads import set_max_threads
 
@@ -108,6 +115,10 @@ def main(argv: list[str] | None = None) -> int:
         return int(args.func(args) or 0)
     except PinKpiOedError as exc:
         print(f"pin-kpi-oed {args.command}: error: {exc}", file=sys.stderr)
+        return 2
+    except OSError as exc:  # read-only folder, disk full, a folder where a file belongs, ...
+        where = f"{exc.filename}: " if getattr(exc, "filename", None) else ""
+        print(f"pin-kpi-oed {args.command}: error: {where}{exc.strerror or exc}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         print("interrupted", file=sys.stderr)

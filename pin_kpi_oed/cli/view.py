@@ -16,7 +16,9 @@ import time
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from pin_kpi_oed.errors import InputError
+import numpy as np
+
+from pin_kpi_oed.errors import IdentifiabilityError, InputError
 
 if TYPE_CHECKING:
     from pin_kpi_oed.design.design_file import DesignFile
@@ -77,8 +79,7 @@ def _write_figures(df: DesignFile, folder: str) -> None:
     from pin_kpi_oed.viz.figures import design_figures
 
     out = Path(folder)
-    if not out.is_dir():
-        raise InputError(f"--figures {out}: no such folder")
+    out.mkdir(exist_ok=True)  # checked before any work (validation.options); created like diagnose does
     for p in design_figures(df, out).values():
         print(f"wrote {p}")
 
@@ -130,6 +131,11 @@ def run(args: argparse.Namespace) -> int:
     df = load_design(args.design, criteria=criteria)
     for n in df.notes:
         print(f"note: {n}", file=sys.stderr)
+    singular = [e.criterion for e in df.designs if not np.all(np.isfinite(e.cov_s_m2))]
+    if singular:  # issue 15: never show a stored C_s the design's poses do not give
+        raise IdentifiabilityError(f"{args.design}: design(s) {', '.join(singular)}: the q_meas do not determine "
+                                   "C_s (singular information matrix; e.g. repeated poses) - run pin-kpi-oed evaluate "
+                                   "for the details")
     scene = build_scene(df, SceneOptions(scale=args.scale, level=args.level, ghosts=not args.no_ghosts,
                                          capsules_visible=args.capsules))
     _print_designs(df, scene, args.level)

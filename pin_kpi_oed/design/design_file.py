@@ -17,7 +17,9 @@ recomputed is said in :attr:`DesignFile.notes` (one line each):
 * capsule pairs in collision at *every* working configuration (enclosing capsules that overlap
   by construction, a robot standing on its floor) are added to ``skip_pairs``, and objects that
   block the beam at every working configuration to the beam's skip list, as the cell file would;
-* a missing or mis-shaped ``cov_s_m2`` is recomputed with :func:`pin_kpi_oed.oed.evaluate.score_design`
+* a stored ``cov_s_m2`` is checked against the one its ``q_meas`` give (issue 15: the file's numbers are not
+  trusted; a mismatch is noted and the recomputed one used, a singular design gets NaN); a missing or
+  mis-shaped ``cov_s_m2`` is recomputed with :func:`pin_kpi_oed.oed.evaluate.score_design`
   (the same C_s as ``design --json`` and ``evaluate`` write, eq. 19, with the file's prior).
 
 Frames and units: SI. ``world_T_base`` (default identity) places the robot base in the world
@@ -44,6 +46,7 @@ from pin_kpi_oed.errors import InputError, PinKpiOedError
 from pin_kpi_oed.model.tracker import TrackerModel
 from pin_kpi_oed.model.robot import Robot
 from pin_kpi_oed.model.serialize import model_from_dict, se3_from_matrix
+from pin_kpi_oed.validation.schema import validate_design_dict
 
 #: Readable names of the usual criteria (a design entry's own ``label`` wins).
 DESIGN_LABELS: dict[str, str] = {"random": "heuristic", "param": "A on C_p", "kpi": "KPI (A on C_s)"}
@@ -453,19 +456,39 @@ def _read_design(e: Mapping, crit: str, w: str, cell: Cell, covariances: _Covari
     C, source = e.get("cov_s_m2"), "file"
     if C is not None:
         C = np.asarray(C, dtype=float)
-        if C.shape != (3 * t, 3 * t) or not np.all(np.isfinite(C)):
+        if C.shape != (3 * t, 3 * t):
             notes.append(f"design {crit}: cov_s_m2 has shape {C.shape}, expected {(3 * t, 3 * t)}: recomputed")
             C = None
-    if C is None:
-        if not compute_missing:
+        elif not np.all(np.isfinite(C)):
+            notes.append(f"design {crit}: cov_s_m2 contains NaN or inf: recomputed")
+            C = None
+    stored = C
+    if C is None or compute_missing:  # issue 15: never trust stored numbers the file's poses do not give
+        if C is None and not compute_missing:
             raise InputError(f"{w} ({crit}): missing field 'cov_s_m2' (3t x 3t TCP covariance, m^2)")
         try:
             C = covariances(Q)
         except PinKpiOedError as exc:
-            raise type(exc)(f"{w} ({crit}): {exc}") from None
+            if stored is None:
+                raise type(exc)(f"{w} ({crit}): {exc}") from None
+            notes.append(f"design {crit}: its q_meas do not determine C_s ({exc}); the stored cov_s_m2 is not "
+                         "shown")
+            C = np.full_like(stored, np.nan)
         source = "computed"
+        if stored is not None and np.all(np.isfinite(C)):
+            gap = float(np.max(np.abs(stored - C))) / max(float(np.max(np.abs(C))), 1e-300)
+            if gap > 1e-6:
+                notes.append(f"design {crit}: stored cov_s_m2 differs from the one its q_meas give (relative "
+                             f"{gap:.2g}): the recomputed one is shown")
+            else:
+                source = "file"
+    elif stored is not None:
+        sym = 0.5 * (C + C.T)
+        if np.max(np.abs(C - C.T)) > 1e-9 * max(np.max(np.abs(C)), 1e-300) or np.linalg.eigvalsh(sym)[0] < \
+                -1e-9 * max(np.max(np.abs(C)), 1e-300):
+            raise InputError(f"{w} ({crit}).cov_s_m2: not a covariance (not symmetric positive semi-definite)")
     tr = e.get("trace_cs_m2")
-    tr = float(tr) if isinstance(tr, (int, float)) and np.isfinite(tr) else float(np.trace(C))
+    tr = float(tr) if (source == "file" and isinstance(tr, (int, float)) and np.isfinite(tr)) else float(np.trace(C))
     info = {k: v for k, v in e.items() if k not in ("q_meas", "cov_s_m2")}
     return DesignEntry(crit, str(e.get("label") or DESIGN_LABELS.get(crit, crit)), Q, C, tr, source, info)
 
@@ -526,6 +549,7 @@ def load_design(source: str | os.PathLike | Mapping, criteria: Sequence[str] | N
         IdentifiabilityError: a C_s to recompute is not determined by the design's measurements.
     """
     d, where, base_dir = _read_json(source)
+    validate_design_dict(d, where)
     f = _Fields(d)
     notes: list[str] = []
     model = _read_model(f, where, base_dir, notes)

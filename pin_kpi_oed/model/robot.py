@@ -39,6 +39,7 @@ import pinocchio as pin
 
 from pin_kpi_oed.errors import InputError, RobotLoadError
 from pin_kpi_oed.model.kinematics import joint_unit, revolute_mask
+from pin_kpi_oed.validation.robot_checks import captured_stderr, check_robot_scale, check_urdf_tree
 
 #: Folder of the URDFs shipped with the package (KUKA arms).
 URDF_DIR = Path(__file__).resolve().parents[2] / "urdf"
@@ -306,11 +307,14 @@ def load_robot(spec: str | os.PathLike, tool_frame: str | None = None) -> Robot:
         raise RobotLoadError(f"{path}: malformed URDF (XML error: {exc})") from None
     if root.tag != "robot":
         raise RobotLoadError(f"{path}: not a URDF file (root element <{root.tag}>, expected <robot>)")
+    check_urdf_tree(root, path, text)
     try:
-        full = pin.buildModelFromUrdf(str(path))
+        with captured_stderr() as cap:  # urdfdom prints its reasons on fd 2: put them in the one line
+            full = pin.buildModelFromUrdf(str(path))
     except Exception as exc:  # Pinocchio raises ValueError/RuntimeError with long texts
         first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
-        raise RobotLoadError(f"{path}: malformed URDF ({first})") from None
+        why = cap.first_line()
+        raise RobotLoadError(f"{path}: malformed URDF ({why.split('  ')[0] if why else first})") from None
 
     tool = tool_frame or default_tool or ("tool0" if full.existFrame("tool0") else None)
     if tool is None:
@@ -342,7 +346,7 @@ def load_robot(spec: str | os.PathLike, tool_frame: str | None = None) -> Robot:
         raise RobotLoadError(f"{path}: {exc}") from None
     lower, upper = _joint_limits(model, joint_ids, revolute, path)
     name = str(spec) if is_robot_name(spec) else path.stem
-    return Robot(
+    robot = Robot(
         model=model,
         data=model.createData(),
         urdf_path=str(path),
@@ -356,6 +360,8 @@ def load_robot(spec: str | os.PathLike, tool_frame: str | None = None) -> Robot:
         locked_joints=locked,
         revolute=revolute,
     )
+    check_robot_scale(robot.reach(), path)
+    return robot
 
 
 def _joint_limits(model: pin.Model, joint_ids: list[int], revolute: np.ndarray, path: Path

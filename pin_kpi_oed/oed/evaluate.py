@@ -127,6 +127,9 @@ def evaluate_file(path: Path, out: Path | None = None) -> DesignScore:
         raise InputError(f"{path}: no such file") from None
     except (json.JSONDecodeError, UnicodeDecodeError) as exc:
         raise InputError(f"{path}: not valid JSON ({exc})") from None
+    from pin_kpi_oed.validation.schema import validate_design_dict
+
+    validate_design_dict(d, str(path))
     model = model_from_dict(d, str(path))
     for key in ("q_meas", "q_work"):
         if key not in d:

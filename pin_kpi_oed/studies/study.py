@@ -31,8 +31,9 @@ from typing import Any
 import numpy as np
 import pinocchio as pin
 
-from pin_kpi_oed.errors import InfeasibleError, PinKpiOedError
+from pin_kpi_oed.errors import InfeasibleError, InputError, PinKpiOedError
 from pin_kpi_oed.data.atomic import atomic_write_json, atomic_write_text
+from pin_kpi_oed.data.lock import folder_lock
 from pin_kpi_oed.progress import progress
 
 #: Version of the task files: a restarted study recomputes tasks written by another version.
@@ -180,6 +181,11 @@ def _finished(out_dir: Path, task: Task) -> dict | None:
     ident = task.to_dict()
     if any(rec.get(k) != ident[k] for k in ("criteria", "m", "seed", "collision", "n_starts", "version")):
         return None
+    if rec.get("ok"):  # a damaged or hand-edited record (no designs, a criterion missing): recompute
+        designs = rec.get("designs")
+        if not isinstance(designs, list) or not all(isinstance(d, dict) for d in designs) or \
+                {d.get("criterion") for d in designs} < set(ident["criteria"]):
+            return None
     return rec
 
 
@@ -197,7 +203,12 @@ def run_tasks(tasks: list[Task], out_dir: Path, workers: int | None = None, sche
     Returns:
         (records in task order, number of tasks computed now).
     """
-    out_dir = Path(out_dir)
+    with folder_lock(out_dir, "study folder"):  # issue 15: two studies in one folder computed every task twice
+        return _run_tasks_locked(tasks, Path(out_dir), workers, scheduler, desc)
+
+
+def _run_tasks_locked(tasks: list[Task], out_dir: Path, workers: int | None, scheduler: str | None,
+                      desc: str) -> tuple[list[dict], int]:
     (out_dir / "tasks").mkdir(parents=True, exist_ok=True)
     for stale in (out_dir / "tasks").glob(".*.tmp"):  # left by a run killed while writing: never a result
         stale.unlink(missing_ok=True)
@@ -226,7 +237,11 @@ def _run_dask(todo: list[Task], out_dir: Path, scheduler: str, workers: int | No
                                dashboard_address=None)
         client = Client(cluster)
     else:
-        client = Client(scheduler)
+        try:
+            client = Client(scheduler, timeout="10s")
+        except (OSError, TimeoutError) as exc:
+            raise InputError(f"--scheduler {scheduler}: cannot connect to the Dask scheduler within 10 s "
+                             f"({str(exc).splitlines()[0] if str(exc) else type(exc).__name__})") from None
     try:
         futs = client.map(run_task, todo, out_dir=str(out_dir), pure=False)
         key_of = {f.key: t.key for f, t in zip(futs, todo)}

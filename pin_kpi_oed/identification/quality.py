@@ -1,0 +1,204 @@
+"""Fit-quality gate after identification: is the calibrated model plausible given the noise?
+
+A least-squares fit always "converges"; whether its result may go to a robot is a separate
+question. :func:`assess_fit` answers it from three tests, each against what the noise model
+predicts:
+
+1. **Reduced χ²** of the weighted residuals (eq. 5 weights) against its two-sided
+   (1 - ``alpha``) interval ``χ²_{dof}(α/2, 1-α/2) / dof``: only when the noise level is known
+   (sigma columns in the data or ``--sigma``); otherwise the covariance was scaled by χ² and
+   the test is skipped (said so). χ² above ``chi2_poor``
+   makes the fit **poor** (residuals four times the stated noise); above the interval only
+   **suspect** (flagged, exit 0).
+2. **Held-out error** after calibration against the nominal robot's (same fitted set-up): a
+   calibration worse than no calibration is **poor**; held-out RMS above three times the
+   training RMS is **suspect** (over-fit, or a session change).
+3. **Outliers** far beyond the noise with the plain (linear) loss: they bias every parameter;
+   the robust loss (``--loss soft_l1``) is recommended (**poor** when they also spoil 1 or 2).
+
+The verdict is one line naming the likely causes (reflector/TCP offset, units, outliers, wrong
+robot or unmodelled effects) and what to try; :meth:`FitQuality.to_dict` puts it in the JSON.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from scipy.stats import chi2 as _chi2
+
+__all__ = ["FitQuality", "assess_fit"]
+
+#: reduced chi2 above which the residuals are at least four times the stated noise: a poor fit (below it and
+#: above the interval the fit is only "suspect": real arms have unmodelled effects a noise model omits)
+CHI2_POOR = 16.0
+#: an outlier whose weighted error exceeds this many robust standard deviations is "large"
+OUTLIER_LARGE = 20.0
+
+
+@dataclass
+class FitQuality:
+    """Verdict of the fit-quality gate.
+
+    Attributes:
+        verdict: ``"good"``, ``"suspect"`` (flagged, accepted) or ``"poor"`` (refused unless accepted).
+        chi2_reduced: reduced χ² of the fit (dimensionless).
+        chi2_interval: (lo, hi) of its (1 - alpha) interval, or None when the noise level is unknown.
+        dof: degrees of freedom of χ².
+        noise_known: the weights came from sigma columns or a given sigma (absolute noise level).
+        train_rms_m: RMS position error on the training inliers (m).
+        heldout_rms_before_m, heldout_rms_after_m: held-out RMS of the nominal robot and of the
+            calibration (m), or None without validation data.
+        n_outliers: flagged measurements; large_outliers: those beyond ``OUTLIER_LARGE`` robust σ.
+        causes: likely causes, most likely first; advice: what to try.
+        reasons: the failed tests, one phrase each.
+    """
+
+    verdict: str
+    chi2_reduced: float
+    chi2_interval: tuple[float, float] | None
+    dof: int
+    noise_known: bool
+    train_rms_m: float
+    heldout_rms_before_m: float | None = None
+    heldout_rms_after_m: float | None = None
+    n_outliers: int = 0
+    large_outliers: int = 0
+    causes: list[str] = field(default_factory=list)
+    advice: list[str] = field(default_factory=list)
+    reasons: list[str] = field(default_factory=list)
+
+    @property
+    def poor(self) -> bool:
+        """True when the fit must not be used without ``--accept-poor-fit``."""
+        return self.verdict == "poor"
+
+    def line(self) -> str:
+        """The one-line verdict (what failed, likely causes, what to try)."""
+        if self.verdict == "good":
+            chi = (f"reduced chi2 {self.chi2_reduced:.3g} within [{self.chi2_interval[0]:.3g}, "
+                   f"{self.chi2_interval[1]:.3g}]" if self.chi2_interval else
+                   "noise level unknown (no sigma columns, no --sigma): chi2 not tested")
+            return f"fit quality: good ({chi})"
+        out = f"fit quality: {self.verdict.upper()}: {'; '.join(self.reasons)}"
+        if self.causes:
+            out += f"; likely causes: {', '.join(self.causes)}"
+        if self.advice:
+            out += f"; try: {'; '.join(self.advice)}"
+        return out
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready dict (SI units)."""
+        return {"verdict": self.verdict, "message": self.line(), "chi2_reduced": self.chi2_reduced,
+                "chi2_interval": list(self.chi2_interval) if self.chi2_interval else None, "dof": self.dof,
+                "noise_known": self.noise_known, "train_rms_m": self.train_rms_m,
+                "heldout_rms_before_m": self.heldout_rms_before_m, "heldout_rms_after_m": self.heldout_rms_after_m,
+                "n_outliers": self.n_outliers, "large_outliers": self.large_outliers, "causes": list(self.causes),
+                "advice": list(self.advice), "reasons": list(self.reasons)}
+
+
+def _rms(stats: dict | None) -> float | None:
+    if not stats:
+        return None
+    v = stats.get("rms_m")
+    return None if v is None else float(v)
+
+
+def assess_fit(result: Any, validation: dict | None = None, *, nominal_reflector_m: Any = None,
+               reflector_estimated: bool = False, alpha: float = 1e-3, chi2_poor: float = CHI2_POOR) -> FitQuality:
+    """Judge an :class:`~pin_kpi_oed.identification.identify.IdentificationResult` against its noise model.
+
+    Args:
+        result: the identification result (``chi2_reduced``, ``covariance_scaled``, ``weighted_errors``,
+            ``errors_m``, ``outliers``, ``loss``, ``names``, ``reflector_m``).
+        validation: ``{"before": stats, "after": stats}`` of held-out errors (``rms_m`` in m), or None.
+        nominal_reflector_m: the nominal reflector offset the identifiable set was chosen with (m).
+        reflector_estimated: the nominal reflector was estimated from the data (not given by the user).
+        alpha: two-sided false-alarm probability of the χ² interval.
+        chi2_poor: reduced χ² above which the fit is poor.
+
+    Returns:
+        The :class:`FitQuality` verdict.
+    """
+    we = np.asarray(result.weighted_errors, float)
+    m = we.size
+    out_idx = np.asarray(result.outliers, int)
+    keep = np.ones(m, bool)
+    keep[out_idx] = False
+    nh = 6 if getattr(result, "residuals_rad", None) is not None else 3
+    dof = max(int(keep.sum()) * nh - len(result.names), 1)
+    chi2_red = float(result.chi2_reduced)
+    noise_known = not bool(result.covariance_scaled)
+    err = np.asarray(result.errors_m, float)
+    train_rms = float(np.sqrt(np.mean(err[keep] ** 2))) if keep.any() else float("nan")
+    interval = None
+    reasons: list[str] = []
+    causes: list[str] = []
+    advice: list[str] = []
+    verdict = "good"
+
+    def worse(level: str) -> None:
+        nonlocal verdict
+        if level == "poor" or verdict == "good":
+            verdict = level
+
+    # 3. outliers large against the noise (robust scale of all weighted errors)
+    scale = 1.4826 * float(np.median(we)) / np.sqrt(nh) if m else 0.0
+    large = int(np.sum(we[out_idx] > OUTLIER_LARGE * max(scale, 1e-300) * np.sqrt(nh))) if out_idx.size else 0
+    robust = str(result.loss) != "linear"
+    if large and not robust:
+        worse("suspect")
+        reasons.append(f"{large} outlier(s) beyond {OUTLIER_LARGE:g} sigma fitted with the plain loss")
+        causes.append("outliers (gross measurement errors)")
+        advice.append("--loss soft_l1 (robust) or remove the flagged rows")
+    # 1. reduced chi2 against its interval (absolute noise level known)
+    if noise_known:
+        lo, hi = (float(v) / dof for v in _chi2.ppf([alpha / 2, 1 - alpha / 2], dof))
+        interval = (lo, hi)
+        if chi2_red > max(chi2_poor, hi):
+            worse("poor")
+            reasons.append(f"reduced chi2 {chi2_red:.3g} (residual RMS {np.sqrt(chi2_red):.2g}x the stated noise; "
+                           f"expected within [{lo:.3g}, {hi:.3g}])")
+        elif chi2_red > hi:
+            worse("suspect")
+            reasons.append(f"reduced chi2 {chi2_red:.3g} above its {100 * (1 - alpha):g}% interval "
+                           f"[{lo:.3g}, {hi:.3g}]")
+        elif chi2_red < lo:
+            worse("suspect")
+            reasons.append(f"reduced chi2 {chi2_red:.3g} below its interval [{lo:.3g}, {hi:.3g}]: the stated noise "
+                           "is larger than the residuals")
+            causes.append("sigma too large (units of sigma: m)")
+        if chi2_red > hi:
+            refl = None if nominal_reflector_m is None else np.asarray(nominal_reflector_m, float)
+            if refl is not None and not reflector_estimated and float(np.linalg.norm(refl)) < 1e-9:
+                causes.insert(0, "reflector/TCP offset (nominal --reflector 0,0,0 hides parameters it makes "
+                                 "identifiable)")
+                advice.insert(0, "give the reflector offset (--reflector x,y,z in m) or leave --reflector out to "
+                                 "estimate it")
+            else:
+                causes.append("reflector/TCP offset")
+            causes += ["sigma units (m) or an optimistic noise model", "wrong robot model or unmodelled effects"]
+            advice += ["check --sigma / sigma columns (m)", "run pin-kpi-oed diagnose"]
+    # 2. held-out error against the nominal robot's and the training error
+    before, after = (_rms(validation.get("before")), _rms(validation.get("after"))) if validation else (None, None)
+    if before is not None and after is not None:
+        if after > before:
+            worse("poor")
+            reasons.append(f"held-out RMS {after * 1e3:.4g} mm after calibration is worse than the nominal robot's "
+                           f"{before * 1e3:.4g} mm")
+            if not large:
+                causes += ["wrong robot or joint order/zero", "units (m, rad)"]
+        elif np.isfinite(train_rms) and after > 3.0 * train_rms and after > 1e-6:
+            worse("suspect")
+            reasons.append(f"held-out RMS {after * 1e3:.4g} mm is more than 3x the training RMS "
+                           f"{train_rms * 1e3:.4g} mm")
+            causes.append("over-fit or another session (re-register with --register-rows)")
+    seen: set[str] = set()
+    causes = [c for c in causes if not (c in seen or seen.add(c))]
+    seen = set()
+    advice = [a for a in advice if not (a in seen or seen.add(a))]
+    return FitQuality(verdict=verdict, chi2_reduced=chi2_red, chi2_interval=interval, dof=dof,
+                      noise_known=noise_known, train_rms_m=train_rms, heldout_rms_before_m=before,
+                      heldout_rms_after_m=after, n_outliers=int(out_idx.size), large_outliers=large,
+                      causes=causes, advice=advice, reasons=reasons)

@@ -1,0 +1,101 @@
+"""Unit-plausibility guards shared by every command (SI units: m, rad, s, °C).
+
+One place decides what a plausible tracker noise, reflector offset or joint-bound value is, so
+that ``simulate``, ``identify``, ``diagnose`` and the cell reader refuse the same values with the
+same message (issue 15: ``identify --sigma 10`` was accepted, ``diagnose --sigma 15`` refused).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Iterable
+
+import numpy as np
+
+from pin_kpi_oed.errors import InputError
+
+__all__ = ["MAX_TOOL_OFFSET_M", "SIGMA_MAX_M", "SIGMA_ROT_MAX_RAD", "check_sigma_m", "check_sigma_rad", "check_offset_m",
+           "check_angle_rad"]
+
+#: largest plausible measurement noise sigma (m): 1 cm; more means the value was given in mm
+SIGMA_MAX_M = 0.01
+#: largest plausible reflector / TCP offset from the tool frame (m); more means mm
+MAX_TOOL_OFFSET_M = 3.0
+#: largest plausible orientation noise sigma (rad): about 5.7°
+SIGMA_ROT_MAX_RAD = 0.1
+
+
+def _values(v: float | Iterable[float], what: str) -> np.ndarray:
+    try:
+        a = np.atleast_1d(np.asarray(v, dtype=float)).ravel()
+    except (TypeError, ValueError):
+        raise InputError(f"{what}: expected numbers, got {v!r}") from None
+    if a.size == 0 or not np.all(np.isfinite(a)):
+        raise InputError(f"{what}: expected finite numbers, got {v!r}")
+    return a
+
+
+def check_sigma_m(v: float | Iterable[float], what: str) -> np.ndarray:
+    """A position noise sigma in m: positive, finite and at most :data:`SIGMA_MAX_M`.
+
+    Args:
+        v: value(s) (m).
+        what: option or field name for the message.
+
+    Returns:
+        The values as a float array (m).
+
+    Raises:
+        InputError: naming ``what``, the value and the unit.
+    """
+    a = _values(v, what)
+    if np.any(a <= 0):
+        raise InputError(f"{what}: noise sigma must be positive (m), got {', '.join(f'{x:g}' for x in a)}")
+    if np.any(a > SIGMA_MAX_M):
+        raise InputError(f"{what}: noise sigma {', '.join(f'{x:g}' for x in a)} m is more than {SIGMA_MAX_M * 1e3:g} "
+                         f"mm: give it in m (e.g. 1e-5 for 10 µm)")
+    return a
+
+
+def check_sigma_rad(v: float | Iterable[float], what: str) -> np.ndarray:
+    """An orientation noise sigma in rad: positive, finite, at most :data:`SIGMA_ROT_MAX_RAD`.
+
+    Raises:
+        InputError: naming ``what``, the value and the unit.
+    """
+    a = _values(v, what)
+    if np.any(a <= 0):
+        raise InputError(f"{what}: orientation noise sigma must be positive (rad), got {v}")
+    if np.any(a > SIGMA_ROT_MAX_RAD):
+        raise InputError(f"{what}: orientation noise sigma {v} rad is more than {SIGMA_ROT_MAX_RAD:g} rad "
+                         f"({math.degrees(SIGMA_ROT_MAX_RAD):.1f}°): give it in rad (e.g. 1e-4)")
+    return a
+
+
+def check_offset_m(v: Iterable[float], reach_m: float, what: str) -> np.ndarray:
+    """A tool-frame offset (reflector, TCP) in m: finite and shorter than the robot's reach.
+
+    Raises:
+        InputError: naming ``what``, its length in m and the reach.
+    """
+    a = _values(v, what)
+    n = float(np.linalg.norm(a))
+    if n > reach_m:
+        raise InputError(f"{what}: {n:.4g} m from the tool frame, more than the robot's reach ({reach_m:.3g} m): "
+                         "give it in m (a reflector or TCP offset beyond a few metres is mm)")
+    return a
+
+
+def check_angle_rad(v: float | Iterable[float], what: str, limit: float = 4 * math.pi) -> np.ndarray:
+    """Joint angles in rad: finite and within ±``limit`` (default ±4π; larger values are degrees).
+
+    Raises:
+        InputError: naming ``what`` and the value in rad and °.
+    """
+    a = _values(v, what)
+    bad = np.abs(a) > limit
+    if np.any(bad):
+        x = float(a[np.flatnonzero(bad)[0]])
+        raise InputError(f"{what}: {x:g} rad ({math.degrees(x):.0f}°) is beyond ±{limit:.3g} rad: the values look "
+                         "like degrees; give them in rad")
+    return a

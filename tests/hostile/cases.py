@@ -1,0 +1,337 @@
+"""Hostile inputs of issue 15: every case must end in one clear line, exit code 2 and no file written.
+
+``build_inputs(folder)`` writes the shared inputs (a simulated KR 15 data set with sigma columns and an
+off-axis reflector, a cell file, a design file, broken variants of each); ``CASES`` lists the cases
+(``Case.argv`` uses ``{d}`` for that folder); ``run_case`` runs one in-process through
+``pin_kpi_oed.cli.main.main`` and returns what happened. ``tests/test_hostile.py`` asserts every case;
+``python -m tests.hostile.run_hostile`` reruns them all as real subprocesses and prints a table.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import hashlib
+import io
+import json
+import re
+import shutil
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import yaml
+
+from pin_kpi_oed.cell.cell import CELL_DIR
+from pin_kpi_oed.model.robot import resolve_robot
+
+COMMANDS_WITH_SEED = ["info kr15", "demo", "design --measurements 10", "simulate --robot kr15 --out {d}/new.csv",
+                      "identify --robot kr15 --data {d}/tr.csv", "import-ipa {d}/tr.csv --out {d}/new.csv",
+                      "diagnose --robot kr15 --train {d}/tr.csv --validate {d}/te.csv", "study kuka --out {d}/st"]
+
+
+@dataclass(frozen=True)
+class Case:
+    """One hostile input: ``argv`` (``{d}`` = inputs folder) and a text the one-line refusal must contain."""
+
+    id: str
+    argv: str
+    expect: str
+
+
+def _cases() -> list[Case]:
+    c = [
+        # 2. outputs never destroy inputs (and never each other)
+        Case("out-import-ipa-onto-src", "import-ipa {d}/tr.csv --out {d}/tr.csv", "would destroy the input"),
+        Case("out-identify-json-onto-data", "identify --robot kr15 --data {d}/tr.csv --json {d}/tr.csv",
+             "would destroy the input"),
+        Case("out-identify-urdf-onto-validate", "identify --robot kr15 --data {d}/tr.csv --validate {d}/te.csv "
+             "--urdf-out {d}/te.csv", "would destroy the input"),
+        Case("out-design-json-onto-cell", "design --cell {d}/cell.yaml --json {d}/cell.yaml", "would destroy"),
+        Case("out-view-html-onto-design", "view {d}/d.json --html {d}/d.json --no-open", "would destroy"),
+        Case("out-evaluate-json-onto-design", "evaluate {d}/d.json --json {d}/d.json", "would destroy"),
+        Case("out-import-train-equals-test", "import-ipa {d}/tr.csv --split 0.5 --train {d}/a.csv --test {d}/a.csv",
+             "give each output its own file"),
+        Case("out-simulate-out-equals-test-out", "simulate --robot kr15 --n-test 5 --out {d}/a.csv --test-out "
+             "{d}/a.csv", "give each output its own file"),
+        Case("out-identify-json-equals-model-out", "identify --robot kr15 --data {d}/tr.csv --json {d}/r.json "
+             "--model-out {d}/r.json", "give each output its own file"),
+        Case("out-symlink-onto-input", "identify --robot kr15 --data {d}/tr.csv --json {d}/link.csv",
+             "would destroy the input"),
+        Case("out-missing-folder", "identify --robot kr15 --data {d}/tr.csv --json {d}/nodir/r.json",
+             "does not exist"),
+        Case("out-is-a-folder", "simulate --robot kr15 --out {d}/sub", "is a folder"),
+        Case("out-under-a-file", "simulate --robot kr15 --out {d}/tr.csv/x.csv", "does not exist"),
+        Case("out-diagnose-missing-folder-fast", "diagnose --robot kr15 --train {d}/tr.csv --validate {d}/te.csv "
+             "--json {d}/nodir/x.json", "does not exist"),
+        Case("out-diagnose-figures-is-file", "diagnose --robot kr15 --train {d}/tr.csv --validate {d}/te.csv "
+             "--figures {d}/tr.csv", "not a folder"),
+        Case("out-study-out-is-file", "study kuka --out {d}/tr.csv", "not a folder"),
+        Case("validate-equals-data", "identify --robot kr15 --data {d}/tr.csv --validate {d}/tr.csv",
+             "must not be training data"),
+        Case("diagnose-validate-equals-train", "diagnose --robot kr15 --train {d}/tr.csv --validate {d}/tr.csv",
+             "must not be training data"),
+        # 3. units in cells and files, one unit guard for every command
+        Case("cell-degrees-under-rad", "design --cell {d}/cell_deg_as_rad.yaml", "joint_bounds.lower_rad"),
+        Case("cell-sigma-1m", "design --cell {d}/cell_sigma1.yaml", "noise.sigma_xyz_m"),
+        Case("cell-nested-typo", "design --cell {d}/cell_typo.yaml", "sigma_xyz"),
+        Case("cell-reflector-mm", "design --cell {d}/cell_refl_mm.yaml", "reflector_m"),
+        Case("cell-text-for-number", "design --cell {d}/cell_sixty.yaml", "measurements"),
+        Case("cell-ragged-working", "design --cell {d}/cell_ragged.yaml", "working_configurations"),
+        Case("urdf-in-mm", "info {d}/mm.urdf", "looks like mm"),
+        Case("urdf-zero-axis", "info {d}/zaxis.urdf", "zero length"),
+        Case("urdf-swapped-limits", "info {d}/swap.urdf", "reversed"),
+        Case("urdf-xacro", "info {d}/robot.xacro.urdf", "xacro"),
+        Case("urdf-broken-parent", "info {d}/broken.urdf", "parent link [nolink]"),
+        Case("cell-tracker-mm", "design --cell {d}/cell_tracker_mm.yaml", "tracker.xyz_m"),
+        Case("identify-sigma-10", "identify --robot kr15 --data {d}/tr.csv --sigma 10", "give it in m"),
+        Case("diagnose-sigma-15", "diagnose --robot kr15 --train {d}/tr.csv --validate {d}/te.csv --sigma 15",
+             "give it in m"),
+        Case("simulate-noise-10", "simulate --robot kr15 --out {d}/new.csv --noise 10", "give it in m"),
+        Case("simulate-sigma-rot-degrees", "simulate --robot kr15 --out {d}/new.csv --sigma-rot 5", "rad"),
+        # 4. tracebacks -> one line
+        Case("evaluate-json-list", "evaluate {d}/list.json", "top level"),
+        Case("view-json-list", "view {d}/list.json --html {d}/o.html --no-open", "top level"),
+        Case("evaluate-ragged", "evaluate {d}/ragged.json", "ragged"),
+        Case("view-ragged", "view {d}/ragged.json --html {d}/o.html --no-open", "ragged"),
+        Case("evaluate-strings", "evaluate {d}/strings.json", "q_meas"),
+        Case("view-strings", "view {d}/strings.json --html {d}/o.html --no-open", "q_meas"),
+        Case("temperature-reversed", "simulate --robot kr15 --out {d}/new.csv --temperature 30,20", "--temperature"),
+        Case("temperature-text", "simulate --robot kr15 --out {d}/new.csv --temperature warm,hot", "--temperature"),
+        Case("fix-star", "identify --robot kr15 --data {d}/tr.csv --fix *", "--fix"),
+        Case("fix-all-glob", "identify --robot kr15 --data {d}/tr.csv --fix *,tracker.*", "--fix"),
+        Case("pool-size-negative", "design --certificate --pool-size -5", "--pool-size"),
+        Case("study-workers-0", "study kuka --out {d}/st --workers 0", "--workers"),
+        Case("study-scheduler-foo", "study kuka --out {d}/st --scheduler foo", "--scheduler"),
+        Case("reflector-text", "identify --robot kr15 --data {d}/tr.csv --reflector a,b,c", "--reflector"),
+        Case("tracker-negative-values-ok-but-text", "simulate --robot kr15 --out {d}/new.csv --tracker -1,x,0",
+             "--tracker"),
+        # 5. zero and negative are refused, never replaced by defaults
+        Case("measurements-0", "design --measurements 0", "--measurements"),
+        Case("starts-0", "design --starts 0", "--starts"),
+        Case("max-iter-0", "design --max-iter 0", "--max-iter"),
+        Case("pool-size-0", "design --certificate --pool-size 0", "--pool-size"),
+        Case("arms-0", "study notional90 --out {d}/st --arms 0", "--arms"),
+        Case("arms-negative", "study notional90 --out {d}/st --arms -3", "--arms"),
+        Case("seeds-0", "study kuka --out {d}/st --seeds 0", "--seeds"),
+        Case("study-measurements-5", "study kuka --out {d}/st --measurements 5", "--measurements"),
+        Case("n-0", "simulate --robot kr15 --out {d}/new.csv --n 0", "--n"),
+        Case("n-test-negative", "simulate --robot kr15 --out {d}/new.csv --n-test -1", "--n-test"),
+        Case("kfold-1", "diagnose --robot kr15 --train {d}/tr.csv --kfold 1", "--kfold"),
+        Case("register-rows-0", "identify --robot kr15 --data {d}/tr.csv --validate {d}/te.csv --register-rows 0",
+             "--register-rows"),
+        Case("max-nfev-0", "identify --robot kr15 --data {d}/tr.csv --max-nfev 0", "--max-nfev"),
+        Case("split-negative", "import-ipa {d}/tr.csv --split -0.5 --train {d}/a.csv --test {d}/b.csv", "--split"),
+        Case("view-scale-0", "view {d}/d.json --scale 0 --html {d}/o.html --no-open", "--scale"),
+        Case("view-level-1", "view {d}/d.json --level 1 --html {d}/o.html --no-open", "--level"),
+        Case("tol-negative", "simulate --robot kr15 --out {d}/new.csv --tol-translation -1e-4", "--tol-translation"),
+        # 6. unclear refusals made clear
+        Case("sigma-negative-small", "identify --robot kr15 --data {d}/tr.csv --sigma -1e-5", "--sigma"),
+        Case("sigma-zero", "identify --robot kr15 --data {d}/tr.csv --sigma 0", "must be positive"),
+        Case("two-rows", "identify --robot kr15 --data {d}/two.csv", "two.csv"),
+        # 7. view trusts stored numbers
+        Case("view-identical-poses", "view {d}/same.json --html {d}/o.html --no-open", "do not determine C_s"),
+        # 8. frictions
+        Case("test-out-without-n-test", "simulate --robot kr15 --out {d}/new.csv --test-out {d}/new2.csv",
+             "--n-test"),
+    ]
+    c += [Case(f"seed-negative-{cmd.split()[0]}", cmd + " --seed -1", "--seed") for cmd in COMMANDS_WITH_SEED]
+    return c + _generated()
+
+
+#: command -> (valid arguments, {output option: a valid default when another is under test}, input paths)
+_OUT = {
+    "evaluate": ("evaluate {d}/d.json", {"--json": None}, ["{d}/d.json"]),
+    "demo": ("demo", {"--json": None}, []),
+    "design": ("design --cell {d}/cell.yaml", {"--json": None}, ["{d}/cell.yaml"]),
+    "simulate": ("simulate --robot kr15 --n-test 5", {"--out": "{d}/o1.csv", "--test-out": "{d}/o2.csv",
+                                                      "--truth-json": None}, []),
+    "identify": ("identify --robot kr15 --data {d}/tr.csv --validate {d}/te.csv",
+                 {"--json": None, "--urdf-out": None, "--model-out": None}, ["{d}/tr.csv", "{d}/te.csv"]),
+    "import-ipa": ("import-ipa {d}/tr.csv --split 0.5", {"--out": None, "--train": "{d}/o1.csv",
+                                                          "--test": "{d}/o2.csv"}, ["{d}/tr.csv"]),
+    "register": ("register --model {d}/m.json --data {d}/te.csv", {"--model-out": "{d}/o1.json", "--json": None},
+                 ["{d}/m.json", "{d}/te.csv"]),
+    "predict": ("predict --model {d}/m.json --data {d}/te.csv", {"--out": "{d}/o1.csv"}, ["{d}/m.json", "{d}/te.csv"]),
+    "diagnose": ("diagnose --robot kr15 --train {d}/tr.csv --validate {d}/te.csv", {"--json": None},
+                 ["{d}/tr.csv", "{d}/te.csv"]),
+    "view": ("view {d}/d.json --no-open", {"--html": "{d}/o1.html"}, ["{d}/d.json"]),
+}
+#: (command with valid arguments, option, bad value, expected text) for numeric options
+_NUMERIC = [
+    ("design", "--measurements", ["0", "-1", "ten"]), ("design", "--starts", ["0", "-2", "x"]),
+    ("design", "--max-iter", ["0", "-1", "1.5"]), ("design --certificate", "--pool-size", ["0", "-5", "many"]),
+    ("design", "--seed", ["-1", "-100", "1e3"]),
+    ("simulate --robot kr15 --out {d}/new.csv", "--n", ["0", "-1", "x"]),
+    ("simulate --robot kr15 --out {d}/new.csv", "--n-test", ["-1", "x"]),
+    ("simulate --robot kr15 --out {d}/new.csv", "--noise", ["0", "-1e-5", "10", "1", "nan", "inf", "x", "1,2"]),
+    ("simulate --robot kr15 --out {d}/new.csv", "--sigma-rot", ["0", "-1", "5", "nan"]),
+    ("simulate --robot kr15 --out {d}/new.csv", "--tol-translation", ["-1e-4", "nan", "x"]),
+    ("simulate --robot kr15 --out {d}/new.csv", "--tol-rotation", ["-1e-3", "inf"]),
+    ("simulate --robot kr15 --out {d}/new.csv", "--tol-reflector", ["-1"]),
+    ("simulate --robot kr15 --out {d}/new.csv", "--temperature", ["30,20", "20", "a,b", "nan,20"]),
+    ("simulate --robot kr15 --out {d}/new.csv", "--reflector", ["1,2", "a,b,c", "60,0,120"]),
+    ("simulate --robot kr15 --out {d}/new.csv", "--tracker", ["1,2", "x,0,0"]),
+    ("identify --robot kr15 --data {d}/tr.csv", "--sigma", ["0", "-1e-5", "10", "0.5", "nan", "x", "1,2"]),
+    ("identify --robot kr15 --data {d}/tr.csv", "--sigma-rot", ["0", "-1e-4", "3"]),
+    ("identify --robot kr15 --data {d}/tr.csv", "--reflector", ["a,b,c", "1,2", "30,20,80"]),
+    ("identify --robot kr15 --data {d}/tr.csv", "--max-nfev", ["0", "-1", "x"]),
+    ("identify --robot kr15 --data {d}/tr.csv --validate {d}/te.csv", "--register-rows", ["0", "-3", "2", "x"]),
+    ("identify --robot kr15 --data {d}/tr.csv", "--fix", ["*", "**", "?*", ","]),
+    ("identify --robot kr15 --data {d}/tr.csv", "--seed", ["-1"]),
+    ("identify --robot kr15 --data {d}/tr.csv", "--loss", ["l2"]),
+    ("diagnose --robot kr15 --train {d}/tr.csv --validate {d}/te.csv", "--sigma", ["0", "-1", "15", "x"]),
+    ("diagnose --robot kr15 --train {d}/tr.csv --validate {d}/te.csv", "--alpha", ["0", "1", "-0.1", "x"]),
+    ("diagnose --robot kr15 --train {d}/tr.csv", "--kfold", ["0", "1", "-2", "x"]),
+    ("diagnose --robot kr15 --train {d}/tr.csv --validate {d}/te.csv", "--reflector", ["60,0,120", "x"]),
+    ("import-ipa {d}/tr.csv --train {d}/a.csv --test {d}/b.csv", "--split", ["0", "-0.5", "x", "nan"]),
+    ("view {d}/d.json --no-open --html {d}/o.html", "--scale", ["0", "-1", "x"]),
+    ("view {d}/d.json --no-open --html {d}/o.html", "--level", ["0", "1", "1.5", "x"]),
+    ("study kuka --out {d}/st", "--measurements", ["0", "5", "x"]), ("study kuka --out {d}/st", "--seeds", ["0", "-1"]),
+    ("study notional90 --out {d}/st", "--arms", ["0", "-3"]), ("study kuka --out {d}/st", "--starts", ["0", "-1"]),
+    ("study kuka --out {d}/st", "--workers", ["0", "-1"]),
+    ("study kuka --out {d}/st", "--scheduler", ["foo", "http://x", "tcp://"]),
+    ("info kr15", "--reflector", ["a", "1,2"]), ("info kr15", "--seed", ["-1"]),
+]
+
+
+def _generated() -> list[Case]:
+    """Every output option onto an input / a folder / a missing folder / below a file / another output;
+    every numeric option at zero, negative, text, NaN and out-of-range values."""
+    out: list[Case] = []
+    for cmd, (base, outs, ins) in _OUT.items():
+        for opt in outs:
+            rest = " ".join(f"{o} {v}" for o, v in outs.items() if o != opt and v)
+            bad = [(f"onto-input{k}", p, "would destroy the input") for k, p in enumerate(ins)]
+            bad += [("folder", "{d}/sub", "is a folder"), ("missing-folder", "{d}/nodir/x.out", "does not exist"),
+                    ("below-a-file", "{d}/tr.csv/x.out", "does not exist")]
+            bad += [(f"same-as{o}", v, "its own file") for o, v in outs.items() if o != opt and v]
+            for tag, path, expect in bad:
+                out.append(Case(f"gen-out-{cmd}{opt}-{tag}", f"{base} {rest} {opt} {path}", expect))
+    for cmd, opt in (("diagnose --robot kr15 --train {d}/tr.csv --validate {d}/te.csv", "--figures"),
+                     ("view {d}/d.json --no-open --html {d}/o.html", "--figures"), ("study kuka", "--out")):
+        out += [Case(f"gen-dir-{cmd.split()[0]}{opt}-is-file", f"{cmd} {opt} {{d}}/tr.csv", "not a folder"),
+                Case(f"gen-dir-{cmd.split()[0]}{opt}-parent-missing", f"{cmd} {opt} {{d}}/nodir/f", "does not exist")]
+    for cmd, opt, values in _NUMERIC:
+        for v in values:
+            out.append(Case(f"gen-num-{cmd.split()[0]}{opt}={v}", f"{cmd} {opt} {v}", opt))
+    return out
+
+
+CASES: list[Case] = _cases()
+
+
+def build_inputs(d: Path) -> None:
+    """Write the shared inputs into ``d`` (about 5 s: one simulation, one random design)."""
+    from pin_kpi_oed.cli.main import main
+
+    d.mkdir(parents=True, exist_ok=True)
+    with contextlib.redirect_stdout(io.StringIO()):
+        assert main(["simulate", "--robot", "kr15", "--n", "120", "--n-test", "60", "--seed", "4", "--out",
+                     str(d / "tr.csv"), "--test-out", str(d / "te.csv")]) == 0
+        assert main(["design", "--cell", "kr15", "--criteria", "random", "--measurements", "20", "--json",
+                     str(d / "d.json"), "--quiet"]) == 0
+        assert main(["identify", "--robot", "kr15", "--data", str(d / "tr.csv"), "--model-out", str(d / "m.json"),
+                     "--quiet"]) == 0
+    lines = (d / "tr.csv").read_text().splitlines()
+    (d / "two.csv").write_text("\n".join(lines[:3]) + "\n")
+    (d / "sub").mkdir(exist_ok=True)
+    (d / "link.csv").symlink_to(d / "tr.csv")
+    cell = yaml.safe_load((CELL_DIR / "kr15.yaml").read_text())
+    (d / "cell.yaml").write_text(yaml.safe_dump(cell))
+
+    def variant(name: str, **changes) -> None:
+        v = json.loads(json.dumps(cell))
+        for k, val in changes.items():
+            v[k] = val
+        (d / name).write_text(yaml.safe_dump(v))
+
+    variant("cell_deg_as_rad.yaml", joint_bounds={"lower_rad": cell["joint_bounds"]["lower_deg"],
+                                                  "upper_rad": cell["joint_bounds"]["upper_deg"]})
+    variant("cell_sigma1.yaml", noise={"sigma_xyz_m": [1, 1, 1]})
+    variant("cell_typo.yaml", noise={"sigma_xyz": [1e-6, 1e-6, 1e-6]})
+    variant("cell_refl_mm.yaml", reflector_m=[60.0, 0.0, 120.0])
+    variant("cell_sixty.yaml", measurements="sixty")
+    variant("cell_tracker_mm.yaml", tracker={"xyz_m": [-200.0, -2300.0, 1400.0], "rpy_deg": [0.0, 0.0, 90.0]})
+    variant("cell_ragged.yaml", working_configurations_deg=[[0, -70, 65, 0, 95, 0], [0, 1]])
+    urdf = resolve_robot("kr15")[0].read_text()
+    (d / "broken.urdf").write_text(urdf.replace('<parent link="base_link"/>', '<parent link="nolink"/>', 1))
+    (d / "zaxis.urdf").write_text(re.sub(r'<axis xyz="[^"]*"', '<axis xyz="0 0 0"', urdf, count=1))
+    m = re.search(r'lower="([^"]+)" upper="([^"]+)"', urdf)
+    (d / "swap.urdf").write_text(urdf[:m.start()] + f'lower="{m.group(2)}" upper="{m.group(1)}"' + urdf[m.end():])
+    (d / "mm.urdf").write_text(re.sub(r'(?<=<origin )xyz="([^"]+)"',
+                                      lambda mo: 'xyz="' + " ".join(str(float(x) * 1000) for x in mo.group(1).split())
+                                      + '"', urdf))
+    (d / "robot.xacro.urdf").write_text(urdf.replace("<robot ", '<robot xmlns:xacro="http://www.ros.org/wiki/xacro" ',
+                                                     1).replace("</robot>", '<xacro:include filename="x.xacro"/>'
+                                                                "</robot>"))
+    design = json.loads((d / "d.json").read_text())
+    (d / "list.json").write_text(json.dumps([design]))
+    rag = json.loads(json.dumps(design))
+    rag["q_meas"] = [rag["q_meas"][0], rag["q_meas"][1][:3]]
+    rag["designs"][0]["q_meas"] = rag["q_meas"]
+    (d / "ragged.json").write_text(json.dumps(rag))
+    st = json.loads(json.dumps(design))
+    st["q_meas"] = [["a"] * 6] * 20
+    st["designs"][0]["q_meas"] = st["q_meas"]
+    (d / "strings.json").write_text(json.dumps(st))
+    same = json.loads(json.dumps(design))
+    same["designs"][0]["q_meas"] = [design["designs"][0]["q_meas"][0]] * 20
+    same["q_meas"] = same["designs"][0]["q_meas"]
+    (d / "same.json").write_text(json.dumps(same))
+
+
+def snapshot(d: Path) -> dict[str, str]:
+    """Path -> SHA-256 of every file below ``d`` (symlinks by target), folders as ``<dir>``."""
+    out = {}
+    for p in sorted(d.rglob("*")):
+        out[str(p.relative_to(d))] = "<dir>" if p.is_dir() else hashlib.sha256(p.read_bytes()).hexdigest()
+    return out
+
+
+@dataclass
+class Outcome:
+    """What one case did: exit code, stderr, time (s), whether files changed, a traceback seen."""
+
+    rc: int
+    err: str
+    time_s: float
+    changed: list[str]
+    traceback: bool
+
+    def ok(self, case: Case) -> bool:
+        """Exit 2, one line naming the expected text, no traceback, nothing written."""
+        lines = [ln for ln in self.err.strip().splitlines() if ln.strip()]
+        return (self.rc == 2 and not self.traceback and not self.changed and len(lines) >= 1
+                and case.expect in lines[-1] and not any("Traceback" in ln for ln in lines))
+
+
+def argv_of(case: Case, d: Path) -> list[str]:
+    """The case's arguments with ``{d}`` replaced."""
+    return [a.replace("{d}", str(d)) for a in case.argv.split()]
+
+
+def run_case(case: Case, base: Path, work: Path) -> Outcome:
+    """Copy the inputs ``base`` to ``work``, run the case in-process, compare the files before and after."""
+    if work.exists():
+        shutil.rmtree(work)
+    shutil.copytree(base, work, symlinks=False)
+    (work / "link.csv").unlink()
+    (work / "link.csv").symlink_to(work / "tr.csv")
+    before = snapshot(work)
+    from pin_kpi_oed.cli.main import main
+
+    err, out = io.StringIO(), io.StringIO()
+    t0 = time.perf_counter()
+    tb = False
+    try:
+        with contextlib.redirect_stderr(err), contextlib.redirect_stdout(out):
+            rc = main(argv_of(case, work))
+    except SystemExit as exc:  # argparse
+        rc = int(exc.code or 0)
+    except Exception as exc:  # noqa: BLE001 - a traceback is what this test hunts
+        rc, tb = -1, True
+        err.write(f"Traceback: {type(exc).__name__}: {exc}")
+    dt = time.perf_counter() - t0
+    after = snapshot(work)
+    changed = sorted(k for k in set(before) | set(after) if before.get(k) != after.get(k))
+    return Outcome(rc, err.getvalue(), dt, changed, tb)

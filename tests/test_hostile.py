@@ -1,0 +1,171 @@
+"""Issue 15: a test per hostile input (one clear line, exit 2, nothing written), the fit-quality gate,
+the study-folder lock, and output-path checks before any work."""
+
+from __future__ import annotations
+
+import contextlib
+import io
+import json
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from pin_kpi_oed.cli.main import main
+from pin_kpi_oed.errors import InputError
+from tests.hostile.cases import CASES, build_inputs, run_case
+
+
+@pytest.fixture(scope="module")
+def inputs(tmp_path_factory) -> Path:
+    d = tmp_path_factory.mktemp("hostile") / "inputs"
+    build_inputs(d)
+    return d
+
+
+@pytest.mark.parametrize("case", CASES, ids=[c.id for c in CASES])
+def test_hostile_input_is_refused_in_one_line(case, inputs, tmp_path):
+    out = run_case(case, inputs, tmp_path / "work")
+    assert not out.traceback, out.err
+    assert out.rc == 2, (out.rc, out.err)
+    last = out.err.strip().splitlines()[-1]
+    assert case.expect in last, last
+    assert not out.changed, f"files written or changed: {out.changed}"
+
+
+@pytest.mark.parametrize("case", [c for c in CASES if c.id.startswith("out-")], ids=lambda c: c.id)
+def test_output_path_problems_reported_before_any_work(case, inputs, tmp_path):
+    out = run_case(case, inputs, tmp_path / "work")
+    assert out.rc == 2 and out.time_s < 2.0, (out.time_s, out.err)
+
+
+def _run(*argv) -> tuple[int, str, str]:
+    o, e = io.StringIO(), io.StringIO()
+    with contextlib.redirect_stdout(o), contextlib.redirect_stderr(e):
+        rc = main([str(a) for a in argv])
+    return rc, o.getvalue(), e.getvalue()
+
+
+@pytest.fixture(scope="module")
+def offset_data(tmp_path_factory) -> Path:
+    """KR 15 data (reflector 30, 20, 80 mm, 10 µm noise, sigma columns), and a copy with four 10 cm outliers."""
+    d = tmp_path_factory.mktemp("gate")
+    assert _run("simulate", "--robot", "kr15", "--n", "300", "--n-test", "100", "--seed", "4", "--out",
+                d / "tr.csv", "--test-out", d / "te.csv")[0] == 0
+    lines = (d / "tr.csv").read_text().splitlines()
+    head = lines[0].split(",")
+    xi = head.index("x")
+    for k in (10, 100, 200, 250):
+        row = lines[k].split(",")
+        row[xi] = repr(float(row[xi]) + 0.1)
+        lines[k] = ",".join(row)
+    (d / "out4.csv").write_text("\n".join(lines) + "\n")
+    return d
+
+
+def test_zero_reflector_assumed_is_refused_as_poor_fit(offset_data, tmp_path):
+    """Issue 15 case 1: --reflector 0,0,0 on data with an offset: refused, verdict in the JSON, no URDF."""
+    d = offset_data
+    rc, out, err = _run("identify", "--robot", "kr15", "--data", d / "tr.csv", "--validate", d / "te.csv",
+                        "--reflector", "0,0,0", "--json", tmp_path / "r.json", "--urdf-out", tmp_path / "c.urdf")
+    assert rc == 2 and "POOR" in err and "reflector" in err and len(err.strip().splitlines()) == 1
+    assert not (tmp_path / "c.urdf").exists()
+    q = json.loads((tmp_path / "r.json").read_text())["fit_quality"]
+    assert q["verdict"] == "poor" and q["chi2_reduced"] > 16 and q["chi2_interval"][1] < 1.3
+
+
+def test_default_reflector_is_estimated_and_fit_is_good(offset_data, tmp_path):
+    d = offset_data
+    rc, out, err = _run("identify", "--robot", "kr15", "--data", d / "tr.csv", "--validate", d / "te.csv",
+                        "--json", tmp_path / "r.json")
+    assert rc == 0, err
+    doc = json.loads((tmp_path / "r.json").read_text())
+    assert doc["reflector_nominal_source"] == "estimated"
+    assert np.allclose(doc["reflector_nominal_m"], [0.03, 0.02, 0.08], atol=1.5e-3)
+    assert doc["fit_quality"]["verdict"] == "good"
+    assert doc["validation"]["after"]["rms_m"] < 30e-6  # the noise floor (10 µm per axis -> ~17 µm)
+
+
+def test_large_outliers_switch_to_robust_loss(offset_data, tmp_path):
+    """Issue 15 case 2: four 10 cm outliers: the default switches to soft_l1; --loss linear is refused."""
+    d = offset_data
+    rc, out, err = _run("identify", "--robot", "kr15", "--data", d / "out4.csv", "--validate", d / "te.csv",
+                        "--json", tmp_path / "r.json")
+    assert rc == 0 and "robust loss soft_l1" in out
+    doc = json.loads((tmp_path / "r.json").read_text())
+    assert doc["result"]["loss"] == "soft_l1" and doc["validation"]["after"]["rms_m"] < 30e-6
+    rc, out, err = _run("identify", "--robot", "kr15", "--data", d / "out4.csv", "--validate", d / "te.csv",
+                        "--loss", "linear", "--urdf-out", tmp_path / "c.urdf")
+    assert rc == 2 and "--loss soft_l1" in err and not (tmp_path / "c.urdf").exists()
+    rc, *_ = _run("identify", "--robot", "kr15", "--data", d / "out4.csv", "--loss", "linear", "--accept-poor-fit",
+                  "--urdf-out", tmp_path / "c.urdf")
+    assert rc == 0 and (tmp_path / "c.urdf").exists()
+
+
+def test_sigma_too_small_makes_chi2_poor_and_too_large_suspect(offset_data):
+    from pin_kpi_oed.identification.quality import assess_fit
+
+    class R:  # a result whose reduced chi2 we choose
+        names = ["p"] * 30
+        covariance_scaled = False
+        loss = "linear"
+        residuals_rad = None
+
+        def __init__(self, chi2, n=300):
+            self.chi2_reduced = chi2
+            self.weighted_errors = np.full(n, np.sqrt(3 * chi2))
+            self.errors_m = np.full(n, 1e-5)
+            self.outliers = np.array([], int)
+
+    assert assess_fit(R(1.0)).verdict == "good"
+    assert assess_fit(R(40.0)).verdict == "poor"
+    assert assess_fit(R(3.0)).verdict == "suspect"
+    assert assess_fit(R(0.2)).verdict == "suspect" and "sigma too large" in assess_fit(R(0.2)).line()
+    worse = assess_fit(R(1.0), {"before": {"rms_m": 1e-3}, "after": {"rms_m": 2e-3}})
+    assert worse.verdict == "poor" and "worse than the nominal" in worse.line()
+
+
+def test_study_folder_is_locked_against_a_second_writer(tmp_path):
+    from pin_kpi_oed.data.lock import folder_lock
+    from pin_kpi_oed.studies.study import run_tasks
+
+    with folder_lock(tmp_path / "s", "study folder"):
+        with pytest.raises(InputError, match="another run"):
+            run_tasks([], tmp_path / "s")
+    assert run_tasks([], tmp_path / "s") == ([], 0)  # released
+
+
+def test_task_record_without_designs_is_recomputed(tmp_path):
+    from pin_kpi_oed.studies.study import Task, _finished
+
+    t = Task(key="k", cell="kr15", criteria=("random",), m=10, seed=0, collision=True, n_starts=1, meta={})
+    (tmp_path / "tasks").mkdir()
+    rec = {**t.to_dict(), "ok": True, "designs": []}
+    (tmp_path / "tasks" / "k.json").write_text(json.dumps(rec))
+    assert _finished(tmp_path, t) is None
+    rec["designs"] = [{"criterion": "random", "trace_cs_m2": 1.0}]
+    (tmp_path / "tasks" / "k.json").write_text(json.dumps(rec))
+    assert _finished(tmp_path, t) is not None
+
+
+def test_view_recomputes_a_negative_stored_covariance(inputs, tmp_path):
+    from pin_kpi_oed.design.design_file import load_design
+
+    d = json.loads((inputs / "d.json").read_text())
+    C = np.array(d["designs"][0]["cov_s_m2"])
+    d["designs"][0]["cov_s_m2"] = (-C).tolist()
+    df = load_design(d)
+    assert np.allclose(df.designs[0].cov_s_m2, C, rtol=1e-6)
+    assert any("differs" in n for n in df.notes)
+
+
+def test_oserror_on_output_is_one_line(inputs, tmp_path, monkeypatch):
+    import pin_kpi_oed.data.atomic as atomic
+
+    def full(*a, **k):
+        raise OSError(28, "No space left on device", str(tmp_path / "x.csv"))
+
+    monkeypatch.setattr(atomic, "atomic_write_bytes", full)
+    rc, out, err = _run("simulate", "--robot", "kr15", "--out", tmp_path / "x.csv")
+    assert rc == 2 and "No space left on device" in err and len(err.strip().splitlines()) == 1
