@@ -1,0 +1,156 @@
+"""Designs over the extended model (geometry + effects) with a prior (issue 14)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from pin_kpi_oed.effects.coupled import LinkBending
+from pin_kpi_oed.effects.library import predict_with_effects
+from pin_kpi_oed.effects.periodic import TransmissionError
+from pin_kpi_oed.errors import InputError
+from pin_kpi_oed.identification.identify import identify
+from pin_kpi_oed.identification.simulate import simulate
+from pin_kpi_oed.model.noise import NoiseModel
+from pin_kpi_oed.model.robot import load_robot
+from pin_kpi_oed.model.tracker import TrackerModel
+from pin_kpi_oed.oed.covariance import prior_square_root
+from pin_kpi_oed.oed.extended import ExtendedModel, pool_phi, select_pool
+from pin_kpi_oed.oed.identifiability import analyse
+from pin_kpi_oed.oed.pool import select
+
+
+@pytest.fixture(scope="module")
+def ur10():
+    robot = load_robot("ur10")
+    model = TrackerModel(robot, reflector_m=np.array([0.0, 0.0, 0.109]), noise=NoiseModel(sigma_xyz_m=(1e-5,) * 3))
+    return robot, model, analyse(model).base
+
+
+def _ext(robot, model, base, theta_scale=3e-4, prior=None):
+    effects = [TransmissionError(robot, pairs=[("shoulder_lift_joint", 7), ("elbow_joint", 18)]),
+               LinkBending(robot, terms=[("elbow_joint", "q2+q3", "cos"), ("shoulder_lift_joint", 0, "sin")])]
+    rng = np.random.default_rng(1)
+    thetas = [theta_scale * rng.standard_normal(e.n_params) for e in effects]
+    p = 1e-4 * np.random.default_rng(2).standard_normal(model.n_params)
+    return ExtendedModel(model, p, base, effects, thetas, prior_info=prior)
+
+
+def test_effect_columns_match_finite_differences(ur10):
+    robot, model, base = ur10
+    ext = _ext(robot, model, base)
+    Q = robot.random_q(np.random.default_rng(3), 7)
+    J = ext.jacobian(Q, weighted=False)
+    h = 1e-7
+    for j in range(ext.k):
+        th_p = np.concatenate(ext.thetas).copy()
+        th_m = th_p.copy()
+        th_p[j] += h
+        th_m[j] -= h
+        ys = []
+        for th in (th_p, th_m):
+            parts = np.split(th, np.cumsum([e.n_params for e in ext.effects])[:-1])
+            ys.append(predict_with_effects(model, ext.p, Q, None, list(zip(ext.effects, parts)))[:, :3])
+        fd = (ys[0] - ys[1]) / (2 * h)
+        assert np.allclose(J[:, :3, ext.nb + j], fd, rtol=1e-5, atol=1e-9)
+    # geometric columns at Q + dQ, and weighting by sigma
+    assert np.allclose(ext.jacobian(Q), J / 1e-5)
+
+
+def test_kpi_jacobian_effect_columns_match_finite_differences(ur10):
+    robot, model, base = ur10
+    ext = _ext(robot, model, base)
+    Qw = robot.random_q(np.random.default_rng(4), 3)
+    E = ext.kpi_jacobian(Qw)
+    h = 1e-7
+
+    def kpi(th):
+        parts = np.split(th, np.cumsum([e.n_params for e in ext.effects])[:-1])
+        dQ = sum(e.joint_offset(t, Qw)[0] for e, t in zip(ext.effects, parts))
+        return model.kpi(ext.p, Qw + dQ).ravel()
+
+    th0 = np.concatenate(ext.thetas)
+    for j in range(ext.k):
+        d = np.zeros_like(th0)
+        d[j] = h
+        assert np.allclose(E[:, ext.nb + j], (kpi(th0 + d) - kpi(th0 - d)) / (2 * h), rtol=1e-5, atol=1e-9)
+    dQ = sum(e.joint_offset(t, Qw)[0] for e, t in ext.pairs)
+    assert np.allclose(E[:, :ext.nb], model.kpi_jacobian(ext.p, Qw + dQ)[:, base])
+
+
+def test_prior_square_root_rank_deficient():
+    rng = np.random.default_rng(0)
+    A = rng.standard_normal((3, 6))
+    P = A.T @ A  # rank 3
+    R = prior_square_root(P)
+    assert R.shape == (3, 6)
+    assert np.allclose(R.T @ R, P)
+
+
+def test_map_covariance_and_every_criterion_use_the_prior(ur10):
+    robot, model, base = ur10
+    ext = _ext(robot, model, base)
+    Q = robot.random_q(np.random.default_rng(5), 40)
+    Qw = robot.random_q(np.random.default_rng(6), 3)
+    sig = np.r_[np.full(ext.nb, np.inf), np.full(ext.k, 1e-4)]
+    P = np.diag(np.where(np.isfinite(sig), 1 / sig ** 2, 0.0))
+    F = ext.jacobian(Q).reshape(-1, ext.nx)
+    E = ext.kpi_jacobian(Qw)
+    C_ref = np.linalg.inv(F.T @ F + P)
+    ext.prior_info = P
+    C, C_s = ext.covariances(Q, Qw)
+    assert np.allclose(C, C_ref, rtol=1e-8, atol=0)
+    assert np.isclose(ext.criterion("kpi", Q, Qw), np.trace(E @ C_ref @ E.T), rtol=1e-8)
+    assert np.isclose(ext.criterion("param", Q), np.trace(C_ref), rtol=1e-8)
+    assert np.isclose(ext.criterion("D", Q), -np.linalg.slogdet(F.T @ F + P)[1], rtol=1e-10)
+    # the prior only removes uncertainty: tr C_s with the prior is below the one without
+    ext.prior_info = None
+    assert np.trace(C_s) < np.trace(ext.covariances(Q, Qw)[1])
+
+
+def test_select_pool_with_prior_consistent_and_better_than_random(ur10):
+    robot, model, base = ur10
+    ext = _ext(robot, model, base)
+    ext.prior_info = np.diag(np.r_[np.zeros(ext.nb), np.full(ext.k, 1e8)])
+    Qp = robot.random_q(np.random.default_rng(7), 300)
+    Fp = ext.jacobian(Qp)
+    K = ext.kpi_jacobian(robot.random_q(np.random.default_rng(8), 2))
+    s = select_pool(Fp, 40, K, ext.prior_info)
+    idx = s.indices
+    assert np.unique(idx).size == 40
+    F = Fp[idx].reshape(-1, ext.nx)
+    assert np.isclose(s.phi, pool_phi(ext.prior_info + F.T @ F, K), rtol=1e-9)
+    rng = np.random.default_rng(9)
+    rnd = []
+    for _ in range(20):
+        Fr = Fp[rng.choice(300, 40, replace=False)].reshape(-1, ext.nx)
+        rnd.append(pool_phi(ext.prior_info + Fr.T @ Fr, K))
+    assert s.phi < min(rnd)
+    # without a prior it is pool.select
+    s0 = select_pool(Fp, 40, K, None)
+    assert np.array_equal(np.sort(s0.indices), np.sort(select(Fp, 40, K).indices))
+    with pytest.raises(InputError):
+        select_pool(Fp, 301, K, ext.prior_info)
+
+
+def test_from_calibrated_model_prior_by_name(ur10):
+    robot, model, base = ur10
+    eff = TransmissionError(robot, pairs=[("elbow_joint", 18)])
+    Q = robot.random_q(np.random.default_rng(10), 80)
+    data = simulate(model, Q, effects=[(eff, np.array([2e-4, -1e-4]))], seed=1)
+    res = identify(model, data, use_orientation=False, effects=[eff])
+    ext = ExtendedModel.from_result(res, prior="model")
+    assert ext.k == 2 and ext.names[-2:] == eff.param_names()
+    P = ext.prior_info
+    setup = [i for i, n in enumerate(ext.names) if n.split(".")[0] in model.layout.setup_groups]
+    assert setup and np.allclose(P[setup], 0.0)
+    # the effect block of the prior is the inverse of the fit's (marginal) covariance of the matched names
+    names = list(res.names)
+    keep = [names.index(n) for n in ext.names if n in names and ext.names.index(n) not in setup]
+    Cm = np.asarray(res.covariance)[np.ix_(keep, keep)]
+    ii = [ext.names.index(names[j]) for j in keep]
+    assert np.allclose(P[np.ix_(ii, ii)] @ Cm, np.eye(len(keep)), atol=1e-6)
+    tol = ExtendedModel.from_result(res, prior="tolerances", effect_sigma_rad=1e-4)
+    assert np.allclose(np.diag(tol.prior_info)[-2:], 1e8)
+    with pytest.raises(InputError):
+        ExtendedModel.from_result(res, prior="bogus")
