@@ -52,6 +52,11 @@ class ExtendedModel:
         thetas: their parameter values (linearisation point), one array per effect.
         prior_info: prior information Σ₀⁻¹ over (p_B, θ), (nx, nx), or None (no prior).
         names: names of the nx parameters (base names, then effect parameter names).
+        bias_sigma_m: expected size (per axis, m) of what the model leaves out (e.g. the diagnosis'
+            held-out RMS after the selected terms), or None. **Bias-aware option**: it is added to the
+            measurement variance, σ_eff² = σ² + b², so the weights say how much a row can really tell.
+            A uniform b only rescales F (designs without a prior are unchanged; with a prior, the
+            data weigh less against it).
     """
 
     model: Any
@@ -61,6 +66,7 @@ class ExtendedModel:
     thetas: list = field(default_factory=list)
     prior_info: np.ndarray | None = None
     names: list = field(default_factory=list)
+    bias_sigma_m: float | None = None
 
     def __post_init__(self) -> None:
         self.p = np.asarray(self.p, float)
@@ -120,7 +126,10 @@ class ExtendedModel:
         if self.k:
             out[:, :3, self.nb:] = effect_jacobian(self.model, self.p, Q, aux, pairs)
         if weighted:
-            out /= self.model.sigma(self.p, Qe)[:, :, None]
+            S = self.model.sigma(self.p, Qe)
+            if self.bias_sigma_m:
+                S = np.sqrt(S ** 2 + float(self.bias_sigma_m) ** 2)
+            out /= S[:, :, None]
         return out
 
     def kpi_jacobian(self, Q_work: np.ndarray, aux: Any = None) -> np.ndarray:
