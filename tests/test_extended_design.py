@@ -190,3 +190,69 @@ def test_extended_design_validation_simulated(ur10):
     assert "kpi_ext" in r.summary() and r.to_dict()["methods"]["kpi_ext"]["vs_random"]["n"] == 2
     with pytest.raises(InputError):
         extended_design_validation(model, data, methods=("bogus",))
+
+
+@pytest.mark.parametrize("noise", ["uniform", "range"])
+def test_continuous_design_gradient_matches_finite_differences(ur10, noise):
+    from pin_kpi_oed.oed.extended import ExtendedDesignCriterion
+
+    robot, model0, base = ur10
+    nz = NoiseModel(sigma_xyz_m=(1e-5,) * 3) if noise == "uniform" else NoiseModel(range_a_m=5e-6, range_b=5e-6)
+    model = TrackerModel(robot, reflector_m=np.array([0.0, 0.0, 0.109]), noise=nz)
+    ext = _ext(robot, model, base, theta_scale=2e-3)  # theta != 0: qe = q + dQ(q) is exercised
+    ext.prior_info = np.diag(np.r_[np.zeros(ext.nb), np.full(ext.k, 1e8)])
+    Q = robot.random_q(np.random.default_rng(14), 30)
+    F, dF = ext.jacobian_dq(Q)
+    assert np.allclose(F, ext.jacobian(Q), rtol=1e-10, atol=0)
+    h = 1e-6
+    for i, j in [(0, 0), (3, 1), (7, 2), (11, 3), (20, 4)]:
+        Qp, Qm = Q.copy(), Q.copy()
+        Qp[i, j] += h
+        Qm[i, j] -= h
+        fd = (ext.jacobian(Qp)[i] - ext.jacobian(Qm)[i]) / (2 * h)
+        assert np.allclose(dF[i, :, :, j], fd, rtol=1e-5, atol=1e-6 * np.abs(fd).max())
+    Qw = robot.random_q(np.random.default_rng(15), 2)
+    for name in ("kpi", "param", "D"):
+        crit = ExtendedDesignCriterion(ext, name, Qw)
+        v, g = crit.value_and_grad(Q)
+        assert np.isclose(v, ext.criterion(name, Q, Qw), rtol=1e-10)
+        for i, j in [(2, 1), (9, 2), (25, 0)]:
+            Qp, Qm = Q.copy(), Q.copy()
+            Qp[i, j] += h
+            Qm[i, j] -= h
+            fd = (crit.value(Qp) - crit.value(Qm)) / (2 * h)
+            assert np.isclose(g[i, j], fd, rtol=1e-4, atol=1e-7 * abs(v))
+
+
+def test_ipopt_design_over_the_extended_model_kr15():
+    from pin_kpi_oed.cell.cell import load_cell
+    from pin_kpi_oed.design.optimize import DesignOptions, DesignProblem, ipopt_options, run_designs
+    from pin_kpi_oed.effects.library import GearHarmonic
+    from pin_kpi_oed.oed.extended import ExtendedDesignCriterion
+
+    cell = load_cell("kr15")
+    problem = DesignProblem(cell)
+    rb = problem.model.robot
+    ext = ExtendedModel(problem.model, problem.p0, problem.base, [GearHarmonic(rb, joints=rb.joint_names[1:3])])
+    ext.prior_info = np.diag(np.r_[np.zeros(ext.nb), np.full(ext.k, 2e-4 ** -2)])
+    problem.extended = ext
+    crit = problem.criterion("kpi")
+    assert isinstance(crit, ExtendedDesignCriterion)
+    rnd, kpi = run_designs(cell, ["kpi"], 30, 0, DesignOptions(n_starts=1, ipopt=ipopt_options(max_iter=15),
+                                                                pool_size=300), problem)
+    assert kpi.feasible
+    # the design minimised the extended KPI: far below the heuristic design's
+    assert crit.value(kpi.q_meas) < 0.5 * crit.value(rnd.q_meas)
+
+
+def test_cli_design_model_bad_inputs(tmp_path):
+    import subprocess
+    import sys
+
+    bad = tmp_path / "m.json"
+    bad.write_text('{"format": "something else"}')
+    for name, args in (("missing.json", ["--model", str(tmp_path / "missing.json")]), ("m.json", ["--model", str(bad)])):
+        res = subprocess.run([sys.executable, "-m", "pin_kpi_oed", "design", "--cell", "kr15", "--criteria", "kpi",
+                              "--quiet", *args], capture_output=True, text=True, timeout=300)
+        assert res.returncode == 2, res.stderr
+        assert "Traceback" not in res.stderr and name in res.stderr.splitlines()[-1]

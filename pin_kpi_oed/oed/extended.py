@@ -37,7 +37,8 @@ from pin_kpi_oed.oed.covariance import prior_square_root
 from pin_kpi_oed.oed.criteria import get_criterion
 from pin_kpi_oed.oed.pool import PoolSelection, select
 
-__all__ = ["ExtendedModel", "select_pool", "PriorSelection", "pool_phi"]
+__all__ = ["ExtendedModel", "ExtendedDesignCriterion", "basis_dq", "select_pool", "PriorSelection", "pool_phi",
+           "pool_start"]
 
 
 @dataclass
@@ -151,6 +152,79 @@ class ExtendedModel:
             E[:, :, self.nb:] = Sdq @ np.concatenate([np.asarray(D, float) for D in ders], axis=2)
         return E.reshape(3 * t, self.nx)
 
+    def jacobian_dq(self, Q: np.ndarray, aux: Any = None) -> tuple[np.ndarray, np.ndarray]:
+        """F (as :meth:`jacobian`, weighted) and its exact derivative dF/dq, (m, nh, nx) and (m, nh, nx, n).
+
+        With qe = q + dQ(q), C = ∂qe/∂q = I + Σ θ ∂D/∂q and D = ∂dQ/∂θ:
+
+        * geometric columns: ∂J(qe)/∂qe · C (the model's d²h/dp dq);
+        * effect columns Ydq(qe)·D: (∂Ydq/∂qe · C)·D + Ydq·∂D/∂q, with the point's Hessian
+          ∂²y/∂q_a∂q_b = R_T (ω_a × ṗ_b) for a ≤ b (ṗ_b = v_b + ω_b × p, spatial twists of the joints);
+        * weights 1/σ_eff(qe): the q-dependence of a range-dependent σ is included.
+
+        Only joint-angle effects with a known basis derivative (:func:`basis_dq`) are supported.
+
+        Raises:
+            InputError: an effect without an exact q-derivative, or one with task-space offsets.
+        """
+        Q = np.atleast_2d(np.asarray(Q, float))
+        m, n = Q.shape
+        pairs = self.pairs
+        D = np.zeros((m, n, 0))
+        dD = np.zeros((m, n, 0, n))
+        C = np.broadcast_to(np.eye(n), (m, n, n)).copy()
+        if pairs:
+            Ds, dDs = [], []
+            for e, th in pairs:
+                d_e, D_e = e.joint_offset(th, Q, aux)
+                dY = e.tool_offset(th, Q, aux, self.model, self.p)[1]
+                if np.any(dY):
+                    raise InputError(f"effect '{e.name}': task-space offsets are not supported by the continuous design")
+                Ds.append(np.asarray(D_e, float))
+                dDs.append(basis_dq(e, Q))
+                C += np.einsum("mnkj,k->mnj", dDs[-1], th)
+            D, dD = np.concatenate(Ds, axis=2), np.concatenate(dDs, axis=2)
+        Qe = Q + (D @ np.concatenate(self.thetas) if self.k else 0.0)
+        Y, J, dJ, Ydq = self.model.jacobian_dq(self.p, Qe)
+        nh = J.shape[1]
+        Jx = np.zeros((m, nh, self.nx))
+        dJx = np.zeros((m, nh, self.nx, n))
+        Jx[:, :, :self.nb] = J[:, :, self.base]
+        dJx[:, :, :self.nb] = np.einsum("mapl,mlj->mapj", dJ[:, :, self.base], C)
+        Ydq_q = Ydq @ C  # dy/dq through qe, (m, 3, n)
+        if self.k:
+            H = self._point_hessian(Qe)  # (m, 3, n, n) w.r.t. qe
+            Hq = np.einsum("mabl,mlj->mabj", H, C)  # ∂Ydq(qe)/∂q_j
+            Jx[:, :3, self.nb:] = Ydq @ D
+            dJx[:, :3, self.nb:] = np.einsum("mabj,mbk->makj", Hq, D) + np.einsum("mab,mbkj->makj", Ydq, dD)
+        S = self.model.sigma(self.p, Qe, Y)
+        dS = np.zeros((m, nh, n))
+        nz = self.model.noise
+        if nz.range_a_m is not None and nz.range_b > 0:
+            r = np.linalg.norm(Y[:, :3], axis=1)
+            dS[:, :3, :] = (nz.range_b * np.einsum("ma,man->mn", Y[:, :3] / r[:, None], Ydq_q))[:, None, :]
+        if self.bias_sigma_m:
+            Se = np.sqrt(S ** 2 + float(self.bias_sigma_m) ** 2)
+            dS = dS * (S / Se)[:, :, None]
+            S = Se
+        F = Jx / S[:, :, None]
+        dF = dJx / S[:, :, None, None] - Jx[:, :, :, None] * (dS / (S ** 2)[:, :, None])[:, :, None, :]
+        return F, dF
+
+    def _point_hessian(self, Qe: np.ndarray) -> np.ndarray:
+        """∂²y/∂q_a∂q_b of the measured point (tracker frame), (m, 3, n, n): R_T (ω_a × ṗ_b), a ≤ b, symmetric."""
+        kin = self.model.kinematics(self.p, Qe, self.model.reflector(self.p))
+        RT = self.model.tracker_pose(self.p).rotation
+        v, w = kin.twist[:, :3, :], kin.twist[:, 3:, :]
+        pdot = v + np.cross(w, kin.p[:, :, None], axis=1)
+        n = Qe.shape[1]
+        H = np.zeros((Qe.shape[0], 3, n, n))
+        for a in range(n):
+            for b in range(a, n):
+                H[:, :, a, b] = np.cross(w[:, :, a], pdot[:, :, b])
+                H[:, :, b, a] = H[:, :, a, b]
+        return np.einsum("ab,mbij->maij", RT, H)
+
     # ------------------------------------------------------------------ information and covariances
     def prior_rows(self) -> np.ndarray:
         """R with RᵀR = Σ₀⁻¹, (r, nx) (r = 0 without a prior)."""
@@ -204,7 +278,7 @@ class ExtendedModel:
     @classmethod
     def from_calibrated_model(cls, cm: Any, station: str | None = None, prior: str | None = "model",
                               effect_sigma_rad: float | None = None, tolerances: Any = None,
-                              base: np.ndarray | None = None) -> "ExtendedModel":
+                              base: np.ndarray | None = None, model: Any = None) -> "ExtendedModel":
         """The extended model of a calibrated model file (:class:`~pin_kpi_oed.identification.model_file.CalibratedModel`).
 
         Args:
@@ -217,13 +291,23 @@ class ExtendedModel:
                 (default each effect's ``plausible_max``/3).
             tolerances: :class:`~pin_kpi_oed.identification.simulate.Tolerances` (default ones).
             base: identifiable raw parameter indices (default :func:`~pin_kpi_oed.oed.identifiability.analyse`).
+            model: design for this measurement model (e.g. a cell's tracker placement) with the file's
+                calibrated geometry, instead of the file's station.
 
         Raises:
-            InputError: an unknown prior kind, a covariance that does not match its names.
+            InputError: an unknown prior kind, a covariance that does not match its names, a model of
+                another robot.
         """
         from pin_kpi_oed.oed.identifiability import analyse
 
-        model, p = cm.station_model(station)
+        if model is None:
+            model, p = cm.station_model(station)
+        else:
+            if list(model.robot.joint_names) != list(cm.robot.joint_names):
+                raise InputError(f"model file: its robot's joints {list(cm.robot.joint_names)} are not those of the "
+                                 f"design's robot {list(model.robot.joint_names)}")
+            p = np.zeros(model.n_params)
+            p[:cm.joint_p.size] = cm.joint_p
         b = np.asarray(analyse(model).base if base is None else base, int)
         effects = [e for e in cm.effects if not getattr(e, "setup_specific", False)]
         thetas = [t for e, t in zip(cm.effects, cm.thetas) if not getattr(e, "setup_specific", False)]
@@ -274,6 +358,84 @@ class ExtendedModel:
 
     def _is_setup(self, i: int) -> bool:
         return self.model.layout.names[i].split(".")[0] in self.model.layout.setup_groups
+
+
+def basis_dq(effect: Any, Q: np.ndarray) -> np.ndarray:
+    """Exact ∂D/∂q of a joint-angle effect's basis D = ∂dQ/∂θ, (m, n, k, n).
+
+    Supported: :class:`~pin_kpi_oed.effects.library.GearHarmonic` and
+    :class:`~pin_kpi_oed.effects.periodic.TransmissionError` (sin/cos(o q_j): o cos, −o sin) and
+    :class:`~pin_kpi_oed.effects.coupled.LinkBending` (cos/sin of φ_a = Σ_{l ≤ a} s_l q_l).
+
+    Raises:
+        InputError: another effect (no exact q-derivative in the continuous design yet).
+    """
+    from pin_kpi_oed.effects.coupled import LinkBending
+    from pin_kpi_oed.effects.library import GearHarmonic
+
+    Q = np.atleast_2d(np.asarray(Q, float))
+    m, n = Q.shape
+    k = effect.n_params
+    out = np.zeros((m, n, k, n))
+    if isinstance(effect, GearHarmonic):
+        for i, (j, o) in enumerate(effect.pairs):
+            out[:, j, 2 * i, j] = o * np.cos(o * Q[:, j])
+            out[:, j, 2 * i + 1, j] = -o * np.sin(o * Q[:, j])
+        return out
+    if isinstance(effect, LinkBending):
+        ph = effect.angles(Q)
+        for c, (j, a, f) in enumerate(effect.terms):
+            g = -np.sin(ph[:, a]) if f == "cos" else np.cos(ph[:, a])
+            for l_ in range(a + 1):
+                out[:, j, c, effect.chain[l_]] = g * effect.signs[l_]
+        return out
+    raise InputError(f"effect '{effect.name}': the continuous design has no exact q-derivative of its basis "
+                     "(supported: gear_harmonic, transmission_error, link_bending); use pool selection")
+
+
+@dataclass
+class ExtendedDesignCriterion:
+    """A registered criterion of the extended information M = FᵀF + Σ₀⁻¹ as a function of the configurations.
+
+    The same interface as :class:`~pin_kpi_oed.oed.criteria.DesignCriterion` (``name``, ``is_ratio``,
+    ``value(Q)``, ``value_and_grad(Q)``), so the IPOPT design (eq. 24) can use it: dφ/dQ chains the
+    criterion's dφ/dF (on [F; R], the prior's rows fixed) with :meth:`ExtendedModel.jacobian_dq`.
+
+    Attributes:
+        ext: the extended model (linearisation point, effects, prior).
+        criterion: a registered name or a Criterion instance.
+        Q_work: working configurations of the KPI (rad), or None.
+    """
+
+    ext: ExtendedModel
+    criterion: Any = "kpi"
+    Q_work: np.ndarray | None = None
+
+    def __post_init__(self) -> None:
+        self.crit = get_criterion(self.criterion)
+        self.E = self.ext.kpi_jacobian(self.Q_work) if self.Q_work is not None else None
+        self.R = self.ext.prior_rows()
+
+    @property
+    def name(self) -> str:
+        """The criterion's name."""
+        return self.crit.name
+
+    @property
+    def is_ratio(self) -> bool:
+        """Whether the criterion is a positive quantity."""
+        return self.crit.is_ratio
+
+    def value(self, Q: np.ndarray) -> float:
+        """φ(Q), Q (m, n) rad."""
+        return self.crit.value(np.vstack([self.ext.jacobian(Q).reshape(-1, self.ext.nx), self.R]), self.E, None)
+
+    def value_and_grad(self, Q: np.ndarray) -> tuple[float, np.ndarray]:
+        """φ(Q) and dφ/dQ (m, n) (per rad)."""
+        F, dF = self.ext.jacobian_dq(Q)
+        m, nh, nx = F.shape
+        val, G = self.crit.value_and_grad_F(np.vstack([F.reshape(-1, nx), self.R]), self.E, None)
+        return val, np.einsum("mac,macn->mn", G[:m * nh].reshape(m, nh, nx), dF)
 
 
 # ---------------------------------------------------------------------- pool selection with a prior
@@ -379,3 +541,15 @@ def select_pool(Fp: np.ndarray, m: int, K: np.ndarray | None = None, prior_info:
         if not improved:
             break
     return PriorSelection(indices=np.array(chosen), phi=float(cur), sweeps=sweeps, time_s=time.perf_counter() - t0)
+
+
+def pool_start(ext: ExtendedModel, Q_pool: np.ndarray, criterion: str, m: int, Q_work: np.ndarray | None,
+               seed: int = 0) -> np.ndarray:
+    """Indices of m pool candidates chosen for ``criterion`` on the extended model (the IPOPT design's start).
+
+    Criteria without a pool form select by D-optimality (as the geometric pool start).
+    """
+    crit = get_criterion(criterion)
+    E = ext.kpi_jacobian(Q_work) if (crit.needs_kpi and Q_work is not None) else None
+    K = crit.pool_form(E, ext.nx) if crit.has_pool_form else None
+    return np.asarray(select_pool(ext.jacobian(Q_pool), m, K, ext.prior_info, seed=seed).indices, int)

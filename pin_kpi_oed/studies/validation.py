@@ -448,8 +448,8 @@ def extended_design_validation(model: TrackerModel, data: MeasurementSet, target
             if crit is None:
                 chosen = rng.choice(pool_rows.size, n_meas, replace=False)
             else:
-                K = get_criterion(crit).pool_form(E_ext if on == "extended" else E_ext[:, :ext.nb],
-                                                  ext.nx if on == "extended" else ext.nb)
+                K = get_criterion(crit).pool_form(E_ext[:, :ext.nb] if on == "geometric" else E_ext,
+                                                  ext.nb if on == "geometric" else ext.nx)
                 if on == "geometric":
                     chosen = select(Fp[:, :, :ext.nb], n_meas, K, seed=seed + s).indices
                 else:
