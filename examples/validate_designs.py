@@ -4,6 +4,10 @@
    covariance.
 2. Real data (if the IPA UR10 data are present): working poses held out, 60 calibration poses chosen from the
    rest by the KPI criterion, by D-optimality and at random; identify from each; real errors at the working poses.
+3. Designs over the extended model (issue 14, with --extended): Series C within the session and the directed pair
+   C -> D (set-up re-registered on 60 rows of D); random, D and A on C_p (extended), KPI geometric, KPI extended;
+   every set calibrated with geometry + the terms selected on the training pool; errors of the held-out rows
+   within 0.5 rad (joints 1-5) of 5 working configurations; paired tests. --figure writes docs/extended_designs.png.
 
 Run: python examples/validate_designs.py [--splits 20] [--series ../shared/data/ipa_ur10/Series_C] [--json out.json]
 """
@@ -33,8 +37,12 @@ def main() -> int:
     ap.add_argument("--series", type=Path, default=SERIES_C)
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--json", type=Path, default=None)
+    ap.add_argument("--extended", action="store_true", help="also the designs over the extended model (issue 14)")
+    ap.add_argument("--figure", type=Path, default=None, help="figure of the extended-model comparison (PNG)")
     a = ap.parse_args()
     out = {}
+    if a.extended:
+        out["extended"] = extended(a.series.parent, a.splits, a.seed, a.figure)
 
     # the KPI design of the KR 15 cell (60 poses), then simulated identifications of it
     cell = load_cell("kr15")
@@ -61,6 +69,44 @@ def main() -> int:
     if a.json:
         atomic_write_json(a.json, out)
     return 0
+
+
+def extended(data_dir: Path, splits: int, seed: int, figure: Path | None) -> dict:
+    """Issue 14: within Series C and C -> D, designs over the extended model (see the module docstring)."""
+    from pin_kpi_oed.data.measurements import MeasurementSet
+    from pin_kpi_oed.studies.validation import extended_design_validation
+
+    def load(s: str) -> MeasurementSet:
+        ms = import_ipa(data_dir / f"Series_{s}")
+        return MeasurementSet(ms.joint_names, ms.q, ms.position_m, source=f"Series {s}")
+
+    if not (data_dir / "Series_C").exists():
+        print(f"IPA UR10 data not found at {data_dir}: extended-model part skipped")
+        return {}
+    ur10 = TrackerModel(load_robot("ur10"), reflector_m=np.array([0.0, 0.0, 0.109]),
+                        noise=NoiseModel(sigma_xyz_m=(1e-4,) * 3))
+    methods = ("random", "D", "param", "kpi_geo", "kpi_ext", "D_geo")
+    res = {}
+    for case, (src, tgt) in {"within C": ("C", None), "C -> D": ("C", "D")}.items():
+        r = extended_design_validation(ur10, load(src), None if tgt is None else load(tgt), n_splits=splits,
+                                       seed=seed, methods=methods)
+        print(r.summary())
+        res[case] = r
+    if figure is not None:
+        from pin_kpi_oed.viz.figures import _figure, save_png
+
+        fig = _figure(5.5 * len(res), 4.0)
+        for i, (case, r) in enumerate(res.items(), 1):
+            ax = fig.add_subplot(1, len(res), i)
+            v = [r.error_m[k] * 1e3 for k in methods]
+            ax.boxplot(v)
+            ax.set_xticks(range(1, len(methods) + 1), list(methods))
+            for j, y in enumerate(v, 1):
+                ax.plot(np.full(y.size, j) + np.linspace(-0.15, 0.15, y.size), y, ".", color="0.4", ms=3)
+            ax.set_title(f"UR10 {case}: {r.nit} splits, 60 poses each")
+            ax.set_ylabel("mean held-out error near the work (mm)")
+        save_png(fig, figure)
+    return {k: r.to_dict() for k, r in res.items()}
 
 
 if __name__ == "__main__":

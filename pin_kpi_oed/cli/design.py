@@ -49,6 +49,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="first Ipopt start: pool selection (default) or the heuristic design")
     p.add_argument("--certificate", action="store_true",
                    help="bound tr(C_s) by the approximate-design relaxation over a feasible pool; report efficiencies")
+    p.add_argument("--model", default=None, help="calibrated model file: design over its geometry + effects "
+                   "(transmission_error, gear_harmonic, link_bending) instead of the nominal geometry")
+    p.add_argument("--prior", choices=["model", "tolerances", "none"], default="model",
+                   help="with --model: prior of the parameters (the file's covariance, manufacturing tolerances, none)")
     p.add_argument("--pool-size", dest="pool_size", type=int, default=5000,
                    help="feasible candidates of the certificate's pool (default 5000)")
     p.add_argument("--clearance-margin", dest="clearance_margin", type=float, default=DEFAULT_CLEARANCE_MARGIN_M,
@@ -176,6 +180,19 @@ def run(args: argparse.Namespace) -> int:
         problem = SequentialProblem(cell, Q_given, collision=collision)
     else:
         problem = DesignProblem(cell, collision=collision)
+    if getattr(args, "model", None):
+        if given_file:
+            raise InputError("--model (extended design) cannot be combined with --given yet")
+        from pin_kpi_oed.identification.model_file import load_model_file
+        from pin_kpi_oed.oed.extended import ExtendedModel
+
+        prior = getattr(args, "prior", "model") or "model"
+        problem.extended = ExtendedModel.from_calibrated_model(load_model_file(args.model), model=problem.model,
+                                                               base=problem.base,
+                                                               prior=None if prior == "none" else prior)
+        if not quiet:
+            print(f"extended model from {args.model}: {problem.extended.nb} geometric + {problem.extended.k} effect "
+                  f"parameters, prior: {prior}")
     if not quiet:
         rows = problem.coll.info.count()
         print(cell.summary())

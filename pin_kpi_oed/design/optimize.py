@@ -292,12 +292,19 @@ class DesignProblem:
         """Joints per configuration."""
         return self.cell.robot.nq
 
+    #: Optional :class:`~pin_kpi_oed.oed.extended.ExtendedModel`: design over geometry + effects with a prior.
+    extended: Any = None
+
     def criterion(self, name: str) -> DesignCriterion:
-        """The registered design criterion ``name`` on this problem.
+        """The registered design criterion ``name`` on this problem (on :attr:`extended` when set).
 
         Raises:
             InputError: unknown name.
         """
+        if self.extended is not None:
+            from pin_kpi_oed.oed.extended import ExtendedDesignCriterion
+
+            return ExtendedDesignCriterion(self.extended, name, self.cell.q_work)
         return DesignCriterion(self.model, self.base, name, self.E)
 
     def min_measurements(self) -> int:
@@ -647,7 +654,11 @@ def run_designs(cell: Cell, criteria: list[str], m: int | None = None, seed: int
         if c == "random":
             continue
         Q0 = rnd.q_meas
-        if pool is not None:
+        if pool is not None and problem.extended is not None:
+            from pin_kpi_oed.oed.extended import pool_start
+
+            Q0 = pool[0][pool_start(problem.extended, pool[0], c, m, problem.cell.q_work, seed)]
+        elif pool is not None:
             Q_pool, Fp = pool
             K = get_criterion(c).pool_form(problem.E, problem.base.size)
             Q0 = Q_pool[pool_select(Fp, m, K).indices]

@@ -35,7 +35,7 @@ if TYPE_CHECKING:
     from pin_kpi_oed.model.tracker import TrackerModel
 
 __all__ = ["information", "prior_of", "param_covariance", "covariances", "kpi_covariance", "design_covariances",
-           "kpi_covariance_kkt"]
+           "kpi_covariance_kkt", "prior_square_root"]
 
 
 def information(F: np.ndarray, prior_sigma: np.ndarray | None = None) -> np.ndarray:
@@ -158,3 +158,23 @@ def kpi_covariance_kkt(F: np.ndarray, E: np.ndarray, prior_sigma: np.ndarray | N
     rhs = np.vstack([np.eye(nv), np.zeros((ns, nv))])
     C_v = np.linalg.solve(K, rhs)[:nv]
     return C_v[:nb, :nb], C_v[nb:, nb:]
+
+
+def prior_square_root(P: np.ndarray, rtol: float = 1e-12) -> np.ndarray:
+    """Square-root rows R of a prior information matrix P = Σ₀⁻¹ (positive semi-definite): RᵀR = P.
+
+    Appending R to a weighted Jacobian F gives [F; R]ᵀ[F; R] = FᵀF + Σ₀⁻¹, the MAP information of
+    eq. 19 with a full (not only diagonal) prior covariance; directions without prior information
+    (eigenvalues below ``rtol`` of the largest) get no row.
+
+    Args:
+        P: prior information, (n, n), symmetric positive semi-definite (1/m² or 1/rad²).
+        rtol: relative eigenvalue threshold.
+
+    Returns:
+        (r, n) rows, r ≤ n.
+    """
+    P = 0.5 * (np.asarray(P, float) + np.asarray(P, float).T)
+    w, V = np.linalg.eigh(P)
+    keep = w > rtol * max(float(w.max(initial=0.0)), 0.0)
+    return (V[:, keep] * np.sqrt(w[keep])).T

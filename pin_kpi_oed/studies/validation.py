@@ -248,3 +248,250 @@ def _se3(T: np.ndarray):
 
     T = np.asarray(T)
     return pin.SE3(T[:3, :3].copy(), T[:3, 3].copy())
+
+
+# ---------------------------------------------------------------------- designs over the extended model, real data
+#: Methods of :func:`extended_design_validation`: name -> (criterion, model the criterion is evaluated on).
+EXTENDED_METHODS: dict[str, tuple[str | None, str]] = {
+    "random": (None, ""), "D": ("D", "extended"), "param": ("param", "extended"),
+    "kpi_geo": ("kpi", "geometric"), "kpi_ext": ("kpi", "extended"), "D_geo": ("D", "geometric"),
+    "kpi_bias": ("kpi", "extended+bias"),
+}
+
+
+@dataclass(kw_only=True)
+class ExtendedDesignValidation(Result):
+    """Held-out real errors near working configurations of 60-pose designs, calibrated with the extended model.
+
+    A :class:`~pin_kpi_oed.results.Result` (``status`` ``completed``, ``nit`` = splits, ``time_s``).
+
+    Attributes:
+        methods: design methods (keys of :data:`EXTENDED_METHODS`).
+        error_m: per method, the mean 3-D error of the scored rows of each split, (n_splits,) m.
+        n_scored: scored held-out rows per split; n_terms: selected effect groups per split.
+        settings: the split, radius, prior and selection settings (plain numbers, SI).
+    """
+
+    methods: list[str]
+    error_m: dict[str, np.ndarray]
+    n_scored: np.ndarray
+    n_terms: np.ndarray
+    settings: dict
+
+    def paired(self, a: str, b: str = "random") -> dict:
+        """Paired comparison of method ``a`` against ``b`` over the splits: mean relative reduction,
+        wins, Wilcoxon signed-rank and paired t-test p-values (two-sided)."""
+        from scipy import stats
+
+        x, y = self.error_m[a], self.error_m[b]
+        red = 1.0 - x / y
+        out = {"reduction_mean": float(red.mean()), "reduction_of_means": float(1.0 - x.mean() / y.mean()),
+               "wins": int(np.sum(x < y)), "n": int(x.size)}
+        if x.size >= 2 and np.any(x != y):
+            out["p_wilcoxon"] = float(stats.wilcoxon(x, y).pvalue)
+            out["p_ttest"] = float(stats.ttest_rel(x, y).pvalue)
+        return out
+
+    def to_dict(self) -> dict:
+        """Plain JSON-able dict (SI units)."""
+        return {**self.result_dict(), "settings": self.settings, "n_scored": self.n_scored.tolist(),
+                "n_terms": self.n_terms.tolist(),
+                "methods": {k: {"mean_error_m": float(v.mean()), "std_over_splits_m": float(v.std(ddof=1)),
+                                "per_split_m": v.tolist(),
+                                **({} if k == "random" else {"vs_random": self.paired(k)})}
+                            for k, v in self.error_m.items()}}
+
+    def summary(self) -> str:
+        """Readable table (mm)."""
+        s = self.settings
+        lines = [f"{s['case']}: {self.nit} splits, {self.settings['n_meas']} poses per design, scored rows within "
+                 f"{s['radius_rad']} rad (joints 1-5) of {s['n_work']} working configurations: "
+                 f"{self.n_scored.mean():.0f} rows per split; {self.n_terms.mean():.1f} effect groups selected",
+                 f"{'design':<10}{'held-out error (mm)':>24}{'vs random':>12}{'wins':>7}{'p Wilcoxon':>12}"
+                 f"{'p t-test':>10}"]
+        for k, v in self.error_m.items():
+            if k == "random":
+                lines.append(f"{k:<10}{v.mean() * 1e3:>14.4f} +- {v.std(ddof=1) * 1e3:.4f}")
+                continue
+            c = self.paired(k)
+            lines.append(f"{k:<10}{v.mean() * 1e3:>14.4f} +- {v.std(ddof=1) * 1e3:.4f}"
+                         f"{-100 * c['reduction_of_means']:>+11.1f}%{c['wins']:>5}/{c['n']}"
+                         f"{c.get('p_wilcoxon', float('nan')):>12.2g}{c.get('p_ttest', float('nan')):>10.2g}")
+        return "\n".join(lines)
+
+
+def _fit_extended(model: TrackerModel, data: MeasurementSet, base: np.ndarray, effects: list, p_ref: np.ndarray,
+                  prior_rad: float, held: list | None = None) -> np.ndarray:
+    """MAP fit of (p_B, θ): weighted residuals plus θ/σ_prior rows (rad); returns x (p_B, θ)."""
+    from scipy.optimize import least_squares
+
+    from pin_kpi_oed.identification.problem import ResidualModel
+
+    prob = ResidualModel(model, data, base, effects=effects, p_ref=p_ref, held=held or ())
+    nb, k = prob.nb, prob.k
+    R = np.hstack([np.zeros((k, nb)), np.eye(k) / prior_rad])
+
+    def fun(x):
+        return np.concatenate([prob.residual(x), R @ x])
+
+    def jac(x):
+        return np.vstack([prob.jacobian(x), R])
+
+    return least_squares(fun, prob.x0(), jac=jac, method="lm", x_scale="jac", max_nfev=200).x
+
+
+def _errors(model: TrackerModel, data: MeasurementSet, base: np.ndarray, effects: list, p_ref: np.ndarray,
+            x: np.ndarray) -> np.ndarray:
+    """3-D prediction error of every row of ``data`` (m)."""
+    from pin_kpi_oed.identification.problem import ResidualModel
+
+    prob = ResidualModel(model, data, base, effects=effects, p_ref=p_ref)
+    return np.linalg.norm(prob.evaluate(x)[0], axis=1)
+
+
+def _near(Q: np.ndarray, Q_work: np.ndarray, radius: float, joints: int) -> np.ndarray:
+    """Rows of Q within ``radius`` (Euclidean, rad, first ``joints`` joints) of any working configuration."""
+    d = np.linalg.norm(Q[:, None, :joints] - Q_work[None, :, :joints], axis=2)
+    return np.flatnonzero(d.min(axis=1) <= radius)
+
+
+def extended_design_validation(model: TrackerModel, data: MeasurementSet, target: MeasurementSet | None = None, *,
+                               n_meas: int = 60, n_splits: int = 20, test_frac: float = 0.3, n_work: int = 5,
+                               radius_rad: float = 0.5, joints: int = 5, max_terms: int = 15, max_order: int = 40,
+                               prior_rad: float = 1e-4, n_register: int = 60,
+                               methods: tuple[str, ...] = ("random", "D", "param", "kpi_geo", "kpi_ext"),
+                               seed: int = 0, show_progress: bool = True) -> ExtendedDesignValidation:
+    """Designs over the extended model on real data: choose, calibrate with the extended model, score near the work.
+
+    Per seeded split: the rows of ``data`` are split into a training pool and a held-out part
+    (``test_frac``); ``n_work`` held-out rows are the working configurations and the held-out
+    rows within ``radius_rad`` of one of them (joint space, first ``joints`` joints) are scored.
+    On the training pool the geometry is fitted and the transferable terms are selected
+    (:func:`~pin_kpi_oed.diagnosis.selection.select_terms`, ``max_terms`` groups, orders 1 …
+    ``max_order``); the extended model (:class:`~pin_kpi_oed.oed.extended.ExtendedModel`, prior σ
+    ``prior_rad`` on every effect parameter) gives each candidate's F block. Each method chooses
+    ``n_meas`` poses (random; D or A on C_p on the extended model; the KPI — the measured point at
+    the working configurations — on the geometric or on the extended model); every set is calibrated
+    with the extended model (geometry + set-up + the selected terms, MAP with the same prior) and
+    scored. With ``target`` (another series, a directed pair) the working configurations and scored
+    rows come from ``target``; its set-up is re-registered on ``n_register`` seeded rows (robot and
+    terms held) that are not scored.
+
+    Args:
+        model: nominal measurement model (robot, reflector guess, noise; position only is used).
+        data: the measured rows (the training source).
+        target: another series for the directed-pair case, or None (within-session).
+        n_meas: poses per design; n_splits: seeded splits; test_frac: held-out share.
+        n_work: working configurations per split; radius_rad: scoring radius (rad); joints: joints used.
+        max_terms, max_order: term selection; prior_rad: prior σ of the effect parameters (rad).
+        n_register: rows of ``target`` used to re-register its set-up.
+        methods: keys of :data:`EXTENDED_METHODS`.
+        seed: seed of the splits, the working configurations, the random designs and the selection.
+        show_progress: progress bar.
+
+    Returns:
+        The :class:`ExtendedDesignValidation`.
+
+    Raises:
+        InputError: unknown method, too few rows.
+    """
+    from pin_kpi_oed.diagnosis.selection import select_terms
+    from pin_kpi_oed.oed.extended import ExtendedModel, select_pool
+
+    t0 = time.perf_counter()
+    for k in methods:
+        if k not in EXTENDED_METHODS:
+            raise InputError(f"method '{k}': unknown (known: {', '.join(EXTENDED_METHODS)})")
+    if len(data) < 3 * n_meas:
+        raise InputError(f"{data.source}: {len(data)} rows are too few for {n_meas}-pose designs")
+    rng = np.random.default_rng(seed)
+    err: dict[str, list[float]] = {k: [] for k in methods}
+    n_scored, n_terms, bias = [], [], []
+    for s in progress(range(n_splits), desc="splits", disable=not show_progress):
+        perm = rng.permutation(len(data))
+        n_test = int(round(test_frac * len(data))) if target is None else 0
+        pool_rows = np.sort(perm[n_test:])
+        pool = data.subset(pool_rows)
+        geo = identify(model, pool, use_orientation=False)
+        sel = select_terms(geo, pool, max_order=max_order, max_terms=max_terms, prior_rad=prior_rad, seed=seed + s,
+                           refit=False, show_progress=False)
+        effects = list(sel.effects)
+        n_terms.append(len(sel.terms))
+        bias.append(float(sel.cv_rms_m[-1]) if len(sel.cv_rms_m) else float("nan"))
+        base = np.asarray(geo.identifiability.base, int)
+        p_ref = np.asarray(geo.p, float).copy()
+        p_ref[:6 * model.robot.nq] = 0.0  # start from the nominal robot, the set-up of the pool
+        ext = ExtendedModel(geo.model, p_ref, base, effects)
+        ext.prior_info = np.diag(np.r_[np.zeros(ext.nb), np.full(ext.k, prior_rad ** -2)])
+        Fp = ext.jacobian(pool.q)
+        # bias-aware option: the selection's held-out RMS (per axis) added to the measurement variance
+        b_axis = float(sel.cv_rms_m[-1]) / np.sqrt(3.0) if len(sel.cv_rms_m) else 0.0
+        s_row = model.noise.sigma(pool.position_m)
+        Fp_bias = Fp * (s_row / np.sqrt(s_row ** 2 + b_axis ** 2))[:, :, None]
+        if target is None:
+            test_rows = np.sort(perm[:n_test])
+            tq = data.q[test_rows]
+            work = tq[rng.choice(test_rows.size, n_work, replace=False)]
+            scored = data.subset(test_rows[_near(tq, work, radius_rad, joints)])
+            reg = None
+        else:
+            tperm = rng.permutation(len(target))
+            reg = target.subset(np.sort(tperm[:n_register]))
+            rest = np.sort(tperm[n_register:])
+            work = target.q[rest[rng.choice(rest.size, n_work, replace=False)]]
+            scored = target.subset(rest[_near(target.q[rest], work, radius_rad, joints)])
+        n_scored.append(len(scored))
+        # KPI: the measured point at the working configurations, in the pool's tracker frame
+        E_ext = ext.jacobian(work, weighted=False)[:, :3, :].reshape(-1, ext.nx)
+        for meth in methods:
+            crit, on = EXTENDED_METHODS[meth]
+            if crit is None:
+                chosen = rng.choice(pool_rows.size, n_meas, replace=False)
+            else:
+                K = get_criterion(crit).pool_form(E_ext[:, :ext.nb] if on == "geometric" else E_ext,
+                                                  ext.nb if on == "geometric" else ext.nx)
+                if on == "geometric":
+                    chosen = select(Fp[:, :, :ext.nb], n_meas, K, seed=seed + s).indices
+                else:
+                    chosen = select_pool(Fp_bias if on.endswith("bias") else Fp, n_meas, K, ext.prior_info,
+                                         seed=seed + s).indices
+            x = _fit_extended(geo.model, pool.subset(np.sort(chosen)), base, effects, p_ref, prior_rad)
+            if reg is None:
+                e = _errors(geo.model, scored, base, effects, p_ref, x)
+            else:
+                e = _register_and_score(geo.model, base, effects, p_ref, x, reg, scored)
+            err[meth].append(float(e.mean()))
+    settings = {"case": f"{data.source}" + (f" -> {target.source}" if target is not None else " (within)"),
+                "n_meas": n_meas, "test_frac": test_frac, "n_work": n_work, "radius_rad": radius_rad,
+                "joints": joints, "max_terms": max_terms, "max_order": max_order, "prior_rad": prior_rad,
+                "n_register": n_register if target is not None else 0, "seed": seed,
+                "selection_cv_rms_m": float(np.mean(bias))}
+    return ExtendedDesignValidation(methods=list(methods), error_m={k: np.array(v) for k, v in err.items()},
+                                    n_scored=np.array(n_scored), n_terms=np.array(n_terms), settings=settings,
+                                    success=True, status="completed", nit=n_splits,
+                                    message=f"{n_splits} splits, methods {', '.join(methods)}",
+                                    time_s=time.perf_counter() - t0)
+
+
+def _register_and_score(model: TrackerModel, base: np.ndarray, effects: list, p_ref: np.ndarray, x: np.ndarray,
+                        reg: MeasurementSet, scored: MeasurementSet) -> np.ndarray:
+    """Re-register the set-up (tracker pose, reflector) on ``reg`` with robot and terms held; errors of ``scored``."""
+    from pin_kpi_oed.identification.problem import ResidualModel
+
+    prob = ResidualModel(model, reg, base, effects=effects, p_ref=p_ref)
+    P, th = prob.unpack(x)
+    L = model.layout
+    setup = np.array([i for i in range(L.n) if L.names[i].split(".")[0] in L.setup_groups], int)
+    held = list(zip(effects, th))
+    from scipy.optimize import least_squares
+
+    from pin_kpi_oed.identification.identify import register_points
+
+    # Kabsch start of the tracker pose from the held robot's predictions, then the set-up by least squares
+    pr = ResidualModel(model, reg, setup, p_ref=P, held=held)
+    xs = least_squares(pr.residual, pr.x0(), jac=pr.jacobian, method="lm", max_nfev=200).x
+    P2 = P.copy()
+    P2[setup] = xs
+    del register_points
+    ps = ResidualModel(model, scored, setup, p_ref=P2, held=held)
+    return np.linalg.norm(ps.evaluate(xs)[0], axis=1)
