@@ -84,9 +84,9 @@ def main(m: int = 60) -> None:
     eff_new, eff_old = sel.efficiency(), efficiency(sel.phi, old, m)
     figure("efficiency vs capped (distinct-point) bound", eff_new, 0.95, "", eff_old,
            "vs previous uncapped bound", lower_is_better=False)
-    print(f"  bound gap: tr(C_s) {sel.phi * 1e12:.5f} um^2 vs capped bound {sel.approx.lower_bound / m * 1e12:.5f}"
-          f" um^2 ({100 * (1 - eff_new):.2f} % gap: exchange + rounding); uncapped bound "
-          f"{new_free.lower_bound / m * 1e12:.5f} um^2 ({100 * (1 - new_free.lower_bound / m / sel.phi):.2f}"
+    print(f"  bound gap: tr(C_s) {sel.phi * 1e6:.5e} mm^2 vs capped bound {sel.approx.lower_bound / m * 1e6:.5e}"
+          f" mm^2 ({100 * (1 - eff_new):.2f} % gap: exchange + rounding); uncapped bound "
+          f"{new_free.lower_bound / m * 1e6:.5e} mm^2 ({100 * (1 - new_free.lower_bound / m / sel.phi):.2f}"
           f" % gap, of which the replication the uncapped relaxation allows is "
           f"{100 * (sel.approx.lower_bound - new_free.lower_bound) / sel.approx.lower_bound:.2f} %)")
 

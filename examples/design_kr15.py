@@ -30,9 +30,9 @@ cert = certify(problem, a.measurements, pool_size=1000 if QUICK else 5000, seed=
                extra=[r.q_meas for r in results])
 heur = results[0]
 for r in results:
-    print(f"{r.criterion:<7} tr(C_s) = {r.trace_cs_m2 * 1e12:8.4f} um^2  TCP sigma = {r.tcp_sigma_m * 1e6:6.3f} um  "
-          f"vs heuristic {r.improvement_over(heur):5.1f} %  efficiency {100 * cert.efficiency(r.trace_cs_m2):5.1f} %  "
+    print(f"{r.criterion:<7} tr(C_s) = {r.trace_cs_m2 * 1e6:.4e} mm^2  TCP sigma = {r.tcp_sigma_m * 1e6:6.3f} um  "
+          f"vs random {-r.improvement_over(heur):+6.1f} %  efficiency {100 * cert.efficiency(r.trace_cs_m2):5.1f} %  "
           f"min clearance {r.min_clearance_m * 1e3:5.1f} mm  max incidence {r.max_incidence_deg:4.1f} deg  "
           f"feasible {r.feasible}")
-print(f"certificate: tr(C_s) >= {cert.lower_bound_trace_cs_m2 * 1e12:.4f} um^2 for any {a.measurements}-pose design "
+print(f"certificate: tr(C_s) >= {cert.lower_bound_trace_cs_m2 * 1e6:.4e} mm^2 for any {a.measurements}-pose design "
       f"from {cert.pool_size} feasible poses")

@@ -33,6 +33,6 @@ b = ident.base
 F = model.weighted_jacobian(p0, Q_meas)[:, :, b].reshape(-1, b.size)
 C_s = kpi_covariance(F, E[:, b])
 _, C_s_kkt = kpi_covariance_kkt(F, E[:, b])
-print(f"tr(C_s) = {np.trace(C_s) * 1e12:.4f} um^2 (KKT form: {np.trace(C_s_kkt) * 1e12:.4f} um^2)")
+print(f"tr(C_s) = {np.trace(C_s) * 1e6:.6e} mm^2 (KKT form: {np.trace(C_s_kkt) * 1e6:.6e} mm^2)")
 for name, value in evaluate_all(model, b, Q_meas, E[:, b]).items():
     print(f"  {name:<6} {value: .5g}")

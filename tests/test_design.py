@@ -102,7 +102,7 @@ def test_cli_design_writes_the_json(tmp_path, capsys):
                             no_collision=False, starts=1, max_iter=25, quiet=False)
     assert cli_design.run(ns) == 0
     text = capsys.readouterr().out
-    for col in ("criterion", "tr(C_s) mm^2", "TCP sigma um", "vs heur. %", "min clr mm", "max inc deg", "iters",
+    for col in ("criterion", "tr(C_s) mm^2", "TCP sigma um", "vs random %", "min clr mm", "max inc deg", "iters",
                 "time s"):
         assert col in text
     d = json.loads(out.read_text())
