@@ -334,3 +334,29 @@ def test_real_ur10_joint_bcd_and_transfer(tmp_path):
     assert doc["fit_quality"]["verdict"] == "poor" and "worse than the nominal" in doc["fit_quality"]["message"]
     v = doc["validation"]
     assert v["after"]["n"] == 572 and 0.65e-3 < v["after"]["mean_m"] < 0.80e-3
+
+
+def test_model_file_stores_transfer_effects_with_their_selected_terms():
+    """Selected transmission-error (joint, order) pairs, link-bending terms and drift round-trip through the model
+    file: the rebuilt effects have the same parameters and give the same joint / tool offsets."""
+    import numpy as np
+
+    from pin_kpi_oed.effects.coupled import LinkBending
+    from pin_kpi_oed.effects.drift import Drift
+    from pin_kpi_oed.effects.periodic import TransmissionError
+    from pin_kpi_oed.identification.model_file import effect_from_spec, effect_spec
+    from pin_kpi_oed.model.robot import load_robot
+
+    robot = load_robot("ur10")
+    effects = [TransmissionError(robot, pairs=[("shoulder_lift_joint", 18), ("elbow_joint", 7)]),
+               LinkBending(robot, terms=[("elbow_joint", 1, "cos"), ("shoulder_lift_joint", 0, "sin")]),
+               Drift(robot, degree=2)]
+    rng = np.random.default_rng(3)
+    Q = robot.random_q(rng, 7)
+    for eff in effects:
+        spec = json.loads(json.dumps(effect_spec(eff)))  # through JSON, as in the file
+        back = effect_from_spec(spec, robot)
+        assert type(back) is type(eff) and back.param_names() == eff.param_names()
+        th = rng.normal(size=eff.n_params) * 1e-4
+        if not getattr(eff, "setup_specific", False):
+            assert np.array_equal(back.joint_offset(th, Q)[0], eff.joint_offset(th, Q)[0])

@@ -35,9 +35,9 @@ robot's δ and effects (θ), the reflector in the tracker frame is
 a model file loaded back predicts what the fit predicted (to ~1e-15 m, tested).
 
 Effects are stored as their library class and constructor options. An effect class of the
-library (:data:`pin_kpi_oed.effects.library.EFFECTS`, ``joint_angle_table``, a subset of one)
+library (default and opt-in effects of :mod:`pin_kpi_oed.effects`, ``joint_angle_table``, a subset of one)
 is stored from its attributes; any other effect can be stored if it has ``options() -> dict``
-(JSON-able keyword arguments of its constructor) and its class is in ``EFFECTS`` under its
+(JSON-able keyword arguments of its constructor) and its class is registered under its
 ``name``. The calibrated URDF (``--urdf-out``) carries the geometry only.
 """
 
@@ -55,7 +55,8 @@ import pinocchio as pin
 
 from pin_kpi_oed.data.atomic import atomic_write_json, to_jsonable
 from pin_kpi_oed.data.measurements import MeasurementSet
-from pin_kpi_oed.effects.library import EFFECTS, JointAngleTable, SubsetEffect, predict_with_effects
+from pin_kpi_oed.effects.library import (ALL_EFFECT_NAMES, JointAngleTable, SubsetEffect, effect_class,
+                                        predict_with_effects)
 from pin_kpi_oed.errors import InputError, PinKpiOedError
 from pin_kpi_oed.model.noise import NoiseModel
 from pin_kpi_oed.model.tracker import TrackerModel
@@ -79,9 +80,21 @@ _OPTIONS = {
     "joint_compliance": lambda e: {"joints": _joint_names(e, e.joints)},
     "backlash": lambda e: {"joints": _joint_names(e, e.joints)},
     "joint_scale": lambda e: {"joints": _joint_names(e, e.joints)},
-    "gear_harmonic": lambda e: {"joints": _joint_names(e, e.joints), "orders": [int(o) for o in e.orders]},
+    "gear_harmonic": lambda e: {"pairs": [[e.robot.joint_names[int(j)], int(o)] for j, o in e.pairs]},
+    "transmission_error": lambda e: {"pairs": [[e.robot.joint_names[int(j)], int(o)] for j, o in e.pairs]},
+    "link_bending": lambda e: {"chain": _joint_names(e, e.chain),
+                               "terms": [[e.robot.joint_names[int(j)], int(a), str(f)] for j, a, f in e.terms]},
+    "drift": lambda e: {"degree": int(e.degree), "stations": e.stations,
+                        "t_ref_s": [float(t) for t in np.atleast_1d(e.t_ref_s)]},
     "thermal_expansion": lambda e: {"t_ref_c": float(e.t_ref_c)},
 }
+
+
+def _known_class(name: Any) -> type | None:
+    """The registered effect class of ``name`` (default or opt-in), or None."""
+    if str(name) not in ALL_EFFECT_NAMES:
+        return None
+    return effect_class(str(name))
 
 
 def effect_spec(effect: Any) -> dict:
@@ -98,7 +111,7 @@ def effect_spec(effect: Any) -> dict:
         return {"name": effect.name, "kind": "joint_angle_table", "options": to_jsonable(opts),
                 "param_names": list(effect.param_names())}
     name = getattr(effect, "name", type(effect).__name__)
-    cls = EFFECTS.get(name)
+    cls = _known_class(name)
     if callable(getattr(effect, "options", None)) and cls is not None and isinstance(effect, cls):
         opts = effect.options()
     elif cls is not None and type(effect) is cls and name in _OPTIONS:
@@ -125,11 +138,15 @@ def effect_from_spec(spec: dict, robot: Robot, where: str = "model file") -> Any
             eff = JointAngleTable(robot, o["joints"], [k[0] for k in knots], [k[-1] for k in knots],
                                   step_rad=max(min(float(k[1] - k[0]) for k in knots), 1e-12))
             eff.knots = knots
-        elif kind in EFFECTS:
-            eff = EFFECTS[kind](robot, **dict(spec.get("options") or {}))
+        elif _known_class(kind) is not None:
+            opts = dict(spec.get("options") or {})
+            for key in ("pairs", "terms"):  # JSON lists back to the tuples the constructors take
+                if opts.get(key) is not None:
+                    opts[key] = [tuple(t) for t in opts[key]]
+            eff = _known_class(kind)(robot, **opts)
         else:
             raise InputError(f"{where}: effect '{spec.get('name')}': unknown kind '{kind}' (known: "
-                             f"{', '.join(list(EFFECTS) + ['joint_angle_table', 'subset'])})")
+                             f"{', '.join(list(ALL_EFFECT_NAMES) + ['joint_angle_table', 'subset'])})")
     except (KeyError, TypeError, ValueError, IndexError) as exc:
         raise InputError(f"{where}: effect '{spec.get('name')}': bad options ({exc})") from None
     names = list(eff.param_names())
