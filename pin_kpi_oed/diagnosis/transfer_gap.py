@@ -82,6 +82,11 @@ def predicted_sigma(V: np.ndarray, S: np.ndarray) -> np.ndarray:
     return np.sqrt(np.clip(np.sum(np.asarray(V, float) * np.asarray(S, float) ** 2, axis=1), 0.0, None))
 
 
+def _f3(x: float) -> str:
+    """A length (m) as mm with 3 decimals, "-" when not finite."""
+    return "-" if not np.isfinite(x) else f"{x * 1e3:.3f}"
+
+
 def _rms(e: np.ndarray) -> float:
     return float(np.sqrt(np.mean(e ** 2))) if e.size else float("nan")
 
@@ -139,21 +144,18 @@ def _unregistered_rms(result: Any, ho_data: MeasurementSet, Qv: np.ndarray) -> f
 
 def _gap_texts(g: _GapNumbers, final_label: str) -> tuple[str, str, str]:
     """The coverage, predicted-vs-observed and registration sentences of the reason (mm, µm)."""
-    um, mm = 1e6, 1e3
-
-    def f3(x: float) -> str:
-        return "-" if not np.isfinite(x) else f"{x * mm:.3f}"
+    um = 1e6
 
     cov_txt = (f"{100 * g.overall:.0f}% of the validation rows within {COVERAGE_TOL_RAD} rad of a training angle on "
-               f"every joint; held-out RMS {f3(g.rms)} mm (inside the coverage {f3(g.rms_in)}, outside "
-               f"{f3(g.rms_out)} mm); training RMS {f3(g.train_rms)} mm")
+               f"every joint; held-out RMS {_f3(g.rms)} mm (inside the coverage {_f3(g.rms_in)}, outside "
+               f"{_f3(g.rms_out)} mm); training RMS {_f3(g.train_rms)} mm")
     model_txt = f" ({final_label})" if final_label else ""
     pred_txt = (f"predicted TCP sigma at the validation configurations{model_txt} {g.sp_rms * um:.1f} µm RMS "
                 f"(inside {'-' if not np.isfinite(g.sp_in) else f'{g.sp_in * um:.1f}'}, outside "
                 f"{'-' if not np.isfinite(g.sp_out) else f'{g.sp_out * um:.1f}'} µm) vs observed {g.rms * um:.1f} µm "
                 f"RMS ({g.excess * um:.1f} µm above the noise floor {g.floor_m * um:.1f} µm)")
-    reg_txt = (f"; in the training set-up {f3(g.unreg)} mm before re-registration (the set-up changed too), the "
-               f"training session itself is modelled to {f3(g.within)} mm" if g.registered else "")
+    reg_txt = (f"; in the training set-up {_f3(g.unreg)} mm before re-registration (the set-up changed too), the "
+               f"training session itself is modelled to {_f3(g.within)} mm" if g.registered else "")
     return cov_txt, pred_txt, reg_txt
 
 
@@ -176,15 +178,11 @@ def _classify(g: _GapNumbers, texts: tuple[str, str, str], joints: Sequence[dict
               ho_rows: np.ndarray, n_rows: int) -> tuple[str, str, dict]:
     """(classification, reason, poses to add) by the rules of the module docstring."""
     cov_txt, pred_txt, reg_txt = texts
-    mm = 1e3
-
-    def f3(x: float) -> str:
-        return "-" if not np.isfinite(x) else f"{x * mm:.3f}"
 
     setup_gain = g.registered and g.unreg >= SETUP_GAIN_FACTOR * g.rms
     if setup_gain and g.rms <= SETUP_TRAIN_FACTOR * g.within:
-        why = (f"re-registering the set-up removes most of the error ({f3(g.unreg)} -> {f3(g.rms)} mm, the training "
-               f"session itself is modelled to {f3(g.within)} mm); {cov_txt}; {pred_txt}")
+        why = (f"re-registering the set-up removes most of the error ({_f3(g.unreg)} -> {_f3(g.rms)} mm, the training "
+               f"session itself is modelled to {_f3(g.within)} mm); {cov_txt}; {pred_txt}")
         return "set-up change", why, {}
     if g.overall < EXTRAPOLATION_COVERAGE or (g.excess > 0 and g.sp_rms >= PREDICTED_SHARE * g.excess):
         what = ("validation configurations mostly outside the training coverage" if g.overall < EXTRAPOLATION_COVERAGE
