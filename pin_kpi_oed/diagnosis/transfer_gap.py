@@ -30,7 +30,8 @@ Units: SI (m, rad); the text prints mm and µm.
 
 from __future__ import annotations
 
-from typing import Any
+from dataclasses import dataclass
+from typing import Any, Sequence
 
 import numpy as np
 
@@ -81,8 +82,116 @@ def predicted_sigma(V: np.ndarray, S: np.ndarray) -> np.ndarray:
     return np.sqrt(np.clip(np.sum(np.asarray(V, float) * np.asarray(S, float) ** 2, axis=1), 0.0, None))
 
 
+def _f3(x: float) -> str:
+    """A length (m) as mm with 3 decimals, "-" when not finite."""
+    return "-" if not np.isfinite(x) else f"{x * 1e3:.3f}"
+
+
 def _rms(e: np.ndarray) -> float:
     return float(np.sqrt(np.mean(e ** 2))) if e.size else float("nan")
+
+
+@dataclass
+class _GapNumbers:
+    """The scalar figures of the transfer section (SI units: m; ``overall`` a share of rows)."""
+
+    overall: float
+    rms: float
+    rms_in: float
+    rms_out: float
+    train_rms: float
+    within: float
+    unreg: float
+    sp_rms: float
+    sp_in: float
+    sp_out: float
+    excess: float
+    floor_m: float
+    registered: bool
+
+
+def _coverage(robot: Any, train: MeasurementSet, ho_data: MeasurementSet
+              ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Aligned training / validation configurations (rad) and which validation angles a training angle covers."""
+    from pin_kpi_oed.diagnosis.selection import covered_rows
+    from pin_kpi_oed.identification.problem import align_data
+
+    Qt, Qv = align_data(robot, train), align_data(robot, ho_data)
+    return Qt, Qv, covered_rows(Qt, Qv, COVERAGE_TOL_RAD)
+
+
+def _joint_ranges(joint_names: Sequence[str], Qt: np.ndarray, Qv: np.ndarray, cov: np.ndarray) -> list[dict]:
+    """Per joint: wrapped training / validation ranges, coverage and the uncovered validation range (rad)."""
+    per_joint = cov.mean(axis=0)
+    joints = []
+    for j, n in enumerate(joint_names):
+        tlo, thi = circular_range(Qt[:, j])
+        vlo, vhi = circular_range(Qv[:, j])
+        ulo, uhi = circular_range(Qv[~cov[:, j], j])
+        joints.append({"joint": n, "train_min": tlo, "train_max": thi, "validate_min": vlo, "validate_max": vhi,
+                       "coverage": float(per_joint[j]), "uncovered_min": ulo, "uncovered_max": uhi,
+                       "n_uncovered": int(np.sum(~cov[:, j]))})
+    return joints
+
+
+def _unregistered_rms(result: Any, ho_data: MeasurementSet, Qv: np.ndarray) -> float:
+    """Held-out 3-D RMS (m) of the training fit in the training set-up, before any re-registration."""
+    from pin_kpi_oed.identification.identify import predict
+
+    Y = predict(result.model, result.p, Qv, aux=ho_data)[:, :3]
+    return _rms(np.linalg.norm(ho_data.position_m - Y, axis=1))
+
+
+def _gap_texts(g: _GapNumbers, final_label: str) -> tuple[str, str, str]:
+    """The coverage, predicted-vs-observed and registration sentences of the reason (mm, µm)."""
+    um = 1e6
+
+    cov_txt = (f"{100 * g.overall:.0f}% of the validation rows within {COVERAGE_TOL_RAD} rad of a training angle on "
+               f"every joint; held-out RMS {_f3(g.rms)} mm (inside the coverage {_f3(g.rms_in)}, outside "
+               f"{_f3(g.rms_out)} mm); training RMS {_f3(g.train_rms)} mm")
+    model_txt = f" ({final_label})" if final_label else ""
+    pred_txt = (f"predicted TCP sigma at the validation configurations{model_txt} {g.sp_rms * um:.1f} µm RMS "
+                f"(inside {'-' if not np.isfinite(g.sp_in) else f'{g.sp_in * um:.1f}'}, outside "
+                f"{'-' if not np.isfinite(g.sp_out) else f'{g.sp_out * um:.1f}'} µm) vs observed {g.rms * um:.1f} µm "
+                f"RMS ({g.excess * um:.1f} µm above the noise floor {g.floor_m * um:.1f} µm)")
+    reg_txt = (f"; in the training set-up {_f3(g.unreg)} mm before re-registration (the set-up changed too), the "
+               f"training session itself is modelled to {_f3(g.within)} mm" if g.registered else "")
+    return cov_txt, pred_txt, reg_txt
+
+
+def _poses_to_add(joints: Sequence[dict], use_sp: np.ndarray, ho_rows: np.ndarray, n_rows: int) -> dict:
+    """Joint ranges to measure and the validation rows (1-based) with the largest predicted σ (m)."""
+    um = 1e6
+    worst = np.argsort(-use_sp)[:N_WORST]
+    ranges = [{"joint": j["joint"], "min": j["uncovered_min"], "max": j["uncovered_max"],
+               "n_rows": j["n_uncovered"]} for j in joints if j["n_uncovered"] > 0.05 * n_rows]
+    return {"joint_ranges": ranges, "rows": (np.asarray(ho_rows)[worst] + 1).tolist(),
+            "rows_sigma_m": use_sp[worst].tolist(),
+            "text": ("add training poses covering " + (", ".join(
+                f"{r['joint']} {r['min']:.2f} .. {r['max']:.2f} rad" for r in ranges) or "the validation angles")
+                + f"; or measure first the {len(worst)} validation configurations with the largest predicted "
+                  f"sigma ({use_sp[worst[0]] * um:.0f} .. {use_sp[worst[-1]] * um:.0f} µm): rows "
+                + ", ".join(str(r) for r in (np.asarray(ho_rows)[worst] + 1)))}
+
+
+def _classify(g: _GapNumbers, texts: tuple[str, str, str], joints: Sequence[dict], use_sp: np.ndarray,
+              ho_rows: np.ndarray, n_rows: int) -> tuple[str, str, dict]:
+    """(classification, reason, poses to add) by the rules of the module docstring."""
+    cov_txt, pred_txt, reg_txt = texts
+
+    setup_gain = g.registered and g.unreg >= SETUP_GAIN_FACTOR * g.rms
+    if setup_gain and g.rms <= SETUP_TRAIN_FACTOR * g.within:
+        why = (f"re-registering the set-up removes most of the error ({_f3(g.unreg)} -> {_f3(g.rms)} mm, the training "
+               f"session itself is modelled to {_f3(g.within)} mm); {cov_txt}; {pred_txt}")
+        return "set-up change", why, {}
+    if g.overall < EXTRAPOLATION_COVERAGE or (g.excess > 0 and g.sp_rms >= PREDICTED_SHARE * g.excess):
+        what = ("validation configurations mostly outside the training coverage" if g.overall < EXTRAPOLATION_COVERAGE
+                else "the parameters are poorly determined at the validation configurations")
+        return "extrapolation", f"{what}: {cov_txt}; {pred_txt}{reg_txt}", _poses_to_add(joints, use_sp, ho_rows,
+                                                                                         n_rows)
+    why = (f"validation mostly inside the training coverage and the model is confident there, yet the error is "
+           f"above the training fit: {cov_txt}; {pred_txt}{reg_txt}")
+    return "unmodelled effect", why, {}
 
 
 def transfer_section(result: Any, train: MeasurementSet, ho_data: MeasurementSet, ho_rows: np.ndarray,
@@ -109,83 +218,29 @@ def transfer_section(result: Any, train: MeasurementSet, ho_data: MeasurementSet
         coverage, the uncovered validation range), coverage numbers, RMS inside / outside, the
         predicted σ (RMS, max) vs the observed RMS, ``poses_to_add`` (extrapolation only).
     """
-    from pin_kpi_oed.diagnosis.selection import covered_rows
-    from pin_kpi_oed.identification.identify import predict
-    from pin_kpi_oed.identification.problem import align_data
-
     robot = result.model.robot
-    Qt, Qv = align_data(robot, train), align_data(robot, ho_data)
-    cov = covered_rows(Qt, Qv, COVERAGE_TOL_RAD)
-    per_joint = cov.mean(axis=0)
+    Qt, Qv, cov = _coverage(robot, train, ho_data)
     inside = np.all(cov, axis=1)
-    overall = float(inside.mean())
     use_R = R if final_R is None else final_R
     use_sp = sigma_pred if final_sigma_pred is None else final_sigma_pred
     e = np.linalg.norm(use_R, axis=1)
-    rms, rms_in, rms_out = _rms(e), _rms(e[inside]), _rms(e[~inside])
+    rms = _rms(e)
     train_rms = float(result.rms_m)
-    within = train_rms if within_rms_m is None else float(within_rms_m)
-    unreg = float("nan")
-    if registered:
-        Y = predict(result.model, result.p, Qv, aux=ho_data)[:, :3]
-        unreg = _rms(np.linalg.norm(ho_data.position_m - Y, axis=1))
-    joints = []
-    for j, n in enumerate(robot.joint_names):
-        tlo, thi = circular_range(Qt[:, j])
-        vlo, vhi = circular_range(Qv[:, j])
-        ulo, uhi = circular_range(Qv[~cov[:, j], j])
-        joints.append({"joint": n, "train_min": tlo, "train_max": thi, "validate_min": vlo, "validate_max": vhi,
-                       "coverage": float(per_joint[j]), "uncovered_min": ulo, "uncovered_max": uhi,
-                       "n_uncovered": int(np.sum(~cov[:, j]))})
-    sp_rms = _rms(use_sp)
-    sp_in, sp_out = _rms(use_sp[inside]), _rms(use_sp[~inside])
-    excess = float(np.sqrt(max(rms ** 2 - floor_m ** 2, 0.0)))
-    um, mm = 1e6, 1e3
-
-    def f3(x: float) -> str:
-        return "-" if not np.isfinite(x) else f"{x * mm:.3f}"
-
-    cov_txt = (f"{100 * overall:.0f}% of the validation rows within {COVERAGE_TOL_RAD} rad of a training angle on "
-               f"every joint; held-out RMS {f3(rms)} mm (inside the coverage {f3(rms_in)}, outside {f3(rms_out)} mm); "
-               f"training RMS {f3(train_rms)} mm")
-    model_txt = f" ({final_label})" if final_label else ""
-    pred_txt = (f"predicted TCP sigma at the validation configurations{model_txt} {sp_rms * um:.1f} µm RMS "
-                f"(inside {'-' if not np.isfinite(sp_in) else f'{sp_in * um:.1f}'}, outside "
-                f"{'-' if not np.isfinite(sp_out) else f'{sp_out * um:.1f}'} µm) vs observed {rms * um:.1f} µm RMS ({excess * um:.1f} µm above the noise "
-                f"floor {floor_m * um:.1f} µm)")
-    reg_txt = (f"; in the training set-up {f3(unreg)} mm before re-registration (the set-up changed too), the "
-               f"training session itself is modelled to {f3(within)} mm" if registered else "")
-    poses: dict = {}
-    setup_gain = registered and unreg >= SETUP_GAIN_FACTOR * rms
-    if setup_gain and rms <= SETUP_TRAIN_FACTOR * within:
-        cls = "set-up change"
-        why = (f"re-registering the set-up removes most of the error ({f3(unreg)} -> {f3(rms)} mm, the training "
-               f"session itself is modelled to {f3(within)} mm); {cov_txt}; {pred_txt}")
-    elif overall < EXTRAPOLATION_COVERAGE or (excess > 0 and sp_rms >= PREDICTED_SHARE * excess):
-        cls = "extrapolation"
-        what = ("validation configurations mostly outside the training coverage" if overall < EXTRAPOLATION_COVERAGE
-                else "the parameters are poorly determined at the validation configurations")
-        why = f"{what}: {cov_txt}; {pred_txt}{reg_txt}"
-        worst = np.argsort(-use_sp)[:N_WORST]
-        ranges = [{"joint": j["joint"], "min": j["uncovered_min"], "max": j["uncovered_max"],
-                   "n_rows": j["n_uncovered"]} for j in joints if j["n_uncovered"] > 0.05 * len(ho_data)]
-        poses = {"joint_ranges": ranges, "rows": (np.asarray(ho_rows)[worst] + 1).tolist(),
-                 "rows_sigma_m": use_sp[worst].tolist(),
-                 "text": ("add training poses covering " + (", ".join(
-                     f"{r['joint']} {r['min']:.2f} .. {r['max']:.2f} rad" for r in ranges) or "the validation angles")
-                     + f"; or measure first the {len(worst)} validation configurations with the largest predicted "
-                       f"sigma ({use_sp[worst[0]] * um:.0f} .. {use_sp[worst[-1]] * um:.0f} µm): rows "
-                     + ", ".join(str(r) for r in (np.asarray(ho_rows)[worst] + 1)))}
-    else:
-        cls = "unmodelled effect"
-        why = (f"validation mostly inside the training coverage and the model is confident there, yet the error is "
-               f"above the training fit: {cov_txt}; {pred_txt}{reg_txt}")
+    g = _GapNumbers(overall=float(inside.mean()), rms=rms, rms_in=_rms(e[inside]), rms_out=_rms(e[~inside]),
+                    train_rms=train_rms, within=train_rms if within_rms_m is None else float(within_rms_m),
+                    unreg=_unregistered_rms(result, ho_data, Qv) if registered else float("nan"),
+                    sp_rms=_rms(use_sp), sp_in=_rms(use_sp[inside]), sp_out=_rms(use_sp[~inside]),
+                    excess=float(np.sqrt(max(rms ** 2 - floor_m ** 2, 0.0))), floor_m=floor_m,
+                    registered=bool(registered))
+    joints = _joint_ranges(robot.joint_names, Qt, Qv, cov)
+    cls, why, poses = _classify(g, _gap_texts(g, final_label), joints, use_sp, ho_rows, len(ho_data))
     return {"classification": cls, "reason": why, "joints": joints, "coverage_tol_rad": COVERAGE_TOL_RAD,
-            "coverage_per_joint": [float(c) for c in per_joint], "coverage_all_joints": overall,
-            "heldout_rms_m": rms, "heldout_rms_inside_m": rms_in, "heldout_rms_outside_m": rms_out,
+            "coverage_per_joint": [float(c) for c in cov.mean(axis=0)], "coverage_all_joints": g.overall,
+            "heldout_rms_m": rms, "heldout_rms_inside_m": g.rms_in, "heldout_rms_outside_m": g.rms_out,
             "heldout_rms_geometric_m": _rms(np.linalg.norm(R, axis=1)), "model": final_label or "geometry",
-            "train_rms_m": train_rms, "within_session_rms_m": within, "rms_before_registration_m": unreg, "registered": bool(registered),
-            "predicted_sigma_rms_m": sp_rms, "predicted_sigma_max_m": float(np.max(use_sp)) if use_sp.size else None,
-            "predicted_sigma_inside_m": sp_in, "predicted_sigma_outside_m": sp_out,
-            "noise_floor_m": floor_m, "observed_excess_m": excess,
+            "train_rms_m": train_rms, "within_session_rms_m": g.within, "rms_before_registration_m": g.unreg,
+            "registered": bool(registered),
+            "predicted_sigma_rms_m": g.sp_rms, "predicted_sigma_max_m": float(np.max(use_sp)) if use_sp.size else None,
+            "predicted_sigma_inside_m": g.sp_in, "predicted_sigma_outside_m": g.sp_out,
+            "noise_floor_m": floor_m, "observed_excess_m": g.excess,
             "poses_to_add": poses}
