@@ -17,7 +17,9 @@ from .conftest import REPO
 
 
 def test_four_arm_study_on_local_dask_cluster(tmp_path):
-    s = study.notional_study(tmp_path, m=20, seed=0, arms=4, workers=2, scheduler="local-dask")
+    from pin_kpi_oed.viz.figures import plot_notional
+
+    s = study.notional_study(tmp_path, m=20, seed=0, arms=4, workers=2, scheduler="local-dask", plot=plot_notional)
     assert s["arms"] == 4 and not s["failed_arms"]
     assert s["all_collision_free"]
     assert s["mean_improvement_vs_heuristic"] > 0.2  # the KPI design beats random poses on every arm

@@ -11,6 +11,7 @@ from pin_kpi_oed.errors import InputError
 def run(args: argparse.Namespace) -> int:
     """Run a study and print its table."""
     from pin_kpi_oed.studies import study
+    from pin_kpi_oed.viz.figures import plot_notional, plot_study_figure7
 
     if args.measurements < 9:
         raise InputError(f"--measurements {args.measurements}: at least 9 are needed to identify 27 parameters")
@@ -18,13 +19,13 @@ def run(args: argparse.Namespace) -> int:
     if args.which == "kuka":
         seeds = tuple(range(args.seed, args.seed + args.seeds))
         s = study.kuka_study(out, m=args.measurements, seeds=seeds, workers=args.workers, scheduler=args.scheduler,
-                             n_starts=args.starts)
+                             n_starts=args.starts, plot=plot_study_figure7)
         print(study.format_kuka_table(s))
         print(f"all designs with collision avoidance collision-free: {s['all_collision_free']}; "
               f"wall time {s['wall_time_s']:.0f} s; results in {out}")
     else:
         s = study.notional_study(out, m=args.measurements, seed=args.seed, arms=args.arms, workers=args.workers,
-                                 scheduler=args.scheduler, n_starts=args.starts)
+                                 scheduler=args.scheduler, n_starts=args.starts, plot=plot_notional)
         print(study.format_notional_summary(s))
         print(f"results in {out} (summary.json, arms.csv, notional90.png)")
     return 0

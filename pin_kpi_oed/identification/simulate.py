@@ -25,6 +25,7 @@ import numpy as np
 import pinocchio as pin
 from scipy.spatial.transform import Rotation
 
+from pin_kpi_oed.model.tolerances import Tolerances
 from pin_kpi_oed.errors import InputError
 from pin_kpi_oed.identification.identify import predict
 from pin_kpi_oed.data.measurements import MeasurementSet
@@ -33,46 +34,6 @@ from pin_kpi_oed.model.tracker import TrackerModel
 from pin_kpi_oed.model.robot import Robot
 
 __all__ = ["Tolerances", "random_truth", "default_tracker_pose", "simulate", "truth_to_dict"]
-
-
-@dataclass
-class Tolerances:
-    """Standard deviations of the simulated geometric errors (SI).
-
-    Attributes:
-        joint_translation_m: per joint-placement translation component (m).
-        joint_rotation_rad: per joint-placement rotation component (rad).
-        tracker_translation_m: deviation of the tracker pose from its nominal value (m).
-        tracker_rotation_rad: same, rotation (rad).
-        reflector_m: deviation of the reflector offset from its nominal value (m).
-        probe_rotation_rad: deviation of the probe orientation (6-D only, rad).
-    """
-
-    joint_translation_m: float = 5e-4
-    joint_rotation_rad: float = 1e-3
-    tracker_translation_m: float = 0.0
-    tracker_rotation_rad: float = 0.0
-    reflector_m: float = 0.0
-    probe_rotation_rad: float = 0.0
-
-    def __post_init__(self) -> None:
-        for k, v in asdict(self).items():
-            if not (np.isfinite(v) and v >= 0):
-                raise InputError(f"tolerance {k} must be a finite value >= 0, got {v}")
-
-    def sigma_vector(self, model: TrackerModel) -> np.ndarray:
-        """Standard deviation of every raw parameter of ``model`` (m or rad)."""
-        L = model.layout
-        s = np.zeros(L.n)
-        for j in range(L.n_joints):
-            sl = L.joint_slice(j)
-            s[sl.start:sl.start + 3] = self.joint_translation_m
-            s[sl.start + 3:sl.stop] = self.joint_rotation_rad
-        s[L.tracker.start:L.tracker.start + 3] = self.tracker_translation_m
-        s[L.tracker.start + 3:L.tracker.stop] = self.tracker_rotation_rad
-        s[L.reflector] = self.reflector_m
-        s[L.probe] = self.probe_rotation_rad
-        return s
 
 
 def random_truth(model: TrackerModel, tol: Tolerances | None = None, seed: int = 0,

@@ -35,7 +35,7 @@ from pin_kpi_oed.errors import IdentifiabilityError, InputError
 from pin_kpi_oed.effects.library import effect_jacobian, sum_joint_offsets
 from pin_kpi_oed.oed.covariance import prior_square_root
 from pin_kpi_oed.oed.criteria import get_criterion
-from pin_kpi_oed.oed.pool import PoolSelection, select
+from pin_kpi_oed.oed.pool import PoolSelection, pool_phi, select
 
 __all__ = ["ExtendedModel", "ExtendedDesignCriterion", "basis_dq", "select_pool", "PriorSelection", "pool_phi",
            "pool_start"]
@@ -344,7 +344,7 @@ class ExtendedModel:
                 P[np.ix_(ii, ii)] = np.linalg.pinv(cov[np.ix_(jj, jj)], rcond=1e-12, hermitian=True)
             return P
         if kind == "tolerances":
-            from pin_kpi_oed.identification.simulate import Tolerances
+            from pin_kpi_oed.model.tolerances import Tolerances
 
             tol = Tolerances() if tolerances is None else tolerances
             s = tol.sigma_vector(self.model)[self.base]
@@ -453,18 +453,6 @@ class PriorSelection:
     phi: float
     sweeps: int
     time_s: float
-
-
-def pool_phi(M: np.ndarray, K: np.ndarray | None) -> float:
-    """φ(M): tr(K M⁻¹ Kᵀ) (A-type) or −log det M (K None); inf when M is singular."""
-    try:
-        L = np.linalg.cholesky(M)
-    except np.linalg.LinAlgError:
-        return np.inf
-    if K is None:
-        return float(-2.0 * np.sum(np.log(np.diag(L))))
-    X = np.linalg.solve(L, K.T)
-    return float(np.sum(X * X))
 
 
 def _gains(Fp: np.ndarray, Minv: np.ndarray, K: np.ndarray | None, sign: float) -> np.ndarray:

@@ -43,7 +43,7 @@ from pin_kpi_oed.results import Result
 from pin_kpi_oed.threads import limit_threads
 
 
-def _phi(M: np.ndarray, K: np.ndarray | None) -> float:
+def pool_phi(M: np.ndarray, K: np.ndarray | None) -> float:
     """φ for information M: tr(K M⁻¹ Kᵀ) (A-type) or −log det M (K is None)."""
     try:
         L = np.linalg.cholesky(M)
@@ -132,7 +132,7 @@ def _multiplicative(Fp: np.ndarray, w: np.ndarray, K: np.ndarray | None, tol: fl
     for it in range(1, max_iter + 1):
         M = _info_w(Fp, w)
         d = _d(Fp, M, K)
-        target = _phi(M, K) if K is not None else nb
+        target = pool_phi(M, K) if K is not None else nb
         if d.max() / target - 1.0 < tol:
             break
         w = w * np.sqrt(d / target) if K is not None else w * (d / nb)
@@ -259,7 +259,7 @@ def _newton_simplex(Fa: np.ndarray, w: np.ndarray, K: np.ndarray | None, tol: fl
 def _d_all(Fp: np.ndarray, w: np.ndarray, K: np.ndarray | None, chunk: int = 20000) -> tuple[float, np.ndarray]:
     """φ(w) and the directional derivatives d_i for every candidate, in chunks (bounded memory)."""
     M = _info_w(Fp, w) if np.count_nonzero(w) == w.size else _info_w(Fp[w > 0], w[w > 0])
-    phi = _phi(M, K)
+    phi = pool_phi(M, K)
     L = np.linalg.cholesky(M)
     nb = Fp.shape[-1]
     R = np.linalg.solve(L.T, np.linalg.solve(L, K.T)) if K is not None else np.linalg.inv(L).T  # (nb, ns | nb)
@@ -311,7 +311,7 @@ def approximate_design(Fp: np.ndarray, K: np.ndarray | None = None, tol: float =
     if mc > N:
         raise InputError(f"cannot choose {mc} measurements from a pool of {N} candidates")
     w = np.full(N, 1.0 / N)
-    phi0 = _phi(_info_w(Fp, w), K)
+    phi0 = pool_phi(_info_w(Fp, w), K)
     if not np.isfinite(phi0):
         raise IdentifiabilityError("the candidate pool does not identify the parameters: sample more, or more "
                                    "varied, feasible configurations")
@@ -377,7 +377,7 @@ def _relax_multiplicative(Fp: np.ndarray, w: np.ndarray, K: np.ndarray | None, t
     while total < max_iter:
         M = _info_w(Fp, w)
         d = _d(Fp, M, K)
-        target = _phi(M, K) if K is not None else nb
+        target = pool_phi(M, K) if K is not None else nb
         if d.max() / target - 1.0 < tol:
             break
         active = np.union1d(np.argsort(-w)[:k], np.argsort(-d)[:k // 5])
@@ -437,7 +437,7 @@ def _exchange(Fp: np.ndarray, chosen: np.ndarray, K: np.ndarray | None, ridge: f
         return F.T @ F + reg
 
     M = info_of(chosen)
-    cur = _phi(M, K)
+    cur = pool_phi(M, K)
     FpT = np.ascontiguousarray(Fp.transpose(0, 2, 1))
     F2 = Fp.reshape(N * nh, nb)
     sweeps = 0
@@ -467,7 +467,7 @@ def _exchange(Fp: np.ndarray, chosen: np.ndarray, K: np.ndarray | None, ridge: f
                 in_set[out], in_set[best] = False, True
                 chosen[pos] = best
                 M = M_minus + FpT[best] @ Fp[best]
-                cur = _phi(M, K)
+                cur = pool_phi(M, K)
                 improved = True
         if not improved:
             break
@@ -508,10 +508,10 @@ def select(Fp: np.ndarray, m: int, K: np.ndarray | None = None, tol: float = 1e-
     sub = Fp[cand]
     best, best_phi, sweeps = starts[0], np.inf, 0
     for s0 in starts:
-        ridge = 0.0 if np.isfinite(_phi(_info(sub, s0), K)) else 1e-12
+        ridge = 0.0 if np.isfinite(pool_phi(_info(sub, s0), K)) else 1e-12
         idx, nsw = _exchange(sub, s0, K, ridge)
         sweeps += nsw
-        val = _phi(_info(sub, idx), K)
+        val = pool_phi(_info(sub, idx), K)
         if val < best_phi:
             best, best_phi = idx, val
     return PoolSelection(indices=cand[best], phi=float(best_phi), approx=approx, success=approx.success,
@@ -541,13 +541,13 @@ def detmax(Fp: np.ndarray, m: int, K: np.ndarray | None = None, seed: int = 0) -
     """DETMAX-style baseline: exchange from a random m-subset (seeded)."""
     rng = np.random.default_rng(seed)
     start = rng.choice(Fp.shape[0], size=m, replace=False)
-    ridge = 0.0 if np.isfinite(_phi(_info(Fp, start), K)) else 1e-12
+    ridge = 0.0 if np.isfinite(pool_phi(_info(Fp, start), K)) else 1e-12
     return _exchange(Fp, start, K, ridge)[0]
 
 
 def exact_phi(Fp: np.ndarray, idx: np.ndarray, K: np.ndarray | None = None) -> float:
     """φ of an exact design (the chosen candidates, information not normalised)."""
-    return _phi(_info(Fp, np.asarray(idx)), K)
+    return pool_phi(_info(Fp, np.asarray(idx)), K)
 
 
 def efficiency(phi_exact: float, approx: ApproximateDesign, m: int) -> float:

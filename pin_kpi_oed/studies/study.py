@@ -26,7 +26,7 @@ import time
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, Callable
 
 import numpy as np
 import pinocchio as pin
@@ -261,8 +261,12 @@ def _trace(rec: dict, crit: str) -> float:
 
 
 def notional_study(out_dir: Path, m: int = 60, seed: int = 0, arms: int | None = None, workers: int | None = None,
-                   scheduler: str | None = None, n_starts: int = 1) -> dict:
+                   scheduler: str | None = None, n_starts: int = 1,
+                   plot: Callable[[list[dict], Path], None] | None = None) -> dict:
     """The 90 notional arms (or the first ``arms`` of them): per arm heuristic, A on C_p, A on C_s.
+
+    ``plot(rows, path)`` draws Figure 8 (``notional90.png``) when given, e.g.
+    :func:`pin_kpi_oed.viz.figures.plot_notional` (the study itself draws nothing: viz is downstream).
 
     Writes ``summary.json``, ``arms.csv`` and ``notional90.png`` to ``out_dir``.
     """
@@ -293,8 +297,8 @@ def notional_study(out_dir: Path, m: int = 60, seed: int = 0, arms: int | None =
                      "all_feasible": feas, "wall_time_s": r["wall_time_s"]})
     summary = _notional_summary(rows, failed, m, seed, time.perf_counter() - t0, computed)
     _write_csv(out_dir / "arms.csv", rows)
-    if rows:
-        _plot_notional(rows, out_dir / "notional90.png")
+    if rows and plot is not None:
+        plot(rows, out_dir / "notional90.png")
     atomic_write_json(out_dir / "summary.json", summary)
     return summary
 
@@ -330,41 +334,13 @@ def _write_csv(path: Path, rows: list[dict]) -> None:
     atomic_write_text(path, "\n".join(lines) + "\n")
 
 
-def _plot_notional(rows: list[dict], path: Path) -> None:
-    """Figure-8-like: improvement of the KPI design per arm, over the (a2, d4) grid, vs heuristic and vs A on C_p."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    from pin_kpi_oed.viz.figures import save_png
-
-    a2 = sorted({r["a2_m"] for r in rows})
-    d4 = sorted({r["d4_m"] for r in rows})
-    fig, axes = plt.subplots(1, 2, figsize=(12, 4.6), constrained_layout=True)
-    for ax, key, title in ((axes[0], "improvement_vs_heuristic", "KPI design vs heuristic"),
-                           (axes[1], "improvement_vs_param", "KPI design vs A on C_p")):
-        grid = np.full((len(d4), len(a2)), np.nan)
-        for r in rows:
-            grid[d4.index(r["d4_m"]), a2.index(r["a2_m"])] = 100 * r[key]
-        im = ax.imshow(grid, origin="lower", cmap="viridis", aspect="auto")
-        for (i, j), v in np.ndenumerate(grid):
-            if np.isfinite(v):
-                ax.text(j, i, f"{v:.0f}", ha="center", va="center", fontsize=7, color="w")
-        ax.set_xticks(range(len(a2)), [f"{1e3 * v:.0f}" for v in a2], rotation=90)
-        ax.set_yticks(range(len(d4)), [f"{1e3 * v:.0f}" for v in d4])
-        ax.set_xlabel("segment two a2 (mm)")
-        ax.set_ylabel("segment four d4 (mm)")
-        ax.set_title(f"{title}: mean {np.nanmean(grid):.1f} %")
-        fig.colorbar(im, ax=ax, label="reduction of tr(C_s) (%)")
-    save_png(fig, path)
-    plt.close(fig)
-
-
 def kuka_study(out_dir: Path, m: int = 60, seeds: tuple[int, ...] = (0, 1, 2), cells: tuple[str, ...] = (
-        "kr15", "kr300", "kr500"), workers: int | None = None, scheduler: str | None = None, n_starts: int = 1
-               ) -> dict:
+        "kr15", "kr300", "kr500"), workers: int | None = None, scheduler: str | None = None, n_starts: int = 1,
+               plot: Callable[[dict, Path], None] | None = None) -> dict:
     """Three KUKA cells × {heuristic, A on C_p, A on C_s} × {with, without collision avoidance} × seeds.
+
+    ``plot(task_record, path)`` draws Figure 7 per cell (``figure7_<cell>.png``) when given, e.g.
+    :func:`pin_kpi_oed.viz.figures.plot_study_figure7`.
 
     Writes ``summary.json``, ``table6.csv`` and ``figure7_<cell>.png`` to ``out_dir``.
     """
@@ -393,8 +369,8 @@ def kuka_study(out_dir: Path, m: int = 60, seeds: tuple[int, ...] = (0, 1, 2), c
             row["improvement_param_vs_heuristic"] = 1 - row["trace_cs_param_m2"] / row["trace_cs_random_m2"]
             rows.append(row)
         rec = next((r for r in recs if r["meta"]["cell"] == c and r["collision"] and r.get("ok")), None)
-        if rec is not None:
-            _plot_figure7(rec, out_dir / f"figure7_{c}.png")
+        if rec is not None and plot is not None:
+            plot(rec, out_dir / f"figure7_{c}.png")
     _write_csv(out_dir / "table6.csv", rows)
     with_coll = [r for r in rows if r["collision_avoidance"]]
     summary = {"study": "kuka", "rows": rows, "measurements": m, "seeds": list(seeds),
@@ -404,14 +380,6 @@ def kuka_study(out_dir: Path, m: int = 60, seeds: tuple[int, ...] = (0, 1, 2), c
                "wall_time_s": time.perf_counter() - t0, "tasks_computed_now": computed}
     atomic_write_json(out_dir / "summary.json", summary)
     return summary
-
-
-def _plot_figure7(rec: dict, path: Path) -> None:
-    from pin_kpi_oed.viz.figures import plot_ellipsoid_projections
-
-    covs = {("heuristic" if d["criterion"] == "random" else f"A on C_{'s' if d['criterion'] == 'kpi' else 'p'}"):
-            np.array(d["cov_s_m2"])[:3, :3] for d in rec["designs"]}
-    plot_ellipsoid_projections(covs, path)
 
 
 def format_kuka_table(summary: dict) -> str:

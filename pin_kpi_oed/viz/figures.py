@@ -339,3 +339,40 @@ def design_figures(design: Any, out_dir: str | os.PathLike, prefix: str = "desig
                                    labels=v.labels, incidence_limit_deg=df.incidence_limit_deg,
                                    title=f"{name}: clearance and laser incidence per pose"),
     }
+
+
+# --------------------------------------------------------------------------- study figures
+def plot_notional(rows: list[dict], path: Path) -> None:
+    """Figure-8-like: improvement of the KPI design per arm, over the (a2, d4) grid, vs heuristic and vs A on C_p."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    a2 = sorted({r["a2_m"] for r in rows})
+    d4 = sorted({r["d4_m"] for r in rows})
+    fig, axes = plt.subplots(1, 2, figsize=(12, 4.6), constrained_layout=True)
+    for ax, key, title in ((axes[0], "improvement_vs_heuristic", "KPI design vs heuristic"),
+                           (axes[1], "improvement_vs_param", "KPI design vs A on C_p")):
+        grid = np.full((len(d4), len(a2)), np.nan)
+        for r in rows:
+            grid[d4.index(r["d4_m"]), a2.index(r["a2_m"])] = 100 * r[key]
+        im = ax.imshow(grid, origin="lower", cmap="viridis", aspect="auto")
+        for (i, j), v in np.ndenumerate(grid):
+            if np.isfinite(v):
+                ax.text(j, i, f"{v:.0f}", ha="center", va="center", fontsize=7, color="w")
+        ax.set_xticks(range(len(a2)), [f"{1e3 * v:.0f}" for v in a2], rotation=90)
+        ax.set_yticks(range(len(d4)), [f"{1e3 * v:.0f}" for v in d4])
+        ax.set_xlabel("segment two a2 (mm)")
+        ax.set_ylabel("segment four d4 (mm)")
+        ax.set_title(f"{title}: mean {np.nanmean(grid):.1f} %")
+        fig.colorbar(im, ax=ax, label="reduction of tr(C_s) (%)")
+    save_png(fig, path)
+    plt.close(fig)
+
+
+def plot_study_figure7(rec: dict, path: Path) -> None:
+    """Figure-7-like ellipsoid projections of one KUKA study task record (``figure7_<cell>.png``)."""
+    covs = {("heuristic" if d["criterion"] == "random" else f"A on C_{'s' if d['criterion'] == 'kpi' else 'p'}"):
+            np.array(d["cov_s_m2"])[:3, :3] for d in rec["designs"]}
+    plot_ellipsoid_projections(covs, path)
