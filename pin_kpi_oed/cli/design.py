@@ -45,6 +45,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--starts", type=int, default=None, help="Ipopt starts per criterion (default 2)")
     p.add_argument("--max-iter", dest="max_iter", type=int, default=None, help="Ipopt iteration limit (default 500)")
     p.add_argument("--quiet", action="store_true", help="print the table only")
+    p.add_argument("--distances", choices=["coal", "closed-form"], default="coal",
+                   help="capsule distances in the optimiser: Coal through a Pinocchio GeometryModel (default; one "
+                        "computeDistances per pose) or the closed-form segment distances (the test oracle; equal to 1e-15 m)")
     p.add_argument("--start", choices=["pool", "random"], default="pool",
                    help="first Ipopt start: pool selection (default) or the heuristic design")
     p.add_argument("--certificate", action="store_true",
@@ -180,7 +183,8 @@ def run(args: argparse.Namespace) -> int:
         Q_given = read_poses(given_file, cell.robot, "--given")
         problem = SequentialProblem(cell, Q_given, collision=collision)
     else:
-        problem = DesignProblem(cell, collision=collision)
+        problem = DesignProblem(cell, collision=collision,
+                                distances={"closed-form": "numpy"}.get(getattr(args, "distances", None), "geometry"))
     if getattr(args, "model", None):
         if given_file:
             raise InputError("--model (extended design) cannot be combined with --given yet")

@@ -260,6 +260,9 @@ class DesignProblem:
         aggregate: per-configuration aggregation of the distance rows for the optimiser: ``"ks"``
             (smooth, conservative, exact gradient), ``"min"`` or ``"none"`` (every row; the naive formulation).
         ks_length_m: KS smoothing length (m).
+        distances: capsule distances of the constraints: ``"geometry"`` (default: Coal through
+            a Pinocchio GeometryModel, :class:`~pin_kpi_oed.cell.collision.GeometryDistances`) or ``"numpy"``
+            (the closed-form segment distances, kept as the test oracle; equal to 1e-15 m).
 
     Raises:
         IdentifiabilityError: the TCP at the working configurations is not estimable.
@@ -268,7 +271,7 @@ class DesignProblem:
 
     @limit_threads  # the identifiability analysis (QR, lstsq) ran with every BLAS thread on a busy machine
     def __init__(self, cell: Cell, collision: bool = True, prune: bool = True, aggregate: str = "ks",
-                 ks_length_m: float = 2e-3):
+                 ks_length_m: float = 2e-3, distances: str = "geometry"):
         self.cell = cell
         self.collision = collision
         self.model = cell.tracker_model()
@@ -279,7 +282,7 @@ class DesignProblem:
         self.base = self.ident.base
         self.E = E_full[:, self.base]
         self.coll = CollisionModel(cell, collision=collision, prune=prune, model=self.model)
-        self.cons = AggregatedConstraints(self.coll, aggregate, ks_length_m)
+        self.cons = AggregatedConstraints(self.coll, aggregate, ks_length_m, backend=distances)
         # the heuristic design is always collision-free (it is the practical baseline and every start)
         self.coll_full = self.coll if collision else CollisionModel(cell, collision=True, prune=prune,
                                                                      model=self.model)
