@@ -152,8 +152,8 @@ def run(args: argparse.Namespace) -> int:
         PinKpiOedError: bad cell, unknown criterion, infeasible cell, solver failure (one-line message).
     """
     from pin_kpi_oed.cell.cell import load_cell
-    from pin_kpi_oed.design.optimize import DesignOptions, DesignProblem, ipopt_options, run_designs
-    from pin_kpi_oed.design.sequential import SequentialProblem, poses_until
+    from pin_kpi_oed.design.optimize import DesignOptions, ipopt_options, run_designs
+    from pin_kpi_oed.design.sequential import poses_until
     from pin_kpi_oed.design.user_pool import design_from_pool, read_poses
 
     criteria = parse_criteria(getattr(args, "criteria", "random,param,kpi"))
@@ -179,25 +179,7 @@ def run(args: argparse.Namespace) -> int:
         raise InputError("--target-sigma needs --given (the poses already measured)")
     if target is not None and not (target > 0):
         raise InputError(f"--target-sigma: must be > 0 m, got {target}")
-    if given_file:
-        Q_given = read_poses(given_file, cell.robot, "--given")
-        problem = SequentialProblem(cell, Q_given, collision=collision)
-    else:
-        problem = DesignProblem(cell, collision=collision,
-                                distances={"closed-form": "numpy"}.get(getattr(args, "distances", None), "geometry"))
-    if getattr(args, "model", None):
-        if given_file:
-            raise InputError("--model (extended design) cannot be combined with --given yet")
-        from pin_kpi_oed.identification.model_file import load_model_file
-        from pin_kpi_oed.oed.extended import ExtendedModel
-
-        prior = getattr(args, "prior", "model") or "model"
-        problem.extended = ExtendedModel.from_calibrated_model(load_model_file(args.model), model=problem.model,
-                                                               base=problem.base,
-                                                               prior=None if prior == "none" else prior)
-        if not quiet:
-            print(f"extended model from {args.model}: {problem.extended.nb} geometric + {problem.extended.k} effect "
-                  f"parameters, prior: {prior}")
+    problem = _make_problem(args, cell, given_file, collision, quiet)
     if not quiet:
         rows = problem.coll.info.count()
         print(cell.summary())
@@ -250,29 +232,65 @@ def run(args: argparse.Namespace) -> int:
         until = poses_until(problem, float(target), pool_q)
         print(until.summary())
     if getattr(args, "json", None):
-        doc = design_json(true_cell, problem, results, m, seed, collision)
-        doc["clearance_margin_m"], doc["incidence_margin_deg"] = margins
-        if given_file:  # tr(C_s) and C_s of every design include the measured poses
-            doc["given"] = {"file": str(given_file), "q": problem.Q_given.tolist(),
-                            "tcp_sigma_m": problem.sigma_tcp()}
-            for d, r in zip(doc["designs"], results):
-                d["cov_s_m2"] = score_design(problem.model, np.vstack([problem.Q_given, r.q_meas]), cell.q_work,
-                                             problem.ident).cov_s_m2.tolist()
-        if pool_file:
-            doc["pool_file"] = str(pool_file)
-        if until is not None:
-            doc["poses_until"] = {**until.result_dict(), "target_sigma_m": until.target_sigma_m,
-                                  "n_more": until.n_more, "sigma_now_m": until.sigma_now_m,
-                                  "sigma_verified_m": until.sigma_verified_m, "q_added": until.Q_added.tolist()}
-        if true_checks is not None:
-            for d, rep in zip(doc["designs"], true_checks):
-                d["pose_clearance_m"], d["pose_incidence_deg"] = rep.clearance_m.tolist(), rep.incidence_deg.tolist()
-        if cert is not None:
-            doc["lower_bound_trace_cs_m2"] = cert.lower_bound_trace_cs_m2
-            doc["certificate"] = cert.to_dict()
-            for d, r in zip(doc["designs"], results):
-                d["efficiency"] = cert.efficiency(r.trace_cs_m2)
+        doc = _design_doc(true_cell, problem, results, m, seed, collision, margins, given_file, pool_file, until,
+                          true_checks, cert)
         atomic_write_json(args.json, doc)
         if not quiet:
             print(f"wrote {args.json}")
     return 0
+
+
+def _make_problem(args: argparse.Namespace, cell, given_file, collision: bool, quiet: bool):
+    """The design problem of ``design``: plain, on top of ``--given`` poses, or over an extended model (``--model``)."""
+    from pin_kpi_oed.design.optimize import DesignProblem
+    from pin_kpi_oed.design.sequential import SequentialProblem
+    from pin_kpi_oed.design.user_pool import read_poses
+
+    if given_file:
+        problem = SequentialProblem(cell, read_poses(given_file, cell.robot, "--given"), collision=collision)
+    else:
+        problem = DesignProblem(cell, collision=collision,
+                                distances={"closed-form": "numpy"}.get(getattr(args, "distances", None), "geometry"))
+    if getattr(args, "model", None):
+        if given_file:
+            raise InputError("--model (extended design) cannot be combined with --given yet")
+        from pin_kpi_oed.identification.model_file import load_model_file
+        from pin_kpi_oed.oed.extended import ExtendedModel
+
+        prior = getattr(args, "prior", "model") or "model"
+        problem.extended = ExtendedModel.from_calibrated_model(load_model_file(args.model), model=problem.model,
+                                                               base=problem.base,
+                                                               prior=None if prior == "none" else prior)
+        if not quiet:
+            print(f"extended model from {args.model}: {problem.extended.nb} geometric + {problem.extended.k} effect "
+                  f"parameters, prior: {prior}")
+    return problem
+
+
+def _design_doc(true_cell, problem, results: list, m: int, seed: int, collision: bool, margins, given_file,
+                pool_file, until, true_checks, cert) -> dict:
+    """The JSON document of ``design`` with the margins, the given poses, the pool, the "how many more" answer,
+    the true clearances and the certificate (SI units)."""
+    doc = design_json(true_cell, problem, results, m, seed, collision)
+    doc["clearance_margin_m"], doc["incidence_margin_deg"] = margins
+    if given_file:  # tr(C_s) and C_s of every design include the measured poses
+        doc["given"] = {"file": str(given_file), "q": problem.Q_given.tolist(),
+                        "tcp_sigma_m": problem.sigma_tcp()}
+        for d, r in zip(doc["designs"], results):
+            d["cov_s_m2"] = score_design(problem.model, np.vstack([problem.Q_given, r.q_meas]), true_cell.q_work,
+                                         problem.ident).cov_s_m2.tolist()
+    if pool_file:
+        doc["pool_file"] = str(pool_file)
+    if until is not None:
+        doc["poses_until"] = {**until.result_dict(), "target_sigma_m": until.target_sigma_m,
+                              "n_more": until.n_more, "sigma_now_m": until.sigma_now_m,
+                              "sigma_verified_m": until.sigma_verified_m, "q_added": until.Q_added.tolist()}
+    if true_checks is not None:
+        for d, rep in zip(doc["designs"], true_checks):
+            d["pose_clearance_m"], d["pose_incidence_deg"] = rep.clearance_m.tolist(), rep.incidence_deg.tolist()
+    if cert is not None:
+        doc["lower_bound_trace_cs_m2"] = cert.lower_bound_trace_cs_m2
+        doc["certificate"] = cert.to_dict()
+        for d, r in zip(doc["designs"], results):
+            d["efficiency"] = cert.efficiency(r.trace_cs_m2)
+    return doc
