@@ -59,7 +59,13 @@ def _check_outputs(*paths: str | None) -> None:
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     """Add the ``simulate``, ``identify`` and ``import-ipa`` subcommands."""
-    # ---- simulate ----------------------------------------------------------------
+    _register_simulate(subparsers)
+    _register_identify(subparsers)
+    _register_import_ipa(subparsers)
+
+
+def _register_simulate(subparsers: argparse._SubParsersAction) -> None:
+    """Add the ``simulate`` subcommand and its options."""
     s = subparsers.add_parser("simulate", help="simulate tracker measurements of a robot with random geometric errors",
                               description="Simulate laser-tracker measurements (CSV, SI units) of a 'true' robot: "
                                           "random geometric errors from tolerances, tracker pose, reflector, noise.")
@@ -90,7 +96,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="temperature column: uniform between T0,T1 (degC), read by thermal_expansion")
     s.set_defaults(func=run_simulate)
 
-    # ---- identify ------------------------------------------------------------------
+
+def _register_identify(subparsers: argparse._SubParsersAction) -> None:
+    """Add the ``identify`` subcommand and its options."""
     i = subparsers.add_parser("identify", help="identify geometric parameters from measurements, validate, export URDF",
                               description="Weighted nonlinear least squares (Levenberg-Marquardt, analytic Jacobian) "
                                           "over the identifiable parameters; tracker pose guessed by point-set "
@@ -140,7 +148,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     add_table_options(i)
     i.set_defaults(func=run_identify)
 
-    # ---- import-ipa -------------------------------------------------------------------
+
+def _register_import_ipa(subparsers: argparse._SubParsersAction) -> None:
+    """Add the ``import-ipa`` subcommand and its options."""
     p = subparsers.add_parser("import-ipa", help="convert IPA UR10 laser-tracker files to the measurement CSV format",
                               description="Import an IPA UR10 series (';', decimal commas, mm, degrees) into the SI "
                                           "measurement CSV format, optionally split at random into train/test.")
@@ -299,36 +309,25 @@ def _validation(model: Any, train: Any, opts: Any, result: Any, test: Any, reg: 
     return out, lines
 
 
-def run_identify(args: argparse.Namespace) -> int:
-    """Handler of ``pin-kpi-oed identify``."""
-    from pin_kpi_oed.data.atomic import atomic_write_json, atomic_write_text
-    from pin_kpi_oed.errors import SolverError
-    from pin_kpi_oed.identification.export import (calibrated_urdf_text, check_urdf_fk, model_frames,
-                                                   result_urdf_comment)
-    from pin_kpi_oed.identification.identify import IdentifyOptions, identify
-    from pin_kpi_oed.identification.quality import assess_fit
-    from pin_kpi_oed.identification.reflector_start import estimate_reflector
+def _noise_and_weights(args: argparse.Namespace, train: Any) -> tuple[Any, str, bool]:
+    """(noise model, weighting, scale covariance by reduced chi2) from ``--sigma`` / ``--sigma-rot``."""
     from pin_kpi_oed.model.noise import NoiseModel
-    from pin_kpi_oed.model.tracker import TrackerModel
-    from pin_kpi_oed.model.robot import load_robot
-    from pathlib import Path
 
-    _check_outputs(args.json, args.urdf_out, args.model_out)
-    robot = load_robot(args.robot, args.tool)
-    reach = robot.reach()
-    train = read_data_files(args.data, robot, opts=table_options(args, robot))
-    test, reg = read_validation(args, robot)
     sigma_rot = _positive(args.sigma_rot, "--sigma-rot")
     if args.sigma is not None:
         noise = NoiseModel(sigma_xyz_m=tuple(_floats(args.sigma, (1, 3), "--sigma")), sigma_rot_rad=sigma_rot)
-        weights, scale = "noise", False
-    else:
-        noise = NoiseModel(sigma_xyz_m=(1e-5,) * 3, sigma_rot_rad=sigma_rot)
-        weights, scale = "auto", train.sigma_m is None
-    effects = _effects(args.effects, robot, train)
-    opts = IdentifyOptions(weights=weights, scale_covariance=scale, use_orientation=not args.position_only,
-                           loss=args.loss or "linear", max_nfev=args.max_nfev,
-                           reflector_per_station=args.reflector_per_station)
+        return noise, "noise", False
+    noise = NoiseModel(sigma_xyz_m=(1e-5,) * 3, sigma_rot_rad=sigma_rot)
+    return noise, "auto", train.sigma_m is None
+
+
+def _nominal_reflector(args: argparse.Namespace, robot: Any, noise: Any, train: Any,
+                       opts: Any) -> tuple[np.ndarray, bool]:
+    """(nominal reflector offset in the tool frame (m), whether it was estimated from the data)."""
+    from pin_kpi_oed.identification.reflector_start import estimate_reflector
+    from pin_kpi_oed.model.tracker import TrackerModel
+
+    reach = robot.reach()
     estimated = args.reflector is None
     if estimated:
         reflector = estimate_reflector(TrackerModel(robot, noise=noise, reflector_m=np.zeros(3)), train, opts)
@@ -340,9 +339,15 @@ def run_identify(args: argparse.Namespace) -> int:
         if np.linalg.norm(reflector) > reach:
             raise InputError(f"--reflector {args.reflector}: {np.linalg.norm(reflector):.4g} m from the tool frame, "
                              f"more than the robot's reach ({reach:.3g} m): give it in m")
-    model = TrackerModel(robot, reflector_m=reflector, noise=noise)
-    if args.fix:
-        model.layout.fix(args.fix)
+    return reflector, estimated
+
+
+def _fit(args: argparse.Namespace, model: Any, train: Any, opts: Any, effects: list, reflector: np.ndarray,
+         estimated: bool) -> tuple[Any, Any]:
+    """(result, options used): the fit, refitted with soft_l1 when large outliers are found and no --loss given."""
+    from pin_kpi_oed.identification.identify import identify
+    from pin_kpi_oed.identification.quality import assess_fit
+
     result = identify(model, train, opts, effects=effects)
     quality = assess_fit(result, nominal_reflector_m=reflector, reflector_estimated=estimated)
     if args.loss is None and quality.large_outliers:
@@ -351,28 +356,32 @@ def run_identify(args: argparse.Namespace) -> int:
                   "(give --loss linear to keep the plain fit)")
         opts = replace(opts, loss="soft_l1")
         result = identify(model, train, opts, effects=effects)
-    out = {"result": result.to_dict(), "data": list(args.data), "validate": args.validate,
-           "reflector_nominal_m": reflector.tolist(), "reflector_nominal_source": "estimated" if estimated else "given"}
-    lines = []
-    if test is not None:
-        out["validation"], lines = _validation(model, train, opts, result, test, reg, args)
-    quality = assess_fit(result, out.get("validation"), nominal_reflector_m=reflector, reflector_estimated=estimated)
-    out["fit_quality"] = quality.to_dict()
-    lines.append(quality.line())
-    refuse = quality.poor and not args.accept_poor_fit
-    # everything is computed and checked before the first file is written
-    urdf_text = None
-    if args.urdf_out and not refuse:
-        placements = result.model.joint_placements(result.p)
-        out_dir = Path(args.urdf_out).parent
-        urdf_text = calibrated_urdf_text(robot, placements, comment=result_urdf_comment(result, ", ".join(args.data)),
-                                         out_dir=out_dir if str(out_dir) else ".",
-                                         frames=model_frames(result.calibrated_model()) if args.urdf_frames else ())
-        dp, dr = check_urdf_fk(urdf_text, robot, placements)
-        if dp > 1e-9 or dr > 1e-9:
-            raise SolverError(f"the calibrated URDF reproduces the identified FK only to {dp:.3g} m; nothing written")
-        out["urdf_check_max_error_m"] = dp
-    model_dict = result.calibrated_model().to_dict() if args.model_out and not refuse else None
+    return result, opts
+
+
+def _checked_urdf(args: argparse.Namespace, robot: Any, result: Any) -> tuple[str, float]:
+    """(calibrated URDF text, its max FK position error (m)); raises SolverError if it does not reproduce the fit."""
+    from pin_kpi_oed.errors import SolverError
+    from pin_kpi_oed.identification.export import (calibrated_urdf_text, check_urdf_fk, model_frames,
+                                                   result_urdf_comment)
+    from pathlib import Path
+
+    placements = result.model.joint_placements(result.p)
+    out_dir = Path(args.urdf_out).parent
+    urdf_text = calibrated_urdf_text(robot, placements, comment=result_urdf_comment(result, ", ".join(args.data)),
+                                     out_dir=out_dir if str(out_dir) else ".",
+                                     frames=model_frames(result.calibrated_model()) if args.urdf_frames else ())
+    dp, dr = check_urdf_fk(urdf_text, robot, placements)
+    if dp > 1e-9 or dr > 1e-9:
+        raise SolverError(f"the calibrated URDF reproduces the identified FK only to {dp:.3g} m; nothing written")
+    return urdf_text, dp
+
+
+def _report_and_write(args: argparse.Namespace, result: Any, out: dict, lines: list[str], quality: Any,
+                      urdf_text: str | None, model_dict: dict | None, refuse: bool) -> int:
+    """Print the summary and validation lines, write the outputs; exit code (2 when a poor fit is refused)."""
+    from pin_kpi_oed.data.atomic import atomic_write_json, atomic_write_text
+
     if not args.quiet:
         print(result.summary())
     for ln in lines:
@@ -394,6 +403,44 @@ def run_identify(args: argparse.Namespace) -> int:
               file=sys.stderr)
         return 2
     return 0
+
+
+def run_identify(args: argparse.Namespace) -> int:
+    """Handler of ``pin-kpi-oed identify``."""
+    from pin_kpi_oed.identification.identify import IdentifyOptions
+    from pin_kpi_oed.identification.quality import assess_fit
+    from pin_kpi_oed.model.tracker import TrackerModel
+    from pin_kpi_oed.model.robot import load_robot
+
+    _check_outputs(args.json, args.urdf_out, args.model_out)
+    robot = load_robot(args.robot, args.tool)
+    train = read_data_files(args.data, robot, opts=table_options(args, robot))
+    test, reg = read_validation(args, robot)
+    noise, weights, scale = _noise_and_weights(args, train)
+    effects = _effects(args.effects, robot, train)
+    opts = IdentifyOptions(weights=weights, scale_covariance=scale, use_orientation=not args.position_only,
+                           loss=args.loss or "linear", max_nfev=args.max_nfev,
+                           reflector_per_station=args.reflector_per_station)
+    reflector, estimated = _nominal_reflector(args, robot, noise, train, opts)
+    model = TrackerModel(robot, reflector_m=reflector, noise=noise)
+    if args.fix:
+        model.layout.fix(args.fix)
+    result, opts = _fit(args, model, train, opts, effects, reflector, estimated)
+    out = {"result": result.to_dict(), "data": list(args.data), "validate": args.validate,
+           "reflector_nominal_m": reflector.tolist(), "reflector_nominal_source": "estimated" if estimated else "given"}
+    lines = []
+    if test is not None:
+        out["validation"], lines = _validation(model, train, opts, result, test, reg, args)
+    quality = assess_fit(result, out.get("validation"), nominal_reflector_m=reflector, reflector_estimated=estimated)
+    out["fit_quality"] = quality.to_dict()
+    lines.append(quality.line())
+    refuse = quality.poor and not args.accept_poor_fit
+    # everything is computed and checked before the first file is written
+    urdf_text = None
+    if args.urdf_out and not refuse:
+        urdf_text, out["urdf_check_max_error_m"] = _checked_urdf(args, robot, result)
+    model_dict = result.calibrated_model().to_dict() if args.model_out and not refuse else None
+    return _report_and_write(args, result, out, lines, quality, urdf_text, model_dict, refuse)
 
 
 def run_import_ipa(args: argparse.Namespace) -> int:
