@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import argparse
 import math
+from typing import Any
 
 import numpy as np
 
@@ -74,18 +75,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     d.set_defaults(func=run)
 
 
-def run(args: argparse.Namespace) -> int:
-    """Handler of ``pin-kpi-oed diagnose``; returns 0 when the report was produced."""
+def _checked_effects(args: argparse.Namespace) -> list[str] | None:
+    """Check the output paths and numeric options; the ``--effects`` names (None: all candidates)."""
     from pathlib import Path
 
-    from pin_kpi_oed.cli.identify import read_data_files, read_validation
-    from pin_kpi_oed.data.atomic import atomic_write_json
-    from pin_kpi_oed.diagnosis.diagnose import diagnose
     from pin_kpi_oed.effects.library import ALL_EFFECT_NAMES
-    from pin_kpi_oed.model.noise import NoiseModel
-    from pin_kpi_oed.model.tracker import TrackerModel
-    from pin_kpi_oed.model.robot import load_robot
-    from pin_kpi_oed.viz.diagnosis_plots import diagnosis_figures
 
     if args.json:
         t = Path(args.json)
@@ -109,40 +103,47 @@ def run(args: argparse.Namespace) -> int:
         if unknown:
             raise InputError(f"--effects: unknown effect(s) {', '.join(unknown)} (known: {', '.join(ALL_EFFECT_NAMES)}; "
                              "a tracker range-scale error is not among them: it cannot be observed)")
-    robot = load_robot(args.robot, args.tool)
-    reach = robot.reach()
-    train = read_data_files(args.train, robot, "--train", opts=table_options(args, robot))
-    val, reg = read_validation(args, robot)
-    reflector = _floats(args.reflector, (3,), "--reflector") if args.reflector is not None else np.zeros(3)
-    if np.linalg.norm(reflector) > reach:
-        raise InputError(f"--reflector {args.reflector}: {np.linalg.norm(reflector):.4g} m from the tool frame, more "
-                         f"than the robot's reach ({reach:.3g} m): give it in m")
+    return effects
+
+
+def _noise(args: argparse.Namespace, train: Any, val: Any, reg: Any) -> tuple[Any, str]:
+    """(noise model, weighting) from ``--sigma`` or, without it, the files' sigma columns."""
+    from pin_kpi_oed.model.noise import NoiseModel
+
     if args.sigma is not None:
         s = _floats(args.sigma, (1, 3), "--sigma")
         if np.any(s <= 0) or np.median(s) > 0.1:
             raise InputError(f"--sigma {args.sigma}: must be positive, in m (e.g. 1e-5 for 10 µm)")
-        noise, weights = NoiseModel(sigma_xyz_m=tuple(s)), "noise"
-    else:
-        missing = [f for f, ms in ((", ".join(args.train), train), (args.validate, val), (args.register_data, reg))
-                   if ms is not None and ms.sigma_m is None]
-        if missing:
-            raise InputError(f"{missing[0]}: no sigma columns, so the noise is unknown: give --sigma S (m), the "
-                             "tracker's standard deviation per axis (e.g. 1e-5)")
-        noise, weights = NoiseModel(), "data"
-    if args.reflector is None:  # issue 15: a reflector assumed at 0,0,0 hides parameters and fakes a gap
-        from pin_kpi_oed.identification.identify import IdentifyOptions
-        from pin_kpi_oed.identification.reflector_start import estimate_reflector
+        return NoiseModel(sigma_xyz_m=tuple(s)), "noise"
+    missing = [f for f, ms in ((", ".join(args.train), train), (args.validate, val), (args.register_data, reg))
+               if ms is not None and ms.sigma_m is None]
+    if missing:
+        raise InputError(f"{missing[0]}: no sigma columns, so the noise is unknown: give --sigma S (m), the "
+                         "tracker's standard deviation per axis (e.g. 1e-5)")
+    return NoiseModel(), "data"
 
-        reflector = estimate_reflector(TrackerModel(robot, noise=noise, reflector_m=reflector), train,
-                                       IdentifyOptions(weights=weights, scale_covariance=False))
-        if not args.quiet:
-            print(f"nominal reflector offset estimated from --train: {np.round(reflector * 1e3, 1).tolist()} mm "
-                  f"(give --reflector x,y,z in m to set it)")
-    model = TrackerModel(robot, reflector_m=reflector, noise=noise)
-    rep = diagnose(model, train, val, kfold=args.kfold, effects=effects, weights=weights, alpha=args.alpha,
-                   seed=args.seed, t_ref_c=args.t_ref, register_rows=args.register_rows, register_data=reg,
-                   harmonics=args.harmonics, transfer_prior_rad=args.term_prior,
-                   show_progress=False if args.quiet else None)
+
+def _estimated_reflector(args: argparse.Namespace, robot: Any, noise: Any, weights: str, train: Any,
+                         reflector: np.ndarray) -> np.ndarray:
+    """Nominal reflector offset (m) estimated from ``--train`` (issue 15: a reflector assumed at 0,0,0 hides
+    parameters and fakes a gap)."""
+    from pin_kpi_oed.identification.identify import IdentifyOptions
+    from pin_kpi_oed.identification.reflector_start import estimate_reflector
+    from pin_kpi_oed.model.tracker import TrackerModel
+
+    reflector = estimate_reflector(TrackerModel(robot, noise=noise, reflector_m=reflector), train,
+                                   IdentifyOptions(weights=weights, scale_covariance=False))
+    if not args.quiet:
+        print(f"nominal reflector offset estimated from --train: {np.round(reflector * 1e3, 1).tolist()} mm "
+              f"(give --reflector x,y,z in m to set it)")
+    return reflector
+
+
+def _write_and_print(args: argparse.Namespace, rep: Any) -> None:
+    """Write the figures and the JSON report, print the summary (or the one-line verdict with --quiet)."""
+    from pin_kpi_oed.data.atomic import atomic_write_json
+    from pin_kpi_oed.viz.diagnosis_plots import diagnosis_figures
+
     if args.figures:
         rep.figures = diagnosis_figures(rep, args.figures)
     if args.json:
@@ -158,4 +159,32 @@ def run(args: argparse.Namespace) -> int:
         print(rep.summary())
         if args.json:
             print(f"wrote {args.json}")
+
+
+def run(args: argparse.Namespace) -> int:
+    """Handler of ``pin-kpi-oed diagnose``; returns 0 when the report was produced."""
+    from pin_kpi_oed.cli.identify import read_data_files, read_validation
+    from pin_kpi_oed.diagnosis.diagnose import diagnose
+    from pin_kpi_oed.model.tracker import TrackerModel
+    from pin_kpi_oed.model.robot import load_robot
+
+    effects = _checked_effects(args)
+    robot = load_robot(args.robot, args.tool)
+    reach = robot.reach()
+    train = read_data_files(args.train, robot, "--train", opts=table_options(args, robot))
+    val, reg = read_validation(args, robot)
+    reflector = _floats(args.reflector, (3,), "--reflector") if args.reflector is not None else np.zeros(3)
+    if np.linalg.norm(reflector) > reach:
+        raise InputError(f"--reflector {args.reflector}: {np.linalg.norm(reflector):.4g} m from the tool frame, more "
+                         f"than the robot's reach ({reach:.3g} m): give it in m")
+    noise, weights = _noise(args, train, val, reg)
+    if args.reflector is None:
+        reflector = _estimated_reflector(args, robot, noise, weights, train, reflector)
+    model = TrackerModel(robot, reflector_m=reflector, noise=noise)
+    rep = diagnose(model, train, val, kfold=args.kfold, effects=effects, weights=weights, alpha=args.alpha,
+                   seed=args.seed, t_ref_c=args.t_ref, register_rows=args.register_rows, register_data=reg,
+                   harmonics=args.harmonics, transfer_prior_rad=args.term_prior,
+                   show_progress=False if args.quiet else None)
+    _write_and_print(args, rep)
     return 0
+
