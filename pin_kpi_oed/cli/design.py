@@ -153,40 +153,18 @@ def run(args: argparse.Namespace) -> int:
     """
     from pin_kpi_oed.cell.cell import load_cell
     from pin_kpi_oed.design.optimize import DesignOptions, ipopt_options, run_designs
-    from pin_kpi_oed.design.sequential import poses_until
     from pin_kpi_oed.design.user_pool import design_from_pool, read_poses
 
     criteria = parse_criteria(getattr(args, "criteria", "random,param,kpi"))
     cell = load_cell(getattr(args, "cell", "kr15"))
-    m = getattr(args, "measurements", None) or cell.measurements
-    if m < 1:
-        raise InputError(f"--measurements: must be >= 1, got {m}")
-    seed = int(getattr(args, "seed", 0) or 0)
-    collision = not getattr(args, "no_collision", False)
-    starts = getattr(args, "starts", None) or 2
-    max_iter = getattr(args, "max_iter", None) or 500
-    quiet = bool(getattr(args, "quiet", False))
-    if starts < 1 or max_iter < 1:
-        raise InputError("--starts and --max-iter must be >= 1")
+    m, seed, collision, starts, max_iter, quiet = _run_knobs(args, cell)
     true_cell = cell
     margins = (float(getattr(args, "clearance_margin", 0.0) or 0.0), float(getattr(args, "incidence_margin", 0.0) or 0.0))
     cell = with_margins(cell, *margins)  # the optimiser's cell; `true_cell` for the reported clearances
-    pool_file, given_file = getattr(args, "pool", None), getattr(args, "given", None)
-    target = getattr(args, "target_sigma", None)
-    if pool_file and given_file:
-        raise InputError("--pool and --given cannot be combined (select from the pool, or design on top of --given)")
-    if target is not None and not given_file:
-        raise InputError("--target-sigma needs --given (the poses already measured)")
-    if target is not None and not (target > 0):
-        raise InputError(f"--target-sigma: must be > 0 m, got {target}")
+    pool_file, given_file, target = _pool_given_target(args)
     problem = _make_problem(args, cell, given_file, collision, quiet)
     if not quiet:
-        rows = problem.coll.info.count()
-        print(cell.summary())
-        print(f"{m} measurements, seed {seed}, {'with' if collision else 'WITHOUT'} collision avoidance; "
-              f"{problem.base.size} identifiable parameters; constraint rows per configuration: "
-              + ", ".join(f"{k} {v}" for k, v in rows.items() if v)
-              + f" (aggregated to {problem.cons.n_rows} for Ipopt); {starts} start(s) per criterion")
+        _print_header(cell, problem, m, seed, collision, starts)
     opts = DesignOptions(collision=collision, n_starts=starts, ipopt=ipopt_options(max_iter=max_iter),
                          start=getattr(args, "start", "pool") or "pool")
     cert = None
@@ -197,6 +175,59 @@ def run(args: argparse.Namespace) -> int:
     else:
         results = run_designs(cell, criteria, m, seed, opts, problem)
     true_checks = _true_checks(true_cell, results) if cell is not true_cell else None
+    cert = _certificate(args, problem, results, m, seed, cert, given_file, pool_file)
+    _print_results(results, criteria, cert, m, pool_file, quiet, cell, true_cell, margins, true_checks)
+    until = _poses_until(args, problem, cell, target, seed) if target is not None else None
+    if getattr(args, "json", None):
+        doc = _design_doc(true_cell, problem, results, m, seed, collision, margins, given_file, pool_file, until,
+                          true_checks, cert)
+        atomic_write_json(args.json, doc)
+        if not quiet:
+            print(f"wrote {args.json}")
+    return 0
+
+
+def _run_knobs(args: argparse.Namespace, cell) -> tuple[int, int, bool, int, int, bool]:
+    """(measurements, seed, collision avoidance, starts, max Ipopt iterations, quiet), checked."""
+    m = getattr(args, "measurements", None) or cell.measurements
+    if m < 1:
+        raise InputError(f"--measurements: must be >= 1, got {m}")
+    seed = int(getattr(args, "seed", 0) or 0)
+    collision = not getattr(args, "no_collision", False)
+    starts = getattr(args, "starts", None) or 2
+    max_iter = getattr(args, "max_iter", None) or 500
+    quiet = bool(getattr(args, "quiet", False))
+    if starts < 1 or max_iter < 1:
+        raise InputError("--starts and --max-iter must be >= 1")
+    return m, seed, collision, starts, max_iter, quiet
+
+
+def _pool_given_target(args: argparse.Namespace) -> tuple[str | None, str | None, float | None]:
+    """(``--pool``, ``--given``, ``--target-sigma`` in m), checked for combinations that make no sense."""
+    pool_file, given_file = getattr(args, "pool", None), getattr(args, "given", None)
+    target = getattr(args, "target_sigma", None)
+    if pool_file and given_file:
+        raise InputError("--pool and --given cannot be combined (select from the pool, or design on top of --given)")
+    if target is not None and not given_file:
+        raise InputError("--target-sigma needs --given (the poses already measured)")
+    if target is not None and not (target > 0):
+        raise InputError(f"--target-sigma: must be > 0 m, got {target}")
+    return pool_file, given_file, target
+
+
+def _print_header(cell, problem, m: int, seed: int, collision: bool, starts: int) -> None:
+    """Print the cell summary and the size of the design problem."""
+    rows = problem.coll.info.count()
+    print(cell.summary())
+    print(f"{m} measurements, seed {seed}, {'with' if collision else 'WITHOUT'} collision avoidance; "
+          f"{problem.base.size} identifiable parameters; constraint rows per configuration: "
+          + ", ".join(f"{k} {v}" for k, v in rows.items() if v)
+          + f" (aggregated to {problem.cons.n_rows} for Ipopt); {starts} start(s) per criterion")
+
+
+def _certificate(args: argparse.Namespace, problem, results: list, m: int, seed: int, cert,
+                 given_file: str | None, pool_file: str | None):
+    """The optimality certificate of ``--certificate`` (the pool's one with ``--pool``; None with ``--given``)."""
     if getattr(args, "certificate", False) and given_file:
         print("certificate: not computed with --given (the bound does not include the measured poses)")
     elif getattr(args, "certificate", False) and not pool_file:
@@ -204,6 +235,12 @@ def run(args: argparse.Namespace) -> int:
 
         cert = certify(problem, m, pool_size=getattr(args, "pool_size", 5000) or 5000, seed=seed,
                        extra=[r.q_meas for r in results if r.feasible])
+    return cert
+
+
+def _print_results(results: list, criteria: list, cert, m: int, pool_file: str | None, quiet: bool, cell,
+                   true_cell, margins: tuple[float, float], true_checks) -> None:
+    """Print the result table, the certificate, the random design's acceptance and the infeasible designs."""
     shown = [r for r in results if r.criterion in criteria] or results
     print(table(shown, results[0], cert))
     if cert is not None:
@@ -224,20 +261,18 @@ def run(args: argparse.Namespace) -> int:
             print(f"margins: clearance {margins[0] * 1e3:g} mm, incidence {margins[1]:g} deg enforced by the optimiser; "
                   f"min clr / max inc above are the TRUE values (cell clearance {true_cell.clearance_m * 1e3:g} mm, "
                   f"incidence limit {true_cell.incidence_max_deg:g} deg)")
-    until = None
-    if target is not None:
-        pool_q, _ = problem.random_design(getattr(args, "pool_size", 5000) or 5000,
-                                          seed=np.random.SeedSequence([seed, 2]),
-                                          max_tries=max(cell.max_random_tries, 200 * (getattr(args, "pool_size", 5000) or 5000)))
-        until = poses_until(problem, float(target), pool_q)
-        print(until.summary())
-    if getattr(args, "json", None):
-        doc = _design_doc(true_cell, problem, results, m, seed, collision, margins, given_file, pool_file, until,
-                          true_checks, cert)
-        atomic_write_json(args.json, doc)
-        if not quiet:
-            print(f"wrote {args.json}")
-    return 0
+
+
+def _poses_until(args: argparse.Namespace, problem, cell, target: float, seed: int):
+    """``--target-sigma``: add poses from a random pool until the target is met; prints and returns the result."""
+    from pin_kpi_oed.design.sequential import poses_until
+
+    pool_q, _ = problem.random_design(getattr(args, "pool_size", 5000) or 5000,
+                                      seed=np.random.SeedSequence([seed, 2]),
+                                      max_tries=max(cell.max_random_tries, 200 * (getattr(args, "pool_size", 5000) or 5000)))
+    until = poses_until(problem, float(target), pool_q)
+    print(until.summary())
+    return until
 
 
 def _make_problem(args: argparse.Namespace, cell, given_file, collision: bool, quiet: bool):
