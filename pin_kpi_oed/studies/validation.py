@@ -395,15 +395,8 @@ def extended_design_validation(model: TrackerModel, data: MeasurementSet, target
     Raises:
         InputError: unknown method, too few rows.
     """
-    from pin_kpi_oed.diagnosis.selection import select_terms
-    from pin_kpi_oed.oed.extended import ExtendedModel, select_pool
-
     t0 = time.perf_counter()
-    for k in methods:
-        if k not in EXTENDED_METHODS:
-            raise InputError(f"method '{k}': unknown (known: {', '.join(EXTENDED_METHODS)})")
-    if len(data) < 3 * n_meas:
-        raise InputError(f"{data.source}: {len(data)} rows are too few for {n_meas}-pose designs")
+    _check_extended(methods, data, n_meas)
     rng = np.random.default_rng(seed)
     err: dict[str, list[float]] = {k: [] for k in methods}
     n_scored, n_terms, bias = [], [], []
@@ -412,55 +405,13 @@ def extended_design_validation(model: TrackerModel, data: MeasurementSet, target
         n_test = int(round(test_frac * len(data))) if target is None else 0
         pool_rows = np.sort(perm[n_test:])
         pool = data.subset(pool_rows)
-        geo = identify(model, pool, use_orientation=False)
-        sel = select_terms(geo, pool, max_order=max_order, max_terms=max_terms, prior_rad=prior_rad, seed=seed + s,
-                           refit=False, show_progress=False)
-        effects = list(sel.effects)
-        n_terms.append(len(sel.terms))
-        bias.append(float(sel.cv_rms_m[-1]) if len(sel.cv_rms_m) else float("nan"))
-        base = np.asarray(geo.identifiability.base, int)
-        p_ref = np.asarray(geo.p, float).copy()
-        p_ref[:6 * model.robot.nq] = 0.0  # start from the nominal robot, the set-up of the pool
-        ext = ExtendedModel(geo.model, p_ref, base, effects)
-        ext.prior_info = np.diag(np.r_[np.zeros(ext.nb), np.full(ext.k, prior_rad ** -2)])
-        Fp = ext.jacobian(pool.q)
-        # bias-aware option: the selection's held-out RMS (per axis) added to the measurement variance
-        b_axis = float(sel.cv_rms_m[-1]) / np.sqrt(3.0) if len(sel.cv_rms_m) else 0.0
-        s_row = model.noise.sigma(pool.position_m)
-        Fp_bias = Fp * (s_row / np.sqrt(s_row ** 2 + b_axis ** 2))[:, :, None]
-        if target is None:
-            test_rows = np.sort(perm[:n_test])
-            tq = data.q[test_rows]
-            work = tq[rng.choice(test_rows.size, n_work, replace=False)]
-            scored = data.subset(test_rows[_near(tq, work, radius_rad, joints)])
-            reg = None
-        else:
-            tperm = rng.permutation(len(target))
-            reg = target.subset(np.sort(tperm[:n_register]))
-            rest = np.sort(tperm[n_register:])
-            work = target.q[rest[rng.choice(rest.size, n_work, replace=False)]]
-            scored = target.subset(rest[_near(target.q[rest], work, radius_rad, joints)])
+        fit = _fit_split(model, pool, seed + s, max_order, max_terms, prior_rad)
+        n_terms.append(fit.n_terms)
+        bias.append(fit.cv_rms_m)
+        work, scored, reg = _work_and_scored(data, target, perm, n_test, rng, n_work, n_register, radius_rad, joints)
         n_scored.append(len(scored))
-        # KPI: the measured point at the working configurations, in the pool's tracker frame
-        E_ext = ext.jacobian(work, weighted=False)[:, :3, :].reshape(-1, ext.nx)
-        for meth in methods:
-            crit, on = EXTENDED_METHODS[meth]
-            if crit is None:
-                chosen = rng.choice(pool_rows.size, n_meas, replace=False)
-            else:
-                K = get_criterion(crit).pool_form(E_ext[:, :ext.nb] if on == "geometric" else E_ext,
-                                                  ext.nb if on == "geometric" else ext.nx)
-                if on == "geometric":
-                    chosen = select(Fp[:, :, :ext.nb], n_meas, K, seed=seed + s).indices
-                else:
-                    chosen = select_pool(Fp_bias if on.endswith("bias") else Fp, n_meas, K, ext.prior_info,
-                                         seed=seed + s).indices
-            x = _fit_extended(geo.model, pool.subset(np.sort(chosen)), base, effects, p_ref, prior_rad)
-            if reg is None:
-                e = _errors(geo.model, scored, base, effects, p_ref, x)
-            else:
-                e = _register_and_score(geo.model, base, effects, p_ref, x, reg, scored)
-            err[meth].append(float(e.mean()))
+        for meth, e in _score_methods(fit, pool, work, scored, reg, methods, rng, n_meas, seed + s, prior_rad):
+            err[meth].append(e)
     settings = {"case": f"{data.source}" + (f" -> {target.source}" if target is not None else " (within)"),
                 "n_meas": n_meas, "test_frac": test_frac, "n_work": n_work, "radius_rad": radius_rad,
                 "joints": joints, "max_terms": max_terms, "max_order": max_order, "prior_rad": prior_rad,
@@ -471,6 +422,107 @@ def extended_design_validation(model: TrackerModel, data: MeasurementSet, target
                                     success=True, status="completed", nit=n_splits,
                                     message=f"{n_splits} splits, methods {', '.join(methods)}",
                                     time_s=time.perf_counter() - t0)
+
+
+def _check_extended(methods: tuple[str, ...], data: MeasurementSet, n_meas: int) -> None:
+    """Raise InputError for an unknown method or too few rows for ``n_meas``-pose designs."""
+    for k in methods:
+        if k not in EXTENDED_METHODS:
+            raise InputError(f"method '{k}': unknown (known: {', '.join(EXTENDED_METHODS)})")
+    if len(data) < 3 * n_meas:
+        raise InputError(f"{data.source}: {len(data)} rows are too few for {n_meas}-pose designs")
+
+
+def _score_methods(fit: "_SplitFit", pool: MeasurementSet, work: np.ndarray, scored: MeasurementSet,
+                   reg: MeasurementSet | None, methods: tuple[str, ...], rng: np.random.Generator, n_meas: int,
+                   seed: int, prior_rad: float) -> list[tuple[str, float]]:
+    """(method, mean position error (m)) on the scored rows of each method's design, calibrated with the extended model."""
+    # KPI: the measured point at the working configurations, in the pool's tracker frame
+    ext = fit.ext
+    E_ext = ext.jacobian(work, weighted=False)[:, :3, :].reshape(-1, ext.nx)
+    out = []
+    for meth in methods:
+        chosen = _choose(meth, fit, E_ext, rng, len(pool), n_meas, seed)
+        x = _fit_extended(fit.geo.model, pool.subset(np.sort(chosen)), fit.base, fit.effects, fit.p_ref, prior_rad)
+        if reg is None:
+            e = _errors(fit.geo.model, scored, fit.base, fit.effects, fit.p_ref, x)
+        else:
+            e = _register_and_score(fit.geo.model, fit.base, fit.effects, fit.p_ref, x, reg, scored)
+        out.append((meth, float(e.mean())))
+    return out
+
+
+@dataclass
+class _SplitFit:
+    """One split's training-pool fit: geometry, selected terms and the extended model's pool Jacobians."""
+
+    geo: object           # IdentificationResult of the geometric fit on the pool
+    n_terms: int          # selected transferable terms
+    cv_rms_m: float       # the selection's held-out RMS (m), NaN without selection
+    effects: list
+    base: np.ndarray      # identifiable base parameters
+    p_ref: np.ndarray     # reference parameters: nominal robot, the pool's set-up
+    ext: object           # ExtendedModel (prior sigma on every effect parameter)
+    Fp: np.ndarray        # weighted pool Jacobians of the extended model
+    Fp_bias: np.ndarray   # the same with the selection's bias added to the measurement variance
+
+
+def _fit_split(model: TrackerModel, pool: MeasurementSet, seed: int, max_order: int, max_terms: int,
+               prior_rad: float) -> _SplitFit:
+    """Fit the geometry on the training pool, select the transferable terms, build the extended model."""
+    from pin_kpi_oed.diagnosis.selection import select_terms
+    from pin_kpi_oed.oed.extended import ExtendedModel
+
+    geo = identify(model, pool, use_orientation=False)
+    sel = select_terms(geo, pool, max_order=max_order, max_terms=max_terms, prior_rad=prior_rad, seed=seed,
+                       refit=False, show_progress=False)
+    effects = list(sel.effects)
+    cv_rms = float(sel.cv_rms_m[-1]) if len(sel.cv_rms_m) else float("nan")
+    base = np.asarray(geo.identifiability.base, int)
+    p_ref = np.asarray(geo.p, float).copy()
+    p_ref[:6 * model.robot.nq] = 0.0  # start from the nominal robot, the set-up of the pool
+    ext = ExtendedModel(geo.model, p_ref, base, effects)
+    ext.prior_info = np.diag(np.r_[np.zeros(ext.nb), np.full(ext.k, prior_rad ** -2)])
+    Fp = ext.jacobian(pool.q)
+    # bias-aware option: the selection's held-out RMS (per axis) added to the measurement variance
+    b_axis = float(sel.cv_rms_m[-1]) / np.sqrt(3.0) if len(sel.cv_rms_m) else 0.0
+    s_row = model.noise.sigma(pool.position_m)
+    Fp_bias = Fp * (s_row / np.sqrt(s_row ** 2 + b_axis ** 2))[:, :, None]
+    return _SplitFit(geo=geo, n_terms=len(sel.terms), cv_rms_m=cv_rms, effects=effects, base=base, p_ref=p_ref,
+                     ext=ext, Fp=Fp, Fp_bias=Fp_bias)
+
+
+def _work_and_scored(data: MeasurementSet, target: MeasurementSet | None, perm: np.ndarray, n_test: int,
+                     rng: np.random.Generator, n_work: int, n_register: int, radius_rad: float,
+                     joints: int) -> tuple[np.ndarray, MeasurementSet, MeasurementSet | None]:
+    """(working configurations (rad), scored rows, registration rows of ``target`` or None) of one split."""
+    if target is None:
+        test_rows = np.sort(perm[:n_test])
+        tq = data.q[test_rows]
+        work = tq[rng.choice(test_rows.size, n_work, replace=False)]
+        return work, data.subset(test_rows[_near(tq, work, radius_rad, joints)]), None
+    tperm = rng.permutation(len(target))
+    reg = target.subset(np.sort(tperm[:n_register]))
+    rest = np.sort(tperm[n_register:])
+    work = target.q[rest[rng.choice(rest.size, n_work, replace=False)]]
+    return work, target.subset(rest[_near(target.q[rest], work, radius_rad, joints)]), reg
+
+
+def _choose(meth: str, fit: _SplitFit, E_ext: np.ndarray, rng: np.random.Generator, n_pool: int, n_meas: int,
+            seed: int) -> np.ndarray:
+    """Pool indices of the ``n_meas`` poses chosen by method ``meth`` (a key of :data:`EXTENDED_METHODS`)."""
+    from pin_kpi_oed.oed.extended import select_pool
+
+    ext = fit.ext
+    crit, on = EXTENDED_METHODS[meth]
+    if crit is None:
+        return rng.choice(n_pool, n_meas, replace=False)
+    K = get_criterion(crit).pool_form(E_ext[:, :ext.nb] if on == "geometric" else E_ext,
+                                      ext.nb if on == "geometric" else ext.nx)
+    if on == "geometric":
+        return select(fit.Fp[:, :, :ext.nb], n_meas, K, seed=seed).indices
+    return select_pool(fit.Fp_bias if on.endswith("bias") else fit.Fp, n_meas, K, ext.prior_info,
+                       seed=seed).indices
 
 
 def _register_and_score(model: TrackerModel, base: np.ndarray, effects: list, p_ref: np.ndarray, x: np.ndarray,
