@@ -132,73 +132,96 @@ def assess_fit(result: Any, validation: dict | None = None, *, nominal_reflector
     noise_known = not bool(result.covariance_scaled)
     err = np.asarray(result.errors_m, float)
     train_rms = float(np.sqrt(np.mean(err[keep] ** 2))) if keep.any() else float("nan")
+    f = _Findings()
+    large = _check_outliers(f, result, we, out_idx, nh)
     interval = None
-    reasons: list[str] = []
-    causes: list[str] = []
-    advice: list[str] = []
-    verdict = "good"
+    if noise_known:
+        interval = _check_chi2(f, chi2_red, dof, alpha, chi2_poor, nominal_reflector_m, reflector_estimated)
+    before, after = _check_heldout(f, validation, train_rms, large)
+    seen: set[str] = set()
+    causes = [c for c in f.causes if not (c in seen or seen.add(c))]
+    seen = set()
+    advice = [a for a in f.advice if not (a in seen or seen.add(a))]
+    return FitQuality(verdict=f.verdict, chi2_reduced=chi2_red, chi2_interval=interval, dof=dof,
+                      noise_known=noise_known, train_rms_m=train_rms, heldout_rms_before_m=before,
+                      heldout_rms_after_m=after, n_outliers=int(out_idx.size), large_outliers=large,
+                      causes=causes, advice=advice, reasons=f.reasons)
 
-    def worse(level: str) -> None:
-        nonlocal verdict
-        if level == "poor" or verdict == "good":
-            verdict = level
 
-    # 3. outliers large against the noise (robust scale of all weighted errors)
+@dataclass
+class _Findings:
+    """The verdict so far ('good' < 'suspect' < 'poor') with its reasons, possible causes and advice."""
+
+    verdict: str = "good"
+    reasons: list[str] = field(default_factory=list)
+    causes: list[str] = field(default_factory=list)
+    advice: list[str] = field(default_factory=list)
+
+    def worse(self, level: str) -> None:
+        """Raise the verdict to ``level`` ('suspect' never lowers 'poor')."""
+        if level == "poor" or self.verdict == "good":
+            self.verdict = level
+
+
+def _check_outliers(f: _Findings, result: Any, we: np.ndarray, out_idx: np.ndarray, nh: int) -> int:
+    """Check 3: outliers large against the noise (robust scale of all weighted errors); their number."""
+    m = we.size
     scale = 1.4826 * float(np.median(we)) / np.sqrt(nh) if m else 0.0
     large = int(np.sum(we[out_idx] > OUTLIER_LARGE * max(scale, 1e-300) * np.sqrt(nh))) if out_idx.size else 0
     robust = str(result.loss) != "linear"
     if large and not robust:
-        worse("suspect")
-        reasons.append(f"{large} outlier(s) beyond {OUTLIER_LARGE:g} sigma fitted with the plain loss")
-        causes.append("outliers (gross measurement errors)")
-        advice.append("--loss soft_l1 (robust) or remove the flagged rows")
-    # 1. reduced chi2 against its interval (absolute noise level known)
-    if noise_known:
-        lo, hi = (float(v) / dof for v in _chi2.ppf([alpha / 2, 1 - alpha / 2], dof))
-        interval = (lo, hi)
-        if chi2_red > max(chi2_poor, hi):
-            worse("poor")
-            reasons.append(f"reduced chi2 {chi2_red:.3g} (residual RMS {np.sqrt(chi2_red):.2g}x the stated noise; "
-                           f"expected within [{lo:.3g}, {hi:.3g}])")
-        elif chi2_red > hi:
-            worse("suspect")
-            reasons.append(f"reduced chi2 {chi2_red:.3g} above its {100 * (1 - alpha):g}% interval "
-                           f"[{lo:.3g}, {hi:.3g}]")
-        elif chi2_red < lo:
-            worse("suspect")
-            reasons.append(f"reduced chi2 {chi2_red:.3g} below its interval [{lo:.3g}, {hi:.3g}]: the stated noise "
-                           "is larger than the residuals")
-            causes.append("sigma too large (units of sigma: m)")
-        if chi2_red > hi:
-            refl = None if nominal_reflector_m is None else np.asarray(nominal_reflector_m, float)
-            if refl is not None and not reflector_estimated and float(np.linalg.norm(refl)) < 1e-9:
-                causes.insert(0, "reflector/TCP offset (nominal --reflector 0,0,0 hides parameters it makes "
-                                 "identifiable)")
-                advice.insert(0, "give the reflector offset (--reflector x,y,z in m) or leave --reflector out to "
-                                 "estimate it")
-            else:
-                causes.append("reflector/TCP offset")
-            causes += ["sigma units (m) or an optimistic noise model", "wrong robot model or unmodelled effects"]
-            advice += ["check --sigma / sigma columns (m)", "run pin-kpi-oed diagnose"]
-    # 2. held-out error against the nominal robot's and the training error
+        f.worse("suspect")
+        f.reasons.append(f"{large} outlier(s) beyond {OUTLIER_LARGE:g} sigma fitted with the plain loss")
+        f.causes.append("outliers (gross measurement errors)")
+        f.advice.append("--loss soft_l1 (robust) or remove the flagged rows")
+    return large
+
+
+def _check_chi2(f: _Findings, chi2_red: float, dof: int, alpha: float, chi2_poor: float, nominal_reflector_m: Any,
+                reflector_estimated: bool) -> tuple[float, float]:
+    """Check 1: reduced chi2 against its interval (absolute noise level known); the interval."""
+    lo, hi = (float(v) / dof for v in _chi2.ppf([alpha / 2, 1 - alpha / 2], dof))
+    if chi2_red > max(chi2_poor, hi):
+        f.worse("poor")
+        f.reasons.append(f"reduced chi2 {chi2_red:.3g} (residual RMS {np.sqrt(chi2_red):.2g}x the stated noise; "
+                         f"expected within [{lo:.3g}, {hi:.3g}])")
+    elif chi2_red > hi:
+        f.worse("suspect")
+        f.reasons.append(f"reduced chi2 {chi2_red:.3g} above its {100 * (1 - alpha):g}% interval "
+                         f"[{lo:.3g}, {hi:.3g}]")
+    elif chi2_red < lo:
+        f.worse("suspect")
+        f.reasons.append(f"reduced chi2 {chi2_red:.3g} below its interval [{lo:.3g}, {hi:.3g}]: the stated noise "
+                         "is larger than the residuals")
+        f.causes.append("sigma too large (units of sigma: m)")
+    if chi2_red > hi:
+        refl = None if nominal_reflector_m is None else np.asarray(nominal_reflector_m, float)
+        if refl is not None and not reflector_estimated and float(np.linalg.norm(refl)) < 1e-9:
+            f.causes.insert(0, "reflector/TCP offset (nominal --reflector 0,0,0 hides parameters it makes "
+                               "identifiable)")
+            f.advice.insert(0, "give the reflector offset (--reflector x,y,z in m) or leave --reflector out to "
+                               "estimate it")
+        else:
+            f.causes.append("reflector/TCP offset")
+        f.causes += ["sigma units (m) or an optimistic noise model", "wrong robot model or unmodelled effects"]
+        f.advice += ["check --sigma / sigma columns (m)", "run pin-kpi-oed diagnose"]
+    return (lo, hi)
+
+
+def _check_heldout(f: _Findings, validation: dict | None, train_rms: float,
+                   large: int) -> tuple[float | None, float | None]:
+    """Check 2: held-out error against the nominal robot's and the training error; (before, after) RMS (m)."""
     before, after = (_rms(validation.get("before")), _rms(validation.get("after"))) if validation else (None, None)
     if before is not None and after is not None:
         if after > before:
-            worse("poor")
-            reasons.append(f"held-out RMS {after * 1e3:.4g} mm after calibration is worse than the nominal robot's "
-                           f"{before * 1e3:.4g} mm")
+            f.worse("poor")
+            f.reasons.append(f"held-out RMS {after * 1e3:.4g} mm after calibration is worse than the nominal "
+                             f"robot's {before * 1e3:.4g} mm")
             if not large:
-                causes += ["wrong robot or joint order/zero", "units (m, rad)"]
+                f.causes += ["wrong robot or joint order/zero", "units (m, rad)"]
         elif np.isfinite(train_rms) and after > 3.0 * train_rms and after > 1e-6:
-            worse("suspect")
-            reasons.append(f"held-out RMS {after * 1e3:.4g} mm is more than 3x the training RMS "
-                           f"{train_rms * 1e3:.4g} mm")
-            causes.append("over-fit or another session (re-register with --register-rows)")
-    seen: set[str] = set()
-    causes = [c for c in causes if not (c in seen or seen.add(c))]
-    seen = set()
-    advice = [a for a in advice if not (a in seen or seen.add(a))]
-    return FitQuality(verdict=verdict, chi2_reduced=chi2_red, chi2_interval=interval, dof=dof,
-                      noise_known=noise_known, train_rms_m=train_rms, heldout_rms_before_m=before,
-                      heldout_rms_after_m=after, n_outliers=int(out_idx.size), large_outliers=large,
-                      causes=causes, advice=advice, reasons=reasons)
+            f.worse("suspect")
+            f.reasons.append(f"held-out RMS {after * 1e3:.4g} mm is more than 3x the training RMS "
+                             f"{train_rms * 1e3:.4g} mm")
+            f.causes.append("over-fit or another session (re-register with --register-rows)")
+    return before, after
