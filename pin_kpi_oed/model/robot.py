@@ -292,52 +292,9 @@ def load_robot(spec: str | os.PathLike, tool_frame: str | None = None) -> Robot:
             revolute nor prismatic, or a prismatic joint without finite limits (m).
     """
     path, default_tool = resolve_robot(str(spec))
-    if not path.exists():
-        known = ", ".join(SHIPPED_ROBOTS + tuple(ERD_ROBOTS))
-        raise RobotLoadError(f"{path}: no such URDF file (robot names known: {known})")
-    try:
-        text = path.read_text()
-    except (OSError, UnicodeDecodeError) as exc:
-        raise RobotLoadError(f"{path}: cannot read URDF ({exc})") from None
-    import xml.etree.ElementTree as ET
-
-    try:
-        root = ET.fromstring(text)
-    except ET.ParseError as exc:
-        raise RobotLoadError(f"{path}: malformed URDF (XML error: {exc})") from None
-    if root.tag != "robot":
-        raise RobotLoadError(f"{path}: not a URDF file (root element <{root.tag}>, expected <robot>)")
-    check_urdf_tree(root, path, text)
-    try:
-        with captured_stderr() as cap:  # urdfdom prints its reasons on fd 2: put them in the one line
-            full = pin.buildModelFromUrdf(str(path))
-    except Exception as exc:  # Pinocchio raises ValueError/RuntimeError with long texts
-        first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
-        why = cap.first_line()
-        raise RobotLoadError(f"{path}: malformed URDF ({why.split('  ')[0] if why else first})") from None
-
-    tool = tool_frame or default_tool or ("tool0" if full.existFrame("tool0") else None)
-    if tool is None:
-        raise RobotLoadError(f"{path}: no tool frame given and the URDF has no 'tool0' frame: pass --tool FRAME")
-    if not full.existFrame(tool):
-        names = [f.name for f in full.frames if f.type in (pin.FrameType.BODY, pin.FrameType.OP_FRAME)]
-        raise RobotLoadError(f"{path}: unknown tool frame '{tool}' (frames: {', '.join(names[-8:])} ...)")
-
-    chain = _chain_to_frame(full, full.getFrameId(tool))
-    if not chain:
-        raise RobotLoadError(f"{path}: tool frame '{tool}' is not moved by any joint")
-    for j in chain:
-        if full.joints[j].nq != 1 or full.joints[j].nv != 1:
-            raise RobotLoadError(f"{path}: joint '{full.names[j]}' has {full.joints[j].nq} DoF: "
-                                 "not a serial arm of 1-DoF joints")
-    tip_subtree = _subtree(full, chain[-1])
-    extra = [j for j in range(1, full.njoints) if j not in chain]
-    branches = [j for j in extra if j not in tip_subtree]
-    if branches:
-        raise RobotLoadError(f"{path}: not a serial arm: joints {', '.join(full.names[j] for j in branches)} "
-                             f"branch off the chain to '{tool}'")
-    locked = [full.names[j] for j in extra]
-    model = pin.buildReducedModel(full, extra, pin.neutral(full)) if extra else full
+    full = _build_full_model(path)
+    tool = _tool_frame(full, path, tool_frame, default_tool)
+    model, locked = _serial_chain_model(full, path, tool)
 
     joint_ids = list(range(1, model.njoints))
     try:
@@ -362,6 +319,73 @@ def load_robot(spec: str | os.PathLike, tool_frame: str | None = None) -> Robot:
     )
     check_robot_scale(robot.reach(), path)
     return robot
+
+
+def _build_full_model(path: Path) -> pin.Model:
+    """Read, parse and check the URDF at ``path`` and build its full Pinocchio model.
+
+    Raises:
+        RobotLoadError: missing, unreadable or malformed URDF (one line naming the file).
+    """
+    if not path.exists():
+        known = ", ".join(SHIPPED_ROBOTS + tuple(ERD_ROBOTS))
+        raise RobotLoadError(f"{path}: no such URDF file (robot names known: {known})")
+    try:
+        text = path.read_text()
+    except (OSError, UnicodeDecodeError) as exc:
+        raise RobotLoadError(f"{path}: cannot read URDF ({exc})") from None
+    import xml.etree.ElementTree as ET
+
+    try:
+        root = ET.fromstring(text)
+    except ET.ParseError as exc:
+        raise RobotLoadError(f"{path}: malformed URDF (XML error: {exc})") from None
+    if root.tag != "robot":
+        raise RobotLoadError(f"{path}: not a URDF file (root element <{root.tag}>, expected <robot>)")
+    check_urdf_tree(root, path, text)
+    try:
+        with captured_stderr() as cap:  # urdfdom prints its reasons on fd 2: put them in the one line
+            full = pin.buildModelFromUrdf(str(path))
+    except Exception as exc:  # Pinocchio raises ValueError/RuntimeError with long texts
+        first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+        why = cap.first_line()
+        raise RobotLoadError(f"{path}: malformed URDF ({why.split('  ')[0] if why else first})") from None
+    return full
+
+
+def _tool_frame(full: pin.Model, path: Path, tool_frame: str | None, default_tool: str | None) -> str:
+    """The tool frame: given, the robot name's default, or ``tool0``; raises RobotLoadError if absent."""
+    tool = tool_frame or default_tool or ("tool0" if full.existFrame("tool0") else None)
+    if tool is None:
+        raise RobotLoadError(f"{path}: no tool frame given and the URDF has no 'tool0' frame: pass --tool FRAME")
+    if not full.existFrame(tool):
+        names = [f.name for f in full.frames if f.type in (pin.FrameType.BODY, pin.FrameType.OP_FRAME)]
+        raise RobotLoadError(f"{path}: unknown tool frame '{tool}' (frames: {', '.join(names[-8:])} ...)")
+    return tool
+
+
+def _serial_chain_model(full: pin.Model, path: Path, tool: str) -> tuple[pin.Model, list[str]]:
+    """(model reduced to the serial chain moving ``tool``, names of the locked joints).
+
+    Raises:
+        RobotLoadError: the tool is not moved by any joint, a multi-DoF joint, or a branch off the chain.
+    """
+    chain = _chain_to_frame(full, full.getFrameId(tool))
+    if not chain:
+        raise RobotLoadError(f"{path}: tool frame '{tool}' is not moved by any joint")
+    for j in chain:
+        if full.joints[j].nq != 1 or full.joints[j].nv != 1:
+            raise RobotLoadError(f"{path}: joint '{full.names[j]}' has {full.joints[j].nq} DoF: "
+                                 "not a serial arm of 1-DoF joints")
+    tip_subtree = _subtree(full, chain[-1])
+    extra = [j for j in range(1, full.njoints) if j not in chain]
+    branches = [j for j in extra if j not in tip_subtree]
+    if branches:
+        raise RobotLoadError(f"{path}: not a serial arm: joints {', '.join(full.names[j] for j in branches)} "
+                             f"branch off the chain to '{tool}'")
+    locked = [full.names[j] for j in extra]
+    model = pin.buildReducedModel(full, extra, pin.neutral(full)) if extra else full
+    return model, locked
 
 
 def _joint_limits(model: pin.Model, joint_ids: list[int], revolute: np.ndarray, path: Path
