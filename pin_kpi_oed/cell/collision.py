@@ -521,57 +521,78 @@ class CollisionModel:
         clr = self.cell.clearance_m
         gs, Gs = [], []
         mA, mB = self._masks()
+        rows = []
         if len(self.pairs):
-            i1, i2 = self.pairs[:, 0], self.pairs[:, 1]
-            A1, B1, A2, B2 = EA[:, i1], EB[:, i1], EA[:, i2], EB[:, i2]
-            far = None
-            if backend == "geometry":
-                if not hasattr(self, "_geometry"):
-                    self._geometry = GeometryDistances(self)
-                dseg, s, t, w1, w2, far = self._geometry.witness(Q, EA, EB, band if with_grad else -np.inf)
-                diff = w2 - w1
-            else:
-                if backend == "coal":
-                    s, t, w1, w2 = self._coal_witness(EA, EB, i1, i2)
-                else:
-                    s, t, w1, w2 = segment_closest(A1, B1, A2, B2)
-                diff = w2 - w1
-                dseg = np.sqrt(np.einsum("mpa,mpa->mp", diff, diff))
-            gs.append(dseg - self.radius[i1] - self.radius[i2] - clr)
-            if with_grad:
-                nrm = diff / np.where(dseg > 0, dseg, 1.0)[..., None]
-                VT, WT = np.swapaxes(V, 1, 2), np.swapaxes(W, 1, 2)  # (m, 3, n)
-                nv = nrm @ VT  # (m, P, n)
-
-                def side(P: np.ndarray, u: np.ndarray, mask: np.ndarray) -> np.ndarray:
-                    return u[..., None] * (nv + _cross(P, nrm) @ WT) * mask[None]
-
-                Gp = (side(A2, 1.0 - t, mA[i2]) + side(B2, t, mB[i2])
-                      - side(A1, 1.0 - s, mA[i1]) - side(B1, s, mB[i1]))
-                if far is not None:
-                    Gp[far] = 0.0  # outside the band: not evaluated (see ``band``)
-                Gs.append(Gp)
+            rows.append(self._pair_rows(Q, EA, EB, V, W, clr, mA, mB, with_grad, backend, band))
         if len(self.half):
-            a, h, e = self.half[:, 0], self.half[:, 1], self.half[:, 2]
-            Nh = np.array([self.halfspaces[k][0] for k in h]).reshape(-1, 3)
-            Oh = np.array([self.halfspaces[k][1] for k in h])
-            P = np.where(e[None, :, None] == 0, EA[:, a], EB[:, a])
-            gs.append(np.einsum("mpa,pa->mp", P, Nh) - Oh - self.radius[a] - clr)
-            if with_grad:
-                mask = np.where(e[:, None] == 0, mA[a], mB[a])
-                Gs.append((Nh @ np.swapaxes(V, 1, 2) + _cross(P, Nh[None]) @ np.swapaxes(W, 1, 2)) * mask[None])
+            rows.append(self._halfspace_rows(EA, EB, V, W, clr, mA, mB, with_grad))
         if self.with_incidence:
+            rows.append(self._incidence_row(Q, with_grad))
+        for gk, Gk in rows:
+            gs.append(gk)
             if with_grad:
-                c, dc = self.model.incidence_cos(self.p0, Q, with_grad=True)
-                Gs.append(dc[:, None, :])
-            else:
-                c = self.model.incidence_cos(self.p0, Q)
-            gs.append((c - self.cos_max)[:, None])
+                Gs.append(Gk)
         g = np.concatenate(gs, axis=1) if gs else np.zeros((m, 0))
         if not with_grad:
             return g
         G = np.concatenate(Gs, axis=1) if Gs else np.zeros((m, 0, n))
         return g, G
+
+    def _pair_rows(self, Q: np.ndarray, EA: np.ndarray, EB: np.ndarray, V: np.ndarray, W: np.ndarray, clr: float,
+                   mA: np.ndarray, mB: np.ndarray, with_grad: bool, backend: str, band: float | None
+                   ) -> tuple[np.ndarray, np.ndarray | None]:
+        """Capsule-pair rows of :meth:`evaluate`: distance minus radii and clearance (m), gradient or None."""
+        i1, i2 = self.pairs[:, 0], self.pairs[:, 1]
+        A1, B1, A2, B2 = EA[:, i1], EB[:, i1], EA[:, i2], EB[:, i2]
+        far = None
+        if backend == "geometry":
+            if not hasattr(self, "_geometry"):
+                self._geometry = GeometryDistances(self)
+            dseg, s, t, w1, w2, far = self._geometry.witness(Q, EA, EB, band if with_grad else -np.inf)
+            diff = w2 - w1
+        else:
+            if backend == "coal":
+                s, t, w1, w2 = self._coal_witness(EA, EB, i1, i2)
+            else:
+                s, t, w1, w2 = segment_closest(A1, B1, A2, B2)
+            diff = w2 - w1
+            dseg = np.sqrt(np.einsum("mpa,mpa->mp", diff, diff))
+        g = dseg - self.radius[i1] - self.radius[i2] - clr
+        if not with_grad:
+            return g, None
+        nrm = diff / np.where(dseg > 0, dseg, 1.0)[..., None]
+        VT, WT = np.swapaxes(V, 1, 2), np.swapaxes(W, 1, 2)  # (m, 3, n)
+        nv = nrm @ VT  # (m, P, n)
+
+        def side(P: np.ndarray, u: np.ndarray, mask: np.ndarray) -> np.ndarray:
+            return u[..., None] * (nv + _cross(P, nrm) @ WT) * mask[None]
+
+        Gp = (side(A2, 1.0 - t, mA[i2]) + side(B2, t, mB[i2])
+              - side(A1, 1.0 - s, mA[i1]) - side(B1, s, mB[i1]))
+        if far is not None:
+            Gp[far] = 0.0  # outside the band: not evaluated (see ``band``)
+        return g, Gp
+
+    def _halfspace_rows(self, EA: np.ndarray, EB: np.ndarray, V: np.ndarray, W: np.ndarray, clr: float,
+                        mA: np.ndarray, mB: np.ndarray, with_grad: bool) -> tuple[np.ndarray, np.ndarray | None]:
+        """Capsule end point / half-space rows of :meth:`evaluate` (m), gradient or None."""
+        a, h, e = self.half[:, 0], self.half[:, 1], self.half[:, 2]
+        Nh = np.array([self.halfspaces[k][0] for k in h]).reshape(-1, 3)
+        Oh = np.array([self.halfspaces[k][1] for k in h])
+        P = np.where(e[None, :, None] == 0, EA[:, a], EB[:, a])
+        g = np.einsum("mpa,pa->mp", P, Nh) - Oh - self.radius[a] - clr
+        if not with_grad:
+            return g, None
+        mask = np.where(e[:, None] == 0, mA[a], mB[a])
+        return g, (Nh @ np.swapaxes(V, 1, 2) + _cross(P, Nh[None]) @ np.swapaxes(W, 1, 2)) * mask[None]
+
+    def _incidence_row(self, Q: np.ndarray, with_grad: bool) -> tuple[np.ndarray, np.ndarray | None]:
+        """Incidence row of :meth:`evaluate`: cos(angle) − cos(max angle), gradient or None."""
+        if with_grad:
+            c, dc = self.model.incidence_cos(self.p0, Q, with_grad=True)
+            return (c - self.cos_max)[:, None], dc[:, None, :]
+        c = self.model.incidence_cos(self.p0, Q)
+        return (c - self.cos_max)[:, None], None
 
     def _coal_witness(self, EA: np.ndarray, EB: np.ndarray, i1: np.ndarray, i2: np.ndarray
                       ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
