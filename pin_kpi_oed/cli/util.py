@@ -8,6 +8,7 @@ from typing import Any
 import numpy as np
 
 from pin_kpi_oed.errors import InputError
+from pin_kpi_oed.validation.options import floats
 
 
 def parse_floats(text: str, n: int | tuple[int, ...], what: str) -> np.ndarray:
@@ -17,12 +18,8 @@ def parse_floats(text: str, n: int | tuple[int, ...], what: str) -> np.ndarray:
         InputError: not numbers, not finite, or the wrong count (naming the option ``what``).
     """
     ns = (n,) if isinstance(n, int) else n
-    try:
-        v = np.array([float(s) for s in str(text).replace(" ", "").split(",") if s != ""])
-    except ValueError:
-        raise InputError(f"{what}: expected {' or '.join(map(str, ns))} comma-separated numbers (SI units), "
-                         f"got '{text}'") from None
-    if v.size not in ns or not np.all(np.isfinite(v)):
+    v = np.array(floats(text, what))  # the one comma-number parser (validation.options)
+    if v.size not in ns:
         raise InputError(f"{what}: expected {' or '.join(map(str, ns))} finite comma-separated numbers, got '{text}'")
     return v
 

@@ -274,6 +274,15 @@ def write_calibrated_urdf(robot: Robot, placements: Sequence[pin.SE3], path: str
     """
     target = Path(path)
     text = calibrated_urdf_text(robot, placements, comment, out_dir=target.parent if str(target.parent) else ".")
+    return _write_checked(target, text, robot, placements, tol_m)
+
+
+def _write_checked(target: Path, text: str, robot: Robot, placements: Sequence[pin.SE3], tol_m: float) -> float:
+    """Write ``text`` atomically after checking that it reproduces the identified FK; returns the position gap (m).
+
+    Raises:
+        SolverError: the reloaded URDF differs by more than ``tol_m`` (nothing is written).
+    """
     dp, dr = check_urdf_fk(text, robot, placements)
     if dp > tol_m or dr > tol_m:
         raise SolverError(f"the calibrated URDF reproduces the identified FK only to {dp:.3g} m / {dr:.3g} rad "
@@ -335,9 +344,4 @@ def write_model_urdf(cm, path: str | os.PathLike, frames: bool = True, tcp_m: np
                "reflector_<station>, tcp are fixed frames of the set-up. " + URDF_LIMITS_NOTE) if frames else None
     text = calibrated_urdf_text(rb, placements, comment, out_dir=target.parent if str(target.parent) else ".",
                                 frames=model_frames(cm, tcp_m) if frames else ())
-    dp, dr = check_urdf_fk(text, rb, placements)
-    if dp > tol_m or dr > tol_m:
-        raise SolverError(f"the calibrated URDF reproduces the identified FK only to {dp:.3g} m / {dr:.3g} rad "
-                          f"(> {tol_m:g}); nothing written to {target}")
-    atomic_write_text(target, text)
-    return dp
+    return _write_checked(target, text, rb, placements, tol_m)

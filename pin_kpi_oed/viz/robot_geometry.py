@@ -5,13 +5,13 @@ from __future__ import annotations
 
 import re
 import warnings
-from pathlib import Path
 from typing import Sequence
 
 import numpy as np
 import pinocchio as pin
 
 from pin_kpi_oed.cell.cell import CapsuleSpec
+from pin_kpi_oed.cell.meshes import package_dirs
 from pin_kpi_oed.errors import RobotLoadError
 from pin_kpi_oed.model.robot import Robot
 from pin_kpi_oed.viz.style import CAPSULE_RGBA, ROBOT_RGBA
@@ -21,18 +21,6 @@ def slug(name: str) -> str:
     """A scene-path-safe version of a name (``A on C_p`` -> ``A_on_C_p``)."""
     s = re.sub(r"[^A-Za-z0-9_.-]+", "_", str(name)).strip("_")
     return s or "design"
-
-
-def package_dirs(robot: Robot) -> list[str]:
-    """Folders where the URDF's ``package://`` meshes may be found."""
-    dirs = [str(Path(robot.urdf_path).resolve().parent), str(Path(robot.urdf_path).resolve().parents[1])]
-    try:
-        from pin_kpi_oed.model.robot import erd_root
-
-        dirs.append(str(erd_root().parents[1]))
-    except RobotLoadError:
-        pass
-    return dirs
 
 
 def visual_model(robot: Robot) -> tuple[pin.Model, pin.GeometryModel | None, list[str]]:
@@ -50,7 +38,7 @@ def visual_model(robot: Robot) -> tuple[pin.Model, pin.GeometryModel | None, lis
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             visual = pin.buildGeomFromUrdf(full, robot.urdf_path, pin.GeometryType.VISUAL,
-                                           package_dirs=package_dirs(robot))
+                                           package_dirs=package_dirs(robot.urdf_path))
     except Exception as exc:  # missing mesh files etc.
         notes.append(f"URDF visuals not loaded ({str(exc).strip().splitlines()[0][:120] if str(exc).strip() else exc}):"
                      " drawing primitives")
