@@ -213,6 +213,11 @@ class LinkBending(Effect):
         ph = self.angles(Q)
         return np.stack([f(ph[:, i]) for i in range(ph.shape[1]) for f in (np.cos, np.sin)], 1)
 
+    def options(self) -> dict:
+        """Constructor keyword arguments that rebuild this effect (JSON-able; stored in the model file)."""
+        return {"chain": [self.robot.joint_names[int(j)] for j in self.chain],
+                "terms": [[self.robot.joint_names[int(j)], int(a), str(f)] for j, a, f in self.terms]}
+
     def param_names(self, robot: Robot | None = None) -> list[str]:
         return [f"{self.name}.{self.robot.joint_names[j]}.{f}({self.labels[a]})" for j, a, f in self.terms]
 

@@ -118,6 +118,11 @@ class Drift(Effect):
     def _station_names(self) -> list[str]:
         return ["all"] if self.stations is None else self.stations
 
+    def options(self) -> dict:
+        """Constructor keyword arguments that rebuild this effect (JSON-able; stored in the model file)."""
+        return {"degree": int(self.degree), "stations": self.stations,
+                "t_ref_s": [float(t) for t in np.atleast_1d(self.t_ref_s)]}
+
     def param_names(self, robot: Robot | None = None) -> list[str]:
         return [f"{self.name}.{s}.{a}_{_UNITS[d]}" for s in self._station_names() for d in range(1, self.degree + 1)
                 for a in _AXES]

@@ -265,6 +265,10 @@ class _GravityEffect(Effect):
         self.joints = np.flatnonzero(mask)
         self._cache: dict[bytes, np.ndarray] = {}
 
+    def options(self) -> dict:
+        """Constructor keyword arguments that rebuild this effect (JSON-able; stored in the model file)."""
+        return {"joints": [self.robot.joint_names[int(j)] for j in self.joints]}
+
     def param_names(self, robot: Robot | None = None) -> list[str]:
         return [f"{self.name}.{self.robot.joint_names[j]}" for j in self.joints]
 
@@ -363,6 +367,10 @@ class GearHarmonic(Effect):
         self.joints = np.array(sorted({j for j, _ in self.pairs}), int)
         self.orders = tuple(sorted({o for _, o in self.pairs}))
 
+    def options(self) -> dict:
+        """Constructor keyword arguments that rebuild this effect (JSON-able; stored in the model file)."""
+        return {"pairs": [[self.robot.joint_names[int(j)], int(o)] for j, o in self.pairs]}
+
     def param_names(self, robot=None):
         return [f"{self.name}.{self.robot.joint_names[j]}.{f}{o}" for j, o in self.pairs for f in ("sin", "cos")]
 
@@ -412,6 +420,10 @@ class JointScale(Effect):
             raise InputError(f"{self.name}: unknown joint(s) {unknown} (joints: {', '.join(robot.joint_names)})")
         self.joints = np.array([robot.joint_names.index(j) for j in names], int)
 
+    def options(self) -> dict:
+        """Constructor keyword arguments that rebuild this effect (JSON-able; stored in the model file)."""
+        return {"joints": [self.robot.joint_names[int(j)] for j in self.joints]}
+
     def param_names(self, robot=None):
         return [f"{self.name}.{self.robot.joint_names[j]}" for j in self.joints]
 
@@ -433,6 +445,10 @@ class ThermalExpansion(Effect):
         if not np.isfinite(t_ref_c):
             raise InputError(f"{self.name}: T_ref must be finite, got {t_ref_c}")
         self.t_ref_c = float(t_ref_c)
+
+    def options(self) -> dict:
+        """Constructor keyword arguments that rebuild this effect (JSON-able; stored in the model file)."""
+        return {"t_ref_c": float(self.t_ref_c)}
 
     def param_names(self, robot=None):
         return [f"{self.name}.alpha"]

@@ -76,20 +76,6 @@ def _joint_names(effect: Any, idx: Sequence[int]) -> list[str]:
     return [effect.robot.joint_names[int(j)] for j in idx]
 
 
-_OPTIONS = {
-    "joint_compliance": lambda e: {"joints": _joint_names(e, e.joints)},
-    "backlash": lambda e: {"joints": _joint_names(e, e.joints)},
-    "joint_scale": lambda e: {"joints": _joint_names(e, e.joints)},
-    "gear_harmonic": lambda e: {"pairs": [[e.robot.joint_names[int(j)], int(o)] for j, o in e.pairs]},
-    "transmission_error": lambda e: {"pairs": [[e.robot.joint_names[int(j)], int(o)] for j, o in e.pairs]},
-    "link_bending": lambda e: {"chain": _joint_names(e, e.chain),
-                               "terms": [[e.robot.joint_names[int(j)], int(a), str(f)] for j, a, f in e.terms]},
-    "drift": lambda e: {"degree": int(e.degree), "stations": e.stations,
-                        "t_ref_s": [float(t) for t in np.atleast_1d(e.t_ref_s)]},
-    "thermal_expansion": lambda e: {"t_ref_c": float(e.t_ref_c)},
-}
-
-
 def _known_class(name: Any) -> type | None:
     """The registered effect class of ``name`` (default or opt-in), or None."""
     if str(name) not in ALL_EFFECT_NAMES:
@@ -114,8 +100,6 @@ def effect_spec(effect: Any) -> dict:
     cls = _known_class(name)
     if callable(getattr(effect, "options", None)) and cls is not None and isinstance(effect, cls):
         opts = effect.options()
-    elif cls is not None and type(effect) is cls and name in _OPTIONS:
-        opts = _OPTIONS[name](effect)
     else:
         raise InputError(f"effect '{name}' ({type(effect).__name__}) cannot be stored in a model file: it is not an "
                          "effect of pin_kpi_oed.effects.library (or has no options() method)")
