@@ -173,6 +173,12 @@ class Cell:
     q_work: np.ndarray = field(default_factory=lambda: np.zeros((0, 6)))
     measurements: int = 60
     max_random_tries: int = 200_000
+    environment: list = field(default_factory=list)
+
+    @property
+    def environment_capsule_names(self) -> set[str]:
+        """Names of the obstacle capsules fitted to environment files (the check uses the meshes instead)."""
+        return {c.name for e in self.environment for c in e.capsules}
 
     # ------------------------------------------------------------------ derived
     @property
@@ -215,13 +221,16 @@ class Cell:
             "q_work": self.q_work.tolist(),
             "measurements": self.measurements,
             "max_random_tries": self.max_random_tries,
+            "environment": [e.to_dict() for e in self.environment],
         }
 
     def summary(self) -> str:
         """Short readable description."""
         return (f"cell {self.name}: robot {self.robot.name} ({self.robot.tool_frame}), "
                 f"{len(self.robot_capsules)} robot capsules, {len(self.obstacles)} obstacle capsules, "
-                f"{len(self.half_spaces)} half-spaces, {self.q_work.shape[0]} working configuration(s), "
+                f"{len(self.half_spaces)} half-spaces, "
+                + (f"{len(self.environment)} environment file(s), " if self.environment else "")
+                + f"{self.q_work.shape[0]} working configuration(s), "
                 f"incidence <= {self.incidence_max_deg:g} deg")
 
 
@@ -323,7 +332,7 @@ def capsules_from_urdf(robot: Robot, where: str = "robot_capsules", kind: str = 
 _KNOWN_KEYS = {"name", "description", "robot", "tool_frame", "base", "tracker", "reflector_m", "tcp_m", "noise",
                "joint_bounds", "robot_capsules", "extra_capsules", "obstacles", "skip_pairs", "beam",
                "incidence_max_deg", "clearance_m", "working_configurations_rad", "working_configurations_deg",
-               "measurements", "max_random_tries"}
+               "measurements", "max_random_tries", "environment", "working_targets"}
 
 
 def _check_top_level(d: Any, source: str) -> None:
@@ -431,17 +440,32 @@ def _read_obstacles(d: dict, source: str) -> tuple[list[CapsuleSpec], list[HalfS
     return obstacles, halfs
 
 
+def _read_environment(d: dict, source: str, base_dir: Path | None) -> list:
+    """Obstacles from mesh / URDF files (:mod:`pin_kpi_oed.cell.environment`), paths relative to the cell file."""
+    from pin_kpi_oed.cell.environment import load_environment_object
+
+    return [load_environment_object(e, i, base_dir, source, _pose) for i, e in enumerate(d.get("environment") or [])]
+
+
 class _Names:
-    """The names ``skip_pairs`` and ``beam.skip`` may use: capsules, their links, obstacles, half-spaces."""
+    """The names ``skip_pairs`` and ``beam.skip`` may use: capsules, their links, obstacles, half-spaces,
+    environment objects (standing for all their capsules and solids)."""
 
     def __init__(self, caps: list[CapsuleSpec], obstacles: list[CapsuleSpec], halfs: list[HalfSpace],
-                 links: set[str], source: str):
-        names = [c.name for c in caps] + [o.name for o in obstacles] + [h.name for h in halfs]
+                 links: set[str], source: str, environment: list | None = None):
+        env = list(environment or [])
+        names = [c.name for c in caps] + [o.name for o in obstacles] + [h.name for h in halfs] + [e.name for e in env]
         dup = sorted({x for x in names if names.count(x) > 1})
         if dup:
             raise InputError(f"{_where(source, 'cell')}: duplicate capsule/obstacle name(s) {', '.join(dup)}")
         self.known = set(names) | {c.link for c in caps}
         self.links = links
+        #: environment object name -> its capsule names (what the optimiser's skip lists must hold)
+        self.groups = {e.name: [c.name for c in e.capsules] for e in env}
+
+    def expand(self, x: str) -> list[str]:
+        """``x`` and, for an environment object, the names of its capsules."""
+        return [x] + self.groups.get(x, [])
 
     def check(self, x: Any, what: str) -> str:
         """``x`` as a known name.
@@ -463,7 +487,8 @@ def _read_skip_pairs(d: dict, names: _Names, source: str) -> list[tuple[str, str
         w = _where(source, f"skip_pairs[{i}]")
         if not isinstance(pr, (list, tuple)) or len(pr) != 2:
             raise InputError(f"{w}: expected a pair of names, got {pr!r}")
-        skips.append((names.check(pr[0], w), names.check(pr[1], w)))
+        a, b = names.check(pr[0], w), names.check(pr[1], w)
+        skips += [(x, y) for x in names.expand(a) for y in names.expand(b)]
     return skips
 
 
@@ -475,7 +500,7 @@ def _read_beam(d: dict, names: _Names, source: str) -> tuple[float, list[str]]:
     beam_r = float(beam.get("radius_m", 0.005))
     if not (math.isfinite(beam_r) and beam_r >= 0):
         raise InputError(f"{_where(source, 'beam.radius_m')}: must be >= 0, got {beam.get('radius_m')!r}")
-    return beam_r, [names.check(x, _where(source, "beam.skip")) for x in beam.get("skip") or []]
+    return beam_r, [y for x in beam.get("skip") or [] for y in names.expand(names.check(x, _where(source, "beam.skip")))]
 
 
 def _read_limits(d: dict, source: str) -> tuple[float, float, int, int]:
@@ -494,8 +519,11 @@ def _read_limits(d: dict, source: str) -> tuple[float, float, int, int]:
 
 
 def _read_working_configurations(d: dict, robot: Robot, source: str) -> np.ndarray:
-    """Working configurations (t, n) rad, within the joint bounds."""
-    qw = np.atleast_2d(_angles(d, "working_configurations", robot.nq, _where(source, "cell")))
+    """Working configurations (t, n) rad, within the joint bounds (none if only ``working_targets`` are given)."""
+    qw = _angles(d, "working_configurations", robot.nq, _where(source, "cell"), required=not d.get("working_targets"))
+    if qw is None:
+        return np.zeros((0, robot.nq))
+    qw = np.atleast_2d(qw)
     robot.check_q(qw, _where(source, "working_configurations"))
     return qw
 
@@ -528,16 +556,23 @@ def cell_from_dict(d: dict, source: str = "", base_dir: Path | None = None) -> C
     robot.q_lower, robot.q_upper = lo.copy(), hi.copy()
     caps = _read_robot_capsules(d, robot, source)
     obstacles, halfs = _read_obstacles(d, source)
-    names = _Names(caps, obstacles, halfs, body_names(robot), source)
+    env = _read_environment(d, source, base_dir)
+    obstacles += [c for e in env for c in e.capsules]
+    names = _Names(caps, obstacles, halfs, body_names(robot), source, env)
     skips = _read_skip_pairs(d, names, source)
     beam_r, beam_skip = _read_beam(d, names, source)
     inc, clr, m, tries = _read_limits(d, source)
     qw = _read_working_configurations(d, robot, source)
-    return Cell(name=str(d.get("name", Path(source).stem if source else "cell")), source=source, robot=robot,
+    cell = Cell(name=str(d.get("name", Path(source).stem if source else "cell")), source=source, robot=robot,
                 W_T_base=W_T_base, W_T_tracker=W_T_tracker, reflector_m=reflector, tcp_m=tcp, noise=noise,
                 q_lower=lo, q_upper=hi, robot_capsules=caps, obstacles=obstacles, half_spaces=halfs,
                 skip_pairs=skips, beam_radius_m=beam_r, beam_skip=beam_skip, incidence_max_deg=inc,
-                clearance_m=clr, q_work=qw, measurements=m, max_random_tries=tries)
+                clearance_m=clr, q_work=qw, measurements=m, max_random_tries=tries, environment=env)
+    if d.get("working_targets"):
+        from pin_kpi_oed.cell.targets import solve_working_targets
+
+        cell.q_work = np.vstack([qw, solve_working_targets(cell, d["working_targets"], source)])
+    return cell
 
 
 def resolve_cell(spec: str | Path) -> Path:

@@ -144,6 +144,7 @@ class FeasibilityChecker:
         self.labels: list[tuple[str, str | None]] = []  # (name, link) of every geometry object
         self.robot_ids, self.robot_joint = self._add_robot_capsules()
         self.obst_ids, self.half_ids = self._add_obstacles()
+        self.obst_ids += add_environment_solids(self)  # environment meshes themselves (issue 13)
         self.pairs = self._collision_pairs()
         for i, k in self.pairs:
             self.gm.addCollisionPair(pin.CollisionPair(i, k))
@@ -182,6 +183,8 @@ class FeasibilityChecker:
         base_T_W = self.cell.W_T_base.inverse()
         obst, half = [], []
         for o in self.cell.obstacles:
+            if o.name in self.cell.environment_capsule_names:
+                continue  # the optimiser's capsules of an environment file: checked as the meshes themselves
             shape, T = coal_capsule(base_T_W.act(o.a), base_T_W.act(o.b), o.radius)
             go = pin.GeometryObject(o.name, 0, 0, pin.SE3(T.getRotation(), T.getTranslation()), shape)
             obst.append(self.gm.addGeometryObject(go))
@@ -234,6 +237,8 @@ class FeasibilityChecker:
             d[self.n_pairs + k] = coal.distance(beam, Tb, self.gm.geometryObjects[gid].geometry,
                                                 coal.Transform3s(Mg.rotation, Mg.translation), req,
                                                 coal.DistanceResult())
+        if self.mesh_ids:
+            beam_mesh_penetration(self, beam, Tb, d)
         g = self.tracker - refl
         return d, float(oMt.rotation[:, 2] @ g / np.linalg.norm(g))
 
@@ -253,7 +258,8 @@ class FeasibilityChecker:
         pin.updateGeometryPlacements(self.model, self.data, self.gm, self.gd)
         pin.computeDistances(self.gm, self.gd)
         res = self.gd.distanceResults  # one access: indexing the property each time copies the vector
-        return np.array([r.min_distance for r in res])[:self.n_pairs]
+        d = np.array([r.min_distance for r in res])[:self.n_pairs]
+        return mesh_penetration(self, d) if self.mesh_ids else d
 
     def distances(self, Q: np.ndarray) -> np.ndarray:
         """Signed distances of every checked pair and beam target (columns named by :attr:`names`).
@@ -298,3 +304,86 @@ class FeasibilityChecker:
             clr[i] = best
             worst.append(self.names[k] if k >= 0 else "")
         return FeasibilityReport(cf, vis, bounds, clr, inc, worst, len(self.names))
+
+
+# ---------------------------------------------------------------------- environment meshes (issue 13)
+#: a BVH pair that Coal's distance puts within this (m) is tested with coal.collide for penetration
+_MESH_CONTACT_M = 1e-6
+
+
+def add_environment_solids(chk: FeasibilityChecker) -> list[int]:
+    """Add the cell's environment geometry (:mod:`pin_kpi_oed.cell.environment`) to the checker's model.
+
+    Each solid is fixed in the base frame, labelled (solid name, environment object name) so that the
+    skip lists may name the object; non-convex meshes (Coal BVH models) are remembered in
+    ``chk.mesh_ids`` for :func:`mesh_penetration`.
+
+    Returns:
+        The geometry ids added.
+    """
+    base_T_W = chk.cell.W_T_base.inverse()
+    ids: list[int] = []
+    chk.mesh_ids = set()
+    for e in chk.cell.environment:
+        for s in e.solids:
+            go = pin.GeometryObject(s.name, 0, 0, base_T_W * s.W_T_g, s.geometry)
+            i = chk.gm.addGeometryObject(go)
+            chk.labels.append((s.name, e.name))
+            ids.append(i)
+            if not s.convex:
+                chk.mesh_ids.add(i)
+    return ids
+
+
+def _penetration(g1, M1: pin.SE3, g2, M2: pin.SE3) -> float | None:
+    """Coal's penetration depth (m, <= -1e-6) of two intersecting shapes, None if they do not intersect."""
+    import coal
+
+    req = coal.CollisionRequest()
+    req.enable_contact = True
+    req.num_max_contacts = 16
+    res = coal.CollisionResult()
+    if not coal.collide(g1, coal.Transform3s(M1.rotation, M1.translation), g2,
+                        coal.Transform3s(M2.rotation, M2.translation), req, res):
+        return None
+    depth = min((res.getContact(k).penetration_depth for k in range(res.numContacts())), default=0.0)
+    return min(float(depth), -_MESH_CONTACT_M)
+
+
+def mesh_penetration(chk: FeasibilityChecker, d: np.ndarray) -> np.ndarray:
+    """Pair distances with the penetration of non-convex meshes made negative.
+
+    Coal's distance between a capsule and a BVH triangle mesh is about 0 when they intersect
+    (no signed depth); such pairs are tested with ``coal.collide`` at the current placements
+    (``chk.gd.oMg``) and get Coal's contact depth (at least 1e-6 m deep), so that the check flags them.
+
+    Args:
+        chk: the checker, after :meth:`FeasibilityChecker.pair_distances` placed the geometry.
+        d: (n_pairs,) distances (m), changed in place.
+
+    Returns:
+        ``d``.
+    """
+    pairs = getattr(chk, "_mesh_pairs", None)
+    if pairs is None:
+        pairs = chk._mesh_pairs = [p for p, (i, k) in enumerate(chk.pairs) if i in chk.mesh_ids or k in chk.mesh_ids]
+    go, oMg = chk.gm.geometryObjects, chk.gd.oMg
+    for p in pairs:
+        if d[p] <= _MESH_CONTACT_M:
+            i, k = chk.pairs[p]
+            pen = _penetration(go[i].geometry, oMg[i], go[k].geometry, oMg[k])
+            if pen is not None:
+                d[p] = min(d[p], pen)
+    return d
+
+
+def beam_mesh_penetration(chk: FeasibilityChecker, beam, Tb, d: np.ndarray) -> None:
+    """The beam's distances to non-convex meshes made negative where it passes through them (in place;
+    ``d`` holds the pairs first, then the beam targets)."""
+    for k, gid in enumerate(chk.beam_targets):
+        j = chk.n_pairs + k
+        if gid in chk.mesh_ids and d[j] <= _MESH_CONTACT_M:
+            Mb = pin.SE3(Tb.getRotation(), Tb.getTranslation())
+            pen = _penetration(beam, Mb, chk.gm.geometryObjects[gid].geometry, chk.gd.oMg[gid])
+            if pen is not None:
+                d[j] = min(d[j], pen)

@@ -119,3 +119,77 @@ def capsule_of(robot, go: pin.GeometryObject) -> tuple[np.ndarray, np.ndarray, f
         return a, b, r
     raise InputError(f"robot_capsules: the geometry of link '{robot.model.frames[go.parentFrame].name}' in "
                      f"{robot.urdf_path} is a {type(g).__name__}; list its capsules explicitly")
+
+
+def fit_capsules(vertices: np.ndarray, faces: np.ndarray | None, max_radius: float,
+                 max_pieces: int = 16) -> list[tuple[np.ndarray, np.ndarray, float]]:
+    """Enclosing capsules of a triangle mesh, split until each radius is at most ``max_radius``.
+
+    One capsule (:func:`fit_capsule`) encloses the mesh's vertices, hence its convex hull. While the
+    largest capsule's radius exceeds ``max_radius`` (and fewer than ``max_pieces`` capsules exist), its
+    piece of mesh is cut in two by the plane through the middle of its extent along the principal axis
+    that sets the radius (the second-longest extent; trimesh's exact plane slicing, whose cut edges add
+    vertices), and each half gets its own capsule. Every piece's capsule encloses that piece's vertices
+    and so the piece (a capsule is convex): the union of the capsules encloses the mesh, whatever its
+    shape (a table top becomes strips, a leg stays one capsule).
+
+    Args:
+        vertices: (k, 3) vertices (m).
+        faces: (f, 3) vertex indices of the triangles, or None (a point set: one capsule).
+        max_radius: largest wanted capsule radius (m), > 0.
+        max_pieces: most capsules returned (the radius bound may then be exceeded).
+
+    Returns:
+        [(a, b, radius)] segment end points (m) and radius (m), every vertex inside one of them.
+
+    Raises:
+        InputError: no finite vertices.
+    """
+    import heapq
+
+    V = np.asarray(vertices, float).reshape(-1, 3)
+    a, b, r = fit_capsule(V)
+    if faces is None or len(faces) == 0 or r <= max_radius or max_pieces <= 1:
+        return [(a, b, r)]
+    import trimesh
+
+    heap: list = [(-r, 0, (a, b, r), trimesh.Trimesh(V, np.asarray(faces, np.int64), process=False))]
+    done: list[tuple[np.ndarray, np.ndarray, float]] = []
+    tick = 1
+    while heap and len(heap) + len(done) < max_pieces:
+        negr, _, cap, mesh = heapq.heappop(heap)
+        if -negr <= max_radius:
+            done.append(cap)
+            continue
+        halves = _split(mesh)
+        if halves is None:
+            done.append(cap)
+            continue
+        for h in halves:
+            ca = fit_capsule(h.vertices)
+            heapq.heappush(heap, (-ca[2], tick, ca, h))
+            tick += 1
+    return done + [c for _, _, c, _ in heap]
+
+
+def _split(mesh) -> tuple | None:
+    """The two halves of a mesh cut across its second-longest principal extent (None if it cannot be cut)."""
+    from trimesh.intersections import slice_mesh_plane
+
+    V = np.asarray(mesh.vertices, float)
+    c = V.mean(axis=0)
+    _, _, Vt = np.linalg.svd(V - c, full_matrices=False)
+    ext = [(float(np.ptp((V - c) @ u)), u) for u in Vt]
+    ext.sort(key=lambda e: -e[0])
+    width, u = ext[1] if len(ext) > 1 and ext[1][0] > 1e-9 else ext[0]
+    t = (V - c) @ u
+    origin = c + 0.5 * (t.max() + t.min()) * u
+    try:
+        halves = [slice_mesh_plane(mesh, s * u, origin, cap=False) for s in (1.0, -1.0)]
+    except Exception:  # degenerate cut: keep the piece whole
+        return None
+    if any(h is None or len(h.faces) == 0 or len(h.vertices) >= len(V) + len(mesh.faces) * 2 for h in halves):
+        return None
+    if any(np.ptp(((np.asarray(h.vertices) - c) @ u)) > 0.999 * width for h in halves):
+        return None
+    return tuple(halves)

@@ -43,6 +43,17 @@ _CAPSULE = {"type": "object", "additionalProperties": False, "required": ["name"
 _HALF = {"type": "object", "additionalProperties": False, "required": ["name", "normal", "offset_m"],
          "properties": {"name": {"type": "string"}, "normal": _VEC3, "offset_m": _NUM}}
 
+_ENVIRONMENT = {"type": "object", "additionalProperties": False, "required": ["name"],
+                "properties": {"name": {"type": "string"}, "mesh": {"type": "string"}, "urdf": {"type": "string"},
+                               "pose": _POSE,
+                               "scale": {"anyOf": [{"type": "number", "exclusiveMinimum": 0},
+                                                   {"type": "array", "items": {"type": "number", "exclusiveMinimum": 0},
+                                                    "minItems": 3, "maxItems": 3}]},
+                               "max_radius_m": {"type": "number", "exclusiveMinimum": 0},
+                               "max_capsules": {"type": "integer", "minimum": 1}}}
+_TARGET = {"type": "object", "additionalProperties": False, "required": ["xyz_m"],
+           "properties": {"xyz_m": _VEC3, "rpy_rad": _VEC3, "rpy_deg": _VEC3, "seed_rad": _NUMS, "seed_deg": _NUMS}}
+
 #: schema of a cell YAML file (see :mod:`pin_kpi_oed.cell.cell`)
 CELL_SCHEMA: dict[str, Any] = {
     "type": "object", "additionalProperties": False, "required": ["robot"],
@@ -52,7 +63,7 @@ CELL_SCHEMA: dict[str, Any] = {
         "tcp_m": _VEC3, "noise": _NOISE,
         "joint_bounds": {"type": "object", "additionalProperties": False,
                          "properties": {k: _NUMS for k in ("lower_rad", "upper_rad", "lower_deg", "upper_deg")}},
-        "robot_capsules": {"anyOf": [{"const": "urdf"}, {"type": "null"}, {"type": "array", "items": _CAPSULE}]},
+        "robot_capsules": {"anyOf": [{"enum": ["urdf", "urdf_visual"]}, {"type": "null"}, {"type": "array", "items": _CAPSULE}]},
         "extra_capsules": {"type": ["array", "null"], "items": _CAPSULE},
         "obstacles": {"type": ["object", "null"], "additionalProperties": False,
                       "properties": {"capsules": {"type": ["array", "null"], "items": _CAPSULE},
@@ -68,6 +79,8 @@ CELL_SCHEMA: dict[str, Any] = {
         "working_configurations_deg": {"anyOf": [_NUMS, _MATRIX]},
         "measurements": {"type": "integer", "minimum": 1},
         "max_random_tries": {"type": "integer", "minimum": 1},
+        "environment": {"type": ["array", "null"], "items": _ENVIRONMENT},
+        "working_targets": {"type": ["array", "null"], "items": _TARGET},
     },
 }
 

@@ -1,0 +1,186 @@
+"""Working configurations given as Cartesian TCP targets, solved by inverse kinematics.
+
+A cell file may give its working configurations (the KPI poses q_work of eq. 19) as TCP targets in
+the cell frame instead of joint values (SI units)::
+
+    working_targets:
+      - {xyz_m: [0.9, 0.0, 1.25]}                              # TCP position only
+      - {xyz_m: [0.9, 0.3, 1.25], rpy_deg: [180, 0, 0]}        # and the tool frame's orientation
+      - {xyz_m: [...], seed_deg: [0, -100, 110, -100, -90, 0]} # start the search here
+
+The TCP is the cell's ``tcp_m`` point of the tool frame; ``rpy`` is the tool frame's orientation in
+the cell frame (roll-pitch-yaw, as ``base`` and ``tracker``). :func:`solve_tcp_target` runs damped
+least squares on Pinocchio's frame Jacobian (``pin.computeFrameJacobian``, LOCAL_WORLD_ALIGNED, the
+TCP point's rows ``J_v − [r]× J_ω``) with steps through ``pin.integrate``, each iterate projected on
+the joint bounds, from the given seed, then the explicit working configurations, the bounds'
+middle and seeded random starts; the first solution within ``tol`` that the cell check accepts
+(every capsule pair clear of the required clearance and the beam unblocked, in the optimiser's
+capsules: :class:`~pin_kpi_oed.cell.feasibility.FeasibilityChecker`) is kept.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Callable
+
+import numpy as np
+import pinocchio as pin
+
+from pin_kpi_oed.errors import InputError
+
+#: position tolerance of a solved target (m) and orientation tolerance (rad)
+IK_TOL_M = 1e-6
+IK_TOL_RAD = 1e-6
+
+
+@dataclass
+class IkResult:
+    """Outcome of :func:`solve_tcp_target`.
+
+    Attributes:
+        q: the solution (n,) rad / m, or the best iterate when ``success`` is False.
+        success: within tolerance, within the bounds and accepted by the check.
+        residual_m: TCP position error (m); residual_rad: orientation error (rad, 0 if free).
+        starts: starts tried; reason: why the best reachable solution was refused ("" on success).
+    """
+
+    q: np.ndarray
+    success: bool
+    residual_m: float
+    residual_rad: float
+    starts: int
+    reason: str = ""
+
+
+def _skew(v: np.ndarray) -> np.ndarray:
+    return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
+
+
+def _descend(robot, q: np.ndarray, p_t: np.ndarray, R_t: np.ndarray | None, tcp: np.ndarray,
+             max_iter: int, damping: float) -> tuple[np.ndarray, float, float]:
+    """Damped least squares from q; returns (q, position error (m), orientation error (rad))."""
+    model, data, fid = robot.model, robot.model.createData(), robot.tool_frame_id
+    lo, hi = robot.q_lower, robot.q_upper
+    q = np.clip(np.asarray(q, float), lo, hi)
+    ep = er = np.inf
+    for _ in range(max_iter):
+        pin.framesForwardKinematics(model, data, q)
+        M = data.oMf[fid]
+        r = M.rotation @ tcp
+        e_pos = p_t - (M.translation + r)
+        J6 = pin.computeFrameJacobian(model, data, q, fid, pin.LOCAL_WORLD_ALIGNED)
+        J = J6[:3] - _skew(r) @ J6[3:]
+        e = e_pos
+        ep = float(np.linalg.norm(e_pos))
+        er = 0.0
+        if R_t is not None:
+            e_rot = pin.log3(R_t @ M.rotation.T)
+            er = float(np.linalg.norm(e_rot))
+            J = np.vstack([J, J6[3:]])
+            e = np.concatenate([e_pos, e_rot])
+        if ep < 1e-3 * IK_TOL_M and er < 1e-3 * IK_TOL_RAD:
+            break
+        dq = J.T @ np.linalg.solve(J @ J.T + damping ** 2 * np.eye(J.shape[0]), e)
+        big = float(np.max(np.abs(dq)))
+        if big > 0.3:
+            dq *= 0.3 / big
+        q_new = np.clip(pin.integrate(model, q, dq), lo, hi)
+        if np.max(np.abs(q_new - q)) < 1e-14:
+            break
+        q = q_new
+    return q, ep, er
+
+
+def solve_tcp_target(robot, W_T_base: pin.SE3, tcp_m: np.ndarray, xyz_W: np.ndarray, R_W: np.ndarray | None = None,
+                     seeds: list[np.ndarray] | None = None, accept: Callable[[np.ndarray], str] | None = None,
+                     n_random: int = 24, seed: int = 0, max_iter: int = 300, damping: float = 1e-3) -> IkResult:
+    """Joint values putting the TCP at a cell-frame target (optionally with the tool's orientation).
+
+    Args:
+        robot: the robot (its bounds are the cell's).
+        W_T_base: robot base in the cell frame.
+        tcp_m: TCP in the tool frame (m).
+        xyz_W: target TCP position in the cell frame (m).
+        R_W: target tool-frame orientation in the cell frame (3×3), or None (position only).
+        seeds: starts tried first (rad / m).
+        accept: ``q -> ""`` when the cell check accepts q, else the reason (None: accept all).
+        n_random: random starts after the seeds; seed: their random seed.
+        max_iter: iterations per start; damping: the damping λ of (JJᵀ + λ²I).
+
+    Returns:
+        The :class:`IkResult` (the first accepted solution, else the smallest residual found).
+    """
+    base_T_W = W_T_base.inverse()
+    p_t = base_T_W.act(np.asarray(xyz_W, float))
+    R_t = None if R_W is None else base_T_W.rotation @ np.asarray(R_W, float)
+    tcp = np.asarray(tcp_m, float)
+    rng = np.random.default_rng(seed)
+    starts = [np.asarray(s, float) for s in (seeds or [])] + [0.5 * (robot.q_lower + robot.q_upper)]
+    starts += list(robot.random_q(rng, n_random))
+    refused: IkResult | None = None  # reached but refused by the check
+    closest: IkResult | None = None  # not reached: the smallest residual
+    for k, q0 in enumerate(starts):
+        q, ep, er = _descend(robot, q0, p_t, R_t, tcp, max_iter, damping)
+        if ep <= IK_TOL_M and er <= IK_TOL_RAD:
+            reason = accept(q) if accept is not None else ""
+            if not reason:
+                return IkResult(q, True, ep, er, k + 1)
+            refused = refused or IkResult(q, False, ep, er, 0, reason)
+        elif closest is None or ep + er < closest.residual_m + closest.residual_rad:
+            closest = IkResult(q, False, ep, er, 0)
+    best = refused if refused is not None else closest
+    best.starts = len(starts)
+    return best
+
+
+def solve_working_targets(cell, targets: list, source: str = "") -> np.ndarray:
+    """Working configurations (k, n) rad of the cell file's ``working_targets`` (see the module docstring).
+
+    Args:
+        cell: the cell read so far (robot, bounds, base, TCP, capsules, obstacles; its q_work are
+            tried as starts).
+        targets: the ``working_targets`` entries.
+        source: the cell file (for messages).
+
+    Returns:
+        One configuration per target, in order.
+
+    Raises:
+        InputError: a malformed target, or one with no collision-free solution within the bounds,
+            naming the target index and the residual (mm, deg).
+    """
+    import dataclasses
+
+    from pin_kpi_oed.cell.cell import _angles, _vec
+    from pin_kpi_oed.cell.feasibility import FeasibilityChecker
+
+    pre = f"{source}: " if source else ""
+    robot = cell.robot
+    # the optimiser's model (environment files as their enclosing capsules): what the design checks q_work in
+    chk = FeasibilityChecker(dataclasses.replace(cell, environment=[]))
+
+    def accept(q: np.ndarray) -> str:
+        d = chk.distances(q[None])[0]
+        d[:chk.n_pairs] -= cell.clearance_m
+        k = int(np.argmin(d)) if d.size else -1
+        return "" if k < 0 or d[k] >= -1e-9 else f"{chk.names[k]} at {d[k] * 1e3:.1f} mm"
+
+    out = []
+    for i, t in enumerate(targets):
+        w = f"{pre}working_targets[{i}]"
+        if not isinstance(t, dict) or "xyz_m" not in t:
+            raise InputError(f"{w}: expected a mapping with xyz_m (and optional rpy_rad/rpy_deg, seed_rad/seed_deg)")
+        xyz = _vec(t["xyz_m"], 3, f"{w}.xyz_m")
+        rpy = _angles(t, "rpy", 3, w, required=False)
+        seed_q = _angles(t, "seed", robot.nq, w, required=False)
+        seeds = ([seed_q] if seed_q is not None else []) + list(np.atleast_2d(cell.q_work)) + out
+        res = solve_tcp_target(robot, cell.W_T_base, cell.tcp_m, xyz, None if rpy is None else
+                               pin.rpy.rpyToMatrix(*rpy), seeds=seeds, accept=accept, seed=i)
+        if not res.success:
+            what = (f"every solution within the joint bounds collides or blocks the beam ({res.reason})"
+                    if res.reason else "unreachable within the joint bounds")
+            raise InputError(f"{w}: {what}; best residual {res.residual_m * 1e3:.3f} mm"
+                             + (f", {np.degrees(res.residual_rad):.3f} deg" if rpy is not None else "")
+                             + f" from {res.starts} starts")
+        out.append(res.q)
+    return np.array(out).reshape(len(out), robot.nq)

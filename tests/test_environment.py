@@ -1,0 +1,168 @@
+"""Cells from files (issue 13): environment obstacles from a mesh / URDF file (enclosing capsules for the
+optimiser, the meshes themselves in the independent check) and working configurations as TCP targets (IK)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pinocchio as pin
+import pytest
+import trimesh
+import yaml
+
+from pin_kpi_oed.cell.cell import CELL_DIR, cell_from_dict, load_cell
+from pin_kpi_oed.cell.feasibility import FeasibilityChecker
+from pin_kpi_oed.cell.meshes import fit_capsules
+from pin_kpi_oed.cell.targets import solve_tcp_target
+from pin_kpi_oed.errors import InputError
+
+
+def _kr15_dict() -> dict:
+    d = yaml.safe_load((CELL_DIR / "kr15.yaml").read_text())
+    d["robot"] = str(CELL_DIR.parents[2] / "urdf" / "kr15.urdf")
+    return d
+
+
+def _inside_some(points: np.ndarray, caps) -> np.ndarray:
+    """Per point: largest margin by which it is inside one of the capsules (>= 0 inside), m."""
+    best = np.full(len(points), -np.inf)
+    for c in caps:
+        a, b, r = (c.a, c.b, c.radius) if hasattr(c, "a") else c
+        d = b - a
+        L2 = float(d @ d)
+        t = np.clip((points - a) @ d / L2, 0.0, 1.0) if L2 > 0 else np.zeros(len(points))
+        best = np.maximum(best, r - np.linalg.norm(points - (a + t[:, None] * d), axis=1))
+    return best
+
+
+def _l_mesh() -> trimesh.Trimesh:
+    """A non-convex L-shaped bracket, 0.4 m × 0.4 m × 0.1 m."""
+    return trimesh.util.concatenate([
+        trimesh.creation.box([0.4, 0.1, 0.1]),
+        trimesh.creation.box([0.1, 0.4, 0.1], transform=trimesh.transformations.translation_matrix([-0.15, 0.15, 0]))])
+
+
+def _link6_world(cell, q) -> np.ndarray:
+    rb = cell.robot
+    pin.framesForwardKinematics(rb.model, rb.data, q)
+    return (cell.W_T_base * rb.data.oMf[rb.model.getFrameId("link_6")]).translation.copy()
+
+
+def test_fit_capsules_split_a_plate_and_enclose_its_surface():
+    plate = trimesh.creation.box([1.2, 0.8, 0.04])
+    caps = fit_capsules(plate.vertices, plate.faces, 0.1)
+    assert 1 < len(caps) <= 16 and max(r for _, _, r in caps) <= 0.1
+    surface = np.vstack([plate.sample(5000, seed=3), plate.vertices])
+    assert _inside_some(surface, caps).min() >= -1e-9  # every surface point (not only vertices) inside
+
+
+def test_mesh_obstacle_capsules_enclose_it_and_the_check_sees_the_mesh(tmp_path):
+    mesh = _l_mesh()
+    mesh.export(tmp_path / "bracket.stl")
+    d = _kr15_dict()
+    q = load_cell("kr15").q_work[0]
+    centre = _link6_world(load_cell("kr15"), q)  # the bracket around the wrist at the working configuration
+    d["environment"] = [{"name": "bracket", "mesh": "bracket.stl",
+                         "pose": {"xyz_m": centre.tolist(), "rpy_deg": [0.0, 90.0, 30.0]}, "max_radius_m": 0.06}]
+    cell = cell_from_dict(d, str(tmp_path / "cell.yaml"), tmp_path)
+    env = cell.environment[0]
+    assert [s.convex for s in env.solids] == [False]  # an L is not convex: a BVH mesh in the check
+    caps = [c for c in cell.obstacles if c.name.startswith("bracket_")]
+    assert caps and caps == env.capsules and max(c.radius for c in caps) <= 0.06
+    M = env.W_T_obj
+    V = np.asarray(mesh.vertices) @ M.rotation.T + M.translation  # the file's vertices, placed independently
+    assert _inside_some(V, caps).min() >= -1e-9  # every mesh vertex inside the optimiser's capsules
+    chk = FeasibilityChecker(cell)
+    assert not any(n.startswith("bracket_") for n in chk.beam_names)  # the check has the mesh, not the capsules
+    rep = chk.check(q[None])
+    assert not rep.collision_free[0] and "bracket" in rep.worst[0] and rep.clearance_m[0] < 0
+    # far away (3 m above the robot) the same pose is clear of it
+    d["environment"][0]["pose"]["xyz_m"] = [0.0, 0.0, 6.0]
+    far = FeasibilityChecker(cell_from_dict(d, str(tmp_path / "cell.yaml"), tmp_path)).check(q[None])
+    assert far.collision_free[0] and "bracket" not in far.worst[0]
+
+
+def test_urdf_obstacle_boxes_and_cylinders_and_skip_by_name(tmp_path):
+    (tmp_path / "table.urdf").write_text(
+        '<robot name="table"><link name="world"/><link name="top">'
+        '<collision><origin xyz="0 0 0.72"/><geometry><box size="1.2 0.8 0.04"/></geometry></collision>'
+        '<collision><origin xyz="0.55 0.35 0.35"/><geometry><cylinder radius="0.03" length="0.7"/></geometry>'
+        '</collision></link><joint name="j" type="fixed"><parent link="world"/><child link="top"/></joint></robot>')
+    d = _kr15_dict()
+    d["environment"] = [{"name": "table", "urdf": "table.urdf", "pose": {"xyz_m": [0.0, 1.6, 0.0]}}]
+    d["skip_pairs"].append(["base_link", "table"])
+    cell = cell_from_dict(d, str(tmp_path / "cell.yaml"), tmp_path)
+    env = cell.environment[0]
+    assert sorted(s.convex for s in env.solids) == [True, True]
+    corners = np.array([[sx * 0.6, 1.6 + sy * 0.4, 0.72 + sz * 0.02] for sx in (-1, 1) for sy in (-1, 1)
+                        for sz in (-1, 1)])
+    ang = np.linspace(0, 2 * np.pi, 64, endpoint=False)
+    rim = np.array([[0.55 + 0.03 * np.cos(a), 1.95 + 0.03 * np.sin(a), z] for a in ang for z in (0.0, 0.7)])
+    assert _inside_some(np.vstack([corners, rim]), env.capsules).min() >= -1e-9
+    assert ("base_link", "table") in cell.skip_pairs and ("base_link", "table_0") in cell.skip_pairs
+    chk = FeasibilityChecker(cell)
+    assert not any(a == "base_link" and "table" in b for a, b in chk.pair_names)
+    assert any(a == "link_3" and b.startswith("table_top") for a, b in chk.pair_names)
+
+
+@pytest.mark.parametrize("entry, needle", [
+    ({"name": "x", "mesh": "missing.stl"}, "environment[0].mesh: no such file"),
+    ({"name": "x", "mesh": "bad.stl"}, "environment[0].mesh: cannot read the mesh"),
+    ({"name": "x", "urdf": "bad.stl"}, "environment[0].urdf: cannot read the URDF"),
+    ({"name": "x", "mesh": "bad.stl", "urdf": "t.urdf"}, "environment[0]: give exactly one of"),
+    ({"name": "x", "stl": "bad.stl"}, "environment[0]: unknown field(s) stl"),
+])
+def test_bad_environment_file_is_one_line_naming_file_and_key(tmp_path, entry, needle):
+    (tmp_path / "bad.stl").write_text("not a mesh\n")
+    d = _kr15_dict()
+    d["environment"] = [entry]
+    with pytest.raises(InputError) as e:
+        cell_from_dict(d, str(tmp_path / "cell.yaml"), tmp_path)
+    msg = str(e.value)
+    assert needle in msg and "\n" not in msg and "cell.yaml" in msg
+
+
+def test_cli_exit_2_on_a_missing_environment_file(tmp_path, capsys):
+    from pin_kpi_oed.cli.main import main
+
+    d = _kr15_dict()
+    d["environment"] = [{"name": "fixture", "mesh": "nowhere.stl"}]
+    (tmp_path / "cell.yaml").write_text(yaml.safe_dump(d))
+    assert main(["design", "--cell", str(tmp_path / "cell.yaml"), "--criteria", "random", "--measurements", "10"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "environment[0].mesh" in err[0] and "nowhere.stl" in err[0]
+
+
+# ---------------------------------------------------------------------- working targets (IK)
+@pytest.mark.parametrize("name", ["kr15", "ur10"])
+def test_target_from_fk_is_solved_within_limits(name):
+    cell = load_cell(name)
+    rng = np.random.default_rng(5)
+    q_true = cell.q_work[0] + rng.uniform(-0.2, 0.2, cell.robot.nq)
+    M = cell.W_T_base * cell.robot.oMtool(q_true)
+    p = M.act(cell.tcp_m)
+    for R in (None, M.rotation):
+        res = solve_tcp_target(cell.robot, cell.W_T_base, cell.tcp_m, p, R, seeds=[cell.q_work[0]])
+        assert res.success
+        M2 = cell.W_T_base * cell.robot.oMtool(res.q)
+        assert np.linalg.norm(M2.act(cell.tcp_m) - p) <= 1e-6
+        assert np.all(res.q >= cell.q_lower) and np.all(res.q <= cell.q_upper)
+        if R is not None:
+            assert np.linalg.norm(pin.log3(M2.rotation.T @ R)) <= 1e-6
+
+
+def test_working_targets_in_the_cell_file_and_unreachable_target():
+    d = _kr15_dict()
+    cell0 = load_cell("kr15")
+    M = cell0.W_T_base * cell0.robot.oMtool(cell0.q_work[0])
+    d["working_targets"] = [{"xyz_m": M.act(cell0.tcp_m).tolist(),
+                             "rpy_rad": pin.rpy.matrixToRpy(M.rotation).tolist()}]
+    cell = cell_from_dict(d, "kr15.yaml", CELL_DIR)
+    assert cell.q_work.shape == (2, 6)  # the joint-space working configuration, then the solved target
+    M2 = cell.W_T_base * cell.robot.oMtool(cell.q_work[1])
+    assert np.linalg.norm(M2.act(cell.tcp_m) - M.act(cell0.tcp_m)) <= 1e-6
+    d.pop("working_configurations_deg")
+    d["working_targets"].append({"xyz_m": [6.0, 0.0, 1.0]})
+    with pytest.raises(InputError) as e:
+        cell_from_dict(d, "kr15.yaml", CELL_DIR)
+    msg = str(e.value)
+    assert "working_targets[1]" in msg and "residual" in msg and "mm" in msg and "\n" not in msg
