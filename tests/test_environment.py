@@ -166,3 +166,28 @@ def test_working_targets_in_the_cell_file_and_unreachable_target():
         cell_from_dict(d, "kr15.yaml", CELL_DIR)
     msg = str(e.value)
     assert "working_targets[1]" in msg and "residual" in msg and "mm" in msg and "\n" not in msg
+
+
+def test_shipped_ur10_cell_is_built_from_files_and_designs(tmp_path):
+    import json
+
+    from pin_kpi_oed.cli.main import main
+
+    cell = load_cell("ur10")
+    env = cell.environment[0]
+    assert env.kind == "urdf" and len(env.solids) == 6 and sum(not s.convex for s in env.solids) == 1  # the STL
+    assert not any(c.name == "workpiece" for c in cell.obstacles)  # no hand-written environment capsule left
+    d = yaml.safe_load((CELL_DIR / "ur10.yaml").read_text())
+    assert "working_configurations_deg" not in d and len(d["working_targets"]) == cell.q_work.shape[0] == 2
+    for t, q in zip(d["working_targets"], cell.q_work):
+        M = cell.W_T_base * cell.robot.oMtool(q)
+        assert np.linalg.norm(M.act(cell.tcp_m) - np.array(t["xyz_m"])) <= 1e-6
+        assert np.linalg.norm(pin.log3(M.rotation.T @ pin.rpy.rpyToMatrix(*np.radians(t["rpy_deg"])))) <= 1e-6
+    for s in env.solids:  # the optimiser's capsules enclose every vertex of the table and the workpiece
+        assert _inside_some(s.vertices, env.capsules).min() >= -1e-9
+    assert FeasibilityChecker(cell).check(cell.q_work).collision_free.all()
+    out = tmp_path / "d.json"
+    assert main(["design", "--cell", "ur10", "--criteria", "random,kpi", "--measurements", "14", "--json", str(out)]) == 0
+    res = json.loads(out.read_text())
+    assert all(e["check"]["n_colliding"] == 0 and e["check"]["all_feasible"] for e in res["designs"])
+    assert res["cell"]["environment"][0]["name"] == "table"

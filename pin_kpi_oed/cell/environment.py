@@ -7,6 +7,7 @@ A cell file lists them under ``environment`` (paths relative to the cell file; S
         urdf: ur10_table.urdf          # a fixed URDF: every <collision> box / cylinder / sphere / mesh
         pose: {xyz_m: [0.9, 0.0, 0.0], rpy_deg: [0, 0, 0]}   # URDF root in the cell frame
         max_radius_m: 0.08             # capsules for the optimiser: split until each radius <= this
+        max_capsules: 16               # at most this many capsules per geometry piece
       - name: fixture
         mesh: fixture.stl              # STL / OBJ / DAE / PLY (Coal's assimp loader)
         scale: 0.001                   # file units -> m (a number or [sx, sy, sz]); default 1
@@ -42,8 +43,8 @@ from pin_kpi_oed.errors import InputError
 
 #: default largest capsule radius fitted to environment geometry (m)
 DEFAULT_MAX_RADIUS_M = 0.1
-#: default most capsules per environment object
-DEFAULT_MAX_CAPSULES = 24
+#: default most capsules per geometry piece (a URDF <collision> element or a mesh file)
+DEFAULT_MAX_CAPSULES = 16
 
 
 @dataclass
@@ -226,13 +227,12 @@ def load_environment_object(d: Any, index: int, base_dir: Path | None, source: s
     solids = (_mesh_solids(name, p, scale, W_T_obj, where) if kind == "mesh"
               else _urdf_solids(name, p, W_T_obj, where))
     obj = EnvironmentObject(name, kind, str(p), W_T_obj, scale if kind == "mesh" else np.ones(3), rmax, solids)
-    budget = max(1, ncap // len(solids))
     caps = []
     for s in solids:
         if s.vertices.shape[0] == 1:  # a sphere: exactly one capsule
             caps.append((s.vertices[0], s.vertices[0], float(s.geometry.radius)))
         else:
-            caps += fit_capsules(s.vertices, s.faces, rmax, budget)
+            caps += fit_capsules(s.vertices, s.faces, rmax, ncap)
     obj.capsules = [CapsuleSpec(f"{name}_{k}", np.asarray(a, float), np.asarray(b, float), float(r))
                     for k, (a, b, r) in enumerate(caps)]
     return obj
