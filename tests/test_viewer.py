@@ -134,11 +134,15 @@ def test_scene_holds_the_expected_objects(scene):
     # capsules: present but hidden (a toggle in the viewer); visuals shown
     assert rec.properties("/meshcat/robot/collisions") == {"visible": False}
     assert rec.properties("/meshcat/robot/visuals") == {"visible": True}
-    # ghosts: every measurement configuration of every design; the last design's shown
+    # ghosts: none by default for designs of more than 8 poses (issue 13); a marker per pose instead,
+    # the last design's shown
+    assert not any(p.startswith("/meshcat/ghosts/") for p in paths)
     for d in df.designs:
-        ghosts = {p.split("/")[4] for p in paths if p.startswith(f"/meshcat/ghosts/{slug(d.criterion)}/")}
-        assert len(ghosts) == d.q_meas.shape[0] == 16
-        assert rec.properties(f"/meshcat/ghosts/{slug(d.criterion)}") == {"visible": d.criterion == "kpi"}
+        mk = rec.object_dict(f"/meshcat/markers/{slug(d.criterion)}")["object"]
+        ext = mk["geometries"][0]["data"]["attributes"]["position"]["array"]  # a Float32Array (msgpack ext)
+        pos = np.frombuffer(ext.data, np.float32).reshape(-1, 3)
+        np.testing.assert_allclose(pos, df.reflector_world(d.q_meas), atol=1e-5)
+        assert rec.properties(f"/meshcat/markers/{slug(d.criterion)}") == {"visible": d.criterion == "kpi"}
     # ellipsoids: one per design at the working configuration, in the design's colour, 95 %, magnified
     assert [e.design for e in scene.ellipsoids] == list(CRITERIA)
     colours = set()
@@ -173,6 +177,38 @@ def test_scene_holds_the_expected_objects(scene):
         keys = {t["name"]: t["keys"] for t in clips[p]["tracks"]}
         assert len(keys[".position"]) == 2 * n_poses
     assert ".scale" in {t["name"] for t in clips["/meshcat/beam"]["tracks"]}
+
+
+def test_all_ghosts_on_request_and_screen_sized_labels(design_path):
+    """--all-ghosts draws every pose of every design (the last design's shown); the ellipsoid labels are
+    sprites of constant screen size, one line at LABEL_LINE_SCREEN of the page height at any zoom."""
+    from pin_kpi_oed.viz.scene import LABEL_LINE_SCREEN, MESHCAT_FOV_DEG
+
+    sc = build_scene(load_design(design_path), SceneOptions(max_ghosts=None, animate=False))
+    rec, df = sc.recorder, sc.design
+    paths = set(rec.object_paths())
+    for d in df.designs:
+        ghosts = {p.split("/")[4] for p in paths if p.startswith(f"/meshcat/ghosts/{slug(d.criterion)}/")}
+        assert len(ghosts) == d.q_meas.shape[0] == 16
+        assert rec.properties(f"/meshcat/ghosts/{slug(d.criterion)}") == {"visible": d.criterion == "kpi"}
+    few = build_scene(load_design(design_path, criteria=["kpi"]), SceneOptions(max_ghosts=16, animate=False))
+    assert len({p for p in few.recorder.object_paths() if p.startswith("/meshcat/ghosts/kpi/")}) >= 16
+    lab = rec.object_dict("/meshcat/ellipsoids/label/w0")["object"]
+    assert lab["object"]["type"] == "Sprite"
+    mat = lab["materials"][0]
+    assert mat["type"] == "SpriteMaterial" and mat["sizeAttenuation"] is False and mat["depthTest"] is False
+    import umsgpack
+
+    T = np.array(umsgpack.unpackb(rec.node("/meshcat/ellipsoids/label/w0").transform)["matrix"]).reshape(4, 4).T
+    sy = np.linalg.norm(T[:3, 1])
+    n_lines = 1 + len(df.designs)
+    # three.js: a sizeAttenuation=false sprite of height s covers s / (2 tan(fov/2)) of the page height
+    per_line = sy / (2 * np.tan(np.radians(MESHCAT_FOV_DEG / 2))) / n_lines
+    assert per_line == pytest.approx(LABEL_LINE_SCREEN) and per_line >= 0.02  # >= 18 px on a 900 px page
+    assert np.linalg.norm(T[:3, 0]) > 2 * sy  # wider than high: the text is not squeezed
+    # above the ellipsoids, never on them
+    top = max(e.centre_world[2] + e.radii_m.max() * sc.scale for e in sc.ellipsoids)
+    assert T[2, 3] > top
 
 
 def test_robot_and_beam_placed_by_pinocchio(scene):
@@ -525,3 +561,45 @@ def test_static_page_renders_robot_and_ellipsoids_in_chromium(design_path, tmp_p
     assert len(inside) >= 4 and np.mean([diff_p[int(y), int(x)] for x, y in inside]) >= 0.8
     moved = np.abs(D - A).sum(-1) > 40
     assert moved.sum() > 1000, "the robot did not move to the measurement configuration"
+
+
+def test_program_animation_passes_the_via_poses_and_draws_the_ordered_path():
+    """export --html: the animation's frames include the transition paths (every via pose is passed),
+    the ordered path is drawn (reflector trace through the vias), and ghosts only for a handful of poses."""
+    from pin_kpi_oed.viz.program_animation import animate_program
+
+    df = load_design(stand_in_design("kr15", m=10, seed=1, n_sets=2), criteria=["kpi"])
+    for opts, n in ((SceneOptions(animate=False), 0), (SceneOptions(animate=False, max_ghosts=10), 10)):
+        paths = build_scene(df, opts).recorder.object_paths()  # 10 poses: ghosted only on request
+        assert len({p.split("/")[4] for p in paths if p.startswith("/meshcat/ghosts/kpi/")}) == n
+    Q = df.design("kpi").q_meas
+    home = df.q_work[0]
+    via = 0.5 * (Q[1] + Q[2]) + np.radians([10.0, -5.0, 5.0, 0.0, 0.0, 0.0])
+    path = np.array([home, Q[0], Q[1], via, Q[2], Q[3], home])
+    kinds = ["home", "measure", "measure", "via", "measure", "measure", "home"]
+    sc = build_scene(df, SceneOptions(ghosts=False, animate=False))
+    times = animate_program(sc, path, kinds, step_deg=4.0, fps=10)
+    assert len(times) == 4 and np.all(np.diff(times) > 0)
+    rec = sc.recorder
+    anim = [c for c in rec.commands if c["type"] == "set_animation"][-1]
+    beam = next(a["clip"] for a in anim["animations"] if a["path"] == "/meshcat/beam")
+    pos = np.array([k["value"] for t in beam["tracks"] if t["name"] == ".position" for k in t["keys"]])
+    trk = df.world_T_tracker.translation
+    refl = df.reflector_world(path)
+    # a frame holds the robot exactly at the via pose (the beam node sits between tracker and reflector)
+    assert np.min(np.linalg.norm(pos - 0.5 * (trk + refl[3]), axis=1)) < 1e-9
+    # and the frames between Q[1] and the via are intermediate poses (<= 4 deg joint steps)
+    n_steps = int(np.ceil(np.max(np.abs(via - Q[1])) / np.radians(4.0)))
+    mid = 0.5 * (trk + df.reflector_world((Q[1] + (via - Q[1]) * (1 / n_steps))[None])[0])
+    assert np.min(np.linalg.norm(pos - mid, axis=1)) < 1e-9
+    # the ordered path: a line through the reflector at every target, the via drawn as its own dot
+    line = rec.object_dict("/meshcat/program/path")["object"]
+    trace = np.frombuffer(line["geometries"][0]["data"]["attributes"]["position"]["array"].data, np.float32)
+    trace = trace.reshape(-1, 3)
+    assert line["object"]["type"] == "Line" and len(trace) > len(path)
+    for p in refl:
+        assert np.min(np.linalg.norm(trace - p, axis=1)) < 1e-5
+    vias = rec.object_dict("/meshcat/program/via")["object"]["geometries"][0]["data"]["attributes"]["position"]
+    np.testing.assert_allclose(np.frombuffer(vias["array"].data, np.float32).reshape(-1, 3), refl[[3]], atol=1e-5)
+    meas = rec.object_dict("/meshcat/program/measure")["object"]["geometries"][0]["data"]["attributes"]["position"]
+    assert np.frombuffer(meas["array"].data, np.float32).size == 3 * 4

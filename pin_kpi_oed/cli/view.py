@@ -5,6 +5,7 @@
     pin-kpi-oed view design.json --html out.html --no-open
     pin-kpi-oed view design.json --figures figs/ --no-open --html out.html
     pin-kpi-oed view design.json --html pose.html --pose kpi:5   # page opens paused at the KPI design's pose 5
+    pin-kpi-oed view design.json --html all.html --all-ghosts     # ghost every pose (default: designs of <= 8 poses)
 """
 
 from __future__ import annotations
@@ -42,6 +43,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="magnification of the ellipsoids (default: a 1-2-5 number making them visible)")
     p.add_argument("--level", type=float, default=0.95, help="confidence level of the ellipsoids (default 0.95)")
     p.add_argument("--no-ghosts", action="store_true", help="do not draw the measurement configurations at once")
+    p.add_argument("--all-ghosts", action="store_true",
+                   help="ghost every measurement configuration of every design (default: only designs of at most "
+                        "8 poses; the others show a dot per pose and the animated current pose)")
     p.add_argument("--capsules", action="store_true", help="show the robot's capsules initially")
     p.add_argument("--pose", default=None, metavar="CRITERION:K",
                    help="open the static page with the robot at measurement configuration K (0-based) of a design")
@@ -124,7 +128,7 @@ def _serve_until_stopped(scene: Scene, open_browser: bool) -> int:
 def run(args: argparse.Namespace) -> int:
     """Handler of ``view``; returns the exit code (errors raise PinKpiOedError, printed by cli.main)."""
     from pin_kpi_oed.design.design_file import load_design
-    from pin_kpi_oed.viz.scene import SceneOptions, build_scene
+    from pin_kpi_oed.viz.scene import MAX_GHOSTS, SceneOptions, build_scene
 
     _check_args(args)
     criteria = [c.strip() for c in args.criteria.split(",") if c.strip()] if args.criteria else None
@@ -137,6 +141,7 @@ def run(args: argparse.Namespace) -> int:
                                    "C_s (singular information matrix; e.g. repeated poses) - run pin-kpi-oed evaluate "
                                    "for the details")
     scene = build_scene(df, SceneOptions(scale=args.scale, level=args.level, ghosts=not args.no_ghosts,
+                                         max_ghosts=None if args.all_ghosts else MAX_GHOSTS,
                                          capsules_visible=args.capsules))
     _print_designs(df, scene, args.level)
     if args.figures:

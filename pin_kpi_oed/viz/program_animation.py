@@ -4,6 +4,9 @@ The robot (visual meshes and capsules) moves along every joint-space move of the
 ``step_deg`` joint steps, stops at each measurement point for ``hold_frames`` frames with the laser
 beam drawn (the beam is hidden while moving), and passes the via poses without stopping. It
 replaces the scene's pose-by-pose animation (meshcat's *Animations* panel: play / time slider).
+The whole ordered path is drawn too: ``program/path``, the reflector's trace through every move
+(transitions and via poses included, at the animation's steps), ``program/measure`` the
+measurement points and ``program/via`` the via poses (orange dots).
 """
 
 from __future__ import annotations
@@ -14,6 +17,22 @@ import numpy as np
 import pinocchio as pin
 
 from pin_kpi_oed.viz.scene import Scene, _anim_set, _beam_matrix, _placements, _rot_y_to
+from pin_kpi_oed.viz.style import rgb
+
+
+def _draw_path(scene: Scene, trace: np.ndarray, targets: np.ndarray, kinds: list[str]) -> None:
+    """The program's reflector trace (a line), its measurement points and via poses (dots), world frame (m)."""
+    import meshcat.geometry as mg
+
+    vis = scene.vis
+    vis["program/path"].set_object(mg.Line(mg.PointsGeometry(trace.T.astype(np.float32)),
+                                           mg.LineBasicMaterial(color=0x333333, linewidth=2)))
+    for kind, colour in (("measure", 0x2CA02C), ("via", 0xFF7F0E)):
+        P = targets[[k == kind for k in kinds]]
+        if len(P):
+            C = np.repeat(rgb(colour)[:, None], len(P), axis=1).astype(np.float32)  # the material uses vertex colours
+            vis[f"program/{kind}"].set_object(mg.Points(mg.PointsGeometry(P.T.astype(np.float32), color=C),
+                                                        mg.PointsMaterial(size=0.04)))
 
 
 def animate_program(scene: Scene, path: np.ndarray, kinds: list[str], step_deg: float = 3.0, hold_frames: int = 6,
@@ -59,6 +78,7 @@ def animate_program(scene: Scene, path: np.ndarray, kinds: list[str], step_deg: 
             _anim_set(f["beam"], pin.SE3(_rot_y_to(refl - trk), Tb[:3, 3]), np.array([1.0, length, 1.0]))
 
     path = np.atleast_2d(np.asarray(path, float))
+    trace = []
     for i in range(len(path)):
         q = path[i]
         if kinds[i] == "measure":
@@ -71,7 +91,10 @@ def animate_program(scene: Scene, path: np.ndarray, kinds: list[str], step_deg: 
             n = max(1, int(math.ceil(float(np.max(np.abs(b - q) / steps)))))
             for s in np.linspace(0.0, 1.0, n + 1)[:-1]:
                 key(q + s * (b - q), False)
+                trace.append(q + s * (b - q))
                 frame += 1
     key(path[-1], False)
+    trace.append(path[-1])
     scene.vis.set_animation(anim, play=False, repetitions=1)
+    _draw_path(scene, df.reflector_world(np.array(trace)), df.reflector_world(path), list(kinds))
     return times

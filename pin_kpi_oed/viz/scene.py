@@ -12,13 +12,18 @@ Engineers check measurement poses by eye before running them on a real robot.
   standing at the first working configuration;
 * an animation (meshcat's *Animations* panel: play / time slider) that steps the robot and the
   laser beam through every measurement configuration, design after design;
-  ``ghosts/<design>/<k>``: all measurement configurations at once, ghosted in the design's colour;
+  ``ghosts/<design>/<k>``: all measurement configurations at once, ghosted in the design's colour,
+  only for designs of at most :data:`MAX_GHOSTS` poses unless asked (``SceneOptions.max_ghosts``,
+  ``view --all-ghosts``): beyond a handful they hide the robot; ``markers/<design>``: the reflector
+  position of every measurement configuration, a dot in the design's colour (cheap, always drawn);
 * ``robot/collisions``: the robot's capsules (hidden; tick the box to show them);
 * ``beam``: the laser beam from the tracker to the reflector;
 * ``ellipsoids/<design>/w<j>``: at each working configuration, the TCP's 95 % confidence
   ellipsoid of every design, side by side in the design's colour, magnified by a displayed
   factor (``ellipsoids/label``, the page's legend) so that µm-level ellipsoids are visible; a
-  black dot marks the nominal TCP.
+  black dot marks the nominal TCP. The labels are screen-sized sprites (three.js ``Sprite`` with
+  ``sizeAttenuation: false``): :data:`LABEL_LINE_SCREEN` of the page height per text line at any
+  zoom, always facing the camera.
 
 The scene is drawn into a :class:`~pin_kpi_oed.viz.recorder.SceneRecorder` (in process, no
 server); :meth:`Scene.static_html` is the self-contained page, :mod:`pin_kpi_oed.viz.render`
@@ -48,6 +53,10 @@ from pin_kpi_oed.viz.style import BEAM_COLOUR, ROBOT_RGBA, design_colours, rgb
 
 #: Vertical field of view (deg) of meshcat's default perspective camera (viewer/dist/main.min.js).
 MESHCAT_FOV_DEG = 75.0
+#: Designs with more poses than this get no ghosts by default (the animation shows the current pose).
+MAX_GHOSTS = 8
+#: Height of one text line of a 3-D label, as a fraction of the page height (at any zoom).
+LABEL_LINE_SCREEN = 0.028
 
 
 @dataclass
@@ -59,6 +68,7 @@ class SceneOptions:
             about ``ellipsoid_size``.
         level: confidence level of the ellipsoids.
         ghosts: draw every measurement configuration at once (translucent, design colour).
+        max_ghosts: ghosts only for designs of at most this many poses (None: every design).
         capsules_visible: show the robot's capsules initially (they can be toggled in the viewer).
         animate: add the animation stepping through the measurement configurations.
         camera: (target, position) in the world frame (m); default :func:`default_camera`.
@@ -73,6 +83,7 @@ class SceneOptions:
     scale: float | None = None
     level: float = DEFAULT_LEVEL
     ghosts: bool = True
+    max_ghosts: int | None = MAX_GHOSTS
     capsules_visible: bool = False
     animate: bool = True
     camera: tuple[Sequence[float], Sequence[float]] | None = None
@@ -161,7 +172,8 @@ class Scene:
                 f"{int(round(self.level * 100))} % confidence ellipsoids of the TCP, magnified "
                 f"&times;{fmt_factor(self.scale)} (left to right: designs below)</div>" + "".join(rows)
                 + "<div style='color:#555'>Controls &rarr; Animations: step through the measurement poses; "
-                "Scene &rarr; meshcat/robot/collisions: capsules; meshcat/ghosts: all poses.</div></div>")
+                "Scene &rarr; meshcat/robot/collisions: capsules; meshcat/ghosts: all poses (designs of at most "
+                f"{MAX_GHOSTS} poses; view --all-ghosts for all); meshcat/markers: reflector positions.</div></div>")
 
     def pose_time(self, criterion: str, k: int) -> float:
         """Animation time (s) at which the robot holds measurement configuration ``k`` of a design.
@@ -277,6 +289,45 @@ def _text_png(lines: Sequence[tuple[str, str]], dpi: int = 150) -> tuple[bytes, 
     png = buf.getvalue()
     w, h = struct.unpack(">II", png[16:24])  # IHDR
     return png, w / h
+
+
+def label_height(n_lines: int, line_screen: float = LABEL_LINE_SCREEN) -> float:
+    """Height ``s`` of a :func:`label_sprite` of ``n_lines`` lines (``s`` × depth = its world height, m)."""
+    return n_lines * line_screen * 2.0 * float(np.tan(np.radians(MESHCAT_FOV_DEG) / 2))
+
+
+def label_sprite(node: Any, lines: Sequence[tuple[str, str]], position: np.ndarray,
+                 line_screen: float = LABEL_LINE_SCREEN) -> float:
+    """A text label of constant screen size at a world position, always facing the camera.
+
+    A three.js ``Sprite`` whose ``SpriteMaterial`` has ``sizeAttenuation: false``: three.js then
+    multiplies the sprite's scale by its depth, so that a sprite of height ``s`` covers
+    ``s / (2 tan(fov / 2))`` of the page height whatever the zoom. Drawn over everything (no depth test).
+
+    Args:
+        node: the meshcat node to draw into.
+        lines: [(text, '#rrggbb')] lines of the label.
+        position: world position of the label's centre (m).
+        line_screen: height of one line as a fraction of the page height.
+
+    Returns:
+        The sprite's height ``s`` (its world height is ``s`` × depth from the camera).
+    """
+    import meshcat.geometry as mg
+
+    class SpriteMaterial(mg.GenericMaterial):
+        _type = "SpriteMaterial"
+
+    class Sprite(mg.Object):
+        _type = "Sprite"
+
+    png, aspect = _text_png(lines)
+    sy = label_height(len(lines), line_screen)
+    mat = SpriteMaterial(map=mg.ImageTexture(mg.PngImage(png)), transparent=True, depthTest=False, depthWrite=False,
+                         sizeAttenuation=False)
+    node.set_object(Sprite(mg.Box([1.0, 1.0, 1e-4]), mat))
+    node.set_transform(_homogeneous(np.diag([sy * aspect, sy, 1.0]), np.asarray(position, float)))
+    return float(sy)
 
 
 def _place_camera(vis: Any, target: np.ndarray, position: np.ndarray) -> None:
@@ -477,17 +528,39 @@ class _SceneBuilder:
         self.vis["beam"].set_object(self.mg.Cylinder(1.0, 0.004), self.mg.MeshBasicMaterial(color=BEAM_COLOUR))
         self.vis["beam"].set_transform(_beam_matrix(self.Wt.translation, refl0))
 
+    def markers(self) -> None:
+        """The reflector position of every measurement configuration, one point cloud per design
+        (its colour; shown for the designs whose ghosts are shown)."""
+        mg, df = self.mg, self.df
+        for d in df.designs:
+            P = df.reflector_world(d.q_meas).T.astype(np.float32)
+            colour = np.repeat(rgb(self.colours[d.criterion])[:, None], P.shape[1], axis=1).astype(np.float32)
+            self.vis[f"markers/{slug(d.criterion)}"].set_object(
+                mg.Points(mg.PointsGeometry(P, color=colour), mg.PointsMaterial(size=0.025)))
+        shown = self._shown()
+        for d in df.designs:
+            self.vis[f"markers/{slug(d.criterion)}"].set_property("visible", d.criterion in shown)
+
+    def _shown(self) -> set[str]:
+        """Criteria whose ghosts and markers are shown initially."""
+        df = self.df
+        return set(self.opts.ghosts_visible) if self.opts.ghosts_visible is not None else \
+            {df.designs[-1].criterion} if df.designs else set()
+
     def design_ghosts(self) -> None:
-        """Every measurement configuration of every design, ghosted in the design's colour."""
+        """Every measurement configuration of every design of at most ``max_ghosts`` poses, ghosted in the
+        design's colour."""
         df, opts = self.df, self.opts
         for d in df.designs:
+            if opts.max_ghosts is not None and d.q_meas.shape[0] > opts.max_ghosts:
+                continue
             rgba = [*rgb(self.colours[d.criterion]), opts.ghost_opacity]
             for k, q in enumerate(d.q_meas):
                 self._ghost(q, f"ghosts/{slug(d.criterion)}/{k:03d}", rgba)
-        shown = set(opts.ghosts_visible) if opts.ghosts_visible is not None else \
-            {df.designs[-1].criterion} if df.designs else set()
+        shown = self._shown()
         for d in df.designs:
-            self.vis[f"ghosts/{slug(d.criterion)}"].set_property("visible", d.criterion in shown)
+            if opts.max_ghosts is None or d.q_meas.shape[0] <= opts.max_ghosts:
+                self.vis[f"ghosts/{slug(d.criterion)}"].set_property("visible", d.criterion in shown)
 
     def ellipsoids(self, target: np.ndarray, position: np.ndarray) -> tuple[float, list[EllipsoidView]]:
         """The ellipsoids of every design side by side at each working configuration, and their label.
@@ -523,26 +596,19 @@ class _SceneBuilder:
                                           mg.MeshLambertMaterial(color=colour))
                 self.vis[path].set_transform(_homogeneous(axes, c))
                 views.append(EllipsoidView(d.criterion, j, tcp, c, radii, axes, colour, "/meshcat/" + path))
-            self._label(j, tcp, rj, float(scale), side, fwd)
+            self._label(j, tcp, rj, float(scale), position, fwd)
         return float(scale), views
 
-    def _label(self, j: int, tcp: np.ndarray, rj: float, scale: float, side: np.ndarray, fwd: np.ndarray) -> None:
-        """Label above the ellipsoids of working configuration j (level, magnification, designs), facing the camera."""
-        mg = self.mg
+    def _label(self, j: int, tcp: np.ndarray, rj: float, scale: float, camera: np.ndarray, fwd: np.ndarray) -> None:
+        """Label above the ellipsoids of working configuration j (level, magnification, designs): a screen-sized
+        sprite (:func:`label_sprite`), :data:`LABEL_LINE_SCREEN` of the page height per line at any zoom."""
         lines = [(f"{int(round(self.opts.level * 100))} % ellipsoids x{fmt_factor(scale)}", "#111111")]
         lines += [(d.label, f"#{self.colours[d.criterion]:06x}") for d in self.df.designs]
-        png, aspect = _text_png(lines)
-        h = max(0.1, 0.6 * rj * len(lines))
-        w = h * aspect
-        # front faces only (the back face of the thin box would show the text mirrored through it),
-        # drawn over the robot (no depth test) so that the legend is never hidden
-        mat = mg.MeshBasicMaterial(map=mg.ImageTexture(mg.PngImage(png)), transparent=True, side=0, depthTest=False,
-                                   depthWrite=False)
-        lab = self.vis["ellipsoids/label"][f"w{j}"]
-        lab.set_object(mg.Box([w, h, 1e-4]), mat)
-        back = -fwd / np.linalg.norm(fwd)
-        R = np.column_stack([side, np.cross(back, side), back])
-        lab.set_transform(_homogeneous(R, tcp + (rj + 0.6 * h + 0.02) * R[:, 1]))
+        up = np.array([0.0, 0.0, 1.0])
+        depth = float((tcp - camera) @ (fwd / np.linalg.norm(fwd)))
+        # the sprite's world height at the ellipsoids' depth is (its height) · depth: sit just above them
+        h = label_height(len(lines)) * depth
+        label_sprite(self.vis["ellipsoids/label"][f"w{j}"], lines, tcp + (rj + 0.5 * h + 0.02) * up)
 
     def animation(self) -> list[tuple[str, int]]:
         """Keyframes stepping the robot, its capsules and the beam through every measurement configuration,
@@ -605,6 +671,7 @@ def build_scene(design: DesignFile | str | os.PathLike | Mapping, options: Scene
     b.robot()
     b.working_ghosts()
     b.beam()
+    b.markers()
     if opts.ghosts:
         b.design_ghosts()
     scale, views = b.ellipsoids(target, position)
