@@ -42,11 +42,16 @@ Schema (SI units; angles may be given in degrees with a ``_deg`` key instead of
     obstacles:
       capsules:    [{name, a_m, b_m, radius_m}]          # cell frame
       half_spaces: [{name, normal, offset_m}]            # free side n·x >= offset
-    skip_pairs: [[base_link, link_2], [link_1, pedestal]]   # capsule/link/obstacle names
+    environment:                     # obstacles from files (pin_kpi_oed.cell.environment), relative paths
+      - {name: table, urdf: table.urdf, pose: {xyz_m: [...], rpy_deg: [...]}, max_radius_m: 0.1}
+      - {name: fixture, mesh: fixture.stl, scale: 0.001, pose: {...}}
+    skip_pairs: [[base_link, link_2], [link_1, pedestal]]   # capsule/link/obstacle/environment names
     beam: {radius_m: 0.005, skip: []}                    # laser beam capsule tracker -> reflector
     incidence_max_deg: 30
     clearance_m: 0.0                 # required distance between any two capsules
     working_configurations_deg: [[a1, ..., a6]]
+    working_targets:                 # and/or TCP targets (cell frame), solved by IK (pin_kpi_oed.cell.targets)
+      - {xyz_m: [x, y, z], rpy_deg: [r, p, y], seed_deg: [a1, ..., a6]}   # rpy and seed optional
     measurements: 60
     max_random_tries: 200000         # rejection-sampling budget of the heuristic design
 
