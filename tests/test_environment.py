@@ -191,3 +191,14 @@ def test_shipped_ur10_cell_is_built_from_files_and_designs(tmp_path):
     res = json.loads(out.read_text())
     assert all(e["check"]["n_colliding"] == 0 and e["check"]["all_feasible"] for e in res["designs"])
     assert res["cell"]["environment"][0]["name"] == "table"
+    # the design file keeps the environment: view / export check the same solids as design did
+    from pin_kpi_oed.design.design_file import load_design
+
+    df = load_design(out)
+    Q = df.design("kpi").q_meas
+    np.testing.assert_allclose(FeasibilityChecker(df.cell).distances(Q), FeasibilityChecker(cell).distances(Q),
+                               atol=1e-12)
+    res["cell"]["environment"][0]["path"] = str(tmp_path / "moved.urdf")  # the file is gone: capsules, a note
+    moved = load_design(res)
+    assert any("environment 'table' checked as its capsules" in n for n in moved.notes)
+    assert "table_0" in FeasibilityChecker(moved.cell).beam_names

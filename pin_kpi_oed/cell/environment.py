@@ -236,3 +236,40 @@ def load_environment_object(d: Any, index: int, base_dir: Path | None, source: s
     obj.capsules = [CapsuleSpec(f"{name}_{k}", np.asarray(a, float), np.asarray(b, float), float(r))
                     for k, (a, b, r) in enumerate(caps)]
     return obj
+
+
+def environment_from_dicts(entries: Any, obstacles: list, where: str, notes: list[str]) -> list[EnvironmentObject]:
+    """The environment files of a design JSON's cell (:meth:`EnvironmentObject.to_dict`), read again.
+
+    The optimiser's capsules are the design file's obstacles of the names listed (not re-fitted); the
+    files give the independent check its solids. A file that is no longer there (a design JSON moved to
+    another machine) leaves its capsules as ordinary obstacles (conservative) and adds a note.
+
+    Args:
+        entries: the ``environment`` list of the JSON (None: none).
+        obstacles: the design file's obstacle capsules.
+        where: the design file (for messages); notes: list the notes are appended to.
+
+    Returns:
+        The environment objects found.
+    """
+    from pin_kpi_oed.model.serialize import se3_from_matrix
+
+    out: list[EnvironmentObject] = []
+    by_name = {o.name: o for o in obstacles}
+    for i, e in enumerate(entries or []):
+        if not isinstance(e, dict) or not {"name", "kind", "path", "W_T_obj"} <= set(e):
+            continue
+        caps = [by_name[n] for n in e.get("capsules") or [] if n in by_name]
+        d = {"name": e["name"], e["kind"]: e["path"], "max_radius_m": e.get("max_radius_m", DEFAULT_MAX_RADIUS_M)}
+        if e["kind"] == "mesh":
+            d["scale"] = list(e.get("scale", [1.0, 1.0, 1.0]))
+        try:
+            M = se3_from_matrix(e["W_T_obj"], f"{where}: cell.environment[{i}].W_T_obj")
+            obj = load_environment_object(d, i, None, where, lambda _p, _w: M)
+        except InputError as exc:
+            notes.append(f"environment '{e['name']}' checked as its capsules: {exc}")
+            continue
+        obj.capsules = caps
+        out.append(obj)
+    return out

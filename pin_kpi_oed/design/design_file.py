@@ -41,6 +41,7 @@ import numpy as np
 import pinocchio as pin
 
 from pin_kpi_oed.cell.cell import Cell, CapsuleSpec, HalfSpace, capsules_from_urdf
+from pin_kpi_oed.cell.environment import environment_from_dicts
 from pin_kpi_oed.cell.feasibility import FeasibilityChecker
 from pin_kpi_oed.errors import InputError, PinKpiOedError
 from pin_kpi_oed.model.tracker import TrackerModel
@@ -393,7 +394,8 @@ def _read_cell(f: _Fields, model: TrackerModel, where: str, notes: list[str]) ->
                 beam_radius_m=float(beam.get("radius_m", 0.005)), beam_skip=[str(x) for x in beam.get("skip") or []],
                 incidence_max_deg=float(f.get("incidence_limit_deg", "incidence_max_deg", default=30.0)),
                 clearance_m=float(f.get("clearance_m", default=0.0)),
-                q_work=_read_q_work(f, robot, where, notes))
+                q_work=_read_q_work(f, robot, where, notes),
+                environment=environment_from_dicts(f.get("environment"), obstacles, where, notes))
 
 
 def _skip_what_collides_at_work(cell: Cell, notes: list[str]) -> None:
