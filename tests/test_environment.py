@@ -202,3 +202,11 @@ def test_shipped_ur10_cell_is_built_from_files_and_designs(tmp_path):
     moved = load_design(res)
     assert any("environment 'table' checked as its capsules" in n for n in moved.notes)
     assert "table_0" in FeasibilityChecker(moved.cell).beam_names
+    # the viewer draws the files' geometry, the optimiser's capsules hidden under their own toggle
+    from pin_kpi_oed.viz.scene import SceneOptions, build_scene
+
+    rec = build_scene(df, SceneOptions(ghosts=False, animate=False)).recorder
+    paths = rec.object_paths()
+    assert sum(p.startswith("/meshcat/cell/environment/") for p in paths) == 6
+    assert sum(p.startswith("/meshcat/cell/environment_capsules/") for p in paths) == len(env.capsules)
+    assert rec.properties("/meshcat/cell/environment_capsules") == {"visible": False}

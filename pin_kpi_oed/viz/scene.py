@@ -5,7 +5,8 @@ Engineers check measurement poses by eye before running them on a real robot.
 :func:`~pin_kpi_oed.design.design_file.load_design` reads) into a meshcat scene:
 
 * the cell: floor / wall (half-spaces, drawn as thin slabs on the forbidden side of their
-  boundary plane), obstacle capsules and spheres, the laser tracker;
+  boundary plane), obstacle capsules and spheres, the environment files' geometry
+  (``cell/environment``; their fitted capsules hidden under ``cell/environment_capsules``), the laser tracker;
 * the robot, drawn from its URDF visuals through Pinocchio's
   :class:`pinocchio.visualize.MeshcatVisualizer` (meshes where the URDF has them, URDF primitives
   otherwise, and the cell's capsules - or a stick figure - when the URDF has no visual geometry),
@@ -454,13 +455,30 @@ class _SceneBuilder:
             # 1 cm below the plane: no z-fighting with the grid
             node.set_transform(_homogeneous(R, foot - (0.5 * th + 0.01) * h.normal))
 
+    def environment(self) -> None:
+        """The environment files' geometry as the check sees it (``cell/environment/<solid>``); their fitted
+        capsules (the optimiser's) are drawn hidden under ``cell/environment_capsules`` (tick to show)."""
+        mg = self.mg
+        for e in self.df.cell.environment:
+            for sd in e.solids:
+                node = self.vis["cell/environment"][slug(sd.name)]
+                mat = mg.MeshLambertMaterial(color=0xA89F91)
+                if sd.vertices.shape[0] == 1:  # a sphere
+                    node.set_object(mg.Sphere(float(sd.geometry.radius)), mat)
+                    node.set_transform(_homogeneous(t=sd.vertices[0]))
+                else:
+                    node.set_object(mg.TriangularMeshGeometry(sd.vertices, sd.faces), mat)
+        if self.df.cell.environment:
+            self.vis["cell/environment_capsules"].set_property("visible", False)
+
     def obstacles(self) -> None:
-        """Obstacle capsules (spheres when of length 0)."""
+        """Obstacle capsules (spheres when of length 0); environment files' capsules under their own toggle."""
         from pinocchio.visualize.meshcat_visualizer import createCapsule
 
         mg = self.mg
+        env_caps = self.df.cell.environment_capsule_names
         for o in self.df.obstacles:
-            node = self.vis["cell/obstacles"][slug(o.name)]
+            node = self.vis["cell/environment_capsules" if o.name in env_caps else "cell/obstacles"][slug(o.name)]
             mat = mg.MeshPhongMaterial(color=0x8899AA, opacity=0.8)
             L = float(np.linalg.norm(o.b - o.a))
             node.set_object(createCapsule(max(L, 1e-6), o.radius) if L > 1e-9 else mg.Sphere(o.radius), mat)
@@ -667,6 +685,7 @@ def build_scene(design: DesignFile | str | os.PathLike | Mapping, options: Scene
     target, position = b.background_and_camera()
     b.half_spaces()
     b.obstacles()
+    b.environment()
     b.tracker()
     b.robot()
     b.working_ghosts()
