@@ -210,3 +210,49 @@ def test_shipped_ur10_cell_is_built_from_files_and_designs(tmp_path):
     assert sum(p.startswith("/meshcat/cell/environment/") for p in paths) == 6
     assert sum(p.startswith("/meshcat/cell/environment_capsules/") for p in paths) == len(env.capsules)
     assert rec.properties("/meshcat/cell/environment_capsules") == {"visible": False}
+
+
+def test_beam_through_a_non_convex_mesh_is_blocked(tmp_path):
+    """The laser beam crossing a non-convex (BVH) mesh makes the pose invisible, the mesh named."""
+    _l_mesh().export(tmp_path / "bracket.stl")
+    cell0 = load_cell("kr15")
+    q = cell0.q_work[0]
+    refl = (cell0.W_T_base * cell0.robot.oMtool(q)).act(cell0.reflector_m)
+    mid = 0.5 * (refl + cell0.W_T_tracker.translation)
+    d = _kr15_dict()
+    d["environment"] = [{"name": "bracket", "mesh": "bracket.stl", "pose": {"xyz_m": mid.tolist()}}]
+    chk = FeasibilityChecker(cell_from_dict(d, str(tmp_path / "cell.yaml"), tmp_path))
+    dist = chk.distances(q[None])[0]
+    k = chk.names.index("beam|bracket")
+    assert dist[k] < 0
+    rep = chk.check(q[None])
+    assert not rep.visible[0] and rep.worst[0] == "beam|bracket"
+
+
+def test_mesh_penetration_fixes_coals_zero_distance_in_a_degenerate_contact():
+    """Coal's capsule-BVH distance is ~0 (not negative) for a capsule crossing a plate whose end sits on the far
+    face; coal.collide finds the intersection and the check's fix-up makes the distance negative."""
+    from types import SimpleNamespace
+
+    import coal
+
+    from pin_kpi_oed.cell.feasibility import mesh_penetration
+
+    plate = trimesh.creation.box([1.0, 1.0, 0.1])
+    bvh = coal.BVHModelOBBRSS()
+    bvh.beginModel(len(plate.faces), len(plate.vertices))
+    bvh.addVertices(np.asarray(plate.vertices, float))
+    bvh.addTriangles(np.asarray(plate.faces, np.int32))
+    bvh.endModel()
+    cap = coal.Capsule(0.05, 0.4)  # from z = -0.05 (on the bottom face) through the top face
+    M_cap, M_plate = pin.SE3(np.eye(3), np.array([0.0, 0.0, 0.2])), pin.SE3.Identity()
+    d0 = coal.distance(cap, coal.Transform3s(M_cap.rotation, M_cap.translation), bvh, coal.Transform3s(),
+                       coal.DistanceRequest(), coal.DistanceResult())
+    assert d0 > -1e-9  # Coal alone: no penetration seen
+    gm = SimpleNamespace(geometryObjects=[SimpleNamespace(geometry=cap), SimpleNamespace(geometry=bvh)])
+    chk = SimpleNamespace(pairs=[(0, 1)], mesh_ids={1}, gm=gm, gd=SimpleNamespace(oMg=[M_cap, M_plate]))
+    d = mesh_penetration(chk, np.array([d0]))
+    assert d[0] <= -1e-6
+    far = SimpleNamespace(pairs=[(0, 1)], mesh_ids={1}, gm=gm,
+                          gd=SimpleNamespace(oMg=[pin.SE3(np.eye(3), np.array([0.0, 0.0, 0.5])), M_plate]))
+    assert mesh_penetration(far, np.array([0.2]))[0] == 0.2  # clear pairs untouched

@@ -21,8 +21,9 @@ Each file becomes, from the same geometry,
   ``<name>_<k>``;
 * **solids for the independent check** (:mod:`pin_kpi_oed.cell.feasibility`): the geometry itself —
   Coal boxes, cylinders and spheres as given, meshes as Coal convex shapes when they are convex
-  (exact signed distance) and as Coal BVH triangle meshes otherwise (penetration detected by
-  ``coal.collide``, its depth as Coal reports it). A robot capsule entirely inside a closed
+  (exact signed distance) and as Coal BVH triangle meshes otherwise (distance negative when a shape
+  crosses triangles, the depth per triangle as Coal reports it; degenerate contacts re-tested with
+  ``coal.collide``). A robot capsule entirely inside a closed
   non-convex mesh touches no triangle and is not seen by the BVH; the enclosing capsules of the
   optimiser still keep it out.
 

@@ -353,9 +353,11 @@ def _penetration(g1, M1: pin.SE3, g2, M2: pin.SE3) -> float | None:
 def mesh_penetration(chk: FeasibilityChecker, d: np.ndarray) -> np.ndarray:
     """Pair distances with the penetration of non-convex meshes made negative.
 
-    Coal's distance between a capsule and a BVH triangle mesh is about 0 when they intersect
-    (no signed depth); such pairs are tested with ``coal.collide`` at the current placements
-    (``chk.gd.oMg``) and get Coal's contact depth (at least 1e-6 m deep), so that the check flags them.
+    Coal's distance between a capsule and a BVH triangle mesh is negative when the capsule crosses
+    triangles (a depth per triangle, not of the solid), but about 0 in degenerate contacts (a capsule
+    crossing a plate with its end on the far face: ``tests/test_environment.py``); pairs within 1e-6 m
+    are tested with ``coal.collide`` at the current placements (``chk.gd.oMg``) and, when they
+    intersect, get Coal's contact depth (at least 1e-6 m deep), so that the check flags them.
 
     Args:
         chk: the checker, after :meth:`FeasibilityChecker.pair_distances` placed the geometry.
