@@ -427,6 +427,9 @@ def test_cli_view_writes_the_static_page(design_path, tmp_path, capsys):
     assert "no measurement configuration 99 of design 'kpi'" in capsys.readouterr().err
     assert main(["view", str(design_path), "--html", str(out), "--no-open", "--pose", "kpi:3"]) == 0
     assert "a.seek(" in out.read_text()
+    size = out.stat().st_size  # 16 poses per design: no ghosts by default, all of them with --all-ghosts
+    assert main(["view", str(design_path), "--html", str(out), "--no-open", "--all-ghosts"]) == 0
+    assert out.stat().st_size > size + 32 * 2000
 
 
 def test_stand_in_design_is_visible_and_clear():

@@ -188,8 +188,8 @@ def _split(mesh) -> tuple | None:
         halves = [slice_mesh_plane(mesh, s * u, origin, cap=False) for s in (1.0, -1.0)]
     except Exception:  # degenerate cut: keep the piece whole
         return None
-    if any(h is None or len(h.faces) == 0 or len(h.vertices) >= len(V) + len(mesh.faces) * 2 for h in halves):
+    if any(h is None or len(h.faces) == 0 for h in halves):
         return None
-    if any(np.ptp(((np.asarray(h.vertices) - c) @ u)) > 0.999 * width for h in halves):
+    if any(np.ptp(((np.asarray(h.vertices) - c) @ u)) > 0.999 * width for h in halves):  # no progress
         return None
     return tuple(halves)
