@@ -10,7 +10,9 @@ designs through it, and the viewer's clearances are its distances.
 Pairs checked: robot capsules of non-adjacent joints (a joint's parent and child are adjacent),
 every robot capsule against every obstacle capsule and half-space, and the beam (tracker →
 reflector) against every robot capsule, obstacle and half-space; the cell's ``skip_pairs`` and
-``beam_skip`` are honoured (by capsule, link, obstacle or half-space name). Distances are signed
+``beam_skip`` are honoured (by capsule, link, obstacle or half-space name). Obstacles from environment
+files (:mod:`pin_kpi_oed.cell.environment`) are checked as their geometry (Coal boxes, cylinders,
+spheres, convex or BVH meshes), not as the optimiser's enclosing capsules. Distances are signed
 (negative = penetration depth), in metres, for the capsules as solids (radii subtracted).
 """
 
