@@ -122,8 +122,9 @@ def test_newton_parts_gradient_and_hessian_against_finite_differences(pool):
     k, nh, nb = F.shape
     w = np.random.default_rng(0).random(k) + 0.5
     w /= w.sum()
-    for K in (E / 1e-6, None):
-        phi, g, H = _newton_parts(F.reshape(-1, nb), k, nh, w, K)
+    for K in (E / 1e-6, None, np.vstack([E, np.eye(nb)[:30]]) / 1e-6):  # A with ns < nb, D, A with ns > nb
+        phi, g, B = _newton_parts(F.reshape(-1, nb), k, nh, w, K)
+        H = B @ B.T
         h = 1e-6 * w.min()
         for i in (0, 7, 31):
             e = np.zeros(k)
@@ -147,11 +148,19 @@ def test_swap_gains_against_numpy(nh):
     np.testing.assert_allclose(_swap_gains(V, None), np.linalg.slogdet(S)[1], rtol=1e-10)
 
 
-def test_block_sum_against_reshape():
-    from pin_kpi_oed.oed.pool import _block_sum
+@pytest.mark.parametrize("r", [5, 60])
+def test_diagonal_plus_low_rank_solve_against_dense(r):
+    from pin_kpi_oed.oed.pool import _solve_diag_lowrank
 
-    X = np.random.default_rng(0).standard_normal((12, 12))
-    np.testing.assert_allclose(_block_sum(X, 3), X.reshape(4, 3, 4, 3).sum(axis=(1, 3)), rtol=1e-14)
+    rng = np.random.default_rng(r)
+    k = 40
+    D = np.exp(rng.uniform(-8, 8, k))  # interior-point diagonals span many decades
+    B = rng.standard_normal((k, r))
+    rhs = rng.standard_normal((k, 2))
+    want = np.linalg.solve(np.diag(D) + B @ B.T, rhs)
+    np.testing.assert_allclose(_solve_diag_lowrank(D, B, rhs), want, rtol=1e-8, atol=1e-10 * np.abs(want).max())
+    np.testing.assert_allclose(_solve_diag_lowrank(D, B, rhs[:, 0]), want[:, 0], rtol=1e-8,
+                               atol=1e-10 * np.abs(want).max())
 
 
 def test_large_pool_reduction_keeps_the_certificate(pool):

@@ -145,40 +145,69 @@ def _info_w(Fp: np.ndarray, w: np.ndarray) -> np.ndarray:
     return Fw.T @ Fw
 
 
-def _block_sum(X: np.ndarray, nh: int) -> np.ndarray:
-    """Sums of the nh×nh blocks of X (k·nh, k·nh) -> (k, k), by strided slices (a reshape + sum is slower)."""
-    Z = X[:, 0::nh].copy()
-    for b in range(1, nh):
-        Z += X[:, b::nh]
-    H = Z[0::nh].copy()
-    for a in range(1, nh):
-        H += Z[a::nh]
-    return H
-
-
 def _newton_parts(F2: np.ndarray, k: int, nh: int, w: np.ndarray, K: np.ndarray | None
                   ) -> tuple[float, np.ndarray, np.ndarray]:
-    """φ(w), its gradient (−d) and Hessian on a (sub)pool; F2 the stacked candidates (k·nh, nb).
+    """φ(w), its gradient (−d) and a factor B of its Hessian H = B Bᵀ on a (sub)pool; F2 the stacked candidates
+    (k·nh, nb).
 
-    A-type: ∂²φ/∂w_i∂w_j = 2 tr(K M⁻¹A_iM⁻¹A_jM⁻¹Kᵀ) = 2 Σ_ab (U Uᵀ ∘ F M⁻¹ Fᵀ)_(ia, jb) with U = F M⁻¹Kᵀ;
-    D: ∂²φ/∂w_i∂w_j = tr(M⁻¹A_iM⁻¹A_j) = Σ_ab (F M⁻¹ Fᵀ)²_(ia, jb).
+    With M = L Lᵀ, G_i = F_i L⁻ᵀ (nh, nb) and Ã_i = G_iᵀG_i = L⁻¹A_iL⁻ᵀ (A_i = F_iᵀF_i):
+    A-type, R = K L⁻ᵀ: φ = ‖R‖²_F, d_i = ‖G_i Rᵀ‖²_F = ‖F_i M⁻¹Kᵀ‖²_F and
+    ∂²φ/∂w_i∂w_j = 2 tr(K M⁻¹A_iM⁻¹A_jM⁻¹Kᵀ) = 2 tr(P Ã_i Ã_j), P = RᵀR = V Λ Vᵀ. In P's eigenbasis
+    (X_i = Vᵀ Ã_i V, symmetric) 2 tr(P Ã_i Ã_j) = Σ_{a≤b} c_ab X_i,ab X_j,ab with c_ab = 2(λ_a + λ_b)/(1 + δ_ab),
+    so B_i = (√c_ab X_i,ab) over the pairs a ≤ b with c_ab > 0: rank r ≤ nb(nb+1)/2, and for a KPI with ns
+    rows r ≤ ns·nb − ns(ns−1)/2 (pairs inside P's null space drop out; ns = 3: 78 of 378).
+    D: φ = −log det M, d_i = ‖G_i‖²_F, ∂²φ/∂w_i∂w_j = tr(M⁻¹A_iM⁻¹A_j) = tr(Ã_i Ã_j): the same with V = I,
+    λ_a = ½. The Newton system then costs O(k·r²) (Woodbury, :func:`_solve_diag_lowrank`) instead of O(k³).
+
+    Returns:
+        (φ, g (k,), B (k, r)).
     """
     nb = F2.shape[1]
     Fw = F2 * np.repeat(np.sqrt(w), nh)[:, None]
     L = np.linalg.cholesky(Fw.T @ Fw)
     Linv = np.linalg.solve(L, np.eye(nb))
-    Minv = Linv.T @ Linv
-    Y = (F2 @ Minv) @ F2.T
+    G = (F2 @ Linv.T).reshape(k, nh, nb)
     if K is None:
-        g = -np.einsum("iaia->i", Y.reshape(k, nh, k, nh))
-        return float(-2.0 * np.log(np.diag(L)).sum()), g, _block_sum(Y * Y, nh)
-    U = F2 @ (K @ Minv).T
-    g = -(U.reshape(k, -1) ** 2).sum(axis=1)
-    Y *= U @ U.T
-    H = _block_sum(Y, nh)
-    H *= 2.0
-    R = K @ Linv.T
-    return float(np.sum(R * R)), g, H
+        phi = float(-2.0 * np.log(np.diag(L)).sum())
+        g = -np.einsum("iab,iab->i", G, G)
+        lam = np.full(nb, 0.5)
+    else:
+        R = K @ Linv.T
+        phi = float(np.sum(R * R))
+        g = -np.einsum("ias,ias->i", *(2 * [G @ R.T]))
+        lam, V = np.linalg.eigh(R.T @ R)
+        lam = np.where(lam > 1e-13 * lam.max(), lam, 0.0)  # P has rank ns: the rest is rounding
+        G = G @ V
+    ia, ib = np.triu_indices(nb)
+    c = 2.0 * (lam[ia] + lam[ib]) / np.where(ia == ib, 2.0, 1.0)
+    keep = c > 0
+    X = np.einsum("iab,iac->ibc", G, G)  # Vᵀ Ã_i V (k, nb, nb)
+    return phi, g, X[:, ia[keep], ib[keep]] * np.sqrt(c[keep])
+
+
+def _solve_diag_lowrank(D: np.ndarray, B: np.ndarray, rhs: np.ndarray) -> np.ndarray:
+    """Solve (diag(D) + B Bᵀ) X = rhs for D > 0: Woodbury with the r×r capacitance matrix I + BᵀD⁻¹B
+    (Cholesky) when B has fewer columns than rows, the dense k×k system otherwise.
+
+    Args:
+        D: (k,) positive diagonal; B: (k, r); rhs: (k,) or (k, c).
+
+    Returns:
+        X, shaped as rhs.
+    """
+    k, r = B.shape
+    if r >= k:
+        A = B @ B.T
+        A[np.diag_indices(k)] += D
+        return np.linalg.solve(A, rhs)
+    Di = 1.0 / D
+    X = rhs * (Di if rhs.ndim == 1 else Di[:, None])
+    BD = B * Di[:, None]
+    C = B.T @ BD
+    C[np.diag_indices(r)] += 1.0
+    L = np.linalg.cholesky(C)
+    Y = np.linalg.solve(L.T, np.linalg.solve(L, B.T @ X))
+    return X - BD @ Y
 
 
 def _top_mean(d: np.ndarray, m: int) -> float:
@@ -192,7 +221,8 @@ def _newton_simplex(Fa: np.ndarray, w: np.ndarray, K: np.ndarray | None, tol: fl
 
     KKT conditions: ∇φ + ν1 − z + y = 0, w∘z = μ, (1/m − w)∘y = μ, μ → 0 (the cap and its dual y
     only for m > 1). Each step solves the (k+1)-dimensional Newton system with the exact Hessian
-    (:func:`_newton_parts`) and keeps the iterates interior (fraction to the boundary 0.99). It converges
+    (:func:`_newton_parts`: H = B Bᵀ of rank r ≤ nb(nb+1)/2, solved by Woodbury in O(k·r²)) and keeps the
+    iterates interior (fraction to the boundary 0.99). It converges
     in 15–40 steps, where the multiplicative algorithm needs thousands of iterations.
 
     Args:
@@ -216,13 +246,10 @@ def _newton_simplex(Fa: np.ndarray, w: np.ndarray, K: np.ndarray | None, tol: fl
     w = w / w.sum()
     if m > 1:  # strictly inside the cap: mix with the uniform measure (1/k < 1/m)
         w = 0.5 * np.minimum(w, cap) / np.minimum(w, cap).sum() + 0.5 / k
-    phi, g, H = _newton_parts(F2, k, nh, w, K)
+    phi, g, B = _newton_parts(F2, k, nh, w, K)
     nu = float(-g.min())
     z = np.maximum(nu + g, 1e-3 * abs(nu))
     y = np.full(k, 1e-3 * abs(nu)) if m > 1 else np.zeros(k)
-    kkt = np.zeros((k + 1, k + 1))
-    kkt[:k, k] = kkt[k, :k] = 1.0
-    diag = np.arange(k)
     it = 0
     for it in range(1, max_iter + 1):
         if _top_mean(-g, m) / (phi if K is not None else nb) - 1.0 < tol:
@@ -230,15 +257,16 @@ def _newton_simplex(Fa: np.ndarray, w: np.ndarray, K: np.ndarray | None, tol: fl
         s = cap - w
         mu = 0.1 * (float(w @ z) + (float(s @ y) if m > 1 else 0.0)) / k
         rcz = w * z - mu
-        kkt[:k, :k] = H
-        kkt[diag, diag] += z / w
+        D = z / w
         rhs = -(g + nu - z + y) - rcz / w
         if m > 1:
             rcy = s * y - mu
-            kkt[diag, diag] += y / s
+            D = D + y / s
             rhs += rcy / s
-        sol = np.linalg.solve(kkt, np.append(rhs, 1.0 - w.sum()))
-        dw, dnu = sol[:k], sol[k]
+        # [[H + diag(D), 1], [1ᵀ, 0]] [dw; dnu] = [rhs; 1 − Σw], H = B Bᵀ: two solves with H + diag(D)
+        X = _solve_diag_lowrank(D, B, np.stack([rhs, np.ones(k)], axis=1))
+        dnu = (X[:, 0].sum() - (1.0 - w.sum())) / X[:, 1].sum()
+        dw = X[:, 0] - dnu * X[:, 1]
         dz = (-rcz - z * dw) / w
         pairs = [(w, dw), (z, dz)]
         if m > 1:
@@ -252,7 +280,7 @@ def _newton_simplex(Fa: np.ndarray, w: np.ndarray, K: np.ndarray | None, tol: fl
         w, z, nu = w + step * dw, z + step * dz, nu + step * dnu
         if m > 1:
             y = y + step * dy
-        phi, g, H = _newton_parts(F2, k, nh, w, K)
+        phi, g, B = _newton_parts(F2, k, nh, w, K)
     return w / w.sum(), it
 
 
