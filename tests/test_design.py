@@ -150,3 +150,38 @@ def test_paper_claims_on_kuka_cells(name):
     assert all(r.feasible for r in res)
     assert kpi.improvement_over(rnd) >= 40.0
     assert kpi.improvement_over(par) >= 10.0
+
+
+# ---------------------------------------------------------------------------- user pools (design --pool)
+@pytest.mark.parametrize("name", ["kr15", "ur10"])
+def test_pool_feasible_set_equals_the_independent_coal_check(name):
+    """``design --pool``'s fast check (batched capsule rows, Coal only within 1e-6 m / 1e-8 of the thresholds)
+    accepts exactly the candidates :class:`FeasibilityChecker` (Coal, every pair) accepts in the tightened cell,
+    also for candidates bisected onto the boundary (1e-12 apart across it), which only Coal decides."""
+    from pin_kpi_oed.design.margins import with_margins
+    from pin_kpi_oed.design.user_pool import check_candidates
+
+    cell = with_margins(load_cell(name), 0.02, 1.0)
+    prob = DesignProblem(cell)
+    rng = np.random.default_rng(7)
+    Qf, _ = prob.random_design(40, seed=3)
+    Q = np.vstack([Qf, np.clip(np.repeat(Qf, 10, axis=0) + rng.normal(0, 0.05, (400, cell.robot.nq)), cell.q_lower,
+                                cell.q_upper), cell.robot.random_q(rng, 800)])
+    coal = prob.checker.check(Q).feasible
+    edge = []  # pairs straddling the boundary, found by bisection on Coal's own verdict
+    for a, b in zip(np.flatnonzero(coal)[:12], np.flatnonzero(~coal)[:12]):
+        lo, hi = 0.0, 1.0
+        for _ in range(45):
+            t = 0.5 * (lo + hi)
+            if prob.checker.check(Q[a] + t * (Q[b] - Q[a])).feasible[0]:
+                lo = t
+            else:
+                hi = t
+        edge += [Q[a] + lo * (Q[b] - Q[a]), Q[a] + hi * (Q[b] - Q[a])]
+    Q = np.vstack([Q, edge])
+    coal = prob.checker.check(Q).feasible
+    ok, Fp, n_coal = check_candidates(prob, Q)
+    np.testing.assert_array_equal(ok, coal)
+    assert 0 < coal.sum() < len(Q) and n_coal >= 12  # the boundary pairs went to Coal ...
+    assert n_coal < 0.1 * len(Q)  # ... and few others
+    np.testing.assert_allclose(Fp, prob.model.weighted_jacobian(prob.p0, Q[ok])[:, :, prob.base], rtol=1e-12)

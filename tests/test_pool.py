@@ -181,3 +181,43 @@ def test_unknown_relaxation_method_is_an_error(pool):
     Fp, E = pool
     with pytest.raises(InputError, match="method"):
         approximate_design(Fp, E, method="simplex")
+
+
+@pytest.mark.parametrize("kind", ["kpi", "D"])
+def test_fixed_information_bound_holds_for_every_subset_of_a_small_pool(pool, kind):
+    """Sequential selection (poses measured before = fixed information M0): the relaxation's bound with M0 as
+    a fixed part is below φ(M0 + Σ_S A_i) of every m-subset S (all 364 of a 14-candidate pool), and the
+    selection finds the best subset."""
+    import itertools
+
+    Fp, E = pool
+    K = E if kind == "kpi" else None
+    F0 = Fp[:40].reshape(-1, Fp.shape[-1])
+    M0 = F0.T @ F0
+    cand, m = Fp[40:54], 3
+    sel = select(cand, m, K, fixed_info=M0)
+    every = np.array([exact_phi(cand, list(S), K, fixed_info=M0) for S in itertools.combinations(range(14), m)])
+    bound = sel.approx.lower_bound / m if K is not None else sel.approx.lower_bound - Fp.shape[-1] * np.log(m)
+    assert bound <= every.min() + 1e-12 * abs(every.min())
+    assert sel.phi == pytest.approx(every.min(), rel=1e-9)
+    assert sel.phi == pytest.approx(exact_phi(cand, sel.indices, K, fixed_info=M0), rel=1e-12)
+    if K is not None:
+        assert sel.approx.success and 0.9 < efficiency(sel.phi, sel.approx, m) <= 1.0
+
+
+def test_fixed_information_selection_on_a_larger_pool_is_certified(pool):
+    Fp, E = pool
+    F0 = Fp[:40].reshape(-1, Fp.shape[-1])
+    M0 = F0.T @ F0
+    cand, m = Fp[40:], 20
+    sel = select(cand, m, E, fixed_info=M0)
+    assert sel.approx.success and sel.approx.max_d_ratio <= 1 + 1e-3
+    rng = np.random.default_rng(6)
+    for S in [sel.indices] + [rng.choice(len(cand), m, replace=False) for _ in range(30)]:
+        assert sel.approx.lower_bound / m <= exact_phi(cand, S, E, fixed_info=M0)
+    assert efficiency(sel.phi, sel.approx, m) > 0.95
+    # the measured poses' information counts: selecting without it is worse on top of them
+    blind = select(cand, m, E).indices
+    assert sel.phi <= exact_phi(cand, blind, E, fixed_info=M0) * (1 + 1e-12)
+    with pytest.raises(InputError, match="needs m"):
+        approximate_design(cand, E, fixed_info=M0)
