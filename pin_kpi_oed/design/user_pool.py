@@ -129,7 +129,8 @@ def fixed_information(problem: DesignProblem) -> np.ndarray | None:
 
 
 def design_from_pool(problem: DesignProblem, Q_candidates: np.ndarray, criteria: list[str], m: int, seed: int = 0,
-                     timings: dict | None = None) -> tuple[list[DesignResult], Certificate | None, int]:
+                     timings: dict | None = None, checked: tuple[np.ndarray, np.ndarray] | None = None
+                     ) -> tuple[list[DesignResult], Certificate | None, int]:
     """Select m poses from user candidates for every criterion.
 
     With a :class:`~pin_kpi_oed.design.sequential.SequentialProblem` the measured poses' information
@@ -142,6 +143,7 @@ def design_from_pool(problem: DesignProblem, Q_candidates: np.ndarray, criteria:
         m: poses to select.
         seed: seed of the random reference and of the exchange starts.
         timings: if given, filled with the time per stage (s): ``check_s``, ``jacobians_s``, ``select_<criterion>_s``.
+        checked: (feasible mask, their Jacobians) of :func:`check_candidates` if already computed.
 
     Returns:
         (results: ``random`` first, then the criteria; the KPI certificate over the feasible candidates
@@ -151,7 +153,7 @@ def design_from_pool(problem: DesignProblem, Q_candidates: np.ndarray, criteria:
         InfeasibleError: fewer than m feasible candidates.
     """
     problem.check_measurements(m)
-    ok, Fp, _ = check_candidates(problem, Q_candidates, timings=timings)
+    ok, Fp = checked if checked is not None else check_candidates(problem, Q_candidates, timings=timings)[:2]
     Q = Q_candidates[ok]
     if len(Q) < m:
         raise InfeasibleError(f"--pool: only {len(Q)} of {len(Q_candidates)} candidates satisfy the cell's constraints "
