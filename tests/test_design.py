@@ -285,6 +285,8 @@ def test_cli_bad_given_and_pool_inputs_exit_2_and_write_nothing(sequential_files
     Qbad[2] = cell.robot.random_q(np.random.default_rng(0), 50)[
         ~DesignProblem(cell).checker.check(cell.robot.random_q(np.random.default_rng(0), 50)).feasible][0]
     _write_poses(bad, cell.robot.joint_names, Qbad)
+    few = tmp_path / "few.csv"
+    _write_poses(few, cell.robot.joint_names, Qg[:2])  # 2 poses do not identify 27 parameters
     garbage = tmp_path / "model.json"
     garbage.write_text("{not json")
     out = tmp_path / "d.json"
@@ -294,7 +296,8 @@ def test_cli_bad_given_and_pool_inputs_exit_2_and_write_nothing(sequential_files
              ["--given", str(bad)],
              ["--given", str(tmp_path / "missing.csv")],
              ["--given", str(folder / "given.csv"), "--given-prior", str(garbage)],
-             ["--pool", str(folder / "pool.csv"), "--given-prior", str(garbage)]]
+             ["--pool", str(folder / "pool.csv"), "--given-prior", str(garbage)],
+             ["--given", str(few), "--pool", str(folder / "pool.csv"), "--target-sigma", "1e-6"]]
     for extra in cases:
         assert main(["design", "--cell", "kr15", "--measurements", "5", "--quiet", "--json", str(out), *extra]) == 2
         err = capsys.readouterr().err.strip().splitlines()
