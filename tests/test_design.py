@@ -150,3 +150,158 @@ def test_paper_claims_on_kuka_cells(name):
     assert all(r.feasible for r in res)
     assert kpi.improvement_over(rnd) >= 40.0
     assert kpi.improvement_over(par) >= 10.0
+
+
+# ---------------------------------------------------------------------------- user pools (design --pool)
+@pytest.mark.parametrize("name", ["kr15", "ur10"])
+def test_pool_feasible_set_equals_the_independent_coal_check(name):
+    """``design --pool``'s fast check (batched capsule rows, Coal only within 1e-6 m / 1e-8 of the thresholds)
+    accepts exactly the candidates :class:`FeasibilityChecker` (Coal, every pair) accepts in the tightened cell,
+    also for candidates bisected onto the boundary (1e-12 apart across it), which only Coal decides."""
+    from pin_kpi_oed.design.margins import with_margins
+    from pin_kpi_oed.design.user_pool import check_candidates
+
+    cell = with_margins(load_cell(name), 0.02, 1.0)
+    prob = DesignProblem(cell)
+    rng = np.random.default_rng(7)
+    Qf, _ = prob.random_design(40, seed=3)
+    Q = np.vstack([Qf, np.clip(np.repeat(Qf, 10, axis=0) + rng.normal(0, 0.05, (400, cell.robot.nq)), cell.q_lower,
+                                cell.q_upper), cell.robot.random_q(rng, 800)])
+    coal = prob.checker.check(Q).feasible
+    edge = []  # pairs straddling the boundary, found by bisection on Coal's own verdict
+    for a, b in zip(np.flatnonzero(coal)[:12], np.flatnonzero(~coal)[:12]):
+        lo, hi = 0.0, 1.0
+        for _ in range(45):
+            t = 0.5 * (lo + hi)
+            if prob.checker.check(Q[a] + t * (Q[b] - Q[a])).feasible[0]:
+                lo = t
+            else:
+                hi = t
+        edge += [Q[a] + lo * (Q[b] - Q[a]), Q[a] + hi * (Q[b] - Q[a])]
+    Q = np.vstack([Q, edge])
+    coal = prob.checker.check(Q).feasible
+    ok, Fp, n_coal = check_candidates(prob, Q)
+    np.testing.assert_array_equal(ok, coal)
+    assert 0 < coal.sum() < len(Q) and n_coal >= 12  # the boundary pairs went to Coal ...
+    assert n_coal < 0.1 * len(Q)  # ... and few others
+    np.testing.assert_allclose(Fp, prob.model.weighted_jacobian(prob.p0, Q[ok])[:, :, prob.base], rtol=1e-12)
+
+
+def _write_poses(path, names, Q):
+    path.write_text(",".join(names) + "\n" + "\n".join(",".join(f"{x:.12f}" for x in q) for q in Q) + "\n")
+
+
+@pytest.fixture(scope="module")
+def sequential_files(tmp_path_factory):
+    """40 measured KR 15 poses and a user pool of 500 feasible + 100 unchecked candidates (seeded)."""
+    cell = load_cell("kr15")
+    Q, _ = DesignProblem(cell).random_design(540, seed=5)
+    folder = tmp_path_factory.mktemp("seq")
+    pool = np.vstack([Q[40:], cell.robot.random_q(np.random.default_rng(1), 100)])
+    _write_poses(folder / "given.csv", cell.robot.joint_names, Q[:40])
+    _write_poses(folder / "pool.csv", cell.robot.joint_names, pool)
+    return folder, Q[:40], pool
+
+
+def test_cli_pool_on_top_of_given_poses_is_certified_and_answers_how_many_more(sequential_files):
+    from pin_kpi_oed.cli.main import main
+    from pin_kpi_oed.design.sequential import SequentialProblem
+    from pin_kpi_oed.oed.criteria import DesignCriterion
+
+    folder, Qg, pool = sequential_files
+    cell = load_cell("kr15")
+    base = DesignProblem(cell)
+    crit = DesignCriterion(base.model, base.base, "kpi", base.E)
+    target = 0.8 * float(np.sqrt(crit.value(Qg)))  # t = 1 working configuration: sigma = sqrt(tr C_s)
+    out = folder / "d.json"
+    m = 10
+    assert main(["design", "--cell", "kr15", "--given", str(folder / "given.csv"), "--pool", str(folder / "pool.csv"),
+                 "--criteria", "random,kpi", "--measurements", str(m), "--clearance-margin", "0",
+                 "--incidence-margin", "0", "--target-sigma", str(target), "--quiet", "--json", str(out)]) == 0
+    doc = json.loads(out.read_text())
+    rnd, kpi = doc["designs"]
+    Qk = np.array(kpi["q_meas"])
+    assert np.min(np.abs(Qk[:, None] - pool[None]).max(axis=2), axis=1).max() < 1e-9  # from the user's pool
+    # tr(C_s) counts the measured poses (recomputed from scratch on the stacked poses)
+    assert kpi["trace_cs_m2"] == pytest.approx(crit.value(np.vstack([Qg, Qk])), rel=1e-9)
+    assert np.trace(np.array(kpi["cov_s_m2"])) == pytest.approx(kpi["trace_cs_m2"], rel=1e-9)
+    assert kpi["trace_cs_m2"] < rnd["trace_cs_m2"] < crit.value(Qg)
+    # the certificate (measured information as the fixed part) bounds every m-subset of the feasible pool
+    bound = doc["lower_bound_trace_cs_m2"]
+    seq = SequentialProblem(cell, Qg)
+    feas = pool[seq.checker.check(pool).feasible]
+    rng = np.random.default_rng(0)
+    for _ in range(20):
+        assert bound <= crit.value(np.vstack([Qg, feas[rng.choice(len(feas), m, replace=False)]]))
+    assert 0.95 < kpi["efficiency"] <= 1.0 + 1e-9
+    # "how many more": adding that many poses of the pool reaches the target, one fewer does not
+    u = doc["poses_until"]
+    k, Qa = u["n_more"], np.array(u["q_added"])
+    assert u["success"] and k == len(Qa) >= 1
+    assert np.min(np.abs(Qa[:, None] - feas[None]).max(axis=2), axis=1).max() < 1e-9
+    assert np.sqrt(crit.value(np.vstack([Qg, Qa]))) <= target * (1 + 1e-9)
+    assert np.sqrt(crit.value(np.vstack([Qg, Qa[:-1]]))) > target
+
+
+def test_given_prior_counts_in_scores_and_certificate(sequential_files):
+    """A prior Σ₀⁻¹ on the robot parameters (here: the covariance of 300 earlier random poses) adds to the
+    measured information: C_s = E (F_gᵀF_g + Σ₀⁻¹ + FᵀF)⁻¹ Eᵀ, and the pool selection's bound includes it."""
+    from pin_kpi_oed.design.sequential import SequentialProblem, prior_information
+    from pin_kpi_oed.design.user_pool import design_from_pool
+
+    folder, Qg, pool = sequential_files
+    cell = load_cell("kr15")
+    seq = SequentialProblem(cell, Qg)
+    Qe = cell.robot.random_q(np.random.default_rng(9), 300)
+    Fe = seq.model.weighted_jacobian(seq.p0, Qe)[:, :, seq.base].reshape(-1, seq.base.size)
+    names = [seq.ident.names[i] for i in seq.base]
+    P = prior_information(seq, names + ["not.a_parameter"], np.pad(np.linalg.inv(Fe.T @ Fe), (0, 1)) + np.diag(
+        [0.0] * len(names) + [1.0]))
+    robot_rows = [k for k, i in enumerate(seq.base) if seq.model.layout.names[i].split(".")[0]
+                  not in seq.model.layout.setup_groups]
+    assert np.abs(P[np.ix_(robot_rows, robot_rows)]).max() > 0 and len(robot_rows) < len(names)
+    seq.set_prior(P)
+    res, cert, _ = design_from_pool(seq, pool, ["random", "kpi"], 10, seed=0)
+    Qk = res[-1].q_meas
+    F = seq.model.weighted_jacobian(seq.p0, np.vstack([Qg, Qk]))[:, :, seq.base].reshape(-1, seq.base.size)
+    want = np.trace(seq.E @ np.linalg.solve(F.T @ F + P, seq.E.T))
+    assert res[-1].trace_cs_m2 == pytest.approx(want, rel=1e-8)
+    no_prior = SequentialProblem(cell, Qg)._kpi.value(Qk)
+    assert res[-1].trace_cs_m2 < no_prior
+    assert cert.lower_bound_trace_cs_m2 <= res[-1].trace_cs_m2 and cert.efficiency(res[-1].trace_cs_m2) > 0.95
+    with pytest.raises(InputError, match="names none"):
+        prior_information(seq, ["x.y"], np.eye(1))
+
+
+def test_cli_bad_given_and_pool_inputs_exit_2_and_write_nothing(sequential_files, tmp_path, capsys):
+    from pin_kpi_oed.cli.main import main
+
+    folder, Qg, pool = sequential_files
+    cell = load_cell("kr15")
+    wrong = tmp_path / "wrong.csv"
+    _write_poses(wrong, ["a1", "a2", "a3", "a4", "a5", "a6"], Qg[:3])
+    bad = tmp_path / "infeasible.csv"
+    Qbad = Qg[:5].copy()
+    Qbad[2] = cell.robot.random_q(np.random.default_rng(0), 50)[
+        ~DesignProblem(cell).checker.check(cell.robot.random_q(np.random.default_rng(0), 50)).feasible][0]
+    _write_poses(bad, cell.robot.joint_names, Qbad)
+    few = tmp_path / "few.csv"
+    _write_poses(few, cell.robot.joint_names, Qg[:2])  # 2 poses do not identify 27 parameters
+    garbage = tmp_path / "model.json"
+    garbage.write_text("{not json")
+    out = tmp_path / "d.json"
+    cases = [["--given", str(folder / "given.csv"), "--pool", str(wrong)],
+             ["--given", str(wrong), "--pool", str(folder / "pool.csv")],
+             ["--given", str(bad), "--pool", str(folder / "pool.csv")],
+             ["--given", str(bad)],
+             ["--given", str(tmp_path / "missing.csv")],
+             ["--given", str(folder / "given.csv"), "--given-prior", str(garbage)],
+             ["--pool", str(folder / "pool.csv"), "--given-prior", str(garbage)],
+             ["--given", str(few), "--pool", str(folder / "pool.csv"), "--target-sigma", "1e-6"]]
+    for extra in cases:
+        assert main(["design", "--cell", "kr15", "--measurements", "5", "--quiet", "--json", str(out), *extra]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and ("--given" in err[0] or "--pool" in err[0]), (extra, err)
+        assert not out.exists()
+    assert "row 3" in (lambda: (main(["design", "--cell", "kr15", "--given", str(bad), "--quiet"]),
+                                capsys.readouterr().err)[1])()

@@ -122,8 +122,9 @@ def test_newton_parts_gradient_and_hessian_against_finite_differences(pool):
     k, nh, nb = F.shape
     w = np.random.default_rng(0).random(k) + 0.5
     w /= w.sum()
-    for K in (E / 1e-6, None):
-        phi, g, H = _newton_parts(F.reshape(-1, nb), k, nh, w, K)
+    for K in (E / 1e-6, None, np.vstack([E, np.eye(nb)[:30]]) / 1e-6):  # A with ns < nb, D, A with ns > nb
+        phi, g, B = _newton_parts(F.reshape(-1, nb), k, nh, w, K)
+        H = B @ B.T
         h = 1e-6 * w.min()
         for i in (0, 7, 31):
             e = np.zeros(k)
@@ -147,11 +148,19 @@ def test_swap_gains_against_numpy(nh):
     np.testing.assert_allclose(_swap_gains(V, None), np.linalg.slogdet(S)[1], rtol=1e-10)
 
 
-def test_block_sum_against_reshape():
-    from pin_kpi_oed.oed.pool import _block_sum
+@pytest.mark.parametrize("r", [5, 60])
+def test_diagonal_plus_low_rank_solve_against_dense(r):
+    from pin_kpi_oed.oed.pool import _solve_diag_lowrank
 
-    X = np.random.default_rng(0).standard_normal((12, 12))
-    np.testing.assert_allclose(_block_sum(X, 3), X.reshape(4, 3, 4, 3).sum(axis=(1, 3)), rtol=1e-14)
+    rng = np.random.default_rng(r)
+    k = 40
+    D = np.exp(rng.uniform(-8, 8, k))  # interior-point diagonals span many decades
+    B = rng.standard_normal((k, r))
+    rhs = rng.standard_normal((k, 2))
+    want = np.linalg.solve(np.diag(D) + B @ B.T, rhs)
+    np.testing.assert_allclose(_solve_diag_lowrank(D, B, rhs), want, rtol=1e-8, atol=1e-10 * np.abs(want).max())
+    np.testing.assert_allclose(_solve_diag_lowrank(D, B, rhs[:, 0]), want[:, 0], rtol=1e-8,
+                               atol=1e-10 * np.abs(want).max())
 
 
 def test_large_pool_reduction_keeps_the_certificate(pool):
@@ -172,3 +181,43 @@ def test_unknown_relaxation_method_is_an_error(pool):
     Fp, E = pool
     with pytest.raises(InputError, match="method"):
         approximate_design(Fp, E, method="simplex")
+
+
+@pytest.mark.parametrize("kind", ["kpi", "D"])
+def test_fixed_information_bound_holds_for_every_subset_of_a_small_pool(pool, kind):
+    """Sequential selection (poses measured before = fixed information M0): the relaxation's bound with M0 as
+    a fixed part is below φ(M0 + Σ_S A_i) of every m-subset S (all 364 of a 14-candidate pool), and the
+    selection finds the best subset."""
+    import itertools
+
+    Fp, E = pool
+    K = E if kind == "kpi" else None
+    F0 = Fp[:40].reshape(-1, Fp.shape[-1])
+    M0 = F0.T @ F0
+    cand, m = Fp[40:54], 3
+    sel = select(cand, m, K, fixed_info=M0)
+    every = np.array([exact_phi(cand, list(S), K, fixed_info=M0) for S in itertools.combinations(range(14), m)])
+    bound = sel.approx.lower_bound / m if K is not None else sel.approx.lower_bound - Fp.shape[-1] * np.log(m)
+    assert bound <= every.min() + 1e-12 * abs(every.min())
+    assert sel.phi == pytest.approx(every.min(), rel=1e-9)
+    assert sel.phi == pytest.approx(exact_phi(cand, sel.indices, K, fixed_info=M0), rel=1e-12)
+    if K is not None:
+        assert sel.approx.success and 0.9 < efficiency(sel.phi, sel.approx, m) <= 1.0
+
+
+def test_fixed_information_selection_on_a_larger_pool_is_certified(pool):
+    Fp, E = pool
+    F0 = Fp[:40].reshape(-1, Fp.shape[-1])
+    M0 = F0.T @ F0
+    cand, m = Fp[40:], 20
+    sel = select(cand, m, E, fixed_info=M0)
+    assert sel.approx.success and sel.approx.max_d_ratio <= 1 + 1e-3
+    rng = np.random.default_rng(6)
+    for S in [sel.indices] + [rng.choice(len(cand), m, replace=False) for _ in range(30)]:
+        assert sel.approx.lower_bound / m <= exact_phi(cand, S, E, fixed_info=M0)
+    assert efficiency(sel.phi, sel.approx, m) > 0.95
+    # the measured poses' information counts: selecting without it is worse on top of them
+    blind = select(cand, m, E).indices
+    assert sel.phi <= exact_phi(cand, blind, E, fixed_info=M0) * (1 + 1e-12)
+    with pytest.raises(InputError, match="needs m"):
+        approximate_design(cand, E, fixed_info=M0)

@@ -622,11 +622,57 @@ class CollisionModel:
         return s, t, w1, w2
 
     def feasible(self, Q: np.ndarray, tol: float = 0.0) -> np.ndarray:
-        """Per configuration: every row ≥ −tol and within the joint bounds (fast path), (m,) bool."""
+        """Per configuration: every row ≥ −tol and within the joint bounds (fast path), (m,) bool.
+
+        The same decision as ``np.all(evaluate(Q, with_grad=False) >= -tol, axis=1)``, through
+        :meth:`row_minima` (capsule pairs certainly clear by a bounding-sphere test are not computed).
+        """
         Q = np.atleast_2d(np.asarray(Q, float))
-        g = self.evaluate(Q, with_grad=False)
-        ok = np.all(g >= -tol, axis=1) if g.shape[1] else np.ones(Q.shape[0], bool)
-        return ok & np.all((Q >= self.robot.q_lower) & (Q <= self.robot.q_upper), axis=1)
+        dmin, inc = self.row_minima(Q, exact_below=-tol + 1e-9)
+        return (dmin >= -tol) & (inc >= -tol) & np.all((Q >= self.robot.q_lower) & (Q <= self.robot.q_upper), axis=1)
+
+    def row_minima(self, Q: np.ndarray, exact_below: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+        """Smallest distance row and the incidence row of every configuration, cheaply.
+
+        Values are those of :meth:`evaluate` (same kernels: :func:`segment_closest`, the half-space and
+        incidence rows). A capsule pair is computed only when its bounding-sphere bound
+        ‖c₁ − c₂‖ − h₁ − h₂ − r₁ − r₂ − clearance (segment centres c, half lengths h; ≤ the pair row by
+        the triangle inequality, 1e-9 m subtracted for rounding) is below ``exact_below``; so the
+        returned minimum is the exact smallest distance row wherever that is below ``exact_below``,
+        and some value ≥ ``exact_below`` elsewhere.
+
+        Args:
+            Q: configurations (m, n) rad.
+            exact_below: distance (m) below which the minimum must be exact.
+
+        Returns:
+            (smallest distance row (m,) m, ``+inf`` without distance rows; incidence row cos β − cos β_max
+            (m,), ``+inf`` without it).
+        """
+        Q = np.atleast_2d(np.asarray(Q, float))
+        m = Q.shape[0]
+        EA, EB, V, W = self._endpoints(Q)
+        clr = self.cell.clearance_m
+        dmin = np.full(m, np.inf)
+        if len(self.half):
+            gh, _ = self._halfspace_rows(EA, EB, V, W, clr, None, None, False)
+            dmin = np.minimum(dmin, gh.min(axis=1))
+        if len(self.pairs):
+            i1, i2 = self.pairs[:, 0], self.pairs[:, 1]
+            C, H = 0.5 * (EA + EB), 0.5 * np.linalg.norm(EB - EA, axis=-1)  # (m, S, 3), (m, S)
+            dc = C[:, i1] - C[:, i2]
+            lb = (np.sqrt(np.einsum("mpa,mpa->mp", dc, dc)) - H[:, i1] - H[:, i2]
+                  - self.radius[i1] - self.radius[i2] - clr - 1e-9)
+            ci, pi = np.nonzero(lb < exact_below)
+            g = lb
+            if ci.size:
+                a, b = i1[pi], i2[pi]
+                _, _, w1, w2 = segment_closest(EA[ci, a], EB[ci, a], EA[ci, b], EB[ci, b])
+                diff = w2 - w1
+                g[ci, pi] = np.sqrt(np.einsum("pa,pa->p", diff, diff)) - self.radius[a] - self.radius[b] - clr
+            dmin = np.minimum(dmin, g.min(axis=1))
+        inc = self._incidence_row(Q, False)[0][:, 0] if self.with_incidence else np.full(m, np.inf)
+        return dmin, inc
 
 
 def _beam_frames(a: np.ndarray, B: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -65,12 +65,17 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="incidence angle the optimiser keeps below the cell's limit (deg, default "
                         f"{DEFAULT_INCIDENCE_MARGIN_DEG:g}; the check reports the true angle)")
     p.add_argument("--pool", default=None, help="select the poses from these candidates (CSV, joint columns in rad, "
-                   "up to 100,000 rows) instead of optimising; the selection's bound is the certificate")
+                   "up to 100,000 rows) instead of optimising; the selection's bound is the certificate "
+                   "(with --given: on top of the measured poses)")
     p.add_argument("--given", default=None, help="poses already measured (CSV, joint columns in rad): design "
-                   "--measurements more on top of them (their information counts)")
+                   "--measurements more on top of them (their information counts; they must pass the cell's check)")
+    p.add_argument("--given-prior", dest="given_prior", default=None,
+                   help="with --given: calibrated model file of an earlier calibration; its parameter covariance "
+                        "is a prior on the robot parameters (set-up parameters get none)")
     p.add_argument("--target-sigma", dest="target_sigma", type=float, default=None,
                    help="with --given: how many more poses until the predicted TCP sigma <= this (m), "
-                        "answered greedily over --pool-size feasible poses and verified by recomputing C_s")
+                        "answered greedily over the --pool candidates (else --pool-size random feasible poses) "
+                        "and verified by recomputing C_s")
     p.set_defaults(func=run)
 
 
@@ -153,7 +158,7 @@ def run(args: argparse.Namespace) -> int:
     """
     from pin_kpi_oed.cell.cell import load_cell
     from pin_kpi_oed.design.optimize import DesignOptions, ipopt_options, run_designs
-    from pin_kpi_oed.design.user_pool import design_from_pool, read_poses
+    from pin_kpi_oed.design.user_pool import check_candidates, design_from_pool, read_poses
 
     criteria = parse_criteria(getattr(args, "criteria", "random,param,kpi"))
     cell = load_cell(getattr(args, "cell", "kr15"))
@@ -162,22 +167,31 @@ def run(args: argparse.Namespace) -> int:
     margins = (float(getattr(args, "clearance_margin", 0.0) or 0.0), float(getattr(args, "incidence_margin", 0.0) or 0.0))
     cell = with_margins(cell, *margins)  # the optimiser's cell; `true_cell` for the reported clearances
     pool_file, given_file, target = _pool_given_target(args)
-    problem = _make_problem(args, cell, given_file, collision, quiet)
+    problem = _make_problem(args, cell, given_file, collision, quiet, true_cell)
+    if target is not None and not problem.identifies():  # before any work: "how many more" needs M⁻¹ of the measured
+        from pin_kpi_oed.errors import IdentifiabilityError
+
+        raise IdentifiabilityError(f"--target-sigma: the measured poses of --given {given_file} do not identify the "
+                                   f"parameters; design at least {problem.min_measurements()} more with "
+                                   "--measurements first")
     if not quiet:
         _print_header(cell, problem, m, seed, collision, starts)
     opts = DesignOptions(collision=collision, n_starts=starts, ipopt=ipopt_options(max_iter=max_iter),
                          start=getattr(args, "start", "pool") or "pool")
-    cert = None
+    cert, checked = None, None
     if pool_file:
-        results, cert, n_ok = design_from_pool(problem, read_poses(pool_file, cell.robot, "--pool"), criteria, m, seed)
+        Qc = read_poses(pool_file, cell.robot, "--pool")
+        ok, Fp, _ = check_candidates(problem, Qc)
+        checked = (Qc[ok], Fp)
+        results, cert, n_ok = design_from_pool(problem, Qc, criteria, m, seed, checked=(ok, Fp))
         if not quiet:
             print(f"--pool: {n_ok} feasible candidates in {pool_file}")
     else:
         results = run_designs(cell, criteria, m, seed, opts, problem)
     true_checks = _true_checks(true_cell, results) if cell is not true_cell else None
     cert = _certificate(args, problem, results, m, seed, cert, given_file, pool_file)
-    _print_results(results, criteria, cert, m, pool_file, quiet, cell, true_cell, margins, true_checks)
-    until = _poses_until(args, problem, cell, target, seed) if target is not None else None
+    _print_results(results, criteria, cert, m, pool_file, quiet, cell, true_cell, margins, true_checks, given_file)
+    until = _poses_until(args, problem, cell, target, seed, checked) if target is not None else None
     if getattr(args, "json", None):
         doc = _design_doc(true_cell, problem, results, m, seed, collision, margins, given_file, pool_file, until,
                           true_checks, cert)
@@ -206,8 +220,8 @@ def _pool_given_target(args: argparse.Namespace) -> tuple[str | None, str | None
     """(``--pool``, ``--given``, ``--target-sigma`` in m), checked for combinations that make no sense."""
     pool_file, given_file = getattr(args, "pool", None), getattr(args, "given", None)
     target = getattr(args, "target_sigma", None)
-    if pool_file and given_file:
-        raise InputError("--pool and --given cannot be combined (select from the pool, or design on top of --given)")
+    if getattr(args, "given_prior", None) and not given_file:
+        raise InputError("--given-prior needs --given (the poses already measured)")
     if target is not None and not given_file:
         raise InputError("--target-sigma needs --given (the poses already measured)")
     if target is not None and not (target > 0):
@@ -227,27 +241,31 @@ def _print_header(cell, problem, m: int, seed: int, collision: bool, starts: int
 
 def _certificate(args: argparse.Namespace, problem, results: list, m: int, seed: int, cert,
                  given_file: str | None, pool_file: str | None):
-    """The optimality certificate of ``--certificate`` (the pool's one with ``--pool``; None with ``--given``)."""
-    if getattr(args, "certificate", False) and given_file:
-        print("certificate: not computed with --given (the bound does not include the measured poses)")
-    elif getattr(args, "certificate", False) and not pool_file:
+    """The optimality certificate of ``--certificate``: the pool's one with ``--pool``; else over a random feasible
+    pool plus the designs' poses, with the measured poses' information as a fixed part with ``--given``."""
+    if getattr(args, "certificate", False) and not pool_file:
+        from pin_kpi_oed.design.user_pool import fixed_information
         from pin_kpi_oed.oed.certificate import certify
 
         cert = certify(problem, m, pool_size=getattr(args, "pool_size", 5000) or 5000, seed=seed,
-                       extra=[r.q_meas for r in results if r.feasible])
+                       extra=[r.q_meas for r in results if r.feasible],
+                       fixed_info=fixed_information(problem) if given_file else None)
     return cert
 
 
 def _print_results(results: list, criteria: list, cert, m: int, pool_file: str | None, quiet: bool, cell,
-                   true_cell, margins: tuple[float, float], true_checks) -> None:
+                   true_cell, margins: tuple[float, float], true_checks, given_file: str | None = None) -> None:
     """Print the result table, the certificate, the random design's acceptance and the infeasible designs."""
     shown = [r for r in results if r.criterion in criteria] or results
     print(table(shown, results[0], cert))
     if cert is not None:
         print(f"certificate: every {m}-pose design from the {cert.pool_size} feasible candidates "
-              f"({'the user pool' if pool_file else 'random pool + the designs poses'}) has tr(C_s) >= "
+              f"({'the user pool' if pool_file else 'random pool + the designs poses'})"
+              f"{' on top of the measured poses' if given_file else ''} has tr(C_s) >= "
               f"{cert.lower_bound_trace_cs_m2 * 1e6:.4e} mm^2 "
-              f"(equivalence theorem: mean of the {m} largest d / phi = {cert.approx.max_d_ratio:.4f})")
+              + (f"(equivalence theorem: mean of the {m} largest d / phi = {cert.approx.max_d_ratio:.4f})"
+                 if not given_file else f"(equivalence theorem with the measured poses' information as a fixed "
+                                        f"part: 1 + gap = {cert.approx.max_d_ratio:.4f})"))
     if not quiet and not pool_file:
         rnd = results[0]
         print(f"random design: {rnd.samples} uniform random poses drawn for {m} feasible ones "
@@ -263,10 +281,15 @@ def _print_results(results: list, criteria: list, cert, m: int, pool_file: str |
                   f"incidence limit {true_cell.incidence_max_deg:g} deg)")
 
 
-def _poses_until(args: argparse.Namespace, problem, cell, target: float, seed: int):
-    """``--target-sigma``: add poses from a random pool until the target is met; prints and returns the result."""
+def _poses_until(args: argparse.Namespace, problem, cell, target: float, seed: int, checked=None):
+    """``--target-sigma``: add poses from the user's feasible ``--pool`` candidates (``checked`` = (poses, their
+    Jacobians)) or from a random feasible pool until the target is met; prints and returns the result."""
     from pin_kpi_oed.design.sequential import poses_until
 
+    if checked is not None:
+        until = poses_until(problem, float(target), checked[0], Fp=checked[1])
+        print(until.summary() + f" (from the {len(checked[0])} feasible --pool candidates)")
+        return until
     pool_q, _ = problem.random_design(getattr(args, "pool_size", 5000) or 5000,
                                       seed=np.random.SeedSequence([seed, 2]),
                                       max_tries=max(cell.max_random_tries, 200 * (getattr(args, "pool_size", 5000) or 5000)))
@@ -275,14 +298,20 @@ def _poses_until(args: argparse.Namespace, problem, cell, target: float, seed: i
     return until
 
 
-def _make_problem(args: argparse.Namespace, cell, given_file, collision: bool, quiet: bool):
-    """The design problem of ``design``: plain, on top of ``--given`` poses, or over an extended model (``--model``)."""
+def _make_problem(args: argparse.Namespace, cell, given_file, collision: bool, quiet: bool, true_cell=None):
+    """The design problem of ``design``: plain, on top of ``--given`` poses (checked in the true cell, with the
+    ``--given-prior``), or over an extended model (``--model``)."""
     from pin_kpi_oed.design.optimize import DesignProblem
     from pin_kpi_oed.design.sequential import SequentialProblem
     from pin_kpi_oed.design.user_pool import read_poses
 
     if given_file:
-        problem = SequentialProblem(cell, read_poses(given_file, cell.robot, "--given"), collision=collision)
+        Qg = read_poses(given_file, cell.robot, "--given")
+        _check_given(true_cell or cell, Qg, given_file)
+        problem = SequentialProblem(cell, Qg, collision=collision)
+        if getattr(args, "given_prior", None):
+            problem.set_prior(_given_prior(args.given_prior, problem))
+            problem.prior_file = str(args.given_prior)
     else:
         problem = DesignProblem(cell, collision=collision,
                                 distances={"closed-form": "numpy"}.get(getattr(args, "distances", None), "geometry"))
@@ -302,18 +331,55 @@ def _make_problem(args: argparse.Namespace, cell, given_file, collision: bool, q
     return problem
 
 
+def _check_given(cell, Q, path: str) -> None:
+    """The measured poses must pass the independent check of the (untightened) cell.
+
+    Raises:
+        InputError: naming the file and the first infeasible poses (pose numbers count data rows from 1).
+    """
+    from pin_kpi_oed.cell.feasibility import FeasibilityChecker
+
+    rep = FeasibilityChecker(cell).check(Q)
+    if not rep.all_feasible:
+        bad = np.flatnonzero(~rep.feasible)
+        why = "; ".join(v.replace(f"pose {i}:", f"row {i + 1}:", 1) for i, v in zip(bad, rep.violations(2)))
+        raise InputError(f"--given {path}: {bad.size} of {len(Q)} measured poses are infeasible in cell "
+                         f"{cell.name} ({why}); remove them or fix the cell")
+
+
+def _given_prior(path: str, problem) -> np.ndarray:
+    """Prior information over the identifiable parameters from a calibrated model file's parameter covariance."""
+    from pin_kpi_oed.design.sequential import prior_information
+    from pin_kpi_oed.identification.model_file import load_model_file
+
+    try:
+        cm = load_model_file(path)
+    except InputError as exc:
+        raise InputError(f"--given-prior: {exc}") from None
+    if list(cm.robot.joint_names) != list(problem.cell.robot.joint_names):
+        raise InputError(f"--given-prior {path}: its robot's joints {list(cm.robot.joint_names)} are not the cell's "
+                         f"{list(problem.cell.robot.joint_names)}")
+    par = cm.parameters or {}
+    if par.get("covariance") is None or not par.get("names"):
+        raise InputError(f"--given-prior {path}: the model file holds no parameter covariance")
+    return prior_information(problem, list(par["names"]), np.asarray(par["covariance"], float), f"--given-prior {path}")
+
+
 def _design_doc(true_cell, problem, results: list, m: int, seed: int, collision: bool, margins, given_file,
                 pool_file, until, true_checks, cert) -> dict:
     """The JSON document of ``design`` with the margins, the given poses, the pool, the "how many more" answer,
     the true clearances and the certificate (SI units)."""
     doc = design_json(true_cell, problem, results, m, seed, collision)
     doc["clearance_margin_m"], doc["incidence_margin_deg"] = margins
-    if given_file:  # tr(C_s) and C_s of every design include the measured poses
+    if given_file:  # tr(C_s) and C_s of every design include the measured poses (and the prior)
+        from pin_kpi_oed.oed.covariance import kpi_covariance
+
         doc["given"] = {"file": str(given_file), "q": problem.Q_given.tolist(),
-                        "tcp_sigma_m": problem.sigma_tcp()}
+                        "tcp_sigma_m": problem.sigma_tcp(),
+                        "prior_file": getattr(problem, "prior_file", None)}
         for d, r in zip(doc["designs"], results):
-            d["cov_s_m2"] = score_design(problem.model, np.vstack([problem.Q_given, r.q_meas]), true_cell.q_work,
-                                         problem.ident).cov_s_m2.tolist()
+            F = problem.model.weighted_jacobian(problem.p0, r.q_meas)[:, :, problem.base].reshape(-1, problem.base.size)
+            d["cov_s_m2"] = kpi_covariance(np.vstack([problem.F_given, F]), problem.E, problem._kpi.prior).tolist()
     if pool_file:
         doc["pool_file"] = str(pool_file)
     if until is not None:

@@ -1,9 +1,12 @@
 """Sequential design: m more poses on top of poses already measured, and "how many more until σ ≤ X".
 
 The information of the measured poses Q_g counts: every criterion is evaluated on the stacked
-weighted Jacobian [F(Q_g); F(Q)] (eq. 24d), so C_p = (F_gᵀF_g + FᵀF + prior)⁻¹ and C_s = E C_p Eᵀ
-(eq. 19) include them; IPOPT moves only the new poses Q (:class:`SequentialProblem`, a
-:class:`~pin_kpi_oed.design.optimize.DesignProblem` whose criteria are :class:`GivenDesignCriterion`).
+weighted Jacobian [F(Q_g); R₀; F(Q)] (eq. 24d), so C_p = (F_gᵀF_g + Σ₀⁻¹ + FᵀF)⁻¹ and C_s = E C_p Eᵀ
+(eq. 19) include them; R₀ (R₀ᵀR₀ = Σ₀⁻¹) are the square-root rows of an optional prior from an earlier
+calibration (:func:`prior_information`: a calibrated model file's parameter covariance). IPOPT moves
+only the new poses Q (:class:`SequentialProblem`, a :class:`~pin_kpi_oed.design.optimize.DesignProblem`
+whose criteria are :class:`GivenDesignCriterion`); a selection from a user pool takes F_gᵀF_g + Σ₀⁻¹
+as the fixed part of its relaxation and certificate (:mod:`pin_kpi_oed.design.user_pool`).
 
 :func:`poses_until` answers "how many more poses until the predicted TCP σ = sqrt(tr C_s / t) at the
 working configurations is ≤ X": a greedy sequential design over a feasible pool (each step adds the
@@ -22,8 +25,45 @@ import numpy as np
 from pin_kpi_oed.cell.cell import Cell
 from pin_kpi_oed.design.optimize import DesignProblem
 from pin_kpi_oed.errors import IdentifiabilityError, InputError
+from pin_kpi_oed.oed.covariance import prior_square_root
 from pin_kpi_oed.oed.criteria import DesignCriterion
 from pin_kpi_oed.results import Result
+
+
+def prior_information(problem: DesignProblem, names: list[str], covariance: np.ndarray, source: str = "prior"
+                      ) -> np.ndarray:
+    """Prior information Σ₀⁻¹ over the problem's identifiable parameters from an earlier calibration.
+
+    The covariance of the parameters (matched by name, e.g. ``joint_a2.tx``) is marginalised to the
+    identifiable robot parameters it contains and inverted there (pseudo-inverse); set-up parameters
+    (tracker, reflector) get no prior: a new measurement set-up is placed anew.
+
+    Args:
+        problem: the design problem (its layout and identifiable set).
+        names: parameter names of the covariance.
+        covariance: (k, k) in m², rad² (as the model file stores it).
+        source: the file, for messages.
+
+    Returns:
+        (nb, nb) information (1/m², 1/rad²), zero where no prior.
+
+    Raises:
+        InputError: a covariance that does not match its names, or no identifiable robot parameter in it.
+    """
+    cov = np.asarray(covariance, float)
+    if cov.ndim != 2 or cov.shape != (len(names), len(names)) or not np.all(np.isfinite(cov)):
+        raise InputError(f"{source}: parameter covariance is {cov.shape} (finite values needed) for {len(names)} names")
+    layout = problem.model.layout
+    setup = set(layout.setup_groups)
+    here = {layout.names[i]: k for k, i in enumerate(problem.base) if layout.names[i].split(".")[0] not in setup}
+    pairs = [(here[n], j) for j, n in enumerate(names) if n in here]
+    if not pairs:
+        raise InputError(f"{source}: its covariance names none of the identifiable robot parameters "
+                         f"({', '.join(list(here)[:3])}, ...)")
+    ii, jj = np.array(pairs).T
+    P = np.zeros((problem.base.size, problem.base.size))
+    P[np.ix_(ii, ii)] = np.linalg.pinv(cov[np.ix_(jj, jj)], rcond=1e-12, hermitian=True)
+    return 0.5 * (P + P.T)
 
 
 @dataclass
@@ -58,19 +98,41 @@ class SequentialProblem(DesignProblem):
     Args:
         cell: the cell.
         Q_given: the measured configurations (k, n) rad.
+        prior_info: prior information Σ₀⁻¹ over the identifiable parameters (nb, nb) (:func:`prior_information`),
+            or None; its square-root rows are appended to the measured poses' rows.
         **kwargs: as :class:`DesignProblem`.
 
+    Attributes:
+        F_given: [F(Q_given); R₀] over the identifiable parameters.
+
     Raises:
-        InputError: Q_given of the wrong width or outside the robot's joint limits.
+        InputError: Q_given of the wrong width or outside the robot's joint limits, a prior of the wrong shape.
     """
 
-    def __init__(self, cell: Cell, Q_given: np.ndarray, **kwargs):
+    def __init__(self, cell: Cell, Q_given: np.ndarray, prior_info: np.ndarray | None = None, **kwargs):
         super().__init__(cell, **kwargs)
         Q_given = np.atleast_2d(np.asarray(Q_given, float))
         if Q_given.shape[1] != self.n:
             raise InputError(f"--given: expected {self.n} joint values per pose, got {Q_given.shape[1]}")
         self.Q_given = cell.robot.check_q(Q_given, "--given")
-        self.F_given = self.model.weighted_jacobian(self.p0, self.Q_given)[:, :, self.base].reshape(-1, self.base.size)
+        self.F_measured = self.model.weighted_jacobian(self.p0, self.Q_given)[:, :, self.base].reshape(-1, self.base.size)
+        self.set_prior(prior_info)
+
+    def set_prior(self, prior_info: np.ndarray | None) -> None:
+        """Set (or drop, None) the prior information Σ₀⁻¹ (nb, nb) of an earlier calibration.
+
+        Raises:
+            InputError: a prior of the wrong shape.
+        """
+        F = self.F_measured
+        self.prior_info = None
+        if prior_info is not None:
+            if np.shape(prior_info) != (self.base.size, self.base.size):
+                raise InputError(f"prior information must be {self.base.size}x{self.base.size}, "
+                                 f"got {np.shape(prior_info)}")
+            self.prior_info = np.asarray(prior_info, float)
+            F = np.vstack([F, prior_square_root(self.prior_info)])
+        self.F_given = F
         self._kpi = self.criterion("kpi")
         self._param = self.criterion("param")
 
@@ -128,15 +190,16 @@ class PosesUntil(Result):
                 f"(verified by recomputing C_s with them)")
 
 
-def poses_until(problem: SequentialProblem, target_sigma_m: float, Q_pool: np.ndarray, max_add: int = 500
-                ) -> PosesUntil:
+def poses_until(problem: SequentialProblem, target_sigma_m: float, Q_pool: np.ndarray, max_add: int = 500,
+                Fp: np.ndarray | None = None) -> PosesUntil:
     """Greedy sequential design over a feasible pool until the predicted TCP σ ≤ target (see module docstring).
 
     Args:
         problem: the sequential problem (its measured poses must identify the parameters).
         target_sigma_m: target σ (m), > 0.
-        Q_pool: feasible candidate poses (N, n) rad.
+        Q_pool: feasible candidate poses (N, n) rad (random ones, or the user's ``--pool``).
         max_add: most poses to add.
+        Fp: their weighted Jacobians over the identifiable parameters (N, nh, nb) if already computed.
 
     Returns:
         The :class:`PosesUntil` answer (``success``: target reached and verified).
@@ -157,7 +220,8 @@ def poses_until(problem: SequentialProblem, target_sigma_m: float, Q_pool: np.nd
     M = problem.F_given.T @ problem.F_given
     if prior is not None:
         M = M + np.diag(1.0 / np.asarray(prior, float) ** 2)
-    Fp = problem.model.weighted_jacobian(problem.p0, Q_pool)[:, :, problem.base]  # (N, nh, nb)
+    if Fp is None:
+        Fp = problem.model.weighted_jacobian(problem.p0, Q_pool)[:, :, problem.base]  # (N, nh, nb)
     Minv = np.linalg.inv(M)
     nh = Fp.shape[1]
     sig_now = float(np.sqrt(np.trace(E @ Minv @ E.T) / t))

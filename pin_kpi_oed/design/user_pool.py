@@ -1,12 +1,20 @@
 """Designs chosen from the user's own candidate poses (``pin-kpi-oed design --pool poses.csv``).
 
 Taught or otherwise trusted poses are read from a CSV (joint columns named as in the URDF, rad;
-other columns ignored), checked against the cell's constraints (batched
-:class:`~pin_kpi_oed.cell.collision.CollisionModel`, the design's margins included) and, for
-every criterion, m of the feasible ones are selected by the relaxation + exchange of
-:func:`pin_kpi_oed.oed.pool.select`. The heuristic reference is m of them drawn at random (seeded).
-The relaxation's equivalence-theorem bound is the certificate: no m-subset of the feasible
-candidates has a lower tr(C_s) than φ*/m (A-type criteria).
+other columns ignored) and checked against the design cell's constraints (the margins included):
+the feasible set is **the independent Coal check's** (:class:`~pin_kpi_oed.cell.feasibility.FeasibilityChecker`,
+its tolerances), obtained fast: the optimiser's batched capsule model
+(:meth:`~pin_kpi_oed.cell.collision.CollisionModel.row_minima`) decides every candidate whose smallest
+clearance row and incidence row are farther than :data:`BAND_M` / :data:`BAND_COS` from the
+checker's thresholds (both compute the same capsule distances, to ~1e-15 m), and Coal decides the
+few within the band. For every criterion, m of the feasible ones are selected by the relaxation +
+exchange of :func:`pin_kpi_oed.oed.pool.select`; the heuristic reference is m of them drawn at
+random (seeded). The relaxation's equivalence-theorem bound is the certificate: no m-subset of the
+feasible candidates has a lower tr(C_s) than φ*/m (A-type criteria).
+
+With poses already measured (:class:`~pin_kpi_oed.design.sequential.SequentialProblem`, ``--pool`` with
+``--given``) their information F_gᵀF_g (+ a prior) is the fixed part M₀ of every selection and of
+the certificate (:func:`pin_kpi_oed.oed.pool.select` with ``fixed_info``).
 """
 
 from __future__ import annotations
@@ -23,13 +31,25 @@ from pin_kpi_oed.model.robot import Robot
 from pin_kpi_oed.oed.certificate import Certificate
 from pin_kpi_oed.oed.criteria import get_criterion
 from pin_kpi_oed.oed.pool import select
+from pin_kpi_oed.threads import limited_threads
 
-#: candidates checked per batch of the collision model (bounds the memory of 100,000 candidates)
+#: candidates checked per batch (bounds the memory of 100,000 candidates; Jacobians of 5,000 at a time are
+#: also twice as fast as of 100,000: cache)
 CHUNK = 5000
+#: the independent check's tolerances (:meth:`FeasibilityChecker.check`): clearance (m), joint bounds (rad / m)
+CHECK_TOL_M = 1e-7
+#: ... and on cos(incidence) − cos(limit)
+CHECK_TOL_COS = 1e-9
+#: candidates whose smallest clearance row lies within this of the check's threshold go to Coal (m)
+BAND_M = 1e-6
+#: the same for the incidence row (cosine)
+BAND_COS = 1e-8
 
 
 def read_poses(path: str | Path, robot: Robot, what: str = "--pool") -> np.ndarray:
     """Joint configurations from a CSV (joint columns named as the robot's, rad), within the robot's limits.
+
+    Values within the 1e-9 rad (m) reading tolerance beyond a limit are put on the limit.
 
     Raises:
         InputError: unreadable file, missing / wrong joint columns, values in degrees, outside the limits.
@@ -38,25 +58,92 @@ def read_poses(path: str | Path, robot: Robot, what: str = "--pool") -> np.ndarr
         ms = read_measurements(path, joint_names=list(robot.joint_names), require_position=False)
     except InputError as exc:
         raise InputError(f"{what}: {exc}") from None
-    return robot.check_q(np.asarray(ms.q, float), what)
+    Q = robot.check_q(np.asarray(ms.q, float), f"{what} {path}")
+    return np.clip(Q, robot.q_lower, robot.q_upper)
+
+
+def check_candidates(problem: DesignProblem, Q: np.ndarray, with_jacobians: bool = True,
+                     timings: dict | None = None) -> tuple[np.ndarray, np.ndarray | None, int]:
+    """The candidates the independent check accepts in the design cell, and their weighted Jacobians.
+
+    Per chunk of :data:`CHUNK`: the batched rows decide the candidates clear of the check's
+    thresholds by more than the band; :meth:`FeasibilityChecker.check` (Coal) decides the others;
+    then the weighted Jacobians of the feasible ones over the identifiable parameters.
+
+    Args:
+        problem: the design problem (its ``coll_full`` and ``checker`` are of the design cell).
+        Q: candidates (N, n) rad.
+        with_jacobians: also return the feasible candidates' weighted Jacobians.
+        timings: if given, ``check_s`` and ``jacobians_s`` (s) are added to it.
+
+    Returns:
+        (feasible mask (N,), Jacobians (n_feasible, nh, nb) or None, candidates decided by Coal).
+    """
+    cm, cell = problem.coll_full, problem.cell
+    N = len(Q)
+    ok = np.zeros(N, bool)
+    F, n_coal, t_chk, t_jac = [], 0, 0.0, 0.0
+    with limited_threads():
+        for a in range(0, N, CHUNK):
+            t0 = time.perf_counter()
+            q = Q[a:a + CHUNK]
+            inb = np.all((q >= cell.q_lower - CHECK_TOL_M) & (q <= cell.q_upper + CHECK_TOL_M), axis=1)
+            dmin, inc = cm.row_minima(q, exact_below=-CHECK_TOL_M + BAND_M)
+            sure = inb & (dmin >= -CHECK_TOL_M + BAND_M) & (inc >= -CHECK_TOL_COS + BAND_COS)
+            near = inb & ~sure & (dmin >= -CHECK_TOL_M - BAND_M) & (inc >= -CHECK_TOL_COS - BAND_COS)
+            if near.any():
+                sure[near] = problem.checker.check(q[near], tol=CHECK_TOL_M).feasible
+                n_coal += int(near.sum())
+            ok[a:a + CHUNK] = sure
+            t1 = time.perf_counter()
+            if with_jacobians and sure.any():
+                F.append(problem.model.weighted_jacobian(problem.p0, q[sure])[:, :, problem.base])
+            t_chk += t1 - t0
+            t_jac += time.perf_counter() - t1
+    if timings is not None:
+        timings["check_s"] = timings.get("check_s", 0.0) + t_chk
+        timings["jacobians_s"] = timings.get("jacobians_s", 0.0) + t_jac
+    Fp = None
+    if with_jacobians:
+        Fp = np.concatenate(F) if F else np.zeros((0, problem.model.nh, problem.base.size))
+    return ok, Fp, n_coal
 
 
 def feasible_mask(problem: DesignProblem, Q: np.ndarray) -> np.ndarray:
-    """Per candidate: every constraint of the design cell holds (collision, beam, incidence, bounds), (N,) bool."""
-    return np.concatenate([problem.coll_full.feasible(Q[i:i + CHUNK]) for i in range(0, len(Q), CHUNK)]) \
-        if len(Q) else np.zeros(0, bool)
+    """Per candidate: the independent check accepts it in the design cell (collision, beam, incidence, bounds), (N,) bool."""
+    return check_candidates(problem, Q, with_jacobians=False)[0]
 
 
-def design_from_pool(problem: DesignProblem, Q_candidates: np.ndarray, criteria: list[str], m: int, seed: int = 0
+def fixed_information(problem: DesignProblem) -> np.ndarray | None:
+    """Information every selected design already has: the measured poses' F_gᵀF_g (their prior rows included,
+    :class:`~pin_kpi_oed.design.sequential.SequentialProblem`) plus the layout's prior diag(1/σ²); None if none."""
+    nb = problem.base.size
+    M0 = np.zeros((nb, nb))
+    F_given = getattr(problem, "F_given", None)
+    if F_given is not None and F_given.size:
+        M0 += F_given.T @ F_given
+    prior = problem._kpi.prior
+    if prior is not None:
+        M0 += np.diag(1.0 / np.asarray(prior, float) ** 2)
+    return M0 if M0.any() else None
+
+
+def design_from_pool(problem: DesignProblem, Q_candidates: np.ndarray, criteria: list[str], m: int, seed: int = 0,
+                     timings: dict | None = None, checked: tuple[np.ndarray, np.ndarray] | None = None
                      ) -> tuple[list[DesignResult], Certificate | None, int]:
     """Select m poses from user candidates for every criterion.
 
+    With a :class:`~pin_kpi_oed.design.sequential.SequentialProblem` the measured poses' information
+    (and its prior) is the fixed part of every selection, of every score and of the certificate.
+
     Args:
-        problem: the design problem of the cell.
+        problem: the design problem of the cell (or a sequential one).
         Q_candidates: the user's candidates (N, n) rad.
         criteria: ``random`` and registered criterion names.
         m: poses to select.
         seed: seed of the random reference and of the exchange starts.
+        timings: if given, filled with the time per stage (s): ``check_s``, ``jacobians_s``, ``select_<criterion>_s``.
+        checked: (feasible mask, their Jacobians) of :func:`check_candidates` if already computed.
 
     Returns:
         (results: ``random`` first, then the criteria; the KPI certificate over the feasible candidates
@@ -66,24 +153,29 @@ def design_from_pool(problem: DesignProblem, Q_candidates: np.ndarray, criteria:
         InfeasibleError: fewer than m feasible candidates.
     """
     problem.check_measurements(m)
-    ok = feasible_mask(problem, Q_candidates)
+    ok, Fp = checked if checked is not None else check_candidates(problem, Q_candidates, timings=timings)[:2]
     Q = Q_candidates[ok]
     if len(Q) < m:
         raise InfeasibleError(f"--pool: only {len(Q)} of {len(Q_candidates)} candidates satisfy the cell's constraints "
                               f"(collision, beam, incidence, margins); {m} needed")
+    M0 = fixed_information(problem)
+    on_top = f" on top of the {len(problem.Q_given)} measured poses" if getattr(problem, "F_given", None) is not None \
+        else ""
     rng = np.random.default_rng(seed)
     t0 = time.perf_counter()
     Qr = Q[np.sort(rng.choice(len(Q), size=m, replace=False))]
     out = [problem.result("random", Qr, problem._kpi.value(Qr), time_s=time.perf_counter() - t0, status="sampled",
                           solver_status="sampled", samples=len(Q),
-                          message=f"{m} of the {len(Q)} feasible user candidates at random")]
-    Fp = problem.model.weighted_jacobian(problem.p0, Q)[:, :, problem.base]
+                          message=f"{m} of the {len(Q)} feasible user candidates at random{on_top}")]
     cert = None
     for c in criteria:
         if c == "random":
             continue
         K = get_criterion(c).pool_form(problem.E, problem.base.size)
-        sel = select(Fp, m, K, seed=seed)
+        t0 = time.perf_counter()
+        sel = select(Fp, m, K, seed=seed, fixed_info=M0)
+        if timings is not None:
+            timings[f"select_{c}_s"] = time.perf_counter() - t0
         Qs = Q[np.sort(sel.indices)]
         out.append(problem.result(c, Qs, problem.criterion(c).value(Qs), time_s=sel.time_s, nit=sel.nit,
                                   status=sel.status, solver_status="pool", samples=len(Q), message=sel.message))
@@ -93,5 +185,5 @@ def design_from_pool(problem: DesignProblem, Q_candidates: np.ndarray, criteria:
                                approx=a, pool_selection=sel.indices, pool_selection_trace_cs_m2=sel.phi, Q_pool=Q,
                                success=a.success, status=a.status, nit=a.nit, time_s=sel.time_s,
                                message=f"tr(C_s) >= {a.lower_bound / m:.4g} m^2 for every {m}-pose subset of the "
-                                       f"{len(Q)} feasible user candidates")
+                                       f"{len(Q)} feasible user candidates{on_top}")
     return out, cert, int(ok.sum())

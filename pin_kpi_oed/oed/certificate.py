@@ -70,7 +70,8 @@ class Certificate(Result):
 
 
 def certify(problem: "DesignProblem", m: int, pool_size: int = 5000, seed: int = 0,
-            max_tries_per_candidate: int = 200, extra: list[np.ndarray] | None = None) -> Certificate:
+            max_tries_per_candidate: int = 200, extra: list[np.ndarray] | None = None,
+            fixed_info: np.ndarray | None = None) -> Certificate:
     """Sample a feasible pool for a design problem, solve the relaxation, select m poses.
 
     Args:
@@ -82,6 +83,8 @@ def certify(problem: "DesignProblem", m: int, pool_size: int = 5000, seed: int =
         extra: further feasible configurations to add to the pool, e.g. the poses of the optimised
             designs: the bound then also covers every design built from them (and an optimised
             design can no longer exceed 100 % efficiency by using poses the random pool missed).
+        fixed_info: information every design already has (poses measured before, a prior), (nb, nb):
+            the bound is then of tr(C_s) with it (:func:`pin_kpi_oed.oed.pool.approximate_design`).
 
     Returns:
         The certificate (bound of tr(C_s), m², for the KPI criterion, eq. 24a).
@@ -95,7 +98,7 @@ def certify(problem: "DesignProblem", m: int, pool_size: int = 5000, seed: int =
     if extra:
         Q = np.vstack([Q] + [np.atleast_2d(x) for x in extra])
     Fp = problem.model.weighted_jacobian(problem.p0, Q)[:, :, problem.base]
-    sel = select(Fp, m, problem.E)
+    sel = select(Fp, m, problem.E, fixed_info=fixed_info)
     approx = sel.approx
     return Certificate(lower_bound_trace_cs_m2=approx.lower_bound / m, m=m, pool_size=Q.shape[0], samples=samples,
                        approx=approx, pool_selection=sel.indices, pool_selection_trace_cs_m2=sel.phi, Q_pool=Q,

@@ -124,15 +124,17 @@ class PoolSelection(Result):
                 "relaxation": self.approx.to_dict()}
 
 
-def _multiplicative(Fp: np.ndarray, w: np.ndarray, K: np.ndarray | None, tol: float, max_iter: int
-                    ) -> tuple[np.ndarray, int]:
-    """Multiplicative iterations on a (sub)pool until the equivalence gap < tol. Returns (w, iterations)."""
+def _multiplicative(Fp: np.ndarray, w: np.ndarray, K: np.ndarray | None, tol: float, max_iter: int,
+                    M0: np.ndarray | None = None) -> tuple[np.ndarray, int]:
+    """Multiplicative iterations on a (sub)pool until the equivalence gap < tol. Returns (w, iterations).
+
+    With a fixed part M0 the target Σ w_i d_i replaces φ (A) / nb (D): a heuristic warm start only."""
     nb = Fp.shape[-1]
     it = 0
     for it in range(1, max_iter + 1):
-        M = _info_w(Fp, w)
+        M = _info_w(Fp, w, M0)
         d = _d(Fp, M, K)
-        target = pool_phi(M, K) if K is not None else nb
+        target = (pool_phi(M, K) if K is not None else nb) if M0 is None else float(w @ d)
         if d.max() / target - 1.0 < tol:
             break
         w = w * np.sqrt(d / target) if K is not None else w * (d / nb)
@@ -140,45 +142,87 @@ def _multiplicative(Fp: np.ndarray, w: np.ndarray, K: np.ndarray | None, tol: fl
     return w, it
 
 
-def _info_w(Fp: np.ndarray, w: np.ndarray) -> np.ndarray:
+def _info_w(Fp: np.ndarray, w: np.ndarray, M0: np.ndarray | None = None) -> np.ndarray:
+    """M(w) = M0 + Σ w_i F_iᵀF_i (M0: the fixed part per unit measure, or None)."""
     Fw = (Fp * np.sqrt(w)[:, None, None]).reshape(-1, Fp.shape[-1])
-    return Fw.T @ Fw
+    return Fw.T @ Fw if M0 is None else Fw.T @ Fw + M0
 
 
-def _block_sum(X: np.ndarray, nh: int) -> np.ndarray:
-    """Sums of the nh×nh blocks of X (k·nh, k·nh) -> (k, k), by strided slices (a reshape + sum is slower)."""
-    Z = X[:, 0::nh].copy()
-    for b in range(1, nh):
-        Z += X[:, b::nh]
-    H = Z[0::nh].copy()
-    for a in range(1, nh):
-        H += Z[a::nh]
-    return H
+def _newton_parts(F2: np.ndarray, k: int, nh: int, w: np.ndarray, K: np.ndarray | None,
+                  M0: np.ndarray | None = None) -> tuple[float, np.ndarray, np.ndarray]:
+    """φ(w), its gradient (−d) and a factor B of its Hessian H = B Bᵀ on a (sub)pool; F2 the stacked candidates
+    (k·nh, nb).
 
+    With M = L Lᵀ, G_i = F_i L⁻ᵀ (nh, nb) and Ã_i = G_iᵀG_i = L⁻¹A_iL⁻ᵀ (A_i = F_iᵀF_i):
+    A-type, R = K L⁻ᵀ: φ = ‖R‖²_F, d_i = ‖G_i Rᵀ‖²_F = ‖F_i M⁻¹Kᵀ‖²_F and
+    ∂²φ/∂w_i∂w_j = 2 tr(K M⁻¹A_iM⁻¹A_jM⁻¹Kᵀ) = 2 tr(P Ã_i Ã_j), P = RᵀR = V Λ Vᵀ. In P's eigenbasis
+    (X_i = Vᵀ Ã_i V, symmetric) 2 tr(P Ã_i Ã_j) = Σ_{a≤b} c_ab X_i,ab X_j,ab with c_ab = 2(λ_a + λ_b)/(1 + δ_ab),
+    so B_i = (√c_ab X_i,ab) over the pairs a ≤ b with c_ab > 0: rank r ≤ nb(nb+1)/2, and for a KPI with ns
+    rows r ≤ ns·nb − ns(ns−1)/2 (pairs inside P's null space drop out; ns = 3: 78 of 378).
+    D: φ = −log det M, d_i = ‖G_i‖²_F, ∂²φ/∂w_i∂w_j = tr(M⁻¹A_iM⁻¹A_j) = tr(Ã_i Ã_j): the same with V = I,
+    λ_a = ½. The Newton system then costs O(k·r²) (Woodbury, :func:`_solve_diag_lowrank`) instead of O(k³).
+    A fixed part M0 (M = M0 + Σ w_i A_i) changes only M.
 
-def _newton_parts(F2: np.ndarray, k: int, nh: int, w: np.ndarray, K: np.ndarray | None
-                  ) -> tuple[float, np.ndarray, np.ndarray]:
-    """φ(w), its gradient (−d) and Hessian on a (sub)pool; F2 the stacked candidates (k·nh, nb).
-
-    A-type: ∂²φ/∂w_i∂w_j = 2 tr(K M⁻¹A_iM⁻¹A_jM⁻¹Kᵀ) = 2 Σ_ab (U Uᵀ ∘ F M⁻¹ Fᵀ)_(ia, jb) with U = F M⁻¹Kᵀ;
-    D: ∂²φ/∂w_i∂w_j = tr(M⁻¹A_iM⁻¹A_j) = Σ_ab (F M⁻¹ Fᵀ)²_(ia, jb).
+    Returns:
+        (φ, g (k,), B (k, r)).
     """
     nb = F2.shape[1]
     Fw = F2 * np.repeat(np.sqrt(w), nh)[:, None]
-    L = np.linalg.cholesky(Fw.T @ Fw)
+    L = np.linalg.cholesky(Fw.T @ Fw if M0 is None else Fw.T @ Fw + M0)
     Linv = np.linalg.solve(L, np.eye(nb))
-    Minv = Linv.T @ Linv
-    Y = (F2 @ Minv) @ F2.T
+    G = (F2 @ Linv.T).reshape(k, nh, nb)
     if K is None:
-        g = -np.einsum("iaia->i", Y.reshape(k, nh, k, nh))
-        return float(-2.0 * np.log(np.diag(L)).sum()), g, _block_sum(Y * Y, nh)
-    U = F2 @ (K @ Minv).T
-    g = -(U.reshape(k, -1) ** 2).sum(axis=1)
-    Y *= U @ U.T
-    H = _block_sum(Y, nh)
-    H *= 2.0
-    R = K @ Linv.T
-    return float(np.sum(R * R)), g, H
+        phi = float(-2.0 * np.log(np.diag(L)).sum())
+        g = -np.einsum("iab,iab->i", G, G)
+        lam = np.full(nb, 0.5)
+    else:
+        R = K @ Linv.T
+        phi = float(np.sum(R * R))
+        g = -np.einsum("ias,ias->i", *(2 * [G @ R.T]))
+        lam, V = np.linalg.eigh(R.T @ R)
+        lam = np.where(lam > 1e-13 * lam.max(), lam, 0.0)  # P has rank ns: the rest is rounding
+        G = G @ V
+    ia, ib = np.triu_indices(nb)
+    c = 2.0 * (lam[ia] + lam[ib]) / np.where(ia == ib, 2.0, 1.0)
+    keep = c > 0
+    ia, ib = ia[keep], ib[keep]
+    X = G[:, 0, ia] * G[:, 0, ib]  # the kept entries of Vᵀ Ã_i V = Σ_h (G_i V)_h,a (G_i V)_h,b, (k, r)
+    for h in range(1, nh):
+        X += G[:, h, ia] * G[:, h, ib]
+    X *= np.sqrt(c[keep])
+    return phi, g, X
+
+
+def _solve_diag_lowrank(D: np.ndarray, B: np.ndarray, rhs: np.ndarray) -> np.ndarray:
+    """Solve (diag(D) + B Bᵀ) X = rhs for D > 0: Woodbury with the r×r capacitance matrix I + BᵀD⁻¹B
+    (Cholesky) when B has fewer columns than rows, the dense k×k system otherwise.
+
+    Args:
+        D: (k,) positive diagonal; B: (k, r); rhs: (k,) or (k, c).
+
+    Returns:
+        X, shaped as rhs.
+    """
+    k, r = B.shape
+    if r >= k:
+        A = B @ B.T
+        A[np.diag_indices(k)] += D
+        return np.linalg.solve(A, rhs)
+    Di = 1.0 / D
+    X = rhs * (Di if rhs.ndim == 1 else Di[:, None])
+    BD = B * Di[:, None]
+    C = B.T @ BD
+    C[np.diag_indices(r)] += 1.0
+    L = np.linalg.cholesky(C)
+    Y = np.linalg.solve(L.T, np.linalg.solve(L, B.T @ X))
+    return X - BD @ Y
+
+
+def _gap(d: np.ndarray, w: np.ndarray, scale: float, m: int, fixed: bool) -> float:
+    """Equivalence-theorem gap: mean_top_m(d)/scale − 1 (scale = φ (A) or nb (D) = Σ w_i d_i without a fixed
+    part), or with a fixed part (mean_top_m(d) − Σ w_i d_i)/scale."""
+    top = _top_mean(d, m)
+    return top / scale - 1.0 if not fixed else (top - float(w @ d) / float(w.sum())) / abs(scale)
 
 
 def _top_mean(d: np.ndarray, m: int) -> float:
@@ -187,12 +231,13 @@ def _top_mean(d: np.ndarray, m: int) -> float:
 
 
 def _newton_simplex(Fa: np.ndarray, w: np.ndarray, K: np.ndarray | None, tol: float, m: int = 1,
-                    max_iter: int = 60) -> tuple[np.ndarray, int]:
+                    max_iter: int = 60, M0: np.ndarray | None = None) -> tuple[np.ndarray, int]:
     """Primal–dual interior-point (Newton) method for min φ(w) over {w ≥ 0, Σw = 1, w ≤ 1/m}.
 
     KKT conditions: ∇φ + ν1 − z + y = 0, w∘z = μ, (1/m − w)∘y = μ, μ → 0 (the cap and its dual y
     only for m > 1). Each step solves the (k+1)-dimensional Newton system with the exact Hessian
-    (:func:`_newton_parts`) and keeps the iterates interior (fraction to the boundary 0.99). It converges
+    (:func:`_newton_parts`: H = B Bᵀ of rank r ≤ nb(nb+1)/2, solved by Woodbury in O(k·r²)) and keeps the
+    iterates interior (fraction to the boundary 0.99). It converges
     in 15–40 steps, where the multiplicative algorithm needs thousands of iterations.
 
     Args:
@@ -202,6 +247,8 @@ def _newton_simplex(Fa: np.ndarray, w: np.ndarray, K: np.ndarray | None, tol: fl
         tol: stop when the gap on the subpool, mean of the m largest d / φ − 1 (A) or / nb − 1 (D), < tol.
         m: the cap 1/m on each weight (distinct points of an m-point design); 1 = no cap.
         max_iter: cap on Newton steps.
+        M0: fixed information per unit measure (M = M0 + Σ w_i A_i), or None; the gap is then
+            (mean of the m largest d − Σ w_i d_i) / (φ (A) or nb (D)).
 
     Returns:
         (weights, Newton steps).
@@ -216,29 +263,27 @@ def _newton_simplex(Fa: np.ndarray, w: np.ndarray, K: np.ndarray | None, tol: fl
     w = w / w.sum()
     if m > 1:  # strictly inside the cap: mix with the uniform measure (1/k < 1/m)
         w = 0.5 * np.minimum(w, cap) / np.minimum(w, cap).sum() + 0.5 / k
-    phi, g, H = _newton_parts(F2, k, nh, w, K)
+    phi, g, B = _newton_parts(F2, k, nh, w, K, M0)
     nu = float(-g.min())
     z = np.maximum(nu + g, 1e-3 * abs(nu))
     y = np.full(k, 1e-3 * abs(nu)) if m > 1 else np.zeros(k)
-    kkt = np.zeros((k + 1, k + 1))
-    kkt[:k, k] = kkt[k, :k] = 1.0
-    diag = np.arange(k)
     it = 0
     for it in range(1, max_iter + 1):
-        if _top_mean(-g, m) / (phi if K is not None else nb) - 1.0 < tol:
+        if _gap(-g, w, phi if K is not None else nb, m, M0 is not None) < tol:
             break
         s = cap - w
         mu = 0.1 * (float(w @ z) + (float(s @ y) if m > 1 else 0.0)) / k
         rcz = w * z - mu
-        kkt[:k, :k] = H
-        kkt[diag, diag] += z / w
+        D = z / w
         rhs = -(g + nu - z + y) - rcz / w
         if m > 1:
             rcy = s * y - mu
-            kkt[diag, diag] += y / s
+            D = D + y / s
             rhs += rcy / s
-        sol = np.linalg.solve(kkt, np.append(rhs, 1.0 - w.sum()))
-        dw, dnu = sol[:k], sol[k]
+        # [[H + diag(D), 1], [1ᵀ, 0]] [dw; dnu] = [rhs; 1 − Σw], H = B Bᵀ: two solves with H + diag(D)
+        X = _solve_diag_lowrank(D, B, np.stack([rhs, np.ones(k)], axis=1))
+        dnu = (X[:, 0].sum() - (1.0 - w.sum())) / X[:, 1].sum()
+        dw = X[:, 0] - dnu * X[:, 1]
         dz = (-rcz - z * dw) / w
         pairs = [(w, dw), (z, dz)]
         if m > 1:
@@ -252,13 +297,14 @@ def _newton_simplex(Fa: np.ndarray, w: np.ndarray, K: np.ndarray | None, tol: fl
         w, z, nu = w + step * dw, z + step * dz, nu + step * dnu
         if m > 1:
             y = y + step * dy
-        phi, g, H = _newton_parts(F2, k, nh, w, K)
+        phi, g, B = _newton_parts(F2, k, nh, w, K, M0)
     return w / w.sum(), it
 
 
-def _d_all(Fp: np.ndarray, w: np.ndarray, K: np.ndarray | None, chunk: int = 20000) -> tuple[float, np.ndarray]:
+def _d_all(Fp: np.ndarray, w: np.ndarray, K: np.ndarray | None, chunk: int = 20000, M0: np.ndarray | None = None
+           ) -> tuple[float, np.ndarray]:
     """φ(w) and the directional derivatives d_i for every candidate, in chunks (bounded memory)."""
-    M = _info_w(Fp, w) if np.count_nonzero(w) == w.size else _info_w(Fp[w > 0], w[w > 0])
+    M = _info_w(Fp, w, M0) if np.count_nonzero(w) == w.size else _info_w(Fp[w > 0], w[w > 0], M0)
     phi = pool_phi(M, K)
     L = np.linalg.cholesky(M)
     nb = Fp.shape[-1]
@@ -271,7 +317,8 @@ def _d_all(Fp: np.ndarray, w: np.ndarray, K: np.ndarray | None, chunk: int = 200
 
 
 def approximate_design(Fp: np.ndarray, K: np.ndarray | None = None, tol: float = 1e-3, max_iter: int = 20000,
-                       method: str = "newton", m: int | None = None) -> ApproximateDesign:
+                       method: str = "newton", m: int | None = None, fixed_info: np.ndarray | None = None
+                       ) -> ApproximateDesign:
     """Optimal approximate design on a candidate pool, with its certificate.
 
     ``method="newton"`` (default): candidate reduction by the equivalence theorem and an
@@ -290,6 +337,14 @@ def approximate_design(Fp: np.ndarray, K: np.ndarray | None = None, tol: float =
     φ(v) ≥ φ(w) − (mean_top_m(d) − nb) (D), for every capped v. This is never looser than the
     uncapped bound (the maximum) and removes the gap that comes from replicated points.
 
+    **Fixed information** (``fixed_info`` = M₀, e.g. poses already measured and a prior: sequential
+    design): an exact design S of m candidates has M = M₀ + Σ_S A_i = m·(M₀/m + Σ_i v_i A_i), v = 1_S/m
+    in the capped simplex, so the relaxation is solved for M(w) = M₀/m + Σ w_i A_i and, φ being convex
+    in w, φ(v) ≥ φ(w) + ∇φ(w)ᵀ(v − w) ≥ φ(w) − (mean_top_m(d) − Σ w_i d_i) for every capped v (the
+    equivalence-theorem bound with a fixed part; homogeneity no longer holds). As without it, an exact
+    design's tr C_s ≥ lower_bound/m (A) and −log det M ≥ lower_bound − nb log m (D); the gap is
+    (mean_top_m(d) − Σ w_i d_i)/φ (A) or /nb (D), and ``max_d_ratio`` is 1 + that gap.
+
     Args:
         Fp: weighted Jacobians of the candidates over the identifiable parameters, (N, nh, nb).
         K: A-type criterion matrix (E for tr C_s, identity for tr C_p); None = D-optimality.
@@ -298,10 +353,12 @@ def approximate_design(Fp: np.ndarray, K: np.ndarray | None = None, tol: float =
         max_iter: cap on the total number of iterations (multiplicative, or Newton steps).
         method: ``newton`` or ``multiplicative``.
         m: cap the weights at 1/m (distinct-point designs of m candidates); None = no cap.
+        fixed_info: information M₀ every design already has (nb, nb), same weighting as Fp; needs ``m``
+            and the Newton method.
 
     Raises:
-        IdentifiabilityError: the whole pool does not identify the parameters.
-        InputError: unknown method, or m larger than the pool.
+        IdentifiabilityError: the whole pool (with M₀) does not identify the parameters.
+        InputError: unknown method, m larger than the pool, ``fixed_info`` without m or of the wrong shape.
     """
     t0 = time.perf_counter()
     if method not in ("newton", "multiplicative"):
@@ -310,45 +367,58 @@ def approximate_design(Fp: np.ndarray, K: np.ndarray | None = None, tol: float =
     mc = 1 if m is None or method == "multiplicative" else int(m)
     if mc > N:
         raise InputError(f"cannot choose {mc} measurements from a pool of {N} candidates")
+    M0 = None
+    if fixed_info is not None:
+        if m is None or method != "newton":
+            raise InputError("approximate design with fixed information needs m and the Newton method")
+        if np.shape(fixed_info) != (nb, nb):
+            raise InputError(f"fixed information must be {nb}x{nb}, got {np.shape(fixed_info)}")
+        M0 = np.asarray(fixed_info, float) / mc
     w = np.full(N, 1.0 / N)
-    phi0 = pool_phi(_info_w(Fp, w), K)
+    phi0 = pool_phi(_info_w(Fp, w, M0), K)
     if not np.isfinite(phi0):
         raise IdentifiabilityError("the candidate pool does not identify the parameters: sample more, or more "
                                    "varied, feasible configurations")
     if method == "newton":
-        w, total = _relax_newton(Fp, K, tol, max_iter, phi0, mc)
+        w, total = _relax_newton(Fp, K, tol, max_iter, phi0, mc, M0)
     else:
         w, total = _relax_multiplicative(Fp, w, K, tol, max_iter)
-    phi, d = _d_all(Fp, w, K)
+    phi, d = _d_all(Fp, w, K, M0=M0)
     top = _top_mean(d, mc)
-    if K is not None:
+    if M0 is not None:
+        bound = phi - (top - float(w @ d))
+        ratio = 1.0 + _gap(d, w, phi if K is not None else nb, mc, True)
+        bound = max(bound, 0.0) if K is not None else bound
+    elif K is not None:
         bound, ratio = phi ** 2 / top, top / phi
     else:
         bound, ratio = phi - (top - nb), top / nb
     ok = bool(ratio - 1.0 < tol)
     unit = "Newton steps" if method == "newton" else "iterations"
     what = "max d" if mc == 1 else f"mean of the {mc} largest d"
+    scale = "phi" if K is not None else "nb"
+    what = f"{what} / {scale}" if M0 is None else f"1 + ({what} - sum w d) / {scale} (fixed information)"
     return ApproximateDesign(weights=w, phi=phi, lower_bound=bound, max_d_ratio=float(ratio),
                              support=np.flatnonzero(w > 1e-4 / N), nit=total, success=ok,
                              status="converged" if ok else "max_iter",
-                             message=f"equivalence theorem: {what} / {'phi' if K is not None else 'nb'} = "
+                             message=f"equivalence theorem: {what} = "
                                      f"{ratio:.5f} after {total} {unit}",
                              time_s=time.perf_counter() - t0)
 
 
-def _relax_newton(Fp: np.ndarray, K: np.ndarray | None, tol: float, max_iter: int, phi0: float, m: int
-                  ) -> tuple[np.ndarray, int]:
+def _relax_newton(Fp: np.ndarray, K: np.ndarray | None, tol: float, max_iter: int, phi0: float, m: int,
+                  M0: np.ndarray | None = None) -> tuple[np.ndarray, int]:
     """Working-set interior-point relaxation (see :func:`approximate_design`). Returns (w, Newton steps)."""
     N, nh, nb = Fp.shape
     Ks = None if K is None else K / np.sqrt(phi0)  # φ ≈ 1 at the start: well-scaled Newton systems
-    w, _ = _multiplicative(Fp, np.full(N, 1.0 / N), Ks, tol, 5)
+    w, _ = _multiplicative(Fp, np.full(N, 1.0 / N), Ks, tol, 5, M0)
     k = min(N, max(6 * nb, 150, 2 * m))
-    work = np.union1d(np.argsort(-w)[:k], np.argsort(-_d_all(Fp, w, Ks)[1])[:k // 3 + m])
+    work = np.union1d(np.argsort(-w)[:k], np.argsort(-_d_all(Fp, w, Ks, M0=M0)[1])[:k // 3 + m])
     total = 0
     while True:
         wa = w[work] + 1e-3 / work.size
         try:
-            wa, it = _newton_simplex(Fp[work], wa / wa.sum(), Ks, tol / 10, m, max(1, min(60, max_iter - total)))
+            wa, it = _newton_simplex(Fp[work], wa / wa.sum(), Ks, tol / 10, m, max(1, min(60, max_iter - total)), M0)
         except np.linalg.LinAlgError:  # the working set does not identify: enlarge it
             if work.size == N:
                 raise
@@ -359,11 +429,11 @@ def _relax_newton(Fp: np.ndarray, K: np.ndarray | None, tol: float, max_iter: in
         w[work] = wa
         w[w < 1e-9 * wa.max()] = 0.0  # interior-point dust; the certificate is computed for this w
         w /= w.sum()
-        phi, d = _d_all(Fp, w, Ks)
+        phi, d = _d_all(Fp, w, Ks, M0=M0)
         target = phi if K is not None else nb
         outside = np.setdiff1d(np.argsort(-d)[:m + k], work)
         outside = outside[d[outside] > np.partition(d[work], work.size - m)[work.size - m]] if outside.size else outside
-        if _top_mean(d, m) / target - 1.0 < tol or total >= max_iter or outside.size == 0:
+        if _gap(d, w, target, m, M0 is not None) < tol or total >= max_iter or outside.size == 0:
             return w, total
         work = np.union1d(work[wa > 1e-4 * wa.max()], outside)
 
@@ -423,14 +493,15 @@ def _swap_gains(V: np.ndarray, G: np.ndarray | None) -> np.ndarray:
     return out / det
 
 
-def _exchange(Fp: np.ndarray, chosen: np.ndarray, K: np.ndarray | None, ridge: float, max_sweeps: int = 50
-              ) -> tuple[np.ndarray, int]:
-    """Fedorov exchange with Woodbury updates: swap points while φ decreases. Returns (chosen indices, sweeps)."""
+def _exchange(Fp: np.ndarray, chosen: np.ndarray, K: np.ndarray | None, ridge: float, max_sweeps: int = 50,
+              M0: np.ndarray | None = None) -> tuple[np.ndarray, int]:
+    """Fedorov exchange with Woodbury updates: swap points while φ decreases (information M0 + Σ_chosen F_iᵀF_i).
+    Returns (chosen indices, sweeps)."""
     N, nh, nb = Fp.shape
     chosen = list(chosen)
     in_set = np.zeros(N, bool)
     in_set[chosen] = True
-    reg = ridge * np.eye(nb)
+    reg = ridge * np.eye(nb) if M0 is None else ridge * np.eye(nb) + M0
 
     def info_of(idx):
         F = Fp[idx].reshape(-1, nb)
@@ -476,7 +547,7 @@ def _exchange(Fp: np.ndarray, chosen: np.ndarray, K: np.ndarray | None, ridge: f
 
 @limit_threads
 def select(Fp: np.ndarray, m: int, K: np.ndarray | None = None, tol: float = 1e-3, n_starts: int = 2,
-           seed: int = 0) -> PoolSelection:
+           seed: int = 0, fixed_info: np.ndarray | None = None) -> PoolSelection:
     """Choose m distinct candidates: relaxation (weights capped at 1/m), rounding to the largest weights, exchange.
 
     The exchange runs, over the support and the max(300, 5m) candidates with the largest d_i at the
@@ -490,6 +561,8 @@ def select(Fp: np.ndarray, m: int, K: np.ndarray | None = None, tol: float = 1e-
         tol: equivalence-theorem tolerance of the relaxation.
         n_starts: seeded exchange starts besides the rounded relaxation.
         seed: seed of those starts.
+        fixed_info: information M₀ every design already has (poses measured before, a prior), (nb, nb):
+            φ of M₀ + Σ_chosen F_iᵀF_i is minimised and certified (:func:`approximate_design`).
 
     Returns:
         The selection (``indices``, exact ``phi``) with the approximate design and its certificate;
@@ -503,15 +576,16 @@ def select(Fp: np.ndarray, m: int, K: np.ndarray | None = None, tol: float = 1e-
     N = Fp.shape[0]
     if m > N:
         raise InputError(f"cannot choose {m} measurements from a pool of {N} candidates")
-    approx = approximate_design(Fp, K, tol=tol, m=m)
-    cand, starts = _exchange_starts(Fp, m, K, approx, n_starts, seed)
+    approx = approximate_design(Fp, K, tol=tol, m=m, fixed_info=fixed_info)
+    M0 = None if fixed_info is None else np.asarray(fixed_info, float)
+    cand, starts = _exchange_starts(Fp, m, K, approx, n_starts, seed, None if M0 is None else M0 / m)
     sub = Fp[cand]
     best, best_phi, sweeps = starts[0], np.inf, 0
     for s0 in starts:
-        ridge = 0.0 if np.isfinite(pool_phi(_info(sub, s0), K)) else 1e-12
-        idx, nsw = _exchange(sub, s0, K, ridge)
+        ridge = 0.0 if np.isfinite(pool_phi(_info(sub, s0, M0), K)) else 1e-12
+        idx, nsw = _exchange(sub, s0, K, ridge, M0=M0)
         sweeps += nsw
-        val = pool_phi(_info(sub, idx), K)
+        val = pool_phi(_info(sub, idx, M0), K)
         if val < best_phi:
             best, best_phi = idx, val
     return PoolSelection(indices=cand[best], phi=float(best_phi), approx=approx, success=approx.success,
@@ -520,10 +594,10 @@ def select(Fp: np.ndarray, m: int, K: np.ndarray | None = None, tol: float = 1e-
 
 
 def _exchange_starts(Fp: np.ndarray, m: int, K: np.ndarray | None, approx: ApproximateDesign, n_starts: int,
-                     seed: int) -> tuple[np.ndarray, list[np.ndarray]]:
+                     seed: int, M0: np.ndarray | None = None) -> tuple[np.ndarray, list[np.ndarray]]:
     """The exchange's candidate subset (support + largest directional derivatives) and its starts in it:
     the rounded relaxation and ``n_starts`` seeded subsets of the candidates the relaxation favours."""
-    d = _d_all(Fp, approx.weights, K)[1]
+    d = _d_all(Fp, approx.weights, K, M0=M0)[1]
     cand = np.union1d(np.argsort(-d)[:max(300, 5 * m)], np.flatnonzero(approx.weights > 0))
     order = np.lexsort((-d[cand], -approx.weights[cand]))  # by weight, then by d (positions in cand)
     start = order[:m]
@@ -532,9 +606,9 @@ def _exchange_starts(Fp: np.ndarray, m: int, K: np.ndarray | None, approx: Appro
     return cand, [start] + [rng.choice(favoured, size=m, replace=False) for _ in range(n_starts)]
 
 
-def _info(Fp: np.ndarray, idx: np.ndarray) -> np.ndarray:
+def _info(Fp: np.ndarray, idx: np.ndarray, M0: np.ndarray | None = None) -> np.ndarray:
     F = Fp[idx].reshape(-1, Fp.shape[-1])
-    return F.T @ F
+    return F.T @ F if M0 is None else F.T @ F + M0
 
 
 def detmax(Fp: np.ndarray, m: int, K: np.ndarray | None = None, seed: int = 0) -> np.ndarray:
@@ -545,9 +619,10 @@ def detmax(Fp: np.ndarray, m: int, K: np.ndarray | None = None, seed: int = 0) -
     return _exchange(Fp, start, K, ridge)[0]
 
 
-def exact_phi(Fp: np.ndarray, idx: np.ndarray, K: np.ndarray | None = None) -> float:
-    """φ of an exact design (the chosen candidates, information not normalised)."""
-    return pool_phi(_info(Fp, np.asarray(idx)), K)
+def exact_phi(Fp: np.ndarray, idx: np.ndarray, K: np.ndarray | None = None, fixed_info: np.ndarray | None = None
+              ) -> float:
+    """φ of an exact design (the chosen candidates, information not normalised; plus ``fixed_info`` if given)."""
+    return pool_phi(_info(Fp, np.asarray(idx), None if fixed_info is None else np.asarray(fixed_info, float)), K)
 
 
 def efficiency(phi_exact: float, approx: ApproximateDesign, m: int) -> float:

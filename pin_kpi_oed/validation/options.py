@@ -141,7 +141,7 @@ OUTPUTS = {"evaluate": ["json"], "demo": ["json"], "design": ["json"], "simulate
            "identify": ["json", "urdf_out", "model_out"], "import-ipa": ["out", "train", "test"],
            "register": ["model_out", "json"], "predict": ["out"], "diagnose": ["json"], "view": ["html"]}
 #: command -> argparse dests of inputs (files or folders; lists allowed)
-INPUTS = {"evaluate": ["design"], "design": ["cell"], "identify": ["data", "validate", "register_data", "robot"],
+INPUTS = {"evaluate": ["design"], "design": ["cell", "pool", "given", "given_prior", "model"], "identify": ["data", "validate", "register_data", "robot"],
           "simulate": ["robot"], "import-ipa": ["src"], "register": ["model", "data"], "predict": ["model", "data"],
           "diagnose": ["train", "validate", "register_data", "robot"], "view": ["design"], "info": ["robot"]}
 #: command -> argparse dests of output folders
