@@ -67,7 +67,8 @@ def check_candidates(problem: DesignProblem, Q: np.ndarray, with_jacobians: bool
     """The candidates the independent check accepts in the design cell, and their weighted Jacobians.
 
     Per chunk of :data:`CHUNK`: the batched rows decide the candidates clear of the check's
-    thresholds by more than the band; :meth:`FeasibilityChecker.check` (Coal) decides the others;
+    thresholds by more than the band; :meth:`FeasibilityChecker.check` (Coal) decides the others (in a
+    cell with environment files, every candidate the rows do not clear: their capsules enclose meshes);
     then the weighted Jacobians of the feasible ones over the identifiable parameters.
 
     Args:
@@ -90,7 +91,9 @@ def check_candidates(problem: DesignProblem, Q: np.ndarray, with_jacobians: bool
             inb = np.all((q >= cell.q_lower - CHECK_TOL_M) & (q <= cell.q_upper + CHECK_TOL_M), axis=1)
             dmin, inc = cm.row_minima(q, exact_below=-CHECK_TOL_M + BAND_M)
             sure = inb & (dmin >= -CHECK_TOL_M + BAND_M) & (inc >= -CHECK_TOL_COS + BAND_COS)
-            near = inb & ~sure & (dmin >= -CHECK_TOL_M - BAND_M) & (inc >= -CHECK_TOL_COS - BAND_COS)
+            near = inb & ~sure & (inc >= -CHECK_TOL_COS - BAND_COS)
+            if not cell.environment:  # else the rows hold enclosing capsules of meshes Coal checks as they are:
+                near &= dmin >= -CHECK_TOL_M - BAND_M  # a row violation there is no verdict, Coal decides
             if near.any():
                 sure[near] = problem.checker.check(q[near], tol=CHECK_TOL_M).feasible
                 n_coal += int(near.sum())
