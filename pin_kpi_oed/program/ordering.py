@@ -279,12 +279,12 @@ class _Router:
             if self.tc.check(qa, qb).clear:
                 self.set_route(key, [])
                 continue
-            if not (self.reach_home(key[0]) & self.reach_home(key[1])):
-                self.set_route(key, None)
+            if plan_checks is None and not (self.reach_home(key[0]) & self.reach_home(key[1])):
+                self.set_route(key, None)  # the last attempt (plan_checks given) plans even from such nodes
                 continue
             r = self.route(qa, qb, plan_checks or self.o.plan_checks)
-            if r is None:  # both reach home: through home
-                ra, rb = self.home_route[key[0]], self.home_route[key[1]]
+            ra, rb = self.home_route.get(key[0]), self.home_route.get(key[1])
+            if r is None and ra is not None and rb is not None:  # both reach home: through home
                 r = [*ra, self.nodes[0], *rb[::-1]] if key[0] and key[1] else (ra or []) + (rb or [])[::-1]
             self.set_route(key, r)
         return new
