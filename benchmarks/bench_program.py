@@ -28,10 +28,15 @@ CELLS = ("kr15", "kr300", "kr500", "ur10")
 
 
 def code_hash() -> str:
-    """Hash (12 hex) of the package's source and shipped cells: designs are cached per code state."""
+    """Hash (12 hex) of the package's source and shipped cells: designs are cached per code state.
+
+    ``program/`` and ``viz/`` are left out: they are downstream of ``design/`` (tests/test_architecture.py), so
+    they cannot change a design.
+    """
     root = Path(__file__).resolve().parents[1] / "pin_kpi_oed"
     h = hashlib.sha256()
-    for f in sorted([*root.rglob("*.py"), *(root / "cell" / "cells").glob("*")]):
+    files = [f for f in root.rglob("*.py") if f.relative_to(root).parts[0] not in ("program", "viz")]
+    for f in sorted([*files, *(root / "cell" / "cells").glob("*")]):
         h.update(str(f.relative_to(root)).encode())
         h.update(f.read_bytes())
     return h.hexdigest()[:12]

@@ -141,7 +141,8 @@ def test_ur10_colliding_move_is_planned_by_ompl_and_passes_the_dense_check(ur10)
     assert tc.clearance(qa) >= 0.01 and tc.clearance(qb) >= 0.01
     straight = tc.check(qa, qb, stop_early=False)
     assert not straight.clear and straight.min_clearance_m < 0  # a true collision, not just inside the margin
-    assert tc.repair(qa, qb, tc.structured_vias(qa, qb, ur10.q_work[0]), lambda a, b: move_time(a, b, np.ones(6))) is None
+    vias = tc.structured_vias(qa, qb, ur10.q_work[0])
+    assert tc.repair(qa, qb, vias, lambda a, b: move_time(a, b, np.ones(6))) is None
     route = tc.plan_route(qa, qb, seed=0, max_checks=60_000)
     assert route is not None and len(route) >= 1
     path = np.vstack([qa, *route, qb])
@@ -159,6 +160,7 @@ def test_ur10_program_takes_the_pocket_poses_equivalent_and_exports_the_vias(ur1
     assert prog.success and prog.n_colliding == 0 and sorted(prog.order) == [0, 1, 2]
     meas = {w.pose: w.q for w in prog.waypoints if w.kind == "measure"}
     assert meas[0][4] == pytest.approx(Q[0, 4] + 2 * np.pi)  # the pocket's wrist 2 taken a full turn round
+    assert prog.n_turned >= 1 and "2pi-equivalent" in prog.summary()
     for i, q in meas.items():
         assert np.max(np.abs(ur10.robot.oMtool(q).translation - ur10.robot.oMtool(Q[i]).translation)) < 1e-9
     fine = TransitionChecker(ur10, 0.01, step_rad=np.radians(0.5))

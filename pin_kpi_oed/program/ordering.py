@@ -14,8 +14,8 @@ configuration unless given):
    (:class:`~pin_kpi_oed.program.transitions.TransitionChecker`); a colliding move is repaired
    through safe via pose(s), else along a path planned by OMPL's RRT-Connect
    (:meth:`~pin_kpi_oed.program.transitions.TransitionChecker.plan_route`), and its cost raised to
-   the repaired route's time, or, when no route is found, to a penalty; the tour is re-solved until every move of it has been checked
-   (reordering around what collides);
+   the repaired route's time, or, when no route is found, to a penalty; the tour is re-solved until
+   every move of it has been checked (reordering around what collides);
 4. the final program is re-checked move by move with no early stop (the independent figure).
 
 The as-designed order (home → poses in the listed order and listed joint values → home, straight
@@ -68,6 +68,7 @@ class Program(Result):
         n_moves: moves of the program.
         n_colliding: moves still colliding in the final dense check.
         n_repaired: moves routed through via poses.
+        n_turned: poses measured at a 2π-equivalent of their listed joint values (same TCP, other turns).
         as_designed_colliding: moves of the listed order colliding in the dense check.
         min_move_clearance_m: smallest clearance along every move minus the cell's required clearance (m).
         margin_m: clearance margin every move must keep (m).
@@ -83,6 +84,7 @@ class Program(Result):
     n_moves: int = 0
     n_colliding: int = 0
     n_repaired: int = 0
+    n_turned: int = 0
     as_designed_colliding: int = 0
     min_move_clearance_m: float = float("inf")
     margin_m: float = 0.0
@@ -106,14 +108,17 @@ class Program(Result):
                 "speeds": self.speeds.tolist(), "cycle_time_s": self.cycle_time_s,
                 "as_designed_time_s": self.as_designed_time_s, "reduction": self.reduction,
                 "n_moves": self.n_moves, "n_colliding": self.n_colliding, "n_repaired": self.n_repaired,
+                "n_turned": self.n_turned,
                 "as_designed_colliding": self.as_designed_colliding,
                 "min_move_clearance_m": self.min_move_clearance_m, "margin_m": self.margin_m,
                 "n_rounds": self.n_rounds, "solver": self.solver}
 
     def summary(self) -> str:
         """A readable line."""
-        return (f"program: {len(self.order)} poses, {self.n_moves} moves ({self.n_repaired} via safe poses), "
-                f"{self.n_colliding} colliding; cycle time {self.cycle_time_s:.1f} s vs {self.as_designed_time_s:.1f} s "
+        return (f"program: {len(self.order)} poses ({self.n_turned} at a 2pi-equivalent: same TCP), {self.n_moves} "
+                f"moves ({self.n_repaired} via safe poses), "
+                f"{self.n_colliding} colliding; cycle time {self.cycle_time_s:.1f} s vs "
+                f"{self.as_designed_time_s:.1f} s "
                 f"as designed ({100 * self.reduction:.1f} % shorter; as designed {self.as_designed_colliding} "
                 f"colliding moves); min move clearance {self.min_move_clearance_m * 1e3:.1f} mm "
                 f"(margin {self.margin_m * 1e3:.0f} mm)")
@@ -345,6 +350,7 @@ def plan_program(cell: Cell, Q: np.ndarray, options: ProgramOptions | None = Non
                    waypoints=prog, order=[w.pose for w in prog if w.kind == "measure"], speeds=speeds,
                    cycle_time_s=path_time(path, speeds), as_designed_time_s=path_time(designed, speeds),
                    n_moves=len(per_move), n_colliding=n_col,
+                   n_turned=int(sum(w.kind == "measure" and not np.array_equal(w.q, Q[w.pose]) for w in prog)),
                    n_repaired=int(sum(1 for a, b in zip(tour, tour[1:] + tour[:1]) if edges.get((min(a, b), max(a, b))))),
                    as_designed_colliding=int(sum(not m.clear for m in as_designed)),
                    min_move_clearance_m=min((m.min_clearance_m for m in per_move), default=float("inf")),
