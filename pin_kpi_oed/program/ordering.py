@@ -10,7 +10,8 @@ configuration unless given):
 2. the order of least total time from OR-Tools' routing solver (a closed tour through home
    visiting exactly one representative of each pose — a disjunction per pose; guided local
    search, capped by a solution count and a time limit);
-3. lazy collision checking: every move of the tour is checked densely
+3. lazy collision checking (greedy descents from the previous tour while costs change, then guided
+   local search, at most three times): every move of the tour is checked densely
    (:class:`~pin_kpi_oed.program.transitions.TransitionChecker`); a colliding move is repaired
    through safe via pose(s), else along a path planned by OMPL's RRT-Connect
    (:meth:`~pin_kpi_oed.program.transitions.TransitionChecker.plan_route`), and its cost raised to
@@ -125,7 +126,7 @@ class Program(Result):
 
 
 def solve_tour(cost_s: np.ndarray, time_limit_s: float = 2.0, solution_limit: int = 100, fast: bool = False,
-               groups: list[list[int]] | None = None) -> list[int]:
+               groups: list[list[int]] | None = None, initial: list[int] | None = None) -> list[int]:
     """Closed tour of least total cost through every node, starting and ending at node 0 (OR-Tools routing).
 
     Args:
@@ -137,6 +138,8 @@ def solve_tour(cost_s: np.ndarray, time_limit_s: float = 2.0, solution_limit: in
             reproducible when the time limit is not reached).
         fast: greedy descent from the cheapest-arc start instead of guided local search (a local
             optimum in ~0.2 s for 60 poses; used while the lazy collision checks still change costs).
+        initial: a tour (starting with 0) to start the local search from instead of the cheapest-arc
+            construction (the previous round's tour: most costs are unchanged).
 
     Returns:
         Node order starting with 0 (length k).
@@ -164,7 +167,14 @@ def solve_tour(cost_s: np.ndarray, time_limit_s: float = 2.0, solution_limit: in
     params.time_limit.FromMilliseconds(int(max(time_limit_s, 0.01) * 1e3))
     if not fast:
         params.solution_limit = int(solution_limit)
-    sol = routing.SolveWithParameters(params)
+    if initial is not None and len(initial) > 1:
+        routing.CloseModelWithParameters(params)
+        start = routing.ReadAssignmentFromRoutes([[manager.NodeToIndex(int(i)) for i in initial[1:]]], True)
+        sol = routing.SolveFromAssignmentWithParameters(start, params) if start is not None else None
+        if sol is None:
+            sol = routing.SolveWithParameters(params)
+    else:
+        sol = routing.SolveWithParameters(params)
     if sol is None:
         raise SolverError("ordering: OR-Tools found no tour")
     idx, out = routing.Start(0), []
@@ -189,7 +199,8 @@ class ProgramOptions:
         time_limit_s: routing search cap per solve (s).
         max_rounds: tour solves at most.
         plan_checks: OMPL planning budget per colliding move while ordering (configurations
-            checked); four times that in the last attempt on the final tour.
+            checked); half of it for a pose's route home, four times it in the last attempt on
+            the final tour.
         equivalents: choose among each pose's 2π-equivalent representatives (else the listed values).
     """
 
@@ -252,7 +263,7 @@ class _Router:
             if hop is not None and not self.tc.check(q, self.nodes[0]).clear:  # straight to a node reaching home
                 self.home_route[i] = [self.nodes[hop], *self.home_route[hop]]
             else:
-                self.home_route[i] = self.route(q, self.nodes[0], self.o.plan_checks)
+                self.home_route[i] = self.route(q, self.nodes[0], self.o.plan_checks // 2)
             if self.home_route[i] is None:
                 self.cost[i, :] = self.cost[:, i] = PENALTY_S
                 self.cost[i, i] = 0.0
@@ -328,13 +339,14 @@ def plan_program(cell: Cell, Q: np.ndarray, options: ProgramOptions | None = Non
     tc = TransitionChecker(cell, o.margin_m, step_rad=np.radians(o.step_deg))
     cost = time_matrix(nodes, speeds)
     router = _Router(nodes, tc, speeds, cost, o)
-    tour, rounds, fast = [0], 0, True
+    tour, rounds, fast, n_gls = [0], 0, True, 0
     for rounds in range(1, o.max_rounds + 1):
-        tour = solve_tour(cost, o.time_limit_s, fast=fast, groups=groups)
-        if not router.check_tour(tour):
-            if not fast:
-                break
-            fast = False  # costs settled: one guided local search, checked again
+        tour = solve_tour(cost, o.time_limit_s, fast=fast, groups=groups, initial=tour if rounds > 1 else None)
+        n_gls += not fast
+        changed = router.check_tour(tour)
+        if not changed and not fast or n_gls >= 3:
+            break
+        fast = changed  # costs settled: a guided local search; it found unchecked moves: greedy rounds again
     router.check_tour(tour)  # round limit hit: check what the last tour added
     router.check_tour(tour, plan_checks=4 * o.plan_checks)  # last attempt on moves still without a route
     edges = router.edges
