@@ -278,7 +278,7 @@ class TransitionChecker:
 
         Returns:
             The intermediate configurations (empty when the straight move is clear), or None when an
-            end pose collides or no route was found in time.
+            end pose collides or no route was found within the budget.
         """
         from ompl import base as ob
         from ompl import geometric as og
