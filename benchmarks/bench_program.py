@@ -3,11 +3,13 @@ margins) ordered by OR-Tools, every move densely checked (<= 1 deg steps, Coal, 
 moves repaired through via poses, exported in every format; cycle time against the as-designed order.
 
 Run: ``python -m benchmarks bench_program`` (designs are computed with ``pin-kpi-oed design --certificate`` into
-``$PKO_BENCH_DIR`` (default /tmp/pko_bench_program) unless already there).
+``$PKO_BENCH_DIR/<code hash>/`` (default /tmp/pko_bench_program), reused only by the same package source: a
+design cached by older code (the certificate's efficiency is the design's) is never reported for new code).
 """
 
 from __future__ import annotations
 
+import hashlib
 import json
 import os
 import time
@@ -25,9 +27,25 @@ from pin_kpi_oed.program.transitions import TransitionChecker
 CELLS = ("kr15", "kr300", "kr500", "ur10")
 
 
+def code_hash() -> str:
+    """Hash (12 hex) of the package's source and shipped cells: designs are cached per code state.
+
+    ``program/`` and ``viz/`` are left out: they are downstream of ``design/`` (tests/test_architecture.py), so
+    they cannot change a design.
+    """
+    root = Path(__file__).resolve().parents[1] / "pin_kpi_oed"
+    h = hashlib.sha256()
+    files = [f for f in root.rglob("*.py") if f.relative_to(root).parts[0] not in ("program", "viz")]
+    for f in sorted([*files, *(root / "cell" / "cells").glob("*")]):
+        h.update(str(f.relative_to(root)).encode())
+        h.update(f.read_bytes())
+    return h.hexdigest()[:12]
+
+
 def design_file(cell: str, folder: Path) -> Path:
-    """The KPI design of a cell with the default margins and the certificate (computed once)."""
-    path = folder / f"{cell}.json"
+    """The KPI design of a cell with the default margins and the certificate (computed once per code state)."""
+    path = folder / code_hash() / f"{cell}.json"
+    path.parent.mkdir(parents=True, exist_ok=True)
     if not path.exists():
         assert cli(["design", "--cell", cell, "--criteria", "random,kpi", "--certificate", "--quiet",
                     "--json", str(path)]) == 0

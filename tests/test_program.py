@@ -13,7 +13,7 @@ from pin_kpi_oed.cell.collision import CollisionModel, random_feasible
 from pin_kpi_oed.cell.feasibility import FeasibilityChecker
 from pin_kpi_oed.program.ordering import ProgramOptions, plan_program, solve_tour
 from pin_kpi_oed.program.timing import joint_speeds, move_time, path_time, time_matrix
-from pin_kpi_oed.program.transitions import TransitionChecker
+from pin_kpi_oed.program.transitions import TransitionChecker, equivalents
 
 
 @pytest.fixture(scope="module")
@@ -98,6 +98,89 @@ def test_program_orders_checks_and_repairs(kr15, poses):
     assert prog.cycle_time_s == pytest.approx(path_time(path, v))
     assert prog.cycle_time_s < prog.as_designed_time_s
     assert prog.waypoints[0].kind == prog.waypoints[-1].kind == "home" and sum(w.kind == "measure" for w in prog.waypoints) == len(poses)
+
+
+# ---------------------------------------------------------------------------- UR10: ±360° joints, OMPL repair
+
+#: two poses of the UR10 cell's KPI design (deg): the straight move collides (so does home -> B) and no
+#: structured via pose clears it; B's equivalent with wrist 1 at -188° is reached straight from A
+UR10_A = [110.567, -69.385, 89.576, -34.028, -59.137, -72.239]
+UR10_B = [69.601, -41.018, -147.856, 172.004, -102.254, -46.746]
+#: a UR10 design pose whose wrist 2 (-226.5°) sits in a pocket between its -270° bound and the forearm:
+#: no route leaves it; its 2π-equivalent (133.5°) is in the free space's main part
+UR10_POCKET = [76.06, -149.554, 11.564, -90.812, -226.516, -1.974]
+
+
+@pytest.fixture(scope="module")
+def ur10():
+    return load_cell("ur10")
+
+
+def test_equivalents_keep_the_measured_tcp_and_clearances(ur10):
+    q = np.radians([-23.213, -154.715, -115.824, 269.739, 119.397, 39.421])
+    E = equivalents(q, ur10.q_lower, ur10.q_upper, ur10.robot.is_revolute)
+    np.testing.assert_array_equal(E[0], q)
+    assert len(E) == 4  # wrist 1 (269.7 -> -90.3) and wrist 2 (119.4 -> -240.6); wrist 3 (39.4) has none
+    k = (E - q) / (2 * np.pi)
+    np.testing.assert_allclose(k, np.rint(k), atol=1e-12)
+    assert np.all((E >= ur10.q_lower) & (E <= ur10.q_upper))
+    fc = FeasibilityChecker(ur10)
+    T0, d0 = ur10.robot.oMtool(q), fc.pair_distances(q)
+    for e in E[1:]:
+        T = ur10.robot.oMtool(e)
+        tcp0, tcp = T0.act(np.array([0, 0, 0.15])), T.act(np.array([0, 0, 0.15]))
+        assert np.max(np.abs(tcp - tcp0)) < 1e-9 and np.max(np.abs(T.rotation - T0.rotation)) < 1e-9
+        np.testing.assert_allclose(fc.pair_distances(e), d0, atol=1e-9)
+    kr = load_cell("kr15")  # KR 15: a4/a6 ±350°, no other joint has room for a full turn
+    assert len(equivalents(np.zeros(6), kr.q_lower, kr.q_upper, kr.robot.is_revolute)) == 1
+
+
+def test_ur10_colliding_move_is_planned_by_ompl_and_passes_the_dense_check(ur10):
+    tc = TransitionChecker(ur10, 0.01)
+    qa, qb = np.radians(UR10_A), np.radians(UR10_B)
+    assert tc.clearance(qa) >= 0.01 and tc.clearance(qb) >= 0.01
+    straight = tc.check(qa, qb, stop_early=False)
+    assert not straight.clear and straight.min_clearance_m < 0  # a true collision, not just inside the margin
+    vias = tc.structured_vias(qa, qb, ur10.q_work[0])
+    assert tc.repair(qa, qb, vias, lambda a, b: move_time(a, b, np.ones(6))) is None
+    route = tc.plan_route(qa, qb, seed=0, max_checks=60_000)
+    assert route is not None and len(route) >= 1
+    path = np.vstack([qa, *route, qb])
+    assert np.all((path >= ur10.q_lower) & (path <= ur10.q_upper))
+    # independent re-check with a fresh checker at 0.25 deg steps
+    fine = TransitionChecker(ur10, 0.01, step_rad=np.radians(0.25))
+    check = fine.path_check(path)
+    assert check.clear and check.min_clearance_m >= 0.01 - 1e-9
+
+
+def test_ur10_program_takes_the_pocket_poses_equivalent_and_exports_the_vias(ur10):
+    """Equivalents avoid the pocket; with the listed values only, colliding moves get via points (exported)."""
+    Q = np.radians([UR10_POCKET, UR10_A, UR10_B])
+    prog = plan_program(ur10, Q, ProgramOptions(margin_m=0.01, time_limit_s=0.3, via_pool=100))
+    assert prog.success and prog.n_colliding == 0 and sorted(prog.order) == [0, 1, 2]
+    meas = {w.pose: w.q for w in prog.waypoints if w.kind == "measure"}
+    assert meas[0][4] == pytest.approx(Q[0, 4] + 2 * np.pi)  # the pocket's wrist 2 taken a full turn round
+    assert prog.n_turned >= 1 and "2pi-equivalent" in prog.summary()
+    for i, q in meas.items():
+        assert np.max(np.abs(ur10.robot.oMtool(q).translation - ur10.robot.oMtool(Q[i]).translation)) < 1e-9
+    fine = TransitionChecker(ur10, 0.01, step_rad=np.radians(0.5))
+    assert fine.path_check(prog.path).clear
+    # the listed values only: A -> B and home -> B collide, the program goes through via points ...
+    listed = plan_program(ur10, Q[1:], ProgramOptions(margin_m=0.01, time_limit_s=0.3, via_pool=100, equivalents=False))
+    assert listed.success and fine.path_check(listed.path).clear
+    assert listed.n_repaired >= 1 and any(w.kind == "via" for w in listed.waypoints)
+    # ... and the exported program holds them
+    info = ProgramInfo(cell=ur10.name, design="t", robot="ur10", joint_names=list(ur10.robot.joint_names),
+                       revolute=np.ones(6, bool), cycle_time_s=listed.cycle_time_s)
+    texts = write_program("urscript", listed.path, [w.kind for w in listed.waypoints],
+                          [w.pose for w in listed.waypoints], info)
+    back, measured = parse_program("urscript", texts, np.ones(6, bool))
+    np.testing.assert_allclose(back, listed.path, atol=1e-6)
+    assert sorted(measured) == [0, 1]
+    # without the equivalents the pocket pose has no safe move at all
+    stuck = plan_program(ur10, Q[:1], ProgramOptions(margin_m=0.01, time_limit_s=0.3, via_pool=100,
+                                                     equivalents=False, plan_checks=3000))
+    assert not stuck.success and stuck.n_colliding >= 1
 
 
 # ---------------------------------------------------------------------------- exports

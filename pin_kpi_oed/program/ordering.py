@@ -3,18 +3,24 @@
 :func:`plan_program` builds the program home → poses → home (home: the first working
 configuration unless given):
 
-1. move times between every pair of poses (:mod:`pin_kpi_oed.program.timing`: max_j |Δq_j| / v_j);
-2. the order of least total time from OR-Tools' routing solver (a closed tour through home;
-   guided local search, capped by a solution count and a time limit);
-3. lazy collision checking: every move of the tour is checked densely
+1. every pose's representatives q + 2πk within the joint bounds
+   (:func:`~pin_kpi_oed.program.transitions.equivalents`: the same link placements, so the same
+   measurement; UR arms have ±360° joints) and the move times between every pair of them
+   (:mod:`pin_kpi_oed.program.timing`: max_j |Δq_j| / v_j);
+2. the order of least total time from OR-Tools' routing solver (a closed tour through home
+   visiting exactly one representative of each pose — a disjunction per pose; guided local
+   search, capped by a solution count and a time limit);
+3. lazy collision checking (greedy descents from the previous tour while costs change, then guided
+   local search, at most three times): every move of the tour is checked densely
    (:class:`~pin_kpi_oed.program.transitions.TransitionChecker`); a colliding move is repaired
-   through safe via pose(s) and its cost raised to the repaired route's time, or, when no route
-   is found, to a penalty; the tour is re-solved until every move of it has been checked
-   (reordering around what collides);
+   through safe via pose(s), else along a path planned by OMPL's RRT-Connect
+   (:meth:`~pin_kpi_oed.program.transitions.TransitionChecker.plan_route`), and its cost raised to
+   the repaired route's time, or, when no route is found, to a penalty; the tour is re-solved until
+   every move of it has been checked (reordering around what collides);
 4. the final program is re-checked move by move with no early stop (the independent figure).
 
-The as-designed order (home → poses in the listed order → home, straight moves) is timed and
-checked the same way for comparison.
+The as-designed order (home → poses in the listed order and listed joint values → home, straight
+moves) is timed and checked the same way for comparison.
 """
 
 from __future__ import annotations
@@ -27,7 +33,7 @@ import numpy as np
 from pin_kpi_oed.cell.cell import Cell
 from pin_kpi_oed.errors import InputError, SolverError
 from pin_kpi_oed.program.timing import joint_speeds, move_time, path_time, time_matrix
-from pin_kpi_oed.program.transitions import TransitionChecker
+from pin_kpi_oed.program.transitions import TransitionChecker, equivalents
 from pin_kpi_oed.results import Result
 
 #: cost (s) of a move that collides and could not be repaired
@@ -39,7 +45,8 @@ class Waypoint:
     """One target of the program.
 
     Attributes:
-        q: configuration (n,) rad (m for prismatic joints).
+        q: configuration (n,) rad (m for prismatic joints); for a ``measure`` waypoint the design's
+            pose or a 2π-equivalent of it (the same link placements).
         kind: ``home``, ``measure`` or ``via``.
         pose: index of the pose in the design (``measure`` only, else -1).
     """
@@ -62,6 +69,7 @@ class Program(Result):
         n_moves: moves of the program.
         n_colliding: moves still colliding in the final dense check.
         n_repaired: moves routed through via poses.
+        n_turned: poses measured at a 2π-equivalent of their listed joint values (same TCP, other turns).
         as_designed_colliding: moves of the listed order colliding in the dense check.
         min_move_clearance_m: smallest clearance along every move minus the cell's required clearance (m).
         margin_m: clearance margin every move must keep (m).
@@ -77,6 +85,7 @@ class Program(Result):
     n_moves: int = 0
     n_colliding: int = 0
     n_repaired: int = 0
+    n_turned: int = 0
     as_designed_colliding: int = 0
     min_move_clearance_m: float = float("inf")
     margin_m: float = 0.0
@@ -100,30 +109,37 @@ class Program(Result):
                 "speeds": self.speeds.tolist(), "cycle_time_s": self.cycle_time_s,
                 "as_designed_time_s": self.as_designed_time_s, "reduction": self.reduction,
                 "n_moves": self.n_moves, "n_colliding": self.n_colliding, "n_repaired": self.n_repaired,
+                "n_turned": self.n_turned,
                 "as_designed_colliding": self.as_designed_colliding,
                 "min_move_clearance_m": self.min_move_clearance_m, "margin_m": self.margin_m,
                 "n_rounds": self.n_rounds, "solver": self.solver}
 
     def summary(self) -> str:
         """A readable line."""
-        return (f"program: {len(self.order)} poses, {self.n_moves} moves ({self.n_repaired} via safe poses), "
-                f"{self.n_colliding} colliding; cycle time {self.cycle_time_s:.1f} s vs {self.as_designed_time_s:.1f} s "
+        return (f"program: {len(self.order)} poses ({self.n_turned} at a 2pi-equivalent: same TCP), {self.n_moves} "
+                f"moves ({self.n_repaired} via safe poses), "
+                f"{self.n_colliding} colliding; cycle time {self.cycle_time_s:.1f} s vs "
+                f"{self.as_designed_time_s:.1f} s "
                 f"as designed ({100 * self.reduction:.1f} % shorter; as designed {self.as_designed_colliding} "
                 f"colliding moves); min move clearance {self.min_move_clearance_m * 1e3:.1f} mm "
                 f"(margin {self.margin_m * 1e3:.0f} mm)")
 
 
-def solve_tour(cost_s: np.ndarray, time_limit_s: float = 2.0, solution_limit: int = 100, fast: bool = False
-               ) -> list[int]:
+def solve_tour(cost_s: np.ndarray, time_limit_s: float = 2.0, solution_limit: int = 100, fast: bool = False,
+               groups: list[list[int]] | None = None, initial: list[int] | None = None) -> list[int]:
     """Closed tour of least total cost through every node, starting and ending at node 0 (OR-Tools routing).
 
     Args:
         cost_s: (k, k) move costs (s), rounded to ms for the solver.
+        groups: alternatives: the tour visits exactly one node of each group (an OR-Tools disjunction
+            without penalty); nodes in no group are visited. None: every node is visited.
         time_limit_s: wall-clock cap of the search (s).
         solution_limit: cap on the solutions the guided local search visits (keeps the result
             reproducible when the time limit is not reached).
         fast: greedy descent from the cheapest-arc start instead of guided local search (a local
             optimum in ~0.2 s for 60 poses; used while the lazy collision checks still change costs).
+        initial: a tour (starting with 0) to start the local search from instead of the cheapest-arc
+            construction (the previous round's tour: most costs are unchanged).
 
     Returns:
         Node order starting with 0 (length k).
@@ -134,13 +150,16 @@ def solve_tour(cost_s: np.ndarray, time_limit_s: float = 2.0, solution_limit: in
     from ortools.constraint_solver import pywrapcp, routing_enums_pb2
 
     k = cost_s.shape[0]
-    if k <= 2:
+    if k <= 2 and not any(len(g) > 1 for g in groups or []):
         return list(range(k))
     C = np.rint(np.asarray(cost_s) * 1e3).astype(np.int64)  # ms
     manager = pywrapcp.RoutingIndexManager(k, 1, 0)
     routing = pywrapcp.RoutingModel(manager)
     cb = routing.RegisterTransitMatrix(C.tolist())
     routing.SetArcCostEvaluatorOfAllVehicles(cb)
+    for g in groups or []:
+        if len(g) > 1:
+            routing.AddDisjunction([manager.NodeToIndex(int(i)) for i in g])  # no penalty: exactly one
     params = pywrapcp.DefaultRoutingSearchParameters()
     params.first_solution_strategy = routing_enums_pb2.FirstSolutionStrategy.PATH_CHEAPEST_ARC
     meta = routing_enums_pb2.LocalSearchMetaheuristic
@@ -148,7 +167,14 @@ def solve_tour(cost_s: np.ndarray, time_limit_s: float = 2.0, solution_limit: in
     params.time_limit.FromMilliseconds(int(max(time_limit_s, 0.01) * 1e3))
     if not fast:
         params.solution_limit = int(solution_limit)
-    sol = routing.SolveWithParameters(params)
+    if initial is not None and len(initial) > 1:
+        routing.CloseModelWithParameters(params)
+        start = routing.ReadAssignmentFromRoutes([[manager.NodeToIndex(int(i)) for i in initial[1:]]], True)
+        sol = routing.SolveFromAssignmentWithParameters(start, params) if start is not None else None
+        if sol is None:
+            sol = routing.SolveWithParameters(params)
+    else:
+        sol = routing.SolveWithParameters(params)
     if sol is None:
         raise SolverError("ordering: OR-Tools found no tour")
     idx, out = routing.Start(0), []
@@ -168,9 +194,14 @@ class ProgramOptions:
         speed_override: share of the URDF speed limits (0, 1].
         step_deg: dense-check step (deg, ≤ 1).
         via_pool: safe configurations sampled for repairs.
-        seed: seed of the via pool.
+        seed: seed of the via pool and of OMPL (see
+            :meth:`~pin_kpi_oed.program.transitions.TransitionChecker.plan_route`).
         time_limit_s: routing search cap per solve (s).
         max_rounds: tour solves at most.
+        plan_checks: OMPL planning budget per colliding move while ordering (configurations
+            checked); half of it for a pose's route home, four times it in the last attempt on
+            the final tour.
+        equivalents: choose among each pose's 2π-equivalent representatives (else the listed values).
     """
 
     margin_m: float = 0.0
@@ -181,35 +212,98 @@ class ProgramOptions:
     seed: int = 0
     time_limit_s: float = 2.0
     max_rounds: int = 30
+    plan_checks: int = 15_000
+    equivalents: bool = True
 
 
-def _route_edges(nodes: np.ndarray, tc: TransitionChecker, speeds: np.ndarray, vias: list, edges: dict,
-                 cost: np.ndarray, tour: list[int]) -> bool:
-    """Check the unchecked moves of a tour; repair or penalise the colliding ones. Returns: anything new."""
-    new = False
+class _Router:
+    """Lazy move checks and repairs of the tours (state shared by the rounds of :func:`plan_program`).
 
-    def c(a, b):
-        return move_time(a, b, speeds)
+    Every node's route to home (node 0) is found once when one of its moves collides: straight,
+    through via poses, or planned by OMPL. A node without one (a representative in a pocket of the
+    free space, e.g. a wrist folded between its bound and the forearm) gets every move penalised, so
+    the tour takes another representative. A colliding move between two nodes that reach home is
+    repaired through via poses, else by OMPL, else through home (always safe).
+    """
 
-    for a, b in zip(tour, tour[1:] + tour[:1]):
-        key = (min(a, b), max(a, b))
-        if key in edges:
-            continue
-        new = True
-        if tc.check(nodes[a], nodes[b]).clear:
-            edges[key] = []
-            continue
-        if not len(vias[0]):
-            vias[0] = tc.safe_pool(vias[1], seed=vias[2])
-        qa, qb = nodes[key[0]], nodes[key[1]]
-        route = tc.repair(qa, qb, np.vstack([tc.structured_vias(qa, qb, nodes[0]), vias[0]]), c)
-        edges[key] = route
+    def __init__(self, nodes: np.ndarray, tc: TransitionChecker, speeds: np.ndarray, cost: np.ndarray,
+                 o: ProgramOptions):
+        self.nodes, self.tc, self.speeds, self.cost, self.o = nodes, tc, speeds, cost, o
+        self.edges: dict[tuple[int, int], list | None] = {}
+        self.home_route: dict[int, list | None] = {0: []}
+        self._pool: np.ndarray | None = None
+
+    def c(self, qa: np.ndarray, qb: np.ndarray) -> float:
+        """Move time (s)."""
+        return move_time(qa, qb, self.speeds)
+
+    def pool(self) -> np.ndarray:
+        """The seeded safe via pool (sampled at first use)."""
+        if self._pool is None:
+            self._pool = self.tc.safe_pool(self.o.via_pool, seed=self.o.seed)
+        return self._pool
+
+    def route(self, qa: np.ndarray, qb: np.ndarray, plan_checks: int) -> list | None:
+        """Intermediate configurations of a safe route qa → qb (via poses, else OMPL), None if none found."""
+        tc = self.tc
+        if tc.check(qa, qb).clear:
+            return []
+        r = tc.repair(qa, qb, np.vstack([tc.structured_vias(qa, qb, self.nodes[0]), self.pool()]), self.c)
+        if r is None:
+            r = tc.plan_route(qa, qb, seed=self.o.seed, max_checks=plan_checks)
+        return r
+
+    def reach_home(self, i: int) -> bool:
+        """Whether node i has a safe route to home (computed once)."""
+        if i not in self.home_route:
+            q = self.nodes[i]
+            known = [j for j, r in self.home_route.items() if r is not None and j != 0]
+            known.sort(key=lambda j: self.c(q, self.nodes[j]))
+            hop = next((j for j in known[:8] if self.tc.check(q, self.nodes[j]).clear), None)
+            if hop is not None and not self.tc.check(q, self.nodes[0]).clear:  # straight to a node reaching home
+                self.home_route[i] = [self.nodes[hop], *self.home_route[hop]]
+            else:
+                self.home_route[i] = self.route(q, self.nodes[0], self.o.plan_checks // 2)
+            if self.home_route[i] is None:
+                self.cost[i, :] = self.cost[:, i] = PENALTY_S
+                self.cost[i, i] = 0.0
+        return self.home_route[i] is not None
+
+    def set_route(self, key: tuple[int, int], route: list | None) -> None:
+        """Store the route of a move and its cost (the route's time, or the penalty)."""
+        a, b = key
+        self.edges[key] = route
         if route is None:
-            cost[a, b] = cost[b, a] = PENALTY_S
+            self.cost[a, b] = self.cost[b, a] = PENALTY_S
         else:
-            pts = [nodes[key[0]], *route, nodes[key[1]]]
-            cost[a, b] = cost[b, a] = sum(c(p, q) for p, q in zip(pts[:-1], pts[1:]))
-    return new
+            pts = [self.nodes[a], *route, self.nodes[b]]
+            self.cost[a, b] = self.cost[b, a] = sum(self.c(p, q) for p, q in zip(pts[:-1], pts[1:]))
+
+    def check_tour(self, tour: list[int], plan_checks: int | None = None) -> bool:
+        """Check the unchecked (or unrouted) moves of a tour; repair or penalise the colliding ones.
+
+        Returns:
+            Whether any move was new.
+        """
+        new = False
+        for a, b in zip(tour, tour[1:] + tour[:1]):
+            key = (min(a, b), max(a, b))
+            if key in self.edges and (plan_checks is None or self.edges[key] is not None):
+                continue
+            new = True
+            qa, qb = self.nodes[key[0]], self.nodes[key[1]]
+            if self.tc.check(qa, qb).clear:
+                self.set_route(key, [])
+                continue
+            if plan_checks is None and not (self.reach_home(key[0]) & self.reach_home(key[1])):
+                self.set_route(key, None)  # the last attempt (plan_checks given) plans even from such nodes
+                continue
+            r = self.route(qa, qb, plan_checks or self.o.plan_checks)
+            ra, rb = self.home_route.get(key[0]), self.home_route.get(key[1])
+            if r is None and ra is not None and rb is not None:  # both reach home: through home
+                r = [*ra, self.nodes[0], *rb[::-1]] if key[0] and key[1] else (ra or []) + (rb or [])[::-1]
+            self.set_route(key, r)
+        return new
 
 
 def plan_program(cell: Cell, Q: np.ndarray, options: ProgramOptions | None = None) -> Program:
@@ -237,21 +331,26 @@ def plan_program(cell: Cell, Q: np.ndarray, options: ProgramOptions | None = Non
     speeds = joint_speeds(cell.robot, o.speed_override)
     home = np.asarray(o.home if o.home is not None else (cell.q_work[0] if len(cell.q_work) else cell.robot.neutral),
                       float)
-    nodes = np.vstack([home, Q])
+    rev = np.asarray(cell.robot.is_revolute, bool)
+    reps = [equivalents(q, cell.q_lower, cell.q_upper, rev) if o.equivalents else q[None] for q in Q]
+    nodes = np.vstack([home, *reps])
+    pose_of = np.concatenate([[-1], *[np.full(len(r), i) for i, r in enumerate(reps)]]).astype(int)
+    groups = [list(np.flatnonzero(pose_of == i)) for i in range(len(Q))]
     tc = TransitionChecker(cell, o.margin_m, step_rad=np.radians(o.step_deg))
     cost = time_matrix(nodes, speeds)
-    edges: dict[tuple[int, int], list | None] = {}
-    vias = [np.zeros((0, n)), o.via_pool, o.seed]
-    tour, rounds, fast = [0], 0, True
+    router = _Router(nodes, tc, speeds, cost, o)
+    tour, rounds, fast, n_gls = [0], 0, True, 0
     for rounds in range(1, o.max_rounds + 1):
-        tour = solve_tour(cost, o.time_limit_s, fast=fast)
-        if not _route_edges(nodes, tc, speeds, vias, edges, cost, tour):
-            if not fast:
-                break
-            fast = False  # costs settled: one guided local search, checked again
-    _route_edges(nodes, tc, speeds, vias, edges, cost, tour)  # round limit hit: check what the last tour added
-    _hard_repair(nodes, tc, speeds, edges, tour, o)
-    prog = _assemble(nodes, tour, edges)
+        tour = solve_tour(cost, o.time_limit_s, fast=fast, groups=groups, initial=tour if rounds > 1 else None)
+        n_gls += not fast
+        changed = router.check_tour(tour)
+        if not changed and not fast or n_gls >= 3:
+            break
+        fast = changed  # costs settled: a guided local search; it found unchecked moves: greedy rounds again
+    router.check_tour(tour)  # round limit hit: check what the last tour added
+    router.check_tour(tour, plan_checks=4 * o.plan_checks)  # last attempt on moves still without a route
+    edges = router.edges
+    prog = _assemble(nodes, tour, edges, pose_of)
     path = np.array([w.q for w in prog])
     per_move = [tc.check(a, b, stop_early=False) for a, b in zip(path[:-1], path[1:])]
     designed = np.vstack([home, Q, home])
@@ -263,35 +362,18 @@ def plan_program(cell: Cell, Q: np.ndarray, options: ProgramOptions | None = Non
                    waypoints=prog, order=[w.pose for w in prog if w.kind == "measure"], speeds=speeds,
                    cycle_time_s=path_time(path, speeds), as_designed_time_s=path_time(designed, speeds),
                    n_moves=len(per_move), n_colliding=n_col,
+                   n_turned=int(sum(w.kind == "measure" and not np.array_equal(w.q, Q[w.pose]) for w in prog)),
                    n_repaired=int(sum(1 for a, b in zip(tour, tour[1:] + tour[:1]) if edges.get((min(a, b), max(a, b))))),
                    as_designed_colliding=int(sum(not m.clear for m in as_designed)),
                    min_move_clearance_m=min((m.min_clearance_m for m in per_move), default=float("inf")),
                    margin_m=o.margin_m, n_rounds=rounds)
 
 
-def _hard_repair(nodes: np.ndarray, tc: TransitionChecker, speeds: np.ndarray, edges: dict, tour: list[int],
-                 o: ProgramOptions) -> None:
-    """Last attempt for moves of the final tour still without a route: a larger pool, more candidates."""
-    bad = [(a, b) for a, b in zip(tour, tour[1:] + tour[:1]) if edges.get((min(a, b), max(a, b)), []) is None]
-    if not bad:
-        return
-    pool = tc.safe_pool(8 * o.via_pool, seed=o.seed + 1)
-
-    def c(a, b):
-        return move_time(a, b, speeds)
-
-    for a, b in bad:
-        i, j = min(a, b), max(a, b)
-        qa, qb = nodes[i], nodes[j]
-        edges[(i, j)] = tc.repair(qa, qb, np.vstack([tc.structured_vias(qa, qb, nodes[0]), pool]), c,
-                                  max_one=8 * 24, max_legs=16)
-
-
-def _assemble(nodes: np.ndarray, tour: list[int], edges: dict) -> list[Waypoint]:
-    """Waypoints of a tour: home, poses and vias (in travel direction), home again."""
+def _assemble(nodes: np.ndarray, tour: list[int], edges: dict, pose_of: np.ndarray) -> list[Waypoint]:
+    """Waypoints of a tour: home, poses (their chosen representatives) and vias (in travel direction), home."""
     out: list[Waypoint] = []
     for a, b in zip(tour, tour[1:] + tour[:1]):
-        out.append(Waypoint(nodes[a].copy(), "home" if a == 0 else "measure", a - 1 if a else -1))
+        out.append(Waypoint(nodes[a].copy(), "home" if a == 0 else "measure", int(pose_of[a])))
         route = edges.get((min(a, b), max(a, b))) or []
         if a > b:
             route = route[::-1]

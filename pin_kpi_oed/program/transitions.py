@@ -14,11 +14,19 @@ the tracker measures at the poses only.
 A colliding move is repaired by :meth:`TransitionChecker.repair`: through one safe intermediate
 pose (wrist-first / arm-first splits of the move, the home pose, retracted variants of the end
 poses, then a seeded pool of collision-free configurations; cheapest first), else through two
-(every leg densely checked).
+(every leg densely checked); when neither works, :meth:`TransitionChecker.plan_route` plans a
+path with OMPL's RRT-Connect in joint space (validity: the same pair distances and margin; motions
+checked at ≤ one dense step per joint), shortcut by OMPL's path simplifier, and every leg of the
+result densely re-checked by :meth:`TransitionChecker.check`.
+
+:func:`equivalents` lists the configurations q + 2πk of a pose inside the joint bounds (UR arms have
+±360° joints): the same link placements, so the same measurement, clearance and incidence; the
+ordering picks the representative per pose that makes the moves short and safe.
 """
 
 from __future__ import annotations
 
+import itertools
 import math
 from dataclasses import dataclass
 
@@ -27,6 +35,39 @@ import numpy as np
 from pin_kpi_oed.cell.cell import Cell
 from pin_kpi_oed.cell.feasibility import FeasibilityChecker
 from pin_kpi_oed.errors import InputError
+
+#: OMPL's random numbers come from one process-wide seed generator: set once, at the first plan
+_OMPL_SEEDED: list[int] = []
+
+
+def equivalents(q: np.ndarray, lower: np.ndarray, upper: np.ndarray, revolute: np.ndarray,
+                max_count: int = 64) -> np.ndarray:
+    """The configurations q + 2πk (k integer per revolute joint) within the bounds; q itself first.
+
+    A revolute joint turned by a full turn places every link exactly as before, so each returned
+    configuration gives the same tool pose (the same measurement), clearance and incidence.
+
+    Args:
+        q: configuration (n,) rad (m for prismatic joints, never shifted).
+        lower, upper: joint bounds (n,).
+        revolute: (n,) bool, which joints are revolute.
+        max_count: at most this many configurations (q first, then by fewer shifted joints).
+
+    Returns:
+        (k ≥ 1, n) configurations; row 0 is q.
+    """
+    q = np.asarray(q, float)
+    choices = []
+    for j in range(q.size):
+        ks = [0]
+        if revolute[j]:
+            kmax = int(math.floor((upper[j] - q[j]) / (2 * math.pi) + 1e-12))
+            kmin = int(math.ceil((lower[j] - q[j]) / (2 * math.pi) - 1e-12))
+            ks += [k for k in range(kmin, kmax + 1) if k != 0]
+        choices.append(ks)
+    combos = sorted(itertools.product(*choices), key=lambda ks: sum(k != 0 for k in ks))[:max_count]
+    out = q[None, :] + 2 * math.pi * np.array(combos, float)
+    return np.clip(out, lower, upper) if len(out) > 1 else out
 
 
 @dataclass
@@ -216,3 +257,76 @@ class TransitionChecker:
             if self.check(vias[i], vias[j]).clear:
                 return [vias[i], vias[j]]
         return None
+
+    def plan_route(self, qa: np.ndarray, qb: np.ndarray, seed: int = 0, max_checks: int = 20_000
+                   ) -> list[np.ndarray] | None:
+        """A collision-free route qa → qb from OMPL's RRT-Connect in joint space, shortcut and re-checked.
+
+        The planner works in joint coordinates scaled by the dense steps (one unit = one step), so
+        OMPL's motion checks at resolution one unit never step more than ``step_rad`` / ``step_m`` in
+        any joint; a state is valid when its clearance keeps what :meth:`check` requires (the margin,
+        or the end poses' clearance if smaller). The path is simplified with OMPL's
+        ``PathSimplifier.simplifyMax`` (shortcuts, vertex reduction), then every leg is densely
+        checked by :meth:`check`; a leg that fails rejects the route.
+
+        Args:
+            qa, qb: end configurations (n,).
+            seed: OMPL's process-wide seed, set at the first plan of the process only (OMPL cannot
+                re-seed once it has drawn numbers: a plan is reproducible in a fresh process).
+            max_checks: planning budget in configurations checked (a count, not a time: the
+                result does not depend on the machine's load).
+
+        Returns:
+            The intermediate configurations (empty when the straight move is clear), or None when an
+            end pose collides or no route was found within the budget.
+        """
+        from ompl import base as ob
+        from ompl import geometric as og
+        from ompl import util as ou
+
+        qa, qb = np.asarray(qa, float), np.asarray(qb, float)
+        need = min(self.margin_m, self.clearance(qa), self.clearance(qb)) - 1e-9
+        if need < -1e-9:
+            return None
+        if not _OMPL_SEEDED:
+            ou.setLogLevel(ou.LOG_NONE)
+            ou.RNG.setSeed(int(seed) % (2 ** 31 - 1) + 1)  # OMPL refuses 0
+            _OMPL_SEEDED.append(int(seed))
+        n = qa.size
+        scale = self.steps
+        lo, hi = self.cell.q_lower / scale, self.cell.q_upper / scale
+        space = ob.RealVectorStateSpace(n)
+        bounds = ob.RealVectorBounds(n)
+        for j in range(n):
+            bounds.setLow(j, float(lo[j]))
+            bounds.setHigh(j, float(hi[j]))
+        space.setBounds(bounds)
+        si = ob.SpaceInformation(space)
+
+        def valid(state) -> bool:
+            x = np.fromiter((state[j] for j in range(n)), float, n)
+            return bool(self.clearance(x * scale) >= need)
+
+        si.setStateValidityChecker(valid)
+        si.setStateValidityCheckingResolution(1.0 / space.getMaximumExtent())  # one step per joint
+        si.setup()
+        start, goal = space.allocState(), space.allocState()
+        for j in range(n):
+            start[j], goal[j] = float(qa[j] / scale[j]), float(qb[j] / scale[j])
+        pdef = ob.ProblemDefinition(si)
+        pdef.setStartAndGoalStates(start, goal)
+        planner = og.RRTConnect(si)
+        planner.setProblemDefinition(pdef)
+        planner.setup()
+        stop_at = self.n_evaluations + int(max_checks)
+        planner.solve(ob.PlannerTerminationCondition(lambda: self.n_evaluations >= stop_at))
+        if not pdef.hasExactSolution():
+            return None
+        path = pdef.getSolutionPath()
+        og.PathSimplifier(si).simplifyMax(path)
+        pts = np.array([[path.getState(i)[j] for j in range(n)] for i in range(path.getStateCount())]) * scale
+        pts[0], pts[-1] = qa, qb
+        pts = np.clip(pts, self.cell.q_lower, self.cell.q_upper)
+        if not all(self.check(a, b).clear for a, b in zip(pts[:-1], pts[1:])):
+            return None
+        return [p.copy() for p in pts[1:-1]]
