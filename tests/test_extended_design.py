@@ -133,6 +133,35 @@ def test_select_pool_with_prior_consistent_and_better_than_random(ur10):
         select_pool(Fp, 301, K, ext.prior_info)
 
 
+def test_pool_gains_match_the_criterion_change_and_the_exchange_is_a_local_optimum(ur10):
+    """The Cholesky/closed-form gains are exactly −Δφ of adding a block; no single swap improves the result."""
+    from pin_kpi_oed.oed.extended import _gains
+
+    robot, model, base = ur10
+    ext = _ext(robot, model, base)
+    ext.prior_info = np.diag(np.r_[np.zeros(ext.nb), np.full(ext.k, 1e8)])
+    Fp = ext.jacobian(robot.random_q(np.random.default_rng(11), 120))
+    K = ext.kpi_jacobian(robot.random_q(np.random.default_rng(12), 2))
+    N, nh, nx = Fp.shape
+    F0 = Fp[:50].reshape(-1, nx)
+    M = ext.prior_info + F0.T @ F0
+    for KK in (K, None):
+        g = _gains(Fp.reshape(-1, nx), nh, M, KK)
+        ref = np.array([pool_phi(M, KK) - pool_phi(M + Fp[i].T @ Fp[i], KK) for i in range(N)])
+        assert np.allclose(g, ref, rtol=1e-7, atol=1e-12 * abs(pool_phi(M, KK)))
+    assert _gains(Fp.reshape(-1, nx), nh, -np.eye(nx), K) is None  # not positive definite
+    s = select_pool(Fp, 20, K, ext.prior_info)
+    chosen = list(s.indices)
+    for pos in range(0, 20, 4):
+        for j in range(0, N, 7):
+            if j in chosen:
+                continue
+            trial = chosen.copy()
+            trial[pos] = j
+            Ft = Fp[trial].reshape(-1, nx)
+            assert pool_phi(ext.prior_info + Ft.T @ Ft, K) >= s.phi * (1 - 1e-9)
+
+
 def test_from_calibrated_model_prior_by_name(ur10):
     robot, model, base = ur10
     eff = TransmissionError(robot, pairs=[("elbow_joint", 18)])

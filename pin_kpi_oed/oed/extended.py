@@ -35,7 +35,8 @@ from pin_kpi_oed.errors import IdentifiabilityError, InputError
 from pin_kpi_oed.effects.library import effect_jacobian, sum_joint_offsets
 from pin_kpi_oed.oed.covariance import prior_square_root
 from pin_kpi_oed.oed.criteria import get_criterion
-from pin_kpi_oed.oed.pool import PoolSelection, pool_phi, select
+from pin_kpi_oed.oed.pool import PoolSelection, _swap_gains, pool_phi, select
+from pin_kpi_oed.threads import limit_threads
 
 __all__ = ["ExtendedModel", "ExtendedDesignCriterion", "basis_dq", "select_pool", "PriorSelection", "pool_phi",
            "pool_start"]
@@ -455,17 +456,29 @@ class PriorSelection:
     time_s: float
 
 
-def _gains(Fp: np.ndarray, Minv: np.ndarray, K: np.ndarray | None, sign: float) -> np.ndarray:
-    """−Δφ of adding (sign=+1) each candidate's block to M (Woodbury), (N,)."""
-    nh = Fp.shape[1]
-    B = Fp @ Minv
-    S = np.eye(nh) + sign * np.einsum("nab,ncb->nac", B, Fp)
+def _gains(F2: np.ndarray, nh: int, M: np.ndarray, K: np.ndarray | None) -> np.ndarray | None:
+    """−Δφ of adding each candidate's block to M (Woodbury), (N,); None if M is not positive definite.
+
+    With M = L Lᵀ and V_i = F_i L⁻ᵀ (one GEMM over the stacked blocks F2, (N·nh, nx)):
+    S_i = I + V_i V_iᵀ, −Δφ = log det S_i (D) or tr(G_iᵀ S_i⁻¹ G_i) with G_i = F_i M⁻¹ Kᵀ (A-type);
+    the nh×nh algebra is :func:`pin_kpi_oed.oed.pool._swap_gains` (written out for nh ≤ 3).
+    """
+    from scipy.linalg import solve_triangular
+
+    try:
+        L = np.linalg.cholesky(M)
+    except np.linalg.LinAlgError:
+        return None
+    LiT = solve_triangular(L, np.eye(M.shape[0]), lower=True).T  # L⁻ᵀ
+    N = F2.shape[0] // nh
+    V = (F2 @ LiT).reshape(N, nh, -1)
     if K is None:
-        return sign * np.linalg.slogdet(S)[1]
-    G = B @ K.T
-    return sign * np.einsum("nas,nas->n", G, np.linalg.solve(S, G))
+        return _swap_gains(V, None)
+    G = (V.reshape(N * nh, -1) @ (K @ LiT).T).reshape(N, nh, -1)  # F_i L⁻ᵀ L⁻¹ Kᵀ
+    return _swap_gains(V, G)
 
 
+@limit_threads
 def select_pool(Fp: np.ndarray, m: int, K: np.ndarray | None = None, prior_info: np.ndarray | None = None,
                 seed: int = 0, max_sweeps: int = 30) -> PoolSelection | PriorSelection:
     """Choose m of N candidates for the extended model (A-type with K, or D-optimal), with a prior.
@@ -499,10 +512,15 @@ def select_pool(Fp: np.ndarray, m: int, K: np.ndarray | None = None, prior_info:
         raise IdentifiabilityError("the candidate pool with the prior does not determine the extended parameters")
     eps = 1e-10 * np.trace(full) / nx
     M = M0 + eps * np.eye(nx)
+    F2 = Fp.reshape(N * nh, nx)
     chosen: list[int] = []
     free = np.ones(N, bool)
     for _ in range(m):
-        g = np.where(free, _gains(Fp, np.linalg.inv(M), K, 1.0), -np.inf)
+        g0 = _gains(F2, nh, M, K)
+        if g0 is None:
+            raise IdentifiabilityError("extended pool selection: the prior information is not positive "
+                                       "semi-definite")
+        g = np.where(free, g0, -np.inf)
         i = int(np.argmax(g))
         chosen.append(i)
         free[i] = False
@@ -516,9 +534,10 @@ def select_pool(Fp: np.ndarray, m: int, K: np.ndarray | None = None, prior_info:
             out = chosen[pos]
             Mm = M - Fp[out].T @ Fp[out]
             phi_m = pool_phi(Mm, K)
-            if not np.isfinite(phi_m):
+            g0 = None if not np.isfinite(phi_m) else _gains(F2, nh, Mm, K)
+            if g0 is None:
                 continue
-            g = np.where(free, _gains(Fp, np.linalg.inv(Mm), K, 1.0), -np.inf)
+            g = np.where(free, g0, -np.inf)
             best = int(np.argmax(g))
             if phi_m - g[best] < cur * (1 - 1e-10) - 1e-300 if K is not None else phi_m - g[best] < cur - 1e-10:
                 free[out], free[best] = True, False
