@@ -134,8 +134,8 @@ def test_select_pool_with_prior_consistent_and_better_than_random(ur10):
 
 
 def test_pool_gains_match_the_criterion_change_and_the_exchange_is_a_local_optimum(ur10):
-    """The Cholesky/closed-form gains are exactly −Δφ of adding a block; no single swap improves the result."""
-    from pin_kpi_oed.oed.extended import _gains
+    """Woodbury gains (adding a block; swapping one out, then adding) are exactly −Δφ; no single swap improves."""
+    from pin_kpi_oed.oed.extended import _PoolState
 
     robot, model, base = ur10
     ext = _ext(robot, model, base)
@@ -146,10 +146,23 @@ def test_pool_gains_match_the_criterion_change_and_the_exchange_is_a_local_optim
     F0 = Fp[:50].reshape(-1, nx)
     M = ext.prior_info + F0.T @ F0
     for KK in (K, None):
-        g = _gains(Fp.reshape(-1, nx), nh, M, KK)
+        st = _PoolState(Fp, KK)
+        assert st.at(M) and np.isclose(st.phi, pool_phi(M, KK), rtol=1e-9, atol=0.0)
         ref = np.array([pool_phi(M, KK) - pool_phi(M + Fp[i].T @ Fp[i], KK) for i in range(N)])
-        assert np.allclose(g, ref, rtol=1e-7, atol=1e-12 * abs(pool_phi(M, KK)))
-    assert _gains(Fp.reshape(-1, nx), nh, -np.eye(nx), K) is None  # not positive definite
+        assert np.allclose(st.add_gains(), ref, rtol=1e-7, atol=1e-12 * abs(pool_phi(M, KK)))
+        for o in (3, 17):
+            Mm = M - Fp[o].T @ Fp[o]
+            phi_m, g = st.swap_gains(o)
+            assert np.isclose(phi_m, pool_phi(Mm, KK), rtol=1e-9, atol=1e-12)
+            ref = np.array([pool_phi(Mm, KK) - pool_phi(Mm + Fp[i].T @ Fp[i], KK) for i in range(N)])
+            assert np.allclose(g, ref, rtol=1e-7, atol=1e-12 * abs(pool_phi(M, KK)))
+        # nh > 3 path (blocks of two measurements stacked) agrees with the closed form
+        st6 = _PoolState(Fp.reshape(N // 2, 2 * nh, nx), KK)
+        st6.at(M)
+        ref6 = np.array([pool_phi(M, KK) - pool_phi(M + Fp[2 * i:2 * i + 2].reshape(-1, nx).T
+                                                       @ Fp[2 * i:2 * i + 2].reshape(-1, nx), KK) for i in range(N // 2)])
+        assert np.allclose(st6.add_gains(), ref6, rtol=1e-7, atol=1e-12 * abs(pool_phi(M, KK)))
+    assert not _PoolState(Fp, K).at(-np.eye(nx))  # not positive definite
     s = select_pool(Fp, 20, K, ext.prior_info)
     chosen = list(s.indices)
     for pos in range(0, 20, 4):
