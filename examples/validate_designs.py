@@ -47,11 +47,14 @@ def main() -> int:
     ap.add_argument("--cases", default=",".join(CASES), help="extended-model cases, comma-separated")
     ap.add_argument("--case-dir", type=Path, default=None, help="one JSON per extended-model case (resumable)")
     ap.add_argument("--extended-only", action="store_true", help="only the extended-model part")
+    ap.add_argument("--simulation-json", type=Path, default=None,
+                    help="JSON of `python -m benchmarks.bench_extended --only simulation --json ...`: adds its panel")
     a = ap.parse_args()
     out = {}
     if a.extended:
+        sim = json.loads(a.simulation_json.read_text())["simulation"] if a.simulation_json else None
         out["extended"] = extended(a.series.parent, a.splits, a.seed, a.figure,
-                                   [c.strip() for c in a.cases.split(",") if c.strip()], a.case_dir)
+                                   [c.strip() for c in a.cases.split(",") if c.strip()], a.case_dir, sim)
         if a.extended_only:
             if a.json:
                 atomic_write_json(a.json, out)
@@ -89,7 +92,7 @@ METHODS = ("random", "D", "param", "kpi_geo", "kpi_ext", "D_geo")
 
 
 def extended(data_dir: Path, splits: int, seed: int, figure: Path | None, cases: list[str] | None = None,
-             case_dir: Path | None = None) -> dict:
+             case_dir: Path | None = None, simulation: dict | None = None) -> dict:
     """Issue 14: within Series C and the directed pairs, designs over the extended model (module docstring).
 
     Args:
@@ -98,6 +101,7 @@ def extended(data_dir: Path, splits: int, seed: int, figure: Path | None, cases:
         figure: PNG of the per-split errors of every case, or None.
         cases: "C" (within Series C) or "S->T" (chosen and calibrated on S, scored on T after re-registering).
         case_dir: folder of one JSON per case, written as each case completes; a case found there is read.
+        simulation: the benchmark's simulation results for the figure's last panel, or None.
 
     Returns:
         {case: ExtendedDesignValidation.to_dict()}.
@@ -129,15 +133,21 @@ def extended(data_dir: Path, splits: int, seed: int, figure: Path | None, cases:
         if f is not None:
             atomic_write_json(f, res[case])
     if figure is not None:
-        extended_figure(res, figure)
+        extended_figure(res, figure, simulation)
     return res
 
 
-def extended_figure(res: dict, figure: Path) -> None:
-    """Per-split held-out errors (mm) of every method, one panel per case, written as PNG."""
+def extended_figure(res: dict, figure: Path, simulation: dict | None = None) -> None:
+    """Per-split held-out errors (mm) of every method, one panel per case, written as PNG.
+
+    The y axis ends at 1.6 × the largest median of a panel; splits above it are drawn at the top
+    edge as triangles with their count and largest value (e.g. the failed random sets of D -> C).
+    ``simulation`` (the ``simulation`` part of ``python -m benchmarks.bench_extended --json``) adds a panel:
+    the paired gap geometric − extended KPI design (µm, ± standard error) against the effect size.
+    """
     from pin_kpi_oed.viz.figures import _figure, save_png
 
-    n = len(res)
+    n = len(res) + (simulation is not None)
     cols = min(n, 3)
     rows = (n + cols - 1) // cols
     fig = _figure(5.0 * cols, 3.8 * rows)
@@ -145,12 +155,35 @@ def extended_figure(res: dict, figure: Path) -> None:
         ax = fig.add_subplot(rows, cols, i)
         meths = list(d["methods"])
         v = [np.asarray(d["methods"][k]["per_split_m"]) * 1e3 for k in meths]
-        ax.boxplot(v)
+        top = 1.6 * max(float(np.median(y)) for y in v)
+        ax.boxplot([np.minimum(y, top) for y in v], showfliers=False)
         ax.set_xticks(range(1, len(meths) + 1), meths, fontsize=8)
         for j, y in enumerate(v, 1):
-            ax.plot(np.full(y.size, j) + np.linspace(-0.15, 0.15, y.size), y, ".", color="0.4", ms=3)
+            x = np.full(y.size, j) + np.linspace(-0.15, 0.15, y.size)
+            ok = y <= top
+            ax.plot(x[ok], y[ok], ".", color="0.4", ms=3)
+            if np.any(~ok):
+                ax.plot(x[~ok], np.full(int(np.sum(~ok)), top), "^", color="C3", ms=5)
+                ax.annotate(f"{int(np.sum(~ok))} above (max {y.max():.1f})", (j, top), textcoords="offset points",
+                            xytext=(6, -4), ha="left", fontsize=7, color="C3")
+        ax.set_ylim(0.0, top * 1.02)
         ax.set_title(f"UR10 {case}: {d['nit']} splits, 60 poses each", fontsize=9)
         ax.set_ylabel("held-out error near the work (mm)", fontsize=8)
+    if simulation is not None:
+        ax = fig.add_subplot(rows, cols, n)
+        for j, (nz, sim) in enumerate(simulation.items()):
+            a = np.asarray(sim["sizes_rad"]) * 1e6
+            for cal, ls in (("map", "-"), ("ls", "--")):
+                g = np.array([c[cal]["gap_mean_m"] for c in sim["cases"]]) * 1e6
+                e = np.array([c[cal]["gap_sem_m"] for c in sim["cases"]]) * 1e6
+                ax.errorbar(a, g, yerr=e, fmt="o" + ls, color=f"C{j}", ms=3, capsize=2,
+                            label=f"sigma {float(nz) * 1e6:g} um, {'MAP (prior %g urad)' % (sim['prior_rad'] * 1e6) if cal == 'map' else 'least squares'}")
+        ax.axhline(0.0, color="0.6", lw=0.8)
+        ax.set_xscale("symlog", linthresh=100.0)
+        ax.set_xlabel("effect size a (urad)", fontsize=8)
+        ax.set_ylabel("TCP error, geometric - extended KPI design (um)", fontsize=8)
+        ax.set_title(f"simulation: {sim['reps']} repetitions per size", fontsize=9)
+        ax.legend(fontsize=6)
     save_png(fig, figure)
 
 
