@@ -88,7 +88,7 @@ def main() -> int:
 
 
 CASES = ("C", "C->D", "B->C", "C->B", "D->C")
-METHODS = ("random", "D", "param", "kpi_geo", "kpi_ext", "D_geo")
+METHODS = ("random", "D", "param", "kpi_geo", "kpi_ext", "kpi_bias", "D_geo")
 
 
 def extended(data_dir: Path, splits: int, seed: int, figure: Path | None, cases: list[str] | None = None,
