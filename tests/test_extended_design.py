@@ -293,6 +293,7 @@ def test_ipopt_design_over_the_extended_model_kr15():
     assert np.isclose(np.trace(sc[0]["cov_s_m2"]), crit.value(rnd.q_meas), rtol=1e-9, atol=0.0)
     assert not np.isclose(sc[1]["trace_cs_m2"], kpi.trace_cs_m2, rtol=1e-3, atol=0.0)  # not the geometric value
     txt = table([rnd, kpi], rnd, None, sc)
+    assert f"{100 * (sc[1]['trace_cs_m2'] / sc[0]['trace_cs_m2'] - 1):+.1f}" in txt.splitlines()[-1]  # ext vs random
     assert "ext tr(C_s) mm^2" in txt and "geo tr(C_s) mm^2" in txt
     assert f"{sc[1]['trace_cs_m2'] * 1e6:.4e}" in txt.splitlines()[-1]
     assert extended_scores(DesignProblem(cell), [kpi], cell.q_work) is None

@@ -89,27 +89,33 @@ def parse_criteria(text: str) -> list[str]:
         raise InputError(f"--criteria: {exc}") from None
 
 
-def table(results: list, reference=None, certificate=None, extended: list | None = None) -> str:
+def table(results: list, reference=None, certificate=None, extended: list | None = None,
+          extended_reference: dict | None = None) -> str:
     """The design table (one row per :class:`~pin_kpi_oed.design.optimize.DesignResult`; efficiency with a certificate).
 
     Args:
         results: the designs; reference: the design the "vs random" column compares with (default the first).
         certificate: the optimality certificate or None.
         extended: per design (same order as ``results``) the extended-model scores of :func:`extended_scores`
-            (``--model``): the table then shows the extended-model tr(C_s) (with the prior) and TCP σ first and
-            labels the geometric ones "geo".
+            (``--model``): the table then shows the extended-model tr(C_s) (with the prior) and TCP σ first,
+            labels the geometric ones "geo" and compares the extended tr(C_s) with the reference's.
+        extended_reference: the reference design's extended scores when it is not among ``results``.
     """
     ref = reference or results[0]
     ext_by_id = {id(r): e for r, e in zip(results, extended)} if extended is not None else None
     head = (f"{'criterion':<10}" + (f"{'ext tr(C_s) mm^2':>18}{'ext sigma um':>14}" if ext_by_id else "")
             + f"{'geo tr(C_s) mm^2' if ext_by_id else 'tr(C_s) mm^2':>{18 if ext_by_id else 14}}"
-            f"{'geo sigma um' if ext_by_id else 'TCP sigma um':>14}{'vs random %':>12}{'min clr mm':>11}"
+            f"{'geo sigma um' if ext_by_id else 'TCP sigma um':>14}{'ext vs rnd %' if ext_by_id else 'vs random %':>{13 if ext_by_id else 12}}{'min clr mm':>11}"
             f"{'max inc deg':>12}{'iters':>7}{'time s':>8}" + (f"{'effic. %':>10}" if certificate else "")
             + "  check")
     lines = [head, "-" * len(head)]
     for r in results:
         # signed change of tr(C_s) against the random (the paper's heuristic) design: negative = more precise
         imp = 0.0 - r.improvement_over(ref) + 0.0 if math.isfinite(r.trace_cs_m2) else float("nan")
+        if ext_by_id:  # the extended tr(C_s) against the reference's (the criterion the designs optimised)
+            e_r, e_ref = ext_by_id.get(id(r)), ext_by_id.get(id(ref), extended_reference)
+            imp = (100.0 * (e_r["trace_cs_m2"] / e_ref["trace_cs_m2"] - 1.0) + 0.0 if e_r and e_ref
+                   else float("nan"))
         it = f"{r.iterations:d}" if r.criterion != "random" else "-"
         chk = "ok" if r.feasible else f"{100 * r.share_colliding:.0f}% coll."
         if not r.feasible and r.share_colliding == 0:
@@ -119,7 +125,7 @@ def table(results: list, reference=None, certificate=None, extended: list | None
             e = ext_by_id.get(id(r), {"trace_cs_m2": float("nan"), "tcp_sigma_m": float("nan")})
             ext = f"{e['trace_cs_m2'] * 1e6:>18.4e}{e['tcp_sigma_m'] * 1e6:>14.4f}"
         lines.append(f"{r.criterion:<10}{ext}{r.trace_cs_m2 * 1e6:>{18 if ext_by_id else 14}.4e}"
-                     f"{r.tcp_sigma_m * 1e6:>14.4f}{imp:>+12.1f}"
+                     f"{r.tcp_sigma_m * 1e6:>14.4f}{imp:>+{13 if ext_by_id else 12}.1f}"
                      f"{r.min_clearance_m * 1e3:>11.1f}{r.max_incidence_deg:>12.1f}{it:>7}"
                      f"{r.solve_time_s:>8.2f}"
                      + (f"{100 * certificate.efficiency(r.trace_cs_m2):>10.1f}" if certificate else "")
@@ -292,7 +298,8 @@ def _print_results(results: list, criteria: list, cert, m: int, pool_file: str |
     """Print the result table, the certificate, the random design's acceptance and the infeasible designs."""
     shown = [r for r in results if r.criterion in criteria] or results
     ext_of = {id(r): e for r, e in zip(results, ext_scores)} if ext_scores is not None else None
-    print(table(shown, results[0], cert, [ext_of[id(r)] for r in shown] if ext_of else None))
+    print(table(shown, results[0], cert, [ext_of[id(r)] for r in shown] if ext_of else None,
+                ext_of[id(results[0])] if ext_of else None))
     if ext_of:
         print("ext = extended model (geometry + the model file's effects, with the prior: the criterion the designs "
               "optimised); geo = identifiable geometry + set-up only, no prior (the plain design's tr(C_s))")
