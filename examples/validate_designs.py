@@ -4,16 +4,19 @@
    covariance.
 2. Real data (if the IPA UR10 data are present): working poses held out, 60 calibration poses chosen from the
    rest by the KPI criterion, by D-optimality and at random; identify from each; real errors at the working poses.
-3. Designs over the extended model (issue 14, with --extended): Series C within the session and the directed pair
-   C -> D (set-up re-registered on 60 rows of D); random, D and A on C_p (extended), KPI geometric, KPI extended;
+3. Designs over the extended model (issue 14, with --extended): Series C within the session and the directed pairs
+   B -> C, C -> B, C -> D, D -> C (chosen and calibrated on the first series, set-up re-registered on 60 rows of the
+   second); random, D and A on C_p (extended), KPI geometric, KPI extended, KPI extended bias-aware, D geometric;
    every set calibrated with geometry + the terms selected on the training pool; errors of the held-out rows
-   within 0.5 rad (joints 1-5) of 5 working configurations; paired tests. --figure writes docs/extended_designs.png.
+   within 0.5 rad (joints 1-5) of 5 working configurations; paired Wilcoxon / t-tests against random.
+   --figure writes the figure (docs/extended_designs.png), --simulation-json adds the simulation panel.
    --cases picks the cases ("C", "C->D", "B->C", "C->B", "D->C"; default all), --case-dir keeps one JSON per case
    as it completes (a case already there is read, not re-run), --extended-only skips parts 1 and 2.
 
 Run: python examples/validate_designs.py [--splits 20] [--series ../shared/data/ipa_ur10/Series_C] [--json out.json]
-     python examples/validate_designs.py --extended --extended-only --splits 20 --case-dir runs/x14 \
-         --figure docs/extended_designs.png
+     python -m benchmarks.bench_extended --only simulation --reps 200 --json runs/sim.json
+     python examples/validate_designs.py --extended --extended-only --splits 20 --case-dir runs \
+         --simulation-json runs/sim.json --figure docs/extended_designs.png
 """
 
 from __future__ import annotations
