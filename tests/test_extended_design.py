@@ -163,6 +163,10 @@ def test_pool_gains_match_the_criterion_change_and_the_exchange_is_a_local_optim
                                                        @ Fp[2 * i:2 * i + 2].reshape(-1, nx), KK) for i in range(N // 2)])
         assert np.allclose(st6.add_gains(), ref6, rtol=1e-7, atol=1e-12 * abs(pool_phi(M, KK)))
     assert not _PoolState(Fp, K).at(-np.eye(nx))  # not positive definite
+    from pin_kpi_oed.errors import IdentifiabilityError
+
+    with pytest.raises(IdentifiabilityError, match="chosen candidates"):
+        select_pool(Fp, 2, K, ext.prior_info)  # 6 rows cannot determine the geometry without a prior
     s = select_pool(Fp, 20, K, ext.prior_info)
     chosen = list(s.indices)
     for pos in range(0, 20, 4):

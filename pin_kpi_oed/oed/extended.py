@@ -565,7 +565,8 @@ def select_pool(Fp: np.ndarray, m: int, K: np.ndarray | None = None, prior_info:
 
     Raises:
         InputError: m larger than the pool.
-        IdentifiabilityError: the pool with the prior does not determine the parameters.
+        IdentifiabilityError: the pool with the prior does not determine the parameters, or m candidates
+            with the prior cannot (too few for the unknowns without a prior).
     """
     Fp = np.asarray(Fp, float)
     N, nh, nx = Fp.shape
