@@ -1,25 +1,23 @@
 """Designs over the extended model: simulation with withheld effects, and the design time (issue 14).
 
-**Simulation.** A UR10 measured by a laser tracker (σ = 10 µm per axis). Truth: random geometric
-errors (:class:`~pin_kpi_oed.identification.simulate.Tolerances`, 0.5 mm / 1 mrad) plus transmission
-errors of four joints (orders of the real UR10's selected terms: shoulder_lift 20, elbow 18,
-shoulder_pan 12, wrist_1 10), each coefficient ~ N(0, a²), a growing. A fixed pool of 400 random
-configurations, 5 working configurations, 60 poses per design:
-
-* ``geo/geo``: KPI design on the geometric model, calibrated with the geometric model (status quo);
-* ``geo/ext``: the same design, calibrated with the extended model (geometry + the four terms, MAP,
-  prior σ 200 µrad per coefficient);
-* ``ext/ext``: KPI design on the extended model (same prior, :func:`pin_kpi_oed.oed.extended.select_pool`),
-  calibrated with the extended model.
-
-Score: true TCP error at the working configurations (mean 3-D norm), per repetition (new truth,
-new noise), ≥ 100 repetitions per size; paired Wilcoxon test ext/ext vs geo/ext and geo/geo.
+**Simulation.** A UR10 measured by a laser tracker (σ = 10 µm and 100 µm per axis). Truth: random
+geometric errors (:class:`~pin_kpi_oed.identification.simulate.Tolerances`, 0.5 mm / 1 mrad) plus
+transmission errors of four joints (orders of the real UR10's selected terms: shoulder_lift 20, elbow 18,
+shoulder_pan 12, wrist_1 10), each coefficient ~ N(0, a²), a growing (0, 100, 300, 1000 µrad). A fixed
+pool of 400 random configurations, 5 working configurations, 60 poses per design. KPI designs on the
+geometric model and on the extended model (with the tolerance prior σ₀ = 100 µrad per coefficient, and
+without a prior); each calibrated with the extended model as a MAP with that prior (shrinkage bias ∝ θ)
+and unregularised (least squares). Score: true TCP error at the working configurations (mean 3-D norm),
+per repetition (new truth, new noise); paired Wilcoxon test per size; regression of the paired gap on a.
+Why: in a linear model the estimator covariance does not depend on the true effect, so under an
+unbiased calibration the gap between two designs cannot grow with the effect; it grows only through
+bias, here the MAP's shrinkage, E C Σ₀⁻¹ θ, which is smaller for the design that informs θ.
 
 **Time.** Pool selection of 60 of 2,000 KR 15 cell candidates, KPI on the geometric vs the extended
 model (geometry + a transmission-error pair on A2 and A3), and the IPOPT KPI design of the KR 15 cell
 (60 poses, pool start) on the geometric vs the extended model (gear harmonics of A2, A3, exact gradients).
 
-Run: ``python -m benchmarks.bench_extended [--reps 100] [--json out.json]`` (about 3–6 min on 2 cores).
+Run: ``python -m benchmarks.bench_extended [--reps 100] [--noise 1e-5,1e-4] [--json out.json]`` (about 3–6 min on 2 cores).
 """
 
 from __future__ import annotations
@@ -30,13 +28,42 @@ import time
 import numpy as np
 
 PAIRS = [("shoulder_lift_joint", 20), ("elbow_joint", 18), ("shoulder_pan_joint", 12), ("wrist_1_joint", 10)]
-SIZES_RAD = (0.0, 1e-4, 3e-4)
-PRIOR_RAD = 2e-4
+SIZES_RAD = (0.0, 1e-4, 3e-4, 1e-3)
+PRIOR_RAD = 1e-4  # tolerance prior of the simulation's transmission-error coefficients
+TIME_PRIOR_RAD = 2e-4  # prior of the timing benchmarks
 NOISE_M = 1e-5
 
 
-def simulation(reps: int = 100, seed: int = 0, sizes: tuple[float, ...] = SIZES_RAD) -> dict:
-    """Monte-Carlo of the three design/calibration pairs over effect sizes; returns plain numbers (m)."""
+def simulation(reps: int = 100, seed: int = 0, sizes: tuple[float, ...] = SIZES_RAD, prior_rad: float = PRIOR_RAD,
+               noise_m: float = NOISE_M, quiet: bool = False) -> dict:
+    """Monte-Carlo: extended-model vs geometric KPI design, each calibrated two ways, over effect sizes (m).
+
+    Truth per repetition: geometric errors ~ tolerances (on the identifiable parameters) and transmission
+    errors θ ~ N(0, a² I) (four joints, :data:`PAIRS`); σ = ``noise_m`` per axis (default 10 µm). Designs (60 of a fixed pool
+    of 400 random configurations, 5 working configurations), made once:
+
+    * ``geo``: KPI on the geometric model (:func:`pin_kpi_oed.oed.pool.select`);
+    * ``ext_map``: KPI on the extended model with the tolerance prior σ₀ = ``prior_rad`` per coefficient
+      (:func:`pin_kpi_oed.oed.extended.select_pool`);
+    * ``ext_ls``: KPI on the extended model without a prior.
+
+    Calibrations: ``map`` (geometry + θ, prior σ₀ on θ: shrinkage bias ∝ θ) and ``ls`` (unregularised).
+    Compared pairs: geo vs ext_map under ``map``, geo vs ext_ls under ``ls``. Score: true TCP error at
+    the working configurations (mean 3-D norm). Paired Wilcoxon signed-rank test per size; the growth
+    of the paired gap (geo − ext) with a is tested by a linear regression of the per-repetition gaps
+    on a (two-sided p of the slope). The linear-model prediction of the RMS TCP error,
+    sqrt(tr(E C (FᵀF + a² Σ₀⁻²) C Eᵀ)/t) with C = (FᵀF + Σ₀⁻¹)⁻¹ (MAP; a-independent for LS),
+    is printed beside it.
+
+    Args:
+        reps: repetitions per size (new truth and noise each); seed: seed of pool, truths, noise.
+        sizes: effect sizes a (rad); prior_rad: σ₀ of the tolerance prior (rad); noise_m: tracker σ (m).
+        quiet: no printing.
+
+    Returns:
+        Plain numbers (m): per size and calibration the mean/std errors, paired tests, predictions;
+        the regression of the gaps on a.
+    """
     from scipy import stats
 
     from pin_kpi_oed.effects.periodic import TransmissionError
@@ -52,7 +79,7 @@ def simulation(reps: int = 100, seed: int = 0, sizes: tuple[float, ...] = SIZES_
 
     rb = load_robot("ur10")
     model = TrackerModel(rb, tracker_T_base=default_tracker_pose(rb), reflector_m=np.array([0.05, 0.02, 0.10]),
-                         noise=NoiseModel((NOISE_M,) * 3))
+                         noise=NoiseModel((noise_m,) * 3))
     base = analyse(model).base
     eff = TransmissionError(rb, pairs=PAIRS)
     rng = np.random.default_rng(seed)
@@ -60,48 +87,86 @@ def simulation(reps: int = 100, seed: int = 0, sizes: tuple[float, ...] = SIZES_
     Qw = rb.random_q(rng, 5)
     p0 = np.zeros(model.n_params)
     ext = ExtendedModel(model, p0, base, [eff])
-    ext.prior_info = np.diag(np.r_[np.zeros(ext.nb), np.full(ext.k, PRIOR_RAD ** -2)])
+    P0 = np.diag(np.r_[np.zeros(ext.nb), np.full(ext.k, prior_rad ** -2)])
     Fp = ext.jacobian(Qp)
     E = ext.kpi_jacobian(Qw)
     kpi = get_criterion("kpi")
     t0 = time.perf_counter()
-    d_geo = np.sort(select(Fp[:, :, :ext.nb], 60, kpi.pool_form(E[:, :ext.nb], ext.nb), seed=seed).indices)
-    d_ext = np.sort(select_pool(Fp, 60, kpi.pool_form(E, ext.nx), ext.prior_info, seed=seed).indices)
+    designs = {"geo": np.sort(select(Fp[:, :, :ext.nb], 60, kpi.pool_form(E[:, :ext.nb], ext.nb), seed=seed).indices),
+               "ext_map": np.sort(select_pool(Fp, 60, kpi.pool_form(E, ext.nx), P0, seed=seed).indices),
+               "ext_ls": np.sort(select_pool(Fp, 60, kpi.pool_form(E, ext.nx), None, seed=seed).indices)}
     t_design = time.perf_counter() - t0
-    out = {"sizes_rad": list(sizes), "reps": reps, "prior_rad": PRIOR_RAD, "design_time_s": t_design, "cases": []}
+    calib = {"map": (prior_rad, "ext_map"), "ls": (np.inf, "ext_ls")}
+
+    def predicted_rms(d: str, cal: str, a: float) -> float:
+        F = Fp[designs[d]].reshape(-1, ext.nx)
+        M = F.T @ F + (P0 if cal == "map" else 0.0)
+        C = np.linalg.inv(M)
+        Mid = F.T @ F + (a ** 2 * P0 @ P0 if cal == "map" else 0.0)
+        return float(np.sqrt(np.trace(E @ C @ Mid @ C @ E.T) / Qw.shape[0]))
+
+    out = {"sizes_rad": list(sizes), "reps": reps, "prior_rad": prior_rad, "noise_m": noise_m, "n_pool": 400,
+           "n_work": 5, "n_meas": 60, "design_time_s": t_design, "cases": [], "growth": {}}
+    gaps: dict[str, list] = {c: [] for c in calib}
     for a in sizes:
-        errs = {"geo/geo": [], "geo/ext": [], "ext/ext": []}
-        seeds = np.random.SeedSequence([seed, int(a * 1e7)]).spawn(reps)
+        errs: dict[str, list[float]] = {f"{d}/{c}": [] for c, (_, de) in calib.items() for d in ("geo", de)}
+        seeds = np.random.SeedSequence([seed, int(round(a * 1e7))]).spawn(reps)
         for r in range(reps):
             s1, s2, s3 = (int(x) for x in seeds[r].generate_state(3))
             p_true = random_truth(model, Tolerances(), seed=s1, only=base)
             th = a * np.random.default_rng(s2).standard_normal(eff.n_params)
             s_true = model.kpi(p_true, Qw + eff.joint_offset(th, Qw)[0])
-            for key, design in (("geo/geo", d_geo), ("geo/ext", d_geo), ("ext/ext", d_ext)):
-                data = simulate(model, Qp[design], p_true, effects=[(eff, th)], seed=s3, record_sigma=False)
-                effects = [eff] if key.endswith("ext") else []
-                x = _fit_extended(model, data, base, effects, p0, PRIOR_RAD)
+            for key in errs:
+                d, c = key.split("/")
+                data = simulate(model, Qp[designs[d]], p_true, effects=[(eff, th)], seed=s3, record_sigma=False)
+                x = _fit_extended(model, data, base, [eff], p0, calib[c][0])
                 P = p0.copy()
                 P[base] = x[:base.size]
-                dQ = eff.joint_offset(x[base.size:], Qw)[0] if effects else 0.0
-                errs[key].append(float(np.linalg.norm(model.kpi(P, Qw + dQ) - s_true, axis=1).mean()))
+                s_hat = model.kpi(P, Qw + eff.joint_offset(x[base.size:], Qw)[0])
+                errs[key].append(float(np.linalg.norm(s_hat - s_true, axis=1).mean()))
         e = {k: np.array(v) for k, v in errs.items()}
-        case = {"size_rad": a, **{k: {"mean_m": float(v.mean()), "std_m": float(v.std(ddof=1))} for k, v in e.items()}}
-        for ref in ("geo/ext", "geo/geo"):
-            case[f"ext/ext vs {ref}"] = {"reduction": float(1 - e["ext/ext"].mean() / e[ref].mean()),
-                                         "wins": int(np.sum(e["ext/ext"] < e[ref])),
-                                         "p_wilcoxon": float(stats.wilcoxon(e["ext/ext"], e[ref]).pvalue)}
+        case = {"size_rad": a}
+        for c, (_, de) in calib.items():
+            g, x_ = e[f"geo/{c}"], e[f"{de}/{c}"]
+            gaps[c].append(g - x_)
+            case[c] = {"geo": {"mean_m": float(g.mean()), "std_m": float(g.std(ddof=1)),
+                               "predicted_rms_m": predicted_rms("geo", c, a)},
+                       de: {"mean_m": float(x_.mean()), "std_m": float(x_.std(ddof=1)),
+                            "predicted_rms_m": predicted_rms(de, c, a)},
+                       "gap_mean_m": float((g - x_).mean()),
+                       "gap_sem_m": float((g - x_).std(ddof=1) / np.sqrt(reps)),
+                       "reduction": float(1.0 - x_.mean() / g.mean()), "wins": int(np.sum(x_ < g)),
+                       "p_wilcoxon": float(stats.wilcoxon(x_, g).pvalue) if np.any(x_ != g) else 1.0}
+            if not quiet:
+                cc = case[c]
+                print(f"a = {a * 1e6:5.0f} urad, {c:>3} calibration: geo design {g.mean() * 1e6:8.2f} um "
+                      f"(pred. RMS {cc['geo']['predicted_rms_m'] * 1e6:7.2f}), {de} design {x_.mean() * 1e6:8.2f} um "
+                      f"(pred. {cc[de]['predicted_rms_m'] * 1e6:7.2f}); gap {cc['gap_mean_m'] * 1e6:+.2f} "
+                      f"+- {cc['gap_sem_m'] * 1e6:.2f} um, {-100 * cc['reduction']:+.1f} %, wins {cc['wins']}/{reps}, "
+                      f"Wilcoxon p {cc['p_wilcoxon']:.2g}", flush=True)
         out["cases"].append(case)
-        print(f"a = {a * 1e6:5.0f} urad: " + "  ".join(f"{k} {v.mean() * 1e6:7.2f} um" for k, v in e.items())
-              + "  | ext/ext vs geo/ext {:+.1%} (wins {}/{}, p {:.2g}); vs geo/geo {:+.1%} (p {:.2g})".format(
-                  -case["ext/ext vs geo/ext"]["reduction"], case["ext/ext vs geo/ext"]["wins"], reps,
-                  case["ext/ext vs geo/ext"]["p_wilcoxon"], -case["ext/ext vs geo/geo"]["reduction"],
-                  case["ext/ext vs geo/geo"]["p_wilcoxon"]), flush=True)
+    for c in calib:
+        a_all = np.repeat(np.asarray(sizes, float), reps)
+        lr = stats.linregress(a_all, np.concatenate(gaps[c]))
+        out["growth"][c] = {"slope_m_per_rad": float(lr.slope), "slope_stderr": float(lr.stderr),
+                            "p_slope": float(lr.pvalue)}
+        if not quiet:
+            print(f"{c} calibration: the paired gap geo - ext grows by {lr.slope:.4f} um per urad "
+                  f"(+- {lr.stderr:.4f}), p {lr.pvalue:.2g} (linear regression over "
+                  f"{a_all.size} repetitions)", flush=True)
     return out
 
 
-def design_time(seed: int = 0) -> dict:
-    """Pool selection time (s) on the KR 15 cell: KPI on the geometric vs the extended model."""
+def design_time(seed: int = 0, rounds: int = 5) -> dict:
+    """Pool selection time (s) on the KR 15 cell: KPI on the geometric vs the extended model.
+
+    Args:
+        seed: seed of the 2,000 random candidates and of the selections.
+        rounds: interleaved timing rounds (geometric, extended); the medians are reported.
+
+    Returns:
+        {"geometric_s", "extended_s" (medians, s), "ratio", "rounds", per-round times}.
+    """
     from pin_kpi_oed.cell.cell import load_cell
     from pin_kpi_oed.effects.periodic import TransmissionError
     from pin_kpi_oed.oed.criteria import get_criterion
@@ -115,20 +180,25 @@ def design_time(seed: int = 0) -> dict:
     base = analyse(model).base
     j = rb.joint_names
     ext = ExtendedModel(model, np.zeros(model.n_params), base, [TransmissionError(rb, pairs=[(j[1], 1), (j[2], 1)])])
-    ext.prior_info = np.diag(np.r_[np.zeros(ext.nb), np.full(ext.k, PRIOR_RAD ** -2)])
+    ext.prior_info = np.diag(np.r_[np.zeros(ext.nb), np.full(ext.k, TIME_PRIOR_RAD ** -2)])
     Q = rb.random_q(np.random.default_rng(seed), 2000)
     kpi = get_criterion("kpi")
-    t0 = time.perf_counter()
-    Fg = model.weighted_jacobian(np.zeros(model.n_params), Q)[:, :, base]
-    Eg = model.kpi_jacobian(np.zeros(model.n_params), cell.q_work)[:, base]
-    select(Fg, 60, kpi.pool_form(Eg, base.size), seed=seed)
-    t_geo = time.perf_counter() - t0
-    t0 = time.perf_counter()
-    select_pool(ext.jacobian(Q), 60, kpi.pool_form(ext.kpi_jacobian(cell.q_work), ext.nx), ext.prior_info, seed=seed)
-    t_ext = time.perf_counter() - t0
-    print(f"KR 15 cell, 60 of 2000 candidates: geometric KPI {t_geo:.2f} s, extended KPI {t_ext:.2f} s "
-          f"(ratio {t_ext / t_geo:.2f}, target <= 2)", flush=True)
-    return {"geometric_s": t_geo, "extended_s": t_ext, "ratio": t_ext / t_geo}
+    tg, te = [], []
+    for _ in range(rounds):  # interleaved rounds, medians: robust to a shared, loaded machine
+        t0 = time.perf_counter()
+        Fg = model.weighted_jacobian(np.zeros(model.n_params), Q)[:, :, base]
+        Eg = model.kpi_jacobian(np.zeros(model.n_params), cell.q_work)[:, base]
+        select(Fg, 60, kpi.pool_form(Eg, base.size), seed=seed)
+        tg.append(time.perf_counter() - t0)
+        t0 = time.perf_counter()
+        select_pool(ext.jacobian(Q), 60, kpi.pool_form(ext.kpi_jacobian(cell.q_work), ext.nx), ext.prior_info,
+                    seed=seed)
+        te.append(time.perf_counter() - t0)
+    t_geo, t_ext = float(np.median(tg)), float(np.median(te))
+    print(f"KR 15 cell, 60 of 2000 candidates (median of {rounds} interleaved rounds): geometric KPI {t_geo:.2f} s, "
+          f"extended KPI {t_ext:.2f} s (ratio {t_ext / t_geo:.2f}, target <= 2)", flush=True)
+    return {"geometric_s": t_geo, "extended_s": t_ext, "ratio": t_ext / t_geo, "rounds": rounds,
+            "geometric_all_s": tg, "extended_all_s": te}
 
 
 def ipopt_time(seed: int = 0) -> dict:
@@ -149,7 +219,7 @@ def ipopt_time(seed: int = 0) -> dict:
         if kind == "extended":
             rb = problem.model.robot
             ext = ExtendedModel(problem.model, problem.p0, problem.base, [GearHarmonic(rb, joints=rb.joint_names[1:3])])
-            ext.prior_info = np.diag(np.r_[np.zeros(ext.nb), np.full(ext.k, PRIOR_RAD ** -2)])
+            ext.prior_info = np.diag(np.r_[np.zeros(ext.nb), np.full(ext.k, TIME_PRIOR_RAD ** -2)])
             problem.extended = ext
         t0 = time.perf_counter()
         res = run_designs(cell, ["kpi"], 60, seed, DesignOptions(n_starts=1), problem)[-1]
@@ -171,6 +241,7 @@ def main(argv: list[str] | None = None) -> dict:
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--json", default=None)
     ap.add_argument("--only", choices=["time", "ipopt", "simulation"], default=None)
+    ap.add_argument("--noise", default="1e-5,1e-4", help="tracker sigma(s) of the simulation, m, comma-separated")
     a = ap.parse_args(argv if argv is not None else [])
     out = {}
     if a.only in (None, "time"):
@@ -178,7 +249,11 @@ def main(argv: list[str] | None = None) -> dict:
     if a.only in (None, "ipopt"):
         out["ipopt_time"] = ipopt_time(a.seed)
     if a.only in (None, "simulation"):
-        out["simulation"] = simulation(a.reps, a.seed)
+        out["simulation"] = {}
+        for nz in (float(v) for v in a.noise.split(",") if v.strip()):
+            print(f"simulation, tracker sigma {nz * 1e6:g} um, prior {PRIOR_RAD * 1e6:g} urad, {a.reps} repetitions "
+                  "per size:", flush=True)
+            out["simulation"][f"{nz:g}"] = simulation(a.reps, a.seed, noise_m=nz)
     if a.json:
         from pin_kpi_oed.data.atomic import atomic_write_json
 

@@ -133,6 +133,52 @@ def test_select_pool_with_prior_consistent_and_better_than_random(ur10):
         select_pool(Fp, 301, K, ext.prior_info)
 
 
+def test_pool_gains_match_the_criterion_change_and_the_exchange_is_a_local_optimum(ur10):
+    """Woodbury gains (adding a block; swapping one out, then adding) are exactly −Δφ; no single swap improves."""
+    from pin_kpi_oed.oed.extended import _PoolState
+
+    robot, model, base = ur10
+    ext = _ext(robot, model, base)
+    ext.prior_info = np.diag(np.r_[np.zeros(ext.nb), np.full(ext.k, 1e8)])
+    Fp = ext.jacobian(robot.random_q(np.random.default_rng(11), 120))
+    K = ext.kpi_jacobian(robot.random_q(np.random.default_rng(12), 2))
+    N, nh, nx = Fp.shape
+    F0 = Fp[:50].reshape(-1, nx)
+    M = ext.prior_info + F0.T @ F0
+    for KK in (K, None):
+        st = _PoolState(Fp, KK)
+        assert st.at(M) and np.isclose(st.phi, pool_phi(M, KK), rtol=1e-9, atol=0.0)
+        ref = np.array([pool_phi(M, KK) - pool_phi(M + Fp[i].T @ Fp[i], KK) for i in range(N)])
+        assert np.allclose(st.add_gains(), ref, rtol=1e-7, atol=1e-12 * abs(pool_phi(M, KK)))
+        for o in (3, 17):
+            Mm = M - Fp[o].T @ Fp[o]
+            phi_m, g = st.swap_gains(o)
+            assert np.isclose(phi_m, pool_phi(Mm, KK), rtol=1e-9, atol=1e-12)
+            ref = np.array([pool_phi(Mm, KK) - pool_phi(Mm + Fp[i].T @ Fp[i], KK) for i in range(N)])
+            assert np.allclose(g, ref, rtol=1e-7, atol=1e-12 * abs(pool_phi(M, KK)))
+        # nh > 3 path (blocks of two measurements stacked) agrees with the closed form
+        st6 = _PoolState(Fp.reshape(N // 2, 2 * nh, nx), KK)
+        st6.at(M)
+        ref6 = np.array([pool_phi(M, KK) - pool_phi(M + Fp[2 * i:2 * i + 2].reshape(-1, nx).T
+                                                       @ Fp[2 * i:2 * i + 2].reshape(-1, nx), KK) for i in range(N // 2)])
+        assert np.allclose(st6.add_gains(), ref6, rtol=1e-7, atol=1e-12 * abs(pool_phi(M, KK)))
+    assert not _PoolState(Fp, K).at(-np.eye(nx))  # not positive definite
+    from pin_kpi_oed.errors import IdentifiabilityError
+
+    with pytest.raises(IdentifiabilityError, match="chosen candidates"):
+        select_pool(Fp, 2, K, ext.prior_info)  # 6 rows cannot determine the geometry without a prior
+    s = select_pool(Fp, 20, K, ext.prior_info)
+    chosen = list(s.indices)
+    for pos in range(0, 20, 4):
+        for j in range(0, N, 7):
+            if j in chosen:
+                continue
+            trial = chosen.copy()
+            trial[pos] = j
+            Ft = Fp[trial].reshape(-1, nx)
+            assert pool_phi(ext.prior_info + Ft.T @ Ft, K) >= s.phi * (1 - 1e-9)
+
+
 def test_from_calibrated_model_prior_by_name(ur10):
     robot, model, base = ur10
     eff = TransmissionError(robot, pairs=[("elbow_joint", 18)])
@@ -243,6 +289,23 @@ def test_ipopt_design_over_the_extended_model_kr15():
     assert kpi.feasible
     # the design minimised the extended KPI: far below the heuristic design's
     assert crit.value(kpi.q_meas) < 0.5 * crit.value(rnd.q_meas)
+    # design table and JSON report the extended-model tr(C_s) (with the prior), the geometric one labelled beside it
+    from pin_kpi_oed.cli.design import _design_doc, extended_scores, table
+
+    sc = extended_scores(problem, [rnd, kpi], cell.q_work)
+    assert np.isclose(sc[1]["trace_cs_m2"], crit.value(kpi.q_meas), rtol=1e-9, atol=0.0)
+    assert np.isclose(np.trace(sc[0]["cov_s_m2"]), crit.value(rnd.q_meas), rtol=1e-9, atol=0.0)
+    assert not np.isclose(sc[1]["trace_cs_m2"], kpi.trace_cs_m2, rtol=1e-3, atol=0.0)  # not the geometric value
+    txt = table([rnd, kpi], rnd, None, sc)
+    assert f"{100 * (sc[1]['trace_cs_m2'] / sc[0]['trace_cs_m2'] - 1):+.1f}" in txt.splitlines()[-1]  # ext vs random
+    assert "ext tr(C_s) mm^2" in txt and "geo tr(C_s) mm^2" in txt
+    assert f"{sc[1]['trace_cs_m2'] * 1e6:.4e}" in txt.splitlines()[-1]
+    assert extended_scores(DesignProblem(cell), [kpi], cell.q_work) is None
+    doc = _design_doc(cell, problem, [rnd, kpi], 30, 0, True, (0.0, 0.0), None, None, None, None, None, sc, "m.json",
+                      "tolerances")
+    assert doc["designs"][1]["extended"]["trace_cs_m2"] == sc[1]["trace_cs_m2"]
+    assert doc["designs"][1]["trace_cs_m2"] == kpi.trace_cs_m2
+    assert doc["extended_model"]["prior"] == "tolerances" and doc["extended_model"]["n_effect"] == ext.k
 
 
 def test_cli_design_model_bad_inputs(tmp_path):

@@ -94,26 +94,80 @@ def parse_criteria(text: str) -> list[str]:
         raise InputError(f"--criteria: {exc}") from None
 
 
-def table(results: list, reference=None, certificate=None) -> str:
-    """The design table (one row per :class:`~pin_kpi_oed.design.optimize.DesignResult`; efficiency with a certificate)."""
+def table(results: list, reference=None, certificate=None, extended: list | None = None,
+          extended_reference: dict | None = None) -> str:
+    """The design table (one row per :class:`~pin_kpi_oed.design.optimize.DesignResult`; efficiency with a certificate).
+
+    Args:
+        results: the designs; reference: the design the "vs random" column compares with (default the first).
+        certificate: the optimality certificate or None.
+        extended: per design (same order as ``results``) the extended-model scores of :func:`extended_scores`
+            (``--model``): the table then shows the extended-model tr(C_s) (with the prior) and TCP σ first,
+            labels the geometric ones "geo" and compares the extended tr(C_s) with the reference's.
+        extended_reference: the reference design's extended scores when it is not among ``results``.
+    """
     ref = reference or results[0]
-    head = (f"{'criterion':<10}{'tr(C_s) mm^2':>14}{'TCP sigma um':>14}{'vs random %':>12}{'min clr mm':>11}"
+    ext_by_id = {id(r): e for r, e in zip(results, extended)} if extended is not None else None
+    head = (f"{'criterion':<10}" + (f"{'ext tr(C_s) mm^2':>18}{'ext sigma um':>14}" if ext_by_id else "")
+            + f"{'geo tr(C_s) mm^2' if ext_by_id else 'tr(C_s) mm^2':>{18 if ext_by_id else 14}}"
+            f"{'geo sigma um' if ext_by_id else 'TCP sigma um':>14}{'ext vs rnd %' if ext_by_id else 'vs random %':>{13 if ext_by_id else 12}}{'min clr mm':>11}"
             f"{'max inc deg':>12}{'iters':>7}{'time s':>8}" + (f"{'effic. %':>10}" if certificate else "")
             + "  check")
     lines = [head, "-" * len(head)]
     for r in results:
         # signed change of tr(C_s) against the random (the paper's heuristic) design: negative = more precise
         imp = 0.0 - r.improvement_over(ref) + 0.0 if math.isfinite(r.trace_cs_m2) else float("nan")
+        if ext_by_id:  # the extended tr(C_s) against the reference's (the criterion the designs optimised)
+            e_r, e_ref = ext_by_id.get(id(r)), ext_by_id.get(id(ref), extended_reference)
+            imp = (100.0 * (e_r["trace_cs_m2"] / e_ref["trace_cs_m2"] - 1.0) + 0.0 if e_r and e_ref
+                   else float("nan"))
         it = f"{r.iterations:d}" if r.criterion != "random" else "-"
         chk = "ok" if r.feasible else f"{100 * r.share_colliding:.0f}% coll."
         if not r.feasible and r.share_colliding == 0:
             chk = f"{100 * r.share_infeasible:.0f}% infeas."
-        lines.append(f"{r.criterion:<10}{r.trace_cs_m2 * 1e6:>14.4e}{r.tcp_sigma_m * 1e6:>14.4f}{imp:>+12.1f}"
+        ext = ""
+        if ext_by_id:
+            e = ext_by_id.get(id(r), {"trace_cs_m2": float("nan"), "tcp_sigma_m": float("nan")})
+            ext = f"{e['trace_cs_m2'] * 1e6:>18.4e}{e['tcp_sigma_m'] * 1e6:>14.4f}"
+        lines.append(f"{r.criterion:<10}{ext}{r.trace_cs_m2 * 1e6:>{18 if ext_by_id else 14}.4e}"
+                     f"{r.tcp_sigma_m * 1e6:>14.4f}{imp:>+{13 if ext_by_id else 12}.1f}"
                      f"{r.min_clearance_m * 1e3:>11.1f}{r.max_incidence_deg:>12.1f}{it:>7}"
                      f"{r.solve_time_s:>8.2f}"
                      + (f"{100 * certificate.efficiency(r.trace_cs_m2):>10.1f}" if certificate else "")
                      + f"  {chk}")
     return "\n".join(lines)
+
+
+def extended_scores(problem, results: list, q_work: np.ndarray) -> list[dict] | None:
+    """Extended-model scores of every design (``--model``), or None without an extended model.
+
+    C = (FᵀF + Σ₀⁻¹)⁻¹ over geometry + the model file's effects with the chosen prior, C_s = E C Eᵀ
+    (eq. 19, extended; :meth:`~pin_kpi_oed.oed.extended.ExtendedModel.covariances`).
+
+    Args:
+        problem: the design problem (its ``extended`` model, or None).
+        results: the designs (``q_meas``, rad).
+        q_work: working configurations (rad).
+
+    Returns:
+        Per design {"trace_cs_m2", "tcp_sigma_m" = sqrt(tr(C_s)/t), "cov_s_m2"} (m², m); NaN where the
+        design with the prior does not determine the parameters.
+    """
+    from pin_kpi_oed.errors import IdentifiabilityError
+
+    ext = getattr(problem, "extended", None)
+    if ext is None:
+        return None
+    t = np.atleast_2d(q_work).shape[0]
+    out = []
+    for r in results:
+        try:
+            Cs = ext.covariances(r.q_meas, q_work)[1]
+            tr = float(np.trace(Cs))
+            out.append({"trace_cs_m2": tr, "tcp_sigma_m": math.sqrt(tr / t), "cov_s_m2": Cs.tolist()})
+        except (IdentifiabilityError, ValueError):
+            out.append({"trace_cs_m2": float("nan"), "tcp_sigma_m": float("nan"), "cov_s_m2": None})
+    return out
 
 
 def design_json(cell, problem, results: list, m: int, seed: int, collision: bool) -> dict:
@@ -190,11 +244,13 @@ def run(args: argparse.Namespace) -> int:
         results = run_designs(cell, criteria, m, seed, opts, problem)
     true_checks = _true_checks(true_cell, results) if cell is not true_cell else None
     cert = _certificate(args, problem, results, m, seed, cert, given_file, pool_file)
-    _print_results(results, criteria, cert, m, pool_file, quiet, cell, true_cell, margins, true_checks, given_file)
+    ext_scores = extended_scores(problem, results, true_cell.q_work)
+    _print_results(results, criteria, cert, m, pool_file, quiet, cell, true_cell, margins, true_checks, given_file,
+                   ext_scores)
     until = _poses_until(args, problem, cell, target, seed, checked) if target is not None else None
     if getattr(args, "json", None):
         doc = _design_doc(true_cell, problem, results, m, seed, collision, margins, given_file, pool_file, until,
-                          true_checks, cert)
+                          true_checks, cert, ext_scores, getattr(args, "model", None), getattr(args, "prior", None))
         atomic_write_json(args.json, doc)
         if not quiet:
             print(f"wrote {args.json}")
@@ -254,10 +310,16 @@ def _certificate(args: argparse.Namespace, problem, results: list, m: int, seed:
 
 
 def _print_results(results: list, criteria: list, cert, m: int, pool_file: str | None, quiet: bool, cell,
-                   true_cell, margins: tuple[float, float], true_checks, given_file: str | None = None) -> None:
+                   true_cell, margins: tuple[float, float], true_checks, given_file: str | None = None,
+                   ext_scores: list | None = None) -> None:
     """Print the result table, the certificate, the random design's acceptance and the infeasible designs."""
     shown = [r for r in results if r.criterion in criteria] or results
-    print(table(shown, results[0], cert))
+    ext_of = {id(r): e for r, e in zip(results, ext_scores)} if ext_scores is not None else None
+    print(table(shown, results[0], cert, [ext_of[id(r)] for r in shown] if ext_of else None,
+                ext_of[id(results[0])] if ext_of else None))
+    if ext_of:
+        print("ext = extended model (geometry + the model file's effects, with the prior: the criterion the designs "
+              "optimised); geo = identifiable geometry + set-up only, no prior (the plain design's tr(C_s))")
     if cert is not None:
         print(f"certificate: every {m}-pose design from the {cert.pool_size} feasible candidates "
               f"({'the user pool' if pool_file else 'random pool + the designs poses'})"
@@ -366,10 +428,20 @@ def _given_prior(path: str, problem) -> np.ndarray:
 
 
 def _design_doc(true_cell, problem, results: list, m: int, seed: int, collision: bool, margins, given_file,
-                pool_file, until, true_checks, cert) -> dict:
+                pool_file, until, true_checks, cert, ext_scores: list | None = None, model_file: str | None = None,
+                prior: str | None = None) -> dict:
     """The JSON document of ``design`` with the margins, the given poses, the pool, the "how many more" answer,
-    the true clearances and the certificate (SI units)."""
+    the true clearances, the certificate and, with ``--model``, the extended-model scores of every design
+    (``designs[i]["extended"]``; ``trace_cs_m2`` stays the geometric one, SI units)."""
     doc = design_json(true_cell, problem, results, m, seed, collision)
+    if ext_scores is not None:
+        ext = problem.extended
+        doc["extended_model"] = {"file": str(model_file), "prior": prior or "model", "n_geometric": ext.nb,
+                                 "n_effect": ext.k, "names": list(ext.names),
+                                 "note": "designs[i].extended: tr(C_s) of the extended model with the prior (the "
+                                         "criterion designed for); designs[i].trace_cs_m2: geometric, no prior"}
+        for d, e in zip(doc["designs"], ext_scores):
+            d["extended"] = e
     doc["clearance_margin_m"], doc["incidence_margin_deg"] = margins
     if given_file:  # tr(C_s) and C_s of every design include the measured poses (and the prior)
         from pin_kpi_oed.oed.covariance import kpi_covariance
