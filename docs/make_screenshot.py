@@ -35,7 +35,7 @@ def design_file(tmp: Path) -> tuple[Path, bool]:
         return Path(sys.argv[1]), True
     path = tmp / "design.json"
     try:
-        from pin_kpi_oed.cli.main import main as cli
+        from pin_kpi_oed.cli.app import main as cli
 
         rc = cli(["design", "--cell", "kr15", "--criteria", "random,param,kpi", "--measurements", "60", "--seed", "0",
                   "--json", str(path)])

@@ -30,7 +30,7 @@ if args:
 else:
     design_json = Path(tempfile.mkdtemp()) / "design.json"
     try:  # the KPI design of the shipped KR 15 cell (issue 4)
-        from pin_kpi_oed.cli.main import main as cli
+        from pin_kpi_oed.cli.app import main as cli
 
         m = 30 if quick else 60
         rc = cli(["design", "--cell", "kr15", "--criteria", "random,param,kpi", "--measurements", str(m),

@@ -2,6 +2,6 @@
 
 import sys
 
-from pin_kpi_oed.cli.main import main
+from pin_kpi_oed.cli.app import main
 
 sys.exit(main())

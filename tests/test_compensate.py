@@ -10,7 +10,7 @@ import pinocchio as pin
 import pytest
 
 from pin_kpi_oed import NoiseModel, TrackerModel, load_robot
-from pin_kpi_oed.cli.main import main
+from pin_kpi_oed.cli.app import main
 from pin_kpi_oed.data.measurements import MeasurementSet
 from pin_kpi_oed.data.targets import TargetSet, read_targets
 from pin_kpi_oed.effects.library import parse_effects_spec, size_effect

@@ -176,7 +176,7 @@ def test_toy_criterion_through_ipopt_design_and_evaluate(toys, problem, tmp_path
     assert score.criteria["cs_max"] == pytest.approx(res.value, rel=1e-9)
     assert score.criteria["cs_z"] == pytest.approx(np.trace(score.cov_s_m2[2::3, 2::3]), rel=1e-9)
     # the evaluate command (in-process, the registry is this process's) prints it with its unit
-    from pin_kpi_oed.cli.main import main
+    from pin_kpi_oed.cli.app import main
 
     path = tmp_path / "d.json"
     path.write_text(json.dumps({**model_to_dict(problem.model), "q_meas": res.q_meas.tolist(),

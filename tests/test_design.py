@@ -204,7 +204,7 @@ def sequential_files(tmp_path_factory):
 
 
 def test_cli_pool_on_top_of_given_poses_is_certified_and_answers_how_many_more(sequential_files):
-    from pin_kpi_oed.cli.main import main
+    from pin_kpi_oed.cli.app import main
     from pin_kpi_oed.design.sequential import SequentialProblem
     from pin_kpi_oed.oed.criteria import DesignCriterion
 
@@ -274,7 +274,7 @@ def test_given_prior_counts_in_scores_and_certificate(sequential_files):
 
 
 def test_cli_bad_given_and_pool_inputs_exit_2_and_write_nothing(sequential_files, tmp_path, capsys):
-    from pin_kpi_oed.cli.main import main
+    from pin_kpi_oed.cli.app import main
 
     folder, Qg, pool = sequential_files
     cell = load_cell("kr15")

@@ -8,7 +8,7 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from pin_kpi_oed.cli.main import main as cli_main
+from pin_kpi_oed.cli.app import main as cli_main
 from pin_kpi_oed.diagnosis.diagnose import diagnose
 from pin_kpi_oed.effects.library import EFFECT_NAMES, parse_effects_spec, size_effect, visible_rms
 from pin_kpi_oed.data.measurements import MeasurementSet, write_measurements

@@ -122,7 +122,7 @@ def test_bad_environment_file_is_one_line_naming_file_and_key(tmp_path, entry, n
 
 
 def test_cli_exit_2_on_a_missing_environment_file(tmp_path, capsys):
-    from pin_kpi_oed.cli.main import main
+    from pin_kpi_oed.cli.app import main
 
     d = _kr15_dict()
     d["environment"] = [{"name": "fixture", "mesh": "nowhere.stl"}]
@@ -171,7 +171,7 @@ def test_working_targets_in_the_cell_file_and_unreachable_target():
 def test_shipped_ur10_cell_is_built_from_files_and_designs(tmp_path):
     import json
 
-    from pin_kpi_oed.cli.main import main
+    from pin_kpi_oed.cli.app import main
 
     cell = load_cell("ur10")
     env = cell.environment[0]

@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from pin_kpi_oed.cli.main import main
+from pin_kpi_oed.cli.app import main
 from pin_kpi_oed.errors import InputError
 from tests.hostile.cases import CASES, build_inputs, run_case
 

@@ -184,7 +184,7 @@ def test_ur10_program_takes_the_pocket_poses_equivalent_and_exports_the_vias(ur1
 
 
 # ---------------------------------------------------------------------------- exports
-from pin_kpi_oed.cli.main import main  # noqa: E402
+from pin_kpi_oed.cli.app import main  # noqa: E402
 from pin_kpi_oed.model.robot import load_robot  # noqa: E402
 from pin_kpi_oed.program.export import FORMATS, ProgramInfo, parse_program, write_program  # noqa: E402
 

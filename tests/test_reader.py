@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from pin_kpi_oed import NoiseModel, TrackerModel, load_robot
-from pin_kpi_oed.cli.main import main
+from pin_kpi_oed.cli.app import main
 from pin_kpi_oed.data.measurements import read_measurements, write_measurements
 from pin_kpi_oed.data.table import parse_columns, parse_units
 from pin_kpi_oed.errors import InputError

@@ -106,7 +106,7 @@ def test_entry_points_run_single_threaded_with_numpy_imported_first() -> None:
 
 def test_cli_threads_option_sets_the_limit_and_rejects_nonsense(monkeypatch):
     from pin_kpi_oed import threads
-    from pin_kpi_oed.cli.main import main
+    from pin_kpi_oed.cli.app import main
 
     monkeypatch.setattr(threads, "_max_threads", None)
     assert main(["--threads", "2", "info", "kr15", "--json"]) == 0

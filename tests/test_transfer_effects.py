@@ -371,7 +371,7 @@ def _write_withheld_split(model, tmp_path, seed, n, n_train):
 def test_cli_diagnose_selects_withheld_transmission_error(model, tmp_path, capsys):
     import json
 
-    from pin_kpi_oed.cli.main import main as cli_main
+    from pin_kpi_oed.cli.app import main as cli_main
 
     _write_withheld_split(model, tmp_path, 21, 700, 500)
     out = tmp_path / "r.json"
@@ -401,7 +401,7 @@ def test_diagnose_transfer_section_names_extrapolation(model, tmp_path, capsys):
     """Train in one region of the shoulder/elbow, validate in another (tracker moved): "extrapolation" is named."""
     import json
 
-    from pin_kpi_oed.cli.main import main as cli_main
+    from pin_kpi_oed.cli.app import main as cli_main
     from pin_kpi_oed.data.measurements import write_measurements
 
     ur10 = model.robot
@@ -515,7 +515,7 @@ def test_circular_range_wraps_like_the_coverage():
 def test_cli_term_prior_shrinks_the_selected_terms(model, tmp_path, capsys):
     import json
 
-    from pin_kpi_oed.cli.main import main as cli_main
+    from pin_kpi_oed.cli.app import main as cli_main
 
     _write_withheld_split(model, tmp_path, 23, 500, 350)
     amps = {}

@@ -402,7 +402,7 @@ def test_nice_factor_and_ellipsoid():
 
 # ----------------------------------------------------------------------------- CLI
 def test_cli_view_writes_the_static_page(design_path, tmp_path, capsys):
-    from pin_kpi_oed.cli.main import main
+    from pin_kpi_oed.cli.app import main
 
     out = tmp_path / "view.html"
     assert main(["view", str(design_path), "--html", str(out), "--no-open", "--criteria", "random,kpi",

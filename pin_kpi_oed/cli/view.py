@@ -126,7 +126,7 @@ def _serve_until_stopped(scene: Scene, open_browser: bool) -> int:
 
 
 def run(args: argparse.Namespace) -> int:
-    """Handler of ``view``; returns the exit code (errors raise PinKpiOedError, printed by cli.main)."""
+    """Handler of ``view``; returns the exit code (errors raise PinKpiOedError, printed by cli.app)."""
     from pin_kpi_oed.design.design_file import load_design
     from pin_kpi_oed.viz.scene import MAX_GHOSTS, SceneOptions, build_scene
 

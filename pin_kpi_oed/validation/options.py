@@ -1,4 +1,4 @@
-"""Option checks of every command, run before any work (``cli/main.py`` calls :func:`check_args`).
+"""Option checks of every command, run before any work (``cli/app.py`` calls :func:`check_args`).
 
 Each rule names the option, the allowed range and the unit; zero and negative values are refused
 rather than replaced by defaults (issue 15: ``--measurements 0`` designed 60, ``--arms -3`` ran 87).

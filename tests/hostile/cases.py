@@ -3,7 +3,7 @@
 ``build_inputs(folder)`` writes the shared inputs (a simulated KR 15 data set with sigma columns and an
 off-axis reflector, a cell file, a design file, broken variants of each); ``CASES`` lists the cases
 (``Case.argv`` uses ``{d}`` for that folder); ``run_case`` runs one in-process through
-``pin_kpi_oed.cli.main.main`` and returns what happened. ``tests/test_hostile.py`` asserts every case;
+``pin_kpi_oed.cli.app.main`` and returns what happened. ``tests/test_hostile.py`` asserts every case;
 ``python -m tests.hostile.run_hostile`` reruns them all as real subprocesses and prints a table.
 """
 
@@ -222,7 +222,7 @@ CASES: list[Case] = _cases()
 
 def build_inputs(d: Path) -> None:
     """Write the shared inputs into ``d`` (about 5 s: one simulation, one random design)."""
-    from pin_kpi_oed.cli.main import main
+    from pin_kpi_oed.cli.app import main
 
     d.mkdir(parents=True, exist_ok=True)
     with contextlib.redirect_stdout(io.StringIO()):
@@ -318,7 +318,7 @@ def run_case(case: Case, base: Path, work: Path) -> Outcome:
     (work / "link.csv").unlink()
     (work / "link.csv").symlink_to(work / "tr.csv")
     before = snapshot(work)
-    from pin_kpi_oed.cli.main import main
+    from pin_kpi_oed.cli.app import main
 
     err, out = io.StringIO(), io.StringIO()
     t0 = time.perf_counter()
