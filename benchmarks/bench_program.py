@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from pin_kpi_oed.cell.feasibility import FeasibilityChecker
-from pin_kpi_oed.cli.main import main as cli
+from pin_kpi_oed.cli.app import main as cli
 from pin_kpi_oed.design.design_file import load_design
 from pin_kpi_oed.program.export import FORMATS, ProgramInfo, parse_program, write_program
 from pin_kpi_oed.program.ordering import ProgramOptions, plan_program
