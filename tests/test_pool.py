@@ -255,3 +255,18 @@ def test_near_duplicate_pool_is_certified_on_every_candidate(pool, kind):
     assert all(exact_phi(big, idx, K) >= bound_exact for idx in designs)
     base = np.median([exact_phi(big, detmax(big, m, K, seed=s), K) for s in range(3)])
     assert sel.phi <= base + 1e-3 * abs(base)
+
+
+def test_onto_capped_gives_a_capped_measure():
+    """The warm start's projection: weights above the cap are cut, the measure stays a probability ≤ cap."""
+    from pin_kpi_oed.oed.pool import _onto_capped
+
+    rng = np.random.default_rng(3)
+    w = rng.exponential(size=200) ** 4
+    w /= w.sum()
+    cap = 1 / 60
+    assert w.max() > cap  # the case that needs the cut
+    v = _onto_capped(w, cap)
+    assert abs(v.sum() - 1) < 1e-12 and v.min() >= 0 and v.max() <= cap * (1 + 1e-12)
+    small = np.full(100, 0.01)
+    np.testing.assert_array_equal(_onto_capped(small, cap), small)

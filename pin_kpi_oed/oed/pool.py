@@ -246,7 +246,7 @@ def _onto_capped(w: np.ndarray, cap: float) -> np.ndarray:
 
 
 def _newton_simplex(Fa: np.ndarray, w: np.ndarray, K: np.ndarray | None, tol: float, m: int = 1,
-                    max_iter: int = 60, M0: np.ndarray | None = None, mix: float = 0.5) -> tuple[np.ndarray, int]:
+                    max_iter: int = 60, M0: np.ndarray | None = None, warm: bool = False) -> tuple[np.ndarray, int]:
     """Primal–dual interior-point (Newton) method for min φ(w) over {w ≥ 0, Σw = 1, w ≤ 1/m}.
 
     KKT conditions: ∇φ + ν1 − z + y = 0, w∘z = μ, (1/m − w)∘y = μ, μ → 0 (the cap and its dual y
@@ -264,6 +264,7 @@ def _newton_simplex(Fa: np.ndarray, w: np.ndarray, K: np.ndarray | None, tol: fl
         max_iter: cap on Newton steps.
         M0: fixed information per unit measure (M = M0 + Σ w_i A_i), or None; the gap is then
             (mean of the m largest d − Σ w_i d_i) / (φ (A) or nb (D)).
+        warm: w is a previous solution: start from it mixed 10 % (not 50 %) with the uniform measure.
 
     Returns:
         (weights, Newton steps).
@@ -277,7 +278,10 @@ def _newton_simplex(Fa: np.ndarray, w: np.ndarray, K: np.ndarray | None, tol: fl
     w = np.clip(w, 1e-6 / k, None)
     w = w / w.sum()
     if m > 1:  # strictly inside the cap: mix with the uniform measure (1/k < 1/m)
-        w = (1.0 - mix) * _onto_capped(w, cap) + mix / k
+        if warm:  # the previous round's weights, 10 % toward the uniform measure (strictly inside: ≤ 0.9 cap + 0.1/k)
+            w = 0.9 * _onto_capped(w, cap) + 0.1 / k
+        else:
+            w = 0.5 * np.minimum(w, cap) / np.minimum(w, cap).sum() + 0.5 / k
     phi, g, B = _newton_parts(F2, k, nh, w, K, M0)
     nu = float(-g.min())
     z = np.maximum(nu + g, 1e-3 * abs(nu))
@@ -433,7 +437,8 @@ _PRUNE = 1e-3
 _MARGIN = 0.5
 #: the exchange runs over the support and the max(_NCAND, 5m) candidates of largest d
 _NCAND = 300
-#: ... and the best design is polished by an exchange over the _POLISH candidates of largest d
+#: ... and in large pools (N > 2·_SUB) the best design is polished by an exchange over the _POLISH candidates of
+#: largest d
 _POLISH = 3000
 
 
@@ -441,29 +446,33 @@ def _relax_newton(Fp: np.ndarray, K: np.ndarray | None, tol: float, max_iter: in
                   M0: np.ndarray | None = None) -> tuple[np.ndarray, int]:
     """Working-set interior-point relaxation (see :func:`approximate_design`). Returns (w, Newton steps).
 
-    Round 1 solves on :data:`_SUB` random candidates (large pools) or on the candidates five multiplicative
-    iterations favour; every later round keeps the candidates with weight (≥ :data:`_PRUNE` of the largest),
-    adds the strongest violators of the equivalence condition on the whole pool (d_i above the working set's
-    m-th largest d; at most :data:`_GROW` × the working set) and warm-starts the interior-point method from the
-    previous weights (10 % mixed with the uniform measure instead of 50 %). Each round is solved to tol/10; the
-    loop ends when the gap over **all** candidates is < tol (or no candidate violates), so the reduction is exact.
+    Small pools (N ≤ 2·:data:`_SUB`): round 1 on the candidates five multiplicative iterations favour; later
+    rounds keep the candidates with weight ≥ 1e-4 of the largest and add those of the m + k largest d_i above
+    the working set's m-th largest d. Large pools (the 100,000-pose user pools, where near-duplicate candidates
+    made that working set grow by ~150 per round over ~30 rounds): round 1 on :data:`_SUB` random candidates
+    (seeded); later rounds keep the weights ≥ :data:`_PRUNE` of the largest, add the violators (d_i above the
+    working set's m-th largest d) whose excess is > :data:`_MARGIN` · tol · φ first — at most :data:`_GROW` × the
+    working set — and warm-start the interior-point method from the previous weights. Each round is solved to
+    tol/10; the loop ends when the gap over **all** candidates is < tol (or no candidate violates), so the
+    reduction is exact in both cases.
     """
     N, nh, nb = Fp.shape
     Ks = None if K is None else K / np.sqrt(phi0)  # φ ≈ 1 at the start: well-scaled Newton systems
     k = min(N, max(6 * nb, 150, 2 * m))
-    total, mix = 0, 0.5
-    if N > 2 * _SUB:
+    large = N > 2 * _SUB
+    if large:
         work = np.sort(np.random.default_rng(0).choice(N, _SUB, replace=False))  # seeded: reproducible
         w = np.zeros(N)
         w[work] = 1.0 / work.size
     else:
         w, _ = _multiplicative(Fp, np.full(N, 1.0 / N), Ks, tol, 5, M0)
         work = np.union1d(np.argsort(-w)[:k], np.argsort(-_d_all(Fp, w, Ks, M0=M0)[1])[:k // 3 + m])
+    total, warm = 0, False
     while True:
         wa = w[work] + 1e-3 / work.size
         try:
             wa, it = _newton_simplex(Fp[work], wa / wa.sum(), Ks, tol / 10, m,
-                                     max(1, min(60, max_iter - total)), M0, mix)
+                                     max(1, min(60, max_iter - total)), M0, warm)
         except np.linalg.LinAlgError:  # the working set does not identify: enlarge it
             if work.size == N:
                 raise
@@ -476,16 +485,17 @@ def _relax_newton(Fp: np.ndarray, K: np.ndarray | None, tol: float, max_iter: in
         w /= w.sum()
         phi, d = _d_all(Fp, w, Ks, M0=M0)
         target = phi if K is not None else nb
-        gap = _gap(d, w, target, m, M0 is not None)
         thr = np.partition(d[work], work.size - m)[work.size - m]
-        viol = np.setdiff1d(np.flatnonzero(d > thr), work)
-        if gap < tol or total >= max_iter or viol.size == 0:
+        viol = np.setdiff1d(np.flatnonzero(d > thr) if large else np.argsort(-d)[:m + k], work)
+        viol = viol[d[viol] > thr]
+        if _gap(d, w, target, m, M0 is not None) < tol or total >= max_iter or viol.size == 0:
             return w, total
-        strong = viol[d[viol] > thr + _MARGIN * tol * abs(target)]
-        viol = strong if strong.size else viol
-        add = viol[np.argsort(-d[viol])[:max(m + k, int(_GROW * work.size))]]
-        work = np.union1d(work[wa > _PRUNE * wa.max()], add)
-        mix = 0.1
+        if large:
+            strong = viol[d[viol] > thr + _MARGIN * tol * abs(target)]
+            viol = strong if strong.size else viol
+            viol = viol[np.argsort(-d[viol])[:max(m + k, int(_GROW * work.size))]]
+        work = np.union1d(work[wa > (_PRUNE if large else 1e-4) * wa.max()], viol)
+        warm = large
 
 
 def _relax_multiplicative(Fp: np.ndarray, w: np.ndarray, K: np.ndarray | None, tol: float, max_iter: int
@@ -639,7 +649,7 @@ def select(Fp: np.ndarray, m: int, K: np.ndarray | None = None, tol: float = 1e-
         if val < best_phi:
             best, best_phi = idx, val
     best = cand[best]
-    wide = np.union1d(cand, np.argsort(-d)[:_POLISH]) if _POLISH else cand
+    wide = np.union1d(cand, np.argsort(-d)[:_POLISH]) if N > 2 * _SUB else cand
     if wide.size > cand.size:  # polish: the best design, exchanged over a wider set (can only lower φ)
         pos = np.searchsorted(wide, best)
         idx, nsw = _exchange(Fp[wide], pos, K, 0.0 if np.isfinite(best_phi) else 1e-12, M0=M0)
