@@ -231,8 +231,16 @@ def _top_mean(d: np.ndarray, m: int) -> float:
 
 
 def _onto_capped(w: np.ndarray, cap: float) -> np.ndarray:
-    """A measure of the capped simplex {v ≥ 0, Σv = 1, v ≤ cap} from w ≥ 0 (Σw = 1, cap·size ≥ 1): weights above
-    the cap are cut to it and the excess is spread over the others in proportion (repeated until none exceeds)."""
+    """A measure of the capped simplex {v ≥ 0, Σv = 1, v ≤ cap} from w: weights above the cap are cut to it and
+    the excess is spread over the others in proportion (repeated until none exceeds; the warm start's projection).
+
+    Args:
+        w: weights ≥ 0 summing to 1, (k,).
+        cap: the cap 1/m, with cap·k ≥ 1.
+
+    Returns:
+        v, (k,): Σv = 1, 0 ≤ v ≤ cap; v = w if w is already capped.
+    """
     v = w.copy()
     for _ in range(v.size):
         over = v > cap
@@ -342,7 +350,8 @@ def approximate_design(Fp: np.ndarray, K: np.ndarray | None = None, tol: float =
 
     ``method="newton"`` (default): candidate reduction by the equivalence theorem and an
     interior-point Newton method on the simplex. Five multiplicative iterations on the whole pool
-    pick a working set (the candidates carrying weight and those with the largest d_i); the
+    pick a working set (the candidates carrying weight and those with the largest d_i; pools of more
+    than 4,000 candidates start from 2,000 drawn at random, seeded, see :func:`_relax_newton`); the
     interior-point method (:func:`_newton_simplex`) solves the relaxation on it to tol/10; then d_i is
     evaluated on the whole pool: every candidate outside the m largest d_i satisfies the
     equivalence condition and stays out, the others join the working set, and the loop repeats
