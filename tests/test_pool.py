@@ -270,3 +270,20 @@ def test_onto_capped_gives_a_capped_measure():
     assert abs(v.sum() - 1) < 1e-12 and v.min() >= 0 and v.max() <= cap * (1 + 1e-12)
     small = np.full(100, 0.01)
     np.testing.assert_array_equal(_onto_capped(small, cap), small)
+
+
+def test_selection_efficiency_of_d_and_a_type(pool):
+    """The benchmark's efficiency per criterion: A-type is the certificate's ratio; D-type the D-efficiency bound
+    exp(−(φ(ξ) − (φ* − nb log m))/nb), ≤ 1, and a random subset's is lower than the selection's."""
+    from pin_kpi_oed.design.user_pool import selection_efficiency
+
+    Fp, E = pool
+    m, nb = 40, Fp.shape[-1]
+    sel = select(Fp, m, E)
+    assert selection_efficiency(sel, m) == sel.efficiency()
+    d_sel = select(Fp, m, None)
+    eff = selection_efficiency(d_sel, m, nb)
+    assert 0.9 < eff <= 1.0
+    rnd = np.random.default_rng(4).choice(len(Fp), m, replace=False)
+    bound = d_sel.approx.lower_bound - nb * np.log(m)
+    assert np.exp(-(exact_phi(Fp, rnd, None) - bound) / nb) < eff
