@@ -221,3 +221,69 @@ def test_fixed_information_selection_on_a_larger_pool_is_certified(pool):
     assert sel.phi <= exact_phi(cand, blind, E, fixed_info=M0) * (1 + 1e-12)
     with pytest.raises(InputError, match="needs m"):
         approximate_design(cand, E, fixed_info=M0)
+
+
+@pytest.mark.parametrize("kind", ["kpi", "param", "D"])
+def test_near_duplicate_pool_is_certified_on_every_candidate(pool, kind):
+    """A pool of near-duplicates (each pose taught 20 times, the benchmark's structure) takes the large-pool path
+    (random first working set, warm-started rounds): the gap holds on all candidates, recomputed here from the
+    weights alone; the bound is below the selection and random m-subsets; the selection beats DETMAX's median."""
+    Fp, E = pool
+    K = {"kpi": E, "param": np.eye(Fp.shape[-1]), "D": None}[kind]
+    rng = np.random.default_rng(7)
+    big = np.concatenate([Fp * (1 + 0.01 * rng.standard_normal((len(Fp), 1, 1))) for _ in range(20)])
+    m = 60
+    sel = select(big, m, K)
+    ap = sel.approx
+    assert ap.success and len(set(sel.indices.tolist())) == m
+    w = ap.weights
+    M = np.einsum("i,iab,iac->bc", w, big, big)
+    Minv = np.linalg.inv(M)
+    if K is None:
+        d = np.einsum("iab,bc,iac->i", big, Minv, big)
+        phi, top = -np.linalg.slogdet(M)[1], np.mean(np.sort(d)[-m:])
+        assert top / Fp.shape[-1] - 1 <= 1e-3 + 1e-9
+        bound_exact = ap.lower_bound - Fp.shape[-1] * np.log(m)  # −log det of any exact m-design is above
+    else:
+        G = big @ (Minv @ K.T)
+        d = np.einsum("ias,ias->i", G, G)
+        phi, top = np.trace(K @ Minv @ K.T), np.mean(np.sort(d)[-m:])
+        assert top / phi - 1 <= 1e-3 + 1e-9
+        bound_exact = ap.lower_bound / m
+    assert abs(phi - ap.phi) <= 1e-9 * abs(phi)
+    designs = [sel.indices] + [rng.choice(len(big), m, replace=False) for _ in range(20)]
+    assert all(exact_phi(big, idx, K) >= bound_exact for idx in designs)
+    base = np.median([exact_phi(big, detmax(big, m, K, seed=s), K) for s in range(3)])
+    assert sel.phi <= base + 1e-3 * abs(base)
+
+
+def test_onto_capped_gives_a_capped_measure():
+    """The warm start's projection: weights above the cap are cut, the measure stays a probability ≤ cap."""
+    from pin_kpi_oed.oed.pool import _onto_capped
+
+    rng = np.random.default_rng(3)
+    w = rng.exponential(size=200) ** 4
+    w /= w.sum()
+    cap = 1 / 60
+    assert w.max() > cap  # the case that needs the cut
+    v = _onto_capped(w, cap)
+    assert abs(v.sum() - 1) < 1e-12 and v.min() >= 0 and v.max() <= cap * (1 + 1e-12)
+    small = np.full(100, 0.01)
+    np.testing.assert_array_equal(_onto_capped(small, cap), small)
+
+
+def test_selection_efficiency_of_d_and_a_type(pool):
+    """The benchmark's efficiency per criterion: A-type is the certificate's ratio; D-type the D-efficiency bound
+    exp(−(φ(ξ) − (φ* − nb log m))/nb), ≤ 1, and a random subset's is lower than the selection's."""
+    from pin_kpi_oed.design.user_pool import selection_efficiency
+
+    Fp, E = pool
+    m, nb = 40, Fp.shape[-1]
+    sel = select(Fp, m, E)
+    assert selection_efficiency(sel, m) == sel.efficiency()
+    d_sel = select(Fp, m, None)
+    eff = selection_efficiency(d_sel, m, nb)
+    assert 0.9 < eff <= 1.0
+    rnd = np.random.default_rng(4).choice(len(Fp), m, replace=False)
+    bound = d_sel.approx.lower_bound - nb * np.log(m)
+    assert np.exp(-(exact_phi(Fp, rnd, None) - bound) / nb) < eff

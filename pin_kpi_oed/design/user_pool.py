@@ -30,7 +30,7 @@ from pin_kpi_oed.errors import InfeasibleError, InputError
 from pin_kpi_oed.model.robot import Robot
 from pin_kpi_oed.oed.certificate import Certificate
 from pin_kpi_oed.oed.criteria import get_criterion
-from pin_kpi_oed.oed.pool import select
+from pin_kpi_oed.oed.pool import PoolSelection, select
 from pin_kpi_oed.threads import limited_threads
 
 #: candidates checked per batch (bounds the memory of 100,000 candidates; Jacobians of 5,000 at a time are
@@ -131,6 +131,25 @@ def fixed_information(problem: DesignProblem) -> np.ndarray | None:
     return M0 if M0.any() else None
 
 
+def selection_efficiency(sel: PoolSelection, m: int, nb: int | None = None) -> float:
+    """Efficiency of a pool selection against its relaxation's certificate (≤ 1).
+
+    A-type: (φ*/m) / φ(ξ) (:meth:`PoolSelection.efficiency`). D-type (−log det): the D-efficiency
+    (det M(ξ) / det M*)^(1/nb) ≥ exp(−(φ(ξ) − (φ* − nb log m)) / nb), φ* the certified bound per unit measure.
+
+    Args:
+        sel: the selection (its ``phi`` and ``approx.lower_bound``).
+        m: selected poses.
+        nb: the number of parameters if the criterion's pool form is −log det M (K None); None for A-type.
+
+    Returns:
+        The efficiency's lower bound, in (0, 1].
+    """
+    if nb is None:
+        return sel.efficiency()
+    return float(np.exp(-(sel.phi - (sel.approx.lower_bound - nb * np.log(m))) / nb))
+
+
 def design_from_pool(problem: DesignProblem, Q_candidates: np.ndarray, criteria: list[str], m: int, seed: int = 0,
                      timings: dict | None = None, checked: tuple[np.ndarray, np.ndarray] | None = None
                      ) -> tuple[list[DesignResult], Certificate | None, int]:
@@ -145,7 +164,9 @@ def design_from_pool(problem: DesignProblem, Q_candidates: np.ndarray, criteria:
         criteria: ``random`` and registered criterion names.
         m: poses to select.
         seed: seed of the random reference and of the exchange starts.
-        timings: if given, filled with the time per stage (s): ``check_s``, ``jacobians_s``, ``select_<criterion>_s``.
+        timings: if given, filled with the time per stage (s): ``check_s``, ``jacobians_s``, ``select_<criterion>_s``
+            (and its CPU time ``select_<criterion>_cpu_s``), and each selection's efficiency against its certificate, ``efficiency_<criterion>``
+            (:func:`selection_efficiency`).
         checked: (feasible mask, their Jacobians) of :func:`check_candidates` if already computed.
 
     Returns:
@@ -175,10 +196,12 @@ def design_from_pool(problem: DesignProblem, Q_candidates: np.ndarray, criteria:
         if c == "random":
             continue
         K = get_criterion(c).pool_form(problem.E, problem.base.size)
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), time.process_time()
         sel = select(Fp, m, K, seed=seed, fixed_info=M0)
         if timings is not None:
             timings[f"select_{c}_s"] = time.perf_counter() - t0
+            timings[f"select_{c}_cpu_s"] = time.process_time() - c0
+            timings[f"efficiency_{c}"] = selection_efficiency(sel, m, problem.base.size if K is None else None)
         Qs = Q[np.sort(sel.indices)]
         out.append(problem.result(c, Qs, problem.criterion(c).value(Qs), time_s=sel.time_s, nit=sel.nit,
                                   status=sel.status, solver_status="pool", samples=len(Q), message=sel.message))

@@ -230,8 +230,31 @@ def _top_mean(d: np.ndarray, m: int) -> float:
     return float(d.max()) if m <= 1 else float(np.mean(np.partition(d, d.size - m)[d.size - m:]))
 
 
+def _onto_capped(w: np.ndarray, cap: float) -> np.ndarray:
+    """A measure of the capped simplex {v ≥ 0, Σv = 1, v ≤ cap} from w: weights above the cap are cut to it and
+    the excess is spread over the others in proportion (repeated until none exceeds; the warm start's projection).
+
+    Args:
+        w: weights ≥ 0 summing to 1, (k,).
+        cap: the cap 1/m, with cap·k ≥ 1.
+
+    Returns:
+        v, (k,): Σv = 1, 0 ≤ v ≤ cap; v = w if w is already capped.
+    """
+    v = w.copy()
+    for _ in range(v.size):
+        over = v > cap
+        if not over.any():
+            break
+        excess = float(np.sum(v[over] - cap))
+        v[over] = cap
+        free = v < cap
+        v[free] += excess * (v[free] / v[free].sum() if v[free].sum() > 0 else 1.0 / free.sum())
+    return v
+
+
 def _newton_simplex(Fa: np.ndarray, w: np.ndarray, K: np.ndarray | None, tol: float, m: int = 1,
-                    max_iter: int = 60, M0: np.ndarray | None = None) -> tuple[np.ndarray, int]:
+                    max_iter: int = 60, M0: np.ndarray | None = None, warm: bool = False) -> tuple[np.ndarray, int]:
     """Primal–dual interior-point (Newton) method for min φ(w) over {w ≥ 0, Σw = 1, w ≤ 1/m}.
 
     KKT conditions: ∇φ + ν1 − z + y = 0, w∘z = μ, (1/m − w)∘y = μ, μ → 0 (the cap and its dual y
@@ -249,6 +272,7 @@ def _newton_simplex(Fa: np.ndarray, w: np.ndarray, K: np.ndarray | None, tol: fl
         max_iter: cap on Newton steps.
         M0: fixed information per unit measure (M = M0 + Σ w_i A_i), or None; the gap is then
             (mean of the m largest d − Σ w_i d_i) / (φ (A) or nb (D)).
+        warm: w is a previous solution: start from it mixed 10 % (not 50 %) with the uniform measure.
 
     Returns:
         (weights, Newton steps).
@@ -262,7 +286,10 @@ def _newton_simplex(Fa: np.ndarray, w: np.ndarray, K: np.ndarray | None, tol: fl
     w = np.clip(w, 1e-6 / k, None)
     w = w / w.sum()
     if m > 1:  # strictly inside the cap: mix with the uniform measure (1/k < 1/m)
-        w = 0.5 * np.minimum(w, cap) / np.minimum(w, cap).sum() + 0.5 / k
+        if warm:  # the previous round's weights, 10 % toward the uniform measure (strictly inside: ≤ 0.9 cap + 0.1/k)
+            w = 0.9 * _onto_capped(w, cap) + 0.1 / k
+        else:
+            w = 0.5 * np.minimum(w, cap) / np.minimum(w, cap).sum() + 0.5 / k
     phi, g, B = _newton_parts(F2, k, nh, w, K, M0)
     nu = float(-g.min())
     z = np.maximum(nu + g, 1e-3 * abs(nu))
@@ -323,7 +350,8 @@ def approximate_design(Fp: np.ndarray, K: np.ndarray | None = None, tol: float =
 
     ``method="newton"`` (default): candidate reduction by the equivalence theorem and an
     interior-point Newton method on the simplex. Five multiplicative iterations on the whole pool
-    pick a working set (the candidates carrying weight and those with the largest d_i); the
+    pick a working set (the candidates carrying weight and those with the largest d_i; pools of more
+    than 4,000 candidates start from 2,000 drawn at random, seeded, see :func:`_relax_newton`); the
     interior-point method (:func:`_newton_simplex`) solves the relaxation on it to tol/10; then d_i is
     evaluated on the whole pool: every candidate outside the m largest d_i satisfies the
     equivalence condition and stays out, the others join the working set, and the loop repeats
@@ -406,19 +434,54 @@ def approximate_design(Fp: np.ndarray, K: np.ndarray | None = None, tol: float =
                              time_s=time.perf_counter() - t0)
 
 
+#: pools larger than twice this start the working set from this many candidates drawn at random (seeded), not
+#: from multiplicative iterations on the whole pool (a far better first working set for large pools)
+_SUB = 2000
+#: per round the working set grows by at most this fraction (and at least by m + k candidates)
+_GROW = 0.5
+#: candidates whose weight fell below this fraction of the largest leave the working set
+_PRUNE = 1e-3
+#: violators whose d exceeds the working set's m-th largest d by more than this · tol · φ join first (the others
+#: only if none does: near-duplicates of the support within the tolerance would otherwise flood the working set)
+_MARGIN = 0.5
+#: the exchange runs over the support and the max(_NCAND, 5m) candidates of largest d
+_NCAND = 300
+#: ... and in large pools (N > 2·_SUB) the best design is polished by an exchange over the _POLISH candidates of
+#: largest d
+_POLISH = 3000
+
+
 def _relax_newton(Fp: np.ndarray, K: np.ndarray | None, tol: float, max_iter: int, phi0: float, m: int,
                   M0: np.ndarray | None = None) -> tuple[np.ndarray, int]:
-    """Working-set interior-point relaxation (see :func:`approximate_design`). Returns (w, Newton steps)."""
+    """Working-set interior-point relaxation (see :func:`approximate_design`). Returns (w, Newton steps).
+
+    Small pools (N ≤ 2·:data:`_SUB`): round 1 on the candidates five multiplicative iterations favour; later
+    rounds keep the candidates with weight ≥ 1e-4 of the largest and add those of the m + k largest d_i above
+    the working set's m-th largest d. Large pools (the 100,000-pose user pools, where near-duplicate candidates
+    made that working set grow by ~150 per round over ~30 rounds): round 1 on :data:`_SUB` random candidates
+    (seeded); later rounds keep the weights ≥ :data:`_PRUNE` of the largest, add the violators (d_i above the
+    working set's m-th largest d) whose excess is > :data:`_MARGIN` · tol · φ first — at most :data:`_GROW` × the
+    working set — and warm-start the interior-point method from the previous weights. Each round is solved to
+    tol/10; the loop ends when the gap over **all** candidates is < tol (or no candidate violates), so the
+    reduction is exact in both cases.
+    """
     N, nh, nb = Fp.shape
     Ks = None if K is None else K / np.sqrt(phi0)  # φ ≈ 1 at the start: well-scaled Newton systems
-    w, _ = _multiplicative(Fp, np.full(N, 1.0 / N), Ks, tol, 5, M0)
     k = min(N, max(6 * nb, 150, 2 * m))
-    work = np.union1d(np.argsort(-w)[:k], np.argsort(-_d_all(Fp, w, Ks, M0=M0)[1])[:k // 3 + m])
-    total = 0
+    large = N > 2 * _SUB
+    if large:
+        work = np.sort(np.random.default_rng(0).choice(N, _SUB, replace=False))  # seeded: reproducible
+        w = np.zeros(N)
+        w[work] = 1.0 / work.size
+    else:
+        w, _ = _multiplicative(Fp, np.full(N, 1.0 / N), Ks, tol, 5, M0)
+        work = np.union1d(np.argsort(-w)[:k], np.argsort(-_d_all(Fp, w, Ks, M0=M0)[1])[:k // 3 + m])
+    total, warm = 0, False
     while True:
         wa = w[work] + 1e-3 / work.size
         try:
-            wa, it = _newton_simplex(Fp[work], wa / wa.sum(), Ks, tol / 10, m, max(1, min(60, max_iter - total)), M0)
+            wa, it = _newton_simplex(Fp[work], wa / wa.sum(), Ks, tol / 10, m,
+                                     max(1, min(60, max_iter - total)), M0, warm)
         except np.linalg.LinAlgError:  # the working set does not identify: enlarge it
             if work.size == N:
                 raise
@@ -431,11 +494,17 @@ def _relax_newton(Fp: np.ndarray, K: np.ndarray | None, tol: float, max_iter: in
         w /= w.sum()
         phi, d = _d_all(Fp, w, Ks, M0=M0)
         target = phi if K is not None else nb
-        outside = np.setdiff1d(np.argsort(-d)[:m + k], work)
-        outside = outside[d[outside] > np.partition(d[work], work.size - m)[work.size - m]] if outside.size else outside
-        if _gap(d, w, target, m, M0 is not None) < tol or total >= max_iter or outside.size == 0:
+        thr = np.partition(d[work], work.size - m)[work.size - m]
+        viol = np.setdiff1d(np.flatnonzero(d > thr) if large else np.argsort(-d)[:m + k], work)
+        viol = viol[d[viol] > thr]
+        if _gap(d, w, target, m, M0 is not None) < tol or total >= max_iter or viol.size == 0:
             return w, total
-        work = np.union1d(work[wa > 1e-4 * wa.max()], outside)
+        if large:
+            strong = viol[d[viol] > thr + _MARGIN * tol * abs(target)]
+            viol = strong if strong.size else viol
+            viol = viol[np.argsort(-d[viol])[:max(m + k, int(_GROW * work.size))]]
+        work = np.union1d(work[wa > (_PRUNE if large else 1e-4) * wa.max()], viol)
+        warm = large
 
 
 def _relax_multiplicative(Fp: np.ndarray, w: np.ndarray, K: np.ndarray | None, tol: float, max_iter: int
@@ -578,7 +647,7 @@ def select(Fp: np.ndarray, m: int, K: np.ndarray | None = None, tol: float = 1e-
         raise InputError(f"cannot choose {m} measurements from a pool of {N} candidates")
     approx = approximate_design(Fp, K, tol=tol, m=m, fixed_info=fixed_info)
     M0 = None if fixed_info is None else np.asarray(fixed_info, float)
-    cand, starts = _exchange_starts(Fp, m, K, approx, n_starts, seed, None if M0 is None else M0 / m)
+    cand, starts, d = _exchange_starts(Fp, m, K, approx, n_starts, seed, None if M0 is None else M0 / m)
     sub = Fp[cand]
     best, best_phi, sweeps = starts[0], np.inf, 0
     for s0 in starts:
@@ -588,22 +657,31 @@ def select(Fp: np.ndarray, m: int, K: np.ndarray | None = None, tol: float = 1e-
         val = pool_phi(_info(sub, idx, M0), K)
         if val < best_phi:
             best, best_phi = idx, val
-    return PoolSelection(indices=cand[best], phi=float(best_phi), approx=approx, success=approx.success,
+    best = cand[best]
+    wide = np.union1d(cand, np.argsort(-d)[:_POLISH]) if N > 2 * _SUB else cand
+    if wide.size > cand.size:  # polish: the best design, exchanged over a wider set (can only lower φ)
+        pos = np.searchsorted(wide, best)
+        idx, nsw = _exchange(Fp[wide], pos, K, 0.0 if np.isfinite(best_phi) else 1e-12, M0=M0)
+        sweeps += nsw
+        val = pool_phi(_info(Fp, wide[idx], M0), K)
+        if val < best_phi:
+            best, best_phi = wide[idx], val
+    return PoolSelection(indices=best, phi=float(best_phi), approx=approx, success=approx.success,
                          status=approx.status, nit=sweeps, time_s=time.perf_counter() - t0,
                          message=f"{m} of {N} candidates; {approx.message}")
 
 
 def _exchange_starts(Fp: np.ndarray, m: int, K: np.ndarray | None, approx: ApproximateDesign, n_starts: int,
-                     seed: int, M0: np.ndarray | None = None) -> tuple[np.ndarray, list[np.ndarray]]:
+                     seed: int, M0: np.ndarray | None = None) -> tuple[np.ndarray, list[np.ndarray], np.ndarray]:
     """The exchange's candidate subset (support + largest directional derivatives) and its starts in it:
     the rounded relaxation and ``n_starts`` seeded subsets of the candidates the relaxation favours."""
     d = _d_all(Fp, approx.weights, K, M0=M0)[1]
-    cand = np.union1d(np.argsort(-d)[:max(300, 5 * m)], np.flatnonzero(approx.weights > 0))
+    cand = np.union1d(np.argsort(-d)[:max(_NCAND, 5 * m)], np.flatnonzero(approx.weights > 0))
     order = np.lexsort((-d[cand], -approx.weights[cand]))  # by weight, then by d (positions in cand)
     start = order[:m]
     rng = np.random.default_rng(seed)
     favoured = order[:min(cand.size, 3 * m)]
-    return cand, [start] + [rng.choice(favoured, size=m, replace=False) for _ in range(n_starts)]
+    return cand, [start] + [rng.choice(favoured, size=m, replace=False) for _ in range(n_starts)], d
 
 
 def _info(Fp: np.ndarray, idx: np.ndarray, M0: np.ndarray | None = None) -> np.ndarray:
