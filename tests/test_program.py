@@ -239,6 +239,18 @@ def test_export_cli_writes_a_checked_program(small_design, tmp_path):
     np.testing.assert_allclose(Q, [w["q"] for w in doc["waypoints"]], atol=1e-6)
 
 
+def test_export_shows_progress_on_a_terminal_only(small_design, tmp_path, capsys, monkeypatch):
+    """Ordering and move checks take a minute on the UR10: a bar on stderr when forced / on a terminal, none in pipes."""
+    monkeypatch.setenv("PIN_KPI_OED_PROGRESS", "1")
+    assert main(["export", str(small_design), "--format", "csv", "--out", str(tmp_path / "a.csv"), "--quiet"]) == 0
+    err = capsys.readouterr().err
+    assert "program: order + check moves" in err and "checks=" in err
+    monkeypatch.setenv("PIN_KPI_OED_PROGRESS", "0")
+    assert main(["export", str(small_design), "--format", "csv", "--out", str(tmp_path / "b.csv"), "--quiet"]) == 0
+    assert "program: order" not in capsys.readouterr().err
+    assert (tmp_path / "a.csv").read_text().splitlines()[-3:] == (tmp_path / "b.csv").read_text().splitlines()[-3:]
+
+
 def test_export_cli_bad_input_exit_2_nothing_written(small_design, tmp_path, capsys):
     out = tmp_path / "p.txt"
     assert main(["export", str(small_design), "--format", "fanuc", "--out", str(out)]) == 2

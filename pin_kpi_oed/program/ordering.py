@@ -32,6 +32,7 @@ import numpy as np
 
 from pin_kpi_oed.cell.cell import Cell
 from pin_kpi_oed.errors import InputError, SolverError
+from pin_kpi_oed.progress import progress
 from pin_kpi_oed.program.timing import joint_speeds, move_time, path_time, time_matrix
 from pin_kpi_oed.program.transitions import TransitionChecker, equivalents
 from pin_kpi_oed.results import Result
@@ -340,15 +341,22 @@ def plan_program(cell: Cell, Q: np.ndarray, options: ProgramOptions | None = Non
     cost = time_matrix(nodes, speeds)
     router = _Router(nodes, tc, speeds, cost, o)
     tour, rounds, fast, n_gls = [0], 0, True, 0
-    for rounds in range(1, o.max_rounds + 1):
-        tour = solve_tour(cost, o.time_limit_s, fast=fast, groups=groups, initial=tour if rounds > 1 else None)
-        n_gls += not fast
-        changed = router.check_tour(tour)
-        if not changed and not fast or n_gls >= 3:
-            break
-        fast = changed  # costs settled: a guided local search; it found unchecked moves: greedy rounds again
-    router.check_tour(tour)  # round limit hit: check what the last tour added
-    router.check_tour(tour, plan_checks=4 * o.plan_checks)  # last attempt on moves still without a route
+    # a bar on a terminal (silent in pipes and tests): rounds of ordering + dense move checks, then the last checks
+    with progress(total=o.max_rounds + 2, desc="program: order + check moves", unit="round") as bar:
+        for rounds in range(1, o.max_rounds + 1):
+            tour = solve_tour(cost, o.time_limit_s, fast=fast, groups=groups, initial=tour if rounds > 1 else None)
+            n_gls += not fast
+            changed = router.check_tour(tour)
+            bar.update()
+            bar.set_postfix(checks=tc.n_evaluations)
+            if not changed and not fast or n_gls >= 3:
+                break
+            fast = changed  # costs settled: a guided local search; it found unchecked moves: greedy rounds again
+        bar.total = rounds + 2
+        router.check_tour(tour)  # round limit hit: check what the last tour added
+        bar.update()
+        router.check_tour(tour, plan_checks=4 * o.plan_checks)  # last attempt on moves still without a route
+        bar.update()
     edges = router.edges
     prog = _assemble(nodes, tour, edges, pose_of)
     path = np.array([w.q for w in prog])
