@@ -35,7 +35,7 @@ from pin_kpi_oed.errors import IdentifiabilityError, InputError
 from pin_kpi_oed.effects.library import effect_jacobian, sum_joint_offsets
 from pin_kpi_oed.oed.covariance import prior_square_root
 from pin_kpi_oed.oed.criteria import get_criterion
-from pin_kpi_oed.oed.pool import PoolSelection, pool_phi, select
+from pin_kpi_oed.oed.pool import PoolSelection, block_gains, pool_phi, select
 from pin_kpi_oed.threads import limit_threads
 
 __all__ = ["ExtendedModel", "ExtendedDesignCriterion", "basis_dq", "select_pool", "PriorSelection", "pool_phi",
@@ -457,31 +457,8 @@ class PriorSelection:
 
 
 def _block_gains(s: dict, G: np.ndarray | None, N: int, nh: int) -> np.ndarray:
-    """−Δφ of adding candidate blocks whose S_i (nh×nh, entries ``s[a, b]`` for a ≤ b, each (N,)) is known:
-    log det S_i (D, G None) or tr(G_iᵀ S_i⁻¹ G_i) (A-type, G (nh, N, ns)). Closed forms for nh ≤ 3."""
-    if nh > 3:
-        S = np.empty((N, nh, nh))
-        for (a, b), v in s.items():
-            S[:, a, b] = S[:, b, a] = v
-        if G is None:
-            return np.linalg.slogdet(S)[1]
-        Gn = G.transpose(1, 0, 2)
-        return np.einsum("nas,nas->n", Gn, np.linalg.solve(S, Gn))
-    if nh == 1:
-        adj, det = {(0, 0): np.ones(N)}, s[0, 0]
-    elif nh == 2:
-        adj, det = {(0, 0): s[1, 1], (0, 1): -s[0, 1], (1, 1): s[0, 0]}, s[0, 0] * s[1, 1] - s[0, 1] ** 2
-    else:
-        a_, b_, c_, e_, f_, i_ = s[0, 0], s[0, 1], s[0, 2], s[1, 1], s[1, 2], s[2, 2]
-        adj = {(0, 0): e_ * i_ - f_ * f_, (0, 1): c_ * f_ - b_ * i_, (0, 2): b_ * f_ - c_ * e_,
-               (1, 1): a_ * i_ - c_ * c_, (1, 2): b_ * c_ - a_ * f_, (2, 2): a_ * e_ - b_ * b_}
-        det = a_ * adj[0, 0] + b_ * adj[0, 1] + c_ * adj[0, 2]
-    if G is None:
-        return np.log(det)
-    out = np.zeros(N)
-    for (a, b), v in adj.items():
-        out += (1.0 if a == b else 2.0) * v * np.einsum("ns,ns->n", G[a], G[b])
-    return out / det
+    """:func:`~pin_kpi_oed.oed.pool.block_gains` with G laid out (nh, N, ns)."""
+    return block_gains(s, None if G is None else G.transpose(1, 0, 2), N, nh)
 
 
 class _PoolState:

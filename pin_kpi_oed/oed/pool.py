@@ -529,24 +529,23 @@ def _relax_multiplicative(Fp: np.ndarray, w: np.ndarray, K: np.ndarray | None, t
     return w, total
 
 
-def _swap_gains(V: np.ndarray, G: np.ndarray | None) -> np.ndarray:
-    """For each candidate i with S_i = I + V_i V_iᵀ: tr(G_iᵀ S_i⁻¹ G_i) (A-type), or log det S_i (G None: D).
+def block_gains(s: dict, G: np.ndarray | None, N: int, nh: int) -> np.ndarray:
+    """−Δφ of candidate blocks whose S_i (nh×nh) is known by its entries ``s[a, b]`` (a ≤ b, each (N,)):
+    log det S_i (D-type, G None) or tr(G_iᵀ S_i⁻¹ G_i) (A-type, G (N, nh, ns)).
 
-    V: (N, nh, nb), G: (N, nh, ns). For nh ≤ 3 the 3×3 (2×2, 1×1) algebra is written out on length-N
-    arrays — NumPy's batched ``solve`` / ``einsum`` on tiny matrices cost more than the arithmetic —
-    with tr(Gᵀ S⁻¹ G) = Σ_ab (S⁻¹)_ab (G Gᵀ)_ab; larger nh use ``np.linalg``.
+    For nh ≤ 3 the 3×3 (2×2, 1×1) algebra is written out on length-N arrays — NumPy's batched ``solve`` /
+    ``einsum`` on tiny matrices cost more than the arithmetic — with tr(Gᵀ S⁻¹ G) = Σ_ab (S⁻¹)_ab (G Gᵀ)_ab;
+    larger nh use ``np.linalg``. Shared by the exchange here and :mod:`pin_kpi_oed.oed.extended`.
     """
-    nh = V.shape[1]
-    s = {(a, b): np.einsum("nk,nk->n", V[:, a], V[:, b]) + (a == b) for a in range(nh) for b in range(a, nh)}
     if nh > 3:
-        S = np.empty((V.shape[0], nh, nh))
+        S = np.empty((N, nh, nh))
         for (a, b), v in s.items():
             S[:, a, b] = S[:, b, a] = v
         if G is None:
             return np.linalg.slogdet(S)[1]
         return np.einsum("nas,nas->n", G, np.linalg.solve(S, G))
     if nh == 1:
-        adj, det = {(0, 0): np.ones_like(s[0, 0])}, s[0, 0]
+        adj, det = {(0, 0): np.ones(N)}, s[0, 0]
     elif nh == 2:
         adj, det = {(0, 0): s[1, 1], (0, 1): -s[0, 1], (1, 1): s[0, 0]}, s[0, 0] * s[1, 1] - s[0, 1] ** 2
     else:
@@ -556,10 +555,20 @@ def _swap_gains(V: np.ndarray, G: np.ndarray | None) -> np.ndarray:
         det = a_ * adj[0, 0] + b_ * adj[0, 1] + c_ * adj[0, 2]
     if G is None:
         return np.log(det)
-    out = np.zeros(V.shape[0])
+    out = np.zeros(N)
     for (a, b), v in adj.items():
         out += (1.0 if a == b else 2.0) * v * np.einsum("ns,ns->n", G[:, a], G[:, b])
     return out / det
+
+
+def _swap_gains(V: np.ndarray, G: np.ndarray | None) -> np.ndarray:
+    """For each candidate i with S_i = I + V_i V_iᵀ: tr(G_iᵀ S_i⁻¹ G_i) (A-type), or log det S_i (G None: D).
+
+    V: (N, nh, nb), G: (N, nh, ns); see :func:`block_gains`.
+    """
+    nh = V.shape[1]
+    s = {(a, b): np.einsum("nk,nk->n", V[:, a], V[:, b]) + (a == b) for a in range(nh) for b in range(a, nh)}
+    return block_gains(s, G, V.shape[0], nh)
 
 
 def _exchange(Fp: np.ndarray, chosen: np.ndarray, K: np.ndarray | None, ridge: float, max_sweeps: int = 50,
