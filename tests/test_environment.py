@@ -250,9 +250,9 @@ def test_mesh_penetration_fixes_coals_zero_distance_in_a_degenerate_contact():
                        coal.DistanceRequest(), coal.DistanceResult())
     assert d0 > -1e-9  # Coal alone: no penetration seen
     gm = SimpleNamespace(geometryObjects=[SimpleNamespace(geometry=cap), SimpleNamespace(geometry=bvh)])
-    chk = SimpleNamespace(pairs=[(0, 1)], mesh_ids={1}, gm=gm, gd=SimpleNamespace(oMg=[M_cap, M_plate]))
+    chk = SimpleNamespace(pairs=[(0, 1)], mesh_pairs=[0], gm=gm, gd=SimpleNamespace(oMg=[M_cap, M_plate]))
     d = mesh_penetration(chk, np.array([d0]))
     assert d[0] <= -1e-6
-    far = SimpleNamespace(pairs=[(0, 1)], mesh_ids={1}, gm=gm,
+    far = SimpleNamespace(pairs=[(0, 1)], mesh_pairs=[0], gm=gm,
                           gd=SimpleNamespace(oMg=[pin.SE3(np.eye(3), np.array([0.0, 0.0, 0.5])), M_plate]))
     assert mesh_penetration(far, np.array([0.2]))[0] == 0.2  # clear pairs untouched

@@ -146,8 +146,11 @@ class FeasibilityChecker:
         self.labels: list[tuple[str, str | None]] = []  # (name, link) of every geometry object
         self.robot_ids, self.robot_joint = self._add_robot_capsules()
         self.obst_ids, self.half_ids = self._add_obstacles()
-        self.obst_ids += add_environment_solids(self)  # environment meshes themselves (issue 13)
+        env_ids, self.mesh_ids = add_environment_solids(self)  # environment meshes themselves (issue 13)
+        self.obst_ids += env_ids
         self.pairs = self._collision_pairs()
+        #: pairs with a non-convex mesh (Coal BVH), whose near-zero distances :func:`mesh_penetration` re-tests
+        self.mesh_pairs = [p for p, (i, k) in enumerate(self.pairs) if i in self.mesh_ids or k in self.mesh_ids]
         for i, k in self.pairs:
             self.gm.addCollisionPair(pin.CollisionPair(i, k))
         self.gd = pin.GeometryData(self.gm)
@@ -261,7 +264,7 @@ class FeasibilityChecker:
         pin.computeDistances(self.gm, self.gd)
         res = self.gd.distanceResults  # one access: indexing the property each time copies the vector
         d = np.array([r.min_distance for r in res])[:self.n_pairs]
-        return mesh_penetration(self, d) if self.mesh_ids else d
+        return mesh_penetration(self, d) if self.mesh_pairs else d
 
     def distances(self, Q: np.ndarray) -> np.ndarray:
         """Signed distances of every checked pair and beam target (columns named by :attr:`names`).
@@ -313,19 +316,19 @@ class FeasibilityChecker:
 _MESH_CONTACT_M = 1e-6
 
 
-def add_environment_solids(chk: FeasibilityChecker) -> list[int]:
+def add_environment_solids(chk: FeasibilityChecker) -> tuple[list[int], set[int]]:
     """Add the cell's environment geometry (:mod:`pin_kpi_oed.cell.environment`) to the checker's model.
 
     Each solid is fixed in the base frame, labelled (solid name, environment object name) so that the
-    skip lists may name the object; non-convex meshes (Coal BVH models) are remembered in
-    ``chk.mesh_ids`` for :func:`mesh_penetration`.
+    skip lists may name the object.
 
     Returns:
-        The geometry ids added.
+        (the geometry ids added, those of them that are non-convex meshes (Coal BVH models), for
+        :func:`mesh_penetration`).
     """
     base_T_W = chk.cell.W_T_base.inverse()
     ids: list[int] = []
-    chk.mesh_ids = set()
+    mesh_ids: set[int] = set()
     for e in chk.cell.environment:
         for s in e.solids:
             go = pin.GeometryObject(s.name, 0, 0, base_T_W * s.W_T_g, s.geometry)
@@ -333,8 +336,8 @@ def add_environment_solids(chk: FeasibilityChecker) -> list[int]:
             chk.labels.append((s.name, e.name))
             ids.append(i)
             if not s.convex:
-                chk.mesh_ids.add(i)
-    return ids
+                mesh_ids.add(i)
+    return ids, mesh_ids
 
 
 def _penetration(g1, M1: pin.SE3, g2, M2: pin.SE3) -> float | None:
@@ -362,17 +365,15 @@ def mesh_penetration(chk: FeasibilityChecker, d: np.ndarray) -> np.ndarray:
     intersect, get Coal's contact depth (at least 1e-6 m deep), so that the check flags them.
 
     Args:
-        chk: the checker, after :meth:`FeasibilityChecker.pair_distances` placed the geometry.
+        chk: the checker (its ``pairs`` and ``mesh_pairs``), after :meth:`FeasibilityChecker.pair_distances`
+            placed the geometry.
         d: (n_pairs,) distances (m), changed in place.
 
     Returns:
         ``d``.
     """
-    pairs = getattr(chk, "_mesh_pairs", None)
-    if pairs is None:
-        pairs = chk._mesh_pairs = [p for p, (i, k) in enumerate(chk.pairs) if i in chk.mesh_ids or k in chk.mesh_ids]
     go, oMg = chk.gm.geometryObjects, chk.gd.oMg
-    for p in pairs:
+    for p in chk.mesh_pairs:
         if d[p] <= _MESH_CONTACT_M:
             i, k = chk.pairs[p]
             pen = _penetration(go[i].geometry, oMg[i], go[k].geometry, oMg[k])
