@@ -300,12 +300,11 @@ def _certificate(args: argparse.Namespace, problem, results: list, m: int, seed:
     """The optimality certificate of ``--certificate``: the pool's one with ``--pool``; else over a random feasible
     pool plus the designs' poses, with the measured poses' information as a fixed part with ``--given``."""
     if getattr(args, "certificate", False) and not pool_file:
-        from pin_kpi_oed.design.user_pool import fixed_information
         from pin_kpi_oed.oed.certificate import certify
 
         cert = certify(problem, m, pool_size=getattr(args, "pool_size", 5000) or 5000, seed=seed,
                        extra=[r.q_meas for r in results if r.feasible],
-                       fixed_info=fixed_information(problem) if given_file else None)
+                       fixed_info=problem.fixed_information() if given_file else None)
     return cert
 
 

@@ -290,6 +290,12 @@ class DesignProblem:
         self._kpi = DesignCriterion(self.model, self.base, "kpi", self.E)
         self._param = DesignCriterion(self.model, self.base, "param", self.E)
 
+    def fixed_information(self) -> np.ndarray | None:
+        """Information every design of this problem already has, (nb, nb) over the identifiable parameters:
+        the layout's prior diag(1/σ²) (1/m², 1/rad²); None without a prior."""
+        prior = self._kpi.prior
+        return None if prior is None else np.diag(1.0 / np.asarray(prior, float) ** 2)
+
     @property
     def n(self) -> int:
         """Joints per configuration."""

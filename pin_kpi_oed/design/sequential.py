@@ -136,6 +136,12 @@ class SequentialProblem(DesignProblem):
         self._kpi = self.criterion("kpi")
         self._param = self.criterion("param")
 
+    def fixed_information(self) -> np.ndarray | None:
+        """The measured poses' information F_gᵀF_g (their prior rows included) plus the layout's prior, (nb, nb)."""
+        M0 = self.F_given.T @ self.F_given
+        P = super().fixed_information()
+        return M0 if P is None else M0 + P
+
     def criterion(self, name: str) -> GivenDesignCriterion:
         """The registered criterion ``name`` with the measured poses' information."""
         return GivenDesignCriterion(self.model, self.base, name, self.E, F_given=self.F_given)
@@ -216,10 +222,7 @@ def poses_until(problem: SequentialProblem, target_sigma_m: float, Q_pool: np.nd
                                    f"at least {problem.min_measurements()} more with --measurements first")
     t = problem.cell.q_work.shape[0]
     E = problem.E
-    prior = problem._kpi.prior
-    M = problem.F_given.T @ problem.F_given
-    if prior is not None:
-        M = M + np.diag(1.0 / np.asarray(prior, float) ** 2)
+    M = problem.fixed_information()
     if Fp is None:
         Fp = problem.model.weighted_jacobian(problem.p0, Q_pool)[:, :, problem.base]  # (N, nh, nb)
     Minv = np.linalg.inv(M)

@@ -117,20 +117,6 @@ def feasible_mask(problem: DesignProblem, Q: np.ndarray) -> np.ndarray:
     return check_candidates(problem, Q, with_jacobians=False)[0]
 
 
-def fixed_information(problem: DesignProblem) -> np.ndarray | None:
-    """Information every selected design already has: the measured poses' F_gᵀF_g (their prior rows included,
-    :class:`~pin_kpi_oed.design.sequential.SequentialProblem`) plus the layout's prior diag(1/σ²); None if none."""
-    nb = problem.base.size
-    M0 = np.zeros((nb, nb))
-    F_given = getattr(problem, "F_given", None)
-    if F_given is not None and F_given.size:
-        M0 += F_given.T @ F_given
-    prior = problem._kpi.prior
-    if prior is not None:
-        M0 += np.diag(1.0 / np.asarray(prior, float) ** 2)
-    return M0 if M0.any() else None
-
-
 def selection_efficiency(sel: PoolSelection, m: int, nb: int | None = None) -> float:
     """Efficiency of a pool selection against its relaxation's certificate (≤ 1).
 
@@ -182,7 +168,7 @@ def design_from_pool(problem: DesignProblem, Q_candidates: np.ndarray, criteria:
     if len(Q) < m:
         raise InfeasibleError(f"--pool: only {len(Q)} of {len(Q_candidates)} candidates satisfy the cell's constraints "
                               f"(collision, beam, incidence, margins); {m} needed")
-    M0 = fixed_information(problem)
+    M0 = problem.fixed_information()
     on_top = f" on top of the {len(problem.Q_given)} measured poses" if getattr(problem, "F_given", None) is not None \
         else ""
     rng = np.random.default_rng(seed)
