@@ -222,12 +222,8 @@ def run(args: argparse.Namespace) -> int:
     cell = with_margins(cell, *margins)  # the optimiser's cell; `true_cell` for the reported clearances
     pool_file, given_file, target = _pool_given_target(args)
     problem = _make_problem(args, cell, given_file, collision, quiet, true_cell)
-    if target is not None and not problem.identifies():  # before any work: "how many more" needs M⁻¹ of the measured
-        from pin_kpi_oed.errors import IdentifiabilityError
-
-        raise IdentifiabilityError(f"--target-sigma: the measured poses of --given {given_file} do not identify the "
-                                   f"parameters; design at least {problem.min_measurements()} more with "
-                                   "--measurements first")
+    if target is not None:  # before any work: "how many more" needs M⁻¹ of the measured poses
+        problem.require_identified(f"--target-sigma: --given {given_file}")
     if not quiet:
         _print_header(cell, problem, m, seed, collision, starts)
     opts = DesignOptions(collision=collision, n_starts=starts, ipopt=ipopt_options(max_iter=max_iter),

@@ -150,6 +150,17 @@ class SequentialProblem(DesignProblem):
         """Whether the measured poses alone identify the base parameters."""
         return bool(np.linalg.matrix_rank(self.F_given) == self.base.size) if self.F_given.size else False
 
+    def require_identified(self, what: str = "--given") -> None:
+        """Refuse a step that needs M⁻¹ of the measured poses alone (the "how many more" answer).
+
+        Raises:
+            IdentifiabilityError: the measured poses do not identify the parameters (names ``what`` and how
+                many poses to design first).
+        """
+        if not self.identifies():
+            raise IdentifiabilityError(f"{what}: the measured poses do not identify the parameters; design "
+                                       f"at least {self.min_measurements()} more with --measurements first")
+
     def min_measurements(self) -> int:
         """Fewest new poses that can identify the base parameters together with the measured ones."""
         if self.identifies():
@@ -217,9 +228,7 @@ def poses_until(problem: SequentialProblem, target_sigma_m: float, Q_pool: np.nd
     t0 = time.perf_counter()
     if not (target_sigma_m > 0):
         raise InputError(f"--target-sigma: must be > 0 m, got {target_sigma_m}")
-    if not problem.identifies():
-        raise IdentifiabilityError("--given: the measured poses do not identify the parameters; design "
-                                   f"at least {problem.min_measurements()} more with --measurements first")
+    problem.require_identified()
     t = problem.cell.q_work.shape[0]
     E = problem.E
     M = problem.fixed_information()
