@@ -6,7 +6,7 @@ import ast
 from pathlib import Path
 
 #: Upstream to downstream, as drawn in docs/ARCHITECTURE.md.
-ORDER = ["errors", "progress", "threads", "validation", "data", "results", "model", "effects", "oed", "cell", "design",
+ORDER = ["errors", "progress", "threads", "validation", "data", "results", "model", "effects", "discrepancy", "oed", "cell", "design",
          "program", "identification", "diagnosis", "studies", "viz", "cli"]
 PKG = Path(__file__).resolve().parents[1] / "pin_kpi_oed"
 

@@ -119,6 +119,7 @@ from scipy.stats import chi2 as _chi2
 from pin_kpi_oed.data.measurements import MeasurementSet
 from pin_kpi_oed.effects.library import predict_with_effects
 from pin_kpi_oed.errors import IdentifiabilityError, InputError, SolverError
+from pin_kpi_oed.identification.discrepancy_fit import discrepancy_options, result_discrepancy
 from pin_kpi_oed.identification.model_file import CalibratedModel, Setup
 from pin_kpi_oed.identification.problem import (ResidualModel, StationLayout, StationSet, align_data,
                                                 effect_param_names, jl_inv, log3)
@@ -262,6 +263,11 @@ class IdentifyOptions:
         theta0: start values of the effects' θ (one array per effect; default zeros).
         held_effects: ``[(effect, θ), ...]`` applied with their parameters held (not estimated),
             e.g. the transferable effects of an earlier calibration; kept in the result and its model.
+        discrepancy: model discrepancy δ(q) fitted to the residuals after the parametric fit
+            (:mod:`pin_kpi_oed.discrepancy`): ``none`` (the paper's noise-only model, the default of
+            this function), ``auto`` (the command line's default: a Gaussian process when the data are
+            enough and it lowers the K-fold held-out error, else a white discrepancy at the residual
+            level), ``on``, or :class:`~pin_kpi_oed.discrepancy.gp.DiscrepancyOptions`.
     """
 
     p0: np.ndarray | None = None
@@ -285,6 +291,7 @@ class IdentifyOptions:
     effect_prior_rad: float | None = None
     theta0: Sequence[np.ndarray] | None = None
     held_effects: Sequence[tuple[Any, np.ndarray]] = ()
+    discrepancy: Any = "none"
 
     def __post_init__(self) -> None:
         if self.effect_prior_rad is not None and not (np.isfinite(self.effect_prior_rad)
@@ -411,6 +418,7 @@ class IdentificationResult(Result):
     reflector_per_station: bool = False
     source: str = ""
     held: list = field(default_factory=list, repr=False)
+    discrepancy: Any = field(default=None, repr=False)
 
     @property
     def converged(self) -> bool:
@@ -485,7 +493,8 @@ class IdentificationResult(Result):
                         "units": [_unit(n) for n in self.names], "covariance": self.covariance},
             fit=fit, default_station=self.stations[0] if len(self.stations) == 1 else None,
             history=[{"step": "identify", "data": self.source, "stations": list(self.stations),
-                      "n_measurements": self.n_measurements, "rms_m": self.rms_m}])
+                      "n_measurements": self.n_measurements, "rms_m": self.rms_m}],
+            discrepancy=self.discrepancy)
 
     def to_dict(self) -> dict:
         """Plain JSON-able dict (SI units)."""
@@ -525,6 +534,8 @@ class IdentificationResult(Result):
             "residuals_rad": self.residuals_rad,
             "errors_m": self.errors_m,
             "outliers": self.outliers,
+            "discrepancy": None if self.discrepancy is None else {
+                "kind": self.discrepancy.kind, "decision": self.discrepancy.decision, "cv": self.discrepancy.cv},
             "tcp_std_m": self.tcp_std_m,
             "identifiability": self.identifiability.to_dict() if self.identifiability is not None else None,
         }
@@ -560,6 +571,8 @@ class IdentificationResult(Result):
                 out.append(f"  reflector in {self.model.robot.tool_frame}"
                            f"{f' (station {lab})' if self.reflector_per_station and S > 1 else ''}: "
                            f"{np.round(su.reflector_m * 1e3, 4).tolist()} mm")
+        if self.discrepancy is not None:
+            out.append(f"  {self.discrepancy.decision}")
         if self.tcp_std_m.size:
             out.append(f"  predicted TCP std at {self.tcp_std_m.size} working configurations: mean "
                        f"{self.tcp_std_m.mean() * 1e6:.2f} µm, max {self.tcp_std_m.max() * 1e6:.2f} µm")
@@ -1010,7 +1023,7 @@ def identify(model: TrackerModel, data: MeasurementSet, options: IdentifyOptions
     first = setups[stations.labels[0]]
     sol = solution.sol
     converged = bool(sol.status > 0)
-    return IdentificationResult(
+    result = IdentificationResult(
         success=converged, status="converged" if converged else "max_nfev", message=str(sol.message),
         nit=solution.nit, nfev=solution.nfev, solver_status=int(sol.status),
         names=prob.names, values=x.copy(), std=std, covariance=C, correlation=corr,
@@ -1025,6 +1038,9 @@ def identify(model: TrackerModel, data: MeasurementSet, options: IdentifyOptions
         station_rows=list(prob.rows), P=P_hat, param_names=list(stations.layout.names), station_set=stations,
         reflector_per_station=bool(opts.reflector_per_station), source=data.source,
         held=[(e, np.asarray(t, float)) for e, t in opts.held_effects], time_s=time.perf_counter() - t_start)
+    result.discrepancy = result_discrepancy(result, data, discrepancy_options(opts.discrepancy, opts.seed), inp.Q)
+    result.time_s = time.perf_counter() - t_start
+    return result
 
 
 # --------------------------------------------------------------------------- #
@@ -1066,6 +1082,7 @@ def validate(result: IdentificationResult | CalibratedModel, data: MeasurementSe
     want_rot = bool(cm.pose6d and data.rotvec_rad is not None)
     Y = cm.predict(Q, data, orientation=want_rot)
     out = error_stats(np.linalg.norm(data.position_m - Y[:, :3], axis=1))
+    out.update(calibration_stats(cm, Q, data))
     if want_rot:
         Rp = Rotation.from_rotvec(Y[:, 3:]).as_matrix()
         Rm = Rotation.from_rotvec(data.rotvec_rad).as_matrix()
@@ -1075,10 +1092,30 @@ def validate(result: IdentificationResult | CalibratedModel, data: MeasurementSe
     return out
 
 
+def calibration_stats(cm: CalibratedModel, Q: np.ndarray, data: MeasurementSet) -> dict:
+    """How honest the model's σ is on measured rows: standardised errors z = (measured − predicted)/σ per axis.
+
+    Returns:
+        ``z_rms`` (RMS of z over rows and axes; 1 when σ is right), ``inside_95`` (share of rows whose
+        Σ z² ≤ χ²₃(0.95) = 7.815: their 95 % ellipsoid holds the measurement), ``sigma_mean_m`` (mean
+        predicted 3-D σ = sqrt(Σ σ²), m), ``extrapolation_share`` (rows outside the training coverage).
+    """
+    Yp, sig, extra = cm.predict_with_sigma(Q, data)
+    z2 = ((data.position_m - Yp) / sig) ** 2
+    return {"z_rms": float(np.sqrt(z2.mean())), "inside_95": float(np.mean(z2.sum(axis=1) <= 7.8147)),
+            "sigma_mean_m": float(np.sqrt((sig ** 2).sum(axis=1)).mean()),
+            "extrapolation_share": float(np.mean(extra))}
+
+
 def format_validation(stats: dict, title: str = "held-out") -> str:
     """One line of validation statistics in mm (``stats`` from :func:`validate`)."""
     s = (f"{title}: n={stats['n']}, mean {stats['mean_m'] * 1e3:.4f} mm, RMS {stats['rms_m'] * 1e3:.4f} mm, "
          f"p95 {stats['p95_m'] * 1e3:.4f} mm, max {stats['max_m'] * 1e3:.4f} mm")
     if "rot_rms_rad" in stats:
         s += f", orientation RMS {stats['rot_rms_rad'] * 1e3:.4f} mrad"
+    if "z_rms" in stats:
+        s += (f"; predicted σ (3-D) mean {stats['sigma_mean_m'] * 1e3:.4f} mm, standardised error RMS "
+              f"{stats['z_rms']:.2f} (1 = honest), {stats['inside_95'] * 100:.0f} % inside the 95 % ellipsoid"
+              + (f", {stats['extrapolation_share'] * 100:.0f} % of rows outside the training coverage"
+                 if stats.get("extrapolation_share") else ""))
     return s
