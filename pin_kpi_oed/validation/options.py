@@ -142,7 +142,7 @@ OUTPUTS = {"evaluate": ["json"], "demo": ["json"], "design": ["json"], "simulate
            "register": ["model_out", "json"], "predict": ["out"], "diagnose": ["json"], "view": ["html"]}
 #: command -> argparse dests of inputs (files or folders; lists allowed)
 INPUTS = {"evaluate": ["design"], "design": ["cell", "pool", "given", "given_prior", "model"], "identify": ["data", "validate", "register_data", "robot"],
-          "simulate": ["robot"], "import-ipa": ["src"], "register": ["model", "data"], "predict": ["model", "data"],
+          "simulate": ["robot", "design"], "import-ipa": ["src"], "register": ["model", "data"], "predict": ["model", "data"],
           "diagnose": ["train", "validate", "register_data", "robot"], "view": ["design"], "info": ["robot"]}
 #: command -> argparse dests of output folders
 FOLDERS = {"diagnose": ["figures"], "view": ["figures"], "study": ["out"]}
