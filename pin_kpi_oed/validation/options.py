@@ -1,7 +1,7 @@
 """Option checks of every command, run before any work (``cli/app.py`` calls :func:`check_args`).
 
 Each rule names the option, the allowed range and the unit; zero and negative values are refused
-rather than replaced by defaults (issue 15: ``--measurements 0`` designed 60, ``--arms -3`` ran 87).
+rather than replaced by defaults (``--measurements 0`` never silently designs 60 poses).
 The rules are a table per command (:data:`RULES`); output and input paths of each command are in
 :data:`OUTPUTS`, :data:`INPUTS` and :data:`FOLDERS`, checked by :func:`~pin_kpi_oed.validation.paths.check_outputs`.
 """
