@@ -11,8 +11,9 @@ import pytest
 import yaml
 
 from pin_kpi_oed.cell.cell import CELL_DIR, cell_from_dict, load_cell
-from pin_kpi_oed.cell.collision import (INCID, AggregatedConstraints, CollisionModel, point_segment_distance,
-                                        random_feasible, segment_closest)
+from pin_kpi_oed.cell.aggregate import AggregatedConstraints
+from pin_kpi_oed.cell.collision import INCID, CollisionModel, random_feasible
+from pin_kpi_oed.cell.segments import point_segment_distance, segment_closest
 from pin_kpi_oed.cell.feasibility import FeasibilityChecker, coal_capsule
 from pin_kpi_oed.errors import InfeasibleError, InputError, PinKpiOedError
 
@@ -337,11 +338,11 @@ def test_geometry_backend_band_and_aggregate(coll15):
 
 
 def test_beam_frames_map_z_onto_the_beam():
-    from pin_kpi_oed.cell.collision import _beam_frames
+    from pin_kpi_oed.cell.coal_distances import beam_frames
 
     a = np.array([1.0, 2.0, 0.5])
     B = np.array([[3.0, 2.0, 0.5], [1.0, 2.0, -3.0], [1.0, 2.0, 4.0], [0.2, -1.0, 2.0]])
-    R, c, h = _beam_frames(a, B)
+    R, c, h = beam_frames(a, B)
     for i in range(len(B)):
         assert np.allclose(R[i].T @ R[i], np.eye(3), atol=1e-12) and np.linalg.det(R[i]) == pytest.approx(1.0)
         assert np.allclose(c[i] + h[i] * R[i][:, 2], B[i]) and np.allclose(c[i] - h[i] * R[i][:, 2], a)
