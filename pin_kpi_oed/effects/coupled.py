@@ -44,7 +44,8 @@ from typing import Any, Sequence
 import numpy as np
 import pinocchio as pin
 
-from pin_kpi_oed.effects.library import Effect, gravity_torque, joint_label
+from pin_kpi_oed.effects.base import Effect, joint_label
+from pin_kpi_oed.effects.gravity import gravity_torque
 from pin_kpi_oed.errors import InputError
 from pin_kpi_oed.model.robot import Robot
 
