@@ -12,6 +12,7 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 import pin_kpi_oed.data.atomic as patomic
+import pin_kpi_oed.data.measurement_writer as measurement_writer
 import pin_kpi_oed.data.measurements as pio
 from pin_kpi_oed.errors import InputError, PinKpiOedError
 from pin_kpi_oed.data.measurements import MeasurementSet, read_measurements, write_measurements
@@ -344,7 +345,7 @@ def test_atomic_write_keeps_old_file_if_serialisation_fails_midway(tmp_path: Pat
     write_measurements(_full_set(10, seed=1), f)
     before = f.read_bytes()
     calls = {"n": 0}
-    real = pio._format_float
+    real = measurement_writer._format_float
 
     def flaky(v: float) -> str:
         calls["n"] += 1
@@ -352,7 +353,7 @@ def test_atomic_write_keeps_old_file_if_serialisation_fails_midway(tmp_path: Pat
             raise RuntimeError("boom in the middle")
         return real(v)
 
-    monkeypatch.setattr(pio, "_format_float", flaky)
+    monkeypatch.setattr(measurement_writer, "_format_float", flaky)
     with pytest.raises(RuntimeError, match="boom"):
         write_measurements(_full_set(10, seed=2), f)
     assert f.read_bytes() == before
