@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import abc
 from typing import Any, Sequence
 
 import numpy as np
@@ -27,12 +28,16 @@ def check_aux_len(aux: Any, m: int, what: str) -> None:
         raise InputError(f"{what}: the measurement set has {len(aux)} rows but {m} configurations were given")
 
 
-class Effect:
-    """Base class of an unmodelled effect (Effect interface, ``docs/ARCHITECTURE.md``).
+class Effect(abc.ABC):
+    """Abstract base of an unmodelled effect (Effect interface, ``docs/ARCHITECTURE.md``).
 
-    Subclasses set ``name``, ``unit`` (of θ), ``description`` and override
-    :meth:`param_names` and :meth:`joint_offset` and/or :meth:`tool_offset`.
-    ``dQ`` and ``dY`` are linear in θ, so the derivatives are exact.
+    An effect owns its value, its parameter Jacobian and its joint-angle derivative:
+    :meth:`joint_offset` / :meth:`tool_offset` return the value (dQ rad, dY m) and its exact
+    derivative w.r.t. θ (``dQ`` and ``dY`` are linear in θ); :meth:`joint_offset_dq` returns the
+    derivative of the joint-angle basis ∂dQ/∂θ w.r.t. the configuration (what the continuous
+    extended design needs). Subclasses set ``name``, ``unit`` (of θ), ``description``, implement
+    :meth:`param_names` and override :meth:`joint_offset` and/or :meth:`tool_offset` (and
+    :meth:`joint_offset_dq` when the design may use them).
 
     Attributes:
         robot: the arm the effect acts on.
@@ -54,9 +59,9 @@ class Effect:
         self.robot = robot
 
     # -- interface ----------------------------------------------------------------
+    @abc.abstractmethod
     def param_names(self, robot: Robot | None = None) -> list[str]:
         """Names of the parameters θ (``<effect>.<joint>[.<term>]``)."""
-        raise NotImplementedError
 
     @property
     def n_params(self) -> int:
@@ -74,6 +79,21 @@ class Effect:
         """Task-space offsets dY (m, 3) m (tracker frame) and dY/dθ (m, 3, k); zeros by default."""
         m = n_rows(Q)
         return np.zeros((m, 3)), np.zeros((m, 3, self.n_params))
+
+    def joint_offset_dq(self, Q: np.ndarray) -> np.ndarray:
+        """Exact ∂D/∂q of the joint-angle basis D = ∂dQ/∂θ, (m, n, k, n) (rad/rad per unit of θ).
+
+        The basis must not depend on auxiliary data. By default there is none: the effect is not
+        available to the continuous (IPOPT) extended design, only to pool selection.
+
+        Args:
+            Q: configurations, (m, n) rad.
+
+        Raises:
+            InputError: the effect has no exact q-derivative of its basis.
+        """
+        raise InputError(f"effect '{self.name}': the continuous design has no exact q-derivative of its basis "
+                         "(supported: gear_harmonic, transmission_error, link_bending); use pool selection")
 
     # -- extras -------------------------------------------------------------------
     def check(self, aux: Any) -> str | None:
@@ -169,6 +189,10 @@ class SubsetEffect(Effect):
     def tool_offset(self, theta, Q, aux=None, model=None, p=None):
         d, D = self.base.tool_offset(self._full(theta), Q, aux, model, p)
         return d, D[:, :, self.keep]
+
+    def joint_offset_dq(self, Q: np.ndarray) -> np.ndarray:
+        """The base effect's basis derivative, restricted to the kept parameters, (m, n, k, n)."""
+        return self.base.joint_offset_dq(Q)[:, :, self.keep, :]
 
     def dropped(self) -> list[str]:
         """Names of the parameters held at 0."""

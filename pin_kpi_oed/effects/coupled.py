@@ -244,6 +244,18 @@ class LinkBending(Effect):
             D[:, j, k] = B[:, 2 * a + (f == "sin")]
         return D @ th, D
 
+    def joint_offset_dq(self, Q: np.ndarray) -> np.ndarray:
+        """∂D/∂q of the basis cos/sin φ_a, φ_a = Σ_{l ≤ a} s_l q_l: (−sin φ_a / cos φ_a) s_l on q_l, (m, n, k, n)."""
+        Q = np.atleast_2d(np.asarray(Q, float))
+        m, n = Q.shape
+        out = np.zeros((m, n, self.n_params, n))
+        ph = self.angles(Q)
+        for c, (j, a, f) in enumerate(self.terms):
+            g = -np.sin(ph[:, a]) if f == "cos" else np.cos(ph[:, a])
+            for l_ in range(a + 1):
+                out[:, j, c, self.chain[l_]] = g * self.signs[l_]
+        return out
+
     def describe(self, theta: np.ndarray) -> list[str]:
         """One line per (joint, angle): ``"elbow: 450 µrad amplitude in the angle q2+q3 (phase 35°)"``.
 

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import abc
 import hashlib
 from typing import Any, Sequence
 
@@ -94,8 +95,9 @@ class GravityEffect(Effect):
             self._cache[key] = gravity_torque(self.robot, Q, pl)
         return self._cache[key]
 
+    @abc.abstractmethod
     def _basis(self, tau: np.ndarray) -> np.ndarray:
-        raise NotImplementedError
+        """Per-joint basis B(τ_g) (m, n) of Δq_j = θ_j · B_j (compliance: τ; backlash: sign τ)."""
 
     def joint_offset(self, theta, Q, aux=None):
         Q = np.atleast_2d(np.asarray(Q, float))

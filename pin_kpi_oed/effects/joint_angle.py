@@ -90,6 +90,16 @@ class GearHarmonic(Effect):
             D[:, j, 2 * i + 1] = np.cos(o * Q[:, j])
         return D @ th, D
 
+    def joint_offset_dq(self, Q: np.ndarray) -> np.ndarray:
+        """∂D/∂q of the basis sin/cos(o q_j): o cos(o q_j), −o sin(o q_j) on joint j, (m, n, k, n)."""
+        Q = np.atleast_2d(np.asarray(Q, float))
+        m, n = Q.shape
+        out = np.zeros((m, n, self.n_params, n))
+        for i, (j, o) in enumerate(self.pairs):
+            out[:, j, 2 * i, j] = o * np.cos(o * Q[:, j])
+            out[:, j, 2 * i + 1, j] = -o * np.sin(o * Q[:, j])
+        return out
+
 
 class JointScale(Effect):
     """Transmission-ratio error: Δq_j = s_j · q_j (dimensionless)."""
