@@ -12,7 +12,7 @@ import pytest
 
 from pin_kpi_oed import NoiseModel, TrackerModel, load_robot
 from pin_kpi_oed.errors import IdentifiabilityError, InputError, PinKpiOedError, SolverError
-from pin_kpi_oed.identification.export import calibrated_urdf_text, check_urdf_fk, export_result_urdf, write_calibrated_urdf
+from pin_kpi_oed.identification.urdf_export import calibrated_urdf_text, check_urdf_fk, export_result_urdf, write_calibrated_urdf
 from pin_kpi_oed.oed.identifiability import analyse
 from pin_kpi_oed.identification.identify import (ResidualModel, _jl_inv, format_validation, identify, predict, register_points,
                                   validate)

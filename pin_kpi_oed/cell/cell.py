@@ -50,7 +50,7 @@ Schema (SI units; angles may be given in degrees with a ``_deg`` key instead of
     incidence_max_deg: 30
     clearance_m: 0.0                 # required distance between any two capsules
     working_configurations_deg: [[a1, ..., a6]]
-    working_targets:                 # and/or TCP targets (cell frame), solved by IK (pin_kpi_oed.cell.targets)
+    working_targets:                 # and/or TCP targets (cell frame), solved by IK (pin_kpi_oed.cell.working_targets)
       - {xyz_m: [x, y, z], rpy_deg: [r, p, y], seed_deg: [a1, ..., a6]}   # rpy and seed optional
     measurements: 60
     max_random_tries: 200000         # rejection-sampling budget of the heuristic design
@@ -375,7 +375,7 @@ def cell_from_dict(d: dict, source: str = "", base_dir: Path | None = None) -> C
                 skip_pairs=skips, beam_radius_m=beam_r, beam_skip=beam_skip, incidence_max_deg=inc,
                 clearance_m=clr, q_work=qw, measurements=m, max_random_tries=tries, environment=env)
     if d.get("working_targets"):
-        from pin_kpi_oed.cell.targets import solve_working_targets
+        from pin_kpi_oed.cell.working_targets import solve_working_targets
 
         cell.q_work = np.vstack([qw, solve_working_targets(cell, d["working_targets"], source)])
     return cell

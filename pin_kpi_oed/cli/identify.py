@@ -392,7 +392,7 @@ def _fit(args: argparse.Namespace, model: Any, train: Any, opts: Any, effects: l
 def _checked_urdf(args: argparse.Namespace, robot: Any, result: Any) -> tuple[str, float]:
     """(calibrated URDF text, its max FK position error (m)); raises SolverError if it does not reproduce the fit."""
     from pin_kpi_oed.errors import SolverError
-    from pin_kpi_oed.identification.export import (calibrated_urdf_text, check_urdf_fk, model_frames,
+    from pin_kpi_oed.identification.urdf_export import (calibrated_urdf_text, check_urdf_fk, model_frames,
                                                    result_urdf_comment)
     from pathlib import Path
 
