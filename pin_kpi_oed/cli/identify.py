@@ -32,6 +32,7 @@ import pinocchio as pin
 from pin_kpi_oed.cli.util import add_table_options, table_options
 from pin_kpi_oed.cli.util import parse_floats as _floats
 from pin_kpi_oed.errors import InputError
+from pin_kpi_oed.model.robot import ROBOT_HELP
 
 __all__ = ["register", "run_simulate", "run_identify", "run_import_ipa"]
 
@@ -70,7 +71,7 @@ def _register_simulate(subparsers: argparse._SubParsersAction) -> None:
                               description="Simulate laser-tracker measurements (CSV, SI units) of a 'true' robot: "
                                           "random geometric errors from tolerances, tracker pose, reflector, noise.")
     s.add_argument("--robot", default=None,
-                   help="URDF path or name (kr15, kr300, kr500, ur3, ur5, ur10, panda); not with --design")
+                   help=f"{ROBOT_HELP}; not with --design")
     s.add_argument("--design", default=None,
                    help="design JSON (pin-kpi-oed design --json): measure its poses (--criterion) with its robot, "
                         "tracker pose and reflector as the nominal set-up, instead of random poses")
@@ -114,7 +115,7 @@ def _register_identify(subparsers: argparse._SubParsersAction) -> None:
                                           "(nominal robot + fitted tracker pose and reflector) and after calibration; "
                                           "with --register-rows/--register-data the set-up is first re-registered "
                                           "on some rows of another session and only the rest are scored.")
-    i.add_argument("--robot", required=True, help="URDF path or name (kr15, kr300, kr500, ur3, ur5, ur10, panda)")
+    i.add_argument("--robot", required=True, help=ROBOT_HELP)
     i.add_argument("--tool", default=None, help="tool frame (default tool0)")
     i.add_argument("--data", required=True, action="append",
                    help="measurement CSV (joint columns, x, y, z in m, ...); repeat for several files: each file is "
