@@ -364,7 +364,7 @@ def test_bad_nan(kr15_data, tmp_path):
 def test_bad_mm_instead_of_m(kr15_data, tmp_path):
     robot, tm, nominal, data = kr15_data
     mm = MeasurementSet(joint_names=data.joint_names, q=data.q, position_m=data.position_m * 1e3)
-    with pytest.raises(InputError, match="look like mm"):
+    with pytest.raises(InputError, match="looks like mm"):
         identify(nominal, mm)
     write_measurements(mm, tmp_path / "mm.csv")
     with pytest.raises(InputError, match="mm"):
@@ -484,3 +484,23 @@ def test_ur10_urdf_is_cb3_dh():
         M = robot.oMtool(q)
         assert np.abs(Rz @ M.translation - T[:3, 3]).max() < 1e-9
         assert np.abs(Rz @ M.rotation - T[:3, :3]).max() < 1e-9
+
+
+def test_one_unit_guard_for_reader_and_identify(kr15_data, tmp_path):
+    """Positions in cm (10x) spread beyond 3x the reach: the reader (with the reach) and identify refuse them
+    with the same guard (validation.units.check_position_spread_m); metres pass both."""
+    from pin_kpi_oed.validation.units import POSITION_SPREAD_FACTOR, check_position_spread_m
+
+    robot, tm, nominal, data = kr15_data
+    reach = robot.reach()
+    spread = check_position_spread_m(data.position_m, reach, "m")
+    assert 10 * spread > POSITION_SPREAD_FACTOR * (reach + np.linalg.norm(nominal.reflector_m))  # cm must be refused
+    cm = MeasurementSet(joint_names=data.joint_names, q=data.q, position_m=data.position_m * 10.0)
+    with pytest.raises(InputError, match=f"more than {POSITION_SPREAD_FACTOR:g} x reach.*looks like mm"):
+        identify(nominal, cm)
+    write_measurements(cm, tmp_path / "cm.csv")
+    with pytest.raises(InputError, match=f"more than {POSITION_SPREAD_FACTOR:g} x reach.*looks like mm"):
+        read_measurements(tmp_path / "cm.csv", joint_names=data.joint_names, reach_m=reach)
+    write_measurements(data, tmp_path / "m.csv")
+    assert len(read_measurements(tmp_path / "m.csv", joint_names=data.joint_names, reach_m=reach)) == len(data)
+

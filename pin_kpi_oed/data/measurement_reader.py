@@ -20,16 +20,15 @@ from pin_kpi_oed.data.measurement_set import (PAYLOAD_COLUMN, POSITION_COLUMNS, 
                                               TIME_COLUMN, MeasurementSet)
 from pin_kpi_oed.data.table import Units, parse_columns, parse_units, read_text_table, rename_header
 from pin_kpi_oed.errors import InputError
+from pin_kpi_oed.validation.units import check_position_spread_m
 
-__all__ = ["ANGLE_LIMIT_RAD", "MAX_MEDIAN_DISTANCE_M", "REACH_FACTOR", "MAX_MEDIAN_SIGMA_M", "read_measurements",
+__all__ = ["ANGLE_LIMIT_RAD", "MAX_MEDIAN_DISTANCE_M", "MAX_MEDIAN_SIGMA_M", "read_measurements",
            "parse_numeric_table", "check_positive_sigma"]
 
 #: Joint values (rad) or rotation-vector components beyond this look like degrees.
 ANGLE_LIMIT_RAD = 2.0 * math.pi + 0.1
 #: Median tracker-to-reflector distance (m) beyond which a file looks like mm.
 MAX_MEDIAN_DISTANCE_M = 50.0
-#: Factor on the robot reach for the reach-based mm guard.
-REACH_FACTOR = 20.0
 #: Median standard deviation (m) beyond which sigma looks like mm/µm.
 MAX_MEDIAN_SIGMA_M = 0.1
 
@@ -256,7 +255,7 @@ def _check_units(ms: MeasurementSet, cols: _Columns, row_lines: list[int], src: 
     if cols.position:
         dist = np.linalg.norm(pos, axis=1)
         med = float(np.median(dist))
-        limit = MAX_MEDIAN_DISTANCE_M if reach_m is None else max(MAX_MEDIAN_DISTANCE_M, REACH_FACTOR * float(reach_m))
+        limit = MAX_MEDIAN_DISTANCE_M
         if med > limit:
             r = int(np.argmax(dist))
             raise InputError(
@@ -264,16 +263,10 @@ def _check_units(ms: MeasurementSet, cols: _Columns, row_lines: list[int], src: 
                 f"(e.g. row {r + 1} (line {row_lines[r]}): {dist[r]:.6g}); looks like mm/degrees; convert to m/rad or declare the units (--units mm,deg)"
             )
     if reach_m is not None and cols.position:
-        for rows in ms.station_rows().values():  # each station has its own tracker frame
-            spread = np.linalg.norm(pos[rows] - np.median(pos[rows], axis=0), axis=1)
-            med_spread = float(np.median(spread))
-            if med_spread > REACH_FACTOR * float(reach_m):
-                r = int(rows[np.argmax(spread)])
-                raise InputError(
-                    f"{src}: columns x, y, z: median distance of the points from their median point "
-                    f"{med_spread:.6g} m exceeds {REACH_FACTOR:g} x reach ({float(reach_m):g} m) "
-                    f"(e.g. row {r + 1} (line {row_lines[r]})); looks like mm/degrees; convert to m/rad or declare the units (--units mm,deg)"
-                )
+        for lab, rows in ms.station_rows().items():  # each station has its own tracker frame
+            where = f"{src}: columns x, y, z" + (f", station '{lab}'" if ms.station is not None else "")
+            check_position_spread_m(pos[rows], float(reach_m), where,
+                                    "convert to m/rad or declare the units (--units mm,deg)")
     rev = np.array([u != "m" for u in joint_units]) if joint_units is not None else np.ones(len(cols.joints), bool)
     for arr, names, mask in ((ms.q, cols.joints, rev), (ms.rotvec_rad, ROTVEC_COLUMNS, np.ones(3, bool))):
         if arr is None:

@@ -96,7 +96,7 @@ every public name is importable from here.
 from __future__ import annotations
 
 from pin_kpi_oed.data.measurement_reader import (ANGLE_LIMIT_RAD, MAX_MEDIAN_DISTANCE_M, MAX_MEDIAN_SIGMA_M,
-                                                 REACH_FACTOR, check_positive_sigma, parse_numeric_table,
+                                                 check_positive_sigma, parse_numeric_table,
                                                  read_measurements)
 from pin_kpi_oed.data.measurement_set import (PAYLOAD_COLUMN, POSITION_COLUMNS, RESERVED_COLUMNS, ROTVEC_COLUMNS,
                                               SIGMA_AXIS_COLUMNS, SIGMA_COLUMN, STATION_COLUMN, TEMPERATURE_COLUMN,
@@ -121,6 +121,5 @@ __all__ = [
     "check_positive_sigma",
     "ANGLE_LIMIT_RAD",
     "MAX_MEDIAN_DISTANCE_M",
-    "REACH_FACTOR",
     "MAX_MEDIAN_SIGMA_M",
 ]
