@@ -504,3 +504,29 @@ def test_one_unit_guard_for_reader_and_identify(kr15_data, tmp_path):
     write_measurements(data, tmp_path / "m.csv")
     assert len(read_measurements(tmp_path / "m.csv", joint_names=data.joint_names, reach_m=reach)) == len(data)
 
+
+def test_fit_quality_names_extrapolation_when_validation_lies_outside_training(kr15_data):
+    """A held-out error worse than the nominal robot's is 'extrapolation' when most validation rows lie outside the
+    training's joint angles (coverage_summary), and 'wrong robot or joint order/zero' when they are covered."""
+    from pin_kpi_oed.identification.coverage import coverage_summary
+    from pin_kpi_oed.identification.quality import assess_fit
+
+    robot, tm, nominal, data = kr15_data
+    j = robot.joint_names.index("joint_a1")
+    low = data.q[:, j] < np.median(data.q[:, j])
+    train, test = data.subset(np.flatnonzero(low)), data.subset(np.flatnonzero(~low))
+    outside = coverage_summary(robot, train, test)
+    inside = coverage_summary(robot, data, test)
+    assert outside["rows_covered"] < 0.5 and outside["per_joint"]["joint_a1"] < 0.5 and inside["rows_covered"] == 1.0
+
+    class R:  # a good training fit (reduced chi2 1)
+        names, covariance_scaled, loss, residuals_rad = ["p"] * 30, False, "linear", None
+        chi2_reduced, weighted_errors = 1.0, np.full(300, np.sqrt(3.0))
+        errors_m, outliers = np.full(300, 1e-5), np.array([], int)
+
+    worse = {"before": {"rms_m": 1e-3}, "after": {"rms_m": 2e-3}}
+    q_out = assess_fit(R(), {**worse, "coverage": outside})
+    assert q_out.verdict == "poor" and "extrapolation" in q_out.line() and "joint_a1" in q_out.line()
+    assert "wrong robot" not in q_out.line()
+    q_in = assess_fit(R(), {**worse, "coverage": inside})
+    assert "wrong robot or joint order/zero" in q_in.line() and "extrapolation" not in q_in.line()

@@ -333,6 +333,9 @@ def _validation(model: Any, train: Any, opts: Any, result: Any, test: Any, reg: 
         head = [f"transfer to {args.validate}: set-up (tracker pose, reflector) re-registered on {how} with the robot "
                 f"held; scored on the other {va['n']} rows (row numbers in the JSON: validation.registration.rows)"]
         out = {"registration": r, "scored_rows": va["scored_rows"]}
+    from pin_kpi_oed.identification.coverage import coverage_summary
+
+    out["coverage"] = coverage_summary(model.robot, train, test)
     out.update({"before": vb, "after": va, "before_means": "nominal robot + fitted tracker pose and reflector",
                 "after_means": "calibration (geometry" + (" + effects)" if result.effects else ")")})
     lines = head + [format_validation(vb, "before (nominal geometry + fitted tracker pose and reflector)"),
