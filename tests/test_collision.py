@@ -346,3 +346,24 @@ def test_beam_frames_map_z_onto_the_beam():
     for i in range(len(B)):
         assert np.allclose(R[i].T @ R[i], np.eye(3), atol=1e-12) and np.linalg.det(R[i]) == pytest.approx(1.0)
         assert np.allclose(c[i] + h[i] * R[i][:, 2], B[i]) and np.allclose(c[i] - h[i] * R[i][:, 2], a)
+
+
+def test_every_overlap_is_listed_at_once_with_the_skip_pairs_hint(coll15):
+    """A working configuration with several colliding pairs: one message names every pair and the skip_pairs entry."""
+    rng = np.random.default_rng(4)
+    Q = coll15.robot.random_q(rng, 2000)
+    g = coll15.evaluate(Q, with_grad=False)
+    robot_rows = np.array([i for i, n in enumerate(coll15.info.names) if n.startswith("robot:")])
+    n_bad = np.sum(g[:, robot_rows] < -0.01, axis=1)
+    i = int(np.flatnonzero(n_bad >= 2)[0])
+    bad = [coll15.info.names[r].removeprefix("robot:") for r in robot_rows[g[i, robot_rows] < -0.01]]
+    d = _cell_dict()
+    d["working_configurations_deg"] = [np.degrees(Q[i]).tolist()]
+    with pytest.raises(InputError) as err:
+        CollisionModel(cell_from_dict(d, "bad.yaml"))
+    msg = str(err.value)
+    assert "\n" not in msg and msg.count("working configuration 0 is in collision") >= len(bad) >= 2
+    hint = msg.split("skip_pairs: [", 1)[1]
+    for pair in bad:
+        a, b = pair.split("|")
+        assert f"({pair}," in msg.replace("robot:", "") and f"[{a}, {b}]" in hint

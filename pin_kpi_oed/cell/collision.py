@@ -352,6 +352,7 @@ class CollisionModel:
             if T @ nv - off - cell.beam_radius_m < 0:
                 raise InputError(f"{cell.source or cell.name}: the tracker is outside the free side of "
                                  f"half-space '{hsp.name}'; move the tracker")
+        problems, pairs = [], []
         for a in range(nr):
             if self.seg_joint[a] != 0:
                 continue
@@ -361,16 +362,20 @@ class CollisionModel:
                 _, _, w1, w2 = segment_closest(self.A_loc[a], self.B_loc[a], self.A_loc[o], self.B_loc[o])
                 d = np.linalg.norm(w2 - w1) - self.radius[a] - self.radius[o]
                 if d < cell.clearance_m:
-                    raise InputError(f"{cell.source or cell.name}: fixed robot capsule '{self.seg_names[a]}' "
-                                     f"collides with obstacle '{self.seg_names[o]}' ({d * 1e3:.0f} mm); move the "
-                                     f"obstacle or add [{self.seg_names[a]}, {self.seg_names[o]}] to skip_pairs")
+                    problems.append(f"fixed robot capsule '{self.seg_names[a]}' collides with obstacle "
+                                    f"'{self.seg_names[o]}' ({d * 1e3:.0f} mm)")
+                    pairs.append((self.seg_names[a], self.seg_names[o]))
             for hsp, (nv, off) in zip(cell.half_spaces, self.halfspaces):
                 if self._skipped_half(a, hsp.name):
                     continue
                 d = min(self.A_loc[a] @ nv, self.B_loc[a] @ nv) - off - self.radius[a]
                 if d < cell.clearance_m:
-                    raise InputError(f"{cell.source or cell.name}: fixed robot capsule '{self.seg_names[a]}' "
-                                     f"crosses half-space '{hsp.name}' ({d * 1e3:.0f} mm); move the robot base")
+                    problems.append(f"fixed robot capsule '{self.seg_names[a]}' crosses half-space '{hsp.name}' "
+                                    f"({d * 1e3:.0f} mm; move the robot base)")
+                    pairs.append((self.seg_names[a], hsp.name))
+        if problems:
+            raise InputError(f"{cell.source or cell.name}: " + "; ".join(problems) + "; " + _skip_hint(pairs)
+                             + ", otherwise move the obstacle or the robot base")
 
     def _check_working(self) -> None:
         """Every working configuration must be collision-free and in the tracker's line of sight."""
@@ -383,6 +388,7 @@ class CollisionModel:
             self.pairs, self.half, self.with_incidence, self.info, self.jac_rows, self.jac_cols = saved
         names = self.rows_all["rows"].names
         kinds = self.rows_all["rows"].kind
+        problems, pairs = [], []
         for i in range(g.shape[0]):
             for r in np.flatnonzero(g[i] < 0):
                 if kinds[r] == INCID:
@@ -392,8 +398,13 @@ class CollisionModel:
                     else "is in collision"
                 if g[i, r] + cell.clearance_m >= 0:  # clear, but inside the required clearance (margins included)
                     what = f"is closer than the required clearance of {cell.clearance_m * 1e3:g} mm (margins included)"
-                raise InputError(f"{cell.source or cell.name}: working configuration {i} {what} ({nm}, "
-                                 f"{g[i, r] * 1e3:.1f} mm)")
+                elif kinds[r] == PAIR and not nm.startswith("beam"):
+                    pair = tuple(nm.removeprefix("robot:").split("|", 1))
+                    pairs += [pair] if pair not in pairs else []
+                problems.append(f"working configuration {i} {what} ({nm}, {g[i, r] * 1e3:.1f} mm)")
+        if problems:
+            raise InputError(f"{cell.source or cell.name}: " + "; ".join(problems)
+                             + (f"; {_skip_hint(pairs)}" if pairs else ""))
 
     # ------------------------------------------------------------------ evaluation
     @property
@@ -625,6 +636,13 @@ class CollisionModel:
             dmin = np.minimum(dmin, g.min(axis=1))
         inc = self._incidence_row(Q, False)[0][:, 0] if self.with_incidence else np.full(m, np.inf)
         return dmin, inc
+
+
+def _skip_hint(pairs: list[tuple[str, str]]) -> str:
+    """The advice for capsules that overlap by construction: the cell file's ``skip_pairs`` entry to add."""
+    listed = ", ".join(f"[{a}, {b}]" for a, b in pairs)
+    return (f"if they overlap by construction (enclosing capsules of adjacent links, a robot on its pedestal or "
+            f"floor), list them under skip_pairs in the cell file: skip_pairs: [{listed}]")
 
 
 def random_feasible(coll: CollisionModel, m: int, rng: np.random.Generator, max_tries: int,
