@@ -59,7 +59,7 @@ _PIPELINE = {
     "CalibratedModel": "pin_kpi_oed.identification.model_file",
     "load_model_file": "pin_kpi_oed.identification.model_file",
     "register_setup": "pin_kpi_oed.identification.transfer", "predict_table": "pin_kpi_oed.identification.transfer",
-    "write_model_urdf": "pin_kpi_oed.identification.export",
+    "write_model_urdf": "pin_kpi_oed.identification.urdf_export",
     # diagnosis
     "diagnose": "pin_kpi_oed.diagnosis.diagnose", "DiagnoseOptions": "pin_kpi_oed.diagnosis.diagnose_options",
     "DiagnosisReport": "pin_kpi_oed.diagnosis.report",
