@@ -184,3 +184,28 @@ def test_cli_identify_predict_and_damaged_block(withheld, tmp_path, capsys):
         err = capsys.readouterr().err
         assert needle in err and str(f) in err and "Traceback" not in err, err
         assert not out_csv.exists()
+
+
+def test_cli_diagnose_model_out_feeds_register_and_predict(withheld, tmp_path, capsys):
+    """diagnose --model-out writes the reported model (with its discrepancy); register keeps the robot's
+    discrepancy and re-fits the set-up only; predict then writes σ."""
+    model, train, test = withheld
+    write_measurements(train, tmp_path / "train.csv")
+    write_measurements(test.subset(np.arange(40)), tmp_path / "reg.csv")
+    write_measurements(test.subset(np.arange(40, 300)), tmp_path / "held.csv")
+    m = tmp_path / "diag_model.json"
+    assert main(["diagnose", "--robot", "ur10", "--train", str(tmp_path / "train.csv"), "--kfold", "3",
+                 "--reflector", "0.03,0.02,0.08", "--sigma", "1e-5", "--effects", "joint_compliance,gear_harmonic",
+                 "--model-out", str(m), "--quiet"]) == 0
+    doc = json.loads(m.read_text())
+    assert "discrepancy" in doc and doc["discrepancy"]["kind"] in ("exact", "white")
+    reg = tmp_path / "reg_model.json"
+    assert main(["register", "--model", str(m), "--data", str(tmp_path / "reg.csv"), "--model-out", str(reg)]) == 0
+    back = load_model_file(reg)
+    assert back.discrepancy is not None and back.discrepancy.to_dict() == load_model_file(m).discrepancy.to_dict()
+    pred = tmp_path / "pred.csv"
+    assert main(["predict", "--model", str(reg), "--data", str(tmp_path / "held.csv"), "--out", str(pred)]) == 0
+    p = np.genfromtxt(pred, delimiter=",", names=True)
+    z = np.c_[p["x"] - p["x_pred"], p["y"] - p["y_pred"], p["z"] - p["z_pred"]] / np.c_[p["sigma_x"], p["sigma_y"],
+                                                                                      p["sigma_z"]]
+    assert 0.5 < np.sqrt(np.mean(z ** 2)) < 2.0

@@ -18,11 +18,12 @@ from __future__ import annotations
 
 import argparse
 import math
+import os
 from typing import Any
 
 import numpy as np
 
-from pin_kpi_oed.cli.identify import add_register_args
+from pin_kpi_oed.cli.identify import add_discrepancy_arg, add_register_args
 from pin_kpi_oed.cli.util import add_table_options, table_options
 from pin_kpi_oed.cli.util import parse_floats as _floats
 from pin_kpi_oed.errors import InputError
@@ -71,6 +72,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     d.add_argument("--seed", type=int, default=0, help="seed of the K-fold split and the registration rows (default 0)")
     d.add_argument("--json", default=None, help="write the report (JSON, SI units) here")
     d.add_argument("--figures", default=None, help="write PNG figures of the residuals into this folder")
+    d.add_argument("--model-out", default=None,
+                   help="write the model the diagnosis reports (geometry + the selected effects, fitted on all "
+                        "training rows, with the discrepancy of --discrepancy) as a model file for register, predict, "
+                        "compensate and design --model")
+    add_discrepancy_arg(d)
     d.add_argument("--quiet", action="store_true", help="print only the one-line verdict")
     add_table_options(d)
     d.set_defaults(func=run)
@@ -170,6 +176,12 @@ def run(args: argparse.Namespace) -> int:
     from pin_kpi_oed.model.robot import load_robot
 
     effects = _checked_effects(args)
+    if args.model_out:
+        from pin_kpi_oed.data.atomic import check_writable
+
+        check_writable(args.model_out)
+        if any(os.path.abspath(args.model_out) == os.path.abspath(f) for f in args.train + [args.validate or ""]):
+            raise InputError(f"--model-out {args.model_out}: is an input of this command; name another file")
     robot = load_robot(args.robot, args.tool)
     reach = robot.reach()
     train = read_data_files(args.train, robot, "--train", opts=table_options(args, robot))
@@ -186,6 +198,27 @@ def run(args: argparse.Namespace) -> int:
                    seed=args.seed, t_ref_c=args.t_ref, register_rows=args.register_rows, register_data=reg,
                    harmonics=args.harmonics, transfer_prior_rad=args.term_prior,
                    show_progress=False if args.quiet else None)
+    model_dict = _diagnosed_model(args, rep, train)
     _write_and_print(args, rep)
+    if model_dict is not None:
+        from pin_kpi_oed.data.atomic import atomic_write_json
+
+        atomic_write_json(args.model_out, model_dict)
+        print(f"wrote {args.model_out} (geometry"
+              + "".join(f" + {e}" for e in rep.selected_effects) + f"; {rep.model_fit.discrepancy.decision if rep.model_fit.discrepancy else 'no discrepancy'})")
     return 0
+
+
+def _diagnosed_model(args: argparse.Namespace, rep: Any, train: Any) -> dict | None:
+    """The model file content of ``--model-out``: the report's full-data fit with its discrepancy."""
+    from pin_kpi_oed.identification.discrepancy_fit import discrepancy_options, result_discrepancy
+
+    if not args.model_out:
+        return None
+    fit = rep.model_fit
+    if not args.quiet and args.discrepancy != "none":
+        print(f"fitting the model discrepancy ({args.discrepancy}) of the reported model on {len(train)} rows ...",
+              flush=True)
+    fit.discrepancy = result_discrepancy(fit, train, discrepancy_options(args.discrepancy, args.seed))
+    return fit.calibrated_model().to_dict()
 

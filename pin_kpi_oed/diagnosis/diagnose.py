@@ -268,4 +268,5 @@ def _diagnose_steps(model: TrackerModel, train: MeasurementSet, validate: Measur
         validation_mismatch=validation_mismatch, mismatch=mismatch, notes=notes, geometry=geometry,
         registration=dict(plan.registration_info), term_selection=term_selection,
         transfer=transfer, plot_data={"residuals_m": geo.R, "regressors": regs},
+        model_fit=current.full.result if selected and current.full is not None else res0,
         time_s=time.perf_counter() - t0)

@@ -121,6 +121,9 @@ class DiagnosisReport(Result):
             ``unmodelled effect``) with the numbers behind it, and for extrapolation the poses to add.
         term_selection: the sparse selection of transferable terms (``transmission_error``,
             ``link_bending`` candidates): chosen terms in plain words, held-out RMS path (m).
+        model_fit: the identification the report describes, fitted on all training rows (geometry and
+            the selected effects; not in ``to_dict``): :meth:`calibrated_model` of it is what
+            ``diagnose --model-out`` writes.
         plot_data: what the figures need (not in ``to_dict``): ``residuals_m`` (held-out geometric
             residuals, n × 3, m), ``regressors`` (name -> (values, unit)).
     """
@@ -156,6 +159,7 @@ class DiagnosisReport(Result):
     term_selection: dict = field(default_factory=dict)
     transfer: dict = field(default_factory=dict)
     plot_data: dict = field(default_factory=dict, repr=False)
+    model_fit: Any = field(default=None, repr=False)
 
     def effect(self, name: str) -> EffectResult:
         """The single-effect result of ``name``."""
