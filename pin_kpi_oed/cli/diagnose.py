@@ -59,8 +59,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         "(needed when the files have none)")
     d.add_argument("--effects", default=None,
                    help="candidate effects, comma-separated (default: joint_compliance, gear_harmonic, backlash, "
-                        "thermal_expansion, joint_scale); also transmission_error and link_bending (their terms "
-                        "are chosen by sparse selection on held-out error) and drift (linear in time/row order)")
+                        "thermal_expansion, joint_scale, transmission_error and link_bending: the last two's terms "
+                        "are chosen by sparse selection on held-out error); also drift (linear in time/row order)")
     d.add_argument("--harmonics", type=int, default=40,
                    help="highest order (cycles per revolution) of the transmission_error candidate (default 40)")
     d.add_argument("--term-prior", type=float, default=None, metavar="RAD",
@@ -103,7 +103,9 @@ def _checked_effects(args: argparse.Namespace) -> list[str] | None:
         raise InputError(f"--term-prior must be a positive angle in rad below 0.1 (e.g. 1e-4), got {args.term_prior}")
     if not (math.isfinite(args.alpha) and 0 < args.alpha < 1):
         raise InputError(f"--alpha must be in (0, 1), got {args.alpha}")
-    effects = None
+    from pin_kpi_oed.diagnosis.diagnose_options import DEFAULT_CANDIDATES
+
+    effects = list(DEFAULT_CANDIDATES)
     if args.effects:
         effects = [e.strip() for e in args.effects.split(",") if e.strip()]
         unknown = [e for e in effects if e not in ALL_EFFECT_NAMES]

@@ -6,11 +6,18 @@ from dataclasses import dataclass
 from typing import Sequence
 
 from pin_kpi_oed.data.measurements import MeasurementSet
-from pin_kpi_oed.effects.library import Effect
+from pin_kpi_oed.effects.library import EFFECT_NAMES, Effect
 from pin_kpi_oed.errors import InputError
 from pin_kpi_oed.model.tracker import TrackerModel
 
-__all__ = ["DiagnoseOptions", "check_options"]
+__all__ = ["DiagnoseOptions", "check_options", "DEFAULT_CANDIDATES"]
+
+
+#: The candidates of ``pin-kpi-oed diagnose`` by default: every library effect, plus the transferable
+#: terms chosen by sparse K-fold selection (``transmission_error``: Fourier orders of each joint's angle;
+#: ``link_bending``: the arm-plane gravity terms). On real arms the transmission terms close most of the
+#: gap a geometric calibration leaves (UR10 Series C: docs/results.md), so they are not opt-in there.
+DEFAULT_CANDIDATES: tuple[str, ...] = EFFECT_NAMES + ("transmission_error", "link_bending")
 
 
 @dataclass
@@ -19,7 +26,8 @@ class DiagnoseOptions:
 
     Attributes:
         kfold: K-fold cross-validation on the training data alone (K ≥ 2), instead of a validation set.
-        effects: candidate effect names or objects (default: all of :data:`EFFECT_NAMES`).
+        effects: candidate effect names or objects (default: all of :data:`EFFECT_NAMES`; the command
+            line's default is :data:`DEFAULT_CANDIDATES`, which adds the transferable terms).
         weights: ``auto`` (sigma columns if present, else the noise model), ``data`` or ``noise``.
         alpha: significance level of the gap test and of the effect tests.
         seed: seed of the K-fold split and of the random registration rows.
