@@ -1,0 +1,71 @@
+"""Discrepancy speed and memory: identify with ``discrepancy="auto"`` on 2,773 real rows ≤ 30 s; on 12,000 rows
+≤ 120 s and ≤ 2 GB; predict (with σ) of 10,000 rows ≤ 5 s.
+
+Data: the IPA UR10 Series C (2,773 random poses) and Series A (11,911 grid poses, 89 rows of Series C added to
+reach 12,000), position only, σ = 0.1 mm uniform weights; the baseline is the same identification without the
+discrepancy (``discrepancy="none"``), timed in the same run. Peak memory: the process's maximum resident set
+(``resource.getrusage``) after the 12,000-row fit. Without the IPA data the benchmark says so and skips.
+
+Run:  python -m benchmarks bench_discrepancy
+"""
+
+from __future__ import annotations
+
+import resource
+import time
+
+import numpy as np
+
+from benchmarks.common import figure
+
+
+def main() -> dict:
+    from benchmarks.honest_sigma import find_data, load
+    from pin_kpi_oed import NoiseModel, TrackerModel, load_robot
+    from pin_kpi_oed.data.measurements import MeasurementSet, concat_measurements
+    from pin_kpi_oed.identification.identify import identify
+
+    folder = find_data()
+    if folder is None or not (folder / "Series_A").is_dir():
+        print("== bench_discrepancy: IPA UR10 data not found (PIN_KPI_OED_IPA_DATA): skipped")
+        return {}
+    model = TrackerModel(load_robot("ur10"), reflector_m=np.array([0.0, 0.0, 0.109]),
+                         noise=NoiseModel(sigma_xyz_m=(1e-4,) * 3))
+    C = load(folder, "C")
+    out = {}
+
+    def timed(data, mode):
+        t0 = time.perf_counter()
+        res = identify(model, data, discrepancy=mode, raise_on_failure=False)
+        return time.perf_counter() - t0, res
+
+    t_none, _ = timed(C, "none")
+    t_auto, res = timed(C, "auto")
+    out["identify_auto_2773_s"] = t_auto
+    figure(f"identify --discrepancy auto, {len(C)} rows (Series C)", t_auto, 30.0, "s", t_none, "without")
+    print(f"   {res.discrepancy.decision}")
+    A = load(folder, "A")
+    big = concat_measurements([A, C.subset(np.arange(12000 - len(A)))], ["A", "C"])
+    t_none, _ = timed(big, "none")
+    t_auto, res = timed(big, "auto")
+    peak_gb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024 ** 2
+    out.update({"identify_auto_12000_s": t_auto, "peak_rss_gb": peak_gb})
+    figure(f"identify --discrepancy auto, {len(big)} rows (Series A + C)", t_auto, 120.0, "s", t_none, "without")
+    figure("peak resident memory of the process after it", peak_gb, 2.0, "GB")
+    print(f"   {res.discrepancy.decision}")
+    cm = res.calibrated_model()
+    Q = np.vstack([A.q, A.q])[:10000]
+    aux = MeasurementSet(A.joint_names, Q, station=np.array(["A"] * len(Q)))
+    t0 = time.perf_counter()
+    cm.predict_with_sigma(Q, aux)
+    t_pred = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    cm.predict(Q, aux)
+    t_plain = time.perf_counter() - t0
+    out["predict_10000_s"] = t_pred
+    figure("predict with sigma, 10,000 rows", t_pred, 5.0, "s", t_plain, "predict without sigma")
+    return out
+
+
+if __name__ == "__main__":
+    main()
