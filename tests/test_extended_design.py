@@ -219,7 +219,7 @@ def test_bias_option_rescales_weights_only(ur10):
 
 
 def test_extended_design_validation_simulated(ur10):
-    from pin_kpi_oed.studies.validation import _near, extended_design_validation
+    from pin_kpi_oed.studies.design_trials import _near, extended_design_validation
 
     robot, model, base = ur10
     Qw = np.zeros((2, 6))

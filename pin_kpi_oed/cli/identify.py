@@ -152,9 +152,20 @@ def _register_identify(subparsers: argparse._SubParsersAction) -> None:
     i.add_argument("--fix", default=None, help="parameters held at nominal, comma-separated names or globs "
                                                "(e.g. 'reflector.*' or 'tracker.*')")
     i.add_argument("--max-nfev", type=int, default=None, help="maximum number of residual evaluations")
+    add_discrepancy_arg(i)
     i.add_argument("--quiet", action="store_true", help="print only the validation lines")
     add_table_options(i)
     i.set_defaults(func=run_identify)
+
+
+def add_discrepancy_arg(p: argparse.ArgumentParser) -> None:
+    """``--discrepancy auto|on|none`` (identify, diagnose)."""
+    p.add_argument("--discrepancy", default="auto", choices=["auto", "on", "none"],
+                   help="model discrepancy: a Gaussian process over the joint angles fitted to the residuals of the "
+                        "parametric fit, so that every prediction carries an honest sigma. auto (default): fitted "
+                        "when there are enough rows and it lowers the 5-fold held-out error, else the residual level "
+                        "as an independent error per row; on: always the Gaussian process; none: the paper's "
+                        "noise-only model")
 
 
 def _register_import_ipa(subparsers: argparse._SubParsersAction) -> None:
@@ -318,7 +329,7 @@ def _validation(model: Any, train: Any, opts: Any, result: Any, test: Any, reg: 
     from pin_kpi_oed.identification.identify import format_validation, identify, validate
     from pin_kpi_oed.identification.transfer import validate_transfer
 
-    before = identify(model, train, opts, setup_only=True)
+    before = identify(model, train, opts, setup_only=True, discrepancy="none")
     if args.register_rows is None and reg is None:
         vb, va = validate(before, test), validate(result, test)
         head = []
@@ -393,6 +404,18 @@ def _fit(args: argparse.Namespace, model: Any, train: Any, opts: Any, effects: l
     return result, opts
 
 
+def _discrepancy(args: argparse.Namespace, result: Any, train: Any) -> Any:
+    """The discrepancy of the final fit (``--discrepancy``), its decision printed on one line."""
+    from pin_kpi_oed.identification.discrepancy_fit import discrepancy_options, result_discrepancy
+
+    if args.discrepancy != "none" and not args.quiet:
+        print(f"fitting the model discrepancy ({args.discrepancy}) on {len(train)} rows ...", flush=True)
+    disc = result_discrepancy(result, train, discrepancy_options(args.discrepancy, args.seed))
+    if disc is not None and args.quiet:
+        print(disc.decision)
+    return disc
+
+
 def _checked_urdf(args: argparse.Namespace, robot: Any, result: Any) -> tuple[str, float]:
     """(calibrated URDF text, its max FK position error (m)); raises SolverError if it does not reproduce the fit."""
     from pin_kpi_oed.errors import SolverError
@@ -460,6 +483,7 @@ def run_identify(args: argparse.Namespace) -> int:
     if args.fix:
         model.layout.fix(args.fix)
     result, opts = _fit(args, model, train, opts, effects, reflector, estimated)
+    result.discrepancy = _discrepancy(args, result, train)
     out = {"result": result.to_dict(), "data": list(args.data), "validate": args.validate,
            "reflector_nominal_m": reflector.tolist(), "reflector_nominal_source": "estimated" if estimated else "given"}
     lines = []
