@@ -43,6 +43,7 @@ _PIPELINE = {
     "run_designs": "pin_kpi_oed.design.optimize", "DesignOptions": "pin_kpi_oed.design.optimize",
     "DesignProblem": "pin_kpi_oed.design.optimize", "DesignResult": "pin_kpi_oed.design.optimize",
     "load_design": "pin_kpi_oed.design.design_file", "DesignFile": "pin_kpi_oed.design.design_file",
+    "write_design": "pin_kpi_oed.design.design_file",
     "analyse": "pin_kpi_oed.oed.identifiability", "score_design": "pin_kpi_oed.oed.evaluate",
     # measurements
     "MeasurementSet": "pin_kpi_oed.data.measurements", "read_measurements": "pin_kpi_oed.data.measurements",

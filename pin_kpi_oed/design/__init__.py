@@ -3,7 +3,7 @@
 User-facing names (imported on first use): :func:`run_designs` (heuristic + optimum designs of a cell),
 :class:`DesignOptions`, :class:`DesignProblem`, :class:`DesignResult`, :func:`design_random`,
 :func:`design_ipopt`; :func:`load_design`, :class:`DesignFile`, :class:`DesignEntry`, :func:`write_design`,
-:func:`design_document` (design files);
+:func:`design_document` (design files: what ``view`` and ``export`` read);
 :func:`read_poses` (a user pool), :class:`SequentialProblem`, :func:`poses_until` (designing on top of
 measured poses); :func:`certify` (the optimality certificate of a design problem).
 """
