@@ -55,7 +55,7 @@ def main() -> dict:
     print(f"   {res.discrepancy.decision}")
     cm = res.calibrated_model()
     Q = np.vstack([A.q, A.q])[:10000]
-    aux = MeasurementSet(A.joint_names, Q, station=np.array(["A"] * len(Q)))
+    aux = MeasurementSet(A.joint_names, Q, np.full((len(Q), 3), np.nan), station=np.array(["A"] * len(Q)))
     t0 = time.perf_counter()
     cm.predict_with_sigma(Q, aux)
     t_pred = time.perf_counter() - t0

@@ -209,3 +209,30 @@ def test_cli_diagnose_model_out_feeds_register_and_predict(withheld, tmp_path, c
     z = np.c_[p["x"] - p["x_pred"], p["y"] - p["y_pred"], p["z"] - p["z_pred"]] / np.c_[p["sigma_x"], p["sigma_y"],
                                                                                       p["sigma_z"]]
     assert 0.5 < np.sqrt(np.mean(z ** 2)) < 2.0
+
+
+def test_compensation_includes_the_discrepancy(withheld):
+    """Compensated joints put the calibrated TCP — discrepancy included — on the targets; each carries its σ."""
+    from pin_kpi_oed.data.measurements import MeasurementSet
+    from pin_kpi_oed.data.targets import TargetSet
+    from pin_kpi_oed.identification.compensate import CompensationOptions, compensate, forward
+
+    model, train, test = withheld
+    cm = identify(model, train, discrepancy=DiscrepancyOptions(mode="on", n_fit=300, starts=(0.1,))).calibrated_model()
+    Q = test.q[:8]
+    goal = forward(cm, Q, frame="base")
+    plain = forward(dataclasses_replace(cm), Q, frame="base")
+    assert np.abs(goal - plain).max() > 1e-6                    # the discrepancy moves the predicted TCP
+    ts = TargetSet([f"t{i}" for i in range(8)], goal, None, None, list(cm.robot.joint_names),
+                   MeasurementSet(list(cm.robot.joint_names), Q, np.full((len(Q), 3), np.nan)))
+    res = compensate(cm, ts, CompensationOptions(frame="base"))
+    ok = np.array([s == "ok" for s in res.target_status])
+    assert ok.sum() >= 6
+    assert np.abs(forward(cm, res.q[ok], frame="base") - goal[ok]).max() < 1e-9
+    assert res.sigma_m.shape == (8,) and np.all(res.sigma_m > 0)
+
+
+def dataclasses_replace(cm):
+    import dataclasses
+
+    return dataclasses.replace(cm, discrepancy=None)

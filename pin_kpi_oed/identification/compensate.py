@@ -135,6 +135,7 @@ class PoseModel:
         if not nominal:
             self.p[:6 * self.robot.nq] = cm.joint_p
         self.pairs = [] if nominal else list(zip(cm.effects, cm.thetas))
+        self.discrepancy = None if nominal else cm.discrepancy
         self.model = self.tm.pinocchio_model(self.p)
         self.data = self.model.createData()
         self.fid = self.robot.tool_frame_id
@@ -147,6 +148,8 @@ class PoseModel:
         """TCP positions (m, 3) m and tool rotations (m, 3, 3) in the target frame at Q (rad)."""
         Q = np.atleast_2d(np.asarray(Q, float))
         pos = predict_with_effects(self.tm, self.p, Q, aux, self.pairs)[:, :3]
+        if self.discrepancy is not None:  # the robot's discrepancy (base frame) at the commanded joints
+            pos = pos + self.discrepancy.predict(Q, return_var=False)[0] @ self.T.rotation.T
         Qe = Q + self.joint_offsets(Q, aux)
         R = np.empty((Q.shape[0], 3, 3))
         for i, q in enumerate(Qe):
@@ -259,6 +262,8 @@ class CompensationResult(Result):
         status: per target ``ok`` / ``unreachable`` / ``near_singular`` (``status`` of the
             result: ``ok`` if every target is ok, else a count).
         frame: ``cell`` or ``base``; tcp_m: the TCP point (tool frame, m); station.
+        sigma_m: predicted 3-D standard deviation of the TCP at q (m): the model's discrepancy
+            (posterior and white level; its noise model's σ without one), (m,).
     """
 
     names: list[str] = field(default_factory=list)
@@ -274,6 +279,7 @@ class CompensationResult(Result):
     station: str = ""
     tcp_m: np.ndarray = field(default_factory=lambda: np.zeros(3))
     orientation: bool = False
+    sigma_m: np.ndarray = field(default_factory=lambda: np.zeros(0))
 
     def summary(self) -> str:
         """Counts, correction statistics (mm), and the targets that are not ok."""
@@ -286,6 +292,9 @@ class CompensationResult(Result):
         if c.size:
             lines.append(f"predicted correction: mean {np.nanmean(c):.4f} mm, max {np.nanmax(c):.4f} mm; "
                          f"largest residual {np.nanmax(self.residual_m) * 1e3:.2e} mm")
+        if self.sigma_m.size:
+            lines.append(f"predicted TCP sigma (3-D) at the compensated joints: mean {np.mean(self.sigma_m) * 1e3:.4f} "
+                         f"mm, max {np.max(self.sigma_m) * 1e3:.4f} mm")
         bad = [(n, s) for n, s in zip(self.names, self.target_status) if s != "ok"]
         for n, s in bad[:10]:
             lines.append(f"  target {n}: {s}")
@@ -433,23 +442,32 @@ def _result(cm: CalibratedModel, ts: TargetSet, opt: CompensationOptions, pm: Po
         nit=int(nom.nit + cal.nit), time_s=time.perf_counter() - t0, names=list(ts.names),
         joint_names=list(cm.robot.joint_names), q_nominal=nom.Q, q=cal.Q, correction_m=correction,
         residual_m=cal.err_m, residual_rad=cal.err_rad, inv_cond=cal.inv_cond, target_status=status,
-        frame=opt.frame, station=cm.station(opt.station), tcp_m=pm.tcp, orientation=ts.rotvec_rad is not None)
+        frame=opt.frame, station=cm.station(opt.station), tcp_m=pm.tcp, orientation=ts.rotvec_rad is not None,
+        sigma_m=_tcp_sigma(cm, cal.Q, ts.aux, opt.station))
+
+
+def _tcp_sigma(cm: CalibratedModel, Q: np.ndarray, aux: Any, station: str | None) -> np.ndarray:
+    """3-D σ (m) of the TCP at Q: :meth:`CalibratedModel.predict_with_sigma` of the station (one σ for every command)."""
+    _, sig, _ = cm.predict_with_sigma(Q, aux if isinstance(aux, MeasurementSet) else None, station=cm.station(station))
+    return np.sqrt((sig ** 2).sum(axis=1))
 
 
 def write_compensation(path: str | os.PathLike, res: CompensationResult) -> None:
     """Write the compensated joints as CSV, atomically (SI units).
 
     Columns: ``name``, the joint columns (compensated, rad / m: send these), ``<joint>_nominal``,
-    ``correction_m``, ``residual_m``, ``residual_rad``, ``inv_cond``, ``status``.
+    ``correction_m``, ``residual_m``, ``residual_rad``, ``inv_cond``, ``sigma_m`` (predicted 3-D TCP σ, m),
+    ``status``.
     """
     buf = io.StringIO()
     w = csv.writer(buf, lineterminator="\n")
     w.writerow(["name"] + res.joint_names + [f"{j}_nominal" for j in res.joint_names]
-               + ["correction_m", "residual_m", "residual_rad", "inv_cond", "status"])
+               + ["correction_m", "residual_m", "residual_rad", "inv_cond", "sigma_m", "status"])
     for i, n in enumerate(res.names):
         w.writerow([n] + [repr(float(v)) for v in res.q[i]] + [repr(float(v)) for v in res.q_nominal[i]]
                    + [repr(float(res.correction_m[i])), repr(float(res.residual_m[i])),
-                      repr(float(res.residual_rad[i])), repr(float(res.inv_cond[i])), res.target_status[i]])
+                      repr(float(res.residual_rad[i])), repr(float(res.inv_cond[i])),
+                      repr(float(res.sigma_m[i])) if res.sigma_m.size else "", res.target_status[i]])
     atomic_write_text(path, buf.getvalue())
 
 
