@@ -236,3 +236,15 @@ def dataclasses_replace(cm):
     import dataclasses
 
     return dataclasses.replace(cm, discrepancy=None)
+
+
+def test_cli_too_few_rows_for_the_discrepancy(withheld, tmp_path, capsys):
+    """--discrepancy on with fewer rows than a Gaussian process needs: one line, exit 2, nothing written."""
+    model, train, _ = withheld
+    write_measurements(train.subset(np.arange(30)), tmp_path / "few.csv")
+    out = tmp_path / "m.json"
+    rc = main(["identify", "--robot", "ur10", "--data", str(tmp_path / "few.csv"), "--reflector", "0.03,0.02,0.08",
+               "--sigma", "1e-5", "--discrepancy", "on", "--model-out", str(out), "--quiet"])
+    err = capsys.readouterr().err
+    assert rc == 2 and "too few" in err and "--discrepancy" in err and "Traceback" not in err
+    assert not out.exists()
