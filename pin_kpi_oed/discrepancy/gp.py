@@ -152,6 +152,10 @@ class Discrepancy:
         Minv: DTC's K_ZZ⁻¹ − A⁻¹ (m, m).
         coverage: (d, bins) bool, the joint-angle bins the training rows visit.
         n_rows: training rows; cv: the K-fold held-out check (plain numbers); decision: one line.
+        param_names, param_cov, Bn: the parametric part's uncertainty under the discrepancy (universal
+            kriging, :meth:`set_parametric` / :meth:`parametric_covariance`): the names of the robot
+            parameters it covers, C = (Σ_a s_a⁻² F_aᵀ (K + wI)⁻¹ F_a)⁻¹ over them and the training set-ups
+            (P, P), and (K + wI)⁻¹ F_a per axis (n, 3, P) (exact only; the white kind needs none).
     """
 
     kind: str
@@ -169,6 +173,9 @@ class Discrepancy:
     cv: dict = field(default_factory=dict)
     decision: str = ""
     time_s: float = 0.0
+    param_names: list = field(default_factory=list)
+    param_cov: np.ndarray | None = None
+    Bn: np.ndarray | None = None
     _chol: Any = field(default=None, repr=False)
 
     # ------------------------------------------------------------------ posterior
@@ -214,6 +221,47 @@ class Discrepancy:
             var = v[:, None] * self.scale_m ** 2
         return mean, var
 
+    def set_parametric(self, F: np.ndarray, names: list) -> None:
+        """Store the generalised-least-squares covariance of the parameters under Σ = S²(K + wI).
+
+        Args:
+            F: Jacobian of the training rows' predictions (base frame) w.r.t. the parameters, (n, 3, P)
+                (robot parameters first, named by ``names``; then the training stations' set-up parameters).
+            names: the robot parameters' names (the first ``len(names)`` columns of F).
+        """
+        n, _, P = F.shape
+        if self.kind == "exact":
+            self._factor()
+            Bn = np.stack([sla.cho_solve(self._chol, F[:, a, :], check_finite=False) for a in range(3)], axis=1)
+            info = sum(F[:, a, :].T @ Bn[:, a, :] / self.scale_m[a] ** 2 for a in range(3))
+            self.Bn = Bn
+        elif self.kind == "white":
+            info = sum(F[:, a, :].T @ F[:, a, :] / self.noise_var_m2[a] for a in range(3))
+        else:
+            return
+        self.param_cov = np.linalg.pinv(0.5 * (info + info.T), rcond=1e-12, hermitian=True)
+        self.param_names = list(names)
+
+    def parametric_covariance(self, Q: np.ndarray, E: np.ndarray) -> np.ndarray:
+        """(m, 3, 3) base-frame covariance (m²) of the prediction error the parametric part adds at Q.
+
+        Universal kriging: (E − K_WQ Σ⁻¹ F) C (E − K_WQ Σ⁻¹ F)ᵀ with E the Jacobian of the predictions at Q
+        w.r.t. the robot parameters (base frame, (m, 3, R); the set-up columns are zero: a new station's set-up
+        is re-registered). Near the training rows the discrepancy reproduces the parametric error
+        (K_WQ Σ⁻¹ F ≈ E) and the term vanishes; far from them it is E C Eᵀ.
+        """
+        m = len(Q)
+        if self.param_cov is None:
+            return np.zeros((m, 3, 3))
+        P = self.param_cov.shape[0]
+        D = np.zeros((m, 3, P))
+        D[:, :, :E.shape[2]] = E
+        if self.Bn is not None:
+            Kwq = self.kernel(np.atleast_2d(Q), self.Z)
+            for a in range(3):
+                D[:, a, :] -= Kwq @ self.Bn[:, a, :]
+        return np.einsum("map,pq,mbq->mab", D, self.param_cov, D)
+
     @property
     def noise_var_m2(self) -> np.ndarray:
         """Variance per axis (m²) of what repeats from pose to pose only (tracker noise, repeatability)."""
@@ -247,6 +295,10 @@ class Discrepancy:
              "coverage_bin_rad": COVERAGE_BIN_RAD, "cv": self.cv, "decision": self.decision}
         if self.coverage is not None:
             d["coverage"] = ["".join("1" if b else "0" for b in row) for row in self.coverage]
+        if self.param_cov is not None:
+            d["parametric"] = {"param_names": list(self.param_names), "covariance": encode_array(self.param_cov)}
+            if self.Bn is not None:
+                d["parametric"]["Bn"] = encode_array(self.Bn)
         if self.kind != "white":
             d["kernel"] = self.kernel.to_dict()
             d["Z_rad"] = encode_array(self.Z)
@@ -304,11 +356,24 @@ class Discrepancy:
             coverage = np.array([[c == "1" for c in r] for r in cov])
         out = cls(kind, names, scale, mean, float(noise), coverage=coverage, n_rows=int(d.get("n_rows") or 0),
                   cv=dict(d.get("cv") or {}), decision=str(d.get("decision") or ""))
+        par = d.get("parametric")
+        if par is not None:
+            if not isinstance(par, dict) or not isinstance(par.get("param_names"), list):
+                raise ValueError(f"{where}.parametric: must hold 'param_names' and 'covariance'")
+            out.param_names = [str(x) for x in par["param_names"]]
+            out.param_cov = decode_array(par.get("covariance"), f"{where}.parametric.covariance", (None, None))
+            P = out.param_cov.shape[0]
+            if out.param_cov.shape != (P, P) or len(out.param_names) > P:
+                raise ValueError(f"{where}.parametric.covariance: must be square with at least one row per name")
+            if par.get("Bn") is not None:
+                out.Bn = decode_array(par["Bn"], f"{where}.parametric.Bn", (None, 3, P))
         if kind == "white":
             return out
         out.kernel = JointKernel.from_dict(d.get("kernel"), len(names), f"{where}.kernel")
         out.Z = decode_array(d.get("Z_rad"), f"{where}.Z_rad", (None, len(names)))
         m = out.Z.shape[0]
+        if out.Bn is not None and out.Bn.shape[0] != m:
+            raise ValueError(f"{where}.parametric.Bn: {out.Bn.shape[0]} rows for {m} training configurations")
         if kind == "exact":
             out.y = decode_array(d.get("y"), f"{where}.y", (m, 3))
         else:

@@ -67,4 +67,34 @@ def result_discrepancy(result: Any, data: MeasurementSet, options: Any = "auto",
     if len(Q) != len(result.residuals_m):
         raise InputError(f"discrepancy: {len(Q)} configurations for {len(result.residuals_m)} residuals")
     rows, R = base_frame_residuals(result)
-    return fit_discrepancy(np.asarray(Q, float)[rows], R, list(result.model.robot.joint_names), opts)
+    Q = np.asarray(Q, float)
+    disc = fit_discrepancy(Q[rows], R, list(result.model.robot.joint_names), opts)
+    if disc is not None:
+        F, names = parameter_jacobian(result, Q)
+        disc.set_parametric(F[rows], names)
+    return disc
+
+
+def parameter_jacobian(result: Any, Q: np.ndarray) -> tuple[np.ndarray, list[str]]:
+    """Jacobian of a fit's predictions at its rows w.r.t. its robot parameters and every station's set-up,
+    rotated into the robot base frame: ((n, 3, R + 9 S), the R robot parameters' names).
+
+    The robot parameters are the estimated joint-placement errors of the fit (its identifiable set); each
+    station adds its tracker pose (6) and reflector (3) columns, zero on the other stations' rows.
+    """
+    robot = result.model.robot
+    L0 = result.station_models[0].layout
+    robot_names = [n for n in result.names if n in set(L0.names[:6 * robot.nq])]
+    S = len(result.stations)
+    F = np.zeros((len(Q), 3, len(robot_names) + 9 * S))
+    for s, (lab, rows) in enumerate(zip(result.stations, result.station_rows)):
+        model, p = result.station_models[s], result.station_p[s]
+        J = model.jacobian(p, Q[rows])[:, :3, :]
+        L = model.layout
+        cols = [L.names.index(n) for n in robot_names]
+        setup = list(range(L.tracker.start, L.tracker.stop)) + list(range(L.reflector.start, L.reflector.stop))
+        Rs = np.asarray(result.setups[lab].tracker_T_base, float)[:3, :3]
+        Jb = np.einsum("ba,mbp->map", Rs, J)
+        F[rows, :, :len(robot_names)] = Jb[:, :, cols]
+        F[rows, :, len(robot_names) + 9 * s: len(robot_names) + 9 * (s + 1)] = Jb[:, :, setup]
+    return F, robot_names

@@ -347,15 +347,27 @@ class CalibratedModel:
         m = len(Q)
         if self.discrepancy is None:
             return Y, np.asarray(self.noise.sigma(Y[:, :3]), float).reshape(m, 3), np.zeros(m, bool)
-        _, var = self.discrepancy.predict(Q)
-        V = var + self.discrepancy.noise_var_m2
+        d = self.discrepancy
+        _, var = d.predict(Q)
+        V = var + d.noise_var_m2
         labels = self._row_stations(m, aux, station)
         sig = np.empty((m, 3))
         for lab in dict.fromkeys(labels):
             rows = np.flatnonzero(labels == lab)
             R = self.setups[lab].tracker_T_base[:3, :3]
-            sig[rows] = np.sqrt(np.einsum("ij,nj,ij->ni", R, V[rows], R))
-        return Y, sig, self.discrepancy.extrapolation(Q)
+            Cb = np.einsum("na,ab->nab", V[rows], np.eye(3)) + d.parametric_covariance(Q[rows], self._robot_jacobian(
+                lab, Q[rows]))
+            sig[rows] = np.sqrt(np.einsum("ia,nab,ib->ni", R, Cb, R))
+        return Y, sig, d.extrapolation(Q)
+
+    def _robot_jacobian(self, label: str, Q: np.ndarray) -> np.ndarray:
+        """Base-frame Jacobian (m, 3, R) of station ``label``'s predictions w.r.t. the discrepancy's robot parameters."""
+        names = self.discrepancy.param_names
+        if not names:
+            return np.zeros((len(Q), 3, 0))
+        model, p = self.station_model(label)
+        J = model.jacobian(p, Q)[:, :3, [model.layout.names.index(n) for n in names]]
+        return np.einsum("ba,mbp->map", self.setups[label].tracker_T_base[:3, :3], J)
 
     def _row_stations(self, m: int, aux: MeasurementSet | None, station: str | None) -> np.ndarray:
         if station is None and aux is not None and aux.station is not None:
