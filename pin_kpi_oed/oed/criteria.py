@@ -79,6 +79,8 @@ class Criterion:
     is_ratio: ClassVar[bool] = False
     needs_kpi: ClassVar[bool] = False
     has_pool_form: ClassVar[bool] = False
+    #: a function of the configurations, not of F alone (``kpi_gp``): evaluated through the design problem
+    needs_configurations: ClassVar[bool] = False
 
     def value_and_grad_F(self, F: np.ndarray, E: np.ndarray | None = None,
                          prior_sigma: np.ndarray | None = None) -> tuple[float, np.ndarray]:
@@ -417,6 +419,8 @@ def evaluate_all(model: TrackerModel, base: np.ndarray, Q: np.ndarray, E: np.nda
     prior = prior_of(model, base)
     out = {}
     for name, crit in CRITERIA.items():
+        if getattr(crit, "needs_configurations", False):
+            continue  # a function of the configurations (kpi_gp): scored by the design problem
         if crit.needs_kpi and E is None:
             out[name] = float("nan")
             continue
@@ -425,3 +429,7 @@ def evaluate_all(model: TrackerModel, base: np.ndarray, Q: np.ndarray, E: np.nda
         except IdentifiabilityError:
             out[name] = float("inf")
     return out
+
+
+# the discrepancy-aware KPI criterion (kpi_gp) registers itself after the noise-only ones
+from pin_kpi_oed.oed import discrepancy_kpi as _discrepancy_kpi  # noqa: E402,F401
