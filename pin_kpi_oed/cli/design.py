@@ -243,10 +243,22 @@ def run(args: argparse.Namespace) -> int:
     ext_scores = extended_scores(problem, results, true_cell.q_work)
     _print_results(results, criteria, cert, m, pool_file, quiet, cell, true_cell, margins, true_checks, given_file,
                    ext_scores)
+    gp_scores = None
+    if problem.discrepancy is not None or "kpi_gp" in criteria:  # opt-in: the paper's output is unchanged without
+        from pin_kpi_oed.oed.discrepancy_kpi import NO_CERTIFICATE
+
+        gp_scores = discrepancy_scores(problem, results)
+        print(problem.discrepancy_prior().describe())
+        print(discrepancy_table([r for r in results if r.criterion in criteria] or results,
+                                [g for r, g in zip(results, gp_scores) if r.criterion in criteria] or gp_scores))
+        if "kpi_gp" in criteria:
+            print(NO_CERTIFICATE)
     until = _poses_until(args, problem, cell, target, seed, checked) if target is not None else None
     if getattr(args, "json", None):
         doc = _design_doc(true_cell, problem, results, m, seed, collision, margins, given_file, pool_file, until,
                           true_checks, cert, ext_scores, getattr(args, "model", None), getattr(args, "prior", None))
+        if gp_scores is not None:
+            _discrepancy_doc(doc, problem, gp_scores)
         atomic_write_json(args.json, doc)
         if not quiet:
             print(f"wrote {args.json}")
@@ -379,13 +391,64 @@ def _make_problem(args: argparse.Namespace, cell, given_file, collision: bool, q
         from pin_kpi_oed.oed.extended import ExtendedModel
 
         prior = getattr(args, "prior", "model") or "model"
-        problem.extended = ExtendedModel.from_calibrated_model(load_model_file(args.model), model=problem.model,
+        cm = load_model_file(args.model)
+        _set_discrepancy(problem, cm, args.model)
+        problem.extended = ExtendedModel.from_calibrated_model(cm, model=problem.model,
                                                                base=problem.base,
                                                                prior=None if prior == "none" else prior)
         if not quiet:
             print(f"extended model from {args.model}: {problem.extended.nb} geometric + {problem.extended.k} effect "
                   f"parameters, prior: {prior}")
     return problem
+
+
+def _set_discrepancy(problem, cm, path: str) -> None:
+    """The discrepancy of ``--model`` (its kernel, per-axis scale and white level; the data it was fitted on are not
+    used: a new calibration re-fits the robot) as the problem's discrepancy.
+
+    Raises:
+        InputError: the model file's robot has other joints than the cell's.
+    """
+    from pin_kpi_oed.oed.discrepancy_kpi import DiscrepancyPrior
+
+    if cm.discrepancy is None:
+        return
+    if list(cm.robot.joint_names) != list(problem.cell.robot.joint_names):
+        raise InputError(f"--model {path}: its robot's joints {list(cm.robot.joint_names)} are not the cell's "
+                         f"{list(problem.cell.robot.joint_names)}")
+    problem.discrepancy = DiscrepancyPrior.from_discrepancy(
+        cm.discrepancy, f"--model {path}, fitted on {cm.discrepancy.n_rows} rows ({cm.discrepancy.kind})")
+
+
+def discrepancy_scores(problem, results: list) -> list[dict]:
+    """Honest TCP scores of every design with the problem's discrepancy (universal-kriging C_s, base frame).
+
+    Returns:
+        Per design {"trace_cs_m2", "tcp_sigma_m" = sqrt(tr(C_s)/t)} (m², m); NaN where the design does not identify
+        the parameters.
+    """
+    from pin_kpi_oed.errors import IdentifiabilityError
+
+    crit = problem.gp_criterion()
+    t = problem.cell.q_work.shape[0]
+    out = []
+    for r in results:
+        try:
+            tr = float(crit.value(r.q_meas))
+        except IdentifiabilityError:
+            tr = float("nan")
+        out.append({"trace_cs_m2": tr, "tcp_sigma_m": math.sqrt(tr / t) if tr == tr else float("nan")})
+    return out
+
+
+def discrepancy_table(results: list, scores: list[dict]) -> str:
+    """The predicted TCP σ at the working configurations: the paper's (tracker noise only) beside the honest one
+    (discrepancy included), µm."""
+    head = f"{'criterion':<10}{'paper sigma um':>16}{'with discrepancy sigma um':>27}"
+    lines = [head, "-" * len(head)]
+    for r, sc in zip(results, scores):
+        lines.append(f"{r.criterion:<10}{r.tcp_sigma_m * 1e6:>16.3f}{sc['tcp_sigma_m'] * 1e6:>27.3f}")
+    return "\n".join(lines)
 
 
 def _check_given(cell, Q, path: str) -> None:
@@ -420,6 +483,21 @@ def _given_prior(path: str, problem) -> np.ndarray:
     if par.get("covariance") is None or not par.get("names"):
         raise InputError(f"--given-prior {path}: the model file holds no parameter covariance")
     return prior_information(problem, list(par["names"]), np.asarray(par["covariance"], float), f"--given-prior {path}")
+
+
+def _discrepancy_doc(doc: dict, problem, gp_scores: list[dict]) -> None:
+    """Add the discrepancy (source, S, white level, kernel) and every design's honest scores to the JSON (SI)."""
+    d = problem.discrepancy_prior()
+    doc["discrepancy"] = {"source": d.source, "scale_m": d.scale_m.tolist(), "noise": d.noise,
+                          "white_sigma_m": (d.scale_m * math.sqrt(d.noise)).tolist(),
+                          "delta_sigma_m": d.prior_sigma_m().tolist(),
+                          "kernel": None if d.kernel is None else d.kernel.to_dict(),
+                          "certificate": "none exists for kpi_gp",
+                          "note": "designs[i].discrepancy: universal-kriging tr(C_s) and TCP sigma at the working "
+                                  "configurations, discrepancy included (base frame); designs[i].trace_cs_m2 / "
+                                  "tcp_sigma_m: the paper's, tracker noise only"}
+    for dd, sc in zip(doc["designs"], gp_scores):
+        dd["discrepancy"] = sc
 
 
 def _design_doc(true_cell, problem, results: list, m: int, seed: int, collision: bool, margins, given_file,
