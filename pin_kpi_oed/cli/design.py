@@ -76,6 +76,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="with --given: how many more poses until the predicted TCP sigma <= this (m), "
                         "answered greedily over the --pool candidates (else --pool-size random feasible poses) "
                         "and verified by recomputing C_s")
+    p.add_argument("--curve", default=None,
+                   help="with the discrepancy (kpi_gp or --model with a discrepancy): write the poses-needed figure "
+                        "(predicted TCP sigma at the working configurations vs number of poses, designed and random; "
+                        "PNG); the curve also goes to --json")
     p.set_defaults(func=run)
 
 
@@ -222,7 +226,11 @@ def run(args: argparse.Namespace) -> int:
     cell = with_margins(cell, *margins)  # the optimiser's cell; `true_cell` for the reported clearances
     pool_file, given_file, target = _pool_given_target(args)
     problem = _make_problem(args, cell, given_file, collision, quiet, true_cell)
-    if target is not None:  # before any work: "how many more" needs M⁻¹ of the measured poses
+    disc_on = problem.discrepancy is not None or "kpi_gp" in criteria
+    if target is not None and not disc_on and not given_file:
+        raise InputError(f"--target-sigma needs --given or a discrepancy: --model {getattr(args, 'model', None)} "
+                         f"holds no discrepancy block (write it with identify --model-out)")
+    if target is not None and not disc_on:  # before any work: "how many more" needs M⁻¹ of the measured poses
         problem.require_identified(f"--target-sigma: --given {given_file}")
     if not quiet:
         _print_header(cell, problem, m, seed, collision, starts)
@@ -253,12 +261,17 @@ def run(args: argparse.Namespace) -> int:
                                 [g for r, g in zip(results, gp_scores) if r.criterion in criteria] or gp_scores))
         if "kpi_gp" in criteria:
             print(NO_CERTIFICATE)
-    until = _poses_until(args, problem, cell, target, seed, checked) if target is not None else None
+    curve = None
+    if disc_on and (target is not None or getattr(args, "curve", None)):
+        curve = _poses_needed(args, problem, cell, target, seed, m, checked)
+    until = _poses_until(args, problem, cell, target, seed, checked) if target is not None and not disc_on else None
     if getattr(args, "json", None):
         doc = _design_doc(true_cell, problem, results, m, seed, collision, margins, given_file, pool_file, until,
                           true_checks, cert, ext_scores, getattr(args, "model", None), getattr(args, "prior", None))
         if gp_scores is not None:
             _discrepancy_doc(doc, problem, gp_scores)
+        if curve is not None:
+            doc["poses_needed"] = curve.to_dict()
         atomic_write_json(args.json, doc)
         if not quiet:
             print(f"wrote {args.json}")
@@ -286,8 +299,13 @@ def _pool_given_target(args: argparse.Namespace) -> tuple[str | None, str | None
     target = getattr(args, "target_sigma", None)
     if getattr(args, "given_prior", None) and not given_file:
         raise InputError("--given-prior needs --given (the poses already measured)")
-    if target is not None and not given_file:
-        raise InputError("--target-sigma needs --given (the poses already measured)")
+    crits = str(getattr(args, "criteria", "") or "")
+    disc = getattr(args, "model", None) or "kpi_gp" in [c.strip() for c in crits.split(",")]
+    if target is not None and not given_file and not disc:
+        raise InputError("--target-sigma needs --given (the poses already measured) or the discrepancy "
+                         "(--criteria with kpi_gp, or --model with a discrepancy)")
+    if getattr(args, "curve", None) and not disc:
+        raise InputError("--curve needs the discrepancy (--criteria with kpi_gp, or --model with a discrepancy)")
     if target is not None and not (target > 0):
         raise InputError(f"--target-sigma: must be > 0 m, got {target}")
     return pool_file, given_file, target
@@ -365,6 +383,28 @@ def _poses_until(args: argparse.Namespace, problem, cell, target: float, seed: i
     until = poses_until(problem, float(target), pool_q)
     print(until.summary())
     return until
+
+
+def _poses_needed(args: argparse.Namespace, problem, cell, target: float | None, seed: int, m: int, checked=None):
+    """The poses-needed curve with the discrepancy (and the answer to ``--target-sigma``) over the user's feasible
+    ``--pool`` candidates or random feasible poses (at most 2,000, seeded); prints the answer, writes ``--curve``."""
+    from pin_kpi_oed.oed.discrepancy_kpi import poses_needed
+
+    if checked is not None:
+        Q_pool = checked[0]
+    else:
+        size = min(getattr(args, "pool_size", 5000) or 5000, 2000)
+        Q_pool, _ = problem.random_design(size, seed=np.random.SeedSequence([seed, 3]),
+                                          max_tries=max(cell.max_random_tries, 200 * size))
+    n_max = min(len(Q_pool), max(4 * m, 120))
+    curve = poses_needed(problem.gp_criterion(), Q_pool, n_max, target_sigma_m=target, seed=seed)
+    print(curve.summary() + f" ({len(Q_pool)} feasible candidates, {curve.time_s:.1f} s)")
+    if getattr(args, "curve", None):
+        from pin_kpi_oed.viz.poses_needed import plot_poses_needed
+
+        plot_poses_needed(curve.to_dict(), args.curve, title=f"{cell.name}: poses needed (discrepancy included)")
+        print(f"wrote {args.curve}")
+    return curve
 
 
 def _make_problem(args: argparse.Namespace, cell, given_file, collision: bool, quiet: bool, true_cell=None):

@@ -50,7 +50,7 @@ from pin_kpi_oed.oed.criteria import Criterion, register
 
 __all__ = ["DiscrepancyPrior", "default_discrepancy", "DEFAULT_DISCREPANCY", "kpi_gp_covariance",
            "kpi_gp_value_and_grad", "KpiDiscrepancy", "DiscrepancyDesignCriterion", "select_pool_gp",
-           "GpPoolSelection", "NO_CERTIFICATE"]
+           "GpPoolSelection", "NO_CERTIFICATE", "PosesNeeded", "poses_needed"]
 
 #: One line the design output prints for this criterion.
 NO_CERTIFICATE = ("kpi_gp: no optimality certificate exists for the discrepancy-aware criterion (the kernel couples "
@@ -311,7 +311,9 @@ class DiscrepancyDesignCriterion:
         else:
             self.Q_given, self.J_given = None, None
 
-    def _all(self, Q: np.ndarray, J: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def _all(self, Q: np.ndarray, J: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
+        if J is None:  # no new poses: the measured ones alone
+            return self.Q_given, self.J_given
         if self.Q_given is None:
             return Q, J
         return np.vstack([self.Q_given, Q]), np.concatenate([self.J_given, J])
@@ -326,7 +328,9 @@ class DiscrepancyDesignCriterion:
     def value(self, Q: np.ndarray) -> float:
         """tr C_s (m²)."""
         Q = np.atleast_2d(Q)
-        Qa, Ja = self._all(Q, _base_frame(self.model, self.p, Q, self.base, False)[0])
+        if len(Q) == 0 and self.Q_given is None:
+            raise IdentifiabilityError("no poses: the parameters are not identified")
+        Qa, Ja = self._all(Q, _base_frame(self.model, self.p, Q, self.base, False)[0] if len(Q) else None)
         d = self.discrepancy
         return kpi_gp_value_and_grad(Ja, self.E, d.cov(Qa), d.cov(self.Q_work, Qa), self.tr_kww, d.scale_m,
                                      d.noise, self.prior_info, grad=False)[0]
@@ -581,3 +585,128 @@ def select_pool_gp(J_pool: np.ndarray, Q_pool: np.ndarray, E: np.ndarray, Q_work
                                 prior_info, grad=False)[0]
     return GpPoolSelection(indices=idx, value=float(val), path=np.array(path), exchanges=swaps,
                            time_s=time.perf_counter() - t0)
+
+
+# --------------------------------------------------------------------------- how many poses
+@dataclass
+class PosesNeeded:
+    """Predicted TCP σ at the working configurations (discrepancy included) against the number of poses.
+
+    Attributes:
+        n: numbers of new poses (on top of the measured ones, if any).
+        sigma_designed_m: σ = sqrt(tr C_s / t) of the greedy kpi_gp design of each size from the pool (m;
+            the sizes are nested: the first n poses of one greedy sequence), recomputed from scratch.
+        sigma_random_m: mean σ of ``n_random`` seeded random subsets of the pool of each size (m).
+        sigma_random_sd_m: their standard deviation (m).
+        sigma_now_m: σ of the measured poses alone (m), or None without measured poses.
+        order: the greedy sequence (pool indices).
+        pool_size: candidates; seed: seed of the random subsets.
+        target_sigma_m: the target (m) or None; n_for_target: fewest designed poses reaching it (None: not reached
+            within ``n.max()``); plateau_m: σ with the most designed poses tried (what the discrepancy allows
+            with this pool and budget).
+    """
+
+    n: np.ndarray
+    sigma_designed_m: np.ndarray
+    sigma_random_m: np.ndarray
+    sigma_random_sd_m: np.ndarray
+    sigma_now_m: float | None
+    order: np.ndarray
+    pool_size: int
+    seed: int
+    target_sigma_m: float | None = None
+    n_for_target: int | None = None
+    plateau_m: float = float("nan")
+    time_s: float = 0.0
+
+    def to_dict(self) -> dict:
+        """Plain JSON-able dict (SI units)."""
+        return {"n": self.n.tolist(), "sigma_designed_m": self.sigma_designed_m.tolist(),
+                "sigma_random_m": self.sigma_random_m.tolist(), "sigma_random_sd_m": self.sigma_random_sd_m.tolist(),
+                "sigma_now_m": self.sigma_now_m, "pool_size": self.pool_size, "seed": self.seed,
+                "target_sigma_m": self.target_sigma_m, "n_for_target": self.n_for_target,
+                "plateau_m": self.plateau_m, "time_s": self.time_s,
+                "note": "predicted TCP sigma at the working configurations with the discrepancy (universal kriging); "
+                        "designed = greedy kpi_gp sequence from the pool (nested; the IPOPT design of one size is usually "
+                        "better), random = mean of seeded random subsets"}
+
+    def summary(self) -> str:
+        """The answer in words (µm), with the honest plateau when the target is out of reach."""
+        top = int(self.n.max())
+        if self.target_sigma_m is None:
+            return (f"poses needed (discrepancy included): {top} designed poses reach {self.plateau_m * 1e6:.1f} um "
+                    f"at the working configurations (random: {self.sigma_random_m[-1] * 1e6:.1f} um)")
+        tgt = self.target_sigma_m * 1e6
+        if self.n_for_target is not None:
+            return (f"--target-sigma {tgt:.1f} um (discrepancy included): {self.n_for_target} designed pose(s) "
+                    f"reach it (verified by recomputing C_s); random poses of this pool: "
+                    + (f"{int(self.n[np.argmax(self.sigma_random_m <= self.target_sigma_m)])}"
+                       if np.any(self.sigma_random_m <= self.target_sigma_m) else f"more than {top}"))
+        half = int(np.argmin(np.abs(self.n - top / 2)))
+        gain = 100.0 * (1.0 - self.plateau_m / self.sigma_designed_m[half])
+        return (f"--target-sigma {tgt:.1f} um is below what the discrepancy allows within {top} poses: {top} designed "
+                f"poses reach only {self.plateau_m * 1e6:.1f} um, {self.plateau_m * 1e6 - tgt:.1f} um "
+                f"({self.plateau_m / self.target_sigma_m:.2f}x) above the target, and going from {int(self.n[half])} to "
+                f"{top} poses lowered sigma by only {gain:.0f} %; a better model (effects) or a smaller working "
+                f"region helps more than poses")
+
+
+def poses_needed(crit: DiscrepancyDesignCriterion, Q_pool: np.ndarray, n_max: int, n_points: int = 12,
+                 target_sigma_m: float | None = None, n_random: int = 5, seed: int = 0) -> PosesNeeded:
+    """The poses-needed curve: predicted σ at the working configurations (discrepancy included) vs number of poses,
+    for the greedy kpi_gp sequence and for random subsets of a feasible pool; the fewest designed poses that reach
+    ``target_sigma_m``.
+
+    Args:
+        crit: the discrepancy-aware criterion (with the measured poses, if any).
+        Q_pool: feasible candidate poses (N, n) rad.
+        n_max: most new poses (≤ N).
+        n_points: sizes of the curve (geometric grid from the smallest identifying size to ``n_max``).
+        target_sigma_m: target σ (m) or None.
+        n_random: random subsets per size; seed: their seed.
+
+    Raises:
+        InputError: a non-positive target, fewer candidates than ``n_max``.
+    """
+    t0 = time.perf_counter()
+    if target_sigma_m is not None and not (target_sigma_m > 0):
+        raise InputError(f"--target-sigma: must be > 0 m, got {target_sigma_m}")
+    N = len(Q_pool)
+    n_max = min(int(n_max), N)
+    t = crit.Q_work.shape[0]
+    Jp = crit.pool_jacobians(Q_pool)
+    sel = crit.select(Q_pool, n_max, J_pool=Jp, exchange_passes=0)
+    order = sel.indices
+    nb = crit.E.shape[2]
+    given = crit.Q_given is not None
+    n_min = 1 if given else max(1, int(np.ceil(nb / 3)))
+    grid = np.unique(np.round(np.geomspace(n_min, n_max, n_points)).astype(int))
+
+    def sigma(idx: np.ndarray) -> float:
+        try:
+            return float(np.sqrt(crit.value(Q_pool[idx]) / t))
+        except IdentifiabilityError:
+            return float("inf")
+    des = np.array([sigma(order[:k]) for k in grid])
+    rng = np.random.default_rng(seed)
+    rs = np.array([[sigma(rng.choice(N, k, replace=False)) for _ in range(n_random)] for k in grid])
+    rs = np.where(np.isfinite(rs), rs, np.nan)
+    now = None
+    if given:
+        try:
+            now = float(np.sqrt(crit.value(np.zeros((0, Q_pool.shape[1]))) / t))
+        except IdentifiabilityError:
+            now = float("inf")
+    out = PosesNeeded(n=grid, sigma_designed_m=des, sigma_random_m=np.nanmean(rs, axis=1),
+                      sigma_random_sd_m=np.nanstd(rs, axis=1), sigma_now_m=now, order=order, pool_size=N, seed=seed,
+                      target_sigma_m=target_sigma_m, plateau_m=float(des[-1]))
+    if target_sigma_m is not None:
+        path = np.sqrt(np.maximum(sel.path, 0) / t)
+        hit = np.flatnonzero(path <= target_sigma_m)
+        if hit.size:
+            k = int(hit[0]) + 1
+            while k <= n_max and sigma(order[:k]) > target_sigma_m * (1 + 1e-9):  # verify from scratch
+                k += 1
+            out.n_for_target = k if k <= n_max else None
+    out.time_s = time.perf_counter() - t0
+    return out
