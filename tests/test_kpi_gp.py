@@ -178,3 +178,87 @@ def test_registered_and_evaluated_through_the_problem(problem):
     dc = problem.criterion("kpi_gp")
     assert dc.is_ratio and dc.value(Q) > 0
     assert "default" in problem.discrepancy_prior().describe()
+
+
+def test_cli_design_with_default_discrepancy_curve_and_plateau(tmp_path, capsys):
+    """design --criteria random,kpi_gp: the default discrepancy is stated, the honest σ is reported beside the
+    paper's, a target below the plateau is answered with the plateau, the curve goes to the JSON and a figure."""
+    import json
+
+    from pin_kpi_oed.cli.app import main
+
+    out_json, png = tmp_path / "d.json", tmp_path / "curve.png"
+    assert main(["design", "--cell", "kr15", "--criteria", "random,kpi_gp", "--measurements", "20", "--starts", "1",
+                 "--max-iter", "15", "--pool-size", "300", "--target-sigma", "1e-5", "--curve", str(png),
+                 "--json", str(out_json), "--quiet"]) == 0
+    out = capsys.readouterr().out
+    assert "discrepancy (default: S = 0.1 mm" in out and "no optimality certificate" in out
+    assert "is below what the discrepancy allows" in out
+    doc = json.loads(out_json.read_text())
+    assert doc["discrepancy"]["scale_m"] == [1e-4] * 3
+    for d in doc["designs"]:
+        assert d["discrepancy"]["tcp_sigma_m"] > 10 * d["tcp_sigma_m"]     # the honest σ is far above the paper's
+    gp = {d["criterion"]: d["discrepancy"]["tcp_sigma_m"] for d in doc["designs"]}
+    assert gp["kpi_gp"] < gp["random"]
+    curve = doc["poses_needed"]
+    assert curve["n_for_target"] is None and curve["plateau_m"] > 1e-5
+    des, rnd = np.array(curve["sigma_designed_m"]), np.array(curve["sigma_random_m"])
+    assert np.all(np.diff(des) <= 1e-12) and np.all(des[1:] < rnd[1:])
+    assert png.stat().st_size > 10_000
+    # a reachable target: the fewest designed poses, verified
+    assert main(["design", "--cell", "kr15", "--criteria", "random,kpi_gp", "--measurements", "20", "--starts", "1",
+                 "--max-iter", "5", "--pool-size", "300", "--target-sigma", str(1.05 * des[-1]), "--quiet"]) == 0
+    assert "designed pose(s) reach it" in capsys.readouterr().out
+
+
+def test_cli_design_without_the_discrepancy_is_unchanged(tmp_path, capsys):
+    """Without kpi_gp and without --model, the output and the JSON carry no discrepancy (the paper's design)."""
+    import json
+
+    from pin_kpi_oed.cli.app import main
+
+    out_json = tmp_path / "d.json"
+    assert main(["design", "--cell", "kr15", "--criteria", "random,kpi", "--measurements", "20", "--starts", "1",
+                 "--max-iter", "5", "--json", str(out_json), "--quiet"]) == 0
+    assert "discrepancy" not in capsys.readouterr().out
+    doc = json.loads(out_json.read_text())
+    assert "discrepancy" not in doc and "poses_needed" not in doc
+    assert main(["design", "--cell", "kr15", "--criteria", "random,kpi", "--curve", str(tmp_path / "c.png")]) == 2
+    assert "--curve needs the discrepancy" in capsys.readouterr().err
+
+
+def test_cli_design_takes_the_discrepancy_of_a_model_file(tmp_path, capsys):
+    """design --model m.json: the discrepancy block's kernel, scale and white level are the design's, named."""
+    import json
+
+    from pin_kpi_oed import NoiseModel, TrackerModel, load_robot
+    from pin_kpi_oed.cli.app import main
+    from pin_kpi_oed.discrepancy import Discrepancy, JointKernel
+    from pin_kpi_oed.identification.identify import identify
+    from pin_kpi_oed.identification.simulate import default_tracker_pose, simulate
+
+    cell = load_cell("ur10")
+    robot = load_robot("ur10")
+    model = TrackerModel(robot, tracker_T_base=default_tracker_pose(robot), reflector_m=np.array([0.03, 0.02, 0.08]),
+                         noise=NoiseModel(sigma_xyz_m=(1e-5,) * 3))
+    data = simulate(model, robot.random_q(np.random.default_rng(1), 60), np.zeros(model.n_params), seed=2)
+    from pin_kpi_oed.discrepancy import DiscrepancyOptions
+
+    cm = identify(model, data, discrepancy=DiscrepancyOptions(mode="none")).calibrated_model()
+    k = JointKernel(0.8, np.full(6, 1.3), np.full(6, 0.2), np.full(6, 0.4))
+    names = list(robot.joint_names)
+    Z = robot.random_q(np.random.default_rng(3), 5)
+    cm.discrepancy = Discrepancy("exact", names, np.array([2e-4, 1e-4, 1.5e-4]), np.zeros(3), 0.02, k, Z,
+                                 np.zeros((5, 3)), n_rows=5)
+    f = tmp_path / "m.json"
+    cm.save(f)
+    out_json = tmp_path / "d.json"
+    assert main(["design", "--cell", "ur10", "--model", str(f), "--criteria", "random,kpi_gp", "--measurements",
+                 "20", "--starts", "1", "--max-iter", "5", "--json", str(out_json), "--quiet"]) == 0
+    out = capsys.readouterr().out
+    assert f"--model {f}" in out and "with discrepancy sigma um" in out
+    doc = json.loads(out_json.read_text())
+    assert doc["discrepancy"]["scale_m"] == pytest.approx([2e-4, 1e-4, 1.5e-4])
+    assert doc["discrepancy"]["kernel"]["length_scale_rad"] == pytest.approx([1.3] * 6)
+    assert doc["discrepancy"]["white_sigma_m"] == pytest.approx(np.array([2e-4, 1e-4, 1.5e-4]) * np.sqrt(0.02))
+    assert cell.robot.joint_names == robot.joint_names
