@@ -152,6 +152,7 @@ def default_discrepancy(n_joints: int) -> DiscrepancyPrior:
 
 # --------------------------------------------------------------------------- the covariance and its gradient
 def _prep(J, E, Kqq, Kwq, scale, w, P):
+    """A = G⁻¹, U, V_a, H_a (axis-major), C = M⁻¹ and s² (matrix products only: this runs at every IPOPT step)."""
     J = np.asarray(J, float)
     E = np.asarray(E, float)
     m, _, nb = J.shape
@@ -163,12 +164,13 @@ def _prep(J, E, Kqq, Kwq, scale, w, P):
     Li = np.linalg.solve(L, np.eye(m))
     A = Li.T @ Li
     U = A @ Kwq.T                                           # (m, t)
-    V = np.einsum("ij,jac->aic", A, J)                      # (3, m, nb)
+    Ja = np.ascontiguousarray(np.swapaxes(J, 0, 1))         # (3, m, nb)
+    V = A @ Ja                                              # (3, m, nb)
     s2 = scale ** 2
-    M = np.einsum("a,iac,aid->cd", 1.0 / s2, J, V)
+    M = sum(Ja[a].T @ V[a] / s2[a] for a in range(3))
     if P is not None:
         M = M + P
-    H = np.moveaxis(E, 1, 0) - np.einsum("it,iac->atc", U, J)   # (3, t, nb)
+    H = np.swapaxes(E, 0, 1) - U.T @ Ja                     # (3, t, nb)
     try:
         Lm = np.linalg.cholesky(0.5 * (M + M.T))
     except np.linalg.LinAlgError:
@@ -197,9 +199,11 @@ def kpi_gp_covariance(J: np.ndarray, E: np.ndarray, Kqq: np.ndarray, Kwq: np.nda
     A, U, V, H, C, s2 = _prep(J, E, Kqq, Kwq, scale, noise, prior_info)
     t = Kww.shape[0]
     Kc = Kww - Kwq @ U
-    Cs = np.einsum("atc,cd,bud->taub", H, C, H)
+    HC = H @ C
+    Cs = np.zeros((t, 3, t, 3))
     for a in range(3):
-        Cs[:, a, :, a] += s2[a] * Kc
+        for b in range(3):
+            Cs[:, a, :, b] = HC[a] @ H[b].T + (s2[a] * Kc if a == b else 0.0)
     return Cs.reshape(3 * t, 3 * t)
 
 
@@ -214,16 +218,17 @@ def kpi_gp_value_and_grad(J: np.ndarray, E: np.ndarray, Kqq: np.ndarray, Kwq: np
     scale = np.asarray(scale_m, float)
     A, U, V, H, C, s2 = _prep(J, E, Kqq, Kwq, scale, noise, prior_info)
     sig2 = float(s2.sum())
-    N = np.einsum("atc,atd->cd", H, H)
+    N = sum(H[a].T @ H[a] for a in range(3))
     phi = sig2 * (tr_kww - float(np.sum(Kwq * U.T))) + float(np.sum(C * N))
     if not grad:
         return phi, None
     D = C @ N @ C
-    gJ = -2.0 * np.einsum("a,aic,cd->iad", 1.0 / s2, V, D) - 2.0 * np.einsum("it,atc,cd->iad", U, H, C)
-    HC = np.einsum("atc,cd->atd", H, C)
-    gK = -2.0 * sig2 * U.T - 2.0 * np.einsum("atd,aid->ti", HC, V)
-    gG = (sig2 * U @ U.T + np.einsum("a,aic,cd,ajd->ij", 1.0 / s2, V, D, V)
-          + 2.0 * np.einsum("it,atd,ajd->ij", U, HC, V))
+    HC = H @ C                                              # (3, t, nb)
+    VD = V @ D                                              # (3, m, nb)
+    gJ = np.stack([-2.0 / s2[a] * VD[a] - 2.0 * U @ HC[a] for a in range(3)], axis=1)   # (m, 3, nb)
+    HCV = HC @ np.swapaxes(V, 1, 2)                         # (3, t, m)
+    gK = -2.0 * sig2 * U.T - 2.0 * HCV.sum(0)
+    gG = sig2 * U @ U.T + sum(VD[a] @ V[a].T / s2[a] for a in range(3)) + 2.0 * U @ HCV.sum(0)
     return phi, {"J": gJ, "Kwq": gK, "G": gG}
 
 
