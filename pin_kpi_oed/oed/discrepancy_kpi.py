@@ -46,7 +46,7 @@ import numpy as np
 
 from pin_kpi_oed.errors import IdentifiabilityError, InputError
 from pin_kpi_oed.oed.covariance import prior_of
-from pin_kpi_oed.oed.criteria import Criterion, register
+from pin_kpi_oed.oed.criteria import Criterion, KpiDiscrepancy
 
 __all__ = ["DiscrepancyPrior", "default_discrepancy", "DEFAULT_DISCREPANCY", "kpi_gp_covariance",
            "kpi_gp_value_and_grad", "KpiDiscrepancy", "DiscrepancyDesignCriterion", "select_pool_gp",
@@ -232,27 +232,7 @@ def kpi_gp_value_and_grad(J: np.ndarray, E: np.ndarray, Kqq: np.ndarray, Kwq: np
     return phi, {"J": gJ, "Kwq": gK, "G": gG}
 
 
-# --------------------------------------------------------------------------- the registered criterion
-class KpiDiscrepancy(Criterion):
-    """A on the universal-kriging C_s: tr of the TCP error covariance with the model discrepancy (m²).
-
-    A function of the configurations (the kernel couples the poses), not of F alone: the design evaluates it
-    through :class:`DiscrepancyDesignCriterion` (``DesignProblem.criterion('kpi_gp')``); :meth:`value_and_grad_F`
-    refuses. Pool selection: :func:`select_pool_gp` (its own exchange; no certificate).
-    """
-
-    name, label, unit = "kpi_gp", "A on C_s with the model discrepancy (universal kriging, m^2)", "m^2"
-    is_ratio, needs_kpi, has_pool_form = True, True, False
-    needs_configurations = True
-
-    def value_and_grad_F(self, F, E=None, prior_sigma=None):
-        raise InputError("the kpi_gp criterion needs the configurations (the discrepancy kernel couples the "
-                         "poses): evaluate it through the design problem (DesignProblem.criterion('kpi_gp'))")
-
-
-register(KpiDiscrepancy)
-
-
+# --------------------------------------------------------------------------- the criterion of configurations
 def _base_frame(model, p, Q, base, with_dq):
     """Reflector Jacobian in the robot base frame over the base parameters: J (m, 3, nb) and ∂J/∂q (m, 3, nb, n)."""
     R = model.tracker_pose(p).rotation
@@ -507,6 +487,37 @@ class _GreedyState:
         return phi
 
 
+def _exchange(st: _GreedyState, sel: list[int], excl: np.ndarray, k0: int, cur: float, passes: int, t0: float,
+              budget: float | None) -> tuple[list[int], float, int]:
+    """Exchange passes of :func:`select_pool_gp`: each chosen pose in turn removed (exact downdate) and replaced by the
+    best candidate if that lowers tr C_s; a fresh factor after each pass with swaps. Returns (set, value, swaps)."""
+    m = len(sel)
+    swaps = 0
+    for _ in range(passes):
+        changed = False
+        for pos in range(m):
+            if budget is not None and time.perf_counter() - t0 > budget:
+                break
+            i = k0 + sel[pos]
+            down = st.without(i)
+            ex = excl.copy()
+            ex[i] = False
+            phi = down.values(ex)
+            j = int(np.argmin(phi))
+            if j != i and phi[j] < cur * (1 - 1e-9):
+                excl[i], excl[j] = False, True
+                sel[pos] = j - k0
+                cur = float(phi[j])
+                swaps += 1
+                changed = True
+                st = down
+                st.add(j)
+        if not changed:
+            break
+        st = st.build(list(range(k0)) + [k0 + x for x in sel])   # fresh factor after a pass with swaps
+    return sel, cur, swaps
+
+
 def select_pool_gp(J_pool: np.ndarray, Q_pool: np.ndarray, E: np.ndarray, Q_work: np.ndarray,
                    discrepancy: DiscrepancyPrior, m: int, prior_info: np.ndarray | None = None,
                    Q_given: np.ndarray | None = None, J_given: np.ndarray | None = None, exchange_passes: int = 1,
@@ -559,29 +570,7 @@ def select_pool_gp(J_pool: np.ndarray, Q_pool: np.ndarray, E: np.ndarray, Q_work
         excl[j] = True
     sel = [j - k0 for j in st.chosen[k0:]]
     cur = path[-1]
-    swaps = 0
-    for _ in range(exchange_passes):
-        changed = False
-        for pos in range(m):
-            if time_budget_s is not None and time.perf_counter() - t0 > time_budget_s:
-                break
-            i = k0 + sel[pos]
-            down = st.without(i)
-            ex = excl.copy()
-            ex[i] = False
-            phi = down.values(ex)
-            j = int(np.argmin(phi))
-            if j != i and phi[j] < cur * (1 - 1e-9):
-                excl[i], excl[j] = False, True
-                sel[pos] = j - k0
-                cur = float(phi[j])
-                swaps += 1
-                changed = True
-                st = down
-                st.add(j)
-        if not changed:
-            break
-        st = st.build(list(range(k0)) + [k0 + x for x in sel])   # fresh factor after a pass with swaps
+    sel, cur, swaps = _exchange(st, sel, excl, k0, cur, exchange_passes, t0, time_budget_s)
     idx = np.array(sel, int)
     Jsel = np.concatenate([J_given, J_pool[idx]]) if k0 else J_pool[idx]
     Qsel = np.vstack([Q_given, Q_pool[idx]]) if k0 else Q_pool[idx]
