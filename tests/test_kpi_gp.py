@@ -262,3 +262,49 @@ def test_cli_design_takes_the_discrepancy_of_a_model_file(tmp_path, capsys):
     assert doc["discrepancy"]["kernel"]["length_scale_rad"] == pytest.approx([1.3] * 6)
     assert doc["discrepancy"]["white_sigma_m"] == pytest.approx(np.array([2e-4, 1e-4, 1.5e-4]) * np.sqrt(0.02))
     assert cell.robot.joint_names == robot.joint_names
+
+
+def test_cli_campaign_refits_the_discrepancy_on_the_measured_batch(tmp_path, capsys):
+    """design --given measured.csv --model m.json: the discrepancy is re-fitted on the measured batch (a withheld
+    gear harmonic), the next batch designed on top of it, the σ before and after reported."""
+    import json
+
+    from pin_kpi_oed import NoiseModel, TrackerModel, load_robot
+    from pin_kpi_oed.cli.app import main
+    from pin_kpi_oed.data.measurements import write_measurements
+    from pin_kpi_oed.discrepancy import Discrepancy, DiscrepancyOptions, JointKernel
+    from pin_kpi_oed.effects.library import GearHarmonic
+    from pin_kpi_oed.identification.identify import identify
+    from pin_kpi_oed.identification.simulate import default_tracker_pose, simulate
+
+    robot = load_robot("ur10")
+    model = TrackerModel(robot, tracker_T_base=default_tracker_pose(robot), reflector_m=np.array([0.03, 0.02, 0.08]),
+                         noise=NoiseModel(sigma_xyz_m=(1e-5,) * 3))
+    cm = identify(model, simulate(model, robot.random_q(np.random.default_rng(1), 60), np.zeros(model.n_params),
+                                  seed=2), discrepancy=DiscrepancyOptions(mode="none")).calibrated_model()
+    names = list(robot.joint_names)
+    cm.discrepancy = Discrepancy("exact", names, np.full(3, 1e-4), np.zeros(3), 0.02,
+                                 JointKernel(0.8, np.full(6, 1.3), np.full(6, 0.2), np.full(6, 0.4)),
+                                 robot.random_q(np.random.default_rng(3), 5), np.zeros((5, 3)), n_rows=5)
+    f = tmp_path / "m.json"
+    cm.save(f)
+    problem = DesignProblem(load_cell("ur10"))
+    Qg = problem.random_design(70, 4)[0]
+    gh = GearHarmonic(robot, joints=["shoulder_lift_joint", "elbow_joint"], orders=(2, 3))
+    theta = 3e-4 * np.random.default_rng(5).standard_normal(len(gh.param_names()))
+    cmodel = problem.model
+    data = simulate(cmodel, Qg, np.zeros(cmodel.n_params), effects=[(gh, theta)], seed=7)
+    write_measurements(data, tmp_path / "meas.csv")
+    out_json = tmp_path / "d.json"
+    assert main(["design", "--cell", "ur10", "--given", str(tmp_path / "meas.csv"), "--model", str(f), "--criteria",
+                 "random,kpi_gp", "--measurements", "10", "--starts", "1", "--max-iter", "5", "--json",
+                 str(out_json)]) == 0
+    out = capsys.readouterr().out
+    assert "discrepancy: Gaussian process fitted" in out and "measured poses alone (70)" in out
+    doc = json.loads(out_json.read_text())
+    assert doc["discrepancy"]["source"].startswith("re-fitted on --given")
+    assert doc["discrepancy"]["kernel"]["length_scale_rad"] != pytest.approx([1.3] * 6)
+    line = next(ln for ln in out.splitlines() if ln.startswith("measured poses alone"))
+    alone = float(line.split("discrepancy ")[1].split(" um")[0]) * 1e-6
+    for d in doc["designs"]:
+        assert d["discrepancy"]["tcp_sigma_m"] < alone

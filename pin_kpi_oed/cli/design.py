@@ -233,6 +233,9 @@ def run(args: argparse.Namespace) -> int:
 
         gp_scores = discrepancy_scores(problem, results)
         print(problem.discrepancy_prior().describe())
+        if given_file:
+            print(f"measured poses alone ({len(problem.Q_given)}): predicted TCP sigma with the discrepancy "
+                  f"{_sigma_given(problem) * 1e6:.3f} um; the table adds each design's poses to them")
         print(discrepancy_table([r for r in results if r.criterion in criteria] or results,
                                 [g for r, g in zip(results, gp_scores) if r.criterion in criteria] or gp_scores))
         if "kpi_gp" in criteria:
@@ -403,8 +406,13 @@ def _make_problem(args: argparse.Namespace, cell, given_file, collision: bool, q
         problem = DesignProblem(cell, collision=collision,
                                 distances={"closed-form": "numpy"}.get(getattr(args, "distances", None), "geometry"))
     if getattr(args, "model", None):
-        if given_file:
-            raise InputError("--model (extended design) cannot be combined with --given yet")
+        if given_file:  # a measurement campaign: the discrepancy re-fitted on the measured batch, geometric design
+            from pin_kpi_oed.identification.model_file import load_model_file
+
+            cm = load_model_file(args.model)
+            _set_discrepancy(problem, cm, args.model)
+            _refit_discrepancy(problem, given_file, quiet)
+            return problem
         from pin_kpi_oed.identification.model_file import load_model_file
         from pin_kpi_oed.oed.extended import ExtendedModel
 
@@ -438,6 +446,39 @@ def _set_discrepancy(problem, cm, path: str) -> None:
         cm.discrepancy, f"--model {path}, fitted on {cm.discrepancy.n_rows} rows ({cm.discrepancy.kind})")
 
 
+def _refit_discrepancy(problem, given_file: str, quiet: bool) -> None:
+    """``--given measured.csv --model model.json``: re-fit the discrepancy on the measured batch (geometry and set-up
+    by least squares, then the Gaussian process on the residuals, mode ``on``) when the file holds measured positions
+    and enough rows; else keep the model file's discrepancy, saying why."""
+    from pin_kpi_oed.data.measurement_reader import read_measurements
+    from pin_kpi_oed.discrepancy import DiscrepancyOptions
+    from pin_kpi_oed.identification.identify import identify
+    from pin_kpi_oed.oed.discrepancy_kpi import DiscrepancyPrior
+
+    ms = read_measurements(given_file, joint_names=list(problem.cell.robot.joint_names), require_position=False)
+    pos = getattr(ms, "position_m", None)
+    n_min = DiscrepancyOptions().min_rows
+    why = None
+    if pos is None or not np.all(np.isfinite(pos)):
+        why = "it holds no measured positions (x, y, z)"
+    elif len(pos) < n_min:
+        why = f"its {len(pos)} rows are fewer than the {n_min} a Gaussian process needs"
+    if why is None:
+        fit = identify(problem.model, ms, discrepancy=DiscrepancyOptions(mode="on"))
+        if fit.discrepancy is not None:
+            problem.discrepancy = DiscrepancyPrior.from_discrepancy(
+                fit.discrepancy, f"re-fitted on --given {given_file} ({len(pos)} rows; geometry + set-up by least "
+                                 f"squares, then the Gaussian process on the residuals)")
+            if not quiet:
+                print(fit.discrepancy.decision)
+            return
+        why = "the fit returned no discrepancy"
+    if problem.discrepancy is None:
+        raise InputError(f"--given {given_file}: the discrepancy cannot be re-fitted ({why}) and --model holds none")
+    if not quiet:
+        print(f"--given {given_file}: discrepancy not re-fitted ({why}); the --model one is used")
+
+
 def discrepancy_scores(problem, results: list) -> list[dict]:
     """Honest TCP scores of every design with the problem's discrepancy (universal-kriging C_s, base frame).
 
@@ -457,6 +498,17 @@ def discrepancy_scores(problem, results: list) -> list[dict]:
             tr = float("nan")
         out.append({"trace_cs_m2": tr, "tcp_sigma_m": math.sqrt(tr / t) if tr == tr else float("nan")})
     return out
+
+
+def _sigma_given(problem) -> float:
+    """Predicted TCP σ (m) at the working configurations of the measured poses alone, discrepancy included."""
+    from pin_kpi_oed.errors import IdentifiabilityError
+
+    crit = problem.gp_criterion()
+    try:
+        return math.sqrt(crit.value(np.zeros((0, problem.n))) / problem.cell.q_work.shape[0])
+    except IdentifiabilityError:
+        return float("inf")
 
 
 def discrepancy_table(results: list, scores: list[dict]) -> str:
