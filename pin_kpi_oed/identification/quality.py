@@ -133,7 +133,7 @@ def assess_fit(result: Any, validation: dict | None = None, *, nominal_reflector
     err = np.asarray(result.errors_m, float)
     train_rms = float(np.sqrt(np.mean(err[keep] ** 2))) if keep.any() else float("nan")
     f = _Findings()
-    large = _check_outliers(f, result, we, out_idx, nh)
+    large = _check_outliers(f, result, we, out_idx, nh, noise_known)
     interval = None
     if noise_known:
         interval = _check_chi2(f, chi2_red, dof, alpha, chi2_poor, nominal_reflector_m, reflector_estimated)
@@ -163,8 +163,12 @@ class _Findings:
             self.verdict = level
 
 
-def _check_outliers(f: _Findings, result: Any, we: np.ndarray, out_idx: np.ndarray, nh: int) -> int:
-    """Check 3: outliers large against the noise (robust scale of all weighted errors); their number."""
+def _check_outliers(f: _Findings, result: Any, we: np.ndarray, out_idx: np.ndarray, nh: int,
+                    noise_known: bool = True) -> int:
+    """Check 3: outliers large against the noise (robust scale of all weighted errors); their number.
+
+    With the noise level unknown, χ² cannot tell a fit pulled by its outliers from a good one: any flagged
+    outlier fitted with the plain loss makes the fit suspect (never "good")."""
     m = we.size
     scale = 1.4826 * float(np.median(we)) / np.sqrt(nh) if m else 0.0
     large = int(np.sum(we[out_idx] > OUTLIER_LARGE * max(scale, 1e-300) * np.sqrt(nh))) if out_idx.size else 0
@@ -174,6 +178,12 @@ def _check_outliers(f: _Findings, result: Any, we: np.ndarray, out_idx: np.ndarr
         f.reasons.append(f"{large} outlier(s) beyond {OUTLIER_LARGE:g} sigma fitted with the plain loss")
         f.causes.append("outliers (gross measurement errors)")
         f.advice.append("--loss soft_l1 (robust) or remove the flagged rows")
+    elif out_idx.size and not robust and not noise_known:
+        f.worse("suspect")
+        f.reasons.append(f"{out_idx.size} flagged outlier(s) fitted with the plain loss and the noise level unknown "
+                         "(chi2 not tested)")
+        f.causes.append("outliers (gross measurement errors)")
+        f.advice.append("--loss soft_l1 (robust), sigma columns or --sigma, or remove the flagged rows")
     return large
 
 

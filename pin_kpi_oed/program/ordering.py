@@ -333,7 +333,7 @@ def plan_program(cell: Cell, Q: np.ndarray, options: ProgramOptions | None = Non
     home = np.asarray(o.home if o.home is not None else (cell.q_work[0] if len(cell.q_work) else cell.robot.neutral),
                       float)
     rev = np.asarray(cell.robot.is_revolute, bool)
-    reps = [equivalents(q, cell.q_lower, cell.q_upper, rev) if o.equivalents else q[None] for q in Q]
+    reps = [_within(equivalents(q, cell.q_lower, cell.q_upper, rev), cell) if o.equivalents else q[None] for q in Q]
     nodes = np.vstack([home, *reps])
     pose_of = np.concatenate([[-1], *[np.full(len(r), i) for i, r in enumerate(reps)]]).astype(int)
     groups = [list(np.flatnonzero(pose_of == i)) for i in range(len(Q))]
@@ -375,6 +375,12 @@ def plan_program(cell: Cell, Q: np.ndarray, options: ProgramOptions | None = Non
                    as_designed_colliding=int(sum(not m.clear for m in as_designed)),
                    min_move_clearance_m=min((m.min_clearance_m for m in per_move), default=float("inf")),
                    margin_m=o.margin_m, n_rounds=rounds)
+
+
+def _within(reps: np.ndarray, cell: Cell) -> np.ndarray:
+    """The representatives within the joint bounds (all of them, q first, when none is)."""
+    ok = np.all((reps >= cell.q_lower - 1e-9) & (reps <= cell.q_upper + 1e-9), axis=1)
+    return reps[ok] if ok.any() else reps
 
 
 def _assemble(nodes: np.ndarray, tour: list[int], edges: dict, pose_of: np.ndarray) -> list[Waypoint]:

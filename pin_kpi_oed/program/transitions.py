@@ -66,8 +66,9 @@ def equivalents(q: np.ndarray, lower: np.ndarray, upper: np.ndarray, revolute: n
             ks += [k for k in range(kmin, kmax + 1) if k != 0]
         choices.append(ks)
     combos = sorted(itertools.product(*choices), key=lambda ks: sum(k != 0 for k in ks))[:max_count]
-    out = q[None, :] + 2 * math.pi * np.array(combos, float)
-    return np.clip(out, lower, upper) if len(out) > 1 else out
+    # exactly q + 2πk, never clipped: a clipped value would be another pose (issue: a joint beyond its limit
+    # was exported at the limit); rows other than q are within the bounds by construction
+    return q[None, :] + 2 * math.pi * np.array(combos, float)
 
 
 @dataclass
