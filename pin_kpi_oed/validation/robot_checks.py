@@ -119,7 +119,7 @@ def _spread_ratio(robot: Any, Q: np.ndarray, P: np.ndarray) -> float:
     (independent of the unknown tracker pose)."""
     import pinocchio as pin
 
-    k = min(len(Q), 200)
+    k = min(len(Q), 120)
     idx = np.linspace(0, len(Q) - 1, k).round().astype(int)
     T = np.empty((k, 3))
     for r, i in enumerate(idx):
