@@ -124,7 +124,8 @@ def _message(err: Any) -> str:
     if v == "type":
         t = err.validator_value
         t = " or ".join(t) if isinstance(t, list) else t
-        return f"expected {'a ' if t in ('number', 'integer', 'string', 'object', 'array') else ''}{t}, " \
+        art = {"number": "a ", "string": "a ", "integer": "an ", "object": "an ", "array": "an "}.get(t, "")
+        return f"expected {art}{t}, " \
                f"got {err.instance!r:.60}"
     if v in ("minItems", "maxItems"):
         return f"wrong number of entries ({len(err.instance)}; {v} {err.validator_value})"

@@ -226,6 +226,23 @@ def _issue24() -> list[Case]:
         Case("compensate-all-unreachable", "compensate --model {d}/m.json --targets {d}/targets_far.csv --out "
              "{d}/o.csv", "unreachable"),
     ]
+    # 5. model files through a schema: every field typed and ranged, covariances symmetric PSD, file named
+    bad = {"m_str.json": "joint_a2.tx", "m_dict.json": "joint_a2.tx", "m_list.json": "tcp_m",
+           "m_null.json": "reflector_m", "m_covstr.json": "covariance", "m_cov_elem_str.json": "covariance",
+           "m_negdef.json": "positive semi-definite", "m_zerocov.json": "all zero", "m_asym.json": "symmetric",
+           "m_noise_mm.json": "noise.sigma_xyz_m", "m_refl_mm.json": "reflector_m", "m_unknown_key.json": "geometri",
+           "m_std_negative.json": "std", "m_rows_text.json": "n_rows", "m_nan.json": "range_b"}
+    for f, expect in bad.items():
+        tag = f[2:-5]
+        c += [Case(f"model-{tag}-predict", f"predict --model {{d}}/{f} --data {{d}}/te.csv --out {{d}}/o.csv", expect),
+              Case(f"model-{tag}-register", f"register --model {{d}}/{f} --data {{d}}/reg20.csv --model-out "
+                   f"{{d}}/o.json", expect),
+              Case(f"model-{tag}-compensate", f"compensate --model {{d}}/{f} --targets {{d}}/targets.csv --out "
+                   f"{{d}}/o.csv", expect),
+              Case(f"model-{tag}-design-model", f"design --model {{d}}/{f} --measurements 10 --json {{d}}/o.json",
+                   expect),
+              Case(f"model-{tag}-given-prior", f"design --given {{d}}/given.csv --given-prior {{d}}/{f} "
+                   f"--measurements 5 --json {{d}}/o.json", expect)]
     return c
 
 
@@ -451,6 +468,44 @@ def _build_issue24(d: Path, design: dict) -> None:
         assert main(["identify", "--robot", "ur10", "--data", str(d / "ur.csv"), "--model-out", str(d / "m_ur10.json"),
                      "--quiet", "--accept-poor-fit"]) == 0
     (d / "ur.csv").unlink()
+    model = json.loads((d / "m.json").read_text())
+
+    def bad_model(name: str, edit) -> None:
+        e = json.loads(json.dumps(model))
+        edit(e)
+        (d / name).write_text(json.dumps(e))
+
+    def put(path: str, value):
+        def f(e):
+            *head, last = path.split("/")
+            o = e
+            for k in head:
+                o = o[int(k)] if isinstance(o, list) else o[k]
+            if isinstance(o, list):
+                o[int(last)] = value
+            else:
+                o[last] = value
+        return f
+
+    cov = np.asarray(model["geometry"]["parameters"]["covariance"], float)
+    bad_model("m_str.json", put("geometry/joint_placement_errors/joint_a2.tx", "abc"))
+    bad_model("m_dict.json", put("geometry/joint_placement_errors/joint_a2.tx", {"v": 1}))
+    bad_model("m_list.json", put("tcp_m", [[0.0], [0.0], [0.0]]))
+    bad_model("m_null.json", put("stations/tr/reflector_m", None))
+    bad_model("m_covstr.json", put("geometry/parameters/covariance", "diag(1e-8)"))
+    bad_model("m_cov_elem_str.json", put("geometry/parameters/covariance/0/1", "x"))
+    bad_model("m_negdef.json", put("geometry/parameters/covariance", (-cov).tolist()))
+    bad_model("m_zerocov.json", put("geometry/parameters/covariance", np.zeros_like(cov).tolist()))
+    bad_model("m_asym.json", put("geometry/parameters/covariance", (cov + np.triu(np.full_like(cov, 1e-3), 1)).tolist()))
+    bad_model("m_noise_mm.json", put("noise/sigma_xyz_m", [10.0, 10.0, 10.0]))
+    bad_model("m_refl_mm.json", put("stations/tr/reflector_m", [30.0, 20.0, 80.0]))
+    bad_model("m_unknown_key.json", put("geometri", {}))
+    bad_model("m_std_negative.json", put("geometry/parameters/std/0", -1.0))
+    bad_model("m_rows_text.json", put("stations/tr/n_rows", "120"))
+    (d / "m_nan.json").write_text((d / "m.json").read_text().replace('"range_b": 0.0', '"range_b": NaN'))
+    Qd = np.asarray(design["q_meas"], float)[:10]
+    (d / "given.csv").write_text(",".join(f"joint_a{k}" for k in range(1, 7)) + "\n"
+                                 + "\n".join(",".join(f"{v:.10f}" for v in q) for q in Qd) + "\n")
 
 
 def snapshot(d: Path) -> dict[str, str]:
