@@ -1,4 +1,4 @@
-"""Pool selection benchmark (issue 16), NumPy imported first, one core kept busy by a spinning process.
+"""Pool selection benchmark, NumPy imported first, one core kept busy by a spinning process.
 
 Figures, each with its target and the baseline measured in the same run under the same thread limit:
 

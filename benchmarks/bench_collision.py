@@ -1,7 +1,7 @@
-"""Constraint-evaluation benchmark (issue 16): 60 poses of the KR 15 cell, values + gradients, Coal vs closed form.
+"""Constraint-evaluation benchmark: 60 poses of the KR 15 cell, values + gradients, Coal vs closed form.
 
-Figures (CPU time per evaluation, median of repeated runs — CPU time, because wall time on a shared 2-core
-machine mostly measures the other processes; wall time printed alongside):
+Figures (CPU time per evaluation, median of repeated runs — CPU time, because wall time on a machine shared
+with other jobs mostly measures the other processes; wall time printed alongside):
 
 * closed form (NumPy, the optimiser's default) — the baseline;
 * Coal through one ``pin.computeDistances`` per pose on a ``pin.GeometryModel`` (``backend="geometry"``), with

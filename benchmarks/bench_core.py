@@ -1,6 +1,6 @@
 """Core benchmark: parameter Jacobian and criterion + gradient for 60 configurations (KR 15).
 
-Targets (issue 2): Jacobian for 60 configurations <= 1 ms; criterion + gradient <= 3 ms (median).
+Targets: Jacobian for 60 configurations <= 1 ms; criterion + gradient <= 3 ms (median).
 """
 
 from __future__ import annotations

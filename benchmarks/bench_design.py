@@ -1,4 +1,4 @@
-"""Design benchmark: KR 15 KPI design with collision avoidance by Ipopt (issue 4).
+"""Design benchmark: KR 15 KPI design with collision avoidance by Ipopt.
 
 Target: the KR 15 KPI design with 60 measurements and the full constraint set in <= 5 s (median of
 repeated runs, 2 cores). Also reported: where the time goes (naive formulation with one Ipopt row per

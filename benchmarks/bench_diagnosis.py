@@ -5,7 +5,7 @@ temperature column (so all five candidate effects are tried). Two cases:
 
 * split: 1,000 training + 1,000 held-out measurements;
 * K-fold: one file of 2,000 measurements, 5-fold cross-validation;
-* real data (issue 12): ``diagnose`` on all of IPA UR10 Series C (2,773 rows, 5-fold, position
+* real data: ``diagnose`` on all of IPA UR10 Series C (2,773 rows, 5-fold, position
   only, σ = 0.1 mm) with the default candidates plus ``transmission_error`` (orders 1–40, sparse
   selection), as ``pin-kpi-oed diagnose --train C.csv --kfold 5 --effects
   joint_compliance,gear_harmonic,backlash,thermal_expansion,joint_scale,transmission_error

@@ -1,4 +1,4 @@
-"""Designs over the extended model: simulation with withheld effects, and the design time (issue 14).
+"""Designs over the extended model: simulation with withheld effects, and the design time.
 
 **Simulation.** A UR10 measured by a laser tracker (σ = 10 µm and 100 µm per axis). Truth: random
 geometric errors (:class:`~pin_kpi_oed.identification.simulate.Tolerances`, 0.5 mm / 1 mrad) plus

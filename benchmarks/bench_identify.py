@@ -8,7 +8,7 @@ robot and set-up, ~10 ms), "warm" = median of repeated calls on the same set-up;
 the process (one-time lazy loads) is printed separately. Linearity: time per LM iteration, fitted as a + b·m; the ratio
 t(2000)/t(1000) per iteration should be ≈ 2 for large m.
 
-For comparison (issue 3): a well-known Pinocchio-based toolbox needs about 0.5 s of CPU for 100
+For comparison: a well-known Pinocchio-based toolbox needs about 0.5 s of CPU for 100
 postures with finite-difference Jacobians.
 
 Run:  python benchmarks/bench_identify.py   (or ``main()``)

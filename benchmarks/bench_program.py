@@ -1,4 +1,4 @@
-"""Measurement programs (issue 13): KR 15/300/500 and UR10 KPI designs (20 mm clearance and 1 deg incidence
+"""Measurement programs: KR 15/300/500 and UR10 KPI designs (20 mm clearance and 1 deg incidence
 margins) ordered by OR-Tools, every move densely checked (<= 1 deg steps, Coal, capsules + 10 mm), colliding
 moves repaired through via poses, exported in every format; cycle time against the as-designed order.
 

@@ -1,4 +1,4 @@
-"""Study benchmark (issue 6): the 90-arm study with 60 measurements per design in <= 10 minutes on 2 cores,
+"""Study benchmark: the 90-arm study with 60 measurements per design in <= 10 minutes on 2 cores,
 and its scaling with workers (1 vs 2 processes on a subset). Writes to ``out/bench_notional90`` (fresh)."""
 
 from __future__ import annotations

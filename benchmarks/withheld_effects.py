@@ -8,11 +8,11 @@ is drawn so that the part of it a geometric calibration cannot absorb is k × σ
 RMS), k ~ U(2, 10) (:func:`pin_kpi_oed.effects.library.visible_rms`). The diagnosis sees only the
 files and tries every candidate.
 
-Targets (issue 5): right ``dominant_effect`` in >= 95 % of the runs of each effect; for
+Targets: right ``dominant_effect`` in >= 95 % of the runs of each effect; for
 data with no effect ``gap_detected`` false in >= 95 %; after adding the named effect the
 held-out RMS within 10 % of the noise floor.
 
-Transfer cases (issue 12, ``--mode transfer``): the calibration is used on another day, in
+Transfer cases (``--mode transfer``): the calibration is used on another day, in
 another part of joint space, with the tracker moved. Training: shoulder_pan in [−π, 0.3] rad,
 shoulder_lift in [−π, −1.2] rad; validation: shoulder_pan in [0, π], shoulder_lift in
 [−2.0, 0] (the other joints over their full range); the validation tracker stands 0.5 m and
@@ -215,7 +215,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--jobs", type=int, default=2)
     ap.add_argument("--effects", default=None, help="comma-separated subset (default: all + none)")
     ap.add_argument("--mode", default="both", choices=("within", "transfer", "both"),
-                    help="within one session (issue 5), across sessions (issue 12, transfer), or both")
+                    help="within one session, across sessions (transfer), or both")
     ap.add_argument("--json", default=None, help="write every run's outcome here")
     a = ap.parse_args(argv)
     from pin_kpi_oed.effects.library import EFFECT_NAMES

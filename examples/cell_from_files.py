@@ -1,4 +1,4 @@
-"""A measurement cell built from files (issue 13): an environment URDF and mesh, Cartesian working targets.
+"""A measurement cell built from files: an environment URDF and mesh, Cartesian working targets.
 
 Writes, into a folder, a fixture mesh (STL, in mm as CAD exports it) and a cell YAML for the KR 15 that
 reads it (`environment:`; a URDF of boxes / meshes works the same way, see the shipped ur10 cell and

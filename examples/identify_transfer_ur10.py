@@ -11,7 +11,7 @@ elsewhere). For each directed pair X→Y this script does what ``pin-kpi-oed`` d
 calibrate on all rows of X (geometry only, σ = 0.1 mm as ``identify_ur10.py``), re-fit only the set-up
 (tracker pose, reflector; robot held) on 60 seeded random rows of Y, and score the other rows of Y. Then
 it calibrates B + C + D jointly (three stations, one robot) and prints that fit's own residual. These
-are the geometric baselines of issue 12 (≈ 0.55 / 0.84 / 0.71–0.76 / 0.54 mm mean).
+are the geometric baselines of the transfer study (docs/results.md) (≈ 0.55 / 0.84 / 0.71–0.76 / 0.54 mm mean).
 
 Run:  python examples/identify_transfer_ur10.py [--data DIR] [--rows 60] [--seed 0]
 """

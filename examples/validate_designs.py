@@ -4,7 +4,7 @@
    covariance.
 2. Real data (if the IPA UR10 data are present): working poses held out, 60 calibration poses chosen from the
    rest by the KPI criterion, by D-optimality and at random; identify from each; real errors at the working poses.
-3. Designs over the extended model (issue 14, with --extended): Series C within the session and the directed pairs
+3. Designs over the extended model (with --extended): Series C within the session and the directed pairs
    B -> C, C -> B, C -> D, D -> C (chosen and calibrated on the first series, set-up re-registered on 60 rows of the
    second); random, D and A on C_p (extended), KPI geometric, KPI extended, KPI extended bias-aware, D geometric;
    every set calibrated with geometry + the terms selected on the training pool; errors of the held-out rows
@@ -45,7 +45,7 @@ def main() -> int:
     ap.add_argument("--series", type=Path, default=SERIES_C)
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--json", type=Path, default=None)
-    ap.add_argument("--extended", action="store_true", help="also the designs over the extended model (issue 14)")
+    ap.add_argument("--extended", action="store_true", help="also the designs over the extended model")
     ap.add_argument("--figure", type=Path, default=None, help="figure of the extended-model comparison (PNG)")
     ap.add_argument("--cases", default=",".join(CASES), help="extended-model cases, comma-separated")
     ap.add_argument("--case-dir", type=Path, default=None, help="one JSON per extended-model case (resumable)")
@@ -96,7 +96,7 @@ METHODS = ("random", "D", "param", "kpi_geo", "kpi_ext", "kpi_bias", "D_geo")
 
 def extended(data_dir: Path, splits: int, seed: int, figure: Path | None, cases: list[str] | None = None,
              case_dir: Path | None = None, simulation: dict | None = None) -> dict:
-    """Issue 14: within Series C and the directed pairs, designs over the extended model (module docstring).
+    """Within Series C and the directed pairs, designs over the extended model (module docstring).
 
     Args:
         data_dir: folder of the IPA series (Series_B, Series_C, Series_D).

@@ -29,7 +29,7 @@ if args:
     design_json = Path(args[0])
 else:
     design_json = Path(tempfile.mkdtemp()) / "design.json"
-    try:  # the KPI design of the shipped KR 15 cell (issue 4)
+    try:  # the KPI design of the shipped KR 15 cell
         from pin_kpi_oed.cli.app import main as cli
 
         m = 30 if quick else 60

@@ -4,13 +4,28 @@ The package reads as the pipeline it implements (Jost et al., J. Math. Industry 
 
 robot -> parameters -> measurement -> identifiability / covariance -> criteria
 -> design -> identification -> diagnosis, with the CLI and visualisation at the edge.
+
+The top level offers that pipeline by name (each subpackage exports its own names too)::
+
+    import pin_kpi_oed as pko
+
+    cell = pko.load_cell("kr15")                          # a shipped cell or a YAML file
+    kpi = pko.run_designs(cell, ["kpi"], m=30)[-1]        # the heuristic design first, then the KPI design
+    model = cell.tracker_model()
+    truth = pko.random_truth(model, seed=0)               # a simulated "real" robot
+    result = pko.identify(model, pko.simulate(model, kpi.q_meas, truth, seed=1))
+
+(the README's example continues to the held-out error).
+
+Everything beyond the robot model is imported on first use (``import pin_kpi_oed`` stays cheap).
 """
 
 # BLAS / OpenMP threads are limited at run time around every entry point (threads.py, threadpoolctl),
 # whatever the caller imported first; environment variables are not used for that.
+from pin_kpi_oed._lazy import lazy_exports
 from pin_kpi_oed.threads import get_max_threads, limited_threads, set_max_threads
 from pin_kpi_oed.errors import (IdentifiabilityError, InfeasibleError, InputError, PinKpiOedError, RobotLoadError,
-                     SolverError)
+                                SolverError)
 from pin_kpi_oed.model.robot import Robot, load_robot
 from pin_kpi_oed.model.parameters import ParameterLayout
 from pin_kpi_oed.model.device import MeasurementModel
@@ -19,6 +34,43 @@ from pin_kpi_oed.model.tracker import TrackerModel
 
 __version__ = "0.1.0"
 
-__all__ = ["get_max_threads", "limited_threads", "set_max_threads", "IdentifiabilityError", "InfeasibleError", "InputError", "PinKpiOedError", "RobotLoadError",
-           "SolverError", "Robot", "load_robot", "ParameterLayout", "MeasurementModel", "NoiseModel",
-           "TrackerModel"]
+#: The pipeline, imported on first use: public name -> module that defines it.
+_PIPELINE = {
+    # cell
+    "Cell": "pin_kpi_oed.cell.cell", "load_cell": "pin_kpi_oed.cell.cell",
+    "FeasibilityChecker": "pin_kpi_oed.cell.feasibility",
+    # design
+    "run_designs": "pin_kpi_oed.design.optimize", "DesignOptions": "pin_kpi_oed.design.optimize",
+    "DesignProblem": "pin_kpi_oed.design.optimize", "DesignResult": "pin_kpi_oed.design.optimize",
+    "load_design": "pin_kpi_oed.design.design_file", "DesignFile": "pin_kpi_oed.design.design_file",
+    "analyse": "pin_kpi_oed.oed.identifiability", "score_design": "pin_kpi_oed.oed.evaluate",
+    # measurements
+    "MeasurementSet": "pin_kpi_oed.data.measurements", "read_measurements": "pin_kpi_oed.data.measurements",
+    "write_measurements": "pin_kpi_oed.data.measurements", "concat_measurements": "pin_kpi_oed.data.measurements",
+    "read_targets": "pin_kpi_oed.data.targets",
+    # simulation
+    "Tolerances": "pin_kpi_oed.model.tolerances", "random_truth": "pin_kpi_oed.identification.simulate",
+    "simulate": "pin_kpi_oed.identification.simulate",
+    # identification, held-out validation, model files
+    "identify": "pin_kpi_oed.identification.identify", "IdentifyOptions": "pin_kpi_oed.identification.identify",
+    "IdentificationResult": "pin_kpi_oed.identification.identify", "validate": "pin_kpi_oed.identification.identify",
+    "CalibratedModel": "pin_kpi_oed.identification.model_file",
+    "load_model_file": "pin_kpi_oed.identification.model_file",
+    "register_setup": "pin_kpi_oed.identification.transfer", "predict_table": "pin_kpi_oed.identification.transfer",
+    "write_model_urdf": "pin_kpi_oed.identification.export",
+    # diagnosis
+    "diagnose": "pin_kpi_oed.diagnosis.diagnose", "DiagnoseOptions": "pin_kpi_oed.diagnosis.diagnose",
+    "DiagnosisReport": "pin_kpi_oed.diagnosis.diagnose",
+    # compensation
+    "compensate": "pin_kpi_oed.identification.compensate",
+    "CompensationOptions": "pin_kpi_oed.identification.compensate",
+    # measurement programs
+    "plan_program": "pin_kpi_oed.program.ordering", "ProgramOptions": "pin_kpi_oed.program.ordering",
+    "write_program": "pin_kpi_oed.program.export", "ProgramInfo": "pin_kpi_oed.program.export",
+}
+
+__getattr__, __dir__ = lazy_exports(globals(), _PIPELINE)
+
+__all__ = ["get_max_threads", "limited_threads", "set_max_threads", "IdentifiabilityError", "InfeasibleError",
+           "InputError", "PinKpiOedError", "RobotLoadError", "SolverError", "Robot", "load_robot", "ParameterLayout",
+           "MeasurementModel", "NoiseModel", "TrackerModel", *_PIPELINE]

@@ -2,7 +2,7 @@
 
 The package's dense linear algebra is small (tens of columns: information matrices, Cholesky factors of
 C_p, per-pose 3x3 blocks). On such sizes extra BLAS threads only add contention: a 25-column information
-matrix took 10 ms with 2 OpenBLAS threads on a loaded 2-core machine and 0.35 ms with one. Environment
+matrix took 10 ms with 2 OpenBLAS threads competing with other processes and 0.35 ms with one. Environment
 variables (``OMP_NUM_THREADS``) act only if they are set before NumPy is first imported, and user scripts
 import NumPy first; so the package limits the threads of the already-loaded BLAS / OpenMP libraries at
 run time with threadpoolctl, around each public entry point (:func:`limit_threads`).

@@ -1,4 +1,4 @@
-"""Cells from files (issue 13): environment obstacles from a mesh / URDF file (enclosing capsules for the
+"""Cells from files: environment obstacles from a mesh / URDF file (enclosing capsules for the
 optimiser, the meshes themselves in the independent check) and working configurations as TCP targets (IK)."""
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""Designs over the extended model (geometry + effects) with a prior (issue 14)."""
+"""Designs over the extended model (geometry + effects) with a prior."""
 
 from __future__ import annotations
 

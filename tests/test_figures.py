@@ -1,4 +1,4 @@
-"""Report figures (issue 8): PNGs written atomically, ellipse geometry, design figures; progress bars."""
+"""Report figures: PNGs written atomically, ellipse geometry, design figures; progress bars."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""Issue 15: a test per hostile input (one clear line, exit 2, nothing written), the fit-quality gate,
+"""A test per hostile input (one clear line, exit 2, nothing written), the fit-quality gate,
 the study-folder lock, and output-path checks before any work."""
 
 from __future__ import annotations
@@ -65,7 +65,7 @@ def offset_data(tmp_path_factory) -> Path:
 
 
 def test_zero_reflector_assumed_is_refused_as_poor_fit(offset_data, tmp_path):
-    """Issue 15 case 1: --reflector 0,0,0 on data with an offset: refused, verdict in the JSON, no URDF."""
+    """Hostile case 1: --reflector 0,0,0 on data with an offset: refused, verdict in the JSON, no URDF."""
     d = offset_data
     rc, out, err = _run("identify", "--robot", "kr15", "--data", d / "tr.csv", "--validate", d / "te.csv",
                         "--reflector", "0,0,0", "--json", tmp_path / "r.json", "--urdf-out", tmp_path / "c.urdf")
@@ -88,7 +88,7 @@ def test_default_reflector_is_estimated_and_fit_is_good(offset_data, tmp_path):
 
 
 def test_large_outliers_switch_to_robust_loss(offset_data, tmp_path):
-    """Issue 15 case 2: four 10 cm outliers: the default switches to soft_l1; --loss linear is refused."""
+    """Hostile case 2: four 10 cm outliers: the default switches to soft_l1; --loss linear is refused."""
     d = offset_data
     rc, out, err = _run("identify", "--robot", "kr15", "--data", d / "out4.csv", "--validate", d / "te.csv",
                         "--json", tmp_path / "r.json")

@@ -1,4 +1,4 @@
-"""Thread control (issue 16): the BLAS limit holds even when NumPy was imported before the package."""
+"""Thread control: the BLAS limit holds even when NumPy was imported before the package."""
 
 from __future__ import annotations
 

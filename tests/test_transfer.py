@@ -330,7 +330,7 @@ def test_real_ur10_joint_bcd_and_transfer(tmp_path):
                 "--register-rows", 60, "--seed", 0, "--reflector", "0,0,0.109", "--sigma", "1e-4", "--json",
                 tmp_path / "cd.json", "--quiet", "--accept-poor-fit") == 0
     doc = json.loads((tmp_path / "cd.json").read_text())
-    # C's calibration does not transfer to D (held-out worse than the nominal robot): the gate says so (issue 15)
+    # C's calibration does not transfer to D (held-out worse than the nominal robot): the gate says so
     assert doc["fit_quality"]["verdict"] == "poor" and "worse than the nominal" in doc["fit_quality"]["message"]
     v = doc["validation"]
     assert v["after"]["n"] == 572 and 0.65e-3 < v["after"]["mean_m"] < 0.80e-3

@@ -1,4 +1,4 @@
-"""Meshcat preview (issue 8): the design-file reader, the scene's objects, the CLI, and a real
+"""Meshcat preview: the design-file reader, the scene's objects, the CLI, and a real
 render of the static page in headless Chromium.
 
 The design JSON is built here (``make_design``) from ``load_robot('kr15')``, random configurations
@@ -48,7 +48,7 @@ def cs_oracle(model: TrackerModel, Q: np.ndarray, q_work: np.ndarray) -> np.ndar
 
 
 def make_design(m: int = 16, seed: int = 0, cov_for: tuple[str, ...] = ("random", "kpi")) -> dict:
-    """A design JSON (dict) as issue 4 writes it, from random KR 15 configurations.
+    """A design JSON (dict) as ``design --json`` writes it, from random KR 15 configurations.
 
     ``random``: one random set; ``param`` / ``kpi``: the best of a few random sets by tr(C_p) / tr(C_s).
     ``cov_s_m2`` is written only for the criteria in ``cov_for`` (the viewer recomputes the others).
@@ -134,7 +134,7 @@ def test_scene_holds_the_expected_objects(scene):
     # capsules: present but hidden (a toggle in the viewer); visuals shown
     assert rec.properties("/meshcat/robot/collisions") == {"visible": False}
     assert rec.properties("/meshcat/robot/visuals") == {"visible": True}
-    # ghosts: none by default for designs of more than 8 poses (issue 13); a marker per pose instead,
+    # ghosts: none by default for designs of more than 8 poses; a marker per pose instead,
     # the last design's shown
     assert not any(p.startswith("/meshcat/ghosts/") for p in paths)
     for d in df.designs:

@@ -146,7 +146,7 @@ class FeasibilityChecker:
         self.labels: list[tuple[str, str | None]] = []  # (name, link) of every geometry object
         self.robot_ids, self.robot_joint = self._add_robot_capsules()
         self.obst_ids, self.half_ids = self._add_obstacles()
-        env_ids, self.mesh_ids = add_environment_solids(self)  # environment meshes themselves (issue 13)
+        env_ids, self.mesh_ids = add_environment_solids(self)  # environment meshes themselves
         self.obst_ids += env_ids
         self.pairs = self._collision_pairs()
         #: pairs with a non-convex mesh (Coal BVH), whose near-zero distances :func:`mesh_penetration` re-tests
@@ -311,7 +311,7 @@ class FeasibilityChecker:
         return FeasibilityReport(cf, vis, bounds, clr, inc, worst, len(self.names))
 
 
-# ---------------------------------------------------------------------- environment meshes (issue 13)
+# ---------------------------------------------------------------------- environment meshes
 #: a BVH pair that Coal's distance puts within this (m) is tested with coal.collide for penetration
 _MESH_CONTACT_M = 1e-6
 

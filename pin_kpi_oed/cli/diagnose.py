@@ -125,7 +125,7 @@ def _noise(args: argparse.Namespace, train: Any, val: Any, reg: Any) -> tuple[An
 
 def _estimated_reflector(args: argparse.Namespace, robot: Any, noise: Any, weights: str, train: Any,
                          reflector: np.ndarray) -> np.ndarray:
-    """Nominal reflector offset (m) estimated from ``--train`` (issue 15: a reflector assumed at 0,0,0 hides
+    """Nominal reflector offset (m) estimated from ``--train`` (a reflector assumed at 0,0,0 hides
     parameters and fakes a gap)."""
     from pin_kpi_oed.identification.identify import IdentifyOptions
     from pin_kpi_oed.identification.reflector_start import estimate_reflector

@@ -69,9 +69,16 @@ def _register_simulate(subparsers: argparse._SubParsersAction) -> None:
     s = subparsers.add_parser("simulate", help="simulate tracker measurements of a robot with random geometric errors",
                               description="Simulate laser-tracker measurements (CSV, SI units) of a 'true' robot: "
                                           "random geometric errors from tolerances, tracker pose, reflector, noise.")
-    s.add_argument("--robot", required=True, help="URDF path or name (kr15, kr300, kr500, ur3, ur5, ur10, panda)")
+    s.add_argument("--robot", default=None,
+                   help="URDF path or name (kr15, kr300, kr500, ur3, ur5, ur10, panda); not with --design")
+    s.add_argument("--design", default=None,
+                   help="design JSON (pin-kpi-oed design --json): measure its poses (--criterion) with its robot, "
+                        "tracker pose and reflector as the nominal set-up, instead of random poses")
+    s.add_argument("--criterion", default=None,
+                   help="which design of --design to measure (default: the file's last, e.g. kpi)")
     s.add_argument("--tool", default=None, help="tool frame (default tool0)")
-    s.add_argument("--n", type=int, default=80, help="number of training measurements (default 80)")
+    s.add_argument("--n", type=int, default=80,
+                   help="number of training measurements (default 80; with --design: the design's poses)")
     s.add_argument("--n-test", type=int, default=0, help="number of held-out measurements (default 0)")
     s.add_argument("--out", required=True, help="training CSV file")
     s.add_argument("--test-out", default=None, help="held-out CSV file (with --n-test)")
@@ -184,23 +191,34 @@ def run_simulate(args: argparse.Namespace) -> int:
     if args.n_test and not args.test_out:
         raise InputError("--n-test needs --test-out FILE")
     _check_outputs(args.out, args.test_out, args.truth_json)
-    robot = load_robot(args.robot, args.tool)
+    if (args.robot is None) == (args.design is None):
+        raise InputError("simulate: give --robot ROBOT (random poses) or --design DESIGN.json (its poses), not both")
+    if args.criterion and not args.design:
+        raise InputError("--criterion: only with --design")
+    design = _design_poses(args.design, args.criterion) if args.design else None
+    robot = design[0].robot if design else load_robot(args.robot, args.tool)
     noise = NoiseModel(sigma_xyz_m=tuple(_floats(args.noise, (1, 3), "--noise")),
                        sigma_rot_rad=_positive(args.sigma_rot, "--sigma-rot"))
-    if args.tracker:
+    if design:
+        T = design[0].model.tracker_T_base
+    elif args.tracker:
         v = _floats(args.tracker, (3, 6), "--tracker")
         rpy = v[3:] if v.size == 6 else np.zeros(3)
         T = pin.SE3(pin.rpy.rpyToMatrix(rpy), v[:3])
     else:
         T = default_tracker_pose(robot)
-    model = TrackerModel(robot, tracker_T_base=T, reflector_m=_floats(args.reflector, 3, "--reflector"), noise=noise,
-                         pose6d=args.pose6d)
+    reflector = design[0].model.reflector_m if design else _floats(args.reflector, 3, "--reflector")
+    model = TrackerModel(robot, tracker_T_base=T, reflector_m=reflector, noise=noise, pose6d=args.pose6d)
     tol = Tolerances(joint_translation_m=float(_floats(args.tol_translation, 1, "--tol-translation")[0]),
                      joint_rotation_rad=float(_floats(args.tol_rotation, 1, "--tol-rotation")[0]),
                      reflector_m=float(_floats(args.tol_reflector, 1, "--tol-reflector")[0]))
     truth = random_truth(model, tol, seed=args.seed)
     rng = np.random.default_rng(args.seed + 1)
-    Q = robot.random_q(rng, args.n + args.n_test)
+    if design:
+        args.n = len(design[1])
+        Q = np.vstack([design[1], robot.random_q(rng, args.n_test)])
+    else:
+        Q = robot.random_q(rng, args.n + args.n_test)
     effects = []
     if args.effects:
         from pin_kpi_oed.effects.library import parse_effects_spec
@@ -215,11 +233,23 @@ def run_simulate(args: argparse.Namespace) -> int:
         write_measurements(ms.subset(slice(args.n, None)), args.test_out)
     if args.truth_json:
         atomic_write_json(args.truth_json, truth_to_dict(model, truth, tol, args.seed))
-    print(f"simulated {args.n} measurements -> {args.out}"
+    print(f"simulated {args.n} measurements"
+          + (f" at the poses of design '{design[2]}' of {args.design}" if design else "") + f" -> {args.out}"
           + (f", {args.n_test} held-out -> {args.test_out}" if args.n_test else "")
           + f" (robot {robot.name}, tool {robot.tool_frame}, noise sigma {np.array(noise.sigma_xyz_m) * 1e6} µm, "
             f"seed {args.seed}" + (f", effects: {', '.join(e.name for e, _ in effects)}" if effects else "") + ")")
     return 0
+
+
+def _design_poses(path: str, criterion: str | None) -> tuple[Any, np.ndarray, str]:
+    """(design file, poses, criterion) of ``simulate --design``: the named design, else the file's last."""
+    from pin_kpi_oed.design.design_file import load_design
+
+    df = load_design(path)
+    if not df.designs:
+        raise InputError(f"--design {path}: holds no design")
+    entry = df.design(criterion) if criterion else df.designs[-1]
+    return df, np.asarray(entry.q_meas, float), entry.criterion
 
 
 def add_register_args(p: argparse.ArgumentParser) -> None:

@@ -136,7 +136,7 @@ def run(args: argparse.Namespace) -> int:
     for n in df.notes:
         print(f"note: {n}", file=sys.stderr)
     singular = [e.criterion for e in df.designs if not np.all(np.isfinite(e.cov_s_m2))]
-    if singular:  # issue 15: never show a stored C_s the design's poses do not give
+    if singular:  # never show a stored C_s the design's poses do not give
         raise IdentifiabilityError(f"{args.design}: design(s) {', '.join(singular)}: the q_meas do not determine "
                                    "C_s (singular information matrix; e.g. repeated poses) - run pin-kpi-oed evaluate "
                                    "for the details")

@@ -1,1 +1,17 @@
-"""KPI optimum experimental design solved by IPOPT (eq. 24)."""
+"""KPI optimum experimental design solved by IPOPT (eq. 24), design files, user pools, sequential design.
+
+User-facing names (imported on first use): :func:`run_designs` (heuristic + optimum designs of a cell),
+:class:`DesignOptions`, :class:`DesignProblem`, :class:`DesignResult`, :func:`design_random`,
+:func:`design_ipopt`; :func:`load_design`, :class:`DesignFile`, :class:`DesignEntry` (design files);
+:func:`read_poses` (a user pool), :class:`SequentialProblem`, :func:`poses_until` (designing on top of
+measured poses).
+"""
+from pin_kpi_oed._lazy import lazy_exports
+
+_EXPORTS = {**dict.fromkeys(("run_designs", "DesignOptions", "DesignProblem", "DesignResult", "design_random",
+                             "design_ipopt"), "pin_kpi_oed.design.optimize"),
+            **dict.fromkeys(("load_design", "DesignFile", "DesignEntry"), "pin_kpi_oed.design.design_file"),
+            "read_poses": "pin_kpi_oed.design.user_pool",
+            "SequentialProblem": "pin_kpi_oed.design.sequential", "poses_until": "pin_kpi_oed.design.sequential"}
+__getattr__, __dir__ = lazy_exports(globals(), _EXPORTS)
+__all__ = list(_EXPORTS)

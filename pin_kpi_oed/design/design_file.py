@@ -19,7 +19,7 @@ recomputed is said in :attr:`DesignFile.notes` (one line each):
   are added to ``skip_pairs``, and such beam blockers to the beam's skip list; a file with skip lists
   gets nothing added. A working configuration that collides otherwise is never skipped: it is noted and
   kept in :attr:`DesignFile.work_collisions` (``export`` refuses it unless ``--force``);
-* a stored ``cov_s_m2`` is checked against the one its ``q_meas`` give (issue 15: the file's numbers are not
+* a stored ``cov_s_m2`` is checked against the one its ``q_meas`` give (the file's numbers are not
   trusted; a mismatch is noted and the recomputed one used, a singular design gets NaN); a missing or
   mis-shaped ``cov_s_m2`` is recomputed with :func:`pin_kpi_oed.oed.evaluate.score_design`
   (the same C_s as ``design --json`` and ``evaluate`` write, eq. 19, with the file's prior).
@@ -505,7 +505,7 @@ def _read_design(e: Mapping, crit: str, w: str, cell: Cell, covariances: _Covari
             notes.append(f"design {crit}: cov_s_m2 contains NaN or inf: recomputed")
             C = None
     stored = C
-    if C is None or compute_missing:  # issue 15: never trust stored numbers the file's poses do not give
+    if C is None or compute_missing:  # never trust stored numbers the file's poses do not give
         if C is None and not compute_missing:
             raise InputError(f"{w} ({crit}): missing field 'cov_s_m2' (3t x 3t TCP covariance, m^2)")
         try:

@@ -63,7 +63,8 @@ from pin_kpi_oed.model.kinematics import skew
 from pin_kpi_oed.model.parameters import ParameterLayout
 from pin_kpi_oed.oed.identifiability import Identifiability
 
-__all__ = ["StationLayout", "StationSet", "ResidualModel", "align_data", "effect_param_names", "log3", "jl_inv"]
+__all__ = ["StationLayout", "StationSet", "ResidualModel", "align_data", "effect_param_names", "log3", "jl_inv",
+           "predict"]
 
 #: Separator between a set-up parameter group and its station label: ``tracker@B.tx``.
 STATION_SEP = "@"
@@ -129,6 +130,26 @@ def align_data(robot: Any, data: MeasurementSet, need_position: bool = True) -> 
     if data.sigma_m is not None and np.any(data.sigma_m <= 0):
         raise InputError(f"{src}: standard deviations must be > 0 m")
     return robot.check_q(Q, what=src)
+
+
+def predict(model: Any, p: np.ndarray, Q: np.ndarray, effects: Sequence[Any] = (),
+            thetas: Sequence[np.ndarray] = (), aux: MeasurementSet | None = None) -> np.ndarray:
+    """Model response with effects: ``Y = h(p, Q + ΣΔq) + ΣΔy`` (tracker frame).
+
+    A thin form of :func:`pin_kpi_oed.effects.library.predict_with_effects` (the one composition).
+
+    Args:
+        model: the measurement model (a :class:`~pin_kpi_oed.model.tracker.TrackerModel`).
+        p: its raw parameter vector (m, rad).
+        Q: configurations, (m, nq) rad (m for prismatic joints).
+        effects: effect objects; ``thetas`` their parameters, one array per effect.
+        aux: auxiliary data the effects read (temperature, time, payload), or None.
+
+    Returns:
+        (m, 3) positions (m), or (m, 6) with the orientation rotation vector (rad) for a 6-D model.
+    """
+    Q = np.atleast_2d(np.asarray(Q, float))
+    return predict_with_effects(model, p, Q, aux, list(zip(effects, thetas)))
 
 
 def effect_param_names(effects: Sequence[Any], robot: Any) -> list[str]:

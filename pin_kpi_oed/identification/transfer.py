@@ -46,8 +46,9 @@ from pin_kpi_oed.data.atomic import atomic_write_text
 from pin_kpi_oed.data.measurements import MeasurementSet
 from pin_kpi_oed.effects.library import predict_with_effects
 from pin_kpi_oed.errors import InputError, SolverError
-from pin_kpi_oed.identification.identify import (MIN_STATION_ROWS, _proj_so3, default_station_label, error_stats,
-                                                 register_points)
+from pin_kpi_oed.identification.fit_inputs import MIN_STATION_ROWS, default_station_label
+from pin_kpi_oed.identification.heldout import error_stats
+from pin_kpi_oed.identification.tracker_start import proj_so3, register_points
 from pin_kpi_oed.identification.model_file import CalibratedModel, Setup
 from pin_kpi_oed.identification.problem import ResidualModel, StationSet, align_data
 from pin_kpi_oed.model.parameters import ParameterLayout
@@ -143,7 +144,7 @@ def _register_one(model: CalibratedModel, data: MeasurementSet, Q: np.ndarray, l
     if pose6d:
         kin = wm.kinematics(p, Q, wm.reflector(p))
         Rm = Rotation.from_rotvec(data.rotvec_rad).as_matrix()
-        wm.probe_R = _proj_so3(np.einsum("mba,bc,mcd->ad", kin.R_tool, R.T, Rm))
+        wm.probe_R = proj_so3(np.einsum("mba,bc,mcd->ad", kin.R_tool, R.T, Rm))
     base = np.r_[np.arange(L.tracker.start, L.tracker.stop),
                  [] if hold_reflector else np.arange(L.reflector.start, L.reflector.stop),
                  np.arange(L.probe.start, L.probe.stop)].astype(int)

@@ -94,7 +94,7 @@ class TransitionChecker:
     Args:
         cell: the cell (its capsules, obstacles, half-spaces, skip pairs and required clearance).
         margin_m: extra clearance every move must keep (m), on top of ``cell.clearance_m``.
-        step_rad: largest revolute joint step between samples (rad); at most 1° is the issue's contract.
+        step_rad: largest revolute joint step between samples (rad); at most 1° is the contract of the program check.
         step_m: largest prismatic joint step between samples (m).
         checker: an existing :class:`FeasibilityChecker` of the cell (built if None).
 

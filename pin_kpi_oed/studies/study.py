@@ -203,7 +203,7 @@ def run_tasks(tasks: list[Task], out_dir: Path, workers: int | None = None, sche
     Returns:
         (records in task order, number of tasks computed now).
     """
-    with folder_lock(out_dir, "study folder"):  # issue 15: two studies in one folder computed every task twice
+    with folder_lock(out_dir, "study folder"):  # two studies in one folder would compute every task twice
         return _run_tasks_locked(tasks, Path(out_dir), workers, scheduler, desc)
 
 

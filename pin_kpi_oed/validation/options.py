@@ -1,7 +1,7 @@
 """Option checks of every command, run before any work (``cli/app.py`` calls :func:`check_args`).
 
 Each rule names the option, the allowed range and the unit; zero and negative values are refused
-rather than replaced by defaults (issue 15: ``--measurements 0`` designed 60, ``--arms -3`` ran 87).
+rather than replaced by defaults (``--measurements 0`` never silently designs 60 poses).
 The rules are a table per command (:data:`RULES`); output and input paths of each command are in
 :data:`OUTPUTS`, :data:`INPUTS` and :data:`FOLDERS`, checked by :func:`~pin_kpi_oed.validation.paths.check_outputs`.
 """
@@ -164,9 +164,9 @@ OUTPUTS = {"evaluate": ["json"], "demo": ["json"], "design": ["json"], "simulate
            "export": ["out", "json", "html"], "compensate": ["out", "json"], "import-tracker": ["out"]}
 #: command -> argparse dests of inputs (files or folders; lists allowed)
 INPUTS = {"evaluate": ["design"], "design": ["cell", "pool", "given", "given_prior", "model"], "identify": ["data", "validate", "register_data", "robot"],
-          "simulate": ["robot"], "import-ipa": ["src"], "register": ["model", "data"], "predict": ["model", "data"],
-          "diagnose": ["train", "validate", "register_data", "robot"], "view": ["design"], "info": ["robot"],
-          "export": ["design"], "compensate": ["model", "targets", "program"],
+          "simulate": ["robot", "design"], "import-ipa": ["src"], "register": ["model", "data"],
+          "predict": ["model", "data"], "diagnose": ["train", "validate", "register_data", "robot"],
+          "view": ["design"], "info": ["robot"], "export": ["design"], "compensate": ["model", "targets", "program"],
           "import-tracker": ["export", "joints", "robot"]}
 #: command -> argparse dests of output folders
 FOLDERS = {"diagnose": ["figures"], "view": ["figures"], "study": ["out"]}

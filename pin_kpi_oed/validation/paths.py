@@ -2,8 +2,8 @@
 
 :func:`check_outputs` refuses, in milliseconds and before anything is read or computed, an output
 that is a folder, whose folder is missing or read-only, that names one of the command's inputs,
-or that names another output of the same command (issue 15: ``import-ipa x.csv --out x.csv``
-replaced raw tracker data; ``diagnose`` failed on a missing folder after 95–130 s).
+or that names another output of the same command (without it ``import-ipa x.csv --out x.csv`` would
+replace raw tracker data, and ``diagnose`` would fail on a missing folder after minutes of work).
 """
 
 from __future__ import annotations

@@ -2,7 +2,7 @@
 
 One place decides what a plausible tracker noise, reflector offset or joint-bound value is, so
 that ``simulate``, ``identify``, ``diagnose`` and the cell reader refuse the same values with the
-same message (issue 15: ``identify --sigma 10`` was accepted, ``diagnose --sigma 15`` refused).
+same message (``identify --sigma 10`` and ``diagnose --sigma 15`` alike).
 """
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""Hostile inputs of issue 15: every case must end in one clear line, exit code 2 and no file written.
+"""Hostile inputs: every case must end in one clear line, exit code 2 and no file written.
 
 ``build_inputs(folder)`` writes the shared inputs (a simulated KR 15 data set with sigma columns and an
 off-axis reflector, a cell file, a design file, broken variants of each); ``CASES`` lists the cases

@@ -1,4 +1,4 @@
-"""Rerun every hostile input of issue 15 as a real ``pin-kpi-oed`` subprocess and print a table.
+"""Rerun every hostile input as a real ``pin-kpi-oed`` subprocess and print a table.
 
     .venv/bin/python -m tests.hostile.run_hostile [--keep DIR]
 

@@ -1,0 +1,139 @@
+"""Steps 4–7 of :func:`~pin_kpi_oed.identification.identify.identify`: solve, outliers, covariance, TCP σ."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from scipy.optimize import least_squares
+from scipy.stats import chi2 as _chi2
+
+from pin_kpi_oed.errors import IdentifiabilityError, SolverError
+from pin_kpi_oed.identification.identify_options import IdentifyOptions
+from pin_kpi_oed.identification.problem import ResidualModel
+from pin_kpi_oed.oed.covariance import param_covariance
+
+__all__ = ["Solution", "solve", "settle_outliers", "fit_covariance", "tcp_std"]
+
+
+@dataclass
+class Solution:
+    x: np.ndarray
+    sol: Any
+    f_scale: float
+    nit: int
+    nfev: int
+
+
+def _least_squares(prob: ResidualModel, x_init: np.ndarray, loss: str, f_scale: float, method: str,
+                   opts: IdentifyOptions, nfev_max: int) -> Any:
+    try:
+        return least_squares(prob.residual, x_init, jac=prob.jacobian, method=method, loss=loss, f_scale=f_scale,
+                             x_scale="jac", ftol=opts.tol, xtol=opts.tol, gtol=opts.tol, max_nfev=nfev_max)
+    except (ValueError, np.linalg.LinAlgError) as exc:
+        raise SolverError(f"identification failed: {str(exc).splitlines()[0]}") from None
+
+
+def solve(prob: ResidualModel, opts: IdentifyOptions) -> Solution:
+    """Step 4: Levenberg–Marquardt (or a plain fit then the robust loss), checked for divergence and reach."""
+    nfev_max = opts.max_nfev if opts.max_nfev is not None else 50 * max(prob.nx, 1)
+    x0 = prob.x0()
+    lm_ok = prob.n_rows >= prob.nx
+    fs, pre_iter, pre_fev = 1.0, 0, 0
+    if opts.loss == "linear":
+        sol = _least_squares(prob, x0, "linear", 1.0, "lm" if lm_ok else "trf", opts, nfev_max)
+    else:
+        first = _least_squares(prob, x0, "linear", 1.0, "lm" if lm_ok else "trf", opts, nfev_max)
+        if opts.f_scale is None:
+            f_lin = prob.weighted_rows(first.x).ravel()
+            fs = 3.0 * 1.4826 * float(np.median(np.abs(f_lin))) or 1.0
+        else:
+            fs = float(opts.f_scale)
+        sol = _least_squares(prob, first.x, opts.loss, fs, "trf", opts, nfev_max)
+        pre_iter, pre_fev = int(first.njev or 0), int(first.nfev)
+    if not np.all(np.isfinite(sol.x)):
+        raise SolverError("identification diverged (non-finite parameters); check the robot, joint order and units")
+    if sol.status <= 0 and opts.raise_on_failure:
+        raise SolverError(f"identification did not converge in {sol.nfev} evaluations (cost {sol.cost:.4g}): "
+                          "check the joint order, units (m, rad) and the reflector offset, or raise max_nfev")
+    rpos, _ = prob.evaluate(sol.x)
+    errors = np.linalg.norm(rpos, axis=1)
+    robot = prob.stations.robot
+    limit = 0.01 * robot.reach() if opts.max_median_error_m is None else float(opts.max_median_error_m)
+    if float(np.median(errors)) > limit:
+        raise SolverError(f"the fitted model does not reach the data: median position error "
+                          f"{np.median(errors) * 1e3:.4g} mm after {sol.njev or 0} iterations (limit {limit * 1e3:.3g} "
+                          f"mm); check the robot model, tool frame, joint order/zero and units (m, rad)")
+    return Solution(sol.x, sol, fs, pre_iter + int(sol.njev or 0), pre_fev + int(sol.nfev))
+
+
+def _flag(prob: ResidualModel, x: np.ndarray, alpha: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    fw = prob.weighted_rows(x)
+    we = np.linalg.norm(fw, axis=1)
+    s_rob = 1.4826 * float(np.median(np.abs(fw)))
+    thr = float(np.sqrt(_chi2.ppf(1.0 - alpha, prob.nh))) * max(s_rob, 1e-300)
+    return fw, we, np.flatnonzero(we > thr)
+
+
+def settle_outliers(prob: ResidualModel, solution: Solution, opts: IdentifyOptions, src: str
+                     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Step 5: flag outliers; with a robust loss refit plain least squares on the inliers until the flags settle.
+
+    Returns:
+        (weighted rows (m, nh), weighted error norms (m,), outlier indices); ``solution`` and
+        ``prob.mask`` are updated.
+    """
+    fw, we, outliers = _flag(prob, solution.x, opts.outlier_alpha)
+    if opts.loss == "linear":
+        return fw, we, outliers
+    nfev_max = opts.max_nfev if opts.max_nfev is not None else 50 * max(prob.nx, 1)
+    for _ in range(3):
+        prob.mask = np.ones(prob.m, bool)
+        prob.mask[outliers] = False
+        if prob.n_rows < prob.nx:
+            raise IdentifiabilityError(f"{src}: too few inliers ({int(prob.mask.sum())}) for {prob.nx} parameters")
+        sol2 = _least_squares(prob, solution.x, "linear", 1.0, "lm", opts, nfev_max)
+        if sol2.status <= 0 and opts.raise_on_failure:
+            raise SolverError(f"the refit on the inliers did not converge in {sol2.nfev} evaluations")
+        solution.x = sol2.x
+        solution.nit += int(sol2.njev or 0)
+        solution.nfev += int(sol2.nfev)
+        fw, we, new_out = _flag(prob, solution.x, opts.outlier_alpha)
+        if np.array_equal(new_out, outliers):
+            break
+        outliers = new_out
+    prob.mask = np.ones(prob.m, bool)
+    prob.mask[outliers] = False
+    return fw, we, outliers
+
+
+def fit_covariance(prob: ResidualModel, x: np.ndarray, fw: np.ndarray, opts: IdentifyOptions
+                ) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
+    """Step 6: C = (FᵀF + P)⁻¹ (optionally × reduced χ²), standard deviations, correlations, reduced χ²."""
+    F = prob.jacobian_full(x)[prob.mask].reshape(-1, prob.nx)
+    chi2 = float(np.sum(fw[prob.mask] ** 2))
+    dof = max(F.shape[0] + prob.prior_idx.size - prob.nx, 1)
+    chi2_red = chi2 / dof
+    prior = np.full(prob.nx, np.inf)
+    prior[prob.prior_idx] = prob.prior_sigma
+    C = param_covariance(F, prior, prob.names)
+    if opts.scale_covariance:
+        C = C * chi2_red
+    std = np.sqrt(np.clip(np.diag(C), 0.0, None))
+    with np.errstate(invalid="ignore", divide="ignore"):
+        corr = C / np.outer(std, std)
+    return C, std, np.where(np.isfinite(corr), corr, 0.0), chi2_red
+
+
+def tcp_std(prob: ResidualModel, P: np.ndarray, C: np.ndarray, Qw: np.ndarray) -> np.ndarray:
+    """Step 7: sqrt(trace C_s) per working configuration (eq. 25), first station's tracker frame (m)."""
+    st = prob.stations
+    model, p0 = st.models[0], st.station_p(P, 0)
+    E0 = model.kpi_jacobian(p0, Qw)  # (3t, n_station)
+    cols = prob._xcol[0]
+    E = np.zeros((E0.shape[0], prob.nb))
+    use = cols >= 0
+    E[:, cols[use]] = E0[:, use]
+    var = np.einsum("ij,jk,ik->i", E, C[:prob.nb, :prob.nb], E).reshape(-1, 3).sum(axis=1)
+    return np.sqrt(np.clip(var, 0.0, None))
