@@ -46,7 +46,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    "(moves, via poses, the beam at each measurement point)")
     p.add_argument("--force", action="store_true", help="write even if a move still collides")
     p.add_argument("--quiet", action="store_true", help="print nothing")
-    p.set_defaults(func=run_export)
+    p.set_defaults(func=run_export, output_files=_output_files)
 
 
 def _targets(fmt: str, out: str) -> dict[str, Path]:
@@ -54,6 +54,13 @@ def _targets(fmt: str, out: str) -> dict[str, Path]:
     from pin_kpi_oed.program.export import program_files
 
     return program_files(fmt, out)
+
+
+def _output_files(args: argparse.Namespace) -> list[tuple[str, str]]:
+    """(option, path) of every file ``--out`` writes (KRL: the .src and the .dat beside it), for the
+    output-path check before any work (:func:`pin_kpi_oed.validation.options.check_args`)."""
+    files = _targets(str(args.format).lower(), args.out)
+    return [("--out" if f == Path(args.out) else f"--out ({suffix} beside it)", str(f)) for suffix, f in files.items()]
 
 
 def _refusals(df, Q: np.ndarray, rep, design: str) -> list[str]:

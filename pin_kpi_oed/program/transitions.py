@@ -15,9 +15,10 @@ A colliding move is repaired by :meth:`TransitionChecker.repair`: through one sa
 pose (wrist-first / arm-first splits of the move, the home pose, retracted variants of the end
 poses, then a seeded pool of collision-free configurations; cheapest first), else through two
 (every leg densely checked); when neither works, :meth:`TransitionChecker.plan_route` plans a
-path with OMPL's RRT-Connect in joint space (validity: the same pair distances and margin; motions
-checked at ≤ one dense step per joint), shortcut by OMPL's path simplifier, and every leg of the
-result densely re-checked by :meth:`TransitionChecker.check`.
+path with a seeded RRT-Connect in joint space (validity: the same pair distances and margin; every
+tree edge a dense move check), shortcut greedily, and every leg of the result densely re-checked by
+:meth:`TransitionChecker.check`. Its random numbers are seeded per call: the same design gives the
+same program in one process or two.
 
 :func:`equivalents` lists the configurations q + 2πk of a pose inside the joint bounds (UR arms have
 ±360° joints): the same link placements, so the same measurement, clearance and incidence; the
@@ -36,8 +37,6 @@ from pin_kpi_oed.cell.cell import Cell
 from pin_kpi_oed.cell.feasibility import FeasibilityChecker
 from pin_kpi_oed.errors import InputError
 
-#: OMPL's random numbers come from one process-wide seed generator: set once, at the first plan
-_OMPL_SEEDED: list[int] = []
 
 
 def equivalents(q: np.ndarray, lower: np.ndarray, upper: np.ndarray, revolute: np.ndarray,
@@ -115,6 +114,7 @@ class TransitionChecker:
         self.steps = np.where(rev, float(step_rad), float(step_m))
         self.n_evaluations = 0
         self._cache: dict[tuple[bytes, bytes, bool], MoveCheck] = {}
+        self._clearances: dict[bytes, float] = {}
 
     def samples(self, qa: np.ndarray, qb: np.ndarray) -> np.ndarray:
         """Configurations along the straight joint move qa → qb, end points included, steps ≤ the limits."""
@@ -124,10 +124,22 @@ class TransitionChecker:
         return qa + s * (qb - qa)
 
     def clearance(self, q: np.ndarray) -> float:
-        """Smallest pair distance at q minus the cell's required clearance (m); ``inf`` with no pairs."""
+        """Smallest pair distance at q minus the cell's required clearance (m); ``inf`` with no pairs.
+
+        Remembered per configuration (the end poses of moves are asked again and again); only new
+        configurations count in :attr:`n_evaluations`.
+        """
+        key = np.asarray(q, float).tobytes()
+        hit = self._clearances.get(key)
+        if hit is not None:
+            return hit
         self.n_evaluations += 1
         d = self.checker.pair_distances(q)
-        return float(d.min()) - self.cell.clearance_m if d.size else math.inf
+        out = float(d.min()) - self.cell.clearance_m if d.size else math.inf
+        if len(self._clearances) >= 200_000:
+            self._clearances.clear()
+        self._clearances[key] = out
+        return out
 
     def check(self, qa: np.ndarray, qb: np.ndarray, stop_early: bool = True) -> MoveCheck:
         """Densely check the move qa → qb.
@@ -261,73 +273,95 @@ class TransitionChecker:
 
     def plan_route(self, qa: np.ndarray, qb: np.ndarray, seed: int = 0, max_checks: int = 20_000
                    ) -> list[np.ndarray] | None:
-        """A collision-free route qa → qb from OMPL's RRT-Connect in joint space, shortcut and re-checked.
+        """A collision-free route qa → qb from a seeded RRT-Connect in joint space, shortcut and re-checked.
 
-        The planner works in joint coordinates scaled by the dense steps (one unit = one step), so
-        OMPL's motion checks at resolution one unit never step more than ``step_rad`` / ``step_m`` in
-        any joint; a state is valid when its clearance keeps what :meth:`check` requires (the margin,
-        or the end poses' clearance if smaller). The path is simplified with OMPL's
-        ``PathSimplifier.simplifyMax`` (shortcuts, vertex reduction), then every leg is densely
-        checked by :meth:`check`; a leg that fails rejects the route.
+        Bidirectional RRT (Kuffner & LaValle's RRT-Connect) in joint coordinates scaled by the dense steps
+        (one unit = one step): a tree grows from each end toward seeded uniform samples within the cell's
+        joint bounds (steps of at most a fifth of the space's extent, as OMPL's default range), the other
+        tree connects greedily; a new node is valid when its clearance keeps what :meth:`check` requires
+        of the route (the margin, or the end poses' clearance if smaller), and every tree edge is a densely
+        checked move (:meth:`check`). The path found is shortcut greedily (each node joined to the farthest
+        later node it reaches by a clear move), then every leg is densely checked again.
+
+        The random numbers come from ``numpy.random.default_rng`` seeded with ``seed`` and the two end
+        configurations: the same call gives the same route in one process or two, whatever was planned
+        before (OMPL's process-wide seed could not).
 
         Args:
             qa, qb: end configurations (n,).
-            seed: OMPL's process-wide seed, set at the first plan of the process only (OMPL cannot
-                re-seed once it has drawn numbers: a plan is reproducible in a fresh process).
-            max_checks: planning budget in configurations checked (a count, not a time: the
-                result does not depend on the machine's load).
+            seed: seed of the samples.
+            max_checks: planning budget in configurations checked (a count, not a time: the result does
+                not depend on the machine's load).
 
         Returns:
             The intermediate configurations (empty when the straight move is clear), or None when an
             end pose collides or no route was found within the budget.
         """
-        from ompl import base as ob
-        from ompl import geometric as og
-        from ompl import util as ou
-
         qa, qb = np.asarray(qa, float), np.asarray(qb, float)
         need = min(self.margin_m, self.clearance(qa), self.clearance(qb)) - 1e-9
         if need < -1e-9:
             return None
-        if not _OMPL_SEEDED:
-            ou.setLogLevel(ou.LOG_NONE)
-            ou.RNG.setSeed(int(seed) % (2 ** 31 - 1) + 1)  # OMPL refuses 0
-            _OMPL_SEEDED.append(int(seed))
-        n = qa.size
+        if self.check(qa, qb).clear:
+            return []
         scale = self.steps
         lo, hi = self.cell.q_lower / scale, self.cell.q_upper / scale
-        space = ob.RealVectorStateSpace(n)
-        bounds = ob.RealVectorBounds(n)
-        for j in range(n):
-            bounds.setLow(j, float(lo[j]))
-            bounds.setHigh(j, float(hi[j]))
-        space.setBounds(bounds)
-        si = ob.SpaceInformation(space)
-
-        def valid(state) -> bool:
-            x = np.fromiter((state[j] for j in range(n)), float, n)
-            return bool(self.clearance(x * scale) >= need)
-
-        si.setStateValidityChecker(valid)
-        si.setStateValidityCheckingResolution(1.0 / space.getMaximumExtent())  # one step per joint
-        si.setup()
-        start, goal = space.allocState(), space.allocState()
-        for j in range(n):
-            start[j], goal[j] = float(qa[j] / scale[j]), float(qb[j] / scale[j])
-        pdef = ob.ProblemDefinition(si)
-        pdef.setStartAndGoalStates(start, goal)
-        planner = og.RRTConnect(si)
-        planner.setProblemDefinition(pdef)
-        planner.setup()
+        step = 0.2 * float(np.linalg.norm(hi - lo))
+        rng = np.random.default_rng([int(seed) & 0xFFFFFFFF, *np.frombuffer(np.r_[qa, qb].tobytes(), np.uint32)])
         stop_at = self.n_evaluations + int(max_checks)
-        planner.solve(ob.PlannerTerminationCondition(lambda: self.n_evaluations >= stop_at))
-        if not pdef.hasExactSolution():
+        trees = [([qa / scale], [-1]), ([qb / scale], [-1])]
+
+        def extend(tree, target: np.ndarray) -> tuple[str, int]:
+            nodes, parents = tree
+            arr = np.asarray(nodes)
+            k = int(np.argmin(np.sum((arr - target) ** 2, axis=1)))
+            d = target - arr[k]
+            dist = float(np.linalg.norm(d))
+            reached = dist <= step
+            new = target if reached else arr[k] + d * (step / dist)
+            q = new * scale
+            if self.clearance(q) < need or not self.check(arr[k] * scale, q).clear:
+                return "trapped", k
+            nodes.append(new)
+            parents.append(k)
+            return ("reached" if reached else "advanced"), len(nodes) - 1
+
+        def branch(tree, i: int) -> list[np.ndarray]:
+            nodes, parents = tree
+            out = []
+            while i >= 0:
+                out.append(nodes[i] * scale)
+                i = parents[i]
+            return out
+
+        path = None
+        a, b = 0, 1
+        while self.n_evaluations < stop_at:
+            x = lo + rng.random(lo.size) * (hi - lo)
+            status, i = extend(trees[a], x)
+            if status != "trapped":
+                target = trees[a][0][i]
+                while self.n_evaluations < stop_at:
+                    status2, j = extend(trees[b], target)
+                    if status2 == "reached":
+                        ends = (branch(trees[a], i), branch(trees[b], j))
+                        pa, pb = (ends if a == 0 else ends[::-1])
+                        path = pa[::-1] + pb[1:]
+                        break
+                    if status2 == "trapped":
+                        break
+                if path is not None:
+                    break
+            a, b = b, a
+        if path is None:
             return None
-        path = pdef.getSolutionPath()
-        og.PathSimplifier(si).simplifyMax(path)
-        pts = np.array([[path.getState(i)[j] for j in range(n)] for i in range(path.getStateCount())]) * scale
+        pts = [path[0]]
+        i = 0
+        while i < len(path) - 1:  # greedy shortcut: the farthest later node reached by a clear move
+            j = next(j for j in range(len(path) - 1, i, -1) if j == i + 1 or self.check(path[i], path[j]).clear)
+            pts.append(path[j])
+            i = j
+        pts = np.array(pts)
         pts[0], pts[-1] = qa, qb
-        pts = np.clip(pts, self.cell.q_lower, self.cell.q_upper)
-        if not all(self.check(a, b).clear for a, b in zip(pts[:-1], pts[1:])):
+        if not all(self.check(u, v).clear for u, v in zip(pts[:-1], pts[1:])):
             return None
         return [p.copy() for p in pts[1:-1]]

@@ -215,12 +215,11 @@ def check_args(args: argparse.Namespace) -> None:
                 raise InputError(f"--validate {args.validate}: is also --train; held-out data must not be training "
                                  "data")
     outputs = _pairs(args, OUTPUTS.get(cmd, []))
-    if cmd == "export" and getattr(args, "out", None):  # the files a format writes (KRL: .src and its .dat)
-        from pin_kpi_oed.program.export import program_files
-
-        files = program_files(str(getattr(args, "format", "")).lower(), args.out)
-        outputs = [(f"--out ({Path(f).suffix})" if Path(f) != Path(args.out) else "--out", str(f))
-                   for f in files.values()] + [o for o in outputs if o[0] != "--out"]
+    files_of = getattr(args, "output_files", None)  # a command whose option writes several files (KRL: .src + .dat)
+    if callable(files_of):
+        extra = files_of(args)
+        opts = {o for o, _ in extra}
+        outputs = list(extra) + [o for o in outputs if o[0] not in opts]
     check_outputs(outputs, _pairs(args, INPUTS.get(cmd, []), existing_only=True), _pairs(args, FOLDERS.get(cmd, [])))
 
 
