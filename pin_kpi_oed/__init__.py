@@ -52,15 +52,17 @@ _PIPELINE = {
     "Tolerances": "pin_kpi_oed.model.tolerances", "random_truth": "pin_kpi_oed.identification.simulate",
     "simulate": "pin_kpi_oed.identification.simulate",
     # identification, held-out validation, model files
-    "identify": "pin_kpi_oed.identification.identify", "IdentifyOptions": "pin_kpi_oed.identification.identify",
-    "IdentificationResult": "pin_kpi_oed.identification.identify", "validate": "pin_kpi_oed.identification.identify",
+    "identify": "pin_kpi_oed.identification.identify",
+    "IdentifyOptions": "pin_kpi_oed.identification.identify_options",
+    "IdentificationResult": "pin_kpi_oed.identification.identify_result",
+    "validate": "pin_kpi_oed.identification.heldout",
     "CalibratedModel": "pin_kpi_oed.identification.model_file",
     "load_model_file": "pin_kpi_oed.identification.model_file",
     "register_setup": "pin_kpi_oed.identification.transfer", "predict_table": "pin_kpi_oed.identification.transfer",
     "write_model_urdf": "pin_kpi_oed.identification.export",
     # diagnosis
-    "diagnose": "pin_kpi_oed.diagnosis.diagnose", "DiagnoseOptions": "pin_kpi_oed.diagnosis.diagnose",
-    "DiagnosisReport": "pin_kpi_oed.diagnosis.diagnose",
+    "diagnose": "pin_kpi_oed.diagnosis.diagnose", "DiagnoseOptions": "pin_kpi_oed.diagnosis.diagnose_options",
+    "DiagnosisReport": "pin_kpi_oed.diagnosis.report",
     # compensation
     "compensate": "pin_kpi_oed.identification.compensate",
     "CompensationOptions": "pin_kpi_oed.identification.compensate",

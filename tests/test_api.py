@@ -29,7 +29,8 @@ def test_exports_resolve_and_hide_no_module(name: str) -> None:
 
 def test_pipeline_names_are_the_defining_objects() -> None:
     from pin_kpi_oed.cell.cell import load_cell
-    from pin_kpi_oed.identification.identify import identify, validate
+    from pin_kpi_oed.identification.heldout import validate
+    from pin_kpi_oed.identification.identify import identify
     from pin_kpi_oed.identification.simulate import simulate
 
     assert pin_kpi_oed.load_cell is load_cell and pin_kpi_oed.identify is identify

@@ -106,3 +106,32 @@ def test_evaluate_too_few_measurements(tmp_path):
     rb = load_robot("kr15")
     Q = rb.random_q(np.random.default_rng(0), 5).tolist()
     assert_clean_error(run("evaluate", str(_design_json(tmp_path, Q))), "measure at least 9")
+
+
+def test_simulate_needs_robot_or_design_not_both(tmp_path):
+    """``simulate``: random poses of --robot or the poses of --design, one clear line otherwise, nothing written."""
+    out = tmp_path / "m.csv"
+    assert_clean_error(run("simulate", "--out", str(out)), "--robot", "--design")
+    design = tmp_path / "d.json"
+    design.write_text(json.dumps({"robot": "kr15", "designs": [{"criterion": "kpi", "q_meas": [[0.0] * 6] * 3}]}))
+    assert_clean_error(run("simulate", "--robot", "kr15", "--design", str(design), "--out", str(out)), "not both")
+    assert_clean_error(run("simulate", "--robot", "kr15", "--criterion", "kpi", "--out", str(out)), "--criterion")
+    assert not out.exists()
+
+
+def test_simulate_design_measures_the_design_poses(tmp_path):
+    rng = np.random.default_rng(0)
+    Q = load_robot("kr15").random_q(rng, 14)
+    design = tmp_path / "d.json"
+    design.write_text(json.dumps({"robot": "kr15", "reflector_m": [0.05, 0.0, 0.1],
+                                  "designs": [{"criterion": "random", "q_meas": Q[:10].tolist()},
+                                              {"criterion": "kpi", "q_meas": Q.tolist()}]}))
+    res = run("simulate", "--design", str(design), "--out", str(tmp_path / "m.csv"))
+    assert res.returncode == 0, res.stderr
+    assert "design 'kpi'" in res.stdout
+    lines = (tmp_path / "m.csv").read_text().splitlines()
+    head = lines[0].split(",")
+    joints = np.array([[float(v) for v in ln.split(",")[:6]] for ln in lines[1:]])
+    assert head[:6] == list(load_robot("kr15").joint_names) and np.allclose(joints, Q, atol=1e-9)
+    res = run("simulate", "--design", str(design), "--criterion", "random", "--out", str(tmp_path / "r.csv"))
+    assert res.returncode == 0 and len((tmp_path / "r.csv").read_text().splitlines()) == 1 + 10

@@ -6,7 +6,8 @@ User-facing names (imported on first use): :class:`DiagnoseOptions`, :class:`Dia
 """
 from pin_kpi_oed._lazy import lazy_exports
 
-_EXPORTS = {**dict.fromkeys(("DiagnoseOptions", "DiagnosisReport", "EffectResult"), "pin_kpi_oed.diagnosis.diagnose"),
+_EXPORTS = {"DiagnoseOptions": "pin_kpi_oed.diagnosis.diagnose_options",
+            "DiagnosisReport": "pin_kpi_oed.diagnosis.report", "EffectResult": "pin_kpi_oed.diagnosis.report",
             "select_terms": "pin_kpi_oed.diagnosis.selection"}
 __getattr__, __dir__ = lazy_exports(globals(), _EXPORTS)
 __all__ = list(_EXPORTS)

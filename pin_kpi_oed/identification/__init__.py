@@ -10,8 +10,9 @@ writes one, ``.predict(Q)`` predicts); :func:`register_setup`, :func:`predict_ta
 """
 from pin_kpi_oed._lazy import lazy_exports
 
-_EXPORTS = {**dict.fromkeys(("IdentifyOptions", "IdentificationResult", "validate", "error_stats"),
-                            "pin_kpi_oed.identification.identify"),
+_EXPORTS = {"IdentifyOptions": "pin_kpi_oed.identification.identify_options",
+            "IdentificationResult": "pin_kpi_oed.identification.identify_result",
+            "validate": "pin_kpi_oed.identification.heldout", "error_stats": "pin_kpi_oed.identification.heldout",
             "random_truth": "pin_kpi_oed.identification.simulate", "Tolerances": "pin_kpi_oed.model.tolerances",
             "CalibratedModel": "pin_kpi_oed.identification.model_file",
             "load_model_file": "pin_kpi_oed.identification.model_file",
