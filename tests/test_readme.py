@@ -97,3 +97,20 @@ def test_readme_own_robot_recipe_runs(tmp_path, monkeypatch, capsys) -> None:
     assert len(rows) == 1 + 3 and all(r.split(",")[head.index("status")] == "ok" for r in rows[1:])
     corr = np.array([float(r.split(",")[head.index("correction_m")]) for r in rows[1:]])
     assert np.all((corr > 1e-4) & (corr < 1e-2))  # the calibrated model moves the joints by a millimetre or so
+
+
+def _table(text: str) -> dict[str, list[str]]:
+    """criterion -> cells of the design table rows in ``text``."""
+    return {ln.split()[0]: ln.split() for ln in text.splitlines() if re.match(r"(random|param|kpi) +\d", ln)}
+
+
+def test_readme_demo_output_is_what_the_demo_prints(capsys) -> None:
+    """The README shows the demo's actual table: tr(C_s), TCP sigma and efficiency within 1 % of a fresh run."""
+    shown = _table(_block("## The demo", ""))
+    assert set(shown) == {"random", "param", "kpi"}
+    assert main(["demo"]) == 0
+    printed = _table(capsys.readouterr().out)
+    for crit, row in shown.items():
+        for col in (1, 2, -2):  # tr(C_s) mm^2, TCP sigma um, effic. %
+            assert float(printed[crit][col]) == pytest.approx(float(row[col]), rel=0.01), (crit, col)
+        assert printed[crit][-1] == row[-1] == "ok"
