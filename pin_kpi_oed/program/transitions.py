@@ -16,7 +16,7 @@ pose (wrist-first / arm-first splits of the move, the home pose, retracted varia
 poses, then a seeded pool of collision-free configurations; cheapest first), else through two
 (every leg densely checked); when neither works, :meth:`TransitionChecker.plan_route` plans a
 path with a seeded RRT-Connect in joint space (validity: the same pair distances and margin; every
-tree edge a dense move check), shortcut greedily, and every leg of the result densely re-checked by
+tree edge a dense move check), shortcut, and every leg of the result densely re-checked by
 :meth:`TransitionChecker.check`. Its random numbers are seeded per call: the same design gives the
 same program in one process or two.
 
@@ -70,6 +70,140 @@ def equivalents(q: np.ndarray, lower: np.ndarray, upper: np.ndarray, revolute: n
     return q[None, :] + 2 * math.pi * np.array(combos, float)
 
 
+class _LowerBound:
+    """A cheap lower bound of every pair distance of the checker, for many configurations at once.
+
+    Per pair of the :class:`FeasibilityChecker` (the same pairs, the same skip lists): capsule–capsule
+    and capsule–half-space distances in closed form (numpy; Coal computes the same closed forms), a
+    capsule against an environment solid bounded by its distance to the enclosing capsules the cell
+    fitted to that environment object (every vertex inside them): when it is clear of them by b > 0 it
+    is clear of the solid by at least b; when it touches them there is no bound (−inf: the sample is
+    checked exactly). Pairs of two fixed objects are constant (+inf: the exact end-pose checks see them).
+    The bound is verified against the exact distances on seeded random configurations when built;
+    a geometry it cannot bound, or any excess, disables it (every sample is then checked exactly).
+    """
+
+    def __init__(self, checker: FeasibilityChecker):
+        from pin_kpi_oed.cell.collision import segment_closest
+
+        self._closest = segment_closest
+        self.ok = False
+        chk, cell = checker, checker.cell
+        go = chk.gm.geometryObjects
+        base_T_W = cell.W_T_base.inverse()
+        self.model, self.data = chk.model, chk.model.createData()
+        self.n_pairs = chk.n_pairs
+        from pin_kpi_oed.model.kinematics import Chain
+
+        robot = dict(zip(chk.robot_ids, chk.robot_joint))
+        ids = [int(j) for j in cell.robot.joint_ids]
+        if any(j > 0 and j not in ids for j in robot.values()):
+            return  # a capsule on a joint outside the chain: no bound
+        self.chain = Chain(chk.model, ids)
+        jslot = {j: k + 1 for k, j in enumerate(ids)}  # chain frame index; 0: the base frame (fixed objects)
+        half = dict(zip(chk.half_ids, cell.half_spaces))
+        env_caps = {e.name: [(base_T_W.act(c.a), base_T_W.act(c.b), float(c.radius)) for c in e.capsules]
+                    for e in cell.environment}
+        segs: dict = {}  # key -> (chain frame index (0: fixed), A, B, radius)
+
+        def seg_of(i: int):
+            if i not in segs:
+                M, g = go[i].placement, go[i].geometry
+                h = float(g.halfLength)
+                segs[i] = (jslot.get(robot.get(i, 0), 0), M.act(np.array([0.0, 0.0, -h])),
+                           M.act(np.array([0.0, 0.0, h])), float(g.radius))
+            return i
+
+        rows: dict = {}  # (seg key, seg key) -> row index of the segment-pair table
+        self.pair_rows: list[list[int]] = [[] for _ in range(chk.n_pairs)]
+        self.soft = np.zeros(chk.n_pairs, bool)  # bounds through enclosing capsules (no bound when touching)
+        H: list[tuple[int, object, np.ndarray, float]] = []
+        try:
+            for p, (i, k) in enumerate(chk.pairs):
+                if robot.get(i, 0) == 0 and robot.get(k, 0) == 0:
+                    continue  # both fixed: constant
+                if robot.get(i, 0) == 0:
+                    i, k = k, i
+                si = seg_of(i)
+                if k in half:
+                    M = go[k].placement
+                    n = M.rotation @ np.asarray(half[k].normal, float)
+                    H.append((p, si, n, float(half[k].offset) + float(n @ M.translation)))
+                    continue
+                if k in robot or type(go[k].geometry).__name__ == "Capsule":
+                    others = [seg_of(k)]
+                else:
+                    owner = chk.labels[k][1]
+                    if not env_caps.get(owner):
+                        return  # a solid without enclosing capsules: no bound
+                    others = []
+                    for c, (a, b, r) in enumerate(env_caps[owner]):
+                        key = ("env", owner, c)
+                        segs.setdefault(key, (0, a, b, r))
+                        others.append(key)
+                    self.soft[p] = True
+                for sk in others:
+                    self.pair_rows[p].append(rows.setdefault((si, sk), len(rows)))
+        except AttributeError:  # a geometry that is not a capsule where one was expected
+            return
+        keys = list(rows)
+        order = list(segs)
+        index = {k: u for u, k in enumerate(order)}
+        self.U_joint = np.array([segs[k][0] for k in order], int)
+        self.U_A = np.array([segs[k][1] for k in order], float).reshape(-1, 3)
+        self.U_B = np.array([segs[k][2] for k in order], float).reshape(-1, 3)
+        self.U1 = np.array([index[a] for a, _ in keys], int)
+        self.U2 = np.array([index[b] for _, b in keys], int)
+        self.R = np.array([segs[a][3] + segs[b][3] for a, b in keys], float)
+        self.H_pair = np.array([h[0] for h in H], int)
+        self.H_seg = np.array([index[h[1]] for h in H], int)
+        self.H_n = np.array([h[2] for h in H], float).reshape(-1, 3)
+        self.H_off = np.array([h[3] + segs[h[1]][3] for h in H], float)
+        self.H = H
+        self.bounded = np.array([bool(r) for r in self.pair_rows], bool)
+        self.bounded[[h[0] for h in H]] = True
+        flat = [(p, r) for p, rs in enumerate(self.pair_rows) for r in rs]
+        self.flat_pair = np.array([p for p, _ in flat], int)
+        self.flat_row = np.array([r for _, r in flat], int)
+        self.starts = np.flatnonzero(np.r_[True, np.diff(self.flat_pair) != 0]) if flat else np.zeros(0, int)
+        self.first_pair = self.flat_pair[self.starts] if flat else np.zeros(0, int)
+        rng = np.random.default_rng(11)
+        Q = cell.q_lower + rng.random((48, cell.q_lower.size)) * (cell.q_upper - cell.q_lower)
+        exact = np.array([chk.pair_distances(q) for q in Q])
+        lb = self.pairs(Q)
+        fin = np.isfinite(lb)
+        constant = ~self.bounded
+        self.ok = bool(np.all(lb[fin] <= exact[fin] + 1e-9) and np.all(np.ptp(exact[:, constant], axis=0) < 1e-12))
+
+    def _frames(self, Q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        fr = self.chain.frames(Q)  # batched numpy forward kinematics; frame 0 is the base
+        return fr.R, fr.t
+
+    def pairs(self, Q: np.ndarray) -> np.ndarray:
+        """(m, n_pairs) lower bounds of the pair distances (m); +inf for constant pairs."""
+        Q = np.atleast_2d(np.asarray(Q, float))
+        Rs, ts = self._frames(Q)
+        Rj, tj = Rs[:, self.U_joint], ts[:, self.U_joint]
+        EA = np.einsum("msij,sj->msi", Rj, self.U_A) + tj  # every segment's end points, (m, S, 3)
+        EB = np.einsum("msij,sj->msi", Rj, self.U_B) + tj
+        out = np.full((len(Q), self.n_pairs), np.inf)
+        if self.flat_row.size:
+            _, _, w1, w2 = self._closest(EA[:, self.U1], EB[:, self.U1], EA[:, self.U2], EB[:, self.U2])
+            d = np.linalg.norm(w2 - w1, axis=2) - self.R
+            out[:, self.first_pair] = np.minimum.reduceat(d[:, self.flat_row], self.starts, axis=1)
+            soft = out[:, self.soft]
+            out[:, self.soft] = np.where(soft > 0, soft, -np.inf)  # touching the enclosing capsules: no bound
+        if self.H_pair.size:
+            da = np.einsum("mhi,hi->mh", EA[:, self.H_seg], self.H_n)
+            db = np.einsum("mhi,hi->mh", EB[:, self.H_seg], self.H_n)
+            out[:, self.H_pair] = np.minimum(out[:, self.H_pair], np.minimum(da, db) - self.H_off)
+        return out
+
+    def __call__(self, Q: np.ndarray) -> np.ndarray:
+        """(m,) lower bound of the smallest pair distance at each configuration (m)."""
+        return self.pairs(Q).min(axis=1) - 1e-9
+
+
 @dataclass
 class MoveCheck:
     """Dense check of one joint-space move.
@@ -96,13 +230,16 @@ class TransitionChecker:
         step_rad: largest revolute joint step between samples (rad); at most 1° is the contract of the program check.
         step_m: largest prismatic joint step between samples (m).
         checker: an existing :class:`FeasibilityChecker` of the cell (built if None).
+        use_bound: let a verified cheap lower bound of the pair distances (:class:`_LowerBound`) clear the
+            samples it proves clear; the others, the end poses and every sample that decides a result are
+            checked exactly (Coal). The decisions and the smallest clearances are those of the exact check.
 
     Raises:
         InputError: negative margin or non-positive steps.
     """
 
     def __init__(self, cell: Cell, margin_m: float = 0.0, step_rad: float = math.radians(1.0),
-                 step_m: float = 0.005, checker: FeasibilityChecker | None = None):
+                 step_m: float = 0.005, checker: FeasibilityChecker | None = None, use_bound: bool = True):
         if not (margin_m >= 0 and step_rad > 0 and step_m > 0):
             raise InputError(f"transition check: margin >= 0 and steps > 0 required, got margin {margin_m} m, "
                              f"steps {step_rad} rad / {step_m} m")
@@ -115,6 +252,9 @@ class TransitionChecker:
         self.n_evaluations = 0
         self._cache: dict[tuple[bytes, bytes, bool], MoveCheck] = {}
         self._clearances: dict[bytes, float] = {}
+        bound = _LowerBound(self.checker) if use_bound else None
+        #: the cheap lower bound deciding the samples it clears (None: every sample checked exactly)
+        self.bound = bound if bound is not None and bound.ok else None
 
     def samples(self, qa: np.ndarray, qb: np.ndarray) -> np.ndarray:
         """Configurations along the straight joint move qa → qb, end points included, steps ≤ the limits."""
@@ -163,7 +303,29 @@ class TransitionChecker:
         best, where, n = ends[k], float(k), 2
         if min(ends) < -1e-9:
             need = math.inf  # an end pose itself collides: the move cannot be clear
-        for i in sorted(range(1, len(S) - 1), key=lambda i: abs(i - len(S) / 2)):  # middle outwards
+        inner = list(range(1, len(S) - 1))
+        if self.bound is not None and stop_early and len(inner) > 8 and best >= need:
+            for i in (len(S) // 2, len(S) // 4, (3 * len(S)) // 4):  # a colliding move is usually caught here
+                c = self.clearance(S[i])
+                n += 1
+                if c < best:
+                    best, where = c, i / (len(S) - 1)
+                if best < need:
+                    break
+        if self.bound is not None and inner and not (stop_early and best < need):
+            # exact checks only where the bound cannot decide, lowest bound first: the result (clear or not,
+            # and without early stop the smallest clearance) is the exact check's
+            lb = self.bound(S[1:-1]) - self.cell.clearance_m
+            order = np.argsort(lb, kind="stable")
+            for o in order:
+                if (stop_early and (best < need or lb[o] >= need)) or (not stop_early and lb[o] >= best):
+                    break
+                c = self.clearance(S[o + 1])
+                n += 1
+                if c < best:
+                    best, where = c, (o + 1) / (len(S) - 1)
+            inner = []
+        for i in sorted(inner, key=lambda i: abs(i - len(S) / 2)):  # middle outwards
             if stop_early and best < need:
                 break
             c = self.clearance(S[i])
@@ -196,14 +358,37 @@ class TransitionChecker:
         """
         rng = np.random.default_rng(seed)
         lo, hi = self.cell.q_lower, self.cell.q_upper
-        out = []
-        for _ in range(max_tries or 50 * n):
-            q = lo + rng.random(lo.size) * (hi - lo)
-            if self.clearance(q) >= 2.0 * self.margin_m + 0.01:
-                out.append(q)
-                if len(out) >= n:
-                    break
-        return np.array(out).reshape(-1, lo.size)
+        out: list[np.ndarray] = []
+        tries = max_tries or 50 * n
+        thr = 2.0 * self.margin_m + 0.01
+        while tries > 0 and len(out) < n:  # the same draws, in the same order, as one at a time
+            X = lo + rng.random((min(64, tries), lo.size)) * (hi - lo)
+            tries -= len(X)
+            ok = self.at_least(X, thr, stop_after=n - len(out))
+            out += [x for x in X[ok]]
+        return np.array(out[:n]).reshape(-1, lo.size)
+
+    def at_least(self, X: np.ndarray, threshold: float, stop_after: int | None = None) -> np.ndarray:
+        """Which configurations keep ``clearance(q) >= threshold`` (the bound decides the clear ones).
+
+        Args:
+            X: configurations (k, n).
+            threshold: required clearance (m, on top of the cell's).
+            stop_after: stop once this many are found (the rest are False).
+
+        Returns:
+            (k,) bool.
+        """
+        X = np.atleast_2d(np.asarray(X, float))
+        lb = (self.bound(X) - self.cell.clearance_m) if self.bound is not None and len(X) else np.full(len(X), -np.inf)
+        out = np.zeros(len(X), bool)
+        found = 0
+        for i, x in enumerate(X):
+            out[i] = lb[i] >= threshold or self.clearance(x) >= threshold
+            found += out[i]
+            if stop_after is not None and found >= stop_after:
+                break
+        return out
 
     def structured_vias(self, qa: np.ndarray, qb: np.ndarray, home: np.ndarray | None = None) -> np.ndarray:
         """Via candidates a programmer would try first for the move qa → qb.
@@ -254,8 +439,7 @@ class TransitionChecker:
         lo, hi = self.cell.q_lower, self.cell.q_upper
         inside = np.all((vias >= lo) & (vias <= hi), axis=1)
         vias = vias[inside]
-        ok = np.array([self.clearance(v) >= self.margin_m for v in vias], bool)
-        vias = vias[ok]
+        vias = vias[self.at_least(vias, self.margin_m)]
         if len(vias) == 0:
             return None
         ca = np.array([cost(qa, v) for v in vias])
@@ -280,8 +464,9 @@ class TransitionChecker:
         joint bounds (steps of at most a fifth of the space's extent, as OMPL's default range), the other
         tree connects greedily; a new node is valid when its clearance keeps what :meth:`check` requires
         of the route (the margin, or the end poses' clearance if smaller), and every tree edge is a densely
-        checked move (:meth:`check`). The path found is shortcut greedily (each node joined to the farthest
-        later node it reaches by a clear move), then every leg is densely checked again.
+        checked move (:meth:`check`). The path found is shortcut (each node joined to the farthest later node
+        a clear move reaches, found by bisection, within half the budget again), then every leg is densely
+        checked again.
 
         The random numbers come from ``numpy.random.default_rng`` seeded with ``seed`` and the two end
         configurations: the same call gives the same route in one process or two, whatever was planned
@@ -356,8 +541,15 @@ class TransitionChecker:
             return None
         pts = [path[0]]
         i = 0
-        while i < len(path) - 1:  # greedy shortcut: the farthest later node reached by a clear move
-            j = next(j for j in range(len(path) - 1, i, -1) if j == i + 1 or self.check(path[i], path[j]).clear)
+        budget = self.n_evaluations + max(int(max_checks) // 2, 1)
+        while i < len(path) - 1:  # shortcut: from each node, the farthest later node reached (bisection)
+            j, lo_j, hi_j = i + 1, i + 1, len(path) - 1
+            while lo_j <= hi_j and self.n_evaluations < budget:
+                mid = (lo_j + hi_j + 1) // 2
+                if mid == i + 1 or self.check(path[i], path[mid]).clear:
+                    j, lo_j = max(j, mid), mid + 1
+                else:
+                    hi_j = mid - 1
             pts.append(path[j])
             i = j
         pts = np.array(pts)
