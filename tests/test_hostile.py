@@ -285,3 +285,22 @@ def test_new_checks_are_fast(inputs):
     check_points_against_joints(robot, Q, P, "a", "b")
     assess_registration("s", P, P, np.full(2000, 1e-5), np.full(3, 1e-5), 9)
     assert time.perf_counter() - t0 < 0.05 * 2  # two commands' worth on a loaded machine
+
+
+def test_move_check_bound_gives_the_exact_decisions(inputs):
+    """The lower bound only skips samples it proves clear: decisions and smallest clearances are the exact ones."""
+    from pin_kpi_oed.design.design_file import load_design
+    from pin_kpi_oed.program.transitions import TransitionChecker
+
+    df = load_design(inputs / "d.json")
+    Q = np.vstack([df.cell.q_work[0], df.designs[0].q_meas, df.cell.q_work[0]])
+    fast, exact = TransitionChecker(df.cell, 0.01), TransitionChecker(df.cell, 0.01, use_bound=False)
+    assert fast.bound is not None and fast.bound.ok
+    for a, b in zip(Q[:-1], Q[1:]):
+        assert fast.check(a, b).clear == exact.check(a, b).clear
+        assert fast.check(a, b, stop_early=False).min_clearance_m == pytest.approx(
+            exact.check(a, b, stop_early=False).min_clearance_m, abs=1e-12)
+    X = df.cell.robot.random_q(np.random.default_rng(1), 200)
+    lb = fast.bound.pairs(X)
+    E = np.array([fast.checker.pair_distances(q) for q in X])
+    assert np.all(lb[np.isfinite(lb)] <= E[np.isfinite(lb)] + 1e-9)
