@@ -75,7 +75,7 @@ def simulation(reps: int = 100, seed: int = 0, sizes: tuple[float, ...] = SIZES_
     from pin_kpi_oed.oed.extended import ExtendedModel, select_pool
     from pin_kpi_oed.oed.identifiability import analyse
     from pin_kpi_oed.oed.pool import select
-    from pin_kpi_oed.studies.validation import _fit_extended
+    from pin_kpi_oed.studies.design_trials import _fit_extended
 
     rb = load_robot("ur10")
     model = TrackerModel(rb, tracker_T_base=default_tracker_pose(rb), reflector_m=np.array([0.05, 0.02, 0.10]),

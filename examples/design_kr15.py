@@ -12,7 +12,7 @@ import argparse
 import os
 
 from pin_kpi_oed.cell.cell import load_cell
-from pin_kpi_oed.oed.certificate import certify
+from pin_kpi_oed.design.optimality import certify
 from pin_kpi_oed.design.optimize import DesignProblem, run_designs
 
 QUICK = os.environ.get("PIN_KPI_OED_QUICK") == "1"

@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from pin_kpi_oed import NoiseModel, TrackerModel, load_robot
-from pin_kpi_oed.identification.export import export_result_urdf
+from pin_kpi_oed.identification.urdf_export import export_result_urdf
 from pin_kpi_oed.identification.identify import format_validation, identify, validate
 from pin_kpi_oed.data.atomic import atomic_write_json
 from pin_kpi_oed.identification.simulate import Tolerances, default_tracker_pose, random_truth, simulate

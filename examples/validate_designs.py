@@ -32,7 +32,7 @@ from pin_kpi_oed.cell.cell import load_cell
 from pin_kpi_oed.design.optimize import run_designs
 from pin_kpi_oed.data.atomic import atomic_write_json
 from pin_kpi_oed.data.ipa import import_ipa
-from pin_kpi_oed.studies.validation import monte_carlo, real_data_validation
+from pin_kpi_oed.studies.design_trials import monte_carlo, real_data_validation
 
 SERIES_C = Path(__file__).resolve().parents[2] / "shared" / "data" / "ipa_ur10" / "Series_C"
 QUICK = os.environ.get("PIN_KPI_OED_QUICK") == "1"
@@ -110,7 +110,7 @@ def extended(data_dir: Path, splits: int, seed: int, figure: Path | None, cases:
         {case: ExtendedDesignValidation.to_dict()}.
     """
     from pin_kpi_oed.data.measurements import MeasurementSet
-    from pin_kpi_oed.studies.validation import extended_design_validation
+    from pin_kpi_oed.studies.design_trials import extended_design_validation
 
     def load(s: str) -> MeasurementSet:
         ms = import_ipa(data_dir / f"Series_{s}")

@@ -43,6 +43,7 @@ _PIPELINE = {
     "run_designs": "pin_kpi_oed.design.optimize", "DesignOptions": "pin_kpi_oed.design.optimize",
     "DesignProblem": "pin_kpi_oed.design.optimize", "DesignResult": "pin_kpi_oed.design.optimize",
     "load_design": "pin_kpi_oed.design.design_file", "DesignFile": "pin_kpi_oed.design.design_file",
+    "write_design": "pin_kpi_oed.design.design_file",
     "analyse": "pin_kpi_oed.oed.identifiability", "score_design": "pin_kpi_oed.oed.evaluate",
     # measurements
     "MeasurementSet": "pin_kpi_oed.data.measurements", "read_measurements": "pin_kpi_oed.data.measurements",
@@ -59,7 +60,7 @@ _PIPELINE = {
     "CalibratedModel": "pin_kpi_oed.identification.model_file",
     "load_model_file": "pin_kpi_oed.identification.model_file",
     "register_setup": "pin_kpi_oed.identification.transfer", "predict_table": "pin_kpi_oed.identification.transfer",
-    "write_model_urdf": "pin_kpi_oed.identification.export",
+    "write_model_urdf": "pin_kpi_oed.identification.urdf_export",
     # diagnosis
     "diagnose": "pin_kpi_oed.diagnosis.diagnose", "DiagnoseOptions": "pin_kpi_oed.diagnosis.diagnose_options",
     "DiagnosisReport": "pin_kpi_oed.diagnosis.report",

@@ -45,3 +45,18 @@ def test_import_stays_cheap() -> None:
             "'pin_kpi_oed.identification.identify', 'pin_kpi_oed.design.optimize') if m in sys.modules]; print(heavy)")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout.strip()
     assert out == "[]", f"import pin_kpi_oed loads {out}"
+
+
+def test_design_file_written_from_python_is_read_back(tmp_path) -> None:
+    """``write_design`` writes what ``load_design`` (and so ``view`` / ``export``) reads: same poses, same C_s."""
+    import numpy as np
+
+    cell = pin_kpi_oed.load_cell("kr15")
+    problem = pin_kpi_oed.DesignProblem(cell)
+    designs = pin_kpi_oed.run_designs(cell, ["random"], m=12, problem=problem)
+    path = pin_kpi_oed.write_design(tmp_path / "d.json", cell, problem, designs, 12, 0)
+    df = pin_kpi_oed.load_design(path)
+    entry = df.design("random")
+    np.testing.assert_allclose(entry.q_meas, designs[0].q_meas, atol=1e-12)
+    assert entry.trace_cs_m2 == pytest.approx(designs[0].trace_cs_m2, rel=1e-9)
+    assert df.robot.name == cell.robot.name and not df.notes

@@ -1,4 +1,5 @@
-"""The package reads as its pipeline: nothing upstream imports from downstream (docs/ARCHITECTURE.md)."""
+"""The package reads as its pipeline (docs/ARCHITECTURE.md): nothing upstream imports from downstream, no import
+circle (lazy imports included), no module over 800 lines, no function over 80 lines."""
 
 from __future__ import annotations
 
@@ -6,8 +7,8 @@ import ast
 from pathlib import Path
 
 #: Upstream to downstream, as drawn in docs/ARCHITECTURE.md.
-ORDER = ["errors", "progress", "threads", "validation", "data", "results", "model", "effects", "oed", "cell", "design",
-         "program", "identification", "diagnosis", "studies", "viz", "cli"]
+ORDER = ["errors", "progress", "threads", "validation", "data", "results", "model", "effects", "discrepancy", "oed",
+         "cell", "design", "program", "identification", "diagnosis", "studies", "viz", "cli"]
 PKG = Path(__file__).resolve().parents[1] / "pin_kpi_oed"
 
 
@@ -42,3 +43,99 @@ def test_nothing_upstream_imports_downstream() -> None:
             if other in rank and rank[other] > rank[top]:
                 bad.append(f"{f.relative_to(PKG)}:{line} ({top}) imports {mod}")
     assert not bad, "upstream imports downstream:\n" + "\n".join(bad)
+
+
+#: Largest module (lines) and function (lines, decorators excluded, docstring included).
+MAX_MODULE_LINES = 800
+MAX_FUNCTION_LINES = 80
+
+
+def _module_name(f: Path) -> str:
+    parts = f.relative_to(PKG.parent).with_suffix("").parts
+    return ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
+
+
+def _import_graph() -> dict[str, set[str]]:
+    """Module -> the pin_kpi_oed modules it imports at run time (lazy imports included, ``if TYPE_CHECKING:``
+    not; ``from pkg import module`` resolved)."""
+    files = {_module_name(f): f for f in PKG.rglob("*.py")}
+    graph: dict[str, set[str]] = {m: set() for m in files}
+    for m, f in files.items():
+        tree = ast.parse(f.read_text())
+        typing_only = {id(n) for node in ast.walk(tree) if isinstance(node, ast.If)
+                       and "TYPE_CHECKING" in ast.unparse(node.test) for b in node.body for n in ast.walk(b)}
+        for node in ast.walk(tree):
+            if id(node) in typing_only:
+                continue
+            if isinstance(node, ast.ImportFrom) and node.module and node.module.startswith("pin_kpi_oed"):
+                targets = [node.module] + [f"{node.module}.{a.name}" for a in node.names]
+            elif isinstance(node, ast.Import):
+                targets = [a.name for a in node.names]
+            else:
+                continue
+            # a package's __init__ is not an edge: importing pkg.mod runs it, but it holds no cycle by itself
+            graph[m].update(t for t in targets if t in files and t != m and files[t].name != "__init__.py")
+    return graph
+
+
+def _cycles(graph: dict[str, set[str]]) -> list[list[str]]:
+    """Strongly connected components with more than one module (Tarjan), each sorted."""
+    index: dict[str, int] = {}
+    low: dict[str, int] = {}
+    stack: list[str] = []
+    on: set[str] = set()
+    out: list[list[str]] = []
+
+    def visit(v: str) -> None:
+        index[v] = low[v] = len(index)
+        stack.append(v)
+        on.add(v)
+        for w in graph.get(v, ()):
+            if w not in index:
+                visit(w)
+                low[v] = min(low[v], low[w])
+            elif w in on:
+                low[v] = min(low[v], index[w])
+        if low[v] == index[v]:
+            comp = []
+            while True:
+                w = stack.pop()
+                on.discard(w)
+                comp.append(w)
+                if w == v:
+                    break
+            if len(comp) > 1:
+                out.append(sorted(comp))
+
+    for v in sorted(graph):
+        if v not in index:
+            visit(v)
+    return out
+
+
+def test_cycle_finder_finds_a_circle_through_a_lazy_import() -> None:
+    assert _cycles({"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}}) == [["a", "b", "c"]]
+    assert _cycles({"a": {"b"}, "b": set()}) == []
+    tree = ast.parse("def f():\n    from pin_kpi_oed.cell.cell import Cell\n")
+    assert [m for _, m in _runtime_imports(tree)] == ["pin_kpi_oed.cell.cell"]
+
+
+def test_no_import_circle() -> None:
+    circles = _cycles(_import_graph())
+    assert not circles, "import circles (lazy imports included):\n" + "\n".join(" <-> ".join(c) for c in circles)
+
+
+def test_no_module_over_800_lines_and_no_function_over_80() -> None:
+    long_modules, long_functions = [], []
+    for f in sorted(PKG.rglob("*.py")):
+        text = f.read_text()
+        n = len(text.splitlines())
+        if n > MAX_MODULE_LINES:
+            long_modules.append(f"{f.relative_to(PKG)}: {n} lines")
+        for node in ast.walk(ast.parse(text)):
+            if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
+                length = node.end_lineno - node.lineno + 1
+                if length > MAX_FUNCTION_LINES:
+                    long_functions.append(f"{f.relative_to(PKG)}:{node.lineno} {node.name}: {length} lines")
+    assert not long_modules, f"modules over {MAX_MODULE_LINES} lines: " + "; ".join(long_modules)
+    assert not long_functions, f"functions over {MAX_FUNCTION_LINES} lines: " + "; ".join(long_functions)

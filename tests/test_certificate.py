@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from pin_kpi_oed.cell.cell import load_cell
-from pin_kpi_oed.oed.certificate import certify
+from pin_kpi_oed.design.optimality import certify
 from pin_kpi_oed.design.optimize import DesignProblem
 
 from .conftest import REPO

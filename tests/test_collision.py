@@ -11,8 +11,9 @@ import pytest
 import yaml
 
 from pin_kpi_oed.cell.cell import CELL_DIR, cell_from_dict, load_cell
-from pin_kpi_oed.cell.collision import (INCID, AggregatedConstraints, CollisionModel, point_segment_distance,
-                                        random_feasible, segment_closest)
+from pin_kpi_oed.cell.aggregate import AggregatedConstraints
+from pin_kpi_oed.cell.collision import INCID, CollisionModel, random_feasible
+from pin_kpi_oed.cell.segments import point_segment_distance, segment_closest
 from pin_kpi_oed.cell.feasibility import FeasibilityChecker, coal_capsule
 from pin_kpi_oed.errors import InfeasibleError, InputError, PinKpiOedError
 
@@ -337,11 +338,32 @@ def test_geometry_backend_band_and_aggregate(coll15):
 
 
 def test_beam_frames_map_z_onto_the_beam():
-    from pin_kpi_oed.cell.collision import _beam_frames
+    from pin_kpi_oed.cell.coal_distances import beam_frames
 
     a = np.array([1.0, 2.0, 0.5])
     B = np.array([[3.0, 2.0, 0.5], [1.0, 2.0, -3.0], [1.0, 2.0, 4.0], [0.2, -1.0, 2.0]])
-    R, c, h = _beam_frames(a, B)
+    R, c, h = beam_frames(a, B)
     for i in range(len(B)):
         assert np.allclose(R[i].T @ R[i], np.eye(3), atol=1e-12) and np.linalg.det(R[i]) == pytest.approx(1.0)
         assert np.allclose(c[i] + h[i] * R[i][:, 2], B[i]) and np.allclose(c[i] - h[i] * R[i][:, 2], a)
+
+
+def test_every_overlap_is_listed_at_once_with_the_skip_pairs_hint(coll15):
+    """A working configuration with several colliding pairs: one message names every pair and the skip_pairs entry."""
+    rng = np.random.default_rng(4)
+    Q = coll15.robot.random_q(rng, 2000)
+    g = coll15.evaluate(Q, with_grad=False)
+    robot_rows = np.array([i for i, n in enumerate(coll15.info.names) if n.startswith("robot:")])
+    n_bad = np.sum(g[:, robot_rows] < -0.01, axis=1)
+    i = int(np.flatnonzero(n_bad >= 2)[0])
+    bad = [coll15.info.names[r].removeprefix("robot:") for r in robot_rows[g[i, robot_rows] < -0.01]]
+    d = _cell_dict()
+    d["working_configurations_deg"] = [np.degrees(Q[i]).tolist()]
+    with pytest.raises(InputError) as err:
+        CollisionModel(cell_from_dict(d, "bad.yaml"))
+    msg = str(err.value)
+    assert "\n" not in msg and msg.count("working configuration 0 is in collision") >= len(bad) >= 2
+    hint = msg.split("skip_pairs: [", 1)[1]
+    for pair in bad:
+        a, b = pair.split("|")
+        assert f"({pair}," in msg.replace("robot:", "") and f"[{a}, {b}]" in hint

@@ -246,7 +246,7 @@ def test_real_ur10_compensated_predictions_match_held_out_rows():
 def test_calibrated_urdf_carries_tracker_reflector_and_tcp_frames(world, tmp_path):
     import yourdfpy
 
-    from pin_kpi_oed.identification.export import write_model_urdf
+    from pin_kpi_oed.identification.urdf_export import write_model_urdf
 
     robot, _, _, _, cm, _, _ = world
     out = tmp_path / "calibrated.urdf"

@@ -305,3 +305,42 @@ def test_cli_bad_given_and_pool_inputs_exit_2_and_write_nothing(sequential_files
         assert not out.exists()
     assert "row 3" in (lambda: (main(["design", "--cell", "kr15", "--given", str(bad), "--quiet"]),
                                 capsys.readouterr().err)[1])()
+
+
+def test_api_writes_the_design_file_view_and_export_read(problem, tmp_path):
+    """write_design (the writer ``design --json`` calls) makes a file load_design reads back: same poses, cell, C_s."""
+    from pin_kpi_oed.design.design_file import design_document, load_design, write_design
+
+    results = run_designs(problem.cell, ["random"], 12, 3, problem=problem)
+    path = write_design(tmp_path / "d.json", problem.cell, problem, results, 12, 3)
+    df = load_design(path)
+    entry = df.designs[0]
+    assert entry.criterion == "random" and np.allclose(entry.q_meas, results[0].q_meas, atol=0.0)
+    assert np.allclose(df.cell.q_work, problem.cell.q_work) and df.cell.robot.name == problem.cell.robot.name
+    doc = design_document(problem.cell, problem, results, 12, 3)
+    assert np.isclose(np.trace(np.asarray(doc["designs"][0]["cov_s_m2"])), results[0].trace_cs_m2, rtol=1e-9)
+    assert json.loads(path.read_text())["q_meas"] == doc["q_meas"]
+
+
+def test_cli_pool_drops_and_counts_infeasible_candidates(sequential_files, tmp_path, capsys):
+    """Candidates outside the cell's joint bounds or infeasible are dropped and counted in one line, by reason;
+    the design is made from the others (the file is not refused for one bad pose)."""
+    from pin_kpi_oed.cli.app import main
+
+    folder, _, pool = sequential_files
+    cell = load_cell("kr15")
+    out_of_bounds = pool[:3].copy()
+    out_of_bounds[:, 1] = cell.q_upper[1] + 0.5  # rad, beyond the cell's bound of joint 2 (not degrees)
+    _write_poses(tmp_path / "pool.csv", cell.robot.joint_names, np.vstack([pool, out_of_bounds]))
+    assert main(["design", "--cell", "kr15", "--pool", str(tmp_path / "pool.csv"), "--criteria", "random,kpi",
+                 "--measurements", "10", "--clearance-margin", "0", "--incidence-margin", "0", "--quiet",
+                 "--json", str(tmp_path / "d.json")]) == 0
+    line = next(ln for ln in capsys.readouterr().out.splitlines() if ln.startswith("--pool:"))
+    n = len(pool) + 3
+    assert f"{n} candidates in" in line and f"3 outside the cell's joint bounds (rows {n - 2}, {n - 1}, {n})" in line
+    feasible = int(line.split(": ")[2].split(" feasible")[0])
+    assert f"{n - feasible} dropped" in line and feasible <= 500 + 100
+    counted = sum(int(part.split(" ")[0]) for part in line.split("dropped (")[1].rstrip(")").split("; "))
+    assert counted == n - feasible  # every dropped candidate has its reason
+    q = np.array(json.loads((tmp_path / "d.json").read_text())["q_meas"])
+    assert np.all(q[:, 1] <= cell.q_upper[1] + 1e-9)

@@ -264,3 +264,33 @@ def test_joint_angle_table(ur10):
     full = np.zeros(t.n_params)
     full[[0, 3]] = [1e-4, 2e-4]
     assert np.allclose(d2, t.joint_offset(full, Q)[0]) and D2.shape[2] == 2
+
+
+def test_effect_is_an_abstract_base_owning_its_joint_angle_derivative(ur10):
+    """Effect cannot be built without param_names; the basis derivative ∂(∂dQ/∂θ)/∂q of the joint-angle effects
+    equals central differences; effects without one refuse by name (the continuous design needs it)."""
+    from pin_kpi_oed.effects.base import Effect, SubsetEffect
+    from pin_kpi_oed.effects.coupled import LinkBending
+    from pin_kpi_oed.effects.periodic import TransmissionError
+
+    class NoNames(Effect):
+        name = "no_names"
+
+    with pytest.raises(TypeError, match="abstract"):
+        NoNames(ur10)
+    rng = np.random.default_rng(7)
+    Q = ur10.random_q(rng, 5)
+    effects = [GearHarmonic(ur10), TransmissionError(ur10, max_order=3),
+               LinkBending(ur10, terms=[("elbow_joint", "q2+q3", "cos"), ("shoulder_lift_joint", 0, "sin")]),
+               SubsetEffect(GearHarmonic(ur10), [1, 4, 6])]
+    h = 1e-6
+    for eff in effects:
+        dD = eff.joint_offset_dq(Q)
+        th = np.zeros(eff.n_params)
+        for j in range(ur10.nq):
+            E = np.zeros_like(Q)
+            E[:, j] = h
+            fd = (eff.joint_offset(th, Q + E)[1] - eff.joint_offset(th, Q - E)[1]) / (2 * h)
+            assert np.allclose(dD[..., j], fd, atol=1e-7), (eff.name, j)
+    with pytest.raises(InputError, match="joint_compliance.*no exact q-derivative"):
+        JointCompliance(ur10).joint_offset_dq(Q)

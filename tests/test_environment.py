@@ -12,7 +12,7 @@ import yaml
 from pin_kpi_oed.cell.cell import CELL_DIR, cell_from_dict, load_cell
 from pin_kpi_oed.cell.feasibility import FeasibilityChecker
 from pin_kpi_oed.cell.meshes import fit_capsules
-from pin_kpi_oed.cell.targets import solve_tcp_target
+from pin_kpi_oed.cell.working_targets import solve_tcp_target
 from pin_kpi_oed.errors import InputError
 
 

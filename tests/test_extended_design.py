@@ -219,7 +219,7 @@ def test_bias_option_rescales_weights_only(ur10):
 
 
 def test_extended_design_validation_simulated(ur10):
-    from pin_kpi_oed.studies.validation import _near, extended_design_validation
+    from pin_kpi_oed.studies.design_trials import _near, extended_design_validation
 
     robot, model, base = ur10
     Qw = np.zeros((2, 6))
@@ -290,7 +290,8 @@ def test_ipopt_design_over_the_extended_model_kr15():
     # the design minimised the extended KPI: far below the heuristic design's
     assert crit.value(kpi.q_meas) < 0.5 * crit.value(rnd.q_meas)
     # design table and JSON report the extended-model tr(C_s) (with the prior), the geometric one labelled beside it
-    from pin_kpi_oed.cli.design import _design_doc, extended_scores, table
+    from pin_kpi_oed.cli.design import extended_scores, table
+    from pin_kpi_oed.design.design_file import design_document
 
     sc = extended_scores(problem, [rnd, kpi], cell.q_work)
     assert np.isclose(sc[1]["trace_cs_m2"], crit.value(kpi.q_meas), rtol=1e-9, atol=0.0)
@@ -301,8 +302,8 @@ def test_ipopt_design_over_the_extended_model_kr15():
     assert "ext tr(C_s) mm^2" in txt and "geo tr(C_s) mm^2" in txt
     assert f"{sc[1]['trace_cs_m2'] * 1e6:.4e}" in txt.splitlines()[-1]
     assert extended_scores(DesignProblem(cell), [kpi], cell.q_work) is None
-    doc = _design_doc(cell, problem, [rnd, kpi], 30, 0, True, (0.0, 0.0), None, None, None, None, None, sc, "m.json",
-                      "tolerances")
+    doc = design_document(cell, problem, [rnd, kpi], 30, 0, True, extended_scores=sc, model_file="m.json",
+                          prior="tolerances")
     assert doc["designs"][1]["extended"]["trace_cs_m2"] == sc[1]["trace_cs_m2"]
     assert doc["designs"][1]["trace_cs_m2"] == kpi.trace_cs_m2
     assert doc["extended_model"]["prior"] == "tolerances" and doc["extended_model"]["n_effect"] == ext.k

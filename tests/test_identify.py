@@ -12,7 +12,7 @@ import pytest
 
 from pin_kpi_oed import NoiseModel, TrackerModel, load_robot
 from pin_kpi_oed.errors import IdentifiabilityError, InputError, PinKpiOedError, SolverError
-from pin_kpi_oed.identification.export import calibrated_urdf_text, check_urdf_fk, export_result_urdf, write_calibrated_urdf
+from pin_kpi_oed.identification.urdf_export import calibrated_urdf_text, check_urdf_fk, export_result_urdf, write_calibrated_urdf
 from pin_kpi_oed.oed.identifiability import analyse
 from pin_kpi_oed.identification.identify import (ResidualModel, _jl_inv, format_validation, identify, predict, register_points,
                                   validate)
@@ -364,7 +364,7 @@ def test_bad_nan(kr15_data, tmp_path):
 def test_bad_mm_instead_of_m(kr15_data, tmp_path):
     robot, tm, nominal, data = kr15_data
     mm = MeasurementSet(joint_names=data.joint_names, q=data.q, position_m=data.position_m * 1e3)
-    with pytest.raises(InputError, match="look like mm"):
+    with pytest.raises(InputError, match="looks like mm"):
         identify(nominal, mm)
     write_measurements(mm, tmp_path / "mm.csv")
     with pytest.raises(InputError, match="mm"):
@@ -484,3 +484,49 @@ def test_ur10_urdf_is_cb3_dh():
         M = robot.oMtool(q)
         assert np.abs(Rz @ M.translation - T[:3, 3]).max() < 1e-9
         assert np.abs(Rz @ M.rotation - T[:3, :3]).max() < 1e-9
+
+
+def test_one_unit_guard_for_reader_and_identify(kr15_data, tmp_path):
+    """Positions in cm (10x) spread beyond 3x the reach: the reader (with the reach) and identify refuse them
+    with the same guard (validation.units.check_position_spread_m); metres pass both."""
+    from pin_kpi_oed.validation.units import POSITION_SPREAD_FACTOR, check_position_spread_m
+
+    robot, tm, nominal, data = kr15_data
+    reach = robot.reach()
+    spread = check_position_spread_m(data.position_m, reach, "m")
+    assert 10 * spread > POSITION_SPREAD_FACTOR * (reach + np.linalg.norm(nominal.reflector_m))  # cm must be refused
+    cm = MeasurementSet(joint_names=data.joint_names, q=data.q, position_m=data.position_m * 10.0)
+    with pytest.raises(InputError, match=f"more than {POSITION_SPREAD_FACTOR:g} x reach.*looks like mm"):
+        identify(nominal, cm)
+    write_measurements(cm, tmp_path / "cm.csv")
+    with pytest.raises(InputError, match=f"more than {POSITION_SPREAD_FACTOR:g} x reach.*looks like mm"):
+        read_measurements(tmp_path / "cm.csv", joint_names=data.joint_names, reach_m=reach)
+    write_measurements(data, tmp_path / "m.csv")
+    assert len(read_measurements(tmp_path / "m.csv", joint_names=data.joint_names, reach_m=reach)) == len(data)
+
+
+def test_fit_quality_names_extrapolation_when_validation_lies_outside_training(kr15_data):
+    """A held-out error worse than the nominal robot's is 'extrapolation' when most validation rows lie outside the
+    training's joint angles (coverage_summary), and 'wrong robot or joint order/zero' when they are covered."""
+    from pin_kpi_oed.identification.coverage import coverage_summary
+    from pin_kpi_oed.identification.quality import assess_fit
+
+    robot, tm, nominal, data = kr15_data
+    j = robot.joint_names.index("joint_a1")
+    low = data.q[:, j] < np.median(data.q[:, j])
+    train, test = data.subset(np.flatnonzero(low)), data.subset(np.flatnonzero(~low))
+    outside = coverage_summary(robot, train, test)
+    inside = coverage_summary(robot, data, test)
+    assert outside["rows_covered"] < 0.5 and outside["per_joint"]["joint_a1"] < 0.5 and inside["rows_covered"] == 1.0
+
+    class R:  # a good training fit (reduced chi2 1)
+        names, covariance_scaled, loss, residuals_rad = ["p"] * 30, False, "linear", None
+        chi2_reduced, weighted_errors = 1.0, np.full(300, np.sqrt(3.0))
+        errors_m, outliers = np.full(300, 1e-5), np.array([], int)
+
+    worse = {"before": {"rms_m": 1e-3}, "after": {"rms_m": 2e-3}}
+    q_out = assess_fit(R(), {**worse, "coverage": outside})
+    assert q_out.verdict == "poor" and "extrapolation" in q_out.line() and "joint_a1" in q_out.line()
+    assert "wrong robot" not in q_out.line()
+    q_in = assess_fit(R(), {**worse, "coverage": inside})
+    assert "wrong robot or joint order/zero" in q_in.line() and "extrapolation" not in q_in.line()

@@ -12,6 +12,7 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 import pin_kpi_oed.data.atomic as patomic
+import pin_kpi_oed.data.measurement_writer as measurement_writer
 import pin_kpi_oed.data.measurements as pio
 from pin_kpi_oed.errors import InputError, PinKpiOedError
 from pin_kpi_oed.data.measurements import MeasurementSet, read_measurements, write_measurements
@@ -247,13 +248,13 @@ def test_positions_in_mm(tmp_path: Path) -> None:
 
 def test_positions_in_mm_reach_rule(tmp_path: Path) -> None:
     # A small robot close to the tracker: |p| stays below 50 m even in mm, but the
-    # points spread over more than 20 x reach.
+    # points spread over more than 3 x reach (validation.units.POSITION_SPREAD_FACTOR).
     rng = np.random.default_rng(3)
     pts = rng.normal(0.0, 0.2, (30, 3)) * 1000.0 / 20.0  # spread of ~10 "m"
     rows = [[0.01 * i, 0.0, 0.0] + list(p) for i, p in enumerate(pts)]
     f = _write_csv(tmp_path / "m.csv", JOINTS + ["x", "y", "z"], rows)
     assert len(read_measurements(f, joint_names=JOINTS)) == 30  # passes without reach
-    _raises(f, "20 x reach (0.3 m)", "looks like mm/degrees; convert to m/rad", joint_names=JOINTS, reach_m=0.3)
+    _raises(f, "3 x reach (0.3 m)", "looks like mm; convert to m/rad", joint_names=JOINTS, reach_m=0.3)
     _raises(f, "reach_m", joint_names=JOINTS, reach_m=-1.0)
 
 
@@ -344,7 +345,7 @@ def test_atomic_write_keeps_old_file_if_serialisation_fails_midway(tmp_path: Pat
     write_measurements(_full_set(10, seed=1), f)
     before = f.read_bytes()
     calls = {"n": 0}
-    real = pio._format_float
+    real = measurement_writer._format_float
 
     def flaky(v: float) -> str:
         calls["n"] += 1
@@ -352,7 +353,7 @@ def test_atomic_write_keeps_old_file_if_serialisation_fails_midway(tmp_path: Pat
             raise RuntimeError("boom in the middle")
         return real(v)
 
-    monkeypatch.setattr(pio, "_format_float", flaky)
+    monkeypatch.setattr(measurement_writer, "_format_float", flaky)
     with pytest.raises(RuntimeError, match="boom"):
         write_measurements(_full_set(10, seed=2), f)
     assert f.read_bytes() == before

@@ -370,7 +370,7 @@ def test_sequential_design_beats_random_and_answers_how_many_more(kr15, tmp_path
 
 # ---------------------------------------------------------------------------- cells from meshes
 from pin_kpi_oed.cell.meshes import _vertices, capsule_of, fit_capsule, geometry_model  # noqa: E402
-from pin_kpi_oed.cell.collision import point_segment_distance  # noqa: E402
+from pin_kpi_oed.cell.segments import point_segment_distance  # noqa: E402
 
 
 def test_fit_capsule_encloses_and_is_tight_on_a_cylinder():

@@ -66,7 +66,7 @@ def test_monte_carlo_predicts_with_the_model_prior():
     import numpy as np
 
     from pin_kpi_oed.oed import identifiability as idf
-    from pin_kpi_oed.studies.validation import monte_carlo
+    from pin_kpi_oed.studies.design_trials import monte_carlo
 
     from .conftest import make_model
 

@@ -276,7 +276,7 @@ def test_cli_identify_register_predict(ur10, two_stations, tmp_path, capsys):
     (tmp_path / "q.csv").write_text(",".join(ur10.joint_names) + "\n" + ",".join(repr(float(v)) for v in Q[0]) + "\n")
     assert _cli("predict", "--model", m2, "--data", tmp_path / "q.csv", "--out", tmp_path / "q_pred.csv") == 0
     head = (tmp_path / "q_pred.csv").read_text().splitlines()[0]
-    assert head.endswith("x_pred,y_pred,z_pred")
+    assert head.endswith("x_pred,y_pred,z_pred,sigma_x,sigma_y,sigma_z,extrapolation")
     # identify with a validation file from another session, re-registered on 12 seeded rows
     assert _cli("identify", "--robot", "ur10", "--data", tmp_path / "A.csv", "--validate", tmp_path / "held.csv",
                 "--register-rows", 12, "--seed", 3, "--reflector", "0.03,0.02,0.08", "--json", tmp_path / "t.json",

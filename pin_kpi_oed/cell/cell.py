@@ -50,7 +50,7 @@ Schema (SI units; angles may be given in degrees with a ``_deg`` key instead of
     incidence_max_deg: 30
     clearance_m: 0.0                 # required distance between any two capsules
     working_configurations_deg: [[a1, ..., a6]]
-    working_targets:                 # and/or TCP targets (cell frame), solved by IK (pin_kpi_oed.cell.targets)
+    working_targets:                 # and/or TCP targets (cell frame), solved by IK (pin_kpi_oed.cell.working_targets)
       - {xyz_m: [x, y, z], rpy_deg: [r, p, y], seed_deg: [a1, ..., a6]}   # rpy and seed optional
     measurements: 60
     max_random_tries: 200000         # rejection-sampling budget of the heuristic design
@@ -66,224 +66,25 @@ configuration, a robot mounted on its pedestal).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import pinocchio as pin
 
+from pin_kpi_oed.cell.cell_model import CapsuleSpec, Cell, HalfSpace
+from pin_kpi_oed.cell.fields import read_angles as _angles
+from pin_kpi_oed.cell.fields import read_pose as _pose
+from pin_kpi_oed.cell.fields import read_vec as _vec
+from pin_kpi_oed.cell.fields import where as _where
 from pin_kpi_oed.errors import InputError, RobotLoadError
 from pin_kpi_oed.model.noise import NoiseModel
 from pin_kpi_oed.model.robot import Robot, is_robot_name, load_robot
-from pin_kpi_oed.model.tracker import TrackerModel
 from pin_kpi_oed.validation.schema import validate_cell_dict
 
 #: Folder of the cells shipped with the package.
 CELL_DIR = Path(__file__).resolve().parent / "cells"
 SHIPPED_CELLS = ("kr15", "kr300", "kr500", "ur10")
-
-
-@dataclass
-class CapsuleSpec:
-    """A capsule: segment [a, b] and radius (m).
-
-    Attributes:
-        name: unique name (robot capsules: ``<link>`` or ``<link>_<k>``).
-        a: first end point (m) — link frame for robot capsules, cell frame for obstacles.
-        b: second end point (m).
-        radius: radius (m).
-        link: robot link name (None for obstacles).
-    """
-
-    name: str
-    a: np.ndarray
-    b: np.ndarray
-    radius: float
-    link: str | None = None
-
-    def to_dict(self) -> dict:
-        """Plain numbers (m)."""
-        d = {"name": self.name, "a_m": [float(x) for x in self.a], "b_m": [float(x) for x in self.b],
-             "radius_m": float(self.radius)}
-        if self.link is not None:
-            d["link"] = self.link
-        return d
-
-
-@dataclass
-class HalfSpace:
-    """The free side ``{x : normal·x ≥ offset}`` of a plane (cell frame).
-
-    Attributes:
-        name: unique name.
-        normal: unit normal pointing into the free side.
-        offset: offset (m).
-    """
-
-    name: str
-    normal: np.ndarray
-    offset: float
-
-    def to_dict(self) -> dict:
-        """Plain numbers (m)."""
-        return {"name": self.name, "normal": [float(x) for x in self.normal], "offset_m": float(self.offset)}
-
-
-@dataclass
-class Cell:
-    """A measurement cell (see the module docstring for the file format).
-
-    Attributes:
-        name: cell name.
-        source: file the cell was read from ("" if built in code).
-        robot: the loaded robot.
-        W_T_base: robot base pose in the cell frame.
-        W_T_tracker: tracker pose in the cell frame.
-        reflector_m: reflector in the tool frame (m).
-        tcp_m: KPI point in the tool frame (m).
-        noise: tracker noise model.
-        q_lower, q_upper: joint bounds of the design (rad).
-        robot_capsules: robot capsules (link frames).
-        obstacles: obstacle capsules (cell frame).
-        half_spaces: half-spaces (cell frame).
-        skip_pairs: user pairs of names never checked against each other.
-        beam_radius_m: radius of the laser-beam capsule (m).
-        beam_skip: names the beam is not checked against.
-        incidence_max_deg: largest incidence angle of the beam on the reflector (deg).
-        clearance_m: required clearance of every capsule pair (m).
-        q_work: working configurations (t, n) rad.
-        measurements: default number of measurement configurations.
-        max_random_tries: rejection-sampling budget of the heuristic design.
-    """
-
-    name: str
-    source: str
-    robot: Robot
-    W_T_base: pin.SE3
-    W_T_tracker: pin.SE3
-    reflector_m: np.ndarray
-    tcp_m: np.ndarray
-    noise: NoiseModel
-    q_lower: np.ndarray
-    q_upper: np.ndarray
-    robot_capsules: list[CapsuleSpec]
-    obstacles: list[CapsuleSpec] = field(default_factory=list)
-    half_spaces: list[HalfSpace] = field(default_factory=list)
-    skip_pairs: list[tuple[str, str]] = field(default_factory=list)
-    beam_radius_m: float = 0.005
-    beam_skip: list[str] = field(default_factory=list)
-    incidence_max_deg: float = 30.0
-    clearance_m: float = 0.0
-    q_work: np.ndarray = field(default_factory=lambda: np.zeros((0, 6)))
-    measurements: int = 60
-    max_random_tries: int = 200_000
-    environment: list = field(default_factory=list)
-
-    @property
-    def environment_capsule_names(self) -> set[str]:
-        """Names of the obstacle capsules fitted to environment files (the check uses the meshes instead)."""
-        return {c.name for e in self.environment for c in e.capsules}
-
-    # ------------------------------------------------------------------ derived
-    @property
-    def tracker_T_base(self) -> pin.SE3:
-        """Pose of the robot base in the tracker frame, (W_T_tracker)⁻¹ W_T_base."""
-        return self.W_T_tracker.inverse() * self.W_T_base
-
-    @property
-    def tracker_in_base(self) -> np.ndarray:
-        """Tracker origin (beam start) in the robot base frame (m)."""
-        return (self.W_T_base.inverse() * self.W_T_tracker).translation.copy()
-
-    def tracker_model(self) -> TrackerModel:
-        """The measurement model of the cell (nominal parameters; robot bounds replaced by the cell's)."""
-        return TrackerModel(self.robot, tracker_T_base=self.tracker_T_base, reflector_m=self.reflector_m.copy(),
-                            tcp_m=self.tcp_m.copy(), noise=self.noise)
-
-    def to_dict(self) -> dict:
-        """The cell in plain numbers (SI units, cell frame for obstacles)."""
-        return {
-            "name": self.name,
-            "source": self.source,
-            "robot": {"name": self.robot.name, "urdf_path": self.robot.urdf_path, "tool_frame": self.robot.tool_frame},
-            "W_T_base": self.W_T_base.homogeneous.tolist(),
-            "W_T_tracker": self.W_T_tracker.homogeneous.tolist(),
-            "tracker_T_base": self.tracker_T_base.homogeneous.tolist(),
-            "reflector_m": self.reflector_m.tolist(),
-            "tcp_m": self.tcp_m.tolist(),
-            "noise": self.noise.to_dict(),
-            "joint_names": list(self.robot.joint_names),
-            "q_lower_rad": self.q_lower.tolist(),
-            "q_upper_rad": self.q_upper.tolist(),
-            "robot_capsules": [c.to_dict() for c in self.robot_capsules],
-            "obstacles": {"capsules": [c.to_dict() for c in self.obstacles],
-                          "half_spaces": [h.to_dict() for h in self.half_spaces]},
-            "skip_pairs": [list(p) for p in self.skip_pairs],
-            "beam": {"radius_m": self.beam_radius_m, "skip": list(self.beam_skip)},
-            "incidence_max_deg": self.incidence_max_deg,
-            "clearance_m": self.clearance_m,
-            "q_work": self.q_work.tolist(),
-            "measurements": self.measurements,
-            "max_random_tries": self.max_random_tries,
-            "environment": [e.to_dict() for e in self.environment],
-        }
-
-    def summary(self) -> str:
-        """Short readable description."""
-        return (f"cell {self.name}: robot {self.robot.name} ({self.robot.tool_frame}), "
-                f"{len(self.robot_capsules)} robot capsules, {len(self.obstacles)} obstacle capsules, "
-                f"{len(self.half_spaces)} half-spaces, "
-                + (f"{len(self.environment)} environment file(s), " if self.environment else "")
-                + f"{self.q_work.shape[0]} working configuration(s), "
-                f"incidence <= {self.incidence_max_deg:g} deg")
-
-
-# ---------------------------------------------------------------------- parsing helpers
-def _where(src: str, key: str) -> str:
-    return f"{src}: {key}" if src else key
-
-
-def _vec(v: Any, n: int, what: str) -> np.ndarray:
-    try:
-        a = np.asarray(v, dtype=float).reshape(-1)
-    except (TypeError, ValueError):
-        raise InputError(f"{what}: expected {n} numbers, got {v!r}") from None
-    if a.size != n or not np.all(np.isfinite(a)):
-        raise InputError(f"{what}: expected {n} finite numbers, got {v!r}")
-    return a
-
-
-def _angles(d: dict, stem: str, n: int | None, what: str, required: bool = True) -> np.ndarray | None:
-    """Read ``<stem>_rad`` or ``<stem>_deg`` (converted to rad)."""
-    if f"{stem}_rad" in d and f"{stem}_deg" in d:
-        raise InputError(f"{what}: give either '{stem}_rad' or '{stem}_deg', not both")
-    for key, scale in ((f"{stem}_rad", 1.0), (f"{stem}_deg", math.pi / 180.0)):
-        if key in d:
-            try:
-                a = np.asarray(d[key], dtype=float)
-            except (TypeError, ValueError):
-                raise InputError(f"{what}.{key}: expected numbers, got {d[key]!r}") from None
-            if not np.all(np.isfinite(a)) or (n is not None and a.shape[-1:] != (n,)):
-                raise InputError(f"{what}.{key}: expected {n} finite numbers per entry, got {d[key]!r}")
-            return a * scale
-    if required:
-        raise InputError(f"{what}: missing '{stem}_rad' (or '{stem}_deg')")
-    return None
-
-
-def _pose(d: Any, what: str) -> pin.SE3:
-    if d is None:
-        return pin.SE3.Identity()
-    if not isinstance(d, dict):
-        raise InputError(f"{what}: expected a mapping with xyz_m and rpy_rad/rpy_deg, got {d!r}")
-    unknown = set(d) - {"xyz_m", "rpy_rad", "rpy_deg"}
-    if unknown:
-        raise InputError(f"{what}: unknown field(s) {', '.join(sorted(unknown))} (expected xyz_m, rpy_rad or rpy_deg)")
-    xyz = _vec(d.get("xyz_m", [0, 0, 0]), 3, f"{what}.xyz_m")
-    rpy = _angles(d, "rpy", 3, what, required=False)
-    rpy = np.zeros(3) if rpy is None else rpy
-    return pin.SE3(pin.rpy.rpyToMatrix(*rpy), xyz)
 
 
 def _capsule(d: Any, what: str, need_link: bool) -> CapsuleSpec:
@@ -574,7 +375,7 @@ def cell_from_dict(d: dict, source: str = "", base_dir: Path | None = None) -> C
                 skip_pairs=skips, beam_radius_m=beam_r, beam_skip=beam_skip, incidence_max_deg=inc,
                 clearance_m=clr, q_work=qw, measurements=m, max_random_tries=tries, environment=env)
     if d.get("working_targets"):
-        from pin_kpi_oed.cell.targets import solve_working_targets
+        from pin_kpi_oed.cell.working_targets import solve_working_targets
 
         cell.q_work = np.vstack([qw, solve_working_targets(cell, d["working_targets"], source)])
     return cell

@@ -29,8 +29,8 @@ and for a point x carried by joint k, ∂x/∂q_j = v_j + ω_j × x for j ≤ k 
 world twist of joint j, Pinocchio's WORLD Jacobian column). This holds in penetration too
 (d < 0 while the segments are apart); only intersecting segments (d_P = 0) have no gradient.
 The same distances from Coal are available with ``backend="geometry"``: the segments as
-capsules of a ``pin.GeometryModel`` (:class:`GeometryDistances`), one ``pin.computeDistances``
-per configuration in C++, witness points projected back onto the segments and the same
+capsules of a ``pin.GeometryModel`` (:class:`~pin_kpi_oed.cell.coal_distances.GeometryDistances`), one
+``pin.computeDistances`` per configuration in C++, witness points projected back onto the segments and the same
 witness-point gradient; the tests check it equals the closed form to 1e-9 (the closed form stays
 the optimiser's default and the test oracle: on 60 poses the Coal path costs 1.7× its CPU time with
 the KS band, 2.6× with every witness point read, dominated by reading results from Python).
@@ -55,65 +55,16 @@ from dataclasses import dataclass, field
 import numpy as np
 import pinocchio as pin
 
-from pin_kpi_oed.cell.cell import Cell
+from pin_kpi_oed.cell.cell_model import Cell
+from pin_kpi_oed.cell.coal_distances import GeometryDistances
 from pin_kpi_oed.cell.feasibility import coal_capsule
+from pin_kpi_oed.cell.segments import cross, point_segment_distance, segment_closest
 from pin_kpi_oed.errors import InfeasibleError, InputError
 from pin_kpi_oed.model.kinematics import Chain
 from pin_kpi_oed.model.tracker import TrackerModel
 
 # row kinds
 PAIR, HALF, INCID = 0, 1, 2
-
-
-# ---------------------------------------------------------------------------- geometry kernels
-def segment_closest(A1: np.ndarray, B1: np.ndarray, A2: np.ndarray, B2: np.ndarray, eps: float = 1e-14
-                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Closest points of segment pairs [A1, B1], [A2, B2], batched over leading axes.
-
-    Args:
-        A1, B1, A2, B2: end points, (..., 3) m.
-        eps: squared length below which a segment is a point (m²).
-
-    Returns:
-        (s, t, w1, w2): parameters in [0, 1], (...), and witness points w1 = A1 + s(B1 − A1),
-        w2 = A2 + t(B2 − A2), (..., 3).
-    """
-    d1, d2, r = B1 - A1, B2 - A2, A1 - A2
-    a = np.einsum("...i,...i->...", d1, d1)
-    e = np.einsum("...i,...i->...", d2, d2)
-    f = np.einsum("...i,...i->...", d2, r)
-    c = np.einsum("...i,...i->...", d1, r)
-    b = np.einsum("...i,...i->...", d1, d2)
-    pa, pe = a <= eps, e <= eps
-    a_s, e_s = np.where(pa, 1.0, a), np.where(pe, 1.0, e)
-    denom = a * e - b * b
-    gen = denom > 1e-12 * np.maximum(a * e, 1e-300)
-    s = np.where(gen, np.clip((b * f - c * e) / np.where(gen, denom, 1.0), 0.0, 1.0), 0.0)
-    t = (b * s + f) / e_s
-    lo, hi = t < 0.0, t > 1.0
-    s = np.where(lo, np.clip(-c / a_s, 0.0, 1.0), np.where(hi, np.clip((b - c) / a_s, 0.0, 1.0), s))
-    t = np.clip(t, 0.0, 1.0)
-    # degenerate segments (points)
-    s = np.where(pa, 0.0, np.where(pe, np.clip(-c / a_s, 0.0, 1.0), s))
-    t = np.where(pe, 0.0, np.where(pa, np.clip(f / e_s, 0.0, 1.0), t))
-    w1 = A1 + s[..., None] * d1
-    w2 = A2 + t[..., None] * d2
-    return s, t, w1, w2
-
-
-def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Cross product over the last axis (broadcast), faster than ``np.cross`` for small arrays."""
-    a0, a1, a2 = a[..., 0], a[..., 1], a[..., 2]
-    b0, b1, b2 = b[..., 0], b[..., 1], b[..., 2]
-    return np.stack([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0], axis=-1)
-
-
-def point_segment_distance(p: np.ndarray, A: np.ndarray, B: np.ndarray) -> np.ndarray:
-    """Distance of points p to segments [A, B] (broadcast, m)."""
-    d = B - A
-    L2 = np.einsum("...i,...i->...", d, d)
-    u = np.clip(np.einsum("...i,...i->...", p - A, d) / np.where(L2 > 0, L2, 1.0), 0.0, 1.0)
-    return np.linalg.norm(p - (A + u[..., None] * d), axis=-1)
 
 
 # ---------------------------------------------------------------------------- the optimiser's model
@@ -401,6 +352,7 @@ class CollisionModel:
             if T @ nv - off - cell.beam_radius_m < 0:
                 raise InputError(f"{cell.source or cell.name}: the tracker is outside the free side of "
                                  f"half-space '{hsp.name}'; move the tracker")
+        problems, pairs = [], []
         for a in range(nr):
             if self.seg_joint[a] != 0:
                 continue
@@ -410,16 +362,20 @@ class CollisionModel:
                 _, _, w1, w2 = segment_closest(self.A_loc[a], self.B_loc[a], self.A_loc[o], self.B_loc[o])
                 d = np.linalg.norm(w2 - w1) - self.radius[a] - self.radius[o]
                 if d < cell.clearance_m:
-                    raise InputError(f"{cell.source or cell.name}: fixed robot capsule '{self.seg_names[a]}' "
-                                     f"collides with obstacle '{self.seg_names[o]}' ({d * 1e3:.0f} mm); move the "
-                                     f"obstacle or add [{self.seg_names[a]}, {self.seg_names[o]}] to skip_pairs")
+                    problems.append(f"fixed robot capsule '{self.seg_names[a]}' collides with obstacle "
+                                    f"'{self.seg_names[o]}' ({d * 1e3:.0f} mm)")
+                    pairs.append((self.seg_names[a], self.seg_names[o]))
             for hsp, (nv, off) in zip(cell.half_spaces, self.halfspaces):
                 if self._skipped_half(a, hsp.name):
                     continue
                 d = min(self.A_loc[a] @ nv, self.B_loc[a] @ nv) - off - self.radius[a]
                 if d < cell.clearance_m:
-                    raise InputError(f"{cell.source or cell.name}: fixed robot capsule '{self.seg_names[a]}' "
-                                     f"crosses half-space '{hsp.name}' ({d * 1e3:.0f} mm); move the robot base")
+                    problems.append(f"fixed robot capsule '{self.seg_names[a]}' crosses half-space '{hsp.name}' "
+                                    f"({d * 1e3:.0f} mm; move the robot base)")
+                    pairs.append((self.seg_names[a], hsp.name))
+        if problems:
+            raise InputError(f"{cell.source or cell.name}: " + "; ".join(problems) + "; " + _skip_hint(pairs)
+                             + ", otherwise move the obstacle or the robot base")
 
     def _check_working(self) -> None:
         """Every working configuration must be collision-free and in the tracker's line of sight."""
@@ -432,6 +388,7 @@ class CollisionModel:
             self.pairs, self.half, self.with_incidence, self.info, self.jac_rows, self.jac_cols = saved
         names = self.rows_all["rows"].names
         kinds = self.rows_all["rows"].kind
+        problems, pairs = [], []
         for i in range(g.shape[0]):
             for r in np.flatnonzero(g[i] < 0):
                 if kinds[r] == INCID:
@@ -441,8 +398,13 @@ class CollisionModel:
                     else "is in collision"
                 if g[i, r] + cell.clearance_m >= 0:  # clear, but inside the required clearance (margins included)
                     what = f"is closer than the required clearance of {cell.clearance_m * 1e3:g} mm (margins included)"
-                raise InputError(f"{cell.source or cell.name}: working configuration {i} {what} ({nm}, "
-                                 f"{g[i, r] * 1e3:.1f} mm)")
+                elif kinds[r] == PAIR and not nm.startswith("beam"):
+                    pair = tuple(nm.removeprefix("robot:").split("|", 1))
+                    pairs += [pair] if pair not in pairs else []
+                problems.append(f"working configuration {i} {what} ({nm}, {g[i, r] * 1e3:.1f} mm)")
+        if problems:
+            raise InputError(f"{cell.source or cell.name}: " + "; ".join(problems)
+                             + (f"; {_skip_hint(pairs)}" if pairs else ""))
 
     # ------------------------------------------------------------------ evaluation
     @property
@@ -472,8 +434,8 @@ class CollisionModel:
         if not with_grad:
             return EA, EB, None, None
         mA, mB = self._masks()
-        JA = (V[:, None] + _cross(W[:, None], EA[:, :, None])) * mA[None, :, :, None]  # (m, S, n, 3)
-        JB = (V[:, None] + _cross(W[:, None], EB[:, :, None])) * mB[None, :, :, None]
+        JA = (V[:, None] + cross(W[:, None], EA[:, :, None])) * mA[None, :, :, None]  # (m, S, n, 3)
+        JB = (V[:, None] + cross(W[:, None], EB[:, :, None])) * mB[None, :, :, None]
         return EA, EB, np.swapaxes(JA, 2, 3), np.swapaxes(JB, 2, 3)
 
     def _endpoints(self, Q: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -504,7 +466,8 @@ class CollisionModel:
             with_grad: also return the gradients.
             backend: ``"numpy"`` (closed-form batched segment distances, the optimiser's default),
                 ``"geometry"`` (witness points from one ``pin.computeDistances`` call per configuration on
-                a ``pin.GeometryModel`` of the segments: :class:`GeometryDistances`) or ``"coal"``
+                a ``pin.GeometryModel`` of the segments:
+                :class:`~pin_kpi_oed.cell.coal_distances.GeometryDistances`) or ``"coal"``
                 (``coal.distance`` per pair and configuration from Python, for verification).
             band: ``geometry`` backend only: gradients of the pair rows only within ``band`` (m) of the
                 configuration's closest pair, zero for the others (their values are exact). With the
@@ -565,7 +528,7 @@ class CollisionModel:
         nv = nrm @ VT  # (m, P, n)
 
         def side(P: np.ndarray, u: np.ndarray, mask: np.ndarray) -> np.ndarray:
-            return u[..., None] * (nv + _cross(P, nrm) @ WT) * mask[None]
+            return u[..., None] * (nv + cross(P, nrm) @ WT) * mask[None]
 
         Gp = (side(A2, 1.0 - t, mA[i2]) + side(B2, t, mB[i2])
               - side(A1, 1.0 - s, mA[i1]) - side(B1, s, mB[i1]))
@@ -584,7 +547,7 @@ class CollisionModel:
         if not with_grad:
             return g, None
         mask = np.where(e[:, None] == 0, mA[a], mB[a])
-        return g, (Nh @ np.swapaxes(V, 1, 2) + _cross(P, Nh[None]) @ np.swapaxes(W, 1, 2)) * mask[None]
+        return g, (Nh @ np.swapaxes(V, 1, 2) + cross(P, Nh[None]) @ np.swapaxes(W, 1, 2)) * mask[None]
 
     def _incidence_row(self, Q: np.ndarray, with_grad: bool) -> tuple[np.ndarray, np.ndarray | None]:
         """Incidence row of :meth:`evaluate`: cos(angle) − cos(max angle), gradient or None."""
@@ -675,213 +638,11 @@ class CollisionModel:
         return dmin, inc
 
 
-def _beam_frames(a: np.ndarray, B: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Frames of capsules from a fixed point a to points B (m, 3): rotations taking z to B − a (m, 3, 3),
-    centres (m, 3) and half lengths (m,), m (Rodrigues' formula, batched; the same frames as
-    :func:`~pin_kpi_oed.cell.feasibility.coal_capsule` up to a rotation about the axis)."""
-    d = B - a
-    L = np.linalg.norm(d, axis=1)
-    u = d / np.where(L > 0, L, 1.0)[:, None]
-    c = u[:, 2]  # cos of the angle between z and u
-    k = np.stack([-u[:, 1], u[:, 0], np.zeros_like(c)], axis=1)  # z × u (sin θ · axis)
-    K = np.zeros((d.shape[0], 3, 3))
-    K[:, 0, 1], K[:, 0, 2], K[:, 1, 0] = -k[:, 2], k[:, 1], k[:, 2]
-    K[:, 1, 2], K[:, 2, 0], K[:, 2, 1] = -k[:, 0], -k[:, 1], k[:, 0]
-    f = np.where(c > -1 + 1e-12, 1.0 / (1.0 + np.where(c > -1 + 1e-12, c, 0.0)), 0.0)
-    R = np.eye(3) + K + (K @ K) * f[:, None, None]
-    R[c <= -1 + 1e-12] = np.diag([1.0, -1.0, -1.0])  # z to −z
-    return R, 0.5 * (a + B), 0.5 * L
-
-
-class GeometryDistances:
-    """The segments of a :class:`CollisionModel` as a Pinocchio ``GeometryModel`` (Coal capsules).
-
-    Robot capsules hang on their joints, obstacles on the universe, and the beam — a capsule from the
-    tracker to the reflector whose length changes with q — is re-shaped and re-placed per
-    configuration. One ``pin.computeDistances`` per configuration evaluates every pair of
-    ``coll.pairs`` in C++; the witness points (on the capsules' surfaces) are projected back onto the
-    segments, which gives the segment parameters (s, t) that the witness-point gradient of
-    :meth:`CollisionModel.evaluate` needs (∂d/∂q from the witness points and the joints' twists).
-
-    Args:
-        coll: the constraint model whose segments and pairs are built.
-    """
-
-    def __init__(self, coll: "CollisionModel"):
-        rm = coll.robot.model
-        self.model, self.data = rm, rm.createData()
-        self.gm = pin.GeometryModel()
-        jids = list(coll.robot.joint_ids)
-        for k in range(len(coll.seg_names)):
-            j = int(coll.seg_joint[k])
-            parent = jids[j - 1] if j > 0 else 0
-            shape, T = coal_capsule(coll.A_loc[k], coll.B_loc[k], coll.radius[k])
-            self.gm.addGeometryObject(pin.GeometryObject(coll.seg_names[k], parent, 0,
-                                                         pin.SE3(T.getRotation(), T.getTranslation()), shape))
-        self.beam, self.tracker = coll.beam, coll.tracker
-        self.pairs = coll.pairs
-        for a, b in self.pairs:
-            self.gm.addCollisionPair(pin.CollisionPair(int(a), int(b)))
-        self.gd = pin.GeometryData(self.gm)
-        # references into GeometryData's result vector (iterating the vector wraps anew each time: 30x slower)
-        self.results = list(self.gd.distanceResults)
-        self.uses_beam = bool(np.any(self.pairs == self.beam)) if len(self.pairs) else False
-        self.radius = coll.radius
-
-    def witness(self, Q: np.ndarray, EA: np.ndarray, EB: np.ndarray, band: float | None = None
-                ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """Segment distances, parameters and witness points of every pair at every configuration.
-
-        Args:
-            Q: configurations (m, n) rad.
-            EA, EB: the segments' end points at Q (m, S, 3), m (from :meth:`CollisionModel.endpoints`).
-            band: if given (m), witness points only for the pairs within ``band`` of their
-                configuration's closest pair (reading a witness point from Python costs ~10× a
-                distance); the others are marked ``far`` (their s, t, w are meaningless).
-
-        Returns:
-            dseg (m, P) segment distances (capsule distance + radii) m, (s, t) (m, P) in [0, 1], the
-            witness points on the segments w1, w2 (m, P, 3) m, and far (m, P) bool.
-        """
-        m, P = Q.shape[0], len(self.pairs)
-        near = np.zeros((m, P, 2, 3))
-        far = np.ones(m * P, bool)
-        dist = np.empty((m, P))
-        beam_obj = self.gm.geometryObjects[self.beam]
-        beam_shape = beam_obj.geometry
-        res = self.results
-        if self.uses_beam:
-            Rb, cb, hb = _beam_frames(self.tracker, EB[:, self.beam])
-        model, data, gm, gd = self.model, self.data, self.gm, self.gd
-        se3 = pin.SE3
-        rows, pts = [], []
-        for i in range(m):
-            if self.uses_beam:
-                beam_shape.halfLength = hb[i]
-                beam_obj.placement = se3(Rb[i], cb[i])
-            pin.forwardKinematics(model, data, Q[i])
-            pin.updateGeometryPlacements(model, data, gm, gd)
-            pin.computeDistances(gm, gd)
-            di = [r.min_distance for r in res]
-            dist[i] = di
-            if band is None:
-                sel = range(P)
-            else:
-                lim = min(di) + band
-                sel = [k for k in range(P) if di[k] <= lim]
-            for k in sel:
-                r = res[k]
-                rows.append(i * P + k)
-                pts.append((r.getNearestPoint1(), r.getNearestPoint2()))
-        if rows:
-            near.reshape(m * P, 2, 3)[rows] = pts
-            far[rows] = False
-        i1, i2 = self.pairs[:, 0], self.pairs[:, 1]
-
-        def project(p: np.ndarray, A: np.ndarray, B: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-            d = B - A
-            L2 = np.einsum("mpa,mpa->mp", d, d)
-            u = np.clip(np.einsum("mpa,mpa->mp", p - A, d) / np.where(L2 > 0, L2, 1.0), 0.0, 1.0)
-            return u, A + u[..., None] * d
-
-        s, w1 = project(near[:, :, 0], EA[:, i1], EB[:, i1])
-        t, w2 = project(near[:, :, 1], EA[:, i2], EB[:, i2])
-        return dist + self.radius[i1] + self.radius[i2], s, t, w1, w2, far.reshape(m, P)
-
-
-class AggregatedConstraints:
-    """Per-configuration aggregation of the distance rows of a :class:`CollisionModel`.
-
-    Each configuration keeps two rows: the Kreisselmeier–Steinhauser aggregate of all its
-    distance rows (capsule pairs, half-spaces, beam) and the incidence row::
-
-        c(q) = d_min − ℓ · log Σ_p exp(−(d_p − d_min)/ℓ),      ∂c/∂q = Σ_p w_p ∂d_p/∂q,
-        w_p = exp(−(d_p − d_min)/ℓ) / Σ_k exp(−(d_k − d_min)/ℓ)  (softmax weights).
-
-    c is smooth and its gradient is exact (the softmax-weighted exact distance gradients);
-    ``min_p d_p − ℓ ln N ≤ c ≤ min_p d_p``, so ``c ≥ 0`` implies every ``d_p ≥ 0``: the aggregate is
-    conservative (by less than ℓ when one pair is more than ~5ℓ closer than the others) and never
-    admits a collision. ``mode="min"`` uses min_p d_p itself (exact value, gradient of the closest
-    pair, not differentiable where two pairs tie). ``mode="none"`` keeps every row.
-
-    Args:
-        coll: the full constraint model.
-        mode: ``"ks"``, ``"min"`` or ``"none"``.
-        length_m: KS smoothing length ℓ (m).
-        backend: distances of the capsule pairs: ``"numpy"`` (closed form, default) or ``"geometry"``
-            (Coal through one ``pin.computeDistances`` per configuration, :class:`GeometryDistances`;
-            witness points read only within 40ℓ of the closest pair for ``ks`` — the softmax weight of
-            the others is below e⁻⁴⁰ — and for the closest pair only for ``min``).
-    """
-
-    def __init__(self, coll: CollisionModel, mode: str = "ks", length_m: float = 2e-3, backend: str = "numpy"):
-        if mode not in ("ks", "min", "none"):
-            raise InputError(f"unknown constraint aggregation '{mode}' (ks, min, none)")
-        if backend not in ("numpy", "geometry"):
-            raise InputError(f"unknown distance backend '{backend}' (numpy, geometry)")
-        self.coll, self.mode, self.length, self.backend = coll, mode, float(length_m), backend
-        self.n, self.robot, self.cell = coll.n, coll.robot, coll.cell
-        kind = coll.info.kind
-        self.dist = np.flatnonzero(kind != INCID)
-        self.inc = np.flatnonzero(kind == INCID)
-        if mode == "none":
-            self.n_rows, self.units = coll.n_rows, list(coll.info.units)
-            self.jac_rows, self.jac_cols = coll.jac_rows, coll.jac_cols
-            self.names = list(coll.info.names)
-            return
-        deps = [set(), set()]
-        for r in self.dist:
-            deps[0].update(int(j) for j in coll.info.deps[r])
-        for r in self.inc:
-            deps[1].update(int(j) for j in coll.info.deps[r])
-        rows, cols, units, names = [], [], [], []
-        k = 0
-        for part, idx, unit, name in ((0, self.dist, "m", f"{mode}(clearances)"), (1, self.inc, "cos", "incidence")):
-            if idx.size == 0:
-                continue
-            d = sorted(deps[part])
-            rows += [k] * len(d)
-            cols += d
-            units.append(unit)
-            names.append(name)
-            k += 1
-        self.n_rows, self.units, self.names = k, units, names
-        self.jac_rows, self.jac_cols = np.array(rows, int), np.array(cols, int)
-
-    def evaluate(self, Q: np.ndarray, with_grad: bool = True) -> np.ndarray | tuple[np.ndarray, np.ndarray]:
-        """Aggregated rows (m, n_rows) and, with ``with_grad``, their gradients (m, n_rows, n)."""
-        if self.backend == "numpy":
-            out = self.coll.evaluate(Q, with_grad=with_grad)
-        else:
-            band = {"ks": 40.0 * self.length, "min": 0.0, "none": None}[self.mode]
-            out = self.coll.evaluate(Q, with_grad=with_grad, backend="geometry", band=band)
-        if self.mode == "none":
-            return out
-        g, G = out if with_grad else (out, None)
-        m = g.shape[0]
-        vals, grads = [], []
-        if self.dist.size:
-            gd = g[:, self.dist]
-            k = np.argmin(gd, axis=1)
-            dmin = gd[np.arange(m), k]
-            if self.mode == "min":
-                vals.append(dmin)
-                if with_grad:
-                    grads.append(G[np.arange(m), self.dist[k]])
-            else:
-                e = np.exp(-(gd - dmin[:, None]) / self.length)
-                s = e.sum(axis=1)
-                vals.append(dmin - self.length * np.log(s))
-                if with_grad:
-                    grads.append(np.einsum("mr,mrn->mn", e / s[:, None], G[:, self.dist]))
-        if self.inc.size:
-            vals.append(g[:, self.inc[0]])
-            if with_grad:
-                grads.append(G[:, self.inc[0]])
-        ga = np.stack(vals, axis=1) if vals else np.zeros((m, 0))
-        if not with_grad:
-            return ga
-        return ga, (np.stack(grads, axis=1) if grads else np.zeros((m, 0, self.n)))
+def _skip_hint(pairs: list[tuple[str, str]]) -> str:
+    """The advice for capsules that overlap by construction: the cell file's ``skip_pairs`` entry to add."""
+    listed = ", ".join(f"[{a}, {b}]" for a, b in pairs)
+    return (f"if they overlap by construction (enclosing capsules of adjacent links, a robot on its pedestal or "
+            f"floor), list them under skip_pairs in the cell file: skip_pairs: [{listed}]")
 
 
 def random_feasible(coll: CollisionModel, m: int, rng: np.random.Generator, max_tries: int,

@@ -40,6 +40,7 @@ from typing import Any
 import numpy as np
 import pinocchio as pin
 
+from pin_kpi_oed.cell.cell_model import CapsuleSpec
 from pin_kpi_oed.errors import InputError
 
 #: default largest capsule radius fitted to environment geometry (m)
@@ -196,7 +197,6 @@ def load_environment_object(d: Any, index: int, base_dir: Path | None, source: s
     Raises:
         InputError: a missing/unreadable file or a bad field, naming the cell file and the key.
     """
-    from pin_kpi_oed.cell.cell import CapsuleSpec
     from pin_kpi_oed.cell.meshes import fit_capsules
 
     pre = f"{source}: " if source else ""

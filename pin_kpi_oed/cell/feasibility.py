@@ -23,7 +23,7 @@ from dataclasses import dataclass
 import numpy as np
 import pinocchio as pin
 
-from pin_kpi_oed.cell.cell import Cell
+from pin_kpi_oed.cell.cell_model import Cell
 
 
 def coal_capsule(a: np.ndarray, b: np.ndarray, radius: float):

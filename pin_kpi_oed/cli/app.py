@@ -16,6 +16,7 @@ from pathlib import Path
 
 from pin_kpi_oed.cli.util import parse_floats
 from pin_kpi_oed.errors import PinKpiOedError
+from pin_kpi_oed.model.robot import ROBOT_HELP
 
 TOPICS = ("design", "identify", "transfer", "diagnose", "view", "study", "compensate", "tracker_export", "program")
 
@@ -71,7 +72,7 @@ def build_parser() -> argparse.ArgumentParser:
                         help="BLAS / OpenMP threads inside the package (default 1, or PIN_KPI_OED_THREADS)")
     sub = parser.add_subparsers(dest="command", required=True)
     p = sub.add_parser("info", help="joints, limits, parameter count and identifiable rank of a robot")
-    p.add_argument("robot", help="URDF path or name (kr15, kr300, kr500, kr15_track, ur3, ur5, ur10, panda)")
+    p.add_argument("robot", help=ROBOT_HELP)
     p.add_argument("--tool", default=None, help="tool frame (default tool0)")
     p.add_argument("--reflector", default="0.05,0.0,0.05", help="reflector offset x,y,z in the tool frame (m)")
     p.add_argument("--seed", type=int, default=0, help="seed of the random excitation")

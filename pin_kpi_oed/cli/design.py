@@ -21,12 +21,10 @@ import math
 import numpy as np
 
 
-from pin_kpi_oed.data.atomic import atomic_write_json
+from pin_kpi_oed.design.design_file import write_design
 from pin_kpi_oed.design.margins import DEFAULT_CLEARANCE_MARGIN_M, DEFAULT_INCIDENCE_MARGIN_DEG, with_margins
 from pin_kpi_oed.errors import InputError
-from pin_kpi_oed.model.serialize import model_to_dict
 from pin_kpi_oed.oed.criteria import CRITERIA, check_names
-from pin_kpi_oed.oed.evaluate import score_design
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -170,29 +168,6 @@ def extended_scores(problem, results: list, q_work: np.ndarray) -> list[dict] | 
     return out
 
 
-def design_json(cell, problem, results: list, m: int, seed: int, collision: bool) -> dict:
-    """The JSON document of a design run (SI units; readable by ``pin-kpi-oed evaluate``)."""
-    main = next((r for r in results if r.criterion == "kpi"), results[-1])
-    return {
-        **model_to_dict(problem.model),  # robot, tracker_T_base, reflector_m, tcp_m, noise (as `evaluate` reads them)
-        "q_work": cell.q_work.tolist(),
-        "joint_names": list(cell.robot.joint_names),
-        "capsules": [c.to_dict() for c in cell.robot_capsules],
-        "obstacles": [o.to_dict() for o in cell.obstacles],
-        "half_spaces": [h.to_dict() for h in cell.half_spaces],
-        "cell": cell.to_dict(),
-        "measurements": m,
-        "seed": seed,
-        "collision_avoidance": collision,
-        "identifiable": [problem.ident.names[i] for i in problem.base],
-        "constraint_rows_per_configuration": problem.coll.info.count(),
-        "designs": [{**r.to_dict(), "cov_s_m2": score_design(problem.model, r.q_meas, cell.q_work, problem.ident).cov_s_m2.tolist()}
-                    for r in results],
-        "q_meas": main.q_meas.tolist(),
-        "q_meas_criterion": main.criterion,
-    }
-
-
 def _true_checks(cell, results: list) -> list:
     """Independent check of every design in the untightened cell; the results report its true values."""
     from pin_kpi_oed.cell.feasibility import FeasibilityChecker
@@ -212,7 +187,7 @@ def run(args: argparse.Namespace) -> int:
     """
     from pin_kpi_oed.cell.cell import load_cell
     from pin_kpi_oed.design.optimize import DesignOptions, ipopt_options, run_designs
-    from pin_kpi_oed.design.user_pool import check_candidates, design_from_pool, read_poses
+    from pin_kpi_oed.design.user_pool import check_candidates, design_from_pool, pool_line, read_pool
 
     criteria = parse_criteria(getattr(args, "criteria", "random,param,kpi"))
     cell = load_cell(getattr(args, "cell", "kr15"))
@@ -230,12 +205,12 @@ def run(args: argparse.Namespace) -> int:
                          start=getattr(args, "start", "pool") or "pool")
     cert, checked = None, None
     if pool_file:
-        Qc = read_poses(pool_file, cell.robot, "--pool")
-        ok, Fp, _ = check_candidates(problem, Qc)
+        Qc, outside = read_pool(pool_file, cell.robot, "--pool")
+        reasons: dict[str, int] = {}
+        ok, Fp, _ = check_candidates(problem, Qc, reasons=reasons)
+        print(pool_line(pool_file, len(Qc) + len(outside), outside, int(ok.sum()), reasons))
         checked = (Qc[ok], Fp)
         results, cert, n_ok = design_from_pool(problem, Qc, criteria, m, seed, checked=(ok, Fp))
-        if not quiet:
-            print(f"--pool: {n_ok} feasible candidates in {pool_file}")
     else:
         results = run_designs(cell, criteria, m, seed, opts, problem)
     true_checks = _true_checks(true_cell, results) if cell is not true_cell else None
@@ -245,9 +220,10 @@ def run(args: argparse.Namespace) -> int:
                    ext_scores)
     until = _poses_until(args, problem, cell, target, seed, checked) if target is not None else None
     if getattr(args, "json", None):
-        doc = _design_doc(true_cell, problem, results, m, seed, collision, margins, given_file, pool_file, until,
-                          true_checks, cert, ext_scores, getattr(args, "model", None), getattr(args, "prior", None))
-        atomic_write_json(args.json, doc)
+        write_design(args.json, true_cell, problem, results, m, seed, collision, margins=margins, given_file=given_file,
+                     pool_file=pool_file, until=until, true_checks=true_checks, certificate=cert,
+                     extended_scores=ext_scores, model_file=getattr(args, "model", None),
+                     prior=getattr(args, "prior", None))
         if not quiet:
             print(f"wrote {args.json}")
     return 0
@@ -296,7 +272,7 @@ def _certificate(args: argparse.Namespace, problem, results: list, m: int, seed:
     """The optimality certificate of ``--certificate``: the pool's one with ``--pool``; else over a random feasible
     pool plus the designs' poses, with the measured poses' information as a fixed part with ``--given``."""
     if getattr(args, "certificate", False) and not pool_file:
-        from pin_kpi_oed.oed.certificate import certify
+        from pin_kpi_oed.design.optimality import certify
 
         cert = certify(problem, m, pool_size=getattr(args, "pool_size", 5000) or 5000, seed=seed,
                        extra=[r.q_meas for r in results if r.feasible],
@@ -420,45 +396,3 @@ def _given_prior(path: str, problem) -> np.ndarray:
     if par.get("covariance") is None or not par.get("names"):
         raise InputError(f"--given-prior {path}: the model file holds no parameter covariance")
     return prior_information(problem, list(par["names"]), np.asarray(par["covariance"], float), f"--given-prior {path}")
-
-
-def _design_doc(true_cell, problem, results: list, m: int, seed: int, collision: bool, margins, given_file,
-                pool_file, until, true_checks, cert, ext_scores: list | None = None, model_file: str | None = None,
-                prior: str | None = None) -> dict:
-    """The JSON document of ``design`` with the margins, the given poses, the pool, the "how many more" answer,
-    the true clearances, the certificate and, with ``--model``, the extended-model scores of every design
-    (``designs[i]["extended"]``; ``trace_cs_m2`` stays the geometric one, SI units)."""
-    doc = design_json(true_cell, problem, results, m, seed, collision)
-    if ext_scores is not None:
-        ext = problem.extended
-        doc["extended_model"] = {"file": str(model_file), "prior": prior or "model", "n_geometric": ext.nb,
-                                 "n_effect": ext.k, "names": list(ext.names),
-                                 "note": "designs[i].extended: tr(C_s) of the extended model with the prior (the "
-                                         "criterion designed for); designs[i].trace_cs_m2: geometric, no prior"}
-        for d, e in zip(doc["designs"], ext_scores):
-            d["extended"] = e
-    doc["clearance_margin_m"], doc["incidence_margin_deg"] = margins
-    if given_file:  # tr(C_s) and C_s of every design include the measured poses (and the prior)
-        from pin_kpi_oed.oed.covariance import kpi_covariance
-
-        doc["given"] = {"file": str(given_file), "q": problem.Q_given.tolist(),
-                        "tcp_sigma_m": problem.sigma_tcp(),
-                        "prior_file": getattr(problem, "prior_file", None)}
-        for d, r in zip(doc["designs"], results):
-            F = problem.model.weighted_jacobian(problem.p0, r.q_meas)[:, :, problem.base].reshape(-1, problem.base.size)
-            d["cov_s_m2"] = kpi_covariance(np.vstack([problem.F_given, F]), problem.E, problem._kpi.prior).tolist()
-    if pool_file:
-        doc["pool_file"] = str(pool_file)
-    if until is not None:
-        doc["poses_until"] = {**until.result_dict(), "target_sigma_m": until.target_sigma_m,
-                              "n_more": until.n_more, "sigma_now_m": until.sigma_now_m,
-                              "sigma_verified_m": until.sigma_verified_m, "q_added": until.Q_added.tolist()}
-    if true_checks is not None:
-        for d, rep in zip(doc["designs"], true_checks):
-            d["pose_clearance_m"], d["pose_incidence_deg"] = rep.clearance_m.tolist(), rep.incidence_deg.tolist()
-    if cert is not None:
-        doc["lower_bound_trace_cs_m2"] = cert.lower_bound_trace_cs_m2
-        doc["certificate"] = cert.to_dict()
-        for d, r in zip(doc["designs"], results):
-            d["efficiency"] = cert.efficiency(r.trace_cs_m2)
-    return doc

@@ -26,6 +26,7 @@ from pin_kpi_oed.cli.identify import add_register_args
 from pin_kpi_oed.cli.util import add_table_options, table_options
 from pin_kpi_oed.cli.util import parse_floats as _floats
 from pin_kpi_oed.errors import InputError
+from pin_kpi_oed.model.robot import ROBOT_HELP
 
 __all__ = ["register", "run"]
 
@@ -41,7 +42,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                     "backlash, thermal_expansion, joint_scale) alone and by forward selection, and report how far "
                     "each shrinks the held-out error. A tracker range-scale error cannot be seen in such data "
                     "(it equals a uniform scaling of the robot); the report says so.")
-    d.add_argument("--robot", required=True, help="URDF path or name (kr15, kr300, kr500, ur3, ur5, ur10, panda)")
+    d.add_argument("--robot", required=True, help=ROBOT_HELP)
     d.add_argument("--tool", default=None, help="tool frame (default tool0)")
     d.add_argument("--train", required=True, action="append",
                    help="training measurement CSV (joint columns, x, y, z in m, ...); repeat for several files "

@@ -32,6 +32,7 @@ import pinocchio as pin
 from pin_kpi_oed.cli.util import add_table_options, table_options
 from pin_kpi_oed.cli.util import parse_floats as _floats
 from pin_kpi_oed.errors import InputError
+from pin_kpi_oed.model.robot import ROBOT_HELP
 
 __all__ = ["register", "run_simulate", "run_identify", "run_import_ipa"]
 
@@ -70,7 +71,7 @@ def _register_simulate(subparsers: argparse._SubParsersAction) -> None:
                               description="Simulate laser-tracker measurements (CSV, SI units) of a 'true' robot: "
                                           "random geometric errors from tolerances, tracker pose, reflector, noise.")
     s.add_argument("--robot", default=None,
-                   help="URDF path or name (kr15, kr300, kr500, ur3, ur5, ur10, panda); not with --design")
+                   help=f"{ROBOT_HELP}; not with --design")
     s.add_argument("--design", default=None,
                    help="design JSON (pin-kpi-oed design --json): measure its poses (--criterion) with its robot, "
                         "tracker pose and reflector as the nominal set-up, instead of random poses")
@@ -114,7 +115,7 @@ def _register_identify(subparsers: argparse._SubParsersAction) -> None:
                                           "(nominal robot + fitted tracker pose and reflector) and after calibration; "
                                           "with --register-rows/--register-data the set-up is first re-registered "
                                           "on some rows of another session and only the rest are scored.")
-    i.add_argument("--robot", required=True, help="URDF path or name (kr15, kr300, kr500, ur3, ur5, ur10, panda)")
+    i.add_argument("--robot", required=True, help=ROBOT_HELP)
     i.add_argument("--tool", default=None, help="tool frame (default tool0)")
     i.add_argument("--data", required=True, action="append",
                    help="measurement CSV (joint columns, x, y, z in m, ...); repeat for several files: each file is "
@@ -151,9 +152,20 @@ def _register_identify(subparsers: argparse._SubParsersAction) -> None:
     i.add_argument("--fix", default=None, help="parameters held at nominal, comma-separated names or globs "
                                                "(e.g. 'reflector.*' or 'tracker.*')")
     i.add_argument("--max-nfev", type=int, default=None, help="maximum number of residual evaluations")
+    add_discrepancy_arg(i)
     i.add_argument("--quiet", action="store_true", help="print only the validation lines")
     add_table_options(i)
     i.set_defaults(func=run_identify)
+
+
+def add_discrepancy_arg(p: argparse.ArgumentParser) -> None:
+    """``--discrepancy auto|on|none`` (identify, diagnose)."""
+    p.add_argument("--discrepancy", default="auto", choices=["auto", "on", "none"],
+                   help="model discrepancy: a Gaussian process over the joint angles fitted to the residuals of the "
+                        "parametric fit, so that every prediction carries an honest sigma. auto (default): fitted "
+                        "when there are enough rows and it lowers the 5-fold held-out error, else the residual level "
+                        "as an independent error per row; on: always the Gaussian process; none: the paper's "
+                        "noise-only model")
 
 
 def _register_import_ipa(subparsers: argparse._SubParsersAction) -> None:
@@ -317,7 +329,7 @@ def _validation(model: Any, train: Any, opts: Any, result: Any, test: Any, reg: 
     from pin_kpi_oed.identification.identify import format_validation, identify, validate
     from pin_kpi_oed.identification.transfer import validate_transfer
 
-    before = identify(model, train, opts, setup_only=True)
+    before = identify(model, train, opts, setup_only=True, discrepancy="none")
     if args.register_rows is None and reg is None:
         vb, va = validate(before, test), validate(result, test)
         head = []
@@ -332,6 +344,9 @@ def _validation(model: Any, train: Any, opts: Any, result: Any, test: Any, reg: 
         head = [f"transfer to {args.validate}: set-up (tracker pose, reflector) re-registered on {how} with the robot "
                 f"held; scored on the other {va['n']} rows (row numbers in the JSON: validation.registration.rows)"]
         out = {"registration": r, "scored_rows": va["scored_rows"]}
+    from pin_kpi_oed.identification.coverage import coverage_summary
+
+    out["coverage"] = coverage_summary(model.robot, train, test)
     out.update({"before": vb, "after": va, "before_means": "nominal robot + fitted tracker pose and reflector",
                 "after_means": "calibration (geometry" + (" + effects)" if result.effects else ")")})
     lines = head + [format_validation(vb, "before (nominal geometry + fitted tracker pose and reflector)"),
@@ -392,10 +407,22 @@ def _fit(args: argparse.Namespace, model: Any, train: Any, opts: Any, effects: l
     return result, opts
 
 
+def _discrepancy(args: argparse.Namespace, result: Any, train: Any) -> Any:
+    """The discrepancy of the final fit (``--discrepancy``), its decision printed on one line."""
+    from pin_kpi_oed.identification.discrepancy_fit import discrepancy_options, result_discrepancy
+
+    if args.discrepancy != "none" and not args.quiet:
+        print(f"fitting the model discrepancy ({args.discrepancy}) on {len(train)} rows ...", flush=True)
+    disc = result_discrepancy(result, train, discrepancy_options(args.discrepancy, args.seed))
+    if disc is not None and args.quiet:
+        print(disc.decision)
+    return disc
+
+
 def _checked_urdf(args: argparse.Namespace, robot: Any, result: Any) -> tuple[str, float]:
     """(calibrated URDF text, its max FK position error (m)); raises SolverError if it does not reproduce the fit."""
     from pin_kpi_oed.errors import SolverError
-    from pin_kpi_oed.identification.export import (calibrated_urdf_text, check_urdf_fk, model_frames,
+    from pin_kpi_oed.identification.urdf_export import (calibrated_urdf_text, check_urdf_fk, model_frames,
                                                    result_urdf_comment)
     from pathlib import Path
 
@@ -459,6 +486,7 @@ def run_identify(args: argparse.Namespace) -> int:
     if args.fix:
         model.layout.fix(args.fix)
     result, opts = _fit(args, model, train, opts, effects, reflector, estimated)
+    result.discrepancy = _discrepancy(args, result, train)
     out = {"result": result.to_dict(), "data": list(args.data), "validate": args.validate,
            "reflector_nominal_m": reflector.tolist(), "reflector_nominal_source": "estimated" if estimated else "given"}
     lines = []

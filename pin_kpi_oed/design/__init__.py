@@ -2,16 +2,19 @@
 
 User-facing names (imported on first use): :func:`run_designs` (heuristic + optimum designs of a cell),
 :class:`DesignOptions`, :class:`DesignProblem`, :class:`DesignResult`, :func:`design_random`,
-:func:`design_ipopt`; :func:`load_design`, :class:`DesignFile`, :class:`DesignEntry` (design files);
+:func:`design_ipopt`; :func:`load_design`, :class:`DesignFile`, :class:`DesignEntry`, :func:`write_design`,
+:func:`design_document` (design files: what ``view`` and ``export`` read);
 :func:`read_poses` (a user pool), :class:`SequentialProblem`, :func:`poses_until` (designing on top of
-measured poses).
+measured poses); :func:`certify` (the optimality certificate of a design problem).
 """
 from pin_kpi_oed._lazy import lazy_exports
 
 _EXPORTS = {**dict.fromkeys(("run_designs", "DesignOptions", "DesignProblem", "DesignResult", "design_random",
                              "design_ipopt"), "pin_kpi_oed.design.optimize"),
-            **dict.fromkeys(("load_design", "DesignFile", "DesignEntry"), "pin_kpi_oed.design.design_file"),
+            **dict.fromkeys(("load_design", "DesignFile", "DesignEntry", "write_design", "design_document"),
+                           "pin_kpi_oed.design.design_file"),
             "read_poses": "pin_kpi_oed.design.user_pool",
-            "SequentialProblem": "pin_kpi_oed.design.sequential", "poses_until": "pin_kpi_oed.design.sequential"}
+            "SequentialProblem": "pin_kpi_oed.design.sequential", "poses_until": "pin_kpi_oed.design.sequential",
+            "certify": "pin_kpi_oed.design.optimality"}
 __getattr__, __dir__ = lazy_exports(globals(), _EXPORTS)
 __all__ = list(_EXPORTS)

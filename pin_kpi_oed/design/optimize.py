@@ -53,7 +53,8 @@ from typing import Any
 import numpy as np
 
 from pin_kpi_oed.cell.cell import Cell
-from pin_kpi_oed.cell.collision import AggregatedConstraints, CollisionModel, random_feasible
+from pin_kpi_oed.cell.aggregate import AggregatedConstraints
+from pin_kpi_oed.cell.collision import CollisionModel, random_feasible
 from pin_kpi_oed.cell.feasibility import FeasibilityChecker, FeasibilityReport
 from pin_kpi_oed.errors import IdentifiabilityError, InputError, SolverError
 from pin_kpi_oed.oed.criteria import DesignCriterion, check_names, get_criterion
@@ -261,7 +262,7 @@ class DesignProblem:
             (smooth, conservative, exact gradient), ``"min"`` or ``"none"`` (every row; the naive formulation).
         ks_length_m: KS smoothing length (m).
         distances: capsule distances of the constraints: ``"geometry"`` (default: Coal through
-            a Pinocchio GeometryModel, :class:`~pin_kpi_oed.cell.collision.GeometryDistances`) or ``"numpy"``
+            a Pinocchio GeometryModel, :class:`~pin_kpi_oed.cell.coal_distances.GeometryDistances`) or ``"numpy"``
             (the closed-form segment distances, kept as the test oracle; equal to 1e-15 m).
 
     Raises:

@@ -73,8 +73,51 @@ def read_poses(path: str | Path, robot: Robot, what: str = "--pool") -> np.ndarr
     return np.clip(Q, robot.q_lower, robot.q_upper)
 
 
+def read_pool(path: str | Path, robot: Robot, what: str = "--pool") -> tuple[np.ndarray, np.ndarray]:
+    """Candidate configurations from a CSV (joint columns named as the robot's, rad): those outside the joint bounds
+    are dropped (and returned by row), not refused; values within 1e-9 rad (m) beyond a bound are put on it.
+
+    Args:
+        path: the pose file.
+        robot: the robot (its bounds are the cell's).
+        what: the option, for messages.
+
+    Returns:
+        (the candidates within the bounds (N, n) rad, 1-based data-row numbers of those outside).
+
+    Raises:
+        InputError: unreadable file, missing / wrong joint columns, values in degrees or not finite, or no
+            candidate within the bounds.
+    """
+    try:
+        ms = read_measurements(path, joint_names=list(robot.joint_names), require_position=False)
+    except InputError as exc:
+        raise InputError(f"{what}: {exc}") from None
+    Q = np.asarray(ms.q, float)
+    if not np.all(np.isfinite(Q)):
+        robot.check_q(Q, f"{what} {path}")  # names the first non-finite value
+    tol = 1e-9
+    inside = np.all((Q >= robot.q_lower - tol) & (Q <= robot.q_upper + tol), axis=1)
+    if not inside.any():
+        raise InputError(f"{what} {path}: none of its {len(Q)} candidates lies within the cell's joint bounds")
+    return np.clip(Q[inside], robot.q_lower, robot.q_upper), np.flatnonzero(~inside) + 1
+
+
+def pool_line(path: str | Path, n_read: int, outside_rows: np.ndarray, n_feasible: int, reasons: dict) -> str:
+    """One line: how many candidates the pool file held, how many are feasible, how many were dropped and why."""
+    dropped = n_read - n_feasible
+    why = []
+    if len(outside_rows):
+        rows = ", ".join(map(str, outside_rows[:5])) + (" ..." if len(outside_rows) > 5 else "")
+        why.append(f"{len(outside_rows)} outside the cell's joint bounds (rows {rows})")
+    why += [f"{n} {what}" for what, n in reasons.items() if n]
+    return (f"--pool: {n_read} candidates in {path}: {n_feasible} feasible" +
+            (f", {dropped} dropped ({'; '.join(why)})" if dropped else ""))
+
+
 def check_candidates(problem: DesignProblem, Q: np.ndarray, with_jacobians: bool = True,
-                     timings: dict | None = None) -> tuple[np.ndarray, np.ndarray | None, int]:
+                     timings: dict | None = None, reasons: dict | None = None
+                     ) -> tuple[np.ndarray, np.ndarray | None, int]:
     """The candidates the independent check accepts in the design cell, and their weighted Jacobians.
 
     Per chunk of :data:`CHUNK`: the batched rows decide the candidates clear of the check's
@@ -87,6 +130,8 @@ def check_candidates(problem: DesignProblem, Q: np.ndarray, with_jacobians: bool
         Q: candidates (N, n) rad.
         with_jacobians: also return the feasible candidates' weighted Jacobians.
         timings: if given, ``check_s`` and ``jacobians_s`` (s) are added to it.
+        reasons: if given, the rejected candidates are counted into it by reason: ``outside the joint bounds``,
+            ``beyond the incidence limit``, ``in collision or blocking the beam`` (clearance, margins included).
 
     Returns:
         (feasible mask (N,), Jacobians (n_feasible, nh, nb) or None, candidates decided by Coal).
@@ -109,6 +154,8 @@ def check_candidates(problem: DesignProblem, Q: np.ndarray, with_jacobians: bool
                 sure[near] = problem.checker.check(q[near], tol=CHECK_TOL_M).feasible
                 n_coal += int(near.sum())
             ok[a:a + CHUNK] = sure
+            if reasons is not None:
+                _count_reasons(reasons, ~sure, inb, inc)
             t1 = time.perf_counter()
             if with_jacobians and sure.any():
                 F.append(problem.model.weighted_jacobian(problem.p0, q[sure])[:, :, problem.base])
@@ -121,6 +168,14 @@ def check_candidates(problem: DesignProblem, Q: np.ndarray, with_jacobians: bool
     if with_jacobians:
         Fp = np.concatenate(F) if F else np.zeros((0, problem.model.nh, problem.base.size))
     return ok, Fp, n_coal
+
+
+def _count_reasons(reasons: dict, rejected: np.ndarray, inb: np.ndarray, inc: np.ndarray) -> None:
+    """Add the rejected candidates of a chunk to ``reasons`` (bounds, incidence row, else clearance / beam)."""
+    bad_inc = rejected & inb & (inc < -CHECK_TOL_COS)
+    for what, n in (("outside the joint bounds", rejected & ~inb), ("beyond the incidence limit", bad_inc),
+                    ("in collision or blocking the beam", rejected & inb & ~bad_inc)):
+        reasons[what] = reasons.get(what, 0) + int(n.sum())
 
 
 def feasible_mask(problem: DesignProblem, Q: np.ndarray) -> np.ndarray:

@@ -72,6 +72,7 @@ from pin_kpi_oed.effects.coupled import LinkBending
 from pin_kpi_oed.effects.library import Effect
 from pin_kpi_oed.effects.periodic import DEFAULT_MAX_ORDER, TransmissionError
 from pin_kpi_oed.errors import InputError
+from pin_kpi_oed.identification.coverage import coverage, covered_rows
 from pin_kpi_oed.identification.identify import IdentificationResult, identify, resolve_options
 from pin_kpi_oed.identification.problem import ResidualModel
 from pin_kpi_oed.progress import progress
@@ -614,42 +615,3 @@ def refit_with(fit: IdentificationResult, data: MeasurementSet, effects: Sequenc
         kw["station"] = fit.stations[0]
     kw.update(options)
     return identify(fit.model, data, effects=list(fit.effects) + list(effects), **kw)
-
-
-# --------------------------------------------------------------------------- coverage
-def coverage(source_q: np.ndarray, target_q: np.ndarray, tol_rad: float = 0.05) -> tuple[np.ndarray, float]:
-    """Share of target rows whose joint angle lies within ``tol_rad`` of a source angle, per joint (wrapped mod 2π).
-
-    Args:
-        source_q: training configurations (m_s, n) rad.
-        target_q: validation configurations (m_t, n) rad.
-        tol_rad: tolerance (rad).
-
-    Returns:
-        (fraction per joint (n,), fraction of target rows covered on every joint at once).
-    """
-    covered = covered_rows(source_q, target_q, tol_rad)
-    return covered.mean(axis=0), float(np.all(covered, axis=1).mean())
-
-
-def covered_rows(source_q: np.ndarray, target_q: np.ndarray, tol_rad: float = 0.05) -> np.ndarray:
-    """Which target angles lie within ``tol_rad`` of a source angle of the same joint (wrapped mod 2π).
-
-    Args:
-        source_q: training configurations (m_s, n) rad.
-        target_q: validation configurations (m_t, n) rad.
-        tol_rad: tolerance (rad).
-
-    Returns:
-        (m_t, n) bool: covered per row and joint.
-    """
-    S = np.mod(np.asarray(source_q, float) + np.pi, 2 * np.pi) - np.pi
-    T = np.mod(np.asarray(target_q, float) + np.pi, 2 * np.pi) - np.pi
-    covered = np.zeros(T.shape, bool)
-    for j in range(T.shape[1]):
-        s = np.sort(S[:, j])
-        s_ext = np.concatenate([s - 2 * np.pi, s, s + 2 * np.pi])
-        i = np.clip(np.searchsorted(s_ext, T[:, j]), 1, s_ext.size - 1)
-        d = np.minimum(np.abs(T[:, j] - s_ext[i - 1]), np.abs(T[:, j] - s_ext[i]))
-        covered[:, j] = d <= tol_rad
-    return covered

@@ -44,7 +44,8 @@ from typing import Any, Sequence
 import numpy as np
 import pinocchio as pin
 
-from pin_kpi_oed.effects.library import Effect, gravity_torque, joint_label
+from pin_kpi_oed.effects.base import Effect, joint_label
+from pin_kpi_oed.effects.gravity import gravity_torque
 from pin_kpi_oed.errors import InputError
 from pin_kpi_oed.model.robot import Robot
 
@@ -242,6 +243,18 @@ class LinkBending(Effect):
         for k, (j, a, f) in enumerate(self.terms):
             D[:, j, k] = B[:, 2 * a + (f == "sin")]
         return D @ th, D
+
+    def joint_offset_dq(self, Q: np.ndarray) -> np.ndarray:
+        """∂D/∂q of the basis cos/sin φ_a, φ_a = Σ_{l ≤ a} s_l q_l: (−sin φ_a / cos φ_a) s_l on q_l, (m, n, k, n)."""
+        Q = np.atleast_2d(np.asarray(Q, float))
+        m, n = Q.shape
+        out = np.zeros((m, n, self.n_params, n))
+        ph = self.angles(Q)
+        for c, (j, a, f) in enumerate(self.terms):
+            g = -np.sin(ph[:, a]) if f == "cos" else np.cos(ph[:, a])
+            for l_ in range(a + 1):
+                out[:, j, c, self.chain[l_]] = g * self.signs[l_]
+        return out
 
     def describe(self, theta: np.ndarray) -> list[str]:
         """One line per (joint, angle): ``"elbow: 450 µrad amplitude in the angle q2+q3 (phase 35°)"``.

@@ -29,7 +29,7 @@ from typing import Any, Sequence
 
 import numpy as np
 
-from pin_kpi_oed.effects.library import Effect, _check_aux_len
+from pin_kpi_oed.effects.base import Effect, check_aux_len
 from pin_kpi_oed.errors import InputError
 from pin_kpi_oed.model.robot import Robot
 
@@ -161,7 +161,7 @@ class Drift(Effect):
         note = self.check(aux)
         if note:
             raise InputError(note)
-        _check_aux_len(aux, m, self.name)
+        check_aux_len(aux, m, self.name)
         t = np.asarray(aux.time_s, float)
         s = self._rows(aux, m)
         tau = t - self.t_ref_s[s]

@@ -35,7 +35,7 @@ from __future__ import annotations
 
 from typing import Sequence
 
-from pin_kpi_oed.effects.library import GearHarmonic
+from pin_kpi_oed.effects.joint_angle import GearHarmonic
 from pin_kpi_oed.errors import InputError
 from pin_kpi_oed.model.robot import Robot
 

@@ -20,7 +20,7 @@ _EXPORTS = {"IdentifyOptions": "pin_kpi_oed.identification.identify_options",
             "predict_table": "pin_kpi_oed.identification.transfer",
             "CompensationOptions": "pin_kpi_oed.identification.compensate",
             "compensate_program": "pin_kpi_oed.identification.compensate",
-            "write_model_urdf": "pin_kpi_oed.identification.export",
-            "write_calibrated_urdf": "pin_kpi_oed.identification.export"}
+            "write_model_urdf": "pin_kpi_oed.identification.urdf_export",
+            "write_calibrated_urdf": "pin_kpi_oed.identification.urdf_export"}
 __getattr__, __dir__ = lazy_exports(globals(), _EXPORTS)
 __all__ = list(_EXPORTS)

@@ -8,7 +8,6 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 
@@ -17,6 +16,7 @@ from pin_kpi_oed.errors import InputError
 from pin_kpi_oed.identification.identify_options import IdentifyOptions
 from pin_kpi_oed.identification.problem import align_data
 from pin_kpi_oed.model.tracker import TrackerModel
+from pin_kpi_oed.validation.units import check_position_spread_m
 
 __all__ = ["MIN_STATION_ROWS", "FitInputs", "check_inputs", "default_station_label"]
 
@@ -43,15 +43,6 @@ def check_duplicates(Q: np.ndarray, data: MeasurementSet) -> None:
         rows = np.flatnonzero(inv.ravel() == g) + 1
         raise InputError(f"{data.source or 'measurement set'}: duplicate measurements (same joint values and same "
                          f"measured values): rows {', '.join(map(str, rows[:5]))}; remove the copies")
-
-
-def check_position_units(robot: Any, Y: np.ndarray, reflector: np.ndarray, src: str) -> None:
-    """Reject positions whose spread the robot cannot produce (mm instead of m)."""
-    reach = robot.reach() + float(np.linalg.norm(reflector))
-    spread = float(np.median(np.linalg.norm(Y - np.median(Y, axis=0), axis=1)))
-    if spread > 3.0 * reach:
-        raise InputError(f"{src}: the measured points lie a median {spread:.4g} from their median point, but the "
-                         f"robot reaches only {reach:.3g} m: positions look like mm; convert x, y, z to m")
 
 
 @dataclass
@@ -84,7 +75,8 @@ def check_inputs(model: TrackerModel, data: MeasurementSet, opts: IdentifyOption
         if rows.size < MIN_STATION_ROWS:
             raise InputError(f"{where} has {rows.size} rows: too few to determine its tracker pose (at least "
                              f"{MIN_STATION_ROWS}, better many more)")
-        check_position_units(model.robot, data.position_m[rows], model.reflector_m, where)
+        check_position_spread_m(data.position_m[rows], model.robot.reach() + float(np.linalg.norm(model.reflector_m)),
+                                where)
     return FitInputs(src, Q, bool(opts.use_orientation and data.rotvec_rad is not None),
                    np.asarray(data.sigma_m, float) if use_data_sigma else None,
                    "data" if use_data_sigma else "noise model", list(groups), list(groups.values()))

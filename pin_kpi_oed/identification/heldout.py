@@ -49,6 +49,7 @@ def validate(result: IdentificationResult | CalibratedModel, data: MeasurementSe
     want_rot = bool(cm.pose6d and data.rotvec_rad is not None)
     Y = cm.predict(Q, data, orientation=want_rot)
     out = error_stats(np.linalg.norm(data.position_m - Y[:, :3], axis=1))
+    out.update(calibration_stats(cm, Q, data))
     if want_rot:
         Rp = Rotation.from_rotvec(Y[:, 3:]).as_matrix()
         Rm = Rotation.from_rotvec(data.rotvec_rad).as_matrix()
@@ -58,10 +59,30 @@ def validate(result: IdentificationResult | CalibratedModel, data: MeasurementSe
     return out
 
 
+def calibration_stats(cm: CalibratedModel, Q: np.ndarray, data: MeasurementSet) -> dict:
+    """How honest the model's σ is on measured rows: standardised errors z = (measured − predicted)/σ per axis.
+
+    Returns:
+        ``z_rms`` (RMS of z over rows and axes; 1 when σ is right), ``inside_95`` (share of rows whose
+        Σ z² ≤ χ²₃(0.95) = 7.815: their 95 % ellipsoid holds the measurement), ``sigma_mean_m`` (mean
+        predicted 3-D σ = sqrt(Σ σ²), m), ``extrapolation_share`` (rows outside the training coverage).
+    """
+    Yp, sig, extra = cm.predict_with_sigma(Q, data)
+    z2 = ((data.position_m - Yp) / sig) ** 2
+    return {"z_rms": float(np.sqrt(z2.mean())), "inside_95": float(np.mean(z2.sum(axis=1) <= 7.8147)),
+            "sigma_mean_m": float(np.sqrt((sig ** 2).sum(axis=1)).mean()),
+            "extrapolation_share": float(np.mean(extra))}
+
+
 def format_validation(stats: dict, title: str = "held-out") -> str:
     """One line of validation statistics in mm (``stats`` from :func:`validate`)."""
     s = (f"{title}: n={stats['n']}, mean {stats['mean_m'] * 1e3:.4f} mm, RMS {stats['rms_m'] * 1e3:.4f} mm, "
          f"p95 {stats['p95_m'] * 1e3:.4f} mm, max {stats['max_m'] * 1e3:.4f} mm")
     if "rot_rms_rad" in stats:
         s += f", orientation RMS {stats['rot_rms_rad'] * 1e3:.4f} mrad"
+    if "z_rms" in stats:
+        s += (f"; predicted σ (3-D) mean {stats['sigma_mean_m'] * 1e3:.4f} mm, standardised error RMS "
+              f"{stats['z_rms']:.2f} (1 = honest), {stats['inside_95'] * 100:.0f} % inside the 95 % ellipsoid"
+              + (f", {stats['extrapolation_share'] * 100:.0f} % of rows outside the training coverage"
+                 if stats.get("extrapolation_share") else ""))
     return s

@@ -117,6 +117,7 @@ import numpy as np
 import pinocchio as pin
 
 from pin_kpi_oed.data.measurements import MeasurementSet
+from pin_kpi_oed.identification.discrepancy_fit import discrepancy_options, result_discrepancy
 from pin_kpi_oed.identification.fit_inputs import (MIN_STATION_ROWS, FitInputs, check_inputs,
                                                    default_station_label)
 from pin_kpi_oed.identification.heldout import error_stats, format_validation, validate
@@ -221,7 +222,7 @@ def identify(model: TrackerModel, data: MeasurementSet, options: IdentifyOptions
     first = setups[stations.labels[0]]
     sol = solution.sol
     converged = bool(sol.status > 0)
-    return IdentificationResult(
+    result = IdentificationResult(
         success=converged, status="converged" if converged else "max_nfev", message=str(sol.message),
         nit=solution.nit, nfev=solution.nfev, solver_status=int(sol.status),
         names=prob.names, values=x.copy(), std=std, covariance=C, correlation=corr,
@@ -236,3 +237,6 @@ def identify(model: TrackerModel, data: MeasurementSet, options: IdentifyOptions
         station_rows=list(prob.rows), P=P_hat, param_names=list(stations.layout.names), station_set=stations,
         reflector_per_station=bool(opts.reflector_per_station), source=data.source,
         held=[(e, np.asarray(t, float)) for e, t in opts.held_effects], time_s=time.perf_counter() - t_start)
+    result.discrepancy = result_discrepancy(result, data, discrepancy_options(opts.discrepancy, opts.seed), inp.Q)
+    result.time_s = time.perf_counter() - t_start
+    return result

@@ -56,6 +56,11 @@ class IdentifyOptions:
         theta0: start values of the effects' θ (one array per effect; default zeros).
         held_effects: ``[(effect, θ), ...]`` applied with their parameters held (not estimated),
             e.g. the transferable effects of an earlier calibration; kept in the result and its model.
+        discrepancy: model discrepancy δ(q) fitted to the residuals after the parametric fit
+            (:mod:`pin_kpi_oed.discrepancy`): ``none`` (the paper's noise-only model, the default of
+            this function), ``auto`` (the command line's default: a Gaussian process when the data are
+            enough and it lowers the K-fold held-out error, else a white discrepancy at the residual
+            level), ``on``, or :class:`~pin_kpi_oed.discrepancy.gp.DiscrepancyOptions`.
     """
 
     p0: np.ndarray | None = None
@@ -79,6 +84,7 @@ class IdentifyOptions:
     effect_prior_rad: float | None = None
     theta0: Sequence[np.ndarray] | None = None
     held_effects: Sequence[tuple[Any, np.ndarray]] = ()
+    discrepancy: Any = "none"
 
     def __post_init__(self) -> None:
         if self.effect_prior_rad is not None and not (np.isfinite(self.effect_prior_rad)

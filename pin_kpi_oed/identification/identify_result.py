@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 import pinocchio as pin
@@ -111,6 +112,7 @@ class IdentificationResult(Result):
     reflector_per_station: bool = False
     source: str = ""
     held: list = field(default_factory=list, repr=False)
+    discrepancy: Any = field(default=None, repr=False)
 
     @property
     def converged(self) -> bool:
@@ -185,7 +187,8 @@ class IdentificationResult(Result):
                         "units": [param_unit(n) for n in self.names], "covariance": self.covariance},
             fit=fit, default_station=self.stations[0] if len(self.stations) == 1 else None,
             history=[{"step": "identify", "data": self.source, "stations": list(self.stations),
-                      "n_measurements": self.n_measurements, "rms_m": self.rms_m}])
+                      "n_measurements": self.n_measurements, "rms_m": self.rms_m}],
+            discrepancy=self.discrepancy)
 
     def to_dict(self) -> dict:
         """Plain JSON-able dict (SI units)."""
@@ -225,6 +228,8 @@ class IdentificationResult(Result):
             "residuals_rad": self.residuals_rad,
             "errors_m": self.errors_m,
             "outliers": self.outliers,
+            "discrepancy": None if self.discrepancy is None else {
+                "kind": self.discrepancy.kind, "decision": self.discrepancy.decision, "cv": self.discrepancy.cv},
             "tcp_std_m": self.tcp_std_m,
             "identifiability": self.identifiability.to_dict() if self.identifiability is not None else None,
         }
@@ -260,6 +265,8 @@ class IdentificationResult(Result):
                 out.append(f"  reflector in {self.model.robot.tool_frame}"
                            f"{f' (station {lab})' if self.reflector_per_station and S > 1 else ''}: "
                            f"{np.round(su.reflector_m * 1e3, 4).tolist()} mm")
+        if self.discrepancy is not None:
+            out.append(f"  {self.discrepancy.decision}")
         if self.tcp_std_m.size:
             out.append(f"  predicted TCP std at {self.tcp_std_m.size} working configurations: mean "
                        f"{self.tcp_std_m.mean() * 1e6:.2f} µm, max {self.tcp_std_m.max() * 1e6:.2f} µm")

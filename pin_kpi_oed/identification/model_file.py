@@ -25,6 +25,9 @@ key                  content (SI units: m, rad)
 ``noise``            the noise model (:meth:`NoiseModel.to_dict`)
 ``tcp_m``, ``pose6d`` KPI point in the tool frame; whether the model predicts orientations
 ``fit``              fit statistics (measurements, RMS, reduced χ², iterations, ...)
+``discrepancy``      optional: the model discrepancy δ(q) of the robot (base frame; kernel,
+                     hyper-parameters, training or inducing configurations; see
+                     :mod:`pin_kpi_oed.discrepancy.gp`), kept by ``register``
 ``history``          what produced the file, step by step (identify, register)
 ==================== ======================================================================
 
@@ -33,6 +36,11 @@ robot's δ and effects (θ), the reflector in the tracker frame is
 ``y = T_s · oMtool(δ, q + ΣΔq(θ)) · r_s + ΣΔy(θ)``
 (:func:`pin_kpi_oed.effects.library.predict_with_effects`), the same model the fit used:
 a model file loaded back predicts what the fit predicted (to ~1e-15 m, tested).
+
+With a discrepancy, :meth:`CalibratedModel.predict` adds ``R_s · δ̄(q)`` (its posterior mean, rotated
+into the station's tracker frame) and :meth:`CalibratedModel.predict_with_sigma` gives the standard
+deviation of measured − predicted per axis: the discrepancy's posterior variance plus its white
+level (tracker noise and repeatability), and flags rows outside the training coverage.
 
 Effects are stored as their library class and constructor options. An effect class of the
 library (default and opt-in effects of :mod:`pin_kpi_oed.effects`, ``joint_angle_table``, a subset of one)
@@ -55,6 +63,7 @@ import pinocchio as pin
 
 from pin_kpi_oed.data.atomic import atomic_write_json, to_jsonable
 from pin_kpi_oed.data.measurements import MeasurementSet
+from pin_kpi_oed.discrepancy.gp import Discrepancy
 from pin_kpi_oed.effects.library import (ALL_EFFECT_NAMES, JointAngleTable, SubsetEffect, effect_class,
                                         predict_with_effects)
 from pin_kpi_oed.errors import InputError, PinKpiOedError
@@ -215,6 +224,7 @@ class CalibratedModel:
         fit: fit statistics (plain numbers).
         default_station: station used when none is named (None: the only one, if there is one).
         history: provenance, one dict per step (``identify``, ``register``).
+        discrepancy: the robot's model discrepancy δ(q) (base frame), or None (noise-only model).
     """
 
     robot: Robot
@@ -229,6 +239,7 @@ class CalibratedModel:
     fit: dict = field(default_factory=dict)
     default_station: str | None = None
     history: list = field(default_factory=list)
+    discrepancy: Discrepancy | None = None
 
     def __post_init__(self) -> None:
         self.joint_p = np.asarray(self.joint_p, float).reshape(-1)
@@ -303,6 +314,7 @@ class CalibratedModel:
             groups = [(self.station(station), np.arange(m))]
         pairs = list(zip(self.effects, self.thetas))
         out = np.full((m, 6 if orientation else 3), np.nan)
+        delta = self.discrepancy.predict(Q, return_var=False)[0] if self.discrepancy is not None else None
         for lab, rows in groups:
             model, p = self.station_model(lab)
             sub = aux if (aux is None or rows.size == m) else aux.subset(rows)
@@ -310,7 +322,46 @@ class CalibratedModel:
             if orientation and Y.shape[1] < 6:
                 raise InputError(f"station '{lab}' has no probe orientation: the model predicts positions only")
             out[rows] = Y[:, :out.shape[1]]
+            if delta is not None:
+                out[rows, :3] += delta[rows] @ self.setups[lab].tracker_T_base[:3, :3].T
         return out
+
+    def predict_with_sigma(self, Q: np.ndarray, aux: MeasurementSet | None = None, station: str | None = None
+                           ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Predicted reflector positions with the standard deviation of measured − predicted.
+
+        σ² per axis (tracker frame of the row's station) = diag(R_s V R_sᵀ), V = diag(var δ(q) + white),
+        the discrepancy's posterior variance and its white level (tracker noise, repeatability). Without a
+        discrepancy, the noise model's σ (the paper's noise-only model).
+
+        Args:
+            Q, aux, station: as :meth:`predict`.
+
+        Returns:
+            (Y (m, 3) m, sigma (m, 3) m, extrapolation (m,) bool: a joint angle outside the training coverage).
+
+        Raises:
+            InputError: as :meth:`predict`.
+        """
+        Q = self.robot.check_q(np.atleast_2d(np.asarray(Q, float)), "predict: Q")
+        Y = self.predict(Q, aux, station)
+        m = len(Q)
+        if self.discrepancy is None:
+            return Y, np.asarray(self.noise.sigma(Y[:, :3]), float).reshape(m, 3), np.zeros(m, bool)
+        _, var = self.discrepancy.predict(Q)
+        V = var + self.discrepancy.noise_var_m2
+        labels = self._row_stations(m, aux, station)
+        sig = np.empty((m, 3))
+        for lab in dict.fromkeys(labels):
+            rows = np.flatnonzero(labels == lab)
+            R = self.setups[lab].tracker_T_base[:3, :3]
+            sig[rows] = np.sqrt(np.einsum("ij,nj,ij->ni", R, V[rows], R))
+        return Y, sig, self.discrepancy.extrapolation(Q)
+
+    def _row_stations(self, m: int, aux: MeasurementSet | None, station: str | None) -> np.ndarray:
+        if station is None and aux is not None and aux.station is not None:
+            return np.array([self.station(lab) for lab in aux.station.tolist()], dtype=object)
+        return np.array([self.station(station)] * m, dtype=object)
 
     def with_setup(self, label: str, setup: Setup, default: bool = True, step: dict | None = None
                    ) -> "CalibratedModel":
@@ -350,6 +401,7 @@ class CalibratedModel:
             "noise": self.noise.to_dict(),
             "fit": self.fit,
             "history": self.history,
+            **({"discrepancy": self.discrepancy.to_dict()} if self.discrepancy is not None else {}),
         })
 
     def save(self, path: str | os.PathLike) -> None:
@@ -405,9 +457,12 @@ class CalibratedModel:
         tcp = np.asarray(d.get("tcp_m", [0.0, 0.0, 0.0]), float)
         if tcp.shape != (3,):
             raise InputError(f"{where}: field 'tcp_m' must be 3 numbers (m)")
+        disc = None
+        if d.get("discrepancy") is not None:
+            disc = Discrepancy.from_dict(d["discrepancy"], robot.joint_names, f"{where}: discrepancy")
         return cls(robot, joint_p, effects, thetas, setups, noise, tcp, bool(d.get("pose6d", False)),
                    dict(geo.get("parameters") or {}), dict(d.get("fit") or {}),
-                   None if default is None else str(default), list(d.get("history") or []))
+                   None if default is None else str(default), list(d.get("history") or []), disc)
 
 
 def _robot_spec(robot: Robot) -> str:

@@ -218,6 +218,26 @@ def _check_chi2(f: _Findings, chi2_red: float, dof: int, alpha: float, chi2_poor
     return (lo, hi)
 
 
+#: Below this share of validation rows inside the training's joint angles, a worse held-out error is extrapolation.
+EXTRAPOLATION_COVERAGE = 0.5
+
+
+def _explain_worse_heldout(f: _Findings, validation: dict) -> None:
+    """Causes of a held-out error worse than the nominal robot's: extrapolation when the validation rows lie
+    outside the training's joint angles (``validation["coverage"]``), else a wrong model or units."""
+    cov = validation.get("coverage") or {}
+    rows = cov.get("rows_covered")
+    if rows is not None and rows < EXTRAPOLATION_COVERAGE:
+        low = sorted(cov.get("per_joint", {}).items(), key=lambda kv: kv[1])[:2]
+        where = ", ".join(f"{n} {100 * c:.0f}%" for n, c in low)
+        f.causes.append(f"extrapolation: only {100 * rows:.0f}% of the validation rows lie within the training's "
+                        f"joint angles (least covered: {where})")
+        f.advice.append("measure training poses over the validation's joint ranges (pin-kpi-oed diagnose names "
+                        "the poses to add), or validate inside the training's ranges")
+        return
+    f.causes += ["wrong robot or joint order/zero", "units (m, rad)"]
+
+
 def _check_heldout(f: _Findings, validation: dict | None, train_rms: float,
                    large: int) -> tuple[float | None, float | None]:
     """Check 2: held-out error against the nominal robot's and the training error; (before, after) RMS (m)."""
@@ -228,7 +248,7 @@ def _check_heldout(f: _Findings, validation: dict | None, train_rms: float,
             f.reasons.append(f"held-out RMS {after * 1e3:.4g} mm after calibration is worse than the nominal "
                              f"robot's {before * 1e3:.4g} mm")
             if not large:
-                f.causes += ["wrong robot or joint order/zero", "units (m, rad)"]
+                _explain_worse_heldout(f, validation)
         elif np.isfinite(train_rms) and after > 3.0 * train_rms and after > 1e-6:
             f.worse("suspect")
             f.reasons.append(f"held-out RMS {after * 1e3:.4g} mm is more than 3x the training RMS "

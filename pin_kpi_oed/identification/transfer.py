@@ -318,8 +318,10 @@ def predict_table(model: CalibratedModel, data: MeasurementSet, station: str | N
         station: station label for every row (default: the data's column, else the model's default).
 
     Returns:
-        (column names, table (m, k)): ``x_pred, y_pred, z_pred`` and, when the data have positions,
-        ``x, y, z, error`` (m; error = |measured − predicted|).
+        (column names, table (m, k)): ``x_pred, y_pred, z_pred``, ``sigma_x, sigma_y, sigma_z`` (m: the
+        standard deviation of measured − predicted per axis, discrepancy posterior and white level included;
+        :meth:`CalibratedModel.predict_with_sigma`), ``extrapolation`` (1 where a joint angle lies outside the
+        training coverage) and, when the data have positions, ``x, y, z, error`` (m; error = |measured − predicted|).
 
     Raises:
         InputError: the data's joint names do not match the model's robot, an unknown station,
@@ -330,9 +332,9 @@ def predict_table(model: CalibratedModel, data: MeasurementSet, station: str | N
         raise InputError(f"{data.source or 'data'}: joint columns {', '.join(data.joint_names)} do not match the "
                          f"model's robot {model.robot.name} ({', '.join(names)})")
     Q = align_data(model.robot, data, need_position=False)
-    Y = model.predict(Q, data, station=station)
-    cols = ["x_pred", "y_pred", "z_pred"]
-    table = [Y]
+    Y, sig, extra = model.predict_with_sigma(Q, data, station=station)
+    cols = ["x_pred", "y_pred", "z_pred", "sigma_x", "sigma_y", "sigma_z", "extrapolation"]
+    table = [Y, sig, extra.astype(float)[:, None]]
     if data.has_position:
         cols += ["x", "y", "z", "error"]
         table += [data.position_m, np.linalg.norm(data.position_m - Y, axis=1)[:, None]]

@@ -455,8 +455,13 @@ def urdf_text(geom: KukaGeometry, track: LinearTrack | None = None) -> str:
     Returns:
         The URDF document as a string (UTF-8 compatible, ends with a newline).
     """
-    seg = _segments(geom)
-    masses = [geom.total_mass_kg * m / sum(_ARTE_KR16_MASSES) for m in _ARTE_KR16_MASSES]
+    out = _header_lines(geom, track) + _link_lines(geom, track) + _joint_lines(geom, track)
+    out.append("</robot>")
+    return "\n".join(out) + "\n"
+
+
+def _header_lines(geom: KukaGeometry, track: LinearTrack | None) -> list[str]:
+    """The URDF's opening lines: XML declaration, robot element, provenance comment, materials."""
     out: list[str] = []
     w = out.append
     w('<?xml version="1.0"?>')
@@ -476,7 +481,15 @@ def urdf_text(geom: KukaGeometry, track: LinearTrack | None = None) -> str:
     w("  -->")
     w('  <material name="kuka_orange"><color rgba="0.96 0.47 0.13 1"/></material>')
     w('  <material name="kuka_black"><color rgba="0.12 0.12 0.12 1"/></material>')
+    return out
 
+
+def _link_lines(geom: KukaGeometry, track: LinearTrack | None) -> list[str]:
+    """The links: the rail (with a track), ``base_link`` ... ``link_6`` (cylinder visual and collision), ``tool0``."""
+    seg = _segments(geom)
+    masses = [geom.total_mass_kg * m / sum(_ARTE_KR16_MASSES) for m in _ARTE_KR16_MASSES]
+    out: list[str] = []
+    w = out.append
     if track is not None:
         z = track.rail_radius_m
         ends = (np.array([0.0, track.lower_m - track.overhang_m, z]),
@@ -491,7 +504,13 @@ def urdf_text(geom: KukaGeometry, track: LinearTrack | None = None) -> str:
             mass = track.carriage_mass_kg if track is not None else None
         out += _link_text(link, p0, p1, geom.capsule_radii[link], material, mass)
     w('  <link name="tool0"/>')
+    return out
 
+
+def _joint_lines(geom: KukaGeometry, track: LinearTrack | None) -> list[str]:
+    """The joints: the track's prismatic joint (with a track), ``joint_a1`` ... ``joint_a6``, ``joint_a6-tool0``."""
+    out: list[str] = []
+    w = out.append
     if track is not None:
         w(f'  <joint name="{track.joint_name}" type="prismatic">')
         w(f'    <origin xyz="0 0 {_f(track.carriage_height_m)}" rpy="0 0 0"/>')
@@ -527,8 +546,7 @@ def urdf_text(geom: KukaGeometry, track: LinearTrack | None = None) -> str:
     w('    <parent link="link_6"/>')
     w('    <child link="tool0"/>')
     w("  </joint>")
-    w("</robot>")
-    return "\n".join(out) + "\n"
+    return out
 
 
 def notional_arm(lambda_m: float, mu_m: float) -> KukaGeometry:

@@ -3,7 +3,7 @@
 User-facing names (imported on first use): :func:`analyse`, :class:`Identifiability`;
 :func:`score_design`, :class:`DesignScore`; :func:`kpi_covariance`, :func:`param_covariance`;
 :data:`CRITERIA`, :func:`get_criterion`, :class:`Criterion`; :func:`select` (pool selection),
-:func:`certify` (optimality certificate); :class:`ExtendedModel` (designs over geometry + effects).
+:func:`certify_pool` (optimality certificate of a pool); :class:`ExtendedModel` (designs over geometry + effects).
 """
 from pin_kpi_oed._lazy import lazy_exports
 
@@ -12,6 +12,6 @@ _EXPORTS = {"analyse": "pin_kpi_oed.oed.identifiability", "Identifiability": "pi
             "kpi_covariance": "pin_kpi_oed.oed.covariance", "param_covariance": "pin_kpi_oed.oed.covariance",
             "CRITERIA": "pin_kpi_oed.oed.criteria", "get_criterion": "pin_kpi_oed.oed.criteria",
             "Criterion": "pin_kpi_oed.oed.criteria", "select": "pin_kpi_oed.oed.pool",
-            "certify": "pin_kpi_oed.oed.certificate", "ExtendedModel": "pin_kpi_oed.oed.extended"}
+            "certify_pool": "pin_kpi_oed.oed.certificate", "ExtendedModel": "pin_kpi_oed.oed.extended"}
 __getattr__, __dir__ = lazy_exports(globals(), _EXPORTS)
 __all__ = list(_EXPORTS)

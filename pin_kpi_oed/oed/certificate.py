@@ -1,4 +1,6 @@
-"""Optimality certificates of measurement designs on a cell.
+"""Optimality certificates of measurement designs on a candidate pool.
+
+The sampling of the pool on a cell: :mod:`pin_kpi_oed.design.optimality`.
 
 The design problem (24) is non-convex and IPOPT finds a local optimum. Its
 *approximate-design relaxation* over a large pool of feasible poses (random
@@ -19,17 +21,12 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
-
 import numpy as np
 
 from pin_kpi_oed.oed.pool import ApproximateDesign, select
 from pin_kpi_oed.results import Result
 
-if TYPE_CHECKING:
-    from pin_kpi_oed.design.optimize import DesignProblem
-
-__all__ = ["Certificate", "certify"]
+__all__ = ["Certificate", "certify_pool"]
 
 
 @dataclass(kw_only=True)
@@ -69,36 +66,25 @@ class Certificate(Result):
                 "pool_selection_efficiency": self.efficiency(self.pool_selection_trace_cs_m2)}
 
 
-def certify(problem: "DesignProblem", m: int, pool_size: int = 5000, seed: int = 0,
-            max_tries_per_candidate: int = 200, extra: list[np.ndarray] | None = None,
-            fixed_info: np.ndarray | None = None) -> Certificate:
-    """Sample a feasible pool for a design problem, solve the relaxation, select m poses.
+def certify_pool(Fp: np.ndarray, m: int, E: np.ndarray | None, Q: np.ndarray, samples: int,
+                 fixed_info: np.ndarray | None = None, t0: float | None = None) -> Certificate:
+    """The certificate of a feasible candidate pool: solve the relaxation, select m poses, bound tr(C_s).
 
     Args:
-        problem: a :class:`pin_kpi_oed.design.optimize.DesignProblem` (model, identifiable set, E, constraints).
+        Fp: weighted Jacobians of the candidates over the identifiable parameters, (N, nh, nb).
         m: number of measurements.
-        pool_size: feasible candidates to sample.
-        seed: seed of the sampling.
-        max_tries_per_candidate: sampling budget per candidate.
-        extra: further feasible configurations to add to the pool, e.g. the poses of the optimised
-            designs: the bound then also covers every design built from them (and an optimised
-            design can no longer exceed 100 % efficiency by using poses the random pool missed).
+        E: KPI Jacobian of the working configurations (criterion matrix of tr C_s), or None (D-optimality).
+        Q: the candidate configurations, (N, n) rad.
+        samples: random configurations drawn to find them.
         fixed_info: information every design already has (poses measured before, a prior), (nb, nb):
             the bound is then of tr(C_s) with it (:func:`pin_kpi_oed.oed.pool.approximate_design`).
+        t0: ``time.perf_counter()`` when the work began (default: now).
 
     Returns:
         The certificate (bound of tr(C_s), m², for the KPI criterion, eq. 24a).
-
-    Raises:
-        InfeasibleError: not enough feasible poses found (from the sampler).
     """
-    t0 = time.perf_counter()
-    Q, samples = problem.random_design(pool_size, seed=seed, max_tries=max(problem.cell.max_random_tries,
-                                                                          max_tries_per_candidate * pool_size))
-    if extra:
-        Q = np.vstack([Q] + [np.atleast_2d(x) for x in extra])
-    Fp = problem.model.weighted_jacobian(problem.p0, Q)[:, :, problem.base]
-    sel = select(Fp, m, problem.E, fixed_info=fixed_info)
+    t0 = time.perf_counter() if t0 is None else t0
+    sel = select(Fp, m, E, fixed_info=fixed_info)
     approx = sel.approx
     return Certificate(lower_bound_trace_cs_m2=approx.lower_bound / m, m=m, pool_size=Q.shape[0], samples=samples,
                        approx=approx, pool_selection=sel.indices, pool_selection_trace_cs_m2=sel.phi, Q_pool=Q,

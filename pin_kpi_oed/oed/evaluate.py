@@ -38,6 +38,8 @@ class DesignScore(Result):
         rank: identifiable rank; n_meas: number of measurements.
         identifiable: names of the identifiable parameters.
         setup: the set-up dict (robot, tracker, reflector, noise) when scored from a file, else empty.
+        design: what was scored when scored from a file: ``file``, ``criterion`` (the file's ``q_meas_criterion``,
+            None for a hand-written file), ``n_meas``, ``n_work``; else empty.
     """
 
     trace_cs_m2: float
@@ -49,17 +51,24 @@ class DesignScore(Result):
     n_meas: int
     identifiable: list[str] = field(default_factory=list)
     setup: dict = field(default_factory=dict)
+    design: dict = field(default_factory=dict)
 
     def to_dict(self) -> dict:
-        """Plain JSON-able dict (SI units): the common result keys, the scores, ``setup`` when known."""
+        """Plain JSON-able dict (SI units): the common result keys, the scores, ``setup`` and ``design`` when known."""
         out = {"setup": self.setup} if self.setup else {}
+        out.update({"design": self.design} if self.design else {})
         return {**out, **self.result_dict(), "trace_cs_m2": self.trace_cs_m2, "tcp_sigma_m": self.tcp_sigma_m,
                 "cov_s_m2": self.cov_s_m2.tolist(), "trace_cp": self.trace_cp, "criteria": self.criteria,
                 "rank": self.rank, "n_meas": self.n_meas, "identifiable": self.identifiable}
 
     def summary(self) -> str:
-        """Every criterion with its unit and label, then tr(C_s) (mm²) and the TCP σ (µm)."""
+        """The design scored (from a file), every criterion with its unit and label, then tr(C_s) (mm²) and the TCP σ (µm)."""
         lines = []
+        if self.design:
+            d = self.design
+            which = f"design '{d['criterion']}' (its q_meas)" if d.get("criterion") else "q_meas"
+            lines.append(f"scored {which} of {d['file']}: {d['n_meas']} measurement configurations, KPI at "
+                         f"{d['n_work']} working configuration(s)")
         for k, v in self.criteria.items():
             crit = CRITERIA.get(k)
             lines.append(f"{k:<7}{v: .6g}  [{crit.unit if crit else '?'}] {crit.label if crit else ''}".rstrip())
@@ -136,6 +145,9 @@ def evaluate_file(path: Path, out: Path | None = None) -> DesignScore:
             raise InputError(f"{path}: missing field '{key}' (list of joint configurations, rad)")
     score = score_design(model, np.asarray(d["q_meas"], float), np.asarray(d["q_work"], float))
     score.setup = model_to_dict(model)
+    crit = d.get("q_meas_criterion")
+    score.design = {"file": str(path), "criterion": crit if isinstance(crit, str) else None,
+                    "n_meas": int(np.shape(d["q_meas"])[0]), "n_work": int(np.shape(d["q_work"])[0])}
     if out is not None:
         atomic_write_json(out, score.to_dict())
     return score

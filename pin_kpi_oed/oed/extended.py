@@ -38,7 +38,7 @@ from pin_kpi_oed.oed.criteria import get_criterion
 from pin_kpi_oed.oed.pool import PoolSelection, block_gains, pool_phi, select
 from pin_kpi_oed.threads import limit_threads
 
-__all__ = ["ExtendedModel", "ExtendedDesignCriterion", "basis_dq", "select_pool", "PriorSelection", "pool_phi",
+__all__ = ["ExtendedModel", "ExtendedDesignCriterion", "select_pool", "PriorSelection", "pool_phi",
            "pool_start"]
 
 
@@ -163,7 +163,8 @@ class ExtendedModel:
           ∂²y/∂q_a∂q_b = R_T (ω_a × ṗ_b) for a ≤ b (ṗ_b = v_b + ω_b × p, spatial twists of the joints);
         * weights 1/σ_eff(qe): the q-dependence of a range-dependent σ is included.
 
-        Only joint-angle effects with a known basis derivative (:func:`basis_dq`) are supported.
+        Only joint-angle effects with a known basis derivative
+        (:meth:`~pin_kpi_oed.effects.base.Effect.joint_offset_dq`) are supported.
 
         Raises:
             InputError: an effect without an exact q-derivative, or one with task-space offsets.
@@ -182,7 +183,7 @@ class ExtendedModel:
                 if np.any(dY):
                     raise InputError(f"effect '{e.name}': task-space offsets are not supported by the continuous design")
                 Ds.append(np.asarray(D_e, float))
-                dDs.append(basis_dq(e, Q))
+                dDs.append(e.joint_offset_dq(Q))
                 C += np.einsum("mnkj,k->mnj", dDs[-1], th)
             D, dD = np.concatenate(Ds, axis=2), np.concatenate(dDs, axis=2)
         Qe = Q + (D @ np.concatenate(self.thetas) if self.k else 0.0)
@@ -359,39 +360,6 @@ class ExtendedModel:
 
     def _is_setup(self, i: int) -> bool:
         return self.model.layout.names[i].split(".")[0] in self.model.layout.setup_groups
-
-
-def basis_dq(effect: Any, Q: np.ndarray) -> np.ndarray:
-    """Exact ∂D/∂q of a joint-angle effect's basis D = ∂dQ/∂θ, (m, n, k, n).
-
-    Supported: :class:`~pin_kpi_oed.effects.library.GearHarmonic` and
-    :class:`~pin_kpi_oed.effects.periodic.TransmissionError` (sin/cos(o q_j): o cos, −o sin) and
-    :class:`~pin_kpi_oed.effects.coupled.LinkBending` (cos/sin of φ_a = Σ_{l ≤ a} s_l q_l).
-
-    Raises:
-        InputError: another effect (no exact q-derivative in the continuous design yet).
-    """
-    from pin_kpi_oed.effects.coupled import LinkBending
-    from pin_kpi_oed.effects.library import GearHarmonic
-
-    Q = np.atleast_2d(np.asarray(Q, float))
-    m, n = Q.shape
-    k = effect.n_params
-    out = np.zeros((m, n, k, n))
-    if isinstance(effect, GearHarmonic):
-        for i, (j, o) in enumerate(effect.pairs):
-            out[:, j, 2 * i, j] = o * np.cos(o * Q[:, j])
-            out[:, j, 2 * i + 1, j] = -o * np.sin(o * Q[:, j])
-        return out
-    if isinstance(effect, LinkBending):
-        ph = effect.angles(Q)
-        for c, (j, a, f) in enumerate(effect.terms):
-            g = -np.sin(ph[:, a]) if f == "cos" else np.cos(ph[:, a])
-            for l_ in range(a + 1):
-                out[:, j, c, effect.chain[l_]] = g * effect.signs[l_]
-        return out
-    raise InputError(f"effect '{effect.name}': the continuous design has no exact q-derivative of its basis "
-                     "(supported: gear_harmonic, transmission_error, link_bending); use pool selection")
 
 
 @dataclass

@@ -389,19 +389,8 @@ def approximate_design(Fp: np.ndarray, K: np.ndarray | None = None, tol: float =
         InputError: unknown method, m larger than the pool, ``fixed_info`` without m or of the wrong shape.
     """
     t0 = time.perf_counter()
-    if method not in ("newton", "multiplicative"):
-        raise InputError(f"approximate design method: expected 'newton' or 'multiplicative', got {method!r}")
     N, nh, nb = Fp.shape
-    mc = 1 if m is None or method == "multiplicative" else int(m)
-    if mc > N:
-        raise InputError(f"cannot choose {mc} measurements from a pool of {N} candidates")
-    M0 = None
-    if fixed_info is not None:
-        if m is None or method != "newton":
-            raise InputError("approximate design with fixed information needs m and the Newton method")
-        if np.shape(fixed_info) != (nb, nb):
-            raise InputError(f"fixed information must be {nb}x{nb}, got {np.shape(fixed_info)}")
-        M0 = np.asarray(fixed_info, float) / mc
+    mc, M0 = _relaxation_setup(N, nb, method, m, fixed_info)
     w = np.full(N, 1.0 / N)
     phi0 = pool_phi(_info_w(Fp, w, M0), K)
     if not np.isfinite(phi0):
@@ -412,15 +401,7 @@ def approximate_design(Fp: np.ndarray, K: np.ndarray | None = None, tol: float =
     else:
         w, total = _relax_multiplicative(Fp, w, K, tol, max_iter)
     phi, d = _d_all(Fp, w, K, M0=M0)
-    top = _top_mean(d, mc)
-    if M0 is not None:
-        bound = phi - (top - float(w @ d))
-        ratio = 1.0 + _gap(d, w, phi if K is not None else nb, mc, True)
-        bound = max(bound, 0.0) if K is not None else bound
-    elif K is not None:
-        bound, ratio = phi ** 2 / top, top / phi
-    else:
-        bound, ratio = phi - (top - nb), top / nb
+    bound, ratio = _equivalence_bound(phi, d, w, K, nb, mc, M0)
     ok = bool(ratio - 1.0 < tol)
     unit = "Newton steps" if method == "newton" else "iterations"
     what = "max d" if mc == 1 else f"mean of the {mc} largest d"
@@ -432,6 +413,48 @@ def approximate_design(Fp: np.ndarray, K: np.ndarray | None = None, tol: float =
                              message=f"equivalence theorem: {what} = "
                                      f"{ratio:.5f} after {total} {unit}",
                              time_s=time.perf_counter() - t0)
+
+
+def _relaxation_setup(N: int, nb: int, method: str, m: int | None, fixed_info: np.ndarray | None
+                      ) -> tuple[int, np.ndarray | None]:
+    """The weight cap's m and the fixed information per measurement M₀/m of :func:`approximate_design`.
+
+    Returns:
+        (mc: 1 without a cap, else m; M₀/m (nb, nb) or None).
+
+    Raises:
+        InputError: unknown method, m larger than the pool, ``fixed_info`` without m or of the wrong shape.
+    """
+    if method not in ("newton", "multiplicative"):
+        raise InputError(f"approximate design method: expected 'newton' or 'multiplicative', got {method!r}")
+    mc = 1 if m is None or method == "multiplicative" else int(m)
+    if mc > N:
+        raise InputError(f"cannot choose {mc} measurements from a pool of {N} candidates")
+    if fixed_info is None:
+        return mc, None
+    if m is None or method != "newton":
+        raise InputError("approximate design with fixed information needs m and the Newton method")
+    if np.shape(fixed_info) != (nb, nb):
+        raise InputError(f"fixed information must be {nb}x{nb}, got {np.shape(fixed_info)}")
+    return mc, np.asarray(fixed_info, float) / mc
+
+
+def _equivalence_bound(phi: float, d: np.ndarray, w: np.ndarray, K: np.ndarray | None, nb: int, mc: int,
+                       M0: np.ndarray | None) -> tuple[float, float]:
+    """The equivalence-theorem lower bound on φ of every (capped) design and the d-ratio (see
+    :func:`approximate_design`): A-type φ²/top or φ − (top − Σ w d) with fixed information, D-type φ − (top − nb).
+
+    Returns:
+        (lower bound on φ, max_d_ratio: 1 at the optimum).
+    """
+    top = _top_mean(d, mc)
+    if M0 is not None:
+        bound = phi - (top - float(w @ d))
+        ratio = 1.0 + _gap(d, w, phi if K is not None else nb, mc, True)
+        return (max(bound, 0.0) if K is not None else bound), ratio
+    if K is not None:
+        return phi ** 2 / top, top / phi
+    return phi - (top - nb), top / nb
 
 
 #: pools larger than twice this start the working set from this many candidates drawn at random (seeded), not

@@ -36,7 +36,7 @@ def _check_file_target(opt: str, path: Path) -> None:
         raise InputError(f"{opt} {path}: is a folder; give a file name")
     folder = path.parent if str(path.parent) else Path(".")
     if not folder.is_dir():
-        raise InputError(f"{opt} {path}: folder '{folder}' does not exist")
+        raise InputError(f"{opt} {path}: folder '{folder}' does not exist (create it first: mkdir -p {folder})")
     if not os.access(folder, os.W_OK | os.X_OK):
         raise InputError(f"{opt} {path}: folder '{folder}' is not writable")
     if path.exists() and not os.access(path, os.W_OK):
@@ -52,7 +52,8 @@ def _check_dir_target(opt: str, path: Path) -> None:
         return
     parent = path.parent if str(path.parent) else Path(".")
     if not parent.is_dir():
-        raise InputError(f"{opt} {path}: parent folder '{parent}' does not exist")
+        raise InputError(f"{opt} {path}: parent folder '{parent}' does not exist (create it first: mkdir -p {parent}; "
+                         "the command creates only the last folder)")
     if not os.access(parent, os.W_OK | os.X_OK):
         raise InputError(f"{opt} {path}: parent folder '{parent}' is not writable")
 

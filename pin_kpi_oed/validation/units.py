@@ -15,7 +15,7 @@ import numpy as np
 from pin_kpi_oed.errors import InputError
 
 __all__ = ["MAX_TOOL_OFFSET_M", "SIGMA_MAX_M", "SIGMA_ROT_MAX_RAD", "check_sigma_m", "check_sigma_rad", "check_offset_m",
-           "check_angle_rad"]
+           "check_angle_rad", "POSITION_SPREAD_FACTOR", "check_position_spread_m"]
 
 #: largest plausible measurement noise sigma (m): 1 cm; more means the value was given in mm
 SIGMA_MAX_M = 0.01
@@ -108,3 +108,36 @@ def check_angle_rad(v: float | Iterable[float], what: str, limit: float = 4 * ma
         raise InputError(f"{what}: {x:g} rad ({math.degrees(x):.0f}°) is beyond ±{limit:.3g} rad: the values look "
                          "like degrees; give them in rad")
     return a
+
+
+#: The measured points of one tracker placement lie a median of at most this many times the robot's reach from
+#: their median point (a robot cannot spread them further); beyond it they are in mm (or cm, inches), not m.
+POSITION_SPREAD_FACTOR = 3.0
+
+
+def check_position_spread_m(points: np.ndarray, reach_m: float, what: str,
+                            advice: str = "convert x, y, z to m") -> float:
+    """The one "looks like mm" guard of measured positions: their spread against the robot's reach.
+
+    The median distance of the points from their median point does not depend on where the tracker
+    stands; a robot of reach R cannot make it larger than R (2R between two poses). More than
+    :data:`POSITION_SPREAD_FACTOR` × R means another length unit.
+
+    Args:
+        points: measured positions of one tracker placement (station), (m, 3) in m.
+        reach_m: the robot's reach (m), plus the tool offset where it is known.
+        what: file / station / columns for the message.
+        advice: what to do, appended to the message.
+
+    Returns:
+        The median spread (m).
+
+    Raises:
+        InputError: the spread exceeds the factor × the reach, naming ``what``, the spread and the reach.
+    """
+    P = np.asarray(points, float).reshape(-1, 3)
+    spread = float(np.median(np.linalg.norm(P - np.median(P, axis=0), axis=1))) if len(P) else 0.0
+    if spread > POSITION_SPREAD_FACTOR * float(reach_m):
+        raise InputError(f"{what}: the measured points lie a median {spread:.6g} m from their median point, more than "
+                         f"{POSITION_SPREAD_FACTOR:g} x reach ({float(reach_m):.3g} m): looks like mm; {advice}")
+    return spread

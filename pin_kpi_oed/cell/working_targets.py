@@ -26,6 +26,8 @@ from typing import Callable
 import numpy as np
 import pinocchio as pin
 
+from pin_kpi_oed.cell.feasibility import FeasibilityChecker
+from pin_kpi_oed.cell.fields import read_angles, read_vec
 from pin_kpi_oed.errors import InputError
 
 #: position tolerance of a solved target (m) and orientation tolerance (rad)
@@ -151,8 +153,6 @@ def solve_working_targets(cell, targets: list, source: str = "") -> np.ndarray:
     """
     import dataclasses
 
-    from pin_kpi_oed.cell.cell import _angles, _vec
-    from pin_kpi_oed.cell.feasibility import FeasibilityChecker
 
     pre = f"{source}: " if source else ""
     robot = cell.robot
@@ -170,9 +170,9 @@ def solve_working_targets(cell, targets: list, source: str = "") -> np.ndarray:
         w = f"{pre}working_targets[{i}]"
         if not isinstance(t, dict) or "xyz_m" not in t:
             raise InputError(f"{w}: expected a mapping with xyz_m (and optional rpy_rad/rpy_deg, seed_rad/seed_deg)")
-        xyz = _vec(t["xyz_m"], 3, f"{w}.xyz_m")
-        rpy = _angles(t, "rpy", 3, w, required=False)
-        seed_q = _angles(t, "seed", robot.nq, w, required=False)
+        xyz = read_vec(t["xyz_m"], 3, f"{w}.xyz_m")
+        rpy = read_angles(t, "rpy", 3, w, required=False)
+        seed_q = read_angles(t, "seed", robot.nq, w, required=False)
         seeds = ([seed_q] if seed_q is not None else []) + list(np.atleast_2d(cell.q_work)) + out
         res = solve_tcp_target(robot, cell.W_T_base, cell.tcp_m, xyz, None if rpy is None else
                                pin.rpy.rpyToMatrix(*rpy), seeds=seeds, accept=accept, seed=i)

@@ -1,4 +1,4 @@
-"""Validation of measurement designs: Monte-Carlo identification and real data.
+"""Trials of measurement designs: Monte-Carlo identification and real data.
 
 **Monte-Carlo.** The KPI covariance C_s = E C_p Eᵀ (eq. 19) is a linearised
 prediction. For a design q_meas we simulate many identification experiments:

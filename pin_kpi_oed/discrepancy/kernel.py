@@ -1,0 +1,184 @@
+r"""The discrepancy kernel: a covariance over joint angles that knows angles wrap.
+
+A calibrated robot model still misses what no parameter of it describes (gear and encoder
+errors between the harmonics a model carries, deflections, cable forces). That model
+discrepancy δ(q) is a smooth function of the joint angles q, periodic in each revolute angle.
+:class:`JointKernel` is the covariance of δ used everywhere — identification, prediction and
+design use this one formula:
+
+.. math::
+
+    k(q, q') = c^2 \prod_j \exp\!\Big(-\frac{2\sin^2(\Delta_j/2)}{L_j^2}\Big)
+             + \sum_j a_j^2 \exp\!\Big(-\frac{2\sin^2(\Delta_j/2)}{\ell_j^2}\Big),
+    \qquad \Delta_j = q_j - q'_j .
+
+``4 sin²(Δ/2) = |(cos q, sin q) − (cos q', sin q')|²``: each factor is a squared-exponential
+kernel on the point (cos q_j, sin q_j) of the unit circle, so q and q + 2π are the same
+configuration and no seam appears at ±π (prismatic joints: the same form, the angle in m is
+then simply a coordinate with period 2π m, far beyond any track length, i.e. a plain SE).
+
+* the **product** part (amplitude c, one length scale L_j per joint, ARD) is a smooth
+  function of the whole configuration: deflections and couplings between joints;
+* the **additive** part (an amplitude a_j and a length scale ℓ_j per joint) is a sum of
+  one-joint functions: transmission / encoder errors, periodic in one joint with many cycles
+  per revolution, which a product kernel would need far more data to learn (a short ℓ_j
+  behaves like a Fourier basis of that joint up to order ≈ 1/ℓ_j).
+
+The kernel is unit-free (amplitudes in units of the normalised residual); the per-axis scale in
+metres is held by :class:`~pin_kpi_oed.discrepancy.gp.Discrepancy`. It implements
+scikit-learn's :class:`~sklearn.gaussian_process.kernels.Kernel` (value and gradient in the
+log hyper-parameters) so that :class:`~sklearn.gaussian_process.GaussianProcessRegressor`
+fits it by maximum marginal likelihood, and adds :meth:`JointKernel.grad_x`, the exact
+derivative in the joint angles a design needs (checked against finite differences).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+from sklearn.gaussian_process.kernels import Hyperparameter, Kernel, StationaryKernelMixin
+
+__all__ = ["JointKernel"]
+
+_BOUNDS_AMP = (1e-4, 1e2)
+_BOUNDS_LEN = (1e-2, 1e2)
+
+
+def _chord2(X: np.ndarray, Y: np.ndarray) -> np.ndarray:
+    """4 sin²((x_j − y_j)/2) = 2 − 2 cos(x_j − y_j) per joint: (n, m, d)."""
+    return 2.0 - 2.0 * np.cos(X[:, None, :] - Y[None, :, :])
+
+
+class JointKernel(StationaryKernelMixin, Kernel):
+    """k(q, q') = c² Π_j SE_j(L_j) + Σ_j a_j² SE_j(ℓ_j) on the unit circle of each joint (see the module).
+
+    Attributes:
+        amplitude: c (unit-free, normalised residual units).
+        length_scale: L_j, (d,) (rad; the product part).
+        joint_amplitude: a_j, (d,) (unit-free; the additive part).
+        joint_length_scale: ℓ_j, (d,) (rad; the additive part).
+    """
+
+    def __init__(self, amplitude: float = 1.0, length_scale: Any = 1.0, joint_amplitude: Any = 0.3,
+                 joint_length_scale: Any = 0.3, amplitude_bounds: Any = _BOUNDS_AMP,
+                 length_scale_bounds: Any = _BOUNDS_LEN, joint_amplitude_bounds: Any = _BOUNDS_AMP,
+                 joint_length_scale_bounds: Any = _BOUNDS_LEN) -> None:
+        self.amplitude = amplitude
+        self.length_scale = length_scale
+        self.joint_amplitude = joint_amplitude
+        self.joint_length_scale = joint_length_scale
+        self.amplitude_bounds = amplitude_bounds
+        self.length_scale_bounds = length_scale_bounds
+        self.joint_amplitude_bounds = joint_amplitude_bounds
+        self.joint_length_scale_bounds = joint_length_scale_bounds
+
+    # ------------------------------------------------------------------ scikit-learn hyper-parameters
+    @property
+    def hyperparameter_amplitude(self) -> Hyperparameter:
+        return Hyperparameter("amplitude", "numeric", self.amplitude_bounds)
+
+    @property
+    def hyperparameter_length_scale(self) -> Hyperparameter:
+        return Hyperparameter("length_scale", "numeric", self.length_scale_bounds, np.size(self.length_scale))
+
+    @property
+    def hyperparameter_joint_amplitude(self) -> Hyperparameter:
+        return Hyperparameter("joint_amplitude", "numeric", self.joint_amplitude_bounds, np.size(self.joint_amplitude))
+
+    @property
+    def hyperparameter_joint_length_scale(self) -> Hyperparameter:
+        return Hyperparameter("joint_length_scale", "numeric", self.joint_length_scale_bounds,
+                              np.size(self.joint_length_scale))
+
+    def _parts(self, d: int) -> tuple[float, np.ndarray, np.ndarray, np.ndarray]:
+        def vec(v: Any) -> np.ndarray:
+            v = np.atleast_1d(np.asarray(v, float))
+            return np.full(d, float(v[0])) if v.size == 1 else v
+        return float(np.asarray(self.amplitude, float).reshape(-1)[0]), vec(self.length_scale), \
+            vec(self.joint_amplitude), vec(self.joint_length_scale)
+
+    def __call__(self, X: np.ndarray, Y: np.ndarray | None = None, eval_gradient: bool = False) -> Any:
+        """K (n, m); with ``eval_gradient`` also dK/dlog θ (n, n, n_θ) in the order of ``self.hyperparameters``."""
+        X = np.atleast_2d(np.asarray(X, float))
+        if eval_gradient and Y is not None:
+            raise ValueError("gradient can only be evaluated when Y is None")
+        Yv = X if Y is None else np.atleast_2d(np.asarray(Y, float))
+        c, L, a, ell = self._parts(X.shape[1])
+        D = _chord2(X, Yv)
+        Dp = D / L ** 2
+        P = c ** 2 * np.exp(-0.5 * Dp.sum(-1))
+        Da = D / ell ** 2
+        A = a ** 2 * np.exp(-0.5 * Da)
+        K = P + A.sum(-1)
+        if not eval_gradient:
+            return K
+        # scikit-learn orders the hyper-parameters by name: amplitude, joint_amplitude, joint_length_scale,
+        # length_scale (``dir`` order of the ``hyperparameter_*`` properties)
+        grads = [2.0 * P[..., None],
+                 2.0 * A if np.size(self.joint_amplitude) > 1 else 2.0 * A.sum(-1, keepdims=True),
+                 A * Da if np.size(self.joint_length_scale) > 1 else (A * Da).sum(-1, keepdims=True),
+                 P[..., None] * Dp if np.size(self.length_scale) > 1 else (P * Dp.sum(-1))[..., None]]
+        return K, np.concatenate(grads, axis=-1)
+
+    def diag(self, X: np.ndarray) -> np.ndarray:
+        """k(q, q) for each row: c² + Σ a_j²."""
+        c, _, a, _ = self._parts(np.atleast_2d(X).shape[1])
+        return np.full(np.atleast_2d(X).shape[0], c ** 2 + float((a ** 2).sum()))
+
+    def is_stationary(self) -> bool:
+        return True
+
+    # ------------------------------------------------------------------ derivative in the joint angles
+    def grad_x(self, X: np.ndarray, Y: np.ndarray) -> np.ndarray:
+        """∂k(x_i, y_k)/∂x_ij: (n, m, d) (per rad).
+
+        ∂/∂x_j of exp(−2 sin²(Δ_j/2)/L_j²) is −sin(Δ_j)/L_j² times the factor (4 sin²(Δ/2) =
+        2 − 2 cos Δ, so its derivative is 2 sin Δ).
+        """
+        X = np.atleast_2d(np.asarray(X, float))
+        Y = np.atleast_2d(np.asarray(Y, float))
+        c, L, a, ell = self._parts(X.shape[1])
+        Dq = X[:, None, :] - Y[None, :, :]
+        D = 2.0 - 2.0 * np.cos(Dq)
+        S = np.sin(Dq)
+        P = c ** 2 * np.exp(-0.5 * (D / L ** 2).sum(-1))
+        A = a ** 2 * np.exp(-0.5 * D / ell ** 2)
+        return -(P[..., None] * S / L ** 2) - A * S / ell ** 2
+
+    # ------------------------------------------------------------------ plain data
+    def to_dict(self) -> dict:
+        """Hyper-parameters as plain numbers (the model file's ``discrepancy.kernel``)."""
+        d = np.size(self.length_scale)
+        c, L, a, ell = self._parts(max(d, np.size(self.joint_amplitude), np.size(self.joint_length_scale)))
+        return {"form": "joint_wrapped_se/1", "amplitude": c, "length_scale_rad": L.tolist(),
+                "joint_amplitude": a.tolist(), "joint_length_scale_rad": ell.tolist()}
+
+    @classmethod
+    def from_dict(cls, d: Any, n_joints: int, where: str = "discrepancy.kernel") -> "JointKernel":
+        """Inverse of :meth:`to_dict`, every field checked.
+
+        Raises:
+            ValueError: another form, a missing field, a wrong length, a non-positive or non-finite value
+                (the message names the field; callers turn it into an input error naming the file).
+        """
+        if not isinstance(d, dict):
+            raise ValueError(f"{where}: must be an object with the kernel's hyper-parameters")
+        if d.get("form") != "joint_wrapped_se/1":
+            raise ValueError(f"{where}.form: {d.get('form')!r} is not a known kernel (expected 'joint_wrapped_se/1')")
+
+        def num(key: str, n: int | None) -> Any:
+            if key not in d:
+                raise ValueError(f"{where}.{key}: missing")
+            try:
+                v = np.asarray(d[key], dtype=float)
+            except (TypeError, ValueError):
+                raise ValueError(f"{where}.{key}: must be numbers, got {d[key]!r}") from None
+            if (n is None and v.shape != ()) or (n is not None and v.shape != (n,)):
+                want = "one number" if n is None else f"{n} numbers (one per joint)"
+                raise ValueError(f"{where}.{key}: must be {want}, got shape {v.shape}")
+            if not np.all(np.isfinite(v)) or np.any(v <= 0):
+                raise ValueError(f"{where}.{key}: must be positive and finite, got {d[key]!r}")
+            return float(v) if n is None else v
+        return cls(num("amplitude", None), num("length_scale_rad", n_joints), num("joint_amplitude", n_joints),
+                   num("joint_length_scale_rad", n_joints))

@@ -1,0 +1,70 @@
+r"""The discrepancy step of a calibration: δ(q) fitted to the residuals of the parametric fit.
+
+:func:`result_discrepancy` takes an :class:`~pin_kpi_oed.identification.identify.IdentificationResult`
+and its data, turns every station's residuals (measured − predicted, in that station's tracker
+frame) into the robot base frame with the station's fitted rotation (``r_base = R_sᵀ r``), leaves
+out the rows the fit flagged as outliers, and fits
+:class:`~pin_kpi_oed.discrepancy.gp.Discrepancy` (see there for the model, the separation of the
+parametric part and δ, and the K-fold decision of ``--discrepancy auto``).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from pin_kpi_oed.data.measurements import MeasurementSet
+from pin_kpi_oed.discrepancy.gp import Discrepancy, DiscrepancyOptions, fit_discrepancy
+from pin_kpi_oed.errors import InputError
+
+__all__ = ["result_discrepancy", "base_frame_residuals", "discrepancy_options"]
+
+
+def discrepancy_options(value: Any, seed: int = 0) -> DiscrepancyOptions:
+    """``auto`` / ``on`` / ``none`` (or options) as :class:`DiscrepancyOptions`.
+
+    Raises:
+        InputError: an unknown mode.
+    """
+    if isinstance(value, DiscrepancyOptions):
+        return value
+    if value is None or value is False:
+        return DiscrepancyOptions(mode="none", seed=seed)
+    return DiscrepancyOptions(mode=str(value), seed=seed)
+
+
+def base_frame_residuals(result: Any) -> tuple[np.ndarray, np.ndarray]:
+    """(rows, residuals in the robot base frame (n, 3) m) of a fit, outliers left out."""
+    R_rows = np.empty((len(result.residuals_m), 3))
+    for lab, rows in zip(result.stations, result.station_rows):
+        R = np.asarray(result.setups[lab].tracker_T_base, float)[:3, :3]
+        R_rows[rows] = result.residuals_m[rows] @ R
+    keep = np.ones(len(R_rows), bool)
+    keep[np.asarray(result.outliers, int)] = False
+    return np.flatnonzero(keep), R_rows[keep]
+
+
+def result_discrepancy(result: Any, data: MeasurementSet, options: Any = "auto", Q: np.ndarray | None = None
+                       ) -> Discrepancy | None:
+    """Fit the discrepancy of a calibration (None for mode ``none``).
+
+    Args:
+        result: the parametric fit (:func:`~pin_kpi_oed.identification.identify.identify`).
+        data: its training data.
+        options: ``auto``, ``on``, ``none`` or :class:`DiscrepancyOptions`.
+        Q: the data's configurations in the robot's joint order (default: aligned from ``data``).
+
+    Raises:
+        InputError: too few rows for mode ``on``; an unknown mode.
+    """
+    opts = discrepancy_options(options)
+    if opts.mode == "none":
+        return None
+    if Q is None:
+        from pin_kpi_oed.identification.problem import align_data
+        Q = align_data(result.model.robot, data)
+    if len(Q) != len(result.residuals_m):
+        raise InputError(f"discrepancy: {len(Q)} configurations for {len(result.residuals_m)} residuals")
+    rows, R = base_frame_residuals(result)
+    return fit_discrepancy(np.asarray(Q, float)[rows], R, list(result.model.robot.joint_names), opts)

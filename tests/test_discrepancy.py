@@ -1,0 +1,186 @@
+"""Model discrepancy: the kernel (derivatives against finite differences), the Gaussian process (posterior
+variance against Monte-Carlo draws of the prior), calibration with a withheld effect (honest σ on held-out
+rows, geometry unchanged by the discrepancy), the model-file block (round trip, damaged fields refused)."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from pin_kpi_oed import NoiseModel, TrackerModel, load_robot
+from pin_kpi_oed.cli.app import main
+from pin_kpi_oed.data.measurements import write_measurements
+from pin_kpi_oed.discrepancy import Discrepancy, DiscrepancyOptions, JointKernel, fit_discrepancy
+from pin_kpi_oed.effects.library import GearHarmonic
+from pin_kpi_oed.errors import InputError
+from pin_kpi_oed.identification.identify import identify, validate
+from pin_kpi_oed.identification.model_file import load_model_file
+from pin_kpi_oed.identification.simulate import Tolerances, default_tracker_pose, random_truth, simulate
+from pin_kpi_oed.identification.transfer import predict_table
+from pin_kpi_oed.oed.identifiability import analyse
+
+NAMES = [f"j{i}" for i in range(6)]
+
+
+def _kernel(rng):
+    return JointKernel(0.7, rng.uniform(0.5, 2, 6), rng.uniform(0.1, 0.5, 6), rng.uniform(0.1, 1, 6))
+
+
+def test_kernel_gradients_match_finite_differences():
+    rng = np.random.default_rng(0)
+    k = _kernel(rng)
+    X, Y = rng.uniform(-3, 3, (7, 6)), rng.uniform(-3, 3, (4, 6))
+    _, G = k(X, eval_gradient=True)
+    eps = 1e-6
+    for i, th in enumerate(k.theta):
+        t = k.theta.copy()
+        t[i] = th + eps
+        Kp = k.clone_with_theta(t)(X)
+        t[i] = th - eps
+        Km = k.clone_with_theta(t)(X)
+        assert np.abs((Kp - Km) / (2 * eps) - G[..., i]).max() < 1e-6, k.hyperparameters[i].name
+    Gx = k.grad_x(X, Y)
+    for j in range(6):
+        d = np.zeros(6)
+        d[j] = eps
+        fd = (k(X + d, Y) - k(X - d, Y)) / (2 * eps)
+        assert np.abs(fd - Gx[..., j]).max() < 1e-6
+    assert np.allclose(k(X + 2 * np.pi, Y), k(X, Y))          # angles wrap: no seam at ±π
+    assert np.allclose(np.diag(k(X)), k.diag(X))
+
+
+def test_posterior_variance_matches_monte_carlo():
+    """Draw δ from the prior, condition on noisy rows, predict new rows: the predicted variance is the
+    mean squared error over the draws (per axis), within Monte-Carlo error."""
+    rng = np.random.default_rng(1)
+    k = JointKernel(1.0, np.full(6, 1.2), np.full(6, 0.3), np.full(6, 0.6))
+    Qtr, Qte = rng.uniform(-2, 2, (60, 6)), rng.uniform(-2, 2, (15, 6))
+    Qall = np.vstack([Qtr, Qte])
+    Lk = np.linalg.cholesky(k(Qall) + 1e-9 * np.eye(len(Qall)))
+    w = 0.05
+    d = Discrepancy("exact", NAMES, np.ones(3), np.zeros(3), w, k, Qtr, np.zeros((60, 3)))
+    _, v = d.predict_normalised(Qte)
+    err2 = []
+    for s in range(400):
+        f = Lk @ rng.standard_normal((len(Qall), 3))
+        d.y, d._chol = f[:60] + np.sqrt(w) * rng.standard_normal((60, 3)), None
+        mu, _ = d.predict_normalised(Qte, return_var=False)
+        err2.append((f[60:] - mu) ** 2)
+    mc = np.mean(err2, axis=0).mean(axis=1)                   # per row, averaged over the 3 axes
+    assert np.all(np.abs(mc / v - 1) < 0.25), np.round(mc / v, 2)
+
+
+def test_inducing_posterior_close_to_exact():
+    rng = np.random.default_rng(2)
+    Q = rng.uniform(-2, 2, (400, 6))
+    R = 1e-4 * np.c_[np.sin(2 * Q[:, 1]), np.cos(Q[:, 2] + Q[:, 1]), np.sin(Q[:, 0])] + 1e-6 * rng.standard_normal(
+        (400, 3))
+    ex = fit_discrepancy(Q, R, NAMES, DiscrepancyOptions(mode="on", n_fit=200, starts=(0.1,)))
+    sp = fit_discrepancy(Q, R, NAMES, DiscrepancyOptions(mode="on", n_fit=200, starts=(0.1,), max_exact=300,
+                                                         n_inducing=250))
+    assert ex.kind == "exact" and sp.kind == "inducing"
+    Qn = rng.uniform(-2, 2, (50, 6))
+    me, ve = ex.predict(Qn)
+    ms, vs = sp.predict(Qn)
+    truth = 1e-4 * np.c_[np.sin(2 * Qn[:, 1]), np.cos(Qn[:, 2] + Qn[:, 1]), np.sin(Qn[:, 0])]
+    assert np.sqrt(np.mean((ms - truth) ** 2)) < 0.3 * np.sqrt(np.mean(truth ** 2))
+    assert np.sqrt(np.mean((me - truth) ** 2)) < 0.3 * np.sqrt(np.mean(truth ** 2))
+    assert np.all(vs >= 0) and np.all(np.isfinite(vs))
+    back = Discrepancy.from_dict(json.loads(json.dumps(sp.to_dict())), NAMES)
+    assert np.allclose(back.predict(Qn)[0], ms) and np.allclose(back.predict(Qn)[1], vs)
+
+
+def test_too_few_rows():
+    rng = np.random.default_rng(3)
+    with pytest.raises(InputError, match="too few"):
+        fit_discrepancy(rng.uniform(-1, 1, (20, 6)), 1e-4 * rng.standard_normal((20, 3)), NAMES,
+                        DiscrepancyOptions(mode="on"))
+    d = fit_discrepancy(rng.uniform(-1, 1, (20, 6)), 1e-4 * rng.standard_normal((20, 3)), NAMES)
+    assert d.kind == "white" and "fewer than" in d.decision
+    assert d.noise_var_m2.shape == (3,) and np.all(d.noise_var_m2 > 0)  # the residual level is the σ
+
+
+@pytest.fixture(scope="module")
+def withheld():
+    """A UR10 with geometric errors and a withheld gear harmonic (0.3 mrad on shoulder and elbow):
+    400 training rows and 300 held-out rows in the same joint range, σ = 10 µm."""
+    robot = load_robot("ur10")
+    model = TrackerModel(robot, tracker_T_base=default_tracker_pose(robot), reflector_m=np.array([0.03, 0.02, 0.08]),
+                         noise=NoiseModel(sigma_xyz_m=(1e-5,) * 3))
+    truth = random_truth(model, Tolerances(5e-4, 1e-3), seed=4, only=[i for i in analyse(model).base if i < 36])
+    gh = GearHarmonic(robot, joints=["shoulder_lift_joint", "elbow_joint"], orders=(2, 3))
+    theta = 3e-4 * np.random.default_rng(5).standard_normal(len(gh.param_names()))
+    rng = np.random.default_rng(6)
+    Q = robot.random_q(rng, 700)
+    Q[:, 0] = rng.uniform(-1.5, 1.5, 700)
+    data = simulate(model, Q, truth, effects=[(gh, theta)], seed=7)
+    return model, data.subset(np.arange(400)), data.subset(np.arange(400, 700))
+
+
+def test_withheld_effect_learnt_with_honest_sigma(withheld, tmp_path):
+    model, train, test = withheld
+    plain = identify(model, train)
+    fit = identify(model, train, discrepancy=DiscrepancyOptions(mode="auto", n_fit=300, seed=0))
+    # the parametric part is fitted first: the geometry is the same with or without the discrepancy
+    assert np.allclose(plain.values, fit.values)
+    assert fit.discrepancy.kind == "exact", fit.discrepancy.decision
+    v0, v1 = validate(plain, test), validate(fit, test)
+    assert v1["mean_m"] < 0.6 * v0["mean_m"], (v0["mean_m"], v1["mean_m"])
+    assert 0.67 <= v1["z_rms"] <= 1.5 and 0.85 <= v1["inside_95"] <= 0.995, v1
+    assert v0["z_rms"] > 3                                     # the noise-only σ is far too small here
+    # the model file carries the discrepancy: predictions and σ reproduced after a round trip
+    cm = fit.calibrated_model()
+    cm.save(tmp_path / "m.json")
+    back = load_model_file(tmp_path / "m.json")
+    Q = test.q
+    Y0, s0, e0 = cm.predict_with_sigma(Q)
+    Y1, s1, e1 = back.predict_with_sigma(Q)
+    assert np.allclose(Y0, Y1, atol=1e-12) and np.allclose(s0, s1) and np.array_equal(e0, e1)
+    cols, table = predict_table(back, test)
+    assert cols[:7] == ["x_pred", "y_pred", "z_pred", "sigma_x", "sigma_y", "sigma_z", "extrapolation"]
+    assert np.allclose(table[:, 3:6], s1)
+
+
+def test_extrapolation_flag_and_sigma_grow_outside_coverage(withheld):
+    model, train, test = withheld
+    fit = identify(model, train, discrepancy=DiscrepancyOptions(mode="on", n_fit=300, seed=0))
+    cm = fit.calibrated_model()
+    Q_in = test.q[:50]
+    Q_out = Q_in.copy()
+    Q_out[:, 0] = np.pi - 0.2                                  # shoulder_pan far outside the ±1.5 rad trained
+    _, s_in, e_in = cm.predict_with_sigma(Q_in)
+    _, s_out, e_out = cm.predict_with_sigma(Q_out)
+    assert e_out.all() and e_in.mean() < 0.1
+    assert np.linalg.norm(s_out, axis=1).mean() > 1.5 * np.linalg.norm(s_in, axis=1).mean()
+
+
+def test_cli_identify_predict_and_damaged_block(withheld, tmp_path, capsys):
+    model, train, test = withheld
+    write_measurements(train, tmp_path / "train.csv")
+    write_measurements(test, tmp_path / "test.csv")
+    r = tmp_path / "m.json"
+    assert main(["identify", "--robot", "ur10", "--data", str(tmp_path / "train.csv"), "--reflector", "0.03,0.02,0.08",
+                 "--sigma", "1e-5", "--model-out", str(r), "--accept-poor-fit", "--quiet"]) == 0
+    out = capsys.readouterr().out
+    assert "discrepancy: Gaussian process fitted" in out
+    doc = json.loads(r.read_text())
+    assert doc["discrepancy"]["kind"] == "exact"
+    pred = tmp_path / "pred.csv"
+    assert main(["predict", "--model", str(r), "--data", str(tmp_path / "test.csv"), "--out", str(pred)]) == 0
+    head = pred.read_text().splitlines()[0].split(",")
+    assert {"sigma_x", "sigma_y", "sigma_z", "extrapolation"} <= set(head)
+    for field, value, needle in [("kernel", {"form": "joint_wrapped_se/1"}, "discrepancy.kernel.amplitude"),
+                                 ("scale_m", "abc", "discrepancy.scale_m"),
+                                 ("joint_names", ["a", "b"], "discrepancy.joint_names"),
+                                 ("y", {"shape": [2, 3], "float64_b64": "!!"}, "discrepancy.y")]:
+        bad = json.loads(r.read_text())
+        bad["discrepancy"][field] = value
+        f = tmp_path / f"bad_{field}.json"
+        f.write_text(json.dumps(bad))
+        out_csv = tmp_path / f"pred_{field}.csv"
+        assert main(["predict", "--model", str(f), "--data", str(tmp_path / "test.csv"), "--out", str(out_csv)]) == 2
+        err = capsys.readouterr().err
+        assert needle in err and str(f) in err and "Traceback" not in err, err
+        assert not out_csv.exists()
