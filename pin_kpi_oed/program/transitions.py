@@ -36,6 +36,7 @@ import numpy as np
 from pin_kpi_oed.cell.cell import Cell
 from pin_kpi_oed.cell.feasibility import FeasibilityChecker
 from pin_kpi_oed.errors import InputError
+from pin_kpi_oed.program.move_bound import MoveBound
 
 
 
@@ -70,140 +71,6 @@ def equivalents(q: np.ndarray, lower: np.ndarray, upper: np.ndarray, revolute: n
     return q[None, :] + 2 * math.pi * np.array(combos, float)
 
 
-class _LowerBound:
-    """A cheap lower bound of every pair distance of the checker, for many configurations at once.
-
-    Per pair of the :class:`FeasibilityChecker` (the same pairs, the same skip lists): capsule–capsule
-    and capsule–half-space distances in closed form (numpy; Coal computes the same closed forms), a
-    capsule against an environment solid bounded by its distance to the enclosing capsules the cell
-    fitted to that environment object (every vertex inside them): when it is clear of them by b > 0 it
-    is clear of the solid by at least b; when it touches them there is no bound (−inf: the sample is
-    checked exactly). Pairs of two fixed objects are constant (+inf: the exact end-pose checks see them).
-    The bound is verified against the exact distances on seeded random configurations when built;
-    a geometry it cannot bound, or any excess, disables it (every sample is then checked exactly).
-    """
-
-    def __init__(self, checker: FeasibilityChecker):
-        from pin_kpi_oed.cell.collision import segment_closest
-
-        self._closest = segment_closest
-        self.ok = False
-        chk, cell = checker, checker.cell
-        go = chk.gm.geometryObjects
-        base_T_W = cell.W_T_base.inverse()
-        self.model, self.data = chk.model, chk.model.createData()
-        self.n_pairs = chk.n_pairs
-        from pin_kpi_oed.model.kinematics import Chain
-
-        robot = dict(zip(chk.robot_ids, chk.robot_joint))
-        ids = [int(j) for j in cell.robot.joint_ids]
-        if any(j > 0 and j not in ids for j in robot.values()):
-            return  # a capsule on a joint outside the chain: no bound
-        self.chain = Chain(chk.model, ids)
-        jslot = {j: k + 1 for k, j in enumerate(ids)}  # chain frame index; 0: the base frame (fixed objects)
-        half = dict(zip(chk.half_ids, cell.half_spaces))
-        env_caps = {e.name: [(base_T_W.act(c.a), base_T_W.act(c.b), float(c.radius)) for c in e.capsules]
-                    for e in cell.environment}
-        segs: dict = {}  # key -> (chain frame index (0: fixed), A, B, radius)
-
-        def seg_of(i: int):
-            if i not in segs:
-                M, g = go[i].placement, go[i].geometry
-                h = float(g.halfLength)
-                segs[i] = (jslot.get(robot.get(i, 0), 0), M.act(np.array([0.0, 0.0, -h])),
-                           M.act(np.array([0.0, 0.0, h])), float(g.radius))
-            return i
-
-        rows: dict = {}  # (seg key, seg key) -> row index of the segment-pair table
-        self.pair_rows: list[list[int]] = [[] for _ in range(chk.n_pairs)]
-        self.soft = np.zeros(chk.n_pairs, bool)  # bounds through enclosing capsules (no bound when touching)
-        H: list[tuple[int, object, np.ndarray, float]] = []
-        try:
-            for p, (i, k) in enumerate(chk.pairs):
-                if robot.get(i, 0) == 0 and robot.get(k, 0) == 0:
-                    continue  # both fixed: constant
-                if robot.get(i, 0) == 0:
-                    i, k = k, i
-                si = seg_of(i)
-                if k in half:
-                    M = go[k].placement
-                    n = M.rotation @ np.asarray(half[k].normal, float)
-                    H.append((p, si, n, float(half[k].offset) + float(n @ M.translation)))
-                    continue
-                if k in robot or type(go[k].geometry).__name__ == "Capsule":
-                    others = [seg_of(k)]
-                else:
-                    owner = chk.labels[k][1]
-                    if not env_caps.get(owner):
-                        return  # a solid without enclosing capsules: no bound
-                    others = []
-                    for c, (a, b, r) in enumerate(env_caps[owner]):
-                        key = ("env", owner, c)
-                        segs.setdefault(key, (0, a, b, r))
-                        others.append(key)
-                    self.soft[p] = True
-                for sk in others:
-                    self.pair_rows[p].append(rows.setdefault((si, sk), len(rows)))
-        except AttributeError:  # a geometry that is not a capsule where one was expected
-            return
-        keys = list(rows)
-        order = list(segs)
-        index = {k: u for u, k in enumerate(order)}
-        self.U_joint = np.array([segs[k][0] for k in order], int)
-        self.U_A = np.array([segs[k][1] for k in order], float).reshape(-1, 3)
-        self.U_B = np.array([segs[k][2] for k in order], float).reshape(-1, 3)
-        self.U1 = np.array([index[a] for a, _ in keys], int)
-        self.U2 = np.array([index[b] for _, b in keys], int)
-        self.R = np.array([segs[a][3] + segs[b][3] for a, b in keys], float)
-        self.H_pair = np.array([h[0] for h in H], int)
-        self.H_seg = np.array([index[h[1]] for h in H], int)
-        self.H_n = np.array([h[2] for h in H], float).reshape(-1, 3)
-        self.H_off = np.array([h[3] + segs[h[1]][3] for h in H], float)
-        self.H = H
-        self.bounded = np.array([bool(r) for r in self.pair_rows], bool)
-        self.bounded[[h[0] for h in H]] = True
-        flat = [(p, r) for p, rs in enumerate(self.pair_rows) for r in rs]
-        self.flat_pair = np.array([p for p, _ in flat], int)
-        self.flat_row = np.array([r for _, r in flat], int)
-        self.starts = np.flatnonzero(np.r_[True, np.diff(self.flat_pair) != 0]) if flat else np.zeros(0, int)
-        self.first_pair = self.flat_pair[self.starts] if flat else np.zeros(0, int)
-        rng = np.random.default_rng(11)
-        Q = cell.q_lower + rng.random((48, cell.q_lower.size)) * (cell.q_upper - cell.q_lower)
-        exact = np.array([chk.pair_distances(q) for q in Q])
-        lb = self.pairs(Q)
-        fin = np.isfinite(lb)
-        constant = ~self.bounded
-        self.ok = bool(np.all(lb[fin] <= exact[fin] + 1e-9) and np.all(np.ptp(exact[:, constant], axis=0) < 1e-12))
-
-    def _frames(self, Q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        fr = self.chain.frames(Q)  # batched numpy forward kinematics; frame 0 is the base
-        return fr.R, fr.t
-
-    def pairs(self, Q: np.ndarray) -> np.ndarray:
-        """(m, n_pairs) lower bounds of the pair distances (m); +inf for constant pairs."""
-        Q = np.atleast_2d(np.asarray(Q, float))
-        Rs, ts = self._frames(Q)
-        Rj, tj = Rs[:, self.U_joint], ts[:, self.U_joint]
-        EA = np.einsum("msij,sj->msi", Rj, self.U_A) + tj  # every segment's end points, (m, S, 3)
-        EB = np.einsum("msij,sj->msi", Rj, self.U_B) + tj
-        out = np.full((len(Q), self.n_pairs), np.inf)
-        if self.flat_row.size:
-            _, _, w1, w2 = self._closest(EA[:, self.U1], EB[:, self.U1], EA[:, self.U2], EB[:, self.U2])
-            d = np.linalg.norm(w2 - w1, axis=2) - self.R
-            out[:, self.first_pair] = np.minimum.reduceat(d[:, self.flat_row], self.starts, axis=1)
-            soft = out[:, self.soft]
-            out[:, self.soft] = np.where(soft > 0, soft, -np.inf)  # touching the enclosing capsules: no bound
-        if self.H_pair.size:
-            da = np.einsum("mhi,hi->mh", EA[:, self.H_seg], self.H_n)
-            db = np.einsum("mhi,hi->mh", EB[:, self.H_seg], self.H_n)
-            out[:, self.H_pair] = np.minimum(out[:, self.H_pair], np.minimum(da, db) - self.H_off)
-        return out
-
-    def __call__(self, Q: np.ndarray) -> np.ndarray:
-        """(m,) lower bound of the smallest pair distance at each configuration (m)."""
-        return self.pairs(Q).min(axis=1) - 1e-9
-
-
 @dataclass
 class MoveCheck:
     """Dense check of one joint-space move.
@@ -230,7 +97,7 @@ class TransitionChecker:
         step_rad: largest revolute joint step between samples (rad); at most 1° is the contract of the program check.
         step_m: largest prismatic joint step between samples (m).
         checker: an existing :class:`FeasibilityChecker` of the cell (built if None).
-        use_bound: let a verified cheap lower bound of the pair distances (:class:`_LowerBound`) clear the
+        use_bound: let a verified cheap lower bound of the pair distances (:class:`~pin_kpi_oed.program.move_bound.MoveBound`) clear the
             samples it proves clear; the others, the end poses and every sample that decides a result are
             checked exactly (Coal). The decisions and the smallest clearances are those of the exact check.
 
@@ -252,7 +119,7 @@ class TransitionChecker:
         self.n_evaluations = 0
         self._cache: dict[tuple[bytes, bytes, bool], MoveCheck] = {}
         self._clearances: dict[bytes, float] = {}
-        bound = _LowerBound(self.checker) if use_bound else None
+        bound = MoveBound(self.checker) if use_bound else None
         #: the cheap lower bound deciding the samples it clears (None: every sample checked exactly)
         self.bound = bound if bound is not None and bound.ok else None
 
@@ -488,11 +355,22 @@ class TransitionChecker:
             return None
         if self.check(qa, qb).clear:
             return []
+        rng = np.random.default_rng([int(seed) & 0xFFFFFFFF, *np.frombuffer(np.r_[qa, qb].tobytes(), np.uint32)])
+        path = self._rrt_connect(qa, qb, need, rng, self.n_evaluations + int(max_checks))
+        if path is None:
+            return None
+        pts = self._shortcut(path, self.n_evaluations + max(int(max_checks) // 2, 1))
+        pts[0], pts[-1] = qa, qb
+        if not all(self.check(u, v).clear for u, v in zip(pts[:-1], pts[1:])):
+            return None
+        return [p.copy() for p in pts[1:-1]]
+
+    def _rrt_connect(self, qa: np.ndarray, qb: np.ndarray, need: float, rng: np.random.Generator, stop_at: int
+                     ) -> list[np.ndarray] | None:
+        """The RRT-Connect search of :meth:`plan_route`: a path qa → qb (configurations), or None."""
         scale = self.steps
         lo, hi = self.cell.q_lower / scale, self.cell.q_upper / scale
         step = 0.2 * float(np.linalg.norm(hi - lo))
-        rng = np.random.default_rng([int(seed) & 0xFFFFFFFF, *np.frombuffer(np.r_[qa, qb].tobytes(), np.uint32)])
-        stop_at = self.n_evaluations + int(max_checks)
         trees = [([qa / scale], [-1]), ([qb / scale], [-1])]
 
         def extend(tree, target: np.ndarray) -> tuple[str, int]:
@@ -518,11 +396,9 @@ class TransitionChecker:
                 i = parents[i]
             return out
 
-        path = None
         a, b = 0, 1
         while self.n_evaluations < stop_at:
-            x = lo + rng.random(lo.size) * (hi - lo)
-            status, i = extend(trees[a], x)
+            status, i = extend(trees[a], lo + rng.random(lo.size) * (hi - lo))
             if status != "trapped":
                 target = trees[a][0][i]
                 while self.n_evaluations < stop_at:
@@ -530,19 +406,17 @@ class TransitionChecker:
                     if status2 == "reached":
                         ends = (branch(trees[a], i), branch(trees[b], j))
                         pa, pb = (ends if a == 0 else ends[::-1])
-                        path = pa[::-1] + pb[1:]
-                        break
+                        return pa[::-1] + pb[1:]
                     if status2 == "trapped":
                         break
-                if path is not None:
-                    break
             a, b = b, a
-        if path is None:
-            return None
+        return None
+
+    def _shortcut(self, path: list[np.ndarray], budget: int) -> np.ndarray:
+        """From each node, the farthest later node a clear move reaches (bisection), within ``budget``."""
         pts = [path[0]]
         i = 0
-        budget = self.n_evaluations + max(int(max_checks) // 2, 1)
-        while i < len(path) - 1:  # shortcut: from each node, the farthest later node reached (bisection)
+        while i < len(path) - 1:
             j, lo_j, hi_j = i + 1, i + 1, len(path) - 1
             while lo_j <= hi_j and self.n_evaluations < budget:
                 mid = (lo_j + hi_j + 1) // 2
@@ -552,8 +426,4 @@ class TransitionChecker:
                     hi_j = mid - 1
             pts.append(path[j])
             i = j
-        pts = np.array(pts)
-        pts[0], pts[-1] = qa, qb
-        if not all(self.check(u, v).clear for u, v in zip(pts[:-1], pts[1:])):
-            return None
-        return [p.copy() for p in pts[1:-1]]
+        return np.array(pts)
