@@ -21,7 +21,8 @@ import math
 import numpy as np
 
 
-from pin_kpi_oed.design.design_file import write_design
+from pin_kpi_oed.data.atomic import atomic_write_json
+from pin_kpi_oed.design.design_file import design_document, write_design
 from pin_kpi_oed.design.margins import DEFAULT_CLEARANCE_MARGIN_M, DEFAULT_INCIDENCE_MARGIN_DEG, with_margins
 from pin_kpi_oed.errors import InputError
 from pin_kpi_oed.oed.criteria import CRITERIA, check_names
@@ -74,6 +75,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="with --given: how many more poses until the predicted TCP sigma <= this (m), "
                         "answered greedily over the --pool candidates (else --pool-size random feasible poses) "
                         "and verified by recomputing C_s")
+    p.add_argument("--curve", default=None,
+                   help="with the discrepancy (kpi_gp or --model with a discrepancy): write the poses-needed figure "
+                        "(predicted TCP sigma at the working configurations vs number of poses, designed and random; "
+                        "PNG); the curve also goes to --json")
     p.set_defaults(func=run)
 
 
@@ -197,7 +202,11 @@ def run(args: argparse.Namespace) -> int:
     cell = with_margins(cell, *margins)  # the optimiser's cell; `true_cell` for the reported clearances
     pool_file, given_file, target = _pool_given_target(args)
     problem = _make_problem(args, cell, given_file, collision, quiet, true_cell)
-    if target is not None:  # before any work: "how many more" needs M⁻¹ of the measured poses
+    disc_on = problem.discrepancy is not None or "kpi_gp" in criteria
+    if target is not None and not disc_on and not given_file:
+        raise InputError(f"--target-sigma needs --given or a discrepancy: --model {getattr(args, 'model', None)} "
+                         f"holds no discrepancy block (write it with identify --model-out)")
+    if target is not None and not disc_on:  # before any work: "how many more" needs M⁻¹ of the measured poses
         problem.require_identified(f"--target-sigma: --given {given_file}")
     if not quiet:
         _print_header(cell, problem, m, seed, collision, starts)
@@ -218,12 +227,33 @@ def run(args: argparse.Namespace) -> int:
     ext_scores = extended_scores(problem, results, true_cell.q_work)
     _print_results(results, criteria, cert, m, pool_file, quiet, cell, true_cell, margins, true_checks, given_file,
                    ext_scores)
-    until = _poses_until(args, problem, cell, target, seed, checked) if target is not None else None
+    gp_scores = None
+    if problem.discrepancy is not None or "kpi_gp" in criteria:  # opt-in: the paper's output is unchanged without
+        from pin_kpi_oed.oed.discrepancy_kpi import NO_CERTIFICATE
+
+        gp_scores = discrepancy_scores(problem, results)
+        print(problem.discrepancy_prior().describe())
+        if given_file:
+            print(f"measured poses alone ({len(problem.Q_given)}): predicted TCP sigma with the discrepancy "
+                  f"{_sigma_given(problem) * 1e6:.3f} um; the table adds each design's poses to them")
+        print(discrepancy_table([r for r in results if r.criterion in criteria] or results,
+                                [g for r, g in zip(results, gp_scores) if r.criterion in criteria] or gp_scores))
+        if "kpi_gp" in criteria:
+            print(NO_CERTIFICATE)
+    curve = None
+    if disc_on and (target is not None or getattr(args, "curve", None)):
+        curve = _poses_needed(args, problem, cell, target, seed, m, checked)
+    until = _poses_until(args, problem, cell, target, seed, checked) if target is not None and not disc_on else None
     if getattr(args, "json", None):
-        write_design(args.json, true_cell, problem, results, m, seed, collision, margins=margins, given_file=given_file,
-                     pool_file=pool_file, until=until, true_checks=true_checks, certificate=cert,
-                     extended_scores=ext_scores, model_file=getattr(args, "model", None),
-                     prior=getattr(args, "prior", None))
+        doc = design_document(true_cell, problem, results, m, seed, collision, margins=margins, given_file=given_file,
+                              pool_file=pool_file, until=until, true_checks=true_checks, certificate=cert,
+                              extended_scores=ext_scores, model_file=getattr(args, "model", None),
+                              prior=getattr(args, "prior", None))
+        if gp_scores is not None:
+            _discrepancy_doc(doc, problem, gp_scores)
+        if curve is not None:
+            doc["poses_needed"] = curve.to_dict()
+        atomic_write_json(args.json, doc)
         if not quiet:
             print(f"wrote {args.json}")
     return 0
@@ -250,8 +280,13 @@ def _pool_given_target(args: argparse.Namespace) -> tuple[str | None, str | None
     target = getattr(args, "target_sigma", None)
     if getattr(args, "given_prior", None) and not given_file:
         raise InputError("--given-prior needs --given (the poses already measured)")
-    if target is not None and not given_file:
-        raise InputError("--target-sigma needs --given (the poses already measured)")
+    crits = str(getattr(args, "criteria", "") or "")
+    disc = getattr(args, "model", None) or "kpi_gp" in [c.strip() for c in crits.split(",")]
+    if target is not None and not given_file and not disc:
+        raise InputError("--target-sigma needs --given (the poses already measured) or the discrepancy "
+                         "(--criteria with kpi_gp, or --model with a discrepancy)")
+    if getattr(args, "curve", None) and not disc:
+        raise InputError("--curve needs the discrepancy (--criteria with kpi_gp, or --model with a discrepancy)")
     if target is not None and not (target > 0):
         raise InputError(f"--target-sigma: must be > 0 m, got {target}")
     return pool_file, given_file, target
@@ -331,6 +366,28 @@ def _poses_until(args: argparse.Namespace, problem, cell, target: float, seed: i
     return until
 
 
+def _poses_needed(args: argparse.Namespace, problem, cell, target: float | None, seed: int, m: int, checked=None):
+    """The poses-needed curve with the discrepancy (and the answer to ``--target-sigma``) over the user's feasible
+    ``--pool`` candidates or random feasible poses (at most 2,000, seeded); prints the answer, writes ``--curve``."""
+    from pin_kpi_oed.oed.discrepancy_kpi import poses_needed
+
+    if checked is not None:
+        Q_pool = checked[0]
+    else:
+        size = min(getattr(args, "pool_size", 5000) or 5000, 2000)
+        Q_pool, _ = problem.random_design(size, seed=np.random.SeedSequence([seed, 3]),
+                                          max_tries=max(cell.max_random_tries, 200 * size))
+    n_max = min(len(Q_pool), max(4 * m, 120))
+    curve = poses_needed(problem.gp_criterion(), Q_pool, n_max, target_sigma_m=target, seed=seed)
+    print(curve.summary() + f" ({len(Q_pool)} feasible candidates, {curve.time_s:.1f} s)")
+    if getattr(args, "curve", None):
+        from pin_kpi_oed.viz.poses_needed import plot_poses_needed
+
+        plot_poses_needed(curve.to_dict(), args.curve, title=f"{cell.name}: poses needed (discrepancy included)")
+        print(f"wrote {args.curve}")
+    return curve
+
+
 def _make_problem(args: argparse.Namespace, cell, given_file, collision: bool, quiet: bool, true_cell=None):
     """The design problem of ``design``: plain, on top of ``--given`` poses (checked in the true cell, with the
     ``--given-prior``), or over an extended model (``--model``)."""
@@ -349,19 +406,119 @@ def _make_problem(args: argparse.Namespace, cell, given_file, collision: bool, q
         problem = DesignProblem(cell, collision=collision,
                                 distances={"closed-form": "numpy"}.get(getattr(args, "distances", None), "geometry"))
     if getattr(args, "model", None):
-        if given_file:
-            raise InputError("--model (extended design) cannot be combined with --given yet")
+        if given_file:  # a measurement campaign: the discrepancy re-fitted on the measured batch, geometric design
+            from pin_kpi_oed.identification.model_file import load_model_file
+
+            cm = load_model_file(args.model)
+            _set_discrepancy(problem, cm, args.model)
+            _refit_discrepancy(problem, given_file, quiet)
+            return problem
         from pin_kpi_oed.identification.model_file import load_model_file
         from pin_kpi_oed.oed.extended import ExtendedModel
 
         prior = getattr(args, "prior", "model") or "model"
-        problem.extended = ExtendedModel.from_calibrated_model(load_model_file(args.model), model=problem.model,
+        cm = load_model_file(args.model)
+        _set_discrepancy(problem, cm, args.model)
+        problem.extended = ExtendedModel.from_calibrated_model(cm, model=problem.model,
                                                                base=problem.base,
                                                                prior=None if prior == "none" else prior)
         if not quiet:
             print(f"extended model from {args.model}: {problem.extended.nb} geometric + {problem.extended.k} effect "
                   f"parameters, prior: {prior}")
     return problem
+
+
+def _set_discrepancy(problem, cm, path: str) -> None:
+    """The discrepancy of ``--model`` (its kernel, per-axis scale and white level; the data it was fitted on are not
+    used: a new calibration re-fits the robot) as the problem's discrepancy.
+
+    Raises:
+        InputError: the model file's robot has other joints than the cell's.
+    """
+    from pin_kpi_oed.oed.discrepancy_kpi import DiscrepancyPrior
+
+    if cm.discrepancy is None:
+        return
+    if list(cm.robot.joint_names) != list(problem.cell.robot.joint_names):
+        raise InputError(f"--model {path}: its robot's joints {list(cm.robot.joint_names)} are not the cell's "
+                         f"{list(problem.cell.robot.joint_names)}")
+    problem.discrepancy = DiscrepancyPrior.from_discrepancy(
+        cm.discrepancy, f"--model {path}, fitted on {cm.discrepancy.n_rows} rows ({cm.discrepancy.kind})")
+
+
+def _refit_discrepancy(problem, given_file: str, quiet: bool) -> None:
+    """``--given measured.csv --model model.json``: re-fit the discrepancy on the measured batch (geometry and set-up
+    by least squares, then the Gaussian process on the residuals, mode ``on``) when the file holds measured positions
+    and enough rows; else keep the model file's discrepancy, saying why."""
+    from pin_kpi_oed.data.measurement_reader import read_measurements
+    from pin_kpi_oed.discrepancy import DiscrepancyOptions
+    from pin_kpi_oed.identification.identify import identify
+    from pin_kpi_oed.oed.discrepancy_kpi import DiscrepancyPrior
+
+    ms = read_measurements(given_file, joint_names=list(problem.cell.robot.joint_names), require_position=False)
+    pos = getattr(ms, "position_m", None)
+    n_min = DiscrepancyOptions().min_rows
+    why = None
+    if pos is None or not np.all(np.isfinite(pos)):
+        why = "it holds no measured positions (x, y, z)"
+    elif len(pos) < n_min:
+        why = f"its {len(pos)} rows are fewer than the {n_min} a Gaussian process needs"
+    if why is None:
+        fit = identify(problem.model, ms, discrepancy=DiscrepancyOptions(mode="on"))
+        if fit.discrepancy is not None:
+            problem.discrepancy = DiscrepancyPrior.from_discrepancy(
+                fit.discrepancy, f"re-fitted on --given {given_file} ({len(pos)} rows; geometry + set-up by least "
+                                 f"squares, then the Gaussian process on the residuals)")
+            if not quiet:
+                print(fit.discrepancy.decision)
+            return
+        why = "the fit returned no discrepancy"
+    if problem.discrepancy is None:
+        raise InputError(f"--given {given_file}: the discrepancy cannot be re-fitted ({why}) and --model holds none")
+    if not quiet:
+        print(f"--given {given_file}: discrepancy not re-fitted ({why}); the --model one is used")
+
+
+def discrepancy_scores(problem, results: list) -> list[dict]:
+    """Honest TCP scores of every design with the problem's discrepancy (universal-kriging C_s, base frame).
+
+    Returns:
+        Per design {"trace_cs_m2", "tcp_sigma_m" = sqrt(tr(C_s)/t)} (m², m); NaN where the design does not identify
+        the parameters.
+    """
+    from pin_kpi_oed.errors import IdentifiabilityError
+
+    crit = problem.gp_criterion()
+    t = problem.cell.q_work.shape[0]
+    out = []
+    for r in results:
+        try:
+            tr = float(crit.value(r.q_meas))
+        except IdentifiabilityError:
+            tr = float("nan")
+        out.append({"trace_cs_m2": tr, "tcp_sigma_m": math.sqrt(tr / t) if tr == tr else float("nan")})
+    return out
+
+
+def _sigma_given(problem) -> float:
+    """Predicted TCP σ (m) at the working configurations of the measured poses alone, discrepancy included."""
+    from pin_kpi_oed.errors import IdentifiabilityError
+
+    crit = problem.gp_criterion()
+    try:
+        return math.sqrt(crit.value(np.zeros((0, problem.n))) / problem.cell.q_work.shape[0])
+    except IdentifiabilityError:
+        return float("inf")
+
+
+def discrepancy_table(results: list, scores: list[dict]) -> str:
+    """The predicted TCP σ at the working configurations: the paper's (tracker noise only) beside the honest one
+    (discrepancy included), µm."""
+    head = f"{'criterion':<10}{'paper sigma um':>16}{'with discrepancy sigma um':>27}"
+    lines = [head, "-" * len(head)]
+    for r, sc in zip(results, scores):
+        lines.append(f"{r.criterion:<10}{r.tcp_sigma_m * 1e6:>16.3f}{sc['tcp_sigma_m'] * 1e6:>27.3f}")
+    return "\n".join(lines)
 
 
 def _check_given(cell, Q, path: str) -> None:
@@ -396,3 +553,18 @@ def _given_prior(path: str, problem) -> np.ndarray:
     if par.get("covariance") is None or not par.get("names"):
         raise InputError(f"--given-prior {path}: the model file holds no parameter covariance")
     return prior_information(problem, list(par["names"]), np.asarray(par["covariance"], float), f"--given-prior {path}")
+
+
+def _discrepancy_doc(doc: dict, problem, gp_scores: list[dict]) -> None:
+    """Add the discrepancy (source, S, white level, kernel) and every design's honest scores to the JSON (SI)."""
+    d = problem.discrepancy_prior()
+    doc["discrepancy"] = {"source": d.source, "scale_m": d.scale_m.tolist(), "noise": d.noise,
+                          "white_sigma_m": (d.scale_m * math.sqrt(d.noise)).tolist(),
+                          "delta_sigma_m": d.prior_sigma_m().tolist(),
+                          "kernel": None if d.kernel is None else d.kernel.to_dict(),
+                          "certificate": "none exists for kpi_gp",
+                          "note": "designs[i].discrepancy: universal-kriging tr(C_s) and TCP sigma at the working "
+                                  "configurations, discrepancy included (base frame); designs[i].trace_cs_m2 / "
+                                  "tcp_sigma_m: the paper's, tracker noise only"}
+    for dd, sc in zip(doc["designs"], gp_scores):
+        dd["discrepancy"] = sc

@@ -304,6 +304,25 @@ class DesignProblem:
 
     #: Optional :class:`~pin_kpi_oed.oed.extended.ExtendedModel`: design over geometry + effects with a prior.
     extended: Any = None
+    #: Optional :class:`~pin_kpi_oed.oed.discrepancy_kpi.DiscrepancyPrior` of the ``kpi_gp`` criterion and of the
+    #: honest TCP σ (None: ``kpi_gp`` uses :func:`~pin_kpi_oed.oed.discrepancy_kpi.default_discrepancy`).
+    discrepancy: Any = None
+
+    def discrepancy_prior(self) -> Any:
+        """The discrepancy of this problem (:attr:`discrepancy`, else the documented default)."""
+        from pin_kpi_oed.oed.discrepancy_kpi import default_discrepancy
+
+        if self.discrepancy is None:
+            self.discrepancy = default_discrepancy(self.n)
+        return self.discrepancy
+
+    def gp_criterion(self) -> Any:
+        """The discrepancy-aware KPI criterion (``kpi_gp``) of this problem's geometry (identifiable geometry +
+        set-up, the layout's prior) at the working configurations."""
+        from pin_kpi_oed.oed.discrepancy_kpi import DiscrepancyDesignCriterion
+
+        return DiscrepancyDesignCriterion(self.model, self.base, self.discrepancy_prior(), self.cell.q_work,
+                                          Q_given=getattr(self, "Q_given", None), p=self.p0)
 
     def criterion(self, name: str) -> DesignCriterion:
         """The registered design criterion ``name`` on this problem (on :attr:`extended` when set).
@@ -311,6 +330,8 @@ class DesignProblem:
         Raises:
             InputError: unknown name.
         """
+        if getattr(get_criterion(name), "needs_configurations", False):
+            return self.gp_criterion()
         if self.extended is not None:
             from pin_kpi_oed.oed.extended import ExtendedDesignCriterion
 
@@ -664,7 +685,9 @@ def run_designs(cell: Cell, criteria: list[str], m: int | None = None, seed: int
         if c == "random":
             continue
         Q0 = rnd.q_meas
-        if pool is not None and problem.extended is not None:
+        if pool is not None and getattr(get_criterion(c), "needs_configurations", False):
+            Q0 = pool[0][problem.criterion(c).select(pool[0], m).indices]
+        elif pool is not None and problem.extended is not None:
             from pin_kpi_oed.oed.extended import pool_start
 
             Q0 = pool[0][pool_start(problem.extended, pool[0], c, m, problem.cell.q_work, seed)]

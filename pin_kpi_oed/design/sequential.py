@@ -144,6 +144,10 @@ class SequentialProblem(DesignProblem):
 
     def criterion(self, name: str) -> GivenDesignCriterion:
         """The registered criterion ``name`` with the measured poses' information."""
+        from pin_kpi_oed.oed.criteria import get_criterion
+
+        if getattr(get_criterion(name), "needs_configurations", False):
+            return self.gp_criterion()
         return GivenDesignCriterion(self.model, self.base, name, self.E, F_given=self.F_given)
 
     def identifies(self) -> bool:

@@ -247,6 +247,15 @@ def design_from_pool(problem: DesignProblem, Q_candidates: np.ndarray, criteria:
     for c in criteria:
         if c == "random":
             continue
+        if getattr(get_criterion(c), "needs_configurations", False):  # kpi_gp: its own exchange, no certificate
+            gsel = problem.criterion(c).select(Q, m)
+            Qs = Q[np.sort(gsel.indices)]
+            out.append(problem.result(c, Qs, gsel.value, time_s=gsel.time_s, nit=gsel.exchanges, status="selected",
+                                      solver_status="pool", samples=len(Q),
+                                      message=f"greedy + exchange ({gsel.exchanges} swaps); no certificate"))
+            if timings is not None:
+                timings[f"select_{c}_s"] = gsel.time_s
+            continue
         K = get_criterion(c).pool_form(problem.E, problem.base.size)
         t0, c0 = time.perf_counter(), time.process_time()
         sel = select(Fp, m, K, seed=seed, fixed_info=M0)

@@ -79,6 +79,8 @@ class Criterion:
     is_ratio: ClassVar[bool] = False
     needs_kpi: ClassVar[bool] = False
     has_pool_form: ClassVar[bool] = False
+    #: a function of the configurations, not of F alone (``kpi_gp``): evaluated through the design problem
+    needs_configurations: ClassVar[bool] = False
 
     def value_and_grad_F(self, F: np.ndarray, E: np.ndarray | None = None,
                          prior_sigma: np.ndarray | None = None) -> tuple[float, np.ndarray]:
@@ -293,6 +295,25 @@ class O5(SingularValueCriterion):
         return np.log(s), -1.0 / (mu ** 2 * s)
 
 
+# ---------------------------------------------------------------------- a criterion of the configurations
+class KpiDiscrepancy(Criterion):
+    """A on the universal-kriging C_s: tr of the TCP error covariance with the model discrepancy (m²).
+
+    A function of the configurations (the discrepancy kernel couples the poses), not of F alone: the design
+    evaluates it through :class:`~pin_kpi_oed.oed.discrepancy_kpi.DiscrepancyDesignCriterion`
+    (``DesignProblem.criterion('kpi_gp')``); :meth:`value_and_grad_F` refuses. Pool selection:
+    :func:`~pin_kpi_oed.oed.discrepancy_kpi.select_pool_gp` (its own exchange; no certificate exists).
+    """
+
+    name, label, unit = "kpi_gp", "A on C_s with the model discrepancy (universal kriging, m^2)", "m^2"
+    is_ratio, needs_kpi, has_pool_form = True, True, False
+    needs_configurations = True
+
+    def value_and_grad_F(self, F, E=None, prior_sigma=None):
+        raise InputError("the kpi_gp criterion needs the configurations (the discrepancy kernel couples the "
+                         "poses): evaluate it through the design problem (DesignProblem.criterion('kpi_gp'))")
+
+
 # ---------------------------------------------------------------------- registry
 #: The registry: criterion name -> instance, in registration order (the order of ``evaluate``'s output).
 CRITERIA: dict[str, Criterion] = {}
@@ -353,7 +374,7 @@ def check_names(names: Iterable[str]) -> list[str]:
     return names
 
 
-for _cls in (KpiTrace, ParamTrace, DOptimality, EOptimality, ConditionNumber, O1, O2, O3, O4, O5):
+for _cls in (KpiTrace, ParamTrace, DOptimality, EOptimality, ConditionNumber, O1, O2, O3, O4, O5, KpiDiscrepancy):
     register(_cls)
 
 
@@ -417,6 +438,8 @@ def evaluate_all(model: TrackerModel, base: np.ndarray, Q: np.ndarray, E: np.nda
     prior = prior_of(model, base)
     out = {}
     for name, crit in CRITERIA.items():
+        if getattr(crit, "needs_configurations", False):
+            continue  # a function of the configurations (kpi_gp): scored by the design problem
         if crit.needs_kpi and E is None:
             out[name] = float("nan")
             continue
