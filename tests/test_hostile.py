@@ -169,3 +169,138 @@ def test_oserror_on_output_is_one_line(inputs, tmp_path, monkeypatch):
     monkeypatch.setattr(atomic, "atomic_write_bytes", full)
     rc, out, err = _run("simulate", "--robot", "kr15", "--out", tmp_path / "x.csv")
     assert rc == 2 and "No space left on device" in err and len(err.strip().splitlines()) == 1
+
+
+# --------------------------------------------------------------------------- issue 24
+def test_equivalents_are_exact_turns_never_clipped():
+    """A joint beyond its limit is never moved onto it: q itself first, the others exactly q + 2πk."""
+    from pin_kpi_oed.program.transitions import equivalents
+
+    lo, hi = np.radians([-180.0, -130.0]), np.radians([180.0, 130.0])
+    q = np.array([3.0, 2.299])  # the second joint beyond 130°
+    E = equivalents(q, lo, hi, np.array([True, True]))
+    assert np.array_equal(E[0], q)
+    k = (E - q) / (2 * np.pi)
+    assert np.allclose(k, np.round(k), atol=1e-12)
+
+
+def test_export_force_writes_the_design_value_beyond_a_limit(inputs, tmp_path):
+    """--force writes a pose beyond a joint limit as designed (no clipping); without it nothing is written."""
+    from pin_kpi_oed.program.export import parse_program
+
+    d = json.loads((inputs / "d_a5.json").read_text())
+    rc, out, err = _run("export", inputs / "d_a5.json", "--format", "csv", "--out", tmp_path / "p.csv")
+    assert rc == 2 and "outside its limits" in err and not (tmp_path / "p.csv").exists()
+    rc, out, err = _run("export", inputs / "d_a5.json", "--format", "csv", "--out", tmp_path / "p.csv", "--force")
+    assert rc == 0 and "warning (--force)" in out
+    Q, poses = parse_program("csv", {".csv": (tmp_path / "p.csv").read_text()}, np.ones(6, bool))
+    rows = [r for r in (tmp_path / "p.csv").read_text().splitlines() if r and not r.startswith("#")][1:]
+    meas = [q for q, r in zip(Q, rows) if r.split(",")[1] == "measure"]
+    qd = np.asarray(d["q_meas"], float)
+    for q, p in zip(meas, poses):
+        dq = (q - qd[p] + np.pi) % (2 * np.pi) - np.pi
+        assert np.max(np.abs(dq)) < 1e-9
+    assert any(abs(q[4] - 2.299) < 1e-9 for q in meas)
+
+
+def test_route_planner_is_seeded_per_call():
+    """The same move planned twice (after other plans) gives the same route: the seed is per call."""
+    from pin_kpi_oed.cell.cell import load_cell
+    from pin_kpi_oed.program.transitions import TransitionChecker
+
+    tc = TransitionChecker(load_cell("kr15"), 0.01)
+    pool = tc.safe_pool(30, seed=2)
+    pairs = [(a, b) for a in range(len(pool)) for b in range(a + 1, len(pool)) if not tc.check(pool[a], pool[b]).clear]
+    assert pairs
+    a, b = pairs[0]
+    r1 = tc.plan_route(pool[a], pool[b], seed=5, max_checks=4000)
+    tc.plan_route(pool[pairs[-1][0]], pool[pairs[-1][1]], seed=5, max_checks=2000)  # something in between
+    r2 = TransitionChecker(load_cell("kr15"), 0.01).plan_route(pool[a], pool[b], seed=5, max_checks=4000)
+    assert (r1 is None) == (r2 is None)
+    if r1 is not None:
+        assert len(r1) == len(r2) and all(np.array_equal(x, y) for x, y in zip(r1, r2))
+        pts = [pool[a], *r1, pool[b]]
+        assert all(tc.check(x, y).clear for x, y in zip(pts[:-1], pts[1:]))
+
+
+def test_urscript_moves_at_the_speed_of_the_predicted_time():
+    from pin_kpi_oed.program.export import ProgramInfo, write_urscript
+    from pin_kpi_oed.program.timing import move_time
+
+    speeds = np.array([2.0, 2.0, 3.0, 3.0, 3.0, 3.0])
+    Q = np.array([[0.0] * 6, [1.0, 0.5, 0.0, 0.0, 0.0, 0.0], [1.0, 0.5, 2.4, 0.0, 0.0, 0.1]])
+    info = ProgramInfo("c", "d", "ur10", [f"j{k}" for k in range(6)], np.ones(6, bool), speeds=speeds)
+    text = write_urscript(Q, ["home", "measure", "measure"], [-1, 0, 1], info)[".script"]
+    vs = [float(x) for x in __import__("re").findall(r"v=([0-9.eE+-]+)\)", text)]
+    for k in (1, 2):
+        t = np.max(np.abs(Q[k] - Q[k - 1])) / vs[k]
+        assert t == pytest.approx(move_time(Q[k - 1], Q[k], speeds), rel=1e-5)
+    assert "v per move" in text
+
+
+def test_register_says_it_replaces_a_station(inputs, tmp_path):
+    import shutil
+
+    shutil.copy(inputs / "reg20.csv", tmp_path / "tr.csv")  # the model's station is named 'tr'
+    rc, out, err = _run("register", "--model", inputs / "m.json", "--data", tmp_path / "tr.csv", "--model-out",
+                        tmp_path / "o.json")
+    assert rc == 0 and "station 'tr' replaced" in out, err
+
+
+def test_outliers_with_unknown_noise_use_the_robust_loss(tmp_path):
+    """10 % of the rows 5 mm off, no sigma columns: soft_l1 is used; a plain fit is never 'good'."""
+    assert _run("simulate", "--robot", "kr15", "--n", "150", "--n-test", "60", "--seed", "7", "--out",
+                tmp_path / "tr.csv", "--test-out", tmp_path / "te.csv")[0] == 0
+    lines = (tmp_path / "tr.csv").read_text().splitlines()
+    head = lines[0].split(",")
+    keep = [i for i, h in enumerate(head) if not h.startswith("sigma")]
+    xi = [head[i] for i in keep].index("x")
+    rows = [[r.split(",")[i] for i in keep] for r in lines[1:]]
+    for k in range(0, len(rows), 10):
+        rows[k][xi] = repr(float(rows[k][xi]) + 0.005)
+    (tmp_path / "o.csv").write_text("\n".join([",".join(head[i] for i in keep)] + [",".join(r) for r in rows]) + "\n")
+    rc, out, err = _run("identify", "--robot", "kr15", "--data", tmp_path / "o.csv", "--validate", tmp_path / "te.csv",
+                        "--json", tmp_path / "r.json")
+    assert rc == 0 and "robust loss soft_l1" in out
+    doc = json.loads((tmp_path / "r.json").read_text())
+    assert doc["result"]["loss"] == "soft_l1" and doc["validation"]["after"]["rms_m"] < 0.1e-3
+    rc, out, err = _run("identify", "--robot", "kr15", "--data", tmp_path / "o.csv", "--loss", "linear")
+    assert "fit quality: good" not in out and "SUSPECT" in out
+
+
+def test_new_checks_are_fast(inputs):
+    """The checks added for issue 24 cost well under 50 ms per command."""
+    from pin_kpi_oed.identification.quality import assess_registration
+    from pin_kpi_oed.model.robot import load_robot
+    from pin_kpi_oed.validation.robot_checks import check_points_against_joints
+    from pin_kpi_oed.validation.schema import validate_model_dict
+
+    d = json.loads((inputs / "m.json").read_text())
+    validate_model_dict(d, "m.json")  # the validator is built once
+    robot = load_robot("kr15")
+    Q = robot.random_q(np.random.default_rng(0), 2000)
+    P = np.array([robot.oMtool(q).translation for q in Q])
+    t0 = time.perf_counter()
+    validate_model_dict(d, "m.json")
+    check_points_against_joints(robot, Q, P, "a", "b")
+    assess_registration("s", P, P, np.full(2000, 1e-5), np.full(3, 1e-5), 9)
+    assert time.perf_counter() - t0 < 0.05 * 2  # two commands' worth on a loaded machine
+
+
+def test_move_check_bound_gives_the_exact_decisions(inputs):
+    """The lower bound only skips samples it proves clear: decisions and smallest clearances are the exact ones."""
+    from pin_kpi_oed.design.design_file import load_design
+    from pin_kpi_oed.program.transitions import TransitionChecker
+
+    df = load_design(inputs / "d.json")
+    Q = np.vstack([df.cell.q_work[0], df.designs[0].q_meas, df.cell.q_work[0]])
+    fast, exact = TransitionChecker(df.cell, 0.01), TransitionChecker(df.cell, 0.01, use_bound=False)
+    assert fast.bound is not None and fast.bound.ok
+    for a, b in zip(Q[:-1], Q[1:]):
+        assert fast.check(a, b).clear == exact.check(a, b).clear
+        assert fast.check(a, b, stop_early=False).min_clearance_m == pytest.approx(
+            exact.check(a, b, stop_early=False).min_clearance_m, abs=1e-12)
+    X = df.cell.robot.random_q(np.random.default_rng(1), 200)
+    lb = fast.bound.pairs(X)
+    E = np.array([fast.checker.pair_distances(q) for q in X])
+    assert np.all(lb[np.isfinite(lb)] <= E[np.isfinite(lb)] + 1e-9)

@@ -17,6 +17,8 @@ from __future__ import annotations
 
 import argparse
 
+import numpy as np
+
 from pin_kpi_oed.cli.util import add_table_options, parse_floats, table_options
 
 __all__ = ["register", "run"]
@@ -54,15 +56,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Handler of ``pin-kpi-oed compensate``."""
-    from pin_kpi_oed.data.atomic import atomic_write_json, check_writable
+    from pin_kpi_oed.data.atomic import atomic_write_json
     from pin_kpi_oed.data.targets import read_targets
+    from pin_kpi_oed.errors import InfeasibleError
     from pin_kpi_oed.identification.compensate import (CompensationOptions, compensate, compensate_program,
                                                        write_compensation)
     from pin_kpi_oed.identification.model_file import load_model_file
 
-    for f in (args.out, args.json):
-        if f:
-            check_writable(f)
     model = load_model_file(args.model)
     robot = model.robot
     kw = table_options(args)
@@ -74,6 +74,14 @@ def run(args: argparse.Namespace) -> int:
     else:
         ts = read_targets(args.targets, robot.joint_names, revolute=robot.is_revolute, **kw)
         res = compensate(model, ts, opt)
+    if res.target_status and "ok" not in res.target_status:  # nothing useful: exit 2, nothing written
+        n_un = res.target_status.count("unreachable")
+        hint = (f"; the TCP {', '.join(f'{x:g}' for x in tcp)} m is {float(np.linalg.norm(tcp)):.3g} m from the tool "
+                "frame" if tcp is not None else "")
+        raise InfeasibleError(f"{args.program or args.targets}: none of the {len(res.target_status)} targets can be "
+                              f"compensated ({n_un} unreachable, "
+                              f"{res.target_status.count('near_singular')} near a singularity) with {args.model}"
+                              f"{hint}; check the frame (--frame {args.frame}) and units (m); nothing written")
     write_compensation(args.out, res)
     if args.json:
         atomic_write_json(args.json, {**res.to_dict(), "model": args.model,

@@ -395,10 +395,13 @@ def _fit(args: argparse.Namespace, model: Any, train: Any, opts: Any, effects: l
 
     result = identify(model, train, opts, effects=effects)
     quality = assess_fit(result, nominal_reflector_m=reflector, reflector_estimated=estimated)
-    if args.loss is None and quality.large_outliers:
+    unknown_noise_outliers = not quality.noise_known and quality.n_outliers > 0
+    if args.loss is None and (quality.large_outliers or unknown_noise_outliers):
         if not args.quiet:
-            print(f"{quality.large_outliers} outlier(s) far beyond the noise: refitted with the robust loss soft_l1 "
-                  "(give --loss linear to keep the plain fit)")
+            why = (f"{quality.large_outliers} outlier(s) far beyond the noise" if quality.large_outliers else
+                   f"{quality.n_outliers} outlier(s) flagged and the noise level unknown (no sigma columns, no "
+                   "--sigma)")
+            print(f"{why}: refitted with the robust loss soft_l1 (give --loss linear to keep the plain fit)")
         opts = replace(opts, loss="soft_l1")
         result = identify(model, train, opts, effects=effects)
     return result, opts

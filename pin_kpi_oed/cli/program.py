@@ -46,32 +46,53 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    "(moves, via poses, the beam at each measurement point)")
     p.add_argument("--force", action="store_true", help="write even if a move still collides")
     p.add_argument("--quiet", action="store_true", help="print nothing")
-    p.set_defaults(func=run_export)
+    p.set_defaults(func=run_export, output_files=_output_files)
 
 
 def _targets(fmt: str, out: str) -> dict[str, Path]:
-    """Files a format writes, by suffix (checked writable before any work)."""
-    from pin_kpi_oed.data.atomic import check_writable
-    from pin_kpi_oed.errors import InputError
-    from pin_kpi_oed.program.export import FORMATS, SUFFIX
+    """Files a format writes, by suffix (checked with the inputs by the option checks before any work)."""
+    from pin_kpi_oed.program.export import program_files
 
-    if fmt not in FORMATS:
-        raise InputError(f"--format: unknown format '{fmt}' (known: {', '.join(FORMATS)})")
-    path = Path(out)
-    files = {SUFFIX[fmt]: path}
-    if fmt == "krl":
-        files = {".src": path if path.suffix.lower() == ".src" else path.with_name(path.name + ".src")}
-        files[".dat"] = files[".src"].with_suffix(".dat")
-    for f in files.values():
-        check_writable(f)
-    return files
+    return program_files(fmt, out)
+
+
+def _output_files(args: argparse.Namespace) -> list[tuple[str, str]]:
+    """(option, path) of every file ``--out`` writes (KRL: the .src and the .dat beside it), for the
+    output-path check before any work (:func:`pin_kpi_oed.validation.options.check_args`)."""
+    files = _targets(str(args.format).lower(), args.out)
+    return [("--out" if f == Path(args.out) else f"--out ({suffix} beside it)", str(f)) for suffix, f in files.items()]
+
+
+def _refusals(df, Q: np.ndarray, rep, design: str) -> list[str]:
+    """What makes the design unsafe to run as is: working configurations in collision, poses in collision,
+    poses beyond a joint limit with no 2π-equivalent inside it (loading a design never widens what is allowed)."""
+    from pin_kpi_oed.program.transitions import equivalents
+
+    cell, rob = df.cell, df.robot
+    out = list(df.work_collisions)
+    rev = np.asarray(rob.is_revolute, bool)
+    for i, q in enumerate(Q):
+        reps = equivalents(q, cell.q_lower, cell.q_upper, rev)
+        if not np.any(np.all((reps >= cell.q_lower - 1e-9) & (reps <= cell.q_upper + 1e-9), axis=1)):
+            j = int(np.argmax(np.maximum(cell.q_lower - q, q - cell.q_upper)))
+            lo, hi = cell.q_lower[j], cell.q_upper[j]
+            unit = (lambda x: f"{x:.4g} rad ({np.degrees(x):.1f}°)") if rev[j] else (lambda x: f"{x:.4g} m")
+            out.append(f"design pose {i}: {rob.joint_names[j]} = {unit(q[j])} is outside its limits "
+                       f"[{unit(lo)}, {unit(hi)}]")
+    bad = np.flatnonzero(~rep.collision_free)
+    for i in bad[:3]:
+        out.append(f"design pose {i}: collides ({rep.worst[i]} at {rep.clearance_m[i] * 1e3:.1f} mm)")
+    if bad.size > 3:
+        out.append(f"{bad.size - 3} more colliding pose(s)")
+    return out
 
 
 def run_export(args: argparse.Namespace) -> int:
     """Handler of ``pin-kpi-oed export`` (returns the exit code).
 
     Raises:
-        PinKpiOedError: unknown format, unwritable output, bad design file, a move that still collides.
+        PinKpiOedError: unknown format, unwritable output, bad design file, a working configuration or a
+            pose in collision or beyond a joint limit, a move that still collides (unless ``--force``).
     """
     from pin_kpi_oed.cell.feasibility import FeasibilityChecker
     from pin_kpi_oed.data.atomic import atomic_write_json, atomic_write_text
@@ -82,30 +103,37 @@ def run_export(args: argparse.Namespace) -> int:
 
     fmt = str(args.format).lower()
     files = _targets(fmt, args.out)
-    if getattr(args, "html", None):
-        from pin_kpi_oed.data.atomic import check_writable
-
-        check_writable(args.html)
-    if args.dwell < 0:
-        raise InputError(f"--dwell: must be >= 0 s, got {args.dwell}")
+    if not (np.isfinite(args.dwell) and args.dwell >= 0):
+        raise InputError(f"--dwell: must be a finite number >= 0 s, got {args.dwell}")
     df = load_design(args.design)
     name = args.design_name or df.raw.get("q_meas_criterion") or df.designs[-1].criterion
     entry = df.design(name)
+    force = bool(getattr(args, "force", False))
+    quiet = bool(getattr(args, "quiet", False))
+    rep = FeasibilityChecker(df.cell).check(entry.q_meas)
+    problems = _refusals(df, entry.q_meas, rep, args.design)
+    if problems and not force:
+        raise InfeasibleError(f"{args.design}: {'; '.join(problems)}; nothing written (--force writes it anyway)")
     # poses sit at the design's margin (an active constraint): moves leaving them keep half of it
     margin = args.margin if args.margin is not None else 0.5 * float(df.raw.get("clearance_margin_m", 0.0) or 0.0)
-    if margin < 0:
-        raise InputError(f"--margin: must be >= 0 m, got {margin}")
+    if not (np.isfinite(margin) and margin >= 0):
+        raise InputError(f"--margin: must be a finite number >= 0 m, got {margin}")
+    if args.margin is not None and rep.collision_free.all() and margin > float(rep.clearance_m.min()) + 1e-9:
+        raise InputError(f"--margin {margin:g} m: more than the design poses keep (smallest pose clearance "
+                         f"{rep.clearance_m.min() * 1e3:.1f} mm): no move leaving that pose can keep it; give at "
+                         f"most {rep.clearance_m.min():.4g} m")
     prog = plan_program(df.cell, entry.q_meas, ProgramOptions(margin_m=margin, speed_override=args.speed_override,
                                                                seed=args.seed))
-    rep = FeasibilityChecker(df.cell).check(entry.q_meas)
-    quiet = bool(getattr(args, "quiet", False))
+    _check_same_poses(prog, entry.q_meas, np.asarray(df.robot.is_revolute, bool), args.design)
     if not quiet:
         print(prog.summary())
         print(f"poses (independent check, true values): clearance {rep.clearance_m.min() * 1e3:.1f} .. "
               f"{rep.clearance_m.max() * 1e3:.1f} mm, incidence {rep.incidence_deg.min():.1f} .. "
               f"{rep.incidence_deg.max():.1f} deg (limit {df.cell.incidence_max_deg:g}); "
               f"{int(np.sum(~rep.feasible))} infeasible pose(s)")
-    if not prog.success and not getattr(args, "force", False):
+        for p in problems:
+            print(f"warning (--force): {p}")
+    if not prog.success and not force:
         raise InfeasibleError(f"{args.design}: {prog.message}; nothing written (--force writes it anyway)")
     path = prog.path
     texts = write_program(fmt, path, [w.kind for w in prog.waypoints], [w.pose for w in prog.waypoints],
@@ -113,19 +141,38 @@ def run_export(args: argparse.Namespace) -> int:
                                       robot=df.robot.name, joint_names=list(df.robot.joint_names),
                                       revolute=np.asarray(df.robot.is_revolute, bool),
                                       cycle_time_s=prog.cycle_time_s, dwell_s=args.dwell,
-                                      name=files[next(iter(files))].stem))
+                                      name=files[next(iter(files))].stem, speeds=prog.speeds))
     for suffix in sorted(texts, key=lambda s: s != ".dat"):  # KRL: the data list first, the program last
         atomic_write_text(files[suffix], texts[suffix])
     if getattr(args, "json", None):
         atomic_write_json(args.json, {**prog.to_dict(), "design": str(args.design), "criterion": name,
                                       "pose_clearance_m": rep.clearance_m, "pose_incidence_deg": rep.incidence_deg,
-                                      "incidence_max_deg": df.cell.incidence_max_deg})
+                                      "incidence_max_deg": df.cell.incidence_max_deg,
+                                      "forced_problems": problems if force else []})
     if getattr(args, "html", None):
         _write_animation(args.design, name, prog, args.html)
     if not quiet:
         print("wrote " + ", ".join(str(files[s]) for s in texts) + (f", {args.html}" if getattr(args, "html", None)
                                                                     else ""))
     return 0
+
+
+def _check_same_poses(prog, Q: np.ndarray, revolute: np.ndarray, design: str) -> None:
+    """Every measurement point of the program is its design pose, up to whole turns of revolute joints.
+
+    Raises:
+        SolverError: a measurement point that is another pose (a bug, never written).
+    """
+    from pin_kpi_oed.errors import SolverError
+
+    for w in prog.waypoints:
+        if w.kind != "measure":
+            continue
+        d = np.asarray(w.q, float) - Q[w.pose]
+        d = np.where(revolute, (d + np.pi) % (2 * np.pi) - np.pi, d)
+        if np.max(np.abs(d)) > 1e-9:
+            raise SolverError(f"{design}: program point of design pose {w.pose} differs from the design by "
+                              f"{np.max(np.abs(d)):.3g} (not a whole turn); nothing written")
 
 
 def _write_animation(design: str, name: str, prog, html: str) -> None:

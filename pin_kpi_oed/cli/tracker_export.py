@@ -35,18 +35,28 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    """Handler of ``pin-kpi-oed import-tracker``."""
-    from pin_kpi_oed.data.atomic import check_writable
-    from pin_kpi_oed.data.measurements import write_measurements
-    from pin_kpi_oed.data.tracker_export import import_tracker_export
-    from pin_kpi_oed.model.robot import load_robot
+    """Handler of ``pin-kpi-oed import-tracker``.
 
-    check_writable(args.out)
+    The joint log is checked against the joint limits, and the points against the joint values: their
+    spreads must agree in scale (a metre file read as mm, a joint log in rad read as degrees are refused,
+    naming the unit that fits); the units assumed are printed.
+    """
+    from pin_kpi_oed.data.measurements import write_measurements
+    from pin_kpi_oed.data.table import ANGLE_UNITS
+    from pin_kpi_oed.data.tracker_export import import_tracker_export, read_point_export
+    from pin_kpi_oed.model.robot import load_robot
+    from pin_kpi_oed.validation.robot_checks import check_points_against_joints
+
     robot = load_robot(args.robot, args.tool)
     ms, names = import_tracker_export(args.export, args.joints, robot.joint_names, joint_units=robot.joint_units,
                                       angle_unit=args.angle_unit, units=args.units, columns=args.columns)
-    robot.check_q(ms.q, args.joints)
+    exp = read_point_export(args.export, units=args.units, columns=args.columns, strict=False)
+    robot.check_units(ms.q, f"{args.joints} ({args.angle_unit})", first_row=1)
+    robot.check_q(ms.q, f"{args.joints} ({args.angle_unit})")
+    check_points_against_joints(robot, ms.q, ms.position_m, f"{args.export}", f"{args.joints}", exp.units, args.angle_unit,
+                                ANGLE_UNITS[args.angle_unit])
     write_measurements(ms, args.out)
     if not args.quiet:
-        print(f"joined {len(names)} points of {args.export} with {args.joints} -> {args.out} (m, rad, s)")
+        print(f"joined {len(names)} points of {args.export} (lengths in {exp.units}: {exp.units_from}) with "
+              f"{args.joints} (joint angles in {args.angle_unit}) -> {args.out} (m, rad, s)")
     return 0

@@ -39,6 +39,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="label of the registered station (default: the data's 'station' column, else the file name)")
     r.add_argument("--hold-reflector", action="store_true", help="keep the model's reflector offset")
     r.add_argument("--json", default=None, help="write the registration result (set-up, rows, RMS) here")
+    r.add_argument("--accept-poor-fit", dest="accept_poor_fit", action="store_true",
+                   help="write the model even when the registration is poor (too few rows, residuals far above "
+                        "the noise, a mirrored frame)")
     r.add_argument("--quiet", action="store_true", help="print nothing")
     add_table_options(r)
     r.set_defaults(func=run_register)
@@ -60,41 +63,75 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def run_register(args: argparse.Namespace) -> int:
-    """Handler of ``pin-kpi-oed register``."""
-    from pin_kpi_oed.data.atomic import atomic_write_json, check_writable
+    """Handler of ``pin-kpi-oed register``: the set-up re-fitted, gated like ``identify`` (enough rows,
+    residuals near the noise, a proper frame; the points' scale against the joint values before the fit)."""
+    from pin_kpi_oed.data.atomic import atomic_write_json
     from pin_kpi_oed.data.measurements import read_measurements
+    from pin_kpi_oed.errors import InputError
     from pin_kpi_oed.identification.model_file import load_model_file
     from pin_kpi_oed.identification.transfer import register_setup
+    from pin_kpi_oed.validation.robot_checks import check_points_against_joints
 
-    for f in (args.model_out, args.json):
-        if f:
-            check_writable(f)
     model = load_model_file(args.model)
     data = read_measurements(args.data, joint_names=model.robot.joint_names, reach_m=model.robot.reach(),
                              **table_options(args, model.robot))
+    check_points_against_joints(model.robot, data.q, data.position_m, args.data, args.data)
+    existing = dict(model.setups)
     res = register_setup(model, data, station=args.station, hold_reflector=args.hold_reflector)
+    gates = _registration_gates(res, data, model, args.hold_reflector)
+    replaced = [lab for lab in res.stations if lab in existing]
     model_dict = res.model.to_dict()
-    out = {**res.to_dict(), "model": args.model, "data": args.data} if args.json else None
+    out = ({**res.to_dict(), "model": args.model, "data": args.data, "quality": [g.to_dict() for g in gates],
+            "replaced_stations": replaced} if args.json else None)
+    poor = [g for g in gates if g.poor]
+    if poor and not args.accept_poor_fit:
+        if out is not None:
+            atomic_write_json(args.json, out)
+        raise InputError(f"{args.data}: {poor[0].line()}; model not written (--accept-poor-fit writes it anyway)")
     atomic_write_json(args.model_out, model_dict)
     if out is not None:
         atomic_write_json(args.json, out)
     if not args.quiet:
         print(res.summary())
+        for g in gates:
+            print(g.line())
+        for lab in replaced:
+            old = existing[lab]
+            print(f"station '{lab}' replaced: it was fitted by {old.fitted_by} on {old.n_rows} rows of "
+                  f"{old.source or 'unknown data'}; the new set-up is in {args.model_out} (give --station NAME to "
+                  "keep both)")
         print("wrote " + ", ".join(f for f in (args.model_out, args.json) if f))
     return 0
 
 
+def _registration_gates(res, data, model, hold_reflector: bool) -> list:
+    """The registration gate of every station registered (:func:`~pin_kpi_oed.identification.quality.assess_registration`)."""
+    from pin_kpi_oed.identification.quality import assess_registration
+
+    ref = model.default_station if model.default_station in model.setups else next(iter(model.setups))
+    gates = []
+    for lab in res.stations:
+        rows = res.rows[lab]
+        sub = data if rows.size == len(data) else data.subset(rows)
+        X = model.predict(data.q[rows], sub, station=ref)  # the held robot, the model's reflector
+        sigma = data.sigma_m[rows] if data.sigma_m is not None else np.asarray(model.noise.sigma_xyz_m, float)
+        gates.append(assess_registration(lab, X, data.position_m[rows], res.errors_m[rows], sigma,
+                                         6 + (0 if hold_reflector else 3)))
+    return gates
+
+
 def run_predict(args: argparse.Namespace) -> int:
     """Handler of ``pin-kpi-oed predict``."""
-    from pin_kpi_oed.data.atomic import check_writable
     from pin_kpi_oed.data.measurements import read_measurements
     from pin_kpi_oed.identification.model_file import load_model_file
     from pin_kpi_oed.identification.transfer import predict_table, write_predictions
+    from pin_kpi_oed.validation.robot_checks import check_points_against_joints
 
-    check_writable(args.out)
     model = load_model_file(args.model)
     data = read_measurements(args.data, joint_names=model.robot.joint_names, reach_m=model.robot.reach(),
                              require_position=False, **table_options(args, model.robot))
+    if data.position_m is not None and np.all(np.isfinite(data.position_m)):
+        check_points_against_joints(model.robot, data.q, data.position_m, args.data, args.data)
     cols, table = predict_table(model, data, station=args.station)
     write_predictions(args.out, data, cols, table)
     if not args.quiet:

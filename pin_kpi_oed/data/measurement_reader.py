@@ -33,8 +33,10 @@ MAX_MEDIAN_DISTANCE_M = 50.0
 MAX_MEDIAN_SIGMA_M = 0.1
 
 
-def _fmt_rows(rows: list[int], lines: list[int], idx: Sequence[int]) -> str:
-    return ", ".join(f"row {rows[i]} (line {lines[i]})" for i in idx)
+def _fmt_rows(rows: list[int], lines: list[int], idx: Sequence[int], first: int = 3) -> str:
+    """``row r (line l)`` of the first few rows, and how many there are in all (a message stays one short line)."""
+    out = ", ".join(f"row {rows[i]} (line {lines[i]})" for i in idx[:first])
+    return out + (f" and {len(idx) - first} more ({len(idx)} rows)" if len(idx) > first else "")
 
 
 def parse_numeric_table(rows: Sequence[Sequence[str]], lines: Sequence[int], header: Sequence[str], src: str,

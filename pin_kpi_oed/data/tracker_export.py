@@ -76,6 +76,8 @@ class TrackerExport:
         frame: the frame named in a ``Frame:`` comment ("" if none).
         source: the file.
         raw_header: the file's column names (lower case), before any mapping.
+        units_from: where the length unit came from (the ``Units:`` comment, the column names,
+            ``--units``, or assumed).
     """
 
     names: list[str]
@@ -86,6 +88,7 @@ class TrackerExport:
     frame: str
     source: str
     raw_header: list[str]
+    units_from: str = ""
 
 
 def _comments_and_body(text: str) -> tuple[list[str], list[str], list[int]]:
@@ -193,7 +196,6 @@ def read_point_export(path: str | os.PathLike, units: str | None = None,
         if declared is not None and declared != given:
             raise InputError(f"{src}: the file says 'Units: {declared}' but {given} was given; drop --units or fix "
                              "the file")
-    unit = declared or given or "mm"
     sep = _separator(body[0])
     # the body (comment lines removed) is read by the shared pandas reader
     header, _, rows, idx = parse_text_table("\n".join(body) + "\n", src, "tracker export", sep=sep)
@@ -203,6 +205,13 @@ def read_point_export(path: str | os.PathLike, units: str | None = None,
                            {k.lower(): v for k, v in parse_columns(columns).items()}, src, strict=strict)
     if not rows:
         raise InputError(f"{src}: no points after the header")
+    header, in_header = _header_units(header, raw_header, src)
+    if in_header is not None:
+        for what, u in (("the file says 'Units: {}'", declared), ("--units {}", given)):
+            if u is not None and u != in_header:
+                raise InputError(f"{src}: the coordinate columns say [{in_header}] but {what.format(u)}; make them "
+                                 "agree (fix the file or drop --units)")
+    unit = declared or in_header or given or "mm"
     i_name = _find(header, _NAME_COLS)
     missing = [c for c in ("x", "y", "z") if c not in header] + (["target"] if i_name is None else [])
     if missing:
@@ -224,7 +233,37 @@ def read_point_export(path: str | os.PathLike, units: str | None = None,
     if dup or any(not n for n in names):
         raise InputError(f"{src}: point names must be unique and non-empty; repeated: {', '.join(dup[:5]) or 'an empty name'}")
     t = _parse_time([r[i_time] for r in rows], lines, src, header[i_time]) if i_time is not None else None
-    return TrackerExport(names, pos, t, sigma, unit, _frame(comments), src, raw_header)
+    how = ("its 'Units:' comment" if declared else "its column names" if in_header else "--units" if given else
+           "assumed (no 'Units:' comment, no unit in the column names, no --units)")
+    return TrackerExport(names, pos, t, sigma, unit, _frame(comments), src, raw_header, how)
+
+
+_HEADER_UNIT = re.compile(r"^\s*(x|y|z|sx|sy|sz|ux|uy|uz)\s*(?:[\[(]\s*([a-zµ]+)\s*[\])]|_([a-z]+))\s*$")
+
+
+def _header_units(header: list[str], raw_header: list[str], src: str) -> tuple[list[str], str | None]:
+    """Coordinate columns named with a unit (``X [m]``, ``x (mm)``, ``X_mm``): the bare names and that unit.
+
+    Raises:
+        InputError: coordinate columns in different units, or an unknown unit.
+    """
+    out, units = list(header), set()
+    for k, (h, raw) in enumerate(zip(header, raw_header)):
+        for name in (h, raw):
+            m = _HEADER_UNIT.match(name)
+            if not m:
+                continue
+            u = (m.group(2) or m.group(3)).replace("µ", "u")
+            u = _UNIT_WORDS.get(u, u)
+            if u not in LENGTH_UNITS:
+                continue
+            units.add(u)
+            if h == name:
+                out[k] = m.group(1)
+            break
+    if len(units) > 1:
+        raise InputError(f"{src}: the coordinate columns name different units ({', '.join(sorted(units))})")
+    return out, (units.pop() if units else None)
 
 
 def import_tracker_export(export_path: str | os.PathLike, joints_path: str | os.PathLike,

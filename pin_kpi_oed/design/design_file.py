@@ -14,9 +14,11 @@ recomputed is said in :attr:`DesignFile.notes` (one line each):
 * no ``tracker_T_base``: the tracker sits at the robot base;
 * no ``q_work``: the robot's neutral configuration;
 * no robot capsules: the URDF's collision cylinders (:func:`~pin_kpi_oed.cell.cell.capsules_from_urdf`);
-* capsule pairs in collision at *every* working configuration (enclosing capsules that overlap
-  by construction, a robot standing on its floor) are added to ``skip_pairs``, and objects that
-  block the beam at every working configuration to the beam's skip list, as the cell file would;
+* a file without skip lists: capsule pairs in collision at *every* working configuration *and* in most
+  random configurations (enclosing capsules that overlap by construction, a robot standing on its floor)
+  are added to ``skip_pairs``, and such beam blockers to the beam's skip list; a file with skip lists
+  gets nothing added. A working configuration that collides otherwise is never skipped: it is noted and
+  kept in :attr:`DesignFile.work_collisions` (``export`` refuses it unless ``--force``);
 * a stored ``cov_s_m2`` is checked against the one its ``q_meas`` give (the file's numbers are not
   trusted; a mismatch is noted and the recomputed one used, a singular design gets NaN); a missing or
   mis-shaped ``cov_s_m2`` is recomputed with :func:`pin_kpi_oed.oed.evaluate.score_design`
@@ -195,6 +197,8 @@ class DesignFile:
         notes: what was assumed or recomputed (one line each).
         source: file name (or ``<dict>``).
         raw: the parsed JSON.
+        work_collisions: working configurations in collision (one line each; never skipped: ``export``
+            refuses them unless ``--force``).
     """
 
     model: TrackerModel
@@ -203,6 +207,7 @@ class DesignFile:
     notes: list[str] = field(default_factory=list)
     source: str = "<dict>"
     raw: dict = field(default_factory=dict)
+    work_collisions: list[str] = field(default_factory=list)
 
     @property
     def robot(self) -> Robot:
@@ -505,20 +510,55 @@ def _read_cell(f: _Fields, model: TrackerModel, where: str, notes: list[str]) ->
                 environment=environment_from_dicts(f.get("environment"), obstacles, where, notes))
 
 
-def _skip_what_collides_at_work(cell: Cell, notes: list[str]) -> None:
-    """Add to the cell's skip lists what collides at every working configuration (adjacent by construction)."""
+#: share of seeded random configurations in which a pair must collide to count as overlapping by construction
+_BY_CONSTRUCTION_SHARE = 0.5
+
+
+def _skip_what_collides_at_work(cell: Cell, notes: list[str], has_skip_lists: bool) -> list[str]:
+    """Skip what overlaps *by construction* (files without skip lists); report what collides at work.
+
+    Loading a design never widens what is allowed: a file that carries its skip lists (``design --json``
+    writes them) gets nothing added. A file without them gets a pair (or beam target) added only when it
+    collides at every working configuration *and* in at least half of 64 seeded random configurations
+    within the joint bounds (enclosing capsules of adjacent links, a robot standing on its floor); a pair
+    that collides at a working configuration otherwise (a working configuration edited into a wall) is
+    kept in the check and returned.
+
+    Returns:
+        One line per working configuration in collision (``working configuration #k: a|b 205.3 mm inside``).
+    """
     chk = FeasibilityChecker(cell)
-    always = np.all(chk.distances(cell.q_work) < 0, axis=0)
-    pairs = [chk.pair_names[k] for k in np.flatnonzero(always[:chk.n_pairs])]
-    beam = [chk.beam_names[k] for k in np.flatnonzero(always[chk.n_pairs:])]
-    if pairs:
-        cell.skip_pairs.extend(pairs)
-        notes.append("in collision at every working configuration, not checked (skip_pairs): "
-                     + ", ".join(f"{a}|{b}" for a, b in pairs))
-    if beam:
-        cell.beam_skip.extend(beam)
-        notes.append("blocking the beam at every working configuration, not checked against the beam: "
-                     + ", ".join(beam))
+    D = chk.distances(cell.q_work)
+    always = np.all(D < 0, axis=0)
+    if always.any() and not has_skip_lists:
+        rng = np.random.default_rng(0)
+        Qr = cell.q_lower + rng.random((64, cell.q_lower.size)) * (cell.q_upper - cell.q_lower)
+        cols = np.flatnonzero(always)
+        Dr = chk.distances(Qr)[:, cols]
+        by_construction = np.zeros_like(always)
+        by_construction[cols] = np.mean(Dr < 0, axis=0) >= _BY_CONSTRUCTION_SHARE
+        pairs = [chk.pair_names[k] for k in np.flatnonzero(by_construction[:chk.n_pairs])]
+        beam = [chk.beam_names[k] for k in np.flatnonzero(by_construction[chk.n_pairs:])]
+        if pairs:
+            cell.skip_pairs.extend(pairs)
+            notes.append("in collision at every working configuration and by construction, not checked "
+                         "(skip_pairs): " + ", ".join(f"{a}|{b}" for a, b in pairs))
+        if beam:
+            cell.beam_skip.extend(beam)
+            notes.append("blocking the beam at every working configuration and by construction, not checked "
+                         "against the beam: " + ", ".join(beam))
+        if pairs or beam:
+            chk = FeasibilityChecker(cell)
+            D = chk.distances(cell.q_work)
+    problems = []
+    for k, d in enumerate(D[:, :chk.n_pairs] - cell.clearance_m):
+        if d.size and d.min() < -1e-7:
+            j = int(np.argmin(d))
+            problems.append(f"working configuration #{k}{' (home)' if k == 0 else ''} collides: {chk.names[j]} "
+                            f"{-d[j] * 1e3:.1f} mm inside")
+    if problems:
+        notes.append("; ".join(problems))
+    return problems
 
 
 def _raw_designs(d: Mapping, where: str) -> list:
@@ -663,6 +703,8 @@ def load_design(source: str | os.PathLike | Mapping, criteria: Sequence[str] | N
     notes: list[str] = []
     model = _read_model(f, where, base_dir, notes)
     cell = _read_cell(f, model, where, notes)
-    _skip_what_collides_at_work(cell, notes)
+    has_skips = any(k in d or k in (d.get("cell") if isinstance(d.get("cell"), Mapping) else {})
+                    for k in ("skip_pairs", "pairs_to_skip", "ignore_pairs"))
+    work_collisions = _skip_what_collides_at_work(cell, notes, has_skips)
     designs = _read_designs(d, cell, model, where, criteria, compute_missing, notes)
-    return DesignFile(model, cell, designs, notes, where, d)
+    return DesignFile(model, cell, designs, notes, where, d, work_collisions)

@@ -19,6 +19,7 @@ the certificate (:func:`pin_kpi_oed.oed.pool.select` with ``fixed_info``).
 
 from __future__ import annotations
 
+import re
 import time
 from pathlib import Path
 
@@ -46,6 +47,13 @@ BAND_M = 1e-6
 BAND_COS = 1e-8
 
 
+def _data_lines(path: str | Path) -> list[int]:
+    """File line numbers (from 1) of the data rows of a CSV (read again only for a message)."""
+    from pin_kpi_oed.data.table import read_text_table
+
+    return list(read_text_table(path, str(path), "pose file")[3])
+
+
 def read_poses(path: str | Path, robot: Robot, what: str = "--pool") -> np.ndarray:
     """Joint configurations from a CSV (joint columns named as the robot's, rad), within the robot's limits.
 
@@ -56,9 +64,12 @@ def read_poses(path: str | Path, robot: Robot, what: str = "--pool") -> np.ndarr
     """
     try:
         ms = read_measurements(path, joint_names=list(robot.joint_names), require_position=False)
-    except InputError as exc:
-        raise InputError(f"{what}: {exc}") from None
-    Q = robot.check_q(np.asarray(ms.q, float), f"{what} {path}")
+    except InputError as exc:  # advice about options design does not have becomes what to do with the file
+        msg = str(exc).replace(" or declare the units (--units mm,deg)", " in the file")
+        msg = re.sub(r"map other names with --columns [^;)]*", "rename the file's columns to the robot's joint names",
+                     msg)
+        raise InputError(f"{what}: {msg}") from None
+    Q = robot.check_q(np.asarray(ms.q, float), f"{what} {path}", line_of=lambda i: _data_lines(path)[i])
     return np.clip(Q, robot.q_lower, robot.q_upper)
 
 

@@ -72,6 +72,7 @@ from pin_kpi_oed.model.tracker import TrackerModel
 from pin_kpi_oed.model.parameters import ParameterLayout
 from pin_kpi_oed.model.robot import ERD_ROBOTS, SHIPPED_ROBOTS, Robot, load_robot
 from pin_kpi_oed.model.serialize import se3_from_matrix
+from pin_kpi_oed.validation.schema import validate_model_dict
 
 __all__ = ["MODEL_FORMAT", "Setup", "CalibratedModel", "load_model_file", "effect_spec", "effect_from_spec"]
 
@@ -436,6 +437,7 @@ class CalibratedModel:
                 a robot whose URDF no longer matches the calibrated one.
         """
         _check_format(d, where)
+        validate_model_dict(d, where)
         rob = d.get("robot")
         if not isinstance(rob, dict) or not (rob.get("spec") or rob.get("urdf_path")):
             raise InputError(f"{where}: field 'robot' must hold 'spec' (robot name or URDF path) and 'tool_frame'")

@@ -133,7 +133,7 @@ def assess_fit(result: Any, validation: dict | None = None, *, nominal_reflector
     err = np.asarray(result.errors_m, float)
     train_rms = float(np.sqrt(np.mean(err[keep] ** 2))) if keep.any() else float("nan")
     f = _Findings()
-    large = _check_outliers(f, result, we, out_idx, nh)
+    large = _check_outliers(f, result, we, out_idx, nh, noise_known)
     interval = None
     if noise_known:
         interval = _check_chi2(f, chi2_red, dof, alpha, chi2_poor, nominal_reflector_m, reflector_estimated)
@@ -163,8 +163,12 @@ class _Findings:
             self.verdict = level
 
 
-def _check_outliers(f: _Findings, result: Any, we: np.ndarray, out_idx: np.ndarray, nh: int) -> int:
-    """Check 3: outliers large against the noise (robust scale of all weighted errors); their number."""
+def _check_outliers(f: _Findings, result: Any, we: np.ndarray, out_idx: np.ndarray, nh: int,
+                    noise_known: bool = True) -> int:
+    """Check 3: outliers large against the noise (robust scale of all weighted errors); their number.
+
+    With the noise level unknown, χ² cannot tell a fit pulled by its outliers from a good one: any flagged
+    outlier fitted with the plain loss makes the fit suspect (never "good")."""
     m = we.size
     scale = 1.4826 * float(np.median(we)) / np.sqrt(nh) if m else 0.0
     large = int(np.sum(we[out_idx] > OUTLIER_LARGE * max(scale, 1e-300) * np.sqrt(nh))) if out_idx.size else 0
@@ -174,6 +178,12 @@ def _check_outliers(f: _Findings, result: Any, we: np.ndarray, out_idx: np.ndarr
         f.reasons.append(f"{large} outlier(s) beyond {OUTLIER_LARGE:g} sigma fitted with the plain loss")
         f.causes.append("outliers (gross measurement errors)")
         f.advice.append("--loss soft_l1 (robust) or remove the flagged rows")
+    elif out_idx.size and not robust and not noise_known:
+        f.worse("suspect")
+        f.reasons.append(f"{out_idx.size} flagged outlier(s) fitted with the plain loss and the noise level unknown "
+                         "(chi2 not tested)")
+        f.causes.append("outliers (gross measurement errors)")
+        f.advice.append("--loss soft_l1 (robust), sigma columns or --sigma, or remove the flagged rows")
     return large
 
 
@@ -245,3 +255,95 @@ def _check_heldout(f: _Findings, validation: dict | None, train_rms: float,
                              f"{train_rms * 1e3:.4g} mm")
             f.causes.append("over-fit or another session (re-register with --register-rows)")
     return before, after
+
+
+@dataclass
+class RegistrationQuality:
+    """Verdict of the registration gate (``register``): one station's set-up fitted with the robot held.
+
+    Attributes:
+        station: the station label; n_rows: its rows; n_unknowns: set-up parameters fitted.
+        chi2_reduced: Σ|e_i|²/σ_i² / (3 m − unknowns) with σ from the sigma columns or the model's noise.
+        rms_m: RMS position error (m); mirrored_rms_m: RMS of the best mirrored (improper) frame (m).
+        verdict: ``good`` or ``poor``; reasons: the failed tests, one phrase each.
+    """
+
+    station: str
+    n_rows: int
+    n_unknowns: int
+    chi2_reduced: float
+    rms_m: float
+    mirrored_rms_m: float
+    verdict: str = "good"
+    reasons: list[str] = field(default_factory=list)
+
+    @property
+    def poor(self) -> bool:
+        """True when the registered set-up must not be written without ``--accept-poor-fit``."""
+        return self.verdict == "poor"
+
+    def line(self) -> str:
+        """The one-line verdict."""
+        head = f"registration of station '{self.station}' ({self.n_rows} rows, RMS {self.rms_m * 1e3:.4g} mm)"
+        if not self.poor:
+            return f"{head}: good (reduced chi2 {self.chi2_reduced:.3g})"
+        return f"{head}: POOR: {'; '.join(self.reasons)}"
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready dict (SI units)."""
+        return {"station": self.station, "n_rows": self.n_rows, "n_unknowns": self.n_unknowns,
+                "chi2_reduced": self.chi2_reduced, "rms_m": self.rms_m, "mirrored_rms_m": self.mirrored_rms_m,
+                "verdict": self.verdict, "message": self.line(), "reasons": list(self.reasons)}
+
+
+def _rigid_rms(X: np.ndarray, Y: np.ndarray, proper: bool) -> float:
+    """RMS of the best rigid fit Y ≈ R X + t (proper: det R = +1; else the best mirrored one, det R = -1)."""
+    xm, ym = X.mean(0), Y.mean(0)
+    U, _, Vt = np.linalg.svd((X - xm).T @ (Y - ym))
+    d = np.sign(np.linalg.det(Vt.T @ U.T)) or 1.0
+    R = Vt.T @ np.diag([1.0, 1.0, d if proper else -d]) @ U.T
+    if not proper and np.linalg.det(R) > 0:
+        R = Vt.T @ np.diag([1.0, 1.0, -1.0]) @ U.T
+    return float(np.sqrt(np.mean(np.sum((Y - ym - (X - xm) @ R.T) ** 2, axis=1))))
+
+
+def assess_registration(station: str, X: np.ndarray, Y: np.ndarray, errors_m: np.ndarray, sigma_m: np.ndarray,
+                        n_unknowns: int, chi2_poor: float = CHI2_POOR) -> RegistrationQuality:
+    """Judge a registered set-up: enough rows, residuals near the noise, a proper (not mirrored) frame.
+
+    Args:
+        station: the station label.
+        X: the positions the held robot predicts for the rows (any rigid frame), (m, 3) m.
+        Y: the measured positions (tracker frame), (m, 3) m.
+        errors_m: position errors after the registration, (m,) m.
+        sigma_m: per-axis noise σ of each row (sigma columns, else the model's noise), (m, 3) or (3,) m.
+        n_unknowns: set-up parameters fitted (6 for the tracker pose, 9 with the reflector).
+        chi2_poor: reduced χ² above which the registration is poor (residuals 4× the noise).
+
+    Returns:
+        The :class:`RegistrationQuality`; poor when the rows give fewer than twice as many equations as
+        unknowns (a fit that passes through every point proves nothing), when the residuals are far above
+        the noise, or when the frame fits only mirrored (axes swapped or negated in the export).
+    """
+    m = int(len(errors_m))
+    sig2 = np.mean(np.broadcast_to(np.asarray(sigma_m, float) ** 2, (m, 3)), axis=1)
+    dof = 3 * m - int(n_unknowns)
+    chi2_red = float(np.sum(np.asarray(errors_m, float) ** 2 / sig2) / max(dof, 1))
+    rms = float(np.sqrt(np.mean(np.asarray(errors_m, float) ** 2))) if m else float("nan")
+    mirrored = _rigid_rms(np.asarray(X, float), np.asarray(Y, float), proper=False) if m >= 4 else float("inf")
+    q = RegistrationQuality(station, m, int(n_unknowns), chi2_red, rms, mirrored)
+    need = -(-2 * int(n_unknowns) // 3)
+    if m < need:
+        q.reasons.append(f"{m} rows give {3 * m} equations for {n_unknowns} set-up unknowns: at least {need} rows are "
+                         "needed to check the fit (it passes through fewer exactly)")
+    if dof > 0 and chi2_red > chi2_poor:
+        q.reasons.append(f"residual RMS {rms * 1e3:.4g} mm is {np.sqrt(chi2_red):.2g}x the noise "
+                         f"(sigma {np.sqrt(np.mean(sig2)) * 1e3:.3g} mm per axis)")
+        if mirrored < 0.25 * rms:
+            q.reasons.append(f"the points fit only a mirrored frame (RMS {mirrored * 1e3:.4g} mm): x/y swapped or an "
+                             "axis negated in the export")
+        else:
+            q.reasons.append("likely: another robot's or another session's data, the joint order, or units (m, rad)")
+    if q.reasons:
+        q.verdict = "poor"
+    return q

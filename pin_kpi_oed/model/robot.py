@@ -33,6 +33,7 @@ import site
 import sys
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pinocchio as pin
@@ -170,13 +171,15 @@ class Robot:
         pin.framesForwardKinematics(self.model, self.data, np.asarray(q, dtype=float))
         return self.data.oMf[self.tool_frame_id].copy()
 
-    def check_q(self, q: np.ndarray, what: str = "q", tol: float = 1e-9) -> np.ndarray:
+    def check_q(self, q: np.ndarray, what: str = "q", tol: float = 1e-9, line_of: Any = None) -> np.ndarray:
         """Validate configurations: shape (m, nq) or (nq,), finite, in SI units, within the joint limits.
 
         Args:
             q: joint values (rad for revolute, m for prismatic joints).
             what: name used in error messages (e.g. the file or field).
             tol: tolerance on the limits (rad or m).
+            line_of: ``line_of(i)`` -> the file line number of row i (0-based), for messages; None: rows are
+                counted from 1 without line numbers.
 
         Returns:
             The configurations as a float array of shape (m, nq).
@@ -190,10 +193,13 @@ class Robot:
         if Q.ndim != 2 or Q.shape[1] != self.nq:
             raise InputError(f"{what}: expected {self.nq} joint values per configuration "
                              f"({', '.join(self.joint_names)}), got shape {np.shape(q)}")
+        def row(i: int) -> str:
+            return f"row {i + 1} (line {line_of(i)})" if line_of is not None else f"configuration {i + 1} (from 1)"
+
         bad = ~np.isfinite(Q)
         if bad.any():
             i, j = np.argwhere(bad)[0]
-            raise InputError(f"{what}: configuration {i}, joint {self.joint_names[j]} is {Q[i, j]} (not finite)")
+            raise InputError(f"{what}: {row(int(i))}, joint {self.joint_names[j]} is {Q[i, j]} (not finite)")
         units = self.joint_units
         lo = Q < self.q_lower - tol
         hi = Q > self.q_upper + tol
@@ -201,7 +207,7 @@ class Robot:
             i, j = np.argwhere(lo | hi)[0]
             u = units[j]
             raise InputError(
-                f"{what}: configuration {i}, joint {self.joint_names[j]} = {Q[i, j]:.6g} {u} is outside its limits "
+                f"{what}: {row(int(i))}, joint {self.joint_names[j]} = {Q[i, j]:.6g} {u} is outside its limits "
                 f"[{self.q_lower[j]:.6g}, {self.q_upper[j]:.6g}] {u}")
         return Q
 

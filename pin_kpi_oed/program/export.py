@@ -23,6 +23,7 @@ import datetime as _dt
 import math
 import re
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 
@@ -30,6 +31,22 @@ from pin_kpi_oed.errors import InputError
 
 FORMATS = ("csv", "urscript", "krl", "rapid")
 SUFFIX = {"csv": ".csv", "urscript": ".script", "krl": ".src", "rapid": ".mod"}
+
+
+def program_files(fmt: str, out: str) -> dict[str, Path]:
+    """Files a format writes, by suffix: the ``--out`` path (KRL: the ``.src``, ``.src`` added when missing,
+    and the ``.dat`` beside it).
+
+    Raises:
+        InputError: unknown format.
+    """
+    if fmt not in FORMATS:
+        raise InputError(f"--format: unknown format '{fmt}' (known: {', '.join(FORMATS)})")
+    path = Path(out)
+    if fmt != "krl":
+        return {SUFFIX[fmt]: path}
+    src = path if path.suffix.lower() == ".src" else path.with_name(path.name + ".src")
+    return {".src": src, ".dat": src.with_suffix(".dat")}
 
 
 @dataclass
@@ -46,6 +63,8 @@ class ProgramInfo:
         date: ISO date-time (UTC) of the export (now if empty).
         dwell_s: wait at each measurement point (s).
         name: program name (KRL / RAPID module name).
+        speeds: joint speeds the predicted motion time assumes (URDF limits × override; rad/s, m/s);
+            URScript then moves each ``movej`` at the leading-joint speed that gives that time.
     """
 
     cell: str
@@ -57,6 +76,7 @@ class ProgramInfo:
     date: str = ""
     dwell_s: float = 0.5
     name: str = "pko_program"
+    speeds: np.ndarray | None = None
 
     def header_lines(self, units: str) -> list[str]:
         """Header lines (no comment prefix)."""
@@ -115,11 +135,25 @@ def write_urscript(Q: np.ndarray, kinds: list[str], poses: list[int], info: Prog
     """URScript: ``movej`` through every target (rad), ``textmsg`` + ``sleep`` at measurement points."""
     _split(info, "urscript")
     name = _names(info)
-    lines = [f"# {h}" for h in info.header_lines(f"rad (movej), a = {a:g} rad/s^2, v = {v:g} rad/s")]
+    if info.speeds is not None:  # movej's v is the leading joint's speed: the one that gives the predicted time
+        sp = np.asarray(info.speeds, float)
+        vs = [float(sp.min())]
+        for qa, qb in zip(Q[:-1], Q[1:]):
+            d = np.abs(qb - qa)
+            t = float(np.max(d / sp))
+            vs.append(float(d.max()) / t if t > 0 else float(sp.min()))
+        unit = (f"rad (movej), a = {a:g} rad/s^2, v per move = the leading joint's speed of the predicted motion "
+                f"time (joint speeds {', '.join(f'{x:.3g}' for x in sp)} rad/s; the first move "
+                f"{vs[0]:.3g} rad/s)")
+    else:
+        vs = [v] * len(Q)
+        unit = (f"rad (movej), a = {a:g} rad/s^2, v = {v:g} rad/s (the predicted motion time assumes the URDF "
+                "speed limits instead)")
+    lines = [f"# {h}" for h in info.header_lines(unit)]
     lines.append(f"def {name}():")
     for i, (q, mark) in enumerate(zip(Q, _mark(kinds, poses))):
         lines.append(f"  # step {i}: {mark}")
-        lines.append(f"  movej([{', '.join(f'{x:.12f}' for x in q)}], a={a:g}, v={v:g})")
+        lines.append(f"  movej([{', '.join(f'{x:.12f}' for x in q)}], a={a:g}, v={vs[i]:.6g})")
         if mark.startswith("MEASURE"):
             lines.append(f'  textmsg("{mark}")')
             lines.append(f"  sleep({info.dwell_s:g})")

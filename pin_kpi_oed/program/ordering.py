@@ -13,7 +13,7 @@ configuration unless given):
 3. lazy collision checking (greedy descents from the previous tour while costs change, then guided
    local search, at most three times): every move of the tour is checked densely
    (:class:`~pin_kpi_oed.program.transitions.TransitionChecker`); a colliding move is repaired
-   through safe via pose(s), else along a path planned by OMPL's RRT-Connect
+   through safe via pose(s), else along a path planned by a seeded RRT-Connect
    (:meth:`~pin_kpi_oed.program.transitions.TransitionChecker.plan_route`), and its cost raised to
    the repaired route's time, or, when no route is found, to a penalty; the tour is re-solved until
    every move of it has been checked (reordering around what collides);
@@ -195,11 +195,11 @@ class ProgramOptions:
         speed_override: share of the URDF speed limits (0, 1].
         step_deg: dense-check step (deg, ≤ 1).
         via_pool: safe configurations sampled for repairs.
-        seed: seed of the via pool and of OMPL (see
+        seed: seed of the via pool and of the route planner (see
             :meth:`~pin_kpi_oed.program.transitions.TransitionChecker.plan_route`).
         time_limit_s: routing search cap per solve (s).
         max_rounds: tour solves at most.
-        plan_checks: OMPL planning budget per colliding move while ordering (configurations
+        plan_checks: route-planning budget per colliding move while ordering (configurations
             checked); half of it for a pose's route home, four times it in the last attempt on
             the final tour.
         equivalents: choose among each pose's 2π-equivalent representatives (else the listed values).
@@ -221,10 +221,10 @@ class _Router:
     """Lazy move checks and repairs of the tours (state shared by the rounds of :func:`plan_program`).
 
     Every node's route to home (node 0) is found once when one of its moves collides: straight,
-    through via poses, or planned by OMPL. A node without one (a representative in a pocket of the
+    through via poses, or planned by RRT-Connect. A node without one (a representative in a pocket of the
     free space, e.g. a wrist folded between its bound and the forearm) gets every move penalised, so
     the tour takes another representative. A colliding move between two nodes that reach home is
-    repaired through via poses, else by OMPL, else through home (always safe).
+    repaired through via poses, else by RRT-Connect, else through home (always safe).
     """
 
     def __init__(self, nodes: np.ndarray, tc: TransitionChecker, speeds: np.ndarray, cost: np.ndarray,
@@ -245,7 +245,7 @@ class _Router:
         return self._pool
 
     def route(self, qa: np.ndarray, qb: np.ndarray, plan_checks: int) -> list | None:
-        """Intermediate configurations of a safe route qa → qb (via poses, else OMPL), None if none found."""
+        """Intermediate configurations of a safe route qa → qb (via poses, else RRT-Connect), None if none found."""
         tc = self.tc
         if tc.check(qa, qb).clear:
             return []
@@ -333,7 +333,7 @@ def plan_program(cell: Cell, Q: np.ndarray, options: ProgramOptions | None = Non
     home = np.asarray(o.home if o.home is not None else (cell.q_work[0] if len(cell.q_work) else cell.robot.neutral),
                       float)
     rev = np.asarray(cell.robot.is_revolute, bool)
-    reps = [equivalents(q, cell.q_lower, cell.q_upper, rev) if o.equivalents else q[None] for q in Q]
+    reps = [_within(equivalents(q, cell.q_lower, cell.q_upper, rev), cell) if o.equivalents else q[None] for q in Q]
     nodes = np.vstack([home, *reps])
     pose_of = np.concatenate([[-1], *[np.full(len(r), i) for i, r in enumerate(reps)]]).astype(int)
     groups = [list(np.flatnonzero(pose_of == i)) for i in range(len(Q))]
@@ -375,6 +375,12 @@ def plan_program(cell: Cell, Q: np.ndarray, options: ProgramOptions | None = Non
                    as_designed_colliding=int(sum(not m.clear for m in as_designed)),
                    min_move_clearance_m=min((m.min_clearance_m for m in per_move), default=float("inf")),
                    margin_m=o.margin_m, n_rounds=rounds)
+
+
+def _within(reps: np.ndarray, cell: Cell) -> np.ndarray:
+    """The representatives within the joint bounds (all of them, q first, when none is)."""
+    ok = np.all((reps >= cell.q_lower - 1e-9) & (reps <= cell.q_upper + 1e-9), axis=1)
+    return reps[ok] if ok.any() else reps
 
 
 def _assemble(nodes: np.ndarray, tour: list[int], edges: dict, pose_of: np.ndarray) -> list[Waypoint]:

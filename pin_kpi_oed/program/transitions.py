@@ -15,9 +15,10 @@ A colliding move is repaired by :meth:`TransitionChecker.repair`: through one sa
 pose (wrist-first / arm-first splits of the move, the home pose, retracted variants of the end
 poses, then a seeded pool of collision-free configurations; cheapest first), else through two
 (every leg densely checked); when neither works, :meth:`TransitionChecker.plan_route` plans a
-path with OMPL's RRT-Connect in joint space (validity: the same pair distances and margin; motions
-checked at ≤ one dense step per joint), shortcut by OMPL's path simplifier, and every leg of the
-result densely re-checked by :meth:`TransitionChecker.check`.
+path with a seeded RRT-Connect in joint space (validity: the same pair distances and margin; every
+tree edge a dense move check), shortcut, and every leg of the result densely re-checked by
+:meth:`TransitionChecker.check`. Its random numbers are seeded per call: the same design gives the
+same program in one process or two.
 
 :func:`equivalents` lists the configurations q + 2πk of a pose inside the joint bounds (UR arms have
 ±360° joints): the same link placements, so the same measurement, clearance and incidence; the
@@ -35,9 +36,8 @@ import numpy as np
 from pin_kpi_oed.cell.cell import Cell
 from pin_kpi_oed.cell.feasibility import FeasibilityChecker
 from pin_kpi_oed.errors import InputError
+from pin_kpi_oed.program.move_bound import MoveBound
 
-#: OMPL's random numbers come from one process-wide seed generator: set once, at the first plan
-_OMPL_SEEDED: list[int] = []
 
 
 def equivalents(q: np.ndarray, lower: np.ndarray, upper: np.ndarray, revolute: np.ndarray,
@@ -66,8 +66,9 @@ def equivalents(q: np.ndarray, lower: np.ndarray, upper: np.ndarray, revolute: n
             ks += [k for k in range(kmin, kmax + 1) if k != 0]
         choices.append(ks)
     combos = sorted(itertools.product(*choices), key=lambda ks: sum(k != 0 for k in ks))[:max_count]
-    out = q[None, :] + 2 * math.pi * np.array(combos, float)
-    return np.clip(out, lower, upper) if len(out) > 1 else out
+    # exactly q + 2πk, never clipped: a clipped value would be another pose (issue: a joint beyond its limit
+    # was exported at the limit); rows other than q are within the bounds by construction
+    return q[None, :] + 2 * math.pi * np.array(combos, float)
 
 
 @dataclass
@@ -96,13 +97,16 @@ class TransitionChecker:
         step_rad: largest revolute joint step between samples (rad); at most 1° is the contract of the program check.
         step_m: largest prismatic joint step between samples (m).
         checker: an existing :class:`FeasibilityChecker` of the cell (built if None).
+        use_bound: let a verified cheap lower bound of the pair distances (:class:`~pin_kpi_oed.program.move_bound.MoveBound`) clear the
+            samples it proves clear; the others, the end poses and every sample that decides a result are
+            checked exactly (Coal). The decisions and the smallest clearances are those of the exact check.
 
     Raises:
         InputError: negative margin or non-positive steps.
     """
 
     def __init__(self, cell: Cell, margin_m: float = 0.0, step_rad: float = math.radians(1.0),
-                 step_m: float = 0.005, checker: FeasibilityChecker | None = None):
+                 step_m: float = 0.005, checker: FeasibilityChecker | None = None, use_bound: bool = True):
         if not (margin_m >= 0 and step_rad > 0 and step_m > 0):
             raise InputError(f"transition check: margin >= 0 and steps > 0 required, got margin {margin_m} m, "
                              f"steps {step_rad} rad / {step_m} m")
@@ -114,6 +118,10 @@ class TransitionChecker:
         self.steps = np.where(rev, float(step_rad), float(step_m))
         self.n_evaluations = 0
         self._cache: dict[tuple[bytes, bytes, bool], MoveCheck] = {}
+        self._clearances: dict[bytes, float] = {}
+        bound = MoveBound(self.checker) if use_bound else None
+        #: the cheap lower bound deciding the samples it clears (None: every sample checked exactly)
+        self.bound = bound if bound is not None and bound.ok else None
 
     def samples(self, qa: np.ndarray, qb: np.ndarray) -> np.ndarray:
         """Configurations along the straight joint move qa → qb, end points included, steps ≤ the limits."""
@@ -123,10 +131,22 @@ class TransitionChecker:
         return qa + s * (qb - qa)
 
     def clearance(self, q: np.ndarray) -> float:
-        """Smallest pair distance at q minus the cell's required clearance (m); ``inf`` with no pairs."""
+        """Smallest pair distance at q minus the cell's required clearance (m); ``inf`` with no pairs.
+
+        Remembered per configuration (the end poses of moves are asked again and again); only new
+        configurations count in :attr:`n_evaluations`.
+        """
+        key = np.asarray(q, float).tobytes()
+        hit = self._clearances.get(key)
+        if hit is not None:
+            return hit
         self.n_evaluations += 1
         d = self.checker.pair_distances(q)
-        return float(d.min()) - self.cell.clearance_m if d.size else math.inf
+        out = float(d.min()) - self.cell.clearance_m if d.size else math.inf
+        if len(self._clearances) >= 200_000:
+            self._clearances.clear()
+        self._clearances[key] = out
+        return out
 
     def check(self, qa: np.ndarray, qb: np.ndarray, stop_early: bool = True) -> MoveCheck:
         """Densely check the move qa → qb.
@@ -150,7 +170,29 @@ class TransitionChecker:
         best, where, n = ends[k], float(k), 2
         if min(ends) < -1e-9:
             need = math.inf  # an end pose itself collides: the move cannot be clear
-        for i in sorted(range(1, len(S) - 1), key=lambda i: abs(i - len(S) / 2)):  # middle outwards
+        inner = list(range(1, len(S) - 1))
+        if self.bound is not None and stop_early and len(inner) > 8 and best >= need:
+            for i in (len(S) // 2, len(S) // 4, (3 * len(S)) // 4):  # a colliding move is usually caught here
+                c = self.clearance(S[i])
+                n += 1
+                if c < best:
+                    best, where = c, i / (len(S) - 1)
+                if best < need:
+                    break
+        if self.bound is not None and inner and not (stop_early and best < need):
+            # exact checks only where the bound cannot decide, lowest bound first: the result (clear or not,
+            # and without early stop the smallest clearance) is the exact check's
+            lb = self.bound(S[1:-1]) - self.cell.clearance_m
+            order = np.argsort(lb, kind="stable")
+            for o in order:
+                if (stop_early and (best < need or lb[o] >= need)) or (not stop_early and lb[o] >= best):
+                    break
+                c = self.clearance(S[o + 1])
+                n += 1
+                if c < best:
+                    best, where = c, (o + 1) / (len(S) - 1)
+            inner = []
+        for i in sorted(inner, key=lambda i: abs(i - len(S) / 2)):  # middle outwards
             if stop_early and best < need:
                 break
             c = self.clearance(S[i])
@@ -183,14 +225,37 @@ class TransitionChecker:
         """
         rng = np.random.default_rng(seed)
         lo, hi = self.cell.q_lower, self.cell.q_upper
-        out = []
-        for _ in range(max_tries or 50 * n):
-            q = lo + rng.random(lo.size) * (hi - lo)
-            if self.clearance(q) >= 2.0 * self.margin_m + 0.01:
-                out.append(q)
-                if len(out) >= n:
-                    break
-        return np.array(out).reshape(-1, lo.size)
+        out: list[np.ndarray] = []
+        tries = max_tries or 50 * n
+        thr = 2.0 * self.margin_m + 0.01
+        while tries > 0 and len(out) < n:  # the same draws, in the same order, as one at a time
+            X = lo + rng.random((min(64, tries), lo.size)) * (hi - lo)
+            tries -= len(X)
+            ok = self.at_least(X, thr, stop_after=n - len(out))
+            out += [x for x in X[ok]]
+        return np.array(out[:n]).reshape(-1, lo.size)
+
+    def at_least(self, X: np.ndarray, threshold: float, stop_after: int | None = None) -> np.ndarray:
+        """Which configurations keep ``clearance(q) >= threshold`` (the bound decides the clear ones).
+
+        Args:
+            X: configurations (k, n).
+            threshold: required clearance (m, on top of the cell's).
+            stop_after: stop once this many are found (the rest are False).
+
+        Returns:
+            (k,) bool.
+        """
+        X = np.atleast_2d(np.asarray(X, float))
+        lb = (self.bound(X) - self.cell.clearance_m) if self.bound is not None and len(X) else np.full(len(X), -np.inf)
+        out = np.zeros(len(X), bool)
+        found = 0
+        for i, x in enumerate(X):
+            out[i] = lb[i] >= threshold or self.clearance(x) >= threshold
+            found += out[i]
+            if stop_after is not None and found >= stop_after:
+                break
+        return out
 
     def structured_vias(self, qa: np.ndarray, qb: np.ndarray, home: np.ndarray | None = None) -> np.ndarray:
         """Via candidates a programmer would try first for the move qa → qb.
@@ -241,8 +306,7 @@ class TransitionChecker:
         lo, hi = self.cell.q_lower, self.cell.q_upper
         inside = np.all((vias >= lo) & (vias <= hi), axis=1)
         vias = vias[inside]
-        ok = np.array([self.clearance(v) >= self.margin_m for v in vias], bool)
-        vias = vias[ok]
+        vias = vias[self.at_least(vias, self.margin_m)]
         if len(vias) == 0:
             return None
         ca = np.array([cost(qa, v) for v in vias])
@@ -260,73 +324,106 @@ class TransitionChecker:
 
     def plan_route(self, qa: np.ndarray, qb: np.ndarray, seed: int = 0, max_checks: int = 20_000
                    ) -> list[np.ndarray] | None:
-        """A collision-free route qa → qb from OMPL's RRT-Connect in joint space, shortcut and re-checked.
+        """A collision-free route qa → qb from a seeded RRT-Connect in joint space, shortcut and re-checked.
 
-        The planner works in joint coordinates scaled by the dense steps (one unit = one step), so
-        OMPL's motion checks at resolution one unit never step more than ``step_rad`` / ``step_m`` in
-        any joint; a state is valid when its clearance keeps what :meth:`check` requires (the margin,
-        or the end poses' clearance if smaller). The path is simplified with OMPL's
-        ``PathSimplifier.simplifyMax`` (shortcuts, vertex reduction), then every leg is densely
-        checked by :meth:`check`; a leg that fails rejects the route.
+        Bidirectional RRT (Kuffner & LaValle's RRT-Connect) in joint coordinates scaled by the dense steps
+        (one unit = one step): a tree grows from each end toward seeded uniform samples within the cell's
+        joint bounds (steps of at most a fifth of the space's extent, as OMPL's default range), the other
+        tree connects greedily; a new node is valid when its clearance keeps what :meth:`check` requires
+        of the route (the margin, or the end poses' clearance if smaller), and every tree edge is a densely
+        checked move (:meth:`check`). The path found is shortcut (each node joined to the farthest later node
+        a clear move reaches, found by bisection, within half the budget again), then every leg is densely
+        checked again.
+
+        The random numbers come from ``numpy.random.default_rng`` seeded with ``seed`` and the two end
+        configurations: the same call gives the same route in one process or two, whatever was planned
+        before (OMPL's process-wide seed could not).
 
         Args:
             qa, qb: end configurations (n,).
-            seed: OMPL's process-wide seed, set at the first plan of the process only (OMPL cannot
-                re-seed once it has drawn numbers: a plan is reproducible in a fresh process).
-            max_checks: planning budget in configurations checked (a count, not a time: the
-                result does not depend on the machine's load).
+            seed: seed of the samples.
+            max_checks: planning budget in configurations checked (a count, not a time: the result does
+                not depend on the machine's load).
 
         Returns:
             The intermediate configurations (empty when the straight move is clear), or None when an
             end pose collides or no route was found within the budget.
         """
-        from ompl import base as ob
-        from ompl import geometric as og
-        from ompl import util as ou
-
         qa, qb = np.asarray(qa, float), np.asarray(qb, float)
         need = min(self.margin_m, self.clearance(qa), self.clearance(qb)) - 1e-9
         if need < -1e-9:
             return None
-        if not _OMPL_SEEDED:
-            ou.setLogLevel(ou.LOG_NONE)
-            ou.RNG.setSeed(int(seed) % (2 ** 31 - 1) + 1)  # OMPL refuses 0
-            _OMPL_SEEDED.append(int(seed))
-        n = qa.size
-        scale = self.steps
-        lo, hi = self.cell.q_lower / scale, self.cell.q_upper / scale
-        space = ob.RealVectorStateSpace(n)
-        bounds = ob.RealVectorBounds(n)
-        for j in range(n):
-            bounds.setLow(j, float(lo[j]))
-            bounds.setHigh(j, float(hi[j]))
-        space.setBounds(bounds)
-        si = ob.SpaceInformation(space)
-
-        def valid(state) -> bool:
-            x = np.fromiter((state[j] for j in range(n)), float, n)
-            return bool(self.clearance(x * scale) >= need)
-
-        si.setStateValidityChecker(valid)
-        si.setStateValidityCheckingResolution(1.0 / space.getMaximumExtent())  # one step per joint
-        si.setup()
-        start, goal = space.allocState(), space.allocState()
-        for j in range(n):
-            start[j], goal[j] = float(qa[j] / scale[j]), float(qb[j] / scale[j])
-        pdef = ob.ProblemDefinition(si)
-        pdef.setStartAndGoalStates(start, goal)
-        planner = og.RRTConnect(si)
-        planner.setProblemDefinition(pdef)
-        planner.setup()
-        stop_at = self.n_evaluations + int(max_checks)
-        planner.solve(ob.PlannerTerminationCondition(lambda: self.n_evaluations >= stop_at))
-        if not pdef.hasExactSolution():
+        if self.check(qa, qb).clear:
+            return []
+        rng = np.random.default_rng([int(seed) & 0xFFFFFFFF, *np.frombuffer(np.r_[qa, qb].tobytes(), np.uint32)])
+        path = self._rrt_connect(qa, qb, need, rng, self.n_evaluations + int(max_checks))
+        if path is None:
             return None
-        path = pdef.getSolutionPath()
-        og.PathSimplifier(si).simplifyMax(path)
-        pts = np.array([[path.getState(i)[j] for j in range(n)] for i in range(path.getStateCount())]) * scale
+        pts = self._shortcut(path, self.n_evaluations + max(int(max_checks) // 2, 1))
         pts[0], pts[-1] = qa, qb
-        pts = np.clip(pts, self.cell.q_lower, self.cell.q_upper)
-        if not all(self.check(a, b).clear for a, b in zip(pts[:-1], pts[1:])):
+        if not all(self.check(u, v).clear for u, v in zip(pts[:-1], pts[1:])):
             return None
         return [p.copy() for p in pts[1:-1]]
+
+    def _rrt_connect(self, qa: np.ndarray, qb: np.ndarray, need: float, rng: np.random.Generator, stop_at: int
+                     ) -> list[np.ndarray] | None:
+        """The RRT-Connect search of :meth:`plan_route`: a path qa → qb (configurations), or None."""
+        scale = self.steps
+        lo, hi = self.cell.q_lower / scale, self.cell.q_upper / scale
+        step = 0.2 * float(np.linalg.norm(hi - lo))
+        trees = [([qa / scale], [-1]), ([qb / scale], [-1])]
+
+        def extend(tree, target: np.ndarray) -> tuple[str, int]:
+            nodes, parents = tree
+            arr = np.asarray(nodes)
+            k = int(np.argmin(np.sum((arr - target) ** 2, axis=1)))
+            d = target - arr[k]
+            dist = float(np.linalg.norm(d))
+            reached = dist <= step
+            new = target if reached else arr[k] + d * (step / dist)
+            q = new * scale
+            if self.clearance(q) < need or not self.check(arr[k] * scale, q).clear:
+                return "trapped", k
+            nodes.append(new)
+            parents.append(k)
+            return ("reached" if reached else "advanced"), len(nodes) - 1
+
+        def branch(tree, i: int) -> list[np.ndarray]:
+            nodes, parents = tree
+            out = []
+            while i >= 0:
+                out.append(nodes[i] * scale)
+                i = parents[i]
+            return out
+
+        a, b = 0, 1
+        while self.n_evaluations < stop_at:
+            status, i = extend(trees[a], lo + rng.random(lo.size) * (hi - lo))
+            if status != "trapped":
+                target = trees[a][0][i]
+                while self.n_evaluations < stop_at:
+                    status2, j = extend(trees[b], target)
+                    if status2 == "reached":
+                        ends = (branch(trees[a], i), branch(trees[b], j))
+                        pa, pb = (ends if a == 0 else ends[::-1])
+                        return pa[::-1] + pb[1:]
+                    if status2 == "trapped":
+                        break
+            a, b = b, a
+        return None
+
+    def _shortcut(self, path: list[np.ndarray], budget: int) -> np.ndarray:
+        """From each node, the farthest later node a clear move reaches (bisection), within ``budget``."""
+        pts = [path[0]]
+        i = 0
+        while i < len(path) - 1:
+            j, lo_j, hi_j = i + 1, i + 1, len(path) - 1
+            while lo_j <= hi_j and self.n_evaluations < budget:
+                mid = (lo_j + hi_j + 1) // 2
+                if mid == i + 1 or self.check(path[i], path[mid]).clear:
+                    j, lo_j = max(j, mid), mid + 1
+                else:
+                    hi_j = mid - 1
+            pts.append(path[j])
+            i = j
+        return np.array(pts)

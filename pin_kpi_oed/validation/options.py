@@ -111,6 +111,23 @@ def _fix(opt: str, v: Any) -> None:
                          "name the parameters or groups to hold (e.g. 'reflector.*', 'tracker.*')")
 
 
+def _finite_at_least(lo: float, unit: str, hi: float | None = None, hint: str = "") -> Callable[[str, Any], None]:
+    def rule(opt: str, v: Any) -> None:
+        if v is None:
+            return
+        x = float(v)
+        if not math.isfinite(x) or x < lo:
+            raise InputError(f"{opt}: must be a finite number >= {lo:g} {unit}, got {v}")
+        if hi is not None and x > hi:
+            raise InputError(f"{opt}: {x:g} {unit} is more than {hi:g} {unit}{hint}")
+    return rule
+
+
+def _share(opt: str, v: Any) -> None:
+    if v is not None and not (math.isfinite(float(v)) and 0 < float(v) <= 1):
+        raise InputError(f"{opt}: a share of the URDF speed limits in (0, 1], got {v}")
+
+
 def _split(opt: str, v: Any) -> None:
     if v is not None and not (math.isfinite(v) and v > 0):
         raise InputError(f"{opt}: a share in (0, 1) or a whole number of rows >= 1, got {v:g}")
@@ -132,6 +149,10 @@ RULES: dict[str, dict[str, Callable[[str, Any], None]]] = {
     "diagnose": {**_SEED, "register_rows": _int_at_least(1), "kfold": _int_at_least(2), "sigma": _sigma_m,
                  "alpha": _open_unit, "reflector": _offset},
     "view": {"scale": _positive_float, "level": _open_unit},
+    "export": {**_SEED, "dwell": _finite_at_least(0.0, "s", 3600.0, " (a wait at each measurement point, in s)"),
+               "margin": _finite_at_least(0.0, "m", 0.5, ": give the move clearance margin in m (e.g. 0.01 for 10 mm)"),
+               "speed_override": _share},
+    "compensate": {**_SEED, "tcp": _offset},
     "study": {**_SEED, "measurements": _int_at_least(9), "seeds": _int_at_least(1), "arms": _int_at_least(1),
               "starts": _int_at_least(1), "workers": _int_at_least(1), "scheduler": _scheduler},
 }
@@ -139,16 +160,19 @@ RULES: dict[str, dict[str, Callable[[str, Any], None]]] = {
 #: command -> argparse dests of output files
 OUTPUTS = {"evaluate": ["json"], "demo": ["json"], "design": ["json"], "simulate": ["out", "test_out", "truth_json"],
            "identify": ["json", "urdf_out", "model_out"], "import-ipa": ["out", "train", "test"],
-           "register": ["model_out", "json"], "predict": ["out"], "diagnose": ["json"], "view": ["html"]}
+           "register": ["model_out", "json"], "predict": ["out"], "diagnose": ["json"], "view": ["html"],
+           "export": ["out", "json", "html"], "compensate": ["out", "json"], "import-tracker": ["out"]}
 #: command -> argparse dests of inputs (files or folders; lists allowed)
 INPUTS = {"evaluate": ["design"], "design": ["cell", "pool", "given", "given_prior", "model"], "identify": ["data", "validate", "register_data", "robot"],
-          "simulate": ["robot", "design"], "import-ipa": ["src"], "register": ["model", "data"], "predict": ["model", "data"],
-          "diagnose": ["train", "validate", "register_data", "robot"], "view": ["design"], "info": ["robot"]}
+          "simulate": ["robot", "design"], "import-ipa": ["src"], "register": ["model", "data"],
+          "predict": ["model", "data"], "diagnose": ["train", "validate", "register_data", "robot"],
+          "view": ["design"], "info": ["robot"], "export": ["design"], "compensate": ["model", "targets", "program"],
+          "import-tracker": ["export", "joints", "robot"]}
 #: command -> argparse dests of output folders
 FOLDERS = {"diagnose": ["figures"], "view": ["figures"], "study": ["out"]}
 
 
-_POSITIONAL = {"design", "src", "which"}
+_POSITIONAL = {"design", "src", "which", "export"}
 
 
 def _opt(dest: str) -> str:
@@ -190,8 +214,13 @@ def check_args(args: argparse.Namespace) -> None:
             if Path(d).exists() and Path(args.validate).exists() and Path(d).resolve() == Path(args.validate).resolve():
                 raise InputError(f"--validate {args.validate}: is also --train; held-out data must not be training "
                                  "data")
-    check_outputs(_pairs(args, OUTPUTS.get(cmd, [])), _pairs(args, INPUTS.get(cmd, []), existing_only=True),
-                  _pairs(args, FOLDERS.get(cmd, [])))
+    outputs = _pairs(args, OUTPUTS.get(cmd, []))
+    files_of = getattr(args, "output_files", None)  # a command whose option writes several files (KRL: .src + .dat)
+    if callable(files_of):
+        extra = files_of(args)
+        opts = {o for o, _ in extra}
+        outputs = list(extra) + [o for o in outputs if o[0] not in opts]
+    check_outputs(outputs, _pairs(args, INPUTS.get(cmd, []), existing_only=True), _pairs(args, FOLDERS.get(cmd, [])))
 
 
 _NEGATIVE = re.compile(r"^-(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?(,.*)?$")

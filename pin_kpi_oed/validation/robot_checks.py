@@ -107,3 +107,78 @@ class captured_stderr:
             if ln:
                 return ln.removeprefix("Error:").strip()
         return ""
+
+
+#: accepted ratio of the measured points' spread to the spread the joint values give (reflector offsets and
+#: real errors move it by far less than a unit mistake: 10 (cm), 25.4 (in), 1000 (mm / m), 57.3 (deg / rad))
+SPREAD_RATIO = 3.0
+
+
+def _spread_ratio(robot: Any, Q: np.ndarray, P: np.ndarray) -> float:
+    """Median pairwise distance of the points over that of the tool-frame origins the joint values give
+    (independent of the unknown tracker pose)."""
+    import pinocchio as pin
+
+    k = min(len(Q), 120)
+    idx = np.linspace(0, len(Q) - 1, k).round().astype(int)
+    T = np.empty((k, 3))
+    for r, i in enumerate(idx):
+        pin.framesForwardKinematics(robot.model, robot.data, np.asarray(Q[i], float))
+        T[r] = robot.data.oMf[robot.tool_frame_id].translation
+    a, b = np.triu_indices(k, 1)
+    dT, dP = np.linalg.norm(T[a] - T[b], axis=1), np.linalg.norm(P[idx][a] - P[idx][b], axis=1)
+    ok = dT > 0.02 * max(float(dT.max(initial=0.0)), 1e-12)
+    if ok.sum() < 1:
+        return float("nan")
+    return float(np.median(dP[ok]) / np.median(dT[ok]))
+
+
+def check_points_against_joints(robot: Any, Q: np.ndarray, P: np.ndarray, points: str, joints: str,
+                                length_unit: str = "m", angle_unit: str = "rad", angle_scale: float = 1.0) -> float:
+    """Do measured positions and joint values agree in scale? (units of a tracker export and a joint log)
+
+    The distances between measured points do not depend on where the tracker stands; the distances
+    between the tool-frame origins the joint values give (nominal kinematics) differ from them only by
+    the reflector offset and the robot's errors. A median ratio beyond :data:`SPREAD_RATIO` either way
+    is a unit mistake: the points' length unit, or the joint log's angle unit (tried: the other one).
+
+    Args:
+        robot: the robot.
+        Q: joint values as read (rad / m), (m, n).
+        P: measured positions as read (m), (m, 3).
+        points, joints: the files, for messages.
+        length_unit: the unit the points were read in; angle_unit: the joint log's (``deg`` / ``rad``).
+        angle_scale: the factor that converted the joint log's revolute values to rad.
+
+    Returns:
+        The ratio (about 1).
+
+    Raises:
+        InputError: naming both files, the ratio and the likely unit mistake.
+    """
+    from pin_kpi_oed.errors import InputError
+
+    Q, P = np.atleast_2d(np.asarray(Q, float)), np.atleast_2d(np.asarray(P, float))
+    if len(Q) < 5:  # too few points for a scale (a handful of pairs)
+        return float("nan")
+    ratio = _spread_ratio(robot, Q, P)
+    if not np.isfinite(ratio) or 1 / SPREAD_RATIO <= ratio <= SPREAD_RATIO:
+        return ratio
+    rev = np.asarray(robot.is_revolute, bool)
+    other = "rad" if angle_unit == "deg" else "deg"
+    Q2 = Q.copy()
+    f = (math.pi / 180.0) if other == "deg" else 1.0
+    Q2[:, rev] = Q[:, rev] / angle_scale * f
+    ratio2 = _spread_ratio(robot, Q2, P) if np.all(np.isfinite(Q2)) else float("nan")
+    head = (f"{points} ({length_unit}) and {joints} ({angle_unit}): the measured points spread {ratio:.3g}x as far as "
+            f"the joint values move the tool ({robot.name}, reach {robot.reach():.2f} m)")
+    if np.isfinite(ratio2) and 1 / SPREAD_RATIO <= ratio2 <= SPREAD_RATIO:
+        raise InputError(f"{head}: the joint log looks like {other}, not {angle_unit}; give --angle-unit {other}")
+    units = {"m": 1.0, "cm": 1e-2, "mm": 1e-3, "in": 0.0254, "um": 1e-6}
+    here = units.get(length_unit, 1.0)
+    true = min(units, key=lambda u: abs(math.log(ratio * units[u] / here)) if ratio > 0 else 0.0)
+    hint = (f"the points look like {true}, not {length_unit} (declare it with a 'Units: {true}' comment or --units "
+            f"{true})" if abs(math.log(ratio * units[true] / here)) < math.log(SPREAD_RATIO) and true != length_unit
+            else "check the length unit of the points ('Units:' comment, --units) and the joint log's angle unit "
+                 "(--angle-unit)")
+    raise InputError(f"{head}; {hint}")

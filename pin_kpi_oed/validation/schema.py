@@ -1,4 +1,4 @@
-"""Typed schemas (JSON Schema, checked with ``jsonschema``) of cell files and design files.
+"""Typed schemas (JSON Schema, checked with ``jsonschema``) of cell, design and model files.
 
 :func:`validate_cell_dict` and :func:`validate_design_dict` run before the readers
 (:func:`pin_kpi_oed.cell.cell.cell_from_dict`, :func:`pin_kpi_oed.design.design_file.load_design`)
@@ -9,7 +9,10 @@ and refuse, in one line naming the file and the field path:
 * ragged arrays, a design file that is not an object;
 
 then the unit-plausibility checks of :mod:`pin_kpi_oed.validation.units` (a noise sigma of 1 m,
-degrees under a ``_rad`` key).
+degrees under a ``_rad`` key). :func:`validate_model_dict` does the same for calibrated model files
+(``identify --model-out``; read by :func:`pin_kpi_oed.identification.model_file.load_model_file`): every
+field typed, numbers finite and in range, the parameter covariance square, symmetric and positive
+semi-definite; the optional ``discrepancy`` block is left to its own reader.
 """
 
 from __future__ import annotations
@@ -22,7 +25,8 @@ import numpy as np
 from pin_kpi_oed.errors import InputError
 from pin_kpi_oed.validation.units import MAX_TOOL_OFFSET_M, check_sigma_m, check_sigma_rad
 
-__all__ = ["CELL_SCHEMA", "DESIGN_SCHEMA", "validate_cell_dict", "validate_design_dict"]
+__all__ = ["CELL_SCHEMA", "DESIGN_SCHEMA", "MODEL_SCHEMA", "validate_cell_dict", "validate_design_dict",
+           "validate_model_dict", "check_covariance"]
 
 #: largest plausible distance of the robot base or the tracker from the cell origin (m)
 MAX_CELL_M = 200.0
@@ -120,7 +124,8 @@ def _message(err: Any) -> str:
     if v == "type":
         t = err.validator_value
         t = " or ".join(t) if isinstance(t, list) else t
-        return f"expected {'a ' if t in ('number', 'integer', 'string', 'object', 'array') else ''}{t}, " \
+        art = {"number": "a ", "string": "a ", "integer": "an ", "object": "an ", "array": "an "}.get(t, "")
+        return f"expected {art}{t}, " \
                f"got {err.instance!r:.60}"
     if v in ("minItems", "maxItems"):
         return f"wrong number of entries ({len(err.instance)}; {v} {err.validator_value})"
@@ -131,10 +136,15 @@ def _message(err: Any) -> str:
     return err.message.splitlines()[0][:160]
 
 
+_VALIDATORS: dict[int, Any] = {}
+
+
 def _validate(d: Any, schema: dict, source: str, what: str) -> None:
     import jsonschema
 
-    validator = jsonschema.Draft202012Validator(schema)
+    validator = _VALIDATORS.get(id(schema))
+    if validator is None:  # built once per schema (a few ms each)
+        validator = _VALIDATORS[id(schema)] = jsonschema.Draft202012Validator(schema)
     errors = sorted(validator.iter_errors(d), key=lambda e: (len(list(e.absolute_path)), list(map(str, e.path))))
     if errors:
         e = errors[0]
@@ -215,3 +225,168 @@ def validate_design_dict(d: Any, source: str = "") -> None:
             raise InputError(f"{where}{name}: rows of different lengths (ragged array)")
     if isinstance(d.get("noise"), dict) and "sigma_xyz_m" in d["noise"]:
         check_sigma_m(d["noise"]["sigma_xyz_m"], f"{where}noise.sigma_xyz_m")
+
+
+_MAT4 = {"type": "array", "items": {"type": "array", "items": _NUM, "minItems": 4, "maxItems": 4},
+         "minItems": 4, "maxItems": 4}
+_MAT3 = {"type": "array", "items": {"type": "array", "items": _NUM, "minItems": 3, "maxItems": 3},
+         "minItems": 3, "maxItems": 3}
+_STRS = {"type": "array", "items": {"type": "string"}}
+_EFFECT = {"type": "object", "required": ["kind"],
+           "properties": {"name": {"type": "string"}, "kind": {"type": "string"},
+                          "options": {"type": ["object", "null"]}, "param_names": _STRS,
+                          "theta": {"type": "array", "items": _NUM}, "unit": {"type": ["string", "array", "null"]},
+                          "base": {"type": "object"}, "keep": {"type": "array", "items": {"type": "integer",
+                                                                                             "minimum": 0}}}}
+_STATION = {"type": "object", "additionalProperties": False, "required": ["tracker_T_base", "reflector_m"],
+            "properties": {"tracker_T_base": _MAT4, "reflector_m": _VEC3, "probe_R": {"anyOf": [_MAT3, {"type": "null"}]},
+                           "n_rows": {"type": "integer", "minimum": 0}, "fitted_by": {"type": "string"},
+                           "source": {"type": "string"}, "rms_m": {"type": ["number", "null"], "minimum": 0}}}
+#: schema of a calibrated model file (``pin_kpi_oed.model/1``; see :mod:`pin_kpi_oed.identification.model_file`)
+MODEL_SCHEMA: dict[str, Any] = {
+    "type": "object", "additionalProperties": False, "required": ["format", "robot", "geometry", "stations"],
+    "properties": {
+        "format": {"type": "string"},
+        "robot": {"type": "object", "additionalProperties": False,
+                  "properties": {"spec": {"type": "string"}, "name": {"type": "string"},
+                                 "urdf_path": {"type": "string"}, "tool_frame": {"type": ["string", "null"]},
+                                 "joint_names": _STRS, "nominal_joint_placements": {"type": "array", "items": _MAT4}}},
+        "tcp_m": _VEC3, "pose6d": {"type": "boolean"},
+        "geometry": {"type": "object", "additionalProperties": False, "required": ["joint_placement_errors"],
+                     "properties": {
+                         "joint_placement_errors": {"type": "object", "additionalProperties": _NUM},
+                         "joint_placements": {"type": "array", "items": _MAT4},
+                         "parameters": {"type": ["object", "null"], "additionalProperties": False,
+                                        "properties": {"names": _STRS, "values": {"type": "array", "items": _NUM},
+                                                       "std": {"type": "array", "items": {"type": "number",
+                                                                                          "minimum": 0}},
+                                                       "units": _STRS,
+                                                       "covariance": {"anyOf": [{"type": "array", "items": {
+                                                           "type": "array", "items": _NUM}}, {"type": "null"}]}}}}},
+        "effects": {"type": ["array", "null"], "items": _EFFECT},
+        "stations": {"type": "object", "minProperties": 1, "additionalProperties": _STATION},
+        "default_station": {"type": ["string", "null"]},
+        "noise": _NOISE,
+        "fit": {"type": ["object", "null"]},
+        "history": {"type": ["array", "null"], "items": {"type": "object"}},
+        "discrepancy": {"type": ["object", "null"]},  # validated by its own reader
+    },
+}
+
+#: largest plausible joint-placement error: translation (m), rotation (rad)
+MAX_PLACEMENT_ERROR = {"t": 0.5, "r": math.pi / 2}
+
+
+def _first_nonfinite(v: Any, path: str) -> str | None:
+    """Path of the first NaN / inf number in a nested list / dict, or None."""
+    if isinstance(v, bool) or v is None or isinstance(v, str):
+        return None
+    if isinstance(v, (int, float)):
+        return None if math.isfinite(v) else path
+    if isinstance(v, dict):
+        for k, x in v.items():
+            hit = _first_nonfinite(x, f"{path}.{k}" if path else str(k))
+            if hit:
+                return hit
+    if isinstance(v, list):
+        for i, x in enumerate(v):
+            hit = _first_nonfinite(x, f"{path}[{i}]")
+            if hit:
+                return hit
+    return None
+
+
+def check_covariance(C: Any, what: str, n: int | None = None) -> np.ndarray:
+    """A covariance matrix: square (n × n), finite, symmetric, positive semi-definite and not zero.
+
+    Args:
+        C: the matrix (nested lists or array).
+        what: the file and field, for the message.
+        n: the expected size (the number of parameter names), or None.
+
+    Returns:
+        The matrix as a float array.
+
+    Raises:
+        InputError: naming ``what`` and what is wrong (the most negative eigenvalue when not PSD).
+    """
+    try:
+        A = np.asarray(C, float)
+    except (TypeError, ValueError):
+        raise InputError(f"{what}: expected a square matrix of numbers") from None
+    if A.ndim != 2 or A.shape[0] != A.shape[1] or (n is not None and A.shape[0] != n):
+        raise InputError(f"{what}: expected a square {n if n is not None else 'k'} x "
+                         f"{n if n is not None else 'k'} matrix, got shape {A.shape}")
+    if not np.all(np.isfinite(A)):
+        raise InputError(f"{what}: contains NaN or inf")
+    scale = float(np.max(np.abs(A))) if A.size else 0.0
+    if scale == 0.0:
+        raise InputError(f"{what}: all zero: not a covariance of a fit (it would claim exact parameters)")
+    if np.max(np.abs(A - A.T)) > 1e-8 * scale:
+        i, j = np.unravel_index(int(np.argmax(np.abs(A - A.T))), A.shape)
+        raise InputError(f"{what}: not symmetric (entry [{i}][{j}] = {A[i, j]:.6g}, [{j}][{i}] = {A[j, i]:.6g})")
+    w = np.linalg.eigvalsh(0.5 * (A + A.T))
+    if w[0] < -1e-9 * scale or np.any(np.diag(A) < 0):
+        raise InputError(f"{what}: not positive semi-definite (smallest eigenvalue {w[0]:.3g}, largest {w[-1]:.3g}): "
+                         "not a covariance")
+    return A
+
+
+def validate_model_dict(d: Any, source: str = "model file") -> None:
+    """Check a parsed model file against :data:`MODEL_SCHEMA`, then numbers and covariances.
+
+    Args:
+        d: the parsed JSON (its ``format`` already checked).
+        source: the file name for the messages.
+
+    Raises:
+        InputError: the first violation, naming the file, the field path, the value and the unit or range.
+    """
+    where = f"{source}: " if source else ""
+    if not isinstance(d, dict):
+        raise InputError(f"{where}expected a JSON object at the top level (a model file), got {type(d).__name__}")
+    _validate(d, MODEL_SCHEMA, source, "model")
+    for key in ("robot", "tcp_m", "geometry", "effects", "stations", "noise"):
+        hit = _first_nonfinite(d.get(key), key)
+        if hit:
+            raise InputError(f"{where}model field {hit}: not a finite number (NaN or inf)")
+    if "tcp_m" in d and float(np.linalg.norm(d["tcp_m"])) > MAX_TOOL_OFFSET_M:
+        raise InputError(f"{where}model field tcp_m: {float(np.linalg.norm(d['tcp_m'])):.4g} m from the tool frame, "
+                         f"more than {MAX_TOOL_OFFSET_M:g} m: give it in m")
+    for name, v in d["geometry"]["joint_placement_errors"].items():
+        kind = str(name).rsplit(".", 1)[-1][:1]
+        lim = MAX_PLACEMENT_ERROR.get(kind)
+        if lim is not None and abs(v) > lim:
+            unit = "m" if kind == "t" else "rad"
+            raise InputError(f"{where}model field geometry.joint_placement_errors.{name}: {v:g} {unit} is beyond "
+                             f"±{lim:.3g} {unit}: not a calibration error (units: m, rad)")
+    for label, st in d["stations"].items():
+        refl = float(np.linalg.norm(st["reflector_m"]))
+        if refl > MAX_TOOL_OFFSET_M:
+            raise InputError(f"{where}model field stations.{label}.reflector_m: {refl:.4g} m from the tool frame, "
+                             f"more than {MAX_TOOL_OFFSET_M:g} m: give it in m")
+        xyz = float(np.linalg.norm(np.asarray(st["tracker_T_base"], float)[:3, 3]))
+        if xyz > MAX_CELL_M:
+            raise InputError(f"{where}model field stations.{label}.tracker_T_base: the base is {xyz:.4g} m from the "
+                             f"tracker, more than {MAX_CELL_M:g} m: give it in m")
+    noise = d.get("noise") or {}
+    if "sigma_xyz_m" in noise:
+        check_sigma_m(noise["sigma_xyz_m"], f"{where}model field noise.sigma_xyz_m")
+    if noise.get("sigma_rot_rad") is not None:
+        check_sigma_rad(noise["sigma_rot_rad"], f"{where}model field noise.sigma_rot_rad")
+    if noise.get("range_a_m") is not None:
+        check_sigma_m(noise["range_a_m"], f"{where}model field noise.range_a_m")
+    if noise.get("range_b") is not None and not (0 <= noise["range_b"] < 1e-2):
+        raise InputError(f"{where}model field noise.range_b: {noise['range_b']:g} must be in [0, 0.01) "
+                         "(m of noise per m of distance)")
+    par = d["geometry"].get("parameters") or {}
+    names = par.get("names")
+    for key in ("values", "std", "units"):
+        if names is not None and par.get(key) is not None and len(par[key]) != len(names):
+            raise InputError(f"{where}model field geometry.parameters.{key}: {len(par[key])} entries for "
+                             f"{len(names)} names")
+    if par.get("covariance") is not None:
+        if _ragged(par["covariance"]):
+            raise InputError(f"{where}model field geometry.parameters.covariance: rows of different lengths (ragged)")
+        check_covariance(par["covariance"], f"{where}model field geometry.parameters.covariance",
+                         len(names) if names is not None else None)

@@ -25,13 +25,22 @@ MAX_TOOL_OFFSET_M = 3.0
 SIGMA_ROT_MAX_RAD = 0.1
 
 
+def _text(v: object) -> str:
+    """A value for a message: numbers as plain numbers (never ``np.float64(...)``), text quoted, short."""
+    try:
+        a = np.atleast_1d(np.asarray(v, dtype=float)).ravel()
+        return ", ".join(f"{x:g}" for x in a[:6]) + (" ..." if a.size > 6 else "")
+    except (TypeError, ValueError):
+        return f"{v!r:.60}"
+
+
 def _values(v: float | Iterable[float], what: str) -> np.ndarray:
     try:
         a = np.atleast_1d(np.asarray(v, dtype=float)).ravel()
     except (TypeError, ValueError):
-        raise InputError(f"{what}: expected numbers, got {v!r}") from None
+        raise InputError(f"{what}: expected numbers, got {_text(v)}") from None
     if a.size == 0 or not np.all(np.isfinite(a)):
-        raise InputError(f"{what}: expected finite numbers, got {v!r}")
+        raise InputError(f"{what}: expected finite numbers, got {_text(v)}")
     return a
 
 
@@ -65,9 +74,9 @@ def check_sigma_rad(v: float | Iterable[float], what: str) -> np.ndarray:
     """
     a = _values(v, what)
     if np.any(a <= 0):
-        raise InputError(f"{what}: orientation noise sigma must be positive (rad), got {v}")
+        raise InputError(f"{what}: orientation noise sigma must be positive (rad), got {_text(v)}")
     if np.any(a > SIGMA_ROT_MAX_RAD):
-        raise InputError(f"{what}: orientation noise sigma {v} rad is more than {SIGMA_ROT_MAX_RAD:g} rad "
+        raise InputError(f"{what}: orientation noise sigma {_text(v)} rad is more than {SIGMA_ROT_MAX_RAD:g} rad "
                          f"({math.degrees(SIGMA_ROT_MAX_RAD):.1f}°): give it in rad (e.g. 1e-4)")
     return a
 

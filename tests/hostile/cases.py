@@ -135,7 +135,115 @@ def _cases() -> list[Case]:
              "--n-test"),
     ]
     c += [Case(f"seed-negative-{cmd.split()[0]}", cmd + " --seed -1", "--seed") for cmd in COMMANDS_WITH_SEED]
-    return c + _generated()
+    return c + _issue24() + _generated()
+
+
+def _issue24() -> list[Case]:
+    """Issue 24: the commands added since issue 15 (model files, register, predict, compensate,
+    import-tracker, export, pools with --given / --given-prior), attacked the same way."""
+    exp = "import-tracker {d}/exp_mm.txt --joints {d}/joints_deg.csv --robot kr15"
+    c = [
+        # 1. a colliding program never written without --force; exported values never clipped
+        Case("export-work-in-wall", "export {d}/d_wall.json --format krl --out {d}/p.src", "working configuration #0"),
+        Case("export-work-in-wall-csv", "export {d}/d_wall.json --format csv --out {d}/p.csv", "collides"),
+        Case("export-pose-beyond-limit", "export {d}/d_a5.json --format rapid --out {d}/p.mod", "outside its limits"),
+        Case("export-pose-beyond-limit-ur", "export {d}/d_a5.json --format csv --out {d}/p.csv", "joint_a5"),
+        Case("export-pose-in-wall", "export {d}/d_pose_wall.json --format csv --out {d}/p.csv", "collides"),
+        # 2. outliers flagged with unknown noise, fitted plainly: never "good" (refused when poor)
+        # 3. import-tracker units against the robot's reach and the joint limits; register gate
+        Case("tracker-m-file-read-as-mm", "import-tracker {d}/exp_m_nounit.txt --joints {d}/joints_deg.csv "
+             "--robot kr15 --out {d}/o.csv", "look like m, not mm"),
+        Case("tracker-joints-rad-read-as-deg", "import-tracker {d}/exp_mm.txt --joints {d}/joints_rad.csv "
+             "--robot kr15 --out {d}/o.csv", "--angle-unit rad"),
+        Case("tracker-header-m-under-units-mm", "import-tracker {d}/exp_hdr_m.txt --joints {d}/joints_deg.csv "
+             "--robot kr15 --out {d}/o.csv", "[m]"),
+        Case("tracker-units-m-with-mm-values", "import-tracker {d}/exp_m_decl_mmvals.txt --joints "
+             "{d}/joints_deg.csv --robot kr15 --out {d}/o.csv", "look like mm, not m"),
+        Case("tracker-units-option-m-with-mm-values", "import-tracker {d}/exp_mm_nounit.txt --joints "
+             "{d}/joints_deg.csv --robot kr15 --units m --out {d}/o.csv", "look like mm, not m"),
+        Case("tracker-joints-deg-as-rad", "import-tracker {d}/exp_mm.txt --joints {d}/joints_deg.csv --robot kr15 "
+             "--angle-unit rad --out {d}/o.csv", "joints_deg.csv"),
+        Case("tracker-another-robot", "import-tracker {d}/exp_mm.txt --joints {d}/joints_deg.csv --robot ur10 "
+             "--out {d}/o.csv", "joints_deg.csv"),
+        Case("register-3-rows", "register --model {d}/m.json --data {d}/reg3.csv --model-out {d}/o.json",
+             "at least 6 rows"),
+        Case("register-xy-swapped", "register --model {d}/m.json --data {d}/reg_swap.csv --model-out {d}/o.json",
+             "mirrored"),
+        Case("register-z-negated", "register --model {d}/m.json --data {d}/reg_negz.csv --model-out {d}/o.json",
+             "mirrored"),
+        Case("register-another-robot", "register --model {d}/m_ur10.json --data {d}/reg20.csv --model-out "
+             "{d}/o.json", "reg20.csv"),
+        Case("register-m-declared-mm", "register --model {d}/m.json --data {d}/reg20.csv --units mm "
+             "--model-out {d}/o.json", "reg20.csv"),
+        Case("register-5-rows-hold-ok-but-4", "register --model {d}/m.json --data {d}/reg4.csv --model-out "
+             "{d}/o.json", "at least 6 rows"),
+        Case("predict-m-declared-mm", "predict --model {d}/m.json --data {d}/reg20.csv --units mm --out {d}/o.csv",
+             "reg20.csv"),
+        # 7. inputs never overwritten: every command that writes goes through the output-path check
+        Case("out-compensate-out-onto-targets", "compensate --model {d}/m.json --targets {d}/targets.csv --out "
+             "{d}/targets.csv", "would destroy the input"),
+        Case("out-compensate-json-onto-model", "compensate --model {d}/m.json --targets {d}/targets.csv --out "
+             "{d}/o.csv --json {d}/m.json", "would destroy the input"),
+        Case("out-compensate-out-onto-program", "compensate --model {d}/m.json --program {d}/prog.csv --out "
+             "{d}/prog.csv", "would destroy the input"),
+        Case("out-compensate-out-equals-json", "compensate --model {d}/m.json --targets {d}/targets.csv --out "
+             "{d}/o.csv --json {d}/o.csv", "its own file"),
+        Case("out-export-onto-design", "export {d}/d.json --format csv --out {d}/d.json", "would destroy the input"),
+        Case("out-export-json-onto-design", "export {d}/d.json --format csv --out {d}/p.csv --json {d}/d.json",
+             "would destroy the input"),
+        Case("out-export-krl-dat-onto-input", "export {d}/d.dat --format krl --out {d}/d.src",
+             "would destroy the input"),
+        Case("out-export-out-equals-json", "export {d}/d.json --format csv --out {d}/p.csv --json {d}/p.csv",
+             "its own file"),
+        Case("out-export-krl-dat-equals-json", "export {d}/d.json --format krl --out {d}/p.src --json {d}/p.dat",
+             "its own file"),
+        Case("out-export-html-onto-design", "export {d}/d.json --format csv --out {d}/p.csv --html {d}/d.json",
+             "would destroy the input"),
+        Case("out-export-missing-folder", "export {d}/d.json --format csv --out {d}/nodir/p.csv", "does not exist"),
+        Case("out-import-tracker-onto-export", exp + " --out {d}/exp_mm.txt", "would destroy the input"),
+        Case("out-import-tracker-onto-joints", exp + " --out {d}/joints_deg.csv", "would destroy the input"),
+        Case("out-import-tracker-folder", exp + " --out {d}/sub", "is a folder"),
+        # 8. invalid programs: --dwell nan / inf / negative; options range-checked
+        Case("export-dwell-nan", "export {d}/d.json --format krl --out {d}/p.src --dwell nan", "--dwell"),
+        Case("export-dwell-inf", "export {d}/d.json --format rapid --out {d}/p.mod --dwell inf", "--dwell"),
+        Case("export-dwell-inf-ur", "export {d}/d.json --format urscript --out {d}/p.script --dwell inf", "--dwell"),
+        Case("export-dwell-negative", "export {d}/d.json --format csv --out {d}/p.csv --dwell -1", "--dwell"),
+        Case("export-seed-negative", "export {d}/d.json --format csv --out {d}/p.csv --seed -1", "--seed"),
+        Case("export-margin-nan", "export {d}/d.json --format csv --out {d}/p.csv --margin nan", "--margin"),
+        Case("export-margin-mm", "export {d}/d.json --format csv --out {d}/p.csv --margin 10", "--margin"),
+        Case("export-margin-1m", "export {d}/d.json --format csv --out {d}/p.csv --margin 0.4", "--margin"),
+        Case("export-speed-0", "export {d}/d.json --format csv --out {d}/p.csv --speed-override 0",
+             "--speed-override"),
+        Case("export-speed-2", "export {d}/d.json --format csv --out {d}/p.csv --speed-override 2",
+             "--speed-override"),
+        Case("export-format-unknown", "export {d}/d.json --format gcode --out {d}/p.nc", "--format"),
+        Case("compensate-seed-negative", "compensate --model {d}/m.json --targets {d}/targets.csv --out {d}/o.csv "
+             "--seed -1", "--seed"),
+        Case("compensate-tcp-mm", "compensate --model {d}/m.json --targets {d}/targets.csv --out {d}/o.csv "
+             "--tcp 0,0,50000", "--tcp"),
+        Case("compensate-tcp-text", "compensate --model {d}/m.json --targets {d}/targets.csv --out {d}/o.csv "
+             "--tcp a,b,c", "--tcp"),
+        Case("compensate-all-unreachable", "compensate --model {d}/m.json --targets {d}/targets_far.csv --out "
+             "{d}/o.csv", "unreachable"),
+    ]
+    # 5. model files through a schema: every field typed and ranged, covariances symmetric PSD, file named
+    bad = {"m_str.json": "joint_a2.tx", "m_dict.json": "joint_a2.tx", "m_list.json": "tcp_m",
+           "m_null.json": "reflector_m", "m_covstr.json": "covariance", "m_cov_elem_str.json": "covariance",
+           "m_negdef.json": "positive semi-definite", "m_zerocov.json": "all zero", "m_asym.json": "symmetric",
+           "m_noise_mm.json": "noise.sigma_xyz_m", "m_refl_mm.json": "reflector_m", "m_unknown_key.json": "geometri",
+           "m_std_negative.json": "std", "m_rows_text.json": "n_rows", "m_nan.json": "range_b"}
+    for f, expect in bad.items():
+        tag = f[2:-5]
+        c += [Case(f"model-{tag}-predict", f"predict --model {{d}}/{f} --data {{d}}/te.csv --out {{d}}/o.csv", expect),
+              Case(f"model-{tag}-register", f"register --model {{d}}/{f} --data {{d}}/reg20.csv --model-out "
+                   f"{{d}}/o.json", expect),
+              Case(f"model-{tag}-compensate", f"compensate --model {{d}}/{f} --targets {{d}}/targets.csv --out "
+                   f"{{d}}/o.csv", expect),
+              Case(f"model-{tag}-design-model", f"design --model {{d}}/{f} --measurements 10 --json {{d}}/o.json",
+                   expect),
+              Case(f"model-{tag}-given-prior", f"design --given {{d}}/given.csv --given-prior {{d}}/{f} "
+                   f"--measurements 5 --json {{d}}/o.json", expect)]
+    return c
 
 
 #: command -> (valid arguments, {output option: a valid default when another is under test}, input paths)
@@ -265,6 +373,7 @@ def build_inputs(d: Path) -> None:
                                                      1).replace("</robot>", '<xacro:include filename="x.xacro"/>'
                                                                 "</robot>"))
     design = json.loads((d / "d.json").read_text())
+    _build_issue24(d, design)
     (d / "list.json").write_text(json.dumps([design]))
     rag = json.loads(json.dumps(design))
     rag["q_meas"] = [rag["q_meas"][0], rag["q_meas"][1][:3]]
@@ -278,6 +387,125 @@ def build_inputs(d: Path) -> None:
     same["designs"][0]["q_meas"] = [design["designs"][0]["q_meas"][0]] * 20
     same["q_meas"] = same["designs"][0]["q_meas"]
     (d / "same.json").write_text(json.dumps(same))
+
+
+def _build_issue24(d: Path, design: dict) -> None:
+    """Inputs of the issue-24 cases: edited designs, tracker exports and joint logs in wrong units,
+    registration rows (too few, mirrored), targets and a program for compensate, a UR10 model."""
+    import numpy as np
+
+    from pin_kpi_oed.cli.app import main
+
+    wall = [2.6, -1.0, 0.8, 0.0, 0.5, 0.0]  # the KR 15 reaching back into its wall (x >= -0.45 m)
+
+    def edited(name: str, edit) -> None:
+        e = json.loads(json.dumps(design))
+        edit(e)
+        (d / name).write_text(json.dumps(e))
+
+    def set_work(e):
+        e["q_work"] = [wall]
+        e["cell"]["q_work"] = [wall]
+
+    def set_pose(k, j, v):
+        def f(e):
+            e["q_meas"][k][j] = v
+            e["designs"][0]["q_meas"][k][j] = v
+        return f
+
+    def set_pose_q(k, q):
+        def f(e):
+            e["q_meas"][k] = list(q)
+            e["designs"][0]["q_meas"][k] = list(q)
+        return f
+
+    edited("d_wall.json", set_work)
+    edited("d_a5.json", set_pose(3, 4, 2.299))  # A5 limit ±130° = ±2.269 rad
+    edited("d_pose_wall.json", set_pose_q(0, wall))
+    (d / "d.dat").write_text(json.dumps(design))
+    rows = (d / "te.csv").read_text().splitlines()
+    head = rows[0].split(",")
+    xi, yi, zi = (head.index(c) for c in "xyz")
+    data = [r.split(",") for r in rows[1:]]
+    J = np.array([[float(r[head.index(f"joint_a{k}")]) for k in range(1, 7)] for r in data])
+    P = np.array([[float(r[k]) for k in (xi, yi, zi)] for r in data])
+    names = [f"P{i + 1:04d}" for i in range(len(data))]
+
+    def export(name: str, unit_line: str | None, pts, head_line="Collection,Group,Target,X,Y,Z"):
+        out = ["// export", "// Frame: Tracker"] + ([unit_line] if unit_line else []) + [head_line]
+        out += [f"C,R,{n},{p[0]:.6f},{p[1]:.6f},{p[2]:.6f}" for n, p in zip(names, pts)]
+        (d / name).write_text("\n".join(out) + "\n")
+
+    export("exp_mm.txt", "// Units: mm", P * 1e3)
+    export("exp_mm_nounit.txt", None, P * 1e3)
+    export("exp_m_nounit.txt", None, P)
+    export("exp_hdr_m.txt", "// Units: mm", P, "Collection,Group,Target,X [m],Y [m],Z [m]")
+    export("exp_m_decl_mmvals.txt", "// Units: m", P * 1e3)
+
+    def log(name: str, Q) -> None:
+        out = ["Target," + ",".join(f"joint_a{k}" for k in range(1, 7))]
+        out += [n + "," + ",".join(f"{v:.8f}" for v in q) for n, q in zip(names, Q)]
+        (d / name).write_text("\n".join(out) + "\n")
+
+    log("joints_deg.csv", np.degrees(J))
+    log("joints_rad.csv", J)
+
+    def table(name: str, body) -> None:
+        (d / name).write_text("\n".join([rows[0]] + [",".join(r) for r in body]) + "\n")
+
+    table("reg3.csv", data[:3])
+    table("reg4.csv", data[:4])
+    table("reg20.csv", data[:20])
+    table("reg_swap.csv", [r[:xi] + [r[yi], r[xi], r[zi]] + r[zi + 1:] for r in data[:20]])
+    table("reg_negz.csv", [r[:zi] + [repr(-float(r[zi]))] + r[zi + 1:] for r in data[:20]])
+    (d / "targets.csv").write_text("x,y,z\n" + "\n".join(",".join(f"{v:.6f}" for v in p) for p in P[:5]) + "\n")
+    (d / "targets_far.csv").write_text("x,y,z\n" + "\n".join(",".join(f"{v + 6.0:.6f}" for v in p)
+                                                              for p in P[:3]) + "\n")
+    (d / "prog.csv").write_text(",".join(f"joint_a{k}" for k in range(1, 7)) + "\n"
+                                + "\n".join(",".join(f"{v:.8f}" for v in q) for q in J[:5]) + "\n")
+    with contextlib.redirect_stdout(io.StringIO()):
+        assert main(["simulate", "--robot", "ur10", "--n", "60", "--seed", "1", "--out", str(d / "ur.csv")]) == 0
+        assert main(["identify", "--robot", "ur10", "--data", str(d / "ur.csv"), "--model-out", str(d / "m_ur10.json"),
+                     "--quiet", "--accept-poor-fit"]) == 0
+    (d / "ur.csv").unlink()
+    model = json.loads((d / "m.json").read_text())
+
+    def bad_model(name: str, edit) -> None:
+        e = json.loads(json.dumps(model))
+        edit(e)
+        (d / name).write_text(json.dumps(e))
+
+    def put(path: str, value):
+        def f(e):
+            *head, last = path.split("/")
+            o = e
+            for k in head:
+                o = o[int(k)] if isinstance(o, list) else o[k]
+            if isinstance(o, list):
+                o[int(last)] = value
+            else:
+                o[last] = value
+        return f
+
+    cov = np.asarray(model["geometry"]["parameters"]["covariance"], float)
+    bad_model("m_str.json", put("geometry/joint_placement_errors/joint_a2.tx", "abc"))
+    bad_model("m_dict.json", put("geometry/joint_placement_errors/joint_a2.tx", {"v": 1}))
+    bad_model("m_list.json", put("tcp_m", [[0.0], [0.0], [0.0]]))
+    bad_model("m_null.json", put("stations/tr/reflector_m", None))
+    bad_model("m_covstr.json", put("geometry/parameters/covariance", "diag(1e-8)"))
+    bad_model("m_cov_elem_str.json", put("geometry/parameters/covariance/0/1", "x"))
+    bad_model("m_negdef.json", put("geometry/parameters/covariance", (-cov).tolist()))
+    bad_model("m_zerocov.json", put("geometry/parameters/covariance", np.zeros_like(cov).tolist()))
+    bad_model("m_asym.json", put("geometry/parameters/covariance", (cov + np.triu(np.full_like(cov, 1e-3), 1)).tolist()))
+    bad_model("m_noise_mm.json", put("noise/sigma_xyz_m", [10.0, 10.0, 10.0]))
+    bad_model("m_refl_mm.json", put("stations/tr/reflector_m", [30.0, 20.0, 80.0]))
+    bad_model("m_unknown_key.json", put("geometri", {}))
+    bad_model("m_std_negative.json", put("geometry/parameters/std/0", -1.0))
+    bad_model("m_rows_text.json", put("stations/tr/n_rows", "120"))
+    (d / "m_nan.json").write_text((d / "m.json").read_text().replace('"range_b": 0.0', '"range_b": NaN'))
+    Qd = np.asarray(design["q_meas"], float)[:10]
+    (d / "given.csv").write_text(",".join(f"joint_a{k}" for k in range(1, 7)) + "\n"
+                                 + "\n".join(",".join(f"{v:.10f}" for v in q) for q in Qd) + "\n")
 
 
 def snapshot(d: Path) -> dict[str, str]:
