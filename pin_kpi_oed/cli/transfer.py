@@ -115,6 +115,8 @@ def _registration_gates(res, data, model, hold_reflector: bool) -> list:
         sub = data if rows.size == len(data) else data.subset(rows)
         X = model.predict(data.q[rows], sub, station=ref)  # the held robot, the model's reflector
         sigma = data.sigma_m[rows] if data.sigma_m is not None else np.asarray(model.noise.sigma_xyz_m, float)
+        if model.discrepancy is not None:  # the robot's discrepancy is part of what the registration leaves
+            sigma = np.sqrt(np.asarray(sigma, float) ** 2 + model.discrepancy.prior_sigma_m ** 2)
         gates.append(assess_registration(lab, X, data.position_m[rows], res.errors_m[rows], sigma,
                                          6 + (0 if hold_reflector else 3)))
     return gates

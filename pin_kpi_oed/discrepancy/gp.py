@@ -263,6 +263,12 @@ class Discrepancy:
         return np.einsum("map,pq,mbq->mab", D, self.param_cov, D)
 
     @property
+    def prior_sigma_m(self) -> np.ndarray:
+        """Per-axis σ (m) of the residuals of the parametric model alone: prior variance of δ plus the white level."""
+        k0 = 0.0 if self.kind == "white" else float(self.kernel.diag(np.zeros((1, len(self.joint_names))))[0])
+        return np.sqrt((k0 + self.noise) * self.scale_m ** 2)
+
+    @property
     def noise_var_m2(self) -> np.ndarray:
         """Variance per axis (m²) of what repeats from pose to pose only (tracker noise, repeatability)."""
         return self.noise * self.scale_m ** 2
