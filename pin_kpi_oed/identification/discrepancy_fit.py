@@ -87,14 +87,12 @@ def parameter_jacobian(result: Any, Q: np.ndarray) -> tuple[np.ndarray, list[str
     robot_names = [n for n in result.names if n in set(L0.names[:6 * robot.nq])]
     S = len(result.stations)
     F = np.zeros((len(Q), 3, len(robot_names) + 9 * S))
-    for s, (lab, rows) in enumerate(zip(result.stations, result.station_rows)):
+    for s, rows in enumerate(result.station_rows):
         model, p = result.station_models[s], result.station_p[s]
-        J = model.jacobian(p, Q[rows])[:, :3, :]
         L = model.layout
         cols = [L.names.index(n) for n in robot_names]
         setup = list(range(L.tracker.start, L.tracker.stop)) + list(range(L.reflector.start, L.reflector.stop))
-        Rs = np.asarray(result.setups[lab].tracker_T_base, float)[:3, :3]
-        Jb = np.einsum("ba,mbp->map", Rs, J)
+        Jb = model.base_jacobian(p, Q[rows])
         F[rows, :, :len(robot_names)] = Jb[:, :, cols]
         F[rows, :, len(robot_names) + 9 * s: len(robot_names) + 9 * (s + 1)] = Jb[:, :, setup]
     return F, robot_names

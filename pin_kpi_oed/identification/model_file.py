@@ -375,8 +375,7 @@ class CalibratedModel:
         if not names:
             return np.zeros((len(Q), 3, 0))
         model, p = self.station_model(label)
-        J = model.jacobian(p, Q)[:, :3, [model.layout.names.index(n) for n in names]]
-        return np.einsum("ba,mbp->map", self.setups[label].tracker_T_base[:3, :3], J)
+        return model.base_jacobian(p, Q, [model.layout.names.index(n) for n in names])
 
     def _row_stations(self, m: int, aux: MeasurementSet | None, station: str | None) -> np.ndarray:
         if station is None and aux is not None and aux.station is not None:

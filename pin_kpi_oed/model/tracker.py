@@ -37,6 +37,7 @@ distance dependent σ = a + b·range; weighted residuals f₁ = Σ⁻¹(η − h
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Sequence
 
 import numpy as np
 import pinocchio as pin
@@ -176,6 +177,20 @@ class TrackerModel(MeasurementModel):
             Jw, _ = self._rotation_jacobian(p, Q, with_dq=False)
             J = np.concatenate([J, Jw], axis=1)
         return J @ self.right_jacobian(p)
+
+    def base_jacobian(self, p: np.ndarray, Q: np.ndarray, cols: Sequence[int] | None = None) -> np.ndarray:
+        """Jacobian of the reflector positions w.r.t. the raw parameters, rotated into the robot base frame.
+
+        Args:
+            p: raw parameters; Q: configurations (m, n) rad; cols: the parameter columns to keep (default all).
+
+        Returns:
+            (m, 3, k): R_tbᵀ · dh/dp (m per parameter unit), R_tb the tracker pose's rotation at ``p``.
+        """
+        J = self.jacobian(p, Q)[:, :3, :]
+        if cols is not None:
+            J = J[:, :, list(cols)]
+        return np.einsum("ba,mbp->map", self.tracker_pose(p).rotation, J)
 
     def jacobian_dq(self, p: np.ndarray, Q: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """Parameter Jacobian and its derivative w.r.t. the joint values.

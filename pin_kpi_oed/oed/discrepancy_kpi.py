@@ -241,7 +241,7 @@ def _base_frame(model, p, Q, base, with_dq):
         J = np.einsum("ba,mbp->map", R, J[:, :3, base])
         dJ = np.einsum("ba,mbpk->mapk", R, dJ[:, :3][:, :, base])
         return J, dJ
-    return np.einsum("ba,mbp->map", R, model.jacobian(p, Q)[:, :3, base]), None
+    return model.base_jacobian(p, Q, base), None
 
 
 @dataclass
