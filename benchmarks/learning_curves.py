@@ -1,0 +1,162 @@
+"""Learning curves on the real UR10: held-out error near the work against the number of calibration poses.
+
+For m in {12, 20, 30, 60, 120} poses chosen from the training pool by the discrepancy-aware KPI (``kpi_gp``), the
+paper's KPI, D-optimal and random (nested random sets), over seeded splits, every set calibrated the same way
+(geometry + set-up by least squares, then the discrepancy's posterior mean on the m residuals with the kernel, the
+per-axis scale and the white level FIXED to a prior model fitted on another series), scored as the mean 3-D error
+of the held-out rows within 0.5 rad (joints 1-5) of 5 working configurations
+(:func:`pin_kpi_oed.studies.learning_curves.curve_split`).
+
+Cases (the prior's series in brackets; it never holds a scored row):
+
+* ``C``: Series C within the session, 30 % held out per split, the pool the other 70 % (prior: Series B);
+* ``A``: Series A's grid (11,911 poses), 30 % held out, the pool 2,000 seeded rows of the other 70 % (prior: C);
+* ``B->C``, ``C->B``, ``C->D``, ``D->C``: the pool all of S, T's set-up re-registered on 60 seeded rows of T
+  (robot and discrepancy held), working configurations and scored rows from T's other rows (prior: S).
+
+Per case and split one JSON file in the cache directory (resumable); the prior models are cached there too.
+
+Run:  OMP_NUM_THREADS=1 python -m benchmarks.learning_curves --case C --seeds 20 [--cache runs/curves]
+      [--json out.json] [--figure docs/learning_curves.png]   (IPA data: $PIN_KPI_OED_IPA_DATA or shared/data/ipa_ur10)
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+from benchmarks.honest_sigma import find_data, load
+from pin_kpi_oed import NoiseModel, TrackerModel, load_robot
+from pin_kpi_oed.data.atomic import atomic_write_json
+from pin_kpi_oed.oed.discrepancy_kpi import DiscrepancyPrior
+from pin_kpi_oed.studies.learning_curves import METHODS, LearningCurves, curve_split
+
+#: case -> (pool series, target series or None, prior series, pool size or None)
+CASES = {"C": ("C", None, "B", None), "A": ("A", None, "C", 2000), "B->C": ("B", "C", "B", None),
+         "C->B": ("C", "B", "C", None), "C->D": ("C", "D", "C", None), "D->C": ("D", "C", "D", None)}
+LABELS = {"kpi_gp": "discrepancy-aware KPI", "kpi": "KPI (noise only)", "D": "D-optimal", "random": "random"}
+
+
+def ur10_model() -> TrackerModel:
+    return TrackerModel(load_robot("ur10"), reflector_m=np.array([0.0, 0.0, 0.109]),
+                        noise=NoiseModel(sigma_xyz_m=(1e-4,) * 3))
+
+
+def prior_of_series(model: TrackerModel, series: str, S: dict, cache: Path) -> DiscrepancyPrior:
+    """The discrepancy of ``identify(..., discrepancy="auto", seed=0)`` on all rows of ``series`` (cached)."""
+    from pin_kpi_oed.identification.identify import identify
+    from pin_kpi_oed.identification.model_file import load_model_file
+
+    path = cache / f"prior_{series}.json"
+    if not path.exists():
+        t0 = time.perf_counter()
+        print(f"fitting the prior discrepancy on Series {series} ({len(S[series])} rows) ...", flush=True)
+        cm = identify(model, S[series], use_orientation=False, discrepancy="auto", seed=0,
+                      raise_on_failure=False).calibrated_model()
+        cm.save(path)
+        print(f"  {cm.discrepancy.decision} ({time.perf_counter() - t0:.0f} s)", flush=True)
+    d = load_model_file(path).discrepancy
+    return DiscrepancyPrior.from_discrepancy(d, f"Series {series} (all {d.n_rows} rows, marginal likelihood)")
+
+
+def run_case(case: str, n_seeds: int, cache: Path, model: TrackerModel, folder: Path) -> LearningCurves:
+    src, tgt, pri, pool_size = CASES[case]
+    S = {s: load(folder, s) for s in {src, pri} | ({tgt} if tgt else set())}
+    prior = prior_of_series(model, pri, S, cache)
+    print(f"[{case}] {prior.describe()}", flush=True)
+    splits = []
+    t0 = time.perf_counter()
+    for seed in range(n_seeds):
+        path = cache / f"{case.replace('->', '_to_')}_seed{seed}.json"
+        if path.exists():
+            splits.append(json.loads(path.read_text()))
+            continue
+        r = curve_split(model, S[src], prior, S[tgt] if tgt else None, seed=seed, pool_size=pool_size)
+        atomic_write_json(path, r)
+        splits.append(r)
+        e = {k: r["error_mean_m"][k] for k in r["methods"]}
+        print(f"[{case}] split {seed + 1}/{n_seeds} (seed {seed}): {r['time_s']:.0f} s, {r['n_scored']} scored rows; "
+              f"20 poses " + ", ".join(f"{k} {v[1] * 1e3:.3f}" for k, v in e.items())
+              + f" mm; full pool {r['full']['error_mean_m'] * 1e3:.3f} mm", flush=True)
+    return LearningCurves(case=case, prior=prior.source, sizes=splits[0]["sizes"], methods=splits[0]["methods"],
+                          splits=splits, success=True, status="completed", nit=len(splits),
+                          message=f"{len(splits)} splits", time_s=time.perf_counter() - t0)
+
+
+def figure(results: list[LearningCurves], path: str) -> None:
+    """Observed mean error (solid, ± standard error) and predicted RMS error at the scored rows (dashed) per method
+    against the number of poses; the full pool's error and its +10 % band in grey."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from pin_kpi_oed.viz.style import design_colours, hex_colour
+
+    col = {k: hex_colour(v) for k, v in design_colours(list(METHODS)).items()}
+    fig, axes = plt.subplots(1, len(results), figsize=(4.6 * len(results), 4.0), squeeze=False)
+    for ax, res in zip(axes[0], results):
+        m = np.array(res.sizes)
+        for meth in res.methods:
+            e = res.array("error_mean_m", meth) * 1e3
+            se = e.std(0, ddof=1) / np.sqrt(len(e)) if len(e) > 1 else 0 * e[0]
+            ax.plot(m, e.mean(0), "-o", color=col[meth], label=f"{LABELS[meth]} observed", ms=4)
+            ax.fill_between(m, e.mean(0) - se, e.mean(0) + se, color=col[meth], alpha=0.15)
+            ax.plot(m, res.array("pred_rms_scored_m", meth).mean(0) * 1e3, "--", color=col[meth], lw=1,
+                    label=f"{LABELS[meth]} predicted")
+        big = res.beyond()
+        if big is not None:
+            ax.plot(np.r_[m[-1], big[0]], np.r_[res.array("error_mean_m", "random").mean(0)[-1],
+                                              big[1].mean(0)] * 1e3, ":o", color=col["random"], ms=3)
+        f = res.full("error_mean_m").mean() * 1e3
+        ax.axhline(f, color="0.4", lw=1)
+        ax.axhspan(f, 1.1 * f, color="0.85")
+        ax.set_xscale("log")
+        ax.set_xlabel("calibration poses m")
+        ax.set_title(f"{res.case} ({len(res.splits)} splits)")
+        ax.grid(alpha=0.3)
+    axes[0][0].set_ylabel("mean 3-D error near the work (mm)")
+    axes[0][0].legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    print(f"figure written to {path}")
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--case", default="C", help=f"comma-separated cases of {', '.join(CASES)} (default C)")
+    ap.add_argument("--seeds", type=int, default=20, help="splits, seeds 0 ... N-1 (default 20)")
+    ap.add_argument("--cache", default="runs/learning_curves", help="cache directory (one JSON per case and split)")
+    ap.add_argument("--json", default=None, help="write the summaries here")
+    ap.add_argument("--figure", default=None, help="draw observed vs predicted curves of the cases here (PNG)")
+    a = ap.parse_args(argv)
+    folder = find_data()
+    if folder is None or not (folder / "Series_C").is_dir():
+        print("IPA UR10 data not found: nothing to do (set PIN_KPI_OED_IPA_DATA)")
+        return 0
+    cases = [c.strip() for c in a.case.split(",") if c.strip()]
+    for c in cases:
+        if c not in CASES:
+            ap.error(f"unknown case '{c}' (known: {', '.join(CASES)})")
+    cache = Path(a.cache)
+    cache.mkdir(parents=True, exist_ok=True)
+    model = ur10_model()
+    results = []
+    for c in cases:
+        res = run_case(c, a.seeds, cache, model, folder)
+        results.append(res)
+        print(res.summary(), flush=True)
+    if a.json:
+        atomic_write_json(a.json, {"cases": [r.to_dict() for r in results], "seeds": a.seeds})
+    if a.figure:
+        figure(results, a.figure)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
