@@ -1,7 +1,8 @@
 """Learning curves on the real UR10: held-out error near the work against the number of calibration poses.
 
 For m in {12, 20, 30, 60, 120} poses chosen from the training pool by the discrepancy-aware KPI (``kpi_gp``), the
-paper's KPI, D-optimal and random (nested random sets), over seeded splits, every set calibrated the same way
+paper's KPI, D-optimal and random (nested random sets), and the discrepancy-aware KPI over the working region
+(``kpi_gp_region``: the working configurations plus up to 100 pool rows within the scoring radius), over seeded splits, every set calibrated the same way
 (geometry + set-up by least squares, then the discrepancy's posterior mean on the m residuals with the kernel, the
 per-axis scale and the white level FIXED to a prior model fitted on another series), scored as the mean 3-D error
 of the held-out rows within 0.5 rad (joints 1-5) of 5 working configurations
@@ -34,12 +35,12 @@ from benchmarks.honest_sigma import find_data, load
 from pin_kpi_oed import NoiseModel, TrackerModel, load_robot
 from pin_kpi_oed.data.atomic import atomic_write_json
 from pin_kpi_oed.oed.discrepancy_kpi import DiscrepancyPrior
-from pin_kpi_oed.studies.learning_curves import METHODS, LearningCurves, curve_split
+from pin_kpi_oed.studies.learning_curves import METHODS, LearningCurves, _n, curve_split
 
 #: case -> (pool series, target series or None, prior series, pool size or None)
 CASES = {"C": ("C", None, "B", None), "A": ("A", None, "C", 2000), "B->C": ("B", "C", "B", None),
          "C->B": ("C", "B", "C", None), "C->D": ("C", "D", "C", None), "D->C": ("D", "C", "D", None)}
-LABELS = {"kpi_gp": "discrepancy-aware KPI", "kpi": "KPI (noise only)", "D": "D-optimal", "random": "random"}
+LABELS = {"kpi_gp": "discrepancy-aware KPI", "kpi_gp_region": "discrepancy-aware KPI, region", "kpi": "KPI (noise only)", "D": "D-optimal", "random": "random"}
 
 
 def ur10_model() -> TrackerModel:
@@ -74,8 +75,10 @@ def run_case(case: str, n_seeds: int, cache: Path, model: TrackerModel, folder: 
     for seed in range(n_seeds):
         path = cache / f"{case.replace('->', '_to_')}_seed{seed}.json"
         if path.exists():
-            splits.append(json.loads(path.read_text()))
-            continue
+            old = json.loads(path.read_text())
+            if old["methods"] == list(METHODS):
+                splits.append(old)
+                continue
         r = curve_split(model, S[src], prior, S[tgt] if tgt else None, seed=seed, pool_size=pool_size)
         atomic_write_json(path, r)
         splits.append(r)
@@ -86,6 +89,54 @@ def run_case(case: str, n_seeds: int, cache: Path, model: TrackerModel, folder: 
     return LearningCurves(case=case, prior=prior.source, sizes=splits[0]["sizes"], methods=splits[0]["methods"],
                           splits=splits, success=True, status="completed", nit=len(splits),
                           message=f"{len(splits)} splits", time_s=time.perf_counter() - t0)
+
+
+def markdown(res: LearningCurves) -> str:
+    """The case as markdown: per m and method the mean ± spread (mm) and against random the change, wins and the
+    Wilcoxon p; then the poses each method needs to come within 10 % of the full pool (observed, predicted)."""
+    meths = res.methods
+    head = "| m | " + " | ".join(LABELS.get(k, k) for k in meths) + " |"
+    rows = [head, "|---" * (len(meths) + 1) + "|"]
+    cmp = {k: res.paired(k) for k in meths if k != "random"}
+    for j, m in enumerate(res.sizes):
+        cells = []
+        for k in meths:
+            e = res.array("error_mean_m", k)[:, j] * 1e3
+            c = f"{e.mean():.3f} ± {e.std(ddof=1):.3f}"
+            if k in cmp:
+                p = cmp[k][j]
+                c += f" ({100 * p['change']:+.0f} %, {p['wins']}/{p['n']}, p {p['p_wilcoxon']:.2g})"
+            cells.append(c)
+        rows.append(f"| {m} | " + " | ".join(cells) + " |")
+    f = res.full("error_mean_m") * 1e3
+    rows.append(f"| full pool ({res.splits[0]['n_pool']}) | {f.mean():.3f} ± {f.std(ddof=1):.3f} |"
+                + " |" * (len(meths) - 1))
+    need = {w: res.needed(key) for w, key in (("observed", "error_mean_m"), ("predicted, sigma at W",
+                                                                              "pred_sigma_work_m"),
+                                               ("predicted, RMS at the scored rows", "pred_rms_scored_m"))}
+    rows += ["", "| poses to within 10 % of the full pool | " + " | ".join(LABELS.get(k, k) for k in meths) + " |",
+             "|---" * (len(meths) + 1) + "|"]
+    for w, d in need.items():
+        rows.append(f"| {w} | " + " | ".join((f"> {res.largest(k) if w == 'observed' else res.sizes[-1]}"
+                                              if not np.isfinite(d[k]) else f"{d[k]:.0f}") for k in meths) + " |")
+    rows += ["", "| poses to match random's mean error at m = " + ", ".join(map(str, res.sizes))
+             + " | observed | predicted (RMS at the scored rows) |", "|---|---|---|"]
+    for k in meths:
+        if k != "random":
+            rows.append(f"| {LABELS.get(k, k)} | " + " | ".join(
+                ", ".join(_n(v, res.sizes[-1], res.sizes[0]) for v in res.equivalent(k, key=key))
+                for key in ("error_mean_m", "pred_rms_scored_m")) + " |")
+    rows += ["", "| m | " + " | ".join(f"{LABELS.get(k, k)}: predicted RMS / observed RMS (mm)" for k in meths)
+             + " |", "|---" * (len(meths) + 1) + "|"]
+    for j, m in enumerate(res.sizes):
+        rows.append(f"| {m} | " + " | ".join(f"{res.array('pred_rms_scored_m', k)[:, j].mean() * 1e3:.3f} / "
+                                             f"{res.array('error_rms_m', k)[:, j].mean() * 1e3:.3f}" for k in meths)
+                    + " |")
+    big = res.beyond()
+    if big is not None:
+        rows += ["", "random, larger sets: " + ", ".join(f"{m} poses {v * 1e3:.3f} mm"
+                                                        for m, v in zip(big[0], big[1].mean(0)))]
+    return "\n".join(rows)
 
 
 def figure(results: list[LearningCurves], path: str) -> None:
@@ -133,6 +184,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--seeds", type=int, default=20, help="splits, seeds 0 ... N-1 (default 20)")
     ap.add_argument("--cache", default="runs/learning_curves", help="cache directory (one JSON per case and split)")
     ap.add_argument("--json", default=None, help="write the summaries here")
+    ap.add_argument("--markdown", action="store_true", help="also print the tables as markdown")
     ap.add_argument("--figure", default=None, help="draw observed vs predicted curves of the cases here (PNG)")
     a = ap.parse_args(argv)
     folder = find_data()
@@ -151,6 +203,8 @@ def main(argv: list[str] | None = None) -> int:
         res = run_case(c, a.seeds, cache, model, folder)
         results.append(res)
         print(res.summary(), flush=True)
+        if a.markdown:
+            print(markdown(res), flush=True)
     if a.json:
         atomic_write_json(a.json, {"cases": [r.to_dict() for r in results], "seeds": a.seeds})
     if a.figure:

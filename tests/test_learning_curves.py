@@ -38,7 +38,7 @@ def setting():
 def test_every_method_gives_finite_curves_of_each_size(setting):
     _, _, _, runs = setting
     r = runs[0]
-    assert r["sizes"] == list(SIZES) and set(r["methods"]) == {"kpi_gp", "kpi", "D", "random"}
+    assert r["sizes"] == list(SIZES) and set(r["methods"]) == {"kpi_gp", "kpi_gp_region", "kpi", "D", "random"}
     for key in ("error_mean_m", "error_rms_m", "error_geo_mean_m", "pred_sigma_work_m", "pred_rms_scored_m"):
         for meth in r["methods"]:
             v = np.array(r[key][meth])

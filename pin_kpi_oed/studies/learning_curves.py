@@ -8,6 +8,9 @@ m poses are chosen from the training pool by each method, for every m of a grid:
 
 * ``kpi_gp``: the discrepancy-aware KPI (:func:`~pin_kpi_oed.oed.discrepancy_kpi.select_pool_gp`, greedy + one
   exchange pass), tr C_s at W under the prior discrepancy;
+* ``kpi_gp_region``: the same criterion over the working *region*: W plus up to ``region_rows`` seeded pool rows
+  within the scoring radius of W (known configurations of the region, never scored rows); the scores are taken
+  over a region of 0.5 rad, which five points with a discrepancy of short length scales do not represent;
 * ``kpi``: the paper's KPI (noise only), pool selection (:func:`~pin_kpi_oed.oed.pool.select`);
 * ``D``: D-optimal pool selection;
 * ``random``: the first m of one seeded permutation of the pool (nested sets).
@@ -45,7 +48,7 @@ __all__ = ["SIZES", "METHODS", "calibrate_fixed", "curve_split", "LearningCurves
 #: Numbers of calibration poses of the curves.
 SIZES = (12, 20, 30, 60, 120)
 #: Design methods.
-METHODS = ("kpi_gp", "kpi", "D", "random")
+METHODS = ("kpi_gp", "kpi_gp_region", "kpi", "D", "random")
 
 
 def calibrate_fixed(model: TrackerModel, data: MeasurementSet, prior: DiscrepancyPrior):
@@ -120,8 +123,9 @@ class _Designs:
     """One split's pool quantities, computed once for every m: the design model (nominal robot, the pool's
     set-up), the base-frame and weighted Jacobians of the pool, and the criteria at W and at the scored rows."""
 
-    def __init__(self, model: TrackerModel, sp: _Split, prior: DiscrepancyPrior, seed: int) -> None:
-        from pin_kpi_oed.studies.design_trials import _design_model
+    def __init__(self, model: TrackerModel, sp: _Split, prior: DiscrepancyPrior, seed: int, radius_rad: float,
+                 joints: int, region_rows: int) -> None:
+        from pin_kpi_oed.studies.design_trials import _design_model, _near
 
         dm = _design_model(model, sp.pool)
         b = analyse(dm).base
@@ -132,6 +136,11 @@ class _Designs:
         # the KPI is the measured point (the reflector) at W and at the scored rows, what the scores measure
         self.crit_w.E = self.crit_w.pool_jacobians(sp.work)
         self.crit_s.E = self.crit_s.pool_jacobians(sp.scored.q)
+        near = _near(self.Q, sp.work, radius_rad, joints)
+        rng = np.random.default_rng([seed, 1])
+        near = near if near.size <= region_rows else np.sort(rng.choice(near, region_rows, replace=False))
+        self.crit_r = DiscrepancyDesignCriterion(dm, b, prior, np.vstack([sp.work, self.Q[near]]))
+        self.crit_r.E = self.crit_r.pool_jacobians(self.crit_r.Q_work)
         self.Jp = self.crit_w.pool_jacobians(self.Q)
         self.Fp = dm.weighted_jacobian(p0, self.Q)[:, :, b]
         E = dm.jacobian(p0, sp.work)[:, :3, :][:, :, b].reshape(-1, b.size)
@@ -144,8 +153,9 @@ class _Designs:
         """Pool indices of the m poses of method ``meth``."""
         if meth == "random":
             return self.order[:m]
-        if meth == "kpi_gp":
-            return self.crit_w.select(self.Q, m, J_pool=self.Jp, exchange_passes=1).indices
+        if meth in ("kpi_gp", "kpi_gp_region"):
+            crit = self.crit_w if meth == "kpi_gp" else self.crit_r
+            return crit.select(self.Q, m, J_pool=self.Jp, exchange_passes=1).indices
         if meth in ("kpi", "D"):
             return select(self.Fp, m, self.K_kpi if meth == "kpi" else None, seed=self.seed).indices
         raise InputError(f"method '{meth}': unknown (known: {', '.join(METHODS)})")
@@ -162,7 +172,7 @@ def curve_split(model: TrackerModel, data: MeasurementSet, prior: DiscrepancyPri
                 target: MeasurementSet | None = None, *, seed: int = 0, sizes: tuple[int, ...] = SIZES,
                 methods: tuple[str, ...] = METHODS, test_frac: float = 0.3, n_work: int = 5,
                 radius_rad: float = 0.5, joints: int = 5, pool_size: int | None = None,
-                n_register: int = 60, random_beyond: tuple[int, ...] = (240, 480, 960)) -> dict:
+                n_register: int = 60, random_beyond: tuple[int, ...] = (240, 480, 960), region_rows: int = 100) -> dict:
     """One split of the learning curves (see the module docstring); plain JSON-able numbers (SI units).
 
     Args:
@@ -174,6 +184,7 @@ def curve_split(model: TrackerModel, data: MeasurementSet, prior: DiscrepancyPri
         sizes: numbers of poses; methods: keys of :data:`METHODS`.
         test_frac, n_work, radius_rad, joints, n_register: the split (as ``extended_design_validation``).
         pool_size: subsample the training pool to this many rows (None: all).
+        region_rows: most pool rows of the working region in ``kpi_gp_region``'s criterion.
         random_beyond: larger sizes scored for the random sets only (where random comes within reach of the full
             pool); sizes above the pool are skipped.
 
@@ -191,7 +202,7 @@ def curve_split(model: TrackerModel, data: MeasurementSet, prior: DiscrepancyPri
     sp = _make_split(data, target, rng, test_frac, n_work, radius_rad, joints, pool_size, n_register)
     if max(sizes) > len(sp.pool):
         raise InputError(f"{data.source}: a pool of {len(sp.pool)} rows is too small for {max(sizes)} poses")
-    des = _Designs(model, sp, prior, seed)
+    des = _Designs(model, sp, prior, seed, radius_rad, joints, region_rows)
     keys = ("error_mean_m", "error_rms_m", "error_geo_mean_m", "pred_sigma_work_m", "pred_rms_scored_m")
     out: dict = {k: {meth: [] for meth in methods} for k in keys}
     sel_time = {meth: 0.0 for meth in methods}
@@ -277,6 +288,18 @@ class LearningCurves(Result):
                                                                          big[1].mean(0)], ref, frac)
         return out
 
+    def largest(self, meth: str) -> int:
+        """The largest size tried for ``meth`` (the random sets go further)."""
+        big = self.beyond()
+        return int(big[0][-1]) if meth == "random" and big is not None else int(self.sizes[-1])
+
+    def equivalent(self, meth: str, base: str = "random", key: str = "error_mean_m") -> list[float]:
+        """Per size m: the poses ``meth`` needs (log-m interpolation of its mean curve of ``key``) to reach what
+        ``base`` reaches with m poses (inf beyond the largest size; ``sizes[0]`` when it is better already there)."""
+        x = self.array(key, meth).mean(0)
+        y = self.array(key, base).mean(0)
+        return [poses_within(np.array(self.sizes), x, float(v), 0.0) for v in y]
+
     def beyond(self) -> tuple[np.ndarray, np.ndarray] | None:
         """(sizes, (splits, sizes) mean errors) of the larger random sets common to every split, or None."""
         sizes = [m for m in self.splits[0].get("random_beyond", {}).get("sizes", [])
@@ -295,6 +318,10 @@ class LearningCurves(Result):
             if meth != "random" and "random" in self.methods:
                 per[meth]["vs_random"] = self.paired(meth)
         big = self.beyond()
+        for meth in self.methods:
+            if meth != "random" and "random" in self.methods:
+                per[meth]["poses_to_match_random"] = self.equivalent(meth)
+                per[meth]["poses_to_match_random_predicted"] = self.equivalent(meth, key="pred_rms_scored_m")
         return {**self.result_dict(), "case": self.case, "prior": self.prior, "sizes": self.sizes,
                 "n_splits": len(self.splits), "n_pool": float(np.mean([s["n_pool"] for s in self.splits])),
                 "n_scored": float(np.mean([s["n_scored"] for s in self.splits])), "methods": per,
@@ -332,12 +359,17 @@ class LearningCurves(Result):
         for key, word in (("error_mean_m", "observed"), ("pred_sigma_work_m", "predicted (sigma at W)")):
             need = self.needed(key)
             lines.append(f"poses to within 10 % of the full pool, {word}: "
-                         + ", ".join(f"{k} {_n(v)}" for k, v in need.items()))
+                         + ", ".join(f"{k} {_n(v, self.largest(k))}" for k, v in need.items()))
+        for meth in self.methods:
+            if meth != "random" and "random" in self.methods:
+                lines.append(f"{meth}: poses to match random's {', '.join(str(m) for m in self.sizes)}: "
+                             + ", ".join(_n(v, self.sizes[-1], self.sizes[0]) for v in self.equivalent(meth)))
         return "\n".join(lines)
 
 
-def _n(v: float) -> str:
-    return f"> {SIZES[-1]}" if not np.isfinite(v) else f"{v:.0f}"
+def _n(v: float, largest: int, smallest: int = 0) -> str:
+    """A number of poses: ``> largest`` when not reached, ``<= smallest`` when reached at the smallest size."""
+    return f"> {largest}" if not np.isfinite(v) else (f"<= {smallest}" if v <= smallest else f"{v:.0f}")
 
 
 def learning_curves(model: TrackerModel, data: MeasurementSet, prior: DiscrepancyPrior,
