@@ -140,39 +140,42 @@ def markdown(res: LearningCurves) -> str:
 
 
 def figure(results: list[LearningCurves], path: str) -> None:
-    """Observed mean error (solid, ± standard error) and predicted RMS error at the scored rows (dashed) per method
-    against the number of poses; the full pool's error and its +10 % band in grey."""
+    """Observed RMS 3-D error of the scored rows (solid, ± standard error over the splits) and the predicted RMS
+    (dashed: universal kriging under the prior discrepancy plus its white level) per method against the number of
+    poses; the full pool's observed RMS in grey with its +10 % band."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    from matplotlib.lines import Line2D
 
     from pin_kpi_oed.viz.style import design_colours, hex_colour
 
     col = {k: hex_colour(v) for k, v in design_colours(list(METHODS)).items()}
-    fig, axes = plt.subplots(1, len(results), figsize=(4.6 * len(results), 4.0), squeeze=False)
+    fig, axes = plt.subplots(1, len(results), figsize=(4.4 * len(results), 4.0), squeeze=False)
     for ax, res in zip(axes[0], results):
         m = np.array(res.sizes)
         for meth in res.methods:
-            e = res.array("error_mean_m", meth) * 1e3
+            e = res.array("error_rms_m", meth) * 1e3
             se = e.std(0, ddof=1) / np.sqrt(len(e)) if len(e) > 1 else 0 * e[0]
-            ax.plot(m, e.mean(0), "-o", color=col[meth], label=f"{LABELS[meth]} observed", ms=4)
+            ax.plot(m, e.mean(0), "-o", color=col[meth], ms=4)
             ax.fill_between(m, e.mean(0) - se, e.mean(0) + se, color=col[meth], alpha=0.15)
-            ax.plot(m, res.array("pred_rms_scored_m", meth).mean(0) * 1e3, "--", color=col[meth], lw=1,
-                    label=f"{LABELS[meth]} predicted")
-        big = res.beyond()
-        if big is not None:
-            ax.plot(np.r_[m[-1], big[0]], np.r_[res.array("error_mean_m", "random").mean(0)[-1],
-                                              big[1].mean(0)] * 1e3, ":o", color=col["random"], ms=3)
-        f = res.full("error_mean_m").mean() * 1e3
+            ax.plot(m, res.array("pred_rms_scored_m", meth).mean(0) * 1e3, "--", color=col[meth], lw=1)
+        f = res.full("error_rms_m").mean() * 1e3
         ax.axhline(f, color="0.4", lw=1)
         ax.axhspan(f, 1.1 * f, color="0.85")
         ax.set_xscale("log")
+        ax.set_xticks(m, [str(v) for v in m])
+        ax.set_xticks([], minor=True)
         ax.set_xlabel("calibration poses m")
-        ax.set_title(f"{res.case} ({len(res.splits)} splits)")
+        ax.set_title(f"{res.case}: {len(res.splits)} splits, full pool {res.splits[0]['n_pool']} poses", fontsize=9)
         ax.grid(alpha=0.3)
-    axes[0][0].set_ylabel("mean 3-D error near the work (mm)")
-    axes[0][0].legend(fontsize=7)
+    axes[0][0].set_ylabel("RMS 3-D error near the work (mm)")
+    handles = [Line2D([], [], color=col[k], marker="o", ms=4, label=LABELS.get(k, k)) for k in results[0].methods]
+    handles += [Line2D([], [], color="k", ls="-", label="observed"), Line2D([], [], color="k", ls="--", lw=1,
+                                                                           label="predicted"),
+                Line2D([], [], color="0.4", lw=1, label="full pool (band: +10 %)")]
+    axes[0][0].legend(handles=handles, fontsize=7)
     fig.tight_layout()
     fig.savefig(path, dpi=120)
     print(f"figure written to {path}")
