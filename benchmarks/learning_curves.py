@@ -92,8 +92,8 @@ def run_case(case: str, n_seeds: int, cache: Path, model: TrackerModel, folder: 
 
 
 def markdown(res: LearningCurves) -> str:
-    """The case as markdown: per m and method the mean ± spread (mm) and against random the change, wins and the
-    Wilcoxon p; then the poses each method needs to come within 10 % of the full pool (observed, predicted)."""
+    """The case as markdown: per m and method the mean ± spread and the median (mm) and against random the median
+    paired change, wins and the Wilcoxon p; then the poses each method needs to come within 10 % of the full pool (observed, predicted)."""
     meths = res.methods
     head = "| m | " + " | ".join(LABELS.get(k, k) for k in meths) + " |"
     rows = [head, "|---" * (len(meths) + 1) + "|"]
@@ -102,24 +102,24 @@ def markdown(res: LearningCurves) -> str:
         cells = []
         for k in meths:
             e = res.array("error_mean_m", k)[:, j] * 1e3
-            c = f"{e.mean():.3f} ± {e.std(ddof=1):.3f}"
+            c = f"{e.mean():.3f} ± {e.std(ddof=1):.3f}, med. {np.median(e):.3f}"
             if k in cmp:
                 p = cmp[k][j]
                 c += f" ({100 * p['change']:+.0f} %, {p['wins']}/{p['n']}, p {p['p_wilcoxon']:.2g})"
             cells.append(c)
         rows.append(f"| {m} | " + " | ".join(cells) + " |")
     f = res.full("error_mean_m") * 1e3
-    rows.append(f"| full pool ({res.splits[0]['n_pool']}) | {f.mean():.3f} ± {f.std(ddof=1):.3f} |"
+    rows.append(f"| full pool ({res.splits[0]['n_pool']}) | {f.mean():.3f} ± {f.std(ddof=1):.3f}, med. {np.median(f):.3f} |"
                 + " |" * (len(meths) - 1))
     need = {w: res.needed(key) for w, key in (("observed", "error_mean_m"), ("predicted, sigma at W",
                                                                               "pred_sigma_work_m"),
                                                ("predicted, RMS at the scored rows", "pred_rms_scored_m"))}
-    rows += ["", "| poses to within 10 % of the full pool | " + " | ".join(LABELS.get(k, k) for k in meths) + " |",
+    rows += ["", "| poses to within 10 % of the full pool (median curves) | " + " | ".join(LABELS.get(k, k) for k in meths) + " |",
              "|---" * (len(meths) + 1) + "|"]
     for w, d in need.items():
         rows.append(f"| {w} | " + " | ".join((f"> {res.largest(k) if w == 'observed' else res.sizes[-1]}"
                                               if not np.isfinite(d[k]) else f"{d[k]:.0f}") for k in meths) + " |")
-    rows += ["", "| poses to match random's mean error at m = " + ", ".join(map(str, res.sizes))
+    rows += ["", "| poses to match random's median error at m = " + ", ".join(map(str, res.sizes))
              + " | observed | predicted (RMS at the scored rows) |", "|---|---|---|"]
     for k in meths:
         if k != "random":
@@ -134,8 +134,8 @@ def markdown(res: LearningCurves) -> str:
                     + " |")
     big = res.beyond()
     if big is not None:
-        rows += ["", "random, larger sets: " + ", ".join(f"{m} poses {v * 1e3:.3f} mm"
-                                                        for m, v in zip(big[0], big[1].mean(0)))]
+        rows += ["", "random, larger sets (median over the splits): " + ", ".join(
+            f"{m} poses {v * 1e3:.3f} mm" for m, v in zip(big[0], np.median(big[1], 0)))]
     return "\n".join(rows)
 
 

@@ -264,7 +264,8 @@ class LearningCurves(Result):
         return np.array([s["full"][key] for s in self.splits], float)
 
     def paired(self, meth: str, base: str = "random") -> list[dict]:
-        """Per size: relative change of the mean error against ``base``, wins, Wilcoxon signed-rank p (two-sided)."""
+        """Per size: the median over the splits of the paired relative change of the error against ``base``
+        (robust to a failed set), the change of the means, wins and the Wilcoxon signed-rank p (two-sided)."""
         from scipy import stats
 
         x, y = self.array("error_mean_m", meth), self.array("error_mean_m", base)
@@ -272,20 +273,20 @@ class LearningCurves(Result):
         for j in range(len(self.sizes)):
             a, b = x[:, j], y[:, j]
             p = float(stats.wilcoxon(a, b).pvalue) if a.size >= 2 and np.any(a != b) else float("nan")
-            out.append({"change": float(a.mean() / b.mean() - 1.0), "wins": int(np.sum(a < b)), "n": int(a.size),
-                        "p_wilcoxon": p})
+            out.append({"change": float(np.median(a / b) - 1.0), "change_of_means": float(a.mean() / b.mean() - 1.0),
+                        "wins": int(np.sum(a < b)), "n": int(a.size), "p_wilcoxon": p})
         return out
 
     def needed(self, key: str = "error_mean_m", frac: float = 0.1) -> dict:
-        """Poses each method needs to come within ``frac`` of the full pool, on the mean curve over the splits
-        (observed: ``error_mean_m``; predicted: ``pred_sigma_work_m`` or ``pred_rms_scored_m``)."""
-        ref = float(self.full(key).mean())
-        out = {meth: poses_within(np.array(self.sizes), self.array(key, meth).mean(0), ref, frac)
+        """Poses each method needs to come within ``frac`` of the full pool, on the median curve over the splits
+        (robust to a failed set; observed: ``error_mean_m``; predicted: ``pred_sigma_work_m`` or ``pred_rms_scored_m``)."""
+        ref = float(np.median(self.full(key)))
+        out = {meth: poses_within(np.array(self.sizes), np.median(self.array(key, meth), 0), ref, frac)
                for meth in self.methods}
         big = self.beyond()
         if key == "error_mean_m" and "random" in out and big is not None:
-            out["random"] = poses_within(np.r_[self.sizes, big[0]], np.r_[self.array(key, "random").mean(0),
-                                                                         big[1].mean(0)], ref, frac)
+            out["random"] = poses_within(np.r_[self.sizes, big[0]], np.r_[np.median(self.array(key, "random"), 0),
+                                                                         np.median(big[1], 0)], ref, frac)
         return out
 
     def largest(self, meth: str) -> int:
@@ -294,10 +295,11 @@ class LearningCurves(Result):
         return int(big[0][-1]) if meth == "random" and big is not None else int(self.sizes[-1])
 
     def equivalent(self, meth: str, base: str = "random", key: str = "error_mean_m") -> list[float]:
-        """Per size m: the poses ``meth`` needs (log-m interpolation of its mean curve of ``key``) to reach what
-        ``base`` reaches with m poses (inf beyond the largest size; ``sizes[0]`` when it is better already there)."""
-        x = self.array(key, meth).mean(0)
-        y = self.array(key, base).mean(0)
+        """Per size m: the poses ``meth`` needs (log-m interpolation of its median curve of ``key`` over the splits)
+        to reach what ``base`` reaches with m poses (inf beyond the largest size; ``sizes[0]`` when it is better
+        already there)."""
+        x = np.median(self.array(key, meth), 0)
+        y = np.median(self.array(key, base), 0)
         return [poses_within(np.array(self.sizes), x, float(v), 0.0) for v in y]
 
     def beyond(self) -> tuple[np.ndarray, np.ndarray] | None:
@@ -312,7 +314,8 @@ class LearningCurves(Result):
     def to_dict(self) -> dict:
         """Plain JSON-able dict (SI units): the per-size means and spreads, the paired tests, the poses needed."""
         keys = ("error_mean_m", "error_rms_m", "error_geo_mean_m", "pred_sigma_work_m", "pred_rms_scored_m")
-        per = {meth: {k: {"mean": self.array(k, meth).mean(0).tolist(), "sd": self.array(k, meth).std(0, ddof=1)
+        per = {meth: {k: {"mean": self.array(k, meth).mean(0).tolist(),
+                          "median": np.median(self.array(k, meth), 0).tolist(), "sd": self.array(k, meth).std(0, ddof=1)
                           .tolist() if len(self.splits) > 1 else None} for k in keys} for meth in self.methods}
         for meth in self.methods:
             if meth != "random" and "random" in self.methods:
@@ -327,7 +330,8 @@ class LearningCurves(Result):
                 "n_scored": float(np.mean([s["n_scored"] for s in self.splits])), "methods": per,
                 "full": {k: float(self.full(k).mean()) for k in keys},
                 "random_beyond": None if big is None else {"sizes": big[0].tolist(),
-                                                           "error_mean_m": big[1].mean(0).tolist()},
+                                                           "error_mean_m": big[1].mean(0).tolist(),
+                                                           "error_median_m": np.median(big[1], 0).tolist()},
                 "poses_within_10pct": {"observed": self.needed(), "predicted_work": self.needed("pred_sigma_work_m"),
                                        "predicted_scored": self.needed("pred_rms_scored_m")}}
 
@@ -336,7 +340,7 @@ class LearningCurves(Result):
         n_sc = np.mean([s["n_scored"] for s in self.splits])
         lines = [f"{self.case}: {len(self.splits)} splits, {n_sc:.0f} scored rows per split; discrepancy "
                  f"hyper-parameters fixed from {self.prior}",
-                 f"{'design':<8}{'m':>5}{'mean error (mm)':>20}{'vs random':>11}{'wins':>7}{'p':>9}"
+                 f"{'design':<8}{'m':>5}{'mean error (mm)':>20}{'median':>8}{'vs random':>11}{'wins':>7}{'p':>9}"
                  f"{'pred. sigma W':>15}{'pred. RMS':>11}{'obs. RMS':>10}"]
         for meth in self.methods:
             e, r = self.array("error_mean_m", meth), self.array("error_rms_m", meth)
@@ -346,16 +350,17 @@ class LearningCurves(Result):
                 sd = e[:, j].std(ddof=1) if len(e) > 1 else 0.0
                 cmp = (f"{100 * pr[j]['change']:>+10.1f}%{pr[j]['wins']:>4}/{pr[j]['n']:<2}{pr[j]['p_wilcoxon']:>9.2g}"
                        if pr else f"{'':>11}{'':>7}{'':>9}")
-                lines.append(f"{meth:<8}{m:>5}{e[:, j].mean() * 1e3:>12.4f} +- {sd * 1e3:.4f}{cmp}"
+                lines.append(f"{meth:<8}{m:>5}{e[:, j].mean() * 1e3:>12.4f} +- {sd * 1e3:.4f}"
+                             f"{np.median(e[:, j]) * 1e3:>8.4f}{cmp}"
                              f"{pw[:, j].mean() * 1e3:>15.4f}{ps[:, j].mean() * 1e3:>11.4f}{r[:, j].mean() * 1e3:>10.4f}")
         f = {k: self.full(k).mean() * 1e3 for k in ("error_mean_m", "pred_sigma_work_m", "pred_rms_scored_m",
                                                       "error_rms_m")}
-        lines.append(f"{'full':<8}{self.splits[0]['n_pool']:>5}{f['error_mean_m']:>12.4f}{'':>35}"
+        lines.append(f"{'full':<8}{self.splits[0]['n_pool']:>5}{f['error_mean_m']:>12.4f}{'':>43}"
                      f"{f['pred_sigma_work_m']:>15.4f}{f['pred_rms_scored_m']:>11.4f}{f['error_rms_m']:>10.4f}")
         big = self.beyond()
         if big is not None:
-            lines.append("random, larger sets: " + ", ".join(f"{m} poses {v * 1e3:.4f} mm"
-                                                           for m, v in zip(big[0], big[1].mean(0))))
+            lines.append("random, larger sets (median): " + ", ".join(f"{m} poses {v * 1e3:.4f} mm"
+                                                                    for m, v in zip(big[0], np.median(big[1], 0))))
         for key, word in (("error_mean_m", "observed"), ("pred_sigma_work_m", "predicted (sigma at W)")):
             need = self.needed(key)
             lines.append(f"poses to within 10 % of the full pool, {word}: "
