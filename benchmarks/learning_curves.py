@@ -140,9 +140,9 @@ def markdown(res: LearningCurves) -> str:
 
 
 def figure(results: list[LearningCurves], path: str) -> None:
-    """Observed RMS 3-D error of the scored rows (solid, ± standard error over the splits) and the predicted RMS
-    (dashed: universal kriging under the prior discrepancy plus its white level) per method against the number of
-    poses; the full pool's observed RMS in grey with its +10 % band."""
+    """Observed RMS 3-D error of the scored rows (solid: median over the splits, band: quartiles) and the predicted
+    RMS (dashed, median: universal kriging under the prior discrepancy plus its white level) per method against the
+    number of poses; the full pool's observed RMS in grey with its +10 % band."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -152,16 +152,20 @@ def figure(results: list[LearningCurves], path: str) -> None:
     from pin_kpi_oed.viz.style import design_colours, hex_colour
 
     col = {k: hex_colour(v) for k, v in design_colours(list(METHODS)).items()}
-    fig, axes = plt.subplots(1, len(results), figsize=(4.4 * len(results), 4.0), squeeze=False)
-    for ax, res in zip(axes[0], results):
+    ncol = min(len(results), 3)
+    nrow = -(-len(results) // ncol)
+    fig, axes = plt.subplots(nrow, ncol, figsize=(4.4 * ncol, 3.8 * nrow), squeeze=False)
+    for ax in axes.ravel()[len(results):]:
+        ax.set_visible(False)
+    for ax, res in zip(axes.ravel(), results):
         m = np.array(res.sizes)
         for meth in res.methods:
             e = res.array("error_rms_m", meth) * 1e3
-            se = e.std(0, ddof=1) / np.sqrt(len(e)) if len(e) > 1 else 0 * e[0]
-            ax.plot(m, e.mean(0), "-o", color=col[meth], ms=4)
-            ax.fill_between(m, e.mean(0) - se, e.mean(0) + se, color=col[meth], alpha=0.15)
-            ax.plot(m, res.array("pred_rms_scored_m", meth).mean(0) * 1e3, "--", color=col[meth], lw=1)
-        f = res.full("error_rms_m").mean() * 1e3
+            q = np.percentile(e, [25, 50, 75], axis=0)
+            ax.plot(m, q[1], "-o", color=col[meth], ms=4)
+            ax.fill_between(m, q[0], q[2], color=col[meth], alpha=0.15)
+            ax.plot(m, np.median(res.array("pred_rms_scored_m", meth), 0) * 1e3, "--", color=col[meth], lw=1)
+        f = float(np.median(res.full("error_rms_m"))) * 1e3
         ax.axhline(f, color="0.4", lw=1)
         ax.axhspan(f, 1.1 * f, color="0.85")
         ax.set_xscale("log")
@@ -170,7 +174,8 @@ def figure(results: list[LearningCurves], path: str) -> None:
         ax.set_xlabel("calibration poses m")
         ax.set_title(f"{res.case}: {len(res.splits)} splits, full pool {res.splits[0]['n_pool']} poses", fontsize=9)
         ax.grid(alpha=0.3)
-    axes[0][0].set_ylabel("RMS 3-D error near the work (mm)")
+    for row in axes:
+        row[0].set_ylabel("RMS 3-D error near the work (mm)")
     handles = [Line2D([], [], color=col[k], marker="o", ms=4, label=LABELS.get(k, k)) for k in results[0].methods]
     handles += [Line2D([], [], color="k", ls="-", label="observed"), Line2D([], [], color="k", ls="--", lw=1,
                                                                            label="predicted"),
