@@ -139,6 +139,31 @@ def markdown(res: LearningCurves) -> str:
     return "\n".join(rows)
 
 
+def compact_markdown(results: list[LearningCurves], methods: tuple[str, ...] = ("kpi_gp", "kpi", "D", "random")
+                     ) -> str:
+    """Several cases in one markdown table: per case and m the median (mm) of each method, against random the
+    median paired change, wins and Wilcoxon p; then the poses each needs to come within 10 % of the full pool."""
+    rows = ["| case | m | " + " | ".join(LABELS[k] for k in methods) + " |", "|---" * (len(methods) + 2) + "|"]
+    for res in results:
+        cmp = {k: res.paired(k) for k in methods if k != "random"}
+        for j, m in enumerate(res.sizes):
+            cells = []
+            for k in methods:
+                c = f"{np.median(res.array('error_mean_m', k)[:, j]) * 1e3:.3f}"
+                if k in cmp:
+                    p = cmp[k][j]
+                    c += f" ({100 * p['change']:+.0f} %, {p['wins']}/{p['n']}, p {p['p_wilcoxon']:.2g})"
+                cells.append(c)
+            rows.append(f"| {res.case if j == 0 else ''} | {m} | " + " | ".join(cells) + " |")
+    rows += ["", "| case | full pool (poses, median mm) | " + " | ".join(LABELS[k] for k in methods)
+             + " |", "|---" * (len(methods) + 2) + "|"]
+    for res in results:
+        need = res.needed()
+        rows.append(f"| {res.case} | {res.splits[0]['n_pool']}, {np.median(res.full('error_mean_m')) * 1e3:.3f} | "
+                    + " | ".join(_n(need[k], res.largest(k), res.sizes[0]) for k in methods) + " |")
+    return "\n".join(rows)
+
+
 def figure(results: list[LearningCurves], path: str) -> None:
     """Observed RMS 3-D error of the scored rows (solid: median over the splits, band: quartiles) and the predicted
     RMS (dashed, median: universal kriging under the prior discrepancy plus its white level) per method against the
@@ -213,6 +238,8 @@ def main(argv: list[str] | None = None) -> int:
         print(res.summary(), flush=True)
         if a.markdown:
             print(markdown(res), flush=True)
+    if a.markdown and len(results) > 1:
+        print(compact_markdown(results), flush=True)
     if a.json:
         atomic_write_json(a.json, {"cases": [r.to_dict() for r in results], "seeds": a.seeds})
     if a.figure:
