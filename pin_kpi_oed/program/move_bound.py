@@ -129,7 +129,7 @@ class MoveBound:
         return bool(np.all(lb[fin] <= exact[fin] + 1e-9) and np.all(np.ptp(exact[:, ~self.bounded], axis=0) < 1e-12))
 
     def _frames(self, Q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        fr = self.chain.frames(Q)  # batched numpy forward kinematics; frame 0 is the base
+        fr = self.chain.frames(Q, twists=False)  # batched numpy forward kinematics; frame 0 is the base
         return fr.R, fr.t
 
     def pairs(self, Q: np.ndarray) -> np.ndarray:
