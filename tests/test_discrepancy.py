@@ -4,6 +4,7 @@ rows, geometry unchanged by the discrepancy), the model-file block (round trip, 
 
 from __future__ import annotations
 
+import dataclasses
 import json
 
 import numpy as np
@@ -281,3 +282,19 @@ def test_cli_too_few_rows_for_the_discrepancy(withheld, tmp_path, capsys):
     err = capsys.readouterr().err
     assert rc == 2 and "too few" in err and "--discrepancy" in err and "Traceback" not in err
     assert not out.exists()
+
+
+def test_fit_quality_counts_the_discrepancy_but_never_excuses_a_poor_fit(withheld):
+    """Residuals twice the stated noise: suspect for the noise-only model, good when a Gaussian process with an
+    honest K-fold σ explains them (said so); residuals six times the noise stay poor with or without it."""
+    from pin_kpi_oed.identification.quality import assess_fit
+    model, train, _ = withheld
+    r = np.sqrt(np.mean(identify(model, train).residuals_m ** 2))     # residual RMS per axis (m)
+    for factor, plain_verdict, gp_verdict in [(2.0, "suspect", "good"), (6.0, "poor", "poor")]:
+        data = dataclasses.replace(train, sigma_m=np.full((len(train), 3), r / factor))
+        plain = assess_fit(identify(model, data))
+        with_gp = assess_fit(identify(model, data, discrepancy=DiscrepancyOptions(mode="on", n_fit=300, seed=0)))
+        assert plain.verdict == plain_verdict and "chi2" in plain.line(), plain.line()
+        assert with_gp.verdict == gp_verdict, with_gp.line()
+        if gp_verdict == "good":
+            assert "model discrepancy" in with_gp.line() and with_gp.to_dict()["explained_by_discrepancy"]
