@@ -1,0 +1,98 @@
+"""Learning curves (studies.learning_curves) on simulated data with a smooth discrepancy: every design calibrated the
+same way with the discrepancy's hyper-parameters fixed, the discrepancy-aware design lowers its own predicted σ, the
+full pool beats a few poses, and the poses-needed interpolation."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from pin_kpi_oed import NoiseModel, TrackerModel, load_robot
+from pin_kpi_oed.data.measurements import MeasurementSet
+from pin_kpi_oed.discrepancy.kernel import JointKernel
+from pin_kpi_oed.identification.simulate import random_truth, simulate
+from pin_kpi_oed.oed.discrepancy_kpi import DiscrepancyPrior
+from pin_kpi_oed.studies.learning_curves import LearningCurves, calibrate_fixed, curve_split, poses_within
+
+SIZES = (12, 40)
+
+
+@pytest.fixture(scope="module")
+def setting():
+    """A UR10 measured at 300 random configurations: geometric errors, 20 µm noise and a smooth 0.3 mm discrepancy (one-joint functions);
+    the prior is that discrepancy's kernel (what a previous calibration would hand over)."""
+    model = TrackerModel(load_robot("ur10"), reflector_m=np.array([0.0, 0.0, 0.109]),
+                         noise=NoiseModel(sigma_xyz_m=(2e-5,) * 3))
+    rng = np.random.default_rng(3)
+    Q = model.robot.random_q(rng, 300)
+    data = simulate(model, Q, random_truth(model, seed=4), seed=5, record_sigma=False)
+    delta = 3e-4 * np.c_[np.sin(Q[:, 1]), np.cos(Q[:, 2]), np.sin(Q[:, 0]) + np.sin(Q[:, 2])]
+    data = MeasurementSet(data.joint_names, data.q, data.position_m + delta, source="simulated.csv")
+    kernel = JointKernel(0.3, np.full(6, 1.0), np.full(6, 0.6), np.full(6, 1.0))
+    prior = DiscrepancyPrior(kernel, np.full(3, 3e-4), (2e-5 / 3e-4) ** 2, "simulated truth's kernel")
+    runs = [curve_split(model, data, prior, seed=s, sizes=SIZES, n_work=5, radius_rad=2.5, random_beyond=(120,))
+            for s in (0, 1)]
+    return model, data, prior, runs
+
+
+def test_every_method_gives_finite_curves_of_each_size(setting):
+    _, _, _, runs = setting
+    r = runs[0]
+    assert r["sizes"] == list(SIZES) and set(r["methods"]) == {"kpi_gp", "kpi_gp_region", "kpi", "D", "random"}
+    for key in ("error_mean_m", "error_rms_m", "error_geo_mean_m", "pred_sigma_work_m", "pred_rms_scored_m"):
+        for meth in r["methods"]:
+            v = np.array(r[key][meth])
+            assert v.shape == (len(SIZES),) and np.all(np.isfinite(v)) and np.all(v > 0), (key, meth)
+    assert r["n_scored"] > 0 and r["random_beyond"]["sizes"] == [120]
+    # RMS ≥ mean of the same errors
+    assert np.all(np.array(r["error_rms_m"]["random"]) >= np.array(r["error_mean_m"]["random"]))
+
+
+def test_discrepancy_mean_pays_with_the_full_pool_and_more_poses_help(setting):
+    _, _, _, runs = setting
+    for r in runs:
+        full = r["full"]
+        assert full["error_mean_m"] < 0.7 * full["error_geo_mean_m"]   # the smooth discrepancy is learnt
+        assert full["error_mean_m"] < r["error_mean_m"]["random"][0]   # 210 poses beat 12
+        assert full["pred_sigma_work_m"] < r["pred_sigma_work_m"]["random"][-1]
+
+
+def test_discrepancy_aware_design_lowers_its_own_predicted_sigma(setting):
+    _, _, _, runs = setting
+    for r in runs:
+        gp, rnd = np.array(r["pred_sigma_work_m"]["kpi_gp"]), np.array(r["pred_sigma_work_m"]["random"])
+        assert np.all(gp < rnd)
+        assert gp[1] < gp[0]
+
+
+def test_calibrate_fixed_keeps_the_geometry_and_adds_the_posterior_mean(setting):
+    model, data, prior, _ = setting
+    cm, plain = calibrate_fixed(model, data.subset(np.arange(150)), prior)
+    assert cm.discrepancy is not None and plain.discrepancy is None
+    assert cm.discrepancy.kernel is prior.kernel and np.allclose(cm.discrepancy.scale_m, prior.scale_m)
+    held = data.subset(np.arange(150, 300))
+    e = np.linalg.norm(held.position_m - cm.predict(held.q), axis=1).mean()
+    e0 = np.linalg.norm(held.position_m - plain.predict(held.q), axis=1).mean()
+    assert e < 0.7 * e0
+    white = DiscrepancyPrior(None, prior.scale_m, 1.0)
+    a, b = calibrate_fixed(model, data.subset(np.arange(150)), white)
+    assert a is b and a.discrepancy is None
+
+
+def test_summary_paired_tests_and_poses_needed(setting):
+    _, _, prior, runs = setting
+    res = LearningCurves(case="simulated", prior=prior.source, sizes=list(SIZES), methods=runs[0]["methods"],
+                         splits=runs, success=True)
+    d = res.to_dict()
+    assert d["n_splits"] == 2 and len(d["methods"]["kpi_gp"]["vs_random"]) == len(SIZES)
+    assert d["methods"]["kpi_gp"]["vs_random"][0]["n"] == 2
+    assert set(d["poses_within_10pct"]["observed"]) == set(runs[0]["methods"])
+    text = res.summary()
+    assert "kpi_gp" in text and "poses to within 10 % of the full pool" in text and "larger sets" in text
+
+
+def test_poses_within_interpolates_in_log_m():
+    sizes = np.array([10, 20, 40])
+    assert poses_within(sizes, np.array([3.0, 2.0, 1.0]), 1.0) == pytest.approx(np.exp(np.log(20) + 0.9 * np.log(2)))
+    assert poses_within(sizes, np.array([1.05, 1.0, 1.0]), 1.0) == 10
+    assert poses_within(sizes, np.array([3.0, 2.0, 1.5]), 1.0) == np.inf
