@@ -304,6 +304,12 @@ def test_move_check_bound_gives_the_exact_decisions(inputs):
     lb = fast.bound.pairs(X)
     E = np.array([fast.checker.pair_distances(q) for q in X])
     assert np.all(lb[np.isfinite(lb)] <= E[np.isfinite(lb)] + 1e-9)
+    for cap in (0.03, 0.1):  # balls instead of closest points far above the cap: still a bound, the same below it
+        capped = fast.bound.pairs(X, cap)
+        assert np.all(capped[np.isfinite(capped)] <= E[np.isfinite(capped)] + 1e-9)
+        low, low_capped = lb.min(axis=1), capped.min(axis=1)
+        below = low < cap
+        assert below.any() and np.array_equal(low_capped[below], low[below]) and np.all(low_capped[~below] >= cap)
 
 
 def test_the_second_of_two_concurrent_writers_is_refused(tmp_path, monkeypatch):

@@ -38,6 +38,10 @@ from pin_kpi_oed.cell.feasibility import FeasibilityChecker
 from pin_kpi_oed.errors import InputError
 from pin_kpi_oed.program.move_bound import MoveBound
 
+#: how far above a decision's threshold (m) the move-check bound may use a segment pair's enclosing balls instead
+#: of its closest points (:meth:`~pin_kpi_oed.program.move_bound.MoveBound.pairs`): the same decisions, cheaper
+BALL_CAP_M = 0.05
+
 #: RRT-Connect's step, as a share of the joint space's extent (OMPL's default is 0.2: long edges that mostly
 #: collide in a cell, each a dense check of hundreds of samples; 0.05 plans the UR10 cell's routes in fewer checks)
 ROUTE_RANGE = 0.05
@@ -185,7 +189,8 @@ class TransitionChecker:
         if self.bound is not None and inner and not (stop_early and best < need):
             # exact checks only where the bound cannot decide, lowest bound first: the result (clear or not,
             # and without early stop the smallest clearance) is the exact check's
-            lb = self.bound(S[1:-1]) - self.cell.clearance_m
+            cap = self.cell.clearance_m + max(need, self.margin_m) + BALL_CAP_M if stop_early else None
+            lb = self.bound(S[1:-1], cap) - self.cell.clearance_m
             order = np.argsort(lb, kind="stable")
             for o in order:
                 if (stop_early and (best < need or lb[o] >= need)) or (not stop_early and lb[o] >= best):
@@ -250,7 +255,8 @@ class TransitionChecker:
             (k,) bool.
         """
         X = np.atleast_2d(np.asarray(X, float))
-        lb = (self.bound(X) - self.cell.clearance_m) if self.bound is not None and len(X) else np.full(len(X), -np.inf)
+        cap = self.cell.clearance_m + threshold + BALL_CAP_M
+        lb = (self.bound(X, cap) - self.cell.clearance_m) if self.bound is not None and len(X) else np.full(len(X), -np.inf)
         out = np.zeros(len(X), bool)
         found = 0
         for i, x in enumerate(X):
