@@ -123,5 +123,7 @@ def test_design_with_model_writes_honest_blocks_and_the_viewer_draws_them(calibr
     page = tmp_path / "v.html"
     assert main(["view", str(old), "--sigma", "honest", "--html", str(page), "--no-open", "--no-ghosts"]) == 2
     assert "--sigma honest" in capsys.readouterr().err and not page.exists()
+    assert main(["view", str(d), "--sigma", "both", "--html", str(page), "--no-open"]) == 2
+    assert "--sigma: must be honest or paper" in capsys.readouterr().err and not page.exists()
     assert main(["view", str(d), "--html", str(page), "--no-open", "--no-ghosts"]) == 0
     assert "discrepancy included" in capsys.readouterr().out and page.exists()

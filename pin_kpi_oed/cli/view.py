@@ -61,11 +61,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def _check_args(args: argparse.Namespace) -> None:
-    """Raises InputError on a bad --level, --scale or --html folder."""
+    """Raises InputError on a bad --level, --scale, --sigma or --html folder."""
     if not (0.0 < args.level < 1.0):
         raise InputError(f"--level must be in (0, 1), got {args.level}")
     if args.scale is not None and not args.scale > 0:
         raise InputError(f"--scale must be > 0, got {args.scale}")
+    if args.sigma is not None and args.sigma not in ("honest", "paper"):
+        raise InputError(f"--sigma: must be honest or paper, got '{args.sigma}'")
     if args.html is not None and not Path(args.html).resolve().parent.is_dir():
         raise InputError(f"--html {args.html}: folder {Path(args.html).parent} does not exist")
 
