@@ -186,10 +186,9 @@ def run_sigma(args: tuple) -> dict:
         val = val.subset(held)
         val = MeasurementSet(val.joint_names, val.q, val.position_m, station=np.array(["target"] * len(val)),
                              temperature_c=val.temperature_c)
-    import dataclasses
 
     v = validate(cm, val)
-    v0 = validate(dataclasses.replace(cm, discrepancy=None), val)
+    v0 = validate(cm.noise_only(), val)
     return {"mode": f"sigma-{where}", "effect": effect or "none", "seed": seed, "k": k,
             "decision": cm.discrepancy.decision if cm.discrepancy is not None else "none",
             "mean_plain_m": v0["mean_m"], "mean_m": v["mean_m"], "z_rms": v["z_rms"], "inside_95": v["inside_95"],

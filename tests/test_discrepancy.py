@@ -298,3 +298,24 @@ def test_fit_quality_counts_the_discrepancy_but_never_excuses_a_poor_fit(withhel
         assert with_gp.verdict == gp_verdict, with_gp.line()
         if gp_verdict == "good":
             assert "model discrepancy" in with_gp.line() and with_gp.to_dict()["explained_by_discrepancy"]
+
+
+def test_cli_diagnose_transfer_section_reports_the_written_models_sigma(withheld, tmp_path, capsys):
+    """With validation data and --model-out, the transfer section scores the written model with the σ predict
+    writes (same registration rows and seed): its figures equal validate_transfer's on the model file."""
+    from pin_kpi_oed.identification.transfer import validate_transfer
+    model, train, test = withheld
+    write_measurements(train, tmp_path / "train.csv")
+    write_measurements(test, tmp_path / "val.csv")
+    m, rep = tmp_path / "m.json", tmp_path / "rep.json"
+    assert main(["diagnose", "--robot", "ur10", "--train", str(tmp_path / "train.csv"), "--validate",
+                 str(tmp_path / "val.csv"), "--register-rows", "40", "--seed", "3", "--reflector", "0.03,0.02,0.08",
+                 "--sigma", "1e-5", "--effects", "joint_compliance", "--discrepancy", "on", "--model-out", str(m),
+                 "--json", str(rep)]) == 0
+    out = capsys.readouterr().out
+    assert "the written model's sigma at the validation rows" in out
+    ms = json.loads(rep.read_text())["transfer"]["model_sigma"]
+    from pin_kpi_oed.data.measurements import read_measurements
+    ref = validate_transfer(load_model_file(m), read_measurements(tmp_path / "val.csv"), register_rows=40, seed=3)
+    assert ms["z_rms"] == pytest.approx(ref["z_rms"], rel=1e-6) and ms["n"] == ref["n"] == 260
+    assert 0.67 <= ms["z_rms"] <= 1.5 and "discrepancy" in ms["model"]

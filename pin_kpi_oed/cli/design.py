@@ -489,20 +489,25 @@ def discrepancy_scores(problem, results: list) -> list[dict]:
     """Honest TCP scores of every design with the problem's discrepancy (universal-kriging C_s, base frame).
 
     Returns:
-        Per design {"trace_cs_m2", "tcp_sigma_m" = sqrt(tr(C_s)/t)} (m², m); NaN where the design does not identify
-        the parameters.
+        Per design {"trace_cs_m2", "tcp_sigma_m" = sqrt(tr(C_s)/t), "cov_s_m2"} (m², m, m²); ``cov_s_m2`` is the full
+        universal-kriging C_s (3t × 3t) rotated to the tracker frame, like the design's own ``cov_s_m2`` (the trace
+        is the base frame's); NaN / None where the design does not identify the parameters.
     """
     from pin_kpi_oed.errors import IdentifiabilityError
 
     crit = problem.gp_criterion()
     t = problem.cell.q_work.shape[0]
+    R = np.kron(np.eye(t), crit.model.tracker_pose(crit.p).rotation)  # base -> tracker frame, per working configuration
     out = []
     for r in results:
         try:
             tr = float(crit.value(r.q_meas))
+            C = R @ crit.covariance(r.q_meas) @ R.T
+            cov = (0.5 * (C + C.T)).tolist()
         except IdentifiabilityError:
-            tr = float("nan")
-        out.append({"trace_cs_m2": tr, "tcp_sigma_m": math.sqrt(tr / t) if tr == tr else float("nan")})
+            tr, cov = float("nan"), None
+        out.append({"trace_cs_m2": tr, "tcp_sigma_m": math.sqrt(tr / t) if tr == tr else float("nan"),
+                    "cov_s_m2": cov})
     return out
 
 
@@ -570,7 +575,8 @@ def _discrepancy_doc(doc: dict, problem, gp_scores: list[dict]) -> None:
                           "kernel": None if d.kernel is None else d.kernel.to_dict(),
                           "certificate": "none exists for kpi_gp",
                           "note": "designs[i].discrepancy: universal-kriging tr(C_s) and TCP sigma at the working "
-                                  "configurations, discrepancy included (base frame); designs[i].trace_cs_m2 / "
-                                  "tcp_sigma_m: the paper's, tracker noise only"}
+                                  "configurations, discrepancy included, and its C_s (3t x 3t, m^2) in the tracker "
+                                  "frame like designs[i].cov_s_m2 (pin-kpi-oed view draws it); "
+                                  "designs[i].trace_cs_m2 / tcp_sigma_m / cov_s_m2: the paper's, tracker noise only"}
     for dd, sc in zip(doc["designs"], gp_scores):
         dd["discrepancy"] = sc

@@ -52,6 +52,7 @@ is stored from its attributes; any other effect can be stored if it has ``option
 from __future__ import annotations
 
 import copy
+import dataclasses
 import json
 import os
 from dataclasses import dataclass, field
@@ -394,6 +395,14 @@ class CalibratedModel:
         if station is None and aux is not None and aux.station is not None:
             return np.array([self.station(lab) for lab in aux.station.tolist()], dtype=object)
         return np.array([self.station(station)] * m, dtype=object)
+
+    def noise_only(self) -> "CalibratedModel":
+        """A copy without the discrepancy and with every station's σ factor 1: the paper's noise-only model
+        (its σ counts the tracker noise only), for contrast with the honest σ."""
+        new = copy.copy(self)
+        new.discrepancy = None
+        new.setups = {lab: dataclasses.replace(st, sigma_scale=1.0) for lab, st in self.setups.items()}
+        return new
 
     def with_setup(self, label: str, setup: Setup, default: bool = True, step: dict | None = None
                    ) -> "CalibratedModel":

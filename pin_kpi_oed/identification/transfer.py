@@ -47,7 +47,7 @@ from pin_kpi_oed.data.measurements import MeasurementSet
 from pin_kpi_oed.effects.library import predict_with_effects
 from pin_kpi_oed.errors import InputError, SolverError
 from pin_kpi_oed.identification.fit_inputs import MIN_STATION_ROWS, default_station_label
-from pin_kpi_oed.identification.heldout import error_stats
+from pin_kpi_oed.identification.heldout import calibration_stats, error_stats
 from pin_kpi_oed.identification.tracker_start import proj_so3, register_points
 from pin_kpi_oed.identification.model_file import CalibratedModel, Setup
 from pin_kpi_oed.identification.problem import ResidualModel, StationSet, align_data
@@ -307,7 +307,9 @@ def validate_transfer(model: CalibratedModel, data: MeasurementSet, *, register_
 
     Returns:
         Statistics of the scored rows (:func:`error_stats`: ``n``, ``mean_m``, ``rms_m``, ``median_m``,
-        ``p95_m``, ``max_m``, ``errors_m``) plus ``registration``: ``source``, ``rows`` (1-based
+        ``p95_m``, ``max_m``, ``errors_m``), how honest the predicted σ is there
+        (:func:`~pin_kpi_oed.identification.heldout.calibration_stats`: ``z_rms``, ``inside_95``,
+        ``sigma_mean_m``, ``extrapolation_share``; ``sigma_scale`` of the registration) plus ``registration``: ``source``, ``rows`` (1-based
         row numbers of the registration rows in their file), ``n``, ``rms_m``, ``seed``, the
         ``setup``; and ``scored_rows`` (1-based row numbers of ``data`` scored).
 
@@ -328,6 +330,8 @@ def validate_transfer(model: CalibratedModel, data: MeasurementSet, *, register_
     Q = align_data(model.robot, held)
     Y = rr.model.predict(Q, held, station=label)
     out = error_stats(np.linalg.norm(held.position_m - Y, axis=1))
+    out.update(calibration_stats(rr.model, Q, held, station=label))
+    out["sigma_scale"] = rr.setups[label].sigma_scale
     out["registration"] = {"source": reg.source, "rows": (reg_idx + 1).tolist(), "n": int(len(reg)),
                            "rms_m": rr.rms_m, "seed": int(seed) if register_data is None else None,
                            "setup": rr.setups[label].to_dict(), "hold_reflector": bool(hold_reflector)}
