@@ -24,7 +24,7 @@ import numpy as np
 from pin_kpi_oed.data.atomic import atomic_write_json
 from pin_kpi_oed.design.design_file import design_document, write_design
 from pin_kpi_oed.design.margins import DEFAULT_CLEARANCE_MARGIN_M, DEFAULT_INCIDENCE_MARGIN_DEG, with_margins
-from pin_kpi_oed.errors import InputError
+from pin_kpi_oed.errors import IdentifiabilityError, InputError
 from pin_kpi_oed.oed.criteria import CRITERIA, check_names
 
 
@@ -192,7 +192,8 @@ def run(args: argparse.Namespace) -> int:
     """
     from pin_kpi_oed.cell.cell import load_cell
     from pin_kpi_oed.design.optimize import DesignOptions, ipopt_options, run_designs
-    from pin_kpi_oed.design.user_pool import check_candidates, design_from_pool, pool_line, read_pool
+    from pin_kpi_oed.design.user_pool import (check_candidates, design_from_pool, duplicates_line, pool_line,
+                                              read_pool)
 
     criteria = parse_criteria(getattr(args, "criteria", "random,param,kpi"))
     cell = load_cell(getattr(args, "cell", "kr15"))
@@ -219,7 +220,12 @@ def run(args: argparse.Namespace) -> int:
         ok, Fp, _ = check_candidates(problem, Qc, reasons=reasons)
         print(pool_line(pool_file, len(Qc) + len(outside), outside, int(ok.sum()), reasons))
         checked = (Qc[ok], Fp)
-        results, cert, n_ok = design_from_pool(problem, Qc, criteria, m, seed, checked=(ok, Fp))
+        try:
+            results, cert, n_ok = design_from_pool(problem, Qc, criteria, m, seed, checked=(ok, Fp))
+        except IdentifiabilityError as exc:  # near-duplicate candidates: name their rows
+            rows = np.setdiff1d(np.arange(1, len(Qc) + len(outside) + 1), outside)[ok]
+            raise IdentifiabilityError(duplicates_line(pool_file, Qc[ok], rows) or f"--pool {pool_file}: {exc}") \
+                from None
     else:
         results = run_designs(cell, criteria, m, seed, opts, problem)
     true_checks = _true_checks(true_cell, results) if cell is not true_cell else None

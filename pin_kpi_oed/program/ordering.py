@@ -13,7 +13,7 @@ configuration unless given):
 3. lazy collision checking (greedy descents from the previous tour while costs change, then guided
    local search, at most three times): every move of the tour is checked densely
    (:class:`~pin_kpi_oed.program.transitions.TransitionChecker`); a colliding move is repaired
-   through safe via pose(s), else along a path planned by a seeded RRT-Connect
+   through safe via pose(s), else along a path planned by OMPL's RRT-Connect, seeded per move
    (:meth:`~pin_kpi_oed.program.transitions.TransitionChecker.plan_route`), and its cost raised to
    the repaired route's time, or, when no route is found, to a penalty; the tour is re-solved until
    every move of it has been checked (reordering around what collides);
@@ -255,16 +255,27 @@ class _Router:
         return r
 
     def reach_home(self, i: int) -> bool:
-        """Whether node i has a safe route to home (computed once)."""
+        """Whether node i has a safe route to home (computed once).
+
+        A clear straight move to a node that reaches home gives the route; a clear straight move to a node
+        that does not (its route home was not found) puts node i in the same part of the free space, so
+        it is dropped without planning; otherwise a route is planned within an eighth of the budget (the
+        routes home found take a few hundred checks; a pocket would take all of it).
+        """
         if i not in self.home_route:
             q = self.nodes[i]
-            known = [j for j, r in self.home_route.items() if r is not None and j != 0]
-            known.sort(key=lambda j: self.c(q, self.nodes[j]))
-            hop = next((j for j in known[:8] if self.tc.check(q, self.nodes[j]).clear), None)
-            if hop is not None and not self.tc.check(q, self.nodes[0]).clear:  # straight to a node reaching home
+            near = sorted((j for j in self.home_route if j != 0), key=lambda j: self.c(q, self.nodes[j]))
+            known = [j for j in near if self.home_route[j] is not None][:8]
+            trapped = [j for j in near if self.home_route[j] is None][:8]
+            hop = next((j for j in known if self.tc.check(q, self.nodes[j]).clear), None)
+            if self.tc.check(q, self.nodes[0]).clear:
+                self.home_route[i] = []
+            elif hop is not None:  # straight to a node reaching home
                 self.home_route[i] = [self.nodes[hop], *self.home_route[hop]]
+            elif any(self.tc.check(q, self.nodes[j]).clear for j in trapped):
+                self.home_route[i] = None
             else:
-                self.home_route[i] = self.route(q, self.nodes[0], self.o.plan_checks // 2)
+                self.home_route[i] = self.route(q, self.nodes[0], self.o.plan_checks // 16)
             if self.home_route[i] is None:
                 self.cost[i, :] = self.cost[:, i] = PENALTY_S
                 self.cost[i, i] = 0.0
