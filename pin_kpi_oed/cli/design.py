@@ -248,7 +248,7 @@ def run(args: argparse.Namespace) -> int:
             print(NO_CERTIFICATE)
     curve = None
     if disc_on and (target is not None or getattr(args, "curve", None)):
-        curve = _poses_needed(args, problem, cell, target, seed, m, checked)
+        curve = _poses_needed(args, problem, cell, target, seed, m, checked, results)
     until = _poses_until(args, problem, cell, target, seed, checked) if target is not None and not disc_on else None
     if getattr(args, "json", None):
         doc = design_document(true_cell, problem, results, m, seed, collision, margins=margins, given_file=given_file,
@@ -372,20 +372,29 @@ def _poses_until(args: argparse.Namespace, problem, cell, target: float, seed: i
     return until
 
 
-def _poses_needed(args: argparse.Namespace, problem, cell, target: float | None, seed: int, m: int, checked=None):
+def _poses_needed(args: argparse.Namespace, problem, cell, target: float | None, seed: int, m: int, checked=None,
+                  results: list | None = None):
     """The poses-needed curve with the discrepancy (and the answer to ``--target-sigma``) over the user's feasible
-    ``--pool`` candidates or random feasible poses (at most 2,000, seeded); prints the answer, writes ``--curve``."""
+    ``--pool`` candidates or random feasible poses (at most 2,000, seeded) plus the feasible poses of the optimised
+    designs in ``results``; prints the answer, writes ``--curve``."""
     from pin_kpi_oed.oed.discrepancy_kpi import poses_needed
 
     if checked is not None:
         Q_pool = checked[0]
+        what = "feasible --pool candidates"
     else:
         size = min(getattr(args, "pool_size", 5000) or 5000, 2000)
         Q_pool, _ = problem.random_design(size, seed=np.random.SeedSequence([seed, 3]),
                                           max_tries=max(cell.max_random_tries, 200 * size))
+        # the optimised designs' own poses join the random ones (as in the certificate's pool): the curve and its
+        # plateau never claim less than a design of the table reaches
+        extra = [np.asarray(r.q_meas, float) for r in (results or []) if r.criterion != "random" and r.feasible]
+        if extra:
+            Q_pool = np.vstack([Q_pool] + extra)
+        what = "feasible candidates: random" + (" + the designs' poses" if extra else "")
     n_max = min(len(Q_pool), max(4 * m, 120))
     curve = poses_needed(problem.gp_criterion(), Q_pool, n_max, target_sigma_m=target, seed=seed)
-    print(curve.summary() + f" ({len(Q_pool)} feasible candidates, {curve.time_s:.1f} s)")
+    print(curve.summary() + f" ({len(Q_pool)} {what}, {curve.time_s:.1f} s)")
     if getattr(args, "curve", None):
         from pin_kpi_oed.viz.poses_needed import plot_poses_needed
 
