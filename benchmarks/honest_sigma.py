@@ -23,7 +23,6 @@ or shared/data/ipa_ur10 beside the repository)
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import os
 import sys
 import time
@@ -58,7 +57,7 @@ def load(folder: Path, s: str) -> MeasurementSet:
 
 
 def score(cm, held: MeasurementSet, station=None) -> dict:
-    plain = dataclasses.replace(cm, discrepancy=None)
+    plain = cm.noise_only()
     v = validate(cm, held) if station is None else _validate_station(cm, held, station)
     v0 = validate(plain, held) if station is None else _validate_station(plain, held, station)
     return {"n": v["n"], "mean_plain_mm": v0["mean_m"] * 1e3, "mean_mm": v["mean_m"] * 1e3,

@@ -25,6 +25,13 @@ belongs to one session and is re-fitted at registration, never transferred. Targ
 effect named in >= 95 % of the transfer runs. (A transmission-error truth is "named" when the
 diagnosis names ``transmission_error``.)
 
+Honest σ (``--mode sigma``): the same within and transfer cases, calibrated geometrically with the
+discrepancy (``discrepancy="auto"``: a Gaussian process over the joint angles on the residuals; the effect is
+never named), the transfer set-up re-registered on 60 rows (which also scales σ by those rows' standardised
+errors). Per truth: held-out mean error without and with the discrepancy's mean, the standardised RMS of the
+errors (error / predicted σ per axis; honest within [0.67, 1.5]) and the share of rows inside their 95 %
+ellipsoid (honest 85–99 %), medians over the seeds, and the share of runs honest on both counts.
+
 Run: ``python -m benchmarks.withheld_effects [--seeds 20] [--n 500] [--jobs 2] [--mode within|transfer|both]
 [--json out.json]`` (within: about 10–20 min on 2 cores; ``--seeds 3`` for a quick look).
 """
@@ -162,8 +169,53 @@ def run_transfer(args: tuple) -> dict:
             "time_s": time.perf_counter() - t0, "mode": "transfer"}
 
 
+def run_sigma(args: tuple) -> dict:
+    """One honest-σ case: geometric calibration with the discrepancy, held-out rows scored with their σ."""
+    effect, seed, n, where = args
+    from pin_kpi_oed.data.measurements import MeasurementSet
+    from pin_kpi_oed.identification.identify import identify, validate
+    from pin_kpi_oed.identification.transfer import register_setup, registration_split
+
+    make = make_transfer_case if where == "transfer" else make_case
+    nominal, train, val, k = make(effect, seed, n)
+    t0 = time.perf_counter()
+    cm = identify(nominal, train, discrepancy="auto", seed=seed, raise_on_failure=False).calibrated_model()
+    if where == "transfer":
+        reg, held = registration_split(len(val), REGISTER_ROWS, seed)
+        cm = register_setup(cm, val.subset(reg), station="target").model
+        val = val.subset(held)
+        val = MeasurementSet(val.joint_names, val.q, val.position_m, station=np.array(["target"] * len(val)),
+                             temperature_c=val.temperature_c)
+
+    v = validate(cm, val)
+    v0 = validate(cm.noise_only(), val)
+    return {"mode": f"sigma-{where}", "effect": effect or "none", "seed": seed, "k": k,
+            "decision": cm.discrepancy.decision if cm.discrepancy is not None else "none",
+            "mean_plain_m": v0["mean_m"], "mean_m": v["mean_m"], "z_rms": v["z_rms"], "inside_95": v["inside_95"],
+            "z_rms_noise_only": v0["z_rms"], "time_s": time.perf_counter() - t0}
+
+
+def _sigma_table(runs: list[dict], names: list[str], title: str) -> None:
+    print(title)
+    hdr = (f"{'truth':<20}{'runs':>5}{'mean um geometric':>19}{'+ discrepancy':>15}{'z RMS':>8}{'inside 95%':>12}"
+           f"{'honest runs':>13}{'z noise-only':>14}")
+    print(hdr)
+    print("-" * len(hdr))
+    for e in names:
+        rs = [r for r in runs if r["effect"] == e]
+        if not rs:
+            continue
+        honest = np.mean([0.67 <= r["z_rms"] <= 1.5 and 0.85 <= r["inside_95"] <= 0.99 for r in rs])
+        med = {key: float(np.median([r[key] for r in rs])) for key in ("mean_plain_m", "mean_m", "z_rms",
+                                                                        "inside_95", "z_rms_noise_only")}
+        print(f"{e:<20}{len(rs):>5}{med['mean_plain_m'] * 1e6:>19.1f}{med['mean_m'] * 1e6:>15.1f}{med['z_rms']:>8.2f}"
+              f"{med['inside_95'] * 100:>11.1f}%{honest * 100:>12.0f}%{med['z_rms_noise_only']:>14.2f}")
+
+
 def run_one(args: tuple) -> dict:
     effect, seed, n = args[:3]
+    if len(args) > 3 and args[3].startswith("sigma-"):
+        return run_sigma((effect, seed, n, args[3][len("sigma-"):]))
     if len(args) > 3 and args[3] == "transfer":
         return run_transfer((effect, seed, n))
     from pin_kpi_oed.diagnosis.diagnose import diagnose
@@ -214,14 +266,16 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--n", type=int, default=500, help="training (= held-out) measurements per run")
     ap.add_argument("--jobs", type=int, default=2)
     ap.add_argument("--effects", default=None, help="comma-separated subset (default: all + none)")
-    ap.add_argument("--mode", default="both", choices=("within", "transfer", "both"),
-                    help="within one session, across sessions (transfer), or both")
+    ap.add_argument("--mode", default="both", choices=("within", "transfer", "both", "sigma"),
+                    help="within one session, across sessions (transfer), or both; sigma: the honest-sigma check of "
+                         "the discrepancy (within and transfer)")
     ap.add_argument("--json", default=None, help="write every run's outcome here")
     a = ap.parse_args(argv)
     from pin_kpi_oed.effects.library import EFFECT_NAMES
 
-    modes = ["within", "transfer"] if a.mode == "both" else [a.mode]
+    modes = {"both": ["within", "transfer"], "sigma": ["sigma-within", "sigma-transfer"]}.get(a.mode, [a.mode])
     names = {"within": list(EFFECT_NAMES) + ["none"], "transfer": list(EFFECT_NAMES) + list(TRANSFER_EXTRA)}
+    names.update({"sigma-within": names["within"], "sigma-transfer": names["transfer"]})
     if a.effects:
         names = {m: a.effects.split(",") for m in modes}
     tasks = [(None if e == "none" else e, s, a.n, m) for m in modes for e in names[m] for s in range(a.seeds)]
@@ -234,6 +288,17 @@ def main(argv: list[str] | None = None) -> int:
     else:
         runs = [run_one(t) for t in tasks]
     ok_all = True
+    if a.mode == "sigma":
+        for m in modes:
+            _sigma_table([r for r in runs if r["mode"] == m], names[m],
+                         f"honest sigma ({m[6:]}): UR10, sigma = {NOISE_M * 1e6:.0f} um/axis, {a.n} + {a.n} "
+                         f"measurements, {a.seeds} seeds per row, effect withheld, discrepancy auto; medians")
+        print(f"{len(runs)} runs in {time.perf_counter() - t0:.0f} s")
+        if a.json:
+            from pin_kpi_oed.data.atomic import atomic_write_json
+
+            atomic_write_json(a.json, {"runs": runs, "noise_m": NOISE_M, "n": a.n, "seeds": a.seeds, "modes": modes})
+        return 0
     for m in modes:
         rm = [r for r in runs if r["mode"] == m]
         title = (f"withheld-effects study ({m}): UR10, sigma = {NOISE_M * 1e6:.0f} um/axis, {a.n} + {a.n} "

@@ -4,6 +4,7 @@ rows, geometry unchanged by the discrepancy), the model-file block (round trip, 
 
 from __future__ import annotations
 
+import dataclasses
 import json
 
 import numpy as np
@@ -49,6 +50,39 @@ def test_kernel_gradients_match_finite_differences():
         assert np.abs(fd - Gx[..., j]).max() < 1e-6
     assert np.allclose(k(X + 2 * np.pi, Y), k(X, Y))          # angles wrap: no seam at ±π
     assert np.allclose(np.diag(k(X)), k.diag(X))
+
+
+def test_kernel_value_without_gradient_equals_the_chord_form():
+    """K from outer products of the circle points equals the per-pair chord formula, and the cached chords of
+    the gradient path give the same K."""
+    from pin_kpi_oed.discrepancy.kernel import _chord2
+    rng = np.random.default_rng(3)
+    k = _kernel(rng)
+    X, Y = rng.uniform(-7, 7, (40, 6)), rng.uniform(-7, 7, (25, 6))
+    c, L, a, ell = k._parts(6)
+    D = _chord2(X, Y)
+    K_ref = c ** 2 * np.exp(-0.5 * (D / L ** 2).sum(-1)) + (a ** 2 * np.exp(-0.5 * D / ell ** 2)).sum(-1)
+    assert np.abs(k(X, Y) - K_ref).max() < 1e-12
+    K_grad, _ = k(X, eval_gradient=True)
+    K_grad2, _ = k(X, eval_gradient=True)                     # second call: chords from the cache
+    assert np.abs(K_grad - k(X)).max() < 1e-12 and np.array_equal(K_grad, K_grad2)
+    K_other, _ = k(X[::-1], eval_gradient=True)              # another training set: the cache is refreshed
+    assert np.abs(K_other - k(X[::-1])).max() < 1e-12
+
+
+def test_kfold_by_block_inversion_equals_refitting_each_fold():
+    """The exact K-fold check from one inverse equals building each fold's posterior without its rows."""
+    from pin_kpi_oed.discrepancy.gp import _kfold
+    rng = np.random.default_rng(4)
+    k = _kernel(rng)
+    Q = rng.uniform(-2, 2, (90, 6))
+    Y = rng.normal(size=(90, 3))
+    scale = np.array([1e-4, 2e-4, 1.5e-4])
+    fast = _kfold(k, 0.2, Q, Y, scale, DiscrepancyOptions(folds=5), NAMES)
+    slow = _kfold(k, 0.2, Q, Y, scale, DiscrepancyOptions(folds=5, max_exact=50, n_inducing=90), NAMES)
+    for key in ("mean_without_m", "mean_with_m", "rms_with_m", "z_rms", "inside_95"):
+        assert fast[key] == pytest.approx(slow[key], rel=1e-6), key
+    assert fast["mean_with_m"] < fast["mean_without_m"] * 1.5
 
 
 def test_posterior_variance_matches_monte_carlo():
@@ -248,3 +282,40 @@ def test_cli_too_few_rows_for_the_discrepancy(withheld, tmp_path, capsys):
     err = capsys.readouterr().err
     assert rc == 2 and "too few" in err and "--discrepancy" in err and "Traceback" not in err
     assert not out.exists()
+
+
+def test_fit_quality_counts_the_discrepancy_but_never_excuses_a_poor_fit(withheld):
+    """Residuals twice the stated noise: suspect for the noise-only model, good when a Gaussian process with an
+    honest K-fold σ explains them (said so); residuals six times the noise stay poor with or without it."""
+    from pin_kpi_oed.identification.quality import assess_fit
+    model, train, _ = withheld
+    r = np.sqrt(np.mean(identify(model, train).residuals_m ** 2))     # residual RMS per axis (m)
+    for factor, plain_verdict, gp_verdict in [(2.0, "suspect", "good"), (6.0, "poor", "poor")]:
+        data = dataclasses.replace(train, sigma_m=np.full((len(train), 3), r / factor))
+        plain = assess_fit(identify(model, data))
+        with_gp = assess_fit(identify(model, data, discrepancy=DiscrepancyOptions(mode="on", n_fit=300, seed=0)))
+        assert plain.verdict == plain_verdict and "chi2" in plain.line(), plain.line()
+        assert with_gp.verdict == gp_verdict, with_gp.line()
+        if gp_verdict == "good":
+            assert "model discrepancy" in with_gp.line() and with_gp.to_dict()["explained_by_discrepancy"]
+
+
+def test_cli_diagnose_transfer_section_reports_the_written_models_sigma(withheld, tmp_path, capsys):
+    """With validation data and --model-out, the transfer section scores the written model with the σ predict
+    writes (same registration rows and seed): its figures equal validate_transfer's on the model file."""
+    from pin_kpi_oed.identification.transfer import validate_transfer
+    model, train, test = withheld
+    write_measurements(train, tmp_path / "train.csv")
+    write_measurements(test, tmp_path / "val.csv")
+    m, rep = tmp_path / "m.json", tmp_path / "rep.json"
+    assert main(["diagnose", "--robot", "ur10", "--train", str(tmp_path / "train.csv"), "--validate",
+                 str(tmp_path / "val.csv"), "--register-rows", "40", "--seed", "3", "--reflector", "0.03,0.02,0.08",
+                 "--sigma", "1e-5", "--effects", "joint_compliance", "--discrepancy", "on", "--model-out", str(m),
+                 "--json", str(rep)]) == 0
+    out = capsys.readouterr().out
+    assert "the written model's sigma at the validation rows" in out
+    ms = json.loads(rep.read_text())["transfer"]["model_sigma"]
+    from pin_kpi_oed.data.measurements import read_measurements
+    ref = validate_transfer(load_model_file(m), read_measurements(tmp_path / "val.csv"), register_rows=40, seed=3)
+    assert ms["z_rms"] == pytest.approx(ref["z_rms"], rel=1e-6) and ms["n"] == ref["n"] == 260
+    assert 0.67 <= ms["z_rms"] <= 1.5 and "discrepancy" in ms["model"]

@@ -304,3 +304,81 @@ def test_move_check_bound_gives_the_exact_decisions(inputs):
     lb = fast.bound.pairs(X)
     E = np.array([fast.checker.pair_distances(q) for q in X])
     assert np.all(lb[np.isfinite(lb)] <= E[np.isfinite(lb)] + 1e-9)
+    for cap in (0.03, 0.1):  # balls instead of closest points far above the cap: still a bound, the same below it
+        capped = fast.bound.pairs(X, cap)
+        assert np.all(capped[np.isfinite(capped)] <= E[np.isfinite(capped)] + 1e-9)
+        low, low_capped = lb.min(axis=1), capped.min(axis=1)
+        below = low < cap
+        assert below.any() and np.array_equal(low_capped[below], low[below]) and np.all(low_capped[~below] >= cap)
+
+
+def test_the_second_of_two_concurrent_writers_is_refused(tmp_path, monkeypatch):
+    """Another process writes the output while a command runs: the command refuses to replace it, in one line."""
+    import subprocess
+    import sys
+
+    import pin_kpi_oed.data.atomic as atomic
+
+    out = tmp_path / "tr.csv"
+    real = atomic._folder_lock
+    code = f"from pin_kpi_oed.data.atomic import atomic_write_text; atomic_write_text({str(out)!r}, 'other\\n')"
+
+    def other_process_first(directory):  # the command's write is about to replace the file
+        if not out.exists():
+            subprocess.run([sys.executable, "-c", code], check=True)
+        return real(directory)
+
+    monkeypatch.setattr(atomic, "_folder_lock", other_process_first)
+    rc, _, err = _run("simulate", "--robot", "kr15", "--n", "30", "--seed", "1", "--out", out)
+    last = err.strip().splitlines()[-1] if err.strip() else ""
+    assert rc == 2 and f"cannot write '{out}'" in last and "another process wrote it" in last, err
+    assert out.read_text() == "other\n" and not list(tmp_path.glob(".*.tmp"))
+    monkeypatch.setattr(atomic, "_folder_lock", real)
+    rc, _, err = _run("simulate", "--robot", "kr15", "--n", "30", "--seed", "1", "--out", out)  # one after the other
+    assert rc == 0, err
+    assert out.read_text().count("\n") > 30
+
+
+def test_a_claimed_output_can_be_written_again_by_its_own_command(tmp_path):
+    from pin_kpi_oed.data.atomic import atomic_write_text
+    from pin_kpi_oed.validation.paths import claim_output, release_outputs
+
+    p = tmp_path / "x.txt"
+    claim_output(p)
+    atomic_write_text(p, "a")
+    atomic_write_text(p, "b")  # its own earlier write is no other writer
+    assert p.read_text() == "b"
+    p.write_text("changed by someone else")
+    with pytest.raises(InputError, match="another process wrote it"):
+        atomic_write_text(p, "c")
+    claim_output(p)  # a new command checks the file again: it may replace it
+    atomic_write_text(p, "d")
+    assert p.read_text() == "d"
+    release_outputs()  # a command's claims end with it: a later write of the file is no conflict
+    p.write_text("edited")
+    atomic_write_text(p, "e")
+    assert p.read_text() == "e"
+
+
+def test_near_duplicate_pool_poses_are_named_by_row(tmp_path):
+    """A pool of 4 poses taught 20 times each (1e-9 rad apart): one line naming the duplicate rows, nothing written."""
+    from pin_kpi_oed.cell.cell import load_cell
+    from pin_kpi_oed.design.margins import with_margins
+    from pin_kpi_oed.design.optimize import DesignProblem
+    from pin_kpi_oed.design.user_pool import near_duplicates
+
+    cell = with_margins(load_cell("kr15"), 0.02, 1.0)
+    Q0, _ = DesignProblem(cell).random_design(4, seed=3, max_tries=10 ** 5)
+    Q = np.clip(np.repeat(Q0, 20, axis=0) + np.random.default_rng(0).normal(0, 1e-9, (80, 6)), cell.q_lower,
+                cell.q_upper)
+    groups = near_duplicates(Q)
+    assert sorted(map(len, groups)) == [20, 20, 20, 20] and list(groups[0]) == list(range(20))
+    assert near_duplicates(Q0) == []
+    pool = tmp_path / "pool.csv"
+    pool.write_text("\n".join([",".join(cell.robot.joint_names)] + [",".join(f"{x:.12f}" for x in q) for q in Q]) + "\n")
+    out = tmp_path / "d.json"
+    rc, _, err = _run("design", "--cell", "kr15", "--pool", pool, "--criteria", "random,kpi", "--json", out)
+    last = err.strip().splitlines()[-1]
+    assert rc == 2 and "only 4 distinct poses" in last and "rows 1, 2, 3, 4, 5 (+15 more)" in last, err
+    assert "rows 21, 22, 23, 24, 25" in last and str(pool) in last and len(last) < 400
+    assert not out.exists()

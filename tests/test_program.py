@@ -100,7 +100,26 @@ def test_program_orders_checks_and_repairs(kr15, poses):
     assert prog.waypoints[0].kind == prog.waypoints[-1].kind == "home" and sum(w.kind == "measure" for w in prog.waypoints) == len(poses)
 
 
-# ---------------------------------------------------------------------------- UR10: ±360° joints, OMPL repair
+def test_program_does_not_depend_on_the_machines_speed(kr15, poses, monkeypatch):
+    """The tour search stops by a solution count, not the clock: a machine ten times slower gives the same program."""
+    from pin_kpi_oed.program import ordering
+
+    first = plan_program(kr15, poses, ProgramOptions(margin_m=0.005, via_pool=150))
+    real_solve = ordering.solve_tour
+    slow = {"calls": 0}
+
+    def slow_solve(cost, time_limit_s, *a, **k):  # a ten times slower machine: a tenth of the time
+        slow["calls"] += 1
+        return real_solve(cost, time_limit_s / 10, *a, **k)
+
+    monkeypatch.setattr(ordering, "solve_tour", slow_solve)
+    again = plan_program(kr15, poses, ProgramOptions(margin_m=0.005, via_pool=150))
+    assert slow["calls"] >= 2 and np.array_equal(first.path, again.path)
+    assert [w.kind for w in first.waypoints] == [w.kind for w in again.waypoints]
+    assert first.cycle_time_s == again.cycle_time_s
+
+
+# ---------------------------------------------------------------------------- UR10: ±360° joints, OMPL route planning
 
 #: two poses of the UR10 cell's KPI design (deg): the straight move collides (so does home -> B) and no
 #: structured via pose clears it; B's equivalent with wrist 1 at -188° is reached straight from A
@@ -151,6 +170,29 @@ def test_ur10_colliding_move_is_planned_by_ompl_and_passes_the_dense_check(ur10)
     fine = TransitionChecker(ur10, 0.01, step_rad=np.radians(0.25))
     check = fine.path_check(path)
     assert check.clear and check.min_clearance_m >= 0.01 - 1e-9
+
+
+def test_ur10_route_is_the_same_in_one_process_or_two(ur10):
+    """OMPL is seeded per call: the same move gives the same route after other plans and in a fresh process."""
+    import subprocess
+    import sys
+
+    qa, qb = np.radians(UR10_A), np.radians(UR10_B)
+    first = TransitionChecker(ur10, 0.01).plan_route(qa, qb, seed=3, max_checks=60_000)
+    assert first is not None and len(first) >= 1
+    other = TransitionChecker(ur10, 0.01)
+    other.plan_route(qb, np.radians(UR10_POCKET), seed=3, max_checks=2_000)  # something else planned before
+    again = other.plan_route(qa, qb, seed=3, max_checks=60_000)
+    assert len(again) == len(first) and all(np.array_equal(x, y) for x, y in zip(first, again))
+    code = ("import numpy as np; from pin_kpi_oed.cell.cell import load_cell; "
+            "from pin_kpi_oed.program.transitions import TransitionChecker; "
+            f"r = TransitionChecker(load_cell('ur10'), 0.01).plan_route(np.radians({UR10_A}), np.radians({UR10_B}), "
+            "seed=3, max_checks=60_000); print(np.array(r).tobytes().hex())")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout.strip()
+    assert out == np.array(first).tobytes().hex()
+    other_seed = TransitionChecker(ur10, 0.01).plan_route(qa, qb, seed=4, max_checks=60_000)
+    assert other_seed is not None and not (len(other_seed) == len(first)
+                                           and all(np.array_equal(x, y) for x, y in zip(first, other_seed)))
 
 
 def test_ur10_program_takes_the_pocket_poses_equivalent_and_exports_the_vias(ur10):

@@ -360,3 +360,33 @@ def test_model_file_stores_transfer_effects_with_their_selected_terms():
         th = rng.normal(size=eff.n_params) * 1e-4
         if not getattr(eff, "setup_specific", False):
             assert np.array_equal(back.joint_offset(th, Q)[0], eff.joint_offset(th, Q)[0])
+
+
+def test_registration_scales_sigma_to_a_worse_session(ur10, two_stations, tmp_path):
+    """Rows of a new session 4x noisier than the calibration: the registration's σ factor is about 4 and the
+    held-out standardised RMS about 1 (without the factor about 4); a session as good as the calibration keeps 1;
+    the factor survives the model file, and a factor below 1 in a file is refused with the field named."""
+    mA, _, truth, dA, _ = two_stations
+    cm = identify(mA, dA).calibrated_model()
+    mC = _model(ur10, T_C, sigma=4 * SIGMA)
+    Q = ur10.random_q(np.random.default_rng(11), 400)
+    noisy = simulate(mC, Q, truth, seed=12, source="C.csv")
+    reg, held = registration_split(len(noisy), 150, seed=0)
+    rr = register_setup(cm, noisy.subset(reg), station="C")
+    k = rr.setups["C"].sigma_scale
+    assert 3.2 < k < 4.8, k
+    Y, sig, _ = rr.model.predict_with_sigma(Q[held], station="C")
+    z = np.sqrt(np.mean(((noisy.position_m[held] - Y) / sig) ** 2))
+    assert 0.8 < z < 1.25, (z, k)     # 150 rows: the factor's own sampling error is a few per cent
+    assert z * k > 3.0                                   # unscaled it would be about 4x too optimistic
+    assert "scaled by" in rr.summary()
+    clean = simulate(_model(ur10, T_C), Q, truth, seed=13, source="C2.csv")
+    assert register_setup(cm, clean.subset(reg), station="C").setups["C"].sigma_scale < 1.3
+    path = tmp_path / "m.json"
+    rr.model.save(path)
+    assert load_model_file(path).setups["C"].sigma_scale == pytest.approx(k)
+    d = json.loads(path.read_text())
+    d["stations"]["C"]["sigma_scale"] = 0.5
+    path.write_text(json.dumps(d))
+    with pytest.raises(InputError, match="sigma_scale"):
+        load_model_file(path)

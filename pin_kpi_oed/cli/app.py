@@ -104,6 +104,7 @@ def main(argv: list[str] | None = None) -> int:
     :class:`PinKpiOedError` or an operating-system error becomes one line and exit code 2.
     """
     from pin_kpi_oed.validation.options import accept_negative_numbers, check_args
+    from pin_kpi_oed.validation.paths import release_outputs
 
     parser = accept_negative_numbers(build_parser())
     args = parser.parse_args(argv)
@@ -124,6 +125,8 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("interrupted", file=sys.stderr)
         return 130
+    finally:
+        release_outputs()  # the command's claims on its outputs end with it
 
 
 if __name__ == "__main__":

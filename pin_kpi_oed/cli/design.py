@@ -24,7 +24,7 @@ import numpy as np
 from pin_kpi_oed.data.atomic import atomic_write_json
 from pin_kpi_oed.design.design_file import design_document, write_design
 from pin_kpi_oed.design.margins import DEFAULT_CLEARANCE_MARGIN_M, DEFAULT_INCIDENCE_MARGIN_DEG, with_margins
-from pin_kpi_oed.errors import InputError
+from pin_kpi_oed.errors import IdentifiabilityError, InputError
 from pin_kpi_oed.oed.criteria import CRITERIA, check_names
 
 
@@ -192,7 +192,8 @@ def run(args: argparse.Namespace) -> int:
     """
     from pin_kpi_oed.cell.cell import load_cell
     from pin_kpi_oed.design.optimize import DesignOptions, ipopt_options, run_designs
-    from pin_kpi_oed.design.user_pool import check_candidates, design_from_pool, pool_line, read_pool
+    from pin_kpi_oed.design.user_pool import (check_candidates, design_from_pool, duplicates_line, pool_line,
+                                              read_pool)
 
     criteria = parse_criteria(getattr(args, "criteria", "random,param,kpi"))
     cell = load_cell(getattr(args, "cell", "kr15"))
@@ -219,7 +220,12 @@ def run(args: argparse.Namespace) -> int:
         ok, Fp, _ = check_candidates(problem, Qc, reasons=reasons)
         print(pool_line(pool_file, len(Qc) + len(outside), outside, int(ok.sum()), reasons))
         checked = (Qc[ok], Fp)
-        results, cert, n_ok = design_from_pool(problem, Qc, criteria, m, seed, checked=(ok, Fp))
+        try:
+            results, cert, n_ok = design_from_pool(problem, Qc, criteria, m, seed, checked=(ok, Fp))
+        except IdentifiabilityError as exc:  # near-duplicate candidates: name their rows
+            rows = np.setdiff1d(np.arange(1, len(Qc) + len(outside) + 1), outside)[ok]
+            raise IdentifiabilityError(duplicates_line(pool_file, Qc[ok], rows) or f"--pool {pool_file}: {exc}") \
+                from None
     else:
         results = run_designs(cell, criteria, m, seed, opts, problem)
     true_checks = _true_checks(true_cell, results) if cell is not true_cell else None
@@ -242,7 +248,7 @@ def run(args: argparse.Namespace) -> int:
             print(NO_CERTIFICATE)
     curve = None
     if disc_on and (target is not None or getattr(args, "curve", None)):
-        curve = _poses_needed(args, problem, cell, target, seed, m, checked)
+        curve = _poses_needed(args, problem, cell, target, seed, m, checked, results)
     until = _poses_until(args, problem, cell, target, seed, checked) if target is not None and not disc_on else None
     if getattr(args, "json", None):
         doc = design_document(true_cell, problem, results, m, seed, collision, margins=margins, given_file=given_file,
@@ -366,20 +372,29 @@ def _poses_until(args: argparse.Namespace, problem, cell, target: float, seed: i
     return until
 
 
-def _poses_needed(args: argparse.Namespace, problem, cell, target: float | None, seed: int, m: int, checked=None):
+def _poses_needed(args: argparse.Namespace, problem, cell, target: float | None, seed: int, m: int, checked=None,
+                  results: list | None = None):
     """The poses-needed curve with the discrepancy (and the answer to ``--target-sigma``) over the user's feasible
-    ``--pool`` candidates or random feasible poses (at most 2,000, seeded); prints the answer, writes ``--curve``."""
+    ``--pool`` candidates or random feasible poses (at most 2,000, seeded) plus the feasible poses of the optimised
+    designs in ``results``; prints the answer, writes ``--curve``."""
     from pin_kpi_oed.oed.discrepancy_kpi import poses_needed
 
     if checked is not None:
         Q_pool = checked[0]
+        what = "feasible --pool candidates"
     else:
         size = min(getattr(args, "pool_size", 5000) or 5000, 2000)
         Q_pool, _ = problem.random_design(size, seed=np.random.SeedSequence([seed, 3]),
                                           max_tries=max(cell.max_random_tries, 200 * size))
+        # the optimised designs' own poses join the random ones (as in the certificate's pool): the curve and its
+        # plateau never claim less than a design of the table reaches
+        extra = [np.asarray(r.q_meas, float) for r in (results or []) if r.criterion != "random" and r.feasible]
+        if extra:
+            Q_pool = np.vstack([Q_pool] + extra)
+        what = "feasible candidates: random" + (" + the designs' poses" if extra else "")
     n_max = min(len(Q_pool), max(4 * m, 120))
     curve = poses_needed(problem.gp_criterion(), Q_pool, n_max, target_sigma_m=target, seed=seed)
-    print(curve.summary() + f" ({len(Q_pool)} feasible candidates, {curve.time_s:.1f} s)")
+    print(curve.summary() + f" ({len(Q_pool)} {what}, {curve.time_s:.1f} s)")
     if getattr(args, "curve", None):
         from pin_kpi_oed.viz.poses_needed import plot_poses_needed
 
@@ -483,20 +498,25 @@ def discrepancy_scores(problem, results: list) -> list[dict]:
     """Honest TCP scores of every design with the problem's discrepancy (universal-kriging C_s, base frame).
 
     Returns:
-        Per design {"trace_cs_m2", "tcp_sigma_m" = sqrt(tr(C_s)/t)} (m², m); NaN where the design does not identify
-        the parameters.
+        Per design {"trace_cs_m2", "tcp_sigma_m" = sqrt(tr(C_s)/t), "cov_s_m2"} (m², m, m²); ``cov_s_m2`` is the full
+        universal-kriging C_s (3t × 3t) rotated to the tracker frame, like the design's own ``cov_s_m2`` (the trace
+        is the base frame's); NaN / None where the design does not identify the parameters.
     """
     from pin_kpi_oed.errors import IdentifiabilityError
 
     crit = problem.gp_criterion()
     t = problem.cell.q_work.shape[0]
+    R = np.kron(np.eye(t), crit.model.tracker_pose(crit.p).rotation)  # base -> tracker frame, per working configuration
     out = []
     for r in results:
         try:
             tr = float(crit.value(r.q_meas))
+            C = R @ crit.covariance(r.q_meas) @ R.T
+            cov = (0.5 * (C + C.T)).tolist()
         except IdentifiabilityError:
-            tr = float("nan")
-        out.append({"trace_cs_m2": tr, "tcp_sigma_m": math.sqrt(tr / t) if tr == tr else float("nan")})
+            tr, cov = float("nan"), None
+        out.append({"trace_cs_m2": tr, "tcp_sigma_m": math.sqrt(tr / t) if tr == tr else float("nan"),
+                    "cov_s_m2": cov})
     return out
 
 
@@ -564,7 +584,8 @@ def _discrepancy_doc(doc: dict, problem, gp_scores: list[dict]) -> None:
                           "kernel": None if d.kernel is None else d.kernel.to_dict(),
                           "certificate": "none exists for kpi_gp",
                           "note": "designs[i].discrepancy: universal-kriging tr(C_s) and TCP sigma at the working "
-                                  "configurations, discrepancy included (base frame); designs[i].trace_cs_m2 / "
-                                  "tcp_sigma_m: the paper's, tracker noise only"}
+                                  "configurations, discrepancy included, and its C_s (3t x 3t, m^2) in the tracker "
+                                  "frame like designs[i].cov_s_m2 (pin-kpi-oed view draws it); "
+                                  "designs[i].trace_cs_m2 / tcp_sigma_m / cov_s_m2: the paper's, tracker noise only"}
     for dd, sc in zip(doc["designs"], gp_scores):
         dd["discrepancy"] = sc

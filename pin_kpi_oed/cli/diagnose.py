@@ -200,7 +200,10 @@ def run(args: argparse.Namespace) -> int:
                    seed=args.seed, t_ref_c=args.t_ref, register_rows=args.register_rows, register_data=reg,
                    harmonics=args.harmonics, transfer_prior_rad=args.term_prior,
                    show_progress=False if args.quiet else None)
-    model_dict = _diagnosed_model(args, rep, train)
+    cm = _diagnosed_model(args, rep, train)
+    model_dict = None if cm is None else cm.to_dict()
+    if cm is not None and val is not None and rep.transfer:
+        rep.transfer["model_sigma"] = _model_sigma(args, rep, cm, val, reg)
     _write_and_print(args, rep)
     if model_dict is not None:
         from pin_kpi_oed.data.atomic import atomic_write_json
@@ -222,5 +225,25 @@ def _diagnosed_model(args: argparse.Namespace, rep: Any, train: Any) -> dict | N
         print(f"fitting the model discrepancy ({args.discrepancy}) of the reported model on {len(train)} rows ...",
               flush=True)
     fit.discrepancy = result_discrepancy(fit, train, discrepancy_options(args.discrepancy, args.seed))
-    return fit.calibrated_model().to_dict()
+    return fit.calibrated_model()
+
+
+def _model_sigma(args: argparse.Namespace, rep: Any, cm: Any, val: Any, reg: Any) -> dict:
+    """The written model scored on the validation rows with its σ (the σ ``predict`` writes): re-registered as the
+    diagnosis did in transfer mode (same rows, same seed), as is otherwise."""
+    from pin_kpi_oed.identification.identify import validate
+    from pin_kpi_oed.identification.transfer import validate_transfer
+
+    if args.register_rows is not None or reg is not None:
+        st = validate_transfer(cm, val, register_rows=None if reg is not None else args.register_rows,
+                               register_data=reg, seed=args.seed)
+    else:
+        st = validate(cm, val)
+    label = "geometry" + "".join(f" + {e}" for e in rep.selected_effects) + (
+        " + discrepancy" if cm.discrepancy is not None and cm.discrepancy.kind != "white" else
+        " + white discrepancy" if cm.discrepancy is not None else "")
+    return {"model": label, "n": int(st["n"]), "mean_m": float(st["mean_m"]), "rms_m": float(st["rms_m"]),
+            "sigma_mean_m": float(st["sigma_mean_m"]), "z_rms": float(st["z_rms"]),
+            "inside_95": float(st["inside_95"]), "extrapolation_share": float(st["extrapolation_share"]),
+            "sigma_scale": float(st.get("sigma_scale", 1.0))}
 

@@ -50,12 +50,14 @@ def _positive(text: str, what: str) -> float:
 
 
 def _check_outputs(*paths: str | None) -> None:
-    """Fail before anything is written if an output's folder is missing or the path is a folder."""
-    from pin_kpi_oed.data.atomic import check_writable
+    """Fail before anything is written if an output's folder is missing or the path is a folder; claim the outputs
+    (a write finding one changed by another process meanwhile is refused)."""
+    from pin_kpi_oed.data.atomic import check_writable, claim_output
 
     for p in paths:
         if p:
             check_writable(p)
+            claim_output(p)
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:

@@ -12,6 +12,7 @@ Examples::
     pin-kpi-oed identify --robot ur10 --data B.csv --reflector 0,0,0.109 --sigma 1e-4 --model-out model.json
     pin-kpi-oed register --model model.json --data reg.csv --model-out model2.json
     pin-kpi-oed predict --model model2.json --data held.csv --out pred.csv
+    pin-kpi-oed predict --model model2.json --data use.csv --out pred.csv --figure trust.png
 """
 
 from __future__ import annotations
@@ -57,6 +58,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--station", default=None,
                    help="station whose set-up to use (default: the data's 'station' column, else the model's "
                         "default station)")
+    p.add_argument("--figure", default=None, metavar="OUT.png",
+                   help="also write the trust map (PNG): the rows' reflector positions (robot base frame, top and "
+                        "side view) coloured by the predicted sigma (mm), the rows outside the measured coverage "
+                        "marked, the discrepancy's training configurations in grey")
     p.add_argument("--quiet", action="store_true", help="print nothing")
     add_table_options(p)
     p.set_defaults(func=run_predict)
@@ -135,6 +140,12 @@ def run_predict(args: argparse.Namespace) -> int:
     if data.position_m is not None and np.all(np.isfinite(data.position_m)):
         check_points_against_joints(model.robot, data.q, data.position_m, args.data, args.data)
     cols, table = predict_table(model, data, station=args.station)
+    if args.figure:  # the same predict_with_sigma as the table's sigma columns
+        from pin_kpi_oed.identification.problem import align_data
+        from pin_kpi_oed.viz.trust_map import plot_trust_map
+
+        tm = plot_trust_map(model, align_data(model.robot, data, need_position=False), data, args.station,
+                            out=args.figure)
     write_predictions(args.out, data, cols, table)
     if not args.quiet:
         msg = f"predicted {len(data)} rows of {args.data} with {args.model}"
@@ -143,4 +154,8 @@ def run_predict(args: argparse.Namespace) -> int:
             msg += (f": error mean {e.mean() * 1e3:.4f} mm, RMS {np.sqrt(np.mean(e ** 2)) * 1e3:.4f} mm, "
                     f"max {e.max() * 1e3:.4f} mm")
         print(msg + f" -> {args.out}")
+        if args.figure:
+            print(f"trust map: predicted sigma median {np.median(tm.sigma_m) * 1e3:.4f} mm, max "
+                  f"{tm.sigma_m.max() * 1e3:.4f} mm; {tm.n_extrapolated} of {len(data)} rows outside the measured "
+                  f"coverage -> {args.figure}")
     return 0

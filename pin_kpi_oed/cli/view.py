@@ -6,6 +6,8 @@
     pin-kpi-oed view design.json --figures figs/ --no-open --html out.html
     pin-kpi-oed view design.json --html pose.html --pose kpi:5   # page opens paused at the KPI design's pose 5
     pin-kpi-oed view design.json --html all.html --all-ghosts     # ghost every pose (default: designs of <= 8 poses)
+    pin-kpi-oed view design.json --html paper.html --sigma paper  # the paper's C_s (default: the honest one when the
+                                                                  # file has it: design --model, discrepancy included)
 """
 
 from __future__ import annotations
@@ -49,31 +51,41 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--capsules", action="store_true", help="show the robot's capsules initially")
     p.add_argument("--pose", default=None, metavar="CRITERION:K",
                    help="open the static page with the robot at measurement configuration K (0-based) of a design")
+    p.add_argument("--sigma", default=None, metavar="honest|paper",
+                   help="which C_s the ellipsoids show: honest (model discrepancy included, the same sigma as "
+                        "predict; written by design --model) or paper (tracker noise only); default honest when "
+                        "every design of the file has it, else paper")
     p.add_argument("--figures", default=None, metavar="DIR",
                    help="also write the report figures (ellipsoid projections, designs, poses) as PNG to DIR")
     p.set_defaults(func=run)
 
 
 def _check_args(args: argparse.Namespace) -> None:
-    """Raises InputError on a bad --level, --scale or --html folder."""
+    """Raises InputError on a bad --level, --scale, --sigma or --html folder."""
     if not (0.0 < args.level < 1.0):
         raise InputError(f"--level must be in (0, 1), got {args.level}")
     if args.scale is not None and not args.scale > 0:
         raise InputError(f"--scale must be > 0, got {args.scale}")
+    if args.sigma is not None and args.sigma not in ("honest", "paper"):
+        raise InputError(f"--sigma: must be honest or paper, got '{args.sigma}'")
     if args.html is not None and not Path(args.html).resolve().parent.is_dir():
         raise InputError(f"--html {args.html}: folder {Path(args.html).parent} does not exist")
 
 
 def _print_designs(df: DesignFile, scene: Scene, level: float) -> None:
-    """One line per design: poses, tr(C_s) (mm², as ``pin-kpi-oed design``), TCP sigma (µm), colour."""
+    """One line per design: poses, tr(C_s) (mm², as ``pin-kpi-oed design``), TCP sigma (µm), colour; the C_s shown
+    (honest: discrepancy included; paper: tracker noise only)."""
     from pin_kpi_oed.viz.ellipsoids import fmt_factor
+    from pin_kpi_oed.viz.scene import SIGMA_TEXT
 
     t = df.q_work.shape[0]
     print(f"{df.robot.name}: {len(df.designs)} design(s), {t} working configuration(s); "
-          f"{int(round(level * 100))} % TCP ellipsoids magnified x{fmt_factor(scene.scale)}")
+          f"{int(round(level * 100))} % TCP ellipsoids magnified x{fmt_factor(scene.scale)}; C_s {scene.sigma} "
+          f"({SIGMA_TEXT[scene.sigma]})")
     for d in df.designs:
-        print(f"  {d.label:<18} {d.q_meas.shape[0]:>4} poses  tr(C_s) = {d.trace_cs_m2 * 1e6:.4e} mm^2  "
-              f"TCP sigma = {(max(d.trace_cs_m2, 0.0) / t) ** 0.5 * 1e6:8.4g} um  "
+        tr = float(np.trace(d.cov_s_honest_m2)) if scene.sigma == "honest" else d.trace_cs_m2
+        print(f"  {d.label:<18} {d.q_meas.shape[0]:>4} poses  tr(C_s) = {tr * 1e6:.4e} mm^2  "
+              f"TCP sigma = {(max(tr, 0.0) / t) ** 0.5 * 1e6:8.4g} um  "
               f"colour #{scene.colours[d.criterion]:06x}"
               + ("  (C_s recomputed)" if d.cov_source == "computed" else ""))
 
@@ -142,7 +154,7 @@ def run(args: argparse.Namespace) -> int:
                                    "for the details")
     scene = build_scene(df, SceneOptions(scale=args.scale, level=args.level, ghosts=not args.no_ghosts,
                                          max_ghosts=None if args.all_ghosts else MAX_GHOSTS,
-                                         capsules_visible=args.capsules))
+                                         capsules_visible=args.capsules, sigma=args.sigma))
     _print_designs(df, scene, args.level)
     if args.figures:
         _write_figures(df, args.figures)

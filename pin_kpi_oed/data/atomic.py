@@ -2,19 +2,29 @@
 
 Every file the package writes (CSV, JSON, URDF, PNG, HTML) goes through :func:`atomic_write_bytes`:
 a temporary file in the same directory, flushed and fsync-ed, then renamed over the target.
+
+Concurrent writers: a command's output check (:func:`pin_kpi_oed.validation.paths.check_outputs`)
+remembers each output file's state (:func:`~pin_kpi_oed.validation.paths.claim_output`); a write that finds the file changed since
+then — another process wrote it while the command ran — is refused with a message naming the file,
+instead of the last writer silently replacing the other's output. The comparison and the rename happen
+under a lock of the folder (``flock``, where the system has it), so two writers finishing at once are
+ordered and the second one is refused.
 """
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import secrets
+import time
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from pin_kpi_oed.errors import InputError
+from pin_kpi_oed.validation.paths import claim_output, claimed_state, output_signature
 
 
 # --------------------------------------------------------------------------- #
@@ -32,6 +42,23 @@ def _fsync_dir(directory: Path) -> None:
         pass
     finally:
         os.close(fd)
+
+
+@contextlib.contextmanager
+def _folder_lock(directory: Path):
+    """An exclusive ``flock`` of the folder while held (nothing where the system has no ``flock``)."""
+    try:
+        import fcntl
+
+        fd = os.open(directory, os.O_RDONLY)
+    except (ImportError, OSError):
+        yield
+        return
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX)
+        yield
+    finally:
+        os.close(fd)  # closing releases the lock
 
 
 def check_writable(path: str | os.PathLike[str]) -> Path:
@@ -63,7 +90,8 @@ def atomic_write_bytes(path: str | os.PathLike[str], data: bytes) -> None:
         data: Full content.
 
     Raises:
-        InputError: If the target directory does not exist or ``path`` is a directory.
+        InputError: If the target directory does not exist, ``path`` is a directory, or another process
+            wrote ``path`` after this process claimed it (:func:`~pin_kpi_oed.validation.paths.claim_output`).
         OSError: On other file-system failures (disk full, permissions).
     """
     target = check_writable(path)
@@ -85,7 +113,16 @@ def atomic_write_bytes(path: str | os.PathLike[str], data: bytes) -> None:
                 os.chmod(tmp, target.stat().st_mode & 0o7777)
             except OSError:
                 pass
-        os.replace(tmp, target)
+        with _folder_lock(directory):
+            claimed, before = claimed_state(target)
+            if claimed and output_signature(target) != before:
+                when = time.strftime("%H:%M:%S", time.localtime(target.stat().st_mtime)) if target.exists() else "?"
+                raise InputError(f"cannot write '{target}': another process wrote it at {when}, while this command "
+                                 "ran; its file is kept (give this command another output file, or run the two one "
+                                 "after the other)")
+            os.replace(tmp, target)
+            if claimed:
+                claim_output(target)  # its own write is no other writer
     except BaseException:
         try:
             os.unlink(tmp)

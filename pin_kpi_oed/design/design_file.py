@@ -174,6 +174,9 @@ class DesignEntry:
         trace_cs_m2: tr(C_s) (m²).
         cov_source: ``file`` or ``computed`` (recomputed because the file has none).
         info: every other field of the design entry, as read.
+        cov_s_honest_m2: the honest C_s (3t, 3t) m², tracker frame like ``cov_s_m2``: the universal-kriging
+            covariance with the model discrepancy included (``designs[i].discrepancy.cov_s_m2``, written by
+            ``design --model``), or None (older files, no discrepancy).
     """
 
     criterion: str
@@ -183,6 +186,12 @@ class DesignEntry:
     trace_cs_m2: float
     cov_source: str
     info: dict = field(default_factory=dict)
+    cov_s_honest_m2: np.ndarray | None = None
+
+    def covariance(self, honest: bool) -> np.ndarray:
+        """C_s (3t, 3t) m², tracker frame: the honest one (discrepancy included) when asked and present, else the
+        paper's (tracker noise only)."""
+        return self.cov_s_honest_m2 if honest and self.cov_s_honest_m2 is not None else self.cov_s_m2
 
 
 @dataclass
@@ -639,7 +648,29 @@ def _read_design(e: Mapping, crit: str, w: str, cell: Cell, covariances: _Covari
     tr = e.get("trace_cs_m2")
     tr = float(tr) if (source == "file" and isinstance(tr, (int, float)) and np.isfinite(tr)) else float(np.trace(C))
     info = {k: v for k, v in e.items() if k not in ("q_meas", "cov_s_m2")}
-    return DesignEntry(crit, str(e.get("label") or DESIGN_LABELS.get(crit, crit)), Q, C, tr, source, info)
+    return DesignEntry(crit, str(e.get("label") or DESIGN_LABELS.get(crit, crit)), Q, C, tr, source, info,
+                       _honest_covariance(e, crit, t, notes))
+
+
+def _honest_covariance(e: Mapping, crit: str, t: int, notes: list[str]) -> np.ndarray | None:
+    """``discrepancy.cov_s_m2`` of a design entry (3t × 3t m², tracker frame), or None (absent, or unusable: noted)."""
+    disc = e.get("discrepancy")
+    if not isinstance(disc, Mapping) or disc.get("cov_s_m2") is None:
+        return None
+    try:
+        C = np.asarray(disc["cov_s_m2"], dtype=float)
+    except (TypeError, ValueError):
+        C = np.zeros(0)
+    if C.shape != (3 * t, 3 * t) or not np.all(np.isfinite(C)):
+        notes.append(f"design {crit}: discrepancy.cov_s_m2 is not a finite {3 * t} x {3 * t} matrix: the paper's "
+                     "C_s is shown")
+        return None
+    big = max(float(np.max(np.abs(C))), 1e-300)
+    if np.max(np.abs(C - C.T)) > 1e-9 * big or np.linalg.eigvalsh(0.5 * (C + C.T))[0] < -1e-9 * big:
+        notes.append(f"design {crit}: discrepancy.cov_s_m2 is not symmetric positive semi-definite: the paper's "
+                     "C_s is shown")
+        return None
+    return C
 
 
 def _read_designs(d: Mapping, cell: Cell, model: TrackerModel, where: str, criteria: Sequence[str] | None,
@@ -682,7 +713,9 @@ def load_design(source: str | os.PathLike | Mapping, criteria: Sequence[str] | N
       cylinders), ``obstacles`` (capsules / spheres), ``half_spaces``, ``skip_pairs``, ``beam``
       (``radius_m``, ``skip``), ``incidence_limit_deg`` / ``incidence_max_deg`` (default 30), ``clearance_m``;
     * ``designs``: list of ``{criterion, q_meas (m × n rad), cov_s_m2 (3t × 3t m², tracker frame),
-      trace_cs_m2, label, ...}``, or a single design given by a top-level ``q_meas``.
+      trace_cs_m2, label, discrepancy, ...}``, or a single design given by a top-level ``q_meas``; optional
+      ``discrepancy.cov_s_m2`` (3t × 3t m², tracker frame, written by ``design --model``): the honest C_s, model
+      discrepancy included (:attr:`DesignEntry.cov_s_honest_m2`; unusable ones are noted and ignored).
 
     Args:
         source: path of the JSON file, or the parsed dict.

@@ -115,6 +115,44 @@ def pool_line(path: str | Path, n_read: int, outside_rows: np.ndarray, n_feasibl
             (f", {dropped} dropped ({'; '.join(why)})" if dropped else ""))
 
 
+#: candidates closer than this in every joint (rad, m) are one pose for :func:`near_duplicates`
+DUPLICATE_TOL = 1e-6
+
+
+def near_duplicates(Q: np.ndarray, tol: float = DUPLICATE_TOL) -> list[np.ndarray]:
+    """Groups of candidates that are the same pose up to ``tol`` in every joint (rad, m), largest first.
+
+    Args:
+        Q: candidates (N, n).
+        tol: joint tolerance.
+
+    Returns:
+        The groups of two or more (0-based indices into Q, ascending), largest group first.
+    """
+    Q = np.atleast_2d(np.asarray(Q, float))
+    if len(Q) < 2:
+        return []
+    _, inverse, counts = np.unique(np.floor(Q / tol + 0.5).astype(np.int64), axis=0, return_inverse=True,
+                                   return_counts=True)
+    inverse = inverse.reshape(-1)
+    groups = [np.flatnonzero(inverse == g) for g in np.flatnonzero(counts > 1)]
+    return sorted(groups, key=lambda g: (-len(g), g[0]))
+
+
+def duplicates_line(path: str | Path, Q: np.ndarray, rows: np.ndarray) -> str | None:
+    """One line naming the near-duplicate candidates (by their 1-based data rows ``rows``), None when there are none."""
+    groups = near_duplicates(Q)
+    if not groups:
+        return None
+    distinct = len(Q) - sum(len(g) - 1 for g in groups)
+    shown = "; ".join("rows " + ", ".join(map(str, rows[g[:5]])) + (f" (+{len(g) - 5} more)" if len(g) > 5 else "")
+                      for g in groups[:3])
+    more = f"; {len(groups) - 3} more group{'s' if len(groups) > 4 else ''}" if len(groups) > 3 else ""
+    return (f"--pool {path}: the {len(Q)} feasible candidates are only {distinct} distinct poses (the same pose "
+            f"within {DUPLICATE_TOL:g} rad: {shown}{more}), too few varied ones to identify the parameters; "
+            "give more varied candidates")
+
+
 def check_candidates(problem: DesignProblem, Q: np.ndarray, with_jacobians: bool = True,
                      timings: dict | None = None, reasons: dict | None = None
                      ) -> tuple[np.ndarray, np.ndarray | None, int]:

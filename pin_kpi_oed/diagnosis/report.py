@@ -113,7 +113,9 @@ class DiagnosisReport(Result):
         geometry: training fit of the geometric model (RMS, χ²_red, parameters, tracker).
         registration: transfer mode: the registration rows (1-based row numbers of their file),
             their file, number and seed, and the scored rows.
-        transfer: with validation data (:func:`pin_kpi_oed.diagnosis.transfer_gap.transfer_section`):
+        transfer: with validation data (:func:`pin_kpi_oed.diagnosis.transfer_gap.transfer_section`; with
+            ``--model-out``, ``model_sigma``: the written model's σ scored on the validation rows, the same σ as
+            ``predict``):
             per-joint ranges of train and validation (rad, wrapped as the coverage), coverage per
             joint and overall, held-out RMS inside / outside the coverage, before / after the
             set-up registration (m), the predicted TCP σ at the validation configurations vs the
@@ -222,6 +224,13 @@ class DiagnosisReport(Result):
         tf = self.transfer
         if tf:
             out.append(f"  transfer gap: {tf['classification'].upper()}: {tf['reason']}")
+            hs = tf.get("model_sigma")
+            if hs:
+                out.append(f"    the written model's sigma at the validation rows ({hs['model']}): mean 3-D "
+                           f"{hs['sigma_mean_m'] * 1e3:.3f} mm for a mean error of {hs['mean_m'] * 1e3:.3f} mm; "
+                           f"standardised RMS {hs['z_rms']:.2f} (1 = honest), {hs['inside_95'] * 100:.0f} % inside "
+                           f"the 95 % ellipsoid" + (f"; sigma scaled by {hs['sigma_scale']:.2f} at registration"
+                                                    if hs.get("sigma_scale", 1.0) > 1.0 else ""))
             if tf.get("poses_to_add", {}).get("text"):
                 out.append(f"    to fix it: {tf['poses_to_add']['text']}")
             out.append(f"    {'joint':<22}{'train range rad':>20}{'validation range rad':>24}{'covered':>9}"

@@ -50,6 +50,28 @@ def _chord2(X: np.ndarray, Y: np.ndarray) -> np.ndarray:
     return 2.0 - 2.0 * np.cos(X[:, None, :] - Y[None, :, :])
 
 
+class _ChordCache:
+    """The last training set's chords: they do not depend on the hyper-parameters, and the marginal-likelihood
+    optimiser evaluates the kernel on the same X a few hundred times (keyed by the array's bytes)."""
+
+    def __init__(self) -> None:
+        self.entry: tuple[bytes, np.ndarray] | None = None
+
+    def __call__(self, X: np.ndarray) -> np.ndarray:
+        key = X.shape[0].to_bytes(8, "little") + np.ascontiguousarray(X).tobytes()
+        entry = self.entry                       # one read: safe when two threads fit at once
+        if entry is None or entry[0] != key:
+            D = _chord2(X, X)
+            D.flags.writeable = False
+            entry = (key, D)
+            self.entry = entry
+        return entry[1]
+
+
+#: One shared entry: scikit-learn evaluates a fresh clone of the kernel at every step of the optimiser.
+_CHORDS = _ChordCache()
+
+
 class JointKernel(StationaryKernelMixin, Kernel):
     """k(q, q') = c² Π_j SE_j(L_j) + Σ_j a_j² SE_j(ℓ_j) on the unit circle of each joint (see the module).
 
@@ -105,7 +127,9 @@ class JointKernel(StationaryKernelMixin, Kernel):
             raise ValueError("gradient can only be evaluated when Y is None")
         Yv = X if Y is None else np.atleast_2d(np.asarray(Y, float))
         c, L, a, ell = self._parts(X.shape[1])
-        D = _chord2(X, Yv)
+        if not eval_gradient:
+            return self._value(X, Yv, c, L, a, ell)
+        D = _CHORDS(X)
         Dp = D / L ** 2
         P = c ** 2 * np.exp(-0.5 * Dp.sum(-1))
         Da = D / ell ** 2
@@ -120,6 +144,23 @@ class JointKernel(StationaryKernelMixin, Kernel):
                  A * Da if np.size(self.joint_length_scale) > 1 else (A * Da).sum(-1, keepdims=True),
                  P[..., None] * Dp if np.size(self.length_scale) > 1 else (P * Dp.sum(-1))[..., None]]
         return K, np.concatenate(grads, axis=-1)
+
+    @staticmethod
+    def _value(X: np.ndarray, Y: np.ndarray, c: float, L: np.ndarray, a: np.ndarray, ell: np.ndarray) -> np.ndarray:
+        """K without the gradient, without a trigonometric function per pair: cos(x − y) = cos x cos y + sin x sin y,
+        so the product part is one matrix product of the scaled circle points and each one-joint part an outer
+        product."""
+        cX, sX, cY, sY = np.cos(X), np.sin(X), np.cos(Y), np.sin(Y)
+        # Σ_j (2 − 2 cos Δ_j)/L_j² = Σ_j 2/L_j² − 2 [cX/L, sX/L] · [cY/L, sY/L]ᵀ
+        G = np.hstack([cX / L, sX / L]) @ np.hstack([cY / L, sY / L]).T
+        K = c ** 2 * np.exp(np.minimum(G - float(np.sum(1.0 / L ** 2)), 0.0))
+        for j in range(X.shape[1]):
+            Cj = np.multiply.outer(cX[:, j], cY[:, j])
+            Cj += np.multiply.outer(sX[:, j], sY[:, j])
+            Cj -= 1.0
+            Cj /= ell[j] ** 2
+            K += a[j] ** 2 * np.exp(np.minimum(Cj, 0.0))
+        return K
 
     def diag(self, X: np.ndarray) -> np.ndarray:
         """k(q, q) for each row: c² + Σ a_j²."""

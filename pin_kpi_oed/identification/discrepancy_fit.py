@@ -34,14 +34,23 @@ def discrepancy_options(value: Any, seed: int = 0) -> DiscrepancyOptions:
     return DiscrepancyOptions(mode=str(value), seed=seed)
 
 
-def base_frame_residuals(result: Any) -> tuple[np.ndarray, np.ndarray]:
-    """(rows, residuals in the robot base frame (n, 3) m) of a fit, outliers left out."""
+def _keep_flagged(result: Any, opts: Any) -> bool:
+    """Whether the rows flagged as outliers go into the discrepancy too: only when the plain (linear) loss kept them
+    in the parametric fit and leaving them out would leave fewer rows than the Gaussian process needs (a fit that
+    misses an effect flags its largest residuals, which are the discrepancy's information)."""
+    n, k = len(result.residuals_m), np.asarray(result.outliers).size
+    return bool(k and getattr(result, "loss", "linear") == "linear" and n - k < opts.min_rows <= n)
+
+
+def base_frame_residuals(result: Any, keep_flagged: bool = False) -> tuple[np.ndarray, np.ndarray]:
+    """(rows, residuals in the robot base frame (n, 3) m) of a fit, outliers left out (kept with ``keep_flagged``)."""
     R_rows = np.empty((len(result.residuals_m), 3))
     for lab, rows in zip(result.stations, result.station_rows):
         R = np.asarray(result.setups[lab].tracker_T_base, float)[:3, :3]
         R_rows[rows] = result.residuals_m[rows] @ R
     keep = np.ones(len(R_rows), bool)
-    keep[np.asarray(result.outliers, int)] = False
+    if not keep_flagged:
+        keep[np.asarray(result.outliers, int)] = False
     return np.flatnonzero(keep), R_rows[keep]
 
 
@@ -66,9 +75,13 @@ def result_discrepancy(result: Any, data: MeasurementSet, options: Any = "auto",
         Q = align_data(result.model.robot, data)
     if len(Q) != len(result.residuals_m):
         raise InputError(f"discrepancy: {len(Q)} configurations for {len(result.residuals_m)} residuals")
-    rows, R = base_frame_residuals(result)
+    rows, R = base_frame_residuals(result, keep_flagged=_keep_flagged(result, opts))
     Q = np.asarray(Q, float)
     disc = fit_discrepancy(Q[rows], R, list(result.model.robot.joint_names), opts)
+    if disc is not None and rows.size > len(result.residuals_m) - np.asarray(result.outliers).size:
+        disc.decision += (f" (the {np.asarray(result.outliers).size} rows flagged as outliers are kept: the "
+                          f"plain least-squares fit used them, and without them {rows.size - np.asarray(result.outliers).size} "
+                          f"rows are fewer than the {opts.min_rows} a Gaussian process needs)")
     if disc is not None:
         F, names = parameter_jacobian(result, Q)
         disc.set_parametric(F[rows], names)

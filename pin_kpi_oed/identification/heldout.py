@@ -59,7 +59,7 @@ def validate(result: IdentificationResult | CalibratedModel, data: MeasurementSe
     return out
 
 
-def calibration_stats(cm: CalibratedModel, Q: np.ndarray, data: MeasurementSet) -> dict:
+def calibration_stats(cm: CalibratedModel, Q: np.ndarray, data: MeasurementSet, station: str | None = None) -> dict:
     """How honest the model's σ is on measured rows: standardised errors z = (measured − predicted)/σ per axis.
 
     Returns:
@@ -67,7 +67,7 @@ def calibration_stats(cm: CalibratedModel, Q: np.ndarray, data: MeasurementSet) 
         Σ z² ≤ χ²₃(0.95) = 7.815: their 95 % ellipsoid holds the measurement), ``sigma_mean_m`` (mean
         predicted 3-D σ = sqrt(Σ σ²), m), ``extrapolation_share`` (rows outside the training coverage).
     """
-    Yp, sig, extra = cm.predict_with_sigma(Q, data)
+    Yp, sig, extra = cm.predict_with_sigma(Q, data, station=station)
     z2 = ((data.position_m - Yp) / sig) ** 2
     return {"z_rms": float(np.sqrt(z2.mean())), "inside_95": float(np.mean(z2.sum(axis=1) <= 7.8147)),
             "sigma_mean_m": float(np.sqrt((sig ** 2).sum(axis=1)).mean()),

@@ -52,6 +52,7 @@ is stored from its attributes; any other effect can be stored if it has ``option
 from __future__ import annotations
 
 import copy
+import dataclasses
 import json
 import os
 from dataclasses import dataclass, field
@@ -163,6 +164,9 @@ class Setup:
         fitted_by: ``identify`` (fitted with the robot) or ``register`` (robot held).
         source: file(s) the rows came from.
         rms_m: RMS position error of those rows after the fit (m), or None.
+        sigma_scale: factor (≥ 1) on every predicted σ at this station: a registration sets it from its
+            own rows' standardised errors (:func:`~pin_kpi_oed.identification.transfer.register_setup`), so
+            a session that is worse than the calibrated one says so; 1 for a fitted station.
     """
 
     tracker_T_base: np.ndarray
@@ -172,8 +176,12 @@ class Setup:
     fitted_by: str = "identify"
     source: str = ""
     rms_m: float | None = None
+    sigma_scale: float = 1.0
 
     def __post_init__(self) -> None:
+        self.sigma_scale = float(self.sigma_scale)
+        if not np.isfinite(self.sigma_scale) or self.sigma_scale < 1.0:
+            raise InputError(f"station set-up: sigma_scale must be a finite number >= 1, got {self.sigma_scale!r}")
         self.tracker_T_base = se3_from_matrix(self.tracker_T_base, "tracker_T_base").homogeneous.copy()
         self.reflector_m = np.asarray(self.reflector_m, float).reshape(3)
         if self.probe_R is not None:
@@ -184,7 +192,7 @@ class Setup:
         """Plain numbers for JSON."""
         return to_jsonable({"tracker_T_base": self.tracker_T_base, "reflector_m": self.reflector_m,
                             "probe_R": self.probe_R, "n_rows": int(self.n_rows), "fitted_by": self.fitted_by,
-                            "source": self.source, "rms_m": self.rms_m})
+                            "source": self.source, "rms_m": self.rms_m, "sigma_scale": self.sigma_scale})
 
     @classmethod
     def from_dict(cls, d: dict, where: str) -> "Setup":
@@ -204,8 +212,11 @@ class Setup:
             R = np.asarray(R, float)
             if R.shape != (3, 3) or not np.all(np.isfinite(R)):
                 raise InputError(f"{where}: 'probe_R' must be a 3x3 rotation matrix")
+        scale = d.get("sigma_scale", 1.0)
+        if isinstance(scale, bool) or not isinstance(scale, (int, float)) or not np.isfinite(scale) or scale < 1.0:
+            raise InputError(f"{where}: 'sigma_scale' must be a finite number >= 1, got {scale!r}")
         return cls(T, refl, R, int(d.get("n_rows", 0)), str(d.get("fitted_by", "identify")),
-                   str(d.get("source", "")), d.get("rms_m"))
+                   str(d.get("source", "")), d.get("rms_m"), float(scale))
 
 
 @dataclass
@@ -338,6 +349,8 @@ class CalibratedModel:
         error: on the UR10 Series C halves the standardised RMS is 1.10 without the term and 0.55 with the
         exact universal-kriging term (its cross term K_WQ Σ⁻¹ F reproduces E only in part with short length
         scales), see docs/results.md. Without a discrepancy, the noise model's σ (the paper's noise-only model).
+        Every σ of a station is multiplied by its :attr:`Setup.sigma_scale` (> 1 after a registration whose
+        rows were worse than the model predicted).
 
         Args:
             Q, aux, station: as :meth:`predict`.
@@ -351,13 +364,14 @@ class CalibratedModel:
         Q = self.robot.check_q(np.atleast_2d(np.asarray(Q, float)), "predict: Q")
         Y = self.predict(Q, aux, station)
         m = len(Q)
+        labels = self._row_stations(m, aux, station)
+        scale = np.array([self.setups[lab].sigma_scale for lab in labels], float)[:, None]
         if self.discrepancy is None:
-            return Y, np.asarray(self.noise.sigma(Y[:, :3]), float).reshape(m, 3), np.zeros(m, bool)
+            return Y, scale * np.asarray(self.noise.sigma(Y[:, :3]), float).reshape(m, 3), np.zeros(m, bool)
         d = self.discrepancy
         _, var = d.predict(Q)
         V = var + d.noise_var_m2
         extra = d.extrapolation(Q)
-        labels = self._row_stations(m, aux, station)
         sig = np.empty((m, 3))
         for lab in dict.fromkeys(labels):
             rows = np.flatnonzero(labels == lab)
@@ -367,7 +381,7 @@ class CalibratedModel:
             if far.size:  # outside the coverage: the parametric part's error under the discrepancy
                 Cb[extra[rows]] += d.parametric_covariance(Q[far], self._robot_jacobian(lab, Q[far]))
             sig[rows] = np.sqrt(np.einsum("ia,nab,ib->ni", R, Cb, R))
-        return Y, sig, extra
+        return Y, scale * sig, extra
 
     def _robot_jacobian(self, label: str, Q: np.ndarray) -> np.ndarray:
         """Base-frame Jacobian (m, 3, R) of station ``label``'s predictions w.r.t. the discrepancy's robot parameters."""
@@ -381,6 +395,14 @@ class CalibratedModel:
         if station is None and aux is not None and aux.station is not None:
             return np.array([self.station(lab) for lab in aux.station.tolist()], dtype=object)
         return np.array([self.station(station)] * m, dtype=object)
+
+    def noise_only(self) -> "CalibratedModel":
+        """A copy without the discrepancy and with every station's σ factor 1: the paper's noise-only model
+        (its σ counts the tracker noise only), for contrast with the honest σ."""
+        new = copy.copy(self)
+        new.discrepancy = None
+        new.setups = {lab: dataclasses.replace(st, sigma_scale=1.0) for lab, st in self.setups.items()}
+        return new
 
     def with_setup(self, label: str, setup: Setup, default: bool = True, step: dict | None = None
                    ) -> "CalibratedModel":

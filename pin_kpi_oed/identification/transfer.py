@@ -47,7 +47,7 @@ from pin_kpi_oed.data.measurements import MeasurementSet
 from pin_kpi_oed.effects.library import predict_with_effects
 from pin_kpi_oed.errors import InputError, SolverError
 from pin_kpi_oed.identification.fit_inputs import MIN_STATION_ROWS, default_station_label
-from pin_kpi_oed.identification.heldout import error_stats
+from pin_kpi_oed.identification.heldout import calibration_stats, error_stats
 from pin_kpi_oed.identification.tracker_start import proj_so3, register_points
 from pin_kpi_oed.identification.model_file import CalibratedModel, Setup
 from pin_kpi_oed.identification.problem import ResidualModel, StationSet, align_data
@@ -95,6 +95,9 @@ class RegistrationResult(Result):
             out.append(f"  station {lab} ({st.n_rows} rows, RMS {st.rms_m * 1e3:.4f} mm): tracker_T_base xyz "
                        f"{np.round(T[:3, 3], 6).tolist()} m, rpy {np.round(pin.rpy.matrixToRpy(T[:3, :3]), 6).tolist()}"
                        f" rad; reflector {np.round(st.reflector_m * 1e3, 4).tolist()} mm")
+            if st.sigma_scale > 1.0:
+                out.append(f"  station {lab}: predicted σ scaled by {st.sigma_scale:.2f}: its registration rows' errors "
+                           f"are {st.sigma_scale:.2f}x the model's σ (another session than the calibration)")
         return "\n".join(out)
 
     def to_dict(self) -> dict:
@@ -230,11 +233,14 @@ def register_setup(model: CalibratedModel, data: MeasurementSet, *, station: str
         nit += int(sol.njev or 0)
         nfev += int(sol.nfev)
         ok &= bool(sol.status > 0)
+        probe = new.with_setup(label, setup, default=True)
+        setup.sigma_scale, z_reg = _sigma_scale(probe, sub, Q[rows], label, int(sol.x.size))
         setups[label] = setup
         rows_used[label] = rows
         new = new.with_setup(label, setup, default=True,
                              step={"step": "register", "data": data.source, "station": label, "n_rows": int(rows.size),
-                                   "rms_m": setup.rms_m, "hold_reflector": bool(hold_reflector)})
+                                   "rms_m": setup.rms_m, "hold_reflector": bool(hold_reflector),
+                                   "standardised_rms": z_reg, "sigma_scale": setup.sigma_scale})
     if setup_effects or len(transferable(model)) != len(model.effects):
         pairs = transferable(model) + list(zip(setup_effects, own_thetas))
         new = dataclasses.replace(new, effects=[e for e, _ in pairs], thetas=[t for _, t in pairs])
@@ -243,6 +249,28 @@ def register_setup(model: CalibratedModel, data: MeasurementSet, *, station: str
                               time_s=time.perf_counter() - t0, model=new, stations=list(setups), setups=setups,
                               rows=rows_used, errors_m=errors, source=data.source,
                               setup_thetas=[np.asarray(t, float) for t in own_thetas])
+
+
+def _sigma_scale(model: CalibratedModel, data: MeasurementSet, Q: np.ndarray, label: str, n_unknowns: int
+                 ) -> tuple[float, float | None]:
+    """The σ factor of a newly registered station: s = √(Σ z² / (3m − k)) over its m registration rows
+    (z = residual / predicted σ per axis, k the set-up's unknowns), kept only when above 1.
+
+    A session unlike the calibrated one (another day, set-up or temperature) shows in the registration rows'
+    residuals before any other row is measured; scaling by s keeps the predicted σ honest there. The factor never
+    shrinks σ: 60 rows of a session that happen to fit well are no evidence that the rest will.
+
+    Returns:
+        (factor ≥ 1, the registration rows' standardised RMS, or None when 3m ≤ k).
+    """
+    dof = 3 * len(Q) - int(n_unknowns)
+    if dof <= 0:
+        return 1.0, None
+    Y, sig, _ = model.predict_with_sigma(Q, data, station=label)
+    z2 = float(np.sum(((np.asarray(data.position_m, float) - Y[:, :3]) / sig) ** 2))
+    if not np.isfinite(z2):
+        return 1.0, None
+    return max(1.0, float(np.sqrt(z2 / dof))), float(np.sqrt(z2 / (3 * len(Q))))
 
 
 def registration_split(n: int, register_rows: int, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
@@ -279,7 +307,9 @@ def validate_transfer(model: CalibratedModel, data: MeasurementSet, *, register_
 
     Returns:
         Statistics of the scored rows (:func:`error_stats`: ``n``, ``mean_m``, ``rms_m``, ``median_m``,
-        ``p95_m``, ``max_m``, ``errors_m``) plus ``registration``: ``source``, ``rows`` (1-based
+        ``p95_m``, ``max_m``, ``errors_m``), how honest the predicted σ is there
+        (:func:`~pin_kpi_oed.identification.heldout.calibration_stats`: ``z_rms``, ``inside_95``,
+        ``sigma_mean_m``, ``extrapolation_share``; ``sigma_scale`` of the registration) plus ``registration``: ``source``, ``rows`` (1-based
         row numbers of the registration rows in their file), ``n``, ``rms_m``, ``seed``, the
         ``setup``; and ``scored_rows`` (1-based row numbers of ``data`` scored).
 
@@ -300,6 +330,8 @@ def validate_transfer(model: CalibratedModel, data: MeasurementSet, *, register_
     Q = align_data(model.robot, held)
     Y = rr.model.predict(Q, held, station=label)
     out = error_stats(np.linalg.norm(held.position_m - Y, axis=1))
+    out.update(calibration_stats(rr.model, Q, held, station=label))
+    out["sigma_scale"] = rr.setups[label].sigma_scale
     out["registration"] = {"source": reg.source, "rows": (reg_idx + 1).tolist(), "n": int(len(reg)),
                            "rms_m": rr.rms_m, "seed": int(seed) if register_data is None else None,
                            "setup": rr.setups[label].to_dict(), "hold_reflector": bool(hold_reflector)}

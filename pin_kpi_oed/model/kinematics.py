@@ -234,12 +234,15 @@ class Chain:
             raise InputError(f"configurations must have {self.n} joint values, got shape {Q.shape}")
         return Q
 
-    def frames(self, Q: np.ndarray, placements: Sequence[pin.SE3] | None = None) -> ChainFrames:
+    def frames(self, Q: np.ndarray, placements: Sequence[pin.SE3] | None = None, twists: bool = True
+               ) -> ChainFrames:
         """Joint frames and world twists for configurations Q (eq. 1).
 
         Args:
             Q: configurations, (m, n) (rad for revolute, m for prismatic joints).
             placements: joint placements M_j to use (default the nominal ones), e.g. perturbed.
+            twists: compute the world twists (False: ``V`` and ``W`` are zeros, for callers that need the
+                frames only).
 
         Returns:
             The :class:`ChainFrames`.
@@ -254,8 +257,8 @@ class Chain:
         t = np.empty((m, n + 1, 3))
         R_A = np.empty((m, n, 3, 3))
         t_A = np.empty((m, n, 3))
-        V = np.empty((m, n, 3))
-        W = np.empty((m, n, 3))
+        V = np.zeros((m, n, 3))
+        W = np.zeros((m, n, 3))
         R[:, 0], t[:, 0] = np.eye(3), 0.0
         Rc = np.broadcast_to(np.eye(3), (m, 3, 3))
         tc = np.zeros((m, 3))
@@ -265,14 +268,15 @@ class Chain:
             Rc = Rc @ Mk.rotation
             R_A[:, k], t_A[:, k] = Rc, tc
             if self.revolute[k]:
-                w = Rc @ self.ang[k]
-                W[:, k] = w
-                V[:, k] = -np.cross(w, tc)
+                if twists:
+                    w = Rc @ self.ang[k]
+                    W[:, k] = w
+                    V[:, k] = -np.cross(w, tc)
                 s, c = np.sin(Q[:, k])[:, None, None], np.cos(Q[:, k])[:, None, None]
                 Rc = Rc @ (np.eye(3) + s * self._K[k] + (1.0 - c) * self._KK[k])
             else:
                 u = Rc @ self.lin[k]
-                V[:, k], W[:, k] = u, 0.0
+                V[:, k] = u if twists else 0.0
                 tc = tc + u * Q[:, k:k + 1]
             R[:, k + 1], t[:, k + 1] = Rc, tc
         return ChainFrames(R, t, R_A, t_A, V, W)

@@ -596,7 +596,7 @@ class PosesNeeded:
         order: the greedy sequence (pool indices).
         pool_size: candidates; seed: seed of the random subsets.
         target_sigma_m: the target (m) or None; n_for_target: fewest designed poses reaching it (None: not reached
-            within ``n.max()``); plateau_m: σ with the most designed poses tried (what the discrepancy allows
+            within ``n.max()``; 0: the measured poses already reach it); plateau_m: σ with the most designed poses tried (what the discrepancy allows
             with this pool and budget).
     """
 
@@ -631,6 +631,9 @@ class PosesNeeded:
             return (f"poses needed (discrepancy included): {top} designed poses reach {self.plateau_m * 1e6:.1f} um "
                     f"at the working configurations (random: {self.sigma_random_m[-1] * 1e6:.1f} um)")
         tgt = self.target_sigma_m * 1e6
+        if self.n_for_target == 0:
+            return (f"--target-sigma {tgt:.1f} um (discrepancy included): the measured poses already reach it "
+                    f"(predicted {self.sigma_now_m * 1e6:.1f} um); no more poses are needed")
         if self.n_for_target is not None:
             return (f"--target-sigma {tgt:.1f} um (discrepancy included): {self.n_for_target} designed pose(s) "
                     f"reach it (verified by recomputing C_s); random poses of this pool: "
@@ -694,7 +697,9 @@ def poses_needed(crit: DiscrepancyDesignCriterion, Q_pool: np.ndarray, n_max: in
     out = PosesNeeded(n=grid, sigma_designed_m=des, sigma_random_m=np.nanmean(rs, axis=1),
                       sigma_random_sd_m=np.nanstd(rs, axis=1), sigma_now_m=now, order=order, pool_size=N, seed=seed,
                       target_sigma_m=target_sigma_m, plateau_m=float(des[-1]))
-    if target_sigma_m is not None:
+    if target_sigma_m is not None and now is not None and now <= target_sigma_m:
+        out.n_for_target = 0                                   # the measured poses already reach it
+    elif target_sigma_m is not None:
         path = np.sqrt(np.maximum(sel.path, 0) / t)
         hit = np.flatnonzero(path <= target_sigma_m)
         if hit.size:

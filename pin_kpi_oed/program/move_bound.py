@@ -106,6 +106,10 @@ class MoveBound:
         self.U1 = np.array([index[a] for a, _ in keys], int)
         self.U2 = np.array([index[b] for _, b in keys], int)
         self.R = np.array([segs[a][3] + segs[b][3] for a, b in keys], float)
+        # each row's two segments inside balls (centre, half length + radius): |c1 - c2| - the two radii bounds the row
+        self.U_C = 0.5 * (self.U_A + self.U_B)
+        half = 0.5 * np.linalg.norm(self.U_B - self.U_A, axis=1)
+        self.R_ball = half[self.U1] + half[self.U2] + self.R
         self.H_pair = np.array([h[0] for h in H], int)
         self.H_seg = np.array([index[h[1]] for h in H], int)
         self.H_n = np.array([h[2] for h in H], float).reshape(-1, 3)
@@ -124,25 +128,42 @@ class MoveBound:
         rng = np.random.default_rng(11)
         Q = cell.q_lower + rng.random((48, cell.q_lower.size)) * (cell.q_upper - cell.q_lower)
         exact = np.array([chk.pair_distances(q) for q in Q])
-        lb = self.pairs(Q)
-        fin = np.isfinite(lb)
-        return bool(np.all(lb[fin] <= exact[fin] + 1e-9) and np.all(np.ptp(exact[:, ~self.bounded], axis=0) < 1e-12))
+        ok = True
+        for cap in (None, 0.1):
+            lb = self.pairs(Q, cap)
+            fin = np.isfinite(lb)
+            ok &= bool(np.all(lb[fin] <= exact[fin] + 1e-9))
+        return ok and bool(np.all(np.ptp(exact[:, ~self.bounded], axis=0) < 1e-12))
 
     def _frames(self, Q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        fr = self.chain.frames(Q)  # batched numpy forward kinematics; frame 0 is the base
+        fr = self.chain.frames(Q, twists=False)  # batched numpy forward kinematics; frame 0 is the base
         return fr.R, fr.t
 
-    def pairs(self, Q: np.ndarray) -> np.ndarray:
-        """(m, n_pairs) lower bounds of the pair distances (m); +inf for constant pairs."""
+    def pairs(self, Q: np.ndarray, cap: float | None = None) -> np.ndarray:
+        """(m, n_pairs) lower bounds of the pair distances (m); +inf for constant pairs.
+
+        With ``cap``, a segment pair whose enclosing balls keep at least ``cap`` apart at every configuration of Q
+        is bounded by the balls' distance (a weaker bound, ≥ cap) instead of its closest points: below ``cap`` the
+        smallest bound of a configuration is the same as without, and it costs a fraction.
+        """
         Q = np.atleast_2d(np.asarray(Q, float))
         Rs, ts = self._frames(Q)
         Rj, tj = Rs[:, self.U_joint], ts[:, self.U_joint]
-        EA = np.einsum("msij,sj->msi", Rj, self.U_A) + tj  # every segment's end points, (m, S, 3)
-        EB = np.einsum("msij,sj->msi", Rj, self.U_B) + tj
         out = np.full((len(Q), self.n_pairs), np.inf)
+        d = np.empty((len(Q), len(self.U1)))
+        near = np.arange(len(self.U1))
+        if cap is not None and near.size:
+            C = np.einsum("msij,sj->msi", Rj, self.U_C) + tj
+            d = np.linalg.norm(C[:, self.U1] - C[:, self.U2], axis=2) - self.R_ball
+            near = np.flatnonzero(np.any(d < cap, axis=0))
+        u1, u2 = self.U1[near], self.U2[near]
+        seg = np.unique(np.r_[u1, u2, self.H_seg]).astype(int)  # the segments whose end points are needed
+        EA, EB = np.zeros((len(Q), len(self.U_A), 3)), np.zeros((len(Q), len(self.U_A), 3))
+        EA[:, seg] = np.einsum("msij,sj->msi", Rj[:, seg], self.U_A[seg]) + tj[:, seg]  # end points, (m, S, 3)
+        EB[:, seg] = np.einsum("msij,sj->msi", Rj[:, seg], self.U_B[seg]) + tj[:, seg]
         if self.flat_row.size:
-            _, _, w1, w2 = self._closest(EA[:, self.U1], EB[:, self.U1], EA[:, self.U2], EB[:, self.U2])
-            d = np.linalg.norm(w2 - w1, axis=2) - self.R
+            _, _, w1, w2 = self._closest(EA[:, u1], EB[:, u1], EA[:, u2], EB[:, u2])
+            d[:, near] = np.linalg.norm(w2 - w1, axis=2) - self.R[near]
             out[:, self.first_pair] = np.minimum.reduceat(d[:, self.flat_row], self.starts, axis=1)
             soft = out[:, self.soft]
             out[:, self.soft] = np.where(soft > 0, soft, -np.inf)  # touching the enclosing capsules: no bound
@@ -152,6 +173,6 @@ class MoveBound:
             out[:, self.H_pair] = np.minimum(out[:, self.H_pair], np.minimum(da, db) - self.H_off)
         return out
 
-    def __call__(self, Q: np.ndarray) -> np.ndarray:
-        """(m,) lower bound of the smallest pair distance at each configuration (m)."""
-        return self.pairs(Q).min(axis=1) - 1e-9
+    def __call__(self, Q: np.ndarray, cap: float | None = None) -> np.ndarray:
+        """(m,) lower bound of the smallest pair distance at each configuration (m); see :meth:`pairs` for ``cap``."""
+        return self.pairs(Q, cap).min(axis=1) - 1e-9

@@ -9,11 +9,11 @@ configuration unless given):
    (:mod:`pin_kpi_oed.program.timing`: max_j |Δq_j| / v_j);
 2. the order of least total time from OR-Tools' routing solver (a closed tour through home
    visiting exactly one representative of each pose — a disjunction per pose; guided local
-   search, capped by a solution count and a time limit);
+   search, stopped by a solution count; a wall-clock cap far above it is a safety net only);
 3. lazy collision checking (greedy descents from the previous tour while costs change, then guided
    local search, at most three times): every move of the tour is checked densely
    (:class:`~pin_kpi_oed.program.transitions.TransitionChecker`); a colliding move is repaired
-   through safe via pose(s), else along a path planned by a seeded RRT-Connect
+   through safe via pose(s), else along a path planned by OMPL's RRT-Connect, seeded per move
    (:meth:`~pin_kpi_oed.program.transitions.TransitionChecker.plan_route`), and its cost raised to
    the repaired route's time, or, when no route is found, to a penalty; the tour is re-solved until
    every move of it has been checked (reordering around what collides);
@@ -197,7 +197,9 @@ class ProgramOptions:
         via_pool: safe configurations sampled for repairs.
         seed: seed of the via pool and of the route planner (see
             :meth:`~pin_kpi_oed.program.transitions.TransitionChecker.plan_route`).
-        time_limit_s: routing search cap per solve (s).
+        time_limit_s: wall-clock cap of a routing solve (s): a safety net well above what a solve takes (a cap that
+            binds would make the program depend on the machine's load).
+        solutions: solutions a guided local search visits (its stopping rule: the same costs give the same tour).
         max_rounds: tour solves at most.
         plan_checks: route-planning budget per colliding move while ordering (configurations
             checked); half of it for a pose's route home, four times it in the last attempt on
@@ -211,7 +213,8 @@ class ProgramOptions:
     step_deg: float = 1.0
     via_pool: int = 300
     seed: int = 0
-    time_limit_s: float = 2.0
+    time_limit_s: float = 20.0
+    solutions: int = 30
     max_rounds: int = 30
     plan_checks: int = 15_000
     equivalents: bool = True
@@ -255,16 +258,27 @@ class _Router:
         return r
 
     def reach_home(self, i: int) -> bool:
-        """Whether node i has a safe route to home (computed once)."""
+        """Whether node i has a safe route to home (computed once).
+
+        A clear straight move to a node that reaches home gives the route; a clear straight move to a node
+        that does not (its route home was not found) puts node i in the same part of the free space, so
+        it is dropped without planning; otherwise a route is planned within an eighth of the budget (the
+        routes home found take a few hundred checks; a pocket would take all of it).
+        """
         if i not in self.home_route:
             q = self.nodes[i]
-            known = [j for j, r in self.home_route.items() if r is not None and j != 0]
-            known.sort(key=lambda j: self.c(q, self.nodes[j]))
-            hop = next((j for j in known[:8] if self.tc.check(q, self.nodes[j]).clear), None)
-            if hop is not None and not self.tc.check(q, self.nodes[0]).clear:  # straight to a node reaching home
+            near = sorted((j for j in self.home_route if j != 0), key=lambda j: self.c(q, self.nodes[j]))
+            known = [j for j in near if self.home_route[j] is not None][:8]
+            trapped = [j for j in near if self.home_route[j] is None][:8]
+            hop = next((j for j in known if self.tc.check(q, self.nodes[j]).clear), None)
+            if self.tc.check(q, self.nodes[0]).clear:
+                self.home_route[i] = []
+            elif hop is not None:  # straight to a node reaching home
                 self.home_route[i] = [self.nodes[hop], *self.home_route[hop]]
+            elif any(self.tc.check(q, self.nodes[j]).clear for j in trapped):
+                self.home_route[i] = None
             else:
-                self.home_route[i] = self.route(q, self.nodes[0], self.o.plan_checks // 2)
+                self.home_route[i] = self.route(q, self.nodes[0], self.o.plan_checks // 16)
             if self.home_route[i] is None:
                 self.cost[i, :] = self.cost[:, i] = PENALTY_S
                 self.cost[i, i] = 0.0
@@ -344,7 +358,8 @@ def plan_program(cell: Cell, Q: np.ndarray, options: ProgramOptions | None = Non
     # a bar on a terminal (silent in pipes and tests): rounds of ordering + dense move checks, then the last checks
     with progress(total=o.max_rounds + 2, desc="program: order + check moves", unit="round") as bar:
         for rounds in range(1, o.max_rounds + 1):
-            tour = solve_tour(cost, o.time_limit_s, fast=fast, groups=groups, initial=tour if rounds > 1 else None)
+            tour = solve_tour(cost, o.time_limit_s, o.solutions, fast=fast, groups=groups,
+                              initial=tour if rounds > 1 else None)
             n_gls += not fast
             changed = router.check_tour(tour)
             bar.update()

@@ -160,7 +160,7 @@ RULES: dict[str, dict[str, Callable[[str, Any], None]]] = {
 #: command -> argparse dests of output files
 OUTPUTS = {"evaluate": ["json"], "demo": ["json"], "design": ["json"], "simulate": ["out", "test_out", "truth_json"],
            "identify": ["json", "urdf_out", "model_out"], "import-ipa": ["out", "train", "test"],
-           "register": ["model_out", "json"], "predict": ["out"], "diagnose": ["json"], "view": ["html"],
+           "register": ["model_out", "json"], "predict": ["out", "figure"], "diagnose": ["json"], "view": ["html"],
            "export": ["out", "json", "html"], "compensate": ["out", "json"], "import-tracker": ["out"]}
 #: command -> argparse dests of inputs (files or folders; lists allowed)
 INPUTS = {"evaluate": ["design"], "design": ["cell", "pool", "given", "given_prior", "model"], "identify": ["data", "validate", "register_data", "robot"],

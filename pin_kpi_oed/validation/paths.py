@@ -3,7 +3,10 @@
 :func:`check_outputs` refuses, in milliseconds and before anything is read or computed, an output
 that is a folder, whose folder is missing or read-only, that names one of the command's inputs,
 or that names another output of the same command (without it ``import-ipa x.csv --out x.csv`` would
-replace raw tracker data, and ``diagnose`` would fail on a missing folder after minutes of work).
+replace raw tracker data, and ``diagnose`` would fail on a missing folder after minutes of work). It also
+claims every output file (:func:`claim_output`; the package's one atomic writer,
+:func:`pin_kpi_oed.data.atomic.atomic_write_bytes`, compares): if another process writes one of
+them while the command runs, the command's write is refused instead of silently replacing it.
 """
 
 from __future__ import annotations
@@ -14,7 +17,8 @@ from typing import Iterable
 
 from pin_kpi_oed.errors import InputError
 
-__all__ = ["check_outputs", "same_file"]
+__all__ = ["check_outputs", "same_file", "claim_output", "claimed_state", "output_signature",
+           "release_outputs"]
 
 
 def _key(path: str | os.PathLike[str]) -> str:
@@ -29,6 +33,38 @@ def same_file(a: str | os.PathLike[str], b: str | os.PathLike[str]) -> bool:
         return os.path.samefile(a, b)
     except OSError:
         return False
+
+
+#: the state of each claimed output file when its command checked it (path key -> (inode, size, mtime ns),
+#: None when the file did not exist)
+_CLAIMED: dict[str, tuple[int, int, int] | None] = {}
+
+
+def output_signature(path: str | os.PathLike[str]) -> tuple[int, int, int] | None:
+    """(inode, size, mtime ns) of a file, None when there is none: any write (an atomic one makes a new inode)
+    changes it."""
+    try:
+        st = os.stat(path)
+    except OSError:
+        return None
+    return (st.st_ino, st.st_size, st.st_mtime_ns)
+
+
+def claim_output(path: str | os.PathLike[str]) -> None:
+    """Remember an output file's state now (a command's start, or its own write): the atomic writer refuses to
+    replace the file if another process has written it in between."""
+    _CLAIMED[_key(path)] = output_signature(path)
+
+
+def release_outputs() -> None:
+    """Forget every claim (the command that made them has ended)."""
+    _CLAIMED.clear()
+
+
+def claimed_state(path: str | os.PathLike[str]) -> tuple[bool, tuple[int, int, int] | None]:
+    """(whether ``path`` is claimed, its state when claimed)."""
+    key = _key(path)
+    return key in _CLAIMED, _CLAIMED.get(key)
 
 
 def _check_file_target(opt: str, path: Path) -> None:
@@ -95,3 +131,6 @@ def check_outputs(outputs: Iterable[tuple[str, str | os.PathLike[str] | None]],
                 if same_file(path, op):
                     raise InputError(f"{opt} {path}: is also {oopt}; give each output its own file")
             seen.append((opt, path))
+    for _, path in seen:
+        if not path.is_dir():
+            claim_output(path)  # a write finding it changed by another process meanwhile is refused

@@ -241,7 +241,8 @@ _EFFECT = {"type": "object", "required": ["kind"],
 _STATION = {"type": "object", "additionalProperties": False, "required": ["tracker_T_base", "reflector_m"],
             "properties": {"tracker_T_base": _MAT4, "reflector_m": _VEC3, "probe_R": {"anyOf": [_MAT3, {"type": "null"}]},
                            "n_rows": {"type": "integer", "minimum": 0}, "fitted_by": {"type": "string"},
-                           "source": {"type": "string"}, "rms_m": {"type": ["number", "null"], "minimum": 0}}}
+                           "source": {"type": "string"}, "rms_m": {"type": ["number", "null"], "minimum": 0},
+                           "sigma_scale": {"type": "number", "minimum": 1}}}
 #: schema of a calibrated model file (``pin_kpi_oed.model/1``; see :mod:`pin_kpi_oed.identification.model_file`)
 MODEL_SCHEMA: dict[str, Any] = {
     "type": "object", "additionalProperties": False, "required": ["format", "robot", "geometry", "stations"],

@@ -22,7 +22,9 @@ Engineers check measurement poses by eye before running them on a real robot.
 * ``ellipsoids/<design>/w<j>``: at each working configuration, the TCP's 95 % confidence
   ellipsoid of every design, side by side in the design's colour, magnified by a displayed
   factor (``ellipsoids/label``, the page's legend) so that µm-level ellipsoids are visible; a
-  black dot marks the nominal TCP. The labels are screen-sized sprites (three.js ``Sprite`` with
+  black dot marks the nominal TCP. The ellipsoids are the honest C_s (model discrepancy included,
+  ``designs[i].discrepancy.cov_s_m2`` of ``design --model``: the same σ as ``predict``) when every design
+  has it, else the paper's (tracker noise only); :attr:`SceneOptions.sigma` picks one, the labels say which. The labels are screen-sized sprites (three.js ``Sprite`` with
   ``sizeAttenuation: false``): :data:`LABEL_LINE_SCREEN` of the page height per text line at any
   zoom, always facing the camera.
 
@@ -79,6 +81,9 @@ class SceneOptions:
         background: ``white`` (light grey gradient) or ``meshcat`` (meshcat's default blue).
         ghosts_visible: criteria whose ghosts are shown initially (the others can be ticked in the
             viewer); default the last design only (usually the KPI design), to keep the picture readable.
+        sigma: which C_s the ellipsoids and the legend show: ``honest`` (model discrepancy included:
+            :attr:`~pin_kpi_oed.design.design_file.DesignEntry.cov_s_honest_m2`), ``paper`` (tracker noise
+            only), or None: honest when every design has it, else paper.
     """
 
     scale: float | None = None
@@ -94,6 +99,7 @@ class SceneOptions:
     fps: int = 8
     background: str = "white"
     ghosts_visible: Sequence[str] | None = None
+    sigma: str | None = None
 
 
 @dataclass
@@ -131,6 +137,7 @@ class Scene:
         frames_per_pose, fps: animation timing (each pose is held ``frames_per_pose`` frames).
         animation_poses: (criterion, k) of every animation step, in order.
         colours: colour (0xRRGGBB) of every design.
+        sigma: the C_s shown, ``honest`` (model discrepancy included) or ``paper`` (tracker noise only).
     """
 
     vis: Any
@@ -145,6 +152,7 @@ class Scene:
     fps: int
     animation_poses: list[tuple[str, int]]
     colours: dict[str, int] = field(default_factory=dict)
+    sigma: str = "paper"
 
     @property
     def recorder(self) -> SceneRecorder | None:
@@ -160,18 +168,21 @@ class Scene:
         """An HTML legend (designs, colours, tr(C_s) in mm², TCP σ in µm, magnification) for the static page."""
         rows = []
         t = self.design.q_work.shape[0]
+        honest = self.sigma == "honest"
         for d in self.design.designs:
-            sig = np.sqrt(max(d.trace_cs_m2, 0.0) / t) * 1e6
+            tr = float(np.trace(d.cov_s_honest_m2)) if honest else d.trace_cs_m2
+            sig = np.sqrt(max(tr, 0.0) / t) * 1e6
             rows.append(f"<div><span style='display:inline-block;width:12px;height:12px;"
                         f"background:#{self.colours[d.criterion]:06x};margin-right:6px;vertical-align:middle'></span>"
                         f"{html_mod.escape(d.label)}: {d.q_meas.shape[0]} poses, tr(C<sub>s</sub>) = "
-                        f"{d.trace_cs_m2 * 1e6:.4e} mm&sup2;, TCP &sigma; = {sig:.3g} &micro;m</div>")
+                        f"{tr * 1e6:.4e} mm&sup2;, TCP &sigma; = {sig:.3g} &micro;m</div>")
         return ("<div id='pko-legend' style='position:fixed;left:8px;bottom:8px;padding:6px 10px;"
                 "background:rgba(255,255,255,0.85);font:13px sans-serif;color:#111;border-radius:4px;"
                 "pointer-events:none'>"
                 f"<div><b>{html_mod.escape(self.design.robot.name)}</b> &mdash; "
                 f"{int(round(self.level * 100))} % confidence ellipsoids of the TCP, magnified "
-                f"&times;{fmt_factor(self.scale)} (left to right: designs below)</div>" + "".join(rows)
+                f"&times;{fmt_factor(self.scale)} (left to right: designs below); {SIGMA_TEXT[self.sigma]}</div>"
+                + "".join(rows)
                 + "<div style='color:#555'>Controls &rarr; Animations: step through the measurement poses; "
                 "Scene &rarr; meshcat/robot/collisions: capsules; meshcat/ghosts: all poses (designs of at most "
                 f"{MAX_GHOSTS} poses; view --all-ghosts for all); meshcat/markers: reflector positions.</div></div>")
@@ -373,14 +384,39 @@ def _anim_set(node, M: pin.SE3, scale: np.ndarray) -> None:
         clip.set_property(node.current_frame, "scale", "vector3", [float(x) for x in scale])
 
 
-def _world_ellipsoids(df: DesignFile, level: float
+#: What each kind of C_s includes (the ellipsoids' labels and the page's legend).
+SIGMA_TEXT = {"honest": "discrepancy included", "paper": "tracker noise only"}
+
+
+def sigma_kind(df: DesignFile, sigma: str | None = None) -> str:
+    """The C_s to show: ``honest`` or ``paper``; None: honest when every design of ``df`` has it, else paper.
+
+    Raises:
+        InputError: an unknown kind, or ``honest`` asked of a file without the honest C_s.
+    """
+    have = bool(df.designs) and all(d.cov_s_honest_m2 is not None for d in df.designs)
+    if sigma is None:
+        return "honest" if have else "paper"
+    if sigma not in SIGMA_TEXT:
+        raise InputError(f"--sigma: must be honest or paper, got '{sigma}'")
+    if sigma == "honest" and not have:
+        missing = [d.criterion for d in df.designs if d.cov_s_honest_m2 is None]
+        raise InputError(f"--sigma honest: design(s) {', '.join(missing)} of {df.source} have no "
+                         "discrepancy.cov_s_m2 (write the file with pin-kpi-oed design --model MODEL_JSON, a model "
+                         "with a discrepancy; or give --sigma paper)")
+    return sigma
+
+
+def _world_ellipsoids(df: DesignFile, level: float, sigma: str = "paper"
                       ) -> list[tuple[int, int, DesignEntry, np.ndarray, np.ndarray]]:
-    """(design index, work index, design, semi-axes (m), axes (world)) for every design and working configuration."""
+    """(design index, work index, design, semi-axes (m), axes (world)) for every design and working configuration;
+    ``sigma``: the honest C_s (discrepancy included) or the paper's."""
     Rw = df.world_T_tracker.rotation
     out = []
     for di, d in enumerate(df.designs):
+        Cs = d.covariance(sigma == "honest")
         for j in range(df.q_work.shape[0]):
-            C = d.cov_s_m2[3 * j:3 * j + 3, 3 * j:3 * j + 3]
+            C = Cs[3 * j:3 * j + 3, 3 * j:3 * j + 3]
             radii, axes = confidence_ellipsoid(Rw @ C @ Rw.T, level)
             out.append((di, j, d, radii, axes))
     return out
@@ -394,6 +430,7 @@ class _SceneBuilder:
         import meshcat.geometry as mg
 
         self.mg, self.df, self.vis, self.opts = mg, df, vis, opts
+        self.sigma = sigma_kind(df, opts.sigma)
         self.colours = design_colours([d.criterion for d in df.designs])
         self.model, visual, notes = visual_model(df.robot)
         df.notes.extend(n for n in notes if n not in df.notes)
@@ -587,7 +624,7 @@ class _SceneBuilder:
             (magnification, the ellipsoids drawn).
         """
         df, opts, mg = self.df, self.opts, self.mg
-        ells = _world_ellipsoids(df, opts.level)
+        ells = _world_ellipsoids(df, opts.level, self.sigma)
         rmax = max((float(e[3].max()) for e in ells), default=0.0)
         scale = opts.scale
         if scale is None:
@@ -620,7 +657,8 @@ class _SceneBuilder:
     def _label(self, j: int, tcp: np.ndarray, rj: float, scale: float, camera: np.ndarray, fwd: np.ndarray) -> None:
         """Label above the ellipsoids of working configuration j (level, magnification, designs): a screen-sized
         sprite (:func:`label_sprite`), :data:`LABEL_LINE_SCREEN` of the page height per line at any zoom."""
-        lines = [(f"{int(round(self.opts.level * 100))} % ellipsoids x{fmt_factor(scale)}", "#111111")]
+        lines = [(f"{int(round(self.opts.level * 100))} % ellipsoids x{fmt_factor(scale)}, {SIGMA_TEXT[self.sigma]}",
+                  "#111111")]
         lines += [(d.label, f"#{self.colours[d.criterion]:06x}") for d in self.df.designs]
         up = np.array([0.0, 0.0, 1.0])
         depth = float((tcp - camera) @ (fwd / np.linalg.norm(fwd)))
@@ -696,4 +734,4 @@ def build_scene(design: DesignFile | str | os.PathLike | Mapping, options: Scene
     scale, views = b.ellipsoids(target, position)
     poses = b.animation() if opts.animate and df.designs else []
     return Scene(vis, b.viz, df, scale, float(opts.level), views, target, position, opts.frames_per_pose, opts.fps,
-                 poses, b.colours)
+                 poses, b.colours, b.sigma)
