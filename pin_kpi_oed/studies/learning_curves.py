@@ -8,7 +8,8 @@ m poses are chosen from the training pool by each method, for every m of a grid:
 
 * ``kpi_gp``: the discrepancy-aware KPI (:func:`~pin_kpi_oed.oed.discrepancy_kpi.select_pool_gp`, greedy + one
   exchange pass), tr C_s at W under the prior discrepancy;
-* ``kpi_gp_region``: the same criterion over the working *region*: W plus up to ``region_rows`` seeded pool rows
+* ``kpi_gp_region``: the same criterion over the working *region*
+  (:func:`~pin_kpi_oed.design.region.working_region`): W plus up to ``region_rows`` seeded pool rows
   within the scoring radius of W (known configurations of the region, never scored rows); the scores are taken
   over a region of 0.5 rad, which five points with a discrepancy of short length scales do not represent;
 * ``kpi``: the paper's KPI (noise only), pool selection (:func:`~pin_kpi_oed.oed.pool.select`);
@@ -125,7 +126,8 @@ class _Designs:
 
     def __init__(self, model: TrackerModel, sp: _Split, prior: DiscrepancyPrior, seed: int, radius_rad: float,
                  joints: int, region_rows: int) -> None:
-        from pin_kpi_oed.studies.design_trials import _design_model, _near
+        from pin_kpi_oed.design.region import working_region
+        from pin_kpi_oed.studies.design_trials import _design_model
 
         dm = _design_model(model, sp.pool)
         b = analyse(dm).base
@@ -136,10 +138,8 @@ class _Designs:
         # the KPI is the measured point (the reflector) at W and at the scored rows, what the scores measure
         self.crit_w.E = self.crit_w.pool_jacobians(sp.work)
         self.crit_s.E = self.crit_s.pool_jacobians(sp.scored.q)
-        near = _near(self.Q, sp.work, radius_rad, joints)
-        rng = np.random.default_rng([seed, 1])
-        near = near if near.size <= region_rows else np.sort(rng.choice(near, region_rows, replace=False))
-        self.crit_r = DiscrepancyDesignCriterion(dm, b, prior, np.vstack([sp.work, self.Q[near]]))
+        region = working_region(sp.work, radius_rad, region_rows, seed, pool=self.Q, joints=joints)
+        self.crit_r = DiscrepancyDesignCriterion(dm, b, prior, region.configurations())
         self.crit_r.E = self.crit_r.pool_jacobians(self.crit_r.Q_work)
         self.Jp = self.crit_w.pool_jacobians(self.Q)
         self.Fp = dm.weighted_jacobian(p0, self.Q)[:, :, b]
