@@ -79,6 +79,14 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="with the discrepancy (kpi_gp or --model with a discrepancy): write the poses-needed figure "
                         "(predicted TCP sigma at the working configurations vs number of poses, designed and random; "
                         "PNG); the curve also goes to --json")
+    p.add_argument("--work-radius", dest="work_radius", type=float, default=None,
+                   help="kpi_gp: take the KPI over the working region, the working configurations plus "
+                        "--work-samples seeded configurations within this radius of them (rad, Euclidean over joints "
+                        "1-5, within the joint bounds and collision-free); default 0.5 with kpi_gp (the discrepancy's "
+                        "length scales are short: a few configurations do not represent where the robot works), "
+                        "0 = the working configurations alone")
+    p.add_argument("--work-samples", dest="work_samples", type=int, default=None,
+                   help="configurations drawn for the working region (default 100; the infeasible ones are dropped)")
     p.set_defaults(func=run)
 
 
@@ -211,6 +219,7 @@ def run(args: argparse.Namespace) -> int:
         problem.require_identified(f"--target-sigma: --given {given_file}")
     if not quiet:
         _print_header(cell, problem, m, seed, collision, starts)
+    _set_region(args, problem, criteria, seed, true_cell)
     opts = DesignOptions(collision=collision, n_starts=starts, ipopt=ipopt_options(max_iter=max_iter),
                          start=getattr(args, "start", "pool") or "pool")
     cert, checked = None, None
@@ -296,6 +305,31 @@ def _pool_given_target(args: argparse.Namespace) -> tuple[str | None, str | None
     if target is not None and not (target > 0):
         raise InputError(f"--target-sigma: must be > 0 m, got {target}")
     return pool_file, given_file, target
+
+
+def _set_region(args: argparse.Namespace, problem, criteria: list[str], seed: int, true_cell) -> None:
+    """``--work-radius`` / ``--work-samples``: the working region of ``kpi_gp`` (default 0.5 rad and 100 samples
+    with kpi_gp, none otherwise), drawn with the design's seed, within the joint bounds and collision-free in the untightened cell; prints it.
+
+    The region is always sampled, also with ``--pool``: the pool is where one may measure, the region where the robot
+    works (a pool's rows near W would cover the region only where the candidates happen to lie).
+
+    Raises:
+        InputError: a negative radius or number of samples.
+    """
+    from pin_kpi_oed.design.region import DEFAULT_WORK_RADIUS_RAD, DEFAULT_WORK_SAMPLES
+
+    radius = getattr(args, "work_radius", None)
+    samples = getattr(args, "work_samples", None)
+    samples = DEFAULT_WORK_SAMPLES if samples is None else int(samples)
+    if radius is None:
+        radius = DEFAULT_WORK_RADIUS_RAD if "kpi_gp" in criteria else 0.0
+    if radius < 0 or samples < 0:
+        raise InputError(f"--work-radius ({radius:g}) and --work-samples ({samples}) must be >= 0")
+    if radius == 0 or samples == 0:
+        return
+    problem.set_region(radius, samples, seed, cell=true_cell)
+    print(problem.region.describe())
 
 
 def _print_header(cell, problem, m: int, seed: int, collision: bool, starts: int) -> None:
@@ -393,7 +427,7 @@ def _poses_needed(args: argparse.Namespace, problem, cell, target: float | None,
             Q_pool = np.vstack([Q_pool] + extra)
         what = "feasible candidates: random" + (" + the designs' poses" if extra else "")
     n_max = min(len(Q_pool), max(4 * m, 120))
-    curve = poses_needed(problem.gp_criterion(), Q_pool, n_max, target_sigma_m=target, seed=seed)
+    curve = poses_needed(problem.gp_criterion(region=False), Q_pool, n_max, target_sigma_m=target, seed=seed)
     print(curve.summary() + f" ({len(Q_pool)} {what}, {curve.time_s:.1f} s)")
     if getattr(args, "curve", None):
         from pin_kpi_oed.viz.poses_needed import plot_poses_needed
@@ -498,13 +532,16 @@ def discrepancy_scores(problem, results: list) -> list[dict]:
     """Honest TCP scores of every design with the problem's discrepancy (universal-kriging C_s, base frame).
 
     Returns:
-        Per design {"trace_cs_m2", "tcp_sigma_m" = sqrt(tr(C_s)/t), "cov_s_m2"} (m², m, m²); ``cov_s_m2`` is the full
+        Per design {"trace_cs_m2", "tcp_sigma_m" = sqrt(tr(C_s)/t), "cov_s_m2"} (m², m, m²) at the working
+        configurations W and, with a working region, {"trace_cs_region_m2", "tcp_sigma_region_m"} over W plus the
+        region's configurations (sqrt(tr(C_s)/(t + k))); ``cov_s_m2`` is the full
         universal-kriging C_s (3t × 3t) rotated to the tracker frame, like the design's own ``cov_s_m2`` (the trace
         is the base frame's); NaN / None where the design does not identify the parameters.
     """
     from pin_kpi_oed.errors import IdentifiabilityError
 
-    crit = problem.gp_criterion()
+    crit = problem.gp_criterion(region=False)
+    reg = problem.gp_criterion() if getattr(problem, "region", None) is not None and problem.region.kept else None
     t = problem.cell.q_work.shape[0]
     R = np.kron(np.eye(t), crit.model.tracker_pose(crit.p).rotation)  # base -> tracker frame, per working configuration
     out = []
@@ -517,6 +554,13 @@ def discrepancy_scores(problem, results: list) -> list[dict]:
             tr, cov = float("nan"), None
         out.append({"trace_cs_m2": tr, "tcp_sigma_m": math.sqrt(tr / t) if tr == tr else float("nan"),
                     "cov_s_m2": cov})
+        if reg is not None:
+            n = reg.Q_work.shape[0]
+            try:
+                tr_r = float(reg.value(r.q_meas))
+            except IdentifiabilityError:
+                tr_r = float("nan")
+            out[-1].update({"trace_cs_region_m2": tr_r, "tcp_sigma_region_m": math.sqrt(tr_r / n)})
     return out
 
 
@@ -524,7 +568,7 @@ def _sigma_given(problem) -> float:
     """Predicted TCP σ (m) at the working configurations of the measured poses alone, discrepancy included."""
     from pin_kpi_oed.errors import IdentifiabilityError
 
-    crit = problem.gp_criterion()
+    crit = problem.gp_criterion(region=False)
     try:
         return math.sqrt(crit.value(np.zeros((0, problem.n))) / problem.cell.q_work.shape[0])
     except IdentifiabilityError:
@@ -533,11 +577,14 @@ def _sigma_given(problem) -> float:
 
 def discrepancy_table(results: list, scores: list[dict]) -> str:
     """The predicted TCP σ at the working configurations: the paper's (tracker noise only) beside the honest one
-    (discrepancy included), µm."""
-    head = f"{'criterion':<10}{'paper sigma um':>16}{'with discrepancy sigma um':>27}"
+    (discrepancy included), and the honest one over the working region when the scores hold it, µm."""
+    region = any("tcp_sigma_region_m" in sc for sc in scores)
+    head = (f"{'criterion':<10}{'paper sigma um':>16}{'with discrepancy sigma um':>27}"
+            + (f"{'over the region um':>20}" if region else ""))
     lines = [head, "-" * len(head)]
     for r, sc in zip(results, scores):
-        lines.append(f"{r.criterion:<10}{r.tcp_sigma_m * 1e6:>16.3f}{sc['tcp_sigma_m'] * 1e6:>27.3f}")
+        lines.append(f"{r.criterion:<10}{r.tcp_sigma_m * 1e6:>16.3f}{sc['tcp_sigma_m'] * 1e6:>27.3f}"
+                     + (f"{sc.get('tcp_sigma_region_m', float('nan')) * 1e6:>20.3f}" if region else ""))
     return "\n".join(lines)
 
 
@@ -587,5 +634,9 @@ def _discrepancy_doc(doc: dict, problem, gp_scores: list[dict]) -> None:
                                   "configurations, discrepancy included, and its C_s (3t x 3t, m^2) in the tracker "
                                   "frame like designs[i].cov_s_m2 (pin-kpi-oed view draws it); "
                                   "designs[i].trace_cs_m2 / tcp_sigma_m / cov_s_m2: the paper's, tracker noise only"}
+    region = getattr(problem, "region", None)
+    doc["working_region"] = None if region is None else {
+        **region.to_dict(), "note": "kpi_gp's KPI is tr(C_s) over the working configurations and these; "
+                                    "designs[i].discrepancy.tcp_sigma_region_m is sqrt(tr(C_s)/(t + kept)) over them"}
     for dd, sc in zip(doc["designs"], gp_scores):
         dd["discrepancy"] = sc

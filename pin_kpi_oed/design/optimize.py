@@ -316,12 +316,36 @@ class DesignProblem:
             self.discrepancy = default_discrepancy(self.n)
         return self.discrepancy
 
-    def gp_criterion(self) -> Any:
+    #: Optional :class:`~pin_kpi_oed.design.region.WorkingRegion`: ``kpi_gp`` takes its KPI over W and the region's
+    #: configurations (None: W alone; :meth:`set_region`).
+    region: Any = None
+
+    def set_region(self, radius_rad: float, samples: int, seed: int = 0, joints: int = 5, cell: Cell | None = None
+                   ) -> Any:
+        """Draw the working region of ``kpi_gp`` (:func:`~pin_kpi_oed.design.region.working_region`): ``samples``
+        seeded configurations within ``radius_rad`` of the working configurations, those outside the joint bounds or
+        in collision (the independent check of ``cell``, default this problem's) dropped; R = 0 leaves W alone.
+        The tracker's line of sight and incidence are not required: the region is where the robot works, not where
+        it is measured (the working configurations themselves usually face away from the tracker). Returns it."""
+        from pin_kpi_oed.design.region import working_region
+
+        checker = self.checker if cell is None else FeasibilityChecker(cell)
+
+        def reachable(Q: np.ndarray) -> np.ndarray:
+            rep = checker.check(Q)
+            return rep.within_bounds & rep.collision_free
+
+        self.region = working_region(self.cell.q_work, radius_rad, samples, seed, joints=joints, feasible=reachable)
+        return self.region
+
+    def gp_criterion(self, region: bool = True) -> Any:
         """The discrepancy-aware KPI criterion (``kpi_gp``) of this problem's geometry (identifiable geometry +
-        set-up, the layout's prior) at the working configurations."""
+        set-up, the layout's prior) at the working configurations, and over the :attr:`region` when one is set
+        and ``region``."""
         from pin_kpi_oed.oed.discrepancy_kpi import DiscrepancyDesignCriterion
 
-        return DiscrepancyDesignCriterion(self.model, self.base, self.discrepancy_prior(), self.cell.q_work,
+        Q_work = self.region.configurations() if region and self.region is not None else self.cell.q_work
+        return DiscrepancyDesignCriterion(self.model, self.base, self.discrepancy_prior(), Q_work,
                                           Q_given=getattr(self, "Q_given", None), p=self.p0)
 
     def criterion(self, name: str) -> DesignCriterion:
