@@ -91,23 +91,28 @@ def run_case(case: str, n_seeds: int, cache: Path, model: TrackerModel, folder: 
                           message=f"{len(splits)} splits", time_s=time.perf_counter() - t0)
 
 
+def _cells(res: LearningCurves, methods, j: int, full: bool = False) -> list[str]:
+    """Table cells of size index ``j``: the median (mm; ``full``: mean ± spread first) and, against random, the
+    median paired change, wins and the Wilcoxon p."""
+    cells = []
+    for k in methods:
+        e = res.array("error_mean_m", k)[:, j] * 1e3
+        c = (f"{e.mean():.3f} ± {e.std(ddof=1):.3f}, med. " if full else "") + f"{np.median(e):.3f}"
+        if k != "random":
+            p = res.paired(k)[j]
+            c += f" ({100 * p['change']:+.0f} %, {p['wins']}/{p['n']}, p {p['p_wilcoxon']:.2g})"
+        cells.append(c)
+    return cells
+
+
 def markdown(res: LearningCurves) -> str:
     """The case as markdown: per m and method the mean ± spread and the median (mm) and against random the median
     paired change, wins and the Wilcoxon p; then the poses each method needs to come within 10 % of the full pool (observed, predicted)."""
     meths = res.methods
     head = "| m | " + " | ".join(LABELS.get(k, k) for k in meths) + " |"
     rows = [head, "|---" * (len(meths) + 1) + "|"]
-    cmp = {k: res.paired(k) for k in meths if k != "random"}
     for j, m in enumerate(res.sizes):
-        cells = []
-        for k in meths:
-            e = res.array("error_mean_m", k)[:, j] * 1e3
-            c = f"{e.mean():.3f} ± {e.std(ddof=1):.3f}, med. {np.median(e):.3f}"
-            if k in cmp:
-                p = cmp[k][j]
-                c += f" ({100 * p['change']:+.0f} %, {p['wins']}/{p['n']}, p {p['p_wilcoxon']:.2g})"
-            cells.append(c)
-        rows.append(f"| {m} | " + " | ".join(cells) + " |")
+        rows.append(f"| {m} | " + " | ".join(_cells(res, meths, j, full=True)) + " |")
     f = res.full("error_mean_m") * 1e3
     rows.append(f"| full pool ({res.splits[0]['n_pool']}) | {f.mean():.3f} ± {f.std(ddof=1):.3f}, med. {np.median(f):.3f} |"
                 + " |" * (len(meths) - 1))
@@ -136,6 +141,23 @@ def markdown(res: LearningCurves) -> str:
     if big is not None:
         rows += ["", "random, larger sets (median over the splits): " + ", ".join(
             f"{m} poses {v * 1e3:.3f} mm" for m, v in zip(big[0], np.median(big[1], 0)))]
+    return "\n".join(rows)
+
+
+def compact_markdown(results: list[LearningCurves], methods: tuple[str, ...] = ("kpi_gp", "kpi", "D", "random")
+                     ) -> str:
+    """Several cases in one markdown table: per case and m the median (mm) of each method, against random the
+    median paired change, wins and Wilcoxon p; then the poses each needs to come within 10 % of the full pool."""
+    rows = ["| case | m | " + " | ".join(LABELS[k] for k in methods) + " |", "|---" * (len(methods) + 2) + "|"]
+    for res in results:
+        for j, m in enumerate(res.sizes):
+            rows.append(f"| {res.case if j == 0 else ''} | {m} | " + " | ".join(_cells(res, methods, j)) + " |")
+    rows += ["", "| case | full pool (poses, median mm) | " + " | ".join(LABELS[k] for k in methods)
+             + " |", "|---" * (len(methods) + 2) + "|"]
+    for res in results:
+        need = res.needed()
+        rows.append(f"| {res.case} | {res.splits[0]['n_pool']}, {np.median(res.full('error_mean_m')) * 1e3:.3f} | "
+                    + " | ".join(_n(need[k], res.largest(k), res.sizes[0]) for k in methods) + " |")
     return "\n".join(rows)
 
 
@@ -213,6 +235,8 @@ def main(argv: list[str] | None = None) -> int:
         print(res.summary(), flush=True)
         if a.markdown:
             print(markdown(res), flush=True)
+    if a.markdown and len(results) > 1:
+        print(compact_markdown(results), flush=True)
     if a.json:
         atomic_write_json(a.json, {"cases": [r.to_dict() for r in results], "seeds": a.seeds})
     if a.figure:

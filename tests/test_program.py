@@ -100,6 +100,25 @@ def test_program_orders_checks_and_repairs(kr15, poses):
     assert prog.waypoints[0].kind == prog.waypoints[-1].kind == "home" and sum(w.kind == "measure" for w in prog.waypoints) == len(poses)
 
 
+def test_program_does_not_depend_on_the_machines_speed(kr15, poses, monkeypatch):
+    """The tour search stops by a solution count, not the clock: a machine ten times slower gives the same program."""
+    from pin_kpi_oed.program import ordering
+
+    first = plan_program(kr15, poses, ProgramOptions(margin_m=0.005, via_pool=150))
+    real_solve = ordering.solve_tour
+    slow = {"calls": 0}
+
+    def slow_solve(cost, time_limit_s, *a, **k):  # a ten times slower machine: a tenth of the time
+        slow["calls"] += 1
+        return real_solve(cost, time_limit_s / 10, *a, **k)
+
+    monkeypatch.setattr(ordering, "solve_tour", slow_solve)
+    again = plan_program(kr15, poses, ProgramOptions(margin_m=0.005, via_pool=150))
+    assert slow["calls"] >= 2 and np.array_equal(first.path, again.path)
+    assert [w.kind for w in first.waypoints] == [w.kind for w in again.waypoints]
+    assert first.cycle_time_s == again.cycle_time_s
+
+
 # ---------------------------------------------------------------------------- UR10: ±360° joints, OMPL route planning
 
 #: two poses of the UR10 cell's KPI design (deg): the straight move collides (so does home -> B) and no

@@ -9,7 +9,7 @@ configuration unless given):
    (:mod:`pin_kpi_oed.program.timing`: max_j |Δq_j| / v_j);
 2. the order of least total time from OR-Tools' routing solver (a closed tour through home
    visiting exactly one representative of each pose — a disjunction per pose; guided local
-   search, capped by a solution count and a time limit);
+   search, stopped by a solution count; a wall-clock cap far above it is a safety net only);
 3. lazy collision checking (greedy descents from the previous tour while costs change, then guided
    local search, at most three times): every move of the tour is checked densely
    (:class:`~pin_kpi_oed.program.transitions.TransitionChecker`); a colliding move is repaired
@@ -197,7 +197,9 @@ class ProgramOptions:
         via_pool: safe configurations sampled for repairs.
         seed: seed of the via pool and of the route planner (see
             :meth:`~pin_kpi_oed.program.transitions.TransitionChecker.plan_route`).
-        time_limit_s: routing search cap per solve (s).
+        time_limit_s: wall-clock cap of a routing solve (s): a safety net well above what a solve takes (a cap that
+            binds would make the program depend on the machine's load).
+        solutions: solutions a guided local search visits (its stopping rule: the same costs give the same tour).
         max_rounds: tour solves at most.
         plan_checks: route-planning budget per colliding move while ordering (configurations
             checked); half of it for a pose's route home, four times it in the last attempt on
@@ -211,7 +213,8 @@ class ProgramOptions:
     step_deg: float = 1.0
     via_pool: int = 300
     seed: int = 0
-    time_limit_s: float = 2.0
+    time_limit_s: float = 20.0
+    solutions: int = 30
     max_rounds: int = 30
     plan_checks: int = 15_000
     equivalents: bool = True
@@ -355,7 +358,8 @@ def plan_program(cell: Cell, Q: np.ndarray, options: ProgramOptions | None = Non
     # a bar on a terminal (silent in pipes and tests): rounds of ordering + dense move checks, then the last checks
     with progress(total=o.max_rounds + 2, desc="program: order + check moves", unit="round") as bar:
         for rounds in range(1, o.max_rounds + 1):
-            tour = solve_tour(cost, o.time_limit_s, fast=fast, groups=groups, initial=tour if rounds > 1 else None)
+            tour = solve_tour(cost, o.time_limit_s, o.solutions, fast=fast, groups=groups,
+                              initial=tour if rounds > 1 else None)
             n_gls += not fast
             changed = router.check_tour(tour)
             bar.update()

@@ -123,10 +123,8 @@ def withheld_case(model: Any, Q_pool: np.ndarray, Q_pilot: np.ndarray, W: np.nda
     from pin_kpi_oed.identification.identify import identify
     from pin_kpi_oed.identification.simulate import simulate
     from pin_kpi_oed.model.noise import NoiseModel
-    from pin_kpi_oed.oed.criteria import get_criterion
-    from pin_kpi_oed.oed.discrepancy_kpi import DiscrepancyDesignCriterion, DiscrepancyPrior, default_discrepancy
+    from pin_kpi_oed.oed.discrepancy_kpi import DiscrepancyDesignCriterion, DiscrepancyPrior
     from pin_kpi_oed.oed.identifiability import analyse
-    from pin_kpi_oed.oed.pool import select
     from pin_kpi_oed.studies.learning_curves import calibrate_fixed
 
     t0 = time.perf_counter()
@@ -153,22 +151,7 @@ def withheld_case(model: Any, Q_pool: np.ndarray, Q_pilot: np.ndarray, W: np.nda
                  "predicted_sigma_m": {d: [] for d in DESIGNS}}
     for m in sizes:
         for d in DESIGNS:
-            if d == "kpi_gp":
-                idx = crit.select(Q_pool, m, J_pool=Jp, exchange_passes=1).indices
-            elif d == "random":  # per robot: a seeded permutation of the pool, nested sizes
-                idx = np.random.default_rng([seed, 7]).permutation(len(Q_pool))[:m]
-            elif (d, m) in fixed:
-                idx = fixed[(d, m)]
-            else:
-                if d == "kpi_gp_default":
-                    c0 = DiscrepancyDesignCriterion(model, base, default_discrepancy(model.robot.nq), W, p=p0)
-                    idx = c0.select(Q_pool, m, J_pool=Jp, exchange_passes=1).indices
-                else:  # kpi
-                    E = model.kpi_jacobian(p0, W)[:, base]
-                    Fp = model.weighted_jacobian(p0, Q_pool)[:, :, base]
-                    idx = select(Fp, m, get_criterion("kpi").pool_form(E, base.size), seed=0).indices
-                fixed[(d, m)] = np.asarray(idx, int)
-            idx = np.asarray(idx, int)
+            idx = _choose(d, m, model, crit, Q_pool, Jp, W, base, seed, fixed)
             cm, plain = calibrate_fixed(model, data.subset(idx), prior)
             e = np.linalg.norm(predicted_tcp(cm, W) - truth_W, axis=1)
             e0 = np.linalg.norm(predicted_tcp(plain, W) - truth_W, axis=1)
@@ -180,6 +163,30 @@ def withheld_case(model: Any, Q_pool: np.ndarray, Q_pilot: np.ndarray, W: np.nda
                 out["predicted_sigma_m"][d].append(float("nan"))
     out["time_s"] = time.perf_counter() - t0
     return out
+
+
+def _choose(d: str, m: int, model: Any, crit: Any, Q_pool: np.ndarray, Jp: np.ndarray, W: np.ndarray,
+            base: np.ndarray, seed: int, fixed: dict) -> np.ndarray:
+    """Pool indices of design ``d`` of ``m`` poses (selections that do not depend on the robot kept in ``fixed``)."""
+    from pin_kpi_oed.oed.criteria import get_criterion
+    from pin_kpi_oed.oed.discrepancy_kpi import DiscrepancyDesignCriterion, default_discrepancy
+    from pin_kpi_oed.oed.pool import select
+
+    p0 = np.zeros(model.n_params)
+    if d == "kpi_gp":
+        return np.asarray(crit.select(Q_pool, m, J_pool=Jp, exchange_passes=1).indices, int)
+    if d == "random":  # per robot: a seeded permutation of the pool, nested sizes
+        return np.random.default_rng([seed, 7]).permutation(len(Q_pool))[:m]
+    if (d, m) not in fixed:
+        if d == "kpi_gp_default":
+            c0 = DiscrepancyDesignCriterion(model, base, default_discrepancy(model.robot.nq), W, p=p0)
+            idx = c0.select(Q_pool, m, J_pool=Jp, exchange_passes=1).indices
+        else:  # kpi
+            E = model.kpi_jacobian(p0, W)[:, base]
+            Fp = model.weighted_jacobian(p0, Q_pool)[:, :, base]
+            idx = select(Fp, m, get_criterion("kpi").pool_form(E, base.size), seed=0).indices
+        fixed[(d, m)] = np.asarray(idx, int)
+    return np.asarray(fixed[(d, m)], int)
 
 
 def paired_summary(a: Sequence[float], b: Sequence[float]) -> dict:
