@@ -12,7 +12,7 @@ hyper-parameters) and scored by the true TCP error at the working configurations
 (:mod:`pin_kpi_oed.studies.kpi_withheld`). Paired Wilcoxon tests per (a, m).
 
 Run: ``OMP_NUM_THREADS=1 python -m benchmarks.kpi_gp_withheld [--reps 20] [--pool 1000] [--pilot 200]
-[--json out.json]`` (progress per case on stderr).
+[--json out.json]`` (progress per case on stderr; about 16 min on 2 cores, ``--reps 3`` for a quick look).
 """
 
 from __future__ import annotations
