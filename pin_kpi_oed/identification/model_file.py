@@ -364,7 +364,7 @@ class CalibratedModel:
         Q = self.robot.check_q(np.atleast_2d(np.asarray(Q, float)), "predict: Q")
         Y = self.predict(Q, aux, station)
         m = len(Q)
-        labels = self._row_stations(m, aux, station)
+        labels = self.row_stations(m, aux, station)
         scale = np.array([self.setups[lab].sigma_scale for lab in labels], float)[:, None]
         if self.discrepancy is None:
             return Y, scale * np.asarray(self.noise.sigma(Y[:, :3]), float).reshape(m, 3), np.zeros(m, bool)
@@ -391,7 +391,13 @@ class CalibratedModel:
         model, p = self.station_model(label)
         return model.base_jacobian(p, Q, [model.layout.names.index(n) for n in names])
 
-    def _row_stations(self, m: int, aux: MeasurementSet | None, station: str | None) -> np.ndarray:
+    def row_stations(self, m: int, aux: MeasurementSet | None = None, station: str | None = None) -> np.ndarray:
+        """The station label of each of ``m`` rows, as :meth:`predict` picks it: ``station`` for every row, else
+        ``aux``'s station column, else the default station (object array of labels).
+
+        Raises:
+            InputError: an unknown station.
+        """
         if station is None and aux is not None and aux.station is not None:
             return np.array([self.station(lab) for lab in aux.station.tolist()], dtype=object)
         return np.array([self.station(station)] * m, dtype=object)

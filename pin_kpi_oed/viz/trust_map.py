@@ -103,7 +103,7 @@ def trust_map(model: Any, Q: np.ndarray, aux: Any = None, station: str | None = 
     if Q.shape[0] == 0:
         raise InputError("trust map: no rows to draw")
     Y, sig, extra = model.predict_with_sigma(Q, aux, station)
-    labels = model._row_stations(len(Q), aux, station)
+    labels = model.row_stations(len(Q), aux, station)
     train, train_label = _training(model, labels[0])
     return TrustMap(_to_base(model, Y, labels), np.sqrt(np.sum(sig ** 2, axis=1)), sig, np.asarray(extra, bool),
                     train, train_label)
