@@ -17,44 +17,27 @@ Run:  python -m benchmarks bench_checks
 from __future__ import annotations
 
 import json
-import statistics
 import tempfile
-import time
 from pathlib import Path
 
 import numpy as np
 
-from benchmarks.common import figure
+from benchmarks.common import figure, median_time, withheld_ur10
 
 
-def _median_s(fn, reps: int = 20) -> float:
-    fn()
-    out = []
-    for _ in range(reps):
-        t0 = time.perf_counter()
-        fn()
-        out.append(time.perf_counter() - t0)
-    return statistics.median(out)
+def _median(fn) -> float:
+    return median_time(fn, repeat=20, warmup=1)
 
 
 def main() -> dict:
-    from pin_kpi_oed import NoiseModel, TrackerModel, load_robot
-    from pin_kpi_oed.effects.library import GearHarmonic
     from pin_kpi_oed.identification.identify import identify
     from pin_kpi_oed.identification.model_file import load_model_file
     from pin_kpi_oed.identification.quality import assess_registration
-    from pin_kpi_oed.identification.simulate import Tolerances, default_tracker_pose, random_truth, simulate
-    from pin_kpi_oed.oed.identifiability import analyse
     from pin_kpi_oed.validation.paths import check_outputs, release_outputs
     from pin_kpi_oed.validation.schema import validate_model_dict
 
-    rb = load_robot("ur10")
-    model = TrackerModel(rb, tracker_T_base=default_tracker_pose(rb), reflector_m=np.array([0.03, 0.02, 0.08]),
-                         noise=NoiseModel(sigma_xyz_m=(1e-5,) * 3))
-    truth = random_truth(model, Tolerances(5e-4, 1e-3), seed=4, only=[i for i in analyse(model).base if i < 36])
-    gh = GearHarmonic(rb, joints=["shoulder_lift_joint", "elbow_joint"], orders=(2, 3))
-    theta = 3e-4 * np.random.default_rng(5).standard_normal(len(gh.param_names()))
-    data = simulate(model, rb.random_q(np.random.default_rng(6), 2400), truth, effects=[(gh, theta)], seed=7)
+    model, data = withheld_ur10(2400)
+    rb = model.robot
     cm = identify(model, data.subset(np.arange(400)), discrepancy="on", raise_on_failure=False).calibrated_model()
     out = {}
     with tempfile.TemporaryDirectory() as tmp:
@@ -70,17 +53,17 @@ def main() -> dict:
             check_outputs(outs, ins)
             release_outputs()
 
-        t_load = _median_s(lambda: load_model_file(mf))
-        checks = {"output-path check (3 outputs, 2 inputs)": _median_s(paths),
+        t_load = _median(lambda: load_model_file(mf))
+        checks = {"output-path check (3 outputs, 2 inputs)": _median(paths),
                   f"model-file schema ({mf.stat().st_size / 1e3:.0f} kB, discrepancy block)":
-                      _median_s(lambda: validate_model_dict(doc, str(mf)))}
+                      _median(lambda: validate_model_dict(doc, str(mf)))}
     reg = data.subset(np.arange(400, 460))
     Y = cm.predict(reg.q)
-    checks["registration gate (60 rows)"] = _median_s(
+    checks["registration gate (60 rows)"] = _median(
         lambda: assess_registration("s", Y, reg.position_m, np.linalg.norm(reg.position_m - Y, axis=1),
                                     np.full(3, 1e-5), 9))
     big = data.subset(np.arange(400, 2400))
-    checks["joint limits of 2,000 rows"] = _median_s(lambda: rb.check_q(big.q, "data"))
+    checks["joint limits of 2,000 rows"] = _median(lambda: rb.check_q(big.q, "data"))
     for label, t in checks.items():
         out[label] = t
         figure(label, t * 1e3, 50.0, "ms", t_load * 1e3, "loading the model file")

@@ -72,20 +72,10 @@ def main() -> dict:
 
 def big(n: int = 100_000, n_test: int = 2_000) -> dict:
     """The inducing-point posterior on a simulated ``n``-row file: time, peak memory, held-out honesty."""
-    from pin_kpi_oed import NoiseModel, TrackerModel, load_robot
-    from pin_kpi_oed.effects.library import GearHarmonic
+    from benchmarks.common import withheld_ur10
     from pin_kpi_oed.identification.identify import identify, validate
-    from pin_kpi_oed.identification.simulate import Tolerances, default_tracker_pose, random_truth, simulate
-    from pin_kpi_oed.oed.identifiability import analyse
 
-    rb = load_robot("ur10")
-    model = TrackerModel(rb, tracker_T_base=default_tracker_pose(rb), reflector_m=np.array([0.03, 0.02, 0.08]),
-                         noise=NoiseModel(sigma_xyz_m=(1e-5,) * 3))
-    truth = random_truth(model, Tolerances(5e-4, 1e-3), seed=4, only=[i for i in analyse(model).base if i < 36])
-    gh = GearHarmonic(rb, joints=["shoulder_lift_joint", "elbow_joint"], orders=(2, 3))
-    theta = 3e-4 * np.random.default_rng(5).standard_normal(len(gh.param_names()))
-    Q = rb.random_q(np.random.default_rng(6), n + n_test)
-    data = simulate(model, Q, truth, effects=[(gh, theta)], seed=7)
+    model, data = withheld_ur10(n + n_test)
     train, test = data.subset(np.arange(n)), data.subset(np.arange(n, n + n_test))
     t0, c0 = time.perf_counter(), time.process_time()
     res = identify(model, train, discrepancy="auto", raise_on_failure=False)

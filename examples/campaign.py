@@ -19,7 +19,7 @@ command's number with the discrepancy re-fitted on everything measured), the TRU
 simulation: the calibrated model, discrepancy mean included, against the simulated robot, tracker frame) and the
 held-out standardised RMS (1 = honest σ).
 
-Run:  python examples/campaign.py [--out folder] [--target-sigma 5e-5] [--batch 20]
+Run:  python examples/campaign.py [--out folder] [--target-sigma 3.5e-5] [--batch 20]
 (PIN_KPI_OED_QUICK=1: fewer held-out rows, smaller candidate pools, one IPOPT start, two batches)
 """
 
@@ -101,8 +101,8 @@ def cli(args: list[str], log: Path | None = None, show: tuple[str, ...] = ()) ->
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--out", default=None, help="folder of the campaign's files (default: a temporary folder)")
-    ap.add_argument("--target-sigma", dest="target", type=float, default=5e-5,
-                    help="target TCP sigma at the working configurations (m, default 5e-5)")
+    ap.add_argument("--target-sigma", dest="target", type=float, default=3.5e-5,
+                    help="target TCP sigma at the working configurations (m, default 3.5e-5)")
     ap.add_argument("--first", type=int, default=60, help="poses of batch 1 (>= 60: the Gaussian process needs 60)")
     ap.add_argument("--batch", type=int, default=20, help="poses of each later batch")
     ap.add_argument("--batches", type=int, default=2 if QUICK else 3, help="most batches")

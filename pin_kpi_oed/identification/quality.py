@@ -309,7 +309,6 @@ class RegistrationQuality:
     mirrored_rms_m: float
     verdict: str = "good"
     reasons: list[str] = field(default_factory=list)
-    explained_by_discrepancy: str = ""
 
     @property
     def poor(self) -> bool:
