@@ -211,7 +211,8 @@ def run(args: argparse.Namespace) -> int:
     cell = with_margins(cell, *margins)  # the optimiser's cell; `true_cell` for the reported clearances
     pool_file, given_file, target = _pool_given_target(args)
     problem = _make_problem(args, cell, given_file, collision, quiet, true_cell)
-    disc_on = problem.discrepancy is not None or "kpi_gp" in criteria
+    gp_names = _gp_names(criteria)
+    disc_on = problem.discrepancy is not None or bool(gp_names)
     if target is not None and not disc_on and not given_file:
         raise InputError(f"--target-sigma needs --given or a discrepancy: --model {getattr(args, 'model', None)} "
                          f"holds no discrepancy block (write it with identify --model-out)")
@@ -243,9 +244,7 @@ def run(args: argparse.Namespace) -> int:
     _print_results(results, criteria, cert, m, pool_file, quiet, cell, true_cell, margins, true_checks, given_file,
                    ext_scores)
     gp_scores = None
-    if problem.discrepancy is not None or "kpi_gp" in criteria:  # opt-in: the paper's output is unchanged without
-        from pin_kpi_oed.oed.discrepancy_kpi import NO_CERTIFICATE
-
+    if disc_on:  # opt-in: the paper's output is unchanged without
         gp_scores = discrepancy_scores(problem, results)
         print(problem.discrepancy_prior().describe())
         if given_file:
@@ -253,8 +252,7 @@ def run(args: argparse.Namespace) -> int:
                   f"{_sigma_given(problem) * 1e6:.3f} um; the table adds each design's poses to them")
         print(discrepancy_table([r for r in results if r.criterion in criteria] or results,
                                 [g for r, g in zip(results, gp_scores) if r.criterion in criteria] or gp_scores))
-        if "kpi_gp" in criteria:
-            print(NO_CERTIFICATE)
+        print(*(no_certificate(c) for c in gp_names), sep="\n", end="\n" if gp_names else "")
     curve = None
     if disc_on and (target is not None or getattr(args, "curve", None)):
         curve = _poses_needed(args, problem, cell, target, seed, m, checked, results)
@@ -296,7 +294,7 @@ def _pool_given_target(args: argparse.Namespace) -> tuple[str | None, str | None
     if getattr(args, "given_prior", None) and not given_file:
         raise InputError("--given-prior needs --given (the poses already measured)")
     crits = str(getattr(args, "criteria", "") or "")
-    disc = getattr(args, "model", None) or "kpi_gp" in [c.strip() for c in crits.split(",")]
+    disc = getattr(args, "model", None) or bool(_gp_names([c.strip() for c in crits.split(",")]))
     if target is not None and not given_file and not disc:
         raise InputError("--target-sigma needs --given (the poses already measured) or the discrepancy "
                          "(--criteria with kpi_gp, or --model with a discrepancy)")
@@ -305,6 +303,18 @@ def _pool_given_target(args: argparse.Namespace) -> tuple[str | None, str | None
     if target is not None and not (target > 0):
         raise InputError(f"--target-sigma: must be > 0 m, got {target}")
     return pool_file, given_file, target
+
+
+def no_certificate(name: str) -> str:
+    """The design output's line for the discrepancy-aware criterion ``name``: no certificate exists."""
+    from pin_kpi_oed.oed.discrepancy_criteria import no_certificate as line
+
+    return line(name)
+
+
+def _gp_names(criteria: list[str]) -> list[str]:
+    """The discrepancy-aware criteria (``kpi_gp``, ``D_gp``, …) among registered names (others ignored)."""
+    return [c for c in criteria if c in CRITERIA and getattr(CRITERIA[c], "needs_configurations", False)]
 
 
 def _set_region(args: argparse.Namespace, problem, criteria: list[str], seed: int, true_cell) -> None:
@@ -629,7 +639,7 @@ def _discrepancy_doc(doc: dict, problem, gp_scores: list[dict]) -> None:
                           "white_sigma_m": (d.scale_m * math.sqrt(d.noise)).tolist(),
                           "delta_sigma_m": d.prior_sigma_m().tolist(),
                           "kernel": None if d.kernel is None else d.kernel.to_dict(),
-                          "certificate": "none exists for kpi_gp",
+                          "certificate": "none exists for the discrepancy-aware criteria (kpi_gp, D_gp, ...)",
                           "note": "designs[i].discrepancy: universal-kriging tr(C_s) and TCP sigma at the working "
                                   "configurations, discrepancy included, and its C_s (3t x 3t, m^2) in the tracker "
                                   "frame like designs[i].cov_s_m2 (pin-kpi-oed view draws it); "

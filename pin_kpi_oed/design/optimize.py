@@ -338,12 +338,18 @@ class DesignProblem:
         self.region = working_region(self.cell.q_work, radius_rad, samples, seed, joints=joints, feasible=reachable)
         return self.region
 
-    def gp_criterion(self, region: bool = True) -> Any:
+    def gp_criterion(self, region: bool = True, name: str = "kpi_gp") -> Any:
         """The discrepancy-aware KPI criterion (``kpi_gp``) of this problem's geometry (identifiable geometry +
         set-up, the layout's prior) at the working configurations, and over the :attr:`region` when one is set
-        and ``region``."""
+        and ``region``; another discrepancy-aware ``name`` (``D_gp``, ``param_gp``, …): its
+        :class:`~pin_kpi_oed.oed.discrepancy_criteria.GlsDesignCriterion` (no working configurations)."""
         from pin_kpi_oed.oed.discrepancy_kpi import DiscrepancyDesignCriterion
 
+        if name != "kpi_gp":
+            from pin_kpi_oed.oed.discrepancy_criteria import GlsDesignCriterion
+
+            return GlsDesignCriterion(self.model, self.base, self.discrepancy_prior(), name,
+                                      Q_given=getattr(self, "Q_given", None), p=self.p0)
         Q_work = self.region.configurations() if region and self.region is not None else self.cell.q_work
         return DiscrepancyDesignCriterion(self.model, self.base, self.discrepancy_prior(), Q_work,
                                           Q_given=getattr(self, "Q_given", None), p=self.p0)
@@ -355,7 +361,7 @@ class DesignProblem:
             InputError: unknown name.
         """
         if getattr(get_criterion(name), "needs_configurations", False):
-            return self.gp_criterion()
+            return self.gp_criterion(name=name)
         if self.extended is not None:
             from pin_kpi_oed.oed.extended import ExtendedDesignCriterion
 

@@ -147,7 +147,7 @@ class SequentialProblem(DesignProblem):
         from pin_kpi_oed.oed.criteria import get_criterion
 
         if getattr(get_criterion(name), "needs_configurations", False):
-            return self.gp_criterion()
+            return self.gp_criterion(name=name)
         return GivenDesignCriterion(self.model, self.base, name, self.E, F_given=self.F_given)
 
     def identifies(self) -> bool:

@@ -52,8 +52,8 @@ from pin_kpi_oed.errors import IdentifiabilityError, InputError
 from pin_kpi_oed.model.tracker import TrackerModel
 from pin_kpi_oed.oed.covariance import information, prior_of
 
-__all__ = ["Criterion", "CovarianceCriterion", "SingularValueCriterion", "CRITERIA", "register", "unregister",
-           "get_criterion", "check_names", "DesignCriterion", "evaluate_all"]
+__all__ = ["Criterion", "CovarianceCriterion", "SingularValueCriterion", "DiscrepancyForm", "CRITERIA", "register",
+           "unregister", "get_criterion", "check_names", "DesignCriterion", "evaluate_all"]
 
 
 class Criterion:
@@ -314,6 +314,38 @@ class KpiDiscrepancy(Criterion):
                          "poses): evaluate it through the design problem (DesignProblem.criterion('kpi_gp'))")
 
 
+class DiscrepancyForm(Criterion):
+    """The discrepancy-aware form ``<name>_gp`` of a noise-only criterion of the parameters (D, A, E, the indices).
+
+    The same φ on the GLS information M = Σ_a s_a⁻² J_aᵀ (K_QQ + wI)⁻¹ J_a + Σ₀⁻¹ (the indices: on the whitened
+    Jacobian), a function of the configurations: evaluated through
+    :class:`~pin_kpi_oed.oed.discrepancy_criteria.GlsDesignCriterion` (``DesignProblem.criterion('D_gp')``);
+    :meth:`value_and_grad_F` refuses. Pool selection: its own greedy + exchange (no certificate exists).
+    """
+
+    has_pool_form = False
+    needs_configurations = True
+
+    def __init__(self, base: Criterion) -> None:
+        if not self.applies(base):
+            raise InputError(f"criterion {base.name}: no discrepancy-aware form (not a function of the parameter "
+                             f"information)")
+        self.base = base
+        self.name = f"{base.name}_gp"
+        self.label = f"{base.label}, with the model discrepancy (GLS information)"
+        self.unit, self.is_ratio = base.unit, base.is_ratio
+
+    @staticmethod
+    def applies(crit: Criterion) -> bool:
+        """Whether ``crit`` is a function of the parameter information (has a discrepancy-aware form)."""
+        return isinstance(crit, SingularValueCriterion) or (isinstance(crit, CovarianceCriterion)
+                                                             and not crit.needs_kpi)
+
+    def value_and_grad_F(self, F, E=None, prior_sigma=None):
+        raise InputError(f"the {self.name} criterion needs the configurations (the discrepancy kernel couples the "
+                         f"poses): evaluate it through the design problem (DesignProblem.criterion('{self.name}'))")
+
+
 # ---------------------------------------------------------------------- registry
 #: The registry: criterion name -> instance, in registration order (the order of ``evaluate``'s output).
 CRITERIA: dict[str, Criterion] = {}
@@ -376,6 +408,9 @@ def check_names(names: Iterable[str]) -> list[str]:
 
 for _cls in (KpiTrace, ParamTrace, DOptimality, EOptimality, ConditionNumber, O1, O2, O3, O4, O5, KpiDiscrepancy):
     register(_cls)
+for _c in list(CRITERIA.values()):
+    if DiscrepancyForm.applies(_c):
+        register(DiscrepancyForm(_c))
 
 
 # ---------------------------------------------------------------------- criteria of configurations

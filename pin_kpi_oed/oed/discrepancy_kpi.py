@@ -244,6 +244,13 @@ def _base_frame(model, p, Q, base, with_dq):
     return model.base_jacobian(p, Q, base), None
 
 
+def _chain_q(g: dict, dJ: np.ndarray, disc: "DiscrepancyPrior", Q: np.ndarray, Qa: np.ndarray, k: int) -> np.ndarray:
+    """dφ/dQ of the moving poses Q = Qa[k:] from ∂φ/∂J and ∂φ/∂G (K_QQ through both its arguments), (m, n)."""
+    grad = np.einsum("iac,iack->ik", g["J"][k:], dJ)
+    Gs = g["G"] + g["G"].T
+    return grad + np.einsum("ij,ijk->ik", Gs[k:], disc.grad_x(Q, Qa))
+
+
 @dataclass
 class DiscrepancyDesignCriterion:
     """``kpi_gp`` as a function of the measurement configurations Q (the :class:`DesignCriterion` interface).
@@ -329,9 +336,7 @@ class DiscrepancyDesignCriterion:
         d = self.discrepancy
         val, g = kpi_gp_value_and_grad(Ja, self.E, d.cov(Qa), d.cov(self.Q_work, Qa), self.tr_kww, d.scale_m,
                                        d.noise, self.prior_info)
-        grad = np.einsum("iac,iack->ik", g["J"][k:], dJ)
-        Gs = g["G"] + g["G"].T
-        grad += np.einsum("ij,ijk->ik", Gs[k:], d.grad_x(Q, Qa))
+        grad = _chain_q(g, dJ, d, Q, Qa, k)
         grad += np.einsum("ti,itk->ik", g["Kwq"][:, k:], d.grad_x(Q, self.Q_work))
         return val, grad
 
@@ -396,7 +401,7 @@ class _GreedyState:
 
     def build(self, sel: list[int]) -> "_GreedyState":
         """The state given the set ``sel`` from scratch (one Cholesky factor, a few products)."""
-        st = _GreedyState.__new__(_GreedyState)
+        st = type(self).__new__(type(self))
         st.__dict__.update({k: v for k, v in self.__dict__.items()})
         S = np.asarray(sel, int)
         d = self.disc
@@ -421,7 +426,7 @@ class _GreedyState:
 
     def without(self, i: int) -> "_GreedyState":
         """The state with the chosen candidate ``i`` removed (exact rank-one downdate: a row of sign −1 in ``V``)."""
-        st = _GreedyState.__new__(_GreedyState)
+        st = type(self).__new__(type(self))
         st.__dict__.update(self.__dict__)
         kap = self.kdiag[i]
         w = self.w
@@ -518,6 +523,48 @@ def _exchange(st: _GreedyState, sel: list[int], excl: np.ndarray, k0: int, cur: 
     return sel, cur, swaps
 
 
+def _ridge(J_pool: np.ndarray, discrepancy: DiscrepancyPrior) -> float:
+    """The tiny ridge of the greedy start: 1e-9 of the pool's mean information per parameter."""
+    s2 = discrepancy.scale_m ** 2
+    return 1e-9 * float(np.mean(np.einsum("a,nac,nac->n", 1 / s2, J_pool, J_pool))) / max(J_pool.shape[2], 1) \
+        / max(discrepancy.noise, 1e-12)
+
+
+def _after_given(J_pool: np.ndarray, Q_pool: np.ndarray, m: int, J_given: np.ndarray | None,
+                 Q_given: np.ndarray | None) -> tuple[np.ndarray, np.ndarray, int]:
+    """The candidates after the measured poses: (J, Q, number measured k0).
+
+    Raises:
+        InputError: m outside 1..N.
+    """
+    N = len(Q_pool)
+    if not (1 <= m <= N):
+        raise InputError(f"pool selection: cannot choose {m} of {N} candidates")
+    if Q_given is not None and len(Q_given):
+        return np.concatenate([J_given, J_pool]), np.vstack([Q_given, Q_pool]), len(Q_given)
+    return J_pool, Q_pool, 0
+
+
+def _greedy_exchange(st: _GreedyState, m: int, k0: int, passes: int, t0: float, budget: float | None
+                     ) -> tuple[np.ndarray, list[float], int]:
+    """Greedy additions of m candidates to a state holding k0 measured poses first, then the exchange passes
+    (:func:`_exchange`); the criterion is the state's :meth:`values`. Returns (pool indices, greedy path, swaps)."""
+    for i in range(k0):
+        st.add(i)
+    excl = np.zeros(len(st.Qc), bool)
+    excl[:k0] = True
+    path = []
+    for _ in range(m):
+        phi = st.values(excl)
+        j = int(np.argmin(phi))
+        path.append(float(phi[j]))
+        st.add(j)
+        excl[j] = True
+    sel = [j - k0 for j in st.chosen[k0:]]
+    sel, _, swaps = _exchange(st, sel, excl, k0, path[-1], passes, t0, budget)
+    return np.array(sel, int), path, swaps
+
+
 def select_pool_gp(J_pool: np.ndarray, Q_pool: np.ndarray, E: np.ndarray, Q_work: np.ndarray,
                    discrepancy: DiscrepancyPrior, m: int, prior_info: np.ndarray | None = None,
                    Q_given: np.ndarray | None = None, J_given: np.ndarray | None = None, exchange_passes: int = 1,
@@ -545,35 +592,11 @@ def select_pool_gp(J_pool: np.ndarray, Q_pool: np.ndarray, E: np.ndarray, Q_work
         IdentifiabilityError: the chosen set does not identify the parameters.
     """
     t0 = time.perf_counter()
-    N = len(Q_pool)
-    if not (1 <= m <= N):
-        raise InputError(f"pool selection: cannot choose {m} of {N} candidates")
-    Jall, Qall, k0 = J_pool, Q_pool, 0
-    if Q_given is not None and len(Q_given):
-        k0 = len(Q_given)
-        Jall, Qall = np.concatenate([J_given, J_pool]), np.vstack([Q_given, Q_pool])
-    s2 = discrepancy.scale_m ** 2
-    eps = 1e-9 * float(np.mean(np.einsum("a,nac,nac->n", 1 / s2, J_pool, J_pool))) / max(J_pool.shape[2], 1) \
-        / max(discrepancy.noise, 1e-12)
-
-    st = _GreedyState(Jall, Qall, E, Q_work, discrepancy, prior_info, eps)
-    for i in range(k0):
-        st.add(i)
-    excl = np.zeros(len(Qall), bool)
-    excl[:k0] = True
-    path = []
-    for _ in range(m):
-        phi = st.values(excl)
-        j = int(np.argmin(phi))
-        path.append(float(phi[j]))
-        st.add(j)
-        excl[j] = True
-    sel = [j - k0 for j in st.chosen[k0:]]
-    cur = path[-1]
-    sel, cur, swaps = _exchange(st, sel, excl, k0, cur, exchange_passes, t0, time_budget_s)
-    idx = np.array(sel, int)
-    Jsel = np.concatenate([J_given, J_pool[idx]]) if k0 else J_pool[idx]
-    Qsel = np.vstack([Q_given, Q_pool[idx]]) if k0 else Q_pool[idx]
+    Jall, Qall, k0 = _after_given(J_pool, Q_pool, m, J_given, Q_given)
+    st = _GreedyState(Jall, Qall, E, Q_work, discrepancy, prior_info, _ridge(J_pool, discrepancy))
+    idx, path, swaps = _greedy_exchange(st, m, k0, exchange_passes, t0, time_budget_s)
+    rows = np.concatenate([np.arange(k0), k0 + idx])
+    Jsel, Qsel = Jall[rows], Qall[rows]
     val = kpi_gp_value_and_grad(Jsel, E, discrepancy.cov(Qsel), discrepancy.cov(Q_work, Qsel),
                                 float(np.trace(discrepancy.cov(Q_work))), discrepancy.scale_m, discrepancy.noise,
                                 prior_info, grad=False)[0]
