@@ -297,9 +297,10 @@ def _pool_given_target(args: argparse.Namespace) -> tuple[str | None, str | None
     disc = getattr(args, "model", None) or bool(_gp_names([c.strip() for c in crits.split(",")]))
     if target is not None and not given_file and not disc:
         raise InputError("--target-sigma needs --given (the poses already measured) or the discrepancy "
-                         "(--criteria with kpi_gp, or --model with a discrepancy)")
+                         "(--criteria with a discrepancy-aware criterion such as kpi_gp, or --model with a discrepancy)")
     if getattr(args, "curve", None) and not disc:
-        raise InputError("--curve needs the discrepancy (--criteria with kpi_gp, or --model with a discrepancy)")
+        raise InputError("--curve needs the discrepancy (--criteria with a discrepancy-aware criterion such as kpi_gp, "
+                         "or --model with a discrepancy)")
     if target is not None and not (target > 0):
         raise InputError(f"--target-sigma: must be > 0 m, got {target}")
     return pool_file, given_file, target
