@@ -47,10 +47,11 @@ def validate(result: IdentificationResult | CalibratedModel, data: MeasurementSe
     cm = result if isinstance(result, CalibratedModel) else result.calibrated_model()
     Q = align_data(cm.robot, data)
     want_rot = bool(cm.pose6d and data.rotvec_rad is not None)
-    Y = cm.predict(Q, data, orientation=want_rot)
-    out = error_stats(np.linalg.norm(data.position_m - Y[:, :3], axis=1))
-    out.update(calibration_stats(cm, Q, data))
+    pred = cm.predict_with_sigma(Q, data)
+    out = error_stats(np.linalg.norm(data.position_m - pred[0], axis=1))
+    out.update(calibration_stats(cm, Q, data, prediction=pred))
     if want_rot:
+        Y = cm.predict(Q, data, orientation=True)
         Rp = Rotation.from_rotvec(Y[:, 3:]).as_matrix()
         Rm = Rotation.from_rotvec(data.rotvec_rad).as_matrix()
         a = np.linalg.norm(log3(Rm @ np.swapaxes(Rp, 1, 2)), axis=1)
@@ -59,15 +60,19 @@ def validate(result: IdentificationResult | CalibratedModel, data: MeasurementSe
     return out
 
 
-def calibration_stats(cm: CalibratedModel, Q: np.ndarray, data: MeasurementSet, station: str | None = None) -> dict:
+def calibration_stats(cm: CalibratedModel, Q: np.ndarray, data: MeasurementSet, station: str | None = None,
+                      prediction: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None) -> dict:
     """How honest the model's σ is on measured rows: standardised errors z = (measured − predicted)/σ per axis.
+
+    ``prediction``: the (Y, σ, extrapolation) of :meth:`CalibratedModel.predict_with_sigma` for these rows when
+    the caller has it already (not computed again).
 
     Returns:
         ``z_rms`` (RMS of z over rows and axes; 1 when σ is right), ``inside_95`` (share of rows whose
         Σ z² ≤ χ²₃(0.95) = 7.815: their 95 % ellipsoid holds the measurement), ``sigma_mean_m`` (mean
         predicted 3-D σ = sqrt(Σ σ²), m), ``extrapolation_share`` (rows outside the training coverage).
     """
-    Yp, sig, extra = cm.predict_with_sigma(Q, data, station=station)
+    Yp, sig, extra = prediction if prediction is not None else cm.predict_with_sigma(Q, data, station=station)
     z2 = ((data.position_m - Yp) / sig) ** 2
     return {"z_rms": float(np.sqrt(z2.mean())), "inside_95": float(np.mean(z2.sum(axis=1) <= 7.8147)),
             "sigma_mean_m": float(np.sqrt((sig ** 2).sum(axis=1)).mean()),

@@ -315,6 +315,12 @@ class CalibratedModel:
             InputError: unknown station, wrong shape, joint values outside the limits.
         """
         Q = self.robot.check_q(np.atleast_2d(np.asarray(Q, float)), "predict: Q")
+        delta = self.discrepancy.predict(Q, return_var=False)[0] if self.discrepancy is not None else None
+        return self._predict(Q, aux, station, orientation, delta)
+
+    def _predict(self, Q: np.ndarray, aux: MeasurementSet | None, station: str | None, orientation: bool,
+                 delta: np.ndarray | None) -> np.ndarray:
+        """:meth:`predict` of checked configurations with the discrepancy's mean ``delta`` (base frame, m) given."""
         m = Q.shape[0]
         if aux is not None and len(aux) != m:
             raise InputError(f"predict: {len(aux)} rows of auxiliary data for {m} configurations")
@@ -325,7 +331,6 @@ class CalibratedModel:
             groups = [(self.station(station), np.arange(m))]
         pairs = list(zip(self.effects, self.thetas))
         out = np.full((m, 6 if orientation else 3), np.nan)
-        delta = self.discrepancy.predict(Q, return_var=False)[0] if self.discrepancy is not None else None
         for lab, rows in groups:
             model, p = self.station_model(lab)
             sub = aux if (aux is None or rows.size == m) else aux.subset(rows)
@@ -362,14 +367,15 @@ class CalibratedModel:
             InputError: as :meth:`predict`.
         """
         Q = self.robot.check_q(np.atleast_2d(np.asarray(Q, float)), "predict: Q")
-        Y = self.predict(Q, aux, station)
         m = len(Q)
         labels = self.row_stations(m, aux, station)
         scale = np.array([self.setups[lab].sigma_scale for lab in labels], float)[:, None]
         if self.discrepancy is None:
+            Y = self._predict(Q, aux, station, False, None)
             return Y, scale * np.asarray(self.noise.sigma(Y[:, :3]), float).reshape(m, 3), np.zeros(m, bool)
         d = self.discrepancy
-        _, var = d.predict(Q)
+        delta, var = d.predict(Q)                      # one kernel evaluation for the mean and the variance
+        Y = self._predict(Q, aux, station, False, delta)
         V = var + d.noise_var_m2
         extra = d.extrapolation(Q)
         sig = np.empty((m, 3))

@@ -328,9 +328,9 @@ def validate_transfer(model: CalibratedModel, data: MeasurementSet, *, register_
         reg, held = data.subset(reg_idx), data.subset(held_idx)
     rr = register_setup(model, reg, station=label, hold_reflector=hold_reflector, weights=weights)
     Q = align_data(model.robot, held)
-    Y = rr.model.predict(Q, held, station=label)
-    out = error_stats(np.linalg.norm(held.position_m - Y, axis=1))
-    out.update(calibration_stats(rr.model, Q, held, station=label))
+    pred = rr.model.predict_with_sigma(Q, held, station=label)
+    out = error_stats(np.linalg.norm(held.position_m - pred[0], axis=1))
+    out.update(calibration_stats(rr.model, Q, held, prediction=pred))
     out["sigma_scale"] = rr.setups[label].sigma_scale
     out["registration"] = {"source": reg.source, "rows": (reg_idx + 1).tolist(), "n": int(len(reg)),
                            "rms_m": rr.rms_m, "seed": int(seed) if register_data is None else None,
