@@ -263,6 +263,8 @@ class DiscrepancyDesignCriterion:
         Q_given: poses measured before (k, n) rad (their rows count; only Q moves), or None.
         prior_info: Σ₀⁻¹ (nb, nb) or None (default: the layout's prior, :func:`prior_of`).
         p: linearisation point (raw parameters); default nominal.
+        Q_register: configurations where the set-up will be registered again before the calibration is used (another
+            session), or None (used in the set-up it was measured in); see :meth:`set_registration`.
 
     Raises:
         InputError: a 6-D probe model (the discrepancy covers positions only).
@@ -275,9 +277,12 @@ class DiscrepancyDesignCriterion:
     Q_given: np.ndarray | None = None
     prior_info: np.ndarray | None = None
     p: np.ndarray | None = None
+    Q_register: np.ndarray | None = None
     name: str = "kpi_gp"
     is_ratio: bool = True
     crit: Criterion = field(default=None, repr=False)
+    #: The :class:`~pin_kpi_oed.oed.reregistration.Reregistration` when the set-up is registered again, else None.
+    reg: Any = field(default=None, repr=False)
 
     def __post_init__(self) -> None:
         if getattr(self.model, "nh", 3) != 3:
@@ -302,6 +307,33 @@ class DiscrepancyDesignCriterion:
             self.J_given = _base_frame(self.model, self.p, self.Q_given, self.base, False)[0]
         else:
             self.Q_given, self.J_given = None, None
+        if self.Q_register is not None:
+            self.set_registration(self.Q_register)
+
+    def set_registration(self, Q_register: np.ndarray) -> None:
+        """Score the TCP error after the set-up is registered again on ``Q_register`` (another session): E becomes
+        the re-registered KPI Jacobian Ẽ and the registration's own covariance is added to C_s
+        (:mod:`pin_kpi_oed.oed.reregistration`). Call it after any change of :attr:`E`.
+
+        Raises:
+            InputError: configurations that do not determine the set-up.
+        """
+        from pin_kpi_oed.oed.reregistration import reregistration
+
+        Q_register = np.atleast_2d(np.asarray(Q_register, float))
+        setup = self.model.layout.is_setup()[self.base]
+        E = self.E if self.reg is None else self._E_own
+        self._E_own = E
+        d = self.discrepancy
+        self.reg = reregistration(E, self.pool_jacobians(Q_register), setup, d.scale_m, d.noise, d.cov(Q_register),
+                                  Q_register)
+        self.E = self.reg.E
+        self.Q_register = Q_register
+
+    @property
+    def tr_register(self) -> float:
+        """tr C_reg (m²): the registration's own error at the working configurations (0 without re-registration)."""
+        return 0.0 if self.reg is None else self.reg.trace_m2
 
     def _all(self, Q: np.ndarray, J: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
         if J is None:  # no new poses: the measured ones alone
@@ -314,8 +346,9 @@ class DiscrepancyDesignCriterion:
         """C_s (3t, 3t) m² of the measured poses (``Q_given`` + Q), base frame."""
         Qa, Ja = self._all(np.atleast_2d(Q), _base_frame(self.model, self.p, np.atleast_2d(Q), self.base, False)[0])
         d = self.discrepancy
-        return kpi_gp_covariance(Ja, self.E, d.cov(Qa), d.cov(self.Q_work, Qa), self.Kww, d.scale_m, d.noise,
-                                 self.prior_info)
+        C = kpi_gp_covariance(Ja, self.E, d.cov(Qa), d.cov(self.Q_work, Qa), self.Kww, d.scale_m, d.noise,
+                              self.prior_info)
+        return C if self.reg is None else C + self.reg.cov_m2
 
     def value(self, Q: np.ndarray) -> float:
         """tr C_s (m²)."""
@@ -325,7 +358,7 @@ class DiscrepancyDesignCriterion:
         Qa, Ja = self._all(Q, _base_frame(self.model, self.p, Q, self.base, False)[0] if len(Q) else None)
         d = self.discrepancy
         return kpi_gp_value_and_grad(Ja, self.E, d.cov(Qa), d.cov(self.Q_work, Qa), self.tr_kww, d.scale_m,
-                                     d.noise, self.prior_info, grad=False)[0]
+                                     d.noise, self.prior_info, grad=False)[0] + self.tr_register
 
     def value_and_grad(self, Q: np.ndarray) -> tuple[float, np.ndarray]:
         """tr C_s (m²) and its exact gradient w.r.t. Q (m, n) (m² per rad)."""
@@ -338,7 +371,7 @@ class DiscrepancyDesignCriterion:
                                        d.noise, self.prior_info)
         grad = _chain_q(g, dJ, d, Q, Qa, k)
         grad += np.einsum("ti,itk->ik", g["Kwq"][:, k:], d.grad_x(Q, self.Q_work))
-        return val, grad
+        return val + self.tr_register, grad
 
     def pool_jacobians(self, Q_pool: np.ndarray) -> np.ndarray:
         """Base-frame Jacobians of candidate poses (N, 3, nb)."""
@@ -347,8 +380,12 @@ class DiscrepancyDesignCriterion:
     def select(self, Q_pool: np.ndarray, m: int, J_pool: np.ndarray | None = None, **kw) -> "GpPoolSelection":
         """m of the candidate poses by :func:`select_pool_gp` (on top of ``Q_given``)."""
         J_pool = self.pool_jacobians(Q_pool) if J_pool is None else J_pool
-        return select_pool_gp(J_pool, np.atleast_2d(Q_pool), self.E, self.Q_work, self.discrepancy, m,
-                              self.prior_info, Q_given=self.Q_given, J_given=self.J_given, **kw)
+        sel = select_pool_gp(J_pool, np.atleast_2d(Q_pool), self.E, self.Q_work, self.discrepancy, m,
+                             self.prior_info, Q_given=self.Q_given, J_given=self.J_given, **kw)
+        if self.reg is not None:
+            sel.value += self.tr_register
+            sel.path = sel.path + self.tr_register
+        return sel
 
 
 # --------------------------------------------------------------------------- pool selection

@@ -23,7 +23,10 @@ on other data (:class:`~pin_kpi_oed.oed.discrepancy_kpi.DiscrepancyPrior`, the s
 uses). The full pool is calibrated the same way (the reference accuracy). Per chosen set the result holds the
 mean and RMS 3-D error of the scored rows (with and without the discrepancy's mean) and the predicted σ:
 sqrt(tr C_s / t) at W (the design's own number, the poses-needed curve) and the predicted RMS 3-D error at the
-scored rows, sqrt(tr C_s(scored) / n + Σ_a w s_a²) (universal kriging plus the white level).
+scored rows, sqrt(tr C_s(scored) / n + Σ_a w s_a²) (universal kriging plus the white level). Across sessions the
+criteria and the predictions are those after T's set-up is registered on its registration rows
+(:mod:`pin_kpi_oed.oed.reregistration`: the registration configurations are known when the poses are chosen; their
+measurements are not used), which is how the calibration is scored.
 """
 
 from __future__ import annotations
@@ -141,6 +144,9 @@ class _Designs:
         region = working_region(sp.work, radius_rad, region_rows, seed, pool=self.Q, joints=joints)
         self.crit_r = DiscrepancyDesignCriterion(dm, b, prior, region.configurations())
         self.crit_r.E = self.crit_r.pool_jacobians(self.crit_r.Q_work)
+        if sp.reg is not None:  # another session: scored after T's set-up is registered on its rows
+            for crit in (self.crit_w, self.crit_s, self.crit_r):
+                crit.set_registration(sp.reg.q)
         self.Jp = self.crit_w.pool_jacobians(self.Q)
         self.Fp = dm.weighted_jacobian(p0, self.Q)[:, :, b]
         E = dm.jacobian(p0, sp.work)[:, :3, :][:, :, b].reshape(-1, b.size)

@@ -1,0 +1,114 @@
+"""The KPI after re-registration (:mod:`pin_kpi_oed.oed.reregistration`): the covariance of the re-registered TCP
+error against Monte-Carlo of the whole chain (calibration with the discrepancy, a new set-up registered on other
+rows), the set-up's own error removed, and the criterion's gradient unchanged in form (finite differences)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from pin_kpi_oed.cell.cell import load_cell
+from pin_kpi_oed.design.optimize import DesignProblem
+from pin_kpi_oed.errors import InputError
+from pin_kpi_oed.oed.discrepancy_kpi import (DiscrepancyDesignCriterion, DiscrepancyPrior, default_discrepancy,
+                                             kpi_gp_covariance)
+from pin_kpi_oed.oed.reregistration import reregistration
+
+
+@pytest.fixture(scope="module")
+def problem():
+    return DesignProblem(load_cell("kr15"))
+
+
+@pytest.mark.parametrize("white", [True, False])
+def test_reregistered_covariance_matches_monte_carlo(white):
+    """GLS calibration + kriging on Q in one set-up; a new set-up s_T registered by least squares on R; the error of
+    the TCP prediction at W in the new set-up has covariance C_s(Ẽ) + C_reg."""
+    rng = np.random.default_rng(5)
+    m, t, r, nb, d = 16, 3, 6, 7, 2
+    setup = np.zeros(nb, bool)
+    setup[-3:] = True                                        # the last three parameters: the set-up
+    Q, W, R = (rng.uniform(-np.pi, np.pi, (k, d)) for k in (m, t, r))
+    J, E, JR = (rng.normal(size=(k, 3, nb)) * 1e-3 for k in (m, t, r))
+    d0 = default_discrepancy(d)
+    disc = DiscrepancyPrior(None if white else d0.kernel, np.array([1e-4, 2e-4, 0.5e-4]), 0.05)
+    Kall = disc.cov(np.vstack([Q, W]))
+    KR = disc.cov(R)
+    rr = reregistration(E, JR, setup, disc.scale_m, disc.noise, KR, R)
+    assert np.all(rr.E[:, :, setup] == 0)
+    Cs = kpi_gp_covariance(J, rr.E, Kall[:m, :m], Kall[m:, :m], Kall[m:, m:], disc.scale_m, disc.noise) + rr.cov_m2
+    n = 40000
+    s2 = disc.scale_m ** 2
+    Lk = np.linalg.cholesky(Kall + 1e-12 * np.eye(m + t))
+    LR = np.linalg.cholesky(KR + disc.noise * np.eye(r))
+    delta = np.einsum("ij,njb->nib", Lk, rng.normal(size=(n, m + t, 3))) * disc.scale_m
+    eps = rng.normal(size=(n, m, 3)) * disc.scale_m * np.sqrt(disc.noise)
+    theta = np.tile(rng.normal(size=nb), (n, 1))
+    y = np.einsum("iac,nc->nia", J, theta) + delta[:, :m] + eps
+    A = np.linalg.inv(Kall[:m, :m] + disc.noise * np.eye(m))
+    M = np.einsum("a,iac,ij,jad->cd", 1 / s2, J, A, J)
+    th = np.linalg.solve(M, np.einsum("a,iac,ij,nja->nc", 1 / s2, J, A, y).T).T
+    res = y - np.einsum("iac,nc->nia", J, th)
+    dW = np.einsum("ti,ij,nja->nta", Kall[m:, :m], A, res)  # the kriged discrepancy at W
+    # the new session: another set-up, registration rows with their own discrepancy and noise
+    theta_T = theta.copy()
+    theta_T[:, setup] = rng.normal(size=3)
+    yR = np.einsum("iac,nc->nia", JR, theta_T) + np.einsum("ij,njb->nib", LR, rng.normal(size=(n, r, 3))) \
+        * disc.scale_m
+    G = JR[:, :, setup].reshape(3 * r, -1)
+    om = np.tile(1 / s2, r)
+    th_reg = th.copy()
+    rhs = (yR - np.einsum("iac,nc->nia", JR[:, :, ~setup], th[:, ~setup])).reshape(n, 3 * r)
+    th_reg[:, setup] = np.linalg.solve(G.T @ (om[:, None] * G), ((rhs * om) @ G).T).T
+    pred = np.einsum("tac,nc->nta", E, th_reg) + dW
+    true = np.einsum("tac,nc->nta", E, theta_T) + delta[:, m:]
+    err = (pred - true).reshape(n, 3 * t)
+    emp = err.T @ err / n
+    assert np.trace(emp) == pytest.approx(np.trace(Cs), rel=0.03)
+    sd = np.sqrt(np.outer(np.diag(Cs), np.diag(Cs)))
+    assert np.abs(emp - Cs).max() <= 0.05 * sd.max()
+
+
+def test_a_pure_setup_error_is_removed_by_registering_at_the_work(problem):
+    """Registering at the working configurations themselves: an error of the set-up parameters alone leaves no
+    TCP error there (Ẽ's set-up columns are zero and its robot columns see no set-up direction)."""
+    crit = DiscrepancyDesignCriterion(problem.model, problem.base, default_discrepancy(6), problem.cell.q_work,
+                                      p=problem.p0)
+    setup = problem.model.layout.is_setup()[problem.base]
+    E0 = crit.E.copy()
+    assert np.abs(E0[:, :, setup]).max() > 0
+    crit.set_registration(problem.random_design(12, 4)[0])
+    assert np.all(crit.E[:, :, setup] == 0)
+    assert crit.tr_register > 0
+    assert not np.allclose(crit.E[:, :, ~setup], E0[:, :, ~setup])
+    # set again: computed from the un-registered E, not from Ẽ
+    E1 = crit.E.copy()
+    crit.set_registration(crit.Q_register)
+    assert np.allclose(crit.E, E1)
+
+
+def test_gradient_with_reregistration_matches_finite_differences(problem):
+    Q = problem.random_design(16, 5)[0]
+    crit = DiscrepancyDesignCriterion(problem.model, problem.base, default_discrepancy(6), problem.cell.q_work,
+                                      p=problem.p0, Q_register=problem.random_design(8, 9)[0])
+    v, g = crit.value_and_grad(Q)
+    assert v == pytest.approx(crit.value(Q), rel=1e-12)
+    assert v == pytest.approx(np.trace(crit.covariance(Q)), rel=1e-9)
+    h = 1e-6
+    num = np.zeros((3, Q.shape[1]))
+    for i in range(3):
+        for k in range(Q.shape[1]):
+            Qp, Qm = Q.copy(), Q.copy()
+            Qp[i, k] += h
+            Qm[i, k] -= h
+            num[i, k] = (crit.value(Qp) - crit.value(Qm)) / (2 * h)
+    assert np.abs(num - g[:3]).max() <= 1e-5 * np.abs(g[:3]).max()
+    sel = crit.select(problem.random_design(80, 2)[0], 12)
+    assert sel.value == pytest.approx(crit.value(problem.random_design(80, 2)[0][sel.indices]), rel=1e-9)
+
+
+def test_too_few_registration_configurations_are_refused(problem):
+    crit = DiscrepancyDesignCriterion(problem.model, problem.base, default_discrepancy(6), problem.cell.q_work,
+                                      p=problem.p0)
+    with pytest.raises(InputError, match="do not determine the set-up"):
+        crit.set_registration(problem.random_design(1, 4)[0])
