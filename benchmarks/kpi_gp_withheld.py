@@ -43,6 +43,9 @@ def main(argv: list[str] | None = None) -> dict:
     ap.add_argument("--amplitudes", default=",".join(f"{a:g}" for a in AMPLITUDES_MRAD), help="mrad, comma-separated")
     ap.add_argument("--per-point", dest="per_point", type=int, default=3,
                     help="perturbed working configurations per cell working configuration")
+    ap.add_argument("--pilot-discrepancy", dest="pilot_discrepancy", choices=["auto", "on"], default="auto",
+                    help="the pilot's identify --discrepancy: auto (a user's default: white when the process does not "
+                         "pay on the pilot) or on (always fitted)")
     ap.add_argument("--json", default=None)
     a = ap.parse_args(argv)
     amps = [float(x) for x in a.amplitudes.split(",")]
@@ -58,16 +61,18 @@ def main(argv: list[str] | None = None) -> dict:
     runs = []
     for rep in range(a.reps):
         for amp in amps:
-            r = withheld_case(problem.model, Q_pool, Q_pilot, W, amp * 1e-3, seed=rep, sizes=SIZES, fixed=fixed)
+            r = withheld_case(problem.model, Q_pool, Q_pilot, W, amp * 1e-3, seed=rep, sizes=SIZES, fixed=fixed,
+                              pilot_discrepancy=a.pilot_discrepancy)
             runs.append(r)
             e = r["error_m"]
             print(f"rep {rep} a {amp:g} mrad ({r['time_s']:.1f} s): " + "; ".join(
                 f"m={m}: " + " ".join(f"{d} {e[d][i] * 1e3:.3f}" for d in DESIGNS) for i, m in enumerate(SIZES))
                 + " mm", file=sys.stderr, flush=True)
-    out = {"reps": a.reps, "pool": len(Q_pool), "pilot": len(Q_pilot), "t_work": len(W), "sizes": list(SIZES),
+    out = {"reps": a.reps, "pool": len(Q_pool), "pilot": len(Q_pilot), "pilot_discrepancy": a.pilot_discrepancy,
+           "t_work": len(W), "sizes": list(SIZES),
            "amplitudes_mrad": amps, "runs": runs, "summary": []}
     head = (f"{'a mrad':>7}{'m':>4}{'kpi_gp mm':>11}{'kpi mm':>9}{'change':>8}{'wins':>7}{'p':>9}"
-            f"{'gp(default) mm':>16}{'random mm':>11}{'kpi_gp pred. sigma mm':>23}")
+            f"{'gp(default) mm':>16}{'random mm':>11}{'kpi_gp pred. sigma mm':>23}{'GP pilots':>11}")
     print(f"true TCP error at {len(W)} working configurations (RMS 3-D, mean over {a.reps} robots); kpi_gp (pilot "
           f"prior) vs plain kpi, paired Wilcoxon")
     print(head)
@@ -80,11 +85,13 @@ def main(argv: list[str] | None = None) -> dict:
             s.update({"amplitude_mrad": amp, "m": m, "mean_kpi_gp_default_m": float(np.mean(col["kpi_gp_default"])),
                       "mean_random_m": float(np.mean(col["random"])),
                       "default_vs_kpi": paired_summary(col["kpi_gp_default"], col["kpi"]),
-                      "mean_pred_sigma_kpi_gp_m": float(np.nanmean([r["predicted_sigma_m"]["kpi_gp"][i] for r in rs]))})
+                      "mean_pred_sigma_kpi_gp_m": float(np.nanmean([r["predicted_sigma_m"]["kpi_gp"][i] for r in rs])),
+                      "gp_pilots": int(sum(r["pilot"]["kind"] != "white" for r in rs))})
             out["summary"].append(s)
             print(f"{amp:>7g}{m:>4}{s['mean_a_m'] * 1e3:>11.4f}{s['mean_b_m'] * 1e3:>9.4f}{100 * s['change_mean']:>+7.1f}%"
                   f"{s['wins_a']:>4}/{s['n']:<2}{s['p']:>9.2g}{s['mean_kpi_gp_default_m'] * 1e3:>16.4f}"
-                  f"{s['mean_random_m'] * 1e3:>11.4f}{s['mean_pred_sigma_kpi_gp_m'] * 1e3:>23.4f}")
+                  f"{s['mean_random_m'] * 1e3:>11.4f}{s['mean_pred_sigma_kpi_gp_m'] * 1e3:>23.4f}"
+                  f"{s['gp_pilots']:>8}/{len(rs)}")
     out["time_s"] = time.perf_counter() - t0
     print(f"{len(runs)} cases in {out['time_s']:.0f} s")
     if a.json:

@@ -15,6 +15,7 @@ from pin_kpi_oed.oed.discrepancy_kpi import (DiscrepancyDesignCriterion, Discrep
 from pin_kpi_oed.oed.reregistration import reregistration
 
 
+
 @pytest.fixture(scope="module")
 def problem():
     return DesignProblem(load_cell("kr15"))
@@ -22,8 +23,10 @@ def problem():
 
 @pytest.mark.parametrize("white", [True, False])
 def test_reregistered_covariance_matches_monte_carlo(white):
-    """GLS calibration + kriging on Q in one set-up; a new set-up s_T registered by least squares on R; the error of
-    the TCP prediction at W in the new set-up has covariance C_s(Ẽ) + C_reg."""
+    """GLS calibration + kriging on Q in one set-up; a new set-up s_T registered by least squares on R against the
+    calibrated prediction there (geometry + the kriged discrepancy, carried over); the error of the TCP prediction
+    at W in the new set-up has covariance C_s(Ẽ) + C_reg: exactly with a white discrepancy, and within a few per cent
+    with a correlated one (whose kriging error at R the formula leaves out)."""
     rng = np.random.default_rng(5)
     m, t, r, nb, d = 16, 3, 6, 7, 2
     setup = np.zeros(nb, bool)
@@ -32,41 +35,39 @@ def test_reregistered_covariance_matches_monte_carlo(white):
     J, E, JR = (rng.normal(size=(k, 3, nb)) * 1e-3 for k in (m, t, r))
     d0 = default_discrepancy(d)
     disc = DiscrepancyPrior(None if white else d0.kernel, np.array([1e-4, 2e-4, 0.5e-4]), 0.05)
-    Kall = disc.cov(np.vstack([Q, W]))
-    KR = disc.cov(R)
-    rr = reregistration(E, JR, setup, disc.scale_m, disc.noise, KR, R)
+    Kall = disc.cov(np.vstack([Q, W, R]))
+    rr = reregistration(E, JR, setup, disc.scale_m, disc.noise, R)
     assert np.all(rr.E[:, :, setup] == 0)
-    Cs = kpi_gp_covariance(J, rr.E, Kall[:m, :m], Kall[m:, :m], Kall[m:, m:], disc.scale_m, disc.noise) + rr.cov_m2
+    Cs = kpi_gp_covariance(J, rr.E, Kall[:m, :m], Kall[m:m + t, :m], Kall[m:m + t, m:m + t], disc.scale_m,
+                           disc.noise) + rr.cov_m2
     n = 40000
     s2 = disc.scale_m ** 2
-    Lk = np.linalg.cholesky(Kall + 1e-12 * np.eye(m + t))
-    LR = np.linalg.cholesky(KR + disc.noise * np.eye(r))
-    delta = np.einsum("ij,njb->nib", Lk, rng.normal(size=(n, m + t, 3))) * disc.scale_m
-    eps = rng.normal(size=(n, m, 3)) * disc.scale_m * np.sqrt(disc.noise)
+    Lk = np.linalg.cholesky(Kall + 1e-12 * np.eye(m + t + r))
+    delta = np.einsum("ij,njb->nib", Lk, rng.normal(size=(n, m + t + r, 3))) * disc.scale_m
+    eps = rng.normal(size=(n, m + r, 3)) * disc.scale_m * np.sqrt(disc.noise)
     theta = np.tile(rng.normal(size=nb), (n, 1))
-    y = np.einsum("iac,nc->nia", J, theta) + delta[:, :m] + eps
+    y = np.einsum("iac,nc->nia", J, theta) + delta[:, :m] + eps[:, :m]
     A = np.linalg.inv(Kall[:m, :m] + disc.noise * np.eye(m))
     M = np.einsum("a,iac,ij,jad->cd", 1 / s2, J, A, J)
     th = np.linalg.solve(M, np.einsum("a,iac,ij,nja->nc", 1 / s2, J, A, y).T).T
     res = y - np.einsum("iac,nc->nia", J, th)
-    dW = np.einsum("ti,ij,nja->nta", Kall[m:, :m], A, res)  # the kriged discrepancy at W
-    # the new session: another set-up, registration rows with their own discrepancy and noise
+    krig = np.einsum("ti,ij,nja->nta", Kall[m:, :m], A, res)    # the kriged discrepancy at W and R
+    # the new session: another set-up; its registration rows measured, the calibrated prediction subtracted
     theta_T = theta.copy()
     theta_T[:, setup] = rng.normal(size=3)
-    yR = np.einsum("iac,nc->nia", JR, theta_T) + np.einsum("ij,njb->nib", LR, rng.normal(size=(n, r, 3))) \
-        * disc.scale_m
+    yR = np.einsum("iac,nc->nia", JR, theta_T) + delta[:, m + t:] + eps[:, m:]
     G = JR[:, :, setup].reshape(3 * r, -1)
     om = np.tile(1 / s2, r)
     th_reg = th.copy()
-    rhs = (yR - np.einsum("iac,nc->nia", JR[:, :, ~setup], th[:, ~setup])).reshape(n, 3 * r)
+    rhs = (yR - np.einsum("iac,nc->nia", JR[:, :, ~setup], th[:, ~setup]) - krig[:, t:]).reshape(n, 3 * r)
     th_reg[:, setup] = np.linalg.solve(G.T @ (om[:, None] * G), ((rhs * om) @ G).T).T
-    pred = np.einsum("tac,nc->nta", E, th_reg) + dW
-    true = np.einsum("tac,nc->nta", E, theta_T) + delta[:, m:]
+    pred = np.einsum("tac,nc->nta", E, th_reg) + krig[:, :t]
+    true = np.einsum("tac,nc->nta", E, theta_T) + delta[:, m:m + t]
     err = (pred - true).reshape(n, 3 * t)
     emp = err.T @ err / n
-    assert np.trace(emp) == pytest.approx(np.trace(Cs), rel=0.03)
+    assert np.trace(emp) == pytest.approx(np.trace(Cs), rel=0.03 if white else 0.1)
     sd = np.sqrt(np.outer(np.diag(Cs), np.diag(Cs)))
-    assert np.abs(emp - Cs).max() <= 0.05 * sd.max()
+    assert np.abs(emp - Cs).max() <= (0.05 if white else 0.15) * sd.max()
 
 
 def test_a_pure_setup_error_is_removed_by_registering_at_the_work(problem):
@@ -112,3 +113,33 @@ def test_too_few_registration_configurations_are_refused(problem):
                                       p=problem.p0)
     with pytest.raises(InputError, match="do not determine the set-up"):
         crit.set_registration(problem.random_design(1, 4)[0])
+
+
+def test_cli_design_for_another_session(tmp_path, capsys):
+    """design --reregister work: said in one line; the honest σ is the re-registered one (the old set-up's error
+    no longer counts, so it is below the same design's σ in the set-up it is measured in); refused without the
+    discrepancy, with too few configurations, with one clear line."""
+    import json
+
+    from pin_kpi_oed.cli.app import main
+
+    base = ["design", "--cell", "kr15", "--criteria", "random,kpi_gp", "--measurements", "20", "--starts", "1",
+            "--max-iter", "10", "--work-samples", "30", "--quiet"]
+    assert main(base + ["--json", str(tmp_path / "a.json")]) == 0
+    capsys.readouterr()
+    assert main(base + ["--reregister", "work", "--json", str(tmp_path / "b.json")]) == 0
+    assert "registered again on" in capsys.readouterr().out
+    a, b = (json.loads((tmp_path / f).read_text()) for f in ("a.json", "b.json"))
+    ra = {d["criterion"]: d["discrepancy"]["tcp_sigma_m"] for d in a["designs"]}
+    rb = {d["criterion"]: d["discrepancy"]["tcp_sigma_m"] for d in b["designs"]}
+    assert rb["random"] != pytest.approx(ra["random"], rel=1e-3)
+    one = tmp_path / "one.csv"
+    one.write_text("joint_a1,joint_a2,joint_a3,joint_a4,joint_a5,joint_a6\n0,-1.5,1.5,0,0.5,0\n")
+    assert main(base + ["--reregister", str(one)]) == 2
+    err = capsys.readouterr().err
+    assert "do not determine the set-up" in err and len(err.strip().splitlines()) == 1
+    assert main(base + ["--work-radius", "0", "--reregister", "work"]) == 2   # one working configuration
+    err = capsys.readouterr().err
+    assert "--reregister" in err and len(err.strip().splitlines()) == 1
+    assert main(["design", "--cell", "kr15", "--criteria", "random,kpi", "--reregister", "work"]) == 2
+    assert "--reregister needs the discrepancy" in capsys.readouterr().err

@@ -87,6 +87,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         "0 = the working configurations alone")
     p.add_argument("--work-samples", dest="work_samples", type=int, default=None,
                    help="configurations drawn for the working region (default 100; the infeasible ones are dropped)")
+    p.add_argument("--reregister", default=None, metavar="work|FILE",
+                   help="with the discrepancy: the calibration will be used in another session, after the tracker "
+                        "(set-up) is registered again on these configurations (CSV, joint columns in rad; 'work': the "
+                        "working configurations and the working region's); kpi_gp and the honest sigma then score the TCP error after that "
+                        "registration instead of the parameter uncertainty carried in the old set-up")
     p.set_defaults(func=run)
 
 
@@ -221,6 +226,7 @@ def run(args: argparse.Namespace) -> int:
     if not quiet:
         _print_header(cell, problem, m, seed, collision, starts)
     _set_region(args, problem, criteria, seed, true_cell)
+    _set_reregister(args, problem, disc_on)
     opts = DesignOptions(collision=collision, n_starts=starts, ipopt=ipopt_options(max_iter=max_iter),
                          start=getattr(args, "start", "pool") or "pool")
     cert, checked = None, None
@@ -341,6 +347,35 @@ def _set_region(args: argparse.Namespace, problem, criteria: list[str], seed: in
         return
     problem.set_region(radius, samples, seed, cell=true_cell)
     print(problem.region.describe())
+
+
+def _set_reregister(args: argparse.Namespace, problem, disc_on: bool) -> None:
+    """``--reregister work|FILE``: score kpi_gp and the honest σ after the set-up is registered again on these
+    configurations (:attr:`DesignProblem.Q_register`); prints one line.
+
+    Raises:
+        InputError: without a discrepancy, an unreadable file, or configurations that do not determine the set-up.
+    """
+    where = getattr(args, "reregister", None)
+    if where is None:
+        return
+    if not disc_on:
+        raise InputError("--reregister needs the discrepancy: a discrepancy-aware criterion such as kpi_gp, or --model "
+                         "with a discrepancy")
+    if where == "work":
+        region = getattr(problem, "region", None)
+        Q = region.configurations() if region is not None else problem.cell.q_work
+    else:
+        from pin_kpi_oed.design.user_pool import read_poses
+
+        Q = read_poses(where, problem.cell.robot, "--reregister")
+    problem.Q_register = np.atleast_2d(Q)
+    try:
+        problem.gp_criterion(region=False)                 # checks that they determine the set-up
+    except InputError as err:
+        raise InputError(f"--reregister {where}: {err}") from None
+    print(f"used in another session: kpi_gp and the honest sigma score the TCP error after the tracker is registered "
+          f"again on {len(problem.Q_register)} configuration(s) ({where})")
 
 
 def _print_header(cell, problem, m: int, seed: int, collision: bool, starts: int) -> None:

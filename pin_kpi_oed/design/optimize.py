@@ -316,6 +316,11 @@ class DesignProblem:
             self.discrepancy = default_discrepancy(self.n)
         return self.discrepancy
 
+    #: Optional configurations (r, n) rad where the set-up is registered again before the calibration is used (another
+    #: session): ``kpi_gp`` and the honest σ score the TCP error after that registration
+    #: (:mod:`pin_kpi_oed.oed.reregistration`); None: used in the set-up it is measured in.
+    Q_register: Any = None
+
     #: Optional :class:`~pin_kpi_oed.design.region.WorkingRegion`: ``kpi_gp`` takes its KPI over W and the region's
     #: configurations (None: W alone; :meth:`set_region`).
     region: Any = None
@@ -352,7 +357,8 @@ class DesignProblem:
                                       Q_given=getattr(self, "Q_given", None), p=self.p0)
         Q_work = self.region.configurations() if region and self.region is not None else self.cell.q_work
         return DiscrepancyDesignCriterion(self.model, self.base, self.discrepancy_prior(), Q_work,
-                                          Q_given=getattr(self, "Q_given", None), p=self.p0)
+                                          Q_given=getattr(self, "Q_given", None), p=self.p0,
+                                          Q_register=self.Q_register)
 
     def criterion(self, name: str) -> DesignCriterion:
         """The registered design criterion ``name`` on this problem (on :attr:`extended` when set).

@@ -325,8 +325,7 @@ class DiscrepancyDesignCriterion:
         E = self.E if self.reg is None else self._E_own
         self._E_own = E
         d = self.discrepancy
-        self.reg = reregistration(E, self.pool_jacobians(Q_register), setup, d.scale_m, d.noise, d.cov(Q_register),
-                                  Q_register)
+        self.reg = reregistration(E, self.pool_jacobians(Q_register), setup, d.scale_m, d.noise, Q_register)
         self.E = self.reg.E
         self.Q_register = Q_register
 

@@ -13,13 +13,16 @@ configurations W (set-up columns E_s),
            \tilde E = E - E_s\,(G_R^T \Omega G_R)^{-1} G_R^T \Omega\, J_R,
 
 with Ω = diag(1/s_a²) the per-axis weights. Ẽ replaces E in the discrepancy-aware KPI (its set-up columns are
-zero: the old set-up does not matter any more). The registration's own error adds a constant, design-independent
-term: the registration rows' noise (white level) and the new session's discrepancy at R (its prior covariance,
-counted as independent of the discrepancy the calibration learnt: exact when the discrepancy does not carry over
-between sessions, as on the real UR10 where carrying its mean to another session made the error 1–6 % worse),
+zero: the old set-up does not matter any more). The registration's own noise adds a constant, design-independent
+term (white level w per axis at the r registration rows),
 
 .. math::  C_{\mathrm{reg}} = E_s P\,N_R\,P^T E_s^T,\qquad P = (G_R^T \Omega G_R)^{-1} G_R^T \Omega,\qquad
-           N_R = \operatorname{blkdiag}_a\, s_a^2 (K_{RR} + w I).
+           N_R = \operatorname{blkdiag}_a\, s_a^2 w I_r.
+
+The discrepancy is taken as carried to the new session with the model (what the calibrated model assumes: its
+posterior mean is predicted there, and its kriging error at W is counted as before). A discrepancy that belongs to
+the session is not in this prediction: ``register`` measures it on the registration rows and scales the station's
+σ by their standardised errors, before any other row is measured.
 
 Without it a design for another session scores the parameter uncertainty extrapolated to W in the old set-up:
 on the real UR10 (Series D → C) that number is 40–500 mm for every set while the re-registered error is
@@ -60,7 +63,7 @@ class Reregistration:
 
 
 def reregistration(E: np.ndarray, J_register: np.ndarray, setup: np.ndarray, scale_m: np.ndarray, noise: float,
-                   K_register: np.ndarray, Q_register: np.ndarray) -> Reregistration:
+                   Q_register: np.ndarray) -> Reregistration:
     """Ẽ and C_reg of the module formulas.
 
     Args:
@@ -68,7 +71,6 @@ def reregistration(E: np.ndarray, J_register: np.ndarray, setup: np.ndarray, sca
         J_register: the measured point's Jacobian at the registration configurations, base frame (r, 3, nb).
         setup: boolean mask (nb,) of the set-up parameters (what the registration re-fits).
         scale_m: the discrepancy's per-axis scale S (3,) m; noise: its white level w (normalised).
-        K_register: the discrepancy's normalised kernel at R (r, r) (zeros for a white discrepancy).
         Q_register: R (r, n) rad (kept in the result).
 
     Raises:
@@ -92,6 +94,6 @@ def reregistration(E: np.ndarray, J_register: np.ndarray, setup: np.ndarray, sca
     Es = E[:, :, setup]                                         # (t, 3, k)
     Et = E - np.einsum("tak,kp->tap", Es, P @ Jr)
     Et[:, :, setup] = 0.0                                       # exactly: the old set-up does not matter
-    N = np.kron(np.asarray(K_register, float) + noise * np.eye(r), np.diag(s2))   # rows (configuration, axis)
+    N = np.kron(noise * np.eye(r), np.diag(s2))                 # rows (configuration, axis)
     B = Es.reshape(-1, Es.shape[2]) @ P                         # (3t, 3r)
     return Reregistration(Et, B @ N @ B.T, np.atleast_2d(np.asarray(Q_register, float)), setup)

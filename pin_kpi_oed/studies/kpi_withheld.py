@@ -8,7 +8,8 @@ data are rows of the same noisy measurements: the comparison is paired). Per num
 
 * ``kpi_gp``: the discrepancy-aware KPI (:func:`~pin_kpi_oed.oed.discrepancy_kpi.select_pool_gp`, greedy + one
   exchange pass) with the discrepancy's hyper-parameters fitted on a separate *pilot* set of the same robot
-  (``identify(..., discrepancy="on")`` on random feasible poses that are not in the pool);
+  (``identify(..., discrepancy="auto")``, a user's default, on random feasible poses that are not in the pool: a
+  white discrepancy when the process does not pay on the pilot, and the criterion is then the noise-only KPI);
 * ``kpi_gp_default``: the same criterion with the documented default discrepancy (nothing measured before);
 * ``kpi``: the paper's KPI (noise only), pool selection (:func:`~pin_kpi_oed.oed.pool.select`);
 * ``random``: the first m of a seeded permutation of the pool.
@@ -98,7 +99,7 @@ def predicted_tcp(cm: Any, Q: np.ndarray, tcp_m: np.ndarray | None = None, stati
 
 def withheld_case(model: Any, Q_pool: np.ndarray, Q_pilot: np.ndarray, W: np.ndarray, amplitude_rad: float,
                   seed: int, sizes: Sequence[int] = (20, 60), noise_m: float = 1e-5,
-                  fixed: dict | None = None) -> dict:
+                  fixed: dict | None = None, pilot_discrepancy: str = "auto") -> dict:
     """One simulated robot and amplitude: every design of :data:`DESIGNS` and size, calibrated the same way, scored
     by the true TCP error at ``W`` (see the module docstring).
 
@@ -112,6 +113,9 @@ def withheld_case(model: Any, Q_pool: np.ndarray, Q_pilot: np.ndarray, W: np.nda
         sizes: numbers of poses.
         fixed: selections that do not depend on the robot, ``{(design, m): pool indices}``, reused when given
             (``kpi_gp_default``, ``kpi``); computed and stored into it otherwise.
+        pilot_discrepancy: ``discrepancy=`` of the pilot's identification: ``auto`` (what ``identify`` and
+            ``diagnose --model-out`` do for a user: a white discrepancy when the Gaussian process does not lower the
+            pilot's K-fold error, and ``kpi_gp`` is then the noise-only KPI) or ``on`` (always fitted).
 
     Returns:
         ``{"seed", "amplitude_rad", "pilot": {...}, "error_m": {design: [per size]}, "error_geo_m": ...,
@@ -134,7 +138,7 @@ def withheld_case(model: Any, Q_pool: np.ndarray, Q_pilot: np.ndarray, W: np.nda
     p_true, effects = withheld_truth(model, amplitude_rad, seed)
     data = simulate(model, Q_pool, p_true, effects=effects, seed=seed + 1)
     pilot = simulate(model, Q_pilot, p_true, effects=effects, seed=seed + 2)
-    pfit = identify(model, pilot, discrepancy="on", seed=seed, raise_on_failure=False)
+    pfit = identify(model, pilot, discrepancy=pilot_discrepancy, seed=seed, raise_on_failure=False)
     prior = DiscrepancyPrior.from_discrepancy(pfit.discrepancy, f"pilot: {len(Q_pilot)} random poses of this robot")
     base = analyse(model).base
     p0 = np.zeros(model.n_params)
