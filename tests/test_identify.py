@@ -530,3 +530,22 @@ def test_fit_quality_names_extrapolation_when_validation_lies_outside_training(k
     assert "wrong robot" not in q_out.line()
     q_in = assess_fit(R(), {**worse, "coverage": inside})
     assert "wrong robot or joint order/zero" in q_in.line() and "extrapolation" not in q_in.line()
+
+
+def test_fit_quality_refuses_an_implausible_geometry(kr15_data):
+    """A fit whose joint placements moved far beyond what a real arm can be off (another local solution of few
+    poses) is poor, naming the parameter; the same fit with its real-sized errors is not flagged for its geometry."""
+    import dataclasses
+
+    from pin_kpi_oed.identification.quality import PLAUSIBLE_JOINT_ROTATION_RAD, assess_fit
+
+    robot, tm, nominal, data = kr15_data
+    res = identify(nominal, data)
+    ok = assess_fit(res)
+    assert "implausibly far" not in ok.line()
+    assert np.abs(res.p[~res.model.layout.is_setup()]).max() < 0.2 * PLAUSIBLE_JOINT_ROTATION_RAD
+    p = res.p.copy()
+    k = res.model.layout.index("joint_a2.ry")
+    p[k] = 0.894
+    bad = assess_fit(dataclasses.replace(res, p=p))
+    assert bad.verdict == "poor" and "joint_a2.ry 0.894 rad" in bad.line() and "more or more varied poses" in bad.line()

@@ -18,6 +18,11 @@ predicts:
    (the verdict says so); a poor χ² never is.
 3. **Outliers** far beyond the noise with the plain (linear) loss: they bias every parameter;
    the robust loss (``--loss soft_l1``) is recommended (**poor** when they also spoil 1 or 2).
+4. **Plausible geometry**: a fitted joint placement more than :data:`PLAUSIBLE_JOINT_TRANSLATION_M` or
+   :data:`PLAUSIBLE_JOINT_ROTATION_RAD` from the nominal model is no real arm's (manufacturing errors are a few
+   tenths of a mm and mrad). With few poses the least-squares fit can land on another local solution that fits
+   them as well as the true one (on the real UR10, 12-20 poses of one session: joint rotations of 0.08-0.9 rad
+   and TCP errors of 4-40 mm in another session, at a residual as small as the good fits'): **poor**.
 
 The verdict is one line naming the likely causes (reflector/TCP offset, units, outliers, wrong
 robot or unmodelled effects) and what to try; :meth:`FitQuality.to_dict` puts it in the JSON.
@@ -38,6 +43,10 @@ __all__ = ["FitQuality", "assess_fit"]
 CHI2_POOR = 16.0
 #: an outlier whose weighted error exceeds this many robust standard deviations is "large"
 OUTLIER_LARGE = 20.0
+#: a fitted joint-placement translation (m) / rotation (rad) beyond these is no real arm's: ~40x the manufacturing
+#: tolerances of :class:`~pin_kpi_oed.model.tolerances.Tolerances` (0.5 mm, 1 mrad)
+PLAUSIBLE_JOINT_TRANSLATION_M = 0.02
+PLAUSIBLE_JOINT_ROTATION_RAD = 0.05
 
 
 @dataclass
@@ -153,6 +162,7 @@ def assess_fit(result: Any, validation: dict | None = None, *, nominal_reflector
             f.causes += g.causes
             f.advice += g.advice
     before, after = _check_heldout(f, validation, train_rms, large)
+    _check_geometry(f, result)
     seen: set[str] = set()
     causes = [c for c in f.causes if not (c in seen or seen.add(c))]
     seen = set()
@@ -179,6 +189,33 @@ def _explained_by_discrepancy(result: Any, g: "_Findings", chi2_red: float, inte
     return (f"reduced chi2 {chi2_red:.3g} above the noise's interval [{interval[0]:.3g}, {interval[1]:.3g}]: the "
             f"residuals are the model discrepancy's (Gaussian process, {cv.get('folds', 5)}-fold held-out "
             f"standardised RMS {float(z):.2f}); every predicted sigma includes it")
+
+
+def _check_geometry(f: "_Findings", result: Any) -> None:
+    """Check 4: every fitted joint placement within :data:`PLAUSIBLE_JOINT_TRANSLATION_M` /
+    :data:`PLAUSIBLE_JOINT_ROTATION_RAD` of the nominal model, else poor (the worst one named)."""
+    p, model = getattr(result, "p", None), getattr(result, "model", None)
+    layout = getattr(model, "layout", None)
+    if p is None or layout is None:
+        return
+    p = np.asarray(p, float)
+    bad = []
+    for j in range(layout.n_joints):
+        sl = layout.joint_slice(j)
+        for k in range(sl.start, sl.stop):
+            lim = PLAUSIBLE_JOINT_TRANSLATION_M if k - sl.start < 3 else PLAUSIBLE_JOINT_ROTATION_RAD
+            if abs(p[k]) > lim:
+                bad.append((abs(p[k]) / lim, k, k - sl.start < 3))
+    if not bad:
+        return
+    _, k, trans = max(bad)
+    value = f"{p[k] * 1e3:.1f} mm" if trans else f"{p[k]:.3f} rad"
+    f.worse("poor")
+    f.reasons.append(f"{len(bad)} fitted joint placement(s) implausibly far from the nominal model ({layout.names[k]} "
+                     f"{value}; real arms are within {PLAUSIBLE_JOINT_TRANSLATION_M * 1e3:g} mm and "
+                     f"{PLAUSIBLE_JOINT_ROTATION_RAD:g} rad)")
+    f.causes.append("poses that do not pin the geometry down (the fit found another solution that fits them)")
+    f.advice.append("measure more or more varied poses (pin-kpi-oed design)")
 
 
 @dataclass
