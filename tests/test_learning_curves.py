@@ -12,7 +12,8 @@ from pin_kpi_oed.data.measurements import MeasurementSet
 from pin_kpi_oed.discrepancy.kernel import JointKernel
 from pin_kpi_oed.identification.simulate import random_truth, simulate
 from pin_kpi_oed.oed.discrepancy_kpi import DiscrepancyPrior
-from pin_kpi_oed.studies.learning_curves import LearningCurves, calibrate_fixed, curve_split, poses_within
+from pin_kpi_oed.studies.learning_curves import (LearningCurves, calibrate_fixed, curve_split, poses_within,
+                                                 region_beyond)
 
 SIZES = (12, 40)
 
@@ -89,6 +90,23 @@ def test_summary_paired_tests_and_poses_needed(setting):
     assert set(d["poses_within_10pct"]["observed"]) == set(runs[0]["methods"])
     text = res.summary()
     assert "kpi_gp" in text and "poses to within 10 % of the full pool" in text and "larger sets" in text
+
+
+def test_region_form_beyond_the_grid_is_the_same_split_and_extends_poses_needed(setting):
+    """region_beyond draws the split of curve_split (same seed, same pool): its sets of the grid sizes are the
+    curve's; larger ones extend the region form's curve in poses_needed and largest()."""
+    model, data, prior, runs = setting
+    kw = dict(n_work=5, radius_rad=2.5)
+    same = region_beyond(model, data, prior, seed=0, sizes=(SIZES[-1],), **kw)
+    assert same["error_mean_m"][0] == pytest.approx(runs[0]["error_mean_m"]["kpi_gp_region"][-1], rel=1e-9)
+    splits = [dict(r, region_beyond=region_beyond(model, data, prior, seed=s, sizes=(100, 5000), **kw))
+              for s, r in zip((0, 1), runs)]
+    assert splits[0]["region_beyond"]["sizes"] == [100]              # above the pool: skipped
+    res = LearningCurves(case="simulated", prior=prior.source, sizes=list(SIZES), methods=runs[0]["methods"],
+                         splits=splits, success=True)
+    assert res.largest("kpi_gp_region") == 100 and res.largest("kpi") == SIZES[-1]
+    assert res.beyond("kpi_gp_region")[1].shape == (2, 1)
+    assert "kpi_gp_region, larger sets" in res.summary() and res.to_dict()["region_beyond"]["sizes"] == [100]
 
 
 def test_poses_within_interpolates_in_log_m():

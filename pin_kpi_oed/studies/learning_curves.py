@@ -46,8 +46,8 @@ from pin_kpi_oed.oed.identifiability import analyse
 from pin_kpi_oed.oed.pool import select
 from pin_kpi_oed.results import Result
 
-__all__ = ["SIZES", "METHODS", "calibrate_fixed", "curve_split", "LearningCurves", "learning_curves",
-           "poses_within"]
+__all__ = ["SIZES", "METHODS", "calibrate_fixed", "curve_split", "region_beyond", "LearningCurves",
+           "learning_curves", "poses_within"]
 
 #: Numbers of calibration poses of the curves.
 SIZES = (12, 20, 30, 60, 120)
@@ -229,6 +229,26 @@ def curve_split(model: TrackerModel, data: MeasurementSet, prior: DiscrepancyPri
             "time_s": time.perf_counter() - t0}
 
 
+def region_beyond(model: TrackerModel, data: MeasurementSet, prior: DiscrepancyPrior,
+                  target: MeasurementSet | None = None, *, seed: int = 0, sizes: tuple[int, ...] = (240, 480),
+                  test_frac: float = 0.3, n_work: int = 5, radius_rad: float = 0.5, joints: int = 5,
+                  pool_size: int | None = None, n_register: int = 60, region_rows: int = 100) -> dict:
+    """Larger sets of the region form (``kpi_gp_region``) on the split of :func:`curve_split` with the same
+    arguments (the same draws): where the designs come within reach of the full pool. Sizes above the pool are
+    skipped.
+
+    Returns:
+        ``{"sizes", "error_mean_m", "time_s"}`` (m).
+    """
+    t0 = time.perf_counter()
+    rng = np.random.default_rng(seed)
+    sp = _make_split(data, target, rng, test_frac, n_work, radius_rad, joints, pool_size, n_register)
+    des = _Designs(model, sp, prior, seed, radius_rad, joints, region_rows)
+    big = [m for m in sizes if m < len(sp.pool)]
+    err = [_score(model, sp.pool.subset(np.sort(des.choose("kpi_gp_region", m))), sp, prior)[0] for m in big]
+    return {"sizes": big, "error_mean_m": err, "time_s": time.perf_counter() - t0}
+
+
 def poses_within(sizes: np.ndarray, curve: np.ndarray, ref: float, frac: float = 0.1) -> float:
     """Fewest poses at which ``curve`` comes within ``frac`` of ``ref`` (linear interpolation in log m between the
     sizes; inf when not reached within the largest size)."""
@@ -289,16 +309,17 @@ class LearningCurves(Result):
         ref = float(np.median(self.full(key)))
         out = {meth: poses_within(np.array(self.sizes), np.median(self.array(key, meth), 0), ref, frac)
                for meth in self.methods}
-        big = self.beyond()
-        if key == "error_mean_m" and "random" in out and big is not None:
-            out["random"] = poses_within(np.r_[self.sizes, big[0]], np.r_[np.median(self.array(key, "random"), 0),
+        for meth in ("random", "kpi_gp_region"):
+            big = self.beyond(meth)
+            if key == "error_mean_m" and meth in out and big is not None:
+                out[meth] = poses_within(np.r_[self.sizes, big[0]], np.r_[np.median(self.array(key, meth), 0),
                                                                          np.median(big[1], 0)], ref, frac)
         return out
 
     def largest(self, meth: str) -> int:
-        """The largest size tried for ``meth`` (the random sets go further)."""
-        big = self.beyond()
-        return int(big[0][-1]) if meth == "random" and big is not None else int(self.sizes[-1])
+        """The largest size tried for ``meth`` (the random sets and, when run, the region form's go further)."""
+        big = self.beyond(meth) if meth in ("random", "kpi_gp_region") else None
+        return int(big[0][-1]) if big is not None else int(self.sizes[-1])
 
     def equivalent(self, meth: str, base: str = "random", key: str = "error_mean_m") -> list[float]:
         """Per size m: the poses ``meth`` needs (log-m interpolation of its median curve of ``key`` over the splits)
@@ -308,14 +329,16 @@ class LearningCurves(Result):
         y = np.median(self.array(key, base), 0)
         return [poses_within(np.array(self.sizes), x, float(v), 0.0) for v in y]
 
-    def beyond(self) -> tuple[np.ndarray, np.ndarray] | None:
-        """(sizes, (splits, sizes) mean errors) of the larger random sets common to every split, or None."""
-        sizes = [m for m in self.splits[0].get("random_beyond", {}).get("sizes", [])
-                 if all(m in s["random_beyond"]["sizes"] for s in self.splits)]
+    def beyond(self, meth: str = "random") -> tuple[np.ndarray, np.ndarray] | None:
+        """(sizes, (splits, sizes) mean errors) of the larger sets of ``meth`` common to every split (``random``:
+        ``random_beyond``; ``kpi_gp_region``: ``region_beyond``, of :func:`region_beyond`), or None."""
+        key = "random_beyond" if meth == "random" else "region_beyond"
+        sizes = [m for m in (self.splits[0].get(key) or {}).get("sizes", [])
+                 if all(m in (s.get(key) or {}).get("sizes", []) for s in self.splits)]
         if not sizes:
             return None
-        return np.array(sizes), np.array([[s["random_beyond"]["error_mean_m"][s["random_beyond"]["sizes"].index(m)]
-                                           for m in sizes] for s in self.splits])
+        return np.array(sizes), np.array([[s[key]["error_mean_m"][s[key]["sizes"].index(m)] for m in sizes]
+                                          for s in self.splits])
 
     def to_dict(self) -> dict:
         """Plain JSON-able dict (SI units): the per-size means and spreads, the paired tests, the poses needed."""
@@ -335,6 +358,7 @@ class LearningCurves(Result):
                 "n_splits": len(self.splits), "n_pool": float(np.mean([s["n_pool"] for s in self.splits])),
                 "n_scored": float(np.mean([s["n_scored"] for s in self.splits])), "methods": per,
                 "full": {k: float(self.full(k).mean()) for k in keys},
+                "region_beyond": _beyond_dict(self.beyond("kpi_gp_region")),
                 "random_beyond": None if big is None else {"sizes": big[0].tolist(),
                                                            "error_mean_m": big[1].mean(0).tolist(),
                                                            "error_median_m": np.median(big[1], 0).tolist()},
@@ -363,10 +387,11 @@ class LearningCurves(Result):
                                                       "error_rms_m")}
         lines.append(f"{'full':<8}{self.splits[0]['n_pool']:>5}{f['error_mean_m']:>12.4f}{'':>43}"
                      f"{f['pred_sigma_work_m']:>15.4f}{f['pred_rms_scored_m']:>11.4f}{f['error_rms_m']:>10.4f}")
-        big = self.beyond()
-        if big is not None:
-            lines.append("random, larger sets (median): " + ", ".join(f"{m} poses {v * 1e3:.4f} mm"
-                                                                    for m, v in zip(big[0], np.median(big[1], 0))))
+        for meth in ("random", "kpi_gp_region"):
+            big = self.beyond(meth)
+            if big is not None:
+                lines.append(f"{meth}, larger sets (median): " + ", ".join(
+                    f"{m} poses {v * 1e3:.4f} mm" for m, v in zip(big[0], np.median(big[1], 0))))
         for key, word in (("error_mean_m", "observed"), ("pred_sigma_work_m", "predicted (sigma at W)")):
             need = self.needed(key)
             lines.append(f"poses to within 10 % of the full pool, {word}: "
@@ -376,6 +401,14 @@ class LearningCurves(Result):
                 lines.append(f"{meth}: poses to match random's {', '.join(str(m) for m in self.sizes)}: "
                              + ", ".join(_n(v, self.sizes[-1], self.sizes[0]) for v in self.equivalent(meth)))
         return "\n".join(lines)
+
+
+def _beyond_dict(big: tuple[np.ndarray, np.ndarray] | None) -> dict | None:
+    """The larger sets of :meth:`LearningCurves.beyond` as a JSON-able dict (m), or None."""
+    if big is None:
+        return None
+    return {"sizes": big[0].tolist(), "error_mean_m": big[1].mean(0).tolist(),
+            "error_median_m": np.median(big[1], 0).tolist()}
 
 
 def _n(v: float, largest: int, smallest: int = 0) -> str:
