@@ -138,3 +138,23 @@ def test_progress_is_silent_off_a_terminal(monkeypatch, capsys):
     buf = io.StringIO()
     list(progress(range(3), desc="forced", file=buf, mininterval=0))
     assert "forced" in buf.getvalue()
+
+
+def test_design_figures_show_the_honest_covariance_when_the_file_has_it(design, tmp_path):
+    """With every design's C_s with the discrepancy in the file (design --model), the ellipsoids and bars show it
+    by default, the paper's on request; a file without it shows the paper's."""
+    import copy
+
+    d = copy.deepcopy(design)
+    df0 = load_design(d)
+    for e, entry in zip(d["designs"], df0.designs):
+        e.setdefault("discrepancy", {})["cov_s_m2"] = (9.0 * entry.cov_s_m2).tolist()
+    df = load_design(d)
+    honest, paper = figures.design_figure_data(df), figures.design_figure_data(df, sigma="paper")
+    assert honest.sigma == "honest" and paper.sigma == "paper"
+    for e in df.designs:
+        assert honest.traces_m2[e.criterion] == pytest.approx(9.0 * paper.traces_m2[e.criterion], rel=1e-9)
+        np.testing.assert_allclose(honest.covs_m2[e.criterion], 9.0 * paper.covs_m2[e.criterion], rtol=1e-9)
+    assert figures.design_figure_data(df0).sigma == "paper"      # nothing honest in the file: the paper's
+    out = figures.design_figures(df, tmp_path, prefix="h")
+    assert all(_png_size(p)[0] > 500 for p in out.values())

@@ -90,13 +90,13 @@ def _print_designs(df: DesignFile, scene: Scene, level: float) -> None:
               + ("  (C_s recomputed)" if d.cov_source == "computed" else ""))
 
 
-def _write_figures(df: DesignFile, folder: str) -> None:
-    """The report figures as PNG in an existing folder."""
+def _write_figures(df: DesignFile, folder: str, sigma: str = "honest") -> None:
+    """The report figures as PNG in an existing folder, with the same C_s as the viewer's ellipsoids."""
     from pin_kpi_oed.viz.figures import design_figures
 
     out = Path(folder)
     out.mkdir(exist_ok=True)  # checked before any work (validation.options); created like diagnose does
-    for p in design_figures(df, out).values():
+    for p in design_figures(df, out, sigma=sigma).values():
         print(f"wrote {p}")
 
 
@@ -157,7 +157,7 @@ def run(args: argparse.Namespace) -> int:
                                          capsules_visible=args.capsules, sigma=args.sigma))
     _print_designs(df, scene, args.level)
     if args.figures:
-        _write_figures(df, args.figures)
+        _write_figures(df, args.figures, scene.sigma)
     pose = _pose(args, scene)
     if args.html is None:
         return _serve_until_stopped(scene, open_browser=not args.no_open)

@@ -270,6 +270,8 @@ class DesignFigureData:
             independent check of the file's cell (:meth:`~pin_kpi_oed.design.design_file.DesignFile.pose_clearance`).
         incidence_deg: per pose, laser incidence (deg): the file's ``incidence_deg`` list, else the model's.
         colours: ``#rrggbb``; labels: readable names.
+        sigma: the C_s shown, ``honest`` (discrepancy included: every design of the file holds one) or ``paper``
+            (tracker noise only).
     """
 
     covs_m2: dict[str, np.ndarray]
@@ -278,22 +280,27 @@ class DesignFigureData:
     incidence_deg: dict[str, np.ndarray]
     colours: dict[str, str]
     labels: dict[str, str]
+    sigma: str = "paper"
 
 
-def design_figure_data(df: Any, frame: str = "world") -> DesignFigureData:
+def design_figure_data(df: Any, frame: str = "world", sigma: str = "honest") -> DesignFigureData:
     """The values :func:`design_figures` plots, from a :class:`~pin_kpi_oed.design.design_file.DesignFile`.
 
     Args:
         df: the design file.
         frame: ``world`` (the cell frame, z up) or ``tracker`` for the covariances.
+        sigma: ``honest``: the C_s with the discrepancy when every design of the file holds one (``design
+            --model``), else the paper's; ``paper``: the paper's (tracker noise only).
     """
     R = df.world_T_tracker.rotation if frame == "world" else np.eye(3)
     colours = design_colours([d.criterion for d in df.designs])
-    out = DesignFigureData({}, {}, {}, {}, {}, {})
+    honest = sigma == "honest" and all(d.cov_s_honest_m2 is not None for d in df.designs)
+    out = DesignFigureData({}, {}, {}, {}, {}, {}, "honest" if honest else "paper")
     for d in df.designs:
         m = d.q_meas.shape[0]
-        out.covs_m2[d.criterion] = np.array([R @ B @ R.T for B in _blocks(d.cov_s_m2)])
-        out.traces_m2[d.criterion] = d.trace_cs_m2
+        C = d.covariance(honest)
+        out.covs_m2[d.criterion] = np.array([R @ B @ R.T for B in _blocks(C)])
+        out.traces_m2[d.criterion] = float(np.trace(C)) if honest else d.trace_cs_m2
         c = _per_pose(d.info, ("clearance_m", "pose_clearance_m", "clearances_m"), m)
         out.clearance_m[d.criterion] = c if c is not None else df.pose_clearance(d.q_meas)
         a = _per_pose(d.info, ("incidence_deg", "pose_incidence_deg"), m)
@@ -304,7 +311,7 @@ def design_figure_data(df: Any, frame: str = "world") -> DesignFigureData:
 
 
 def design_figures(design: Any, out_dir: str | os.PathLike, prefix: str = "design", level: float = 0.95,
-                   frame: str = "world") -> dict[str, Path]:
+                   frame: str = "world", sigma: str = "honest") -> dict[str, Path]:
     """The three figures of a design file, written to ``out_dir`` (values: :func:`design_figure_data`).
 
     Args:
@@ -313,6 +320,7 @@ def design_figures(design: Any, out_dir: str | os.PathLike, prefix: str = "desig
         prefix: file-name prefix.
         level: confidence level of the ellipsoids.
         frame: ``world`` (the cell frame, z up) or ``tracker`` for the ellipsoid projections.
+        sigma: the C_s of the ellipsoids and bars (:func:`design_figure_data`); the titles name it.
 
     Returns:
         ``{"ellipsoids": path, "bars": path, "poses": path}``.
@@ -326,15 +334,16 @@ def design_figures(design: Any, out_dir: str | os.PathLike, prefix: str = "desig
     out = Path(out_dir)
     if not out.is_dir():
         raise InputError(f"cannot write figures to '{out}': no such folder")
-    v = design_figure_data(df, frame)
+    v = design_figure_data(df, frame, sigma)
     name = df.robot.name
+    which = "discrepancy included" if v.sigma == "honest" else "tracker noise only"
     return {
         "ellipsoids": plot_ellipsoid_projections(
             v.covs_m2, out / f"{prefix}_ellipsoids.png", colours=v.colours, labels=v.labels, level=level,
             frame="cell frame" if frame == "world" else "tracker frame",
-            title=f"{name}: TCP {int(round(level * 100))} % confidence ellipsoids, projected"),
+            title=f"{name}: TCP {int(round(level * 100))} % confidence ellipsoids, projected ({which})"),
         "bars": plot_design_bars(v.traces_m2, out / f"{prefix}_designs.png", n_work=df.q_work.shape[0],
-                                 colours=v.colours, labels=v.labels, title=f"{name}: designs compared"),
+                                 colours=v.colours, labels=v.labels, title=f"{name}: designs compared ({which})"),
         "poses": plot_pose_quality(v.clearance_m, v.incidence_deg, out / f"{prefix}_poses.png", colours=v.colours,
                                    labels=v.labels, incidence_limit_deg=df.incidence_limit_deg,
                                    title=f"{name}: clearance and laser incidence per pose"),

@@ -165,6 +165,15 @@ def _issue24() -> list[Case]:
              "--angle-unit rad --out {d}/o.csv", "joints_deg.csv"),
         Case("tracker-another-robot", "import-tracker {d}/exp_mm.txt --joints {d}/joints_deg.csv --robot ur10 "
              "--out {d}/o.csv", "joints_deg.csv"),
+        # a calibration for another session: the registration configurations are checked before any design
+        Case("design-reregister-missing", "design --criteria kpi_gp --work-samples 10 --measurements 10 --reregister "
+             "{d}/nope.csv --json {d}/o.json", "nope.csv"),
+        Case("design-reregister-degrees", "design --criteria kpi_gp --work-samples 10 --measurements 10 --reregister "
+             "{d}/joints_deg.csv --json {d}/o.json", "joints_deg.csv"),
+        Case("design-reregister-one-pose", "design --criteria kpi_gp --work-samples 10 --measurements 10 --reregister "
+             "{d}/one_pose.csv --json {d}/o.json", "do not determine the set-up"),
+        Case("design-reregister-no-discrepancy", "design --criteria random,kpi --measurements 10 --reregister work "
+             "--json {d}/o.json", "needs the discrepancy"),
         Case("register-3-rows", "register --model {d}/m.json --data {d}/reg3.csv --model-out {d}/o.json",
              "at least 6 rows"),
         Case("register-xy-swapped", "register --model {d}/m.json --data {d}/reg_swap.csv --model-out {d}/o.json",
@@ -507,6 +516,8 @@ def _build_issue24(d: Path, design: dict) -> None:
     Qd = np.asarray(design["q_meas"], float)[:10]
     (d / "given.csv").write_text(",".join(f"joint_a{k}" for k in range(1, 7)) + "\n"
                                  + "\n".join(",".join(f"{v:.10f}" for v in q) for q in Qd) + "\n")
+    (d / "one_pose.csv").write_text(",".join(f"joint_a{k}" for k in range(1, 7)) + "\n"
+                                    + ",".join(f"{v:.10f}" for v in Qd[0]) + "\n")
 
 
 def snapshot(d: Path) -> dict[str, str]:
