@@ -66,7 +66,8 @@ def prior_of_series(model: TrackerModel, series: str, S: dict, cache: Path) -> D
 
 
 def run_case(case: str, n_seeds: int, cache: Path, model: TrackerModel, folder: Path,
-             region_sizes: tuple[int, ...] = ()) -> LearningCurves:
+             region_sizes: tuple[int, ...] = (), region_rows: int = 100,
+             methods: tuple[str, ...] = METHODS) -> LearningCurves:
     src, tgt, pri, pool_size = CASES[case]
     S = {s: load(folder, s) for s in {src, pri} | ({tgt} if tgt else set())}
     prior = prior_of_series(model, pri, S, cache)
@@ -77,10 +78,12 @@ def run_case(case: str, n_seeds: int, cache: Path, model: TrackerModel, folder: 
         path = cache / f"{case.replace('->', '_to_')}_seed{seed}.json"
         if path.exists():
             old = json.loads(path.read_text())
-            if old["methods"] == list(METHODS):
+            if old["methods"] == list(methods) and old.get("region_rows", 100) == region_rows:
                 splits.append(old)
                 continue
-        r = curve_split(model, S[src], prior, S[tgt] if tgt else None, seed=seed, pool_size=pool_size)
+        r = curve_split(model, S[src], prior, S[tgt] if tgt else None, seed=seed, pool_size=pool_size,
+                        methods=methods, region_rows=region_rows)
+        r["region_rows"] = region_rows
         atomic_write_json(path, r)
         splits.append(r)
         e = {k: r["error_mean_m"][k] for k in r["methods"]}
@@ -91,7 +94,7 @@ def run_case(case: str, n_seeds: int, cache: Path, model: TrackerModel, folder: 
         have = (r.get("region_beyond") or {}).get("sizes")
         if region_sizes and have is None:
             r["region_beyond"] = region_beyond(model, S[src], prior, S[tgt] if tgt else None, seed=seed,
-                                               sizes=region_sizes, pool_size=pool_size)
+                                               sizes=region_sizes, pool_size=pool_size, region_rows=region_rows)
             atomic_write_json(cache / f"{case.replace('->', '_to_')}_seed{seed}.json", r)
             print(f"[{case}] split {seed + 1}/{n_seeds}: kpi_gp_region with " + ", ".join(
                 f"{m} poses {e * 1e3:.3f}" for m, e in zip(r["region_beyond"]["sizes"],
@@ -228,6 +231,10 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--json", default=None, help="write the summaries here")
     ap.add_argument("--markdown", action="store_true", help="also print the tables as markdown")
     ap.add_argument("--figure", default=None, help="draw observed vs predicted curves of the cases here (PNG)")
+    ap.add_argument("--region-rows", dest="region_rows", type=int, default=100,
+                    help="most pool rows of the working region in kpi_gp_region's criterion (default 100; a larger "
+                         "number takes every pool row within the radius; give another --cache)")
+    ap.add_argument("--methods", default=",".join(METHODS), help=f"comma-separated of {', '.join(METHODS)}")
     ap.add_argument("--region-beyond", dest="region_beyond", default="",
                     help="larger sizes of the region form (kpi_gp_region), comma-separated, e.g. 240,480: where it "
                          "comes within 10 %% of the full pool (added to the cached splits)")
@@ -246,7 +253,8 @@ def main(argv: list[str] | None = None) -> int:
     results = []
     for c in cases:
         res = run_case(c, a.seeds, cache, model, folder,
-                       tuple(int(x) for x in a.region_beyond.split(",") if x.strip()))
+                       tuple(int(x) for x in a.region_beyond.split(",") if x.strip()), a.region_rows,
+                       tuple(x.strip() for x in a.methods.split(",") if x.strip()))
         results.append(res)
         print(res.summary(), flush=True)
         if a.markdown:
