@@ -313,7 +313,8 @@ class DiscrepancyDesignCriterion:
     def set_registration(self, Q_register: np.ndarray) -> None:
         """Score the TCP error after the set-up is registered again on ``Q_register`` (another session): E becomes
         the re-registered KPI Jacobian Ẽ and the registration's own covariance is added to C_s
-        (:mod:`pin_kpi_oed.oed.reregistration`). Call it after any change of :attr:`E`.
+        (:mod:`pin_kpi_oed.oed.reregistration`). Set :attr:`E` before the first call; a later call (other
+        configurations) starts again from that un-registered E.
 
         Raises:
             InputError: configurations that do not determine the set-up.
@@ -322,8 +323,7 @@ class DiscrepancyDesignCriterion:
 
         Q_register = np.atleast_2d(np.asarray(Q_register, float))
         setup = self.model.layout.is_setup()[self.base]
-        E = self.E if self.reg is None else self._E_own
-        self._E_own = E
+        E = self.E if self.reg is None else self.reg.E_before
         d = self.discrepancy
         self.reg = reregistration(E, self.pool_jacobians(Q_register), setup, d.scale_m, d.noise, Q_register)
         self.E = self.reg.E

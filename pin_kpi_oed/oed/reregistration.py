@@ -46,12 +46,14 @@ class Reregistration:
 
     Attributes:
         E: Ẽ (t, 3, nb), base frame (set-up columns zero).
+        E_before: the KPI Jacobian E it was computed from (t, 3, nb).
         cov_m2: C_reg (3t, 3t) m², rows per working configuration then axis.
         Q_register: the registration configurations R (r, n) rad.
         setup: mask of the set-up columns among the nb identifiable parameters.
     """
 
     E: np.ndarray
+    E_before: np.ndarray
     cov_m2: np.ndarray
     Q_register: np.ndarray
     setup: np.ndarray
@@ -96,4 +98,4 @@ def reregistration(E: np.ndarray, J_register: np.ndarray, setup: np.ndarray, sca
     Et[:, :, setup] = 0.0                                       # exactly: the old set-up does not matter
     N = np.kron(noise * np.eye(r), np.diag(s2))                 # rows (configuration, axis)
     B = Es.reshape(-1, Es.shape[2]) @ P                         # (3t, 3r)
-    return Reregistration(Et, B @ N @ B.T, np.atleast_2d(np.asarray(Q_register, float)), setup)
+    return Reregistration(Et, E, B @ N @ B.T, np.atleast_2d(np.asarray(Q_register, float)), setup)
