@@ -90,8 +90,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--reregister", default=None, metavar="work|FILE",
                    help="with the discrepancy: the calibration will be used in another session, after the tracker "
                         "(set-up) is registered again on these configurations (CSV, joint columns in rad; 'work': the "
-                        "working configurations and the working region's); kpi_gp and the honest sigma then score the TCP error after that "
-                        "registration instead of the parameter uncertainty carried in the old set-up")
+                        "working configurations and the working region's); kpi_gp and the honest sigma then score "
+                        "the TCP error after that registration instead of the parameter uncertainty carried in the "
+                        "old set-up")
     p.set_defaults(func=run)
 
 

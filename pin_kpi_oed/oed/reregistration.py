@@ -26,7 +26,7 @@ the session is not in this prediction: ``register`` measures it on the registrat
 
 Without it a design for another session scores the parameter uncertainty extrapolated to W in the old set-up:
 on the real UR10 (Series D → C) that number is 40–500 mm for every set while the re-registered error is
-0.5–0.7 mm, and a criterion minimising it picks nearly unidentified sets.
+0.5–0.7 mm, and the discrepancy-aware KPI minimising it was 59 % worse than random at 30 poses (−11 % with Ẽ).
 """
 
 from __future__ import annotations
