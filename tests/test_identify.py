@@ -549,3 +549,29 @@ def test_fit_quality_refuses_an_implausible_geometry(kr15_data):
     p[k] = 0.894
     bad = assess_fit(dataclasses.replace(res, p=p))
     assert bad.verdict == "poor" and "joint_a2.ry 0.894 rad" in bad.line() and "more or more varied poses" in bad.line()
+
+
+def test_geometry_prior_changes_nothing_the_data_determine(kr15_data, tmp_path, capsys):
+    """set_joint_prior puts N(0, σ²) on the joint placements only; with 60 poses the fit with a weak prior
+    (5 mm, 10 mrad) is the fit without it to well within its standard deviations; bad values are one clear line."""
+    import copy
+
+    from pin_kpi_oed.cli.app import main
+
+    robot, tm, nominal, data = kr15_data
+    plain = identify(nominal, data)
+    m = copy.deepcopy(nominal)
+    m.layout.set_joint_prior(5e-3, 1e-2)
+    L = m.layout
+    joint = ~L.is_setup()
+    assert set(L.prior_sigma[joint]) == {5e-3, 1e-2} and np.all(np.isinf(L.prior_sigma[~joint]))
+    with_prior = identify(m, data)
+    assert with_prior.names == plain.names
+    assert np.all(np.abs(with_prior.values - plain.values) <= 0.1 * plain.std)
+    with pytest.raises(InputError, match="rotation sigma must be positive"):
+        m.layout.set_joint_prior(5e-3, 0.0)
+    path = tmp_path / "d.csv"
+    write_measurements(data, path)
+    assert main(["identify", "--robot", "kr15", "--data", str(path), "--geometry-prior", "5e-3"]) == 2
+    err = capsys.readouterr().err
+    assert "--geometry-prior" in err and len(err.strip().splitlines()) == 1

@@ -153,6 +153,10 @@ def _register_identify(subparsers: argparse._SubParsersAction) -> None:
                         "implausible (the verdict stays in the summary and the JSON)")
     i.add_argument("--fix", default=None, help="parameters held at nominal, comma-separated names or globs "
                                                "(e.g. 'reflector.*' or 'tracker.*')")
+    i.add_argument("--geometry-prior", dest="geometry_prior", default=None, metavar="TRANS_M,ROT_RAD",
+                   help="a Gaussian prior on every joint placement around the nominal model, sigma of its translation "
+                        "(m) and rotation (rad), e.g. 5e-3,1e-2 (ten times manufacturing tolerances): changes nothing "
+                        "the data determine and keeps a fit of few poses from landing on another geometric solution")
     i.add_argument("--max-nfev", type=int, default=None, help="maximum number of residual evaluations")
     add_discrepancy_arg(i)
     i.add_argument("--quiet", action="store_true", help="print only the validation lines")
@@ -467,6 +471,21 @@ def _report_and_write(args: argparse.Namespace, result: Any, out: dict, lines: l
     return 0
 
 
+def _two_positive(text: str, option: str) -> tuple[float, float]:
+    """Two positive finite numbers "a,b" of an option.
+
+    Raises:
+        InputError: anything else, naming the option and the value.
+    """
+    try:
+        vals = [float(v) for v in str(text).split(",")]
+    except ValueError:
+        vals = []
+    if len(vals) != 2 or not all(np.isfinite(v) and v > 0 for v in vals):
+        raise InputError(f"{option}: expected two positive numbers TRANS_M,ROT_RAD (e.g. 5e-3,1e-2), got '{text}'")
+    return vals[0], vals[1]
+
+
 def run_identify(args: argparse.Namespace) -> int:
     """Handler of ``pin-kpi-oed identify``."""
     from pin_kpi_oed.identification.identify import IdentifyOptions
@@ -487,6 +506,8 @@ def run_identify(args: argparse.Namespace) -> int:
     model = TrackerModel(robot, reflector_m=reflector, noise=noise)
     if args.fix:
         model.layout.fix(args.fix)
+    if getattr(args, "geometry_prior", None):
+        model.layout.set_joint_prior(*_two_positive(args.geometry_prior, "--geometry-prior"))
     result, opts = _fit(args, model, train, opts, effects, reflector, estimated)
     result.discrepancy = _discrepancy(args, result, train)
     out = {"result": result.to_dict(), "data": list(args.data), "validate": args.validate,

@@ -215,7 +215,8 @@ def _check_geometry(f: "_Findings", result: Any) -> None:
                      f"{value}; real arms are within {PLAUSIBLE_JOINT_TRANSLATION_M * 1e3:g} mm and "
                      f"{PLAUSIBLE_JOINT_ROTATION_RAD:g} rad)")
     f.causes.append("poses that do not pin the geometry down (the fit found another solution that fits them)")
-    f.advice.append("measure more or more varied poses (pin-kpi-oed design)")
+    f.advice.append("measure more or more varied poses (pin-kpi-oed design), or identify --geometry-prior 5e-3,1e-2 "
+                    "(keeps every joint placement near the nominal model)")
 
 
 @dataclass

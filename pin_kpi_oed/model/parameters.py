@@ -188,6 +188,24 @@ class ParameterLayout:
         self.fixed = self.fixed | self.select(patterns)
         return self
 
+    def set_joint_prior(self, translation_m: float, rotation_rad: float) -> "ParameterLayout":
+        """Give every joint placement a Gaussian prior around the nominal model: N(0, translation_m²) on its
+        translation and N(0, rotation_rad²) on its rotation components (the set-up groups keep theirs). A weak
+        prior (e.g. 5 mm and 10 mrad, ten times the manufacturing tolerances) changes nothing the data determine
+        and keeps a fit of few poses from landing on another geometric solution. Returns self.
+
+        Raises:
+            InputError: a value not positive and finite.
+        """
+        for what, v in (("translation", translation_m), ("rotation", rotation_rad)):
+            if not (np.isfinite(v) and v > 0):
+                raise InputError(f"joint-placement prior: the {what} sigma must be positive and finite, got {v}")
+        for j in range(self.n_joints):
+            sl = self.joint_slice(j)
+            self.prior_sigma[sl.start:sl.start + 3] = float(translation_m)
+            self.prior_sigma[sl.start + 3:sl.stop] = float(rotation_rad)
+        return self
+
     def set_prior(self, patterns: list[str] | str, sigma: float) -> "ParameterLayout":
         """Give matching parameters a Gaussian prior N(0, sigma²) (m or rad). Returns self.
 
