@@ -72,8 +72,8 @@ def main(argv: list[str]) -> dict:
     good = e <= 2e-3
     print(f"all: {int((~good).sum())} sets above 2 mm, {int((f & ~good).sum())} of them flagged; "
           f"{int((f & good).sum())} of the {int(good.sum())} others flagged; with the prior {int((w > 2e-3).sum())} "
-          f"above 2 mm, and the sets below 2 mm change by at most {np.abs(w - e)[good].max() * 1e3:.3f} mm "
-          f"(median {np.median(np.abs(w - e)[good]) * 1e3:.4f} mm)")
+          f"above 2 mm; the sets below 2 mm: at most {(w - e)[good].max() * 1e3:+.3f} mm worse, at most "
+          f"{-(w - e)[good].min() * 1e3:.3f} mm better, median |change| {np.median(np.abs(w - e)[good]) * 1e3:.4f} mm")
     return out
 
 
