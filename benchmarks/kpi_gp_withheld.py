@@ -46,12 +46,20 @@ def main(argv: list[str] | None = None) -> dict:
     ap.add_argument("--pilot-discrepancy", dest="pilot_discrepancy", choices=["auto", "on"], default="auto",
                     help="the pilot's identify --discrepancy: auto (a user's default: white when the process does not "
                          "pay on the pilot) or on (always fitted)")
+    ap.add_argument("--tcp-at-reflector", dest="tcp_at_reflector", action="store_true",
+                    help="score the TCP at the reflector instead of the cell's TCP: what the discrepancy, learnt at the "
+                         "reflector, can see (the flange's rotation error times the TCP-reflector offset it cannot)")
     ap.add_argument("--json", default=None)
     a = ap.parse_args(argv)
     amps = [float(x) for x in a.amplitudes.split(",")]
     t0 = time.perf_counter()
     cell = load_cell("ur10")
     problem = DesignProblem(cell)
+    model = problem.model
+    if a.tcp_at_reflector:
+        import dataclasses
+
+        model = dataclasses.replace(model, tcp_m=np.asarray(model.reflector_m, float).copy())
     Q_pool, _ = problem.random_design(a.pool, seed=np.random.SeedSequence([0, 1]))
     Q_pilot, _ = problem.random_design(a.pilot, seed=np.random.SeedSequence([0, 2]))
     W = working_region(cell.q_work, a.per_point, 0.3, seed=3)
@@ -61,7 +69,7 @@ def main(argv: list[str] | None = None) -> dict:
     runs = []
     for rep in range(a.reps):
         for amp in amps:
-            r = withheld_case(problem.model, Q_pool, Q_pilot, W, amp * 1e-3, seed=rep, sizes=SIZES, fixed=fixed,
+            r = withheld_case(model, Q_pool, Q_pilot, W, amp * 1e-3, seed=rep, sizes=SIZES, fixed=fixed,
                               pilot_discrepancy=a.pilot_discrepancy)
             runs.append(r)
             e = r["error_m"]
@@ -69,12 +77,14 @@ def main(argv: list[str] | None = None) -> dict:
                 f"m={m}: " + " ".join(f"{d} {e[d][i] * 1e3:.3f}" for d in DESIGNS) for i, m in enumerate(SIZES))
                 + " mm", file=sys.stderr, flush=True)
     out = {"reps": a.reps, "pool": len(Q_pool), "pilot": len(Q_pilot), "pilot_discrepancy": a.pilot_discrepancy,
+           "tcp_m": np.asarray(model.tcp_m, float).tolist(),
            "t_work": len(W), "sizes": list(SIZES),
            "amplitudes_mrad": amps, "runs": runs, "summary": []}
     head = (f"{'a mrad':>7}{'m':>4}{'kpi_gp mm':>11}{'kpi mm':>9}{'change':>8}{'wins':>7}{'p':>9}"
             f"{'gp(default) mm':>16}{'random mm':>11}{'kpi_gp pred. sigma mm':>23}{'GP pilots':>11}")
-    print(f"true TCP error at {len(W)} working configurations (RMS 3-D, mean over {a.reps} robots); kpi_gp (pilot "
-          f"prior) vs plain kpi, paired Wilcoxon")
+    print(f"true TCP error at {len(W)} working configurations (RMS 3-D, mean over {a.reps} robots; TCP "
+          f"{', '.join(f'{v:g}' for v in model.tcp_m)} m in the tool frame, reflector "
+          f"{', '.join(f'{v:g}' for v in model.reflector_m)} m); kpi_gp (pilot prior) vs plain kpi, paired Wilcoxon")
     print(head)
     print("-" * len(head))
     for amp in amps:
