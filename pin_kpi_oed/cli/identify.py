@@ -471,19 +471,18 @@ def _report_and_write(args: argparse.Namespace, result: Any, out: dict, lines: l
     return 0
 
 
-def _two_positive(text: str, option: str) -> tuple[float, float]:
-    """Two positive finite numbers "a,b" of an option.
+def _geometry_prior(text: str | None) -> tuple[float, float] | None:
+    """``--geometry-prior TRANS_M,ROT_RAD``, checked before any work (None when not given).
 
     Raises:
-        InputError: anything else, naming the option and the value.
+        InputError: not two positive finite numbers, naming the option.
     """
-    try:
-        vals = [float(v) for v in str(text).split(",")]
-    except ValueError:
-        vals = []
-    if len(vals) != 2 or not all(np.isfinite(v) and v > 0 for v in vals):
-        raise InputError(f"{option}: expected two positive numbers TRANS_M,ROT_RAD (e.g. 5e-3,1e-2), got '{text}'")
-    return vals[0], vals[1]
+    if text is None:
+        return None
+    t, r = _floats(text, 2, "--geometry-prior")
+    if not (t > 0 and r > 0):
+        raise InputError(f"--geometry-prior: both sigmas must be > 0 (translation m, rotation rad), got '{text}'")
+    return float(t), float(r)
 
 
 def run_identify(args: argparse.Namespace) -> int:
@@ -494,6 +493,7 @@ def run_identify(args: argparse.Namespace) -> int:
     from pin_kpi_oed.model.robot import load_robot
 
     _check_outputs(args.json, args.urdf_out, args.model_out)
+    geometry_prior = _geometry_prior(getattr(args, "geometry_prior", None))
     robot = load_robot(args.robot, args.tool)
     train = read_data_files(args.data, robot, opts=table_options(args, robot))
     test, reg = read_validation(args, robot)
@@ -506,8 +506,8 @@ def run_identify(args: argparse.Namespace) -> int:
     model = TrackerModel(robot, reflector_m=reflector, noise=noise)
     if args.fix:
         model.layout.fix(args.fix)
-    if getattr(args, "geometry_prior", None):
-        model.layout.set_joint_prior(*_two_positive(args.geometry_prior, "--geometry-prior"))
+    if geometry_prior is not None:
+        model.layout.set_joint_prior(*geometry_prior)
     result, opts = _fit(args, model, train, opts, effects, reflector, estimated)
     result.discrepancy = _discrepancy(args, result, train)
     out = {"result": result.to_dict(), "data": list(args.data), "validate": args.validate,
