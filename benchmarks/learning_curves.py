@@ -67,7 +67,7 @@ def prior_of_series(model: TrackerModel, series: str, S: dict, cache: Path) -> D
 
 def run_case(case: str, n_seeds: int, cache: Path, model: TrackerModel, folder: Path,
              region_sizes: tuple[int, ...] = (), region_rows: int = 100,
-             methods: tuple[str, ...] = METHODS) -> LearningCurves:
+             methods: tuple[str, ...] = METHODS, random_sizes: tuple[int, ...] = ()) -> LearningCurves:
     src, tgt, pri, pool_size = CASES[case]
     S = {s: load(folder, s) for s in {src, pri} | ({tgt} if tgt else set())}
     prior = prior_of_series(model, pri, S, cache)
@@ -90,16 +90,22 @@ def run_case(case: str, n_seeds: int, cache: Path, model: TrackerModel, folder: 
         print(f"[{case}] split {seed + 1}/{n_seeds} (seed {seed}): {r['time_s']:.0f} s, {r['n_scored']} scored rows; "
               f"20 poses " + ", ".join(f"{k} {v[1] * 1e3:.3f}" for k, v in e.items())
               + f" mm; full pool {r['full']['error_mean_m'] * 1e3:.3f} mm", flush=True)
-    for seed, r in enumerate(splits):  # the region form's larger sets, added to the cached split
-        have = (r.get("region_beyond") or {}).get("sizes")
-        if region_sizes and have is None:
-            r["region_beyond"] = region_beyond(model, S[src], prior, S[tgt] if tgt else None, seed=seed,
-                                               sizes=region_sizes, pool_size=pool_size, region_rows=region_rows)
+    for seed, r in enumerate(splits):  # larger sets of the region form and of random, added to the cached split
+        for key, meth, want in (("region_beyond", "kpi_gp_region", region_sizes),
+                                ("random_beyond", "random", random_sizes)):
+            have = r.get(key) or {"sizes": [], "error_mean_m": []}
+            todo = tuple(m for m in want if m not in have["sizes"] and m < r["n_pool"])
+            if not todo:
+                continue
+            new = region_beyond(model, S[src], prior, S[tgt] if tgt else None, seed=seed, sizes=todo,
+                                pool_size=pool_size, region_rows=region_rows, method=meth)
+            both = sorted(zip(have["sizes"] + new["sizes"], have["error_mean_m"] + new["error_mean_m"]))
+            r[key] = {"sizes": [m for m, _ in both], "error_mean_m": [e for _, e in both],
+                      "time_s": have.get("time_s", 0.0) + new["time_s"]}
             atomic_write_json(cache / f"{case.replace('->', '_to_')}_seed{seed}.json", r)
-            print(f"[{case}] split {seed + 1}/{n_seeds}: kpi_gp_region with " + ", ".join(
-                f"{m} poses {e * 1e3:.3f}" for m, e in zip(r["region_beyond"]["sizes"],
-                                                          r["region_beyond"]["error_mean_m"]))
-                + f" mm ({r['region_beyond']['time_s']:.0f} s)", flush=True)
+            print(f"[{case}] split {seed + 1}/{n_seeds}: {meth} with " + ", ".join(
+                f"{m} poses {e * 1e3:.3f}" for m, e in zip(new["sizes"], new["error_mean_m"]))
+                + f" mm ({new['time_s']:.0f} s)", flush=True)
     return LearningCurves(case=case, prior=prior.source, sizes=splits[0]["sizes"], methods=splits[0]["methods"],
                           splits=splits, success=True, status="completed", nit=len(splits),
                           message=f"{len(splits)} splits", time_s=time.perf_counter() - t0)
@@ -238,6 +244,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--region-beyond", dest="region_beyond", default="",
                     help="larger sizes of the region form (kpi_gp_region), comma-separated, e.g. 240,480: where it "
                          "comes within 10 %% of the full pool (added to the cached splits)")
+    ap.add_argument("--random-beyond", dest="random_beyond", default="",
+                    help="larger sizes of the random sets beyond 240,480,960, comma-separated, e.g. 1360 "
+                         "(added to the cached splits)")
     a = ap.parse_args(argv)
     folder = find_data()
     if folder is None or not (folder / "Series_C").is_dir():
@@ -254,7 +263,8 @@ def main(argv: list[str] | None = None) -> int:
     for c in cases:
         res = run_case(c, a.seeds, cache, model, folder,
                        tuple(int(x) for x in a.region_beyond.split(",") if x.strip()), a.region_rows,
-                       tuple(x.strip() for x in a.methods.split(",") if x.strip()))
+                       tuple(x.strip() for x in a.methods.split(",") if x.strip()),
+                       tuple(int(x) for x in a.random_beyond.split(",") if x.strip()))
         results.append(res)
         print(res.summary(), flush=True)
         if a.markdown:

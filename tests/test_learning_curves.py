@@ -109,6 +109,21 @@ def test_region_form_beyond_the_grid_is_the_same_split_and_extends_poses_needed(
     assert "kpi_gp_region, larger sets" in res.summary() and res.to_dict()["region_beyond"]["sizes"] == [100]
 
 
+
+def test_random_sets_beyond_the_grid_are_the_curves_nested_random_sets(setting):
+    """method="random" draws the split's own permutation: its sets of the grid's and of random_beyond's sizes
+    are the curve's (the same scores), without building the design criteria; other methods are refused."""
+    from pin_kpi_oed.errors import InputError
+
+    model, data, prior, runs = setting
+    kw = dict(n_work=5, radius_rad=2.5)
+    got = region_beyond(model, data, prior, seed=1, sizes=(SIZES[-1], 120, 5000), method="random", **kw)
+    assert got["sizes"] == [SIZES[-1], 120]                            # above the pool: skipped
+    assert got["error_mean_m"][0] == pytest.approx(runs[1]["error_mean_m"]["random"][-1], rel=1e-9)
+    assert got["error_mean_m"][1] == pytest.approx(runs[1]["random_beyond"]["error_mean_m"][0], rel=1e-9)
+    with pytest.raises(InputError, match="kpi_gp_region and random"):
+        region_beyond(model, data, prior, seed=1, sizes=(40,), method="kpi", **kw)
+
 def test_poses_within_interpolates_in_log_m():
     sizes = np.array([10, 20, 40])
     assert poses_within(sizes, np.array([3.0, 2.0, 1.0]), 1.0) == pytest.approx(np.exp(np.log(20) + 0.9 * np.log(2)))

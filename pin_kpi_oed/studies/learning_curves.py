@@ -232,20 +232,31 @@ def curve_split(model: TrackerModel, data: MeasurementSet, prior: DiscrepancyPri
 def region_beyond(model: TrackerModel, data: MeasurementSet, prior: DiscrepancyPrior,
                   target: MeasurementSet | None = None, *, seed: int = 0, sizes: tuple[int, ...] = (240, 480),
                   test_frac: float = 0.3, n_work: int = 5, radius_rad: float = 0.5, joints: int = 5,
-                  pool_size: int | None = None, n_register: int = 60, region_rows: int = 100) -> dict:
-    """Larger sets of the region form (``kpi_gp_region``) on the split of :func:`curve_split` with the same
-    arguments (the same draws): where the designs come within reach of the full pool. Sizes above the pool are
-    skipped.
+                  pool_size: int | None = None, n_register: int = 60, region_rows: int = 100,
+                  method: str = "kpi_gp_region") -> dict:
+    """Larger sets of the region form (``kpi_gp_region``; ``method="random"``: of the nested random sets) on the
+    split of :func:`curve_split` with the same arguments (the same draws): where the designs come within reach of
+    the full pool. Sizes above the pool are skipped.
 
     Returns:
         ``{"sizes", "error_mean_m", "time_s"}`` (m).
+
+    Raises:
+        InputError: a method other than ``kpi_gp_region`` and ``random``.
     """
+    if method not in ("kpi_gp_region", "random"):
+        raise InputError(f"method '{method}': larger sets are drawn for kpi_gp_region and random only")
     t0 = time.perf_counter()
     rng = np.random.default_rng(seed)
     sp = _make_split(data, target, rng, test_frac, n_work, radius_rad, joints, pool_size, n_register)
-    des = _Designs(model, sp, prior, seed, radius_rad, joints, region_rows)
     big = [m for m in sizes if m < len(sp.pool)]
-    err = [_score(model, sp.pool.subset(np.sort(des.choose("kpi_gp_region", m))), sp, prior)[0] for m in big]
+    if method == "random":  # the permutation of _Designs.order, without the criteria
+        order = np.random.default_rng(seed).permutation(len(sp.pool))
+        choose = lambda m: order[:m]  # noqa: E731
+    else:
+        des = _Designs(model, sp, prior, seed, radius_rad, joints, region_rows)
+        choose = lambda m: des.choose("kpi_gp_region", m)  # noqa: E731
+    err = [_score(model, sp.pool.subset(np.sort(choose(m))), sp, prior)[0] for m in big]
     return {"sizes": big, "error_mean_m": err, "time_s": time.perf_counter() - t0}
 
 
