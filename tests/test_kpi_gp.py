@@ -189,8 +189,12 @@ def test_cli_design_with_default_discrepancy_curve_and_plateau(tmp_path, capsys)
     out = capsys.readouterr().out
     assert "discrepancy (default: S = 0.1 mm" in out and "no optimality certificate" in out
     assert "is below what the discrepancy allows" in out
+    assert "lever arm: the discrepancy is learnt at the reflector and the TCP is 100.0 mm from it" in out
+    assert "0.1 mrad per axis adds 14.1 um" in out     # KR 15 cell: reflector (60, 0, 120) mm, TCP (0, 0, 200) mm
     doc = json.loads(out_json.read_text())
     assert doc["discrepancy"]["scale_m"] == [1e-4] * 3
+    assert doc["discrepancy"]["tcp_from_reflector_m"] == pytest.approx(0.1)
+    assert doc["discrepancy"]["lever_arm_sigma_per_rad_m"] == pytest.approx(0.1 * np.sqrt(2))
     for d in doc["designs"]:
         assert d["discrepancy"]["tcp_sigma_m"] > 10 * d["tcp_sigma_m"]     # the honest σ is far above the paper's
     gp = {d["criterion"]: d["discrepancy"]["tcp_sigma_m"] for d in doc["designs"]}
@@ -205,6 +209,23 @@ def test_cli_design_with_default_discrepancy_curve_and_plateau(tmp_path, capsys)
     assert main(["design", "--cell", "kr15", "--criteria", "random,kpi_gp", "--measurements", "20", "--starts", "1",
                  "--max-iter", "15", "--pool-size", "300", "--target-sigma", str(1.05 * des[-1]), "--quiet"]) == 0
     assert "designed pose(s) reach it" in capsys.readouterr().out
+
+
+def test_lever_arm_factor_matches_monte_carlo():
+    """An isotropic flange rotation of σ_θ per axis moves a point at d from the reflector by δθ × d, whose 3-D RMS
+    is sqrt(2)·σ_θ·|d| (the factor the design output quotes)."""
+    from pin_kpi_oed.cli.design import LEVER_ARM_EXAMPLE_RAD, lever_arm_line, lever_arm_m
+    from pin_kpi_oed.model.tracker import TrackerModel
+    from pin_kpi_oed.model.robot import load_robot
+
+    rng = np.random.default_rng(0)
+    d = np.array([0.03, -0.05, 0.04])
+    theta = rng.normal(0.0, LEVER_ARM_EXAMPLE_RAD, (200_000, 3))
+    rms = np.sqrt(np.mean(np.sum(np.cross(theta, d) ** 2, axis=1)))
+    assert rms == pytest.approx(np.sqrt(2) * LEVER_ARM_EXAMPLE_RAD * np.linalg.norm(d), rel=0.01)
+    model = TrackerModel(load_robot("ur10"), reflector_m=np.array([0.0, 0.0, 0.1]), tcp_m=np.array([0.0, 0.0, 0.1]) + d)
+    assert lever_arm_m(model) == pytest.approx(np.linalg.norm(d))
+    assert f"adds {rms * 1e6:.1f} um" in lever_arm_line(model)
 
 
 def test_cli_design_without_the_discrepancy_is_unchanged(tmp_path, capsys):

@@ -259,7 +259,7 @@ def run(args: argparse.Namespace) -> int:
                   f"{_sigma_given(problem) * 1e6:.3f} um; the table adds each design's poses to them")
         print(discrepancy_table([r for r in results if r.criterion in criteria] or results,
                                 [g for r, g in zip(results, gp_scores) if r.criterion in criteria] or gp_scores))
-        print(*(no_certificate(c) for c in gp_names), sep="\n", end="\n" if gp_names else "")
+        _discrepancy_notes(problem, gp_names)
     curve = None
     if disc_on and (target is not None or getattr(args, "curve", None)):
         curve = _poses_needed(args, problem, cell, target, seed, m, checked, results)
@@ -622,6 +622,36 @@ def _sigma_given(problem) -> float:
         return float("inf")
 
 
+#: TCP-reflector distance (m) from which the design output states the lever arm the honest σ leaves out.
+LEVER_ARM_NOTE_M = 1e-3
+#: Flange rotation (rad per axis) the lever-arm line quotes as an example.
+LEVER_ARM_EXAMPLE_RAD = 1e-4
+
+
+def _discrepancy_notes(problem, gp_names: list[str]) -> None:
+    """Print that no certificate exists for the discrepancy-aware criteria, and the lever arm when the TCP is away
+    from the reflector."""
+    print(*(no_certificate(c) for c in gp_names), sep="\n", end="\n" if gp_names else "")
+    if lever_arm_m(problem.model) >= LEVER_ARM_NOTE_M:
+        print(lever_arm_line(problem.model))
+
+
+def lever_arm_m(model) -> float:
+    """Distance (m) of the TCP from the reflector, both in the tool frame."""
+    return float(np.linalg.norm(np.asarray(model.tcp_m, float) - np.asarray(model.reflector_m, float)))
+
+
+def lever_arm_line(model) -> str:
+    """One line: the honest σ is learnt at the reflector; an unmodelled flange rotation of σ_θ per axis (isotropic)
+    moves a TCP at distance d from it by sqrt(2)·σ_θ·d (3-D RMS), which no reflector position shows."""
+    d = lever_arm_m(model)
+    add = math.sqrt(2.0) * LEVER_ARM_EXAMPLE_RAD * d
+    return (f"lever arm: the discrepancy is learnt at the reflector and the TCP is {d * 1e3:.1f} mm from it; the "
+            f"sigma with the discrepancy leaves out the flange's unmodelled rotation, which one reflector cannot "
+            f"see ({LEVER_ARM_EXAMPLE_RAD * 1e3:g} mrad per axis adds {add * 1e6:.1f} um in quadrature at the TCP); "
+            f"a reflector at the TCP avoids it")
+
+
 def discrepancy_table(results: list, scores: list[dict]) -> str:
     """The predicted TCP σ at the working configurations: the paper's (tracker noise only) beside the honest one
     (discrepancy included), and the honest one over the working region when the scores hold it, µm."""
@@ -677,10 +707,15 @@ def _discrepancy_doc(doc: dict, problem, gp_scores: list[dict]) -> None:
                           "delta_sigma_m": d.prior_sigma_m().tolist(),
                           "kernel": None if d.kernel is None else d.kernel.to_dict(),
                           "certificate": "none exists for the discrepancy-aware criteria (kpi_gp, D_gp, ...)",
+                          "tcp_from_reflector_m": lever_arm_m(problem.model),
+                          "lever_arm_sigma_per_rad_m": math.sqrt(2.0) * lever_arm_m(problem.model),
                           "note": "designs[i].discrepancy: universal-kriging tr(C_s) and TCP sigma at the working "
                                   "configurations, discrepancy included, and its C_s (3t x 3t, m^2) in the tracker "
                                   "frame like designs[i].cov_s_m2 (pin-kpi-oed view draws it); "
-                                  "designs[i].trace_cs_m2 / tcp_sigma_m / cov_s_m2: the paper's, tracker noise only"}
+                                  "designs[i].trace_cs_m2 / tcp_sigma_m / cov_s_m2: the paper's, tracker noise only; "
+                                  "the discrepancy is learnt at the reflector: a flange rotation of s rad per axis "
+                                  "adds lever_arm_sigma_per_rad_m * s (3-D RMS, in quadrature) at the TCP, which "
+                                  "no sigma here includes"}
     region = getattr(problem, "region", None)
     doc["working_region"] = None if region is None else {
         **region.to_dict(), "note": "kpi_gp's KPI is tr(C_s) over the working configurations and these; "
