@@ -157,6 +157,14 @@ def markdown(res: LearningCurves) -> str:
         rows.append(f"| {m} | " + " | ".join(f"{res.array('pred_rms_scored_m', k)[:, j].mean() * 1e3:.3f} / "
                                              f"{res.array('error_rms_m', k)[:, j].mean() * 1e3:.3f}" for k in meths)
                     + " |")
+    others = [k for k in meths if k != "random"]
+    if others and "random" in meths:
+        rows += ["", "| m | " + " | ".join(f"{LABELS.get(k, k)}: change of the RMS against random, predicted / observed"
+                                           for k in others) + " |", "|---" * (len(others) + 1) + "|"]
+        chg = {k: [res.paired(k, key=key) for key in ("pred_rms_scored_m", "error_rms_m")] for k in others}
+        for j, m in enumerate(res.sizes):
+            rows.append(f"| {m} | " + " | ".join(f"{100 * chg[k][0][j]['change']:+.0f} % / {100 * chg[k][1][j]['change']:+.0f} %"
+                                                 for k in others) + " |")
     for meth in ("random", "kpi_gp_region"):
         big = res.beyond(meth)
         if big is not None:

@@ -90,6 +90,10 @@ def test_summary_paired_tests_and_poses_needed(setting):
     assert set(d["poses_within_10pct"]["observed"]) == set(runs[0]["methods"])
     text = res.summary()
     assert "kpi_gp" in text and "poses to within 10 % of the full pool" in text and "larger sets" in text
+    pred = res.paired("kpi_gp", key="pred_rms_scored_m")             # the predicted change, per split paired
+    x, y = res.array("pred_rms_scored_m", "kpi_gp"), res.array("pred_rms_scored_m", "random")
+    assert [p["change"] for p in pred] == pytest.approx(list(np.median(x / y, 0) - 1.0))
+    assert pred[-1]["change"] < 0          # the design lowers its own prediction against random's
 
 
 def test_region_form_beyond_the_grid_is_the_same_split_and_extends_poses_needed(setting):

@@ -300,12 +300,13 @@ class LearningCurves(Result):
         """(splits,) values of ``key`` for the full pool."""
         return np.array([s["full"][key] for s in self.splits], float)
 
-    def paired(self, meth: str, base: str = "random") -> list[dict]:
-        """Per size: the median over the splits of the paired relative change of the error against ``base``
-        (robust to a failed set), the change of the means, wins and the Wilcoxon signed-rank p (two-sided)."""
+    def paired(self, meth: str, base: str = "random", key: str = "error_mean_m") -> list[dict]:
+        """Per size: the median over the splits of the paired relative change of ``key`` (default the observed mean
+        error; ``pred_rms_scored_m``: the predicted one) against ``base`` (robust to a failed set), the change of
+        the means, wins and the Wilcoxon signed-rank p (two-sided)."""
         from scipy import stats
 
-        x, y = self.array("error_mean_m", meth), self.array("error_mean_m", base)
+        x, y = self.array(key, meth), self.array(key, base)
         out = []
         for j in range(len(self.sizes)):
             a, b = x[:, j], y[:, j]
