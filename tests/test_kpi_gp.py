@@ -187,7 +187,8 @@ def test_cli_design_with_default_discrepancy_curve_and_plateau(tmp_path, capsys)
                  "--max-iter", "15", "--pool-size", "300", "--target-sigma", "1e-5", "--curve", str(png),
                  "--json", str(out_json), "--quiet"]) == 0
     out = capsys.readouterr().out
-    assert "discrepancy (default: S = 0.1 mm" in out and "no optimality certificate" in out
+    assert "discrepancy (default for the industrial class, from the name 'kr15': S = 0.1 mm" in out
+    assert "no optimality certificate" in out
     assert "is below what the discrepancy allows" in out
     assert "lever arm: the discrepancy is learnt at the reflector and the TCP is 100.0 mm from it" in out
     assert "0.1 mrad per axis adds 14.1 um" in out     # KR 15 cell: reflector (60, 0, 120) mm, TCP (0, 0, 200) mm

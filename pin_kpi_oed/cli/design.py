@@ -85,6 +85,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         "1-5, within the joint bounds and collision-free); default 0.5 with kpi_gp (the discrepancy's "
                         "length scales are short: a few configurations do not represent where the robot works), "
                         "0 = the working configurations alone")
+    p.add_argument("--robot-class", dest="robot_class", choices=["collaborative", "industrial", "generic"],
+                   default=None, help="class of the default discrepancy without --model (default: from the robot's "
+                                      "name: ur*, panda* collaborative; kr* industrial; else generic)")
     p.add_argument("--work-samples", dest="work_samples", type=int, default=None,
                    help="configurations drawn for the working region (default 100; the infeasible ones are dropped)")
     p.add_argument("--reregister", default=None, metavar="work|FILE",
@@ -501,6 +504,7 @@ def _make_problem(args: argparse.Namespace, cell, given_file, collision: bool, q
     else:
         problem = DesignProblem(cell, collision=collision,
                                 distances={"closed-form": "numpy"}.get(getattr(args, "distances", None), "geometry"))
+    problem.robot_class = getattr(args, "robot_class", None)
     if getattr(args, "model", None):
         if given_file:  # a measurement campaign: the discrepancy re-fitted on the measured batch, geometric design
             from pin_kpi_oed.identification.model_file import load_model_file

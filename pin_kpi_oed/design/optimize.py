@@ -305,15 +305,19 @@ class DesignProblem:
     #: Optional :class:`~pin_kpi_oed.oed.extended.ExtendedModel`: design over geometry + effects with a prior.
     extended: Any = None
     #: Optional :class:`~pin_kpi_oed.oed.discrepancy_kpi.DiscrepancyPrior` of the ``kpi_gp`` criterion and of the
-    #: honest TCP σ (None: ``kpi_gp`` uses :func:`~pin_kpi_oed.oed.discrepancy_kpi.default_discrepancy`).
+    #: honest TCP σ (None: the documented default of the robot's class,
+    #: :func:`~pin_kpi_oed.oed.discrepancy_defaults.class_discrepancy`).
     discrepancy: Any = None
+    #: Optional robot class of that default (a key of :data:`~pin_kpi_oed.oed.discrepancy_defaults.ROBOT_CLASSES`;
+    #: None: from the robot's name).
+    robot_class: str | None = None
 
     def discrepancy_prior(self) -> Any:
-        """The discrepancy of this problem (:attr:`discrepancy`, else the documented default)."""
-        from pin_kpi_oed.oed.discrepancy_kpi import default_discrepancy
+        """The discrepancy of this problem (:attr:`discrepancy`, else the documented default of the robot's class)."""
+        from pin_kpi_oed.oed.discrepancy_defaults import class_discrepancy
 
         if self.discrepancy is None:
-            self.discrepancy = default_discrepancy(self.n)
+            self.discrepancy = class_discrepancy(self.cell.robot, self.robot_class)
         return self.discrepancy
 
     #: Optional configurations (r, n) rad where the set-up is registered again before the calibration is used (another
