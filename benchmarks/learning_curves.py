@@ -157,6 +157,13 @@ def markdown(res: LearningCurves) -> str:
         rows.append(f"| {m} | " + " | ".join(f"{res.array('pred_rms_scored_m', k)[:, j].mean() * 1e3:.3f} / "
                                              f"{res.array('error_rms_m', k)[:, j].mean() * 1e3:.3f}" for k in meths)
                     + " |")
+    if "->" in res.case and all("pred_rms_scored_exact_m" in sp for sp in res.splits):  # across sessions
+        rows += ["", "| m | " + " | ".join(f"{LABELS.get(k, k)}: predicted RMS, criterion's / exact re-registered "
+                                           f"form, and observed (median, mm)" for k in meths) + " |",
+                 "|---" * (len(meths) + 1) + "|"]
+        for j, m in enumerate(res.sizes):
+            rows.append(f"| {m} | " + " | ".join(" / ".join(f"{np.median(res.array(key, k)[:, j]) * 1e3:.3f}" for key in (
+                "pred_rms_scored_m", "pred_rms_scored_exact_m", "error_rms_m")) for k in meths) + " |")
     others = [k for k in meths if k != "random"]
     if others and "random" in meths:
         rows += ["", "| m | " + " | ".join(f"{LABELS.get(k, k)}: change of the RMS against random, predicted / observed"

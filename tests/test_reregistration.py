@@ -12,7 +12,7 @@ from pin_kpi_oed.design.optimize import DesignProblem
 from pin_kpi_oed.errors import InputError
 from pin_kpi_oed.oed.discrepancy_kpi import (DiscrepancyDesignCriterion, DiscrepancyPrior, default_discrepancy,
                                              kpi_gp_covariance)
-from pin_kpi_oed.oed.reregistration import reregistration
+from pin_kpi_oed.oed.reregistration import reregistered_covariance, reregistration
 
 from .fd import fd_rows
 
@@ -69,6 +69,16 @@ def test_reregistered_covariance_matches_monte_carlo(white):
     assert np.trace(emp) == pytest.approx(np.trace(Cs), rel=0.03 if white else 0.1)
     sd = np.sqrt(np.outer(np.diag(Cs), np.diag(Cs)))
     assert np.abs(emp - Cs).max() <= (0.05 if white else 0.15) * sd.max()
+    # the exact form (the kriging error at R in the registration) matches in both cases, and equals the criterion's
+    # form with a white discrepancy (no kriging error to correlate)
+    C_WR = kpi_gp_covariance(J, np.concatenate([E, JR]), Kall[:m, :m], Kall[m:, :m], Kall[m:, m:], disc.scale_m,
+                             disc.noise)
+    exact = reregistered_covariance(rr, C_WR)
+    assert np.trace(emp) == pytest.approx(np.trace(exact), rel=0.03)
+    sd = np.sqrt(np.outer(np.diag(exact), np.diag(exact)))
+    assert np.abs(emp - exact).max() <= 0.05 * sd.max()
+    if white:
+        assert exact == pytest.approx(Cs, rel=1e-9, abs=1e-12 * np.abs(Cs).max())
 
 
 def test_a_pure_setup_error_is_removed_by_registering_at_the_work(problem):
@@ -101,6 +111,26 @@ def test_gradient_with_reregistration_matches_finite_differences(problem):
     sel = crit.select(problem.random_design(80, 2)[0], 12)
     assert sel.value == pytest.approx(crit.value(problem.random_design(80, 2)[0][sel.indices]), rel=1e-9)
 
+
+
+def test_exact_form_of_the_criterion(problem):
+    """The criterion's exact re-registered covariance: its own covariance without registration and with a white
+    discrepancy (no kriging error at R to carry); with a correlated one it differs, and a wrong C_WR is refused."""
+    Q = problem.random_design(16, 5)[0]
+    R = problem.random_design(8, 9)[0]
+    d = default_discrepancy(6)
+    white = DiscrepancyPrior(None, d.scale_m, d.noise)
+    crit = DiscrepancyDesignCriterion(problem.model, problem.base, white, problem.cell.q_work, p=problem.p0)
+    assert np.allclose(crit.reregistered_covariance(Q), crit.covariance(Q))
+    crit.set_registration(R)
+    C = crit.covariance(Q)
+    assert np.allclose(crit.reregistered_covariance(Q), C, rtol=1e-9, atol=1e-12 * np.abs(C).max())
+    corr = DiscrepancyDesignCriterion(problem.model, problem.base, d, problem.cell.q_work, p=problem.p0,
+                                      Q_register=R)
+    exact, approx = np.trace(corr.reregistered_covariance(Q)), corr.value(Q)
+    assert exact > 0 and abs(exact / approx - 1) > 1e-4
+    with pytest.raises(InputError, match="C_WR must be"):
+        reregistered_covariance(corr.reg, np.eye(3))
 
 def test_too_few_registration_configurations_are_refused(problem):
     crit = DiscrepancyDesignCriterion(problem.model, problem.base, default_discrepancy(6), problem.cell.q_work,

@@ -349,6 +349,21 @@ class DiscrepancyDesignCriterion:
                               self.prior_info)
         return C if self.reg is None else C + self.reg.cov_m2
 
+    def reregistered_covariance(self, Q: np.ndarray) -> np.ndarray:
+        """C_s (3t, 3t) m² of the measured poses (``Q_given`` + Q), base frame, after re-registration in the exact
+        form: the kriging error at R in the registration (:func:`~pin_kpi_oed.oed.reregistration.reregistered_covariance`);
+        :meth:`covariance` without re-registration."""
+        from pin_kpi_oed.oed.reregistration import reregistered_covariance
+
+        Q = np.atleast_2d(Q)
+        if self.reg is None:
+            return self.covariance(Q)
+        Qa, Ja = self._all(Q, _base_frame(self.model, self.p, Q, self.base, False)[0] if len(Q) else None)
+        d, WR = self.discrepancy, np.vstack([self.Q_work, self.Q_register])
+        E2 = np.concatenate([self.reg.E_before, self.pool_jacobians(self.Q_register)])
+        C_WR = kpi_gp_covariance(Ja, E2, d.cov(Qa), d.cov(WR, Qa), d.cov(WR), d.scale_m, d.noise, self.prior_info)
+        return reregistered_covariance(self.reg, C_WR)
+
     def value(self, Q: np.ndarray) -> float:
         """tr C_s (m²)."""
         Q = np.atleast_2d(Q)

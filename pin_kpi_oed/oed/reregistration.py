@@ -19,6 +19,21 @@ term (white level w per axis at the r registration rows),
 .. math::  C_{\mathrm{reg}} = E_s P\,N_R\,P^T E_s^T,\qquad P = (G_R^T \Omega G_R)^{-1} G_R^T \Omega,\qquad
            N_R = \operatorname{blkdiag}_a\, s_a^2 w I_r.
 
+**The kriging error at R.** The registration fits the set-up to the residuals at R, which hold the calibrated
+prediction's error there: its parametric part J_R Δθ (in Ẽ above) and the discrepancy's kriging error k_R, which is
+correlated with the kriging error k_W at W. Exactly (to first order), with e = [e_W; e_R] the calibrated
+prediction's errors at W and R and C_WR their universal-kriging covariance (the KPI of W ∪ R with E' = [E; J_R]),
+
+.. math::  e_W' = L\,e - B\,\varepsilon_R,\qquad L = [\,I,\; -B\,],\qquad B = E_s P,\qquad
+           C_s' = L\,C_{WR}\,L^T + C_{\mathrm{reg}}
+
+(:func:`reregistered_covariance`).
+
+The design criterion keeps Ẽ (it credits the registration with the parametric part only, and counts k_W as
+before): its pool updates and IPOPT gradient are those of a plain trace, where L C_WR Lᵀ would need a weighted
+one. The honest σ the design reports and the learning curves' predictions use the exact form
+(:meth:`~pin_kpi_oed.oed.discrepancy_kpi.DiscrepancyDesignCriterion.reregistered_covariance`).
+
 The discrepancy is taken as carried to the new session with the model (what the calibrated model assumes: its
 posterior mean is predicted there, and its kriging error at W is counted as before). A discrepancy that belongs to
 the session is not in this prediction: ``register`` measures it on the registration rows and scales the station's
@@ -37,7 +52,7 @@ import numpy as np
 
 from pin_kpi_oed.errors import InputError
 
-__all__ = ["Reregistration", "reregistration"]
+__all__ = ["Reregistration", "reregistration", "reregistered_covariance"]
 
 
 @dataclass
@@ -50,6 +65,8 @@ class Reregistration:
         cov_m2: C_reg (3t, 3t) m², rows per working configuration then axis.
         Q_register: the registration configurations R (r, n) rad.
         setup: mask of the set-up columns among the nb identifiable parameters.
+        gain: B = E_s P (3t, 3r): how the registration moves the working configurations' prediction per residual at
+            R (rows per configuration then axis).
     """
 
     E: np.ndarray
@@ -57,6 +74,7 @@ class Reregistration:
     cov_m2: np.ndarray
     Q_register: np.ndarray
     setup: np.ndarray
+    gain: np.ndarray
 
     @property
     def trace_m2(self) -> float:
@@ -98,4 +116,23 @@ def reregistration(E: np.ndarray, J_register: np.ndarray, setup: np.ndarray, sca
     Et[:, :, setup] = 0.0                                       # exactly: the old set-up does not matter
     N = np.kron(noise * np.eye(r), np.diag(s2))                 # rows (configuration, axis)
     B = Es.reshape(-1, Es.shape[2]) @ P                         # (3t, 3r)
-    return Reregistration(Et, E, B @ N @ B.T, np.atleast_2d(np.asarray(Q_register, float)), setup)
+    return Reregistration(Et, E, B @ N @ B.T, np.atleast_2d(np.asarray(Q_register, float)), setup, B)
+
+
+def reregistered_covariance(rr: Reregistration, C_WR: np.ndarray) -> np.ndarray:
+    """The exact re-registered C_s' = L C_WR Lᵀ + C_reg of the module formulas, (3t, 3t) m², base frame.
+
+    Args:
+        rr: the :func:`reregistration` of the working configurations W and the registration configurations R.
+        C_WR: the universal-kriging covariance of the calibrated prediction's errors at W ∪ R (W first; rows per
+            configuration then axis), (3(t + r), 3(t + r)) m²: the KPI covariance with E' = [E; J_R]
+            (:func:`~pin_kpi_oed.oed.discrepancy_kpi.kpi_gp_covariance`).
+
+    Raises:
+        InputError: C_WR of another size than W ∪ R.
+    """
+    n_w, n_r = rr.gain.shape
+    if np.shape(C_WR) != (n_w + n_r, n_w + n_r):
+        raise InputError(f"re-registration: C_WR must be {n_w + n_r} x {n_w + n_r} (W then R), got {np.shape(C_WR)}")
+    L = np.hstack([np.eye(n_w), -rr.gain])
+    return L @ np.asarray(C_WR, float) @ L.T + rr.cov_m2

@@ -166,12 +166,15 @@ class _Designs:
             return select(self.Fp, m, self.K_kpi if meth == "kpi" else None, seed=self.seed).indices
         raise InputError(f"method '{meth}': unknown (known: {', '.join(METHODS)})")
 
-    def predicted(self, idx: np.ndarray) -> tuple[float, float]:
-        """(σ at W = sqrt(tr C_s / t), predicted RMS 3-D error at the scored rows) of the poses ``idx`` (m)."""
+    def predicted(self, idx: np.ndarray) -> tuple[float, float, float]:
+        """(σ at W = sqrt(tr C_s / t), predicted RMS 3-D error at the scored rows, the same with the exact
+        re-registered covariance) of the poses ``idx`` (m); the last two are equal within a session."""
         Q = self.Q[np.asarray(idx, int)]
         t, n = self.crit_w.Q_work.shape[0], self.crit_s.Q_work.shape[0]
-        return (float(np.sqrt(self.crit_w.value(Q) / t)),
-                float(np.sqrt(self.crit_s.value(Q) / n + self.white_m2)))
+        rms = float(np.sqrt(self.crit_s.value(Q) / n + self.white_m2))
+        exact = rms if self.crit_s.reg is None else float(
+            np.sqrt(np.trace(self.crit_s.reregistered_covariance(Q)) / n + self.white_m2))
+        return float(np.sqrt(self.crit_w.value(Q) / t)), rms, exact
 
 
 def curve_split(model: TrackerModel, data: MeasurementSet, prior: DiscrepancyPrior,
@@ -196,7 +199,8 @@ def curve_split(model: TrackerModel, data: MeasurementSet, prior: DiscrepancyPri
 
     Returns:
         ``{"seed", "n_pool", "n_scored", "sizes", "methods", "error_mean_m", "error_rms_m", "error_geo_mean_m",
-        "pred_sigma_work_m", "pred_rms_scored_m"`` (per method, one value per size), ``"full"`` (the same numbers
+        "pred_sigma_work_m", "pred_rms_scored_m", "pred_rms_scored_exact_m"`` (per method, one value per size;
+        the last is the prediction with the exact re-registered covariance across sessions), ``"full"`` (the same numbers
         of the whole pool), ``"random_beyond"`` (``sizes`` and ``error_mean_m`` of the larger random sets),
         ``"select_time_s"`` (per method), ``"time_s"``}.
 
@@ -209,7 +213,8 @@ def curve_split(model: TrackerModel, data: MeasurementSet, prior: DiscrepancyPri
     if max(sizes) > len(sp.pool):
         raise InputError(f"{data.source}: a pool of {len(sp.pool)} rows is too small for {max(sizes)} poses")
     des = _Designs(model, sp, prior, seed, radius_rad, joints, region_rows)
-    keys = ("error_mean_m", "error_rms_m", "error_geo_mean_m", "pred_sigma_work_m", "pred_rms_scored_m")
+    keys = ("error_mean_m", "error_rms_m", "error_geo_mean_m", "pred_sigma_work_m", "pred_rms_scored_m",
+            "pred_rms_scored_exact_m")
     out: dict = {k: {meth: [] for meth in methods} for k in keys}
     sel_time = {meth: 0.0 for meth in methods}
     for m in sizes:
