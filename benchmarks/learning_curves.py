@@ -184,6 +184,7 @@ def compact_markdown(results: list[LearningCurves], methods: tuple[str, ...] = (
                      ) -> str:
     """Several cases in one markdown table: per case and m the median (mm) of each method, against random the
     median paired change, wins and Wilcoxon p; then the poses each needs to come within 10 % of the full pool."""
+    methods = tuple(k for k in methods if all(k in res.methods for res in results))  # the ones every case ran
     rows = ["| case | m | " + " | ".join(LABELS[k] for k in methods) + " |", "|---" * (len(methods) + 2) + "|"]
     for res in results:
         for j, m in enumerate(res.sizes):
