@@ -187,6 +187,16 @@ def test_cli_compensate_targets_in_mm_with_other_names(world, tmp_path, capsys):
     assert [r["name"] for r in rows] == [f"T{i}" for i in range(12)] and all(r["status"] == "ok" for r in rows)
     Q = np.array([[float(r[j]) for j in robot.joint_names] for r in rows])
     assert np.linalg.norm(cm.predict(Q) - Yt, axis=1).max() < 1e-8
+    # the honest sigma in the JSON (the CSV's), and the lever arm said when the TCP is away from the reflector
+    assert rep["sigma_m"] == pytest.approx([float(r["sigma_m"]) for r in rows]) and min(rep["sigma_m"]) > 0
+    assert rep["tcp_from_reflector_m"] == 0.0
+    refl = cm.setups[cm.station(None)].reflector_m
+    tcp = refl + np.array([0.0, 0.03, 0.04])
+    assert main([str(a) for a in base[:-1] + ["--columns", "name=Point,x=X,y=Y,z=Z", "--units", "mm", "--tcp",
+                                              ",".join(f"{v:.17g}" for v in tcp), "--json", tmp_path / "r2.json"]]) == 0
+    out_text = capsys.readouterr().out
+    assert "lever arm: the discrepancy is learnt at the reflector and the TCP is 50.0 mm from it; this sigma" in out_text
+    assert json.loads((tmp_path / "r2.json").read_text())["tcp_from_reflector_m"] == pytest.approx(0.05)
     # a joint-space program (degrees, other names) through the same options
     names = [f"A{k + 1}" for k in range(robot.nq)]
     Qp = _regular(robot.random_q(np.random.default_rng(12), 5) * 0.8)

@@ -215,7 +215,7 @@ def test_cli_design_with_default_discrepancy_curve_and_plateau(tmp_path, capsys)
 def test_lever_arm_factor_matches_monte_carlo():
     """An isotropic flange rotation of σ_θ per axis moves a point at d from the reflector by δθ × d, whose 3-D RMS
     is sqrt(2)·σ_θ·|d| (the factor the design output quotes)."""
-    from pin_kpi_oed.cli.design import LEVER_ARM_EXAMPLE_RAD, lever_arm_line, lever_arm_m
+    from pin_kpi_oed.discrepancy.lever_arm import LEVER_ARM_EXAMPLE_RAD, lever_arm_line, lever_arm_m
     from pin_kpi_oed.model.tracker import TrackerModel
     from pin_kpi_oed.model.robot import load_robot
 
@@ -225,8 +225,8 @@ def test_lever_arm_factor_matches_monte_carlo():
     rms = np.sqrt(np.mean(np.sum(np.cross(theta, d) ** 2, axis=1)))
     assert rms == pytest.approx(np.sqrt(2) * LEVER_ARM_EXAMPLE_RAD * np.linalg.norm(d), rel=0.01)
     model = TrackerModel(load_robot("ur10"), reflector_m=np.array([0.0, 0.0, 0.1]), tcp_m=np.array([0.0, 0.0, 0.1]) + d)
-    assert lever_arm_m(model) == pytest.approx(np.linalg.norm(d))
-    assert f"adds {rms * 1e6:.1f} um" in lever_arm_line(model)
+    assert lever_arm_m(model.tcp_m, model.reflector_m) == pytest.approx(np.linalg.norm(d))
+    assert f"adds {rms * 1e6:.1f} um" in lever_arm_line(lever_arm_m(model.tcp_m, model.reflector_m))
 
 
 def test_cli_design_without_the_discrepancy_is_unchanged(tmp_path, capsys):

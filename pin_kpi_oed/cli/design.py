@@ -626,34 +626,15 @@ def _sigma_given(problem) -> float:
         return float("inf")
 
 
-#: TCP-reflector distance (m) from which the design output states the lever arm the honest σ leaves out.
-LEVER_ARM_NOTE_M = 1e-3
-#: Flange rotation (rad per axis) the lever-arm line quotes as an example.
-LEVER_ARM_EXAMPLE_RAD = 1e-4
-
-
 def _discrepancy_notes(problem, gp_names: list[str]) -> None:
     """Print that no certificate exists for the discrepancy-aware criteria, and the lever arm when the TCP is away
     from the reflector."""
     print(*(no_certificate(c) for c in gp_names), sep="\n", end="\n" if gp_names else "")
-    if lever_arm_m(problem.model) >= LEVER_ARM_NOTE_M:
-        print(lever_arm_line(problem.model))
+    from pin_kpi_oed.discrepancy.lever_arm import LEVER_ARM_NOTE_M, lever_arm_line, lever_arm_m
 
-
-def lever_arm_m(model) -> float:
-    """Distance (m) of the TCP from the reflector, both in the tool frame."""
-    return float(np.linalg.norm(np.asarray(model.tcp_m, float) - np.asarray(model.reflector_m, float)))
-
-
-def lever_arm_line(model) -> str:
-    """One line: the honest σ is learnt at the reflector; an unmodelled flange rotation of σ_θ per axis (isotropic)
-    moves a TCP at distance d from it by sqrt(2)·σ_θ·d (3-D RMS), which no reflector position shows."""
-    d = lever_arm_m(model)
-    add = math.sqrt(2.0) * LEVER_ARM_EXAMPLE_RAD * d
-    return (f"lever arm: the discrepancy is learnt at the reflector and the TCP is {d * 1e3:.1f} mm from it; the "
-            f"sigma with the discrepancy leaves out the flange's unmodelled rotation, which one reflector cannot "
-            f"see ({LEVER_ARM_EXAMPLE_RAD * 1e3:g} mrad per axis adds {add * 1e6:.1f} um in quadrature at the TCP); "
-            f"a reflector at the TCP avoids it")
+    d = lever_arm_m(problem.model.tcp_m, problem.model.reflector_m)
+    if d >= LEVER_ARM_NOTE_M:
+        print(lever_arm_line(d))
 
 
 def discrepancy_table(results: list, scores: list[dict]) -> str:
@@ -705,14 +686,17 @@ def _given_prior(path: str, problem) -> np.ndarray:
 
 def _discrepancy_doc(doc: dict, problem, gp_scores: list[dict]) -> None:
     """Add the discrepancy (source, S, white level, kernel) and every design's honest scores to the JSON (SI)."""
+    from pin_kpi_oed.discrepancy.lever_arm import lever_arm_m, lever_arm_sigma_m
+
     d = problem.discrepancy_prior()
     doc["discrepancy"] = {"source": d.source, "scale_m": d.scale_m.tolist(), "noise": d.noise,
                           "white_sigma_m": (d.scale_m * math.sqrt(d.noise)).tolist(),
                           "delta_sigma_m": d.prior_sigma_m().tolist(),
                           "kernel": None if d.kernel is None else d.kernel.to_dict(),
                           "certificate": "none exists for the discrepancy-aware criteria (kpi_gp, D_gp, ...)",
-                          "tcp_from_reflector_m": lever_arm_m(problem.model),
-                          "lever_arm_sigma_per_rad_m": math.sqrt(2.0) * lever_arm_m(problem.model),
+                          "tcp_from_reflector_m": lever_arm_m(problem.model.tcp_m, problem.model.reflector_m),
+                          "lever_arm_sigma_per_rad_m": lever_arm_sigma_m(
+                              lever_arm_m(problem.model.tcp_m, problem.model.reflector_m), 1.0),
                           "note": "designs[i].discrepancy: universal-kriging tr(C_s) and TCP sigma at the working "
                                   "configurations, discrepancy included, and its C_s (3t x 3t, m^2) in the tracker "
                                   "frame like designs[i].cov_s_m2 (pin-kpi-oed view draws it); "

@@ -263,7 +263,9 @@ class CompensationResult(Result):
             result: ``ok`` if every target is ok, else a count).
         frame: ``cell`` or ``base``; tcp_m: the TCP point (tool frame, m); station.
         sigma_m: predicted 3-D standard deviation of the TCP at q (m): the model's discrepancy
-            (posterior and white level; its noise model's σ without one), (m,).
+            (posterior and white level; its noise model's σ without one), (m,). Learnt at the reflector: a TCP
+            away from it adds the flange rotation's lever arm (:mod:`pin_kpi_oed.discrepancy.lever_arm`).
+        tcp_from_reflector_m: the TCP's distance from the station's reflector (m).
     """
 
     names: list[str] = field(default_factory=list)
@@ -280,6 +282,7 @@ class CompensationResult(Result):
     tcp_m: np.ndarray = field(default_factory=lambda: np.zeros(3))
     orientation: bool = False
     sigma_m: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    tcp_from_reflector_m: float = 0.0
 
     def summary(self) -> str:
         """Counts, correction statistics (mm), and the targets that are not ok."""
@@ -295,6 +298,10 @@ class CompensationResult(Result):
         if self.sigma_m.size:
             lines.append(f"predicted TCP sigma (3-D) at the compensated joints: mean {np.mean(self.sigma_m) * 1e3:.4f} "
                          f"mm, max {np.max(self.sigma_m) * 1e3:.4f} mm")
+            from pin_kpi_oed.discrepancy.lever_arm import LEVER_ARM_NOTE_M, lever_arm_line
+
+            if self.tcp_from_reflector_m >= LEVER_ARM_NOTE_M:
+                lines.append(lever_arm_line(self.tcp_from_reflector_m, "this sigma"))
         bad = [(n, s) for n, s in zip(self.names, self.target_status) if s != "ok"]
         for n, s in bad[:10]:
             lines.append(f"  target {n}: {s}")
@@ -309,7 +316,8 @@ class CompensationResult(Result):
                             "q": self.q, "q_nominal": self.q_nominal, "correction_m": self.correction_m,
                             "residual_m": self.residual_m, "residual_rad": self.residual_rad,
                             "inv_cond": self.inv_cond, "target_status": self.target_status, "frame": self.frame,
-                            "station": self.station, "tcp_m": self.tcp_m, "orientation": self.orientation})
+                            "station": self.station, "tcp_m": self.tcp_m, "orientation": self.orientation,
+                            "sigma_m": self.sigma_m, "tcp_from_reflector_m": self.tcp_from_reflector_m})
 
 
 def _nominal_ik(pm0: PoseModel, pos_t: np.ndarray, R_t: np.ndarray | None, Q_start: np.ndarray, aux: Any,
@@ -443,7 +451,8 @@ def _result(cm: CalibratedModel, ts: TargetSet, opt: CompensationOptions, pm: Po
         joint_names=list(cm.robot.joint_names), q_nominal=nom.Q, q=cal.Q, correction_m=correction,
         residual_m=cal.err_m, residual_rad=cal.err_rad, inv_cond=cal.inv_cond, target_status=status,
         frame=opt.frame, station=cm.station(opt.station), tcp_m=pm.tcp, orientation=ts.rotvec_rad is not None,
-        sigma_m=_tcp_sigma(cm, cal.Q, ts.aux, opt.station))
+        sigma_m=_tcp_sigma(cm, cal.Q, ts.aux, opt.station),
+        tcp_from_reflector_m=float(np.linalg.norm(pm.tcp - cm.setups[cm.station(opt.station)].reflector_m)))
 
 
 def _tcp_sigma(cm: CalibratedModel, Q: np.ndarray, aux: Any, station: str | None) -> np.ndarray:
