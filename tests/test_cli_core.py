@@ -142,3 +142,20 @@ def test_simulate_design_measures_the_design_poses(tmp_path):
     assert head[:6] == list(load_robot("kr15").joint_names) and np.allclose(joints, Q, atol=1e-9)
     res = run("simulate", "--design", str(design), "--criterion", "random", "--out", str(tmp_path / "r.csv"))
     assert res.returncode == 0 and len((tmp_path / "r.csv").read_text().splitlines()) == 1 + 10
+
+
+@pytest.mark.parametrize("argv, expect", [
+    (["design", "--robot-class", "heavy"], "argument --robot-class: invalid choice: 'heavy'"),
+    (["design", "--measurements", "x"], "argument --measurements: invalid int value: 'x'"),
+    (["nosuch"], "argument command: invalid choice: 'nosuch'"),
+    ([], "the following arguments are required: command"),
+])
+def test_usage_errors_are_one_line_and_exit_2(argv, expect, capsys):
+    """A usage error (unknown choice, wrong type, missing command) is one line naming the option, exit 2."""
+    from pin_kpi_oed.cli.app import main
+
+    with pytest.raises(SystemExit) as exc:
+        main(argv)
+    assert exc.value.code == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and expect in err[0] and err[0].endswith("--help")

@@ -65,9 +65,17 @@ def cmd_demo(args: argparse.Namespace) -> int:
     return run_design(ns)
 
 
+class OneLineParser(argparse.ArgumentParser):
+    """An argument parser whose usage errors are one line (``prog: error: message; see prog --help``) and exit 2,
+    like every other bad input of the command line (argparse prints the whole usage block first)."""
+
+    def error(self, message: str):  # noqa: D401 - argparse's hook
+        self.exit(2, f"{self.prog}: error: {message}; see {self.prog} --help\n")
+
+
 def build_parser() -> argparse.ArgumentParser:
-    """The argument parser with every available subcommand."""
-    parser = argparse.ArgumentParser(prog="pin-kpi-oed", description=__doc__.splitlines()[0])
+    """The argument parser with every available subcommand (their usage errors: one line, exit 2)."""
+    parser = OneLineParser(prog="pin-kpi-oed", description=__doc__.splitlines()[0])
     parser.add_argument("--threads", type=int, default=None,
                         help="BLAS / OpenMP threads inside the package (default 1, or PIN_KPI_OED_THREADS)")
     sub = parser.add_subparsers(dest="command", required=True)
