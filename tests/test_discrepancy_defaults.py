@@ -82,4 +82,8 @@ def test_the_class_scales_the_honest_trace_not_the_design():
            for k, d in priors.items()}
     ratio = (priors["collaborative"].scale_m[0] / priors["generic"].scale_m[0]) ** 2
     assert val["collaborative"] == pytest.approx(ratio * val["generic"], rel=1e-6)
+    pool = problem.random_design(120, 3)[0]                                    # the pool selection is the same
+    sel = {k: DiscrepancyDesignCriterion(problem.model, problem.base, d, problem.cell.q_work, p=problem.p0)
+           .select(pool, 12).indices for k, d in priors.items()}
+    assert np.array_equal(sel["collaborative"], sel["generic"])
     assert problem.discrepancy_prior().scale_m[0] == pytest.approx(priors["collaborative"].scale_m[0])

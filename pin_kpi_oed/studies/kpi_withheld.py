@@ -10,7 +10,9 @@ data are rows of the same noisy measurements: the comparison is paired). Per num
   exchange pass) with the discrepancy's hyper-parameters fitted on a separate *pilot* set of the same robot
   (``identify(..., discrepancy="auto")``, a user's default, on random feasible poses that are not in the pool: a
   white discrepancy when the process does not pay on the pilot, and the criterion is then the noise-only KPI);
-* ``kpi_gp_default``: the same criterion with the documented default discrepancy (nothing measured before);
+* ``kpi_gp_default``: the same criterion with the generic default discrepancy (nothing measured before; the UR10's
+  class default of :mod:`~pin_kpi_oed.oed.discrepancy_defaults` differs by its scale only, which multiplies every
+  tr C_s by the same factor and leaves the selection unchanged);
 * ``kpi``: the paper's KPI (noise only), pool selection (:func:`~pin_kpi_oed.oed.pool.select`);
 * ``random``: the first m of a seeded permutation of the pool.
 
