@@ -689,14 +689,13 @@ def _discrepancy_doc(doc: dict, problem, gp_scores: list[dict]) -> None:
     from pin_kpi_oed.discrepancy.lever_arm import lever_arm_m, lever_arm_sigma_m
 
     d = problem.discrepancy_prior()
+    arm = lever_arm_m(problem.model.tcp_m, problem.model.reflector_m)
     doc["discrepancy"] = {"source": d.source, "scale_m": d.scale_m.tolist(), "noise": d.noise,
                           "white_sigma_m": (d.scale_m * math.sqrt(d.noise)).tolist(),
                           "delta_sigma_m": d.prior_sigma_m().tolist(),
                           "kernel": None if d.kernel is None else d.kernel.to_dict(),
                           "certificate": "none exists for the discrepancy-aware criteria (kpi_gp, D_gp, ...)",
-                          "tcp_from_reflector_m": lever_arm_m(problem.model.tcp_m, problem.model.reflector_m),
-                          "lever_arm_sigma_per_rad_m": lever_arm_sigma_m(
-                              lever_arm_m(problem.model.tcp_m, problem.model.reflector_m), 1.0),
+                          "tcp_from_reflector_m": arm, "lever_arm_sigma_per_rad_m": lever_arm_sigma_m(arm, 1.0),
                           "note": "designs[i].discrepancy: universal-kriging tr(C_s) and TCP sigma at the working "
                                   "configurations, discrepancy included, and its C_s (3t x 3t, m^2) in the tracker "
                                   "frame like designs[i].cov_s_m2 (pin-kpi-oed view draws it); "

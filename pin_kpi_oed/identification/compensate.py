@@ -432,6 +432,8 @@ def _check_effects(cm: CalibratedModel, aux: MeasurementSet) -> None:
 
 def _result(cm: CalibratedModel, ts: TargetSet, opt: CompensationOptions, pm: PoseModel, nom: _IK, cal: _IK,
             pos_t: np.ndarray, t0: float) -> CompensationResult:
+    from pin_kpi_oed.discrepancy.lever_arm import lever_arm_m
+
     pos_nom, _ = pm.pose(nom.Q, ts.aux)
     correction = np.linalg.norm(pos_nom - pos_t, axis=1)
     status = []
@@ -452,7 +454,7 @@ def _result(cm: CalibratedModel, ts: TargetSet, opt: CompensationOptions, pm: Po
         residual_m=cal.err_m, residual_rad=cal.err_rad, inv_cond=cal.inv_cond, target_status=status,
         frame=opt.frame, station=cm.station(opt.station), tcp_m=pm.tcp, orientation=ts.rotvec_rad is not None,
         sigma_m=_tcp_sigma(cm, cal.Q, ts.aux, opt.station),
-        tcp_from_reflector_m=float(np.linalg.norm(pm.tcp - cm.setups[cm.station(opt.station)].reflector_m)))
+        tcp_from_reflector_m=lever_arm_m(pm.tcp, cm.setups[cm.station(opt.station)].reflector_m))
 
 
 def _tcp_sigma(cm: CalibratedModel, Q: np.ndarray, aux: Any, station: str | None) -> np.ndarray:

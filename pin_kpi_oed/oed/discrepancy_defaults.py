@@ -15,7 +15,7 @@ size of the honest σ, not which design is optimal. The classes:
 
 * ``collaborative`` (light arms with strain-wave drives: UR3/5/10, Panda): S_c = 0.25 mm at the UR10's reach
   (1.75 m), white 25 µm per axis. Basis: the discrepancy fitted on all 1,484 rows of the real UR10's Series B
-  (δ σ 0.30 / 0.25 / 0.25 mm, white 37 / 31 / 31 µm per axis; docs/results.md). A UR5 (reach 1.0 m) gets
+  (δ σ 0.30 / 0.25 / 0.25 mm, white 37 / 31 / 31 µm per axis; docs/results.md). A UR5 (reach 1.24 m) gets
   the same S_c (the max(1, ·) keeps short arms at S_c).
 * ``industrial`` (KUKA KR arms and alike): S_c = 0.1 mm at the KR 15's reach (2.15 m), white 10 µm: an
   assumption of the order of the residuals after geometric calibration, not a fit (no measured industrial arm
