@@ -106,6 +106,11 @@ def _make_split(data: MeasurementSet, target: MeasurementSet | None, rng: np.ran
     return _Split(data.subset(pool_rows), work, scored, reg)
 
 
+def _random_order(seed: int, n: int) -> np.ndarray:
+    """The seeded permutation of a pool of n rows whose first m are the random set of m poses (nested sets)."""
+    return np.random.default_rng(seed).permutation(n)
+
+
 def _score(model: TrackerModel, rows: MeasurementSet, sp: _Split, prior: DiscrepancyPrior) -> tuple[float, ...]:
     """(mean, RMS with the discrepancy's mean; mean without) 3-D error (m) of the scored rows after calibrating on
     ``rows`` (pairs: the target's set-up re-registered on the registration rows, robot and discrepancy held)."""
@@ -152,7 +157,7 @@ class _Designs:
         E = dm.jacobian(p0, sp.work)[:, :3, :][:, :, b].reshape(-1, b.size)
         self.K_kpi = get_criterion("kpi").pool_form(E, b.size)
         self.white_m2 = float(np.sum(prior.scale_m ** 2) * prior.noise)
-        self.order = np.random.default_rng(seed).permutation(len(self.Q))
+        self.order = _random_order(seed, len(self.Q))
         self.seed = seed
 
     def choose(self, meth: str, m: int) -> np.ndarray:
@@ -255,8 +260,8 @@ def region_beyond(model: TrackerModel, data: MeasurementSet, prior: DiscrepancyP
     rng = np.random.default_rng(seed)
     sp = _make_split(data, target, rng, test_frac, n_work, radius_rad, joints, pool_size, n_register)
     big = [m for m in sizes if m < len(sp.pool)]
-    if method == "random":  # the permutation of _Designs.order, without the criteria
-        order = np.random.default_rng(seed).permutation(len(sp.pool))
+    if method == "random":  # the nested random sets of curve_split, without the criteria
+        order = _random_order(seed, len(sp.pool))
         choose = lambda m: order[:m]  # noqa: E731
     else:
         des = _Designs(model, sp, prior, seed, radius_rad, joints, region_rows)
