@@ -7,6 +7,15 @@ variables (``OMP_NUM_THREADS``) act only if they are set before NumPy is first i
 import NumPy first; so the package limits the threads of the already-loaded BLAS / OpenMP libraries at
 run time with threadpoolctl, around each public entry point (:func:`limit_threads`).
 
+threadpoolctl limits only the libraries loaded when the limit is set: SciPy's own OpenBLAS is loaded with
+``scipy.linalg``, and scikit-learn's OpenMP runtime with scikit-learn, often after an entry point started. So
+:func:`limited_threads` loads SciPy's linear algebra before it sets the limit, and a whole process (the command
+line, :func:`limit_process_threads`) also sets the libraries' own variables (``OPENBLAS_NUM_THREADS``,
+``OMP_NUM_THREADS``, ``MKL_NUM_THREADS``; those the user set are kept), which every library loaded later reads.
+Without that, the discrepancy fit of ``identify`` ran SciPy's Cholesky factorisations with one BLAS thread per
+core: on a 2-core machine 27 s CPU for 14.5 s wall idle, and far longer when other work held the cores, where one
+thread took 14 s CPU and wall.
+
 The limit is 1 by default. Users with big problems (100,000-candidate pools, long diagnoses) may allow more
 with :func:`set_max_threads`, the environment variable ``PIN_KPI_OED_THREADS``, or the CLI's ``--threads``.
 """
@@ -22,7 +31,10 @@ from threadpoolctl import threadpool_limits
 
 from pin_kpi_oed.errors import InputError
 
-__all__ = ["get_max_threads", "set_max_threads", "limited_threads", "limit_threads"]
+__all__ = ["get_max_threads", "set_max_threads", "limited_threads", "limit_threads", "limit_process_threads"]
+
+#: The variables BLAS / OpenMP libraries read when they are loaded.
+THREAD_VARIABLES = ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS")
 
 _F = TypeVar("_F", bound=Callable[..., Any])
 _max_threads: int | None = None
@@ -73,6 +85,8 @@ def limited_threads() -> Iterator[None]:
         return
     _depth = 1
     try:
+        import scipy.linalg  # noqa: F401  (SciPy's own BLAS: loaded now, so the limit below covers it)
+
         with threadpool_limits(limits=get_max_threads()):
             yield
     finally:
@@ -88,3 +102,21 @@ def limit_threads(func: _F) -> _F:
             return func(*args, **kwargs)
 
     return wrapper  # type: ignore[return-value]
+
+
+def limit_process_threads() -> Any:
+    """Limit the BLAS / OpenMP threads of the whole process to :func:`get_max_threads` (the command line does).
+
+    The libraries loaded so far are limited now (threadpoolctl), those loaded later through their variables
+    (:data:`THREAD_VARIABLES`, set unless the user set them; subprocesses inherit them).
+
+    Returns:
+        threadpoolctl's limiter: used as a context (``with limit_process_threads():``) it restores the loaded
+        libraries' limits on exit.
+    """
+    n = get_max_threads()
+    for var in THREAD_VARIABLES:
+        os.environ.setdefault(var, str(n))
+    import scipy.linalg  # noqa: F401
+
+    return threadpool_limits(limits=n)

@@ -69,6 +69,7 @@ def test_set_max_threads_validates_and_resets() -> None:
 
 
 def test_nested_contexts_are_cheap_and_restore() -> None:
+    import scipy.linalg  # noqa: F401  (every BLAS the context limits is loaded before ``before``)
     from threadpoolctl import threadpool_info
 
     def blas():
@@ -113,3 +114,38 @@ def test_cli_threads_option_sets_the_limit_and_rejects_nonsense(monkeypatch):
     assert threads.get_max_threads() == 2
     assert main(["--threads", "0", "info", "kr15"]) == 2
     threads.set_max_threads(None)
+
+
+SCIPY_PROBE = """
+    import numpy as np                      # NumPy loaded, SciPy's own BLAS not yet
+    from threadpoolctl import threadpool_info
+    from pin_kpi_oed.threads import limited_threads
+    def scipy_blas():
+        return [i["num_threads"] for i in threadpool_info() if "scipy.libs" in i["filepath"]]
+    with limited_threads():
+        import scipy.linalg                 # loaded inside an entry point (as the discrepancy fit does)
+        inside = scipy_blas()
+    print(max(inside), max(scipy_blas()))
+"""
+
+
+def test_limit_covers_scipy_blas_loaded_inside_an_entry_point() -> None:
+    out = _run(SCIPY_PROBE)
+    inside, after = (int(x) for x in out.split())
+    if after < 2:
+        pytest.skip("SciPy's BLAS starts with one thread on this machine: the test would prove nothing")
+    assert inside == 1
+
+
+def test_process_limit_covers_libraries_loaded_later() -> None:
+    out = _run("""
+        import numpy as np
+        from threadpoolctl import threadpool_info
+        from pin_kpi_oed.threads import limit_process_threads
+        limit_process_threads()
+        import scipy.linalg, sklearn.gaussian_process   # SciPy's BLAS, scikit-learn's OpenMP: loaded after
+        print(len(threadpool_info()), max(i["num_threads"] for i in threadpool_info()))
+    """)
+    libs, worst = (int(x) for x in out.split())
+    assert libs >= 3, "NumPy's and SciPy's BLAS and an OpenMP runtime expected: the test would prove little"
+    assert worst == 1

@@ -122,7 +122,10 @@ def main(argv: list[str] | None = None) -> int:
             from pin_kpi_oed.threads import set_max_threads
 
             set_max_threads(args.threads)
-        return int(args.func(args) or 0)
+        from pin_kpi_oed.threads import limit_process_threads
+
+        with limit_process_threads():
+            return int(args.func(args) or 0)
     except PinKpiOedError as exc:
         print(f"pin-kpi-oed {args.command}: error: {exc}", file=sys.stderr)
         return 2
