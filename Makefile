@@ -1,4 +1,4 @@
-# Two set-up commands: `make demo` and `make test`. Each bootstraps .venv on its own.
+# Two set-up commands: `make demo` and `make test` (ruff, then pytest). Each bootstraps .venv on its own.
 PYTHON ?= python3
 VENV   := .venv
 PY     := $(VENV)/bin/python
@@ -19,6 +19,7 @@ demo: $(STAMP)
 	$(VENV)/bin/pin-kpi-oed demo
 
 test: $(STAMP)
+	$(PY) -m ruff check pin_kpi_oed tests
 	$(PY) -m pytest -n 2 -q
 
 bench: $(STAMP)

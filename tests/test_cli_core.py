@@ -89,8 +89,8 @@ def test_evaluate_scores_every_criterion(tmp_path):
     assert set(d["criteria"]) >= {"kpi", "param", "D", "E", "cond", "O1", "O2", "O3", "O4", "O5"}
     assert d["criteria"]["kpi"] == pytest.approx(d["trace_cs_m2"])
     assert d["rank"] == 27
-    assert res.stdout.splitlines()[0] == f"scored q_meas of {tmp_path / 'design.json'}: 40 measurement configurations, " \
-                                         "KPI at 1 working configuration(s)"
+    assert res.stdout.splitlines()[0] == (f"scored q_meas of {tmp_path / 'design.json'}: 40 measurement "
+                                          "configurations, KPI at 1 working configuration(s)")
     assert d["design"] == {"file": str(tmp_path / "design.json"), "criterion": None, "n_meas": 40, "n_work": 1}
     doc = json.loads((tmp_path / "design.json").read_text())
     (tmp_path / "design.json").write_text(json.dumps({**doc, "q_meas_criterion": "kpi"}))

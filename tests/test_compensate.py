@@ -195,7 +195,8 @@ def test_cli_compensate_targets_in_mm_with_other_names(world, tmp_path, capsys):
     assert main([str(a) for a in base[:-1] + ["--columns", "name=Point,x=X,y=Y,z=Z", "--units", "mm", "--tcp",
                                               ",".join(f"{v:.17g}" for v in tcp), "--json", tmp_path / "r2.json"]]) == 0
     out_text = capsys.readouterr().out
-    assert "lever arm: the discrepancy is learnt at the reflector and the TCP is 50.0 mm from it; this sigma" in out_text
+    assert ("lever arm: the discrepancy is learnt at the reflector and the TCP is 50.0 mm from it; "
+            "this sigma") in out_text
     assert json.loads((tmp_path / "r2.json").read_text())["tcp_from_reflector_m"] == pytest.approx(0.05)
     # a joint-space program (degrees, other names) through the same options
     names = [f"A{k + 1}" for k in range(robot.nq)]

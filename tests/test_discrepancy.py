@@ -97,7 +97,7 @@ def test_posterior_variance_matches_monte_carlo():
     d = Discrepancy("exact", NAMES, np.ones(3), np.zeros(3), w, k, Qtr, np.zeros((60, 3)))
     _, v = d.predict_normalised(Qte)
     err2 = []
-    for s in range(400):
+    for _ in range(400):
         f = Lk @ rng.standard_normal((len(Qall), 3))
         d.y, d._chol = f[:60] + np.sqrt(w) * rng.standard_normal((60, 3)), None
         mu, _ = d.predict_normalised(Qte, return_var=False)

@@ -58,8 +58,10 @@ def test_cli_design_states_the_class_and_takes_robot_class(tmp_path, capsys):
     args = ["design", "--cell", "ur10", "--criteria", "random,kpi_gp", "--measurements", "12", "--starts", "1",
             "--max-iter", "5", "--work-samples", "10", "--quiet"]
     assert main(args + ["--json", str(tmp_path / "a.json")]) == 0
-    assert "discrepancy (default for the collaborative class, from the name 'ur10': S = 0.25 mm" in capsys.readouterr().out
-    assert json.loads((tmp_path / "a.json").read_text())["discrepancy"]["scale_m"] == pytest.approx([2.5e-4] * 3, rel=1e-3)
+    assert ("discrepancy (default for the collaborative class, from the name 'ur10': "
+            "S = 0.25 mm") in capsys.readouterr().out
+    assert json.loads((tmp_path / "a.json").read_text())["discrepancy"]["scale_m"] == pytest.approx([2.5e-4] * 3,
+                                                                                                    rel=1e-3)
     assert main(args + ["--robot-class", "industrial", "--json", str(tmp_path / "b.json")]) == 0
     assert "industrial class, given" in capsys.readouterr().out
     assert json.loads((tmp_path / "b.json").read_text())["discrepancy"]["scale_m"] == pytest.approx([1e-4] * 3)

@@ -6,7 +6,8 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from pin_kpi_oed.effects.library import (ALL_EFFECT_NAMES, EFFECT_NAMES, UNOBSERVABLE_NOTES, Backlash, GearHarmonic, JointCompliance,
+from pin_kpi_oed.effects.library import (ALL_EFFECT_NAMES, EFFECT_NAMES, UNOBSERVABLE_NOTES, Backlash, GearHarmonic,
+                                         JointCompliance,
                                  JointScale, ThermalExpansion, candidate_effects, effect_jacobian, gravity_torque,
                                  make_effect, parse_effects_spec, predict_with_effects, range_scale_parameters)
 from pin_kpi_oed.errors import InputError

@@ -159,8 +159,8 @@ def test_pool_gains_match_the_criterion_change_and_the_exchange_is_a_local_optim
         # nh > 3 path (blocks of two measurements stacked) agrees with the closed form
         st6 = _PoolState(Fp.reshape(N // 2, 2 * nh, nx), KK)
         st6.at(M)
-        ref6 = np.array([pool_phi(M, KK) - pool_phi(M + Fp[2 * i:2 * i + 2].reshape(-1, nx).T
-                                                       @ Fp[2 * i:2 * i + 2].reshape(-1, nx), KK) for i in range(N // 2)])
+        F6 = [Fp[2 * i:2 * i + 2].reshape(-1, nx) for i in range(N // 2)]
+        ref6 = np.array([pool_phi(M, KK) - pool_phi(M + F.T @ F, KK) for F in F6])
         assert np.allclose(st6.add_gains(), ref6, rtol=1e-7, atol=1e-12 * abs(pool_phi(M, KK)))
     assert not _PoolState(Fp, K).at(-np.eye(nx))  # not positive definite
     from pin_kpi_oed.errors import IdentifiabilityError
@@ -315,7 +315,8 @@ def test_cli_design_model_bad_inputs(tmp_path):
 
     bad = tmp_path / "m.json"
     bad.write_text('{"format": "something else"}')
-    for name, args in (("missing.json", ["--model", str(tmp_path / "missing.json")]), ("m.json", ["--model", str(bad)])):
+    for name, args in (("missing.json", ["--model", str(tmp_path / "missing.json")]),
+                       ("m.json", ["--model", str(bad)])):
         res = subprocess.run([sys.executable, "-m", "pin_kpi_oed", "design", "--cell", "kr15", "--criteria", "kpi",
                               "--quiet", *args], capture_output=True, text=True, timeout=300)
         assert res.returncode == 2, res.stderr

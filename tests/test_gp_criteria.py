@@ -13,9 +13,8 @@ from pin_kpi_oed.cell.cell import load_cell
 from pin_kpi_oed.design.optimize import DesignProblem
 from pin_kpi_oed.errors import InputError
 from pin_kpi_oed.oed.criteria import CRITERIA, DiscrepancyForm, get_criterion
-from pin_kpi_oed.oed.discrepancy_criteria import (GlsDesignCriterion, _GlsState, gls_value_and_grad,
-                                                  select_pool_gls)
-from pin_kpi_oed.oed.discrepancy_kpi import DiscrepancyPrior, _ridge, default_discrepancy
+from pin_kpi_oed.oed.discrepancy_criteria import (GlsDesignCriterion, _GlsState, gls_value_and_grad)
+from pin_kpi_oed.oed.discrepancy_kpi import DiscrepancyPrior, default_discrepancy
 
 GP = ["D_gp", "param_gp", "E_gp", "cond_gp", "O1_gp", "O2_gp", "O3_gp", "O4_gp", "O5_gp"]
 
@@ -134,7 +133,8 @@ def test_cli_design_with_gls_criteria_says_no_certificate(tmp_path, capsys):
     from pin_kpi_oed.cli.app import main
 
     out = tmp_path / "d.json"
-    rc = main(["design", "--cell", "kr15", "--criteria", "random,D_gp,param_gp", "--measurements", "14", "--pool-size", "200", "--starts", "1",
+    rc = main(["design", "--cell", "kr15", "--criteria", "random,D_gp,param_gp", "--measurements", "14", "--pool-size",
+               "200", "--starts", "1",
                "--max-iter", "15", "--json", str(out), "--quiet"])
     assert rc == 0
     text = capsys.readouterr().out

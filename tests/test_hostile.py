@@ -375,7 +375,8 @@ def test_near_duplicate_pool_poses_are_named_by_row(tmp_path):
     assert sorted(map(len, groups)) == [20, 20, 20, 20] and list(groups[0]) == list(range(20))
     assert near_duplicates(Q0) == []
     pool = tmp_path / "pool.csv"
-    pool.write_text("\n".join([",".join(cell.robot.joint_names)] + [",".join(f"{x:.12f}" for x in q) for q in Q]) + "\n")
+    rows = [",".join(cell.robot.joint_names)] + [",".join(f"{x:.12f}" for x in q) for q in Q]
+    pool.write_text("\n".join(rows) + "\n")
     out = tmp_path / "d.json"
     rc, _, err = _run("design", "--cell", "kr15", "--pool", pool, "--criteria", "random,kpi", "--json", out)
     last = err.strip().splitlines()[-1]

@@ -12,9 +12,11 @@ import pytest
 
 from pin_kpi_oed import NoiseModel, TrackerModel, load_robot
 from pin_kpi_oed.errors import IdentifiabilityError, InputError, PinKpiOedError, SolverError
-from pin_kpi_oed.identification.urdf_export import calibrated_urdf_text, check_urdf_fk, export_result_urdf, write_calibrated_urdf
+from pin_kpi_oed.identification.urdf_export import (calibrated_urdf_text, check_urdf_fk, export_result_urdf,
+                                                    write_calibrated_urdf)
 from pin_kpi_oed.oed.identifiability import analyse
-from pin_kpi_oed.identification.identify import (ResidualModel, _jl_inv, format_validation, identify, predict, register_points,
+from pin_kpi_oed.identification.identify import (ResidualModel, _jl_inv, format_validation, identify, predict,
+                                                 register_points,
                                   validate)
 from pin_kpi_oed.data.measurements import MeasurementSet, read_measurements, write_measurements
 from pin_kpi_oed.identification.simulate import Tolerances, default_tracker_pose, random_truth, simulate
@@ -23,7 +25,8 @@ SIGMA = 1e-5  # tracker noise (m) of the simulated round trips
 REFLECTOR = np.array([0.03, 0.02, 0.08])
 _HERE = Path(__file__).resolve()
 IPA_C = next((p / "shared" / "data" / "ipa_ur10" / "Series_C" for p in (_HERE.parents[2], _HERE.parents[3])
-              if (p / "shared" / "data" / "ipa_ur10").is_dir()), _HERE.parents[2] / "shared" / "data" / "ipa_ur10" / "Series_C")
+              if (p / "shared" / "data" / "ipa_ur10").is_dir()),
+              _HERE.parents[2] / "shared" / "data" / "ipa_ur10" / "Series_C")
 needs_ipa = pytest.mark.skipif(not IPA_C.is_dir(), reason=f"IPA data not found at {IPA_C}")
 
 

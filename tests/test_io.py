@@ -262,7 +262,8 @@ def test_joints_in_degrees(tmp_path: Path) -> None:
     header, rows = _good_rows()
     rows[1][2] = 95.0
     f = _write_csv(tmp_path / "m.csv", header, rows)
-    _raises(f, "m.csv", "column 'j3'", "row 2 (line 3)", "value 95.0 exceeds", "looks like mm/degrees; convert to m/rad",
+    _raises(f, "m.csv", "column 'j3'", "row 2 (line 3)", "value 95.0 exceeds",
+            "looks like mm/degrees; convert to m/rad",
             joint_names=JOINTS)
 
 
@@ -436,7 +437,7 @@ def test_kfold_disjoint_cover_reproducible() -> None:
     tests = [_rows_of(te, ms) for _, te in folds]
     assert sorted(np.concatenate(tests)) == list(range(23))
     assert sorted(len(t) for t in tests) == [4, 4, 5, 5, 5]
-    for (tr, te), t in zip(folds, tests):
+    for (tr, _te), t in zip(folds, tests):
         tri = _rows_of(tr, ms)
         assert set(tri).isdisjoint(t) and len(tri) + len(t) == 23
     again = ms.kfold(5, seed=9)

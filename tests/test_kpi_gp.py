@@ -13,8 +13,7 @@ from pin_kpi_oed.errors import InputError
 from pin_kpi_oed.oed.covariance import covariances, prior_of
 from pin_kpi_oed.oed.criteria import CRITERIA, evaluate_all, get_criterion
 from pin_kpi_oed.oed.discrepancy_kpi import (DiscrepancyDesignCriterion, DiscrepancyPrior, _GreedyState,
-                                             default_discrepancy, kpi_gp_covariance, kpi_gp_value_and_grad,
-                                             select_pool_gp)
+                                             default_discrepancy, kpi_gp_covariance, kpi_gp_value_and_grad)
 
 from .fd import fd_rows
 

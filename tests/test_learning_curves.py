@@ -20,7 +20,8 @@ SIZES = (12, 40)
 
 @pytest.fixture(scope="module")
 def setting():
-    """A UR10 measured at 300 random configurations: geometric errors, 20 µm noise and a smooth 0.3 mm discrepancy (one-joint functions);
+    """A UR10 measured at 300 random configurations: geometric errors, 20 µm noise and a smooth 0.3 mm discrepancy
+    (one-joint functions);
     the prior is that discrepancy's kernel (what a previous calibration would hand over)."""
     model = TrackerModel(load_robot("ur10"), reflector_m=np.array([0.0, 0.0, 0.109]),
                          noise=NoiseModel(sigma_xyz_m=(2e-5,) * 3))

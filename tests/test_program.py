@@ -97,7 +97,8 @@ def test_program_orders_checks_and_repairs(kr15, poses):
     v = joint_speeds(kr15.robot)
     assert prog.cycle_time_s == pytest.approx(path_time(path, v))
     assert prog.cycle_time_s < prog.as_designed_time_s
-    assert prog.waypoints[0].kind == prog.waypoints[-1].kind == "home" and sum(w.kind == "measure" for w in prog.waypoints) == len(poses)
+    assert prog.waypoints[0].kind == prog.waypoints[-1].kind == "home"
+    assert sum(w.kind == "measure" for w in prog.waypoints) == len(poses)
 
 
 def test_program_does_not_depend_on_the_machines_speed(kr15, poses, monkeypatch):
@@ -282,7 +283,8 @@ def test_export_cli_writes_a_checked_program(small_design, tmp_path):
 
 
 def test_export_shows_progress_on_a_terminal_only(small_design, tmp_path, capsys, monkeypatch):
-    """Ordering and move checks take a minute on the UR10: a bar on stderr when forced / on a terminal, none in pipes."""
+    """Ordering and move checks take a minute on the UR10: a bar on stderr when forced / on a terminal, none in
+    pipes."""
     monkeypatch.setenv("PIN_KPI_OED_PROGRESS", "1")
     assert main(["export", str(small_design), "--format", "csv", "--out", str(tmp_path / "a.csv"), "--quiet"]) == 0
     err = capsys.readouterr().err

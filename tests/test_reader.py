@@ -154,7 +154,8 @@ def test_tracker_export_sample_file_round_trips(tmp_path):
     ms, names = import_tracker_export(tmp_path / "export.txt", tmp_path / "joints.csv", robot.joint_names,
                                       columns=cols)
     assert names == exp.names  # the export's order; the joint log was in another order
-    assert np.allclose(np.degrees(ms.q[0]), [10, -80, 100, -30, 45, 0]) and np.allclose(ms.temperature_c, [21.0, 21.2, 21.5])
+    assert np.allclose(np.degrees(ms.q[0]), [10, -80, 100, -30, 45, 0]) and np.allclose(ms.temperature_c,
+                                                                                        [21.0, 21.2, 21.5])
     assert np.array_equal(ms.position_m, exp.position_m) and np.array_equal(ms.time_s, exp.time_s)
     # write it back in the layout: the same text, point for point (4 decimals of mm, ms time stamps)
     write_tracker_export(tmp_path / "again.txt", names, ms.position_m, ms.time_s, start="2026-11-22T10:15:03.250",

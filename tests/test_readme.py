@@ -72,8 +72,8 @@ def test_readme_own_robot_recipe_runs(tmp_path, monkeypatch, capsys) -> None:
         assert main(c) == 0, f"pin-kpi-oed {' '.join(c)} failed:\n{capsys.readouterr().err}"
         out = capsys.readouterr().out
         if c[0] == "identify":
-            held[c[c.index("--model-out") + 1]] = [float(x) for x in re.findall(r"^(?:before|after)\b.*?mean ([\d.]+) mm",
-                                                                               out, re.M)]
+            means = re.findall(r"^(?:before|after)\b.*?mean ([\d.]+) mm", out, re.M)
+            held[c[c.index("--model-out") + 1]] = [float(x) for x in means]
 
     design = json.loads((tmp_path / "ur5_design.json").read_text())
     tr = {d["criterion"]: d["trace_cs_m2"] for d in design["designs"]}

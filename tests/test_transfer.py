@@ -18,7 +18,7 @@ from pin_kpi_oed.errors import IdentifiabilityError, InputError
 from pin_kpi_oed.identification.identify import identify, validate
 from pin_kpi_oed.identification.model_file import MODEL_FORMAT, CalibratedModel, Setup, load_model_file
 from pin_kpi_oed.identification.simulate import Tolerances, default_tracker_pose, random_truth, simulate
-from pin_kpi_oed.identification.transfer import predict_table, register_setup, registration_split, validate_transfer
+from pin_kpi_oed.identification.transfer import register_setup, registration_split, validate_transfer
 from pin_kpi_oed.oed.identifiability import analyse
 
 SIGMA = 1e-5

@@ -16,7 +16,7 @@ from pin_kpi_oed.effects.library import (ALL_EFFECT_NAMES, EFFECT_NAMES, JointCo
                                          gravity_torque, make_effect, parse_effects_spec, predict_with_effects,
                                          size_effect)
 from pin_kpi_oed.effects.periodic import TransmissionError
-from pin_kpi_oed.errors import IdentifiabilityError, InputError
+from pin_kpi_oed.errors import InputError
 from pin_kpi_oed.identification.identify import identify, validate
 from pin_kpi_oed.identification.problem import align_data
 from pin_kpi_oed.identification.transfer import register_setup

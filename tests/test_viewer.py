@@ -524,7 +524,7 @@ def test_static_page_renders_robot_and_ellipsoids_in_chromium(design_path, tmp_p
         if not todo:
             break
         with ThreadPoolExecutor(len(todo)) as ex:
-            for k, img in zip(todo, ex.map(lambda k: shoot(k, timeout_ms), todo)):
+            for k, img in zip(todo, ex.map(lambda k, t=timeout_ms: shoot(k, t), todo)):
                 imgs[k] = img
     for k in pages:
         assert rendered(imgs[k]), f"{k}: Chromium did not render the scene (WebGL?)"

@@ -306,7 +306,8 @@ def _read_beam(d: dict, names: _Names, source: str) -> tuple[float, list[str]]:
     beam_r = float(beam.get("radius_m", 0.005))
     if not (math.isfinite(beam_r) and beam_r >= 0):
         raise InputError(f"{_where(source, 'beam.radius_m')}: must be >= 0, got {beam.get('radius_m')!r}")
-    return beam_r, [y for x in beam.get("skip") or [] for y in names.expand(names.check(x, _where(source, "beam.skip")))]
+    skip_where = _where(source, "beam.skip")
+    return beam_r, [y for x in beam.get("skip") or [] for y in names.expand(names.check(x, skip_where))]
 
 
 def _read_limits(d: dict, source: str) -> tuple[float, float, int, int]:

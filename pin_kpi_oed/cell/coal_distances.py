@@ -51,7 +51,7 @@ class GeometryDistances:
         coll: the constraint model whose segments and pairs are built.
     """
 
-    def __init__(self, coll: "CollisionModel"):
+    def __init__(self, coll: CollisionModel):
         rm = coll.robot.model
         self.model, self.data = rm, rm.createData()
         self.gm = pin.GeometryModel()

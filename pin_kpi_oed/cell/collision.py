@@ -575,7 +575,7 @@ class CollisionModel:
                     out.append((shape, T, a, b))
                 res = coal.DistanceResult()
                 coal.distance(out[0][0], out[0][1], out[1][0], out[1][1], req, res)
-                for (shape, T, a, b), wp, sp, wo in ((out[0], res.getNearestPoint1(), s, w1),
+                for (_shape, _T, a, b), wp, sp, wo in ((out[0], res.getNearestPoint1(), s, w1),
                                                      (out[1], res.getNearestPoint2(), t, w2)):
                     d = b - a
                     L2 = d @ d

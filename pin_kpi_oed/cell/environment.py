@@ -267,7 +267,7 @@ def environment_from_dicts(entries: Any, obstacles: list, where: str, notes: lis
             d["scale"] = list(e.get("scale", [1.0, 1.0, 1.0]))
         try:
             M = se3_from_matrix(e["W_T_obj"], f"{where}: cell.environment[{i}].W_T_obj")
-            obj = load_environment_object(d, i, None, where, lambda _p, _w: M)
+            obj = load_environment_object(d, i, None, where, lambda _p, _w, M=M: M)
         except InputError as exc:
             notes.append(f"environment '{e['name']}' checked as its capsules: {exc}")
             continue

@@ -95,7 +95,8 @@ def geometry_model(robot, kind: str = "collision") -> pin.GeometryModel:
     if kind not in types:
         raise InputError(f"robot_capsules: unknown geometry kind '{kind}' (collision or visual)")
     try:
-        return pin.buildGeomFromUrdf(robot.model, robot.urdf_path, types[kind], package_dirs=package_dirs(robot.urdf_path))
+        return pin.buildGeomFromUrdf(robot.model, robot.urdf_path, types[kind],
+                                     package_dirs=package_dirs(robot.urdf_path))
     except Exception as exc:
         first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
         raise InputError(f"robot_capsules: cannot read the {kind} geometry of {robot.urdf_path} ({first}); "
@@ -190,6 +191,6 @@ def _split(mesh) -> tuple | None:
         return None
     if any(h is None or len(h.faces) == 0 for h in halves):
         return None
-    if any(np.ptp(((np.asarray(h.vertices) - c) @ u)) > 0.999 * width for h in halves):  # no progress
+    if any(np.ptp((np.asarray(h.vertices) - c) @ u) > 0.999 * width for h in halves):  # no progress
         return None
     return tuple(halves)

@@ -21,7 +21,7 @@ capsules: :class:`~pin_kpi_oed.cell.feasibility.FeasibilityChecker`) is kept.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Callable
+from collections.abc import Callable
 
 import numpy as np
 import pinocchio as pin

@@ -9,7 +9,8 @@ improvement of tr(C_s) over the heuristic design (%), the smallest clearance (mm
 incidence angle (°) found by the independent check, Ipopt iterations and solve time (s).
 ``--clearance-margin`` (default 0.02 m) and ``--incidence-margin`` (default 1°) tighten the cell the
 optimiser designs in; the table's clearance and incidence are the true ones (independent check of
-the cell as given; ``demo`` keeps the paper's zero margins). ``--no-collision`` drops the collision and line-of-sight constraints (joint bounds and incidence
+the cell as given; ``demo`` keeps the paper's zero margins). ``--no-collision`` drops the collision and line-of-sight
+constraints (joint bounds and incidence
 only) and reports the share of poses that collide.
 """
 
@@ -22,7 +23,7 @@ import numpy as np
 
 
 from pin_kpi_oed.data.atomic import atomic_write_json
-from pin_kpi_oed.design.design_file import design_document, write_design
+from pin_kpi_oed.design.design_file import design_document
 from pin_kpi_oed.design.margins import DEFAULT_CLEARANCE_MARGIN_M, DEFAULT_INCIDENCE_MARGIN_DEG, with_margins
 from pin_kpi_oed.errors import IdentifiabilityError, InputError
 from pin_kpi_oed.oed.criteria import CRITERIA, check_names
@@ -46,7 +47,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--quiet", action="store_true", help="print the table only")
     p.add_argument("--distances", choices=["coal", "closed-form"], default="coal",
                    help="capsule distances in the optimiser: Coal through a Pinocchio GeometryModel (default; one "
-                        "computeDistances per pose) or the closed-form segment distances (the test oracle; equal to 1e-15 m)")
+                        "computeDistances per pose) or the closed-form segment distances "
+                        "(the test oracle; equal to 1e-15 m)")
     p.add_argument("--start", choices=["pool", "random"], default="pool",
                    help="first Ipopt start: pool selection (default) or the heuristic design")
     p.add_argument("--certificate", action="store_true",
@@ -130,7 +132,8 @@ def table(results: list, reference=None, certificate=None, extended: list | None
     ext_by_id = {id(r): e for r, e in zip(results, extended)} if extended is not None else None
     head = (f"{'criterion':<10}" + (f"{'ext tr(C_s) mm^2':>18}{'ext sigma um':>14}" if ext_by_id else "")
             + f"{'geo tr(C_s) mm^2' if ext_by_id else 'tr(C_s) mm^2':>{18 if ext_by_id else 14}}"
-            f"{'geo sigma um' if ext_by_id else 'TCP sigma um':>14}{'ext vs rnd %' if ext_by_id else 'vs random %':>{13 if ext_by_id else 12}}{'min clr mm':>11}"
+            f"{'geo sigma um' if ext_by_id else 'TCP sigma um':>14}"
+            f"{'ext vs rnd %' if ext_by_id else 'vs random %':>{13 if ext_by_id else 12}}{'min clr mm':>11}"
             f"{'max inc deg':>12}{'iters':>7}{'time s':>8}" + (f"{'effic. %':>10}" if certificate else "")
             + "  check")
     lines = [head, "-" * len(head)]
@@ -216,7 +219,8 @@ def run(args: argparse.Namespace) -> int:
     cell = load_cell(getattr(args, "cell", "kr15"))
     m, seed, collision, starts, max_iter, quiet = _run_knobs(args, cell)
     true_cell = cell
-    margins = (float(getattr(args, "clearance_margin", 0.0) or 0.0), float(getattr(args, "incidence_margin", 0.0) or 0.0))
+    margins = (float(getattr(args, "clearance_margin", 0.0) or 0.0),
+               float(getattr(args, "incidence_margin", 0.0) or 0.0))
     cell = with_margins(cell, *margins)  # the optimiser's cell; `true_cell` for the reported clearances
     pool_file, given_file, target = _pool_given_target(args)
     problem = _make_problem(args, cell, given_file, collision, quiet, true_cell)
@@ -307,7 +311,8 @@ def _pool_given_target(args: argparse.Namespace) -> tuple[str | None, str | None
     disc = getattr(args, "model", None) or bool(_gp_names([c.strip() for c in crits.split(",")]))
     if target is not None and not given_file and not disc:
         raise InputError("--target-sigma needs --given (the poses already measured) or the discrepancy "
-                         "(--criteria with a discrepancy-aware criterion such as kpi_gp, or --model with a discrepancy)")
+                         "(--criteria with a discrepancy-aware criterion "
+                         "such as kpi_gp, or --model with a discrepancy)")
     if getattr(args, "curve", None) and not disc:
         raise InputError("--curve needs the discrepancy (--criteria with a discrepancy-aware criterion such as kpi_gp, "
                          "or --model with a discrepancy)")
@@ -330,7 +335,8 @@ def _gp_names(criteria: list[str]) -> list[str]:
 
 def _set_region(args: argparse.Namespace, problem, criteria: list[str], seed: int, true_cell) -> None:
     """``--work-radius`` / ``--work-samples``: the working region of ``kpi_gp`` (default 0.5 rad and 100 samples
-    with kpi_gp, none otherwise), drawn with the design's seed, within the joint bounds and collision-free in the untightened cell; prints it.
+    with kpi_gp, none otherwise), drawn with the design's seed, within the joint bounds and collision-free in the
+    untightened cell; prints it.
 
     The region is always sampled, also with ``--pool``: the pool is where one may measure, the region where the robot
     works (a pool's rows near W would cover the region only where the candidates happen to lie).
@@ -434,7 +440,8 @@ def _print_results(results: list, criteria: list, cert, m: int, pool_file: str |
             if not r.feasible:
                 print(f"  {r.criterion}: {', '.join(r.check.get('violations', [])[:3])}")
         if true_checks is not None:
-            print(f"margins: clearance {margins[0] * 1e3:g} mm, incidence {margins[1]:g} deg enforced by the optimiser; "
+            print(f"margins: clearance {margins[0] * 1e3:g} mm, incidence {margins[1]:g} deg "
+                  f"enforced by the optimiser; "
                   f"min clr / max inc above are the TRUE values (cell clearance {true_cell.clearance_m * 1e3:g} mm, "
                   f"incidence limit {true_cell.incidence_max_deg:g} deg)")
 
@@ -450,7 +457,8 @@ def _poses_until(args: argparse.Namespace, problem, cell, target: float, seed: i
         return until
     pool_q, _ = problem.random_design(getattr(args, "pool_size", 5000) or 5000,
                                       seed=np.random.SeedSequence([seed, 2]),
-                                      max_tries=max(cell.max_random_tries, 200 * (getattr(args, "pool_size", 5000) or 5000)))
+                                      max_tries=max(cell.max_random_tries,
+                                                    200 * (getattr(args, "pool_size", 5000) or 5000)))
     until = poses_until(problem, float(target), pool_q)
     print(until.summary())
     return until

@@ -110,7 +110,8 @@ def _checked_effects(args: argparse.Namespace) -> list[str] | None:
         effects = [e.strip() for e in args.effects.split(",") if e.strip()]
         unknown = [e for e in effects if e not in ALL_EFFECT_NAMES]
         if unknown:
-            raise InputError(f"--effects: unknown effect(s) {', '.join(unknown)} (known: {', '.join(ALL_EFFECT_NAMES)}; "
+            raise InputError(f"--effects: unknown effect(s) {', '.join(unknown)} "
+                             f"(known: {', '.join(ALL_EFFECT_NAMES)}; "
                              "a tracker range-scale error is not among them: it cannot be observed)")
     return effects
 
@@ -209,8 +210,8 @@ def run(args: argparse.Namespace) -> int:
         from pin_kpi_oed.data.atomic import atomic_write_json
 
         atomic_write_json(args.model_out, model_dict)
-        print(f"wrote {args.model_out} (geometry"
-              + "".join(f" + {e}" for e in rep.selected_effects) + f"; {rep.model_fit.discrepancy.decision if rep.model_fit.discrepancy else 'no discrepancy'})")
+        disc = rep.model_fit.discrepancy.decision if rep.model_fit.discrepancy else "no discrepancy"
+        print(f"wrote {args.model_out} (geometry" + "".join(f" + {e}" for e in rep.selected_effects) + f"; {disc})")
     return 0
 
 

@@ -202,7 +202,8 @@ def run_simulate(args: argparse.Namespace) -> int:
     from pin_kpi_oed.model.noise import NoiseModel
     from pin_kpi_oed.model.tracker import TrackerModel
     from pin_kpi_oed.model.robot import load_robot
-    from pin_kpi_oed.identification.simulate import Tolerances, default_tracker_pose, random_truth, simulate, truth_to_dict
+    from pin_kpi_oed.identification.simulate import (Tolerances, default_tracker_pose, random_truth, simulate,
+                                                     truth_to_dict)
 
     if args.n < 1 or args.n_test < 0:
         raise InputError(f"--n must be >= 1 and --n-test >= 0, got {args.n} and {args.n_test}")
@@ -310,7 +311,8 @@ def read_validation(args: argparse.Namespace, robot: Any) -> tuple[Any, Any]:
         raise InputError("--register-rows/--register-data re-register the set-up on rows of another session: they "
                          "need --validate FILE")
     reach, kw = robot.reach(), table_options(args, robot)
-    test = read_measurements(args.validate, joint_names=robot.joint_names, reach_m=reach, **kw) if args.validate else None
+    test = (read_measurements(args.validate, joint_names=robot.joint_names, reach_m=reach, **kw)
+            if args.validate else None)
     reg = read_measurements(args.register_data, joint_names=robot.joint_names, reach_m=reach, **kw) \
         if args.register_data else None
     return test, reg

@@ -7,7 +7,8 @@ Example::
 
 orders the design's poses for the least predicted cycle time (OR-Tools; move time = max_j |Δq_j|/v_j
 with the URDF speed limits), checks every move densely (≤ 1° joint steps, Coal, the cell's capsules
-plus the margin: default half the design's ``--clearance-margin``, since the poses sit at that margin), routes colliding moves through safe via poses, prints the cycle time against the
+plus the margin: default half the design's ``--clearance-margin``, since the poses sit at that margin), routes colliding
+moves through safe via poses, prints the cycle time against the
 as-designed order and the true clearance / incidence of every pose (independent check), and writes
 the program atomically. Nothing is written when a move still collides (unless ``--force``) or the
 input is bad (one line, exit code 2).

@@ -53,7 +53,8 @@ def run(args: argparse.Namespace) -> int:
     exp = read_point_export(args.export, units=args.units, columns=args.columns, strict=False)
     robot.check_units(ms.q, f"{args.joints} ({args.angle_unit})", first_row=1)
     robot.check_q(ms.q, f"{args.joints} ({args.angle_unit})")
-    check_points_against_joints(robot, ms.q, ms.position_m, f"{args.export}", f"{args.joints}", exp.units, args.angle_unit,
+    check_points_against_joints(robot, ms.q, ms.position_m, f"{args.export}", f"{args.joints}", exp.units,
+                                args.angle_unit,
                                 ANGLE_UNITS[args.angle_unit])
     write_measurements(ms, args.out)
     if not args.quiet:

@@ -110,7 +110,8 @@ def run_register(args: argparse.Namespace) -> int:
 
 
 def _registration_gates(res, data, model, hold_reflector: bool) -> list:
-    """The registration gate of every station registered (:func:`~pin_kpi_oed.identification.quality.assess_registration`)."""
+    """The registration gate of every station registered
+    (:func:`~pin_kpi_oed.identification.quality.assess_registration`)."""
     from pin_kpi_oed.identification.quality import assess_registration
 
     ref = model.default_station if model.default_station in model.setups else next(iter(model.setups))

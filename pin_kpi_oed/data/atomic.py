@@ -4,7 +4,8 @@ Every file the package writes (CSV, JSON, URDF, PNG, HTML) goes through :func:`a
 a temporary file in the same directory, flushed and fsync-ed, then renamed over the target.
 
 Concurrent writers: a command's output check (:func:`pin_kpi_oed.validation.paths.check_outputs`)
-remembers each output file's state (:func:`~pin_kpi_oed.validation.paths.claim_output`); a write that finds the file changed since
+remembers each output file's state (:func:`~pin_kpi_oed.validation.paths.claim_output`); a write that finds the file
+changed since
 then — another process wrote it while the command ran — is refused with a message naming the file,
 instead of the last writer silently replacing the other's output. The comparison and the rename happen
 under a lock of the folder (``flock``, where the system has it), so two writers finishing at once are

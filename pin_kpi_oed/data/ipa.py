@@ -115,7 +115,8 @@ _GOAL = {
     "Goal pitch": "goal_pitch",
     "Goal yaw": "goal_yaw",
 }
-_KNOWN = set(UR10_JOINT_NAMES) | set(_POS) | set(_ROT) | set(_POS_STD) | set(_ROT_STD) | {_TEMP, _TIMESTAMP} | set(_GOAL)
+_KNOWN = (set(UR10_JOINT_NAMES) | set(_POS) | set(_ROT) | set(_POS_STD) | set(_ROT_STD) | {_TEMP, _TIMESTAMP}
+          | set(_GOAL))
 
 
 def _clean(cell: str) -> str:

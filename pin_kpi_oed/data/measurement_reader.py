@@ -10,7 +10,7 @@ import math
 import os
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Callable, Sequence
+from collections.abc import Callable, Sequence
 
 import numpy as np
 import pandas as pd
@@ -262,7 +262,8 @@ def _check_units(ms: MeasurementSet, cols: _Columns, row_lines: list[int], src: 
             r = int(np.argmax(dist))
             raise InputError(
                 f"{src}: columns x, y, z: median distance from the tracker {med:.6g} m exceeds {limit:g} m "
-                f"(e.g. row {r + 1} (line {row_lines[r]}): {dist[r]:.6g}); looks like mm/degrees; convert to m/rad or declare the units (--units mm,deg)"
+                f"(e.g. row {r + 1} (line {row_lines[r]}): {dist[r]:.6g}); looks like mm/degrees; "
+                f"convert to m/rad or declare the units (--units mm,deg)"
             )
     if reach_m is not None and cols.position:
         for lab, rows in ms.station_rows().items():  # each station has its own tracker frame
@@ -278,7 +279,8 @@ def _check_units(ms: MeasurementSet, cols: _Columns, row_lines: list[int], src: 
             r, c = np.argwhere(big)[0]
             raise InputError(
                 f"{src}: column '{names[c]}', row {r + 1} (line {row_lines[r]}): value {float(arr[r, c])!r} "
-                f"exceeds 2π+0.1 rad in magnitude; looks like mm/degrees; convert to m/rad or declare the units (--units mm,deg)"
+                f"exceeds 2π+0.1 rad in magnitude; looks like mm/degrees; "
+                f"convert to m/rad or declare the units (--units mm,deg)"
             )
     if ms.sigma_m is not None:
         sigma = ms.sigma_m

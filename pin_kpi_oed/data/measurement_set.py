@@ -8,7 +8,8 @@ from __future__ import annotations
 import dataclasses
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Sequence
+from typing import Any
+from collections.abc import Sequence
 
 import numpy as np
 
@@ -141,11 +142,11 @@ class MeasurementSet:
             return {default: np.arange(len(self))}
         return {lab: np.flatnonzero(self.station == lab) for lab in self.station_labels()}
 
-    def with_station(self, label: str) -> "MeasurementSet":
+    def with_station(self, label: str) -> MeasurementSet:
         """A copy whose rows all belong to station ``label``."""
         return dataclasses.replace(self, station=np.full(len(self), str(label), dtype=object))
 
-    def subset(self, idx: Sequence[int] | np.ndarray | slice) -> "MeasurementSet":
+    def subset(self, idx: Sequence[int] | np.ndarray | slice) -> MeasurementSet:
         """Measurements selected by ``idx``, as a new set (arrays are copies).
 
         Args:
@@ -190,7 +191,7 @@ class MeasurementSet:
             station=None if self.station is None else self.station[idx].copy(),
         )
 
-    def split(self, fraction: float, seed: int | None = 0) -> tuple["MeasurementSet", "MeasurementSet"]:
+    def split(self, fraction: float, seed: int | None = 0) -> tuple[MeasurementSet, MeasurementSet]:
         """Random train/test split (reproducible for a given seed).
 
         Rows are drawn with ``numpy.random.default_rng(seed).permutation``; each
@@ -219,7 +220,7 @@ class MeasurementSet:
         perm = np.random.default_rng(seed).permutation(m)
         return self.subset(np.sort(perm[:n_train])), self.subset(np.sort(perm[n_train:]))
 
-    def kfold(self, k: int, seed: int | None = 0) -> list[tuple["MeasurementSet", "MeasurementSet"]]:
+    def kfold(self, k: int, seed: int | None = 0) -> list[tuple[MeasurementSet, MeasurementSet]]:
         """K-fold cross-validation splits (reproducible for a given seed).
 
         The rows are shuffled once with ``numpy.random.default_rng(seed)`` and

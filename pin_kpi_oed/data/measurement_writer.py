@@ -60,7 +60,8 @@ def write_measurements(ms: MeasurementSet, path: str | os.PathLike[str]) -> None
     if ms.sigma_m is not None:
         header += list(SIGMA_AXIS_COLUMNS)
         blocks.append(ms.sigma_m)
-    for name, arr in ((TEMPERATURE_COLUMN, ms.temperature_c), (PAYLOAD_COLUMN, ms.payload_kg), (TIME_COLUMN, ms.time_s)):
+    for name, arr in ((TEMPERATURE_COLUMN, ms.temperature_c), (PAYLOAD_COLUMN, ms.payload_kg),
+                      (TIME_COLUMN, ms.time_s)):
         if arr is not None:
             header.append(name)
             blocks.append(arr[:, None])

@@ -28,7 +28,7 @@ from __future__ import annotations
 import os
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Mapping, Sequence
+from collections.abc import Mapping, Sequence
 
 import numpy as np
 
@@ -162,5 +162,6 @@ def _sniff(src: str, pos: np.ndarray | None, rv: np.ndarray | None, q: np.ndarra
         big = (np.abs(arr) > ANGLE_LIMIT_RAD) & mask[None, :]
         if big.any():
             r, c = np.argwhere(big)[0]
-            raise InputError(f"{src}: column '{names[c]}', row {r + 1} (line {lines[r]}): value {float(arr[r, c]):.6g} exceeds "
+            raise InputError(f"{src}: column '{names[c]}', row {r + 1} (line {lines[r]}): "
+                             f"value {float(arr[r, c]):.6g} exceeds "
                              f"2π+0.1 rad; looks like degrees; declare the units (--units mm,deg) or convert to rad")

@@ -44,7 +44,7 @@ import re
 from dataclasses import dataclass
 from datetime import datetime
 from pathlib import Path
-from typing import Mapping, Sequence
+from collections.abc import Mapping, Sequence
 
 import numpy as np
 
@@ -231,7 +231,8 @@ def read_point_export(path: str | os.PathLike, units: str | None = None,
     names = [r[i_name].strip() for r in rows]
     dup = sorted({n for n in names if names.count(n) > 1})
     if dup or any(not n for n in names):
-        raise InputError(f"{src}: point names must be unique and non-empty; repeated: {', '.join(dup[:5]) or 'an empty name'}")
+        raise InputError(f"{src}: point names must be unique and non-empty; "
+                         f"repeated: {', '.join(dup[:5]) or 'an empty name'}")
     t = _parse_time([r[i_time] for r in rows], lines, src, header[i_time]) if i_time is not None else None
     how = ("its 'Units:' comment" if declared else "its column names" if in_header else "--units" if given else
            "assumed (no 'Units:' comment, no unit in the column names, no --units)")

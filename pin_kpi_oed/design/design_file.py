@@ -37,7 +37,8 @@ import os
 from dataclasses import dataclass, field
 from functools import cached_property
 from pathlib import Path
-from typing import Any, Mapping, Sequence
+from typing import Any
+from collections.abc import Mapping, Sequence
 
 import numpy as np
 import pinocchio as pin
@@ -584,7 +585,8 @@ def _raw_designs(d: Mapping, where: str) -> list:
 
 
 class _Covariances:
-    """C_s of designs whose file has none: :func:`~pin_kpi_oed.oed.evaluate.score_design` (one identifiability analysis)."""
+    """C_s of designs whose file has none: :func:`~pin_kpi_oed.oed.evaluate.score_design` (one identifiability
+    analysis)."""
 
     def __init__(self, model: TrackerModel, q_work: np.ndarray):
         self.model, self.q_work, self.ident = model, q_work, None

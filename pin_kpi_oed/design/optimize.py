@@ -154,7 +154,7 @@ class DesignResult(Result):
         """Wall time (s) (= ``time_s``)."""
         return self.time_s
 
-    def improvement_over(self, reference: "DesignResult") -> float:
+    def improvement_over(self, reference: DesignResult) -> float:
         """Relative reduction of tr(C_s) w.r.t. ``reference`` (%)."""
         return 100.0 * (1.0 - self.trace_cs_m2 / reference.trace_cs_m2)
 

@@ -1,4 +1,5 @@
-r"""The working *region* of the discrepancy-aware KPI: the working configurations W plus seeded configurations near them.
+r"""The working *region* of the discrepancy-aware KPI: the working configurations W plus seeded configurations near
+them.
 
 Why: the discrepancy δ(q) is a Gaussian process over the joint angles whose fitted length scales are short (on the
 real UR10 about 0.05 rad on the shoulder-lift joint). Its covariance between two configurations 0.1 rad apart is
@@ -16,7 +17,7 @@ samples it in the cell (feasible configurations only), the learning-curves study
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Callable
+from collections.abc import Callable
 
 import numpy as np
 

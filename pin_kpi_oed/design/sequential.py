@@ -115,7 +115,8 @@ class SequentialProblem(DesignProblem):
         if Q_given.shape[1] != self.n:
             raise InputError(f"--given: expected {self.n} joint values per pose, got {Q_given.shape[1]}")
         self.Q_given = cell.robot.check_q(Q_given, "--given")
-        self.F_measured = self.model.weighted_jacobian(self.p0, self.Q_given)[:, :, self.base].reshape(-1, self.base.size)
+        F_given = self.model.weighted_jacobian(self.p0, self.Q_given)[:, :, self.base]
+        self.F_measured = F_given.reshape(-1, self.base.size)
         self.set_prior(prior_info)
 
     def set_prior(self, prior_info: np.ndarray | None) -> None:

@@ -217,7 +217,8 @@ def _count_reasons(reasons: dict, rejected: np.ndarray, inb: np.ndarray, inc: np
 
 
 def feasible_mask(problem: DesignProblem, Q: np.ndarray) -> np.ndarray:
-    """Per candidate: the independent check accepts it in the design cell (collision, beam, incidence, bounds), (N,) bool."""
+    """Per candidate: the independent check accepts it in the design cell (collision, beam, incidence, bounds), (N,)
+    bool."""
     return check_candidates(problem, Q, with_jacobians=False)[0]
 
 
@@ -255,7 +256,8 @@ def design_from_pool(problem: DesignProblem, Q_candidates: np.ndarray, criteria:
         m: poses to select.
         seed: seed of the random reference and of the exchange starts.
         timings: if given, filled with the time per stage (s): ``check_s``, ``jacobians_s``, ``select_<criterion>_s``
-            (and its CPU time ``select_<criterion>_cpu_s``), and each selection's efficiency against its certificate, ``efficiency_<criterion>``
+            (and its CPU time ``select_<criterion>_cpu_s``), and each selection's efficiency against its certificate,
+            ``efficiency_<criterion>``
             (:func:`selection_efficiency`).
         checked: (feasible mask, their Jacobians) of :func:`check_candidates` if already computed.
 

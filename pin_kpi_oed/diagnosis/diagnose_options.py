@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Sequence
+from collections.abc import Sequence
 
 from pin_kpi_oed.data.measurements import MeasurementSet
 from pin_kpi_oed.effects.library import EFFECT_NAMES, Effect
@@ -69,7 +69,7 @@ class DiagnoseOptions:
     show_progress: bool | None = None
 
     @classmethod
-    def resolve(cls, options: "DiagnoseOptions | None", overrides: dict) -> "DiagnoseOptions":
+    def resolve(cls, options: DiagnoseOptions | None, overrides: dict) -> DiagnoseOptions:
         """``options`` (or the defaults) with the keyword ``overrides`` applied.
 
         Raises:

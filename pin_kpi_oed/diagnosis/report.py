@@ -83,7 +83,8 @@ class EffectResult:
 
 @dataclass
 class DiagnosisReport(Result):
-    """Outcome of :func:`~pin_kpi_oed.diagnosis.diagnose.diagnose` (SI units; ``summary()`` prints mm / µm); common fields of
+    """Outcome of :func:`~pin_kpi_oed.diagnosis.diagnose.diagnose` (SI units; ``summary()`` prints mm / µm); common
+    fields of
     :class:`~pin_kpi_oed.results.Result`: ``success`` (the report was produced), ``status``
     (``gap``, ``no_gap`` or ``mismatch``), ``message`` (the verdict), ``nit`` (forward-selection
     steps), ``nfev`` (identifications run), ``time_s``.

@@ -62,7 +62,8 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass, field
-from typing import Any, Sequence
+from typing import Any
+from collections.abc import Sequence
 
 import numpy as np
 import scipy.linalg as sla
@@ -80,7 +81,8 @@ from pin_kpi_oed.results import Result
 from pin_kpi_oed.threads import limit_threads
 
 __all__ = [
-    "SelectionOptions", "SelectionPath", "SelectionResult", "transfer_candidates", "forward_select", "select_terms", "coverage", "covered_rows", "measurement_folds",
+    "SelectionOptions", "SelectionPath", "SelectionResult", "transfer_candidates", "forward_select", "select_terms",
+    "coverage", "covered_rows", "measurement_folds",
 ]
 
 #: Candidate groups moving the reflector less than this per rad of their terms (RMS, m/rad) are left out.
@@ -155,7 +157,7 @@ class SelectionOptions:
     show_progress: bool | None = None
 
     @classmethod
-    def resolve(cls, options: "SelectionOptions | None", overrides: dict) -> "SelectionOptions":
+    def resolve(cls, options: SelectionOptions | None, overrides: dict) -> SelectionOptions:
         """``options`` (or the defaults) with the keyword ``overrides`` applied (``resolve_options``).
 
         Raises:
@@ -524,7 +526,7 @@ def _describe_terms(cands: Sequence[Effect], chosen: Sequence[_Group], effects: 
         for (label, idx), line in zip(eff.groups(), eff.describe(th)):
             texts[(eff.name, label)] = (line, float(np.sqrt(np.sum(np.asarray(th)[idx] ** 2))))
     terms = []
-    for step, (ei, gi, label, _) in enumerate(chosen, 1):
+    for step, (ei, _gi, label, _) in enumerate(chosen, 1):
         line, amp = texts.get((cands[ei].name, label), (label, float("nan")))
         terms.append({"effect": cands[ei].name, "group": label, "amplitude_rad": amp, "text": line,
                       "cv_rms_m": cv_rms_m[step]})

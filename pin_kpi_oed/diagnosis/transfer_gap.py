@@ -31,7 +31,8 @@ Units: SI (m, rad); the text prints mm and µm.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any, Sequence
+from typing import Any
+from collections.abc import Sequence
 
 import numpy as np
 

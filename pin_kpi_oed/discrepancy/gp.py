@@ -42,7 +42,8 @@ import base64
 import time
 import warnings
 from dataclasses import dataclass, field
-from typing import Any, Sequence
+from typing import Any
+from collections.abc import Sequence
 
 import numpy as np
 from scipy import linalg as sla
@@ -285,7 +286,8 @@ class Discrepancy:
         return self.kernel(np.atleast_2d(Qa), None if Qb is None else np.atleast_2d(Qb))
 
     def extrapolation(self, Q: np.ndarray) -> np.ndarray:
-        """(m,) bool: rows with a joint angle in a bin (``COVERAGE_BIN_RAD``) no training row visited, or its neighbour."""
+        """(m,) bool: rows with a joint angle in a bin (``COVERAGE_BIN_RAD``) no training row visited, or its
+        neighbour."""
         if self.coverage is None:
             return np.zeros(len(Q), bool)
         cov = self.coverage | np.roll(self.coverage, 1, axis=1) | np.roll(self.coverage, -1, axis=1)
@@ -320,7 +322,7 @@ class Discrepancy:
         return d
 
     @classmethod
-    def from_dict(cls, d: Any, joint_names: Sequence[str], where: str = "discrepancy") -> "Discrepancy":
+    def from_dict(cls, d: Any, joint_names: Sequence[str], where: str = "discrepancy") -> Discrepancy:
         """Rebuild from :meth:`to_dict` output, every field checked against the robot's joints.
 
         Raises:
@@ -332,7 +334,7 @@ class Discrepancy:
             raise InputError(f"{exc}") from None
 
     @classmethod
-    def _from_dict(cls, d: Any, names: list, where: str) -> "Discrepancy":
+    def _from_dict(cls, d: Any, names: list, where: str) -> Discrepancy:
         if not isinstance(d, dict):
             raise ValueError(f"{where}: must be an object (write it with identify or diagnose --model-out)")
         if d.get("format") != "pin_kpi_oed.discrepancy/1":

@@ -196,7 +196,7 @@ class JointKernel(StationaryKernelMixin, Kernel):
                 "joint_amplitude": a.tolist(), "joint_length_scale_rad": ell.tolist()}
 
     @classmethod
-    def from_dict(cls, d: Any, n_joints: int, where: str = "discrepancy.kernel") -> "JointKernel":
+    def from_dict(cls, d: Any, n_joints: int, where: str = "discrepancy.kernel") -> JointKernel:
         """Inverse of :meth:`to_dict`, every field checked.
 
         Raises:

@@ -3,7 +3,8 @@
 from __future__ import annotations
 
 import abc
-from typing import Any, Sequence
+from typing import Any
+from collections.abc import Sequence
 
 import numpy as np
 
@@ -126,7 +127,7 @@ class Effect(abc.ABC):
         """
         return [(n, [i]) for i, n in enumerate(self.param_names())]
 
-    def restrict(self, groups: Sequence[int]) -> "Effect":
+    def restrict(self, groups: Sequence[int]) -> Effect:
         """The same effect with only the parameter groups ``groups`` (indices into :meth:`groups`)."""
         gr = self.groups()
         return SubsetEffect(self, sorted(i for g in groups for i in gr[g][1]))

@@ -2,7 +2,8 @@ r"""Combining effects with a measurement model: ``Y = h(p, Q + ΣΔq) + ΣΔy`` 
 
 from __future__ import annotations
 
-from typing import Any, Sequence
+from typing import Any
+from collections.abc import Sequence
 
 import numpy as np
 

@@ -39,7 +39,8 @@ the angle q2+q3 (phase 35°)``.
 
 from __future__ import annotations
 
-from typing import Any, Sequence
+from typing import Any
+from collections.abc import Sequence
 
 import numpy as np
 import pinocchio as pin
@@ -186,7 +187,7 @@ class LinkBending(Effect):
         return [t for t in terms if t not in drop]
 
     @classmethod
-    def from_spec(cls, robot: Robot, text: str) -> "LinkBending":
+    def from_spec(cls, robot: Robot, text: str) -> LinkBending:
         """From ``"elbow_joint:q2+q3,wrist_1_joint:q2"`` ((joint, angle) pairs, cos and sin each).
 
         Raises:
@@ -228,7 +229,7 @@ class LinkBending(Effect):
             out.setdefault((j, a), []).append(k)
         return [(f"{joint_label(self.robot, j)} in {self.labels[a]}", idx) for (j, a), idx in out.items()]
 
-    def restrict(self, groups: Sequence[int]) -> "LinkBending":
+    def restrict(self, groups: Sequence[int]) -> LinkBending:
         gr = self.groups()
         keep = sorted(i for g in groups for i in gr[g][1])
         return LinkBending(self.robot, chain=[self.robot.joint_names[k] for k in self.chain],
@@ -263,7 +264,7 @@ class LinkBending(Effect):
         """
         th = self._theta(theta)
         out = []
-        for label, idx in self.groups():
+        for _label, idx in self.groups():
             j, a, _ = self.terms[idx[0]]
             v = {self.terms[i][2]: th[i] for i in idx}
             c, s = v.get("cos", 0.0), v.get("sin", 0.0)

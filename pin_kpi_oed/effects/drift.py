@@ -25,7 +25,8 @@ as a stand-in and say so.
 
 from __future__ import annotations
 
-from typing import Any, Sequence
+from typing import Any
+from collections.abc import Sequence
 
 import numpy as np
 
@@ -87,7 +88,7 @@ class Drift(Effect):
         self.t_ref_s = tr
 
     @classmethod
-    def from_data(cls, robot: Robot, data: Any, degree: int = 1) -> "Drift":
+    def from_data(cls, robot: Robot, data: Any, degree: int = 1) -> Drift:
         """One drift per station of ``data`` (its ``station`` column, else one), t_ref = each station's mean time.
 
         Raises:
@@ -104,7 +105,7 @@ class Drift(Effect):
         return cls(robot, degree, labels, [float(t[st == s].mean()) for s in labels])
 
     @classmethod
-    def from_spec(cls, robot: Robot, text: str) -> "Drift":
+    def from_spec(cls, robot: Robot, text: str) -> Drift:
         """From ``"degree=2"``.
 
         Raises:
@@ -131,7 +132,7 @@ class Drift(Effect):
         k = 3 * self.degree
         return [(f"station {s}", list(range(i * k, (i + 1) * k))) for i, s in enumerate(self._station_names())]
 
-    def restrict(self, groups: Sequence[int]) -> "Drift":
+    def restrict(self, groups: Sequence[int]) -> Drift:
         names = self._station_names()
         if self.stations is None:
             return self

@@ -4,7 +4,8 @@ from __future__ import annotations
 
 import abc
 import hashlib
-from typing import Any, Sequence
+from typing import Any
+from collections.abc import Sequence
 
 import numpy as np
 import pinocchio as pin

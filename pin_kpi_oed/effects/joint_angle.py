@@ -2,7 +2,8 @@
 
 from __future__ import annotations
 
-from typing import Any, Sequence
+from typing import Any
+from collections.abc import Sequence
 
 import numpy as np
 
@@ -157,7 +158,7 @@ class JointAngleTable(Effect):
 
     @classmethod
     def from_data(cls, robot: Robot, data: Any, step_rad: float = 0.05, joints: Sequence[str] | None = None
-                  ) -> "JointAngleTable":
+                  ) -> JointAngleTable:
         """Knots every ``step_rad`` over the range each joint covers in ``data`` (a MeasurementSet)."""
         joints = list(joints) if joints is not None else list(robot.joint_names)
         idx = [list(data.joint_names).index(j) for j in joints]

@@ -79,7 +79,8 @@ thermal expansion (:mod:`~pin_kpi_oed.effects.thermal`), composition with a mode
 from __future__ import annotations
 
 import re
-from typing import Any, Sequence
+from typing import Any
+from collections.abc import Sequence
 
 import numpy as np
 

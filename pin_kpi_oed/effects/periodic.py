@@ -33,7 +33,7 @@ revolution); :meth:`TransmissionError.describe` prints e.g.
 
 from __future__ import annotations
 
-from typing import Sequence
+from collections.abc import Sequence
 
 from pin_kpi_oed.effects.joint_angle import GearHarmonic
 from pin_kpi_oed.errors import InputError
@@ -71,7 +71,7 @@ class TransmissionError(GearHarmonic):
         super().__init__(robot, joints=joints, orders=range(1, int(max_order) + 1), pairs=pairs)
 
     @classmethod
-    def from_spec(cls, robot: Robot, text: str) -> "TransmissionError":
+    def from_spec(cls, robot: Robot, text: str) -> TransmissionError:
         """From ``"shoulder_lift_joint:7,elbow_joint:18"`` ((joint, order) pairs) or ``"max_order=40"``.
 
         Raises:

@@ -216,7 +216,7 @@ def _solve_ik(pm: PoseModel, pos_t: np.ndarray, R_t: np.ndarray | None, Q0: np.n
     lam = np.full(len(Q), float(opt.damping))
     E = errors(Q)
     nit = 0
-    for nit in range(1, opt.max_iter + 1):
+    for nit in range(1, opt.max_iter + 1):  # noqa: B007 (the count is read after the loop)
         todo = (np.linalg.norm(E[:, :3], axis=1) > opt.tol_m)
         if rows6:
             todo |= np.linalg.norm(E[:, 3:], axis=1) > opt.tol_rad
@@ -288,7 +288,8 @@ class CompensationResult(Result):
         """Counts, correction statistics (mm), and the targets that are not ok."""
         c = self.correction_m * 1e3
         ok = [s == "ok" for s in self.target_status]
-        lines = [f"compensated {len(self.names)} targets ({'position + orientation' if self.orientation else 'position'}"
+        lines = [f"compensated {len(self.names)} targets "
+                 f"({'position + orientation' if self.orientation else 'position'}"
                  f", {self.frame} frame{' of station ' + self.station if self.frame == 'cell' else ''}): "
                  f"{sum(ok)} ok, {self.target_status.count('near_singular')} near a singularity, "
                  f"{self.target_status.count('unreachable')} unreachable"]
@@ -458,7 +459,8 @@ def _result(cm: CalibratedModel, ts: TargetSet, opt: CompensationOptions, pm: Po
 
 
 def _tcp_sigma(cm: CalibratedModel, Q: np.ndarray, aux: Any, station: str | None) -> np.ndarray:
-    """3-D σ (m) of the TCP at Q: :meth:`CalibratedModel.predict_with_sigma` of the station (one σ for every command)."""
+    """3-D σ (m) of the TCP at Q: :meth:`CalibratedModel.predict_with_sigma` of the station (one σ for every
+    command)."""
     _, sig, _ = cm.predict_with_sigma(Q, aux if isinstance(aux, MeasurementSet) else None, station=cm.station(station))
     return np.sqrt((sig ** 2).sum(axis=1))
 

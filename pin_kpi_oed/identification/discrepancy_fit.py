@@ -80,7 +80,8 @@ def result_discrepancy(result: Any, data: MeasurementSet, options: Any = "auto",
     disc = fit_discrepancy(Q[rows], R, list(result.model.robot.joint_names), opts)
     if disc is not None and rows.size > len(result.residuals_m) - np.asarray(result.outliers).size:
         disc.decision += (f" (the {np.asarray(result.outliers).size} rows flagged as outliers are kept: the "
-                          f"plain least-squares fit used them, and without them {rows.size - np.asarray(result.outliers).size} "
+                          f"plain least-squares fit used them, "
+                          f"and without them {rows.size - np.asarray(result.outliers).size} "
                           f"rows are fewer than the {opts.min_rows} a Gaussian process needs)")
     if disc is not None:
         F, names = parameter_jacobian(result, Q)

@@ -9,7 +9,8 @@ robot information, every unknown determined by the data of all stations together
 from __future__ import annotations
 
 import copy
-from typing import Any, Sequence
+from typing import Any
+from collections.abc import Sequence
 
 import numpy as np
 
@@ -136,7 +137,8 @@ def build_problem(stations: StationSet, data: MeasurementSet, inp: FitInputs, ef
     """Step 3: the residual model over the identifiable parameters, with every data check."""
     opts = opts or IdentifyOptions()
     prob = ResidualModel(stations, data, np.asarray(ident.base, int), effects, sigma=inp.sigma, p_ref=P, Q=inp.Q,
-                         held=opts.held_effects, effect_prior_sigma=effect_prior(effects, opts.effect_prior_rad, stations.robot),
+                         held=opts.held_effects,
+                         effect_prior_sigma=effect_prior(effects, opts.effect_prior_rad, stations.robot),
                          theta0=opts.theta0)
     n_eq = prob.m * prob.nh
     if n_eq < prob.nx:

@@ -57,9 +57,11 @@ effect's Δy (its ``model, p`` arguments) is neglected in the Jacobian (not in f
 
 Steps of :func:`identify`
 -------------------------
-1. **Inputs** (:func:`~pin_kpi_oed.identification.fit_inputs.check_inputs`): joint columns, units, duplicates, weights; every station
+1. **Inputs** (:func:`~pin_kpi_oed.identification.fit_inputs.check_inputs`): joint columns, units, duplicates, weights;
+every station
    has at least 3 rows (one row is refused by name).
-2. **Start** (:func:`~pin_kpi_oed.identification.tracker_start.start_stations`): the tracker pose of every station is unknown in practice. It is
+2. **Start** (:func:`~pin_kpi_oed.identification.tracker_start.start_stations`): the tracker pose of every station is
+unknown in practice. It is
    guessed in closed form by point-set registration (Kabsch/Umeyama, no scale) of the nominal
    forward kinematics x_i (base frame) onto the station's measured points y_i (tracker frame)::
 
@@ -69,10 +71,12 @@ Steps of :func:`identify`
    ``R_probe = proj_SO3(Σ_i (R_T R_tool,i)ᵀ R_meas,i)``. Every station is then measured
    through a working :class:`~pin_kpi_oed.model.tracker.TrackerModel` whose nominal tracker
    pose is its guess, so the tracker parameters stay small.
-3. **Parameters** (:func:`~pin_kpi_oed.identification.identifiable.identifiable_set`): the structural analysis of one station lifted to all
+3. **Parameters** (:func:`~pin_kpi_oed.identification.identifiable.identifiable_set`): the structural analysis of one
+station lifted to all
    (:meth:`StationLayout.lift <pin_kpi_oed.identification.problem.StationLayout.lift>`); then the
    data checks on the stacked Jacobian: enough equations, every station's rows determine its own
-   set-up and add information on the robot beyond it (:func:`~pin_kpi_oed.identification.identifiable.check_stations`), every unknown
+   set-up and add information on the robot beyond it (:func:`~pin_kpi_oed.identification.identifiable.check_stations`),
+   every unknown
    determined by the data of all stations together (:func:`~pin_kpi_oed.identification.identifiable.data_rank_check`).
 4. **Solve**, **outliers**, **covariance** (:mod:`~pin_kpi_oed.identification.solve`), **TCP uncertainty**, **result**.
 
@@ -111,7 +115,8 @@ from here too.
 from __future__ import annotations
 
 import time
-from typing import Any, Sequence
+from typing import Any
+from collections.abc import Sequence
 
 import numpy as np
 import pinocchio as pin

@@ -4,7 +4,8 @@ from __future__ import annotations
 
 import dataclasses
 from dataclasses import dataclass
-from typing import Any, Sequence
+from typing import Any
+from collections.abc import Sequence
 
 import numpy as np
 
@@ -98,7 +99,7 @@ class IdentifyOptions:
             raise InputError(f"outlier_alpha must be in (0, 1), got {self.outlier_alpha}")
 
     @classmethod
-    def resolve(cls, options: "IdentifyOptions | None", overrides: dict) -> "IdentifyOptions":
+    def resolve(cls, options: IdentifyOptions | None, overrides: dict) -> IdentifyOptions:
         """``options`` (or the defaults) with the keyword ``overrides`` applied (:func:`resolve_options`)."""
         return resolve_options(cls, options, overrides, "identify")
 

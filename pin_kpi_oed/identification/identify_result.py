@@ -31,7 +31,8 @@ def param_unit(name: str) -> str:
 
 @dataclass
 class IdentificationResult(Result):
-    """Outcome of :func:`~pin_kpi_oed.identification.identify.identify` (common fields ``success``, ``status``, ``message``, ``nit``,
+    """Outcome of :func:`~pin_kpi_oed.identification.identify.identify` (common fields ``success``, ``status``,
+    ``message``, ``nit``,
     ``nfev``, ``time_s`` of :class:`~pin_kpi_oed.results.Result`).
 
     Attributes:
@@ -279,6 +280,6 @@ class IdentificationResult(Result):
         C = self.correlation
         iu = np.triu_indices(len(self.names), 1)
         strong = [(abs(C[i, j]), i, j) for i, j in zip(*iu) if abs(C[i, j]) > 0.95]
-        for c, i, j in sorted(strong, reverse=True)[:5]:
+        for _c, i, j in sorted(strong, reverse=True)[:5]:
             out.append(f"  strongly correlated: {self.names[i]} / {self.names[j]} ({C[i, j]:+.3f})")
         return "\n".join(out)

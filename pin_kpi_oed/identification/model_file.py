@@ -57,7 +57,8 @@ import json
 import os
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Sequence
+from typing import Any
+from collections.abc import Sequence
 
 import numpy as np
 import pinocchio as pin
@@ -195,7 +196,7 @@ class Setup:
                             "source": self.source, "rms_m": self.rms_m, "sigma_scale": self.sigma_scale})
 
     @classmethod
-    def from_dict(cls, d: dict, where: str) -> "Setup":
+    def from_dict(cls, d: dict, where: str) -> Setup:
         """Inverse of :meth:`to_dict`.
 
         Raises:
@@ -390,7 +391,8 @@ class CalibratedModel:
         return Y, scale * sig, extra
 
     def _robot_jacobian(self, label: str, Q: np.ndarray) -> np.ndarray:
-        """Base-frame Jacobian (m, 3, R) of station ``label``'s predictions w.r.t. the discrepancy's robot parameters."""
+        """Base-frame Jacobian (m, 3, R) of station ``label``'s predictions w.r.t. the discrepancy's robot
+        parameters."""
         names = self.discrepancy.param_names
         if not names:
             return np.zeros((len(Q), 3, 0))
@@ -408,7 +410,7 @@ class CalibratedModel:
             return np.array([self.station(lab) for lab in aux.station.tolist()], dtype=object)
         return np.array([self.station(station)] * m, dtype=object)
 
-    def noise_only(self) -> "CalibratedModel":
+    def noise_only(self) -> CalibratedModel:
         """A copy without the discrepancy and with every station's σ factor 1: the paper's noise-only model
         (its σ counts the tracker noise only), for contrast with the honest σ."""
         new = copy.copy(self)
@@ -417,7 +419,7 @@ class CalibratedModel:
         return new
 
     def with_setup(self, label: str, setup: Setup, default: bool = True, step: dict | None = None
-                   ) -> "CalibratedModel":
+                   ) -> CalibratedModel:
         """A copy with station ``label`` set to ``setup`` (added or replaced)."""
         new = copy.copy(self)
         new.setups = dict(self.setups)
@@ -462,7 +464,7 @@ class CalibratedModel:
         atomic_write_json(path, self.to_dict())
 
     @classmethod
-    def from_dict(cls, d: Any, where: str = "model file") -> "CalibratedModel":
+    def from_dict(cls, d: Any, where: str = "model file") -> CalibratedModel:
         """Build the model from a model file's content.
 
         Raises:

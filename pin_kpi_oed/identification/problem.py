@@ -50,7 +50,8 @@ effects), then one prior row per base parameter with a finite prior σ. Jacobian
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any, Sequence
+from typing import Any
+from collections.abc import Sequence
 
 import numpy as np
 from scipy.spatial.transform import Rotation
@@ -200,7 +201,7 @@ class StationLayout:
 
     @classmethod
     def build(cls, L: ParameterLayout, labels: Sequence[str], reflector_per_station: bool = False
-              ) -> "StationLayout":
+              ) -> StationLayout:
         """Global layout of ``labels`` stations whose models use layout ``L`` (fixed/prior copied from ``L``)."""
         labels = [str(s) for s in labels]
         S = len(labels)
@@ -294,7 +295,7 @@ class StationSet:
         self.layout = layout
 
     @classmethod
-    def single(cls, model: TrackerModel, label: str = "") -> "StationSet":
+    def single(cls, model: TrackerModel, label: str = "") -> StationSet:
         """One station measured through ``model`` (global layout = the model's layout)."""
         return cls([model], StationLayout.build(model.layout, [label]))
 

@@ -174,7 +174,7 @@ def assess_fit(result: Any, validation: dict | None = None, *, nominal_reflector
                       explained_by_discrepancy=explained if f.verdict == "good" else "")
 
 
-def _explained_by_discrepancy(result: Any, g: "_Findings", chi2_red: float, interval: tuple[float, float]) -> str:
+def _explained_by_discrepancy(result: Any, g: _Findings, chi2_red: float, interval: tuple[float, float]) -> str:
     """A χ² above its interval but below the poor threshold is the model discrepancy's when a Gaussian process
     over the joint angles was fitted to the residuals and its K-fold held-out σ is honest (standardised RMS within
     [0.67, 1.5]): every σ the model predicts then includes that error. A poor χ² (residuals far above the stated
@@ -191,7 +191,7 @@ def _explained_by_discrepancy(result: Any, g: "_Findings", chi2_red: float, inte
             f"standardised RMS {float(z):.2f}); every predicted sigma includes it")
 
 
-def _check_geometry(f: "_Findings", result: Any) -> None:
+def _check_geometry(f: _Findings, result: Any) -> None:
     """Check 4: every fitted joint placement within :data:`PLAUSIBLE_JOINT_TRANSLATION_M` /
     :data:`PLAUSIBLE_JOINT_ROTATION_RAD` of the nominal model, else poor (the worst one named)."""
     p, model = getattr(result, "p", None), getattr(result, "model", None)

@@ -4,7 +4,8 @@ The nominal reflector offset does more than start the fit: the structural identi
 computed at it (:func:`pin_kpi_oed.oed.identifiability.analyse`). A reflector assumed at the
 flange centre (0, 0, 0), on the last joint's axis, makes the last joints' placement errors look
 unidentifiable, so they are held at nominal and the fit ends far above the noise (a KR 15 with the
-reflector at (30, 20, 80) mm fitted as if at 0: reduced χ² 28, held-out RMS 5x the noise floor). :func:`estimate_reflector` fits the set-up only
+reflector at (30, 20, 80) mm fitted as if at 0: reduced χ² 28, held-out RMS 5x the noise floor).
+:func:`estimate_reflector` fits the set-up only
 (tracker pose and reflector, nominal geometry) and returns the reflector rounded to 1 mm, so a
 reflector truly on the axis stays on it (components under 0.5 mm become 0) while an off-axis
 one is recognised.

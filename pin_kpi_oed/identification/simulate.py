@@ -18,8 +18,9 @@ deviation = tolerance). Every random draw takes a seed.
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass
-from typing import Any, Sequence
+from dataclasses import asdict
+from typing import Any
+from collections.abc import Sequence
 
 import numpy as np
 import pinocchio as pin

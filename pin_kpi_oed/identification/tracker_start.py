@@ -8,7 +8,8 @@ station's measured points; for a 6-D probe the probe orientation is the chordal 
 
 from __future__ import annotations
 
-from typing import Any, Sequence
+from typing import Any
+from collections.abc import Sequence
 
 import numpy as np
 import pinocchio as pin

@@ -35,7 +35,8 @@ import io
 import os
 import time
 from dataclasses import dataclass, field
-from typing import Any, Sequence
+from typing import Any
+from collections.abc import Sequence
 
 import numpy as np
 import pinocchio as pin
@@ -96,7 +97,8 @@ class RegistrationResult(Result):
                        f"{np.round(T[:3, 3], 6).tolist()} m, rpy {np.round(pin.rpy.matrixToRpy(T[:3, :3]), 6).tolist()}"
                        f" rad; reflector {np.round(st.reflector_m * 1e3, 4).tolist()} mm")
             if st.sigma_scale > 1.0:
-                out.append(f"  station {lab}: predicted σ scaled by {st.sigma_scale:.2f}: its registration rows' errors "
+                out.append(f"  station {lab}: predicted σ scaled by {st.sigma_scale:.2f}: "
+                           f"its registration rows' errors "
                            f"are {st.sigma_scale:.2f}x the model's σ (another session than the calibration)")
         return "\n".join(out)
 
@@ -309,7 +311,8 @@ def validate_transfer(model: CalibratedModel, data: MeasurementSet, *, register_
         Statistics of the scored rows (:func:`error_stats`: ``n``, ``mean_m``, ``rms_m``, ``median_m``,
         ``p95_m``, ``max_m``, ``errors_m``), how honest the predicted σ is there
         (:func:`~pin_kpi_oed.identification.heldout.calibration_stats`: ``z_rms``, ``inside_95``,
-        ``sigma_mean_m``, ``extrapolation_share``; ``sigma_scale`` of the registration) plus ``registration``: ``source``, ``rows`` (1-based
+        ``sigma_mean_m``, ``extrapolation_share``; ``sigma_scale`` of the registration) plus ``registration``:
+        ``source``, ``rows`` (1-based
         row numbers of the registration rows in their file), ``n``, ``rms_m``, ``seed``, the
         ``setup``; and ``scored_rows`` (1-based row numbers of ``data`` scored).
 

@@ -27,7 +27,7 @@ import re
 import xml.etree.ElementTree as ET
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Sequence
+from collections.abc import Sequence
 
 import numpy as np
 import pinocchio as pin
@@ -37,7 +37,8 @@ from pin_kpi_oed.data.atomic import atomic_write_text
 from pin_kpi_oed.model.parameters import ParameterLayout
 from pin_kpi_oed.model.robot import Robot
 
-__all__ = ["ROOT", "FixedFrame", "model_frames", "write_model_urdf", "URDF_LIMITS_NOTE", "calibrated_urdf_text", "check_urdf_fk", "write_calibrated_urdf", "export_result_urdf",
+__all__ = ["ROOT", "FixedFrame", "model_frames", "write_model_urdf", "URDF_LIMITS_NOTE", "calibrated_urdf_text",
+           "check_urdf_fk", "write_calibrated_urdf", "export_result_urdf",
            "result_urdf_comment"]
 
 #: What a calibrated URDF cannot carry; written as an XML comment into every exported URDF.
@@ -183,9 +184,9 @@ def calibrated_urdf_text(robot: Robot, placements: Sequence[pin.SE3], comment: s
         el = joints.get(name)
         if el is None:
             raise RobotLoadError(f"{path}: joint '{name}' not found in the URDF")
-        O = _parse_origin(el)
+        O_k = _parse_origin(el)
         M_nom = robot.model.jointPlacements[jid]
-        new = O * M_nom.inverse() * pin.SE3(placements[k])  # O_k' = F_k^-1 M_k'
+        new = O_k * M_nom.inverse() * pin.SE3(placements[k])  # O_k' = F_k^-1 M_k'
         R = new.rotation
         U, _, Vt = np.linalg.svd(R)
         new = pin.SE3(U @ Vt, new.translation)
@@ -297,7 +298,7 @@ def result_urdf_comment(result, source: str | None = None) -> str:
     T = np.asarray(result.tracker_T_base)
     stations = list(getattr(result, "stations", []) or [])
     return (f"calibrated by pin_kpi_oed from {source or result.n_measurements} "
-            f"({result.n_measurements} measurements{f', stations ' + ', '.join(stations) if len(stations) > 1 else ''}"
+            f"({result.n_measurements} measurements{', stations ' + ', '.join(stations) if len(stations) > 1 else ''}"
             f"); tool frame {result.model.robot.tool_frame}; reflector_m "
             f"{np.array2string(np.asarray(result.reflector_m), precision=9)}; tracker_T_base translation "
             f"{np.array2string(T[:3, 3], precision=9)} m{f' (station {stations[0]})' if len(stations) > 1 else ''}. "

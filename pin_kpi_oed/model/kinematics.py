@@ -30,7 +30,8 @@ Also here: :func:`skew`, :func:`se3_from_matrix` (a checked 4×4 → ``pin.SE3``
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any, Sequence
+from typing import Any
+from collections.abc import Sequence
 
 import numpy as np
 import pinocchio as pin
@@ -219,7 +220,7 @@ class Chain:
         self._K, self._KK = K, K @ K
 
     @classmethod
-    def from_robot(cls, robot: Any) -> "Chain":
+    def from_robot(cls, robot: Any) -> Chain:
         """The chain of a :class:`~pin_kpi_oed.model.robot.Robot` (joints base to tip, its tool frame)."""
         return cls(robot.model, robot.joint_ids, robot.tool_frame_id)
 

@@ -55,7 +55,7 @@ class NoiseModel:
                 "range_b": self.range_b, "sigma_rot_rad": self.sigma_rot_rad}
 
     @classmethod
-    def from_dict(cls, d: dict) -> "NoiseModel":
+    def from_dict(cls, d: dict) -> NoiseModel:
         """Inverse of :meth:`to_dict`."""
         return cls(sigma_xyz_m=tuple(d.get("sigma_xyz_m", (1e-6,) * 3)), range_a_m=d.get("range_a_m"),
                    range_b=float(d.get("range_b", 0.0)), sigma_rot_rad=float(d.get("sigma_rot_rad", 1e-4)))

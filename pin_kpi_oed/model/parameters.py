@@ -183,12 +183,12 @@ class ParameterLayout:
         """One example name per set-up group (last component), for error messages."""
         return [self.names[self.group_slice(g).stop - 1] for g in self.setup_groups if self.group_slice(g).stop > 0]
 
-    def fix(self, patterns: list[str] | str) -> "ParameterLayout":
+    def fix(self, patterns: list[str] | str) -> ParameterLayout:
         """Mark parameters as known (held at their value). Returns self."""
         self.fixed = self.fixed | self.select(patterns)
         return self
 
-    def set_joint_prior(self, translation_m: float, rotation_rad: float) -> "ParameterLayout":
+    def set_joint_prior(self, translation_m: float, rotation_rad: float) -> ParameterLayout:
         """Give every joint placement a Gaussian prior around the nominal model: N(0, translation_m²) on its
         translation and N(0, rotation_rad²) on its rotation components (the set-up groups keep theirs). A weak
         prior (e.g. 5 mm and 10 mrad, ten times the manufacturing tolerances) changes nothing the data determine
@@ -206,7 +206,7 @@ class ParameterLayout:
             self.prior_sigma[sl.start + 3:sl.stop] = float(rotation_rad)
         return self
 
-    def set_prior(self, patterns: list[str] | str, sigma: float) -> "ParameterLayout":
+    def set_prior(self, patterns: list[str] | str, sigma: float) -> ParameterLayout:
         """Give matching parameters a Gaussian prior N(0, sigma²) (m or rad). Returns self.
 
         Raises:

@@ -37,13 +37,13 @@ distance dependent σ = a + b·range; weighted residuals f₁ = Σ⁻¹(η − h
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Sequence
+from collections.abc import Sequence
 
 import numpy as np
 import pinocchio as pin
 
 from pin_kpi_oed.model.device import MeasurementModel
-from pin_kpi_oed.model.kinematics import Kinematics, point_velocity, skew
+from pin_kpi_oed.model.kinematics import point_velocity, skew
 from pin_kpi_oed.model.noise import NoiseModel
 from pin_kpi_oed.model.parameters import PROBE_SETUP, TRACKER_SETUP, ParameterLayout
 from pin_kpi_oed.model.robot import Robot

@@ -52,7 +52,7 @@ def information(F: np.ndarray, prior_sigma: np.ndarray | None = None) -> np.ndar
     return M
 
 
-def prior_of(model: "TrackerModel", base: np.ndarray) -> np.ndarray | None:
+def prior_of(model: TrackerModel, base: np.ndarray) -> np.ndarray | None:
     """Prior standard deviations of the identifiable parameters from the model's layout.
 
     Args:
@@ -114,7 +114,7 @@ def kpi_covariance(F: np.ndarray, E: np.ndarray, prior_sigma: np.ndarray | None 
     return covariances(F, E, prior_sigma)[1]
 
 
-def design_covariances(model: "TrackerModel", base: np.ndarray, Q_meas: np.ndarray, E: np.ndarray,
+def design_covariances(model: TrackerModel, base: np.ndarray, Q_meas: np.ndarray, E: np.ndarray,
                        p: np.ndarray | None = None, names: list[str] | None = None) -> tuple[np.ndarray, np.ndarray]:
     """C_p and C_s of measurement configurations, F and the prior taken from the model (eqs. 19, 24c–24d).
 

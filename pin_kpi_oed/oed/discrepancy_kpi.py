@@ -86,7 +86,7 @@ class DiscrepancyPrior:
             raise InputError(f"discrepancy white level must be > 0, got {self.noise}")
 
     @classmethod
-    def from_discrepancy(cls, d: Any, source: str = "") -> "DiscrepancyPrior":
+    def from_discrepancy(cls, d: Any, source: str = "") -> DiscrepancyPrior:
         """The prior (kernel, S, w) of a fitted :class:`~pin_kpi_oed.discrepancy.gp.Discrepancy` (its data not used:
         a new calibration re-fits the robot)."""
         kernel = d.kernel if getattr(d, "kind", "white") != "white" else None
@@ -244,7 +244,7 @@ def _base_frame(model, p, Q, base, with_dq):
     return model.base_jacobian(p, Q, base), None
 
 
-def _chain_q(g: dict, dJ: np.ndarray, disc: "DiscrepancyPrior", Q: np.ndarray, Qa: np.ndarray, k: int) -> np.ndarray:
+def _chain_q(g: dict, dJ: np.ndarray, disc: DiscrepancyPrior, Q: np.ndarray, Qa: np.ndarray, k: int) -> np.ndarray:
     """dφ/dQ of the moving poses Q = Qa[k:] from ∂φ/∂J and ∂φ/∂G (K_QQ through both its arguments), (m, n)."""
     grad = np.einsum("iac,iack->ik", g["J"][k:], dJ)
     Gs = g["G"] + g["G"].T
@@ -351,7 +351,8 @@ class DiscrepancyDesignCriterion:
 
     def reregistered_covariance(self, Q: np.ndarray) -> np.ndarray:
         """C_s (3t, 3t) m² of the measured poses (``Q_given`` + Q), base frame, after re-registration in the exact
-        form: the kriging error at R in the registration (:func:`~pin_kpi_oed.oed.reregistration.reregistered_covariance`);
+        form: the kriging error at R in the registration
+        (:func:`~pin_kpi_oed.oed.reregistration.reregistered_covariance`);
         :meth:`covariance` without re-registration."""
         from pin_kpi_oed.oed.reregistration import reregistered_covariance
 
@@ -391,7 +392,7 @@ class DiscrepancyDesignCriterion:
         """Base-frame Jacobians of candidate poses (N, 3, nb)."""
         return _base_frame(self.model, self.p, np.atleast_2d(Q_pool), self.base, False)[0]
 
-    def select(self, Q_pool: np.ndarray, m: int, J_pool: np.ndarray | None = None, **kw) -> "GpPoolSelection":
+    def select(self, Q_pool: np.ndarray, m: int, J_pool: np.ndarray | None = None, **kw) -> GpPoolSelection:
         """m of the candidate poses by :func:`select_pool_gp` (on top of ``Q_given``)."""
         J_pool = self.pool_jacobians(Q_pool) if J_pool is None else J_pool
         sel = select_pool_gp(J_pool, np.atleast_2d(Q_pool), self.E, self.Q_work, self.discrepancy, m,
@@ -450,17 +451,17 @@ class _GreedyState:
             self.kcols[i] = self.disc.cov(self.Qc, self.Qc[i:i + 1])[:, 0]
         return self.kcols[i]
 
-    def build(self, sel: list[int]) -> "_GreedyState":
+    def build(self, sel: list[int]) -> _GreedyState:
         """The state given the set ``sel`` from scratch (one Cholesky factor, a few products)."""
         st = type(self).__new__(type(self))
         st.__dict__.update({k: v for k, v in self.__dict__.items()})
         S = np.asarray(sel, int)
-        d = self.disc
         G = np.array([self.kcol(int(i))[S] for i in S]) + self.w * np.eye(S.size)
         L = np.linalg.cholesky(G)
         from scipy.linalg import solve_triangular
 
-        st.V = solve_triangular(L, np.array([self.kcol(int(i)) for i in S]), lower=True, check_finite=False)      # (k, N)
+        st.V = solve_triangular(L, np.array([self.kcol(int(i)) for i in S]), lower=True,
+                                check_finite=False)      # (k, N)
         Wt = solve_triangular(L, self.Kwc0[:, S].T, lower=True, check_finite=False)               # (k, t)
         B = solve_triangular(L, self.Jc[S].reshape(S.size, -1), lower=True, check_finite=False)   # (k, 3 nb)
         nb = self.Jc.shape[2]
@@ -475,7 +476,7 @@ class _GreedyState:
         st.chosen = list(S)
         return st
 
-    def without(self, i: int) -> "_GreedyState":
+    def without(self, i: int) -> _GreedyState:
         """The state with the chosen candidate ``i`` removed (exact rank-one downdate: a row of sign −1 in ``V``)."""
         st = type(self).__new__(type(self))
         st.__dict__.update(self.__dict__)
@@ -670,7 +671,8 @@ class PosesNeeded:
         order: the greedy sequence (pool indices).
         pool_size: candidates; seed: seed of the random subsets.
         target_sigma_m: the target (m) or None; n_for_target: fewest designed poses reaching it (None: not reached
-            within ``n.max()``; 0: the measured poses already reach it); plateau_m: σ with the most designed poses tried (what the discrepancy allows
+            within ``n.max()``; 0: the measured poses already reach it); plateau_m: σ with the most designed poses tried
+            (what the discrepancy allows
             with this pool and budget).
     """
 
@@ -695,8 +697,9 @@ class PosesNeeded:
                 "target_sigma_m": self.target_sigma_m, "n_for_target": self.n_for_target,
                 "plateau_m": self.plateau_m, "time_s": self.time_s,
                 "note": "predicted TCP sigma at the working configurations with the discrepancy (universal kriging); "
-                        "designed = greedy kpi_gp sequence from the pool (nested; the IPOPT design of one size is usually "
-                        "better), random = mean of seeded random subsets"}
+                        "designed = greedy kpi_gp sequence from the pool "
+                        "(nested; the IPOPT design of one size is usually better)"
+                        ", random = mean of seeded random subsets"}
 
     def summary(self) -> str:
         """The answer in words (µm), with the honest plateau when the target is out of reach."""
@@ -717,7 +720,8 @@ class PosesNeeded:
         gain = 100.0 * (1.0 - self.plateau_m / self.sigma_designed_m[half])
         return (f"--target-sigma {tgt:.1f} um is below what the discrepancy allows within {top} poses: {top} designed "
                 f"poses reach only {self.plateau_m * 1e6:.1f} um, {self.plateau_m * 1e6 - tgt:.1f} um "
-                f"({self.plateau_m / self.target_sigma_m:.2f}x) above the target, and going from {int(self.n[half])} to "
+                f"({self.plateau_m / self.target_sigma_m:.2f}x) above the target, "
+                f"and going from {int(self.n[half])} to "
                 f"{top} poses lowered sigma by only {gain:.0f} %; a better model (effects) or a smaller working "
                 f"region helps more than poses")
 

@@ -62,7 +62,8 @@ class DesignScore(Result):
                 "rank": self.rank, "n_meas": self.n_meas, "identifiable": self.identifiable}
 
     def summary(self) -> str:
-        """The design scored (from a file), every criterion with its unit and label, then tr(C_s) (mm²) and the TCP σ (µm)."""
+        """The design scored (from a file), every criterion with its unit and label, then tr(C_s) (mm²) and the TCP σ
+        (µm)."""
         lines = []
         if self.design:
             d = self.design

@@ -181,7 +181,8 @@ class ExtendedModel:
                 d_e, D_e = e.joint_offset(th, Q, aux)
                 dY = e.tool_offset(th, Q, aux, self.model, self.p)[1]
                 if np.any(dY):
-                    raise InputError(f"effect '{e.name}': task-space offsets are not supported by the continuous design")
+                    raise InputError(f"effect '{e.name}': task-space offsets "
+                                     f"are not supported by the continuous design")
                 Ds.append(np.asarray(D_e, float))
                 dDs.append(e.joint_offset_dq(Q))
                 C += np.einsum("mnkj,k->mnj", dDs[-1], th)
@@ -280,8 +281,9 @@ class ExtendedModel:
     @classmethod
     def from_calibrated_model(cls, cm: Any, station: str | None = None, prior: str | None = "model",
                               effect_sigma_rad: float | None = None, tolerances: Any = None,
-                              base: np.ndarray | None = None, model: Any = None) -> "ExtendedModel":
-        """The extended model of a calibrated model file (:class:`~pin_kpi_oed.identification.model_file.CalibratedModel`).
+                              base: np.ndarray | None = None, model: Any = None) -> ExtendedModel:
+        """The extended model of a calibrated model file
+        (:class:`~pin_kpi_oed.identification.model_file.CalibratedModel`).
 
         Args:
             cm: the calibrated model (geometry, effects, set-ups, parameter covariance).
@@ -319,7 +321,7 @@ class ExtendedModel:
 
     @classmethod
     def from_result(cls, result: Any, prior: str | None = "model", effect_sigma_rad: float | None = None,
-                    tolerances: Any = None) -> "ExtendedModel":
+                    tolerances: Any = None) -> ExtendedModel:
         """The extended model of an :class:`~pin_kpi_oed.identification.identify.IdentificationResult`
         (through its calibrated model; see :meth:`from_calibrated_model`)."""
         return cls.from_calibrated_model(result.calibrated_model(), prior=prior, effect_sigma_rad=effect_sigma_rad,
@@ -543,7 +545,7 @@ def select_pool(Fp: np.ndarray, m: int, K: np.ndarray | None = None, prior_info:
                                    "the extended parameters")
     cur = st.phi
     sweeps = 0
-    for sweeps in range(1, max_sweeps + 1):
+    for sweeps in range(1, max_sweeps + 1):  # noqa: B007 (the count is read after the loop)
         improved = False
         for pos in range(m):
             out = chosen[pos]

@@ -131,7 +131,7 @@ def _multiplicative(Fp: np.ndarray, w: np.ndarray, K: np.ndarray | None, tol: fl
     With a fixed part M0 the target Σ w_i d_i replaces φ (A) / nb (D): a heuristic warm start only."""
     nb = Fp.shape[-1]
     it = 0
-    for it in range(1, max_iter + 1):
+    for it in range(1, max_iter + 1):  # noqa: B007 (the count is read after the loop)
         M = _info_w(Fp, w, M0)
         d = _d(Fp, M, K)
         target = (pool_phi(M, K) if K is not None else nb) if M0 is None else float(w @ d)
@@ -295,7 +295,7 @@ def _newton_simplex(Fa: np.ndarray, w: np.ndarray, K: np.ndarray | None, tol: fl
     z = np.maximum(nu + g, 1e-3 * abs(nu))
     y = np.full(k, 1e-3 * abs(nu)) if m > 1 else np.zeros(k)
     it = 0
-    for it in range(1, max_iter + 1):
+    for it in range(1, max_iter + 1):  # noqa: B007 (the count is read after the loop)
         if _gap(-g, w, phi if K is not None else nb, m, M0 is not None) < tol:
             break
         s = cap - w
@@ -613,7 +613,7 @@ def _exchange(Fp: np.ndarray, chosen: np.ndarray, K: np.ndarray | None, ridge: f
     FpT = np.ascontiguousarray(Fp.transpose(0, 2, 1))
     F2 = Fp.reshape(N * nh, nb)
     sweeps = 0
-    for sweeps in range(1, max_sweeps + 1):
+    for sweeps in range(1, max_sweeps + 1):  # noqa: B007 (the count is read after the loop)
         improved = False
         for pos in range(len(chosen)):
             out = chosen[pos]

@@ -33,7 +33,8 @@ The design criterion and every σ ``design`` reports keep Ẽ (the registration 
 the error at R only, k_W counted as before): their pool updates and IPOPT gradient are those of a plain trace,
 where L C_WR Lᵀ would need a weighted one. The exact form is
 :meth:`~pin_kpi_oed.oed.discrepancy_kpi.DiscrepancyDesignCriterion.reregistered_covariance`: Monte-Carlo exact
-where the criterion's form is 7 % low in a correlated case (tests/test_reregistration.py), and 1.3–4.5 % below it on the real UR10
+where the criterion's form is 7 % low in a correlated case (tests/test_reregistration.py), and 1.3–4.5 % below it on the
+real UR10
 pairs, whose observed errors differ from both by more (docs/results.md).
 
 The discrepancy is taken as carried to the new session with the model (what the calibrated model assumes: its

@@ -272,7 +272,8 @@ def parse_program(fmt: str, texts: dict[str, str], revolute: np.ndarray) -> tupl
             q[ext] = [vals[f"E{k + 1}"] * 1e-3 for k in range(ext.size)]
             pts[int(m.group(1))] = q
         order = [int(k) for k in re.findall(r"^PTP XP(\d+)", texts[".src"], re.M)]
-        return np.array([pts[k] for k in order]), _measure_marks(texts[".src"], r";step \d+: MEASURE \d+ \(design pose (\d+)\)")
+        return np.array([pts[k] for k in order]), _measure_marks(texts[".src"],
+                                                                 r";step \d+: MEASURE \d+ \(design pose (\d+)\)")
     if fmt == "rapid":
         t = texts[".mod"]
         pts = {}

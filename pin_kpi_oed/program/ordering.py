@@ -386,7 +386,8 @@ def plan_program(cell: Cell, Q: np.ndarray, options: ProgramOptions | None = Non
                    cycle_time_s=path_time(path, speeds), as_designed_time_s=path_time(designed, speeds),
                    n_moves=len(per_move), n_colliding=n_col,
                    n_turned=int(sum(w.kind == "measure" and not np.array_equal(w.q, Q[w.pose]) for w in prog)),
-                   n_repaired=int(sum(1 for a, b in zip(tour, tour[1:] + tour[:1]) if edges.get((min(a, b), max(a, b))))),
+                   n_repaired=int(sum(1 for a, b in zip(tour, tour[1:] + tour[:1])
+                                      if edges.get((min(a, b), max(a, b))))),
                    as_designed_colliding=int(sum(not m.clear for m in as_designed)),
                    min_move_clearance_m=min((m.min_clearance_m for m in per_move), default=float("inf")),
                    margin_m=o.margin_m, n_rounds=rounds)

@@ -104,7 +104,8 @@ class TransitionChecker:
         step_rad: largest revolute joint step between samples (rad); at most 1° is the contract of the program check.
         step_m: largest prismatic joint step between samples (m).
         checker: an existing :class:`FeasibilityChecker` of the cell (built if None).
-        use_bound: let a verified cheap lower bound of the pair distances (:class:`~pin_kpi_oed.program.move_bound.MoveBound`) clear the
+        use_bound: let a verified cheap lower bound of the pair distances
+        (:class:`~pin_kpi_oed.program.move_bound.MoveBound`) clear the
             samples it proves clear; the others, the end poses and every sample that decides a result are
             checked exactly (Coal). The decisions and the smallest clearances are those of the exact check.
 
@@ -256,7 +257,8 @@ class TransitionChecker:
         """
         X = np.atleast_2d(np.asarray(X, float))
         cap = self.cell.clearance_m + threshold + BALL_CAP_M
-        lb = (self.bound(X, cap) - self.cell.clearance_m) if self.bound is not None and len(X) else np.full(len(X), -np.inf)
+        lb = ((self.bound(X, cap) - self.cell.clearance_m) if self.bound is not None and len(X)
+              else np.full(len(X), -np.inf))
         out = np.zeros(len(X), bool)
         found = 0
         for i, x in enumerate(X):
@@ -325,7 +327,7 @@ class TransitionChecker:
                 return [vias[k]]
         A = [k for k in np.argsort(ca)[:3 * max_legs] if self.check(qa, vias[k]).clear][:max_legs]
         B = [k for k in np.argsort(cb)[:3 * max_legs] if self.check(vias[k], qb).clear][:max_legs]
-        legs = sorted(((ca[i] + cost(vias[i], vias[j]) + cb[j], i, j) for i in A for j in B if i != j))
+        legs = sorted((ca[i] + cost(vias[i], vias[j]) + cb[j], i, j) for i in A for j in B if i != j)
         for _, i, j in legs:
             if self.check(vias[i], vias[j]).clear:
                 return [vias[i], vias[j]]

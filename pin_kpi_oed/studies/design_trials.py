@@ -66,7 +66,8 @@ class MonteCarloResult(Result):
 
     def to_dict(self) -> dict:
         """Plain JSON-able dict (SI units): the common result keys and the comparison."""
-        return {**self.result_dict(), "n_rep": self.n_rep, "n_meas": self.n_meas, "predicted_trace_cs_m2": float(np.trace(
+        return {**self.result_dict(), "n_rep": self.n_rep, "n_meas": self.n_meas,
+                "predicted_trace_cs_m2": float(np.trace(
             self.predicted_cov_m2)), "empirical_trace_m2": float(np.trace(self.empirical_cov_m2)),
             "trace_ratio": self.trace_ratio, "bias_m": self.bias_m.tolist(), "failures": self.failures,
             "predicted_cov_m2": self.predicted_cov_m2.tolist(), "empirical_cov_m2": self.empirical_cov_m2.tolist()}
@@ -433,10 +434,11 @@ def _check_extended(methods: tuple[str, ...], data: MeasurementSet, n_meas: int)
         raise InputError(f"{data.source}: {len(data)} rows are too few for {n_meas}-pose designs")
 
 
-def _score_methods(fit: "_SplitFit", pool: MeasurementSet, work: np.ndarray, scored: MeasurementSet,
+def _score_methods(fit: _SplitFit, pool: MeasurementSet, work: np.ndarray, scored: MeasurementSet,
                    reg: MeasurementSet | None, methods: tuple[str, ...], rng: np.random.Generator, n_meas: int,
                    seed: int, prior_rad: float) -> list[tuple[str, float]]:
-    """(method, mean position error (m)) on the scored rows of each method's design, calibrated with the extended model."""
+    """(method, mean position error (m)) on the scored rows of each method's design, calibrated with the extended
+    model."""
     # KPI: the measured point at the working configurations, in the pool's tracker frame
     ext = fit.ext
     E_ext = ext.jacobian(work, weighted=False)[:, :3, :].reshape(-1, ext.nx)

@@ -27,7 +27,8 @@ from __future__ import annotations
 
 import dataclasses
 import time
-from typing import Any, Sequence
+from typing import Any
+from collections.abc import Sequence
 
 import numpy as np
 
@@ -55,7 +56,8 @@ def working_region(q_work: np.ndarray, per_point: int, radius_rad: float, seed: 
 def withheld_truth(model: Any, amplitude_rad: float, seed: int, joints: Sequence[str] = HARMONIC_JOINTS,
                    orders: Sequence[int] = HARMONIC_ORDERS) -> tuple[np.ndarray, list]:
     """(true raw parameters, [(gear harmonic, θ)]) of one simulated robot: geometric errors (0.5 mm / 1 mrad per
-    identifiable joint-placement and set-up component) and a gear harmonic of amplitude ``amplitude_rad`` per (joint, order) component with
+    identifiable joint-placement and set-up component) and a gear harmonic of amplitude ``amplitude_rad`` per (joint,
+    order) component with
     seeded random phases (the same phases for every amplitude of a seed)."""
     from pin_kpi_oed.effects.library import GearHarmonic
     from pin_kpi_oed.identification.simulate import Tolerances, random_truth

@@ -205,7 +205,8 @@ def curve_split(model: TrackerModel, data: MeasurementSet, prior: DiscrepancyPri
     Returns:
         ``{"seed", "n_pool", "n_scored", "sizes", "methods", "error_mean_m", "error_rms_m", "error_geo_mean_m",
         "pred_sigma_work_m", "pred_rms_scored_m", "pred_rms_scored_exact_m"`` (per method, one value per size;
-        the last is the prediction with the exact re-registered covariance across sessions), ``"full"`` (the same numbers
+        the last is the prediction with the exact re-registered covariance across sessions), ``"full"`` (the same
+        numbers
         of the whole pool), ``"random_beyond"`` (``sizes`` and ``error_mean_m`` of the larger random sets),
         ``"select_time_s"`` (per method), ``"time_s"``}.
 
@@ -235,7 +236,8 @@ def curve_split(model: TrackerModel, data: MeasurementSet, prior: DiscrepancyPri
     beyond = {"sizes": big, "error_mean_m": [_score(model, sp.pool.subset(np.sort(des.order[:m])), sp, prior)[0]
                                              for m in big]}
     return {"seed": seed, "n_pool": len(sp.pool), "n_scored": len(sp.scored), "sizes": list(sizes),
-            "methods": list(methods), **out, "full": dict(zip(keys, full)), "random_beyond": beyond, "select_time_s": sel_time,
+            "methods": list(methods), **out, "full": dict(zip(keys, full)), "random_beyond": beyond,
+            "select_time_s": sel_time,
             "time_s": time.perf_counter() - t0}
 
 
@@ -327,7 +329,8 @@ class LearningCurves(Result):
 
     def needed(self, key: str = "error_mean_m", frac: float = 0.1) -> dict:
         """Poses each method needs to come within ``frac`` of the full pool, on the median curve over the splits
-        (robust to a failed set; observed: ``error_mean_m``; predicted: ``pred_sigma_work_m`` or ``pred_rms_scored_m``)."""
+        (robust to a failed set; observed: ``error_mean_m``; predicted: ``pred_sigma_work_m`` or
+        ``pred_rms_scored_m``)."""
         ref = float(np.median(self.full(key)))
         out = {meth: poses_within(np.array(self.sizes), np.median(self.array(key, meth), 0), ref, frac)
                for meth in self.methods}
@@ -404,7 +407,8 @@ class LearningCurves(Result):
                        if pr else f"{'':>11}{'':>7}{'':>9}")
                 lines.append(f"{meth:<8}{m:>5}{e[:, j].mean() * 1e3:>12.4f} +- {sd * 1e3:.4f}"
                              f"{np.median(e[:, j]) * 1e3:>8.4f}{cmp}"
-                             f"{pw[:, j].mean() * 1e3:>15.4f}{ps[:, j].mean() * 1e3:>11.4f}{r[:, j].mean() * 1e3:>10.4f}")
+                             f"{pw[:, j].mean() * 1e3:>15.4f}{ps[:, j].mean() * 1e3:>11.4f}"
+                             f"{r[:, j].mean() * 1e3:>10.4f}")
         f = {k: self.full(k).mean() * 1e3 for k in ("error_mean_m", "pred_sigma_work_m", "pred_rms_scored_m",
                                                       "error_rms_m")}
         lines.append(f"{'full':<8}{self.splits[0]['n_pool']:>5}{f['error_mean_m']:>12.4f}{'':>43}"

@@ -26,7 +26,8 @@ import time
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
+from collections.abc import Callable
 
 import numpy as np
 import pinocchio as pin
@@ -313,7 +314,8 @@ def _notional_summary(rows: list[dict], failed: list[dict], m: int, seed: int, w
         avg_var[c] = {k: v / 3 for k, v in avg_var[c].items()}
     return {
         "study": "notional90", "arms": len(rows), "failed_arms": failed, "measurements": m, "seed": seed,
-        "mean_improvement_vs_heuristic": float(np.mean([r["improvement_vs_heuristic"] for r in rows])) if rows else None,
+        "mean_improvement_vs_heuristic": (float(np.mean([r["improvement_vs_heuristic"] for r in rows]))
+                                          if rows else None),
         "mean_improvement_vs_param": float(np.mean([r["improvement_vs_param"] for r in rows])) if rows else None,
         "mean_improvement_param_vs_heuristic": float(np.mean([r["improvement_param_vs_heuristic"] for r in rows]))
         if rows else None,
@@ -408,7 +410,8 @@ def format_notional_summary(s: dict) -> str:
         if v:
             lines.append(f"  {name:<38}{v['min'] * 1e6:>12.4e}{v['mean'] * 1e6:>12.4e}{v['max'] * 1e6:>12.4e}")
     if s["arms"]:
-        lines.append(f"mean change of tr(C_s) with the KPI design: {-100 * s['mean_improvement_vs_heuristic']:+.1f} % vs "
+        lines.append(f"mean change of tr(C_s) with the KPI design: "
+                     f"{-100 * s['mean_improvement_vs_heuristic']:+.1f} % vs "
                      f"random, {-100 * s['mean_improvement_vs_param']:+.1f} % vs A on C_p "
                      f"(A on C_p vs random: {-100 * s['mean_improvement_param_vs_heuristic']:+.1f} %)")
     lines.append(f"all designs collision-free (independent check): {s['all_collision_free']}")

@@ -12,7 +12,8 @@ import argparse
 import math
 import re
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
+from collections.abc import Callable
 
 from pin_kpi_oed.errors import InputError
 from pin_kpi_oed.validation.paths import check_outputs
@@ -163,7 +164,8 @@ OUTPUTS = {"evaluate": ["json"], "demo": ["json"], "design": ["json"], "simulate
            "register": ["model_out", "json"], "predict": ["out", "figure"], "diagnose": ["json"], "view": ["html"],
            "export": ["out", "json", "html"], "compensate": ["out", "json"], "import-tracker": ["out"]}
 #: command -> argparse dests of inputs (files or folders; lists allowed)
-INPUTS = {"evaluate": ["design"], "design": ["cell", "pool", "given", "given_prior", "model"], "identify": ["data", "validate", "register_data", "robot"],
+INPUTS = {"evaluate": ["design"], "design": ["cell", "pool", "given", "given_prior", "model"],
+          "identify": ["data", "validate", "register_data", "robot"],
           "simulate": ["robot", "design"], "import-ipa": ["src"], "register": ["model", "data"],
           "predict": ["model", "data"], "diagnose": ["train", "validate", "register_data", "robot"],
           "view": ["design"], "info": ["robot"], "export": ["design"], "compensate": ["model", "targets", "program"],

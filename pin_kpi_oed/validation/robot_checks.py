@@ -71,7 +71,7 @@ class captured_stderr:
     ``cap.first_line()`` its first meaningful line (e.g. urdfdom's reason for a refusal).
     """
 
-    def __enter__(self) -> "captured_stderr":
+    def __enter__(self) -> captured_stderr:
         import os
         import sys
         import tempfile

@@ -8,13 +8,14 @@ same message (``identify --sigma 10`` and ``diagnose --sigma 15`` alike).
 from __future__ import annotations
 
 import math
-from typing import Iterable
+from collections.abc import Iterable
 
 import numpy as np
 
 from pin_kpi_oed.errors import InputError
 
-__all__ = ["MAX_TOOL_OFFSET_M", "SIGMA_MAX_M", "SIGMA_ROT_MAX_RAD", "check_sigma_m", "check_sigma_rad", "check_offset_m",
+__all__ = ["MAX_TOOL_OFFSET_M", "SIGMA_MAX_M", "SIGMA_ROT_MAX_RAD", "check_sigma_m", "check_sigma_rad",
+           "check_offset_m",
            "check_angle_rad", "POSITION_SPREAD_FACTOR", "check_position_spread_m"]
 
 #: largest plausible measurement noise sigma (m): 1 cm; more means the value was given in mm

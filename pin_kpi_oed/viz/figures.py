@@ -4,7 +4,8 @@
   the xy, xz and yz planes, one row per working configuration (as the paper's Figure 7, heuristic
   vs KPI design). The curve drawn is the *shadow* of the 3-D ellipsoid {x : xᵀC⁻¹x <= χ²₃(level)}
   on the plane, i.e. the ellipse of the 2×2 marginal covariance with the same χ²₃ bound.
-* :func:`plot_design_bars`: tr(C_s) (mm², as ``pin-kpi-oed design``) and the RMS TCP σ (µm) of each design, with the change
+* :func:`plot_design_bars`: tr(C_s) (mm², as ``pin-kpi-oed design``) and the RMS TCP σ (µm) of each design, with the
+change
   relative to the heuristic.
 * :func:`plot_pose_quality`: per measurement pose, the clearance (mm) and the laser incidence (°).
 * :func:`design_figures`: the three from a design JSON (:func:`pin_kpi_oed.design.design_file.load_design`).
@@ -20,7 +21,8 @@ import io
 import os
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Mapping, Sequence
+from typing import Any
+from collections.abc import Mapping, Sequence
 
 import numpy as np
 

@@ -169,7 +169,7 @@ class SceneRecorder:
     def get_image(self, *args, **kwargs):
         raise PinKpiOedError("the recorded scene has no browser attached: write it with --html or view it live")
 
-    def open(self) -> "SceneRecorder":
+    def open(self) -> SceneRecorder:
         return self
 
     def close(self) -> None:

@@ -24,7 +24,8 @@ Engineers check measurement poses by eye before running them on a real robot.
   factor (``ellipsoids/label``, the page's legend) so that µm-level ellipsoids are visible; a
   black dot marks the nominal TCP. The ellipsoids are the honest C_s (model discrepancy included,
   ``designs[i].discrepancy.cov_s_m2`` of ``design --model``: the same σ as ``predict``) when every design
-  has it, else the paper's (tracker noise only); :attr:`SceneOptions.sigma` picks one, the labels say which. The labels are screen-sized sprites (three.js ``Sprite`` with
+  has it, else the paper's (tracker noise only); :attr:`SceneOptions.sigma` picks one, the labels say which. The labels
+  are screen-sized sprites (three.js ``Sprite`` with
   ``sizeAttenuation: false``): :data:`LABEL_LINE_SCREEN` of the page height per text line at any
   zoom, always facing the camera.
 
@@ -41,7 +42,8 @@ import os
 import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Mapping, Sequence
+from typing import Any
+from collections.abc import Mapping, Sequence
 
 import numpy as np
 import pinocchio as pin
@@ -211,7 +213,7 @@ class Scene:
         if pose is not None:
             t = self.pose_time(*pose)
             extra += ("<script>(function seek() { const a = viewer.animator; if (!a.actions.length) "
-                      "{ requestAnimationFrame(seek); return; } a.play(); a.pause(); a.seek(%r); })();</script>" % t)
+                      f"{{ requestAnimationFrame(seek); return; }} a.play(); a.pause(); a.seek({t!r}); }})();</script>")
         if self.recorder is not None:
             return self.recorder.get_scene(title=f"pin-kpi-oed: {self.design.robot.name} design", extra_body=extra)
         return self.vis.static_html().replace("</body>", extra + "\n</body>", 1)

@@ -141,7 +141,8 @@ def plot_trust_map(model: Any, Q: np.ndarray, aux: Any = None, station: str | No
                        zorder=1)
         inside = ~far
         sc = ax.scatter(P[inside, 0], P[inside, j], s=26, c=s_mm[inside], cmap="viridis", vmin=vmin, vmax=vmax,
-                        edgecolors="k", linewidths=0.3, label=f"inside the measured coverage ({int(inside.sum())} rows)", zorder=2)
+                        edgecolors="k", linewidths=0.3, label=f"inside the measured coverage "
+                                                              f"({int(inside.sum())} rows)", zorder=2)
         ax.scatter(P[far, 0], P[far, j], s=60, c=s_mm[far], cmap="viridis", vmin=vmin, vmax=vmax, marker="X",
                    edgecolors="#d62728", linewidths=0.9,
                    label=f"extrapolation: outside the measured coverage ({int(far.sum())} rows)", zorder=3)

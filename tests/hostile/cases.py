@@ -506,7 +506,8 @@ def _build_issue24(d: Path, design: dict) -> None:
     bad_model("m_cov_elem_str.json", put("geometry/parameters/covariance/0/1", "x"))
     bad_model("m_negdef.json", put("geometry/parameters/covariance", (-cov).tolist()))
     bad_model("m_zerocov.json", put("geometry/parameters/covariance", np.zeros_like(cov).tolist()))
-    bad_model("m_asym.json", put("geometry/parameters/covariance", (cov + np.triu(np.full_like(cov, 1e-3), 1)).tolist()))
+    bad_model("m_asym.json",
+              put("geometry/parameters/covariance", (cov + np.triu(np.full_like(cov, 1e-3), 1)).tolist()))
     bad_model("m_noise_mm.json", put("noise/sigma_xyz_m", [10.0, 10.0, 10.0]))
     bad_model("m_refl_mm.json", put("stations/tr/reflector_m", [30.0, 20.0, 80.0]))
     bad_model("m_unknown_key.json", put("geometri", {}))
