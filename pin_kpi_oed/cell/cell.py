@@ -138,7 +138,7 @@ def capsules_from_urdf(robot: Robot, where: str = "robot_capsules", kind: str = 
 _KNOWN_KEYS = {"name", "description", "robot", "tool_frame", "base", "tracker", "reflector_m", "tcp_m", "noise",
                "joint_bounds", "robot_capsules", "extra_capsules", "obstacles", "skip_pairs", "beam",
                "incidence_max_deg", "clearance_m", "working_configurations_rad", "working_configurations_deg",
-               "measurements", "max_random_tries", "environment", "working_targets"}
+               "measurements", "max_random_tries", "environment", "working_targets", "kinematics"}
 
 
 def _check_top_level(d: Any, source: str) -> None:
@@ -159,8 +159,11 @@ def _read_robot(d: dict, source: str, base_dir: Path | None) -> Robot:
         p = Path(spec)
         if not p.is_absolute():
             spec = str((base_dir / p).resolve())
+    kin = d.get("kinematics")
+    if kin is not None and base_dir is not None and not Path(str(kin)).is_absolute():
+        kin = str((base_dir / str(kin)).resolve())
     try:
-        return load_robot(spec, d.get("tool_frame"))
+        return load_robot(spec, d.get("tool_frame"), kinematics=kin)
     except RobotLoadError as exc:
         raise RobotLoadError(f"{_where(source, 'robot')}: {exc}") from None
 

@@ -18,7 +18,8 @@ from pin_kpi_oed.cli.util import parse_floats
 from pin_kpi_oed.errors import PinKpiOedError
 from pin_kpi_oed.model.robot import ROBOT_HELP
 
-TOPICS = ("design", "identify", "transfer", "diagnose", "view", "study", "compensate", "tracker_export", "program")
+TOPICS = ("design", "identify", "transfer", "diagnose", "view", "study", "compensate", "tracker_export", "program",
+          "export_model", "report")
 
 
 
@@ -29,7 +30,7 @@ def cmd_info(args: argparse.Namespace) -> int:
     from pin_kpi_oed.model.tracker import TrackerModel
     from pin_kpi_oed.model.robot import load_robot
 
-    robot = load_robot(args.robot, args.tool)
+    robot = load_robot(args.robot, args.tool, kinematics=args.kinematics)
     refl = parse_floats(args.reflector, 3, "--reflector")
     model = TrackerModel(robot, reflector_m=refl)
     ident = analyse(model, seed=args.seed)
@@ -82,6 +83,7 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("info", help="joints, limits, parameter count and identifiable rank of a robot")
     p.add_argument("robot", help=ROBOT_HELP)
     p.add_argument("--tool", default=None, help="tool frame (default tool0)")
+    p.add_argument("--kinematics", default=None, help="UR kinematics file (ur_description layout) of a UR robot")
     p.add_argument("--reflector", default="0.05,0.0,0.05", help="reflector offset x,y,z in the tool frame (m)")
     p.add_argument("--seed", type=int, default=0, help="seed of the random excitation")
     p.add_argument("--json", action="store_true", help="print JSON instead of text")

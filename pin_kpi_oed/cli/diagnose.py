@@ -45,6 +45,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                     "(it equals a uniform scaling of the robot); the report says so.")
     d.add_argument("--robot", required=True, help=ROBOT_HELP)
     d.add_argument("--tool", default=None, help="tool frame (default tool0)")
+    d.add_argument("--kinematics", default=None, help="UR kinematics file (ur_description default_kinematics.yaml layout, e.g. from ur_calibration) as the nominal model of a UR --robot")
     d.add_argument("--train", required=True, action="append",
                    help="training measurement CSV (joint columns, x, y, z in m, ...); repeat for several files "
                         "(each its own station unless it has a 'station' column)")
@@ -185,7 +186,7 @@ def run(args: argparse.Namespace) -> int:
         check_writable(args.model_out)
         if any(os.path.abspath(args.model_out) == os.path.abspath(f) for f in args.train + [args.validate or ""]):
             raise InputError(f"--model-out {args.model_out}: is an input of this command; name another file")
-    robot = load_robot(args.robot, args.tool)
+    robot = load_robot(args.robot, args.tool, kinematics=args.kinematics)
     reach = robot.reach()
     train = read_data_files(args.train, robot, "--train", opts=table_options(args, robot))
     val, reg = read_validation(args, robot)

@@ -119,6 +119,7 @@ def _register_identify(subparsers: argparse._SubParsersAction) -> None:
                                           "on some rows of another session and only the rest are scored.")
     i.add_argument("--robot", required=True, help=ROBOT_HELP)
     i.add_argument("--tool", default=None, help="tool frame (default tool0)")
+    i.add_argument("--kinematics", default=None, help="UR kinematics file (ur_description default_kinematics.yaml layout, e.g. from ur_calibration) as the nominal model of a UR --robot")
     i.add_argument("--data", required=True, action="append",
                    help="measurement CSV (joint columns, x, y, z in m, ...); repeat for several files: each file is "
                         "its own station (tracker placement) unless it has a 'station' column")
@@ -496,7 +497,7 @@ def run_identify(args: argparse.Namespace) -> int:
 
     _check_outputs(args.json, args.urdf_out, args.model_out)
     geometry_prior = _geometry_prior(getattr(args, "geometry_prior", None))
-    robot = load_robot(args.robot, args.tool)
+    robot = load_robot(args.robot, args.tool, kinematics=args.kinematics)
     train = read_data_files(args.data, robot, opts=table_options(args, robot))
     test, reg = read_validation(args, robot)
     noise, weights, scale = _noise_and_weights(args, train)

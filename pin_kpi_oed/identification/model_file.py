@@ -443,7 +443,8 @@ class CalibratedModel:
             "format": MODEL_FORMAT,
             "robot": {"spec": _robot_spec(rb), "name": rb.name, "urdf_path": str(rb.urdf_path),
                       "tool_frame": rb.tool_frame, "joint_names": list(rb.joint_names),
-                      "nominal_joint_placements": [M.homogeneous for M in nominal]},
+                      "nominal_joint_placements": [M.homogeneous for M in nominal],
+                      **({"kinematics": rb.kinematics.layout()} if rb.kinematics is not None else {})},
             "tcp_m": self.tcp_m,
             "pose6d": bool(self.pose6d),
             "geometry": {"joint_placement_errors": {n: float(v) for n, v in zip(L.names, self.joint_p)},
@@ -525,6 +526,8 @@ def _robot_spec(robot: Robot) -> str:
     from pin_kpi_oed.model.robot import resolve_robot
 
     key = str(robot.name).lower()
+    if robot.kinematics is not None:  # a UR name with its kinematics (stored beside it)
+        return key
     if key in SHIPPED_ROBOTS or key in ERD_ROBOTS:
         try:
             if Path(resolve_robot(key)[0]).resolve() == Path(robot.urdf_path).resolve():
@@ -548,7 +551,12 @@ def _check_format(d: Any, where: str) -> None:
 def _load_model_robot(rob: dict, where: str) -> Robot:
     spec = str(rob.get("spec") or rob.get("urdf_path"))
     try:
-        robot = load_robot(spec, rob.get("tool_frame"))
+        kin = rob.get("kinematics")
+        if kin is not None:
+            from pin_kpi_oed.model.ur_kinematics import parse_ur_kinematics
+
+            kin = parse_ur_kinematics(kin, f"{where}: robot.kinematics")
+        robot = load_robot(spec, rob.get("tool_frame"), kinematics=kin)
     except PinKpiOedError as exc:
         raise InputError(f"{where}: robot '{spec}': {exc}") from None
     names = rob.get("joint_names")

@@ -176,16 +176,18 @@ def calibrated_urdf_text(robot: Robot, placements: Sequence[pin.SE3], comment: s
     path = Path(robot.urdf_path)
     try:
         parser = ET.XMLParser(target=ET.TreeBuilder(insert_comments=True))
-        root = ET.fromstring(path.read_text(), parser=parser)
+        root = ET.fromstring(robot.read_urdf_text(), parser=parser)
     except (OSError, ET.ParseError) as exc:
         raise RobotLoadError(f"{path}: cannot parse the URDF for export ({exc})") from None
     joints = {j.get("name"): j for j in root.findall("joint")}
+    # the template's own placements (a kinematics file may have replaced the robot's): F_k = M_k O_k^-1
+    template = robot.model if robot.kinematics is None else _reduced(pin.buildModelFromXML(robot.read_urdf_text()), robot)
     for k, (name, jid) in enumerate(zip(robot.joint_names, robot.joint_ids)):
         el = joints.get(name)
         if el is None:
             raise RobotLoadError(f"{path}: joint '{name}' not found in the URDF")
         O_k = _parse_origin(el)
-        M_nom = robot.model.jointPlacements[jid]
+        M_nom = template.jointPlacements[jid]
         new = O_k * M_nom.inverse() * pin.SE3(placements[k])  # O_k' = F_k^-1 M_k'
         R = new.rotation
         U, _, Vt = np.linalg.svd(R)

@@ -153,7 +153,7 @@ RULES: dict[str, dict[str, Callable[[str, Any], None]]] = {
     "export": {**_SEED, "dwell": _finite_at_least(0.0, "s", 3600.0, " (a wait at each measurement point, in s)"),
                "margin": _finite_at_least(0.0, "m", 0.5, ": give the move clearance margin in m (e.g. 0.01 for 10 mm)"),
                "speed_override": _share},
-    "compensate": {**_SEED, "tcp": _offset},
+    "compensate": {**_SEED, "tcp": _offset}, "export-model": {"tcp": _offset},
     "study": {**_SEED, "measurements": _int_at_least(9), "seeds": _int_at_least(1), "arms": _int_at_least(1),
               "starts": _int_at_least(1), "workers": _int_at_least(1), "scheduler": _scheduler},
 }
@@ -162,14 +162,16 @@ RULES: dict[str, dict[str, Callable[[str, Any], None]]] = {
 OUTPUTS = {"evaluate": ["json"], "demo": ["json"], "design": ["json"], "simulate": ["out", "test_out", "truth_json"],
            "identify": ["json", "urdf_out", "model_out"], "import-ipa": ["out", "train", "test"],
            "register": ["model_out", "json"], "predict": ["out", "figure"], "diagnose": ["json"], "view": ["html"],
-           "export": ["out", "json", "html"], "compensate": ["out", "json"], "import-tracker": ["out"]}
+           "export": ["out", "json", "html"], "compensate": ["out", "json"], "import-tracker": ["out"],
+           "export-model": ["out"], "report": ["html", "json", "pdf"]}
 #: command -> argparse dests of inputs (files or folders; lists allowed)
 INPUTS = {"evaluate": ["design"], "design": ["cell", "pool", "given", "given_prior", "model"],
-          "identify": ["data", "validate", "register_data", "robot"],
+          "identify": ["data", "validate", "register_data", "robot", "kinematics"],
           "simulate": ["robot", "design"], "import-ipa": ["src"], "register": ["model", "data"],
-          "predict": ["model", "data"], "diagnose": ["train", "validate", "register_data", "robot"],
+          "predict": ["model", "data"], "diagnose": ["train", "validate", "register_data", "robot", "kinematics"],
           "view": ["design"], "info": ["robot"], "export": ["design"], "compensate": ["model", "targets", "program"],
-          "import-tracker": ["export", "joints", "robot"]}
+          "import-tracker": ["export", "joints", "robot"], "export-model": ["model"],
+          "report": ["model", "train", "validate", "register_data"]}
 #: command -> argparse dests of output folders
 FOLDERS = {"diagnose": ["figures"], "view": ["figures"], "study": ["out"]}
 

@@ -63,7 +63,7 @@ CELL_SCHEMA: dict[str, Any] = {
     "type": "object", "additionalProperties": False, "required": ["robot"],
     "properties": {
         "name": {"type": "string"}, "description": {"type": "string"}, "robot": {"type": "string"},
-        "tool_frame": {"type": ["string", "null"]}, "base": _POSE, "tracker": _POSE, "reflector_m": _VEC3,
+        "kinematics": {"type": "string"}, "tool_frame": {"type": ["string", "null"]}, "base": _POSE, "tracker": _POSE, "reflector_m": _VEC3,
         "tcp_m": _VEC3, "noise": _NOISE,
         "joint_bounds": {"type": "object", "additionalProperties": False,
                          "properties": {k: _NUMS for k in ("lower_rad", "upper_rad", "lower_deg", "upper_deg")}},
@@ -253,7 +253,8 @@ MODEL_SCHEMA: dict[str, Any] = {
         "robot": {"type": "object", "additionalProperties": False,
                   "properties": {"spec": {"type": "string"}, "name": {"type": "string"},
                                  "urdf_path": {"type": "string"}, "tool_frame": {"type": ["string", "null"]},
-                                 "joint_names": _STRS, "nominal_joint_placements": {"type": "array", "items": _MAT4}}},
+                                 "joint_names": _STRS, "nominal_joint_placements": {"type": "array", "items": _MAT4},
+                                 "kinematics": {"type": "object"}}},
         "tcp_m": _VEC3, "pose6d": {"type": "boolean"},
         "geometry": {"type": "object", "additionalProperties": False, "required": ["joint_placement_errors"],
                      "properties": {
