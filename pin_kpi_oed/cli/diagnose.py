@@ -59,7 +59,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="tracker noise sigma per axis (m), 1 or 3 values; overrides the files' sigma columns "
                         "(needed when the files have none)")
     d.add_argument("--effects", default=None,
-                   help="candidate effects, comma-separated (default: joint_compliance, gear_harmonic, backlash, "
+                   help="candidate effects, comma-separated, or none (geometry only: nothing to extrapolate in another "
+                        "session's joint ranges) (default: joint_compliance, gear_harmonic, backlash, "
                         "thermal_expansion, joint_scale, transmission_error and link_bending: the last two's terms "
                         "are chosen by sparse selection on held-out error); also drift (linear in time/row order)")
     d.add_argument("--harmonics", type=int, default=40,
@@ -107,6 +108,8 @@ def _checked_effects(args: argparse.Namespace) -> list[str] | None:
     from pin_kpi_oed.diagnosis.diagnose_options import DEFAULT_CANDIDATES
 
     effects = list(DEFAULT_CANDIDATES)
+    if args.effects and args.effects.strip().lower() == "none":
+        return []  # geometry only: what transfers to configurations the training did not measure
     if args.effects:
         effects = [e.strip() for e in args.effects.split(",") if e.strip()]
         unknown = [e for e in effects if e not in ALL_EFFECT_NAMES]

@@ -74,6 +74,7 @@ def run_register(args: argparse.Namespace) -> int:
     from pin_kpi_oed.data.measurements import read_measurements
     from pin_kpi_oed.errors import InputError
     from pin_kpi_oed.identification.model_file import load_model_file
+    from pin_kpi_oed.identification.registration_check import registration_gates
     from pin_kpi_oed.identification.transfer import register_setup
     from pin_kpi_oed.validation.robot_checks import check_points_against_joints
 
@@ -83,7 +84,7 @@ def run_register(args: argparse.Namespace) -> int:
     check_points_against_joints(model.robot, data.q, data.position_m, args.data, args.data)
     existing = dict(model.setups)
     res = register_setup(model, data, station=args.station, hold_reflector=args.hold_reflector)
-    gates = _registration_gates(res, data, model, args.hold_reflector)
+    gates = registration_gates(res, data, model, args.hold_reflector)
     replaced = [lab for lab in res.stations if lab in existing]
     model_dict = res.model.to_dict()
     out = ({**res.to_dict(), "model": args.model, "data": args.data, "quality": [g.to_dict() for g in gates],
@@ -107,25 +108,6 @@ def run_register(args: argparse.Namespace) -> int:
                   "keep both)")
         print("wrote " + ", ".join(f for f in (args.model_out, args.json) if f))
     return 0
-
-
-def _registration_gates(res, data, model, hold_reflector: bool) -> list:
-    """The registration gate of every station registered
-    (:func:`~pin_kpi_oed.identification.quality.assess_registration`)."""
-    from pin_kpi_oed.identification.quality import assess_registration
-
-    ref = model.default_station if model.default_station in model.setups else next(iter(model.setups))
-    gates = []
-    for lab in res.stations:
-        rows = res.rows[lab]
-        sub = data if rows.size == len(data) else data.subset(rows)
-        X = model.predict(data.q[rows], sub, station=ref)  # the held robot, the model's reflector
-        sigma = data.sigma_m[rows] if data.sigma_m is not None else np.asarray(model.noise.sigma_xyz_m, float)
-        if model.discrepancy is not None:  # the robot's discrepancy is part of what the registration leaves
-            sigma = np.sqrt(np.asarray(sigma, float) ** 2 + model.discrepancy.prior_sigma_m ** 2)
-        gates.append(assess_registration(lab, X, data.position_m[rows], res.errors_m[rows], sigma,
-                                         6 + (0 if hold_reflector else 3)))
-    return gates
 
 
 def run_predict(args: argparse.Namespace) -> int:

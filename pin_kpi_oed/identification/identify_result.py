@@ -14,6 +14,7 @@ from pin_kpi_oed.identification.model_file import CalibratedModel
 from pin_kpi_oed.identification.problem import StationSet, effect_param_names, predict
 from pin_kpi_oed.model.tracker import TrackerModel
 from pin_kpi_oed.oed.identifiability import Identifiability
+from pin_kpi_oed.validation.units import SIGMA_MAX_M
 from pin_kpi_oed.results import Result
 
 __all__ = ["IdentificationResult", "param_unit"]
@@ -137,6 +138,25 @@ class IdentificationResult(Result):
         keep[self.outliers] = False
         return float(np.sqrt(np.mean(self.errors_m[keep] ** 2))) if keep.any() else float("nan")
 
+    def residual_sigma_m(self) -> np.ndarray | None:
+        r"""The fit's own residual level per axis (m): s_a = √(Σ_i r_{ia}² / (m − k/3)) over the m inlier rows,
+        k the estimated parameters (robot, set-up and effects), i.e. the position residuals corrected for
+        what the fit absorbed (3m − k degrees of freedom in all).
+
+        What a new session of the same robot is compared with (``register``): a model written without the
+        tracker's noise keeps its default noise, but its residual level says how well the robot fitted.
+
+        Returns:
+            (3,) m, or None when 3m ≤ k (no degrees of freedom left).
+        """
+        keep = np.ones(len(self.residuals_m), bool)
+        keep[self.outliers] = False
+        R = np.asarray(self.residuals_m, float)[keep, :3]
+        dof = R.shape[0] - len(self.values) / 3.0  # values: robot, set-up and effect parameters
+        if dof <= 0 or not np.all(np.isfinite(R)):
+            return None
+        return np.sqrt(np.sum(R ** 2, axis=0) / dof)
+
     def parameter(self, name: str) -> tuple[float, float]:
         """(value, std) of an estimated parameter by name.
 
@@ -180,6 +200,9 @@ class IdentificationResult(Result):
                "success": bool(self.success), "status": self.status, "nit": int(self.nit), "nfev": int(self.nfev),
                "time_s": float(self.time_s), "rows_per_station": n_rows,
                "reflector_per_station": bool(self.reflector_per_station)}
+        level = self.residual_sigma_m()
+        if level is not None and np.all(level > 0) and np.all(level <= SIGMA_MAX_M):  # else not a calibration
+            fit["residual_sigma_m"] = level
         return CalibratedModel(
             robot=self.model.robot, joint_p=np.asarray(self.p[:nj], float).copy(), effects=self.all_effects()[0],
             thetas=[t.copy() for t in self.all_effects()[1]], setups=dict(self.setups),

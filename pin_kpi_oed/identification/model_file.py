@@ -24,7 +24,9 @@ key                  content (SI units: m, rad)
 ``default_station``  the station used when none is named (the last registered one)
 ``noise``            the noise model (:meth:`NoiseModel.to_dict`)
 ``tcp_m``, ``pose6d`` KPI point in the tool frame; whether the model predicts orientations
-``fit``              fit statistics (measurements, RMS, reduced χ², iterations, ...)
+``fit``              fit statistics (measurements, RMS, reduced χ², iterations, ...) and
+                     ``residual_sigma_m``: the fit's own residual level per axis (m, corrected
+                     for the fitted parameters), what ``register`` compares a new session with
 ``discrepancy``      optional: the model discrepancy δ(q) of the robot (base frame; kernel,
                      hyper-parameters, training or inducing configurations; see
                      :mod:`pin_kpi_oed.discrepancy.gp`), kept by ``register``
@@ -75,6 +77,7 @@ from pin_kpi_oed.model.parameters import ParameterLayout
 from pin_kpi_oed.model.robot import ERD_ROBOTS, SHIPPED_ROBOTS, Robot, load_robot
 from pin_kpi_oed.model.serialize import se3_from_matrix
 from pin_kpi_oed.validation.schema import validate_model_dict
+from pin_kpi_oed.validation.units import check_sigma_m
 
 __all__ = ["MODEL_FORMAT", "Setup", "CalibratedModel", "load_model_file", "effect_spec", "effect_from_spec"]
 
@@ -399,6 +402,16 @@ class CalibratedModel:
         model, p = self.station_model(label)
         return model.base_jacobian(p, Q, [model.layout.names.index(n) for n in names])
 
+    @property
+    def residual_sigma_m(self) -> np.ndarray | None:
+        """The calibration's own residual level per axis (m; ``fit.residual_sigma_m``), or None if the file has none.
+
+        A new session of the same robot is expected to fit about this well after its set-up is re-registered,
+        whatever noise the model file states (a model written without the tracker's noise keeps its default).
+        """
+        level = self.fit.get("residual_sigma_m") if isinstance(self.fit, dict) else None
+        return None if level is None else np.asarray(level, float).reshape(3)
+
     def row_stations(self, m: int, aux: MeasurementSet | None = None, station: str | None = None) -> np.ndarray:
         """The station label of each of ``m`` rows, as :meth:`predict` picks it: ``station`` for every row, else
         ``aux``'s station column, else the default station (object array of labels).
@@ -513,11 +526,16 @@ class CalibratedModel:
         tcp = np.asarray(d.get("tcp_m", [0.0, 0.0, 0.0]), float)
         if tcp.shape != (3,):
             raise InputError(f"{where}: field 'tcp_m' must be 3 numbers (m)")
+        fit = dict(d.get("fit") or {})
+        if fit.get("residual_sigma_m") is not None:
+            fit["residual_sigma_m"] = check_sigma_m(fit["residual_sigma_m"], f"{where}: field fit.residual_sigma_m")
+            if fit["residual_sigma_m"].size != 3:
+                raise InputError(f"{where}: field fit.residual_sigma_m must be 3 numbers (m per axis)")
         disc = None
         if d.get("discrepancy") is not None:
             disc = Discrepancy.from_dict(d["discrepancy"], robot.joint_names, f"{where}: discrepancy")
         return cls(robot, joint_p, effects, thetas, setups, noise, tcp, bool(d.get("pose6d", False)),
-                   dict(geo.get("parameters") or {}), dict(d.get("fit") or {}),
+                   dict(geo.get("parameters") or {}), fit,
                    None if default is None else str(default), list(d.get("history") or []), disc)
 
 

@@ -31,7 +31,7 @@ robot or unmodelled effects) and what to try; :meth:`FitQuality.to_dict` puts it
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, Callable
 
 import numpy as np
 from scipy.stats import chi2 as _chi2
@@ -379,7 +379,8 @@ def _rigid_rms(X: np.ndarray, Y: np.ndarray, proper: bool) -> float:
 
 
 def assess_registration(station: str, X: np.ndarray, Y: np.ndarray, errors_m: np.ndarray, sigma_m: np.ndarray,
-                        n_unknowns: int, chi2_poor: float = CHI2_POOR) -> RegistrationQuality:
+                        n_unknowns: int, chi2_poor: float = CHI2_POOR,
+                        explain: Callable[[float], str] | None = None) -> RegistrationQuality:
     """Judge a registered set-up: enough rows, residuals near the noise, a proper (not mirrored) frame.
 
     Args:
@@ -390,6 +391,9 @@ def assess_registration(station: str, X: np.ndarray, Y: np.ndarray, errors_m: np
         sigma_m: per-axis noise σ of each row (sigma columns, else the model's noise), (m, 3) or (3,) m.
         n_unknowns: set-up parameters fitted (6 for the tracker pose, 9 with the reflector).
         chi2_poor: reduced χ² above which the registration is poor (residuals 4× the noise).
+        explain: called with the reduced χ² when the residuals are too large and the frame is not mirrored: the
+            tested cause and its fix (:func:`~pin_kpi_oed.identification.registration_check.poor_registration_cause`);
+            without it the likely causes are listed.
 
     Returns:
         The :class:`RegistrationQuality`; poor when the rows give fewer than twice as many equations as
@@ -413,6 +417,8 @@ def assess_registration(station: str, X: np.ndarray, Y: np.ndarray, errors_m: np
         if mirrored < 0.25 * rms:
             q.reasons.append(f"the points fit only a mirrored frame (RMS {mirrored * 1e3:.4g} mm): x/y swapped or an "
                              "axis negated in the export")
+        elif explain is not None:
+            q.reasons.append(explain(chi2_red))
         else:
             q.reasons.append("likely: another robot's or another session's data, the joint order, or units (m, rad)")
     if q.reasons:

@@ -1,0 +1,150 @@
+"""A new session registered or refused for the true reason: the calibration's residual level in the model file,
+the registration gate against it, and the tested cause of a poor registration (effects extrapolating, coverage)."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+
+import numpy as np
+import pinocchio as pin
+import pytest
+
+from pin_kpi_oed import NoiseModel, TrackerModel, load_robot
+from pin_kpi_oed.cli.app import main
+from pin_kpi_oed.data.measurements import MeasurementSet, write_measurements
+from pin_kpi_oed.effects.library import GearHarmonic
+from pin_kpi_oed.errors import InputError
+from pin_kpi_oed.identification.identify import identify
+from pin_kpi_oed.identification.model_file import load_model_file
+from pin_kpi_oed.identification.registration_check import (coverage_share, reference_sigma_m, registration_gates,
+                                                            uncovered_ranges)
+from pin_kpi_oed.identification.simulate import Tolerances, random_truth, simulate
+from pin_kpi_oed.identification.transfer import register_setup
+from pin_kpi_oed.oed.identifiability import analyse
+
+NOISE = 1e-4  # m: the sessions' true noise per axis; the models state 1e-6 m (the default), as without --sigma
+REFLECTOR = np.array([0.0, 0.0, 0.1])
+T_A = pin.SE3(pin.rpy.rpyToMatrix(0.0, 0.0, 0.5), np.array([2.0, 0.5, -0.3]))
+T_C = pin.SE3(pin.rpy.rpyToMatrix(0.05, -0.02, 2.0), np.array([-1.5, 2.0, 0.1]))
+
+
+def _tracker(robot, T, sigma=NOISE):
+    return TrackerModel(robot, tracker_T_base=T, reflector_m=REFLECTOR, noise=NoiseModel(sigma_xyz_m=(sigma,) * 3))
+
+
+def _no_sigma(ms: MeasurementSet) -> MeasurementSet:
+    return dataclasses.replace(ms, sigma_m=None)
+
+
+@pytest.fixture(scope="module")
+def case():
+    """A UR10 with random geometric errors: session A (80 rows, shoulder in [-1, 0] rad), session C (another
+    tracker pose, 120 rows over the whole workspace), both with 0.1 mm noise and no sigma columns."""
+    robot = load_robot("ur10")
+    mA = _tracker(robot, T_A)
+    truth = random_truth(mA, Tolerances(5e-4, 1e-3), seed=4, only=[i for i in analyse(mA).base if i < 36])
+    QA = robot.random_q(np.random.default_rng(5), 80)
+    QA[:, 0] = np.random.default_rng(6).uniform(-1.0, 0.0, 80)
+    dA = _no_sigma(simulate(mA, QA, truth, seed=7, source="A.csv"))
+    QC = robot.random_q(np.random.default_rng(8), 120)
+    dC = _no_sigma(simulate(_tracker(robot, T_C), QC, truth, seed=9, source="C.csv"))
+    nominal = TrackerModel(robot, reflector_m=REFLECTOR)  # default noise 1e-6 m: far below the real level
+    cm = identify(nominal, dA).calibrated_model()
+    return robot, dA, dC, cm
+
+
+def test_model_file_records_the_residual_level(case, tmp_path):
+    robot, dA, _, cm = case
+    level = cm.residual_sigma_m
+    assert level is not None and level.shape == (3,)
+    assert np.all(np.abs(level / NOISE - 1) < 0.2), level          # the sessions' true noise, not the stated 1e-6
+    assert np.all(level > np.asarray(cm.noise.sigma_xyz_m) * 50)
+    naive = np.sqrt(np.mean(identify(TrackerModel(robot, reflector_m=REFLECTOR), dA).residuals_m ** 2, axis=0))
+    assert np.all(level > naive)                                   # corrected for the fitted parameters (3m - k)
+    path = tmp_path / "m.json"
+    cm.save(path)
+    assert np.allclose(load_model_file(path).residual_sigma_m, level, rtol=0, atol=0)
+    d = json.loads(path.read_text())
+    d["fit"]["residual_sigma_m"] = [1e-4, -1e-4, 1e-4]
+    path.write_text(json.dumps(d))
+    with pytest.raises(InputError, match="fit.residual_sigma_m"):
+        load_model_file(path)
+    d["fit"]["residual_sigma_m"] = [1e-4, 1e-4]
+    path.write_text(json.dumps(d))
+    with pytest.raises(InputError, match="fit.residual_sigma_m"):
+        load_model_file(path)
+
+
+def test_register_compares_the_new_session_with_the_residual_level(case, tmp_path, capsys):
+    """Same robot, another tracker pose: registered (without the level it was refused at ~100x the stated
+    noise); the σ factor then carries the session's level into predict (standardised RMS about 1)."""
+    robot, dA, dC, cm = case
+    m1, m2, pred = tmp_path / "m.json", tmp_path / "m2.json", tmp_path / "pred.csv"
+    cm.save(m1)
+    write_measurements(dC.subset(np.arange(40)), tmp_path / "reg.csv")
+    write_measurements(dC.subset(np.arange(40, 120)), tmp_path / "held.csv")
+    assert main(["register", "--model", str(m1), "--data", str(tmp_path / "reg.csv"), "--model-out", str(m2)]) == 0
+    assert ": good" in capsys.readouterr().out
+    assert main(["predict", "--model", str(m2), "--data", str(tmp_path / "held.csv"), "--out", str(pred)]) == 0
+    p = np.genfromtxt(pred, delimiter=",", names=True)
+    z = np.c_[(p["x"] - p["x_pred"]) / p["sigma_x"], (p["y"] - p["y_pred"]) / p["sigma_y"],
+              (p["z"] - p["z_pred"]) / p["sigma_z"]]
+    assert 0.67 < np.sqrt(np.mean(z ** 2)) < 1.5
+    # the same file without its residual level: compared with the stated noise, refused as before
+    old = json.loads(m1.read_text())
+    del old["fit"]["residual_sigma_m"]
+    m0 = tmp_path / "m0.json"
+    m0.write_text(json.dumps(old))
+    assert main(["register", "--model", str(m0), "--data", str(tmp_path / "reg.csv"), "--model-out",
+                 str(tmp_path / "m3.json")]) == 2
+    assert "POOR" in capsys.readouterr().err and not (tmp_path / "m3.json").exists()
+
+
+def test_data_of_another_robot_is_still_refused(case):
+    """Rows whose joint columns are permuted (the wrong joint order): refused against the residual level, with
+    the generic cause (the geometry alone fits no better: nothing to blame on the model's terms)."""
+    robot, _, dC, cm = case
+    sub = dC.subset(np.arange(40))
+    bad = dataclasses.replace(sub, q=sub.q[:, [1, 0, 2, 3, 5, 4]].copy())
+    res = register_setup(cm, bad, station="C")
+    (gate,) = registration_gates(res, bad, cm)
+    assert gate.poor and "another robot's or another session's data" in gate.line()
+
+
+def test_poor_registration_names_extrapolating_effects(case):
+    """A model whose effect (a 1 mrad gear harmonic on the shoulder, absent from the robot) is what the new rows
+    cannot fit: the cause names the effect, the geometry-only fit and the fixes, not "another robot"."""
+    robot, _, dC, cm = case
+    eff = GearHarmonic(robot, joints=[robot.joint_names[1]])
+    bad = dataclasses.replace(cm, effects=[eff], thetas=[np.full(len(eff.param_names()), 1e-3)])
+    sub = dC.subset(np.arange(40))
+    res = register_setup(bad, sub, station="C")
+    (gate,) = registration_gates(res, sub, bad)
+    line = gate.line()
+    assert gate.poor and "gear_harmonic extrapolates" in line and "geometry alone registers" in line
+    assert "--effects none" in line and "--term-prior" in line and "another robot" not in line
+    (good,) = registration_gates(register_setup(cm, sub, station="C"), sub, cm)
+    assert not good.poor
+
+
+def test_reference_level_and_coverage_helpers(case):
+    robot, dA, dC, cm = case
+    ref = reference_sigma_m(cm)
+    assert np.allclose(ref, cm.residual_sigma_m)                  # the level, not the stated 1e-6 m
+    assert np.allclose(reference_sigma_m(dataclasses.replace(cm, fit={})), cm.noise.sigma_xyz_m)
+    assert coverage_share(cm, dC.q) is None and uncovered_ranges(cm, dC.q) == []   # no training configurations kept
+
+
+def test_coverage_named_with_a_discrepancy(case):
+    """A model with a discrepancy keeps its training configurations: the rows beyond the shoulder's measured range
+    [-1, 0] rad are named with that range."""
+    robot, dA, dC, _ = case
+    cm = identify(TrackerModel(robot, reflector_m=REFLECTOR), dA, discrepancy="on").calibrated_model()
+    inside = dC.q[:, 0] < 0.0
+    share = coverage_share(cm, dC.q)
+    assert share is not None and share < coverage_share(cm, dA.q)
+    ranges = uncovered_ranges(cm, dC.q)
+    assert inside.any() and ranges and ranges[0].startswith(robot.joint_names[0])
+    lo, hi = (float(v) for v in ranges[0].split("(measured ")[1].rstrip(")").split(".."))
+    assert -1.0 <= lo < -0.9 and -0.1 < hi <= 0.0
