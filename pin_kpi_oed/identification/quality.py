@@ -31,7 +31,8 @@ robot or unmodelled effects) and what to try; :meth:`FitQuality.to_dict` puts it
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any, Callable
+from collections.abc import Callable
+from typing import Any
 
 import numpy as np
 from scipy.stats import chi2 as _chi2
@@ -412,7 +413,7 @@ def assess_registration(station: str, X: np.ndarray, Y: np.ndarray, errors_m: np
         q.reasons.append(f"{m} rows give {3 * m} equations for {n_unknowns} set-up unknowns: at least {need} rows are "
                          "needed to check the fit (it passes through fewer exactly)")
     if dof > 0 and chi2_red > chi2_poor:
-        q.reasons.append(f"residual RMS {rms * 1e3:.4g} mm is {np.sqrt(chi2_red):.2g}x the noise "
+        q.reasons.append(f"residual RMS {rms * 1e3:.4g} mm is {np.sqrt(chi2_red):.2g}x the expected level "
                          f"(sigma {np.sqrt(np.mean(sig2)) * 1e3:.3g} mm per axis)")
         if mirrored < 0.25 * rms:
             q.reasons.append(f"the points fit only a mirrored frame (RMS {mirrored * 1e3:.4g} mm): x/y swapped or an "

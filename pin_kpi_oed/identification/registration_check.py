@@ -143,10 +143,11 @@ def poor_registration_cause(model: CalibratedModel, data: MeasurementSet, label:
             if chi2_geo <= CHI2_POOR or chi2_geo <= 0.5 * chi2_full:
                 parts = names + (["discrepancy"] if model.discrepancy is not None else [])
                 verb = "extrapolate" if len(parts) > 1 else "extrapolates"
-                return (f"cause: the model's {' and '.join(parts)} {verb} outside the joint coverage of its calibration ({inside or 'coverage unknown'}): the geometry "
-                        f"alone registers these rows at RMS {geo.rms_m * 1e3:.3g} mm ({np.sqrt(chi2_geo):.2g}x the "
-                        "noise); fix: a geometry-only model (diagnose/identify --effects none), a prior on the terms "
-                        f"(diagnose --term-prior 1e-4), or {measure}")
+                return (f"cause: the model's {' and '.join(parts)} {verb} outside the joint coverage of its "
+                        f"calibration ({inside or 'coverage unknown'}): the geometry alone registers these rows at "
+                        f"RMS {geo.rms_m * 1e3:.3g} mm ({np.sqrt(chi2_geo):.2g}x the expected level); fix: a "
+                        "geometry-only model (diagnose --effects none, or identify without --effects), a prior on "
+                        f"the terms (diagnose --term-prior 1e-4), or {measure}")
     if share is not None and share < 0.5:
         return (f"cause: the rows lie outside the joint coverage of the calibration ({inside}); fix: {measure}, "
                 "or calibrate on rows that include this session's configurations")
