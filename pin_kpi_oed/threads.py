@@ -13,8 +13,7 @@ threadpoolctl limits only the libraries loaded when the limit is set: SciPy's ow
 line, :func:`limit_process_threads`) also sets the libraries' own variables (``OPENBLAS_NUM_THREADS``,
 ``OMP_NUM_THREADS``, ``MKL_NUM_THREADS``; those the user set are kept), which every library loaded later reads.
 Without that, the discrepancy fit of ``identify`` ran SciPy's Cholesky factorisations with one BLAS thread per
-core: on a 2-core machine 27 s CPU for 14.5 s wall idle, and far longer when other work held the cores, where one
-thread took 14 s CPU and wall.
+core, which doubled its CPU time for no gain in wall time and multiplied the wall time when other work held the cores.
 
 The limit is 1 by default. Users with big problems (100,000-candidate pools, long diagnoses) may allow more
 with :func:`set_max_threads`, the environment variable ``PIN_KPI_OED_THREADS``, or the CLI's ``--threads``.
