@@ -20,8 +20,8 @@ model can express, and the identified parameters are the same with or without th
 residuals carry less information.
 
 Hyper-parameters (k's amplitudes and length scales, w) by maximum marginal likelihood
-(scikit-learn's :class:`~sklearn.gaussian_process.GaussianProcessRegressor`, L-BFGS-B from each
-deterministic start, at most ``max_iter`` iterations: more change the hyper-parameters but not the
+(:mod:`~pin_kpi_oed.discrepancy.marginal`: scikit-learn's regressor's objective, evaluated on the pairs of rows;
+L-BFGS-B from each deterministic start, at most ``max_iter`` iterations: more change the hyper-parameters but not the
 held-out error) on a seeded subset of at most ``n_fit`` rows; the K-fold check of each start comes
 from one inverse of Σ = K + wI (block inversion, no refit per fold); the posterior uses every row: exactly up to
 ``max_exact`` rows, above that the projected-process (DTC) approximation on ``n_inducing``
@@ -40,7 +40,6 @@ from __future__ import annotations
 
 import base64
 import time
-import warnings
 from dataclasses import dataclass, field
 from typing import Any
 from collections.abc import Sequence
@@ -398,27 +397,17 @@ class Discrepancy:
 def _hyper_fit(Q: np.ndarray, Y: np.ndarray, opts: DiscrepancyOptions, joint_amplitude: float
                ) -> tuple[JointKernel, float]:
     """Maximum marginal likelihood of the kernel and the white level on a seeded subset (normalised Y),
-    from a start whose additive (one-joint) amplitudes are ``joint_amplitude``."""
-    from sklearn.exceptions import ConvergenceWarning
-    from sklearn.gaussian_process import GaussianProcessRegressor
-    from sklearn.gaussian_process.kernels import WhiteKernel
-    from scipy.optimize import minimize
+    from a start whose additive (one-joint) amplitudes are ``joint_amplitude``
+    (:func:`~pin_kpi_oed.discrepancy.marginal.maximise_marginal_likelihood`)."""
+    from pin_kpi_oed.discrepancy.marginal import maximise_marginal_likelihood
 
     d = Q.shape[1]
     rng = np.random.default_rng(opts.seed)
     sub = rng.permutation(len(Q))[:opts.n_fit]
-    k0 = JointKernel(0.7, np.ones(d), np.full(d, joint_amplitude), np.full(d, 0.5)) + WhiteKernel(0.3, (1e-5, 10.0))
-    def lbfgs(obj_func, theta0, bounds):
-        res = minimize(obj_func, theta0, method="L-BFGS-B", jac=True, bounds=bounds,
-                       options={"maxiter": int(opts.max_iter)})
-        return res.x, res.fun
-
-    gp = GaussianProcessRegressor(k0, optimizer=lbfgs, normalize_y=False, n_restarts_optimizer=opts.restarts,
-                                  random_state=int(opts.seed))
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", ConvergenceWarning)
-        gp.fit(Q[sub], Y[sub])
-    return gp.kernel_.k1, float(gp.kernel_.k2.noise_level)
+    k0 = JointKernel(0.7, np.ones(d), np.full(d, joint_amplitude), np.full(d, 0.5))
+    kernel, noise, _ = maximise_marginal_likelihood(Q[sub], Y[sub], k0, 0.3, (1e-5, 10.0), opts.max_iter,
+                                                    opts.restarts, opts.seed)
+    return kernel, noise
 
 
 def _posterior(kernel: JointKernel, noise: float, Q: np.ndarray, Y: np.ndarray, opts: DiscrepancyOptions,

@@ -1,0 +1,139 @@
+r"""The log marginal likelihood of the discrepancy's hyper-parameters and its gradient, on the pairs of rows.
+
+For the covariance Σ = K + (w + ε) I of n training rows (K the
+:class:`~pin_kpi_oed.discrepancy.kernel.JointKernel`, w the white level, ε = 1e-10 the jitter scikit-learn's
+regressor adds) and m output columns Y (n, m) sharing it,
+
+.. math::
+
+    \log p(Y \mid θ) = -\tfrac12 \operatorname{tr}(Y^T Σ^{-1} Y) - m \sum_i \log L_{ii} - \tfrac{m n}{2} \log 2π,
+    \qquad
+    \frac{\partial \log p}{\partial θ_k} = \tfrac12 \sum_{ij} W_{ij} \frac{\partial Σ_{ij}}{\partial θ_k},
+    \quad W = α α^T - m Σ^{-1},\ α = Σ^{-1} Y,
+
+with L the Cholesky factor of Σ and θ the logarithms of the hyper-parameters in scikit-learn's order (c, a_j,
+ℓ_j, L_j, then w). Every derivative of the kernel is a product of its own parts with the chords
+D_ij = 4 sin²(Δ_j/2) (see the kernel's module):
+
+.. math::
+
+    \frac{\partial Σ}{\partial \log c} = 2P, \quad
+    \frac{\partial Σ}{\partial \log a_j} = 2A_j, \quad
+    \frac{\partial Σ}{\partial \log ℓ_j} = A_j \frac{D_j}{ℓ_j^2}, \quad
+    \frac{\partial Σ}{\partial \log L_j} = P \frac{D_j}{L_j^2}, \quad
+    \frac{\partial Σ}{\partial \log w} = w I,
+
+so each gradient entry is one weighted sum over the pairs i < j (twice, W and Σ being symmetric) plus the
+diagonal, where D = 0. Scikit-learn's regressor forms the (n, n, 2 + 3d) gradient tensor and contracts it with
+an einsum per evaluation; here the chords of the pairs are formed once per training set, the one-joint
+exponentials once per evaluation, and the inverse comes from the same Cholesky factor (LAPACK potri). The value
+and gradient equal scikit-learn's to rounding (tested), so L-BFGS-B takes the same steps.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+from scipy import linalg as sla
+from scipy.optimize import minimize
+
+from pin_kpi_oed.discrepancy.kernel import JointKernel
+
+__all__ = ["MarginalLikelihood", "maximise_marginal_likelihood"]
+
+#: What scikit-learn's regressor adds to the diagonal (its ``alpha``), kept so the optimum is the same.
+REGRESSOR_JITTER = 1e-10
+
+
+class MarginalLikelihood:
+    """−log p(Y | θ) and its gradient for one training set (see the module).
+
+    Args:
+        Q: training configurations (n, d) rad.
+        Y: normalised residuals (n, m).
+    """
+
+    def __init__(self, Q: np.ndarray, Y: np.ndarray) -> None:
+        Q = np.atleast_2d(np.asarray(Q, float))
+        self.Y = np.asarray(Y, float).reshape(len(Q), -1)
+        self.n, self.d = Q.shape
+        i, j = np.triu_indices(self.n, 1)
+        self.flat = i + j * self.n                                       # (i, j), i < j, in column-major order
+        self.D = 2.0 - 2.0 * np.cos(Q.T[:, i] - Q.T[:, j])                 # (d, pairs) chords 4 sin²(Δ/2)
+        self.S = np.zeros((self.n, self.n), order="F")                    # Σ's upper triangle, factored in place
+        self.nfev = 0
+
+    def split(self, theta: np.ndarray) -> tuple[float, np.ndarray, np.ndarray, np.ndarray, float]:
+        """(c, a, ℓ, L, w) from θ (logarithms, scikit-learn's order)."""
+        d = self.d
+        v = np.exp(np.asarray(theta, float))
+        return float(v[0]), v[1:1 + d], v[1 + d:1 + 2 * d], v[1 + 2 * d:1 + 3 * d], float(v[1 + 3 * d])
+
+    def __call__(self, theta: np.ndarray) -> tuple[float, np.ndarray]:
+        """(−log p, −∂ log p/∂θ); (inf, 0) where Σ is not positive definite (as scikit-learn)."""
+        self.nfev += 1
+        c, a, ell, L, w = self.split(theta)
+        n, m, d = self.n, self.Y.shape[1], self.d
+        P = np.exp((-0.5 / L ** 2) @ self.D)                             # (pairs,), c² not yet applied
+        P *= c ** 2
+        A = self.D * (-0.5 / ell ** 2)[:, None]                          # (d, pairs)
+        np.exp(A, out=A)
+        A *= (a ** 2)[:, None]
+        S = self.S
+        Sf = S.reshape(-1, order="F")                                    # a view (column-major)
+        Sf[self.flat] = P + A.sum(0)
+        Sf[::n + 1] = c ** 2 + float(np.sum(a ** 2)) + w + REGRESSOR_JITTER
+        Lc, info = sla.lapack.dpotrf(S, lower=0, clean=0, overwrite_a=1)   # Σ = UᵀU
+        if info != 0:
+            return np.inf, np.zeros(len(theta))
+        alpha, info = sla.lapack.dpotrs(Lc, self.Y, lower=0)
+        lml = -0.5 * float(np.sum(self.Y * alpha)) - m * float(np.sum(np.log(np.diag(Lc)))) \
+            - 0.5 * m * n * np.log(2.0 * np.pi)
+        Si, info = sla.lapack.dpotri(Lc, lower=0, overwrite_c=1)               # Σ⁻¹ (upper triangle)
+        if info != 0:
+            return np.inf, np.zeros(len(theta))
+        W = alpha @ alpha.T
+        Wd = float(np.trace(W) - m * np.trace(Si))                            # the diagonal's sum
+        W -= m * Si
+        Wp = W.reshape(-1, order="F")[self.flat]                              # the pairs i < j ...
+        Wp *= 2.0                                                             # ... counted for both triangles
+        WP = Wp * P
+        g = np.empty(len(theta))
+        g[0] = float(WP.sum()) + c ** 2 * Wd
+        g[1:1 + d] = A @ Wp + a ** 2 * Wd
+        g[1 + d:1 + 2 * d] = 0.5 * np.einsum("p,jp,jp->j", Wp, A, self.D) / ell ** 2
+        g[1 + 2 * d:1 + 3 * d] = 0.5 * (self.D @ WP) / L ** 2
+        g[1 + 3 * d] = 0.5 * w * Wd
+        return -lml, -g
+
+
+def maximise_marginal_likelihood(Q: np.ndarray, Y: np.ndarray, kernel0: JointKernel, noise0: float,
+                                 noise_bounds: tuple[float, float], max_iter: int, restarts: int = 0,
+                                 seed: int = 0) -> tuple[JointKernel, float, float]:
+    """The kernel and white level of largest marginal likelihood: L-BFGS-B from ``kernel0`` and ``noise0`` (at most
+    ``max_iter`` iterations), and from ``restarts`` starts drawn uniformly over the log bounds (seeded with ``seed``,
+    as scikit-learn's regressor draws them).
+
+    Returns:
+        (kernel, white level w (normalised variance), log marginal likelihood at it).
+    """
+    f = MarginalLikelihood(Q, Y)
+    d = f.d
+    c, L0, a0, ell0 = kernel0._parts(d)
+    theta0 = np.log(np.concatenate([[c], a0, ell0, L0, [noise0]]))
+    b = [kernel0.amplitude_bounds] + [kernel0.joint_amplitude_bounds] * d + \
+        [kernel0.joint_length_scale_bounds] * d + [kernel0.length_scale_bounds] * d + [noise_bounds]
+    bounds = np.log(np.asarray(b, float))
+    starts = [theta0]
+    rng = np.random.RandomState(int(seed))
+    starts += [rng.uniform(bounds[:, 0], bounds[:, 1]) for _ in range(int(restarts))]
+    best: Any = None
+    for t0 in starts:
+        res = minimize(f, t0, method="L-BFGS-B", jac=True, bounds=bounds, options={"maxiter": int(max_iter)})
+        if best is None or res.fun < best.fun:
+            best = res
+    c, a, ell, L, w = f.split(best.x)
+    kernel = JointKernel(c, L, a, ell, kernel0.amplitude_bounds, kernel0.length_scale_bounds,
+                         kernel0.joint_amplitude_bounds, kernel0.joint_length_scale_bounds)
+    return kernel, w, -float(best.fun)

@@ -1,0 +1,135 @@
+"""The discrepancy's marginal likelihood on the pairs of rows: value and gradient equal scikit-learn's regressor's
+(to rounding) and the finite differences; the fitted hyper-parameters, the K-fold held-out error and the
+standardised RMS equal those of the scikit-learn optimisation it replaces, on simulated residuals and on a fixed
+subset of the IPA UR10's Series C (skipped without the data)."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from pin_kpi_oed.discrepancy import DiscrepancyOptions, JointKernel, fit_discrepancy
+from pin_kpi_oed.discrepancy import gp as gp_module
+from pin_kpi_oed.discrepancy.marginal import MarginalLikelihood
+
+NAMES = [f"j{i}" for i in range(6)]
+
+
+def _gp_rows(n: int, d: int, m: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
+    """n configurations and m columns drawn from the discrepancy's prior plus a white level."""
+    rng = np.random.default_rng(seed)
+    Q = rng.uniform(-np.pi, np.pi, (n, d))
+    k = JointKernel(0.6, rng.uniform(0.5, 2, d), rng.uniform(0.1, 0.4, d), rng.uniform(0.2, 0.8, d))
+    K = k(Q) + 0.05 * np.eye(n)
+    return Q, np.linalg.cholesky(K) @ rng.standard_normal((n, m))
+
+
+def _sklearn_regressor(d: int, joint_amplitude: float = 0.1):
+    from sklearn.gaussian_process import GaussianProcessRegressor
+    from sklearn.gaussian_process.kernels import WhiteKernel
+
+    k0 = JointKernel(0.7, np.ones(d), np.full(d, joint_amplitude), np.full(d, 0.5)) + WhiteKernel(0.3, (1e-5, 10.0))
+    return GaussianProcessRegressor(k0, optimizer=None), k0
+
+
+@pytest.mark.parametrize("d, m", [(6, 3), (3, 1)])
+def test_value_and_gradient_equal_scikit_learns(d, m):
+    Q, Y = _gp_rows(120, d, m, seed=d)
+    reg, k0 = _sklearn_regressor(d)
+    reg.fit(Q, Y)
+    f = MarginalLikelihood(Q, Y)
+    rng = np.random.default_rng(0)
+    for theta in (k0.theta, k0.theta + 0.5 * rng.standard_normal(len(k0.theta))):
+        v_ref, g_ref = reg.log_marginal_likelihood(theta, eval_gradient=True)
+        v, g = f(theta)
+        assert -v == pytest.approx(v_ref, rel=1e-12, abs=1e-9)
+        assert np.abs(-g - g_ref).max() <= 1e-9 * np.abs(g_ref).max()
+
+
+def test_gradient_matches_finite_differences():
+    Q, Y = _gp_rows(80, 6, 3, seed=1)
+    f = MarginalLikelihood(Q, Y)
+    theta = np.log(np.r_[0.5, np.full(6, 0.2), np.full(6, 0.4), np.full(6, 1.2), 0.1])
+    _, g = f(theta)
+    eps = 1e-6
+    for k in range(len(theta)):
+        t = theta.copy()
+        t[k] += eps
+        vp, _ = f(t)
+        t[k] -= 2 * eps
+        vm, _ = f(t)
+        assert (vp - vm) / (2 * eps) == pytest.approx(g[k], rel=1e-5, abs=1e-5)
+
+
+def _sklearn_hyper_fit(Q, Y, opts, joint_amplitude):
+    """The optimisation the marginal likelihood on pairs replaced: scikit-learn's regressor, L-BFGS-B."""
+    import warnings
+
+    from scipy.optimize import minimize
+    from sklearn.exceptions import ConvergenceWarning
+
+    sub = np.random.default_rng(opts.seed).permutation(len(Q))[:opts.n_fit]
+    reg, _ = _sklearn_regressor(Q.shape[1], joint_amplitude)
+
+    def lbfgs(obj_func, theta0, bounds):
+        res = minimize(obj_func, theta0, method="L-BFGS-B", jac=True, bounds=bounds,
+                       options={"maxiter": int(opts.max_iter)})
+        return res.x, res.fun
+
+    reg.optimizer = lbfgs
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", ConvergenceWarning)
+        reg.fit(Q[sub], Y[sub])
+    return reg.kernel_.k1, float(reg.kernel_.k2.noise_level)
+
+
+def _same_fit(Q, R, opts, monkeypatch):
+    fast = fit_discrepancy(Q, R, NAMES, opts)
+    monkeypatch.setattr(gp_module, "_hyper_fit", _sklearn_hyper_fit)
+    ref = fit_discrepancy(Q, R, NAMES, opts)
+    assert fast.kind == ref.kind and fast.kind != "white", "a case where the Gaussian process is kept is needed"
+    assert fast.cv["mean_with_m"] == pytest.approx(ref.cv["mean_with_m"], rel=0.01)
+    assert abs(fast.cv["z_rms"] - ref.cv["z_rms"]) <= 0.03
+    assert fast.noise == pytest.approx(ref.noise, rel=0.05)
+    return fast, ref
+
+
+def test_fit_equals_the_scikit_learn_optimisation_on_simulated_residuals(monkeypatch):
+    Q, Y = _gp_rows(200, 6, 3, seed=3)
+    R = 1e-4 * Y + np.array([1e-5, -2e-5, 0.0])
+    fast, ref = _same_fit(Q, R, DiscrepancyOptions(mode="auto", n_fit=120), monkeypatch)
+    a, b = fast.kernel.to_dict(), ref.kernel.to_dict()
+    for key in ("amplitude", "length_scale_rad", "joint_amplitude", "joint_length_scale_rad"):
+        assert np.allclose(a[key], b[key], rtol=1e-3), key
+
+
+def _ipa_folder() -> Path | None:
+    env = os.environ.get("PIN_KPI_OED_IPA_DATA")
+    if env:
+        return Path(env)
+    for up in Path(__file__).resolve().parents:
+        if (up / "shared" / "data" / "ipa_ur10" / "Series_C").is_dir():
+            return up / "shared" / "data" / "ipa_ur10"
+    return None
+
+
+def test_fit_equals_the_scikit_learn_optimisation_on_a_series_c_subset(monkeypatch):
+    folder = _ipa_folder()
+    if folder is None:
+        pytest.skip("IPA UR10 data not found (PIN_KPI_OED_IPA_DATA)")
+    from pin_kpi_oed import NoiseModel, TrackerModel, load_robot
+    from pin_kpi_oed.data.ipa import import_ipa
+    from pin_kpi_oed.identification.discrepancy_fit import base_frame_residuals
+    from pin_kpi_oed.identification.identify import identify
+
+    ms = import_ipa(folder / "Series_C")
+    data = ms.subset(np.sort(np.random.default_rng(0).permutation(len(ms.q))[:400]))
+    model = TrackerModel(load_robot("ur10"), reflector_m=np.array([0.0, 0.0, 0.109]),
+                         noise=NoiseModel(sigma_xyz_m=(1e-4,) * 3))
+    res = identify(model, data, discrepancy="none", raise_on_failure=False)
+    rows, R = base_frame_residuals(res)
+    fast, _ = _same_fit(data.q[rows], R, DiscrepancyOptions(mode="auto", n_fit=150, starts=(0.1,)), monkeypatch)
+    assert fast.cv["mean_with_m"] < 0.7 * fast.cv["mean_without_m"]  # the Series C discrepancy is learnt
