@@ -1,4 +1,4 @@
-# Two set-up commands: `make demo` and `make test` (ruff, then pytest). Each bootstraps .venv on its own.
+# Two set-up commands: `make demo` and `make test` (ruff, mypy, then pytest). Each bootstraps .venv on its own.
 PYTHON ?= python3
 VENV   := .venv
 PY     := $(VENV)/bin/python
@@ -20,6 +20,7 @@ demo: $(STAMP)
 
 test: $(STAMP)
 	$(PY) -m ruff check pin_kpi_oed tests
+	$(PY) -m mypy pin_kpi_oed
 	$(PY) -m pytest -n 2 -q
 
 bench: $(STAMP)

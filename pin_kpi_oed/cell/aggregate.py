@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 
 from pin_kpi_oed.cell.collision import INCID, CollisionModel
@@ -50,7 +52,7 @@ class AggregatedConstraints:
             self.jac_rows, self.jac_cols = coll.jac_rows, coll.jac_cols
             self.names = list(coll.info.names)
             return
-        deps = [set(), set()]
+        deps: list[set[int]] = [set(), set()]
         for r in self.dist:
             deps[0].update(int(j) for j in coll.info.deps[r])
         for r in self.inc:
@@ -71,6 +73,7 @@ class AggregatedConstraints:
 
     def evaluate(self, Q: np.ndarray, with_grad: bool = True) -> np.ndarray | tuple[np.ndarray, np.ndarray]:
         """Aggregated rows (m, n_rows) and, with ``with_grad``, their gradients (m, n_rows, n)."""
+        out: Any  # the rows, or (rows, gradients) with with_grad
         if self.backend == "numpy":
             out = self.coll.evaluate(Q, with_grad=with_grad)
         else:

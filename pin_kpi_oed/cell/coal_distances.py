@@ -109,7 +109,7 @@ class GeometryDistances:
             di = [r.min_distance for r in res]
             dist[i] = di
             if band is None:
-                sel = range(P)
+                sel: range | list[int] = range(P)
             else:
                 lim = min(di) + band
                 sel = [k for k in range(P) if di[k] <= lim]

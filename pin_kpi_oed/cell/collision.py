@@ -50,6 +50,8 @@ design densely with Pinocchio and Coal — none of this module's code path.
 
 from __future__ import annotations
 
+from typing import Literal, overload
+
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -451,6 +453,16 @@ class CollisionModel:
         EB[:, static] = self.B_loc[static]
         EB[:, self.beam] = tj[:, self.beam] + Rj[:, self.beam] @ self.refl_local
         return EA, EB, V, W
+
+    @overload
+    def evaluate(self, Q: np.ndarray, with_grad: Literal[False], backend: str = ..., band: float | None = ...
+                 ) -> np.ndarray: ...
+    @overload
+    def evaluate(self, Q: np.ndarray, with_grad: Literal[True] = ..., backend: str = ..., band: float | None = ...
+                 ) -> tuple[np.ndarray, np.ndarray]: ...
+    @overload
+    def evaluate(self, Q: np.ndarray, with_grad: bool, backend: str = ..., band: float | None = ...
+                 ) -> np.ndarray | tuple[np.ndarray, np.ndarray]: ...
 
     def evaluate(self, Q: np.ndarray, with_grad: bool = True, backend: str = "numpy", band: float | None = None
                  ) -> np.ndarray | tuple[np.ndarray, np.ndarray]:

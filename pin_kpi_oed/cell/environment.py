@@ -215,8 +215,8 @@ def load_environment_object(d: Any, index: int, base_dir: Path | None, source: s
     if not p.is_file():
         raise InputError(f"{where}: no such file {p}")
     W_T_obj = pose_reader(d.get("pose"), f"{w}.pose")
-    sc = d.get("scale", 1.0)
-    scale = np.full(3, float(sc)) if np.isscalar(sc) else np.asarray(sc, float).reshape(-1)
+    sc: Any = d.get("scale", 1.0)
+    scale = np.full(3, float(np.asarray(sc, float))) if np.ndim(sc) == 0 else np.asarray(sc, float).reshape(-1)
     if scale.shape != (3,) or not np.all(np.isfinite(scale) & (scale > 0)):
         raise InputError(f"{w}.scale: expected a positive number or 3 positive numbers, got {sc!r}")
     if kind == "urdf" and "scale" in d:

@@ -13,6 +13,7 @@ beyond the ends.
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pinocchio as pin
@@ -68,7 +69,7 @@ def _vertices(go: pin.GeometryObject) -> np.ndarray:
         return np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)]) * h
     import trimesh
 
-    mesh = trimesh.load(go.meshPath, force="mesh")
+    mesh: Any = trimesh.load(go.meshPath, force="mesh")
     return np.asarray(mesh.vertices, float) * np.asarray(go.meshScale, float)
 
 

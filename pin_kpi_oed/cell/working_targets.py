@@ -165,7 +165,7 @@ def solve_working_targets(cell, targets: list, source: str = "") -> np.ndarray:
         k = int(np.argmin(d)) if d.size else -1
         return "" if k < 0 or d[k] >= -1e-9 else f"{chk.names[k]} at {d[k] * 1e3:.1f} mm"
 
-    out = []
+    out: list[np.ndarray] = []
     for i, t in enumerate(targets):
         w = f"{pre}working_targets[{i}]"
         if not isinstance(t, dict) or "xyz_m" not in t:

@@ -502,13 +502,14 @@ def _make_problem(args: argparse.Namespace, cell, given_file, collision: bool, q
     from pin_kpi_oed.design.sequential import SequentialProblem
     from pin_kpi_oed.design.user_pool import read_poses
 
+    problem: DesignProblem
     if given_file:
         Qg = read_poses(given_file, cell.robot, "--given")
         _check_given(true_cell or cell, Qg, given_file)
-        problem = SequentialProblem(cell, Qg, collision=collision)
+        problem = seq = SequentialProblem(cell, Qg, collision=collision)
         if getattr(args, "given_prior", None):
-            problem.set_prior(_given_prior(args.given_prior, problem))
-            problem.prior_file = str(args.given_prior)
+            seq.set_prior(_given_prior(args.given_prior, seq))
+            seq.prior_file = str(args.given_prior)
     else:
         problem = DesignProblem(cell, collision=collision,
                                 distances={"closed-form": "numpy"}.get(getattr(args, "distances", None), "geometry"))

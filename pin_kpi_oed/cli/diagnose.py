@@ -219,7 +219,7 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def _diagnosed_model(args: argparse.Namespace, rep: Any, train: Any) -> dict | None:
+def _diagnosed_model(args: argparse.Namespace, rep: Any, train: Any) -> Any:
     """The model file content of ``--model-out``: the report's full-data fit with its discrepancy."""
     from pin_kpi_oed.identification.discrepancy_fit import discrepancy_options, result_discrepancy
 

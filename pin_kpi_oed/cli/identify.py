@@ -515,7 +515,7 @@ def run_identify(args: argparse.Namespace) -> int:
     result.discrepancy = _discrepancy(args, result, train)
     out = {"result": result.to_dict(), "data": list(args.data), "validate": args.validate,
            "reflector_nominal_m": reflector.tolist(), "reflector_nominal_source": "estimated" if estimated else "given"}
-    lines = []
+    lines: list[str] = []
     if test is not None:
         out["validation"], lines = _validation(model, train, opts, result, test, reg, args)
     quality = assess_fit(result, out.get("validation"), nominal_reflector_m=reflector, reflector_estimated=estimated)

@@ -70,7 +70,7 @@ class TargetSet:
 
 
 def read_targets(path: str | os.PathLike, joint_names: Sequence[str], *, program: bool = False,
-                 revolute: Sequence[bool] | None = None, units: str | Units | None = None,
+                 revolute: Sequence[bool] | np.ndarray | None = None, units: str | Units | None = None,
                  columns: str | Mapping[str, str] | None = None) -> TargetSet:
     """Read a targets file (``program=False``) or a joint-space program (``program=True``).
 

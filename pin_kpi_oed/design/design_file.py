@@ -589,7 +589,8 @@ class _Covariances:
     analysis)."""
 
     def __init__(self, model: TrackerModel, q_work: np.ndarray):
-        self.model, self.q_work, self.ident = model, q_work, None
+        self.model, self.q_work = model, q_work
+        self.ident: Any = None
 
     def __call__(self, Q: np.ndarray) -> np.ndarray:
         from pin_kpi_oed.oed.evaluate import score_design

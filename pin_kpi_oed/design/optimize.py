@@ -364,7 +364,7 @@ class DesignProblem:
                                           Q_given=getattr(self, "Q_given", None), p=self.p0,
                                           Q_register=self.Q_register)
 
-    def criterion(self, name: str) -> DesignCriterion:
+    def criterion(self, name: str) -> Any:
         """The registered design criterion ``name`` on this problem (on :attr:`extended` when set).
 
         Raises:
@@ -444,7 +444,8 @@ class _NLP:
         off_c = (np.arange(m) * self.n)[:, None]
         self.jr = (off_r + cons.jac_rows[None, :]).ravel()
         self.jc = (off_c + cons.jac_cols[None, :]).ravel()
-        self._gkey = self._fkey = None
+        self._gkey: bytes | None = None
+        self._fkey: bytes | None = None
         self.best_x: np.ndarray | None = None
         self.best_f = np.inf
         self.iterations = 0

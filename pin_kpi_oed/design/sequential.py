@@ -117,6 +117,7 @@ class SequentialProblem(DesignProblem):
         self.Q_given = cell.robot.check_q(Q_given, "--given")
         F_given = self.model.weighted_jacobian(self.p0, self.Q_given)[:, :, self.base]
         self.F_measured = F_given.reshape(-1, self.base.size)
+        self.prior_file: str | None = None  # the file the prior came from, for the design file
         self.set_prior(prior_info)
 
     def set_prior(self, prior_info: np.ndarray | None) -> None:
@@ -242,7 +243,8 @@ def poses_until(problem: SequentialProblem, target_sigma_m: float, Q_pool: np.nd
     Minv = np.linalg.inv(M)
     nh = Fp.shape[1]
     sig_now = float(np.sqrt(np.trace(E @ Minv @ E.T) / t))
-    chosen, path = [], []
+    chosen: list[int] = []
+    path: list[float] = []
     sig = sig_now
     avail = np.ones(Fp.shape[0], bool)
     while sig > target_sigma_m and len(chosen) < max_add and avail.any():

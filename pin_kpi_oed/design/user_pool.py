@@ -275,8 +275,8 @@ def design_from_pool(problem: DesignProblem, Q_candidates: np.ndarray, criteria:
         raise InfeasibleError(f"--pool: only {len(Q)} of {len(Q_candidates)} candidates satisfy the cell's constraints "
                               f"(collision, beam, incidence, margins); {m} needed")
     M0 = problem.fixed_information()
-    on_top = f" on top of the {len(problem.Q_given)} measured poses" if getattr(problem, "F_given", None) is not None \
-        else ""
+    Q_given = getattr(problem, "Q_given", None)
+    on_top = f" on top of the {len(Q_given)} measured poses" if getattr(problem, "F_given", None) is not None else ""
     rng = np.random.default_rng(seed)
     t0 = time.perf_counter()
     Qr = Q[np.sort(rng.choice(len(Q), size=m, replace=False))]

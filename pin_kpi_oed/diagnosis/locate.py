@@ -26,8 +26,8 @@ def _regressors(model: TrackerModel, p: np.ndarray, data: MeasurementSet, order:
     for j, n in enumerate(rb.joint_names):
         out[f"q_{n}"] = (Q[:, j], "rad")
     tau = gravity_torque(rb, Q, data.payload_kg)
-    for j in np.flatnonzero(loaded_joints(rb)):
-        out[f"gravity_torque_{rb.joint_names[j]}"] = (tau[:, j], "N*m")
+    for k in np.flatnonzero(loaded_joints(rb)):
+        out[f"gravity_torque_{rb.joint_names[k]}"] = (tau[:, k], "N*m")
     if data.temperature_c is not None and np.ptp(data.temperature_c) > 0:
         out["temperature"] = (np.asarray(data.temperature_c, float), "degC")
     if data.time_s is not None and np.ptp(data.time_s) > 0:

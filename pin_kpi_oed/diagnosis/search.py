@@ -58,7 +58,7 @@ def select_transfer_terms(geo_fit: Any, train: MeasurementSet, names: Sequence[s
         if not (np.isfinite(opts.transfer_prior_rad) and opts.transfer_prior_rad > 0):
             raise InputError(f"diagnose: --term-prior must be a positive number of rad, got {opts.transfer_prior_rad}")
         for e in sel.effects:
-            e.prior_rad = float(opts.transfer_prior_rad)  # identify's per-effect prior (effect_prior_rad)
+            e.prior_rad = float(opts.transfer_prior_rad)  # type: ignore[attr-defined]  # identify's per-effect prior (effect_prior_rad)
         info["prior_rad"] = float(opts.transfer_prior_rad)
     if not sel.terms:
         notes.append(f"term selection ({', '.join(names)}): no term lowers the {sel.folds}-fold held-out error")
@@ -198,7 +198,7 @@ def forward_selection(eng: Engine, geo: Scored, singles: list[EffectResult], sco
     """
     selection: list[dict] = []
     selected: list[str] = []
-    current, current_effects = geo, []
+    current, current_effects = geo, list[Any]()
     step_results = {s.name: s for s in singles if s.status == "ok"}
     remaining = list(usable)
     limit_sel = len(usable) if max_selected is None else int(max_selected)

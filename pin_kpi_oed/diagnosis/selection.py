@@ -221,13 +221,14 @@ def _fold_grams(b: np.ndarray, A: np.ndarray, groups: Sequence[np.ndarray], fold
     sc = np.linalg.norm(X, axis=0)
     sc[sc == 0] = 1.0
     X = X / sc
-    cols, c0 = [], A.shape[1]
+    cols: list[np.ndarray] = []
+    c0 = int(A.shape[1])
     for g in groups:
         cols.append(np.arange(c0, c0 + g.shape[1]))
         c0 += g.shape[1]
     by_size: dict[int, list[int]] = {}
-    for g, c in enumerate(cols):
-        by_size.setdefault(c.size, []).append(g)
+    for gi, c in enumerate(cols):
+        by_size.setdefault(c.size, []).append(gi)
     K = int(fold.max()) + 1
     G = X.T @ X
     h = X.T @ b
@@ -320,7 +321,7 @@ def _greedy_path(fg: _FoldGrams, p0: int, gmax: np.ndarray, max_groups: int, min
     chosen_pos: list[tuple[np.ndarray, float]] = []  # (positions in S, bound) of the selected groups
     S = np.arange(p0)
     sse0, rms0 = _cv_exact(fg, S)
-    path_sse, path_rms, selected = [sse0], [rms0], []
+    path_sse, path_rms, selected = [sse0], [rms0], list[int]()
     stop = f"cap of {max_groups} groups reached"
     best = sse0
     with progress(total=max_groups, desc=desc, unit="term", disable=show_progress is False) as bar:
@@ -494,8 +495,8 @@ def _visible_groups(cands: Sequence[Effect], lever: np.ndarray, min_lever_m: flo
     left_out: list[str] = []
     c0 = 0
     for ei, e in enumerate(cands):
-        for gi, (label, idx) in enumerate(e.groups()):
-            idx = np.asarray(idx, int)
+        for gi, (label, group_idx) in enumerate(e.groups()):
+            idx = np.asarray(group_idx, int)
             if np.max(lever[c0 + idx]) < min_lever_m:
                 left_out.append(f"{e.name}: {label}")
             else:
@@ -521,7 +522,7 @@ def _selected_effects(cands: Sequence[Effect], groups: Sequence[_Group], path: S
 def _describe_terms(cands: Sequence[Effect], chosen: Sequence[_Group], effects: Sequence[Effect],
                     theta: Sequence[np.ndarray], cv_rms_m: Sequence[float]) -> list[dict]:
     """Plain words and amplitude (rad) per selected group, in selection order, with the held-out RMS after it."""
-    texts: dict[tuple[int, int], tuple[str, float]] = {}
+    texts: dict[tuple[str, str], tuple[str, float]] = {}
     for eff, th in zip(effects, theta):
         for (label, idx), line in zip(eff.groups(), eff.describe(th)):
             texts[(eff.name, label)] = (line, float(np.sqrt(np.sum(np.asarray(th)[idx] ** 2))))
@@ -609,7 +610,7 @@ def refit_with(fit: IdentificationResult, data: MeasurementSet, effects: Sequenc
     """
     th0 = [np.asarray(t, float) for t in fit.theta] + (
         [np.zeros(e.n_params) for e in effects] if theta0 is None else [np.asarray(t, float) for t in theta0])
-    kw = {"weights": "data" if fit.sigma_source == "data" else "noise",
+    kw: dict[str, Any] = {"weights": "data" if fit.sigma_source == "data" else "noise",
           "reflector_per_station": fit.reflector_per_station, "held_effects": fit.held, "theta0": th0,
           "effect_prior_rad": prior_rad, "use_orientation": fit.residuals_rad is not None,
           "raise_on_failure": False}

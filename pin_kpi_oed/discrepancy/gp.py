@@ -300,7 +300,7 @@ class Discrepancy:
     # ------------------------------------------------------------------ plain data
     def to_dict(self) -> dict:
         """The model file's ``discrepancy`` block (SI units; arrays base64 float64)."""
-        d = {"format": "pin_kpi_oed.discrepancy/1", "kind": self.kind, "frame": "robot_base",
+        d: dict[str, Any] = {"format": "pin_kpi_oed.discrepancy/1", "kind": self.kind, "frame": "robot_base",
              "joint_names": list(self.joint_names), "scale_m": [float(v) for v in self.scale_m],
              "mean_m": [float(v) for v in self.mean_m], "noise": float(self.noise), "n_rows": int(self.n_rows),
              "coverage_bin_rad": COVERAGE_BIN_RAD, "cv": self.cv, "decision": self.decision}
@@ -493,10 +493,10 @@ def _kfold(kernel: JointKernel, noise: float, Q: np.ndarray, Y: np.ndarray, scal
         zz = r ** 2 / var[:, None]
         z2.append(zz)
         inside.append(zz.sum(1) <= 7.8147)
-    e0, e1, z2 = np.concatenate(e0), np.concatenate(e1), np.vstack(z2)
-    return {"folds": opts.folds, "mean_without_m": float(e0.mean()), "mean_with_m": float(e1.mean()),
-            "rms_without_m": float(np.sqrt(np.mean(e0 ** 2))), "rms_with_m": float(np.sqrt(np.mean(e1 ** 2))),
-            "z_rms": float(np.sqrt(z2.mean())), "inside_95": float(np.concatenate(inside).mean())}
+    a0, a1, zz2 = np.concatenate(e0), np.concatenate(e1), np.vstack(z2)
+    return {"folds": opts.folds, "mean_without_m": float(a0.mean()), "mean_with_m": float(a1.mean()),
+            "rms_without_m": float(np.sqrt(np.mean(a0 ** 2))), "rms_with_m": float(np.sqrt(np.mean(a1 ** 2))),
+            "z_rms": float(np.sqrt(zz2.mean())), "inside_95": float(np.concatenate(inside).mean())}
 
 
 def fit_discrepancy(Q: np.ndarray, R: np.ndarray, joint_names: Sequence[str],

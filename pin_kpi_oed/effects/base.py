@@ -55,6 +55,8 @@ class Effect(abc.ABC):
     #: True for effects of one measurement set-up (e.g. drift of the tracker within a session): they
     #: are re-fitted with the tracker pose at every registration and never transferred to another set-up.
     setup_specific: bool = False
+    #: Joint indices (n,) of the effects with one parameter per joint (:meth:`_per_joint_offset`).
+    joints: Sequence[int] | np.ndarray
 
     def __init__(self, robot: Robot):
         self.robot = robot

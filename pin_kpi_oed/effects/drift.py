@@ -73,7 +73,7 @@ class Drift(Effect):
                    "in time within a session, per station; set-up specific, re-fitted at registration")
 
     def __init__(self, robot: Robot, degree: int = 1, stations: Sequence[str] | None = None,
-                 t_ref_s: Sequence[float] | float | None = None):
+                 t_ref_s: Sequence[float] | np.ndarray | float | None = None):
         super().__init__(robot)
         if degree not in (1, 2):
             raise InputError(f"{self.name}: degree must be 1 (linear) or 2 (quadratic), got {degree}")

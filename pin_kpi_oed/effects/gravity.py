@@ -41,7 +41,8 @@ def gravity_torque(robot: Robot, Q: np.ndarray, payload_kg: np.ndarray | float |
         pl = np.broadcast_to(np.asarray(payload_kg, float), (m,))
         g = np.asarray(model.gravity.linear, float)
         fid = robot.tool_frame_id
-        for i in np.flatnonzero(pl != 0):
+        for k in np.flatnonzero(pl != 0):
+            i = int(k)
             J = pin.computeFrameJacobian(model, data, Q[i], fid, pin.ReferenceFrame.LOCAL_WORLD_ALIGNED)
             tau[i] -= J[:3].T @ (pl[i] * g)
     return tau

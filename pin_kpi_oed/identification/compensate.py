@@ -225,7 +225,7 @@ def _solve_ik(pm: PoseModel, pos_t: np.ndarray, R_t: np.ndarray | None, Q0: np.n
             break
         Qe = Q + pm.joint_offsets(Q, aux)
         Qn = Q.copy()
-        for i in np.flatnonzero(todo):
+        for i in map(int, np.flatnonzero(todo)):
             J = pm.jacobian(Qe[i])[:nr] * w[:, None]
             dq = J.T @ np.linalg.solve(J @ J.T + lam[i] ** 2 * np.eye(nr), E[i] * w)
             s = np.abs(dq).max()

@@ -87,11 +87,11 @@ _FORMAT_NAME = MODEL_FORMAT.split("/")[0]
 
 
 # --------------------------------------------------------------------------- effects <-> plain data
-def _joint_names(effect: Any, idx: Sequence[int]) -> list[str]:
+def _joint_names(effect: Any, idx: Sequence[int] | np.ndarray) -> list[str]:
     return [effect.robot.joint_names[int(j)] for j in idx]
 
 
-def _known_class(name: Any) -> type | None:
+def _known_class(name: Any) -> Any:
     """The registered effect class of ``name`` (default or opt-in), or None."""
     if str(name) not in ALL_EFFECT_NAMES:
         return None
@@ -128,6 +128,7 @@ def effect_from_spec(spec: dict, robot: Robot, where: str = "model file") -> Any
         InputError: an unknown kind, bad options, or parameter names that differ from the stored ones.
     """
     kind = spec.get("kind")
+    eff: Any
     try:
         if kind == "subset":
             eff = SubsetEffect(effect_from_spec(spec["base"], robot, where), [int(k) for k in spec["keep"]])

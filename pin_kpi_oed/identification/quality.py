@@ -164,10 +164,8 @@ def assess_fit(result: Any, validation: dict | None = None, *, nominal_reflector
             f.advice += g.advice
     before, after = _check_heldout(f, validation, train_rms, large)
     _check_geometry(f, result)
-    seen: set[str] = set()
-    causes = [c for c in f.causes if not (c in seen or seen.add(c))]
-    seen = set()
-    advice = [a for a in f.advice if not (a in seen or seen.add(a))]
+    causes = list(dict.fromkeys(f.causes))  # duplicates dropped, order kept
+    advice = list(dict.fromkeys(f.advice))
     return FitQuality(verdict=f.verdict, chi2_reduced=chi2_red, chi2_interval=interval, dof=dof,
                       noise_known=noise_known, train_rms_m=train_rms, heldout_rms_before_m=before,
                       heldout_rms_after_m=after, n_outliers=int(out_idx.size), large_outliers=large,

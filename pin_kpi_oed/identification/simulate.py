@@ -110,6 +110,7 @@ def simulate(model: TrackerModel, Q: np.ndarray, truth_p: np.ndarray | None = No
     if p.shape != (model.n_params,):
         raise InputError(f"simulate: truth_p must have {model.n_params} entries, got shape {p.shape}")
     noise = noise or model.noise
+    cols: dict[str, Any]
     if isinstance(aux, MeasurementSet):
         cols = {"temperature_c": aux.temperature_c, "payload_kg": aux.payload_kg, "time_s": aux.time_s,
                 "extra": dict(aux.extra)}

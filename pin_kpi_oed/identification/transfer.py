@@ -73,7 +73,7 @@ class RegistrationResult(Result):
         setup_thetas: fitted parameters of the ``setup_effects`` of the registration (one array each).
     """
 
-    model: CalibratedModel = field(repr=False, default=None)  # type: ignore[assignment]
+    model: CalibratedModel = field(repr=False, default=None)
     stations: list = field(default_factory=list)
     setups: dict = field(default_factory=dict)
     rows: dict = field(default_factory=dict)

@@ -409,7 +409,7 @@ def _f(x: float) -> str:
     return repr(x)
 
 
-def _v(values: Sequence[float]) -> str:
+def _v(values: Sequence[float] | np.ndarray) -> str:
     return " ".join(_f(v) for v in values)
 
 

@@ -36,7 +36,7 @@ class NoiseModel:
             s = np.repeat(s, 3)
         if s.size != 3 or not np.all(np.isfinite(s)) or np.any(s <= 0):
             raise InputError(f"noise sigma must be 1 or 3 positive finite values (m), got {self.sigma_xyz_m}")
-        self.sigma_xyz_m = tuple(float(x) for x in s)
+        self.sigma_xyz_m = (float(s[0]), float(s[1]), float(s[2]))
         if self.range_a_m is not None and not (self.range_a_m > 0 and self.range_b >= 0):
             raise InputError(f"distance-dependent noise needs a > 0 m and b >= 0, got a={self.range_a_m}, "
                              f"b={self.range_b}")

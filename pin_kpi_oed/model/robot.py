@@ -67,7 +67,7 @@ UNIT_GUARD = {"rad": 2.0 * np.pi + 0.1, "m": 100.0}
 _LOOKS_LIKE = {"rad": "degrees", "m": "mm"}
 
 
-def is_robot_name(spec: str) -> bool:
+def is_robot_name(spec: str | os.PathLike) -> bool:
     """Whether ``spec`` is a robot name (shipped or example-robot-data) rather than a URDF path."""
     return str(spec).lower() in ROBOT_NAMES
 

@@ -36,6 +36,8 @@ distance dependent σ = a + b·range; weighted residuals f₁ = Σ⁻¹(η − h
 
 from __future__ import annotations
 
+from typing import Literal, overload
+
 from dataclasses import dataclass, field
 from collections.abc import Sequence
 
@@ -254,6 +256,12 @@ class TrackerModel(MeasurementModel):
         return F, dF
 
     # ------------------------------------------------------------------ incidence angle
+    @overload
+    def incidence_cos(self, p: np.ndarray, Q: np.ndarray, with_grad: Literal[False] = ...) -> np.ndarray: ...
+    @overload
+    def incidence_cos(self, p: np.ndarray, Q: np.ndarray, with_grad: Literal[True]
+                      ) -> tuple[np.ndarray, np.ndarray]: ...
+
     def incidence_cos(self, p: np.ndarray, Q: np.ndarray, with_grad: bool = False
                       ) -> np.ndarray | tuple[np.ndarray, np.ndarray]:
         """cos β of the laser incidence angle (eq. 4) and optionally d cos β / dq, (m,) and (m, n).

@@ -331,9 +331,9 @@ class DiscrepancyForm(Criterion):
             raise InputError(f"criterion {base.name}: no discrepancy-aware form (not a function of the parameter "
                              f"information)")
         self.base = base
-        self.name = f"{base.name}_gp"
-        self.label = f"{base.label}, with the model discrepancy (GLS information)"
-        self.unit, self.is_ratio = base.unit, base.is_ratio
+        self.name = f"{base.name}_gp"  # type: ignore[misc]
+        self.label = f"{base.label}, with the model discrepancy (GLS information)"  # type: ignore[misc]
+        self.unit, self.is_ratio = base.unit, base.is_ratio  # type: ignore[misc]
 
     @staticmethod
     def applies(crit: Criterion) -> bool:

@@ -80,13 +80,13 @@ class Identifiability:
             key = (grp, ", ".join(partners) if partners else "nothing")
             agg.setdefault(key, []).append(d["name"].split(".")[1])
         lines = []
-        for (grp, partners), comps in agg.items():
+        for (grp, with_text), comps in agg.items():
             conv = " (convention: the robot parameter is held nominal)" if any(
-                p in partners for p in self.setup_groups) else ""
-            if partners == "nothing":
+                p in with_text for p in self.setup_groups) else ""
+            if with_text == "nothing":
                 lines.append(f"{grp}.{{{','.join(comps)}}} held at nominal: not observable with this set-up")
             else:
-                lines.append(f"{grp}.{{{','.join(comps)}}} held at nominal: confounded with {partners}{conv}")
+                lines.append(f"{grp}.{{{','.join(comps)}}} held at nominal: confounded with {with_text}{conv}")
         return lines
 
     def summary(self) -> str:

@@ -35,6 +35,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass, field
+from collections.abc import Sequence
 
 import numpy as np
 
@@ -594,8 +595,8 @@ def _swap_gains(V: np.ndarray, G: np.ndarray | None) -> np.ndarray:
     return block_gains(s, G, V.shape[0], nh)
 
 
-def _exchange(Fp: np.ndarray, chosen: np.ndarray, K: np.ndarray | None, ridge: float, max_sweeps: int = 50,
-              M0: np.ndarray | None = None) -> tuple[np.ndarray, int]:
+def _exchange(Fp: np.ndarray, chosen: Sequence[int] | np.ndarray, K: np.ndarray | None, ridge: float,
+              max_sweeps: int = 50, M0: np.ndarray | None = None) -> tuple[np.ndarray, int]:
     """Fedorov exchange with Woodbury updates: swap points while φ decreases (information M0 + Σ_chosen F_iᵀF_i).
     Returns (chosen indices, sweeps)."""
     N, nh, nb = Fp.shape

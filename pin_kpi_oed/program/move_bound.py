@@ -8,6 +8,8 @@ those of the exact check.
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 
 from pin_kpi_oed.cell.feasibility import FeasibilityChecker
@@ -83,7 +85,7 @@ class MoveBound:
                 H.append((p, si, n, float(half[k].offset) + float(n @ M.translation)))
                 continue
             if k in robot or type(go[k].geometry).__name__ == "Capsule":
-                others = [seg_of(k)]
+                others: list[Any] = [seg_of(k)]
             else:
                 owner = chk.labels[k][1]
                 if not env_caps.get(owner):

@@ -350,7 +350,7 @@ def plan_program(cell: Cell, Q: np.ndarray, options: ProgramOptions | None = Non
     reps = [_within(equivalents(q, cell.q_lower, cell.q_upper, rev), cell) if o.equivalents else q[None] for q in Q]
     nodes = np.vstack([home, *reps])
     pose_of = np.concatenate([[-1], *[np.full(len(r), i) for i, r in enumerate(reps)]]).astype(int)
-    groups = [list(np.flatnonzero(pose_of == i)) for i in range(len(Q))]
+    groups = [[int(k) for k in np.flatnonzero(pose_of == i)] for i in range(len(Q))]
     tc = TransitionChecker(cell, o.margin_m, step_rad=np.radians(o.step_deg))
     cost = time_matrix(nodes, speeds)
     router = _Router(nodes, tc, speeds, cost, o)

@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -458,13 +459,13 @@ def _score_methods(fit: _SplitFit, pool: MeasurementSet, work: np.ndarray, score
 class _SplitFit:
     """One split's training-pool fit: geometry, selected terms and the extended model's pool Jacobians."""
 
-    geo: object           # IdentificationResult of the geometric fit on the pool
+    geo: Any              # IdentificationResult of the geometric fit on the pool
     n_terms: int          # selected transferable terms
     cv_rms_m: float       # the selection's held-out RMS (m), NaN without selection
     effects: list
     base: np.ndarray      # identifiable base parameters
     p_ref: np.ndarray     # reference parameters: nominal robot, the pool's set-up
-    ext: object           # ExtendedModel (prior sigma on every effect parameter)
+    ext: Any              # ExtendedModel (prior sigma on every effect parameter)
     Fp: np.ndarray        # weighted pool Jacobians of the extended model
     Fp_bias: np.ndarray   # the same with the selection's bias added to the measurement variance
 

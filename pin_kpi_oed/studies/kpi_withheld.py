@@ -202,11 +202,11 @@ def paired_summary(a: Sequence[float], b: Sequence[float]) -> dict:
     two-sided Wilcoxon signed-rank p (scipy; 1.0 when every pair is equal)."""
     from scipy.stats import wilcoxon
 
-    a, b = np.asarray(a, float), np.asarray(b, float)
-    if a.shape != b.shape or a.size == 0:
-        raise InputError(f"paired summary: {a.size} and {b.size} values")
-    diff = a - b
-    p = 1.0 if np.all(diff == 0) else float(wilcoxon(a, b).pvalue)
-    return {"n": int(a.size), "mean_a_m": float(a.mean()), "mean_b_m": float(b.mean()),
-            "median_ratio": float(np.median(a / b)), "change_mean": float(a.mean() / b.mean() - 1.0),
+    x, y = np.asarray(a, float), np.asarray(b, float)
+    if x.shape != y.shape or x.size == 0:
+        raise InputError(f"paired summary: {x.size} and {y.size} values")
+    diff = x - y
+    p = 1.0 if np.all(diff == 0) else float(wilcoxon(x, y).pvalue)
+    return {"n": int(x.size), "mean_a_m": float(x.mean()), "mean_b_m": float(y.mean()),
+            "median_ratio": float(np.median(x / y)), "change_mean": float(x.mean() / y.mean() - 1.0),
             "wins_a": int(np.sum(diff < 0)), "p": p}

@@ -34,6 +34,7 @@ from __future__ import annotations
 import dataclasses
 import time
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -368,7 +369,7 @@ class LearningCurves(Result):
     def to_dict(self) -> dict:
         """Plain JSON-able dict (SI units): the per-size means and spreads, the paired tests, the poses needed."""
         keys = ("error_mean_m", "error_rms_m", "error_geo_mean_m", "pred_sigma_work_m", "pred_rms_scored_m")
-        per = {meth: {k: {"mean": self.array(k, meth).mean(0).tolist(),
+        per: dict[str, dict[str, Any]] = {meth: {k: {"mean": self.array(k, meth).mean(0).tolist(),
                           "median": np.median(self.array(k, meth), 0).tolist(), "sd": self.array(k, meth).std(0, ddof=1)
                           .tolist() if len(self.splits) > 1 else None} for k in keys} for meth in self.methods}
         for meth in self.methods:

@@ -358,7 +358,7 @@ def kuka_study(out_dir: Path, m: int = 60, seeds: tuple[int, ...] = (0, 1, 2), c
             rs = [r for r in recs if r["meta"]["cell"] == c and r["collision"] == col and r.get("ok")]
             if not rs:
                 continue
-            row = {"cell": c, "collision_avoidance": col, "seeds": len(rs)}
+            row: dict[str, Any] = {"cell": c, "collision_avoidance": col, "seeds": len(rs)}
             for crit in ("random", "param", "kpi"):
                 tr = np.array([_trace(r, crit) for r in rs])
                 row[f"trace_cs_{crit}_m2"] = float(tr.mean())

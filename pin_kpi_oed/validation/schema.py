@@ -157,7 +157,7 @@ def _validate(d: Any, schema: dict, source: str, what: str) -> None:
 
 
 def _ragged(v: Any) -> bool:
-    return isinstance(v, list) and v and isinstance(v[0], list) and len({len(r) if isinstance(r, list) else -1
+    return isinstance(v, list) and bool(v) and isinstance(v[0], list) and len({len(r) if isinstance(r, list) else -1
                                                                         for r in v}) > 1
 
 

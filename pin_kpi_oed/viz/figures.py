@@ -233,8 +233,7 @@ def plot_pose_quality(clearance_m: Mapping[str, np.ndarray], incidence_deg: Mapp
         a = np.asarray(incidence_deg.get(n, []), float)
         if a.size:
             x = np.arange(a.size)
-            bad = incidence_limit_deg is not None and a > incidence_limit_deg
-            bad = np.asarray(bad) if np.ndim(bad) else np.zeros(a.size, bool)
+            bad = (a > incidence_limit_deg) if incidence_limit_deg is not None else np.zeros(a.size, bool)
             ax.bar(x[~bad], a[~bad], color=col[n])
             ax.bar(x[bad], a[bad], color="#d62728")
             if incidence_limit_deg is not None:

@@ -268,7 +268,7 @@ def _beam_matrix(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return T
 
 
-def _homogeneous(R: np.ndarray | None = None, t: np.ndarray | None = None) -> np.ndarray:
+def _homogeneous(R: np.ndarray | None = None, t: np.ndarray | Sequence[float] | None = None) -> np.ndarray:
     """4×4 transform from a rotation and a translation (defaults identity / zero)."""
     T = np.eye(4)
     if R is not None:
@@ -445,7 +445,7 @@ class _SceneBuilder:
         floors = [h.offset for h in df.half_spaces if h.normal[2] > 0.9]
         self.has_floor = bool(floors)
         self.floor_z = max(floors, default=min(0.0, self.W.translation[2]))
-        self.viz = None
+        self.viz: Any = None  # pinocchio's MeshcatVisualizer once the robot is drawn
 
     def _robot_geometries(self, visual: pin.GeometryModel | None) -> tuple[pin.GeometryModel, pin.GeometryModel]:
         """(visual geometry, ghost geometry): the URDF visuals, else the capsules or a stick figure; ghosts
