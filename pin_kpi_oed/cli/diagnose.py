@@ -45,7 +45,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                     "(it equals a uniform scaling of the robot); the report says so.")
     d.add_argument("--robot", required=True, help=ROBOT_HELP)
     d.add_argument("--tool", default=None, help="tool frame (default tool0)")
-    d.add_argument("--kinematics", default=None, help="UR kinematics file (ur_description default_kinematics.yaml layout, e.g. from ur_calibration) as the nominal model of a UR --robot")
+    d.add_argument("--kinematics", default=None,
+                   help="UR kinematics file (ur_description default_kinematics.yaml layout, e.g. from ur_calibration) "
+                        "as the nominal model of a UR --robot")
     d.add_argument("--train", required=True, action="append",
                    help="training measurement CSV (joint columns, x, y, z in m, ...); repeat for several files "
                         "(each its own station unless it has a 'station' column)")

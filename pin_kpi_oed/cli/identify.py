@@ -119,7 +119,9 @@ def _register_identify(subparsers: argparse._SubParsersAction) -> None:
                                           "on some rows of another session and only the rest are scored.")
     i.add_argument("--robot", required=True, help=ROBOT_HELP)
     i.add_argument("--tool", default=None, help="tool frame (default tool0)")
-    i.add_argument("--kinematics", default=None, help="UR kinematics file (ur_description default_kinematics.yaml layout, e.g. from ur_calibration) as the nominal model of a UR --robot")
+    i.add_argument("--kinematics", default=None,
+                   help="UR kinematics file (ur_description default_kinematics.yaml layout, e.g. from ur_calibration) "
+                        "as the nominal model of a UR --robot")
     i.add_argument("--data", required=True, action="append",
                    help="measurement CSV (joint columns, x, y, z in m, ...); repeat for several files: each file is "
                         "its own station (tracker placement) unless it has a 'station' column")

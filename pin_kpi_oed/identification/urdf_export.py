@@ -181,7 +181,8 @@ def calibrated_urdf_text(robot: Robot, placements: Sequence[pin.SE3], comment: s
         raise RobotLoadError(f"{path}: cannot parse the URDF for export ({exc})") from None
     joints = {j.get("name"): j for j in root.findall("joint")}
     # the template's own placements (a kinematics file may have replaced the robot's): F_k = M_k O_k^-1
-    template = robot.model if robot.kinematics is None else _reduced(pin.buildModelFromXML(robot.read_urdf_text()), robot)
+    template = (robot.model if robot.kinematics is None
+                else _reduced(pin.buildModelFromXML(robot.read_urdf_text()), robot))
     for k, (name, jid) in enumerate(zip(robot.joint_names, robot.joint_ids)):
         el = joints.get(name)
         if el is None:

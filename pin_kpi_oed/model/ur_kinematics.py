@@ -53,7 +53,8 @@ import hashlib
 import os
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Sequence
+from typing import Any
+from collections.abc import Sequence
 
 import numpy as np
 import pinocchio as pin
@@ -117,7 +118,7 @@ class URKinematics:
         return (isinstance(other, URKinematics) and self.hash == other.hash
                 and np.array_equal(self.values, other.values))
 
-    __hash__ = None  # type: ignore[assignment]
+    __hash__ = None
 
     def placements(self) -> list[pin.SE3]:
         """The joint origins P_k = T(x, y, z) · R_rpy(roll, pitch, yaw), base to tip."""
@@ -147,7 +148,7 @@ class URKinematics:
         return f"calib_{int.from_bytes(hashlib.sha256(text.encode()).digest()[:8], 'big')}"
 
     @classmethod
-    def from_values(cls, values: np.ndarray, source: str = "") -> "URKinematics":
+    def from_values(cls, values: np.ndarray, source: str = "") -> URKinematics:
         """Kinematics with the content hash of its values (:meth:`content_hash`)."""
         V = np.array(values, float).reshape(6, 6)
         return cls(V, cls.content_hash(V), source)
@@ -233,7 +234,8 @@ def ur_urdf_text(kin: URKinematics, name: str) -> str:
     for k, (joint, P) in enumerate(zip(UR_JOINTS, kin.placements())):
         out.append(f'  <joint name="{joint}" type="revolute"><parent link="{links[k]}"/>'
                    f'<child link="{links[k + 1]}"/>{_origin(P)}<axis xyz="0 0 1"/>'
-                   f'<limit lower="{_num(-_LIMITS[k])}" upper="{_num(_LIMITS[k])}" effort="100" velocity="{_num(speeds[k])}"/>'
+                   f'<limit lower="{_num(-_LIMITS[k])}" upper="{_num(_LIMITS[k])}" effort="100" '
+                   f'velocity="{_num(speeds[k])}"/>'
                    "</joint>")
     out += ['  <joint name="base_link-base_fixed_joint" type="fixed"><parent link="base_link"/><child link="base"/>'
             f"{_origin(UR_BASE_INERTIA)}</joint>",
@@ -332,7 +334,8 @@ def ur_values_of(model: pin.Model, joint_ids: Sequence[int], tool_frame_id: int,
         InputError: not six revolute joints, or a tool frame the layout cannot carry (off the last axis).
     """
     S, screw = _ur_map(model, joint_ids, tool_frame_id, reference)
-    M = [pin.SE3(model.jointPlacements[j]) for j in joint_ids] if placements is None else [pin.SE3(P) for P in placements]
+    M = ([pin.SE3(model.jointPlacements[j]) for j in joint_ids] if placements is None
+         else [pin.SE3(P) for P in placements])
     P = [UR_BASE_INERTIA.inverse() * M[0] * S[0]] + [S[k - 1].inverse() * M[k] * S[k] for k in range(1, 6)]
     P[5] = P[5] * screw
     return np.array([np.r_[Pk.translation, pin.rpy.matrixToRpy(Pk.rotation)] for Pk in P])

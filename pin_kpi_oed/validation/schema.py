@@ -63,7 +63,8 @@ CELL_SCHEMA: dict[str, Any] = {
     "type": "object", "additionalProperties": False, "required": ["robot"],
     "properties": {
         "name": {"type": "string"}, "description": {"type": "string"}, "robot": {"type": "string"},
-        "kinematics": {"type": "string"}, "tool_frame": {"type": ["string", "null"]}, "base": _POSE, "tracker": _POSE, "reflector_m": _VEC3,
+        "kinematics": {"type": "string"}, "tool_frame": {"type": ["string", "null"]}, "base": _POSE, "tracker": _POSE,
+        "reflector_m": _VEC3,
         "tcp_m": _VEC3, "noise": _NOISE,
         "joint_bounds": {"type": "object", "additionalProperties": False,
                          "properties": {k: _NUMS for k in ("lower_rad", "upper_rad", "lower_deg", "upper_deg")}},

@@ -7,7 +7,8 @@ kinematics (its own kinematics file, else the type's default), so the values sta
 (:func:`~pin_kpi_oed.model.robot.load_robot` with the new kinematics) and its tool0 compared with the
 calibrated model's at seeded configurations; it is written only within 1e-9 m. Every joint placement
 parameter is carried (a rotation about a joint's axis becomes part of that joint's roll / pitch / yaw);
-effects, discrepancy, set-ups, TCP and covariance are not (:func:`~pin_kpi_oed.identification.model_formats.base.lost_parts`).
+effects, discrepancy, set-ups, TCP and covariance are not
+(:func:`~pin_kpi_oed.identification.model_formats.base.lost_parts`).
 """
 
 from __future__ import annotations
