@@ -133,3 +133,16 @@ def test_fit_equals_the_scikit_learn_optimisation_on_a_series_c_subset(monkeypat
     rows, R = base_frame_residuals(res)
     fast, _ = _same_fit(data.q[rows], R, DiscrepancyOptions(mode="auto", n_fit=150, starts=(0.1,)), monkeypatch)
     assert fast.cv["mean_with_m"] < 0.7 * fast.cv["mean_without_m"]  # the Series C discrepancy is learnt
+
+
+def test_posterior_from_the_kfold_factor_equals_the_one_formed_again():
+    from pin_kpi_oed.discrepancy import Discrepancy
+
+    Q, Y = _gp_rows(150, 6, 3, seed=5)
+    fit = fit_discrepancy(Q, 1e-4 * Y, NAMES, DiscrepancyOptions(mode="on", n_fit=100, starts=(0.1,)))
+    assert fit.kind == "exact" and fit._chol is not None, "the fit must hand its K-fold factor to the posterior"
+    again = Discrepancy.from_dict(fit.to_dict(), NAMES)
+    assert again._chol is None
+    W = np.random.default_rng(1).uniform(-np.pi, np.pi, (40, 6))
+    (m1, v1), (m2, v2) = fit.predict(W), again.predict(W)
+    assert np.allclose(m1, m2, rtol=1e-9, atol=1e-18) and np.allclose(v1, v2, rtol=1e-9, atol=1e-22)

@@ -190,6 +190,12 @@ class Discrepancy:
             self.alpha = sla.cho_solve(self._chol, self.y, check_finite=False)
         return self._chol
 
+    def set_factor(self, L: np.ndarray) -> None:
+        """Use L, the lower Cholesky factor of K(Z, Z) + (w + jitter) I (the K-fold check's), as the exact posterior's
+        factor instead of forming it again."""
+        self._chol = (L, True)
+        self.alpha = sla.cho_solve(self._chol, self.y, check_finite=False)
+
     def predict_normalised(self, Q: np.ndarray, return_var: bool = True, chunk: int = 4000
                            ) -> tuple[np.ndarray, np.ndarray | None]:
         """Posterior mean (m, 3) and variance (m,) of δ in normalised units (variance without the white term)."""
@@ -446,11 +452,14 @@ def _stable_cholesky(K: np.ndarray) -> np.ndarray:
     raise np.linalg.LinAlgError("the inducing configurations' kernel matrix is not positive definite")
 
 
-def _spd_inverse(S: np.ndarray) -> np.ndarray:
-    """Inverse of a symmetric positive-definite matrix from its Cholesky factor (LAPACK potrf + potri)."""
+def _spd_inverse(S: np.ndarray, keep: dict | None = None) -> np.ndarray:
+    """Inverse of a symmetric positive-definite matrix from its Cholesky factor (LAPACK potrf + potri); the lower
+    factor is stored in ``keep["chol"]`` when ``keep`` is given."""
     Lc, info = sla.lapack.dpotrf(S, lower=1, clean=1, overwrite_a=0)
     if info != 0:
         raise np.linalg.LinAlgError("the discrepancy covariance is not positive definite")
+    if keep is not None:
+        keep["chol"] = Lc.copy()
     Si, info = sla.lapack.dpotri(Lc, lower=1, overwrite_c=1)
     if info != 0:
         raise np.linalg.LinAlgError("the discrepancy covariance could not be inverted")
@@ -459,13 +468,14 @@ def _spd_inverse(S: np.ndarray) -> np.ndarray:
 
 
 def _kfold(kernel: JointKernel, noise: float, Q: np.ndarray, Y: np.ndarray, scale: np.ndarray,
-           opts: DiscrepancyOptions, names: list) -> dict:
+           opts: DiscrepancyOptions, names: list, keep: dict | None = None) -> dict:
     """K-fold held-out check with the hyper-parameters fixed: mean 3-D error (m) without and with δ,
     and the standardised errors of the held-out rows.
 
     Up to ``max_exact`` rows the folds come from one inverse of Σ = K + wI (block inversion: the
     held-out residuals of fold I are (Σ⁻¹)_II⁻¹ (Σ⁻¹y)_I with covariance (Σ⁻¹)_II⁻¹, exactly what refitting
-    the posterior without fold I gives); above it each fold's DTC posterior is built.
+    the posterior without fold I gives); above it each fold's DTC posterior is built. Σ is the exact posterior's
+    (jitter included), and its Cholesky factor is stored in ``keep["chol"]`` for the posterior when ``keep`` is given.
     """
     rng = np.random.default_rng(opts.seed + 1)
     fold = rng.permutation(len(Q)) % opts.folds
@@ -473,8 +483,8 @@ def _kfold(kernel: JointKernel, noise: float, Q: np.ndarray, Y: np.ndarray, scal
     exact = len(Q) <= opts.max_exact
     if exact:
         S = kernel(Q)
-        S[np.diag_indices_from(S)] += noise
-        Si = _spd_inverse(S)
+        S[np.diag_indices_from(S)] += noise + _JITTER
+        Si = _spd_inverse(S, keep)
         alpha = Si @ Y
     for k in range(opts.folds):
         tr, te = fold != k, fold == k
@@ -541,10 +551,11 @@ def fit_discrepancy(Q: np.ndarray, R: np.ndarray, joint_names: Sequence[str],
     best = None
     for a0 in opts.starts:
         kernel, noise = _hyper_fit(Q, Y, opts, float(a0))
-        cv = _kfold(kernel, noise, Q, Y, scale, opts, names)
+        keep: dict = {}
+        cv = _kfold(kernel, noise, Q, Y, scale, opts, names, keep)
         if best is None or cv["mean_with_m"] < best[2]["mean_with_m"]:
-            best = (kernel, noise, cv)
-    kernel, noise, cv = best
+            best = (kernel, noise, cv, keep.get("chol"))
+    kernel, noise, cv, chol = best
     gain = 1.0 - cv["mean_with_m"] / cv["mean_without_m"]
     cv["gain"] = float(gain)
     words = (f"{opts.folds}-fold held-out mean {cv['mean_without_m'] * 1e3:.4f} -> {cv['mean_with_m'] * 1e3:.4f} mm "
@@ -558,6 +569,8 @@ def fit_discrepancy(Q: np.ndarray, R: np.ndarray, joint_names: Sequence[str],
     post = _posterior(kernel, noise, Q, Y, opts, np.random.default_rng(opts.seed + 100))
     out = Discrepancy(post["kind"], names, scale, mean, noise, kernel, post["Z"], post.get("y"), post.get("alpha"),
                       post.get("Minv"), _coverage_bins(Q), n, cv)
+    if post["kind"] == "exact" and chol is not None:
+        out.set_factor(chol)
     out.decision = (f"discrepancy: Gaussian process fitted ({post['kind']}, {n} rows): {words}")
     out.time_s = time.perf_counter() - t0
     return out
