@@ -21,7 +21,7 @@ demo: $(STAMP)
 test: $(STAMP)
 	$(PY) -m ruff check pin_kpi_oed tests
 	$(PY) -m mypy pin_kpi_oed
-	$(PY) -m pytest -n 2 -q
+	$(PY) -m pytest -n 2 -q --durations=15
 
 bench: $(STAMP)
 	$(PY) -m benchmarks

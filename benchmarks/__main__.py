@@ -1,4 +1,9 @@
-"""Run every benchmark: ``python -m benchmarks`` (``make bench``)."""
+"""Run every benchmark: ``python -m benchmarks`` (``make bench``).
+
+Each benchmark starts with the machine's load average; each time figure is its wall time followed by its CPU time
+(this process and its children) and the load average at its start, so a figure taken while other work held the
+cores is recognisable (its wall time grows, its CPU time barely).
+"""
 
 from __future__ import annotations
 
@@ -18,4 +23,7 @@ if __name__ == "__main__":
                 print(f"== {name}: not present")
                 continue
             raise
+        from benchmarks.common import machine_line
+
+        print(f"== {name}: {machine_line()} at the start", flush=True)
         mod.main()

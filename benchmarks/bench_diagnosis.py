@@ -17,13 +17,12 @@ Run: ``python -m benchmarks bench_diagnosis`` (``make bench`` runs every benchma
 from __future__ import annotations
 
 import os
-import time
 
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 
 import numpy as np  # noqa: E402
 
-from .common import report  # noqa: E402
+from .common import report, timed  # noqa: E402
 
 TARGET_S = 60.0
 
@@ -55,13 +54,9 @@ def main() -> None:
 
     print("== diagnosis (UR10, 2,000 measurements, 5 candidate effects, joint compliance withheld)")
     model, data = _data(2000)
-    t0 = time.perf_counter()
-    rep = diagnose(model, data.subset(np.arange(1000)), data.subset(np.arange(1000, 2000)))
-    t_split = time.perf_counter() - t0
+    t_split, rep = timed(lambda: diagnose(model, data.subset(np.arange(1000)), data.subset(np.arange(1000, 2000))))
     report(f"split 1000/1000: dominant={rep.dominant_effect}", t_split, TARGET_S)
-    t0 = time.perf_counter()
-    rep = diagnose(model, data, kfold=5)
-    t_kf = time.perf_counter() - t0
+    t_kf, rep = timed(lambda: diagnose(model, data, kfold=5))
     report(f"5-fold on 2000: dominant={rep.dominant_effect}", t_kf, TARGET_S)
     series_c()
 
@@ -87,11 +82,7 @@ def series_c() -> float | None:
     data = MeasurementSet(full.joint_names, full.q, full.position_m, source="Series_C")
     model = TrackerModel(load_robot("ur10"), reflector_m=np.array([0.0, 0.0, 0.109]),
                          noise=NoiseModel(sigma_xyz_m=(1e-4,) * 3))
-    t0, c0 = time.perf_counter(), time.process_time()
-    rep = diagnose(model, data, kfold=5, effects=list(EFFECT_NAMES) + ["transmission_error"])
-    t, cpu = time.perf_counter() - t0, time.process_time() - c0
-    print(f"   CPU time of this process {cpu:.1f} s (wall {t:.1f} s; on a shared machine the wall time counts the "
-          f"other processes too)")
+    t, rep = timed(lambda: diagnose(model, data, kfold=5, effects=list(EFFECT_NAMES) + ["transmission_error"]))
     ts = rep.term_selection
     report(f"Series C, {len(data)} rows, 5-fold, defaults + transmission_error: dominant={rep.dominant_effect}, "
            f"{len(ts.get('terms', []))} terms, held-out RMS {rep.heldout_before['rms_m'] * 1e3:.3f} -> "

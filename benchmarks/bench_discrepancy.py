@@ -15,11 +15,10 @@ from __future__ import annotations
 
 import argparse
 import resource
-import time
 
 import numpy as np
 
-from benchmarks.common import figure
+from benchmarks.common import figure, stopwatch, timed as timed_call
 
 
 def main() -> dict:
@@ -38,9 +37,7 @@ def main() -> dict:
     out = {}
 
     def timed(data, mode):
-        t0 = time.perf_counter()
-        res = identify(model, data, discrepancy=mode, raise_on_failure=False)
-        return time.perf_counter() - t0, res
+        return timed_call(lambda: identify(model, data, discrepancy=mode, raise_on_failure=False))
 
     t_none, _ = timed(C, "none")
     t_auto, res = timed(C, "auto")
@@ -59,12 +56,8 @@ def main() -> dict:
     cm = res.calibrated_model()
     Q = np.vstack([A.q, A.q])[:10000]
     aux = MeasurementSet(A.joint_names, Q, np.full((len(Q), 3), np.nan), station=np.array(["A"] * len(Q)))
-    t0 = time.perf_counter()
-    cm.predict_with_sigma(Q, aux)
-    t_pred = time.perf_counter() - t0
-    t0 = time.perf_counter()
-    cm.predict(Q, aux)
-    t_plain = time.perf_counter() - t0
+    t_pred, _ = timed_call(lambda: cm.predict_with_sigma(Q, aux))
+    t_plain, _ = timed_call(lambda: cm.predict(Q, aux))
     out["predict_10000_s"] = t_pred
     figure("predict with sigma, 10,000 rows", t_pred, 5.0, "s", t_plain, "predict without sigma")
     return out
@@ -77,13 +70,13 @@ def big(n: int = 100_000, n_test: int = 2_000) -> dict:
 
     model, data = withheld_ur10(n + n_test)
     train, test = data.subset(np.arange(n)), data.subset(np.arange(n, n + n_test))
-    t0, c0 = time.perf_counter(), time.process_time()
-    res = identify(model, train, discrepancy="auto", raise_on_failure=False)
-    wall, cpu = time.perf_counter() - t0, time.process_time() - c0
+    with stopwatch() as sw:
+        res = identify(model, train, discrepancy="auto", raise_on_failure=False)
+    wall, cpu = sw.timing, sw.timing.cpu_s
     peak_gb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024 ** 2
     cm = res.calibrated_model()
     v, v0 = validate(cm, test), validate(cm.noise_only(), test)
-    print(f"identify --discrepancy auto, {n:,} simulated rows: {wall:.1f} s wall, {cpu:.1f} s CPU")
+    print(f"identify --discrepancy auto, {n:,} simulated rows: {wall.words()}")
     figure("peak resident memory of the process after it (laptop)", peak_gb, 2.0, "GB")
     print(f"   {res.discrepancy.decision}")
     print(f"   {n_test} held-out rows: mean {v0['mean_m'] * 1e6:.1f} -> {v['mean_m'] * 1e6:.1f} um, standardised RMS "

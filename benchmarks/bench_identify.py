@@ -21,6 +21,8 @@ import time
 
 import numpy as np
 
+from benchmarks.common import timed
+
 TARGETS_S = {60: 0.050, 1000: 0.5}
 SIZES = (60, 100, 250, 500, 1000, 2000)
 
@@ -108,11 +110,9 @@ def _stations() -> dict | None:
         sets.append(MeasurementSet(ms.joint_names, ms.q, ms.position_m, source=f"{s}.csv"))
     data = concat_measurements(sets)
     model = TrackerModel(load_robot("ur10"), reflector_m=[0.0, 0.0, 0.109], noise=NoiseModel(sigma_xyz_m=(1e-4,) * 3))
-    t0 = time.perf_counter()
-    res = identify(model, data)
-    dt = time.perf_counter() - t0
+    dt, res = timed(lambda: identify(model, data))
     print(f"stations: UR10 B + C + D jointly ({len(data)} rows, 3 stations, {len(res.names)} parameters): "
-          f"{dt:.2f} s, {res.nit} iterations, residual mean {res.errors_m.mean() * 1e3:.3f} mm")
+          f"{dt.words()}, {res.nit} iterations, residual mean {res.errors_m.mean() * 1e3:.3f} mm")
     return {"rows": len(data), "time_s": dt, "iterations": res.nit, "n_params": len(res.names)}
 
 

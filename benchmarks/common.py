@@ -2,21 +2,98 @@
 
 from __future__ import annotations
 
+import os
+import resource
 import time
-from typing import Callable
+from contextlib import contextmanager
+from collections.abc import Callable, Iterator
 
 
-def median_time(fn: Callable[[], object], repeat: int = 30, warmup: int = 3) -> float:
-    """Median wall time of ``fn()`` in seconds over ``repeat`` runs (after ``warmup``)."""
+def cpu_time() -> float:
+    """CPU time (s) of this process and its finished children (user + system)."""
+    own, kids = resource.getrusage(resource.RUSAGE_SELF), resource.getrusage(resource.RUSAGE_CHILDREN)
+    return own.ru_utime + own.ru_stime + kids.ru_utime + kids.ru_stime
+
+
+def load_average() -> float:
+    """The machine's 1-minute load average (``os.getloadavg``)."""
+    return float(os.getloadavg()[0])
+
+
+class Timing(float):
+    """A wall time in seconds (the float's value) with the CPU time of the same run and the machine's load average
+    at its start: a wall time taken while other work held the cores is recognisable by the load, and its CPU time
+    is still the figure's cost. Scaling (``t * 1e3``) scales both times."""
+
+    cpu_s: float
+    load: float
+
+    def __new__(cls, wall_s: float, cpu_s: float, load: float) -> Timing:
+        obj = super().__new__(cls, wall_s)
+        obj.cpu_s, obj.load = float(cpu_s), float(load)
+        return obj
+
+    def __mul__(self, k: object) -> Timing | float:
+        if isinstance(k, (int, float)) and not isinstance(k, Timing):
+            return Timing(float(self) * k, self.cpu_s * k, self.load)
+        return float(self) * k  # type: ignore[operator]
+
+    __rmul__ = __mul__
+
+    def words(self, unit: str = "s") -> str:
+        """'wall W, CPU C, load L at the start' (``unit`` as the figure's)."""
+        return f"wall {float(self):.4g} {unit}, CPU {self.cpu_s:.4g} {unit}, load {self.load:.1f} at the start"
+
+
+class Stopwatch:
+    """Wall and CPU time of a block (:func:`stopwatch`); ``timing`` is set when the block ends."""
+
+    def __init__(self) -> None:
+        self.load, self.t0, self.c0 = load_average(), time.perf_counter(), cpu_time()
+        self.timing: Timing | None = None
+
+    def stop(self) -> Timing:
+        self.timing = Timing(time.perf_counter() - self.t0, cpu_time() - self.c0, self.load)
+        return self.timing
+
+
+@contextmanager
+def stopwatch() -> Iterator[Stopwatch]:
+    """``with stopwatch() as sw: ...``, then ``sw.timing`` (a :class:`Timing`)."""
+    sw = Stopwatch()
+    try:
+        yield sw
+    finally:
+        sw.stop()
+
+
+def timed(fn: Callable[[], object]) -> tuple[Timing, object]:
+    """(Timing of one call of ``fn``, its result)."""
+    sw = Stopwatch()
+    out = fn()
+    return sw.stop(), out
+
+
+def median_time(fn: Callable[[], object], repeat: int = 30, warmup: int = 3) -> Timing:
+    """Median wall time of ``fn()`` over ``repeat`` runs (after ``warmup``), with the median CPU time of the runs and
+    the load average before the first (a :class:`Timing`, s)."""
     for _ in range(warmup):
         fn()
-    ts = []
+    load = load_average()
+    ts, cs = [], []
     for _ in range(repeat):
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), cpu_time()
         fn()
         ts.append(time.perf_counter() - t0)
+        cs.append(cpu_time() - c0)
     ts.sort()
-    return ts[len(ts) // 2]
+    cs.sort()
+    return Timing(ts[len(ts) // 2], cs[len(cs) // 2], load)
+
+
+def machine_line() -> str:
+    """'load average a, b, c on n cores' (printed at the start of each benchmark)."""
+    return f"load average {', '.join(f'{x:.2f}' for x in os.getloadavg())} on {os.cpu_count()} cores"
 
 
 def withheld_ur10(n_rows: int):
@@ -49,6 +126,7 @@ def report(label: str, seconds: float, target: float | None = None) -> str:
     if target is not None:
         ok = "OK  " if seconds <= target else "MISS"
         line += f"   target {target * 1e3:8.1f} ms   ratio {seconds / target:5.2f}  {ok}"
+    line += _cpu_words(seconds, 1e3, "ms")
     print(line, flush=True)
     return line
 
@@ -74,14 +152,23 @@ def figure(label: str, measured: float, target: float, unit: str = "s", baseline
             f"ratio {measured / target:6.3f}  {'OK  ' if ok else 'MISS'}")
     if baseline is not None:
         line += f"  | {baseline_label} {baseline:.4g} {unit} (x{measured / baseline:.3f})"
+    line += _cpu_words(measured, 1.0, unit)
     print(line, flush=True)
     return line
+
+
+def _cpu_words(value: object, k: float, unit: str) -> str:
+    """The CPU time and start load of a :class:`Timing` figure (wall is the figure itself); for a figure that is no
+    time (a ratio, an error), nothing."""
+    if isinstance(value, Timing):
+        return f"  | CPU {value.cpu_s * k:.4g} {unit}, load {value.load:.1f} at the start"
+    return ""
 
 
 class BusyCore:
     """Context: one extra process spinning on a core (the 'second core busy' condition of the targets)."""
 
-    def __enter__(self) -> "BusyCore":
+    def __enter__(self) -> BusyCore:
         import subprocess
         import sys
 
