@@ -8,7 +8,7 @@ from pathlib import Path
 
 #: Upstream to downstream, as drawn in docs/ARCHITECTURE.md.
 ORDER = ["errors", "progress", "threads", "validation", "data", "results", "model", "effects", "discrepancy", "oed",
-         "cell", "design", "program", "identification", "diagnosis", "studies", "viz", "cli"]
+         "cell", "design", "program", "identification", "diagnosis", "studies", "viz", "report", "cli"]
 PKG = Path(__file__).resolve().parents[1] / "pin_kpi_oed"
 
 

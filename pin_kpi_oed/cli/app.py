@@ -118,6 +118,7 @@ def main(argv: list[str] | None = None) -> int:
 
     parser = accept_negative_numbers(build_parser())
     args = parser.parse_args(argv)
+    args.argv = list(sys.argv[1:] if argv is None else argv)  # the command as given (model files record it)
     try:
         check_args(args)
         if args.threads is not None:

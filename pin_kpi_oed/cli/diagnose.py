@@ -209,6 +209,12 @@ def run(args: argparse.Namespace) -> int:
                    show_progress=False if args.quiet else None)
     cm = _diagnosed_model(args, rep, train)
     model_dict = None if cm is None else cm.to_dict()
+    if model_dict is not None:
+        from pin_kpi_oed.cli.provenance import stamp_model
+
+        stamp_model(model_dict, args, robot, train=args.train, validate=args.validate, reflector_nominal_m=reflector,
+                    extra={"step": "diagnose", "diagnosis": {"status": rep.status, "message": rep.message,
+                                                            "summary": rep.summary()}})
     if cm is not None and val is not None and rep.transfer:
         rep.transfer["model_sigma"] = _model_sigma(args, rep, cm, val, reg)
     _write_and_print(args, rep)

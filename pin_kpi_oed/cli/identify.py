@@ -529,6 +529,11 @@ def run_identify(args: argparse.Namespace) -> int:
     if args.urdf_out and not refuse:
         urdf_text, out["urdf_check_max_error_m"] = _checked_urdf(args, robot, result)
     model_dict = result.calibrated_model().to_dict() if args.model_out and not refuse else None
+    if model_dict is not None:
+        from pin_kpi_oed.cli.provenance import stamp_model
+
+        stamp_model(model_dict, args, robot, train=args.data, validate=args.validate, options=opts,
+                    reflector_nominal_m=reflector, quality=quality)
     return _report_and_write(args, result, out, lines, quality, urdf_text, model_dict, refuse)
 
 

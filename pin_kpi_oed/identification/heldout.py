@@ -38,7 +38,8 @@ def validate(result: IdentificationResult | CalibratedModel, data: MeasurementSe
 
     Returns:
         ``{"n", "mean_m", "rms_m", "median_m", "p95_m", "max_m", "errors_m"}`` (m), plus
-        ``"rot_rms_rad"``, ``"rot_max_rad"`` when both the result and the data are 6-D.
+        ``"rot_rms_rad"``, ``"rot_max_rad"`` when both the result and the data are 6-D; per row
+        ``"residuals_m"`` (measured − predicted, (m, 3)) and ``"sigma_axes_m"`` (its predicted σ per axis).
 
     Raises:
         InputError: missing joint columns, NaN, degrees or out-of-limit joint values, a station
@@ -50,6 +51,7 @@ def validate(result: IdentificationResult | CalibratedModel, data: MeasurementSe
     pred = cm.predict_with_sigma(Q, data)
     out = error_stats(np.linalg.norm(data.position_m - pred[0], axis=1))
     out.update(calibration_stats(cm, Q, data, prediction=pred))
+    out["residuals_m"], out["sigma_axes_m"] = data.position_m - pred[0], pred[1]
     if want_rot:
         Y = cm.predict(Q, data, orientation=True)
         Rp = Rotation.from_rotvec(Y[:, 3:]).as_matrix()

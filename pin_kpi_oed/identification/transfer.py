@@ -311,7 +311,8 @@ def validate_transfer(model: CalibratedModel, data: MeasurementSet, *, register_
         Statistics of the scored rows (:func:`error_stats`: ``n``, ``mean_m``, ``rms_m``, ``median_m``,
         ``p95_m``, ``max_m``, ``errors_m``), how honest the predicted σ is there
         (:func:`~pin_kpi_oed.identification.heldout.calibration_stats`: ``z_rms``, ``inside_95``,
-        ``sigma_mean_m``, ``extrapolation_share``; ``sigma_scale`` of the registration) plus ``registration``:
+        ``sigma_mean_m``, ``extrapolation_share``; ``sigma_scale`` of the registration; per scored row
+        ``residuals_m`` and ``sigma_axes_m``, (m, 3)) plus ``registration``:
         ``source``, ``rows`` (1-based
         row numbers of the registration rows in their file), ``n``, ``rms_m``, ``seed``, the
         ``setup``; and ``scored_rows`` (1-based row numbers of ``data`` scored).
@@ -334,6 +335,7 @@ def validate_transfer(model: CalibratedModel, data: MeasurementSet, *, register_
     pred = rr.model.predict_with_sigma(Q, held, station=label)
     out = error_stats(np.linalg.norm(held.position_m - pred[0], axis=1))
     out.update(calibration_stats(rr.model, Q, held, prediction=pred))
+    out["residuals_m"], out["sigma_axes_m"] = held.position_m - pred[0], pred[1]
     out["sigma_scale"] = rr.setups[label].sigma_scale
     out["registration"] = {"source": reg.source, "rows": (reg_idx + 1).tolist(), "n": int(len(reg)),
                            "rms_m": rr.rms_m, "seed": int(seed) if register_data is None else None,

@@ -1,0 +1,70 @@
+"""CLI subcommand ``report`` of ``pin-kpi-oed``: the calibration certificate (HTML, JSON, PDF).
+
+Examples::
+
+    pin-kpi-oed report --model model.json --train c_train.csv --validate c_test.csv --html cert.html --json cert.json
+    pin-kpi-oed report --model model.json --train C.csv --validate D.csv --register-rows 60 --html cert_d.html
+
+Every figure is the one ``identify --validate`` / ``predict`` / ``diagnose`` compute for the same inputs
+(:mod:`pin_kpi_oed.report`). Bad input (no held-out data, training files other than the model file recorded,
+a kinematics file of another robot or hash): one line, exit 2, nothing written.
+"""
+
+from __future__ import annotations
+
+import argparse
+
+__all__ = ["register", "run"]
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    """Add the ``report`` subcommand."""
+    from pin_kpi_oed.cli.util import add_table_options
+
+    p = subparsers.add_parser(
+        "report", help="calibration certificate (HTML with embedded figures, JSON, PDF) of a model file",
+        description="One self-contained certificate of a calibration: what was calibrated (robot, URDF hash, tool, "
+                    "stations, data files with rows and SHA-256, versions, commands), the parameters with their "
+                    "std and correlations, accuracy before / after on held-out rows, the fit-quality verdict, the "
+                    "honest sigma, the trust map and ISO 9283 AP / vAP / RP where the data hold them.")
+    p.add_argument("--model", required=True, help="calibrated model file (identify / diagnose --model-out)")
+    p.add_argument("--train", required=True, action="append", help="training measurement CSV (repeat for several)")
+    p.add_argument("--validate", default=None, help="held-out measurement CSV (required)")
+    p.add_argument("--register-rows", type=int, default=None,
+                   help="another session: re-register the set-up on this many seeded rows of --validate, score the rest")
+    p.add_argument("--register-data", default=None, help="another session: re-register the set-up on this CSV")
+    p.add_argument("--seed", type=int, default=0, help="seed of the registration rows")
+    p.add_argument("--kinematics", default=None, help="UR kinematics file the model's nominal robot must have (checked)")
+    p.add_argument("--html", default=None, help="write the certificate (HTML) here")
+    p.add_argument("--json", default=None, help="write its content (JSON, SI units) here")
+    p.add_argument("--pdf", default=None, help="print it to PDF here (headless Chromium; skipped with a note if absent)")
+    p.add_argument("--quiet", action="store_true", help="print nothing")
+    add_table_options(p)
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    """Handler of ``pin-kpi-oed report``."""
+    from pin_kpi_oed.cli.util import table_options
+    from pin_kpi_oed.data.provenance import command_line
+    from pin_kpi_oed.errors import InputError
+    from pin_kpi_oed.report.content import build_certificate
+    from pin_kpi_oed.report.write import write_certificate
+
+    if not (args.html or args.json or args.pdf):
+        raise InputError("report: give --html FILE, --json FILE and/or --pdf FILE")
+    if args.register_rows is not None and args.register_data:
+        raise InputError("report: give --register-rows or --register-data, not both")
+    cert = build_certificate(args.model, args.train, args.validate, register_rows=args.register_rows,
+                             register_data_path=args.register_data, seed=args.seed, table_opts=table_options(args),
+                             kinematics=args.kinematics, command=command_line(getattr(args, "argv", None) or []),
+                             figures=bool(args.html or args.pdf))
+    out = write_certificate(cert, html=args.html, json_path=args.json, pdf=args.pdf)
+    if not args.quiet:
+        a = cert.data["accuracy"]
+        print(f"held-out RMS {a['before']['rms_m'] * 1e3:.4f} mm before, {a['after']['rms_m'] * 1e3:.4f} mm after "
+              f"({a['after']['n']} rows); {cert.data['fit_quality'].get('message')}")
+        if out["pdf_skipped"]:
+            print(out["pdf_skipped"])
+        print("wrote " + ", ".join(out["written"]))
+    return 0

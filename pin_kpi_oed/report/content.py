@@ -1,0 +1,245 @@
+r"""The content of a calibration certificate: what was calibrated, the parameters, the accuracy, its honesty.
+
+:func:`build_certificate` reads a model file, its training and held-out measurement files, and collects — from
+the library's own functions, never recomputed another way — every figure the certificate shows:
+
+* **calibrated**: robot, URDF (SHA-256 of its text) and kinematics hash, tool frame, stations with their
+  set-ups (tracker pose, reflector), TCP, the data files (rows, SHA-256; checked against the ones the model
+  file recorded), the model file's SHA-256, software versions, the commands that reproduce it;
+* **parameters**: values, standard deviations, the strongest correlations, the identifiable set in words
+  (:func:`~pin_kpi_oed.oed.identifiability.analyse`), effects, the discrepancy's hyper-parameters;
+* **accuracy**: before / after on the held-out rows (:mod:`pin_kpi_oed.report.accuracy`), the fit-quality verdict
+  ``identify`` recorded, the honest σ (standardised RMS, share inside the 95 % ellipsoid), the trust map
+  numbers, ISO 9283 AP / vAP / RP (:mod:`pin_kpi_oed.report.iso9283`), and the diagnosis ``diagnose`` recorded.
+
+Every number is SI in the returned dict; the HTML prints mm / mrad with the unit.
+"""
+
+from __future__ import annotations
+
+import hashlib
+from dataclasses import dataclass, field
+from typing import Any, Sequence
+
+import numpy as np
+
+from pin_kpi_oed.errors import InputError
+
+__all__ = ["Certificate", "build_certificate", "correlations", "sections_present", "CERTIFICATE_FORMAT", "SECTIONS"]
+
+#: Format tag of the certificate's JSON.
+CERTIFICATE_FORMAT = "pin_kpi_oed.certificate/1"
+#: The certificate's sections, in order: (id, title).
+SECTIONS = (("calibrated", "What was calibrated"), ("parameters", "Parameters"),
+            ("accuracy", "Accuracy on held-out rows"), ("fit_quality", "Fit quality"),
+            ("honest_sigma", "Honest sigma"), ("trust_map", "Trust map"), ("iso9283", "ISO 9283 pose figures"),
+            ("diagnosis", "Diagnosis"), ("reproduce", "Reproduce"))
+
+
+@dataclass
+class Certificate:
+    """A certificate's content: ``data`` (JSON-ready, SI) and ``figures`` (name -> PNG bytes)."""
+
+    data: dict
+    figures: dict = field(default_factory=dict)
+
+
+def correlations(names: Sequence[str], cov: Any, threshold: float = 0.9) -> list[dict]:
+    """Pairs of parameters whose correlation |r| ≥ ``threshold``, strongest first (r = C_ij / √(C_ii C_jj))."""
+    if cov is None:
+        return []
+    C = np.asarray(cov, float)
+    d = np.sqrt(np.clip(np.diag(C), 1e-300, None))
+    R = C / np.outer(d, d)
+    i, j = np.triu_indices(len(d), 1)
+    keep = np.abs(R[i, j]) >= threshold
+    pairs = sorted(zip(i[keep], j[keep]), key=lambda t: -abs(R[t]))
+    return [{"a": names[a], "b": names[b], "r": float(R[a, b])} for a, b in pairs]
+
+
+def _sha256_text(text: str) -> str:
+    return hashlib.sha256(text.encode()).hexdigest()
+
+
+def _check_recorded(cm: Any, records: list[dict], model_path: str) -> dict:
+    """Compare the given training files with those the model file recorded; refuse another data set."""
+    step = (cm.history or [{}])[-1]
+    recorded = step.get("train_files")
+    if not recorded:
+        return {"checked": False, "note": "the model file records no training files (made before provenance was "
+                                          "recorded, or through the Python API): not checked"}
+    want = {r["sha256"] for r in recorded}
+    for rec in records:
+        if rec["sha256"] not in want:
+            names = ", ".join(f"{r['name']} ({r['sha256'][:12]}…)" for r in recorded)
+            raise InputError(f"{rec['path']}: SHA-256 {rec['sha256'][:12]}… is not a file {model_path} was calibrated "
+                             f"on (recorded: {names})")
+    return {"checked": True, "note": "the training files are the ones the model file recorded (SHA-256)"}
+
+
+def _stations(cm: Any) -> list[dict]:
+    import pinocchio as pin
+
+    out = []
+    for lab, st in cm.setups.items():
+        T = np.asarray(st.tracker_T_base)
+        out.append({"label": lab, "tracker_T_base_xyz_m": T[:3, 3].tolist(),
+                    "tracker_T_base_rpy_rad": pin.rpy.matrixToRpy(T[:3, :3]).tolist(),
+                    "reflector_m": np.asarray(st.reflector_m).tolist(), "n_rows": int(st.n_rows),
+                    "fitted_by": st.fitted_by, "source": st.source, "rms_m": st.rms_m,
+                    "sigma_scale": float(st.sigma_scale)})
+    return out
+
+
+def _calibrated(cm: Any, model_path: str, train_recs: list[dict], val_recs: list[dict], checked: dict) -> dict:
+    from pin_kpi_oed.data.provenance import sha256_of, software_versions
+
+    rb = cm.robot
+    step = (cm.history or [{}])[-1]
+    return {"robot": rb.name, "urdf_path": str(rb.urdf_path), "urdf_sha256": _sha256_text(rb.read_urdf_text()),
+            "kinematics_hash": rb.kinematics.hash if rb.kinematics is not None else None,
+            "tool_frame": rb.tool_frame, "joints": list(rb.joint_names), "tcp_m": np.asarray(cm.tcp_m).tolist(),
+            "pose6d": bool(cm.pose6d), "stations": _stations(cm),
+            "model_file": {"path": str(model_path), "sha256": sha256_of(model_path)},
+            "train_files": train_recs, "validate_files": val_recs, "train_files_check": checked,
+            "software_at_calibration": step.get("software"), "software_now": software_versions(),
+            "history": [{k: v for k, v in h.items() if k not in ("software", "diagnosis")} for h in cm.history]}
+
+
+def _identifiable(cm: Any) -> dict:
+    from pin_kpi_oed.oed.identifiability import analyse
+
+    model, _ = cm.station_model(next(iter(cm.setups)))
+    ident = analyse(model)
+    est = list((cm.parameters or {}).get("names") or [])
+    robot_names = [n for n in model.layout.names[:6 * cm.robot.nq]]
+    held = [n for n in robot_names if n not in est]
+    return {"summary": ident.summary().splitlines(), "n_raw": ident.n_raw, "rank": ident.rank,
+            "estimated": est, "held_at_nominal": held,
+            "in_words": (f"{len(est)} parameters estimated; {len(held)} of the {len(robot_names)} joint-placement "
+                         "parameters are held at their nominal values: tracker positions cannot tell them apart "
+                         "from the others or from the set-up (tracker pose, reflector), so any value of them "
+                         "gives the same predictions")}
+
+
+def _parameters(cm: Any) -> dict:
+    P = cm.parameters or {}
+    names = list(P.get("names") or [])
+    rows = [{"name": n, "value": float(v), "std": float(s), "unit": u}
+            for n, v, s, u in zip(names, P.get("values", []), P.get("std", []), P.get("units", [""] * len(names)))]
+    effects = [{"name": e.name, "unit": getattr(e, "unit", ""), "param_names": list(e.param_names()),
+                "theta": np.asarray(t).tolist()} for e, t in zip(cm.effects, cm.thetas)]
+    d = cm.discrepancy
+    disc = None if d is None else {k: v for k, v in d.to_dict().items()
+                                   if k in ("kind", "decision", "scale_m", "noise", "n_rows", "cv")}
+    if d is not None and getattr(d, "kernel", None) is not None:
+        disc["kernel"] = str(d.kernel)
+    return {"rows": rows, "correlations": correlations(names, P.get("covariance")),
+            "identifiable": _identifiable(cm), "effects": effects, "discrepancy": disc}
+
+
+def _read(paths: Sequence[str], robot: Any, opts: dict) -> tuple[Any, list[dict]]:
+    from pin_kpi_oed.data.measurements import concat_measurements, read_measurements
+    from pin_kpi_oed.data.provenance import file_record
+
+    sets, recs = [], []
+    for p in paths:
+        ms = read_measurements(p, joint_names=robot.joint_names, reach_m=robot.reach(), **opts)
+        sets.append(ms)
+        recs.append(file_record(p, len(ms)))
+    return (sets[0] if len(sets) == 1 else concat_measurements(sets)), recs
+
+
+def build_certificate(model_path: str, train_paths: Sequence[str], validate_path: str | None, *,
+                      register_rows: int | None = None, register_data_path: str | None = None, seed: int = 0,
+                      table_opts: dict | None = None, kinematics: str | None = None, command: str = "",
+                      figures: bool = True) -> Certificate:
+    """Collect a calibration certificate.
+
+    Args:
+        model_path: the model file (``identify`` / ``diagnose --model-out``).
+        train_paths: the measurement files it was calibrated on (checked against the recorded SHA-256).
+        validate_path: held-out measurements (required: a certificate states held-out accuracy).
+        register_rows, register_data_path, seed: score on another session after re-registering its set-up.
+        table_opts: reader options (``units``, ``columns``).
+        kinematics: a UR kinematics file the model's nominal robot must have (its hash and values checked).
+        command: the ``report`` command line (printed in the certificate).
+        figures: draw the figures (PNG).
+
+    Raises:
+        InputError: no held-out data, training files other than the recorded ones, a kinematics file of
+            another robot or another hash, bad measurement files.
+    """
+    from pin_kpi_oed.identification.model_file import load_model_file
+    from pin_kpi_oed.report.accuracy import accuracy_figures, before_after
+    from pin_kpi_oed.report.iso9283 import iso_figures
+
+    if not validate_path:
+        raise InputError("report: a certificate states accuracy on rows the model was not fitted on: give "
+                         "--validate FILE (held-out measurements)")
+    cm = load_model_file(model_path)
+    _check_kinematics(cm, kinematics)
+    opts = dict(table_opts or {})
+    train, train_recs = _read(train_paths, cm.robot, opts)
+    test, val_recs = _read([validate_path], cm.robot, opts)
+    if {r["sha256"] for r in val_recs} & {r["sha256"] for r in train_recs}:
+        raise InputError(f"{validate_path}: the held-out file is one of the training files: give rows the model was "
+                         "not fitted on")
+    checked = _check_recorded(cm, train_recs, str(model_path))
+    reg = _read([register_data_path], cm.robot, opts)[0] if register_data_path else None
+    ho = before_after(cm, train, test, register_rows=register_rows, register_data=reg, seed=seed)
+    scored = test if ho.mode == "split" or reg is not None else test.subset(np.asarray(ho.after["scored_rows"]) - 1)
+    names = list(cm.robot.joint_names)
+    acc = {"mode": ho.mode, "registration": _registration(ho.registration), "coverage": ho.coverage,
+           "before_means": "nominal robot + tracker pose and reflector fitted on the training rows",
+           "after_means": "the calibrated model" + (" (set-up re-registered)" if ho.mode == "transfer" else ""),
+           "before": accuracy_figures(ho.before, ho.Q, ho.reach_m, names),
+           "after": accuracy_figures(ho.after, ho.Q, ho.reach_m, names)}
+    quality = (cm.fit or {}).get("quality")
+    after = ho.after
+    data = {"format": CERTIFICATE_FORMAT, "title": f"Calibration certificate: {cm.robot.name}",
+            "calibrated": _calibrated(cm, model_path, train_recs, val_recs, checked),
+            "parameters": _parameters(cm), "accuracy": acc,
+            "fit_quality": quality or {"verdict": "not recorded",
+                                       "message": "the model file holds no fit-quality verdict"},
+            "honest_sigma": {k: after.get(k) for k in ("z_rms", "inside_95", "sigma_mean_m", "extrapolation_share",
+                                                        "sigma_scale")},
+            "trust_map": None, "iso9283": iso_figures(scored, ho.Q, np.asarray(ho.before["residuals_m"]),
+                                                      np.asarray(after["residuals_m"])),
+            "diagnosis": next((h.get("diagnosis") for h in reversed(cm.history or []) if h.get("diagnosis")), None),
+            "reproduce": {"calibration": [h.get("command") for h in cm.history if h.get("command")],
+                          "report": command}}
+    cert = Certificate(data)
+    from pin_kpi_oed.report.figures import draw_figures, trust_numbers
+
+    data["trust_map"] = trust_numbers(cm, ho.Q, scored)
+    if figures:
+        cert.figures = draw_figures(cm, ho, scored, data)
+    return cert
+
+
+def _registration(reg: dict | None) -> dict | None:
+    if reg is None:
+        return None
+    return {k: reg.get(k) for k in ("source", "n", "rms_m", "seed", "hold_reflector")}
+
+
+def _check_kinematics(cm: Any, kinematics: str | None) -> None:
+    """The model's nominal robot must have the given UR kinematics file (values and hash)."""
+    if not kinematics:
+        return
+    from pin_kpi_oed.model.robot import load_robot
+
+    given = load_robot(cm.robot.name, cm.robot.tool_frame, kinematics=kinematics).kinematics
+    have = cm.robot.kinematics
+    if have is None:
+        raise InputError(f"{kinematics}: the model's nominal robot is the {cm.robot.name} URDF ({cm.robot.urdf_path}), "
+                         "not a kinematics file")
+    if given.hash != have.hash or not np.allclose(given.values, have.values, rtol=0, atol=1e-12):
+        raise InputError(f"{kinematics}: kinematics hash {given.hash} differs from the model's nominal {have.hash}")
+
+
+def sections_present(data: dict) -> list[str]:
+    """The section ids of :data:`SECTIONS` the certificate holds (every one, with a statement where empty)."""
+    return [s for s, _ in SECTIONS if s in data]
+

@@ -1,0 +1,149 @@
+r"""ISO 9283 pose figures from calibration data: pose accuracy AP, multi-directional variation vAP, repeatability RP.
+
+ISO 9283:1998 defines, for a commanded pose measured n times (attained positions x_j, barycentre x̄, commanded x_c):
+
+* pose accuracy (clause 7.2.1) AP = ‖x̄ − x_c‖, per axis AP_x = x̄ − x_c, ...;
+* pose repeatability (7.2.2) RP = l̄ + 3·S_l, l_j = ‖x_j − x̄‖, S_l = √(Σ(l_j − l̄)² / (n − 1));
+* multi-directional pose accuracy variation (7.2.3) vAP = max over pairs of approach directions h, k of ‖x̄_h − x̄_k‖.
+
+Here the robot is driven through a model: the position it should reach is what the model predicts for the
+configuration, so the attained-minus-commanded vector of row j is its residual e_j = measured − predicted
+(tracker frame; the "before" model: the nominal robot with its fitted set-up, "after": the calibration) and
+AP = ‖ē‖ over the rows of one commanded position. The rows of one commanded position are those whose commanded
+(goal) positions lie within 0.1 mm of each other (the data's ``goal_x, goal_y, goal_z`` columns, e.g. the IPA
+series); its directions are its distinct configurations (joints within 1 mrad: another orientation or another
+inverse-kinematics branch reaches the position another way), each direction's barycentre the mean residual of
+its rows. RP needs one configuration measured
+repeatedly: rows whose joint values agree within 1 mrad on every joint form a cycle group (≥ 3 rows); RP is
+computed on their residuals (what stays when the commanded position is the same).
+
+Where the data hold no such rows the figure is not given, and the certificate says why.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+__all__ = ["GOAL_POSITION", "clusters", "commanded_groups", "direction_keys",
+           "pose_accuracy", "repeatability", "iso_figures", "CLAUSES"]
+
+#: The data's commanded-position columns (m).
+GOAL_POSITION = ("goal_x", "goal_y", "goal_z")
+#: Clauses of ISO 9283:1998 the figures follow.
+CLAUSES = {"AP": "ISO 9283:1998, 7.2.1 (pose accuracy)", "RP": "ISO 9283:1998, 7.2.2 (pose repeatability)",
+           "vAP": "ISO 9283:1998, 7.2.3 (multi-directional pose accuracy variation)"}
+
+
+def clusters(X: np.ndarray, tol: float, min_size: int = 2) -> list[np.ndarray]:
+    """Rows of X linked by chains of neighbours within ``tol`` (max-norm), groups of at least ``min_size``."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+    from scipy.spatial import cKDTree
+
+    X = np.asarray(X, float)
+    if len(X) == 0:
+        return []
+    pairs = cKDTree(X).query_pairs(r=tol, p=np.inf, output_type="ndarray")
+    A = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(len(X), len(X)))
+    _, lab = connected_components(A, directed=False)
+    groups = [np.flatnonzero(lab == k) for k in np.unique(lab)]
+    return [g for g in groups if g.size >= min_size]
+
+
+def commanded_groups(data: Any, tol_m: float = 1e-4) -> list[np.ndarray] | None:
+    """Rows per commanded position (≥ 2 rows), or None when the data have no goal columns."""
+    if not all(k in data.extra for k in GOAL_POSITION):
+        return None
+    return clusters(np.column_stack([data.extra[k] for k in GOAL_POSITION]), tol_m)
+
+
+def direction_keys(Q: np.ndarray, tol_rad: float = 1e-3) -> np.ndarray:
+    """An integer per row naming its configuration: rows whose joints agree within ``tol_rad`` share one (the
+    same commanded pose reached the same way); the directions of a commanded position are its configurations."""
+    key = np.full(len(Q), -1)
+    for k, g in enumerate(clusters(Q, tol_rad, min_size=1)):
+        key[g] = k
+    return key
+
+
+def pose_accuracy(resid_m: np.ndarray, groups: list[np.ndarray], directions: np.ndarray) -> dict:
+    """AP and vAP per commanded position and their summary (m).
+
+    Args:
+        resid_m: residuals e_j = measured − predicted, (m, 3) m.
+        groups: rows of each commanded position.
+        directions: commanded orientation key per row.
+
+    Returns:
+        ``n_positions``, ``n_samples``, ``AP`` (``mean_m``, ``max_m``, ``per_axis_mean_m``), ``vAP`` (``mean_m``,
+        ``max_m``, ``n_positions``: those with ≥ 2 directions, ``directions_mean``), ``per_position`` (AP_m,
+        AP_xyz_m, vAP_m, n, directions).
+    """
+    rows = []
+    for g in groups:
+        e = resid_m[g]
+        bary = e.mean(axis=0)
+        dirs = np.unique(directions[g])
+        B = np.array([e[directions[g] == d].mean(axis=0) for d in dirs])
+        vap = float(max(np.linalg.norm(B[i] - B[j]) for i in range(len(B)) for j in range(i + 1, len(B)))) \
+            if len(B) > 1 else None
+        rows.append({"AP_m": float(np.linalg.norm(bary)), "AP_xyz_m": bary.tolist(), "vAP_m": vap, "n": int(g.size),
+                     "directions": int(len(dirs))})
+    ap = np.array([r["AP_m"] for r in rows])
+    axes = np.array([r["AP_xyz_m"] for r in rows]).reshape(-1, 3)
+    vap = np.array([r["vAP_m"] for r in rows if r["vAP_m"] is not None])
+    return {"n_positions": len(rows), "n_samples": int(sum(r["n"] for r in rows)),
+            "AP": {"mean_m": float(ap.mean()) if ap.size else None, "max_m": float(ap.max()) if ap.size else None,
+                   "per_axis_mean_m": axes.mean(axis=0).tolist() if ap.size else None},
+            "vAP": {"mean_m": float(vap.mean()) if vap.size else None, "max_m": float(vap.max()) if vap.size else None,
+                    "n_positions": int(vap.size),
+                    "directions_mean": float(np.mean([r["directions"] for r in rows])) if rows else None},
+            "per_position": rows}
+
+
+def repeatability(resid_m: np.ndarray, groups: list[np.ndarray]) -> dict:
+    """RP = l̄ + 3·S_l per cycle group (rows of one configuration) and the summary (m)."""
+    rp = []
+    for g in groups:
+        e = resid_m[g]
+        ell = np.linalg.norm(e - e.mean(axis=0), axis=1)
+        rp.append({"RP_m": float(ell.mean() + 3.0 * np.std(ell, ddof=1)), "n": int(g.size)})
+    v = np.array([r["RP_m"] for r in rp])
+    return {"n_groups": len(rp), "n_samples": int(sum(r["n"] for r in rp)),
+            "median_m": float(np.median(v)) if v.size else None, "max_m": float(v.max()) if v.size else None,
+            "per_group": rp}
+
+
+def iso_figures(data: Any, Q: np.ndarray, resid_before_m: np.ndarray, resid_after_m: np.ndarray,
+                q_tol_rad: float = 1e-3) -> dict:
+    """The ISO 9283 section of a certificate: AP / vAP before and after, RP, or why a figure cannot be given.
+
+    Args:
+        data: the scored rows (their ``extra`` goal columns name the commanded poses).
+        Q: their configurations (rad).
+        resid_before_m, resid_after_m: residuals of the nominal and the calibrated model (m, 3) m.
+        q_tol_rad: joint tolerance of a repeated configuration (rad).
+    """
+    out: dict = {"clauses": CLAUSES, "statements": []}
+    groups = commanded_groups(data)
+    if groups is None:
+        out["statements"].append("no commanded positions in the data (goal_x, goal_y, goal_z columns): no AP, vAP")
+    elif not groups:
+        out["statements"].append("no commanded position was measured more than once: no AP, vAP")
+    else:
+        keys = direction_keys(Q, q_tol_rad)
+        out["AP_vAP"] = {"before": pose_accuracy(resid_before_m, groups, keys),
+                         "after": pose_accuracy(resid_after_m, groups, keys)}
+        if out["AP_vAP"]["after"]["vAP"]["n_positions"] == 0:
+            out["statements"].append("every commanded position was reached in one configuration only: no vAP")
+    cycles = [g for g in clusters(Q, q_tol_rad) if g.size >= 3]
+    if cycles:
+        out["RP"] = repeatability(resid_after_m, cycles)
+        out["RP"]["note"] = (f"repeated configurations (all joints within {q_tol_rad * 1e3:g} mrad, ≥ 3 rows); ISO 9283 "
+                             "asks for 30 cycles per pose")
+    else:
+        out["statements"].append(f"no configuration was measured 3 times or more (joints within {q_tol_rad * 1e3:g} "
+                                 "mrad): no RP")
+    return out

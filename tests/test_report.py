@@ -1,0 +1,226 @@
+"""The calibration certificate (``report``): every figure equals identify's / predict's, ISO 9283 figures against
+an independent computation, bad input refused in one line, the HTML self-contained with every section."""
+
+from __future__ import annotations
+
+import csv
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from pin_kpi_oed import NoiseModel, TrackerModel, load_robot
+from pin_kpi_oed.cli.app import main
+from pin_kpi_oed.data.measurements import MeasurementSet, write_measurements
+from pin_kpi_oed.identification.simulate import Tolerances, default_tracker_pose, random_truth, simulate
+from pin_kpi_oed.oed.identifiability import analyse
+from pin_kpi_oed.report.content import SECTIONS
+from pin_kpi_oed.report.iso9283 import clusters, iso_figures, pose_accuracy, repeatability
+
+REPO = Path(__file__).resolve().parents[1]
+SIGMA = 2e-5
+
+
+def _with_goals(ms: MeasurementSet, goals: np.ndarray) -> MeasurementSet:
+    return MeasurementSet(ms.joint_names, ms.q, ms.position_m, sigma_m=None, source=ms.source,
+                          extra={"goal_x": goals[:, 0], "goal_y": goals[:, 1], "goal_z": goals[:, 2]})
+
+
+@pytest.fixture(scope="module")
+def calibrated(tmp_path_factory):
+    """A simulated UR10 (random geometric errors), 240 training rows, 150 held-out rows (30 commanded positions of 5
+    rows, and 4 configurations measured 3 times), identified by the CLI with --validate, --json and --model-out."""
+    d = tmp_path_factory.mktemp("report")
+    robot = load_robot("ur10")
+    tm = TrackerModel(robot, tracker_T_base=default_tracker_pose(robot), reflector_m=np.array([0.02, 0.01, 0.1]),
+                      noise=NoiseModel((SIGMA,) * 3))
+    base = [i for i in analyse(tm).base if i < 6 * robot.nq]
+    truth = random_truth(tm, Tolerances(5e-4, 1e-3, 0.01, 0.01), seed=4, only=base)
+    rng = np.random.default_rng(2)
+    Qt = robot.random_q(rng, 240)
+    Qv = robot.random_q(rng, 150)
+    Qv[138:141] = Qv[137]  # repeated configurations: 4 groups of 3 (rows 137-140 are 4 repeats)
+    Qv[141:144] = Qv[141]
+    Qv[144:147] = Qv[144]
+    Qv[147:150] = Qv[147]
+    train = simulate(tm, Qt, truth, seed=5, record_sigma=False)
+    test = simulate(tm, Qv, truth, seed=6, record_sigma=False)
+    goals = np.repeat(rng.uniform(-1, 1, size=(30, 3)), 5, axis=0)
+    write_measurements(_with_goals(train, rng.uniform(-1, 1, size=(240, 3))), d / "train.csv")
+    write_measurements(_with_goals(test, goals), d / "test.csv")
+    args = ["identify", "--robot", "ur10", "--data", str(d / "train.csv"), "--validate", str(d / "test.csv"),
+            "--reflector", "0.02,0.01,0.1", "--sigma", str(SIGMA), "--json", str(d / "id.json"),
+            "--model-out", str(d / "model.json"), "--quiet"]
+    assert main(args) == 0
+    return d
+
+
+def _report(d: Path, *extra: str) -> dict:
+    assert main(["report", "--model", str(d / "model.json"), "--train", str(d / "train.csv"), "--validate",
+                 str(d / "test.csv"), "--json", str(d / "cert.json"), "--html", str(d / "cert.html"), *extra]) == 0
+    return json.loads((d / "cert.json").read_text())
+
+
+def test_every_accuracy_figure_equals_identify_validate(calibrated):
+    d = calibrated
+    cert = _report(d)
+    ident = json.loads((d / "id.json").read_text())
+    for k in ("before", "after"):
+        mine, theirs = cert["accuracy"][k], ident["validation"][k]
+        for key in ("n", "mean_m", "rms_m", "median_m", "p95_m", "max_m"):
+            assert mine[key] == pytest.approx(theirs[key], rel=1e-9, abs=1e-12), (k, key)
+        e = np.asarray(theirs["errors_m"])
+        assert mine["mean_3sigma_m"] == pytest.approx(e.mean() + 3 * e.std(ddof=1), rel=1e-9)
+    for key in ("z_rms", "inside_95", "sigma_mean_m", "extrapolation_share"):
+        assert cert["honest_sigma"][key] == pytest.approx(ident["validation"]["after"][key], rel=1e-9, abs=1e-12)
+    assert cert["fit_quality"]["message"] == ident["fit_quality"]["message"]
+    # the parameters are the fit's
+    names = [p["name"] for p in ident["result"]["parameters"]]
+    assert [r["name"] for r in cert["parameters"]["rows"]] == names
+    assert np.allclose([r["std"] for r in cert["parameters"]["rows"]],
+                       [p["std"] for p in ident["result"]["parameters"]], rtol=1e-12)
+    # the command that made the model and the data it saw are recorded and printed
+    assert cert["reproduce"]["calibration"][0].startswith("pin-kpi-oed identify --robot ur10 --data ")
+    assert cert["calibrated"]["train_files"][0]["rows"] == 240 and cert["calibrated"]["train_files_check"]["checked"]
+
+
+def test_trust_map_numbers_equal_predict(calibrated, capsys):
+    d = calibrated
+    cert = _report(d)
+    assert main(["predict", "--model", str(d / "model.json"), "--data", str(d / "test.csv"), "--out",
+                 str(d / "pred.csv")]) == 0
+    capsys.readouterr()
+    with open(d / "pred.csv") as f:
+        rows = list(csv.DictReader(f))
+    s = np.array([[float(r[f"sigma_{a}"]) for a in "xyz"] for r in rows])
+    s3 = np.sqrt((s ** 2).sum(axis=1))
+    t = cert["trust_map"]
+    assert t["sigma_min_m"] == pytest.approx(s3.min(), rel=1e-9)
+    assert t["sigma_median_m"] == pytest.approx(np.median(s3), rel=1e-9)
+    assert t["sigma_max_m"] == pytest.approx(s3.max(), rel=1e-9)
+    err = np.array([float(r["error"]) for r in rows])
+    assert cert["accuracy"]["after"]["max_m"] == pytest.approx(err.max(), rel=1e-9)
+
+
+def test_html_is_self_contained_with_every_section(calibrated):
+    d = calibrated
+    cert = _report(d)
+    html = (d / "cert.html").read_text()
+    for sid, title in SECTIONS:
+        assert f'<section id="{sid}">' in html and title in html
+    assert "src=\"http" not in html and "<script" not in html and html.count("data:image/png;base64,") >= 4
+    assert (d / "cert.html").stat().st_size < 5e6
+    a = cert["accuracy"]["after"]
+    assert f"{a['rms_m'] * 1e3:.4f} mm" in html  # the printed numbers are the JSON's
+    iso = cert["iso9283"]
+    assert iso["AP_vAP"]["after"]["n_positions"] == 30 and iso["RP"]["n_groups"] == 4
+
+
+def _iso_by_hand(resid: np.ndarray, goal: np.ndarray, Q: np.ndarray) -> tuple[list, list, list]:
+    """AP, vAP per commanded position and RP per repeated configuration, with plain loops over exact keys."""
+    ap, vap, rp = [], [], []
+    keys = {}
+    for i, g in enumerate(map(tuple, np.round(goal, 6))):
+        keys.setdefault(g, []).append(i)
+    for rows in keys.values():
+        if len(rows) < 2:
+            continue
+        e = resid[rows]
+        ap.append(float(np.sqrt(sum(e[:, a].mean() ** 2 for a in range(3)))))
+        by_q = {}
+        for i in rows:
+            by_q.setdefault(tuple(np.round(Q[i], 6)), []).append(i)
+        bary = [resid[v].mean(axis=0) for v in by_q.values()]
+        if len(bary) > 1:
+            vap.append(max(float(np.linalg.norm(b - c)) for b in bary for c in bary))
+    byq = {}
+    for i, q in enumerate(map(tuple, np.round(Q, 6))):
+        byq.setdefault(q, []).append(i)
+    for rows in byq.values():
+        if len(rows) >= 3:
+            x = resid[rows]
+            ell = [float(np.linalg.norm(r - x.mean(axis=0))) for r in x]
+            lbar = sum(ell) / len(ell)
+            s = (sum((v - lbar) ** 2 for v in ell) / (len(ell) - 1)) ** 0.5
+            rp.append(lbar + 3 * s)
+    return ap, vap, rp
+
+
+def test_iso9283_figures_match_an_independent_computation():
+    rng = np.random.default_rng(0)
+    goal = np.repeat(rng.uniform(-1, 1, (12, 3)), 6, axis=0)  # 12 commanded positions x 6 rows
+    Q = rng.uniform(-3, 3, (72, 6))
+    Q[1::2] = Q[::2]  # every position reached in 3 configurations, each twice
+    Q[60:63] = Q[60]  # one configuration measured 4 times (rows 60-63 share it)
+    Q[63] = Q[60]
+    resid = rng.normal(0, 1e-4, (72, 3)) + np.repeat(rng.normal(0, 2e-4, (12, 3)), 6, axis=0)
+    ms = MeasurementSet([f"j{i}" for i in range(6)], Q, np.zeros((72, 3)),
+                        extra={"goal_x": goal[:, 0], "goal_y": goal[:, 1], "goal_z": goal[:, 2]})
+    out = iso_figures(ms, Q, resid, resid)
+    ap, vap, rp = _iso_by_hand(resid, goal, Q)
+    got = out["AP_vAP"]["after"]
+    assert sorted(r["AP_m"] for r in got["per_position"]) == pytest.approx(sorted(ap), rel=1e-12)
+    assert sorted(r["vAP_m"] for r in got["per_position"] if r["vAP_m"] is not None) == pytest.approx(sorted(vap))
+    assert sorted(r["RP_m"] for r in out["RP"]["per_group"]) == pytest.approx(sorted(rp), rel=1e-12)
+    assert got["n_positions"] == 12 and got["vAP"]["directions_mean"] == pytest.approx(35 / 12)  # one has 2
+    # no repeats: plain statements, no figures
+    single = MeasurementSet(ms.joint_names, Q[:12:6], np.zeros((2, 3)),
+                            extra={"goal_x": goal[:12:6, 0], "goal_y": goal[:12:6, 1], "goal_z": goal[:12:6, 2]})
+    none = iso_figures(single, Q[:12:6], resid[:2], resid[:2])
+    assert "AP_vAP" not in none and "RP" not in none
+    assert any("no AP" in s for s in none["statements"]) and any("no RP" in s for s in none["statements"])
+
+
+def test_iso_helpers_on_known_values():
+    e = np.array([[1.0, 0, 0], [3.0, 0, 0], [0, 2.0, 0], [0, 4.0, 0]]) * 1e-3
+    pa = pose_accuracy(e, [np.arange(4)], np.array([0, 0, 1, 1]))
+    assert pa["per_position"][0]["AP_m"] == pytest.approx(np.hypot(1.0, 1.5) * 1e-3)  # barycentre (1, 1.5, 0) mm
+    assert pa["per_position"][0]["vAP_m"] == pytest.approx(np.hypot(2.0, 3.0) * 1e-3)  # (2,0,0) vs (0,3,0) mm
+    x = np.array([[1.0, 0, 0], [-1.0, 0, 0], [0, 2.0, 0], [0, -2.0, 0]]) * 1e-3
+    rp = repeatability(x, [np.arange(4)])
+    ell = np.array([1.0, 1.0, 2.0, 2.0])
+    assert rp["max_m"] == pytest.approx((ell.mean() + 3 * ell.std(ddof=1)) * 1e-3)
+    assert [g.tolist() for g in clusters(np.array([[0.0], [0.5e-3], [0.9e-3], [5.0]]), 1e-3)] == [[0, 1, 2]]
+
+
+def test_bad_input_one_line_exit_2_nothing_written(calibrated, capsys, tmp_path):
+    d = calibrated
+    out = tmp_path / "c.html"
+    base = ["report", "--model", str(d / "model.json"), "--train", str(d / "train.csv"), "--html", str(out)]
+    cases = [
+        (base, "give --validate FILE"),
+        (base[:3] + ["--train", str(d / "test.csv"), "--validate", str(d / "train.csv"), "--html", str(out)],
+         "is not a file"),
+        (base + ["--validate", str(d / "test.csv"), "--kinematics", str(REPO / "urdf" / "ur" / "ur5.yaml")],
+         "not a ur10's kinematics"),
+        (base + ["--validate", str(d / "test.csv"), "--kinematics", str(REPO / "urdf" / "ur" / "ur10.yaml")],
+         "nominal robot is the ur10 URDF"),
+    ]
+    for argv, msg in cases:
+        capsys.readouterr()
+        assert main(argv) == 2, msg
+        err = capsys.readouterr().err
+        assert err.count("\n") == 1 and msg in err and "Traceback" not in err, err
+        assert not out.exists()
+
+
+def test_a_hash_mismatch_of_the_kinematics_is_refused(tmp_path, capsys):
+    from pin_kpi_oed.identification.model_file import CalibratedModel, Setup
+    from pin_kpi_oed.identification.model_formats.registry import export_model
+
+    robot = load_robot("ur10", kinematics=REPO / "urdf" / "ur" / "ur10.yaml")
+    p = np.zeros(36)
+    p[14] = 1e-3
+    cm = CalibratedModel(robot, p, setups={"s": Setup(np.eye(4), np.zeros(3))}, default_station="s")
+    export_model(cm, tmp_path / "other.yaml", "ur-yaml")  # another calibration of the same type: another hash
+    cm.save(tmp_path / "m.json")
+    ms = simulate(TrackerModel(robot), robot.random_q(np.random.default_rng(0), 20), seed=0, record_sigma=False)
+    write_measurements(ms, tmp_path / "a.csv")
+    write_measurements(ms, tmp_path / "b.csv")
+    argv = ["report", "--model", str(tmp_path / "m.json"), "--train", str(tmp_path / "a.csv"), "--validate",
+            str(tmp_path / "b.csv"), "--kinematics", str(tmp_path / "other.yaml"), "--json", str(tmp_path / "c.json")]
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert "differs from the model's nominal calib_17227329492635474227" in err and err.count("\n") == 1
+    assert not (tmp_path / "c.json").exists()
