@@ -224,3 +224,39 @@ def test_a_hash_mismatch_of_the_kinematics_is_refused(tmp_path, capsys):
     err = capsys.readouterr().err
     assert "differs from the model's nominal calib_17227329492635474227" in err and err.count("\n") == 1
     assert not (tmp_path / "c.json").exists()
+
+
+def _browser():
+    from pin_kpi_oed.viz.render import find_browser
+
+    return find_browser()
+
+
+@pytest.mark.skipif(_browser() is None, reason="no Chromium/Chrome browser (Debian: apt-get install chromium)")
+def test_certificate_renders_in_headless_chromium(calibrated, tmp_path):
+    from matplotlib.image import imread
+
+    from pin_kpi_oed.viz.render import render_png
+
+    d = calibrated
+    _report(d, "--pdf", str(tmp_path / "cert.pdf"))
+    png = render_png(d / "cert.html", tmp_path / "shot.png", width=1200, height=3000)
+    img = imread(png)
+    assert img.std() > 0.05  # not blank: text, tables and figures
+    assert (tmp_path / "cert.pdf").read_bytes()[:5] == b"%PDF-"
+
+
+def test_diagnosis_recorded_by_diagnose_is_in_the_certificate(calibrated, capsys):
+    d = calibrated
+    argv = ["diagnose", "--robot", "ur10", "--train", str(d / "train.csv"), "--validate", str(d / "test.csv"),
+            "--reflector", "0.02,0.01,0.1", "--sigma", str(SIGMA), "--effects", "joint_compliance",
+            "--discrepancy", "none", "--model-out", str(d / "diag.json"), "--json", str(d / "diag_report.json"),
+            "--quiet"]
+    assert main(argv) == 0
+    capsys.readouterr()
+    diag = json.loads((d / "diag_report.json").read_text())
+    assert main(["report", "--model", str(d / "diag.json"), "--train", str(d / "train.csv"), "--validate",
+                 str(d / "test.csv"), "--json", str(d / "cert_diag.json"), "--quiet"]) == 0
+    cert = json.loads((d / "cert_diag.json").read_text())
+    assert cert["diagnosis"]["message"] == diag["message"]
+    assert cert["reproduce"]["calibration"][-1].startswith("pin-kpi-oed diagnose --robot ur10")
