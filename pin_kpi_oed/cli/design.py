@@ -87,6 +87,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         "1-5, within the joint bounds and collision-free); default 0.5 with kpi_gp (the discrepancy's "
                         "length scales are short: a few configurations do not represent where the robot works), "
                         "0 = the working configurations alone")
+    p.add_argument("--no-hedge", dest="no_hedge", action="store_true",
+                   help="kpi_gp without --model: design for the class's default discrepancy alone (default: hedge "
+                        "over its length scales x0.5 and x2, its level x3 and noise only, so that a robot whose "
+                        "discrepancy differs from the default is not designed worse than by the noise-only KPI)")
     p.add_argument("--robot-class", dest="robot_class", choices=["collaborative", "industrial", "generic"],
                    default=None, help="class of the default discrepancy without --model (default: from the robot's "
                                       "name: ur*, panda* collaborative; kr* industrial; else generic)")
@@ -514,6 +518,7 @@ def _make_problem(args: argparse.Namespace, cell, given_file, collision: bool, q
         problem = DesignProblem(cell, collision=collision,
                                 distances={"closed-form": "numpy"}.get(getattr(args, "distances", None), "geometry"))
     problem.robot_class = getattr(args, "robot_class", None)
+    problem.hedge = not getattr(args, "no_hedge", False)
     if getattr(args, "model", None):
         if given_file:  # a measurement campaign: the discrepancy re-fitted on the measured batch, geometric design
             from pin_kpi_oed.identification.model_file import load_model_file
@@ -639,6 +644,10 @@ def _discrepancy_notes(problem, gp_names: list[str]) -> None:
     """Print that no certificate exists for the discrepancy-aware criteria, and the lever arm when the TCP is away
     from the reflector."""
     print(*(no_certificate(c) for c in gp_names), sep="\n", end="\n" if gp_names else "")
+    if "kpi_gp" in gp_names and problem.discrepancy_assumed and problem.hedge:
+        from pin_kpi_oed.oed.hedged_kpi import HEDGE_LINE
+
+        print(HEDGE_LINE)
     from pin_kpi_oed.discrepancy.lever_arm import LEVER_ARM_NOTE_M, lever_arm_line, lever_arm_m
 
     d = lever_arm_m(problem.model.tcp_m, problem.model.reflector_m)

@@ -318,7 +318,14 @@ class DesignProblem:
 
         if self.discrepancy is None:
             self.discrepancy = class_discrepancy(self.cell.robot, self.robot_class)
+            self.discrepancy_assumed = True
         return self.discrepancy
+
+    #: The discrepancy is an assumption (the class default, nothing measured): the ``kpi_gp`` design hedges over a
+    #: family of priors around it (:mod:`pin_kpi_oed.oed.hedged_kpi`) unless :attr:`hedge` is False.
+    discrepancy_assumed: bool = False
+    #: Hedge an assumed discrepancy (False: design for the assumed prior alone).
+    hedge: bool = True
 
     #: Optional configurations (r, n) rad where the set-up is registered again before the calibration is used (another
     #: session): ``kpi_gp`` and the honest σ score the TCP error after that registration
@@ -371,7 +378,12 @@ class DesignProblem:
             InputError: unknown name.
         """
         if getattr(get_criterion(name), "needs_configurations", False):
-            return self.gp_criterion(name=name)
+            crit = self.gp_criterion(name=name)
+            if name == "kpi_gp" and self.hedge and self.discrepancy_assumed:
+                from pin_kpi_oed.oed.hedged_kpi import HedgedDesignCriterion
+
+                return HedgedDesignCriterion.around(crit)
+            return crit
         if self.extended is not None:
             from pin_kpi_oed.oed.extended import ExtendedDesignCriterion
 

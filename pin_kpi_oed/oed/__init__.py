@@ -3,7 +3,8 @@
 User-facing names (imported on first use): :func:`analyse`, :class:`Identifiability`;
 :func:`score_design`, :class:`DesignScore`; :func:`kpi_covariance`, :func:`param_covariance`;
 :data:`CRITERIA`, :func:`get_criterion`, :class:`Criterion`; :func:`select` (pool selection),
-:func:`certify_pool` (optimality certificate of a pool); :class:`ExtendedModel` (designs over geometry + effects).
+:func:`certify_pool` (optimality certificate of a pool); :class:`ExtendedModel` (designs over geometry + effects);
+:class:`HedgedDesignCriterion`, :func:`prior_family` (``kpi_gp`` hedged over priors around an assumed discrepancy).
 """
 from pin_kpi_oed._lazy import lazy_exports
 
@@ -12,6 +13,7 @@ _EXPORTS = {"analyse": "pin_kpi_oed.oed.identifiability", "Identifiability": "pi
             "kpi_covariance": "pin_kpi_oed.oed.covariance", "param_covariance": "pin_kpi_oed.oed.covariance",
             "CRITERIA": "pin_kpi_oed.oed.criteria", "get_criterion": "pin_kpi_oed.oed.criteria",
             "Criterion": "pin_kpi_oed.oed.criteria", "select": "pin_kpi_oed.oed.pool",
-            "certify_pool": "pin_kpi_oed.oed.certificate", "ExtendedModel": "pin_kpi_oed.oed.extended"}
+            "certify_pool": "pin_kpi_oed.oed.certificate", "ExtendedModel": "pin_kpi_oed.oed.extended",
+            "HedgedDesignCriterion": "pin_kpi_oed.oed.hedged_kpi", "prior_family": "pin_kpi_oed.oed.hedged_kpi"}
 __getattr__, __dir__ = lazy_exports(globals(), _EXPORTS)
 __all__ = list(_EXPORTS)

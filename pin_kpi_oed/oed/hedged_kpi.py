@@ -1,0 +1,263 @@
+r"""A design under an *assumed* discrepancy that hedges against the assumption being wrong.
+
+Without a fitted discrepancy ``kpi_gp`` assumes one (the robot class's default,
+:mod:`~pin_kpi_oed.oed.discrepancy_defaults`): a kernel with its length scales and a level of δ against the white
+noise. The design that is optimal for that assumption spends poses on kriging the discrepancy near the working
+configurations; on a robot whose discrepancy is shorter, longer, smaller or absent, those poses identify the
+parameters worse than the paper's noise-only KPI design would.
+
+The hedged criterion takes the KPI under a *family* of priors P_1 … P_K and their geometric mean
+
+.. math::  φ_H(Q) = \prod_k φ_k(Q)^{ω_k}, \qquad
+           \log φ_H(Q) = \sum_k ω_k \log φ_k(Q) = \sum_k ω_k \log\frac{φ_k(Q)}{φ_k^*} + \mathrm{const},
+           \qquad \sum_k ω_k = 1,
+
+φ_k = tr C_s under P_k (:class:`~pin_kpi_oed.oed.discrepancy_kpi.DiscrepancyDesignCriterion`, m²). Minimising φ_H
+minimises the weighted mean log-regret against each member's own optimum φ_k^*: a member's *relative* loss counts
+whatever the size of its traces. The weights split evenly between the two hypotheses "the assumed discrepancy,
+in some variant, is right" and "it is not": ω = 1/2 for the noise-only member and 1/2 shared by the others
+(:data:`NOISE_ONLY_WEIGHT`). The family (:func:`prior_family`) around the assumed prior P_0:
+
+* P_0 itself;
+* its length scales (whole-configuration and one-joint) × 1/2 and × 2;
+* its δ 3× larger against the white level (w / 9);
+* the noise-only prior (k ≡ 0, white level w: the paper's KPI, σ² = w s² per axis).
+
+The exact gradient is ∇φ_H = φ_H · Σ_k ω_k ∇φ_k / φ_k (each member's exact dφ_k/dQ), so IPOPT designs with it
+as with ``kpi_gp``. Pool selection (:meth:`HedgedDesignCriterion.select`): every member's own selection
+(:func:`~pin_kpi_oed.oed.discrepancy_kpi.select_pool_gp`, greedy + exchange) is a candidate set; the one of least
+φ_H is kept and improved by exchange passes on φ_H (a chosen pose swapped for the pool candidate that lowers φ_H
+most, over a seeded subset of the pool when it is large).
+
+A fitted discrepancy (``design --model``) is not hedged: it is a measurement, not an assumption.
+"""
+
+from __future__ import annotations
+
+import copy
+import dataclasses
+import time
+from typing import Any
+
+import numpy as np
+
+from pin_kpi_oed.errors import IdentifiabilityError, InputError
+from pin_kpi_oed.oed.discrepancy_kpi import (DiscrepancyDesignCriterion, DiscrepancyPrior, GpPoolSelection,
+                                             kpi_gp_value_and_grad)
+
+__all__ = ["LENGTH_FACTORS", "LEVEL_FACTORS", "HEDGE_LINE", "prior_family", "HedgedDesignCriterion"]
+
+#: Factors on the assumed prior's length scales (whole-configuration and one-joint alike).
+LENGTH_FACTORS = (0.5, 2.0)
+#: Factors on the assumed prior's δ level against its white level (δ × f: w / f²).
+LEVEL_FACTORS = (3.0,)
+#: Weight of the noise-only member (the other members share the rest evenly).
+NOISE_ONLY_WEIGHT = 0.5
+#: The line ``design`` prints when it hedges.
+HEDGE_LINE = ("kpi_gp: the discrepancy is an assumption (no --model): the design hedges over 5 priors (half the "
+              f"weight on the assumed one, its length scales x{LENGTH_FACTORS[0]:g} and x{LENGTH_FACTORS[1]:g} and "
+              f"its level x{LEVEL_FACTORS[0]:g}, half on noise only; the weighted geometric mean of their tr C_s), "
+              "so that a robot whose discrepancy differs is not designed worse than by the noise-only KPI "
+              "(--no-hedge: the assumed prior alone); the sigma shown is the assumed prior's")
+#: Candidates tried per chosen pose in an exchange pass over a large pool (a seeded subset).
+EXCHANGE_CANDIDATES = 200
+
+
+def _scaled_kernel(kernel: Any, factor: float) -> Any:
+    """A copy of a :class:`~pin_kpi_oed.discrepancy.kernel.JointKernel` with every length scale × ``factor``."""
+    k = copy.deepcopy(kernel)
+    k.length_scale = np.asarray(kernel.length_scale, float) * factor
+    k.joint_length_scale = np.asarray(kernel.joint_length_scale, float) * factor
+    return k
+
+
+def prior_family(prior: DiscrepancyPrior, length_factors: tuple = LENGTH_FACTORS,
+                 level_factors: tuple = LEVEL_FACTORS, noise_only: bool = True) -> list[DiscrepancyPrior]:
+    """The priors the hedged criterion averages over (see the module docstring), the assumed one first.
+
+    Args:
+        prior: the assumed prior P_0.
+        length_factors: factors on its length scales.
+        level_factors: factors on its δ against the white level.
+        noise_only: add the noise-only prior (k ≡ 0, the same white level).
+
+    Returns:
+        [P_0, length variants, level variants, noise-only]; a white prior (no kernel) alone when P_0 is white.
+    """
+    fam = [prior]
+    if prior.kernel is None:
+        return fam
+    for f in length_factors:
+        fam.append(DiscrepancyPrior(_scaled_kernel(prior.kernel, float(f)), prior.scale_m, prior.noise,
+                                    f"{prior.source}; length scales x{f:g}"))
+    for f in level_factors:
+        fam.append(DiscrepancyPrior(prior.kernel, prior.scale_m, prior.noise / float(f) ** 2,
+                                    f"{prior.source}; delta x{f:g} against the white level"))
+    if noise_only:
+        fam.append(DiscrepancyPrior(None, prior.scale_m, prior.noise, "noise only (the paper's KPI)"))
+    return fam
+
+
+@dataclasses.dataclass
+class HedgedDesignCriterion:
+    """``kpi_gp`` under an assumed prior, hedged over :func:`prior_family` (the :class:`DesignCriterion` interface:
+    ``value``, ``value_and_grad``, ``select``).
+
+    Attributes:
+        members: one :class:`DiscrepancyDesignCriterion` per prior of the family (same model, base, working
+            configurations, measured poses and parameter prior), the assumed one first.
+        name: ``kpi_gp``; is_ratio: True (φ_H > 0, m²).
+    """
+
+    members: list
+    weights: np.ndarray | None = None
+    name: str = "kpi_gp"
+    is_ratio: bool = True
+
+    def __post_init__(self) -> None:
+        if not self.members:
+            raise InputError("hedged kpi_gp: no prior in the family")
+        K = len(self.members)
+        if self.weights is None:
+            noise = K > 1 and self.members[-1].discrepancy.kernel is None
+            self.weights = (np.r_[np.full(K - 1, (1 - NOISE_ONLY_WEIGHT) / (K - 1)), NOISE_ONLY_WEIGHT] if noise
+                            else np.full(K, 1.0 / K))
+        self.weights = np.asarray(self.weights, float).reshape(-1)
+        if self.weights.size != K or np.any(self.weights < 0) or not np.isclose(self.weights.sum(), 1.0):
+            raise InputError(f"hedged kpi_gp: {self.weights.size} weights for {K} priors, or not summing to 1")
+
+    @classmethod
+    def around(cls, crit: DiscrepancyDesignCriterion, **family: Any) -> HedgedDesignCriterion:
+        """The hedged criterion around ``crit``'s prior (``family``: keywords of :func:`prior_family`)."""
+        members = [crit]
+        for P in prior_family(crit.discrepancy, **family)[1:]:
+            members.append(DiscrepancyDesignCriterion(crit.model, crit.base, P, crit.Q_work, Q_given=crit.Q_given,
+                                                      prior_info=crit.prior_info, p=crit.p,
+                                                      Q_register=crit.Q_register))
+        return cls(members)
+
+    @property
+    def discrepancy(self) -> DiscrepancyPrior:
+        """The assumed prior P_0 (what the design states and its σ uses)."""
+        return self.members[0].discrepancy
+
+    @property
+    def Q_given(self) -> np.ndarray | None:
+        """Poses measured before (shared by every member)."""
+        return self.members[0].Q_given
+
+    def member_values(self, Q: np.ndarray) -> np.ndarray:
+        """tr C_s of every member (K,) m²."""
+        return np.array([c.value(Q) for c in self.members], float)
+
+    def value(self, Q: np.ndarray) -> float:
+        """φ_H (m²): the weighted geometric mean of the members' tr C_s."""
+        return float(np.exp(self.weights @ np.log(self.member_values(Q))))
+
+    def value_and_grad(self, Q: np.ndarray) -> tuple[float, np.ndarray]:
+        """φ_H (m²) and its exact gradient w.r.t. Q (m, n) (m² per rad)."""
+        vals, grads = zip(*(c.value_and_grad(Q) for c in self.members))
+        v = np.asarray(vals, float)
+        phi = float(np.exp(self.weights @ np.log(v)))
+        return phi, phi * sum(w * g / vk for w, g, vk in zip(self.weights, grads, v))
+
+    def covariance(self, Q: np.ndarray) -> np.ndarray:
+        """C_s under the assumed prior (3t, 3t) m² (the σ the design states)."""
+        return self.members[0].covariance(Q)
+
+    def pool_jacobians(self, Q_pool: np.ndarray) -> np.ndarray:
+        """Base-frame Jacobians of candidate poses (N, 3, nb)."""
+        return self.members[0].pool_jacobians(Q_pool)
+
+    def set_registration(self, Q_register: np.ndarray) -> None:
+        """Score every member after the set-up is registered again on ``Q_register``."""
+        for c in self.members:
+            c.set_registration(Q_register)
+
+    def select(self, Q_pool: np.ndarray, m: int, J_pool: np.ndarray | None = None, exchange_passes: int = 1,
+               seed: int = 0, **kw: Any) -> GpPoolSelection:
+        """m of the candidate poses minimising φ_H: the best of the members' own selections, then exchange passes.
+
+        Args:
+            Q_pool: candidates (N, n) rad; m: poses to choose; J_pool: their Jacobians (default computed).
+            exchange_passes: exchange passes on φ_H (0: the best member selection as it is).
+            seed: seed of the candidate subset of an exchange over a pool larger than :data:`EXCHANGE_CANDIDATES`.
+            kw: passed to each member's :meth:`~DiscrepancyDesignCriterion.select` (e.g. ``time_budget_s``).
+
+        Raises:
+            InputError: m larger than the pool. IdentifiabilityError: no member's selection identifies the parameters.
+        """
+        t0 = time.perf_counter()
+        Q_pool = np.atleast_2d(np.asarray(Q_pool, float))
+        J_pool = self.pool_jacobians(Q_pool) if J_pool is None else J_pool
+        best, best_v = None, np.inf
+        for c in self.members:
+            try:
+                idx = np.asarray(c.select(Q_pool, m, J_pool=J_pool, **kw).indices, int)
+                v = self.value(Q_pool[idx])
+            except IdentifiabilityError:
+                continue
+            if v < best_v:
+                best, best_v = idx, v
+        if best is None:
+            raise IdentifiabilityError(f"hedged kpi_gp: no selection of {m} of the {len(Q_pool)} candidates "
+                                       "identifies the parameters under every prior of the family")
+        path = [best_v]
+        best, best_v, swaps = self._exchange(Q_pool, J_pool, best, best_v, exchange_passes, seed, path)
+        return GpPoolSelection(indices=best, value=float(best_v), path=np.array(path), exchanges=swaps,
+                               time_s=time.perf_counter() - t0)
+
+    def _pool_scorer(self, Q_pool: np.ndarray, J_pool: np.ndarray) -> Any:
+        """φ_H of pool subsets from precomputed kernel blocks: ``score(idx) -> float`` (m²)."""
+        blocks = []
+        for c in self.members:
+            d = c.discrepancy
+            Qg = np.zeros((0, Q_pool.shape[1])) if c.Q_given is None else c.Q_given
+            Qa = np.vstack([Qg, Q_pool])
+            Ja = J_pool if c.J_given is None else np.concatenate([c.J_given, J_pool])
+            blocks.append((c, d, Ja, d.cov(Qa), d.cov(c.Q_work, Qa), len(Qg)))
+
+        def score(idx: np.ndarray) -> float:
+            logs = []
+            for c, d, Ja, K, Kw, k0 in blocks:
+                rows = np.concatenate([np.arange(k0), k0 + np.asarray(idx, int)])
+                v = kpi_gp_value_and_grad(Ja[rows], c.E, K[np.ix_(rows, rows)], Kw[:, rows], c.tr_kww, d.scale_m,
+                                          d.noise, c.prior_info, grad=False)[0] + c.tr_register
+                logs.append(np.log(v))
+            return float(np.exp(self.weights @ np.asarray(logs)))
+
+        return score
+
+    def _exchange(self, Q_pool: np.ndarray, J_pool: np.ndarray, idx: np.ndarray, val: float, passes: int,
+                  seed: int, path: list) -> tuple[np.ndarray, float, int]:
+        """Exchange passes on φ_H: each chosen pose in turn swapped for the candidate that lowers φ_H most."""
+        if passes <= 0:
+            return idx, val, 0
+        score = self._pool_scorer(Q_pool, J_pool)
+        rng = np.random.default_rng(seed)
+        swaps = 0
+        for _ in range(int(passes)):
+            improved = False
+            for pos in range(len(idx)):
+                rest = np.setdiff1d(np.arange(len(Q_pool)), idx)
+                if len(rest) > EXCHANGE_CANDIDATES:
+                    rest = rng.choice(rest, EXCHANGE_CANDIDATES, replace=False)
+                best_c, best_v = None, val * (1 - 1e-9)
+                for cand in rest:
+                    trial = idx.copy()
+                    trial[pos] = cand
+                    try:
+                        v = score(trial)
+                    except IdentifiabilityError:
+                        continue
+                    if v < best_v:
+                        best_c, best_v = cand, v
+                if best_c is not None:
+                    idx = idx.copy()
+                    idx[pos] = best_c
+                    val, improved = best_v, True
+                    swaps += 1
+                path.append(val)
+            if not improved:
+                break
+        return idx, val, swaps
