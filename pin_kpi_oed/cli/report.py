@@ -31,13 +31,16 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--train", required=True, action="append", help="training measurement CSV (repeat for several)")
     p.add_argument("--validate", default=None, help="held-out measurement CSV (required)")
     p.add_argument("--register-rows", type=int, default=None,
-                   help="another session: re-register the set-up on this many seeded rows of --validate, score the rest")
+                   help="another session: re-register the set-up on this many seeded rows of --validate, "
+                        "score the rest")
     p.add_argument("--register-data", default=None, help="another session: re-register the set-up on this CSV")
     p.add_argument("--seed", type=int, default=0, help="seed of the registration rows")
-    p.add_argument("--kinematics", default=None, help="UR kinematics file the model's nominal robot must have (checked)")
+    p.add_argument("--kinematics", default=None,
+                   help="UR kinematics file the model's nominal robot must have (checked)")
     p.add_argument("--html", default=None, help="write the certificate (HTML) here")
     p.add_argument("--json", default=None, help="write its content (JSON, SI units) here")
-    p.add_argument("--pdf", default=None, help="print it to PDF here (headless Chromium; skipped with a note if absent)")
+    p.add_argument("--pdf", default=None,
+                   help="print it to PDF here (headless Chromium; skipped with a note if absent)")
     p.add_argument("--quiet", action="store_true", help="print nothing")
     add_table_options(p)
     p.set_defaults(func=run)

@@ -13,7 +13,7 @@ import platform
 import shlex
 from importlib import metadata
 from pathlib import Path
-from typing import Sequence
+from collections.abc import Sequence
 
 __all__ = ["sha256_of", "file_record", "software_versions", "command_line", "DEPENDENCIES"]
 

@@ -55,7 +55,8 @@ def fit_options(cm: Any) -> tuple[Any, np.ndarray]:
     opts = IdentifyOptions(weights=o.get("weights", "auto"), loss=o.get("loss", fit.get("loss", "linear")),
                            use_orientation=bool(o.get("use_orientation", True)),
                            scale_covariance=bool(o.get("scale_covariance", fit.get("covariance_scaled", False))),
-                           max_nfev=o.get("max_nfev"), reflector_per_station=bool(o.get("reflector_per_station", False)))
+                           max_nfev=o.get("max_nfev"),
+                           reflector_per_station=bool(o.get("reflector_per_station", False)))
     refl = step.get("reflector_nominal_m")
     if refl is None:
         refl = next(iter(cm.setups.values())).reflector_m

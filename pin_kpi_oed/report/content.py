@@ -19,13 +19,15 @@ from __future__ import annotations
 
 import hashlib
 from dataclasses import dataclass, field
-from typing import Any, Sequence
+from typing import Any
+from collections.abc import Sequence
 
 import numpy as np
 
 from pin_kpi_oed.errors import InputError
 
-__all__ = ["Certificate", "build_certificate", "correlations", "sections_present", "CERTIFICATE_FORMAT", "SECTIONS"]
+__all__ = ["Certificate", "build_certificate", "correlations", "sections_present", "portable_path",
+           "CERTIFICATE_FORMAT", "SECTIONS"]
 
 #: Format tag of the certificate's JSON.
 CERTIFICATE_FORMAT = "pin_kpi_oed.certificate/1"
@@ -91,12 +93,33 @@ def _stations(cm: Any) -> list[dict]:
     return out
 
 
+def portable_path(path: str) -> str:
+    """A robot file's path without the machine's folders: ``example-robot-data:<relative>`` or
+    ``pin_kpi_oed:<relative>`` for the shipped robots, else the path as given."""
+    from pathlib import Path
+
+    from pin_kpi_oed.errors import RobotLoadError
+    from pin_kpi_oed.model.robot import URDF_DIR, erd_root
+
+    p = Path(path).resolve()
+    roots = [("pin_kpi_oed:urdf/", URDF_DIR)]
+    try:
+        roots.append(("example-robot-data:", erd_root()))
+    except RobotLoadError:
+        pass
+    for prefix, root in roots:
+        if p.is_relative_to(root.resolve()):
+            return f"{prefix}{p.relative_to(root.resolve())}"
+    return str(path)
+
+
 def _calibrated(cm: Any, model_path: str, train_recs: list[dict], val_recs: list[dict], checked: dict) -> dict:
     from pin_kpi_oed.data.provenance import sha256_of, software_versions
 
     rb = cm.robot
     step = (cm.history or [{}])[-1]
-    return {"robot": rb.name, "urdf_path": str(rb.urdf_path), "urdf_sha256": _sha256_text(rb.read_urdf_text()),
+    return {"robot": rb.name, "urdf_path": portable_path(str(rb.urdf_path)),
+            "urdf_sha256": _sha256_text(rb.read_urdf_text()),
             "kinematics_hash": rb.kinematics.hash if rb.kinematics is not None else None,
             "tool_frame": rb.tool_frame, "joints": list(rb.joint_names), "tcp_m": np.asarray(cm.tcp_m).tolist(),
             "pose6d": bool(cm.pose6d), "stations": _stations(cm),

@@ -121,7 +121,8 @@ def _trust_png(cm: Any, Q: np.ndarray, scored: Any) -> bytes:
 
     with tempfile.TemporaryDirectory() as tmp:
         out = Path(tmp) / "trust.png"
-        plot_trust_map(cm, Q, scored, cm.default_station or next(iter(cm.setups)), out=out, title=f"{cm.robot.name}: predicted σ on the held-out rows")
+        plot_trust_map(cm, Q, scored, cm.default_station or next(iter(cm.setups)), out=out,
+                       title=f"{cm.robot.name}: predicted σ on the held-out rows")
         return out.read_bytes()
 
 

@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import base64
 import html
-import json
 from typing import Any
 
 import numpy as np
@@ -20,8 +19,10 @@ __all__ = ["render_html", "mm"]
 
 _CSS = """body{font-family:sans-serif;max-width:1100px;margin:2em auto;color:#222}
 h1{border-bottom:3px solid #4c72b0}h2{border-bottom:1px solid #ccc;margin-top:1.6em}
-table{border-collapse:collapse;margin:.6em 0}td,th{border:1px solid #ccc;padding:3px 8px;font-size:13px;text-align:right}
-th{background:#eef}td.l,th.l{text-align:left}code{background:#f4f4f4;padding:2px 4px;font-size:12px;word-break:break-all}
+table{border-collapse:collapse;margin:.6em 0}
+td,th{border:1px solid #ccc;padding:3px 8px;font-size:13px;text-align:right}
+th{background:#eef}td.l,th.l{text-align:left}
+code{background:#f4f4f4;padding:2px 4px;font-size:12px;word-break:break-all}
 .verdict{font-weight:bold}img{max-width:100%}.note{color:#555;font-size:13px}"""
 
 
@@ -50,7 +51,8 @@ def _img(figs: dict, name: str, alt: str) -> str:
 def _calibrated(d: dict) -> str:
     c = d["calibrated"]
     rows = [["robot", c["robot"]], ["URDF", c["urdf_path"]], ["URDF SHA-256", c["urdf_sha256"]],
-            ["kinematics hash", c["kinematics_hash"] or "— (the URDF's own kinematics)"], ["tool frame", c["tool_frame"]],
+            ["kinematics hash", c["kinematics_hash"] or "— (the URDF's own kinematics)"],
+            ["tool frame", c["tool_frame"]],
             ["TCP in the tool frame", ", ".join(mm(v, 2) for v in c["tcp_m"])],
             ["model file", f"{c['model_file']['path']} (SHA-256 {c['model_file']['sha256']})"]]
     out = _table(["item", "value"], rows, left=2)
@@ -73,7 +75,9 @@ def _parameters(d: dict) -> str:
     p = d["parameters"]
 
     def val(v: float, u: str) -> str:
-        return f"{v * 1e3:+.4f} {'mm' if u == 'm' else 'mrad' if u == 'rad' else u}" if u in ("m", "rad") else f"{v:+.6g} {u}"
+        if u in ("m", "rad"):
+            return f"{v * 1e3:+.4f} {'mm' if u == 'm' else 'mrad'}"
+        return f"{v:+.6g} {u}"
 
     out = _table(["parameter", "value", "std"], [[r["name"], val(r["value"], r["unit"]),
                                                   val(r["std"], r["unit"]).lstrip("+")] for r in p["rows"]])
@@ -119,8 +123,9 @@ def _accuracy(d: dict) -> str:
         out += (f"<p>Set-up re-registered on {r['n']} rows of {_e(r['source'])} (RMS {mm(r['rms_m'])}); the other rows "
                 "are scored.</p>")
     cov = a.get("coverage") or {}
-    if cov:
-        out += f"<p class=\"note\">Coverage: {_e(json.dumps({k: v for k, v in cov.items() if not isinstance(v, list)}))}</p>"
+    if cov.get("rows_covered") is not None:
+        out += (f"<p class=\"note\">{cov['rows_covered'] * 100:.1f} % of the held-out rows lie within the training's "
+                f"joint angles (±{cov.get('tol_rad', 0.05):g} rad on every joint).</p>")
     return out + _table(["3-D error", "before", "after"], rows)
 
 
@@ -139,7 +144,8 @@ def _iso(d: dict) -> str:
         out += f"<p class=\"note\">AP: {_e(iso['clauses']['AP'])}; vAP: {_e(iso['clauses']['vAP'])}.</p>"
     if "RP" in iso:
         r = iso["RP"]
-        out += (f"<p>RP ({_e(iso['clauses']['RP'])}): {r['n_groups']} repeated configurations, {r['n_samples']} samples;"
+        out += (f"<p>RP ({_e(iso['clauses']['RP'])}): {r['n_groups']} repeated configurations, "
+                f"{r['n_samples']} samples;"
                 f" median {mm(r['median_m'])}, max {mm(r['max_m'])}. {_e(r['note'])}.</p>")
     out += "".join(f"<p>{_e(s)}.</p>" for s in iso["statements"])
     return out
@@ -154,7 +160,10 @@ def _section(sid: str, title: str, d: dict, figs: dict) -> str:
         body = _accuracy(d) + _img(figs, "histogram", "error histogram") + _img(figs, "reach_joints", "error vs reach")
     elif sid == "fit_quality":
         q = d["fit_quality"]
-        body = f'<p class="verdict">{_e(q.get("message"))}</p>'
+        files = [f["name"] for h in d["calibrated"]["history"][-1:] for f in h.get("validate_files") or []]
+        body = (f'<p class="verdict">{_e(q.get("message"))}</p>'
+                '<p class="note">The verdict the calibrating command gave '
+                f"on its training rows{' and ' + _e(', '.join(files)) if files else ''}.</p>")
     elif sid == "honest_sigma":
         h = d["honest_sigma"]
         body = ("<p>Predicted σ (3-D) mean {}; standardised error RMS {} (1 = honest); {} of the held-out rows inside "

@@ -4,7 +4,7 @@ ISO 9283:1998 defines, for a commanded pose measured n times (attained positions
 
 * pose accuracy (clause 7.2.1) AP = ‖x̄ − x_c‖, per axis AP_x = x̄ − x_c, ...;
 * pose repeatability (7.2.2) RP = l̄ + 3·S_l, l_j = ‖x_j − x̄‖, S_l = √(Σ(l_j − l̄)² / (n − 1));
-* multi-directional pose accuracy variation (7.2.3) vAP = max over pairs of approach directions h, k of ‖x̄_h − x̄_k‖.
+* multi-directional pose accuracy variation (7.3) vAP = max over pairs of approach directions h, k of ‖x̄_h − x̄_k‖.
 
 Here the robot is driven through a model: the position it should reach is what the model predicts for the
 configuration, so the attained-minus-commanded vector of row j is its residual e_j = measured − predicted
@@ -33,7 +33,7 @@ __all__ = ["GOAL_POSITION", "clusters", "commanded_groups", "direction_keys",
 GOAL_POSITION = ("goal_x", "goal_y", "goal_z")
 #: Clauses of ISO 9283:1998 the figures follow.
 CLAUSES = {"AP": "ISO 9283:1998, 7.2.1 (pose accuracy)", "RP": "ISO 9283:1998, 7.2.2 (pose repeatability)",
-           "vAP": "ISO 9283:1998, 7.2.3 (multi-directional pose accuracy variation)"}
+           "vAP": "ISO 9283:1998, 7.3 (multi-directional pose accuracy variation)"}
 
 
 def clusters(X: np.ndarray, tol: float, min_size: int = 2) -> list[np.ndarray]:
@@ -81,7 +81,7 @@ def pose_accuracy(resid_m: np.ndarray, groups: list[np.ndarray], directions: np.
         ``max_m``, ``n_positions``: those with ≥ 2 directions, ``directions_mean``), ``per_position`` (AP_m,
         AP_xyz_m, vAP_m, n, directions).
     """
-    rows = []
+    rows: list[dict] = []
     for g in groups:
         e = resid_m[g]
         bary = e.mean(axis=0)
@@ -93,12 +93,12 @@ def pose_accuracy(resid_m: np.ndarray, groups: list[np.ndarray], directions: np.
                      "directions": int(len(dirs))})
     ap = np.array([r["AP_m"] for r in rows])
     axes = np.array([r["AP_xyz_m"] for r in rows]).reshape(-1, 3)
-    vap = np.array([r["vAP_m"] for r in rows if r["vAP_m"] is not None])
+    vaps = np.array([r["vAP_m"] for r in rows if r["vAP_m"] is not None])
     return {"n_positions": len(rows), "n_samples": int(sum(r["n"] for r in rows)),
             "AP": {"mean_m": float(ap.mean()) if ap.size else None, "max_m": float(ap.max()) if ap.size else None,
                    "per_axis_mean_m": axes.mean(axis=0).tolist() if ap.size else None},
-            "vAP": {"mean_m": float(vap.mean()) if vap.size else None, "max_m": float(vap.max()) if vap.size else None,
-                    "n_positions": int(vap.size),
+            "vAP": {"mean_m": float(vaps.mean()) if vaps.size else None,
+                    "max_m": float(vaps.max()) if vaps.size else None, "n_positions": int(vaps.size),
                     "directions_mean": float(np.mean([r["directions"] for r in rows])) if rows else None},
             "per_position": rows}
 
@@ -141,8 +141,8 @@ def iso_figures(data: Any, Q: np.ndarray, resid_before_m: np.ndarray, resid_afte
     cycles = [g for g in clusters(Q, q_tol_rad) if g.size >= 3]
     if cycles:
         out["RP"] = repeatability(resid_after_m, cycles)
-        out["RP"]["note"] = (f"repeated configurations (all joints within {q_tol_rad * 1e3:g} mrad, ≥ 3 rows); ISO 9283 "
-                             "asks for 30 cycles per pose")
+        out["RP"]["note"] = (f"repeated configurations (all joints within {q_tol_rad * 1e3:g} mrad, ≥ 3 rows); "
+                             "ISO 9283 asks for 30 cycles per pose")
     else:
         out["statements"].append(f"no configuration was measured 3 times or more (joints within {q_tol_rad * 1e3:g} "
                                  "mrad): no RP")

@@ -18,8 +18,9 @@ def certificate_json(cert: Certificate) -> dict:
     return to_jsonable(cert.data)
 
 
-def write_certificate(cert: Certificate, *, html: str | os.PathLike | None = None, json_path: str | os.PathLike | None = None,
-                      pdf: str | os.PathLike | None = None) -> dict[str, Any]:
+def write_certificate(cert: Certificate, *, html: str | os.PathLike | None = None,
+                      json_path: str | os.PathLike | None = None, pdf: str | os.PathLike | None = None
+                      ) -> dict[str, Any]:
     """Write the certificate's files (atomically); returns what was written and why the PDF was not.
 
     Raises:

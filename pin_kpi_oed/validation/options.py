@@ -153,7 +153,8 @@ RULES: dict[str, dict[str, Callable[[str, Any], None]]] = {
     "export": {**_SEED, "dwell": _finite_at_least(0.0, "s", 3600.0, " (a wait at each measurement point, in s)"),
                "margin": _finite_at_least(0.0, "m", 0.5, ": give the move clearance margin in m (e.g. 0.01 for 10 mm)"),
                "speed_override": _share},
-    "compensate": {**_SEED, "tcp": _offset}, "export-model": {"tcp": _offset}, "report": {**_SEED, "register_rows": _int_at_least(3)},
+    "compensate": {**_SEED, "tcp": _offset}, "export-model": {"tcp": _offset},
+    "report": {**_SEED, "register_rows": _int_at_least(3)},
     "study": {**_SEED, "measurements": _int_at_least(9), "seeds": _int_at_least(1), "arms": _int_at_least(1),
               "starts": _int_at_least(1), "workers": _int_at_least(1), "scheduler": _scheduler},
 }
