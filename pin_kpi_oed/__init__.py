@@ -61,6 +61,12 @@ _PIPELINE = {
     "load_model_file": "pin_kpi_oed.identification.model_file",
     "register_setup": "pin_kpi_oed.identification.transfer", "predict_table": "pin_kpi_oed.identification.transfer",
     "write_model_urdf": "pin_kpi_oed.identification.urdf_export",
+    # model formats: UR kinematics files in and out, the calibrated URDF
+    "read_ur_kinematics": "pin_kpi_oed.model.ur_kinematics", "URKinematics": "pin_kpi_oed.model.ur_kinematics",
+    "export_model": "pin_kpi_oed.identification.model_formats.registry",
+    "MODEL_FORMATS": "pin_kpi_oed.identification.model_formats.registry",
+    # the calibration certificate
+    "build_certificate": "pin_kpi_oed.report.content", "write_certificate": "pin_kpi_oed.report.write",
     # diagnosis
     "diagnose": "pin_kpi_oed.diagnosis.diagnose", "DiagnoseOptions": "pin_kpi_oed.diagnosis.diagnose_options",
     "DiagnosisReport": "pin_kpi_oed.diagnosis.report",
