@@ -28,3 +28,56 @@ def make_model(name: str = "kr15", reflector=(0.05, 0.03, 0.08), noise: NoiseMod
 @pytest.fixture
 def kr15_model() -> TrackerModel:
     return make_model("kr15")
+
+
+# ---------------------------------------------------------------------- CPU time per test (printed by the run)
+def _cpu_s() -> float:
+    import resource
+
+    own, kids = resource.getrusage(resource.RUSAGE_SELF), resource.getrusage(resource.RUSAGE_CHILDREN)
+    return own.ru_utime + own.ru_stime + kids.ru_utime + kids.ru_stime
+
+
+@pytest.hookimpl(hookwrapper=True)
+def pytest_runtest_protocol(item, nextitem):
+    """Each test's CPU time (set-up, call and tear-down; its process and finished children), in its reports'
+    ``user_properties`` (they travel from xdist workers to the controller)."""
+    c0 = _cpu_s()
+    item.user_properties.append(("cpu_s", c0))  # replaced by the difference at tear-down
+    yield
+
+
+@pytest.hookimpl(hookwrapper=True)
+def pytest_runtest_makereport(item, call):
+    outcome = yield
+    if call.when == "teardown":
+        props = dict(item.user_properties)
+        if "cpu_s" in props:
+            item.user_properties[:] = [(k, v) for k, v in item.user_properties if k != "cpu_s"]
+            item.user_properties.append(("cpu_s", _cpu_s() - props["cpu_s"]))
+            outcome.get_result().user_properties = list(item.user_properties)
+
+
+_CPU: dict[str, float] = {}
+
+
+def pytest_runtest_logreport(report):
+    if report.when == "teardown":
+        cpu = dict(report.user_properties).get("cpu_s")
+        if cpu is not None:
+            _CPU[report.nodeid] = float(cpu)
+
+
+def pytest_terminal_summary(terminalreporter):
+    """The suite's CPU time and its 15 most expensive tests: unlike the wall times of ``--durations``, CPU time does
+    not grow when other work holds the cores (``make test`` prints both)."""
+    if not _CPU:
+        return
+    import os
+
+    tr = terminalreporter
+    tr.section("CPU time per test (process and children)")
+    for nodeid, cpu in sorted(_CPU.items(), key=lambda kv: -kv[1])[:15]:
+        tr.write_line(f"{cpu:8.2f} s CPU  {nodeid}")
+    tr.write_line(f"{sum(_CPU.values()):8.1f} s CPU in {len(_CPU)} tests; load average "
+                  f"{', '.join(f'{x:.2f}' for x in os.getloadavg())} at the end on {os.cpu_count()} cores")
