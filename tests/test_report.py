@@ -260,3 +260,62 @@ def test_diagnosis_recorded_by_diagnose_is_in_the_certificate(calibrated, capsys
     cert = json.loads((d / "cert_diag.json").read_text())
     assert cert["diagnosis"]["message"] == diag["message"]
     assert cert["reproduce"]["calibration"][-1].startswith("pin-kpi-oed diagnose --robot ur10")
+
+
+def _root(parent, i):
+    while parent[i] != i:
+        i = parent[i]
+    return i
+
+
+_IPA = next((p / "shared" / "data" / "ipa_ur10" for p in (REPO.parents[0], REPO.parents[1])
+             if (p / "shared" / "data" / "ipa_ur10").is_dir()), None)
+
+
+@pytest.mark.skipif(_IPA is None, reason="IPA UR10 data not found")
+@pytest.mark.parametrize("series,positions,cycles", [("D", 31, 24), ("B", 153, 0), ("A", 618, 0)])
+def test_iso_groups_on_the_ipa_series_match_an_independent_computation(series, positions, cycles):
+    """Series D (ISO cube, centre repeated) and B (154 positions x 10 configurations): commanded positions (goals
+    linked within 0.1 mm) and configurations (joints within 1 mrad) by a plain union-find over all pairs against the
+    module's clustering; AP and vAP on the measured positions as residuals checked by hand; the cycle groups counted."""
+    from pin_kpi_oed.data.ipa import import_ipa
+    from pin_kpi_oed.report.iso9283 import commanded_groups, direction_keys
+
+    ms = import_ipa(_IPA / f"Series_{series}")
+    goal = np.column_stack([ms.extra[k] for k in ("goal_x", "goal_y", "goal_z")])
+    groups = commanded_groups(ms)
+    parent = list(range(len(goal)))  # single linkage at 0.1 mm (every axis), a plain union-find over all pairs
+    for i in range(len(goal)):
+        for j in np.flatnonzero(np.abs(goal[i + 1:] - goal[i]).max(axis=1) <= 1e-4) + i + 1:
+            parent[_root(parent, int(j))] = _root(parent, i)
+    seeds: dict = {}
+    for i in range(len(goal)):
+        seeds.setdefault(_root(parent, i), []).append(i)
+    want = sorted(sorted(v) for v in seeds.values() if len(v) >= 2)
+    assert sorted(sorted(g.tolist()) for g in groups) == want and len(want) == positions
+    # configurations: rows linked by max |dq| < 1 mrad, by a plain union-find over every pair of a position's rows
+    keys = direction_keys(ms.q)
+    resid = ms.position_m - ms.position_m.mean(axis=0)
+    vap = []
+    for rows in want:
+        link = {i: i for i in rows}
+        for a in rows:
+            for b in rows:
+                if a < b and np.abs(ms.q[a] - ms.q[b]).max() <= 1e-3:
+                    link[_root(link, a)] = _root(link, b)
+        mine = {}
+        for i in rows:
+            mine.setdefault(keys[i], set()).add(i)
+        theirs = {}
+        for i in rows:
+            theirs.setdefault(_root(link, i), set()).add(i)
+        assert sorted(map(sorted, mine.values())) == sorted(map(sorted, theirs.values()))
+        bary = [resid[sorted(v)].mean(axis=0) for v in theirs.values()]
+        if len(bary) > 1:
+            vap.append(max(float(np.linalg.norm(x - y)) for x in bary for y in bary))
+    out = iso_figures(ms, ms.q, resid, resid)
+    ap = [sum((sum(resid[i][a] for i in g) / len(g)) ** 2 for a in range(3)) ** 0.5 for g in want]
+    got = out["AP_vAP"]["after"]
+    assert sorted(r["AP_m"] for r in got["per_position"]) == pytest.approx(sorted(ap), rel=1e-12)
+    assert sorted(r["vAP_m"] for r in got["per_position"] if r["vAP_m"] is not None) == pytest.approx(sorted(vap))
+    assert (out.get("RP", {}).get("n_groups", 0)) == cycles
