@@ -136,12 +136,15 @@ def test_simulate_design_measures_the_design_poses(tmp_path):
     res = run("simulate", "--design", str(design), "--out", str(tmp_path / "m.csv"))
     assert res.returncode == 0, res.stderr
     assert "design 'kpi'" in res.stdout
-    lines = (tmp_path / "m.csv").read_text().splitlines()
+    text = (tmp_path / "m.csv").read_text()
+    assert '# tool_frame: "tool0"' in text and "# reflector_m: [0.05, 0.0, 0.1]" in text  # the design's tool
+    lines = [ln for ln in text.splitlines() if not ln.startswith("#")]
     head = lines[0].split(",")
     joints = np.array([[float(v) for v in ln.split(",")[:6]] for ln in lines[1:]])
     assert head[:6] == list(load_robot("kr15").joint_names) and np.allclose(joints, Q, atol=1e-9)
     res = run("simulate", "--design", str(design), "--criterion", "random", "--out", str(tmp_path / "r.csv"))
-    assert res.returncode == 0 and len((tmp_path / "r.csv").read_text().splitlines()) == 1 + 10
+    rows = [ln for ln in (tmp_path / "r.csv").read_text().splitlines() if not ln.startswith("#")]
+    assert res.returncode == 0 and len(rows) == 1 + 10
 
 
 @pytest.mark.parametrize("argv, expect", [

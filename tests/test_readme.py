@@ -81,7 +81,8 @@ def test_readme_own_robot_recipe_runs(tmp_path, monkeypatch, capsys) -> None:
     assert all(d["status"] != "max_iter" for d in design["designs"])
     script = (tmp_path / "ur5_kpi.script").read_text()
     assert script.count("MEASURE") >= 40 and "movej(" in script
-    assert len((tmp_path / "ur5_meas.csv").read_text().splitlines()) == 1 + 40
+    meas = (tmp_path / "ur5_meas.csv").read_text().splitlines()
+    assert '# tool_frame: "tool0"' in meas and len([ln for ln in meas if not ln.startswith("#")]) == 1 + 40
 
     before, geo = held["ur5_geo.json"]            # held-out mean: nominal robot, geometric calibration
     _, with_effect = held["ur5_model.json"]       # ... with the joint compliance identified too

@@ -16,7 +16,7 @@ from pathlib import Path
 
 from pin_kpi_oed.cli.util import parse_floats
 from pin_kpi_oed.errors import PinKpiOedError
-from pin_kpi_oed.model.robot import ROBOT_HELP
+from pin_kpi_oed.model.robot import ROBOT_HELP, TOOL_HELP
 
 TOPICS = ("design", "identify", "transfer", "diagnose", "view", "study", "compensate", "tracker_export", "program",
           "export_model", "report")
@@ -82,7 +82,7 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", required=True)
     p = sub.add_parser("info", help="joints, limits, parameter count and identifiable rank of a robot")
     p.add_argument("robot", help=ROBOT_HELP)
-    p.add_argument("--tool", default=None, help="tool frame (default tool0)")
+    p.add_argument("--tool", default=None, help=TOOL_HELP)
     p.add_argument("--kinematics", default=None, help="UR kinematics file (ur_description layout) of a UR robot")
     p.add_argument("--reflector", default="0.05,0.0,0.05", help="reflector offset x,y,z in the tool frame (m)")
     p.add_argument("--seed", type=int, default=0, help="seed of the random excitation")

@@ -4,7 +4,9 @@ The controller keeps its nominal kinematics; ``compensate`` tells it other joint
 real TCP lands on the target according to the calibrated model (geometry + effects), by inverse
 kinematics on that model started from the nominal solution
 (:mod:`pin_kpi_oed.identification.compensate`). Per target it reports the predicted correction
-(mm) and flags targets that are unreachable or near a singularity.
+(mm) and flags targets that are unreachable, off the branch of their joint hint / the model's working
+configurations, at a joint limit, in collision (``--cell``) or near a singularity. The TCP (``--tcp``) is in the
+model's tool frame, which the summary names.
 
 Examples::
 
@@ -19,6 +21,7 @@ import argparse
 
 import numpy as np
 
+from pin_kpi_oed.cli.tool import model_tool
 from pin_kpi_oed.cli.util import add_table_options, parse_floats, table_options
 
 __all__ = ["register", "run"]
@@ -34,7 +37,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                     "(tracker frame of the station) or the robot base frame (--frame base). --program: CSV with "
                     "the joint columns of a nominal program; each pose's nominal TCP pose (base frame) becomes the "
                     "target. Writes the compensated joints, the nominal ones, the predicted correction (m), the "
-                    "residual and a status per target (ok / unreachable / near_singular).")
+                    "residual and a status per target (ok / unreachable / off_branch / joint_limit / collision / "
+                    "near_singular); only ok is safe to send. The nominal IK starts from the target's joint hint, "
+                    "else the model's (or --cell's) working configuration nearest the target.")
     src = p.add_mutually_exclusive_group(required=True)
     src.add_argument("--targets", default=None, help="CSV of Cartesian TCP targets (x, y, z; rx, ry, rz optional)")
     src.add_argument("--program", default=None, help="CSV of a joint-space program (the robot's joint columns)")
@@ -44,7 +49,16 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="frame of --targets: cell = tracker frame of the station (default), base = robot base frame")
     p.add_argument("--station", default=None, help="station of the cell frame and default TCP (default: the model's)")
     p.add_argument("--tcp", default=None,
-                   help="TCP point x,y,z in the tool frame (m); default the station's reflector (what was measured)")
+                   help="TCP point x,y,z (m) in the model's tool frame (printed; the frame the calibration used); "
+                        "default the model's TCP when its cell or data stated one, else the station's reflector "
+                        "(what was measured)")
+    p.add_argument("--cell", default=None,
+                   help="cell YAML file or shipped cell name: every compensated configuration is checked for "
+                        "collisions in it (status 'collision'); its robot, tool frame and TCP must be the model's, "
+                        "its working configurations give the branch of targets without joint hints")
+    p.add_argument("--max-branch-step", dest="max_branch_step", type=float, default=0.05,
+                   help="largest joint change (rad) compensation may make to the nominal solution; beyond it the "
+                        "target is 'off_branch' (default 0.05)")
     p.add_argument("--position-only", action="store_true",
                    help="with --program: hold the TCP position only, leave the orientation free")
     p.add_argument("--seed", type=int, default=0, help="seed of the random restarts of the nominal IK")
@@ -59,15 +73,24 @@ def run(args: argparse.Namespace) -> int:
     from pin_kpi_oed.data.atomic import atomic_write_json
     from pin_kpi_oed.data.targets import read_targets
     from pin_kpi_oed.errors import InfeasibleError
-    from pin_kpi_oed.identification.compensate import (CompensationOptions, compensate, compensate_program,
-                                                       write_compensation)
+    from pin_kpi_oed.identification.compensate import (STATUSES, CompensationOptions, compensate,
+                                                       compensate_program, write_compensation)
     from pin_kpi_oed.identification.model_file import load_model_file
 
     model = load_model_file(args.model)
     robot = model.robot
+    tool = model_tool(args, model, args.model)  # --cell against the model: robot, tool frame, TCP
+    cell = None
+    if args.cell:
+        from pin_kpi_oed.cell.cell import load_cell
+
+        cell = load_cell(args.cell)
+        if model.q_work is None and tool.q_work is not None:
+            model.q_work = robot.check_q(tool.q_work, f"--cell {args.cell}: working configurations")
     kw = table_options(args)
     tcp = parse_floats(args.tcp, 3, "--tcp") if args.tcp else None
-    opt = CompensationOptions(frame=args.frame, station=args.station, tcp_m=tcp, seed=args.seed)
+    opt = CompensationOptions(frame=args.frame, station=args.station, tcp_m=tcp, seed=args.seed, cell=cell,
+                              max_branch_step_rad=args.max_branch_step)
     if args.program:
         prog = read_targets(args.program, robot.joint_names, program=True, revolute=robot.is_revolute, **kw)
         res = compensate_program(model, prog, opt, orientation=not args.position_only)
@@ -78,10 +101,12 @@ def run(args: argparse.Namespace) -> int:
         n_un = res.target_status.count("unreachable")
         hint = (f"; the TCP {', '.join(f'{x:g}' for x in tcp)} m is {float(np.linalg.norm(tcp)):.3g} m from the tool "
                 "frame" if tcp is not None else "")
+        others = ", ".join(f"{res.target_status.count(k)} {k.replace('_', ' ')}" for k in STATUSES[2:]
+                           if k in res.target_status)
         raise InfeasibleError(f"{args.program or args.targets}: none of the {len(res.target_status)} targets can be "
-                              f"compensated ({n_un} unreachable, "
-                              f"{res.target_status.count('near_singular')} near a singularity) with {args.model}"
-                              f"{hint}; check the frame (--frame {args.frame}) and units (m); nothing written")
+                              f"compensated ({n_un} unreachable" + (f", {others}" if others else "")
+                              + f") with {args.model} (TCP in tool frame {robot.tool_frame}){hint}; check the frame "
+                              f"(--frame {args.frame}) and units (m); nothing written")
     write_compensation(args.out, res)
     if args.json:
         atomic_write_json(args.json, {**res.to_dict(), "model": args.model,

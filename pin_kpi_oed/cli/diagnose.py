@@ -27,7 +27,8 @@ from pin_kpi_oed.cli.identify import add_discrepancy_arg, add_register_args
 from pin_kpi_oed.cli.util import add_table_options, table_options
 from pin_kpi_oed.cli.util import parse_floats as _floats
 from pin_kpi_oed.errors import InputError
-from pin_kpi_oed.model.robot import ROBOT_HELP
+from pin_kpi_oed.cli.tool import add_cell_arg, command_tool
+from pin_kpi_oed.model.robot import ROBOT_HELP, TOOL_HELP
 
 __all__ = ["register", "run"]
 
@@ -43,8 +44,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                     "backlash, thermal_expansion, joint_scale) alone and by forward selection, and report how far "
                     "each shrinks the held-out error. A tracker range-scale error cannot be seen in such data "
                     "(it equals a uniform scaling of the robot); the report says so.")
-    d.add_argument("--robot", required=True, help=ROBOT_HELP)
-    d.add_argument("--tool", default=None, help="tool frame (default tool0)")
+    d.add_argument("--robot", default=None, help=ROBOT_HELP + "; default: the robot of --cell or of the data's header")
+    d.add_argument("--tool", default=None, help=TOOL_HELP)
+    add_cell_arg(d)
     d.add_argument("--kinematics", default=None,
                    help="UR kinematics file (ur_description default_kinematics.yaml layout, e.g. from ur_calibration) "
                         "as the nominal model of a UR --robot")
@@ -56,7 +58,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     g.add_argument("--kfold", type=int, default=None, help="K-fold cross-validation on --train alone (K >= 2)")
     add_register_args(d)
     d.add_argument("--reflector", default=None,
-                   help="nominal reflector offset in the tool frame x,y,z (m); default: estimated from --train")
+                   help="nominal reflector offset in the tool frame x,y,z (m); default: the reflector of --cell or of "
+                        "the data's header, else estimated from --train")
     d.add_argument("--sigma", default=None,
                    help="tracker noise sigma per axis (m), 1 or 3 values; overrides the files' sigma columns "
                         "(needed when the files have none)")
@@ -182,7 +185,6 @@ def run(args: argparse.Namespace) -> int:
     from pin_kpi_oed.cli.identify import read_data_files, read_validation
     from pin_kpi_oed.diagnosis.diagnose import diagnose
     from pin_kpi_oed.model.tracker import TrackerModel
-    from pin_kpi_oed.model.robot import load_robot
 
     effects = _checked_effects(args)
     if args.model_out:
@@ -191,18 +193,25 @@ def run(args: argparse.Namespace) -> int:
         check_writable(args.model_out)
         if any(os.path.abspath(args.model_out) == os.path.abspath(f) for f in args.train + [args.validate or ""]):
             raise InputError(f"--model-out {args.model_out}: is an input of this command; name another file")
-    robot = load_robot(args.robot, args.tool, kinematics=args.kinematics)
+    ct = command_tool(args, args.train, other_paths=[p for p in (args.validate, args.register_data) if p],
+                      reflector_option=args.reflector)
+    robot = ct.robot
+    if not args.quiet:
+        print(ct.line())
     reach = robot.reach()
     train = read_data_files(args.train, robot, "--train", opts=table_options(args, robot))
+    train.tool = ct.tool  # the agreed tool travels into --model-out
     val, reg = read_validation(args, robot)
-    reflector = _floats(args.reflector, (3,), "--reflector") if args.reflector is not None else np.zeros(3)
+    reflector = _floats(args.reflector, (3,), "--reflector") if args.reflector is not None else (
+        ct.tool.reflector_m if ct.tool.reflector_m is not None else np.zeros(3))
     if np.linalg.norm(reflector) > reach:
         raise InputError(f"--reflector {args.reflector}: {np.linalg.norm(reflector):.4g} m from the tool frame, more "
                          f"than the robot's reach ({reach:.3g} m): give it in m")
     noise, weights = _noise(args, train, val, reg)
-    if args.reflector is None:
+    if args.reflector is None and ct.tool.reflector_m is None:
         reflector = _estimated_reflector(args, robot, noise, weights, train, reflector)
-    model = TrackerModel(robot, reflector_m=reflector, noise=noise)
+    model = TrackerModel(robot, reflector_m=reflector, noise=noise,
+                         tcp_m=ct.tool.tcp_m if ct.tool.tcp_m is not None else np.zeros(3))
     rep = diagnose(model, train, val, kfold=args.kfold, effects=effects, weights=weights, alpha=args.alpha,
                    seed=args.seed, t_ref_c=args.t_ref, register_rows=args.register_rows, register_data=reg,
                    harmonics=args.harmonics, transfer_prior_rad=args.term_prior,

@@ -1,4 +1,4 @@
-"""CLI subcommands ``simulate``, ``identify`` and ``import-ipa`` of ``pin-kpi-oed``.
+"""CLI subcommands ``identify`` and ``import-ipa`` of ``pin-kpi-oed`` (and ``simulate``, :mod:`pin_kpi_oed.cli.simulate`).
 
 ``register(subparsers)`` adds the three subcommands; each sets ``func`` to its handler
 ``run_*(args) -> int`` (0 on success). Errors are :class:`~pin_kpi_oed.errors.PinKpiOedError`
@@ -14,6 +14,7 @@ Examples::
     pin-kpi-oed identify --robot ur10 --data B.csv --data C.csv --data D.csv --reflector 0,0,0.109 --sigma 1e-4 \\
         --model-out bcd.json                                  # three stations, one robot
     pin-kpi-oed identify --robot ur10 --data C.csv --validate D.csv --register-rows 60 --seed 0 --reflector 0,0,0.109
+    pin-kpi-oed identify --cell cell.yaml --data train.csv --model-out model.json   # tool frame, reflector, TCP
     pin-kpi-oed import-ipa ../shared/data/ipa_ur10/Series_C --position-only --split 0.5 --seed 0 \\
         --train c_train.csv --test c_test.csv
 """
@@ -27,14 +28,14 @@ from dataclasses import replace
 from typing import Any
 
 import numpy as np
-import pinocchio as pin
 
 from pin_kpi_oed.cli.util import add_table_options, table_options
 from pin_kpi_oed.cli.util import parse_floats as _floats
 from pin_kpi_oed.errors import InputError
-from pin_kpi_oed.model.robot import ROBOT_HELP
+from pin_kpi_oed.cli.tool import add_cell_arg, command_tool
+from pin_kpi_oed.model.robot import ROBOT_HELP, TOOL_HELP
 
-__all__ = ["register", "run_simulate", "run_identify", "run_import_ipa"]
+__all__ = ["register", "run_identify", "run_import_ipa"]
 
 
 
@@ -62,49 +63,11 @@ def _check_outputs(*paths: str | None) -> None:
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     """Add the ``simulate``, ``identify`` and ``import-ipa`` subcommands."""
-    _register_simulate(subparsers)
+    from pin_kpi_oed.cli.simulate import register_simulate
+
+    register_simulate(subparsers)
     _register_identify(subparsers)
     _register_import_ipa(subparsers)
-
-
-def _register_simulate(subparsers: argparse._SubParsersAction) -> None:
-    """Add the ``simulate`` subcommand and its options."""
-    s = subparsers.add_parser("simulate", help="simulate tracker measurements of a robot with random geometric errors",
-                              description="Simulate laser-tracker measurements (CSV, SI units) of a 'true' robot: "
-                                          "random geometric errors from tolerances, tracker pose, reflector, noise.")
-    s.add_argument("--robot", default=None,
-                   help=f"{ROBOT_HELP}; not with --design")
-    s.add_argument("--design", default=None,
-                   help="design JSON (pin-kpi-oed design --json): measure its poses (--criterion) with its robot, "
-                        "tracker pose and reflector as the nominal set-up, instead of random poses")
-    s.add_argument("--criterion", default=None,
-                   help="which design of --design to measure (default: the file's last, e.g. kpi)")
-    s.add_argument("--tool", default=None, help="tool frame (default tool0)")
-    s.add_argument("--n", type=int, default=80,
-                   help="number of training measurements (default 80; with --design: the design's poses)")
-    s.add_argument("--n-test", type=int, default=0, help="number of held-out measurements (default 0)")
-    s.add_argument("--out", required=True, help="training CSV file")
-    s.add_argument("--test-out", default=None, help="held-out CSV file (with --n-test)")
-    s.add_argument("--truth-json", default=None, help="write the true parameters, tracker pose and reflector here")
-    s.add_argument("--seed", type=int, default=0, help="seed of every random draw (default 0)")
-    s.add_argument("--reflector", default="0.03,0.02,0.08", help="reflector offset in the tool frame, x,y,z (m)")
-    s.add_argument("--tracker", default=None,
-                   help="pose of the robot base in the tracker frame x,y,z[,roll,pitch,yaw] (m, rad); "
-                        "default: a tracker reach + 1.5 m away")
-    s.add_argument("--noise", default="1e-5", help="tracker noise sigma (m), 1 or 3 values (default 1e-5)")
-    s.add_argument("--tol-translation", default="5e-4", help="sigma of the joint-placement translation errors (m)")
-    s.add_argument("--tol-rotation", default="1e-3", help="sigma of the joint-placement rotation errors (rad)")
-    s.add_argument("--tol-reflector", default="0", help="sigma of the reflector offset error (m)")
-    s.add_argument("--pose6d", action="store_true", help="also simulate 6-DoF probe orientations (rx, ry, rz)")
-    s.add_argument("--sigma-rot", default="1e-4", help="orientation noise of --pose6d (rad)")
-    s.add_argument("--effects", default=None,
-                   help="unmodelled effects of the 'real' robot, e.g. joint_compliance=2e-6,gear_harmonic=5e-5 "
-                        "(name=SIZE: random +-SIZE per parameter; name=v1:v2:... exact values; see "
-                        "pin_kpi_oed.effects.library.parse_effects_spec). A tracker range-scale error is not offered: "
-                        "it equals a uniform scaling of the robot and no data can reveal it")
-    s.add_argument("--temperature", default="20,25",
-                   help="temperature column: uniform between T0,T1 (degC), read by thermal_expansion")
-    s.set_defaults(func=run_simulate)
 
 
 def _register_identify(subparsers: argparse._SubParsersAction) -> None:
@@ -117,8 +80,9 @@ def _register_identify(subparsers: argparse._SubParsersAction) -> None:
                                           "(nominal robot + fitted tracker pose and reflector) and after calibration; "
                                           "with --register-rows/--register-data the set-up is first re-registered "
                                           "on some rows of another session and only the rest are scored.")
-    i.add_argument("--robot", required=True, help=ROBOT_HELP)
-    i.add_argument("--tool", default=None, help="tool frame (default tool0)")
+    i.add_argument("--robot", default=None, help=ROBOT_HELP + "; default: the robot of --cell or of the data's header")
+    i.add_argument("--tool", default=None, help=TOOL_HELP)
+    add_cell_arg(i)
     i.add_argument("--kinematics", default=None,
                    help="UR kinematics file (ur_description default_kinematics.yaml layout, e.g. from ur_calibration) "
                         "as the nominal model of a UR --robot")
@@ -130,8 +94,9 @@ def _register_identify(subparsers: argparse._SubParsersAction) -> None:
     _add_validation_args(i, "held-out measurement CSV (nothing is re-fitted on it unless --register-rows/"
                             "--register-data re-register the set-up)")
     i.add_argument("--reflector", default=None,
-                   help="nominal reflector offset in the tool frame x,y,z (m); default: estimated from the data "
-                        "(set-up fit with the nominal geometry, rounded to 1 mm)")
+                   help="nominal reflector offset in the tool frame x,y,z (m); default: the reflector of --cell or of "
+                        "the data's header, else estimated from the data (set-up fit with the nominal geometry, "
+                        "rounded to 1 mm)")
     i.add_argument("--effects", default=None,
                    help="effects identified with the geometry, comma-separated names of the effect library (e.g. "
                         "joint_compliance,gear_harmonic); stored in --model-out")
@@ -195,83 +160,6 @@ def _register_import_ipa(subparsers: argparse._SubParsersAction) -> None:
                    help="keep the std columns as sigma (they are the scatter of the tracker's averaged reading, "
                         "not its accuracy: by default they are dropped and the fit weights uniformly)")
     p.set_defaults(func=run_import_ipa)
-
-
-# --------------------------------------------------------------------------- #
-def run_simulate(args: argparse.Namespace) -> int:
-    """Handler of ``pin-kpi-oed simulate``."""
-    from pin_kpi_oed.data.measurements import write_measurements
-    from pin_kpi_oed.data.atomic import atomic_write_json
-    from pin_kpi_oed.model.noise import NoiseModel
-    from pin_kpi_oed.model.tracker import TrackerModel
-    from pin_kpi_oed.model.robot import load_robot
-    from pin_kpi_oed.identification.simulate import (Tolerances, default_tracker_pose, random_truth, simulate,
-                                                     truth_to_dict)
-
-    if args.n < 1 or args.n_test < 0:
-        raise InputError(f"--n must be >= 1 and --n-test >= 0, got {args.n} and {args.n_test}")
-    if args.n_test and not args.test_out:
-        raise InputError("--n-test needs --test-out FILE")
-    _check_outputs(args.out, args.test_out, args.truth_json)
-    if (args.robot is None) == (args.design is None):
-        raise InputError("simulate: give --robot ROBOT (random poses) or --design DESIGN.json (its poses), not both")
-    if args.criterion and not args.design:
-        raise InputError("--criterion: only with --design")
-    design = _design_poses(args.design, args.criterion) if args.design else None
-    robot = design[0].robot if design else load_robot(args.robot, args.tool)
-    noise = NoiseModel(sigma_xyz_m=tuple(_floats(args.noise, (1, 3), "--noise")),
-                       sigma_rot_rad=_positive(args.sigma_rot, "--sigma-rot"))
-    if design:
-        T = design[0].model.tracker_T_base
-    elif args.tracker:
-        v = _floats(args.tracker, (3, 6), "--tracker")
-        rpy = v[3:] if v.size == 6 else np.zeros(3)
-        T = pin.SE3(pin.rpy.rpyToMatrix(rpy), v[:3])
-    else:
-        T = default_tracker_pose(robot)
-    reflector = design[0].model.reflector_m if design else _floats(args.reflector, 3, "--reflector")
-    model = TrackerModel(robot, tracker_T_base=T, reflector_m=reflector, noise=noise, pose6d=args.pose6d)
-    tol = Tolerances(joint_translation_m=float(_floats(args.tol_translation, 1, "--tol-translation")[0]),
-                     joint_rotation_rad=float(_floats(args.tol_rotation, 1, "--tol-rotation")[0]),
-                     reflector_m=float(_floats(args.tol_reflector, 1, "--tol-reflector")[0]))
-    truth = random_truth(model, tol, seed=args.seed)
-    rng = np.random.default_rng(args.seed + 1)
-    if design:
-        args.n = len(design[1])
-        Q = np.vstack([design[1], robot.random_q(rng, args.n_test)])
-    else:
-        Q = robot.random_q(rng, args.n + args.n_test)
-    effects = []
-    if args.effects:
-        from pin_kpi_oed.effects.library import parse_effects_spec
-
-        effects = parse_effects_spec(args.effects, robot, np.random.default_rng(args.seed + 3))
-    t0, t1 = _floats(args.temperature, 2, "--temperature")
-    aux = {"temperature_c": np.random.default_rng(args.seed + 4).uniform(t0, t1, len(Q))}
-    ms = simulate(model, Q, truth, effects=effects, aux=aux, seed=args.seed + 2)
-    train = ms.subset(slice(0, args.n))
-    write_measurements(train, args.out)
-    if args.n_test:
-        write_measurements(ms.subset(slice(args.n, None)), args.test_out)
-    if args.truth_json:
-        atomic_write_json(args.truth_json, truth_to_dict(model, truth, tol, args.seed))
-    print(f"simulated {args.n} measurements"
-          + (f" at the poses of design '{design[2]}' of {args.design}" if design else "") + f" -> {args.out}"
-          + (f", {args.n_test} held-out -> {args.test_out}" if args.n_test else "")
-          + f" (robot {robot.name}, tool {robot.tool_frame}, noise sigma {np.array(noise.sigma_xyz_m) * 1e6} µm, "
-            f"seed {args.seed}" + (f", effects: {', '.join(e.name for e, _ in effects)}" if effects else "") + ")")
-    return 0
-
-
-def _design_poses(path: str, criterion: str | None) -> tuple[Any, np.ndarray, str]:
-    """(design file, poses, criterion) of ``simulate --design``: the named design, else the file's last."""
-    from pin_kpi_oed.design.design_file import load_design
-
-    df = load_design(path)
-    if not df.designs:
-        raise InputError(f"--design {path}: holds no design")
-    entry = df.design(criterion) if criterion else df.designs[-1]
-    return df, np.asarray(entry.q_meas, float), entry.criterion
 
 
 def add_register_args(p: argparse.ArgumentParser) -> None:
@@ -378,12 +266,15 @@ def _noise_and_weights(args: argparse.Namespace, train: Any) -> tuple[Any, str, 
 
 
 def _nominal_reflector(args: argparse.Namespace, robot: Any, noise: Any, train: Any,
-                       opts: Any) -> tuple[np.ndarray, bool]:
-    """(nominal reflector offset in the tool frame (m), whether it was estimated from the data)."""
+                       opts: Any, tool: Any = None) -> tuple[np.ndarray, bool]:
+    """(nominal reflector offset in the tool frame (m), whether it was estimated from the data): ``--reflector``,
+    else the reflector of the cell / the data's header (``tool``), else estimated."""
     from pin_kpi_oed.identification.reflector_start import estimate_reflector
     from pin_kpi_oed.model.tracker import TrackerModel
 
     reach = robot.reach()
+    if args.reflector is None and tool is not None and tool.reflector_m is not None:
+        return tool.reflector_m.copy(), False
     estimated = args.reflector is None
     if estimated:
         reflector = estimate_reflector(TrackerModel(robot, noise=noise, reflector_m=np.zeros(3)), train, opts)
@@ -495,20 +386,25 @@ def run_identify(args: argparse.Namespace) -> int:
     from pin_kpi_oed.identification.identify import IdentifyOptions
     from pin_kpi_oed.identification.quality import assess_fit
     from pin_kpi_oed.model.tracker import TrackerModel
-    from pin_kpi_oed.model.robot import load_robot
 
     _check_outputs(args.json, args.urdf_out, args.model_out)
     geometry_prior = _geometry_prior(getattr(args, "geometry_prior", None))
-    robot = load_robot(args.robot, args.tool, kinematics=args.kinematics)
+    ct = command_tool(args, args.data, other_paths=[p for p in (args.validate, args.register_data) if p],
+                      reflector_option=args.reflector, per_station_reflector=args.reflector_per_station)
+    robot = ct.robot
+    if not args.quiet:
+        print(ct.line())
     train = read_data_files(args.data, robot, opts=table_options(args, robot))
+    train.tool = ct.tool  # the agreed tool travels into the model file
     test, reg = read_validation(args, robot)
     noise, weights, scale = _noise_and_weights(args, train)
     effects = _effects(args.effects, robot, train)
     opts = IdentifyOptions(weights=weights, scale_covariance=scale, use_orientation=not args.position_only,
                            loss=args.loss or "linear", max_nfev=args.max_nfev,
                            reflector_per_station=args.reflector_per_station)
-    reflector, estimated = _nominal_reflector(args, robot, noise, train, opts)
-    model = TrackerModel(robot, reflector_m=reflector, noise=noise)
+    reflector, estimated = _nominal_reflector(args, robot, noise, train, opts, ct.tool)
+    tcp = ct.tool.tcp_m if ct.tool.tcp_m is not None else np.zeros(3)
+    model = TrackerModel(robot, reflector_m=reflector, tcp_m=tcp, noise=noise)
     if args.fix:
         model.layout.fix(args.fix)
     if geometry_prior is not None:
@@ -516,7 +412,9 @@ def run_identify(args: argparse.Namespace) -> int:
     result, opts = _fit(args, model, train, opts, effects, reflector, estimated)
     result.discrepancy = _discrepancy(args, result, train)
     out = {"result": result.to_dict(), "data": list(args.data), "validate": args.validate,
-           "reflector_nominal_m": reflector.tolist(), "reflector_nominal_source": "estimated" if estimated else "given"}
+           "reflector_nominal_m": reflector.tolist(),
+           "reflector_nominal_source": "estimated" if estimated else ("given" if args.reflector else "cell/header"),
+           "tool": {"tool_frame": robot.tool_frame, **ct.tool.to_dict(), "source": ct.tool.source}}
     lines: list[str] = []
     if test is not None:
         out["validation"], lines = _validation(model, train, opts, result, test, reg, args)

@@ -13,6 +13,8 @@ from __future__ import annotations
 
 import argparse
 
+from pin_kpi_oed.model.robot import TOOL_HELP
+
 __all__ = ["register", "run"]
 
 
@@ -25,7 +27,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("export", help="tracker point export (text)")
     p.add_argument("--joints", required=True, help="joint log CSV: point name + one column per joint")
     p.add_argument("--robot", required=True, help="URDF path or robot name (its joints name the columns)")
-    p.add_argument("--tool", default=None, help="tool frame (default tool0)")
+    p.add_argument("--tool", default=None, help=TOOL_HELP)
     p.add_argument("--out", required=True, help="write the measurement CSV here")
     p.add_argument("--angle-unit", choices=("deg", "rad"), default="deg", help="unit of the joint log (default deg)")
     p.add_argument("--units", default=None, help="length unit of the export if it has no 'Units:' comment (default mm)")
@@ -56,6 +58,11 @@ def run(args: argparse.Namespace) -> int:
     check_points_against_joints(robot, ms.q, ms.position_m, f"{args.export}", f"{args.joints}", exp.units,
                                 args.angle_unit,
                                 ANGLE_UNITS[args.angle_unit])
+    from pin_kpi_oed.data.tool_header import ToolSpec
+    from pin_kpi_oed.model.robot import portable_spec
+
+    # the tool header: the robot, and the tool frame when --tool named it (the default frame is no statement)
+    ms.tool = ToolSpec(robot=portable_spec(robot), tool_frame=args.tool or None, source=args.out)
     write_measurements(ms, args.out)
     if not args.quiet:
         print(f"joined {len(names)} points of {args.export} (lengths in {exp.units}: {exp.units_from}) with "

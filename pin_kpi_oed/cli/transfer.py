@@ -21,6 +21,7 @@ import argparse
 
 import numpy as np
 
+from pin_kpi_oed.cli.tool import model_tool
 from pin_kpi_oed.cli.util import add_table_options, table_options
 
 __all__ = ["register", "run_register", "run_predict"]
@@ -39,6 +40,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     r.add_argument("--station", default=None,
                    help="label of the registered station (default: the data's 'station' column, else the file name)")
     r.add_argument("--hold-reflector", action="store_true", help="keep the model's reflector offset")
+    r.add_argument("--cell", default=None, help="cell YAML file or shipped cell name: its robot, tool frame and TCP "
+                                                "must be the model's (a contradiction is refused)")
     r.add_argument("--json", default=None, help="write the registration result (set-up, rows, RMS) here")
     r.add_argument("--accept-poor-fit", dest="accept_poor_fit", action="store_true",
                    help="write the model even when the registration is poor (too few rows, residuals far above "
@@ -79,6 +82,7 @@ def run_register(args: argparse.Namespace) -> int:
     from pin_kpi_oed.validation.robot_checks import check_points_against_joints
 
     model = load_model_file(args.model)
+    model_tool(args, model, args.model, [args.data])  # the data's tool header and --cell against the model
     data = read_measurements(args.data, joint_names=model.robot.joint_names, reach_m=model.robot.reach(),
                              **table_options(args, model.robot))
     check_points_against_joints(model.robot, data.q, data.position_m, args.data, args.data)
@@ -118,6 +122,7 @@ def run_predict(args: argparse.Namespace) -> int:
     from pin_kpi_oed.validation.robot_checks import check_points_against_joints
 
     model = load_model_file(args.model)
+    model_tool(args, model, args.model, [args.data])
     data = read_measurements(args.data, joint_names=model.robot.joint_names, reach_m=model.robot.reach(),
                              require_position=False, **table_options(args, model.robot))
     if data.position_m is not None and np.all(np.isfinite(data.position_m)):
@@ -131,7 +136,8 @@ def run_predict(args: argparse.Namespace) -> int:
                             out=args.figure)
     write_predictions(args.out, data, cols, table)
     if not args.quiet:
-        msg = f"predicted {len(data)} rows of {args.data} with {args.model}"
+        msg = (f"predicted {len(data)} rows of {args.data} with {args.model} (the station's reflector in tool "
+               f"frame {model.robot.tool_frame})")
         if "error" in cols:
             e = table[:, cols.index("error")]
             msg += (f": error mean {e.mean() * 1e3:.4f} mm, RMS {np.sqrt(np.mean(e ** 2)) * 1e3:.4f} mm, "

@@ -18,12 +18,13 @@ import pandas as pd
 from pin_kpi_oed.data.measurement_set import (PAYLOAD_COLUMN, POSITION_COLUMNS, RESERVED_COLUMNS, ROTVEC_COLUMNS,
                                               SIGMA_AXIS_COLUMNS, SIGMA_COLUMN, STATION_COLUMN, TEMPERATURE_COLUMN,
                                               TIME_COLUMN, MeasurementSet)
-from pin_kpi_oed.data.table import Units, parse_columns, parse_units, read_text_table, rename_header
+from pin_kpi_oed.data.table import Units, parse_columns, parse_text_table, parse_units, read_text_file, rename_header
+from pin_kpi_oed.data.tool_header import ToolSpec, parse_tool_header, split_tool_header
 from pin_kpi_oed.errors import InputError
 from pin_kpi_oed.validation.units import check_position_spread_m
 
 __all__ = ["ANGLE_LIMIT_RAD", "MAX_MEDIAN_DISTANCE_M", "MAX_MEDIAN_SIGMA_M", "read_measurements",
-           "parse_numeric_table", "check_positive_sigma"]
+           "read_measurement_tool", "parse_numeric_table", "check_positive_sigma"]
 
 #: Joint values (rad) or rotation-vector components beyond this look like degrees.
 ANGLE_LIMIT_RAD = 2.0 * math.pi + 0.1
@@ -120,9 +121,25 @@ def _parse_float(cell: str) -> float:
     return float(cell.strip())
 
 
-def _read_table(p: Path, src: str) -> tuple[list[str], int, list[list[str]], list[int]]:
-    """Step 1: the header and the data rows (cells as text) with their file line numbers (pandas)."""
-    header, header_line, rows, row_lines = read_text_table(p, src, "measurement file")
+def read_measurement_tool(path: str | os.PathLike[str]) -> ToolSpec | None:
+    """The tool header of a measurement CSV (:mod:`pin_kpi_oed.data.tool_header`), read before the robot is
+    loaded (the header may name its tool frame); None when the file has none.
+
+    Raises:
+        InputError: a missing or unreadable file, a malformed header field.
+    """
+    src = str(path)
+    comments, _, _ = split_tool_header(read_text_file(path, src, "measurement file"))
+    return parse_tool_header(comments, src)
+
+
+def _read_table(p: Path, src: str) -> tuple[list[str], int, list[list[str]], list[int], ToolSpec | None]:
+    """Step 1: the tool header, the column header and the data rows (cells as text) with their file line
+    numbers (pandas)."""
+    comments, text, skipped = split_tool_header(read_text_file(p, src, "measurement file"))
+    tool = parse_tool_header(comments, src)
+    header, header_line, rows, row_lines = parse_text_table(text, src, "measurement file")
+    header_line, row_lines = header_line + skipped, [r + skipped for r in row_lines]
     if not header:
         raise InputError(f"{src}: empty file, expected a header row (joint names, x, y, z, ...)")
     if len(header) == 1 and ";" in header[0]:
@@ -132,7 +149,7 @@ def _read_table(p: Path, src: str) -> tuple[list[str], int, list[list[str]], lis
         )
     if not rows:
         raise InputError(f"{src}: no measurement rows after the header")
-    return header, header_line, rows, row_lines
+    return header, header_line, rows, row_lines, tool
 
 
 @dataclass
@@ -386,11 +403,12 @@ def read_measurements(
         raise InputError(f"reach_m must be a positive number of metres, got {reach_m!r}")
     u = parse_units(units)
     mapping = parse_columns(columns)
-    header, header_line, rows, row_lines = _read_table(p, src)
+    header, header_line, rows, row_lines, tool = _read_table(p, src)
     header = rename_header(header, mapping, src)
     cols = _check_header(header, header_line, src, joint_names, require_position)
     data = parse_numeric_table(rows, row_lines, header, src, _parse_float, cols.found, skip=(STATION_COLUMN,))
     ms = _apply_units(_build_set(data, rows, cols, src), u, joint_units)
+    ms.tool = tool
     _check_values(ms, cols, row_lines, src)
     _check_units(ms, cols, row_lines, src, reach_m, joint_units)
     _check_duplicates(ms, row_lines, src)

@@ -13,6 +13,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from pin_kpi_oed.data.tool_header import ToolSpec, resolve_tool
 from pin_kpi_oed.errors import InputError
 
 __all__ = ["POSITION_COLUMNS", "ROTVEC_COLUMNS", "SIGMA_COLUMN", "SIGMA_AXIS_COLUMNS", "TEMPERATURE_COLUMN",
@@ -62,6 +63,8 @@ class MeasurementSet:
         extra: Further numeric columns, name -> (m,) array (units as in the file).
         station: Label of the measurement set-up (tracker placement) of every row,
             (m,) text; ``None`` = one station for all rows.
+        tool: The tool the rows were measured with (robot, tool frame, reflector, TCP, working
+            configurations; :mod:`pin_kpi_oed.data.tool_header`), from the file's header; ``None``: unknown.
 
     Raises:
         InputError: At construction, if an array has the wrong shape, the
@@ -80,6 +83,7 @@ class MeasurementSet:
     source: str = ""
     extra: dict[str, np.ndarray] = field(default_factory=dict)
     station: np.ndarray | None = None
+    tool: ToolSpec | None = None
 
     def __post_init__(self) -> None:
         self.joint_names = [str(n) for n in self.joint_names]
@@ -189,6 +193,7 @@ class MeasurementSet:
             source=self.source,
             extra={k: take(v) for k, v in self.extra.items()},
             station=None if self.station is None else self.station[idx].copy(),
+            tool=self.tool,
         )
 
     def split(self, fraction: float, seed: int | None = 0) -> tuple[MeasurementSet, MeasurementSet]:
@@ -267,8 +272,8 @@ def concat_measurements(sets: Sequence[MeasurementSet], labels: Sequence[str] | 
         One :class:`MeasurementSet` with a ``station`` column.
 
     Raises:
-        InputError: no sets, different joint names, or two sets without a station column
-            that would get the same label.
+        InputError: no sets, different joint names, two sets without a station column
+            that would get the same label, or headers naming different robots, tool frames or TCPs.
     """
     sets = list(sets)
     if not sets:
@@ -296,9 +301,14 @@ def concat_measurements(sets: Sequence[MeasurementSet], labels: Sequence[str] | 
         return None if any(v is None for v in vals) else np.concatenate(vals, axis=0)
 
     common = [k for k in sets[0].extra if all(k in s.extra for s in sets)]
+    tools = [s.tool for s in sets if s.tool is not None]
+    # one robot, tool frame and TCP for every set; the reflector and working configurations may differ per station
+    tool = resolve_tool(tools, skip=("reflector_m", "q_work")) if tools else None
+    if tool is not None:
+        tool.source = tools[0].source
     return MeasurementSet(joint_names=joints, q=cat("q"), position_m=cat("position_m"), rotvec_rad=cat("rotvec_rad"),
                           sigma_m=cat("sigma_m"), temperature_c=cat("temperature_c"), payload_kg=cat("payload_kg"),
                           time_s=cat("time_s"),
                           source=source if source is not None else "+".join(s.source for s in sets if s.source),
                           extra={k: np.concatenate([s.extra[k] for s in sets]) for k in common},
-                          station=np.concatenate(stations))
+                          station=np.concatenate(stations), tool=tool)

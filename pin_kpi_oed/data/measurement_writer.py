@@ -41,6 +41,8 @@ def write_measurements(ms: MeasurementSet, path: str | os.PathLike[str]) -> None
     Columns: joints, ``x,y,z``, then if present ``rx,ry,rz``,
     ``sigma_x,sigma_y,sigma_z``, ``temperature``, ``payload``, ``time``,
     ``station`` (text), then the extra columns. Floats use ``repr`` so a read-back is bit-identical.
+    A set with a :attr:`~MeasurementSet.tool` begins with its header (comment lines,
+    :mod:`pin_kpi_oed.data.tool_header`).
 
     Args:
         ms: The measurements (SI units).
@@ -75,6 +77,8 @@ def write_measurements(ms: MeasurementSet, path: str | os.PathLike[str]) -> None
         raise InputError(f"cannot write '{target}': the set has no measured positions (x, y, z)")
 
     buf = _stdio.StringIO()
+    if ms.tool is not None:  # the tool the rows were measured with, as comment lines the reader keeps
+        buf.write("".join(line + "\n" for line in ms.tool.header_lines()))
     writer = csv.writer(buf, lineterminator="\n")
     writer.writerow(header)
     for i, row in enumerate(table):

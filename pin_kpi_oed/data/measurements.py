@@ -70,6 +70,14 @@ CSV format
 * Two rows with identical joint values and identical measurement (x, y, z and,
   if present, rx, ry, rz) are duplicates and rejected.
 
+* Tool header: comment lines (``#``) before the column header carry the tool the rows were
+  measured with, one field per line, the value in JSON (``# tool_frame: "panda_link8"``;
+  fields ``robot``, ``tool_frame``, ``reflector_m``, ``tcp_m``, ``q_work``;
+  :mod:`pin_kpi_oed.data.tool_header`). The reader keeps them in :attr:`MeasurementSet.tool`
+  (:func:`read_measurement_tool` reads them alone) and the writer writes them back; other comment
+  lines there are ignored. ``identify``, ``diagnose``, ``register`` and ``simulate`` take the tool
+  from them and refuse an option or a cell that contradicts them.
+
 Example::
 
     shoulder_pan_joint,shoulder_lift_joint,elbow_joint,wrist_1_joint,wrist_2_joint,wrist_3_joint,x,y,z,sigma_x,sigma_y,sigma_z,temperature
@@ -97,7 +105,7 @@ from __future__ import annotations
 
 from pin_kpi_oed.data.measurement_reader import (ANGLE_LIMIT_RAD, MAX_MEDIAN_DISTANCE_M, MAX_MEDIAN_SIGMA_M,
                                                  check_positive_sigma, parse_numeric_table,
-                                                 read_measurements)
+                                                 read_measurement_tool, read_measurements)
 from pin_kpi_oed.data.measurement_set import (PAYLOAD_COLUMN, POSITION_COLUMNS, RESERVED_COLUMNS, ROTVEC_COLUMNS,
                                               SIGMA_AXIS_COLUMNS, SIGMA_COLUMN, STATION_COLUMN, TEMPERATURE_COLUMN,
                                               TIME_COLUMN, MeasurementSet, concat_measurements)
@@ -115,6 +123,7 @@ __all__ = [
     "STATION_COLUMN",
     "MeasurementSet",
     "read_measurements",
+    "read_measurement_tool",
     "write_measurements",
     "concat_measurements",
     "parse_numeric_table",

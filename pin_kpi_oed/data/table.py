@@ -30,8 +30,7 @@ import pandas as pd
 from pin_kpi_oed.errors import InputError
 
 __all__ = ["LENGTH_UNITS", "ANGLE_UNITS", "Units", "SI_UNITS", "parse_units", "parse_columns", "rename_header",
-           "read_text_table",
-           "parse_text_table"]
+           "read_text_table", "read_text_file", "parse_text_table"]
 
 #: Length units accepted in a declaration and their factor to metres.
 LENGTH_UNITS: dict[str, float] = {"m": 1.0, "cm": 1e-2, "mm": 1e-3, "um": 1e-6, "µm": 1e-6, "in": 0.0254}
@@ -194,18 +193,26 @@ def read_text_table(path: str | os.PathLike, src: str, kind: str = "file", sep: 
     Raises:
         InputError: a missing file, a directory, unreadable or not UTF-8 text, an empty file.
     """
+    return parse_text_table(read_text_file(path, src, kind), src, kind, sep)
+
+
+def read_text_file(path: str | os.PathLike, src: str, kind: str = "file") -> str:
+    """The text of a UTF-8 file (a byte-order mark dropped).
+
+    Raises:
+        InputError: a missing file, a directory, unreadable or not UTF-8 text.
+    """
     p = Path(path)
     if not p.exists():
         raise InputError(f"{kind} '{src}' does not exist")
     if p.is_dir():
         raise InputError(f"{kind} '{src}' is a directory, expected a text file")
     try:
-        text = p.read_text(encoding="utf-8-sig")
+        return p.read_text(encoding="utf-8-sig")
     except UnicodeDecodeError as exc:
         raise InputError(f"{src}: not a UTF-8 text file ({exc})") from None
     except OSError as exc:
         raise InputError(f"{src}: cannot read file ({exc.strerror})") from None
-    return parse_text_table(text, src, kind, sep)
 
 
 def parse_text_table(text: str, src: str, kind: str = "file", sep: str = ","

@@ -29,11 +29,19 @@ of 10⁻⁴) is left out of J but not out of the residual, so the iteration conv
 solution of the calibrated model (linearly, at a rate of that order). A position-only target
 leaves the orientation free: the minimum-norm steps stay close to the nominal solution.
 
+The nominal IK starts from the target's joint hint, else from the model's working configuration nearest
+the target, else from the neutral configuration (:mod:`pin_kpi_oed.identification.compensate_checks`): the
+solution stays on that branch, also on a redundant arm. The TCP c is given in the robot's tool frame
+(``CalibratedModel.robot.tool_frame``; the model's ``tcp_m`` when a cell or a measurement header stated it).
+
 Status per target: ``ok``; ``unreachable`` (the nominal or the calibrated IK ends farther from
 the target than ``reach_tol_m`` / ``reach_tol_rad``: outside the workspace, at a joint limit, or
 at a singularity where the calibrated pose needs a large joint motion — ``inv_cond`` tells which);
-``near_singular`` (reached, but the inverse condition number σ_min/σ_max of the scaled Jacobian
-is below ``singular_ratio``: small TCP corrections there need large joint motions).
+``off_branch`` (the nominal IK left the branch of the hint / working configuration, or compensation moved
+a joint by more than ``max_branch_step_rad``); ``joint_limit`` (a joint of the compensated configuration at
+its limit); ``collision`` (with ``cell``: the compensated configuration collides in the cell's independent
+check); ``near_singular`` (reached, but the inverse condition number σ_min/σ_max of the scaled Jacobian
+is below ``singular_ratio``: small TCP corrections there need large joint motions). Only ``ok`` is safe to send.
 """
 
 from __future__ import annotations
@@ -53,17 +61,21 @@ from pin_kpi_oed.data.measurements import MeasurementSet
 from pin_kpi_oed.data.targets import TargetSet
 from pin_kpi_oed.effects.library import predict_with_effects, sum_joint_offsets
 from pin_kpi_oed.errors import InputError
+from pin_kpi_oed.identification.compensate_checks import (branch_step, collision_rows, joint_limit_rows,
+                                                          start_configurations)
 from pin_kpi_oed.identification.model_file import CalibratedModel
 from pin_kpi_oed.model.kinematics import skew
 from pin_kpi_oed.model.parameters import ParameterLayout
 from pin_kpi_oed.model.tracker import TrackerModel
 from pin_kpi_oed.results import Result
 
-__all__ = ["FRAMES", "CompensationOptions", "PoseModel", "CompensationResult", "compensate", "compensate_program",
+__all__ = ["FRAMES", "STATUSES", "CompensationOptions", "PoseModel", "CompensationResult", "compensate", "compensate_program",
            "write_compensation", "forward"]
 
 #: Frames a target can be given in.
 FRAMES = ("cell", "base")
+#: Status of a compensated target; only the first is safe to send.
+STATUSES = ("ok", "unreachable", "off_branch", "joint_limit", "collision", "near_singular")
 
 
 @dataclass
@@ -84,6 +96,11 @@ class CompensationOptions:
         singular_ratio: inverse condition number below which a solution is ``near_singular``.
         restarts: seeded random starts of the nominal IK when the first start fails.
         seed: seed of those starts.
+        max_branch_step_rad: largest joint change (rad / m) compensation may make to the nominal solution; beyond
+            it the compensated configuration is on another branch (``off_branch``).
+        limit_margin: a compensated joint this close to its limit (rad / m) is ``joint_limit``.
+        cell: the :class:`~pin_kpi_oed.cell.cell_model.Cell` whose independent check every compensated configuration
+            must pass (``collision`` otherwise); None: not checked.
     """
 
     frame: str = "cell"
@@ -100,11 +117,15 @@ class CompensationOptions:
     singular_ratio: float = 1e-2
     restarts: int = 10
     seed: int = 0
+    max_branch_step_rad: float = 0.05
+    limit_margin: float = 1e-6
+    cell: Any = None
 
     def __post_init__(self) -> None:
         if self.frame not in FRAMES:
             raise InputError(f"frame must be one of {', '.join(FRAMES)}, got '{self.frame}'")
-        for k in ("length_m", "tol_m", "tol_rad", "reach_tol_m", "reach_tol_rad", "max_step_rad", "singular_ratio"):
+        for k in ("length_m", "tol_m", "tol_rad", "reach_tol_m", "reach_tol_rad", "max_step_rad", "singular_ratio",
+                  "max_branch_step_rad", "limit_margin"):
             v = float(getattr(self, k))
             if not (np.isfinite(v) and v > 0):
                 raise InputError(f"compensation option {k} must be a positive number, got {v!r}")
@@ -119,7 +140,8 @@ class PoseModel:
         cm: the calibrated model.
         frame: ``cell`` or ``base`` (see the module docstring).
         station: station of the cell frame / default TCP.
-        tcp_m: TCP in the tool frame (m); default the station's reflector.
+        tcp_m: TCP in the tool frame (m); default the model's TCP when a cell or a measurement header stated it
+            (``cm.tool_source``), else the station's reflector.
         nominal: use the nominal geometry and no effects (what the controller computes).
     """
 
@@ -128,7 +150,8 @@ class PoseModel:
         self.robot = cm.robot
         st = cm.setups[cm.station(station)]
         self.T = pin.SE3(st.tracker_T_base) if frame == "cell" else pin.SE3.Identity()
-        self.tcp = np.asarray(st.reflector_m if tcp_m is None else tcp_m, float).reshape(3)
+        default = cm.tcp_m if cm.tool_source else st.reflector_m
+        self.tcp = np.asarray(default if tcp_m is None else tcp_m, float).reshape(3)
         L = ParameterLayout(list(self.robot.joint_names))
         self.tm = TrackerModel(self.robot, tracker_T_base=self.T, reflector_m=self.tcp, noise=cm.noise, layout=L)
         self.p = np.zeros(L.n)
@@ -266,6 +289,12 @@ class CompensationResult(Result):
             (posterior and white level; its noise model's σ without one), (m,). Learnt at the reflector: a TCP
             away from it adds the flange rotation's lever arm (:mod:`pin_kpi_oed.discrepancy.lever_arm`).
         tcp_from_reflector_m: the TCP's distance from the station's reflector (m).
+        tool_frame: the tool frame ``tcp_m`` is given in.
+        start: per target, where its branch came from (``hint``, ``working``, ``neutral``; ``program``).
+        q_start: the start configurations (m, n).
+        branch_step_rad: per target, the largest joint change of ``q`` from ``q_nominal`` (rad / m).
+        from_start_rad: per target, the largest joint difference of ``q`` from ``q_start`` (rad / m).
+        collision_pair: per target with a cell, the pair nearest to colliding at ``q`` ("" without a cell).
     """
 
     names: list[str] = field(default_factory=list)
@@ -283,16 +312,28 @@ class CompensationResult(Result):
     orientation: bool = False
     sigma_m: np.ndarray = field(default_factory=lambda: np.zeros(0))
     tcp_from_reflector_m: float = 0.0
+    tool_frame: str = ""
+    start: list[str] = field(default_factory=list)
+    q_start: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
+    branch_step_rad: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    from_start_rad: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    collision_pair: list[str] = field(default_factory=list)
 
     def summary(self) -> str:
         """Counts, correction statistics (mm), and the targets that are not ok."""
         c = self.correction_m * 1e3
         ok = [s == "ok" for s in self.target_status]
+        counts = ", ".join(f"{self.target_status.count(k)} {k.replace('_', ' ')}" for k in STATUSES[1:]
+                           if k in self.target_status)
         lines = [f"compensated {len(self.names)} targets "
                  f"({'position + orientation' if self.orientation else 'position'}"
                  f", {self.frame} frame{' of station ' + self.station if self.frame == 'cell' else ''}): "
-                 f"{sum(ok)} ok, {self.target_status.count('near_singular')} near a singularity, "
-                 f"{self.target_status.count('unreachable')} unreachable"]
+                 f"{sum(ok)} ok" + (f", {counts}" if counts else ""),
+                 f"TCP {np.round(self.tcp_m * 1e3, 3).tolist()} mm in tool frame {self.tool_frame}"
+                 + ("; branch from: " + ", ".join(f"{self.start.count(k)} {k}" for k in dict.fromkeys(self.start))
+                    if self.start else "")
+                 + (f"; largest joint change by compensation {np.max(self.branch_step_rad):.2e} rad"
+                    if self.branch_step_rad.size else "")]
         if c.size:
             lines.append(f"predicted correction: mean {np.nanmean(c):.4f} mm, max {np.nanmax(c):.4f} mm; "
                          f"largest residual {np.nanmax(self.residual_m) * 1e3:.2e} mm")
@@ -318,13 +359,21 @@ class CompensationResult(Result):
                             "residual_m": self.residual_m, "residual_rad": self.residual_rad,
                             "inv_cond": self.inv_cond, "target_status": self.target_status, "frame": self.frame,
                             "station": self.station, "tcp_m": self.tcp_m, "orientation": self.orientation,
-                            "sigma_m": self.sigma_m, "tcp_from_reflector_m": self.tcp_from_reflector_m})
+                            "sigma_m": self.sigma_m, "tcp_from_reflector_m": self.tcp_from_reflector_m,
+                            "tool_frame": self.tool_frame, "start": self.start, "q_start": self.q_start,
+                            "branch_step_rad": self.branch_step_rad, "from_start_rad": self.from_start_rad,
+                            "collision_pair": self.collision_pair})
 
 
 def _nominal_ik(pm0: PoseModel, pos_t: np.ndarray, R_t: np.ndarray | None, Q_start: np.ndarray, aux: Any,
-                opt: CompensationOptions) -> _IK:
-    """Nominal IK from Q_start, then from seeded random starts for the rows that did not converge."""
+                opt: CompensationOptions) -> tuple[_IK, np.ndarray]:
+    """Nominal IK from Q_start, then from seeded random starts for the rows that did not converge.
+
+    Returns:
+        (the solutions, per row whether a random restart gave its solution).
+    """
     ik = _solve_ik(pm0, pos_t, R_t, Q_start, aux, opt)
+    restarted = np.zeros(len(Q_start), bool)
     rng = np.random.default_rng(opt.seed)
     for _ in range(opt.restarts):
         bad = (ik.err_m > opt.reach_tol_m) | (ik.err_rad > opt.reach_tol_rad)
@@ -339,8 +388,9 @@ def _nominal_ik(pm0: PoseModel, pos_t: np.ndarray, R_t: np.ndarray | None, Q_sta
             if better[k]:
                 ik.Q[i], ik.err_m[i], ik.err_rad[i], ik.inv_cond[i] = (again.Q[k], again.err_m[k], again.err_rad[k],
                                                                        again.inv_cond[k])
+                restarted[i] = True
         ik.nit += again.nit
-    return ik
+    return ik, restarted
 
 
 def compensate(cm: CalibratedModel, targets: TargetSet, options: CompensationOptions | None = None
@@ -370,12 +420,11 @@ def compensate(cm: CalibratedModel, targets: TargetSet, options: CompensationOpt
     pm0 = PoseModel(cm, opt.frame, opt.station, opt.tcp_m, nominal=True)
     pos_t = np.asarray(targets.position_m, float)
     R_t = None if targets.rotvec_rad is None else np.array([pin.exp3(v) for v in targets.rotvec_rad])
-    m = len(targets)
-    Q_start = targets.q if targets.q is not None else np.tile(cm.robot.neutral(), (m, 1))
-    Q_start = np.clip(Q_start, cm.robot.q_lower, cm.robot.q_upper)
-    nom = _nominal_ik(pm0, pos_t, R_t, Q_start, targets.aux, opt)
+    start = start_configurations(pm0, cm.q_work, targets.q, pos_t, R_t, targets.aux, opt.length_m)
+    nom, restarted = _nominal_ik(pm0, pos_t, R_t, start.Q, targets.aux, opt)
     cal = _solve_ik(pm, pos_t, R_t, nom.Q, targets.aux, opt)
-    return _result(cm, targets, opt, pm, nom, cal, pos_t, t0)
+    left = restarted & np.array([k != "neutral" for k in start.kind])  # the hint's / working branch was left
+    return _result(cm, targets, opt, pm, nom, cal, pos_t, t0, start.Q, start.kind, left)
 
 
 def compensate_program(cm: CalibratedModel, program: TargetSet, options: CompensationOptions | None = None,
@@ -412,7 +461,7 @@ def compensate_program(cm: CalibratedModel, program: TargetSet, options: Compens
     nom = _IK(Q0.copy(), np.zeros(len(Q0)), np.zeros(len(Q0)), np.ones(len(Q0)), 0)
     cal = _solve_ik(pm, pos_t, R_t, Q0, program.aux, opt)
     targets = TargetSet(program.names, pos_t, None, Q0, program.joint_names, program.aux, program.source)
-    res = _result(cm, targets, opt, pm, nom, cal, pos_t, t0)
+    res = _result(cm, targets, opt, pm, nom, cal, pos_t, t0, Q0, ["program"] * len(Q0), np.zeros(len(Q0), bool))
     res.orientation = bool(orientation)
     return res
 
@@ -432,30 +481,50 @@ def _check_effects(cm: CalibratedModel, aux: MeasurementSet) -> None:
 
 
 def _result(cm: CalibratedModel, ts: TargetSet, opt: CompensationOptions, pm: PoseModel, nom: _IK, cal: _IK,
-            pos_t: np.ndarray, t0: float) -> CompensationResult:
+            pos_t: np.ndarray, t0: float, Q_start: np.ndarray, start: list[str], left_branch: np.ndarray
+            ) -> CompensationResult:
     from pin_kpi_oed.discrepancy.lever_arm import lever_arm_m
 
     pos_nom, _ = pm.pose(nom.Q, ts.aux)
     correction = np.linalg.norm(pos_nom - pos_t, axis=1)
-    status = []
-    for i in range(len(ts)):
-        if (nom.err_m[i] > opt.reach_tol_m or nom.err_rad[i] > opt.reach_tol_rad
-                or cal.err_m[i] > opt.reach_tol_m or cal.err_rad[i] > opt.reach_tol_rad):
-            status.append("unreachable")
-        elif cal.inv_cond[i] < opt.singular_ratio:
-            status.append("near_singular")
-        else:
-            status.append("ok")
+    step = branch_step(cal.Q, nom.Q)
+    at_limit = joint_limit_rows(cm.robot, cal.Q, opt.limit_margin)
+    colliding, pair = (collision_rows(opt.cell, cal.Q) if opt.cell is not None
+                       else (np.zeros(len(ts), bool), [""] * len(ts)))
+    status = [_status(i, opt, nom, cal, bool(left_branch[i]), step[i] > opt.max_branch_step_rad, at_limit[i],
+                      colliding[i]) for i in range(len(ts))]
     n_bad = sum(s != "ok" for s in status)
     return CompensationResult(
         success=n_bad == 0, status="ok" if n_bad == 0 else f"{n_bad} of {len(ts)} targets not ok",
-        message="" if n_bad == 0 else "see the per-target status (unreachable / near_singular)",
+        message="" if n_bad == 0 else "see the per-target status (" + " / ".join(STATUSES[1:]) + ")",
         nit=int(nom.nit + cal.nit), time_s=time.perf_counter() - t0, names=list(ts.names),
         joint_names=list(cm.robot.joint_names), q_nominal=nom.Q, q=cal.Q, correction_m=correction,
         residual_m=cal.err_m, residual_rad=cal.err_rad, inv_cond=cal.inv_cond, target_status=status,
         frame=opt.frame, station=cm.station(opt.station), tcp_m=pm.tcp, orientation=ts.rotvec_rad is not None,
         sigma_m=_tcp_sigma(cm, cal.Q, ts.aux, opt.station),
-        tcp_from_reflector_m=lever_arm_m(pm.tcp, cm.setups[cm.station(opt.station)].reflector_m))
+        tcp_from_reflector_m=lever_arm_m(pm.tcp, cm.setups[cm.station(opt.station)].reflector_m),
+        tool_frame=cm.robot.tool_frame, start=list(start), q_start=np.asarray(Q_start, float),
+        branch_step_rad=step, from_start_rad=branch_step(cal.Q, Q_start), collision_pair=pair)
+
+
+def _status(i: int, opt: CompensationOptions, nom: _IK, cal: _IK, left_branch: bool, big_step: bool,
+            at_limit: bool, colliding: bool) -> str:
+    """The status of target i (module docstring): the first failed check. Near a singularity compensation needs
+    large joint steps, so ``near_singular`` is named before a step too large for the branch."""
+    if (nom.err_m[i] > opt.reach_tol_m or nom.err_rad[i] > opt.reach_tol_rad
+            or cal.err_m[i] > opt.reach_tol_m or cal.err_rad[i] > opt.reach_tol_rad):
+        return "unreachable"
+    if left_branch:
+        return "off_branch"
+    if cal.inv_cond[i] < opt.singular_ratio:
+        return "near_singular"
+    if big_step:
+        return "off_branch"
+    if at_limit:
+        return "joint_limit"
+    if colliding:
+        return "collision"
+    return "ok"
 
 
 def _tcp_sigma(cm: CalibratedModel, Q: np.ndarray, aux: Any, station: str | None) -> np.ndarray:
@@ -470,17 +539,21 @@ def write_compensation(path: str | os.PathLike, res: CompensationResult) -> None
 
     Columns: ``name``, the joint columns (compensated, rad / m: send these), ``<joint>_nominal``,
     ``correction_m``, ``residual_m``, ``residual_rad``, ``inv_cond``, ``sigma_m`` (predicted 3-D TCP σ, m),
+    ``start`` (where the branch came from), ``branch_step_rad`` (largest joint change from the nominal solution),
     ``status``.
     """
     buf = io.StringIO()
     w = csv.writer(buf, lineterminator="\n")
     w.writerow(["name"] + res.joint_names + [f"{j}_nominal" for j in res.joint_names]
-               + ["correction_m", "residual_m", "residual_rad", "inv_cond", "sigma_m", "status"])
+               + ["correction_m", "residual_m", "residual_rad", "inv_cond", "sigma_m", "start", "branch_step_rad",
+                  "status"])
     for i, n in enumerate(res.names):
         w.writerow([n] + [repr(float(v)) for v in res.q[i]] + [repr(float(v)) for v in res.q_nominal[i]]
                    + [repr(float(res.correction_m[i])), repr(float(res.residual_m[i])),
                       repr(float(res.residual_rad[i])), repr(float(res.inv_cond[i])),
-                      repr(float(res.sigma_m[i])) if res.sigma_m.size else "", res.target_status[i]])
+                      repr(float(res.sigma_m[i])) if res.sigma_m.size else "",
+                      res.start[i] if res.start else "",
+                      repr(float(res.branch_step_rad[i])) if res.branch_step_rad.size else "", res.target_status[i]])
     atomic_write_text(path, buf.getvalue())
 
 

@@ -133,6 +133,7 @@ from pin_kpi_oed.identification.model_file import Setup
 from pin_kpi_oed.identification.problem import (ResidualModel, align_data, effect_param_names, jl_inv, log3,
                                                 predict)
 from pin_kpi_oed.identification.solve import fit_covariance, settle_outliers, solve, tcp_std
+from pin_kpi_oed.identification.tool_check import check_tool
 from pin_kpi_oed.identification.tracker_start import proj_so3, register_points, start_stations
 from pin_kpi_oed.model.tracker import TrackerModel
 from pin_kpi_oed.threads import limit_threads
@@ -210,6 +211,7 @@ def identify(model: TrackerModel, data: MeasurementSet, options: IdentifyOptions
     """
     t_start = time.perf_counter()
     opts = IdentifyOptions.resolve(options, overrides)
+    check_tool(model.robot, model.tcp_m, data)
     inp = check_inputs(model, data, opts)
     stations, P0, T_init = start_stations(model, data, inp, effects, opts)
     ident = identifiable_set(stations, opts)
@@ -241,7 +243,8 @@ def identify(model: TrackerModel, data: MeasurementSet, options: IdentifyOptions
         station_p=[stations.station_p(P_hat, s) for s in range(len(stations.labels))],
         station_rows=list(prob.rows), P=P_hat, param_names=list(stations.layout.names), station_set=stations,
         reflector_per_station=bool(opts.reflector_per_station), source=data.source,
-        held=[(e, np.asarray(t, float)) for e, t in opts.held_effects], time_s=time.perf_counter() - t_start)
+        held=[(e, np.asarray(t, float)) for e, t in opts.held_effects], time_s=time.perf_counter() - t_start,
+        tool=data.tool)
     result.discrepancy = result_discrepancy(result, data, discrepancy_options(opts.discrepancy, opts.seed), inp.Q)
     result.time_s = time.perf_counter() - t_start
     return result

@@ -74,6 +74,8 @@ class IdentificationResult(Result):
             :class:`~pin_kpi_oed.identification.problem.ResidualModel` on other rows: ``p_ref=P``).
         reflector_per_station: each station had its own reflector.
         source: where the data came from.
+        tool: the data's tool (:attr:`MeasurementSet.tool`: robot, tool frame, reflector, TCP, working
+            configurations), carried into the model file; None: the data did not state it.
     """
 
     names: list[str]
@@ -115,6 +117,7 @@ class IdentificationResult(Result):
     source: str = ""
     held: list = field(default_factory=list, repr=False)
     discrepancy: Any = field(default=None, repr=False)
+    tool: Any = field(default=None, repr=False)
 
     @property
     def converged(self) -> bool:
@@ -189,6 +192,13 @@ class IdentificationResult(Result):
         return ([e for e, _ in self.held] + list(self.effects),
                 [np.asarray(t, float) for _, t in self.held] + [np.asarray(t, float) for t in self.theta])
 
+    def _tcp_m(self) -> np.ndarray:
+        """The model's TCP (m, tool frame); at the origin, the data header's when it states one."""
+        tcp = np.asarray(self.model.tcp_m, float)
+        if not np.any(tcp != 0) and self.tool is not None and self.tool.tcp_m is not None:
+            return self.tool.tcp_m.copy()
+        return tcp.copy()
+
     def calibrated_model(self) -> CalibratedModel:
         """Everything the fit found as a :class:`CalibratedModel` (what ``--model-out`` writes)."""
         nj = 6 * self.model.robot.nq
@@ -206,13 +216,14 @@ class IdentificationResult(Result):
         return CalibratedModel(
             robot=self.model.robot, joint_p=np.asarray(self.p[:nj], float).copy(), effects=self.all_effects()[0],
             thetas=[t.copy() for t in self.all_effects()[1]], setups=dict(self.setups),
-            noise=self.model.noise, tcp_m=self.model.tcp_m, pose6d=bool(self.model.pose6d),
+            noise=self.model.noise, tcp_m=self._tcp_m(), pose6d=bool(self.model.pose6d),
             parameters={"names": list(self.names), "values": self.values, "std": self.std,
                         "units": [param_unit(n) for n in self.names], "covariance": self.covariance},
             fit=fit, default_station=self.stations[0] if len(self.stations) == 1 else None,
             history=[{"step": "identify", "data": self.source, "stations": list(self.stations),
                       "n_measurements": self.n_measurements, "rms_m": self.rms_m}],
-            discrepancy=self.discrepancy)
+            discrepancy=self.discrepancy, q_work=None if self.tool is None else self.tool.q_work,
+            tool_source="" if self.tool is None or self.tool.tcp_m is None else self.tool.source)
 
     def to_dict(self) -> dict:
         """Plain JSON-able dict (SI units)."""

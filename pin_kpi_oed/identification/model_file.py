@@ -24,6 +24,11 @@ key                  content (SI units: m, rad)
 ``default_station``  the station used when none is named (the last registered one)
 ``noise``            the noise model (:meth:`NoiseModel.to_dict`)
 ``tcp_m``, ``pose6d`` KPI point in the tool frame; whether the model predicts orientations
+``tool_source``      where ``tcp_m`` and the tool frame come from (a cell file or a measurement
+                     file's tool header); absent: not stated, ``compensate`` then takes the
+                     station's reflector as its default TCP
+``q_work``           optional: the cell's working configurations (rad / m per joint), the branch
+                     ``compensate`` keeps for targets without a joint hint
 ``fit``              fit statistics (measurements, RMS, reduced χ², iterations, ...) and
                      ``residual_sigma_m``: the fit's own residual level per axis (m, corrected
                      for the fitted parameters), what ``register`` compares a new session with
@@ -74,7 +79,7 @@ from pin_kpi_oed.errors import InputError, PinKpiOedError
 from pin_kpi_oed.model.noise import NoiseModel
 from pin_kpi_oed.model.tracker import TrackerModel
 from pin_kpi_oed.model.parameters import ParameterLayout
-from pin_kpi_oed.model.robot import ERD_ROBOTS, SHIPPED_ROBOTS, Robot, load_robot
+from pin_kpi_oed.model.robot import Robot, load_robot, portable_spec
 from pin_kpi_oed.model.serialize import se3_from_matrix
 from pin_kpi_oed.validation.schema import validate_model_dict
 from pin_kpi_oed.validation.units import check_sigma_m
@@ -241,6 +246,8 @@ class CalibratedModel:
         default_station: station used when none is named (None: the only one, if there is one).
         history: provenance, one dict per step (``identify``, ``register``).
         discrepancy: the robot's model discrepancy δ(q) (base frame), or None (noise-only model).
+        q_work: the cell's working configurations, (k, n) rad / m, or None.
+        tool_source: where ``tcp_m`` and the tool frame come from (cell or measurement header); "" = not stated.
     """
 
     robot: Robot
@@ -256,6 +263,8 @@ class CalibratedModel:
     default_station: str | None = None
     history: list = field(default_factory=list)
     discrepancy: Discrepancy | None = None
+    q_work: np.ndarray | None = None
+    tool_source: str = ""
 
     def __post_init__(self) -> None:
         self.joint_p = np.asarray(self.joint_p, float).reshape(-1)
@@ -265,6 +274,16 @@ class CalibratedModel:
         if len(self.thetas) != len(self.effects):
             raise InputError(f"{len(self.effects)} effects but {len(self.thetas)} parameter vectors")
         self.tcp_m = np.asarray(self.tcp_m, float).reshape(3)
+        if self.q_work is not None:
+            self.q_work = self.robot.check_q(self.q_work, "q_work (working configurations)")
+
+    @property
+    def default_tcp_m(self) -> np.ndarray:
+        """The TCP in the tool frame (m) a command uses by default: ``tcp_m`` when a cell or a measurement
+        header stated it, else the default station's reflector (the point the calibration measured)."""
+        if self.tool_source:
+            return self.tcp_m.copy()
+        return self.setups[self.station(None)].reflector_m.copy()
 
     # ------------------------------------------------------------------ stations
     @property
@@ -455,11 +474,13 @@ class CalibratedModel:
         calibrated = [M * pin.exp6(self.joint_p[L.joint_slice(k)]) for k, M in enumerate(nominal)]
         return to_jsonable({
             "format": MODEL_FORMAT,
-            "robot": {"spec": _robot_spec(rb), "name": rb.name, "urdf_path": str(rb.urdf_path),
+            "robot": {"spec": portable_spec(rb), "name": rb.name, "urdf_path": str(rb.urdf_path),
                       "tool_frame": rb.tool_frame, "joint_names": list(rb.joint_names),
                       "nominal_joint_placements": [M.homogeneous for M in nominal],
                       **({"kinematics": rb.kinematics.layout()} if rb.kinematics is not None else {})},
             "tcp_m": self.tcp_m,
+            **({"tool_source": self.tool_source} if self.tool_source else {}),
+            **({"q_work": self.q_work} if self.q_work is not None else {}),
             "pose6d": bool(self.pose6d),
             "geometry": {"joint_placement_errors": {n: float(v) for n, v in zip(L.names, self.joint_p)},
                          "joint_placements": [M.homogeneous for M in calibrated],
@@ -535,25 +556,17 @@ class CalibratedModel:
         disc = None
         if d.get("discrepancy") is not None:
             disc = Discrepancy.from_dict(d["discrepancy"], robot.joint_names, f"{where}: discrepancy")
+        q_work = d.get("q_work")
+        if q_work is not None:
+            try:
+                q_work = np.asarray(q_work, float).reshape(-1, robot.nq)
+            except (TypeError, ValueError):
+                raise InputError(f"{where}: field 'q_work' must be a list of {robot.nq} joint values each "
+                                 f"({', '.join(robot.joint_names)})") from None
         return cls(robot, joint_p, effects, thetas, setups, noise, tcp, bool(d.get("pose6d", False)),
                    dict(geo.get("parameters") or {}), fit,
-                   None if default is None else str(default), list(d.get("history") or []), disc)
-
-
-def _robot_spec(robot: Robot) -> str:
-    """Portable robot spec: the known name when it resolves to the same URDF, else the URDF path."""
-    from pin_kpi_oed.model.robot import resolve_robot
-
-    key = str(robot.name).lower()
-    if robot.kinematics is not None:  # a UR name with its kinematics (stored beside it)
-        return key
-    if key in SHIPPED_ROBOTS or key in ERD_ROBOTS:
-        try:
-            if Path(resolve_robot(key)[0]).resolve() == Path(robot.urdf_path).resolve():
-                return key
-        except PinKpiOedError:
-            pass
-    return str(robot.urdf_path)
+                   None if default is None else str(default), list(d.get("history") or []), disc,
+                   q_work=q_work, tool_source=str(d.get("tool_source") or ""))
 
 
 def _check_format(d: Any, where: str) -> None:

@@ -14,6 +14,11 @@ with σ_i from the model's :class:`~pin_kpi_oed.model.noise.NoiseModel` (per-axi
 a + b·range); a 6-D probe's orientation is ``R_meas = exp3(ε_rot) R_model`` with
 ε_rot ~ N(0, σ_rot² I). Geometric errors are drawn from tolerances (normal, standard
 deviation = tolerance). Every random draw takes a seed.
+
+A truth is saved as a JSON document (``"format": "pin_kpi_oed.truth/1"``, :func:`truth_to_dict`): the nominal
+set-up (robot, tool frame, tracker pose, reflector, TCP, noise), p* by parameter name, and the effects with
+their θ*; :func:`load_truth` rebuilds the same simulated robot from it, to measure it again at other poses
+or in another session (``simulate --truth FILE``).
 """
 
 from __future__ import annotations
@@ -34,7 +39,11 @@ from pin_kpi_oed.model.noise import NoiseModel
 from pin_kpi_oed.model.tracker import TrackerModel
 from pin_kpi_oed.model.robot import Robot
 
-__all__ = ["Tolerances", "random_truth", "default_tracker_pose", "simulate", "truth_to_dict"]
+__all__ = ["TRUTH_FORMAT", "Tolerances", "random_truth", "default_tracker_pose", "simulate", "truth_to_dict",
+           "load_truth", "feasible_poses"]
+
+#: Format name and version of a saved truth.
+TRUTH_FORMAT = "pin_kpi_oed.truth/1"
 
 
 def random_truth(model: TrackerModel, tol: Tolerances | None = None, seed: int = 0,
@@ -150,18 +159,106 @@ def simulate(model: TrackerModel, Q: np.ndarray, truth_p: np.ndarray | None = No
                           payload_kg=ms.payload_kg, time_s=ms.time_s, source=source, extra=extra)
 
 
-def truth_to_dict(model: TrackerModel, truth_p: np.ndarray, tol: Tolerances | None = None, seed: int | None = None
-                  ) -> dict:
-    """JSON-able description of a simulated truth (SI units)."""
+def truth_to_dict(model: TrackerModel, truth_p: np.ndarray, tol: Tolerances | None = None, seed: int | None = None,
+                  effects: Sequence[tuple[Any, np.ndarray]] = ()) -> dict:
+    """JSON-able description of a simulated truth (SI units), from which :func:`load_truth` rebuilds it.
+
+    Raises:
+        InputError: an effect that cannot be stored.
+    """
+    from pin_kpi_oed.data.atomic import to_jsonable
+    from pin_kpi_oed.identification.model_file import effect_spec
+    from pin_kpi_oed.model.robot import portable_spec
+
     p = np.asarray(truth_p, float)
-    return {
+    return to_jsonable({
+        "format": TRUTH_FORMAT,
         "robot": model.robot.name,
+        "robot_spec": portable_spec(model.robot),
         "tool_frame": model.robot.tool_frame,
         "p_raw": {n: float(v) for n, v in zip(model.layout.names, p)},
         "tracker_T_base": model.tracker_pose(p).homogeneous,
         "reflector_m": model.reflector(p),
+        "nominal": {"tracker_T_base": model.tracker_T_base.homogeneous, "reflector_m": model.reflector_m,
+                    "tcp_m": model.tcp_m, "pose6d": bool(model.pose6d)},
         "joint_placements": [M.homogeneous for M in model.joint_placements(p)],
+        "effects": [{**effect_spec(e), "theta": np.asarray(t, float)} for e, t in effects],
         "noise": model.noise.to_dict(),
         "tolerances": asdict(tol) if tol is not None else None,
         "seed": seed,
-    }
+    })
+
+
+def load_truth(path: str) -> tuple[TrackerModel, np.ndarray, list[tuple[Any, np.ndarray]]]:
+    """The simulated robot of a truth file (:func:`truth_to_dict`): (nominal model, p*, [(effect, θ*), ...]).
+
+    Raises:
+        InputError: a missing or unreadable file, another format, a missing or malformed field (named).
+    """
+    import json
+    from pathlib import Path
+
+    from pin_kpi_oed.identification.model_file import effect_from_spec
+    from pin_kpi_oed.model.kinematics import se3_from_matrix
+    from pin_kpi_oed.model.robot import load_robot
+
+    try:
+        d = json.loads(Path(path).read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise InputError(f"--truth {path}: cannot read the truth file ({exc})") from None
+    if not isinstance(d, dict) or d.get("format") != TRUTH_FORMAT:
+        raise InputError(f"--truth {path}: not a truth file (field 'format' is "
+                         f"{d.get('format') if isinstance(d, dict) else None!r}, expected '{TRUTH_FORMAT}'; "
+                         "write one with simulate --truth FILE)")
+    try:
+        nom = d["nominal"]
+        robot = load_robot(d["robot_spec"], d["tool_frame"])
+        model = TrackerModel(robot, tracker_T_base=se3_from_matrix(nom["tracker_T_base"], f"{path}: tracker_T_base"),
+                             reflector_m=np.asarray(nom["reflector_m"], float), tcp_m=np.asarray(nom["tcp_m"], float),
+                             noise=NoiseModel.from_dict(d["noise"]), pose6d=bool(nom["pose6d"]))
+        raw = d["p_raw"]
+        missing = [n for n in model.layout.names if n not in raw]
+        if missing:
+            raise InputError(f"--truth {path}: p_raw lacks {', '.join(missing[:3])}")
+        p = np.array([float(raw[n]) for n in model.layout.names])
+        effects = [(effect_from_spec(e, robot, f"--truth {path}: effects[{i}]"), np.asarray(e["theta"], float))
+                   for i, e in enumerate(d.get("effects") or [])]
+    except (KeyError, TypeError, ValueError) as exc:
+        raise InputError(f"--truth {path}: missing or malformed field ({exc})") from None
+    if not np.all(np.isfinite(p)):
+        raise InputError(f"--truth {path}: p_raw has values that are not finite")
+    return model, p, effects
+
+
+def feasible_poses(cell: Any, n: int, seed: int) -> np.ndarray:
+    """``n`` configurations drawn uniformly within the cell's joint bounds and kept when feasible in the cell:
+    collision-free, the beam clear and the reflector in sight by the cell's own independent check.
+
+    Args:
+        cell: the :class:`~pin_kpi_oed.cell.cell_model.Cell`.
+        n: number of configurations.
+        seed: seed of the draws.
+
+    Returns:
+        (n, nq) configurations (rad / m).
+
+    Raises:
+        InfeasibleError: fewer than ``n`` feasible configurations within the cell's sampling budget.
+    """
+    from pin_kpi_oed.cell.collision import CollisionModel, random_feasible
+    from pin_kpi_oed.cell.feasibility import FeasibilityChecker
+    from pin_kpi_oed.errors import InfeasibleError
+
+    rng = np.random.default_rng(seed)
+    coll, chk = CollisionModel(cell), FeasibilityChecker(cell)
+    found: list[np.ndarray] = []
+    for _ in range(5):
+        want = n - len(found)
+        if want <= 0:
+            break
+        Q, _ = random_feasible(coll, want + max(2, want // 5), rng, cell.max_random_tries)
+        found.extend(Q[chk.check(Q).feasible])
+    if len(found) < n:
+        raise InfeasibleError(f"cell {cell.name}: only {len(found)} of {n} random configurations are feasible in the "
+                              "cell's independent check; ask for fewer held-out poses")
+    return np.asarray(found[:n])

@@ -61,6 +61,24 @@ ROBOT_NAMES: tuple[str, ...] = SHIPPED_ROBOTS + tuple(ERD_ROBOTS) + ("ur3e", "ur
 ROBOT_HELP = (f"URDF path or name ({', '.join(ROBOT_NAMES)}); a UR name takes its calibration "
               "with --kinematics calib.yaml (ur_description layout)")
 
+
+def default_tool_frames() -> dict[str, str]:
+    """The tool frame each robot name loads by default (``tool0`` unless example-robot-data's URDF says otherwise)."""
+    return {**dict.fromkeys(SHIPPED_ROBOTS, "tool0"), **{k: v[1] for k, v in ERD_ROBOTS.items()}}
+
+
+def _tool_help() -> str:
+    by_frame: dict[str, list[str]] = {}
+    for name, frame in default_tool_frames().items():
+        by_frame.setdefault(frame, []).append(name)
+    other = [f"{frame} for {', '.join(names)}" for frame, names in by_frame.items() if frame != "tool0"]
+    return ("tool frame of the URDF (default: " + "; ".join(other + ["tool0 for the other robots and URDFs"])
+            + "); taken from --cell or the data's header when given there")
+
+
+#: Help text of every ``--tool`` option: the real default tool frame of each robot name.
+TOOL_HELP = _tool_help()
+
 #: Joint values beyond these magnitudes are in the wrong unit: degrees (revolute) or mm (prismatic).
 UNIT_GUARD = {"rad": 2.0 * np.pi + 0.1, "m": 100.0}
 #: What a value beyond :data:`UNIT_GUARD` looks like, per unit.
@@ -95,6 +113,30 @@ def resolve_robot(spec: str) -> tuple[Path, str | None]:
         rel, tool = ERD_ROBOTS[key]
         return erd_root() / rel, tool
     return Path(spec), None
+
+
+def portable_spec(robot: "Robot") -> str:
+    """The robot's spec for files: its name when that name loads the same URDF, else the URDF path."""
+    key = str(robot.name).lower()
+    if getattr(robot, "kinematics", None) is not None:  # a UR name with its kinematics (stored beside it)
+        return key
+    if key in SHIPPED_ROBOTS or key in ERD_ROBOTS:
+        try:
+            if Path(resolve_robot(key)[0]).resolve() == Path(robot.urdf_path).resolve():
+                return key
+        except RobotLoadError:
+            pass
+    return str(robot.urdf_path)
+
+
+def same_robot(spec_a: str, spec_b: str) -> bool:
+    """Whether two robot specs (names or URDF paths) load the same URDF file."""
+    def path(spec: str) -> Path:
+        try:
+            return Path(resolve_robot(str(spec))[0]).resolve()
+        except RobotLoadError:
+            return Path(str(spec)).resolve()
+    return path(spec_a) == path(spec_b)
 
 
 @dataclass

@@ -167,10 +167,12 @@ OUTPUTS = {"evaluate": ["json"], "demo": ["json"], "design": ["json"], "simulate
            "export-model": ["out"], "report": ["html", "json", "pdf"]}
 #: command -> argparse dests of inputs (files or folders; lists allowed)
 INPUTS = {"evaluate": ["design"], "design": ["cell", "pool", "given", "given_prior", "model"],
-          "identify": ["data", "validate", "register_data", "robot", "kinematics"],
-          "simulate": ["robot", "design"], "import-ipa": ["src"], "register": ["model", "data"],
-          "predict": ["model", "data"], "diagnose": ["train", "validate", "register_data", "robot", "kinematics"],
-          "view": ["design"], "info": ["robot"], "export": ["design"], "compensate": ["model", "targets", "program"],
+          "identify": ["data", "validate", "register_data", "robot", "kinematics", "cell"],
+          "simulate": ["robot", "design", "cell", "poses", "truth"], "import-ipa": ["src"],
+          "register": ["model", "data", "cell"], "predict": ["model", "data"],
+          "diagnose": ["train", "validate", "register_data", "robot", "kinematics", "cell"],
+          "view": ["design"], "info": ["robot"], "export": ["design"],
+          "compensate": ["model", "targets", "program", "cell"],
           "import-tracker": ["export", "joints", "robot"], "export-model": ["model"],
           "report": ["model", "train", "validate", "register_data"]}
 #: command -> argparse dests of output folders

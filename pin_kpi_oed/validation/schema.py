@@ -257,6 +257,8 @@ MODEL_SCHEMA: dict[str, Any] = {
                                  "joint_names": _STRS, "nominal_joint_placements": {"type": "array", "items": _MAT4},
                                  "kinematics": {"type": "object"}}},
         "tcp_m": _VEC3, "pose6d": {"type": "boolean"},
+        "tool_source": {"type": "string"},
+        "q_work": {"type": "array", "minItems": 1, "items": {"type": "array", "minItems": 1, "items": _NUM}},
         "geometry": {"type": "object", "additionalProperties": False, "required": ["joint_placement_errors"],
                      "properties": {
                          "joint_placement_errors": {"type": "object", "additionalProperties": _NUM},
@@ -351,7 +353,7 @@ def validate_model_dict(d: Any, source: str = "model file") -> None:
     if not isinstance(d, dict):
         raise InputError(f"{where}expected a JSON object at the top level (a model file), got {type(d).__name__}")
     _validate(d, MODEL_SCHEMA, source, "model")
-    for key in ("robot", "tcp_m", "geometry", "effects", "stations", "noise"):
+    for key in ("robot", "tcp_m", "q_work", "geometry", "effects", "stations", "noise"):
         hit = _first_nonfinite(d.get(key), key)
         if hit:
             raise InputError(f"{where}model field {hit}: not a finite number (NaN or inf)")

@@ -350,7 +350,7 @@ def build_inputs(d: Path) -> None:
                      str(d / "d.json"), "--quiet"]) == 0
         assert main(["identify", "--robot", "kr15", "--data", str(d / "tr.csv"), "--model-out", str(d / "m.json"),
                      "--quiet"]) == 0
-    lines = (d / "tr.csv").read_text().splitlines()
+    lines = [ln for ln in (d / "tr.csv").read_text().splitlines() if not ln.startswith("#")]  # tool header off
     (d / "two.csv").write_text("\n".join(lines[:3]) + "\n")
     (d / "sub").mkdir(exist_ok=True)
     (d / "link.csv").symlink_to(d / "tr.csv")
@@ -433,7 +433,7 @@ def _build_issue24(d: Path, design: dict) -> None:
     edited("d_a5.json", set_pose(3, 4, 2.299))  # A5 limit ±130° = ±2.269 rad
     edited("d_pose_wall.json", set_pose_q(0, wall))
     (d / "d.dat").write_text(json.dumps(design))
-    rows = (d / "te.csv").read_text().splitlines()
+    rows = [ln for ln in (d / "te.csv").read_text().splitlines() if not ln.startswith("#")]
     head = rows[0].split(",")
     xi, yi, zi = (head.index(c) for c in "xyz")
     data = [r.split(",") for r in rows[1:]]
