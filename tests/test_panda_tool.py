@@ -114,8 +114,9 @@ def test_panda_link8_tool_travels_and_compensation_keeps_the_branch(tmp_path):
         r[1:4] = T.act(M.act(refl))
     with open(targets, "w", newline="") as f:
         csv.writer(f).writerows([["name", "x", "y", "z", "rx", "ry", "rz"]] + rows)
-    rc, out, err = _main("compensate", "--model", model, "--targets", targets, "--tcp", ",".join(repr(float(v)) for v in refl),
-                         "--out", tmp_path / "j.csv", "--json", tmp_path / "j.json")
+    rc, out, err = _main("compensate", "--model", model, "--targets", targets, "--tcp",
+                         ",".join(repr(float(v)) for v in refl), "--out", tmp_path / "j.csv",
+                         "--json", tmp_path / "j.json")
     assert rc == 0, err
     res = json.loads((tmp_path / "j.json").read_text())
     goal, refl_true = np.array([r[1:4] for r in rows], float), tm[0].reflector(tm[1])  # where the reflector truly is

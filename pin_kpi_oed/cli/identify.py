@@ -1,4 +1,4 @@
-"""CLI subcommands ``identify`` and ``import-ipa`` of ``pin-kpi-oed`` (and ``simulate``, :mod:`pin_kpi_oed.cli.simulate`).
+"""CLI subcommands ``identify`` and ``import-ipa`` of ``pin-kpi-oed`` (``simulate``: :mod:`pin_kpi_oed.cli.simulate`).
 
 ``register(subparsers)`` adds the three subcommands; each sets ``func`` to its handler
 ``run_*(args) -> int`` (0 on success). Errors are :class:`~pin_kpi_oed.errors.PinKpiOedError`

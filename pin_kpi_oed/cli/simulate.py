@@ -72,7 +72,8 @@ def register_simulate(subparsers: argparse._SubParsersAction) -> None:
     s.add_argument("--truth-json", default=None, help="also write the true robot here (the same document as --truth)")
     s.add_argument("--seed", type=int, default=0, help="seed of every random draw (default 0)")
     s.add_argument("--reflector", default=None,
-                   help=f"reflector offset in the tool frame, x,y,z (m); default: the cell's, else {_DEFAULT_REFLECTOR}")
+                   help=f"reflector offset in the tool frame, x,y,z (m); default: the cell's, else "
+                        f"{_DEFAULT_REFLECTOR}")
     s.add_argument("--tracker", default=None,
                    help="pose of the robot base in the tracker frame x,y,z[,roll,pitch,yaw] (m, rad); "
                         "default: the cell's, else a tracker reach + 1.5 m away")
@@ -196,7 +197,8 @@ def _nominal_model(args: argparse.Namespace, cell: Any, noise: Any) -> Any:
 
     if cell is not None:
         if args.tracker:
-            raise InputError(f"--tracker: the cell places the tracker ({args.cell or args.design}); leave --tracker out")
+            raise InputError(f"--tracker: the cell places the tracker ({args.cell or args.design}); leave --tracker "
+                             "out")
         return TrackerModel(cell.robot, tracker_T_base=cell.tracker_T_base, reflector_m=cell.reflector_m.copy(),
                             tcp_m=cell.tcp_m.copy(), noise=noise, pose6d=args.pose6d)
     robot = load_robot(args.robot, args.tool)

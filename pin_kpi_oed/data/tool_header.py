@@ -26,7 +26,8 @@ from __future__ import annotations
 import dataclasses
 import json
 from dataclasses import dataclass
-from typing import Iterable, Sequence
+from collections.abc import Iterable, Sequence
+from typing import Any
 
 import numpy as np
 
@@ -154,7 +155,7 @@ def parse_tool_header(comments: Iterable[tuple[int, str]], src: str) -> ToolSpec
     Raises:
         InputError: a field given twice or with a malformed value (file, line and field named).
     """
-    found: dict[str, object] = {}
+    found: dict[str, Any] = {}
     for line, text in comments:
         key, sep, value = text.partition(":")
         key = key.strip()
@@ -206,7 +207,7 @@ def resolve_tool(specs: Sequence[ToolSpec | None], skip: Sequence[str] = ()) -> 
     Raises:
         InputError: two sources give different values of a field (both named, with their values).
     """
-    out: dict[str, object] = {}
+    out: dict[str, Any] = {}
     origin: dict[str, str] = {}
     for spec in specs:
         if spec is None:
@@ -226,6 +227,6 @@ def resolve_tool(specs: Sequence[ToolSpec | None], skip: Sequence[str] = ()) -> 
     return res
 
 
-def with_tool(spec: ToolSpec | None, **fields: object) -> ToolSpec:
+def with_tool(spec: ToolSpec | None, **fields: Any) -> ToolSpec:
     """A copy of ``spec`` (or a new spec) with ``fields`` set."""
     return dataclasses.replace(spec or ToolSpec(), **fields)

@@ -69,8 +69,8 @@ from pin_kpi_oed.model.parameters import ParameterLayout
 from pin_kpi_oed.model.tracker import TrackerModel
 from pin_kpi_oed.results import Result
 
-__all__ = ["FRAMES", "STATUSES", "CompensationOptions", "PoseModel", "CompensationResult", "compensate", "compensate_program",
-           "write_compensation", "forward"]
+__all__ = ["FRAMES", "STATUSES", "CompensationOptions", "PoseModel", "CompensationResult", "compensate",
+           "compensate_program", "write_compensation", "forward"]
 
 #: Frames a target can be given in.
 FRAMES = ("cell", "base")

@@ -115,7 +115,7 @@ def resolve_robot(spec: str) -> tuple[Path, str | None]:
     return Path(spec), None
 
 
-def portable_spec(robot: "Robot") -> str:
+def portable_spec(robot: Robot) -> str:
     """The robot's spec for files: its name when that name loads the same URDF, else the URDF path."""
     key = str(robot.name).lower()
     if getattr(robot, "kinematics", None) is not None:  # a UR name with its kinematics (stored beside it)
