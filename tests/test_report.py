@@ -85,6 +85,24 @@ def test_every_accuracy_figure_equals_identify_validate(calibrated):
     assert cert["calibrated"]["train_files"][0]["rows"] == 240 and cert["calibrated"]["train_files_check"]["checked"]
 
 
+def test_another_session_re_registered_equals_identify_validate(calibrated, capsys):
+    d = calibrated
+    args = ["identify", "--robot", "ur10", "--data", str(d / "train.csv"), "--validate", str(d / "test.csv"),
+            "--register-rows", "40", "--seed", "1", "--reflector", "0.02,0.01,0.1", "--sigma", str(SIGMA),
+            "--json", str(d / "id_t.json"), "--model-out", str(d / "model_t.json"), "--quiet"]
+    assert main(args) == 0
+    assert main(["report", "--model", str(d / "model_t.json"), "--train", str(d / "train.csv"), "--validate",
+                 str(d / "test.csv"), "--register-rows", "40", "--seed", "1", "--json", str(d / "cert_t.json"),
+                 "--quiet"]) == 0
+    capsys.readouterr()
+    cert, ident = json.loads((d / "cert_t.json").read_text()), json.loads((d / "id_t.json").read_text())
+    assert cert["accuracy"]["mode"] == "transfer" and cert["accuracy"]["registration"]["n"] == 40
+    for k in ("before", "after"):
+        for key in ("n", "mean_m", "rms_m", "p95_m", "max_m"):
+            assert cert["accuracy"][k][key] == pytest.approx(ident["validation"][k][key], rel=1e-9, abs=1e-12)
+    assert cert["honest_sigma"]["z_rms"] == pytest.approx(ident["validation"]["after"]["z_rms"], rel=1e-9)
+
+
 def test_trust_map_numbers_equal_predict(calibrated, capsys):
     d = calibrated
     cert = _report(d)

@@ -50,6 +50,7 @@ def register_simulate(subparsers: argparse._SubParsersAction) -> None:
                                           "frame, tracker, reflector, TCP, noise) or from --robot and its options; "
                                           "--truth saves the true robot or, when the file exists, measures it again.")
     s.add_argument("--robot", default=None, help=f"{ROBOT_HELP}; not with --design")
+    s.add_argument("--kinematics", default=None, help="UR kinematics file (ur_description layout) of a UR --robot")
     s.add_argument("--cell", default=None, help=CELL_HELP + "; random and held-out poses are feasible in it")
     s.add_argument("--design", default=None,
                    help="design JSON (pin-kpi-oed design --json): measure its poses (--criterion) in its cell (robot, "
@@ -201,7 +202,7 @@ def _nominal_model(args: argparse.Namespace, cell: Any, noise: Any) -> Any:
                              "out")
         return TrackerModel(cell.robot, tracker_T_base=cell.tracker_T_base, reflector_m=cell.reflector_m.copy(),
                             tcp_m=cell.tcp_m.copy(), noise=noise, pose6d=args.pose6d)
-    robot = load_robot(args.robot, args.tool)
+    robot = load_robot(args.robot, args.tool, kinematics=args.kinematics)
     if args.tracker:
         v = _floats(args.tracker, (3, 6), "--tracker")
         T = pin.SE3(pin.rpy.rpyToMatrix(v[3:] if v.size == 6 else np.zeros(3)), v[:3])

@@ -583,12 +583,7 @@ def _check_format(d: Any, where: str) -> None:
 def _load_model_robot(rob: dict, where: str) -> Robot:
     spec = str(rob.get("spec") or rob.get("urdf_path"))
     try:
-        kin = rob.get("kinematics")
-        if kin is not None:
-            from pin_kpi_oed.model.ur_kinematics import parse_ur_kinematics
-
-            kin = parse_ur_kinematics(kin, f"{where}: robot.kinematics")
-        robot = load_robot(spec, rob.get("tool_frame"), kinematics=kin)
+        robot = load_robot(spec, rob.get("tool_frame"), kinematics=rob.get("kinematics"))
     except PinKpiOedError as exc:
         raise InputError(f"{where}: robot '{spec}': {exc}") from None
     names = rob.get("joint_names")

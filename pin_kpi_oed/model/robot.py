@@ -346,8 +346,9 @@ def load_robot(spec: str | os.PathLike, tool_frame: str | None = None, kinematic
             example-robot-data name (``ur3``, ``ur5``, ``ur10``, ``panda``).
         tool_frame: tool frame name; default ``tool0`` where the URDF has one
             (``panda_hand_tcp`` for the Panda).
-        kinematics: a UR kinematics file (path, or a loaded
-            :class:`~pin_kpi_oed.model.ur_kinematics.URKinematics`) as the nominal model of a UR name
+        kinematics: a UR kinematics file (path, a loaded
+            :class:`~pin_kpi_oed.model.ur_kinematics.URKinematics`, or the file's layout as a dict) as the nominal
+            model of a UR name
             (``ur3``, ``ur5``, ``ur10``, ``ur3e``, ``ur5e``, ``ur10e``, ``ur16e``); the e-series names load
             ``ur_description``'s default kinematics without it (``ur10e`` needs the file).
 
@@ -430,7 +431,7 @@ def _ur_kinematics(spec: str, kinematics: Any) -> Any:
         InputError: an unreadable or malformed kinematics file.
     """
     from pin_kpi_oed.model.ur_kinematics import (UR_TYPES, URKinematics, check_ur_type, default_ur_kinematics,
-                                                 read_ur_kinematics)
+                                                 parse_ur_kinematics, read_ur_kinematics)
 
     key = spec.lower()
     if kinematics is None:
@@ -444,7 +445,10 @@ def _ur_kinematics(spec: str, kinematics: Any) -> Any:
     if key not in UR_TYPES:
         raise RobotLoadError(f"a UR kinematics file is the nominal model of a UR robot ({', '.join(UR_TYPES)}), "
                              f"not of '{spec}'")
-    kin = kinematics if isinstance(kinematics, URKinematics) else read_ur_kinematics(kinematics)
+    if isinstance(kinematics, dict):  # the file's layout, as a model file stores it
+        kin = parse_ur_kinematics(kinematics, "robot.kinematics")
+    else:
+        kin = kinematics if isinstance(kinematics, URKinematics) else read_ur_kinematics(kinematics)
     check_ur_type(kin, key)
     return kin
 

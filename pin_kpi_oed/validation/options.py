@@ -168,7 +168,7 @@ OUTPUTS = {"evaluate": ["json"], "demo": ["json"], "design": ["json"], "simulate
 #: command -> argparse dests of inputs (files or folders; lists allowed)
 INPUTS = {"evaluate": ["design"], "design": ["cell", "pool", "given", "given_prior", "model"],
           "identify": ["data", "validate", "register_data", "robot", "kinematics", "cell"],
-          "simulate": ["robot", "design", "cell", "poses", "truth"], "import-ipa": ["src"],
+          "simulate": ["robot", "design", "cell", "poses", "truth", "kinematics"], "import-ipa": ["src"],
           "register": ["model", "data", "cell"], "predict": ["model", "data"],
           "diagnose": ["train", "validate", "register_data", "robot", "kinematics", "cell"],
           "view": ["design"], "info": ["robot"], "export": ["design"],
