@@ -264,6 +264,15 @@ def test_certificate_renders_in_headless_chromium(calibrated, tmp_path):
     assert (tmp_path / "cert.pdf").read_bytes()[:5] == b"%PDF-"
 
 
+@pytest.mark.skipif(_browser() is not None, reason="a browser is installed: the PDF is made")
+def test_without_a_browser_the_pdf_is_skipped_with_a_note(calibrated, capsys, tmp_path):
+    d = calibrated
+    assert main(["report", "--model", str(d / "model.json"), "--train", str(d / "train.csv"), "--validate",
+                 str(d / "test.csv"), "--html", str(tmp_path / "c.html"), "--pdf", str(tmp_path / "c.pdf")]) == 0
+    out = capsys.readouterr().out
+    assert "PDF not made" in out and (tmp_path / "c.html").exists() and not (tmp_path / "c.pdf").exists()
+
+
 def test_diagnosis_recorded_by_diagnose_is_in_the_certificate(calibrated, capsys):
     d = calibrated
     argv = ["diagnose", "--robot", "ur10", "--train", str(d / "train.csv"), "--validate", str(d / "test.csv"),

@@ -207,7 +207,9 @@ def test_export_model_cli(tmp_path, capsys):
     assert "reproduces the calibrated tool frame" in out and "not in this file" in out
     assert main(["export-model", "--model", str(tmp_path / "m.json"), "--format", "urdf",
                  "--out", str(tmp_path / "c.urdf"), "--tcp", "0,0,0.1"]) == 0
-    assert 'name="tcp"' in (tmp_path / "c.urdf").read_text()
+    urdf = (tmp_path / "c.urdf").read_text()
+    assert 'name="tcp"' in urdf and 'name="tracker_s"' in urdf  # the set-up frames, for TF
+    assert "package://example-robot-data/robots/ur_description/meshes/ur10" in urdf  # ROS mesh URIs kept
     back = load_robot("ur10", kinematics=tmp_path / "c.yaml")
     assert np.linalg.norm(_tool0(back) - _calibrated_tool0(cm), axis=1).max() < 1e-9
     # bad input: one line, exit 2, nothing written
