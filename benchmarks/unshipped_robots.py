@@ -193,7 +193,8 @@ def _lines(name: str, how: str, r: dict) -> list[str]:
     ok_in = 0.85 <= h["inside_95"] <= 0.99
     lines = [f"{name} ({how}): held-out n={h['n']}: standardised RMS {h['z_rms']:.2f} (target 0.67-1.5: "
              f"{'met' if ok_z else 'NOT met'}), {h['inside_95'] * 100:.0f} % inside the 95 % ellipsoid "
-             f"(target 85-99 %: {'met' if ok_in else 'NOT met'}), predicted 3-D sigma mean {h['sigma_mean_m'] * 1e3:.4f} mm, "
+             f"(target 85-99 %: {'met' if ok_in else 'NOT met'}), predicted 3-D sigma mean "
+             f"{h['sigma_mean_m'] * 1e3:.4f} mm, "
              f"{h['extrapolated'] * 100:.0f} % of the rows flagged outside the coverage"]
     for label in ("tcp", "reflector"):
         for t in r.get(f"compensation_{label}", []):

@@ -107,6 +107,9 @@ def test_panda_link8_tool_travels_and_compensation_keeps_the_branch(tmp_path):
     # the fitted reflector offset absorbs: about the 0.5 mm tolerance); the defect put it 0.1 m away
     err_tcp = np.linalg.norm(true_tcp(tm, cm.tcp_m, Q) - np.array([r[1:4] for r in rows], float), axis=1)
     assert np.all(err_tcp < 1e-3), err_tcp
+    unseen = np.array(res["tcp_unobservable_m"])  # ... and compensate says so: its sigma holds it
+    assert np.all(unseen > 0.3e-3) and np.all(err_tcp <= np.sqrt(7.8147 / 3) * np.array(res["sigma_m"]))
+    assert "the reflector cannot see at this TCP" in out
     # at the reflector, the point the calibration measured, the true robot lands on the target
     refl = cm.setups[cm.station()].reflector_m
     for r, q in zip(rows, cm.q_work):
@@ -123,6 +126,7 @@ def test_panda_link8_tool_travels_and_compensation_keeps_the_branch(tmp_path):
     err_comp = np.linalg.norm(true_tcp(tm, refl_true, np.array(res["q"])) - goal, axis=1)
     err_nom = np.linalg.norm(true_tcp(tm, refl_true, np.array(res["q_nominal"])) - goal, axis=1)
     assert np.all(err_comp < 0.05e-3), err_comp
+    assert res["tcp_unobservable_m"] == [0.0, 0.0]  # the fitted reflector is what the calibration saw
     assert np.all(err_comp < err_nom / 4), (err_comp, err_nom)
 
 
@@ -154,3 +158,40 @@ def test_redundant_arm_keeps_the_hint_or_working_branch_and_flags_limits(tmp_pat
     # lower limit at the target: a margin of 1 rad puts it "at" the limit)
     res = compensate(cm, ts, CompensationOptions(frame="base", limit_margin=1.0))
     assert res.target_status == ["joint_limit"] and not res.success
+
+
+def test_unobservable_tcp_offset_matches_a_refit_of_the_true_robot():
+    """The σ compensate adds at a TCP away from the reflector: for true joint-placement errors the fit cannot
+    determine (drawn at the tolerances), a noise-free calibration's TCP misses by G δ_u, the linear map the σ
+    propagates (within 10 %), and nothing at the fitted reflector."""
+    from pin_kpi_oed.data.tool_header import ToolSpec
+    from pin_kpi_oed.identification.identify import identify
+    from pin_kpi_oed.identification.simulate import simulate
+    from pin_kpi_oed.identification.tool_offset import unobservable_map, unobservable_tcp_sigma
+    from pin_kpi_oed.model.noise import NoiseModel
+    from pin_kpi_oed.model.robot import load_robot
+    from pin_kpi_oed.model.tracker import TrackerModel
+
+    robot = load_robot("panda", "panda_link8")
+    rng = np.random.default_rng(3)
+    tcp = np.array([0.0, 0.0, 0.1034])
+    nominal = TrackerModel(robot, tracker_T_base=pin.SE3(np.eye(3), np.array([-1.5, 0.2, 0.4])),
+                           reflector_m=np.array([0.0, 0.06, 0.07]), tcp_m=tcp, noise=NoiseModel((1e-6,) * 3))
+    Q, Qw = robot.random_q(rng, 40), robot.random_q(rng, 4)
+    for draw in range(3):
+        p_true = np.zeros(nominal.n_params)
+        p_true[:6 * robot.nq] = rng.normal(0.0, 1.0, 6 * robot.nq) * np.tile([5e-4] * 3 + [1e-3] * 3, robot.nq)
+        data = simulate(nominal, Q, p_true, seed=draw)
+        data.sigma_m = None
+        data.tool = ToolSpec(tool_frame="panda_link8", tcp_m=tcp, source="sim")
+        cm = identify(nominal, data).calibrated_model()
+        truth_tcp = TrackerModel(robot, tracker_T_base=nominal.tracker_T_base, reflector_m=tcp).predict(p_true, Qw)
+        model_c, p_c = cm.station_model(None)
+        cal_tcp = TrackerModel(robot, tracker_T_base=model_c.tracker_T_base, reflector_m=tcp).predict(p_c, Qw)
+        G, u, _ = unobservable_map(cm, None, tcp, Qw)
+        linear = np.einsum("mak,k->ma", G, p_true[u])  # how far the truth's undetermined errors move the TCP
+        assert np.linalg.norm(truth_tcp - cal_tcp - linear) < 0.1 * np.linalg.norm(linear), (truth_tcp - cal_tcp,
+                                                                                          linear)
+        refl = cm.setups[cm.station()].reflector_m
+        assert np.all(unobservable_tcp_sigma(cm, None, refl, Qw) == 0.0)
+        assert np.all(unobservable_tcp_sigma(cm, None, tcp, Qw) > 1e-4)

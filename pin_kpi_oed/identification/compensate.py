@@ -32,7 +32,9 @@ leaves the orientation free: the minimum-norm steps stay close to the nominal so
 The nominal IK starts from the target's joint hint, else from the model's working configuration nearest
 the target, else from the neutral configuration (:mod:`pin_kpi_oed.identification.compensate_checks`): the
 solution stays on that branch, also on a redundant arm. The TCP c is given in the robot's tool frame
-(``CalibratedModel.robot.tool_frame``; the model's ``tcp_m`` when a cell or a measurement header stated it).
+(``CalibratedModel.robot.tool_frame``; the model's ``tcp_m`` when a cell or a measurement header stated it). The σ at
+a TCP away from the fitted reflector includes what one reflector cannot see there
+(:mod:`pin_kpi_oed.identification.tool_offset`).
 
 Status per target: ``ok``; ``unreachable`` (the nominal or the calibrated IK ends farther from
 the target than ``reach_tol_m`` / ``reach_tol_rad``: outside the workspace, at a joint limit, or
@@ -64,6 +66,7 @@ from pin_kpi_oed.errors import InputError
 from pin_kpi_oed.identification.compensate_checks import (branch_step, collision_rows, joint_limit_rows,
                                                           start_configurations)
 from pin_kpi_oed.identification.model_file import CalibratedModel
+from pin_kpi_oed.identification.tool_offset import unobservable_tcp_sigma
 from pin_kpi_oed.model.kinematics import skew
 from pin_kpi_oed.model.parameters import ParameterLayout
 from pin_kpi_oed.model.tracker import TrackerModel
@@ -101,6 +104,9 @@ class CompensationOptions:
         limit_margin: a compensated joint this close to its limit (rad / m) is ``joint_limit``.
         cell: the :class:`~pin_kpi_oed.cell.cell_model.Cell` whose independent check every compensated configuration
             must pass (``collision`` otherwise); None: not checked.
+        tool_tolerances: the manufacturing tolerances of the joint placements the calibration could not determine,
+            for the σ of a TCP away from the reflector (:mod:`pin_kpi_oed.identification.tool_offset`); default
+            :class:`~pin_kpi_oed.model.tolerances.Tolerances` (0.5 mm, 1 mrad).
     """
 
     frame: str = "cell"
@@ -120,6 +126,7 @@ class CompensationOptions:
     max_branch_step_rad: float = 0.05
     limit_margin: float = 1e-6
     cell: Any = None
+    tool_tolerances: Any = None
 
     def __post_init__(self) -> None:
         if self.frame not in FRAMES:
@@ -286,7 +293,8 @@ class CompensationResult(Result):
             result: ``ok`` if every target is ok, else a count).
         frame: ``cell`` or ``base``; tcp_m: the TCP point (tool frame, m); station.
         sigma_m: predicted 3-D standard deviation of the TCP at q (m): the model's discrepancy
-            (posterior and white level; its noise model's σ without one), (m,). Learnt at the reflector: a TCP
+            (posterior and white level; its noise model's σ without one) and, at a TCP away from the
+            reflector, ``tcp_unobservable_m``, (m,). Learnt at the reflector: a TCP
             away from it adds the flange rotation's lever arm (:mod:`pin_kpi_oed.discrepancy.lever_arm`).
         tcp_from_reflector_m: the TCP's distance from the station's reflector (m).
         tool_frame: the tool frame ``tcp_m`` is given in.
@@ -295,6 +303,9 @@ class CompensationResult(Result):
         branch_step_rad: per target, the largest joint change of ``q`` from ``q_nominal`` (rad / m).
         from_start_rad: per target, the largest joint difference of ``q`` from ``q_start`` (rad / m).
         collision_pair: per target with a cell, the pair nearest to colliding at ``q`` ("" without a cell).
+        tcp_unobservable_m: per target, the 3-D σ (m) at the TCP of what one reflector cannot see (joint-placement
+            errors the fit could not determine, under the tolerances; 0 at the fitted reflector), included in
+            ``sigma_m``.
     """
 
     names: list[str] = field(default_factory=list)
@@ -318,6 +329,7 @@ class CompensationResult(Result):
     branch_step_rad: np.ndarray = field(default_factory=lambda: np.zeros(0))
     from_start_rad: np.ndarray = field(default_factory=lambda: np.zeros(0))
     collision_pair: list[str] = field(default_factory=list)
+    tcp_unobservable_m: np.ndarray = field(default_factory=lambda: np.zeros(0))
 
     def summary(self) -> str:
         """Counts, correction statistics (mm), and the targets that are not ok."""
@@ -344,6 +356,11 @@ class CompensationResult(Result):
 
             if self.tcp_from_reflector_m >= LEVER_ARM_NOTE_M:
                 lines.append(lever_arm_line(self.tcp_from_reflector_m, "this sigma"))
+            if self.tcp_unobservable_m.size and np.max(self.tcp_unobservable_m) > 0:
+                lines.append(f"of which {np.max(self.tcp_unobservable_m) * 1e3:.4f} mm (3-D, 1 sigma) the reflector "
+                             "cannot see at this TCP: joint-placement errors the calibration could not determine "
+                             "(e.g. along and about the last joint axis), from the manufacturing tolerances; a "
+                             "reflector at the TCP (or the TCP measured) removes it")
         bad = [(n, s) for n, s in zip(self.names, self.target_status) if s != "ok"]
         for n, s in bad[:10]:
             lines.append(f"  target {n}: {s}")
@@ -362,7 +379,7 @@ class CompensationResult(Result):
                             "sigma_m": self.sigma_m, "tcp_from_reflector_m": self.tcp_from_reflector_m,
                             "tool_frame": self.tool_frame, "start": self.start, "q_start": self.q_start,
                             "branch_step_rad": self.branch_step_rad, "from_start_rad": self.from_start_rad,
-                            "collision_pair": self.collision_pair})
+                            "collision_pair": self.collision_pair, "tcp_unobservable_m": self.tcp_unobservable_m})
 
 
 def _nominal_ik(pm0: PoseModel, pos_t: np.ndarray, R_t: np.ndarray | None, Q_start: np.ndarray, aux: Any,
@@ -491,6 +508,7 @@ def _result(cm: CalibratedModel, ts: TargetSet, opt: CompensationOptions, pm: Po
     at_limit = joint_limit_rows(cm.robot, cal.Q, opt.limit_margin)
     colliding, pair = (collision_rows(opt.cell, cal.Q) if opt.cell is not None
                        else (np.zeros(len(ts), bool), [""] * len(ts)))
+    unseen = unobservable_tcp_sigma(cm, opt.station, pm.tcp, cal.Q, opt.tool_tolerances, seed=opt.seed)
     status = [_status(i, opt, nom, cal, bool(left_branch[i]), step[i] > opt.max_branch_step_rad, at_limit[i],
                       colliding[i]) for i in range(len(ts))]
     n_bad = sum(s != "ok" for s in status)
@@ -501,7 +519,7 @@ def _result(cm: CalibratedModel, ts: TargetSet, opt: CompensationOptions, pm: Po
         joint_names=list(cm.robot.joint_names), q_nominal=nom.Q, q=cal.Q, correction_m=correction,
         residual_m=cal.err_m, residual_rad=cal.err_rad, inv_cond=cal.inv_cond, target_status=status,
         frame=opt.frame, station=cm.station(opt.station), tcp_m=pm.tcp, orientation=ts.rotvec_rad is not None,
-        sigma_m=_tcp_sigma(cm, cal.Q, ts.aux, opt.station),
+        sigma_m=np.sqrt(_tcp_sigma(cm, cal.Q, ts.aux, opt.station) ** 2 + unseen ** 2), tcp_unobservable_m=unseen,
         tcp_from_reflector_m=lever_arm_m(pm.tcp, cm.setups[cm.station(opt.station)].reflector_m),
         tool_frame=cm.robot.tool_frame, start=list(start), q_start=np.asarray(Q_start, float),
         branch_step_rad=step, from_start_rad=branch_step(cal.Q, Q_start), collision_pair=pair)
