@@ -68,7 +68,7 @@ def _table(title: str, cases: dict[str, list[dict]], key: str = "error_m") -> li
     return rows
 
 
-def simulated(reps: int, kinds: list[str], log) -> dict[str, list[dict]]:
+def simulated(reps: int, kinds: list[str], log, noise_weight: float | None = None) -> dict[str, list[dict]]:
     from pin_kpi_oed.cell.cell import load_cell
     from pin_kpi_oed.design.optimize import DesignProblem
     from pin_kpi_oed.studies.hedged_design import choose_sets, simulated_case
@@ -84,14 +84,14 @@ def simulated(reps: int, kinds: list[str], log) -> dict[str, list[dict]]:
     for rep in range(reps):
         t0 = time.perf_counter()
         pool = big[np.random.default_rng([rep, 5]).permutation(len(big))[:200]]
-        sets = {m: choose_sets(problem.model, assumed, pool, W, m, rep) for m in SIZES}
+        sets = {m: choose_sets(problem.model, assumed, pool, W, m, rep, noise_weight=noise_weight) for m in SIZES}
         for k in kinds:
             cases[k].append(simulated_case(problem.model, pool, W, k, rep, sets, assumed))
         log(f"simulated rep {rep}: {time.perf_counter() - t0:.0f} s")
     return cases
 
 
-def measured(ipa_reps: int, pairs: list[str], log) -> dict[str, list[dict]]:
+def measured(ipa_reps: int, pairs: list[str], log, noise_weight: float | None = None) -> dict[str, list[dict]]:
     from benchmarks.register_pairs import find_data
     from pin_kpi_oed import NoiseModel, TrackerModel, load_robot
     from pin_kpi_oed.data.ipa import import_ipa
@@ -128,7 +128,7 @@ def measured(ipa_reps: int, pairs: list[str], log) -> dict[str, list[dict]]:
         cases[key] = []
         for rep in range(ipa_reps):
             t0 = time.perf_counter()
-            cases[key].append(measured_case(model, load(tgt), priors[src], rep, SIZES))
+            cases[key].append(measured_case(model, load(tgt), priors[src], rep, SIZES, noise_weight=noise_weight))
             log(f"{key} rep {rep}: {time.perf_counter() - t0:.0f} s")
     return cases
 
@@ -141,6 +141,8 @@ def main(argv: list[str] | None = None) -> dict:
     ap.add_argument("--ipa-reps", dest="ipa_reps", type=int, default=6, help="seeded splits per IPA pair (0: skip)")
     ap.add_argument("--kinds", default=",".join(TRUTH_KINDS), help="simulated robot kinds, comma-separated")
     ap.add_argument("--pairs", default=",".join(PAIRS), help="IPA prior -> design series, e.g. B-C,D-C")
+    ap.add_argument("--noise-weight", dest="noise_weight", type=float, default=None,
+                    help="the hedged criterion's weight on noise only (default the package's, 0.5)")
     ap.add_argument("--json", default=None)
     a = ap.parse_args(argv)
 
@@ -149,8 +151,8 @@ def main(argv: list[str] | None = None) -> dict:
 
     t0 = time.perf_counter()
     kinds = [k.strip() for k in a.kinds.split(",") if k.strip()]
-    sim = simulated(a.reps, kinds, log) if a.reps > 0 else {}
-    ipa = measured(a.ipa_reps, [p.strip().upper() for p in a.pairs.split(",") if p.strip()], log) \
+    sim = simulated(a.reps, kinds, log, a.noise_weight) if a.reps > 0 else {}
+    ipa = measured(a.ipa_reps, [p.strip().upper() for p in a.pairs.split(",") if p.strip()], log, a.noise_weight) \
         if a.ipa_reps > 0 else {}
     out = {"sizes": list(SIZES), "reps": a.reps, "ipa_reps": a.ipa_reps, "tables": {}}
     if sim:

@@ -46,7 +46,7 @@ def test_value_is_the_weighted_geometric_mean_and_gradient_exact(ur5):
     h = HedgedDesignCriterion.around(crit)
     Q = pool[:12]
     v = h.member_values(Q)
-    assert np.allclose(h.weights, [0.125, 0.125, 0.125, 0.125, 0.5])
+    assert np.allclose(h.weights, [0.075, 0.075, 0.075, 0.075, 0.7])
     assert h.value(Q) == pytest.approx(float(np.exp(h.weights @ np.log(v))), rel=1e-12)
     val, g = h.value_and_grad(Q)
     assert val == pytest.approx(h.value(Q), rel=1e-12)

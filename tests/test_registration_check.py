@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+from pathlib import Path
 
 import numpy as np
 import pinocchio as pin
@@ -148,3 +149,44 @@ def test_coverage_named_with_a_discrepancy(case):
     assert inside.any() and ranges and ranges[0].startswith(robot.joint_names[0])
     lo, hi = (float(v) for v in ranges[0].split("(measured ")[1].rstrip(")").split(".."))
     assert -1.0 <= lo < -0.9 and -0.1 < hi <= 0.0
+
+
+_here = Path(__file__).resolve()
+IPA = next((p / "shared" / "data" / "ipa_ur10" for p in (_here.parents[2], _here.parents[3])
+            if (p / "shared" / "data" / "ipa_ur10").is_dir()), _here.parents[2] / "shared" / "data" / "ipa_ur10")
+
+
+#: (joint index, order) of the transmission-error terms diagnose selected on all of Series B (seed 0, 5-fold).
+SERIES_B_TERMS = [(0, k) for k in (1, 6, 9, 15, 18, 19, 21, 25, 29, 30)] \
+    + [(1, k) for k in (2, 3, 5, 6, 10, 15, 17, 23, 24, 29, 33, 39)] \
+    + [(2, k) for k in (3, 6, 9, 10, 11, 13, 14, 15, 17, 21, 22, 23, 25, 27, 30, 33, 34, 40)] \
+    + [(3, k) for k in (6, 9, 11, 15, 18, 23, 24)] + [(4, k) for k in (3, 8, 16, 18, 22)]
+
+
+@pytest.mark.skipif(not IPA.is_dir(), reason=f"IPA data not found at {IPA}")
+def test_real_ur10_series_b_to_c_refused_for_the_extrapolating_terms_geometry_registered():
+    """600 rows of the real UR10's Series B, 60 of Series C: a model with the transmission-error terms diagnose selects
+    on B is refused on C naming them and the geometry-only fix (the geometry alone fits C's rows better); the
+    geometry-only model of the same rows, written without the tracker's noise, is registered (compared with its
+    residual level, not the default noise)."""
+    from pin_kpi_oed.data.ipa import import_ipa
+    from pin_kpi_oed.effects.periodic import TransmissionError
+
+    robot = load_robot("ur10")
+    nominal = TrackerModel(robot, reflector_m=np.array([0.0, 0.0, 0.109]))
+
+    def rows(series: str, n: int, seed: int) -> MeasurementSet:
+        ms = import_ipa(IPA / f"Series_{series}")
+        ms = MeasurementSet(ms.joint_names, ms.q, ms.position_m, source=f"{series}.csv")
+        return ms.subset(np.sort(np.random.default_rng(seed).permutation(len(ms))[:n]))
+
+    B, C = rows("B", 600, 0), rows("C", 60, 1)
+    geo = identify(nominal, B).calibrated_model()
+    assert geo.residual_sigma_m is not None and np.all(geo.residual_sigma_m > 1e-4)   # 0.2-0.3 mm, not 1e-6 m
+    (gate,) = registration_gates(register_setup(geo, C, station="C"), C, geo)
+    assert not gate.poor, gate.line()
+    te = TransmissionError(robot, pairs=[(robot.joint_names[j], k) for j, k in SERIES_B_TERMS])
+    cm = identify(nominal, B, effects=[te]).calibrated_model()
+    (gate,) = registration_gates(register_setup(cm, C, station="C"), C, cm)
+    line = gate.line()
+    assert gate.poor and "transmission_error extrapolates" in line and "--effects none" in line, line

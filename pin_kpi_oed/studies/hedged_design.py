@@ -67,13 +67,15 @@ def gp_discrepancy_sample(Q: np.ndarray, sigma_m: float, length_rad: float, seed
 
 
 def choose_sets(model: Any, assumed: Any, Q_pool: np.ndarray, W: np.ndarray, m: int, seed: int,
-                exchange_passes: int = 1) -> dict[str, np.ndarray]:
+                exchange_passes: int = 1, noise_weight: float | None = None) -> dict[str, np.ndarray]:
     """Pool indices of every method of :data:`METHODS` for m poses (they depend on the pool and W, not the robot).
 
     Args:
         model: the nominal measurement model; assumed: the :class:`DiscrepancyPrior` the design assumes.
         Q_pool: candidates (N, n) rad; W: working configurations (t, n) rad; m: poses; seed: the random set's seed.
         exchange_passes: exchange passes of the hedged selection.
+        noise_weight: the hedged criterion's weight on noise only (default: the package's,
+            :data:`~pin_kpi_oed.oed.hedged_kpi.NOISE_ONLY_WEIGHT`).
     """
     from pin_kpi_oed.oed.criteria import get_criterion
     from pin_kpi_oed.oed.discrepancy_kpi import DiscrepancyDesignCriterion
@@ -86,7 +88,8 @@ def choose_sets(model: Any, assumed: Any, Q_pool: np.ndarray, W: np.ndarray, m: 
     crit = DiscrepancyDesignCriterion(model, base, assumed, W, p=p0)
     Jp = crit.pool_jacobians(Q_pool)
     out = {"kpi_gp": np.asarray(crit.select(Q_pool, m, J_pool=Jp, exchange_passes=1).indices, int)}
-    hedged = HedgedDesignCriterion.around(crit)
+    hedged = HedgedDesignCriterion.around(crit) if noise_weight is None else \
+        HedgedDesignCriterion.around(crit, noise_weight=noise_weight)
     out["kpi_gp_hedged"] = np.asarray(hedged.select(Q_pool, m, J_pool=Jp, exchange_passes=exchange_passes,
                                                     seed=seed).indices, int)
     E = model.kpi_jacobian(p0, W)[:, base]
@@ -154,7 +157,8 @@ def simulated_case(model: Any, Q_pool: np.ndarray, W: np.ndarray, kind: str, see
 
 
 def measured_case(model: Any, data: Any, assumed: Any, seed: int, sizes: Sequence[int] = (12, 20),
-                  pool_size: int = 200, n_work: int = 8, exchange_passes: int = 1) -> dict:
+                  pool_size: int = 200, n_work: int = 8, exchange_passes: int = 1,
+                  noise_weight: float | None = None) -> dict:
     """One seeded split of a measured series: ``n_work`` rows are the working configurations (scored by their
     measured positions), a pool of ``pool_size`` other rows; every method's sets of each size calibrated and scored.
 
@@ -162,7 +166,7 @@ def measured_case(model: Any, data: Any, assumed: Any, seed: int, sizes: Sequenc
         model: the nominal measurement model (robot, reflector; the tracker pose is registered by the fit).
         data: the series (joint columns, positions); assumed: the prior the design and the calibration assume.
         seed: the split and the random sets; sizes: numbers of poses; pool_size, n_work: rows of each part.
-        exchange_passes: of the hedged selection.
+        exchange_passes, noise_weight: of the hedged selection (:func:`choose_sets`).
 
     Returns:
         ``{"seed", "error_m": {method: {m: e}}, "error_geo_m": ..., "time_s"}`` (m).
@@ -183,7 +187,7 @@ def measured_case(model: Any, data: Any, assumed: Any, seed: int, sizes: Sequenc
     out: dict = {"seed": int(seed), "error_m": {}, "error_geo_m": {}}
     for m in sizes:
         try:
-            sets = choose_sets(model, assumed, Q[pool], Q[work], int(m), seed, exchange_passes)
+            sets = choose_sets(model, assumed, Q[pool], Q[work], int(m), seed, exchange_passes, noise_weight)
         except IdentifiabilityError:
             continue
         for meth, idx in sets.items():
