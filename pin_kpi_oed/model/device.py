@@ -221,7 +221,9 @@ class MeasurementModel(ABC):
 
         Returns:
             :class:`~pin_kpi_oed.model.kinematics.Kinematics` (``.p``, ``.R_tool``, ``.R_A``, ``.t_A``,
-            ``.twist`` = Pinocchio's WORLD joint Jacobian).
+            ``.twist`` = Pinocchio's WORLD joint Jacobian), read-only: the last result is remembered and
+            returned again for the same ``p``, ``Q`` and point (a least-squares step asks for the residuals,
+            the Jacobian and the effects' columns at the same point).
 
         Raises:
             InputError: wrong parameter count or joint count.
@@ -230,7 +232,16 @@ class MeasurementModel(ABC):
         Q = np.atleast_2d(np.asarray(Q, float))
         if Q.shape[1] != self.robot.nq:
             raise InputError(f"configurations must have {self.robot.nq} joint values, got {Q.shape[1]}")
-        return self._chain.tool_point(Q, point_m, self._placements)
+        point_m = np.asarray(point_m, float)
+        key = (self._p_applied.tobytes(), Q.shape, Q.tobytes(), point_m.tobytes())
+        last = getattr(self, "_kin_last", None)  # one read: safe when two threads ask at once
+        if last is not None and last[0] == key:
+            return last[1]
+        kin = self._chain.tool_point(Q, point_m, self._placements)
+        for a in (kin.p, kin.R_tool, kin.R_A, kin.t_A, kin.twist):
+            a.flags.writeable = False  # shared by the callers of the same p, Q and point
+        self._kin_last = (key, kin)
+        return kin
 
     def sensor_point(self, p: np.ndarray, Q: np.ndarray, point_m: np.ndarray, offset_group: str | None = None,
                      with_dq: bool = False) -> SensorPoint:
