@@ -195,3 +195,35 @@ def test_unobservable_tcp_offset_matches_a_refit_of_the_true_robot():
         refl = cm.setups[cm.station()].reflector_m
         assert np.all(unobservable_tcp_sigma(cm, None, refl, Qw) == 0.0)
         assert np.all(unobservable_tcp_sigma(cm, None, tcp, Qw) > 1e-4)
+
+
+def test_collision_and_branch_checks_are_never_ok(tmp_path):
+    """With a cell, a compensated configuration that collides is 'collision'; a joint step beyond the branch limit
+    is 'off_branch'; otherwise the same targets are 'ok'."""
+    from pin_kpi_oed.cell.cell import load_cell
+    from pin_kpi_oed.cell.cell_model import CapsuleSpec
+    from pin_kpi_oed.data.measurements import MeasurementSet
+    from pin_kpi_oed.data.targets import TargetSet
+    from pin_kpi_oed.identification.compensate import CompensationOptions, PoseModel, compensate
+    from pin_kpi_oed.identification.model_file import CalibratedModel, Setup
+
+    (tmp_path / "cell.yaml").write_text(CELL)
+    cell = load_cell(tmp_path / "cell.yaml")
+    robot = cell.robot
+    rng = np.random.default_rng(4)
+    cm = CalibratedModel(robot, rng.normal(0, 2e-4, 6 * robot.nq),
+                         setups={"A": Setup(cell.tracker_T_base.homogeneous, cell.reflector_m)},
+                         tcp_m=cell.tcp_m, q_work=cell.q_work, tool_source="test")
+    pos, R = PoseModel(cm, "base", nominal=True).pose(cell.q_work)
+    rv = np.array([pin.log3(r) for r in R])
+    n = len(pos)
+    ts = TargetSet([f"w{k}" for k in range(n)], pos, rv, None, list(robot.joint_names),
+                   MeasurementSet(list(robot.joint_names), cell.q_work, np.zeros((n, 3))), "t")
+    ok = compensate(cm, ts, CompensationOptions(frame="base", cell=cell))
+    assert ok.target_status == ["ok"] * n and ok.start == ["working"] * n
+    assert compensate(cm, ts, CompensationOptions(frame="base", max_branch_step_rad=1e-6)).target_status == \
+        ["off_branch"] * n  # compensation moves joints by ~1e-3 rad: beyond a branch limit of 1e-6 rad
+    W_tcp = cell.W_T_base.act(robot.oMtool(ok.q[0]).act(cell.tcp_m))
+    cell.obstacles.append(CapsuleSpec("post", W_tcp + [0.0, 0.0, -0.05], W_tcp + [0.0, 0.0, 0.05], 0.03))
+    hit = compensate(cm, ts, CompensationOptions(frame="base", cell=cell))
+    assert hit.target_status[0] == "collision" and not hit.success and "post" in hit.collision_pair[0]
