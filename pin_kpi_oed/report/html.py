@@ -54,6 +54,9 @@ def _calibrated(d: dict) -> str:
             ["kinematics hash", c["kinematics_hash"] or "— (the URDF's own kinematics)"],
             ["tool frame", c["tool_frame"]],
             ["TCP in the tool frame", ", ".join(mm(v, 2) for v in c["tcp_m"])],
+            ["tracker noise model (weights of the fit)",
+             ", ".join(f"{v * 1e6:.1f} µm" for v in c["noise"]["sigma_xyz_m"])
+             + f" per axis ({c.get('sigma_source') or 'as given'})"],
             ["model file", f"{c['model_file']['path']} (SHA-256 {c['model_file']['sha256']})"]]
     out = _table(["item", "value"], rows, left=2)
     st = [[s["label"], ", ".join(f"{v:.4f}" for v in s["tracker_T_base_xyz_m"]) + " m",
@@ -141,6 +144,9 @@ def _iso(d: dict) -> str:
                          f"{x['vAP']['directions_mean']:.1f}" if x["vAP"]["directions_mean"] else "—"])
         out += _table(["model", "positions", "samples", "AP mean", "AP max", "vAP mean", "vAP max",
                        "positions with ≥ 2 directions", "directions per position"], rows)
+        out += "".join(f"<p>AP per axis, mean over the positions ({k}): "
+                       + ", ".join(f"{a} {mm(v)}" for a, v in zip("xyz", iso["AP_vAP"][k]["AP"]["per_axis_mean_m"]))
+                       + "</p>" for k in ("before", "after"))
         out += f"<p class=\"note\">AP: {_e(iso['clauses']['AP'])}; vAP: {_e(iso['clauses']['vAP'])}.</p>"
     if "RP" in iso:
         r = iso["RP"]
