@@ -215,6 +215,11 @@ def test_bad_input_one_line_exit_2_nothing_written(calibrated, capsys, tmp_path)
         (base + ["--validate", str(d / "test.csv"), "--kinematics", str(REPO / "urdf" / "ur" / "ur10.yaml")],
          "nominal robot is the ur10 URDF"),
     ]
+    doc = json.loads((d / "model.json").read_text())  # a model calibrated on two files, given one of them
+    doc["history"][-1]["train_files"].append({"path": "other.csv", "name": "other.csv", "sha256": "0" * 64, "rows": 9})
+    (tmp_path / "two.json").write_text(json.dumps(doc))
+    cases.append((["report", "--model", str(tmp_path / "two.json")] + base[3:] + ["--validate", str(d / "test.csv")],
+                  "give every one of them"))
     for argv, msg in cases:
         capsys.readouterr()
         assert main(argv) == 2, msg
@@ -261,6 +266,12 @@ def test_certificate_renders_in_headless_chromium(calibrated, tmp_path):
     png = render_png(d / "cert.html", tmp_path / "shot.png", width=1200, height=3000)
     img = imread(png)
     assert img.std() > 0.05  # not blank: text, tables and figures
+    import subprocess
+
+    dom = subprocess.run([_browser(), "--headless", "--no-sandbox", "--disable-gpu", "--dump-dom",
+                          (d / "cert.html").resolve().as_uri()], capture_output=True, text=True, timeout=120).stdout
+    for sid, title in SECTIONS:  # every section is in the page the browser built
+        assert f'id="{sid}"' in dom and title in dom
     assert (tmp_path / "cert.pdf").read_bytes()[:5] == b"%PDF-"
 
 

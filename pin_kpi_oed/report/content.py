@@ -71,11 +71,15 @@ def _check_recorded(cm: Any, records: list[dict], model_path: str) -> dict:
         return {"checked": False, "note": "the model file records no training files (made before provenance was "
                                           "recorded, or through the Python API): not checked"}
     want = {r["sha256"] for r in recorded}
+    names = ", ".join(f"{r['name']} ({r['sha256'][:12]}…)" for r in recorded)
     for rec in records:
         if rec["sha256"] not in want:
-            names = ", ".join(f"{r['name']} ({r['sha256'][:12]}…)" for r in recorded)
             raise InputError(f"{rec['path']}: SHA-256 {rec['sha256'][:12]}… is not a file {model_path} was calibrated "
                              f"on (recorded: {names})")
+    missing = want - {r["sha256"] for r in records}
+    if missing:
+        raise InputError(f"--train: {model_path} was calibrated on {len(want)} files ({names}); give every one of them "
+                         "(the nominal comparison is fitted on all its training rows)")
     return {"checked": True, "note": "the training files are the ones the model file recorded (SHA-256)"}
 
 
