@@ -223,3 +223,23 @@ def test_export_model_cli(tmp_path, capsys):
     assert "not a ur10's kinematics" in capsys.readouterr().err
     assert main(["info", "ur10", "--kinematics", str(tmp_path / "c.yaml"), "--json"]) == 0
     assert json.loads(capsys.readouterr().out)["robot"]["name"] == "ur10"
+
+
+def test_an_e_series_arm_goes_through_the_command_line(tmp_path, capsys):
+    """simulate -> identify -> predict -> export-model on a UR5e (ur_description's default kinematics): the data's
+    tool header names the robot 'ur5e' and every command agrees it is the model's robot."""
+    d = tmp_path
+    assert main(["simulate", "--robot", "ur5e", "--n", "120", "--n-test", "40", "--reflector", "0.03,0.02,0.08",
+                 "--out", str(d / "m.csv"), "--test-out", str(d / "h.csv")]) == 0
+    assert main(["identify", "--robot", "ur5e", "--data", str(d / "m.csv"), "--validate", str(d / "h.csv"),
+                 "--reflector", "0.03,0.02,0.08", "--sigma", "1e-5", "--model-out", str(d / "model.json"),
+                 "--quiet"]) == 0
+    assert main(["predict", "--model", str(d / "model.json"), "--data", str(d / "h.csv"), "--out",
+                 str(d / "p.csv")]) == 0
+    assert main(["export-model", "--model", str(d / "model.json"), "--format", "ur-yaml", "--out",
+                 str(d / "k.yaml")]) == 0
+    capsys.readouterr()
+    cm = load_model_file(d / "model.json")
+    assert cm.robot.kinematics.hash == "calib_12788084448423163542"  # the nominal it started from
+    back = load_robot("ur5e", kinematics=d / "k.yaml")
+    assert np.linalg.norm(_tool0(back) - _calibrated_tool0(cm), axis=1).max() < 1e-9

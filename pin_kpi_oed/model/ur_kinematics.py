@@ -226,7 +226,7 @@ def ur_urdf_text(kin: URKinematics, name: str) -> str:
     speeds = UR_TYPES[name.lower()]
     links = ["base_link_inertia", "shoulder_link", "upper_arm_link", "forearm_link", "wrist_1_link",
              "wrist_2_link", "wrist_3_link"]
-    out = [f'<robot name="{name}">', f"  <!-- {name} kinematics {kin.hash} ({kin.source or 'in memory'}) -->",
+    out = [f'<robot name="{name}">', f"  <!-- {name}: ur_description's chain with the kinematics {kin.hash} -->",
            '  <link name="base_link"/>'] + [f'  <link name="{ln}"/>' for ln in links]
     out += ['  <link name="flange"/>', '  <link name="tool0"/>', '  <link name="base"/>',
             '  <joint name="base_link-base_link_inertia" type="fixed"><parent link="base_link"/>'
