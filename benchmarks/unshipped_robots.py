@@ -166,9 +166,7 @@ def walk_api(name: str, work: Path) -> dict:
     cell = pko.load_cell(cell_path)
     train = pko.read_measurements(w / "tr.csv", joint_names=cell.robot.joint_names)
     test = pko.read_measurements(w / "te.csv", joint_names=cell.robot.joint_names)
-    model = pko.TrackerModel(cell.robot, reflector_m=train.tool.reflector_m, tcp_m=train.tool.tcp_m,
-                             noise=cell.noise)
-    result = pko.identify(model, train)
+    result = pko.identify(cell.tracker_model(), train)  # the cell's tool frame, reflector, TCP; the API's defaults
     cm = result.calibrated_model()
     stats = calibration_stats(cm, test.q, test)
     truth = load_truth(str(w / "truth.json"))

@@ -42,8 +42,12 @@ class CommandTool:
 
     def line(self) -> str:
         """One line for the terminal: the tool frame, reflector and TCP in use and where they come from."""
-        return f"tool: {self.tool.describe()} ({self.tool.source})" if self.tool.source else \
-            f"tool: tool frame {self.robot.tool_frame} (the robot's default)"
+        parts = [f"tool frame {self.robot.tool_frame}"
+                 + ("" if self.tool.tool_frame else f" (the default of robot {self.robot.name}; --tool or --cell to "
+                                                    "name another)")]
+        rest = ToolSpec(reflector_m=self.tool.reflector_m, tcp_m=self.tool.tcp_m).describe()
+        return "tool: " + ", ".join(parts + ([rest] if rest else [])) + (f" ({self.tool.source})"
+                                                                         if self.tool.source else "")
 
 
 def add_cell_arg(p: argparse.ArgumentParser) -> None:
