@@ -357,3 +357,34 @@ def test_iso_groups_on_the_ipa_series_match_an_independent_computation(series, p
     assert sorted(r["AP_m"] for r in got["per_position"]) == pytest.approx(sorted(ap), rel=1e-12)
     assert sorted(r["vAP_m"] for r in got["per_position"] if r["vAP_m"] is not None) == pytest.approx(sorted(vap))
     assert (out.get("RP", {}).get("n_groups", 0)) == cycles
+
+
+@pytest.mark.skipif(_IPA is None, reason="IPA UR10 data not found")
+def test_on_the_ipa_data_every_figure_equals_identify_validate(tmp_path, capsys):
+    """Real UR10 rows (Series C: 400 to calibrate, 300 held out; Series D re-registered on 60 rows): identify
+    --validate --json and report on its model give the same before / after figures and honest sigma."""
+    from pin_kpi_oed.data.ipa import import_ipa
+
+    c = import_ipa(_IPA / "Series_C")
+    write_measurements(c.subset(np.arange(400)), tmp_path / "train.csv")
+    write_measurements(c.subset(np.arange(400, 700)), tmp_path / "test.csv")
+    write_measurements(import_ipa(_IPA / "Series_D"), tmp_path / "D.csv")
+    for name, held, extra in (("c", "test.csv", []), ("d", "D.csv", ["--register-rows", "60", "--seed", "0"])):
+        assert main(["identify", "--robot", "ur10", "--data", str(tmp_path / "train.csv"), "--validate",
+                     str(tmp_path / held), "--reflector", "0,0,0.109", "--discrepancy", "none", *extra,
+                     "--json", str(tmp_path / f"id_{name}.json"), "--model-out", str(tmp_path / f"m_{name}.json"),
+                     "--accept-poor-fit", "--quiet"]) in (0, 2)
+        assert main(["report", "--model", str(tmp_path / f"m_{name}.json"), "--train", str(tmp_path / "train.csv"),
+                     "--validate", str(tmp_path / held), *extra, "--json", str(tmp_path / f"cert_{name}.json"),
+                     "--quiet"]) == 0
+        capsys.readouterr()
+        cert = json.loads((tmp_path / f"cert_{name}.json").read_text())
+        ident = json.loads((tmp_path / f"id_{name}.json").read_text())
+        for k in ("before", "after"):
+            for key in ("n", "mean_m", "rms_m", "median_m", "p95_m", "max_m"):
+                assert cert["accuracy"][k][key] == pytest.approx(ident["validation"][k][key], rel=1e-9), (name, k, key)
+        for key in ("z_rms", "inside_95", "sigma_mean_m"):
+            assert cert["honest_sigma"][key] == pytest.approx(ident["validation"]["after"][key], rel=1e-9)
+        assert cert["fit_quality"]["message"] == ident["fit_quality"]["message"]
+    iso = json.loads((tmp_path / "cert_d.json").read_text())["iso9283"]
+    assert iso["AP_vAP"]["after"]["n_positions"] > 20 and iso["RP"]["n_groups"] > 10  # the ISO cube, centre repeated
