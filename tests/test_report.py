@@ -101,6 +101,10 @@ def test_another_session_re_registered_equals_identify_validate(calibrated, caps
         for key in ("n", "mean_m", "rms_m", "p95_m", "max_m"):
             assert cert["accuracy"][k][key] == pytest.approx(ident["validation"][k][key], rel=1e-9, abs=1e-12)
     assert cert["honest_sigma"]["z_rms"] == pytest.approx(ident["validation"]["after"]["z_rms"], rel=1e-9)
+    # the trust map is drawn with the model as registered there: its sigma is the honest sigma's
+    s3 = np.linalg.norm(np.asarray(ident["validation"]["after"]["sigma_axes_m"]), axis=1)
+    assert cert["trust_map"]["sigma_median_m"] == pytest.approx(np.median(s3), rel=1e-9)
+    assert cert["trust_map"]["sigma_max_m"] == pytest.approx(s3.max(), rel=1e-9)
 
 
 def test_trust_map_numbers_equal_predict(calibrated, capsys):

@@ -33,6 +33,9 @@ class Heldout:
         mode: ``split`` (held-out rows of the same set-up) or ``transfer`` (set-up re-registered on other rows).
         registration: what the transfer registration used (``validate_transfer``'s ``registration``), or None.
         coverage: share of the held-out rows inside the training's joint angles (``coverage_summary``).
+        model: the calibrated model the scored rows are predicted with: the model itself, or (another session) the
+            model with the set-up registered as ``validate_transfer`` registers it (station ``transfer``).
+        station: the station of ``model`` the scored rows belong to.
     """
 
     before: dict
@@ -42,6 +45,8 @@ class Heldout:
     mode: str = "split"
     registration: dict | None = None
     coverage: dict = field(default_factory=dict)
+    model: Any = None
+    station: str | None = None
 
 
 def fit_options(cm: Any) -> tuple[Any, np.ndarray]:
@@ -93,7 +98,7 @@ def before_after(cm: Any, train: Any, test: Any, *, register_rows: int | None = 
     from pin_kpi_oed.identification.heldout import validate
     from pin_kpi_oed.identification.identify import identify
     from pin_kpi_oed.identification.problem import align_data
-    from pin_kpi_oed.identification.transfer import validate_transfer
+    from pin_kpi_oed.identification.transfer import register_setup, registration_split, validate_transfer
     from pin_kpi_oed.model.tracker import TrackerModel
 
     opts, refl = fit_options(cm)
@@ -101,14 +106,18 @@ def before_after(cm: Any, train: Any, test: Any, *, register_rows: int | None = 
     before = identify(model, train, opts, setup_only=True, discrepancy="none")
     Q = align_data(cm.robot, test)
     if register_rows is None and register_data is None:
-        vb, va, mode, reg = validate(before, test), validate(cm, test), "split", None
-    else:
-        kw = dict(register_rows=register_rows, register_data=register_data, seed=seed)
-        vb = validate_transfer(before.calibrated_model(), test, **kw)
-        va = validate_transfer(cm, test, **kw)
-        mode, reg = "transfer", va["registration"]
-        Q = Q[np.asarray(va["scored_rows"], int) - 1]
-    return Heldout(vb, va, Q, _reach(cm, Q), mode, reg, coverage_summary(cm.robot, train, test))
+        vb, va = validate(before, test), validate(cm, test)
+        return Heldout(vb, va, Q, _reach(cm, Q), "split", None, coverage_summary(cm.robot, train, test), cm,
+                       cm.default_station or next(iter(cm.setups)))
+    kw = dict(register_rows=register_rows, register_data=register_data, seed=seed)
+    vb = validate_transfer(before.calibrated_model(), test, **kw)
+    va = validate_transfer(cm, test, **kw)
+    Q = Q[np.asarray(va["scored_rows"], int) - 1]
+    # the registered model validate_transfer scored with (same rows, same call): for the trust map
+    rows = registration_split(len(test), register_rows, seed)[0] if register_data is None else None
+    reg = register_setup(cm, test.subset(rows) if rows is not None else register_data, station="transfer").model
+    return Heldout(vb, va, Q, _reach(cm, Q), "transfer", va["registration"], coverage_summary(cm.robot, train, test),
+                   reg, "transfer")
 
 
 def _binned(x: np.ndarray, e: np.ndarray, bins: int) -> dict:

@@ -240,7 +240,7 @@ def build_certificate(model_path: str, train_paths: Sequence[str], validate_path
     cert = Certificate(data)
     from pin_kpi_oed.report.figures import draw_figures, trust_numbers
 
-    data["trust_map"] = trust_numbers(cm, ho.Q, scored)
+    data["trust_map"] = trust_numbers(ho.model, ho.Q, scored, ho.station)
     if figures:
         cert.figures = draw_figures(cm, ho, scored, data)
     return cert
