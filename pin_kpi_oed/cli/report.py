@@ -55,9 +55,9 @@ def run(args: argparse.Namespace) -> int:
     from pin_kpi_oed.report.write import write_certificate
 
     if not (args.html or args.json or args.pdf):
-        raise InputError("report: give --html FILE, --json FILE and/or --pdf FILE")
+        raise InputError("give --html FILE, --json FILE and/or --pdf FILE")
     if args.register_rows is not None and args.register_data:
-        raise InputError("report: give --register-rows or --register-data, not both")
+        raise InputError("give --register-rows or --register-data, not both")
     cert = build_certificate(args.model, args.train, args.validate, register_rows=args.register_rows,
                              register_data_path=args.register_data, seed=args.seed, table_opts=table_options(args),
                              kinematics=args.kinematics, command=command_line(getattr(args, "argv", None) or []),

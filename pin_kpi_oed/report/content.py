@@ -203,7 +203,7 @@ def build_certificate(model_path: str, train_paths: Sequence[str], validate_path
     from pin_kpi_oed.report.iso9283 import iso_figures
 
     if not validate_path:
-        raise InputError("report: a certificate states accuracy on rows the model was not fitted on: give "
+        raise InputError("a certificate states accuracy on rows the model was not fitted on: give "
                          "--validate FILE (held-out measurements)")
     cm = load_model_file(model_path)
     _check_kinematics(cm, kinematics)

@@ -174,7 +174,7 @@ INPUTS = {"evaluate": ["design"], "design": ["cell", "pool", "given", "given_pri
           "view": ["design"], "info": ["robot"], "export": ["design"],
           "compensate": ["model", "targets", "program", "cell"],
           "import-tracker": ["export", "joints", "robot"], "export-model": ["model"],
-          "report": ["model", "train", "validate", "register_data"]}
+          "report": ["model", "train", "validate", "register_data", "kinematics"]}
 #: command -> argparse dests of output folders
 FOLDERS = {"diagnose": ["figures"], "view": ["figures"], "study": ["out"]}
 
