@@ -120,6 +120,9 @@ def _accuracy(d: dict) -> str:
     rows += [[f"{ax}: mean / RMS / max |e|"] + [" / ".join(mm(a[k]["per_axis"][ax][f], 4) for f in
                                                          ("mean_m", "rms_m", "max_abs_m")) for k in ("before", "after")]
              for ax in "xyz"]
+    if "rot_rms_rad" in a["after"] and "rot_rms_rad" in a["before"]:
+        rows.append(["orientation RMS (6-D probe)"]
+                    + [f"{a[k]['rot_rms_rad'] * 1e3:.4f} mrad" for k in ("before", "after")])
     out = f"<p>Before: {_e(a['before_means'])}. After: {_e(a['after_means'])}.</p>"
     if a["registration"]:
         r = a["registration"]
