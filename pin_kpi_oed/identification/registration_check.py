@@ -91,20 +91,25 @@ def coverage_share(model: CalibratedModel, Q: np.ndarray) -> float | None:
 
 
 def uncovered_ranges(model: CalibratedModel, Q: np.ndarray, limit: int = 3) -> list[str]:
-    """The joints whose angles in Q (m, n) rad reach beyond the calibration's range, widest first:
-    ``"shoulder_lift_joint -2.1..-0.4 rad (measured -1.6..-0.9)"``, at most ``limit`` of them (none when the
-    model keeps no training configurations)."""
+    """The joints whose angles in Q (m, n) rad the calibration never measured (no training angle of that joint within
+    :data:`~pin_kpi_oed.identification.coverage.COVERAGE_TOL_RAD`, wrapped mod 2π), most rows first:
+    ``"shoulder_pan_joint -3.06..-1.06 rad (60 of 60 rows)"`` (the uncovered rows' angles wrapped to (−π, π]), at
+    most ``limit`` of them with at least 5 % of the rows; none when the model keeps no training configurations."""
+    from pin_kpi_oed.identification.coverage import COVERAGE_TOL_RAD, covered_rows
+
     Z = training_configurations(model)
-    if Z is None or not len(Z):
+    Q = np.atleast_2d(np.asarray(Q, float))
+    if Z is None or not len(Z) or not len(Q):
         return []
-    lo, hi = Z.min(axis=0), Z.max(axis=0)
-    q_lo, q_hi = Q.min(axis=0), Q.max(axis=0)
-    beyond = np.maximum(lo - q_lo, 0.0) + np.maximum(q_hi - hi, 0.0)
+    out_rows = ~covered_rows(Z, Q, COVERAGE_TOL_RAD)
+    share = out_rows.mean(axis=0)
     out = []
-    for j in np.argsort(-beyond)[:limit]:
-        if beyond[j] > 0.05:
-            out.append(f"{model.robot.joint_names[j]} {q_lo[j]:.2f}..{q_hi[j]:.2f} rad "
-                       f"(measured {lo[j]:.2f}..{hi[j]:.2f})")
+    for j in np.argsort(-share, kind="stable")[:limit]:
+        if share[j] < 0.05:
+            continue
+        a = np.mod(Q[out_rows[:, j], j] + np.pi, 2 * np.pi) - np.pi
+        out.append(f"{model.robot.joint_names[j]} {a.min():.2f}..{a.max():.2f} rad "
+                   f"({int(out_rows[:, j].sum())} of {len(Q)} rows)")
     return out
 
 
@@ -134,7 +139,8 @@ def poor_registration_cause(model: CalibratedModel, data: MeasurementSet, label:
     share = coverage_share(model, Q)
     ranges = uncovered_ranges(model, Q)
     inside = ("" if share is None else f"{100 * share:.0f} % of the rows lie inside the model's joint coverage")
-    measure = ("measure the missing ranges (" + "; ".join(ranges) + ")") if ranges else "measure the missing ranges"
+    measure = ("measure the missing joint ranges (" + "; ".join(ranges) + ")") if ranges else \
+        "measure the missing joint ranges"
     names = sorted({getattr(e, "name", type(e).__name__) for e in model.effects})
     if names or model.discrepancy is not None:
         try:
