@@ -521,17 +521,21 @@ def _make_problem(args: argparse.Namespace, cell, given_file, collision: bool, q
     problem.hedge = not getattr(args, "no_hedge", False)
     if getattr(args, "model", None):
         if given_file:  # a measurement campaign: the discrepancy re-fitted on the measured batch, geometric design
+            from pin_kpi_oed.cli.tool import model_cell_tool
             from pin_kpi_oed.identification.model_file import load_model_file
 
             cm = load_model_file(args.model)
+            model_cell_tool(cm, args.model, cell, args.cell)  # the model's robot, tool frame and TCP are the cell's
             _set_discrepancy(problem, cm, args.model)
             _refit_discrepancy(problem, given_file, quiet)
             return problem
+        from pin_kpi_oed.cli.tool import model_cell_tool
         from pin_kpi_oed.identification.model_file import load_model_file
         from pin_kpi_oed.oed.extended import ExtendedModel
 
         prior = getattr(args, "prior", "model") or "model"
         cm = load_model_file(args.model)
+        model_cell_tool(cm, args.model, cell, args.cell)  # the model's robot, tool frame and TCP are the cell's
         _set_discrepancy(problem, cm, args.model)
         problem.extended = ExtendedModel.from_calibrated_model(cm, model=problem.model,
                                                                base=problem.base,

@@ -19,7 +19,7 @@ from pin_kpi_oed.data.tool_header import ToolSpec, resolve_tool
 from pin_kpi_oed.errors import InputError
 
 __all__ = ["CELL_HELP", "CommandTool", "add_cell_arg", "command_tool", "cell_tool_spec", "canonical_robot",
-           "model_tool"]
+           "model_tool", "model_cell_tool"]
 
 #: Help of every ``--cell`` option that supplies the tool.
 CELL_HELP = ("cell YAML file or shipped cell name: the robot, its tool frame, the reflector, the TCP and the "
@@ -160,4 +160,17 @@ def model_tool(args: argparse.Namespace, model: Any, model_path: str, data_paths
 
         specs.append(cell_tool_spec(load_cell(args.cell), f"--cell {args.cell}"))
     specs += [read_measurement_tool(p) for p in data_paths]
+    return resolve_tool([canonical_robot(s) for s in specs], skip=("reflector_m", "q_work"))
+
+
+def model_cell_tool(model: Any, model_path: str, cell: Any, cell_name: str) -> ToolSpec:
+    """:func:`model_tool` against a cell already loaded (``design --model``): the same robot, tool frame and TCP.
+
+    Raises:
+        InputError: the cell names another robot, tool frame or TCP than the model (both named).
+    """
+    rb = model.robot
+    specs = [ToolSpec(robot=str(rb.urdf_path), tool_frame=rb.tool_frame,
+                      tcp_m=model.tcp_m if model.tool_source else None, source=f"--model {model_path}"),
+             cell_tool_spec(cell, f"--cell {cell_name}")]
     return resolve_tool([canonical_robot(s) for s in specs], skip=("reflector_m", "q_work"))
