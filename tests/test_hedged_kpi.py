@@ -97,3 +97,21 @@ def test_simulated_discrepancy_sample_has_its_level_and_length_scale():
     both = gp_discrepancy_sample(np.vstack([Q[:50], near]), 1e-4, 1.0, seed=2)
     assert np.corrcoef(both[:50].ravel(), both[50:].ravel())[0, 1] > 0.99
     assert np.all(gp_discrepancy_sample(Q, 0.0, 1.0, seed=1) == 0.0)
+
+
+def test_cli_design_says_it_hedges_and_refuses_no_hedge_where_nothing_is_assumed(tmp_path, capsys):
+    from pin_kpi_oed.cli.app import main
+
+    cell = load_cell(str(ROOT / "examples" / "ur5_cell.yaml"))
+    Q, _ = DesignProblem(cell).random_design(60, seed=np.random.SeedSequence([5, 1]))
+    pool = tmp_path / "pool.csv"
+    pool.write_text(",".join(cell.robot.joint_names) + "\n"
+                    + "".join(",".join(repr(float(v)) for v in q) + "\n" for q in Q))
+    args = ["design", "--cell", str(ROOT / "examples" / "ur5_cell.yaml"), "--pool", str(pool), "--criteria", "kpi_gp",
+            "--measurements", "12", "--work-radius", "0"]
+    assert main(args) == 0
+    assert "kpi_gp: the discrepancy is an assumption (no --model): the design hedges" in capsys.readouterr().out
+    assert main(args + ["--no-hedge"]) == 0
+    assert "the design hedges" not in capsys.readouterr().out
+    assert main(args[:6] + ["kpi", "--no-hedge"]) == 2
+    assert "--no-hedge applies to kpi_gp without --model" in capsys.readouterr().err

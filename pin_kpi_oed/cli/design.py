@@ -322,6 +322,11 @@ def _pool_given_target(args: argparse.Namespace) -> tuple[str | None, str | None
                          "or --model with a discrepancy)")
     if target is not None and not (target > 0):
         raise InputError(f"--target-sigma: must be > 0 m, got {target}")
+    if getattr(args, "no_hedge", False) and ("kpi_gp" not in [c.strip() for c in crits.split(",")]
+                                             or getattr(args, "model", None)):
+        raise InputError("--no-hedge applies to kpi_gp without --model (the assumed class default); "
+                         f"--criteria {crits or '(default)'}" + (" with --model: a fitted discrepancy is never hedged"
+                                                                  if getattr(args, "model", None) else ""))
     return pool_file, given_file, target
 
 
