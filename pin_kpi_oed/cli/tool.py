@@ -100,6 +100,7 @@ def command_tool(args: argparse.Namespace, data_paths: Sequence[str], *, other_p
     """
     from pin_kpi_oed.cli.util import parse_floats
     from pin_kpi_oed.data.measurements import read_measurement_tool
+    from pin_kpi_oed.errors import RobotLoadError
     from pin_kpi_oed.model.robot import load_robot
 
     specs: list[ToolSpec | None] = []
@@ -127,8 +128,12 @@ def command_tool(args: argparse.Namespace, data_paths: Sequence[str], *, other_p
     if cell is not None and main.tool_frame == cell.robot.tool_frame and not getattr(args, "kinematics", None):
         robot = cell.robot
     else:
-        robot = load_robot(robot_opt if robot_opt else main.robot, main.tool_frame,
-                           kinematics=getattr(args, "kinematics", None))
+        try:
+            robot = load_robot(robot_opt if robot_opt else main.robot, main.tool_frame,
+                               kinematics=getattr(args, "kinematics", None))
+        except RobotLoadError as exc:
+            where = [part for part in main.source.split(", ") if part.startswith(("tool_frame", "robot"))]
+            raise RobotLoadError(f"{exc} ({'; '.join(where)})" if where else str(exc)) from None
     if main.q_work is not None:
         main.q_work = robot.check_q(main.q_work, f"working configurations ({main.source})")
     return CommandTool(robot=robot, tool=main, cell=cell)
