@@ -64,7 +64,7 @@ from pin_kpi_oed.data.targets import TargetSet
 from pin_kpi_oed.effects.library import predict_with_effects, sum_joint_offsets
 from pin_kpi_oed.errors import InputError
 from pin_kpi_oed.identification.compensate_checks import (branch_step, collision_rows, joint_limit_rows,
-                                                          start_configurations)
+                                                          nearest_to_reference, start_configurations)
 from pin_kpi_oed.identification.model_file import CalibratedModel
 from pin_kpi_oed.identification.tool_offset import unobservable_tcp_sigma
 from pin_kpi_oed.model.kinematics import skew
@@ -439,6 +439,11 @@ def compensate(cm: CalibratedModel, targets: TargetSet, options: CompensationOpt
     R_t = None if targets.rotvec_rad is None else np.array([pin.exp3(v) for v in targets.rotvec_rad])
     start = start_configurations(pm0, cm.q_work, targets.q, pos_t, R_t, targets.aux, opt.length_m)
     nom, restarted = _nominal_ik(pm0, pos_t, R_t, start.Q, targets.aux, opt)
+    reached = (nom.err_m <= opt.reach_tol_m) & (nom.err_rad <= opt.reach_tol_rad) & ~restarted
+    if reached.any():  # a redundant arm: the solution nearest the hint / working configuration
+        w = np.r_[np.ones(3), np.full(3, opt.length_m)] if R_t is not None else np.ones(3)
+        nom.Q[reached] = nearest_to_reference(pm0, nom.Q[reached], start.Q[reached], pos_t[reached],
+                                              None if R_t is None else R_t[reached], w, opt.reach_tol_m)
     cal = _solve_ik(pm, pos_t, R_t, nom.Q, targets.aux, opt)
     left = restarted & np.array([k != "neutral" for k in start.kind])  # the hint's / working branch was left
     return _result(cm, targets, opt, pm, nom, cal, pos_t, t0, start.Q, start.kind, left)

@@ -8,7 +8,9 @@ Start (reference) configuration of every target, in order of precedence:
 3. else the robot's neutral configuration (then seeded random restarts).
 
 From that start the damped least-squares IK takes minimum-norm steps, so on a redundant arm (7 joints, or a
-position-only target on 6) it ends on the start's branch and near it in the null space. Checks of every
+position-only target on 6) it ends on the start's branch; :func:`nearest_to_reference` then slides the solution along
+its self-motion manifold to the configuration nearest the start (null-space steps N(q_ref − q), N = I − J⁺J, each
+followed by Gauss–Newton steps back onto the target), so the solution is the one nearest the hint. Checks of every
 compensated configuration q (and the reason it is not ``ok``):
 
 * ``off_branch``: the nominal IK needed a random restart although a hint or a working configuration gave the branch
@@ -27,8 +29,8 @@ from typing import Any
 import numpy as np
 import pinocchio as pin
 
-__all__ = ["BRANCH_STARTS", "StartConfigurations", "start_configurations", "joint_limit_rows", "collision_rows",
-           "branch_step"]
+__all__ = ["BRANCH_STARTS", "StartConfigurations", "start_configurations", "nearest_to_reference", "joint_limit_rows",
+           "collision_rows", "branch_step"]
 
 #: Where a target's start configuration came from.
 BRANCH_STARTS = ("hint", "working", "neutral")
@@ -83,6 +85,57 @@ def start_configurations(pm0: Any, q_work: np.ndarray | None, Q_hint: np.ndarray
         kind = ["hint"] * m
         index = np.full(m, -1)
     return StartConfigurations(Q, kind, index)
+
+
+def nearest_to_reference(pm: Any, Q: np.ndarray, Q_ref: np.ndarray, pos_t: np.ndarray, R_t: np.ndarray | None,
+                         weights: np.ndarray, tol_m: float, iters: int = 30) -> np.ndarray:
+    """Each redundant row of Q moved along its self-motion manifold to the solution nearest Q_ref (module docstring).
+
+    Args:
+        pm: the :class:`~pin_kpi_oed.identification.compensate.PoseModel` the rows solve (the nominal one).
+        Q: converged solutions (m, n); Q_ref: their references (m, n) (rad / m).
+        pos_t, R_t: the targets (m, 3) and rotations (m, 3, 3) or None (position only).
+        weights: the task rows' weights (3 or 6), orientation rows in m/rad.
+        tol_m: a moved row must still reach its target within this (m; rad × weight for orientation).
+        iters: null-space steps per row.
+
+    Returns:
+        (m, n): each row at least as near its reference as before (rows without redundancy unchanged).
+    """
+    robot = pm.robot
+    nr = len(weights)
+    if robot.nq <= nr:
+        return Q
+    Q = np.array(Q, float)
+
+    def task_error(q: np.ndarray, i: int) -> np.ndarray:
+        pos, R = pm.pose(q[None], None)
+        e = pos_t[i] - pos[0]
+        if R_t is not None:
+            e = np.r_[e, pin.log3(R_t[i] @ R[0].T)]
+        return e * weights
+
+    for i in range(len(Q)):
+        q = Q[i]
+        for _ in range(iters):
+            J = pm.jacobian(q)[:nr] * weights[:, None]
+            Jp = np.linalg.pinv(J)
+            d = (np.eye(robot.nq) - Jp @ J) @ (Q_ref[i] - q)
+            if np.linalg.norm(d) < 1e-9:
+                break
+            q1 = np.clip(q + d, robot.q_lower, robot.q_upper)
+            for _ in range(5):  # back onto the target (the null-space step leaves a second-order error)
+                e = task_error(q1, i)
+                if np.linalg.norm(e) <= 1e-10:
+                    break
+                q1 = np.clip(q1 + np.linalg.pinv(pm.jacobian(q1)[:nr] * weights[:, None]) @ e, robot.q_lower,
+                             robot.q_upper)
+            if np.linalg.norm(task_error(q1, i)) > tol_m or \
+                    np.linalg.norm(q1 - Q_ref[i]) >= np.linalg.norm(q - Q_ref[i]):
+                break
+            q = q1
+        Q[i] = q
+    return Q
 
 
 def joint_limit_rows(robot: Any, Q: np.ndarray, margin: float) -> np.ndarray:
