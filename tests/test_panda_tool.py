@@ -228,6 +228,10 @@ def test_collision_and_branch_checks_are_never_ok(tmp_path):
                    MeasurementSet(list(robot.joint_names), cell.q_work, np.zeros((n, 3))), "t")
     ok = compensate(cm, ts, CompensationOptions(frame="base", cell=cell))
     assert ok.target_status == ["ok"] * n and ok.start == ["working"] * n
+    cm.q_work = None  # a model without working configurations: the cell's give the branch
+    again = compensate(cm, ts, CompensationOptions(frame="base", cell=cell))
+    assert again.start == ["working"] * n and np.allclose(again.q, ok.q, atol=1e-9)
+    cm.q_work = cell.q_work
     assert compensate(cm, ts, CompensationOptions(frame="base", max_branch_step_rad=1e-6)).target_status == \
         ["off_branch"] * n  # compensation moves joints by ~1e-3 rad: beyond a branch limit of 1e-6 rad
     W_tcp = cell.W_T_base.act(robot.oMtool(ok.q[0]).act(cell.tcp_m))

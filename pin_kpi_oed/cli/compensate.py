@@ -79,14 +79,12 @@ def run(args: argparse.Namespace) -> int:
 
     model = load_model_file(args.model)
     robot = model.robot
-    tool = model_tool(args, model, args.model)  # --cell against the model: robot, tool frame, TCP
+    model_tool(args, model, args.model)  # --cell against the model: robot, tool frame, TCP
     cell = None
-    if args.cell:
+    if args.cell:  # collisions checked in it; its working configurations when the model has none
         from pin_kpi_oed.cell.cell import load_cell
 
         cell = load_cell(args.cell)
-        if model.q_work is None and tool.q_work is not None:
-            model.q_work = robot.check_q(tool.q_work, f"--cell {args.cell}: working configurations")
     kw = table_options(args)
     tcp = parse_floats(args.tcp, 3, "--tcp") if args.tcp else None
     opt = CompensationOptions(frame=args.frame, station=args.station, tcp_m=tcp, seed=args.seed, cell=cell,

@@ -103,7 +103,8 @@ class CompensationOptions:
             it the compensated configuration is on another branch (``off_branch``).
         limit_margin: a compensated joint this close to its limit (rad / m) is ``joint_limit``.
         cell: the :class:`~pin_kpi_oed.cell.cell_model.Cell` whose independent check every compensated configuration
-            must pass (``collision`` otherwise); None: not checked.
+            must pass (``collision`` otherwise; its working configurations give the branch when the model has none);
+            None: not checked.
         tool_tolerances: the manufacturing tolerances of the joint placements the calibration could not determine,
             for the σ of a TCP away from the reflector (:mod:`pin_kpi_oed.identification.tool_offset`); default
             :class:`~pin_kpi_oed.model.tolerances.Tolerances` (0.5 mm, 1 mrad).
@@ -437,7 +438,9 @@ def compensate(cm: CalibratedModel, targets: TargetSet, options: CompensationOpt
     pm0 = PoseModel(cm, opt.frame, opt.station, opt.tcp_m, nominal=True)
     pos_t = np.asarray(targets.position_m, float)
     R_t = None if targets.rotvec_rad is None else np.array([pin.exp3(v) for v in targets.rotvec_rad])
-    start = start_configurations(pm0, cm.q_work, targets.q, pos_t, R_t, targets.aux, opt.length_m)
+    q_work = cm.q_work if cm.q_work is not None or opt.cell is None or not np.size(opt.cell.q_work) else \
+        cm.robot.check_q(opt.cell.q_work, "the cell's working configurations")
+    start = start_configurations(pm0, q_work, targets.q, pos_t, R_t, targets.aux, opt.length_m)
     nom, restarted = _nominal_ik(pm0, pos_t, R_t, start.Q, targets.aux, opt)
     reached = (nom.err_m <= opt.reach_tol_m) & (nom.err_rad <= opt.reach_tol_rad) & ~restarted
     if reached.any():  # a redundant arm: the solution nearest the hint / working configuration
