@@ -21,7 +21,7 @@ import argparse
 
 import numpy as np
 
-from pin_kpi_oed.cli.tool import model_tool
+from pin_kpi_oed.cli.tool import model_cell_tool
 from pin_kpi_oed.cli.util import add_table_options, parse_floats, table_options
 
 __all__ = ["register", "run"]
@@ -79,12 +79,12 @@ def run(args: argparse.Namespace) -> int:
 
     model = load_model_file(args.model)
     robot = model.robot
-    model_tool(args, model, args.model)  # --cell against the model: robot, tool frame, TCP
     cell = None
     if args.cell:  # collisions checked in it; its working configurations when the model has none
         from pin_kpi_oed.cell.cell import load_cell
 
         cell = load_cell(args.cell)
+        model_cell_tool(model, args.model, cell, args.cell)  # the model's robot, tool frame and TCP are the cell's
     kw = table_options(args)
     tcp = parse_floats(args.tcp, 3, "--tcp") if args.tcp else None
     opt = CompensationOptions(frame=args.frame, station=args.station, tcp_m=tcp, seed=args.seed, cell=cell,
