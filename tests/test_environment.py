@@ -257,3 +257,152 @@ def test_mesh_penetration_fixes_coals_zero_distance_in_a_degenerate_contact():
     far = SimpleNamespace(pairs=[(0, 1)], mesh_pairs=[0], gm=gm,
                           gd=SimpleNamespace(oMg=[pin.SE3(np.eye(3), np.array([0.0, 0.0, 0.5])), M_plate]))
     assert mesh_penetration(far, np.array([0.2]))[0] == 0.2  # clear pairs untouched
+
+
+# ---------------------------------------------------------------------- primitives (box, cylinder, sphere)
+def _seg_box_distance(a: np.ndarray, b: np.ndarray, r: float, M: pin.SE3, half: np.ndarray) -> float:
+    """Distance (m) of a capsule to a box, by dense sampling of the segment in the box frame (independent of Coal)."""
+    t = np.linspace(0.0, 1.0, 20001)[:, None]
+    P = (a + t * (b - a) - M.translation) @ M.rotation  # box frame
+    out = np.linalg.norm(np.maximum(np.abs(P) - half, 0.0), axis=1)
+    inside = np.all(np.abs(P) <= half, axis=1)
+    depth = np.where(inside, -np.min(half - np.abs(P), axis=1), 0.0)
+    return float(np.min(np.where(inside, depth, out))) - r
+
+
+def _seg_point_distance(a: np.ndarray, b: np.ndarray, c: np.ndarray) -> float:
+    d = b - a
+    t = np.clip((c - a) @ d / (d @ d), 0.0, 1.0)
+    return float(np.linalg.norm(c - (a + t * d)))
+
+
+def _robot_capsule_world(chk, cell, q, name):
+    """(a, b, radius) of the robot capsule ``name`` in the cell frame at ``q``."""
+    rb = cell.robot
+    spec = next(c for c in cell.robot_capsules if c.name == name)
+    pin.framesForwardKinematics(rb.model, rb.data, q)
+    M = cell.W_T_base * rb.data.oMf[rb.model.getFrameId(spec.link)]
+    return M.act(spec.a), M.act(spec.b), spec.radius
+
+
+def test_box_cylinder_sphere_obstacles_one_coal_shape_exact_distances_and_enclosing_capsules(tmp_path):
+    """A primitive is one Coal shape in the check (its distance to a robot capsule equals the analytic one) and
+    its capsules enclose it: a 0.3 m cube is one capsule (through a URDF box: up to 16)."""
+    cell0 = load_cell("kr15")
+    q = cell0.q_work[0]
+    wrist = _link6_world(cell0, q)
+    d = _kr15_dict()
+    R = pin.rpy.rpyToMatrix(0.3, -0.2, 0.7)
+    d["environment"] = [
+        {"name": "crate", "box": {"size_m": [0.3, 0.3, 0.3]},
+         "pose": {"xyz_m": (wrist + [0.0, 0.0, 0.45]).tolist(), "rpy_deg": np.degrees([0.3, -0.2, 0.7]).tolist()}},
+        {"name": "pillar", "cylinder": {"radius_m": 0.1, "length_m": 1.5}, "pose": {"xyz_m": [-0.2, 1.8, 0.75]}},
+        {"name": "lamp", "sphere": {"radius_m": 0.2}, "pose": {"xyz_m": (wrist + [0.0, -0.5, 0.0]).tolist()}}]
+    cell = cell_from_dict(d, str(tmp_path / "cell.yaml"), tmp_path)
+    crate, pillar, lamp = cell.environment
+    assert [len(e.solids) for e in cell.environment] == [1, 1, 1] and all(e.solids[0].convex for e in cell.environment)
+    assert len(crate.capsules) == 1 and len(pillar.capsules) == 1 and len(lamp.capsules) == 1
+    cube = trimesh.creation.box(extents=[0.3, 0.3, 0.3])
+    surface = np.vstack([cube.sample(4000, seed=1), cube.vertices]) @ R.T + crate.W_T_obj.translation
+    assert _inside_some(surface, crate.capsules).min() >= -1e-9
+    cyl = trimesh.creation.cylinder(radius=0.1, height=1.5, sections=64)
+    surf = np.vstack([cyl.sample(4000, seed=2), cyl.vertices]) + pillar.W_T_obj.translation
+    assert _inside_some(surf, pillar.capsules).min() >= -1e-9
+    assert pillar.capsules[0].radius == pytest.approx(0.1)
+    chk = FeasibilityChecker(cell)
+    dist = dict(zip(chk.names, chk.distances(q[None])[0]))
+    wrist_caps = [c for c in cell.robot_capsules if c.link in ("link_5", "link_6")]
+    assert wrist_caps
+    for cap in wrist_caps:
+        a, b, r = _robot_capsule_world(chk, cell, q, cap.name)
+        key = next(k for k in dist if k.split("|")[0] == cap.name and k.split("|")[1] == "crate")
+        exact = _seg_box_distance(a, b, r, crate.W_T_obj, np.array([0.15, 0.15, 0.15]))
+        assert dist[key] == pytest.approx(exact, abs=2e-4)
+        key = next(k for k in dist if k.split("|")[0] == cap.name and k.split("|")[1] == "lamp")
+        assert dist[key] == pytest.approx(_seg_point_distance(a, b, lamp.W_T_obj.translation) - r - 0.2, abs=1e-7)
+
+
+def test_primitive_obstacles_round_trip_through_the_design_file(tmp_path):
+    from pin_kpi_oed.cell.environment import environment_from_dicts
+
+    d = _kr15_dict()
+    d["environment"] = [{"name": "crate", "box": {"size_m": [0.3, 0.2, 0.1]}, "pose": {"xyz_m": [0.0, 1.6, 0.05]}}]
+    cell = cell_from_dict(d, str(tmp_path / "cell.yaml"), tmp_path)
+    notes: list[str] = []
+    back = environment_from_dicts([e.to_dict() for e in cell.environment], cell.obstacles, "d.json", notes)
+    assert not notes and len(back) == 1 and back[0].kind == "box"
+    assert np.allclose(back[0].solids[0].geometry.halfSide, [0.15, 0.1, 0.05])
+    assert [c.name for c in back[0].capsules] == [c.name for c in cell.environment[0].capsules]
+
+
+@pytest.mark.parametrize("entry, needle", [
+    ({"name": "x", "box": {"size_m": [0.3, 0.3]}}, "box.size_m"),
+    ({"name": "x", "box": {"size_m": [0.3, -0.3, 0.3]}}, "box.size_m"),
+    ({"name": "x", "cylinder": {"radius_m": 0.1}}, "length_m"),
+    ({"name": "x", "sphere": {"radius_m": 0}}, "radius_m"),
+    ({"name": "x", "sphere": {"radius_m": 0.1}, "box": {"size_m": [1, 1, 1]}}, "give exactly one of"),
+])
+def test_bad_primitive_obstacle_is_one_line_naming_the_field(tmp_path, entry, needle):
+    d = _kr15_dict()
+    d["environment"] = [entry]
+    with pytest.raises(InputError) as e:
+        cell_from_dict(d, str(tmp_path / "cell.yaml"), tmp_path)
+    assert needle in str(e.value) and "\n" not in str(e.value)
+
+
+def _sphere_near(cell, q, name: str, gap: float, radius: float = 0.05) -> list[float]:
+    """Centre of a sphere of ``radius`` ``gap`` m clear of the robot capsule ``name`` at ``q`` (cell frame), beside
+    the capsule's middle along the cell's y axis."""
+    a, b, r = _robot_capsule_world(None, cell, q, name)
+    return ((a + b) / 2 + np.array([0.0, 1.0, 0.0]) * (r + radius + gap)).tolist()
+
+
+def test_clearance_message_names_the_clearance_margin_option(tmp_path, capsys):
+    from pin_kpi_oed.cli.app import main
+
+    cell = load_cell("kr15")
+    q = cell.q_work[0]
+    cap = next(c.name for c in cell.robot_capsules if c.link == "link_5")  # the others are > 30 mm from it
+    d = _kr15_dict()
+    d["obstacles"]["capsules"].append({"name": "probe_stand", "a_m": _sphere_near(cell, q, cap, 0.010),
+                                       "b_m": _sphere_near(cell, q, cap, 0.010), "radius_m": 0.05})
+    (tmp_path / "c.yaml").write_text(yaml.safe_dump(d))
+    assert main(["design", "--cell", str(tmp_path / "c.yaml"), "--criteria", "random", "--measurements", "10"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "probe_stand" in err[0], err
+    assert "--clearance-margin 20 mm" in err[0] and "--clearance-margin 0.009 admits it" in err[0], err[0]
+
+
+def test_obstacle_on_the_base_and_tracker_in_an_obstacle_are_named_before_the_working_targets(tmp_path):
+    """The UR10 cell (working targets solved by IK): an obstacle the shoulder hits at every configuration, or one
+    around the tracker (a capsule or a box), is refused as the cell's fault, not as an unreachable working target."""
+    base = yaml.safe_load((CELL_DIR / "ur10.yaml").read_text())
+    for f in ("ur10_table.urdf", "ur10_workpiece.stl"):
+        (tmp_path / f).write_bytes((CELL_DIR / f).read_bytes())
+
+    def refused(edit) -> str:
+        d = yaml.safe_load(yaml.safe_dump(base))
+        edit(d)
+        with pytest.raises(InputError) as e:
+            cell_from_dict(d, str(tmp_path / "cell.yaml"), tmp_path)
+        assert "\n" not in str(e.value) and "working_targets" not in str(e.value), str(e.value)
+        return str(e.value)
+
+    msg = refused(lambda d: d["obstacles"]["capsules"].append(
+        {"name": "crate", "a_m": [0.0, 0.0, 1.05], "b_m": [0.0, 0.0, 1.05], "radius_m": 0.08}))
+    assert "obstacle 'crate' overlaps the robot: 'shoulder_link'" in msg and "every one of 64" in msg
+    msg = refused(lambda d: d["obstacles"]["capsules"].append(
+        {"name": "cover", "a_m": [0.3, -2.6, 1.2], "b_m": [0.3, -2.6, 1.4], "radius_m": 0.2}))
+    assert "the tracker at [0.300, -2.600, 1.300] m (cell frame) is inside obstacle 'cover'" in msg
+    msg = refused(lambda d: d["environment"].append(
+        {"name": "hut", "box": {"size_m": [0.5, 0.5, 0.5]}, "pose": {"xyz_m": [0.3, -2.6, 1.3]}}))
+    assert "is inside obstacle 'hut'" in msg
+    # a plate above the tracker whose coarse enclosing capsule holds it: the optimiser's capsule is named, with the fix
+    plate = {"name": "plate", "box": {"size_m": [0.6, 0.6, 0.02]}, "pose": {"xyz_m": [0.3, -2.6, 1.45]},
+             "max_radius_m": 1.0}
+    msg = refused(lambda d: d["environment"].append(plate))
+    assert "obstacle 'plate_0' (an enclosing capsule the optimiser uses for 'plate'" in msg and "max_radius_m" in msg
+    d = yaml.safe_load(yaml.safe_dump(base))
+    d["environment"].append({**plate, "max_radius_m": 0.05})  # strips 5 cm thick: the tracker is clear of them
+    cell = cell_from_dict(d, str(tmp_path / "cell.yaml"), tmp_path)
+    assert len(cell.environment[-1].capsules) > 1

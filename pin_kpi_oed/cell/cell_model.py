@@ -84,7 +84,9 @@ class Cell:
         beam_radius_m: radius of the laser-beam capsule (m).
         beam_skip: names the beam is not checked against.
         incidence_max_deg: largest incidence angle of the beam on the reflector (deg).
-        clearance_m: required clearance of every capsule pair (m).
+        clearance_m: required clearance of every capsule pair (m), margins included.
+        clearance_margin_m: the part of ``clearance_m`` the design added on top of the cell file's
+            (``design --clearance-margin``; 0 for the cell as read).
         q_work: working configurations (t, n) rad.
         measurements: default number of measurement configurations.
         max_random_tries: rejection-sampling budget of the heuristic design.
@@ -112,6 +114,7 @@ class Cell:
     measurements: int = 60
     max_random_tries: int = 200_000
     environment: list = field(default_factory=list)
+    clearance_margin_m: float = 0.0
 
     @property
     def environment_capsule_names(self) -> set[str]:

@@ -343,13 +343,17 @@ class CollisionModel:
         """Fixed robot capsules vs obstacles/half-spaces, and the tracker outside every obstacle."""
         nr, cell = self.n_robot, self.cell
         T = self.tracker
+        where = "[" + ", ".join(f"{x:.3f}" for x in cell.W_T_tracker.translation) + "]"
+        env_caps = cell.environment_capsule_names  # environment objects: checked as their solids below
         for o in range(nr, nr + self.n_obst):
+            if self.seg_names[o] in env_caps:
+                continue
             d = point_segment_distance(T, self.A_loc[o], self.B_loc[o]) - self.radius[o] - cell.beam_radius_m
             if d < 0 and not self._beam_skipped(o):
-                where = np.round(cell.W_T_tracker.translation, 3)
                 raise InputError(f"{cell.source or cell.name}: the tracker at {where} m (cell frame) is inside "
                                  f"obstacle '{self.seg_names[o]}' "
                                  f"({d * 1e3:.0f} mm clearance); move the tracker or the obstacle")
+        self._check_tracker_in_environment(where)
         for hsp, (nv, off) in zip(cell.half_spaces, self.halfspaces):
             if T @ nv - off - cell.beam_radius_m < 0:
                 raise InputError(f"{cell.source or cell.name}: the tracker is outside the free side of "
@@ -379,6 +383,21 @@ class CollisionModel:
             raise InputError(f"{cell.source or cell.name}: " + "; ".join(problems) + "; " + _skip_hint(pairs)
                              + ", otherwise move the obstacle or the robot base")
 
+    def _check_tracker_in_environment(self, where: str) -> None:
+        """The tracker outside every environment solid (Coal's exact distance; the fitted capsules enclose more)."""
+        from pin_kpi_oed.cell.environment import ball_distance
+
+        cell = self.cell
+        for e in cell.environment:
+            if e.name in cell.beam_skip:
+                continue
+            for s in e.solids:
+                d = ball_distance(s, cell.W_T_tracker.translation, cell.beam_radius_m)
+                if d < 0:
+                    raise InputError(f"{cell.source or cell.name}: the tracker at {where} m (cell frame) is inside "
+                                     f"obstacle '{s.name}' ({d * 1e3:.0f} mm clearance); move the tracker or the "
+                                     "obstacle")
+
     def _check_working(self) -> None:
         """Every working configuration must be collision-free and in the tracker's line of sight."""
         cell = self.cell
@@ -399,7 +418,8 @@ class CollisionModel:
                 what = "is out of the tracker's sight: the laser beam is blocked" if nm.startswith("beam") \
                     else "is in collision"
                 if g[i, r] + cell.clearance_m >= 0:  # clear, but inside the required clearance (margins included)
-                    what = f"is closer than the required clearance of {cell.clearance_m * 1e3:g} mm (margins included)"
+                    what = (f"is closer than the required clearance of {cell.clearance_m * 1e3:g} mm"
+                            + _clearance_parts(cell, float(g[i, r]) + cell.clearance_m))
                 elif kinds[r] == PAIR and not nm.startswith("beam"):
                     pair = tuple(nm.removeprefix("robot:").split("|", 1))
                     pairs += [pair] if pair not in pairs else []
@@ -648,6 +668,17 @@ class CollisionModel:
             dmin = np.minimum(dmin, g.min(axis=1))
         inc = self._incidence_row(Q, False)[0][:, 0] if self.with_incidence else np.full(m, np.inf)
         return dmin, inc
+
+
+def _clearance_parts(cell: Cell, actual_m: float) -> str:
+    """Where a required clearance comes from (the cell file's ``clearance_m``, ``design --clearance-margin``) and the
+    margin that admits a pose ``actual_m`` (m) clear."""
+    margin = float(getattr(cell, "clearance_margin_m", 0.0))
+    if margin <= 0:
+        return " (clearance_m of the cell file)"
+    fit = max(0.0, np.floor((actual_m - (cell.clearance_m - margin)) * 1e3 - 1e-6) / 1e3)  # strictly within
+    return (f" (clearance_m {(cell.clearance_m - margin) * 1e3:g} mm of the cell file + --clearance-margin "
+            f"{margin * 1e3:g} mm; --clearance-margin {fit:g} admits it)")
 
 
 def _skip_hint(pairs: list[tuple[str, str]]) -> str:

@@ -13,6 +13,22 @@ A cell file lists them under ``environment`` (paths relative to the cell file; S
         scale: 0.001                   # file units -> m (a number or [sx, sy, sz]); default 1
         pose: {xyz_m: [...], rpy_deg: [...]}
 
+      - name: crate                    # a primitive: one Coal shape, no file
+        box: {size_m: [0.3, 0.3, 0.3]}   # full side lengths along the pose's x, y, z
+        pose: {xyz_m: [0.6, -0.4, 0.15]}
+      - name: pillar
+        cylinder: {radius_m: 0.1, length_m: 1.5}   # axis along the pose's z, centred
+        pose: {xyz_m: [-0.5, 0.8, 0.75]}
+      - name: lamp
+        sphere: {radius_m: 0.2}
+        pose: {xyz_m: [0.0, 1.2, 1.6]}
+
+A primitive is one Coal shape: the independent check's distances to it are exact (Coal's signed
+distance). The optimiser's capsules: a sphere is one capsule of length 0 and a cylinder one capsule of its
+radius along its axis (both exact enclosures); a box the fewest enclosing capsules whose radius is at most
+``max_radius_m`` (:func:`box_capsules`; default: the larger of 0.1 m and the box's smallest half side times √2:
+a cube is one capsule, a table top a few strips).
+
 Each file becomes, from the same geometry,
 
 * **capsules for the optimiser** (eqs. 20–21): enclosing capsules fitted to every geometry piece
@@ -75,13 +91,14 @@ class EnvironmentObject:
 
     Attributes:
         name: its name (skip lists may use it).
-        kind: ``mesh`` or ``urdf``.
-        path: the file (absolute).
+        kind: ``mesh``, ``urdf`` or a primitive (``box``, ``cylinder``, ``sphere``).
+        path: the file (absolute; empty for a primitive).
         W_T_obj: pose of the file's frame in the cell frame.
         scale: (3,) scale of a mesh file (1 for URDFs: their meshes carry their own).
         max_radius_m: largest fitted capsule radius asked for (m).
         solids: the geometry for the independent check.
         capsules: the enclosing capsules for the optimiser (cell frame), ``<name>_<k>``.
+        shape: a primitive's sizes (m), e.g. ``{"size_m": [x, y, z]}``; None for a file.
     """
 
     name: str
@@ -92,12 +109,17 @@ class EnvironmentObject:
     max_radius_m: float
     solids: list[EnvironmentSolid] = field(default_factory=list)
     capsules: list = field(default_factory=list)
+    shape: dict | None = None
 
     def to_dict(self) -> dict:
-        """Plain numbers (SI units): the file, its pose (4×4), scale and the fitted capsules."""
-        return {"name": self.name, "kind": self.kind, "path": self.path, "W_T_obj": self.W_T_obj.homogeneous.tolist(),
-                "scale": [float(x) for x in self.scale], "max_radius_m": self.max_radius_m,
-                "capsules": [c.name for c in self.capsules], "solids": [s.name for s in self.solids]}
+        """Plain numbers (SI units): the file (or a primitive's sizes), its pose (4×4), scale and the fitted
+        capsules."""
+        out = {"name": self.name, "kind": self.kind, "path": self.path, "W_T_obj": self.W_T_obj.homogeneous.tolist(),
+               "scale": [float(x) for x in self.scale], "max_radius_m": self.max_radius_m,
+               "capsules": [c.name for c in self.capsules], "solids": [s.name for s in self.solids]}
+        if self.shape is not None:
+            out["shape"] = self.shape
+        return out
 
 
 def _first_line(exc: BaseException) -> str:
@@ -203,11 +225,14 @@ def load_environment_object(d: Any, index: int, base_dir: Path | None, source: s
     w = f"{pre}environment[{index}]"
     if not isinstance(d, dict) or "name" not in d:
         raise InputError(f"{w}: expected a mapping with name and mesh or urdf")
-    kinds = [k for k in ("mesh", "urdf") if k in d]
+    kinds = [k for k in ("mesh", "urdf") + PRIMITIVES if k in d]
     if len(kinds) != 1:
-        raise InputError(f"{w}: give exactly one of 'mesh' or 'urdf' (a file relative to the cell file)")
+        raise InputError(f"{w}: give exactly one of 'mesh' or 'urdf' (a file relative to the cell file) or a "
+                         f"primitive ({', '.join(PRIMITIVES)})")
     kind = kinds[0]
     name = str(d["name"])
+    if kind in PRIMITIVES:
+        return _primitive_object(d, kind, name, w, pose_reader)
     p = Path(str(d[kind]))
     if not p.is_absolute() and base_dir is not None:
         p = (base_dir / p).resolve()
@@ -239,6 +264,105 @@ def load_environment_object(d: Any, index: int, base_dir: Path | None, source: s
     return obj
 
 
+#: obstacle shapes a cell file may give without a file (one Coal shape each)
+PRIMITIVES = ("box", "cylinder", "sphere")
+
+
+def _positive(spec: dict, key: str, n: int | None, where: str) -> Any:
+    v = spec.get(key) if isinstance(spec, dict) else None
+    try:
+        a = np.asarray(v, float)
+    except (TypeError, ValueError):
+        a = np.array([np.nan])
+    if v is None or a.shape != (() if n is None else (n,)) or not np.all(np.isfinite(a) & (a > 0)):
+        want = "a positive number" if n is None else f"{n} positive numbers"
+        raise InputError(f"{where}.{key}: expected {want} (m), got {v!r}")
+    return float(a) if n is None else a
+
+
+def box_capsules(half: np.ndarray, max_radius: float, max_pieces: int = DEFAULT_MAX_CAPSULES
+                 ) -> list[tuple[np.ndarray, np.ndarray, float]]:
+    """Enclosing capsules of a box (its own frame): strips along its longest side, the cross-section split into
+    k1 × k2 cells, the fewest whose radius is at most ``max_radius`` (at most ``max_pieces``; else the smallest
+    radius within them). A strip of half-sizes (h0, c1, c2) is enclosed by the capsule of radius sqrt(c1² + c2²)
+    whose segment spans ±h0 (its corners lie on the end caps).
+
+    Returns:
+        [(a, b, radius)] in the box frame (m).
+    """
+    order = np.argsort(-np.asarray(half, float))
+    h0, h1, h2 = (float(half[i]) for i in order)
+    best = None
+    for k1 in range(1, max_pieces + 1):
+        for k2 in range(1, max_pieces // k1 + 1):
+            r = float(np.hypot(h1 / k1, h2 / k2))
+            key = (r > max_radius, k1 * k2 if r <= max_radius else r)
+            if best is None or key < best[0]:
+                best = (key, k1, k2, r)
+    _, k1, k2, r = best
+    out = []
+    for i in range(k1):
+        for j in range(k2):
+            c = np.zeros(3)
+            c[order[1]] = -h1 + h1 / k1 * (2 * i + 1)
+            c[order[2]] = -h2 + h2 / k2 * (2 * j + 1)
+            e = np.zeros(3)
+            e[order[0]] = h0
+            out.append((c - e, c + e, r))
+    return out
+
+
+def _primitive_object(d: dict, kind: str, name: str, w: str, pose_reader) -> EnvironmentObject:
+    """A box / cylinder / sphere entry: one Coal shape for the check, its enclosing capsules for the optimiser."""
+    import coal
+
+    spec, where = d[kind], f"{w}.{kind}"
+    extra = set(spec) - {"box": {"size_m"}, "cylinder": {"radius_m", "length_m"}, "sphere": {"radius_m"}}[kind] \
+        if isinstance(spec, dict) else set()
+    if not isinstance(spec, dict) or extra:
+        raise InputError(f"{where}: expected {{size_m: [x, y, z]}} for a box, {{radius_m, length_m}} for a cylinder, "
+                         f"{{radius_m}} for a sphere (m)" + (f"; unknown {', '.join(sorted(extra))}" if extra else ""))
+    if "scale" in d:
+        raise InputError(f"{w}.scale: only for 'mesh' (give a primitive's sizes in m)")
+    W_T_obj = pose_reader(d.get("pose"), f"{w}.pose")
+    if kind == "box":
+        size = _positive(spec, "size_m", 3, where)
+        geom, shape = coal.Box(*size), {"size_m": size.tolist()}
+        rmax_default = max(DEFAULT_MAX_RADIUS_M, float(np.min(size)) / 2.0 * np.sqrt(2.0) * 1.001)
+    elif kind == "cylinder":
+        r, length = _positive(spec, "radius_m", None, where), _positive(spec, "length_m", None, where)
+        geom, shape, rmax_default = coal.Cylinder(r, length), {"radius_m": r, "length_m": length}, r
+    else:
+        r = _positive(spec, "radius_m", None, where)
+        geom, shape, rmax_default = coal.Sphere(r), {"radius_m": r}, r
+    rmax = float(d.get("max_radius_m", rmax_default))
+    ncap = int(d.get("max_capsules", DEFAULT_MAX_CAPSULES))
+    if not (rmax > 0 and np.isfinite(rmax)) or ncap < 1:
+        raise InputError(f"{w}: max_radius_m must be > 0 and max_capsules >= 1")
+    solid = _solid(name, geom, W_T_obj, where)
+    if kind == "sphere":
+        caps = [(solid.vertices[0], solid.vertices[0], r)]
+    elif kind == "cylinder":  # its own capsule: the axis, the radius (encloses the cylinder exactly)
+        caps = [(W_T_obj.act(np.array([0.0, 0.0, -length / 2])), W_T_obj.act(np.array([0.0, 0.0, length / 2])), r)]
+    else:
+        caps = [(W_T_obj.act(a), W_T_obj.act(b), rr) for a, b, rr in box_capsules(size / 2.0, rmax, ncap)]
+    obj = EnvironmentObject(name, kind, "", W_T_obj, np.ones(3), rmax, [solid], shape=shape)
+    obj.capsules = [CapsuleSpec(f"{name}_{k}", np.asarray(a, float), np.asarray(b, float), float(rr))
+                    for k, (a, b, rr) in enumerate(caps)]
+    return obj
+
+
+def ball_distance(solid: EnvironmentSolid, p: np.ndarray, radius: float = 0.0) -> float:
+    """Distance (m) of a ball of ``radius`` at ``p`` (cell frame) to a solid, negative when they overlap (Coal;
+    exact for boxes, cylinders, spheres and convex meshes)."""
+    import coal
+
+    M = coal.Transform3s(np.asarray(solid.W_T_g.rotation), np.asarray(solid.W_T_g.translation))
+    T = coal.Transform3s(np.eye(3), np.asarray(p, float))
+    return float(coal.distance(coal.Sphere(max(float(radius), 1e-9)), T, solid.geometry, M, coal.DistanceRequest(),
+                               coal.DistanceResult()))
+
+
 def environment_from_dicts(entries: Any, obstacles: list, where: str, notes: list[str]) -> list[EnvironmentObject]:
     """The environment files of a design JSON's cell (:meth:`EnvironmentObject.to_dict`), read again.
 
@@ -262,7 +386,8 @@ def environment_from_dicts(entries: Any, obstacles: list, where: str, notes: lis
         if not isinstance(e, dict) or not {"name", "kind", "path", "W_T_obj"} <= set(e):
             continue
         caps = [by_name[n] for n in e.get("capsules") or [] if n in by_name]
-        d = {"name": e["name"], e["kind"]: e["path"], "max_radius_m": e.get("max_radius_m", DEFAULT_MAX_RADIUS_M)}
+        d = {"name": e["name"], e["kind"]: e.get("shape") if e["kind"] in PRIMITIVES else e["path"],
+             "max_radius_m": e.get("max_radius_m", DEFAULT_MAX_RADIUS_M)}
         if e["kind"] == "mesh":
             d["scale"] = list(e.get("scale", [1.0, 1.0, 1.0]))
         try:

@@ -135,6 +135,40 @@ def solve_tcp_target(robot, W_T_base: pin.SE3, tcp_m: np.ndarray, xyz_W: np.ndar
     return best
 
 
+#: random configurations (seeded) in which an obstacle that collides in every one is the cell's fault, not a target's
+N_ALWAYS = 64
+
+
+def _check_always_blocked(chk: FeasibilityChecker, cell, pre: str) -> None:
+    """Refuse an obstacle that collides with a robot capsule, or blocks the beam, in each of :data:`N_ALWAYS` random
+    configurations within the bounds (it overlaps the robot's base, or hides the tracker): no target is to blame.
+
+    Raises:
+        InputError: naming the obstacle, the robot capsule (or the beam) and the fix.
+    """
+    Q = np.random.default_rng(0).uniform(cell.q_lower, cell.q_upper, (N_ALWAYS, cell.robot.nq))
+    D = chk.distances(Q)
+    D[:, :chk.n_pairs] -= cell.clearance_m
+    ncols = chk.n_pairs + len(chk.beam_names)
+    always = [k for k in range(min(ncols, D.shape[1])) if np.all(D[:, k] < -1e-9)]
+    if not always:
+        return
+    k = always[0]
+    a, b = chk.names[k].split("|", 1)
+    worst = float(np.max(D[:, k])) * 1e3
+    env = next((e.name for e in cell.environment if b in {c.name for c in e.capsules}), None)
+    fitted = (f" (an enclosing capsule the optimiser uses for '{env}'; a smaller max_radius_m of '{env}' fits it "
+              "tighter)" if env else "")
+    if a == "beam":
+        where = "[" + ", ".join(f"{x:.3f}" for x in cell.W_T_tracker.translation) + "]"
+        raise InputError(f"{pre}obstacle '{b}'{fitted} blocks the laser beam in every one of {N_ALWAYS} random "
+                         f"configurations (at best {worst:.0f} mm): it hides the tracker at {where} m (cell frame); "
+                         "move the tracker or the obstacle")
+    raise InputError(f"{pre}obstacle '{b}'{fitted} overlaps the robot: '{a}' collides with it in every one of {N_ALWAYS} random "
+                     f"configurations (at best {worst:.0f} mm, clearance_m {cell.clearance_m * 1e3:g} mm included): "
+                     f"move the obstacle, or if it is the robot's own pedestal list [{a}, {b}] under skip_pairs")
+
+
 def solve_working_targets(cell, targets: list, source: str = "") -> np.ndarray:
     """Working configurations (k, n) rad of the cell file's ``working_targets`` (see the module docstring).
 
@@ -154,10 +188,16 @@ def solve_working_targets(cell, targets: list, source: str = "") -> np.ndarray:
     import dataclasses
 
 
+    from pin_kpi_oed.cell.collision import CollisionModel
+
     pre = f"{source}: " if source else ""
     robot = cell.robot
+    # the cell's own faults first, said as such (not as a target no solution reaches): the tracker inside an
+    # obstacle, a fixed robot capsule in one, an obstacle the robot hits or the beam crosses in every configuration
+    CollisionModel(cell, collision=False)
     # the optimiser's model (environment files as their enclosing capsules): what the design checks q_work in
     chk = FeasibilityChecker(dataclasses.replace(cell, environment=[]))
+    _check_always_blocked(chk, cell, pre)
 
     def accept(q: np.ndarray) -> str:
         d = chk.distances(q[None])[0]

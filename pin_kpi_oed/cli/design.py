@@ -27,6 +27,8 @@ from pin_kpi_oed.design.design_file import design_document
 from pin_kpi_oed.design.margins import DEFAULT_CLEARANCE_MARGIN_M, DEFAULT_INCIDENCE_MARGIN_DEG, with_margins
 from pin_kpi_oed.errors import IdentifiabilityError, InputError
 from pin_kpi_oed.oed.criteria import CRITERIA, check_names
+from pin_kpi_oed.validation.options import check_discrepancy_options
+from pin_kpi_oed.validation.robot_checks import check_same_robot
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -230,6 +232,7 @@ def run(args: argparse.Namespace) -> int:
     problem = _make_problem(args, cell, given_file, collision, quiet, true_cell)
     gp_names = _gp_names(criteria)
     disc_on = problem.discrepancy is not None or bool(gp_names)
+    check_discrepancy_options(args, bool(gp_names), getattr(problem, "discrepancy", None) is not None)
     if target is not None and not disc_on and not given_file:
         raise InputError(f"--target-sigma needs --given or a discrepancy: --model {getattr(args, 'model', None)} "
                          f"holds no discrepancy block (write it with identify --model-out)")
@@ -531,6 +534,7 @@ def _make_problem(args: argparse.Namespace, cell, given_file, collision: bool, q
 
             cm = load_model_file(args.model)
             model_cell_tool(cm, args.model, cell, args.cell)  # the model's robot, tool frame and TCP are the cell's
+            check_same_robot(cm.robot, cell.robot, f"--model {args.model}")
             _set_discrepancy(problem, cm, args.model)
             _refit_discrepancy(problem, given_file, quiet)
             return problem
@@ -541,6 +545,7 @@ def _make_problem(args: argparse.Namespace, cell, given_file, collision: bool, q
         prior = getattr(args, "prior", "model") or "model"
         cm = load_model_file(args.model)
         model_cell_tool(cm, args.model, cell, args.cell)  # the model's robot, tool frame and TCP are the cell's
+        check_same_robot(cm.robot, cell.robot, f"--model {args.model}")
         _set_discrepancy(problem, cm, args.model)
         problem.extended = ExtendedModel.from_calibrated_model(cm, model=problem.model,
                                                                base=problem.base,
@@ -702,9 +707,7 @@ def _given_prior(path: str, problem) -> np.ndarray:
         cm = load_model_file(path)
     except InputError as exc:
         raise InputError(f"--given-prior: {exc}") from None
-    if list(cm.robot.joint_names) != list(problem.cell.robot.joint_names):
-        raise InputError(f"--given-prior {path}: its robot's joints {list(cm.robot.joint_names)} are not the cell's "
-                         f"{list(problem.cell.robot.joint_names)}")
+    check_same_robot(cm.robot, problem.cell.robot, f"--given-prior {path}")
     par = cm.parameters or {}
     if par.get("covariance") is None or not par.get("names"):
         raise InputError(f"--given-prior {path}: the model file holds no parameter covariance")

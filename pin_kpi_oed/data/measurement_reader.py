@@ -30,6 +30,8 @@ __all__ = ["ANGLE_LIMIT_RAD", "MAX_MEDIAN_DISTANCE_M", "MAX_MEDIAN_SIGMA_M", "re
 ANGLE_LIMIT_RAD = 2.0 * math.pi + 0.1
 #: Median tracker-to-reflector distance (m) beyond which a file looks like mm.
 MAX_MEDIAN_DISTANCE_M = 50.0
+#: the smallest standard deviation a measurement file may state (m or rad): 1 nm / 1 nrad
+MIN_SIGMA = 1e-9
 #: Median standard deviation (m) beyond which sigma looks like mm/µm.
 MAX_MEDIAN_SIGMA_M = 0.1
 
@@ -115,6 +117,13 @@ def check_positive_sigma(sigma: np.ndarray, names: Sequence[str], lines: Sequenc
         r, a = bad[0]
         raise InputError(f"{src}: column '{names[a]}', row {r + 1} (line {lines[r]}): "
                          f"standard deviation {float(sigma[r, a])!r} {unit} must be > 0")
+    tiny = np.argwhere(sigma < MIN_SIGMA)
+    if tiny.size:
+        r, a = tiny[0]
+        raise InputError(f"{src}: column '{names[a]}', row {r + 1} (line {lines[r]}): standard deviation "
+                         f"{float(sigma[r, a]):g} {unit} is below {MIN_SIGMA:g} {unit}, finer than any tracker "
+                         f"measures (its weight would swamp the fit); give sigma in {unit}")
+
 
 
 def _parse_float(cell: str) -> float:
@@ -240,6 +249,10 @@ def _build_set(data: np.ndarray, rows: list[list[str]], cols: _Columns, src: str
         if empty.size:
             raise InputError(f"{src}: column 'station', row {int(empty[0]) + 1}: empty station label "
                              "(give every row a label, e.g. B or 1)")
+        odd = [k for k, lab in enumerate(station) if not str(lab).isprintable()]
+        if odd:
+            raise InputError(f"{src}: column 'station', row {odd[0] + 1}: station label {station[odd[0]]!r} holds a "
+                             "line break or control character (give every row a one-line label, e.g. B or 1)")
     return MeasurementSet(
         joint_names=cols.joints,
         q=block(cols.joints),

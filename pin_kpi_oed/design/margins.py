@@ -44,4 +44,5 @@ def with_margins(cell: Cell, clearance_margin_m: float = 0.0, incidence_margin_d
                          f"incidence limit), got {incidence_margin_deg}")
     if cm == 0.0 and im == 0.0:
         return cell
-    return dataclasses.replace(cell, clearance_m=cell.clearance_m + cm, incidence_max_deg=cell.incidence_max_deg - im)
+    return dataclasses.replace(cell, clearance_m=cell.clearance_m + cm, incidence_max_deg=cell.incidence_max_deg - im,
+                               clearance_margin_m=cell.clearance_margin_m + cm)

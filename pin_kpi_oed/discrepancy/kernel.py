@@ -43,6 +43,9 @@ __all__ = ["JointKernel"]
 
 _BOUNDS_AMP = (1e-4, 1e2)
 _BOUNDS_LEN = (1e-2, 1e2)
+#: what a model file's kernel may hold: ten times beyond the fit's bounds (amplitudes normalised, length scales rad);
+#: further out the kernel overflows or is constant to machine precision
+FILE_RANGE_AMP, FILE_RANGE_LEN = (1e-5, 1e3), (1e-3, 1e3)
 
 
 def _chord2(X: np.ndarray, Y: np.ndarray) -> np.ndarray:
@@ -234,6 +237,11 @@ class JointKernel(StationaryKernelMixin, Kernel):
                 raise ValueError(f"{where}.{key}: must be {want}, got shape {v.shape}")
             if not np.all(np.isfinite(v)) or np.any(v <= 0):
                 raise ValueError(f"{where}.{key}: must be positive and finite, got {d[key]!r}")
+            lo, hi = FILE_RANGE_LEN if key.endswith("_rad") else FILE_RANGE_AMP
+            if np.any(v < lo) or np.any(v > hi):
+                raise ValueError(f"{where}.{key}: {np.atleast_1d(v)[(np.atleast_1d(v) < lo) | (np.atleast_1d(v) > hi)][0]:g} "
+                                 f"is outside [{lo:g}, {hi:g}] (the fit keeps it within "
+                                 f"{_BOUNDS_LEN if key.endswith('_rad') else _BOUNDS_AMP}); was the file edited?")
             return float(v) if n is None else v
         return cls(num("amplitude", None), num("length_scale_rad", n_joints), num("joint_amplitude", n_joints),
                    num("joint_length_scale_rad", n_joints))

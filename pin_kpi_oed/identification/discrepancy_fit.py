@@ -77,7 +77,16 @@ def result_discrepancy(result: Any, data: MeasurementSet, options: Any = "auto",
         raise InputError(f"discrepancy: {len(Q)} configurations for {len(result.residuals_m)} residuals")
     rows, R = base_frame_residuals(result, keep_flagged=_keep_flagged(result, opts))
     Q = np.asarray(Q, float)
-    disc = fit_discrepancy(Q[rows], R, list(result.model.robot.joint_names), opts)
+    try:
+        disc = fit_discrepancy(Q[rows], R, list(result.model.robot.joint_names), opts)
+    except InputError as exc:
+        left = np.setdiff1d(np.arange(len(Q)), rows)
+        if not left.size:
+            raise
+        shown = ", ".join(str(int(r) + 1) for r in left[:5]) + (f" (+{left.size - 5} more)" if left.size > 5 else "")
+        raise InputError(f"{exc} ({len(Q)} rows given: row{'s' * (left.size > 1)} {shown} flagged as outlier"
+                         f"{'s' * (left.size > 1)} and left out; check {'them' if left.size > 1 else 'it'} or "
+                         "measure more poses)") from None
     if disc is not None and rows.size > len(result.residuals_m) - np.asarray(result.outliers).size:
         disc.decision += (f" (the {np.asarray(result.outliers).size} rows flagged as outliers are kept: the "
                           f"plain least-squares fit used them, "

@@ -16,10 +16,11 @@ from typing import Any
 from collections.abc import Callable
 
 from pin_kpi_oed.errors import InputError
-from pin_kpi_oed.validation.paths import check_outputs
+from pin_kpi_oed.validation.paths import check_figure_suffix, check_outputs
 from pin_kpi_oed.validation.units import MAX_TOOL_OFFSET_M, check_offset_m, check_sigma_m, check_sigma_rad
 
-__all__ = ["accept_negative_numbers", "check_args", "RULES", "OUTPUTS", "INPUTS", "FOLDERS", "floats"]
+__all__ = ["accept_negative_numbers", "check_args", "RULES", "OUTPUTS", "INPUTS", "FOLDERS", "FIGURES", "floats",
+           "check_discrepancy_options"]
 
 
 def floats(text: Any, what: str) -> list[float]:
@@ -134,18 +135,68 @@ def _split(opt: str, v: Any) -> None:
         raise InputError(f"{opt}: a share in (0, 1) or a whole number of rows >= 1, got {v:g}")
 
 
+def _target_sigma(opt: str, v: Any) -> None:
+    """A TCP sigma target in m: between 0.1 µm (below any tracker's resolution) and 5 mm (beyond: mm meant)."""
+    if v is None:
+        return
+    x = float(v)
+    if not (math.isfinite(x) and x > 0):
+        raise InputError(f"{opt}: must be a positive TCP sigma in m, got {v}")
+    if x > TARGET_SIGMA_MAX_M:
+        raise InputError(f"{opt}: {x:g} m is more than {TARGET_SIGMA_MAX_M * 1e3:g} mm: give the TCP sigma in m "
+                         f"(e.g. {x * 1e-3:g} for {x:g} mm)")
+    if x < TARGET_SIGMA_MIN_M:
+        raise InputError(f"{opt}: {x:g} m ({x * 1e6:.3g} µm) is below {TARGET_SIGMA_MIN_M * 1e6:g} µm, finer than any "
+                         "tracker measures; give the TCP sigma in m (e.g. 3.5e-05 for 35 µm)")
+
+
+def _radius_rad(opt: str, v: Any) -> None:
+    """A joint-space radius in rad: finite, >= 0 and at most π (more is degrees meant)."""
+    if v is None:
+        return
+    x = float(v)
+    if not math.isfinite(x) or x < 0:
+        raise InputError(f"{opt}: must be a finite radius >= 0 rad, got {v}")
+    if x > math.pi:
+        raise InputError(f"{opt}: {x:g} rad is more than π rad (180°): give it in rad "
+                         f"(e.g. {math.radians(x):.3g} for {x:g}°)")
+
+
+def _geometry_prior(opt: str, v: Any) -> None:
+    """``TRANS_M,ROT_RAD``: two positive sigmas, at most 0.1 m and 0.5 rad (more is mm / degrees meant)."""
+    if v is None:
+        return
+    a = floats(v, opt)
+    if len(a) != 2 or not (a[0] > 0 and a[1] > 0):
+        raise InputError(f"{opt}: expected two positive sigmas TRANS_M,ROT_RAD (m, rad), got '{v}'")
+    if a[0] > GEOMETRY_PRIOR_MAX_M:
+        raise InputError(f"{opt}: translation sigma {a[0]:g} m is more than {GEOMETRY_PRIOR_MAX_M:g} m: give it in m "
+                         f"(e.g. {a[0] * 1e-3:g} for {a[0]:g} mm)")
+    if a[1] > GEOMETRY_PRIOR_MAX_RAD:
+        raise InputError(f"{opt}: rotation sigma {a[1]:g} rad is more than {GEOMETRY_PRIOR_MAX_RAD:g} rad: give it in "
+                         f"rad (e.g. {math.radians(a[1]):.3g} for {a[1]:g}°)")
+
+
+#: the range of a TCP sigma target (m): 0.1 µm .. 5 mm
+TARGET_SIGMA_MIN_M, TARGET_SIGMA_MAX_M = 1e-7, 5e-3
+#: the largest sigmas of a joint-placement prior: 0.1 m, 0.5 rad
+GEOMETRY_PRIOR_MAX_M, GEOMETRY_PRIOR_MAX_RAD = 0.1, 0.5
 _SEED = {"seed": _int_at_least(0)}
 #: command -> {argparse dest: rule(option name, value)}
 RULES: dict[str, dict[str, Callable[[str, Any], None]]] = {
     "info": {**_SEED, "reflector": _offset},
     "demo": dict(_SEED),
     "design": {**_SEED, "measurements": _int_at_least(1), "starts": _int_at_least(1), "max_iter": _int_at_least(1),
-               "pool_size": _int_at_least(1)},
+               "pool_size": _int_at_least(1), "target_sigma": _target_sigma, "work_radius": _radius_rad,
+               "work_samples": _int_at_least(0),
+               "clearance_margin": _finite_at_least(0.0, "m", 0.5, ": give the clearance margin in m (e.g. 0.02 for "
+                                                                    "20 mm)"),
+               "incidence_margin": _finite_at_least(0.0, "deg", 89.0)},
     "simulate": {**_SEED, "n": _int_at_least(1), "n_test": _int_at_least(0), "noise": _sigma_m,
                  "sigma_rot": _sigma_rad, "tol_translation": _nonneg_float, "tol_rotation": _nonneg_float,
                  "tol_reflector": _nonneg_float, "temperature": _range("°C"), "reflector": _offset},
     "identify": {**_SEED, "register_rows": _int_at_least(1), "max_nfev": _int_at_least(1), "sigma": _sigma_m,
-                 "sigma_rot": _sigma_rad, "fix": _fix, "reflector": _offset},
+                 "sigma_rot": _sigma_rad, "fix": _fix, "reflector": _offset, "geometry_prior": _geometry_prior},
     "import-ipa": {**_SEED, "split": _split},
     "diagnose": {**_SEED, "register_rows": _int_at_least(1), "kfold": _int_at_least(2), "sigma": _sigma_m,
                  "alpha": _open_unit, "reflector": _offset},
@@ -160,13 +211,17 @@ RULES: dict[str, dict[str, Callable[[str, Any], None]]] = {
 }
 
 #: command -> argparse dests of output files
-OUTPUTS = {"evaluate": ["json"], "demo": ["json"], "design": ["json"], "simulate": ["out", "test_out", "truth_json"],
+OUTPUTS = {"evaluate": ["json"], "demo": ["json"], "design": ["json", "curve"],
+           "simulate": ["out", "test_out", "truth_json"],
            "identify": ["json", "urdf_out", "model_out"], "import-ipa": ["out", "train", "test"],
-           "register": ["model_out", "json"], "predict": ["out", "figure"], "diagnose": ["json"], "view": ["html"],
-           "export": ["out", "json", "html"], "compensate": ["out", "json"], "import-tracker": ["out"],
+           "register": ["model_out", "json"], "predict": ["out", "figure"], "diagnose": ["json", "model_out"],
+           "view": ["html"], "export": ["out", "json", "html"], "compensate": ["out", "json"], "import-tracker": ["out"],
            "export-model": ["out"], "report": ["html", "json", "pdf"]}
-#: command -> argparse dests of inputs (files or folders; lists allowed)
-INPUTS = {"evaluate": ["design"], "design": ["cell", "pool", "given", "given_prior", "model"],
+#: command -> argparse dests of figure outputs (their names end in a format the package writes)
+FIGURES = {"design": ["curve"], "predict": ["figure"]}
+#: command -> argparse dests of inputs (files or folders; lists allowed); besides these, every other option's
+#: value that names an existing file counts as an input (a new input option is protected without being listed)
+INPUTS = {"evaluate": ["design"], "design": ["cell", "pool", "given", "given_prior", "model", "reregister"],
           "identify": ["data", "validate", "register_data", "robot", "kinematics", "cell"],
           "simulate": ["robot", "design", "cell", "poses", "truth", "kinematics"], "import-ipa": ["src"],
           "register": ["model", "data", "cell"], "predict": ["model", "data"],
@@ -227,7 +282,44 @@ def check_args(args: argparse.Namespace) -> None:
         extra = files_of(args)
         opts = {o for o, _ in extra}
         outputs = list(extra) + [o for o in outputs if o[0] not in opts]
-    check_outputs(outputs, _pairs(args, INPUTS.get(cmd, []), existing_only=True), _pairs(args, FOLDERS.get(cmd, [])))
+    check_outputs(outputs, _inputs(args, cmd), _pairs(args, FOLDERS.get(cmd, [])))
+    for opt, path in _pairs(args, FIGURES.get(cmd, [])):
+        check_figure_suffix(opt, path)
+
+
+def check_discrepancy_options(args: argparse.Namespace, gp_criteria: bool, model_discrepancy: bool) -> None:
+    """``design``'s options that act only with the discrepancy, refused where they would be ignored without a word.
+
+    Args:
+        args: the parsed ``design`` options.
+        gp_criteria: a discrepancy-aware criterion (``kpi_gp``, ...) is among ``--criteria``.
+        model_discrepancy: ``--model`` holds a discrepancy block.
+
+    Raises:
+        InputError: naming the option, why it would do nothing, and what to add or drop.
+    """
+    model = getattr(args, "model", None)
+    fix = ("add a discrepancy-aware criterion (--criteria ...,kpi_gp)" if not model else
+           f"--model {model} holds no discrepancy (write one with identify --discrepancy on --model-out), or add "
+           "kpi_gp to --criteria")
+    if not (gp_criteria or model_discrepancy):
+        for dest, does in (("curve", "draws the poses needed with the discrepancy"),
+                           ("work_radius", "sets the working region of the discrepancy-aware KPI"),
+                           ("work_samples", "sets the working region of the discrepancy-aware KPI"),
+                           ("robot_class", "chooses the discrepancy a design assumes")):
+            if getattr(args, dest, None) is not None:
+                raise InputError(f"{_opt(dest)}: {does}, and this design has none: {fix}; or drop {_opt(dest)}")
+    if model_discrepancy and getattr(args, "robot_class", None) is not None:
+        raise InputError(f"--robot-class {args.robot_class}: chooses the discrepancy a design assumes without a model "
+                         f"file, but --model {model} holds its own (used instead); drop --robot-class")
+
+
+def _inputs(args: argparse.Namespace, cmd: str | None) -> list[tuple[str, Any]]:
+    """The command's declared inputs, and every other option whose value names an existing file."""
+    declared = _pairs(args, INPUTS.get(cmd, []), existing_only=True)
+    skip = set(INPUTS.get(cmd, [])) | set(OUTPUTS.get(cmd, [])) | set(FOLDERS.get(cmd, [])) | {"command", "func"}
+    others = [d for d, v in vars(args).items() if d not in skip and isinstance(v, (str, list))]
+    return declared + [(o, p) for o, p in _pairs(args, others, existing_only=True) if Path(p).is_file()]
 
 
 _NEGATIVE = re.compile(r"^-(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?(,.*)?$")

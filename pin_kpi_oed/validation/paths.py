@@ -18,7 +18,24 @@ from collections.abc import Iterable
 from pin_kpi_oed.errors import InputError
 
 __all__ = ["check_outputs", "same_file", "claim_output", "claimed_state", "output_signature",
-           "release_outputs"]
+           "release_outputs", "FIGURE_SUFFIXES", "check_figure_suffix"]
+
+#: file name endings a figure output may have; the figure is written in the format its name says
+FIGURE_SUFFIXES = (".png", ".pdf", ".svg")
+
+
+def check_figure_suffix(opt: str, path: str | os.PathLike[str] | None) -> None:
+    """A figure output's name ends in a format the package writes (:data:`FIGURE_SUFFIXES`).
+
+    Raises:
+        InputError: naming the option, the path and the endings allowed (a ``.jpg`` name would hold PNG bytes).
+    """
+    if not path:
+        return
+    suffix = Path(path).suffix.lower()
+    if suffix not in FIGURE_SUFFIXES:
+        raise InputError(f"{opt} {path}: a figure is written as {', '.join(FIGURE_SUFFIXES)}; "
+                         f"end the file name with one of them (got '{suffix or 'no ending'}')")
 
 
 def _key(path: str | os.PathLike[str]) -> str:

@@ -11,9 +11,9 @@ from typing import Any
 
 import numpy as np
 
-from pin_kpi_oed.errors import RobotLoadError
+from pin_kpi_oed.errors import InputError, RobotLoadError
 
-__all__ = ["check_urdf_tree", "check_robot_scale", "MAX_REACH_M"]
+__all__ = ["check_urdf_tree", "check_robot_scale", "MAX_REACH_M", "kinematic_difference", "check_same_robot"]
 
 #: the largest plausible reach of an arm (m); a URDF in mm gives ~1000x its real reach
 MAX_REACH_M = 100.0
@@ -156,7 +156,6 @@ def check_points_against_joints(robot: Any, Q: np.ndarray, P: np.ndarray, points
     Raises:
         InputError: naming both files, the ratio and the likely unit mistake.
     """
-    from pin_kpi_oed.errors import InputError
 
     Q, P = np.atleast_2d(np.asarray(Q, float)), np.atleast_2d(np.asarray(P, float))
     if len(Q) < 5:  # too few points for a scale (a handful of pairs)
@@ -182,3 +181,51 @@ def check_points_against_joints(robot: Any, Q: np.ndarray, P: np.ndarray, points
             else "check the length unit of the points ('Units:' comment, --units) and the joint log's angle unit "
                  "(--angle-unit)")
     raise InputError(f"{head}; {hint}")
+
+
+#: a calibration corrects joint placements by millimetres and milliradians; a difference beyond these is another arm
+SAME_ROBOT_TOL_M, SAME_ROBOT_TOL_RAD = 0.02, 0.05
+
+
+def kinematic_difference(a: Any, b: Any) -> str | None:
+    """How the kinematic structure of two robots differs (joint names, types, axes, placements), None when the same.
+
+    Args:
+        a, b: robots (``model.robot.Robot``: a Pinocchio ``model``, ``joint_ids``, ``joint_names``).
+
+    Returns:
+        The first difference in words (joint and values in m / rad), or None. Joint placements within
+        :data:`SAME_ROBOT_TOL_M` / :data:`SAME_ROBOT_TOL_RAD` are the same arm (what a calibration changes).
+    """
+    if list(a.joint_names) != list(b.joint_names):
+        return f"joints {list(a.joint_names)} against {list(b.joint_names)}"
+    for name, ja, jb in zip(a.joint_names, a.joint_ids, b.joint_ids):
+        if a.model.joints[ja].shortname() != b.model.joints[jb].shortname():
+            return f"joint {name} is {a.model.joints[ja].shortname()} against {b.model.joints[jb].shortname()}"
+        Ma, Mb = a.model.jointPlacements[ja], b.model.jointPlacements[jb]
+        dt = float(np.linalg.norm(Ma.translation - Mb.translation))
+        if dt > SAME_ROBOT_TOL_M:
+            return (f"joint {name} sits {dt * 1e3:.0f} mm apart (placement {_xyz(Ma.translation)} against "
+                    f"{_xyz(Mb.translation)} m)")
+        R = Ma.rotation.T @ Mb.rotation
+        ang = math.acos(max(-1.0, min(1.0, (float(np.trace(R)) - 1.0) / 2.0)))
+        if ang > SAME_ROBOT_TOL_RAD:
+            return f"joint {name} is turned {math.degrees(ang):.1f}° against the other"
+    return None
+
+
+def _xyz(v: Any) -> str:
+    return ", ".join(f"{float(x):.3f}" for x in v)
+
+
+def check_same_robot(model_robot: Any, cell_robot: Any, what: str) -> None:
+    """Refuse a calibration of another arm (a UR5's model file for a UR10 cell has the same joint names).
+
+    Raises:
+        InputError: naming ``what`` (option and file), both robots and the first difference.
+    """
+
+    diff = kinematic_difference(model_robot, cell_robot)
+    if diff is not None:
+        raise InputError(f"{what}: calibrates the robot '{model_robot.name}', not the cell's '{cell_robot.name}' "
+                         f"({diff}); use a model file identified on this robot")

@@ -50,7 +50,8 @@ def _figure(w: float, h: float):
 
 
 def save_png(fig: Any, path: str | os.PathLike, dpi: int = 150) -> Path:
-    """Render ``fig`` to PNG and write it atomically; returns the path.
+    """Render ``fig`` in the format its file name says (``.pdf``, ``.svg``, else PNG) and write it atomically;
+    returns the path.
 
     Raises:
         InputError: the target folder does not exist, or ``path`` is a folder.
@@ -58,7 +59,8 @@ def save_png(fig: Any, path: str | os.PathLike, dpi: int = 150) -> Path:
     from pin_kpi_oed.data.atomic import atomic_write_bytes
 
     buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=dpi)
+    suffix = Path(path).suffix.lower()
+    fig.savefig(buf, format=suffix[1:] if suffix in (".pdf", ".svg") else "png", dpi=dpi)
     atomic_write_bytes(path, buf.getvalue())
     return Path(path)
 

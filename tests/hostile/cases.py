@@ -31,11 +31,23 @@ COMMANDS_WITH_SEED = ["info kr15", "demo", "design --measurements 10", "simulate
 
 @dataclass(frozen=True)
 class Case:
-    """One hostile input: ``argv`` (``{d}`` = inputs folder) and a text the one-line refusal must contain."""
+    """One hostile input: ``argv`` (``{d}`` = inputs folder) and a text the answer must contain.
+
+    ``kind`` ``refuse`` (the default): exit 2, ``expect`` in the one-line refusal, nothing written.
+    ``warn``: the command may run (exit 0 or 2), but ``expect`` is said on stdout or stderr and no input changes.
+    ``max_s``: beyond this many CPU seconds the case counts as a hang (CPU time: wall time depends on the machine's
+    load). ``needs``: an input too large to copy for every case, built in the case's folder first
+    (:data:`tests.hostile.surfaces.EXTRA`). ``slow``: left out of the default test run (``-m slow`` runs it;
+    ``run_hostile`` always does).
+    """
 
     id: str
     argv: str
     expect: str
+    kind: str = "refuse"
+    max_s: float = 60.0
+    needs: str | None = None
+    slow: bool = False
 
 
 def _cases() -> list[Case]:
@@ -135,7 +147,9 @@ def _cases() -> list[Case]:
              "--n-test"),
     ]
     c += [Case(f"seed-negative-{cmd.split()[0]}", cmd + " --seed -1", "--seed") for cmd in COMMANDS_WITH_SEED]
-    return c + _issue24() + _generated()
+    from tests.hostile.surfaces import surface_cases
+
+    return c + _issue24() + _generated() + surface_cases()
 
 
 def _issue24() -> list[Case]:
@@ -514,6 +528,9 @@ def _build_issue24(d: Path, design: dict) -> None:
     bad_model("m_std_negative.json", put("geometry/parameters/std/0", -1.0))
     bad_model("m_rows_text.json", put("stations/tr/n_rows", "120"))
     (d / "m_nan.json").write_text((d / "m.json").read_text().replace('"range_b": 0.0', '"range_b": NaN'))
+    from tests.hostile.surfaces import build_surface_inputs
+
+    build_surface_inputs(d)
     Qd = np.asarray(design["q_meas"], float)[:10]
     (d / "given.csv").write_text(",".join(f"joint_a{k}" for k in range(1, 7)) + "\n"
                                  + "\n".join(",".join(f"{v:.10f}" for v in q) for q in Qd) + "\n")
@@ -531,19 +548,44 @@ def snapshot(d: Path) -> dict[str, str]:
 
 @dataclass
 class Outcome:
-    """What one case did: exit code, stderr, time (s), whether files changed, a traceback seen."""
+    """What one case did: exit code, stderr, time (s), files written or changed (``changed``), inputs among them
+    (``inputs_changed``), a traceback seen, stdout."""
 
     rc: int
     err: str
     time_s: float
     changed: list[str]
     traceback: bool
+    out: str = ""
+    inputs_changed: tuple[str, ...] = ()
+    cpu_s: float = 0.0
+
+    def verdict(self, case: Case) -> str:
+        """``ok`` or what went wrong, worst first: ``traceback``, ``input changed``, ``hang``, ``exit 0`` (a refusal
+        was due), ``silent`` (a warning was due and not said), ``written`` (a refusal left files), ``unclear``
+        (refused without the expected text in one line)."""
+        lines = [ln for ln in self.err.strip().splitlines() if ln.strip()]
+        if self.traceback or "Traceback" in self.err:
+            return "traceback"
+        if self.inputs_changed:
+            return "input changed"
+        if self.cpu_s > case.max_s:
+            return "hang"
+        if case.kind == "warn":
+            if case.expect not in self.out + self.err or self.rc not in (0, 2):
+                return "silent"
+            return "ok"
+        if self.rc == 0:
+            return "exit 0"
+        if self.changed:
+            return "written"
+        if self.rc != 2 or not lines or case.expect not in lines[-1]:
+            return "unclear"
+        return "ok"
 
     def ok(self, case: Case) -> bool:
-        """Exit 2, one line naming the expected text, no traceback, nothing written."""
-        lines = [ln for ln in self.err.strip().splitlines() if ln.strip()]
-        return (self.rc == 2 and not self.traceback and not self.changed and len(lines) >= 1
-                and case.expect in lines[-1] and not any("Traceback" in ln for ln in lines))
+        """The case's answer is right (see :meth:`verdict`)."""
+        return self.verdict(case) == "ok"
 
 
 def argv_of(case: Case, d: Path) -> list[str]:
@@ -551,18 +593,27 @@ def argv_of(case: Case, d: Path) -> list[str]:
     return [a.replace("{d}", str(d)) for a in case.argv.split()]
 
 
-def run_case(case: Case, base: Path, work: Path) -> Outcome:
-    """Copy the inputs ``base`` to ``work``, run the case in-process, compare the files before and after."""
+def prepare(case: Case, base: Path, work: Path) -> None:
+    """Copy the inputs ``base`` to ``work`` (the symlink pointing into ``work``) and build what the case needs."""
+    from tests.hostile.surfaces import EXTRA
+
     if work.exists():
         shutil.rmtree(work)
     shutil.copytree(base, work, symlinks=False)
     (work / "link.csv").unlink()
     (work / "link.csv").symlink_to(work / "tr.csv")
+    if case.needs:
+        EXTRA[case.needs](work)
+
+
+def run_case(case: Case, base: Path, work: Path) -> Outcome:
+    """Copy the inputs ``base`` to ``work``, run the case in-process, compare the files before and after."""
+    prepare(case, base, work)
     before = snapshot(work)
     from pin_kpi_oed.cli.app import main
 
     err, out = io.StringIO(), io.StringIO()
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.process_time()
     tb = False
     try:
         with contextlib.redirect_stderr(err), contextlib.redirect_stdout(out):
@@ -572,7 +623,7 @@ def run_case(case: Case, base: Path, work: Path) -> Outcome:
     except Exception as exc:  # noqa: BLE001 - a traceback is what this test hunts
         rc, tb = -1, True
         err.write(f"Traceback: {type(exc).__name__}: {exc}")
-    dt = time.perf_counter() - t0
+    dt, cpu = time.perf_counter() - t0, time.process_time() - c0
     after = snapshot(work)
     changed = sorted(k for k in set(before) | set(after) if before.get(k) != after.get(k))
-    return Outcome(rc, err.getvalue(), dt, changed, tb)
+    return Outcome(rc, err.getvalue(), dt, changed, tb, out.getvalue(), tuple(k for k in changed if k in before), cpu)
