@@ -214,3 +214,40 @@ def test_cli_diagnose(compliance_case, tmp_path, capsys):
                    "--effects", "tracker_scale"])
     err = capsys.readouterr().err
     assert rc == 2 and "cannot be observed" in err
+
+
+def test_terms_chosen_on_training_but_not_held_out_are_said_in_the_verdict():
+    """15 transmission terms chosen by the K-fold selection and then not selected on the held-out rows: the verdict
+    says so (message clause and a note with the numbers), never a bare 'dominant effect: none'."""
+    from pin_kpi_oed.diagnosis.diagnose import _unconfirmed_terms
+    from pin_kpi_oed.diagnosis.report import EffectResult
+
+    ts = {"terms": [{"text": f"t{k}"} for k in range(15)], "cv_rms_m": [178.6e-6, 34.2e-6]}
+    e = EffectResult("transmission_error", heldout_rms_before_m=2.1e-4, heldout_rms_after_m=2.0e-4)
+    e.heldout_pvalue = 0.4
+    notes: list[str] = []
+    clause = _unconfirmed_terms(ts, ["transmission_error"], [], [e], notes)
+    assert clause == "; the 15 term(s) chosen on the training rows are not confirmed held-out"
+    assert len(notes) == 1 and "178.6 -> 34.2 µm" in notes[0] and "210.0 -> 200.0 µm, p_heldout 0.4" in notes[0]
+    assert _unconfirmed_terms(ts, ["transmission_error"], ["transmission_error"], [e], []) == ""
+    assert _unconfirmed_terms({}, [], [], [], []) == ""
+
+
+def test_coverage_advice_stays_within_the_joint_limits():
+    """Uncovered validation angles of a ±2.90 rad joint on both sides of ±π are advised as their own values (within
+    the limits, as intervals), never as a wrapped arc such as 0.51 .. 5.88 rad."""
+    from pin_kpi_oed.diagnosis.transfer_gap import _joint_ranges, _poses_to_add
+
+    rng = np.random.default_rng(0)
+    Qt = rng.uniform(-0.5, 0.5, (40, 1))
+    Qv = np.concatenate([rng.uniform(-2.9, -2.5, 10), rng.uniform(0.51, 2.9, 20)])[:, None]
+    cov = np.abs(Qv - 0.0) < 0.5
+    joints = _joint_ranges(["panda_joint1"], Qt, Qv, cov)
+    iv = joints[0]["uncovered_intervals"]
+    assert -2.9 <= joints[0]["uncovered_min"] and joints[0]["uncovered_max"] <= 2.9
+    assert len(iv) == 2 and iv[0][1] < -2.4 and iv[1][0] > 0.5
+    text = _poses_to_add(joints, np.full(30, 1e-4), np.arange(30), 30)["text"]
+    import re
+    vals = [float(x) for x in re.findall(r"(-?\d+\.\d+) \.\. (-?\d+\.\d+)", text)[0] + re.findall(
+        r"(-?\d+\.\d+) \.\. (-?\d+\.\d+)", text)[1]]
+    assert all(-2.9 <= v <= 2.9 for v in vals) and "panda_joint1" in text and " and " in text, text

@@ -127,3 +127,19 @@ def test_design_with_model_writes_honest_blocks_and_the_viewer_draws_them(calibr
     assert "--sigma: must be honest or paper" in capsys.readouterr().err and not page.exists()
     assert main(["view", str(d), "--html", str(page), "--no-open", "--no-ghosts"]) == 0
     assert "discrepancy included" in capsys.readouterr().out and page.exists()
+
+
+def test_the_title_says_what_the_sigma_holds(calibrated, tmp_path):
+    """A Gaussian-process model says so; a white level alone or no block is never called 'discrepancy included'."""
+    import dataclasses
+
+    cm, Q, _ = calibrated
+    white = Discrepancy("white", list(cm.robot.joint_names), np.full(3, 1e-4), np.zeros(3), 1.0, n_rows=40)
+    titles = {}
+    for tag, d in (("gp", cm.discrepancy), ("white", white), ("none", None)):
+        tm = plot_trust_map(dataclasses.replace(cm, discrepancy=d), Q[:5], out=tmp_path / f"{tag}.png")
+        titles[tag] = tm.figure._suptitle.get_text()
+    assert "Gaussian-process discrepancy (exact, 40 rows)" in titles["gp"]
+    assert "white residual level; no correlated discrepancy" in titles["white"]
+    assert "no discrepancy (noise-only model)" in titles["none"]
+    assert not any("discrepancy included" in t for t in titles.values())

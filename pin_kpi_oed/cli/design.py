@@ -232,7 +232,6 @@ def run(args: argparse.Namespace) -> int:
     problem = _make_problem(args, cell, given_file, collision, quiet, true_cell)
     gp_names = _gp_names(criteria)
     disc_on = problem.discrepancy is not None or bool(gp_names)
-    check_discrepancy_options(args, bool(gp_names), getattr(problem, "discrepancy", None) is not None)
     if target is not None and not disc_on and not given_file:
         raise InputError(f"--target-sigma needs --given or a discrepancy: --model {getattr(args, 'model', None)} "
                          f"holds no discrepancy block (write it with identify --model-out)")
@@ -358,6 +357,8 @@ def _set_region(args: argparse.Namespace, problem, criteria: list[str], seed: in
     """
     from pin_kpi_oed.design.region import DEFAULT_WORK_RADIUS_RAD, DEFAULT_WORK_SAMPLES
 
+    # the options that act only with the discrepancy, refused (not ignored) without it
+    check_discrepancy_options(args, bool(_gp_names(criteria)), getattr(problem, "discrepancy", None) is not None)
     radius = getattr(args, "work_radius", None)
     samples = getattr(args, "work_samples", None)
     samples = DEFAULT_WORK_SAMPLES if samples is None else int(samples)
@@ -502,7 +503,9 @@ def _poses_needed(args: argparse.Namespace, problem, cell, target: float | None,
     if getattr(args, "curve", None):
         from pin_kpi_oed.viz.poses_needed import plot_poses_needed
 
-        plot_poses_needed(curve.to_dict(), args.curve, title=f"{cell.name}: poses needed (discrepancy included)")
+        src = problem.discrepancy_prior().source or "given"
+        plot_poses_needed(curve.to_dict(), args.curve, title=f"{cell.name}: poses needed (σ with the discrepancy: "
+                                                             f"{src if len(src) <= 70 else src[:67] + '...'})")
         print(f"wrote {args.curve}")
     return curve
 

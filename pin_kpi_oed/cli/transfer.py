@@ -85,7 +85,8 @@ def run_register(args: argparse.Namespace) -> int:
     model_tool(args, model, args.model, [args.data])  # the data's tool header and --cell against the model
     data = read_measurements(args.data, joint_names=model.robot.joint_names, reach_m=model.robot.reach(),
                              **table_options(args, model.robot))
-    check_points_against_joints(model.robot, data.q, data.position_m, args.data, args.data)
+    check_points_against_joints(model.robot, data.q, data.position_m, args.data, args.data,
+                                    **_declared_units(args))
     existing = dict(model.setups)
     res = register_setup(model, data, station=args.station, hold_reflector=args.hold_reflector)
     gates = registration_gates(res, data, model, args.hold_reflector)
@@ -126,7 +127,8 @@ def run_predict(args: argparse.Namespace) -> int:
     data = read_measurements(args.data, joint_names=model.robot.joint_names, reach_m=model.robot.reach(),
                              require_position=False, **table_options(args, model.robot))
     if data.position_m is not None and np.all(np.isfinite(data.position_m)):
-        check_points_against_joints(model.robot, data.q, data.position_m, args.data, args.data)
+        check_points_against_joints(model.robot, data.q, data.position_m, args.data, args.data,
+                                    **_declared_units(args))
     cols, table = predict_table(model, data, station=args.station)
     if args.figure:  # the same predict_with_sigma as the table's sigma columns
         from pin_kpi_oed.identification.problem import align_data
@@ -148,3 +150,12 @@ def run_predict(args: argparse.Namespace) -> int:
                   f"{tm.sigma_m.max() * 1e3:.4f} mm; {tm.n_extrapolated} of {len(data)} rows outside the measured "
                   f"coverage -> {args.figure}")
     return 0
+
+
+def _declared_units(args: argparse.Namespace) -> dict:
+    """The units a CSV was read in (``--units``) for the unit-scale check of its points and joints, whose advice
+    then names ``--units`` (the option these commands have)."""
+    from pin_kpi_oed.data.table import parse_units
+
+    u = parse_units(getattr(args, "units", None))
+    return {"length_unit": u.length, "angle_unit": u.angle, "angle_scale": u.angle_rad, "options": "table"}

@@ -614,7 +614,11 @@ def _start_value(crit: DesignCriterion, Q0: np.ndarray) -> float:
         raise SolverError(f"the start design of the {crit.name} design does not identify the parameters ({exc})"
                           ) from None
     if crit.is_ratio and not (np.isfinite(f0) and f0 > 0):
-        raise SolverError(f"criterion {crit.name} is {f0} at the start design: cannot scale it")
+        disc = getattr(crit, "discrepancy", None)
+        what = (f"; it is computed with the discrepancy ({getattr(disc, 'source', '') or 'given'}): check its kernel, "
+                "scale_m and noise" if disc is not None else
+                "; check the cell's noise, reflector, TCP and working configurations")
+        raise SolverError(f"criterion {crit.name} is {f0} at the start design: cannot scale it{what}")
     return f0
 
 

@@ -114,6 +114,23 @@ def _verdict(gap: dict, remaining_gap: dict, selected: list[str], mismatch: bool
     return "none"
 
 
+def _unconfirmed_terms(term_selection: dict, chosen: list[str], selected: list[str], singles: list,
+                       notes: list[str]) -> str:
+    """The verdict's words when the terms chosen on the training rows (step 3b) are not selected on the held-out
+    rows (step 7): a note with the numbers, and a clause for the one-line message ("" when they are, or none were)."""
+    if not term_selection or not term_selection.get("terms") or any(c in selected for c in chosen):
+        return ""
+    n = len(term_selection["terms"])
+    cv = term_selection.get("cv_rms_m") or [float("nan")]
+    held = [e for e in singles if e.name in chosen and e.status == "ok"]
+    how = "; ".join(f"{e.name}: held-out RMS {e.heldout_rms_before_m * 1e6:.1f} -> {e.heldout_rms_after_m * 1e6:.1f} "
+                    f"µm, p_heldout {e.heldout_pvalue:.2g}" for e in held) or "not scored"
+    notes.append(f"the term selection chose {n} term(s) on the training rows ({cv[0] * 1e6:.1f} -> {cv[-1] * 1e6:.1f} "
+                 f"µm, K-fold) but the held-out rows do not confirm them ({how}): they are not named as dominant and "
+                 "describe the training session only (check the validation rows' coverage)")
+    return f"; the {n} term(s) chosen on the training rows are not confirmed held-out"
+
+
 #: Share of the selected transmission-error amplitude (squared) in orders 1–2 above which the terms are
 #: the gear_harmonic model (gear / encoder eccentricity) and named so.
 LOW_ORDER_SHARE = 0.9
@@ -212,6 +229,7 @@ def _diagnose_steps(model: TrackerModel, train: MeasurementSet, validate: Measur
     # (3b) transferable terms chosen by sparse selection, then scored like any candidate
     term_names = [e for e in (opts.effects or ()) if isinstance(e, str) and e in SELECTED_TERM_EFFECTS]
     term_selection: dict = {}
+    chosen: list = []
     if term_names:
         bar.set_postfix_str("term selection")
         chosen, term_selection = select_transfer_terms(geo_fit, train, term_names, opts, notes)
@@ -249,6 +267,7 @@ def _diagnose_steps(model: TrackerModel, train: MeasurementSet, validate: Measur
     # (8) verdict
     dominant = _verdict(gap, remaining_gap, selected, validation_mismatch, floor, ra, notes)
     dominant = _name_low_orders(dominant, term_selection, [e.name for e in cands], notes)
+    unconfirmed = _unconfirmed_terms(term_selection, [e.name for e in chosen], selected, singles, notes)
     for u in sorted(eng.unconverged):
         notes.append(f"the identification with {u} stopped at its evaluation limit before converging; its numbers "
                      "are those of the last iterate")
@@ -257,7 +276,7 @@ def _diagnose_steps(model: TrackerModel, train: MeasurementSet, validate: Measur
     status = "mismatch" if validation_mismatch else ("gap" if gap["gap_detected"] else "no_gap")
     message = {"mismatch": "the validation data do not match the training set-up; no effect named",
                "gap": f"gap detected; dominant effect: {dominant}",
-               "no_gap": "held-out residuals consistent with the noise"}[status]
+               "no_gap": "held-out residuals consistent with the noise"}[status] + unconfirmed
     return DiagnosisReport(
         success=True, status=status, message=message, nit=len(selection), nfev=eng.n_fits,
         robot=model.robot.name, tool_frame=model.robot.tool_frame, mode=plan.mode, k_folds=plan.k,

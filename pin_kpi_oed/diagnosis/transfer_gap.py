@@ -121,17 +121,31 @@ def _coverage(robot: Any, train: MeasurementSet, ho_data: MeasurementSet
     return Qt, Qv, covered_rows(Qt, Qv, COVERAGE_TOL_RAD)
 
 
+def uncovered_intervals(q: np.ndarray, q_train: np.ndarray) -> list[tuple[float, float]]:
+    """The uncovered joint values ``q`` (rad, as measured: within the joint's limits, never wrapped) as intervals,
+    split where a training value ``q_train`` lies between two of them; [] for none."""
+    a = np.sort(np.asarray(q, float).ravel())
+    if a.size == 0:
+        return []
+    t = np.sort(np.asarray(q_train, float).ravel())
+    cut = np.flatnonzero(np.searchsorted(t, a[1:]) > np.searchsorted(t, a[:-1], side="right"))
+    starts, ends = np.r_[0, cut + 1], np.r_[cut, a.size - 1]
+    return [(float(a[i]), float(a[k])) for i, k in zip(starts, ends)]
+
+
 def _joint_ranges(joint_names: Sequence[str], Qt: np.ndarray, Qv: np.ndarray, cov: np.ndarray) -> list[dict]:
-    """Per joint: wrapped training / validation ranges, coverage and the uncovered validation range (rad)."""
+    """Per joint: wrapped training / validation ranges, coverage and the uncovered validation values (rad, as measured:
+    within the joint's limits), as their range and as intervals."""
     per_joint = cov.mean(axis=0)
     joints = []
     for j, n in enumerate(joint_names):
         tlo, thi = circular_range(Qt[:, j])
         vlo, vhi = circular_range(Qv[:, j])
-        ulo, uhi = circular_range(Qv[~cov[:, j], j])
+        iv = uncovered_intervals(Qv[~cov[:, j], j], Qt[:, j])
+        ulo, uhi = (iv[0][0], iv[-1][1]) if iv else (float("nan"), float("nan"))
         joints.append({"joint": n, "train_min": tlo, "train_max": thi, "validate_min": vlo, "validate_max": vhi,
                        "coverage": float(per_joint[j]), "uncovered_min": ulo, "uncovered_max": uhi,
-                       "n_uncovered": int(np.sum(~cov[:, j]))})
+                       "uncovered_intervals": [list(x) for x in iv], "n_uncovered": int(np.sum(~cov[:, j]))})
     return joints
 
 
@@ -165,11 +179,14 @@ def _poses_to_add(joints: Sequence[dict], use_sp: np.ndarray, ho_rows: np.ndarra
     um = 1e6
     worst = np.argsort(-use_sp)[:N_WORST]
     ranges = [{"joint": j["joint"], "min": j["uncovered_min"], "max": j["uncovered_max"],
-               "n_rows": j["n_uncovered"]} for j in joints if j["n_uncovered"] > 0.05 * n_rows]
+               "intervals": j["uncovered_intervals"], "n_rows": j["n_uncovered"]}
+              for j in joints if j["n_uncovered"] > 0.05 * n_rows]
     return {"joint_ranges": ranges, "rows": (np.asarray(ho_rows)[worst] + 1).tolist(),
             "rows_sigma_m": use_sp[worst].tolist(),
             "text": ("add training poses covering " + (", ".join(
-                f"{r['joint']} {r['min']:.2f} .. {r['max']:.2f} rad" for r in ranges) or "the validation angles")
+                f"{r['joint']} " + " and ".join(f"{lo:.2f} .. {hi:.2f}" for lo, hi in r["intervals"][:3])
+                + (f" (+{len(r['intervals']) - 3} more)" if len(r["intervals"]) > 3 else "") + " rad"
+                for r in ranges) or "the validation angles")
                 + f"; or measure first the {len(worst)} validation configurations with the largest predicted "
                   f"sigma ({use_sp[worst[0]] * um:.0f} .. {use_sp[worst[-1]] * um:.0f} µm): rows "
                 + ", ".join(str(r) for r in (np.asarray(ho_rows)[worst] + 1)))}

@@ -377,6 +377,10 @@ def _rigid_rms(X: np.ndarray, Y: np.ndarray, proper: bool) -> float:
     return float(np.sqrt(np.mean(np.sum((Y - ym - (X - xm) @ R.T) ** 2, axis=1))))
 
 
+#: a registration whose reduced χ² is below this fits ~30× better than its stated noise: the noise is in wrong units
+CHI2_TOO_SMALL = 1e-3
+
+
 def assess_registration(station: str, X: np.ndarray, Y: np.ndarray, errors_m: np.ndarray, sigma_m: np.ndarray,
                         n_unknowns: int, chi2_poor: float = CHI2_POOR,
                         explain: Callable[[float], str] | None = None) -> RegistrationQuality:
@@ -397,7 +401,8 @@ def assess_registration(station: str, X: np.ndarray, Y: np.ndarray, errors_m: np
     Returns:
         The :class:`RegistrationQuality`; poor when the rows give fewer than twice as many equations as
         unknowns (a fit that passes through every point proves nothing), when the residuals are far above
-        the noise, or when the frame fits only mirrored (axes swapped or negated in the export).
+        the noise or far below it (reduced χ² under :data:`CHI2_TOO_SMALL`: the noise stated in mm), or when the
+        frame fits only mirrored (axes swapped or negated in the export).
     """
     m = int(len(errors_m))
     sig2 = np.mean(np.broadcast_to(np.asarray(sigma_m, float) ** 2, (m, 3)), axis=1)
@@ -420,6 +425,10 @@ def assess_registration(station: str, X: np.ndarray, Y: np.ndarray, errors_m: np
             q.reasons.append(explain(chi2_red))
         else:
             q.reasons.append("likely: another robot's or another session's data, the joint order, or units (m, rad)")
+    if dof > 0 and chi2_red < CHI2_TOO_SMALL:
+        q.reasons.append(f"residual RMS {rms * 1e3:.4g} mm is {np.sqrt(chi2_red):.2g}x the stated noise (sigma "
+                         f"{np.sqrt(np.mean(sig2)) * 1e3:.3g} mm per axis): the sigma columns or the model's noise are "
+                         "far too large (in mm, not m?); give sigma in m")
     if q.reasons:
         q.verdict = "poor"
     return q

@@ -317,7 +317,8 @@ def check_discrepancy_options(args: argparse.Namespace, gp_criteria: bool, model
 def _inputs(args: argparse.Namespace, cmd: str | None) -> list[tuple[str, Any]]:
     """The command's declared inputs, and every other option whose value names an existing file."""
     declared = _pairs(args, INPUTS.get(cmd, []), existing_only=True)
-    skip = set(INPUTS.get(cmd, [])) | set(OUTPUTS.get(cmd, [])) | set(FOLDERS.get(cmd, [])) | {"command", "func"}
+    skip = (set(INPUTS.get(cmd, [])) | set(OUTPUTS.get(cmd, [])) | set(FOLDERS.get(cmd, []))
+            | {"command", "func", "argv"})  # argv: the whole command line as given (for the files' provenance)
     others = [d for d, v in vars(args).items() if d not in skip and isinstance(v, (str, list))]
     return declared + [(o, p) for o, p in _pairs(args, others, existing_only=True) if Path(p).is_file()]
 

@@ -134,7 +134,8 @@ def _spread_ratio(robot: Any, Q: np.ndarray, P: np.ndarray) -> float:
 
 
 def check_points_against_joints(robot: Any, Q: np.ndarray, P: np.ndarray, points: str, joints: str,
-                                length_unit: str = "m", angle_unit: str = "rad", angle_scale: float = 1.0) -> float:
+                                length_unit: str = "m", angle_unit: str = "rad", angle_scale: float = 1.0,
+                                options: str = "tracker") -> float:
     """Do measured positions and joint values agree in scale? (units of a tracker export and a joint log)
 
     The distances between measured points do not depend on where the tracker stands; the distances
@@ -149,6 +150,8 @@ def check_points_against_joints(robot: Any, Q: np.ndarray, P: np.ndarray, points
         points, joints: the files, for messages.
         length_unit: the unit the points were read in; angle_unit: the joint log's (``deg`` / ``rad``).
         angle_scale: the factor that converted the joint log's revolute values to rad.
+        options: the command's unit options the advice names: ``tracker`` (``import-tracker``: ``--angle-unit``,
+            a 'Units:' comment or ``--units``) or ``table`` (a measurement CSV: ``--units``, e.g. ``mm,deg``).
 
     Returns:
         The ratio (about 1).
@@ -171,15 +174,21 @@ def check_points_against_joints(robot: Any, Q: np.ndarray, P: np.ndarray, points
     ratio2 = _spread_ratio(robot, Q2, P) if np.all(np.isfinite(Q2)) else float("nan")
     head = (f"{points} ({length_unit}) and {joints} ({angle_unit}): the measured points spread {ratio:.3g}x as far as "
             f"the joint values move the tool ({robot.name}, reach {robot.reach():.2f} m)")
+    table = options == "table"
     if np.isfinite(ratio2) and 1 / SPREAD_RATIO <= ratio2 <= SPREAD_RATIO:
-        raise InputError(f"{head}: the joint log looks like {other}, not {angle_unit}; give --angle-unit {other}")
+        fix = (f"give --units {other}" if other == "deg" else "give the joints in rad (drop deg from --units)") \
+            if table else f"give --angle-unit {other}"
+        raise InputError(f"{head}: the joint {'values look' if table else 'log looks'} like {other}, not {angle_unit}; "
+                         f"{fix}")
     units = {"m": 1.0, "cm": 1e-2, "mm": 1e-3, "in": 0.0254, "um": 1e-6}
     here = units.get(length_unit, 1.0)
     true = min(units, key=lambda u: abs(math.log(ratio * units[u] / here)) if ratio > 0 else 0.0)
-    hint = (f"the points look like {true}, not {length_unit} (declare it with a 'Units: {true}' comment or --units "
-            f"{true})" if abs(math.log(ratio * units[true] / here)) < math.log(SPREAD_RATIO) and true != length_unit
-            else "check the length unit of the points ('Units:' comment, --units) and the joint log's angle unit "
-                 "(--angle-unit)")
+    declare = f"--units {true}" if table else f"a 'Units: {true}' comment or --units {true}"
+    hint = (f"the points look like {true}, not {length_unit} (declare it with {declare})"
+            if abs(math.log(ratio * units[true] / here)) < math.log(SPREAD_RATIO) and true != length_unit
+            else ("check the length and angle units of the file (--units, e.g. mm,deg)" if table else
+                  "check the length unit of the points ('Units:' comment, --units) and the joint log's angle unit "
+                  "(--angle-unit)"))
     raise InputError(f"{head}; {hint}")
 
 

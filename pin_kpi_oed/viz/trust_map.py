@@ -27,7 +27,7 @@ import numpy as np
 from pin_kpi_oed.errors import InputError
 from pin_kpi_oed.viz.figures import _figure, save_png
 
-__all__ = ["TrustMap", "trust_map", "plot_trust_map"]
+__all__ = ["TrustMap", "trust_map", "plot_trust_map", "sigma_contents"]
 
 #: Colour of the measured (training) configurations.
 TRAINING_COLOUR = "#9a9a9a"
@@ -109,6 +109,17 @@ def trust_map(model: Any, Q: np.ndarray, aux: Any = None, station: str | None = 
                     train, train_label)
 
 
+def sigma_contents(model: Any) -> str:
+    """What the predicted σ of ``model`` holds, for a title: the parameters' covariance and noise always; a
+    Gaussian-process discrepancy only when the model file holds one (a white level is not one)."""
+    d = getattr(model, "discrepancy", None)
+    if d is None:
+        return "σ: parameters + noise; no discrepancy (noise-only model)"
+    if d.kind == "white":
+        return "σ: parameters + a white residual level; no correlated discrepancy"
+    return f"σ: parameters + Gaussian-process discrepancy ({d.kind}, {d.n_rows} rows) + white level"
+
+
 def plot_trust_map(model: Any, Q: np.ndarray, aux: Any = None, station: str | None = None, *,
                    out: str | os.PathLike, title: str | None = None) -> TrustMap:
     """Write the trust map (PNG): top (x–y) and side (x–z) views of the rows' reflector positions, base frame,
@@ -153,8 +164,8 @@ def plot_trust_map(model: Any, Q: np.ndarray, aux: Any = None, station: str | No
         ax.grid(True, alpha=0.3)
     axes[0].legend(loc="best", fontsize=7, framealpha=0.85)
     fig.colorbar(sc, ax=list(axes), label="predicted σ (mm)", shrink=0.9)
-    disc = "discrepancy included" if model.discrepancy is not None else "noise-only model: no discrepancy"
-    fig.suptitle(title or f"{model.robot.name}: predicted TCP σ over {len(P)} configurations ({disc}); "
+    fig.suptitle(title or f"{model.robot.name}: predicted TCP σ over {len(P)} configurations "
+                          f"({sigma_contents(model)}); "
                           f"median {np.median(s_mm):.3f} mm, max {s_mm.max():.3f} mm", fontsize=11)
     tm.path = save_png(fig, out)
     tm.figure = fig

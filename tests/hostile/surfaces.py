@@ -58,6 +58,16 @@ def build_surface_inputs(d: Path) -> None:
                      "--discrepancy", "none", "--quiet", "--accept-poor-fit"]) == 0
         assert main(["simulate", "--robot", "ur10", "--n", "20", "--seed", "2", "--out", str(d / "reg_ur10.csv")]) == 0
     (d / "ur5.csv").unlink()
+    (d / "reg_ur10_bare.csv").write_text("\n".join(ln for ln in (d / "reg_ur10.csv").read_text().splitlines()
+                                                   if not ln.startswith("#")) + "\n")  # no tool header
+    reg = [ln for ln in (d / "reg20.csv").read_text().splitlines() if not ln.startswith("#")]
+    h = reg[0].split(",")
+    sig = [h.index(c) for c in ("sigma_x", "sigma_y", "sigma_z")]
+    rows = [r.split(",") for r in reg[1:]]
+    for r in rows:
+        for i in sig:
+            r[i] = "0.005"  # 5 mm stated, 10 µm real
+    (d / "reg20_sigma_mm.csv").write_text("\n".join([reg[0]] + [",".join(r) for r in rows]) + "\n")
     from pin_kpi_oed.cell.cell import load_cell
     from pin_kpi_oed.design.optimize import DesignProblem
 
@@ -65,7 +75,7 @@ def build_surface_inputs(d: Path) -> None:
     Q, _ = DesignProblem(cell).random_design(10, seed=3, max_tries=10 ** 5)
     (d / "given_ur10.csv").write_text("\n".join([",".join(cell.robot.joint_names)]
                                                 + [",".join(f"{x:.10f}" for x in q) for q in Q]) + "\n")
-    lines = (d / "tr.csv").read_text().splitlines()
+    lines = [ln for ln in (d / "tr.csv").read_text().splitlines() if not ln.startswith("#")]  # tool header off
     head = lines[0].split(",")
 
     def table(name: str, edit) -> None:
@@ -100,7 +110,7 @@ def build_surface_inputs(d: Path) -> None:
 def _big(work: Path) -> None:
     """``big.csv``: 50,000 rows, the training rows repeated with joint values 1e-7 rad apart (made in the case's
     folder: too large to copy for every case)."""
-    lines = (work / "tr.csv").read_text().splitlines()
+    lines = [ln for ln in (work / "tr.csv").read_text().splitlines() if not ln.startswith("#")]
     head = lines[0].split(",")
     nj = sum(h.startswith("joint_") for h in head)
     rows = [r.split(",") for r in lines[1:]]
@@ -174,7 +184,14 @@ def surface_cases() -> list:
         Case("s-robot-ur5-prior-for-ur10-cell", "design --cell ur10 --given {d}/given_ur10.csv --given-prior "
              "{d}/m_ur5.json --measurements 5", "calibrates the robot 'ur5'"),
         Case("s-robot-ur5-model-on-ur10-rows", "register --model {d}/m_ur5.json --data {d}/reg_ur10.csv --model-out "
-             "{d}/o.json", "another robot's"),
+             "{d}/o.json", "contradicts"),
+        Case("s-robot-ur5-model-on-ur10-rows-no-header", "register --model {d}/m_ur5.json --data "
+             "{d}/reg_ur10_bare.csv --model-out {d}/o.json", "another robot's"),
+        # wrong exit 0 and unclear answers
+        Case("s-unclear-register-sigma-in-mm", "register --model {d}/m.json --data {d}/reg20_sigma_mm.csv "
+             "--model-out {d}/o.json", "give sigma in m"),
+        Case("s-unclear-predict-hint-names-its-options", "predict --model {d}/m.json --data {d}/reg20.csv --units deg "
+             "--out {d}/o.csv", "drop deg from --units"),
         # tracebacks and unclear answers of damaged data files
         Case("s-data-sigma-1e-300", "identify --robot kr15 --data {d}/sig_tiny.csv", "sigma"),
         Case("s-data-station-empty", "identify --robot kr15 --data {d}/station_empty.csv", "station"),
