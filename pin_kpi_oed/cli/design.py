@@ -537,7 +537,6 @@ def _make_problem(args: argparse.Namespace, cell, given_file, collision: bool, q
 
             cm = load_model_file(args.model)
             model_cell_tool(cm, args.model, cell, args.cell)  # the model's robot, tool frame and TCP are the cell's
-            check_same_robot(cm.robot, cell.robot, f"--model {args.model}")
             _set_discrepancy(problem, cm, args.model)
             _refit_discrepancy(problem, given_file, quiet)
             return problem
@@ -548,7 +547,6 @@ def _make_problem(args: argparse.Namespace, cell, given_file, collision: bool, q
         prior = getattr(args, "prior", "model") or "model"
         cm = load_model_file(args.model)
         model_cell_tool(cm, args.model, cell, args.cell)  # the model's robot, tool frame and TCP are the cell's
-        check_same_robot(cm.robot, cell.robot, f"--model {args.model}")
         _set_discrepancy(problem, cm, args.model)
         problem.extended = ExtendedModel.from_calibrated_model(cm, model=problem.model,
                                                                base=problem.base,
