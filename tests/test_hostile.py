@@ -415,3 +415,20 @@ def test_a_figure_is_written_in_the_format_its_name_says(inputs, tmp_path):
                           tmp_path / "p.csv", "--figure", tmp_path / name, "--quiet")
         assert rc == 0, err
         assert (tmp_path / name).read_bytes()[:len(magic)] == magic
+
+
+def test_a_criterion_that_is_not_finite_at_the_start_names_its_source():
+    """'criterion kpi_gp is nan at the start design' names the discrepancy it was computed with (file and fields)."""
+    from types import SimpleNamespace
+
+    from pin_kpi_oed.design.optimize import _start_value
+    from pin_kpi_oed.errors import SolverError
+
+    crit = SimpleNamespace(name="kpi_gp", is_ratio=True, value=lambda Q: float("nan"),
+                           discrepancy=SimpleNamespace(source="--model m.json, fitted on 120 rows (exact)"))
+    with pytest.raises(SolverError) as e:
+        _start_value(crit, np.zeros((3, 6)))
+    assert "kpi_gp is nan" in str(e.value) and "--model m.json" in str(e.value) and "scale_m" in str(e.value)
+    plain = SimpleNamespace(name="kpi", is_ratio=True, value=lambda Q: 0.0)
+    with pytest.raises(SolverError, match="cell's noise"):
+        _start_value(plain, np.zeros((3, 6)))

@@ -115,3 +115,10 @@ def test_readme_demo_output_is_what_the_demo_prints(capsys) -> None:
         for col in (1, 2, -2):  # tr(C_s) mm^2, TCP sigma um, effic. %
             assert float(printed[crit][col]) == pytest.approx(float(row[col]), rel=0.01), (crit, col)
         assert printed[crit][-1] == row[-1] == "ok"
+
+
+def test_readme_names_every_shipped_robot() -> None:
+    from pin_kpi_oed.model.robot import ROBOT_NAMES
+
+    missing = [n for n in ROBOT_NAMES if f"`{n}`" not in README]
+    assert not missing, f"README.md does not list the shipped robot names {missing}"

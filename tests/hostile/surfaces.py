@@ -23,6 +23,7 @@ _DISC_EDITS = {
     "len_tiny": (lambda b: b["kernel"].update(length_scale_rad=[1e-300] * 6), "length_scale_rad"),
     "len_huge": (lambda b: b["kernel"].update(joint_length_scale_rad=[1e300] * 6), "joint_length_scale_rad"),
     "amp_1e200": (lambda b: b["kernel"].update(amplitude=1e200), "amplitude"),
+    "amp_nan": (lambda b: b["kernel"].update(amplitude=float("nan")), "amplitude"),
     "noise_1e10": (lambda b: b.update(noise=1e10), "noise"),
     "cv_list": (lambda b: b.update(cv=[1, 2]), "cv"),
     "nrows_list": (lambda b: b.update(n_rows=[120]), "n_rows"),
