@@ -224,6 +224,10 @@ def test_bad_input_one_line_exit_2_nothing_written(calibrated, capsys, tmp_path)
     (tmp_path / "two.json").write_text(json.dumps(doc))
     cases.append((["report", "--model", str(tmp_path / "two.json")] + base[3:] + ["--validate", str(d / "test.csv")],
                   "give every one of them"))
+    text = (d / "test.csv").read_text()  # held-out rows whose tool header names another tool frame
+    (tmp_path / "other_tool.csv").write_text("# pin_kpi_oed.tool/1\n# robot: \"ur10\"\n# tool_frame: \"wrist_3_link\"\n"
+                                             + "\n".join(ln for ln in text.splitlines() if not ln.startswith("#")))
+    cases.append((base + ["--validate", str(tmp_path / "other_tool.csv")], "wrist_3_link"))
     for argv, msg in cases:
         capsys.readouterr()
         assert main(argv) == 2, msg

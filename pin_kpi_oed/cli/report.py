@@ -58,6 +58,12 @@ def run(args: argparse.Namespace) -> int:
         raise InputError("give --html FILE, --json FILE and/or --pdf FILE")
     if args.register_rows is not None and args.register_data:
         raise InputError("give --register-rows or --register-data, not both")
+    if args.validate:  # the data files' tool headers against the model: robot, tool frame, TCP
+        from pin_kpi_oed.cli.tool import model_tool
+        from pin_kpi_oed.identification.model_file import load_model_file
+
+        model_tool(args, load_model_file(args.model), args.model,
+                   [*args.train, args.validate, *([args.register_data] if args.register_data else [])])
     cert = build_certificate(args.model, args.train, args.validate, register_rows=args.register_rows,
                              register_data_path=args.register_data, seed=args.seed, table_opts=table_options(args),
                              kinematics=args.kinematics, command=command_line(getattr(args, "argv", None) or []),
