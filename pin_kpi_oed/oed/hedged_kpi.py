@@ -28,7 +28,7 @@ The exact gradient is ∇φ_H = φ_H · Σ_k ω_k ∇φ_k / φ_k (each member's 
 as with ``kpi_gp``. Pool selection (:meth:`HedgedDesignCriterion.select`): every member's own selection
 (:func:`~pin_kpi_oed.oed.discrepancy_kpi.select_pool_gp`, greedy + exchange) is a candidate set; the one of least
 φ_H is kept and improved by exchange passes on φ_H (a chosen pose swapped for the pool candidate that lowers φ_H
-most, over a seeded subset of the pool when it is large).
+most, over a seeded subset of the pool when m times the candidates exceeds :data:`EXCHANGE_EVALUATIONS`).
 
 A fitted discrepancy (``design --model``) is not hedged: it is a measurement, not an assumption.
 """
@@ -61,8 +61,10 @@ HEDGE_LINE = ("kpi_gp: the discrepancy is an assumption (no --model): the design
               "the weighted geometric mean of their tr C_s), so that a robot whose discrepancy differs is not "
               "designed worse than by the noise-only KPI (--no-hedge: the assumed prior alone); the sigma shown "
               "is the assumed prior's")
-#: Candidates tried per chosen pose in an exchange pass over a large pool (a seeded subset).
-EXCHANGE_CANDIDATES = 200
+#: Swaps tried per exchange pass: each of the m chosen poses is tried against every other candidate when the pool
+#: allows, else against a seeded subset of max(10, this / m) of them (the pass costs about this many evaluations of
+#: the K members).
+EXCHANGE_EVALUATIONS = 4000
 
 
 def _scaled_kernel(kernel: Any, factor: float) -> Any:
@@ -194,7 +196,7 @@ class HedgedDesignCriterion:
         Args:
             Q_pool: candidates (N, n) rad; m: poses to choose; J_pool: their Jacobians (default computed).
             exchange_passes: exchange passes on φ_H (0: the best member selection as it is).
-            seed: seed of the candidate subset of an exchange over a pool larger than :data:`EXCHANGE_CANDIDATES`.
+            seed: seed of the candidate subsets of an exchange over a large pool (:data:`EXCHANGE_EVALUATIONS`).
             kw: passed to each member's :meth:`~DiscrepancyDesignCriterion.select` (e.g. ``time_budget_s``).
 
         Raises:
@@ -253,8 +255,9 @@ class HedgedDesignCriterion:
             improved = False
             for pos in range(len(idx)):
                 rest = np.setdiff1d(np.arange(len(Q_pool)), idx)
-                if len(rest) > EXCHANGE_CANDIDATES:
-                    rest = rng.choice(rest, EXCHANGE_CANDIDATES, replace=False)
+                k = max(10, EXCHANGE_EVALUATIONS // len(idx))
+                if len(rest) > k:
+                    rest = rng.choice(rest, k, replace=False)
                 best_c, best_v = None, val * (1 - 1e-9)
                 for cand in rest:
                     trial = idx.copy()
