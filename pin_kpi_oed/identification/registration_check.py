@@ -72,9 +72,9 @@ def reference_sigma_m(model: CalibratedModel, data: MeasurementSet | None = None
 
 def training_configurations(model: CalibratedModel) -> np.ndarray | None:
     """The configurations (k, n) rad the calibration measured, as far as the model file keeps them, or None."""
-    cov = getattr(model, "coverage", None)
-    if cov is not None and getattr(cov, "Z", None) is not None:
-        return np.asarray(cov.Z, float)
+    for cov in (getattr(model, "coverage", None), getattr(model.discrepancy, "coverage", None)):
+        if cov is not None and getattr(cov, "Z", None) is not None:  # the joint-space coverage measure's rows
+            return np.asarray(cov.Z, float)
     if model.discrepancy is not None:
         return np.asarray(model.discrepancy.Z, float)
     return None
