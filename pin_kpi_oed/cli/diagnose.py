@@ -233,6 +233,11 @@ def run(args: argparse.Namespace) -> int:
         atomic_write_json(args.model_out, model_dict)
         disc = rep.model_fit.discrepancy.decision if rep.model_fit.discrepancy else "no discrepancy"
         print(f"wrote {args.model_out} (geometry" + "".join(f" + {e}" for e in rep.selected_effects) + f"; {disc})")
+        if rep.selected_effects and not args.quiet:
+            print(f"note: {', '.join(rep.selected_effects)} {'is' if len(rep.selected_effects) == 1 else 'are'} "
+                  "fitted on the joint ranges of these rows; a session in other ranges is refused by register with "
+                  "that cause: there a geometry-only model (--effects none) or a prior on the terms (--term-prior "
+                  "1e-4) transfers")
     return 0
 
 
