@@ -121,12 +121,14 @@ def test_poor_registration_names_extrapolating_effects(case):
     bad = dataclasses.replace(cm, effects=[eff], thetas=[np.full(len(eff.param_names()), 1e-3)])
     sub = dC.subset(np.arange(40))
     res = register_setup(bad, sub, station="C")
+    assert res.poor and res.to_dict()["poor"] and "gear_harmonic extrapolates" in res.summary()  # the API flags it
     (gate,) = registration_gates(res, sub, bad)
+    assert gate.line() == res.quality[0].line()
     line = gate.line()
     assert gate.poor and "gear_harmonic extrapolates" in line and "geometry alone registers" in line
     assert "--effects none" in line and "--term-prior" in line and "another robot" not in line
-    (good,) = registration_gates(register_setup(cm, sub, station="C"), sub, cm)
-    assert not good.poor
+    good = register_setup(cm, sub, station="C")
+    assert not good.poor and not good.quality[0].poor and ": good" in good.summary()
 
 
 def test_reference_level_and_coverage_helpers(case):

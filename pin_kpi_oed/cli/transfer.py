@@ -77,7 +77,6 @@ def run_register(args: argparse.Namespace) -> int:
     from pin_kpi_oed.data.measurements import read_measurements
     from pin_kpi_oed.errors import InputError
     from pin_kpi_oed.identification.model_file import load_model_file
-    from pin_kpi_oed.identification.registration_check import registration_gates
     from pin_kpi_oed.identification.transfer import register_setup
     from pin_kpi_oed.validation.robot_checks import check_points_against_joints
 
@@ -89,7 +88,7 @@ def run_register(args: argparse.Namespace) -> int:
                                     **_declared_units(args))
     existing = dict(model.setups)
     res = register_setup(model, data, station=args.station, hold_reflector=args.hold_reflector)
-    gates = registration_gates(res, data, model, args.hold_reflector)
+    gates = res.quality
     replaced = [lab for lab in res.stations if lab in existing]
     model_dict = res.model.to_dict()
     out = ({**res.to_dict(), "model": args.model, "data": args.data, "quality": [g.to_dict() for g in gates],
@@ -103,9 +102,7 @@ def run_register(args: argparse.Namespace) -> int:
     if out is not None:
         atomic_write_json(args.json, out)
     if not args.quiet:
-        print(res.summary())
-        for g in gates:
-            print(g.line())
+        print(res.summary())  # the gate's line of every station included
         for lab in replaced:
             old = existing[lab]
             print(f"station '{lab}' replaced: it was fitted by {old.fitted_by} on {old.n_rows} rows of "

@@ -144,7 +144,8 @@ def poor_registration_cause(model: CalibratedModel, data: MeasurementSet, label:
     names = sorted({getattr(e, "name", type(e).__name__) for e in model.effects})
     if names or model.discrepancy is not None:
         try:
-            geo = register_setup(_geometry_only(model), data, station=label, hold_reflector=hold_reflector)
+            geo = register_setup(_geometry_only(model), data, station=label, hold_reflector=hold_reflector,
+                                 check=False)
         except PinKpiOedError:
             geo = None
         if geo is not None:

@@ -71,6 +71,9 @@ class RegistrationResult(Result):
         errors_m: position error norm of every given row after the registration (m).
         source: file the rows came from.
         setup_thetas: fitted parameters of the ``setup_effects`` of the registration (one array each).
+        quality: the registration gate of every station against the calibration's own level
+            (:func:`~pin_kpi_oed.identification.registration_check.registration_gates`; what ``register`` refuses
+            on): :attr:`poor` flags a registration whose model must not be used without a look at the cause.
     """
 
     model: CalibratedModel = field(repr=False, default=None)
@@ -80,6 +83,12 @@ class RegistrationResult(Result):
     errors_m: np.ndarray = field(default_factory=lambda: np.zeros(0))
     source: str = ""
     setup_thetas: list = field(default_factory=list)
+    quality: list = field(default_factory=list)
+
+    @property
+    def poor(self) -> bool:
+        """A station's registration failed its gate (see :attr:`quality`: the line names the cause and the fix)."""
+        return any(q.poor for q in self.quality)
 
     @property
     def rms_m(self) -> float:
@@ -96,6 +105,9 @@ class RegistrationResult(Result):
             out.append(f"  station {lab} ({st.n_rows} rows, RMS {st.rms_m * 1e3:.4f} mm): tracker_T_base xyz "
                        f"{np.round(T[:3, 3], 6).tolist()} m, rpy {np.round(pin.rpy.matrixToRpy(T[:3, :3]), 6).tolist()}"
                        f" rad; reflector {np.round(st.reflector_m * 1e3, 4).tolist()} mm")
+            gate = next((q for q in self.quality if q.station == lab), None)
+            if gate is not None:
+                out.append(f"  {gate.line()}")
             if st.sigma_scale > 1.0:
                 out.append(f"  station {lab}: predicted σ scaled by {st.sigma_scale:.2f}: "
                            f"its registration rows' errors "
@@ -106,7 +118,8 @@ class RegistrationResult(Result):
         """Plain JSON-able dict (SI units)."""
         return {**self.result_dict(), "stations": list(self.stations), "source": self.source,
                 "setups": {k: v.to_dict() for k, v in self.setups.items()},
-                "rows": {k: (np.asarray(v) + 1).tolist() for k, v in self.rows.items()}, "rms_m": self.rms_m}
+                "rows": {k: (np.asarray(v) + 1).tolist() for k, v in self.rows.items()}, "rms_m": self.rms_m,
+                "quality": [q.to_dict() for q in self.quality], "poor": self.poor}
 
 
 def _groups(model: CalibratedModel, data: MeasurementSet, station: str | None) -> dict[str, np.ndarray]:
@@ -183,8 +196,8 @@ def _register_one(model: CalibratedModel, data: MeasurementSet, Q: np.ndarray, l
 
 def register_setup(model: CalibratedModel, data: MeasurementSet, *, station: str | None = None,
                    hold_reflector: bool = False, weights: str = "auto", use_orientation: bool = True,
-                   tol: float = 1e-12, max_nfev: int | None = None, setup_effects: Sequence[Any] = ()
-                   ) -> RegistrationResult:
+                   tol: float = 1e-12, max_nfev: int | None = None, setup_effects: Sequence[Any] = (),
+                   check: bool = True) -> RegistrationResult:
     """Re-fit only the set-up (tracker pose, reflector) of a station on ``data``, the robot held.
 
     Args:
@@ -199,6 +212,8 @@ def register_setup(model: CalibratedModel, data: MeasurementSet, *, station: str
         setup_effects: set-up-specific effects of the new session (e.g. ``Drift.from_data(robot, data)``)
             fitted together with the set-up (one station only); the model's own set-up-specific
             effects are replaced by them (they never transfer).
+        check: judge every station's registration against the calibration's own level (``quality``, ``poor``;
+            a poor one with its tested cause, which registers the rows once more with the geometry alone).
 
     Returns:
         The :class:`RegistrationResult`; ``.model`` holds the new set-up(s), the last the default,
@@ -246,11 +261,17 @@ def register_setup(model: CalibratedModel, data: MeasurementSet, *, station: str
     if setup_effects or len(transferable(model)) != len(model.effects):
         pairs = transferable(model) + list(zip(setup_effects, own_thetas))
         new = dataclasses.replace(new, effects=[e for e, _ in pairs], thetas=[t for _, t in pairs])
-    return RegistrationResult(success=ok, status="converged" if ok else "max_nfev",
-                              message="set-up registered with the robot held", nit=nit, nfev=nfev,
-                              time_s=time.perf_counter() - t0, model=new, stations=list(setups), setups=setups,
-                              rows=rows_used, errors_m=errors, source=data.source,
-                              setup_thetas=[np.asarray(t, float) for t in own_thetas])
+    res = RegistrationResult(success=ok, status="converged" if ok else "max_nfev",
+                             message="set-up registered with the robot held", nit=nit, nfev=nfev,
+                             time_s=time.perf_counter() - t0, model=new, stations=list(setups), setups=setups,
+                             rows=rows_used, errors_m=errors, source=data.source,
+                             setup_thetas=[np.asarray(t, float) for t in own_thetas])
+    if check:
+        from pin_kpi_oed.identification.registration_check import registration_gates
+
+        res.quality = registration_gates(res, data, model, hold_reflector)
+        res.time_s = time.perf_counter() - t0
+    return res
 
 
 def _sigma_scale(model: CalibratedModel, data: MeasurementSet, Q: np.ndarray, label: str, n_unknowns: int
