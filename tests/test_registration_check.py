@@ -109,7 +109,7 @@ def test_data_of_another_robot_is_still_refused(case):
     sub = dC.subset(np.arange(40))
     bad = dataclasses.replace(sub, q=sub.q[:, [1, 0, 2, 3, 5, 4]].copy())
     res = register_setup(cm, bad, station="C")
-    (gate,) = registration_gates(res, bad, cm)
+    (gate,) = registration_gates(res, bad, cm, register=register_setup)
     assert gate.poor and "another robot's or another session's data" in gate.line()
 
 
@@ -122,7 +122,7 @@ def test_poor_registration_names_extrapolating_effects(case):
     sub = dC.subset(np.arange(40))
     res = register_setup(bad, sub, station="C")
     assert res.poor and res.to_dict()["poor"] and "gear_harmonic extrapolates" in res.summary()  # the API flags it
-    (gate,) = registration_gates(res, sub, bad)
+    (gate,) = registration_gates(res, sub, bad, register=register_setup)
     assert gate.line() == res.quality[0].line()
     line = gate.line()
     assert gate.poor and "gear_harmonic extrapolates" in line and "geometry alone registers" in line
@@ -188,10 +188,10 @@ def test_real_ur10_series_b_to_c_refused_for_the_extrapolating_terms_geometry_re
     B, C = rows("B", 600, 0), rows("C", 60, 1)
     geo = identify(nominal, B).calibrated_model()
     assert geo.residual_sigma_m is not None and np.all(geo.residual_sigma_m > 1e-4)   # 0.2-0.3 mm, not 1e-6 m
-    (gate,) = registration_gates(register_setup(geo, C, station="C"), C, geo)
+    (gate,) = registration_gates(register_setup(geo, C, station="C"), C, geo, register=register_setup)
     assert not gate.poor, gate.line()
     te = TransmissionError(robot, pairs=[(robot.joint_names[j], k) for j, k in SERIES_B_TERMS])
     cm = identify(nominal, B, effects=[te]).calibrated_model()
-    (gate,) = registration_gates(register_setup(cm, C, station="C"), C, cm)
+    (gate,) = registration_gates(register_setup(cm, C, station="C"), C, cm, register=register_setup)
     line = gate.line()
     assert gate.poor and "transmission_error extrapolates" in line and "--effects none" in line, line

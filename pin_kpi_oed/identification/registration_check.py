@@ -31,6 +31,7 @@ When the registration is poor, the cause is tested, not guessed (:func:`poor_reg
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -118,7 +119,8 @@ def _geometry_only(model: CalibratedModel) -> CalibratedModel:
 
 
 def poor_registration_cause(model: CalibratedModel, data: MeasurementSet, label: str, chi2_full: float,
-                            sigma_m: np.ndarray, hold_reflector: bool = False) -> str:
+                            sigma_m: np.ndarray, hold_reflector: bool = False, *,
+                            register: Callable[..., Any]) -> str:
     """Why the registration of ``data`` (one station's rows) is poor: the tested cause and its fix, one clause.
 
     Args:
@@ -128,12 +130,13 @@ def poor_registration_cause(model: CalibratedModel, data: MeasurementSet, label:
         chi2_full: the registration's reduced χ² against ``sigma_m``.
         sigma_m: the reference σ of the rows (:func:`reference_sigma_m`), (m, 3) or (3,) m.
         hold_reflector: the registration held the reflector.
+        register: :func:`~pin_kpi_oed.identification.transfer.register_setup` (passed in: the registration calls
+            this check).
 
     Returns:
         The cause (see the module docstring), naming the coverage, the extrapolating terms and the fix.
     """
     from pin_kpi_oed.identification.problem import align_data
-    from pin_kpi_oed.identification.transfer import register_setup
 
     Q = align_data(model.robot, data)
     share = coverage_share(model, Q)
@@ -144,8 +147,7 @@ def poor_registration_cause(model: CalibratedModel, data: MeasurementSet, label:
     names = sorted({getattr(e, "name", type(e).__name__) for e in model.effects})
     if names or model.discrepancy is not None:
         try:
-            geo = register_setup(_geometry_only(model), data, station=label, hold_reflector=hold_reflector,
-                                 check=False)
+            geo = register(_geometry_only(model), data, station=label, hold_reflector=hold_reflector, check=False)
         except PinKpiOedError:
             geo = None
         if geo is not None:
@@ -168,8 +170,8 @@ def poor_registration_cause(model: CalibratedModel, data: MeasurementSet, label:
             + (f" ({inside})" if inside else ""))
 
 
-def registration_gates(res: Any, data: MeasurementSet, model: CalibratedModel, hold_reflector: bool = False
-                       ) -> list[RegistrationQuality]:
+def registration_gates(res: Any, data: MeasurementSet, model: CalibratedModel, hold_reflector: bool = False, *,
+                       register: Callable[..., Any]) -> list[RegistrationQuality]:
     """The registration gate of every station of a :class:`~pin_kpi_oed.identification.transfer.RegistrationResult`,
     against the calibration's own level (:func:`reference_sigma_m`), a poor one with its tested cause.
 
@@ -178,6 +180,8 @@ def registration_gates(res: Any, data: MeasurementSet, model: CalibratedModel, h
         data: the registration data.
         model: the model registered (before the registration).
         hold_reflector: the registration held the reflector.
+        register: :func:`~pin_kpi_oed.identification.transfer.register_setup` (for the geometry-only registration of
+            a poor station's rows; :func:`register_setup` computes these gates itself, ``.quality``).
     """
     ref = model.default_station if model.default_station in model.setups else next(iter(model.setups))
     n_unknowns = 6 + (0 if hold_reflector else 3)
@@ -189,7 +193,7 @@ def registration_gates(res: Any, data: MeasurementSet, model: CalibratedModel, h
         sigma = reference_sigma_m(model, data, rows)
 
         def explain(chi2_red: float, sub=sub, lab=lab, sigma=sigma) -> str:
-            return poor_registration_cause(model, sub, lab, chi2_red, sigma, hold_reflector)
+            return poor_registration_cause(model, sub, lab, chi2_red, sigma, hold_reflector, register=register)
 
         gates.append(assess_registration(lab, X, data.position_m[rows], res.errors_m[rows], sigma, n_unknowns,
                                          explain=explain))

@@ -269,7 +269,7 @@ def register_setup(model: CalibratedModel, data: MeasurementSet, *, station: str
     if check:
         from pin_kpi_oed.identification.registration_check import registration_gates
 
-        res.quality = registration_gates(res, data, model, hold_reflector)
+        res.quality = registration_gates(res, data, model, hold_reflector, register=register_setup)
         res.time_s = time.perf_counter() - t0
     return res
 
