@@ -13,6 +13,12 @@ from pin_kpi_oed.model.robot import Robot
 
 __all__ = ["GearHarmonic", "JointScale", "JointAngleTable"]
 
+#: The last few harmonic bases (key -> read-only (m, n, k) array): a fit asks for the same configurations at every
+#: step with new coefficients, and the basis depends on the configurations only. Process-wide and short, so the
+#: memory stays a few bases whatever the number of effect objects.
+_BASES: dict[tuple, np.ndarray] = {}
+_BASES_KEPT = 4
+
 
 class GearHarmonic(Effect):
     """Gear / encoder eccentricity: harmonics of each joint's own angle (rad).
@@ -83,13 +89,27 @@ class GearHarmonic(Effect):
 
     def joint_offset(self, theta, Q, aux=None):
         th = self._theta(theta)
-        Q = np.atleast_2d(np.asarray(Q, float))
-        m, n = Q.shape
-        D = np.zeros((m, n, th.size))
-        for i, (j, o) in enumerate(self.pairs):
-            D[:, j, 2 * i] = np.sin(o * Q[:, j])
-            D[:, j, 2 * i + 1] = np.cos(o * Q[:, j])
+        D = self._basis(np.atleast_2d(np.asarray(Q, float)), th.size)
         return D @ th, D
+
+    def _basis(self, Q: np.ndarray, k: int) -> np.ndarray:
+        """The basis D (m, n, k) (read-only; remembered for the last few configurations, :data:`_BASES`)."""
+        key = (tuple(self.pairs), k, Q.shape, Q.tobytes())
+        D = _BASES.get(key)
+        if D is None:
+            m, n = Q.shape
+            D = np.zeros((m, n, k))
+            for i, (j, o) in enumerate(self.pairs):
+                D[:, j, 2 * i] = np.sin(o * Q[:, j])
+                D[:, j, 2 * i + 1] = np.cos(o * Q[:, j])
+            D.flags.writeable = False
+            while len(_BASES) >= _BASES_KEPT:
+                try:
+                    _BASES.pop(next(iter(_BASES)))
+                except (KeyError, RuntimeError, StopIteration):  # another thread changed it meanwhile
+                    break
+            _BASES[key] = D
+        return D
 
     def joint_offset_dq(self, Q: np.ndarray) -> np.ndarray:
         """∂D/∂q of the basis sin/cos(o q_j): o cos(o q_j), −o sin(o q_j) on joint j, (m, n, k, n)."""
