@@ -115,3 +115,17 @@ def test_cli_design_says_it_hedges_and_refuses_no_hedge_where_nothing_is_assumed
     assert "the design hedges" not in capsys.readouterr().out
     assert main(args[:6] + ["kpi", "--no-hedge"]) == 2
     assert "--no-hedge applies to kpi_gp without --model" in capsys.readouterr().err
+
+
+def test_sequential_design_hedges_an_assumed_discrepancy_too():
+    """design --given without --model: the poses measured before count in every member of the family."""
+    from pin_kpi_oed.design.sequential import SequentialProblem
+
+    cell = load_cell(str(ROOT / "examples" / "ur5_cell.yaml"))
+    Q_given, _ = DesignProblem(cell).random_design(30, seed=np.random.SeedSequence([6, 1]))
+    problem = SequentialProblem(cell, Q_given)
+    h = problem.criterion("kpi_gp")
+    assert isinstance(h, HedgedDesignCriterion) and len(h.members) == 5
+    assert all(c.Q_given is not None and len(c.Q_given) == 30 for c in h.members)
+    Q = Q_given[:5] + 0.01
+    assert h.value(Q) < h.value(Q[:1])                                     # more poses on top of the given: less
