@@ -17,7 +17,7 @@ score is the RMS 3-D TCP error at the working configurations (mm). Per case and 
 method, and the paired difference hedged − kpi with its standard error (the noise of the comparison): "ok" when
 the hedged design is not worse than the noise-only KPI by more than two standard errors.
 
-Run: ``OMP_NUM_THREADS=1 python -m benchmarks.kpi_gp_hedge [--reps 8] [--ipa-reps 6] [--kinds ...] [--pairs B-C,...]
+Run: ``OMP_NUM_THREADS=1 python -m benchmarks.kpi_gp_hedge [--reps 16] [--ipa-reps 6] [--kinds ...] [--pairs B-C,...]
 [--json out.json]`` (progress on stderr; --reps 2 --ipa-reps 2 for a quick look)
 """
 
@@ -137,7 +137,7 @@ def main(argv: list[str] | None = None) -> dict:
     from pin_kpi_oed.studies.hedged_design import TRUTH_KINDS
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--reps", type=int, default=8, help="simulated pools and robots per kind (seeds 0 .. reps-1)")
+    ap.add_argument("--reps", type=int, default=16, help="simulated pools and robots per kind (seeds 0 .. reps-1)")
     ap.add_argument("--ipa-reps", dest="ipa_reps", type=int, default=6, help="seeded splits per IPA pair (0: skip)")
     ap.add_argument("--kinds", default=",".join(TRUTH_KINDS), help="simulated robot kinds, comma-separated")
     ap.add_argument("--pairs", default=",".join(PAIRS), help="IPA prior -> design series, e.g. B-C,D-C")
