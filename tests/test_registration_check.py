@@ -195,3 +195,19 @@ def test_real_ur10_series_b_to_c_refused_for_the_extrapolating_terms_geometry_re
     (gate,) = registration_gates(register_setup(cm, C, station="C"), C, cm, register=register_setup)
     line = gate.line()
     assert gate.poor and "transmission_error extrapolates" in line and "--effects none" in line, line
+
+
+def test_diagnose_effects_none_writes_a_geometry_only_model(case, tmp_path, capsys):
+    """The fix a refusal names: diagnose --effects none --model-out writes geometry (+ discrepancy) and no effect,
+    records its residual level, and says that no effect was tried rather than that none explains the gap."""
+    robot, dA, _, _ = case
+    write_measurements(dA, tmp_path / "A.csv")
+    m = tmp_path / "m.json"
+    assert main(["diagnose", "--robot", "ur10", "--train", str(tmp_path / "A.csv"), "--kfold", "3", "--reflector",
+                 "0,0,0.1", "--sigma", "1e-5", "--effects", "none", "--discrepancy", "none",
+                 "--model-out", str(m)]) == 0
+    out = capsys.readouterr().out
+    cm = load_model_file(m)
+    assert cm.effects == [] and cm.residual_sigma_m is not None
+    assert np.all(np.abs(cm.residual_sigma_m / NOISE - 1) < 0.3)
+    assert "no candidate effect was tried (--effects none" in out and "not any modelled effect" not in out

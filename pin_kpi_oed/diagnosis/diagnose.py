@@ -95,7 +95,7 @@ __all__ = ["DiagnosisReport", "DiagnoseOptions", "EffectResult", "diagnose", "MI
 
 
 def _verdict(gap: dict, remaining_gap: dict, selected: list[str], mismatch: bool, floor: float, rms_after: float,
-             notes: list[str]) -> str:
+             notes: list[str], tried: bool = True) -> str:
     """Step 8: the dominant effect (or ``none``) and the notes that explain the verdict."""
     detected = bool(gap["gap_detected"])
     if mismatch:
@@ -105,7 +105,10 @@ def _verdict(gap: dict, remaining_gap: dict, selected: list[str], mismatch: bool
             notes.append(f"after {', '.join(selected)} a gap remains (RMS {rms_after * 1e6:.1f} µm vs noise floor "
                          f"{floor * 1e6:.1f} µm): part of the error is not any modelled effect")
         return selected[0]
-    if detected:
+    if detected and not tried:
+        notes.append("a gap is detected and no candidate effect was tried (--effects none: geometry only): the "
+                     "remaining error is left to the model discrepancy (--discrepancy)")
+    elif detected:
         notes.append("a gap is detected but no candidate effect explains a significant part of it on held-out data: "
                      "the remaining error is not any modelled effect")
     elif selected:
@@ -265,7 +268,7 @@ def _diagnose_steps(model: TrackerModel, train: MeasurementSet, validate: Measur
     rb, ra = before["rms_m"], after["rms_m"]
     closed = (rb - ra) / (rb - floor) if rb is not None and rb - floor > 1e-3 * floor else float("nan")
     # (8) verdict
-    dominant = _verdict(gap, remaining_gap, selected, validation_mismatch, floor, ra, notes)
+    dominant = _verdict(gap, remaining_gap, selected, validation_mismatch, floor, ra, notes, tried=bool(cands))
     dominant = _name_low_orders(dominant, term_selection, [e.name for e in cands], notes)
     unconfirmed = _unconfirmed_terms(term_selection, [e.name for e in chosen], selected, singles, notes)
     for u in sorted(eng.unconverged):
