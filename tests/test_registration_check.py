@@ -154,6 +154,7 @@ def test_coverage_named_with_a_discrepancy(case):
     wrapped = np.mod(dC.q[:, 0] + np.pi, 2 * np.pi) - np.pi
     far = int(np.sum((wrapped < -1.06) | (wrapped > 0.06)))          # beyond the measured [-1, 0] rad and the tolerance
     assert m == len(dC) and n_out >= far > 0 and (lo < -1.0 or hi > 0.0)
+    assert robot.q_lower[0] <= lo <= hi <= robot.q_upper[0]          # the rows' own values, within the limits
 
 
 _here = Path(__file__).resolve()

@@ -94,8 +94,9 @@ def coverage_share(model: CalibratedModel, Q: np.ndarray) -> float | None:
 def uncovered_ranges(model: CalibratedModel, Q: np.ndarray, limit: int = 3) -> list[str]:
     """The joints whose angles in Q (m, n) rad the calibration never measured (no training angle of that joint within
     :data:`~pin_kpi_oed.identification.coverage.COVERAGE_TOL_RAD`, wrapped mod 2π), most rows first:
-    ``"shoulder_pan_joint -3.06..-1.06 rad (60 of 60 rows)"`` (the uncovered rows' angles wrapped to (−π, π]), at
-    most ``limit`` of them with at least 5 % of the rows; none when the model keeps no training configurations."""
+    ``"shoulder_pan_joint -3.06..-1.06 rad (60 of 60 rows)"`` (the uncovered rows' own joint values, within the
+    joint's limits), at most ``limit`` of them with at least 5 % of the rows; none when the model keeps no training
+    configurations."""
     from pin_kpi_oed.identification.coverage import COVERAGE_TOL_RAD, covered_rows
 
     Z = training_configurations(model)
@@ -108,7 +109,7 @@ def uncovered_ranges(model: CalibratedModel, Q: np.ndarray, limit: int = 3) -> l
     for j in np.argsort(-share, kind="stable")[:limit]:
         if share[j] < 0.05:
             continue
-        a = np.mod(Q[out_rows[:, j], j] + np.pi, 2 * np.pi) - np.pi
+        a = Q[out_rows[:, j], j]  # the rows' own values: within the joint's limits
         out.append(f"{model.robot.joint_names[j]} {a.min():.2f}..{a.max():.2f} rad "
                    f"({int(out_rows[:, j].sum())} of {len(Q)} rows)")
     return out
