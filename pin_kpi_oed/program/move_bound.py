@@ -156,16 +156,16 @@ class MoveBound:
         near = np.arange(len(self.U1))
         if cap is not None and near.size:
             C = np.einsum("msij,sj->msi", Rj, self.U_C) + tj
-            d = np.linalg.norm(C[:, self.U1] - C[:, self.U2], axis=2) - self.R_ball
+            dC = C[:, self.U1] - C[:, self.U2]
+            d = np.sqrt(np.einsum("mri,mri->mr", dC, dC)) - self.R_ball
             near = np.flatnonzero(np.any(d < cap, axis=0))
         u1, u2 = self.U1[near], self.U2[near]
-        seg = np.unique(np.r_[u1, u2, self.H_seg]).astype(int)  # the segments whose end points are needed
-        EA, EB = np.zeros((len(Q), len(self.U_A), 3)), np.zeros((len(Q), len(self.U_A), 3))
-        EA[:, seg] = np.einsum("msij,sj->msi", Rj[:, seg], self.U_A[seg]) + tj[:, seg]  # end points, (m, S, 3)
-        EB[:, seg] = np.einsum("msij,sj->msi", Rj[:, seg], self.U_B[seg]) + tj[:, seg]
+        EA = np.einsum("msij,sj->msi", Rj, self.U_A) + tj  # every segment's end points, (m, S, 3): a few dozen
+        EB = np.einsum("msij,sj->msi", Rj, self.U_B) + tj
         if self.flat_row.size:
             _, _, w1, w2 = self._closest(EA[:, u1], EB[:, u1], EA[:, u2], EB[:, u2])
-            d[:, near] = np.linalg.norm(w2 - w1, axis=2) - self.R[near]
+            w = w2 - w1
+            d[:, near] = np.sqrt(np.einsum("mri,mri->mr", w, w)) - self.R[near]
             out[:, self.first_pair] = np.minimum.reduceat(d[:, self.flat_row], self.starts, axis=1)
             soft = out[:, self.soft]
             out[:, self.soft] = np.where(soft > 0, soft, -np.inf)  # touching the enclosing capsules: no bound
