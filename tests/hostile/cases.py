@@ -4,7 +4,9 @@
 off-axis reflector, a cell file, a design file, broken variants of each); ``CASES`` lists the cases
 (``Case.argv`` uses ``{d}`` for that folder); ``run_case`` runs one in-process through
 ``pin_kpi_oed.cli.app.main`` and returns what happened. ``tests/test_hostile.py`` asserts every case;
-``python -m tests.hostile.run_hostile`` reruns them all as real subprocesses and prints a table.
+``python -m tests.hostile.run_hostile`` reruns them all as real subprocesses and prints a table and the counts of
+each kind of failure. The cases of the newest surfaces (discrepancy blocks, ``kpi_gp`` design options, another
+arm's model file, outputs onto inputs) are in :mod:`tests.hostile.surfaces`.
 """
 
 from __future__ import annotations
