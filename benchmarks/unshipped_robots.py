@@ -118,6 +118,7 @@ def compensation_table(truth: tuple, cm, res: dict, point_true_m: np.ndarray, X:
     return [{"target": f"w{k}", "status": res["target_status"][k], "start": res["start"][k],
              "true_error_m": float(err[k]), "uncompensated_error_m": float(err_nom[k]), "bound95_m": float(bound[k]),
              "within_bound": bool(err[k] <= bound[k]), "branch_deg": float(branch[k]),
+             "unseen_bound95_m": float(np.asarray(res.get("tcp_unobservable_m") or np.zeros(len(Q)))[k] * BOUND_95),
              "on_branch": bool(branch[k] <= BRANCH_DEG)} for k in range(len(Q))]
 
 
