@@ -20,7 +20,7 @@ from pin_kpi_oed.validation.paths import check_figure_suffix, check_outputs
 from pin_kpi_oed.validation.units import MAX_TOOL_OFFSET_M, check_offset_m, check_sigma_m, check_sigma_rad
 
 __all__ = ["accept_negative_numbers", "check_args", "RULES", "OUTPUTS", "INPUTS", "FOLDERS", "FIGURES", "floats",
-           "check_discrepancy_options"]
+           "check_discrepancy_options", "check_ignored_options", "IGNORED"]
 
 
 def floats(text: Any, what: str) -> list[float]:
@@ -276,6 +276,7 @@ def check_args(args: argparse.Namespace) -> None:
             if Path(d).exists() and Path(args.validate).exists() and Path(d).resolve() == Path(args.validate).resolve():
                 raise InputError(f"--validate {args.validate}: is also --train; held-out data must not be training "
                                  "data")
+    check_ignored_options(args)
     outputs = _pairs(args, OUTPUTS.get(cmd, []))
     files_of = getattr(args, "output_files", None)  # a command whose option writes several files (KRL: .src + .dat)
     if callable(files_of):
@@ -285,6 +286,47 @@ def check_args(args: argparse.Namespace) -> None:
     check_outputs(outputs, _inputs(args, cmd), _pairs(args, FOLDERS.get(cmd, [])))
     for opt, path in _pairs(args, FIGURES.get(cmd, [])):
         check_figure_suffix(opt, path)
+
+
+def _given(args: argparse.Namespace, opt: str) -> bool:
+    """Whether ``opt`` is on the command line (``args.argv``; without it, whether its value is set)."""
+    argv = getattr(args, "argv", None)
+    if argv is None:
+        return bool(getattr(args, opt.lstrip("-").replace("-", "_"), None))
+    return any(a == opt or str(a).startswith(opt + "=") for a in argv)
+
+
+def _effects(args: argparse.Namespace) -> set[str] | None:
+    e = getattr(args, "effects", None)
+    return None if e is None else {x.strip().split("=")[0] for x in str(e).split(",")}
+
+
+#: command -> [(option, whether it acts with the other options, what it needs)]: an option that would do nothing
+#: is refused, never ignored without a word
+IGNORED: dict[str, list[tuple[str, Callable[[argparse.Namespace], bool], str]]] = {
+    "identify": [("--urdf-frames", lambda a: bool(getattr(a, "urdf_out", None)),
+                  "adds frames to the calibrated URDF: add --urdf-out FILE")],
+    "simulate": [("--sigma-rot", lambda a: bool(getattr(a, "pose6d", False)),
+                  "is the orientation noise of --pose6d: add --pose6d")],
+    "compensate": [("--position-only", lambda a: bool(getattr(a, "program", None)),
+                    "holds a --program's TCP position only (--targets are held as given: leave out rx, ry, rz)")],
+    "diagnose": [("--harmonics", lambda a: _effects(a) is None or "transmission_error" in _effects(a),
+                  "sets the transmission_error candidate's orders: add transmission_error to --effects"),
+                 ("--term-prior", lambda a: _effects(a) is None or bool({"transmission_error", "link_bending"}
+                                                                          & _effects(a)),
+                  "is a prior on transmission_error / link_bending terms: add one of them to --effects")],
+}
+
+
+def check_ignored_options(args: argparse.Namespace) -> None:
+    """Refuse an option that would do nothing with the others given (:data:`IGNORED`).
+
+    Raises:
+        InputError: naming the option, what it does and what it needs (or to drop it).
+    """
+    for opt, acts, needs in IGNORED.get(getattr(args, "command", None), []):
+        if _given(args, opt) and not acts(args):
+            raise InputError(f"{opt}: {needs}, or drop {opt} (as given it would do nothing)")
 
 
 def check_discrepancy_options(args: argparse.Namespace, gp_criteria: bool, model_discrepancy: bool) -> None:

@@ -179,6 +179,16 @@ def surface_cases() -> list:
              "--robot-class industrial", "--robot-class"),
         Case("s-ignored-curve-model-without-discrepancy", "design --model {d}/m_nodisc.json --measurements 8 "
              "--curve {d}/c.png", "--curve"),
+        Case("s-ignored-urdf-frames-without-urdf-out", "identify --robot kr15 --data {d}/tr.csv --urdf-frames",
+             "--urdf-frames"),
+        Case("s-ignored-sigma-rot-without-pose6d", "simulate --robot kr15 --out {d}/new.csv --sigma-rot 1e-4",
+             "add --pose6d"),
+        Case("s-ignored-position-only-with-targets", "compensate --model {d}/m.json --targets {d}/targets.csv --out "
+             "{d}/o.csv --position-only", "--position-only"),
+        Case("s-ignored-harmonics-without-transmission-error", f"{diag} --effects joint_compliance --harmonics 5",
+             "--harmonics"),
+        Case("s-ignored-term-prior-without-terms", f"{diag} --effects joint_compliance --term-prior 1e-4",
+             "--term-prior"),
         # (j) another arm's calibration
         Case("s-robot-ur5-model-for-ur10-cell", "design --cell ur10 --model {d}/m_ur5.json --measurements 8",
              "contradicts"),
