@@ -144,6 +144,8 @@ def test_simulate_identify_carry_the_tool_and_refuse_a_contradiction(tmp_path):
                          tmp_path / "d.json")  # the cell's tool0 against the model's link_6
     assert rc == 2 and "--cell kr15: tool frame 'tool0' contradicts 'link_6' from --model" in err
     assert not (tmp_path / "d.json").exists()
+    rc, out, err = _main("predict", "--model", model, "--data", te, "--out", tmp_path / "p.csv")
+    assert rc == 0 and "(the station's reflector in tool frame link_6)" in out, err
     rc, out, err = _main("register", "--model", model, "--data", te, "--model-out", tmp_path / "r.json")
     assert "contradicts" not in err
     te2 = tmp_path / "te2.csv"
