@@ -56,7 +56,7 @@ def world():
     th = size_effect(tm, truth, Q, MeasurementSet(robot.joint_names, Q, np.zeros((300, 3))), eff, th, 3 * SIGMA)
     data = simulate(tm, Q, truth, effects=[(eff, th)], seed=2)
     train, held = data.subset(np.arange(200)), data.subset(np.arange(200, 300))
-    res = identify(TrackerModel(robot, reflector_m=REFLECTOR, noise=tm.noise), train)
+    res = identify(TrackerModel(robot, reflector_m=REFLECTOR, noise=tm.noise), train, discrepancy="none")
     cm = res.calibrated_model()
     held_err = validate(cm, held)
 
@@ -237,7 +237,7 @@ def test_real_ur10_compensated_predictions_match_held_out_rows():
     tr_idx, held_idx = registration_split(len(ms), len(ms) // 2, seed=0)
     robot = load_robot("ur10")
     model = TrackerModel(robot, reflector_m=np.array([0.0, 0.0, 0.109]), noise=NoiseModel(sigma_xyz_m=(1e-4,) * 3))
-    cm = identify(model, ms.subset(tr_idx)).calibrated_model()
+    cm = identify(model, ms.subset(tr_idx), discrepancy="none").calibrated_model()
     held = ms.subset(held_idx)
     v = validate(cm, held)
     e = np.linalg.norm(forward(cm, held.q, held) - held.position_m, axis=1)

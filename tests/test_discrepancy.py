@@ -155,7 +155,7 @@ def withheld():
 
 def test_withheld_effect_learnt_with_honest_sigma(withheld, tmp_path):
     model, train, test = withheld
-    plain = identify(model, train)
+    plain = identify(model, train, discrepancy="none")
     fit = identify(model, train, discrepancy=DiscrepancyOptions(mode="auto", n_fit=300, seed=0))
     # the parametric part is fitted first: the geometry is the same with or without the discrepancy
     assert np.allclose(plain.values, fit.values)
@@ -285,14 +285,16 @@ def test_cli_too_few_rows_for_the_discrepancy(withheld, tmp_path, capsys):
 
 
 def test_fit_quality_counts_the_discrepancy_but_never_excuses_a_poor_fit(withheld):
-    """Residuals twice the stated noise: suspect for the noise-only model, good when a Gaussian process with an
-    honest K-fold σ explains them (said so); residuals six times the noise stay poor with or without it."""
+    """Residuals three times the stated noise: suspect for the noise-only model, good when a Gaussian process with an
+    honest K-fold σ explains them (said so); residuals six times the noise stay poor with or without it. (The
+    Gaussian process's white level is never below the stated noise: at twice the noise that floor makes the K-fold
+    σ 1.5x too large, standardised RMS 0.67.)"""
     from pin_kpi_oed.identification.quality import assess_fit
     model, train, _ = withheld
-    r = np.sqrt(np.mean(identify(model, train).residuals_m ** 2))     # residual RMS per axis (m)
-    for factor, plain_verdict, gp_verdict in [(2.0, "suspect", "good"), (6.0, "poor", "poor")]:
+    r = np.sqrt(np.mean(identify(model, train, discrepancy="none").residuals_m ** 2))  # residual RMS per axis (m)
+    for factor, plain_verdict, gp_verdict in [(3.0, "suspect", "good"), (6.0, "poor", "poor")]:
         data = dataclasses.replace(train, sigma_m=np.full((len(train), 3), r / factor))
-        plain = assess_fit(identify(model, data))
+        plain = assess_fit(identify(model, data, discrepancy="none"))
         with_gp = assess_fit(identify(model, data, discrepancy=DiscrepancyOptions(mode="on", n_fit=300, seed=0)))
         assert plain.verdict == plain_verdict and "chi2" in plain.line(), plain.line()
         assert with_gp.verdict == gp_verdict, with_gp.line()

@@ -333,7 +333,9 @@ def test_real_ur10_joint_bcd_and_transfer(tmp_path):
     # C's calibration does not transfer to D (held-out worse than the nominal robot): the gate says so
     assert doc["fit_quality"]["verdict"] == "poor" and "worse than the nominal" in doc["fit_quality"]["message"]
     v = doc["validation"]
-    assert v["after"]["n"] == 572 and 0.65e-3 < v["after"]["mean_m"] < 0.80e-3
+    # 0.835 mm since the discrepancy also learns from the 26 rows the plain fit flags on C (0.75 mm without them): its
+    # mean extrapolates to D, where C's calibration does not transfer anyway (the gate above)
+    assert v["after"]["n"] == 572 and 0.65e-3 < v["after"]["mean_m"] < 0.86e-3
 
 
 def test_model_file_stores_transfer_effects_with_their_selected_terms():

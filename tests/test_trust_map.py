@@ -15,7 +15,7 @@ from pin_kpi_oed.cli.app import main
 from pin_kpi_oed.data.measurements import write_measurements
 from pin_kpi_oed.design.design_file import load_design
 from pin_kpi_oed.discrepancy import Discrepancy, DiscrepancyOptions, JointKernel
-from pin_kpi_oed.discrepancy.gp import _coverage_bins
+from pin_kpi_oed.discrepancy.coverage import JointCoverage
 from pin_kpi_oed.errors import InputError
 from pin_kpi_oed.identification.identify import identify
 from pin_kpi_oed.identification.model_file import load_model_file
@@ -39,7 +39,7 @@ def calibrated(tmp_path_factory):
     Z[:, 0] = rng.uniform(-1.0, 1.0, 40)
     cm.discrepancy = Discrepancy("exact", list(robot.joint_names), np.array([2e-4, 1e-4, 1.5e-4]), np.zeros(3), 0.02,
                                  JointKernel(0.8, np.full(6, 1.3), np.full(6, 0.2), np.full(6, 0.4)), Z,
-                                 0.3 * rng.standard_normal((40, 3)), coverage=_coverage_bins(Z), n_rows=40)
+                                 0.3 * rng.standard_normal((40, 3)), coverage=JointCoverage.from_training(Z), n_rows=40)
     folder = tmp_path_factory.mktemp("trust")
     cm.save(folder / "m.json")
     Q = np.vstack([Z[:15], Z[15:30]])

@@ -55,6 +55,25 @@ def test_problem_region_is_reachable_in_the_cell():
     assert problem.gp_criterion(region=False).Q_work.shape[0] == 2
 
 
+def test_api_run_designs_draws_the_region_the_command_line_draws():
+    """run_designs(cell, ['kpi_gp']) builds the working region as design does (same radius, samples, seed and
+    cell); without kpi_gp, or with work_radius=0, none."""
+    from pin_kpi_oed.cell.cell import load_cell
+    from pin_kpi_oed.design.optimize import DesignOptions, DesignProblem, _default_region
+    from pin_kpi_oed.design.region import DEFAULT_WORK_RADIUS_RAD, DEFAULT_WORK_SAMPLES
+
+    cell = load_cell("ur10")
+    api, cli, plain = DesignProblem(cell), DesignProblem(cell), DesignProblem(cell)
+    _default_region(api, ["random", "kpi_gp"], DesignOptions(), 3)
+    cli.set_region(DEFAULT_WORK_RADIUS_RAD, DEFAULT_WORK_SAMPLES, 3, cell=cell)
+    assert api.region is not None and api.region.kept > 0
+    assert np.array_equal(api.region.configurations(), cli.region.configurations())
+    _default_region(plain, ["kpi"], DesignOptions(), 3)
+    assert plain.region is None
+    _default_region(plain, ["kpi_gp"], DesignOptions(work_radius=0.0), 3)
+    assert plain.region is None
+
+
 def _design(tmp_path, name, *extra):
     from pin_kpi_oed.cli.app import main
 

@@ -266,7 +266,7 @@ def run(args: argparse.Namespace) -> int:
     gp_scores = None
     if disc_on:  # opt-in: the paper's output is unchanged without
         gp_scores = discrepancy_scores(problem, results)
-        print(problem.discrepancy_prior().describe())
+        print(problem.discrepancy_prior().describe() + "\n" + _sigma_plan(problem, m))
         if given_file:
             print(f"measured poses alone ({len(problem.Q_given)}): predicted TCP sigma with the discrepancy "
                   f"{_sigma_given(problem) * 1e6:.3f} um; the table adds each design's poses to them")
@@ -573,6 +573,14 @@ def _set_discrepancy(problem, cm, path: str) -> None:
                          f"{list(problem.cell.robot.joint_names)}")
     problem.discrepancy = DiscrepancyPrior.from_discrepancy(
         cm.discrepancy, f"--model {path}, fitted on {cm.discrepancy.n_rows} rows ({cm.discrepancy.kind})")
+    cov = cm.discrepancy.coverage if cm.discrepancy.coverage is not None else cm.coverage
+    if cov is not None:
+        far = int(np.sum(cov.extrapolation(problem.cell.q_work)))
+        if far:
+            print(f"--model {path}: {far} of {len(problem.cell.q_work)} working configurations lie outside the "
+                  "calibration's joint-space coverage: its discrepancy was not learnt there (its sigma there adds the "
+                  "parameters' extrapolation error, and predict / compensate flag them); the design's poses near "
+                  "them measure it")
 
 
 def _refit_discrepancy(problem, given_file: str, quiet: bool) -> None:
@@ -606,6 +614,15 @@ def _refit_discrepancy(problem, given_file: str, quiet: bool) -> None:
         raise InputError(f"--given {given_file}: the discrepancy cannot be re-fitted ({why}) and --model holds none")
     if not quiet:
         print(f"--given {given_file}: discrepancy not re-fitted ({why}); the --model one is used")
+
+
+def _sigma_plan(problem, m: int) -> str:
+    """What the discrepancy fit of the designed poses (and any --given ones) will need, and how identify will obtain
+    the σ at that size (:func:`~pin_kpi_oed.discrepancy.gp.sigma_plan`)."""
+    from pin_kpi_oed.discrepancy.gp import sigma_plan
+
+    Qg = getattr(problem, "Q_given", None)
+    return sigma_plan(m + (0 if Qg is None else len(Qg)), int(problem.base.size))
 
 
 def discrepancy_scores(problem, results: list) -> list[dict]:

@@ -228,7 +228,7 @@ def _validation(model: Any, train: Any, opts: Any, result: Any, test: Any, reg: 
     from pin_kpi_oed.identification.identify import format_validation, identify, validate
     from pin_kpi_oed.identification.transfer import validate_transfer
 
-    before = identify(model, train, opts, setup_only=True, discrepancy="none")
+    before = identify(model, train, opts, setup_only=True, discrepancy="none", on_poor_fit="ignore")
     if args.register_rows is None and reg is None:
         vb, va = validate(before, test), validate(result, test)
         head = []
@@ -401,7 +401,10 @@ def run_identify(args: argparse.Namespace) -> int:
     effects = _effects(args.effects, robot, train)
     opts = IdentifyOptions(weights=weights, scale_covariance=scale, use_orientation=not args.position_only,
                            loss=args.loss or "linear", max_nfev=args.max_nfev,
-                           reflector_per_station=args.reflector_per_station)
+                           reflector_per_station=args.reflector_per_station,
+                           # the command runs the discrepancy (seeded by --seed) and the gate (with the validation
+                           # rows and --accept-poor-fit) itself, on the final fit
+                           discrepancy="none", on_poor_fit="ignore")
     reflector, estimated = _nominal_reflector(args, robot, noise, train, opts, ct.tool)
     tcp = ct.tool.tcp_m if ct.tool.tcp_m is not None else np.zeros(3)
     model = TrackerModel(robot, reflector_m=reflector, tcp_m=tcp, noise=noise)

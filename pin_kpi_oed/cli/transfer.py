@@ -142,6 +142,12 @@ def run_predict(args: argparse.Namespace) -> int:
             msg += (f": error mean {e.mean() * 1e3:.4f} mm, RMS {np.sqrt(np.mean(e ** 2)) * 1e3:.4f} mm, "
                     f"max {e.max() * 1e3:.4f} mm")
         print(msg + f" -> {args.out}")
+        from pin_kpi_oed.identification.prediction_sigma import sigma_contents
+        s3 = np.linalg.norm(table[:, [cols.index(c) for c in ("sigma_x", "sigma_y", "sigma_z")]], axis=1)
+        far = int(np.sum(table[:, cols.index("extrapolation")] > 0))
+        print(f"predicted sigma (3-D): median {np.median(s3) * 1e3:.4f} mm, max {s3.max() * 1e3:.4f} mm "
+              f"({sigma_contents(model)}); {far} of {len(data)} rows outside the calibration's joint-space coverage"
+              + (" (extrapolation column 1: the model was not measured near them)" if far else ""))
         if args.figure:
             print(f"trust map: predicted sigma median {np.median(tm.sigma_m) * 1e3:.4f} mm, max "
                   f"{tm.sigma_m.max() * 1e3:.4f} mm; {tm.n_extrapolated} of {len(data)} rows outside the measured "

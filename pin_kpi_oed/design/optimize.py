@@ -235,6 +235,11 @@ class DesignOptions:
             select by D-optimality) from ``pool_size`` feasible random candidates, or ``random`` =
             the heuristic design. Further starts are random.
         pool_size: feasible candidates of the pool start.
+        work_radius: radius (rad) of the working region ``kpi_gp`` takes its KPI over, as ``design --work-radius``
+            (:meth:`DesignProblem.set_region`): None = the command line's default with ``kpi_gp``
+            (:data:`~pin_kpi_oed.design.region.DEFAULT_WORK_RADIUS_RAD`), 0 = the working configurations alone.
+            Used when :func:`run_designs` builds the problem (a given problem keeps its own region).
+        work_samples: seeded samples of the working region (None: the command line's default).
     """
 
     collision: bool = True
@@ -242,6 +247,8 @@ class DesignOptions:
     ipopt: dict | None = None
     start: str = "pool"
     pool_size: int = 1000
+    work_radius: float | None = None
+    work_samples: int | None = None
 
     def __post_init__(self) -> None:
         if self.start not in ("pool", "random"):
@@ -731,7 +738,9 @@ def run_designs(cell: Cell, criteria: list[str], m: int | None = None, seed: int
     opts = options or DesignOptions()
     check_names(criteria)
     m = m or cell.measurements
-    problem = problem or DesignProblem(cell, collision=opts.collision)
+    if problem is None:
+        problem = DesignProblem(cell, collision=opts.collision)
+        _default_region(problem, criteria, opts, seed)
     problem.check_measurements(m)
     rnd = design_random(problem, m, seed)
     out = [rnd]
@@ -754,6 +763,20 @@ def run_designs(cell: Cell, criteria: list[str], m: int | None = None, seed: int
             Q0 = Q_pool[pool_select(Fp, m, K).indices]
         out.append(design_ipopt(problem, c, m, seed, opts.n_starts, start=Q0, options=opts.ipopt))
     return out
+
+
+def _default_region(problem: DesignProblem, criteria: list[str], opts: DesignOptions, seed: int) -> None:
+    """The working region of ``kpi_gp`` as the command line draws it (``design --work-radius/--work-samples``):
+    the same defaults, seed and cell, so that the API and the command line design the same poses."""
+    from pin_kpi_oed.design.region import DEFAULT_WORK_RADIUS_RAD, DEFAULT_WORK_SAMPLES
+
+    radius = opts.work_radius if opts.work_radius is not None else (
+        DEFAULT_WORK_RADIUS_RAD if "kpi_gp" in criteria else 0.0)
+    samples = DEFAULT_WORK_SAMPLES if opts.work_samples is None else int(opts.work_samples)
+    if radius < 0 or samples < 0:
+        raise InputError(f"work_radius ({radius:g}) and work_samples ({samples}) must be >= 0")
+    if radius > 0 and samples > 0:
+        problem.set_region(radius, samples, seed, cell=problem.cell)
 
 
 def _start_pool(problem: DesignProblem, m: int, seed: int, pool_size: int) -> tuple[np.ndarray, np.ndarray]:

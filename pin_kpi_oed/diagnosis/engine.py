@@ -85,7 +85,8 @@ class Engine:
         from pin_kpi_oed.identification.identify import identify
 
         opts = {"raise_on_failure": False, **self.opts}
-        res = identify(self.model, data, effects=list(effects), weights=self.weights, use_orientation=False, **opts)
+        res = identify(self.model, data, effects=list(effects), weights=self.weights, use_orientation=False,
+                       **{"discrepancy": "none", "on_poor_fit": "ignore", **opts})
         self.n_fits += 1
         if not res.converged:
             self.unconverged.add(", ".join(e.name for e in effects) or "geometry")

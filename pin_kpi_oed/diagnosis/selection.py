@@ -613,7 +613,7 @@ def refit_with(fit: IdentificationResult, data: MeasurementSet, effects: Sequenc
     kw: dict[str, Any] = {"weights": "data" if fit.sigma_source == "data" else "noise",
           "reflector_per_station": fit.reflector_per_station, "held_effects": fit.held, "theta0": th0,
           "effect_prior_rad": prior_rad, "use_orientation": fit.residuals_rad is not None,
-          "raise_on_failure": False}
+          "raise_on_failure": False, "discrepancy": "none", "on_poor_fit": "ignore"}
     if len(fit.stations) == 1 and data.station is None:
         kw["station"] = fit.stations[0]
     kw.update(options)

@@ -307,6 +307,9 @@ class CompensationResult(Result):
         tcp_unobservable_m: per target, the 3-D σ (m) at the TCP of what one reflector cannot see (joint-placement
             errors the fit could not determine, under the tolerances; 0 at the fitted reflector), included in
             ``sigma_m``.
+        extrapolation: per target, the compensated joints lie outside the calibration's joint-space coverage
+            (:class:`~pin_kpi_oed.discrepancy.coverage.JointCoverage`): the model extrapolates there and its σ
+            includes the parameters' extrapolation error, (m,) bool.
     """
 
     names: list[str] = field(default_factory=list)
@@ -331,6 +334,7 @@ class CompensationResult(Result):
     from_start_rad: np.ndarray = field(default_factory=lambda: np.zeros(0))
     collision_pair: list[str] = field(default_factory=list)
     tcp_unobservable_m: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    extrapolation: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))
 
     def summary(self) -> str:
         """Counts, correction statistics (mm), and the targets that are not ok."""
@@ -362,6 +366,11 @@ class CompensationResult(Result):
                              "cannot see at this TCP: joint-placement errors the calibration could not determine "
                              "(e.g. along and about the last joint axis), from the manufacturing tolerances; a "
                              "reflector at the TCP (or the TCP measured) removes it")
+        if np.any(self.extrapolation):
+            far = [n for n, e in zip(self.names, self.extrapolation) if e]
+            lines.append(f"{len(far)} of {len(self.names)} targets outside the calibration's joint-space coverage "
+                         f"(extrapolation: {', '.join(far[:5])}{' ...' if len(far) > 5 else ''}): the model was not "
+                         "measured near them; their sigma includes the parameters' extrapolation; measure poses there")
         bad = [(n, s) for n, s in zip(self.names, self.target_status) if s != "ok"]
         for n, s in bad[:10]:
             lines.append(f"  target {n}: {s}")
@@ -380,7 +389,8 @@ class CompensationResult(Result):
                             "sigma_m": self.sigma_m, "tcp_from_reflector_m": self.tcp_from_reflector_m,
                             "tool_frame": self.tool_frame, "start": self.start, "q_start": self.q_start,
                             "branch_step_rad": self.branch_step_rad, "from_start_rad": self.from_start_rad,
-                            "collision_pair": self.collision_pair, "tcp_unobservable_m": self.tcp_unobservable_m})
+                            "collision_pair": self.collision_pair, "tcp_unobservable_m": self.tcp_unobservable_m,
+                            "extrapolation": self.extrapolation})
 
 
 def _nominal_ik(pm0: PoseModel, pos_t: np.ndarray, R_t: np.ndarray | None, Q_start: np.ndarray, aux: Any,
@@ -520,6 +530,7 @@ def _result(cm: CalibratedModel, ts: TargetSet, opt: CompensationOptions, pm: Po
     status = [_status(i, opt, nom, cal, bool(left_branch[i]), step[i] > opt.max_branch_step_rad, at_limit[i],
                       colliding[i]) for i in range(len(ts))]
     n_bad = sum(s != "ok" for s in status)
+    sig, extra = _tcp_sigma(cm, cal.Q, ts.aux, opt.station)
     return CompensationResult(
         success=n_bad == 0, status="ok" if n_bad == 0 else f"{n_bad} of {len(ts)} targets not ok",
         message="" if n_bad == 0 else "see the per-target status (" + " / ".join(STATUSES[1:]) + ")",
@@ -527,7 +538,7 @@ def _result(cm: CalibratedModel, ts: TargetSet, opt: CompensationOptions, pm: Po
         joint_names=list(cm.robot.joint_names), q_nominal=nom.Q, q=cal.Q, correction_m=correction,
         residual_m=cal.err_m, residual_rad=cal.err_rad, inv_cond=cal.inv_cond, target_status=status,
         frame=opt.frame, station=cm.station(opt.station), tcp_m=pm.tcp, orientation=ts.rotvec_rad is not None,
-        sigma_m=np.sqrt(_tcp_sigma(cm, cal.Q, ts.aux, opt.station) ** 2 + unseen ** 2), tcp_unobservable_m=unseen,
+        sigma_m=np.sqrt(sig ** 2 + unseen ** 2), tcp_unobservable_m=unseen, extrapolation=extra,
         tcp_from_reflector_m=lever_arm_m(pm.tcp, cm.setups[cm.station(opt.station)].reflector_m),
         tool_frame=cm.robot.tool_frame, start=list(start), q_start=np.asarray(Q_start, float),
         branch_step_rad=step, from_start_rad=branch_step(cal.Q, Q_start), collision_pair=pair)
@@ -553,11 +564,12 @@ def _status(i: int, opt: CompensationOptions, nom: _IK, cal: _IK, left_branch: b
     return "ok"
 
 
-def _tcp_sigma(cm: CalibratedModel, Q: np.ndarray, aux: Any, station: str | None) -> np.ndarray:
-    """3-D σ (m) of the TCP at Q: :meth:`CalibratedModel.predict_with_sigma` of the station (one σ for every
-    command)."""
-    _, sig, _ = cm.predict_with_sigma(Q, aux if isinstance(aux, MeasurementSet) else None, station=cm.station(station))
-    return np.sqrt((sig ** 2).sum(axis=1))
+def _tcp_sigma(cm: CalibratedModel, Q: np.ndarray, aux: Any, station: str | None) -> tuple[np.ndarray, np.ndarray]:
+    """(3-D σ (m), extrapolation flag) of the TCP at Q: :meth:`CalibratedModel.predict_with_sigma` of the station
+    (one σ and one coverage for every command)."""
+    _, sig, extra = cm.predict_with_sigma(Q, aux if isinstance(aux, MeasurementSet) else None,
+                                          station=cm.station(station))
+    return np.sqrt((sig ** 2).sum(axis=1)), np.asarray(extra, bool)
 
 
 def write_compensation(path: str | os.PathLike, res: CompensationResult) -> None:
@@ -566,20 +578,21 @@ def write_compensation(path: str | os.PathLike, res: CompensationResult) -> None
     Columns: ``name``, the joint columns (compensated, rad / m: send these), ``<joint>_nominal``,
     ``correction_m``, ``residual_m``, ``residual_rad``, ``inv_cond``, ``sigma_m`` (predicted 3-D TCP σ, m),
     ``start`` (where the branch came from), ``branch_step_rad`` (largest joint change from the nominal solution),
-    ``status``.
+    ``extrapolation`` (1: outside the calibration's joint-space coverage), ``status``.
     """
     buf = io.StringIO()
     w = csv.writer(buf, lineterminator="\n")
     w.writerow(["name"] + res.joint_names + [f"{j}_nominal" for j in res.joint_names]
                + ["correction_m", "residual_m", "residual_rad", "inv_cond", "sigma_m", "start", "branch_step_rad",
-                  "status"])
+                  "extrapolation", "status"])
     for i, n in enumerate(res.names):
         w.writerow([n] + [repr(float(v)) for v in res.q[i]] + [repr(float(v)) for v in res.q_nominal[i]]
                    + [repr(float(res.correction_m[i])), repr(float(res.residual_m[i])),
                       repr(float(res.residual_rad[i])), repr(float(res.inv_cond[i])),
                       repr(float(res.sigma_m[i])) if res.sigma_m.size else "",
                       res.start[i] if res.start else "",
-                      repr(float(res.branch_step_rad[i])) if res.branch_step_rad.size else "", res.target_status[i]])
+                      repr(float(res.branch_step_rad[i])) if res.branch_step_rad.size else "",
+                      str(int(res.extrapolation[i])) if res.extrapolation.size else "", res.target_status[i]])
     atomic_write_text(path, buf.getvalue())
 
 

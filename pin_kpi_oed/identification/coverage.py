@@ -1,7 +1,9 @@
-"""Joint-space coverage: which validation configurations lie within the angles the training data measured.
+"""Joint-space coverage: which validation configurations lie within what the training data measured.
 
-A calibration extrapolates where the validation rows leave the training's joint angles; the fit-quality
-gate and the diagnosis name that cause instead of "wrong robot".
+A calibration extrapolates where the validation rows leave the training's coverage; the fit-quality gate and the
+diagnosis name that cause instead of "wrong robot". Whether a *row* is covered is the one joint-space measure of
+every command (:class:`~pin_kpi_oed.discrepancy.coverage.JointCoverage`: the combination of the angles counts);
+the per-joint shares here (:func:`coverage`, :func:`covered_rows`) only explain which joints' ranges are missing.
 """
 
 from __future__ import annotations
@@ -10,6 +12,7 @@ from typing import Any
 
 import numpy as np
 
+from pin_kpi_oed.discrepancy.coverage import JointCoverage
 from pin_kpi_oed.identification.problem import align_data
 
 __all__ = ["coverage", "covered_rows", "coverage_summary", "COVERAGE_TOL_RAD"]
@@ -65,10 +68,12 @@ def coverage_summary(robot: Any, train: Any, test: Any, tol_rad: float = COVERAG
         tol_rad: tolerance (rad).
 
     Returns:
-        ``rows_covered`` (share of validation rows covered on every joint), ``per_joint`` (name -> share),
-        ``tol_rad``.
+        ``rows_covered`` (share of validation rows within the training's joint-space coverage,
+        :class:`~pin_kpi_oed.discrepancy.coverage.JointCoverage`), ``per_joint`` (name -> share of validation
+        angles within ``tol_rad`` of a training angle of that joint), ``tol_rad``.
     """
     Qs = align_data(robot, train, need_position=False)
-    per_joint, rows = coverage(Qs, align_data(robot, test, need_position=False), tol_rad)
-    return {"rows_covered": rows, "per_joint": {n: float(c) for n, c in zip(robot.joint_names, per_joint)},
-            "tol_rad": float(tol_rad)}
+    Qt = align_data(robot, test, need_position=False)
+    per_joint, _ = coverage(Qs, Qt, tol_rad)
+    return {"rows_covered": JointCoverage.from_training(Qs).share_covered(Qt),
+            "per_joint": {n: float(c) for n, c in zip(robot.joint_names, per_joint)}, "tol_rad": float(tol_rad)}

@@ -122,6 +122,8 @@ import numpy as np
 import pinocchio as pin
 
 from pin_kpi_oed.data.measurements import MeasurementSet
+from pin_kpi_oed.discrepancy.coverage import JointCoverage
+from pin_kpi_oed.errors import InputError, SolverError
 from pin_kpi_oed.identification.discrepancy_fit import discrepancy_options, result_discrepancy
 from pin_kpi_oed.identification.fit_inputs import (MIN_STATION_ROWS, FitInputs, check_inputs,
                                                    default_station_label)
@@ -177,6 +179,31 @@ def _setups(prob: ResidualModel, P: np.ndarray, errors: np.ndarray, inp: FitInpu
     return out
 
 
+def _check_effects_determined(effects: Sequence[Any], data: MeasurementSet) -> None:
+    """Refuse an effect the data cannot determine (its ``check`` note: e.g. thermal expansion from a constant
+    temperature, which the link lengths absorb) instead of fitting it.
+
+    Raises:
+        InputError: one line naming the file, the effect and why.
+    """
+    for eff in effects:
+        note = eff.check(data) if hasattr(eff, "check") else None
+        if note:
+            why = note.replace(f"{eff.name}: skipped, ", "")
+            raise InputError(f"{data.source or 'data'}: effect {eff.name} is not determined by the data: {why}; "
+                             "leave it out of the effects (--effects)")
+
+
+def _gate(result: IdentificationResult, model: TrackerModel, opts: IdentifyOptions) -> None:
+    """The fit-quality gate of ``opts.on_poor_fit``: flag (``result.fit_quality``), raise, or ignore."""
+    if opts.on_poor_fit == "ignore":
+        return
+    from pin_kpi_oed.identification.quality import assess_fit
+    result.fit_quality = assess_fit(result, nominal_reflector_m=model.reflector_m)
+    if result.fit_quality.poor and opts.on_poor_fit == "raise":
+        raise SolverError(f"{result.source or 'data'}: {result.fit_quality.line()} (on_poor_fit='flag' to keep it)")
+
+
 @limit_threads
 def identify(model: TrackerModel, data: MeasurementSet, options: IdentifyOptions | None = None, *,
              effects: Sequence[Any] = (), **overrides: Any) -> IdentificationResult:
@@ -213,6 +240,7 @@ def identify(model: TrackerModel, data: MeasurementSet, options: IdentifyOptions
     opts = IdentifyOptions.resolve(options, overrides)
     check_tool(model.robot, model.tcp_m, data)
     inp = check_inputs(model, data, opts)
+    _check_effects_determined(effects, data)
     stations, P0, T_init = start_stations(model, data, inp, effects, opts)
     ident = identifiable_set(stations, opts)
     prob = build_problem(stations, data, inp, effects, P0, ident, opts)
@@ -245,6 +273,8 @@ def identify(model: TrackerModel, data: MeasurementSet, options: IdentifyOptions
         reflector_per_station=bool(opts.reflector_per_station), source=data.source,
         held=[(e, np.asarray(t, float)) for e, t in opts.held_effects], time_s=time.perf_counter() - t_start,
         tool=data.tool)
+    result.coverage = JointCoverage.from_training(inp.Q, opts.seed)
     result.discrepancy = result_discrepancy(result, data, discrepancy_options(opts.discrepancy, opts.seed), inp.Q)
+    _gate(result, model, opts)
     result.time_s = time.perf_counter() - t_start
     return result

@@ -58,10 +58,17 @@ class IdentifyOptions:
         held_effects: ``[(effect, θ), ...]`` applied with their parameters held (not estimated),
             e.g. the transferable effects of an earlier calibration; kept in the result and its model.
         discrepancy: model discrepancy δ(q) fitted to the residuals after the parametric fit
-            (:mod:`pin_kpi_oed.discrepancy`): ``none`` (the paper's noise-only model, the default of
-            this function), ``auto`` (the command line's default: a Gaussian process when the data are
-            enough and it lowers the K-fold held-out error, else a white discrepancy at the residual
-            level), ``on``, or :class:`~pin_kpi_oed.discrepancy.gp.DiscrepancyOptions`.
+            (:mod:`pin_kpi_oed.discrepancy`): ``auto`` (the default, as on the command line: a Gaussian
+            process when the data hold enough distinct poses and it lowers the grouped K-fold held-out error,
+            else a white discrepancy at the residual level corrected for the fitted parameters), ``on``, ``none``
+            (the paper's noise-only model; its σ still includes the parameter covariance), or
+            :class:`~pin_kpi_oed.discrepancy.gp.DiscrepancyOptions` (seeded by ``seed``).
+        on_poor_fit: what the fit-quality gate (:func:`~pin_kpi_oed.identification.quality.assess_fit`, run on
+            the final fit and its discrepancy) does with a poor verdict: ``flag`` (the default: the verdict is in
+            ``result.fit_quality`` and the last line of ``result.summary()``; ``result.fit_quality.poor`` is
+            True), ``raise`` (:class:`~pin_kpi_oed.errors.SolverError` with the verdict's line, as the command
+            line's exit 2 without ``--accept-poor-fit``) or ``ignore`` (no gate: ``result.fit_quality`` None).
+            The command line runs the gate itself, with the validation rows when given.
     """
 
     p0: np.ndarray | None = None
@@ -85,7 +92,8 @@ class IdentifyOptions:
     effect_prior_rad: float | None = None
     theta0: Sequence[np.ndarray] | None = None
     held_effects: Sequence[tuple[Any, np.ndarray]] = ()
-    discrepancy: Any = "none"
+    discrepancy: Any = "auto"
+    on_poor_fit: str = "flag"
 
     def __post_init__(self) -> None:
         if self.effect_prior_rad is not None and not (np.isfinite(self.effect_prior_rad)
@@ -95,6 +103,8 @@ class IdentifyOptions:
             raise InputError(f"unknown loss '{self.loss}' (choose from {', '.join(ROBUST_LOSSES)})")
         if self.weights not in ("auto", "data", "noise"):
             raise InputError(f"weights must be auto, data or noise, got '{self.weights}'")
+        if self.on_poor_fit not in ("flag", "raise", "ignore"):
+            raise InputError(f"on_poor_fit must be flag, raise or ignore, got '{self.on_poor_fit}'")
         if not 0.0 < float(self.outlier_alpha) < 1.0:
             raise InputError(f"outlier_alpha must be in (0, 1), got {self.outlier_alpha}")
 

@@ -118,6 +118,8 @@ class IdentificationResult(Result):
     held: list = field(default_factory=list, repr=False)
     discrepancy: Any = field(default=None, repr=False)
     tool: Any = field(default=None, repr=False)
+    coverage: Any = field(default=None, repr=False)
+    fit_quality: Any = field(default=None, repr=False)
 
     @property
     def converged(self) -> bool:
@@ -223,7 +225,8 @@ class IdentificationResult(Result):
             history=[{"step": "identify", "data": self.source, "stations": list(self.stations),
                       "n_measurements": self.n_measurements, "rms_m": self.rms_m}],
             discrepancy=self.discrepancy, q_work=None if self.tool is None else self.tool.q_work,
-            tool_source="" if self.tool is None or self.tool.tcp_m is None else self.tool.source)
+            tool_source="" if self.tool is None or self.tool.tcp_m is None else self.tool.source,
+            coverage=self.coverage)
 
     def to_dict(self) -> dict:
         """Plain JSON-able dict (SI units)."""
@@ -316,4 +319,6 @@ class IdentificationResult(Result):
         strong = [(abs(C[i, j]), i, j) for i, j in zip(*iu) if abs(C[i, j]) > 0.95]
         for _c, i, j in sorted(strong, reverse=True)[:5]:
             out.append(f"  strongly correlated: {self.names[i]} / {self.names[j]} ({C[i, j]:+.3f})")
+        if self.fit_quality is not None:
+            out.append(f"  {self.fit_quality.line()}")
         return "\n".join(out)

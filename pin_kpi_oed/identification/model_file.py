@@ -72,6 +72,7 @@ import pinocchio as pin
 
 from pin_kpi_oed.data.atomic import atomic_write_json, to_jsonable
 from pin_kpi_oed.data.measurements import MeasurementSet
+from pin_kpi_oed.discrepancy.coverage import JointCoverage
 from pin_kpi_oed.discrepancy.gp import Discrepancy
 from pin_kpi_oed.effects.library import (ALL_EFFECT_NAMES, JointAngleTable, SubsetEffect, effect_class,
                                         predict_with_effects)
@@ -248,6 +249,8 @@ class CalibratedModel:
         discrepancy: the robot's model discrepancy δ(q) (base frame), or None (noise-only model).
         q_work: the cell's working configurations, (k, n) rad / m, or None.
         tool_source: where ``tcp_m`` and the tool frame come from (cell or measurement header); "" = not stated.
+        coverage: the training configurations' joint-space coverage
+            (:class:`~pin_kpi_oed.discrepancy.coverage.JointCoverage`; the discrepancy's when it has one).
     """
 
     robot: Robot
@@ -265,6 +268,7 @@ class CalibratedModel:
     discrepancy: Discrepancy | None = None
     q_work: np.ndarray | None = None
     tool_source: str = ""
+    coverage: JointCoverage | None = None
 
     def __post_init__(self) -> None:
         self.joint_p = np.asarray(self.joint_p, float).reshape(-1)
@@ -377,50 +381,23 @@ class CalibratedModel:
         another region of joint space). Inside the coverage the discrepancy's posterior already holds that
         error: on the UR10 Series C halves the standardised RMS is 1.10 without the term and 0.55 with the
         exact universal-kriging term (its cross term K_WQ Σ⁻¹ F reproduces E only in part with short length
-        scales), see docs/results.md. Without a discrepancy, the noise model's σ (the paper's noise-only model).
-        Every σ of a station is multiplied by its :attr:`Setup.sigma_scale` (> 1 after a registration whose
+        scales), see docs/results.md. A white discrepancy (too few poses for a Gaussian process) and a model without
+        one (the paper's noise-only model: the noise model's σ) add the parameter covariance's E C Eᵀ at every row
+        (:mod:`~pin_kpi_oed.identification.prediction_sigma`). Every σ of a station is multiplied by its :attr:`Setup.sigma_scale` (> 1 after a registration whose
         rows were worse than the model predicted).
 
         Args:
             Q, aux, station: as :meth:`predict`.
 
         Returns:
-            (Y (m, 3) m, sigma (m, 3) m, extrapolation (m,) bool: a joint angle outside the training coverage).
+            (Y (m, 3) m, sigma (m, 3) m, extrapolation (m,) bool: outside the training's joint-space coverage).
 
         Raises:
             InputError: as :meth:`predict`.
         """
+        from pin_kpi_oed.identification.prediction_sigma import predictive_sigma
         Q = self.robot.check_q(np.atleast_2d(np.asarray(Q, float)), "predict: Q")
-        m = len(Q)
-        labels = self.row_stations(m, aux, station)
-        scale = np.array([self.setups[lab].sigma_scale for lab in labels], float)[:, None]
-        if self.discrepancy is None:
-            Y = self._predict(Q, aux, station, False, None)
-            return Y, scale * np.asarray(self.noise.sigma(Y[:, :3]), float).reshape(m, 3), np.zeros(m, bool)
-        d = self.discrepancy
-        delta, var = d.predict(Q)                      # one kernel evaluation for the mean and the variance
-        Y = self._predict(Q, aux, station, False, delta)
-        V = var + d.noise_var_m2
-        extra = d.extrapolation(Q)
-        sig = np.empty((m, 3))
-        for lab in dict.fromkeys(labels):
-            rows = np.flatnonzero(labels == lab)
-            R = self.setups[lab].tracker_T_base[:3, :3]
-            Cb = np.einsum("na,ab->nab", V[rows], np.eye(3))
-            far = rows[extra[rows]]
-            if far.size:  # outside the coverage: the parametric part's error under the discrepancy
-                Cb[extra[rows]] += d.parametric_covariance(Q[far], self._robot_jacobian(lab, Q[far]))
-            sig[rows] = np.sqrt(np.einsum("ia,nab,ib->ni", R, Cb, R))
-        return Y, scale * sig, extra
-
-    def _robot_jacobian(self, label: str, Q: np.ndarray) -> np.ndarray:
-        """Base-frame Jacobian (m, 3, R) of station ``label``'s predictions w.r.t. the discrepancy's robot
-        parameters."""
-        names = self.discrepancy.param_names
-        if not names:
-            return np.zeros((len(Q), 3, 0))
-        model, p = self.station_model(label)
-        return model.base_jacobian(p, Q, [model.layout.names.index(n) for n in names])
+        return predictive_sigma(self, Q, aux, station, self.row_stations(len(Q), aux, station))
 
     @property
     def residual_sigma_m(self) -> np.ndarray | None:
@@ -493,6 +470,7 @@ class CalibratedModel:
             "fit": self.fit,
             "history": self.history,
             **({"discrepancy": self.discrepancy.to_dict()} if self.discrepancy is not None else {}),
+            **({"coverage": self.coverage.to_dict()} if self.coverage is not None else {}),
         })
 
     def save(self, path: str | os.PathLike) -> None:
@@ -563,10 +541,16 @@ class CalibratedModel:
             except (TypeError, ValueError):
                 raise InputError(f"{where}: field 'q_work' must be a list of {robot.nq} joint values each "
                                  f"({', '.join(robot.joint_names)})") from None
+        coverage = None
+        if d.get("coverage") is not None:
+            try:
+                coverage = JointCoverage.from_dict(d["coverage"], robot.nq, f"{where}: coverage")
+            except ValueError as exc:
+                raise InputError(str(exc)) from None
         return cls(robot, joint_p, effects, thetas, setups, noise, tcp, bool(d.get("pose6d", False)),
                    dict(geo.get("parameters") or {}), fit,
                    None if default is None else str(default), list(d.get("history") or []), disc,
-                   q_work=q_work, tool_source=str(d.get("tool_source") or ""))
+                   q_work=q_work, tool_source=str(d.get("tool_source") or ""), coverage=coverage)
 
 
 def _check_format(d: Any, where: str) -> None:

@@ -164,6 +164,7 @@ def assess_fit(result: Any, validation: dict | None = None, *, nominal_reflector
             f.advice += g.advice
     before, after = _check_heldout(f, validation, train_rms, large)
     _check_geometry(f, result)
+    _check_effects(f, result)
     causes = list(dict.fromkeys(f.causes))  # duplicates dropped, order kept
     advice = list(dict.fromkeys(f.advice))
     return FitQuality(verdict=f.verdict, chi2_reduced=chi2_red, chi2_interval=interval, dof=dof,
@@ -216,6 +217,34 @@ def _check_geometry(f: _Findings, result: Any) -> None:
     f.causes.append("poses that do not pin the geometry down (the fit found another solution that fits them)")
     f.advice.append("measure more or more varied poses (pin-kpi-oed design), or identify --geometry-prior 5e-3,1e-2 "
                     "(keeps every joint placement near the nominal model)")
+
+
+#: an effect parameter whose standard deviation exceeds this many times its plausible size is not determined
+UNDETERMINED_FACTOR = 10.0
+
+
+def _check_effects(f: "_Findings", result: Any) -> None:
+    """Check 5: every estimated effect parameter determined by the data: its standard deviation below
+    :data:`UNDETERMINED_FACTOR` times the effect's ``plausible_max``, else poor (the worst one named). A thermal
+    expansion from a nearly constant temperature, for instance, is a link-length change the geometry absorbs."""
+    names, std = list(getattr(result, "names", []) or []), np.asarray(getattr(result, "std", []), float)
+    bad = []
+    for eff in getattr(result, "effects", None) or []:
+        lim = float(getattr(eff, "plausible_max", np.inf))
+        if not np.isfinite(lim):
+            continue
+        for n in eff.param_names(result.model.robot):
+            key = n if str(n).startswith(f"{eff.name}.") else f"{eff.name}.{n}"
+            if key in names and std.size > names.index(key) and std[names.index(key)] > UNDETERMINED_FACTOR * lim:
+                bad.append((std[names.index(key)] / lim, key, std[names.index(key)], lim, eff.unit))
+    if not bad:
+        return
+    _, key, s, lim, unit = max(bad)
+    f.worse("poor")
+    f.reasons.append(f"{len(bad)} effect parameter(s) not determined by the data ({key} ± {s:.3g} {unit}, plausible "
+                     f"size {lim:g} {unit})")
+    f.causes.append("an effect the data do not excite (e.g. thermal expansion without a temperature change)")
+    f.advice.append(f"leave {key.split('.')[0]} out of --effects, or measure where it changes")
 
 
 @dataclass

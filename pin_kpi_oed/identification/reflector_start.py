@@ -39,6 +39,7 @@ def estimate_reflector(model: Any, data: Any, options: Any = None, *, round_m: f
     from pin_kpi_oed.identification.identify import IdentifyOptions, identify
 
     opts = IdentifyOptions.resolve(options, {})
-    res = identify(model, data, opts, setup_only=True, loss="linear", raise_on_failure=False)
+    res = identify(model, data, opts, setup_only=True, loss="linear", raise_on_failure=False,
+                   discrepancy="none", on_poor_fit="ignore")
     r = np.asarray(res.reflector_m, float)
     return np.round(r / round_m) * round_m + 0.0

@@ -114,7 +114,8 @@ def monte_carlo(model: TrackerModel, Q_meas: np.ndarray, Q_work: np.ndarray, n_r
         s_truth, s_noise = (int(x) for x in seeds[k].generate_state(2))
         p_true = random_truth(model, tol, seed=s_truth, only=b)
         data = simulate(model, Q_meas, p_true, seed=s_noise, record_sigma=False)
-        res = identify(model, data, Q_work=Q_work, ident=ident, raise_on_failure=False)
+        res = identify(model, data, Q_work=Q_work, ident=ident, raise_on_failure=False, discrepancy="none",
+                       on_poor_fit="ignore")
         if not res.converged:
             failures += 1
         s_hat = res.model.kpi(res.p, Q_work).ravel()
@@ -222,7 +223,8 @@ def real_data_validation(model: TrackerModel, data: MeasurementSet, n_meas: int 
                 chosen = rng.choice(pool, n_meas, replace=False)
             else:
                 chosen = pool[select(Fp_all[pool], n_meas, crits[meth].pool_form(E_work, b.size)).indices]
-            res = identify(model, data.subset(chosen), use_orientation=False, raise_on_failure=False)
+            res = identify(model, data.subset(chosen), use_orientation=False, raise_on_failure=False,
+                           discrepancy="none", on_poor_fit="ignore")
             out[meth].append(validate(res, data.subset(work))["mean_m"])
             _, C_s = covariances(Fp_all[chosen], E_work, prior)
             pred[meth].append(float(np.sqrt(np.trace(C_s) / n_work)))
@@ -236,7 +238,7 @@ def real_data_validation(model: TrackerModel, data: MeasurementSet, n_meas: int 
 def _design_model(model: TrackerModel, data: MeasurementSet) -> TrackerModel:
     """The position-only model of the design: set-up (tracker pose, reflector) fitted with the nominal robot,
     the noise and the priors (by parameter name) of ``model``."""
-    setup = identify(model, data, setup_only=True, use_orientation=False)
+    setup = identify(model, data, setup_only=True, use_orientation=False, discrepancy="none", on_poor_fit="ignore")
     dm = TrackerModel(model.robot, tracker_T_base=_se3(setup.tracker_T_base), reflector_m=setup.reflector_m,
                       noise=model.noise)
     for i, name in enumerate(dm.layout.names):
@@ -476,7 +478,7 @@ def _fit_split(model: TrackerModel, pool: MeasurementSet, seed: int, max_order: 
     from pin_kpi_oed.diagnosis.selection import select_terms
     from pin_kpi_oed.oed.extended import ExtendedModel
 
-    geo = identify(model, pool, use_orientation=False)
+    geo = identify(model, pool, use_orientation=False, discrepancy="none", on_poor_fit="ignore")
     sel = select_terms(geo, pool, max_order=max_order, max_terms=max_terms, prior_rad=prior_rad, seed=seed,
                        refit=False, show_progress=False)
     effects = list(sel.effects)

@@ -285,6 +285,7 @@ MODEL_SCHEMA: dict[str, Any] = {
         "fit": {"type": ["object", "null"]},
         "history": {"type": ["array", "null"], "items": {"type": "object"}},
         "discrepancy": {"type": ["object", "null"]},  # validated by its own reader
+        "coverage": {"type": ["object", "null"]},  # validated by its own reader (JointCoverage.from_dict)
     },
 }
 
