@@ -167,7 +167,7 @@ def test_every_predicting_command_flags_a_new_combination(ur10_model, tmp_path, 
                  str(tmp_path / "p.csv")]) == 0
     out = capsys.readouterr().out
     assert f"{int(e_new.sum())} of 40 rows outside the calibration's joint-space coverage" in out
-    assert "parameter covariance (noise-only model)" in out
+    assert "parameters + noise; no discrepancy (noise-only model)" in out
     head, *rows = (tmp_path / "p.csv").read_text().splitlines()
     col = head.split(",").index("extrapolation")
     assert sum(float(r.split(",")[col]) for r in rows) == e_new.sum()

@@ -132,13 +132,15 @@ def _coverage(cm: Any) -> Any:
 
 
 def sigma_contents(cm: Any) -> str:
-    """What a model's σ holds, in a few words (printed by ``predict`` beside the σ)."""
+    """What a model's σ holds, in a few words: the parameters' covariance and noise always; a Gaussian-process
+    discrepancy only when the model holds one (a white level is not one). Printed by ``predict``; the trust map's
+    title (:func:`pin_kpi_oed.viz.trust_map.sigma_contents`)."""
     d = cm.discrepancy
     if d is None:
-        return "tracker noise + parameter covariance (noise-only model)"
+        return "parameters + noise; no discrepancy (noise-only model)"
     if d.kind == "white":
-        return "white level (corrected for the fitted parameters) + parameter covariance"
-    return "Gaussian-process discrepancy (posterior + white level) + parameter error outside the coverage"
+        return "parameters + a white residual level; no correlated discrepancy"
+    return f"parameters + Gaussian-process discrepancy ({d.kind}, {d.n_rows} rows) + white level"
 
 
 def predictive_sigma(cm: Any, Q: np.ndarray, aux: Any, station: str | None, labels: np.ndarray

@@ -110,14 +110,11 @@ def trust_map(model: Any, Q: np.ndarray, aux: Any = None, station: str | None = 
 
 
 def sigma_contents(model: Any) -> str:
-    """What the predicted σ of ``model`` holds, for a title: the parameters' covariance and noise always; a
-    Gaussian-process discrepancy only when the model file holds one (a white level is not one)."""
-    d = getattr(model, "discrepancy", None)
-    if d is None:
-        return "σ: parameters + noise; no discrepancy (noise-only model)"
-    if d.kind == "white":
-        return "σ: parameters + a white residual level; no correlated discrepancy"
-    return f"σ: parameters + Gaussian-process discrepancy ({d.kind}, {d.n_rows} rows) + white level"
+    """What the predicted σ of ``model`` holds, for a title
+    (:func:`~pin_kpi_oed.identification.prediction_sigma.sigma_contents`, the words ``predict`` prints)."""
+    from pin_kpi_oed.identification.prediction_sigma import sigma_contents as contents
+
+    return "σ: " + contents(model)
 
 
 def plot_trust_map(model: Any, Q: np.ndarray, aux: Any = None, station: str | None = None, *,
