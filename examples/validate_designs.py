@@ -148,12 +148,12 @@ def extended_figure(res: dict, figure: Path, simulation: dict | None = None) -> 
     ``simulation`` (the ``simulation`` part of ``python -m benchmarks.bench_extended --json``) adds a panel:
     the paired gap geometric − extended KPI design (µm, ± standard error) against the effect size.
     """
-    from pin_kpi_oed.viz.figures import _figure, save_png
+    from pin_kpi_oed.viz.figures import agg_figure, save_png
 
     n = len(res) + (simulation is not None)
     cols = min(n, 3)
     rows = (n + cols - 1) // cols
-    fig = _figure(5.0 * cols, 3.8 * rows)
+    fig = agg_figure(5.0 * cols, 3.8 * rows)
     for i, (case, d) in enumerate(res.items(), 1):
         ax = fig.add_subplot(rows, cols, i)
         meths = list(d["methods"])

@@ -1,5 +1,6 @@
 """The package reads as its pipeline (docs/ARCHITECTURE.md): nothing upstream imports from downstream, no import
-circle (lazy imports included), no module over 800 lines, no function over 80 lines."""
+circle (lazy imports included), no module over 600 lines, no function over 80 lines, no private name reached across
+modules."""
 
 from __future__ import annotations
 
@@ -139,3 +140,49 @@ def test_no_module_over_800_lines_and_no_function_over_80() -> None:
                     long_functions.append(f"{f.relative_to(PKG)}:{node.lineno} {node.name}: {length} lines")
     assert not long_modules, f"modules over {MAX_MODULE_LINES} lines: " + "; ".join(long_modules)
     assert not long_functions, f"functions over {MAX_FUNCTION_LINES} lines: " + "; ".join(long_functions)
+
+
+def _private(name: str) -> bool:
+    return name.startswith("_") and not (name.startswith("__") and name.endswith("__"))
+
+
+def _annotation_nodes(tree: ast.AST) -> set[int]:
+    """ids of the nodes inside annotations (arguments, returns, annotated assignments): typing may name a
+    library's private class (``argparse._SubParsersAction``), the code may not use it."""
+    out: set[int] = set()
+    for node in ast.walk(tree):
+        anns: list[ast.AST | None] = []
+        if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
+            a = node.args
+            anns = [x.annotation for x in a.posonlyargs + a.args + a.kwonlyargs] + [node.returns]
+            anns += [a.vararg.annotation if a.vararg else None, a.kwarg.annotation if a.kwarg else None]
+        elif isinstance(node, ast.AnnAssign):
+            anns = [node.annotation]
+        out.update(id(n) for ann in anns if ann is not None for n in ast.walk(ann))
+    return out
+
+
+def _private_reaches(tree: ast.AST) -> list[tuple[int, str]]:
+    """(line, text) of every private name imported from another module (``from m import _x``, ``m._x``) and every
+    private attribute read on an object other than ``self`` / ``cls`` (``problem._kpi``)."""
+    skip = _annotation_nodes(tree)
+    out = []
+    for node in ast.walk(tree):
+        if isinstance(node, ast.ImportFrom):
+            out += [(node.lineno, f"from {node.module} import {a.name}") for a in node.names if _private(a.name)]
+        elif isinstance(node, ast.Attribute) and _private(node.attr) and id(node) not in skip:
+            if not (isinstance(node.value, ast.Name) and node.value.id in ("self", "cls")):
+                out.append((node.lineno, ast.unparse(node)))
+    return out
+
+
+def test_private_finder_sees_imports_and_attributes() -> None:
+    tree = ast.parse("from pin_kpi_oed.a import _x, y\nimport argparse\n"
+                     "def f(p: argparse._SubParsersAction, q) -> None:\n    self._ok = q._bad + argparse._Act\n")
+    assert [t for _, t in _private_reaches(tree)] == ["from pin_kpi_oed.a import _x", "q._bad", "argparse._Act"]
+
+
+def test_no_private_name_across_modules() -> None:
+    bad = [f"{f.relative_to(PKG)}:{line} {text}" for f in sorted(PKG.rglob("*.py"))
+           for line, text in _private_reaches(ast.parse(f.read_text()))]
+    assert not bad, "private names reached across modules:\n" + "\n".join(bad)

@@ -12,7 +12,8 @@ import yaml
 
 from pin_kpi_oed.cell.cell import CELL_DIR, cell_from_dict, load_cell
 from pin_kpi_oed.cell.aggregate import AggregatedConstraints
-from pin_kpi_oed.cell.collision import INCID, CollisionModel, random_feasible
+from pin_kpi_oed.cell.collision import INCID, CollisionModel
+from pin_kpi_oed.cell.sampling import random_feasible
 from pin_kpi_oed.cell.segments import point_segment_distance, segment_closest
 from pin_kpi_oed.cell.feasibility import FeasibilityChecker, coal_capsule
 from pin_kpi_oed.errors import InfeasibleError, InputError, PinKpiOedError

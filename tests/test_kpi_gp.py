@@ -12,7 +12,7 @@ from pin_kpi_oed.design.optimize import DesignProblem
 from pin_kpi_oed.errors import InputError
 from pin_kpi_oed.oed.covariance import covariances, prior_of
 from pin_kpi_oed.oed.criteria import CRITERIA, evaluate_all, get_criterion
-from pin_kpi_oed.oed.discrepancy_kpi import (DiscrepancyDesignCriterion, DiscrepancyPrior, _GreedyState,
+from pin_kpi_oed.oed.discrepancy_kpi import (DiscrepancyDesignCriterion, DiscrepancyPrior, GreedyState,
                                              default_discrepancy, kpi_gp_covariance, kpi_gp_value_and_grad)
 
 from .fd import fd_rows
@@ -131,7 +131,7 @@ def test_pool_updates_equal_recomputation(problem):
     def direct(idx):
         return kpi_gp_value_and_grad(Jp[idx], crit.E, d.cov(Qp[idx]), d.cov(problem.cell.q_work, Qp[idx]),
                                      crit.tr_kww, d.scale_m, d.noise, crit.prior_info, grad=False)[0]
-    st = _GreedyState(Jp, Qp, crit.E, problem.cell.q_work, d, crit.prior_info, 0.0)
+    st = GreedyState(Jp, Qp, crit.E, problem.cell.q_work, d, crit.prior_info, 0.0)
     S = list(range(0, 30, 2))
     for i in S:
         st.add(i)

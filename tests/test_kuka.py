@@ -15,6 +15,7 @@ import pytest
 from scipy.optimize import minimize_scalar
 
 from pin_kpi_oed.model import kuka
+from pin_kpi_oed.model.notional_arms import notional_arm, notional_arms
 from pin_kpi_oed.errors import InputError
 
 URDF_DIR = Path(__file__).resolve().parents[1] / "urdf"
@@ -272,7 +273,7 @@ def test_tool0_z_along_a6_axis_away_from_wrist(loaded):
 
 # --- notional arms ---------------------------------------------------------------------------------
 def test_notional_grid():
-    arms = kuka.notional_arms()
+    arms = notional_arms()
     assert len(arms) == 90
     assert len({a.name for a in arms}) == 90
     assert len({(a.a2, a.d4) for a in arms}) == 90
@@ -287,9 +288,9 @@ def test_notional_grid():
 
 
 def test_notional_corner_is_kr15():
-    corner = kuka.notional_arms()[0]
+    corner = notional_arms()[0]
     assert corner.name == "notional_a2_0650_d4_0600"
-    assert corner == kuka.notional_arm(0.650, 0.600)
+    assert corner == notional_arm(0.650, 0.600)
     for f in ("d1", "a1", "a2", "a3", "d4", "d6", "q_lower", "q_upper", "capsule_radii", "total_mass_kg",
               "velocity_limits", "effort_limits"):
         assert getattr(corner, f) == getattr(kuka.KR15, f), f
@@ -297,7 +298,7 @@ def test_notional_corner_is_kr15():
 
 
 def test_notional_urdfs_load_with_expected_reach():
-    for arm in kuka.notional_arms():
+    for arm in notional_arms():
         model = pin.buildModelFromXML(kuka.urdf_text(arm))
         q = np.zeros(6)
         q[2] = math.atan2(arm.a3, arm.d4)
@@ -308,7 +309,7 @@ def test_notional_urdfs_load_with_expected_reach():
 @pytest.mark.parametrize("bad", [(0.0, 0.6), (-0.7, 0.6), (0.7, float("nan")), (float("inf"), 0.6)])
 def test_notional_arm_rejects_bad_lengths(bad):
     with pytest.raises(InputError):
-        kuka.notional_arm(*bad)
+        notional_arm(*bad)
 
 
 def test_geometry_validation():

@@ -9,7 +9,8 @@ import numpy as np
 import pytest
 
 from pin_kpi_oed.cell.cell import load_cell
-from pin_kpi_oed.cell.collision import CollisionModel, random_feasible
+from pin_kpi_oed.cell.collision import CollisionModel
+from pin_kpi_oed.cell.sampling import random_feasible
 from pin_kpi_oed.cell.feasibility import FeasibilityChecker
 from pin_kpi_oed.program.ordering import ProgramOptions, plan_program, solve_tour
 from pin_kpi_oed.program.timing import joint_speeds, move_time, path_time, time_matrix

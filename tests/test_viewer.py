@@ -182,7 +182,7 @@ def test_scene_holds_the_expected_objects(scene):
 def test_all_ghosts_on_request_and_screen_sized_labels(design_path):
     """--all-ghosts draws every pose of every design (the last design's shown); the ellipsoid labels are
     sprites of constant screen size, one line at LABEL_LINE_SCREEN of the page height at any zoom."""
-    from pin_kpi_oed.viz.scene import LABEL_LINE_SCREEN, MESHCAT_FOV_DEG
+    from pin_kpi_oed.viz.scene_parts import LABEL_LINE_SCREEN, MESHCAT_FOV_DEG
 
     sc = build_scene(load_design(design_path), SceneOptions(max_ghosts=None, animate=False))
     rec, df = sc.recorder, sc.design

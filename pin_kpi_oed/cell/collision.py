@@ -52,62 +52,22 @@ from __future__ import annotations
 
 from typing import Literal, overload
 
-from dataclasses import dataclass, field
-
 import numpy as np
 import pinocchio as pin
 
 from pin_kpi_oed.cell.cell_model import Cell
+from pin_kpi_oed.cell.cell_checks import check_static, check_working
 from pin_kpi_oed.cell.coal_distances import GeometryDistances
+from pin_kpi_oed.cell.constraint_rows import HALF, INCID, PAIR, ConstraintRows
 from pin_kpi_oed.cell.feasibility import coal_capsule
 from pin_kpi_oed.cell.segments import cross, point_segment_distance, segment_closest
-from pin_kpi_oed.errors import InfeasibleError, InputError
 from pin_kpi_oed.model.kinematics import Chain
 from pin_kpi_oed.model.tracker import TrackerModel
 
-# row kinds
-PAIR, HALF, INCID = 0, 1, 2
+__all__ = ["CollisionModel", "ConstraintRows", "PAIR", "HALF", "INCID", "segment_closest"]
 
 
 # ---------------------------------------------------------------------------- the optimiser's model
-@dataclass
-class ConstraintRows:
-    """Description of the constraint rows of one configuration.
-
-    Attributes:
-        names: readable name of each row (``link_4|car_body``, ``link_2@floor:b``, ``incidence``).
-        kind: PAIR, HALF or INCID per row.
-        deps: 0-based joint indices each row depends on (structural non-zeros of its gradient).
-        units: ``"m"`` (distances) or ``"cos"`` (incidence).
-    """
-
-    names: list[str]
-    kind: np.ndarray
-    deps: list[np.ndarray]
-    units: list[str] = field(default_factory=list)
-
-    @property
-    def n(self) -> int:
-        """Number of rows per configuration."""
-        return len(self.names)
-
-    def count(self) -> dict[str, int]:
-        """Rows per category (self-collision, obstacle, half-space, beam, incidence)."""
-        out = {"self": 0, "obstacle": 0, "half_space": 0, "beam": 0, "incidence": 0}
-        for nm, k in zip(self.names, self.kind):
-            if k == INCID:
-                out["incidence"] += 1
-            elif nm.startswith("beam"):
-                out["beam"] += 1
-            elif k == HALF:
-                out["half_space"] += 1
-            elif nm.startswith("robot:"):
-                out["self"] += 1
-            else:
-                out["obstacle"] += 1
-        return out
-
-
 class CollisionModel:
     """All constraints g(q) ≥ 0 of a cell, evaluated for m configurations in one batched call.
 
@@ -178,15 +138,15 @@ class CollisionModel:
             ob = h.offset - h.normal @ cell.W_T_base.translation
             self.halfspaces.append((nb, float(ob)))
 
-        self._check_static()
+        check_static(self)
         self.rows_all = self._build_rows(collision, incidence, prune=False)
         self.rows = self._build_rows(collision, incidence, prune) if prune else self.rows_all
-        self._set_rows(self.rows)
+        self.set_rows(self.rows)
         if collision:
-            self._check_working()
+            check_working(self)
 
     # ------------------------------------------------------------------ set-up
-    def _skipped(self, a: int, b: int) -> bool:
+    def skipped(self, a: int, b: int) -> bool:
         """Whether segments a and b are in the user's skip list (by capsule, link or obstacle name)."""
         ka = {self.seg_names[a], self.seg_link[a]} - {None}
         kb = {self.seg_names[b], self.seg_link[b]} - {None}
@@ -195,7 +155,7 @@ class CollisionModel:
                 return True
         return False
 
-    def _beam_skipped(self, a: int) -> bool:
+    def beam_skipped(self, a: int) -> bool:
         keys = {self.seg_names[a], self.seg_link[a]} - {None}
         return any(x in keys for x in self.cell.beam_skip)
 
@@ -215,7 +175,7 @@ class CollisionModel:
                     if b <= a:
                         continue
                     ja, jb = self.seg_joint[a], self.seg_joint[b]
-                    if self._adjacent(ja, jb) or self._skipped(a, b):
+                    if self._adjacent(ja, jb) or self.skipped(a, b):
                         continue
                     lo, hi = sorted((ja, jb))
                     pairs.append((a, b))
@@ -226,7 +186,7 @@ class CollisionModel:
                 if ja == 0:
                     continue  # fixed capsules: checked once in _check_static
                 for o in obst:
-                    if self._skipped(a, o):
+                    if self.skipped(a, o):
                         continue
                     if bound is not None and bound["obst"][a, o - nr] > clr + 1e-9:
                         continue
@@ -235,7 +195,7 @@ class CollisionModel:
                     deps.append(np.arange(ja))
             bj = self.refl_joint
             for a in list(rob) + list(obst):
-                if self._beam_skipped(a):
+                if self.beam_skipped(a):
                     continue
                 pairs.append((self.beam, a))
                 names.append(f"beam|{self.seg_names[a]}")
@@ -245,7 +205,7 @@ class CollisionModel:
                 if ja == 0:
                     continue
                 for h, hsp in enumerate(self.cell.half_spaces):
-                    if self._skipped_half(a, hsp.name):
+                    if self.skipped_half(a, hsp.name):
                         continue
                     if bound is not None and bound["half"][a, h] > clr + 1e-9:
                         continue
@@ -270,11 +230,11 @@ class CollisionModel:
         return {"pairs": np.array(pairs, int).reshape(-1, 2), "half": np.array(hs, int).reshape(-1, 3),
                 "incidence": incidence, "rows": ConstraintRows(names, np.array(kinds, int), deps, units)}
 
-    def _skipped_half(self, a: int, hname: str) -> bool:
+    def skipped_half(self, a: int, hname: str) -> bool:
         keys = {self.seg_names[a], self.seg_link[a]} - {None}
         return any((x in keys and y == hname) or (y in keys and x == hname) for x, y in self.cell.skip_pairs)
 
-    def _set_rows(self, rows: dict) -> None:
+    def set_rows(self, rows: dict) -> None:
         self.pairs, self.half = rows["pairs"], rows["half"]
         self.with_incidence = rows["incidence"]
         self.info: ConstraintRows = rows["rows"]
@@ -338,95 +298,6 @@ class CollisionModel:
             for h, (nv, off) in enumerate(self.halfspaces):
                 out_h[a, h] = (o2 @ nv).min() - off - Rk - err
         return {"obst": out_o, "half": out_h}
-
-    def _check_static(self) -> None:
-        """Fixed robot capsules vs obstacles/half-spaces, and the tracker outside every obstacle."""
-        nr, cell = self.n_robot, self.cell
-        T = self.tracker
-        where = "[" + ", ".join(f"{x:.3f}" for x in cell.W_T_tracker.translation) + "]"
-        env_caps = cell.environment_capsule_names  # environment objects: checked as their solids below
-        for o in range(nr, nr + self.n_obst):
-            if self.seg_names[o] in env_caps:
-                continue
-            d = point_segment_distance(T, self.A_loc[o], self.B_loc[o]) - self.radius[o] - cell.beam_radius_m
-            if d < 0 and not self._beam_skipped(o):
-                raise InputError(f"{cell.source or cell.name}: the tracker at {where} m (cell frame) is inside "
-                                 f"obstacle '{self.seg_names[o]}' "
-                                 f"({d * 1e3:.0f} mm clearance); move the tracker or the obstacle")
-        self._check_tracker_in_environment(where)
-        for hsp, (nv, off) in zip(cell.half_spaces, self.halfspaces):
-            if T @ nv - off - cell.beam_radius_m < 0:
-                raise InputError(f"{cell.source or cell.name}: the tracker is outside the free side of "
-                                 f"half-space '{hsp.name}'; move the tracker")
-        problems, pairs = [], []
-        for a in range(nr):
-            if self.seg_joint[a] != 0:
-                continue
-            for o in range(nr, nr + self.n_obst):
-                if self._skipped(a, o):
-                    continue
-                _, _, w1, w2 = segment_closest(self.A_loc[a], self.B_loc[a], self.A_loc[o], self.B_loc[o])
-                d = np.linalg.norm(w2 - w1) - self.radius[a] - self.radius[o]
-                if d < cell.clearance_m:
-                    problems.append(f"fixed robot capsule '{self.seg_names[a]}' collides with obstacle "
-                                    f"'{self.seg_names[o]}' ({d * 1e3:.0f} mm)")
-                    pairs.append((self.seg_names[a], self.seg_names[o]))
-            for hsp, (nv, off) in zip(cell.half_spaces, self.halfspaces):
-                if self._skipped_half(a, hsp.name):
-                    continue
-                d = min(self.A_loc[a] @ nv, self.B_loc[a] @ nv) - off - self.radius[a]
-                if d < cell.clearance_m:
-                    problems.append(f"fixed robot capsule '{self.seg_names[a]}' crosses half-space '{hsp.name}' "
-                                    f"({d * 1e3:.0f} mm; move the robot base)")
-                    pairs.append((self.seg_names[a], hsp.name))
-        if problems:
-            raise InputError(f"{cell.source or cell.name}: " + "; ".join(problems) + "; " + _skip_hint(pairs)
-                             + ", otherwise move the obstacle or the robot base")
-
-    def _check_tracker_in_environment(self, where: str) -> None:
-        """The tracker outside every environment solid (Coal's exact distance; the fitted capsules enclose more)."""
-        from pin_kpi_oed.cell.environment import ball_distance
-
-        cell = self.cell
-        for e in cell.environment:
-            if e.name in cell.beam_skip:
-                continue
-            for s in e.solids:
-                d = ball_distance(s, cell.W_T_tracker.translation, cell.beam_radius_m)
-                if d < 0:
-                    raise InputError(f"{cell.source or cell.name}: the tracker at {where} m (cell frame) is inside "
-                                     f"obstacle '{s.name}' ({d * 1e3:.0f} mm clearance); move the tracker or the "
-                                     "obstacle")
-
-    def _check_working(self) -> None:
-        """Every working configuration must be collision-free and in the tracker's line of sight."""
-        cell = self.cell
-        saved = (self.pairs, self.half, self.with_incidence, self.info, self.jac_rows, self.jac_cols)
-        self._set_rows(self.rows_all)
-        try:
-            g = self.evaluate(cell.q_work, with_grad=False)
-        finally:
-            self.pairs, self.half, self.with_incidence, self.info, self.jac_rows, self.jac_cols = saved
-        names = self.rows_all["rows"].names
-        kinds = self.rows_all["rows"].kind
-        problems, pairs = [], []
-        for i in range(g.shape[0]):
-            for r in np.flatnonzero(g[i] < 0):
-                if kinds[r] == INCID:
-                    continue  # the reflector need not face the tracker while working
-                nm = names[r]
-                what = "is out of the tracker's sight: the laser beam is blocked" if nm.startswith("beam") \
-                    else "is in collision"
-                if g[i, r] + cell.clearance_m >= 0:  # clear, but inside the required clearance (margins included)
-                    what = (f"is closer than the required clearance of {cell.clearance_m * 1e3:g} mm"
-                            + _clearance_parts(cell, float(g[i, r]) + cell.clearance_m))
-                elif kinds[r] == PAIR and not nm.startswith("beam"):
-                    pair = tuple(nm.removeprefix("robot:").split("|", 1))
-                    pairs += [pair] if pair not in pairs else []
-                problems.append(f"working configuration {i} {what} ({nm}, {g[i, r] * 1e3:.1f} mm)")
-        if problems:
-            raise InputError(f"{cell.source or cell.name}: " + "; ".join(problems)
-                             + (f"; {_skip_hint(pairs)}" if pairs else ""))
 
     # ------------------------------------------------------------------ evaluation
     @property
@@ -668,73 +539,3 @@ class CollisionModel:
             dmin = np.minimum(dmin, g.min(axis=1))
         inc = self._incidence_row(Q, False)[0][:, 0] if self.with_incidence else np.full(m, np.inf)
         return dmin, inc
-
-
-def _clearance_parts(cell: Cell, actual_m: float) -> str:
-    """Where a required clearance comes from (the cell file's ``clearance_m``, ``design --clearance-margin``) and the
-    margin that admits a pose ``actual_m`` (m) clear."""
-    margin = float(getattr(cell, "clearance_margin_m", 0.0))
-    if margin <= 0:
-        return " (clearance_m of the cell file)"
-    fit = max(0.0, np.floor((actual_m - (cell.clearance_m - margin)) * 1e3 - 1e-6) / 1e3)  # strictly within
-    return (f" (clearance_m {(cell.clearance_m - margin) * 1e3:g} mm of the cell file + --clearance-margin "
-            f"{margin * 1e3:g} mm; --clearance-margin {fit:g} admits it)")
-
-
-def _skip_hint(pairs: list[tuple[str, str]]) -> str:
-    """The advice for capsules that overlap by construction: the cell file's ``skip_pairs`` entry to add."""
-    listed = ", ".join(f"[{a}, {b}]" for a, b in pairs)
-    return (f"if they overlap by construction (enclosing capsules of adjacent links, a robot on its pedestal or "
-            f"floor), list them under skip_pairs in the cell file: skip_pairs: [{listed}]")
-
-
-def random_feasible(coll: CollisionModel, m: int, rng: np.random.Generator, max_tries: int,
-                    batch: int = 2000) -> tuple[np.ndarray, int]:
-    """Heuristic design: configurations uniform within the joint bounds, rejection-sampled until feasible.
-
-    Args:
-        coll: the constraint model (its rows decide feasibility).
-        m: number of configurations wanted.
-        rng: random generator.
-        max_tries: sampling budget.
-        batch: configurations drawn per batched evaluation.
-
-    Returns:
-        (Q (m, n) rad, number of samples drawn until the m-th feasible one).
-
-    Raises:
-        InfeasibleError: fewer than m feasible poses in ``max_tries`` samples (naming the most
-            often violated constraint).
-    """
-    lo, hi = coll.robot.q_lower, coll.robot.q_upper
-    found: list[np.ndarray] = []
-    drawn = 0
-    viol = np.zeros(coll.n_rows, int)
-    inc_row = np.flatnonzero(coll.info.kind == INCID)
-    while drawn < max_tries and len(found) < m:
-        k = min(batch, max_tries - drawn)
-        Q = rng.uniform(lo, hi, size=(k, coll.n))
-        ok = np.ones(k, bool)
-        if coll.with_incidence:  # cheap first stage: the incidence row alone rejects most samples (96 % on KR 15)
-            ok = coll.model.incidence_cos(coll.p0, Q) - coll.cos_max >= 0
-            viol[inc_row] += k - int(ok.sum())
-        pre = np.flatnonzero(ok)
-        g = coll.evaluate(Q[pre], with_grad=False)
-        ok = np.zeros(k, bool)
-        ok[pre] = np.all(g >= 0, axis=1) if g.shape[1] else True
-        viol += np.sum(g < 0, axis=0)
-        idx = np.flatnonzero(ok)
-        need = m - len(found)
-        if idx.size >= need:
-            drawn += int(idx[need - 1]) + 1
-            found.extend(Q[idx[:need]])
-            break
-        drawn += k
-        found.extend(Q[idx])
-    if len(found) < m:
-        top = [coll.info.names[r] for r in np.argsort(-viol)[:3] if viol[r] > 0]
-        raise InfeasibleError(f"{coll.cell.source or coll.cell.name}: no feasible random pose found "
-                              f"({len(found)} of {m} needed) in {max_tries} tries; most often "
-                              f"violated: {', '.join(top) or 'none'}; relax the cell (obstacles, incidence limit, "
-                              f"joint bounds) or raise max_random_tries")
-    return np.array(found[:m]), drawn

@@ -113,12 +113,13 @@ def main(argv: list[str] | None = None) -> int:
     Options are checked (ranges, units, output paths) before any work; a
     :class:`PinKpiOedError` or an operating-system error becomes one line and exit code 2.
     """
-    from pin_kpi_oed.validation.options import accept_negative_numbers, check_args
+    from pin_kpi_oed.validation.options import check_args, join_negative_values
     from pin_kpi_oed.validation.paths import release_outputs
 
-    parser = accept_negative_numbers(build_parser())
-    args = parser.parse_args(argv)
-    args.argv = list(sys.argv[1:] if argv is None else argv)  # the command as given (model files record it)
+    parser = build_parser()
+    given = list(sys.argv[1:] if argv is None else argv)
+    args = parser.parse_args(join_negative_values(given))
+    args.argv = given  # the command as given (model files record it)
     try:
         check_args(args)
         if args.threads is not None:

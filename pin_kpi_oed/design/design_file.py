@@ -135,7 +135,7 @@ def _add_given(doc: dict, problem: Any, results: Sequence[Any], given_file: str)
                     "prior_file": getattr(problem, "prior_file", None)}
     for d, r in zip(doc["designs"], results):
         F = problem.model.weighted_jacobian(problem.p0, r.q_meas)[:, :, problem.base].reshape(-1, problem.base.size)
-        d["cov_s_m2"] = kpi_covariance(np.vstack([problem.F_given, F]), problem.E, problem._kpi.prior).tolist()
+        d["cov_s_m2"] = kpi_covariance(np.vstack([problem.F_given, F]), problem.E, problem.kpi_criterion.prior).tolist()
 
 
 def write_design(path: str | os.PathLike, cell: Cell, problem: Any, results: Sequence[Any], m: int, seed: int,

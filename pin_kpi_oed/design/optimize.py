@@ -54,7 +54,8 @@ import numpy as np
 
 from pin_kpi_oed.cell.cell import Cell
 from pin_kpi_oed.cell.aggregate import AggregatedConstraints
-from pin_kpi_oed.cell.collision import CollisionModel, random_feasible
+from pin_kpi_oed.cell.collision import CollisionModel
+from pin_kpi_oed.cell.sampling import random_feasible
 from pin_kpi_oed.cell.feasibility import FeasibilityChecker, FeasibilityReport
 from pin_kpi_oed.errors import IdentifiabilityError, InputError, SolverError
 from pin_kpi_oed.oed.criteria import DesignCriterion, check_names, get_criterion
@@ -295,13 +296,13 @@ class DesignProblem:
         self.coll_full = self.coll if collision else CollisionModel(cell, collision=True, prune=prune,
                                                                      model=self.model)
         self.checker = FeasibilityChecker(cell)
-        self._kpi = DesignCriterion(self.model, self.base, "kpi", self.E)
+        self.kpi_criterion = DesignCriterion(self.model, self.base, "kpi", self.E)
         self._param = DesignCriterion(self.model, self.base, "param", self.E)
 
     def fixed_information(self) -> np.ndarray | None:
         """Information every design of this problem already has, (nb, nb) over the identifiable parameters:
         the layout's prior diag(1/σ²) (1/m², 1/rad²); None without a prior."""
-        prior = self._kpi.prior
+        prior = self.kpi_criterion.prior
         return None if prior is None else np.diag(1.0 / np.asarray(prior, float) ** 2)
 
     @property
@@ -434,7 +435,7 @@ class DesignProblem:
                 ``nit``, ``nfev``, ``time_s``, ``solver_status``, ``samples``, ``n_constraints``, ``starts``).
         """
         try:
-            cs = self._kpi.value(Q)
+            cs = self.kpi_criterion.value(Q)
             cp = self._param.value(Q)
         except IdentifiabilityError:
             cs = cp = float("inf")
@@ -664,7 +665,8 @@ def design_random(problem: DesignProblem, m: int, seed: int = 0) -> DesignResult
     t0 = time.perf_counter()
     Q, ns = problem.random_design(m, seed)
     dt = time.perf_counter() - t0
-    return problem.result("random", Q, problem._kpi.value(Q), time_s=dt, status="sampled", solver_status="sampled",
+    return problem.result("random", Q, problem.kpi_criterion.value(Q), time_s=dt, status="sampled",
+                          solver_status="sampled",
                           samples=ns, message=f"{ns} uniform random poses drawn for {m} feasible ones")
 
 

@@ -135,7 +135,7 @@ class SequentialProblem(DesignProblem):
             self.prior_info = np.asarray(prior_info, float)
             F = np.vstack([F, prior_square_root(self.prior_info)])
         self.F_given = F
-        self._kpi = self.criterion("kpi")
+        self.kpi_criterion = self.criterion("kpi")
         self._param = self.criterion("param")
 
     def fixed_information(self) -> np.ndarray | None:
@@ -177,9 +177,9 @@ class SequentialProblem(DesignProblem):
         """Predicted TCP σ = sqrt(tr C_s / t) (m) of the measured poses plus ``Q_new`` (eq. 19)."""
         t = self.cell.q_work.shape[0]
         if Q_new is None or len(Q_new) == 0:
-            tr = self._kpi.crit.value(self.F_given, self.E, self._kpi.prior)
+            tr = self.kpi_criterion.crit.value(self.F_given, self.E, self.kpi_criterion.prior)
         else:
-            tr = self._kpi.value(np.atleast_2d(Q_new))
+            tr = self.kpi_criterion.value(np.atleast_2d(Q_new))
         return float(np.sqrt(tr / t))
 
 

@@ -280,7 +280,8 @@ def design_from_pool(problem: DesignProblem, Q_candidates: np.ndarray, criteria:
     rng = np.random.default_rng(seed)
     t0 = time.perf_counter()
     Qr = Q[np.sort(rng.choice(len(Q), size=m, replace=False))]
-    out = [problem.result("random", Qr, problem._kpi.value(Qr), time_s=time.perf_counter() - t0, status="sampled",
+    out = [problem.result("random", Qr, problem.kpi_criterion.value(Qr), time_s=time.perf_counter() - t0,
+                          status="sampled",
                           solver_status="sampled", samples=len(Q),
                           message=f"{m} of the {len(Q)} feasible user candidates at random{on_top}")]
     cert = None

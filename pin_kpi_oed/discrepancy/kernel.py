@@ -116,7 +116,8 @@ class JointKernel(StationaryKernelMixin, Kernel):
         return Hyperparameter("joint_length_scale", "numeric", self.joint_length_scale_bounds,
                               np.size(self.joint_length_scale))
 
-    def _parts(self, d: int) -> tuple[float, np.ndarray, np.ndarray, np.ndarray]:
+    def parts(self, d: int) -> tuple[float, np.ndarray, np.ndarray, np.ndarray]:
+        """(amplitude, length scales (d,), joint amplitudes (d,), joint length scales (d,)), scalars broadcast to d."""
         def vec(v: Any) -> np.ndarray:
             v = np.atleast_1d(np.asarray(v, float))
             return np.full(d, float(v[0])) if v.size == 1 else v
@@ -129,7 +130,7 @@ class JointKernel(StationaryKernelMixin, Kernel):
         if eval_gradient and Y is not None:
             raise ValueError("gradient can only be evaluated when Y is None")
         Yv = X if Y is None else np.atleast_2d(np.asarray(Y, float))
-        c, L, a, ell = self._parts(X.shape[1])
+        c, L, a, ell = self.parts(X.shape[1])
         if not eval_gradient:
             return self._value(X, Yv, c, L, a, ell)
         D = _CHORDS(X)
@@ -181,7 +182,7 @@ class JointKernel(StationaryKernelMixin, Kernel):
 
     def diag(self, X: np.ndarray) -> np.ndarray:
         """k(q, q) for each row: c² + Σ a_j²."""
-        c, _, a, _ = self._parts(np.atleast_2d(X).shape[1])
+        c, _, a, _ = self.parts(np.atleast_2d(X).shape[1])
         return np.full(np.atleast_2d(X).shape[0], c ** 2 + float((a ** 2).sum()))
 
     def is_stationary(self) -> bool:
@@ -196,7 +197,7 @@ class JointKernel(StationaryKernelMixin, Kernel):
         """
         X = np.atleast_2d(np.asarray(X, float))
         Y = np.atleast_2d(np.asarray(Y, float))
-        c, L, a, ell = self._parts(X.shape[1])
+        c, L, a, ell = self.parts(X.shape[1])
         Dq = X[:, None, :] - Y[None, :, :]
         D = 2.0 - 2.0 * np.cos(Dq)
         S = np.sin(Dq)
@@ -208,7 +209,7 @@ class JointKernel(StationaryKernelMixin, Kernel):
     def to_dict(self) -> dict:
         """Hyper-parameters as plain numbers (the model file's ``discrepancy.kernel``)."""
         d = np.size(self.length_scale)
-        c, L, a, ell = self._parts(max(d, np.size(self.joint_amplitude), np.size(self.joint_length_scale)))
+        c, L, a, ell = self.parts(max(d, np.size(self.joint_amplitude), np.size(self.joint_length_scale)))
         return {"form": "joint_wrapped_se/1", "amplitude": c, "length_scale_rad": L.tolist(),
                 "joint_amplitude": a.tolist(), "joint_length_scale_rad": ell.tolist()}
 

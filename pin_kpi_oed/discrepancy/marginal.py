@@ -120,7 +120,7 @@ def maximise_marginal_likelihood(Q: np.ndarray, Y: np.ndarray, kernel0: JointKer
     """
     f = MarginalLikelihood(Q, Y)
     d = f.d
-    c, L0, a0, ell0 = kernel0._parts(d)
+    c, L0, a0, ell0 = kernel0.parts(d)
     theta0 = np.log(np.concatenate([[c], a0, ell0, L0, [noise0]]))
     b = [kernel0.amplitude_bounds] + [kernel0.joint_amplitude_bounds] * d + \
         [kernel0.joint_length_scale_bounds] * d + [kernel0.length_scale_bounds] * d + [noise_bounds]

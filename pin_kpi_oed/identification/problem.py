@@ -408,7 +408,7 @@ class ResidualModel:
         # column map of each station: its model's raw parameter k -> column of x (or −1)
         pos = np.full(self.layout.n, -1, int)
         pos[self.base] = np.arange(self.nb)
-        self._xcol = [pos[idx] for idx in self.layout.index]
+        self.x_columns = [pos[idx] for idx in self.layout.index]
         self._check_effect_shapes()
 
     def _station_rows(self, data: MeasurementSet) -> list[np.ndarray]:
@@ -537,7 +537,7 @@ class ResidualModel:
             else:
                 dq_ders, Qe = [], Qs
             Jh = model.jacobian(p, Qe)
-            cols = self._xcol[s]
+            cols = self.x_columns[s]
             use = cols >= 0
             Js = J if isinstance(rows, slice) else np.zeros((Qs.shape[0], nh_, self.nx))
             Js[:, :, cols[use]] = Jh[:, :, use]

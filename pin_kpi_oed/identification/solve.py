@@ -131,7 +131,7 @@ def tcp_std(prob: ResidualModel, P: np.ndarray, C: np.ndarray, Qw: np.ndarray) -
     st = prob.stations
     model, p0 = st.models[0], st.station_p(P, 0)
     E0 = model.kpi_jacobian(p0, Qw)  # (3t, n_station)
-    cols = prob._xcol[0]
+    cols = prob.x_columns[0]
     E = np.zeros((E0.shape[0], prob.nb))
     use = cols >= 0
     E[:, cols[use]] = E0[:, use]

@@ -59,8 +59,8 @@ from pin_kpi_oed.errors import IdentifiabilityError, InputError
 from pin_kpi_oed.oed.covariance import prior_of
 from pin_kpi_oed.oed.criteria import (CovarianceCriterion, Criterion, DiscrepancyForm, SingularValueCriterion,
                                       get_criterion)
-from pin_kpi_oed.oed.discrepancy_kpi import (NO_CERTIFICATE, DiscrepancyPrior, GpPoolSelection, _after_given,
-                                             _base_frame, _chain_q, _greedy_exchange, _GreedyState, _ridge)
+from pin_kpi_oed.oed.discrepancy_kpi import (NO_CERTIFICATE, DiscrepancyPrior, GpPoolSelection, after_given,
+                                             base_frame_jacobian, chain_q, greedy_exchange, GreedyState, greedy_ridge)
 
 __all__ = ["gls_information", "criterion_of_information", "gls_value_and_grad", "GlsDesignCriterion",
            "select_pool_gls", "no_certificate"]
@@ -182,7 +182,7 @@ class GlsDesignCriterion:
             self.prior_info = None if ps is None else np.diag(1.0 / np.asarray(ps, float) ** 2)
         if self.Q_given is not None and len(self.Q_given):
             self.Q_given = np.atleast_2d(np.asarray(self.Q_given, float))
-            self.J_given = _base_frame(self.model, self.p, self.Q_given, self.base, False)[0]
+            self.J_given = base_frame_jacobian(self.model, self.p, self.Q_given, self.base, False)[0]
         else:
             self.Q_given, self.J_given = None, None
 
@@ -208,22 +208,22 @@ class GlsDesignCriterion:
     def value(self, Q: np.ndarray) -> float:
         """φ of the measured poses (``Q_given`` + Q)."""
         Q = np.atleast_2d(Q)
-        Qa, Ja = self._all(Q, _base_frame(self.model, self.p, Q, self.base, False)[0] if len(Q) else None)
+        Qa, Ja = self._all(Q, base_frame_jacobian(self.model, self.p, Q, self.base, False)[0] if len(Q) else None)
         d = self.discrepancy
         return gls_value_and_grad(self.crit, Ja, d.cov(Qa), d.scale_m, d.noise, self.prior_info, grad=False)[0]
 
     def value_and_grad(self, Q: np.ndarray) -> tuple[float, np.ndarray]:
         """φ and its exact gradient w.r.t. Q (m, n) (per rad): the Jacobian's and the kernel's parts."""
         Q = np.atleast_2d(np.asarray(Q, float))
-        J, dJ = _base_frame(self.model, self.p, Q, self.base, True)
+        J, dJ = base_frame_jacobian(self.model, self.p, Q, self.base, True)
         Qa, Ja = self._all(Q, J)
         d = self.discrepancy
         val, g = gls_value_and_grad(self.crit, Ja, d.cov(Qa), d.scale_m, d.noise, self.prior_info)
-        return val, _chain_q(g, dJ, d, Q, Qa, len(Qa) - len(Q))
+        return val, chain_q(g, dJ, d, Q, Qa, len(Qa) - len(Q))
 
     def pool_jacobians(self, Q_pool: np.ndarray) -> np.ndarray:
         """Base-frame Jacobians of candidate poses (N, 3, nb)."""
-        return _base_frame(self.model, self.p, np.atleast_2d(Q_pool), self.base, False)[0]
+        return base_frame_jacobian(self.model, self.p, np.atleast_2d(Q_pool), self.base, False)[0]
 
     def select(self, Q_pool: np.ndarray, m: int, J_pool: np.ndarray | None = None, **kw) -> GpPoolSelection:
         """m of the candidate poses by :func:`select_pool_gls` (on top of ``Q_given``)."""
@@ -233,7 +233,7 @@ class GlsDesignCriterion:
 
 
 # --------------------------------------------------------------------------- pool selection
-class _GlsState(_GreedyState):
+class _GlsState(GreedyState):
     """The greedy state of ``kpi_gp`` (no working configurations) scoring candidates by the D or A form."""
 
     form = "D"
@@ -282,11 +282,11 @@ def select_pool_gls(crit: Criterion, J_pool: np.ndarray, Q_pool: np.ndarray, dis
         IdentifiabilityError: the chosen set does not identify the parameters.
     """
     t0 = time.perf_counter()
-    Jall, Qall, k0 = _after_given(J_pool, Q_pool, m, J_given, Q_given)
+    Jall, Qall, k0 = after_given(J_pool, Q_pool, m, J_given, Q_given)
     st = _GlsState(Jall, Qall, np.zeros((0, 3, J_pool.shape[2])), np.zeros((0, Q_pool.shape[1])), discrepancy,
-                   prior_info, _ridge(J_pool, discrepancy))
+                   prior_info, greedy_ridge(J_pool, discrepancy))
     st.form = "A" if crit.name == "param" else "D"
-    idx, path, swaps = _greedy_exchange(st, m, k0, exchange_passes, t0, time_budget_s)
+    idx, path, swaps = greedy_exchange(st, m, k0, exchange_passes, t0, time_budget_s)
     sel = np.concatenate([np.arange(k0), k0 + idx])
     val = gls_value_and_grad(crit, Jall[sel], discrepancy.cov(Qall[sel]), discrepancy.scale_m, discrepancy.noise,
                              prior_info, grad=False)[0]

@@ -233,7 +233,7 @@ def kpi_gp_value_and_grad(J: np.ndarray, E: np.ndarray, Kqq: np.ndarray, Kwq: np
 
 
 # --------------------------------------------------------------------------- the criterion of configurations
-def _base_frame(model, p, Q, base, with_dq):
+def base_frame_jacobian(model, p, Q, base, with_dq):
     """Reflector Jacobian in the robot base frame over the base parameters: J (m, 3, nb) and ∂J/∂q (m, 3, nb, n)."""
     R = model.tracker_pose(p).rotation
     if with_dq:
@@ -244,7 +244,7 @@ def _base_frame(model, p, Q, base, with_dq):
     return model.base_jacobian(p, Q, base), None
 
 
-def _chain_q(g: dict, dJ: np.ndarray, disc: DiscrepancyPrior, Q: np.ndarray, Qa: np.ndarray, k: int) -> np.ndarray:
+def chain_q(g: dict, dJ: np.ndarray, disc: DiscrepancyPrior, Q: np.ndarray, Qa: np.ndarray, k: int) -> np.ndarray:
     """dφ/dQ of the moving poses Q = Qa[k:] from ∂φ/∂J and ∂φ/∂G (K_QQ through both its arguments), (m, n)."""
     grad = np.einsum("iac,iack->ik", g["J"][k:], dJ)
     Gs = g["G"] + g["G"].T
@@ -304,7 +304,7 @@ class DiscrepancyDesignCriterion:
         self.Kww = d.cov(self.Q_work)
         if self.Q_given is not None and len(self.Q_given):
             self.Q_given = np.atleast_2d(np.asarray(self.Q_given, float))
-            self.J_given = _base_frame(self.model, self.p, self.Q_given, self.base, False)[0]
+            self.J_given = base_frame_jacobian(self.model, self.p, self.Q_given, self.base, False)[0]
         else:
             self.Q_given, self.J_given = None, None
         if self.Q_register is not None:
@@ -343,7 +343,8 @@ class DiscrepancyDesignCriterion:
 
     def covariance(self, Q: np.ndarray) -> np.ndarray:
         """C_s (3t, 3t) m² of the measured poses (``Q_given`` + Q), base frame."""
-        Qa, Ja = self._all(np.atleast_2d(Q), _base_frame(self.model, self.p, np.atleast_2d(Q), self.base, False)[0])
+        Qa, Ja = self._all(np.atleast_2d(Q),
+                           base_frame_jacobian(self.model, self.p, np.atleast_2d(Q), self.base, False)[0])
         d = self.discrepancy
         C = kpi_gp_covariance(Ja, self.E, d.cov(Qa), d.cov(self.Q_work, Qa), self.Kww, d.scale_m, d.noise,
                               self.prior_info)
@@ -359,7 +360,7 @@ class DiscrepancyDesignCriterion:
         Q = np.atleast_2d(Q)
         if self.reg is None:
             return self.covariance(Q)
-        Qa, Ja = self._all(Q, _base_frame(self.model, self.p, Q, self.base, False)[0] if len(Q) else None)
+        Qa, Ja = self._all(Q, base_frame_jacobian(self.model, self.p, Q, self.base, False)[0] if len(Q) else None)
         d, WR = self.discrepancy, np.vstack([self.Q_work, self.Q_register])
         E2 = np.concatenate([self.reg.E_before, self.pool_jacobians(self.Q_register)])
         C_WR = kpi_gp_covariance(Ja, E2, d.cov(Qa), d.cov(WR, Qa), d.cov(WR), d.scale_m, d.noise, self.prior_info)
@@ -370,7 +371,7 @@ class DiscrepancyDesignCriterion:
         Q = np.atleast_2d(Q)
         if len(Q) == 0 and self.Q_given is None:
             raise IdentifiabilityError("no poses: the parameters are not identified")
-        Qa, Ja = self._all(Q, _base_frame(self.model, self.p, Q, self.base, False)[0] if len(Q) else None)
+        Qa, Ja = self._all(Q, base_frame_jacobian(self.model, self.p, Q, self.base, False)[0] if len(Q) else None)
         d = self.discrepancy
         return kpi_gp_value_and_grad(Ja, self.E, d.cov(Qa), d.cov(self.Q_work, Qa), self.tr_kww, d.scale_m,
                                      d.noise, self.prior_info, grad=False)[0] + self.tr_register
@@ -378,19 +379,19 @@ class DiscrepancyDesignCriterion:
     def value_and_grad(self, Q: np.ndarray) -> tuple[float, np.ndarray]:
         """tr C_s (m²) and its exact gradient w.r.t. Q (m, n) (m² per rad)."""
         Q = np.atleast_2d(np.asarray(Q, float))
-        J, dJ = _base_frame(self.model, self.p, Q, self.base, True)
+        J, dJ = base_frame_jacobian(self.model, self.p, Q, self.base, True)
         Qa, Ja = self._all(Q, J)
         k = 0 if self.Q_given is None else len(self.Q_given)
         d = self.discrepancy
         val, g = kpi_gp_value_and_grad(Ja, self.E, d.cov(Qa), d.cov(self.Q_work, Qa), self.tr_kww, d.scale_m,
                                        d.noise, self.prior_info)
-        grad = _chain_q(g, dJ, d, Q, Qa, k)
+        grad = chain_q(g, dJ, d, Q, Qa, k)
         grad += np.einsum("ti,itk->ik", g["Kwq"][:, k:], d.grad_x(Q, self.Q_work))
         return val + self.tr_register, grad
 
     def pool_jacobians(self, Q_pool: np.ndarray) -> np.ndarray:
         """Base-frame Jacobians of candidate poses (N, 3, nb)."""
-        return _base_frame(self.model, self.p, np.atleast_2d(Q_pool), self.base, False)[0]
+        return base_frame_jacobian(self.model, self.p, np.atleast_2d(Q_pool), self.base, False)[0]
 
     def select(self, Q_pool: np.ndarray, m: int, J_pool: np.ndarray | None = None, **kw) -> GpPoolSelection:
         """m of the candidate poses by :func:`select_pool_gp` (on top of ``Q_given``)."""
@@ -423,7 +424,7 @@ class GpPoolSelection:
     time_s: float
 
 
-class _GreedyState:
+class GreedyState:
     """Conditional quantities of every candidate given a selected set S (kernel conditioned on S, noisy)."""
 
     def __init__(self, Jc, Qc, E, Qw, disc, prior_info, eps_info):
@@ -451,7 +452,7 @@ class _GreedyState:
             self.kcols[i] = self.disc.cov(self.Qc, self.Qc[i:i + 1])[:, 0]
         return self.kcols[i]
 
-    def build(self, sel: list[int]) -> _GreedyState:
+    def build(self, sel: list[int]) -> GreedyState:
         """The state given the set ``sel`` from scratch (one Cholesky factor, a few products)."""
         st = type(self).__new__(type(self))
         st.__dict__.update({k: v for k, v in self.__dict__.items()})
@@ -476,7 +477,7 @@ class _GreedyState:
         st.chosen = list(S)
         return st
 
-    def without(self, i: int) -> _GreedyState:
+    def without(self, i: int) -> GreedyState:
         """The state with the chosen candidate ``i`` removed (exact rank-one downdate: a row of sign −1 in ``V``)."""
         st = type(self).__new__(type(self))
         st.__dict__.update(self.__dict__)
@@ -544,7 +545,7 @@ class _GreedyState:
         return phi
 
 
-def _exchange(st: _GreedyState, sel: list[int], excl: np.ndarray, k0: int, cur: float, passes: int, t0: float,
+def _exchange(st: GreedyState, sel: list[int], excl: np.ndarray, k0: int, cur: float, passes: int, t0: float,
               budget: float | None) -> tuple[list[int], float, int]:
     """Exchange passes of :func:`select_pool_gp`: each chosen pose in turn removed (exact downdate) and replaced by the
     best candidate if that lowers tr C_s; a fresh factor after each pass with swaps. Returns (set, value, swaps)."""
@@ -575,14 +576,14 @@ def _exchange(st: _GreedyState, sel: list[int], excl: np.ndarray, k0: int, cur: 
     return sel, cur, swaps
 
 
-def _ridge(J_pool: np.ndarray, discrepancy: DiscrepancyPrior) -> float:
+def greedy_ridge(J_pool: np.ndarray, discrepancy: DiscrepancyPrior) -> float:
     """The tiny ridge of the greedy start: 1e-9 of the pool's mean information per parameter."""
     s2 = discrepancy.scale_m ** 2
     return 1e-9 * float(np.mean(np.einsum("a,nac,nac->n", 1 / s2, J_pool, J_pool))) / max(J_pool.shape[2], 1) \
         / max(discrepancy.noise, 1e-12)
 
 
-def _after_given(J_pool: np.ndarray, Q_pool: np.ndarray, m: int, J_given: np.ndarray | None,
+def after_given(J_pool: np.ndarray, Q_pool: np.ndarray, m: int, J_given: np.ndarray | None,
                  Q_given: np.ndarray | None) -> tuple[np.ndarray, np.ndarray, int]:
     """The candidates after the measured poses: (J, Q, number measured k0).
 
@@ -597,7 +598,7 @@ def _after_given(J_pool: np.ndarray, Q_pool: np.ndarray, m: int, J_given: np.nda
     return J_pool, Q_pool, 0
 
 
-def _greedy_exchange(st: _GreedyState, m: int, k0: int, passes: int, t0: float, budget: float | None
+def greedy_exchange(st: GreedyState, m: int, k0: int, passes: int, t0: float, budget: float | None
                      ) -> tuple[np.ndarray, list[float], int]:
     """Greedy additions of m candidates to a state holding k0 measured poses first, then the exchange passes
     (:func:`_exchange`); the criterion is the state's :meth:`values`. Returns (pool indices, greedy path, swaps)."""
@@ -644,9 +645,9 @@ def select_pool_gp(J_pool: np.ndarray, Q_pool: np.ndarray, E: np.ndarray, Q_work
         IdentifiabilityError: the chosen set does not identify the parameters.
     """
     t0 = time.perf_counter()
-    Jall, Qall, k0 = _after_given(J_pool, Q_pool, m, J_given, Q_given)
-    st = _GreedyState(Jall, Qall, E, Q_work, discrepancy, prior_info, _ridge(J_pool, discrepancy))
-    idx, path, swaps = _greedy_exchange(st, m, k0, exchange_passes, t0, time_budget_s)
+    Jall, Qall, k0 = after_given(J_pool, Q_pool, m, J_given, Q_given)
+    st = GreedyState(Jall, Qall, E, Q_work, discrepancy, prior_info, greedy_ridge(J_pool, discrepancy))
+    idx, path, swaps = greedy_exchange(st, m, k0, exchange_passes, t0, time_budget_s)
     rows = np.concatenate([np.arange(k0), k0 + idx])
     Jsel, Qsel = Jall[rows], Qall[rows]
     val = kpi_gp_value_and_grad(Jsel, E, discrepancy.cov(Qsel), discrepancy.cov(Q_work, Qsel),

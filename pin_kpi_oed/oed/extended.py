@@ -316,7 +316,7 @@ class ExtendedModel:
         effects = [e for e in cm.effects if not getattr(e, "setup_specific", False)]
         thetas = [t for e, t in zip(cm.effects, cm.thetas) if not getattr(e, "setup_specific", False)]
         ext = cls(model, p, b, effects, thetas)
-        ext.prior_info = ext._prior(prior, cm.parameters, effect_sigma_rad, tolerances)
+        ext.prior_info = ext.prior_from(prior, cm.parameters, effect_sigma_rad, tolerances)
         return ext
 
     @classmethod
@@ -327,8 +327,10 @@ class ExtendedModel:
         return cls.from_calibrated_model(result.calibrated_model(), prior=prior, effect_sigma_rad=effect_sigma_rad,
                                          tolerances=tolerances)
 
-    def _prior(self, kind: str | None, parameters: dict, effect_sigma_rad: float | None, tolerances: Any
-               ) -> np.ndarray | None:
+    def prior_from(self, kind: str | None, parameters: dict, effect_sigma_rad: float | None, tolerances: Any
+                   ) -> np.ndarray | None:
+        """Prior information Σ₀⁻¹ over the extended parameters: ``kind`` "model" (the model file's covariance of
+        ``parameters``), "tolerances" or None (no prior)."""
         if kind is None:
             return None
         if kind == "model":

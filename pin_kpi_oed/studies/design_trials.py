@@ -205,7 +205,7 @@ def real_data_validation(model: TrackerModel, data: MeasurementSet, n_meas: int 
     for k, c in crits.items():
         if not c.has_pool_form:
             raise InputError(f"method '{k}': the criterion has no pool-selection form (use kpi, param, D or random)")
-    design_model = _design_model(model, data)
+    design_model = position_design_model(model, data)
     ident = analyse(design_model)
     b = ident.base
     p0 = np.zeros(design_model.n_params)
@@ -235,7 +235,7 @@ def real_data_validation(model: TrackerModel, data: MeasurementSet, n_meas: int 
                               time_s=time.perf_counter() - t0)
 
 
-def _design_model(model: TrackerModel, data: MeasurementSet) -> TrackerModel:
+def position_design_model(model: TrackerModel, data: MeasurementSet) -> TrackerModel:
     """The position-only model of the design: set-up (tracker pose, reflector) fitted with the nominal robot,
     the noise and the priors (by parameter name) of ``model``."""
     setup = identify(model, data, setup_only=True, use_orientation=False, discrepancy="none", on_poor_fit="ignore")
@@ -412,7 +412,7 @@ def extended_design_validation(model: TrackerModel, data: MeasurementSet, target
         fit = _fit_split(model, pool, seed + s, max_order, max_terms, prior_rad)
         n_terms.append(fit.n_terms)
         bias.append(fit.cv_rms_m)
-        work, scored, reg = _work_and_scored(data, target, perm, n_test, rng, n_work, n_register, radius_rad, joints)
+        work, scored, reg = work_and_scored(data, target, perm, n_test, rng, n_work, n_register, radius_rad, joints)
         n_scored.append(len(scored))
         for meth, e in _score_methods(fit, pool, work, scored, reg, methods, rng, n_meas, seed + s, prior_rad):
             err[meth].append(e)
@@ -497,7 +497,7 @@ def _fit_split(model: TrackerModel, pool: MeasurementSet, seed: int, max_order: 
                      ext=ext, Fp=Fp, Fp_bias=Fp_bias)
 
 
-def _work_and_scored(data: MeasurementSet, target: MeasurementSet | None, perm: np.ndarray, n_test: int,
+def work_and_scored(data: MeasurementSet, target: MeasurementSet | None, perm: np.ndarray, n_test: int,
                      rng: np.random.Generator, n_work: int, n_register: int, radius_rad: float,
                      joints: int) -> tuple[np.ndarray, MeasurementSet, MeasurementSet | None]:
     """(working configurations (rad), scored rows, registration rows of ``target`` or None) of one split."""

@@ -95,12 +95,12 @@ class _Split:
 def _make_split(data: MeasurementSet, target: MeasurementSet | None, rng: np.random.Generator, test_frac: float,
                 n_work: int, radius_rad: float, joints: int, pool_size: int | None, n_register: int) -> _Split:
     """The split of :func:`extended_design_validation` (same draws), the pool optionally subsampled to ``pool_size``."""
-    from pin_kpi_oed.studies.design_trials import _work_and_scored
+    from pin_kpi_oed.studies.design_trials import work_and_scored
 
     perm = rng.permutation(len(data))
     n_test = int(round(test_frac * len(data))) if target is None else 0
     pool_rows = np.sort(perm[n_test:])
-    work, scored, reg = _work_and_scored(data, target, perm, n_test, rng, n_work, n_register, radius_rad, joints)
+    work, scored, reg = work_and_scored(data, target, perm, n_test, rng, n_work, n_register, radius_rad, joints)
     if pool_size is not None and pool_rows.size > pool_size:
         pool_rows = np.sort(rng.choice(pool_rows, pool_size, replace=False))
     if len(scored) == 0:
@@ -137,9 +137,9 @@ class _Designs:
     def __init__(self, model: TrackerModel, sp: _Split, prior: DiscrepancyPrior, seed: int, radius_rad: float,
                  joints: int, region_rows: int) -> None:
         from pin_kpi_oed.design.region import working_region
-        from pin_kpi_oed.studies.design_trials import _design_model
+        from pin_kpi_oed.studies.design_trials import position_design_model
 
-        dm = _design_model(model, sp.pool)
+        dm = position_design_model(model, sp.pool)
         b = analyse(dm).base
         p0 = np.zeros(dm.n_params)
         self.Q = sp.pool.q

@@ -103,7 +103,8 @@ def notional_cell_dict(lambda_m: float, mu_m: float, out_dir: Path, base: str = 
     import yaml
 
     from pin_kpi_oed.cell.cell import load_cell, resolve_cell
-    from pin_kpi_oed.model.kuka import notional_arm, write_urdf
+    from pin_kpi_oed.model.kuka import write_urdf
+    from pin_kpi_oed.model.notional_arms import notional_arm
     from pin_kpi_oed.model.robot import load_robot
 
     geom = notional_arm(lambda_m, mu_m)
@@ -271,7 +272,7 @@ def notional_study(out_dir: Path, m: int = 60, seed: int = 0, arms: int | None =
 
     Writes ``summary.json``, ``arms.csv`` and ``notional90.png`` to ``out_dir``.
     """
-    from pin_kpi_oed.model.kuka import notional_arms
+    from pin_kpi_oed.model.notional_arms import notional_arms
 
     t0 = time.perf_counter()
     out_dir = Path(out_dir)

@@ -13,13 +13,13 @@ import math
 import re
 from pathlib import Path
 from typing import Any
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 
 from pin_kpi_oed.errors import InputError
 from pin_kpi_oed.validation.paths import check_figure_suffix, check_outputs
 from pin_kpi_oed.validation.units import MAX_TOOL_OFFSET_M, check_offset_m, check_sigma_m, check_sigma_rad
 
-__all__ = ["accept_negative_numbers", "check_args", "RULES", "OUTPUTS", "INPUTS", "FOLDERS", "FIGURES", "floats",
+__all__ = ["join_negative_values", "check_args", "RULES", "OUTPUTS", "INPUTS", "FOLDERS", "FIGURES", "floats",
            "check_discrepancy_options", "check_ignored_options", "IGNORED"]
 
 
@@ -368,17 +368,24 @@ def _inputs(args: argparse.Namespace, cmd: str | None) -> list[tuple[str, Any]]:
 _NEGATIVE = re.compile(r"^-(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?(,.*)?$")
 
 
-def accept_negative_numbers(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:
-    """Let ``--sigma -1e-5`` or ``--tracker -1,0,0`` reach the checks (argparse takes them for options).
+def join_negative_values(argv: Sequence[str]) -> list[str]:
+    """Let ``--sigma -1e-5`` or ``--tracker -1,0,0`` reach the checks: argparse takes a value that starts with a
+    minus sign for an option, so a long option followed by a negative number (or a comma list starting with one)
+    is passed as ``--sigma=-1e-5``.
 
     Returns:
-        ``parser``, with every subparser updated.
+        The arguments, a long option and its negative value joined by ``=``.
     """
-    stack = [parser]
-    while stack:
-        p = stack.pop()
-        p._negative_number_matcher = _NEGATIVE
-        for a in p._actions:
-            if isinstance(a, argparse._SubParsersAction):
-                stack += list(a.choices.values())
-    return parser
+    out: list[str] = []
+    args = list(argv)
+    i = 0
+    while i < len(args):
+        a = args[i]
+        if (a.startswith("--") and "=" not in a and a != "--" and i + 1 < len(args)
+                and _NEGATIVE.match(args[i + 1])):
+            out.append(f"{a}={args[i + 1]}")
+            i += 2
+        else:
+            out.append(a)
+            i += 1
+    return out

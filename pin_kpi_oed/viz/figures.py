@@ -40,7 +40,7 @@ def _colours(names: Sequence[str], colours: Mapping[str, str] | None) -> dict[st
     return {n: given.get(n) or hex_colour(default[n]) for n in names}
 
 
-def _figure(w: float, h: float):
+def agg_figure(w: float, h: float):
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
@@ -115,7 +115,7 @@ def plot_ellipsoid_projections(covs: Mapping[str, np.ndarray], path: str | os.Pa
     k = float(chdtri(3, 1.0 - level))  # chi-square quantile, 3 degrees of freedom
     s = UNITS[unit]
     u = UNIT_LABEL[unit]
-    fig = _figure(10.5, 3.4 * rows + 0.5)
+    fig = agg_figure(10.5, 3.4 * rows + 0.5)
     axes = fig.subplots(rows, 3, squeeze=False)
     planes = [((0, 1), "xy"), ((0, 2), "xz"), ((1, 2), "yz")]
     for r in range(rows):
@@ -174,7 +174,7 @@ def plot_design_bars(traces_m2: Mapping[str, float], path: str | os.PathLike, *,
     lab = [(labels or {}).get(n, n) for n in names]
     base = _baseline(names, baseline)
     sig = np.sqrt(tr / max(n_work, 1)) * 1e6
-    fig = _figure(max(6.0, 1.6 * len(names) + 3.0), 3.8)
+    fig = agg_figure(max(6.0, 1.6 * len(names) + 3.0), 3.8)
     ax1, ax2 = fig.subplots(1, 2)
     x = np.arange(len(names))
     for ax, vals, ylabel in ((ax1, tr * 1e6, "tr(C$_s$) (mm²)"), (ax2, sig, "RMS TCP σ (µm)")):
@@ -213,7 +213,7 @@ def plot_pose_quality(clearance_m: Mapping[str, np.ndarray], incidence_deg: Mapp
     if not names:
         raise InputError("no design to plot")
     col = _colours(names, colours)
-    fig = _figure(10.0, 2.3 * len(names) + 0.8)
+    fig = agg_figure(10.0, 2.3 * len(names) + 0.8)
     axes = fig.subplots(len(names), 2, squeeze=False)
     for r, n in enumerate(names):
         lab = (labels or {}).get(n, n)

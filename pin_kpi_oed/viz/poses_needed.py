@@ -14,7 +14,7 @@ from collections.abc import Mapping
 
 import numpy as np
 
-from pin_kpi_oed.viz.figures import _figure, save_png
+from pin_kpi_oed.viz.figures import agg_figure, save_png
 
 
 def plot_poses_needed(curve: Mapping[str, Any], path: str | os.PathLike, title: str = "") -> Path:
@@ -33,7 +33,7 @@ def plot_poses_needed(curve: Mapping[str, Any], path: str | os.PathLike, title: 
     des = np.asarray(curve["sigma_designed_m"], float) * 1e6
     rnd = np.asarray(curve["sigma_random_m"], float) * 1e6
     sd = np.asarray(curve.get("sigma_random_sd_m", np.zeros_like(rnd)), float) * 1e6
-    fig = _figure(6.0, 4.0)
+    fig = agg_figure(6.0, 4.0)
     ax = fig.add_subplot()
     ax.plot(n, des, "o-", color="#1f77b4", label="designed (kpi_gp, greedy)")
     ax.plot(n, rnd, "s--", color="#7f7f7f", label="random (mean)")

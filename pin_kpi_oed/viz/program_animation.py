@@ -16,7 +16,8 @@ import math
 import numpy as np
 import pinocchio as pin
 
-from pin_kpi_oed.viz.scene import Scene, _anim_set, _beam_matrix, _placements, _rot_y_to
+from pin_kpi_oed.viz.scene import Scene
+from pin_kpi_oed.viz.scene_parts import anim_set, beam_matrix, object_placements, rot_y_to
 from pin_kpi_oed.viz.style import rgb
 
 
@@ -67,15 +68,15 @@ def animate_program(scene: Scene, path: np.ndarray, kinds: list[str], step_deg: 
 
     def key(q: np.ndarray, beam: bool) -> None:
         with anim.at_frame(scene.vis, frame) as f:
-            for g, M in _placements(model, data, visual, vdata, q, pin.SE3.Identity()):
-                _anim_set(f[f"robot/visuals/{g.name}"], M, g.meshScale)
+            for g, M in object_placements(model, data, visual, vdata, q, pin.SE3.Identity()):
+                anim_set(f[f"robot/visuals/{g.name}"], M, g.meshScale)
             if collision is not None:
-                for g, M in _placements(model, data, collision, cdata, q, pin.SE3.Identity()):
-                    _anim_set(f[f"robot/collisions/{g.name}"], M, g.meshScale)
+                for g, M in object_placements(model, data, collision, cdata, q, pin.SE3.Identity()):
+                    anim_set(f[f"robot/collisions/{g.name}"], M, g.meshScale)
             refl = df.reflector_world(q[None])[0]
-            Tb = _beam_matrix(trk, refl)
+            Tb = beam_matrix(trk, refl)
             length = float(np.linalg.norm(refl - trk)) if beam else 1e-6
-            _anim_set(f["beam"], pin.SE3(_rot_y_to(refl - trk), Tb[:3, 3]), np.array([1.0, length, 1.0]))
+            anim_set(f["beam"], pin.SE3(rot_y_to(refl - trk), Tb[:3, 3]), np.array([1.0, length, 1.0]))
 
     path = np.atleast_2d(np.asarray(path, float))
     trace = []

@@ -51,17 +51,16 @@ import pinocchio as pin
 from pin_kpi_oed.design.design_file import DesignEntry, DesignFile, load_design
 from pin_kpi_oed.errors import InputError
 from pin_kpi_oed.viz.ellipsoids import DEFAULT_LEVEL, confidence_ellipsoid, fmt_factor, nice_factor
+from pin_kpi_oed.viz.scene_parts import (MESHCAT_FOV_DEG, anim_set, beam_matrix, default_camera, homogeneous,
+                                         label_height, label_sprite, object_placements, place_camera, plane_frame,
+                                         rot_y_to)
 from pin_kpi_oed.viz.recorder import SceneRecorder, import_meshcat
 from pin_kpi_oed.viz.robot_geometry import (add_reflector, capsule_geometry, is_primitive, slug, stick_geometry,
                                             visual_model)
 from pin_kpi_oed.viz.style import BEAM_COLOUR, ROBOT_RGBA, design_colours, rgb
 
-#: Vertical field of view (deg) of meshcat's default perspective camera (viewer/dist/main.min.js).
-MESHCAT_FOV_DEG = 75.0
 #: Designs with more poses than this get no ghosts by default (the animation shows the current pose).
 MAX_GHOSTS = 8
-#: Height of one text line of a 3-D label, as a fraction of the page height (at any zoom).
-LABEL_LINE_SCREEN = 0.028
 
 
 @dataclass
@@ -242,150 +241,6 @@ class Scene:
         return np.stack([x, y], axis=1)
 
 
-# ============================================================================ placement helpers
-def _plane_frame(n: np.ndarray) -> np.ndarray:
-    """Rotation whose z axis is n and whose y axis is as vertical as possible (x horizontal)."""
-    z = n / np.linalg.norm(n)
-    up = np.array([0.0, 0.0, 1.0]) - z[2] * z
-    if np.linalg.norm(up) < 1e-6:
-        up = np.array([0.0, 1.0, 0.0]) - z[1] * z
-    y = up / np.linalg.norm(up)
-    return np.column_stack([np.cross(y, z), y, z])
-
-
-def _rot_y_to(d: np.ndarray) -> np.ndarray:
-    """Rotation taking the y axis (three.js cylinders) to direction d."""
-    L = np.linalg.norm(d)
-    return pin.Quaternion.FromTwoVectors(np.array([0.0, 1.0, 0.0]), d / L).toRotationMatrix() if L > 1e-12 \
-        else np.eye(3)
-
-
-def _beam_matrix(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Transform of a unit-length y-cylinder onto the segment a-b."""
-    T = np.eye(4)
-    T[:3, :3] = _rot_y_to(b - a) @ np.diag([1.0, max(np.linalg.norm(b - a), 1e-9), 1.0])
-    T[:3, 3] = 0.5 * (a + b)
-    return T
-
-
-def _homogeneous(R: np.ndarray | None = None, t: np.ndarray | Sequence[float] | None = None) -> np.ndarray:
-    """4×4 transform from a rotation and a translation (defaults identity / zero)."""
-    T = np.eye(4)
-    if R is not None:
-        T[:3, :3] = R
-    if t is not None:
-        T[:3, 3] = t
-    return T
-
-
-def _placements(model, data, gmodel, gdata, q, world: pin.SE3):
-    """(geometry object, world placement) of every object of ``gmodel`` at configuration q (Pinocchio FK)."""
-    pin.forwardKinematics(model, data, np.asarray(q, float))
-    pin.updateGeometryPlacements(model, data, gmodel, gdata)
-    return [(g, world * gdata.oMg[i]) for i, g in enumerate(gmodel.geometryObjects)]
-
-
-def _text_png(lines: Sequence[tuple[str, str]], dpi: int = 150) -> tuple[bytes, float]:
-    """A transparent PNG of coloured text lines [(text, '#rrggbb')]; returns (png, width / height)."""
-    import io
-    import struct
-
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
-    from matplotlib.figure import Figure
-
-    n = len(lines)
-    fig = Figure(figsize=(4.0, 0.3 * n), dpi=dpi)
-    FigureCanvasAgg(fig)
-    for i, (text, colour) in enumerate(lines):
-        fig.text(0.0, 1.0 - (i + 1) / n, text, color=colour, fontsize=14, fontweight="bold", va="bottom", ha="left")
-    buf = io.BytesIO()
-    fig.savefig(buf, format="png", transparent=True, bbox_inches="tight", pad_inches=0.04)
-    png = buf.getvalue()
-    w, h = struct.unpack(">II", png[16:24])  # IHDR
-    return png, w / h
-
-
-def label_height(n_lines: int, line_screen: float = LABEL_LINE_SCREEN) -> float:
-    """Height ``s`` of a :func:`label_sprite` of ``n_lines`` lines (``s`` × depth = its world height, m)."""
-    return n_lines * line_screen * 2.0 * float(np.tan(np.radians(MESHCAT_FOV_DEG) / 2))
-
-
-def label_sprite(node: Any, lines: Sequence[tuple[str, str]], position: np.ndarray,
-                 line_screen: float = LABEL_LINE_SCREEN) -> float:
-    """A text label of constant screen size at a world position, always facing the camera.
-
-    A three.js ``Sprite`` whose ``SpriteMaterial`` has ``sizeAttenuation: false``: three.js then
-    multiplies the sprite's scale by its depth, so that a sprite of height ``s`` covers
-    ``s / (2 tan(fov / 2))`` of the page height whatever the zoom. Drawn over everything (no depth test).
-
-    Args:
-        node: the meshcat node to draw into.
-        lines: [(text, '#rrggbb')] lines of the label.
-        position: world position of the label's centre (m).
-        line_screen: height of one line as a fraction of the page height.
-
-    Returns:
-        The sprite's height ``s`` (its world height is ``s`` × depth from the camera).
-    """
-    import meshcat.geometry as mg
-
-    class SpriteMaterial(mg.GenericMaterial):
-        _type = "SpriteMaterial"
-
-    class Sprite(mg.Object):
-        _type = "Sprite"
-
-    png, aspect = _text_png(lines)
-    sy = label_height(len(lines), line_screen)
-    mat = SpriteMaterial(map=mg.ImageTexture(mg.PngImage(png)), transparent=True, depthTest=False, depthWrite=False,
-                         sizeAttenuation=False)
-    node.set_object(Sprite(mg.Box([1.0, 1.0, 1e-4]), mat))
-    node.set_transform(_homogeneous(np.diag([sy * aspect, sy, 1.0]), np.asarray(position, float)))
-    return float(sy)
-
-
-def _place_camera(vis: Any, target: np.ndarray, position: np.ndarray) -> None:
-    """Look at ``target`` from ``position`` (world frame).
-
-    Meshcat's orbit controls always look at (and orbit about) the three.js origin, so the scene
-    (``/meshcat``, and meshcat's ``/Grid`` and ``/Axes``) is shifted by ``-target`` and the camera placed
-    at ``position - target`` (in the camera's y-up frame: (x, z, -y)).
-    """
-    T = _homogeneous(t=-np.asarray(target, float))
-    for path in ("/meshcat", "/Grid", "/Axes"):
-        vis[path].set_transform(T)
-    off = np.asarray(position, float) - np.asarray(target, float)
-    vis["/Cameras/default/rotated/<object>"].set_property("position", [float(off[0]), float(off[2]), float(-off[1])])
-
-
-def default_camera(df: DesignFile) -> tuple[np.ndarray, np.ndarray]:
-    """A camera (target, position), world frame (m), that frames the robot and the working configurations."""
-    base = df.world_T_base.translation
-    reach = df.robot.reach()
-    tcp = df.tcp_world()
-    target = 0.4 * (base + np.array([0.0, 0.0, 0.3 * reach])) + 0.6 * tcp.mean(axis=0)
-    fwd = tcp.mean(axis=0) - base
-    fwd[2] = 0.0
-    if np.linalg.norm(fwd) < 1e-6:
-        fwd = np.array([1.0, 0.0, 0.0])
-    fwd /= np.linalg.norm(fwd)
-    az = np.arctan2(fwd[1], fwd[0]) + np.radians(30.0)
-    el = np.radians(32.0)
-    dist = 1.5 * reach
-    pos = target + dist * np.array([np.cos(az) * np.cos(el), np.sin(az) * np.cos(el), np.sin(el)])
-    return target, pos
-
-
-def _anim_set(node, M: pin.SE3, scale: np.ndarray) -> None:
-    """Position / quaternion (/ scale) keyframe of an animated node."""
-    q = pin.Quaternion(M.rotation)
-    clip = node.get_clip()
-    clip.set_property(node.current_frame, "position", "vector3", [float(x) for x in M.translation])
-    clip.set_property(node.current_frame, "quaternion", "quaternion", [float(q.x), float(q.y), float(q.z), float(q.w)])
-    if not np.allclose(scale, 1.0):
-        clip.set_property(node.current_frame, "scale", "vector3", [float(x) for x in scale])
-
-
 #: What each kind of C_s includes (the ellipsoids' labels and the page's legend).
 SIGMA_TEXT = {"honest": "discrepancy included", "paper": "tracker noise only"}
 
@@ -473,7 +328,7 @@ class _SceneBuilder:
             target, position = default_camera(self.df)
         else:
             target, position = (np.asarray(c, float) for c in self.opts.camera)
-        _place_camera(vis, target, position)
+        place_camera(vis, target, position)
         return np.asarray(target, float), np.asarray(position, float)
 
     def half_spaces(self) -> None:
@@ -482,7 +337,7 @@ class _SceneBuilder:
         for h in self.df.half_spaces:
             size, th = 8.0 * max(1.0, self.reach / 1.5), 0.02
             foot = centre - (h.normal @ centre - h.offset) * h.normal  # projection of the base on the plane
-            R = _plane_frame(h.normal)
+            R = plane_frame(h.normal)
             dims = [size, size, th]
             if abs(h.normal[2]) < 0.9 and self.has_floor:  # a wall: from the floor up
                 height = max(2.5, 1.6 * self.reach)
@@ -492,7 +347,7 @@ class _SceneBuilder:
             node = self.vis["cell/half_spaces"][slug(h.name)]
             node.set_object(mg.Box(dims), mg.MeshLambertMaterial(color=colour, opacity=opacity))
             # 1 cm below the plane: no z-fighting with the grid
-            node.set_transform(_homogeneous(R, foot - (0.5 * th + 0.01) * h.normal))
+            node.set_transform(homogeneous(R, foot - (0.5 * th + 0.01) * h.normal))
 
     def environment(self) -> None:
         """The environment files' geometry as the check sees it (``cell/environment/<solid>``); their fitted
@@ -504,7 +359,7 @@ class _SceneBuilder:
                 mat = mg.MeshLambertMaterial(color=0xA89F91)
                 if sd.vertices.shape[0] == 1:  # a sphere
                     node.set_object(mg.Sphere(float(sd.geometry.radius)), mat)
-                    node.set_transform(_homogeneous(t=sd.vertices[0]))
+                    node.set_transform(homogeneous(t=sd.vertices[0]))
                 else:
                     node.set_object(mg.TriangularMeshGeometry(sd.vertices, sd.faces), mat)
         if self.df.cell.environment:
@@ -523,20 +378,20 @@ class _SceneBuilder:
             node.set_object(createCapsule(max(L, 1e-6), o.radius) if L > 1e-9 else mg.Sphere(o.radius), mat)
             R = pin.Quaternion.FromTwoVectors(np.array([0.0, 0.0, 1.0]), (o.b - o.a) / L).toRotationMatrix() \
                 if L > 1e-9 else None
-            node.set_transform(_homogeneous(R, 0.5 * (o.a + o.b)))
+            node.set_transform(homogeneous(R, 0.5 * (o.a + o.b)))
 
     def tracker(self) -> None:
         """The tracker: head at its frame origin, body, a stand down to the floor, its axes."""
         mg, Wt = self.mg, self.Wt
         tr = self.vis["tracker"]
         tr["head"].set_object(mg.Sphere(0.09), mg.MeshPhongMaterial(color=0x333333))
-        tr["head"].set_transform(_homogeneous(t=Wt.translation))
+        tr["head"].set_transform(homogeneous(t=Wt.translation))
         tr["body"].set_object(mg.Box([0.16, 0.16, 0.16]), mg.MeshPhongMaterial(color=0xDDDDDD))
-        tr["body"].set_transform(_homogeneous(Wt.rotation, Wt.translation - 0.13 * Wt.rotation[:, 2]))
+        tr["body"].set_transform(homogeneous(Wt.rotation, Wt.translation - 0.13 * Wt.rotation[:, 2]))
         h_stand = Wt.translation[2] - 0.21 - self.floor_z
         if h_stand > 0.05:
             tr["stand"].set_object(mg.Cylinder(h_stand, 0.025), mg.MeshPhongMaterial(color=0x555555))
-            tr["stand"].set_transform(_homogeneous(_rot_y_to(np.array([0.0, 0.0, 1.0])),
+            tr["stand"].set_transform(homogeneous(rot_y_to(np.array([0.0, 0.0, 1.0])),
                                                    [Wt.translation[0], Wt.translation[1],
                                                     self.floor_z + 0.5 * h_stand]))
         tr["axes"].set_object(mg.triad(0.25))
@@ -567,7 +422,7 @@ class _SceneBuilder:
                 for g in self.ghost_geom.geometryObjects:
                     viz.loadViewerGeometryObject(g, pin.GeometryType.VISUAL, np.asarray(rgba, float))
             gdata = self.ghost_geom.createData()
-            for g, M in _placements(self.model, self.data, self.ghost_geom, gdata, q, self.W):
+            for g, M in object_placements(self.model, self.data, self.ghost_geom, gdata, q, self.W):
                 T = M.homogeneous
                 T[:3, :3] = T[:3, :3] @ np.diag(g.meshScale)
                 self.vis[f"{root}/{g.name}"].set_transform(T)
@@ -583,7 +438,7 @@ class _SceneBuilder:
         """The laser beam at the first working configuration."""
         refl0 = self.df.reflector_world(self.df.q_work[:1])[0]
         self.vis["beam"].set_object(self.mg.Cylinder(1.0, 0.004), self.mg.MeshBasicMaterial(color=BEAM_COLOUR))
-        self.vis["beam"].set_transform(_beam_matrix(self.Wt.translation, refl0))
+        self.vis["beam"].set_transform(beam_matrix(self.Wt.translation, refl0))
 
     def markers(self) -> None:
         """The reflector position of every measurement configuration, one point cloud per design
@@ -642,7 +497,7 @@ class _SceneBuilder:
             spacing = 2.3 * rj + 0.01
             dot = self.vis["ellipsoids/tcp"][f"w{j}"]
             dot.set_object(mg.Sphere(max(0.006, 0.15 * rj)), mg.MeshPhongMaterial(color=0x111111))
-            dot.set_transform(_homogeneous(t=tcp))
+            dot.set_transform(homogeneous(t=tcp))
             for (di, jj, d, radii, axes) in ells:
                 if jj != j:
                     continue
@@ -651,7 +506,7 @@ class _SceneBuilder:
                 colour = self.colours[d.criterion]
                 self.vis[path].set_object(mg.Ellipsoid(list(np.maximum(radii * scale, 1e-5))),
                                           mg.MeshLambertMaterial(color=colour))
-                self.vis[path].set_transform(_homogeneous(axes, c))
+                self.vis[path].set_transform(homogeneous(axes, c))
                 views.append(EllipsoidView(d.criterion, j, tcp, c, radii, axes, colour, "/meshcat/" + path))
             self._label(j, tcp, rj, float(scale), position, fwd)
         return float(scale), views
@@ -687,15 +542,15 @@ class _SceneBuilder:
                 poses.append((d.criterion, k))
                 for fr in (frame, frame + fpp - 1):
                     with anim.at_frame(self.vis, fr) as f:
-                        for g, M in _placements(self.model, self.data, self.visual, vdata, q, pin.SE3.Identity()):
-                            _anim_set(f[f"robot/visuals/{g.name}"], M, g.meshScale)
+                        for g, M in object_placements(self.model, self.data, self.visual, vdata, q, pin.SE3.Identity()):
+                            anim_set(f[f"robot/visuals/{g.name}"], M, g.meshScale)
                         if self.collision is not None:
-                            for g, M in _placements(self.model, self.data, self.collision, cdata, q,
+                            for g, M in object_placements(self.model, self.data, self.collision, cdata, q,
                                                     pin.SE3.Identity()):
-                                _anim_set(f[f"robot/collisions/{g.name}"], M, g.meshScale)
-                        Tb = _beam_matrix(trk, refl[k])
-                        Mb = pin.SE3(_rot_y_to(refl[k] - trk), Tb[:3, 3])
-                        _anim_set(f["beam"], Mb, np.array([1.0, np.linalg.norm(refl[k] - trk), 1.0]))
+                                anim_set(f[f"robot/collisions/{g.name}"], M, g.meshScale)
+                        Tb = beam_matrix(trk, refl[k])
+                        Mb = pin.SE3(rot_y_to(refl[k] - trk), Tb[:3, 3])
+                        anim_set(f["beam"], Mb, np.array([1.0, np.linalg.norm(refl[k] - trk), 1.0]))
                 frame += fpp
         self.vis.set_animation(anim, play=False, repetitions=1)
         return poses

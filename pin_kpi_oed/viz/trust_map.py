@@ -25,7 +25,7 @@ from typing import Any
 import numpy as np
 
 from pin_kpi_oed.errors import InputError
-from pin_kpi_oed.viz.figures import _figure, save_png
+from pin_kpi_oed.viz.figures import agg_figure, save_png
 
 __all__ = ["TrustMap", "trust_map", "plot_trust_map", "sigma_contents"]
 
@@ -137,7 +137,7 @@ def plot_trust_map(model: Any, Q: np.ndarray, aux: Any = None, station: str | No
     P, T = tm.positions_base_m * 1e3, tm.training_base_m * 1e3       # mm for display
     s_mm = tm.sigma_m * 1e3
     far = tm.extrapolation
-    fig = _figure(11.0, 5.0)
+    fig = agg_figure(11.0, 5.0)
     axes = fig.subplots(1, 2)
     vmin, vmax = float(s_mm.min()), float(s_mm.max())
     if vmax <= vmin:
