@@ -76,17 +76,17 @@ def main(m: int = 60) -> None:
     figure("selection time (relaxation + rounding + exchange), wall", t_sel, 0.5, "s",
            statistics.median(t_dm), "DETMAX one run (median of 5)")
     figure("selection time, CPU", c_sel, 0.5, "s", statistics.median(c_dm), "DETMAX one run, CPU")
-    figure("tr(C_s) of the selection / DETMAX's (median of 5 seeds)", sel.phi / statistics.median(dms), 1.0, "",
+    figure("tr(C_s) of the selection / DETMAX's (median of 5 seeds)", sel.value / statistics.median(dms), 1.0, "",
            min(dms) / statistics.median(dms), "best DETMAX seed /median")
     figure("relaxation (Newton, capped at 1/m) time", sel.approx.time_s, 0.5, "s", t_old,
            "previous (multiplicative)")
     print(f"  relaxation: {sel.approx.message}; previous: {old.message}")
-    eff_new, eff_old = sel.efficiency(), efficiency(sel.phi, old, m)
+    eff_new, eff_old = sel.efficiency(), efficiency(sel.value, old, m)
     figure("efficiency vs capped (distinct-point) bound", eff_new, 0.95, "", eff_old,
            "vs previous uncapped bound", lower_is_better=False)
-    print(f"  bound gap: tr(C_s) {sel.phi * 1e6:.5e} mm^2 vs capped bound {sel.approx.lower_bound / m * 1e6:.5e}"
+    print(f"  bound gap: tr(C_s) {sel.value * 1e6:.5e} mm^2 vs capped bound {sel.approx.lower_bound / m * 1e6:.5e}"
           f" mm^2 ({100 * (1 - eff_new):.2f} % gap: exchange + rounding); uncapped bound "
-          f"{new_free.lower_bound / m * 1e6:.5e} mm^2 ({100 * (1 - new_free.lower_bound / m / sel.phi):.2f}"
+          f"{new_free.lower_bound / m * 1e6:.5e} mm^2 ({100 * (1 - new_free.lower_bound / m / sel.value):.2f}"
           f" % gap, of which the replication the uncapped relaxation allows is "
           f"{100 * (sel.approx.lower_bound - new_free.lower_bound) / sel.approx.lower_bound:.2f} %)")
 

@@ -55,11 +55,11 @@ def main(argv: list[str] | None = None) -> dict:
         sig_rnd = float(np.mean([np.sqrt(gp.value(Q_pool[rnd.choice(1000, 60, replace=False)]) / t)
                                  for _ in range(10)]))
         out["pool"] = {"candidates": 1000, "m": 60, "kpi_gp_time_s_median": float(np.median(times)),
-                       "kpi_gp_times_s": times, "plain_kpi_time_s": t_plain, "exchanges": sel.exchanges,
+                       "kpi_gp_times_s": times, "plain_kpi_time_s": t_plain, "exchanges": sel.nit,
                        "kpi_gp_sigma_m": float(np.sqrt(sel.value / t)),
                        "plain_kpi_selection_kpi_gp_sigma_m": float(np.sqrt(gp.value(Q_pool[plain.indices]) / t)),
                        "random_kpi_gp_sigma_m_mean10": sig_rnd}
-        print(f"pool 1000 -> 60: kpi_gp {np.median(times):.3f} s (median of 3; {sel.exchanges} exchanges), plain kpi "
+        print(f"pool 1000 -> 60: kpi_gp {np.median(times):.3f} s (median of 3; {sel.nit} exchanges), plain kpi "
               f"{t_plain:.3f} s; predicted TCP sigma with the default discrepancy: kpi_gp selection "
               f"{np.sqrt(sel.value / t) * 1e6:.1f} um, plain kpi selection "
               f"{out['pool']['plain_kpi_selection_kpi_gp_sigma_m'] * 1e6:.1f} um, random {sig_rnd * 1e6:.1f} um")

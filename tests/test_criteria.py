@@ -1,5 +1,6 @@
-"""Criteria as objects: closed-form values, pool forms consistent with values, and a toy criterion registered
-from outside the package run through the IPOPT design, the pool start, ``evaluate`` and the CLI."""
+"""Criteria as objects: closed-form values, pool forms consistent with values, and toy criteria registered from
+outside the package (two of the information matrix, one of the configurations) run through the IPOPT design, the
+pool selection, ``evaluate`` and the CLI."""
 
 from __future__ import annotations
 
@@ -9,13 +10,14 @@ import numpy as np
 import pytest
 
 from pin_kpi_oed.cell.cell import load_cell
-from pin_kpi_oed.design.optimize import (_NLP, DesignOptions, DesignProblem, design_ipopt, ipopt_options,
+from pin_kpi_oed.design.ipopt import DesignNLP
+from pin_kpi_oed.design.optimize import (DesignOptions, DesignProblem, design_ipopt, ipopt_options,
                                          run_designs)
 from pin_kpi_oed.errors import InputError
 from pin_kpi_oed.model.serialize import model_to_dict
 from pin_kpi_oed.oed import identifiability as idf
-from pin_kpi_oed.oed.covariance import param_covariance
-from pin_kpi_oed.oed.criteria import CRITERIA, Criterion, DesignCriterion, get_criterion, register, unregister
+from pin_kpi_oed.oed.criteria import CRITERIA, ConfigurationCriterion, Criterion, get_criterion, register, unregister
+from pin_kpi_oed.oed.objective import DesignCriterion, DesignObjective
 from pin_kpi_oed.oed.evaluate import score_design
 from pin_kpi_oed.oed.pool import exact_phi, select
 
@@ -24,19 +26,21 @@ from .conftest import make_model
 M = 14
 
 
-class WorstTcpVariance(Criterion):
-    """Toy criterion written outside the package: the largest eigenvalue of C_s (worst TCP direction, m²).
+def _covariance(M0, prior_info):
+    return np.linalg.inv(M0 if prior_info is None else M0 + prior_info)
 
-    dλ = vᵀE dC_p Eᵀv with dC_p = −C_p (dFᵀF + FᵀdF) C_p, so dλ/dF = −2 (F a) aᵀ with a = C_p Eᵀ v.
-    """
+
+class WorstTcpVariance(Criterion):
+    """Toy criterion of the information matrix written outside the package: the largest eigenvalue of C_s (worst TCP
+    direction, m²). dλ = vᵀE dC_p Eᵀv with dC_p = −C_p dM C_p, so ∂λ/∂M = −a aᵀ with a = C_p Eᵀ v."""
 
     name, label, unit, is_ratio, needs_kpi = "cs_max", "largest eigenvalue of C_s", "m^2", True, True
 
-    def value_and_grad_F(self, F, E=None, prior_sigma=None):
-        C_p = param_covariance(F, prior_sigma)
+    def value_and_grad_M(self, M0, E=None, prior_info=None, rows=0):
+        C_p = _covariance(M0, prior_info)
         w, V = np.linalg.eigh(E @ C_p @ E.T)
         a = C_p @ E.T @ V[:, -1]
-        return float(w[-1]), -2.0 * np.outer(F @ a, a)
+        return float(w[-1]), -np.outer(a, a)
 
 
 class VerticalTcpVariance(Criterion):
@@ -44,19 +48,53 @@ class VerticalTcpVariance(Criterion):
 
     name, label, unit, is_ratio, needs_kpi, has_pool_form = "cs_z", "vertical TCP variance", "m^2", True, True, True
 
-    def value_and_grad_F(self, F, E=None, prior_sigma=None):
+    def value_and_grad_M(self, M0, E=None, prior_info=None, rows=0):
         K = E[2::3]
-        C_p = param_covariance(F, prior_sigma)
-        CK = C_p @ K.T
-        return float(np.trace(K @ CK)), -2.0 * F @ (CK @ CK.T)
+        CK = _covariance(M0, prior_info) @ K.T
+        return float(np.trace(K @ CK)), -(CK @ CK.T)
 
     def pool_form(self, E, nb):
         return E[2::3]
 
 
+class TotalInformation(Criterion):
+    """Toy criterion of the parameter information alone: −log tr M (Γ = −I / tr M)."""
+
+    name, label, unit = "info", "-log of the total information", "log"
+
+    def value_and_grad_M(self, M0, E=None, prior_info=None, rows=0):
+        M = M0 if prior_info is None else M0 + prior_info
+        return -float(np.log(np.trace(M))), -np.eye(M.shape[0]) / np.trace(M)
+
+
+class NearWorkKpi(ConfigurationCriterion):
+    """Toy criterion of the configurations written outside the package: tr(C_s) plus a penalty μ Σ_i ‖q_i − q̄‖²
+    keeping the measurement poses near the mean working configuration q̄ (μ in m²/rad²): no information matrix
+    carries it. Its objective chains the noise-only KPI objective of the design context with the penalty."""
+
+    name, label, unit, is_ratio, needs_kpi = "kpi_near", "tr(C_s) + mu |q - q_work|^2", "m^2", True, True
+    mu = 1e-9
+
+    def objective(self, problem):
+        return _NearWork(problem, self.mu, self)
+
+
+class _NearWork(DesignObjective):
+    def __init__(self, problem, mu, crit):
+        self.kpi = DesignCriterion(problem.model, problem.base, "kpi", problem.E, p=problem.p0)
+        self.q_mean, self.mu, self.crit = np.mean(problem.q_work, axis=0), mu, crit
+
+    def value(self, Q):
+        return self.kpi.value(Q) + self.mu * float(np.sum((np.atleast_2d(Q) - self.q_mean) ** 2))
+
+    def value_and_grad(self, Q):
+        v, g = self.kpi.value_and_grad(Q)
+        return v + self.mu * float(np.sum((Q - self.q_mean) ** 2)), g + 2.0 * self.mu * (Q - self.q_mean)
+
+
 @pytest.fixture
 def toys():
-    crits = [register(WorstTcpVariance()), register(VerticalTcpVariance)]
+    crits = [register(WorstTcpVariance()), register(VerticalTcpVariance), register(NearWorkKpi)]
     yield crits
     for c in crits:
         unregister(c.name)
@@ -119,7 +157,7 @@ def test_pool_forms_agree_with_the_values(setup):
     Fp = F.reshape(20, 3, -1)
     idx = np.arange(3, 17)
     for crit in CRITERIA.values():
-        if crit.has_pool_form:
+        if isinstance(crit, Criterion) and crit.has_pool_form:
             K = crit.pool_form(E, F.shape[1])
             assert exact_phi(Fp, idx, K) == pytest.approx(crit.value(Fp[idx].reshape(-1, F.shape[1]), E), rel=1e-9)
 
@@ -129,7 +167,7 @@ def test_ratio_criteria_are_scaled_and_log_criteria_shifted(problem):
     x = start.ravel()
     for name in CRITERIA:
         crit = problem.criterion(name)
-        nlp = _NLP(crit, problem.cons, M, crit.value(start))
+        nlp = DesignNLP(crit, problem.cons, M, crit.value(start))
         assert nlp.objective(x) == pytest.approx(1.0 if crit.is_ratio else 0.0, abs=1e-12)
         assert crit.is_ratio == (get_criterion(name).unit not in ("log",))
 
@@ -206,3 +244,55 @@ def test_toy_pool_form_selects_for_itself(toys, problem):
     assert des.criterion == "cs_z" and des.feasible
     assert des.value < toy.value(problem.model.weighted_jacobian(problem.p0, rnd.q_meas)[:, :, problem.base]
                                  .reshape(-1, nb), problem.E)
+
+
+def test_outside_criteria_of_both_kinds_design_select_and_evaluate(toys, problem):
+    """One class each, registered from outside: a criterion of the information matrix (cs_z) on the noise-only, the
+    measured-poses and the GLS information models, and a criterion of the configurations (kpi_near), each through
+    the pool selection, the IPOPT design and evaluate."""
+    from pin_kpi_oed.design.sequential import SequentialProblem
+    from pin_kpi_oed.design.user_pool import design_from_pool
+    from pin_kpi_oed.oed.discrepancy_criteria import GlsDesignCriterion
+
+    Q = problem.random_design(60, 4)[0]
+    near = problem.criterion("kpi_near")
+    assert isinstance(near, DesignObjective) and near.name == "kpi_near" and near.is_ratio
+    # pool selection: the generic greedy + exchange of a configuration criterion beats every random subset
+    results, cert, _ = design_from_pool(problem, Q, ["random", "cs_z", "kpi_near"], M, seed=0)
+    by = {r.criterion: r for r in results}
+    rng = np.random.default_rng(0)
+    rnd = [near.value(Q[rng.choice(60, M, replace=False)]) for _ in range(20)]
+    assert by["kpi_near"].value < min(rnd) and by["kpi_near"].value == pytest.approx(near.value(by["kpi_near"].q_meas))
+    assert by["cs_z"].value == pytest.approx(problem.criterion("cs_z").value(by["cs_z"].q_meas), rel=1e-12)
+    # IPOPT from the random start lowers the configuration criterion; its gradient matches finite differences
+    start = problem.random_design(M, 0)[0]
+    v, g = near.value_and_grad(start)
+    d = 1e-6 * np.random.default_rng(2).standard_normal(start.shape)
+    assert (near.value(start + d) - near.value(start - d)) / 2 == pytest.approx(np.sum(g * d), rel=1e-4)
+    res = design_ipopt(problem, "kpi_near", M, seed=0, start=start, options=ipopt_options(max_iter=30))
+    assert res.criterion == "kpi_near" and res.feasible and res.value < 0.8 * v
+    # evaluate scores both (the configuration criterion on the design file's set-up)
+    score = score_design(problem.model, res.q_meas, problem.cell.q_work, problem.ident)
+    assert score.criteria["kpi_near"] == pytest.approx(res.value, rel=1e-9)
+    assert score.criteria["cs_z"] == pytest.approx(np.trace(score.cov_s_m2[2::3, 2::3]), rel=1e-9)
+    assert "kpi_gp" not in score.criteria  # needs a design problem's discrepancy
+    # the same information criterion on two more information models: the measured poses and the GLS information
+    seq = SequentialProblem(problem.cell, Q[:10])
+    given = seq.criterion("cs_z")
+    assert given.value(Q[10:20]) == pytest.approx(get_criterion("cs_z").value(
+        problem.model.weighted_jacobian(problem.p0, Q[:20])[:, :, problem.base].reshape(-1, problem.base.size),
+        problem.E), rel=1e-9)
+    # a criterion registered later gets its GLS form on demand (no registration loop); cs_z needs E: its
+    # discrepancy-aware form is the kriging kpi_gp
+    register(TotalInformation)
+    try:
+        form = get_criterion("info_gp")
+        gls = problem.criterion("info_gp")
+        assert form.base is get_criterion("info") and isinstance(gls, GlsDesignCriterion) and gls.name == "info_gp"
+        sel = gls.select(Q, M)
+        assert sel.value == pytest.approx(gls.value(Q[sel.indices]), rel=1e-9)
+        assert sel.value < min(gls.value(Q[rng.choice(60, M, replace=False)]) for _ in range(10))
+        with pytest.raises(InputError, match="unknown criterion 'cs_z_gp'"):
+            get_criterion("cs_z_gp")
+    finally:
+        unregister("info")

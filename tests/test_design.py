@@ -9,7 +9,8 @@ import numpy as np
 import pytest
 
 from pin_kpi_oed.cell.cell import load_cell
-from pin_kpi_oed.design.optimize import (DesignOptions, DesignProblem, DesignResult, _NLP, design_ipopt, ipopt_options,
+from pin_kpi_oed.design.ipopt import DesignNLP
+from pin_kpi_oed.design.optimize import (DesignOptions, DesignProblem, DesignResult, design_ipopt, ipopt_options,
                                          run_designs, solve_ipopt)
 from pin_kpi_oed.errors import InputError
 
@@ -28,7 +29,7 @@ def start(problem) -> np.ndarray:
 
 def test_nlp_structure_and_gradients(problem, start):
     crit = problem.criterion("kpi")
-    nlp = _NLP(crit, problem.cons, M, crit.value(start))
+    nlp = DesignNLP(crit, problem.cons, M, crit.value(start))
     x = start.ravel().copy()
     rows, cols = nlp.jacobianstructure()
     g = nlp.constraints(x)
@@ -206,7 +207,7 @@ def sequential_files(tmp_path_factory):
 def test_cli_pool_on_top_of_given_poses_is_certified_and_answers_how_many_more(sequential_files):
     from pin_kpi_oed.cli.app import main
     from pin_kpi_oed.design.sequential import SequentialProblem
-    from pin_kpi_oed.oed.criteria import DesignCriterion
+    from pin_kpi_oed.oed.objective import DesignCriterion
 
     folder, Qg, pool = sequential_files
     cell = load_cell("kr15")
@@ -266,7 +267,7 @@ def test_given_prior_counts_in_scores_and_certificate(sequential_files):
     F = seq.model.weighted_jacobian(seq.p0, np.vstack([Qg, Qk]))[:, :, seq.base].reshape(-1, seq.base.size)
     want = np.trace(seq.E @ np.linalg.solve(F.T @ F + P, seq.E.T))
     assert res[-1].trace_cs_m2 == pytest.approx(want, rel=1e-8)
-    no_prior = SequentialProblem(cell, Qg)._kpi.value(Qk)
+    no_prior = SequentialProblem(cell, Qg).kpi_criterion.value(Qk)
     assert res[-1].trace_cs_m2 < no_prior
     assert cert.lower_bound_trace_cs_m2 <= res[-1].trace_cs_m2 and cert.efficiency(res[-1].trace_cs_m2) > 0.95
     with pytest.raises(InputError, match="names none"):

@@ -23,7 +23,7 @@ from pin_kpi_oed.model.robot import Robot, load_robot
 from pin_kpi_oed.model.tracker import TrackerModel
 from pin_kpi_oed.oed import covariance as cov
 from pin_kpi_oed.oed import identifiability as idf
-from pin_kpi_oed.oed.criteria import DesignCriterion
+from pin_kpi_oed.oed.objective import DesignCriterion
 
 
 @dataclass

@@ -59,7 +59,7 @@ def test_kernel_value_without_gradient_equals_the_chord_form():
     rng = np.random.default_rng(3)
     k = _kernel(rng)
     X, Y = rng.uniform(-7, 7, (40, 6)), rng.uniform(-7, 7, (25, 6))
-    c, L, a, ell = k._parts(6)
+    c, L, a, ell = k.parts(6)
     D = _chord2(X, Y)
     K_ref = c ** 2 * np.exp(-0.5 * (D / L ** 2).sum(-1)) + (a ** 2 * np.exp(-0.5 * D / ell ** 2)).sum(-1)
     assert np.abs(k(X, Y) - K_ref).max() < 1e-12

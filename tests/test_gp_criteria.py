@@ -12,7 +12,7 @@ import pytest
 from pin_kpi_oed.cell.cell import load_cell
 from pin_kpi_oed.design.optimize import DesignProblem
 from pin_kpi_oed.errors import InputError
-from pin_kpi_oed.oed.criteria import CRITERIA, DiscrepancyForm, get_criterion
+from pin_kpi_oed.oed.criteria import CRITERIA, Criterion, DiscrepancyForm, criterion_names, get_criterion
 from pin_kpi_oed.oed.discrepancy_criteria import (GlsDesignCriterion, _GlsState, gls_value_and_grad)
 from pin_kpi_oed.oed.discrepancy_kpi import DiscrepancyPrior, default_discrepancy
 
@@ -25,12 +25,16 @@ def problem():
 
 
 def test_every_parameter_criterion_has_its_discrepancy_form():
-    assert all(isinstance(CRITERIA[n], DiscrepancyForm) and CRITERIA[n].needs_configurations for n in GP)
-    assert "kpi_gp_gp" not in CRITERIA and "kpi_gp" in CRITERIA
+    """Made on demand for every registered criterion of the parameter information (none is registered), never for
+    kpi (its discrepancy-aware form is the kriging kpi_gp) or a criterion of the configurations."""
+    assert all(isinstance(get_criterion(n), DiscrepancyForm) and n not in CRITERIA for n in GP)
+    assert get_criterion("D_gp").base is get_criterion("D") and get_criterion("D_gp") is get_criterion("D_gp")
+    assert set(GP) <= set(criterion_names()) and "kpi_gp" in CRITERIA
+    assert not isinstance(get_criterion("kpi_gp"), Criterion) and not isinstance(get_criterion("D_gp"), Criterion)
     with pytest.raises(InputError, match="no discrepancy-aware form"):
         DiscrepancyForm(get_criterion("kpi"))
-    with pytest.raises(InputError, match="needs the configurations"):
-        get_criterion("D_gp").value(np.eye(3))
+    with pytest.raises(InputError, match="unknown criterion 'kpi_gp_gp'"):
+        get_criterion("kpi_gp_gp")
 
 
 @pytest.mark.parametrize("name", GP)

@@ -11,9 +11,11 @@ from pin_kpi_oed.cell.cell import load_cell
 from pin_kpi_oed.design.optimize import DesignProblem
 from pin_kpi_oed.errors import InputError
 from pin_kpi_oed.oed.covariance import covariances, prior_of
-from pin_kpi_oed.oed.criteria import CRITERIA, evaluate_all, get_criterion
-from pin_kpi_oed.oed.discrepancy_kpi import (DiscrepancyDesignCriterion, DiscrepancyPrior, GreedyState,
-                                             default_discrepancy, kpi_gp_covariance, kpi_gp_value_and_grad)
+from pin_kpi_oed.oed.criteria import CRITERIA, ConfigurationCriterion, Criterion, evaluate_all, get_criterion
+from pin_kpi_oed.oed.objective import DesignCriterion
+from pin_kpi_oed.oed.discrepancy_kpi import (DiscrepancyDesignCriterion, DiscrepancyPrior, default_discrepancy,
+                                             kpi_gp_covariance, kpi_gp_value_and_grad)
+from pin_kpi_oed.oed.discrepancy_pool import GreedyState
 
 from .fd import fd_rows
 
@@ -38,7 +40,7 @@ def test_zero_discrepancy_is_the_papers_kpi_covariance(problem):
     Cs = crit.covariance(Q)
     assert np.allclose(Cs, Rb @ Cs_paper @ Rb.T, rtol=1e-8, atol=1e-10 * np.abs(Cs_paper).max())
     assert crit.value(Q) == pytest.approx(np.trace(Cs_paper), rel=1e-9)
-    assert crit.value(Q) == pytest.approx(problem._kpi.value(Q), rel=1e-9)
+    assert crit.value(Q) == pytest.approx(problem.kpi_criterion.value(Q), rel=1e-9)
     # a discrepancy only adds uncertainty: tr C_s grows
     gp = DiscrepancyDesignCriterion(problem.model, problem.base, default_discrepancy(6), problem.cell.q_work,
                                     p=problem.p0)
@@ -161,12 +163,14 @@ def test_pool_updates_equal_recomputation(problem):
 
 
 def test_registered_and_evaluated_through_the_problem(problem):
-    """kpi_gp is in the registry, refuses F alone, is skipped by evaluate_all and runs through the design problem
-    (with the documented default discrepancy)."""
+    """kpi_gp is in the registry as a criterion of the configurations (no form on the information matrix), is left
+    out by evaluate_all without a design problem and runs through the design problem (with the documented default
+    discrepancy)."""
     assert "kpi_gp" in CRITERIA
     c = get_criterion("kpi_gp")
+    assert isinstance(c, ConfigurationCriterion) and not isinstance(c, Criterion)
     with pytest.raises(InputError, match="configurations"):
-        c.value_and_grad_F(np.eye(3))
+        DesignCriterion(problem.model, problem.base, "kpi_gp", problem.E)
     Q = problem.random_design(15, 1)[0]
     assert "kpi_gp" not in evaluate_all(problem.model, problem.base, Q, problem.E)
     dc = problem.criterion("kpi_gp")

@@ -383,7 +383,7 @@ def test_sequential_design_beats_random_and_answers_how_many_more(kr15, tmp_path
     import json
 
     from pin_kpi_oed.design.optimize import DesignProblem
-    from pin_kpi_oed.oed.criteria import DesignCriterion
+    from pin_kpi_oed.oed.objective import DesignCriterion
 
     base = DesignProblem(kr15)
     Q60, _ = base.random_design(60, seed=11)

@@ -24,9 +24,10 @@ import numpy as np
 
 from pin_kpi_oed.data.atomic import atomic_write_json
 from pin_kpi_oed.design.design_file import design_document
+from pin_kpi_oed.design.scores import add_discrepancy_section, discrepancy_scores, extended_scores, sigma_given
 from pin_kpi_oed.design.margins import DEFAULT_CLEARANCE_MARGIN_M, DEFAULT_INCIDENCE_MARGIN_DEG, with_margins
 from pin_kpi_oed.errors import IdentifiabilityError, InputError
-from pin_kpi_oed.oed.criteria import CRITERIA, check_names
+from pin_kpi_oed.oed.criteria import ConfigurationCriterion, check_names, criterion_names, get_criterion
 from pin_kpi_oed.validation.options import check_discrepancy_options
 from pin_kpi_oed.validation.robot_checks import check_same_robot
 
@@ -37,7 +38,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                               description=__doc__.splitlines()[0])
     p.add_argument("--cell", default="kr15", help="shipped cell (kr15, kr300, kr500, ur10) or a cell YAML file")
     p.add_argument("--criteria", default="random,param,kpi",
-                   help="comma-separated: random (heuristic) and registered criteria: " + ", ".join(CRITERIA))
+                   help="comma-separated: random (heuristic) and registered criteria: " + ", ".join(criterion_names()))
     p.add_argument("--measurements", type=int, default=None, help="number of measurement configurations "
                    "(default: the cell's)")
     p.add_argument("--seed", type=int, default=0, help="seed of the heuristic design and of the starts")
@@ -115,7 +116,7 @@ def parse_criteria(text: str) -> list[str]:
     """
     names = [c.strip() for c in str(text).split(",") if c.strip()]
     if not names:
-        raise InputError("--criteria: give at least one of random, " + ", ".join(CRITERIA))
+        raise InputError("--criteria: give at least one of random, " + ", ".join(criterion_names()))
     try:
         return check_names(names)
     except InputError as exc:
@@ -166,37 +167,6 @@ def table(results: list, reference=None, certificate=None, extended: list | None
                      + f"  {chk}")
     return "\n".join(lines)
 
-
-def extended_scores(problem, results: list, q_work: np.ndarray) -> list[dict] | None:
-    """Extended-model scores of every design (``--model``), or None without an extended model.
-
-    C = (FᵀF + Σ₀⁻¹)⁻¹ over geometry + the model file's effects with the chosen prior, C_s = E C Eᵀ
-    (eq. 19, extended; :meth:`~pin_kpi_oed.oed.extended.ExtendedModel.covariances`).
-
-    Args:
-        problem: the design problem (its ``extended`` model, or None).
-        results: the designs (``q_meas``, rad).
-        q_work: working configurations (rad).
-
-    Returns:
-        Per design {"trace_cs_m2", "tcp_sigma_m" = sqrt(tr(C_s)/t), "cov_s_m2"} (m², m); NaN where the
-        design with the prior does not determine the parameters.
-    """
-    from pin_kpi_oed.errors import IdentifiabilityError
-
-    ext = getattr(problem, "extended", None)
-    if ext is None:
-        return None
-    t = np.atleast_2d(q_work).shape[0]
-    out = []
-    for r in results:
-        try:
-            Cs = ext.covariances(r.q_meas, q_work)[1]
-            tr = float(np.trace(Cs))
-            out.append({"trace_cs_m2": tr, "tcp_sigma_m": math.sqrt(tr / t), "cov_s_m2": Cs.tolist()})
-        except (IdentifiabilityError, ValueError):
-            out.append({"trace_cs_m2": float("nan"), "tcp_sigma_m": float("nan"), "cov_s_m2": None})
-    return out
 
 
 def _true_checks(cell, results: list) -> list:
@@ -269,7 +239,7 @@ def run(args: argparse.Namespace) -> int:
         print(problem.discrepancy_prior().describe() + "\n" + _sigma_plan(problem, m))
         if given_file:
             print(f"measured poses alone ({len(problem.Q_given)}): predicted TCP sigma with the discrepancy "
-                  f"{_sigma_given(problem) * 1e6:.3f} um; the table adds each design's poses to them")
+                  f"{sigma_given(problem) * 1e6:.3f} um; the table adds each design's poses to them")
         print(discrepancy_table([r for r in results if r.criterion in criteria] or results,
                                 [g for r, g in zip(results, gp_scores) if r.criterion in criteria] or gp_scores))
         _discrepancy_notes(problem, gp_names)
@@ -283,7 +253,7 @@ def run(args: argparse.Namespace) -> int:
                               extended_scores=ext_scores, model_file=getattr(args, "model", None),
                               prior=getattr(args, "prior", None))
         if gp_scores is not None:
-            _discrepancy_doc(doc, problem, gp_scores)
+            add_discrepancy_section(doc, problem, gp_scores)
         if curve is not None:
             doc["poses_needed"] = curve.to_dict()
         atomic_write_json(args.json, doc)
@@ -341,7 +311,7 @@ def no_certificate(name: str) -> str:
 
 def _gp_names(criteria: list[str]) -> list[str]:
     """The discrepancy-aware criteria (``kpi_gp``, ``D_gp``, …) among registered names (others ignored)."""
-    return [c for c in criteria if c in CRITERIA and getattr(CRITERIA[c], "needs_configurations", False)]
+    return [c for c in criteria if c != "random" and isinstance(get_criterion(c), ConfigurationCriterion)]
 
 
 def _set_region(args: argparse.Namespace, problem, criteria: list[str], seed: int, true_cell) -> None:
@@ -538,7 +508,11 @@ def _make_problem(args: argparse.Namespace, cell, given_file, collision: bool, q
             cm = load_model_file(args.model)
             model_cell_tool(cm, args.model, cell, args.cell)  # the model's robot, tool frame and TCP are the cell's
             _set_discrepancy(problem, cm, args.model)
-            _refit_discrepancy(problem, given_file, quiet)
+            from pin_kpi_oed.identification.design_discrepancy import refit_discrepancy
+
+            line = refit_discrepancy(problem, given_file)
+            if not quiet:
+                print(line)
             return problem
         from pin_kpi_oed.cli.tool import model_cell_tool
         from pin_kpi_oed.identification.model_file import load_model_file
@@ -583,39 +557,6 @@ def _set_discrepancy(problem, cm, path: str) -> None:
                   "them measure it")
 
 
-def _refit_discrepancy(problem, given_file: str, quiet: bool) -> None:
-    """``--given measured.csv --model model.json``: re-fit the discrepancy on the measured batch (geometry and set-up
-    by least squares, then the Gaussian process on the residuals, mode ``on``) when the file holds measured positions
-    and enough rows; else keep the model file's discrepancy, saying why."""
-    from pin_kpi_oed.data.measurement_reader import read_measurements
-    from pin_kpi_oed.discrepancy import DiscrepancyOptions
-    from pin_kpi_oed.identification.identify import identify
-    from pin_kpi_oed.oed.discrepancy_kpi import DiscrepancyPrior
-
-    ms = read_measurements(given_file, joint_names=list(problem.cell.robot.joint_names), require_position=False)
-    pos = getattr(ms, "position_m", None)
-    n_min = DiscrepancyOptions().min_rows
-    why = None
-    if pos is None or not np.all(np.isfinite(pos)):
-        why = "it holds no measured positions (x, y, z)"
-    elif len(pos) < n_min:
-        why = f"its {len(pos)} rows are fewer than the {n_min} a Gaussian process needs"
-    if why is None:
-        fit = identify(problem.model, ms, discrepancy=DiscrepancyOptions(mode="on"))
-        if fit.discrepancy is not None:
-            problem.discrepancy = DiscrepancyPrior.from_discrepancy(
-                fit.discrepancy, f"re-fitted on --given {given_file} ({len(pos)} rows; geometry + set-up by least "
-                                 f"squares, then the Gaussian process on the residuals)")
-            if not quiet:
-                print(fit.discrepancy.decision)
-            return
-        why = "the fit returned no discrepancy"
-    if problem.discrepancy is None:
-        raise InputError(f"--given {given_file}: the discrepancy cannot be re-fitted ({why}) and --model holds none")
-    if not quiet:
-        print(f"--given {given_file}: discrepancy not re-fitted ({why}); the --model one is used")
-
-
 def _sigma_plan(problem, m: int) -> str:
     """What the discrepancy fit of the designed poses (and any --given ones) will need, and how identify will obtain
     the σ at that size (:func:`~pin_kpi_oed.discrepancy.gp.sigma_plan`)."""
@@ -625,51 +566,6 @@ def _sigma_plan(problem, m: int) -> str:
     return sigma_plan(m + (0 if Qg is None else len(Qg)), int(problem.base.size))
 
 
-def discrepancy_scores(problem, results: list) -> list[dict]:
-    """Honest TCP scores of every design with the problem's discrepancy (universal-kriging C_s, base frame).
-
-    Returns:
-        Per design {"trace_cs_m2", "tcp_sigma_m" = sqrt(tr(C_s)/t), "cov_s_m2"} (m², m, m²) at the working
-        configurations W and, with a working region, {"trace_cs_region_m2", "tcp_sigma_region_m"} over W plus the
-        region's configurations (sqrt(tr(C_s)/(t + k))); ``cov_s_m2`` is the full
-        universal-kriging C_s (3t × 3t) rotated to the tracker frame, like the design's own ``cov_s_m2`` (the trace
-        is the base frame's); NaN / None where the design does not identify the parameters.
-    """
-    from pin_kpi_oed.errors import IdentifiabilityError
-
-    crit = problem.gp_criterion(region=False)
-    reg = problem.gp_criterion() if getattr(problem, "region", None) is not None and problem.region.kept else None
-    t = problem.cell.q_work.shape[0]
-    R = np.kron(np.eye(t), crit.model.tracker_pose(crit.p).rotation)  # base -> tracker frame, per working configuration
-    out = []
-    for r in results:
-        try:
-            tr = float(crit.value(r.q_meas))
-            C = R @ crit.covariance(r.q_meas) @ R.T
-            cov = (0.5 * (C + C.T)).tolist()
-        except IdentifiabilityError:
-            tr, cov = float("nan"), None
-        out.append({"trace_cs_m2": tr, "tcp_sigma_m": math.sqrt(tr / t) if tr == tr else float("nan"),
-                    "cov_s_m2": cov})
-        if reg is not None:
-            n = reg.Q_work.shape[0]
-            try:
-                tr_r = float(reg.value(r.q_meas))
-            except IdentifiabilityError:
-                tr_r = float("nan")
-            out[-1].update({"trace_cs_region_m2": tr_r, "tcp_sigma_region_m": math.sqrt(tr_r / n)})
-    return out
-
-
-def _sigma_given(problem) -> float:
-    """Predicted TCP σ (m) at the working configurations of the measured poses alone, discrepancy included."""
-    from pin_kpi_oed.errors import IdentifiabilityError
-
-    crit = problem.gp_criterion(region=False)
-    try:
-        return math.sqrt(crit.value(np.zeros((0, problem.n))) / problem.cell.q_work.shape[0])
-    except IdentifiabilityError:
-        return float("inf")
 
 
 def _discrepancy_notes(problem, gp_names: list[str]) -> None:
@@ -730,30 +626,3 @@ def _given_prior(path: str, problem) -> np.ndarray:
     if par.get("covariance") is None or not par.get("names"):
         raise InputError(f"--given-prior {path}: the model file holds no parameter covariance")
     return prior_information(problem, list(par["names"]), np.asarray(par["covariance"], float), f"--given-prior {path}")
-
-
-def _discrepancy_doc(doc: dict, problem, gp_scores: list[dict]) -> None:
-    """Add the discrepancy (source, S, white level, kernel) and every design's honest scores to the JSON (SI)."""
-    from pin_kpi_oed.discrepancy.lever_arm import lever_arm_m, lever_arm_sigma_m
-
-    d = problem.discrepancy_prior()
-    arm = lever_arm_m(problem.model.tcp_m, problem.model.reflector_m)
-    doc["discrepancy"] = {"source": d.source, "scale_m": d.scale_m.tolist(), "noise": d.noise,
-                          "white_sigma_m": (d.scale_m * math.sqrt(d.noise)).tolist(),
-                          "delta_sigma_m": d.prior_sigma_m().tolist(),
-                          "kernel": None if d.kernel is None else d.kernel.to_dict(),
-                          "certificate": "none exists for the discrepancy-aware criteria (kpi_gp, D_gp, ...)",
-                          "tcp_from_reflector_m": arm, "lever_arm_sigma_per_rad_m": lever_arm_sigma_m(arm, 1.0),
-                          "note": "designs[i].discrepancy: universal-kriging tr(C_s) and TCP sigma at the working "
-                                  "configurations, discrepancy included, and its C_s (3t x 3t, m^2) in the tracker "
-                                  "frame like designs[i].cov_s_m2 (pin-kpi-oed view draws it); "
-                                  "designs[i].trace_cs_m2 / tcp_sigma_m / cov_s_m2: the paper's, tracker noise only; "
-                                  "the discrepancy is learnt at the reflector: a flange rotation of s rad per axis "
-                                  "adds lever_arm_sigma_per_rad_m * s (3-D RMS, in quadrature) at the TCP, which "
-                                  "no sigma here includes"}
-    region = getattr(problem, "region", None)
-    doc["working_region"] = None if region is None else {
-        **region.to_dict(), "note": "kpi_gp's KPI is tr(C_s) over the working configurations and these; "
-                                    "designs[i].discrepancy.tcp_sigma_region_m is sqrt(tr(C_s)/(t + kept)) over them"}
-    for dd, sc in zip(doc["designs"], gp_scores):
-        dd["discrepancy"] = sc

@@ -26,7 +26,8 @@ from pin_kpi_oed.cell.cell import Cell
 from pin_kpi_oed.design.optimize import DesignProblem
 from pin_kpi_oed.errors import IdentifiabilityError, InputError
 from pin_kpi_oed.oed.covariance import prior_square_root
-from pin_kpi_oed.oed.criteria import DesignCriterion
+from pin_kpi_oed.oed.criteria import Criterion
+from pin_kpi_oed.oed.objective import DesignCriterion, information_criterion
 from pin_kpi_oed.results import Result
 
 
@@ -76,20 +77,9 @@ class GivenDesignCriterion(DesignCriterion):
 
     F_given: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
 
-    def value(self, Q: np.ndarray) -> float:
-        """φ([F_given; F(Q)])."""
-        F = self.model.weighted_jacobian(self.p, Q)[:, :, self.base].reshape(-1, self.base.size)
-        return self.crit.value(np.vstack([self.F_given, F]), self.E, self.prior)
-
-    def value_and_grad(self, Q: np.ndarray) -> tuple[float, np.ndarray]:
-        """φ([F_given; F(Q)]) and dφ/dQ (m, n): only the new poses move."""
-        F, dF = self.model.weighted_jacobian_dq(self.p, Q)
-        Fb = F[:, :, self.base]
-        m, nh, nb = Fb.shape
-        k = self.F_given.shape[0]
-        val, G = self.crit.value_and_grad_F(np.vstack([self.F_given, Fb.reshape(-1, nb)]), self.E, self.prior)
-        grad = np.einsum("mac,mack->mk", G[k:].reshape(m, nh, nb), dF[:, :, self.base, :])
-        return val, grad
+    def fixed_rows(self) -> np.ndarray:
+        """The measured poses' rows (their prior rows included): φ([F_given; F(Q)]), only Q moves."""
+        return self.F_given
 
 
 class SequentialProblem(DesignProblem):
@@ -135,8 +125,8 @@ class SequentialProblem(DesignProblem):
             self.prior_info = np.asarray(prior_info, float)
             F = np.vstack([F, prior_square_root(self.prior_info)])
         self.F_given = F
-        self.kpi_criterion = self.criterion("kpi")
-        self._param = self.criterion("param")
+        self.kpi_criterion = self.information_objective(information_criterion("kpi"))
+        self._param = self.information_objective(information_criterion("param"))
 
     def fixed_information(self) -> np.ndarray | None:
         """The measured poses' information F_gᵀF_g (their prior rows included) plus the layout's prior, (nb, nb)."""
@@ -144,13 +134,9 @@ class SequentialProblem(DesignProblem):
         P = super().fixed_information()
         return M0 if P is None else M0 + P
 
-    def criterion(self, name: str) -> GivenDesignCriterion:
-        """The registered criterion ``name`` with the measured poses' information."""
-        from pin_kpi_oed.oed.criteria import get_criterion
-
-        if getattr(get_criterion(name), "needs_configurations", False):
-            return super().criterion(name)  # kpi_gp hedged when its discrepancy is assumed, as without --given
-        return GivenDesignCriterion(self.model, self.base, name, self.E, F_given=self.F_given)
+    def information_objective(self, crit: Criterion) -> GivenDesignCriterion:
+        """A criterion of the information matrix with the measured poses' information."""
+        return GivenDesignCriterion(self.model, self.base, crit, self.E, F_given=self.F_given)
 
     def identifies(self) -> bool:
         """Whether the measured poses alone identify the base parameters."""

@@ -30,8 +30,8 @@ from pin_kpi_oed.design.optimize import DesignProblem, DesignResult
 from pin_kpi_oed.errors import InfeasibleError, InputError
 from pin_kpi_oed.model.robot import Robot
 from pin_kpi_oed.oed.certificate import Certificate
-from pin_kpi_oed.oed.criteria import get_criterion
-from pin_kpi_oed.oed.pool import PoolSelection, select
+from pin_kpi_oed.oed.objective import DesignCriterion
+from pin_kpi_oed.oed.selection_result import PoolSelection
 from pin_kpi_oed.threads import limited_threads
 
 #: candidates checked per batch (bounds the memory of 100,000 candidates; Jacobians of 5,000 at a time are
@@ -238,7 +238,7 @@ def selection_efficiency(sel: PoolSelection, m: int, nb: int | None = None) -> f
     """
     if nb is None:
         return sel.efficiency()
-    return float(np.exp(-(sel.phi - (sel.approx.lower_bound - nb * np.log(m))) / nb))
+    return float(np.exp(-(sel.value - (sel.approx.lower_bound - nb * np.log(m))) / nb))
 
 
 def design_from_pool(problem: DesignProblem, Q_candidates: np.ndarray, criteria: list[str], m: int, seed: int = 0,
@@ -274,7 +274,6 @@ def design_from_pool(problem: DesignProblem, Q_candidates: np.ndarray, criteria:
     if len(Q) < m:
         raise InfeasibleError(f"--pool: only {len(Q)} of {len(Q_candidates)} candidates satisfy the cell's constraints "
                               f"(collision, beam, incidence, margins); {m} needed")
-    M0 = problem.fixed_information()
     Q_given = getattr(problem, "Q_given", None)
     on_top = f" on top of the {len(Q_given)} measured poses" if getattr(problem, "F_given", None) is not None else ""
     rng = np.random.default_rng(seed)
@@ -288,29 +287,24 @@ def design_from_pool(problem: DesignProblem, Q_candidates: np.ndarray, criteria:
     for c in criteria:
         if c == "random":
             continue
-        if getattr(get_criterion(c), "needs_configurations", False):  # kpi_gp: its own exchange, no certificate
-            gsel = problem.criterion(c).select(Q, m)
-            Qs = Q[np.sort(gsel.indices)]
-            out.append(problem.result(c, Qs, gsel.value, time_s=gsel.time_s, nit=gsel.exchanges, status="selected",
-                                      solver_status="pool", samples=len(Q),
-                                      message=f"greedy + exchange ({gsel.exchanges} swaps); no certificate"))
-            if timings is not None:
-                timings[f"select_{c}_s"] = gsel.time_s
-            continue
-        K = get_criterion(c).pool_form(problem.E, problem.base.size)
+        obj = problem.criterion(c)
         t0, c0 = time.perf_counter(), time.process_time()
-        sel = select(Fp, m, K, seed=seed, fixed_info=M0)
+        # the noise-only information: relaxation + certificate over the checked candidates' Jacobians; every other
+        # information model or criterion of the configurations: its own greedy + exchange (no certificate exists)
+        sel = obj.select(Q, m, seed=seed, Fp=Fp) if isinstance(obj, DesignCriterion) else obj.select(Q, m, seed=seed)
         if timings is not None:
             timings[f"select_{c}_s"] = time.perf_counter() - t0
             timings[f"select_{c}_cpu_s"] = time.process_time() - c0
-            timings[f"efficiency_{c}"] = selection_efficiency(sel, m, problem.base.size if K is None else None)
+            if sel.approx is not None:
+                K = obj.crit.pool_form(problem.E, problem.base.size) if isinstance(obj, DesignCriterion) else None
+                timings[f"efficiency_{c}"] = selection_efficiency(sel, m, problem.base.size if K is None else None)
         Qs = Q[np.sort(sel.indices)]
-        out.append(problem.result(c, Qs, problem.criterion(c).value(Qs), time_s=sel.time_s, nit=sel.nit,
-                                  status=sel.status, solver_status="pool", samples=len(Q), message=sel.message))
-        if c == "kpi":
+        out.append(problem.result(c, Qs, obj.value(Qs), time_s=sel.time_s, nit=sel.nit, status=sel.status,
+                                  solver_status="pool", samples=len(Q), message=sel.message))
+        if c == "kpi" and sel.approx is not None:
             a = sel.approx
             cert = Certificate(lower_bound_trace_cs_m2=a.lower_bound / m, m=m, pool_size=len(Q), samples=len(Q),
-                               approx=a, pool_selection=sel.indices, pool_selection_trace_cs_m2=sel.phi, Q_pool=Q,
+                               approx=a, pool_selection=sel.indices, pool_selection_trace_cs_m2=sel.value, Q_pool=Q,
                                success=a.success, status=a.status, nit=a.nit, time_s=sel.time_s,
                                message=f"tr(C_s) >= {a.lower_bound / m:.4g} m^2 for every {m}-pose subset of the "
                                        f"{len(Q)} feasible user candidates{on_top}")

@@ -87,7 +87,7 @@ def certify_pool(Fp: np.ndarray, m: int, E: np.ndarray | None, Q: np.ndarray, sa
     sel = select(Fp, m, E, fixed_info=fixed_info)
     approx = sel.approx
     return Certificate(lower_bound_trace_cs_m2=approx.lower_bound / m, m=m, pool_size=Q.shape[0], samples=samples,
-                       approx=approx, pool_selection=sel.indices, pool_selection_trace_cs_m2=sel.phi, Q_pool=Q,
+                       approx=approx, pool_selection=sel.indices, pool_selection_trace_cs_m2=sel.value, Q_pool=Q,
                        success=approx.success, status=approx.status, nit=approx.nit,
                        message=f"tr(C_s) >= {approx.lower_bound / m:.4g} m^2 for every {m}-pose design from "
                                f"{Q.shape[0]} feasible candidates ({approx.message})",

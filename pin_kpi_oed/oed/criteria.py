@@ -20,47 +20,58 @@ name        φ                                      meaning
 ``O5``      log Σ 1/μ_i                            Sun–Hollerbach O5 = 1/Σ(1/μ_i)
 ==========  =====================================  ==================================
 
-**One class per criterion.** Each criterion is a subclass of :class:`Criterion` carrying its
-``name``, ``label``, ``unit``, whether it ``is_ratio`` (a positive quantity the design solver scales
-by its start value; the others are logarithms, shifted instead), whether it ``needs_kpi`` (the
-sensitivity E), its value and exact gradient dφ/dF (:meth:`Criterion.value_and_grad_F`) and its
-pool-selection form (:meth:`Criterion.pool_form`). The registry :data:`CRITERIA` maps names to
-instances; every user (the IPOPT design, the pool start, ``evaluate``, the CLI, the validation)
-looks criteria up there. **Adding a criterion** = writing one subclass and calling
-:func:`register` on it (from this file or from outside the package)::
+**Two kinds of criteria, one class each.**
+
+* A :class:`Criterion` is a function of the information matrix (in the spirit of cvxpy's atoms): φ(M₀) and
+  Γ = ∂φ/∂M₀ (:meth:`Criterion.value_and_grad_M`, M₀ the information of the measurements, the prior Σ₀⁻¹ given
+  apart), the same on the weighted Jacobian F (:meth:`Criterion.value_and_grad_F`, dφ/dF = 2FΓ unless a subclass
+  has a better form) and its pool form (:meth:`Criterion.pool_form`). It combines with every *information model*
+  (:mod:`pin_kpi_oed.oed.objective`): noise only, with measured poses, extended with a prior, generalised least
+  squares under the model discrepancy (its ``<name>_gp`` form, :class:`DiscrepancyForm`, made on demand for every
+  criterion of the parameter information).
+* A :class:`ConfigurationCriterion` is a function of the configurations that no information matrix carries (the
+  universal-kriging ``kpi_gp``: the discrepancy kernel couples the poses); it builds its own
+  :class:`~pin_kpi_oed.oed.objective.DesignObjective` on a design problem (:meth:`ConfigurationCriterion.objective`).
+
+Both carry ``name``, ``label``, ``unit``, whether they are a ratio (``is_ratio``: a positive quantity the design
+solver scales by its start value; the others are logarithms, shifted instead) and whether they need the KPI
+sensitivity E (``needs_kpi``). The registry :data:`CRITERIA` maps names to instances; the IPOPT design, the pool
+selection, ``evaluate``, the CLI and the validation look criteria up there (:func:`get_criterion`). **Adding a
+criterion** = writing one subclass and calling :func:`register` on it (from this file or from outside the
+package; ``tests/test_criteria.py`` does both kinds)::
 
     class WorstTcpVariance(Criterion):
         name, label, unit, is_ratio, needs_kpi = "cs_max", "largest eigenvalue of C_s", "m^2", True, True
-        def value_and_grad_F(self, F, E=None, prior_sigma=None): ...
+        def value_and_grad_M(self, M0, E=None, prior_info=None, rows=0): ...   # φ, ∂φ/∂M₀
 
     register(WorstTcpVariance())
 
-Gradients: dφ/dF is closed form (e.g. −2 F M⁻¹EᵀE M⁻¹ for tr C_s, and
-dμ_i = u_iᵀ dF v_i for singular-value criteria), chained with dF/dq from
-:meth:`TrackerModel.weighted_jacobian_dq` by :class:`DesignCriterion`.
+Gradients: Γ is closed form (−M⁻¹EᵀE M⁻¹ for tr C_s, −M⁻¹ for −log det M, Σ_i (∂φ/∂μ_i)/(2μ_i) v_i v_iᵀ for the
+singular values μ_i = sqrt(λ_i(M₀))), chained with dF/dq (:meth:`TrackerModel.weighted_jacobian_dq`) by the
+information model.
 """
 
 from __future__ import annotations
 
+from abc import ABC, abstractmethod
 from collections.abc import Iterable
-from dataclasses import dataclass, field
-from typing import ClassVar
+from typing import TYPE_CHECKING, Any, ClassVar
 
 import numpy as np
 
 from pin_kpi_oed.errors import IdentifiabilityError, InputError
-from pin_kpi_oed.model.tracker import TrackerModel
-from pin_kpi_oed.oed.covariance import information, prior_of
+from pin_kpi_oed.oed.covariance import information
 
-__all__ = ["Criterion", "CovarianceCriterion", "SingularValueCriterion", "DiscrepancyForm", "CRITERIA", "register",
-           "unregister", "get_criterion", "check_names", "DesignCriterion", "evaluate_all"]
+if TYPE_CHECKING:
+    from pin_kpi_oed.oed.objective import DesignObjective
+
+__all__ = ["CriterionInfo", "Criterion", "CovarianceCriterion", "SingularValueCriterion", "ConfigurationCriterion",
+           "DiscrepancyForm", "CRITERIA", "register", "unregister", "get_criterion", "check_names", "criterion_names",
+           "evaluate_all"]
 
 
-class Criterion:
-    """Base class of a design criterion φ(F), to be minimised.
-
-    Subclasses set the class attributes and implement :meth:`value_and_grad_F`; optionally
-    :meth:`pool_form` (with ``has_pool_form = True``) when the criterion can select poses from a pool.
+class CriterionInfo:
+    """What every criterion says about itself (both kinds, :class:`Criterion` and :class:`ConfigurationCriterion`).
 
     Attributes:
         name: registry key, as typed on the command line (``--criteria``).
@@ -69,22 +80,55 @@ class Criterion:
         is_ratio: the value is a positive quantity (the design solver divides by its start value);
             otherwise it is a logarithm (the solver subtracts its start value).
         needs_kpi: the value needs the KPI sensitivity E (working configurations).
-        has_pool_form: :meth:`pool_form` is this criterion's own pool-selection form (A- or D-type);
-            otherwise a pool selection for it falls back to D-optimality.
     """
 
-    name: ClassVar[str] = ""
-    label: ClassVar[str] = ""
-    unit: ClassVar[str] = ""
-    is_ratio: ClassVar[bool] = False
-    needs_kpi: ClassVar[bool] = False
+    name: str = ""
+    label: str = ""
+    unit: str = ""
+    is_ratio: bool = False
+    needs_kpi: bool = False
+
+    def __repr__(self) -> str:
+        return f"<criterion {self.name}: {self.label} [{self.unit}]>"
+
+
+class Criterion(CriterionInfo, ABC):
+    """A design criterion of the information matrix, to be minimised (the abstract base of the first kind).
+
+    Subclasses set the :class:`CriterionInfo` attributes and implement :meth:`value_and_grad_M`; they may give a
+    better-conditioned form on F (:meth:`value_and_grad_F`, e.g. singular values from F's SVD) and a pool form
+    (:meth:`pool_form`, with ``has_pool_form = True``).
+
+    Attributes:
+        has_pool_form: :meth:`pool_form` is this criterion's own pool-selection form (A- or D-type); otherwise a pool
+            selection for it falls back to D-optimality.
+    """
+
     has_pool_form: ClassVar[bool] = False
-    #: a function of the configurations, not of F alone (``kpi_gp``): evaluated through the design problem
-    needs_configurations: ClassVar[bool] = False
+
+    @abstractmethod
+    def value_and_grad_M(self, M0: np.ndarray, E: np.ndarray | None = None, prior_info: np.ndarray | None = None,
+                         rows: int = 0) -> tuple[float, np.ndarray]:
+        """φ and Γ = ∂φ/∂M₀ (symmetric) of the information M₀ of the measurements.
+
+        Args:
+            M0: information of the measurements over the identifiable parameters, (nb, nb) (FᵀF; the GLS M₀ under
+                the discrepancy), in 1/(parameter unit)².
+            E: KPI sensitivity over the same parameters, (n_s, nb), m per parameter unit.
+            prior_info: prior information Σ₀⁻¹ (nb, nb), or None; M = M₀ + Σ₀⁻¹ for the covariance criteria.
+            rows: number of (whitened) measurement rows behind M₀ (Borm–Menq O1 counts them).
+
+        Returns:
+            (φ in :attr:`unit`, Γ with the shape of M₀).
+
+        Raises:
+            IdentifiabilityError: the design does not identify the parameters.
+            InputError: E missing for a criterion that needs it.
+        """
 
     def value_and_grad_F(self, F: np.ndarray, E: np.ndarray | None = None,
                          prior_sigma: np.ndarray | None = None) -> tuple[float, np.ndarray]:
-        """Value φ and exact gradient dφ/dF.
+        """Value φ and exact gradient dφ/dF = 2FΓ of the weighted Jacobian F.
 
         Args:
             F: weighted Jacobian over the identifiable parameters, (rows, nb).
@@ -98,7 +142,9 @@ class Criterion:
             IdentifiabilityError: the design does not identify the parameters.
             InputError: E missing for a criterion that needs it.
         """
-        raise NotImplementedError
+        P = None if prior_sigma is None else np.diag(1.0 / np.asarray(prior_sigma, float) ** 2)
+        val, Gam = self.value_and_grad_M(F.T @ F, E, P, F.shape[0])
+        return float(val), 2.0 * F @ Gam
 
     def value(self, F: np.ndarray, E: np.ndarray | None = None, prior_sigma: np.ndarray | None = None) -> float:
         """φ(F) (see :meth:`value_and_grad_F`)."""
@@ -117,97 +163,105 @@ class Criterion:
         """
         return None
 
-    def _need_E(self, E: np.ndarray | None) -> np.ndarray:
+    def need_E(self, E: np.ndarray | None) -> np.ndarray:
+        """E, or an InputError naming the criterion when it is missing."""
         if E is None:
             raise InputError(f"the {self.name} criterion needs the working configurations (KPI sensitivity E)")
         return E
 
-    def __repr__(self) -> str:
-        return f"<criterion {self.name}: {self.label} [{self.unit}]>"
-
 
 # ---------------------------------------------------------------------- covariance-based criteria
 class CovarianceCriterion(Criterion):
-    """A criterion of the parameter covariance C_p = (FᵀF + P)⁻¹ (eq. 19), through one Cholesky factor.
+    """A criterion of the parameter covariance C_p = (M₀ + Σ₀⁻¹)⁻¹ (eq. 19), through one Cholesky factor.
 
     Subclasses implement :meth:`from_covariance`.
     """
 
+    def value_and_grad_M(self, M0: np.ndarray, E: np.ndarray | None = None, prior_info: np.ndarray | None = None,
+                         rows: int = 0) -> tuple[float, np.ndarray]:
+        M = M0 if prior_info is None else M0 + prior_info
+        val, Gam = self._covariance_form(M, E)
+        return val, 0.5 * (Gam + Gam.T)
+
     def value_and_grad_F(self, F: np.ndarray, E: np.ndarray | None = None,
                          prior_sigma: np.ndarray | None = None) -> tuple[float, np.ndarray]:
-        M = information(F, prior_sigma)
+        val, Gam = self._covariance_form(information(F, prior_sigma), E)
+        return val, 2.0 * F @ Gam
+
+    def _covariance_form(self, M: np.ndarray, E: np.ndarray | None) -> tuple[float, np.ndarray]:
         try:
             L = np.linalg.cholesky(M)
         except np.linalg.LinAlgError:
             raise IdentifiabilityError("singular information matrix: the design does not identify the "
                                        "parameters; use more or more varied configurations") from None
         Linv = np.linalg.solve(L, np.eye(M.shape[0]))
-        return self.from_covariance(F, E, M, L, Linv.T @ Linv)
+        val, Gam = self.from_covariance(E, M, L, Linv.T @ Linv)
+        return float(val), Gam
 
-    def from_covariance(self, F: np.ndarray, E: np.ndarray | None, M: np.ndarray, L: np.ndarray, C: np.ndarray
+    @abstractmethod
+    def from_covariance(self, E: np.ndarray | None, M: np.ndarray, L: np.ndarray, C: np.ndarray
                         ) -> tuple[float, np.ndarray]:
-        """φ and dφ/dF from the information M, its Cholesky factor L and C = M⁻¹."""
-        raise NotImplementedError
+        """φ and Γ = ∂φ/∂M from the information M, its Cholesky factor L and C = M⁻¹."""
 
 
 class KpiTrace(CovarianceCriterion):
     """A on C_s: φ = tr(C_s) = tr(E C_p Eᵀ), the TCP covariance at the working configurations (eqs. 19, 24a, 24c).
 
-    dφ/dF = −2 F C_p Eᵀ E C_p.
+    Γ = −C_p Eᵀ E C_p.
     """
 
     name, label, unit = "kpi", "A on C_s: tr of the TCP covariance (m^2) - the paper's KPI criterion", "m^2"
     is_ratio, needs_kpi, has_pool_form = True, True, True
 
-    def from_covariance(self, F, E, M, L, C):
-        E = self._need_E(E)
+    def from_covariance(self, E, M, L, C):
+        E = self.need_E(E)
         CE = C @ E.T
-        return float(np.sum(E * CE.T)), -2.0 * F @ (CE @ CE.T)
+        return float(np.sum(E * CE.T)), -(CE @ CE.T)
 
     def pool_form(self, E, nb):
-        return self._need_E(E)
+        return self.need_E(E)
 
 
 class ParamTrace(CovarianceCriterion):
     """A on C_p: φ = tr(C_p), the paper's state of the art (A-optimality on the parameters).
 
-    Mixed units (m² and rad²). dφ/dF = −2 F C_p².
+    Mixed units (m² and rad²). Γ = −C_p².
     """
 
     name, label, unit = "param", "A on C_p: tr of the parameter covariance - the paper's state of the art", \
         "m^2 + rad^2 (mixed)"
     is_ratio, has_pool_form = True, True
 
-    def from_covariance(self, F, E, M, L, C):
-        return float(np.trace(C)), -2.0 * F @ (C @ C)
+    def from_covariance(self, E, M, L, C):
+        return float(np.trace(C)), -(C @ C)
 
     def pool_form(self, E, nb):
         return np.eye(nb)
 
 
 class DOptimality(CovarianceCriterion):
-    """D-optimality: φ = −log det M (eq. 10, Daney). dφ/dF = −2 F C_p."""
+    """D-optimality: φ = −log det M (eq. 10, Daney). Γ = −C_p."""
 
     name, label, unit = "D", "D-optimality: -log det(F^T F)", "log"
     has_pool_form = True
 
-    def from_covariance(self, F, E, M, L, C):
-        return float(-2.0 * np.sum(np.log(np.diag(L)))), -2.0 * F @ C
+    def from_covariance(self, E, M, L, C):
+        return float(-2.0 * np.sum(np.log(np.diag(L)))), -C
 
     def pool_form(self, E, nb):
         return None
 
 
 class EOptimality(CovarianceCriterion):
-    """E-optimality: φ = λ_max(C_p) = 1/λ_min(M). dφ/dF = −(2/λ_min²) (F v) vᵀ, v the eigenvector of λ_min."""
+    """E-optimality: φ = λ_max(C_p) = 1/λ_min(M). Γ = −v vᵀ/λ_min², v the eigenvector of λ_min."""
 
     name, label, unit = "E", "E-optimality: largest eigenvalue of C_p", "m^2 or rad^2"
     is_ratio = True
 
-    def from_covariance(self, F, E, M, L, C):
+    def from_covariance(self, E, M, L, C):
         w, V = np.linalg.eigh(M)
         v = V[:, 0]
-        return float(1.0 / w[0]), -(2.0 / w[0] ** 2) * np.outer(F @ v, v)
+        return float(1.0 / w[0]), -np.outer(v, v) / w[0] ** 2
 
 
 # ---------------------------------------------------------------------- singular-value criteria
@@ -226,9 +280,22 @@ class SingularValueCriterion(Criterion):
         val, dmu = self.from_singular_values(mu, F.shape[0])
         return float(val), (U * dmu) @ Vt
 
+    def value_and_grad_M(self, M0: np.ndarray, E: np.ndarray | None = None, prior_info: np.ndarray | None = None,
+                         rows: int = 0) -> tuple[float, np.ndarray]:
+        """μ_i = sqrt(λ_i(M₀)) (the singular values of any F with FᵀF = M₀, e.g. the whitened Jacobian) and
+        Γ = Σ_i (∂φ/∂μ_i)/(2μ_i) v_i v_iᵀ; the prior is not used."""
+        lam, Vec = np.linalg.eigh(M0)
+        lam, Vec = lam[::-1], Vec[:, ::-1]
+        if lam[-1] <= 1e-24 * lam[0]:
+            raise IdentifiabilityError("rank-deficient (whitened) Jacobian: the design does not identify the "
+                                       "parameters")
+        mu = np.sqrt(lam)
+        val, dmu = self.from_singular_values(mu, rows)
+        return float(val), (Vec * (dmu / (2.0 * mu))) @ Vec.T
+
+    @abstractmethod
     def from_singular_values(self, mu: np.ndarray, rows: int) -> tuple[float, np.ndarray]:
         """φ and ∂φ/∂μ from the singular values (descending) and the number of rows of F."""
-        raise NotImplementedError
 
 
 class ConditionNumber(SingularValueCriterion):
@@ -295,63 +362,81 @@ class O5(SingularValueCriterion):
         return np.log(s), -1.0 / (mu ** 2 * s)
 
 
-# ---------------------------------------------------------------------- a criterion of the configurations
-class KpiDiscrepancy(Criterion):
+# ---------------------------------------------------------------------- criteria of the configurations
+class ConfigurationCriterion(CriterionInfo, ABC):
+    """A design criterion of the configurations that no information matrix carries (the abstract base of the second
+    kind): it builds its own objective φ(Q) on a design problem.
+
+    Subclasses set the :class:`CriterionInfo` attributes and implement :meth:`objective`.
+    """
+
+    @abstractmethod
+    def objective(self, problem: Any) -> DesignObjective:
+        """φ(Q) of this criterion on ``problem`` (a :class:`~pin_kpi_oed.design.optimize.DesignProblem`): a
+        :class:`~pin_kpi_oed.oed.objective.DesignObjective` with its value, exact gradient and pool selection."""
+
+
+class KpiDiscrepancy(ConfigurationCriterion):
     """A on the universal-kriging C_s: tr of the TCP error covariance with the model discrepancy (m²).
 
-    A function of the configurations (the discrepancy kernel couples the poses), not of F alone: the design
-    evaluates it through :class:`~pin_kpi_oed.oed.discrepancy_kpi.DiscrepancyDesignCriterion`
-    (``DesignProblem.criterion('kpi_gp')``); :meth:`value_and_grad_F` refuses. Pool selection:
-    :func:`~pin_kpi_oed.oed.discrepancy_kpi.select_pool_gp` (its own exchange; no certificate exists).
+    The discrepancy kernel couples the poses: :class:`~pin_kpi_oed.oed.discrepancy_kpi.DiscrepancyDesignCriterion`
+    on the problem's geometry, discrepancy, working region, measured poses and re-registration
+    (:meth:`DesignProblem.gp_criterion <pin_kpi_oed.design.optimize.DesignProblem.gp_criterion>`). Pool selection:
+    greedy + exchange (:func:`~pin_kpi_oed.oed.discrepancy_kpi.select_pool_gp`; no certificate exists).
     """
 
     name, label, unit = "kpi_gp", "A on C_s with the model discrepancy (universal kriging, m^2)", "m^2"
-    is_ratio, needs_kpi, has_pool_form = True, True, False
-    needs_configurations = True
+    is_ratio, needs_kpi = True, True
 
-    def value_and_grad_F(self, F, E=None, prior_sigma=None):
-        raise InputError("the kpi_gp criterion needs the configurations (the discrepancy kernel couples the "
-                         "poses): evaluate it through the design problem (DesignProblem.criterion('kpi_gp'))")
+    def objective(self, problem: Any) -> DesignObjective:
+        return _gp_objective(problem, self.name)
 
 
-class DiscrepancyForm(Criterion):
-    """The discrepancy-aware form ``<name>_gp`` of a noise-only criterion of the parameters (D, A, E, the indices).
+def _gp_objective(problem: Any, name: str) -> DesignObjective:
+    """The discrepancy-aware objective ``name`` of a design problem (its discrepancy, region, measured poses; hedged
+    when the discrepancy is an assumption: ``DesignProblem.gp_objective``)."""
+    if not hasattr(problem, "gp_objective"):
+        raise InputError(f"criterion {name}: needs a design problem with its discrepancy (design, not evaluate)")
+    return problem.gp_objective(name)
+
+
+class DiscrepancyForm(ConfigurationCriterion):
+    """The discrepancy-aware form ``<name>_gp`` of a criterion of the parameter information (D, A, E, the indices,
+    and every such criterion registered later): made on demand by :func:`get_criterion`, never registered.
 
     The same φ on the GLS information M = Σ_a s_a⁻² J_aᵀ (K_QQ + wI)⁻¹ J_a + Σ₀⁻¹ (the indices: on the whitened
-    Jacobian), a function of the configurations: evaluated through
-    :class:`~pin_kpi_oed.oed.discrepancy_criteria.GlsDesignCriterion` (``DesignProblem.criterion('D_gp')``);
-    :meth:`value_and_grad_F` refuses. Pool selection: its own greedy + exchange (no certificate exists).
+    Jacobian): :class:`~pin_kpi_oed.oed.discrepancy_criteria.GlsDesignCriterion` on the problem's discrepancy. Pool
+    selection: greedy + exchange (no certificate exists).
     """
 
-    has_pool_form = False
-    needs_configurations = True
+    SUFFIX = "_gp"
 
     def __init__(self, base: Criterion) -> None:
         if not self.applies(base):
             raise InputError(f"criterion {base.name}: no discrepancy-aware form (not a function of the parameter "
-                             f"information)")
+                             f"information alone)")
         self.base = base
-        self.name = f"{base.name}_gp"  # type: ignore[misc]
-        self.label = f"{base.label}, with the model discrepancy (GLS information)"  # type: ignore[misc]
-        self.unit, self.is_ratio = base.unit, base.is_ratio  # type: ignore[misc]
+        self.name = f"{base.name}{self.SUFFIX}"
+        self.label = f"{base.label}, with the model discrepancy (GLS information)"
+        self.unit, self.is_ratio, self.needs_kpi = base.unit, base.is_ratio, False
 
     @staticmethod
-    def applies(crit: Criterion) -> bool:
-        """Whether ``crit`` is a function of the parameter information (has a discrepancy-aware form)."""
-        return isinstance(crit, SingularValueCriterion) or (isinstance(crit, CovarianceCriterion)
-                                                             and not crit.needs_kpi)
+    def applies(crit: Any) -> bool:
+        """Whether ``crit`` is a criterion of the parameter information alone (not of E: ``kpi``'s discrepancy-aware
+        form is the kriging ``kpi_gp``)."""
+        return isinstance(crit, Criterion) and not crit.needs_kpi
 
-    def value_and_grad_F(self, F, E=None, prior_sigma=None):
-        raise InputError(f"the {self.name} criterion needs the configurations (the discrepancy kernel couples the "
-                         f"poses): evaluate it through the design problem (DesignProblem.criterion('{self.name}'))")
+    def objective(self, problem: Any) -> DesignObjective:
+        return _gp_objective(problem, self.name)
 
 
 # ---------------------------------------------------------------------- registry
 #: The registry: criterion name -> instance, in registration order (the order of ``evaluate``'s output).
-CRITERIA: dict[str, Criterion] = {}
+CRITERIA: dict[str, Criterion | ConfigurationCriterion] = {}
+_FORMS: dict[str, DiscrepancyForm] = {}
 
 
-def register(criterion: Criterion | type[Criterion], replace: bool = False) -> Criterion:
+def register(criterion: Any, replace: bool = False) -> Criterion | ConfigurationCriterion:
     """Add a criterion to :data:`CRITERIA` (usable by the design, the pool start, ``evaluate`` and the CLI).
 
     Args:
@@ -366,31 +451,47 @@ def register(criterion: Criterion | type[Criterion], replace: bool = False) -> C
             criterion (unless ``replace``).
     """
     crit = criterion() if isinstance(criterion, type) else criterion
-    if not isinstance(crit, Criterion) or not crit.name:
-        raise InputError(f"{criterion!r}: a criterion is a Criterion subclass with a non-empty name")
+    if not isinstance(crit, (Criterion, ConfigurationCriterion)) or not crit.name:
+        raise InputError(f"{criterion!r}: a criterion is a Criterion or ConfigurationCriterion subclass with a "
+                         f"non-empty name")
     if crit.name == "random" or (crit.name in CRITERIA and not replace):
         raise InputError(f"criterion name '{crit.name}' is already taken")
     CRITERIA[crit.name] = crit
+    _FORMS.clear()
     return crit
 
 
 def unregister(name: str) -> None:
     """Remove a criterion from :data:`CRITERIA` (no error if absent)."""
     CRITERIA.pop(name, None)
+    _FORMS.clear()
 
 
-def get_criterion(criterion: str | Criterion) -> Criterion:
-    """The criterion object of a name (an instance is returned as is).
+def criterion_names() -> list[str]:
+    """Every criterion name: the registered ones, then the discrepancy-aware forms ``<name>_gp`` of those of the
+    parameter information (the order of the CLI's help)."""
+    forms = [f"{n}{DiscrepancyForm.SUFFIX}" for n, c in CRITERIA.items() if DiscrepancyForm.applies(c)]
+    return list(CRITERIA) + [f for f in forms if f not in CRITERIA]
+
+
+def get_criterion(criterion: Any) -> Criterion | ConfigurationCriterion:
+    """The criterion object of a name (an instance is returned as is); ``<name>_gp`` of a registered criterion of
+    the parameter information is its :class:`DiscrepancyForm`.
 
     Raises:
         InputError: unknown name, listing the known ones.
     """
-    if isinstance(criterion, Criterion):
+    if isinstance(criterion, (Criterion, ConfigurationCriterion)):
         return criterion
-    try:
+    if isinstance(criterion, str) and criterion in CRITERIA:
         return CRITERIA[criterion]
-    except (KeyError, TypeError):
-        raise InputError(f"unknown criterion '{criterion}' (known: random, {', '.join(CRITERIA)})") from None
+    if isinstance(criterion, str) and criterion.endswith(DiscrepancyForm.SUFFIX):
+        base = CRITERIA.get(criterion[:-len(DiscrepancyForm.SUFFIX)])
+        if DiscrepancyForm.applies(base):
+            if criterion not in _FORMS:
+                _FORMS[criterion] = DiscrepancyForm(base)  # type: ignore[arg-type]
+            return _FORMS[criterion]
+    raise InputError(f"unknown criterion '{criterion}' (known: random, {', '.join(criterion_names())})")
 
 
 def check_names(names: Iterable[str]) -> list[str]:
@@ -408,73 +509,31 @@ def check_names(names: Iterable[str]) -> list[str]:
 
 for _cls in (KpiTrace, ParamTrace, DOptimality, EOptimality, ConditionNumber, O1, O2, O3, O4, O5, KpiDiscrepancy):
     register(_cls)
-for _c in list(CRITERIA.values()):
-    if DiscrepancyForm.applies(_c):
-        register(DiscrepancyForm(_c))
 
 
-# ---------------------------------------------------------------------- criteria of configurations
-@dataclass
-class DesignCriterion:
-    """A criterion as a function of the measurement configurations Q (chains dφ/dF with dF/dQ).
+def evaluate_all(model: Any, base: np.ndarray, Q: np.ndarray, E: np.ndarray | None,
+                 context: Any = None) -> dict[str, float]:
+    """Every registered criterion for one design (NaN where undefined, e.g. kpi without E; inf if singular): those
+    of the information matrix on the noise-only information, those of the configurations on ``context`` (a
+    :class:`~pin_kpi_oed.oed.objective.DesignContext` or a design problem) when given and they can be built on it
+    (``kpi_gp`` needs a design problem's discrepancy: left out otherwise)."""
+    from pin_kpi_oed.oed.covariance import prior_of
 
-    Attributes:
-        model: the measurement model (evaluated at the linearisation point ``p``).
-        base: indices of the identifiable parameters.
-        criterion: a registered name or a :class:`Criterion` instance.
-        E: KPI sensitivity over the base parameters, (3t, nb), or None.
-        p: linearisation point (raw parameters); default nominal.
-
-    Raises:
-        InputError: unknown criterion name.
-    """
-
-    model: TrackerModel
-    base: np.ndarray
-    criterion: str | Criterion = "kpi"
-    E: np.ndarray | None = None
-    p: np.ndarray | None = None
-    crit: Criterion = field(init=False, repr=False)
-
-    def __post_init__(self) -> None:
-        if self.p is None:
-            self.p = np.zeros(self.model.n_params)
-        self.crit = get_criterion(self.criterion)
-        self.prior = prior_of(self.model, self.base)
-
-    @property
-    def name(self) -> str:
-        """The criterion's name."""
-        return self.crit.name
-
-    @property
-    def is_ratio(self) -> bool:
-        """Whether the criterion is a positive quantity (see :attr:`Criterion.is_ratio`)."""
-        return self.crit.is_ratio
-
-    def value(self, Q: np.ndarray) -> float:
-        """φ(Q) for configurations Q, (m, n) rad."""
-        F = self.model.weighted_jacobian(self.p, Q)[:, :, self.base].reshape(-1, self.base.size)
-        return self.crit.value(F, self.E, self.prior)
-
-    def value_and_grad(self, Q: np.ndarray) -> tuple[float, np.ndarray]:
-        """φ(Q) and dφ/dQ, (m, n) (per rad)."""
-        F, dF = self.model.weighted_jacobian_dq(self.p, Q)
-        Fb = F[:, :, self.base]
-        m, nh, nb = Fb.shape
-        val, G = self.crit.value_and_grad_F(Fb.reshape(-1, nb), self.E, self.prior)
-        grad = np.einsum("mac,mack->mk", G.reshape(m, nh, nb), dF[:, :, self.base, :])
-        return val, grad
-
-
-def evaluate_all(model: TrackerModel, base: np.ndarray, Q: np.ndarray, E: np.ndarray | None) -> dict[str, float]:
-    """Every registered criterion for one design (NaN where undefined, e.g. kpi without E; inf if singular)."""
     F = model.weighted_jacobian(np.zeros(model.n_params), Q)[:, :, base].reshape(-1, base.size)
     prior = prior_of(model, base)
     out = {}
     for name, crit in CRITERIA.items():
-        if getattr(crit, "needs_configurations", False):
-            continue  # a function of the configurations (kpi_gp): scored by the design problem
+        if not isinstance(crit, Criterion):
+            if context is not None:
+                try:
+                    obj = crit.objective(context)
+                except InputError:
+                    continue
+                try:
+                    out[name] = obj.value(Q)
+                except IdentifiabilityError:
+                    out[name] = float("inf")
+            continue
         if crit.needs_kpi and E is None:
             out[name] = float("nan")
             continue

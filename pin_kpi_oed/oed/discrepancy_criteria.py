@@ -57,12 +57,14 @@ from scipy.linalg import solve_triangular
 
 from pin_kpi_oed.errors import IdentifiabilityError, InputError
 from pin_kpi_oed.oed.covariance import prior_of
-from pin_kpi_oed.oed.criteria import (CovarianceCriterion, Criterion, DiscrepancyForm, SingularValueCriterion,
-                                      get_criterion)
-from pin_kpi_oed.oed.discrepancy_kpi import (NO_CERTIFICATE, DiscrepancyPrior, GpPoolSelection, after_given,
-                                             base_frame_jacobian, chain_q, greedy_exchange, GreedyState, greedy_ridge)
+from pin_kpi_oed.oed.criteria import Criterion, DiscrepancyForm, get_criterion
+from pin_kpi_oed.oed.objective import DesignObjective, information_criterion
+from pin_kpi_oed.oed.selection_result import PoolSelection
+from pin_kpi_oed.discrepancy.prior import DiscrepancyPrior
+from pin_kpi_oed.oed.discrepancy_kpi import base_frame_jacobian, chain_q
+from pin_kpi_oed.oed.discrepancy_pool import NO_CERTIFICATE, GreedyState, after_given, greedy_exchange, greedy_ridge
 
-__all__ = ["gls_information", "criterion_of_information", "gls_value_and_grad", "GlsDesignCriterion",
+__all__ = ["gls_information", "gls_value_and_grad", "GlsDesignCriterion",
            "select_pool_gls", "no_certificate"]
 
 
@@ -96,50 +98,18 @@ def gls_information(J: np.ndarray, Kqq: np.ndarray, scale_m: np.ndarray, noise: 
     return 0.5 * (M0 + M0.T), np.moveaxis(V.reshape(m, 3, nb), 1, 0), s2
 
 
-def criterion_of_information(crit: Criterion, M0: np.ndarray, prior_info: np.ndarray | None, rows: int
-                             ) -> tuple[float, np.ndarray]:
-    """φ and Γ = ∂φ/∂M₀ (symmetric) of a noise-only criterion of the parameters on the GLS information.
-
-    Covariance criteria (D, A, E, …) take M = M₀ + Σ₀⁻¹ through their own :meth:`from_covariance` at F = I (their
-    dφ/dF is 2FΓ); singular-value criteria take μ_i = sqrt(λ_i(M₀)) through :meth:`from_singular_values` with
-    ``rows`` whitened rows.
-
-    Raises:
-        IdentifiabilityError: M (or M₀) singular.
-        InputError: a criterion that is not a function of the parameter information.
-    """
-    nb = M0.shape[0]
-    if isinstance(crit, SingularValueCriterion):
-        lam, Vec = np.linalg.eigh(M0)
-        lam, Vec = lam[::-1], Vec[:, ::-1]
-        if lam[-1] <= 1e-24 * lam[0]:
-            raise IdentifiabilityError("rank-deficient whitened Jacobian: the design does not identify the "
-                                       "parameters under the discrepancy")
-        mu = np.sqrt(lam)
-        val, dmu = crit.from_singular_values(mu, rows)
-        return float(val), (Vec * (dmu / (2.0 * mu))) @ Vec.T
-    if isinstance(crit, CovarianceCriterion) and not crit.needs_kpi:
-        M = M0 if prior_info is None else M0 + prior_info
-        try:
-            L = np.linalg.cholesky(M)
-        except np.linalg.LinAlgError:
-            raise IdentifiabilityError("singular information matrix: the design does not identify the parameters "
-                                       "under the discrepancy; use more or more varied configurations") from None
-        Li = np.linalg.solve(L, np.eye(nb))
-        val, g = crit.from_covariance(np.eye(nb), None, M, L, Li.T @ Li)
-        return float(val), 0.25 * (g + g.T)
-    raise InputError(f"criterion {crit.name}: no discrepancy-aware form (not a function of the parameter information)")
-
-
-def gls_value_and_grad(crit: Criterion, J: np.ndarray, Kqq: np.ndarray, scale_m: np.ndarray, noise: float,
+def gls_value_and_grad(crit: Criterion | DiscrepancyForm, J: np.ndarray, Kqq: np.ndarray, scale_m: np.ndarray,
+                       noise: float,
                        prior_info: np.ndarray | None = None, grad: bool = True) -> tuple[float, dict | None]:
     """φ of the GLS information and its gradient w.r.t. J (m, 3, nb) and G = K_QQ + wI (m, m) (module formulas).
 
     Returns:
         (φ, {"J": ∂φ/∂J, "G": ∂φ/∂G (entries treated as independent)} or None).
     """
+    if isinstance(crit, DiscrepancyForm):
+        crit = crit.base
     M0, V, s2 = gls_information(J, Kqq, scale_m, noise)
-    phi, Gam = criterion_of_information(crit, M0, prior_info, 3 * J.shape[0])
+    phi, Gam = crit.value_and_grad_M(M0, None, prior_info, 3 * J.shape[0])
     if not grad:
         return phi, None
     VG = V @ Gam                                                           # (3, m, nb)
@@ -149,8 +119,9 @@ def gls_value_and_grad(crit: Criterion, J: np.ndarray, Kqq: np.ndarray, scale_m:
 
 
 @dataclass
-class GlsDesignCriterion:
-    """``<name>_gp`` as a function of the measurement configurations Q (the :class:`DesignCriterion` interface).
+class GlsDesignCriterion(DesignObjective):
+    """A criterion of the parameter information on the GLS information under the discrepancy (its ``<name>_gp``
+    form), a :class:`~pin_kpi_oed.oed.objective.DesignObjective` of the measurement configurations Q.
 
     The attributes of :class:`~pin_kpi_oed.oed.discrepancy_kpi.DiscrepancyDesignCriterion` without the working
     configurations, plus ``criterion``: the noise-only criterion (name or instance, e.g. ``D``) or its registered
@@ -167,11 +138,12 @@ class GlsDesignCriterion:
     Q_given: np.ndarray | None = None
     prior_info: np.ndarray | None = None
     p: np.ndarray | None = None
-    crit: Criterion = field(default=None, repr=False)
+    crit: Any = field(default=None, repr=False)
 
     def __post_init__(self) -> None:
         c = get_criterion(self.criterion)
-        self.crit = c.base if isinstance(c, DiscrepancyForm) else DiscrepancyForm(c).base   # refuses others
+        self.form = c if isinstance(c, DiscrepancyForm) else DiscrepancyForm(information_criterion(c))
+        self.crit = self.form  # name, unit, ratio: the <name>_gp form
         if getattr(self.model, "nh", 3) != 3:
             raise InputError(f"{self.name}: the discrepancy covers reflector positions only; a 6-D probe model is "
                              f"not supported")
@@ -185,16 +157,6 @@ class GlsDesignCriterion:
             self.J_given = base_frame_jacobian(self.model, self.p, self.Q_given, self.base, False)[0]
         else:
             self.Q_given, self.J_given = None, None
-
-    @property
-    def name(self) -> str:
-        """The registered name (``<criterion>_gp``)."""
-        return f"{self.crit.name}_gp"
-
-    @property
-    def is_ratio(self) -> bool:
-        """As the noise-only criterion."""
-        return self.crit.is_ratio
 
     def _all(self, Q: np.ndarray, J: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
         if J is None or len(Q) == 0:
@@ -210,7 +172,7 @@ class GlsDesignCriterion:
         Q = np.atleast_2d(Q)
         Qa, Ja = self._all(Q, base_frame_jacobian(self.model, self.p, Q, self.base, False)[0] if len(Q) else None)
         d = self.discrepancy
-        return gls_value_and_grad(self.crit, Ja, d.cov(Qa), d.scale_m, d.noise, self.prior_info, grad=False)[0]
+        return gls_value_and_grad(self.form.base, Ja, d.cov(Qa), d.scale_m, d.noise, self.prior_info, grad=False)[0]
 
     def value_and_grad(self, Q: np.ndarray) -> tuple[float, np.ndarray]:
         """φ and its exact gradient w.r.t. Q (m, n) (per rad): the Jacobian's and the kernel's parts."""
@@ -218,17 +180,19 @@ class GlsDesignCriterion:
         J, dJ = base_frame_jacobian(self.model, self.p, Q, self.base, True)
         Qa, Ja = self._all(Q, J)
         d = self.discrepancy
-        val, g = gls_value_and_grad(self.crit, Ja, d.cov(Qa), d.scale_m, d.noise, self.prior_info)
+        val, g = gls_value_and_grad(self.form.base, Ja, d.cov(Qa), d.scale_m, d.noise, self.prior_info)
         return val, chain_q(g, dJ, d, Q, Qa, len(Qa) - len(Q))
 
     def pool_jacobians(self, Q_pool: np.ndarray) -> np.ndarray:
         """Base-frame Jacobians of candidate poses (N, 3, nb)."""
         return base_frame_jacobian(self.model, self.p, np.atleast_2d(Q_pool), self.base, False)[0]
 
-    def select(self, Q_pool: np.ndarray, m: int, J_pool: np.ndarray | None = None, **kw) -> GpPoolSelection:
-        """m of the candidate poses by :func:`select_pool_gls` (on top of ``Q_given``)."""
+    def select(self, Q_pool: np.ndarray, m: int, seed: int = 0, J_pool: np.ndarray | None = None, **kw: Any
+               ) -> PoolSelection:
+        """m of the candidate poses by :func:`select_pool_gls` (on top of ``Q_given``; deterministic: ``seed``
+        unused)."""
         J_pool = self.pool_jacobians(Q_pool) if J_pool is None else J_pool
-        return select_pool_gls(self.crit, J_pool, np.atleast_2d(Q_pool), self.discrepancy, m, self.prior_info,
+        return select_pool_gls(self.form.base, J_pool, np.atleast_2d(Q_pool), self.discrepancy, m, self.prior_info,
                                Q_given=self.Q_given, J_given=self.J_given, **kw)
 
 
@@ -263,7 +227,7 @@ class _GlsState(GreedyState):
 def select_pool_gls(crit: Criterion, J_pool: np.ndarray, Q_pool: np.ndarray, discrepancy: DiscrepancyPrior, m: int,
                     prior_info: np.ndarray | None = None, Q_given: np.ndarray | None = None,
                     J_given: np.ndarray | None = None, exchange_passes: int = 1,
-                    time_budget_s: float | None = None) -> GpPoolSelection:
+                    time_budget_s: float | None = None) -> PoolSelection:
     """Choose m of N candidate poses for a discrepancy-aware parameter criterion (greedy + exchange).
 
     The greedy additions and exchange passes of :func:`select_pool_gp` on the D form (A form for ``param``; module
@@ -290,5 +254,6 @@ def select_pool_gls(crit: Criterion, J_pool: np.ndarray, Q_pool: np.ndarray, dis
     sel = np.concatenate([np.arange(k0), k0 + idx])
     val = gls_value_and_grad(crit, Jall[sel], discrepancy.cov(Qall[sel]), discrepancy.scale_m, discrepancy.noise,
                              prior_info, grad=False)[0]
-    return GpPoolSelection(indices=idx, value=float(val), path=np.array(path), exchanges=swaps,
-                           time_s=time.perf_counter() - t0)
+    return PoolSelection(indices=idx, value=float(val), path=np.array(path), nit=swaps,
+                         time_s=time.perf_counter() - t0, success=True, status="selected",
+                         message=f"greedy + exchange ({swaps} swaps); no certificate")

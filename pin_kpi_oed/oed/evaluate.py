@@ -22,6 +22,7 @@ from pin_kpi_oed.model.serialize import model_from_dict, model_to_dict
 from pin_kpi_oed.oed.covariance import design_covariances
 from pin_kpi_oed.oed.criteria import CRITERIA, evaluate_all
 from pin_kpi_oed.oed.identifiability import Identifiability, analyse, check_kpi
+from pin_kpi_oed.oed.objective import DesignContext
 from pin_kpi_oed.results import Result
 
 
@@ -109,7 +110,7 @@ def score_design(model: TrackerModel, Q_meas: np.ndarray, Q_work: np.ndarray,
     E = E_full[:, b]
     C_p, C_s = design_covariances(model, b, Q_meas, E, p0, ident.base_names)
     t = Q_work.shape[0]
-    crit = evaluate_all(model, b, Q_meas, E)
+    crit = evaluate_all(model, b, Q_meas, E, context=DesignContext(model, b, E, p0, Q_work))
     return DesignScore(trace_cs_m2=float(np.trace(C_s)), tcp_sigma_m=float(np.sqrt(np.trace(C_s) / t)), cov_s_m2=C_s,
                        trace_cp=float(np.trace(C_p)), criteria=crit, rank=ident.rank, n_meas=Q_meas.shape[0],
                        identifiable=ident.base_names, success=True, status="scored",

@@ -34,12 +34,12 @@ import numpy as np
 from pin_kpi_oed.errors import IdentifiabilityError, InputError
 from pin_kpi_oed.effects.library import effect_jacobian, sum_joint_offsets
 from pin_kpi_oed.oed.covariance import prior_square_root
-from pin_kpi_oed.oed.criteria import get_criterion
+from pin_kpi_oed.oed.criteria import Criterion
+from pin_kpi_oed.oed.objective import DesignObjective, information_criterion
 from pin_kpi_oed.oed.pool import PoolSelection, block_gains, pool_phi, select
 from pin_kpi_oed.threads import limit_threads
 
-__all__ = ["ExtendedModel", "ExtendedDesignCriterion", "select_pool", "PriorSelection", "pool_phi",
-           "pool_start"]
+__all__ = ["ExtendedModel", "ExtendedDesignCriterion", "select_pool", "pool_phi"]
 
 
 @dataclass
@@ -273,7 +273,7 @@ class ExtendedModel:
 
     def criterion(self, name: str, Q: np.ndarray, Q_work: np.ndarray | None = None, aux: Any = None) -> float:
         """A registered criterion (``kpi``, ``param``, ``D``, …) of the extended information with the prior."""
-        crit = get_criterion(name)
+        crit = information_criterion(name)
         E = self.kpi_jacobian(Q_work) if (crit.needs_kpi and Q_work is not None) else None
         return crit.value(self.augmented(self.jacobian(Q, aux)), E, None)
 
@@ -367,12 +367,10 @@ class ExtendedModel:
 
 
 @dataclass
-class ExtendedDesignCriterion:
-    """A registered criterion of the extended information M = FᵀF + Σ₀⁻¹ as a function of the configurations.
-
-    The same interface as :class:`~pin_kpi_oed.oed.criteria.DesignCriterion` (``name``, ``is_ratio``,
-    ``value(Q)``, ``value_and_grad(Q)``), so the IPOPT design (eq. 24) can use it: dφ/dQ chains the
-    criterion's dφ/dF (on [F; R], the prior's rows fixed) with :meth:`ExtendedModel.jacobian_dq`.
+class ExtendedDesignCriterion(DesignObjective):
+    """A criterion of the information matrix on the extended information M = FᵀF + Σ₀⁻¹ (geometry and effects,
+    the prior Σ₀), a :class:`~pin_kpi_oed.oed.objective.DesignObjective`: dφ/dQ chains the criterion's dφ/dF (on
+    [F; R], the prior's rows fixed) with :meth:`ExtendedModel.jacobian_dq`; pool selection by :func:`select_pool`.
 
     Attributes:
         ext: the extended model (linearisation point, effects, prior).
@@ -383,21 +381,12 @@ class ExtendedDesignCriterion:
     ext: ExtendedModel
     criterion: Any = "kpi"
     Q_work: np.ndarray | None = None
+    crit: Criterion = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
-        self.crit = get_criterion(self.criterion)
+        self.crit = information_criterion(self.criterion)
         self.E = self.ext.kpi_jacobian(self.Q_work) if self.Q_work is not None else None
         self.R = self.ext.prior_rows()
-
-    @property
-    def name(self) -> str:
-        """The criterion's name."""
-        return self.crit.name
-
-    @property
-    def is_ratio(self) -> bool:
-        """Whether the criterion is a positive quantity."""
-        return self.crit.is_ratio
 
     def value(self, Q: np.ndarray) -> float:
         """φ(Q), Q (m, n) rad."""
@@ -410,24 +399,13 @@ class ExtendedDesignCriterion:
         val, G = self.crit.value_and_grad_F(np.vstack([F.reshape(-1, nx), self.R]), self.E, None)
         return val, np.einsum("mac,macn->mn", G[:m * nh].reshape(m, nh, nx), dF)
 
+    def select(self, Q_pool: np.ndarray, m: int, seed: int = 0, **kw: Any) -> PoolSelection:
+        """m of the candidates by :func:`select_pool` (greedy + Fedorov exchange with the prior)."""
+        return select_pool(self.ext.jacobian(np.atleast_2d(Q_pool)), m, self.crit.pool_form(self.E, self.ext.nx),
+                           self.ext.prior_info, seed=seed, **kw)
+
 
 # ---------------------------------------------------------------------- pool selection with a prior
-@dataclass
-class PriorSelection:
-    """m candidates chosen from a pool with fixed prior information M₀ (greedy + Fedorov exchange).
-
-    Attributes:
-        indices: the chosen candidates, (m,) distinct.
-        phi: tr(K M⁻¹ Kᵀ) or −log det M of M = M₀ + Σ F_iᵀF_i.
-        sweeps: exchange sweeps; time_s: wall time (s).
-    """
-
-    indices: np.ndarray
-    phi: float
-    sweeps: int
-    time_s: float
-
-
 def _block_gains(s: dict, G: np.ndarray | None, N: int, nh: int) -> np.ndarray:
     """:func:`~pin_kpi_oed.oed.pool.block_gains` with G laid out (nh, N, ns)."""
     return block_gains(s, None if G is None else G.transpose(1, 0, 2), N, nh)
@@ -494,7 +472,7 @@ class _PoolState:
 
 @limit_threads
 def select_pool(Fp: np.ndarray, m: int, K: np.ndarray | None = None, prior_info: np.ndarray | None = None,
-                seed: int = 0, max_sweeps: int = 30) -> PoolSelection | PriorSelection:
+                seed: int = 0, max_sweeps: int = 30) -> PoolSelection:
     """Choose m of N candidates for the extended model (A-type with K, or D-optimal), with a prior.
 
     Without a prior this is :func:`pin_kpi_oed.oed.pool.select` (relaxation + exchange, certified).
@@ -567,16 +545,5 @@ def select_pool(Fp: np.ndarray, m: int, K: np.ndarray | None = None, prior_info:
                 improved = True
         if not improved:
             break
-    return PriorSelection(indices=np.array(chosen), phi=float(cur), sweeps=sweeps, time_s=time.perf_counter() - t0)
-
-
-def pool_start(ext: ExtendedModel, Q_pool: np.ndarray, criterion: str, m: int, Q_work: np.ndarray | None,
-               seed: int = 0) -> np.ndarray:
-    """Indices of m pool candidates chosen for ``criterion`` on the extended model (the IPOPT design's start).
-
-    Criteria without a pool form select by D-optimality (as the geometric pool start).
-    """
-    crit = get_criterion(criterion)
-    E = ext.kpi_jacobian(Q_work) if (crit.needs_kpi and Q_work is not None) else None
-    K = crit.pool_form(E, ext.nx) if crit.has_pool_form else None
-    return np.asarray(select_pool(ext.jacobian(Q_pool), m, K, ext.prior_info, seed=seed).indices, int)
+    return PoolSelection(indices=np.array(chosen), value=float(cur), nit=sweeps, time_s=time.perf_counter() - t0,
+                         success=True, status="selected", message=f"greedy + exchange ({sweeps} sweeps)")

@@ -43,8 +43,11 @@ from typing import Any
 import numpy as np
 
 from pin_kpi_oed.errors import IdentifiabilityError, InputError
-from pin_kpi_oed.oed.discrepancy_kpi import (DiscrepancyDesignCriterion, DiscrepancyPrior, GpPoolSelection,
-                                             kpi_gp_value_and_grad)
+from pin_kpi_oed.discrepancy.prior import DiscrepancyPrior
+from pin_kpi_oed.oed.discrepancy_kpi import DiscrepancyDesignCriterion
+from pin_kpi_oed.oed.kriging import kpi_gp_value_and_grad
+from pin_kpi_oed.oed.objective import DesignObjective
+from pin_kpi_oed.oed.selection_result import PoolSelection
 
 __all__ = ["LENGTH_FACTORS", "LEVEL_FACTORS", "HEDGE_LINE", "prior_family", "HedgedDesignCriterion"]
 
@@ -103,24 +106,25 @@ def prior_family(prior: DiscrepancyPrior, length_factors: tuple = LENGTH_FACTORS
 
 
 @dataclasses.dataclass
-class HedgedDesignCriterion:
-    """``kpi_gp`` under an assumed prior, hedged over :func:`prior_family` (the :class:`DesignCriterion` interface:
+class HedgedDesignCriterion(DesignObjective):
+    """``kpi_gp`` under an assumed prior, hedged over :func:`prior_family`: the objective the configuration criterion
+    ``kpi_gp`` builds when the discrepancy is an assumption (a :class:`~pin_kpi_oed.oed.objective.DesignObjective`:
     ``value``, ``value_and_grad``, ``select``).
 
     Attributes:
         members: one :class:`DiscrepancyDesignCriterion` per prior of the family (same model, base, working
             configurations, measured poses and parameter prior), the assumed one first.
-        name: ``kpi_gp``; is_ratio: True (φ_H > 0, m²).
+        crit: the members' criterion (``kpi_gp``: φ_H > 0, m²).
     """
 
     members: list
     weights: np.ndarray | None = None
-    name: str = "kpi_gp"
-    is_ratio: bool = True
+    crit: Any = dataclasses.field(default=None, repr=False)
 
     def __post_init__(self) -> None:
         if not self.members:
             raise InputError("hedged kpi_gp: no prior in the family")
+        self.crit = self.members[0].crit
         K = len(self.members)
         if self.weights is None:
             noise = K > 1 and self.members[-1].discrepancy.kernel is None
@@ -189,8 +193,8 @@ class HedgedDesignCriterion:
         for c in self.members:
             c.set_registration(Q_register)
 
-    def select(self, Q_pool: np.ndarray, m: int, J_pool: np.ndarray | None = None, exchange_passes: int = 1,
-               seed: int = 0, **kw: Any) -> GpPoolSelection:
+    def select(self, Q_pool: np.ndarray, m: int, seed: int = 0, J_pool: np.ndarray | None = None,
+               exchange_passes: int = 1, **kw: Any) -> PoolSelection:
         """m of the candidate poses minimising φ_H: the best of the members' own selections, then exchange passes.
 
         Args:
@@ -219,8 +223,9 @@ class HedgedDesignCriterion:
                                        "identifies the parameters under every prior of the family")
         path = [best_v]
         best, best_v, swaps = self._exchange(Q_pool, J_pool, best, best_v, exchange_passes, seed, path)
-        return GpPoolSelection(indices=best, value=float(best_v), path=np.array(path), exchanges=swaps,
-                               time_s=time.perf_counter() - t0)
+        return PoolSelection(indices=best, value=float(best_v), path=np.array(path), nit=swaps,
+                             time_s=time.perf_counter() - t0, success=True, status="selected",
+                             message=f"best member selection + exchange ({swaps} swaps); no certificate")
 
     def _pool_scorer(self, Q_pool: np.ndarray, J_pool: np.ndarray) -> Any:
         """φ_H of pool subsets from precomputed kernel blocks: ``score(idx) -> float`` (m²)."""

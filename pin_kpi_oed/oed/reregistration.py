@@ -129,7 +129,7 @@ def reregistered_covariance(rr: Reregistration, C_WR: np.ndarray) -> np.ndarray:
         rr: the :func:`reregistration` of the working configurations W and the registration configurations R.
         C_WR: the universal-kriging covariance of the calibrated prediction's errors at W ∪ R (W first; rows per
             configuration then axis), (3(t + r), 3(t + r)) m²: the KPI covariance with E' = [E; J_R]
-            (:func:`~pin_kpi_oed.oed.discrepancy_kpi.kpi_gp_covariance`).
+            (:func:`~pin_kpi_oed.oed.kriging.kpi_gp_covariance`).
 
     Raises:
         InputError: C_WR of another size than W ∪ R.

@@ -32,7 +32,7 @@ from pin_kpi_oed.identification.identify import identify, validate
 from pin_kpi_oed.identification.simulate import Tolerances, random_truth, simulate
 from pin_kpi_oed.model.tracker import TrackerModel
 from pin_kpi_oed.oed.covariance import covariances, design_covariances, prior_of
-from pin_kpi_oed.oed.criteria import get_criterion
+from pin_kpi_oed.oed.objective import information_criterion
 from pin_kpi_oed.oed.identifiability import analyse
 from pin_kpi_oed.oed.pool import select
 from pin_kpi_oed.progress import progress
@@ -201,7 +201,7 @@ def real_data_validation(model: TrackerModel, data: MeasurementSet, n_meas: int 
     if len(data) < n_meas + n_work + 10:
         raise InputError(f"{data.source}: {len(data)} rows are too few for {n_work} working and {n_meas} "
                          "calibration poses")
-    crits = {k: get_criterion(k) for k in methods if k != "random"}
+    crits = {k: information_criterion(k) for k in methods if k != "random"}
     for k, c in crits.items():
         if not c.has_pool_form:
             raise InputError(f"method '{k}': the criterion has no pool-selection form (use kpi, param, D or random)")
@@ -522,7 +522,7 @@ def _choose(meth: str, fit: _SplitFit, E_ext: np.ndarray, rng: np.random.Generat
     crit, on = EXTENDED_METHODS[meth]
     if crit is None:
         return rng.choice(n_pool, n_meas, replace=False)
-    K = get_criterion(crit).pool_form(E_ext[:, :ext.nb] if on == "geometric" else E_ext,
+    K = information_criterion(crit).pool_form(E_ext[:, :ext.nb] if on == "geometric" else E_ext,
                                       ext.nb if on == "geometric" else ext.nx)
     if on == "geometric":
         return select(fit.Fp[:, :, :ext.nb], n_meas, K, seed=seed).indices

@@ -77,7 +77,7 @@ def choose_sets(model: Any, assumed: Any, Q_pool: np.ndarray, W: np.ndarray, m: 
         noise_weight: the hedged criterion's weight on noise only (default: the package's,
             :data:`~pin_kpi_oed.oed.hedged_kpi.NOISE_ONLY_WEIGHT`).
     """
-    from pin_kpi_oed.oed.criteria import get_criterion
+    from pin_kpi_oed.oed.objective import information_criterion
     from pin_kpi_oed.oed.discrepancy_kpi import DiscrepancyDesignCriterion
     from pin_kpi_oed.oed.hedged_kpi import HedgedDesignCriterion
     from pin_kpi_oed.oed.identifiability import analyse
@@ -94,7 +94,7 @@ def choose_sets(model: Any, assumed: Any, Q_pool: np.ndarray, W: np.ndarray, m: 
                                                     seed=seed).indices, int)
     E = model.kpi_jacobian(p0, W)[:, base]
     Fp = model.weighted_jacobian(p0, Q_pool)[:, :, base]
-    out["kpi"] = np.asarray(select(Fp, m, get_criterion("kpi").pool_form(E, base.size), seed=0).indices, int)
+    out["kpi"] = np.asarray(select(Fp, m, information_criterion("kpi").pool_form(E, base.size), seed=0).indices, int)
     out["random"] = np.random.default_rng([seed, 7]).permutation(len(Q_pool))[:m]
     return out
 

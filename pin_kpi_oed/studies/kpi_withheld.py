@@ -176,7 +176,7 @@ def withheld_case(model: Any, Q_pool: np.ndarray, Q_pilot: np.ndarray, W: np.nda
 def _choose(d: str, m: int, model: Any, crit: Any, Q_pool: np.ndarray, Jp: np.ndarray, W: np.ndarray,
             base: np.ndarray, seed: int, fixed: dict) -> np.ndarray:
     """Pool indices of design ``d`` of ``m`` poses (selections that do not depend on the robot kept in ``fixed``)."""
-    from pin_kpi_oed.oed.criteria import get_criterion
+    from pin_kpi_oed.oed.objective import information_criterion
     from pin_kpi_oed.oed.discrepancy_kpi import DiscrepancyDesignCriterion, default_discrepancy
     from pin_kpi_oed.oed.pool import select
 
@@ -192,7 +192,7 @@ def _choose(d: str, m: int, model: Any, crit: Any, Q_pool: np.ndarray, Jp: np.nd
         else:  # kpi
             E = model.kpi_jacobian(p0, W)[:, base]
             Fp = model.weighted_jacobian(p0, Q_pool)[:, :, base]
-            idx = select(Fp, m, get_criterion("kpi").pool_form(E, base.size), seed=0).indices
+            idx = select(Fp, m, information_criterion("kpi").pool_form(E, base.size), seed=0).indices
         fixed[(d, m)] = np.asarray(idx, int)
     return np.asarray(fixed[(d, m)], int)
 

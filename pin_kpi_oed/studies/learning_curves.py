@@ -41,7 +41,7 @@ import numpy as np
 from pin_kpi_oed.data.measurements import MeasurementSet
 from pin_kpi_oed.errors import InputError
 from pin_kpi_oed.model.tracker import TrackerModel
-from pin_kpi_oed.oed.criteria import get_criterion
+from pin_kpi_oed.oed.objective import information_criterion
 from pin_kpi_oed.oed.discrepancy_kpi import DiscrepancyDesignCriterion, DiscrepancyPrior
 from pin_kpi_oed.oed.identifiability import analyse
 from pin_kpi_oed.oed.pool import select
@@ -157,7 +157,7 @@ class _Designs:
         self.Jp = self.crit_w.pool_jacobians(self.Q)
         self.Fp = dm.weighted_jacobian(p0, self.Q)[:, :, b]
         E = dm.jacobian(p0, sp.work)[:, :3, :][:, :, b].reshape(-1, b.size)
-        self.K_kpi = get_criterion("kpi").pool_form(E, b.size)
+        self.K_kpi = information_criterion("kpi").pool_form(E, b.size)
         self.white_m2 = float(np.sum(prior.scale_m ** 2) * prior.noise)
         self.order = _random_order(seed, len(self.Q))
         self.seed = seed

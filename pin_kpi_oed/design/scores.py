@@ -1,0 +1,119 @@
+"""What a design run scores besides the criteria: the extended model's tr(C_s) and TCP σ (eq. 19 over geometry and
+effects, with the prior), the honest TCP σ with the discrepancy (universal kriging, over the working configurations
+and the working region) and the discrepancy section of the design file. SI units (m², m)."""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+
+
+__all__ = ["extended_scores", "discrepancy_scores", "sigma_given", "add_discrepancy_section"]
+
+
+def extended_scores(problem: Any, results: list, q_work: np.ndarray) -> list[dict] | None:
+    """Extended-model scores of every design (``--model``), or None without an extended model.
+
+    C = (FᵀF + Σ₀⁻¹)⁻¹ over geometry + the model file's effects with the chosen prior, C_s = E C Eᵀ
+    (eq. 19, extended; :meth:`~pin_kpi_oed.oed.extended.ExtendedModel.covariances`).
+
+    Args:
+        problem: the design problem (its ``extended`` model, or None).
+        results: the designs (``q_meas``, rad).
+        q_work: working configurations (rad).
+
+    Returns:
+        Per design {"trace_cs_m2", "tcp_sigma_m" = sqrt(tr(C_s)/t), "cov_s_m2"} (m², m); NaN where the
+        design with the prior does not determine the parameters.
+    """
+    from pin_kpi_oed.errors import IdentifiabilityError
+
+    ext = getattr(problem, "extended", None)
+    if ext is None:
+        return None
+    t = np.atleast_2d(q_work).shape[0]
+    out = []
+    for r in results:
+        try:
+            Cs = ext.covariances(r.q_meas, q_work)[1]
+            tr = float(np.trace(Cs))
+            out.append({"trace_cs_m2": tr, "tcp_sigma_m": math.sqrt(tr / t), "cov_s_m2": Cs.tolist()})
+        except (IdentifiabilityError, ValueError):
+            out.append({"trace_cs_m2": float("nan"), "tcp_sigma_m": float("nan"), "cov_s_m2": None})
+    return out
+
+
+def discrepancy_scores(problem: Any, results: list) -> list[dict]:
+    """Honest TCP scores of every design with the problem's discrepancy (universal-kriging C_s, base frame).
+
+    Returns:
+        Per design {"trace_cs_m2", "tcp_sigma_m" = sqrt(tr(C_s)/t), "cov_s_m2"} (m², m, m²) at the working
+        configurations W and, with a working region, {"trace_cs_region_m2", "tcp_sigma_region_m"} over W plus the
+        region's configurations (sqrt(tr(C_s)/(t + k))); ``cov_s_m2`` is the full
+        universal-kriging C_s (3t × 3t) rotated to the tracker frame, like the design's own ``cov_s_m2`` (the trace
+        is the base frame's); NaN / None where the design does not identify the parameters.
+    """
+    from pin_kpi_oed.errors import IdentifiabilityError
+
+    crit = problem.gp_criterion(region=False)
+    reg = problem.gp_criterion() if getattr(problem, "region", None) is not None and problem.region.kept else None
+    t = problem.cell.q_work.shape[0]
+    R = np.kron(np.eye(t), crit.model.tracker_pose(crit.p).rotation)  # base -> tracker frame, per working configuration
+    out = []
+    for r in results:
+        try:
+            tr = float(crit.value(r.q_meas))
+            C = R @ crit.covariance(r.q_meas) @ R.T
+            cov = (0.5 * (C + C.T)).tolist()
+        except IdentifiabilityError:
+            tr, cov = float("nan"), None
+        out.append({"trace_cs_m2": tr, "tcp_sigma_m": math.sqrt(tr / t) if tr == tr else float("nan"),
+                    "cov_s_m2": cov})
+        if reg is not None:
+            n = reg.Q_work.shape[0]
+            try:
+                tr_r = float(reg.value(r.q_meas))
+            except IdentifiabilityError:
+                tr_r = float("nan")
+            out[-1].update({"trace_cs_region_m2": tr_r, "tcp_sigma_region_m": math.sqrt(tr_r / n)})
+    return out
+
+
+def sigma_given(problem: Any) -> float:
+    """Predicted TCP σ (m) at the working configurations of the measured poses alone, discrepancy included."""
+    from pin_kpi_oed.errors import IdentifiabilityError
+
+    crit = problem.gp_criterion(region=False)
+    try:
+        return math.sqrt(crit.value(np.zeros((0, problem.n))) / problem.cell.q_work.shape[0])
+    except IdentifiabilityError:
+        return float("inf")
+
+
+def add_discrepancy_section(doc: dict, problem: Any, gp_scores: list[dict]) -> None:
+    """Add the discrepancy (source, S, white level, kernel) and every design's honest scores to the JSON (SI)."""
+    from pin_kpi_oed.discrepancy.lever_arm import lever_arm_m, lever_arm_sigma_m
+
+    d = problem.discrepancy_prior()
+    arm = lever_arm_m(problem.model.tcp_m, problem.model.reflector_m)
+    doc["discrepancy"] = {"source": d.source, "scale_m": d.scale_m.tolist(), "noise": d.noise,
+                          "white_sigma_m": (d.scale_m * math.sqrt(d.noise)).tolist(),
+                          "delta_sigma_m": d.prior_sigma_m().tolist(),
+                          "kernel": None if d.kernel is None else d.kernel.to_dict(),
+                          "certificate": "none exists for the discrepancy-aware criteria (kpi_gp, D_gp, ...)",
+                          "tcp_from_reflector_m": arm, "lever_arm_sigma_per_rad_m": lever_arm_sigma_m(arm, 1.0),
+                          "note": "designs[i].discrepancy: universal-kriging tr(C_s) and TCP sigma at the working "
+                                  "configurations, discrepancy included, and its C_s (3t x 3t, m^2) in the tracker "
+                                  "frame like designs[i].cov_s_m2 (pin-kpi-oed view draws it); "
+                                  "designs[i].trace_cs_m2 / tcp_sigma_m / cov_s_m2: the paper's, tracker noise only; "
+                                  "the discrepancy is learnt at the reflector: a flange rotation of s rad per axis "
+                                  "adds lever_arm_sigma_per_rad_m * s (3-D RMS, in quadrature) at the TCP, which "
+                                  "no sigma here includes"}
+    region = getattr(problem, "region", None)
+    doc["working_region"] = None if region is None else {
+        **region.to_dict(), "note": "kpi_gp's KPI is tr(C_s) over the working configurations and these; "
+                                    "designs[i].discrepancy.tcp_sigma_region_m is sqrt(tr(C_s)/(t + kept)) over them"}
+    for dd, sc in zip(doc["designs"], gp_scores):
+        dd["discrepancy"] = sc

@@ -1,0 +1,216 @@
+r"""A design objective φ(Q): a criterion on an information model, as a function of the measurement configurations.
+
+What the IPOPT design minimises (eq. 24), what the pool selection selects with and what ``evaluate`` scores is one
+:class:`DesignObjective`: its criterion (name, unit, ratio or logarithm: :attr:`DesignObjective.crit`), φ(Q), the
+exact dφ/dQ and the selection of m of a pool's candidates (:meth:`DesignObjective.select`, one
+:class:`~pin_kpi_oed.oed.selection_result.PoolSelection`). Every criterion of the information matrix
+(:class:`~pin_kpi_oed.oed.criteria.Criterion`) works on every information model:
+
+=====================================================================  =============================================
+information model (the objective)                                      M(Q), the pool selection
+=====================================================================  =============================================
+noise only: :class:`DesignCriterion`                                   FᵀF + P (F the weighted Jacobian, P the
+                                                                       layout's prior); relaxation + certificate,
+                                                                       rounding, exchange
+measured poses: :class:`~pin_kpi_oed.design.sequential.GivenDesignCriterion`  F_gᵀF_g + FᵀF (+ their prior rows)
+extended with a prior: :class:`~pin_kpi_oed.oed.extended.ExtendedDesignCriterion`  FᵀF + Σ₀⁻¹ over geometry and
+                                                                       effects; greedy + Fedorov exchange
+GLS under the discrepancy: :class:`~pin_kpi_oed.oed.discrepancy_criteria.GlsDesignCriterion`  Σ_a s_a⁻² J_aᵀ
+                                                                       (K_QQ + wI)⁻¹ J_a + Σ₀⁻¹; greedy + exchange
+                                                                       with rank-one kernel updates
+=====================================================================  =============================================
+
+A criterion of the configurations (:class:`~pin_kpi_oed.oed.criteria.ConfigurationCriterion`, e.g. the kriging
+``kpi_gp``: :class:`~pin_kpi_oed.oed.discrepancy_kpi.DiscrepancyDesignCriterion`, re-registered or not) builds its
+own objective. An objective without a pool form of its own selects by the generic greedy forward selection with
+one exchange pass on φ itself (:meth:`DesignObjective.select`): exact, slower.
+"""
+
+from __future__ import annotations
+
+import time
+from abc import ABC, abstractmethod
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from pin_kpi_oed.errors import IdentifiabilityError, InputError
+from pin_kpi_oed.oed.covariance import prior_of
+from pin_kpi_oed.oed.criteria import Criterion, CriterionInfo, get_criterion
+from pin_kpi_oed.oed.selection_result import PoolSelection
+
+__all__ = ["DesignContext", "DesignObjective", "DesignCriterion", "information_criterion"]
+
+
+@dataclass
+class DesignContext:
+    """What an objective is built on: the measurement model linearised at ``p0``, the identifiable parameters
+    ``base``, the KPI sensitivity ``E`` (3t, nb) at the working configurations ``q_work`` (t, n) rad. A
+    :class:`~pin_kpi_oed.design.optimize.DesignProblem` is one (with its cell, constraints, discrepancy);
+    ``evaluate`` builds one from a design file."""
+
+    model: Any
+    base: np.ndarray
+    E: np.ndarray | None
+    p0: np.ndarray
+    q_work: np.ndarray
+
+
+def information_criterion(criterion: Any) -> Criterion:
+    """The :class:`~pin_kpi_oed.oed.criteria.Criterion` of the information matrix of a name or instance.
+
+    Raises:
+        InputError: unknown, or a criterion of the configurations (it has no form on the information matrix).
+    """
+    crit = get_criterion(criterion)
+    if not isinstance(crit, Criterion):
+        raise InputError(f"criterion {crit.name}: a criterion of the configurations, not of the information matrix "
+                         f"(it builds its own objective on a design problem)")
+    return crit
+
+
+class DesignObjective(ABC):
+    """φ(Q) of a criterion, to be minimised over the measurement configurations Q (m, n) rad.
+
+    Subclasses set :attr:`crit` and implement :meth:`value` and :meth:`value_and_grad`; they override
+    :meth:`select` with the low-rank updates of their information model.
+
+    Attributes:
+        crit: the criterion (its ``name``, ``label``, ``unit``, ``is_ratio``).
+    """
+
+    crit: CriterionInfo
+
+    @property
+    def name(self) -> str:
+        """The criterion's name."""
+        return self.crit.name
+
+    @property
+    def is_ratio(self) -> bool:
+        """Whether φ is a positive quantity (the design solver scales it by its start value; else shifts it)."""
+        return self.crit.is_ratio
+
+    @abstractmethod
+    def value(self, Q: np.ndarray) -> float:
+        """φ(Q) in the criterion's unit.
+
+        Raises:
+            IdentifiabilityError: Q does not identify the parameters.
+        """
+
+    @abstractmethod
+    def value_and_grad(self, Q: np.ndarray) -> tuple[float, np.ndarray]:
+        """φ(Q) and the exact dφ/dQ, (m, n) per rad."""
+
+    def select(self, Q_pool: np.ndarray, m: int, seed: int = 0, **kw: Any) -> PoolSelection:
+        """m of the candidate configurations ``Q_pool`` (N, n): greedy forward selection on φ (candidates that do
+        not yet identify the parameters are scored after a tiny ridge-free fallback: the first that does), then one
+        exchange pass. Generic and exact (N·m evaluations of φ); the information models override it.
+
+        Raises:
+            InputError: m larger than the pool.
+        """
+        t0 = time.perf_counter()
+        Q_pool = np.atleast_2d(np.asarray(Q_pool, float))
+        N = len(Q_pool)
+        if m > N:
+            raise InputError(f"cannot choose {m} measurements from a pool of {N} candidates")
+        rng = np.random.default_rng(seed)
+
+        def phi(idx: list[int]) -> float:
+            try:
+                return self.value(Q_pool[idx])
+            except IdentifiabilityError:
+                return np.inf
+
+        chosen: list[int] = []
+        path = []
+        for _ in range(m):
+            rest = [i for i in rng.permutation(N) if i not in chosen]
+            vals = np.array([phi(chosen + [i]) for i in rest])
+            k = int(np.argmin(vals)) if np.isfinite(vals).any() else 0
+            chosen.append(int(rest[k]))
+            path.append(float(vals[k]))
+        cur, swaps = phi(chosen), 0
+        for pos in range(m):
+            others = [i for i in range(N) if i not in chosen]
+            vals = np.array([phi(chosen[:pos] + [i] + chosen[pos + 1:]) for i in others])
+            if vals.size and vals.min() < cur:
+                chosen[pos], cur, swaps = int(others[int(np.argmin(vals))]), float(vals.min()), swaps + 1
+        return PoolSelection(indices=np.array(chosen), value=float(cur), path=np.array(path), nit=swaps,
+                             time_s=time.perf_counter() - t0, success=bool(np.isfinite(cur)), status="selected",
+                             message=f"generic greedy + one exchange pass ({swaps} swaps); no certificate")
+
+
+@dataclass
+class DesignCriterion(DesignObjective):
+    """A criterion of the information matrix on the noise-only information FᵀF + P (F the weighted Jacobian over the
+    identifiable parameters at ``p``, P the layout's prior): dφ/dQ chains dφ/dF with dF/dQ.
+
+    Attributes:
+        model: the measurement model (evaluated at the linearisation point ``p``).
+        base: indices of the identifiable parameters.
+        criterion: a registered name or a :class:`~pin_kpi_oed.oed.criteria.Criterion` instance.
+        E: KPI sensitivity over the base parameters, (3t, nb), or None.
+        p: linearisation point (raw parameters); default nominal.
+
+    Raises:
+        InputError: unknown criterion name, or a criterion of the configurations.
+    """
+
+    model: Any
+    base: np.ndarray
+    criterion: Any = "kpi"
+    E: np.ndarray | None = None
+    p: np.ndarray | None = None
+    crit: Criterion = field(init=False, repr=False)
+
+    def __post_init__(self) -> None:
+        if self.p is None:
+            self.p = np.zeros(self.model.n_params)
+        self.crit = information_criterion(self.criterion)
+        self.prior = prior_of(self.model, self.base)
+
+    def jacobians(self, Q: np.ndarray) -> np.ndarray:
+        """Weighted Jacobians of configurations over the base parameters, (m, nh, nb)."""
+        return self.model.weighted_jacobian(self.p, np.atleast_2d(Q))[:, :, self.base]
+
+    def fixed_rows(self) -> np.ndarray | None:
+        """Rows every design of this objective already has (none here; measured poses add theirs)."""
+        return None
+
+    def value(self, Q: np.ndarray) -> float:
+        """φ(Q) for configurations Q, (m, n) rad."""
+        F = self.jacobians(Q).reshape(-1, self.base.size)
+        R = self.fixed_rows()
+        return self.crit.value(F if R is None else np.vstack([R, F]), self.E, self.prior)
+
+    def value_and_grad(self, Q: np.ndarray) -> tuple[float, np.ndarray]:
+        """φ(Q) and dφ/dQ, (m, n) (per rad): only the configurations Q move."""
+        F, dF = self.model.weighted_jacobian_dq(self.p, Q)
+        Fb = F[:, :, self.base]
+        m, nh, nb = Fb.shape
+        R = self.fixed_rows()
+        k = 0 if R is None else R.shape[0]
+        Fa = Fb.reshape(-1, nb) if R is None else np.vstack([R, Fb.reshape(-1, nb)])
+        val, G = self.crit.value_and_grad_F(Fa, self.E, self.prior)
+        grad = np.einsum("mac,mack->mk", G[k:].reshape(m, nh, nb), dF[:, :, self.base, :])
+        return val, grad
+
+    def select(self, Q_pool: np.ndarray, m: int, seed: int = 0, **kw: Any) -> PoolSelection:
+        """m of the candidates by the relaxation (its certificate), rounding and exchange
+        (:func:`~pin_kpi_oed.oed.pool.select`), on top of :meth:`fixed_rows` and the prior; ``Fp=`` passes the
+        candidates' Jacobians when already computed."""
+        from pin_kpi_oed.oed.pool import select
+
+        Fp = kw.pop("Fp", None)
+        Fp = self.jacobians(Q_pool) if Fp is None else Fp
+        R = self.fixed_rows()
+        M0 = None if R is None else R.T @ R
+        if self.prior is not None:
+            P = np.diag(1.0 / np.asarray(self.prior, float) ** 2)
+            M0 = P if M0 is None else M0 + P
+        K = self.crit.pool_form(self.E, self.base.size)
+        return select(Fp, m, K, seed=seed, fixed_info=M0, **kw)
