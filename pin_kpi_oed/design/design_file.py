@@ -45,7 +45,7 @@ from pin_kpi_oed.cell.cell import Cell, CapsuleSpec, HalfSpace
 from pin_kpi_oed.cell.feasibility import FeasibilityChecker
 from pin_kpi_oed.design.design_cell import (Fields, read_array, read_cell, read_json, read_model,
                                             skip_what_collides_at_work)
-from pin_kpi_oed.design.design_document import design_document, write_design
+from pin_kpi_oed.design.design_writer import design_document, write_design
 from pin_kpi_oed.errors import InputError, PinKpiOedError
 from pin_kpi_oed.model.tracker import TrackerModel
 from pin_kpi_oed.model.robot import Robot
