@@ -44,6 +44,8 @@ _PIPELINE = {
     "DesignProblem": "pin_kpi_oed.design.optimize", "DesignResult": "pin_kpi_oed.design.optimize",
     "load_design": "pin_kpi_oed.design.design_file", "DesignFile": "pin_kpi_oed.design.design_file",
     "write_design": "pin_kpi_oed.design.design_file",
+    "design_run": "pin_kpi_oed.design.runner", "DesignRun": "pin_kpi_oed.design.runner",
+    "DesignSettings": "pin_kpi_oed.design.runner",
     "analyse": "pin_kpi_oed.oed.identifiability", "score_design": "pin_kpi_oed.oed.evaluate",
     # measurements
     "MeasurementSet": "pin_kpi_oed.data.measurements", "read_measurements": "pin_kpi_oed.data.measurements",

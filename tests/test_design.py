@@ -311,16 +311,46 @@ def test_cli_bad_given_and_pool_inputs_exit_2_and_write_nothing(sequential_files
 def test_api_writes_the_design_file_view_and_export_read(problem, tmp_path):
     """write_design (the writer ``design --json`` calls) makes a file load_design reads back: same poses, cell, C_s."""
     from pin_kpi_oed.design.design_file import design_document, load_design, write_design
+    from pin_kpi_oed.design.runner import DesignRun
 
     results = run_designs(problem.cell, ["random"], 12, 3, problem=problem)
-    path = write_design(tmp_path / "d.json", problem.cell, problem, results, 12, 3)
+    run = DesignRun(cell=problem.cell, problem=problem, results=results, m=12, seed=3)
+    path = write_design(tmp_path / "d.json", run)
     df = load_design(path)
     entry = df.designs[0]
     assert entry.criterion == "random" and np.allclose(entry.q_meas, results[0].q_meas, atol=0.0)
     assert np.allclose(df.cell.q_work, problem.cell.q_work) and df.cell.robot.name == problem.cell.robot.name
-    doc = design_document(problem.cell, problem, results, 12, 3)
+    doc = design_document(run)
     assert np.isclose(np.trace(np.asarray(doc["designs"][0]["cov_s_m2"])), results[0].trace_cs_m2, rtol=1e-9)
     assert json.loads(path.read_text())["q_meas"] == doc["q_meas"]
+
+
+def _without_times(doc):
+    """The document without its wall and CPU times (they differ between any two runs)."""
+    if isinstance(doc, dict):
+        return {k: _without_times(v) for k, v in doc.items() if not k.endswith(("time_s", "_cpu_s"))}
+    if isinstance(doc, list):
+        return [_without_times(v) for v in doc]
+    return doc
+
+
+def test_cli_json_is_the_library_run_written(tmp_path):
+    """``design --json`` and ``pko.write_design`` of the same run (``design_run`` with the same settings) write
+    the same file: the same keys and numbers, wall times apart; ``demo`` goes through the same calls."""
+    import pin_kpi_oed as pko
+    from pin_kpi_oed.cli.app import main
+
+    args = ["--cell", "kr15", "--criteria", "random,kpi", "--measurements", "14", "--starts", "1", "--max-iter", "15",
+            "--certificate", "--pool-size", "300", "--clearance-margin", "0.01", "--seed", "2", "--quiet"]
+    assert main(["design", *args, "--json", str(tmp_path / "cli.json")]) == 0
+    settings = pko.DesignSettings(criteria=("random", "kpi"), measurements=14, seed=2, n_starts=1, max_iter=15,
+                                  certificate=True, certificate_pool_size=300, clearance_margin_m=0.01,
+                                  incidence_margin_deg=1.0)
+    run = pko.design_run(pko.load_cell("kr15"), settings)
+    pko.write_design(tmp_path / "api.json", run)
+    cli, api = (json.loads((tmp_path / f"{n}.json").read_text()) for n in ("cli", "api"))
+    assert cli["clearance_margin_m"] == 0.01 and "certificate" in cli and "pose_clearance_m" in cli["designs"][1]
+    assert _without_times(cli) == _without_times(api)
 
 
 def test_cli_pool_drops_and_counts_infeasible_candidates(sequential_files, tmp_path, capsys):
@@ -345,3 +375,26 @@ def test_cli_pool_drops_and_counts_infeasible_candidates(sequential_files, tmp_p
     assert counted == n - feasible  # every dropped candidate has its reason
     q = np.array(json.loads((tmp_path / "d.json").read_text())["q_meas"])
     assert np.all(q[:, 1] <= cell.q_upper[1] + 1e-9)
+
+
+def test_demo_is_the_library_run(monkeypatch):
+    """``demo`` declares its run (KR 15, random / param / kpi, 60 poses, the certificate) and hands it to
+    ``design_run``, the call ``design`` and the Python API use (no command-line namespace in between)."""
+    import pin_kpi_oed.design.runner as runner
+    from pin_kpi_oed.cli.app import main
+
+    seen = {}
+
+    class Stop(BaseException):
+        pass
+
+    def stop(cell, settings, problem=None, **kw):
+        seen.update(cell=cell.name, settings=settings)
+        raise Stop
+
+    monkeypatch.setattr(runner, "design_run", stop)
+    with pytest.raises(Stop):
+        main(["demo", "--seed", "4"])
+    s = seen["settings"]
+    assert seen["cell"] == load_cell("kr15").name and s.criteria == ("random", "param", "kpi")
+    assert (s.measurements, s.seed, s.certificate, s.clearance_margin_m) == (60, 4, True, 0.0)

@@ -293,6 +293,7 @@ def test_ipopt_design_over_the_extended_model_kr15():
     from pin_kpi_oed.cli.design import table
     from pin_kpi_oed.design.scores import extended_scores
     from pin_kpi_oed.design.design_file import design_document
+    from pin_kpi_oed.design.runner import DesignRun
 
     sc = extended_scores(problem, [rnd, kpi], cell.q_work)
     assert np.isclose(sc[1]["trace_cs_m2"], crit.value(kpi.q_meas), rtol=1e-9, atol=0.0)
@@ -303,8 +304,8 @@ def test_ipopt_design_over_the_extended_model_kr15():
     assert "ext tr(C_s) mm^2" in txt and "geo tr(C_s) mm^2" in txt
     assert f"{sc[1]['trace_cs_m2'] * 1e6:.4e}" in txt.splitlines()[-1]
     assert extended_scores(DesignProblem(cell), [kpi], cell.q_work) is None
-    doc = design_document(cell, problem, [rnd, kpi], 30, 0, True, extended_scores=sc, model_file="m.json",
-                          prior="tolerances")
+    doc = design_document(DesignRun(cell=cell, problem=problem, results=[rnd, kpi], m=30, seed=0,
+                                    extended_scores=sc, model_file="m.json", prior="tolerances"))
     assert doc["designs"][1]["extended"]["trace_cs_m2"] == sc[1]["trace_cs_m2"]
     assert doc["designs"][1]["trace_cs_m2"] == kpi.trace_cs_m2
     assert doc["extended_model"]["prior"] == "tolerances" and doc["extended_model"]["n_effect"] == ext.k

@@ -57,13 +57,25 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
 
 
 def cmd_demo(args: argparse.Namespace) -> int:
-    """``pin-kpi-oed demo``: the main job on the embedded default cell (KR 15)."""
-    from pin_kpi_oed.cli.design import run as run_design
+    """``pin-kpi-oed demo``: the main job on the embedded default cell (KR 15): heuristic, A on C_p and KPI designs of
+    60 poses, the paper's zero margins, the certificate; the same library calls as ``design``."""
+    from pin_kpi_oed.cell.cell import load_cell
+    from pin_kpi_oed.cli.design import print_header, print_results
+    from pin_kpi_oed.design.runner import DesignSettings, design_run
+    from pin_kpi_oed.design.design_writer import write_design
+    from pin_kpi_oed.design.optimize import DesignProblem
 
-    ns = argparse.Namespace(cell="kr15", criteria="random,param,kpi", measurements=60, seed=args.seed,
-                            json=args.json, no_collision=False, starts=None, certificate=True, pool_size=5000,
-                            start="pool", max_iter=None, quiet=False)
-    return run_design(ns)
+    cell = load_cell("kr15")
+    settings = DesignSettings(criteria=("random", "param", "kpi"), measurements=60, seed=args.seed, certificate=True)
+    problem = DesignProblem(cell)
+    print_header(cell, problem, 60, args.seed, True, settings.n_starts)
+    run = design_run(cell, settings, problem)
+    print_results(list(run.results), list(settings.criteria), run.certificate, run.m, None, False, cell, cell,
+                  run.margins, run.true_checks)
+    if args.json:
+        write_design(args.json, run)
+        print(f"wrote {args.json}")
+    return 0
 
 
 class OneLineParser(argparse.ArgumentParser):

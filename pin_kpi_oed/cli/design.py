@@ -17,14 +17,15 @@ only) and reports the share of poses that collide.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import math
+from collections.abc import Sequence
 
 import numpy as np
 
-
-from pin_kpi_oed.data.atomic import atomic_write_json
-from pin_kpi_oed.design.design_file import design_document
-from pin_kpi_oed.design.scores import add_discrepancy_section, discrepancy_scores, extended_scores, sigma_given
+from pin_kpi_oed.design.runner import DesignRun, DesignSettings, design_run, true_checks
+from pin_kpi_oed.design.design_writer import write_design
+from pin_kpi_oed.design.scores import discrepancy_scores, extended_scores, sigma_given
 from pin_kpi_oed.design.margins import DEFAULT_CLEARANCE_MARGIN_M, DEFAULT_INCIDENCE_MARGIN_DEG, with_margins
 from pin_kpi_oed.errors import IdentifiabilityError, InputError
 from pin_kpi_oed.oed.criteria import ConfigurationCriterion, check_names, criterion_names, get_criterion
@@ -169,17 +170,6 @@ def table(results: list, reference=None, certificate=None, extended: list | None
 
 
 
-def _true_checks(cell, results: list) -> list:
-    """Independent check of every design in the untightened cell; the results report its true values."""
-    from pin_kpi_oed.cell.feasibility import FeasibilityChecker
-
-    checker = FeasibilityChecker(cell)
-    reps = [checker.check(r.q_meas) for r in results]
-    for r, rep in zip(results, reps):
-        r.min_clearance_m, r.max_incidence_deg = rep.min_clearance_m, rep.max_incidence_deg
-    return reps
-
-
 def run(args: argparse.Namespace) -> int:
     """Handler of ``pin-kpi-oed design`` (returns the exit code).
 
@@ -187,7 +177,6 @@ def run(args: argparse.Namespace) -> int:
         PinKpiOedError: bad cell, unknown criterion, infeasible cell, solver failure (one-line message).
     """
     from pin_kpi_oed.cell.cell import load_cell
-    from pin_kpi_oed.design.optimize import DesignOptions, ipopt_options, run_designs
     from pin_kpi_oed.design.user_pool import (check_candidates, design_from_pool, duplicates_line, pool_line,
                                               read_pool)
 
@@ -208,12 +197,15 @@ def run(args: argparse.Namespace) -> int:
     if target is not None and not disc_on:  # before any work: "how many more" needs M⁻¹ of the measured poses
         problem.require_identified(f"--target-sigma: --given {given_file}")
     if not quiet:
-        _print_header(cell, problem, m, seed, collision, starts)
+        print_header(cell, problem, m, seed, collision, starts)
     _set_region(args, problem, criteria, seed, true_cell)
     _set_reregister(args, problem, disc_on)
-    opts = DesignOptions(collision=collision, n_starts=starts, ipopt=ipopt_options(max_iter=max_iter),
-                         start=getattr(args, "start", "pool") or "pool")
-    cert, checked = None, None
+    settings = DesignSettings(criteria=tuple(criteria), measurements=m, seed=seed, collision=collision,
+                              n_starts=starts, max_iter=max_iter, start=getattr(args, "start", "pool") or "pool",
+                              certificate=bool(getattr(args, "certificate", False)),
+                              certificate_pool_size=getattr(args, "pool_size", 5000) or 5000,
+                              clearance_margin_m=margins[0], incidence_margin_deg=margins[1])
+    checked = None
     if pool_file:
         Qc, outside = read_pool(pool_file, cell.robot, "--pool")
         reasons: dict[str, int] = {}
@@ -226,16 +218,20 @@ def run(args: argparse.Namespace) -> int:
             rows = np.setdiff1d(np.arange(1, len(Qc) + len(outside) + 1), outside)[ok]
             raise IdentifiabilityError(duplicates_line(pool_file, Qc[ok], rows) or f"--pool {pool_file}: {exc}") \
                 from None
+        run = DesignRun(cell=true_cell, problem=problem, results=results, m=m, seed=seed, collision=collision,
+                        margins=margins, certificate=cert,
+                        true_checks=true_checks(true_cell, results) if cell is not true_cell else None,
+                        extended_scores=extended_scores(problem, results, true_cell.q_work),
+                        discrepancy_scores=discrepancy_scores(problem, results) if disc_on else None)
     else:
-        results = run_designs(cell, criteria, m, seed, opts, problem)
-    true_checks = _true_checks(true_cell, results) if cell is not true_cell else None
-    cert = _certificate(args, problem, results, m, seed, cert, given_file, pool_file)
-    ext_scores = extended_scores(problem, results, true_cell.q_work)
-    _print_results(results, criteria, cert, m, pool_file, quiet, cell, true_cell, margins, true_checks, given_file,
-                   ext_scores)
-    gp_scores = None
-    if disc_on:  # opt-in: the paper's output is unchanged without
-        gp_scores = discrepancy_scores(problem, results)
+        run = design_run(true_cell, settings, problem, discrepancy=disc_on)
+    run = dataclasses.replace(run, given_file=given_file, pool_file=pool_file, model_file=getattr(args, "model", None),
+                              prior=getattr(args, "prior", None))
+    results = list(run.results)
+    print_results(results, criteria, run.certificate, m, pool_file, quiet, cell, true_cell, margins, run.true_checks,
+                   given_file, run.extended_scores)
+    if run.discrepancy_scores is not None:  # opt-in: the paper's output is unchanged without
+        gp_scores = list(run.discrepancy_scores)
         print(problem.discrepancy_prior().describe() + "\n" + _sigma_plan(problem, m))
         if given_file:
             print(f"measured poses alone ({len(problem.Q_given)}): predicted TCP sigma with the discrepancy "
@@ -248,15 +244,7 @@ def run(args: argparse.Namespace) -> int:
         curve = _poses_needed(args, problem, cell, target, seed, m, checked, results)
     until = _poses_until(args, problem, cell, target, seed, checked) if target is not None and not disc_on else None
     if getattr(args, "json", None):
-        doc = design_document(true_cell, problem, results, m, seed, collision, margins=margins, given_file=given_file,
-                              pool_file=pool_file, until=until, true_checks=true_checks, certificate=cert,
-                              extended_scores=ext_scores, model_file=getattr(args, "model", None),
-                              prior=getattr(args, "prior", None))
-        if gp_scores is not None:
-            add_discrepancy_section(doc, problem, gp_scores)
-        if curve is not None:
-            doc["poses_needed"] = curve.to_dict()
-        atomic_write_json(args.json, doc)
+        write_design(args.json, dataclasses.replace(run, until=until, poses_needed=curve))
         if not quiet:
             print(f"wrote {args.json}")
     return 0
@@ -371,7 +359,7 @@ def _set_reregister(args: argparse.Namespace, problem, disc_on: bool) -> None:
           f"again on {len(problem.Q_register)} configuration(s) ({where})")
 
 
-def _print_header(cell, problem, m: int, seed: int, collision: bool, starts: int) -> None:
+def print_header(cell, problem, m: int, seed: int, collision: bool, starts: int) -> None:
     """Print the cell summary and the size of the design problem."""
     rows = problem.coll.info.count()
     print(cell.summary())
@@ -381,22 +369,9 @@ def _print_header(cell, problem, m: int, seed: int, collision: bool, starts: int
           + f" (aggregated to {problem.cons.n_rows} for Ipopt); {starts} start(s) per criterion")
 
 
-def _certificate(args: argparse.Namespace, problem, results: list, m: int, seed: int, cert,
-                 given_file: str | None, pool_file: str | None):
-    """The optimality certificate of ``--certificate``: the pool's one with ``--pool``; else over a random feasible
-    pool plus the designs' poses, with the measured poses' information as a fixed part with ``--given``."""
-    if getattr(args, "certificate", False) and not pool_file:
-        from pin_kpi_oed.design.optimality import certify
-
-        cert = certify(problem, m, pool_size=getattr(args, "pool_size", 5000) or 5000, seed=seed,
-                       extra=[r.q_meas for r in results if r.feasible],
-                       fixed_info=problem.fixed_information() if given_file else None)
-    return cert
-
-
-def _print_results(results: list, criteria: list, cert, m: int, pool_file: str | None, quiet: bool, cell,
+def print_results(results: list, criteria: list, cert, m: int, pool_file: str | None, quiet: bool, cell,
                    true_cell, margins: tuple[float, float], true_checks, given_file: str | None = None,
-                   ext_scores: list | None = None) -> None:
+                   ext_scores: Sequence[dict] | None = None) -> None:
     """Print the result table, the certificate, the random design's acceptance and the infeasible designs."""
     shown = [r for r in results if r.criterion in criteria] or results
     ext_of = {id(r): e for r, e in zip(results, ext_scores)} if ext_scores is not None else None

@@ -13,6 +13,7 @@ _EXPORTS = {**dict.fromkeys(("run_designs", "DesignOptions", "DesignProblem", "D
                              "design_ipopt"), "pin_kpi_oed.design.optimize"),
             **dict.fromkeys(("load_design", "DesignFile", "DesignEntry", "write_design", "design_document"),
                            "pin_kpi_oed.design.design_file"),
+            **dict.fromkeys(("design_run", "DesignRun", "DesignSettings"), "pin_kpi_oed.design.runner"),
             "read_poses": "pin_kpi_oed.design.user_pool",
             "SequentialProblem": "pin_kpi_oed.design.sequential", "poses_until": "pin_kpi_oed.design.sequential",
             "certify": "pin_kpi_oed.design.optimality"}

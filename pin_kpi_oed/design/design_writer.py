@@ -12,37 +12,25 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from pin_kpi_oed.cell.cell import Cell
+from pin_kpi_oed.design.runner import DesignRun
 
 __all__ = ["design_document", "write_design"]
 
 
-def design_document(cell: Cell, problem: Any, results: Sequence[Any], m: int, seed: int, collision: bool = True, *,
-                    margins: tuple[float, float] = (0.0, 0.0), given_file: str | None = None,
-                    pool_file: str | None = None, until: Any = None, true_checks: Sequence[Any] | None = None,
-                    certificate: Any = None, extended_scores: Sequence[dict] | None = None,
-                    model_file: str | None = None, prior: str | None = None) -> dict:
-    """The design file's JSON document (what ``design --json`` writes and :func:`load_design` reads; SI units).
+def design_document(run: DesignRun) -> dict:
+    """The design file's JSON document of one run (what :func:`write_design` and ``design --json`` write and
+    :func:`~pin_kpi_oed.design.design_file.load_design` reads; SI units): the set-up, the cell, every design with
+    its C_s (eq. 19; with measured poses their information included), the ``kpi`` design's (else the last one's)
+    configurations as the file's ``q_meas``; the margins, measured poses, user pool, "how many more" answer,
+    independent checks, certificate, extended model and discrepancy sections when the run has them.
 
     Args:
-        cell: the cell the designs are checked in (the untightened one).
-        problem: the :class:`~pin_kpi_oed.design.optimize.DesignProblem` (model, identifiable set, constraints);
-            with ``given_file`` a :class:`~pin_kpi_oed.design.sequential.SequentialProblem`.
-        results: the designs (:class:`~pin_kpi_oed.design.optimize.DesignResult`); the ``kpi`` one (else the
-            last) is the file's ``q_meas``.
-        m: measurements per design; seed: the run's seed; collision: collision avoidance was on.
-        margins: clearance (m) and incidence (deg) margins the optimiser designed with.
-        given_file: the measured poses designed on top of (their C_s included in every design's ``cov_s_m2``).
-        pool_file: the user pool the designs were selected from.
-        until: the "how many more poses" answer (:func:`~pin_kpi_oed.design.sequential.poses_until`).
-        true_checks: the independent check of every design in ``cell`` (pose clearances m, incidences deg).
-        certificate: the optimality certificate (bound of tr(C_s), m²; every design's efficiency).
-        extended_scores: per design, the extended-model score (``designs[i]["extended"]``); ``model_file``
-            and ``prior`` name the model file and the prior they came from.
+        run: the :class:`~pin_kpi_oed.design.runner.DesignRun`.
 
     Returns:
         The JSON-able dict.
     """
+    cell, problem, results, m = run.cell, run.problem, run.results, run.m
     from pin_kpi_oed.model.serialize import model_to_dict
     from pin_kpi_oed.oed.evaluate import score_design
 
@@ -52,32 +40,40 @@ def design_document(cell: Cell, problem: Any, results: Sequence[Any], m: int, se
         "q_work": cell.q_work.tolist(), "joint_names": list(cell.robot.joint_names),
         "capsules": [c.to_dict() for c in cell.robot_capsules], "obstacles": [o.to_dict() for o in cell.obstacles],
         "half_spaces": [h.to_dict() for h in cell.half_spaces], "cell": cell.to_dict(), "measurements": m,
-        "seed": seed, "collision_avoidance": collision, "identifiable": [problem.ident.names[i] for i in problem.base],
+        "seed": run.seed, "collision_avoidance": run.collision,
+        "identifiable": [problem.ident.names[i] for i in problem.base],
         "constraint_rows_per_configuration": problem.coll.info.count(),
         "designs": [{**r.to_dict(),
                      "cov_s_m2": score_design(problem.model, r.q_meas, cell.q_work, problem.ident).cov_s_m2.tolist()}
                     for r in results],
         "q_meas": main.q_meas.tolist(), "q_meas_criterion": main.criterion,
     }
-    if extended_scores is not None:
-        _add_extended(doc, problem, extended_scores, model_file, prior)
-    doc["clearance_margin_m"], doc["incidence_margin_deg"] = margins
-    if given_file:
-        _add_given(doc, problem, results, given_file)
-    if pool_file:
-        doc["pool_file"] = str(pool_file)
+    if run.extended_scores is not None:
+        _add_extended(doc, problem, run.extended_scores, run.model_file, run.prior)
+    doc["clearance_margin_m"], doc["incidence_margin_deg"] = run.margins
+    if run.given_file:
+        _add_given(doc, problem, results, run.given_file)
+    if run.pool_file:
+        doc["pool_file"] = str(run.pool_file)
+    until, certificate = run.until, run.certificate
     if until is not None:
         doc["poses_until"] = {**until.result_dict(), "target_sigma_m": until.target_sigma_m,
                               "n_more": until.n_more, "sigma_now_m": until.sigma_now_m,
                               "sigma_verified_m": until.sigma_verified_m, "q_added": until.Q_added.tolist()}
-    if true_checks is not None:
-        for d, rep in zip(doc["designs"], true_checks):
+    if run.true_checks is not None:
+        for d, rep in zip(doc["designs"], run.true_checks):
             d["pose_clearance_m"], d["pose_incidence_deg"] = rep.clearance_m.tolist(), rep.incidence_deg.tolist()
     if certificate is not None:
         doc["lower_bound_trace_cs_m2"] = certificate.lower_bound_trace_cs_m2
         doc["certificate"] = certificate.to_dict()
         for d, r in zip(doc["designs"], results):
             d["efficiency"] = certificate.efficiency(r.trace_cs_m2)
+    if run.discrepancy_scores is not None:
+        from pin_kpi_oed.design.scores import add_discrepancy_section
+
+        add_discrepancy_section(doc, problem, list(run.discrepancy_scores))
+    if run.poses_needed is not None:
+        doc["poses_needed"] = run.poses_needed.to_dict()
     return doc
 
 
@@ -103,14 +99,13 @@ def _add_given(doc: dict, problem: Any, results: Sequence[Any], given_file: str)
         d["cov_s_m2"] = kpi_covariance(np.vstack([problem.F_given, F]), problem.E, problem.kpi_criterion.prior).tolist()
 
 
-def write_design(path: str | os.PathLike, cell: Cell, problem: Any, results: Sequence[Any], m: int, seed: int,
-                 collision: bool = True, **extras: Any) -> Path:
-    """Write the design file (atomically) that ``view``, ``export``, ``evaluate`` and :func:`load_design` read.
+def write_design(path: str | os.PathLike, run: DesignRun) -> Path:
+    """Write the design file of a run (atomically) that ``view``, ``export``, ``evaluate`` and
+    :func:`~pin_kpi_oed.design.design_file.load_design` read; ``design --json`` writes through this call.
 
     Args:
         path: the JSON file to write.
-        cell, problem, results, m, seed, collision: as :func:`design_document`.
-        **extras: the keyword arguments of :func:`design_document` (margins, given_file, certificate, ...).
+        run: the :class:`~pin_kpi_oed.design.runner.DesignRun` (:func:`~pin_kpi_oed.design.runner.design_run`).
 
     Returns:
         The path written.
@@ -120,5 +115,5 @@ def write_design(path: str | os.PathLike, cell: Cell, problem: Any, results: Seq
     """
     from pin_kpi_oed.data.atomic import atomic_write_json
 
-    atomic_write_json(path, design_document(cell, problem, results, m, seed, collision, **extras))
+    atomic_write_json(path, design_document(run))
     return Path(path)
