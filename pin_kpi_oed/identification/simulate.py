@@ -245,7 +245,8 @@ def feasible_poses(cell: Any, n: int, seed: int) -> np.ndarray:
     Raises:
         InfeasibleError: fewer than ``n`` feasible configurations within the cell's sampling budget.
     """
-    from pin_kpi_oed.cell.collision import CollisionModel, random_feasible
+    from pin_kpi_oed.cell.collision import CollisionModel
+    from pin_kpi_oed.cell.sampling import random_feasible
     from pin_kpi_oed.cell.feasibility import FeasibilityChecker
     from pin_kpi_oed.errors import InfeasibleError
 
