@@ -86,7 +86,7 @@ def _figures(tree: Path) -> dict:
 
 def _baseline_tree(rev: str, dest: Path) -> Path | None:
     repo = Path(__file__).resolve().parents[1]
-    arch = subprocess.run(["git", "-C", str(repo), "archive", rev, "pin_kpi_oed"], capture_output=True)
+    arch = subprocess.run(["git", "-C", str(repo), "archive", rev, "pin_kpi_oed", "urdf"], capture_output=True)
     if arch.returncode != 0:
         return None
     subprocess.run(["tar", "-x", "-C", str(dest)], input=arch.stdout, check=True)
