@@ -67,7 +67,7 @@ def main(argv: list[str] | None = None) -> int:
     print(format_validation(va, "  after  (geometric calibration)                      "))
     print(f"  fitted reflector in tool0: {np.round(after.reflector_m * 1e3, 3).tolist()} mm "
           f"(baseline fit: {np.round(before.reflector_m * 1e3, 3).tolist()} mm)")
-    print(f"  identification time {after.time_s * 1e3:.0f} ms, {after.iterations} LM iterations")
+    print(f"  identification time {after.time_s * 1e3:.0f} ms, {after.nit} LM iterations")
     ok = va["mean_m"] <= 0.45e-3
     print(f"  target held-out mean ≤ 0.45 mm: {'met' if ok else 'NOT met'}")
     if a.out:

@@ -60,7 +60,7 @@ def test_small_design_improves_and_is_feasible(problem, start):
     assert res.feasible and res.min_clearance_m >= 0 and res.max_incidence_deg <= 30.0 + 1e-9
     assert np.all(res.q_meas >= problem.cell.q_lower) and np.all(res.q_meas <= problem.cell.q_upper)
     assert res.improvement_over(r0) > 20.0
-    assert 0 < res.iterations <= 60 and res.n_constraints == M * problem.cons.n_rows
+    assert 0 < res.nit <= 60 and res.n_constraints == M * problem.cons.n_rows
     d = res.to_dict()
     json.dumps(d)
     assert np.array(d["q_meas"]).shape == (M, 6) and d["criterion"] == "kpi" and "kpi" in res.summary()

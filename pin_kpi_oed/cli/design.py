@@ -152,7 +152,7 @@ def table(results: list, reference=None, certificate=None, extended: list | None
             e_r, e_ref = ext_by_id.get(id(r)), ext_by_id.get(id(ref), extended_reference)
             imp = (100.0 * (e_r["trace_cs_m2"] / e_ref["trace_cs_m2"] - 1.0) + 0.0 if e_r and e_ref
                    else float("nan"))
-        it = f"{r.iterations:d}" if r.criterion != "random" else "-"
+        it = f"{r.nit:d}" if r.criterion != "random" else "-"
         chk = "ok" if r.feasible else f"{100 * r.share_colliding:.0f}% coll."
         if not r.feasible and r.share_colliding == 0:
             chk = f"{100 * r.share_infeasible:.0f}% infeas."
@@ -163,7 +163,7 @@ def table(results: list, reference=None, certificate=None, extended: list | None
         lines.append(f"{r.criterion:<10}{ext}{r.trace_cs_m2 * 1e6:>{18 if ext_by_id else 14}.4e}"
                      f"{r.tcp_sigma_m * 1e6:>14.4f}{imp:>+{13 if ext_by_id else 12}.1f}"
                      f"{r.min_clearance_m * 1e3:>11.1f}{r.max_incidence_deg:>12.1f}{it:>7}"
-                     f"{r.solve_time_s:>8.2f}"
+                     f"{r.time_s:>8.2f}"
                      + (f"{100 * certificate.efficiency(r.trace_cs_m2):>10.1f}" if certificate else "")
                      + f"  {chk}")
     return "\n".join(lines)

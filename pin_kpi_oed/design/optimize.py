@@ -128,16 +128,6 @@ class DesignResult(Result):
         """Every pose passes the independent check (= ``success``)."""
         return self.success
 
-    @property
-    def iterations(self) -> int:
-        """Ipopt iterations of the returned start (= ``nit``)."""
-        return self.nit
-
-    @property
-    def solve_time_s(self) -> float:
-        """Wall time (s) (= ``time_s``)."""
-        return self.time_s
-
     def improvement_over(self, reference: DesignResult) -> float:
         """Relative reduction of tr(C_s) w.r.t. ``reference`` (%)."""
         return 100.0 * (1.0 - self.trace_cs_m2 / reference.trace_cs_m2)

@@ -84,7 +84,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from pin_kpi_oed.effects.base import Effect, SubsetEffect, check_aux_len, joint_label, n_rows
+from pin_kpi_oed.effects.base import Effect, SubsetEffect, joint_label
 from pin_kpi_oed.effects.compose import (effect_jacobian, position_dq, predict_with_effects, size_effect,
                                          sum_joint_offsets, sum_tool_offsets, visible_rms)
 from pin_kpi_oed.effects.gravity import LOADED_REL_TOL, Backlash, JointCompliance, gravity_torque, loaded_joints
@@ -108,11 +108,6 @@ UNOBSERVABLE_NOTES: tuple[str, ...] = (
     "link-length parameters absorb it exactly, so these data cannot reveal it - check the tracker against an "
     "independent length standard (scale bar) instead",
 )
-
-# historical names, kept for callers
-_n_rows = n_rows
-_check_aux_len = check_aux_len
-
 
 #: Effect classes by name (the order is the order of the report's candidate list).
 EFFECTS: dict[str, type[Effect]] = {

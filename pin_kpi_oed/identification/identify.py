@@ -128,15 +128,14 @@ from pin_kpi_oed.identification.discrepancy_fit import discrepancy_options, resu
 from pin_kpi_oed.identification.fit_inputs import (MIN_STATION_ROWS, FitInputs, check_inputs,
                                                    default_station_label)
 from pin_kpi_oed.identification.heldout import error_stats, format_validation, validate
-from pin_kpi_oed.identification.identifiable import IDENT_CACHE, N_EXCITATION, build_problem, identifiable_set
+from pin_kpi_oed.identification.identifiable import N_EXCITATION, build_problem, identifiable_set
 from pin_kpi_oed.identification.identify_options import ROBUST_LOSSES, IdentifyOptions, resolve_options
 from pin_kpi_oed.identification.identify_result import IdentificationResult
 from pin_kpi_oed.identification.model_file import Setup
-from pin_kpi_oed.identification.problem import (ResidualModel, align_data, effect_param_names, jl_inv, log3,
-                                                predict)
+from pin_kpi_oed.identification.problem import (ResidualModel, align_data, effect_param_names, predict)
 from pin_kpi_oed.identification.solve import fit_covariance, settle_outliers, solve, tcp_std
 from pin_kpi_oed.identification.tool_check import check_tool
-from pin_kpi_oed.identification.tracker_start import proj_so3, register_points, start_stations
+from pin_kpi_oed.identification.tracker_start import register_points, start_stations
 from pin_kpi_oed.model.tracker import TrackerModel
 from pin_kpi_oed.threads import limit_threads
 
@@ -158,13 +157,6 @@ __all__ = [
     "MIN_STATION_ROWS",
     "N_EXCITATION",
 ]
-
-# historical names, kept for the tests and callers
-_jl_inv = jl_inv
-_log3 = log3
-_proj_so3 = proj_so3
-_IDENT_CACHE = IDENT_CACHE
-
 
 def _setups(prob: ResidualModel, P: np.ndarray, errors: np.ndarray, inp: FitInputs, data: MeasurementSet
             ) -> dict[str, Setup]:

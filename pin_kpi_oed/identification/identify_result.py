@@ -127,11 +127,6 @@ class IdentificationResult(Result):
         return bool(self.success)
 
     @property
-    def iterations(self) -> int:
-        """Number of Jacobian evaluations (LM iterations) (= ``nit``)."""
-        return int(self.nit)
-
-    @property
     def n_measurements(self) -> int:
         """Number of measurements used in the fit."""
         return int(self.errors_m.size)

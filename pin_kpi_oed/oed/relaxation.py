@@ -72,11 +72,6 @@ class ApproximateDesign(Result):
     max_d_ratio: float
     support: np.ndarray = field(default_factory=lambda: np.zeros(0, int))
 
-    @property
-    def iterations(self) -> int:
-        """Multiplicative iterations (= ``nit``)."""
-        return self.nit
-
     def to_dict(self) -> dict:
         """Plain JSON-able dict (the common result keys and the certificate's figures)."""
         return {**self.result_dict(), "phi": self.phi, "lower_bound": self.lower_bound,
