@@ -513,7 +513,7 @@ def _set_discrepancy(problem, cm, path: str) -> None:
     Raises:
         InputError: the model file's robot has other joints than the cell's.
     """
-    from pin_kpi_oed.oed.discrepancy_kpi import DiscrepancyPrior
+    from pin_kpi_oed.discrepancy.prior import DiscrepancyPrior
 
     if cm.discrepancy is None:
         return

@@ -47,6 +47,7 @@ import numpy as np
 from scipy import linalg as sla
 
 from pin_kpi_oed.discrepancy.arrays import decode_array, encode_array
+from pin_kpi_oed.discrepancy.cholesky import jitter_cholesky
 from pin_kpi_oed.discrepancy.coverage import JointCoverage
 from pin_kpi_oed.discrepancy.kernel import JointKernel
 from pin_kpi_oed.errors import InputError
@@ -555,7 +556,7 @@ def _posterior(kernel: JointKernel, noise: float, Q: np.ndarray, Y: np.ndarray, 
         return {"kind": "exact", "Z": Q.copy(), "y": Y.copy()}
     Z = Q[np.sort(rng.permutation(n)[:opts.n_inducing])]
     m = len(Z)
-    Lz = _stable_cholesky(kernel(Z))
+    Lz = jitter_cholesky(kernel(Z), (1e-8, 1e-6, 1e-4, 1e-2), "the inducing configurations' kernel matrix")
     # A = K_ZZ + w⁻¹ K_ZQ K_QZ = L_z B L_zᵀ with B = I + w⁻¹ V Vᵀ, V = L_z⁻¹ K_ZQ (eigenvalues of B ≥ 1)
     B = np.eye(m)
     c = np.zeros((m, 3))
@@ -570,17 +571,6 @@ def _posterior(kernel: JointKernel, noise: float, Q: np.ndarray, Y: np.ndarray, 
     Li = sla.solve_triangular(Lz, np.eye(m), lower=True, check_finite=False)       # L_z⁻¹
     Minv = Li.T @ inner @ Li                                                      # K_ZZ⁻¹ − A⁻¹
     return {"kind": "inducing", "Z": Z, "alpha": alpha, "Minv": 0.5 * (Minv + Minv.T)}
-
-
-def _stable_cholesky(K: np.ndarray) -> np.ndarray:
-    """Lower Cholesky factor of K, with jitter raised from 1e-8 to 1e-2 of its mean diagonal until it succeeds."""
-    scale = float(np.mean(np.diag(K)))
-    for jitter in (1e-8, 1e-6, 1e-4, 1e-2):
-        try:
-            return np.linalg.cholesky(K + jitter * scale * np.eye(len(K)))
-        except np.linalg.LinAlgError:
-            continue
-    raise np.linalg.LinAlgError("the inducing configurations' kernel matrix is not positive definite")
 
 
 def _spd_inverse(S: np.ndarray, keep: dict | None = None) -> np.ndarray:

@@ -27,7 +27,7 @@ def refit_discrepancy(problem: Any, given_file: str) -> str:
     from pin_kpi_oed.data.measurement_reader import read_measurements
     from pin_kpi_oed.discrepancy import DiscrepancyOptions
     from pin_kpi_oed.identification.identify import identify
-    from pin_kpi_oed.oed.discrepancy_kpi import DiscrepancyPrior
+    from pin_kpi_oed.discrepancy.prior import DiscrepancyPrior
 
     ms = read_measurements(given_file, joint_names=list(problem.cell.robot.joint_names), require_position=False)
     pos = getattr(ms, "position_m", None)

@@ -60,6 +60,7 @@ from pin_kpi_oed.oed.covariance import prior_of
 from pin_kpi_oed.oed.criteria import Criterion, DiscrepancyForm, get_criterion
 from pin_kpi_oed.oed.objective import DesignObjective, information_criterion
 from pin_kpi_oed.oed.selection_result import PoolSelection
+from pin_kpi_oed.discrepancy.cholesky import jitter_cholesky
 from pin_kpi_oed.discrepancy.prior import DiscrepancyPrior
 from pin_kpi_oed.oed.discrepancy_kpi import base_frame_jacobian, chain_q
 from pin_kpi_oed.oed.discrepancy_pool import NO_CERTIFICATE, GreedyState, after_given, greedy_exchange, greedy_ridge
@@ -84,10 +85,7 @@ def gls_information(J: np.ndarray, Kqq: np.ndarray, scale_m: np.ndarray, noise: 
     J = np.asarray(J, float)
     m = J.shape[0]
     G = Kqq + noise * np.eye(m)
-    try:
-        L = np.linalg.cholesky(G)
-    except np.linalg.LinAlgError:
-        L = np.linalg.cholesky(G + 1e-10 * np.mean(np.diag(G)) * np.eye(m))
+    L = jitter_cholesky(G, what="K_QQ + wI")
     Ja = np.ascontiguousarray(np.swapaxes(J, 0, 1))                        # (3, m, nb)
     B = solve_triangular(L, np.concatenate(list(Ja), axis=1), lower=True, check_finite=False)   # L⁻¹ [J_x J_y J_z]
     V = solve_triangular(L.T, B, lower=False, check_finite=False)

@@ -36,7 +36,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from pin_kpi_oed.errors import InputError
-from pin_kpi_oed.oed.discrepancy_kpi import DEFAULT_DISCREPANCY, DiscrepancyPrior, default_discrepancy
+from pin_kpi_oed.discrepancy.prior import DEFAULT_DISCREPANCY, DiscrepancyPrior, default_discrepancy
 
 __all__ = ["RobotClass", "ROBOT_CLASSES", "robot_class_of", "class_discrepancy"]
 

@@ -35,6 +35,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from pin_kpi_oed.discrepancy.cholesky import jitter_cholesky
 from pin_kpi_oed.errors import IdentifiabilityError
 
 __all__ = ["kpi_gp_covariance", "kpi_gp_value_and_grad"]
@@ -46,10 +47,7 @@ def _prep(J, E, Kqq, Kwq, scale, w, P):
     E = np.asarray(E, float)
     m, _, nb = J.shape
     G = Kqq + w * np.eye(m)
-    try:
-        L = np.linalg.cholesky(G)
-    except np.linalg.LinAlgError:
-        L = np.linalg.cholesky(G + 1e-10 * np.mean(np.diag(G)) * np.eye(m))
+    L = jitter_cholesky(G, what="K_QQ + wI")
     Li = np.linalg.solve(L, np.eye(m))
     A = Li.T @ Li
     U = A @ Kwq.T                                           # (m, t)
