@@ -17,7 +17,8 @@ import pytest
 from pin_kpi_oed.cli.app import main
 from pin_kpi_oed.data.measurements import write_measurements
 from pin_kpi_oed.discrepancy.coverage import JointCoverage
-from pin_kpi_oed.discrepancy.gp import DiscrepancyOptions, fit_discrepancy, grouped_folds, sigma_plan, white_level
+from pin_kpi_oed.discrepancy.fit import fit_discrepancy
+from pin_kpi_oed.discrepancy.gp import DiscrepancyOptions, grouped_folds, sigma_plan, white_level
 from pin_kpi_oed.effects.thermal import ThermalExpansion
 from pin_kpi_oed.errors import InputError, SolverError
 from pin_kpi_oed.identification.discrepancy_fit import position_outliers

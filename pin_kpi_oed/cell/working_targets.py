@@ -164,7 +164,8 @@ def _check_always_blocked(chk: FeasibilityChecker, cell, pre: str) -> None:
         raise InputError(f"{pre}obstacle '{b}'{fitted} blocks the laser beam in every one of {N_ALWAYS} random "
                          f"configurations (at best {worst:.0f} mm): it hides the tracker at {where} m (cell frame); "
                          "move the tracker or the obstacle")
-    raise InputError(f"{pre}obstacle '{b}'{fitted} overlaps the robot: '{a}' collides with it in every one of {N_ALWAYS} random "
+    raise InputError(f"{pre}obstacle '{b}'{fitted} overlaps the robot: '{a}' collides with it in every one of "
+                     f"{N_ALWAYS} random "
                      f"configurations (at best {worst:.0f} mm, clearance_m {cell.clearance_m * 1e3:g} mm included): "
                      f"move the obstacle, or if it is the robot's own pedestal list [{a}, {b}] under skip_pairs")
 

@@ -5,7 +5,8 @@ mean and variance, coverage, model-file block), :func:`fit_discrepancy` (hyper-p
 marginal likelihood, exact or inducing-point posterior, K-fold decision).
 """
 
-from pin_kpi_oed.discrepancy.gp import Discrepancy, DiscrepancyOptions, fit_discrepancy
+from pin_kpi_oed.discrepancy.fit import fit_discrepancy
+from pin_kpi_oed.discrepancy.gp import Discrepancy, DiscrepancyOptions
 from pin_kpi_oed.discrepancy.kernel import JointKernel
 
 __all__ = ["Discrepancy", "DiscrepancyOptions", "JointKernel", "fit_discrepancy"]

@@ -72,7 +72,7 @@ class JointCoverage:
     n_rows: int = 0
 
     @classmethod
-    def from_training(cls, Q: np.ndarray, seed: int = 0) -> "JointCoverage":
+    def from_training(cls, Q: np.ndarray, seed: int = 0) -> JointCoverage:
         """The coverage of training configurations Q (n, d) rad (seeded subset above :data:`MAX_STORED` rows)."""
         Q = np.atleast_2d(np.asarray(Q, float))
         W = _wrapped(Q)
@@ -134,7 +134,7 @@ class JointCoverage:
                 "Z_rad": encode_array(self.Z)}
 
     @classmethod
-    def from_dict(cls, d: Any, n_joints: int, where: str) -> "JointCoverage":
+    def from_dict(cls, d: Any, n_joints: int, where: str) -> JointCoverage:
         """Inverse of :meth:`to_dict`.
 
         Raises:

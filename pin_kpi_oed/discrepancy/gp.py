@@ -38,7 +38,6 @@ then δ(W) = S μ + mean, var δ = S² v, and the variance of a new measurement 
 
 from __future__ import annotations
 
-import time
 from dataclasses import dataclass, field
 from typing import Any
 from collections.abc import Sequence
@@ -47,18 +46,17 @@ import numpy as np
 from scipy import linalg as sla
 
 from pin_kpi_oed.discrepancy.arrays import decode_array, encode_array
-from pin_kpi_oed.discrepancy.cholesky import jitter_cholesky
 from pin_kpi_oed.discrepancy.coverage import JointCoverage
 from pin_kpi_oed.discrepancy.kernel import JointKernel
 from pin_kpi_oed.errors import InputError
 
-__all__ = ["DiscrepancyOptions", "Discrepancy", "fit_discrepancy", "encode_array", "decode_array",
+__all__ = ["DiscrepancyOptions", "Discrepancy", "encode_array", "decode_array",
            "white_level", "grouped_folds", "NEAR_DUPLICATE_RAD", "sigma_plan"]
 
 #: Width of the joint-angle bins of the coverage in model files written before the joint-space measure (rad).
 _LEGACY_BIN_RAD = 0.05
 _NBINS = int(np.ceil(2 * np.pi / _LEGACY_BIN_RAD))
-_JITTER = 1e-8
+JITTER = 1e-8
 #: Configurations closer than this (wrapped joint-space distance, rad) are one pose measured again: they share a
 #: fold of the K-fold check and count once towards the rows a Gaussian process needs.
 NEAR_DUPLICATE_RAD = 0.05
@@ -164,7 +162,7 @@ def white_level(R: np.ndarray, n_params: int = 0, floor_m: np.ndarray | None = N
     return np.maximum(s, 1e-12), int(k), widen
 
 
-def sigma_plan(n_poses: int, n_params: int, options: "DiscrepancyOptions | None" = None) -> str:
+def sigma_plan(n_poses: int, n_params: int, options: DiscrepancyOptions | None = None) -> str:
     """One line: what the discrepancy fit of ``identify --discrepancy auto`` will need and how the honest σ will be
     obtained from ``n_poses`` distinct poses and a fit of ``n_params`` parameters (what ``design`` prints)."""
     opts = options or DiscrepancyOptions()
@@ -242,7 +240,7 @@ class Discrepancy:
     # ------------------------------------------------------------------ posterior
     def _factor(self) -> Any:
         if self._chol is None and self.kind == "exact":
-            K = self.kernel(self.Z) + (self.noise + _JITTER) * np.eye(len(self.Z))
+            K = self.kernel(self.Z) + (self.noise + JITTER) * np.eye(len(self.Z))
             self._chol = sla.cho_factor(K, lower=True, check_finite=False)
             self.alpha = sla.cho_solve(self._chol, self.y, check_finite=False)
         return self._chol
@@ -486,7 +484,7 @@ FILE_NOISE_MAX = 1e3
 _PARAM_KINDS = ("tx", "ty", "tz", "rx", "ry", "rz")
 
 
-def _cv_rows(n: int, opts: DiscrepancyOptions) -> np.ndarray:
+def kfold_rows(n: int, opts: DiscrepancyOptions) -> np.ndarray:
     """The rows of the K-fold check: all up to ``max_exact`` (exact folds); beyond, a seeded subset of ``max_exact``
     (folds of inducing posteriors over every row cost minutes on 50,000 rows and tell no more about the gain)."""
     if n <= opts.max_exact:
@@ -518,7 +516,7 @@ def _file_param_names(names: list, joints: list, where: str) -> list:
     return [str(x) for x in names]
 
 
-def _check_file_sigma(disc: "Discrepancy", where: str) -> None:
+def _check_file_sigma(disc: Discrepancy, where: str) -> None:
     if disc.noise > FILE_NOISE_MAX:
         raise ValueError(f"{where}.noise: {disc.noise:g} is more than {FILE_NOISE_MAX:g} (normalised units; the fit "
                          "keeps it at most 10); was the file edited?")
@@ -527,213 +525,3 @@ def _check_file_sigma(disc: "Discrepancy", where: str) -> None:
         raise ValueError(f"{where}.scale_m: the discrepancy's sigma per axis {', '.join(f'{s:.3g}' for s in sig)} m is "
                          f"more than {FILE_SIGMA_MAX_M * 1e3:g} mm: scale_m is in m (and noise, kernel amplitudes "
                          "normalised); was it written in mm?")
-
-
-# --------------------------------------------------------------------------- fitting
-def _hyper_fit(Q: np.ndarray, Y: np.ndarray, opts: DiscrepancyOptions, joint_amplitude: float,
-               min_noise: float = 1e-5) -> tuple[JointKernel, float]:
-    """Maximum marginal likelihood of the kernel and the white level on a seeded subset (normalised Y),
-    from a start whose additive (one-joint) amplitudes are ``joint_amplitude``; the white level at least
-    ``min_noise`` (the data's stated noise in normalised units)
-    (:func:`~pin_kpi_oed.discrepancy.marginal.maximise_marginal_likelihood`)."""
-    from pin_kpi_oed.discrepancy.marginal import maximise_marginal_likelihood
-
-    d = Q.shape[1]
-    rng = np.random.default_rng(opts.seed)
-    sub = rng.permutation(len(Q))[:opts.n_fit]
-    k0 = JointKernel(0.7, np.ones(d), np.full(d, joint_amplitude), np.full(d, 0.5))
-    kernel, noise, _ = maximise_marginal_likelihood(Q[sub], Y[sub], k0, max(0.3, 1.5 * min_noise),
-                                                    (min_noise, max(10.0, 4.0 * min_noise)), opts.max_iter,
-                                                    opts.restarts, opts.seed)
-    return kernel, noise
-
-
-def _posterior(kernel: JointKernel, noise: float, Q: np.ndarray, Y: np.ndarray, opts: DiscrepancyOptions,
-               rng: np.random.Generator, chunk: int = 2000) -> dict:
-    """Exact (n ≤ max_exact) or DTC posterior pieces for :class:`Discrepancy`."""
-    n = len(Q)
-    if n <= opts.max_exact:
-        return {"kind": "exact", "Z": Q.copy(), "y": Y.copy()}
-    Z = Q[np.sort(rng.permutation(n)[:opts.n_inducing])]
-    m = len(Z)
-    Lz = jitter_cholesky(kernel(Z), (1e-8, 1e-6, 1e-4, 1e-2), "the inducing configurations' kernel matrix")
-    # A = K_ZZ + w⁻¹ K_ZQ K_QZ = L_z B L_zᵀ with B = I + w⁻¹ V Vᵀ, V = L_z⁻¹ K_ZQ (eigenvalues of B ≥ 1)
-    B = np.eye(m)
-    c = np.zeros((m, 3))
-    for a in range(0, n, chunk):
-        V = sla.solve_triangular(Lz, kernel(Z, Q[a:a + chunk]), lower=True, check_finite=False)
-        B += V @ V.T / noise
-        c += V @ Y[a:a + chunk] / noise
-    cB = sla.cho_factor(B, lower=True, check_finite=False)
-    alpha = sla.solve_triangular(Lz, sla.cho_solve(cB, c, check_finite=False), lower=True, trans="T",
-                                 check_finite=False)
-    inner = np.eye(m) - sla.cho_solve(cB, np.eye(m), check_finite=False)           # I − B⁻¹
-    Li = sla.solve_triangular(Lz, np.eye(m), lower=True, check_finite=False)       # L_z⁻¹
-    Minv = Li.T @ inner @ Li                                                      # K_ZZ⁻¹ − A⁻¹
-    return {"kind": "inducing", "Z": Z, "alpha": alpha, "Minv": 0.5 * (Minv + Minv.T)}
-
-
-def _spd_inverse(S: np.ndarray, keep: dict | None = None) -> np.ndarray:
-    """Inverse of a symmetric positive-definite matrix from its Cholesky factor (LAPACK potrf + potri); the lower
-    factor is stored in ``keep["chol"]`` when ``keep`` is given."""
-    Lc, info = sla.lapack.dpotrf(S, lower=1, clean=1, overwrite_a=0)
-    if info != 0:
-        raise np.linalg.LinAlgError("the discrepancy covariance is not positive definite")
-    if keep is not None:
-        keep["chol"] = Lc.copy()
-    Si, info = sla.lapack.dpotri(Lc, lower=1, overwrite_c=1)
-    if info != 0:
-        raise np.linalg.LinAlgError("the discrepancy covariance could not be inverted")
-    Si = np.tril(Si)
-    return Si + np.tril(Si, -1).T
-
-
-def _kfold(kernel: JointKernel, noise: float, Q: np.ndarray, Y: np.ndarray, scale: np.ndarray,
-           opts: DiscrepancyOptions, names: list, keep: dict | None = None) -> dict:
-    """K-fold held-out check with the hyper-parameters fixed: mean 3-D error (m) without and with δ,
-    and the standardised errors of the held-out rows.
-
-    Up to ``max_exact`` rows the folds come from one inverse of Σ = K + wI (block inversion: the
-    held-out residuals of fold I are (Σ⁻¹)_II⁻¹ (Σ⁻¹y)_I with covariance (Σ⁻¹)_II⁻¹, exactly what refitting
-    the posterior without fold I gives); above it each fold's DTC posterior is built. Σ is the exact posterior's
-    (jitter included), and its Cholesky factor is stored in ``keep["chol"]`` for the posterior when ``keep`` is given.
-    """
-    fold, _ = grouped_folds(Q, opts.folds, opts.seed + 1)
-    n_folds = int(fold.max()) + 1
-    e0, e1, z2, inside = [], [], [], []
-    exact = len(Q) <= opts.max_exact
-    if exact:
-        S = kernel(Q)
-        S[np.diag_indices_from(S)] += noise + _JITTER
-        Si = _spd_inverse(S, keep)
-        alpha = Si @ Y
-    for k in range(n_folds):
-        tr, te = fold != k, fold == k
-        if exact:
-            c = sla.cho_factor(Si[np.ix_(te, te)], lower=True, check_finite=False)
-            r = sla.cho_solve(c, alpha[te], check_finite=False)                  # y_I − μ_I (normalised)
-            var = np.diag(sla.cho_solve(c, np.eye(int(te.sum())), check_finite=False))
-        else:
-            post = _posterior(kernel, noise, Q[tr], Y[tr], opts, np.random.default_rng(opts.seed + 2 + k))
-            dk = Discrepancy(post["kind"], names, scale, np.zeros(3), noise, kernel, post["Z"], post.get("y"),
-                             post.get("alpha"), post.get("Minv"))
-            mu, v = dk.predict_normalised(Q[te])
-            r, var = Y[te] - mu, v + noise
-        e0.append(np.linalg.norm(Y[te] * scale, axis=1))
-        e1.append(np.linalg.norm(r * scale, axis=1))
-        zz = r ** 2 / var[:, None]
-        z2.append(zz)
-        inside.append(zz.sum(1) <= 7.8147)
-    a0, a1, zz2 = np.concatenate(e0), np.concatenate(e1), np.vstack(z2)
-    return {"folds": n_folds, "grouped": True, "mean_without_m": float(a0.mean()), "mean_with_m": float(a1.mean()),
-            "rms_without_m": float(np.sqrt(np.mean(a0 ** 2))), "rms_with_m": float(np.sqrt(np.mean(a1 ** 2))),
-            "z_rms": float(np.sqrt(zz2.mean())), "inside_95": float(np.concatenate(inside).mean())}
-
-
-def fit_discrepancy(Q: np.ndarray, R: np.ndarray, joint_names: Sequence[str],
-                    options: DiscrepancyOptions | None = None, *, n_params: int = 0,
-                    noise_floor_m: np.ndarray | None = None) -> Discrepancy | None:
-    """Fit δ to the residuals of a parametric fit.
-
-    Args:
-        Q: training configurations (n, d) rad.
-        R: residuals measured − predicted in the robot base frame (n, 3) m.
-        joint_names: the robot's joints (columns of Q).
-        options: :class:`DiscrepancyOptions` (mode ``none`` returns None).
-        n_params: parameters the parametric fit estimated from these rows (the white level's 3m − p correction,
-            :func:`white_level`).
-        noise_floor_m: the data's stated noise per axis (m): no white level (of the white kind or the Gaussian
-            process's) below it. None: no floor (the noise level is unknown).
-
-    Returns:
-        The :class:`Discrepancy` (``decision`` says what was decided and why), or None for mode ``none``.
-
-    Raises:
-        InputError: too few rows for mode ``on``, non-finite residuals.
-    """
-    t0 = time.perf_counter()
-    opts = options or DiscrepancyOptions()
-    if opts.mode == "none":
-        return None
-    Q = np.atleast_2d(np.asarray(Q, float))
-    R = np.asarray(R, float).reshape(-1, 3)
-    names = list(joint_names)
-    if not np.all(np.isfinite(R)) or not np.all(np.isfinite(Q)):
-        raise InputError("discrepancy: non-finite residuals or joint values")
-    n = len(Q)
-    coverage = JointCoverage.from_training(Q, opts.seed)
-    white = _white(R, names, n_params, noise_floor_m, coverage)
-    # distinct poses (near-duplicates counted once) on a seeded subset: enough to tell whether there are min_rows
-    few = np.sort(np.random.default_rng(opts.seed + 3).permutation(n)[:max(2000, 4 * opts.min_rows)])
-    _, n_poses = grouped_folds(Q[few], opts.folds, opts.seed + 1)
-    if n_poses < opts.min_rows:
-        if opts.mode == "on":
-            raise InputError(f"discrepancy: {n_poses} distinct poses are too few for the Gaussian process (at least "
-                             f"{opts.min_rows}); measure more poses or use --discrepancy auto/none")
-        white.decision = (f"discrepancy: white: {n_poses} distinct poses, fewer than the {opts.min_rows} a Gaussian "
-                          f"process needs; {white.decision}")
-        white.time_s = time.perf_counter() - t0
-        return white
-    mean = R.mean(axis=0)
-    scale = np.maximum(R.std(axis=0), 1e-12)
-    min_noise = 1e-5
-    if noise_floor_m is not None:
-        min_noise = max(min_noise, float(np.max((np.asarray(noise_floor_m, float) / scale) ** 2)))
-    Y = (R - mean) / scale
-    best = None
-    cv_rows = _cv_rows(n, opts)
-    for a0 in opts.starts:
-        kernel, noise = _hyper_fit(Q, Y, opts, float(a0), min_noise)
-        keep: dict = {}  # the factor of all rows (reused by an exact posterior): only when the check uses them all
-        cv = _kfold(kernel, noise, Q[cv_rows], Y[cv_rows], scale, opts, names, keep if len(cv_rows) == n else None)
-        if best is None or cv["mean_with_m"] < best[2]["mean_with_m"]:
-            best = (kernel, noise, cv, keep.get("chol"))
-    kernel, noise, cv, chol = best
-    gain = 1.0 - cv["mean_with_m"] / cv["mean_without_m"]
-    cv["gain"] = float(gain)
-    words = (f"{cv['folds']}-fold held-out mean (near-duplicate poses in one fold) {cv['mean_without_m'] * 1e3:.4f} "
-             f"-> {cv['mean_with_m'] * 1e3:.4f} mm ({gain * 100:+.1f} %), standardised RMS {cv['z_rms']:.2f}"
-             + (f", on a seeded subset of {len(cv_rows)} of the {n} rows" if len(cv_rows) < n else ""))
-    if opts.mode == "auto" and gain < opts.min_gain:
-        white.cv.update(cv)
-        white.decision = (f"discrepancy: white: the Gaussian process does not lower the held-out error enough "
-                          f"({words}; needs {opts.min_gain * 100:.0f} %); {white.decision}")
-        white.time_s = time.perf_counter() - t0
-        return white
-    post = _posterior(kernel, noise, Q, Y, opts, np.random.default_rng(opts.seed + 100))
-    scale = _dof_rescale(post, scale, n, n_params, cv)
-    out = Discrepancy(post["kind"], names, scale, mean, noise, kernel, post["Z"], post.get("y"), post.get("alpha"),
-                      post.get("Minv"), coverage, n, cv)
-    if post["kind"] == "exact" and chol is not None:
-        out.set_factor(chol)
-    out.decision = (f"discrepancy: Gaussian process fitted ({post['kind']}, {n} rows): {words}")
-    out.time_s = time.perf_counter() - t0
-    return out
-
-
-def _dof_rescale(post: dict, scale: np.ndarray, n: int, n_params: int, cv: dict) -> np.ndarray:
-    """The residuals are those of a fit of p parameters: their level is sqrt((3n − p) / 3n) of the error at a new
-    pose. S grows by the inverse (every variance by 3n / (3n − p)); y and alpha shrink alike, so the posterior mean
-    is unchanged. Returns the new S (``cv["dof_factor"]`` records the factor)."""
-    dof = float(np.sqrt(3.0 * n / max(3 * n - int(n_params), 1)))
-    for key in ("y", "alpha"):
-        if post.get(key) is not None:
-            post[key] = post[key] / dof
-    cv["dof_factor"] = dof
-    return scale * dof
-
-
-def _white(R: np.ndarray, names: list, n_params: int, floor_m: np.ndarray | None,
-           coverage: JointCoverage) -> Discrepancy:
-    """The white discrepancy of residuals R (:func:`white_level`), its decision's second half."""
-    level, k, widen = white_level(R, n_params, floor_m)
-    raw = np.sqrt(np.mean(R ** 2, axis=0))
-    floored = floor_m is not None and bool(np.any(level <= np.asarray(floor_m, float) * (1 + 1e-12)))
-    out = Discrepancy("white", names, level, np.zeros(3), 1.0, coverage=coverage, n_rows=len(R),
-                      cv={"dof": k, "n_params": int(n_params), "small_sample_factor": widen})
-    out.decision = (f"white level {np.sqrt(np.sum(level ** 2)) * 1e3:.4f} mm (3-D) from the residual RMS "
-                    f"{np.sqrt(np.sum(raw ** 2)) * 1e3:.4f} mm: corrected for the {int(n_params)} fitted parameters "
-                    f"(3m - p = {k}), widened x{widen:.3f} for its small-sample uncertainty"
-                    + (", at least the data's stated noise" if floored else "")
-                    + "; every sigma adds the parameter covariance")
-    return out

@@ -240,7 +240,8 @@ class JointKernel(StationaryKernelMixin, Kernel):
                 raise ValueError(f"{where}.{key}: must be positive and finite, got {d[key]!r}")
             lo, hi = FILE_RANGE_LEN if key.endswith("_rad") else FILE_RANGE_AMP
             if np.any(v < lo) or np.any(v > hi):
-                raise ValueError(f"{where}.{key}: {np.atleast_1d(v)[(np.atleast_1d(v) < lo) | (np.atleast_1d(v) > hi)][0]:g} "
+                va = np.atleast_1d(v)
+                raise ValueError(f"{where}.{key}: {va[(va < lo) | (va > hi)][0]:g} "
                                  f"is outside [{lo:g}, {hi:g}] (the fit keeps it within "
                                  f"{_BOUNDS_LEN if key.endswith('_rad') else _BOUNDS_AMP}); was the file edited?")
             return float(v) if n is None else v

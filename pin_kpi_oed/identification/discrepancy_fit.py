@@ -20,7 +20,8 @@ from typing import Any
 import numpy as np
 
 from pin_kpi_oed.data.measurements import MeasurementSet
-from pin_kpi_oed.discrepancy.gp import Discrepancy, DiscrepancyOptions, fit_discrepancy
+from pin_kpi_oed.discrepancy.fit import fit_discrepancy
+from pin_kpi_oed.discrepancy.gp import Discrepancy, DiscrepancyOptions
 from pin_kpi_oed.errors import InputError
 
 __all__ = ["result_discrepancy", "base_frame_residuals", "discrepancy_options", "position_outliers",

@@ -223,7 +223,7 @@ def _check_geometry(f: _Findings, result: Any) -> None:
 UNDETERMINED_FACTOR = 10.0
 
 
-def _check_effects(f: "_Findings", result: Any) -> None:
+def _check_effects(f: _Findings, result: Any) -> None:
     """Check 5: every estimated effect parameter determined by the data: its standard deviation below
     :data:`UNDETERMINED_FACTOR` times the effect's ``plausible_max``, else poor (the worst one named). A thermal
     expansion from a nearly constant temperature, for instance, is a link-length change the geometry absorbs."""

@@ -215,7 +215,8 @@ OUTPUTS = {"evaluate": ["json"], "demo": ["json"], "design": ["json", "curve"],
            "simulate": ["out", "test_out", "truth_json"],
            "identify": ["json", "urdf_out", "model_out"], "import-ipa": ["out", "train", "test"],
            "register": ["model_out", "json"], "predict": ["out", "figure"], "diagnose": ["json", "model_out"],
-           "view": ["html"], "export": ["out", "json", "html"], "compensate": ["out", "json"], "import-tracker": ["out"],
+           "view": ["html"], "export": ["out", "json", "html"], "compensate": ["out", "json"],
+           "import-tracker": ["out"],
            "export-model": ["out"], "report": ["html", "json", "pdf"]}
 #: command -> argparse dests of figure outputs (their names end in a format the package writes)
 FIGURES = {"design": ["curve"], "predict": ["figure"]}
