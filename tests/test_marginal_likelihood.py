@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from pin_kpi_oed.discrepancy import DiscrepancyOptions, JointKernel, fit_discrepancy
-from pin_kpi_oed.discrepancy import gp as gp_module
+from pin_kpi_oed.discrepancy import fit as gp_module
 from pin_kpi_oed.discrepancy.marginal import MarginalLikelihood
 
 NAMES = [f"j{i}" for i in range(6)]
