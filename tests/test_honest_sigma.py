@@ -22,7 +22,7 @@ from pin_kpi_oed.discrepancy.gp import DiscrepancyOptions, grouped_folds, sigma_
 from pin_kpi_oed.effects.thermal import ThermalExpansion
 from pin_kpi_oed.errors import InputError, SolverError
 from pin_kpi_oed.identification.discrepancy_fit import position_outliers
-from pin_kpi_oed.identification.identify import identify, validate
+from pin_kpi_oed.identification.identify import identify
 from pin_kpi_oed.identification.model_file import load_model_file
 from pin_kpi_oed.identification.simulate import Tolerances, default_tracker_pose, random_truth, simulate
 from pin_kpi_oed.model.noise import NoiseModel

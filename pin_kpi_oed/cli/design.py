@@ -290,13 +290,6 @@ def _pool_given_target(args: argparse.Namespace) -> tuple[str | None, str | None
     return pool_file, given_file, target
 
 
-def no_certificate(name: str) -> str:
-    """The design output's line for the discrepancy-aware criterion ``name``: no certificate exists."""
-    from pin_kpi_oed.oed.discrepancy_criteria import no_certificate as line
-
-    return line(name)
-
-
 def _gp_names(criteria: list[str]) -> list[str]:
     """The discrepancy-aware criteria (``kpi_gp``, ``D_gp``, …) among registered names (others ignored)."""
     return [c for c in criteria if c != "random" and isinstance(get_criterion(c), ConfigurationCriterion)]
@@ -546,6 +539,8 @@ def _sigma_plan(problem, m: int) -> str:
 def _discrepancy_notes(problem, gp_names: list[str]) -> None:
     """Print that no certificate exists for the discrepancy-aware criteria, and the lever arm when the TCP is away
     from the reflector."""
+    from pin_kpi_oed.oed.discrepancy_criteria import no_certificate
+
     print(*(no_certificate(c) for c in gp_names), sep="\n", end="\n" if gp_names else "")
     if "kpi_gp" in gp_names and problem.discrepancy_assumed and problem.hedge:
         from pin_kpi_oed.oed.hedged_kpi import HEDGE_LINE

@@ -48,9 +48,6 @@ is below ``singular_ratio``: small TCP corrections there need large joint motion
 
 from __future__ import annotations
 
-import csv
-import io
-import os
 import time
 from dataclasses import dataclass, field
 from typing import Any
@@ -58,13 +55,13 @@ from typing import Any
 import numpy as np
 import pinocchio as pin
 
-from pin_kpi_oed.data.atomic import atomic_write_text
 from pin_kpi_oed.data.measurements import MeasurementSet
 from pin_kpi_oed.data.targets import TargetSet
 from pin_kpi_oed.effects.library import predict_with_effects, sum_joint_offsets
 from pin_kpi_oed.errors import InputError
 from pin_kpi_oed.identification.compensate_checks import (branch_step, collision_rows, joint_limit_rows,
                                                           nearest_to_reference, start_configurations)
+from pin_kpi_oed.identification.compensation_file import write_compensation
 from pin_kpi_oed.identification.model_file import CalibratedModel
 from pin_kpi_oed.identification.tool_offset import unobservable_tcp_sigma
 from pin_kpi_oed.model.kinematics import skew
@@ -570,30 +567,6 @@ def _tcp_sigma(cm: CalibratedModel, Q: np.ndarray, aux: Any, station: str | None
     _, sig, extra = cm.predict_with_sigma(Q, aux if isinstance(aux, MeasurementSet) else None,
                                           station=cm.station(station))
     return np.sqrt((sig ** 2).sum(axis=1)), np.asarray(extra, bool)
-
-
-def write_compensation(path: str | os.PathLike, res: CompensationResult) -> None:
-    """Write the compensated joints as CSV, atomically (SI units).
-
-    Columns: ``name``, the joint columns (compensated, rad / m: send these), ``<joint>_nominal``,
-    ``correction_m``, ``residual_m``, ``residual_rad``, ``inv_cond``, ``sigma_m`` (predicted 3-D TCP σ, m),
-    ``start`` (where the branch came from), ``branch_step_rad`` (largest joint change from the nominal solution),
-    ``extrapolation`` (1: outside the calibration's joint-space coverage), ``status``.
-    """
-    buf = io.StringIO()
-    w = csv.writer(buf, lineterminator="\n")
-    w.writerow(["name"] + res.joint_names + [f"{j}_nominal" for j in res.joint_names]
-               + ["correction_m", "residual_m", "residual_rad", "inv_cond", "sigma_m", "start", "branch_step_rad",
-                  "extrapolation", "status"])
-    for i, n in enumerate(res.names):
-        w.writerow([n] + [repr(float(v)) for v in res.q[i]] + [repr(float(v)) for v in res.q_nominal[i]]
-                   + [repr(float(res.correction_m[i])), repr(float(res.residual_m[i])),
-                      repr(float(res.residual_rad[i])), repr(float(res.inv_cond[i])),
-                      repr(float(res.sigma_m[i])) if res.sigma_m.size else "",
-                      res.start[i] if res.start else "",
-                      repr(float(res.branch_step_rad[i])) if res.branch_step_rad.size else "",
-                      str(int(res.extrapolation[i])) if res.extrapolation.size else "", res.target_status[i]])
-    atomic_write_text(path, buf.getvalue())
 
 
 def forward(cm: CalibratedModel, Q: np.ndarray, aux: Any = None, frame: str = "cell", station: str | None = None,

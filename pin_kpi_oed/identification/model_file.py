@@ -273,9 +273,9 @@ class CalibratedModel:
         """
         Q = self.robot.check_q(np.atleast_2d(np.asarray(Q, float)), "predict: Q")
         delta = self.discrepancy.predict(Q, return_var=False)[0] if self.discrepancy is not None else None
-        return self._predict(Q, aux, station, orientation, delta)
+        return self.predict_rows(Q, aux, station, orientation, delta)
 
-    def _predict(self, Q: np.ndarray, aux: MeasurementSet | None, station: str | None, orientation: bool,
+    def predict_rows(self, Q: np.ndarray, aux: MeasurementSet | None, station: str | None, orientation: bool,
                  delta: np.ndarray | None) -> np.ndarray:
         """:meth:`predict` of checked configurations with the discrepancy's mean ``delta`` (base frame, m) given."""
         m = Q.shape[0]
@@ -312,7 +312,8 @@ class CalibratedModel:
         exact universal-kriging term (its cross term K_WQ Σ⁻¹ F reproduces E only in part with short length
         scales), see docs/results.md. A white discrepancy (too few poses for a Gaussian process) and a model without
         one (the paper's noise-only model: the noise model's σ) add the parameter covariance's E C Eᵀ at every row
-        (:mod:`~pin_kpi_oed.identification.prediction_sigma`). Every σ of a station is multiplied by its :attr:`Setup.sigma_scale` (> 1 after a registration whose
+        (:mod:`~pin_kpi_oed.identification.prediction_sigma`). Every σ of a station is multiplied by its
+        :attr:`Setup.sigma_scale` (> 1 after a registration whose
         rows were worse than the model predicted).
 
         Args:

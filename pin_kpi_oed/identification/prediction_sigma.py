@@ -2,7 +2,8 @@ r"""The standard deviation of measured − predicted: the one σ every command t
 
 For a row q of station s (tracker rotation R_s), the covariance of measured − predicted in the tracker frame is
 
-.. math::  C(q) = R_s\,\bigl(V_δ(q) + W + E(q)\,C_p\,E(q)^\top\bigr)\,R_s^\top \;[+\ \mathrm{diag}(σ_{\mathrm{noise}}^2)],
+.. math::  C(q) = R_s\,\bigl(V_δ(q) + W + E(q)\,C_p\,E(q)^\top\bigr)\,R_s^\top
+           \;[+\ \mathrm{diag}(σ_{\mathrm{noise}}^2)],
 
 * V_δ: the discrepancy's posterior variance (a Gaussian process) — zero for a white or noise-only model;
 * W: the white level (tracker noise and repeatability; for a white discrepancy the residual level corrected for the
@@ -64,7 +65,8 @@ def robot_parameter_covariance(cm: Any, label: str | None = None) -> tuple[list[
 
 
 def _robot_jacobian(cm: Any, label: str, Q: np.ndarray, names: list[str]) -> np.ndarray:
-    """Base-frame Jacobian (m, 3, k) of station ``label``'s predictions w.r.t. the parameters ``names`` (layout names)."""
+    """Base-frame Jacobian (m, 3, k) of station ``label``'s predictions w.r.t. the parameters ``names`` (layout
+    names)."""
     if not names:
         return np.zeros((len(Q), 3, 0))
     model, p = cm.station_model(label)
@@ -156,12 +158,12 @@ def predictive_sigma(cm: Any, Q: np.ndarray, aux: Any, station: str | None, labe
     extra = cov.extrapolation(Q) if cov is not None else np.zeros(m, bool)
     d = cm.discrepancy
     if d is None:
-        Y = cm._predict(Q, aux, station, False, None)
+        Y = cm.predict_rows(Q, aux, station, False, None)
         noise2 = np.asarray(cm.noise.sigma(Y[:, :3]), float).reshape(m, 3) ** 2
         V = np.zeros((m, 3))
     else:
         delta, var = d.predict(Q)                      # one kernel evaluation for the mean and the variance
-        Y = cm._predict(Q, aux, station, False, delta)
+        Y = cm.predict_rows(Q, aux, station, False, delta)
         noise2 = np.zeros((m, 3))
         V = var + d.noise_var_m2
     sig = np.empty((m, 3))
