@@ -64,7 +64,7 @@ def test_gradient_matches_finite_differences():
         assert (vp - vm) / (2 * eps) == pytest.approx(g[k], rel=1e-5, abs=1e-5)
 
 
-def _sklearn_hyper_fit(Q, Y, opts, joint_amplitude):
+def _sklearn_hyper_fit(Q, Y, opts, joint_amplitude, min_noise=1e-5):
     """The optimisation the marginal likelihood on pairs replaced: scikit-learn's regressor, L-BFGS-B."""
     import warnings
 
