@@ -52,6 +52,9 @@ Schema (SI units; angles may be given in degrees with a ``_deg`` key instead of
     working_configurations_deg: [[a1, ..., a6]]
     working_targets:                 # and/or TCP targets (cell frame), solved by IK (pin_kpi_oed.cell.working_targets)
       - {xyz_m: [x, y, z], rpy_deg: [r, p, y], seed_deg: [a1, ..., a6]}   # rpy and seed optional
+    working_paths:                   # and/or paths the TCP follows (pin_kpi_oed.cell.paths): the path KPI
+      - {name: seam, waypoints: [{xyz_m: [...], rpy_deg: [...]}, ...], step_m: 0.005}
+    orientation_length_m: 0.2        # the 6-D KPI's weight of the tool orientation (position + L x rotation)
     measurements: 60
     max_random_tries: 200000         # rejection-sampling budget of the heuristic design
 
@@ -84,7 +87,7 @@ from pin_kpi_oed.validation.schema import validate_cell_dict
 
 #: Folder of the cells shipped with the package.
 CELL_DIR = Path(__file__).resolve().parent / "cells"
-SHIPPED_CELLS = ("kr15", "kr300", "kr500", "ur10")
+SHIPPED_CELLS = ("kr15", "kr15_seam", "kr300", "kr500", "ur10")
 
 
 def _capsule(d: Any, what: str, need_link: bool) -> CapsuleSpec:
@@ -138,7 +141,8 @@ def capsules_from_urdf(robot: Robot, where: str = "robot_capsules", kind: str = 
 _KNOWN_KEYS = {"name", "description", "robot", "tool_frame", "base", "tracker", "reflector_m", "tcp_m", "noise",
                "joint_bounds", "robot_capsules", "extra_capsules", "obstacles", "skip_pairs", "beam",
                "incidence_max_deg", "clearance_m", "working_configurations_rad", "working_configurations_deg",
-               "measurements", "max_random_tries", "environment", "working_targets", "kinematics"}
+               "measurements", "max_random_tries", "environment", "working_targets", "kinematics",
+               "working_paths", "orientation_length_m"}
 
 
 def _check_top_level(d: Any, source: str) -> None:
@@ -330,7 +334,8 @@ def _read_limits(d: dict, source: str) -> tuple[float, float, int, int]:
 
 def _read_working_configurations(d: dict, robot: Robot, source: str) -> np.ndarray:
     """Working configurations (t, n) rad, within the joint bounds (none if only ``working_targets`` are given)."""
-    qw = _angles(d, "working_configurations", robot.nq, _where(source, "cell"), required=not d.get("working_targets"))
+    qw = _angles(d, "working_configurations", robot.nq, _where(source, "cell"),
+                 required=not (d.get("working_targets") or d.get("working_paths")))
     if qw is None:
         return np.zeros((0, robot.nq))
     qw = np.atleast_2d(qw)
@@ -382,7 +387,25 @@ def cell_from_dict(d: dict, source: str = "", base_dir: Path | None = None) -> C
         from pin_kpi_oed.cell.working_targets import solve_working_targets
 
         cell.q_work = np.vstack([qw, solve_working_targets(cell, d["working_targets"], source)])
+    cell.orientation_length_m = _read_orientation_length(d, source)
+    if d.get("working_paths"):
+        from pin_kpi_oed.cell.paths import read_working_paths
+
+        cell.paths = read_working_paths(cell, d["working_paths"], source, base_dir)
+        if cell.q_work.shape[0] == 0:  # the point KPI of a cell with paths only: every path's end points
+            cell.q_work = np.vstack([np.vstack([p.Q[0], p.Q[-1]]) for p in cell.paths])
     return cell
+
+
+def _read_orientation_length(d: dict, source: str) -> float:
+    """``orientation_length_m``: the length weighting the tool's orientation in the 6-D KPI (m, default 0.2)."""
+    v = d.get("orientation_length_m", 0.2)
+    if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v <= 0:
+        raise InputError(f"{_where(source, 'orientation_length_m')}: expected a positive length in m, got {v!r}")
+    if v > 5.0:
+        raise InputError(f"{_where(source, 'orientation_length_m')}: {v:g} m is longer than any tool; the value looks "
+                         f"like mm: give it in m (e.g. 0.2 for 200 mm)")
+    return float(v)
 
 
 def resolve_cell(spec: str | Path) -> Path:

@@ -90,6 +90,10 @@ class Cell:
         q_work: working configurations (t, n) rad.
         measurements: default number of measurement configurations.
         max_random_tries: rejection-sampling budget of the heuristic design.
+        environment: the environment files' objects.
+        paths: the working paths (:class:`~pin_kpi_oed.cell.paths.WorkingPath`: samples solved by IK).
+        orientation_length_m: the length L weighting the tool's orientation in the 6-D KPI (position + L x
+            rotation, "orientation at L"), m.
     """
 
     name: str
@@ -115,6 +119,15 @@ class Cell:
     max_random_tries: int = 200_000
     environment: list = field(default_factory=list)
     clearance_margin_m: float = 0.0
+    paths: list = field(default_factory=list)
+    orientation_length_m: float = 0.2
+
+    @property
+    def q_path(self) -> np.ndarray:
+        """Every working path's samples stacked, (S, n) rad (none without paths): the path KPI's configurations."""
+        if not self.paths:
+            return np.zeros((0, self.robot.nq))
+        return np.vstack([p.Q for p in self.paths])
 
     @property
     def environment_capsule_names(self) -> set[str]:
@@ -163,6 +176,8 @@ class Cell:
             "measurements": self.measurements,
             "max_random_tries": self.max_random_tries,
             "environment": [e.to_dict() for e in self.environment],
+            "paths": [p.to_dict() for p in self.paths],
+            "orientation_length_m": self.orientation_length_m,
         }
 
     def summary(self) -> str:
@@ -172,4 +187,5 @@ class Cell:
                 f"{len(self.half_spaces)} half-spaces, "
                 + (f"{len(self.environment)} environment file(s), " if self.environment else "")
                 + f"{self.q_work.shape[0]} working configuration(s), "
-                f"incidence <= {self.incidence_max_deg:g} deg")
+                + (f"{len(self.paths)} working path(s) ({len(self.q_path)} samples), " if self.paths else "")
+                + f"incidence <= {self.incidence_max_deg:g} deg")

@@ -93,6 +93,24 @@ def _descend(robot, q: np.ndarray, p_t: np.ndarray, R_t: np.ndarray | None, tcp:
     return q, ep, er
 
 
+def track_target(robot, W_T_base: pin.SE3, tcp_m: np.ndarray, xyz_W: np.ndarray, R_W: np.ndarray | None,
+                 q_start: np.ndarray, max_iter: int = 60, damping: float = 1e-3) -> tuple[np.ndarray, float, float]:
+    """Damped least squares from one start only (no restarts): a path follower's warm-started step.
+
+    Args:
+        robot, W_T_base, tcp_m, xyz_W, R_W: as :func:`solve_tcp_target`.
+        q_start: the start, typically the previous sample's solution (rad / m).
+        max_iter: iterations; damping: the damping λ of (JJᵀ + λ²I).
+
+    Returns:
+        (q, position error (m), orientation error (rad, 0 if free)).
+    """
+    base_T_W = W_T_base.inverse()
+    p_t = base_T_W.act(np.asarray(xyz_W, float))
+    R_t = None if R_W is None else base_T_W.rotation @ np.asarray(R_W, float)
+    return _descend(robot, q_start, p_t, R_t, np.asarray(tcp_m, float), max_iter, damping)
+
+
 def solve_tcp_target(robot, W_T_base: pin.SE3, tcp_m: np.ndarray, xyz_W: np.ndarray, R_W: np.ndarray | None = None,
                      seeds: list[np.ndarray] | None = None, accept: Callable[[np.ndarray], str] | None = None,
                      n_random: int = 24, seed: int = 0, max_iter: int = 300, damping: float = 1e-3) -> IkResult:

@@ -62,6 +62,8 @@ from pin_kpi_oed.cell.feasibility import FeasibilityChecker, FeasibilityReport
 from pin_kpi_oed.errors import IdentifiabilityError, InputError
 from pin_kpi_oed.oed.criteria import ConfigurationCriterion, Criterion, check_names, get_criterion
 from pin_kpi_oed.oed.objective import DesignCriterion, DesignObjective
+from pin_kpi_oed.oed.path_kpi import PathKpi  # noqa: F401  (registers kpi_path)
+from pin_kpi_oed.oed.pose_kpi import PoseKpi  # noqa: F401  (registers kpi6)
 from pin_kpi_oed.oed.identifiability import analyse, check_kpi
 from pin_kpi_oed.results import Result
 from pin_kpi_oed.threads import limit_threads

@@ -227,6 +227,25 @@ class TrackerModel(MeasurementModel):
         J = self.sensor_point(p, Q_work, self.tcp_m).J
         return (J @ self.right_jacobian(p)).reshape(-1, self.n_params)
 
+    def kpi_rotation_jacobian(self, p: np.ndarray, Q_work: np.ndarray) -> np.ndarray:
+        """Sensitivity of the tool frame's orientation (tracker frame, rotation vector) to the parameters at the
+        working configurations, (3t, np) rad per parameter unit: the rotational rows of the 6-D KPI.
+
+        Joint j's placement turns the tool by R_T R_A,j δω_j; the tracker pose by R_T δω_t; translations, the
+        reflector and the TCP point do not turn it.
+        """
+        p = np.asarray(p, float)
+        L = self.layout
+        kin = self.kinematics(p, Q_work, self.tcp_m)
+        m = kin.p.shape[0]
+        J = np.zeros((m, 3, self.n_params))
+        for k in range(L.n_joints):
+            J[:, :, L.joint_slice(k).start + 3:L.joint_slice(k).stop] = kin.R_A[:, k]
+        fs = L.group_slice(self.frame_group)
+        J[:, :, fs.start + 3:fs.stop] = np.eye(3)
+        J = np.einsum("ab,mbp->map", self.sensor_pose(p).rotation, J)
+        return (J @ self.right_jacobian(p)).reshape(-1, self.n_params)
+
     # ------------------------------------------------------------------ weighting
     def sigma(self, p: np.ndarray, Q: np.ndarray, Y: np.ndarray | None = None) -> np.ndarray:
         """Standard deviation of every measurement row, (m, nh) (m; rad for orientation rows)."""

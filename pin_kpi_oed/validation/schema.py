@@ -95,6 +95,8 @@ CELL_SCHEMA: dict[str, Any] = {
         "max_random_tries": {"type": "integer", "minimum": 1},
         "environment": {"type": ["array", "null"], "items": _ENVIRONMENT},
         "working_targets": {"type": ["array", "null"], "items": _TARGET},
+        "working_paths": {"type": ["array", "null"], "items": {"type": "object"}},
+        "orientation_length_m": _NUM,
     },
 }
 
