@@ -4,6 +4,8 @@ the per-sample definition, pool selection, and the refusals of paths that cannot
 from __future__ import annotations
 
 import copy
+import subprocess
+import sys
 
 import numpy as np
 import pinocchio as pin
@@ -13,7 +15,6 @@ import yaml
 from pin_kpi_oed.cell.cell import CELL_DIR, cell_from_dict, load_cell
 from pin_kpi_oed.design.optimize import DesignProblem
 from pin_kpi_oed.errors import InputError
-from pin_kpi_oed.oed.criteria import get_criterion
 from pin_kpi_oed.oed.covariance import information
 
 
@@ -170,3 +171,25 @@ def test_kpi_path_needs_a_cell_with_paths():
     with pytest.raises(InputError, match="working_paths"):
         prob.criterion("kpi_path")
     copy.copy(prob)  # the problem stays usable
+
+
+def test_profile_rms_is_the_path_kpi_and_worst_bounds_it(seam_problem):
+    from pin_kpi_oed.design.path_profile import path_profile
+
+    Q = seam_problem.cell.robot.random_q(np.random.default_rng(4), 25)
+    prof = path_profile(seam_problem, Q, seam_problem.cell.q_path, 0.2)
+    assert prof["rms_sigma_pos_m"] ** 2 == pytest.approx(seam_problem.criterion("kpi_path").value(Q), rel=1e-9)
+    pos, rot = np.array(prof["sigma_pos_m"]), np.array(prof["sigma_rot_rad"])
+    assert prof["worst_sigma_pos_m"] == pos.max() >= prof["rms_sigma_pos_m"] >= pos.min() > 0
+    assert np.allclose(prof["sigma_at_length_m"], np.sqrt(pos ** 2 + 0.04 * rot ** 2))
+
+
+def test_cli_refuses_a_path_through_the_car_in_one_line(tmp_path):
+    d = _seam_dict()
+    d["working_paths"][0]["waypoints"][1]["xyz_m"] = [1.3, 0.4, 0.9]
+    (tmp_path / "bad.yaml").write_text(yaml.safe_dump(d))
+    res = subprocess.run([sys.executable, "-m", "pin_kpi_oed", "design", "--cell", str(tmp_path / "bad.yaml"),
+                          "--criteria", "kpi_path"], capture_output=True, text=True, timeout=300)
+    lines = [ln for ln in res.stderr.strip().splitlines() if ln.strip()]
+    assert res.returncode == 2 and len(lines) == 1 and "Traceback" not in res.stderr, res.stderr
+    assert "working_paths[0] 'seam': sample" in lines[0] and "clear" in lines[0]

@@ -28,7 +28,7 @@ from pin_kpi_oed.design.design_writer import write_design
 from pin_kpi_oed.design.scores import discrepancy_scores, extended_scores, sigma_given
 from pin_kpi_oed.design.margins import DEFAULT_CLEARANCE_MARGIN_M, DEFAULT_INCIDENCE_MARGIN_DEG, with_margins
 from pin_kpi_oed.errors import IdentifiabilityError, InputError
-from pin_kpi_oed.oed.criteria import ConfigurationCriterion, check_names, criterion_names, get_criterion
+from pin_kpi_oed.oed.criteria import check_names, criterion_names, get_criterion
 from pin_kpi_oed.validation.options import check_discrepancy_options
 from pin_kpi_oed.validation.robot_checks import check_same_robot
 
@@ -177,8 +177,8 @@ def run(args: argparse.Namespace) -> int:
         PinKpiOedError: bad cell, unknown criterion, infeasible cell, solver failure (one-line message).
     """
     from pin_kpi_oed.cell.cell import load_cell
-    from pin_kpi_oed.design.user_pool import (check_candidates, design_from_pool, duplicates_line, pool_line,
-                                              read_pool)
+    from pin_kpi_oed.design.path_profile import path_profiles, profile_lines
+    from pin_kpi_oed.design.user_pool import check_candidates, design_from_pool, duplicates_line, pool_line, read_pool
 
     criteria = parse_criteria(getattr(args, "criteria", "random,param,kpi"))
     cell = load_cell(getattr(args, "cell", "kr15"))
@@ -222,7 +222,8 @@ def run(args: argparse.Namespace) -> int:
                         margins=margins, certificate=cert,
                         true_checks=true_checks(true_cell, results) if cell is not true_cell else None,
                         extended_scores=extended_scores(problem, results, true_cell.q_work),
-                        discrepancy_scores=discrepancy_scores(problem, results) if disc_on else None)
+                        discrepancy_scores=discrepancy_scores(problem, results) if disc_on else None,
+                        path_profiles=path_profiles(problem, results))
     else:
         run = design_run(true_cell, settings, problem, discrepancy=disc_on)
     run = dataclasses.replace(run, given_file=given_file, pool_file=pool_file, model_file=getattr(args, "model", None),
@@ -230,6 +231,7 @@ def run(args: argparse.Namespace) -> int:
     results = list(run.results)
     print_results(results, criteria, run.certificate, m, pool_file, quiet, cell, true_cell, margins, run.true_checks,
                    given_file, run.extended_scores)
+    print(*profile_lines(run.path_profiles), sep="\n", end="\n" if run.path_profiles else "")
     if run.discrepancy_scores is not None:  # opt-in: the paper's output is unchanged without
         gp_scores = list(run.discrepancy_scores)
         print(problem.discrepancy_prior().describe() + "\n" + _sigma_plan(problem, m))
@@ -292,7 +294,7 @@ def _pool_given_target(args: argparse.Namespace) -> tuple[str | None, str | None
 
 def _gp_names(criteria: list[str]) -> list[str]:
     """The discrepancy-aware criteria (``kpi_gp``, ``D_gp``, …) among registered names (others ignored)."""
-    return [c for c in criteria if c != "random" and isinstance(get_criterion(c), ConfigurationCriterion)]
+    return [c for c in criteria if c != "random" and getattr(get_criterion(c), "uses_discrepancy", False)]
 
 
 def _set_region(args: argparse.Namespace, problem, criteria: list[str], seed: int, true_cell) -> None:

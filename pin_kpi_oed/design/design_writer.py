@@ -51,6 +51,8 @@ def design_document(run: DesignRun) -> dict:
     if run.extended_scores is not None:
         _add_extended(doc, problem, run.extended_scores, run.model_file, run.prior)
     doc["clearance_margin_m"], doc["incidence_margin_deg"] = run.margins
+    if run.path_profiles is not None:
+        doc["path_profiles"] = run.path_profiles
     if run.given_file:
         _add_given(doc, problem, results, run.given_file)
     if run.pool_file:

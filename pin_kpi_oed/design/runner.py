@@ -74,6 +74,8 @@ class DesignRun:
         true_checks: the independent check of every design in ``cell`` (with margins).
         certificate: the optimality certificate; extended_scores: the extended model's scores (``model_file``,
             ``prior``: where they came from); discrepancy_scores: the honest scores with the discrepancy.
+        path_profiles: σ of the TCP and of the tool orientation along the cell's working paths per design
+            (:func:`~pin_kpi_oed.design.path_profile.path_profiles`), None without paths.
     """
 
     cell: Cell
@@ -93,6 +95,7 @@ class DesignRun:
     prior: str | None = None
     discrepancy_scores: Sequence[dict] | None = None
     poses_needed: Any = field(default=None)
+    path_profiles: Sequence[dict] | None = None
 
 
 def true_checks(cell: Cell, results: Sequence[Any]) -> list:
@@ -129,8 +132,9 @@ def design_run(cell: Cell, settings: DesignSettings | None = None, problem: Any 
     """
     from pin_kpi_oed.design.margins import with_margins
     from pin_kpi_oed.design.optimize import DesignOptions, DesignProblem, ipopt_options, run_designs
+    from pin_kpi_oed.design.path_profile import path_profiles
     from pin_kpi_oed.design.scores import discrepancy_scores, extended_scores
-    from pin_kpi_oed.oed.criteria import ConfigurationCriterion, get_criterion
+    from pin_kpi_oed.oed.criteria import get_criterion
 
     s = settings or DesignSettings()
     margins = (float(s.clearance_margin_m), float(s.incidence_margin_deg))
@@ -151,8 +155,9 @@ def design_run(cell: Cell, settings: DesignSettings | None = None, problem: Any 
                        fixed_info=problem.fixed_information() if given else None)
     if discrepancy is None:
         discrepancy = problem.discrepancy is not None or any(
-            c != "random" and isinstance(get_criterion(c), ConfigurationCriterion) for c in s.criteria)
+            c != "random" and getattr(get_criterion(c), "uses_discrepancy", False) for c in s.criteria)
     return DesignRun(cell=cell, problem=problem, results=results, m=m, seed=s.seed, collision=s.collision,
                      margins=margins, true_checks=checks, certificate=cert,
                      extended_scores=extended_scores(problem, results, cell.q_work),
-                     discrepancy_scores=discrepancy_scores(problem, results) if discrepancy else None)
+                     discrepancy_scores=discrepancy_scores(problem, results) if discrepancy else None,
+                     path_profiles=path_profiles(problem, results))

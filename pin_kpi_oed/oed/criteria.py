@@ -368,7 +368,14 @@ class ConfigurationCriterion(CriterionInfo, ABC):
     kind): it builds its own objective φ(Q) on a design problem.
 
     Subclasses set the :class:`CriterionInfo` attributes and implement :meth:`objective`.
+
+    Attributes:
+        uses_discrepancy: the objective is built on the problem's model discrepancy (the kriging ``kpi_gp``, the
+            ``<name>_gp`` forms: the design then reports the σ with the discrepancy); False for a criterion of the
+            configurations on the noise-only information (the path and 6-D KPIs).
     """
+
+    uses_discrepancy: ClassVar[bool] = True
 
     @abstractmethod
     def objective(self, problem: Any) -> DesignObjective:

@@ -60,7 +60,7 @@ class PathKpi(ConfigurationCriterion):
     """``kpi_path``: the mean tr C_s over the working paths' samples (m²), on the noise-only information."""
 
     name, label, unit = "kpi_path", "mean tr of the TCP covariance along the working paths (m^2)", "m^2"
-    is_ratio, needs_kpi = True, True
+    is_ratio, needs_kpi, uses_discrepancy = True, True, False
 
     def objective(self, problem: Any) -> DesignObjective:
         return DesignCriterion(problem.model, problem.base, PathTrace(), path_sensitivity(problem), problem.p0)

@@ -52,7 +52,7 @@ class PoseKpi(ConfigurationCriterion):
     ``orientation_length_m`` (m²), on the noise-only information."""
 
     name, label, unit = "kpi6", "mean tr of the 6-D TCP covariance, orientation x the cell's length (m^2)", "m^2"
-    is_ratio, needs_kpi = True, True
+    is_ratio, needs_kpi, uses_discrepancy = True, True, False
 
     def objective(self, problem: Any) -> DesignObjective:
         cell = getattr(problem, "cell", None)
