@@ -1,4 +1,4 @@
-"""``pin-kpi-oed study kuka|notional90``: the paper's studies (thin layer over :mod:`pin_kpi_oed.studies.study`)."""
+"""``pin-kpi-oed study kuka|notional90|paths``: the paper's studies (thin layer over :mod:`pin_kpi_oed.studies`)."""
 
 from __future__ import annotations
 
@@ -23,6 +23,14 @@ def run(args: argparse.Namespace) -> int:
         print(study.format_kuka_table(s))
         print(f"all designs with collision avoidance collision-free: {s['all_collision_free']}; "
               f"wall time {s['wall_time_s']:.0f} s; results in {out}")
+    elif args.which == "paths":
+        from pin_kpi_oed.studies.path_study import format_path_table, path_study
+
+        seeds = tuple(range(args.seed, args.seed + args.seeds))
+        s = path_study(out, m=args.measurements, seeds=seeds, n_starts=args.starts)
+        print(format_path_table(s))
+        print(f"all designs collision-free: {s['all_feasible']}; wall time {s['wall_time_s']:.0f} s; "
+              f"results in {out / 'summary.json'}")
     else:
         s = study.notional_study(out, m=args.measurements, seed=args.seed, arms=args.arms, workers=args.workers,
                                  scheduler=args.scheduler, n_starts=args.starts, plot=plot_notional)
@@ -33,12 +41,13 @@ def run(args: argparse.Namespace) -> int:
 
 def register(sub: argparse._SubParsersAction) -> None:
     """Add the ``study`` subcommand."""
-    p = sub.add_parser("study", help="reproduce the paper's studies (KUKA cells, 90 notional arms)")
-    p.add_argument("which", choices=["kuka", "notional90"])
+    p = sub.add_parser("study", help="reproduce the paper's studies (KUKA cells, 90 notional arms) and the weld-seam "
+                                     "path KPI study")
+    p.add_argument("which", choices=["kuka", "notional90", "paths"])
     p.add_argument("--out", required=True, help="output folder (resumable: finished tasks are kept)")
     p.add_argument("--measurements", type=int, default=60)
     p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--seeds", type=int, default=3, help="kuka: number of seeds per cell")
+    p.add_argument("--seeds", type=int, default=3, help="kuka, paths: number of seeds (per cell)")
     p.add_argument("--arms", type=int, default=None, help="notional90: only the first N arms")
     p.add_argument("--starts", type=int, default=1, help="IPOPT starts per design")
     p.add_argument("--workers", type=int, default=None, help="local processes (default: all cores)")
