@@ -193,3 +193,14 @@ def test_cli_refuses_a_path_through_the_car_in_one_line(tmp_path):
     lines = [ln for ln in res.stderr.strip().splitlines() if ln.strip()]
     assert res.returncode == 2 and len(lines) == 1 and "Traceback" not in res.stderr, res.stderr
     assert "working_paths[0] 'seam': sample" in lines[0] and "clear" in lines[0]
+
+
+def test_kpi_path_takes_the_measured_poses_into_account(seam_cell):
+    from pin_kpi_oed.design.sequential import SequentialProblem
+
+    rng = np.random.default_rng(6)
+    Q_given, Q = seam_cell.robot.random_q(rng, 20), seam_cell.robot.random_q(rng, 5)
+    seq = SequentialProblem(seam_cell, Q_given, collision=False)
+    both = np.vstack([Q_given, Q])
+    plain = DesignProblem(seam_cell, collision=False).criterion("kpi_path")
+    assert seq.criterion("kpi_path").value(Q) == pytest.approx(plain.value(both), rel=1e-9)

@@ -5,16 +5,17 @@ With E_i the KPI sensitivity (eq. 24e) at the path's sample i = 1…S (the sampl
 :mod:`pin_kpi_oed.cell.paths`, solved by IK on one branch) and C_p = (M₀ + P)⁻¹ the parameter covariance of the
 design (eq. 19)::
 
-    φ_path = (1/S) Σ_i tr(E_i C_p E_iᵀ) = tr(Ē C_p Ēᵀ),     Ē = E_path / √S        (m²)
+    φ_path = (1/S) Σ_i tr(E_i C_p E_iᵀ) = (1/S) tr(E_path C_p E_pathᵀ)        (m²)
 
 the A-criterion on C_s of eq. 24a with the path's samples as the working configurations, weighted so that the value
-is the mean per sample (independent of the sampling density). Being of the information matrix with a fixed Ē, it
-has the exact gradient Γ = −C_p Ēᵀ Ē C_p, the pool form K = Ē (relaxation, equivalence-theorem certificate,
-rounding and exchange) and works on every information model of :mod:`pin_kpi_oed.oed.objective` that takes an E.
-:class:`PathKpi` (``kpi_path``) is the registered criterion of the configurations: it builds Ē on a design problem
-whose cell has working paths and returns the noise-only :class:`~pin_kpi_oed.oed.objective.DesignCriterion` of
-:class:`PathTrace` on it. The worst sample, max_i tr(E_i C_p E_iᵀ), is reported in the path profile
-(:mod:`pin_kpi_oed.design.path_profile`), not designed for (non-smooth).
+is the mean per sample (independent of the sampling density). Being of the information matrix with a fixed E_path,
+it has the exact gradient Γ = −C_p E_pathᵀ E_path C_p / S, the pool form K = E_path/√S (relaxation,
+equivalence-theorem certificate, rounding and exchange) and works on every information model of
+:mod:`pin_kpi_oed.oed.objective` that takes an E. :class:`PathKpi` (``kpi_path``) is the registered criterion of the
+configurations: on a design problem whose cell has working paths it builds E_path and returns :class:`PathTrace` on
+the problem's information model (noise only, measured poses, extended with a prior). The worst sample,
+max_i tr(E_i C_p E_iᵀ), is reported in the path profile (:mod:`pin_kpi_oed.design.path_profile`), not designed for
+(non-smooth).
 """
 
 from __future__ import annotations
@@ -31,14 +32,25 @@ __all__ = ["PathTrace", "PathKpi", "path_sensitivity"]
 
 
 class PathTrace(KpiTrace):
-    """tr(Ē C_p Ēᵀ) with Ē the path's sensitivity over √S: the mean tr C_s per path sample (m²), the information-
-    matrix form of ``kpi_path`` (not registered: its E is the path's, which only :class:`PathKpi` builds)."""
+    """(1/S) tr(E C_p Eᵀ) with E the path's sensitivity (3S rows): the mean tr C_s per path sample (m²), the
+    information-matrix form of ``kpi_path`` (not registered: its E is the path's, which only :class:`PathKpi`
+    builds). Γ = −C_p Eᵀ E C_p / S; pool form K = E/√S."""
 
     name, label, unit = "kpi_path", "mean tr of the TCP covariance over the working paths' samples (m^2)", "m^2"
 
+    def from_covariance(self, E, M, L, C):
+        val, Gam = super().from_covariance(E, M, L, C)
+        S = self.need_E(E).shape[0] // 3
+        return val / S, Gam / S
+
+    def pool_form(self, E, nb):
+        E = self.need_E(E)
+        return E / np.sqrt(E.shape[0] // 3)
+
 
 def path_sensitivity(problem: Any) -> np.ndarray:
-    """Ē = E_path / √S over the problem's identifiable parameters, (3S, nb) m per parameter unit.
+    """E of the TCP at every working path sample over the problem's identifiable parameters, (3S, nb) m per
+    parameter unit.
 
     Raises:
         InputError: the problem has no cell or its cell no working paths.
@@ -49,21 +61,30 @@ def path_sensitivity(problem: Any) -> np.ndarray:
     cell = getattr(problem, "cell", None)
     if cell is None or not getattr(cell, "paths", None):
         raise InputError("criterion kpi_path: needs a cell with working_paths (the cell file's working_paths key)")
-    Qs = cell.q_path
-    E_full = problem.model.kpi_jacobian(problem.p0, Qs)
+    E_full = problem.model.kpi_jacobian(problem.p0, cell.q_path)
     if getattr(problem, "ident", None) is not None:
         check_kpi(problem.ident, problem.model, E_full, f"{cell.name}: the TCP along the working paths")
-    return E_full[:, problem.base] / np.sqrt(len(Qs))
+    return E_full[:, problem.base]
 
 
 class PathKpi(ConfigurationCriterion):
-    """``kpi_path``: the mean tr C_s over the working paths' samples (m²), on the noise-only information."""
+    """``kpi_path``: the mean tr C_s over the working paths' samples (m²) on the problem's information model:
+    noise only, with the measured poses (``design --given``) or the extended model (``design --model``)."""
 
     name, label, unit = "kpi_path", "mean tr of the TCP covariance along the working paths (m^2)", "m^2"
     is_ratio, needs_kpi, uses_discrepancy = True, True, False
 
     def objective(self, problem: Any) -> DesignObjective:
-        return DesignCriterion(problem.model, problem.base, PathTrace(), path_sensitivity(problem), problem.p0)
+        E = path_sensitivity(problem)
+        if getattr(problem, "extended", None) is not None:
+            from pin_kpi_oed.oed.extended import ExtendedDesignCriterion
+
+            return ExtendedDesignCriterion(problem.extended, PathTrace(), problem.cell.q_path)
+        if hasattr(problem, "information_objective"):
+            obj = problem.information_objective(PathTrace())
+            obj.E = E
+            return obj
+        return DesignCriterion(problem.model, problem.base, PathTrace(), E, problem.p0)
 
 
 register(PathKpi)

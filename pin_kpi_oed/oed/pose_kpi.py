@@ -8,8 +8,9 @@ configuration i = 1…t::
     E6_i = [E_i ; L·R_i],     φ6 = (1/t) Σ_i tr(E6_i C_p E6_iᵀ) = (1/t) Σ_i (tr C_s,i + L² tr C_θ,i)      (m²)
 
 "orientation at L" (the cell file's ``orientation_length_m``, default 0.2 m: "orientation at 200 mm"). It is the
-A-criterion of eq. 24a with the stacked Ē = [E6_i] / √t: exact gradient Γ = −C_p ĒᵀĒ C_p, pool form K = Ē
-(relaxation and certificate). L → 0 gives the position KPI over t; a large L designs for the orientation alone.
+A-criterion of eq. 24a with the stacked E6 = [E6_i] over t: exact gradient Γ = −C_p E6ᵀE6 C_p / t, pool form
+K = E6/√t (relaxation and certificate). L → 0 gives the position KPI over t; a large L designs for the orientation
+alone.
 """
 
 from __future__ import annotations
@@ -18,6 +19,7 @@ from typing import Any
 
 import numpy as np
 
+from pin_kpi_oed.errors import InputError
 from pin_kpi_oed.oed.criteria import ConfigurationCriterion, KpiTrace, register
 from pin_kpi_oed.oed.objective import DesignCriterion, DesignObjective
 
@@ -25,15 +27,24 @@ __all__ = ["PoseTrace", "PoseKpi", "pose_sensitivity"]
 
 
 class PoseTrace(KpiTrace):
-    """tr(Ē C_p Ēᵀ) of the stacked 6-D sensitivity (m²): the information-matrix form of ``kpi6`` (not registered:
-    its E is the 6-D one, which only :class:`PoseKpi` builds)."""
+    """(1/t) tr(E6 C_p E6ᵀ) of the stacked 6-D sensitivity (6t rows, m²): the information-matrix form of ``kpi6``
+    (not registered: its E is the 6-D one, which only :class:`PoseKpi` builds). Pool form K = E6/√t."""
 
     name, label, unit = "kpi6", "mean tr of the 6-D TCP covariance, orientation x L (m^2)", "m^2"
+
+    def from_covariance(self, E, M, L, C):
+        val, Gam = super().from_covariance(E, M, L, C)
+        t = self.need_E(E).shape[0] // 6
+        return val / t, Gam / t
+
+    def pool_form(self, E, nb):
+        E = self.need_E(E)
+        return E / np.sqrt(E.shape[0] // 6)
 
 
 def pose_sensitivity(model: Any, p0: np.ndarray, Q_work: np.ndarray, base: np.ndarray,
                      length_m: float) -> np.ndarray:
-    """Ē = [E_i ; L·R_i]_i / √t over the parameters ``base``, (6t, nb) m per parameter unit.
+    """E6 = [E_i ; L·R_i]_i over the parameters ``base``, (6t, nb) m per parameter unit.
 
     Args:
         model: the measurement model (a tracker model: position and orientation sensitivity).
@@ -44,21 +55,32 @@ def pose_sensitivity(model: Any, p0: np.ndarray, Q_work: np.ndarray, base: np.nd
     t = len(Q_work)
     E = model.kpi_jacobian(p0, Q_work)[:, base].reshape(t, 3, -1)
     R = model.kpi_rotation_jacobian(p0, Q_work)[:, base].reshape(t, 3, -1)
-    return np.concatenate([E, length_m * R], axis=1).reshape(6 * t, -1) / np.sqrt(t)
+    return np.concatenate([E, length_m * R], axis=1).reshape(6 * t, -1)
 
 
 class PoseKpi(ConfigurationCriterion):
     """``kpi6``: the mean 6-D TCP covariance at the working configurations, orientation at the cell's
-    ``orientation_length_m`` (m²), on the noise-only information."""
+    ``orientation_length_m`` (m²), on the noise-only information or with the measured poses (``design --given``).
+
+    Raises (from :meth:`objective`):
+        InputError: on the extended model of ``design --model`` (its effects carry no orientation sensitivity).
+    """
 
     name, label, unit = "kpi6", "mean tr of the 6-D TCP covariance, orientation x the cell's length (m^2)", "m^2"
     is_ratio, needs_kpi, uses_discrepancy = True, True, False
 
     def objective(self, problem: Any) -> DesignObjective:
+        if getattr(problem, "extended", None) is not None:
+            raise InputError("criterion kpi6: not available on the extended model of --model (its effects carry no "
+                             "orientation sensitivity); design kpi6 without --model")
         cell = getattr(problem, "cell", None)
         L = float(getattr(cell, "orientation_length_m", 0.2))
-        Eb = pose_sensitivity(problem.model, problem.p0, problem.q_work, problem.base, L)
-        return DesignCriterion(problem.model, problem.base, PoseTrace(), Eb, problem.p0)
+        E6 = pose_sensitivity(problem.model, problem.p0, problem.q_work, problem.base, L)
+        if hasattr(problem, "information_objective"):
+            obj = problem.information_objective(PoseTrace())
+            obj.E = E6
+            return obj
+        return DesignCriterion(problem.model, problem.base, PoseTrace(), E6, problem.p0)
 
 
 register(PoseKpi)
