@@ -4,6 +4,7 @@ the per-sample definition, pool selection, and the refusals of paths that cannot
 from __future__ import annotations
 
 import copy
+import json
 import subprocess
 import sys
 
@@ -204,3 +205,21 @@ def test_kpi_path_takes_the_measured_poses_into_account(seam_cell):
     both = np.vstack([Q_given, Q])
     plain = DesignProblem(seam_cell, collision=False).criterion("kpi_path")
     assert seq.criterion("kpi_path").value(Q) == pytest.approx(plain.value(both), rel=1e-9)
+
+
+def test_viewer_draws_the_working_path(tmp_path, seam_cell):
+    from pin_kpi_oed.design.design_file import load_design
+    from pin_kpi_oed.design.runner import DesignSettings, design_run
+    from pin_kpi_oed.design.design_writer import write_design
+    from pin_kpi_oed.viz.scene import SceneOptions, build_scene
+
+    run = design_run(seam_cell, DesignSettings(criteria=("random",), measurements=12, seed=0))
+    path = tmp_path / "seam.json"
+    write_design(path, run)
+    doc = json.loads(path.read_text())
+    prof = doc["path_profiles"][0]["paths"][0]
+    assert doc["path_profiles"][0]["criterion"] == "random" and len(prof["sigma_pos_m"]) == 161
+    sc = build_scene(load_design(path), SceneOptions(animate=False))
+    obj = sc.recorder.object_dict("/meshcat/working/paths/seam/line")["object"]
+    X = np.frombuffer(obj["geometries"][0]["data"]["attributes"]["position"]["array"].data, np.float32).reshape(-1, 3)
+    assert np.allclose(X, seam_cell.paths[0].xyz_W, atol=1e-6)

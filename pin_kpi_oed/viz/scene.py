@@ -53,7 +53,7 @@ from pin_kpi_oed.errors import InputError
 from pin_kpi_oed.viz.ellipsoids import DEFAULT_LEVEL, confidence_ellipsoid, fmt_factor, nice_factor
 from pin_kpi_oed.viz.scene_parts import (MESHCAT_FOV_DEG, anim_set, beam_matrix, default_camera, homogeneous,
                                          label_height, label_sprite, object_placements, place_camera, plane_frame,
-                                         rot_y_to)
+                                         rot_y_to, working_paths)
 from pin_kpi_oed.viz.recorder import SceneRecorder, import_meshcat
 from pin_kpi_oed.viz.robot_geometry import (add_reflector, capsule_geometry, is_primitive, slug, stick_geometry,
                                             visual_model)
@@ -584,6 +584,7 @@ def build_scene(design: DesignFile | str | os.PathLike | Mapping, options: Scene
     b.tracker()
     b.robot()
     b.working_ghosts()
+    working_paths(vis, b.mg, df)
     b.beam()
     b.markers()
     if opts.ghosts:

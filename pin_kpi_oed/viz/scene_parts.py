@@ -163,3 +163,18 @@ def anim_set(node, M: pin.SE3, scale: np.ndarray) -> None:
     clip.set_property(node.current_frame, "quaternion", "quaternion", [float(q.x), float(q.y), float(q.z), float(q.w)])
     if not np.allclose(scale, 1.0):
         clip.set_property(node.current_frame, "scale", "vector3", [float(x) for x in scale])
+
+
+def working_paths(vis: Any, mg: Any, df: DesignFile) -> int:
+    """Draw the cell's working paths (the design file's ``cell.paths``: TCP positions in the cell frame, m) as
+    lines under ``working/paths/<name>``, with a point at every sample. Returns the number of paths drawn."""
+    paths = (df.raw.get("cell") or {}).get("paths") or []
+    for p in paths:
+        X = np.asarray(p.get("xyz_m", []), dtype=np.float32).reshape(-1, 3)
+        if len(X) < 2:
+            continue
+        node = vis[f"working/paths/{p.get('name', 'path')}"]
+        node["line"].set_object(mg.Line(mg.PointsGeometry(X.T), mg.LineBasicMaterial(color=0xD62728, linewidth=3)))
+        node["samples"].set_object(mg.Points(mg.PointsGeometry(X.T), mg.PointsMaterial(size=0.006, color=0xD62728)))
+    return len(paths)
+
