@@ -17,6 +17,7 @@ from pin_kpi_oed.cell.cell import CELL_DIR, cell_from_dict, load_cell
 from pin_kpi_oed.design.optimize import DesignProblem
 from pin_kpi_oed.errors import InputError
 from pin_kpi_oed.oed.covariance import information
+from pin_kpi_oed.oed.criteria import get_criterion
 
 
 @pytest.fixture(scope="module")
@@ -223,3 +224,16 @@ def test_viewer_draws_the_working_path(tmp_path, seam_cell):
     obj = sc.recorder.object_dict("/meshcat/working/paths/seam/line")["object"]
     X = np.frombuffer(obj["geometries"][0]["data"]["attributes"]["position"]["array"].data, np.float32).reshape(-1, 3)
     assert np.allclose(X, seam_cell.paths[0].xyz_W, atol=1e-6)
+
+
+def test_kpi_path_gp_is_the_kriging_kpi_over_the_path_samples(seam_problem):
+    seam_problem.hedge = False
+    try:
+        obj = seam_problem.criterion("kpi_path_gp")
+        Q = seam_problem.cell.robot.random_q(np.random.default_rng(7), 15)
+        at_path = seam_problem.gp_criterion(Q_work=seam_problem.cell.q_path)
+        assert obj.value(Q) == pytest.approx(at_path.value(Q), rel=1e-12)
+        assert obj.value(Q) != pytest.approx(seam_problem.gp_criterion().value(Q), rel=1e-3)  # not the end points
+        assert get_criterion("kpi_path_gp").uses_discrepancy and not get_criterion("kpi_path").uses_discrepancy
+    finally:
+        seam_problem.hedge = True

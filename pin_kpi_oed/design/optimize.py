@@ -64,6 +64,7 @@ from pin_kpi_oed.oed.criteria import ConfigurationCriterion, Criterion, check_na
 from pin_kpi_oed.oed.objective import DesignCriterion, DesignObjective
 from pin_kpi_oed.oed.path_kpi import PathKpi  # noqa: F401  (registers kpi_path)
 from pin_kpi_oed.oed.pose_kpi import PoseKpi  # noqa: F401  (registers kpi6)
+from pin_kpi_oed.oed.path_kpi_gp import PathDiscrepancyKpi  # noqa: F401  (registers kpi_path_gp)
 from pin_kpi_oed.oed.identifiability import analyse, check_kpi
 from pin_kpi_oed.results import Result
 from pin_kpi_oed.threads import limit_threads
@@ -300,10 +301,11 @@ class DesignProblem:
         self.region = working_region(self.cell.q_work, radius_rad, samples, seed, joints=joints, feasible=reachable)
         return self.region
 
-    def gp_criterion(self, region: bool = True, name: str = "kpi_gp") -> Any:
+    def gp_criterion(self, region: bool = True, name: str = "kpi_gp", Q_work: np.ndarray | None = None) -> Any:
         """The discrepancy-aware KPI criterion (``kpi_gp``) of this problem's geometry (identifiable geometry +
         set-up, the layout's prior) at the working configurations, and over the :attr:`region` when one is set
-        and ``region``; another discrepancy-aware ``name`` (``D_gp``, ``param_gp``, …): its
+        and ``region`` (or at ``Q_work`` when given: the working paths' samples of ``kpi_path_gp``); another
+        discrepancy-aware ``name`` (``D_gp``, ``param_gp``, …): its
         :class:`~pin_kpi_oed.oed.discrepancy_criteria.GlsDesignCriterion` (no working configurations)."""
         from pin_kpi_oed.oed.discrepancy_kpi import DiscrepancyDesignCriterion
 
@@ -312,17 +314,18 @@ class DesignProblem:
 
             return GlsDesignCriterion(self.model, self.base, self.discrepancy_prior(), name,
                                       Q_given=getattr(self, "Q_given", None), p=self.p0)
-        Q_work = self.region.configurations() if region and self.region is not None else self.cell.q_work
+        if Q_work is None:
+            Q_work = self.region.configurations() if region and self.region is not None else self.cell.q_work
         return DiscrepancyDesignCriterion(self.model, self.base, self.discrepancy_prior(), Q_work,
                                           Q_given=getattr(self, "Q_given", None), p=self.p0,
                                           Q_register=self.Q_register)
 
-    def gp_objective(self, name: str = "kpi_gp") -> DesignObjective:
+    def gp_objective(self, name: str = "kpi_gp", Q_work: np.ndarray | None = None) -> DesignObjective:
         """The design objective of a discrepancy-aware criterion (:meth:`gp_criterion`); ``kpi_gp`` under an assumed
         discrepancy (:attr:`discrepancy_assumed`, nothing measured) hedges over a family of priors around it
         (:class:`~pin_kpi_oed.oed.hedged_kpi.HedgedDesignCriterion`) unless :attr:`hedge` is False. The scores (the
-        honest σ) take :meth:`gp_criterion` itself."""
-        crit = self.gp_criterion(name=name)
+        honest σ) take :meth:`gp_criterion` itself; ``Q_work`` as there."""
+        crit = self.gp_criterion(name=name, Q_work=Q_work)
         if name == "kpi_gp" and self.hedge and self.discrepancy_assumed:
             from pin_kpi_oed.oed.hedged_kpi import HedgedDesignCriterion
 
