@@ -83,7 +83,7 @@ def path_profiles(problem: Any, results: Sequence[Any]) -> list[dict] | None:
     return out
 
 
-def profile_lines(profiles: list[dict] | None) -> list[str]:
+def profile_lines(profiles: Sequence[dict] | None) -> list[str]:
     """The design table's path lines: per design and path, σ_pos (µm) and σ_rot (µrad) as RMS and worst sample."""
     lines = []
     for e in profiles or []:
