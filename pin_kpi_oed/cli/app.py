@@ -18,8 +18,8 @@ from pin_kpi_oed.cli.util import parse_floats
 from pin_kpi_oed.errors import PinKpiOedError
 from pin_kpi_oed.model.robot import ROBOT_HELP, TOOL_HELP
 
-TOPICS = ("design", "identify", "transfer", "diagnose", "view", "study", "compensate", "tracker_export", "program",
-          "export_model", "report")
+TOPICS = ("check", "design", "identify", "transfer", "diagnose", "view", "study", "compensate", "tracker_export",
+          "program", "export_model", "report")
 
 
 

@@ -183,6 +183,9 @@ TARGET_SIGMA_MIN_M, TARGET_SIGMA_MAX_M = 1e-7, 5e-3
 GEOMETRY_PRIOR_MAX_M, GEOMETRY_PRIOR_MAX_RAD = 0.1, 0.5
 _SEED = {"seed": _int_at_least(0)}
 #: command -> {argparse dest: rule(option name, value)}
+#: check's TCP tolerance (m): positive, at most 10 mm (a value in mm is refused)
+_TOLERANCE = _finite_at_least(1e-9, "m", 0.01, ": give the tolerance in m (e.g. 1e-4 for 0.1 mm)")
+
 RULES: dict[str, dict[str, Callable[[str, Any], None]]] = {
     "info": {**_SEED, "reflector": _offset},
     "demo": dict(_SEED),
@@ -205,6 +208,9 @@ RULES: dict[str, dict[str, Callable[[str, Any], None]]] = {
                "margin": _finite_at_least(0.0, "m", 0.5, ": give the move clearance margin in m (e.g. 0.01 for 10 mm)"),
                "speed_override": _share},
     "compensate": {**_SEED, "tcp": _offset}, "export-model": {"tcp": _offset},
+    "check": {**_SEED, "alpha": _open_unit, "tolerance": _TOLERANCE, "measurements": _int_at_least(3),
+              "pool_size": _int_at_least(3)},
+    "monitor": {"alpha": _open_unit, "tolerance": _TOLERANCE, "every": _int_at_least(3)},
     "report": {**_SEED, "register_rows": _int_at_least(3)},
     "study": {**_SEED, "measurements": _int_at_least(9), "seeds": _int_at_least(1), "arms": _int_at_least(1),
               "starts": _int_at_least(1), "workers": _int_at_least(1), "scheduler": _scheduler},
@@ -217,7 +223,8 @@ OUTPUTS = {"evaluate": ["json"], "demo": ["json"], "design": ["json", "curve"],
            "register": ["model_out", "json"], "predict": ["out", "figure"], "diagnose": ["json", "model_out"],
            "view": ["html"], "export": ["out", "json", "html"], "compensate": ["out", "json"],
            "import-tracker": ["out"],
-           "export-model": ["out"], "report": ["html", "json", "pdf"]}
+           "export-model": ["out"], "report": ["html", "json", "pdf"], "check": ["model_out", "json", "out", "program"],
+           "monitor": ["model_out", "json"]}
 #: command -> argparse dests of figure outputs (their names end in a format the package writes)
 FIGURES = {"design": ["curve"], "predict": ["figure"]}
 #: command -> argparse dests of inputs (files or folders; lists allowed); besides these, every other option's
@@ -230,7 +237,8 @@ INPUTS = {"evaluate": ["design"], "design": ["cell", "pool", "given", "given_pri
           "view": ["design"], "info": ["robot"], "export": ["design"],
           "compensate": ["model", "targets", "program", "cell"],
           "import-tracker": ["export", "joints", "robot"], "export-model": ["model"],
-          "report": ["model", "train", "validate", "register_data", "kinematics"]}
+          "report": ["model", "train", "validate", "register_data", "kinematics"], "check": ["model", "data", "cell"],
+          "monitor": ["model", "data"]}
 #: command -> argparse dests of output folders
 FOLDERS = {"diagnose": ["figures"], "view": ["figures"], "study": ["out"]}
 

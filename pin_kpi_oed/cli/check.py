@@ -1,0 +1,144 @@
+"""CLI subcommand ``check`` of ``pin-kpi-oed``: does a calibration still hold, and if not, what changed.
+
+``check`` takes the measured check rows, re-registers the set-up with the robot held and tests the residuals
+against the model's honest σ (χ² at the stated α, the false-alarm rate): *holds* / *set-up moved* / *the robot
+changed* (which group, by how much ± σ, the re-fitted model written with ``--model-out``) / *the discrepancy's
+level* / *re-calibrate*, in one line and in JSON. ``check design`` chooses the few poses (default 10) that give the
+check the largest power against a change of any group that moves the TCP by ``--tolerance`` (m, RMS over the
+working configurations), feasible in ``--cell``, written as a joint CSV (``--out``: measure it and give it back as
+``--data``) and as a robot program (``--program`` with ``--format``).
+
+Examples::
+
+    pin-kpi-oed check design --model model.json --cell cell.yaml --tolerance 1e-4 --out check_poses.csv \\
+        --program check.script --format urscript
+    pin-kpi-oed check --model model.json --data check_rows.csv --json verdict.json --model-out refit.json
+"""
+
+from __future__ import annotations
+
+import argparse
+
+import numpy as np
+
+from pin_kpi_oed.cli.tool import model_tool
+from pin_kpi_oed.cli.util import add_table_options, table_options
+
+__all__ = ["register", "run_check"]
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    """Add the ``check`` subcommand (``check`` and ``check design``)."""
+    p = subparsers.add_parser("check", help="does a calibration still hold? (check design: the poses to measure)",
+                              description="On measured check rows: re-register the set-up, test the residuals "
+                                          "against the model's honest sigma; the verdict in one line and JSON. "
+                                          "'check design': the poses that give that test the largest power.")
+    p.add_argument("action", nargs="?", choices=["design"], default=None,
+                   help="'design': choose the check poses instead of judging measured ones")
+    p.add_argument("--model", required=True, help="calibrated model file (identify / register --model-out)")
+    p.add_argument("--data", default=None, help="the measured check rows: CSV with joint columns and x, y, z (m)")
+    p.add_argument("--station", default=None, help="the model's station the set-up is compared with (default: "
+                                                   "the model's default station)")
+    p.add_argument("--alpha", type=float, default=0.05, help="level of the test: its false-alarm rate (default 0.05)")
+    p.add_argument("--tolerance", type=float, default=1e-4,
+                   help="the RMS change of the TCP at the working configurations the check must detect, in m "
+                        "(default 1e-4 = 0.1 mm)")
+    p.add_argument("--cell", default=None, help="cell YAML file or shipped cell name: check design's poses are "
+                                                "feasible in it; its working configurations when the model has none")
+    p.add_argument("--measurements", "-m", type=int, default=10, help="check design: number of poses (default 10)")
+    p.add_argument("--pool-size", dest="pool_size", type=int, default=400,
+                   help="check design: feasible candidate poses (default 400)")
+    p.add_argument("--seed", type=int, default=0, help="seed of the candidate poses and the reference poses")
+    p.add_argument("--out", default=None, help="check design: write the poses here (CSV, joint columns in rad)")
+    p.add_argument("--program", default=None, help="check design: also write a robot program here (--format)")
+    p.add_argument("--format", default="csv", help="program format: csv, urscript, krl, rapid (default csv)")
+    p.add_argument("--model-out", dest="model_out", default=None,
+                   help="check: write the re-registered model (the re-fitted one when the robot changed) here")
+    p.add_argument("--json", default=None, help="write the verdict / the design as JSON here")
+    p.add_argument("--quiet", action="store_true", help="print nothing")
+    add_table_options(p)
+    p.set_defaults(func=run_check)
+
+
+def run_check(args: argparse.Namespace) -> int:
+    """Handler of ``pin-kpi-oed check`` and ``check design``."""
+    from pin_kpi_oed.errors import InputError
+    from pin_kpi_oed.identification.model_file import load_model_file
+
+    model = load_model_file(args.model)
+    if args.action == "design":
+        if args.data or args.model_out:
+            raise InputError("check design: --data and --model-out belong to the check itself (without 'design')")
+        if not (args.out or args.json or args.program):
+            raise InputError("check design: give --out (the poses, CSV), --program or --json; nothing would be "
+                             "written")
+        return _design(args, model)
+    if not args.data:
+        raise InputError("check: give --data (the measured check rows), or 'check design' to choose them")
+    if args.out or args.program:
+        raise InputError("check: --out and --program belong to 'check design'")
+    return _verdict(args, model)
+
+
+def _verdict(args: argparse.Namespace, model) -> int:
+    from pin_kpi_oed.data.atomic import atomic_write_json
+    from pin_kpi_oed.data.measurements import read_measurements
+    from pin_kpi_oed.identification.check import check_calibration
+    from pin_kpi_oed.validation.robot_checks import check_points_against_joints
+
+    spec = model_tool(args, model, args.model, [args.data])
+    data = read_measurements(args.data, joint_names=model.robot.joint_names, reach_m=model.robot.reach(),
+                             **table_options(args, model.robot))
+    check_points_against_joints(model.robot, data.q, data.position_m, args.data, args.data)
+    res = check_calibration(model, data, station=args.station, alpha=args.alpha, tolerance_m=args.tolerance,
+                            q_work=getattr(spec, "q_work", None), seed=args.seed)
+    doc = {**res.to_dict(), "model": args.model, "data": args.data, "model_out": args.model_out}
+    if args.model_out:
+        atomic_write_json(args.model_out, res.model.to_dict())
+    if args.json:
+        atomic_write_json(args.json, doc)
+    if not args.quiet:
+        print(res.summary())
+        written = [f for f in (args.model_out, args.json) if f]
+        if written:
+            print("wrote " + ", ".join(written))
+    return 0
+
+
+def _design(args: argparse.Namespace, model) -> int:
+    from pin_kpi_oed.data.atomic import atomic_write_json, atomic_write_text
+    from pin_kpi_oed.identification.check_design import design_check
+    from pin_kpi_oed.errors import InputError
+    from pin_kpi_oed.program.export import ProgramInfo, write_program
+
+    cell = None
+    if args.cell:
+        from pin_kpi_oed.cell.cell import load_cell
+
+        model_tool(args, model, args.model)
+        cell = load_cell(args.cell)
+    d = design_check(model, m=args.measurements, tolerance_m=args.tolerance, alpha=args.alpha, cell=cell,
+                     pool_size=args.pool_size, seed=args.seed, station=args.station)
+    rb = model.robot
+    texts = {}
+    if args.out:
+        head = ",".join(rb.joint_names)
+        texts[args.out] = head + "\n" + "".join(",".join(repr(float(v)) for v in q) + "\n" for q in d.Q)
+    if args.program:
+        info = ProgramInfo(cell=getattr(cell, "name", "") or "none", design=f"check design of {args.model}",
+                           robot=rb.name, joint_names=list(rb.joint_names), revolute=np.asarray(rb.revolute, bool),
+                           name="pko_check")
+        prog = write_program(args.format, d.Q, ["measure"] * len(d.Q), list(range(len(d.Q))), info)
+        if len(prog) != 1:
+            raise InputError(f"--format {args.format}: writes several files; use csv, urscript or rapid for a "
+                             "check program")
+        texts[args.program] = next(iter(prog.values()))
+    for path, text in texts.items():
+        atomic_write_text(path, text)
+    if args.json:
+        atomic_write_json(args.json, {**d.to_dict(), "model": args.model, "cell": args.cell})
+    if not args.quiet:
+        print(d.summary())
+        print("wrote " + ", ".join(f for f in (args.out, args.program, args.json) if f))
+    return 0
+

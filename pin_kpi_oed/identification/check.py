@@ -1,0 +1,310 @@
+r"""Keep a calibration: the verdict of a quick check on a few measured poses.
+
+On the check rows the set-up (tracker pose; the reflector held: a moved reflector is a tool change) is
+re-registered with the robot held (:func:`~pin_kpi_oed.identification.transfer.register_setup`) and the residuals
+are whitened by the model's honest σ (:meth:`CalibratedModel.predict_with_sigma`, the discrepancy's posterior and
+white level; the registration's own σ factor is *not* applied: it would hide the change under test). The test
+statistic T = ‖z‖² is χ²(3m − 6) when the calibration holds, so the check raises a false alarm with probability α
+(the stated level). Its power against the weakest change of RMS size τ at the working configurations of each
+parameter group is P(χ'²(3m − 6, τ²μ_g) > χ²_{1−α}) (:mod:`pin_kpi_oed.oed.check_power`).
+
+The verdict, in this order:
+
+* **holds** — T below the critical value and the registered set-up within its uncertainty of the model's
+  station (Mahalanobis distance of the set-up change, χ²(6) at α); the TCP σ at the working configurations is stated;
+* **set-up moved** — T below the critical value, the set-up changed beyond its uncertainty: re-registered, by how much
+  (RMS displacement of the check points, mm);
+* **robot changed** — T above; a group g explains the residuals: the group's detectable directions fitted with the
+  set-up by least squares on the whitened rows, its remaining χ²(3m − 6 − r_g) below its critical value (the smallest
+  such group, then the best fit); the change with its standard deviation, and the re-fitted model (group changed,
+  set-up re-registered) — when the check rows determine it; else the poses to add;
+* **discrepancy level** — T above, no group explains it and none takes a significant share (χ²(r_g) at α over the
+  groups, Bonferroni): the residuals are larger everywhere alike, σ × √(T/(3m − 6));
+* **re-calibrate** — T above and no group explains it.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+import pinocchio as pin
+from scipy import stats
+
+from pin_kpi_oed.data.measurements import MeasurementSet
+from pin_kpi_oed.errors import InputError
+from pin_kpi_oed.identification.model_file import CalibratedModel
+from pin_kpi_oed.identification.problem import align_data
+from pin_kpi_oed.identification.transfer import register_setup
+from pin_kpi_oed.model.tracker import TrackerModel
+from pin_kpi_oed.oed.check_power import CheckGroup, CheckPower, check_groups, power_of, test_threshold
+from pin_kpi_oed.results import Result
+
+__all__ = ["CheckResult", "check_calibration", "check_criterion", "CHECK_STATION"]
+
+#: Station label of the set-up registered on the check rows.
+CHECK_STATION = "check"
+VERDICTS = ("holds", "setup_moved", "robot_changed", "discrepancy_level", "recalibrate")
+
+
+@dataclass(kw_only=True)
+class CheckResult(Result):
+    """The verdict of :func:`check_calibration` (SI units).
+
+    Attributes:
+        verdict: one of ``holds``, ``setup_moved``, ``robot_changed``, ``discrepancy_level``, ``recalibrate``.
+        n_rows: check rows; dof: degrees of freedom 3m − 6 of the test; alpha: its level (false-alarm rate).
+        chi2: T = Σ z²; threshold: χ²_{1−α}(dof); p_value: P(χ²(dof) > T).
+        setup_shift_m: RMS displacement of the check points by the set-up change (m); setup_distance: its
+            Mahalanobis distance (χ²(6) under no change).
+        power: group name -> power of the test against the weakest change of size ``tolerance_m``.
+        tolerance_m: RMS TCP change at the working configurations the power is stated for (m).
+        tcp_sigma_m: TCP σ at the working configurations (norm, per configuration; m), the re-registered model's.
+        group: the named group (robot changed), or "".
+        change: the group's fitted change in its columns (raw units: m, rad), std: its standard deviations.
+        change_tcp_m: RMS TCP displacement of the change at the working configurations (m).
+        determined: whether the check rows determine the named group's change.
+        sigma_factor: √(T/dof) (the discrepancy's level against the model's).
+        model: the re-registered (or re-fitted) model.
+        refit_chi2: T of the re-fitted model on the check rows (NaN if none).
+        groups: per group ``{name, chi2_remaining, dof, determined}``.
+    """
+
+    verdict: str
+    n_rows: int
+    dof: int
+    alpha: float
+    chi2: float
+    threshold: float
+    p_value: float
+    setup_shift_m: float
+    setup_distance: float
+    power: dict = field(default_factory=dict)
+    tolerance_m: float = 1e-4
+    tcp_sigma_m: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    group: str = ""
+    change: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    std: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    change_tcp_m: float = float("nan")
+    determined: bool = False
+    sigma_factor: float = 1.0
+    model: CalibratedModel | None = field(default=None, repr=False)
+    refit_chi2: float = float("nan")
+    groups: list = field(default_factory=list)
+
+    def summary(self) -> str:
+        """One line (mm, mrad)."""
+        stat = (f"chi2 {self.chi2:.1f} on {self.dof} dof (threshold {self.threshold:.1f} at alpha {self.alpha:g}, "
+                f"p {self.p_value:.3g})")
+        weakest = min(self.power, key=self.power.get) if self.power else ""
+        pw = (f"; power against a {self.tolerance_m * 1e3:.3g} mm change: {min(self.power.values()):.2f} "
+              f"(weakest: {weakest})") if self.power else ""
+        if self.verdict in ("holds", "setup_moved"):
+            tcp = (f", TCP sigma at the working configurations median {np.median(self.tcp_sigma_m) * 1e3:.3f} mm, max "
+                   f"{np.max(self.tcp_sigma_m) * 1e3:.3f} mm" if self.tcp_sigma_m.size else "")
+            head = "holds" if self.verdict == "holds" else (f"set-up moved by {self.setup_shift_m * 1e3:.3f} mm "
+                                                             "(re-registered); the calibration holds")
+            return f"check: {head}{tcp}; {stat}{pw}"
+        if self.verdict == "robot_changed":
+            what = _change_text(self)
+            return f"check: the robot changed: {what}; {stat}{pw}"
+        if self.verdict == "discrepancy_level":
+            return (f"check: the discrepancy's level changed: residuals {self.sigma_factor:.2f}x the model's sigma "
+                    f"everywhere alike (no group explains them); {stat}{pw}")
+        return f"check: re-calibrate: no parameter group explains the residuals; {stat}{pw}"
+
+    def to_dict(self) -> dict:
+        """Plain JSON-able dict (SI units)."""
+        return {**self.result_dict(), "verdict": self.verdict, "n_rows": self.n_rows, "dof": self.dof,
+                "alpha": self.alpha, "chi2": self.chi2, "threshold": self.threshold, "p_value": self.p_value,
+                "setup_shift_m": self.setup_shift_m, "setup_distance": self.setup_distance, "power": self.power,
+                "tolerance_m": self.tolerance_m, "tcp_sigma_m": np.asarray(self.tcp_sigma_m).tolist(),
+                "group": self.group, "change": np.asarray(self.change).tolist(),
+                "std": np.asarray(self.std).tolist(), "change_tcp_m": self.change_tcp_m,
+                "determined": self.determined, "sigma_factor": self.sigma_factor, "refit_chi2": self.refit_chi2,
+                "groups": self.groups}
+
+
+def _change_text(r: CheckResult) -> str:
+    if not r.determined:
+        return f"{r.group} (not determined by the check rows: measure the poses check design proposes for it)"
+    if r.group.endswith(" offset"):
+        k = int(np.argmax(np.abs(r.change)))
+        return (f"{r.group} by {r.change[k] * 1e3:+.3f} ± {r.std[k] * 1e3:.3f} mrad "
+                f"({r.change_tcp_m * 1e3:.3f} mm RMS at the TCP)")
+    if r.group == "tool":
+        return (f"tool by [{', '.join(f'{v * 1e3:+.3f}' for v in r.change)}] ± "
+                f"[{', '.join(f'{v * 1e3:.3f}' for v in r.std)}] mm")
+    names = ("tx", "ty", "tz", "rx", "ry", "rz")
+    big = [k for k in range(r.change.size) if abs(r.change[k]) > 3 * r.std[k]] or [int(np.argmax(np.abs(r.change)))]
+    parts = [f"{names[k]} {r.change[k] * 1e3:+.3f} ± {r.std[k] * 1e3:.3f} {'mm' if k < 3 else 'mrad'}" for k in big]
+    return f"{r.group}: {', '.join(parts)} ({r.change_tcp_m * 1e3:.3f} mm RMS at the TCP)"
+
+
+def check_criterion(model: CalibratedModel, q_work: np.ndarray, sigma_m: np.ndarray, station: str | None = None,
+                    n_ref: int = 300, seed: int = 0) -> tuple[CheckPower, TrackerModel, np.ndarray]:
+    """The :class:`~pin_kpi_oed.oed.check_power.CheckPower` of a calibrated model.
+
+    Args:
+        model: the calibrated model; station: its station whose set-up the check re-registers.
+        q_work: working configurations (t, n) rad.
+        sigma_m: honest σ per axis (3,) m the poses are whitened with.
+        n_ref: seeded random configurations within the joint limits that tell the groups' directions apart from
+            the set-up; seed: their seed.
+
+    Returns:
+        (criterion, the station's measurement model with noise σ = ``sigma_m``, its raw parameter vector p).
+    """
+    from pin_kpi_oed.model.noise import NoiseModel
+
+    wm, p = model.station_model(station)
+    wm.noise = NoiseModel(sigma_xyz_m=tuple(np.asarray(sigma_m, float).reshape(3)))
+    L = wm.layout
+    rb = model.robot
+    rng = np.random.default_rng(seed)
+    Q_ref = rng.uniform(rb.q_lower, rb.q_upper, size=(n_ref, rb.nq))
+    J_ref = wm.weighted_jacobian(p, Q_ref)[:, :3, :].reshape(-1, L.n)
+    E = wm.kpi_jacobian(p, np.atleast_2d(q_work))
+    lin, ang = wm.joint_axes
+    joint_cols = [np.arange(L.joint_slice(j).start, L.joint_slice(j).stop) for j in range(L.n_joints)]
+    setup = np.arange(L.tracker.start, L.tracker.stop)
+    tool = np.arange(L.reflector.start, L.reflector.stop)
+    groups = check_groups(J_ref, E, setup, joint_cols, list(rb.joint_names), np.hstack([lin, ang]), tool)
+    return CheckPower(setup, groups), wm, p
+
+
+def _honest(model: CalibratedModel, Q: np.ndarray, data: MeasurementSet | None, label: str
+            ) -> tuple[np.ndarray, np.ndarray]:
+    """Predictions and honest σ (m, 3) of station ``label``, its σ factor left out."""
+    st = dataclasses.replace(model.setups[label], sigma_scale=1.0)
+    Y, sig, _ = model.with_setup(label, st).predict_with_sigma(Q, data, station=label)
+    return Y, sig
+
+
+def check_calibration(model: CalibratedModel, data: MeasurementSet, *, station: str | None = None,
+                      alpha: float = 0.05, tolerance_m: float = 1e-4, q_work: np.ndarray | None = None,
+                      seed: int = 0) -> CheckResult:
+    """The verdict of a check on measured rows (module docstring).
+
+    Args:
+        model: the calibrated model; station: the model's station the check compares the set-up with.
+        data: the check rows (joint columns, x, y, z in m).
+        alpha: level of the test (its false-alarm rate), in (0, 0.5).
+        tolerance_m: RMS TCP change at the working configurations the power is stated for (m).
+        q_work: working configurations (t, n) rad; default the model's, else the check rows.
+        seed: seed of the reference configurations of the groups.
+
+    Returns:
+        The :class:`CheckResult`.
+
+    Raises:
+        InputError: α out of range, a tolerance ≤ 0, too few rows (fewer than 3, or no degree of freedom left).
+    """
+    t0 = time.perf_counter()
+    if not 0.0 < alpha < 0.5:
+        raise InputError(f"check: alpha must be in (0, 0.5), got {alpha}")
+    if not (np.isfinite(tolerance_m) and tolerance_m > 0):
+        raise InputError(f"check: the tolerance must be > 0 m, got {tolerance_m}")
+    old = model.station(station)
+    Q = align_data(model.robot, data)
+    m = len(data)
+    if 3 * m - 6 < 3:
+        raise InputError(f"{data.source or 'check data'}: {m} check rows are too few to register the set-up and test "
+                         f"the rest (at least 3 rows; 10 recommended)")
+    reg = register_setup(model, data, station=CHECK_STATION, hold_reflector=True)
+    cm = reg.model
+    Y, sig = _honest(cm, Q, data, CHECK_STATION)
+    z = ((data.position_m - Y) / sig).reshape(-1)
+    T, dof = float(z @ z), 3 * m - 6
+    thr = test_threshold(dof, alpha)
+    qw = np.atleast_2d(q_work if q_work is not None else (model.q_work if model.q_work is not None else Q))
+    crit, wm, p = check_criterion(cm, qw, np.median(sig, axis=0), CHECK_STATION, seed=seed)
+    J = wm.jacobian(p, Q)[:, :3, :] / sig[:, :, None]
+    F = J.reshape(-1, wm.layout.n)
+    shift, dist = _setup_change(model.setups[old].tracker_T_base, cm.setups[CHECK_STATION].tracker_T_base,
+                                F[:, crit.setup], cm, Q, data)
+    mu = crit.mu(F.T @ F)[0]
+    power = {g.name: power_of(tolerance_m ** 2 * u, dof, alpha) for g, u in zip(crit.groups, mu)}
+    out: dict[str, Any] = dict(n_rows=m, dof=dof, alpha=alpha, chi2=T, threshold=thr,
+                               p_value=float(stats.chi2.sf(T, dof)), setup_shift_m=shift, setup_distance=dist, power=power, tolerance_m=tolerance_m,
+                               sigma_factor=float(np.sqrt(T / dof)), model=cm, success=True, status="checked")
+    if T <= thr:
+        moved = dist > test_threshold(6, alpha)
+        tcp = np.linalg.norm(_honest(cm, qw, None, CHECK_STATION)[1], axis=1)
+        return CheckResult(verdict="setup_moved" if moved else "holds", tcp_sigma_m=tcp,
+                           message="the residuals are within the model's sigma", time_s=time.perf_counter() - t0,
+                           **out)
+    named = _name_group(crit, F, z, dof, alpha)
+    out["groups"] = named["table"]
+    if named["best"] is None:
+        verdict = "recalibrate" if named["significant"] else "discrepancy_level"
+        return CheckResult(verdict=verdict, message="no parameter group explains the residuals",
+                           time_s=time.perf_counter() - t0, **out)
+    g, x, cov, det = named["best"]
+    delta = g.basis @ x
+    std = np.sqrt(np.maximum(np.diag(g.basis @ cov @ g.basis.T), 0.0))
+    E = wm.kpi_jacobian(p, qw)[:, g.cols]
+    tcp_m = (float(np.linalg.norm(delta)) if g.kind == "tool"
+             else float(np.sqrt(np.mean(np.sum((E @ delta).reshape(-1, 3) ** 2, axis=1)))))
+    refit, T2 = (None, float("nan"))
+    if det:
+        refit, T2 = _refit(model, data, Q, g, delta)
+    return CheckResult(verdict="robot_changed", group=g.name, change=delta, std=std, change_tcp_m=tcp_m,
+                       determined=det, refit_chi2=T2, message=f"{g.name} changed",
+                       time_s=time.perf_counter() - t0, **{**out, "model": refit if refit is not None else cm})
+
+
+def _setup_change(T_old: np.ndarray, T_new: np.ndarray, G: np.ndarray, cm: CalibratedModel, Q: np.ndarray,
+                  data: MeasurementSet) -> tuple[float, float]:
+    """RMS displacement (m) of the check points between the old and the new set-up, and the Mahalanobis distance
+    of the change under the registration's covariance (GᵀG)⁻¹ (G the whitened set-up columns)."""
+    d = pin.log6(pin.SE3(T_old).inverse() * pin.SE3(T_new)).vector
+    X = cm.predict(Q, data, station=CHECK_STATION)
+    Rn, tn = T_new[:3, :3], T_new[:3, 3]
+    base = (X - tn) @ Rn                                      # points in the robot base frame
+    Xo = base @ T_old[:3, :3].T + T_old[:3, 3]
+    shift = float(np.sqrt(np.mean(np.sum((X - Xo) ** 2, axis=1))))
+    return shift, float(d @ (G.T @ G) @ d)
+
+
+def _name_group(crit: CheckPower, F: np.ndarray, z: np.ndarray, dof: int, alpha: float) -> dict:
+    """Each group fitted with the set-up; the smallest group whose remaining χ² passes, then the best fit."""
+    Gs = F[:, crit.setup]
+    T = float(z @ z)
+    table, passing, gains = [], [], []
+    for g in crit.groups:
+        A = np.hstack([Gs, F[:, g.cols] @ g.basis])
+        r = g.basis.shape[1]
+        x, *_ = np.linalg.lstsq(A, z, rcond=None)
+        sv = np.linalg.svd(A / np.maximum(np.linalg.norm(A, axis=0), 1e-300), compute_uv=False)
+        det = bool(sv[-1] > 1e-6 * sv[0]) and A.shape[0] > A.shape[1]
+        rem = float(np.sum((z - A @ x) ** 2))
+        ok = det and rem <= test_threshold(dof - r, alpha)
+        table.append({"name": g.name, "chi2_remaining": rem, "dof": dof - r, "determined": det, "explains": ok})
+        gains.append(stats.chi2.sf(T - rem, r))
+        if ok:
+            cov = np.linalg.pinv(A.T @ A)[-r:, -r:]
+            passing.append((r, rem, g, x[-r:], cov, det))
+    best = min(passing, key=lambda c: (c[0], c[1]))[2:] if passing else None
+    significant = bool(min(gains) < alpha / len(crit.groups)) if gains else False
+    return {"best": best, "table": table, "significant": significant}
+
+
+def _refit(model: CalibratedModel, data: MeasurementSet, Q: np.ndarray, g: CheckGroup, delta: np.ndarray
+           ) -> tuple[CalibratedModel, float]:
+    """The model with the group's change applied and the set-up re-registered on the check rows; its χ²."""
+    if g.kind == "tool":
+        setups = {k: dataclasses.replace(s, reflector_m=s.reflector_m + delta) for k, s in model.setups.items()}
+        new = dataclasses.replace(model, setups=setups, tcp_m=model.tcp_m + delta)
+    else:
+        jp = model.joint_p.copy()
+        jp[g.cols] += delta
+        new = dataclasses.replace(model, joint_p=jp)
+    new.history = list(model.history) + [{"step": "check", "data": data.source, "group": g.name,
+                                          "change": delta.tolist()}]
+    reg = register_setup(new, data, station=CHECK_STATION, hold_reflector=True)
+    Y, sig = _honest(reg.model, Q, data, CHECK_STATION)
+    return reg.model, float(np.sum(((data.position_m - Y) / sig) ** 2))

@@ -1,0 +1,174 @@
+"""The designed check: a few poses chosen for verification, not identification.
+
+The poses maximise the check's power against the weakest change of each parameter group of the robot that moves
+the TCP by the tolerance τ (RMS over the working configurations), the set-up re-determined on the same poses:
+:class:`~pin_kpi_oed.oed.check_power.CheckPower` (a criterion of the information matrix over the set-up and the
+groups' columns) minimised over a pool of configurations that are feasible in the cell (collision, joint limits,
+tracker line of sight and incidence: :func:`~pin_kpi_oed.cell.sampling.random_feasible`), by greedy forward
+selection (a ridge on the first poses, until the set-up is determined) and an exchange pass, with the rank-3
+information of every candidate computed once. The poses are whitened by the model's honest σ (the median over the
+pool of :meth:`~pin_kpi_oed.identification.model_file.CalibratedModel.predict_with_sigma`).
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from pin_kpi_oed.errors import IdentifiabilityError, InputError
+from pin_kpi_oed.identification.check import check_criterion
+from pin_kpi_oed.identification.model_file import CalibratedModel
+from pin_kpi_oed.oed.check_power import CheckPower, power_of
+from pin_kpi_oed.oed.selection_result import PoolSelection
+from pin_kpi_oed.results import Result
+
+__all__ = ["CheckDesign", "design_check", "check_pool", "select_check", "check_powers"]
+
+
+@dataclass(kw_only=True)
+class CheckDesign(Result):
+    """A designed check (SI units).
+
+    Attributes:
+        Q: the poses (m, n) rad; selection: the :class:`PoolSelection`.
+        power: group -> power against its weakest change of size ``tolerance_m`` at level ``alpha``.
+        power_random: the same for m seeded random poses of the same pool (the median over ``n_random`` draws).
+        tolerance_m, alpha: what the power is stated for; sigma_m: the honest σ per axis the poses are whitened with.
+        feasible_in: the cell the pool is feasible in, or "" (joint limits only).
+    """
+
+    Q: np.ndarray
+    selection: PoolSelection = field(repr=False)
+    power: dict
+    power_random: dict
+    tolerance_m: float
+    alpha: float
+    sigma_m: np.ndarray
+    feasible_in: str = ""
+
+    def summary(self) -> str:
+        """One line (mm)."""
+        w = min(self.power, key=self.power.get)
+        wr = min(self.power_random, key=self.power_random.get)
+        where = f"feasible in {self.feasible_in}" if self.feasible_in else "within the joint limits (no cell given)"
+        return (f"check design: {len(self.Q)} poses ({where}); power against a {self.tolerance_m * 1e3:.3g} mm change "
+                f"at the TCP (alpha {self.alpha:g}): weakest {self.power[w]:.2f} ({w}); {len(self.Q)} random poses: "
+                f"{self.power_random[wr]:.2f} ({wr})")
+
+    def to_dict(self) -> dict:
+        """Plain JSON-able dict (SI units)."""
+        return {**self.result_dict(), "q_check": np.asarray(self.Q).tolist(), "power": self.power,
+                "power_random": self.power_random, "tolerance_m": self.tolerance_m, "alpha": self.alpha,
+                "sigma_m": np.asarray(self.sigma_m).tolist(), "feasible_in": self.feasible_in,
+                "selection": self.selection.to_dict()}
+
+
+def check_pool(model: CalibratedModel, n: int, seed: int, cell=None) -> np.ndarray:
+    """n seeded candidate configurations: feasible in ``cell`` when given, else uniform within the joint limits.
+
+    Raises:
+        InfeasibleError: the cell admits too few poses.
+    """
+    rng = np.random.default_rng(seed)
+    rb = model.robot
+    if cell is None:
+        return rng.uniform(rb.q_lower, rb.q_upper, size=(n, rb.nq))
+    from pin_kpi_oed.cell.collision import CollisionModel
+    from pin_kpi_oed.cell.sampling import random_feasible
+
+    return random_feasible(CollisionModel(cell), n, rng, cell.max_random_tries)[0]
+
+
+def check_powers(crit: CheckPower, F: np.ndarray, tolerance_m: float, alpha: float) -> dict:
+    """Group -> power of the check with whitened Jacobian F (3m, np) against the group's weakest change of size τ."""
+    dof = F.shape[0] - crit.setup.size
+    mu = crit.mu(F.T @ F)[0]
+    return {g.name: power_of(tolerance_m ** 2 * u, dof, alpha) for g, u in zip(crit.groups, mu)}
+
+
+def select_check(crit: CheckPower, Fp: np.ndarray, m: int, seed: int = 0) -> PoolSelection:
+    """m of the candidates (whitened Jacobians Fp (N, 3, np)) minimising the check criterion: greedy forward
+    selection (a ridge of 1e-6 of the mean information until the set-up is determined), one exchange pass.
+
+    Raises:
+        InputError: m larger than the pool or below 3.
+    """
+    t0 = time.perf_counter()
+    N = len(Fp)
+    if not 3 <= m <= N:
+        raise InputError(f"check design: {m} poses from a pool of {N} candidates (3 to {N})")
+    Mi = np.einsum("nap,naq->npq", Fp, Fp)
+    ridge = 1e-6 * np.mean(np.einsum("npp->np", Mi), axis=0).max() * np.eye(Mi.shape[1])
+    order = np.random.default_rng(seed).permutation(N)
+
+    def phi(M: np.ndarray) -> float:
+        try:
+            return crit.value_M(M)
+        except IdentifiabilityError:
+            return np.inf
+
+    chosen: list[int] = []
+    path = []
+    M = np.zeros_like(ridge)
+    for _ in range(m):
+        vals = np.array([phi(M + Mi[i] + ridge) if i not in chosen else np.inf for i in order])
+        k = int(order[int(np.argmin(vals))])
+        chosen.append(k)
+        M = M + Mi[k]
+        path.append(float(np.min(vals)))
+    cur, swaps = phi(M), 0
+    for pos in range(m):
+        base = M - Mi[chosen[pos]]
+        vals = np.array([phi(base + Mi[i]) if i not in chosen else np.inf for i in range(N)])
+        if vals.min() < cur:
+            k = int(np.argmin(vals))
+            chosen[pos], M, cur, swaps = k, base + Mi[k], float(vals[k]), swaps + 1
+    return PoolSelection(indices=np.array(chosen), value=float(cur), path=np.array(path), nit=swaps,
+                         time_s=time.perf_counter() - t0, success=bool(np.isfinite(cur)), status="selected",
+                         message=f"greedy + one exchange pass ({swaps} swaps) on the check criterion; no certificate")
+
+
+def design_check(model: CalibratedModel, *, m: int = 10, tolerance_m: float = 1e-4, alpha: float = 0.05,
+                 cell=None, pool_size: int = 400, seed: int = 0, station: str | None = None,
+                 q_work: np.ndarray | None = None, n_random: int = 20) -> CheckDesign:
+    """Design a check of ``m`` poses (module docstring).
+
+    Args:
+        model: the calibrated model; station: the station whose set-up the check re-registers (default station).
+        m: number of check poses (≥ 3; 10 recommended).
+        tolerance_m: the RMS TCP change at the working configurations the check must detect (m).
+        alpha: the check's false-alarm rate.
+        cell: the work cell (a :class:`~pin_kpi_oed.cell.cell_model.Cell`) the poses must be feasible in, or None.
+        pool_size: candidate configurations; seed: their seed and the selection's.
+        q_work: working configurations (t, n) rad; default the model's, else the cell's.
+        n_random: random designs of m pool poses the power is compared with.
+
+    Raises:
+        InputError: no working configurations, m out of range, a tolerance ≤ 0.
+        InfeasibleError: the cell admits fewer than ``pool_size`` poses.
+    """
+    t0 = time.perf_counter()
+    if not (np.isfinite(tolerance_m) and tolerance_m > 0):
+        raise InputError(f"check design: the tolerance must be > 0 m, got {tolerance_m}")
+    qw = q_work if q_work is not None else model.q_work
+    if qw is None and cell is not None:
+        qw = cell.q_work
+    if qw is None:
+        raise InputError("check design: no working configurations (the model file has none; give --cell with "
+                         "working configurations)")
+    Q_pool = check_pool(model, pool_size, seed, cell)
+    sigma = np.median(model.predict_with_sigma(Q_pool, station=station)[1], axis=0)
+    crit, wm, p = check_criterion(model, np.atleast_2d(qw), sigma, station, seed=seed)
+    Fp = wm.weighted_jacobian(p, Q_pool)[:, :3, :]
+    sel = select_check(crit, Fp, m, seed)
+    power = check_powers(crit, Fp[sel.indices].reshape(-1, Fp.shape[2]), tolerance_m, alpha)
+    rng = np.random.default_rng(seed + 1)
+    rand = [check_powers(crit, Fp[rng.choice(len(Q_pool), m, replace=False)].reshape(-1, Fp.shape[2]),
+                         tolerance_m, alpha) for _ in range(n_random)]
+    power_random = {k: float(np.median([r[k] for r in rand])) for k in power}
+    return CheckDesign(Q=Q_pool[sel.indices], selection=sel, power=power, power_random=power_random,
+                       tolerance_m=tolerance_m, alpha=alpha, sigma_m=sigma,
+                       feasible_in=getattr(cell, "name", "") if cell is not None else "", success=sel.success,
+                       status="designed", message=sel.message, time_s=time.perf_counter() - t0)

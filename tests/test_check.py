@@ -1,0 +1,130 @@
+"""The calibration check: the check criterion (gradient against finite differences, FD of dφ/dQ through the design
+objective), the verdict on simulated events (false alarms at the stated rate, changes named), the designed check
+against random poses, the CLI (verdict, design, bad input)."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+from scipy import stats
+
+from pin_kpi_oed import load_robot
+from pin_kpi_oed.cli.app import main
+from pin_kpi_oed.data.measurements import MeasurementSet, write_measurements
+from pin_kpi_oed.identification.check_design import design_check
+from pin_kpi_oed.identification.check import check_criterion
+from pin_kpi_oed.oed.objective import DesignCriterion
+from pin_kpi_oed.studies.check_events import event_rates, simulate_event, simulated_model
+
+from .fd import fd_rows
+
+SIGMA = 2e-5
+
+
+@pytest.fixture(scope="module")
+def setting():
+    rb = load_robot("ur10")
+    rng = np.random.default_rng(0)
+    qw = 0.5 * rng.uniform(rb.q_lower, rb.q_upper, size=(5, rb.nq))
+    model = simulated_model(rb, qw, SIGMA, 0)
+    Qc = 0.7 * rng.uniform(rb.q_lower, rb.q_upper, size=(10, rb.nq))
+    return rb, model, Qc
+
+
+def test_criterion_gradient_matches_finite_differences(setting):
+    rb, model, Qc = setting
+    crit, wm, p = check_criterion(model, model.q_work, np.full(3, SIGMA))
+    F = wm.weighted_jacobian(p, Qc)[:, :3, :].reshape(-1, wm.layout.n)
+    M0 = F.T @ F
+    val, Gam = crit.value_and_grad_M(M0)
+    rng = np.random.default_rng(1)
+    for _ in range(3):
+        D = rng.normal(size=M0.shape)
+        D = (D + D.T) * 1e-4 * np.abs(M0).max()
+        h = 1e-3
+        num = (crit.value_M(M0 + h * D) - crit.value_M(M0 - h * D)) / (2 * h)
+        assert num == pytest.approx(float(np.sum(Gam * D)), rel=1e-4, abs=1e-9)
+    # dφ/dQ through the design objective (a Criterion on the noise-only information, the chain with dF/dQ)
+    obj = DesignCriterion(wm, np.arange(wm.layout.n), criterion=crit, p=p)
+    v, G = obj.value_and_grad(Qc)
+    assert v == pytest.approx(val, rel=1e-9)
+    num = fd_rows(obj.value, Qc, 2, h=1e-6)
+    np.testing.assert_allclose(G[:2], num, rtol=2e-3, atol=1e-6 * np.abs(num).max())
+
+
+def test_groups_leave_out_setup_changes(setting):
+    rb, model, Qc = setting
+    crit, _, _ = check_criterion(model, model.q_work, np.full(3, SIGMA))
+    names = [g.name for g in crit.groups]
+    assert "tool" in names and f"{rb.joint_names[2]} offset" in names
+    assert not any(n.startswith(rb.joint_names[0]) for n in names)   # the first joint's placement is the set-up's
+
+
+def test_no_change_false_alarms_at_the_stated_rate(setting):
+    rb, model, Qc = setting
+    ev = [simulate_event(model, Qc, "none", s, alpha=0.1) for s in range(60)]
+    T = np.array([e.result.chi2 for e in ev])
+    dof = ev[0].result.dof
+    assert dof == 3 * len(Qc) - 6
+    assert stats.kstest(T, stats.chi2(dof).cdf).pvalue > 0.01        # T is χ²(3m − 6) when the calibration holds
+    flagged = event_rates(ev)["none"]["flagged"]
+    assert stats.binom.cdf(round(flagged * 60), 60, 0.1) > 0.005 and flagged < 0.25
+
+
+def test_changes_are_named(setting):
+    rb, model, Qc = setting
+    for kind in ("joint_offset", "tool", "tracker"):
+        ev = [simulate_event(model, Qc, kind, s) for s in range(8)]
+        assert event_rates(ev)[kind]["right"] >= 0.75, (kind, [(e.verdict, e.group, e.joint) for e in ev])
+    e = simulate_event(model, Qc, "tracker", 3)
+    assert e.verdict == "setup_moved" and e.result.setup_shift_m > 1e-3
+    e = simulate_event(model, Qc, "tool", 1, size={"tool_m": 1e-3})
+    assert e.verdict == "robot_changed" and e.group == "tool" and e.result.determined
+    assert np.linalg.norm(e.result.change) == pytest.approx(1e-3, rel=0.1)
+    assert e.result.refit_chi2 < stats.chi2.isf(0.01, e.result.dof)       # the re-fitted model fits the rows
+
+
+def test_designed_check_beats_random_poses(setting):
+    rb, model, _ = setting
+    d = design_check(model, m=8, tolerance_m=4e-5, pool_size=150, seed=0, n_random=10)
+    assert d.Q.shape == (8, rb.nq)
+    assert np.all(d.Q >= rb.q_lower) and np.all(d.Q <= rb.q_upper)
+    assert min(d.power.values()) > min(d.power_random.values()) + 0.1
+    assert d.selection.success and d.selection.indices.size == 8
+
+
+def _write(path: Path, rb, Q, Y) -> str:
+    write_measurements(MeasurementSet(list(rb.joint_names), Q, Y), path)
+    return str(path)
+
+
+def test_cli_verdict_design_and_bad_input(setting, tmp_path, capsys):
+    rb, model, Qc = setting
+    mp = tmp_path / "model.json"
+    model.save(mp)
+    rng = np.random.default_rng(5)
+    ok = _write(tmp_path / "ok.csv", rb, Qc, model.predict(Qc) + rng.normal(size=(10, 3)) * SIGMA)
+    assert main(["check", "--model", str(mp), "--data", ok, "--json", str(tmp_path / "v.json"), "--alpha", "0.01"]) == 0
+    out = capsys.readouterr().out
+    assert out.startswith("check: holds")
+    v = json.loads((tmp_path / "v.json").read_text())
+    assert v["verdict"] == "holds" and v["dof"] == 24 and v["alpha"] == 0.01
+    assert v["threshold"] == pytest.approx(stats.chi2.isf(0.01, 24))
+    two = _write(tmp_path / "two.csv", rb, Qc[:2], model.predict(Qc[:2]))
+    assert main(["check", "--model", str(mp), "--data", two, "--json", str(tmp_path / "t.json")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "too few" in err and not (tmp_path / "t.json").exists()
+    kr = load_robot("kr15")
+    other = tmp_path / "kr.csv"
+    write_measurements(MeasurementSet(list(kr.joint_names), np.zeros((10, kr.nq)), np.ones((10, 3))), other)
+    assert main(["check", "--model", str(mp), "--data", str(other), "--model-out", str(tmp_path / "o.json")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "kr.csv" in err and not (tmp_path / "o.json").exists()
+    assert main(["check", "design", "--model", str(mp), "-m", "6", "--pool-size", "60", "--out",
+                 str(tmp_path / "p.csv"), "--program", str(tmp_path / "c.script"), "--format", "urscript"]) == 0
+    lines = (tmp_path / "p.csv").read_text().splitlines()
+    assert lines[0] == ",".join(rb.joint_names) and len(lines) == 7
+    assert (tmp_path / "c.script").read_text().count("movej") >= 6
