@@ -214,8 +214,7 @@ def check_calibration(model: CalibratedModel, data: MeasurementSet, *, station: 
     if 3 * m - 6 < 3:
         raise InputError(f"{data.source or 'check data'}: {m} check rows are too few to register the set-up and test "
                          f"the rest (at least 3 rows; 10 recommended)")
-    reg = register_setup(model, data, station=CHECK_STATION, hold_reflector=True)
-    cm = reg.model
+    cm = _register(model, data, Q)
     Y, sig = _honest(cm, Q, data, CHECK_STATION)
     z = ((data.position_m - Y) / sig).reshape(-1)
     T, dof = float(z @ z), 3 * m - 6
@@ -229,7 +228,8 @@ def check_calibration(model: CalibratedModel, data: MeasurementSet, *, station: 
     mu = crit.mu(F.T @ F)[0]
     power = {g.name: power_of(tolerance_m ** 2 * u, dof, alpha) for g, u in zip(crit.groups, mu)}
     out: dict[str, Any] = dict(n_rows=m, dof=dof, alpha=alpha, chi2=T, threshold=thr,
-                               p_value=float(stats.chi2.sf(T, dof)), setup_shift_m=shift, setup_distance=dist, power=power, tolerance_m=tolerance_m,
+                               p_value=float(stats.chi2.sf(T, dof)), setup_shift_m=shift, setup_distance=dist,
+                               power=power, tolerance_m=tolerance_m,
                                sigma_factor=float(np.sqrt(T / dof)), model=cm, success=True, status="checked")
     if T <= thr:
         moved = dist > test_threshold(6, alpha)
@@ -255,6 +255,22 @@ def check_calibration(model: CalibratedModel, data: MeasurementSet, *, station: 
     return CheckResult(verdict="robot_changed", group=g.name, change=delta, std=std, change_tcp_m=tcp_m,
                        determined=det, refit_chi2=T2, message=f"{g.name} changed",
                        time_s=time.perf_counter() - t0, **{**out, "model": refit if refit is not None else cm})
+
+
+def _register(model: CalibratedModel, data: MeasurementSet, Q: np.ndarray) -> CalibratedModel:
+    """The set-up registered on the check rows (reflector held) with the discrepancy's mean δ(q) taken out of the rows
+    first (the registration fits the geometry and the effects; the model predicts δ on top: without this a rigid part
+    of δ over a few rows would be counted twice). δ is in the base frame: rotated by the registered tracker pose,
+    which is re-fitted twice."""
+    reg = register_setup(model, data, station=CHECK_STATION, hold_reflector=True).model
+    if model.discrepancy is None:
+        return reg
+    delta = model.discrepancy.predict(Q, return_var=False)[0]
+    for _ in range(2):
+        R = reg.setups[CHECK_STATION].tracker_T_base[:3, :3]
+        rows = dataclasses.replace(data, position_m=data.position_m - delta @ R.T)
+        reg = register_setup(model, rows, station=CHECK_STATION, hold_reflector=True).model
+    return reg
 
 
 def _setup_change(T_old: np.ndarray, T_new: np.ndarray, G: np.ndarray, cm: CalibratedModel, Q: np.ndarray,
@@ -305,6 +321,6 @@ def _refit(model: CalibratedModel, data: MeasurementSet, Q: np.ndarray, g: Check
         new = dataclasses.replace(model, joint_p=jp)
     new.history = list(model.history) + [{"step": "check", "data": data.source, "group": g.name,
                                           "change": delta.tolist()}]
-    reg = register_setup(new, data, station=CHECK_STATION, hold_reflector=True)
-    Y, sig = _honest(reg.model, Q, data, CHECK_STATION)
-    return reg.model, float(np.sum(((data.position_m - Y) / sig) ** 2))
+    reg = _register(new, data, Q)
+    Y, sig = _honest(reg, Q, data, CHECK_STATION)
+    return reg, float(np.sum(((data.position_m - Y) / sig) ** 2))

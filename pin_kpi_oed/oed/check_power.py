@@ -74,7 +74,7 @@ def power_of(noncentrality: float, dof: int, alpha: float) -> float:
 
 def check_groups(J_ref: np.ndarray, E: np.ndarray, setup: np.ndarray, joint_cols: list[np.ndarray],
                  joint_names: list[str], offset_dirs: np.ndarray, tool_cols: np.ndarray | None,
-                 rtol: float = 1e-7) -> list[CheckGroup]:
+                 rtol: float = 1e-7, min_tcp: float = 1e-5) -> list[CheckGroup]:
     """The groups a check tests, from a rich reference set of poses.
 
     Args:
@@ -86,6 +86,8 @@ def check_groups(J_ref: np.ndarray, E: np.ndarray, setup: np.ndarray, joint_cols
         offset_dirs: per joint, the unit 6-vector of its offset (rotation about its axis) in its columns.
         tool_cols: the tool's (reflector's) 3 columns, or None.
         rtol: relative threshold of a direction told apart from the set-up / moving the TCP.
+        min_tcp: a direction that moves the TCP by less than this per unit (m per m or per rad) does not matter
+            (an offset of a joint whose axis passes through the TCP).
 
     Returns:
         The groups with at least one direction that is detectable and matters.
@@ -109,7 +111,7 @@ def check_groups(J_ref: np.ndarray, E: np.ndarray, setup: np.ndarray, joint_cols
         B = D @ U[:, keep]                                  # detectable directions (orthonormal within D)
         A = np.eye(len(cols)) if kind == "tool" else E[:, cols].T @ E[:, cols] / t
         a, V = np.linalg.eigh(B.T @ A @ B)
-        ok = a > rtol * max(a.max(), 1e-300)
+        ok = a > max(rtol * a.max(), min_tcp ** 2)
         if not ok.any():
             continue
         out.append(CheckGroup(name, kind, np.asarray(cols), B, B @ (V[:, ok] / np.sqrt(a[ok]))))
