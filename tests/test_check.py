@@ -128,3 +128,29 @@ def test_cli_verdict_design_and_bad_input(setting, tmp_path, capsys):
     lines = (tmp_path / "p.csv").read_text().splitlines()
     assert lines[0] == ",".join(rb.joint_names) and len(lines) == 7
     assert (tmp_path / "c.script").read_text().count("movej") >= 6
+
+
+def test_monitor_replay_predicts_first_and_follows_a_moved_tracker(setting, tmp_path, capsys):
+    import dataclasses
+
+    import pinocchio as pin
+
+    rb, model, _ = setting
+    rng = np.random.default_rng(7)
+    Q = 0.7 * rng.uniform(rb.q_lower, rb.q_upper, size=(60, rb.nq))
+    st = model.setups["A"]
+    moved = model.with_setup("A", dataclasses.replace(st, tracker_T_base=(
+        pin.SE3(st.tracker_T_base) * pin.exp6(np.r_[0.02, 0.0, 0.0, 0.0, 0.0, 0.01])).homogeneous))
+    Y = np.vstack([model.predict(Q[:30]), moved.predict(Q[30:])]) + rng.normal(size=(60, 3)) * SIGMA
+    mp, dp = tmp_path / "m.json", tmp_path / "rows.csv"
+    model.save(mp)
+    write_measurements(MeasurementSet(list(rb.joint_names), Q, Y), dp)
+    assert main(["monitor", "--model", str(mp), "--data", str(dp), "--json", str(tmp_path / "log.json")]) == 0
+    out = capsys.readouterr().out
+    log = json.loads((tmp_path / "log.json").read_text())
+    verdicts = [b["verdict"] for b in log["batches"]]
+    assert verdicts[3] == "setup_moved" and "rows 31-40" in out          # the first check after the move
+    assert verdicts[:3] == ["holds"] * 3 and verdicts[4:] == ["holds"] * 2  # followed: the later rows hold again
+    err = np.array(log["error_m"])
+    assert err[30:40].mean() > 100 * SIGMA and err[40:].mean() < 3 * SIGMA  # predicted before use: the move shows once
+    assert main(["monitor", "--model", str(mp), "--data", str(dp), "--every", "2"]) == 2

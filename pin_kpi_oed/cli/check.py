@@ -24,7 +24,7 @@ import numpy as np
 from pin_kpi_oed.cli.tool import model_tool
 from pin_kpi_oed.cli.util import add_table_options, table_options
 
-__all__ = ["register", "run_check"]
+__all__ = ["register", "run_check", "run_monitor"]
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -58,6 +58,47 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--quiet", action="store_true", help="print nothing")
     add_table_options(p)
     p.set_defaults(func=run_check)
+
+    mo = subparsers.add_parser("monitor", help="replay rows measured during work: each predicted first, a check every "
+                                                "few rows, the model updated by the verdict",
+                               description="Replay a measurement file in its order (time order): each row is "
+                                           "predicted with its honest sigma before it is used (standardised RMS over "
+                                           "the replay), every --every rows a check (set-up re-registered, chi2 at "
+                                           "--alpha); the model follows a moved set-up or a re-fitted group. One line "
+                                           "per event.")
+    mo.add_argument("--model", required=True, help="calibrated model file")
+    mo.add_argument("--data", required=True, help="rows measured during work: CSV with joint columns and x, y, z (m)")
+    mo.add_argument("--every", type=int, default=10, help="rows per check (default 10)")
+    mo.add_argument("--alpha", type=float, default=0.05, help="level of each check (default 0.05)")
+    mo.add_argument("--tolerance", type=float, default=1e-4, help="RMS TCP change the power is stated for, m")
+    mo.add_argument("--station", default=None, help="the model's station of the first rows (default station)")
+    mo.add_argument("--model-out", dest="model_out", default=None, help="write the model at the end of the replay")
+    mo.add_argument("--json", default=None, help="write the log (per row error and sigma, per check the verdict)")
+    mo.add_argument("--quiet", action="store_true", help="print nothing")
+    add_table_options(mo)
+    mo.set_defaults(func=run_monitor)
+
+
+def run_monitor(args: argparse.Namespace) -> int:
+    """Handler of ``pin-kpi-oed monitor``."""
+    from pin_kpi_oed.data.atomic import atomic_write_json
+    from pin_kpi_oed.data.measurements import read_measurements
+    from pin_kpi_oed.identification.model_file import load_model_file
+    from pin_kpi_oed.identification.monitor import monitor
+
+    model = load_model_file(args.model)
+    model_tool(args, model, args.model, [args.data])
+    data = read_measurements(args.data, joint_names=model.robot.joint_names, reach_m=model.robot.reach(),
+                             **table_options(args, model.robot))
+    log = monitor(model, data, every=args.every, alpha=args.alpha, tolerance_m=args.tolerance, station=args.station,
+                  echo=None if args.quiet else print)
+    if args.model_out:
+        atomic_write_json(args.model_out, log.model.to_dict())
+    if args.json:
+        atomic_write_json(args.json, {**log.to_dict(), "model": args.model, "data": args.data})
+    if not args.quiet:
+        print(log.summary())
+    return 0
 
 
 def run_check(args: argparse.Namespace) -> int:

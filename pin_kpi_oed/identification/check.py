@@ -43,11 +43,15 @@ from pin_kpi_oed.model.tracker import TrackerModel
 from pin_kpi_oed.oed.check_power import CheckGroup, CheckPower, check_groups, power_of, test_threshold
 from pin_kpi_oed.results import Result
 
-__all__ = ["CheckResult", "check_calibration", "check_criterion", "CHECK_STATION"]
+__all__ = ["CheckResult", "check_calibration", "check_criterion", "CHECK_STATION", "UndeterminedSetup"]
 
 #: Station label of the set-up registered on the check rows.
 CHECK_STATION = "check"
 VERDICTS = ("holds", "setup_moved", "robot_changed", "discrepancy_level", "recalibrate")
+
+
+class UndeterminedSetup(InputError):
+    """The check rows do not determine the set-up at the working configurations (e.g. all near one point)."""
 
 
 @dataclass(kw_only=True)
@@ -223,6 +227,8 @@ def check_calibration(model: CalibratedModel, data: MeasurementSet, *, station: 
     crit, wm, p = check_criterion(cm, qw, np.median(sig, axis=0), CHECK_STATION, seed=seed)
     J = wm.jacobian(p, Q)[:, :3, :] / sig[:, :, None]
     F = J.reshape(-1, wm.layout.n)
+    _require_setup(wm.kpi_jacobian(p, qw)[:, crit.setup], F[:, crit.setup], _honest(cm, qw, None, CHECK_STATION)[1],
+                   data, m)
     shift, dist = _setup_change(model.setups[old].tracker_T_base, cm.setups[CHECK_STATION].tracker_T_base,
                                 F[:, crit.setup], cm, Q, data)
     mu = crit.mu(F.T @ F)[0]
@@ -271,6 +277,19 @@ def _register(model: CalibratedModel, data: MeasurementSet, Q: np.ndarray) -> Ca
         rows = dataclasses.replace(data, position_m=data.position_m - delta @ R.T)
         reg = register_setup(model, rows, station=CHECK_STATION, hold_reflector=True).model
     return reg
+
+
+def _require_setup(E_s: np.ndarray, G: np.ndarray, sig_w: np.ndarray, data: MeasurementSet, m: int) -> None:
+    """Refuse rows whose registration moves the working configurations' prediction by more than twice the honest σ
+    there (RMS 3-D; the registration's covariance (GᵀG)⁻¹ carried by the KPI Jacobian's set-up columns E_s)."""
+    C = E_s @ np.linalg.pinv(G.T @ G) @ E_s.T
+    reg = float(np.sqrt(np.trace(C) / (E_s.shape[0] // 3)))
+    honest = float(np.sqrt(np.mean(np.sum(sig_w ** 2, axis=1))))
+    if not reg <= 2.0 * honest:
+        raise UndeterminedSetup(f"{data.source or 'check data'}: the {m} check rows do not determine the set-up at the "
+                                f"working configurations (the registration alone leaves {reg * 1e3:.3f} mm there, the "
+                                f"honest sigma is {honest * 1e3:.3f} mm); measure poses spread over the workspace "
+                                "(check design)")
 
 
 def _setup_change(T_old: np.ndarray, T_new: np.ndarray, G: np.ndarray, cm: CalibratedModel, Q: np.ndarray,
