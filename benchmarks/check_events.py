@@ -13,8 +13,12 @@ Real UR10 (IPA data, ``--real``): a model (``identify`` with ``discrepancy="auto
 checked on 10 seeded rows of the other half (``--splits`` seeded splits: *holds* expected, false alarms at α) and on
 10 seeded rows of Series D (another session, another region of joint space).
 
-Run:  python -m benchmarks.check_events [--events 20] [--robots 2] [--real] [--splits 3]
-      (the issue's figures: --events 200 --robots 20 --real --splits 20)
+Monitor (``--monitor N``): a model of 2,000 seeded rows of Series A, the next N other rows replayed in time order
+(:func:`~pin_kpi_oed.identification.monitor.monitor`, a check every 10 rows): standardised RMS of the rows predicted
+before use, mean error and predicted σ, checks flagged, time per row.
+
+Run:  python -m benchmarks.check_events [--events 20] [--robots 2] [--real] [--splits 3] [--monitor 1500]
+      (the issue's figures: --events 200 --robots 20 --real --splits 20 --monitor 9911)
 """
 
 from __future__ import annotations
@@ -107,16 +111,49 @@ def real(splits: int) -> None:
         print(f"flagged on {name}: {k} of {splits} (stated false-alarm rate on the same session: {ALPHA:.0%})")
 
 
+def replay(n_rows: int) -> None:
+    from benchmarks.honest_sigma import calibrate, find_data
+    from pin_kpi_oed.data.ipa import import_ipa
+    from pin_kpi_oed.data.measurements import MeasurementSet
+    from pin_kpi_oed.identification.monitor import monitor
+    from pin_kpi_oed.model.noise import NoiseModel
+    from pin_kpi_oed.model.tracker import TrackerModel
+
+    folder = find_data()
+    if folder is None:
+        print("monitor: IPA data not found ($PIN_KPI_OED_IPA_DATA)")
+        return
+    ms = import_ipa(folder / "Series_A")
+    A = MeasurementSet(ms.joint_names, ms.q, ms.position_m, temperature_c=ms.temperature_c, time_s=ms.time_s,
+                       source="A")
+    A = A.subset(np.argsort(A.time_s, kind="stable"))
+    perm = np.random.default_rng(0).permutation(len(A))
+    train, rest = np.sort(perm[:2000]), np.sort(perm[2000:])[:n_rows]
+    model = TrackerModel(load_robot("ur10"), reflector_m=np.array([0.0, 0.0, 0.109]),
+                         noise=NoiseModel(sigma_xyz_m=(1e-4,) * 3))
+    cm = calibrate(model, A.subset(train), 0)
+    log = monitor(cm, A.subset(rest), every=10, alpha=ALPHA, tolerance_m=TOL)
+    print(f"monitor, Series A: model of 2,000 seeded rows, {len(rest)} other rows replayed in time order "
+          f"({(A.time_s[rest[-1]] - A.time_s[rest[0]]) / 3600:.1f} h)")
+    print(log.summary())
+    marks = log.batches[:: max(1, len(log.batches) // 8)]
+    print("standardised RMS so far at rows " + ", ".join(f"{b['last_row']}: {b['z_rms_so_far']:.2f}" for b in marks))
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--events", type=int, default=20, help="events per kind and pose set (the issue's: 200)")
     ap.add_argument("--robots", type=int, default=2, help="simulated robots the events are spread over")
     ap.add_argument("--real", action="store_true", help="also the real UR10 checks (IPA data)")
     ap.add_argument("--splits", type=int, default=3, help="seeded splits of Series C (the issue's: 20)")
+    ap.add_argument("--monitor", type=int, default=0, help="replay this many rows of Series A (0: none)")
     args = ap.parse_args(argv)
-    simulated(args.events, args.robots)
+    if args.events:
+        simulated(args.events, args.robots)
     if args.real:
         real(args.splits)
+    if args.monitor:
+        replay(args.monitor)
     return 0
 
 
