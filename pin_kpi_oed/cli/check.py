@@ -64,16 +64,17 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                                description="Replay a measurement file in its order (time order): each row is "
                                            "predicted with its honest sigma before it is used (standardised RMS over "
                                            "the replay), every --every rows a check (set-up re-registered, chi2 at "
-                                           "--alpha); the model follows a moved set-up (--refit: also a re-fitted group). One line "
-                                           "per event.")
+                                           "--alpha); the model follows a moved set-up (--refit: also a re-fitted "
+                                           "group). One line per event.")
     mo.add_argument("--model", required=True, help="calibrated model file")
     mo.add_argument("--data", required=True, help="rows measured during work: CSV with joint columns and x, y, z (m)")
     mo.add_argument("--every", type=int, default=10, help="rows per check (default 10)")
     mo.add_argument("--alpha", type=float, default=0.05, help="level of each check (default 0.05)")
     mo.add_argument("--tolerance", type=float, default=1e-4, help="RMS TCP change the power is stated for, m")
     mo.add_argument("--station", default=None, help="the model's station of the first rows (default station)")
-    mo.add_argument("--refit", action="store_true", help="also follow a re-fitted group of the robot (default: only "
-                                                         "a moved set-up; a robot change asks for check design's poses)")
+    mo.add_argument("--refit", action="store_true",
+                    help="also follow a re-fitted group of the robot (default: only a moved set-up; a robot change "
+                         "asks for check design's poses)")
     mo.add_argument("--model-out", dest="model_out", default=None, help="write the model at the end of the replay")
     mo.add_argument("--json", default=None, help="write the log (per row error and sigma, per check the verdict)")
     mo.add_argument("--quiet", action="store_true", help="print nothing")

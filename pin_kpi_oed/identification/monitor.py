@@ -9,8 +9,8 @@ replay (0.67–1.5 is honest). Every ``every`` rows the rows since the last chec
 point (an orientation series) do not, and the window grows until they do (at most ``max_window`` rows, the oldest
 dropped): the set-up re-registered, the residuals tested at α; the model is updated by the verdict — *set-up
 moved*: the re-registered set-up (*robot changed* with a determined group: the re-fitted model, with ``refit``);
-otherwise kept, and the event says what to do (measure ``check design``'s poses; re-calibrate). One line per event; the log holds every
-check. The file is read once (a file that grows while it is read is not followed).
+otherwise kept, and the event says what to do (measure ``check design``'s poses; re-calibrate). One line per event;
+the log holds every check. The file is read once (a file that grows while it is read is not followed).
 """
 
 from __future__ import annotations
