@@ -237,3 +237,32 @@ def test_kpi_path_gp_is_the_kriging_kpi_over_the_path_samples(seam_problem):
         assert get_criterion("kpi_path_gp").uses_discrepancy and not get_criterion("kpi_path").uses_discrepancy
     finally:
         seam_problem.hedge = True
+
+
+def test_orientation_sigma_matches_monte_carlo(seam_problem):
+    """The tool orientation's predicted σ along the seam against 40 simulated identifications (random true geometric
+    errors within the tolerances, the cell's noise): realised / predicted mean square within sampling error."""
+    from pin_kpi_oed.design.path_profile import path_profile
+    from pin_kpi_oed.identification.identify import identify
+    from pin_kpi_oed.identification.simulate import random_truth, simulate
+
+    model, cell = seam_problem.model, seam_problem.cell
+    Q = cell.robot.random_q(np.random.default_rng(8), 30)
+    Qs = cell.q_path[::20]
+    prof = path_profile(seam_problem, Q, Qs, 0.2)
+    predicted = float(np.mean(np.square(prof["sigma_rot_rad"])))
+
+    def orientation(mdl, p):
+        kin = mdl.kinematics(p, Qs, mdl.tcp_m)
+        return np.einsum("ab,mbc->mac", mdl.sensor_pose(p).rotation, kin.R_tool)
+
+    errs = []
+    for k in range(40):
+        p_true = random_truth(model, seed=100 + k, only=seam_problem.base)
+        res = identify(model, simulate(model, Q, p_true, seed=200 + k, record_sigma=False), ident=seam_problem.ident,
+                       raise_on_failure=False)
+        R_hat, R_true = orientation(res.model, res.p), orientation(model, p_true)
+        errs.append([np.sum(pin.log3(R_hat[i] @ R_true[i].T) ** 2) for i in range(len(Qs))])
+    ratio = float(np.mean(errs)) / predicted
+    print(f"orientation sigma: realised / predicted mean square {ratio:.3f}")
+    assert 0.6 < ratio < 1.5, ratio
