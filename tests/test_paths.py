@@ -266,3 +266,30 @@ def test_orientation_sigma_matches_monte_carlo(seam_problem):
     ratio = float(np.mean(errs)) / predicted
     print(f"orientation sigma: realised / predicted mean square {ratio:.3f}")
     assert 0.6 < ratio < 1.5, ratio
+
+
+def test_compensated_seam_program_stays_continuous(seam_problem):
+    """A joint-space program along the seam compensated on a calibrated model: every row ok, the compensated steps
+    between consecutive samples follow the program's (no branch change), within 1 mrad per joint."""
+    from pin_kpi_oed.data.measurements import MeasurementSet
+    from pin_kpi_oed.data.targets import TargetSet
+    from pin_kpi_oed.identification.compensate import compensate_program
+    from pin_kpi_oed.identification.identify import identify
+    from pin_kpi_oed.identification.simulate import random_truth, simulate
+
+    model, cell = seam_problem.model, seam_problem.cell
+    Q = cell.robot.random_q(np.random.default_rng(9), 40)
+    p_true = random_truth(model, seed=3, only=seam_problem.base)
+    cm = identify(model, simulate(model, Q, p_true, seed=4, record_sigma=False), ident=seam_problem.ident,
+                  raise_on_failure=False).calibrated_model()
+    Qp = cell.paths[0].Q
+    names = list(cell.robot.joint_names)
+    aux = MeasurementSet(names, Qp, np.full((len(Qp), 3), np.nan))
+    prog = TargetSet([str(i) for i in range(len(Qp))], None, None, Qp, names, aux, "seam")
+    res = compensate_program(cm, prog)
+    assert all(s == "ok" for s in res.target_status), set(res.target_status)
+    assert np.abs(res.q - Qp).max() > 1e-6  # the calibration changes the joints
+    jump = np.abs(np.diff(res.q, axis=0) - np.diff(Qp, axis=0)).max()
+    print(f"compensation: largest joint change {np.abs(res.q - Qp).max():.2e} rad, "
+          f"largest change of a step {jump:.2e} rad")
+    assert jump < 1e-3
