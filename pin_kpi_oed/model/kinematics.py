@@ -263,24 +263,20 @@ class Chain:
         R[:, 0], t[:, 0] = np.eye(3), 0.0
         Rc = np.broadcast_to(np.eye(3), (m, 3, 3))
         tc = np.zeros((m, 3))
-        # a product with a constant matrix or vector is one matrix product of the stacked rows ((3m, 3) @ (3, 3)),
-        # not m small ones; the joint's rotation Rc (I + s K + (1 − c) K²) as Rc + s (Rc K) + (1 − c) (Rc K²)
         for k in range(n):
             Mk = M[k]
-            rows = np.ascontiguousarray(Rc).reshape(3 * m, 3)
-            tc = tc + (rows @ Mk.translation).reshape(m, 3)
-            rows = rows @ Mk.rotation
-            Rc = rows.reshape(m, 3, 3)
+            tc = tc + Rc @ Mk.translation
+            Rc = Rc @ Mk.rotation
             R_A[:, k], t_A[:, k] = Rc, tc
             if self.revolute[k]:
                 if twists:
-                    w = (rows @ self.ang[k]).reshape(m, 3)
+                    w = Rc @ self.ang[k]
                     W[:, k] = w
                     V[:, k] = -np.cross(w, tc)
-                s, c = np.sin(Q[:, k])[:, None, None], 1.0 - np.cos(Q[:, k])[:, None, None]
-                Rc = Rc + s * (rows @ self._K[k]).reshape(m, 3, 3) + c * (rows @ self._KK[k]).reshape(m, 3, 3)
+                s, c = np.sin(Q[:, k])[:, None, None], np.cos(Q[:, k])[:, None, None]
+                Rc = Rc @ (np.eye(3) + s * self._K[k] + (1.0 - c) * self._KK[k])
             else:
-                u = (rows @ self.lin[k]).reshape(m, 3)
+                u = Rc @ self.lin[k]
                 V[:, k] = u if twists else 0.0
                 tc = tc + u * Q[:, k:k + 1]
             R[:, k + 1], t[:, k + 1] = Rc, tc
