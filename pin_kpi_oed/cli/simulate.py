@@ -172,8 +172,10 @@ def _setup(args: argparse.Namespace, reuse: bool) -> tuple[Any, Any, np.ndarray,
     effects = []
     if args.effects:
         from pin_kpi_oed.effects.library import parse_effects_spec
+        from pin_kpi_oed.validation.units import check_effect_sizes
 
         effects = parse_effects_spec(args.effects, model.robot, np.random.default_rng(args.seed + 3))
+        check_effect_sizes(effects)  # a size in degrees or µrad refused, naming the unit
     return model, cell, random_truth(model, tol, seed=args.seed), effects, tol, design
 
 

@@ -16,7 +16,8 @@ from pin_kpi_oed.errors import InputError
 
 __all__ = ["MAX_TOOL_OFFSET_M", "SIGMA_MAX_M", "SIGMA_ROT_MAX_RAD", "check_sigma_m", "check_sigma_rad",
            "check_offset_m",
-           "check_angle_rad", "POSITION_SPREAD_FACTOR", "check_position_spread_m"]
+           "check_angle_rad", "POSITION_SPREAD_FACTOR", "check_position_spread_m", "EFFECT_SIZE_MAX",
+           "check_effect_sizes"]
 
 #: largest plausible measurement noise sigma (m): 1 cm; more means the value was given in mm
 SIGMA_MAX_M = 0.01
@@ -142,3 +143,27 @@ def check_position_spread_m(points: np.ndarray, reach_m: float, what: str,
         raise InputError(f"{what}: the measured points lie a median {spread:.6g} m from their median point, more than "
                          f"{POSITION_SPREAD_FACTOR:g} x reach ({float(reach_m):.3g} m): looks like mm; {advice}")
     return spread
+
+
+#: the largest plausible size of a simulated effect's parameters, per unit (SI): beyond, another unit was meant
+#: (a gear harmonic of 5 is degrees or µrad, not rad)
+EFFECT_SIZE_MAX = {"rad": 0.05, "rad/(N*m)": 1e-4, "1": 0.05, "1/K": 1e-3, "m/s": 1e-3}
+
+
+def check_effect_sizes(effects: Iterable, what: str = "--effects") -> None:
+    """Refuse simulated effect parameters beyond :data:`EFFECT_SIZE_MAX` of their unit.
+
+    Args:
+        effects: (effect, theta) pairs; an effect has ``name`` and ``unit``.
+        what: the option for the message.
+
+    Raises:
+        InputError: naming the effect, the value, its unit and the bound.
+    """
+    for eff, theta in effects:
+        big = EFFECT_SIZE_MAX.get(getattr(eff, "unit", ""))
+        a = np.abs(np.asarray(theta, float))
+        if big is not None and a.size and float(a.max()) > big:
+            raise InputError(f"{what}: {eff.name} of size {float(a.max()):g} {eff.unit} is more than {big:g} "
+                             f"{eff.unit}: give it in SI units ({eff.unit}), e.g. gear_harmonic=5e-5 (rad), "
+                             "joint_compliance=2e-6 (rad/(N*m))")

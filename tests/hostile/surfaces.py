@@ -189,6 +189,10 @@ def surface_cases() -> list:
              "--harmonics"),
         Case("s-ignored-term-prior-without-terms", f"{diag} --effects joint_compliance --term-prior 1e-4",
              "--term-prior"),
+        Case("s-unit-simulate-gear-harmonic-degrees", "simulate --robot kr15 --out {d}/new.csv --effects "
+             "gear_harmonic=5", "give it in SI units (rad)"),
+        Case("s-unit-simulate-compliance-large", "simulate --robot kr15 --out {d}/new.csv --effects "
+             "joint_compliance=2", "rad/(N*m)"),
         # (j) another arm's calibration
         Case("s-robot-ur5-model-for-ur10-cell", "design --cell ur10 --model {d}/m_ur5.json --measurements 8",
              "contradicts"),
