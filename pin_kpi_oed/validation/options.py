@@ -95,6 +95,22 @@ def _range(unit: str) -> Callable[[str, Any], None]:
     return rule
 
 
+#: the plausible range of a cell's temperature (°C); beyond it, K or °F was meant
+TEMPERATURE_RANGE_C = (-50.0, 100.0)
+
+
+def _temperature(opt: str, v: Any) -> None:
+    """LOW,HIGH in °C, LOW <= HIGH, within :data:`TEMPERATURE_RANGE_C`."""
+    if v is None:
+        return
+    _range("°C")(opt, v)
+    lo, hi = TEMPERATURE_RANGE_C
+    bad = [x for x in floats(v, opt) if not lo <= x <= hi]
+    if bad:
+        raise InputError(f"{opt}: {bad[0]:g} °C is outside [{lo:g}, {hi:g}] °C: give the temperature in °C "
+                         f"({bad[0]:g} K would be {bad[0] - 273.15:g} °C)")
+
+
 def _scheduler(opt: str, v: Any) -> None:
     if v is None or v == "local-dask":
         return
@@ -197,7 +213,7 @@ RULES: dict[str, dict[str, Callable[[str, Any], None]]] = {
                "incidence_margin": _finite_at_least(0.0, "deg", 89.0)},
     "simulate": {**_SEED, "n": _int_at_least(1), "n_test": _int_at_least(0), "noise": _sigma_m,
                  "sigma_rot": _sigma_rad, "tol_translation": _nonneg_float, "tol_rotation": _nonneg_float,
-                 "tol_reflector": _nonneg_float, "temperature": _range("°C"), "reflector": _offset},
+                 "tol_reflector": _nonneg_float, "temperature": _temperature, "reflector": _offset},
     "identify": {**_SEED, "register_rows": _int_at_least(1), "max_nfev": _int_at_least(1), "sigma": _sigma_m,
                  "sigma_rot": _sigma_rad, "fix": _fix, "reflector": _offset, "geometry_prior": _geometry_prior},
     "import-ipa": {**_SEED, "split": _split},

@@ -193,6 +193,8 @@ def surface_cases() -> list:
              "gear_harmonic=5", "give it in SI units (rad)"),
         Case("s-unit-simulate-compliance-large", "simulate --robot kr15 --out {d}/new.csv --effects "
              "joint_compliance=2", "rad/(N*m)"),
+        Case("s-unit-simulate-temperature-kelvin", "simulate --robot kr15 --out {d}/new.csv --temperature 293,303",
+             "give the temperature in °C"),
         # (j) another arm's calibration
         Case("s-robot-ur5-model-for-ur10-cell", "design --cell ur10 --model {d}/m_ur5.json --measurements 8",
              "contradicts"),
