@@ -293,3 +293,15 @@ def test_compensated_seam_program_stays_continuous(seam_problem):
     print(f"compensation: largest joint change {np.abs(res.q - Qp).max():.2e} rad, "
           f"largest change of a step {jump:.2e} rad")
     assert jump < 1e-3
+
+
+def test_kpi6_is_not_scored_without_the_cells_length(seam_problem):
+    from pin_kpi_oed.oed.criteria import evaluate_all
+    from pin_kpi_oed.oed.objective import DesignContext
+
+    ctx = DesignContext(seam_problem.model, seam_problem.base, seam_problem.E, seam_problem.p0, seam_problem.q_work)
+    Q = seam_problem.cell.robot.random_q(np.random.default_rng(10), 20)
+    scores = evaluate_all(seam_problem.model, seam_problem.base, Q, seam_problem.E, ctx)
+    assert "kpi" in scores and "kpi6" not in scores and "kpi_path" not in scores
+    with pytest.raises(InputError, match="orientation_length_m"):
+        get_criterion("kpi6").objective(ctx)

@@ -63,7 +63,8 @@ class PoseKpi(ConfigurationCriterion):
     ``orientation_length_m`` (m²), on the noise-only information or with the measured poses (``design --given``).
 
     Raises (from :meth:`objective`):
-        InputError: on the extended model of ``design --model`` (its effects carry no orientation sensitivity).
+        InputError: on the extended model of ``design --model`` (its effects carry no orientation sensitivity), or
+            without a cell (``evaluate`` of a design file leaves it out rather than assume a length).
     """
 
     name, label, unit = "kpi6", "mean tr of the 6-D TCP covariance, orientation x the cell's length (m^2)", "m^2"
@@ -74,7 +75,9 @@ class PoseKpi(ConfigurationCriterion):
             raise InputError("criterion kpi6: not available on the extended model of --model (its effects carry no "
                              "orientation sensitivity); design kpi6 without --model")
         cell = getattr(problem, "cell", None)
-        L = float(getattr(cell, "orientation_length_m", 0.2))
+        if cell is None or not hasattr(cell, "orientation_length_m"):
+            raise InputError("criterion kpi6: needs a design problem on a cell (its orientation_length_m)")
+        L = float(cell.orientation_length_m)
         E6 = pose_sensitivity(problem.model, problem.p0, problem.q_work, problem.base, L)
         if hasattr(problem, "information_objective"):
             obj = problem.information_objective(PoseTrace())
