@@ -421,7 +421,7 @@ def test_a_criterion_that_is_not_finite_at_the_start_names_its_source():
     """'criterion kpi_gp is nan at the start design' names the discrepancy it was computed with (file and fields)."""
     from types import SimpleNamespace
 
-    from pin_kpi_oed.design.optimize import _start_value
+    from pin_kpi_oed.design.ipopt import _start_value
     from pin_kpi_oed.errors import SolverError
 
     crit = SimpleNamespace(name="kpi_gp", is_ratio=True, value=lambda Q: float("nan"),
