@@ -162,3 +162,18 @@ def test_usage_errors_are_one_line_and_exit_2(argv, expect, capsys):
     assert exc.value.code == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and expect in err[0] and err[0].endswith("--help")
+
+
+def test_library_errors_name_parameters_and_the_command_line_its_options():
+    """The design library names the parameter (``clearance_margin_m``), the command line the option that sets it."""
+    from pin_kpi_oed.cell.cell import load_cell
+    from pin_kpi_oed.cli.flags import PARAMETER_FLAGS, in_flags
+    from pin_kpi_oed.design.margins import with_margins
+    from pin_kpi_oed.errors import InputError
+
+    with pytest.raises(InputError, match=r"^clearance_margin_m: must be in \[0, 1\) m") as err:
+        with_margins(load_cell("kr15"), -0.01, 0.0)
+    assert in_flags(str(err.value)).startswith("--clearance-margin: must be in [0, 1) m")
+    assert in_flags("cell c: Q_given: 3 poses; target_sigma_m: 0") == "cell c: --given: 3 poses; --target-sigma: 0"
+    assert in_flags("clearance_m of the cell file") == "clearance_m of the cell file"  # a word, not a parameter
+    assert all("_" in p and f.startswith("--") for p, f in PARAMETER_FLAGS.items())

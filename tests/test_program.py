@@ -315,9 +315,9 @@ def test_with_margins_tightens_only_the_optimisers_cell(kr15):
     c = with_margins(kr15, 0.02, 1.5)
     assert c.clearance_m == pytest.approx(kr15.clearance_m + 0.02) and c.incidence_max_deg == pytest.approx(28.5)
     assert kr15.incidence_max_deg == 30.0 and with_margins(kr15, 0.0, 0.0) is kr15
-    with pytest.raises(InputError, match="--incidence-margin"):
+    with pytest.raises(InputError, match="incidence_margin_deg"):
         with_margins(kr15, 0.0, 30.0)
-    with pytest.raises(InputError, match="--clearance-margin"):
+    with pytest.raises(InputError, match="clearance_margin_m"):
         with_margins(kr15, -0.01, 0.0)
 
 

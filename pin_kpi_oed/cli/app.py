@@ -143,7 +143,9 @@ def main(argv: list[str] | None = None) -> int:
         with limit_process_threads():
             return int(args.func(args) or 0)
     except PinKpiOedError as exc:
-        print(f"pin-kpi-oed {args.command}: error: {exc}", file=sys.stderr)
+        from pin_kpi_oed.cli.flags import in_flags
+
+        print(f"pin-kpi-oed {args.command}: error: {in_flags(str(exc))}", file=sys.stderr)
         return 2
     except OSError as exc:  # read-only folder, disk full, a folder where a file belongs, ...
         where = f"{exc.filename}: " if getattr(exc, "filename", None) else ""

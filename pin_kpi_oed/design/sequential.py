@@ -103,7 +103,7 @@ class SequentialProblem(DesignProblem):
         super().__init__(cell, **kwargs)
         Q_given = np.atleast_2d(np.asarray(Q_given, float))
         if Q_given.shape[1] != self.n:
-            raise InputError(f"--given: expected {self.n} joint values per pose, got {Q_given.shape[1]}")
+            raise InputError(f"Q_given: expected {self.n} joint values per pose, got {Q_given.shape[1]}")
         self.Q_given = cell.robot.check_q(Q_given, "--given")
         F_given = self.model.weighted_jacobian(self.p0, self.Q_given)[:, :, self.base]
         self.F_measured = F_given.reshape(-1, self.base.size)
@@ -219,7 +219,7 @@ def poses_until(problem: SequentialProblem, target_sigma_m: float, Q_pool: np.nd
     """
     t0 = time.perf_counter()
     if not (target_sigma_m > 0):
-        raise InputError(f"--target-sigma: must be > 0 m, got {target_sigma_m}")
+        raise InputError(f"target_sigma_m: must be > 0 m, got {target_sigma_m}")
     problem.require_identified()
     t = problem.cell.q_work.shape[0]
     E = problem.E

@@ -272,7 +272,8 @@ def design_from_pool(problem: DesignProblem, Q_candidates: np.ndarray, criteria:
     ok, Fp = checked if checked is not None else check_candidates(problem, Q_candidates, timings=timings)[:2]
     Q = Q_candidates[ok]
     if len(Q) < m:
-        raise InfeasibleError(f"--pool: only {len(Q)} of {len(Q_candidates)} candidates satisfy the cell's constraints "
+        raise InfeasibleError(f"Q_candidates: only {len(Q)} of {len(Q_candidates)} "
+                              f"candidates satisfy the cell's constraints "
                               f"(collision, beam, incidence, margins); {m} needed")
     Q_given = getattr(problem, "Q_given", None)
     on_top = f" on top of the {len(Q_given)} measured poses" if getattr(problem, "F_given", None) is not None else ""

@@ -296,7 +296,7 @@ def poses_needed(crit: DiscrepancyDesignCriterion, Q_pool: np.ndarray, n_max: in
     """
     t0 = time.perf_counter()
     if target_sigma_m is not None and not (target_sigma_m > 0):
-        raise InputError(f"--target-sigma: must be > 0 m, got {target_sigma_m}")
+        raise InputError(f"target_sigma_m: must be > 0 m, got {target_sigma_m}")
     N = len(Q_pool)
     n_max = min(int(n_max), N)
     t = crit.Q_work.shape[0]
