@@ -24,7 +24,7 @@ When the registration is poor, the cause is tested, not guessed (:func:`poor_reg
    harmonics, bending terms) extrapolate outside it. The share of the rows inside the model's joint coverage
    and the joint ranges the calibration did not measure are named, with the fixes: a geometry-only model
    (``--effects none``), a prior on the terms (``--term-prior``), or measuring the missing ranges.
-2. **Rows outside the coverage**, the geometry poor as well: the ranges to measure.
+2. **Rows outside the coverage**, the geometry poor as well and the RMS below a gross 10 mm: the ranges to measure.
 3. Otherwise: another robot's or another session's data, the joint order, or units.
 """
 
@@ -40,6 +40,10 @@ from pin_kpi_oed.data.measurements import MeasurementSet
 from pin_kpi_oed.errors import PinKpiOedError
 from pin_kpi_oed.identification.model_file import CalibratedModel
 from pin_kpi_oed.identification.quality import CHI2_POOR, RegistrationQuality, assess_registration
+
+#: A registration RMS beyond this (m) is not a calibration extrapolating outside its coverage (a geometric model's
+#: error there stays at the millimetre level): the rows are likely of another robot, in another joint order or unit.
+GROSS_RMS_M = 0.01
 
 #: The geometry alone fits the registration rows "better" when its reduced χ² is at most this share of the full
 #: model's (its RMS about 13 % lower): the model's terms, not the session, are what the rows cannot fit.
@@ -164,7 +168,8 @@ def poor_registration_cause(model: CalibratedModel, data: MeasurementSet, label:
                         f"RMS {geo.rms_m * 1e3:.3g} mm ({np.sqrt(chi2_geo):.2g}x the expected level); fix: a "
                         "geometry-only model (diagnose --effects none, or identify without --effects), a prior on "
                         f"the terms (diagnose --term-prior 1e-4), or {measure}")
-    if share is not None and share < 0.5:
+    rms_m = float(np.sqrt(chi2_full * np.mean(np.asarray(sigma_m, float) ** 2)))
+    if share is not None and share < 0.5 and rms_m < GROSS_RMS_M:
         return (f"cause: the rows lie outside the joint coverage of the calibration ({inside}); fix: {measure}, "
                 "or calibrate on rows that include this session's configurations")
     return ("likely: another robot's or another session's data, the joint order, or units (m, rad)"
