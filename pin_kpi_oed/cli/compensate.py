@@ -5,7 +5,8 @@ real TCP lands on the target according to the calibrated model (geometry + effec
 kinematics on that model started from the nominal solution
 (:mod:`pin_kpi_oed.identification.compensate`). Per target it reports the predicted correction
 (mm) and flags targets that are unreachable, off the branch of their joint hint / the model's working
-configurations, at a joint limit, in collision (``--cell``) or near a singularity. The TCP (``--tcp``) is in the
+configurations, at a joint limit, in collision (``--cell``), near a singularity, or outside the calibration's
+joint-space coverage (``extrapolated``, with the widened σ ``predict`` gives there). The TCP (``--tcp``) is in the
 model's tool frame, which the summary names.
 
 Examples::
@@ -38,7 +39,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                     "the joint columns of a nominal program; each pose's nominal TCP pose (base frame) becomes the "
                     "target. Writes the compensated joints, the nominal ones, the predicted correction (m), the "
                     "residual and a status per target (ok / unreachable / off_branch / joint_limit / collision / "
-                    "near_singular); only ok is safe to send. The nominal IK starts from the target's joint hint, "
+                    "near_singular / extrapolated: outside the calibration's joint-space coverage, with the widened "
+                    "sigma predict gives there; measure poses near it); only ok is safe to send. The nominal IK "
+                    "starts from the target's joint hint, "
                     "else the model's (or --cell's) working configuration nearest the target.")
     src = p.add_mutually_exclusive_group(required=True)
     src.add_argument("--targets", default=None, help="CSV of Cartesian TCP targets (x, y, z; rx, ry, rz optional)")
@@ -95,7 +98,7 @@ def run(args: argparse.Namespace) -> int:
     else:
         ts = read_targets(args.targets, robot.joint_names, revolute=robot.is_revolute, **kw)
         res = compensate(model, ts, opt)
-    if res.target_status and "ok" not in res.target_status:  # nothing useful: exit 2, nothing written
+    if res.target_status and not {"ok", "extrapolated"} & set(res.target_status):  # nothing useful: exit 2
         n_un = res.target_status.count("unreachable")
         hint = (f"; the TCP {', '.join(f'{x:g}' for x in tcp)} m is {float(np.linalg.norm(tcp)):.3g} m from the tool "
                 "frame" if tcp is not None else "")

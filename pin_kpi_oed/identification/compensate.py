@@ -43,7 +43,10 @@ at a singularity where the calibrated pose needs a large joint motion — ``inv_
 a joint by more than ``max_branch_step_rad``); ``joint_limit`` (a joint of the compensated configuration at
 its limit); ``collision`` (with ``cell``: the compensated configuration collides in the cell's independent
 check); ``near_singular`` (reached, but the inverse condition number σ_min/σ_max of the scaled Jacobian
-is below ``singular_ratio``: small TCP corrections there need large joint motions). Only ``ok`` is safe to send.
+is below ``singular_ratio``: small TCP corrections there need large joint motions); ``extrapolated`` (every check
+passed, but the compensated configuration lies outside the calibration's joint-space coverage,
+:class:`~pin_kpi_oed.discrepancy.coverage.JointCoverage`: the model was not measured near it, the correction there is
+an extrapolation and its σ the widened one ``predict`` gives for the same configuration). Only ``ok`` is safe to send.
 """
 
 from __future__ import annotations
@@ -75,7 +78,7 @@ __all__ = ["FRAMES", "STATUSES", "CompensationOptions", "PoseModel", "Compensati
 #: Frames a target can be given in.
 FRAMES = ("cell", "base")
 #: Status of a compensated target; only the first is safe to send.
-STATUSES = ("ok", "unreachable", "off_branch", "joint_limit", "collision", "near_singular")
+STATUSES = ("ok", "unreachable", "off_branch", "joint_limit", "collision", "near_singular", "extrapolated")
 
 
 @dataclass
@@ -365,9 +368,13 @@ class CompensationResult(Result):
                              "reflector at the TCP (or the TCP measured) removes it")
         if np.any(self.extrapolation):
             far = [n for n, e in zip(self.names, self.extrapolation) if e]
+            n_st = self.target_status.count("extrapolated")
             lines.append(f"{len(far)} of {len(self.names)} targets outside the calibration's joint-space coverage "
-                         f"(extrapolation: {', '.join(far[:5])}{' ...' if len(far) > 5 else ''}): the model was not "
-                         "measured near them; their sigma includes the parameters' extrapolation; measure poses there")
+                         f"(extrapolation: {', '.join(far[:5])}{' ...' if len(far) > 5 else ''}"
+                         f"{f'; {n_st} of them status extrapolated, not ok' if n_st else ''}): the model was not "
+                         "measured near them, their correction is an extrapolation and their sigma the widened one "
+                         "predict gives there (the parameters' extrapolation included); measure poses near them "
+                         "(design --given with the calibration's poses adds them) and identify again")
         bad = [(n, s) for n, s in zip(self.names, self.target_status) if s != "ok"]
         for n, s in bad[:10]:
             lines.append(f"  target {n}: {s}")
@@ -524,10 +531,10 @@ def _result(cm: CalibratedModel, ts: TargetSet, opt: CompensationOptions, pm: Po
     colliding, pair = (collision_rows(opt.cell, cal.Q) if opt.cell is not None
                        else (np.zeros(len(ts), bool), [""] * len(ts)))
     unseen = unobservable_tcp_sigma(cm, opt.station, pm.tcp, cal.Q, opt.tool_tolerances, seed=opt.seed)
-    status = [_status(i, opt, nom, cal, bool(left_branch[i]), step[i] > opt.max_branch_step_rad, at_limit[i],
-                      colliding[i]) for i in range(len(ts))]
-    n_bad = sum(s != "ok" for s in status)
     sig, extra = _tcp_sigma(cm, cal.Q, ts.aux, opt.station)
+    status = [_status(i, opt, nom, cal, bool(left_branch[i]), step[i] > opt.max_branch_step_rad, at_limit[i],
+                      colliding[i], bool(extra[i])) for i in range(len(ts))]
+    n_bad = sum(s != "ok" for s in status)
     return CompensationResult(
         success=n_bad == 0, status="ok" if n_bad == 0 else f"{n_bad} of {len(ts)} targets not ok",
         message="" if n_bad == 0 else "see the per-target status (" + " / ".join(STATUSES[1:]) + ")",
@@ -542,9 +549,10 @@ def _result(cm: CalibratedModel, ts: TargetSet, opt: CompensationOptions, pm: Po
 
 
 def _status(i: int, opt: CompensationOptions, nom: _IK, cal: _IK, left_branch: bool, big_step: bool,
-            at_limit: bool, colliding: bool) -> str:
+            at_limit: bool, colliding: bool, outside: bool) -> str:
     """The status of target i (module docstring): the first failed check. Near a singularity compensation needs
-    large joint steps, so ``near_singular`` is named before a step too large for the branch."""
+    large joint steps, so ``near_singular`` is named before a step too large for the branch; ``extrapolated`` (outside
+    the calibration's joint-space coverage) comes last: every other check passed."""
     if (nom.err_m[i] > opt.reach_tol_m or nom.err_rad[i] > opt.reach_tol_rad
             or cal.err_m[i] > opt.reach_tol_m or cal.err_rad[i] > opt.reach_tol_rad):
         return "unreachable"
@@ -558,6 +566,8 @@ def _status(i: int, opt: CompensationOptions, nom: _IK, cal: _IK, left_branch: b
         return "joint_limit"
     if colliding:
         return "collision"
+    if outside:
+        return "extrapolated"
     return "ok"
 
 
