@@ -76,10 +76,10 @@ import numpy as np
 import pinocchio as pin
 
 from pin_kpi_oed.cell.cell_model import CapsuleSpec, Cell, HalfSpace
-from pin_kpi_oed.cell.fields import read_angles as _angles
-from pin_kpi_oed.cell.fields import read_pose as _pose
-from pin_kpi_oed.cell.fields import read_vec as _vec
-from pin_kpi_oed.cell.fields import where as _where
+from pin_kpi_oed.cell.fields import read_angles as angles_of
+from pin_kpi_oed.cell.fields import read_pose as pose_of
+from pin_kpi_oed.cell.fields import read_vec as vec_of
+from pin_kpi_oed.cell.fields import where as at
 from pin_kpi_oed.errors import InputError, RobotLoadError
 from pin_kpi_oed.model.noise import NoiseModel
 from pin_kpi_oed.model.robot import Robot, is_robot_name, load_robot
@@ -99,7 +99,7 @@ def _capsule(d: Any, what: str, need_link: bool) -> CapsuleSpec:
     r = float(d["radius_m"])
     if not (math.isfinite(r) and r >= 0):
         raise InputError(f"{what}.radius_m: must be a finite number >= 0, got {d['radius_m']!r}")
-    return CapsuleSpec(str(d["name"]), _vec(d["a_m"], 3, f"{what}.a_m"), _vec(d["b_m"], 3, f"{what}.b_m"), r,
+    return CapsuleSpec(str(d["name"]), vec_of(d["a_m"], 3, f"{what}.a_m"), vec_of(d["b_m"], 3, f"{what}.b_m"), r,
                        str(d["link"]) if need_link else None)
 
 
@@ -151,9 +151,9 @@ def _check_top_level(d: Any, source: str) -> None:
         raise InputError(f"{source or 'cell'}: expected a YAML mapping at the top level")
     unknown = set(d) - _KNOWN_KEYS
     if unknown:
-        raise InputError(f"{_where(source, 'cell')}: unknown field(s) {', '.join(sorted(unknown))}")
+        raise InputError(f"{at(source, 'cell')}: unknown field(s) {', '.join(sorted(unknown))}")
     if "robot" not in d:
-        raise InputError(f"{_where(source, 'robot')}: missing field (shipped name or URDF path)")
+        raise InputError(f"{at(source, 'robot')}: missing field (shipped name or URDF path)")
 
 
 def _read_robot(d: dict, source: str, base_dir: Path | None) -> Robot:
@@ -169,23 +169,23 @@ def _read_robot(d: dict, source: str, base_dir: Path | None) -> Robot:
     try:
         return load_robot(spec, d.get("tool_frame"), kinematics=kin)
     except RobotLoadError as exc:
-        raise RobotLoadError(f"{_where(source, 'robot')}: {exc}") from None
+        raise RobotLoadError(f"{at(source, 'robot')}: {exc}") from None
 
 
 def _read_tracker_setup(d: dict, source: str) -> tuple[pin.SE3, pin.SE3, np.ndarray, np.ndarray, NoiseModel]:
     """(W_T_base, W_T_tracker, reflector in the tool frame (m), TCP in the tool frame (m), noise)."""
-    W_T_base = _pose(d.get("base"), _where(source, "base"))
+    W_T_base = pose_of(d.get("base"), at(source, "base"))
     if "tracker" not in d:
-        raise InputError(f"{_where(source, 'tracker')}: missing field (tracker pose xyz_m, rpy_rad)")
-    W_T_tracker = _pose(d["tracker"], _where(source, "tracker"))
+        raise InputError(f"{at(source, 'tracker')}: missing field (tracker pose xyz_m, rpy_rad)")
+    W_T_tracker = pose_of(d["tracker"], at(source, "tracker"))
     if "reflector_m" not in d:
-        raise InputError(f"{_where(source, 'reflector_m')}: missing field (reflector in the tool frame, m)")
-    reflector = _vec(d["reflector_m"], 3, _where(source, "reflector_m"))
-    tcp = _vec(d.get("tcp_m", [0.0, 0.0, 0.0]), 3, _where(source, "tcp_m"))
+        raise InputError(f"{at(source, 'reflector_m')}: missing field (reflector in the tool frame, m)")
+    reflector = vec_of(d["reflector_m"], 3, at(source, "reflector_m"))
+    tcp = vec_of(d.get("tcp_m", [0.0, 0.0, 0.0]), 3, at(source, "tcp_m"))
     try:
         noise = NoiseModel.from_dict(d.get("noise") or {})
     except InputError as exc:
-        raise InputError(f"{_where(source, 'noise')}: {exc}") from None
+        raise InputError(f"{at(source, 'noise')}: {exc}") from None
     return W_T_base, W_T_tracker, reflector, tcp, noise
 
 
@@ -195,11 +195,11 @@ def _read_joint_bounds(d: dict, robot: Robot, source: str) -> tuple[np.ndarray, 
     jb = d.get("joint_bounds")
     if jb is None:
         return lo, hi
-    w = _where(source, "joint_bounds")
+    w = at(source, "joint_bounds")
     if not isinstance(jb, dict):
         raise InputError(f"{w}: expected a mapping with lower_rad/upper_rad (or _deg)")
-    lo2 = _angles(jb, "lower", robot.nq, w, required=False)
-    hi2 = _angles(jb, "upper", robot.nq, w, required=False)
+    lo2 = angles_of(jb, "lower", robot.nq, w, required=False)
+    hi2 = angles_of(jb, "upper", robot.nq, w, required=False)
     lo = lo if lo2 is None else lo2
     hi = hi if hi2 is None else hi2
     bad = np.flatnonzero(~(lo < hi))
@@ -213,20 +213,20 @@ def _read_robot_capsules(d: dict, robot: Robot, source: str) -> list[CapsuleSpec
     """Robot capsules (link frames): the URDF's collision cylinders or a list, plus ``extra_capsules``."""
     rc = d.get("robot_capsules", "urdf")
     if rc == "urdf" or rc is None:
-        caps = capsules_from_urdf(robot, _where(source, "robot_capsules"))
+        caps = capsules_from_urdf(robot, at(source, "robot_capsules"))
     elif rc == "urdf_visual":
-        caps = capsules_from_urdf(robot, _where(source, "robot_capsules"), kind="visual")
+        caps = capsules_from_urdf(robot, at(source, "robot_capsules"), kind="visual")
     elif isinstance(rc, list):
-        caps = [_capsule(c, _where(source, f"robot_capsules[{i}]"), True) for i, c in enumerate(rc)]
+        caps = [_capsule(c, at(source, f"robot_capsules[{i}]"), True) for i, c in enumerate(rc)]
     else:
-        raise InputError(f"{_where(source, 'robot_capsules')}: expected 'urdf', 'urdf_visual' or a list of capsules, "
+        raise InputError(f"{at(source, 'robot_capsules')}: expected 'urdf', 'urdf_visual' or a list of capsules, "
                          f"got {rc!r}")
-    caps += [_capsule(c, _where(source, f"extra_capsules[{i}]"), True)
+    caps += [_capsule(c, at(source, f"extra_capsules[{i}]"), True)
              for i, c in enumerate(d.get("extra_capsules") or [])]
     links = body_names(robot)
     for c in caps:
         if c.link not in links:
-            raise InputError(f"{_where(source, 'robot_capsules')}: capsule '{c.name}' is on unknown link '{c.link}' "
+            raise InputError(f"{at(source, 'robot_capsules')}: capsule '{c.name}' is on unknown link '{c.link}' "
                              f"(links of {robot.name}: {', '.join(sorted(links))})")
     return caps
 
@@ -235,18 +235,18 @@ def _read_obstacles(d: dict, source: str) -> tuple[list[CapsuleSpec], list[HalfS
     """Obstacle capsules and half-spaces (cell frame)."""
     obs = d.get("obstacles") or {}
     if not isinstance(obs, dict):
-        raise InputError(f"{_where(source, 'obstacles')}: expected a mapping with 'capsules' and 'half_spaces'")
+        raise InputError(f"{at(source, 'obstacles')}: expected a mapping with 'capsules' and 'half_spaces'")
     unknown = set(obs) - {"capsules", "half_spaces"}
     if unknown:
-        raise InputError(f"{_where(source, 'obstacles')}: unknown field(s) {', '.join(sorted(unknown))}")
-    obstacles = [_capsule(c, _where(source, f"obstacles.capsules[{i}]"), False)
+        raise InputError(f"{at(source, 'obstacles')}: unknown field(s) {', '.join(sorted(unknown))}")
+    obstacles = [_capsule(c, at(source, f"obstacles.capsules[{i}]"), False)
                  for i, c in enumerate(obs.get("capsules") or [])]
     halfs = []
     for i, h in enumerate(obs.get("half_spaces") or []):
-        w = _where(source, f"obstacles.half_spaces[{i}]")
+        w = at(source, f"obstacles.half_spaces[{i}]")
         if not isinstance(h, dict) or not {"name", "normal", "offset_m"} <= set(h):
             raise InputError(f"{w}: expected a mapping with name, normal, offset_m")
-        nrm = _vec(h["normal"], 3, f"{w}.normal")
+        nrm = vec_of(h["normal"], 3, f"{w}.normal")
         if np.linalg.norm(nrm) < 1e-9:
             raise InputError(f"{w}.normal: must not be zero")
         halfs.append(HalfSpace(str(h["name"]), nrm / np.linalg.norm(nrm), float(h["offset_m"])))
@@ -257,7 +257,7 @@ def _read_environment(d: dict, source: str, base_dir: Path | None) -> list:
     """Obstacles from mesh / URDF files (:mod:`pin_kpi_oed.cell.environment`), paths relative to the cell file."""
     from pin_kpi_oed.cell.environment import load_environment_object
 
-    return [load_environment_object(e, i, base_dir, source, _pose) for i, e in enumerate(d.get("environment") or [])]
+    return [load_environment_object(e, i, base_dir, source, pose_of) for i, e in enumerate(d.get("environment") or [])]
 
 
 class _Names:
@@ -270,7 +270,7 @@ class _Names:
         names = [c.name for c in caps] + [o.name for o in obstacles] + [h.name for h in halfs] + [e.name for e in env]
         dup = sorted({x for x in names if names.count(x) > 1})
         if dup:
-            raise InputError(f"{_where(source, 'cell')}: duplicate capsule/obstacle name(s) {', '.join(dup)}")
+            raise InputError(f"{at(source, 'cell')}: duplicate capsule/obstacle name(s) {', '.join(dup)}")
         self.known = set(names) | {c.link for c in caps}
         self.links = links
         #: environment object name -> its capsule names (what the optimiser's skip lists must hold)
@@ -297,7 +297,7 @@ def _read_skip_pairs(d: dict, names: _Names, source: str) -> list[tuple[str, str
     """Pairs of names never checked against each other."""
     skips = []
     for i, pr in enumerate(d.get("skip_pairs") or []):
-        w = _where(source, f"skip_pairs[{i}]")
+        w = at(source, f"skip_pairs[{i}]")
         if not isinstance(pr, (list, tuple)) or len(pr) != 2:
             raise InputError(f"{w}: expected a pair of names, got {pr!r}")
         a, b = names.check(pr[0], w), names.check(pr[1], w)
@@ -309,11 +309,11 @@ def _read_beam(d: dict, names: _Names, source: str) -> tuple[float, list[str]]:
     """(beam radius (m), names the beam is not checked against)."""
     beam = d.get("beam") or {}
     if not isinstance(beam, dict):
-        raise InputError(f"{_where(source, 'beam')}: expected a mapping with radius_m and skip")
+        raise InputError(f"{at(source, 'beam')}: expected a mapping with radius_m and skip")
     beam_r = float(beam.get("radius_m", 0.005))
     if not (math.isfinite(beam_r) and beam_r >= 0):
-        raise InputError(f"{_where(source, 'beam.radius_m')}: must be >= 0, got {beam.get('radius_m')!r}")
-    skip_where = _where(source, "beam.skip")
+        raise InputError(f"{at(source, 'beam.radius_m')}: must be >= 0, got {beam.get('radius_m')!r}")
+    skip_where = at(source, "beam.skip")
     return beam_r, [y for x in beam.get("skip") or [] for y in names.expand(names.check(x, skip_where))]
 
 
@@ -321,25 +321,25 @@ def _read_limits(d: dict, source: str) -> tuple[float, float, int, int]:
     """(incidence limit (deg), clearance (m), measurements, random-design budget)."""
     inc = float(d.get("incidence_max_deg", 30.0))
     if not (0 < inc <= 180):
-        raise InputError(f"{_where(source, 'incidence_max_deg')}: must be in (0, 180] deg, got {inc}")
+        raise InputError(f"{at(source, 'incidence_max_deg')}: must be in (0, 180] deg, got {inc}")
     clr = float(d.get("clearance_m", 0.0))
     if not (math.isfinite(clr) and clr >= 0):
-        raise InputError(f"{_where(source, 'clearance_m')}: must be >= 0 m, got {clr}")
+        raise InputError(f"{at(source, 'clearance_m')}: must be >= 0 m, got {clr}")
     m = int(d.get("measurements", 60))
     tries = int(d.get("max_random_tries", 200_000))
     if m < 1 or tries < 1:
-        raise InputError(f"{_where(source, 'measurements')}: measurements and max_random_tries must be >= 1")
+        raise InputError(f"{at(source, 'measurements')}: measurements and max_random_tries must be >= 1")
     return inc, clr, m, tries
 
 
 def _read_working_configurations(d: dict, robot: Robot, source: str) -> np.ndarray:
     """Working configurations (t, n) rad, within the joint bounds (none if only ``working_targets`` are given)."""
-    qw = _angles(d, "working_configurations", robot.nq, _where(source, "cell"),
+    qw = angles_of(d, "working_configurations", robot.nq, at(source, "cell"),
                  required=not (d.get("working_targets") or d.get("working_paths")))
     if qw is None:
         return np.zeros((0, robot.nq))
     qw = np.atleast_2d(qw)
-    robot.check_q(qw, _where(source, "working_configurations"))
+    robot.check_q(qw, at(source, "working_configurations"))
     return qw
 
 
@@ -401,9 +401,9 @@ def _read_orientation_length(d: dict, source: str) -> float:
     """``orientation_length_m``: the length weighting the tool's orientation in the 6-D KPI (m, default 0.2)."""
     v = d.get("orientation_length_m", 0.2)
     if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v <= 0:
-        raise InputError(f"{_where(source, 'orientation_length_m')}: expected a positive length in m, got {v!r}")
+        raise InputError(f"{at(source, 'orientation_length_m')}: expected a positive length in m, got {v!r}")
     if v > 5.0:
-        raise InputError(f"{_where(source, 'orientation_length_m')}: {v:g} m is longer than any tool; the value looks "
+        raise InputError(f"{at(source, 'orientation_length_m')}: {v:g} m is longer than any tool; the value looks "
                          f"like mm: give it in m (e.g. 0.2 for 200 mm)")
     return float(v)
 

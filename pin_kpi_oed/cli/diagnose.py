@@ -25,7 +25,7 @@ import numpy as np
 
 from pin_kpi_oed.cli.identify import add_discrepancy_arg, add_register_args
 from pin_kpi_oed.cli.util import add_table_options, table_options
-from pin_kpi_oed.cli.util import parse_floats as _floats
+from pin_kpi_oed.cli.util import parse_floats
 from pin_kpi_oed.errors import InputError
 from pin_kpi_oed.cli.tool import add_cell_arg, command_tool
 from pin_kpi_oed.model.robot import ROBOT_HELP, TOOL_HELP
@@ -130,7 +130,7 @@ def _noise(args: argparse.Namespace, train: Any, val: Any, reg: Any) -> tuple[An
     from pin_kpi_oed.model.noise import NoiseModel
 
     if args.sigma is not None:
-        s = _floats(args.sigma, (1, 3), "--sigma")
+        s = parse_floats(args.sigma, (1, 3), "--sigma")
         if np.any(s <= 0) or np.median(s) > 0.1:
             raise InputError(f"--sigma {args.sigma}: must be positive, in m (e.g. 1e-5 for 10 µm)")
         return NoiseModel(sigma_xyz_m=tuple(s)), "noise"
@@ -202,7 +202,7 @@ def run(args: argparse.Namespace) -> int:
     train = read_data_files(args.train, robot, "--train", opts=table_options(args, robot))
     train.tool = ct.tool  # the agreed tool travels into --model-out
     val, reg = read_validation(args, robot)
-    reflector = _floats(args.reflector, (3,), "--reflector") if args.reflector is not None else (
+    reflector = parse_floats(args.reflector, (3,), "--reflector") if args.reflector is not None else (
         ct.tool.reflector_m if ct.tool.reflector_m is not None else np.zeros(3))
     if np.linalg.norm(reflector) > reach:
         raise InputError(f"--reflector {args.reflector}: {np.linalg.norm(reflector):.4g} m from the tool frame, more "

@@ -30,7 +30,7 @@ from typing import Any
 import numpy as np
 
 from pin_kpi_oed.cli.util import add_table_options, table_options
-from pin_kpi_oed.cli.util import parse_floats as _floats
+from pin_kpi_oed.cli.util import parse_floats
 from pin_kpi_oed.errors import InputError
 from pin_kpi_oed.cli.tool import add_cell_arg, command_tool
 from pin_kpi_oed.model.robot import ROBOT_HELP, TOOL_HELP
@@ -261,7 +261,7 @@ def _noise_and_weights(args: argparse.Namespace, train: Any) -> tuple[Any, str, 
 
     sigma_rot = _positive(args.sigma_rot, "--sigma-rot")
     if args.sigma is not None:
-        noise = NoiseModel(sigma_xyz_m=tuple(_floats(args.sigma, (1, 3), "--sigma")), sigma_rot_rad=sigma_rot)
+        noise = NoiseModel(sigma_xyz_m=tuple(parse_floats(args.sigma, (1, 3), "--sigma")), sigma_rot_rad=sigma_rot)
         return noise, "noise", False
     noise = NoiseModel(sigma_xyz_m=(1e-5,) * 3, sigma_rot_rad=sigma_rot)
     return noise, "auto", train.sigma_m is None
@@ -284,7 +284,7 @@ def _nominal_reflector(args: argparse.Namespace, robot: Any, noise: Any, train: 
             print(f"nominal reflector offset estimated from the data: {np.round(reflector * 1e3, 1).tolist()} mm "
                   f"in {robot.tool_frame} (give --reflector x,y,z in m to set it)")
     else:
-        reflector = _floats(args.reflector, 3, "--reflector")
+        reflector = parse_floats(args.reflector, 3, "--reflector")
         if np.linalg.norm(reflector) > reach:
             raise InputError(f"--reflector {args.reflector}: {np.linalg.norm(reflector):.4g} m from the tool frame, "
                              f"more than the robot's reach ({reach:.3g} m): give it in m")
@@ -377,7 +377,7 @@ def _geometry_prior(text: str | None) -> tuple[float, float] | None:
     """
     if text is None:
         return None
-    t, r = _floats(text, 2, "--geometry-prior")
+    t, r = parse_floats(text, 2, "--geometry-prior")
     if not (t > 0 and r > 0):
         raise InputError(f"--geometry-prior: both sigmas must be > 0 (translation m, rotation rad), got '{text}'")
     return float(t), float(r)

@@ -28,7 +28,7 @@ import numpy as np
 import pinocchio as pin
 
 from pin_kpi_oed.cli.tool import CELL_HELP
-from pin_kpi_oed.cli.util import parse_floats as _floats
+from pin_kpi_oed.cli.util import parse_floats
 from pin_kpi_oed.errors import InputError
 from pin_kpi_oed.model.robot import ROBOT_HELP, TOOL_HELP
 
@@ -98,7 +98,7 @@ def register_simulate(subparsers: argparse._SubParsersAction) -> None:
 
 
 def _positive(text: str, what: str) -> float:
-    v = float(_floats(text, 1, what)[0])
+    v = float(parse_floats(text, 1, what)[0])
     if not v > 0:
         raise InputError(f"{what}: must be positive and finite, got {text}")
     return v
@@ -154,8 +154,8 @@ def _setup(args: argparse.Namespace, reuse: bool) -> tuple[Any, Any, np.ndarray,
     truth = load_truth(args.truth) if reuse else None
     specs = [ToolSpec(robot=args.robot, source=f"--robot {args.robot}") if args.robot else None,
              ToolSpec(tool_frame=args.tool, source=f"--tool {args.tool}") if args.tool else None,
-             ToolSpec(reflector_m=_floats(args.reflector, 3, "--reflector"), source=f"--reflector {args.reflector}")
-             if args.reflector else None,
+             ToolSpec(reflector_m=parse_floats(args.reflector, 3, "--reflector"),
+                      source=f"--reflector {args.reflector}") if args.reflector else None,
              cell_tool_spec(cell, f"--cell {args.cell}" if args.cell else f"--design {args.design}") if cell else None,
              ToolSpec(robot=truth[0].robot.urdf_path, tool_frame=truth[0].robot.tool_frame,
                       reflector_m=truth[0].reflector_m, source=f"--truth {args.truth}") if truth else None]
@@ -166,9 +166,9 @@ def _setup(args: argparse.Namespace, reuse: bool) -> tuple[Any, Any, np.ndarray,
         model.noise = noise
         return model, cell, p, effects, None, design
     model = _nominal_model(args, cell, noise)
-    tol = Tolerances(joint_translation_m=float(_floats(args.tol_translation or "5e-4", 1, "--tol-translation")[0]),
-                     joint_rotation_rad=float(_floats(args.tol_rotation or "1e-3", 1, "--tol-rotation")[0]),
-                     reflector_m=float(_floats(args.tol_reflector or "0", 1, "--tol-reflector")[0]))
+    tol = Tolerances(joint_translation_m=float(parse_floats(args.tol_translation or "5e-4", 1, "--tol-translation")[0]),
+                     joint_rotation_rad=float(parse_floats(args.tol_rotation or "1e-3", 1, "--tol-rotation")[0]),
+                     reflector_m=float(parse_floats(args.tol_reflector or "0", 1, "--tol-reflector")[0]))
     effects = []
     if args.effects:
         from pin_kpi_oed.effects.library import parse_effects_spec
@@ -188,7 +188,7 @@ def _noise(args: argparse.Namespace, cell: Any, truth: Any) -> Any:
         base = truth[0].noise if truth is not None else cell.noise
         return NoiseModel(sigma_xyz_m=tuple(base.sigma_xyz_m), range_a_m=base.range_a_m, range_b=base.range_b,
                           sigma_rot_rad=sigma_rot)
-    return NoiseModel(sigma_xyz_m=tuple(_floats(args.noise or _DEFAULT_NOISE, (1, 3), "--noise")),
+    return NoiseModel(sigma_xyz_m=tuple(parse_floats(args.noise or _DEFAULT_NOISE, (1, 3), "--noise")),
                       sigma_rot_rad=sigma_rot)
 
 
@@ -206,11 +206,11 @@ def _nominal_model(args: argparse.Namespace, cell: Any, noise: Any) -> Any:
                             tcp_m=cell.tcp_m.copy(), noise=noise, pose6d=args.pose6d)
     robot = load_robot(args.robot, args.tool, kinematics=args.kinematics)
     if args.tracker:
-        v = _floats(args.tracker, (3, 6), "--tracker")
+        v = parse_floats(args.tracker, (3, 6), "--tracker")
         T = pin.SE3(pin.rpy.rpyToMatrix(v[3:] if v.size == 6 else np.zeros(3)), v[:3])
     else:
         T = default_tracker_pose(robot)
-    reflector = _floats(args.reflector or _DEFAULT_REFLECTOR, 3, "--reflector")
+    reflector = parse_floats(args.reflector or _DEFAULT_REFLECTOR, 3, "--reflector")
     return TrackerModel(robot, tracker_T_base=T, reflector_m=reflector, noise=noise, pose6d=args.pose6d)
 
 
@@ -250,7 +250,7 @@ def run_simulate(args: argparse.Namespace) -> int:
     Q, Q_test, what = _poses(args, model, cell, design)
     robot = model.robot
     Q_all = np.vstack([Q, Q_test])
-    t0, t1 = _floats(args.temperature, 2, "--temperature")
+    t0, t1 = parse_floats(args.temperature, 2, "--temperature")
     aux = {"temperature_c": np.random.default_rng(args.seed + 4).uniform(t0, t1, len(Q_all))}
     ms = simulate(model, Q_all, truth_p, effects=effects, aux=aux, seed=args.seed + 2)
     ms.tool = ToolSpec(robot=portable_spec(robot), tool_frame=robot.tool_frame, reflector_m=model.reflector_m,
