@@ -29,9 +29,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     from pin_kpi_oed.program.export import FORMATS
 
     p = subparsers.add_parser("export", help="ordered, collision-checked robot program of a design "
-                              "(csv, urscript, krl, rapid)", description=__doc__.splitlines()[0])
+                              f"({', '.join(FORMATS)})", description=__doc__.splitlines()[0])
     p.add_argument("design", help="design JSON (pin-kpi-oed design --json)")
-    p.add_argument("--format", required=True, help="one of " + ", ".join(FORMATS))
+    p.add_argument("--format", required=True, help="one of " + ", ".join(FORMATS)
+                   + " (the program format registry, pin_kpi_oed.program.formats)")
     p.add_argument("--out", required=True, help="program file (krl: the .src; the .dat is written beside it)")
     p.add_argument("--design-name", dest="design_name", default=None,
                    help="which design of the file (default: the file's q_meas design)")
