@@ -218,7 +218,7 @@ def check_calibration(model: CalibratedModel, data: MeasurementSet, *, station: 
     if 3 * m - 6 < 3:
         raise InputError(f"{data.source or 'check data'}: {m} check rows are too few to register the set-up and test "
                          f"the rest (at least 3 rows; 10 recommended)")
-    cm = _register(model, data, Q)
+    cm = _register(model, data)
     Y, sig = _honest(cm, Q, data, CHECK_STATION)
     z = ((data.position_m - Y) / sig).reshape(-1)
     T, dof = float(z @ z), 3 * m - 6
@@ -263,20 +263,10 @@ def check_calibration(model: CalibratedModel, data: MeasurementSet, *, station: 
                        time_s=time.perf_counter() - t0, **{**out, "model": refit if refit is not None else cm})
 
 
-def _register(model: CalibratedModel, data: MeasurementSet, Q: np.ndarray) -> CalibratedModel:
-    """The set-up registered on the check rows (reflector held) with the discrepancy's mean δ(q) taken out of the rows
-    first (the registration fits the geometry and the effects; the model predicts δ on top: without this a rigid part
-    of δ over a few rows would be counted twice). δ is in the base frame: rotated by the registered tracker pose,
-    which is re-fitted twice."""
-    reg = register_setup(model, data, station=CHECK_STATION, hold_reflector=True).model
-    if model.discrepancy is None:
-        return reg
-    delta = model.discrepancy.predict(Q, return_var=False)[0]
-    for _ in range(2):
-        R = reg.setups[CHECK_STATION].tracker_T_base[:3, :3]
-        rows = dataclasses.replace(data, position_m=data.position_m - delta @ R.T)
-        reg = register_setup(model, rows, station=CHECK_STATION, hold_reflector=True).model
-    return reg
+def _register(model: CalibratedModel, data: MeasurementSet) -> CalibratedModel:
+    """The set-up registered on the check rows (reflector held), fitted to the model's full prediction (geometry,
+    effects and the discrepancy's mean, as :func:`~pin_kpi_oed.identification.transfer.register_setup` does)."""
+    return register_setup(model, data, station=CHECK_STATION, hold_reflector=True).model
 
 
 def _require_setup(E_s: np.ndarray, G: np.ndarray, sig_w: np.ndarray, data: MeasurementSet, m: int) -> None:
@@ -340,6 +330,6 @@ def _refit(model: CalibratedModel, data: MeasurementSet, Q: np.ndarray, g: Check
         new = dataclasses.replace(model, joint_p=jp)
     new.history = list(model.history) + [{"step": "check", "data": data.source, "group": g.name,
                                           "change": delta.tolist()}]
-    reg = _register(new, data, Q)
+    reg = _register(new, data)
     Y, sig = _honest(reg, Q, data, CHECK_STATION)
     return reg, float(np.sum(((data.position_m - Y) / sig) ** 2))
