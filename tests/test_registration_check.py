@@ -214,3 +214,13 @@ def test_diagnose_effects_none_writes_a_geometry_only_model(case, tmp_path, caps
     assert cm.effects == [] and cm.residual_sigma_m is not None
     assert np.all(np.abs(cm.residual_sigma_m / NOISE - 1) < 0.3)
     assert "no candidate effect was tried (--effects none" in out and "not any modelled effect" not in out
+
+
+def test_registration_gate_reads_the_robots_joint_columns_of_a_wider_file(case):
+    """A file read without a robot keeps its other numeric columns beside the joints (the IPA files' goal_* and
+    sigma_euler_*): the gate takes the robot's joint columns, as the registration does, and judges the same."""
+    robot, _, dC, cm = case
+    sub = dC.subset(np.arange(40))
+    wide = dataclasses.replace(sub, joint_names=[*sub.joint_names, "goal_x"], q=np.c_[sub.q, np.zeros(len(sub))])
+    narrow, widened = register_setup(cm, sub, station="C"), register_setup(cm, wide, station="C")
+    assert widened.quality[0].line() == narrow.quality[0].line()

@@ -189,13 +189,16 @@ def registration_gates(res: Any, data: MeasurementSet, model: CalibratedModel, h
         register: :func:`~pin_kpi_oed.identification.transfer.register_setup` (for the geometry-only registration of
             a poor station's rows; :func:`register_setup` computes these gates itself, ``.quality``).
     """
+    from pin_kpi_oed.identification.problem import align_data
+
     ref = model.default_station if model.default_station in model.setups else next(iter(model.setups))
     n_unknowns = 6 + (0 if hold_reflector else 3)
+    Q = align_data(model.robot, data)  # the robot's joint columns in its order (the file may hold other columns)
     gates = []
     for lab in res.stations:
         rows = res.rows[lab]
         sub = data if rows.size == len(data) else data.subset(rows)
-        X = model.predict(data.q[rows], sub, station=ref)  # the held robot, the model's reflector
+        X = model.predict(Q[rows], sub, station=ref)  # the held robot, the model's reflector
         sigma = reference_sigma_m(model, data, rows)
 
         def explain(chi2_red: float, sub=sub, lab=lab, sigma=sigma) -> str:
