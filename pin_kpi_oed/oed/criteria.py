@@ -65,9 +65,9 @@ from pin_kpi_oed.oed.covariance import information
 if TYPE_CHECKING:
     from pin_kpi_oed.oed.objective import DesignObjective
 
-__all__ = ["CriterionInfo", "Criterion", "CovarianceCriterion", "SingularValueCriterion", "ConfigurationCriterion",
-           "DiscrepancyForm", "CRITERIA", "register", "unregister", "get_criterion", "check_names", "criterion_names",
-           "evaluate_all"]
+__all__ = ["CriterionInfo", "Criterion", "CovarianceCriterion", "SampleMeanTrace", "SingularValueCriterion",
+           "ConfigurationCriterion", "DiscrepancyForm", "CRITERIA", "register", "unregister", "get_criterion",
+           "check_names", "criterion_names", "evaluate_all"]
 
 
 class CriterionInfo:
@@ -220,6 +220,23 @@ class KpiTrace(CovarianceCriterion):
 
     def pool_form(self, E, nb):
         return self.need_E(E)
+
+
+class SampleMeanTrace(KpiTrace):
+    """tr(E C_p Eᵀ) / S over a sensitivity E stacked from S samples of :attr:`rows_per_sample` rows each: the mean
+    KPI per sample (m²) of a criterion whose E only it builds (paths, 6-D poses). Γ = −C_p Eᵀ E C_p / S; pool form
+    K = E/√S."""
+
+    rows_per_sample = 3
+
+    def from_covariance(self, E, M, L, C):
+        val, Gam = super().from_covariance(E, M, L, C)
+        S = self.need_E(E).shape[0] // self.rows_per_sample
+        return val / S, Gam / S
+
+    def pool_form(self, E, nb):
+        E = self.need_E(E)
+        return E / np.sqrt(E.shape[0] // self.rows_per_sample)
 
 
 class ParamTrace(CovarianceCriterion):

@@ -25,27 +25,19 @@ from typing import Any
 import numpy as np
 
 from pin_kpi_oed.errors import InputError
-from pin_kpi_oed.oed.criteria import ConfigurationCriterion, KpiTrace, register
+from pin_kpi_oed.oed.criteria import ConfigurationCriterion, SampleMeanTrace, register
 from pin_kpi_oed.oed.objective import DesignCriterion, DesignObjective
 
 __all__ = ["PathTrace", "PathKpi", "path_sensitivity"]
 
 
-class PathTrace(KpiTrace):
+class PathTrace(SampleMeanTrace):
     """(1/S) tr(E C_p Eᵀ) with E the path's sensitivity (3S rows): the mean tr C_s per path sample (m²), the
     information-matrix form of ``kpi_path`` (not registered: its E is the path's, which only :class:`PathKpi`
     builds). Γ = −C_p Eᵀ E C_p / S; pool form K = E/√S."""
 
     name, label, unit = "kpi_path", "mean tr of the TCP covariance over the working paths' samples (m^2)", "m^2"
-
-    def from_covariance(self, E, M, L, C):
-        val, Gam = super().from_covariance(E, M, L, C)
-        S = self.need_E(E).shape[0] // 3
-        return val / S, Gam / S
-
-    def pool_form(self, E, nb):
-        E = self.need_E(E)
-        return E / np.sqrt(E.shape[0] // 3)
+    rows_per_sample = 3
 
 
 def path_sensitivity(problem: Any) -> np.ndarray:

@@ -20,26 +20,18 @@ from typing import Any
 import numpy as np
 
 from pin_kpi_oed.errors import InputError
-from pin_kpi_oed.oed.criteria import ConfigurationCriterion, KpiTrace, register
+from pin_kpi_oed.oed.criteria import ConfigurationCriterion, SampleMeanTrace, register
 from pin_kpi_oed.oed.objective import DesignCriterion, DesignObjective
 
 __all__ = ["PoseTrace", "PoseKpi", "pose_sensitivity"]
 
 
-class PoseTrace(KpiTrace):
+class PoseTrace(SampleMeanTrace):
     """(1/t) tr(E6 C_p E6ᵀ) of the stacked 6-D sensitivity (6t rows, m²): the information-matrix form of ``kpi6``
     (not registered: its E is the 6-D one, which only :class:`PoseKpi` builds). Pool form K = E6/√t."""
 
     name, label, unit = "kpi6", "mean tr of the 6-D TCP covariance, orientation x L (m^2)", "m^2"
-
-    def from_covariance(self, E, M, L, C):
-        val, Gam = super().from_covariance(E, M, L, C)
-        t = self.need_E(E).shape[0] // 6
-        return val / t, Gam / t
-
-    def pool_form(self, E, nb):
-        E = self.need_E(E)
-        return E / np.sqrt(E.shape[0] // 6)
+    rows_per_sample = 6
 
 
 def pose_sensitivity(model: Any, p0: np.ndarray, Q_work: np.ndarray, base: np.ndarray,
