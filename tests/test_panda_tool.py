@@ -8,14 +8,14 @@ and compensation returned joints 45-50 deg away from the working configuration, 
 
 from __future__ import annotations
 
-import contextlib
 import csv
-import io
 import json
 
 import numpy as np
 import pinocchio as pin
 import pytest
+
+from tests.cli_run import run_cli
 
 CELL = """\
 name: panda_test
@@ -40,16 +40,6 @@ measurements: 40
 """
 
 
-def _main(*argv) -> tuple[int, str, str]:
-    from pin_kpi_oed.cli.app import main
-
-    out, err = io.StringIO(), io.StringIO()
-    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
-        try:
-            rc = main([str(a) for a in argv])
-        except SystemExit as exc:
-            rc = int(exc.code)
-    return rc, out.getvalue(), err.getvalue()
 
 
 def true_tcp(truth, tcp_m: np.ndarray, Q: np.ndarray) -> np.ndarray:
@@ -74,15 +64,15 @@ def test_panda_link8_tool_travels_and_compensation_keeps_the_branch(tmp_path):
     cell = tmp_path / "cell.yaml"
     cell.write_text(CELL)
     d, tr, truth, model = (tmp_path / n for n in ("d.json", "tr.csv", "truth.json", "m.json"))
-    assert _main("design", "--cell", cell, "--criteria", "random", "--json", d, "--quiet")[0] == 0
-    rc, out, err = _main("simulate", "--design", d, "--truth", truth, "--tol-rotation", "2e-4", "--out", tr)
+    assert run_cli("design", "--cell", cell, "--criteria", "random", "--json", d, "--quiet")[0] == 0
+    rc, out, err = run_cli("simulate", "--design", d, "--truth", truth, "--tol-rotation", "2e-4", "--out", tr)
     assert rc == 0, err
     assert "tool frame panda_link8" in out
-    rc, out, err = _main("identify", "--robot", "panda", "--data", tr, "--model-out", model, "--quiet")
+    rc, out, err = run_cli("identify", "--robot", "panda", "--data", tr, "--model-out", model, "--quiet")
     assert rc == 0, err  # --robot panda alone: the tool frame comes from the data's header, not panda_hand_tcp
     cm = load_model_file(model)
     assert cm.robot.tool_frame == "panda_link8" and np.allclose(cm.tcp_m, [0, 0, 0.1034]) and cm.q_work.shape == (2, 7)
-    rc, _, err = _main("identify", "--robot", "panda", "--tool", "panda_hand_tcp", "--data", tr)
+    rc, _, err = run_cli("identify", "--robot", "panda", "--tool", "panda_hand_tcp", "--data", tr)
     assert rc == 2 and "tool frame 'panda_link8' contradicts 'panda_hand_tcp' from --tool panda_hand_tcp" in err
 
     # the working targets, in the true tracker frame (what the tracker sees), without joint hints
@@ -95,7 +85,7 @@ def test_panda_link8_tool_travels_and_compensation_keeps_the_branch(tmp_path):
     targets = tmp_path / "targets.csv"
     with open(targets, "w", newline="") as f:
         csv.writer(f).writerows([["name", "x", "y", "z", "rx", "ry", "rz"]] + rows)
-    rc, out, err = _main("compensate", "--model", model, "--targets", targets, "--cell", cell, "--out",
+    rc, out, err = run_cli("compensate", "--model", model, "--targets", targets, "--cell", cell, "--out",
                          tmp_path / "j.csv", "--json", tmp_path / "j.json")
     assert rc == 0, err
     assert "TCP [0.0, 0.0, 103.4] mm in tool frame panda_link8" in out and "2 working" in out
@@ -119,7 +109,7 @@ def test_panda_link8_tool_travels_and_compensation_keeps_the_branch(tmp_path):
         r[1:4] = T.act(M.act(refl))
     with open(targets, "w", newline="") as f:
         csv.writer(f).writerows([["name", "x", "y", "z", "rx", "ry", "rz"]] + rows)
-    rc, out, err = _main("compensate", "--model", model, "--targets", targets, "--tcp",
+    rc, out, err = run_cli("compensate", "--model", model, "--targets", targets, "--tcp",
                          ",".join(repr(float(v)) for v in refl), "--out", tmp_path / "j.csv",
                          "--json", tmp_path / "j.json")
     assert rc == 0, err

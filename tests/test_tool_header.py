@@ -3,8 +3,6 @@ refused in one line (robot, tool frame, reflector, TCP)."""
 
 from __future__ import annotations
 
-import contextlib
-import io
 import json
 
 import numpy as np
@@ -15,22 +13,14 @@ from pin_kpi_oed.data.measurements import (MeasurementSet, concat_measurements, 
 from pin_kpi_oed.data.tool_header import ToolSpec, resolve_tool
 from pin_kpi_oed.errors import InputError
 
+from tests.cli_run import run_cli
+
 
 def _set(tool: ToolSpec | None, m: int = 4, seed: int = 0) -> MeasurementSet:
     rng = np.random.default_rng(seed)
     return MeasurementSet(["a", "b"], rng.uniform(-1, 1, (m, 2)), rng.uniform(0, 2, (m, 3)), tool=tool)
 
 
-def _main(*argv) -> tuple[int, str, str]:
-    from pin_kpi_oed.cli.app import main
-
-    out, err = io.StringIO(), io.StringIO()
-    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
-        try:
-            rc = main([str(a) for a in argv])
-        except SystemExit as exc:
-            rc = int(exc.code)
-    return rc, out.getvalue(), err.getvalue()
 
 
 def test_header_round_trip_keeps_every_field_and_the_line_numbers(tmp_path):
@@ -124,35 +114,35 @@ def test_every_tool_help_states_the_panda_default(capsys):
 
 def test_simulate_identify_carry_the_tool_and_refuse_a_contradiction(tmp_path):
     tr, te, model = tmp_path / "tr.csv", tmp_path / "te.csv", tmp_path / "m.json"
-    rc, out, err = _main("simulate", "--robot", "kr15", "--tool", "link_6", "--reflector", "0.03,0.02,0.08", "--n",
+    rc, out, err = run_cli("simulate", "--robot", "kr15", "--tool", "link_6", "--reflector", "0.03,0.02,0.08", "--n",
                          "40", "--n-test", "5", "--out", tr, "--test-out", te)
     assert rc == 0, err
     assert read_measurement_tool(tr).tool_frame == "link_6" and read_measurement_tool(te).tool_frame == "link_6"
-    rc, out, err = _main("identify", "--data", tr, "--model-out", model, "--accept-poor-fit")  # no --robot: header
+    rc, out, err = run_cli("identify", "--data", tr, "--model-out", model, "--accept-poor-fit")  # no --robot: header
     assert rc == 0, err
     assert "tool: tool frame link_6, reflector [30.0, 20.0, 80.0] mm" in out
     d = json.loads(model.read_text())
     assert d["robot"]["tool_frame"] == "link_6" and d["robot"]["spec"] == "kr15"
-    rc, out, err = _main("identify", "--robot", "kr15", "--data", tr, "--tool", "tool0")
+    rc, out, err = run_cli("identify", "--robot", "kr15", "--data", tr, "--tool", "tool0")
     assert rc == 2 and err.strip().count("\n") == 0
     assert f"{tr}: tool frame 'link_6' contradicts 'tool0' from --tool tool0" in err
-    rc, out, err = _main("identify", "--robot", "kr15", "--data", tr, "--reflector", "0.03,0.02,0.09")
+    rc, out, err = run_cli("identify", "--robot", "kr15", "--data", tr, "--reflector", "0.03,0.02,0.09")
     assert rc == 2 and "reflector" in err and "contradicts" in err
-    rc, out, err = _main("identify", "--robot", "ur5", "--data", tr)
+    rc, out, err = run_cli("identify", "--robot", "ur5", "--data", tr)
     assert rc == 2 and "robot" in err and "contradicts" in err
-    rc, out, err = _main("design", "--cell", "kr15", "--model", model, "--criteria", "kpi", "--json",
+    rc, out, err = run_cli("design", "--cell", "kr15", "--model", model, "--criteria", "kpi", "--json",
                          tmp_path / "d.json")  # the cell's tool0 against the model's link_6
     assert rc == 2 and "--cell kr15: tool frame 'tool0' contradicts 'link_6' from --model" in err
     assert not (tmp_path / "d.json").exists()
-    rc, out, err = _main("predict", "--model", model, "--data", te, "--out", tmp_path / "p.csv")
+    rc, out, err = run_cli("predict", "--model", model, "--data", te, "--out", tmp_path / "p.csv")
     assert rc == 0 and "(the station's reflector in tool frame link_6)" in out, err
-    rc, out, err = _main("register", "--model", model, "--data", te, "--model-out", tmp_path / "r.json")
+    rc, out, err = run_cli("register", "--model", model, "--data", te, "--model-out", tmp_path / "r.json")
     assert "contradicts" not in err
     te2 = tmp_path / "te2.csv"
     ms = read_measurements(te)
     ms.tool = ToolSpec(tool_frame="tool0", source=str(te2))
     write_measurements(ms, te2)
-    rc, out, err = _main("register", "--model", model, "--data", te2, "--model-out", tmp_path / "r2.json")
+    rc, out, err = run_cli("register", "--model", model, "--data", te2, "--model-out", tmp_path / "r2.json")
     assert rc == 2 and "tool frame 'tool0' contradicts 'link_6'" in err
     assert not (tmp_path / "r2.json").exists()
 
