@@ -65,6 +65,7 @@ from pin_kpi_oed.oed.objective import DesignCriterion, DesignObjective
 from pin_kpi_oed.oed.path_kpi import PathKpi  # noqa: F401  (registers kpi_path)
 from pin_kpi_oed.oed.pose_kpi import PoseKpi  # noqa: F401  (registers kpi6)
 from pin_kpi_oed.oed.path_kpi_gp import PathDiscrepancyKpi  # noqa: F401  (registers kpi_path_gp)
+from pin_kpi_oed.oed.path_kpi_max import PathMaxKpi  # noqa: F401  (registers kpi_path_max)
 from pin_kpi_oed.oed.identifiability import analyse, check_kpi
 from pin_kpi_oed.results import Result
 from pin_kpi_oed.threads import limit_threads

@@ -15,6 +15,7 @@ _EXPORTS = {"analyse": "pin_kpi_oed.oed.identifiability", "Identifiability": "pi
             "Criterion": "pin_kpi_oed.oed.criteria", "select": "pin_kpi_oed.oed.pool",
             "certify_pool": "pin_kpi_oed.oed.certificate", "ExtendedModel": "pin_kpi_oed.oed.extended",
             "HedgedDesignCriterion": "pin_kpi_oed.oed.hedged_kpi", "prior_family": "pin_kpi_oed.oed.hedged_kpi",
-            "PathKpi": "pin_kpi_oed.oed.path_kpi", "PoseKpi": "pin_kpi_oed.oed.pose_kpi"}
+            "PathKpi": "pin_kpi_oed.oed.path_kpi", "PathMaxKpi": "pin_kpi_oed.oed.path_kpi_max",
+            "PoseKpi": "pin_kpi_oed.oed.pose_kpi"}
 __getattr__, __dir__ = lazy_exports(globals(), _EXPORTS)
 __all__ = list(_EXPORTS)

@@ -1,0 +1,86 @@
+"""The worst-sample path KPI ``kpi_path_max``: the power mean of tr C_s over the path samples, between the mean
+(``kpi_path``) and the worst sample, with exact gradients in M and in the configurations."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from pin_kpi_oed.cell.cell import load_cell
+from pin_kpi_oed.design.optimize import DesignProblem
+from pin_kpi_oed.oed.covariance import information
+from pin_kpi_oed.oed.path_kpi_max import PathMaxTrace
+
+
+@pytest.fixture(scope="module")
+def seam_problem():
+    return DesignProblem(load_cell("kr15_seam"), collision=False)
+
+
+def _traces(problem, Q):
+    F = problem.model.weighted_jacobian(problem.p0, Q)[:, :, problem.base].reshape(-1, problem.base.size)
+    C = np.linalg.inv(information(F, problem.kpi_criterion.prior))
+    E = problem.model.kpi_jacobian(problem.p0, problem.cell.q_path)[:, problem.base].reshape(-1, 3, problem.base.size)
+    return np.einsum("sap,pq,saq->s", E, C, E)
+
+
+def test_value_is_the_power_mean_between_mean_and_worst(seam_problem):
+    Q = seam_problem.cell.robot.random_q(np.random.default_rng(2), 30)
+    t = _traces(seam_problem, Q)
+    val = seam_problem.criterion("kpi_path_max").value(Q)
+    assert val == pytest.approx(np.mean(t ** 16) ** (1 / 16), rel=1e-9)
+    assert t.mean() < val <= t.max()
+    assert seam_problem.criterion("kpi_path").value(Q) == pytest.approx(t.mean(), rel=1e-9)
+
+
+def test_sharpness_one_is_the_mean_and_a_large_one_the_worst_sample():
+    rng = np.random.default_rng(0)
+    F, E = rng.normal(size=(60, 8)), rng.normal(size=(3 * 40, 8))
+    M = F.T @ F
+    C = np.linalg.inv(M)
+    t = np.einsum("sap,pq,saq->s", E.reshape(40, 3, 8), C, E.reshape(40, 3, 8))
+    assert PathMaxTrace(1.0).value_and_grad_M(M, E)[0] == pytest.approx(t.mean(), rel=1e-10)
+    assert PathMaxTrace(400.0).value_and_grad_M(M, E)[0] == pytest.approx(t.max(), rel=0.01)
+    with pytest.raises(ValueError, match="sharpness"):
+        PathMaxTrace(0.5)
+
+
+def test_gradient_in_M_matches_finite_differences():
+    rng = np.random.default_rng(1)
+    F, E = rng.normal(size=(50, 7)), rng.normal(size=(3 * 25, 7))
+    M = F.T @ F
+    crit = PathMaxTrace()
+    val, G = crit.value_and_grad_M(M, E)
+    h = 1e-6 * np.abs(M).max()
+    for i, j in [(0, 0), (2, 5), (6, 1), (4, 4)]:
+        D = np.zeros_like(M)
+        D[i, j] = D[j, i] = h
+        fd = (crit.value_and_grad_M(M + D, E)[0] - crit.value_and_grad_M(M - D, E)[0]) / (2 * h)
+        expect = G[i, j] * (1 if i == j else 2)
+        assert fd == pytest.approx(expect, rel=1e-5, abs=1e-9 * abs(val)), (i, j)
+
+
+def test_gradient_in_the_configurations_matches_finite_differences(seam_problem):
+    obj = seam_problem.criterion("kpi_path_max")
+    Q = seam_problem.cell.robot.random_q(np.random.default_rng(1), 20)
+    val, G = obj.value_and_grad(Q)
+    assert val == pytest.approx(obj.value(Q), rel=1e-12)
+    h = 1e-6
+    for i, j in [(0, 0), (3, 1), (7, 2), (11, 4), (19, 5)]:
+        Qp, Qm = Q.copy(), Q.copy()
+        Qp[i, j] += h
+        Qm[i, j] -= h
+        fd = (obj.value(Qp) - obj.value(Qm)) / (2 * h)
+        assert fd == pytest.approx(G[i, j], rel=1e-4, abs=1e-8 * abs(val)), (i, j)
+
+
+def test_pool_selection_reports_the_worst_sample_criterion(seam_problem):
+    rng = np.random.default_rng(3)
+    pool = seam_problem.cell.robot.random_q(rng, 300)
+    obj = seam_problem.criterion("kpi_path_max")
+    sel = obj.select(pool, 20, seed=0)
+    assert len(sel.indices) == 20
+    Qs = pool[sel.indices]
+    assert obj.value(Qs) == pytest.approx(np.mean(_traces(seam_problem, Qs) ** 16) ** (1 / 16), rel=1e-9)
+    rand = [obj.value(pool[rng.choice(300, 20, replace=False)]) for _ in range(10)]
+    assert obj.value(Qs) < min(rand)
