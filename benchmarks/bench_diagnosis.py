@@ -63,23 +63,18 @@ def main() -> None:
 
 def series_c() -> float | None:
     """Diagnose all of IPA UR10 Series C with the default candidates + transmission_error; the time (s) or None."""
-    from pathlib import Path
-
-    from pin_kpi_oed.data.ipa import import_ipa
-    from pin_kpi_oed.data.measurements import MeasurementSet
+    from benchmarks.common import find_ipa_data, load_ipa_series
     from pin_kpi_oed.diagnosis.diagnose import diagnose
     from pin_kpi_oed.effects.library import EFFECT_NAMES
     from pin_kpi_oed.model.noise import NoiseModel
     from pin_kpi_oed.model.robot import load_robot
     from pin_kpi_oed.model.tracker import TrackerModel
 
-    root = next((up / "shared" / "data" / "ipa_ur10" for up in Path(__file__).resolve().parents
-                 if (up / "shared" / "data" / "ipa_ur10" / "Series_C").is_dir()), None)
-    if root is None:
+    root = find_ipa_data()
+    if root is None or not (root / "Series_C").is_dir():
         print("   Series C not found (shared/data/ipa_ur10): skipped")
         return None
-    full = import_ipa(root / "Series_C")
-    data = MeasurementSet(full.joint_names, full.q, full.position_m, source="Series_C")
+    data = load_ipa_series(root, "C")
     model = TrackerModel(load_robot("ur10"), reflector_m=np.array([0.0, 0.0, 0.109]),
                          noise=NoiseModel(sigma_xyz_m=(1e-4,) * 3))
     t, rep = timed(lambda: diagnose(model, data, kfold=5, effects=list(EFFECT_NAMES) + ["transmission_error"]))

@@ -24,18 +24,18 @@ from benchmarks.common import BusyCore, figure, stopwatch, timed as timed_call
 
 
 def main() -> dict:
-    from benchmarks.honest_sigma import find_data, load
+    from benchmarks.common import find_ipa_data, load_ipa_series
     from pin_kpi_oed import NoiseModel, TrackerModel, load_robot
     from pin_kpi_oed.data.measurements import MeasurementSet, concat_measurements
     from pin_kpi_oed.identification.identify import identify
 
-    folder = find_data()
+    folder = find_ipa_data()
     if folder is None or not (folder / "Series_A").is_dir():
         print("== bench_discrepancy: IPA UR10 data not found (PIN_KPI_OED_IPA_DATA): skipped")
         return {}
     model = TrackerModel(load_robot("ur10"), reflector_m=np.array([0.0, 0.0, 0.109]),
                          noise=NoiseModel(sigma_xyz_m=(1e-4,) * 3))
-    C = load(folder, "C")
+    C = load_ipa_series(folder, "C")
     out = {}
 
     def timed(data, mode="auto"):
@@ -56,7 +56,7 @@ def main() -> dict:
     out["identify_auto_2773_s"] = t_auto
     figure(f"identify --discrepancy auto, {len(C)} rows (Series C)", t_auto, 30.0, "s", t_none, "without")
     print(f"   {res.discrepancy.decision}")
-    A = load(folder, "A")
+    A = load_ipa_series(folder, "A")
     big = concat_measurements([A, C.subset(np.arange(12000 - len(A)))], ["A", "C"])
     t_none, _ = timed(big, "none")
     t_auto, res = timed(big, "auto")

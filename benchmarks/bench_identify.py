@@ -92,24 +92,16 @@ def main(repeats: int = 7) -> dict:
 
 def _stations() -> dict | None:
     """Several stations in one calibration: the real UR10 series B + C + D (4,900 rows, 3 tracker poses)."""
-    from pathlib import Path
-
+    from benchmarks.common import find_ipa_data, load_ipa_series
     from pin_kpi_oed import NoiseModel, TrackerModel, load_robot
-    from pin_kpi_oed.data.ipa import import_ipa
-    from pin_kpi_oed.data.measurements import MeasurementSet, concat_measurements
+    from pin_kpi_oed.data.measurements import concat_measurements
     from pin_kpi_oed.identification.identify import identify
 
-    here = Path(__file__).resolve()
-    ipa = next((q / "shared" / "data" / "ipa_ur10" for q in (here.parents[2], here.parents[3])
-                if (q / "shared" / "data" / "ipa_ur10").is_dir()), None)
-    if ipa is None:
+    ipa = find_ipa_data()
+    if ipa is None or not ipa.is_dir():
         print("stations: IPA UR10 data not found; skipped")
         return None
-    sets = []
-    for s in "BCD":
-        ms = import_ipa(ipa / f"Series_{s}")
-        sets.append(MeasurementSet(ms.joint_names, ms.q, ms.position_m, source=f"{s}.csv"))
-    data = concat_measurements(sets)
+    data = concat_measurements([load_ipa_series(ipa, s) for s in "BCD"])
     model = TrackerModel(load_robot("ur10"), reflector_m=[0.0, 0.0, 0.109], noise=NoiseModel(sigma_xyz_m=(1e-4,) * 3))
     dt, res = timed(lambda: identify(model, data))
     print(f"stations: UR10 B + C + D jointly ({len(data)} rows, 3 stations, {len(res.names)} parameters): "

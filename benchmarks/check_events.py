@@ -81,16 +81,17 @@ def simulated(n_events: int, n_robots: int) -> None:
 
 
 def real(splits: int) -> None:
-    from benchmarks.honest_sigma import calibrate, find_data, load
+    from benchmarks.common import find_ipa_data, load_ipa_series
+    from benchmarks.honest_sigma import calibrate
     from pin_kpi_oed.identification.check import UndeterminedSetup, check_calibration
     from pin_kpi_oed.model.noise import NoiseModel
     from pin_kpi_oed.model.tracker import TrackerModel
 
-    folder = find_data()
+    folder = find_ipa_data()
     if folder is None:
         print("real UR10: IPA data not found ($PIN_KPI_OED_IPA_DATA)")
         return
-    C, D = load(folder, "C"), load(folder, "D")
+    C, D = load_ipa_series(folder, "C"), load_ipa_series(folder, "D")
     model = TrackerModel(load_robot("ur10"), reflector_m=np.array([0.0, 0.0, 0.109]),
                          noise=NoiseModel(sigma_xyz_m=(1e-4,) * 3))
     print(f"real UR10: a model of a seeded half of Series C checked on 10 rows (alpha {ALPHA}, tolerance "
@@ -119,20 +120,17 @@ def real(splits: int) -> None:
 
 
 def replay(n_rows: int) -> None:
-    from benchmarks.honest_sigma import calibrate, find_data
-    from pin_kpi_oed.data.ipa import import_ipa
-    from pin_kpi_oed.data.measurements import MeasurementSet
+    from benchmarks.common import find_ipa_data, load_ipa_series
+    from benchmarks.honest_sigma import calibrate
     from pin_kpi_oed.identification.monitor import monitor
     from pin_kpi_oed.model.noise import NoiseModel
     from pin_kpi_oed.model.tracker import TrackerModel
 
-    folder = find_data()
+    folder = find_ipa_data()
     if folder is None:
         print("monitor: IPA data not found ($PIN_KPI_OED_IPA_DATA)")
         return
-    ms = import_ipa(folder / "Series_A")
-    A = MeasurementSet(ms.joint_names, ms.q, ms.position_m, temperature_c=ms.temperature_c, time_s=ms.time_s,
-                       source="A")
+    A = load_ipa_series(folder, "A", with_time=True)
     A = A.subset(np.argsort(A.time_s, kind="stable"))
     perm = np.random.default_rng(0).permutation(len(A))
     train, rest = np.sort(perm[:2000]), np.sort(perm[2000:])[:n_rows]

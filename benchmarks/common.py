@@ -120,6 +120,34 @@ def withheld_ur10(n_rows: int):
     return model, simulate(model, Q, truth, effects=[(gh, theta)], seed=7)
 
 
+IPA_MISSING = "IPA UR10 data not found: nothing to do (set PIN_KPI_OED_IPA_DATA)"
+
+
+def find_ipa_data():
+    """The IPA UR10 folder (``Series_A`` … ``Series_D``): $PIN_KPI_OED_IPA_DATA, else ``shared/data/ipa_ur10`` beside
+    an ancestor of the repository; None when neither exists."""
+    from pathlib import Path
+
+    env = os.environ.get("PIN_KPI_OED_IPA_DATA")
+    if env:
+        return Path(env)
+    for up in Path(__file__).resolve().parents[1].parents:
+        if (up / "shared" / "data" / "ipa_ur10").is_dir():
+            return up / "shared" / "data" / "ipa_ur10"
+    return None
+
+
+def load_ipa_series(folder, series: str, *, with_time: bool = False):
+    """Series ``series`` (A, B, C or D) of the IPA UR10 data as position rows (what ``import-ipa --position-only``
+    writes): joints (rad), position (m), temperature (°C), the time (s) with ``with_time``; source ``<series>.csv``."""
+    from pin_kpi_oed.data.ipa import import_ipa
+    from pin_kpi_oed.data.measurements import MeasurementSet
+
+    ms = import_ipa(folder / f"Series_{series}")
+    return MeasurementSet(ms.joint_names, ms.q, ms.position_m, temperature_c=ms.temperature_c,
+                          time_s=ms.time_s if with_time else None, source=f"{series}.csv")
+
+
 def report(label: str, seconds: float, target: float | None = None) -> str:
     """One line: label, time (ms) and the ratio to its target."""
     line = f"{label:<55} {seconds * 1e3:9.3f} ms"

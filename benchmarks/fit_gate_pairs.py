@@ -20,7 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
-from benchmarks.honest_sigma import find_data, load
+from benchmarks.common import find_ipa_data, load_ipa_series
 from benchmarks.learning_curves import ur10_model, prior_of_series
 
 
@@ -33,10 +33,10 @@ def main(argv: list[str]) -> dict:
     ap.add_argument("--seeds", type=int, default=20)
     ap.add_argument("--cache", default="runs/learning_curves", help="where the Series D prior is cached")
     a = ap.parse_args(argv)
-    folder = find_data()
+    folder = find_ipa_data()
     if folder is None:
         sys.exit("IPA data not found: set PIN_KPI_OED_IPA_DATA")
-    S = {s: load(folder, s) for s in "CD"}
+    S = {s: load_ipa_series(folder, s) for s in "CD"}
     model = ur10_model()
     weak = ur10_model()
     weak.layout.set_joint_prior(5e-3, 1e-2)

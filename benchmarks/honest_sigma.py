@@ -23,37 +23,19 @@ or shared/data/ipa_ur10 beside the repository)
 from __future__ import annotations
 
 import argparse
-import os
 import sys
 import time
-from pathlib import Path
 
 import numpy as np
 
+from benchmarks.common import IPA_MISSING, find_ipa_data, load_ipa_series
 from pin_kpi_oed import NoiseModel, TrackerModel, load_robot
 from pin_kpi_oed.data.atomic import atomic_write_json
-from pin_kpi_oed.data.ipa import import_ipa
 from pin_kpi_oed.data.measurements import MeasurementSet, concat_measurements
 from pin_kpi_oed.identification.identify import identify, validate
 from pin_kpi_oed.identification.transfer import register_setup, registration_split
 
-ROOT = Path(__file__).resolve().parents[1]
 CASES = ["C halves", "B->C", "C->B", "C->D", "D->C", "BCD 5-fold", "A halves", "BCD->A"]
-
-
-def find_data() -> Path | None:
-    env = os.environ.get("PIN_KPI_OED_IPA_DATA")
-    if env:
-        return Path(env)
-    for up in ROOT.parents:
-        if (up / "shared" / "data" / "ipa_ur10").is_dir():
-            return up / "shared" / "data" / "ipa_ur10"
-    return None
-
-
-def load(folder: Path, s: str) -> MeasurementSet:
-    ms = import_ipa(folder / f"Series_{s}")
-    return MeasurementSet(ms.joint_names, ms.q, ms.position_m, temperature_c=ms.temperature_c, source=f"{s}.csv")
 
 
 def score(cm, held: MeasurementSet, station=None) -> dict:
@@ -115,13 +97,13 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--json", default=None)
     a = ap.parse_args(argv)
-    folder = find_data()
+    folder = find_ipa_data()
     if folder is None or not (folder / "Series_C").is_dir():
-        print("IPA UR10 data not found: nothing to do (set PIN_KPI_OED_IPA_DATA)")
+        print(IPA_MISSING)
         return 0
     cases = [c.strip() for c in a.cases.split(",") if c.strip()]
     need = {ch for c in cases for ch in c.split()[0].replace("->", "") if ch in "ABCD"}
-    S = {s: load(folder, s) for s in sorted(need)}
+    S = {s: load_ipa_series(folder, s) for s in sorted(need)}
     model = TrackerModel(load_robot("ur10"), reflector_m=np.array([0.0, 0.0, 0.109]),
                          noise=NoiseModel(sigma_xyz_m=(1e-4,) * 3))
     print(f"{'case':<11} {'n':>6} {'mean plain':>10} {'mean +GP':>9} {'sigma':>7} {'z RMS':>6} {'in 95%':>7} "

@@ -92,15 +92,14 @@ def simulated(reps: int, kinds: list[str], log, noise_weight: float | None = Non
 
 
 def measured(ipa_reps: int, pairs: list[str], log, noise_weight: float | None = None) -> dict[str, list[dict]]:
-    from benchmarks.register_pairs import find_data
+    from benchmarks.common import find_ipa_data, load_ipa_series
     from pin_kpi_oed import NoiseModel, TrackerModel, load_robot
-    from pin_kpi_oed.data.ipa import import_ipa
     from pin_kpi_oed.data.measurements import MeasurementSet
     from pin_kpi_oed.identification.identify import identify
     from pin_kpi_oed.oed.discrepancy_kpi import DiscrepancyPrior
     from pin_kpi_oed.studies.hedged_design import measured_case
 
-    folder = find_data()
+    folder = find_ipa_data()
     if folder is None or not folder.is_dir():
         log("IPA data not found: the measured part is skipped")
         return {}
@@ -111,8 +110,7 @@ def measured(ipa_reps: int, pairs: list[str], log, noise_weight: float | None = 
 
     def load(s: str) -> MeasurementSet:
         if s not in series:
-            ms = import_ipa(folder / f"Series_{s}")
-            series[s] = MeasurementSet(ms.joint_names, ms.q, ms.position_m, source=f"Series {s}")
+            series[s] = load_ipa_series(folder, s)
         return series[s]
 
     cases: dict[str, list[dict]] = {}

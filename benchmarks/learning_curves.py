@@ -31,7 +31,7 @@ from pathlib import Path
 
 import numpy as np
 
-from benchmarks.honest_sigma import find_data, load
+from benchmarks.common import find_ipa_data, load_ipa_series
 from pin_kpi_oed import NoiseModel, TrackerModel, load_robot
 from pin_kpi_oed.data.atomic import atomic_write_json
 from pin_kpi_oed.oed.discrepancy_kpi import DiscrepancyPrior
@@ -69,7 +69,7 @@ def run_case(case: str, n_seeds: int, cache: Path, model: TrackerModel, folder: 
              region_sizes: tuple[int, ...] = (), region_rows: int = 100,
              methods: tuple[str, ...] = METHODS, random_sizes: tuple[int, ...] = ()) -> LearningCurves:
     src, tgt, pri, pool_size = CASES[case]
-    S = {s: load(folder, s) for s in {src, pri} | ({tgt} if tgt else set())}
+    S = {s: load_ipa_series(folder, s) for s in {src, pri} | ({tgt} if tgt else set())}
     prior = prior_of_series(model, pri, S, cache)
     print(f"[{case}] {prior.describe()}", flush=True)
     splits = []
@@ -264,7 +264,7 @@ def main(argv: list[str] | None = None) -> int:
                     help="larger sizes of the random sets beyond 240,480,960, comma-separated, e.g. 1360 "
                          "(added to the cached splits)")
     a = ap.parse_args(argv)
-    folder = find_data()
+    folder = find_ipa_data()
     if folder is None or not (folder / "Series_C").is_dir():
         print("IPA UR10 data not found: nothing to do (set PIN_KPI_OED_IPA_DATA)")
         return 0

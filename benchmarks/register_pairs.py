@@ -37,21 +37,12 @@ from pathlib import Path
 
 import numpy as np
 
+from benchmarks.common import find_ipa_data
+
 ROOT = Path(__file__).resolve().parents[1]
 PAIRS = ["B-C", "C-B", "C-D", "D-C"]
 REG_ROWS = 60
 DIAGNOSE = ["--robot", "ur10", "--kfold", "5", "--reflector", "0,0,0.109", "--sigma", "1e-4", "--quiet"]
-
-
-def find_data() -> Path | None:
-    """The IPA UR10 folder: $PIN_KPI_OED_IPA_DATA, else ``shared/data/ipa_ur10`` beside an ancestor of the repo."""
-    env = os.environ.get("PIN_KPI_OED_IPA_DATA")
-    if env:
-        return Path(env)
-    for up in ROOT.parents:
-        if (up / "shared" / "data" / "ipa_ur10").is_dir():
-            return up / "shared" / "data" / "ipa_ur10"
-    return None
 
 
 def cli(*argv: object) -> subprocess.CompletedProcess:
@@ -154,7 +145,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--seed", type=int, default=0, help="seed of the registration rows and the program rows")
     ap.add_argument("--json", default=None, help="write the results here")
     args = ap.parse_args(argv)
-    data = find_data()
+    data = find_ipa_data()
     if data is None or not data.is_dir():
         print("IPA UR10 data not found: set PIN_KPI_OED_IPA_DATA")
         return 2

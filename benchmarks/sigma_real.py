@@ -26,7 +26,7 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 import numpy as np  # noqa: E402
 
-from benchmarks.honest_sigma import find_data, load  # noqa: E402
+from benchmarks.common import IPA_MISSING, find_ipa_data, load_ipa_series  # noqa: E402
 
 PAIRS = ("B->C", "C->B", "C->D", "D->C")
 
@@ -62,12 +62,12 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--sets", type=int, default=3, help="seeded random sets per (pair, m)")
     ap.add_argument("--json", default=None)
     a = ap.parse_args(argv)
-    folder = find_data()
+    folder = find_ipa_data()
     if folder is None or not (folder / "Series_C").is_dir():
-        print("IPA UR10 data not found: nothing to do (set PIN_KPI_OED_IPA_DATA)")
+        print(IPA_MISSING)
         return 0
     pairs = [p.strip() for p in a.pairs.split(",") if p.strip()]
-    S = {s: load(folder, s) for s in sorted({c for p in pairs for c in p.split("->")})}
+    S = {s: load_ipa_series(folder, s) for s in sorted({c for p in pairs for c in p.split("->")})}
     model = TrackerModel(load_robot("ur10"), reflector_m=np.array([0.0, 0.0, 0.109]),
                          noise=NoiseModel(sigma_xyz_m=(1e-4,) * 3))
     print(f"{'pair':<6} {'m':>4} {'kind':>12} {'z RMS median (range)':>22} {'in 95 % median (range)':>24} "

@@ -138,6 +138,38 @@ def test_coverage_judges_the_combination_of_angles():
     assert cov.share_covered(mixed) < 0.05               # ...but never together: flagged
 
 
+def test_coverage_wraps_only_joints_whose_range_spans_a_turn():
+    """A linear track (m) and a revolute joint narrower than 2π are judged linearly; a joint of ±2π wraps."""
+    from pin_kpi_oed.identification.coverage import covered_rows
+    from pin_kpi_oed.model.robot import load_robot
+
+    track = load_robot("kr15_track")                     # joint_e1: prismatic, 0 .. 6.4 m; joint_a2: -2.71 .. 0.61
+    per = track.periodic_joints
+    assert list(per) == [False, True, False, False, True, False, True]
+    rng = np.random.default_rng(8)
+    Z = np.column_stack([rng.uniform(0.0, 0.5, 400), rng.uniform(-0.3, 0.3, (400, 6))])
+    Z[:, 2] = rng.uniform(-2.7, -2.2, 400)               # joint_a2 near its lower end
+    cov = JointCoverage.from_training(Z, periodic=per)
+    far = Z[:50].copy()
+    far[:, 0] += 2 * np.pi                               # 6.28 m further along the track: the same value mod 2π
+    assert cov.share_covered(Z[50:100]) > 0.9 and cov.share_covered(far) == 0.0
+    assert np.all(JointCoverage.from_training(Z).covered(far))          # what wrapping every joint said
+    assert not covered_rows(Z, far, 0.05, per)[:, 0].any() and covered_rows(Z, far, 0.05)[:, 0].all()
+    # the block written to a model file keeps the mask
+    back = JointCoverage.from_dict(cov.to_dict(), 7, "coverage")
+    assert list(back.periodic) == list(per) and back.share_covered(far) == 0.0
+    # a revolute joint's ends are neighbours only when its range spans a turn: -3.1 and +3.1 rad on the UR10's ±2π
+    ur10 = load_robot("ur10")
+    assert ur10.periodic_joints.all()
+    Zu = np.zeros((1, 6))
+    Zu[0, 0] = -3.1
+    Qu = Zu.copy()
+    Qu[0, 0] = 3.1
+    assert covered_rows(Zu, Qu, 0.1, ur10.periodic_joints).all()
+    narrow = np.array([False] * 6)                       # the same joint limited to ±3.12 rad: 6.2 rad apart
+    assert not covered_rows(Zu, Qu, 0.1, narrow)[0, 0]
+
+
 def test_every_predicting_command_flags_a_new_combination(ur10_model, tmp_path, capsys):
     """predict (the model's σ, noise-only too) flags and widens rows whose combination of angles is new."""
     model = ur10_model

@@ -118,7 +118,7 @@ def _coverage(robot: Any, train: MeasurementSet, ho_data: MeasurementSet
     from pin_kpi_oed.identification.problem import align_data
 
     Qt, Qv = align_data(robot, train), align_data(robot, ho_data)
-    return Qt, Qv, covered_rows(Qt, Qv, COVERAGE_TOL_RAD)
+    return Qt, Qv, covered_rows(Qt, Qv, COVERAGE_TOL_RAD, robot.periodic_joints)
 
 
 def uncovered_intervals(q: np.ndarray, q_train: np.ndarray) -> list[tuple[float, float]]:

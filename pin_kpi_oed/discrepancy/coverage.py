@@ -8,7 +8,10 @@ wrapped joint-space distance
            \qquad \operatorname{wrap}(x) = ((x + π) \bmod 2π) - π,
 
 lies within the coverage radius ρ, **and** each of its angles lies within ρ_j of a training angle of the same
-joint. The *combination* of the angles counts, not each joint alone: a row whose every angle was measured, but
+joint. Only *periodic* joints are wrapped — revolute joints whose limits span 2π or more, where q and q + 2π are
+the same link pose (:attr:`~pin_kpi_oed.model.robot.Robot.periodic_joints`); a prismatic joint (a linear track)
+enters in metres as it is, and a revolute joint with a narrower range linearly (the ends of its range are far apart,
+not neighbours). The *combination* of the angles counts, not each joint alone: a row whose every angle was measured, but
 never together (shoulder of one pose, elbow of another), is far from every training configuration and is flagged;
 the per-joint test flags a row beyond the measured range of one joint even where the training poses are sparse
 in joint space as a whole.
@@ -22,7 +25,7 @@ its nearest other one (duplicates removed),
 alone (the distance of each to its nearest other one, wrapped). A new configuration drawn from the same distribution as
 the training is as far from its nearest training configuration as those are from each other, so about 95 % of such
 rows are covered whatever the number of poses or the joint count; a configuration beyond the spacing of the
-measured set is not. Angles are wrapped (revolute joints); a prismatic joint's metres enter the distance as they are.
+measured set is not.
 
 The training configurations kept for the measure are a seeded subset of at most :data:`MAX_STORED` distinct rows.
 """
@@ -37,7 +40,7 @@ from scipy.spatial import cKDTree
 
 from pin_kpi_oed.discrepancy.arrays import decode_array, encode_array
 
-__all__ = ["JointCoverage", "RADIUS_FACTOR", "MIN_RADIUS_RAD", "MAX_STORED"]
+__all__ = ["JointCoverage", "RADIUS_FACTOR", "MIN_RADIUS_RAD", "MAX_STORED", "joint_space_box", "joint_distance"]
 
 #: κ: the coverage radius is this times the 95 % quantile of the training's nearest-neighbour distances.
 RADIUS_FACTOR = 1.25
@@ -48,11 +51,52 @@ MAX_STORED = 2000
 _TWO_PI = 2.0 * np.pi
 
 
-def _wrapped(Q: np.ndarray) -> np.ndarray:
-    """Angles in [0, 2π) (the periodic box of the k-d tree)."""
-    W = np.mod(np.asarray(Q, float), _TWO_PI)
-    W[W >= _TWO_PI] = 0.0
-    return W
+def joint_space_box(Q: np.ndarray, periodic: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Configurations Q (n, d) in the box of a periodic k-d tree, and the box's size per joint.
+
+    Args:
+        Q: joint values (n, d), rad / m.
+        periodic: (d,) bool, joints compared modulo 2π; None: every joint (configurations of unknown joints).
+
+    Returns:
+        (W, box): W = Q with the periodic columns wrapped into [0, 2π); box (d,) = 2π for a periodic joint, 0 (no
+        wrap) for the others — ``cKDTree(W, boxsize=box)`` measures the distance of the module docstring.
+    """
+    Q = np.atleast_2d(np.asarray(Q, float))
+    per = np.ones(Q.shape[1], bool) if periodic is None else np.asarray(periodic, bool).reshape(-1)
+    if per.shape != (Q.shape[1],):
+        raise ValueError(f"periodic mask of {per.size} joints for configurations of {Q.shape[1]}")
+    W = Q.copy()
+    W[:, per] = np.mod(W[:, per], _TWO_PI)
+    W[:, per] = np.where(W[:, per] >= _TWO_PI, 0.0, W[:, per])
+    return W, np.where(per, _TWO_PI, 0.0)
+
+
+def joint_distance(Z: np.ndarray, Q: np.ndarray, periodic: np.ndarray | None = None) -> np.ndarray:
+    """(m, d) distance (rad / m; wrapped for a ``periodic`` joint, None: every joint) of each value of Q (m, d) to
+    the nearest value of the same joint in Z (k, d); inf when Z is empty."""
+    Q = np.atleast_2d(np.asarray(Q, float))
+    Z = np.asarray(Z, float).reshape(-1, Q.shape[1])
+    if not len(Z):
+        return np.full(Q.shape, np.inf)
+    WZ, box = joint_space_box(Z, periodic)
+    WQ, _ = joint_space_box(Q, periodic)
+    out = np.empty(Q.shape)
+    for j in range(Q.shape[1]):
+        a = np.sort(WZ[:, j])
+        ext = np.r_[a - _TWO_PI, a, a + _TWO_PI] if box[j] > 0 else np.r_[a[0], a]
+        i = np.clip(np.searchsorted(ext, WQ[:, j]), 1, ext.size - 1)
+        out[:, j] = np.minimum(np.abs(WQ[:, j] - ext[i - 1]), np.abs(WQ[:, j] - ext[i]))
+    return out
+
+
+def _nearest_gap(a: np.ndarray, periodic: bool) -> np.ndarray:
+    """Distance of each of the sorted distinct values ``a`` to its nearest other one (wrapped when periodic)."""
+    if periodic:
+        gap = np.diff(np.r_[a, a[0] + _TWO_PI])  # to the next angle, wrapped
+        return np.minimum(gap, np.roll(gap, 1))
+    gap = np.diff(a)
+    return np.minimum(np.r_[np.inf, gap], np.r_[gap, np.inf])
 
 
 @dataclass
@@ -64,53 +108,57 @@ class JointCoverage:
         radius_rad: ρ, the joint-space coverage radius (rad).
         joint_radius_rad: ρ_j, the per-joint coverage radius (d,) rad.
         n_rows: training rows the measure was built from.
+        periodic: (d,) bool, the joints compared modulo 2π (:func:`joint_space_box`); None: every joint.
     """
 
     Z: np.ndarray
     radius_rad: float
     joint_radius_rad: np.ndarray
     n_rows: int = 0
+    periodic: np.ndarray | None = None
 
     @classmethod
-    def from_training(cls, Q: np.ndarray, seed: int = 0) -> JointCoverage:
-        """The coverage of training configurations Q (n, d) rad (seeded subset above :data:`MAX_STORED` rows)."""
+    def from_training(cls, Q: np.ndarray, seed: int = 0, periodic: np.ndarray | None = None) -> JointCoverage:
+        """The coverage of training configurations Q (n, d) rad / m (seeded subset above :data:`MAX_STORED` rows).
+
+        Args:
+            Q: training configurations (n, d).
+            seed: seed of the subset.
+            periodic: (d,) bool, the joints compared modulo 2π (the robot's
+                :attr:`~pin_kpi_oed.model.robot.Robot.periodic_joints`); None: every joint.
+        """
         Q = np.atleast_2d(np.asarray(Q, float))
-        W = _wrapped(Q)
+        W, box = joint_space_box(Q, periodic)
+        per = box > 0
         _, first = np.unique(np.round(W, 9), axis=0, return_index=True)
         U = Q[np.sort(first)]
         if len(U) > MAX_STORED:
             U = U[np.sort(np.random.default_rng(seed).permutation(len(U))[:MAX_STORED])]
         radius, per_joint = MIN_RADIUS_RAD, np.full(U.shape[1], MIN_RADIUS_RAD)
         if len(U) >= 2:
-            d, _ = cKDTree(_wrapped(U), boxsize=_TWO_PI).query(_wrapped(U), k=2)
+            WU, _ = joint_space_box(U, per)
+            d, _ = cKDTree(WU, boxsize=box).query(WU, k=2)
             radius = max(MIN_RADIUS_RAD, RADIUS_FACTOR * float(np.quantile(d[:, 1], 0.95)))
             for j in range(U.shape[1]):
-                a = np.unique(np.round(_wrapped(U[:, j]), 9))
+                a = np.unique(np.round(WU[:, j], 9))
                 if a.size >= 2:
-                    gap = np.diff(np.r_[a, a[0] + _TWO_PI])          # to the next angle, wrapped
-                    nn = np.minimum(gap, np.roll(gap, 1))             # to the nearest other angle
+                    nn = _nearest_gap(a, bool(per[j]))
                     per_joint[j] = max(MIN_RADIUS_RAD, RADIUS_FACTOR * float(np.quantile(nn, 0.95)))
-        return cls(U, float(radius), per_joint, int(len(Q)))
+        return cls(U, float(radius), per_joint, int(len(Q)), per.copy())
 
     def distance(self, Q: np.ndarray) -> np.ndarray:
-        """(m,) wrapped joint-space distance (rad) of each configuration to its nearest training configuration."""
+        """(m,) joint-space distance (rad / m) of each configuration to its nearest training configuration."""
         Q = np.atleast_2d(np.asarray(Q, float))
         if len(self.Z) == 0:
             return np.full(len(Q), np.inf)
-        d, _ = cKDTree(_wrapped(self.Z), boxsize=_TWO_PI).query(_wrapped(Q), k=1)
+        WZ, box = joint_space_box(self.Z, self.periodic)
+        d, _ = cKDTree(WZ, boxsize=box).query(joint_space_box(Q, self.periodic)[0], k=1)
         return np.asarray(d, float)
 
     def joint_distance(self, Q: np.ndarray) -> np.ndarray:
-        """(m, d) wrapped distance (rad) of each angle to the nearest training angle of the same joint."""
-        Q = np.atleast_2d(np.asarray(Q, float))
-        out = np.empty(Q.shape)
-        for j in range(Q.shape[1]):
-            a = np.sort(_wrapped(self.Z[:, j]))
-            ext = np.r_[a - _TWO_PI, a, a + _TWO_PI]
-            t = _wrapped(Q[:, j])
-            i = np.clip(np.searchsorted(ext, t), 1, ext.size - 1)
-            out[:, j] = np.minimum(np.abs(t - ext[i - 1]), np.abs(t - ext[i]))
-        return out
+        """(m, d) distance (rad / m) of each value to the nearest training value of the same joint
+        (:func:`joint_distance`)."""
+        return joint_distance(self.Z, Q, self.periodic)
 
     def covered(self, Q: np.ndarray) -> np.ndarray:
         """(m,) bool: configurations within ρ of a training configuration and each angle within ρ_j of a
@@ -129,13 +177,17 @@ class JointCoverage:
 
     def to_dict(self) -> dict:
         """Plain data for a model file (configurations as base64 float64)."""
-        return {"measure": "joint_space_nearest/1", "radius_rad": float(self.radius_rad),
-                "joint_radius_rad": [float(v) for v in self.joint_radius_rad], "n_rows": int(self.n_rows),
-                "Z_rad": encode_array(self.Z)}
+        out = {"measure": "joint_space_nearest/1", "radius_rad": float(self.radius_rad),
+               "joint_radius_rad": [float(v) for v in self.joint_radius_rad], "n_rows": int(self.n_rows),
+               "Z_rad": encode_array(self.Z)}
+        if self.periodic is not None:
+            out["periodic"] = [bool(v) for v in self.periodic]
+        return out
 
     @classmethod
-    def from_dict(cls, d: Any, n_joints: int, where: str) -> JointCoverage:
-        """Inverse of :meth:`to_dict`.
+    def from_dict(cls, d: Any, n_joints: int, where: str, periodic: np.ndarray | None = None) -> JointCoverage:
+        """Inverse of :meth:`to_dict`; ``periodic`` (the robot's) for a block written without its ``periodic``
+        field (None: every joint, as such blocks were built).
 
         Raises:
             ValueError: a damaged block (the field named with ``where``).
@@ -155,4 +207,8 @@ class JointCoverage:
         n = d.get("n_rows", len(Z))
         if isinstance(n, bool) or not isinstance(n, int) or n < 0:
             raise ValueError(f"{where}.n_rows: must be a non-negative integer, got {n!r}")
-        return cls(Z, float(r), rj, int(n))
+        per = d.get("periodic", None if periodic is None else [bool(v) for v in np.asarray(periodic, bool)])
+        if per is not None and (not isinstance(per, list) or len(per) != n_joints
+                                or not all(isinstance(v, bool) for v in per)):
+            raise ValueError(f"{where}.periodic: must be {n_joints} true/false values, got {per!r}")
+        return cls(Z, float(r), rj, int(n), None if per is None else np.array(per, bool))

@@ -80,7 +80,8 @@ def _spd_inverse(S: np.ndarray, keep: dict | None = None) -> np.ndarray:
 
 
 def _kfold(kernel: JointKernel, noise: float, Q: np.ndarray, Y: np.ndarray, scale: np.ndarray,
-           opts: DiscrepancyOptions, names: list, keep: dict | None = None) -> dict:
+           opts: DiscrepancyOptions, names: list, keep: dict | None = None,
+           periodic: np.ndarray | None = None) -> dict:
     """K-fold held-out check with the hyper-parameters fixed: mean 3-D error (m) without and with δ,
     and the standardised errors of the held-out rows.
 
@@ -89,7 +90,7 @@ def _kfold(kernel: JointKernel, noise: float, Q: np.ndarray, Y: np.ndarray, scal
     the posterior without fold I gives); above it each fold's DTC posterior is built. Σ is the exact posterior's
     (jitter included), and its Cholesky factor is stored in ``keep["chol"]`` for the posterior when ``keep`` is given.
     """
-    fold, _ = grouped_folds(Q, opts.folds, opts.seed + 1)
+    fold, _ = grouped_folds(Q, opts.folds, opts.seed + 1, periodic)
     n_folds = int(fold.max()) + 1
     e0, e1, z2, inside = [], [], [], []
     exact = len(Q) <= opts.max_exact
@@ -123,18 +124,18 @@ def _kfold(kernel: JointKernel, noise: float, Q: np.ndarray, Y: np.ndarray, scal
 
 def fit_discrepancy(Q: np.ndarray, R: np.ndarray, joint_names: Sequence[str],
                     options: DiscrepancyOptions | None = None, *, n_params: int = 0,
-                    noise_floor_m: np.ndarray | None = None) -> Discrepancy | None:
+                    noise_floor_m: np.ndarray | None = None, periodic: np.ndarray | None = None) -> Discrepancy | None:
     """Fit δ to the residuals of a parametric fit.
 
     Args:
-        Q: training configurations (n, d) rad.
-        R: residuals measured − predicted in the robot base frame (n, 3) m.
+        Q: training configurations (n, d) rad. R: residuals measured − predicted in the robot base frame (n, 3) m.
         joint_names: the robot's joints (columns of Q).
         options: :class:`DiscrepancyOptions` (mode ``none`` returns None).
         n_params: parameters the parametric fit estimated from these rows (the white level's 3m − p correction,
             :func:`white_level`).
         noise_floor_m: the data's stated noise per axis (m): no white level (of the white kind or the Gaussian
             process's) below it. None: no floor (the noise level is unknown).
+        periodic: (d,) bool, joints compared mod 2π (``Robot.periodic_joints``); None: every joint.
 
     Returns:
         The :class:`Discrepancy` (``decision`` says what was decided and why), or None for mode ``none``.
@@ -152,11 +153,11 @@ def fit_discrepancy(Q: np.ndarray, R: np.ndarray, joint_names: Sequence[str],
     if not np.all(np.isfinite(R)) or not np.all(np.isfinite(Q)):
         raise InputError("discrepancy: non-finite residuals or joint values")
     n = len(Q)
-    coverage = JointCoverage.from_training(Q, opts.seed)
+    coverage = JointCoverage.from_training(Q, opts.seed, periodic)
     white = _white(R, names, n_params, noise_floor_m, coverage)
     # distinct poses (near-duplicates counted once) on a seeded subset: enough to tell whether there are min_rows
     few = np.sort(np.random.default_rng(opts.seed + 3).permutation(n)[:max(2000, 4 * opts.min_rows)])
-    _, n_poses = grouped_folds(Q[few], opts.folds, opts.seed + 1)
+    _, n_poses = grouped_folds(Q[few], opts.folds, opts.seed + 1, periodic)
     if n_poses < opts.min_rows:
         if opts.mode == "on":
             raise InputError(f"discrepancy: {n_poses} distinct poses are too few for the Gaussian process (at least "
@@ -176,7 +177,8 @@ def fit_discrepancy(Q: np.ndarray, R: np.ndarray, joint_names: Sequence[str],
     for a0 in opts.starts:
         kernel, noise = _hyper_fit(Q, Y, opts, float(a0), min_noise)
         keep: dict = {}  # the factor of all rows (reused by an exact posterior): only when the check uses them all
-        cv = _kfold(kernel, noise, Q[cv_rows], Y[cv_rows], scale, opts, names, keep if len(cv_rows) == n else None)
+        cv = _kfold(kernel, noise, Q[cv_rows], Y[cv_rows], scale, opts, names, keep if len(cv_rows) == n else None,
+                    coverage.periodic)
         if best is None or cv["mean_with_m"] < best[2]["mean_with_m"]:
             best = (kernel, noise, cv, keep.get("chol"))
     kernel, noise, cv, chol = best

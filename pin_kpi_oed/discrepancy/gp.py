@@ -46,7 +46,7 @@ import numpy as np
 from scipy import linalg as sla
 
 from pin_kpi_oed.discrepancy.arrays import decode_array, encode_array
-from pin_kpi_oed.discrepancy.coverage import JointCoverage
+from pin_kpi_oed.discrepancy.coverage import JointCoverage, joint_space_box
 from pin_kpi_oed.discrepancy.kernel import JointKernel
 from pin_kpi_oed.errors import InputError
 
@@ -106,23 +106,23 @@ class DiscrepancyOptions:
                 raise InputError(f"discrepancy option {name} must be a positive integer, got {getattr(self, name)}")
 
 
-def grouped_folds(Q: np.ndarray, folds: int, seed: int) -> tuple[np.ndarray, int]:
+def grouped_folds(Q: np.ndarray, folds: int, seed: int, periodic: np.ndarray | None = None) -> tuple[np.ndarray, int]:
     """K folds that keep near-duplicate configurations together: (fold of each row (n,), number of pose groups).
 
-    Rows within :data:`NEAR_DUPLICATE_RAD` of each other (wrapped joint-space distance, chained) form one group
-    (a pose measured again, or jittered around the same pose); groups are dealt in a seeded random order to the
-    fold with the fewest rows so far. A held-out row then never has its own repeat in the training folds, which
-    would make the K-fold gain of a Gaussian process (which interpolates the repeat) look larger than on new poses.
-    With fewer groups than ``folds``, each group is its own fold.
+    Rows within :data:`NEAR_DUPLICATE_RAD` of each other (joint-space distance of
+    :func:`~pin_kpi_oed.discrepancy.coverage.joint_space_box`: wrapped for ``periodic`` joints, None: every joint;
+    chained) form one group (a pose measured again, or jittered around the same pose); groups are dealt in a seeded
+    random order to the fold with the fewest rows so far. A held-out row then never has its own repeat in the
+    training folds, which would make the K-fold gain of a model that can fit the repeat (a Gaussian process, a
+    selected effect term) look larger than on new poses. With fewer groups than ``folds``, each group is its own fold.
     """
     from scipy.sparse import coo_matrix
     from scipy.sparse.csgraph import connected_components
     from scipy.spatial import cKDTree
 
-    W = np.mod(np.atleast_2d(np.asarray(Q, float)), 2 * np.pi)
-    W[W >= 2 * np.pi] = 0.0
+    W, box = joint_space_box(Q, periodic)
     n = len(W)
-    pairs = cKDTree(W, boxsize=2 * np.pi).query_pairs(NEAR_DUPLICATE_RAD, output_type="ndarray")
+    pairs = cKDTree(W, boxsize=box).query_pairs(NEAR_DUPLICATE_RAD, output_type="ndarray")
     graph = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(n, n))
     n_groups, group = connected_components(graph, directed=False)
     k = min(int(folds), int(n_groups))

@@ -12,7 +12,7 @@ from typing import Any
 
 import numpy as np
 
-from pin_kpi_oed.discrepancy.coverage import JointCoverage
+from pin_kpi_oed.discrepancy.coverage import JointCoverage, joint_distance
 from pin_kpi_oed.identification.problem import align_data
 
 __all__ = ["coverage", "covered_rows", "coverage_summary", "COVERAGE_TOL_RAD"]
@@ -21,42 +21,40 @@ __all__ = ["coverage", "covered_rows", "coverage_summary", "COVERAGE_TOL_RAD"]
 COVERAGE_TOL_RAD = 0.05
 
 
-def coverage(source_q: np.ndarray, target_q: np.ndarray, tol_rad: float = 0.05) -> tuple[np.ndarray, float]:
-    """Share of target rows whose joint angle lies within ``tol_rad`` of a source angle, per joint (wrapped mod 2π).
+def coverage(source_q: np.ndarray, target_q: np.ndarray, tol_rad: float = 0.05,
+             periodic: np.ndarray | None = None) -> tuple[np.ndarray, float]:
+    """Share of target rows whose joint value lies within ``tol_rad`` of a source value, per joint
+    (:func:`covered_rows`).
 
     Args:
-        source_q: training configurations (m_s, n) rad.
-        target_q: validation configurations (m_t, n) rad.
-        tol_rad: tolerance (rad).
+        source_q: training configurations (m_s, n) rad / m.
+        target_q: validation configurations (m_t, n) rad / m.
+        tol_rad: tolerance (rad; m for a prismatic joint).
+        periodic: (n,) bool, the joints compared modulo 2π (the robot's
+            :attr:`~pin_kpi_oed.model.robot.Robot.periodic_joints`); None: every joint.
 
     Returns:
         (fraction per joint (n,), fraction of target rows covered on every joint at once).
     """
-    covered = covered_rows(source_q, target_q, tol_rad)
+    covered = covered_rows(source_q, target_q, tol_rad, periodic)
     return covered.mean(axis=0), float(np.all(covered, axis=1).mean())
 
 
-def covered_rows(source_q: np.ndarray, target_q: np.ndarray, tol_rad: float = 0.05) -> np.ndarray:
-    """Which target angles lie within ``tol_rad`` of a source angle of the same joint (wrapped mod 2π).
+def covered_rows(source_q: np.ndarray, target_q: np.ndarray, tol_rad: float = 0.05,
+                 periodic: np.ndarray | None = None) -> np.ndarray:
+    """Which target values lie within ``tol_rad`` of a source value of the same joint
+    (:func:`~pin_kpi_oed.discrepancy.coverage.joint_distance`: wrapped mod 2π for a ``periodic`` joint only).
 
     Args:
-        source_q: training configurations (m_s, n) rad.
-        target_q: validation configurations (m_t, n) rad.
-        tol_rad: tolerance (rad).
+        source_q: training configurations (m_s, n) rad / m.
+        target_q: validation configurations (m_t, n) rad / m.
+        tol_rad: tolerance (rad; m for a prismatic joint).
+        periodic: (n,) bool, the joints compared modulo 2π; None: every joint.
 
     Returns:
         (m_t, n) bool: covered per row and joint.
     """
-    S = np.mod(np.asarray(source_q, float) + np.pi, 2 * np.pi) - np.pi
-    T = np.mod(np.asarray(target_q, float) + np.pi, 2 * np.pi) - np.pi
-    covered = np.zeros(T.shape, bool)
-    for j in range(T.shape[1]):
-        s = np.sort(S[:, j])
-        s_ext = np.concatenate([s - 2 * np.pi, s, s + 2 * np.pi])
-        i = np.clip(np.searchsorted(s_ext, T[:, j]), 1, s_ext.size - 1)
-        d = np.minimum(np.abs(T[:, j] - s_ext[i - 1]), np.abs(T[:, j] - s_ext[i]))
-        covered[:, j] = d <= tol_rad
-    return covered
+    return joint_distance(source_q, target_q, periodic) <= tol_rad
 
 
 def coverage_summary(robot: Any, train: Any, test: Any, tol_rad: float = COVERAGE_TOL_RAD) -> dict:
@@ -74,6 +72,6 @@ def coverage_summary(robot: Any, train: Any, test: Any, tol_rad: float = COVERAG
     """
     Qs = align_data(robot, train, need_position=False)
     Qt = align_data(robot, test, need_position=False)
-    per_joint, _ = coverage(Qs, Qt, tol_rad)
-    return {"rows_covered": JointCoverage.from_training(Qs).share_covered(Qt),
+    per_joint, _ = coverage(Qs, Qt, tol_rad, robot.periodic_joints)
+    return {"rows_covered": JointCoverage.from_training(Qs, periodic=robot.periodic_joints).share_covered(Qt),
             "per_joint": {n: float(c) for n, c in zip(robot.joint_names, per_joint)}, "tol_rad": float(tol_rad)}

@@ -114,7 +114,8 @@ def result_discrepancy(result: Any, data: MeasurementSet, options: Any = "auto",
     n_out = position_outliers(result).size
     try:
         disc = fit_discrepancy(Q[rows], R, list(result.model.robot.joint_names), opts, n_params=len(result.names),
-                               noise_floor_m=stated_noise_m(result, data))
+                               noise_floor_m=stated_noise_m(result, data),
+                               periodic=result.model.robot.periodic_joints)
     except InputError as exc:
         left = np.setdiff1d(np.arange(len(Q)), rows)
         flagged = left if left.size else position_outliers(result)

@@ -265,7 +265,7 @@ def identify(model: TrackerModel, data: MeasurementSet, options: IdentifyOptions
         reflector_per_station=bool(opts.reflector_per_station), source=data.source,
         held=[(e, np.asarray(t, float)) for e, t in opts.held_effects], time_s=time.perf_counter() - t_start,
         tool=data.tool)
-    result.coverage = JointCoverage.from_training(inp.Q, opts.seed)
+    result.coverage = JointCoverage.from_training(inp.Q, opts.seed, model.robot.periodic_joints)
     result.discrepancy = result_discrepancy(result, data, discrepancy_options(opts.discrepancy, opts.seed), inp.Q)
     _gate(result, model, opts)
     result.time_s = time.perf_counter() - t_start

@@ -474,7 +474,8 @@ class CalibratedModel:
         coverage = None
         if d.get("coverage") is not None:
             try:
-                coverage = JointCoverage.from_dict(d["coverage"], robot.nq, f"{where}: coverage")
+                coverage = JointCoverage.from_dict(d["coverage"], robot.nq, f"{where}: coverage",
+                                                   robot.periodic_joints)
             except ValueError as exc:
                 raise InputError(str(exc)) from None
         return cls(robot, joint_p, effects, thetas, setups, noise, tcp, bool(d.get("pose6d", False)),

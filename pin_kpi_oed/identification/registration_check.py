@@ -96,8 +96,9 @@ def coverage_share(model: CalibratedModel, Q: np.ndarray) -> float | None:
 
 
 def uncovered_ranges(model: CalibratedModel, Q: np.ndarray, limit: int = 3) -> list[str]:
-    """The joints whose angles in Q (m, n) rad the calibration never measured (no training angle of that joint within
-    :data:`~pin_kpi_oed.identification.coverage.COVERAGE_TOL_RAD`, wrapped mod 2π), most rows first:
+    """The joints whose angles in Q (m, n) rad the calibration never measured (no training angle of that joint
+    within :data:`~pin_kpi_oed.identification.coverage.COVERAGE_TOL_RAD`, wrapped mod 2π for a periodic joint), most
+    rows first:
     ``"shoulder_pan_joint -3.06..-1.06 rad (60 of 60 rows)"`` (the uncovered rows' own joint values, within the
     joint's limits), at most ``limit`` of them with at least 5 % of the rows; none when the model keeps no training
     configurations."""
@@ -107,7 +108,7 @@ def uncovered_ranges(model: CalibratedModel, Q: np.ndarray, limit: int = 3) -> l
     Q = np.atleast_2d(np.asarray(Q, float))
     if Z is None or not len(Z) or not len(Q):
         return []
-    out_rows = ~covered_rows(Z, Q, COVERAGE_TOL_RAD)
+    out_rows = ~covered_rows(Z, Q, COVERAGE_TOL_RAD, model.robot.periodic_joints)
     share = out_rows.mean(axis=0)
     out = []
     for j in np.argsort(-share, kind="stable")[:limit]:

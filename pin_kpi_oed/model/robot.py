@@ -205,6 +205,14 @@ class Robot:
         return self.revolute.copy()
 
     @property
+    def periodic_joints(self) -> np.ndarray:
+        """Boolean mask of the joints whose values are compared modulo 2π: revolute joints whose limits span at
+        least 2π (q and q + 2π both reachable, the same link pose). Prismatic joints (m) and revolute joints with a
+        narrower range are compared linearly: their ends are far apart, not neighbours."""
+        span = np.asarray(self.q_upper, float) - np.asarray(self.q_lower, float)
+        return self.is_revolute & (span >= 2.0 * np.pi - 1e-9)
+
+    @property
     def joint_units(self) -> list[str]:
         """SI unit of each joint value: ``"rad"`` (revolute) or ``"m"`` (prismatic)."""
         return [joint_unit(bool(r)) for r in self.is_revolute]
