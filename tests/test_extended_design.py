@@ -135,7 +135,8 @@ def test_select_pool_with_prior_consistent_and_better_than_random(ur10):
 
 def test_pool_gains_match_the_criterion_change_and_the_exchange_is_a_local_optimum(ur10):
     """Woodbury gains (adding a block; swapping one out, then adding) are exactly −Δφ; no single swap improves."""
-    from pin_kpi_oed.oed.extended import _PoolState
+    from pin_kpi_oed.errors import IdentifiabilityError
+    from pin_kpi_oed.oed.pool_search import InformationState
 
     robot, model, base = ur10
     ext = _ext(robot, model, base)
@@ -146,8 +147,8 @@ def test_pool_gains_match_the_criterion_change_and_the_exchange_is_a_local_optim
     F0 = Fp[:50].reshape(-1, nx)
     M = ext.prior_info + F0.T @ F0
     for KK in (K, None):
-        st = _PoolState(Fp, KK)
-        assert st.at(M) and np.isclose(st.phi, pool_phi(M, KK), rtol=1e-9, atol=0.0)
+        st = InformationState(Fp, KK, M)
+        assert np.isclose(st.phi, pool_phi(M, KK), rtol=1e-9, atol=0.0)
         ref = np.array([pool_phi(M, KK) - pool_phi(M + Fp[i].T @ Fp[i], KK) for i in range(N)])
         assert np.allclose(st.add_gains(), ref, rtol=1e-7, atol=1e-12 * abs(pool_phi(M, KK)))
         for o in (3, 17):
@@ -157,13 +158,12 @@ def test_pool_gains_match_the_criterion_change_and_the_exchange_is_a_local_optim
             ref = np.array([pool_phi(Mm, KK) - pool_phi(Mm + Fp[i].T @ Fp[i], KK) for i in range(N)])
             assert np.allclose(g, ref, rtol=1e-7, atol=1e-12 * abs(pool_phi(M, KK)))
         # nh > 3 path (blocks of two measurements stacked) agrees with the closed form
-        st6 = _PoolState(Fp.reshape(N // 2, 2 * nh, nx), KK)
-        st6.at(M)
+        st6 = InformationState(Fp.reshape(N // 2, 2 * nh, nx), KK, M)
         F6 = [Fp[2 * i:2 * i + 2].reshape(-1, nx) for i in range(N // 2)]
         ref6 = np.array([pool_phi(M, KK) - pool_phi(M + F.T @ F, KK) for F in F6])
         assert np.allclose(st6.add_gains(), ref6, rtol=1e-7, atol=1e-12 * abs(pool_phi(M, KK)))
-    assert not _PoolState(Fp, K).at(-np.eye(nx))  # not positive definite
-    from pin_kpi_oed.errors import IdentifiabilityError
+    with pytest.raises(IdentifiabilityError, match="not positive definite"):
+        InformationState(Fp, K, -np.eye(nx))
 
     with pytest.raises(IdentifiabilityError, match="chosen candidates"):
         select_pool(Fp, 2, K, ext.prior_info)  # 6 rows cannot determine the geometry without a prior

@@ -13,7 +13,8 @@ from pin_kpi_oed.cell.cell import load_cell
 from pin_kpi_oed.design.optimize import DesignProblem
 from pin_kpi_oed.errors import InputError
 from pin_kpi_oed.oed.criteria import CRITERIA, Criterion, DiscrepancyForm, criterion_names, get_criterion
-from pin_kpi_oed.oed.discrepancy_criteria import (GlsDesignCriterion, _GlsState, gls_value_and_grad)
+from pin_kpi_oed.oed.discrepancy_criteria import GlsDesignCriterion, gls_value_and_grad
+from pin_kpi_oed.oed.discrepancy_pool import GlsState
 from pin_kpi_oed.oed.discrepancy_kpi import DiscrepancyPrior, default_discrepancy
 
 GP = ["D_gp", "param_gp", "E_gp", "cond_gp", "O1_gp", "O2_gp", "O3_gp", "O4_gp", "O5_gp"]
@@ -100,8 +101,8 @@ def test_pool_updates_equal_recomputation(problem, form):
     crit = GlsDesignCriterion(problem.model, problem.base, d, "D_gp" if form == "D" else "param_gp", p=problem.p0)
     Qp = problem.random_design(40, 8)[0]
     Jp = crit.pool_jacobians(Qp)
-    st = _GlsState(Jp, Qp, np.zeros((0, 3, Jp.shape[2])), np.zeros((0, 6)), d, crit.prior_info, 0.0)
-    st.form = form
+    st = GlsState(Jp, Qp, np.zeros((0, 3, Jp.shape[2])), np.zeros((0, 6)), d, crit.prior_info, 0.0)
+    st.K = get_criterion(crit.form.base.name).pool_form(None, Jp.shape[2])  # the A form of param: K = I
     for i in range(12):
         st.add(i)
     st = st.without(4)

@@ -136,16 +136,17 @@ def test_newton_parts_gradient_and_hessian_against_finite_differences(pool):
 
 
 @pytest.mark.parametrize("nh", [1, 2, 3, 4])
-def test_swap_gains_against_numpy(nh):
-    from pin_kpi_oed.oed.pool import _swap_gains
+def test_block_gains_against_numpy(nh):
+    from pin_kpi_oed.oed.pool_search import block_gains
 
     rng = np.random.default_rng(nh)
     V = rng.standard_normal((50, nh, 6))
     G = rng.standard_normal((50, nh, 3))
     S = np.eye(nh) + V @ V.transpose(0, 2, 1)
     want = np.einsum("nas,nas->n", G, np.linalg.solve(S, G))
-    np.testing.assert_allclose(_swap_gains(V, G), want, rtol=1e-10)
-    np.testing.assert_allclose(_swap_gains(V, None), np.linalg.slogdet(S)[1], rtol=1e-10)
+    s = {(a, b): S[:, a, b] for a in range(nh) for b in range(a, nh)}
+    np.testing.assert_allclose(block_gains(s, G, 50, nh), want, rtol=1e-10)
+    np.testing.assert_allclose(block_gains(s, None, 50, nh), np.linalg.slogdet(S)[1], rtol=1e-10)
 
 
 @pytest.mark.parametrize("r", [5, 60])

@@ -40,8 +40,10 @@ the D or A value of every candidate after a rank-three information update M + Σ
 
     −log det M − log det(D_g + R M⁻¹ Rᵀ) + log det D_g,    tr M⁻¹ − tr(W R M⁻² Rᵀ),  W = (D_g + R M⁻¹ Rᵀ)⁻¹,
 
-D_g = g diag(s_a²). ``param_gp`` selects with its own A form, every other criterion with the D form (the
-fallback of the noise-only pool selection); the returned value is the criterion itself, recomputed from scratch.
+D_g = g diag(s_a²) (tr(K M⁻¹ Kᵀ) with the criterion's pool matrix K in general). A criterion with a pool matrix
+(:meth:`~pin_kpi_oed.oed.criteria.Criterion.pool_form`: ``param``, K = I) selects with its A form, every other
+criterion with the D form (the fallback of the noise-only pool selection); the returned value is the criterion
+itself, recomputed from scratch.
 No equivalence-theorem certificate exists for these criteria: M is not the information of a design measure (the
 kernel couples the poses), so the output says so (:func:`no_certificate`).
 """
@@ -63,7 +65,8 @@ from pin_kpi_oed.oed.selection_result import PoolSelection
 from pin_kpi_oed.discrepancy.cholesky import jitter_cholesky
 from pin_kpi_oed.discrepancy.prior import DiscrepancyPrior
 from pin_kpi_oed.oed.discrepancy_kpi import base_frame_jacobian, chain_q
-from pin_kpi_oed.oed.discrepancy_pool import NO_CERTIFICATE, GreedyState, after_given, greedy_exchange, greedy_ridge
+from pin_kpi_oed.oed.discrepancy_pool import NO_CERTIFICATE, GlsState, after_given, greedy_ridge
+from pin_kpi_oed.oed.pool_search import greedy_exchange
 
 __all__ = ["gls_information", "gls_value_and_grad", "GlsDesignCriterion",
            "select_pool_gls", "no_certificate"]
@@ -195,40 +198,15 @@ class GlsDesignCriterion(DesignObjective):
 
 
 # --------------------------------------------------------------------------- pool selection
-class _GlsState(GreedyState):
-    """The greedy state of ``kpi_gp`` (no working configurations) scoring candidates by the D or A form."""
-
-    form = "D"
-
-    def values(self, exclude: np.ndarray) -> np.ndarray:
-        """−log det M or tr M⁻¹ after adding each candidate (inf for excluded ones), exact rank-three update."""
-        nb = self.M.shape[0]
-        M = 0.5 * (self.M + self.M.T) + self.eps * np.eye(nb)
-        C = np.linalg.inv(M)
-        g = self.kdiag + self.w                                  # (N,)
-        R = self.Rc                                              # (N, 3, nb)
-        CR = R @ C
-        Dg = np.zeros((len(g), 3, 3))
-        idx = np.arange(3)
-        Dg[:, idx, idx] = g[:, None] * self.s2[None, :]
-        S = Dg + CR @ np.swapaxes(R, 1, 2)                       # D_g + R C Rᵀ
-        if self.form == "A":
-            W = np.linalg.inv(S)
-            phi = np.trace(C) - np.einsum("nab,nba->n", W, CR @ np.swapaxes(CR, 1, 2))
-        else:
-            phi = (-np.linalg.slogdet(M)[1] - np.linalg.slogdet(S)[1]
-                   + np.log(g) * 3 + float(np.log(self.s2).sum()))
-        phi[exclude] = np.inf
-        return phi
-
-
 def select_pool_gls(crit: Criterion, J_pool: np.ndarray, Q_pool: np.ndarray, discrepancy: DiscrepancyPrior, m: int,
                     prior_info: np.ndarray | None = None, Q_given: np.ndarray | None = None,
                     J_given: np.ndarray | None = None, exchange_passes: int = 1,
                     time_budget_s: float | None = None) -> PoolSelection:
     """Choose m of N candidate poses for a discrepancy-aware parameter criterion (greedy + exchange).
 
-    The greedy additions and exchange passes of :func:`select_pool_gp` on the D form (A form for ``param``; module
+    The one pool selector (:func:`~pin_kpi_oed.oed.pool_search.greedy_exchange`) on
+    :class:`~pin_kpi_oed.oed.discrepancy_pool.GlsState`: the A form tr(K M⁻¹ Kᵀ) when the criterion has a pool
+    matrix K (:meth:`~pin_kpi_oed.oed.criteria.Criterion.pool_form`; ``param``: K = I), else the D form (module
     formulas); ``path`` holds the form's values (regularised by the same tiny ridge until the set identifies the
     parameters), ``value`` the criterion ``crit`` of the chosen set recomputed from scratch.
 
@@ -245,10 +223,13 @@ def select_pool_gls(crit: Criterion, J_pool: np.ndarray, Q_pool: np.ndarray, dis
     """
     t0 = time.perf_counter()
     Jall, Qall, k0 = after_given(J_pool, Q_pool, m, J_given, Q_given)
-    st = _GlsState(Jall, Qall, np.zeros((0, 3, J_pool.shape[2])), np.zeros((0, Q_pool.shape[1])), discrepancy,
-                   prior_info, greedy_ridge(J_pool, discrepancy))
-    st.form = "A" if crit.name == "param" else "D"
-    idx, path, swaps = greedy_exchange(st, m, k0, exchange_passes, t0, time_budget_s)
+    nb = J_pool.shape[2]
+    st = GlsState(Jall, Qall, np.zeros((0, 3, nb)), np.zeros((0, Q_pool.shape[1])), discrepancy, prior_info,
+                  greedy_ridge(J_pool, discrepancy))
+    st.K = crit.pool_form(None, nb) if not crit.needs_kpi else None
+    found = greedy_exchange(st, m, k0, exchange_passes, deadline=None if time_budget_s is None
+                            else t0 + time_budget_s)
+    idx, path, swaps = found.indices, found.path, found.swaps
     sel = np.concatenate([np.arange(k0), k0 + idx])
     val = gls_value_and_grad(crit, Jall[sel], discrepancy.cov(Qall[sel]), discrepancy.scale_m, discrepancy.noise,
                              prior_info, grad=False)[0]

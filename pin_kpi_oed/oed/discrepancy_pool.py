@@ -7,6 +7,7 @@ GLS forms subclass the state). No equivalence-theorem certificate exists: the ke
 from __future__ import annotations
 
 import time
+from collections.abc import Sequence
 
 import numpy as np
 from scipy.linalg import solve_triangular
@@ -14,17 +15,36 @@ from scipy.linalg import solve_triangular
 from pin_kpi_oed.discrepancy.prior import DiscrepancyPrior
 from pin_kpi_oed.errors import InputError
 from pin_kpi_oed.oed.kriging import kpi_gp_value_and_grad
+from pin_kpi_oed.oed.pool_search import PoolState, greedy_exchange
 from pin_kpi_oed.oed.selection_result import PoolSelection
 
-__all__ = ["GreedyState", "greedy_ridge", "after_given", "greedy_exchange", "select_pool_gp", "NO_CERTIFICATE"]
+__all__ = ["GreedyState", "GlsState", "greedy_ridge", "after_given", "select_pool_gp", "NO_CERTIFICATE"]
 
 #: One line the design output prints for this criterion.
 NO_CERTIFICATE = ("kpi_gp: no optimality certificate exists for the discrepancy-aware criterion (the kernel couples "
                   "the poses; the equivalence theorem of the noise-only criteria does not apply)")
 
 
-class GreedyState:
-    """Conditional quantities of every candidate given a selected set S (kernel conditioned on S, noisy)."""
+def sym3_trace_solve(S: dict, X: dict) -> np.ndarray:
+    """tr(S_n⁻¹ X_n) of N symmetric 3×3 pairs given by their entries (a ≤ b, each (N,)), by the adjugate."""
+    a, b, c, e, f, i = S[0, 0], S[0, 1], S[0, 2], S[1, 1], S[1, 2], S[2, 2]
+    A00, A01, A02 = e * i - f * f, c * f - b * i, b * f - c * e
+    A11, A12, A22 = a * i - c * c, b * c - a * f, a * e - b * b
+    det = a * A00 + b * A01 + c * A02
+    return (A00 * X[0, 0] + A11 * X[1, 1] + A22 * X[2, 2] + 2.0 * (A01 * X[0, 1] + A02 * X[0, 2] + A12 * X[1, 2])) / det
+
+
+class GreedyState(PoolState):
+    """Conditional quantities of every candidate given a chosen set S (kernel conditioned on S, noisy), the
+    :class:`~pin_kpi_oed.oed.pool_search.PoolState` of the discrepancy-aware criteria: φ(S ∪ {i}) is tr C_s of
+    ``kpi_gp`` here, the D or A form of the GLS information in :class:`GlsState`.
+
+    Args:
+        Jc: the candidates' base-frame Jacobians (N, 3, nb); Qc: their configurations (N, n) rad.
+        E: KPI Jacobian (t, 3, nb), base frame; Qw: working configurations (t, n) rad.
+        disc: the :class:`DiscrepancyPrior`; prior_info: Σ₀⁻¹ (nb, nb) or None; eps_info: the ridge on M of
+            :meth:`values` (0: exact).
+    """
 
     def __init__(self, Jc, Qc, E, Qw, disc, prior_info, eps_info):
         self.Jc, self.Qc, self.disc = Jc, Qc, disc
@@ -33,7 +53,8 @@ class GreedyState:
         N, _, nb = Jc.shape
         self.kdiag = np.full(N, 0.0) if disc.kernel is None else disc.kernel.diag(Qc)
         self.Uc = disc.cov(Qw, Qc)                              # (t, N) conditional cross-covariance
-        self.Rc = Jc.copy()                                      # (N, 3, nb) conditional Jacobian rows
+        self.Ja = np.ascontiguousarray(np.swapaxes(Jc, 0, 1))    # (3, N, nb) the Jacobian rows, axis-major
+        self.Rc = self.Ja.copy()                                 # (3, N, nb) conditional Jacobian rows
         self.H = np.moveaxis(E, 1, 0).copy()                     # (3, t, nb)
         self.T = float(np.trace(disc.cov(Qw)))
         self.M = np.zeros((nb, nb)) if prior_info is None else np.array(prior_info, float)
@@ -45,10 +66,14 @@ class GreedyState:
         self.sgn = np.zeros(0)
         self.chosen: list[int] = []
 
+    @property
+    def n_candidates(self) -> int:
+        return len(self.Qc)
+
     def kcol(self, i: int) -> np.ndarray:
-        """k(candidates, candidate i) (N,), cached."""
+        """k(candidate i, candidates) (N,), cached."""
         if i not in self.kcols:
-            self.kcols[i] = self.disc.cov(self.Qc, self.Qc[i:i + 1])[:, 0]
+            self.kcols[i] = self.disc.cov(self.Qc[i:i + 1], self.Qc)[0]
         return self.kcols[i]
 
     def build(self, sel: list[int]) -> GreedyState:
@@ -67,13 +92,16 @@ class GreedyState:
         st.sgn = np.ones(S.size)
         st.kdiag = self.kdiag0 - np.einsum("kn,kn->n", st.V, st.V)
         st.Uc = self.Kwc0 - Wt.T @ st.V
-        st.Rc = self.Jc - (st.V.T @ B).reshape(self.Jc.shape)
         B3 = B.reshape(S.size, 3, nb)
+        st.Rc = self.Ja - np.einsum("kn,kac->anc", st.V, B3)
         st.H = self.H0 - np.einsum("kt,kac->atc", Wt, B3)
         st.T = self.T0 - float(np.sum(Wt * Wt))
         st.M = self.M0 + np.einsum("a,kac,kad->cd", 1.0 / self.s2, B3, B3)
         st.chosen = list(S)
         return st
+
+    def rebuild(self, chosen: Sequence[int]) -> GreedyState:
+        return self.build(list(chosen))
 
     def without(self, i: int) -> GreedyState:
         """The state with the chosen candidate ``i`` removed (exact rank-one downdate: a row of sign −1 in ``V``)."""
@@ -84,12 +112,12 @@ class GreedyState:
         g = kap * w / (w - kap) + w
         kcol = (self.kcol(i) - self.V.T @ (self.sgn * self.V[:, i])) * (g / w)
         u = self.Uc[:, i] * (g / w)
-        r = self.Rc[i] * (g / w)
+        r = self.Rc[:, i] * (g / w)                              # (3, nb)
         st.kdiag = self.kdiag + kcol ** 2 / g
         st.Uc = self.Uc + np.outer(u, kcol) / g
         st.Uc[:, i] = u
-        st.Rc = self.Rc + kcol[:, None, None] * r[None] / g
-        st.Rc[i] = r
+        st.Rc = self.Rc + kcol[None, :, None] * r[:, None, :] / g
+        st.Rc[:, i] = r
         st.H = self.H + np.einsum("t,ac->atc", u, r) / g
         st.T = self.T + float(u @ u) / g
         st.M = self.M - np.einsum("a,ac,ad->cd", 1.0 / self.s2, r, r) / g
@@ -103,75 +131,92 @@ class GreedyState:
         kp = (self.kcol(p) - self.V.T @ (self.sgn * self.V[:, p])) \
             if self.disc.kernel is not None else np.zeros(len(self.Qc))
         u = self.Uc[:, p].copy()
-        r = self.Rc[p].copy()                                    # (3, nb)
+        r = self.Rc[:, p].copy()                                 # (3, nb)
         self.V = np.vstack([self.V, kp / np.sqrt(g)])
         self.sgn = np.append(self.sgn, 1.0)
         self.kdiag = self.kdiag - kp ** 2 / g
         self.Uc -= np.outer(u, kp) / g
-        self.Rc -= kp[:, None, None] * r[None] / g
+        self.Rc -= kp[None, :, None] * r[:, None, :] / g
         self.H -= np.einsum("t,ac->atc", u, r) / g
         self.T -= float(u @ u) / g
         self.M += np.einsum("a,ac,ad->cd", 1.0 / self.s2, r, r) / g
         self.chosen.append(p)
 
-    def values(self, exclude: np.ndarray) -> np.ndarray:
-        """tr C_s after adding each candidate (inf for excluded ones), exact rank-three information update."""
+    def whitened(self, R: np.ndarray, *more: np.ndarray) -> list[np.ndarray]:
+        """Rows whitened by the information of the chosen set: X L⁻ᵀ for each (…, nb) array, L the Cholesky factor
+        of M + εI (so that R C Rᵀ = R̃ R̃ᵀ without forming C = (M + εI)⁻¹ and squaring its condition)."""
         nb = self.M.shape[0]
         M = self.M + self.eps * np.eye(nb)
-        C = np.linalg.inv(0.5 * (M + M.T))
-        N = np.einsum("atc,atd->cd", self.H, self.H)
-        Dm = C @ N @ C
-        g = self.kdiag + self.w                                  # (N,)
-        uu = np.einsum("tn,tn->n", self.Uc, self.Uc)
-        R = self.Rc                                              # (N, 3, nb)
-        Rt = np.swapaxes(R, 1, 2)
-        CR = R @ C                                               # (N, 3, nb): rows (C r_a)ᵀ
-        RCR = CR @ Rt                                            # (N, 3, 3)
-        RDR = (R @ Dm) @ Rt
-        Z = np.swapaxes(self.H, 1, 2) @ self.Uc                  # (3, nb, N): z_a = H_aᵀ u
-        RCZ = np.einsum("nac,bcn->nab", CR, Z, optimize=True)
-        Dinv = np.zeros_like(RCR)
-        idx = np.arange(3)
-        Dinv[:, idx, idx] = (g[:, None] * self.s2[None, :])
-        W = np.linalg.inv(Dinv + RCR)
+        L = np.linalg.cholesky(0.5 * (M + M.T))
+        out = []
+        for X in (R,) + more:
+            out.append(solve_triangular(L, X.reshape(-1, nb).T, lower=True, check_finite=False).T.reshape(X.shape))
+        return out
+
+    def values(self, exclude: np.ndarray, among: np.ndarray | None = None) -> np.ndarray:
+        """tr C_s after adding each candidate (inf for excluded ones; ``among``: only those candidates, ``exclude``
+        unused), exact rank-three information update, in rows whitened by M (:meth:`whitened`):
+
+        tr C_s(S ∪ {i}) = σ²(T − |u|²/g) + tr CN − 2 tr(RCZ)/g + |u|² tr(RCR)/g² − tr(W X), W = (D_g + RCR)⁻¹,
+        X = RDR − (RCR RCZᵀ + RCZ RCR)/g + |u|² RCR²/g², D = C N C, z_a = H_aᵀ u (per candidate), N = Σ H_aᵀH_a."""
+        R, Uc, g = self.Rc, self.Uc, self.kdiag + self.w
+        if among is not None:
+            R, Uc, g = R[:, among], Uc[:, among], g[among]
+        Rw, Hw = self.whitened(R, self.H)                        # R L⁻ᵀ (3, n, nb), H L⁻ᵀ (3, t, nb)
+        nb = Rw.shape[2]
+        Hf = Hw.reshape(-1, nb)
+        Nw = Hf.T @ Hf                                           # L⁻¹ N L⁻ᵀ: R D Rᵀ = R̃ Ñ R̃ᵀ
+        uu = np.einsum("tn,tn->n", Uc, Uc)
+        DR = (Rw.reshape(-1, nb) @ Nw).reshape(Rw.shape)
+        Z = np.matmul(Uc.T, Hw)                                  # (3, n, nb): L⁻¹ z_a
+        RCR = {(a, b): np.einsum("nk,nk->n", Rw[a], Rw[b]) for a in range(3) for b in range(a, 3)}
+        RDR = {(a, b): np.einsum("nk,nk->n", DR[a], Rw[b]) for a in range(3) for b in range(a, 3)}
+        RCR.update({(b, a): v for (a, b), v in list(RCR.items())})
+        RCZ = {(a, b): np.einsum("nk,nk->n", Rw[a], Z[b]) for a in range(3) for b in range(3)}
         gi = 1.0 / g
-        trCN = (np.sum(C * N) - 2 * gi * np.einsum("naa->n", RCZ) + uu * gi ** 2 * np.einsum("naa->n", RCR))
-        X = (RDR - gi[:, None, None] * (RCR @ np.swapaxes(RCZ, 1, 2) + RCZ @ RCR)
-             + (uu * gi ** 2)[:, None, None] * (RCR @ RCR))
-        phi = float(self.s2.sum()) * (self.T - uu * gi) + trCN - np.einsum("nab,nba->n", W, X)
-        phi[exclude] = np.inf
+        c2 = uu * gi ** 2
+        P = {(a, c): sum(RCR[a, b] * RCZ[c, b] for b in range(3)) for a in range(3) for c in range(3)}
+        X = {(a, c): RDR[a, c] - gi * (P[a, c] + P[c, a]) + c2 * sum(RCR[a, b] * RCR[b, c] for b in range(3))
+             for a in range(3) for c in range(a, 3)}
+        S = {(a, b): RCR[a, b] + (g * self.s2[a] if a == b else 0.0) for a in range(3) for b in range(a, 3)}
+        trCN = (float(np.trace(Nw)) - 2 * gi * sum(RCZ[a, a] for a in range(3))
+                + c2 * sum(RCR[a, a] for a in range(3)))
+        phi = float(self.s2.sum()) * (self.T - uu * gi) + trCN - sym3_trace_solve(S, X)
+        if among is None:
+            phi[exclude] = np.inf
         return phi
 
 
-def _exchange(st: GreedyState, sel: list[int], excl: np.ndarray, k0: int, cur: float, passes: int, t0: float,
-              budget: float | None) -> tuple[list[int], float, int]:
-    """Exchange passes of :func:`select_pool_gp`: each chosen pose in turn removed (exact downdate) and replaced by the
-    best candidate if that lowers tr C_s; a fresh factor after each pass with swaps. Returns (set, value, swaps)."""
-    m = len(sel)
-    swaps = 0
-    for _ in range(passes):
-        changed = False
-        for pos in range(m):
-            if budget is not None and time.perf_counter() - t0 > budget:
-                break
-            i = k0 + sel[pos]
-            down = st.without(i)
-            ex = excl.copy()
-            ex[i] = False
-            phi = down.values(ex)
-            j = int(np.argmin(phi))
-            if j != i and phi[j] < cur * (1 - 1e-9):
-                excl[i], excl[j] = False, True
-                sel[pos] = j - k0
-                cur = float(phi[j])
-                swaps += 1
-                changed = True
-                st = down
-                st.add(j)
-        if not changed:
-            break
-        st = st.build(list(range(k0)) + [k0 + x for x in sel])   # fresh factor after a pass with swaps
-    return sel, cur, swaps
+class GlsState(GreedyState):
+    """The greedy state of the GLS information (no working configurations) scoring candidates by the A form
+    tr(K M⁻¹ Kᵀ) (``K`` the criterion's pool matrix) or, K None, the D form −log det M."""
+
+    K: np.ndarray | None = None
+
+    def values(self, exclude: np.ndarray, among: np.ndarray | None = None) -> np.ndarray:
+        """−log det M or tr(K M⁻¹ Kᵀ) after adding each candidate (inf for excluded ones; ``among``: only those),
+        exact rank-three update: −log det M − log det(D_g + R C Rᵀ) + log det D_g, tr(K C Kᵀ) − tr(W (R C Kᵀ)(K C Rᵀ)),
+        W = (D_g + R C Rᵀ)⁻¹, D_g = g diag(s²)."""
+        nb = self.M.shape[0]
+        M = 0.5 * (self.M + self.M.T) + self.eps * np.eye(nb)
+        C = np.linalg.inv(M)
+        R, g = self.Rc, self.kdiag + self.w
+        if among is not None:
+            R, g = R[:, among], g[among]
+        CR = (R.reshape(-1, nb) @ C).reshape(R.shape)
+        S = {(a, b): np.einsum("nk,nk->n", CR[a], R[b]) + (g * self.s2[a] if a == b else 0.0)
+             for a in range(3) for b in range(a, 3)}
+        if self.K is not None:
+            G = (CR.reshape(-1, nb) @ self.K.T).reshape(3, R.shape[1], -1)     # R C Kᵀ per axis (3, N, ns)
+            X = {(a, b): np.einsum("ns,ns->n", G[a], G[b]) for a in range(3) for b in range(a, 3)}
+            phi = float(np.sum(self.K.T * (C @ self.K.T))) - sym3_trace_solve(S, X)
+        else:
+            a_, b_, c_, e_, f_, i_ = S[0, 0], S[0, 1], S[0, 2], S[1, 1], S[1, 2], S[2, 2]
+            det = a_ * (e_ * i_ - f_ * f_) + b_ * (c_ * f_ - b_ * i_) + c_ * (b_ * f_ - c_ * e_)
+            phi = (-np.linalg.slogdet(M)[1] - np.log(det) + np.log(g) * 3 + float(np.log(self.s2).sum()))
+        if among is None:
+            phi[exclude] = np.inf
+        return phi
 
 
 def greedy_ridge(J_pool: np.ndarray, discrepancy: DiscrepancyPrior) -> float:
@@ -194,26 +239,6 @@ def after_given(J_pool: np.ndarray, Q_pool: np.ndarray, m: int, J_given: np.ndar
     if Q_given is not None and len(Q_given):
         return np.concatenate([J_given, J_pool]), np.vstack([Q_given, Q_pool]), len(Q_given)
     return J_pool, Q_pool, 0
-
-
-def greedy_exchange(st: GreedyState, m: int, k0: int, passes: int, t0: float, budget: float | None
-                     ) -> tuple[np.ndarray, list[float], int]:
-    """Greedy additions of m candidates to a state holding k0 measured poses first, then the exchange passes
-    (:func:`_exchange`); the criterion is the state's :meth:`values`. Returns (pool indices, greedy path, swaps)."""
-    for i in range(k0):
-        st.add(i)
-    excl = np.zeros(len(st.Qc), bool)
-    excl[:k0] = True
-    path = []
-    for _ in range(m):
-        phi = st.values(excl)
-        j = int(np.argmin(phi))
-        path.append(float(phi[j]))
-        st.add(j)
-        excl[j] = True
-    sel = [j - k0 for j in st.chosen[k0:]]
-    sel, _, swaps = _exchange(st, sel, excl, k0, path[-1], passes, t0, budget)
-    return np.array(sel, int), path, swaps
 
 
 def select_pool_gp(J_pool: np.ndarray, Q_pool: np.ndarray, E: np.ndarray, Q_work: np.ndarray,
@@ -245,7 +270,9 @@ def select_pool_gp(J_pool: np.ndarray, Q_pool: np.ndarray, E: np.ndarray, Q_work
     t0 = time.perf_counter()
     Jall, Qall, k0 = after_given(J_pool, Q_pool, m, J_given, Q_given)
     st = GreedyState(Jall, Qall, E, Q_work, discrepancy, prior_info, greedy_ridge(J_pool, discrepancy))
-    idx, path, swaps = greedy_exchange(st, m, k0, exchange_passes, t0, time_budget_s)
+    found = greedy_exchange(st, m, k0, exchange_passes, deadline=None if time_budget_s is None
+                            else t0 + time_budget_s)
+    idx, path, swaps = found.indices, found.path, found.swaps
     rows = np.concatenate([np.arange(k0), k0 + idx])
     Jsel, Qsel = Jall[rows], Qall[rows]
     val = kpi_gp_value_and_grad(Jsel, E, discrepancy.cov(Qsel), discrepancy.cov(Q_work, Qsel),

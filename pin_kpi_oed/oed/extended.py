@@ -36,7 +36,8 @@ from pin_kpi_oed.effects.library import effect_jacobian, sum_joint_offsets
 from pin_kpi_oed.oed.covariance import prior_square_root
 from pin_kpi_oed.oed.criteria import Criterion
 from pin_kpi_oed.oed.objective import DesignObjective, information_criterion
-from pin_kpi_oed.oed.pool import PoolSelection, block_gains, pool_phi, select
+from pin_kpi_oed.oed.pool import PoolSelection, pool_phi, select
+from pin_kpi_oed.oed.pool_search import InformationState, greedy_exchange
 from pin_kpi_oed.threads import limit_threads
 
 __all__ = ["ExtendedModel", "ExtendedDesignCriterion", "select_pool", "pool_phi"]
@@ -406,81 +407,18 @@ class ExtendedDesignCriterion(DesignObjective):
 
 
 # ---------------------------------------------------------------------- pool selection with a prior
-def _block_gains(s: dict, G: np.ndarray | None, N: int, nh: int) -> np.ndarray:
-    """:func:`~pin_kpi_oed.oed.pool.block_gains` with G laid out (nh, N, ns)."""
-    return block_gains(s, None if G is None else G.transpose(1, 0, 2), N, nh)
-
-
-class _PoolState:
-    """Per-candidate quantities at an information matrix M, for greedy and exchange steps (Woodbury).
-
-    With B_i = F_i M⁻¹: A_i = F_i M⁻¹ F_iᵀ and H_i = F_i M⁻¹ Kᵀ, computed with one GEMM over the stacked
-    blocks (layout (nh, N, ·), contiguous per measurement axis). Adding candidate i: S_i = I + A_i,
-    G_i = H_i. Swapping out a chosen o (M₋ = M − F_oᵀF_o, S_o = I − A_o = L_o L_oᵀ):
-    F_i M₋⁻¹ F_iᵀ = A_i + D_i D_iᵀ and F_i M₋⁻¹ Kᵀ = H_i + D_i L_o⁻¹ H_o with D_i = B_i F_oᵀ L_o⁻ᵀ —
-    O(N·nh·nx·nh) per position instead of a new O(N·nh·nx²) product.
-    """
-
-    def __init__(self, Fp: np.ndarray, K: np.ndarray | None) -> None:
-        self.N, self.nh, self.nx = Fp.shape
-        self.Fp = Fp
-        self.Fa = np.ascontiguousarray(Fp.transpose(1, 0, 2))  # (nh, N, nx)
-        self.K = K
-
-    def at(self, M: np.ndarray) -> bool:
-        """Set M; False if M is not positive definite."""
-        try:
-            L = np.linalg.cholesky(M)
-        except np.linalg.LinAlgError:
-            return False
-        nh, N, nx = self.nh, self.N, self.nx
-        Minv = np.linalg.inv(M)
-        Minv = 0.5 * (Minv + Minv.T)
-        self.B = (self.Fa.reshape(nh * N, nx) @ Minv).reshape(nh, N, nx)
-        self.A = {(a, b): np.einsum("nk,nk->n", self.B[a], self.Fa[b]) for a in range(nh) for b in range(a, nh)}
-        if self.K is None:
-            self.H = None
-            self.phi = float(-2.0 * np.sum(np.log(np.diag(L))))
-        else:
-            self.H = (self.B.reshape(nh * N, nx) @ self.K.T).reshape(nh, N, -1)
-            X = np.linalg.solve(L, self.K.T)
-            self.phi = float(np.sum(X * X))
-        return True
-
-    def add_gains(self) -> np.ndarray:
-        """−Δφ of adding each candidate to M, (N,)."""
-        s = {k: v + (1.0 if k[0] == k[1] else 0.0) for k, v in self.A.items()}
-        return _block_gains(s, self.H, self.N, self.nh)
-
-    def swap_gains(self, o: int) -> tuple[float, np.ndarray] | None:
-        """(φ of M − F_oᵀF_o, −Δφ of adding each candidate to it), or None if it is singular."""
-        nh = self.nh
-        So = np.eye(nh) - np.array([[self.A[min(a, b), max(a, b)][o] for b in range(nh)] for a in range(nh)])
-        try:
-            Lo = np.linalg.cholesky(So)
-        except np.linalg.LinAlgError:
-            return None
-        LoiT = np.linalg.inv(Lo).T
-        D = (self.B.reshape(nh * self.N, self.nx) @ (self.Fp[o].T @ LoiT)).reshape(nh, self.N, nh)
-        s = {(a, b): v + (1.0 if a == b else 0.0) + np.einsum("nc,nc->n", D[a], D[b]) for (a, b), v in self.A.items()}
-        if self.H is None:
-            return self.phi - 2.0 * float(np.sum(np.log(np.diag(Lo)))), _block_gains(s, None, self.N, nh)
-        W = LoiT.T @ self.H[:, o, :]  # L_o⁻¹ H_o, (nh, ns)
-        G = self.H + (D.reshape(nh * self.N, nh) @ W).reshape(nh, self.N, -1)
-        return self.phi + float(np.sum(W * W)), _block_gains(s, G, self.N, nh)
-
-
 @limit_threads
 def select_pool(Fp: np.ndarray, m: int, K: np.ndarray | None = None, prior_info: np.ndarray | None = None,
                 seed: int = 0, max_sweeps: int = 30) -> PoolSelection:
     """Choose m of N candidates for the extended model (A-type with K, or D-optimal), with a prior.
 
     Without a prior this is :func:`pin_kpi_oed.oed.pool.select` (relaxation + exchange, certified).
-    With prior information M₀ = Σ₀⁻¹: greedy forward selection on M = M₀ + ε I + Σ F_iᵀF_i (ε a
-    tiny ridge while M is singular), then Fedorov exchange sweeps until no swap lowers φ. Every step
-    scores all candidates at once through :class:`_PoolState` (one GEMM per accepted change; a swap-out
-    is a rank-nh Woodbury correction, O(N·nh²·nx)), so the selection costs about what the geometric
-    :func:`~pin_kpi_oed.oed.pool.select` costs (KR 15 cell, 60 of 2,000: ratio ≈ 0.9).
+    With prior information M₀ = Σ₀⁻¹: the one pool selector (:func:`~pin_kpi_oed.oed.pool_search.greedy_exchange`)
+    on :class:`~pin_kpi_oed.oed.pool_search.InformationState`: greedy forward selection on M = M₀ + ε I +
+    Σ F_iᵀF_i (ε a tiny ridge while M is singular), then Fedorov exchange sweeps until no swap lowers φ. Every step
+    scores all candidates at once (one GEMM per accepted change; a swap-out is a rank-nh Woodbury correction,
+    O(N·nh²·nx)), so the selection costs about what the geometric :func:`~pin_kpi_oed.oed.pool.select` costs
+    (KR 15 cell, 60 of 2,000: ratio ≈ 0.9).
 
     Args:
         Fp: weighted extended Jacobian blocks of the candidates, (N, nh, nx).
@@ -507,43 +445,13 @@ def select_pool(Fp: np.ndarray, m: int, K: np.ndarray | None = None, prior_info:
     if not np.isfinite(pool_phi(full, K)):
         raise IdentifiabilityError("the candidate pool with the prior does not determine the extended parameters")
     eps = 1e-10 * np.trace(full) / nx
-    M = M0 + eps * np.eye(nx)
-    st = _PoolState(Fp, K)
-    chosen: list[int] = []
-    free = np.ones(N, bool)
-    for _ in range(m):
-        if not st.at(M):
-            raise IdentifiabilityError("extended pool selection: the prior information is not positive "
-                                       "semi-definite")
-        i = int(np.argmax(np.where(free, st.add_gains(), -np.inf)))
-        chosen.append(i)
-        free[i] = False
-        M = M + Fp[i].T @ Fp[i]
-    M = M - eps * np.eye(nx)
-    if not st.at(M):
-        raise IdentifiabilityError("extended pool selection: the chosen candidates with the prior do not determine "
-                                   "the extended parameters")
-    cur = st.phi
-    sweeps = 0
-    for sweeps in range(1, max_sweeps + 1):  # noqa: B007 (the count is read after the loop)
-        improved = False
-        for pos in range(m):
-            out = chosen[pos]
-            sw = st.swap_gains(out)
-            if sw is None:
-                continue
-            phi_m, g0 = sw
-            g = np.where(free, g0, -np.inf)
-            best = int(np.argmax(g))
-            if phi_m - g[best] < cur * (1 - 1e-10) - 1e-300 if K is not None else phi_m - g[best] < cur - 1e-10:
-                free[out], free[best] = True, False
-                chosen[pos] = best
-                M = M - Fp[out].T @ Fp[out] + Fp[best].T @ Fp[best]
-                if not st.at(M):
-                    raise IdentifiabilityError("extended pool selection: the exchange lost positive definiteness")
-                cur = st.phi
-                improved = True
-        if not improved:
-            break
-    return PoolSelection(indices=np.array(chosen), value=float(cur), nit=sweeps, time_s=time.perf_counter() - t0,
-                         success=True, status="selected", message=f"greedy + exchange ({sweeps} sweeps)")
+    try:
+        st = InformationState(Fp, K, M0, ridge=eps)
+    except IdentifiabilityError:
+        raise IdentifiabilityError("extended pool selection: the prior information is not positive semi-definite"
+                                   ) from None
+    rel, tol = (1e-10, 1e-300) if K is not None else (0.0, 1e-10)
+    found = greedy_exchange(st, m, passes=max_sweeps, rel_tol=rel, abs_tol=tol)
+    return PoolSelection(indices=found.indices, value=float(found.value), nit=found.passes,
+                         time_s=time.perf_counter() - t0, success=True, status="selected",
+                         message=f"greedy + exchange ({found.passes} sweeps)")

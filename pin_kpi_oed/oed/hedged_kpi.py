@@ -28,7 +28,9 @@ The exact gradient is ∇φ_H = φ_H · Σ_k ω_k ∇φ_k / φ_k (each member's 
 as with ``kpi_gp``. Pool selection (:meth:`HedgedDesignCriterion.select`): every member's own selection
 (:func:`~pin_kpi_oed.oed.discrepancy_kpi.select_pool_gp`, greedy + exchange) is a candidate set; the one of least
 φ_H is kept and improved by exchange passes on φ_H (a chosen pose swapped for the pool candidate that lowers φ_H
-most, over a seeded subset of the pool when m times the candidates exceeds :data:`EXCHANGE_EVALUATIONS`).
+most, over a seeded subset of the pool when m times the candidates exceeds :data:`EXCHANGE_EVALUATIONS`; every
+member's tr C_s of a swap from its :class:`~pin_kpi_oed.oed.discrepancy_pool.GreedyState`, an exact downdate and
+rank-three update, instead of a kriging solve per member and candidate).
 
 A fitted discrepancy (``design --model``) is not hedged: it is a measurement, not an assumption.
 """
@@ -45,6 +47,7 @@ import numpy as np
 from pin_kpi_oed.errors import IdentifiabilityError, InputError
 from pin_kpi_oed.discrepancy.prior import DiscrepancyPrior
 from pin_kpi_oed.oed.discrepancy_kpi import DiscrepancyDesignCriterion
+from pin_kpi_oed.oed.discrepancy_pool import GreedyState, after_given
 from pin_kpi_oed.oed.kriging import kpi_gp_value_and_grad
 from pin_kpi_oed.oed.objective import DesignObjective
 from pin_kpi_oed.oed.selection_result import PoolSelection
@@ -248,12 +251,26 @@ class HedgedDesignCriterion(DesignObjective):
 
         return score
 
+    def _member_states(self, Q_pool: np.ndarray, J_pool: np.ndarray) -> tuple[list[GreedyState], int]:
+        """Every member's exact (unregularised) pool state over the measured poses and the candidates, and k0,
+        the number of measured poses (the first candidates of each state)."""
+        states = []
+        for c in self.members:
+            Ja, Qa, k0 = after_given(J_pool, Q_pool, 1, c.J_given, c.Q_given)
+            states.append(GreedyState(Ja, Qa, c.E, c.Q_work, c.discrepancy, c.prior_info, 0.0))
+        return states, k0
+
     def _exchange(self, Q_pool: np.ndarray, J_pool: np.ndarray, idx: np.ndarray, val: float, passes: int,
                   seed: int, path: list) -> tuple[np.ndarray, float, int]:
-        """Exchange passes on φ_H: each chosen pose in turn swapped for the candidate that lowers φ_H most."""
+        """Exchange passes on φ_H: each chosen pose in turn swapped for the candidate that lowers φ_H most among a
+        seeded subset of the others; every member's tr C_s of each swap by its state's exact downdate and rank-three
+        update (:class:`~pin_kpi_oed.oed.discrepancy_pool.GreedyState`), the accepted set's φ_H from scratch."""
         if passes <= 0:
             return idx, val, 0
         score = self._pool_scorer(Q_pool, J_pool)
+        states, k0 = self._member_states(Q_pool, J_pool)
+        fixed = list(range(k0))
+        states = [st.build(fixed + list(k0 + idx)) for st in states]
         rng = np.random.default_rng(seed)
         swaps = 0
         for _ in range(int(passes)):
@@ -263,21 +280,24 @@ class HedgedDesignCriterion(DesignObjective):
                 k = max(10, EXCHANGE_EVALUATIONS // len(idx))
                 if len(rest) > k:
                     rest = rng.choice(rest, k, replace=False)
-                best_c, best_v = None, val * (1 - 1e-9)
-                for cand in rest:
+                logs = np.zeros(len(rest))
+                with np.errstate(invalid="ignore", divide="ignore"):
+                    for w, st, c in zip(self.weights, states, self.members):
+                        logs += w * np.log(st.without(k0 + int(idx[pos])).values(None, among=k0 + rest)
+                                           + c.tr_register)
+                vals = np.where(np.isfinite(logs), np.exp(logs), np.inf)
+                j = int(np.argmin(vals))
+                if vals[j] < val * (1 - 1e-9):
                     trial = idx.copy()
-                    trial[pos] = cand
+                    trial[pos] = rest[j]
                     try:
                         v = score(trial)
                     except IdentifiabilityError:
-                        continue
-                    if v < best_v:
-                        best_c, best_v = cand, v
-                if best_c is not None:
-                    idx = idx.copy()
-                    idx[pos] = best_c
-                    val, improved = best_v, True
-                    swaps += 1
+                        v = np.inf
+                    if v < val * (1 - 1e-9):
+                        idx, val, improved = trial, v, True
+                        swaps += 1
+                        states = [st.build(fixed + list(k0 + idx)) for st in states]
                 path.append(val)
             if not improved:
                 break

@@ -14,8 +14,8 @@ distinct pool candidates satisfies **tr C_s ≥ φ*/m**, the bound against which
 (φ*/m)/φ(ξ) is reported.
 
 **Rounding and exchange.** The m largest-weight candidates (distinct) start a
-Fedorov exchange: repeatedly swap a chosen point for a pool point when it
-lowers φ, with rank-3 Woodbury updates evaluated for all candidates at once.
+Fedorov exchange of the one pool selector (:mod:`pin_kpi_oed.oed.pool_search`): repeatedly swap a chosen
+point for a pool point when it lowers φ, with rank-nh Woodbury updates evaluated for all candidates at once.
 :func:`detmax` is the classical DETMAX-style exchange from a random start,
 the baseline the relaxation must match or beat.
 """
@@ -30,6 +30,7 @@ import numpy as np
 from pin_kpi_oed.errors import InputError
 from pin_kpi_oed.oed.relaxation import (WORKING_SET, ApproximateDesign, approximate_design, directional_derivatives,
                                         efficiency, pool_phi)
+from pin_kpi_oed.oed.pool_search import block_gains, information_exchange
 from pin_kpi_oed.oed.selection_result import PoolSelection
 from pin_kpi_oed.threads import limit_threads
 
@@ -43,98 +44,13 @@ CANDIDATES = 300
 POLISH = 3000
 
 
-def block_gains(s: dict, G: np.ndarray | None, N: int, nh: int) -> np.ndarray:
-    """−Δφ of candidate blocks whose S_i (nh×nh) is known by its entries ``s[a, b]`` (a ≤ b, each (N,)):
-    log det S_i (D-type, G None) or tr(G_iᵀ S_i⁻¹ G_i) (A-type, G (N, nh, ns)).
-
-    For nh ≤ 3 the 3×3 (2×2, 1×1) algebra is written out on length-N arrays — NumPy's batched ``solve`` /
-    ``einsum`` on tiny matrices cost more than the arithmetic — with tr(Gᵀ S⁻¹ G) = Σ_ab (S⁻¹)_ab (G Gᵀ)_ab;
-    larger nh use ``np.linalg``. Shared by the exchange here and :mod:`pin_kpi_oed.oed.extended`.
-    """
-    if nh > 3:
-        S = np.empty((N, nh, nh))
-        for (a, b), v in s.items():
-            S[:, a, b] = S[:, b, a] = v
-        if G is None:
-            return np.linalg.slogdet(S)[1]
-        return np.einsum("nas,nas->n", G, np.linalg.solve(S, G))
-    if nh == 1:
-        adj, det = {(0, 0): np.ones(N)}, s[0, 0]
-    elif nh == 2:
-        adj, det = {(0, 0): s[1, 1], (0, 1): -s[0, 1], (1, 1): s[0, 0]}, s[0, 0] * s[1, 1] - s[0, 1] ** 2
-    else:
-        a_, b_, c_, e_, f_, i_ = s[0, 0], s[0, 1], s[0, 2], s[1, 1], s[1, 2], s[2, 2]
-        adj = {(0, 0): e_ * i_ - f_ * f_, (0, 1): c_ * f_ - b_ * i_, (0, 2): b_ * f_ - c_ * e_,
-               (1, 1): a_ * i_ - c_ * c_, (1, 2): b_ * c_ - a_ * f_, (2, 2): a_ * e_ - b_ * b_}
-        det = a_ * adj[0, 0] + b_ * adj[0, 1] + c_ * adj[0, 2]
-    if G is None:
-        return np.log(det)
-    out = np.zeros(N)
-    for (a, b), v in adj.items():
-        out += (1.0 if a == b else 2.0) * v * np.einsum("ns,ns->n", G[:, a], G[:, b])
-    return out / det
-
-
-def _swap_gains(V: np.ndarray, G: np.ndarray | None) -> np.ndarray:
-    """For each candidate i with S_i = I + V_i V_iᵀ: tr(G_iᵀ S_i⁻¹ G_i) (A-type), or log det S_i (G None: D).
-
-    V: (N, nh, nb), G: (N, nh, ns); see :func:`block_gains`.
-    """
-    nh = V.shape[1]
-    s = {(a, b): np.einsum("nk,nk->n", V[:, a], V[:, b]) + (a == b) for a in range(nh) for b in range(a, nh)}
-    return block_gains(s, G, V.shape[0], nh)
-
-
 def _exchange(Fp: np.ndarray, chosen: Sequence[int] | np.ndarray, K: np.ndarray | None, ridge: float,
               max_sweeps: int = 50, M0: np.ndarray | None = None) -> tuple[np.ndarray, int]:
-    """Fedorov exchange with Woodbury updates: swap points while φ decreases (information M0 + Σ_chosen F_iᵀF_i).
-    Returns (chosen indices, sweeps)."""
-    N, nh, nb = Fp.shape
-    chosen = list(chosen)
-    in_set = np.zeros(N, bool)
-    in_set[chosen] = True
+    """Fedorov exchange of the one pool selector (:func:`~pin_kpi_oed.oed.pool_search.exchange` on the information
+    M0 + ridge·I + Σ_chosen F_iᵀF_i): swap points while φ decreases. Returns (chosen indices, sweeps)."""
+    nb = Fp.shape[2]
     reg = ridge * np.eye(nb) if M0 is None else ridge * np.eye(nb) + M0
-
-    def info_of(idx):
-        F = Fp[idx].reshape(-1, nb)
-        return F.T @ F + reg
-
-    M = info_of(chosen)
-    cur = pool_phi(M, K)
-    FpT = np.ascontiguousarray(Fp.transpose(0, 2, 1))
-    F2 = Fp.reshape(N * nh, nb)
-    sweeps = 0
-    for sweeps in range(1, max_sweeps + 1):  # noqa: B007 (the count is read after the loop)
-        improved = False
-        for pos in range(len(chosen)):
-            out = chosen[pos]
-            M_minus = M - FpT[out] @ Fp[out]
-            try:
-                L = np.linalg.cholesky(M_minus)
-            except np.linalg.LinAlgError:
-                continue
-            Linv = np.linalg.solve(L, np.eye(nb))
-            V = (F2 @ Linv.T).reshape(N, nh, nb)  # F_i L⁻ᵀ: S_i = I + V_i V_iᵀ = I + F_i M⁻¹ F_iᵀ
-            if K is None:
-                phi_minus = float(-2.0 * np.sum(np.log(np.diag(L))))
-                gain = _swap_gains(V, None)  # −Δφ = log det S_i
-            else:
-                R = K @ Linv.T  # (ns, nb): K M⁻¹ Kᵀ = R Rᵀ
-                phi_minus = float(np.sum(R * R))
-                G = (F2 @ (Linv.T @ R.T)).reshape(N, nh, -1)  # F_i M⁻¹ Kᵀ, (N, nh, ns)
-                gain = _swap_gains(V, G)  # tr reduction
-            gain[in_set] = -np.inf
-            best = int(np.argmax(gain))
-            new_phi = phi_minus - gain[best]
-            if new_phi < cur * (1 - 1e-10) - 1e-300:
-                in_set[out], in_set[best] = False, True
-                chosen[pos] = best
-                M = M_minus + FpT[best] @ Fp[best]
-                cur = pool_phi(M, K)
-                improved = True
-        if not improved:
-            break
-    return np.array(chosen), sweeps
+    return information_exchange(Fp, chosen, K, reg, max_sweeps, rel_tol=1e-10, abs_tol=1e-300)
 
 
 @limit_threads
