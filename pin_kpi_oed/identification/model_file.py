@@ -92,6 +92,10 @@ _FORMAT_NAME = MODEL_FORMAT.split("/")[0]
 
 
 # --------------------------------------------------------------------------- the model
+#: most registration configurations a station keeps (:attr:`Setup.registered_q_rad`)
+REGISTERED_Q_MAX = 2000
+
+
 @dataclass
 class Setup:
     """The measurement set-up of one station (SI units).
@@ -107,6 +111,11 @@ class Setup:
         sigma_scale: factor (≥ 1) on every predicted σ at this station: a registration sets it from its
             own rows' standardised errors (:func:`~pin_kpi_oed.identification.transfer.register_setup`), so
             a session that is worse than the calibrated one says so; 1 for a fitted station.
+        registered_q_rad: the configurations a registration fitted the set-up on, (k, n) rad (at most
+            :data:`REGISTERED_Q_MAX`, a seeded subset beyond): the predicted σ at this station counts the robot's
+            error that the set-up fitted on them could not absorb
+            (:func:`~pin_kpi_oed.identification.prediction_sigma.predictive_sigma`); None for a fitted station and
+            for model files written before it was recorded.
     """
 
     tracker_T_base: np.ndarray
@@ -117,9 +126,15 @@ class Setup:
     source: str = ""
     rms_m: float | None = None
     sigma_scale: float = 1.0
+    registered_q_rad: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         self.sigma_scale = float(self.sigma_scale)
+        if self.registered_q_rad is not None:
+            Q = np.asarray(self.registered_q_rad, float)
+            if len(Q) > REGISTERED_Q_MAX:
+                Q = Q[np.sort(np.random.default_rng(0).choice(len(Q), REGISTERED_Q_MAX, replace=False))]
+            self.registered_q_rad = Q
         if not np.isfinite(self.sigma_scale) or self.sigma_scale < 1.0:
             raise InputError(f"station set-up: sigma_scale must be a finite number >= 1, got {self.sigma_scale!r}")
         self.tracker_T_base = se3_from_matrix(self.tracker_T_base, "tracker_T_base").homogeneous.copy()
@@ -132,7 +147,8 @@ class Setup:
         """Plain numbers for JSON."""
         return to_jsonable({"tracker_T_base": self.tracker_T_base, "reflector_m": self.reflector_m,
                             "probe_R": self.probe_R, "n_rows": int(self.n_rows), "fitted_by": self.fitted_by,
-                            "source": self.source, "rms_m": self.rms_m, "sigma_scale": self.sigma_scale})
+                            "source": self.source, "rms_m": self.rms_m, "sigma_scale": self.sigma_scale,
+                            **({} if self.registered_q_rad is None else {"registered_q_rad": self.registered_q_rad})})
 
     @classmethod
     def from_dict(cls, d: dict, where: str) -> Setup:
@@ -155,8 +171,17 @@ class Setup:
         scale = d.get("sigma_scale", 1.0)
         if isinstance(scale, bool) or not isinstance(scale, (int, float)) or not np.isfinite(scale) or scale < 1.0:
             raise InputError(f"{where}: 'sigma_scale' must be a finite number >= 1, got {scale!r}")
+        Qr = d.get("registered_q_rad")
+        if Qr is not None:
+            try:
+                Qr = np.asarray(Qr, float)
+            except (TypeError, ValueError):
+                Qr = np.zeros((0, 0, 0))
+            if Qr.ndim != 2 or len(Qr) == 0 or not np.all(np.isfinite(Qr)):
+                raise InputError(f"{where}: 'registered_q_rad' must be rows of finite joint values (rad), one per "
+                                 "registration row")
         return cls(T, refl, R, int(d.get("n_rows", 0)), str(d.get("fitted_by", "identify")),
-                   str(d.get("source", "")), d.get("rms_m"), float(scale))
+                   str(d.get("source", "")), d.get("rms_m"), float(scale), Qr)
 
 
 @dataclass
@@ -445,6 +470,11 @@ class CalibratedModel:
         if not isinstance(st, dict) or not st:
             raise InputError(f"{where}: field 'stations' must name at least one station set-up")
         setups = {str(k): Setup.from_dict(v, f"{where}: stations.{k}") for k, v in st.items()}
+        for k, v in setups.items():
+            n_joints = len(robot.joint_names)
+            if v.registered_q_rad is not None and v.registered_q_rad.shape[1] != n_joints:
+                raise InputError(f"{where}: stations.{k}.registered_q_rad: {v.registered_q_rad.shape[1]} joint "
+                                 f"values per row, the robot has {n_joints}")
         default = d.get("default_station")
         if default is not None and str(default) not in setups:
             raise InputError(f"{where}: default_station '{default}' is not among the stations "

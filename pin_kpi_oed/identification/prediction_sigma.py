@@ -98,15 +98,22 @@ def _setup_jacobian(cm: Any, label: str, Q: np.ndarray) -> np.ndarray:
 def _registered(cm: Any, label: str, Q: np.ndarray, E: np.ndarray, names: list[str]) -> np.ndarray:
     """The robot Jacobian E (m, 3, R) over ``names`` of a station registered later, after its set-up absorbed what
     it can: Ẽ = E − G(q) (G_Zᵀ G_Z)⁻¹ G_Zᵀ J_Z (the re-registration formula of :mod:`pin_kpi_oed.oed.reregistration`)
-    with the set-up re-fitted on the calibration's training configurations Z (the coverage's) as the stand-in for
-    the registration rows. With the robot's marginal covariance alone the set-up's share would count as error: on
-    the UR10, 35 poses of Series B scored on C after registration, standardised RMS 0.50 instead of 0.8-1. Without
-    a coverage, E (conservative)."""
-    cov = _coverage(cm)
-    if cov is None or len(cov.Z) < 3 or not names:
+    with Z the configurations the registration fitted the set-up on (:attr:`Setup.registered_q_rad`): the robot's
+    error there is what the set-up absorbed, so the error left at q is E Δp less the set-up's answer to it. With the
+    robot's marginal covariance alone the set-up's share counts as error (35 poses of the UR10's Series B scored on C
+    after registration: standardised RMS 0.50); with the calibration's own configurations as the stand-in for Z,
+    what the set-up absorbs in the other session's joint ranges is missed (the same case 0.33-0.48; 0.79-1.10 on the
+    registration rows). A model file written before the rows were recorded uses the stand-in; without either, E
+    (conservative)."""
+    st = cm.setups[label]
+    Z = st.registered_q_rad
+    if Z is None or len(Z) < 3:
+        cov = _coverage(cm)
+        Z = None if cov is None else cov.Z
+    if Z is None or len(Z) < 3 or not names:
         return E
-    Gz = _setup_jacobian(cm, label, cov.Z).reshape(-1, 9)
-    Jz = _robot_jacobian(cm, label, cov.Z, names).reshape(-1, len(names))
+    Gz = _setup_jacobian(cm, label, Z).reshape(-1, 9)
+    Jz = _robot_jacobian(cm, label, Z, names).reshape(-1, len(names))
     norms = np.linalg.norm(Gz, axis=0)
     norms[norms == 0] = 1.0
     # set-up directions Z barely determines (relative singular value below 1 %) are left out, not amplified

@@ -224,7 +224,7 @@ def _register_one(model: CalibratedModel, data: MeasurementSet, Q: np.ndarray, l
     err = np.linalg.norm(prob.evaluate(sol.x)[0], axis=1)
     R_probe = wm.probe_R @ pin.exp3(P[L.probe]) if pose6d else None
     setup = Setup(wm.tracker_pose(P).homogeneous.copy(), wm.reflector(P), R_probe, m, "register", data.source,
-                  float(np.sqrt(np.mean(err ** 2))))
+                  float(np.sqrt(np.mean(err ** 2))), registered_q_rad=np.asarray(Q, float))
     return setup, (sol, err, th_own)
 
 

@@ -255,7 +255,9 @@ _STATION = {"type": "object", "additionalProperties": False, "required": ["track
                            "probe_R": {"anyOf": [_MAT3, {"type": "null"}]},
                            "n_rows": {"type": "integer", "minimum": 0}, "fitted_by": {"type": "string"},
                            "source": {"type": "string"}, "rms_m": {"type": ["number", "null"], "minimum": 0},
-                           "sigma_scale": {"type": "number", "minimum": 1}}}
+                           "sigma_scale": {"type": "number", "minimum": 1},
+                           "registered_q_rad": {"type": "array", "minItems": 1,
+                                                "items": {"type": "array", "items": _NUM, "minItems": 1}}}}
 #: schema of a calibrated model file (``pin_kpi_oed.model/1``; see :mod:`pin_kpi_oed.identification.model_file`)
 MODEL_SCHEMA: dict[str, Any] = {
     "type": "object", "additionalProperties": False, "required": ["format", "robot", "geometry", "stations"],
