@@ -316,3 +316,46 @@ def test_compensation_uses_the_model_effects(world):
     cm_t = dataclasses.replace(cm, effects=[ThermalExpansion(robot)], thetas=[np.zeros(1)])
     with pytest.raises(InputError, match="temperature"):
         compensate(cm_t, ts)  # the targets have no temperature column for the thermal effect
+
+
+def _line_program(robot, a, b, n=81):
+    Qp = np.asarray(a, float) + np.linspace(0.0, 1.0, n)[:, None] * (np.asarray(b, float) - np.asarray(a, float))
+    return TargetSet([f"L{i}" for i in range(n)], None, None, Qp, list(robot.joint_names), _aux(robot, n), "line")
+
+
+def test_program_compensation_keeps_the_path_continuous(world):
+    """A joint-space line: the correction changes between consecutive rows far less than the program's steps (no
+    branch change); a line through the wrist singularity (q5 = 0) is reported broken there, never sent as ok."""
+    robot, _, _, _, cm, _, _ = world
+    res = compensate_program(cm, _line_program(robot, [0.3, -1.2, 1.4, -0.5, 1.0, 0.7],
+                                               [0.9, -1.0, 1.6, -0.3, 1.4, 0.9]))
+    assert set(res.target_status) <= {"ok", "extrapolated"}
+    step = np.abs(np.diff(res.q_nominal, axis=0)).max()
+    assert res.correction_jump_rad[0] == 0.0 and res.correction_jump_rad.max() < 0.01 * step
+    assert np.allclose(res.correction_jump_rad[1:], np.abs(np.diff(res.q - res.q_nominal, axis=0)).max(axis=1))
+    assert "continuity: the correction changes by at most" in res.summary() and "broken" not in res.summary()
+    sing = compensate_program(cm, _line_program(robot, [0.3, -1.2, 1.4, -0.5, 0.4, 0.7],
+                                                [0.5, -1.0, 1.2, -0.3, -0.4, 0.9]))
+    good = np.array([s in ("ok", "extrapolated") for s in sing.target_status])
+    both = good[1:] & good[:-1]
+    assert (~good).any() and sing.correction_jump_rad.max() > 0.1  # the wrist flips where it is not ok
+    assert sing.correction_jump_rad[1:][both].max() < np.abs(np.diff(sing.q_nominal, axis=0)).max()
+    assert "the program is broken at" in sing.summary()
+
+
+def test_cli_program_csv_has_the_continuity_column(world, tmp_path):
+    from tests.cli_run import run_cli
+    from pin_kpi_oed.data.atomic import atomic_write_json
+
+    robot, _, _, _, cm, _, _ = world
+    prog = _line_program(robot, [0.3, -1.2, 1.4, -0.5, 1.0, 0.7], [0.9, -1.0, 1.6, -0.3, 1.4, 0.9], n=11)
+    atomic_write_json(tmp_path / "m.json", cm.to_dict())
+    _write(tmp_path / "prog.csv", list(robot.joint_names), prog.q.tolist())
+    rc, out, err = run_cli("compensate", "--model", tmp_path / "m.json", "--program", tmp_path / "prog.csv",
+                           "--out", tmp_path / "c.csv")
+    assert rc == 0, err
+    rows = list(csv.DictReader(open(tmp_path / "c.csv")))
+    assert len(rows) == 11 and float(rows[0]["correction_jump_rad"]) == 0.0
+    assert 0 < max(float(r["correction_jump_rad"]) for r in rows) < 1e-3
+    assert "sigma_rot_rad" not in rows[0]  # a position-only model states no orientation sigma
+    assert "continuity:" in out

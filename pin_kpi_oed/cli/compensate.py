@@ -64,6 +64,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         "target is 'off_branch' (default 0.05)")
     p.add_argument("--position-only", action="store_true",
                    help="with --program: hold the TCP position only, leave the orientation free")
+    p.add_argument("--tool-length", dest="tool_length", type=float, default=0.2, metavar="M",
+                   help="6-D models: the tool orientation's sigma is also stated as the position sigma it causes "
+                        "this far along the tool axis (m; default 0.2)")
     p.add_argument("--seed", type=int, default=0, help="seed of the random restarts of the nominal IK")
     p.add_argument("--json", default=None, help="write the full result (per target) as JSON here")
     p.add_argument("--quiet", action="store_true", help="print nothing")
@@ -91,7 +94,7 @@ def run(args: argparse.Namespace) -> int:
     kw = table_options(args)
     tcp = parse_floats(args.tcp, 3, "--tcp") if args.tcp else None
     opt = CompensationOptions(frame=args.frame, station=args.station, tcp_m=tcp, seed=args.seed, cell=cell,
-                              max_branch_step_rad=args.max_branch_step)
+                              max_branch_step_rad=args.max_branch_step, tool_length_m=args.tool_length)
     if args.program:
         prog = read_targets(args.program, robot.joint_names, program=True, revolute=robot.is_revolute, **kw)
         res = compensate_program(model, prog, opt, orientation=not args.position_only)

@@ -3,7 +3,8 @@
 ``register`` re-fits only the measurement set-up (tracker pose, reflector offset) of a calibrated
 model file on the given rows, with the robot (geometry + effects) held, and writes a new model
 file; ``predict`` writes, per row of a CSV, the reflector position the full model predicts
-(x, y, z in m, tracker frame), and the measured position and the error when the file has them.
+(x, y, z in m, tracker frame), and the measured position and the error when the file has them; a 6-D model also the
+probe orientation (rad) with its σ and the σ it causes at ``--tool-length`` along the tool axis (m).
 Errors are :class:`~pin_kpi_oed.errors.PinKpiOedError` with one-line messages (exit code 2);
 files are written atomically, after everything has been computed and checked.
 
@@ -65,6 +66,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="also write the trust map (PNG): the rows' reflector positions (robot base frame, top and "
                         "side view) coloured by the predicted sigma (mm), the rows outside the measured coverage "
                         "marked, the discrepancy's training configurations in grey")
+    p.add_argument("--tool-length", dest="tool_length", type=float, default=0.2, metavar="M",
+                   help="6-D models: the length along the tool axis (m) at which the orientation sigma is also "
+                        "stated as the position sigma it causes there (column sigma_at_length; default 0.2 m)")
     p.add_argument("--quiet", action="store_true", help="print nothing")
     add_table_options(p)
     p.set_defaults(func=run_predict)
@@ -126,7 +130,7 @@ def run_predict(args: argparse.Namespace) -> int:
     if data.position_m is not None and np.all(np.isfinite(data.position_m)):
         check_points_against_joints(model.robot, data.q, data.position_m, args.data, args.data,
                                     **_declared_units(args))
-    cols, table = predict_table(model, data, station=args.station)
+    cols, table = predict_table(model, data, station=args.station, tool_length_m=args.tool_length)
     if args.figure:  # the same predict_with_sigma as the table's sigma columns
         from pin_kpi_oed.identification.problem import align_data
         from pin_kpi_oed.viz.trust_map import plot_trust_map
@@ -148,11 +152,27 @@ def run_predict(args: argparse.Namespace) -> int:
         print(f"predicted sigma (3-D): median {np.median(s3) * 1e3:.4f} mm, max {s3.max() * 1e3:.4f} mm "
               f"({sigma_contents(model)}); {far} of {len(data)} rows outside the calibration's joint-space coverage"
               + (" (extrapolation column 1: the model was not measured near them)" if far else ""))
+        if model.pose6d:
+            print(_orientation_line(cols, table, args.tool_length))
         if args.figure:
             print(f"trust map: predicted sigma median {np.median(tm.sigma_m) * 1e3:.4f} mm, max "
                   f"{tm.sigma_m.max() * 1e3:.4f} mm; {tm.n_extrapolated} of {len(data)} rows outside the measured "
                   f"coverage -> {args.figure}")
     return 0
+
+
+def _orientation_line(cols: list[str], table: np.ndarray, length_m: float) -> str:
+    """The orientation σ of a 6-D model's predictions (mrad, 3-D) and the σ it causes at ``length_m`` along the tool
+    axis (mm); the orientation error against the data's when it has orientations."""
+    sw = np.linalg.norm(table[:, [cols.index(c) for c in ("sigma_rx", "sigma_ry", "sigma_rz")]], axis=1)
+    sl = table[:, cols.index("sigma_at_length")]
+    line = (f"predicted orientation sigma (3-D): median {np.median(sw) * 1e3:.4f} mrad, max {sw.max() * 1e3:.4f} mrad;"
+            f" at {length_m * 1e3:g} mm along the tool axis it moves the tool by sigma median "
+            f"{np.median(sl) * 1e3:.4f} mm, max {sl.max() * 1e3:.4f} mm")
+    if "rot_error" in cols:
+        e = table[:, cols.index("rot_error")]
+        line += f"; orientation error RMS {np.sqrt(np.mean(e ** 2)) * 1e3:.4f} mrad, max {e.max() * 1e3:.4f} mrad"
+    return line
 
 
 def _declared_units(args: argparse.Namespace) -> dict:

@@ -52,7 +52,7 @@ an extrapolation and its σ the widened one ``predict`` gives for the same confi
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -65,20 +65,19 @@ from pin_kpi_oed.errors import InputError
 from pin_kpi_oed.identification.compensate_checks import (branch_step, collision_rows, joint_limit_rows,
                                                           nearest_to_reference, start_configurations)
 from pin_kpi_oed.identification.compensation_file import write_compensation
+from pin_kpi_oed.identification.compensation_result import STATUSES, CompensationResult
 from pin_kpi_oed.identification.model_file import CalibratedModel
+from pin_kpi_oed.identification.prediction_sigma import DEFAULT_TOOL_LENGTH_M
 from pin_kpi_oed.identification.tool_offset import unobservable_tcp_sigma
 from pin_kpi_oed.model.kinematics import skew
 from pin_kpi_oed.model.parameters import ParameterLayout
 from pin_kpi_oed.model.tracker import TrackerModel
-from pin_kpi_oed.results import Result
 
 __all__ = ["FRAMES", "STATUSES", "CompensationOptions", "PoseModel", "CompensationResult", "compensate",
            "compensate_program", "write_compensation", "forward"]
 
 #: Frames a target can be given in.
 FRAMES = ("cell", "base")
-#: Status of a compensated target; only the first is safe to send.
-STATUSES = ("ok", "unreachable", "off_branch", "joint_limit", "collision", "near_singular", "extrapolated")
 
 
 @dataclass
@@ -105,6 +104,8 @@ class CompensationOptions:
         cell: the :class:`~pin_kpi_oed.cell.cell_model.Cell` whose independent check every compensated configuration
             must pass (``collision`` otherwise; its working configurations give the branch when the model has none);
             None: not checked.
+        tool_length_m: a 6-D model's orientation σ is also stated as the σ of the point this far along the tool
+            axis (m).
         tool_tolerances: the manufacturing tolerances of the joint placements the calibration could not determine,
             for the σ of a TCP away from the reflector (:mod:`pin_kpi_oed.identification.tool_offset`); default
             :class:`~pin_kpi_oed.model.tolerances.Tolerances` (0.5 mm, 1 mrad).
@@ -128,6 +129,7 @@ class CompensationOptions:
     limit_margin: float = 1e-6
     cell: Any = None
     tool_tolerances: Any = None
+    tool_length_m: float = DEFAULT_TOOL_LENGTH_M
 
     def __post_init__(self) -> None:
         if self.frame not in FRAMES:
@@ -139,6 +141,8 @@ class CompensationOptions:
                 raise InputError(f"compensation option {k} must be a positive number, got {v!r}")
         if self.tcp_m is not None:
             self.tcp_m = np.asarray(self.tcp_m, float).reshape(3)
+        if not (np.isfinite(self.tool_length_m) and self.tool_length_m >= 0):
+            raise InputError(f"compensation option tool_length_m must be a length >= 0 (m), got {self.tool_length_m!r}")
 
 
 class PoseModel:
@@ -278,125 +282,6 @@ def _solve_ik(pm: PoseModel, pos_t: np.ndarray, R_t: np.ndarray | None, Q0: np.n
     return _IK(Q, err_m, err_rad, inv_cond, nit)
 
 
-@dataclass(kw_only=True)
-class CompensationResult(Result):
-    """Compensated joint values of every target (SI units).
-
-    Attributes:
-        names: target labels.
-        joint_names: the robot's joints (columns of ``q`` and ``q_nominal``).
-        q_nominal: nominal IK solutions (what the controller would command for the target), (m, n).
-        q: compensated joint values (send these), (m, n).
-        correction_m: predicted TCP correction |F_cal(q_nominal) − target|, (m,) m.
-        residual_m, residual_rad: calibrated-model distance of q's TCP from the target (m, rad).
-        inv_cond: inverse condition number of the scaled Jacobian at q.
-        status: per target ``ok`` / ``unreachable`` / ``near_singular`` (``status`` of the
-            result: ``ok`` if every target is ok, else a count).
-        frame: ``cell`` or ``base``; tcp_m: the TCP point (tool frame, m); station.
-        sigma_m: predicted 3-D standard deviation of the TCP at q (m): the model's discrepancy
-            (posterior and white level; its noise model's σ without one) and, at a TCP away from the
-            reflector, ``tcp_unobservable_m``, (m,). Learnt at the reflector: a TCP
-            away from it adds the flange rotation's lever arm (:mod:`pin_kpi_oed.discrepancy.lever_arm`).
-        tcp_from_reflector_m: the TCP's distance from the station's reflector (m).
-        tool_frame: the tool frame ``tcp_m`` is given in.
-        start: per target, where its branch came from (``hint``, ``working``, ``neutral``; ``program``).
-        q_start: the start configurations (m, n).
-        branch_step_rad: per target, the largest joint change of ``q`` from ``q_nominal`` (rad / m).
-        from_start_rad: per target, the largest joint difference of ``q`` from ``q_start`` (rad / m).
-        collision_pair: per target with a cell, the pair nearest to colliding at ``q`` ("" without a cell).
-        tcp_unobservable_m: per target, the 3-D σ (m) at the TCP of what one reflector cannot see (joint-placement
-            errors the fit could not determine, under the tolerances; 0 at the fitted reflector), included in
-            ``sigma_m``.
-        extrapolation: per target, the compensated joints lie outside the calibration's joint-space coverage
-            (:class:`~pin_kpi_oed.discrepancy.coverage.JointCoverage`): the model extrapolates there and its σ
-            includes the parameters' extrapolation error, (m,) bool.
-    """
-
-    names: list[str] = field(default_factory=list)
-    joint_names: list[str] = field(default_factory=list)
-    q_nominal: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
-    q: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
-    correction_m: np.ndarray = field(default_factory=lambda: np.zeros(0))
-    residual_m: np.ndarray = field(default_factory=lambda: np.zeros(0))
-    residual_rad: np.ndarray = field(default_factory=lambda: np.zeros(0))
-    inv_cond: np.ndarray = field(default_factory=lambda: np.zeros(0))
-    target_status: list[str] = field(default_factory=list)
-    frame: str = "cell"
-    station: str = ""
-    tcp_m: np.ndarray = field(default_factory=lambda: np.zeros(3))
-    orientation: bool = False
-    sigma_m: np.ndarray = field(default_factory=lambda: np.zeros(0))
-    tcp_from_reflector_m: float = 0.0
-    tool_frame: str = ""
-    start: list[str] = field(default_factory=list)
-    q_start: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
-    branch_step_rad: np.ndarray = field(default_factory=lambda: np.zeros(0))
-    from_start_rad: np.ndarray = field(default_factory=lambda: np.zeros(0))
-    collision_pair: list[str] = field(default_factory=list)
-    tcp_unobservable_m: np.ndarray = field(default_factory=lambda: np.zeros(0))
-    extrapolation: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))
-
-    def summary(self) -> str:
-        """Counts, correction statistics (mm), and the targets that are not ok."""
-        c = self.correction_m * 1e3
-        ok = [s == "ok" for s in self.target_status]
-        counts = ", ".join(f"{self.target_status.count(k)} {k.replace('_', ' ')}" for k in STATUSES[1:]
-                           if k in self.target_status)
-        lines = [f"compensated {len(self.names)} targets "
-                 f"({'position + orientation' if self.orientation else 'position'}"
-                 f", {self.frame} frame{' of station ' + self.station if self.frame == 'cell' else ''}): "
-                 f"{sum(ok)} ok" + (f", {counts}" if counts else ""),
-                 f"TCP {np.round(self.tcp_m * 1e3, 3).tolist()} mm in tool frame {self.tool_frame}"
-                 + ("; branch from: " + ", ".join(f"{self.start.count(k)} {k}" for k in dict.fromkeys(self.start))
-                    if self.start else "")
-                 + (f"; largest joint change by compensation {np.max(self.branch_step_rad):.2e} rad"
-                    if self.branch_step_rad.size else "")]
-        if c.size:
-            lines.append(f"predicted correction: mean {np.nanmean(c):.4f} mm, max {np.nanmax(c):.4f} mm; "
-                         f"largest residual {np.nanmax(self.residual_m) * 1e3:.2e} mm")
-        if self.sigma_m.size:
-            lines.append(f"predicted TCP sigma (3-D) at the compensated joints: mean {np.mean(self.sigma_m) * 1e3:.4f} "
-                         f"mm, max {np.max(self.sigma_m) * 1e3:.4f} mm")
-            from pin_kpi_oed.discrepancy.lever_arm import LEVER_ARM_NOTE_M, lever_arm_line
-
-            if self.tcp_from_reflector_m >= LEVER_ARM_NOTE_M:
-                lines.append(lever_arm_line(self.tcp_from_reflector_m, "this sigma"))
-            if self.tcp_unobservable_m.size and np.max(self.tcp_unobservable_m) > 0:
-                lines.append(f"of which {np.max(self.tcp_unobservable_m) * 1e3:.4f} mm (3-D, 1 sigma) the reflector "
-                             "cannot see at this TCP: joint-placement errors the calibration could not determine "
-                             "(e.g. along and about the last joint axis), from the manufacturing tolerances; a "
-                             "reflector at the TCP (or the TCP measured) removes it")
-        if np.any(self.extrapolation):
-            far = [n for n, e in zip(self.names, self.extrapolation) if e]
-            n_st = self.target_status.count("extrapolated")
-            lines.append(f"{len(far)} of {len(self.names)} targets outside the calibration's joint-space coverage "
-                         f"(extrapolation: {', '.join(far[:5])}{' ...' if len(far) > 5 else ''}"
-                         f"{f'; {n_st} of them status extrapolated, not ok' if n_st else ''}): the model was not "
-                         "measured near them, their correction is an extrapolation and their sigma the widened one "
-                         "predict gives there (the parameters' extrapolation included); measure poses near them "
-                         "(design --given with the calibration's poses adds them) and identify again")
-        bad = [(n, s) for n, s in zip(self.names, self.target_status) if s != "ok"]
-        for n, s in bad[:10]:
-            lines.append(f"  target {n}: {s}")
-        if len(bad) > 10:
-            lines.append(f"  ... and {len(bad) - 10} more")
-        return "\n".join(lines)
-
-    def to_dict(self) -> dict:
-        from pin_kpi_oed.data.atomic import to_jsonable
-
-        return to_jsonable({**self.result_dict(), "names": self.names, "joint_names": self.joint_names,
-                            "q": self.q, "q_nominal": self.q_nominal, "correction_m": self.correction_m,
-                            "residual_m": self.residual_m, "residual_rad": self.residual_rad,
-                            "inv_cond": self.inv_cond, "target_status": self.target_status, "frame": self.frame,
-                            "station": self.station, "tcp_m": self.tcp_m, "orientation": self.orientation,
-                            "sigma_m": self.sigma_m, "tcp_from_reflector_m": self.tcp_from_reflector_m,
-                            "tool_frame": self.tool_frame, "start": self.start, "q_start": self.q_start,
-                            "branch_step_rad": self.branch_step_rad, "from_start_rad": self.from_start_rad,
-                            "collision_pair": self.collision_pair, "tcp_unobservable_m": self.tcp_unobservable_m,
-                            "extrapolation": self.extrapolation})
-
-
 def _nominal_ik(pm0: PoseModel, pos_t: np.ndarray, R_t: np.ndarray | None, Q_start: np.ndarray, aux: Any,
                 opt: CompensationOptions) -> tuple[_IK, np.ndarray]:
     """Nominal IK from Q_start, then from seeded random starts for the rows that did not converge.
@@ -502,6 +387,7 @@ def compensate_program(cm: CalibratedModel, program: TargetSet, options: Compens
     targets = TargetSet(program.names, pos_t, None, Q0, program.joint_names, program.aux, program.source)
     res = _result(cm, targets, opt, pm, nom, cal, pos_t, t0, Q0, ["program"] * len(Q0), np.zeros(len(Q0), bool))
     res.orientation = bool(orientation)
+    res.correction_jump_rad = np.r_[0.0, np.abs(np.diff(cal.Q - Q0, axis=0)).max(axis=1)] if len(Q0) else np.zeros(0)
     return res
 
 
@@ -532,6 +418,7 @@ def _result(cm: CalibratedModel, ts: TargetSet, opt: CompensationOptions, pm: Po
                        else (np.zeros(len(ts), bool), [""] * len(ts)))
     unseen = unobservable_tcp_sigma(cm, opt.station, pm.tcp, cal.Q, opt.tool_tolerances, seed=opt.seed)
     sig, extra = _tcp_sigma(cm, cal.Q, ts.aux, opt.station)
+    rot, at_l = _orientation_sigma(cm, cal.Q, ts.aux, opt)
     status = [_status(i, opt, nom, cal, bool(left_branch[i]), step[i] > opt.max_branch_step_rad, at_limit[i],
                       colliding[i], bool(extra[i])) for i in range(len(ts))]
     n_bad = sum(s != "ok" for s in status)
@@ -545,7 +432,8 @@ def _result(cm: CalibratedModel, ts: TargetSet, opt: CompensationOptions, pm: Po
         sigma_m=np.sqrt(sig ** 2 + unseen ** 2), tcp_unobservable_m=unseen, extrapolation=extra,
         tcp_from_reflector_m=lever_arm_m(pm.tcp, cm.setups[cm.station(opt.station)].reflector_m),
         tool_frame=cm.robot.tool_frame, start=list(start), q_start=np.asarray(Q_start, float),
-        branch_step_rad=step, from_start_rad=branch_step(cal.Q, Q_start), collision_pair=pair)
+        branch_step_rad=step, from_start_rad=branch_step(cal.Q, Q_start), collision_pair=pair,
+        sigma_rot_rad=rot, tool_length_m=float(opt.tool_length_m), sigma_at_length_m=at_l)
 
 
 def _status(i: int, opt: CompensationOptions, nom: _IK, cal: _IK, left_branch: bool, big_step: bool,
@@ -577,6 +465,21 @@ def _tcp_sigma(cm: CalibratedModel, Q: np.ndarray, aux: Any, station: str | None
     _, sig, extra = cm.predict_with_sigma(Q, aux if isinstance(aux, MeasurementSet) else None,
                                           station=cm.station(station))
     return np.sqrt((sig ** 2).sum(axis=1)), np.asarray(extra, bool)
+
+
+def _orientation_sigma(cm: CalibratedModel, Q: np.ndarray, aux: Any, opt: CompensationOptions
+                       ) -> tuple[np.ndarray, np.ndarray]:
+    """(3-D σ of the orientation (rad), σ at ``opt.tool_length_m`` along the tool axis (m)) at Q of a 6-D model: of
+    the frame the calibration measured (the probe's), which a tool rigidly mounted with it shares (its mounting
+    relative to the probe is the nominal one, like a TCP away from the reflector); empty for a position-only model."""
+    from pin_kpi_oed.identification.prediction_sigma import orientation_sigma
+
+    if not cm.pose6d or not len(Q):
+        return np.zeros(0), np.zeros(0)
+    label = cm.station(opt.station)
+    _, s, at_l = orientation_sigma(cm, Q, aux if isinstance(aux, MeasurementSet) else None, label,
+                                   np.array([label] * len(Q), dtype=object), opt.tool_length_m)
+    return np.linalg.norm(s, axis=1), at_l
 
 
 def forward(cm: CalibratedModel, Q: np.ndarray, aux: Any = None, frame: str = "cell", station: str | None = None,

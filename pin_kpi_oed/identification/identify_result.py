@@ -14,7 +14,7 @@ from pin_kpi_oed.identification.model_file import CalibratedModel
 from pin_kpi_oed.identification.problem import StationSet, effect_param_names, predict
 from pin_kpi_oed.model.tracker import TrackerModel
 from pin_kpi_oed.oed.identifiability import Identifiability
-from pin_kpi_oed.validation.units import SIGMA_MAX_M
+from pin_kpi_oed.validation.units import SIGMA_MAX_M, SIGMA_ROT_MAX_RAD
 from pin_kpi_oed.results import Result
 
 __all__ = ["IdentificationResult", "param_unit"]
@@ -157,6 +157,24 @@ class IdentificationResult(Result):
             return None
         return np.sqrt(np.sum(R ** 2, axis=0) / dof)
 
+    def residual_sigma_rad(self) -> np.ndarray | None:
+        r"""The fit's own orientation residual level per axis (rad, tracker frame) of a 6-D fit:
+        s_a = √(Σ_i ω_{ia}² / (m − k/6)) over the m inlier rows (ω the orientation residuals, k the estimated
+        parameters shared by the 6m rows): the white part of the orientation σ ``predict`` gives.
+
+        Returns:
+            (3,) rad, or None for a position-only fit or when 6m ≤ k.
+        """
+        if self.residuals_rad is None:
+            return None
+        keep = np.ones(len(self.residuals_rad), bool)
+        keep[self.outliers] = False
+        W = np.asarray(self.residuals_rad, float)[keep]
+        dof = W.shape[0] - len(self.values) / 6.0
+        if dof <= 0 or not np.all(np.isfinite(W)):
+            return None
+        return np.sqrt(np.sum(W ** 2, axis=0) / dof)
+
     def parameter(self, name: str) -> tuple[float, float]:
         """(value, std) of an estimated parameter by name.
 
@@ -210,6 +228,9 @@ class IdentificationResult(Result):
         level = self.residual_sigma_m()
         if level is not None and np.all(level > 0) and np.all(level <= SIGMA_MAX_M):  # else not a calibration
             fit["residual_sigma_m"] = level
+        level_rad = self.residual_sigma_rad()
+        if level_rad is not None and np.all(level_rad > 0) and np.all(level_rad <= SIGMA_ROT_MAX_RAD):
+            fit["residual_sigma_rad"] = level_rad
         return CalibratedModel(
             robot=self.model.robot, joint_p=np.asarray(self.p[:nj], float).copy(), effects=self.all_effects()[0],
             thetas=[t.copy() for t in self.all_effects()[1]], setups=dict(self.setups),

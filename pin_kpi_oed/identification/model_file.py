@@ -31,7 +31,9 @@ key                  content (SI units: m, rad)
                      ``compensate`` keeps for targets without a joint hint
 ``fit``              fit statistics (measurements, RMS, reduced χ², iterations, ...) and
                      ``residual_sigma_m``: the fit's own residual level per axis (m, corrected
-                     for the fitted parameters), what ``register`` compares a new session with
+                     for the fitted parameters), what ``register`` compares a new session with;
+                     a 6-D fit's ``residual_sigma_rad``: the orientation residual level per axis
+                     (rad), the white part of the orientation σ ``predict`` gives
 ``discrepancy``      optional: the model discrepancy δ(q) of the robot (base frame; kernel,
                      hyper-parameters, training or inducing configurations; see
                      :mod:`pin_kpi_oed.discrepancy.gp`), kept by ``register``
@@ -82,7 +84,7 @@ from pin_kpi_oed.model.parameters import ParameterLayout
 from pin_kpi_oed.model.robot import Robot, load_robot, portable_spec
 from pin_kpi_oed.model.serialize import se3_from_matrix
 from pin_kpi_oed.validation.schema import validate_model_dict
-from pin_kpi_oed.validation.units import check_sigma_m
+from pin_kpi_oed.validation.units import check_sigma_m, check_sigma_rad
 
 __all__ = ["MODEL_FORMAT", "Setup", "CalibratedModel", "load_model_file", "effect_spec", "effect_from_spec"]
 
@@ -354,6 +356,28 @@ class CalibratedModel:
         Q = self.robot.check_q(np.atleast_2d(np.asarray(Q, float)), "predict: Q")
         return predictive_sigma(self, Q, aux, station, self.row_stations(len(Q), aux, station))
 
+    def predict_orientation_with_sigma(self, Q: np.ndarray, aux: MeasurementSet | None = None,
+                                       station: str | None = None, length_m: float = 0.0
+                                       ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """A 6-D model's predicted probe orientation with the standard deviation of measured − predicted
+        (:func:`~pin_kpi_oed.identification.prediction_sigma.orientation_sigma`).
+
+        Args:
+            Q, aux, station: as :meth:`predict`.
+            length_m: a length along the tool axis (m): the 3-D σ of the point there that the orientation error
+                moves (the tool's tip at L).
+
+        Returns:
+            (rotation vectors (m, 3) rad, σ per axis (m, 3) rad, both in the station's tracker frame; σ at
+            ``length_m`` (m,) m).
+
+        Raises:
+            InputError: a position-only model or station, a negative length, as :meth:`predict`.
+        """
+        from pin_kpi_oed.identification.prediction_sigma import orientation_sigma
+        Q = self.robot.check_q(np.atleast_2d(np.asarray(Q, float)), "predict: Q")
+        return orientation_sigma(self, Q, aux, station, self.row_stations(len(Q), aux, station), length_m)
+
     @property
     def residual_sigma_m(self) -> np.ndarray | None:
         """The calibration's own residual level per axis (m; ``fit.residual_sigma_m``), or None if the file has none.
@@ -491,6 +515,11 @@ class CalibratedModel:
             fit["residual_sigma_m"] = check_sigma_m(fit["residual_sigma_m"], f"{where}: field fit.residual_sigma_m")
             if fit["residual_sigma_m"].size != 3:
                 raise InputError(f"{where}: field fit.residual_sigma_m must be 3 numbers (m per axis)")
+        if fit.get("residual_sigma_rad") is not None:
+            fit["residual_sigma_rad"] = check_sigma_rad(fit["residual_sigma_rad"],
+                                                        f"{where}: field fit.residual_sigma_rad")
+            if fit["residual_sigma_rad"].size != 3:
+                raise InputError(f"{where}: field fit.residual_sigma_rad must be 3 numbers (rad per axis)")
         disc = None
         if d.get("discrepancy") is not None:
             disc = Discrepancy.from_dict(d["discrepancy"], robot.joint_names, f"{where}: discrepancy")

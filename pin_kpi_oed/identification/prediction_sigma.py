@@ -20,6 +20,19 @@ For a row q of station s (tracker rotation R_s), the covariance of measured − 
     coverage, the least-squares term E C_ls Eᵀ inside it
     (:meth:`~pin_kpi_oed.discrepancy.gp.Discrepancy.parametric_covariance`).
 
+The tool's orientation (6-D models, :func:`orientation_sigma`): the covariance of the measured − predicted
+orientation (rotation vector, tracker frame of the station) is
+
+.. math::  C_ω(q) = f\,Ω(q)\,C_p\,Ω(q)^\top + \mathrm{diag}(w_ω^2),
+
+Ω the orientation rows of the station's Jacobian over the fit's parameters (as E above, the probe's orientation
+included; a station registered later takes the robot's unprojected, which errs on the large side), C_p the fit's
+covariance, f = max(1, reduced χ²) when it was not scaled, w_ω the fit's orientation residual level per axis
+(``fit.residual_sigma_rad``, corrected for the fitted parameters; else the stated orientation noise): the
+discrepancy is a position term, so what the geometry leaves of the orientation is counted as white. A point at a
+length L along the tool axis z (the tool frame's z in the tracker frame) moves by L·ω × z; its 3-D σ is
+L·√tr([z]ₓ C_ω [z]ₓᵀ) (rotations about the axis do not move it).
+
 Rows outside the training's joint-space coverage (:class:`~pin_kpi_oed.discrepancy.coverage.JointCoverage`: the
 combination of the angles counts) are flagged; every σ of a station is multiplied by its ``sigma_scale``.
 """
@@ -30,16 +43,25 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["predictive_sigma", "robot_parameter_covariance", "sigma_contents"]
+from pin_kpi_oed.model.kinematics import skew
+
+#: the length along the tool axis at which ``predict`` and ``compensate`` state the orientation's effect (m):
+#: "orientation at 200 mm", as a cell's ``orientation_length_m`` defaults to
+DEFAULT_TOOL_LENGTH_M = 0.2
+
+__all__ = ["DEFAULT_TOOL_LENGTH_M", "predictive_sigma", "orientation_sigma", "robot_parameter_covariance",
+           "sigma_contents"]
 
 
-def robot_parameter_covariance(cm: Any, label: str | None = None) -> tuple[list[str], list[str], np.ndarray | None]:
+def robot_parameter_covariance(cm: Any, label: str | None = None, probe: bool = False
+                               ) -> tuple[list[str], list[str], np.ndarray | None]:
     """The fit's parameters a prediction of station ``label`` depends on, from a model's ``parameters``: (names in
     the fit, the station layout's names of the same parameters, their covariance), or ([], [], None).
 
     The robot parameters always; the station's own set-up (tracker pose, reflector) too when ``identify`` fitted it
     with the robot (their errors are correlated and partly cancel). A station registered later gets the robot's
-    alone; its Jacobian is then projected (:func:`_registered`).
+    alone; its Jacobian is then projected (:func:`_registered`). ``probe``: a 6-D station's set-up includes the
+    probe's orientation (what the measured orientation depends on besides the robot).
     """
     from pin_kpi_oed.identification.problem import STATION_SEP
     from pin_kpi_oed.model.parameters import ParameterLayout
@@ -49,7 +71,7 @@ def robot_parameter_covariance(cm: Any, label: str | None = None) -> tuple[list[
     if C is None or not names:
         return [], [], None
     C = np.asarray(C, float)
-    L = ParameterLayout(list(cm.robot.joint_names))
+    L = ParameterLayout(list(cm.robot.joint_names), pose6d=probe)
     robot = set(L.names[:6 * cm.robot.nq])
     own = label is not None and cm.setups[label].fitted_by == "identify"
     setup = set(L.names[6 * cm.robot.nq:]) if own else set()
@@ -210,3 +232,46 @@ def predictive_sigma(cm: Any, Q: np.ndarray, aux: Any, station: str | None, labe
                         Cb[mask] += d.parametric_covariance(Q[rows][mask], E[mask], inside=inside)
         sig[rows] = np.sqrt(np.einsum("ia,nab,ib->ni", R, Cb, R) + noise2[rows])
     return Y, scale * sig, extra
+
+
+def orientation_sigma(cm: Any, Q: np.ndarray, aux: Any, station: str | None, labels: np.ndarray,
+                      length_m: float = 0.0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(ω (m, 3) rad, σ_ω (m, 3) rad, σ_L (m,) m) of a 6-D
+    :class:`~pin_kpi_oed.identification.model_file.CalibratedModel` at checked configurations Q (module docstring):
+    the predicted probe orientation (rotation vector, tracker frame), the σ per axis of measured − predicted
+    orientation, and the 3-D σ of a point ``length_m`` along the tool axis that the orientation error moves.
+
+    Raises:
+        InputError: the model (or the rows' station) predicts positions only, or ``length_m`` is negative.
+    """
+    from pin_kpi_oed.errors import InputError
+
+    if not cm.pose6d:
+        raise InputError("the model predicts positions only (identified without orientations): no orientation "
+                         "sigma; identify with the rx, ry, rz columns of a 6-DoF probe")
+    if not (np.isfinite(length_m) and length_m >= 0):
+        raise InputError(f"tool length {length_m!r} m: must be a length >= 0 (m)")
+    m = len(Q)
+    delta = cm.discrepancy.predict(Q, return_var=False)[0] if cm.discrepancy is not None else None
+    W = cm.predict_rows(Q, aux, station, True, delta)[:, 3:6]
+    level = (cm.fit or {}).get("residual_sigma_rad")
+    w2 = (np.asarray(level, float).reshape(3) if level is not None else np.full(3, cm.noise.sigma_rot_rad)) ** 2
+    sig, sig_l = np.empty((m, 3)), np.empty(m)
+    for lab in dict.fromkeys(labels):
+        rows = np.flatnonzero(labels == lab)
+        model, p = _jacobian_model(cm, lab)
+        if not model.pose6d:
+            raise InputError(f"station '{lab}' was registered without orientations: no orientation sigma there")
+        C = np.tile(np.diag(w2), (rows.size, 1, 1))
+        _, names, Cp = robot_parameter_covariance(cm, lab, probe=True)
+        if Cp is not None:
+            cols = [model.layout.names.index(n) for n in names]
+            Om = model.jacobian(p, Q[rows])[:, 3:6][:, :, cols]
+            C += np.einsum("map,pq,mbq->mab", Om, Cp * _chi2_factor(cm), Om)
+        kin = model.kinematics(p, Q[rows], model.reflector(p))
+        z = np.einsum("ab,mb->ma", model.tracker_pose(p).rotation, kin.R_tool[:, :, 2])
+        Z = skew(z)
+        scale = cm.setups[lab].sigma_scale
+        sig[rows] = scale * np.sqrt(np.einsum("maa->ma", C))
+        sig_l[rows] = scale * length_m * np.sqrt(np.maximum(np.einsum("mab,mbc,mac->m", Z, C, Z), 0.0))
+    return W, sig, sig_l

@@ -55,6 +55,7 @@ from pin_kpi_oed.identification.fit_inputs import MIN_STATION_ROWS, default_stat
 from pin_kpi_oed.identification.heldout import calibration_stats, error_stats
 from pin_kpi_oed.identification.tracker_start import proj_so3, register_points
 from pin_kpi_oed.identification.model_file import CalibratedModel, Setup
+from pin_kpi_oed.identification.prediction_sigma import DEFAULT_TOOL_LENGTH_M
 from pin_kpi_oed.identification.problem import ResidualModel, StationSet, align_data
 from pin_kpi_oed.model.parameters import ParameterLayout
 from pin_kpi_oed.results import Result
@@ -399,8 +400,8 @@ def validate_transfer(model: CalibratedModel, data: MeasurementSet, *, register_
     return out
 
 
-def predict_table(model: CalibratedModel, data: MeasurementSet, station: str | None = None
-                  ) -> tuple[list[str], np.ndarray]:
+def predict_table(model: CalibratedModel, data: MeasurementSet, station: str | None = None,
+                  tool_length_m: float = DEFAULT_TOOL_LENGTH_M) -> tuple[list[str], np.ndarray]:
     """Per row of ``data``: predicted reflector x, y, z (m, tracker frame), measured x, y, z and error if present.
 
     Args:
@@ -414,6 +415,10 @@ def predict_table(model: CalibratedModel, data: MeasurementSet, station: str | N
         standard deviation of measured − predicted per axis, discrepancy posterior and white level included;
         :meth:`CalibratedModel.predict_with_sigma`), ``extrapolation`` (1 where a joint angle lies outside the
         training coverage) and, when the data have positions, ``x, y, z, error`` (m; error = |measured − predicted|).
+        A 6-D model adds the probe orientation ``rx_pred, ry_pred, rz_pred`` (rotation vector, rad, tracker frame),
+        ``sigma_rx, sigma_ry, sigma_rz`` (rad), ``sigma_at_length`` (m: the 3-D σ of the point ``tool_length_m``
+        along the tool axis that the orientation error moves; :meth:`CalibratedModel.predict_orientation_with_sigma`)
+        and, when the data have orientations, ``rot_error`` (rad, the angle of measured · predicted⁻¹).
 
     Raises:
         InputError: the data's joint names do not match the model's robot, an unknown station,
@@ -430,6 +435,14 @@ def predict_table(model: CalibratedModel, data: MeasurementSet, station: str | N
     if data.has_position:
         cols += ["x", "y", "z", "error"]
         table += [data.position_m, np.linalg.norm(data.position_m - Y, axis=1)[:, None]]
+    if model.pose6d:
+        W, sw, sl = model.predict_orientation_with_sigma(Q, data, station=station, length_m=tool_length_m)
+        cols += ["rx_pred", "ry_pred", "rz_pred", "sigma_rx", "sigma_ry", "sigma_rz", "sigma_at_length"]
+        table += [W, sw, sl[:, None]]
+        if data.rotvec_rad is not None:
+            err = (Rotation.from_rotvec(data.rotvec_rad) * Rotation.from_rotvec(W).inv()).magnitude()
+            cols.append("rot_error")
+            table.append(err[:, None])
     return cols, np.hstack(table)
 
 

@@ -71,6 +71,7 @@ def path_study(out_dir: Path, m: int = 60, seeds: tuple[int, ...] = (0, 1, 2, 3,
     from pin_kpi_oed.studies.kpi_withheld import paired_summary
 
     t0 = time.perf_counter()
+    Path(out_dir).mkdir(parents=True, exist_ok=True)  # before the work: a folder that cannot be made fails now
     c = load_cell(cell)
     problem = DesignProblem(c)
     recs = [_one_seed(problem, m, s, n_starts) for s in progress(list(seeds), desc="path study seeds")]

@@ -202,6 +202,9 @@ _SEED = {"seed": _int_at_least(0)}
 #: check's TCP tolerance (m): positive, at most 10 mm (a value in mm is refused)
 _TOLERANCE = _finite_at_least(1e-9, "m", 0.01, ": give the tolerance in m (e.g. 1e-4 for 0.1 mm)")
 
+#: a length along the tool axis (m): at most 5 m (a value in mm is refused)
+_TOOL_LENGTH = _finite_at_least(0.0, "m", 5.0, ": give the length along the tool axis in m (e.g. 0.2 for 200 mm)")
+
 RULES: dict[str, dict[str, Callable[[str, Any], None]]] = {
     "info": {**_SEED, "reflector": _offset},
     "demo": dict(_SEED),
@@ -223,7 +226,8 @@ RULES: dict[str, dict[str, Callable[[str, Any], None]]] = {
     "export": {**_SEED, "dwell": _finite_at_least(0.0, "s", 3600.0, " (a wait at each measurement point, in s)"),
                "margin": _finite_at_least(0.0, "m", 0.5, ": give the move clearance margin in m (e.g. 0.01 for 10 mm)"),
                "speed_override": _share},
-    "compensate": {**_SEED, "tcp": _offset}, "export-model": {"tcp": _offset},
+    "compensate": {**_SEED, "tcp": _offset, "tool_length": _TOOL_LENGTH}, "export-model": {"tcp": _offset},
+    "predict": {"tool_length": _TOOL_LENGTH},
     "check": {**_SEED, "alpha": _open_unit, "tolerance": _TOLERANCE, "measurements": _int_at_least(3),
               "pool_size": _int_at_least(3)},
     "monitor": {"alpha": _open_unit, "tolerance": _TOLERANCE, "every": _int_at_least(3)},
