@@ -122,18 +122,22 @@ def test_covariance_matches_monte_carlo(with_prior):
     assert np.abs(emp - Cs).max() <= 0.05 * sd.max()
 
 
-def test_pool_updates_equal_recomputation(problem):
+@pytest.mark.parametrize("n_work", [0, 12])
+def test_pool_updates_equal_recomputation(problem, n_work):
     """Greedy (rank-one kernel, rank-three information) and exchange (downdate) values of every candidate equal
-    tr C_s recomputed from scratch; the selection beats random poses of the same pool."""
+    tr C_s recomputed from scratch, with few working configurations (3t < nb: through R̃ H̃ᵀ) and many (3t ≥ nb);
+    the selection beats random poses of the same pool."""
     Qp = problem.random_design(60, 8)[0]
+    Qw = problem.cell.q_work if n_work == 0 else problem.random_design(n_work, 9)[0]
+    assert (3 * len(Qw) < problem.base.size) == (n_work == 0)
     d = default_discrepancy(6)
-    crit = DiscrepancyDesignCriterion(problem.model, problem.base, d, problem.cell.q_work, p=problem.p0)
+    crit = DiscrepancyDesignCriterion(problem.model, problem.base, d, Qw, p=problem.p0)
     Jp = crit.pool_jacobians(Qp)
 
     def direct(idx):
-        return kpi_gp_value_and_grad(Jp[idx], crit.E, d.cov(Qp[idx]), d.cov(problem.cell.q_work, Qp[idx]),
+        return kpi_gp_value_and_grad(Jp[idx], crit.E, d.cov(Qp[idx]), d.cov(Qw, Qp[idx]),
                                      crit.tr_kww, d.scale_m, d.noise, crit.prior_info, grad=False)[0]
-    st = GreedyState(Jp, Qp, crit.E, problem.cell.q_work, d, crit.prior_info, 0.0)
+    st = GreedyState(Jp, Qp, crit.E, Qw, d, crit.prior_info, 0.0)
     S = list(range(0, 30, 2))
     for i in S:
         st.add(i)
@@ -150,6 +154,8 @@ def test_pool_updates_equal_recomputation(problem):
     rest = S[:3] + S[4:]
     for j in (S[3], 5, 44):
         assert vals2[j] == pytest.approx(direct(rest + [j]), rel=1e-7)
+    among = np.array([5, 44, 51])
+    assert st.values_without(S[3], among) == pytest.approx(vals2[among], rel=1e-9)
     built = st.build(S)
     assert built.values(ex)[[1, 31]] == pytest.approx(vals[[1, 31]], rel=1e-9)
     sel = crit.select(Qp, 15, J_pool=Jp)

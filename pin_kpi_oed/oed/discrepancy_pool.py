@@ -118,13 +118,34 @@ class GreedyState(PoolState):
         st.Uc[:, i] = u
         st.Rc = self.Rc + kcol[None, :, None] * r[:, None, :] / g
         st.Rc[:, i] = r
-        st.H = self.H + np.einsum("t,ac->atc", u, r) / g
-        st.T = self.T + float(u @ u) / g
-        st.M = self.M - np.einsum("a,ac,ad->cd", 1.0 / self.s2, r, r) / g
+        self._downdate_information(st, u, r, g)
         st.V = np.vstack([self.V, kcol / np.sqrt(g)])
         st.sgn = np.append(self.sgn, -1.0)
         st.chosen = [c for c in self.chosen if c != i]
         return st
+
+    def values_without(self, i: int, among: np.ndarray) -> np.ndarray:
+        """:meth:`values` of the candidates ``among`` (none of them chosen) for the set without the chosen ``i``:
+        the downdate of :meth:`without` on those candidates' rows only (this state unchanged)."""
+        st = type(self).__new__(type(self))
+        st.__dict__.update(self.__dict__)
+        kap = self.kdiag[i]
+        w = self.w
+        g = kap * w / (w - kap) + w
+        kcol = (self.kcol(i)[among] - self.V[:, among].T @ (self.sgn * self.V[:, i])) * (g / w)
+        u = self.Uc[:, i] * (g / w)
+        r = self.Rc[:, i] * (g / w)
+        st.kdiag = self.kdiag[among] + kcol ** 2 / g
+        st.Uc = self.Uc[:, among] + np.outer(u, kcol) / g
+        st.Rc = self.Rc[:, among] + kcol[None, :, None] * r[:, None, :] / g
+        self._downdate_information(st, u, r, g)
+        return st.values(np.zeros(len(among), bool))
+
+    def _downdate_information(self, st: GreedyState, u: np.ndarray, r: np.ndarray, g: float) -> None:
+        """The set-wide part of :meth:`without` (H, T, M) into ``st``."""
+        st.H = self.H + np.einsum("t,ac->atc", u, r) / g
+        st.T = self.T + float(u @ u) / g
+        st.M = self.M - np.einsum("a,ac,ad->cd", 1.0 / self.s2, r, r) / g
 
     def add(self, p: int) -> None:
         g = self.kdiag[p] + self.w
@@ -148,10 +169,8 @@ class GreedyState(PoolState):
         nb = self.M.shape[0]
         M = self.M + self.eps * np.eye(nb)
         L = np.linalg.cholesky(0.5 * (M + M.T))
-        out = []
-        for X in (R,) + more:
-            out.append(solve_triangular(L, X.reshape(-1, nb).T, lower=True, check_finite=False).T.reshape(X.shape))
-        return out
+        LiT = solve_triangular(L, np.eye(nb), lower=True, check_finite=False).T
+        return [(X.reshape(-1, nb) @ LiT).reshape(X.shape) for X in (R,) + more]
 
     def values(self, exclude: np.ndarray, among: np.ndarray | None = None) -> np.ndarray:
         """tr C_s after adding each candidate (inf for excluded ones; ``among``: only those candidates, ``exclude``
@@ -167,12 +186,19 @@ class GreedyState(PoolState):
         Hf = Hw.reshape(-1, nb)
         Nw = Hf.T @ Hf                                           # L⁻¹ N L⁻ᵀ: R D Rᵀ = R̃ Ñ R̃ᵀ
         uu = np.einsum("tn,tn->n", Uc, Uc)
-        DR = (Rw.reshape(-1, nb) @ Nw).reshape(Rw.shape)
-        Z = np.matmul(Uc.T, Hw)                                  # (3, n, nb): L⁻¹ z_a
+        n, t = Rw.shape[1], Hw.shape[1]
         RCR = {(a, b): np.einsum("nk,nk->n", Rw[a], Rw[b]) for a in range(3) for b in range(a, 3)}
-        RDR = {(a, b): np.einsum("nk,nk->n", DR[a], Rw[b]) for a in range(3) for b in range(a, 3)}
         RCR.update({(b, a): v for (a, b), v in list(RCR.items())})
-        RCZ = {(a, b): np.einsum("nk,nk->n", Rw[a], Z[b]) for a in range(3) for b in range(3)}
+        if 3 * t < nb:  # N has rank 3t: R̃ Ñ R̃ᵀ and R̃ z̃ from Y = R̃ H̃ᵀ (3, n, 3, t)
+            Y = (Rw.reshape(-1, nb) @ Hf.T).reshape(3, n, 3 * t)
+            RDR = {(a, b): np.einsum("nk,nk->n", Y[a], Y[b]) for a in range(3) for b in range(a, 3)}
+            Y4 = Y.reshape(3, n, 3, t)
+            RCZ = {(a, b): np.einsum("nt,tn->n", Y4[a, :, b], Uc) for a in range(3) for b in range(3)}
+        else:
+            DR = (Rw.reshape(-1, nb) @ Nw).reshape(Rw.shape)
+            Z = np.matmul(Uc.T, Hw)                              # (3, n, nb): L⁻¹ z_a
+            RDR = {(a, b): np.einsum("nk,nk->n", DR[a], Rw[b]) for a in range(3) for b in range(a, 3)}
+            RCZ = {(a, b): np.einsum("nk,nk->n", Rw[a], Z[b]) for a in range(3) for b in range(3)}
         gi = 1.0 / g
         c2 = uu * gi ** 2
         P = {(a, c): sum(RCR[a, b] * RCZ[c, b] for b in range(3)) for a in range(3) for c in range(3)}
@@ -244,7 +270,7 @@ def after_given(J_pool: np.ndarray, Q_pool: np.ndarray, m: int, J_given: np.ndar
 def select_pool_gp(J_pool: np.ndarray, Q_pool: np.ndarray, E: np.ndarray, Q_work: np.ndarray,
                    discrepancy: DiscrepancyPrior, m: int, prior_info: np.ndarray | None = None,
                    Q_given: np.ndarray | None = None, J_given: np.ndarray | None = None, exchange_passes: int = 1,
-                   time_budget_s: float | None = None) -> PoolSelection:
+                   time_budget_s: float | None = None, kcols: dict | None = None) -> PoolSelection:
     """Choose m of N candidate poses minimising tr C_s under the discrepancy (greedy + exchange).
 
     Greedy: each step adds the candidate of lowest tr C_s, evaluated for all candidates at once by exact
@@ -262,6 +288,8 @@ def select_pool_gp(J_pool: np.ndarray, Q_pool: np.ndarray, E: np.ndarray, Q_work
         Q_given, J_given: poses measured before and their Jacobians (always in the set), or None.
         exchange_passes: passes of the exchange (0: greedy only).
         time_budget_s: stop the exchange when this wall time is spent (None: no limit).
+        kcols: a cache of kernel columns k(candidate i, candidates) to share with other selections over the same
+            candidates and kernel (:attr:`GreedyState.kcols`), or None.
 
     Raises:
         InputError: m larger than the pool.
@@ -270,6 +298,8 @@ def select_pool_gp(J_pool: np.ndarray, Q_pool: np.ndarray, E: np.ndarray, Q_work
     t0 = time.perf_counter()
     Jall, Qall, k0 = after_given(J_pool, Q_pool, m, J_given, Q_given)
     st = GreedyState(Jall, Qall, E, Q_work, discrepancy, prior_info, greedy_ridge(J_pool, discrepancy))
+    if kcols is not None:
+        st.kcols = kcols
     found = greedy_exchange(st, m, k0, exchange_passes, deadline=None if time_budget_s is None
                             else t0 + time_budget_s)
     idx, path, swaps = found.indices, found.path, found.swaps

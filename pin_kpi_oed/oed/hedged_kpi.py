@@ -213,10 +213,12 @@ class HedgedDesignCriterion(DesignObjective):
         Q_pool = np.atleast_2d(np.asarray(Q_pool, float))
         J_pool = self.pool_jacobians(Q_pool) if J_pool is None else J_pool
         best, best_v = None, np.inf
-        for c in self.members:
+        caches = self._kernel_caches()
+        score = self._pool_scorer(Q_pool, J_pool)
+        for c, cache in zip(self.members, caches):
             try:
-                idx = np.asarray(c.select(Q_pool, m, J_pool=J_pool, **kw).indices, int)
-                v = self.value(Q_pool[idx])
+                idx = np.asarray(c.select(Q_pool, m, J_pool=J_pool, kcols=cache, **kw).indices, int)
+                v = score(idx)
             except IdentifiabilityError:
                 continue
             if v < best_v:
@@ -225,50 +227,46 @@ class HedgedDesignCriterion(DesignObjective):
             raise IdentifiabilityError(f"hedged kpi_gp: no selection of {m} of the {len(Q_pool)} candidates "
                                        "identifies the parameters under every prior of the family")
         path = [best_v]
-        best, best_v, swaps = self._exchange(Q_pool, J_pool, best, best_v, exchange_passes, seed, path)
+        best, best_v, swaps = self._exchange(Q_pool, J_pool, best, best_v, exchange_passes, seed, path, score,
+                                             caches)
         return PoolSelection(indices=best, value=float(best_v), path=np.array(path), nit=swaps,
                              time_s=time.perf_counter() - t0, success=True, status="selected",
                              message=f"best member selection + exchange ({swaps} swaps); no certificate")
 
-    def _pool_scorer(self, Q_pool: np.ndarray, J_pool: np.ndarray) -> Any:
-        """φ_H of pool subsets from precomputed kernel blocks: ``score(idx) -> float`` (m²)."""
-        blocks = []
-        for c in self.members:
-            d = c.discrepancy
-            Qg = np.zeros((0, Q_pool.shape[1])) if c.Q_given is None else c.Q_given
-            Qa = np.vstack([Qg, Q_pool])
-            Ja = J_pool if c.J_given is None else np.concatenate([c.J_given, J_pool])
-            blocks.append((c, d, Ja, d.cov(Qa), d.cov(c.Q_work, Qa), len(Qg)))
+    def _kernel_caches(self) -> list[dict | None]:
+        """One cache of kernel columns per member, shared by the members of one kernel (the level variants)."""
+        by_kernel: dict[int, dict] = {}
+        return [None if c.discrepancy.kernel is None else by_kernel.setdefault(id(c.discrepancy.kernel), {})
+                for c in self.members]
 
+    def _pool_scorer(self, Q_pool: np.ndarray, J_pool: np.ndarray) -> Any:
+        """φ_H of pool subsets, from scratch: ``score(idx) -> float`` (m²)."""
         def score(idx: np.ndarray) -> float:
             logs = []
-            for c, d, Ja, K, Kw, k0 in blocks:
+            for c in self.members:
+                d = c.discrepancy
+                Ja, Qa, k0 = after_given(J_pool, Q_pool, 1, c.J_given, c.Q_given)
                 rows = np.concatenate([np.arange(k0), k0 + np.asarray(idx, int)])
-                v = kpi_gp_value_and_grad(Ja[rows], c.E, K[np.ix_(rows, rows)], Kw[:, rows], c.tr_kww, d.scale_m,
-                                          d.noise, c.prior_info, grad=False)[0] + c.tr_register
+                v = kpi_gp_value_and_grad(Ja[rows], c.E, d.cov(Qa[rows]), d.cov(c.Q_work, Qa[rows]), c.tr_kww,
+                                          d.scale_m, d.noise, c.prior_info, grad=False)[0] + c.tr_register
                 logs.append(np.log(v))
             return float(np.exp(self.weights @ np.asarray(logs)))
 
         return score
 
-    def _member_states(self, Q_pool: np.ndarray, J_pool: np.ndarray) -> tuple[list[GreedyState], int]:
-        """Every member's exact (unregularised) pool state over the measured poses and the candidates, and k0,
-        the number of measured poses (the first candidates of each state)."""
-        states = []
-        for c in self.members:
-            Ja, Qa, k0 = after_given(J_pool, Q_pool, 1, c.J_given, c.Q_given)
-            states.append(GreedyState(Ja, Qa, c.E, c.Q_work, c.discrepancy, c.prior_info, 0.0))
-        return states, k0
-
     def _exchange(self, Q_pool: np.ndarray, J_pool: np.ndarray, idx: np.ndarray, val: float, passes: int,
-                  seed: int, path: list) -> tuple[np.ndarray, float, int]:
+                  seed: int, path: list, score: Any, caches: list) -> tuple[np.ndarray, float, int]:
         """Exchange passes on φ_H: each chosen pose in turn swapped for the candidate that lowers φ_H most among a
         seeded subset of the others; every member's tr C_s of each swap by its state's exact downdate and rank-three
         update (:class:`~pin_kpi_oed.oed.discrepancy_pool.GreedyState`), the accepted set's φ_H from scratch."""
         if passes <= 0:
             return idx, val, 0
-        score = self._pool_scorer(Q_pool, J_pool)
-        states, k0 = self._member_states(Q_pool, J_pool)
+        states = []
+        for c, cache in zip(self.members, caches):
+            Ja, Qa, k0 = after_given(J_pool, Q_pool, 1, c.J_given, c.Q_given)
+            states.append(GreedyState(Ja, Qa, c.E, c.Q_work, c.discrepancy, c.prior_info, 0.0))
+            if cache is not None:
+                states[-1].kcols = cache
         fixed = list(range(k0))
         states = [st.build(fixed + list(k0 + idx)) for st in states]
         rng = np.random.default_rng(seed)
@@ -283,8 +281,7 @@ class HedgedDesignCriterion(DesignObjective):
                 logs = np.zeros(len(rest))
                 with np.errstate(invalid="ignore", divide="ignore"):
                     for w, st, c in zip(self.weights, states, self.members):
-                        logs += w * np.log(st.without(k0 + int(idx[pos])).values(None, among=k0 + rest)
-                                           + c.tr_register)
+                        logs += w * np.log(st.values_without(k0 + int(idx[pos]), k0 + rest) + c.tr_register)
                 vals = np.where(np.isfinite(logs), np.exp(logs), np.inf)
                 j = int(np.argmin(vals))
                 if vals[j] < val * (1 - 1e-9):
@@ -295,10 +292,13 @@ class HedgedDesignCriterion(DesignObjective):
                     except IdentifiabilityError:
                         v = np.inf
                     if v < val * (1 - 1e-9):
+                        states = [st.without(k0 + int(idx[pos])) for st in states]
+                        for st in states:
+                            st.add(k0 + int(rest[j]))
                         idx, val, improved = trial, v, True
                         swaps += 1
-                        states = [st.build(fixed + list(k0 + idx)) for st in states]
                 path.append(val)
             if not improved:
                 break
+            states = [st.build(fixed + list(k0 + idx)) for st in states]   # fresh factors after a pass with swaps
         return idx, val, swaps
