@@ -154,3 +154,25 @@ def test_monitor_replay_predicts_first_and_follows_a_moved_tracker(setting, tmp_
     err = np.array(log["error_m"])
     assert err[30:40].mean() > 100 * SIGMA and err[40:].mean() < 3 * SIGMA  # predicted before use: the move shows once
     assert main(["monitor", "--model", str(mp), "--data", str(dp), "--every", "2"]) == 2
+
+
+def test_rows_near_one_pose_name_the_poses_to_add(setting, tmp_path):
+    """Check rows near one configuration determine the tracker on them but not at the working configurations: the
+    verdict is still given, says so, and names poses (designed on top of the rows) that, measured too, determine it."""
+    from pin_kpi_oed.identification.check import check_calibration
+
+    rb, model, Qc = setting
+    rng = np.random.default_rng(11)
+    Qn = Qc[:1] + 0.03 * rng.standard_normal((10, rb.nq))
+    data = MeasurementSet(list(rb.joint_names), Qn, model.predict(Qn) + rng.normal(size=(10, 3)) * SIGMA)
+    r = check_calibration(model, data, seed=0)
+    assert r.verdict == "holds" and not r.setup_determined
+    assert r.registration_sigma_m > 2 * r.honest_sigma_m
+    assert 1 <= len(r.poses_to_add) <= 20 and np.all(r.poses_to_add >= rb.q_lower)
+    assert "do not determine the set-up" in r.summary() and f"the {len(r.poses_to_add)} poses" in r.summary()
+    assert np.asarray(r.to_dict()["poses_to_add"]).shape == r.poses_to_add.shape
+    Q2 = np.vstack([Qn, r.poses_to_add])
+    more = MeasurementSet(list(rb.joint_names), Q2, model.predict(Q2) + rng.normal(size=(len(Q2), 3)) * SIGMA)
+    r2 = check_calibration(model, more, seed=0)
+    assert r2.setup_determined and r2.poses_to_add.size == 0 and r2.verdict == "holds"
+    assert r2.registration_sigma_m <= 2 * r2.honest_sigma_m

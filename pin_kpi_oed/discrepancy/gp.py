@@ -274,6 +274,22 @@ class Discrepancy:
                 var[a:a + chunk] = np.maximum(self.kernel.diag(W) - red, 0.0)
         return mu, var
 
+    def posterior_covariance(self, Q: np.ndarray) -> np.ndarray:
+        """Posterior covariance of δ between the configurations Q, (m, m) in normalised units (multiply by s_a² for
+        axis a; the white term not included): k(Q, Q) − k(Q, Z) (K + wI)⁻¹ k(Z, Q) (DTC: k(Q, Z) M⁻¹ k(Z, Q)). Its
+        diagonal is :meth:`predict_normalised`'s variance; zeros for a white discrepancy."""
+        Q = np.atleast_2d(np.asarray(Q, float))
+        if self.kind == "white":
+            return np.zeros((len(Q), len(Q)))
+        self._factor()
+        Kqz = self.kernel(Q, self.Z)
+        if self.kind == "exact":
+            V = sla.solve_triangular(self._chol[0], Kqz.T, lower=True, check_finite=False)
+            red = V.T @ V
+        else:
+            red = Kqz @ self.Minv @ Kqz.T
+        return self.kernel(Q) - red
+
     def predict(self, Q: np.ndarray, return_var: bool = True) -> tuple[np.ndarray, np.ndarray | None]:
         """δ at configurations Q in the base frame: mean (m, 3) m and its variance per axis (m, 3) m².
 
@@ -339,6 +355,33 @@ class Discrepancy:
             for a in range(3):
                 D[:, a, :] -= Kwq @ self.Bn[:, a, :]
         return np.einsum("map,pq,mbq->mab", D, C, D)
+
+    def parametric_factor(self, Q: np.ndarray, E: np.ndarray, inside: np.ndarray) -> np.ndarray:
+        """A factor A (m, 3, P) of the parametric part's covariance *between* rows: cov(row i axis a, row j axis b) =
+        Σ_p A[i, a, p] A[j, b, p]; its diagonal blocks are :meth:`parametric_covariance` (``inside``: per row, (m,)
+        bool, the least-squares term inside the coverage, universal kriging outside; the two terms have separate
+        columns: a row inside and a row outside the coverage are uncorrelated in this part)."""
+        m = len(Q)
+        out = np.zeros((m, 3, 0))
+        for mask, ins in ((~inside, False), (inside, True)):
+            C = self.param_cov_ls if ins and self.param_cov_ls is not None else self.param_cov
+            if C is None:
+                C = self.param_cov_ls
+            if C is None or not mask.any():
+                continue
+            w, U = np.linalg.eigh(0.5 * (C + C.T))
+            Lc = U * np.sqrt(np.maximum(w, 0.0))
+            D = np.zeros((int(mask.sum()), 3, C.shape[0]))
+            D[:, :, :E.shape[2]] = E[mask]
+            if self.Bn is not None and C is self.param_cov:
+                Kwq = self.kernel(np.atleast_2d(Q[mask]), self.Z)
+                for a in range(3):
+                    D[:, a, :] -= Kwq @ self.Bn[:, a, :]
+            A = np.zeros((m, 3, out.shape[2] + C.shape[0]))
+            A[:, :, :out.shape[2]] = out
+            A[mask, :, out.shape[2]:] = D @ Lc
+            out = A
+        return out
 
     @property
     def prior_sigma_m(self) -> np.ndarray:

@@ -1,12 +1,19 @@
 r"""Keep a calibration: the verdict of a quick check on a few measured poses.
 
 On the check rows the set-up (tracker pose; the reflector held: a moved reflector is a tool change) is
-re-registered with the robot held (:func:`~pin_kpi_oed.identification.transfer.register_setup`) and the residuals
-are whitened by the model's honest σ (:meth:`CalibratedModel.predict_with_sigma`, the discrepancy's posterior and
-white level; the registration's own σ factor is *not* applied: it would hide the change under test). The test
-statistic T = ‖z‖² is χ²(3m − 6) when the calibration holds, so the check raises a false alarm with probability α
-(the stated level). Its power against the weakest change of RMS size τ at the working configurations of each
-parameter group is P(χ'²(3m − 6, τ²μ_g) > χ²_{1−α}) (:mod:`pin_kpi_oed.oed.check_power`).
+re-registered with the robot held (:func:`~pin_kpi_oed.identification.transfer.register_setup`) and the residuals r
+are whitened by the model's joint honest covariance Σ of the check rows
+(:func:`~pin_kpi_oed.identification.prediction_sigma.predictive_covariance`: the honest σ of
+:meth:`CalibratedModel.predict_with_sigma` on its diagonal, the discrepancy's posterior covariance and the
+parameters' error shared between rows and axes off it; the registration's own σ factor is *not* applied: it would
+hide the change under test): z = L⁻¹r (Σ = LLᵀ), the set-up's generalised least-squares step projected out. With the
+marginal σ alone the rows' correlations (axes correlated by 0.3 on the real UR10) make T more spread than χ² and the
+check raises false alarms well above its stated rate. T = ‖z‖² has 3m − 6 degrees of freedom; its law under no
+change is the scaled χ² of :class:`~pin_kpi_oed.oed.check_power.CheckNull` — the standardised RMS f and the excess
+kurtosis κ of the model's own K-fold held-out errors (the plain χ²(3m − 6) for a model without a K-fold check) — so
+the check raises a false alarm with probability α (the stated level). Its power against the weakest change of RMS
+size τ at the working configurations of each parameter group is that law's non-central tail
+(:mod:`pin_kpi_oed.oed.check_power`).
 
 The verdict, in this order:
 
@@ -32,26 +39,24 @@ from typing import Any
 
 import numpy as np
 import pinocchio as pin
-from scipy import stats
 
 from pin_kpi_oed.data.measurements import MeasurementSet
 from pin_kpi_oed.errors import InputError
+from pin_kpi_oed.identification.check_poses import SETUP_FACTOR, poses_to_add, registration_sigma_m
 from pin_kpi_oed.identification.model_file import CalibratedModel
 from pin_kpi_oed.identification.problem import align_data
 from pin_kpi_oed.identification.transfer import register_setup
 from pin_kpi_oed.model.tracker import TrackerModel
-from pin_kpi_oed.oed.check_power import CheckGroup, CheckPower, check_groups, power_of, test_threshold
+from pin_kpi_oed.oed.check_power import CheckGroup, CheckNull, CheckPower, check_groups
 from pin_kpi_oed.results import Result
 
-__all__ = ["CheckResult", "check_calibration", "check_criterion", "CHECK_STATION", "UndeterminedSetup"]
+__all__ = ["CheckResult", "check_calibration", "check_criterion", "check_null", "CHECK_STATION"]
 
 #: Station label of the set-up registered on the check rows.
 CHECK_STATION = "check"
 VERDICTS = ("holds", "setup_moved", "robot_changed", "discrepancy_level", "recalibrate")
-
-
-class UndeterminedSetup(InputError):
-    """The check rows do not determine the set-up at the working configurations (e.g. all near one point)."""
+#: Candidate configurations (within the joint limits) the poses to add are chosen from.
+POOL_SIZE = 400
 
 
 @dataclass(kw_only=True)
@@ -75,6 +80,12 @@ class CheckResult(Result):
         model: the re-registered (or re-fitted) model.
         refit_chi2: T of the re-fitted model on the check rows (NaN if none).
         groups: per group ``{name, chi2_remaining, dof, determined}``.
+        registration_sigma_m: the σ the registration on the check rows alone leaves at the working configurations
+            (RMS 3-D, m); honest_sigma_m: the model's honest σ there (RMS 3-D, m); setup_determined: the first at most
+            :data:`~pin_kpi_oed.identification.check_poses.SETUP_FACTOR` × the second.
+        poses_to_add: configurations (k, n) rad to measure next, with the check rows given
+            (:func:`~pin_kpi_oed.identification.check_poses.poses_to_add`): when the rows do not determine the
+            set-up at the working configurations or the named group; empty otherwise.
     """
 
     verdict: str
@@ -98,6 +109,10 @@ class CheckResult(Result):
     model: CalibratedModel | None = field(default=None, repr=False)
     refit_chi2: float = float("nan")
     groups: list = field(default_factory=list)
+    registration_sigma_m: float = float("nan")
+    honest_sigma_m: float = float("nan")
+    setup_determined: bool = True
+    poses_to_add: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
 
     def summary(self) -> str:
         """One line (mm, mrad)."""
@@ -106,6 +121,7 @@ class CheckResult(Result):
         weakest = min(self.power, key=self.power.get) if self.power else ""
         pw = (f"; power against a {self.tolerance_m * 1e3:.3g} mm change: {min(self.power.values()):.2f} "
               f"(weakest: {weakest})") if self.power else ""
+        pw += self.undetermined_text()
         if self.verdict in ("holds", "setup_moved"):
             tcp = (f", TCP sigma at the working configurations median {np.median(self.tcp_sigma_m) * 1e3:.3f} mm, max "
                    f"{np.max(self.tcp_sigma_m) * 1e3:.3f} mm" if self.tcp_sigma_m.size else "")
@@ -120,6 +136,18 @@ class CheckResult(Result):
                     f"everywhere alike (no group explains them); {stat}{pw}")
         return f"check: re-calibrate: no parameter group explains the residuals; {stat}{pw}"
 
+    def undetermined_text(self) -> str:
+        """What the check rows leave undetermined and the poses to add ("" when nothing)."""
+        k = len(self.poses_to_add)
+        add = f"measure the {k} poses of poses_to_add (--json) too" if k else "measure poses spread over the workspace"
+        if not self.setup_determined:
+            return (f"; the {self.n_rows} rows do not determine the set-up at the working configurations (the "
+                    f"registration alone leaves {self.registration_sigma_m * 1e3:.3f} mm there, the honest sigma is "
+                    f"{self.honest_sigma_m * 1e3:.3f} mm): {add}")
+        if self.verdict == "robot_changed" and not self.determined:
+            return f"; the rows do not determine the change of {self.group}: {add}"
+        return ""
+
     def to_dict(self) -> dict:
         """Plain JSON-able dict (SI units)."""
         return {**self.result_dict(), "verdict": self.verdict, "n_rows": self.n_rows, "dof": self.dof,
@@ -129,12 +157,14 @@ class CheckResult(Result):
                 "group": self.group, "change": np.asarray(self.change).tolist(),
                 "std": np.asarray(self.std).tolist(), "change_tcp_m": self.change_tcp_m,
                 "determined": self.determined, "sigma_factor": self.sigma_factor, "refit_chi2": self.refit_chi2,
-                "groups": self.groups}
+                "groups": self.groups, "registration_sigma_m": self.registration_sigma_m,
+                "honest_sigma_m": self.honest_sigma_m, "setup_determined": self.setup_determined,
+                "poses_to_add": np.asarray(self.poses_to_add).tolist()}
 
 
 def _change_text(r: CheckResult) -> str:
     if not r.determined:
-        return f"{r.group} (not determined by the check rows: measure the poses check design proposes for it)"
+        return f"{r.group} (not determined by the check rows)"
     if r.group.endswith(" offset"):
         k = int(np.argmax(np.abs(r.change)))
         return (f"{r.group} by {r.change[k] * 1e3:+.3f} ± {r.std[k] * 1e3:.3f} mrad "
@@ -219,67 +249,128 @@ def check_calibration(model: CalibratedModel, data: MeasurementSet, *, station: 
         raise InputError(f"{data.source or 'check data'}: {m} check rows are too few to register the set-up and test "
                          f"the rest (at least 3 rows; 10 recommended)")
     cm = _register(model, data)
-    Y, sig = _honest(cm, Q, data, CHECK_STATION)
-    z = ((data.position_m - Y) / sig).reshape(-1)
-    T, dof = float(z @ z), 3 * m - 6
-    thr = test_threshold(dof, alpha)
+    Y, Sigma = _joint_honest(cm, Q, data)
+    sig = np.sqrt(np.diag(Sigma)).reshape(m, 3)
+    dof = 3 * m - 6
+    null = check_null(model)
+    thr = null.threshold(dof, alpha)
     qw = np.atleast_2d(q_work if q_work is not None else (model.q_work if model.q_work is not None else Q))
     crit, wm, p = check_criterion(cm, qw, np.median(sig, axis=0), CHECK_STATION, seed=seed)
-    J = wm.jacobian(p, Q)[:, :3, :] / sig[:, :, None]
-    F = J.reshape(-1, wm.layout.n)
-    _require_setup(wm.kpi_jacobian(p, qw)[:, crit.setup], F[:, crit.setup], _honest(cm, qw, None, CHECK_STATION)[1],
-                   data, m)
+    z, F = _whiten(Sigma, data.position_m - Y, wm.jacobian(p, Q)[:, :3, :])
+    z = _project_out(z, F[:, crit.setup])
+    T = float(z @ z)
+    E_w = wm.kpi_jacobian(p, qw)
+    reach = _setup_reach(cm, crit, F, E_w, qw)
     shift, dist = _setup_change(model.setups[old].tracker_T_base, cm.setups[CHECK_STATION].tracker_T_base,
                                 F[:, crit.setup], cm, Q, data)
     mu = crit.mu(F.T @ F)[0]
-    power = {g.name: power_of(tolerance_m ** 2 * u, dof, alpha) for g, u in zip(crit.groups, mu)}
+    power = {g.name: null.power(tolerance_m ** 2 * u, dof, alpha) for g, u in zip(crit.groups, mu)}
     out: dict[str, Any] = dict(n_rows=m, dof=dof, alpha=alpha, chi2=T, threshold=thr,
-                               p_value=float(stats.chi2.sf(T, dof)), setup_shift_m=shift, setup_distance=dist,
-                               power=power, tolerance_m=tolerance_m,
+                               p_value=null.sf(T, dof), setup_shift_m=shift, setup_distance=dist,
+                               power=power, tolerance_m=tolerance_m, registration_sigma_m=reach["reg"],
+                               honest_sigma_m=reach["honest"], setup_determined=reach["determined"],
                                sigma_factor=float(np.sqrt(T / dof)), model=cm, success=True, status="checked")
+
+    def add() -> np.ndarray:
+        pool = np.random.default_rng(seed).uniform(model.robot.q_lower, model.robot.q_upper,
+                                                   size=(POOL_SIZE, model.robot.nq))
+        return poses_to_add(crit, wm, p, F, E_w[:, crit.setup], reach["honest"], pool, seed=seed)[0]
+
+    if not reach["determined"]:
+        out["poses_to_add"] = add()
     if T <= thr:
-        moved = dist > test_threshold(6, alpha)
-        tcp = np.linalg.norm(_honest(cm, qw, None, CHECK_STATION)[1], axis=1)
-        return CheckResult(verdict="setup_moved" if moved else "holds", tcp_sigma_m=tcp,
+        moved = dist > null.threshold(6, alpha)
+        return CheckResult(verdict="setup_moved" if moved else "holds", tcp_sigma_m=reach["tcp"],
                            message="the residuals are within the model's sigma", time_s=time.perf_counter() - t0,
                            **out)
-    named = _name_group(crit, F, z, dof, alpha)
+    named = _name_group(crit, F, z, dof, alpha, null)
     out["groups"] = named["table"]
     if named["best"] is None:
         verdict = "recalibrate" if named["significant"] else "discrepancy_level"
         return CheckResult(verdict=verdict, message="no parameter group explains the residuals",
                            time_s=time.perf_counter() - t0, **out)
-    g, x, cov, det = named["best"]
+    if not named["best"][3] and "poses_to_add" not in out:
+        out["poses_to_add"] = add()
+    return _changed(model, data, Q, named["best"], E_w, out, t0)
+
+
+def _changed(model: CalibratedModel, data: MeasurementSet, Q: np.ndarray, best: tuple, E_w: np.ndarray,
+             out: dict, t0: float) -> CheckResult:
+    """The *robot changed* verdict of the named group: its change, the TCP displacement at the working
+    configurations, and the re-fitted model when the rows determine the group."""
+    g, x, cov, det = best
     delta = g.basis @ x
     std = np.sqrt(np.maximum(np.diag(g.basis @ cov @ g.basis.T), 0.0))
-    E = wm.kpi_jacobian(p, qw)[:, g.cols]
+    E = E_w[:, g.cols]
     tcp_m = (float(np.linalg.norm(delta)) if g.kind == "tool"
              else float(np.sqrt(np.mean(np.sum((E @ delta).reshape(-1, 3) ** 2, axis=1)))))
     refit, T2 = (None, float("nan"))
     if det:
         refit, T2 = _refit(model, data, Q, g, delta)
+    if refit is not None:
+        out = {**out, "model": refit}
     return CheckResult(verdict="robot_changed", group=g.name, change=delta, std=std, change_tcp_m=tcp_m,
                        determined=det, refit_chi2=T2, message=f"{g.name} changed",
-                       time_s=time.perf_counter() - t0, **{**out, "model": refit if refit is not None else cm})
+                       time_s=time.perf_counter() - t0, **out)
+
+
+def _setup_reach(cm: CalibratedModel, crit: CheckPower, F: np.ndarray, E_w: np.ndarray, qw: np.ndarray) -> dict:
+    """What the registration on the check rows leaves at the working configurations: its own σ there (RMS 3-D, m),
+    the model's honest σ there, whether the first is at most :data:`SETUP_FACTOR` × the second, and the TCP σ per
+    working configuration with the registration's share (m)."""
+    s = crit.setup
+    Ms = F[:, s].T @ F[:, s]
+    sig_w = _honest(cm, qw, None, CHECK_STATION)[1]
+    honest = float(np.sqrt(np.mean(np.sum(sig_w ** 2, axis=1))))
+    reg = registration_sigma_m(E_w[:, s], Ms)
+    C = E_w[:, s] @ np.linalg.pinv(Ms, hermitian=True) @ E_w[:, s].T
+    per = np.sum(np.diag(C).reshape(-1, 3), axis=1)
+    tcp = np.sqrt(np.sum(sig_w ** 2, axis=1) + np.maximum(per, 0.0))
+    return {"reg": reg, "honest": honest, "determined": bool(reg <= SETUP_FACTOR * honest), "tcp": tcp}
+
+
+def check_null(model: CalibratedModel) -> CheckNull:
+    """The law of the check's statistic under no change (:class:`~pin_kpi_oed.oed.check_power.CheckNull`): the
+    standardised RMS and excess kurtosis of the model's own K-fold held-out errors (a Gaussian-process discrepancy's
+    ``cv``), else the plain χ²."""
+    d = model.discrepancy
+    cv = d.cv if d is not None and d.kind != "white" else {}
+    f, k = cv.get("z_rms"), cv.get("z_kurtosis")
+    ok = [v is not None and np.isfinite(v) for v in (f, k)]
+    return CheckNull(factor=float(np.clip(f, 0.5, 3.0)) if ok[0] else 1.0,
+                     kurtosis=float(np.clip(k, 0.0, 10.0)) if ok[1] else 0.0)
+
+
+def _joint_honest(cm: CalibratedModel, Q: np.ndarray, data: MeasurementSet) -> tuple[np.ndarray, np.ndarray]:
+    """Predictions (m, 3) and the joint honest covariance (3m, 3m) of the check station's rows, its σ factor left
+    out (:func:`~pin_kpi_oed.identification.prediction_sigma.predictive_covariance`)."""
+    from pin_kpi_oed.identification.prediction_sigma import predictive_covariance
+
+    st = dataclasses.replace(cm.setups[CHECK_STATION], sigma_scale=1.0)
+    return predictive_covariance(cm.with_setup(CHECK_STATION, st), Q, data, CHECK_STATION)
+
+
+def _whiten(Sigma: np.ndarray, r: np.ndarray, J: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Residuals r (m, 3) and Jacobian J (m, 3, n) whitened by the joint covariance: L⁻¹ r, L⁻¹ J (Σ = L Lᵀ)."""
+    import scipy.linalg as sla
+
+    L = np.linalg.cholesky(Sigma + 1e-12 * np.mean(np.diag(Sigma)) * np.eye(len(Sigma)))
+    z = sla.solve_triangular(L, r.reshape(-1), lower=True)
+    F = sla.solve_triangular(L, J.reshape(len(Sigma), -1), lower=True)
+    return z, F
+
+
+def _project_out(z: np.ndarray, G: np.ndarray) -> np.ndarray:
+    """z minus its least-squares fit by the columns G: the whitened residuals after the set-up's generalised
+    least-squares re-registration (the registration itself fits without the rows' correlations)."""
+    x, *_ = np.linalg.lstsq(G, z, rcond=None)
+    return z - G @ x
 
 
 def _register(model: CalibratedModel, data: MeasurementSet) -> CalibratedModel:
     """The set-up registered on the check rows (reflector held), fitted to the model's full prediction (geometry,
     effects and the discrepancy's mean, as :func:`~pin_kpi_oed.identification.transfer.register_setup` does)."""
     return register_setup(model, data, station=CHECK_STATION, hold_reflector=True).model
-
-
-def _require_setup(E_s: np.ndarray, G: np.ndarray, sig_w: np.ndarray, data: MeasurementSet, m: int) -> None:
-    """Refuse rows whose registration moves the working configurations' prediction by more than twice the honest σ
-    there (RMS 3-D; the registration's covariance (GᵀG)⁻¹ carried by the KPI Jacobian's set-up columns E_s)."""
-    C = E_s @ np.linalg.pinv(G.T @ G) @ E_s.T
-    reg = float(np.sqrt(np.trace(C) / (E_s.shape[0] // 3)))
-    honest = float(np.sqrt(np.mean(np.sum(sig_w ** 2, axis=1))))
-    if not reg <= 2.0 * honest:
-        raise UndeterminedSetup(f"{data.source or 'check data'}: the {m} check rows do not determine the set-up at the "
-                                f"working configurations (the registration alone leaves {reg * 1e3:.3f} mm there, the "
-                                f"honest sigma is {honest * 1e3:.3f} mm); measure poses spread over the workspace "
-                                "(check design)")
 
 
 def _setup_change(T_old: np.ndarray, T_new: np.ndarray, G: np.ndarray, cm: CalibratedModel, Q: np.ndarray,
@@ -295,7 +386,7 @@ def _setup_change(T_old: np.ndarray, T_new: np.ndarray, G: np.ndarray, cm: Calib
     return shift, float(d @ (G.T @ G) @ d)
 
 
-def _name_group(crit: CheckPower, F: np.ndarray, z: np.ndarray, dof: int, alpha: float) -> dict:
+def _name_group(crit: CheckPower, F: np.ndarray, z: np.ndarray, dof: int, alpha: float, null: CheckNull) -> dict:
     """Each group fitted with the set-up; the smallest group whose remaining χ² passes, then the best fit."""
     Gs = F[:, crit.setup]
     T = float(z @ z)
@@ -307,9 +398,9 @@ def _name_group(crit: CheckPower, F: np.ndarray, z: np.ndarray, dof: int, alpha:
         sv = np.linalg.svd(A / np.maximum(np.linalg.norm(A, axis=0), 1e-300), compute_uv=False)
         det = bool(sv[-1] > 1e-6 * sv[0]) and A.shape[0] > A.shape[1]
         rem = float(np.sum((z - A @ x) ** 2))
-        ok = det and rem <= test_threshold(dof - r, alpha)
+        ok = det and rem <= null.threshold(dof - r, alpha)
         table.append({"name": g.name, "chi2_remaining": rem, "dof": dof - r, "determined": det, "explains": ok})
-        gains.append(stats.chi2.sf(T - rem, r))
+        gains.append(null.sf(T - rem, r))
         if ok:
             cov = np.linalg.pinv(A.T @ A)[-r:, -r:]
             passing.append((r, rem, g, x[-r:], cov, det))
@@ -331,5 +422,9 @@ def _refit(model: CalibratedModel, data: MeasurementSet, Q: np.ndarray, g: Check
     new.history = list(model.history) + [{"step": "check", "data": data.source, "group": g.name,
                                           "change": delta.tolist()}]
     reg = _register(new, data)
-    Y, sig = _honest(reg, Q, data, CHECK_STATION)
-    return reg, float(np.sum(((data.position_m - Y) / sig) ** 2))
+    Y, Sigma = _joint_honest(reg, Q, data)
+    wm, p = reg.station_model(CHECK_STATION)
+    z, F = _whiten(Sigma, data.position_m - Y, wm.jacobian(p, Q)[:, :3, :])
+    L = wm.layout
+    z = _project_out(z, F[:, L.tracker.start:L.tracker.stop])
+    return reg, float(z @ z)

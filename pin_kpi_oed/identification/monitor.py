@@ -22,7 +22,7 @@ import numpy as np
 
 from pin_kpi_oed.data.measurements import MeasurementSet
 from pin_kpi_oed.errors import InputError
-from pin_kpi_oed.identification.check import CHECK_STATION, UndeterminedSetup, check_calibration
+from pin_kpi_oed.identification.check import CHECK_STATION, check_calibration
 from pin_kpi_oed.identification.model_file import CalibratedModel
 from pin_kpi_oed.identification.problem import align_data
 from pin_kpi_oed.results import Result
@@ -107,9 +107,10 @@ def monitor(model: CalibratedModel, data: MeasurementSet, *, every: int = 10, al
         err.append(np.linalg.norm(r, axis=1))
         sig.append(np.linalg.norm(s, axis=1))
         window = (window + rows.tolist())[-max_window:]
-        try:
-            res = check_calibration(cur, data.subset(window), station=label, alpha=alpha, tolerance_m=tolerance_m)
-        except UndeterminedSetup:
+        if len(window) < 3:
+            continue
+        res = check_calibration(cur, data.subset(window), station=label, alpha=alpha, tolerance_m=tolerance_m)
+        if not res.setup_determined and len(window) < max_window:
             continue
         first, window = window[0], []
         updated = res.verdict == "setup_moved" or (refit and res.verdict == "robot_changed" and res.determined)

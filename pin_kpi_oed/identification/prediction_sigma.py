@@ -49,7 +49,7 @@ from pin_kpi_oed.model.kinematics import skew
 #: "orientation at 200 mm", as a cell's ``orientation_length_m`` defaults to
 DEFAULT_TOOL_LENGTH_M = 0.2
 
-__all__ = ["DEFAULT_TOOL_LENGTH_M", "predictive_sigma", "orientation_sigma", "robot_parameter_covariance",
+__all__ = ["DEFAULT_TOOL_LENGTH_M", "predictive_covariance", "predictive_sigma", "orientation_sigma", "robot_parameter_covariance",
            "sigma_contents"]
 
 
@@ -275,3 +275,50 @@ def orientation_sigma(cm: Any, Q: np.ndarray, aux: Any, station: str | None, lab
         sig[rows] = scale * np.sqrt(np.einsum("maa->ma", C))
         sig_l[rows] = scale * length_m * np.sqrt(np.maximum(np.einsum("mab,mbc,mac->m", Z, C, Z), 0.0))
     return W, sig, sig_l
+
+
+def predictive_covariance(cm: Any, Q: np.ndarray, aux: Any, label: str) -> tuple[np.ndarray, np.ndarray]:
+    """(Y (m, 3) m, C (3m, 3m) m²): the joint covariance of measured − predicted over the rows of one station
+    (tracker frame, row-major: index 3 i + a), the σ of :func:`predictive_sigma` with the rows' correlations: the
+    discrepancy's posterior covariance between the rows (per axis S_a² k_post(q_i, q_j)), the white level on the
+    diagonal, the parametric part's error shared by every row (:meth:`Discrepancy.parametric_factor`; a noise-only
+    model: E C_p Eᵀ between rows), all rotated into the tracker frame and multiplied by the station's
+    ``sigma_scale``². Its 3 × 3 diagonal blocks hold :func:`predictive_sigma`'s σ² on their diagonals.
+
+    Args:
+        cm: the calibrated model; Q: checked configurations (m, n) rad; aux: the rows' auxiliary data or None;
+        label: the station of every row.
+    """
+    m = len(Q)
+    st = cm.setups[label]
+    R = st.tracker_T_base[:3, :3]
+    d = cm.discrepancy
+    Cb = np.zeros((m, 3, m, 3))
+    if d is None:
+        Y = cm.predict_rows(Q, aux, label, False, None)
+        _, names, Cp = robot_parameter_covariance(cm, label)
+        A = np.zeros((m, 3, 0))
+        if Cp is not None:
+            E = _robot_jacobian(cm, label, Q, names)
+            if st.fitted_by != "identify":
+                E = _registered(cm, label, Q, E, names)
+            w, U = np.linalg.eigh(0.5 * (Cp + Cp.T) * _chi2_factor(cm))
+            A = E @ (U * np.sqrt(np.maximum(w, 0.0)))
+        noise2 = np.asarray(cm.noise.sigma(Y[:, :3]), float).reshape(m, 3) ** 2
+    else:
+        delta, _ = d.predict(Q, return_var=False)
+        Y = cm.predict_rows(Q, aux, label, False, delta)
+        K = d.posterior_covariance(Q)
+        for a in range(3):
+            Cb[:, a, :, a] = K * d.scale_m[a] ** 2 + np.eye(m) * d.noise_var_m2[a]
+        A = np.zeros((m, 3, 0))
+        if d.param_cov is not None or d.param_cov_ls is not None:
+            E = _discrepancy_jacobian(cm, d, label, Q)
+            cov = _coverage(cm)
+            out = cov.extrapolation(Q) if cov is not None else np.zeros(m, bool)
+            A = d.parametric_factor(Q, E, ~out if d.kind != "white" else np.zeros(m, bool))
+        noise2 = np.zeros((m, 3))
+    Cb += np.einsum("iap,jbp->iajb", A, A)
+    Ct = np.einsum("xa,iajb,yb->ixjy", R, Cb, R).reshape(3 * m, 3 * m)
+    Ct[np.diag_indices(3 * m)] += noise2.reshape(-1)
+    return Y, Ct * st.sigma_scale ** 2

@@ -40,7 +40,7 @@ from scipy import stats
 from pin_kpi_oed.errors import IdentifiabilityError, InputError
 from pin_kpi_oed.oed.criteria import Criterion
 
-__all__ = ["CheckGroup", "CheckPower", "check_groups", "test_threshold", "power_of"]
+__all__ = ["CheckGroup", "CheckNull", "CheckPower", "check_groups", "test_threshold", "power_of"]
 
 
 @dataclass
@@ -60,6 +60,50 @@ class CheckGroup:
     cols: np.ndarray
     basis: np.ndarray
     C: np.ndarray
+
+
+@dataclass(frozen=True)
+class CheckNull:
+    r"""The law of the check's statistic T when nothing changed, from the model's own held-out residuals.
+
+    A Gaussian-process model's K-fold check states the RMS f of its standardised held-out errors and their excess
+    kurtosis κ (real residuals have heavier tails than a Gaussian: on the UR10's Series C κ ≈ 0.5–1.2). The sum of
+    ν whitened squares then has mean f²ν and variance 2f⁴ν(1 + κ/2), which the scaled χ² (Satterthwaite) matches:
+
+    .. math::  T \sim f^2 c\, χ^2(ν / c),\qquad c = 1 + \max(κ, 0) / 2.
+
+    f = 1, κ = 0 (a model without a K-fold check: white or noise-only) is the plain χ²(ν). A change of
+    non-centrality λ (in the model's σ) gives T ≈ f²c χ'²(ν/c, λ / (f²c)).
+
+    Attributes:
+        factor: f, the held-out standardised RMS; kurtosis: κ.
+    """
+
+    factor: float = 1.0
+    kurtosis: float = 0.0
+
+    @property
+    def scale(self) -> float:
+        """f² c."""
+        return self.factor ** 2 * self.spread
+
+    @property
+    def spread(self) -> float:
+        """c = 1 + max(κ, 0)/2."""
+        return 1.0 + max(float(self.kurtosis), 0.0) / 2.0
+
+    def threshold(self, dof: float, alpha: float) -> float:
+        """The critical value of T on ``dof`` degrees of freedom at level α."""
+        return self.scale * float(stats.chi2.isf(alpha, dof / self.spread))
+
+    def sf(self, T: float, dof: float) -> float:
+        """P(T' > T) under no change."""
+        return float(stats.chi2.sf(T / self.scale, dof / self.spread))
+
+    def power(self, noncentrality: float, dof: float, alpha: float) -> float:
+        """The probability the test detects a change of non-centrality λ (in the model's σ)."""
+        nu = dof / self.spread
+        return float(stats.ncx2.sf(stats.chi2.isf(alpha, nu), nu, max(float(noncentrality) / self.scale, 1e-12)))
 
 
 def test_threshold(dof: int, alpha: float) -> float:

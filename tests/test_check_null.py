@@ -1,0 +1,91 @@
+"""The check's statistic under no change: the rows' joint honest covariance (its diagonal the honest σ, its
+off-diagonal the discrepancy's posterior and the parameters' shared error) and the law of T from the model's own
+K-fold held-out errors (scaled χ² against Monte-Carlo of heavy-tailed sums)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy import stats
+
+from pin_kpi_oed.discrepancy.gp import DiscrepancyOptions
+from pin_kpi_oed.effects.joint_angle import GearHarmonic
+from pin_kpi_oed.identification.check import check_null
+from pin_kpi_oed.identification.identify import identify
+from pin_kpi_oed.identification.prediction_sigma import predictive_covariance
+from pin_kpi_oed.identification.simulate import Tolerances, default_tracker_pose, random_truth, simulate
+from pin_kpi_oed.model.noise import NoiseModel
+from pin_kpi_oed.model.robot import load_robot
+from pin_kpi_oed.model.tracker import TrackerModel
+from pin_kpi_oed.oed.check_power import CheckNull
+from pin_kpi_oed.oed.check_power import test_threshold as chi2_threshold
+from pin_kpi_oed.oed.identifiability import analyse
+
+
+@pytest.fixture(scope="module")
+def gp_model():
+    """A UR10 calibrated with a Gaussian-process discrepancy (a withheld gear harmonic), 300 rows, σ = 10 µm."""
+    robot = load_robot("ur10")
+    model = TrackerModel(robot, tracker_T_base=default_tracker_pose(robot), reflector_m=np.array([0.03, 0.02, 0.08]),
+                         noise=NoiseModel(sigma_xyz_m=(1e-5,) * 3))
+    truth = random_truth(model, Tolerances(5e-4, 1e-3), seed=4, only=[i for i in analyse(model).base if i < 36])
+    gh = GearHarmonic(robot, joints=["shoulder_lift_joint", "elbow_joint"], orders=(2, 3))
+    theta = 3e-4 * np.random.default_rng(5).standard_normal(len(gh.param_names()))
+    rng = np.random.default_rng(6)
+    Q = robot.random_q(rng, 360)
+    Q[:, 0] = rng.uniform(-1.5, 1.5, 360)
+    data = simulate(model, Q, truth, effects=[(gh, theta)], seed=7)
+    fit = identify(model, data.subset(np.arange(300)), discrepancy=DiscrepancyOptions(mode="on", n_fit=300, seed=0))
+    return fit.calibrated_model(), data.subset(np.arange(300, 360)), data.subset(np.arange(300))
+
+
+def test_joint_covariance_holds_the_honest_sigma_and_the_rows_correlations(gp_model):
+    cm, held, train = gp_model
+    assert cm.discrepancy.kind == "exact"
+    lab = cm.station(None)
+    # rows inside the coverage, a row next to another (correlated through the posterior), rows far outside
+    Q = np.vstack([held.q[:6], held.q[:1] + 0.02, np.clip(3.0 * held.q[6:9], cm.robot.q_lower, cm.robot.q_upper)])
+    Y, sig, out = cm.predict_with_sigma(Q)
+    assert out[-3:].any() and not out[:6].all()
+    Y2, C = predictive_covariance(cm, Q, None, lab)
+    np.testing.assert_allclose(Y2, Y, atol=1e-12)
+    np.testing.assert_allclose(np.sqrt(np.diag(C)).reshape(-1, 3), sig, rtol=1e-9)
+    assert np.allclose(C, C.T) and np.linalg.eigvalsh(C).min() > -1e-12 * np.abs(C).max()
+    corr = C / np.sqrt(np.outer(np.diag(C), np.diag(C)))
+    assert np.max(np.abs(corr[0:3, 18:21].diagonal())) > 0.3           # a pose and its neighbour share δ
+    # the discrepancy's posterior covariance is the textbook formula
+    d = cm.discrepancy
+    K = d.kernel(d.Z) + (d.noise + 1e-10) * np.eye(len(d.Z))
+    Kqz = d.kernel(Q, d.Z)
+    ref = d.kernel(Q) - Kqz @ np.linalg.solve(K, Kqz.T)
+    np.testing.assert_allclose(d.posterior_covariance(Q), ref, atol=1e-6 * np.abs(ref).max())
+
+
+def test_null_law_of_heavy_tailed_sums_monte_carlo():
+    """Sums of 24 squared t(8) errors scaled by f = 1.1 (excess kurtosis 1.5): the plain χ²(24) raises 3x the stated
+    false alarms, the scaled χ² of (f, κ) keeps them at α."""
+    rng = np.random.default_rng(0)
+    nu_t, f, dof, alpha = 8.0, 1.1, 24, 0.05
+    z = f * rng.standard_t(nu_t, size=(40000, dof)) / np.sqrt(nu_t / (nu_t - 2))
+    T = np.sum(z ** 2, axis=1)
+    kurt = 6.0 / (nu_t - 4)
+    plain = np.mean(T > chi2_threshold(dof, alpha))
+    law = CheckNull(factor=f, kurtosis=kurt)
+    scaled = np.mean(T > law.threshold(dof, alpha))
+    assert plain > 2.5 * alpha
+    assert abs(scaled - alpha) < 0.01, scaled
+    assert law.sf(law.threshold(dof, alpha), dof) == pytest.approx(alpha, rel=1e-9)
+    # the plain law is the χ² and its power the non-central χ²'s
+    assert CheckNull().threshold(dof, alpha) == pytest.approx(stats.chi2.isf(alpha, dof))
+    assert CheckNull().power(30.0, dof, alpha) == pytest.approx(stats.ncx2.sf(stats.chi2.isf(alpha, dof), dof, 30.0))
+    assert law.power(30.0, dof, alpha) < CheckNull().power(30.0, dof, alpha)
+
+
+def test_check_null_is_the_models_kfold_check(gp_model):
+    cm, _, _ = gp_model
+    law = check_null(cm)
+    cv = cm.discrepancy.cv
+    assert law.factor == pytest.approx(cv["z_rms"]) and law.kurtosis == pytest.approx(max(cv["z_kurtosis"], 0.0))
+    assert "z_kurtosis" in cv and np.isfinite(cv["z_kurtosis"])
+    plain = cm.noise_only()
+    assert check_null(plain) == CheckNull()
