@@ -49,8 +49,8 @@ from pin_kpi_oed.model.kinematics import skew
 #: "orientation at 200 mm", as a cell's ``orientation_length_m`` defaults to
 DEFAULT_TOOL_LENGTH_M = 0.2
 
-__all__ = ["DEFAULT_TOOL_LENGTH_M", "predictive_covariance", "predictive_sigma", "orientation_sigma", "robot_parameter_covariance",
-           "sigma_contents"]
+__all__ = ["DEFAULT_TOOL_LENGTH_M", "predictive_covariance", "predictive_sigma", "orientation_sigma",
+           "robot_parameter_covariance", "sigma_contents"]
 
 
 def robot_parameter_covariance(cm: Any, label: str | None = None, probe: bool = False
