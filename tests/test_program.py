@@ -156,6 +156,19 @@ def test_equivalents_keep_the_measured_tcp_and_clearances(ur10):
     assert len(equivalents(np.zeros(6), kr.q_lower, kr.q_upper, kr.robot.is_revolute)) == 1
 
 
+def test_smallest_pair_distance_is_the_smallest_of_every_pair(ur10, kr15):
+    """The move checks read only Coal's smallest pair distance: the minimum of every pair, in a cell with a
+    non-convex mesh (the UR10 table) and without, clear and colliding configurations alike."""
+    for cell in (ur10, kr15):
+        fc = FeasibilityChecker(cell)
+        X = cell.robot.random_q(np.random.default_rng(5), 300)
+        exact = np.array([fc.pair_distances(q).min() for q in X])
+        fast = np.array([fc.min_pair_distance(q) for q in X])
+        assert (exact < 0).any() and (exact > 0.01).any()
+        np.testing.assert_allclose(fast, exact, rtol=0, atol=1e-12)  # Coal's warm starts: equal to ~1e-16 m
+    assert FeasibilityChecker(ur10).mesh_pairs  # the mesh branch was taken
+
+
 def test_ur10_colliding_move_is_planned_by_ompl_and_passes_the_dense_check(ur10):
     tc = TransitionChecker(ur10, 0.01)
     qa, qb = np.radians(UR10_A), np.radians(UR10_B)

@@ -266,6 +266,30 @@ class FeasibilityChecker:
         d = np.array([r.min_distance for r in res])[:self.n_pairs]
         return mesh_penetration(self, d) if self.mesh_pairs else d
 
+    def min_pair_distance(self, q: np.ndarray) -> float:
+        """The smallest of :meth:`pair_distances` at one configuration (m; ``inf`` with no pairs).
+
+        Coal computes every pair as in :meth:`pair_distances`; Pinocchio's ``computeDistances`` returns the index
+        of the smallest, so only that result is read (reading all of them costs several times Coal's work). When
+        that smallest is within the contact tolerance of a non-convex mesh, every pair is read and re-tested as in
+        :meth:`pair_distances` (:func:`mesh_penetration` changes only pairs that close): the same value.
+
+        Args:
+            q: configuration (n,) rad (m for prismatic joints).
+
+        Returns:
+            Smallest signed distance (m); the cell's required clearance is not subtracted.
+        """
+        if not self.n_pairs:
+            return float("inf")
+        pin.framesForwardKinematics(self.model, self.data, np.asarray(q, float))
+        pin.updateGeometryPlacements(self.model, self.data, self.gm, self.gd)
+        k = pin.computeDistances(self.gm, self.gd)
+        d_min = float(self.gd.distanceResults[k].min_distance)
+        if not self.mesh_pairs or d_min > _MESH_CONTACT_M:
+            return d_min
+        return float(self.pair_distances(q).min())
+
     def distances(self, Q: np.ndarray) -> np.ndarray:
         """Signed distances of every checked pair and beam target (columns named by :attr:`names`).
 

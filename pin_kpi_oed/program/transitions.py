@@ -149,8 +149,7 @@ class TransitionChecker:
         if hit is not None:
             return hit
         self.n_evaluations += 1
-        d = self.checker.pair_distances(q)
-        out = float(d.min()) - self.cell.clearance_m if d.size else math.inf
+        out = self.checker.min_pair_distance(q) - self.cell.clearance_m
         if len(self._clearances) >= 200_000:
             self._clearances.clear()
         self._clearances[key] = out
