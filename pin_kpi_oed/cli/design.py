@@ -223,7 +223,7 @@ def run(args: argparse.Namespace) -> int:
                         true_checks=true_checks(true_cell, results) if cell is not true_cell else None,
                         extended_scores=extended_scores(problem, results, true_cell.q_work),
                         discrepancy_scores=discrepancy_scores(problem, results) if disc_on else None,
-                        path_profiles=path_profiles(problem, results))
+                        path_profiles=path_profiles(problem, results, discrepancy=disc_on))
     else:
         run = design_run(true_cell, settings, problem, discrepancy=disc_on)
     run = dataclasses.replace(run, given_file=given_file, pool_file=pool_file, model_file=getattr(args, "model", None),

@@ -56,7 +56,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         "predict; written by design --model) or paper (tracker noise only); default honest when "
                         "every design of the file has it, else paper")
     p.add_argument("--figures", default=None, metavar="DIR",
-                   help="also write the report figures (ellipsoid projections, designs, poses) as PNG to DIR")
+                   help="also write the report figures (ellipsoid projections, designs, poses; the sigma profile "
+                        "along the working paths when the design has paths) as PNG to DIR")
     p.set_defaults(func=run)
 
 
@@ -98,6 +99,14 @@ def _write_figures(df: DesignFile, folder: str, sigma: str = "honest") -> None:
     out.mkdir(exist_ok=True)  # checked before any work (validation.options); created like diagnose does
     for p in design_figures(df, out, sigma=sigma).values():
         print(f"wrote {p}")
+    if df.raw.get("path_profiles"):  # a cell with working paths: the σ profile along them
+        from pin_kpi_oed.viz.path_profile_plot import PROFILE_UNITS, plot_path_profiles
+
+        shown = {d.criterion for d in df.designs}
+        p = plot_path_profiles([e for e in df.raw["path_profiles"] if e.get("criterion") in shown],
+                               out / "design_path_sigma.png",
+                               title=f"{df.robot.name}: predicted sigma along the working paths")
+        print(f"wrote {p} ({PROFILE_UNITS})")
 
 
 def _pose(args: argparse.Namespace, scene: Scene) -> tuple[str, int] | None:

@@ -7,8 +7,13 @@ E_i (position, m) and R_i (tool orientation, rad) at path sample i::
     σ_L,i   = sqrt(σ_pos,i² + L² σ_rot,i²)  (m: position and orientation at the cell's ``orientation_length_m``)
 
 the profile along the path (``path_profiles`` of the design file), its RMS over the samples and its worst sample
-(the design table's path lines). ``kpi_path`` minimises the mean of σ_pos,i² along the path; ``kpi6`` the mean of
-σ_L,i² at the working configurations.
+(the design table's path lines). ``kpi_path`` minimises the mean of σ_pos,i² along the path, ``kpi_path_max`` its
+smooth worst sample; ``kpi6`` the mean of σ_L,i² at the working configurations.
+
+With the discrepancy (a design run whose criteria or ``--model`` bring one) the profile also holds the TCP's σ with
+it, σ_gp,i = sqrt(tr C_s,i^UK): the universal-kriging C_s of ``kpi_path_gp`` at the path samples
+(:meth:`~pin_kpi_oed.oed.discrepancy_kpi.DiscrepancyDesignCriterion.covariance`, its 3×3 diagonal block i): what the
+noise-only σ leaves out along the path. The discrepancy is a position term: the orientation σ stays the noise-only one.
 """
 
 from __future__ import annotations
@@ -21,7 +26,7 @@ import numpy as np
 from pin_kpi_oed.errors import IdentifiabilityError
 from pin_kpi_oed.oed.covariance import information
 
-__all__ = ["path_profile", "path_profiles", "profile_lines"]
+__all__ = ["path_profile", "discrepancy_profile", "path_profiles", "profile_lines"]
 
 
 def path_profile(problem: Any, Q: np.ndarray, Q_samples: np.ndarray, length_m: float) -> dict:
@@ -59,11 +64,33 @@ def path_profile(problem: Any, Q: np.ndarray, Q_samples: np.ndarray, length_m: f
     return out
 
 
-def path_profiles(problem: Any, results: Sequence[Any]) -> list[dict] | None:
+def discrepancy_profile(problem: Any, Q: np.ndarray, Q_samples: np.ndarray) -> dict:
+    """σ_gp per path sample (module docstring) for the design Q: ``sigma_pos_gp_m`` (list, m), its ``rms_`` and
+    ``worst_``.
+
+    Raises:
+        IdentifiabilityError: Q does not identify the parameters.
+    """
+    C = problem.gp_criterion(Q_work=Q_samples).covariance(Q)
+    S = len(Q_samples)
+    i = np.arange(S)
+    blocks = C.reshape(S, 3, S, 3)[i, :, i, :]  # (S, 3, 3): the 3×3 diagonal block of every sample
+    v = np.sqrt(np.maximum(np.einsum("saa->s", blocks), 0.0))
+    return {"sigma_pos_gp_m": v.tolist(), "rms_sigma_pos_gp_m": float(np.sqrt(np.mean(v ** 2))),
+            "worst_sigma_pos_gp_m": float(v.max())}
+
+
+def path_profiles(problem: Any, results: Sequence[Any], discrepancy: bool = False) -> list[dict] | None:
     """The profile of every working path of the problem's cell for every design with poses (None without paths).
 
+    Args:
+        problem: the design problem (its cell's paths).
+        results: the designs.
+        discrepancy: also the σ with the problem's discrepancy (:func:`discrepancy_profile`).
+
     Returns:
-        One entry per design: ``criterion`` and ``paths`` (per path: ``name``, ``s_m`` and :func:`path_profile`).
+        One entry per design: ``criterion`` and ``paths`` (per path: ``name``, ``s_m``, :func:`path_profile` and
+        with ``discrepancy`` :func:`discrepancy_profile`).
     """
     cell = problem.cell
     if not getattr(cell, "paths", None):
@@ -76,6 +103,8 @@ def path_profiles(problem: Any, results: Sequence[Any]) -> list[dict] | None:
         for p in cell.paths:
             try:
                 prof = path_profile(problem, r.q_meas, p.Q, cell.orientation_length_m)
+                if discrepancy:
+                    prof.update(discrepancy_profile(problem, r.q_meas, p.Q))
             except IdentifiabilityError:
                 continue
             entry["paths"].append({"name": p.name, "s_m": p.s_m.tolist(), **prof})
@@ -91,5 +120,7 @@ def profile_lines(profiles: Sequence[dict] | None) -> list[str]:
             lines.append(f"  {e['criterion']:>10} path {p['name']}: TCP sigma RMS {p['rms_sigma_pos_m'] * 1e6:.3f} um,"
                          f" worst {p['worst_sigma_pos_m'] * 1e6:.3f} um; orientation RMS "
                          f"{p['rms_sigma_rot_rad'] * 1e6:.3f} urad, worst {p['worst_sigma_rot_rad'] * 1e6:.3f} urad; "
-                         f"at {p['length_m'] * 1e3:g} mm RMS {p['rms_sigma_at_length_m'] * 1e6:.3f} um")
+                         f"at {p['length_m'] * 1e3:g} mm RMS {p['rms_sigma_at_length_m'] * 1e6:.3f} um"
+                         + (f"; with the discrepancy TCP sigma RMS {p['rms_sigma_pos_gp_m'] * 1e6:.3f} um, worst "
+                            f"{p['worst_sigma_pos_gp_m'] * 1e6:.3f} um" if "rms_sigma_pos_gp_m" in p else ""))
     return lines

@@ -160,4 +160,4 @@ def design_run(cell: Cell, settings: DesignSettings | None = None, problem: Any 
                      margins=margins, true_checks=checks, certificate=cert,
                      extended_scores=extended_scores(problem, results, cell.q_work),
                      discrepancy_scores=discrepancy_scores(problem, results) if discrepancy else None,
-                     path_profiles=path_profiles(problem, results))
+                     path_profiles=path_profiles(problem, results, discrepancy=bool(discrepancy)))

@@ -114,9 +114,10 @@ class CompensationResult(Result):
             if self.tcp_from_reflector_m >= LEVER_ARM_NOTE_M:
                 lines.append(lever_arm_line(self.tcp_from_reflector_m, "this sigma"))
             if self.sigma_rot_rad.size:
-                lines.append(f"predicted orientation sigma (3-D, the measured probe's frame): mean {np.mean(self.sigma_rot_rad) * 1e3:.4f} "
-                             f"mrad, max {np.max(self.sigma_rot_rad) * 1e3:.4f} mrad; at {self.tool_length_m * 1e3:g} "
-                             f"mm along the tool axis it moves the tool by sigma mean "
+                lines.append(f"predicted orientation sigma (3-D, the measured probe's frame): mean "
+                             f"{np.mean(self.sigma_rot_rad) * 1e3:.4f} mrad, max "
+                             f"{np.max(self.sigma_rot_rad) * 1e3:.4f} mrad; at {self.tool_length_m * 1e3:g} mm "
+                             "along the tool axis it moves the tool by sigma mean "
                              f"{np.mean(self.sigma_at_length_m) * 1e3:.4f} mm, max "
                              f"{np.max(self.sigma_at_length_m) * 1e3:.4f} mm")
             if self.tcp_unobservable_m.size and np.max(self.tcp_unobservable_m) > 0:

@@ -359,17 +359,12 @@ class CalibratedModel:
     def predict_orientation_with_sigma(self, Q: np.ndarray, aux: MeasurementSet | None = None,
                                        station: str | None = None, length_m: float = 0.0
                                        ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """A 6-D model's predicted probe orientation with the standard deviation of measured − predicted
-        (:func:`~pin_kpi_oed.identification.prediction_sigma.orientation_sigma`).
-
-        Args:
-            Q, aux, station: as :meth:`predict`.
-            length_m: a length along the tool axis (m): the 3-D σ of the point there that the orientation error
-                moves (the tool's tip at L).
+        """A 6-D model's predicted probe orientation with the σ of measured − predicted
+        (:func:`~pin_kpi_oed.identification.prediction_sigma.orientation_sigma`; Q, aux, station as :meth:`predict`).
 
         Returns:
-            (rotation vectors (m, 3) rad, σ per axis (m, 3) rad, both in the station's tracker frame; σ at
-            ``length_m`` (m,) m).
+            (rotation vectors (m, 3) rad, σ per axis (m, 3) rad, both in the station's tracker frame; the 3-D σ (m,)
+            m of the point ``length_m`` (m) along the tool axis that the orientation error moves).
 
         Raises:
             InputError: a position-only model or station, a negative length, as :meth:`predict`.
@@ -510,16 +505,7 @@ class CalibratedModel:
         tcp = np.asarray(d.get("tcp_m", [0.0, 0.0, 0.0]), float)
         if tcp.shape != (3,):
             raise InputError(f"{where}: field 'tcp_m' must be 3 numbers (m)")
-        fit = dict(d.get("fit") or {})
-        if fit.get("residual_sigma_m") is not None:
-            fit["residual_sigma_m"] = check_sigma_m(fit["residual_sigma_m"], f"{where}: field fit.residual_sigma_m")
-            if fit["residual_sigma_m"].size != 3:
-                raise InputError(f"{where}: field fit.residual_sigma_m must be 3 numbers (m per axis)")
-        if fit.get("residual_sigma_rad") is not None:
-            fit["residual_sigma_rad"] = check_sigma_rad(fit["residual_sigma_rad"],
-                                                        f"{where}: field fit.residual_sigma_rad")
-            if fit["residual_sigma_rad"].size != 3:
-                raise InputError(f"{where}: field fit.residual_sigma_rad must be 3 numbers (rad per axis)")
+        fit = _checked_fit(d.get("fit"), where)
         disc = None
         if d.get("discrepancy") is not None:
             disc = Discrepancy.from_dict(d["discrepancy"], robot.joint_names, f"{where}: discrepancy")
@@ -573,6 +559,18 @@ def _load_model_robot(rob: dict, where: str) -> Robot:
             raise InputError(f"{where}: the URDF of robot '{spec}' differs from the one calibrated (joint "
                              f"{robot.joint_names[k]}'s nominal placement changed): load the model with that URDF")
     return robot
+
+
+def _checked_fit(fit: Any, where: str) -> dict:
+    """A model file's ``fit`` block with its residual levels checked: ``residual_sigma_m`` (3 sigmas in m) and a 6-D
+    fit's ``residual_sigma_rad`` (3 sigmas in rad)."""
+    fit = dict(fit or {})
+    for key, check, unit in (("residual_sigma_m", check_sigma_m, "m"), ("residual_sigma_rad", check_sigma_rad, "rad")):
+        if fit.get(key) is not None:
+            fit[key] = check(fit[key], f"{where}: field fit.{key}")
+            if fit[key].size != 3:
+                raise InputError(f"{where}: field fit.{key} must be 3 numbers ({unit} per axis)")
+    return fit
 
 
 def load_model_file(path: str | os.PathLike) -> CalibratedModel:

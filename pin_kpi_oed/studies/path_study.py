@@ -93,6 +93,7 @@ def path_study(out_dir: Path, m: int = 60, seeds: tuple[int, ...] = (0, 1, 2, 3,
                                "path_samples": int(len(c.q_path)), "orientation_length_m": c.orientation_length_m,
                                "means": means, "paired": pairs, "records": recs,
                                "all_feasible": all(d["feasible"] for r in recs for d in r["designs"].values())}
+    atomic_write_json(Path(out_dir) / "summary.json", summary)  # the designs' scores kept before the Monte-Carlo
     if mc_reps:
         from pin_kpi_oed.studies.design_trials import monte_carlo
 
