@@ -96,7 +96,7 @@ def measured(ipa_reps: int, pairs: list[str], log, noise_weight: float | None = 
     from pin_kpi_oed import NoiseModel, TrackerModel, load_robot
     from pin_kpi_oed.data.measurements import MeasurementSet
     from pin_kpi_oed.identification.identify import identify
-    from pin_kpi_oed.oed.discrepancy_kpi import DiscrepancyPrior
+    from pin_kpi_oed.discrepancy.prior import DiscrepancyPrior
     from pin_kpi_oed.studies.hedged_design import measured_case
 
     folder = find_ipa_data()

@@ -34,7 +34,7 @@ import numpy as np
 from benchmarks.common import find_ipa_data, load_ipa_series
 from pin_kpi_oed import NoiseModel, TrackerModel, load_robot
 from pin_kpi_oed.data.atomic import atomic_write_json
-from pin_kpi_oed.oed.discrepancy_kpi import DiscrepancyPrior
+from pin_kpi_oed.discrepancy.prior import DiscrepancyPrior
 from pin_kpi_oed.studies.learning_curves import METHODS, LearningCurves, _n, curve_split, region_beyond
 
 #: case -> (pool series, target series or None, prior series, pool size or None)

@@ -9,8 +9,7 @@ import pytest
 
 from pin_kpi_oed import load_robot
 from pin_kpi_oed.errors import InputError
-from pin_kpi_oed.oed.discrepancy_defaults import ROBOT_CLASSES, class_discrepancy, robot_class_of
-from pin_kpi_oed.oed.discrepancy_kpi import DEFAULT_DISCREPANCY, default_discrepancy
+from pin_kpi_oed.oed.discrepancy_defaults import ROBOT_CLASSES, class_discrepancy, default_discrepancy, robot_class_of
 
 
 @pytest.mark.parametrize("name, cls", [("ur5", "collaborative"), ("UR10e", "collaborative"), ("panda", "collaborative"),
@@ -24,7 +23,7 @@ def test_kr15_keeps_the_generic_numbers_so_its_designs_are_unchanged():
     d, g = class_discrepancy(robot), default_discrepancy(robot.nq)
     assert d.scale_m == pytest.approx(g.scale_m) and d.noise == pytest.approx(g.noise)
     Q = robot.random_q(np.random.default_rng(0), 7)
-    assert d.cov(Q) == pytest.approx(g.cov(Q))
+    assert d.covariance(Q) == pytest.approx(g.covariance(Q))
     assert "industrial class, from the name 'kr15'" in d.source and "not a fit" in d.source
 
 
@@ -35,17 +34,17 @@ def test_scale_grows_with_the_reach_beyond_the_reference_arm():
         d = class_discrepancy(robot)
         assert robot.reach() > c.reach_m
         assert d.scale_m == pytest.approx(np.full(3, c.scale_m * robot.reach() / c.reach_m))
-        assert d.noise == pytest.approx(DEFAULT_DISCREPANCY["white_m"] ** 2 / DEFAULT_DISCREPANCY["scale_m"] ** 2)
+        assert d.noise == pytest.approx(ROBOT_CLASSES["generic"].white_m ** 2 / ROBOT_CLASSES["generic"].scale_m ** 2)
     ur10, ur5 = class_discrepancy(load_robot("ur10")), class_discrepancy(load_robot("ur5"))
     assert ur10.scale_m[0] == pytest.approx(2.5e-4, rel=1e-3)                  # the Series B fit's order
     assert ur5.scale_m[0] == pytest.approx(2.5e-4)                              # a shorter arm keeps S_c
-    assert ur10.prior_sigma_m() == pytest.approx(ur10.scale_m)                 # k(q, q) = 1
+    assert ur10.delta_sigma_m == pytest.approx(ur10.scale_m)                 # k(q, q) = 1
 
 
 def test_given_class_overrides_the_name_and_an_unknown_class_is_refused():
     robot = load_robot("ur10")
     d = class_discrepancy(robot, "generic")
-    assert d.scale_m[0] == DEFAULT_DISCREPANCY["scale_m"] and "generic class, given" in d.source
+    assert d.scale_m[0] == ROBOT_CLASSES["generic"].scale_m and "generic class, given" in d.source
     with pytest.raises(InputError, match="robot class 'heavy': unknown"):
         class_discrepancy(robot, "heavy")
 

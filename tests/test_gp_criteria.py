@@ -15,7 +15,8 @@ from pin_kpi_oed.errors import InputError
 from pin_kpi_oed.oed.criteria import CRITERIA, Criterion, DiscrepancyForm, criterion_names, get_criterion
 from pin_kpi_oed.oed.discrepancy_criteria import GlsDesignCriterion, gls_value_and_grad
 from pin_kpi_oed.oed.discrepancy_pool import GlsState
-from pin_kpi_oed.oed.discrepancy_kpi import DiscrepancyPrior, default_discrepancy
+from pin_kpi_oed.discrepancy.prior import DiscrepancyPrior
+from pin_kpi_oed.oed.discrepancy_defaults import default_discrepancy
 
 GP = ["D_gp", "param_gp", "E_gp", "cond_gp", "O1_gp", "O2_gp", "O3_gp", "O4_gp", "O5_gp"]
 
@@ -80,15 +81,16 @@ def test_kernel_part_of_the_gradient_matches_finite_differences(problem, name):
     crit = GlsDesignCriterion(problem.model, problem.base, d, name, p=problem.p0)
     J = crit.pool_jacobians(Q)
     base = crit.crit
-    _, g = gls_value_and_grad(base, J, d.cov(Q), d.scale_m, d.noise, crit.prior_info)
+    _, g = gls_value_and_grad(base, J, d.covariance(Q), d.scale_m, d.noise, crit.prior_info)
     gk = np.einsum("ij,ijk->ik", g["G"] + g["G"].T, d.grad_x(Q, Q))
     h = 1e-6
     for i, k in [(0, 0), (3, 2), (7, 4)]:
         Qp, Qm = Q.copy(), Q.copy()
         Qp[i, k] += h
         Qm[i, k] -= h
-        num = (gls_value_and_grad(base, J, d.cov(Qp), d.scale_m, d.noise, crit.prior_info, grad=False)[0]
-               - gls_value_and_grad(base, J, d.cov(Qm), d.scale_m, d.noise, crit.prior_info, grad=False)[0]) / (2 * h)
+        num = (gls_value_and_grad(base, J, d.covariance(Qp), d.scale_m, d.noise, crit.prior_info, grad=False)[0]
+               - gls_value_and_grad(base, J, d.covariance(Qm), d.scale_m, d.noise, crit.prior_info, grad=False)[0]
+               ) / (2 * h)
         assert num == pytest.approx(gk[i, k], rel=1e-5, abs=1e-7 * np.abs(gk).max())
     assert np.abs(gk).max() > 0
 
@@ -110,7 +112,7 @@ def test_pool_updates_equal_recomputation(problem, form):
     phi = st.values(np.zeros(40, bool))
     for c in (15, 30):
         idx = S + [c]
-        ref = gls_value_and_grad(crit.crit, Jp[idx], d.cov(Qp[idx]), d.scale_m, d.noise, crit.prior_info,
+        ref = gls_value_and_grad(crit.crit, Jp[idx], d.covariance(Qp[idx]), d.scale_m, d.noise, crit.prior_info,
                                  grad=False)[0]
         assert phi[c] == pytest.approx(ref, rel=1e-8, abs=1e-10)
 

@@ -10,7 +10,8 @@ import pytest
 
 from pin_kpi_oed.cell.cell import load_cell
 from pin_kpi_oed.design.optimize import DesignProblem
-from pin_kpi_oed.oed.discrepancy_kpi import DiscrepancyDesignCriterion, DiscrepancyPrior
+from pin_kpi_oed.discrepancy.prior import DiscrepancyPrior
+from pin_kpi_oed.oed.discrepancy_kpi import DiscrepancyDesignCriterion
 from pin_kpi_oed.oed.hedged_kpi import HedgedDesignCriterion, prior_family
 from pin_kpi_oed.studies.hedged_design import gp_discrepancy_sample
 

@@ -13,8 +13,10 @@ from pin_kpi_oed.errors import InputError
 from pin_kpi_oed.oed.covariance import covariances, prior_of
 from pin_kpi_oed.oed.criteria import CRITERIA, ConfigurationCriterion, Criterion, evaluate_all, get_criterion
 from pin_kpi_oed.oed.objective import DesignCriterion
-from pin_kpi_oed.oed.discrepancy_kpi import (DiscrepancyDesignCriterion, DiscrepancyPrior, default_discrepancy,
-                                             kpi_gp_covariance, kpi_gp_value_and_grad)
+from pin_kpi_oed.discrepancy.prior import DiscrepancyPrior
+from pin_kpi_oed.oed.discrepancy_defaults import default_discrepancy
+from pin_kpi_oed.oed.discrepancy_kpi import DiscrepancyDesignCriterion
+from pin_kpi_oed.oed.kriging import kpi_gp_covariance, kpi_gp_value_and_grad
 from pin_kpi_oed.oed.discrepancy_pool import GreedyState
 
 from .fd import fd_rows
@@ -67,8 +69,8 @@ def test_kernel_part_of_the_gradient_is_not_zero(problem):
     d = default_discrepancy(6)
     crit = DiscrepancyDesignCriterion(problem.model, problem.base, d, problem.cell.q_work, p=problem.p0)
     J = crit.pool_jacobians(Q)
-    _, g = kpi_gp_value_and_grad(J, crit.E, d.cov(Q), d.cov(problem.cell.q_work, Q), crit.tr_kww, d.scale_m,
-                                 d.noise, crit.prior_info)
+    _, g = kpi_gp_value_and_grad(J, crit.E, d.covariance(Q), d.covariance(problem.cell.q_work, Q), crit.tr_kww,
+                                 d.scale_m, d.noise, crit.prior_info)
     Gs = g["G"] + g["G"].T
     gk = (np.einsum("ij,ijk->ik", Gs, d.grad_x(Q, Q))
           + np.einsum("ti,itk->ik", g["Kwq"], d.grad_x(Q, problem.cell.q_work)))
@@ -78,8 +80,8 @@ def test_kernel_part_of_the_gradient_is_not_zero(problem):
     Qm[2, 1] -= h
 
     def phi(Qx):
-        return kpi_gp_value_and_grad(J, crit.E, d.cov(Qx), d.cov(problem.cell.q_work, Qx), crit.tr_kww, d.scale_m,
-                                     d.noise, crit.prior_info, grad=False)[0]
+        return kpi_gp_value_and_grad(J, crit.E, d.covariance(Qx), d.covariance(problem.cell.q_work, Qx), crit.tr_kww,
+                                     d.scale_m, d.noise, crit.prior_info, grad=False)[0]
     fd = (phi(Qp) - phi(Qm)) / (2 * h)
     assert fd == pytest.approx(gk[2, 1], rel=1e-5)
     assert abs(fd) > 1e-6 * phi(Q)
@@ -99,7 +101,7 @@ def test_covariance_matches_monte_carlo(with_prior):
     disc = DiscrepancyPrior(disc.kernel, np.array([1e-4, 2e-4, 0.5e-4]), 0.05)
     sig0 = np.array([0.05, 0.1, 0.2, 0.1])
     P = np.diag(1 / sig0 ** 2) if with_prior else None
-    Kall = disc.cov(np.vstack([Q, W]))
+    Kall = disc.covariance(np.vstack([Q, W]))
     Cs = kpi_gp_covariance(J, E, Kall[:m, :m], Kall[m:, :m], Kall[m:, m:], disc.scale_m, disc.noise, P)
     n = 40000
     Lk = np.linalg.cholesky(Kall + 1e-12 * np.eye(m + t))
@@ -135,7 +137,7 @@ def test_pool_updates_equal_recomputation(problem, n_work):
     Jp = crit.pool_jacobians(Qp)
 
     def direct(idx):
-        return kpi_gp_value_and_grad(Jp[idx], crit.E, d.cov(Qp[idx]), d.cov(Qw, Qp[idx]),
+        return kpi_gp_value_and_grad(Jp[idx], crit.E, d.covariance(Qp[idx]), d.covariance(Qw, Qp[idx]),
                                      crit.tr_kww, d.scale_m, d.noise, crit.prior_info, grad=False)[0]
     st = GreedyState(Jp, Qp, crit.E, Qw, d, crit.prior_info, 0.0)
     S = list(range(0, 30, 2))

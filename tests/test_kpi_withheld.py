@@ -126,7 +126,8 @@ def test_flagged_rows_feed_the_discrepancy_when_the_plain_fit_used_them():
 def test_poses_needed_says_when_the_measured_poses_already_reach_the_target():
     from pin_kpi_oed.cell.cell import load_cell
     from pin_kpi_oed.design.optimize import DesignProblem
-    from pin_kpi_oed.oed.discrepancy_kpi import DiscrepancyDesignCriterion, default_discrepancy, poses_needed
+    from pin_kpi_oed.oed.discrepancy_defaults import default_discrepancy
+    from pin_kpi_oed.oed.discrepancy_kpi import DiscrepancyDesignCriterion, poses_needed
 
     problem = DesignProblem(load_cell("kr15"))
     rng = np.random.default_rng(0)

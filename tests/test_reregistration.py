@@ -10,8 +10,10 @@ import pytest
 from pin_kpi_oed.cell.cell import load_cell
 from pin_kpi_oed.design.optimize import DesignProblem
 from pin_kpi_oed.errors import InputError
-from pin_kpi_oed.oed.discrepancy_kpi import (DiscrepancyDesignCriterion, DiscrepancyPrior, default_discrepancy,
-                                             kpi_gp_covariance)
+from pin_kpi_oed.discrepancy.prior import DiscrepancyPrior
+from pin_kpi_oed.oed.discrepancy_defaults import default_discrepancy
+from pin_kpi_oed.oed.discrepancy_kpi import DiscrepancyDesignCriterion
+from pin_kpi_oed.oed.kriging import kpi_gp_covariance
 from pin_kpi_oed.oed.reregistration import reregistered_covariance, reregistration
 
 from .fd import fd_rows
@@ -36,7 +38,7 @@ def test_reregistered_covariance_matches_monte_carlo(white):
     J, E, JR = (rng.normal(size=(k, 3, nb)) * 1e-3 for k in (m, t, r))
     d0 = default_discrepancy(d)
     disc = DiscrepancyPrior(None if white else d0.kernel, np.array([1e-4, 2e-4, 0.5e-4]), 0.05)
-    Kall = disc.cov(np.vstack([Q, W, R]))
+    Kall = disc.covariance(np.vstack([Q, W, R]))
     rr = reregistration(E, JR, setup, disc.scale_m, disc.noise, R)
     assert np.all(rr.E[:, :, setup] == 0)
     Cs = kpi_gp_covariance(J, rr.E, Kall[:m, :m], Kall[m:m + t, :m], Kall[m:m + t, m:m + t], disc.scale_m,

@@ -100,7 +100,7 @@ def add_discrepancy_section(doc: dict, problem: Any, gp_scores: list[dict]) -> N
     arm = lever_arm_m(problem.model.tcp_m, problem.model.reflector_m)
     doc["discrepancy"] = {"source": d.source, "scale_m": d.scale_m.tolist(), "noise": d.noise,
                           "white_sigma_m": (d.scale_m * math.sqrt(d.noise)).tolist(),
-                          "delta_sigma_m": d.prior_sigma_m().tolist(),
+                          "delta_sigma_m": d.delta_sigma_m.tolist(),
                           "kernel": None if d.kernel is None else d.kernel.to_dict(),
                           "certificate": "none exists for the discrepancy-aware criteria (kpi_gp, D_gp, ...)",
                           "tcp_from_reflector_m": arm, "lever_arm_sigma_per_rad_m": lever_arm_sigma_m(arm, 1.0),

@@ -46,6 +46,7 @@ import numpy as np
 from scipy import linalg as sla
 
 from pin_kpi_oed.discrepancy.arrays import decode_array, encode_array
+from pin_kpi_oed.discrepancy.base import DiscrepancyModel
 from pin_kpi_oed.discrepancy.coverage import JointCoverage, joint_space_box
 from pin_kpi_oed.discrepancy.kernel import JointKernel
 from pin_kpi_oed.errors import InputError
@@ -190,8 +191,9 @@ def _legacy_bins(cov: Any, names: list, where: str) -> np.ndarray:
 
 
 @dataclass
-class Discrepancy:
-    """A fitted discrepancy in the robot base frame (see the module docstring).
+class Discrepancy(DiscrepancyModel):
+    """A fitted discrepancy in the robot base frame (see the module docstring): the prior of
+    :class:`~pin_kpi_oed.discrepancy.base.DiscrepancyModel` (``covariance``, ``prior_sigma_m``, ...) and the posterior.
 
     Attributes:
         kind: ``exact``, ``inducing`` (DTC) or ``white`` (no correlation: the residual level per row).
@@ -384,22 +386,9 @@ class Discrepancy:
         return out
 
     @property
-    def prior_sigma_m(self) -> np.ndarray:
-        """Per-axis σ (m) of the residuals of the parametric model alone: prior variance of δ plus the white level."""
-        k0 = 0.0 if self.kind == "white" else float(self.kernel.diag(np.zeros((1, len(self.joint_names))))[0])
-        return np.sqrt((k0 + self.noise) * self.scale_m ** 2)
-
-    @property
-    def noise_var_m2(self) -> np.ndarray:
-        """Variance per axis (m²) of what repeats from pose to pose only (tracker noise, repeatability)."""
-        return self.noise * self.scale_m ** 2
-
-    def covariance(self, Qa: np.ndarray, Qb: np.ndarray | None = None) -> np.ndarray:
-        """Prior covariance k(Qa, Qb) in normalised units (multiply by s_a² for axis a, m²)."""
-        if self.kind == "white":
-            Qb = Qa if Qb is None else Qb
-            return np.zeros((len(Qa), len(Qb)))
-        return self.kernel(np.atleast_2d(Qa), None if Qb is None else np.atleast_2d(Qb))
+    def n_joints(self) -> int:
+        """The robot's joints (the columns of Q)."""
+        return len(self.joint_names)
 
     def extrapolation(self, Q: np.ndarray) -> np.ndarray:
         """(m,) bool: configurations outside the training's joint-space coverage

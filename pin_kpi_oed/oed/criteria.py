@@ -406,7 +406,7 @@ class KpiDiscrepancy(ConfigurationCriterion):
     The discrepancy kernel couples the poses: :class:`~pin_kpi_oed.oed.discrepancy_kpi.DiscrepancyDesignCriterion`
     on the problem's geometry, discrepancy, working region, measured poses and re-registration
     (:meth:`DesignProblem.gp_criterion <pin_kpi_oed.design.optimize.DesignProblem.gp_criterion>`). Pool selection:
-    greedy + exchange (:func:`~pin_kpi_oed.oed.discrepancy_kpi.select_pool_gp`; no certificate exists).
+    greedy + exchange (:func:`~pin_kpi_oed.oed.discrepancy_pool.select_pool_gp`; no certificate exists).
     """
 
     name, label, unit = "kpi_gp", "A on C_s with the model discrepancy (universal kriging, m^2)", "m^2"

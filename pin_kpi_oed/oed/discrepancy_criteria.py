@@ -173,7 +173,8 @@ class GlsDesignCriterion(DesignObjective):
         Q = np.atleast_2d(Q)
         Qa, Ja = self._all(Q, base_frame_jacobian(self.model, self.p, Q, self.base, False)[0] if len(Q) else None)
         d = self.discrepancy
-        return gls_value_and_grad(self.form.base, Ja, d.cov(Qa), d.scale_m, d.noise, self.prior_info, grad=False)[0]
+        return gls_value_and_grad(self.form.base, Ja, d.covariance(Qa), d.scale_m, d.noise, self.prior_info,
+                                  grad=False)[0]
 
     def value_and_grad(self, Q: np.ndarray) -> tuple[float, np.ndarray]:
         """φ and its exact gradient w.r.t. Q (m, n) (per rad): the Jacobian's and the kernel's parts."""
@@ -181,7 +182,7 @@ class GlsDesignCriterion(DesignObjective):
         J, dJ = base_frame_jacobian(self.model, self.p, Q, self.base, True)
         Qa, Ja = self._all(Q, J)
         d = self.discrepancy
-        val, g = gls_value_and_grad(self.form.base, Ja, d.cov(Qa), d.scale_m, d.noise, self.prior_info)
+        val, g = gls_value_and_grad(self.form.base, Ja, d.covariance(Qa), d.scale_m, d.noise, self.prior_info)
         return val, chain_q(g, dJ, d, Q, Qa, len(Qa) - len(Q))
 
     def pool_jacobians(self, Q_pool: np.ndarray) -> np.ndarray:
@@ -231,7 +232,7 @@ def select_pool_gls(crit: Criterion, J_pool: np.ndarray, Q_pool: np.ndarray, dis
                             else t0 + time_budget_s)
     idx, path, swaps = found.indices, found.path, found.swaps
     sel = np.concatenate([np.arange(k0), k0 + idx])
-    val = gls_value_and_grad(crit, Jall[sel], discrepancy.cov(Qall[sel]), discrepancy.scale_m, discrepancy.noise,
+    val = gls_value_and_grad(crit, Jall[sel], discrepancy.covariance(Qall[sel]), discrepancy.scale_m, discrepancy.noise,
                              prior_info, grad=False)[0]
     return PoolSelection(indices=idx, value=float(val), path=np.array(path), nit=swaps,
                          time_s=time.perf_counter() - t0, success=True, status="selected",

@@ -8,8 +8,8 @@ flexibility of its drives. Per class c the per-axis scale is
     S = S_c · max(1, reach / reach_c),
 
 with the class's reference arm (``reach_c``) and its S_c; the kernel is the generic one of
-:func:`~pin_kpi_oed.oed.discrepancy_kpi.default_discrepancy` (k(q, q) = 1, half whole-configuration with length
-scales of 1 rad, half one-joint with 0.5 rad), and the white level w = (white_c / S_c)² = 1/100 for every class:
+:data:`KERNEL_SHAPE` (k(q, q) = 1, half whole-configuration with length scales of 1 rad, half one-joint with
+0.5 rad), and the white level w = (white_c / S_c)² = 1/100 for every class:
 the white σ is S/10. Without a parameter prior tr C_s then only scales by S², so the class and the reach set the
 size of the honest σ, not which design is optimal. The classes:
 
@@ -21,7 +21,7 @@ size of the honest σ, not which design is optimal. The classes:
   assumption of the order of the residuals after geometric calibration, not a fit (no measured industrial arm
   ships with the package); the KR 300 / KR 500 get 0.15 / 0.18 mm.
 * ``generic`` (a robot of unknown class): S = 0.1 mm, white 10 µm, whatever the reach — the package's
-  :data:`~pin_kpi_oed.oed.discrepancy_kpi.DEFAULT_DISCREPANCY`.
+  :func:`default_discrepancy`.
 
 The reach is :meth:`~pin_kpi_oed.model.robot.Robot.reach` (a linear track's travel included).
 
@@ -35,10 +35,16 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from pin_kpi_oed.discrepancy.kernel import JointKernel
+from pin_kpi_oed.discrepancy.prior import DiscrepancyPrior
 from pin_kpi_oed.errors import InputError
-from pin_kpi_oed.discrepancy.prior import DEFAULT_DISCREPANCY, DiscrepancyPrior, default_discrepancy
 
-__all__ = ["RobotClass", "ROBOT_CLASSES", "robot_class_of", "class_discrepancy"]
+__all__ = ["RobotClass", "ROBOT_CLASSES", "KERNEL_SHAPE", "robot_class_of", "class_discrepancy",
+           "default_discrepancy"]
+
+#: The kernel every default assumes (a stated assumption, not a fit): the share of k(q, q) = 1 in the
+#: whole-configuration part, its length scale and the one-joint parts' length scale (rad).
+KERNEL_SHAPE = {"product_share": 0.5, "length_scale_rad": 1.0, "joint_length_scale_rad": 0.5}
 
 
 @dataclass(frozen=True)
@@ -74,8 +80,7 @@ ROBOT_CLASSES: dict[str, RobotClass] = {c.name: c for c in (
     RobotClass("industrial", 1e-4, 2.15, 1e-5,
                "an assumption of the order of the residuals after geometric calibration (KR 15: 0.1 mm)",
                ("kr",)),
-    RobotClass("generic", DEFAULT_DISCREPANCY["scale_m"], None, DEFAULT_DISCREPANCY["white_m"],
-               "the package's generic default for a robot of unknown class"),
+    RobotClass("generic", 1e-4, None, 1e-5, "the package's generic default for a robot of unknown class"),
 )}
 
 
@@ -96,7 +101,7 @@ def class_discrepancy(robot, robot_class: str | None = None) -> DiscrepancyPrior
         robot_class: a key of :data:`ROBOT_CLASSES`, or None to take it from the robot's name.
 
     Returns:
-        The :class:`~pin_kpi_oed.oed.discrepancy_kpi.DiscrepancyPrior`; its ``source`` states the class, S, the white
+        The :class:`~pin_kpi_oed.discrepancy.prior.DiscrepancyPrior`; its ``source`` states the class, S, the white
         level and the basis.
 
     Raises:
@@ -115,3 +120,23 @@ def class_discrepancy(robot, robot_class: str | None = None) -> DiscrepancyPrior
     source = (f"default for the {c.name} class, {how}: S = {S * 1e3:.3g} mm{grow}; basis: {c.basis}; not a fit "
               f"(--robot-class to change the class, --model for a fitted one)")
     return DiscrepancyPrior(base.kernel, np.full(3, S), (c.white_m / c.scale_m) ** 2, source)
+
+
+def default_discrepancy(n_joints: int) -> DiscrepancyPrior:
+    """The documented default before any measurement, whatever the robot: the ``generic`` class of
+    :data:`ROBOT_CLASSES` with the kernel :data:`KERNEL_SHAPE`.
+
+    S = 0.1 mm per axis, white 10 µm per axis (w = (10 µm / 0.1 mm)² = 0.01), k(q, q) = 1 split half into the
+    whole-configuration part (c² = 0.5, L_j = 1 rad) and half into one-joint parts (a_j² = 0.5/d, ℓ_j = 0.5 rad).
+    A stated assumption of the order of the residuals after geometric calibration of industrial arms (the
+    real UR10 data of this package leave 0.1-0.5 mm); pass ``--model`` with a fitted discrepancy for a real one.
+    """
+    share = KERNEL_SHAPE["product_share"]
+    k = JointKernel(np.sqrt(share), np.full(n_joints, KERNEL_SHAPE["length_scale_rad"]),
+                    np.full(n_joints, np.sqrt((1 - share) / n_joints)),
+                    np.full(n_joints, KERNEL_SHAPE["joint_length_scale_rad"]))
+    g = ROBOT_CLASSES["generic"]
+    return DiscrepancyPrior(k, np.full(3, g.scale_m), (g.white_m / g.scale_m) ** 2,
+                            f"default: S = {g.scale_m * 1e3:g} mm, white {g.white_m * 1e6:g} um per axis, length "
+                            f"scales {KERNEL_SHAPE['length_scale_rad']:g} rad (whole configuration) and "
+                            f"{KERNEL_SHAPE['joint_length_scale_rad']:g} rad (one joint); an assumption, not a fit")

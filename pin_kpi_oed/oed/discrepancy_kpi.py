@@ -20,18 +20,16 @@ from typing import Any
 
 import numpy as np
 
-from pin_kpi_oed.discrepancy.prior import DEFAULT_DISCREPANCY, DiscrepancyPrior, default_discrepancy
+from pin_kpi_oed.discrepancy.prior import DiscrepancyPrior
 from pin_kpi_oed.errors import IdentifiabilityError, InputError
 from pin_kpi_oed.oed.covariance import prior_of
 from pin_kpi_oed.oed.criteria import KpiDiscrepancy
-from pin_kpi_oed.oed.discrepancy_pool import NO_CERTIFICATE, select_pool_gp
+from pin_kpi_oed.oed.discrepancy_pool import select_pool_gp
 from pin_kpi_oed.oed.kriging import kpi_gp_covariance, kpi_gp_value_and_grad
 from pin_kpi_oed.oed.objective import DesignObjective
 from pin_kpi_oed.oed.selection_result import PoolSelection
 
-__all__ = ["DiscrepancyPrior", "default_discrepancy", "DEFAULT_DISCREPANCY", "kpi_gp_covariance",
-           "kpi_gp_value_and_grad", "KpiDiscrepancy", "DiscrepancyDesignCriterion", "select_pool_gp",
-           "NO_CERTIFICATE", "PosesNeeded", "poses_needed"]
+__all__ = ["base_frame_jacobian", "chain_q", "DiscrepancyDesignCriterion", "PosesNeeded", "poses_needed"]
 
 
 # --------------------------------------------------------------------------- the criterion of configurations
@@ -102,8 +100,8 @@ class DiscrepancyDesignCriterion(DesignObjective):
             ps = prior_of(self.model, self.base)
             self.prior_info = None if ps is None else np.diag(1.0 / np.asarray(ps, float) ** 2)
         d = self.discrepancy
-        self.tr_kww = float(np.trace(d.cov(self.Q_work)))
-        self.Kww = d.cov(self.Q_work)
+        self.tr_kww = float(np.trace(d.covariance(self.Q_work)))
+        self.Kww = d.covariance(self.Q_work)
         if self.Q_given is not None and len(self.Q_given):
             self.Q_given = np.atleast_2d(np.asarray(self.Q_given, float))
             self.J_given = base_frame_jacobian(self.model, self.p, self.Q_given, self.base, False)[0]
@@ -148,7 +146,7 @@ class DiscrepancyDesignCriterion(DesignObjective):
         Qa, Ja = self._all(np.atleast_2d(Q),
                            base_frame_jacobian(self.model, self.p, np.atleast_2d(Q), self.base, False)[0])
         d = self.discrepancy
-        C = kpi_gp_covariance(Ja, self.E, d.cov(Qa), d.cov(self.Q_work, Qa), self.Kww, d.scale_m, d.noise,
+        C = kpi_gp_covariance(Ja, self.E, d.covariance(Qa), d.covariance(self.Q_work, Qa), self.Kww, d.scale_m, d.noise,
                               self.prior_info)
         return C if self.reg is None else C + self.reg.cov_m2
 
@@ -165,7 +163,8 @@ class DiscrepancyDesignCriterion(DesignObjective):
         Qa, Ja = self._all(Q, base_frame_jacobian(self.model, self.p, Q, self.base, False)[0] if len(Q) else None)
         d, WR = self.discrepancy, np.vstack([self.Q_work, self.Q_register])
         E2 = np.concatenate([self.reg.E_before, self.pool_jacobians(self.Q_register)])
-        C_WR = kpi_gp_covariance(Ja, E2, d.cov(Qa), d.cov(WR, Qa), d.cov(WR), d.scale_m, d.noise, self.prior_info)
+        C_WR = kpi_gp_covariance(Ja, E2, d.covariance(Qa), d.covariance(WR, Qa), d.covariance(WR), d.scale_m, d.noise,
+                                 self.prior_info)
         return reregistered_covariance(self.reg, C_WR)
 
     def value(self, Q: np.ndarray) -> float:
@@ -175,8 +174,8 @@ class DiscrepancyDesignCriterion(DesignObjective):
             raise IdentifiabilityError("no poses: the parameters are not identified")
         Qa, Ja = self._all(Q, base_frame_jacobian(self.model, self.p, Q, self.base, False)[0] if len(Q) else None)
         d = self.discrepancy
-        return kpi_gp_value_and_grad(Ja, self.E, d.cov(Qa), d.cov(self.Q_work, Qa), self.tr_kww, d.scale_m,
-                                     d.noise, self.prior_info, grad=False)[0] + self.tr_register
+        return kpi_gp_value_and_grad(Ja, self.E, d.covariance(Qa), d.covariance(self.Q_work, Qa), self.tr_kww,
+                                     d.scale_m, d.noise, self.prior_info, grad=False)[0] + self.tr_register
 
     def value_and_grad(self, Q: np.ndarray) -> tuple[float, np.ndarray]:
         """tr C_s (m²) and its exact gradient w.r.t. Q (m, n) (m² per rad)."""
@@ -185,8 +184,8 @@ class DiscrepancyDesignCriterion(DesignObjective):
         Qa, Ja = self._all(Q, J)
         k = 0 if self.Q_given is None else len(self.Q_given)
         d = self.discrepancy
-        val, g = kpi_gp_value_and_grad(Ja, self.E, d.cov(Qa), d.cov(self.Q_work, Qa), self.tr_kww, d.scale_m,
-                                       d.noise, self.prior_info)
+        val, g = kpi_gp_value_and_grad(Ja, self.E, d.covariance(Qa), d.covariance(self.Q_work, Qa), self.tr_kww,
+                                       d.scale_m, d.noise, self.prior_info)
         grad = chain_q(g, dJ, d, Q, Qa, k)
         grad += np.einsum("ti,itk->ik", g["Kwq"][:, k:], d.grad_x(Q, self.Q_work))
         return val + self.tr_register, grad

@@ -52,11 +52,11 @@ class GreedyState(PoolState):
         self.w = disc.noise
         N, _, nb = Jc.shape
         self.kdiag = np.full(N, 0.0) if disc.kernel is None else disc.kernel.diag(Qc)
-        self.Uc = disc.cov(Qw, Qc)                              # (t, N) conditional cross-covariance
+        self.Uc = disc.covariance(Qw, Qc)                              # (t, N) conditional cross-covariance
         self.Ja = np.ascontiguousarray(np.swapaxes(Jc, 0, 1))    # (3, N, nb) the Jacobian rows, axis-major
         self.Rc = self.Ja.copy()                                 # (3, N, nb) conditional Jacobian rows
         self.H = np.moveaxis(E, 1, 0).copy()                     # (3, t, nb)
-        self.T = float(np.trace(disc.cov(Qw)))
+        self.T = float(np.trace(disc.covariance(Qw)))
         self.M = np.zeros((nb, nb)) if prior_info is None else np.array(prior_info, float)
         self.kdiag0, self.Kwc0, self.H0, self.T0, self.M0 = self.kdiag.copy(), self.Uc.copy(), self.H.copy(), \
             self.T, self.M.copy()
@@ -73,7 +73,7 @@ class GreedyState(PoolState):
     def kcol(self, i: int) -> np.ndarray:
         """k(candidate i, candidates) (N,), cached."""
         if i not in self.kcols:
-            self.kcols[i] = self.disc.cov(self.Qc[i:i + 1], self.Qc)[0]
+            self.kcols[i] = self.disc.covariance(self.Qc[i:i + 1], self.Qc)[0]
         return self.kcols[i]
 
     def build(self, sel: list[int]) -> GreedyState:
@@ -305,8 +305,8 @@ def select_pool_gp(J_pool: np.ndarray, Q_pool: np.ndarray, E: np.ndarray, Q_work
     idx, path, swaps = found.indices, found.path, found.swaps
     rows = np.concatenate([np.arange(k0), k0 + idx])
     Jsel, Qsel = Jall[rows], Qall[rows]
-    val = kpi_gp_value_and_grad(Jsel, E, discrepancy.cov(Qsel), discrepancy.cov(Q_work, Qsel),
-                                float(np.trace(discrepancy.cov(Q_work))), discrepancy.scale_m, discrepancy.noise,
+    val = kpi_gp_value_and_grad(Jsel, E, discrepancy.covariance(Qsel), discrepancy.covariance(Q_work, Qsel),
+                                float(np.trace(discrepancy.covariance(Q_work))), discrepancy.scale_m, discrepancy.noise,
                                 prior_info, grad=False)[0]
     return PoolSelection(indices=idx, value=float(val), path=np.array(path), nit=swaps,
                          time_s=time.perf_counter() - t0, success=True, status="selected",

@@ -26,7 +26,7 @@ robots, 0.5 once: docs/results.md). The family (:func:`prior_family`) around the
 
 The exact gradient is ∇φ_H = φ_H · Σ_k ω_k ∇φ_k / φ_k (each member's exact dφ_k/dQ), so IPOPT designs with it
 as with ``kpi_gp``. Pool selection (:meth:`HedgedDesignCriterion.select`): every member's own selection
-(:func:`~pin_kpi_oed.oed.discrepancy_kpi.select_pool_gp`, greedy + exchange) is a candidate set; the one of least
+(:func:`~pin_kpi_oed.oed.discrepancy_pool.select_pool_gp`, greedy + exchange) is a candidate set; the one of least
 φ_H is kept and improved by exchange passes on φ_H (a chosen pose swapped for the pool candidate that lowers φ_H
 most, over a seeded subset of the pool when m times the candidates exceeds :data:`EXCHANGE_EVALUATIONS`; every
 member's tr C_s of a swap from its :class:`~pin_kpi_oed.oed.discrepancy_pool.GreedyState`, an exact downdate and
@@ -247,8 +247,8 @@ class HedgedDesignCriterion(DesignObjective):
                 d = c.discrepancy
                 Ja, Qa, k0 = after_given(J_pool, Q_pool, 1, c.J_given, c.Q_given)
                 rows = np.concatenate([np.arange(k0), k0 + np.asarray(idx, int)])
-                v = kpi_gp_value_and_grad(Ja[rows], c.E, d.cov(Qa[rows]), d.cov(c.Q_work, Qa[rows]), c.tr_kww,
-                                          d.scale_m, d.noise, c.prior_info, grad=False)[0] + c.tr_register
+                v = kpi_gp_value_and_grad(Ja[rows], c.E, d.covariance(Qa[rows]), d.covariance(c.Q_work, Qa[rows]),
+                                          c.tr_kww, d.scale_m, d.noise, c.prior_info, grad=False)[0] + c.tr_register
                 logs.append(np.log(v))
             return float(np.exp(self.weights @ np.asarray(logs)))
 

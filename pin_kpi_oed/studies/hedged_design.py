@@ -4,7 +4,7 @@ The design assumes a discrepancy it has not measured (the robot class's default,
 series). Per case, m poses are chosen from a pool by
 
 * ``kpi_gp``: the discrepancy-aware KPI under the assumed prior alone
-  (:func:`~pin_kpi_oed.oed.discrepancy_kpi.select_pool_gp`, greedy + one exchange pass);
+  (:func:`~pin_kpi_oed.oed.discrepancy_pool.select_pool_gp`, greedy + one exchange pass);
 * ``kpi_gp_hedged``: the same criterion hedged over a family of priors around the assumed one
   (:class:`~pin_kpi_oed.oed.hedged_kpi.HedgedDesignCriterion`, what ``design`` uses without a fitted discrepancy);
 * ``kpi``: the paper's noise-only KPI (:func:`~pin_kpi_oed.oed.pool.select`);

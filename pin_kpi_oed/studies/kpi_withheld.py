@@ -6,7 +6,7 @@ harmonic the model never names (orders 2 and 3 of some joints, amplitude ``a`` r
 measured by a tracker with σ per axis. A fixed pool of feasible candidate poses is measured once (every design's
 data are rows of the same noisy measurements: the comparison is paired). Per number of poses m:
 
-* ``kpi_gp``: the discrepancy-aware KPI (:func:`~pin_kpi_oed.oed.discrepancy_kpi.select_pool_gp`, greedy + one
+* ``kpi_gp``: the discrepancy-aware KPI (:func:`~pin_kpi_oed.oed.discrepancy_pool.select_pool_gp`, greedy + one
   exchange pass) with the discrepancy's hyper-parameters fitted on a separate *pilot* set of the same robot
   (``identify(..., discrepancy="auto")``, a user's default, on random feasible poses that are not in the pool: a
   white discrepancy when the process does not pay on the pilot, and the criterion is then the noise-only KPI);
@@ -131,7 +131,8 @@ def withheld_case(model: Any, Q_pool: np.ndarray, Q_pilot: np.ndarray, W: np.nda
     from pin_kpi_oed.identification.identify import identify
     from pin_kpi_oed.identification.simulate import simulate
     from pin_kpi_oed.model.noise import NoiseModel
-    from pin_kpi_oed.oed.discrepancy_kpi import DiscrepancyDesignCriterion, DiscrepancyPrior
+    from pin_kpi_oed.discrepancy.prior import DiscrepancyPrior
+    from pin_kpi_oed.oed.discrepancy_kpi import DiscrepancyDesignCriterion
     from pin_kpi_oed.oed.identifiability import analyse
     from pin_kpi_oed.studies.learning_curves import calibrate_fixed
 
@@ -153,7 +154,7 @@ def withheld_case(model: Any, Q_pool: np.ndarray, Q_pilot: np.ndarray, W: np.nda
     truth_W = true_tcp(model, p_true, effects, W)
     out: dict = {"seed": seed, "amplitude_rad": amplitude_rad, "sizes": list(sizes),
                  "pilot": {"rows": len(Q_pilot), "kind": pfit.discrepancy.kind,
-                           "delta_sigma_m": prior.prior_sigma_m().tolist(),
+                           "delta_sigma_m": prior.delta_sigma_m.tolist(),
                            "white_sigma_m": (prior.scale_m * np.sqrt(prior.noise)).tolist()},
                  "error_m": {d: [] for d in DESIGNS}, "error_geo_m": {d: [] for d in DESIGNS},
                  "predicted_sigma_m": {d: [] for d in DESIGNS}}
@@ -177,7 +178,8 @@ def _choose(d: str, m: int, model: Any, crit: Any, Q_pool: np.ndarray, Jp: np.nd
             base: np.ndarray, seed: int, fixed: dict) -> np.ndarray:
     """Pool indices of design ``d`` of ``m`` poses (selections that do not depend on the robot kept in ``fixed``)."""
     from pin_kpi_oed.oed.objective import information_criterion
-    from pin_kpi_oed.oed.discrepancy_kpi import DiscrepancyDesignCriterion, default_discrepancy
+    from pin_kpi_oed.oed.discrepancy_defaults import default_discrepancy
+    from pin_kpi_oed.oed.discrepancy_kpi import DiscrepancyDesignCriterion
     from pin_kpi_oed.oed.pool import select
 
     p0 = np.zeros(model.n_params)

@@ -6,7 +6,7 @@ held out, some held-out rows are the working configurations W and the held-out r
 scored; across sessions S → T the whole of S is the pool and T's set-up is re-registered on seeded rows of T),
 m poses are chosen from the training pool by each method, for every m of a grid:
 
-* ``kpi_gp``: the discrepancy-aware KPI (:func:`~pin_kpi_oed.oed.discrepancy_kpi.select_pool_gp`, greedy + one
+* ``kpi_gp``: the discrepancy-aware KPI (:func:`~pin_kpi_oed.oed.discrepancy_pool.select_pool_gp`, greedy + one
   exchange pass), tr C_s at W under the prior discrepancy;
 * ``kpi_gp_region``: the same criterion over the working *region*
   (:func:`~pin_kpi_oed.design.region.working_region`): W plus up to ``region_rows`` seeded pool rows
@@ -19,7 +19,7 @@ m poses are chosen from the training pool by each method, for every m of a grid:
 Every chosen set is calibrated the same way (:func:`calibrate_fixed`): geometry and set-up by least squares
 (:func:`~pin_kpi_oed.identification.identify.identify`), then the discrepancy's posterior mean conditioned on
 the m residuals with the hyper-parameters (kernel, per-axis scale, white level) **fixed** to a prior model fitted
-on other data (:class:`~pin_kpi_oed.oed.discrepancy_kpi.DiscrepancyPrior`, the same one the ``kpi_gp`` design
+on other data (:class:`~pin_kpi_oed.discrepancy.prior.DiscrepancyPrior`, the same one the ``kpi_gp`` design
 uses). The full pool is calibrated the same way (the reference accuracy). Per chosen set the result holds the
 mean and RMS 3-D error of the scored rows (with and without the discrepancy's mean) and the predicted σ:
 sqrt(tr C_s / t) at W (the design's own number, the poses-needed curve) and the predicted RMS 3-D error at the
@@ -42,7 +42,8 @@ from pin_kpi_oed.data.measurements import MeasurementSet
 from pin_kpi_oed.errors import InputError
 from pin_kpi_oed.model.tracker import TrackerModel
 from pin_kpi_oed.oed.objective import information_criterion
-from pin_kpi_oed.oed.discrepancy_kpi import DiscrepancyDesignCriterion, DiscrepancyPrior
+from pin_kpi_oed.discrepancy.prior import DiscrepancyPrior
+from pin_kpi_oed.oed.discrepancy_kpi import DiscrepancyDesignCriterion
 from pin_kpi_oed.oed.identifiability import analyse
 from pin_kpi_oed.oed.pool import select
 from pin_kpi_oed.results import Result
