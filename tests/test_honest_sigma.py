@@ -286,6 +286,43 @@ def test_api_defaults_equal_the_command_line(ur10_model, tmp_path, capsys):
     assert json.loads(out.read_text())["coverage"]["measure"] == "joint_space_nearest/1"
 
 
+def test_api_and_command_line_switch_to_the_robust_loss_alike(ur10_model, tmp_path):
+    """A file with gross outliers: the command line and the Python API take the same default loss decision (one
+    place: identify's loss="auto") and give the same numbers; loss="linear" keeps the plain fit in both."""
+    model = ur10_model
+    rng = np.random.default_rng(13)
+    data = simulate(model, model.robot.random_q(rng, 120), _truth(model, 3), seed=6, record_sigma=False)
+    bad = np.array([23])
+    data.position_m[bad] += 5e-3 * np.array([0.6, -0.8, 0.0])           # 5 mm against 10 µm noise
+    write_measurements(data, tmp_path / "d.csv")
+    base = ["identify", "--robot", "ur10", "--data", str(tmp_path / "d.csv"), "--reflector", "0.03,0.02,0.08",
+            "--discrepancy", "none", "--accept-poor-fit", "--quiet"]
+    common = base + ["--sigma", str(SIG)]
+    assert main(common + ["--json", str(tmp_path / "cli.json")]) == 0
+    cli = json.loads((tmp_path / "cli.json").read_text())["result"]
+    api = identify(model, data, discrepancy="none")
+    assert api.loss == cli["loss"] == "soft_l1" and "far beyond the noise" in api.loss_decision
+    assert api.loss_decision in api.summary() and cli["loss_decision"] == api.loss_decision
+    par = cli["parameters"]
+    assert [p["name"] for p in par] == api.names
+    assert np.allclose([p["value"] for p in par], api.values, rtol=0, atol=1e-12)
+    assert np.allclose([p["std"] for p in par], api.std, rtol=1e-9, atol=0)
+    assert set(bad.tolist()) <= set(api.outliers.tolist())
+    # the plain fit on request, in both: the outliers pull it
+    assert main(common + ["--loss", "linear", "--json", str(tmp_path / "lin.json")]) == 0
+    lin = json.loads((tmp_path / "lin.json").read_text())["result"]
+    plain = identify(model, data, discrepancy="none", loss="linear")
+    assert lin["loss"] == plain.loss == "linear" and not plain.loss_decision
+    assert np.allclose([p["value"] for p in lin["parameters"]], plain.values, rtol=0, atol=1e-12)
+    assert np.median(api.errors_m) < 0.5 * np.median(plain.errors_m)
+    # the noise level unknown (no --sigma; the API's scale_covariance): any flagged outlier switches, in both
+    assert main(base + ["--json", str(tmp_path / "unknown.json")]) == 0
+    unk = json.loads((tmp_path / "unknown.json").read_text())["result"]
+    api_unk = identify(model, data, discrepancy="none", scale_covariance=True)
+    assert unk["loss"] == api_unk.loss == "soft_l1" and unk["loss_decision"] == api_unk.loss_decision
+    assert np.allclose([p["value"] for p in unk["parameters"]], api_unk.values, rtol=0, atol=1e-12)
+
+
 def test_design_says_how_the_sigma_will_be_obtained():
     few = sigma_plan(35, 33)
     assert "fewer than the 60" in few and "3m - p = 72" in few and "parameter covariance" in few

@@ -18,6 +18,7 @@ from pin_kpi_oed.effects.library import GearHarmonic
 from pin_kpi_oed.errors import InputError
 from pin_kpi_oed.identification.identify import identify
 from pin_kpi_oed.identification.model_file import load_model_file
+from pin_kpi_oed.identification.problem import align_data
 from pin_kpi_oed.identification.registration_check import (coverage_share, reference_sigma_m, registration_gates,
                                                             uncovered_ranges)
 from pin_kpi_oed.identification.simulate import Tolerances, random_truth, simulate
@@ -224,3 +225,32 @@ def test_registration_gate_reads_the_robots_joint_columns_of_a_wider_file(case):
     wide = dataclasses.replace(sub, joint_names=[*sub.joint_names, "goal_x"], q=np.c_[sub.q, np.zeros(len(sub))])
     narrow, widened = register_setup(cm, sub, station="C"), register_setup(cm, wide, station="C")
     assert widened.quality[0].line() == narrow.quality[0].line()
+
+
+def test_registration_keeps_the_calibrations_reflector_when_the_rows_leave_it_free(case):
+    """Rows whose flange axis stays within 0.4° of one direction leave the reflector's offset along it free against
+    the tracker translation: the registration says so in one line and keeps the calibration's reflector; rows that
+    turn the flange register a reflector of their own (as before), with no note."""
+    robot, _, dC, cm = case
+    rng = np.random.default_rng(21)
+    flat = robot.random_q(rng, 60)
+    flat[:, 3] = np.mod(-np.pi / 2 - flat[:, 1] - flat[:, 2] + np.pi, 2 * np.pi) - np.pi   # tool z straight down,
+    flat[:, 4] = -np.pi / 2
+    flat[:, 3:5] += rng.uniform(-0.005, 0.005, (60, 2))                                  # within 0.4°
+    axis = np.array([robot.oMtool(q).rotation[:, 2] for q in flat])
+    assert np.all(axis[:, 2] < -np.cos(np.deg2rad(0.5)))
+    truth = random_truth(_tracker(robot, T_A), Tolerances(5e-4, 1e-3), seed=4,
+                         only=[i for i in analyse(_tracker(robot, T_A)).base if i < 36])
+    reg = _no_sigma(simulate(_tracker(robot, T_C), flat, truth, seed=22, source="flat.csv"))
+    cal = cm.setups[cm.default_station].reflector_m
+    rr = register_setup(cm, reg, station="new")
+    assert len(rr.notes) == 1 and "reflector is poorly determined by these 60 rows" in rr.notes[0]
+    assert "flat.csv" in rr.notes[0] and "calibration's reflector is kept" in rr.notes[0]
+    assert np.array_equal(rr.setups["new"].reflector_m, cal) and rr.notes[0] in rr.summary()
+    assert rr.to_dict()["notes"] == rr.notes
+    # the kept reflector predicts rows of every flange orientation of that session
+    Qh = align_data(robot, dC)
+    err = np.linalg.norm(dC.position_m - rr.model.predict(Qh, dC, station="new"), axis=1)
+    assert np.sqrt(np.mean(err ** 2)) < 5 * NOISE
+    spread = register_setup(cm, dC.subset(np.arange(60)), station="new")
+    assert not spread.notes and not np.array_equal(spread.setups["new"].reflector_m, cal)

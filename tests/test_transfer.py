@@ -330,9 +330,13 @@ def test_real_ur10_joint_bcd_and_transfer(tmp_path):
                 "--register-rows", 60, "--seed", 0, "--reflector", "0,0,0.109", "--sigma", "1e-4", "--json",
                 tmp_path / "cd.json", "--quiet", "--accept-poor-fit") == 0
     doc = json.loads((tmp_path / "cd.json").read_text())
-    # C's calibration does not transfer to D (held-out worse than the nominal robot): the gate says so
-    assert doc["fit_quality"]["verdict"] == "poor" and "worse than the nominal" in doc["fit_quality"]["message"]
     v = doc["validation"]
+    # D's 60 registration rows barely turn the flange: they leave the reflector free (a free fit slides it 0.1 m
+    # along the flange axis, absorbing error), so both models keep their calibration's reflector, and C's
+    # calibration then predicts D better than the nominal robot does
+    notes = v["registration"]["notes"]
+    assert v["registration"]["hold_reflector"] and len(notes) == 1 and "poorly determined" in notes[0]
+    assert v["after"]["rms_m"] < v["before"]["rms_m"] and doc["fit_quality"]["verdict"] != "poor"
     # 0.835 mm since the discrepancy also learns from the 26 rows the plain fit flags on C (0.75 mm without them): its
     # mean extrapolates to D, where C's calibration does not transfer anyway (the gate above)
     assert v["after"]["n"] == 572 and 0.65e-3 < v["after"]["mean_m"] < 0.86e-3

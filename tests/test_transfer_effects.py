@@ -204,7 +204,7 @@ def test_forward_select_scores_equal_explicit_refits():
     A = rng.normal(size=(n, p0))
     groups = [rng.normal(size=(n, 2)) for _ in range(12)] + [rng.normal(size=(n, 1))]
     b = A @ rng.normal(size=p0) + groups[5] @ [0.8, -0.5] + 0.3 * groups[12][:, 0] + 0.05 * rng.normal(size=n)
-    fold = measurement_folds(n, 4, 0)
+    fold = measurement_folds(rng.uniform(-3, 3, (n, 6)), 4, 0)
 
     def explicit(cols):
         X = np.hstack(cols)
@@ -286,6 +286,30 @@ def test_selection_recovers_withheld_transmission_error(model):
     assert res.rms_m <= 1.1 * FLOOR
     d = sel.to_dict()
     assert d["status"] == "selected" and len(d["terms"]) == 2 and "transmission_error" in sel.summary()
+
+
+def test_selection_folds_keep_repeated_poses_together(model):
+    """Each of 150 poses measured 3 times (jittered by 2 mrad) with its own error (nothing a smooth term can carry
+    to a new pose): a K-fold that splits the repeats lets high orders fit a held-out row's twins and prints a gain;
+    the default folds keep each pose's repeats in one fold (the discrepancy's grouping) and show next to none."""
+    ur10 = model.robot
+    rng = np.random.default_rng(31)
+    Q = np.repeat(ur10.random_q(rng, 150), 3, axis=0) + 2e-3 * rng.standard_normal((450, 6))
+    truth = random_truth(model, Tolerances(joint_translation_m=2e-4, joint_rotation_rad=5e-4), seed=7)
+    data = simulate(model, Q, truth, seed=8, record_sigma=False)
+    data.position_m += np.repeat(4 * SIG * rng.standard_normal((150, 3)), 3, axis=0)
+    fold = measurement_folds(Q, 5, 0, ur10.periodic_joints)
+    assert all(len(set(fold[3 * i:3 * i + 3])) == 1 for i in range(150))
+    geo = identify(model, data, discrepancy="none", loss="linear")
+    grouped = select_terms(geo, data, max_order=40, show_progress=False, refit=False)
+    leaky = np.empty(len(data), int)
+    leaky[rng.permutation(len(data))] = np.arange(len(data)) % 5
+    split = select_terms(geo, data, max_order=40, show_progress=False, refit=False, folds=leaky)
+
+    def gain(sel):
+        return 1.0 - sel.cv_rms_m[-1] / sel.cv_rms_m[0]
+    assert gain(split) > 0.2 and len(split.terms) > 3 * len(grouped.terms)   # the leak
+    assert gain(grouped) < 0.1
 
 
 def test_selection_transfers_to_another_region_and_tracker_pose(model):

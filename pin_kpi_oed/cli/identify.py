@@ -113,9 +113,10 @@ def _register_identify(subparsers: argparse._SubParsersAction) -> None:
                         "reduced chi2")
     i.add_argument("--sigma-rot", default="1e-4", help="orientation noise of 6-D data (rad, default 1e-4)")
     i.add_argument("--position-only", action="store_true", help="ignore rx, ry, rz columns")
-    i.add_argument("--loss", default=None, choices=["linear", "soft_l1", "huber", "cauchy"],
-                   help="loss: linear (Levenberg-Marquardt) or robust (outliers flagged); default linear, switched "
-                        "to soft_l1 when outliers far beyond the noise are found")
+    i.add_argument("--loss", default=None, choices=["auto", "linear", "soft_l1", "huber", "cauchy"],
+                   help="loss: linear (Levenberg-Marquardt) or robust (outliers flagged); default auto: linear, "
+                        "switched to soft_l1 when outliers far beyond the noise are found, or any outlier with the "
+                        "noise level unknown (as the Python API's identify)")
     i.add_argument("--accept-poor-fit", action="store_true",
                    help="write the calibrated URDF/model and exit 0 even when the fit-quality gate finds the fit "
                         "implausible (the verdict stays in the summary and the JSON)")
@@ -244,6 +245,7 @@ def _validation(model: Any, train: Any, opts: Any, result: Any, test: Any, reg: 
                else f"the {r['n']} rows of {args.register_data}")
         head = [f"transfer to {args.validate}: set-up (tracker pose, reflector) re-registered on {how} with the robot "
                 f"held; scored on the other {va['n']} rows (row numbers in the JSON: validation.registration.rows)"]
+        head += va["registration"]["notes"]
         out = {"registration": r, "scored_rows": va["scored_rows"]}
     from pin_kpi_oed.identification.coverage import coverage_summary
 
@@ -291,24 +293,15 @@ def _nominal_reflector(args: argparse.Namespace, robot: Any, noise: Any, train: 
     return reflector, estimated
 
 
-def _fit(args: argparse.Namespace, model: Any, train: Any, opts: Any, effects: list, reflector: np.ndarray,
-         estimated: bool) -> tuple[Any, Any]:
-    """(result, options used): the fit, refitted with soft_l1 when large outliers are found and no --loss given."""
+def _fit(args: argparse.Namespace, model: Any, train: Any, opts: Any, effects: list) -> tuple[Any, Any]:
+    """(result, options with the loss used): the library's fit (``--loss`` default auto: the robust loss when
+    :func:`~pin_kpi_oed.identification.quality.robust_loss_reason` says so), its decision printed."""
     from pin_kpi_oed.identification.identify import identify
-    from pin_kpi_oed.identification.quality import assess_fit
 
     result = identify(model, train, opts, effects=effects)
-    quality = assess_fit(result, nominal_reflector_m=reflector, reflector_estimated=estimated)
-    unknown_noise_outliers = not quality.noise_known and quality.n_outliers > 0
-    if args.loss is None and (quality.large_outliers or unknown_noise_outliers):
-        if not args.quiet:
-            why = (f"{quality.large_outliers} outlier(s) far beyond the noise" if quality.large_outliers else
-                   f"{quality.n_outliers} outlier(s) flagged and the noise level unknown (no sigma columns, no "
-                   "--sigma)")
-            print(f"{why}: refitted with the robust loss soft_l1 (give --loss linear to keep the plain fit)")
-        opts = replace(opts, loss="soft_l1")
-        result = identify(model, train, opts, effects=effects)
-    return result, opts
+    if result.loss_decision and not args.quiet:
+        print(result.loss_decision)
+    return result, replace(opts, loss=result.loss)
 
 
 def _discrepancy(args: argparse.Namespace, result: Any, train: Any) -> Any:
@@ -402,7 +395,7 @@ def run_identify(args: argparse.Namespace) -> int:
     noise, weights, scale = _noise_and_weights(args, train)
     effects = _effects(args.effects, robot, train)
     opts = IdentifyOptions(weights=weights, scale_covariance=scale, use_orientation=not args.position_only,
-                           loss=args.loss or "linear", max_nfev=args.max_nfev,
+                           loss=args.loss or "auto", max_nfev=args.max_nfev,
                            reflector_per_station=args.reflector_per_station,
                            # the command runs the discrepancy (seeded by --seed) and the gate (with the validation
                            # rows and --accept-poor-fit) itself, on the final fit
@@ -414,7 +407,7 @@ def run_identify(args: argparse.Namespace) -> int:
         model.layout.fix(args.fix)
     if geometry_prior is not None:
         model.layout.set_joint_prior(*geometry_prior)
-    result, opts = _fit(args, model, train, opts, effects, reflector, estimated)
+    result, opts = _fit(args, model, train, opts, effects)
     result.discrepancy = _discrepancy(args, result, train)
     out = {"result": result.to_dict(), "data": list(args.data), "validate": args.validate,
            "reflector_nominal_m": reflector.tolist(),

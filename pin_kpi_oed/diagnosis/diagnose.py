@@ -200,7 +200,7 @@ def diagnose(model: TrackerModel, train: MeasurementSet, validate: MeasurementSe
     check_options(model, train, validate, opts)
     notes: list[str] = []
     cands = candidate_list(model.robot, train, opts)
-    plan = plan_folds(train, validate, opts)
+    plan = plan_folds(train, validate, opts, model.robot)
     eng = Engine(model, plan, train, [np.ones(len(te), bool) for _, te in plan.folds], opts.weights,
                   dict(opts.identify_options or {}), opts.exact_kfold)
 

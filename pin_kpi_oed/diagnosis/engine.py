@@ -86,7 +86,7 @@ class Engine:
 
         opts = {"raise_on_failure": False, **self.opts}
         res = identify(self.model, data, effects=list(effects), weights=self.weights, use_orientation=False,
-                       **{"discrepancy": "none", "on_poor_fit": "ignore", **opts})
+                       **{"discrepancy": "none", "on_poor_fit": "ignore", "loss": "linear", **opts})
         self.n_fits += 1
         if not res.converged:
             self.unconverged.add(", ".join(e.name for e in effects) or "geometry")
@@ -179,8 +179,11 @@ class Engine:
         return Scored(list(effects), full, np.vstack(Rs), np.vstack(Ss), np.vstack(Vs))
 
 
-def plan_folds(train: MeasurementSet, validate: MeasurementSet | None, opts: DiagnoseOptions) -> Plan:
-    """Step 2: the folds: train / validate, train / validate with a set-up registration, or K-fold."""
+def plan_folds(train: MeasurementSet, validate: MeasurementSet | None, opts: DiagnoseOptions, robot: Any = None
+               ) -> Plan:
+    """Step 2: the folds: train / validate, train / validate with a set-up registration, or K-fold (seeded; near-
+    duplicate configurations of ``robot``'s joints share a fold, :func:`~pin_kpi_oed.diagnosis.selection.
+    measurement_folds`; without ``robot`` the data's joint columns, every joint wrapped)."""
     if validate is not None and opts.register_rows is None and opts.register_data is None:
         return Plan("split", 1, [(train, validate)], [np.arange(len(validate))], None, validate)
     if validate is not None:
@@ -201,8 +204,13 @@ def plan_folds(train: MeasurementSet, validate: MeasurementSet | None, opts: Dia
     if kfold > len(train) // 3:
         raise InputError(f"diagnose: {len(train)} measurements are too few for {kfold} folds "
                          f"(each fold needs at least 3 measurements)")
-    perm = np.random.default_rng(opts.seed).permutation(len(train))
-    parts = np.array_split(perm, int(kfold))
+    from pin_kpi_oed.diagnosis.selection import measurement_folds
+    from pin_kpi_oed.identification.problem import align_data
+
+    Q = align_data(robot, train, need_position=False) if robot is not None else train.q
+    fold = measurement_folds(Q, int(kfold), opts.seed, None if robot is None else robot.periodic_joints)
+    kfold = int(fold.max()) + 1
+    parts = [np.flatnonzero(fold == k) for k in range(kfold)]
     folds, orders, fold_rows = [], [], []
     for i, te in enumerate(parts):
         tr = np.sort(np.concatenate([f for j, f in enumerate(parts) if j != i]))

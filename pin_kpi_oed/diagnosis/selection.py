@@ -22,7 +22,8 @@ with the weighted residual b = W (y − ŷ) and the weighted Jacobian A of every
 fit estimated, and C_g the weighted Jacobian of candidate group g (``effect_jacobian``
 columns: dŷ/dq · ∂Δq/∂θ), the model with groups S is b ≈ [A, C_S] x. Columns are scaled to
 unit norm (X̃ = X D⁻¹) and a tiny ridge λ (default 1e-8) is added. The measurements are
-split into K folds (seeded permutation; the 3 rows of a measurement share a fold). For
+split into K folds (seeded; the 3 rows of a measurement share a fold, and so do near-duplicate configurations —
+a pose measured again or jittered around it —, :func:`measurement_folds`). For
 fold k, with G = X̃ᵀX̃ and h = X̃ᵀb summed over the training rows (``tr``) or the held-out
 rows (``te``)::
 
@@ -68,6 +69,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from pin_kpi_oed.data.measurements import MeasurementSet
+from pin_kpi_oed.discrepancy.gp import grouped_folds
 from pin_kpi_oed.diagnosis.forward_selection import MIN_LEVER_M, SelectionOptions, SelectionPath, forward_select
 from pin_kpi_oed.effects.coupled import LinkBending
 from pin_kpi_oed.effects.library import Effect
@@ -75,7 +77,7 @@ from pin_kpi_oed.effects.periodic import DEFAULT_MAX_ORDER, TransmissionError
 from pin_kpi_oed.errors import InputError
 from pin_kpi_oed.identification.coverage import coverage, covered_rows
 from pin_kpi_oed.identification.identify import IdentificationResult, identify
-from pin_kpi_oed.identification.problem import ResidualModel
+from pin_kpi_oed.identification.problem import ResidualModel, align_data
 from pin_kpi_oed.results import Result
 from pin_kpi_oed.threads import limit_threads
 
@@ -106,17 +108,25 @@ def transfer_candidates(robot: Any, max_order: int = DEFAULT_MAX_ORDER, joints: 
     return out
 
 
-def measurement_folds(m: int, k: int, seed: int) -> np.ndarray:
-    """Fold of each of m measurements for K-fold cross-validation (seeded permutation), (m,) in 0 … k−1.
+def measurement_folds(Q: np.ndarray, k: int, seed: int, periodic: np.ndarray | None = None) -> np.ndarray:
+    """Fold of each measurement at configurations Q (m, n) for K-fold cross-validation, (m,) in 0 … k−1: near-
+    duplicate configurations (a pose measured again, or jittered around it) share a fold
+    (:func:`~pin_kpi_oed.discrepancy.gp.grouped_folds`, seeded), so a held-out row never has its own repeat among
+    the training rows — a term that fits the repeat would otherwise show a held-out gain that new poses do not.
+
+    Args:
+        Q: the measurements' joint values (m, n) rad / m.
+        k: folds (fewer when there are fewer pose groups).
+        seed: seed of the groups' order.
+        periodic: (n,) bool, the joints compared modulo 2π (``Robot.periodic_joints``); None: every joint.
 
     Raises:
         InputError: k < 2 or fewer measurements than folds.
     """
+    m = len(np.atleast_2d(Q))
     if k < 2 or m < k:
         raise InputError(f"cross-validation needs 2 <= folds <= measurements, got {k} folds for {m} measurements")
-    fold = np.empty(m, int)
-    fold[np.random.default_rng(seed).permutation(m)] = np.arange(m) % k
-    return fold
+    return grouped_folds(Q, k, seed, periodic)[0]
 
 
 # --------------------------------------------------------------------------- options
@@ -204,12 +214,16 @@ def _linear_system(fit: IdentificationResult, data: MeasurementSet, candidates: 
     return b, Jr[:, :n_fit], Jr[:, n_fit:], (1.0 / W).ravel(), lever
 
 
-def _fold_of_measurements(folds: int | np.ndarray, seed: int, m: int) -> tuple[np.ndarray, int]:
-    """Fold of every measurement ((m,) int) and the number of folds: ``folds`` as given, or a seeded split."""
+def _fold_of_measurements(folds: int | np.ndarray, seed: int, fit: IdentificationResult, data: MeasurementSet
+                          ) -> tuple[np.ndarray, int]:
+    """Fold of every measurement ((m,) int) and the number of folds: ``folds`` as given, or a seeded split that
+    keeps near-duplicate poses together (:func:`measurement_folds`)."""
     if isinstance(folds, np.ndarray):
         fold_m = np.asarray(folds, int)
         return fold_m, int(fold_m.max()) + 1
-    return measurement_folds(m, folds, seed), folds
+    robot = fit.model.robot
+    fold_m = measurement_folds(align_data(robot, data, need_position=False), folds, seed, robot.periodic_joints)
+    return fold_m, int(fold_m.max()) + 1
 
 
 _Group = tuple[int, int, str, np.ndarray]  # (effect index, group index, label, columns)
@@ -293,7 +307,7 @@ def select_terms(fit: IdentificationResult, data: MeasurementSet, options: Selec
         raise InputError("select_terms: give an identification result and its training data")
     cands = list(candidates) if candidates is not None else transfer_candidates(fit.model.robot, opts.max_order)
     b, A, C, sig, lever = _linear_system(fit, data, cands)
-    fold_m, folds = _fold_of_measurements(opts.folds, opts.seed, len(data))
+    fold_m, folds = _fold_of_measurements(opts.folds, opts.seed, fit, data)
     groups, left_out = _visible_groups(cands, lever, opts.min_lever_m)
     gmax = [cands[g[0]].plausible_max if opts.max_amplitude_rad is None else opts.max_amplitude_rad for g in groups]
     path = forward_select(b, A, [C[:, g[3]] for g in groups], np.repeat(fold_m, 3), opts, row_sigma=sig,
@@ -339,7 +353,7 @@ def refit_with(fit: IdentificationResult, data: MeasurementSet, effects: Sequenc
     kw: dict[str, Any] = {"weights": "data" if fit.sigma_source == "data" else "noise",
           "reflector_per_station": fit.reflector_per_station, "held_effects": fit.held, "theta0": th0,
           "effect_prior_rad": prior_rad, "use_orientation": fit.residuals_rad is not None,
-          "raise_on_failure": False, "discrepancy": "none", "on_poor_fit": "ignore"}
+          "raise_on_failure": False, "discrepancy": "none", "on_poor_fit": "ignore", "loss": "linear"}
     if len(fit.stations) == 1 and data.station is None:
         kw["station"] = fit.stations[0]
     kw.update(options)

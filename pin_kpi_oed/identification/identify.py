@@ -115,6 +115,7 @@ from here too.
 from __future__ import annotations
 
 import time
+from dataclasses import replace
 from typing import Any
 from collections.abc import Sequence
 
@@ -132,6 +133,7 @@ from pin_kpi_oed.identification.identifiable import N_EXCITATION, build_problem,
 from pin_kpi_oed.identification.identify_options import ROBUST_LOSSES, IdentifyOptions, resolve_options
 from pin_kpi_oed.identification.identify_result import IdentificationResult
 from pin_kpi_oed.identification.model_file import Setup
+from pin_kpi_oed.identification.quality import robust_loss_reason
 from pin_kpi_oed.identification.problem import (ResidualModel, align_data, effect_param_names, predict)
 from pin_kpi_oed.identification.solve import fit_covariance, settle_outliers, solve, tcp_std
 from pin_kpi_oed.identification.tool_check import check_tool
@@ -233,6 +235,22 @@ def identify(model: TrackerModel, data: MeasurementSet, options: IdentifyOptions
     check_tool(model.robot, model.tcp_m, data)
     inp = check_inputs(model, data, opts)
     _check_effects_determined(effects, data)
+    result = _fit(model, data, inp, effects, replace(opts, loss="linear") if opts.loss == "auto" else opts, t_start)
+    why = robust_loss_reason(result) if opts.loss == "auto" else ""
+    if why:
+        result = _fit(model, data, inp, effects, replace(opts, loss="soft_l1"), t_start)
+        result.loss_decision = (f"{why}: refitted with the robust loss soft_l1 (--loss linear, loss='linear', "
+                                "keeps the plain fit)")
+    result.coverage = JointCoverage.from_training(inp.Q, opts.seed, model.robot.periodic_joints)
+    result.discrepancy = result_discrepancy(result, data, discrepancy_options(opts.discrepancy, opts.seed), inp.Q)
+    _gate(result, model, opts)
+    result.time_s = time.perf_counter() - t_start
+    return result
+
+
+def _fit(model: TrackerModel, data: MeasurementSet, inp: FitInputs, effects: Sequence[Any], opts: IdentifyOptions,
+         t_start: float) -> IdentificationResult:
+    """One least-squares fit with ``opts.loss`` (steps 2–6 of the module docstring), before the discrepancy."""
     stations, P0, T_init = start_stations(model, data, inp, effects, opts)
     ident = identifiable_set(stations, opts)
     prob = build_problem(stations, data, inp, effects, P0, ident, opts)
@@ -265,8 +283,4 @@ def identify(model: TrackerModel, data: MeasurementSet, options: IdentifyOptions
         reflector_per_station=bool(opts.reflector_per_station), source=data.source,
         held=[(e, np.asarray(t, float)) for e, t in opts.held_effects], time_s=time.perf_counter() - t_start,
         tool=data.tool)
-    result.coverage = JointCoverage.from_training(inp.Q, opts.seed, model.robot.periodic_joints)
-    result.discrepancy = result_discrepancy(result, data, discrepancy_options(opts.discrepancy, opts.seed), inp.Q)
-    _gate(result, model, opts)
-    result.time_s = time.perf_counter() - t_start
     return result

@@ -23,8 +23,11 @@ class IdentifyOptions:
 
     Attributes:
         p0: raw parameters of the model to start from / hold fixed entries at (default zeros).
-        loss: ``linear`` (Levenberg–Marquardt), ``soft_l1``, ``huber`` or ``cauchy`` (robust,
-            followed by a plain refit on the inliers; see the module docstring).
+        loss: ``auto`` (the default, as on the command line: ``linear``, refitted with ``soft_l1`` when
+            :func:`~pin_kpi_oed.identification.quality.robust_loss_reason` finds outliers far beyond the noise, or
+            any flagged outlier with the noise level unknown; ``result.loss`` is the loss used and
+            ``result.loss_decision`` says why it switched), ``linear`` (Levenberg–Marquardt), ``soft_l1``, ``huber``
+            or ``cauchy`` (robust, followed by a plain refit on the inliers; see the module docstring).
         f_scale: robust-loss scale in weighted units; default 3 × the MAD scale of a first
             plain least-squares fit.
         weights: ``auto`` (the data's sigma columns if present, else the noise model),
@@ -72,7 +75,7 @@ class IdentifyOptions:
     """
 
     p0: np.ndarray | None = None
-    loss: str = "linear"
+    loss: str = "auto"
     f_scale: float | None = None
     weights: str = "auto"
     register: bool = True
@@ -99,8 +102,8 @@ class IdentifyOptions:
         if self.effect_prior_rad is not None and not (np.isfinite(self.effect_prior_rad)
                                                       and self.effect_prior_rad > 0):
             raise InputError(f"effect_prior_rad must be a positive number of rad, got {self.effect_prior_rad}")
-        if self.loss not in ROBUST_LOSSES:
-            raise InputError(f"unknown loss '{self.loss}' (choose from {', '.join(ROBUST_LOSSES)})")
+        if self.loss not in ("auto",) + ROBUST_LOSSES:
+            raise InputError(f"unknown loss '{self.loss}' (choose from auto, {', '.join(ROBUST_LOSSES)})")
         if self.weights not in ("auto", "data", "noise"):
             raise InputError(f"weights must be auto, data or noise, got '{self.weights}'")
         if self.on_poor_fit not in ("flag", "raise", "ignore"):

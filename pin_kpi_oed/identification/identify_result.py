@@ -62,7 +62,8 @@ class IdentificationResult(Result):
         model: the first station's working :class:`TrackerModel` (not serialised).
         effects: the effect objects (not serialised; names in ``to_dict``).
         identifiability: the analysis that chose the parameters (over every station's parameters).
-        loss: loss function used; ``f_scale`` its scale (weighted units).
+        loss: loss function used; ``f_scale`` its scale (weighted units); ``loss_decision``: why ``loss="auto"``
+            switched to the robust loss ("" when it did not).
         covariance_scaled: covariance multiplied by ``chi2_reduced`` (relative weights only).
         sigma_source: where the weights came from (``data``, ``noise model``).
         solver_status: :func:`scipy.optimize.least_squares` status code.
@@ -101,6 +102,7 @@ class IdentificationResult(Result):
     effects: list = field(default_factory=list, repr=False)
     identifiability: Identifiability | None = field(default=None, repr=False)
     loss: str = "linear"
+    loss_decision: str = ""
     f_scale: float = 1.0
     covariance_scaled: bool = False
     sigma_source: str = "noise model"
@@ -254,7 +256,7 @@ class IdentificationResult(Result):
             "tool_frame": self.model.robot.tool_frame,
             "n_measurements": self.n_measurements,
             "pose6d": bool(self.model.pose6d),
-            "loss": self.loss,
+            "loss": self.loss, "loss_decision": self.loss_decision,
             "f_scale": self.f_scale,
             "sigma_source": self.sigma_source,
             "converged": bool(self.converged),
@@ -300,6 +302,8 @@ class IdentificationResult(Result):
                f"  position residuals: RMS {self.rms_m * 1e3:.4f} mm, mean {e.mean():.4f} mm, max {e.max():.4f} mm; "
                f"reduced chi2 {self.chi2_reduced:.3g} (weights: {self.sigma_source}"
                f"{', covariance scaled by it' if self.covariance_scaled else ''})"]
+        if self.loss_decision:
+            out.append(f"  {self.loss_decision}")
         if self.residuals_rad is not None:
             a = np.linalg.norm(self.residuals_rad, axis=1) * 1e3
             out.append(f"  orientation residuals: RMS {np.sqrt(np.mean(a ** 2)):.4f} mrad, max {a.max():.4f} mrad")

@@ -37,7 +37,7 @@ from typing import Any
 import numpy as np
 from scipy.stats import chi2 as _chi2
 
-__all__ = ["FitQuality", "assess_fit"]
+__all__ = ["FitQuality", "assess_fit", "robust_loss_reason"]
 
 #: reduced chi2 above which the residuals are at least four times the stated noise: a poor fit (below it and
 #: above the interval the fit is only "suspect": real arms have unmodelled effects a noise model omits)
@@ -268,9 +268,7 @@ def _check_outliers(f: _Findings, result: Any, we: np.ndarray, out_idx: np.ndarr
 
     With the noise level unknown, χ² cannot tell a fit pulled by its outliers from a good one: any flagged
     outlier fitted with the plain loss makes the fit suspect (never "good")."""
-    m = we.size
-    scale = 1.4826 * float(np.median(we)) / np.sqrt(nh) if m else 0.0
-    large = int(np.sum(we[out_idx] > OUTLIER_LARGE * max(scale, 1e-300) * np.sqrt(nh))) if out_idx.size else 0
+    large = _large_outliers(we, out_idx, nh)
     robust = str(result.loss) != "linear"
     if large and not robust:
         f.worse("suspect")
@@ -284,6 +282,28 @@ def _check_outliers(f: _Findings, result: Any, we: np.ndarray, out_idx: np.ndarr
         f.causes.append("outliers (gross measurement errors)")
         f.advice.append("--loss soft_l1 (robust), sigma columns or --sigma, or remove the flagged rows")
     return large
+
+
+def _large_outliers(we: np.ndarray, out_idx: np.ndarray, nh: int) -> int:
+    """Flagged outliers whose weighted error exceeds :data:`OUTLIER_LARGE` robust standard deviations."""
+    scale = 1.4826 * float(np.median(we)) / np.sqrt(nh) if we.size else 0.0
+    return int(np.sum(we[out_idx] > OUTLIER_LARGE * max(scale, 1e-300) * np.sqrt(nh))) if out_idx.size else 0
+
+
+def robust_loss_reason(result: Any) -> str:
+    """Why a plain (linear) fit should be refitted with the robust loss, or "" when it need not: outliers far
+    beyond the noise (:data:`OUTLIER_LARGE`), or any flagged outlier with the noise level unknown (the covariance
+    scaled by χ², which then cannot tell a fit pulled by its outliers from a good one) — check 3's two findings,
+    the one decision of ``identify(loss="auto")`` (the default of the Python API and the command line)."""
+    if str(result.loss) != "linear":
+        return ""
+    we, out_idx = np.asarray(result.weighted_errors, float), np.asarray(result.outliers, int)
+    large = _large_outliers(we, out_idx, 6 if getattr(result, "residuals_rad", None) is not None else 3)
+    if large:
+        return f"{large} outlier(s) far beyond the noise"
+    if out_idx.size and bool(result.covariance_scaled):
+        return f"{out_idx.size} outlier(s) flagged and the noise level unknown (no sigma columns, no --sigma)"
+    return ""
 
 
 def _check_chi2(f: _Findings, chi2_red: float, dof: int, alpha: float, chi2_poor: float, nominal_reflector_m: Any,

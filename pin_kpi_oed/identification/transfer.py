@@ -76,6 +76,7 @@ class RegistrationResult(Result):
         errors_m: position error norm of every given row after the registration (m).
         source: file the rows came from.
         setup_thetas: fitted parameters of the ``setup_effects`` of the registration (one array each).
+        notes: one line per station whose rows did not determine the reflector (the calibration's was kept).
         quality: the registration gate of every station against the calibration's own level
             (:func:`~pin_kpi_oed.identification.registration_check.registration_gates`; what ``register`` refuses
             on): :attr:`poor` flags a registration whose model must not be used without a look at the cause.
@@ -89,6 +90,7 @@ class RegistrationResult(Result):
     source: str = ""
     setup_thetas: list = field(default_factory=list)
     quality: list = field(default_factory=list)
+    notes: list = field(default_factory=list)
 
     @property
     def poor(self) -> bool:
@@ -110,6 +112,7 @@ class RegistrationResult(Result):
             out.append(f"  station {lab} ({st.n_rows} rows, RMS {st.rms_m * 1e3:.4f} mm): tracker_T_base xyz "
                        f"{np.round(T[:3, 3], 6).tolist()} m, rpy {np.round(pin.rpy.matrixToRpy(T[:3, :3]), 6).tolist()}"
                        f" rad; reflector {np.round(st.reflector_m * 1e3, 4).tolist()} mm")
+            out += [f"  {n}" for n in self.notes if f"station '{lab}'" in n]
             gate = next((q for q in self.quality if q.station == lab), None)
             if gate is not None:
                 out.append(f"  {gate.line()}")
@@ -124,7 +127,7 @@ class RegistrationResult(Result):
         return {**self.result_dict(), "stations": list(self.stations), "source": self.source,
                 "setups": {k: v.to_dict() for k, v in self.setups.items()},
                 "rows": {k: (np.asarray(v) + 1).tolist() for k, v in self.rows.items()}, "rms_m": self.rms_m,
-                "quality": [q.to_dict() for q in self.quality], "poor": self.poor}
+                "quality": [q.to_dict() for q in self.quality], "poor": self.poor, "notes": list(self.notes)}
 
 
 def _groups(model: CalibratedModel, data: MeasurementSet, station: str | None) -> dict[str, np.ndarray]:
@@ -165,6 +168,10 @@ class _DiscrepancyMean:
         Q = np.atleast_2d(np.asarray(Q, float))
         R = np.eye(3) if model is None else model.tracker_pose(p).rotation
         return self._delta(Q) @ R.T, np.zeros((Q.shape[0], 3, 0))
+
+
+#: the registration rows do not determine the reflector when its σ exceeds this many times their residual level
+REFLECTOR_UNDETERMINED = 10.0
 
 
 def _register_one(model: CalibratedModel, data: MeasurementSet, Q: np.ndarray, label: str, hold_reflector: bool,
@@ -226,7 +233,43 @@ def _register_one(model: CalibratedModel, data: MeasurementSet, Q: np.ndarray, l
     R_probe = wm.probe_R @ pin.exp3(P[L.probe]) if pose6d else None
     setup = Setup(wm.tracker_pose(P).homogeneous.copy(), wm.reflector(P), R_probe, m, "register", data.source,
                   float(np.sqrt(np.mean(err ** 2))), registered_q_rad=np.asarray(Q, float))
-    return setup, (sol, err, th_own)
+    noise_m = float(np.sqrt(np.mean(np.sum(1.0 / prob.W[:, :3] ** 2, axis=1))))  # the weights' 3-D σ
+    note = "" if hold_reflector else _undetermined_reflector(sol, prob.names, setup, ref.reflector_m, label, src,
+                                                             noise_m)
+    return setup, (sol, err, th_own, note)
+
+
+def _undetermined_reflector(sol: Any, names: Sequence[str], setup: Setup, reflector_cal_m: np.ndarray, label: str,
+                            src: str, noise_m: float) -> str:
+    """The one-line note when the registration rows do not determine the reflector, else "".
+
+    The reflector's covariance from the registration's Jacobian, C = (JᵀJ)⁻¹ · max(1, χ²/dof) (its 3×3 block); the
+    rows do not determine the reflector when σ along its worst direction, √λ_max(C_rr), exceeds
+    :data:`REFLECTOR_UNDETERMINED` times the level they are fitted to (their residual RMS, at least the noise the
+    weights state): rows that barely turn the flange axis leave the reflector's offset along it free against the
+    tracker translation (the IPA UR10's Series D, 60 rows: σ 44 mm against a 0.93 mm RMS; rows that turn the flange:
+    below half their RMS). The calibration's reflector, fitted on rows that turn the flange, is then the better
+    value: :func:`register_setup` keeps it.
+    """
+    idx = [i for i, n in enumerate(names) if str(n).startswith("reflector.")]
+    J = np.asarray(sol.jac, float)
+    dof = J.shape[0] - J.shape[1]
+    if len(idx) != 3 or dof <= 0 or setup.rms_m is None:
+        return ""
+    C = np.linalg.pinv(J.T @ J) * max(1.0, 2.0 * float(sol.cost) / dof)
+    w, V = np.linalg.eigh(C[np.ix_(idx, idx)])
+    sigma = float(np.sqrt(max(w[-1], 0.0)))
+    level = max(float(setup.rms_m), float(noise_m))
+    if not sigma > REFLECTOR_UNDETERMINED * level:
+        return ""
+    axis = V[:, -1] * np.sign(V[np.argmax(np.abs(V[:, -1])), -1])
+    moved = float(np.linalg.norm(setup.reflector_m - np.asarray(reflector_cal_m, float)))
+    return (f"registration of station '{label}' on {src}: the reflector is poorly determined by these "
+            f"{setup.n_rows} rows (σ {sigma * 1e3:.1f} mm along {np.round(axis, 2).tolist()} of the tool frame, "
+            f"over {REFLECTOR_UNDETERMINED:g}x their {level * 1e3:.3f} mm residual level: the flange axis barely "
+            f"turns); fitted free it "
+            f"moves {moved * 1e3:.1f} mm from the calibration's, so the calibration's reflector is kept — measure "
+            f"rows turning the flange to register a new one")
 
 
 def register_setup(model: CalibratedModel, data: MeasurementSet, *, station: str | None = None,
@@ -240,13 +283,12 @@ def register_setup(model: CalibratedModel, data: MeasurementSet, *, station: str
         data: the registration rows (joint columns, x, y, z).
         station: label of the (new or re-fitted) station for all rows; default the data's
             ``station`` column (one set-up per label), else the file name without extension.
-        hold_reflector: keep the reflector offset (fit the tracker pose only).
+        hold_reflector: keep the reflector offset (fit the tracker pose only); rows that do not determine it keep
+            the calibration's too (:func:`_undetermined_reflector`, said in :attr:`RegistrationResult.notes`).
         weights: ``auto`` (sigma columns if present, else the model's noise), ``data`` or ``noise``.
         use_orientation: use rx, ry, rz when both the model and the data have them.
-        tol: solver tolerances; max_nfev: evaluation limit (default 50 × unknowns).
-        setup_effects: set-up-specific effects of the new session (e.g. ``Drift.from_data(robot, data)``)
-            fitted together with the set-up (one station only); the model's own set-up-specific
-            effects are replaced by them (they never transfer).
+        tol, max_nfev: solver tolerances, evaluation limit (default 50 × unknowns). setup_effects: the new
+            session's set-up effects (``Drift.from_data(robot, data)``), fitted with the set-up (one station only).
         check: judge every station's registration against the calibration's own level (``quality``, ``poor``;
             a poor one with its tested cause, which registers the rows once more with the geometry alone).
 
@@ -255,9 +297,8 @@ def register_setup(model: CalibratedModel, data: MeasurementSet, *, station: str
         and the robot effects plus ``setup_effects`` (with their fitted θ, also in ``setup_thetas``).
 
     Raises:
-        InputError: missing joint columns, bad values, fewer than 3 rows, or rows that do not
-            determine the set-up (rank-deficient), naming the file, station and parameter.
-        SolverError: the registration diverged.
+        InputError: missing joint columns, bad values, fewer than 3 rows, or rows that do not determine the
+            set-up (rank-deficient), naming the file, station and parameter. SolverError: diverged.
     """
     t0 = time.perf_counter()
     if weights not in ("auto", "data", "noise"):
@@ -274,13 +315,16 @@ def register_setup(model: CalibratedModel, data: MeasurementSet, *, station: str
     own_thetas: list[np.ndarray] = []
     setups: dict[str, Setup] = {}
     rows_used: dict[str, np.ndarray] = {}
-    errors = np.zeros(len(data))
+    errors, notes = np.zeros(len(data)), []
     nit = nfev = 0
     ok = True
     for label, rows in groups.items():
         sub = data if rows.size == len(data) else data.subset(rows)
-        setup, (sol, err, own_thetas) = _register_one(model, sub, Q[rows], label, hold_reflector, weights,
-                                                      use_orientation, tol, max_nfev, setup_effects)
+        args = (weights, use_orientation, tol, max_nfev, setup_effects)
+        setup, (sol, err, own_thetas, note) = _register_one(model, sub, Q[rows], label, hold_reflector, *args)
+        if note:  # the rows do not determine the reflector: the calibration's is kept
+            setup, (sol, err, own_thetas, _) = _register_one(model, sub, Q[rows], label, True, *args)
+            notes.append(note)
         errors[rows] = err
         nit += int(sol.njev or 0)
         nfev += int(sol.nfev)
@@ -291,7 +335,7 @@ def register_setup(model: CalibratedModel, data: MeasurementSet, *, station: str
         rows_used[label] = rows
         new = new.with_setup(label, setup, default=True,
                              step={"step": "register", "data": data.source, "station": label, "n_rows": int(rows.size),
-                                   "rms_m": setup.rms_m, "hold_reflector": bool(hold_reflector),
+                                   "rms_m": setup.rms_m, "hold_reflector": bool(hold_reflector or note),
                                    "standardised_rms": z_reg, "sigma_scale": setup.sigma_scale})
     if setup_effects or len(transferable(model)) != len(model.effects):
         pairs = transferable(model) + list(zip(setup_effects, own_thetas))
@@ -300,7 +344,7 @@ def register_setup(model: CalibratedModel, data: MeasurementSet, *, station: str
                              message="set-up registered with the robot held", nit=nit, nfev=nfev,
                              time_s=time.perf_counter() - t0, model=new, stations=list(setups), setups=setups,
                              rows=rows_used, errors_m=errors, source=data.source,
-                             setup_thetas=[np.asarray(t, float) for t in own_thetas])
+                             setup_thetas=[np.asarray(t, float) for t in own_thetas], notes=notes)
     if check:
         from pin_kpi_oed.identification.registration_check import registration_gates
 
@@ -395,7 +439,8 @@ def validate_transfer(model: CalibratedModel, data: MeasurementSet, *, register_
     out["sigma_scale"] = rr.setups[label].sigma_scale
     out["registration"] = {"source": reg.source, "rows": (reg_idx + 1).tolist(), "n": int(len(reg)),
                            "rms_m": rr.rms_m, "seed": int(seed) if register_data is None else None,
-                           "setup": rr.setups[label].to_dict(), "hold_reflector": bool(hold_reflector)}
+                           "setup": rr.setups[label].to_dict(), "hold_reflector": bool(hold_reflector or rr.notes),
+                           "notes": list(rr.notes)}
     out["scored_rows"] = (held_idx + 1).tolist()
     return out
 

@@ -115,7 +115,7 @@ def monte_carlo(model: TrackerModel, Q_meas: np.ndarray, Q_work: np.ndarray, n_r
         p_true = random_truth(model, tol, seed=s_truth, only=b)
         data = simulate(model, Q_meas, p_true, seed=s_noise, record_sigma=False)
         res = identify(model, data, Q_work=Q_work, ident=ident, raise_on_failure=False, discrepancy="none",
-                       on_poor_fit="ignore")
+                       on_poor_fit="ignore", loss="linear")
         if not res.converged:
             failures += 1
         s_hat = res.model.kpi(res.p, Q_work).ravel()
@@ -224,7 +224,7 @@ def real_data_validation(model: TrackerModel, data: MeasurementSet, n_meas: int 
             else:
                 chosen = pool[select(Fp_all[pool], n_meas, crits[meth].pool_form(E_work, b.size)).indices]
             res = identify(model, data.subset(chosen), use_orientation=False, raise_on_failure=False,
-                           discrepancy="none", on_poor_fit="ignore")
+                           discrepancy="none", on_poor_fit="ignore", loss="linear")
             out[meth].append(validate(res, data.subset(work))["mean_m"])
             _, C_s = covariances(Fp_all[chosen], E_work, prior)
             pred[meth].append(float(np.sqrt(np.trace(C_s) / n_work)))
