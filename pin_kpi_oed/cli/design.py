@@ -26,6 +26,7 @@ import numpy as np
 from pin_kpi_oed.design.runner import DesignRun, DesignSettings, design_run, true_checks
 from pin_kpi_oed.design.design_writer import write_design
 from pin_kpi_oed.design.scores import discrepancy_scores, extended_scores, sigma_given
+from pin_kpi_oed.identification.prediction_sigma import sigma_at
 from pin_kpi_oed.design.margins import DEFAULT_CLEARANCE_MARGIN_M, DEFAULT_INCIDENCE_MARGIN_DEG, with_margins
 from pin_kpi_oed.errors import IdentifiabilityError, InputError
 from pin_kpi_oed.oed.criteria import check_names, criterion_names, get_criterion
@@ -517,14 +518,13 @@ def _set_discrepancy(problem, cm, path: str) -> None:
                          f"{list(problem.cell.robot.joint_names)}")
     problem.discrepancy = DiscrepancyPrior.from_discrepancy(
         cm.discrepancy, f"--model {path}, fitted on {cm.discrepancy.n_rows} rows ({cm.discrepancy.kind})")
-    cov = cm.discrepancy.coverage if cm.discrepancy.coverage is not None else cm.coverage
-    if cov is not None:
-        far = int(np.sum(cov.extrapolation(problem.cell.q_work)))
-        if far:
-            print(f"--model {path}: {far} of {len(problem.cell.q_work)} working configurations lie outside the "
-                  "calibration's joint-space coverage: its discrepancy was not learnt there (its sigma there adds the "
-                  "parameters' extrapolation error, and predict / compensate flag them); the design's poses near "
-                  "them measure it")
+    sig, far = sigma_at(cm, problem.cell.q_work)
+    problem.model_sigma = {"sigma_m": sig.tolist(), "extrapolated": far.tolist(), "note": "as predict gives it"}
+    print(f"--model {path}: predicted sigma now at the working configurations (as predict gives it): "
+          + ", ".join(f"{s * 1e3:.4f} mm" + (" (outside the coverage)" if f else "") for s, f in zip(sig, far))
+          + (f"; {int(far.sum())} of {len(far)} outside the calibration's joint-space coverage: its discrepancy was "
+             "not learnt there (the sigma is widened by the parameters' extrapolation error, predict / compensate "
+             "flag them); the design's poses near them measure it" if far.any() else ""))
 
 
 def _sigma_plan(problem, m: int) -> str:

@@ -111,6 +111,8 @@ def add_discrepancy_section(doc: dict, problem: Any, gp_scores: list[dict]) -> N
                                   "the discrepancy is learnt at the reflector: a flange rotation of s rad per axis "
                                   "adds lever_arm_sigma_per_rad_m * s (3-D RMS, in quadrature) at the TCP, which "
                                   "no sigma here includes"}
+    if getattr(problem, "model_sigma", None) is not None:
+        doc["discrepancy"]["model_sigma_at_work"] = problem.model_sigma
     region = getattr(problem, "region", None)
     doc["working_region"] = None if region is None else {
         **region.to_dict(), "note": "kpi_gp's KPI is tr(C_s) over the working configurations and these; "

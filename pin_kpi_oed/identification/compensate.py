@@ -67,7 +67,7 @@ from pin_kpi_oed.identification.compensate_checks import (branch_step, collision
 from pin_kpi_oed.identification.compensation_file import write_compensation
 from pin_kpi_oed.identification.compensation_result import STATUSES, CompensationResult
 from pin_kpi_oed.identification.model_file import CalibratedModel
-from pin_kpi_oed.identification.prediction_sigma import DEFAULT_TOOL_LENGTH_M
+from pin_kpi_oed.identification.prediction_sigma import DEFAULT_TOOL_LENGTH_M, sigma_at
 from pin_kpi_oed.identification.tool_offset import unobservable_tcp_sigma
 from pin_kpi_oed.model.kinematics import skew
 from pin_kpi_oed.model.parameters import ParameterLayout
@@ -460,11 +460,9 @@ def _status(i: int, opt: CompensationOptions, nom: _IK, cal: _IK, left_branch: b
 
 
 def _tcp_sigma(cm: CalibratedModel, Q: np.ndarray, aux: Any, station: str | None) -> tuple[np.ndarray, np.ndarray]:
-    """(3-D σ (m), extrapolation flag) of the TCP at Q: :meth:`CalibratedModel.predict_with_sigma` of the station
+    """(3-D σ (m), extrapolation flag) of the TCP at Q: :func:`~pin_kpi_oed.identification.prediction_sigma.sigma_at`
     (one σ and one coverage for every command)."""
-    _, sig, extra = cm.predict_with_sigma(Q, aux if isinstance(aux, MeasurementSet) else None,
-                                          station=cm.station(station))
-    return np.sqrt((sig ** 2).sum(axis=1)), np.asarray(extra, bool)
+    return sigma_at(cm, Q, aux if isinstance(aux, MeasurementSet) else None, station)
 
 
 def _orientation_sigma(cm: CalibratedModel, Q: np.ndarray, aux: Any, opt: CompensationOptions

@@ -50,7 +50,7 @@ from pin_kpi_oed.model.kinematics import skew
 DEFAULT_TOOL_LENGTH_M = 0.2
 
 __all__ = ["DEFAULT_TOOL_LENGTH_M", "predictive_covariance", "predictive_sigma", "orientation_sigma",
-           "robot_parameter_covariance", "sigma_contents"]
+           "robot_parameter_covariance", "sigma_contents", "sigma_at"]
 
 
 def robot_parameter_covariance(cm: Any, label: str | None = None, probe: bool = False
@@ -322,3 +322,12 @@ def predictive_covariance(cm: Any, Q: np.ndarray, aux: Any, label: str) -> tuple
     Ct = np.einsum("xa,iajb,yb->ixjy", R, Cb, R).reshape(3 * m, 3 * m)
     Ct[np.diag_indices(3 * m)] += noise2.reshape(-1)
     return Y, Ct * st.sigma_scale ** 2
+
+
+def sigma_at(cm: Any, Q: np.ndarray, aux: Any = None, station: str | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """(3-D σ (m,) m, outside the coverage (m,) bool) of a calibrated model's predictions at configurations Q (rad)
+    of a station (default: the model's): ``predict``'s σ (:meth:`CalibratedModel.predict_with_sigma`, widened
+    outside the coverage), the one every command that states a σ at configurations reports (``compensate``'s
+    targets, ``design --model``'s working configurations)."""
+    _, sig, extra = cm.predict_with_sigma(np.atleast_2d(np.asarray(Q, float)), aux, station=cm.station(station))
+    return np.sqrt((sig ** 2).sum(axis=1)), np.asarray(extra, bool)
