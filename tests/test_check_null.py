@@ -89,3 +89,29 @@ def test_check_null_is_the_models_kfold_check(gp_model):
     assert "z_kurtosis" in cv and np.isfinite(cv["z_kurtosis"])
     plain = cm.noise_only()
     assert check_null(plain) == CheckNull()
+
+
+def test_naming_prefers_the_group_that_explains_far_better():
+    """A one-column group that passes its fit test is not named when a three-column group explains the rows far
+    better (Akaike's criterion, not the smallest passing group); the fit test of the named group is at α/5."""
+    from pin_kpi_oed.identification.check import FIT_SHARE, _name_group
+    from pin_kpi_oed.oed.check_power import CheckGroup, CheckPower
+
+    rng = np.random.default_rng(3)
+    F = rng.standard_normal((30, 10))
+    delta = np.array([1.0, -0.8, 0.6])
+    F[:, 6] = F[:, 7:10] @ delta + 0.25 * rng.standard_normal(30)          # the offset mimics most of the tool change
+    z = F[:, 7:10] @ (2.0 * delta) + rng.standard_normal(30)
+    G = F[:, :6]
+    z = z - G @ np.linalg.lstsq(G, z, rcond=None)[0]
+    groups = [CheckGroup("j offset", "offset", np.array([6]), np.eye(1), np.eye(1)),
+              CheckGroup("tool", "tool", np.arange(7, 10), np.eye(3), np.eye(3))]
+    crit = CheckPower(np.arange(6), groups)
+    law = CheckNull()
+    out = _name_group(crit, F, z, 24, 0.05, law)
+    rows = {t["name"]: t for t in out["table"]}
+    assert rows["j offset"]["explains"] and rows["tool"]["explains"]      # both pass: the old rule named the offset
+    assert rows["tool"]["chi2_remaining"] + 6 < rows["j offset"]["chi2_remaining"] + 2
+    assert out["best"][0].name == "tool"
+    np.testing.assert_allclose(out["best"][1], 2.0 * delta, atol=0.5)
+    assert FIT_SHARE == 5.0 and law.threshold(21, 0.05 / FIT_SHARE) > law.threshold(21, 0.05)

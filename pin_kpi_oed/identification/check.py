@@ -22,8 +22,8 @@ The verdict, in this order:
 * **set-up moved** — T below the critical value, the set-up changed beyond its uncertainty: re-registered, by how much
   (RMS displacement of the check points, mm);
 * **robot changed** — T above; a group g explains the residuals: the group's detectable directions fitted with the
-  set-up by least squares on the whitened rows, its remaining χ²(3m − 6 − r_g) below its critical value (the smallest
-  such group, then the best fit); the change with its standard deviation, and the re-fitted model (group changed,
+  set-up by least squares on the whitened rows, its remaining χ²(3m − 6 − r_g) below its critical value at α/5
+  (among such groups the least remaining χ² + 2 r_g, Akaike's criterion); the change with its standard deviation, and the re-fitted model (group changed,
   set-up re-registered) — when the check rows determine it; else the poses to add;
 * **discrepancy level** — T above, no group explains it and none takes a significant share (χ²(r_g) at α over the
   groups, Bonferroni): the residuals are larger everywhere alike, σ × √(T/(3m − 6));
@@ -55,6 +55,8 @@ __all__ = ["CheckResult", "check_calibration", "check_criterion", "check_null", 
 #: Station label of the set-up registered on the check rows.
 CHECK_STATION = "check"
 VERDICTS = ("holds", "setup_moved", "robot_changed", "discrepancy_level", "recalibrate")
+#: The named group's goodness of fit is tested at α / FIT_SHARE.
+FIT_SHARE = 5.0
 #: Candidate configurations (within the joint limits) the poses to add are chosen from.
 POOL_SIZE = 400
 
@@ -387,24 +389,29 @@ def _setup_change(T_old: np.ndarray, T_new: np.ndarray, G: np.ndarray, cm: Calib
 
 
 def _name_group(crit: CheckPower, F: np.ndarray, z: np.ndarray, dof: int, alpha: float, null: CheckNull) -> dict:
-    """Each group fitted with the set-up; the smallest group whose remaining χ² passes, then the best fit."""
+    """Each group fitted with the set-up; among the groups whose remaining χ² passes at α / :data:`FIT_SHARE` (the
+    true group fails its own fit test at that rate, which caps the share named right at 1 − α / FIT_SHARE), the one
+    of the least remaining χ² + 2 r_g (Akaike's criterion of the whitened rows: a larger group must explain more, a
+    one-column group is not preferred when a three-column one fits far better)."""
     Gs = F[:, crit.setup]
     T = float(z @ z)
     table, passing, gains = [], [], []
     for g in crit.groups:
         A = np.hstack([Gs, F[:, g.cols] @ g.basis])
-        r = g.basis.shape[1]
-        x, *_ = np.linalg.lstsq(A, z, rcond=None)
+        x, *_ = np.linalg.lstsq(A, z, rcond=1e-6)
         sv = np.linalg.svd(A / np.maximum(np.linalg.norm(A, axis=0), 1e-300), compute_uv=False)
         det = bool(sv[-1] > 1e-6 * sv[0]) and A.shape[0] > A.shape[1]
+        r = g.basis.shape[1] if det else max(int(np.sum(sv > 1e-6 * sv[0])) - Gs.shape[1], 0)
         rem = float(np.sum((z - A @ x) ** 2))
-        ok = det and rem <= null.threshold(dof - r, alpha)
+        # a group the rows do not determine may still explain them: named, with the poses that determine it
+        ok = r > 0 and rem <= null.threshold(dof - r, alpha / FIT_SHARE)
         table.append({"name": g.name, "chi2_remaining": rem, "dof": dof - r, "determined": det, "explains": ok})
         gains.append(null.sf(T - rem, r))
         if ok:
-            cov = np.linalg.pinv(A.T @ A)[-r:, -r:]
-            passing.append((r, rem, g, x[-r:], cov, det))
-    best = min(passing, key=lambda c: (c[0], c[1]))[2:] if passing else None
+            k = g.basis.shape[1]
+            cov = np.linalg.pinv(A.T @ A, rcond=1e-12)[-k:, -k:]
+            passing.append((r, rem, g, x[-k:], cov, det))
+    best = min(passing, key=lambda c: c[1] + 2 * c[0])[2:] if passing else None
     significant = bool(min(gains) < alpha / len(crit.groups)) if gains else False
     return {"best": best, "table": table, "significant": significant}
 

@@ -21,7 +21,8 @@ from pin_kpi_oed.identification.check import check_calibration
 from pin_kpi_oed.identification.model_file import CalibratedModel, Setup
 from pin_kpi_oed.model.noise import NoiseModel
 
-__all__ = ["EVENT_KINDS", "CheckEvent", "simulated_model", "simulate_event", "event_rates"]
+__all__ = ["EVENT_KINDS", "CheckEvent", "simulated_model", "simulate_event", "event_rates", "tcp_error_m",
+           "recalibrate"]
 
 EVENT_KINDS = ("none", "joint_offset", "tool", "tracker")
 
@@ -35,6 +36,9 @@ class CheckEvent:
         verdict: the check's verdict; group: the group it named; right: whether the verdict is the right one.
         tcp_change_m: RMS displacement of the TCP at the working configurations by the robot's change (m, robot
             base frame); a change below the tolerance does not matter (``holds`` is right for it too).
+        refit_error_m: RMS TCP error at the working configurations (tracker frame, m) of the verdict's re-fitted
+            model against the changed robot (NaN unless the verdict re-fitted a group);
+        recal_error_m: the same of a full re-calibration on ``Q_recal`` (NaN without).
     """
 
     kind: str
@@ -44,6 +48,8 @@ class CheckEvent:
     right: bool
     tcp_change_m: float = 0.0
     result: object = field(default=None, repr=False)
+    refit_error_m: float = float("nan")
+    recal_error_m: float = float("nan")
 
 
 def simulated_model(robot, q_work: np.ndarray, sigma_m: float, seed: int) -> CalibratedModel:
@@ -83,12 +89,16 @@ def _truth(model: CalibratedModel, kind: str, rng: np.random.Generator, size: di
 
 
 def simulate_event(model: CalibratedModel, Q_check: np.ndarray, kind: str, seed: int, *, alpha: float = 0.05,
-                   tolerance_m: float = 1e-4, size: dict | None = None) -> CheckEvent:
+                   tolerance_m: float = 1e-4, size: dict | None = None, Q_recal: np.ndarray | None = None
+                   ) -> CheckEvent:
     """One event: the change, the noisy check rows at ``Q_check`` (rad), the verdict.
 
     Args:
         size: the changes' sizes: ``offset_rad`` (5e-4), ``tool_m`` (5e-4), ``tracker_m`` (0.05), ``tracker_rad``
             (0.02).
+        Q_recal: when given and the verdict re-fitted a group, also a full re-calibration (``identify``, every
+            identifiable parameter and the set-up) on noisy rows of the changed robot at these poses, for the
+            comparison of the TCP errors at the working configurations.
     """
     size = {"offset_rad": 5e-4, "tool_m": 5e-4, "tracker_m": 0.05, "tracker_rad": 0.02, **(size or {})}
     rng = np.random.default_rng(seed)
@@ -108,7 +118,41 @@ def simulate_event(model: CalibratedModel, Q_check: np.ndarray, kind: str, seed:
         right = r.verdict == "robot_changed" and r.group == "tool"
     else:
         right = r.verdict == "robot_changed" and r.group.startswith(joint + " ")
-    return CheckEvent(kind, joint, r.verdict, r.group, bool(right), tcp, r)
+    ev = CheckEvent(kind, joint, r.verdict, r.group, bool(right), tcp, r)
+    if r.verdict == "robot_changed" and r.determined:
+        ev.refit_error_m = tcp_error_m(r.model, truth, model)
+        if Q_recal is not None:
+            ev.recal_error_m = tcp_error_m(recalibrate(model, truth, Q_recal, seed), truth, model)
+    return ev
+
+
+def tcp_error_m(estimate: CalibratedModel, truth: CalibratedModel, ref: CalibratedModel) -> float:
+    """RMS TCP error (m) at ``ref``'s working configurations of a model (its default station: registered on the
+    changed robot's rows) against the changed robot, both in the tracker frame they were measured in; the TCP rides
+    with each model's reflector (``ref``'s TCP offset from its reflector)."""
+    pts = []
+    for m in (estimate, truth):
+        wm, p = m.station_model(None)
+        wm.tcp_m = ref.tcp_m + (m.setups[m.station(None)].reflector_m - ref.setups[ref.station(None)].reflector_m)
+        pts.append(wm.kpi(p, ref.q_work).reshape(-1, 3))
+    return float(np.sqrt(np.mean(np.sum((pts[0] - pts[1]) ** 2, axis=1))))
+
+
+def recalibrate(model: CalibratedModel, truth: CalibratedModel, Q: np.ndarray, seed: int) -> CalibratedModel:
+    """A full re-calibration of the changed robot: noisy rows (the model's σ) at Q, ``identify`` from the nominal
+    geometry (the set-up registered in closed form, every identifiable parameter fitted, no discrepancy)."""
+    from pin_kpi_oed.identification.identify import identify
+    from pin_kpi_oed.model.tracker import TrackerModel
+
+    rng = np.random.default_rng(seed + 7)
+    sigma = np.asarray(model.noise.sigma_xyz_m)
+    Y = truth.predict(Q, station="A") + rng.normal(size=(len(Q), 3)) * sigma
+    data = MeasurementSet(list(model.robot.joint_names), Q, Y, source="re-calibration")
+    st = model.setups[model.station(None)]
+    nominal = TrackerModel(model.robot, reflector_m=st.reflector_m, tcp_m=model.tcp_m, noise=model.noise)
+    cm = identify(nominal, data, discrepancy="none").calibrated_model()
+    cm.q_work = model.q_work
+    return cm
 
 
 def _tcp_change(model: CalibratedModel, truth: CalibratedModel) -> float:
