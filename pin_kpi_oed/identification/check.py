@@ -23,8 +23,9 @@ The verdict, in this order:
   (RMS displacement of the check points, mm);
 * **robot changed** — T above; a group g explains the residuals: the group's detectable directions fitted with the
   set-up by least squares on the whitened rows, its remaining χ²(3m − 6 − r_g) below its critical value at α/5
-  (among such groups the least remaining χ² + 2 r_g, Akaike's criterion); the change with its standard deviation, and the re-fitted model (group changed,
-  set-up re-registered) — when the check rows determine it; else the poses to add;
+  (among such groups the least remaining χ² + 2 r_g, Akaike's criterion); the change with its standard deviation,
+  and the re-fitted model (group changed, set-up re-registered) — when the check rows determine it; else the poses
+  to add;
 * **discrepancy level** — T above, no group explains it and none takes a significant share (χ²(r_g) at α over the
   groups, Bonferroni): the residuals are larger everywhere alike, σ × √(T/(3m − 6));
 * **re-calibrate** — T above and no group explains it.
