@@ -172,9 +172,9 @@ def test_missing_temperature_and_too_few_rows(ur10):
     nominal, tr, te = make_case(ur10, "joint_compliance", 5, 25, k=6.0, temperature=False)
     rep = diagnose(nominal, tr, te)
     th = rep.effect("thermal_expansion")
-    assert th.status == "skipped" and "temperature" in th.note
+    assert th.status == "skipped" and "temperature" in th.message
     gh = rep.effect("gear_harmonic")
-    assert gh.status == "skipped" and "too few training rows" in gh.note
+    assert gh.status == "skipped" and "too few training rows" in gh.message
     assert rep.effect("joint_compliance").status == "ok"
     assert rep.dominant_effect == "joint_compliance"
     assert any("temperature" in n for n in rep.notes)

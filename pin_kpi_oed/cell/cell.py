@@ -75,7 +75,7 @@ from typing import Any
 import numpy as np
 import pinocchio as pin
 
-from pin_kpi_oed.cell.cell_model import CapsuleSpec, Cell, HalfSpace
+from pin_kpi_oed.cell.cell_model import DEFAULT_BEAM_RADIUS_M, DEFAULT_INCIDENCE_MAX_DEG, CapsuleSpec, Cell, HalfSpace
 from pin_kpi_oed.cell.fields import read_angles as angles_of
 from pin_kpi_oed.cell.fields import read_pose as pose_of
 from pin_kpi_oed.cell.fields import read_vec as vec_of
@@ -310,7 +310,7 @@ def _read_beam(d: dict, names: _Names, source: str) -> tuple[float, list[str]]:
     beam = d.get("beam") or {}
     if not isinstance(beam, dict):
         raise InputError(f"{at(source, 'beam')}: expected a mapping with radius_m and skip")
-    beam_r = float(beam.get("radius_m", 0.005))
+    beam_r = float(beam.get("radius_m", DEFAULT_BEAM_RADIUS_M))
     if not (math.isfinite(beam_r) and beam_r >= 0):
         raise InputError(f"{at(source, 'beam.radius_m')}: must be >= 0, got {beam.get('radius_m')!r}")
     skip_where = at(source, "beam.skip")
@@ -319,7 +319,7 @@ def _read_beam(d: dict, names: _Names, source: str) -> tuple[float, list[str]]:
 
 def _read_limits(d: dict, source: str) -> tuple[float, float, int, int]:
     """(incidence limit (deg), clearance (m), measurements, random-design budget)."""
-    inc = float(d.get("incidence_max_deg", 30.0))
+    inc = float(d.get("incidence_max_deg", DEFAULT_INCIDENCE_MAX_DEG))
     if not (0 < inc <= 180):
         raise InputError(f"{at(source, 'incidence_max_deg')}: must be in (0, 180] deg, got {inc}")
     clr = float(d.get("clearance_m", 0.0))

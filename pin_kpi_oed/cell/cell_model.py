@@ -14,7 +14,12 @@ from pin_kpi_oed.model.noise import NoiseModel
 from pin_kpi_oed.model.robot import Robot
 from pin_kpi_oed.model.tracker import TrackerModel
 
-__all__ = ["CapsuleSpec", "HalfSpace", "Cell"]
+__all__ = ["CapsuleSpec", "HalfSpace", "Cell", "DEFAULT_BEAM_RADIUS_M", "DEFAULT_INCIDENCE_MAX_DEG"]
+
+#: The laser beam's capsule radius (m) of a cell (or design file) that does not give one.
+DEFAULT_BEAM_RADIUS_M = 0.005
+#: The largest incidence angle of the beam on the reflector (deg, eq. 4) of a cell that does not give one.
+DEFAULT_INCIDENCE_MAX_DEG = 30.0
 
 
 @dataclass
@@ -110,9 +115,9 @@ class Cell:
     obstacles: list[CapsuleSpec] = field(default_factory=list)
     half_spaces: list[HalfSpace] = field(default_factory=list)
     skip_pairs: list[tuple[str, str]] = field(default_factory=list)
-    beam_radius_m: float = 0.005
+    beam_radius_m: float = DEFAULT_BEAM_RADIUS_M
     beam_skip: list[str] = field(default_factory=list)
-    incidence_max_deg: float = 30.0
+    incidence_max_deg: float = DEFAULT_INCIDENCE_MAX_DEG
     clearance_m: float = 0.0
     q_work: np.ndarray = field(default_factory=lambda: np.zeros((0, 6)))
     measurements: int = 60

@@ -227,7 +227,7 @@ def solve_path(cell: Any, X: np.ndarray, R: np.ndarray | None, what: str, seeds:
     first = solve_tcp_target(robot, cell.W_T_base, cell.tcp_m, X[0], None if R is None else R[0], seeds=seeds,
                              accept=accept)
     if not first.success:
-        what0 = (f"every solution within the joint bounds collides ({first.reason})" if first.reason
+        what0 = (f"every solution within the joint bounds collides ({first.message})" if first.message
                  else "unreachable within the joint bounds")
         raise InputError(f"{where(0)}: {what0} (best residual {first.residual_m * 1e3:.3f} mm); move the path into "
                          f"reach or clear of the obstacles, or give seed_deg")

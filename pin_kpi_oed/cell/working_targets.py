@@ -29,6 +29,7 @@ import pinocchio as pin
 from pin_kpi_oed.cell.feasibility import FeasibilityChecker
 from pin_kpi_oed.cell.fields import read_angles, read_vec
 from pin_kpi_oed.errors import InputError
+from pin_kpi_oed.results import Result
 
 #: position tolerance of a solved target (m) and orientation tolerance (rad)
 IK_TOL_M = 1e-6
@@ -36,22 +37,19 @@ IK_TOL_RAD = 1e-6
 
 
 @dataclass
-class IkResult:
-    """Outcome of :func:`solve_tcp_target`.
+class IkResult(Result):
+    """Outcome of :func:`solve_tcp_target` (a :class:`~pin_kpi_oed.results.Result`: ``success`` within tolerance,
+    within the bounds and accepted by the check; ``status`` ``solved``, ``refused`` (reached, refused by the check:
+    ``message`` says why) or ``unreachable``; ``nit`` the starts tried).
 
     Attributes:
         q: the solution (n,) rad / m, or the best iterate when ``success`` is False.
-        success: within tolerance, within the bounds and accepted by the check.
         residual_m: TCP position error (m); residual_rad: orientation error (rad, 0 if free).
-        starts: starts tried; reason: why the best reachable solution was refused ("" on success).
     """
 
     q: np.ndarray
-    success: bool
     residual_m: float
     residual_rad: float
-    starts: int
-    reason: str = ""
 
 
 def _skew(v: np.ndarray) -> np.ndarray:
@@ -144,12 +142,12 @@ def solve_tcp_target(robot, W_T_base: pin.SE3, tcp_m: np.ndarray, xyz_W: np.ndar
         if ep <= IK_TOL_M and er <= IK_TOL_RAD:
             reason = accept(q) if accept is not None else ""
             if not reason:
-                return IkResult(q, True, ep, er, k + 1)
-            refused = refused or IkResult(q, False, ep, er, 0, reason)
+                return IkResult(q, ep, er, success=True, status="solved", nit=k + 1)
+            refused = refused or IkResult(q, ep, er, status="refused", message=reason)
         elif closest is None or ep + er < closest.residual_m + closest.residual_rad:
-            closest = IkResult(q, False, ep, er, 0)
+            closest = IkResult(q, ep, er, status="unreachable")
     best = refused if refused is not None else closest
-    best.starts = len(starts)
+    best.nit = len(starts)
     return best
 
 
@@ -236,10 +234,10 @@ def solve_working_targets(cell, targets: list, source: str = "") -> np.ndarray:
         res = solve_tcp_target(robot, cell.W_T_base, cell.tcp_m, xyz, None if rpy is None else
                                pin.rpy.rpyToMatrix(*rpy), seeds=seeds, accept=accept, seed=i)
         if not res.success:
-            what = (f"every solution within the joint bounds collides or blocks the beam ({res.reason})"
-                    if res.reason else "unreachable within the joint bounds")
+            what = (f"every solution within the joint bounds collides or blocks the beam ({res.message})"
+                    if res.message else "unreachable within the joint bounds")
             raise InputError(f"{w}: {what}; best residual {res.residual_m * 1e3:.3f} mm"
                              + (f", {np.degrees(res.residual_rad):.3f} deg" if rpy is not None else "")
-                             + f" from {res.starts} starts")
+                             + f" from {res.nit} starts")
         out.append(res.q)
     return np.array(out).reshape(len(out), robot.nq)

@@ -15,6 +15,7 @@ import numpy as np
 import pinocchio as pin
 
 from pin_kpi_oed.cell.cell import Cell, CapsuleSpec, HalfSpace, capsules_from_urdf
+from pin_kpi_oed.cell.cell_model import DEFAULT_BEAM_RADIUS_M, DEFAULT_INCIDENCE_MAX_DEG
 from pin_kpi_oed.cell.environment import environment_from_dicts
 from pin_kpi_oed.cell.feasibility import FeasibilityChecker
 from pin_kpi_oed.errors import InputError
@@ -232,8 +233,10 @@ def read_cell(f: Fields, model: TrackerModel, where: str, notes: list[str]) -> C
                 W_T_tracker=W_T_base * model.tracker_T_base.inverse(), reflector_m=model.reflector_m,
                 tcp_m=model.tcp_m, noise=model.noise, q_lower=q_lower, q_upper=q_upper, robot_capsules=capsules,
                 obstacles=obstacles, half_spaces=half_spaces, skip_pairs=skip,
-                beam_radius_m=float(beam.get("radius_m", 0.005)), beam_skip=[str(x) for x in beam.get("skip") or []],
-                incidence_max_deg=float(f.get("incidence_limit_deg", "incidence_max_deg", default=30.0)),
+                beam_radius_m=float(beam.get("radius_m", DEFAULT_BEAM_RADIUS_M)),
+                beam_skip=[str(x) for x in beam.get("skip") or []],
+                incidence_max_deg=float(f.get("incidence_limit_deg", "incidence_max_deg",
+                                              default=DEFAULT_INCIDENCE_MAX_DEG)),
                 clearance_m=float(f.get("clearance_m", default=0.0)),
                 q_work=read_q_work(f, robot, where, notes),
                 environment=environment_from_dicts(f.get("environment"), obstacles, where, notes))

@@ -10,6 +10,7 @@ import numpy as np
 import pinocchio as pin
 
 from pin_kpi_oed.cell.cell import capsules_from_urdf
+from pin_kpi_oed.cell.cell_model import DEFAULT_INCIDENCE_MAX_DEG
 from pin_kpi_oed.design.design_file import load_design
 from pin_kpi_oed.errors import InfeasibleError
 from pin_kpi_oed.model.noise import NoiseModel
@@ -45,7 +46,7 @@ def _stand_in_cell(rb: Robot) -> dict:
         ],
         "half_spaces": [{"name": "floor", "normal": [0, 0, 1], "offset": 0.0},
                         {"name": "wall", "normal": [1, 0, 0], "offset": -0.45 * k}],
-        "incidence_limit_deg": 30.0,
+        "incidence_limit_deg": DEFAULT_INCIDENCE_MAX_DEG,
         "q_work": [q_work.tolist()],
         "stand_in": "random configurations, not an optimised design (pin_kpi_oed.design.stand_in)",
     }

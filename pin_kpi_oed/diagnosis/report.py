@@ -26,13 +26,13 @@ def _f(x: Any) -> Any:
 
 # --------------------------------------------------------------------------- results
 @dataclass
-class EffectResult:
-    """One candidate effect added (alone, or at a forward-selection step) to a reference model.
+class EffectResult(Result):
+    """One candidate effect added (alone, or at a forward-selection step) to a reference model (a
+    :class:`~pin_kpi_oed.results.Result`: ``status`` ``ok`` or ``skipped``, ``success`` when ok, ``message`` why it
+    was skipped or which parameters were dropped).
 
     Attributes:
         name: effect name.
-        status: ``ok`` or ``skipped``.
-        note: why it was skipped, or which parameters were dropped.
         n_params: number of identified parameters (after dropping undeterminable ones).
         heldout_rms_before_m / heldout_rms_after_m: held-out RMS error without / with it (m).
         heldout_mean_after_m / heldout_max_after_m: held-out mean / max error with it (m).
@@ -45,8 +45,6 @@ class EffectResult:
     """
 
     name: str
-    status: str = "ok"
-    note: str = ""
     n_params: int = 0
     heldout_rms_before_m: float = float("nan")
     heldout_rms_after_m: float = float("nan")
@@ -61,6 +59,10 @@ class EffectResult:
     significant: bool = False
     theta: dict = field(default_factory=dict)
 
+    def __post_init__(self) -> None:
+        self.status = self.status or "ok"
+        self.success = self.status == "ok"
+
     @property
     def reduction_m(self) -> float:
         """Held-out RMS reduction (m); −inf when skipped."""
@@ -70,7 +72,7 @@ class EffectResult:
 
     def to_dict(self) -> dict:
         """Plain JSON-able dict (SI units)."""
-        return {"name": self.name, "status": self.status, "note": self.note, "n_params": self.n_params,
+        return {**self.result_dict(), "name": self.name, "n_params": self.n_params,
                 "heldout_rms_before_m": _f(self.heldout_rms_before_m),
                 "heldout_rms_after_m": _f(self.heldout_rms_after_m),
                 "heldout_mean_after_m": _f(self.heldout_mean_after_m),
@@ -251,7 +253,7 @@ class DiagnosisReport(Result):
                    f"{'p_heldout':>11}  significant")
         for e in self.effects:
             if e.status != "ok":
-                out.append(f"    {e.name:<19}{'-':>4}  skipped: {e.note}")
+                out.append(f"    {e.name:<19}{'-':>4}  skipped: {e.message}")
                 continue
             out.append(f"    {e.name:<19}{e.n_params:>4}{e.heldout_rms_after_m * um:>14.2f}"
                        f"{_pct(e.gap_closed_fraction):>8}{e.f_pvalue:>10.2g}{e.delta_bic:>10.1f}"

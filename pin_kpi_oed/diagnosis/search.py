@@ -152,7 +152,7 @@ def single_effects(eng: Engine, geo_fit: Fit, geo: Scored, cands: list[Effect], 
             bar.update()
         note = next((n for n in (eff.check(d) for d in [eng.full_train] + [te for _, te in eng.folds]) if n), None)
         if note:
-            singles.append(EffectResult(eff.name, status="skipped", note=note))
+            singles.append(EffectResult(eff.name, status="skipped", message=note))
             notes.append(note)
             continue
         dof_left = 3 * n_train_min - geo_fit.nx - eff.n_params
@@ -160,25 +160,25 @@ def single_effects(eng: Engine, geo_fit: Fit, geo: Scored, cands: list[Effect], 
             need = int(math.ceil((geo_fit.nx + eff.n_params * (1 + MIN_DOF_PER_PARAM) + 10) / 3))
             msg = (f"{eff.name}: skipped, too few training rows ({n_train_min}) for its {eff.n_params} parameters "
                    f"next to {geo_fit.nx} geometric ones (needs at least {need} measurements)")
-            singles.append(EffectResult(eff.name, status="skipped", note=msg))
+            singles.append(EffectResult(eff.name, status="skipped", message=msg))
             notes.append(msg)
             continue
         e2, msg = prune(eng, geo_fit, eff, [])
         if msg:
             notes.append(msg)
         if e2 is None:
-            singles.append(EffectResult(eff.name, status="skipped", note=msg))
+            singles.append(EffectResult(eff.name, status="skipped", message=msg))
             continue
         try:
             sc = eng.score([e2])
         except PinKpiOedError as exc:
             m_ = f"{eff.name}: skipped, identification with it failed ({exc})"
-            singles.append(EffectResult(eff.name, status="skipped", note=m_))
+            singles.append(EffectResult(eff.name, status="skipped", message=m_))
             notes.append(m_)
             continue
         r = compare_nested(geo, sc, eff.name, len(cands), alpha, floor)
         if msg:
-            r.note = msg
+            r.message = msg
         singles.append(r)
         scored[eff.name] = sc
         pruned[eff.name] = e2

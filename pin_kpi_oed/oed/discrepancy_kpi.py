@@ -28,6 +28,7 @@ from pin_kpi_oed.oed.discrepancy_pool import select_pool_gp
 from pin_kpi_oed.oed.kriging import kpi_gp_covariance, kpi_gp_value_and_grad
 from pin_kpi_oed.oed.objective import DesignObjective
 from pin_kpi_oed.oed.selection_result import PoolSelection
+from pin_kpi_oed.results import Result
 
 __all__ = ["base_frame_jacobian", "chain_q", "DiscrepancyDesignCriterion", "PosesNeeded", "poses_needed"]
 
@@ -208,8 +209,10 @@ class DiscrepancyDesignCriterion(DesignObjective):
 
 # --------------------------------------------------------------------------- how many poses
 @dataclass
-class PosesNeeded:
-    """Predicted TCP σ at the working configurations (discrepancy included) against the number of poses.
+class PosesNeeded(Result):
+    """Predicted TCP σ at the working configurations (discrepancy included) against the number of poses (a
+    :class:`~pin_kpi_oed.results.Result`: ``success`` when the target is reached or none was asked for, ``status``
+    ``reached`` / ``not reached`` / ``curve``).
 
     Attributes:
         n: numbers of new poses (on top of the measured ones, if any).
@@ -237,11 +240,10 @@ class PosesNeeded:
     target_sigma_m: float | None = None
     n_for_target: int | None = None
     plateau_m: float = float("nan")
-    time_s: float = 0.0
 
     def to_dict(self) -> dict:
         """Plain JSON-able dict (SI units)."""
-        return {"n": self.n.tolist(), "sigma_designed_m": self.sigma_designed_m.tolist(),
+        return {**self.result_dict(), "n": self.n.tolist(), "sigma_designed_m": self.sigma_designed_m.tolist(),
                 "sigma_random_m": self.sigma_random_m.tolist(), "sigma_random_sd_m": self.sigma_random_sd_m.tolist(),
                 "sigma_now_m": self.sigma_now_m, "pool_size": self.pool_size, "seed": self.seed,
                 "target_sigma_m": self.target_sigma_m, "n_for_target": self.n_for_target,
@@ -336,4 +338,7 @@ def poses_needed(crit: DiscrepancyDesignCriterion, Q_pool: np.ndarray, n_max: in
                 k += 1
             out.n_for_target = k if k <= n_max else None
     out.time_s = time.perf_counter() - t0
+    out.success = target_sigma_m is None or out.n_for_target is not None
+    out.status = "curve" if target_sigma_m is None else ("reached" if out.n_for_target is not None else "not reached")
+    out.message = out.summary()
     return out

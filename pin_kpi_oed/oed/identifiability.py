@@ -37,11 +37,14 @@ import scipy.linalg as sla
 
 from pin_kpi_oed.errors import IdentifiabilityError
 from pin_kpi_oed.model.device import MeasurementModel
+from pin_kpi_oed.results import Result
 
 
 @dataclass
-class Identifiability:
-    """Result of the identifiability analysis.
+class Identifiability(Result):
+    """Result of the identifiability analysis (a :class:`~pin_kpi_oed.results.Result`: ``status`` ``full rank`` or
+    ``rank deficient`` — the free parameters the data cannot tell apart are dropped, a normal outcome: ``success``
+    either way —, ``message`` the rank in words).
 
     Attributes:
         names: raw parameter names.
@@ -98,7 +101,7 @@ class Identifiability:
 
     def to_dict(self) -> dict:
         """Plain JSON-able dict."""
-        return {"n_raw": self.n_raw, "n_free": self.n_free, "rank": self.rank,
+        return {**self.result_dict(), "n_raw": self.n_raw, "n_free": self.n_free, "rank": self.rank,
                 "identifiable": self.base_names, "dropped": self.dropped, "groups": self.groups_text(),
                 "notes": self.notes}
 
@@ -176,7 +179,8 @@ def analyse(model: MeasurementModel, Q: np.ndarray | None = None, prefer: list[s
     if len(kept_idx) != rank:
         notes.append(f"ordered selection kept {len(kept_idx)} columns but the pivoted QR rank is {rank}")
     return Identifiability(L.names, np.array(kept_idx, int), rank, L.n, len(free), dropped, notes, N,
-                           L.setup_groups)
+                           L.setup_groups, success=True, status="full rank" if rank == len(free) else "rank deficient",
+                           message=f"{rank} of {len(free)} free parameters identifiable")
 
 
 def check_kpi(ident: Identifiability, model: MeasurementModel, E: np.ndarray, what: str = "KPI", tol: float = 1e-6
