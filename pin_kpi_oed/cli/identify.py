@@ -293,14 +293,12 @@ def _nominal_reflector(args: argparse.Namespace, robot: Any, noise: Any, train: 
     return reflector, estimated
 
 
-def _fit(args: argparse.Namespace, model: Any, train: Any, opts: Any, effects: list) -> tuple[Any, Any]:
+def _fit(model: Any, train: Any, opts: Any, effects: list) -> tuple[Any, Any]:
     """(result, options with the loss used): the library's fit (``--loss`` default auto: the robust loss when
-    :func:`~pin_kpi_oed.identification.quality.robust_loss_reason` says so), its decision printed."""
+    :func:`~pin_kpi_oed.identification.quality.robust_loss_reason` says so; the summary prints the decision)."""
     from pin_kpi_oed.identification.identify import identify
 
     result = identify(model, train, opts, effects=effects)
-    if result.loss_decision and not args.quiet:
-        print(result.loss_decision)
     return result, replace(opts, loss=result.loss)
 
 
@@ -407,7 +405,7 @@ def run_identify(args: argparse.Namespace) -> int:
         model.layout.fix(args.fix)
     if geometry_prior is not None:
         model.layout.set_joint_prior(*geometry_prior)
-    result, opts = _fit(args, model, train, opts, effects)
+    result, opts = _fit(model, train, opts, effects)
     result.discrepancy = _discrepancy(args, result, train)
     out = {"result": result.to_dict(), "data": list(args.data), "validate": args.validate,
            "reflector_nominal_m": reflector.tolist(),

@@ -249,7 +249,7 @@ def build_certificate(model_path: str, train_paths: Sequence[str], validate_path
 def _registration(reg: dict | None) -> dict | None:
     if reg is None:
         return None
-    return {k: reg.get(k) for k in ("source", "n", "rms_m", "seed", "hold_reflector")}
+    return {k: reg.get(k) for k in ("source", "n", "rms_m", "seed", "hold_reflector", "notes")}
 
 
 def _check_kinematics(cm: Any, kinematics: str | None) -> None:

@@ -128,6 +128,7 @@ def _accuracy(d: dict) -> str:
         r = a["registration"]
         out += (f"<p>Set-up re-registered on {r['n']} rows of {_e(r['source'])} (RMS {mm(r['rms_m'])}); the other rows "
                 "are scored.</p>")
+        out += "".join(f"<p class=\"note\">{_e(n)}</p>" for n in r.get("notes") or [])
     cov = a.get("coverage") or {}
     if cov.get("rows_covered") is not None:
         out += (f"<p class=\"note\">{cov['rows_covered'] * 100:.1f} % of the held-out rows lie within the training's "
