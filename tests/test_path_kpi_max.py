@@ -84,3 +84,16 @@ def test_pool_selection_reports_the_worst_sample_criterion(seam_problem):
     assert obj.value(Qs) == pytest.approx(np.mean(_traces(seam_problem, Qs) ** 16) ** (1 / 16), rel=1e-9)
     rand = [obj.value(pool[rng.choice(300, 20, replace=False)]) for _ in range(10)]
     assert obj.value(Qs) < min(rand)
+
+
+@pytest.mark.slow
+def test_path_study_compares_the_worst_sample_criterion(tmp_path):
+    from pin_kpi_oed.studies.path_study import format_path_table, path_study
+
+    s = path_study(tmp_path / "new" / "paths", m=20, seeds=(0, 1), mc_reps=0)
+    assert (tmp_path / "new" / "paths" / "summary.json").is_file()  # the folder made before the work
+    assert {"kpi_path_max_vs_kpi_path_worst_sigma_pos_m", "kpi_path_max_vs_kpi_rms_sigma_pos_m"} <= set(s["paired"])
+    for r in s["records"]:  # each design's own criterion: the worst-sample one is no worse there than the mean one
+        d = r["designs"]
+        assert d["kpi_path_max"]["worst_sigma_pos_m"] <= 1.02 * d["kpi_path"]["worst_sigma_pos_m"]
+    assert "kpi_path_max" in format_path_table(s)
