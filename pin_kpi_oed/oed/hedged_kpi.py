@@ -27,10 +27,11 @@ robots, 0.5 once: docs/results.md). The family (:func:`prior_family`) around the
 The exact gradient is ∇φ_H = φ_H · Σ_k ω_k ∇φ_k / φ_k (each member's exact dφ_k/dQ), so IPOPT designs with it
 as with ``kpi_gp``. Pool selection (:meth:`HedgedDesignCriterion.select`): every member's own selection
 (:func:`~pin_kpi_oed.oed.discrepancy_pool.select_pool_gp`, greedy + exchange) is a candidate set; the one of least
-φ_H is kept and improved by exchange passes on φ_H (a chosen pose swapped for the pool candidate that lowers φ_H
-most, over a seeded subset of the pool when m times the candidates exceeds :data:`EXCHANGE_EVALUATIONS`; every
-member's tr C_s of a swap from its :class:`~pin_kpi_oed.oed.discrepancy_pool.GreedyState`, an exact downdate and
-rank-three update, instead of a kriging solve per member and candidate).
+φ_H is kept and improved by the one pool selector's exchange passes on φ_H (:class:`HedgedState`: a chosen pose
+swapped for the pool candidate that lowers φ_H most, over a seeded subset of the pool when m times the candidates
+exceeds :data:`EXCHANGE_EVALUATIONS`; every member's tr C_s of a swap from its
+:class:`~pin_kpi_oed.oed.discrepancy_pool.GreedyState`, an exact downdate and rank-three update, instead of a kriging
+solve per member and candidate).
 
 A fitted discrepancy (``design --model``) is not hedged: it is a measurement, not an assumption.
 """
@@ -40,6 +41,7 @@ from __future__ import annotations
 import copy
 import dataclasses
 import time
+from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
@@ -48,11 +50,13 @@ from pin_kpi_oed.errors import IdentifiabilityError, InputError
 from pin_kpi_oed.discrepancy.prior import DiscrepancyPrior
 from pin_kpi_oed.oed.discrepancy_kpi import DiscrepancyDesignCriterion
 from pin_kpi_oed.oed.discrepancy_pool import GreedyState, after_given
+from pin_kpi_oed.oed.pool_search import PoolState, exchange
 from pin_kpi_oed.oed.kriging import kpi_gp_value_and_grad
 from pin_kpi_oed.oed.objective import DesignObjective
 from pin_kpi_oed.oed.selection_result import PoolSelection
 
-__all__ = ["LENGTH_FACTORS", "LEVEL_FACTORS", "HEDGE_LINE", "prior_family", "HedgedDesignCriterion"]
+__all__ = ["LENGTH_FACTORS", "LEVEL_FACTORS", "HEDGE_LINE", "prior_family", "HedgedDesignCriterion",
+           "HedgedState"]
 
 #: Factors on the assumed prior's length scales (whole-configuration and one-joint alike).
 LENGTH_FACTORS = (0.5, 2.0)
@@ -256,9 +260,9 @@ class HedgedDesignCriterion(DesignObjective):
 
     def _exchange(self, Q_pool: np.ndarray, J_pool: np.ndarray, idx: np.ndarray, val: float, passes: int,
                   seed: int, path: list, score: Any, caches: list) -> tuple[np.ndarray, float, int]:
-        """Exchange passes on φ_H: each chosen pose in turn swapped for the candidate that lowers φ_H most among a
-        seeded subset of the others; every member's tr C_s of each swap by its state's exact downdate and rank-three
-        update (:class:`~pin_kpi_oed.oed.discrepancy_pool.GreedyState`), the accepted set's φ_H from scratch."""
+        """Exchange passes on φ_H: the one pool selector's :func:`~pin_kpi_oed.oed.pool_search.exchange` on a
+        :class:`HedgedState` (each chosen pose in turn swapped for the candidate of least φ_H among a seeded subset
+        of the others). Appends φ_H after each pass to ``path``."""
         if passes <= 0:
             return idx, val, 0
         states = []
@@ -268,37 +272,78 @@ class HedgedDesignCriterion(DesignObjective):
             if cache is not None:
                 states[-1].kcols = cache
         fixed = list(range(k0))
-        states = [st.build(fixed + list(k0 + idx)) for st in states]
-        rng = np.random.default_rng(seed)
+        st: PoolState = HedgedState([s.build(fixed + list(k0 + idx)) for s in states], self.weights,
+                                    np.array([c.tr_register for c in self.members]), k0, len(idx), score,
+                                    np.random.default_rng(seed))
+        excl = np.zeros(st.n_candidates, bool)
+        excl[:k0] = True
+        excl[k0 + idx] = True
         swaps = 0
         for _ in range(int(passes)):
-            improved = False
-            for pos in range(len(idx)):
-                rest = np.setdiff1d(np.arange(len(Q_pool)), idx)
-                k = max(10, EXCHANGE_EVALUATIONS // len(idx))
-                if len(rest) > k:
-                    rest = rng.choice(rest, k, replace=False)
-                logs = np.zeros(len(rest))
-                with np.errstate(invalid="ignore", divide="ignore"):
-                    for w, st, c in zip(self.weights, states, self.members):
-                        logs += w * np.log(st.values_without(k0 + int(idx[pos]), k0 + rest) + c.tr_register)
-                vals = np.where(np.isfinite(logs), np.exp(logs), np.inf)
-                j = int(np.argmin(vals))
-                if vals[j] < val * (1 - 1e-9):
-                    trial = idx.copy()
-                    trial[pos] = rest[j]
-                    try:
-                        v = score(trial)
-                    except IdentifiabilityError:
-                        v = np.inf
-                    if v < val * (1 - 1e-9):
-                        states = [st.without(k0 + int(idx[pos])) for st in states]
-                        for st in states:
-                            st.add(k0 + int(rest[j]))
-                        idx, val, improved = trial, v, True
-                        swaps += 1
-                path.append(val)
-            if not improved:
+            st, sel, val, n, _ = exchange(st, list(k0 + idx), excl, val, 1, rel_tol=1e-9, fixed=fixed)
+            idx, swaps = np.array(sel, int) - k0, swaps + n
+            path.append(val)
+            if n == 0:
                 break
-            states = [st.build(fixed + list(k0 + idx)) for st in states]   # fresh factors after a pass with swaps
         return idx, val, swaps
+
+
+class HedgedState(PoolState):
+    """The :class:`~pin_kpi_oed.oed.pool_search.PoolState` of the hedged criterion: every member's
+    :class:`~pin_kpi_oed.oed.discrepancy_pool.GreedyState` over the same candidates (measured poses first); φ_H of a
+    swap from the members' exact downdates and rank-three updates, over a seeded subset of the candidates when m
+    times the candidates exceeds :data:`EXCHANGE_EVALUATIONS` (φ_H ``inf`` elsewhere); φ_H of an accepted set from
+    scratch (``score``)."""
+
+    def __init__(self, states: list, weights: np.ndarray, tr_register: np.ndarray, k0: int, m: int, score: Any,
+                 rng: np.random.Generator) -> None:
+        self.states, self.weights, self.tr_register = states, weights, tr_register
+        self.k0, self.m, self.score, self.rng = k0, m, score, rng
+        self.removed: int | None = None
+        self.chosen = list(states[0].chosen)
+
+    @property
+    def n_candidates(self) -> int:
+        return self.states[0].n_candidates
+
+    def values(self, exclude: np.ndarray) -> np.ndarray:
+        out = np.full(self.n_candidates, np.inf)
+        if self.removed is None:  # additions are not part of the hedged search (it starts from a member's set)
+            return out
+        rest = np.flatnonzero(~exclude)
+        rest = rest[rest != self.removed]
+        k = max(10, EXCHANGE_EVALUATIONS // self.m)
+        if len(rest) > k:
+            rest = self.rng.choice(rest, k, replace=False)
+        logs = np.zeros(len(rest))
+        with np.errstate(invalid="ignore", divide="ignore"):
+            for w, st, tr in zip(self.weights, self.states, self.tr_register):
+                logs += w * np.log(st.values_without(self.removed, rest) + tr)
+        out[rest] = np.where(np.isfinite(logs), np.exp(logs), np.inf)
+        return out
+
+    def without(self, i: int) -> HedgedState:
+        st = copy.copy(self)
+        st.removed = int(i)
+        st.chosen = [c for c in self.chosen if c != i]
+        return st
+
+    def add(self, i: int) -> None:
+        if self.removed is not None:
+            self.states = [s.without(self.removed) for s in self.states]
+            self.removed = None
+        for s in self.states:
+            s.add(int(i))
+        self.chosen.append(int(i))
+
+    def rebuild(self, chosen: Sequence[int]) -> HedgedState:
+        st = copy.copy(self)
+        st.states = [s.build(list(chosen)) for s in self.states]
+        return st
+
+    def settled(self, predicted: float) -> float:
+        """φ_H of the accepted set from scratch."""
+        try:
+            return float(self.score(np.asarray(self.chosen[self.k0:], int) - self.k0))
+        except IdentifiabilityError:
+            return float("inf")

@@ -38,6 +38,7 @@ import numpy as np
 from pin_kpi_oed.errors import IdentifiabilityError, InputError
 from pin_kpi_oed.oed.covariance import prior_of
 from pin_kpi_oed.oed.criteria import Criterion, CriterionInfo, get_criterion
+from pin_kpi_oed.oed.pool_search import ValueState, greedy_exchange
 from pin_kpi_oed.oed.selection_result import PoolSelection
 
 __all__ = ["DesignContext", "DesignObjective", "DesignCriterion", "information_criterion"]
@@ -105,9 +106,11 @@ class DesignObjective(ABC):
         """φ(Q) and the exact dφ/dQ, (m, n) per rad."""
 
     def select(self, Q_pool: np.ndarray, m: int, seed: int = 0, **kw: Any) -> PoolSelection:
-        """m of the candidate configurations ``Q_pool`` (N, n): greedy forward selection on φ (candidates that do
-        not yet identify the parameters are scored after a tiny ridge-free fallback: the first that does), then one
-        exchange pass. Generic and exact (N·m evaluations of φ); the information models override it.
+        """m of the candidate configurations ``Q_pool`` (N, n): the one pool selector
+        (:func:`~pin_kpi_oed.oed.pool_search.greedy_exchange`) on :class:`~pin_kpi_oed.oed.pool_search.ValueState`:
+        greedy forward selection on φ (while no addition identifies the parameters, the next candidate of a seeded
+        order), then one exchange pass. Generic and exact (N·m evaluations of φ); the information models override
+        it with their low-rank updates.
 
         Raises:
             InputError: m larger than the pool.
@@ -117,7 +120,6 @@ class DesignObjective(ABC):
         N = len(Q_pool)
         if m > N:
             raise InputError(f"cannot choose {m} measurements from a pool of {N} candidates")
-        rng = np.random.default_rng(seed)
 
         def phi(idx: list[int]) -> float:
             try:
@@ -125,21 +127,10 @@ class DesignObjective(ABC):
             except IdentifiabilityError:
                 return np.inf
 
-        chosen: list[int] = []
-        path = []
-        for _ in range(m):
-            rest = [i for i in rng.permutation(N) if i not in chosen]
-            vals = np.array([phi(chosen + [i]) for i in rest])
-            k = int(np.argmin(vals)) if np.isfinite(vals).any() else 0
-            chosen.append(int(rest[k]))
-            path.append(float(vals[k]))
-        cur, swaps = phi(chosen), 0
-        for pos in range(m):
-            others = [i for i in range(N) if i not in chosen]
-            vals = np.array([phi(chosen[:pos] + [i] + chosen[pos + 1:]) for i in others])
-            if vals.size and vals.min() < cur:
-                chosen[pos], cur, swaps = int(others[int(np.argmin(vals))]), float(vals.min()), swaps + 1
-        return PoolSelection(indices=np.array(chosen), value=float(cur), path=np.array(path), nit=swaps,
+        st = ValueState(phi, N, seed)
+        found = greedy_exchange(st, m, passes=1, rel_tol=0.0)
+        cur, swaps = found.value, found.swaps
+        return PoolSelection(indices=found.indices, value=float(cur), path=np.array(found.path), nit=swaps,
                              time_s=time.perf_counter() - t0, success=bool(np.isfinite(cur)), status="selected",
                              message=f"generic greedy + one exchange pass ({swaps} swaps); no certificate")
 

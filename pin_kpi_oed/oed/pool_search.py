@@ -12,8 +12,10 @@ extended with a prior; :mod:`~pin_kpi_oed.oed.pool`,         (Woodbury, rank nh)
 :mod:`~pin_kpi_oed.oed.extended`)                            correction of every candidate's blocks
 :class:`~pin_kpi_oed.oed.discrepancy_pool.GreedyState`       the kernel conditioned on S (rank one per pose) and
 (the GLS forms, the kriging ``kpi_gp``)                      the GLS information (rank three)
-:class:`~pin_kpi_oed.oed.hedged_kpi.HedgedState` (hedged     the members' states; φ_H = Π_k φ_k^{ω_k}
-``kpi_gp``)
+(the hedged ``kpi_gp``: one per member of the family,       φ_H = Π_k φ_k^{ω_k} of the members' updates
+:class:`~pin_kpi_oed.oed.hedged_kpi.HedgedDesignCriterion`)
+:class:`ValueState` (an objective of configurations          none: φ(S ∪ {i}) from scratch for every candidate
+without updates of its own)
 ==========================================================  ======================================================
 
 The criterion enters only through the state's values: the A form tr(K M⁻¹ Kᵀ) when the criterion has a pool matrix K
@@ -36,7 +38,7 @@ from __future__ import annotations
 import copy
 import time
 from abc import ABC, abstractmethod
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from typing import NamedTuple
 
 import numpy as np
@@ -44,7 +46,8 @@ import numpy as np
 from pin_kpi_oed.errors import IdentifiabilityError
 from pin_kpi_oed.oed.relaxation import pool_phi
 
-__all__ = ["PoolState", "InformationState", "Search", "greedy", "exchange", "greedy_exchange", "block_gains"]
+__all__ = ["PoolState", "ValueState", "InformationState", "Search", "greedy", "exchange", "greedy_exchange",
+           "block_gains"]
 
 
 class PoolState(ABC):
@@ -91,13 +94,57 @@ class PoolState(ABC):
         """φ(S) after an accepted swap: ``predicted`` (the update's value) unless the state knows it afresh."""
         return predicted
 
+    def pick(self, phi: np.ndarray, exclude: np.ndarray) -> int:
+        """The candidate a greedy step adds: the least φ (the first of equal ones); while no addition gives a finite
+        φ (S does not yet determine the parameters), the first candidate not excluded."""
+        j = int(np.argmin(phi))
+        return j if np.isfinite(phi[j]) else int(np.flatnonzero(~exclude)[0])
+
+
+class ValueState(PoolState):
+    """φ(S ∪ {i}) evaluated from scratch for every candidate: the state of an objective without low-rank updates
+    (a criterion of the configurations without a pool form of its own; N evaluations of φ per step).
+
+    Args:
+        phi: φ of a list of candidate indices (``inf`` when they do not determine the parameters).
+        n: candidates; seed: seed of the candidates' order in each greedy step (ties and steps without a finite φ
+            take the first in it).
+    """
+
+    def __init__(self, phi: Callable[[list[int]], float], n: int, seed: int = 0) -> None:
+        self.phi, self.N, self.rng = phi, int(n), np.random.default_rng(seed)
+        self.chosen: list[int] = []
+
+    @property
+    def n_candidates(self) -> int:
+        return self.N
+
+    def values(self, exclude: np.ndarray) -> np.ndarray:
+        out = np.full(self.N, np.inf)
+        for i in np.flatnonzero(~exclude):
+            out[i] = self.phi(self.chosen + [int(i)])
+        return out
+
+    def add(self, i: int) -> None:
+        self.chosen.append(int(i))
+
+    def without(self, i: int) -> ValueState:
+        st = copy.copy(self)
+        st.chosen = [c for c in self.chosen if c != i]
+        return st
+
+    def pick(self, phi: np.ndarray, exclude: np.ndarray) -> int:
+        order = np.array([i for i in self.rng.permutation(self.N) if not exclude[i]], int)
+        k = int(np.argmin(phi[order]))
+        return int(order[k]) if np.isfinite(phi[order[k]]) else int(order[0])
+
 
 def greedy(st: PoolState, m: int, exclude: np.ndarray) -> list[float]:
     """Add m candidates to ``st``, each the one of least φ (``exclude`` updated in place); φ after each addition."""
     path = []
     for _ in range(m):
         phi = st.values(exclude)
-        j = int(np.argmin(phi))
+        j = st.pick(phi, exclude)
         path.append(float(phi[j]))
         st.add(j)
         exclude[j] = True
