@@ -220,7 +220,7 @@ def ipopt_time(seed: int = 0) -> dict:
             rb = problem.model.robot
             ext = ExtendedModel(problem.model, problem.p0, problem.base, [GearHarmonic(rb, joints=rb.joint_names[1:3])])
             ext.prior_info = np.diag(np.r_[np.zeros(ext.nb), np.full(ext.k, TIME_PRIOR_RAD ** -2)])
-            problem.extended = ext
+            problem = problem.replaced(extended=ext)
         t0 = time.perf_counter()
         res = run_designs(cell, ["kpi"], 60, seed, DesignOptions(n_starts=1), problem)[-1]
         out[kind] = {"time_s": time.perf_counter() - t0, "ipopt_time_s": res.time_s, "iterations": res.nit,

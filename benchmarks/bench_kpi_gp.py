@@ -7,7 +7,8 @@
   same run (target ≤ 2×); the honest TCP σ (discrepancy included) and the paper's σ of both designs.
 * The same two timings for ``design``'s default form of ``kpi_gp``: the KPI over the working region (W plus 100
   seeded configurations within 0.5 rad, :func:`~pin_kpi_oed.design.region.working_region`).
-* The criterion itself is timed for a given discrepancy (``problem.hedge = False``: what ``--model`` designs with);
+* The criterion itself is timed for a given discrepancy (a problem declared with ``hedge=False``: what ``--model``
+  designs with);
   without ``--model`` the class default is an assumption and ``design`` hedges over 5 priors
   (:mod:`pin_kpi_oed.oed.hedged_kpi`): its pool selection (the members' selections + one exchange pass) and IPOPT
   design over W are timed as well (target: pool ≤ 10 s, design ≤ 6× the plain KPI's: 5 criteria per evaluation).
@@ -37,8 +38,7 @@ def main(argv: list[str] | None = None) -> dict:
     out = {}
     with limited_threads():
         cell = with_margins(load_cell("kr15"), 0.02, 1.0)
-        problem = DesignProblem(cell)
-        problem.hedge = False  # the criterion for a given discrepancy; the hedged form is timed in _hedged
+        problem = DesignProblem(cell, hedge=False)  # the criterion for a given discrepancy; hedged: in _hedged
         Q_pool, _ = problem.random_design(1000, seed=np.random.SeedSequence([0, 1]), max_tries=400_000)
         gp = problem.criterion("kpi_gp")
         Jp = gp.pool_jacobians(Q_pool)
@@ -98,12 +98,13 @@ def _region(problem, cell, Q_pool: np.ndarray, Jp: np.ndarray, opts, t_kpi: floa
     """``design``'s default form of kpi_gp: the KPI over the working region (0.5 rad, 100 seeded samples); the pool
     selection and the IPOPT design timed as above, against the same run's plain design."""
     from pin_kpi_oed.design.optimize import run_designs
+    from pin_kpi_oed.design.region import region_in_cell
 
-    reg = problem.set_region(0.5, 100, 0)
+    reg = region_in_cell(problem.cell, 0.5, 100, 0)
+    problem = problem.replaced(region=reg)
     gp = problem.criterion("kpi_gp")
     sel = gp.select(Q_pool, 60, J_pool=Jp)
     r = run_designs(cell, ["kpi_gp"], 60, 0, opts, problem)[-1]
-    problem.region = None
     ratio = r.time_s / t_kpi
     print(f"  region ({reg.kept} configurations besides W): pool 1000 -> 60 {sel.time_s:.3f} s; design "
           f"{r.time_s:.2f} s {r.nit} it, kpi_gp region / kpi time = {ratio:.2f} (target <= 2)")
@@ -116,13 +117,12 @@ def _hedged(problem, cell, Q_pool: np.ndarray, Jp: np.ndarray, opts, t_kpi: floa
     1,000 and the IPOPT design over W, against the same run's plain design."""
     from pin_kpi_oed.design.optimize import run_designs
 
-    problem.hedge = True
+    problem = problem.replaced(hedge=True)
     h = problem.criterion("kpi_gp")
     t0 = time.process_time()
     sel = h.select(Q_pool, 60, J_pool=Jp)
     t_pool = time.process_time() - t0
     r = run_designs(cell, ["kpi_gp"], 60, 0, opts, problem)[-1]
-    problem.hedge = False
     ratio = r.time_s / t_kpi
     print(f"  hedged over {len(h.members)} priors: pool 1000 -> 60 {t_pool:.2f} s CPU ({sel.exchanges} exchanges; "
           f"target <= 10 s); design {r.time_s:.2f} s {r.nit} it, hedged / kpi time = {ratio:.2f} (target <= 6)")

@@ -63,10 +63,11 @@ def load_case_cell(name: str):
 
 def designed_poses(problem, m: int, pool: int, seed: int) -> np.ndarray:
     """``kpi_gp`` over the working region (the command line's defaults) from a seeded pool of feasible poses."""
-    from pin_kpi_oed.design.region import DEFAULT_WORK_RADIUS_RAD, DEFAULT_WORK_SAMPLES
+    from pin_kpi_oed.design.region import DEFAULT_WORK_RADIUS_RAD, DEFAULT_WORK_SAMPLES, region_in_cell
 
     if problem.region is None:
-        problem.set_region(DEFAULT_WORK_RADIUS_RAD, DEFAULT_WORK_SAMPLES, seed)
+        problem = problem.replaced(region=region_in_cell(problem.cell, DEFAULT_WORK_RADIUS_RAD, DEFAULT_WORK_SAMPLES,
+                                                         seed))
     Q_pool, _ = problem.random_design(pool, seed=np.random.SeedSequence([seed, 1]))
     return Q_pool[problem.criterion("kpi_gp").select(Q_pool, m).indices]
 

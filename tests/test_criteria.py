@@ -252,7 +252,6 @@ def test_outside_criteria_of_both_kinds_design_select_and_evaluate(toys, problem
     """One class each, registered from outside: a criterion of the information matrix (cs_z) on the noise-only, the
     measured-poses and the GLS information models, and a criterion of the configurations (kpi_near), each through
     the pool selection, the IPOPT design and evaluate."""
-    from pin_kpi_oed.design.sequential import SequentialProblem
     from pin_kpi_oed.design.user_pool import design_from_pool
     from pin_kpi_oed.oed.discrepancy_criteria import GlsDesignCriterion
 
@@ -279,7 +278,7 @@ def test_outside_criteria_of_both_kinds_design_select_and_evaluate(toys, problem
     assert score.criteria["cs_z"] == pytest.approx(np.trace(score.cov_s_m2[2::3, 2::3]), rel=1e-9)
     assert "kpi_gp" not in score.criteria  # needs a design problem's discrepancy
     # the same information criterion on two more information models: the measured poses and the GLS information
-    seq = SequentialProblem(problem.cell, Q[:10])
+    seq = problem.replaced(Q_given=Q[:10])
     given = seq.criterion("cs_z")
     assert given.value(Q[10:20]) == pytest.approx(get_criterion("cs_z").value(
         problem.model.weighted_jacobian(problem.p0, Q[:20])[:, :, problem.base].reshape(-1, problem.base.size),

@@ -206,7 +206,6 @@ def sequential_files(tmp_path_factory):
 
 def test_cli_pool_on_top_of_given_poses_is_certified_and_answers_how_many_more(sequential_files):
     from pin_kpi_oed.cli.app import main
-    from pin_kpi_oed.design.sequential import SequentialProblem
     from pin_kpi_oed.oed.objective import DesignCriterion
 
     folder, Qg, pool = sequential_files
@@ -229,7 +228,7 @@ def test_cli_pool_on_top_of_given_poses_is_certified_and_answers_how_many_more(s
     assert kpi["trace_cs_m2"] < rnd["trace_cs_m2"] < crit.value(Qg)
     # the certificate (measured information as the fixed part) bounds every m-subset of the feasible pool
     bound = doc["lower_bound_trace_cs_m2"]
-    seq = SequentialProblem(cell, Qg)
+    seq = DesignProblem(cell, Q_given=Qg)
     feas = pool[seq.checker.check(pool).feasible]
     rng = np.random.default_rng(0)
     for _ in range(20):
@@ -247,12 +246,12 @@ def test_cli_pool_on_top_of_given_poses_is_certified_and_answers_how_many_more(s
 def test_given_prior_counts_in_scores_and_certificate(sequential_files):
     """A prior Σ₀⁻¹ on the robot parameters (here: the covariance of 300 earlier random poses) adds to the
     measured information: C_s = E (F_gᵀF_g + Σ₀⁻¹ + FᵀF)⁻¹ Eᵀ, and the pool selection's bound includes it."""
-    from pin_kpi_oed.design.sequential import SequentialProblem, prior_information
+    from pin_kpi_oed.design.problem_options import prior_information
     from pin_kpi_oed.design.user_pool import design_from_pool
 
     folder, Qg, pool = sequential_files
     cell = load_cell("kr15")
-    seq = SequentialProblem(cell, Qg)
+    seq = DesignProblem(cell, Q_given=Qg)
     Qe = cell.robot.random_q(np.random.default_rng(9), 300)
     Fe = seq.model.weighted_jacobian(seq.p0, Qe)[:, :, seq.base].reshape(-1, seq.base.size)
     names = [seq.ident.names[i] for i in seq.base]
@@ -261,13 +260,13 @@ def test_given_prior_counts_in_scores_and_certificate(sequential_files):
     robot_rows = [k for k, i in enumerate(seq.base) if seq.model.layout.names[i].split(".")[0]
                   not in seq.model.layout.setup_groups]
     assert np.abs(P[np.ix_(robot_rows, robot_rows)]).max() > 0 and len(robot_rows) < len(names)
-    seq.set_prior(P)
+    seq = seq.replaced(given_prior=P)
     res, cert, _ = design_from_pool(seq, pool, ["random", "kpi"], 10, seed=0)
     Qk = res[-1].q_meas
     F = seq.model.weighted_jacobian(seq.p0, np.vstack([Qg, Qk]))[:, :, seq.base].reshape(-1, seq.base.size)
     want = np.trace(seq.E @ np.linalg.solve(F.T @ F + P, seq.E.T))
     assert res[-1].trace_cs_m2 == pytest.approx(want, rel=1e-8)
-    no_prior = SequentialProblem(cell, Qg).kpi_criterion.value(Qk)
+    no_prior = DesignProblem(cell, Q_given=Qg).kpi_criterion.value(Qk)
     assert res[-1].trace_cs_m2 < no_prior
     assert cert.lower_bound_trace_cs_m2 <= res[-1].trace_cs_m2 and cert.efficiency(res[-1].trace_cs_m2) > 0.95
     with pytest.raises(InputError, match="names none"):
@@ -350,6 +349,33 @@ def test_cli_json_is_the_library_run_written(tmp_path):
     pko.write_design(tmp_path / "api.json", run)
     cli, api = (json.loads((tmp_path / f"{n}.json").read_text()) for n in ("cli", "api"))
     assert cli["clearance_margin_m"] == 0.01 and "certificate" in cli and "pose_clearance_m" in cli["designs"][1]
+    assert _without_times(cli) == _without_times(api)
+
+
+@pytest.mark.parametrize("mode", ["pool", "given"])
+def test_cli_json_is_the_library_run_written_with_pool_and_given(sequential_files, tmp_path, mode):
+    """With measured poses (``--given``) and "how many more" (``--target-sigma``), selected from a user pool
+    (``--pool``) or optimised on top: ``design --json`` and ``pko.write_design`` of ``design_run`` with the same
+    settings write the same file (wall times apart)."""
+    import pin_kpi_oed as pko
+    from pin_kpi_oed.cli.app import main
+
+    folder, Qg, _ = sequential_files
+    target = 0.8 * DesignProblem(load_cell("kr15"), Q_given=Qg).sigma_tcp()
+    given, pool = str(folder / "given.csv"), str(folder / "pool.csv")
+    args = ["--cell", "kr15", "--criteria", "random,kpi", "--measurements", "10", "--seed", "1", "--given", given,
+            "--target-sigma", repr(target), "--pool-size", "300", "--quiet"]
+    kw: dict = dict(criteria=("random", "kpi"), measurements=10, seed=1, given_file=given, target_sigma_m=target,
+                    certificate_pool_size=300, clearance_margin_m=0.02, incidence_margin_deg=1.0)
+    if mode == "pool":
+        args, kw = args + ["--pool", pool], {**kw, "pool_file": pool}
+    else:
+        args, kw = args + ["--starts", "1", "--max-iter", "10"], {**kw, "n_starts": 1, "max_iter": 10}
+    assert main(["design", *args, "--json", str(tmp_path / "cli.json")]) == 0
+    pko.write_design(tmp_path / "api.json", pko.design_run(pko.load_cell("kr15"), pko.DesignSettings(**kw)))
+    cli, api = (json.loads((tmp_path / f"{n}.json").read_text()) for n in ("cli", "api"))
+    assert cli["given"]["file"] == given and cli["poses_until"]["n_more"] >= 1
+    assert ("certificate" in cli) == (mode == "pool")
     assert _without_times(cli) == _without_times(api)
 
 

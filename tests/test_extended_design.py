@@ -281,7 +281,7 @@ def test_ipopt_design_over_the_extended_model_kr15():
     rb = problem.model.robot
     ext = ExtendedModel(problem.model, problem.p0, problem.base, [GearHarmonic(rb, joints=rb.joint_names[1:3])])
     ext.prior_info = np.diag(np.r_[np.zeros(ext.nb), np.full(ext.k, 2e-4 ** -2)])
-    problem.extended = ext
+    problem = problem.replaced(extended=ext)
     crit = problem.criterion("kpi")
     assert isinstance(crit, ExtendedDesignCriterion)
     rnd, kpi = run_designs(cell, ["kpi"], 30, 0, DesignOptions(n_starts=1, ipopt=ipopt_options(max_iter=15),

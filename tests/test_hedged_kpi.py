@@ -82,10 +82,9 @@ def test_design_problem_hedges_only_an_assumed_discrepancy():
     cell = load_cell(str(ROOT / "examples" / "ur5_cell.yaml"))
     problem = DesignProblem(cell)
     assert isinstance(problem.criterion("kpi_gp"), HedgedDesignCriterion)    # the class default: an assumption
-    problem.hedge = False
-    assert isinstance(problem.criterion("kpi_gp"), DiscrepancyDesignCriterion)
-    fitted = DesignProblem(cell)
-    fitted.discrepancy = problem.discrepancy_prior()                             # as design --model sets it
+    assert isinstance(problem.replaced(hedge=False).criterion("kpi_gp"), DiscrepancyDesignCriterion)
+    fitted = DesignProblem(cell, discrepancy=problem.discrepancy_prior())          # as design --model declares it
+    assert not fitted.discrepancy_assumed and problem.discrepancy_assumed
     assert isinstance(fitted.criterion("kpi_gp"), DiscrepancyDesignCriterion)
 
 
@@ -120,11 +119,9 @@ def test_cli_design_says_it_hedges_and_refuses_no_hedge_where_nothing_is_assumed
 
 def test_sequential_design_hedges_an_assumed_discrepancy_too():
     """design --given without --model: the poses measured before count in every member of the family."""
-    from pin_kpi_oed.design.sequential import SequentialProblem
-
     cell = load_cell(str(ROOT / "examples" / "ur5_cell.yaml"))
     Q_given, _ = DesignProblem(cell).random_design(30, seed=np.random.SeedSequence([6, 1]))
-    problem = SequentialProblem(cell, Q_given)
+    problem = DesignProblem(cell, Q_given=Q_given)
     h = problem.criterion("kpi_gp")
     assert isinstance(h, HedgedDesignCriterion) and len(h.members) == 5
     assert all(c.Q_given is not None and len(c.Q_given) == 30 for c in h.members)

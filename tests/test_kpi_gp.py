@@ -331,7 +331,7 @@ def test_cli_campaign_refits_the_discrepancy_on_the_measured_batch(tmp_path, cap
     out = capsys.readouterr().out
     assert "discrepancy: Gaussian process fitted" in out and "measured poses alone (70)" in out
     doc = json.loads(out_json.read_text())
-    assert doc["discrepancy"]["source"].startswith("re-fitted on --given")
+    assert doc["discrepancy"]["source"].startswith(f"re-fitted on the measured poses {tmp_path / 'meas.csv'}")
     assert doc["discrepancy"]["kernel"]["length_scale_rad"] != pytest.approx([1.3] * 6)
     line = next(ln for ln in out.splitlines() if ln.startswith("measured poses alone"))
     alone = float(line.split("discrepancy ")[1].split(" um")[0]) * 1e-6

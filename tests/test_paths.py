@@ -198,11 +198,9 @@ def test_cli_refuses_a_path_through_the_car_in_one_line(tmp_path):
 
 
 def test_kpi_path_takes_the_measured_poses_into_account(seam_cell):
-    from pin_kpi_oed.design.sequential import SequentialProblem
-
     rng = np.random.default_rng(6)
     Q_given, Q = seam_cell.robot.random_q(rng, 20), seam_cell.robot.random_q(rng, 5)
-    seq = SequentialProblem(seam_cell, Q_given, collision=False)
+    seq = DesignProblem(seam_cell, Q_given=Q_given, collision=False)
     both = np.vstack([Q_given, Q])
     plain = DesignProblem(seam_cell, collision=False).criterion("kpi_path")
     assert seq.criterion("kpi_path").value(Q) == pytest.approx(plain.value(both), rel=1e-9)
@@ -227,16 +225,13 @@ def test_viewer_draws_the_working_path(tmp_path, seam_cell):
 
 
 def test_kpi_path_gp_is_the_kriging_kpi_over_the_path_samples(seam_problem):
-    seam_problem.hedge = False
-    try:
-        obj = seam_problem.criterion("kpi_path_gp")
-        Q = seam_problem.cell.robot.random_q(np.random.default_rng(7), 15)
-        at_path = seam_problem.gp_criterion(Q_work=seam_problem.cell.q_path)
-        assert obj.value(Q) == pytest.approx(at_path.value(Q), rel=1e-12)
-        assert obj.value(Q) != pytest.approx(seam_problem.gp_criterion().value(Q), rel=1e-3)  # not the end points
-        assert get_criterion("kpi_path_gp").uses_discrepancy and not get_criterion("kpi_path").uses_discrepancy
-    finally:
-        seam_problem.hedge = True
+    problem = seam_problem.replaced(hedge=False)
+    obj = problem.criterion("kpi_path_gp")
+    Q = problem.cell.robot.random_q(np.random.default_rng(7), 15)
+    at_path = problem.gp_criterion(Q_work=problem.cell.q_path)
+    assert obj.value(Q) == pytest.approx(at_path.value(Q), rel=1e-12)
+    assert obj.value(Q) != pytest.approx(problem.gp_criterion().value(Q), rel=1e-3)  # not the end points
+    assert get_criterion("kpi_path_gp").uses_discrepancy and not get_criterion("kpi_path").uses_discrepancy
 
 
 def test_orientation_sigma_matches_monte_carlo(seam_problem):

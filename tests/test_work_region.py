@@ -8,7 +8,7 @@ import json
 import numpy as np
 import pytest
 
-from pin_kpi_oed.design.region import near_rows, working_region
+from pin_kpi_oed.design.region import near_rows, region_in_cell, working_region
 
 
 def test_sampled_region_is_within_the_radius_seeded_and_filtered():
@@ -45,8 +45,8 @@ def test_problem_region_is_reachable_in_the_cell():
     from pin_kpi_oed.design.optimize import DesignProblem
 
     cell = load_cell("ur10")
-    problem = DesignProblem(cell)
-    reg = problem.set_region(0.5, 60, seed=1)
+    reg = region_in_cell(cell, 0.5, 60, seed=1)
+    problem = DesignProblem(cell, region=reg)
     assert 0 < reg.kept <= 60
     rep = FeasibilityChecker(cell).check(reg.q_near)
     assert np.all(rep.within_bounds & rep.collision_free)
@@ -59,19 +59,15 @@ def test_api_run_designs_draws_the_region_the_command_line_draws():
     """run_designs(cell, ['kpi_gp']) builds the working region as design does (same radius, samples, seed and
     cell); without kpi_gp, or with work_radius=0, none."""
     from pin_kpi_oed.cell.cell import load_cell
-    from pin_kpi_oed.design.optimize import DesignOptions, DesignProblem, _default_region
-    from pin_kpi_oed.design.region import DEFAULT_WORK_RADIUS_RAD, DEFAULT_WORK_SAMPLES
+    from pin_kpi_oed.design.region import DEFAULT_WORK_RADIUS_RAD, DEFAULT_WORK_SAMPLES, default_region
 
     cell = load_cell("ur10")
-    api, cli, plain = DesignProblem(cell), DesignProblem(cell), DesignProblem(cell)
-    _default_region(api, ["random", "kpi_gp"], DesignOptions(), 3)
-    cli.set_region(DEFAULT_WORK_RADIUS_RAD, DEFAULT_WORK_SAMPLES, 3, cell=cell)
-    assert api.region is not None and api.region.kept > 0
-    assert np.array_equal(api.region.configurations(), cli.region.configurations())
-    _default_region(plain, ["kpi"], DesignOptions(), 3)
-    assert plain.region is None
-    _default_region(plain, ["kpi_gp"], DesignOptions(work_radius=0.0), 3)
-    assert plain.region is None
+    api = default_region(cell, ["random", "kpi_gp"], seed=3)
+    cli = region_in_cell(cell, DEFAULT_WORK_RADIUS_RAD, DEFAULT_WORK_SAMPLES, 3)
+    assert api is not None and api.kept > 0
+    assert np.array_equal(api.configurations(), cli.configurations())
+    assert default_region(cell, ["kpi"], seed=3) is None
+    assert default_region(cell, ["kpi_gp"], 0.0, seed=3) is None
 
 
 def _design(tmp_path, name, *extra):

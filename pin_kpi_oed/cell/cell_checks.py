@@ -32,8 +32,8 @@ def _clearance_parts(cell: Cell, actual_m: float) -> str:
     if margin <= 0:
         return " (clearance_m of the cell file)"
     fit = max(0.0, np.floor((actual_m - (cell.clearance_m - margin)) * 1e3 - 1e-6) / 1e3)  # strictly within
-    return (f" (clearance_m {(cell.clearance_m - margin) * 1e3:g} mm of the cell file + --clearance-margin "
-            f"{margin * 1e3:g} mm; --clearance-margin {fit:g} admits it)")
+    return (f" (clearance_m {(cell.clearance_m - margin) * 1e3:g} mm of the cell file + clearance_margin_m "
+            f"{margin * 1e3:g} mm; clearance_margin_m {fit:g} admits it)")
 
 
 def check_static(coll: CollisionModel) -> None:

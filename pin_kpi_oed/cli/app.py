@@ -62,12 +62,12 @@ def cmd_demo(args: argparse.Namespace) -> int:
     from pin_kpi_oed.cell.cell import load_cell
     from pin_kpi_oed.cli.design import print_header, print_results
     from pin_kpi_oed.design.runner import DesignSettings, design_run
+    from pin_kpi_oed.design.declare import design_problem
     from pin_kpi_oed.design.design_writer import write_design
-    from pin_kpi_oed.design.optimize import DesignProblem
 
     cell = load_cell("kr15")
     settings = DesignSettings(criteria=("random", "param", "kpi"), measurements=60, seed=args.seed, certificate=True)
-    problem = DesignProblem(cell)
+    problem = design_problem(cell, settings)
     print_header(cell, problem, 60, args.seed, True, settings.n_starts)
     run = design_run(cell, settings, problem)
     print_results(list(run.results), list(settings.criteria), run.certificate, run.m, None, False, cell, cell,

@@ -17,19 +17,18 @@ only) and reports the share of poses that collide.
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import math
 from collections.abc import Sequence
 
-import numpy as np
 
-from pin_kpi_oed.design.runner import DesignRun, DesignSettings, design_run, true_checks
+from pin_kpi_oed.design.runner import DesignSettings, design_run
 from pin_kpi_oed.design.design_writer import write_design
-from pin_kpi_oed.design.scores import discrepancy_scores, extended_scores, sigma_given
+from pin_kpi_oed.design.scores import sigma_given
 from pin_kpi_oed.identification.prediction_sigma import sigma_at
-from pin_kpi_oed.design.margins import DEFAULT_CLEARANCE_MARGIN_M, DEFAULT_INCIDENCE_MARGIN_DEG, with_margins
-from pin_kpi_oed.errors import IdentifiabilityError, InputError
-from pin_kpi_oed.oed.criteria import check_names, criterion_names, get_criterion
+from pin_kpi_oed.design.margins import DEFAULT_CLEARANCE_MARGIN_M, DEFAULT_INCIDENCE_MARGIN_DEG
+from pin_kpi_oed.cli.flags import in_flags
+from pin_kpi_oed.errors import InputError
+from pin_kpi_oed.oed.criteria import check_names, criterion_names
 from pin_kpi_oed.validation.options import check_discrepancy_options
 from pin_kpi_oed.validation.robot_checks import check_same_robot
 
@@ -172,85 +171,112 @@ def table(results: list, reference=None, certificate=None, extended: list | None
 
 
 def run(args: argparse.Namespace) -> int:
-    """Handler of ``pin-kpi-oed design`` (returns the exit code).
+    """Handler of ``pin-kpi-oed design`` (returns the exit code): the options become
+    :class:`~pin_kpi_oed.design.runner.DesignSettings`, the library declares the problem
+    (:func:`~pin_kpi_oed.design.declare.design_problem`) and runs it (:func:`~pin_kpi_oed.design.runner.design_run`);
+    this prints the run and writes its file.
 
     Raises:
         PinKpiOedError: bad cell, unknown criterion, infeasible cell, solver failure (one-line message).
     """
     from pin_kpi_oed.cell.cell import load_cell
-    from pin_kpi_oed.design.path_profile import path_profiles, profile_lines
-    from pin_kpi_oed.design.user_pool import check_candidates, design_from_pool, duplicates_line, pool_line, read_pool
+    from pin_kpi_oed.design.declare import design_problem
+    from pin_kpi_oed.design.path_profile import profile_lines
 
     criteria = parse_criteria(getattr(args, "criteria", "random,param,kpi"))
     cell = load_cell(getattr(args, "cell", "kr15"))
-    m, seed, collision, starts, max_iter, quiet = _run_knobs(args, cell)
-    true_cell = cell
-    margins = (float(getattr(args, "clearance_margin", 0.0) or 0.0),
-               float(getattr(args, "incidence_margin", 0.0) or 0.0))
-    cell = with_margins(cell, *margins)  # the optimiser's cell; `true_cell` for the reported clearances
-    pool_file, given_file, target = _pool_given_target(args)
-    problem = _make_problem(args, cell, given_file, collision, quiet, true_cell)
-    gp_names = _gp_names(criteria)
-    disc_on = problem.discrepancy is not None or bool(gp_names)
-    if target is not None and not disc_on and not given_file:
+    settings, quiet = _settings(args, cell, criteria)
+    problem = design_problem(cell, settings)
+    disc_on = problem.discrepancy is not None or bool(_gp_names(criteria))
+    if settings.target_sigma_m is not None and not disc_on and not settings.given_file:
         raise InputError(f"--target-sigma needs --given or a discrepancy: --model {getattr(args, 'model', None)} "
                          f"holds no discrepancy block (write it with identify --model-out)")
-    if target is not None and not disc_on:  # before any work: "how many more" needs M⁻¹ of the measured poses
-        problem.require_identified(f"--target-sigma: --given {given_file}")
     if not quiet:
-        print_header(cell, problem, m, seed, collision, starts)
-    _set_region(args, problem, criteria, seed, true_cell)
-    _set_reregister(args, problem, disc_on)
-    settings = DesignSettings(criteria=tuple(criteria), measurements=m, seed=seed, collision=collision,
-                              n_starts=starts, max_iter=max_iter, start=getattr(args, "start", "pool") or "pool",
-                              certificate=bool(getattr(args, "certificate", False)),
-                              certificate_pool_size=getattr(args, "pool_size", 5000) or 5000,
-                              clearance_margin_m=margins[0], incidence_margin_deg=margins[1])
-    checked = None
-    if pool_file:
-        Qc, outside = read_pool(pool_file, cell.robot, "--pool")
-        reasons: dict[str, int] = {}
-        ok, Fp, _ = check_candidates(problem, Qc, reasons=reasons)
-        print(pool_line(pool_file, len(Qc) + len(outside), outside, int(ok.sum()), reasons))
-        checked = (Qc[ok], Fp)
-        try:
-            results, cert, n_ok = design_from_pool(problem, Qc, criteria, m, seed, checked=(ok, Fp))
-        except IdentifiabilityError as exc:  # near-duplicate candidates: name their rows
-            rows = np.setdiff1d(np.arange(1, len(Qc) + len(outside) + 1), outside)[ok]
-            raise IdentifiabilityError(duplicates_line(pool_file, Qc[ok], rows) or f"--pool {pool_file}: {exc}") \
-                from None
-        run = DesignRun(cell=true_cell, problem=problem, results=results, m=m, seed=seed, collision=collision,
-                        margins=margins, certificate=cert,
-                        true_checks=true_checks(true_cell, results) if cell is not true_cell else None,
-                        extended_scores=extended_scores(problem, results, true_cell.q_work),
-                        discrepancy_scores=discrepancy_scores(problem, results) if disc_on else None,
-                        path_profiles=path_profiles(problem, results, discrepancy=disc_on))
-    else:
-        run = design_run(true_cell, settings, problem, discrepancy=disc_on)
-    run = dataclasses.replace(run, given_file=given_file, pool_file=pool_file, model_file=getattr(args, "model", None),
-                              prior=getattr(args, "prior", None))
-    results = list(run.results)
-    print_results(results, criteria, run.certificate, m, pool_file, quiet, cell, true_cell, margins, run.true_checks,
-                   given_file, run.extended_scores)
+        if problem.extended is not None:
+            print(f"extended model from {settings.model_file}: {problem.extended.nb} geometric + "
+                  f"{problem.extended.k} effect parameters, prior: {settings.model_prior}")
+        print_header(problem.cell, problem, settings.measurements, settings.seed, settings.collision,
+                     settings.n_starts)
+    _print_declared(problem, settings.reregister)
+    run = design_run(cell, settings, problem, discrepancy=disc_on, say=_say)
+    results, m = list(run.results), run.m
+    print_results(results, criteria, run.certificate, m, settings.pool_file, quiet, problem.cell, cell, run.margins,
+                  run.true_checks, settings.given_file, run.extended_scores)
     print(*profile_lines(run.path_profiles), sep="\n", end="\n" if run.path_profiles else "")
     if run.discrepancy_scores is not None:  # opt-in: the paper's output is unchanged without
-        gp_scores = list(run.discrepancy_scores)
-        print(problem.discrepancy_prior().describe() + "\n" + _sigma_plan(problem, m))
-        if given_file:
-            print(f"measured poses alone ({len(problem.Q_given)}): predicted TCP sigma with the discrepancy "
-                  f"{sigma_given(problem) * 1e6:.3f} um; the table adds each design's poses to them")
-        print(discrepancy_table([r for r in results if r.criterion in criteria] or results,
-                                [g for r, g in zip(results, gp_scores) if r.criterion in criteria] or gp_scores))
-        _discrepancy_notes(problem, gp_names)
-    curve = None
-    if disc_on and (target is not None or getattr(args, "curve", None)):
-        curve = _poses_needed(args, problem, cell, target, seed, m, checked, results)
-    until = _poses_until(args, problem, cell, target, seed, checked) if target is not None and not disc_on else None
+        _print_discrepancy(run, criteria)
+    print(*(in_flags(line) for line in run.answers), sep="\n", end="\n" if run.answers else "")
+    if getattr(args, "curve", None) and run.poses_needed is not None:
+        from pin_kpi_oed.viz.poses_needed import plot_poses_needed
+
+        src = problem.discrepancy_prior().source or "given"
+        plot_poses_needed(run.poses_needed.to_dict(), args.curve,
+                          title=f"{cell.name}: poses needed (σ with the discrepancy: "
+                                f"{src if len(src) <= 70 else src[:67] + '...'})")
+        print(f"wrote {args.curve}")
     if getattr(args, "json", None):
-        write_design(args.json, dataclasses.replace(run, until=until, poses_needed=curve))
+        write_design(args.json, run)
         if not quiet:
             print(f"wrote {args.json}")
     return 0
+
+
+def _say(line: str) -> None:
+    """Print a line of the library, its parameters named by the options that set them."""
+    print(in_flags(line))
+
+
+def _print_discrepancy(run, criteria: list[str]) -> None:
+    """The discrepancy section: the prior, the σ plan, the measured poses' σ, the honest table and the notes."""
+    problem, results, gp_scores = run.problem, list(run.results), list(run.discrepancy_scores)
+    print(in_flags(problem.discrepancy_prior().describe()) + "\n" + _sigma_plan(problem, run.m))
+    if run.given_file:
+        print(f"measured poses alone ({len(problem.Q_given)}): predicted TCP sigma with the discrepancy "
+              f"{sigma_given(problem) * 1e6:.3f} um; the table adds each design's poses to them")
+    print(discrepancy_table([r for r in results if r.criterion in criteria] or results,
+                            [g for r, g in zip(results, gp_scores) if r.criterion in criteria] or gp_scores))
+    _discrepancy_notes(problem, _gp_names(criteria))
+
+
+def _settings(args: argparse.Namespace, cell, criteria: list[str]) -> tuple[DesignSettings, bool]:
+    """The options as the run's settings (and ``--quiet``): the combinations checked, ``--given-prior`` and
+    ``--model`` read, the model's discrepancy re-fitted on the ``--given`` batch."""
+    m, seed, collision, starts, max_iter, quiet = _run_knobs(args, cell)
+    pool_file, given_file, target = _pool_given_target(args)
+    given_prior = _given_prior(args.given_prior, cell) if getattr(args, "given_prior", None) else None
+    cm = discrepancy = model_sigma = None
+    if getattr(args, "model", None):
+        from pin_kpi_oed.cli.tool import model_cell_tool
+        from pin_kpi_oed.identification.model_file import load_model_file
+
+        cm = load_model_file(args.model)
+        model_cell_tool(cm, args.model, cell, args.cell)  # the model's robot, tool frame and TCP are the cell's
+        model_sigma = _model_sigma(cm, cell, args.model)
+        if given_file:  # a measurement campaign: the discrepancy re-fitted on the measured batch, geometric design
+            from pin_kpi_oed.design.declare import model_discrepancy
+            from pin_kpi_oed.identification.design_discrepancy import refit_discrepancy
+
+            discrepancy, line = refit_discrepancy(cell.tracker_model(), given_file,
+                                                  model_discrepancy(cell, cm, args.model))
+            if not quiet:
+                print(in_flags(line))
+    # the options that act only with the discrepancy, refused (not ignored) without it
+    check_discrepancy_options(args, bool(_gp_names(criteria)), discrepancy is not None or (
+        cm is not None and cm.discrepancy is not None))
+    margins = (float(getattr(args, "clearance_margin", 0.0) or 0.0),
+               float(getattr(args, "incidence_margin", 0.0) or 0.0))
+    return DesignSettings(
+        criteria=tuple(criteria), measurements=m, seed=seed, collision=collision, n_starts=starts, max_iter=max_iter,
+        start=getattr(args, "start", "pool") or "pool", certificate=bool(getattr(args, "certificate", False)),
+        certificate_pool_size=getattr(args, "pool_size", 5000) or 5000, clearance_margin_m=margins[0],
+        incidence_margin_deg=margins[1],
+        distances={"closed-form": "numpy"}.get(getattr(args, "distances", None), "geometry"),
+        pool_file=pool_file, given_file=given_file, given_prior=given_prior, model=cm,
+        model_file=getattr(args, "model", None), model_prior=getattr(args, "prior", "model") or "model",
+        discrepancy=discrepancy, robot_class=getattr(args, "robot_class", None),
+        hedge=not getattr(args, "no_hedge", False), work_radius_rad=getattr(args, "work_radius", None),
+        work_samples=getattr(args, "work_samples", None), reregister=getattr(args, "reregister", None),
+        target_sigma_m=target, poses_needed=bool(getattr(args, "curve", None)), model_sigma_at_work=model_sigma), quiet
 
 
 def _run_knobs(args: argparse.Namespace, cell) -> tuple[int, int, bool, int, int, bool]:
@@ -295,64 +321,18 @@ def _pool_given_target(args: argparse.Namespace) -> tuple[str | None, str | None
 
 def _gp_names(criteria: list[str]) -> list[str]:
     """The discrepancy-aware criteria (``kpi_gp``, ``D_gp``, …) among registered names (others ignored)."""
-    return [c for c in criteria if c != "random" and getattr(get_criterion(c), "uses_discrepancy", False)]
+    from pin_kpi_oed.design.declare import uses_discrepancy
+
+    return uses_discrepancy(criteria)
 
 
-def _set_region(args: argparse.Namespace, problem, criteria: list[str], seed: int, true_cell) -> None:
-    """``--work-radius`` / ``--work-samples``: the working region of ``kpi_gp`` (default 0.5 rad and 100 samples
-    with kpi_gp, none otherwise), drawn with the design's seed, within the joint bounds and collision-free in the
-    untightened cell; prints it.
-
-    The region is always sampled, also with ``--pool``: the pool is where one may measure, the region where the robot
-    works (a pool's rows near W would cover the region only where the candidates happen to lie).
-
-    Raises:
-        InputError: a negative radius or number of samples.
-    """
-    from pin_kpi_oed.design.region import DEFAULT_WORK_RADIUS_RAD, DEFAULT_WORK_SAMPLES
-
-    # the options that act only with the discrepancy, refused (not ignored) without it
-    check_discrepancy_options(args, bool(_gp_names(criteria)), getattr(problem, "discrepancy", None) is not None)
-    radius = getattr(args, "work_radius", None)
-    samples = getattr(args, "work_samples", None)
-    samples = DEFAULT_WORK_SAMPLES if samples is None else int(samples)
-    if radius is None:
-        radius = DEFAULT_WORK_RADIUS_RAD if "kpi_gp" in criteria else 0.0
-    if radius < 0 or samples < 0:
-        raise InputError(f"--work-radius ({radius:g}) and --work-samples ({samples}) must be >= 0")
-    if radius == 0 or samples == 0:
-        return
-    problem.set_region(radius, samples, seed, cell=true_cell)
-    print(problem.region.describe())
-
-
-def _set_reregister(args: argparse.Namespace, problem, disc_on: bool) -> None:
-    """``--reregister work|FILE``: score kpi_gp and the honest σ after the set-up is registered again on these
-    configurations (:attr:`DesignProblem.Q_register`); prints one line.
-
-    Raises:
-        InputError: without a discrepancy, an unreadable file, or configurations that do not determine the set-up.
-    """
-    where = getattr(args, "reregister", None)
-    if where is None:
-        return
-    if not disc_on:
-        raise InputError("--reregister needs the discrepancy: a discrepancy-aware criterion such as kpi_gp, or --model "
-                         "with a discrepancy")
-    if where == "work":
-        region = getattr(problem, "region", None)
-        Q = region.configurations() if region is not None else problem.cell.q_work
-    else:
-        from pin_kpi_oed.design.user_pool import read_poses
-
-        Q = read_poses(where, problem.cell.robot, "--reregister")
-    problem.Q_register = np.atleast_2d(Q)
-    try:
-        problem.gp_criterion(region=False)                 # checks that they determine the set-up
-    except InputError as err:
-        raise InputError(f"--reregister {where}: {err}") from None
-    print(f"used in another session: kpi_gp and the honest sigma score the TCP error after the tracker is registered "
-          f"again on {len(problem.Q_register)} configuration(s) ({where})")
+def _print_declared(problem, reregister: str | None) -> None:
+    """Print the working region and the re-registration the problem is declared with."""
+    if problem.region is not None:
+        print(problem.region.describe())
+    if problem.Q_register is not None:
+        print(f"used in another session: kpi_gp and the honest sigma score the TCP error after the tracker is "
+              f"registered again on {len(problem.Q_register)} configuration(s) ({reregister})")
 
 
 def print_header(cell, problem, m: int, seed: int, collision: bool, starts: int) -> None:
@@ -400,139 +380,12 @@ def print_results(results: list, criteria: list, cert, m: int, pool_file: str | 
                   f"incidence limit {true_cell.incidence_max_deg:g} deg)")
 
 
-def _poses_until(args: argparse.Namespace, problem, cell, target: float, seed: int, checked=None):
-    """``--target-sigma``: add poses from the user's feasible ``--pool`` candidates (``checked`` = (poses, their
-    Jacobians)) or from a random feasible pool until the target is met; prints and returns the result."""
-    from pin_kpi_oed.design.sequential import poses_until
-
-    if checked is not None:
-        until = poses_until(problem, float(target), checked[0], Fp=checked[1])
-        print(until.summary() + f" (from the {len(checked[0])} feasible --pool candidates)")
-        return until
-    pool_q, _ = problem.random_design(getattr(args, "pool_size", 5000) or 5000,
-                                      seed=np.random.SeedSequence([seed, 2]),
-                                      max_tries=max(cell.max_random_tries,
-                                                    200 * (getattr(args, "pool_size", 5000) or 5000)))
-    until = poses_until(problem, float(target), pool_q)
-    print(until.summary())
-    return until
-
-
-def _poses_needed(args: argparse.Namespace, problem, cell, target: float | None, seed: int, m: int, checked=None,
-                  results: list | None = None):
-    """The poses-needed curve with the discrepancy (and the answer to ``--target-sigma``) over the user's feasible
-    ``--pool`` candidates or random feasible poses (at most 2,000, seeded) plus the feasible poses of the optimised
-    designs in ``results``; prints the answer, writes ``--curve``."""
-    from pin_kpi_oed.oed.discrepancy_kpi import poses_needed
-
-    if checked is not None:
-        Q_pool = checked[0]
-        what = "feasible --pool candidates"
-    else:
-        size = min(getattr(args, "pool_size", 5000) or 5000, 2000)
-        Q_pool, _ = problem.random_design(size, seed=np.random.SeedSequence([seed, 3]),
-                                          max_tries=max(cell.max_random_tries, 200 * size))
-        # the optimised designs' own poses join the random ones (as in the certificate's pool): the curve and its
-        # plateau never claim less than a design of the table reaches
-        extra = [np.asarray(r.q_meas, float) for r in (results or []) if r.criterion != "random" and r.feasible]
-        if extra:
-            Q_pool = np.vstack([Q_pool] + extra)
-        what = "feasible candidates: random" + (" + the designs' poses" if extra else "")
-    n_max = min(len(Q_pool), max(4 * m, 120))
-    curve = poses_needed(problem.gp_criterion(region=False), Q_pool, n_max, target_sigma_m=target, seed=seed)
-    print(curve.summary() + f" ({len(Q_pool)} {what}, {curve.time_s:.1f} s)")
-    if getattr(args, "curve", None):
-        from pin_kpi_oed.viz.poses_needed import plot_poses_needed
-
-        src = problem.discrepancy_prior().source or "given"
-        plot_poses_needed(curve.to_dict(), args.curve, title=f"{cell.name}: poses needed (σ with the discrepancy: "
-                                                             f"{src if len(src) <= 70 else src[:67] + '...'})")
-        print(f"wrote {args.curve}")
-    return curve
-
-
-def _make_problem(args: argparse.Namespace, cell, given_file, collision: bool, quiet: bool, true_cell=None):
-    """The design problem of ``design``: plain, on top of ``--given`` poses (checked in the true cell, with the
-    ``--given-prior``), or over an extended model (``--model``)."""
-    from pin_kpi_oed.design.optimize import DesignProblem
-    from pin_kpi_oed.design.sequential import SequentialProblem
-    from pin_kpi_oed.design.user_pool import read_poses
-
-    problem: DesignProblem
-    if given_file:
-        Qg = read_poses(given_file, cell.robot, "--given")
-        _check_given(true_cell or cell, Qg, given_file)
-        problem = seq = SequentialProblem(cell, Qg, collision=collision)
-        if getattr(args, "given_prior", None):
-            seq.set_prior(_given_prior(args.given_prior, seq))
-            seq.prior_file = str(args.given_prior)
-    else:
-        problem = DesignProblem(cell, collision=collision,
-                                distances={"closed-form": "numpy"}.get(getattr(args, "distances", None), "geometry"))
-    problem.robot_class = getattr(args, "robot_class", None)
-    problem.hedge = not getattr(args, "no_hedge", False)
-    if getattr(args, "model", None):
-        if given_file:  # a measurement campaign: the discrepancy re-fitted on the measured batch, geometric design
-            from pin_kpi_oed.cli.tool import model_cell_tool
-            from pin_kpi_oed.identification.model_file import load_model_file
-
-            cm = load_model_file(args.model)
-            model_cell_tool(cm, args.model, cell, args.cell)  # the model's robot, tool frame and TCP are the cell's
-            _set_discrepancy(problem, cm, args.model)
-            from pin_kpi_oed.identification.design_discrepancy import refit_discrepancy
-
-            line = refit_discrepancy(problem, given_file)
-            if not quiet:
-                print(line)
-            return problem
-        from pin_kpi_oed.cli.tool import model_cell_tool
-        from pin_kpi_oed.identification.model_file import load_model_file
-        from pin_kpi_oed.oed.extended import ExtendedModel
-
-        prior = getattr(args, "prior", "model") or "model"
-        cm = load_model_file(args.model)
-        model_cell_tool(cm, args.model, cell, args.cell)  # the model's robot, tool frame and TCP are the cell's
-        _set_discrepancy(problem, cm, args.model)
-        problem.extended = ExtendedModel.from_calibrated_model(cm, model=problem.model,
-                                                               base=problem.base,
-                                                               prior=None if prior == "none" else prior)
-        if not quiet:
-            print(f"extended model from {args.model}: {problem.extended.nb} geometric + {problem.extended.k} effect "
-                  f"parameters, prior: {prior}")
-    return problem
-
-
-def _set_discrepancy(problem, cm, path: str) -> None:
-    """The discrepancy of ``--model`` (its kernel, per-axis scale and white level; the data it was fitted on are not
-    used: a new calibration re-fits the robot) as the problem's discrepancy.
-
-    Raises:
-        InputError: the model file's robot has other joints than the cell's.
-    """
-    from pin_kpi_oed.discrepancy.prior import DiscrepancyPrior
-
-    if cm.discrepancy is None:
-        return
-    if list(cm.robot.joint_names) != list(problem.cell.robot.joint_names):
-        raise InputError(f"--model {path}: its robot's joints {list(cm.robot.joint_names)} are not the cell's "
-                         f"{list(problem.cell.robot.joint_names)}")
-    problem.discrepancy = DiscrepancyPrior.from_discrepancy(
-        cm.discrepancy, f"--model {path}, fitted on {cm.discrepancy.n_rows} rows ({cm.discrepancy.kind})")
-    sig, far = sigma_at(cm, problem.cell.q_work)
-    problem.model_sigma = {"sigma_m": sig.tolist(), "extrapolated": far.tolist(), "note": "as predict gives it"}
-    print(f"--model {path}: predicted sigma now at the working configurations (as predict gives it): "
-          + ", ".join(f"{s * 1e3:.4f} mm" + (" (outside the coverage)" if f else "") for s, f in zip(sig, far))
-          + (f"; {int(far.sum())} of {len(far)} outside the calibration's joint-space coverage: its discrepancy was "
-             "not learnt there (the sigma is widened by the parameters' extrapolation error, predict / compensate "
-             "flag them); the design's poses near them measure it" if far.any() else ""))
-
-
 def _sigma_plan(problem, m: int) -> str:
     """What the discrepancy fit of the designed poses (and any --given ones) will need, and how identify will obtain
     the σ at that size (:func:`~pin_kpi_oed.discrepancy.gp.sigma_plan`)."""
     from pin_kpi_oed.discrepancy.gp import sigma_plan
 
-    Qg = getattr(problem, "Q_given", None)
+    Qg = problem.Q_given
     return sigma_plan(m + (0 if Qg is None else len(Qg)), int(problem.base.size))
 
 
@@ -547,7 +400,7 @@ def _discrepancy_notes(problem, gp_names: list[str]) -> None:
     if "kpi_gp" in gp_names and problem.discrepancy_assumed and problem.hedge:
         from pin_kpi_oed.oed.hedged_kpi import HEDGE_LINE
 
-        print(HEDGE_LINE)
+        print(in_flags(HEDGE_LINE).replace("(hedge False:", "(--no-hedge:"))
     from pin_kpi_oed.discrepancy.lever_arm import LEVER_ARM_NOTE_M, lever_arm_line, lever_arm_m
 
     d = lever_arm_m(problem.model.tcp_m, problem.model.reflector_m)
@@ -568,33 +421,28 @@ def discrepancy_table(results: list, scores: list[dict]) -> str:
     return "\n".join(lines)
 
 
-def _check_given(cell, Q, path: str) -> None:
-    """The measured poses must pass the independent check of the (untightened) cell.
-
-    Raises:
-        InputError: naming the file and the first infeasible poses (pose numbers count data rows from 1).
-    """
-    from pin_kpi_oed.cell.feasibility import FeasibilityChecker
-
-    rep = FeasibilityChecker(cell).check(Q)
-    if not rep.all_feasible:
-        bad = np.flatnonzero(~rep.feasible)
-        why = "; ".join(v.replace(f"pose {i}:", f"row {i + 1}:", 1) for i, v in zip(bad, rep.violations(2)))
-        raise InputError(f"--given {path}: {bad.size} of {len(Q)} measured poses are infeasible in cell "
-                         f"{cell.name} ({why}); remove them or fix the cell")
+def _model_sigma(cm, cell, path: str) -> dict | None:
+    """The model file's own σ at the working configurations as predict gives it (widened outside the joint-space
+    coverage, flagged there), printed in one line; None when the file holds no discrepancy."""
+    if cm.discrepancy is None:
+        return None
+    sig, far = sigma_at(cm, cell.q_work)
+    print(f"--model {path}: predicted sigma now at the working configurations (as predict gives it): "
+          + ", ".join(f"{s * 1e3:.4f} mm" + (" (outside the coverage)" if f else "") for s, f in zip(sig, far))
+          + (f"; {int(far.sum())} of {len(far)} outside the calibration's joint-space coverage: its discrepancy was "
+             "not learnt there (the sigma is widened by the parameters' extrapolation error, predict / compensate "
+             "flag them); the design's poses near them measure it" if far.any() else ""))
+    return {"sigma_m": sig.tolist(), "extrapolated": far.tolist(), "note": "as predict gives it"}
 
 
-def _given_prior(path: str, problem) -> np.ndarray:
-    """Prior information over the identifiable parameters from a calibrated model file's parameter covariance."""
-    from pin_kpi_oed.design.sequential import prior_information
+def _given_prior(path: str, cell):
+    """``--given-prior``: the parameter covariance of a calibrated model file, the prior of the robot parameters."""
+    from pin_kpi_oed.design.problem_options import ParameterPrior
     from pin_kpi_oed.identification.model_file import load_model_file
 
     try:
         cm = load_model_file(path)
     except InputError as exc:
         raise InputError(f"--given-prior: {exc}") from None
-    check_same_robot(cm.robot, problem.cell.robot, f"--given-prior {path}")
-    par = cm.parameters or {}
-    if par.get("covariance") is None or not par.get("names"):
-        raise InputError(f"--given-prior {path}: the model file holds no parameter covariance")
-    return prior_information(problem, list(par["names"]), np.asarray(par["covariance"], float), f"--given-prior {path}")
+    check_same_robot(cm.robot, cell.robot, f"--given-prior {path}")
+    return ParameterPrior.from_model_file(cm, path)

@@ -10,15 +10,24 @@ __all__ = ["PARAMETER_FLAGS", "in_flags"]
 #: Library parameter -> the option of the command line that sets it (names with an underscore only: never a word).
 PARAMETER_FLAGS = {
     "Q_given": "--given",
+    "given_prior": "--given-prior",
+    "Q_register": "--reregister",
+    "model_file": "--model",
+    "model_prior": "--prior",
+    "robot_class": "--robot-class",
+    "effects_spec": "--effects",
+    "work_radius_rad": "--work-radius",
+    "work_samples": "--work-samples",
     "Q_candidates": "--pool",
     "target_sigma_m": "--target-sigma",
     "clearance_margin_m": "--clearance-margin",
     "incidence_margin_deg": "--incidence-margin",
 }
 
-_PATTERN = re.compile(r"(?<![\w.`])(" + "|".join(map(re.escape, PARAMETER_FLAGS)) + r")(?=:)")
+_PATTERN = re.compile(r"(?<![\w.`])(" + "|".join(map(re.escape, PARAMETER_FLAGS)) + r")(?=[:\s(),]|$)")
 
 
 def in_flags(message: str) -> str:
-    """``message`` with every parameter that starts a clause (``name:``) replaced by its option."""
+    """``message`` with every parameter named in it (``name:``, ``name value``, ``name (value)``) replaced by its
+    option."""
     return _PATTERN.sub(lambda m: PARAMETER_FLAGS[m.group(1)], message)

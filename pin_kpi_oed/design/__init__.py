@@ -4,8 +4,10 @@ User-facing names (imported on first use): :func:`run_designs` (heuristic + opti
 :class:`DesignOptions`, :class:`DesignProblem`, :class:`DesignResult`, :func:`design_random`,
 :func:`design_ipopt`; :func:`load_design`, :class:`DesignFile`, :class:`DesignEntry`, :func:`write_design`,
 :func:`design_document` (design files: what ``view`` and ``export`` read);
-:func:`read_poses` (a user pool), :class:`SequentialProblem`, :func:`poses_until` (designing on top of
-measured poses); :func:`certify` (the optimality certificate of a design problem).
+:class:`ProblemOptions` (what a :class:`DesignProblem` is declared with: measured poses and their prior
+:class:`ParameterPrior`, extended model, discrepancy, working region, re-registration); :func:`read_poses` (a user
+pool), :func:`poses_until` (how many more poses on top of measured ones); :func:`certify` (the optimality
+certificate of a design problem).
 """
 from pin_kpi_oed._lazy import lazy_exports
 
@@ -15,7 +17,8 @@ _EXPORTS = {**dict.fromkeys(("run_designs", "DesignOptions", "DesignProblem", "D
                            "pin_kpi_oed.design.design_file"),
             **dict.fromkeys(("design_run", "DesignRun", "DesignSettings"), "pin_kpi_oed.design.runner"),
             "read_poses": "pin_kpi_oed.design.user_pool",
-            "SequentialProblem": "pin_kpi_oed.design.sequential", "poses_until": "pin_kpi_oed.design.sequential",
+            **dict.fromkeys(("ProblemOptions", "ParameterPrior"), "pin_kpi_oed.design.problem_options"),
+            "poses_until": "pin_kpi_oed.design.sequential",
             "certify": "pin_kpi_oed.design.optimality"}
 __getattr__, __dir__ = lazy_exports(globals(), _EXPORTS)
 __all__ = list(_EXPORTS)

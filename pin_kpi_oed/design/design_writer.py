@@ -73,7 +73,7 @@ def design_document(run: DesignRun) -> dict:
     if run.discrepancy_scores is not None:
         from pin_kpi_oed.design.scores import add_discrepancy_section
 
-        add_discrepancy_section(doc, problem, list(run.discrepancy_scores))
+        add_discrepancy_section(doc, problem, list(run.discrepancy_scores), run.model_sigma_at_work)
     if run.poses_needed is not None:
         doc["poses_needed"] = run.poses_needed.to_dict()
     return doc
@@ -95,7 +95,7 @@ def _add_given(doc: dict, problem: Any, results: Sequence[Any], given_file: str)
     from pin_kpi_oed.oed.covariance import kpi_covariance
 
     doc["given"] = {"file": str(given_file), "q": problem.Q_given.tolist(), "tcp_sigma_m": problem.sigma_tcp(),
-                    "prior_file": getattr(problem, "prior_file", None)}
+                    "prior_file": problem.prior_file}
     for d, r in zip(doc["designs"], results):
         F = problem.model.weighted_jacobian(problem.p0, r.q_meas)[:, :, problem.base].reshape(-1, problem.base.size)
         d["cov_s_m2"] = kpi_covariance(np.vstack([problem.F_given, F]), problem.E, problem.kpi_criterion.prior).tolist()

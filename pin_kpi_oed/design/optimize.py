@@ -46,8 +46,9 @@ independent dense :class:`~pin_kpi_oed.cell.feasibility.FeasibilityChecker`.
 
 from __future__ import annotations
 
+import dataclasses
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -61,101 +62,20 @@ from pin_kpi_oed.progress import progress
 from pin_kpi_oed.cell.feasibility import FeasibilityChecker, FeasibilityReport
 from pin_kpi_oed.errors import IdentifiabilityError, InputError
 from pin_kpi_oed.oed.criteria import ConfigurationCriterion, Criterion, check_names, get_criterion
-from pin_kpi_oed.oed.objective import DesignCriterion, DesignObjective
+from pin_kpi_oed.oed.covariance import prior_square_root
+from pin_kpi_oed.oed.objective import DesignCriterion, DesignObjective, information_criterion
 from pin_kpi_oed.oed.path_kpi import PathKpi  # noqa: F401  (registers kpi_path)
 from pin_kpi_oed.oed.pose_kpi import PoseKpi  # noqa: F401  (registers kpi6)
 from pin_kpi_oed.oed.path_kpi_gp import PathDiscrepancyKpi  # noqa: F401  (registers kpi_path_gp)
 from pin_kpi_oed.oed.path_kpi_max import PathMaxKpi  # noqa: F401  (registers kpi_path_max)
 from pin_kpi_oed.oed.identifiability import analyse, check_kpi
-from pin_kpi_oed.results import Result
+from pin_kpi_oed.design.design_result import DesignResult
+from pin_kpi_oed.design.problem_options import ParameterPrior, ProblemOptions, prior_information
 from pin_kpi_oed.threads import limit_threads
 
 
 __all__ = ["DesignResult", "DesignOptions", "DesignProblem", "IpoptRun", "ipopt_options", "solve_ipopt",
            "design_random", "design_ipopt", "run_designs"]
-
-
-@dataclass(kw_only=True)
-class DesignResult(Result):
-    """One measurement design and its scores (a :class:`~pin_kpi_oed.results.Result`).
-
-    The common result fields:
-
-    * ``success``: every pose collision-free, visible and within bounds by the independent check
-      (also readable as ``feasible``);
-    * ``status``: ``sampled`` (heuristic design) or, for the returned Ipopt start, ``converged``,
-      ``acceptable``, ``stalled``, ``max_iter``, ``max_time`` or ``failed``;
-    * ``message``: Ipopt's status, the best-feasible-iterate fallback, violations of the independent check;
-    * ``nit``: Ipopt iterations of the returned start, 0 for random (also ``iterations``);
-    * ``nfev``: objective evaluations of the returned start;
-    * ``time_s``: wall time (s), Ipopt over all starts or the rejection sampling (also ``solve_time_s``).
-
-    Attributes:
-        criterion: ``random`` (heuristic) or a registered criterion name (:data:`~pin_kpi_oed.oed.criteria.CRITERIA`).
-        q_meas: configurations (m, n) rad.
-        trace_cs_m2: tr(C_s) at the working configurations (m²).
-        tcp_sigma_m: sqrt(tr(C_s)/t), RMS 3-D TCP standard deviation per working configuration (m).
-        trace_cp: tr(C_p) over the identifiable parameters (mixed m², rad²).
-        value: the criterion's own value (tr(C_s) for random), in its unit.
-        min_clearance_m: smallest clearance over every pair checked by the independent check (m).
-        max_incidence_deg: largest incidence angle (deg).
-        share_colliding: share of poses in collision (0…1).
-        share_infeasible: share of poses failing any check (0…1).
-        solver_status: Ipopt's status name of the returned start (``sampled`` for random), suffixed
-            with ``; best feasible iterate`` when the fallback was used.
-        collision_avoidance: whether the collision constraints were imposed.
-        samples: random poses drawn (heuristic design) or None.
-        n_constraints: constraint rows of the NLP (0 for random).
-        starts: per start: :meth:`IpoptRun.start_dict`.
-        check: the independent check (plain dict).
-    """
-
-    criterion: str
-    q_meas: np.ndarray
-    trace_cs_m2: float
-    tcp_sigma_m: float
-    trace_cp: float
-    value: float
-    min_clearance_m: float
-    max_incidence_deg: float
-    share_colliding: float
-    share_infeasible: float
-    solver_status: str = ""
-    collision_avoidance: bool = True
-    samples: int | None = None
-    n_constraints: int = 0
-    starts: list[dict] = field(default_factory=list)
-    check: dict = field(default_factory=dict)
-
-    @property
-    def feasible(self) -> bool:
-        """Every pose passes the independent check (= ``success``)."""
-        return self.success
-
-    def improvement_over(self, reference: DesignResult) -> float:
-        """Relative reduction of tr(C_s) w.r.t. ``reference`` (%)."""
-        return 100.0 * (1.0 - self.trace_cs_m2 / reference.trace_cs_m2)
-
-    def to_dict(self) -> dict:
-        """Plain JSON-able dict (SI units): the common result keys, the scores, and the keys of earlier
-        versions (``feasible``, ``iterations``, ``solve_time_s``)."""
-        return {**self.result_dict(), "criterion": self.criterion, "q_meas": self.q_meas.tolist(),
-                "trace_cs_m2": self.trace_cs_m2, "tcp_sigma_m": self.tcp_sigma_m, "trace_cp": self.trace_cp,
-                "value": self.value, "min_clearance_m": self.min_clearance_m,
-                "max_incidence_deg": self.max_incidence_deg, "feasible": self.feasible,
-                "share_colliding": self.share_colliding, "share_infeasible": self.share_infeasible,
-                "solve_time_s": self.time_s, "iterations": self.nit, "solver_status": self.solver_status,
-                "collision_avoidance": self.collision_avoidance, "samples": self.samples,
-                "n_constraints": self.n_constraints, "starts": self.starts, "check": self.check}
-
-    def summary(self) -> str:
-        """One readable line."""
-        extra = f", {self.samples} samples" if self.samples is not None else f", {self.nit} iterations"
-        return (f"{self.criterion}: tr(C_s) = {self.trace_cs_m2 * 1e6:.4g} mm^2, TCP sigma = "
-                f"{self.tcp_sigma_m * 1e6:.3f} um, min clearance {self.min_clearance_m * 1e3:.1f} mm, "
-                f"max incidence {self.max_incidence_deg:.1f} deg, {'feasible' if self.feasible else 'INFEASIBLE'} "
-                f"({100 * self.share_colliding:.0f} % colliding){extra}, {self.time_s:.2f} s, {self.status} "
-                f"({self.solver_status})")
 
 
 @dataclass
@@ -172,7 +92,7 @@ class DesignOptions:
             the heuristic design. Further starts are random.
         pool_size: feasible candidates of the pool start.
         work_radius: radius (rad) of the working region ``kpi_gp`` takes its KPI over, as ``design --work-radius``
-            (:meth:`DesignProblem.set_region`): None = the command line's default with ``kpi_gp``
+            (:func:`~pin_kpi_oed.design.region.default_region`): None = the command line's default with ``kpi_gp``
             (:data:`~pin_kpi_oed.design.region.DEFAULT_WORK_RADIUS_RAD`), 0 = the working configurations alone.
             Used when :func:`run_designs` builds the problem (a given problem keeps its own region).
         work_samples: seeded samples of the working region (None: the command line's default).
@@ -194,30 +114,29 @@ class DesignOptions:
 
 
 class DesignProblem:
-    """Everything fixed across designs of one cell: model, identifiable set, KPI sensitivity, constraints.
+    """Everything fixed across designs of one cell: model, identifiable set, KPI sensitivity, constraints, and what
+    the problem is declared with (:class:`~pin_kpi_oed.design.problem_options.ProblemOptions`, frozen: measured
+    poses and their prior, an extended model, the discrepancy, the working region, re-registration). Nothing is set
+    on a problem after construction; :meth:`replaced` declares another.
 
     Args:
-        cell: the measurement cell.
-        collision: impose the collision and line-of-sight constraints (False: joint bounds and
-            incidence only, the paper's "without collision avoidance").
-        prune: drop constraint rows that can never be active.
-        aggregate: per-configuration aggregation of the distance rows for the optimiser: ``"ks"``
-            (smooth, conservative, exact gradient), ``"min"`` or ``"none"`` (every row; the naive formulation).
-        ks_length_m: KS smoothing length (m).
-        distances: capsule distances of the constraints: ``"geometry"`` (default: Coal through
-            a Pinocchio GeometryModel, :class:`~pin_kpi_oed.cell.coal_distances.GeometryDistances`) or ``"numpy"``
-            (the closed-form segment distances, kept as the test oracle; equal to 1e-15 m).
+        cell: the measurement cell (the one the optimiser designs in: tightened by margins, if any).
+        options: the declaration (default: the defaults).
+        **changes: fields of :class:`~pin_kpi_oed.design.problem_options.ProblemOptions` that override ``options``
+            (``DesignProblem(cell, collision=False)``, ``DesignProblem(cell, Q_given=Q)``).
 
     Raises:
         IdentifiabilityError: the TCP at the working configurations is not estimable.
-        InputError: invalid cell geometry (see :class:`~pin_kpi_oed.cell.collision.CollisionModel`).
+        InputError: invalid cell geometry (see :class:`~pin_kpi_oed.cell.collision.CollisionModel`), measured poses
+            of the wrong width or outside the joint limits (named ``Q_given``), a prior of the wrong shape.
     """
 
     @limit_threads  # the identifiability analysis (QR, lstsq) ran with every BLAS thread on a busy machine
-    def __init__(self, cell: Cell, collision: bool = True, prune: bool = True, aggregate: str = "ks",
-                 ks_length_m: float = 2e-3, distances: str = "geometry"):
+    def __init__(self, cell: Cell, options: ProblemOptions | None = None, **changes: Any):
+        o = options or ProblemOptions()
+        self.options = o = dataclasses.replace(o, **changes) if changes else o
         self.cell = cell
-        self.collision = collision
+        self.collision = o.collision
         self.model = cell.tracker_model()
         self.p0 = np.zeros(self.model.n_params)
         self.ident = analyse(self.model)
@@ -225,20 +144,89 @@ class DesignProblem:
         check_kpi(self.ident, self.model, E_full, f"{cell.name}: the TCP at the working configuration")
         self.base = self.ident.base
         self.E = E_full[:, self.base]
-        self.coll = CollisionModel(cell, collision=collision, prune=prune, model=self.model)
-        self.cons = AggregatedConstraints(self.coll, aggregate, ks_length_m, backend=distances)
+        self.coll = CollisionModel(cell, collision=o.collision, prune=o.prune, model=self.model)
+        self.cons = AggregatedConstraints(self.coll, o.aggregate, o.ks_length_m, backend=o.distances)
         # the heuristic design is always collision-free (it is the practical baseline and every start)
-        self.coll_full = self.coll if collision else CollisionModel(cell, collision=True, prune=prune,
-                                                                     model=self.model)
+        self.coll_full = self.coll if o.collision else CollisionModel(cell, collision=True, prune=o.prune,
+                                                                       model=self.model)
         self.checker = FeasibilityChecker(cell)
-        self.kpi_criterion = DesignCriterion(self.model, self.base, "kpi", self.E)
-        self._param = DesignCriterion(self.model, self.base, "param", self.E)
+        self.Q_given, self.F_given, self.prior_info = self._given(o)
+        self.kpi_criterion = self.information_objective(information_criterion("kpi"))
+        self.param_criterion = self.information_objective(information_criterion("param"))
+        self._assumed: Any = None  # the class default discrepancy, drawn on first use
+
+    def _given(self, o: ProblemOptions) -> tuple[np.ndarray | None, np.ndarray | None, np.ndarray | None]:
+        """(Q_given checked, [F(Q_given); R₀] over the identifiable parameters, Σ₀⁻¹), or Nones without measured
+        poses."""
+        if o.Q_given is None:
+            return None, None, None
+        if o.Q_given.shape[1] != self.n:
+            raise InputError(f"Q_given: expected {self.n} joint values per pose, got {o.Q_given.shape[1]}")
+        Q = self.cell.robot.check_q(o.Q_given, "Q_given")
+        F = self.model.weighted_jacobian(self.p0, Q)[:, :, self.base].reshape(-1, self.base.size)
+        P = o.given_prior
+        if isinstance(P, ParameterPrior):
+            P = prior_information(self, P.names, P.covariance, f"given_prior {P.source}")
+        if P is not None:
+            if np.shape(P) != (self.base.size, self.base.size):
+                raise InputError(f"given_prior: the information must be {self.base.size}x{self.base.size}, "
+                                 f"got {np.shape(P)}")
+            P = np.asarray(P, float)
+            F = np.vstack([F, prior_square_root(P)])
+        return Q, F, P
+
+    def replaced(self, **changes: Any) -> DesignProblem:
+        """The problem of the same cell declared with ``changes`` to its options (a new problem)."""
+        return type(self)(self.cell, self.options, **changes)
+
+    @property
+    def extended(self) -> Any:
+        """The :class:`~pin_kpi_oed.oed.extended.ExtendedModel` the criteria of the information matrix are taken on,
+        or None."""
+        return self.options.extended
+
+    @property
+    def discrepancy(self) -> Any:
+        """The given discrepancy (a :class:`~pin_kpi_oed.discrepancy.prior.DiscrepancyPrior`), None when assumed."""
+        return self.options.discrepancy
+
+    @property
+    def discrepancy_assumed(self) -> bool:
+        """No discrepancy given: the robot class's default is assumed (``kpi_gp`` hedges around it)."""
+        return self.options.discrepancy is None
+
+    @property
+    def hedge(self) -> bool:
+        """Hedge ``kpi_gp`` under an assumed discrepancy."""
+        return self.options.hedge
+
+    @property
+    def region(self) -> Any:
+        """The :class:`~pin_kpi_oed.design.region.WorkingRegion` of ``kpi_gp``, or None."""
+        return self.options.region
+
+    @property
+    def Q_register(self) -> np.ndarray | None:
+        """Configurations of the re-registration before use in another session (rad), or None."""
+        return self.options.Q_register
+
+    @property
+    def prior_file(self) -> str | None:
+        """The file of the measured poses' prior (:class:`~pin_kpi_oed.design.problem_options.ParameterPrior`), or
+        None."""
+        P = self.options.given_prior
+        return P.source if isinstance(P, ParameterPrior) else None
 
     def fixed_information(self) -> np.ndarray | None:
-        """Information every design of this problem already has, (nb, nb) over the identifiable parameters:
-        the layout's prior diag(1/σ²) (1/m², 1/rad²); None without a prior."""
+        """Information every design of this problem already has, (nb, nb) over the identifiable parameters: the
+        measured poses' F_gᵀF_g (their prior rows included) plus the layout's prior diag(1/σ²) (1/m², 1/rad²); None
+        without either."""
         prior = self.kpi_criterion.prior
-        return None if prior is None else np.diag(1.0 / np.asarray(prior, float) ** 2)
+        P = None if prior is None else np.diag(1.0 / np.asarray(prior, float) ** 2)
+        if self.F_given is None:
+            return P
+        M0 = self.F_given.T @ self.F_given
+        return M0 if P is None else M0 + P
 
     @property
     def n(self) -> int:
@@ -250,57 +238,16 @@ class DesignProblem:
         """The working configurations (t, n) rad of the KPI (the cell's)."""
         return self.cell.q_work
 
-    #: Optional :class:`~pin_kpi_oed.oed.extended.ExtendedModel`: design over geometry + effects with a prior.
-    extended: Any = None
-    #: Optional :class:`~pin_kpi_oed.oed.discrepancy_kpi.DiscrepancyPrior` of the ``kpi_gp`` criterion and of the
-    #: honest TCP σ (None: the documented default of the robot's class,
-    #: :func:`~pin_kpi_oed.oed.discrepancy_defaults.class_discrepancy`).
-    discrepancy: Any = None
-    #: Optional robot class of that default (a key of :data:`~pin_kpi_oed.oed.discrepancy_defaults.ROBOT_CLASSES`;
-    #: None: from the robot's name).
-    robot_class: str | None = None
-
     def discrepancy_prior(self) -> Any:
-        """The discrepancy of this problem (:attr:`discrepancy`, else the documented default of the robot's class)."""
-        from pin_kpi_oed.oed.discrepancy_defaults import class_discrepancy
+        """The discrepancy of this problem (:attr:`discrepancy`, else the documented default of the robot's class,
+        :func:`~pin_kpi_oed.oed.discrepancy_defaults.class_discrepancy`)."""
+        if self.options.discrepancy is not None:
+            return self.options.discrepancy
+        if self._assumed is None:
+            from pin_kpi_oed.oed.discrepancy_defaults import class_discrepancy
 
-        if self.discrepancy is None:
-            self.discrepancy = class_discrepancy(self.cell.robot, self.robot_class)
-            self.discrepancy_assumed = True
-        return self.discrepancy
-
-    #: The discrepancy is an assumption (the class default, nothing measured): the ``kpi_gp`` design hedges over a
-    #: family of priors around it (:mod:`pin_kpi_oed.oed.hedged_kpi`) unless :attr:`hedge` is False.
-    discrepancy_assumed: bool = False
-    #: Hedge an assumed discrepancy (False: design for the assumed prior alone).
-    hedge: bool = True
-
-    #: Optional configurations (r, n) rad where the set-up is registered again before the calibration is used (another
-    #: session): ``kpi_gp`` and the honest σ score the TCP error after that registration
-    #: (:mod:`pin_kpi_oed.oed.reregistration`); None: used in the set-up it is measured in.
-    Q_register: Any = None
-
-    #: Optional :class:`~pin_kpi_oed.design.region.WorkingRegion`: ``kpi_gp`` takes its KPI over W and the region's
-    #: configurations (None: W alone; :meth:`set_region`).
-    region: Any = None
-
-    def set_region(self, radius_rad: float, samples: int, seed: int = 0, joints: int = 5, cell: Cell | None = None
-                   ) -> Any:
-        """Draw the working region of ``kpi_gp`` (:func:`~pin_kpi_oed.design.region.working_region`): ``samples``
-        seeded configurations within ``radius_rad`` of the working configurations, those outside the joint bounds or
-        in collision (the independent check of ``cell``, default this problem's) dropped; R = 0 leaves W alone.
-        The tracker's line of sight and incidence are not required: the region is where the robot works, not where
-        it is measured (the working configurations themselves usually face away from the tracker). Returns it."""
-        from pin_kpi_oed.design.region import working_region
-
-        checker = self.checker if cell is None else FeasibilityChecker(cell)
-
-        def reachable(Q: np.ndarray) -> np.ndarray:
-            rep = checker.check(Q)
-            return rep.within_bounds & rep.collision_free
-
-        self.region = working_region(self.cell.q_work, radius_rad, samples, seed, joints=joints, feasible=reachable)
-        return self.region
+            self._assumed = class_discrepancy(self.cell.robot, self.options.robot_class)
+        return self._assumed
 
     def gp_criterion(self, region: bool = True, name: str = "kpi_gp", Q_work: np.ndarray | None = None) -> Any:
         """The discrepancy-aware KPI criterion (``kpi_gp``) of this problem's geometry (identifiable geometry +
@@ -313,13 +260,12 @@ class DesignProblem:
         if name != "kpi_gp":
             from pin_kpi_oed.oed.discrepancy_criteria import GlsDesignCriterion
 
-            return GlsDesignCriterion(self.model, self.base, self.discrepancy_prior(), name,
-                                      Q_given=getattr(self, "Q_given", None), p=self.p0)
+            return GlsDesignCriterion(self.model, self.base, self.discrepancy_prior(), name, Q_given=self.Q_given,
+                                      p=self.p0)
         if Q_work is None:
             Q_work = self.region.configurations() if region and self.region is not None else self.cell.q_work
         return DiscrepancyDesignCriterion(self.model, self.base, self.discrepancy_prior(), Q_work,
-                                          Q_given=getattr(self, "Q_given", None), p=self.p0,
-                                          Q_register=self.Q_register)
+                                          Q_given=self.Q_given, p=self.p0, Q_register=self.Q_register)
 
     def gp_objective(self, name: str = "kpi_gp", Q_work: np.ndarray | None = None) -> DesignObjective:
         """The design objective of a discrepancy-aware criterion (:meth:`gp_criterion`); ``kpi_gp`` under an assumed
@@ -352,12 +298,43 @@ class DesignProblem:
         return self.information_objective(crit)
 
     def information_objective(self, crit: Criterion) -> DesignCriterion:
-        """A criterion of the information matrix on this problem's information (noise only)."""
-        return DesignCriterion(self.model, self.base, crit, self.E)
+        """A criterion of the information matrix on this problem's information: noise only, plus the measured poses'
+        rows (and their prior's) when given."""
+        return DesignCriterion(self.model, self.base, crit, self.E, F_given=self.F_given)
+
+    def identifies(self) -> bool:
+        """Whether the measured poses alone identify the base parameters (False without measured poses)."""
+        return bool(self.F_given is not None and self.F_given.size
+                    and np.linalg.matrix_rank(self.F_given) == self.base.size)
+
+    def require_identified(self, what: str = "Q_given") -> None:
+        """Refuse a step that needs M⁻¹ of the measured poses alone (the "how many more" answer).
+
+        Raises:
+            IdentifiabilityError: the measured poses do not identify the parameters (names ``what`` and how
+                many poses to design first).
+        """
+        if not self.identifies():
+            raise IdentifiabilityError(f"{what}: the measured poses do not identify the parameters; design "
+                                       f"at least {self.min_measurements()} more first")
+
+    def sigma_tcp(self, Q_new: np.ndarray | None = None) -> float:
+        """Predicted TCP σ = sqrt(tr C_s / t) (m) of the measured poses plus ``Q_new`` (eq. 19)."""
+        t = self.cell.q_work.shape[0]
+        if Q_new is None or len(Q_new) == 0:
+            F = self.F_given if self.F_given is not None else np.zeros((0, self.base.size))
+            tr = self.kpi_criterion.crit.value(F, self.E, self.kpi_criterion.prior)
+        else:
+            tr = self.kpi_criterion.value(np.atleast_2d(Q_new))
+        return float(np.sqrt(tr / t))
 
     def min_measurements(self) -> int:
-        """Fewest configurations that can identify the base parameters."""
-        return int(np.ceil(self.base.size / self.model.nh))
+        """Fewest (new) configurations that can identify the base parameters (with the measured ones)."""
+        if self.F_given is None:
+            return int(np.ceil(self.base.size / self.model.nh))
+        if self.identifies():
+            return 1
+        return max(1, int(np.ceil((self.base.size - np.linalg.matrix_rank(self.F_given)) / self.model.nh)))
 
     def check_measurements(self, m: int) -> None:
         """Raise InputError when m configurations cannot identify the base parameters."""
@@ -393,7 +370,7 @@ class DesignProblem:
         """
         try:
             cs = self.kpi_criterion.value(Q)
-            cp = self._param.value(Q)
+            cp = self.param_criterion.value(Q)
         except IdentifiabilityError:
             cs = cp = float("inf")
         rep = report or self.checker.check(Q)
@@ -490,8 +467,10 @@ def run_designs(cell: Cell, criteria: list[str], m: int | None = None, seed: int
     check_names(criteria)
     m = m or cell.measurements
     if problem is None:
-        problem = DesignProblem(cell, collision=opts.collision)
-        _default_region(problem, criteria, opts, seed)
+        from pin_kpi_oed.design.region import default_region
+
+        problem = DesignProblem(cell, collision=opts.collision,
+                                region=default_region(cell, criteria, opts.work_radius, opts.work_samples, seed))
     problem.check_measurements(m)
     rnd = design_random(problem, m, seed)
     out = [rnd]
@@ -509,20 +488,6 @@ def run_designs(cell: Cell, criteria: list[str], m: int | None = None, seed: int
             Q0 = Q_pool[sel.indices]
         out.append(design_ipopt(problem, c, m, seed, opts.n_starts, start=Q0, options=opts.ipopt))
     return out
-
-
-def _default_region(problem: DesignProblem, criteria: list[str], opts: DesignOptions, seed: int) -> None:
-    """The working region of ``kpi_gp`` as the command line draws it (``design --work-radius/--work-samples``):
-    the same defaults, seed and cell, so that the API and the command line design the same poses."""
-    from pin_kpi_oed.design.region import DEFAULT_WORK_RADIUS_RAD, DEFAULT_WORK_SAMPLES
-
-    radius = opts.work_radius if opts.work_radius is not None else (
-        DEFAULT_WORK_RADIUS_RAD if "kpi_gp" in criteria else 0.0)
-    samples = DEFAULT_WORK_SAMPLES if opts.work_samples is None else int(opts.work_samples)
-    if radius < 0 or samples < 0:
-        raise InputError(f"work_radius ({radius:g}) and work_samples ({samples}) must be >= 0")
-    if radius > 0 and samples > 0:
-        problem.set_region(radius, samples, seed, cell=problem.cell)
 
 
 def _start_pool(problem: DesignProblem, m: int, seed: int, pool_size: int) -> tuple[np.ndarray, np.ndarray]:

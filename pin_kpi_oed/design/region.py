@@ -18,12 +18,14 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from collections.abc import Callable
+from typing import Any
 
 import numpy as np
 
 from pin_kpi_oed.errors import InputError
 
-__all__ = ["DEFAULT_WORK_RADIUS_RAD", "DEFAULT_WORK_SAMPLES", "WorkingRegion", "near_rows", "working_region"]
+__all__ = ["DEFAULT_WORK_RADIUS_RAD", "DEFAULT_WORK_SAMPLES", "WorkingRegion", "near_rows", "working_region",
+           "region_in_cell", "default_region"]
 
 #: Default radius (rad) of the working region of ``kpi_gp`` (the learning curves' scoring radius).
 DEFAULT_WORK_RADIUS_RAD = 0.5
@@ -119,7 +121,7 @@ def working_region(q_work: np.ndarray, radius_rad: float = DEFAULT_WORK_RADIUS_R
         pool: candidate rows (N, n) rad, or None to sample.
         joints: joints of the distance (at most n).
         feasible: Q (k, n) -> bool mask (k,) of the configurations to keep, or None to keep all
-            (:meth:`~pin_kpi_oed.design.optimize.DesignProblem.set_region`: joint bounds and collision).
+            (:func:`region_in_cell`: joint bounds and collision).
 
     Raises:
         InputError: R < 0 or K < 0.
@@ -145,3 +147,51 @@ def working_region(q_work: np.ndarray, radius_rad: float = DEFAULT_WORK_RADIUS_R
     if feasible is not None:
         Q = Q[np.asarray(feasible(Q), bool)]
     return WorkingRegion(q_work, Q, radius_rad, joints, samples, samples, seed, "sampled")
+
+
+def region_in_cell(cell: Any, radius_rad: float = DEFAULT_WORK_RADIUS_RAD, samples: int = DEFAULT_WORK_SAMPLES,
+                   seed: int = 0, joints: int = 5) -> WorkingRegion:
+    """The working region of ``kpi_gp`` in a cell (``design --work-radius/--work-samples``): ``samples`` seeded
+    configurations within ``radius_rad`` of the cell's working configurations, those outside the joint bounds or in
+    collision (the cell's independent check) dropped; R = 0 or K = 0 leaves W alone. The tracker's line of sight and
+    incidence are not required: the region is where the robot works, not where it is measured (the working
+    configurations themselves usually face away from the tracker). Pass it to the design problem
+    (:class:`~pin_kpi_oed.design.problem_options.ProblemOptions` ``region``).
+
+    Args:
+        cell: the :class:`~pin_kpi_oed.cell.cell_model.Cell` (untightened: where the robot works).
+        radius_rad: R (rad); samples: K; seed: the draws' seed; joints: joints of the distance.
+
+    Raises:
+        InputError: R < 0 or K < 0 (named ``work_radius_rad`` / ``work_samples``).
+    """
+    from pin_kpi_oed.cell.feasibility import FeasibilityChecker
+
+    if not float(radius_rad) >= 0.0 or int(samples) < 0:
+        raise InputError(f"work_radius_rad ({float(radius_rad):g}) and work_samples ({int(samples)}) must be >= 0")
+    checker = FeasibilityChecker(cell)
+
+    def reachable(Q: np.ndarray) -> np.ndarray:
+        rep = checker.check(Q)
+        return rep.within_bounds & rep.collision_free
+
+    return working_region(cell.q_work, radius_rad, samples, seed, joints=joints, feasible=reachable)
+
+
+def default_region(cell: Any, criteria: Any, radius_rad: float | None = None, samples: int | None = None,
+                   seed: int = 0) -> WorkingRegion | None:
+    """The working region a design draws (:func:`region_in_cell`, the design's seed): R = ``radius_rad``, default
+    :data:`DEFAULT_WORK_RADIUS_RAD` when ``kpi_gp`` is among ``criteria`` and 0 otherwise; K = ``samples``, default
+    :data:`DEFAULT_WORK_SAMPLES`. None when R = 0 or K = 0 (the working configurations alone).
+
+    Raises:
+        InputError: R < 0 or K < 0 (named ``work_radius_rad`` / ``work_samples``).
+    """
+    radius = float(radius_rad) if radius_rad is not None else (
+        DEFAULT_WORK_RADIUS_RAD if "kpi_gp" in criteria else 0.0)
+    k = DEFAULT_WORK_SAMPLES if samples is None else int(samples)
+    if not radius >= 0 or k < 0:
+        raise InputError(f"work_radius_rad ({radius:g}) and work_samples ({k}) must be >= 0")
+    if radius == 0 or k == 0:
+        return None
+    return region_in_cell(cell, radius, k, seed)

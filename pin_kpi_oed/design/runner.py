@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from typing import Any
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 
 from pin_kpi_oed.cell.cell import Cell
 from pin_kpi_oed.errors import InputError
@@ -33,6 +33,25 @@ class DesignSettings:
             ``certificate_pool_size`` candidates plus the designs' poses).
         clearance_margin_m, incidence_margin_deg: the margins the optimiser designs with (the checks and the
             reported clearances use the untightened cell).
+        distances: capsule distances of the optimiser (``geometry``: Coal; ``numpy``: the closed-form oracle).
+        pool_file: select the poses from these candidates (CSV, joint columns in rad) instead of optimising; the
+            selection's bound is the certificate.
+        given_file: poses already measured (CSV, joint columns in rad): design ``measurements`` more on top of them.
+        given_prior: with ``given_file``, an earlier calibration's parameter covariance
+            (:class:`~pin_kpi_oed.design.problem_options.ParameterPrior`).
+        model, model_file, model_prior: a calibrated model (read from ``model_file``): design over its geometry +
+            effects with the prior ``model`` (its covariance), ``tolerances`` or ``none``, and with its discrepancy.
+        discrepancy: a :class:`~pin_kpi_oed.discrepancy.prior.DiscrepancyPrior` instead of the model's (e.g. re-fitted
+            on the measured poses); robot_class, hedge: the assumed discrepancy's class, and hedging it.
+        work_radius_rad, work_samples: the working region of ``kpi_gp`` (None: the defaults,
+            :func:`~pin_kpi_oed.design.region.default_region`).
+        reregister: ``"work"`` or a CSV of configurations where the set-up is registered again before use.
+        target_sigma_m: how many more poses until the predicted TCP σ ≤ this (m): with measured poses greedily, with
+            the discrepancy by the poses-needed curve.
+        poses_needed: compute the poses-needed curve (with the discrepancy).
+        model_sigma_at_work: the model file's own σ at the working configurations as predict gives it
+            (``sigma_m``, ``extrapolated``; :func:`~pin_kpi_oed.identification.prediction_sigma.sigma_at`), for the
+            design file.
     """
 
     criteria: tuple[str, ...] = ("random", "param", "kpi")
@@ -47,6 +66,22 @@ class DesignSettings:
     certificate_pool_size: int = 5000
     clearance_margin_m: float = 0.0
     incidence_margin_deg: float = 0.0
+    distances: str = "geometry"
+    pool_file: str | None = None
+    given_file: str | None = None
+    given_prior: Any = None
+    model: Any = field(default=None, repr=False)
+    model_file: str | None = None
+    model_prior: str = "model"
+    discrepancy: Any = field(default=None, repr=False)
+    robot_class: str | None = None
+    hedge: bool = True
+    work_radius_rad: float | None = None
+    work_samples: int | None = None
+    reregister: str | None = None
+    target_sigma_m: float | None = None
+    poses_needed: bool = False
+    model_sigma_at_work: dict | None = field(default=None, repr=False)
 
     def __post_init__(self) -> None:
         for name in ("n_starts", "max_iter", "start_pool_size", "certificate_pool_size"):
@@ -56,6 +91,12 @@ class DesignSettings:
             raise InputError(f"measurements: must be >= 1, got {self.measurements}")
         if self.start not in ("pool", "random"):
             raise InputError(f"start: 'pool' or 'random', got {self.start!r}")
+        if self.given_prior is not None and not self.given_file:
+            raise InputError("given_prior needs Q_given (the poses already measured)")
+        if self.target_sigma_m is not None and not self.target_sigma_m > 0:
+            raise InputError(f"target_sigma_m: must be > 0 m, got {self.target_sigma_m}")
+        if self.model_prior not in ("model", "tolerances", "none"):
+            raise InputError(f"model_prior: 'model', 'tolerances' or 'none', got {self.model_prior!r}")
 
 
 @dataclass(frozen=True)
@@ -64,8 +105,8 @@ class DesignRun:
 
     Attributes:
         cell: the cell the designs are checked in (the untightened one).
-        problem: the :class:`~pin_kpi_oed.design.optimize.DesignProblem` (with measured poses a
-            :class:`~pin_kpi_oed.design.sequential.SequentialProblem`).
+        problem: the :class:`~pin_kpi_oed.design.optimize.DesignProblem` (its options: measured poses, extended model,
+            discrepancy, working region).
         results: the designs, ``random`` first.
         m: measurements per design; seed: the run's seed; collision: collision avoidance was on.
         margins: clearance (m) and incidence (deg) margins the optimiser designed with.
@@ -76,6 +117,8 @@ class DesignRun:
             ``prior``: where they came from); discrepancy_scores: the honest scores with the discrepancy.
         path_profiles: σ of the TCP and of the tool orientation along the cell's working paths per design
             (:func:`~pin_kpi_oed.design.path_profile.path_profiles`), None without paths.
+        answers: the lines answering ``target_sigma_m`` / the poses-needed curve (what they were taken over).
+        model_sigma_at_work: the model file's own σ at the working configurations (:class:`DesignSettings`).
     """
 
     cell: Cell
@@ -96,6 +139,8 @@ class DesignRun:
     discrepancy_scores: Sequence[dict] | None = None
     poses_needed: Any = field(default=None)
     path_profiles: Sequence[dict] | None = None
+    answers: tuple[str, ...] = ()
+    model_sigma_at_work: dict | None = None
 
 
 def true_checks(cell: Cell, results: Sequence[Any]) -> list:
@@ -111,53 +156,117 @@ def true_checks(cell: Cell, results: Sequence[Any]) -> list:
 
 
 def design_run(cell: Cell, settings: DesignSettings | None = None, problem: Any = None, *,
-               discrepancy: bool | None = None) -> DesignRun:
-    """Perform a design run: the designs (:func:`~pin_kpi_oed.design.optimize.run_designs`) in the cell tightened
-    by the margins, their independent check in ``cell``, the certificate, the extended model's scores and, with a
-    discrepancy, the honest scores.
+               discrepancy: bool | None = None, say: Callable[[str], None] | None = None) -> DesignRun:
+    """Perform a design run: the designs (:func:`~pin_kpi_oed.design.optimize.run_designs`, or the selection from the
+    user's pool) in the cell tightened by the margins, their independent check in ``cell``, the certificate, the
+    extended model's scores, with a discrepancy the honest scores, and the answers to ``target_sigma_m`` / the
+    poses-needed curve.
 
     Args:
         cell: the cell (untightened).
         settings: the run's :class:`DesignSettings` (default: the defaults).
-        problem: a prepared design problem on the tightened cell (measured poses, extended model, discrepancy,
-            working region), else built from ``cell`` and the settings.
+        problem: a prepared design problem on the tightened cell, else declared from the settings
+            (:func:`~pin_kpi_oed.design.declare.design_problem`).
         discrepancy: score with the discrepancy (default: when the problem has one or a criterion of the
             discrepancy is designed).
+        say: receives the lines worth printing while the run goes (the pool's candidates, the extended model).
 
     Returns:
         The :class:`DesignRun`.
 
     Raises:
-        PinKpiOedError: bad cell, unknown criterion, infeasible cell, solver failure.
+        PinKpiOedError: bad cell, unknown criterion, infeasible cell, solver failure, an answer the settings cannot
+            give (``target_sigma_m`` without measured poses or a discrepancy).
     """
-    from pin_kpi_oed.design.margins import with_margins
-    from pin_kpi_oed.design.optimize import DesignOptions, DesignProblem, ipopt_options, run_designs
+    from pin_kpi_oed.design.declare import design_problem, uses_discrepancy
     from pin_kpi_oed.design.path_profile import path_profiles
     from pin_kpi_oed.design.scores import discrepancy_scores, extended_scores
-    from pin_kpi_oed.oed.criteria import get_criterion
 
     s = settings or DesignSettings()
+    say = say or _silent
     margins = (float(s.clearance_margin_m), float(s.incidence_margin_deg))
-    tight = with_margins(cell, *margins)
-    problem = problem or DesignProblem(tight, collision=s.collision)
+    problem = problem or design_problem(cell, s)
     m = int(s.measurements or cell.measurements)
+    if discrepancy is None:
+        discrepancy = problem.discrepancy is not None or bool(uses_discrepancy(s.criteria))
+    if s.target_sigma_m is not None and not discrepancy:
+        if problem.Q_given is None:
+            raise InputError("target_sigma_m needs Q_given (the poses already measured) or the discrepancy (a "
+                             "discrepancy-aware criterion such as kpi_gp, or model_file with a discrepancy)")
+        problem.require_identified(f"target_sigma_m: Q_given {s.given_file}")  # before any work
+    if s.pool_file:
+        from pin_kpi_oed.design.user_pool import select_from_file
+
+        results, cert, checked = select_from_file(problem, s.pool_file, s.criteria, m, s.seed, say)
+    else:
+        results, cert, checked = _optimised(problem, s, m), None, None
+        if s.certificate:
+            from pin_kpi_oed.design.optimality import certify
+
+            cert = certify(problem, m, pool_size=s.certificate_pool_size, seed=s.seed,
+                           extra=[r.q_meas for r in results if r.feasible],
+                           fixed_info=problem.fixed_information() if problem.F_given is not None else None)
+    until, curve, answers = _answers(problem, s, m, bool(discrepancy), checked, results)
+    return DesignRun(cell=cell, problem=problem, results=results, m=m, seed=s.seed, collision=s.collision,
+                     margins=margins, true_checks=true_checks(cell, results) if problem.cell is not cell else None,
+                     certificate=cert, extended_scores=extended_scores(problem, results, cell.q_work),
+                     discrepancy_scores=discrepancy_scores(problem, results) if discrepancy else None,
+                     path_profiles=path_profiles(problem, results, discrepancy=bool(discrepancy)),
+                     given_file=s.given_file, pool_file=s.pool_file,
+                     model_file=s.model_file, prior=s.model_prior if s.model is not None else None, until=until,
+                     poses_needed=curve, answers=answers, model_sigma_at_work=s.model_sigma_at_work)
+
+
+def _silent(line: str) -> None:
+    """Say nothing."""
+
+
+def _optimised(problem: Any, s: DesignSettings, m: int) -> list:
+    """The heuristic and the optimised designs (IPOPT from the pool start) of the settings."""
+    from pin_kpi_oed.design.optimize import DesignOptions, ipopt_options, run_designs
+
     opts = DesignOptions(collision=s.collision, n_starts=s.n_starts, ipopt=ipopt_options(max_iter=s.max_iter),
                          start=s.start, pool_size=s.start_pool_size)
-    results = run_designs(problem.cell, list(s.criteria), m, s.seed, opts, problem)
-    checks = true_checks(cell, results) if tight is not cell else None
-    cert = None
-    if s.certificate:
-        from pin_kpi_oed.design.optimality import certify
+    return run_designs(problem.cell, list(s.criteria), m, s.seed, opts, problem)
 
-        given = getattr(problem, "F_given", None) is not None
-        cert = certify(problem, m, pool_size=s.certificate_pool_size, seed=s.seed,
-                       extra=[r.q_meas for r in results if r.feasible],
-                       fixed_info=problem.fixed_information() if given else None)
-    if discrepancy is None:
-        discrepancy = problem.discrepancy is not None or any(
-            c != "random" and getattr(get_criterion(c), "uses_discrepancy", False) for c in s.criteria)
-    return DesignRun(cell=cell, problem=problem, results=results, m=m, seed=s.seed, collision=s.collision,
-                     margins=margins, true_checks=checks, certificate=cert,
-                     extended_scores=extended_scores(problem, results, cell.q_work),
-                     discrepancy_scores=discrepancy_scores(problem, results) if discrepancy else None,
-                     path_profiles=path_profiles(problem, results, discrepancy=bool(discrepancy)))
+
+def _answers(problem: Any, s: DesignSettings, m: int, discrepancy: bool, checked: Any, results: list
+             ) -> tuple[Any, Any, tuple[str, ...]]:
+    """(how many more poses until ``target_sigma_m`` on top of the measured ones, the poses-needed curve with the
+    discrepancy, the lines that state them): over the user's feasible pool candidates (``checked``: (poses, their
+    Jacobians)) or random feasible poses of the tightened cell."""
+    import numpy as np
+
+    until = curve = None
+    lines: list[str] = []
+    if discrepancy and (s.target_sigma_m is not None or s.poses_needed):
+        from pin_kpi_oed.oed.discrepancy_kpi import poses_needed
+
+        if checked is not None:
+            Q_pool, what = checked[0], "feasible candidates of Q_candidates"
+        else:
+            size = min(s.certificate_pool_size, 2000)
+            Q_pool, _ = problem.random_design(size, seed=np.random.SeedSequence([s.seed, 3]),
+                                              max_tries=max(problem.cell.max_random_tries, 200 * size))
+            # the optimised designs' own poses join the random ones (as in the certificate's pool): the curve and its
+            # plateau never claim less than a design of the table reaches
+            extra = [np.asarray(r.q_meas, float) for r in results if r.criterion != "random" and r.feasible]
+            Q_pool = np.vstack([Q_pool] + extra) if extra else Q_pool
+            what = "feasible candidates: random" + (" + the designs' poses" if extra else "")
+        n_max = min(len(Q_pool), max(4 * m, 120))
+        curve = poses_needed(problem.gp_criterion(region=False), Q_pool, n_max, target_sigma_m=s.target_sigma_m,
+                             seed=s.seed)
+        lines.append(curve.summary() + f" ({len(Q_pool)} {what}, {curve.time_s:.1f} s)")
+    elif s.target_sigma_m is not None:
+        from pin_kpi_oed.design.sequential import poses_until
+
+        if checked is not None:
+            until = poses_until(problem, float(s.target_sigma_m), checked[0], Fp=checked[1])
+            lines.append(until.summary() + f" (from the {len(checked[0])} feasible candidates of Q_candidates)")
+        else:
+            size = s.certificate_pool_size
+            Q_pool, _ = problem.random_design(size, seed=np.random.SeedSequence([s.seed, 2]),
+                                              max_tries=max(problem.cell.max_random_tries, 200 * size))
+            until = poses_until(problem, float(s.target_sigma_m), Q_pool)
+            lines.append(until.summary())
+    return until, curve, tuple(lines)

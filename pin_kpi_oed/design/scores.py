@@ -30,7 +30,7 @@ def extended_scores(problem: Any, results: list, q_work: np.ndarray) -> list[dic
     """
     from pin_kpi_oed.errors import IdentifiabilityError
 
-    ext = getattr(problem, "extended", None)
+    ext = problem.extended
     if ext is None:
         return None
     t = np.atleast_2d(q_work).shape[0]
@@ -58,7 +58,7 @@ def discrepancy_scores(problem: Any, results: list) -> list[dict]:
     from pin_kpi_oed.errors import IdentifiabilityError
 
     crit = problem.gp_criterion(region=False)
-    reg = problem.gp_criterion() if getattr(problem, "region", None) is not None and problem.region.kept else None
+    reg = problem.gp_criterion() if problem.region is not None and problem.region.kept else None
     t = problem.cell.q_work.shape[0]
     R = np.kron(np.eye(t), crit.model.tracker_pose(crit.p).rotation)  # base -> tracker frame, per working configuration
     out = []
@@ -92,8 +92,9 @@ def sigma_given(problem: Any) -> float:
         return float("inf")
 
 
-def add_discrepancy_section(doc: dict, problem: Any, gp_scores: list[dict]) -> None:
-    """Add the discrepancy (source, S, white level, kernel) and every design's honest scores to the JSON (SI)."""
+def add_discrepancy_section(doc: dict, problem: Any, gp_scores: list[dict], model_sigma: dict | None = None) -> None:
+    """Add the discrepancy (source, S, white level, kernel), the model file's own σ at the working configurations
+    (``model_sigma``, as predict gives it) and every design's honest scores to the JSON (SI)."""
     from pin_kpi_oed.discrepancy.lever_arm import lever_arm_m, lever_arm_sigma_m
 
     d = problem.discrepancy_prior()
@@ -111,9 +112,9 @@ def add_discrepancy_section(doc: dict, problem: Any, gp_scores: list[dict]) -> N
                                   "the discrepancy is learnt at the reflector: a flange rotation of s rad per axis "
                                   "adds lever_arm_sigma_per_rad_m * s (3-D RMS, in quadrature) at the TCP, which "
                                   "no sigma here includes"}
-    if getattr(problem, "model_sigma", None) is not None:
-        doc["discrepancy"]["model_sigma_at_work"] = problem.model_sigma
-    region = getattr(problem, "region", None)
+    if model_sigma is not None:
+        doc["discrepancy"]["model_sigma_at_work"] = model_sigma
+    region = problem.region
     doc["working_region"] = None if region is None else {
         **region.to_dict(), "note": "kpi_gp's KPI is tr(C_s) over the working configurations and these; "
                                     "designs[i].discrepancy.tcp_sigma_region_m is sqrt(tr(C_s)/(t + kept)) over them"}

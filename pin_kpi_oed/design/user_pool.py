@@ -12,7 +12,7 @@ exchange of :func:`pin_kpi_oed.oed.pool.select`; the heuristic reference is m of
 random (seeded). The relaxation's equivalence-theorem bound is the certificate: no m-subset of the
 feasible candidates has a lower tr(C_s) than φ*/m (A-type criteria).
 
-With poses already measured (:class:`~pin_kpi_oed.design.sequential.SequentialProblem`, ``--pool`` with
+With poses already measured (a problem declared with ``Q_given``, ``--pool`` with
 ``--given``) their information F_gᵀF_g (+ a prior) is the fixed part M₀ of every selection and of
 the certificate (:func:`pin_kpi_oed.oed.pool.select` with ``fixed_info``).
 """
@@ -21,13 +21,14 @@ from __future__ import annotations
 
 import re
 import time
+from collections.abc import Callable, Sequence
 from pathlib import Path
 
 import numpy as np
 
 from pin_kpi_oed.data.measurements import read_measurements
 from pin_kpi_oed.design.optimize import DesignProblem, DesignResult
-from pin_kpi_oed.errors import InfeasibleError, InputError
+from pin_kpi_oed.errors import IdentifiabilityError, InfeasibleError, InputError
 from pin_kpi_oed.model.robot import Robot
 from pin_kpi_oed.oed.certificate import Certificate
 from pin_kpi_oed.oed.objective import DesignCriterion
@@ -54,7 +55,7 @@ def _data_lines(path: str | Path) -> list[int]:
     return list(read_text_table(path, str(path), "pose file")[3])
 
 
-def read_poses(path: str | Path, robot: Robot, what: str = "--pool") -> np.ndarray:
+def read_poses(path: str | Path, robot: Robot, what: str = "Q_candidates") -> np.ndarray:
     """Joint configurations from a CSV (joint columns named as the robot's, rad), within the robot's limits.
 
     Values within the 1e-9 rad (m) reading tolerance beyond a limit are put on the limit.
@@ -73,7 +74,7 @@ def read_poses(path: str | Path, robot: Robot, what: str = "--pool") -> np.ndarr
     return np.clip(Q, robot.q_lower, robot.q_upper)
 
 
-def read_pool(path: str | Path, robot: Robot, what: str = "--pool") -> tuple[np.ndarray, np.ndarray]:
+def read_pool(path: str | Path, robot: Robot, what: str = "Q_candidates") -> tuple[np.ndarray, np.ndarray]:
     """Candidate configurations from a CSV (joint columns named as the robot's, rad): those outside the joint bounds
     are dropped (and returned by row), not refused; values within 1e-9 rad (m) beyond a bound are put on it.
 
@@ -111,7 +112,7 @@ def pool_line(path: str | Path, n_read: int, outside_rows: np.ndarray, n_feasibl
         rows = ", ".join(map(str, outside_rows[:5])) + (" ..." if len(outside_rows) > 5 else "")
         why.append(f"{len(outside_rows)} outside the cell's joint bounds (rows {rows})")
     why += [f"{n} {what}" for what, n in reasons.items() if n]
-    return (f"--pool: {n_read} candidates in {path}: {n_feasible} feasible" +
+    return (f"Q_candidates: {n_read} candidates in {path}: {n_feasible} feasible" +
             (f", {dropped} dropped ({'; '.join(why)})" if dropped else ""))
 
 
@@ -148,7 +149,7 @@ def duplicates_line(path: str | Path, Q: np.ndarray, rows: np.ndarray) -> str | 
     shown = "; ".join("rows " + ", ".join(map(str, rows[g[:5]])) + (f" (+{len(g) - 5} more)" if len(g) > 5 else "")
                       for g in groups[:3])
     more = f"; {len(groups) - 3} more group{'s' if len(groups) > 4 else ''}" if len(groups) > 3 else ""
-    return (f"--pool {path}: the {len(Q)} feasible candidates are only {distinct} distinct poses (the same pose "
+    return (f"Q_candidates {path}: the {len(Q)} feasible candidates are only {distinct} distinct poses (the same pose "
             f"within {DUPLICATE_TOL:g} rad: {shown}{more}), too few varied ones to identify the parameters; "
             "give more varied candidates")
 
@@ -246,11 +247,11 @@ def design_from_pool(problem: DesignProblem, Q_candidates: np.ndarray, criteria:
                      ) -> tuple[list[DesignResult], Certificate | None, int]:
     """Select m poses from user candidates for every criterion.
 
-    With a :class:`~pin_kpi_oed.design.sequential.SequentialProblem` the measured poses' information
+    With measured poses (a problem declared with ``Q_given``) their information
     (and its prior) is the fixed part of every selection, of every score and of the certificate.
 
     Args:
-        problem: the design problem of the cell (or a sequential one).
+        problem: the design problem of the cell (with or without measured poses).
         Q_candidates: the user's candidates (N, n) rad.
         criteria: ``random`` and registered criterion names.
         m: poses to select.
@@ -275,8 +276,7 @@ def design_from_pool(problem: DesignProblem, Q_candidates: np.ndarray, criteria:
         raise InfeasibleError(f"Q_candidates: only {len(Q)} of {len(Q_candidates)} "
                               f"candidates satisfy the cell's constraints "
                               f"(collision, beam, incidence, margins); {m} needed")
-    Q_given = getattr(problem, "Q_given", None)
-    on_top = f" on top of the {len(Q_given)} measured poses" if getattr(problem, "F_given", None) is not None else ""
+    on_top = f" on top of the {len(problem.Q_given)} measured poses" if problem.Q_given is not None else ""
     rng = np.random.default_rng(seed)
     t0 = time.perf_counter()
     Qr = Q[np.sort(rng.choice(len(Q), size=m, replace=False))]
@@ -310,3 +310,30 @@ def design_from_pool(problem: DesignProblem, Q_candidates: np.ndarray, criteria:
                                message=f"tr(C_s) >= {a.lower_bound / m:.4g} m^2 for every {m}-pose subset of the "
                                        f"{len(Q)} feasible user candidates{on_top}")
     return out, cert, int(ok.sum())
+
+
+def select_from_file(problem: DesignProblem, path: str, criteria: Sequence[str], m: int, seed: int = 0,
+                     say: Callable[[str], None] | None = None
+                     ) -> tuple[list[DesignResult], Certificate | None, tuple[np.ndarray, np.ndarray]]:
+    """The designs of a user's pool file (``design --pool``): the candidates read (:func:`read_pool`), checked
+    (:func:`check_candidates`; ``say`` gets :func:`pool_line`) and selected from (:func:`design_from_pool`).
+
+    Returns:
+        (the designs, the certificate or None, (the feasible candidates (N, n) rad, their weighted Jacobians)).
+
+    Raises:
+        InputError: an unreadable file; InfeasibleError: fewer than m feasible candidates; IdentifiabilityError:
+            the feasible candidates are too few distinct poses (their rows named, :func:`duplicates_line`).
+    """
+    Qc, outside = read_pool(path, problem.cell.robot)
+    reasons: dict[str, int] = {}
+    ok, Fp, _ = check_candidates(problem, Qc, reasons=reasons)
+    if say is not None:
+        say(pool_line(path, len(Qc) + len(outside), outside, int(ok.sum()), reasons))
+    assert Fp is not None  # with_jacobians
+    try:
+        results, cert, _ = design_from_pool(problem, Qc, list(criteria), m, seed, checked=(ok, Fp))
+    except IdentifiabilityError as exc:  # near-duplicate candidates: name their rows
+        rows = np.setdiff1d(np.arange(1, len(Qc) + len(outside) + 1), outside)[ok]
+        raise IdentifiabilityError(duplicates_line(path, Qc[ok], rows) or f"Q_candidates {path}: {exc}") from None
+    return results, cert, (Qc[ok], Fp)

@@ -205,31 +205,31 @@ def parse_effects_spec(spec: str, robot: Robot, rng: np.random.Generator | int |
             continue
         mt = _SPEC_ITEM.match(item)
         if not mt:
-            raise InputError(f"--effects: '{item.strip()}' is not NAME=VALUE (e.g. joint_compliance=2e-6)")
+            raise InputError(f"effects_spec: '{item.strip()}' is not NAME=VALUE (e.g. joint_compliance=2e-6)")
         name, opts, val = mt.group(1), mt.group(2), mt.group(3)
         if opts is None:
             eff = make_effect(name, robot)
         else:
             cls = effect_class(name)
             if not hasattr(cls, "from_spec"):
-                raise InputError(f"--effects: {name} takes no [options]")
+                raise InputError(f"effects_spec: {name} takes no [options]")
             eff = cls.from_spec(robot, opts)
         if name in seen:
-            raise InputError(f"--effects: effect '{name}' given twice")
+            raise InputError(f"effects_spec: effect '{name}' given twice")
         seen.add(name)
         try:
             vals = np.array([float(v) for v in val.split(":")])
         except ValueError:
-            raise InputError(f"--effects: {name}={val}: not a number (or v1:v2:... list)") from None
+            raise InputError(f"effects_spec: {name}={val}: not a number (or v1:v2:... list)") from None
         if not np.all(np.isfinite(vals)):
-            raise InputError(f"--effects: {name}={val}: values must be finite")
+            raise InputError(f"effects_spec: {name}={val}: values must be finite")
         k = eff.n_params
         if vals.size == 1 and k != 1:
             theta = vals[0] * rng.choice([-1.0, 1.0], size=k) * rng.uniform(0.5, 1.0, size=k)
         elif vals.size == k:
             theta = vals.astype(float)
         else:
-            raise InputError(f"--effects: {name} has {k} parameters ({', '.join(eff.param_names())}); "
+            raise InputError(f"effects_spec: {name} has {k} parameters ({', '.join(eff.param_names())}); "
                              f"give one size or exactly {k} colon-separated values, got {vals.size}")
         out.append((eff, theta))
     return out

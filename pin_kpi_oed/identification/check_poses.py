@@ -3,10 +3,9 @@ r"""Poses to add to a check whose rows do not determine what the verdict needs.
 Ten rows measured near C's working configurations of another session determine the tracker pose on the rows, but
 not its lever arm at the working configurations; or a group named by the verdict is not determined by the rows.
 Instead of refusing, the check names the poses to measure next: the measured rows are *given* (their whitened
-information is the fixed rows of the design layer's
-:class:`~pin_kpi_oed.design.sequential.GivenDesignCriterion`, M₀ = F_gᵀF_g) and poses of a pool are added greedily by
-the check criterion φ(M₀ + Σ Mᵢ) (:class:`~pin_kpi_oed.oed.check_power.CheckPower`: the power against the weakest
-change of each group) until
+information is the fixed rows ``F_given`` of a :class:`~pin_kpi_oed.oed.objective.DesignCriterion`, M₀ = F_gᵀF_g)
+and poses of a pool are added greedily by the check criterion φ(M₀ + Σ Mᵢ)
+(:class:`~pin_kpi_oed.oed.check_power.CheckPower`: the power against the weakest change of each group) until
 
 * the set-up is determined at the working configurations W: the registration's own σ there,
   sqrt(tr(E_s (M_ss)⁻¹ E_sᵀ) / t) (E_s the KPI Jacobian's set-up columns, M_ss the set-up block of the whitened
@@ -67,10 +66,10 @@ def poses_to_add(crit: CheckPower, wm, p: np.ndarray, F_given: np.ndarray, E_s: 
         (poses (k, n) rad — empty when the measured rows suffice —, the registration's σ at W after them, m); k =
         ``max_add`` when the pool cannot reach the goal (the σ says how far it got).
     """
-    from pin_kpi_oed.design.sequential import GivenDesignCriterion
+    from pin_kpi_oed.oed.objective import DesignCriterion
 
-    given = GivenDesignCriterion(wm, np.arange(wm.layout.n), crit, F_given=np.asarray(F_given, float), p=p)
-    R = given.fixed_rows()
+    given = DesignCriterion(wm, np.arange(wm.layout.n), crit, F_given=np.asarray(F_given, float), p=p)
+    R = np.asarray(given.F_given, float)
     M = R.T @ R
     limit = factor * honest_w_m
     if not _needs(crit, M, E_s, limit):

@@ -118,7 +118,7 @@ def class_discrepancy(robot, robot_class: str | None = None) -> DiscrepancyPrior
     how = "given" if given else f"from the name '{robot.name}'"
     grow = "" if c.reach_m is None else f" = {c.scale_m * 1e3:g} mm x max(1, reach {reach:.2f} m / {c.reach_m:g} m)"
     source = (f"default for the {c.name} class, {how}: S = {S * 1e3:.3g} mm{grow}; basis: {c.basis}; not a fit "
-              f"(--robot-class to change the class, --model for a fitted one)")
+              f"(robot_class to change the class, model_file for a fitted one)")
     return DiscrepancyPrior(base.kernel, np.full(3, S), (c.white_m / c.scale_m) ** 2, source)
 
 

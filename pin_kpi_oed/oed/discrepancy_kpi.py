@@ -261,16 +261,16 @@ class PosesNeeded(Result):
                     f"at the working configurations (random: {self.sigma_random_m[-1] * 1e6:.1f} um)")
         tgt = self.target_sigma_m * 1e6
         if self.n_for_target == 0:
-            return (f"--target-sigma {tgt:.3g} um (discrepancy included): the measured poses already reach it "
+            return (f"target_sigma_m {tgt:.3g} um (discrepancy included): the measured poses already reach it "
                     f"(predicted {self.sigma_now_m * 1e6:.1f} um); no more poses are needed")
         if self.n_for_target is not None:
-            return (f"--target-sigma {tgt:.3g} um (discrepancy included): {self.n_for_target} designed pose(s) "
+            return (f"target_sigma_m {tgt:.3g} um (discrepancy included): {self.n_for_target} designed pose(s) "
                     f"reach it (verified by recomputing C_s); random poses of this pool: "
                     + (f"{int(self.n[np.argmax(self.sigma_random_m <= self.target_sigma_m)])}"
                        if np.any(self.sigma_random_m <= self.target_sigma_m) else f"more than {top}"))
         half = int(np.argmin(np.abs(self.n - top / 2)))
         gain = 100.0 * (1.0 - self.plateau_m / self.sigma_designed_m[half])
-        return (f"--target-sigma {tgt:.3g} um is below what the discrepancy allows within {top} poses: {top} designed "
+        return (f"target_sigma_m {tgt:.3g} um is below what the discrepancy allows within {top} poses: {top} designed "
                 f"poses reach only {self.plateau_m * 1e6:.1f} um, {self.plateau_m * 1e6 - tgt:.1f} um "
                 f"({self.plateau_m / self.target_sigma_m:.2f}x) above the target, "
                 f"and going from {int(self.n[half])} to "

@@ -64,12 +64,12 @@ LENGTH_FACTORS = (0.5, 2.0)
 LEVEL_FACTORS = (3.0,)
 #: Weight of the noise-only member (the other members share the rest evenly).
 NOISE_ONLY_WEIGHT = 0.7
-#: The line ``design`` prints when it hedges.
-HEDGE_LINE = ("kpi_gp: the discrepancy is an assumption (no --model): the design hedges over 5 priors (weight "
+#: The line ``design`` prints when it hedges (parameters named as the design settings name them).
+HEDGE_LINE = ("kpi_gp: the discrepancy is an assumption (no model_file): the design hedges over 5 priors (weight "
               f"{1 - NOISE_ONLY_WEIGHT:g} on the assumed one, its length scales x{LENGTH_FACTORS[0]:g} and "
               f"x{LENGTH_FACTORS[1]:g} and its level x{LEVEL_FACTORS[0]:g}, {NOISE_ONLY_WEIGHT:g} on noise only; "
               "the weighted geometric mean of their tr C_s), so that a robot whose discrepancy differs is not "
-              "designed worse than by the noise-only KPI (--no-hedge: the assumed prior alone); the sigma shown "
+              "designed worse than by the noise-only KPI (hedge False: the assumed prior alone); the sigma shown "
               "is the assumed prior's")
 #: Swaps tried per exchange pass: each of the m chosen poses is tried against every other candidate when the pool
 #: allows, else against a seeded subset of max(10, this / m) of them (the pass costs about this many evaluations of

@@ -12,7 +12,7 @@ information model (the objective)                                      M(Q), the
 noise only: :class:`DesignCriterion`                                   FᵀF + P (F the weighted Jacobian, P the
                                                                        layout's prior); relaxation + certificate,
                                                                        rounding, exchange
-measured poses: :class:`~pin_kpi_oed.design.sequential.GivenDesignCriterion`  F_gᵀF_g + FᵀF (+ their prior rows)
+measured poses: :class:`DesignCriterion` with ``F_given``             F_gᵀF_g + FᵀF (+ their prior rows)
 extended with a prior: :class:`~pin_kpi_oed.oed.extended.ExtendedDesignCriterion`  FᵀF + Σ₀⁻¹ over geometry and
                                                                        effects; greedy + Fedorov exchange
 GLS under the discrepancy: :class:`~pin_kpi_oed.oed.discrepancy_criteria.GlsDesignCriterion`  Σ_a s_a⁻² J_aᵀ
@@ -146,6 +146,9 @@ class DesignCriterion(DesignObjective):
         criterion: a registered name or a :class:`~pin_kpi_oed.oed.criteria.Criterion` instance.
         E: KPI sensitivity over the base parameters, (3t, nb), or None.
         p: linearisation point (raw parameters); default nominal.
+        F_given: rows every design already has, (k, nb) over the base parameters: the weighted Jacobian of poses
+            already measured and the square-root rows of their prior (F_gᵀF_g + Σ₀⁻¹ then counts; only Q moves);
+            None: none.
 
     Raises:
         InputError: unknown criterion name, or a criterion of the configurations.
@@ -156,6 +159,7 @@ class DesignCriterion(DesignObjective):
     criterion: Any = "kpi"
     E: np.ndarray | None = None
     p: np.ndarray | None = None
+    F_given: np.ndarray | None = None
     crit: Criterion = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
@@ -169,8 +173,8 @@ class DesignCriterion(DesignObjective):
         return self.model.weighted_jacobian(self.p, np.atleast_2d(Q))[:, :, self.base]
 
     def fixed_rows(self) -> np.ndarray | None:
-        """Rows every design of this objective already has (none here; measured poses add theirs)."""
-        return None
+        """Rows every design of this objective already has (:attr:`F_given`, or None)."""
+        return self.F_given
 
     def value(self, Q: np.ndarray) -> float:
         """φ(Q) for configurations Q, (m, n) rad."""

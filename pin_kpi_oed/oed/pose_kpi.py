@@ -64,8 +64,8 @@ class PoseKpi(ConfigurationCriterion):
 
     def objective(self, problem: Any) -> DesignObjective:
         if getattr(problem, "extended", None) is not None:
-            raise InputError("criterion kpi6: not available on the extended model of --model (its effects carry no "
-                             "orientation sensitivity); design kpi6 without --model")
+            raise InputError("criterion kpi6: not available on the extended model of model_file (its effects carry "
+                             "no orientation sensitivity); design kpi6 without model_file")
         cell = getattr(problem, "cell", None)
         if cell is None or not hasattr(cell, "orientation_length_m"):
             raise InputError("criterion kpi6: needs a design problem on a cell (its orientation_length_m)")
