@@ -137,6 +137,26 @@ def find_ipa_data():
     return None
 
 
+def ipa_folder_or_say():
+    """The IPA UR10 folder (:func:`find_ipa_data`) when it holds Series C; else None, :data:`IPA_MISSING` printed."""
+    folder = find_ipa_data()
+    if folder is None or not (folder / "Series_C").is_dir():
+        print(IPA_MISSING)
+        return None
+    return folder
+
+
+def ipa_ur10_model():
+    """The nominal UR10 of the IPA series: reflector 0.109 m along the flange axis, σ 0.1 mm per axis (a uniform
+    weight: the data state no noise)."""
+    import numpy as np
+
+    from pin_kpi_oed import NoiseModel, TrackerModel, load_robot
+
+    return TrackerModel(load_robot("ur10"), reflector_m=np.array([0.0, 0.0, 0.109]),
+                        noise=NoiseModel(sigma_xyz_m=(1e-4,) * 3))
+
+
 def load_ipa_series(folder, series: str, *, with_time: bool = False):
     """Series ``series`` (A, B, C or D) of the IPA UR10 data as position rows (what ``import-ipa --position-only``
     writes): joints (rad), position (m), temperature (°C), the time (s) with ``with_time``; source ``<series>.csv``."""

@@ -28,8 +28,7 @@ import time
 
 import numpy as np
 
-from benchmarks.common import IPA_MISSING, find_ipa_data, load_ipa_series
-from pin_kpi_oed import NoiseModel, TrackerModel, load_robot
+from benchmarks.common import ipa_folder_or_say, ipa_ur10_model, load_ipa_series
 from pin_kpi_oed.data.atomic import atomic_write_json
 from pin_kpi_oed.data.measurements import MeasurementSet, concat_measurements
 from pin_kpi_oed.identification.identify import identify, validate
@@ -97,15 +96,13 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--json", default=None)
     a = ap.parse_args(argv)
-    folder = find_ipa_data()
-    if folder is None or not (folder / "Series_C").is_dir():
-        print(IPA_MISSING)
+    folder = ipa_folder_or_say()
+    if folder is None:
         return 0
     cases = [c.strip() for c in a.cases.split(",") if c.strip()]
     need = {ch for c in cases for ch in c.split()[0].replace("->", "") if ch in "ABCD"}
     S = {s: load_ipa_series(folder, s) for s in sorted(need)}
-    model = TrackerModel(load_robot("ur10"), reflector_m=np.array([0.0, 0.0, 0.109]),
-                         noise=NoiseModel(sigma_xyz_m=(1e-4,) * 3))
+    model = ipa_ur10_model()
     print(f"{'case':<11} {'n':>6} {'mean plain':>10} {'mean +GP':>9} {'sigma':>7} {'z RMS':>6} {'in 95%':>7} "
           f"{'extrap':>6} {'z noise-only':>12} {'time':>7}   (mm; z honest within 0.67-1.5, 85-99 % inside)")
     rows = []

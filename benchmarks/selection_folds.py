@@ -24,7 +24,7 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 import numpy as np  # noqa: E402
 
-from benchmarks.common import IPA_MISSING, find_ipa_data, load_ipa_series  # noqa: E402
+from benchmarks.common import ipa_folder_or_say, ipa_ur10_model, load_ipa_series  # noqa: E402
 
 
 def _rms(R: np.ndarray) -> float:
@@ -63,7 +63,6 @@ def run_pair(model, src, tgt, seed: int) -> dict:
 
 
 def main(argv: list[str] | None = None) -> int:
-    from pin_kpi_oed import NoiseModel, TrackerModel, load_robot
     from pin_kpi_oed.data.atomic import atomic_write_json
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
@@ -72,12 +71,10 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--json", default=None)
     a = ap.parse_args(argv)
-    folder = find_ipa_data()
-    if folder is None or not (folder / "Series_C").is_dir():
-        print(IPA_MISSING)
+    folder = ipa_folder_or_say()
+    if folder is None:
         return 0
-    model = TrackerModel(load_robot("ur10"), reflector_m=np.array([0.0, 0.0, 0.109]),
-                         noise=NoiseModel(sigma_xyz_m=(1e-4,) * 3))
+    model = ipa_ur10_model()
     results = {}
     for pair in [p.strip() for p in a.pairs.split(",") if p.strip()]:
         s, t = pair.split("->")

@@ -26,7 +26,7 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 import numpy as np  # noqa: E402
 
-from benchmarks.common import IPA_MISSING, find_ipa_data, load_ipa_series  # noqa: E402
+from benchmarks.common import ipa_folder_or_say, ipa_ur10_model, load_ipa_series  # noqa: E402
 
 PAIRS = ("B->C", "C->B", "C->D", "D->C")
 
@@ -53,7 +53,6 @@ def one_set(model, src, tgt, m: int, seed: int) -> dict:
 
 
 def main(argv: list[str] | None = None) -> int:
-    from pin_kpi_oed import NoiseModel, TrackerModel, load_robot
     from pin_kpi_oed.data.atomic import atomic_write_json
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
@@ -62,14 +61,12 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--sets", type=int, default=3, help="seeded random sets per (pair, m)")
     ap.add_argument("--json", default=None)
     a = ap.parse_args(argv)
-    folder = find_ipa_data()
-    if folder is None or not (folder / "Series_C").is_dir():
-        print(IPA_MISSING)
+    folder = ipa_folder_or_say()
+    if folder is None:
         return 0
     pairs = [p.strip() for p in a.pairs.split(",") if p.strip()]
     S = {s: load_ipa_series(folder, s) for s in sorted({c for p in pairs for c in p.split("->")})}
-    model = TrackerModel(load_robot("ur10"), reflector_m=np.array([0.0, 0.0, 0.109]),
-                         noise=NoiseModel(sigma_xyz_m=(1e-4,) * 3))
+    model = ipa_ur10_model()
     print(f"{'pair':<6} {'m':>4} {'kind':>12} {'z RMS median (range)':>22} {'in 95 % median (range)':>24} "
           f"{'pooled z':>8} {'pooled in':>9} {'extrap':>7} {'mean err':>9} {'sigma':>7}   (mm; honest: z 0.67-1.5, "
           f"85-99 % inside)", flush=True)
