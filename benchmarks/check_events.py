@@ -17,8 +17,9 @@ checked on 10 seeded rows of the other half (``--splits`` seeded splits: *holds*
 10 seeded rows of Series D (another session, another region of joint space).
 
 Monitor (``--monitor N``): a model of 2,000 seeded rows of Series A, the next N other rows replayed in time order
-(:func:`~pin_kpi_oed.identification.monitor.monitor`, a check every 10 rows): standardised RMS of the rows predicted
-before use, mean error and predicted σ, checks flagged, time per row.
+(:func:`~pin_kpi_oed.identification.monitor.monitor`: the set-up filter, a check every 10 rows): standardised RMS of
+the rows predicted before use (overall and per 1,000 rows), mean error and predicted σ, checks flagged, requests for
+poses, time per row (wall and CPU).
 
 Run:  python -m benchmarks.check_events [--events 20] [--robots 2] [--real] [--splits 3] [--draws 0] [--monitor 1500]
       (the figures of docs/results.md: --events 200 --robots 20 --real --splits 20 --draws 30 --monitor 9911)
@@ -167,7 +168,7 @@ def _transfer_errors(cm, r, rows, pick, seed: int) -> list[float]:
 
 
 def replay(n_rows: int) -> None:
-    from benchmarks.common import find_ipa_data, load_ipa_series
+    from benchmarks.common import cpu_time, find_ipa_data, load_ipa_series
     from benchmarks.honest_sigma import calibrate
     from pin_kpi_oed.identification.monitor import monitor
     from pin_kpi_oed.model.noise import NoiseModel
@@ -184,12 +185,19 @@ def replay(n_rows: int) -> None:
     model = TrackerModel(load_robot("ur10"), reflector_m=np.array([0.0, 0.0, 0.109]),
                          noise=NoiseModel(sigma_xyz_m=(1e-4,) * 3))
     cm = calibrate(model, A.subset(train), 0)
+    cm.q_work = A.q[train[:20]]
+    t0 = cpu_time()
     log = monitor(cm, A.subset(rest), every=10, alpha=ALPHA, tolerance_m=TOL)
+    cpu = (cpu_time() - t0) / len(rest)
     print(f"monitor, Series A: model of 2,000 seeded rows, {len(rest)} other rows replayed in time order "
-          f"({(A.time_s[rest[-1]] - A.time_s[rest[0]]) / 3600:.1f} h)")
-    print(log.summary())
-    marks = log.batches[:: max(1, len(log.batches) // 8)]
-    print("standardised RMS so far at rows " + ", ".join(f"{b['last_row']}: {b['z_rms_so_far']:.2f}" for b in marks))
+          f"({(A.time_s[rest[-1]] - A.time_s[rest[0]]) / 3600:.1f} h of time stamps); working configurations: 20 "
+          "training rows")
+    print(log.summary() + f" ({cpu * 1e3:.1f} ms CPU per row)")
+    z = log.z
+    print("standardised RMS per 1,000 rows (so far): " + ", ".join(
+        f"{np.sqrt(np.mean(z[a:a + 1000] ** 2)):.2f} ({np.sqrt(np.mean(z[:a + 1000] ** 2)):.2f})"
+        for a in range(0, len(z), 1000)))
+    print("requests for poses at rows: " + (", ".join(f"{a['row']} ({a['reason']})" for a in log.asks) or "none"))
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -75,6 +75,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     mo.add_argument("--refit", action="store_true",
                     help="also follow a re-fitted group of the robot (default: only a moved set-up; a robot change "
                          "asks for check design's poses)")
+    mo.add_argument("--follow", action="store_true",
+                    help="follow the file while it grows (rows appended during work): read it every --poll s, stop "
+                         "after --idle s without a new row (or Ctrl-C); a truncated or rewritten file is a warning, "
+                         "the rows used before are kept")
+    mo.add_argument("--poll", type=float, default=1.0, help="--follow: seconds between reads (default 1)")
+    mo.add_argument("--idle", type=float, default=60.0,
+                    help="--follow: stop after this many seconds without a new row (default 60)")
     mo.add_argument("--model-out", dest="model_out", default=None, help="write the model at the end of the replay")
     mo.add_argument("--json", default=None, help="write the log (per row error and sigma, per check the verdict)")
     mo.add_argument("--quiet", action="store_true", help="print nothing")
@@ -86,15 +93,24 @@ def run_monitor(args: argparse.Namespace) -> int:
     """Handler of ``pin-kpi-oed monitor``."""
     from pin_kpi_oed.data.atomic import atomic_write_json
     from pin_kpi_oed.data.measurements import read_measurements
+    from pin_kpi_oed.errors import InputError
     from pin_kpi_oed.identification.model_file import load_model_file
-    from pin_kpi_oed.identification.monitor import monitor
+    from pin_kpi_oed.identification.monitor import Monitor, monitor
 
     model = load_model_file(args.model)
     model_tool(args, model, args.model, [args.data])
-    data = read_measurements(args.data, joint_names=model.robot.joint_names, reach_m=model.robot.reach(),
-                             **table_options(args, model.robot))
-    log = monitor(model, data, every=args.every, alpha=args.alpha, tolerance_m=args.tolerance, station=args.station,
-                  refit=args.refit, echo=None if args.quiet else print)
+    read = dict(joint_names=model.robot.joint_names, reach_m=model.robot.reach(), **table_options(args, model.robot))
+    opts = dict(every=args.every, alpha=args.alpha, tolerance_m=args.tolerance, station=args.station,
+                refit=args.refit, echo=None if args.quiet else print)
+    if args.follow:
+        if not (args.poll > 0 and args.idle > 0):
+            raise InputError(f"--poll {args.poll} / --idle {args.idle}: must be seconds > 0")
+        mon = Monitor(model, **opts)
+        _follow(mon, args.data, read, args.poll, args.idle, args.quiet)
+        mon.flush()
+        log = mon.log()
+    else:
+        log = monitor(model, read_measurements(args.data, **read), **opts)
     if args.model_out:
         atomic_write_json(args.model_out, log.model.to_dict())
     if args.json:
@@ -102,6 +118,31 @@ def run_monitor(args: argparse.Namespace) -> int:
     if not args.quiet:
         print(log.summary())
     return 0
+
+
+def _follow(mon, path: str, read: dict, poll_s: float, idle_s: float, quiet: bool) -> None:
+    """Feed ``mon`` the rows appended to ``path`` until ``idle_s`` pass without one (or Ctrl-C); warnings (a file
+    truncated or rewritten while read, a line that cannot be read yet) on stderr, one line each."""
+    import sys
+    import time
+
+    from pin_kpi_oed.data.measurement_follow import FollowedFile
+
+    f = FollowedFile(path, read)
+    last = time.monotonic()
+    try:
+        while time.monotonic() - last < idle_s:
+            rows, warning = f.poll()
+            if warning and not quiet:
+                print(f"warning: {warning}", file=sys.stderr)
+            if rows is not None:
+                mon.feed(rows)
+                last = time.monotonic()
+            else:
+                time.sleep(poll_s)
+    except KeyboardInterrupt:
+        if not quiet:
+            print("monitor: stopped (Ctrl-C); writing what was seen", file=sys.stderr)
 
 
 def run_check(args: argparse.Namespace) -> int:

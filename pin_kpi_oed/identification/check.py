@@ -223,7 +223,7 @@ def _honest(model: CalibratedModel, Q: np.ndarray, data: MeasurementSet | None, 
 
 def check_calibration(model: CalibratedModel, data: MeasurementSet, *, station: str | None = None,
                       alpha: float = 0.05, tolerance_m: float = 1e-4, q_work: np.ndarray | None = None,
-                      seed: int = 0) -> CheckResult:
+                      seed: int = 0, propose: bool = True) -> CheckResult:
     """The verdict of a check on measured rows (module docstring).
 
     Args:
@@ -232,7 +232,9 @@ def check_calibration(model: CalibratedModel, data: MeasurementSet, *, station: 
         alpha: level of the test (its false-alarm rate), in (0, 0.5).
         tolerance_m: RMS TCP change at the working configurations the power is stated for (m).
         q_work: working configurations (t, n) rad; default the model's, else the check rows.
-        seed: seed of the reference configurations of the groups.
+        seed: seed of the reference configurations of the groups (and of the poses to add).
+        propose: design the poses to add when the rows do not determine the set-up at the working configurations or
+            the named group (False: only say so; ``monitor`` asks once, not at every check).
 
     Returns:
         The :class:`CheckResult`.
@@ -279,7 +281,7 @@ def check_calibration(model: CalibratedModel, data: MeasurementSet, *, station: 
                                                    size=(POOL_SIZE, model.robot.nq))
         return poses_to_add(crit, wm, p, F, E_w[:, crit.setup], reach["honest"], pool, seed=seed)[0]
 
-    if not reach["determined"]:
+    if not reach["determined"] and propose:
         out["poses_to_add"] = add()
     if T <= thr:
         moved = dist > null.threshold(6, alpha)
@@ -292,7 +294,7 @@ def check_calibration(model: CalibratedModel, data: MeasurementSet, *, station: 
         verdict = "recalibrate" if named["significant"] else "discrepancy_level"
         return CheckResult(verdict=verdict, message="no parameter group explains the residuals",
                            time_s=time.perf_counter() - t0, **out)
-    if not named["best"][3] and "poses_to_add" not in out:
+    if not named["best"][3] and "poses_to_add" not in out and propose:
         out["poses_to_add"] = add()
     return _changed(model, data, Q, named["best"], E_w, out, t0)
 

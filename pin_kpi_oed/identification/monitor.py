@@ -1,33 +1,44 @@
-"""Monitoring during work: measurements taken while the robot works, replayed in time order, each row predicted
-before it is used, a check every few rows.
+"""Monitoring during work: rows measured while the robot works, taken in time order, each predicted before it is
+used; the set-up followed recursively, a check every few rows, poses asked for when the rows cannot tell.
 
-Each new row is first *predicted* by the current model (position and honest σ,
-:meth:`CalibratedModel.predict_with_sigma`): its standardised error z = (measured − predicted)/σ is what the model
-promised before it saw the row, so the running standardised RMS of z says whether the σ stays honest over the
-replay (0.67–1.5 is honest). Every ``every`` rows the rows since the last check are a check
-(:func:`check_calibration`) — when they determine the set-up at the working configurations; rows measured near one
-point (an orientation series) do not, and the window grows until they do (at most ``max_window`` rows, the oldest
-dropped): the set-up re-registered, the residuals tested at α; the model is updated by the verdict — *set-up
-moved*: the re-registered set-up (*robot changed* with a determined group: the re-fitted model, with ``refit``);
-otherwise kept, and the event says what to do (measure ``check design``'s poses; re-calibrate). One line per event;
-the log holds every check. The file is read once (a file that grows while it is read is not followed).
+Each new row is first *predicted* (:meth:`CalibratedModel.predict_with_sigma`, corrected by the set-up filter's
+state): its standardised error z = (measured − predicted)/σ is what the monitor promised before it saw the row, so
+the running standardised RMS of z says whether the σ stays honest (0.67–1.5 is honest). The σ is the model's honest
+σ with the set-up filter's own uncertainty (:class:`~pin_kpi_oed.identification.setup_filter.SetupFilter`: the
+tracker pose re-registered recursively, a random walk whose level is estimated from the rows' innovations). Every
+``every`` rows the rows since the last check are a check (:func:`check_calibration`, the set-up re-registered on them,
+the residuals tested at α) when they determine the set-up at the working configurations (rows measured near one point
+do not: the window grows up to ``max_window`` rows). A *set-up moved* verdict on rows the filter rejected as outliers
+(at least half: a jump — a tracker moved —, not a drift) re-registers the set-up on them and starts the filter anew. A *robot changed*, *discrepancy level* or *re-calibrate* verdict
+— or a set-up filter whose uncertainty at the working configurations exceeds the model's honest σ there (the rows
+measured during work no longer pin the set-up) — asks for poses: the check design's (``check design``), once until
+the condition clears. One line per event; the log holds every check and ask.
+
+:class:`Monitor` takes rows as they come (``feed``); ``monitor --follow`` feeds it from a file that grows while it
+is read (:mod:`pin_kpi_oed.cli.check`).
 """
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from dataclasses import dataclass, field
 
 import numpy as np
+import pinocchio as pin
 
 from pin_kpi_oed.data.measurements import MeasurementSet
 from pin_kpi_oed.errors import InputError
 from pin_kpi_oed.identification.check import CHECK_STATION, check_calibration
 from pin_kpi_oed.identification.model_file import CalibratedModel
 from pin_kpi_oed.identification.problem import align_data
+from pin_kpi_oed.identification.setup_filter import SetupFilter
 from pin_kpi_oed.results import Result
 
-__all__ = ["MonitorLog", "monitor"]
+__all__ = ["Monitor", "MonitorLog", "monitor"]
+
+#: Verdicts after which the monitor asks for the check design's poses.
+ASK_VERDICTS = ("robot_changed", "discrepancy_level", "recalibrate")
 
 
 @dataclass(kw_only=True)
@@ -37,18 +48,24 @@ class MonitorLog(Result):
     Attributes:
         z: standardised errors of every row predicted before it was used, (m, 3).
         error_m: position error norm per row (m); sigma_m: predicted σ norm per row (m).
-        batches: per check ``{first_row, last_row, verdict, chi2, dof, p_value, group, z_rms_so_far, updated}``.
-        events: the lines printed (verdicts other than *holds*).
-        model: the model at the end of the replay.
-        time_per_row_s: wall time per row (prediction and the checks).
+        batches: per check ``{first_row, last_row, verdict, chi2, dof, p_value, group, z_rms_so_far, updated,
+            sigma_work_m}`` (sigma_work_m: RMS 3-D σ at the working configurations with the set-up filter's share).
+        asks: per request for poses ``{row, reason, poses}`` (poses (k, n) rad: the check design's).
+        events: the lines printed.
+        model: the model at the end (the set-up filter's state applied to its station).
+        drift_level_m_per_sqrt_s: the set-up drift level most probable at the end; outliers: rows not used.
+        time_per_row_s: wall time per row (prediction, filter and the checks).
     """
 
     z: np.ndarray
     error_m: np.ndarray
     sigma_m: np.ndarray
     batches: list = field(default_factory=list)
+    asks: list = field(default_factory=list)
     events: list = field(default_factory=list)
     model: CalibratedModel | None = field(default=None, repr=False)
+    drift_level_m_per_sqrt_s: float = 0.0
+    outliers: int = 0
     time_per_row_s: float = float("nan")
 
     @property
@@ -60,75 +77,219 @@ class MonitorLog(Result):
         """One line."""
         flagged = sum(b["verdict"] not in ("holds", "setup_moved") for b in self.batches)
         return (f"monitor: {len(self.error_m)} rows, {len(self.batches)} checks ({flagged} flagged a change), "
-                f"standardised RMS {self.z_rms:.2f} (honest within 0.67-1.5), mean error "
-                f"{np.mean(self.error_m) * 1e3:.3f} mm, mean predicted sigma {np.mean(self.sigma_m) * 1e3:.3f} mm, "
-                f"{self.time_per_row_s * 1e3:.1f} ms per row")
+                f"{len(self.asks)} requests for poses, standardised RMS {self.z_rms:.2f} (honest within 0.67-1.5), "
+                f"mean error {np.mean(self.error_m) * 1e3:.3f} mm, mean predicted sigma "
+                f"{np.mean(self.sigma_m) * 1e3:.3f} mm, set-up drift level {self.drift_level_m_per_sqrt_s * 1e9:.3g} "
+                f"nm/sqrt(s), {self.outliers} outlier rows, {self.time_per_row_s * 1e3:.1f} ms per row")
 
     def to_dict(self) -> dict:
         """Plain JSON-able dict (SI units)."""
         return {**self.result_dict(), "rows": int(len(self.error_m)), "z_rms": self.z_rms,
                 "error_m": self.error_m.tolist(), "sigma_m": self.sigma_m.tolist(), "batches": self.batches,
-                "events": self.events, "time_per_row_s": self.time_per_row_s}
+                "asks": [{**a, "poses": np.asarray(a["poses"]).tolist()} for a in self.asks],
+                "events": self.events, "drift_level_m_per_sqrt_s": self.drift_level_m_per_sqrt_s,
+                "outliers": self.outliers, "time_per_row_s": self.time_per_row_s}
 
 
-def monitor(model: CalibratedModel, data: MeasurementSet, *, every: int = 10, alpha: float = 0.05,
-            tolerance_m: float = 1e-4, station: str | None = None, max_window: int = 200, refit: bool = False,
-            echo=None) -> MonitorLog:
-    """Replay ``data`` in its order (time order): predict each row, check every ``every`` rows, update the model.
+class Monitor:
+    """Rows in, predictions, checks and requests out (module docstring).
 
     Args:
-        model: the calibrated model; station: its station the first rows are predicted in (default station).
-        data: the rows measured during work (joint columns, x, y, z in m), in time order.
+        model: the calibrated model; station: its station the rows are measured in (default station).
         every: rows per check (≥ 3); max_window: the most rows a check waits for to determine the set-up.
-        refit: also take the re-fitted group of a *robot changed* check (default: only a moved set-up is followed;
-            rows measured during work are rarely spread enough to re-fit a group of the robot, and on the real UR10
-            replay taking their re-fits made the σ dishonest after a few thousand rows: measure the poses of
-            ``check design`` instead, which the event line says).
         alpha, tolerance_m: as :func:`check_calibration`.
+        refit: also take the re-fitted group of a *robot changed* check (the set-up filter starts anew).
+        forgetting: the set-up filter's λ.
         echo: called with each event line (e.g. ``print``), or None.
+        seed: seed of the check design's poses.
+
+    Raises:
+        InputError: ``every`` below 3.
+    """
+
+    def __init__(self, model: CalibratedModel, *, every: int = 10, alpha: float = 0.05, tolerance_m: float = 1e-4,
+                 station: str | None = None, max_window: int = 200, refit: bool = False, forgetting: float = 0.995,
+                 echo=None, seed: int = 0) -> None:
+        if every < 3:
+            raise InputError(f"monitor: checks of {every} rows (at least 3)")
+        self.every, self.alpha, self.tolerance_m, self.max_window = every, alpha, tolerance_m, max_window
+        self.refit, self.forgetting, self.echo, self.seed = refit, forgetting, echo, seed
+        self.t0 = time.perf_counter()
+        self.busy_s = 0.0
+        self.z: list = []
+        self.err: list = []
+        self.sig: list = []
+        self.batches: list = []
+        self.asks: list = []
+        self.events: list = []
+        self.window: list = []
+        self.all: MeasurementSet | None = None
+        self.next = 0
+        self.seen = 0
+        self.rejected: set = set()
+        self.asking = False
+        self.design_Q: np.ndarray | None = None
+        self._use(model, model.station(station))
+        self.filter: SetupFilter | None = None
+
+    def _use(self, model: CalibratedModel, label: str) -> None:
+        """Follow ``model``'s station ``label``: its measurement model, the set-up Jacobian's columns, the honest σ at
+        the working configurations."""
+        self.model, self.label = model, label
+        self.wm, self.p = model.station_model(label)
+        L = self.wm.layout
+        self.tcols = np.arange(L.tracker.start, L.tracker.stop)
+        self.filter = None
+        qw = model.q_work
+        self.qw = None if qw is None else np.atleast_2d(qw)
+        if self.qw is not None:
+            s = model.predict_with_sigma(self.qw, station=label)[1]
+            self.sigma_w = float(np.sqrt(np.mean(np.sum(s ** 2, axis=1))))
+            self.G_w = self.wm.jacobian(self.p, self.qw)[:, :3][:, :, self.tcols]
+
+    def feed(self, rows: MeasurementSet) -> None:
+        """Take new rows (in time order): predict, filter, check every ``every`` rows."""
+        t = time.perf_counter()
+        self.all = rows if self.all is None else _concat(self.all, rows)
+        while len(self.all) - self.next >= self.every:
+            self._chunk(np.arange(self.next, self.next + self.every))
+            self.next += self.every
+        self.busy_s += time.perf_counter() - t
+
+    def flush(self) -> None:
+        """Predict and use the rows that wait for a full check (the end of a replay)."""
+        if self.all is not None and self.next < len(self.all):
+            t = time.perf_counter()
+            self._predict(self.all.subset(np.arange(self.next, len(self.all))))
+            self.next = len(self.all)
+            self.busy_s += time.perf_counter() - t
+
+    def _predict(self, data: MeasurementSet) -> None:
+        """Each row predicted with the filter's state, then used by the filter."""
+        Q = align_data(self.model.robot, data)
+        Y0, s0, _ = self.model.predict_with_sigma(Q, data, station=self.label)
+        if self.filter is None:
+            self.filter = SetupFilter(lever_m=float(np.median(np.linalg.norm(data.position_m, axis=1))),
+                                      forgetting=self.forgetting)
+        G = self.wm.jacobian(self.p, Q)[:, :3][:, :, self.tcols]
+        times = data.time_s if data.time_s is not None else [None] * len(data)
+        for i in range(len(data)):
+            self.filter.advance(times[i])
+            mu, C = self.filter.predict(G[i], s0[i])
+            r = data.position_m[i] - Y0[i] - mu
+            sd = np.sqrt(np.diag(C))
+            self.z.append(r / sd)
+            self.err.append(float(np.linalg.norm(r)))
+            self.sig.append(float(np.linalg.norm(sd)))
+            if not self.filter.update(data.position_m[i] - Y0[i], G[i], s0[i]):
+                self.rejected.add(self.seen + i)
+        self.seen += len(data)
+
+    def _chunk(self, idx: np.ndarray) -> None:
+        assert self.all is not None
+        self._predict(self.all.subset(idx))
+        self.window = (self.window + idx.tolist())[-self.max_window:]
+        win = self.all.subset(np.asarray(self.window))
+        res = check_calibration(self.model, win, station=self.label, alpha=self.alpha, tolerance_m=self.tolerance_m,
+                                propose=False)
+        if not res.setup_determined and len(win) < self.max_window:
+            return
+        self.window = []
+        first, last = self.seen - len(win) + 1, self.seen
+        jump = res.verdict == "setup_moved" and sum(i in self.rejected for i in range(first - 1, last)) >= len(win) / 2
+        updated = jump or (self.refit and res.verdict == "robot_changed" and res.determined)
+        if updated:
+            self._use(res.model, CHECK_STATION)
+        sw = self.sigma_work()
+        zz = np.asarray(self.z)
+        self.batches.append({"first_row": int(first), "last_row": int(last), "verdict": res.verdict, "chi2": res.chi2,
+                             "dof": res.dof, "p_value": res.p_value, "group": res.group,
+                             "z_rms_so_far": float(np.sqrt(np.mean(zz ** 2))), "updated": bool(updated),
+                             "sigma_work_m": sw})
+        if res.verdict not in ("holds", "setup_moved") or updated:
+            what = "; a jump the set-up filter could not follow: re-registered" if jump else "; model updated"
+            self._event(f"rows {first}-{last}: {res.summary()}" + (what if updated else ""))
+        self._maybe_ask(res, sw)
+
+    def sigma_work(self) -> float:
+        """RMS 3-D σ at the working configurations: the model's honest σ with the set-up filter's share (m), NaN
+        without working configurations."""
+        if self.qw is None or self.filter is None:
+            return float("nan")
+        _, P = self.filter.state()
+        share = np.einsum("wia,ab,wib->", self.G_w, P, self.G_w) / len(self.qw)
+        return float(np.sqrt(self.sigma_w ** 2 + share))
+
+    def _maybe_ask(self, res, sw: float) -> None:
+        """Ask for the check design's poses once when a check cannot be followed or the set-up's share at the
+        working configurations exceeds the honest σ there; again only after the condition cleared."""
+        reason = ""
+        if res.verdict in ASK_VERDICTS and not (self.refit and res.determined):
+            reason = f"the check says {res.verdict.replace('_', ' ')}"
+        elif np.isfinite(sw) and sw > np.sqrt(2.0) * self.sigma_w:
+            reason = (f"the rows measured during work no longer pin the set-up: sigma at the working configurations "
+                      f"{sw * 1e3:.3f} mm against the model's {self.sigma_w * 1e3:.3f} mm")
+        if not reason:
+            self.asking = False
+            return
+        if self.asking:
+            return
+        self.asking = True
+        if self.design_Q is None and self.qw is None:
+            self.design_Q = np.zeros((0, self.model.robot.nq))
+        if self.design_Q is None:
+            from pin_kpi_oed.identification.check_design import design_check
+
+            self.design_Q = design_check(self.model, m=10, tolerance_m=self.tolerance_m, alpha=self.alpha,
+                                         seed=self.seed, station=self.label, n_random=1).Q
+        self.asks.append({"row": int(self.seen), "reason": reason, "poses": self.design_Q})
+        what = (f"measure the {len(self.design_Q)} poses of 'check design' (in the JSON log)" if len(self.design_Q)
+                else "measure the poses of 'check design' (the model has no working configurations: give them)")
+        self._event(f"row {self.seen}: {reason}: {what}")
+
+    def _event(self, line: str) -> None:
+        self.events.append(line)
+        if self.echo is not None:
+            self.echo(line)
+
+    def log(self) -> MonitorLog:
+        """The log so far; its model has the set-up filter's state applied to the followed station."""
+        cur = self.model
+        if self.filter is not None:
+            x, _ = self.filter.state()
+            st = cur.setups[self.label]
+            T = (pin.SE3(st.tracker_T_base) * pin.exp6(x)).homogeneous
+            cur = cur.with_setup(self.label, dataclasses.replace(st, tracker_T_base=T), default=True,
+                                 step={"step": "monitor", "rows": int(self.seen), "setup_correction": x.tolist()})
+        z = np.asarray(self.z).reshape(-1, 3)
+        return MonitorLog(z=z, error_m=np.asarray(self.err), sigma_m=np.asarray(self.sig), batches=self.batches,
+                          asks=self.asks, events=self.events, model=cur,
+                          drift_level_m_per_sqrt_s=self.filter.level_m_per_sqrt_s if self.filter else 0.0,
+                          outliers=self.filter.outliers if self.filter else 0,
+                          time_per_row_s=self.busy_s / max(self.seen, 1), success=True, status="monitored",
+                          message=f"{len(self.batches)} checks of {self.every} rows or more",
+                          time_s=time.perf_counter() - self.t0)
+
+
+def _concat(a: MeasurementSet, b: MeasurementSet) -> MeasurementSet:
+    """Rows of a, then of b (one station: no station column when neither has one)."""
+    from pin_kpi_oed.data.measurements import concat_measurements
+
+    out = concat_measurements([a, b], ["a", "b"], source=a.source)
+    return dataclasses.replace(out, station=None) if a.station is None and b.station is None else out
+
+
+def monitor(model: CalibratedModel, data: MeasurementSet, **options) -> MonitorLog:
+    """Replay ``data`` in its order (time order) through a :class:`Monitor` (its options by name).
 
     Raises:
         InputError: ``every`` below 3 or fewer rows than one check.
     """
-    t0 = time.perf_counter()
-    if every < 3 or len(data) < every:
+    every = int(options.get("every", 10))
+    if len(data) < every:
         raise InputError(f"{data.source or 'monitor data'}: {len(data)} rows, checks of {every} rows (at least 3, and "
                          f"at least one check's rows)")
-    Q = align_data(model.robot, data)
-    label = model.station(station)
-    cur = model
-    z, err, sig, batches, events = [], [], [], [], []
-    window: list[int] = []
-    for start in range(0, len(data) - every + 1, every):
-        rows = np.arange(start, start + every)
-        Y, s, _ = cur.predict_with_sigma(Q[rows], data.subset(rows), station=label)
-        r = data.position_m[rows] - Y
-        z.append(r / s)
-        err.append(np.linalg.norm(r, axis=1))
-        sig.append(np.linalg.norm(s, axis=1))
-        window = (window + rows.tolist())[-max_window:]
-        if len(window) < 3:
-            continue
-        res = check_calibration(cur, data.subset(window), station=label, alpha=alpha, tolerance_m=tolerance_m)
-        if not res.setup_determined and len(window) < max_window:
-            continue
-        first, window = window[0], []
-        updated = res.verdict == "setup_moved" or (refit and res.verdict == "robot_changed" and res.determined)
-        if updated:
-            cur, label = res.model, CHECK_STATION
-        zz = np.concatenate(z)
-        batches.append({"first_row": int(first + 1), "last_row": int(start + every), "verdict": res.verdict,
-                        "chi2": res.chi2, "dof": res.dof, "p_value": res.p_value, "group": res.group,
-                        "z_rms_so_far": float(np.sqrt(np.mean(zz ** 2))), "updated": bool(updated)})
-        if res.verdict != "holds":
-            line = f"rows {first + 1}-{start + every}: {res.summary()}" + ("; model updated" if updated else "")
-            if res.verdict in ("discrepancy_level", "recalibrate", "robot_changed") and not updated:
-                line += "; measure the poses of 'check design' (or re-calibrate)"
-            events.append(line)
-            if echo is not None:
-                echo(line)
-    n = len(np.concatenate(err))
-    return MonitorLog(z=np.concatenate(z), error_m=np.concatenate(err), sigma_m=np.concatenate(sig), batches=batches,
-                      events=events, model=cur, time_per_row_s=(time.perf_counter() - t0) / max(n, 1),
-                      success=True, status="replayed", message=f"{len(batches)} checks of {every} rows",
-                      time_s=time.perf_counter() - t0)
+    mon = Monitor(model, **options)
+    mon.feed(data)
+    mon.flush()
+    return mon.log()
