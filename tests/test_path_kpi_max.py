@@ -97,3 +97,14 @@ def test_path_study_compares_the_worst_sample_criterion(tmp_path):
         d = r["designs"]
         assert d["kpi_path_max"]["worst_sigma_pos_m"] <= 1.02 * d["kpi_path"]["worst_sigma_pos_m"]
     assert "kpi_path_max" in format_path_table(s)
+
+
+def test_measured_poses_count_in_the_worst_sample_criterion(seam_problem):
+    from pin_kpi_oed.design.sequential import SequentialProblem
+
+    cell = seam_problem.cell
+    rng = np.random.default_rng(6)
+    Q_given, Q = cell.robot.random_q(rng, 20), cell.robot.random_q(rng, 5)
+    seq = SequentialProblem(cell, Q_given, collision=False)
+    plain = seam_problem.criterion("kpi_path_max")
+    assert seq.criterion("kpi_path_max").value(Q) == pytest.approx(plain.value(np.vstack([Q_given, Q])), rel=1e-9)

@@ -358,6 +358,11 @@ def compensate_program(cm: CalibratedModel, program: TargetSet, options: Compens
     The target of every program row is the TCP pose the nominal kinematics give for it (in the
     base frame: the controller's view), orientation included unless ``orientation`` is False.
 
+    Continuity: every row's calibrated IK starts from its own program row and a row the correction moves by more
+    than ``max_branch_step_rad`` is ``off_branch``, so consecutive sendable rows stay on the program's branch; the
+    result's ``correction_jump_rad`` (the correction's change from the previous row) shows it, and its summary names
+    where rows that are not ok (a singularity on the way) break the path.
+
     Args:
         cm: the calibrated model.
         program: the nominal program (``program.q``, rad / m).
