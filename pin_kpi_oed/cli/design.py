@@ -138,7 +138,7 @@ def table(results: list, reference=None, certificate=None, extended: list | None
     """
     ref = reference or results[0]
     ext_by_id = {id(r): e for r, e in zip(results, extended)} if extended is not None else None
-    head = (f"{'criterion':<10}" + (f"{'ext tr(C_s) mm^2':>18}{'ext sigma um':>14}" if ext_by_id else "")
+    head = (f"{'criterion':<12}" + (f"{'ext tr(C_s) mm^2':>18}{'ext sigma um':>14}" if ext_by_id else "")
             + f"{'geo tr(C_s) mm^2' if ext_by_id else 'tr(C_s) mm^2':>{18 if ext_by_id else 14}}"
             f"{'geo sigma um' if ext_by_id else 'TCP sigma um':>14}"
             f"{'ext vs rnd %' if ext_by_id else 'vs random %':>{13 if ext_by_id else 12}}{'min clr mm':>11}"
@@ -160,7 +160,7 @@ def table(results: list, reference=None, certificate=None, extended: list | None
         if ext_by_id:
             e = ext_by_id.get(id(r), {"trace_cs_m2": float("nan"), "tcp_sigma_m": float("nan")})
             ext = f"{e['trace_cs_m2'] * 1e6:>18.4e}{e['tcp_sigma_m'] * 1e6:>14.4f}"
-        lines.append(f"{r.criterion:<10}{ext}{r.trace_cs_m2 * 1e6:>{18 if ext_by_id else 14}.4e}"
+        lines.append(f"{r.criterion:<12}{ext}{r.trace_cs_m2 * 1e6:>{18 if ext_by_id else 14}.4e}"
                      f"{r.tcp_sigma_m * 1e6:>14.4f}{imp:>+{13 if ext_by_id else 12}.1f}"
                      f"{r.min_clearance_m * 1e3:>11.1f}{r.max_incidence_deg:>12.1f}{it:>7}"
                      f"{r.time_s:>8.2f}"

@@ -105,7 +105,8 @@ def _write_figures(df: DesignFile, folder: str, sigma: str = "honest") -> None:
         shown = {d.criterion for d in df.designs}
         p = plot_path_profiles([e for e in df.raw["path_profiles"] if e.get("criterion") in shown],
                                out / "design_path_sigma.png",
-                               title=f"{df.robot.name}: predicted sigma along the working paths")
+                               title=f"{df.robot.name}: predicted sigma along the working paths (tracker noise "
+                                     "only, unless a panel says the discrepancy is included)")
         print(f"wrote {p} ({PROFILE_UNITS})")
 
 

@@ -117,7 +117,7 @@ def profile_lines(profiles: Sequence[dict] | None) -> list[str]:
     lines = []
     for e in profiles or []:
         for p in e["paths"]:
-            lines.append(f"  {e['criterion']:>10} path {p['name']}: TCP sigma RMS {p['rms_sigma_pos_m'] * 1e6:.3f} um,"
+            lines.append(f"  {e['criterion']:>12} path {p['name']}: TCP sigma RMS {p['rms_sigma_pos_m'] * 1e6:.3f} um,"
                          f" worst {p['worst_sigma_pos_m'] * 1e6:.3f} um; orientation RMS "
                          f"{p['rms_sigma_rot_rad'] * 1e6:.3f} urad, worst {p['worst_sigma_rot_rad'] * 1e6:.3f} urad; "
                          f"at {p['length_m'] * 1e3:g} mm RMS {p['rms_sigma_at_length_m'] * 1e6:.3f} um"
