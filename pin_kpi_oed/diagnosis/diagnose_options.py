@@ -99,10 +99,10 @@ def check_options(model: TrackerModel, train: MeasurementSet, validate: Measurem
         raise InputError("diagnose: give either validation data (--validate) or a number of folds (--kfold), "
                          "not both and not neither")
     if (opts.register_rows is not None or opts.register_data is not None) and validate is None:
-        raise InputError("diagnose: --register-rows/--register-data re-register the set-up on rows of another "
+        raise InputError("diagnose: register_rows / register_data re-register the set-up on rows of another "
                          "session: they need validation data (--validate)")
     if opts.register_rows is not None and opts.register_data is not None:
-        raise InputError("diagnose: give --register-rows or --register-data, not both")
+        raise InputError("diagnose: give register_rows or register_data, not both")
     if not 0 < opts.alpha < 1:
         raise InputError(f"diagnose: alpha must be in (0, 1), got {opts.alpha}")
     if opts.weights not in ("auto", "data", "noise"):

@@ -56,7 +56,8 @@ def select_transfer_terms(geo_fit: Any, train: MeasurementSet, names: Sequence[s
             "left_out": list(sel.left_out), "terms": [dict(t) for t in sel.terms]}
     if opts.transfer_prior_rad is not None:
         if not (np.isfinite(opts.transfer_prior_rad) and opts.transfer_prior_rad > 0):
-            raise InputError(f"diagnose: --term-prior must be a positive number of rad, got {opts.transfer_prior_rad}")
+            raise InputError(f"diagnose: transfer_prior_rad must be a positive number of rad, got "
+                             f"{opts.transfer_prior_rad}")
         for e in sel.effects:
             e.prior_rad = float(opts.transfer_prior_rad)  # type: ignore[attr-defined]  # identify's per-effect prior (effect_prior_rad)
         info["prior_rad"] = float(opts.transfer_prior_rad)

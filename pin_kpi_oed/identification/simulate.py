@@ -205,9 +205,9 @@ def load_truth(path: str) -> tuple[TrackerModel, np.ndarray, list[tuple[Any, np.
     try:
         d = json.loads(Path(path).read_text(encoding="utf-8"))
     except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
-        raise InputError(f"--truth {path}: cannot read the truth file ({exc})") from None
+        raise InputError(f"truth_file {path}: cannot read the truth file ({exc})") from None
     if not isinstance(d, dict) or d.get("format") != TRUTH_FORMAT:
-        raise InputError(f"--truth {path}: not a truth file (field 'format' is "
+        raise InputError(f"truth_file {path}: not a truth file (field 'format' is "
                          f"{d.get('format') if isinstance(d, dict) else None!r}, expected '{TRUTH_FORMAT}'; "
                          "write one with simulate --truth FILE)")
     try:
@@ -219,14 +219,14 @@ def load_truth(path: str) -> tuple[TrackerModel, np.ndarray, list[tuple[Any, np.
         raw = d["p_raw"]
         missing = [n for n in model.layout.names if n not in raw]
         if missing:
-            raise InputError(f"--truth {path}: p_raw lacks {', '.join(missing[:3])}")
+            raise InputError(f"truth_file {path}: p_raw lacks {', '.join(missing[:3])}")
         p = np.array([float(raw[n]) for n in model.layout.names])
-        effects = [(effect_from_spec(e, robot, f"--truth {path}: effects[{i}]"), np.asarray(e["theta"], float))
+        effects = [(effect_from_spec(e, robot, f"truth_file {path}: effects[{i}]"), np.asarray(e["theta"], float))
                    for i, e in enumerate(d.get("effects") or [])]
     except (KeyError, TypeError, ValueError) as exc:
-        raise InputError(f"--truth {path}: missing or malformed field ({exc})") from None
+        raise InputError(f"truth_file {path}: missing or malformed field ({exc})") from None
     if not np.all(np.isfinite(p)):
-        raise InputError(f"--truth {path}: p_raw has values that are not finite")
+        raise InputError(f"truth_file {path}: p_raw has values that are not finite")
     return model, p, effects
 
 

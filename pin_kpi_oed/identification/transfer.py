@@ -386,9 +386,9 @@ def registration_split(n: int, register_rows: int, seed: int = 0) -> tuple[np.nd
     """
     k = int(register_rows)
     if k < MIN_STATION_ROWS:
-        raise InputError(f"--register-rows {k}: at least {MIN_STATION_ROWS} rows are needed to determine the set-up")
+        raise InputError(f"register_rows {k}: at least {MIN_STATION_ROWS} rows are needed to determine the set-up")
     if k >= n:
-        raise InputError(f"--register-rows {k}: the validation data have only {n} rows, none would be left to score")
+        raise InputError(f"register_rows {k}: the validation data have only {n} rows, none would be left to score")
     perm = np.random.default_rng(seed).permutation(n)
     return np.sort(perm[:k]), np.sort(perm[k:])
 
@@ -421,8 +421,8 @@ def validate_transfer(model: CalibratedModel, data: MeasurementSet, *, register_
         InputError: neither or both of ``register_rows`` / ``register_data``, too few rows.
     """
     if (register_rows is None) == (register_data is None):
-        raise InputError("transfer validation: give either register_rows (--register-rows N) or register_data "
-                         "(--register-data FILE), not both and not neither")
+        raise InputError("transfer validation: give either register_rows (a number of rows) or register_data "
+                         "(a file of rows), not both and not neither")
     label = "transfer"
     if register_data is not None:
         reg, held = register_data, data
