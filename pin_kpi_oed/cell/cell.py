@@ -348,13 +348,14 @@ def body_names(robot: Robot) -> set[str]:
     return {f.name for f in robot.model.frames if f.type == pin.FrameType.BODY}
 
 
-def cell_from_dict(d: dict, source: str = "", base_dir: Path | None = None) -> Cell:
+def cell_from_dict(d: dict, source: str = "", base_dir: Path | None = None, robot: Robot | None = None) -> Cell:
     """Build a :class:`Cell` from the parsed YAML mapping (see the module docstring).
 
     Args:
         d: the mapping.
         source: file name used in error messages.
         base_dir: folder for relative URDF paths.
+        robot: the robot already loaded (a design file's set-up), or None to load the one ``d`` names.
 
     Returns:
         The cell (names validated against the robot). The robot's joint bounds are set to the cell's.
@@ -365,7 +366,7 @@ def cell_from_dict(d: dict, source: str = "", base_dir: Path | None = None) -> C
     """
     _check_top_level(d, source)
     validate_cell_dict(d, source)
-    robot = _read_robot(d, source, base_dir)
+    robot = _read_robot(d, source, base_dir) if robot is None else robot
     W_T_base, W_T_tracker, reflector, tcp, noise = _read_tracker_setup(d, source)
     lo, hi = _read_joint_bounds(d, robot, source)
     robot.q_lower, robot.q_upper = lo.copy(), hi.copy()

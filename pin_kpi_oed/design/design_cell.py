@@ -1,4 +1,5 @@
-"""The set-up and cell of a design file, read tolerantly (see :mod:`pin_kpi_oed.design.design_file`): every field at
+"""The set-up and cell of a design file (see :mod:`pin_kpi_oed.design.design_file`): a stored cell (``design --json``)
+by the cell file's reader (:func:`read_stored_cell`); a hand-written or older file's read tolerantly: every field at
 the top level, then under ``cell``; alias keys (``a``/``a_m``, ``radius``/``radius_m``, ...); what is assumed or
 recomputed is said in the notes (one line each). Frames and units: SI; obstacles and half-spaces in the world frame,
 robot capsules in their link frames."""
@@ -14,7 +15,7 @@ from collections.abc import Mapping
 import numpy as np
 import pinocchio as pin
 
-from pin_kpi_oed.cell.cell import Cell, CapsuleSpec, HalfSpace, capsules_from_urdf
+from pin_kpi_oed.cell.cell import Cell, CapsuleSpec, HalfSpace, capsules_from_urdf, cell_from_dict
 from pin_kpi_oed.cell.cell_model import DEFAULT_BEAM_RADIUS_M, DEFAULT_INCIDENCE_MAX_DEG
 from pin_kpi_oed.cell.environment import environment_from_dicts
 from pin_kpi_oed.cell.feasibility import FeasibilityChecker
@@ -23,7 +24,8 @@ from pin_kpi_oed.model.robot import Robot
 from pin_kpi_oed.model.serialize import model_from_dict, se3_from_matrix
 from pin_kpi_oed.model.tracker import TrackerModel
 
-__all__ = ["Fields", "read_array", "read_json", "read_model", "read_q_work", "read_cell", "skip_what_collides_at_work"]
+__all__ = ["Fields", "read_array", "read_json", "read_model", "read_q_work", "read_cell", "stored_cell",
+           "cell_file_dict", "read_stored_cell", "skip_what_collides_at_work"]
 
 
 def read_array(v: Any, shape: tuple[int, ...] | None, what: str) -> np.ndarray:
@@ -240,6 +242,64 @@ def read_cell(f: Fields, model: TrackerModel, where: str, notes: list[str]) -> C
                 clearance_m=float(f.get("clearance_m", default=0.0)),
                 q_work=read_q_work(f, robot, where, notes),
                 environment=environment_from_dicts(f.get("environment"), obstacles, where, notes))
+
+
+def stored_cell(d: Mapping) -> Mapping | None:
+    """The cell block ``design --json`` writes (:meth:`~pin_kpi_oed.cell.cell_model.Cell.to_dict`), or None for a
+    hand-written or older file without one."""
+    c = d.get("cell")
+    return c if isinstance(c, Mapping) and STORED_CELL_KEYS <= set(c) else None
+
+
+#: the fields by which :func:`stored_cell` recognises a cell block written by ``design --json``
+STORED_CELL_KEYS = {"W_T_base", "W_T_tracker", "robot_capsules", "q_lower_rad", "q_upper_rad", "beam"}
+
+
+def _pose(M: Any, what: str) -> dict:
+    """A 4×4 homogeneous matrix as the cell file's ``{xyz_m, rpy_rad}``."""
+    T = se3_from_matrix(M, what)
+    return {"xyz_m": T.translation.tolist(), "rpy_rad": pin.rpy.matrixToRpy(T.rotation).tolist()}
+
+
+def cell_file_dict(f: Fields, stored: Mapping, robot: Robot, where: str) -> dict:
+    """The cell file's mapping (:func:`~pin_kpi_oed.cell.cell.cell_from_dict`) of a design file's stored cell, the
+    viewer's copies at the top level first (``capsules``, ``obstacles``, ``half_spaces``, ``q_work``). The
+    environment files' capsules stay obstacles (the files are read again by the caller); names of environment
+    objects leave the skip lists, whose capsule pairs they hold."""
+    env_names = {str(e.get("name")) for e in stored.get("environment") or [] if isinstance(e, Mapping)}
+    obstacles = f.get("obstacles")
+    if isinstance(obstacles, Mapping):
+        obstacles, halfs = obstacles.get("capsules"), obstacles.get("half_spaces")
+    else:
+        halfs = f.get("half_spaces")
+    beam = stored.get("beam") if isinstance(stored.get("beam"), Mapping) else {}
+    out = {"name": str(stored.get("name") or robot.name), "robot": robot.name,
+           "base": _pose(stored["W_T_base"], f"{where}: cell.W_T_base"),
+           "tracker": _pose(stored["W_T_tracker"], f"{where}: cell.W_T_tracker"),
+           "reflector_m": stored.get("reflector_m"), "tcp_m": stored.get("tcp_m", [0.0, 0.0, 0.0]),
+           "noise": {k: v for k, v in (stored.get("noise") or {}).items() if v is not None},
+           "joint_bounds": {"lower_rad": stored["q_lower_rad"], "upper_rad": stored["q_upper_rad"]},
+           "robot_capsules": f.get("capsules", "robot_capsules"),
+           "obstacles": {"capsules": obstacles or [], "half_spaces": halfs or []},
+           "skip_pairs": [list(p) for p in stored.get("skip_pairs") or [] if not env_names & {str(x) for x in p}],
+           "beam": {"radius_m": beam.get("radius_m", DEFAULT_BEAM_RADIUS_M),
+                    "skip": [x for x in beam.get("skip") or [] if str(x) not in env_names]},
+           "incidence_max_deg": f.get("incidence_limit_deg", "incidence_max_deg", default=DEFAULT_INCIDENCE_MAX_DEG),
+           "clearance_m": stored.get("clearance_m", 0.0),
+           "working_configurations_rad": f.get("q_work")}
+    for key in ("measurements", "max_random_tries", "orientation_length_m"):
+        if stored.get(key) is not None:
+            out[key] = stored[key]
+    return out
+
+
+def read_stored_cell(f: Fields, stored: Mapping, model: TrackerModel, where: str, notes: list[str]) -> Cell:
+    """The cell of a design file that stores it: the cell file's reader
+    (:func:`~pin_kpi_oed.cell.cell.cell_from_dict`, the same checks as ``load_cell``) on :func:`cell_file_dict`,
+    with the set-up's robot; the environment files read again (:func:`environment_from_dicts`)."""
+    cell = cell_from_dict(cell_file_dict(f, stored, model.robot, where), f"{where}: cell", robot=model.robot)
+    cell.environment = environment_from_dicts(stored.get("environment"), cell.obstacles, where, notes)
+    return cell
 
 
 #: share of seeded random configurations in which a pair must collide to count as overlapping by construction

@@ -6,8 +6,13 @@ model of the set-up (robot, tracker, reflector, TCP, noise, fixed parameters and
 designed in (the same cell model the optimiser and the independent check use), and the designs.
 The viewer, the report figures and ``pin-kpi-oed view`` read designs through it.
 
+The cell ``design --json`` stores (its ``cell`` block, with the viewer's copies of the capsules, obstacles,
+half-spaces and working configurations at the top level) is read by the cell file's reader
+(:func:`~pin_kpi_oed.cell.cell.cell_from_dict`: the checks of ``load_cell``, a damaged field refused with its name;
+:func:`~pin_kpi_oed.design.design_cell.read_stored_cell`).
+
 Tolerant reading: hand-written or older files may leave out most of the cell. Every field is
-looked up at the top level, then under ``cell`` (where ``design --json`` writes the full cell);
+looked up at the top level, then under ``cell``;
 alias keys are accepted (``a``/``a_m``, ``radius``/``radius_m``, ...); what is assumed or
 recomputed is said in :attr:`DesignFile.notes` (one line each):
 
@@ -43,8 +48,8 @@ import pinocchio as pin
 
 from pin_kpi_oed.cell.cell import Cell, CapsuleSpec, HalfSpace
 from pin_kpi_oed.cell.feasibility import FeasibilityChecker
-from pin_kpi_oed.design.design_cell import (Fields, read_array, read_cell, read_json, read_model,
-                                            skip_what_collides_at_work)
+from pin_kpi_oed.design.design_cell import (Fields, read_array, read_cell, read_json, read_model, read_stored_cell,
+                                            skip_what_collides_at_work, stored_cell)
 from pin_kpi_oed.design.design_writer import design_document, write_design
 from pin_kpi_oed.errors import InputError, PinKpiOedError
 from pin_kpi_oed.model.tracker import TrackerModel
@@ -366,7 +371,8 @@ def load_design(source: str | os.PathLike | Mapping, criteria: Sequence[str] | N
     f = Fields(d)
     notes: list[str] = []
     model = read_model(f, where, base_dir, notes)
-    cell = read_cell(f, model, where, notes)
+    stored = stored_cell(d)
+    cell = read_cell(f, model, where, notes) if stored is None else read_stored_cell(f, stored, model, where, notes)
     has_skips = any(k in d or k in (d.get("cell") if isinstance(d.get("cell"), Mapping) else {})
                     for k in ("skip_pairs", "pairs_to_skip", "ignore_pairs"))
     work_collisions = skip_what_collides_at_work(cell, notes, has_skips)
