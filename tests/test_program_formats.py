@@ -102,8 +102,11 @@ def test_krl_writes_the_src_and_the_dat_beside_it(tmp_path):
 
 
 def test_unknown_format_and_bad_registration_are_named():
-    with pytest.raises(InputError, match=r"--format: unknown format 'fanuc' \(known: csv, urscript, krl, rapid\)"):
+    with pytest.raises(InputError, match=r"program_format: unknown format 'fanuc' \(known: csv, urscript, krl, rapid"):
         write_program("fanuc", np.zeros((1, 6)), ["home"], [-1], _info(load_robot("kr15")))
+    from pin_kpi_oed.cli.flags import in_flags  # the command line names its option
+
+    assert in_flags("program_format: unknown format 'fanuc'") == "--format: unknown format 'fanuc'"
     with pytest.raises(InputError, match="already registered"):
         register_format(type(PROGRAM_FORMATS["csv"])())
     with pytest.raises(InputError, match="must be a named ProgramFormat"):

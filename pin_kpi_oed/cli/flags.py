@@ -17,6 +17,8 @@ PARAMETER_FLAGS = {
     "robot_class": "--robot-class",
     "effects_spec": "--effects",
     "truth_file": "--truth",
+    "program_format": "--format",
+    "model_format": "--format",
     "register_rows": "--register-rows",
     "register_data": "--register-data",
     "transfer_prior_rad": "--term-prior",

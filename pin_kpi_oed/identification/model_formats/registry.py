@@ -29,5 +29,5 @@ def export_model(cm, path: str | os.PathLike, fmt: str, *, tcp_m: np.ndarray | N
         SolverError: the written file would not reproduce the calibrated kinematics (nothing written).
     """
     if fmt not in MODEL_FORMATS:
-        raise InputError(f"--format: unknown model format '{fmt}' (known: {', '.join(MODEL_FORMATS)})")
+        raise InputError(f"model_format: unknown model format '{fmt}' (known: {', '.join(MODEL_FORMATS)})")
     return MODEL_FORMATS[fmt].write(cm, path, tcp_m=tcp_m, frames=frames, source=source)

@@ -85,9 +85,9 @@ def split_joints(info: ProgramInfo, fmt: str, allow_prismatic: bool = True) -> t
     rev = np.flatnonzero(np.asarray(info.revolute, bool))
     ext = np.flatnonzero(~np.asarray(info.revolute, bool))
     if rev.size != 6 or (not allow_prismatic and ext.size) or ext.size > 6:
-        raise InputError(f"--format {fmt}: needs 6 revolute joints{'' if allow_prismatic else ' and no prismatic'}"
-                         f" (up to 6 prismatic as external axes), robot {info.robot} has {rev.size} revolute and "
-                         f"{ext.size} prismatic")
+        raise InputError(f"program_format {fmt}: needs 6 revolute joints"
+                         f"{'' if allow_prismatic else ' and no prismatic'} (up to 6 prismatic as external axes), "
+                         f"robot {info.robot} has {rev.size} revolute and {ext.size} prismatic")
     return rev, ext
 
 
@@ -160,7 +160,7 @@ class ProgramFormat(ABC):
         Raises:
             InputError: text that is not a program of the format, or a format without a parser.
         """
-        raise InputError(f"--format {self.name}: no parser for this format (it can be written, not read back)")
+        raise InputError(f"program_format {self.name}: no parser for this format (it can be written, not read back)")
 
     def read(self, path: str | os.PathLike, revolute: np.ndarray) -> tuple[np.ndarray, list[int]]:
         """Read the program files written for ``path`` (see :meth:`files`) back, as :meth:`parse`.

@@ -34,7 +34,7 @@ def register_format(fmt: ProgramFormat) -> ProgramFormat:
     return fmt
 
 
-def get_format(name: str, option: str = "--format: ") -> ProgramFormat:
+def get_format(name: str, option: str = "program_format: ") -> ProgramFormat:
     """The registered format ``name``.
 
     Raises:
