@@ -51,8 +51,7 @@ from pin_kpi_oed.discrepancy.coverage import JointCoverage, joint_space_box
 from pin_kpi_oed.discrepancy.kernel import JointKernel
 from pin_kpi_oed.errors import InputError
 
-__all__ = ["DiscrepancyOptions", "Discrepancy", "encode_array", "decode_array",
-           "white_level", "grouped_folds", "NEAR_DUPLICATE_RAD", "sigma_plan"]
+__all__ = ["DiscrepancyOptions", "Discrepancy", "white_level", "grouped_folds", "NEAR_DUPLICATE_RAD", "sigma_plan"]
 
 #: Width of the joint-angle bins of the coverage in model files written before the joint-space measure (rad).
 _LEGACY_BIN_RAD = 0.05

@@ -149,19 +149,26 @@ class JointKernel(StationaryKernelMixin, Kernel):
                  P[..., None] * Dp if np.size(self.length_scale) > 1 else (P * Dp.sum(-1))[..., None]]
         return K, np.concatenate(grads, axis=-1)
 
+    def against(self, X: np.ndarray, trig_Y: tuple[np.ndarray, np.ndarray]) -> np.ndarray:
+        """K(X, Y) (n, m) for configurations Y given by ``trig_Y`` = (cos Y, sin Y) (each (m, d)), computed once for
+        many X (a pool's candidates, one column at a time); equal to ``self(X, Y)``."""
+        X = np.atleast_2d(np.asarray(X, float))
+        return self._value(X, None, *self.parts(X.shape[1]), trig_Y=trig_Y)
+
     @staticmethod
-    def _value(X: np.ndarray, Y: np.ndarray, c: float, L: np.ndarray, a: np.ndarray, ell: np.ndarray,
-               block: int = 128) -> np.ndarray:
+    def _value(X: np.ndarray, Y: np.ndarray | None, c: float, L: np.ndarray, a: np.ndarray, ell: np.ndarray,
+               block: int = 128, trig_Y: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray:
         """K without the gradient, without a trigonometric function per pair: cos(x − y) = cos x cos y + sin x sin y,
         so the product part is one matrix product of the scaled circle points and each one-joint part an outer
         product; ``block`` rows at a time, so that the one-joint parts are summed while in the processor's cache."""
-        cX, sX, cY, sY = np.cos(X), np.sin(X), np.cos(Y), np.sin(Y)
+        cX, sX = np.cos(X), np.sin(X)
+        cY, sY = (np.cos(Y), np.sin(Y)) if trig_Y is None else trig_Y
         # Σ_j (2 − 2 cos Δ_j)/L_j² = Σ_j 2/L_j² − 2 [cX/L, sX/L] · [cY/L, sY/L]ᵀ
         U, V = np.hstack([cX / L, sX / L]), np.hstack([cY / L, sY / L]).T
         s0 = float(np.sum(1.0 / L ** 2))
         inv = 1.0 / ell ** 2
-        K = np.empty((X.shape[0], Y.shape[0]))
-        T = np.empty((min(block, X.shape[0]), Y.shape[0]))
+        K = np.empty((X.shape[0], cY.shape[0]))
+        T = np.empty((min(block, X.shape[0]), cY.shape[0]))
         for b in range(0, X.shape[0], block):
             Kb = K[b:b + block]
             Tb = T[:len(Kb)]
