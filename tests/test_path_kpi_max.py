@@ -79,8 +79,9 @@ def test_pool_selection_reports_the_worst_sample_criterion(seam_problem):
     pool = seam_problem.cell.robot.random_q(rng, 300)
     obj = seam_problem.criterion("kpi_path_max")
     sel = obj.select(pool, 20, seed=0)
-    assert len(sel.indices) == 20
+    assert len(sel.indices) == 20 and sel.approx is None and "no certificate" in sel.message
     Qs = pool[sel.indices]
+    assert sel.value == pytest.approx(obj.value(Qs), rel=1e-12)
     assert obj.value(Qs) == pytest.approx(np.mean(_traces(seam_problem, Qs) ** 16) ** (1 / 16), rel=1e-9)
     rand = [obj.value(pool[rng.choice(300, 20, replace=False)]) for _ in range(10)]
     assert obj.value(Qs) < min(rand)
@@ -100,11 +101,9 @@ def test_path_study_compares_the_worst_sample_criterion(tmp_path):
 
 
 def test_measured_poses_count_in_the_worst_sample_criterion(seam_problem):
-    from pin_kpi_oed.design.sequential import SequentialProblem
-
     cell = seam_problem.cell
     rng = np.random.default_rng(6)
     Q_given, Q = cell.robot.random_q(rng, 20), cell.robot.random_q(rng, 5)
-    seq = SequentialProblem(cell, Q_given, collision=False)
+    seq = DesignProblem(cell, Q_given=Q_given, collision=False)
     plain = seam_problem.criterion("kpi_path_max")
     assert seq.criterion("kpi_path_max").value(Q) == pytest.approx(plain.value(np.vstack([Q_given, Q])), rel=1e-9)

@@ -28,8 +28,9 @@ import numpy as np
 
 from pin_kpi_oed.oed.criteria import ConfigurationCriterion, CovarianceCriterion, register
 from pin_kpi_oed.oed.objective import DesignCriterion, DesignObjective
+from pin_kpi_oed.oed.selection_result import PoolSelection
 
-__all__ = ["DEFAULT_SHARPNESS", "PathMaxTrace", "PathMaxKpi", "sample_traces"]
+__all__ = ["DEFAULT_SHARPNESS", "PathMaxTrace", "PathMaxKpi", "WorstSampleObjective", "sample_traces"]
 
 #: κ of the power mean: with the 161 samples of the shipped seam φ_max lies within [0.73, 1] × the worst sample
 DEFAULT_SHARPNESS = 16.0
@@ -78,6 +79,30 @@ class PathMaxTrace(CovarianceCriterion):
         return E / np.sqrt(E.shape[0] // self.rows_per_sample)
 
 
+class WorstSampleObjective(DesignObjective):
+    """``kpi_path_max`` on an information model (``inner``, its value and exact gradient), with the pool selection of
+    the module docstring: the mean's relaxation, rounding and exchange (``inner``'s own), reported with φ_max of the
+    chosen poses and without a certificate (none exists for the worst sample)."""
+
+    def __init__(self, inner: DesignObjective):
+        self.inner = inner
+        self.crit = inner.crit
+
+    def value(self, Q: np.ndarray) -> float:
+        return self.inner.value(Q)
+
+    def value_and_grad(self, Q: np.ndarray) -> tuple[float, np.ndarray]:
+        return self.inner.value_and_grad(Q)
+
+    def select(self, Q_pool: np.ndarray, m: int, seed: int = 0, **kw: Any) -> PoolSelection:
+        sel = self.inner.select(Q_pool, m, seed=seed, **kw)
+        Q = np.atleast_2d(np.asarray(Q_pool, float))[sel.indices]
+        return PoolSelection(indices=sel.indices, value=float(self.value(Q)), nit=sel.nit, time_s=sel.time_s,
+                             success=sel.success, status="selected",
+                             message=f"{m} of {len(Q_pool)} candidates by the mean's (kpi_path) relaxation, rounding "
+                                     "and exchange; no certificate exists for the worst sample")
+
+
 class PathMaxKpi(ConfigurationCriterion):
     """``kpi_path_max``: the smooth worst tr C_s over the working paths' samples (m², module docstring) on the
     problem's information model: noise only, with the measured poses (``design --given``) or the extended model
@@ -93,12 +118,12 @@ class PathMaxKpi(ConfigurationCriterion):
         if getattr(problem, "extended", None) is not None:
             from pin_kpi_oed.oed.extended import ExtendedDesignCriterion
 
-            return ExtendedDesignCriterion(problem.extended, PathMaxTrace(), problem.cell.q_path)
+            return WorstSampleObjective(ExtendedDesignCriterion(problem.extended, PathMaxTrace(), problem.cell.q_path))
         if hasattr(problem, "information_objective"):
             obj = problem.information_objective(PathMaxTrace())
             obj.E = E
-            return obj
-        return DesignCriterion(problem.model, problem.base, PathMaxTrace(), E, problem.p0)
+            return WorstSampleObjective(obj)
+        return WorstSampleObjective(DesignCriterion(problem.model, problem.base, PathMaxTrace(), E, problem.p0))
 
 
 register(PathMaxKpi)
