@@ -21,6 +21,7 @@ import math
 from collections.abc import Sequence
 
 
+import pin_kpi_oed.design.optimize  # noqa: F401  (registers the path and 6-D criteria --criteria is checked against)
 from pin_kpi_oed.design.runner import DesignSettings, design_run
 from pin_kpi_oed.design.design_writer import write_design
 from pin_kpi_oed.design.scores import sigma_given
