@@ -117,6 +117,47 @@ def test_pool_updates_equal_recomputation(problem, form):
         assert phi[c] == pytest.approx(ref, rel=1e-8, abs=1e-10)
 
 
+class FirstParametersTrace(Criterion):
+    """An A-type criterion written outside the package: tr of the covariance of the first five parameters, with the
+    pool matrix K = those rows of I (its GLS pool selection must take the A form from ``pool_form``, not a name)."""
+
+    name, label, unit = "a5", "tr of the first five parameters' covariance", "mixed"
+
+    def value_and_grad_M(self, M0, E=None, prior_info=None, rows=0):
+        M = M0 if prior_info is None else M0 + prior_info
+        C = np.linalg.inv(M)[:5]
+        return float(np.trace(C[:, :5])), -(C.T @ C)
+
+    def pool_form(self, E, nb):
+        return np.eye(nb)[:5]
+
+
+def test_gls_pool_selection_takes_the_a_form_of_any_criterion_with_a_pool_matrix(problem):
+    """The GLS selection of an outside criterion with a pool matrix K scores candidates by tr(K M⁻¹ Kᵀ) (equal to the
+    criterion recomputed from scratch), not by the D form; its selection differs from the D form's."""
+    d = default_discrepancy(6)
+    crit = GlsDesignCriterion(problem.model, problem.base, d, FirstParametersTrace(), p=problem.p0)
+    Qp = problem.random_design(60, 8)[0]
+    Jp = crit.pool_jacobians(Qp)
+    sel = crit.select(Qp, 15, J_pool=Jp)
+    ref = gls_value_and_grad(crit.crit, Jp[sel.indices], d.covariance(Qp[sel.indices]), d.scale_m, d.noise,
+                             crit.prior_info, grad=False)[0]
+    assert sel.value == pytest.approx(ref, rel=1e-12)
+    d_sel = GlsDesignCriterion(problem.model, problem.base, d, "D", p=problem.p0).select(Qp, 15, J_pool=Jp)
+    assert sorted(sel.indices.tolist()) != sorted(d_sel.indices.tolist())
+    assert sel.value < crit.value(Qp[d_sel.indices])                     # its own form selects better for it
+    st = GlsState(Jp, Qp, np.zeros((0, 3, Jp.shape[2])), np.zeros((0, 6)), d, crit.prior_info, 0.0)
+    st.K = FirstParametersTrace().pool_form(None, Jp.shape[2])
+    for i in range(12):
+        st.add(i)
+    phi = st.values(np.zeros(60, bool))
+    for c in (20, 41):
+        idx = list(range(12)) + [c]
+        ref = gls_value_and_grad(crit.crit, Jp[idx], d.covariance(Qp[idx]), d.scale_m, d.noise, crit.prior_info,
+                                 grad=False)[0]
+        assert phi[c] == pytest.approx(ref, rel=1e-8)
+
+
 @pytest.mark.parametrize("name", ["D_gp", "param_gp", "O3_gp"])
 def test_pool_selection_beats_random_and_reports_its_value(problem, name):
     d = default_discrepancy(6)
