@@ -171,3 +171,23 @@ def test_compensate_states_the_orientation_sigma(sim):
 
 def _rot_errors_of(rv_true, rv_pred):
     return (Rotation.from_rotvec(rv_true) * Rotation.from_rotvec(rv_pred).inv()).as_rotvec()
+
+
+def test_cli_compensate_program_of_a_6d_model(sim, tmp_path):
+    _, _, _, te, cm = sim[3]
+    atomic_write_json(tmp_path / "m.json", cm.to_dict())
+    names = list(cm.robot.joint_names)
+    with open(tmp_path / "prog.csv", "w", newline="") as fh:
+        w = csv.writer(fh)
+        w.writerow(names)
+        w.writerows(te.q[:8].tolist())
+    rc, out, err = run_cli("compensate", "--model", tmp_path / "m.json", "--program", tmp_path / "prog.csv",
+                           "--out", tmp_path / "c.csv", "--tool-length", "0.25")
+    assert rc == 0, err
+    assert "predicted orientation sigma (3-D, the measured probe's frame)" in out and "at 250 mm" in out
+    rows = list(csv.DictReader(open(tmp_path / "c.csv")))
+    assert all(float(r["sigma_rot_rad"]) > 0 and float(r["sigma_at_length_m"]) > 0 for r in rows)
+    rc, out, err = run_cli("compensate", "--model", tmp_path / "m.json", "--program", tmp_path / "prog.csv",
+                           "--out", tmp_path / "d.csv", "--tool-length", "250")
+    assert rc == 2 and "--tool-length" in err and len(err.strip().splitlines()) == 1
+    assert not (tmp_path / "d.csv").exists()
