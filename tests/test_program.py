@@ -240,6 +240,49 @@ def test_ur10_program_takes_the_pocket_poses_equivalent_and_exports_the_vias(ur1
     assert not stuck.success and stuck.n_colliding >= 1
 
 
+#: a UR10 design pose (rad) with wrist 2 at -234.8°, folded against its bound: its 2π-equivalents with wrist 2
+#: there lie in a pocket of the free space, those with wrist 2 at 125.2° reach home through a few via poses
+UR10_FOLDED = [-0.48369823, -0.44938347, 2.45057794, -2.2208667, -4.09830123, -3.53655392]
+
+
+def test_ur10_route_from_several_starts_leaves_from_a_free_equivalent(ur10):
+    """One RRT-Connect problem from every 2π-equivalent of a pose: the route leaves from one outside the pocket
+    and passes a finer independent check; from the pocket's equivalents alone no route is found."""
+    reps = equivalents(np.array(UR10_FOLDED), ur10.q_lower, ur10.q_upper, ur10.robot.is_revolute)
+    home = ur10.q_work[0]
+    tc = TransitionChecker(ur10, 0.01)
+    found = tc.plan_route_from(reps, home, seed=0, max_checks=3000)
+    assert found is not None
+    k, route = found
+    assert reps[k][4] > 0 and len(route) >= 1  # wrist 2 at 125.2°: out of the pocket
+    fine = TransitionChecker(ur10, 0.01, step_rad=np.radians(0.25))
+    assert fine.path_check(np.vstack([reps[k], *route, home])).clear
+    pocket = reps[reps[:, 4] < -np.pi]
+    assert len(pocket) == 4 and tc.plan_route_from(pocket, home, seed=0, max_checks=3000) is None
+
+
+def test_ur10_pose_whose_equivalents_all_miss_their_budget_is_rescued(ur10):
+    """Each equivalent's own route home fails within its small budget (a sixteenth; no via pool): one problem from
+    all of them with the full budget gives one equivalent its route home and its moves back; the others stay
+    penalised."""
+    from pin_kpi_oed.program.router import PENALTY_S, Router
+
+    reps = equivalents(np.array(UR10_FOLDED), ur10.q_lower, ur10.q_upper, ur10.robot.is_revolute)
+    nodes = np.vstack([ur10.q_work[0], reps])
+    v = joint_speeds(ur10.robot)
+    tc = TransitionChecker(ur10, 0.01)
+    router = Router(nodes, [list(range(1, len(nodes)))], tc, v, time_matrix(nodes, v), seed=0, plan_checks=1600,
+                    via_pool=1)
+    assert not any(router.reach_home(i) for i in range(1, len(nodes)))  # every call failed on its own budget ...
+    rescued = [i for i in range(1, len(nodes)) if router.home_route[i] is not None]
+    assert len(rescued) == 1  # ... and the last one's failure started the rescue
+    j = rescued[0]
+    assert nodes[j][4] > 0 and router.cost[j, 0] == pytest.approx(move_time(nodes[j], nodes[0], v))
+    assert all(router.cost[i, 0] == PENALTY_S for i in range(1, len(nodes)) if i != j)
+    fine = TransitionChecker(ur10, 0.01, step_rad=np.radians(0.25))
+    assert fine.path_check(np.vstack([nodes[j], *router.home_route[j], nodes[0]])).clear
+
+
 # ---------------------------------------------------------------------------- exports
 from pin_kpi_oed.cli.app import main  # noqa: E402
 from pin_kpi_oed.model.robot import load_robot  # noqa: E402

@@ -11,12 +11,14 @@ configuration unless given):
    visiting exactly one representative of each pose — a disjunction per pose; guided local
    search, stopped by a solution count; a wall-clock cap far above it is a safety net only);
 3. lazy collision checking (greedy descents from the previous tour while costs change, then guided
-   local search, at most three times): every move of the tour is checked densely
-   (:class:`~pin_kpi_oed.program.transitions.TransitionChecker`); a colliding move is repaired
-   through safe via pose(s), else along a path planned by OMPL's RRT-Connect, seeded per move
-   (:meth:`~pin_kpi_oed.program.transitions.TransitionChecker.plan_route`), and its cost raised to
-   the repaired route's time, or, when no route is found, to a penalty; the tour is re-solved until
-   every move of it has been checked (reordering around what collides);
+   local search, at most three times; :class:`~pin_kpi_oed.program.router.Router`): every move of the
+   tour is checked densely (:class:`~pin_kpi_oed.program.transitions.TransitionChecker`); a colliding
+   move is repaired through safe via pose(s), else along a path planned by OMPL's RRT-Connect, seeded
+   per move (:meth:`~pin_kpi_oed.program.transitions.TransitionChecker.plan_route`), else through home,
+   and its cost raised to the route's time, or, when an end has no route home, to a penalty (a pose
+   none of whose representatives reached home on its own budget gets one planning problem from all of
+   them); the tour is re-solved until every move of it has been checked (reordering around what
+   collides), and again, guided local search, while the round limit left it with moves without a route;
 4. the final program is re-checked move by move with no early stop (the independent figure).
 
 The as-designed order (home → poses in the listed order and listed joint values → home, straight
@@ -33,12 +35,10 @@ import numpy as np
 from pin_kpi_oed.cell.cell import Cell
 from pin_kpi_oed.errors import InputError, SolverError
 from pin_kpi_oed.progress import progress
-from pin_kpi_oed.program.timing import joint_speeds, move_time, path_time, time_matrix
+from pin_kpi_oed.program.router import Router
+from pin_kpi_oed.program.timing import joint_speeds, path_time, time_matrix
 from pin_kpi_oed.program.transitions import TransitionChecker, equivalents
 from pin_kpi_oed.results import Result
-
-#: cost (s) of a move that collides and could not be repaired
-PENALTY_S = 1.0e4
 
 
 @dataclass
@@ -220,107 +220,6 @@ class ProgramOptions:
     equivalents: bool = True
 
 
-class _Router:
-    """Lazy move checks and repairs of the tours (state shared by the rounds of :func:`plan_program`).
-
-    Every node's route to home (node 0) is found once when one of its moves collides: straight,
-    through via poses, or planned by RRT-Connect. A node without one (a representative in a pocket of the
-    free space, e.g. a wrist folded between its bound and the forearm) gets every move penalised, so
-    the tour takes another representative. A colliding move between two nodes that reach home is
-    repaired through via poses, else by RRT-Connect, else through home (always safe).
-    """
-
-    def __init__(self, nodes: np.ndarray, tc: TransitionChecker, speeds: np.ndarray, cost: np.ndarray,
-                 o: ProgramOptions):
-        self.nodes, self.tc, self.speeds, self.cost, self.o = nodes, tc, speeds, cost, o
-        self.edges: dict[tuple[int, int], list | None] = {}
-        self.home_route: dict[int, list | None] = {0: []}
-        self._pool: np.ndarray | None = None
-
-    def c(self, qa: np.ndarray, qb: np.ndarray) -> float:
-        """Move time (s)."""
-        return move_time(qa, qb, self.speeds)
-
-    def pool(self) -> np.ndarray:
-        """The seeded safe via pool (sampled at first use)."""
-        if self._pool is None:
-            self._pool = self.tc.safe_pool(self.o.via_pool, seed=self.o.seed)
-        return self._pool
-
-    def route(self, qa: np.ndarray, qb: np.ndarray, plan_checks: int) -> list | None:
-        """Intermediate configurations of a safe route qa → qb (via poses, else RRT-Connect), None if none found."""
-        tc = self.tc
-        if tc.check(qa, qb).clear:
-            return []
-        r = tc.repair(qa, qb, np.vstack([tc.structured_vias(qa, qb, self.nodes[0]), self.pool()]), self.c)
-        if r is None:
-            r = tc.plan_route(qa, qb, seed=self.o.seed, max_checks=plan_checks)
-        return r
-
-    def reach_home(self, i: int) -> bool:
-        """Whether node i has a safe route to home (computed once).
-
-        A clear straight move to a node that reaches home gives the route; a clear straight move to a node
-        that does not (its route home was not found) puts node i in the same part of the free space, so
-        it is dropped without planning; otherwise a route is planned within an eighth of the budget (the
-        routes home found take a few hundred checks; a pocket would take all of it).
-        """
-        if i not in self.home_route:
-            q = self.nodes[i]
-            near = sorted((j for j in self.home_route if j != 0), key=lambda j: self.c(q, self.nodes[j]))
-            known = [j for j in near if self.home_route[j] is not None][:8]
-            trapped = [j for j in near if self.home_route[j] is None][:8]
-            hop = next((j for j in known if self.tc.check(q, self.nodes[j]).clear), None)
-            if self.tc.check(q, self.nodes[0]).clear:
-                self.home_route[i] = []
-            elif hop is not None:  # straight to a node reaching home
-                self.home_route[i] = [self.nodes[hop], *self.home_route[hop]]
-            elif any(self.tc.check(q, self.nodes[j]).clear for j in trapped):
-                self.home_route[i] = None
-            else:
-                self.home_route[i] = self.route(q, self.nodes[0], self.o.plan_checks // 16)
-            if self.home_route[i] is None:
-                self.cost[i, :] = self.cost[:, i] = PENALTY_S
-                self.cost[i, i] = 0.0
-        return self.home_route[i] is not None
-
-    def set_route(self, key: tuple[int, int], route: list | None) -> None:
-        """Store the route of a move and its cost (the route's time, or the penalty)."""
-        a, b = key
-        self.edges[key] = route
-        if route is None:
-            self.cost[a, b] = self.cost[b, a] = PENALTY_S
-        else:
-            pts = [self.nodes[a], *route, self.nodes[b]]
-            self.cost[a, b] = self.cost[b, a] = sum(self.c(p, q) for p, q in zip(pts[:-1], pts[1:]))
-
-    def check_tour(self, tour: list[int], plan_checks: int | None = None) -> bool:
-        """Check the unchecked (or unrouted) moves of a tour; repair or penalise the colliding ones.
-
-        Returns:
-            Whether any move was new.
-        """
-        new = False
-        for a, b in zip(tour, tour[1:] + tour[:1]):
-            key = (min(a, b), max(a, b))
-            if key in self.edges and (plan_checks is None or self.edges[key] is not None):
-                continue
-            new = True
-            qa, qb = self.nodes[key[0]], self.nodes[key[1]]
-            if self.tc.check(qa, qb).clear:
-                self.set_route(key, [])
-                continue
-            if plan_checks is None and not (self.reach_home(key[0]) & self.reach_home(key[1])):
-                self.set_route(key, None)  # the last attempt (plan_checks given) plans even from such nodes
-                continue
-            r = self.route(qa, qb, plan_checks or self.o.plan_checks)
-            ra, rb = self.home_route.get(key[0]), self.home_route.get(key[1])
-            if r is None and ra is not None and rb is not None:  # both reach home: through home
-                r = [*ra, self.nodes[0], *rb[::-1]] if key[0] and key[1] else (ra or []) + (rb or [])[::-1]
-            self.set_route(key, r)
-        return new
-
-
 def plan_program(cell: Cell, Q: np.ndarray, options: ProgramOptions | None = None) -> Program:
     """Order, check and repair the moves of a design (see the module docstring).
 
@@ -353,7 +252,7 @@ def plan_program(cell: Cell, Q: np.ndarray, options: ProgramOptions | None = Non
     groups = [[int(k) for k in np.flatnonzero(pose_of == i)] for i in range(len(Q))]
     tc = TransitionChecker(cell, o.margin_m, step_rad=np.radians(o.step_deg))
     cost = time_matrix(nodes, speeds)
-    router = _Router(nodes, tc, speeds, cost, o)
+    router = Router(nodes, groups, tc, speeds, cost, seed=o.seed, plan_checks=o.plan_checks, via_pool=o.via_pool)
     tour, rounds, fast, n_gls = [0], 0, True, 0
     # a bar on a terminal (silent in pipes and tests): rounds of ordering + dense move checks, then the last checks
     with progress(total=o.max_rounds + 2, desc="program: order + check moves", unit="round") as bar:
@@ -368,7 +267,11 @@ def plan_program(cell: Cell, Q: np.ndarray, options: ProgramOptions | None = Non
                 break
             fast = changed  # costs settled: a guided local search; it found unchecked moves: greedy rounds again
         bar.total = rounds + 2
-        router.check_tour(tour)  # round limit hit: check what the last tour added
+        for _ in range(3):  # the round limit hit with moves left without a route: the tour around them
+            if router.routed(tour):
+                break
+            tour = solve_tour(cost, o.time_limit_s, o.solutions, groups=groups, initial=tour)
+            router.check_tour(tour)
         bar.update()
         router.check_tour(tour, plan_checks=4 * o.plan_checks)  # last attempt on moves still without a route
         bar.update()

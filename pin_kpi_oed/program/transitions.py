@@ -189,7 +189,9 @@ class TransitionChecker:
         if self.bound is not None and inner and not (stop_early and best < need):
             # exact checks only where the bound cannot decide, lowest bound first: the result (clear or not,
             # and without early stop the smallest clearance) is the exact check's
-            cap = self.cell.clearance_m + max(need, self.margin_m) + BALL_CAP_M if stop_early else None
+            # the balls stand in for closest points only far above what can decide: the margin (early stop), else
+            # the smallest clearance so far (samples bounded above it are never evaluated)
+            cap = self.cell.clearance_m + (max(need, self.margin_m) if stop_early else best) + BALL_CAP_M
             lb = self.bound(S[1:-1], cap) - self.cell.clearance_m
             order = np.argsort(lb, kind="stable")
             for o in order:
@@ -359,26 +361,56 @@ class TransitionChecker:
             end pose collides or no route was found within the budget.
         """
         qa, qb = np.asarray(qa, float), np.asarray(qb, float)
-        need = min(self.margin_m, self.clearance(qa), self.clearance(qb)) - 1e-9
-        if need < -1e-9:
+        if min(self.clearance(qa), self.clearance(qb)) < 0.0:
             return None
         if self.check(qa, qb).clear:
             return []
-        pts = self._ompl_path(qa, qb, need, _call_seed(seed, qa, qb), max(int(max_checks), 1))
+        found = self.plan_route_from(qa[None], qb, seed=seed, max_checks=max_checks)
+        return None if found is None else found[1]
+
+    def plan_route_from(self, starts: np.ndarray, qb: np.ndarray, seed: int = 0, max_checks: int = 20_000
+                        ) -> tuple[int, list[np.ndarray]] | None:
+        """A collision-free route to qb from whichever of several start configurations reaches it (RRT-Connect).
+
+        One OMPL problem with every start as a start state (RRT-Connect grows its start tree from all of them):
+        starts in a pocket of the free space share one budget with the others instead of each exhausting its
+        own, and the first start connected to the goal wins.
+        Planned, simplified and re-checked as :meth:`plan_route` (OMPL seeded from ``seed``, the starts and qb).
+
+        Args:
+            starts: (k, n) alternative start configurations (e.g. a pose's 2π-equivalents); colliding ones
+                are left out.
+            qb: goal configuration (n,).
+            seed: seed of the planner's random numbers.
+            max_checks: planning budget in configurations checked.
+
+        Returns:
+            (index of the start the route leaves from, its intermediate configurations), or None when qb
+            collides, every start collides or no route was found within the budget.
+        """
+        starts, qb = np.atleast_2d(np.asarray(starts, float)), np.asarray(qb, float)
+        ok = [i for i, q in enumerate(starts) if self.clearance(q) >= 0.0]
+        if not ok or self.clearance(qb) < 0.0:
+            return None
+        need = min(self.margin_m, self.clearance(qb), *(self.clearance(starts[i]) for i in ok)) - 1e-9
+        pts = self._ompl_path(starts[ok], qb, need, _call_seed(seed, *starts[ok], qb), max(int(max_checks), 1))
         if pts is None:
             return None
-        pts[0], pts[-1] = qa, qb
+        k = ok[int(np.argmin(np.abs(starts[ok] - pts[0]).max(axis=1)))]
+        pts[0], pts[-1] = starts[k], qb
         if not all(self.check(u, v).clear for u, v in zip(pts[:-1], pts[1:])):
             return None
-        return [p.copy() for p in pts[1:-1]]
+        return k, [p.copy() for p in pts[1:-1]]
 
-    def _ompl_path(self, qa: np.ndarray, qb: np.ndarray, need: float, seed: int, budget: int) -> np.ndarray | None:
-        """OMPL's RRT-Connect and path simplifier for :meth:`plan_route`: the path's configurations, or None."""
+    def _ompl_path(self, starts: np.ndarray, qb: np.ndarray, need: float, seed: int, budget: int
+                   ) -> np.ndarray | None:
+        """OMPL's RRT-Connect (every row of ``starts`` a start state) and path simplifier for :meth:`plan_route_from`:
+        the path's configurations (its first one of the starts), or None."""
         from ompl import base as ob
         from ompl import geometric as og
         from ompl import util as ou
 
-        n, scale = qa.size, self.steps
+        n, scale = qb.size, self.steps
         counts = {"motions": 0}
 
         def vec(state) -> np.ndarray:
@@ -410,11 +442,16 @@ class TransitionChecker:
             si.setStateValidityChecker(valid)
             si.setMotionValidator(_DenseMotions(si, motion))
             si.setup()
-            start, goal = space.allocState(), space.allocState()
-            for j in range(n):
-                start[j], goal[j] = float(qa[j] / scale[j]), float(qb[j] / scale[j])
             pdef = ob.ProblemDefinition(si)
-            pdef.setStartAndGoalStates(start, goal)
+            for qa in starts:
+                start = space.allocState()
+                for j in range(n):
+                    start[j] = float(qa[j] / scale[j])
+                pdef.addStartState(start)
+            goal = space.allocState()
+            for j in range(n):
+                goal[j] = float(qb[j] / scale[j])
+            pdef.setGoalState(goal)
             planner = og.RRTConnect(si)
             planner.setRange(ROUTE_RANGE * space.getMaximumExtent())
             planner.setProblemDefinition(pdef)
@@ -432,9 +469,9 @@ class TransitionChecker:
             ou.restorePreviousOutputHandler()
 
 
-def _call_seed(seed: int, qa: np.ndarray, qb: np.ndarray) -> int:
-    """OMPL's seed of one planning call (1 … 2³¹ − 1): drawn from ``seed`` and the two end configurations."""
-    words = np.frombuffer(np.r_[qa, qb].astype(float).tobytes(), np.uint32)
+def _call_seed(seed: int, *ends: np.ndarray) -> int:
+    """OMPL's seed of one planning call (1 … 2³¹ − 1): drawn from ``seed`` and the end configurations."""
+    words = np.frombuffer(np.concatenate(ends).astype(float).tobytes(), np.uint32)
     state = np.random.SeedSequence([int(seed) & 0xFFFFFFFF, *map(int, words)]).generate_state(1)[0]
     return int(state) % (2 ** 31 - 1) + 1
 
