@@ -452,6 +452,6 @@ def select_pool(Fp: np.ndarray, m: int, K: np.ndarray | None = None, prior_info:
                                    ) from None
     rel, tol = (1e-10, 1e-300) if K is not None else (0.0, 1e-10)
     found = greedy_exchange(st, m, passes=max_sweeps, rel_tol=rel, abs_tol=tol)
-    return PoolSelection(indices=found.indices, value=float(found.value), nit=found.passes,
+    return PoolSelection(indices=found.indices, value=float(found.value), nit=found.swaps,
                          time_s=time.perf_counter() - t0, success=True, status="selected",
-                         message=f"greedy + exchange ({found.passes} sweeps)")
+                         message=f"greedy + exchange ({found.swaps} swaps in {found.passes} passes)")

@@ -47,7 +47,7 @@ POLISH = 3000
 def _exchange(Fp: np.ndarray, chosen: Sequence[int] | np.ndarray, K: np.ndarray | None, ridge: float,
               max_sweeps: int = 50, M0: np.ndarray | None = None) -> tuple[np.ndarray, int]:
     """Fedorov exchange of the one pool selector (:func:`~pin_kpi_oed.oed.pool_search.exchange` on the information
-    M0 + ridge·I + Σ_chosen F_iᵀF_i): swap points while φ decreases. Returns (chosen indices, sweeps)."""
+    M0 + ridge·I + Σ_chosen F_iᵀF_i): swap points while φ decreases. Returns (chosen indices, swaps)."""
     nb = Fp.shape[2]
     reg = ridge * np.eye(nb) if M0 is None else ridge * np.eye(nb) + M0
     return information_exchange(Fp, chosen, K, reg, max_sweeps, rel_tol=1e-10, abs_tol=1e-300)
@@ -88,11 +88,11 @@ def select(Fp: np.ndarray, m: int, K: np.ndarray | None = None, tol: float = 1e-
     M0 = None if fixed_info is None else np.asarray(fixed_info, float)
     cand, starts, d = _exchange_starts(Fp, m, K, approx, n_starts, seed, None if M0 is None else M0 / m)
     sub = Fp[cand]
-    best, best_phi, sweeps = starts[0], np.inf, 0
+    best, best_phi, swaps = starts[0], np.inf, 0
     for s0 in starts:
         ridge = 0.0 if np.isfinite(pool_phi(_info(sub, s0, M0), K)) else 1e-12
         idx, nsw = _exchange(sub, s0, K, ridge, M0=M0)
-        sweeps += nsw
+        swaps += nsw
         val = pool_phi(_info(sub, idx, M0), K)
         if val < best_phi:
             best, best_phi = idx, val
@@ -101,12 +101,12 @@ def select(Fp: np.ndarray, m: int, K: np.ndarray | None = None, tol: float = 1e-
     if wide.size > cand.size:  # polish: the best design, exchanged over a wider set (can only lower φ)
         pos = np.searchsorted(wide, best)
         idx, nsw = _exchange(Fp[wide], pos, K, 0.0 if np.isfinite(best_phi) else 1e-12, M0=M0)
-        sweeps += nsw
+        swaps += nsw
         val = pool_phi(_info(Fp, wide[idx], M0), K)
         if val < best_phi:
             best, best_phi = wide[idx], val
     return PoolSelection(indices=best, value=float(best_phi), approx=approx, success=approx.success,
-                         status=approx.status, nit=sweeps, time_s=time.perf_counter() - t0,
+                         status=approx.status, nit=swaps, time_s=time.perf_counter() - t0,
                          message=f"{m} of {N} candidates; {approx.message}")
 
 

@@ -390,15 +390,15 @@ class InformationState(PoolState):
 def information_exchange(Fp: np.ndarray, start: Sequence[int] | np.ndarray, K: np.ndarray | None, M0: np.ndarray | None,
                          passes: int, rel_tol: float, abs_tol: float) -> tuple[np.ndarray, int]:
     """:func:`exchange` on :class:`InformationState` from the set ``start`` (the noise-only selection's rounded
-    relaxation, DETMAX's random start). Returns (chosen, passes run)."""
+    relaxation, DETMAX's random start). Returns (chosen, swaps)."""
     try:
         st = InformationState(Fp, K, M0, start)
     except IdentifiabilityError:  # no position can be swapped out of a singular start
-        return np.asarray(start, int), 1
+        return np.asarray(start, int), 0
     excl = np.zeros(st.N, bool)
     excl[st.chosen] = True
-    _, sel, _, _, sweeps = exchange(st, list(st.chosen), excl, st.phi, passes, rel_tol, abs_tol)
-    return np.array(sel, int), sweeps
+    _, sel, _, swaps, _ = exchange(st, list(st.chosen), excl, st.phi, passes, rel_tol, abs_tol)
+    return np.array(sel, int), swaps
 
 
 __all__ += ["information_exchange", "pool_phi"]

@@ -16,7 +16,8 @@ __all__ = ["PoolSelection"]
 
 @dataclass(kw_only=True)
 class PoolSelection(Result):
-    """m candidates chosen from a pool (``nit``: exchange sweeps or swaps; ``time_s``: wall time).
+    """m candidates chosen from a pool (``nit``: the swaps of the exchange, :mod:`pin_kpi_oed.oed.pool_search`;
+    ``time_s``: wall time).
 
     Attributes:
         indices: the chosen candidates, (m,) distinct (greedy selectors: in order of addition, then swapped).
