@@ -59,13 +59,15 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     add_table_options(p)
     p.set_defaults(func=run_check)
 
-    mo = subparsers.add_parser("monitor", help="replay rows measured during work: each predicted first, a check every "
-                                                "few rows, the model updated by the verdict",
-                               description="Replay a measurement file in its order (time order): each row is "
-                                           "predicted with its honest sigma before it is used (standardised RMS over "
-                                           "the replay), every --every rows a check (set-up re-registered, chi2 at "
-                                           "--alpha); the model follows a moved set-up (--refit: also a re-fitted "
-                                           "group). One line per event.")
+    mo = subparsers.add_parser("monitor", help="rows measured during work (a file, or followed as it grows): each "
+                                                "predicted first, the set-up followed, a check every few rows",
+                               description="Take a measurement file's rows in their order (time order; --follow: "
+                                           "as the file grows): each row is predicted with its honest sigma and the "
+                                           "set-up filter's before it is used (standardised RMS over the replay), the "
+                                           "set-up followed by a Kalman filter whose drift level is estimated from the "
+                                           "rows, every --every rows a check (set-up re-registered, chi2 at --alpha; "
+                                           "--refit: also follow a re-fitted group); poses asked for when the rows "
+                                           "cannot tell. One line per event.")
     mo.add_argument("--model", required=True, help="calibrated model file")
     mo.add_argument("--data", required=True, help="rows measured during work: CSV with joint columns and x, y, z (m)")
     mo.add_argument("--every", type=int, default=10, help="rows per check (default 10)")
