@@ -18,9 +18,9 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from pin_kpi_oed.errors import IdentifiabilityError, InputError
-from pin_kpi_oed.identification.check import check_criterion
+from pin_kpi_oed.identification.check import check_criterion, check_null
 from pin_kpi_oed.identification.model_file import CalibratedModel
-from pin_kpi_oed.oed.check_power import CheckPower, power_of
+from pin_kpi_oed.oed.check_power import CheckNull, CheckPower
 from pin_kpi_oed.oed.selection_result import PoolSelection
 from pin_kpi_oed.results import Result
 
@@ -81,11 +81,14 @@ def check_pool(model: CalibratedModel, n: int, seed: int, cell=None) -> np.ndarr
     return random_feasible(CollisionModel(cell), n, rng, cell.max_random_tries)[0]
 
 
-def check_powers(crit: CheckPower, F: np.ndarray, tolerance_m: float, alpha: float) -> dict:
-    """Group -> power of the check with whitened Jacobian F (3m, np) against the group's weakest change of size τ."""
+def check_powers(crit: CheckPower, F: np.ndarray, tolerance_m: float, alpha: float, null: CheckNull | None = None
+                 ) -> dict:
+    """Group -> power of the check with whitened Jacobian F (3m, np) against the group's weakest change of size τ, under
+    the law ``null`` of the statistic (default the plain χ²; :func:`~pin_kpi_oed.identification.check.check_null`)."""
     dof = F.shape[0] - crit.setup.size
     mu = crit.mu(F.T @ F)[0]
-    return {g.name: power_of(tolerance_m ** 2 * u, dof, alpha) for g, u in zip(crit.groups, mu)}
+    law = null or CheckNull()
+    return {g.name: law.power(tolerance_m ** 2 * u, dof, alpha) for g, u in zip(crit.groups, mu)}
 
 
 def select_check(crit: CheckPower, Fp: np.ndarray, m: int, seed: int = 0) -> PoolSelection:
@@ -163,10 +166,11 @@ def design_check(model: CalibratedModel, *, m: int = 10, tolerance_m: float = 1e
     crit, wm, p = check_criterion(model, np.atleast_2d(qw), sigma, station, seed=seed)
     Fp = wm.weighted_jacobian(p, Q_pool)[:, :3, :]
     sel = select_check(crit, Fp, m, seed)
-    power = check_powers(crit, Fp[sel.indices].reshape(-1, Fp.shape[2]), tolerance_m, alpha)
+    null = check_null(model)
+    power = check_powers(crit, Fp[sel.indices].reshape(-1, Fp.shape[2]), tolerance_m, alpha, null)
     rng = np.random.default_rng(seed + 1)
     rand = [check_powers(crit, Fp[rng.choice(len(Q_pool), m, replace=False)].reshape(-1, Fp.shape[2]),
-                         tolerance_m, alpha) for _ in range(n_random)]
+                         tolerance_m, alpha, null) for _ in range(n_random)]
     power_random = {k: float(np.median([r[k] for r in rand])) for k in power}
     return CheckDesign(Q=Q_pool[sel.indices], selection=sel, power=power, power_random=power_random,
                        tolerance_m=tolerance_m, alpha=alpha, sigma_m=sigma,
