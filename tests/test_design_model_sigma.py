@@ -17,7 +17,8 @@ from pin_kpi_oed.identification.simulate import simulate
 def test_design_with_a_model_reports_predicts_sigma_at_the_working_configurations(tmp_path):
     """A UR10 calibrated on 40 poses near its first working configuration: design --model --json holds each working
     configuration's 3-D σ equal to predict's on the same configurations to 1e-9 (relative) with the same flags, and
-    at least one configuration outside the coverage with a σ above the covered one's."""
+    at least one configuration outside the coverage with a σ above the covered one's; the Python API's run with the
+    model's inputs writes the same design file."""
     cell = load_cell("ur10")
     robot = cell.robot
     model = TrackerModel(robot, tracker_T_base=cell.tracker_T_base, reflector_m=np.array([0.0, 0.0, 0.1]),
@@ -47,3 +48,27 @@ def test_design_with_a_model_reports_predicts_sigma_at_the_working_configuration
     assert got["extrapolated"] == flags and any(flags) and not flags[0]
     assert max(s for s, x in zip(sig, flags) if x) > sig[0]
     assert "predicted sigma now at the working configurations" in out and "(outside the coverage)" in out
+    # the same run through the Python API (the model's inputs, then design_run) writes the same file, times apart
+    from pin_kpi_oed.design.design_writer import write_design
+    from pin_kpi_oed.design.runner import DesignSettings, design_run
+    from pin_kpi_oed.identification.design_discrepancy import model_design_inputs
+    from pin_kpi_oed.identification.model_file import load_model_file
+
+    loaded = load_model_file(f)
+    inputs = model_design_inputs(loaded, cell, str(f))
+    settings = DesignSettings(criteria=("random", "kpi_gp"), measurements=20, n_starts=1, max_iter=5,
+                              clearance_margin_m=0.02, incidence_margin_deg=1.0, model=loaded, model_file=str(f),
+                              discrepancy=inputs.discrepancy, model_sigma_at_work=inputs.model_sigma)
+    write_design(tmp_path / "api.json", design_run(cell, settings))
+    cli, api = (json.loads((tmp_path / n).read_text()) for n in ("d.json", "api.json"))
+    assert "extended_model" in cli and cli["discrepancy"]["model_sigma_at_work"]["sigma_m"] == got["sigma_m"]
+    assert _without_times(cli) == _without_times(api)
+
+
+def _without_times(doc):
+    """The document without wall / CPU times (they differ between two runs of the same design)."""
+    if isinstance(doc, dict):
+        return {k: _without_times(v) for k, v in doc.items() if not k.endswith(("time_s", "_cpu_s"))}
+    if isinstance(doc, list):
+        return [_without_times(v) for v in doc]
+    return doc

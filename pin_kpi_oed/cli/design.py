@@ -25,7 +25,6 @@ import pin_kpi_oed.design.optimize  # noqa: F401  (registers the path and 6-D cr
 from pin_kpi_oed.design.runner import DesignSettings, design_run
 from pin_kpi_oed.design.design_writer import write_design
 from pin_kpi_oed.design.scores import sigma_given
-from pin_kpi_oed.identification.prediction_sigma import sigma_at
 from pin_kpi_oed.design.margins import DEFAULT_CLEARANCE_MARGIN_M, DEFAULT_INCIDENCE_MARGIN_DEG
 from pin_kpi_oed.cli.flags import in_flags
 from pin_kpi_oed.errors import InputError
@@ -248,18 +247,15 @@ def _settings(args: argparse.Namespace, cell, criteria: list[str]) -> tuple[Desi
     cm = discrepancy = model_sigma = None
     if getattr(args, "model", None):
         from pin_kpi_oed.cli.tool import model_cell_tool
+        from pin_kpi_oed.identification.design_discrepancy import model_design_inputs
         from pin_kpi_oed.identification.model_file import load_model_file
 
         cm = load_model_file(args.model)
         model_cell_tool(cm, args.model, cell, args.cell)  # the model's robot, tool frame and TCP are the cell's
-        model_sigma = _model_sigma(cm, cell, args.model)
-        if given_file:  # a measurement campaign: the discrepancy re-fitted on the measured batch, geometric design
-            from pin_kpi_oed.design.declare import model_discrepancy
-            from pin_kpi_oed.identification.design_discrepancy import refit_discrepancy
-
-            discrepancy, line = refit_discrepancy(cell.tracker_model(), given_file,
-                                                  model_discrepancy(cell, cm, args.model))
-            if not quiet:
+        inputs = model_design_inputs(cm, cell, args.model, given_file)
+        discrepancy, model_sigma = inputs.discrepancy, inputs.model_sigma
+        for line in (inputs.sigma_line, None if quiet else inputs.refit_line):
+            if line:
                 print(in_flags(line))
     # the options that act only with the discrepancy, refused (not ignored) without it
     check_discrepancy_options(args, bool(_gp_names(criteria)), discrepancy is not None or (
@@ -420,20 +416,6 @@ def discrepancy_table(results: list, scores: list[dict]) -> str:
         lines.append(f"{r.criterion:<10}{r.tcp_sigma_m * 1e6:>16.3f}{sc['tcp_sigma_m'] * 1e6:>27.3f}"
                      + (f"{sc.get('tcp_sigma_region_m', float('nan')) * 1e6:>20.3f}" if region else ""))
     return "\n".join(lines)
-
-
-def _model_sigma(cm, cell, path: str) -> dict | None:
-    """The model file's own σ at the working configurations as predict gives it (widened outside the joint-space
-    coverage, flagged there), printed in one line; None when the file holds no discrepancy."""
-    if cm.discrepancy is None:
-        return None
-    sig, far = sigma_at(cm, cell.q_work)
-    print(f"--model {path}: predicted sigma now at the working configurations (as predict gives it): "
-          + ", ".join(f"{s * 1e3:.4f} mm" + (" (outside the coverage)" if f else "") for s, f in zip(sig, far))
-          + (f"; {int(far.sum())} of {len(far)} outside the calibration's joint-space coverage: its discrepancy was "
-             "not learnt there (the sigma is widened by the parameters' extrapolation error, predict / compensate "
-             "flag them); the design's poses near them measure it" if far.any() else ""))
-    return {"sigma_m": sig.tolist(), "extrapolated": far.tolist(), "note": "as predict gives it"}
 
 
 def _given_prior(path: str, cell):

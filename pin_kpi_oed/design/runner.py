@@ -50,8 +50,8 @@ class DesignSettings:
             the discrepancy by the poses-needed curve.
         poses_needed: compute the poses-needed curve (with the discrepancy).
         model_sigma_at_work: the model file's own σ at the working configurations as predict gives it
-            (``sigma_m``, ``extrapolated``; :func:`~pin_kpi_oed.identification.prediction_sigma.sigma_at`), for the
-            design file.
+            (``sigma_m``, ``extrapolated``), for the design file. With ``discrepancy`` what
+            :func:`~pin_kpi_oed.identification.design_discrepancy.model_design_inputs` returns for ``model``.
     """
 
     criteria: tuple[str, ...] = ("random", "param", "kpi")

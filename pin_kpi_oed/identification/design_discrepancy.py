@@ -1,16 +1,67 @@
-"""The discrepancy of a design with measured poses and a model file (``design --given measured.csv --model
-model.json``): re-fitted on the measured batch (geometry and set-up by least squares, then the Gaussian process on the
-residuals) when the file holds measured positions and enough rows, else the model file's."""
+"""What a calibrated model file brings to a design (``design --model model.json``, :func:`model_design_inputs`): its
+discrepancy (with measured poses, ``--given measured.csv``, re-fitted on the measured batch — geometry and set-up by
+least squares, then the Gaussian process on the residuals — when the file holds measured positions and enough rows,
+:func:`refit_discrepancy`) and its own σ at the working configurations as ``predict`` gives it. The design layer
+cannot fit (it is upstream of identification): these go into
+:class:`~pin_kpi_oed.design.runner.DesignSettings` (``discrepancy``, ``model_sigma_at_work``)."""
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
 from pin_kpi_oed.errors import InputError
 
-__all__ = ["refit_discrepancy"]
+__all__ = ["refit_discrepancy", "ModelDesignInputs", "model_design_inputs"]
+
+
+@dataclass(frozen=True)
+class ModelDesignInputs:
+    """What a model file brings to a design run.
+
+    Attributes:
+        discrepancy: the :class:`~pin_kpi_oed.discrepancy.prior.DiscrepancyPrior` to design with (the model's, or
+            re-fitted on the measured poses), None when the file holds none.
+        model_sigma: the model's own 3-D σ at the working configurations (``sigma_m``, m) and which lie outside its
+            joint-space coverage (``extrapolated``), as ``predict`` gives them; None without a discrepancy.
+        sigma_line: the σ at the working configurations in words (None without a discrepancy).
+        refit_line: the re-fit's decision, or why the discrepancy was not re-fitted (None without measured poses).
+    """
+
+    discrepancy: Any
+    model_sigma: dict | None
+    sigma_line: str | None = None
+    refit_line: str | None = None
+
+
+def model_design_inputs(cm: Any, cell: Any, model_file: str, given_file: str | None = None) -> ModelDesignInputs:
+    """The discrepancy and σ a calibrated model brings to a design in ``cell`` (with measured poses ``given_file``:
+    the discrepancy re-fitted on them when they hold positions).
+
+    Raises:
+        InputError: a model of other joints than the cell's robot (named ``model_file``), a discrepancy that can be
+            neither re-fitted nor taken from the file (named ``Q_given``).
+    """
+    from pin_kpi_oed.design.declare import model_discrepancy
+    from pin_kpi_oed.identification.prediction_sigma import sigma_at
+
+    model_sigma = sigma_line = refit_line = None
+    prior = model_discrepancy(cell, cm, model_file)
+    if prior is not None:
+        sig, far = sigma_at(cm, cell.q_work)
+        model_sigma = {"sigma_m": sig.tolist(), "extrapolated": far.tolist(), "note": "as predict gives it"}
+        sigma_line = (f"model_file {model_file}: predicted sigma now at the working configurations (as predict gives "
+                     "it): " + ", ".join(f"{s * 1e3:.4f} mm" + (" (outside the coverage)" if f else "")
+                                         for s, f in zip(sig, far))
+                     + (f"; {int(far.sum())} of {len(far)} outside the calibration's joint-space coverage: its "
+                        "discrepancy was not learnt there (the sigma is widened by the parameters' extrapolation "
+                        "error, predict / compensate flag them); the design's poses near them measure it"
+                        if far.any() else ""))
+    if given_file:  # a measurement campaign: the discrepancy re-fitted on the measured batch, geometric design
+        prior, refit_line = refit_discrepancy(cell.tracker_model(), given_file, prior)
+    return ModelDesignInputs(prior, model_sigma, sigma_line, refit_line)
 
 
 def refit_discrepancy(model: Any, given_file: str, fallback: Any = None) -> tuple[Any, str]:
