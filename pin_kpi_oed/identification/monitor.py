@@ -9,10 +9,10 @@ tracker pose re-registered recursively, a random walk whose level is estimated f
 ``every`` rows the rows since the last check are a check (:func:`check_calibration`, the set-up re-registered on them,
 the residuals tested at α) when they determine the set-up at the working configurations (rows measured near one point
 do not: the window grows up to ``max_window`` rows). A *set-up moved* verdict on rows the filter rejected as outliers
-(at least half: a jump — a tracker moved —, not a drift) re-registers the set-up on them and starts the filter anew. A *robot changed*, *discrepancy level* or *re-calibrate* verdict
-— or a set-up filter whose uncertainty at the working configurations exceeds the model's honest σ there (the rows
-measured during work no longer pin the set-up) — asks for poses: the check design's (``check design``), once until
-the condition clears. One line per event; the log holds every check and ask.
+(at least half: a jump — a tracker moved —, not a drift) re-registers the set-up on them and starts the filter anew.
+A *robot changed*, *discrepancy level* or *re-calibrate* verdict — or a set-up filter whose share of the σ at the
+working configurations exceeds the model's honest σ there (the rows measured during work no longer pin the set-up) —
+asks for poses: the check design's (``check design``), once until the condition clears. One line per event; the log holds every check and ask.
 
 :class:`Monitor` takes rows as they come (``feed``); ``monitor --follow`` feeds it from a file that grows while it
 is read (:mod:`pin_kpi_oed.cli.check`).
