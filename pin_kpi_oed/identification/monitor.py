@@ -12,7 +12,8 @@ do not: the window grows up to ``max_window`` rows). A *set-up moved* verdict on
 (at least half: a jump — a tracker moved —, not a drift) re-registers the set-up on them and starts the filter anew.
 A *robot changed*, *discrepancy level* or *re-calibrate* verdict — or a set-up filter whose share of the σ at the
 working configurations exceeds the model's honest σ there (the rows measured during work no longer pin the set-up) —
-asks for poses: the check design's (``check design``), once until the condition clears. One line per event; the log holds every check and ask.
+asks for poses: the check design's (``check design``), once until the condition clears. One line per event; the log
+holds every check and ask.
 
 :class:`Monitor` takes rows as they come (``feed``); ``monitor --follow`` feeds it from a file that grows while it
 is read (:mod:`pin_kpi_oed.cli.check`).
