@@ -176,7 +176,7 @@ def test_ur10_colliding_move_is_planned_by_ompl_and_passes_the_dense_check(ur10)
     straight = tc.check(qa, qb, stop_early=False)
     assert not straight.clear and straight.min_clearance_m < 0  # a true collision, not just inside the margin
     vias = tc.structured_vias(qa, qb, ur10.q_work[0])
-    assert tc.repair(qa, qb, vias, lambda a, b: move_time(a, b, np.ones(6))) is None
+    assert tc.repair(qa, qb, vias, np.ones(6)) is None
     route = tc.plan_route(qa, qb, seed=0, max_checks=60_000)
     assert route is not None and len(route) >= 1
     path = np.vstack([qa, *route, qb])

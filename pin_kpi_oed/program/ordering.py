@@ -267,11 +267,12 @@ def plan_program(cell: Cell, Q: np.ndarray, options: ProgramOptions | None = Non
                 break
             fast = changed  # costs settled: a guided local search; it found unchecked moves: greedy rounds again
         bar.total = rounds + 2
-        for _ in range(3):  # the round limit hit with moves left without a route: the tour around them
+        for _ in range(10):  # the round limit hit with moves left without a route: the tour around them
             if router.routed(tour):
                 break
             tour = solve_tour(cost, o.time_limit_s, o.solutions, groups=groups, initial=tour)
-            router.check_tour(tour)
+            if not router.check_tour(tour):
+                break
         bar.update()
         router.check_tour(tour, plan_checks=4 * o.plan_checks)  # last attempt on moves still without a route
         bar.update()

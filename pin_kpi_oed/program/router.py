@@ -76,7 +76,7 @@ class Router:
     def repair(self, qa: np.ndarray, qb: np.ndarray) -> list | None:
         """One or two safe via poses for the move qa → qb (structured candidates, then the pool), None if none."""
         tc = self.tc
-        return tc.repair(qa, qb, np.vstack([tc.structured_vias(qa, qb, self.nodes[0]), self.pool()]), self.c)
+        return tc.repair(qa, qb, tc.structured_vias(qa, qb, self.nodes[0]), self.speeds, safe=self.pool())
 
     def route(self, qa: np.ndarray, qb: np.ndarray, plan_checks: int) -> list | None:
         """Intermediate configurations of a safe route qa → qb (via poses, else RRT-Connect), None if none found."""

@@ -297,38 +297,42 @@ class TransitionChecker:
                 out.append(v)
         return np.array(out)
 
-    def repair(self, qa: np.ndarray, qb: np.ndarray, vias: np.ndarray, cost, max_one: int = 24,
-               max_legs: int = 6) -> list[np.ndarray] | None:
+    def repair(self, qa: np.ndarray, qb: np.ndarray, vias: np.ndarray, speeds: np.ndarray, max_one: int = 24,
+               max_legs: int = 6, safe: np.ndarray | None = None) -> list[np.ndarray] | None:
         """A collision-free route qa → via(s) → qb through candidate via poses, cheapest first.
 
         Args:
             qa, qb: end configurations.
-            vias: candidate intermediate configurations (k, n) (:meth:`structured_vias` first, then
-                a :meth:`safe_pool`); candidates too close to an obstacle are skipped.
-            cost: ``cost(q1, q2)`` of a move (s).
+            vias: candidate intermediate configurations (k, n) (:meth:`structured_vias`); candidates outside
+                the joint bounds or too close to an obstacle are skipped.
+            speeds: joint speed limits (n,): a move's cost is its time max_j |Δq_j| / v_j (s).
             max_one: one-via candidates checked (cheapest first).
             max_legs: candidates per side of the two-via search.
+            safe: candidates known to be within the bounds and to keep the margin (a :meth:`safe_pool`),
+                after ``vias``.
 
         Returns:
             The intermediate configurations (one or two), or None when no route was found.
         """
         vias = np.atleast_2d(vias)
-        if vias.size == 0:
-            return None
         lo, hi = self.cell.q_lower, self.cell.q_upper
-        inside = np.all((vias >= lo) & (vias <= hi), axis=1)
-        vias = vias[inside]
-        vias = vias[self.at_least(vias, self.margin_m)]
+        if vias.size:
+            vias = vias[np.all((vias >= lo) & (vias <= hi), axis=1)]
+            vias = vias[self.at_least(vias, self.margin_m)]
+        if safe is not None and len(safe):
+            vias = np.vstack([vias.reshape(-1, lo.size), safe])
         if len(vias) == 0:
             return None
-        ca = np.array([cost(qa, v) for v in vias])
-        cb = np.array([cost(v, qb) for v in vias])
+        speeds = np.asarray(speeds, float)
+        ca = np.max(np.abs(vias - qa) / speeds, axis=1)
+        cb = np.max(np.abs(qb - vias) / speeds, axis=1)
         for k in np.argsort(ca + cb)[:max_one]:
             if self.check(qa, vias[k]).clear and self.check(vias[k], qb).clear:
                 return [vias[k]]
         A = [k for k in np.argsort(ca)[:3 * max_legs] if self.check(qa, vias[k]).clear][:max_legs]
         B = [k for k in np.argsort(cb)[:3 * max_legs] if self.check(vias[k], qb).clear][:max_legs]
-        legs = sorted((ca[i] + cost(vias[i], vias[j]) + cb[j], i, j) for i in A for j in B if i != j)
+        legs = sorted((ca[i] + float(np.max(np.abs(vias[j] - vias[i]) / speeds)) + cb[j], i, j)
+                      for i in A for j in B if i != j)
         for _, i, j in legs:
             if self.check(vias[i], vias[j]).clear:
                 return [vias[i], vias[j]]
