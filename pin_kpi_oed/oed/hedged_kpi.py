@@ -262,7 +262,8 @@ class HedgedDesignCriterion(DesignObjective):
                   seed: int, path: list, score: Any, caches: list) -> tuple[np.ndarray, float, int]:
         """Exchange passes on φ_H: the one pool selector's :func:`~pin_kpi_oed.oed.pool_search.exchange` on a
         :class:`HedgedState` (each chosen pose in turn swapped for the candidate of least φ_H among a seeded subset
-        of the others). Appends φ_H after each pass to ``path``."""
+        of the others; φ_H of a swap from the updates, of the final set from scratch). Appends φ_H after each pass
+        to ``path``."""
         if passes <= 0:
             return idx, val, 0
         states = []
@@ -273,7 +274,7 @@ class HedgedDesignCriterion(DesignObjective):
                 states[-1].kcols = cache
         fixed = list(range(k0))
         st: PoolState = HedgedState([s.build(fixed + list(k0 + idx)) for s in states], self.weights,
-                                    np.array([c.tr_register for c in self.members]), k0, len(idx), score,
+                                    np.array([c.tr_register for c in self.members]), k0, len(idx),
                                     np.random.default_rng(seed))
         excl = np.zeros(st.n_candidates, bool)
         excl[:k0] = True
@@ -285,6 +286,9 @@ class HedgedDesignCriterion(DesignObjective):
             path.append(val)
             if n == 0:
                 break
+        if swaps:
+            val = score(idx)                                     # the value of the set from scratch
+            path[-1] = val
         return idx, val, swaps
 
 
@@ -292,13 +296,12 @@ class HedgedState(PoolState):
     """The :class:`~pin_kpi_oed.oed.pool_search.PoolState` of the hedged criterion: every member's
     :class:`~pin_kpi_oed.oed.discrepancy_pool.GreedyState` over the same candidates (measured poses first); φ_H of a
     swap from the members' exact downdates and rank-three updates, over a seeded subset of the candidates when m
-    times the candidates exceeds :data:`EXCHANGE_EVALUATIONS` (φ_H ``inf`` elsewhere); φ_H of an accepted set from
-    scratch (``score``)."""
+    times the candidates exceeds :data:`EXCHANGE_EVALUATIONS` (φ_H ``inf`` elsewhere)."""
 
-    def __init__(self, states: list, weights: np.ndarray, tr_register: np.ndarray, k0: int, m: int, score: Any,
+    def __init__(self, states: list, weights: np.ndarray, tr_register: np.ndarray, k0: int, m: int,
                  rng: np.random.Generator) -> None:
         self.states, self.weights, self.tr_register = states, weights, tr_register
-        self.k0, self.m, self.score, self.rng = k0, m, score, rng
+        self.k0, self.m, self.rng = k0, m, rng
         self.removed: int | None = None
         self.chosen = list(states[0].chosen)
 
@@ -341,9 +344,3 @@ class HedgedState(PoolState):
         st.states = [s.build(list(chosen)) for s in self.states]
         return st
 
-    def settled(self, predicted: float) -> float:
-        """φ_H of the accepted set from scratch."""
-        try:
-            return float(self.score(np.asarray(self.chosen[self.k0:], int) - self.k0))
-        except IdentifiabilityError:
-            return float("inf")
