@@ -283,6 +283,35 @@ def test_ur10_pose_whose_equivalents_all_miss_their_budget_is_rescued(ur10):
     assert fine.path_check(np.vstack([nodes[j], *router.home_route[j], nodes[0]])).clear
 
 
+#: ten poses of a UR10 KPI design (rad), UR10_FOLDED second: with a route-home budget of 100 checks per
+#: equivalent, a via pool of 20 and three rounds, the program once ended with two colliding moves (the round
+#: limit left the tour on an equivalent of the folded pose without a route home), at every 1e-9 rad change
+UR10_TEN = [
+    [-1.16457098, -0.00690381, 0.87020137, -4.03202327, -1.83410043, -4.51519816],
+    UR10_FOLDED,
+    [1.75663254, -1.51920194, 0.92908398, -0.04470306, -1.58238909, 1.52716684],
+    [1.30814339, -1.28797202, -2.77451641, -1.95126074, 4.70789329, -1.58135575],
+    [0.56317894, -0.72424407, 1.27269797, -0.74452413, 4.21350826, 4.15678191],
+    [0.82416927, -0.52601222, 1.27246493, -0.80175219, -1.83286105, -1.94486025],
+    [-1.26577243, -1.03924212, 1.53031901, 2.91317656, 4.70612781, 1.54715300],
+    [-0.54818871, -0.84847114, 1.57574651, -0.86698734, 2.32504328, 2.28772818],
+    [0.55982624, -0.17228357, 0.37931206, -2.84655843, 2.02405288, -1.76608686],
+    [-0.67422932, -3.13779339, 1.69393026, 4.71066755, -1.79697397, 2.03713730],
+]
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_ur10_program_stays_clear_when_the_design_moves_by_1e9_rad(ur10, seed):
+    """A design changed by 1e-9 rad (what a rounding change in the kinematics does to an IPOPT design) still gets
+    a program with every move clear in an independent check at 0.5°, on a tight planning budget."""
+    Q = np.array(UR10_TEN) + np.random.default_rng(seed).uniform(-1e-9, 1e-9, (10, 6))
+    prog = plan_program(ur10, Q, ProgramOptions(margin_m=0.01, plan_checks=1600, via_pool=20, max_rounds=3))
+    assert prog.success and prog.n_colliding == 0 and sorted(prog.order) == list(range(10))
+    fine = TransitionChecker(ur10, 0.01, step_rad=np.radians(0.5))
+    path = prog.path
+    assert all(fine.check(a, b, stop_early=False).clear for a, b in zip(path[:-1], path[1:]))
+
+
 # ---------------------------------------------------------------------------- exports
 from pin_kpi_oed.cli.app import main  # noqa: E402
 from pin_kpi_oed.model.robot import load_robot  # noqa: E402
