@@ -157,7 +157,7 @@ def _transfer_errors(cm, r, rows, pick, seed: int) -> list[float]:
     other = rows.subset(rest)
 
     def score(model) -> tuple[float, float]:
-        Y, sig, _ = model.predict_with_sigma(other.q, other, station="check")
+        Y, sig, _ = model.predict_with_sigma(other.q, other, station="check" if "check" in model.setups else None)
         return (float(np.mean(np.linalg.norm(other.position_m - Y, axis=1))) * 1e3,
                 float(np.mean(np.linalg.norm(sig, axis=1))) * 1e3)
 

@@ -85,6 +85,12 @@ def test_changes_are_named(setting):
     assert e.verdict == "robot_changed" and e.group == "tool" and e.result.determined
     assert np.linalg.norm(e.result.change) == pytest.approx(1e-3, rel=0.1)
     assert e.result.refit_chi2 < stats.chi2.isf(0.01, e.result.dof)       # the re-fitted model fits the rows
+    # the tracker did not move: the tool's change alone explains the rows, the calibration's set-up is held and the
+    # re-fitted TCP is within the rows' noise of the truth at the working configurations
+    assert e.result.setup_held and e.result.model.default_station == "A" and "held" in e.result.summary()
+    assert e.refit_error_m < 3 * SIGMA
+    moved = simulate_event(model, Qc, "tracker", 3)
+    assert not moved.result.setup_held
 
 
 def test_designed_check_beats_random_poses(setting):

@@ -24,8 +24,9 @@ The verdict, in this order:
 * **robot changed** — T above; a group g explains the residuals: the group's detectable directions fitted with the
   set-up by least squares on the whitened rows, its remaining χ²(3m − 6 − r_g) below its critical value at α/5
   (among such groups the least remaining χ² + 2 r_g, Akaike's criterion); the change with its standard deviation,
-  and the re-fitted model (group changed, set-up re-registered) — when the check rows determine it; else the poses
-  to add;
+  and the re-fitted model — when the check rows determine it; else the poses to add. The re-fit holds the model's
+  set-up when the group's change alone explains the rows (its fit with the set-up held passes at α/5: the tracker did
+  not move), else re-registers it on the check rows;
 * **discrepancy level** — T above, no group explains it and none takes a significant share (χ²(r_g) at α over the
   groups, Bonferroni): the residuals are larger everywhere alike, σ × √(T/(3m − 6));
 * **re-calibrate** — T above and no group explains it.
@@ -86,6 +87,8 @@ class CheckResult(Result):
         registration_sigma_m: the σ the registration on the check rows alone leaves at the working configurations
             (RMS 3-D, m); honest_sigma_m: the model's honest σ there (RMS 3-D, m); setup_determined: the first at most
             :data:`~pin_kpi_oed.identification.check_poses.SETUP_FACTOR` × the second.
+        setup_held: the re-fit kept the model's set-up (the group's change alone explains the rows, the tracker did
+            not move): the change is then determined by the check rows with the calibration's set-up.
         poses_to_add: configurations (k, n) rad to measure next, with the check rows given
             (:func:`~pin_kpi_oed.identification.check_poses.poses_to_add`): when the rows do not determine the
             set-up at the working configurations or the named group; empty otherwise.
@@ -116,6 +119,7 @@ class CheckResult(Result):
     honest_sigma_m: float = float("nan")
     setup_determined: bool = True
     poses_to_add: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
+    setup_held: bool = False
 
     def summary(self) -> str:
         """One line (mm, mrad)."""
@@ -132,7 +136,7 @@ class CheckResult(Result):
                                                              "(re-registered); the calibration holds")
             return f"check: {head}{tcp}; {stat}{pw}"
         if self.verdict == "robot_changed":
-            what = _change_text(self)
+            what = _change_text(self) + ("; the set-up unchanged (held)" if self.setup_held else "")
             return f"check: the robot changed: {what}; {stat}{pw}"
         if self.verdict == "discrepancy_level":
             return (f"check: the discrepancy's level changed: residuals {self.sigma_factor:.2f}x the model's sigma "
@@ -162,7 +166,7 @@ class CheckResult(Result):
                 "determined": self.determined, "sigma_factor": self.sigma_factor, "refit_chi2": self.refit_chi2,
                 "groups": self.groups, "registration_sigma_m": self.registration_sigma_m,
                 "honest_sigma_m": self.honest_sigma_m, "setup_determined": self.setup_determined,
-                "poses_to_add": np.asarray(self.poses_to_add).tolist()}
+                "poses_to_add": np.asarray(self.poses_to_add).tolist(), "setup_held": self.setup_held}
 
 
 def _change_text(r: CheckResult) -> str:
@@ -296,21 +300,46 @@ def check_calibration(model: CalibratedModel, data: MeasurementSet, *, station: 
                            time_s=time.perf_counter() - t0, **out)
     if not named["best"][3] and "poses_to_add" not in out and propose:
         out["poses_to_add"] = add()
-    return _changed(model, data, Q, named["best"], E_w, out, t0)
+    return _changed(model, data, Q, named["best"], E_w, out, t0, held=_held_fit(model, data, Q, old, Sigma,
+                                                                             named["best"], null, alpha))
+
+
+def _held_fit(model: CalibratedModel, data: MeasurementSet, Q: np.ndarray, old: str, Sigma: np.ndarray, best: tuple,
+              null: CheckNull, alpha: float) -> tuple | None:
+    """The named group fitted with the set-up *held* at the model's station ``old`` (the tracker did not move): (its
+    change, covariance of its basis coordinates, remaining χ²) when that simpler explanation passes its fit test at
+    α / :data:`FIT_SHARE` on 3m − r_g degrees of freedom, else None. The held set-up was determined by the
+    calibration's many rows, so the change is determined better than with the set-up re-fitted on the check rows."""
+    g, _, _, det = best
+    if not det:
+        return None
+    wm, p = model.station_model(old)
+    z0, F0 = _whiten(Sigma, data.position_m - model.predict(Q, data, station=old), wm.jacobian(p, Q)[:, :3, :])
+    A = F0[:, g.cols] @ g.basis
+    x, *_ = np.linalg.lstsq(A, z0, rcond=None)
+    rem = float(np.sum((z0 - A @ x) ** 2))
+    if not rem <= null.threshold(len(z0) - A.shape[1], alpha / FIT_SHARE):
+        return None
+    return g.basis @ x, np.linalg.pinv(A.T @ A), rem
 
 
 def _changed(model: CalibratedModel, data: MeasurementSet, Q: np.ndarray, best: tuple, E_w: np.ndarray,
-             out: dict, t0: float) -> CheckResult:
+             out: dict, t0: float, held: tuple | None = None) -> CheckResult:
     """The *robot changed* verdict of the named group: its change, the TCP displacement at the working
-    configurations, and the re-fitted model when the rows determine the group."""
+    configurations, and the re-fitted model when the rows determine the group (the set-up held when ``held``, the
+    fit of :func:`_held_fit`, is given; else re-registered on the check rows)."""
     g, x, cov, det = best
-    delta = g.basis @ x
+    delta = g.basis @ x if held is None else held[0]
+    cov = cov if held is None else held[1]
     std = np.sqrt(np.maximum(np.diag(g.basis @ cov @ g.basis.T), 0.0))
     E = E_w[:, g.cols]
     tcp_m = (float(np.linalg.norm(delta)) if g.kind == "tool"
              else float(np.sqrt(np.mean(np.sum((E @ delta).reshape(-1, 3) ** 2, axis=1)))))
     refit, T2 = (None, float("nan"))
-    if det:
+    if held is not None:
+        refit, T2 = _apply(model, data, g, delta), held[2]
+        out = {**out, "setup_held": True}
+    elif det:
         refit, T2 = _refit(model, data, Q, g, delta)
     if refit is not None:
         out = {**out, "model": refit}
@@ -422,6 +451,17 @@ def _name_group(crit: CheckPower, F: np.ndarray, z: np.ndarray, dof: int, alpha:
 def _refit(model: CalibratedModel, data: MeasurementSet, Q: np.ndarray, g: CheckGroup, delta: np.ndarray
            ) -> tuple[CalibratedModel, float]:
     """The model with the group's change applied and the set-up re-registered on the check rows; its χ²."""
+    reg = _register(_apply(model, data, g, delta), data)
+    Y, Sigma = _joint_honest(reg, Q, data)
+    wm, p = reg.station_model(CHECK_STATION)
+    z, F = _whiten(Sigma, data.position_m - Y, wm.jacobian(p, Q)[:, :3, :])
+    L = wm.layout
+    z = _project_out(z, F[:, L.tracker.start:L.tracker.stop])
+    return reg, float(z @ z)
+
+
+def _apply(model: CalibratedModel, data: MeasurementSet, g: CheckGroup, delta: np.ndarray) -> CalibratedModel:
+    """The model with the group's change applied (its stations' set-ups kept)."""
     if g.kind == "tool":
         setups = {k: dataclasses.replace(s, reflector_m=s.reflector_m + delta) for k, s in model.setups.items()}
         new = dataclasses.replace(model, setups=setups, tcp_m=model.tcp_m + delta)
@@ -431,10 +471,4 @@ def _refit(model: CalibratedModel, data: MeasurementSet, Q: np.ndarray, g: Check
         new = dataclasses.replace(model, joint_p=jp)
     new.history = list(model.history) + [{"step": "check", "data": data.source, "group": g.name,
                                           "change": delta.tolist()}]
-    reg = _register(new, data)
-    Y, Sigma = _joint_honest(reg, Q, data)
-    wm, p = reg.station_model(CHECK_STATION)
-    z, F = _whiten(Sigma, data.position_m - Y, wm.jacobian(p, Q)[:, :3, :])
-    L = wm.layout
-    z = _project_out(z, F[:, L.tracker.start:L.tracker.stop])
-    return reg, float(z @ z)
+    return new

@@ -200,7 +200,7 @@ class Monitor:
         jump = res.verdict == "setup_moved" and sum(i in self.rejected for i in range(first - 1, last)) >= len(win) / 2
         updated = jump or (self.refit and res.verdict == "robot_changed" and res.determined)
         if updated:
-            self._use(res.model, CHECK_STATION)
+            self._use(res.model, self.label if res.setup_held else CHECK_STATION)
         sw = self.sigma_work()
         zz = np.asarray(self.z)
         self.batches.append({"first_row": int(first), "last_row": int(last), "verdict": res.verdict, "chi2": res.chi2,
