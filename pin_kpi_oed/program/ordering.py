@@ -200,7 +200,9 @@ class ProgramOptions:
         time_limit_s: wall-clock cap of a routing solve (s): a safety net well above what a solve takes (a cap that
             binds would make the program depend on the machine's load).
         solutions: solutions a guided local search visits (its stopping rule: the same costs give the same tour).
-        max_rounds: tour solves at most.
+        max_rounds: tour solves of the lazy checks at most (every move of the last tour is checked and routed
+            whatever the limit, the tour re-solved while one has no route; rounds beyond it mostly trade
+            colliding moves for routes of similar cost).
         plan_checks: route-planning budget per colliding move while ordering (configurations
             checked); half of it for a pose's route home, four times it in the last attempt on
             the final tour.
@@ -215,7 +217,7 @@ class ProgramOptions:
     seed: int = 0
     time_limit_s: float = 20.0
     solutions: int = 30
-    max_rounds: int = 30
+    max_rounds: int = 20
     plan_checks: int = 15_000
     equivalents: bool = True
 
