@@ -92,6 +92,9 @@ def test_evaluate_scores_every_criterion(tmp_path):
     assert res.stdout.splitlines()[0] == (f"scored q_meas of {tmp_path / 'design.json'}: 40 measurement "
                                           "configurations, KPI at 1 working configuration(s)")
     assert d["design"] == {"file": str(tmp_path / "design.json"), "criterion": None, "n_meas": 40, "n_work": 1}
+    # a criterion this file cannot be scored under is named with its reason, never silently left out
+    assert "kpi_path" not in d["criteria"] and "working_paths" in d["not_scored"]["kpi_path"]
+    assert any(line.startswith("kpi_path") and "not scored: " in line for line in res.stdout.splitlines())
     doc = json.loads((tmp_path / "design.json").read_text())
     (tmp_path / "design.json").write_text(json.dumps({**doc, "q_meas_criterion": "kpi"}))
     res = run("evaluate", str(tmp_path / "design.json"))

@@ -536,11 +536,12 @@ for _cls in (KpiTrace, ParamTrace, DOptimality, EOptimality, ConditionNumber, O1
 
 
 def evaluate_all(model: Any, base: np.ndarray, Q: np.ndarray, E: np.ndarray | None,
-                 context: Any = None) -> dict[str, float]:
+                 context: Any = None, not_scored: dict[str, str] | None = None) -> dict[str, float]:
     """Every registered criterion for one design (NaN where undefined, e.g. kpi without E; inf if singular): those
     of the information matrix on the noise-only information, those of the configurations on ``context`` (a
     :class:`~pin_kpi_oed.oed.objective.DesignContext` or a design problem) when given and they can be built on it
-    (``kpi_gp`` needs a design problem's discrepancy: left out otherwise)."""
+    (``kpi_gp`` needs a design problem's discrepancy, ``kpi_path`` a cell's working paths: left out otherwise, each
+    with the reason in ``not_scored`` when given)."""
     from pin_kpi_oed.oed.covariance import prior_of
 
     F = model.weighted_jacobian(np.zeros(model.n_params), Q)[:, :, base].reshape(-1, base.size)
@@ -551,7 +552,9 @@ def evaluate_all(model: Any, base: np.ndarray, Q: np.ndarray, E: np.ndarray | No
             if context is not None:
                 try:
                     obj = crit.objective(context)
-                except InputError:
+                except InputError as exc:
+                    if not_scored is not None:
+                        not_scored[name] = str(exc)
                     continue
                 try:
                     out[name] = obj.value(Q)

@@ -41,6 +41,8 @@ class DesignScore(Result):
         setup: the set-up dict (robot, tracker, reflector, noise) when scored from a file, else empty.
         design: what was scored when scored from a file: ``file``, ``criterion`` (the file's ``q_meas_criterion``,
             None for a hand-written file), ``n_meas``, ``n_work``; else empty.
+        not_scored: the registered criteria of the configurations this design cannot be scored under, each with
+            the reason (``kpi_gp`` without a discrepancy, ``kpi_path`` without working paths).
     """
 
     trace_cs_m2: float
@@ -53,6 +55,7 @@ class DesignScore(Result):
     identifiable: list[str] = field(default_factory=list)
     setup: dict = field(default_factory=dict)
     design: dict = field(default_factory=dict)
+    not_scored: dict[str, str] = field(default_factory=dict)
 
     def to_dict(self) -> dict:
         """Plain JSON-able dict (SI units): the common result keys, the scores, ``setup`` and ``design`` when known."""
@@ -60,7 +63,8 @@ class DesignScore(Result):
         out.update({"design": self.design} if self.design else {})
         return {**out, **self.result_dict(), "trace_cs_m2": self.trace_cs_m2, "tcp_sigma_m": self.tcp_sigma_m,
                 "cov_s_m2": self.cov_s_m2.tolist(), "trace_cp": self.trace_cp, "criteria": self.criteria,
-                "rank": self.rank, "n_meas": self.n_meas, "identifiable": self.identifiable}
+                "rank": self.rank, "n_meas": self.n_meas, "identifiable": self.identifiable,
+                "not_scored": self.not_scored}
 
     def summary(self) -> str:
         """The design scored (from a file), every criterion with its unit and label, then tr(C_s) (mm²) and the TCP σ
@@ -74,6 +78,7 @@ class DesignScore(Result):
         for k, v in self.criteria.items():
             crit = CRITERIA.get(k)
             lines.append(f"{k:<7}{v: .6g}  [{crit.unit if crit else '?'}] {crit.label if crit else ''}".rstrip())
+        lines.extend(f"{k:<7}not scored: {why}" for k, why in self.not_scored.items())
         lines.append(f"tr(C_s) = {self.trace_cs_m2 * 1e6:.6g} mm^2   TCP sigma = {self.tcp_sigma_m * 1e6:.3f} um")
         return "\n".join(lines)
 
@@ -110,10 +115,11 @@ def score_design(model: TrackerModel, Q_meas: np.ndarray, Q_work: np.ndarray,
     E = E_full[:, b]
     C_p, C_s = design_covariances(model, b, Q_meas, E, p0, ident.base_names)
     t = Q_work.shape[0]
-    crit = evaluate_all(model, b, Q_meas, E, context=DesignContext(model, b, E, p0, Q_work))
+    not_scored: dict[str, str] = {}
+    crit = evaluate_all(model, b, Q_meas, E, context=DesignContext(model, b, E, p0, Q_work), not_scored=not_scored)
     return DesignScore(trace_cs_m2=float(np.trace(C_s)), tcp_sigma_m=float(np.sqrt(np.trace(C_s) / t)), cov_s_m2=C_s,
                        trace_cp=float(np.trace(C_p)), criteria=crit, rank=ident.rank, n_meas=Q_meas.shape[0],
-                       identifiable=ident.base_names, success=True, status="scored",
+                       identifiable=ident.base_names, not_scored=not_scored, success=True, status="scored",
                        message=f"{Q_meas.shape[0]} measurements, {ident.rank} identifiable parameters, "
                                f"{t} working configuration(s)",
                        time_s=time.perf_counter() - t0)
