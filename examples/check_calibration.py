@@ -5,7 +5,9 @@ A simulated UR10 calibration (σ = 20 µm per axis, a tool 50 mm off the flange 
 ``design_check`` chooses the 10 poses of most power against a change of 0.1 mm RMS at the working configurations
 (set-up re-registered on the same poses), printed against 10 random poses; ``check_calibration`` gives the verdict
 on the noisy rows of each event (χ² on 3·10 − 6 degrees of freedom at α = 0.05) and, for the changed robot, the
-re-fitted change with its standard deviation.
+re-fitted change with its standard deviation. Ten rows near one pose are judged too and name the poses to add;
+``monitor`` follows 300 rows measured during work while the tracker drifts by 20 µm per hour (each row predicted
+before it is used, the set-up filter's drift level estimated from the rows).
 
 Run:  python examples/check_calibration.py [--seed 0]
 (the same with the command line: ``pin-kpi-oed check design --model M --out poses.csv``, then
@@ -24,6 +26,7 @@ from pin_kpi_oed import load_robot
 from pin_kpi_oed.data.measurements import MeasurementSet
 from pin_kpi_oed.identification.check import check_calibration
 from pin_kpi_oed.identification.check_design import design_check
+from pin_kpi_oed.identification.monitor import monitor
 from pin_kpi_oed.studies.check_events import simulated_model
 
 SIGMA = 2e-5
@@ -50,6 +53,20 @@ def main(argv: list[str] | None = None) -> int:
         rows = MeasurementSet(list(rb.joint_names), d.Q, Y, source=name)
         r = check_calibration(model, rows, alpha=0.05, tolerance_m=1e-4, seed=args.seed)
         print(f"{name}: {r.summary()}")
+    # ten rows near one pose: judged, and the poses to add named (designed with the rows given)
+    Qn = d.Q[:1] + 0.03 * rng.standard_normal((10, rb.nq))
+    near = MeasurementSet(list(rb.joint_names), Qn, model.predict(Qn) + rng.normal(size=(10, 3)) * SIGMA,
+                          source="near one pose")
+    r = check_calibration(model, near, seed=args.seed)
+    print(f"rows near one pose: {r.summary()}")
+    # monitoring during work: 300 rows, the tracker drifting 20 µm per hour in x, one row a minute
+    Qm = 0.7 * rng.uniform(rb.q_lower, rb.q_upper, size=(300, rb.nq))
+    t = 60.0 * np.arange(300)
+    Ym = np.vstack([model.with_setup("A", dataclasses.replace(model.setups["A"], tracker_T_base=(
+        pin.SE3(model.setups["A"].tracker_T_base) * pin.exp6(np.r_[2e-5 * ti / 3600, 0, 0, 0, 0, 0])).homogeneous))
+        .predict(q[None], station="A") for q, ti in zip(Qm, t)]) + rng.normal(size=(300, 3)) * SIGMA
+    log = monitor(model, MeasurementSet(list(rb.joint_names), Qm, Ym, time_s=t, source="work"), every=10)
+    print(log.summary())
     return 0
 
 
