@@ -251,3 +251,29 @@ def test_coverage_advice_stays_within_the_joint_limits():
     vals = [float(x) for x in re.findall(r"(-?\d+\.\d+) \.\. (-?\d+\.\d+)", text)[0] + re.findall(
         r"(-?\d+\.\d+) \.\. (-?\d+\.\d+)", text)[1]]
     assert all(-2.9 <= v <= 2.9 for v in vals) and "panda_joint1" in text and " and " in text, text
+
+
+def test_coverage_advice_for_a_track_is_in_metres_and_never_wrapped():
+    """A linear track (m) is compared on the line: its ranges are min .. max within its 6.4 m travel (never wrapped
+    mod 2π, which would put 6.3 m next to 0.02 m) and the advice names them in m; a periodic wrist stays an arc in
+    rad."""
+    from pin_kpi_oed.diagnosis.transfer_gap import _joint_ranges, _poses_to_add
+    from pin_kpi_oed.identification.coverage import COVERAGE_TOL_RAD, covered_rows
+    from pin_kpi_oed.model.robot import load_robot
+
+    robot = load_robot("kr15_track")
+    rng = np.random.default_rng(1)
+    Qt = np.tile(robot.neutral(), (60, 1))
+    Qv = np.tile(robot.neutral(), (30, 1))
+    Qt[:, 0], Qv[:, 0] = rng.uniform(0.0, 3.0, 60), rng.uniform(5.0, 6.4, 30)
+    Qt[:, 4], Qv[:, 4] = rng.uniform(-3.0, 3.0, 60), rng.uniform(-3.0, 3.0, 30)
+    cov = covered_rows(Qt, Qv, COVERAGE_TOL_RAD, robot.periodic_joints)
+    joints = _joint_ranges(robot.joint_names, Qt, Qv, cov, robot.periodic_joints, robot.joint_units)
+    track = joints[0]
+    assert track["unit"] == "m" and not track["periodic"] and track["coverage"] == 0.0
+    assert 5.0 <= track["validate_min"] < track["validate_max"] <= 6.4
+    assert 0.0 <= track["train_min"] < track["train_max"] <= 3.0
+    assert 5.0 <= track["uncovered_min"] and track["uncovered_max"] <= 6.4
+    assert joints[4]["unit"] == "rad" and joints[4]["periodic"]
+    text = _poses_to_add(joints, np.full(30, 1e-4), np.arange(30), 30)["text"]
+    assert f"joint_e1 {track['uncovered_min']:.2f} .. {track['uncovered_max']:.2f} m" in text, text

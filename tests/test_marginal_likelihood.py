@@ -65,8 +65,9 @@ def test_gradient_matches_finite_differences():
         assert (vp - vm) / (2 * eps) == pytest.approx(g[k], rel=1e-5, abs=1e-5)
 
 
-def _sklearn_hyper_fit(Q, Y, opts, joint_amplitude, min_noise=1e-5):
+def _sklearn_hyper_fit(Q, Y, opts, joint_amplitude, min_noise=1e-5, linear=None, joint_span=None):
     """The optimisation the marginal likelihood on pairs replaced: scikit-learn's regressor, L-BFGS-B."""
+    assert linear is None, "the scikit-learn reference knows no linear joints"
     import warnings
 
     from scipy.optimize import minimize

@@ -119,7 +119,7 @@ class DiagnosisReport(Result):
         transfer: with validation data (:func:`pin_kpi_oed.diagnosis.transfer_gap.transfer_section`; with
             ``--model-out``, ``model_sigma``: the written model's σ scored on the validation rows, the same σ as
             ``predict``):
-            per-joint ranges of train and validation (rad, wrapped as the coverage), coverage per
+            per-joint ranges of train and validation (rad / m; a periodic joint wrapped as the coverage), coverage per
             joint and overall, held-out RMS inside / outside the coverage, before / after the
             set-up registration (m), the predicted TCP σ at the validation configurations vs the
             observed error, the classification of the gap (``extrapolation``, ``set-up change``,
@@ -236,11 +236,12 @@ class DiagnosisReport(Result):
                                                     if hs.get("sigma_scale", 1.0) > 1.0 else ""))
             if tf.get("poses_to_add", {}).get("text"):
                 out.append(f"    to fix it: {tf['poses_to_add']['text']}")
-            out.append(f"    {'joint':<22}{'train range rad':>20}{'validation range rad':>24}{'covered':>9}"
-                       "   (angles wrapped to [-pi, pi) as the coverage; smallest arc, may end beyond pi)")
+            out.append(f"    {'joint':<22}{'train range':>20}{'validation range':>24}{'covered':>9}  unit"
+                       "   (a periodic joint's wrapped to [-pi, pi) as the coverage: smallest arc, may end beyond pi)")
             for j in tf["joints"]:
                 out.append(f"    {j['joint']:<22}{j['train_min']:>9.3f} .. {j['train_max']:<7.3f}"
-                           f"{j['validate_min']:>11.3f} .. {j['validate_max']:<9.3f}{_pct(j['coverage']):>9}")
+                           f"{j['validate_min']:>11.3f} .. {j['validate_max']:<9.3f}{_pct(j['coverage']):>9}  "
+                           f"{j.get('unit', 'rad')}")
         ts = self.term_selection
         if ts:
             out.append(f"  term selection ({', '.join(ts['candidates'])}; orders 1..{ts['max_order']}, "

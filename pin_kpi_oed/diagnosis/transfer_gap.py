@@ -10,7 +10,8 @@ three reasons, told apart by numbers the report prints:
   can be modelled to);
 * **extrapolation** — the validation configurations lie outside what the training data
   determine: fewer than :data:`EXTRAPOLATION_COVERAGE` of the rows lie within
-  :data:`COVERAGE_TOL_RAD` of a training angle on every joint (angles wrapped to [−π, π)), or the
+  :data:`COVERAGE_TOL_RAD` of a training value on every joint (rad; m on a linear track; wrapped mod 2π
+  for a periodic joint only, ``Robot.periodic_joints``), or the
   predicted TCP uncertainty there is a large share of the observed error
   (σ_pred ≥ :data:`PREDICTED_SHARE` × sqrt(RMS² − floor²));
 * **unmodelled effect** — the configurations are covered and the model is confident there
@@ -21,11 +22,13 @@ with V_ia = F_ia C F_iaᵀ the weighted prediction variance from the training fi
 covariance C (eq. 19/25 with E = F; in transfer mode the robot and effect parameters only — the
 set-up is re-registered) and σ_ia the noise. It is compared with the observed held-out RMS.
 
-For "extrapolation" the report says which extra poses would fix it: per joint, the circular
-range of the validation angles no training angle covers (the range to measure), and the
-validation rows with the largest σ_pred (their 1-based row numbers in the validation file).
+For "extrapolation" the report says which extra poses would fix it: per joint, the validation values no
+training value covers, as intervals within the joint's limits (the ranges to measure, in the joint's unit: rad,
+or m for a track), and the validation rows with the largest σ_pred (their 1-based row numbers in the validation
+file). The per-joint train / validation ranges are the smallest arc for a periodic joint (wrapped as the
+coverage), the plain min .. max for any other.
 
-Units: SI (m, rad); the text prints mm and µm.
+Units: SI (m, rad); the text prints mm and µm, joint values in rad (revolute) or m (prismatic).
 """
 
 from __future__ import annotations
@@ -109,11 +112,13 @@ class _GapNumbers:
     excess: float
     floor_m: float
     registered: bool
+    track: bool = False
 
 
 def _coverage(robot: Any, train: MeasurementSet, ho_data: MeasurementSet
               ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Aligned training / validation configurations (rad) and which validation angles a training angle covers."""
+    """Aligned training / validation configurations (rad / m) and which validation values a training value covers
+    (wrapped for a periodic joint only)."""
     from pin_kpi_oed.diagnosis.selection import covered_rows
     from pin_kpi_oed.identification.problem import align_data
 
@@ -133,17 +138,28 @@ def uncovered_intervals(q: np.ndarray, q_train: np.ndarray) -> list[tuple[float,
     return [(float(a[i]), float(a[k])) for i, k in zip(starts, ends)]
 
 
-def _joint_ranges(joint_names: Sequence[str], Qt: np.ndarray, Qv: np.ndarray, cov: np.ndarray) -> list[dict]:
-    """Per joint: wrapped training / validation ranges, coverage and the uncovered validation values (rad, as measured:
-    within the joint's limits), as their range and as intervals."""
+def _span(q: np.ndarray, periodic: bool) -> tuple[float, float]:
+    """The range of joint values ``q``: the smallest arc for a periodic joint, else (min, max); (nan, nan) for none."""
+    if periodic:
+        return circular_range(q)
+    return (float(np.min(q)), float(np.max(q))) if np.size(q) else (float("nan"), float("nan"))
+
+
+def _joint_ranges(joint_names: Sequence[str], Qt: np.ndarray, Qv: np.ndarray, cov: np.ndarray,
+                  periodic: np.ndarray | None = None, units: Sequence[str] | None = None) -> list[dict]:
+    """Per joint: training / validation ranges (the smallest arc, wrapped, for a ``periodic`` joint — None: every
+    joint —, else min .. max), coverage and the uncovered validation values (as measured: within the joint's limits),
+    as their range and as intervals, in the joint's unit (``units``: ``rad`` / ``m``; None: rad)."""
     per_joint = cov.mean(axis=0)
+    per = np.ones(len(joint_names), bool) if periodic is None else np.asarray(periodic, bool)
     joints = []
     for j, n in enumerate(joint_names):
-        tlo, thi = circular_range(Qt[:, j])
-        vlo, vhi = circular_range(Qv[:, j])
+        tlo, thi = _span(Qt[:, j], bool(per[j]))
+        vlo, vhi = _span(Qv[:, j], bool(per[j]))
         iv = uncovered_intervals(Qv[~cov[:, j], j], Qt[:, j])
         ulo, uhi = (iv[0][0], iv[-1][1]) if iv else (float("nan"), float("nan"))
-        joints.append({"joint": n, "train_min": tlo, "train_max": thi, "validate_min": vlo, "validate_max": vhi,
+        joints.append({"joint": n, "unit": "rad" if units is None else str(units[j]), "periodic": bool(per[j]),
+                       "train_min": tlo, "train_max": thi, "validate_min": vlo, "validate_max": vhi,
                        "coverage": float(per_joint[j]), "uncovered_min": ulo, "uncovered_max": uhi,
                        "uncovered_intervals": [list(x) for x in iv], "n_uncovered": int(np.sum(~cov[:, j]))})
     return joints
@@ -161,7 +177,8 @@ def _gap_texts(g: _GapNumbers, final_label: str) -> tuple[str, str, str]:
     """The coverage, predicted-vs-observed and registration sentences of the reason (mm, µm)."""
     um = 1e6
 
-    cov_txt = (f"{100 * g.overall:.0f}% of the validation rows within {COVERAGE_TOL_RAD} rad of a training angle on "
+    tol = f"{COVERAGE_TOL_RAD} rad" + (f" ({COVERAGE_TOL_RAD} m on a track)" if g.track else "")
+    cov_txt = (f"{100 * g.overall:.0f}% of the validation rows within {tol} of a training value on "
                f"every joint; held-out RMS {_f3(g.rms)} mm (inside the coverage {_f3(g.rms_in)}, outside "
                f"{_f3(g.rms_out)} mm); training RMS {_f3(g.train_rms)} mm")
     model_txt = f" ({final_label})" if final_label else ""
@@ -178,14 +195,14 @@ def _poses_to_add(joints: Sequence[dict], use_sp: np.ndarray, ho_rows: np.ndarra
     """Joint ranges to measure and the validation rows (1-based) with the largest predicted σ (m)."""
     um = 1e6
     worst = np.argsort(-use_sp)[:N_WORST]
-    ranges = [{"joint": j["joint"], "min": j["uncovered_min"], "max": j["uncovered_max"],
+    ranges = [{"joint": j["joint"], "unit": j.get("unit", "rad"), "min": j["uncovered_min"], "max": j["uncovered_max"],
                "intervals": j["uncovered_intervals"], "n_rows": j["n_uncovered"]}
               for j in joints if j["n_uncovered"] > 0.05 * n_rows]
     return {"joint_ranges": ranges, "rows": (np.asarray(ho_rows)[worst] + 1).tolist(),
             "rows_sigma_m": use_sp[worst].tolist(),
             "text": ("add training poses covering " + (", ".join(
                 f"{r['joint']} " + " and ".join(f"{lo:.2f} .. {hi:.2f}" for lo, hi in r["intervals"][:3])
-                + (f" (+{len(r['intervals']) - 3} more)" if len(r["intervals"]) > 3 else "") + " rad"
+                + (f" (+{len(r['intervals']) - 3} more)" if len(r["intervals"]) > 3 else "") + f" {r['unit']}"
                 for r in ranges) or "the validation angles")
                 + f"; or measure first the {len(worst)} validation configurations with the largest predicted "
                   f"sigma ({use_sp[worst[0]] * um:.0f} .. {use_sp[worst[-1]] * um:.0f} µm): rows "
@@ -232,8 +249,8 @@ def transfer_section(result: Any, train: MeasurementSet, ho_data: MeasurementSet
             the geometric training RMS).
 
     Returns:
-        ``classification``, ``reason``, ``joints`` (per joint: wrapped train / validation ranges,
-        coverage, the uncovered validation range), coverage numbers, RMS inside / outside, the
+        ``classification``, ``reason``, ``joints`` (per joint: train / validation ranges — wrapped for a periodic
+        joint —, coverage, the uncovered validation range, its ``unit``), coverage numbers, RMS inside / outside, the
         predicted σ (RMS, max) vs the observed RMS, ``poses_to_add`` (extrapolation only).
     """
     robot = result.model.robot
@@ -249,8 +266,8 @@ def transfer_section(result: Any, train: MeasurementSet, ho_data: MeasurementSet
                     unreg=_unregistered_rms(result, ho_data, Qv) if registered else float("nan"),
                     sp_rms=_rms(use_sp), sp_in=_rms(use_sp[inside]), sp_out=_rms(use_sp[~inside]),
                     excess=float(np.sqrt(max(rms ** 2 - floor_m ** 2, 0.0))), floor_m=floor_m,
-                    registered=bool(registered))
-    joints = _joint_ranges(robot.joint_names, Qt, Qv, cov)
+                    registered=bool(registered), track=not bool(np.all(robot.is_revolute)))
+    joints = _joint_ranges(robot.joint_names, Qt, Qv, cov, robot.periodic_joints, robot.joint_units)
     cls, why, poses = _classify(g, _gap_texts(g, final_label), joints, use_sp, ho_rows, len(ho_data))
     return {"classification": cls, "reason": why, "joints": joints, "coverage_tol_rad": COVERAGE_TOL_RAD,
             "coverage_per_joint": [float(c) for c in cov.mean(axis=0)], "coverage_all_joints": g.overall,

@@ -22,17 +22,20 @@ __all__ = ["fit_discrepancy"]
 
 
 def _hyper_fit(Q: np.ndarray, Y: np.ndarray, opts: DiscrepancyOptions, joint_amplitude: float,
-               min_noise: float = 1e-5) -> tuple[JointKernel, float]:
+               min_noise: float = 1e-5, linear: np.ndarray | None = None,
+               joint_span: np.ndarray | None = None) -> tuple[JointKernel, float]:
     """Maximum marginal likelihood of the kernel and the white level on a seeded subset (normalised Y),
     from a start whose additive (one-joint) amplitudes are ``joint_amplitude``; the white level at least
     ``min_noise`` (the data's stated noise in normalised units)
-    (:func:`~pin_kpi_oed.discrepancy.marginal.maximise_marginal_likelihood`)."""
+    (:func:`~pin_kpi_oed.discrepancy.marginal.maximise_marginal_likelihood`). Length scales start at 1 rad (whole
+    configuration) and 0.5 rad (one joint), a ``linear`` joint's at the same share of its travel ``joint_span``
+    (m) / 2π (:meth:`JointKernel.for_joints`)."""
     from pin_kpi_oed.discrepancy.marginal import maximise_marginal_likelihood
 
     d = Q.shape[1]
     rng = np.random.default_rng(opts.seed)
     sub = rng.permutation(len(Q))[:opts.n_fit]
-    k0 = JointKernel(0.7, np.ones(d), np.full(d, joint_amplitude), np.full(d, 0.5))
+    k0 = JointKernel.for_joints(0.7, np.ones(d), np.full(d, joint_amplitude), np.full(d, 0.5), linear, joint_span)
     kernel, noise, _ = maximise_marginal_likelihood(Q[sub], Y[sub], k0, max(0.3, 1.5 * min_noise),
                                                     (min_noise, max(10.0, 4.0 * min_noise)), opts.max_iter,
                                                     opts.restarts, opts.seed)
@@ -126,7 +129,8 @@ def _kfold(kernel: JointKernel, noise: float, Q: np.ndarray, Y: np.ndarray, scal
 
 def fit_discrepancy(Q: np.ndarray, R: np.ndarray, joint_names: Sequence[str],
                     options: DiscrepancyOptions | None = None, *, n_params: int = 0,
-                    noise_floor_m: np.ndarray | None = None, periodic: np.ndarray | None = None) -> Discrepancy | None:
+                    noise_floor_m: np.ndarray | None = None, periodic: np.ndarray | None = None,
+                    linear: np.ndarray | None = None, joint_span: np.ndarray | None = None) -> Discrepancy | None:
     """Fit δ to the residuals of a parametric fit.
 
     Args:
@@ -138,6 +142,9 @@ def fit_discrepancy(Q: np.ndarray, R: np.ndarray, joint_names: Sequence[str],
         noise_floor_m: the data's stated noise per axis (m): no white level (of the white kind or the Gaussian
             process's) below it. None: no floor (the noise level is unknown).
         periodic: (d,) bool, joints compared mod 2π (``Robot.periodic_joints``); None: every joint.
+        linear: (d,) bool, the linear (prismatic) joints, on the line in the kernel (``~Robot.is_revolute``); None:
+            none. joint_span: (d,) the joints' travel (upper − lower limit, m for a linear joint): a linear joint's
+            starting length scales and bounds follow it; None: the training values' own spread.
 
     Returns:
         The :class:`Discrepancy` (``decision`` says what was decided and why), or None for mode ``none``.
@@ -174,16 +181,10 @@ def fit_discrepancy(Q: np.ndarray, R: np.ndarray, joint_names: Sequence[str],
     if noise_floor_m is not None:
         min_noise = max(min_noise, float(np.max((np.asarray(noise_floor_m, float) / scale) ** 2)))
     Y = (R - mean) / scale
-    best = None
     cv_rows = kfold_rows(n, opts)
-    for a0 in opts.starts:
-        kernel, noise = _hyper_fit(Q, Y, opts, float(a0), min_noise)
-        keep: dict = {}  # the factor of all rows (reused by an exact posterior): only when the check uses them all
-        cv = _kfold(kernel, noise, Q[cv_rows], Y[cv_rows], scale, opts, names, keep if len(cv_rows) == n else None,
-                    coverage.periodic)
-        if best is None or cv["mean_with_m"] < best[2]["mean_with_m"]:
-            best = (kernel, noise, cv, keep.get("chol"))
-    kernel, noise, cv, chol = best
+    span = np.ptp(Q, axis=0) if joint_span is None else np.asarray(joint_span, float)
+    kernel, noise, cv, chol = _best_start(Q, Y, scale, opts, names, min_noise, cv_rows, coverage.periodic,
+                                          (linear, span))
     gain = 1.0 - cv["mean_with_m"] / cv["mean_without_m"]
     cv["gain"] = float(gain)
     words = (f"{cv['folds']}-fold held-out mean (near-duplicate poses in one fold) {cv['mean_without_m'] * 1e3:.4f} "
@@ -204,6 +205,23 @@ def fit_discrepancy(Q: np.ndarray, R: np.ndarray, joint_names: Sequence[str],
     out.decision = (f"discrepancy: Gaussian process fitted ({post['kind']}, {n} rows): {words}")
     out.time_s = time.perf_counter() - t0
     return out
+
+
+def _best_start(Q: np.ndarray, Y: np.ndarray, scale: np.ndarray, opts: DiscrepancyOptions, names: list,
+                min_noise: float, cv_rows: np.ndarray, periodic: np.ndarray | None, joints: tuple) -> tuple:
+    """The hyper-parameters from each of ``opts.starts`` (:func:`_hyper_fit`; ``joints`` = (linear mask, travel)),
+    the one of least K-fold held-out mean error (:func:`_kfold` on ``cv_rows``): (kernel, white level, the check, the
+    Cholesky factor of all rows or None)."""
+    best = None
+    for a0 in opts.starts:
+        kernel, noise = _hyper_fit(Q, Y, opts, float(a0), min_noise, *joints)
+        keep: dict = {}  # the factor of all rows (reused by an exact posterior): only when the check uses them all
+        cv = _kfold(kernel, noise, Q[cv_rows], Y[cv_rows], scale, opts, names,
+                    keep if len(cv_rows) == len(Q) else None, periodic)
+        if best is None or cv["mean_with_m"] < best[2]["mean_with_m"]:
+            best = (kernel, noise, cv, keep.get("chol"))
+    assert best is not None, "DiscrepancyOptions.starts is empty"
+    return best
 
 
 def _dof_rescale(post: dict, scale: np.ndarray, n: int, n_params: int, cv: dict) -> np.ndarray:

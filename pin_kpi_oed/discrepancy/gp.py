@@ -424,14 +424,19 @@ class Discrepancy(DiscrepancyModel):
         return d
 
     @classmethod
-    def from_dict(cls, d: Any, joint_names: Sequence[str], where: str = "discrepancy") -> Discrepancy:
-        """Rebuild from :meth:`to_dict` output, every field checked against the robot's joints.
+    def from_dict(cls, d: Any, joint_names: Sequence[str], where: str = "discrepancy",
+                  joint_units: Sequence[str] | None = None) -> Discrepancy:
+        """Rebuild from :meth:`to_dict` output, every field checked against the robot's joints (and their units
+        ``rad`` / ``m``, when given, against the kernel's linear joints: :meth:`JointKernel.check_units`).
 
         Raises:
             InputError: a damaged block (the field named, with ``where``).
         """
         try:
-            return cls._from_dict(d, list(joint_names), where)
+            out = cls._from_dict(d, list(joint_names), where)
+            if joint_units is not None and out.kernel is not None:
+                out.kernel.check_units(list(joint_units), list(joint_names), f"{where}.kernel")
+            return out
         except ValueError as exc:
             raise InputError(f"{exc}") from None
 

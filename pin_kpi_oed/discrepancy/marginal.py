@@ -13,7 +13,7 @@ regressor adds) and m output columns Y (n, m) sharing it,
 
 with L the Cholesky factor of Σ and θ the logarithms of the hyper-parameters in scikit-learn's order (c, a_j,
 ℓ_j, L_j, then w). Every derivative of the kernel is a product of its own parts with the chords
-D_ij = 4 sin²(Δ_j/2) (see the kernel's module):
+D_ij = 4 sin²(Δ_j/2) (Δ_j² for a linear joint, see the kernel's module):
 
 .. math::
 
@@ -38,7 +38,7 @@ import numpy as np
 from scipy import linalg as sla
 from scipy.optimize import minimize
 
-from pin_kpi_oed.discrepancy.kernel import JointKernel
+from pin_kpi_oed.discrepancy.kernel import JointKernel, linear_mask
 
 __all__ = ["MarginalLikelihood", "maximise_marginal_likelihood"]
 
@@ -50,17 +50,21 @@ class MarginalLikelihood:
     """−log p(Y | θ) and its gradient for one training set (see the module).
 
     Args:
-        Q: training configurations (n, d) rad.
+        Q: training configurations (n, d) rad (m for a linear joint).
         Y: normalised residuals (n, m).
+        linear: (d,) bool, the kernel's linear joints (``JointKernel.linear``); None: none.
     """
 
-    def __init__(self, Q: np.ndarray, Y: np.ndarray) -> None:
+    def __init__(self, Q: np.ndarray, Y: np.ndarray, linear: np.ndarray | None = None) -> None:
         Q = np.atleast_2d(np.asarray(Q, float))
         self.Y = np.asarray(Y, float).reshape(len(Q), -1)
         self.n, self.d = Q.shape
         i, j = np.triu_indices(self.n, 1)
         self.flat = i + j * self.n                                       # (i, j), i < j, in column-major order
         self.D = 2.0 - 2.0 * np.cos(Q.T[:, i] - Q.T[:, j])                 # (d, pairs) chords 4 sin²(Δ/2)
+        lin = linear_mask(linear, self.d)
+        if lin is not None:
+            self.D[lin] = (Q.T[lin][:, i] - Q.T[lin][:, j]) ** 2             # a linear joint's Δ²
         self.S = np.zeros((self.n, self.n), order="F")                    # Σ's upper triangle, factored in place
         self.nfev = 0
 
@@ -118,13 +122,17 @@ def maximise_marginal_likelihood(Q: np.ndarray, Y: np.ndarray, kernel0: JointKer
     Returns:
         (kernel, white level w (normalised variance), log marginal likelihood at it).
     """
-    f = MarginalLikelihood(Q, Y)
+    f = MarginalLikelihood(Q, Y, kernel0.linear)
     d = f.d
     c, L0, a0, ell0 = kernel0.parts(d)
     theta0 = np.log(np.concatenate([[c], a0, ell0, L0, [noise0]]))
-    b = [kernel0.amplitude_bounds] + [kernel0.joint_amplitude_bounds] * d + \
-        [kernel0.joint_length_scale_bounds] * d + [kernel0.length_scale_bounds] * d + [noise_bounds]
-    bounds = np.log(np.asarray(b, float))
+
+    def rows(b: Any) -> np.ndarray:                                       # (2,) or per joint (d, 2)
+        return np.broadcast_to(np.asarray(b, float).reshape(-1, 2), (d, 2))
+    b = np.vstack([np.asarray(kernel0.amplitude_bounds, float).reshape(1, 2), rows(kernel0.joint_amplitude_bounds),
+                   rows(kernel0.joint_length_scale_bounds), rows(kernel0.length_scale_bounds),
+                   np.asarray(noise_bounds, float).reshape(1, 2)])
+    bounds = np.log(b)
     starts = [theta0]
     rng = np.random.RandomState(int(seed))
     starts += [rng.uniform(bounds[:, 0], bounds[:, 1]) for _ in range(int(restarts))]
@@ -135,5 +143,5 @@ def maximise_marginal_likelihood(Q: np.ndarray, Y: np.ndarray, kernel0: JointKer
             best = res
     c, a, ell, L, w = f.split(best.x)
     kernel = JointKernel(c, L, a, ell, kernel0.amplitude_bounds, kernel0.length_scale_bounds,
-                         kernel0.joint_amplitude_bounds, kernel0.joint_length_scale_bounds)
+                         kernel0.joint_amplitude_bounds, kernel0.joint_length_scale_bounds, kernel0.linear)
     return kernel, w, -float(best.fun)

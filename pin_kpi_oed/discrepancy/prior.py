@@ -52,10 +52,15 @@ class DiscrepancyPrior(DiscrepancyModel):
                  f"{', '.join(f'{v * 1e6:.1f}' for v in self.white_sigma_m)} um (base frame x, y, z)")
         if self.kernel is not None:
             kd = self.kernel.to_dict()
-            words += (f"; kernel amplitude {kd['amplitude']:.3g}, length scales "
-                      f"{', '.join(f'{v:.2g}' for v in kd['length_scale_rad'])} rad, joint amplitudes "
-                      f"{', '.join(f'{v:.2g}' for v in kd['joint_amplitude'])}, joint length scales "
-                      f"{', '.join(f'{v:.2g}' for v in kd['joint_length_scale_rad'])} rad")
+            units = kd.get("joint_units")
+
+            def lengths(key: str) -> str:
+                if units is None:
+                    return f"{', '.join(f'{v:.2g}' for v in kd[key + '_rad'])} rad"
+                return ", ".join(f"{v:.2g} {u}" for v, u in zip(kd[key], units))
+            words += (f"; kernel amplitude {kd['amplitude']:.3g}, length scales {lengths('length_scale')}, joint "
+                      f"amplitudes {', '.join(f'{v:.2g}' for v in kd['joint_amplitude'])}, joint length scales "
+                      f"{lengths('joint_length_scale')}")
         else:
             words += "; white only (no correlation between poses)"
         return words

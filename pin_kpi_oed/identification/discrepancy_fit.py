@@ -115,7 +115,9 @@ def result_discrepancy(result: Any, data: MeasurementSet, options: Any = "auto",
     try:
         disc = fit_discrepancy(Q[rows], R, list(result.model.robot.joint_names), opts, n_params=len(result.names),
                                noise_floor_m=stated_noise_m(result, data),
-                               periodic=result.model.robot.periodic_joints)
+                               periodic=result.model.robot.periodic_joints,
+                               linear=~result.model.robot.is_revolute,
+                               joint_span=result.model.robot.q_upper - result.model.robot.q_lower)
     except InputError as exc:
         left = np.setdiff1d(np.arange(len(Q)), rows)
         flagged = left if left.size else position_outliers(result)

@@ -187,6 +187,7 @@ class Setup:
 
 
 @dataclass
+
 class CalibratedModel:
     """A calibrated robot with the set-up of every station: predicts tracker readings.
 
@@ -508,7 +509,8 @@ class CalibratedModel:
         fit = _checked_fit(d.get("fit"), where)
         disc = None
         if d.get("discrepancy") is not None:
-            disc = Discrepancy.from_dict(d["discrepancy"], robot.joint_names, f"{where}: discrepancy")
+            disc = Discrepancy.from_dict(d["discrepancy"], robot.joint_names, f"{where}: discrepancy",
+                                         robot.joint_units)
         q_work = d.get("q_work")
         if q_work is not None:
             try:

@@ -115,7 +115,7 @@ def uncovered_ranges(model: CalibratedModel, Q: np.ndarray, limit: int = 3) -> l
         if share[j] < 0.05:
             continue
         a = Q[out_rows[:, j], j]  # the rows' own values: within the joint's limits
-        out.append(f"{model.robot.joint_names[j]} {a.min():.2f}..{a.max():.2f} rad "
+        out.append(f"{model.robot.joint_names[j]} {a.min():.2f}..{a.max():.2f} {model.robot.joint_units[j]} "
                    f"({int(out_rows[:, j].sum())} of {len(Q)} rows)")
     return out
 

@@ -23,7 +23,9 @@ size of the honest σ, not which design is optimal. The classes:
 * ``generic`` (a robot of unknown class): S = 0.1 mm, white 10 µm, whatever the reach — the package's
   :func:`default_discrepancy`.
 
-The reach is :meth:`~pin_kpi_oed.model.robot.Robot.reach` (a linear track's travel included).
+The reach is :meth:`~pin_kpi_oed.model.robot.Robot.reach` (a linear track's travel included). A linear joint
+(prismatic, in m) enters the kernel on the line, its length scales the same shares of its travel / 2π (m): a
+6.4 m track gets 1.02 m and 0.51 m (:meth:`~pin_kpi_oed.discrepancy.kernel.JointKernel.for_joints`).
 
 The class is taken from the robot's name (``ur*``, ``panda*``: collaborative; ``kr*``: industrial) unless given;
 the design output states the class, the numbers and that they are an assumption.
@@ -114,7 +116,10 @@ def class_discrepancy(robot, robot_class: str | None = None) -> DiscrepancyPrior
     c = ROBOT_CLASSES[key]
     reach = float(robot.reach())
     S = c.scale_for(reach)
-    base = default_discrepancy(robot.nq)
+    rev = getattr(robot, "is_revolute", None)
+    base = default_discrepancy(robot.nq, None if rev is None else ~np.asarray(rev, bool),
+                               None if rev is None else np.asarray(robot.q_upper, float) - np.asarray(robot.q_lower,
+                                                                                                     float))
     how = "given" if given else f"from the name '{robot.name}'"
     grow = "" if c.reach_m is None else f" = {c.scale_m * 1e3:g} mm x max(1, reach {reach:.2f} m / {c.reach_m:g} m)"
     source = (f"default for the {c.name} class, {how}: S = {S * 1e3:.3g} mm{grow}; basis: {c.basis}; not a fit "
@@ -122,7 +127,8 @@ def class_discrepancy(robot, robot_class: str | None = None) -> DiscrepancyPrior
     return DiscrepancyPrior(base.kernel, np.full(3, S), (c.white_m / c.scale_m) ** 2, source)
 
 
-def default_discrepancy(n_joints: int) -> DiscrepancyPrior:
+def default_discrepancy(n_joints: int, linear: np.ndarray | None = None,
+                        span: np.ndarray | None = None) -> DiscrepancyPrior:
     """The documented default before any measurement, whatever the robot: the ``generic`` class of
     :data:`ROBOT_CLASSES` with the kernel :data:`KERNEL_SHAPE`.
 
@@ -130,13 +136,16 @@ def default_discrepancy(n_joints: int) -> DiscrepancyPrior:
     whole-configuration part (c² = 0.5, L_j = 1 rad) and half into one-joint parts (a_j² = 0.5/d, ℓ_j = 0.5 rad).
     A stated assumption of the order of the residuals after geometric calibration of industrial arms (the
     real UR10 data of this package leave 0.1-0.5 mm); pass ``--model`` with a fitted discrepancy for a real one.
+    A ``linear`` joint (prismatic) is on the line, its length scales those shares of its travel ``span`` (m) / 2π.
     """
     share = KERNEL_SHAPE["product_share"]
-    k = JointKernel(np.sqrt(share), np.full(n_joints, KERNEL_SHAPE["length_scale_rad"]),
-                    np.full(n_joints, np.sqrt((1 - share) / n_joints)),
-                    np.full(n_joints, KERNEL_SHAPE["joint_length_scale_rad"]))
+    k = JointKernel.for_joints(np.sqrt(share), np.full(n_joints, KERNEL_SHAPE["length_scale_rad"]),
+                               np.full(n_joints, np.sqrt((1 - share) / n_joints)),
+                               np.full(n_joints, KERNEL_SHAPE["joint_length_scale_rad"]), linear, span)
     g = ROBOT_CLASSES["generic"]
     return DiscrepancyPrior(k, np.full(3, g.scale_m), (g.white_m / g.scale_m) ** 2,
                             f"default: S = {g.scale_m * 1e3:g} mm, white {g.white_m * 1e6:g} um per axis, length "
                             f"scales {KERNEL_SHAPE['length_scale_rad']:g} rad (whole configuration) and "
-                            f"{KERNEL_SHAPE['joint_length_scale_rad']:g} rad (one joint); an assumption, not a fit")
+                            f"{KERNEL_SHAPE['joint_length_scale_rad']:g} rad (one joint)"
+                            + ("; a linear joint's x its travel / 2pi in m" if k.linear is not None else "")
+                            + "; an assumption, not a fit")

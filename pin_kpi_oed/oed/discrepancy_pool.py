@@ -62,7 +62,7 @@ class GreedyState(PoolState):
             self.T, self.M.copy()
         self.eps = eps_info
         self.kcols: dict[int, np.ndarray] = {}                   # k(candidates, i), shared by the copies
-        self.trig: tuple[np.ndarray, np.ndarray] | None = None
+        self.trig: tuple[np.ndarray, ...] | None = None
         self.V = np.zeros((0, N))                                # K_S(x, y) = k(x, y) − Σ_r sgn_r V_r(x) V_r(y)
         self.sgn = np.zeros(0)
         self.chosen: list[int] = []
@@ -72,14 +72,14 @@ class GreedyState(PoolState):
         return len(self.Qc)
 
     def kcol(self, i: int) -> np.ndarray:
-        """k(candidate i, candidates) (N,), cached (the candidates' cos and sin computed once)."""
+        """k(candidate i, candidates) (N,), cached (the candidates' cos and sin computed once, ``features``)."""
         if i not in self.kcols:
             k = self.disc.kernel
             if k is None:
                 self.kcols[i] = np.zeros(len(self.Qc))
             else:
                 if self.trig is None:
-                    self.trig = (np.cos(self.Qc), np.sin(self.Qc))
+                    self.trig = k.features(self.Qc)
                 self.kcols[i] = k.against(self.Qc[i:i + 1], self.trig)[0]
         return self.kcols[i]
 
