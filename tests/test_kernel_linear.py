@@ -177,3 +177,41 @@ def test_fit_on_the_line_predicts_far_along_the_track_with_an_honest_sigma():
     assert score["line"][0] <= score["circle"][0], score
     assert 0.67 <= score["line"][1] <= 1.5, score
     assert score["circle"][1] > 3.0, score            # the old kernel: the far end taken for the start, overconfident
+
+
+def test_identified_track_model_file_keeps_the_line(tmp_path):
+    """identify on a simulated KR 15 on its track whose rail is wavy (0.1 mm along the 6.4 m): the fitted kernel has
+    the track on the line, its model file says so, and reads back to the same σ; the file refuses a robot whose
+    joint is revolute where the kernel's is in m."""
+    import json
+
+    from pin_kpi_oed.identification.identify import identify
+    from pin_kpi_oed.identification.model_file import load_model_file
+    from pin_kpi_oed.identification.simulate import default_tracker_pose, simulate
+    from pin_kpi_oed.errors import InputError
+    from pin_kpi_oed.model.noise import NoiseModel
+    from pin_kpi_oed.model.robot import load_robot
+    from pin_kpi_oed.model.tracker import TrackerModel
+
+    rb = load_robot("kr15_track")
+    m = TrackerModel(rb, tracker_T_base=default_tracker_pose(rb, distance_m=4.0), reflector_m=[0.05, 0.02, 0.08],
+                     noise=NoiseModel(sigma_xyz_m=(1e-5,) * 3))
+    Q = rb.random_q(np.random.default_rng(2), 120)
+    data = simulate(m, Q, seed=3)
+    wave = 1e-4 * np.sin(2 * np.pi * Q[:, 0] / 2.5)
+    data.position_m[:, 2] += wave                                              # the rail's height along it
+    cm = identify(m, data, discrepancy="on").calibrated_model()
+    k = cm.discrepancy.kernel
+    assert list(k.linear) == [True] + [False] * 6
+    path = tmp_path / "track_model.json"
+    cm.save(path)
+    doc = json.loads(path.read_text())
+    assert doc["discrepancy"]["kernel"]["form"] == FORM_UNITS
+    assert doc["discrepancy"]["kernel"]["joint_units"] == ["m"] + ["rad"] * 6
+    back = load_model_file(path)
+    Qn = rb.random_q(np.random.default_rng(5), 20)
+    assert np.allclose(back.discrepancy.predict(Qn)[1], cm.discrepancy.predict(Qn)[1], rtol=1e-9)
+    doc["discrepancy"]["kernel"]["joint_units"] = ["rad"] * 6 + ["m"]
+    path.write_text(json.dumps(doc))
+    with pytest.raises(InputError, match="joint_units: joint joint_e1 is in rad, but the robot's joint is in m"):
+        load_model_file(path)
