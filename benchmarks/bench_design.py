@@ -67,7 +67,8 @@ def main(repeats: int = 5) -> None:
     start = problem.random_design(60, 0)[0]
     res, w2, _ = _timed(lambda: design_ipopt(problem, "kpi", 60, seed=0, n_starts=3, start=start))
     _line("KPI design, 60 meas., 3 starts + independent check (seed 0)",
-          f"{w2:8.3f} s   tr(C_s) ratio {res.trace_cs_m2 / problem.kpi_criterion.value(start):.3f}, feasible {res.feasible}")
+          f"{w2:8.3f} s   tr(C_s) ratio {res.trace_cs_m2 / problem.kpi_criterion.value(start):.3f}, "
+          f"feasible {res.feasible}")
 
     # --- where the time goes: naive (one row per pair) vs aggregated formulation, per iteration
     naive = DesignProblem(cell, aggregate="none")

@@ -17,7 +17,8 @@ bias, here the MAP's shrinkage, E C Σ₀⁻¹ θ, which is smaller for the desi
 model (geometry + a transmission-error pair on A2 and A3), and the IPOPT KPI design of the KR 15 cell
 (60 poses, pool start) on the geometric vs the extended model (gear harmonics of A2, A3, exact gradients).
 
-Run: ``python -m benchmarks.bench_extended [--reps 100] [--noise 1e-5,1e-4] [--json out.json]`` (about 3–6 min on 2 cores).
+Run: ``python -m benchmarks.bench_extended [--reps 100] [--noise 1e-5,1e-4] [--json out.json]`` (about 3–6 min on
+2 cores).
 """
 
 from __future__ import annotations
@@ -39,8 +40,8 @@ def simulation(reps: int = 100, seed: int = 0, sizes: tuple[float, ...] = SIZES_
     """Monte-Carlo: extended-model vs geometric KPI design, each calibrated two ways, over effect sizes (m).
 
     Truth per repetition: geometric errors ~ tolerances (on the identifiable parameters) and transmission
-    errors θ ~ N(0, a² I) (four joints, :data:`PAIRS`); σ = ``noise_m`` per axis (default 10 µm). Designs (60 of a fixed pool
-    of 400 random configurations, 5 working configurations), made once:
+    errors θ ~ N(0, a² I) (four joints, :data:`PAIRS`); σ = ``noise_m`` per axis (default 10 µm). Designs (60 of a
+    fixed pool of 400 random configurations, 5 working configurations), made once:
 
     * ``geo``: KPI on the geometric model (:func:`pin_kpi_oed.oed.pool.select`);
     * ``ext_map``: KPI on the extended model with the tolerance prior σ₀ = ``prior_rad`` per coefficient

@@ -1,11 +1,11 @@
 """Certificate speed and size: ``report`` on a 3,000-row model <= 10 s, the HTML <= 5 MB.
 
-A simulated UR10 (random geometric errors, an unmodelled gear harmonic of 50 µrad per joint, sigma 20 µm, seeds
-fixed): 3,000 training rows calibrated by ``identify --discrepancy auto --model-out`` (not timed; the discrepancy it
-keeps makes the honest σ and the trust map cost what they cost on real data), 1,000 held-out rows with 200 commanded positions of 5 rows
-(the ISO 9283 section is filled). Timed: the whole ``pin-kpi-oed report --html --json`` command in this process
-(reading the files, the nominal comparison fit, both scorings, identifiability, ISO figures, the five figures,
-the HTML), wall and CPU time.
+A simulated UR10 (random geometric errors, an unmodelled gear harmonic of 50 µrad per joint, sigma 20 µm, seeds fixed):
+3,000 training rows calibrated by ``identify --discrepancy auto --model-out`` (not timed; the discrepancy it keeps makes
+the honest σ and the trust map cost what they cost on real data), 1,000 held-out rows with 200 commanded positions of 5
+rows (the ISO 9283 section is filled). Timed: the whole ``pin-kpi-oed report --html --json`` command in this process
+(reading the files, the nominal comparison fit, both scorings, identifiability, ISO figures, the five figures, the
+HTML), wall and CPU time.
 
 Run: ``python -m benchmarks bench_report``.
 """

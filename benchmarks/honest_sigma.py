@@ -1,8 +1,8 @@
 """Is the predicted σ honest on real held-out data? The IPA UR10 series, calibrated with the discrepancy.
 
-For each case the robot is calibrated (geometry, tracker pose and reflector per series; σ = 0.1 mm uniform
-weights, the noise level unknown as without ``--sigma``) with ``discrepancy="auto"`` (a Gaussian process over the joint angles on the residuals), then the
-held-out rows are predicted with their σ per axis (:meth:`CalibratedModel.predict_with_sigma`):
+For each case the robot is calibrated (geometry, tracker pose and reflector per series; σ = 0.1 mm uniform weights, the
+noise level unknown as without ``--sigma``) with ``discrepancy="auto"`` (a Gaussian process over the joint angles on the
+residuals), then the held-out rows are predicted with their σ per axis (:meth:`CalibratedModel.predict_with_sigma`):
 
 * ``C halves``: Series C, seeded random halves (same session, nothing re-fitted);
 * ``X->Y``: calibrated on all rows of X, the set-up re-registered on 60 seeded rows of Y (robot and

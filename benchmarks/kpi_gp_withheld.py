@@ -47,8 +47,9 @@ def main(argv: list[str] | None = None) -> dict:
                     help="the pilot's identify --discrepancy: auto (a user's default: white when the process does not "
                          "pay on the pilot) or on (always fitted)")
     ap.add_argument("--tcp-at-reflector", dest="tcp_at_reflector", action="store_true",
-                    help="score the TCP at the reflector instead of the cell's TCP: what the discrepancy, learnt at the "
-                         "reflector, can see (the flange's rotation error times the TCP-reflector offset it cannot)")
+                    help="score the TCP at the reflector instead of the cell's TCP: what the discrepancy, learnt at "
+                         "the reflector, can see (the flange's rotation error times the TCP-reflector offset it "
+                         "cannot)")
     ap.add_argument("--json", default=None)
     a = ap.parse_args(argv)
     amps = [float(x) for x in a.amplitudes.split(",")]
@@ -98,7 +99,8 @@ def main(argv: list[str] | None = None) -> dict:
                       "mean_pred_sigma_kpi_gp_m": float(np.nanmean([r["predicted_sigma_m"]["kpi_gp"][i] for r in rs])),
                       "gp_pilots": int(sum(r["pilot"]["kind"] != "white" for r in rs))})
             out["summary"].append(s)
-            print(f"{amp:>7g}{m:>4}{s['mean_a_m'] * 1e3:>11.4f}{s['mean_b_m'] * 1e3:>9.4f}{100 * s['change_mean']:>+7.1f}%"
+            print(f"{amp:>7g}{m:>4}{s['mean_a_m'] * 1e3:>11.4f}{s['mean_b_m'] * 1e3:>9.4f}"
+                  f"{100 * s['change_mean']:>+7.1f}%"
                   f"{s['wins_a']:>4}/{s['n']:<2}{s['p']:>9.2g}{s['mean_kpi_gp_default_m'] * 1e3:>16.4f}"
                   f"{s['mean_random_m'] * 1e3:>11.4f}{s['mean_pred_sigma_kpi_gp_m'] * 1e3:>23.4f}"
                   f"{s['gp_pilots']:>8}/{len(rs)}")

@@ -2,10 +2,10 @@
 
 For m in {12, 20, 30, 60, 120} poses chosen from the training pool by the discrepancy-aware KPI (``kpi_gp``), the
 paper's KPI, D-optimal and random (nested random sets), and the discrepancy-aware KPI over the working region
-(``kpi_gp_region``: the working configurations plus up to 100 pool rows within the scoring radius), over seeded splits, every set calibrated the same way
-(geometry + set-up by least squares, then the discrepancy's posterior mean on the m residuals with the kernel, the
-per-axis scale and the white level FIXED to a prior model fitted on another series), scored as the mean 3-D error
-of the held-out rows within 0.5 rad (joints 1-5) of 5 working configurations
+(``kpi_gp_region``: the working configurations plus up to 100 pool rows within the scoring radius), over seeded splits,
+every set calibrated the same way (geometry + set-up by least squares, then the discrepancy's posterior mean on the m
+residuals with the kernel, the per-axis scale and the white level FIXED to a prior model fitted on another series),
+scored as the mean 3-D error of the held-out rows within 0.5 rad (joints 1-5) of 5 working configurations
 (:func:`pin_kpi_oed.studies.learning_curves.curve_split`).
 
 Cases (the prior's series in brackets; it never holds a scored row):
@@ -40,7 +40,8 @@ from pin_kpi_oed.studies.learning_curves import METHODS, LearningCurves, _n, cur
 #: case -> (pool series, target series or None, prior series, pool size or None)
 CASES = {"C": ("C", None, "B", None), "A": ("A", None, "C", 2000), "B->C": ("B", "C", "B", None),
          "C->B": ("C", "B", "C", None), "C->D": ("C", "D", "C", None), "D->C": ("D", "C", "D", None)}
-LABELS = {"kpi_gp": "discrepancy-aware KPI", "kpi_gp_region": "discrepancy-aware KPI, region", "kpi": "KPI (noise only)", "D": "D-optimal", "random": "random"}
+LABELS = {"kpi_gp": "discrepancy-aware KPI", "kpi_gp_region": "discrepancy-aware KPI, region",
+          "kpi": "KPI (noise only)", "D": "D-optimal", "random": "random"}
 
 
 def ur10_model() -> TrackerModel:
@@ -127,19 +128,21 @@ def _cells(res: LearningCurves, methods, j: int, full: bool = False) -> list[str
 
 def markdown(res: LearningCurves) -> str:
     """The case as markdown: per m and method the mean ± spread and the median (mm) and against random the median
-    paired change, wins and the Wilcoxon p; then the poses each method needs to come within 10 % of the full pool (observed, predicted)."""
+    paired change, wins and the Wilcoxon p; then the poses each method needs to come within 10 % of the full pool
+    (observed, predicted)."""
     meths = res.methods
     head = "| m | " + " | ".join(LABELS.get(k, k) for k in meths) + " |"
     rows = [head, "|---" * (len(meths) + 1) + "|"]
     for j, m in enumerate(res.sizes):
         rows.append(f"| {m} | " + " | ".join(_cells(res, meths, j, full=True)) + " |")
     f = res.full("error_mean_m") * 1e3
-    rows.append(f"| full pool ({res.splits[0]['n_pool']}) | {f.mean():.3f} ± {f.std(ddof=1):.3f}, med. {np.median(f):.3f} |"
-                + " |" * (len(meths) - 1))
+    rows.append(f"| full pool ({res.splits[0]['n_pool']}) | {f.mean():.3f} ± {f.std(ddof=1):.3f}, "
+                f"med. {np.median(f):.3f} |" + " |" * (len(meths) - 1))
     need = {w: res.needed(key) for w, key in (("observed", "error_mean_m"), ("predicted, sigma at W",
                                                                               "pred_sigma_work_m"),
                                                ("predicted, RMS at the scored rows", "pred_rms_scored_m"))}
-    rows += ["", "| poses to within 10 % of the full pool (median curves) | " + " | ".join(LABELS.get(k, k) for k in meths) + " |",
+    rows += ["", "| poses to within 10 % of the full pool (median curves) | "
+             + " | ".join(LABELS.get(k, k) for k in meths) + " |",
              "|---" * (len(meths) + 1) + "|"]
     for w, d in need.items():
         rows.append(f"| {w} | " + " | ".join((f"> {res.largest(k) if w == 'observed' else res.sizes[-1]}"
@@ -162,16 +165,17 @@ def markdown(res: LearningCurves) -> str:
                                            f"form, and observed (median, mm)" for k in meths) + " |",
                  "|---" * (len(meths) + 1) + "|"]
         for j, m in enumerate(res.sizes):
-            rows.append(f"| {m} | " + " | ".join(" / ".join(f"{np.median(res.array(key, k)[:, j]) * 1e3:.3f}" for key in (
-                "pred_rms_scored_m", "pred_rms_scored_exact_m", "error_rms_m")) for k in meths) + " |")
+            rows.append(f"| {m} | " + " | ".join(" / ".join(
+                f"{np.median(res.array(key, k)[:, j]) * 1e3:.3f}"
+                for key in ("pred_rms_scored_m", "pred_rms_scored_exact_m", "error_rms_m")) for k in meths) + " |")
     others = [k for k in meths if k != "random"]
     if others and "random" in meths:
         rows += ["", "| m | " + " | ".join(f"{LABELS.get(k, k)}: change of the RMS against random, predicted / observed"
                                            for k in others) + " |", "|---" * (len(others) + 1) + "|"]
         chg = {k: [res.paired(k, key=key) for key in ("pred_rms_scored_m", "error_rms_m")] for k in others}
         for j, m in enumerate(res.sizes):
-            rows.append(f"| {m} | " + " | ".join(f"{100 * chg[k][0][j]['change']:+.0f} % / {100 * chg[k][1][j]['change']:+.0f} %"
-                                                 for k in others) + " |")
+            rows.append(f"| {m} | " + " | ".join(f"{100 * chg[k][0][j]['change']:+.0f} % / "
+                                                 f"{100 * chg[k][1][j]['change']:+.0f} %" for k in others) + " |")
     for meth in ("random", "kpi_gp_region"):
         big = res.beyond(meth)
         if big is not None:

@@ -127,7 +127,8 @@ def run(robots: list[str], sizes: list[int], reps: int, amplitude: float, pool: 
             rows.append(row)
             print(f"{name:<6} {m:>4} {kinds:>6} {row['z_rms_median']:>8.2f} ({z.min():.2f}-{z.max():.2f}){'':>9} "
                   f"{row['inside_median'] * 100:>9.1f} % ({ins.min() * 100:.0f}-{ins.max() * 100:.0f} %){'':>6} "
-                  f"{row['z_rms_pooled']:>12.2f} {row['inside_pooled'] * 100:>13.1f}% {row['extrapolation'] * 100:>6.1f}% "
+                  f"{row['z_rms_pooled']:>12.2f} {row['inside_pooled'] * 100:>13.1f}% "
+                  f"{row['extrapolation'] * 100:>6.1f}% "
                   f"{row['mean_mm']:>9.4f} {row['sigma_mm']:>7.4f}", flush=True)
     return rows
 
