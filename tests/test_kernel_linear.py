@@ -215,3 +215,27 @@ def test_identified_track_model_file_keeps_the_line(tmp_path):
     path.write_text(json.dumps(doc))
     with pytest.raises(InputError, match="joint_units: joint joint_e1 is in rad, but the robot's joint is in m"):
         load_model_file(path)
+
+
+def test_kpi_gp_on_the_track_cell_has_an_exact_gradient_along_the_track():
+    """``kpi_gp`` in the track cell under the industrial class's default (the track on the line): dφ/dQ through the
+    kernel's derivative in m along the track matches finite differences, and the track's column is not zero; a pool
+    selection runs on the kernel's ``features``."""
+    from pin_kpi_oed.cell.cell import cell_from_dict
+    from pin_kpi_oed.design.optimize import DesignProblem
+
+    from .fd import fd_rows
+    from .test_track import _track_cell
+
+    problem = DesignProblem(cell_from_dict(_track_cell()))
+    assert list(problem.discrepancy_prior().kernel.linear) == [True] + [False] * 6
+    crit = problem.criterion("kpi_gp")
+    Q = problem.random_design(14, 3)[0]
+    v, g = crit.value_and_grad(Q)
+    assert v == pytest.approx(crit.value(Q), rel=1e-12)
+    num = fd_rows(crit.value, Q, 3)
+    assert np.abs(num - g[:3]).max() <= 1e-5 * np.abs(g[:3]).max()
+    assert np.abs(g[:, 0]).max() > 1e-6 * np.abs(g).max()
+    pool = problem.random_design(120, 4)[0]
+    sel = crit.select(pool, 14, seed=0)                       # 29 parameters: at least 10 poses
+    assert len(sel.indices) == 14 and np.isfinite(sel.value)
