@@ -137,10 +137,11 @@ def find_ipa_data():
     return None
 
 
-def ipa_folder_or_say():
-    """The IPA UR10 folder (:func:`find_ipa_data`) when it holds Series C; else None, :data:`IPA_MISSING` printed."""
+def ipa_folder_or_say(series: str = "C"):
+    """The IPA UR10 folder (:func:`find_ipa_data`) when it holds ``Series_<series>``; else None, :data:`IPA_MISSING`
+    printed."""
     folder = find_ipa_data()
-    if folder is None or not (folder / "Series_C").is_dir():
+    if folder is None or not (folder / f"Series_{series}").is_dir():
         print(IPA_MISSING)
         return None
     return folder
@@ -166,6 +167,31 @@ def load_ipa_series(folder, series: str, *, with_time: bool = False):
     ms = import_ipa(folder / f"Series_{series}")
     return MeasurementSet(ms.joint_names, ms.q, ms.position_m, temperature_c=ms.temperature_c,
                           time_s=ms.time_s if with_time else None, source=f"{series}.csv")
+
+
+def paired_by_size(recs: list[dict], sizes, methods: tuple[str, ...], scores: tuple[str, ...]) -> dict:
+    """Per m of ``sizes``: the means over the splits of every method's scores and, from two splits on, the paired
+    tests (:func:`~pin_kpi_oed.studies.kpi_withheld.paired_summary`) of ``methods[0]`` against each other method
+    (``<first>_vs_<other>_<score>``); ``recs[i]["sizes"][m][method][score]`` holds one split's value."""
+    import numpy as np
+
+    from pin_kpi_oed.studies.kpi_withheld import paired_summary
+
+    first = methods[0]
+    out: dict = {}
+    for m in sizes:
+        col = {(meth, k): np.array([r["sizes"][m][meth][k] for r in recs]) for meth in methods for k in scores}
+        out[m] = {"means": {meth: {k: float(col[(meth, k)].mean()) for k in scores} for meth in methods}}
+        if len(recs) >= 2:
+            out[m]["paired"] = {f"{first}_vs_{b}_{k}": paired_summary(col[(first, k)].tolist(), col[(b, k)].tolist())
+                                for b in methods[1:] for k in scores}
+    return out
+
+
+def paired_lines(summary: dict) -> list[str]:
+    """One line per paired test of :func:`paired_by_size`'s summary: m, the test, mean change, wins, Wilcoxon p."""
+    return [f"m={m} {name}: mean change {p['change_mean'] * 100:+.1f} %, wins {p['wins_a']}/{p['n']}, "
+            f"Wilcoxon p = {p['p']:.3g}" for m, s in summary.items() for name, p in s.get("paired", {}).items()]
 
 
 def report(label: str, seconds: float, target: float | None = None) -> str:

@@ -96,35 +96,26 @@ def run_split(model, ms, seed: int, sizes: tuple[int, ...], n_work: int, length_
 
 def summarise(recs: list[dict], sizes: tuple[int, ...]) -> dict:
     """Means over the splits and the paired tests of ``kpi6`` against the others, per m and score."""
-    from pin_kpi_oed.studies.kpi_withheld import paired_summary
+    from benchmarks.common import paired_by_size
 
-    out: dict = {}
-    for m in sizes:
-        col = {(meth, k): np.array([r["sizes"][m][meth][k] for r in recs]) for meth in METHODS for k in SCORES}
-        out[m] = {"means": {meth: {k: float(col[(meth, k)].mean()) for k in SCORES} for meth in METHODS}}
-        if len(recs) >= 2:
-            out[m]["paired"] = {f"kpi6_vs_{b}_{k}": paired_summary(col[("kpi6", k)].tolist(), col[(b, k)].tolist())
-                                for b in ("kpi", "random") for k in SCORES}
-    return out
+    return paired_by_size(recs, sizes, METHODS, SCORES)
 
 
 def table(summary: dict, n_splits: int, n_work: int, length_m: float) -> str:
     """The table (mrad, mm) and the paired tests."""
+    from benchmarks.common import paired_lines
+
     lines = [f"Series C, {n_splits} splits, {n_work} held-out working configurations; mean orientation error (mrad) / "
              f"mean error {length_m * 1e3:g} mm along the tool axis (mm)",
              f"{'m':>4} " + "".join(f"{meth:>22}" for meth in METHODS)]
     for m, s in summary.items():
         lines.append(f"{m:>4} " + "".join(f"{s['means'][meth]['rot_error_rad'] * 1e3:>12.4f} / "
                                           f"{s['means'][meth]['error_at_length_m'] * 1e3:<6.4f}" for meth in METHODS))
-    for m, s in summary.items():
-        for name, p in s.get("paired", {}).items():
-            lines.append(f"m={m} {name}: mean change {p['change_mean'] * 100:+.1f} %, wins {p['wins_a']}/{p['n']}, "
-                         f"Wilcoxon p = {p['p']:.3g}")
-    return "\n".join(lines)
+    return "\n".join(lines + paired_lines(summary))
 
 
 def main(argv: list[str] | None = None) -> int:
-    from benchmarks.common import find_ipa_data
+    from benchmarks.common import ipa_folder_or_say
     from pin_kpi_oed import NoiseModel, TrackerModel, load_robot
     from pin_kpi_oed.data.atomic import atomic_write_json
     from pin_kpi_oed.data.ipa import import_ipa
@@ -137,9 +128,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--seed", type=int, default=0, help="seed of the first split")
     ap.add_argument("--json", default=None)
     a = ap.parse_args(argv)
-    folder = find_ipa_data()
-    if folder is None or not (folder / "Series_C").is_dir():
-        print("IPA UR10 data not found: nothing to do (set PIN_KPI_OED_IPA_DATA)")
+    folder = ipa_folder_or_say("C")
+    if folder is None:
         return 0
     sizes = tuple(int(s) for s in a.sizes.split(","))
     ms = import_ipa(folder / "Series_C")

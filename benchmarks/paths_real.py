@@ -42,6 +42,7 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 import numpy as np  # noqa: E402
 
 METHODS = ("kpi_path", "kpi_ends", "random")
+SCORES = ("mean_error_m", "worst_error_m")
 #: commanded positions of the lattice's lines per axis (x, y, z): the lines held out are full ones
 LINE_AXES = (1, 0, 2)
 
@@ -129,39 +130,26 @@ def run_split(model, ms, pos, P, ori, seed: int, sizes: tuple[int, ...], n_paths
 
 def summarise(recs: list[dict], sizes: tuple[int, ...]) -> dict:
     """Means over the splits and the paired tests of ``kpi_path`` against the others, per m and score."""
-    from pin_kpi_oed.studies.kpi_withheld import paired_summary
+    from benchmarks.common import paired_by_size
 
-    out: dict = {}
-    for m in sizes:
-        col = {(meth, k): np.array([r["sizes"][m][meth][k] for r in recs])
-               for meth in METHODS for k in ("mean_error_m", "worst_error_m")}
-        out[m] = {"means": {meth: {k: float(col[(meth, k)].mean()) for k in ("mean_error_m", "worst_error_m")}
-                            for meth in METHODS}}
-        if len(recs) >= 2:
-            out[m]["paired"] = {f"kpi_path_vs_{b}_{k}": paired_summary(col[("kpi_path", k)].tolist(),
-                                                                        col[(b, k)].tolist())
-                                for b in ("kpi_ends", "random") for k in ("mean_error_m", "worst_error_m")}
-    return out
+    return paired_by_size(recs, sizes, METHODS, SCORES)
 
 
 def table(summary: dict, n_splits: int, n_paths: int) -> str:
     """The table (mm) and the paired tests."""
+    from benchmarks.common import paired_lines
+
     lines = [f"Series A, {n_splits} splits, {n_paths} held-out lattice lines per split; measured error along the "
              "held-out paths (mm): mean over the samples / mean of each path's worst sample",
              f"{'m':>4} " + "".join(f"{meth:>24}" for meth in METHODS)]
     for m, s in summary.items():
         lines.append(f"{m:>4} " + "".join(f"{s['means'][meth]['mean_error_m'] * 1e3:>12.4f} / "
                                           f"{s['means'][meth]['worst_error_m'] * 1e3:<8.4f}" for meth in METHODS))
-    for m, s in summary.items():
-        for name, p in s.get("paired", {}).items():
-            lines.append(f"m={m} {name}: mean change {p['change_mean'] * 100:+.1f} %, wins {p['wins_a']}/{p['n']}, "
-                         f"Wilcoxon p = {p['p']:.3g}")
-    return "\n".join(lines)
+    return "\n".join(lines + paired_lines(summary))
 
 
 def main(argv: list[str] | None = None) -> int:
-    from benchmarks.common import find_ipa_data
-    from pin_kpi_oed import NoiseModel, TrackerModel, load_robot
+    from benchmarks.common import ipa_folder_or_say, ipa_ur10_model
     from pin_kpi_oed.data.atomic import atomic_write_json
     from pin_kpi_oed.data.ipa import import_ipa
     from pin_kpi_oed.data.measurements import MeasurementSet
@@ -173,17 +161,15 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--seed", type=int, default=0, help="seed of the first split")
     ap.add_argument("--json", default=None)
     a = ap.parse_args(argv)
-    folder = find_ipa_data()
-    if folder is None or not (folder / "Series_A").is_dir():
-        print("IPA UR10 data not found: nothing to do (set PIN_KPI_OED_IPA_DATA)")
+    folder = ipa_folder_or_say("A")
+    if folder is None:
         return 0
     sizes = tuple(int(s) for s in a.sizes.split(","))
     full = import_ipa(folder / "Series_A")
     ms = MeasurementSet(full.joint_names, full.q, full.position_m, temperature_c=full.temperature_c,
                         source="A.csv")
     pos, P, ori = lattice(full)
-    model = TrackerModel(load_robot("ur10"), reflector_m=np.array([0.0, 0.0, 0.109]),
-                         noise=NoiseModel(sigma_xyz_m=(1e-4,) * 3))
+    model = ipa_ur10_model()
     t0, c0 = time.perf_counter(), time.process_time()
     recs = []
     for k in range(a.splits):
