@@ -17,3 +17,13 @@ def run_cli(*argv) -> tuple[int, str, str]:
         except SystemExit as exc:
             rc = int(exc.code)
     return rc, out.getvalue(), err.getvalue()
+
+
+def without_times(doc):
+    """A JSON document a command wrote without its wall and CPU times (they differ between any two runs), to compare
+    the command line's file with the API's."""
+    if isinstance(doc, dict):
+        return {k: without_times(v) for k, v in doc.items() if not k.endswith(("time_s", "_cpu_s"))}
+    if isinstance(doc, list):
+        return [without_times(v) for v in doc]
+    return doc

@@ -13,6 +13,7 @@ from pin_kpi_oed.design.ipopt import DesignNLP
 from pin_kpi_oed.design.optimize import (DesignOptions, DesignProblem, DesignResult, design_ipopt, ipopt_options,
                                          run_designs, solve_ipopt)
 from pin_kpi_oed.errors import InputError
+from tests.cli_run import without_times
 
 M = 14  # small designs keep the suite fast (27 identifiable parameters need >= 9 poses)
 
@@ -324,15 +325,6 @@ def test_api_writes_the_design_file_view_and_export_read(problem, tmp_path):
     assert json.loads(path.read_text())["q_meas"] == doc["q_meas"]
 
 
-def _without_times(doc):
-    """The document without its wall and CPU times (they differ between any two runs)."""
-    if isinstance(doc, dict):
-        return {k: _without_times(v) for k, v in doc.items() if not k.endswith(("time_s", "_cpu_s"))}
-    if isinstance(doc, list):
-        return [_without_times(v) for v in doc]
-    return doc
-
-
 def test_cli_json_is_the_library_run_written(tmp_path):
     """``design --json`` and ``pko.write_design`` of the same run (``design_run`` with the same settings) write
     the same file: the same keys and numbers, wall times apart; ``demo`` goes through the same calls."""
@@ -349,7 +341,7 @@ def test_cli_json_is_the_library_run_written(tmp_path):
     pko.write_design(tmp_path / "api.json", run)
     cli, api = (json.loads((tmp_path / f"{n}.json").read_text()) for n in ("cli", "api"))
     assert cli["clearance_margin_m"] == 0.01 and "certificate" in cli and "pose_clearance_m" in cli["designs"][1]
-    assert _without_times(cli) == _without_times(api)
+    assert without_times(cli) == without_times(api)
 
 
 @pytest.mark.parametrize("mode", ["pool", "given"])
@@ -376,7 +368,7 @@ def test_cli_json_is_the_library_run_written_with_pool_and_given(sequential_file
     cli, api = (json.loads((tmp_path / f"{n}.json").read_text()) for n in ("cli", "api"))
     assert cli["given"]["file"] == given and cli["poses_until"]["n_more"] >= 1
     assert ("certificate" in cli) == (mode == "pool")
-    assert _without_times(cli) == _without_times(api)
+    assert without_times(cli) == without_times(api)
 
 
 def test_cli_pool_drops_and_counts_infeasible_candidates(sequential_files, tmp_path, capsys):

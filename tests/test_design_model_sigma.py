@@ -8,7 +8,7 @@ import json
 
 import numpy as np
 
-from tests.cli_run import run_cli
+from tests.cli_run import run_cli, without_times
 from pin_kpi_oed import NoiseModel, TrackerModel, load_cell
 from pin_kpi_oed.identification.identify import identify
 from pin_kpi_oed.identification.simulate import simulate
@@ -62,13 +62,4 @@ def test_design_with_a_model_reports_predicts_sigma_at_the_working_configuration
     write_design(tmp_path / "api.json", design_run(cell, settings))
     cli, api = (json.loads((tmp_path / n).read_text()) for n in ("d.json", "api.json"))
     assert "extended_model" in cli and cli["discrepancy"]["model_sigma_at_work"]["sigma_m"] == got["sigma_m"]
-    assert _without_times(cli) == _without_times(api)
-
-
-def _without_times(doc):
-    """The document without wall / CPU times (they differ between two runs of the same design)."""
-    if isinstance(doc, dict):
-        return {k: _without_times(v) for k, v in doc.items() if not k.endswith(("time_s", "_cpu_s"))}
-    if isinstance(doc, list):
-        return [_without_times(v) for v in doc]
-    return doc
+    assert without_times(cli) == without_times(api)
