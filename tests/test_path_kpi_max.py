@@ -1,5 +1,6 @@
 """The worst-sample path KPI ``kpi_path_max``: the power mean of tr C_s over the path samples, between the mean
-(``kpi_path``) and the worst sample, with exact gradients in M and in the configurations."""
+(``kpi_path``) and the worst sample, with exact gradients in M and in the configurations (the latter checked
+beside the other path criteria's, ``tests/test_paths.py``)."""
 
 from __future__ import annotations
 
@@ -58,20 +59,6 @@ def test_gradient_in_M_matches_finite_differences():
         fd = (crit.value_and_grad_M(M + D, E)[0] - crit.value_and_grad_M(M - D, E)[0]) / (2 * h)
         expect = G[i, j] * (1 if i == j else 2)
         assert fd == pytest.approx(expect, rel=1e-5, abs=1e-9 * abs(val)), (i, j)
-
-
-def test_gradient_in_the_configurations_matches_finite_differences(seam_problem):
-    obj = seam_problem.criterion("kpi_path_max")
-    Q = seam_problem.cell.robot.random_q(np.random.default_rng(1), 20)
-    val, G = obj.value_and_grad(Q)
-    assert val == pytest.approx(obj.value(Q), rel=1e-12)
-    h = 1e-6
-    for i, j in [(0, 0), (3, 1), (7, 2), (11, 4), (19, 5)]:
-        Qp, Qm = Q.copy(), Q.copy()
-        Qp[i, j] += h
-        Qm[i, j] -= h
-        fd = (obj.value(Qp) - obj.value(Qm)) / (2 * h)
-        assert fd == pytest.approx(G[i, j], rel=1e-4, abs=1e-8 * abs(val)), (i, j)
 
 
 def test_pool_selection_reports_the_worst_sample_criterion(seam_problem):

@@ -124,7 +124,7 @@ def test_rotation_sensitivity_matches_finite_differences(seam_problem):
         assert np.allclose(fd, J[:, :, k], atol=1e-6), k
 
 
-@pytest.mark.parametrize("name", ["kpi_path", "kpi6"])
+@pytest.mark.parametrize("name", ["kpi_path", "kpi_path_max", "kpi6"])
 def test_gradient_matches_finite_differences(seam_problem, name):
     obj = seam_problem.criterion(name)
     Q = seam_problem.cell.robot.random_q(np.random.default_rng(1), 20)
