@@ -100,8 +100,9 @@ def _value_on_line(X: np.ndarray, Y: np.ndarray, c: float, L: np.ndarray, a: np.
     ang = ~lin
     mid = X[:, lin].mean(axis=0)
     xl, yl = (X[:, lin] - mid) / L[lin], (Y[:, lin] - mid) / L[lin]
-    U = np.hstack([np.cos(X[:, ang]) / L[ang], np.sin(X[:, ang]) / L[ang], xl])
-    V = np.hstack([np.cos(Y[:, ang]) / L[ang], np.sin(Y[:, ang]) / L[ang], yl]).T
+    cX, sX, cY, sY = np.cos(X), np.sin(X), np.cos(Y), np.sin(Y)
+    U = np.hstack([cX[:, ang] / L[ang], sX[:, ang] / L[ang], xl])
+    V = np.hstack([cY[:, ang] / L[ang], sY[:, ang] / L[ang], yl]).T
     s0 = float(np.sum(1.0 / L[ang] ** 2))
     rx, ry = 0.5 * np.sum(xl ** 2, axis=1), 0.5 * np.sum(yl ** 2, axis=1)
     inv = 1.0 / ell ** 2
@@ -118,14 +119,15 @@ def _value_on_line(X: np.ndarray, Y: np.ndarray, c: float, L: np.ndarray, a: np.
         np.exp(Kb, out=Kb)
         Kb *= c ** 2
         for j in range(X.shape[1]):
-            np.subtract.outer(X[b:b + block, j], Y[:, j], out=Tb)
             if lin[j]:                        # a_j² exp(−Δ_j²/(2ℓ_j²))
+                np.subtract.outer(X[b:b + block, j], Y[:, j], out=Tb)
                 Tb *= Tb
                 Tb *= -0.5 * inv[j]
-            else:                             # a_j² exp((cos Δ_j − 1)/ℓ_j²)
-                np.cos(Tb, out=Tb)
-                Tb -= 1.0
-                Tb *= inv[j]
+            else:                             # a_j² exp((cos Δ_j − 1)/ℓ_j²), cos Δ = cos x cos y + sin x sin y
+                np.multiply.outer(cX[b:b + block, j] * inv[j], cY[:, j], out=Tb)
+                Tb += np.multiply.outer(sX[b:b + block, j] * inv[j], sY[:, j])
+                Tb -= inv[j]
+                np.minimum(Tb, 0.0, out=Tb)
             np.exp(Tb, out=Tb)
             Tb *= a[j] ** 2
             Kb += Tb
