@@ -9,32 +9,18 @@ import pytest
 from scipy import stats
 
 from pin_kpi_oed.discrepancy.gp import DiscrepancyOptions
-from pin_kpi_oed.effects.joint_angle import GearHarmonic
 from pin_kpi_oed.identification.check import check_null
 from pin_kpi_oed.identification.identify import identify
 from pin_kpi_oed.identification.prediction_sigma import predictive_covariance
-from pin_kpi_oed.identification.simulate import Tolerances, default_tracker_pose, random_truth, simulate
-from pin_kpi_oed.model.noise import NoiseModel
-from pin_kpi_oed.model.robot import load_robot
-from pin_kpi_oed.model.tracker import TrackerModel
 from pin_kpi_oed.oed.check_power import CheckNull
 from pin_kpi_oed.oed.check_power import test_threshold as chi2_threshold
-from pin_kpi_oed.oed.identifiability import analyse
+from tests.withheld import withheld_ur10
 
 
 @pytest.fixture(scope="module")
 def gp_model():
     """A UR10 calibrated with a Gaussian-process discrepancy (a withheld gear harmonic), 300 rows, σ = 10 µm."""
-    robot = load_robot("ur10")
-    model = TrackerModel(robot, tracker_T_base=default_tracker_pose(robot), reflector_m=np.array([0.03, 0.02, 0.08]),
-                         noise=NoiseModel(sigma_xyz_m=(1e-5,) * 3))
-    truth = random_truth(model, Tolerances(5e-4, 1e-3), seed=4, only=[i for i in analyse(model).base if i < 36])
-    gh = GearHarmonic(robot, joints=["shoulder_lift_joint", "elbow_joint"], orders=(2, 3))
-    theta = 3e-4 * np.random.default_rng(5).standard_normal(len(gh.param_names()))
-    rng = np.random.default_rng(6)
-    Q = robot.random_q(rng, 360)
-    Q[:, 0] = rng.uniform(-1.5, 1.5, 360)
-    data = simulate(model, Q, truth, effects=[(gh, theta)], seed=7)
+    model, data = withheld_ur10(360)
     fit = identify(model, data.subset(np.arange(300)), discrepancy=DiscrepancyOptions(mode="on", n_fit=300, seed=0))
     return fit.calibrated_model(), data.subset(np.arange(300, 360)), data.subset(np.arange(300))
 

@@ -10,17 +10,14 @@ import json
 import numpy as np
 import pytest
 
-from pin_kpi_oed import NoiseModel, TrackerModel, load_robot
 from pin_kpi_oed.cli.app import main
 from pin_kpi_oed.data.measurements import write_measurements
 from pin_kpi_oed.discrepancy import Discrepancy, DiscrepancyOptions, JointKernel, fit_discrepancy
-from pin_kpi_oed.effects.library import GearHarmonic
 from pin_kpi_oed.errors import InputError
 from pin_kpi_oed.identification.identify import identify, validate
 from pin_kpi_oed.identification.model_file import load_model_file
-from pin_kpi_oed.identification.simulate import Tolerances, default_tracker_pose, random_truth, simulate
 from pin_kpi_oed.identification.transfer import predict_table
-from pin_kpi_oed.oed.identifiability import analyse
+from tests.withheld import withheld_ur10
 
 NAMES = [f"j{i}" for i in range(6)]
 
@@ -140,16 +137,7 @@ def test_too_few_rows():
 def withheld():
     """A UR10 with geometric errors and a withheld gear harmonic (0.3 mrad on shoulder and elbow):
     400 training rows and 300 held-out rows in the same joint range, σ = 10 µm."""
-    robot = load_robot("ur10")
-    model = TrackerModel(robot, tracker_T_base=default_tracker_pose(robot), reflector_m=np.array([0.03, 0.02, 0.08]),
-                         noise=NoiseModel(sigma_xyz_m=(1e-5,) * 3))
-    truth = random_truth(model, Tolerances(5e-4, 1e-3), seed=4, only=[i for i in analyse(model).base if i < 36])
-    gh = GearHarmonic(robot, joints=["shoulder_lift_joint", "elbow_joint"], orders=(2, 3))
-    theta = 3e-4 * np.random.default_rng(5).standard_normal(len(gh.param_names()))
-    rng = np.random.default_rng(6)
-    Q = robot.random_q(rng, 700)
-    Q[:, 0] = rng.uniform(-1.5, 1.5, 700)
-    data = simulate(model, Q, truth, effects=[(gh, theta)], seed=7)
+    model, data = withheld_ur10(700)
     return model, data.subset(np.arange(400)), data.subset(np.arange(400, 700))
 
 
