@@ -160,11 +160,12 @@ class Router:
         Returns:
             Whether any move was new.
         """
-        new = False
+        new, seen = False, set()
         for a, b in zip(tour, tour[1:] + tour[:1]):
             key = (min(a, b), max(a, b))
-            if key in self.edges and (plan_checks is None or self.edges[key] is not None):
+            if key in seen or key in self.edges and (plan_checks is None or self.edges[key] is not None):
                 continue
+            seen.add(key)
             new = True
             qa, qb = self.nodes[key[0]], self.nodes[key[1]]
             if self.tc.check(qa, qb).clear:
