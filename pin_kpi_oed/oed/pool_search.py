@@ -44,10 +44,9 @@ from typing import NamedTuple
 import numpy as np
 
 from pin_kpi_oed.errors import IdentifiabilityError
-from pin_kpi_oed.oed.relaxation import pool_phi
 
 __all__ = ["PoolState", "ValueState", "InformationState", "Search", "greedy", "exchange", "greedy_exchange",
-           "block_gains"]
+           "block_gains", "information_exchange"]
 
 
 class PoolState(ABC):
@@ -399,6 +398,3 @@ def information_exchange(Fp: np.ndarray, start: Sequence[int] | np.ndarray, K: n
     excl[st.chosen] = True
     _, sel, _, swaps, _ = exchange(st, list(st.chosen), excl, st.phi, passes, rel_tol, abs_tol)
     return np.array(sel, int), swaps
-
-
-__all__ += ["information_exchange", "pool_phi"]
