@@ -95,7 +95,6 @@ def run_monitor(args: argparse.Namespace) -> int:
     """Handler of ``pin-kpi-oed monitor``."""
     from pin_kpi_oed.data.atomic import atomic_write_json
     from pin_kpi_oed.data.measurements import read_measurements
-    from pin_kpi_oed.errors import InputError
     from pin_kpi_oed.identification.model_file import load_model_file
     from pin_kpi_oed.identification.monitor import Monitor, monitor
 
@@ -105,8 +104,6 @@ def run_monitor(args: argparse.Namespace) -> int:
     opts = dict(every=args.every, alpha=args.alpha, tolerance_m=args.tolerance, station=args.station,
                 refit=args.refit, echo=None if args.quiet else print)
     if args.follow:
-        if not (args.poll > 0 and args.idle > 0):
-            raise InputError(f"--poll {args.poll} / --idle {args.idle}: must be seconds > 0")
         mon = Monitor(model, **opts)
         _follow(mon, args.data, read, args.poll, args.idle, args.quiet)
         mon.flush()
