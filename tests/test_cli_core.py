@@ -179,4 +179,9 @@ def test_library_errors_name_parameters_and_the_command_line_its_options():
     assert in_flags(str(err.value)).startswith("--clearance-margin: must be in [0, 1) m")
     assert in_flags("cell c: Q_given: 3 poses; target_sigma_m: 0") == "cell c: --given: 3 poses; --target-sigma: 0"
     assert in_flags("clearance_m of the cell file") == "clearance_m of the cell file"  # a word, not a parameter
-    assert all("_" in p and f.startswith("--") for p, f in PARAMETER_FLAGS.items())
+    assert all(f.startswith("--") for f in PARAMETER_FLAGS.values())
+    # a one-word parameter is rewritten only where marked, never as a word of the sentence
+    assert in_flags("diagnose: parameter 'kfold' must be >= 2") == "diagnose: --kfold must be >= 2"
+    assert in_flags("declare the units (units='mm,deg')") == "declare the units (--units mm,deg)"
+    assert in_flags("the units of sigma: m") == "the units of sigma: m"
+    assert in_flags("parameter 'speed' and speed='1'") == "parameter 'speed' and speed='1'"  # not in the table

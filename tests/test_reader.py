@@ -62,11 +62,11 @@ def test_refused_with_one_clear_line_without_units_or_columns(ur10_data, tmp_pat
     with pytest.raises(InputError) as exc:
         read_measurements(f, joint_names=robot.joint_names, reach_m=robot.reach())
     msg = str(exc.value)
-    assert "missing position column(s) x, y, z" in msg and "--columns" in msg and "\n" not in msg
+    assert "missing position column(s) x, y, z" in msg and "columns='x=X" in msg and "\n" not in msg
     with pytest.raises(InputError) as exc:
         read_measurements(f, joint_names=robot.joint_names, reach_m=robot.reach(), columns=_mapping(robot))
     msg = str(exc.value)
-    assert "looks like mm/degrees" in msg and "--units mm,deg" in msg and "\n" not in msg
+    assert "looks like mm/degrees" in msg and "units='mm,deg'" in msg and "\n" not in msg
     with pytest.raises(InputError, match="maps column"):
         read_measurements(f, joint_names=robot.joint_names, columns="x=NOPE")
 
@@ -182,7 +182,7 @@ def test_tracker_export_refusals(tmp_path):
     with pytest.raises(InputError, match="line 6: 'yesterday' is neither an ISO date-time"):
         read_point_export(tmp_path / "t.txt")
     (tmp_path / "n.txt").write_text(SAMPLE.replace("Target", "Punkt"))
-    with pytest.raises(InputError, match="missing column.*target.*--columns"):
+    with pytest.raises(InputError, match="missing column.*target.*columns='target=NAME"):
         read_point_export(tmp_path / "n.txt")
     assert read_point_export(tmp_path / "n.txt", columns="target=Punkt").names[0] == "P0001"
     robot = load_robot("ur10")

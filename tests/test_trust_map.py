@@ -118,7 +118,7 @@ def test_design_with_model_writes_honest_blocks_and_the_viewer_draws_them(calibr
     old = tmp_path / "old.json"
     old.write_text(json.dumps(doc))
     assert build_scene(load_design(old), SceneOptions(animate=False, ghosts=False)).sigma == "paper"
-    with pytest.raises(InputError, match="--sigma honest"):
+    with pytest.raises(InputError, match="sigma='honest'"):
         build_scene(load_design(old), SceneOptions(animate=False, ghosts=False, sigma="honest"))
     page = tmp_path / "v.html"
     assert main(["view", str(old), "--sigma", "honest", "--html", str(page), "--no-open", "--no-ghosts"]) == 2

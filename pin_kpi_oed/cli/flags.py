@@ -1,5 +1,19 @@
 """The command line's words for the library's parameters: a library error names the parameter (``Q_given``,
-``target_sigma_m``, ...), the command line says the option that sets it (``--given``, ``--target-sigma``)."""
+``target_sigma_m``, ``parameter 'kfold'``, ``units='mm,deg'``), the command line says the option that sets it
+(``--given``, ``--target-sigma``, ``--kfold``, ``--units mm,deg``).
+
+How a message names a parameter so that :func:`in_flags` rewrites it, and never an ordinary word:
+
+- a name with an underscore, bare (``Q_given: 3 poses``, ``target_sigma_m (0)``): rewritten where it stands as a
+  word followed by ``:``, a space, ``(``, ``)``, ``,`` or the end of the message;
+- any name of the table, marked ``parameter 'name'`` (``parameter 'kfold' must be an integer``): the mark and the
+  name become the option (``--kfold must be an integer``); this is how a one-word parameter (``kfold``, ``sigma``,
+  ``units``) is named, since the bare word is never rewritten;
+- any name of the table with a value as a Python keyword, ``name='value'`` (``declare the units (units='mm,deg')``):
+  becomes the option and its value (``--units mm,deg``).
+
+A name outside the table is left as written in every form.
+"""
 
 from __future__ import annotations
 
@@ -7,7 +21,7 @@ import re
 
 __all__ = ["PARAMETER_FLAGS", "in_flags"]
 
-#: Library parameter -> the option of the command line that sets it (names with an underscore only: never a word).
+#: Library parameter -> the option of the command line that sets it.
 PARAMETER_FLAGS = {
     "Q_given": "--given",
     "given_prior": "--given-prior",
@@ -28,12 +42,30 @@ PARAMETER_FLAGS = {
     "target_sigma_m": "--target-sigma",
     "clearance_margin_m": "--clearance-margin",
     "incidence_margin_deg": "--incidence-margin",
+    "train_paths": "--train",
+    "validate_path": "--validate",
+    "tool_frame": "--tool",
+    # one-word parameters: rewritten only when marked (``parameter 'kfold'``, ``units='mm,deg'``)
+    "kfold": "--kfold",
+    "harmonics": "--harmonics",
+    "validate": "--validate",
+    "sigma": "--sigma",
+    "units": "--units",
+    "columns": "--columns",
+    "kinematics": "--kinematics",
+    "scheduler": "--scheduler",
+    "discrepancy": "--discrepancy",
 }
 
-_PATTERN = re.compile(r"(?<![\w.`])(" + "|".join(map(re.escape, PARAMETER_FLAGS)) + r")(?=[:\s(),]|$)")
+_NAMES = "|".join(map(re.escape, sorted(PARAMETER_FLAGS, key=len, reverse=True)))
+_BARE = re.compile(r"(?<![\w.`])(" + "|".join(re.escape(k) for k in PARAMETER_FLAGS if "_" in k)
+                   + r")(?=[:\s(),]|$)")
+_MARKED = re.compile(r"\bparameter '(" + _NAMES + r")'")
+_KEYWORD = re.compile(r"(?<![\w.`'])(" + _NAMES + r")='([^']*)'")
 
 
 def in_flags(message: str) -> str:
-    """``message`` with every parameter named in it (``name:``, ``name value``, ``name (value)``) replaced by its
-    option."""
-    return _PATTERN.sub(lambda m: PARAMETER_FLAGS[m.group(1)], message)
+    """``message`` with every parameter named in it (see the module docstring) replaced by its option."""
+    message = _MARKED.sub(lambda m: PARAMETER_FLAGS[m.group(1)], message)
+    message = _KEYWORD.sub(lambda m: f"{PARAMETER_FLAGS[m.group(1)]} {m.group(2)}", message)
+    return _BARE.sub(lambda m: PARAMETER_FLAGS[m.group(1)], message)

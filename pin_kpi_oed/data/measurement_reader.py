@@ -191,7 +191,7 @@ def _check_header(header: list[str], header_line: int, src: str, joint_names: li
     if missing_xyz and (require_position or len(missing_xyz) != 3):
         raise InputError(
             f"{src}: missing position column(s) {', '.join(missing_xyz)} (m, tracker frame); "
-            f"columns found: {found}; map other names with --columns x=X,..."
+            f"columns found: {found}; map other names with columns='x=X,...'"
         )
     rot_present = [c for c in ROTVEC_COLUMNS if c in seen]
     if rot_present and len(rot_present) != 3:
@@ -225,7 +225,7 @@ def _check_header(header: list[str], header_line: int, src: str, joint_names: li
         if missing:
             raise InputError(
                 f"{src}: missing joint column(s) {', '.join(missing)} (rad); columns found: {found}; map other "
-                f"names with --columns {missing[0]}=NAME,..."
+                f"names with columns='{missing[0]}=NAME,...'"
             )
         extra_names = [c for c in header if c not in RESERVED_COLUMNS and c not in set(joints)]
     return _Columns(seen, joints, extra_names, not missing_xyz, bool(rot_present), sigma_names, found)
@@ -293,13 +293,13 @@ def _check_units(ms: MeasurementSet, cols: _Columns, row_lines: list[int], src: 
             raise InputError(
                 f"{src}: columns x, y, z: median distance from the tracker {med:.6g} m exceeds {limit:g} m "
                 f"(e.g. row {r + 1} (line {row_lines[r]}): {dist[r]:.6g}); looks like mm/degrees; "
-                f"convert to m/rad or declare the units (--units mm,deg)"
+                f"convert to m/rad or declare the units (units='mm,deg')"
             )
     if reach_m is not None and cols.position:
         for lab, rows in ms.station_rows().items():  # each station has its own tracker frame
             where = f"{src}: columns x, y, z" + (f", station '{lab}'" if ms.station is not None else "")
             check_position_spread_m(pos[rows], float(reach_m), where,
-                                    "convert to m/rad or declare the units (--units mm,deg)")
+                                    "convert to m/rad or declare the units (units='mm,deg')")
     rev = np.array([u != "m" for u in joint_units]) if joint_units is not None else np.ones(len(cols.joints), bool)
     for arr, names, mask in ((ms.q, cols.joints, rev), (ms.rotvec_rad, ROTVEC_COLUMNS, np.ones(3, bool))):
         if arr is None:
@@ -310,7 +310,7 @@ def _check_units(ms: MeasurementSet, cols: _Columns, row_lines: list[int], src: 
             raise InputError(
                 f"{src}: column '{names[c]}', row {r + 1} (line {row_lines[r]}): value {float(arr[r, c])!r} "
                 f"exceeds 2π+0.1 rad in magnitude; looks like mm/degrees; "
-                f"convert to m/rad or declare the units (--units mm,deg)"
+                f"convert to m/rad or declare the units (units='mm,deg')"
             )
     if ms.sigma_m is not None:
         sigma = ms.sigma_m
@@ -320,7 +320,7 @@ def _check_units(ms: MeasurementSet, cols: _Columns, row_lines: list[int], src: 
             raise InputError(
                 f"{src}: column(s) {', '.join(dict.fromkeys(cols.sigma_names))}: median standard deviation "
                 f"{med_sigma:.6g} m exceeds {MAX_MEDIAN_SIGMA_M:g} m (e.g. row {r + 1} (line {row_lines[r]}): "
-                f"{sigma[r].max():.6g}); looks like mm/degrees; convert to m/rad or declare the units (--units mm,deg)"
+                f"{sigma[r].max():.6g}); looks like mm/degrees; convert to m/rad or declare the units (units='mm,deg')"
             )
 
 

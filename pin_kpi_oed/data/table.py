@@ -74,7 +74,7 @@ class Units:
 SI_UNITS = Units()
 
 
-def parse_units(text: str | Units | None, what: str = "--units") -> Units:
+def parse_units(text: str | Units | None, what: str = "parameter 'units'") -> Units:
     """Parse a unit declaration: one length and/or one angle unit, comma-separated (``mm,deg``).
 
     Args:
@@ -113,7 +113,7 @@ def parse_units(text: str | Units | None, what: str = "--units") -> Units:
     return Units(length or "m", angle or "rad", declared=True)
 
 
-def parse_columns(text: str | Mapping[str, str] | None, what: str = "--columns") -> dict[str, str]:
+def parse_columns(text: str | Mapping[str, str] | None, what: str = "parameter 'columns'") -> dict[str, str]:
     """Parse a column mapping ``ours=theirs,...`` (e.g. ``joint_a1=A1,x=X``).
 
     Args:
@@ -153,7 +153,7 @@ def parse_columns(text: str | Mapping[str, str] | None, what: str = "--columns")
     return out
 
 
-def rename_header(header: list[str], mapping: Mapping[str, str], src: str, what: str = "--columns",
+def rename_header(header: list[str], mapping: Mapping[str, str], src: str, what: str = "parameter 'columns'",
                   strict: bool = True) -> list[str]:
     """Rename the file's columns by ``mapping`` ({file name: package name}).
 

@@ -111,7 +111,7 @@ def read_targets(path: str | os.PathLike, joint_names: Sequence[str], *, program
     if program and len(has_q) != len(joints):
         missing = [j for j in joints if j not in seen]
         raise InputError(f"{src}: missing joint column(s) {', '.join(missing)} of the program; columns found: "
-                         f"{', '.join(header)} (map other names with --columns)")
+                         f"{', '.join(header)} (map other names with parameter 'columns')")
     if has_q and len(has_q) != len(joints):
         raise InputError(f"{src}: joint columns must be all of {', '.join(joints)} or none; found only "
                          f"{', '.join(has_q)}")
@@ -119,7 +119,7 @@ def read_targets(path: str | os.PathLike, joint_names: Sequence[str], *, program
         miss = [c for c in "xyz" if c not in seen]
         if miss:
             raise InputError(f"{src}: missing position column(s) {', '.join(miss)} of the TCP targets; columns "
-                             f"found: {', '.join(header)} (map other names with --columns)")
+                             f"found: {', '.join(header)} (map other names with parameter 'columns')")
     rot = [c for c in ("rx", "ry", "rz") if c in seen]
     if rot and len(rot) != 3:
         raise InputError(f"{src}: orientation needs all of rx, ry, rz (rotation vector); found only {', '.join(rot)}")
@@ -155,7 +155,7 @@ def _sniff(src: str, pos: np.ndarray | None, rv: np.ndarray | None, q: np.ndarra
         med = float(np.median(np.linalg.norm(pos, axis=1)))
         if med > MAX_MEDIAN_DISTANCE_M:
             raise InputError(f"{src}: columns x, y, z: median distance {med:.6g} m exceeds {MAX_MEDIAN_DISTANCE_M:g} m;"
-                             " looks like mm; declare the units (--units mm,deg) or convert to m/rad")
+                             " looks like mm; declare the units (units='mm,deg') or convert to m/rad")
     for arr, names, mask in ((q, joints, rev), (rv, ["rx", "ry", "rz"], np.ones(3, bool))):
         if arr is None:
             continue
@@ -164,4 +164,4 @@ def _sniff(src: str, pos: np.ndarray | None, rv: np.ndarray | None, q: np.ndarra
             r, c = np.argwhere(big)[0]
             raise InputError(f"{src}: column '{names[c]}', row {r + 1} (line {lines[r]}): "
                              f"value {float(arr[r, c]):.6g} exceeds "
-                             f"2π+0.1 rad; looks like degrees; declare the units (--units mm,deg) or convert to rad")
+                             f"2π+0.1 rad; looks like degrees; declare the units (units='mm,deg') or convert to rad")

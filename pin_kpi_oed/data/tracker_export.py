@@ -191,11 +191,11 @@ def read_point_export(path: str | os.PathLike, units: str | None = None,
     if units is not None:
         given = _UNIT_WORDS.get(str(units).strip().lower(), str(units).strip().lower())
         if given not in LENGTH_UNITS:
-            raise InputError(f"--units: unknown length unit '{units}' for a tracker export "
+            raise InputError(f"parameter 'units': unknown length unit '{units}' for a tracker export "
                              f"(known: {', '.join(LENGTH_UNITS)})")
         if declared is not None and declared != given:
-            raise InputError(f"{src}: the file says 'Units: {declared}' but {given} was given; drop --units or fix "
-                             "the file")
+            raise InputError(f"{src}: the file says 'Units: {declared}' but {given} was given; drop "
+                             "parameter 'units' or fix the file")
     sep = _separator(body[0])
     # the body (comment lines removed) is read by the shared pandas reader
     header, _, rows, idx = parse_text_table("\n".join(body) + "\n", src, "tracker export", sep=sep)
@@ -207,16 +207,16 @@ def read_point_export(path: str | os.PathLike, units: str | None = None,
         raise InputError(f"{src}: no points after the header")
     header, in_header = _header_units(header, raw_header, src)
     if in_header is not None:
-        for what, u in (("the file says 'Units: {}'", declared), ("--units {}", given)):
+        for what, u in (("the file says 'Units: {}'", declared), ("units='{}' was given", given)):
             if u is not None and u != in_header:
                 raise InputError(f"{src}: the coordinate columns say [{in_header}] but {what.format(u)}; make them "
-                                 "agree (fix the file or drop --units)")
+                                 "agree (fix the file or drop parameter 'units')")
     unit = declared or in_header or given or "mm"
     i_name = _find(header, _NAME_COLS)
     missing = [c for c in ("x", "y", "z") if c not in header] + (["target"] if i_name is None else [])
     if missing:
         raise InputError(f"{src}: missing column(s) {', '.join(missing)} in the tracker export; columns found: "
-                         f"{', '.join(header)} (map other names with --columns target=NAME,x=NAME,...)")
+                         f"{', '.join(header)} (map other names with columns='target=NAME,x=NAME,...')")
     i_time = _find(header, _TIME_COLS)
     sig = next((s for s in _SIGMA_COLS if all(c in header for c in s)), None)
     numeric = {"x", "y", "z"} | (set(sig) if sig else set())
@@ -302,13 +302,14 @@ def import_tracker_export(export_path: str | os.PathLike, joints_path: str | os.
     header = rename_header(header, mapping, src, strict=False)
     unused = [c for c in mapping if c not in raw_header and c.lower() not in exp.raw_header]
     if unused:
-        raise InputError(f"--columns maps column(s) {', '.join(unused)} that neither {exp.source} nor {src} has")
+        raise InputError(f"parameter 'columns' maps column(s) {', '.join(unused)} that neither {exp.source} "
+                         f"nor {src} has")
     i_name = _find(header, _NAME_COLS)
     joints = list(joint_names)
     missing = [j for j in joints if j not in header] + (["Target"] if i_name is None else [])
     if missing:
         raise InputError(f"{src}: missing column(s) {', '.join(missing)} in the joint log; columns found: "
-                         f"{', '.join(header)} (map other names with --columns)")
+                         f"{', '.join(header)} (map other names with parameter 'columns')")
     aux = [c for c in ("temperature", "payload") if c in header]
     data = parse_numeric_table(rows, lines, header, src, float, ", ".join(header),
                                skip=tuple(h for h in header if h not in set(joints) | set(aux)))

@@ -66,8 +66,8 @@ def read_poses(path: str | Path, robot: Robot, what: str = "Q_candidates") -> np
     try:
         ms = read_measurements(path, joint_names=list(robot.joint_names), require_position=False)
     except InputError as exc:  # advice about options design does not have becomes what to do with the file
-        msg = str(exc).replace(" or declare the units (--units mm,deg)", " in the file")
-        msg = re.sub(r"map other names with --columns [^;)]*", "rename the file's columns to the robot's joint names",
+        msg = str(exc).replace(" or declare the units (units='mm,deg')", " in the file")
+        msg = re.sub(r"map other names with columns='[^']*'", "rename the file's columns to the robot's joint names",
                      msg)
         raise InputError(f"{what}: {msg}") from None
     Q = robot.check_q(np.asarray(ms.q, float), f"{what} {path}", line_of=lambda i: _data_lines(path)[i])

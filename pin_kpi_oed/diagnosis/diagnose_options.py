@@ -96,11 +96,11 @@ def check_options(model: TrackerModel, train: MeasurementSet, validate: Measurem
                    opts: DiagnoseOptions) -> None:
     """Step 0: one validation mode, a valid alpha and weights, the joint columns."""
     if (validate is None) == (opts.kfold is None):
-        raise InputError("diagnose: give either validation data (--validate) or a number of folds (--kfold), "
-                         "not both and not neither")
+        raise InputError("diagnose: give either validation data (parameter 'validate') or a number of folds "
+                         "(parameter 'kfold'), not both and not neither")
     if (opts.register_rows is not None or opts.register_data is not None) and validate is None:
         raise InputError("diagnose: register_rows / register_data re-register the set-up on rows of another "
-                         "session: they need validation data (--validate)")
+                         "session: they need validation data (parameter 'validate')")
     if opts.register_rows is not None and opts.register_data is not None:
         raise InputError("diagnose: give register_rows or register_data, not both")
     if not 0 < opts.alpha < 1:

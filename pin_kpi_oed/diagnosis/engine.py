@@ -200,7 +200,7 @@ def plan_folds(train: MeasurementSet, validate: MeasurementSet | None, opts: Dia
         return Plan("transfer", 1, [(train, validate.subset(scored))], [scored], None, validate, reg, info)
     kfold = opts.kfold
     if isinstance(kfold, bool) or not isinstance(kfold, (int, np.integer)) or kfold < 2:
-        raise InputError(f"diagnose: --kfold must be an integer >= 2, got {kfold!r}")
+        raise InputError(f"diagnose: parameter 'kfold' must be an integer >= 2, got {kfold!r}")
     if kfold > len(train) // 3:
         raise InputError(f"diagnose: {len(train)} measurements are too few for {kfold} folds "
                          f"(each fold needs at least 3 measurements)")

@@ -42,7 +42,7 @@ def select_transfer_terms(geo_fit: Any, train: MeasurementSet, names: Sequence[s
     from pin_kpi_oed.diagnosis.selection import select_terms
 
     if isinstance(opts.harmonics, bool) or not isinstance(opts.harmonics, (int, np.integer)) or opts.harmonics < 1:
-        raise InputError(f"diagnose: --harmonics must be an integer >= 1, got {opts.harmonics!r}")
+        raise InputError(f"diagnose: parameter 'harmonics' must be an integer >= 1, got {opts.harmonics!r}")
     robot = geo_fit.result.model.robot
     cands: list[Effect] = []
     if "transmission_error" in names:

@@ -170,7 +170,7 @@ def fit_discrepancy(Q: np.ndarray, R: np.ndarray, joint_names: Sequence[str],
     if n_poses < opts.min_rows:
         if opts.mode == "on":
             raise InputError(f"discrepancy: {n_poses} distinct poses are too few for the Gaussian process (at least "
-                             f"{opts.min_rows}); measure more poses or use --discrepancy auto/none")
+                             f"{opts.min_rows}); measure more poses or use discrepancy='auto' or 'none'")
         white.decision = (f"discrepancy: white: {n_poses} distinct poses, fewer than the {opts.min_rows} a Gaussian "
                           f"process needs; {white.decision}")
         white.time_s = time.perf_counter() - t0

@@ -453,7 +453,7 @@ def _ur_kinematics(spec: str, kinematics: Any) -> Any:
             kin = default_ur_kinematics(key)
             if kin is None:
                 raise RobotLoadError(f"{spec}: no default kinematics shipped: pass its kinematics file "
-                                     "(--kinematics calib.yaml, from ur_calibration)")
+                                     "(kinematics='calib.yaml', from ur_calibration)")
             return kin
         return None
     if key not in UR_TYPES:
@@ -503,7 +503,7 @@ def _tool_frame(full: pin.Model, path: Path, tool_frame: str | None, default_too
     """The tool frame: given, the robot name's default, or ``tool0``; raises RobotLoadError if absent."""
     tool = tool_frame or default_tool or ("tool0" if full.existFrame("tool0") else None)
     if tool is None:
-        raise RobotLoadError(f"{path}: no tool frame given and the URDF has no 'tool0' frame: pass --tool FRAME")
+        raise RobotLoadError(f"{path}: no tool frame given and the URDF has no 'tool0' frame: pass tool_frame='FRAME'")
     if not full.existFrame(tool):
         names = [f.name for f in full.frames if f.type in (pin.FrameType.BODY, pin.FrameType.OP_FRAME)]
         raise RobotLoadError(f"{path}: unknown tool frame '{tool}' (frames: {', '.join(names[-8:])} ...)")

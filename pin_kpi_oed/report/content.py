@@ -78,8 +78,8 @@ def _check_recorded(cm: Any, records: list[dict], model_path: str) -> dict:
                              f"on (recorded: {names})")
     missing = want - {r["sha256"] for r in records}
     if missing:
-        raise InputError(f"--train: {model_path} was calibrated on {len(want)} files ({names}); give every one of them "
-                         "(the nominal comparison is fitted on all its training rows)")
+        raise InputError(f"train_paths: {model_path} was calibrated on {len(want)} files ({names}); give every one "
+                         "of them (the nominal comparison is fitted on all its training rows)")
     return {"checked": True, "note": "the training files are the ones the model file recorded (SHA-256)"}
 
 
@@ -204,7 +204,7 @@ def build_certificate(model_path: str, train_paths: Sequence[str], validate_path
 
     if not validate_path:
         raise InputError("a certificate states accuracy on rows the model was not fitted on: give "
-                         "--validate FILE (held-out measurements)")
+                         "validate_path='FILE' (held-out measurements)")
     cm = load_model_file(model_path)
     _check_kinematics(cm, kinematics)
     opts = dict(table_opts or {})

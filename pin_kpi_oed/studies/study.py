@@ -242,7 +242,7 @@ def _run_dask(todo: list[Task], out_dir: Path, scheduler: str, workers: int | No
         try:
             client = Client(scheduler, timeout="10s")
         except (OSError, TimeoutError) as exc:
-            raise InputError(f"--scheduler {scheduler}: cannot connect to the Dask scheduler within 10 s "
+            raise InputError(f"scheduler='{scheduler}': cannot connect to the Dask scheduler within 10 s "
                              f"({str(exc).splitlines()[0] if str(exc) else type(exc).__name__})") from None
     try:
         futs = client.map(run_task, todo, out_dir=str(out_dir), pure=False)

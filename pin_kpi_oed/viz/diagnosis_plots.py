@@ -50,7 +50,7 @@ def diagnosis_figures(report: Any, folder: str | os.PathLike, n_top: int = 4) ->
         raise InputError("diagnosis figures need the report returned by diagnose() (plot data are not stored in JSON)")
     out = Path(folder)
     if out.exists() and not out.is_dir():
-        raise InputError(f"--figures {out}: exists and is not a folder")
+        raise InputError(f"{out}: exists and is not a folder")
     out.mkdir(parents=True, exist_ok=True)
     R, regs = np.asarray(data["residuals_m"], float), data["regressors"]
     floor, before_rms = report.noise_floor_m, report.heldout_before.get("rms_m") or 0.0

@@ -167,7 +167,7 @@ class SceneRecorder:
 
     # --- meshcat window interface
     def get_image(self, *args, **kwargs):
-        raise PinKpiOedError("the recorded scene has no browser attached: write it with --html or view it live")
+        raise PinKpiOedError("the recorded scene has no browser attached: write it as an HTML page or view it live")
 
     def open(self) -> SceneRecorder:
         return self

@@ -255,12 +255,12 @@ def sigma_kind(df: DesignFile, sigma: str | None = None) -> str:
     if sigma is None:
         return "honest" if have else "paper"
     if sigma not in SIGMA_TEXT:
-        raise InputError(f"--sigma: must be honest or paper, got '{sigma}'")
+        raise InputError(f"parameter 'sigma': must be honest or paper, got '{sigma}'")
     if sigma == "honest" and not have:
         missing = [d.criterion for d in df.designs if d.cov_s_honest_m2 is None]
-        raise InputError(f"--sigma honest: design(s) {', '.join(missing)} of {df.source} have no "
+        raise InputError(f"sigma='honest': design(s) {', '.join(missing)} of {df.source} have no "
                          "discrepancy.cov_s_m2 (write the file with pin-kpi-oed design --model MODEL_JSON, a model "
-                         "with a discrepancy; or give --sigma paper)")
+                         "with a discrepancy; or give sigma='paper')")
     return sigma
 
 
