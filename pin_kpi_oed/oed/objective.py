@@ -41,7 +41,7 @@ from pin_kpi_oed.oed.criteria import Criterion, CriterionInfo, get_criterion
 from pin_kpi_oed.oed.pool_search import ValueState, greedy_exchange
 from pin_kpi_oed.oed.selection_result import PoolSelection
 
-__all__ = ["DesignContext", "DesignObjective", "DesignCriterion", "information_criterion"]
+__all__ = ["DesignContext", "DesignObjective", "DesignCriterion", "information_criterion", "criterion_with_E"]
 
 
 @dataclass
@@ -209,3 +209,20 @@ class DesignCriterion(DesignObjective):
             M0 = P if M0 is None else M0 + P
         K = self.crit.pool_form(self.E, self.base.size)
         return select(Fp, m, K, seed=seed, fixed_info=M0, **kw)
+
+
+def criterion_with_E(problem: Any, crit: Criterion, E: np.ndarray) -> DesignCriterion:
+    """``crit`` with a sensitivity of its own (a working path's, a 6-D pose's: not the problem's KPI E) on the
+    problem's information: its ``information_objective`` when it has one (a
+    :class:`~pin_kpi_oed.design.optimize.DesignProblem`: the measured poses' rows included), else the noise-only
+    information at ``problem.p0``.
+
+    Args:
+        problem: a design problem or a :class:`DesignContext`; crit: a criterion of the information matrix;
+        E: its sensitivity over the identifiable parameters (rows, nb).
+    """
+    if hasattr(problem, "information_objective"):
+        obj = problem.information_objective(crit)
+        obj.E = E
+        return obj
+    return DesignCriterion(problem.model, problem.base, crit, E, problem.p0)

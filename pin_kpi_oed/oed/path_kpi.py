@@ -25,10 +25,10 @@ from typing import Any
 import numpy as np
 
 from pin_kpi_oed.errors import InputError
-from pin_kpi_oed.oed.criteria import ConfigurationCriterion, SampleMeanTrace, register
-from pin_kpi_oed.oed.objective import DesignCriterion, DesignObjective
+from pin_kpi_oed.oed.criteria import ConfigurationCriterion, Criterion, SampleMeanTrace, register
+from pin_kpi_oed.oed.objective import DesignObjective, criterion_with_E
 
-__all__ = ["PathTrace", "PathKpi", "path_sensitivity"]
+__all__ = ["PathTrace", "PathKpi", "path_sensitivity", "path_objective"]
 
 
 class PathTrace(SampleMeanTrace):
@@ -67,16 +67,23 @@ class PathKpi(ConfigurationCriterion):
     is_ratio, needs_kpi, uses_discrepancy = True, True, False
 
     def objective(self, problem: Any) -> DesignObjective:
-        E = path_sensitivity(problem)
-        if getattr(problem, "extended", None) is not None:
-            from pin_kpi_oed.oed.extended import ExtendedDesignCriterion
+        return path_objective(problem, PathTrace())
 
-            return ExtendedDesignCriterion(problem.extended, PathTrace(), problem.cell.q_path)
-        if hasattr(problem, "information_objective"):
-            obj = problem.information_objective(PathTrace())
-            obj.E = E
-            return obj
-        return DesignCriterion(problem.model, problem.base, PathTrace(), E, problem.p0)
+
+def path_objective(problem: Any, crit: Criterion) -> DesignObjective:
+    """A criterion of the path samples' covariance (``crit``: :class:`PathTrace`, ``kpi_path_max``'s smooth worst
+    sample) on the problem's information model: the extended model when the problem has one, else the noise-only
+    information with the measured poses' rows (:func:`~pin_kpi_oed.oed.objective.criterion_with_E`).
+
+    Raises:
+        InputError, IdentifiabilityError: as :func:`path_sensitivity`.
+    """
+    E = path_sensitivity(problem)
+    if getattr(problem, "extended", None) is not None:
+        from pin_kpi_oed.oed.extended import ExtendedDesignCriterion
+
+        return ExtendedDesignCriterion(problem.extended, crit, problem.cell.q_path)
+    return criterion_with_E(problem, crit, E)
 
 
 register(PathKpi)

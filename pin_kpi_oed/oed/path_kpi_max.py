@@ -27,7 +27,7 @@ from typing import Any
 import numpy as np
 
 from pin_kpi_oed.oed.criteria import ConfigurationCriterion, CovarianceCriterion, register
-from pin_kpi_oed.oed.objective import DesignCriterion, DesignObjective
+from pin_kpi_oed.oed.objective import DesignObjective
 from pin_kpi_oed.oed.selection_result import PoolSelection
 
 __all__ = ["DEFAULT_SHARPNESS", "PathMaxTrace", "PathMaxKpi", "WorstSampleObjective", "sample_traces"]
@@ -112,18 +112,9 @@ class PathMaxKpi(ConfigurationCriterion):
     is_ratio, needs_kpi, uses_discrepancy = True, True, False
 
     def objective(self, problem: Any) -> DesignObjective:
-        from pin_kpi_oed.oed.path_kpi import path_sensitivity
+        from pin_kpi_oed.oed.path_kpi import path_objective
 
-        E = path_sensitivity(problem)
-        if getattr(problem, "extended", None) is not None:
-            from pin_kpi_oed.oed.extended import ExtendedDesignCriterion
-
-            return WorstSampleObjective(ExtendedDesignCriterion(problem.extended, PathMaxTrace(), problem.cell.q_path))
-        if hasattr(problem, "information_objective"):
-            obj = problem.information_objective(PathMaxTrace())
-            obj.E = E
-            return WorstSampleObjective(obj)
-        return WorstSampleObjective(DesignCriterion(problem.model, problem.base, PathMaxTrace(), E, problem.p0))
+        return WorstSampleObjective(path_objective(problem, PathMaxTrace()))
 
 
 register(PathMaxKpi)

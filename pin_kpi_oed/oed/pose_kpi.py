@@ -21,7 +21,7 @@ import numpy as np
 
 from pin_kpi_oed.errors import InputError
 from pin_kpi_oed.oed.criteria import ConfigurationCriterion, SampleMeanTrace, register
-from pin_kpi_oed.oed.objective import DesignCriterion, DesignObjective
+from pin_kpi_oed.oed.objective import DesignObjective, criterion_with_E
 
 __all__ = ["PoseTrace", "PoseKpi", "pose_sensitivity"]
 
@@ -71,11 +71,7 @@ class PoseKpi(ConfigurationCriterion):
             raise InputError("criterion kpi6: needs a design problem on a cell (its orientation_length_m)")
         L = float(cell.orientation_length_m)
         E6 = pose_sensitivity(problem.model, problem.p0, problem.q_work, problem.base, L)
-        if hasattr(problem, "information_objective"):
-            obj = problem.information_objective(PoseTrace())
-            obj.E = E6
-            return obj
-        return DesignCriterion(problem.model, problem.base, PoseTrace(), E6, problem.p0)
+        return criterion_with_E(problem, PoseTrace(), E6)
 
 
 register(PoseKpi)
