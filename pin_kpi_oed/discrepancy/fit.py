@@ -130,7 +130,9 @@ def _kfold(kernel: JointKernel, noise: float, Q: np.ndarray, Y: np.ndarray, scal
 def fit_discrepancy(Q: np.ndarray, R: np.ndarray, joint_names: Sequence[str],
                     options: DiscrepancyOptions | None = None, *, n_params: int = 0,
                     noise_floor_m: np.ndarray | None = None, periodic: np.ndarray | None = None,
-                    linear: np.ndarray | None = None, joint_span: np.ndarray | None = None) -> Discrepancy | None:
+                    linear: np.ndarray | None = None, joint_span: np.ndarray | None = None,
+                    jacobian: np.ndarray | None = None, joint_jacobian: np.ndarray | None = None
+                    ) -> Discrepancy | None:
     """Fit δ to the residuals of a parametric fit.
 
     Args:
@@ -141,6 +143,9 @@ def fit_discrepancy(Q: np.ndarray, R: np.ndarray, joint_names: Sequence[str],
             :func:`white_level`).
         noise_floor_m: the data's stated noise per axis (m): no white level (of the white kind or the Gaussian
             process's) below it. None: no floor (the noise level is unknown).
+        jacobian, joint_jacobian: the fit's Jacobians w.r.t. its parameters (n, 3, P) and the joint angles (n, 3, d),
+            base frame: below a Gaussian process, joint-angle errors beside the white level (:func:`_joint_angle`; not
+            on a robot with a linear joint).
         periodic: (d,) bool, joints compared mod 2π (``Robot.periodic_joints``); None: every joint.
         linear: (d,) bool, the linear (prismatic) joints, on the line in the kernel (``~Robot.is_revolute``); None:
             none. joint_span: (d,) the joints' travel (upper − lower limit, m for a linear joint): a linear joint's
@@ -156,9 +161,7 @@ def fit_discrepancy(Q: np.ndarray, R: np.ndarray, joint_names: Sequence[str],
     opts = options or DiscrepancyOptions()
     if opts.mode == "none":
         return None
-    Q = np.atleast_2d(np.asarray(Q, float))
-    R = np.asarray(R, float).reshape(-1, 3)
-    names = list(joint_names)
+    Q, R, names = np.atleast_2d(np.asarray(Q, float)), np.asarray(R, float).reshape(-1, 3), list(joint_names)
     if not np.all(np.isfinite(R)) or not np.all(np.isfinite(Q)):
         raise InputError("discrepancy: non-finite residuals or joint values")
     n = len(Q)
@@ -171,15 +174,14 @@ def fit_discrepancy(Q: np.ndarray, R: np.ndarray, joint_names: Sequence[str],
         if opts.mode == "on":
             raise InputError(f"discrepancy: {n_poses} distinct poses are too few for the Gaussian process (at least "
                              f"{opts.min_rows}); measure more poses or use discrepancy='auto' or 'none'")
+        if linear is None or not np.any(linear):              # the joint-angle kernel is one of angles
+            _joint_angle(white, Q, R, jacobian, joint_jacobian, noise_floor_m, periodic)
         white.decision = (f"discrepancy: white: {n_poses} distinct poses, fewer than the {opts.min_rows} a Gaussian "
                           f"process needs; {white.decision}")
         white.time_s = time.perf_counter() - t0
         return white
-    mean = R.mean(axis=0)
-    scale = np.maximum(R.std(axis=0), 1e-12)
-    min_noise = 1e-5
-    if noise_floor_m is not None:
-        min_noise = max(min_noise, float(np.max((np.asarray(noise_floor_m, float) / scale) ** 2)))
+    mean, scale = R.mean(axis=0), np.maximum(R.std(axis=0), 1e-12)
+    min_noise = 1e-5 if noise_floor_m is None else max(1e-5, float(np.max((np.asarray(noise_floor_m) / scale) ** 2)))
     Y = (R - mean) / scale
     cv_rows = kfold_rows(n, opts)
     span = np.ptp(Q, axis=0) if joint_span is None else np.asarray(joint_span, float)
@@ -234,6 +236,34 @@ def _dof_rescale(post: dict, scale: np.ndarray, n: int, n_params: int, cv: dict)
             post[key] = post[key] / dof
     cv["dof_factor"] = dof
     return scale * dof
+
+
+def _joint_angle(white: Discrepancy, Q: np.ndarray, R: np.ndarray, F: np.ndarray | None, Jq: np.ndarray | None,
+                 floor_m: np.ndarray | None, periodic: np.ndarray | None) -> None:
+    """Give the white discrepancy the joint-angle errors its residuals show, when they predict left-out poses
+    better (:mod:`pin_kpi_oed.discrepancy.joint_angle`): its white level becomes that fit's σ_n and its decision
+    says so."""
+    if F is None or Jq is None:
+        return
+    from pin_kpi_oed.discrepancy.joint_angle import fit_joint_angle
+    groups, _ = grouped_folds(Q, len(Q), 0, periodic)
+    got = fit_joint_angle(Q, R, Jq, F, floor_m, float(white.cv.get("small_sample_factor", 1.0)),
+                          white.noise_var_m2, groups)
+    if got is None:
+        white.decision += "; joint-angle errors predict left-out poses no better than the white level"
+        return
+    term, stat = got
+    white.joint_term = term
+    white.scale_m = np.full(3, np.sqrt(term.noise_var_m2))
+    white.noise = 1.0
+    white.cv.update({"joint_angle_tau_rad": float(np.sqrt(term.tau2)),
+                     "joint_angle_length_scale_rad": float(term.length_scale_rad), "joint_angle_loo_gain": float(stat)})
+    white.decision = (f"joint-angle errors of {np.sqrt(term.tau2) * 1e6:.1f} urad per joint, length scale "
+                      f"{term.length_scale_rad:g} rad (restricted maximum likelihood on the residuals; chosen over a "
+                      f"white level alone by the leave-one-pose-out log predictive density, +{stat:.1f}) and a "
+                      f"white level of {np.sqrt(term.noise_var_m2) * 1e3:.4f} mm per axis, each widened "
+                      f"x{white.cv.get('small_sample_factor', 1.0):.3f} for its small-sample uncertainty; every sigma "
+                      f"adds the parameter covariance under them and takes back what the fit absorbed")
 
 
 def _white(R: np.ndarray, names: list, n_params: int, floor_m: np.ndarray | None,

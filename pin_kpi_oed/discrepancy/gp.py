@@ -172,7 +172,8 @@ def sigma_plan(n_poses: int, n_params: int, options: DiscrepancyOptions | None =
                 f"learn the error beyond the noise from; measure more than {int(np.ceil(n_params / 3))} poses")
     _, _, widen = white_level(np.zeros((int(n_poses), 3)), n_params)
     white = (f"a white level from the residuals, corrected for the {n_params} fitted parameters (3m - p = {k}) and "
-             f"widened x{widen:.2f} for its small-sample uncertainty, plus the parameter covariance at every pose")
+             f"widened x{widen:.2f} for its small-sample uncertainty, with joint-angle errors beside it when they "
+             "predict left-out poses better, plus the parameter covariance at every pose")
     if n_poses < opts.min_rows:
         return (f"sigma at {n_poses} poses: fewer than the {opts.min_rows} distinct poses a Gaussian process needs: "
                 f"identify will give {white} (measure {opts.min_rows} or more for a Gaussian process)")
@@ -214,6 +215,9 @@ class Discrepancy(DiscrepancyModel):
             parameters, as if its residuals were independent at their prior level (inside the coverage);
             param_stations: the training stations whose set-up columns follow the robot's (9 each: tracker pose,
             reflector), in order.
+        joint_term: the joint-angle part of a white discrepancy fitted below what a Gaussian process needs
+            (:class:`~pin_kpi_oed.discrepancy.joint_angle.JointAngleTerm`; ``param_cov`` is then its parameters'
+            covariance), or None.
     """
 
     kind: str
@@ -236,6 +240,7 @@ class Discrepancy(DiscrepancyModel):
     Bn: np.ndarray | None = None
     param_cov_ls: np.ndarray | None = None
     param_stations: list = field(default_factory=list)
+    joint_term: Any = None
     _chol: Any = field(default=None, repr=False)
 
     # ------------------------------------------------------------------ posterior
@@ -318,6 +323,12 @@ class Discrepancy(DiscrepancyModel):
             Bn = np.stack([sla.cho_solve(self._chol, F[:, a, :], check_finite=False) for a in range(3)], axis=1)
             info = sum(F[:, a, :].T @ Bn[:, a, :] / self.scale_m[a] ** 2 for a in range(3))
             self.Bn = Bn
+        elif self.kind == "white" and self.joint_term is not None:
+            if self.joint_term.Fplus.shape != (P, 3 * n):
+                raise ValueError(f"discrepancy: the joint-angle term was fitted on another Jacobian "
+                                 f"{self.joint_term.Fplus.shape} than ({P}, {3 * n})")
+            info = None
+            self.param_cov = self.joint_term.param_cov
         elif self.kind == "white":
             info = sum(F[:, a, :].T @ F[:, a, :] / self.noise_var_m2[a] for a in range(3))
         else:
@@ -413,6 +424,8 @@ class Discrepancy(DiscrepancyModel):
                 d["parametric"]["covariance_ls"] = encode_array(self.param_cov_ls)
             if self.Bn is not None:
                 d["parametric"]["Bn"] = encode_array(self.Bn)
+        if self.joint_term is not None:
+            d["joint_angle"] = self.joint_term.to_dict()
         if self.kind != "white":
             d["kernel"] = self.kernel.to_dict()
             d["Z_rad"] = encode_array(self.Z)
@@ -493,6 +506,12 @@ class Discrepancy(DiscrepancyModel):
             P = (out.param_cov if out.param_cov is not None else out.param_cov_ls).shape[0]
             if par.get("Bn") is not None:
                 out.Bn = decode_array(par["Bn"], f"{where}.parametric.Bn", (None, 3, P))
+        if d.get("joint_angle") is not None:
+            from pin_kpi_oed.discrepancy.joint_angle import JointAngleTerm
+            if kind != "white":
+                raise ValueError(f"{where}.joint_angle: only a white discrepancy ('kind') holds one")
+            out.joint_term = JointAngleTerm.from_dict(d["joint_angle"], len(names), out.param_cov,
+                                                      f"{where}.joint_angle")
         if kind == "white":
             _check_file_sigma(out, where)
             return out

@@ -25,7 +25,7 @@ from pin_kpi_oed.discrepancy.gp import Discrepancy, DiscrepancyOptions
 from pin_kpi_oed.errors import InputError
 
 __all__ = ["result_discrepancy", "base_frame_residuals", "discrepancy_options", "position_outliers",
-           "stated_noise_m"]
+           "stated_noise_m", "joint_jacobian", "parameter_jacobian"]
 
 #: False-alarm probability of the position-outlier flag of 6-D fits.
 POSITION_OUTLIER_ALPHA = 1e-3
@@ -112,12 +112,14 @@ def result_discrepancy(result: Any, data: MeasurementSet, options: Any = "auto",
     rows, R = base_frame_residuals(result, keep_flagged=_keep_flagged(result, opts))
     Q = np.asarray(Q, float)
     n_out = position_outliers(result).size
+    F, names = parameter_jacobian(result, Q)
     try:
         disc = fit_discrepancy(Q[rows], R, list(result.model.robot.joint_names), opts, n_params=len(result.names),
                                noise_floor_m=stated_noise_m(result, data),
                                periodic=result.model.robot.periodic_joints,
                                linear=~result.model.robot.is_revolute,
-                               joint_span=result.model.robot.q_upper - result.model.robot.q_lower)
+                               joint_span=result.model.robot.q_upper - result.model.robot.q_lower,
+                               jacobian=F[rows], joint_jacobian=joint_jacobian(result, Q)[rows])
     except InputError as exc:
         left = np.setdiff1d(np.arange(len(Q)), rows)
         flagged = left if left.size else position_outliers(result)
@@ -133,9 +135,17 @@ def result_discrepancy(result: Any, data: MeasurementSet, options: Any = "auto",
         disc.decision += (f" (the {n_out} rows flagged as outliers are kept: the plain least-squares fit used them, "
                           "and an unmodelled effect shows first in the largest residuals)")
     if disc is not None:
-        F, names = parameter_jacobian(result, Q)
         disc.set_parametric(F[rows], names, list(result.stations))
     return disc
+
+
+def joint_jacobian(result: Any, Q: np.ndarray) -> np.ndarray:
+    """∂y/∂q of a fit's predictions at its rows, rotated into the robot base frame, (n, 3, d) m/rad."""
+    out = np.zeros((len(Q), 3, result.model.robot.nq))
+    for s, rows in enumerate(result.station_rows):
+        model, p = result.station_models[s], result.station_p[s]
+        out[rows] = np.einsum("ba,mbj->maj", model.tracker_pose(p).rotation, model.prediction_dq(p, Q[rows]))
+    return out
 
 
 def parameter_jacobian(result: Any, Q: np.ndarray) -> tuple[np.ndarray, list[str]]:

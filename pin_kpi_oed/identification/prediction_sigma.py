@@ -15,7 +15,10 @@ For a row q of station s (tracker rotation R_s), the covariance of measured − 
   - noise-only model: the fit's covariance (``parameters.covariance`` of the model file) of the robot parameters
     and, for a station ``identify`` fitted, its own set-up (:func:`robot_parameter_covariance`), at every row,
     multiplied by the fit's reduced χ² when above 1 (residuals beyond the stated noise);
-  - white discrepancy: the least-squares covariance under the white level, at every row;
+  - white discrepancy: the least-squares covariance under the white level, at every row; with joint-angle errors
+    (few poses, :mod:`pin_kpi_oed.discrepancy.joint_angle`) their covariance τ² J_q J_qᵀ, the parameters' covariance
+    under them and the cross term of what the fit absorbed (``JointAngleTerm.covariance``), per row never below the
+    white level's own covariance (:func:`_never_below_white`);
   - Gaussian process: the universal-kriging term (E − K_WQ Σ⁻¹F) C (E − K_WQ Σ⁻¹F)ᵀ on rows outside the
     coverage, the least-squares term E C_ls Eᵀ inside it
     (:meth:`~pin_kpi_oed.discrepancy.gp.Discrepancy.parametric_covariance`).
@@ -109,6 +112,12 @@ def _robot_jacobian(cm: Any, label: str, Q: np.ndarray, names: list[str]) -> np.
     return model.base_jacobian(p, Q, [model.layout.names.index(n) for n in names])
 
 
+def _joint_jacobian(cm: Any, label: str, Q: np.ndarray) -> np.ndarray:
+    """∂y/∂q (m, 3, d) m/rad of station ``label``'s predictions, robot base frame."""
+    model, p = _jacobian_model(cm, label)
+    return np.einsum("ba,mbj->maj", model.tracker_pose(p).rotation, model.prediction_dq(p, np.atleast_2d(Q)))
+
+
 def _setup_jacobian(cm: Any, label: str, Q: np.ndarray) -> np.ndarray:
     """Base-frame Jacobian (m, 3, 9) of station ``label``'s predictions w.r.t. its set-up (tracker pose, reflector)."""
     model, p = _jacobian_model(cm, label)
@@ -127,12 +136,8 @@ def _registered(cm: Any, label: str, Q: np.ndarray, E: np.ndarray, names: list[s
     what the set-up absorbs in the other session's joint ranges is missed (the same case 0.33-0.48; 0.79-1.10 on the
     registration rows). A model file written before the rows were recorded uses the stand-in; without either, E
     (conservative)."""
-    st = cm.setups[label]
-    Z = st.registered_q_rad
-    if Z is None or len(Z) < 3:
-        cov = _coverage(cm)
-        Z = None if cov is None else cov.Z
-    if Z is None or len(Z) < 3 or not names:
+    Z = _registration_rows(cm, label)
+    if Z is None or not names:
         return E
     Gz = _setup_jacobian(cm, label, Z).reshape(-1, 9)
     Jz = _robot_jacobian(cm, label, Z, names).reshape(-1, len(names))
@@ -141,6 +146,58 @@ def _registered(cm: Any, label: str, Q: np.ndarray, E: np.ndarray, names: list[s
     # set-up directions Z barely determines (relative singular value below 1 %) are left out, not amplified
     B, *_ = np.linalg.lstsq(Gz / norms, Jz, rcond=1e-2)
     return E - np.einsum("mak,kr->mar", _setup_jacobian(cm, label, Q) / norms, B)
+
+
+def _registration_rows(cm: Any, label: str) -> np.ndarray | None:
+    """The configurations a registered station's set-up was fitted on (the stand-in of :func:`_registered` for
+    older model files), or None."""
+    Z = cm.setups[label].registered_q_rad
+    if Z is None or len(Z) < 3:
+        cov = _coverage(cm)
+        Z = None if cov is None else cov.Z
+    return None if Z is None or len(Z) < 3 else Z
+
+
+def _registration_map(cm: Any, label: str, Q: np.ndarray, Z: np.ndarray) -> np.ndarray:
+    """A (m, 3, 3k): the move of the set-up fitted on Z at each q per unit residual at Z's rows (base frame), the
+    map of :func:`_registered` (Ẽ = E − A J_Z)."""
+    Gz = _setup_jacobian(cm, label, Z).reshape(-1, 9)
+    norms = np.linalg.norm(Gz, axis=0)
+    norms[norms == 0] = 1.0
+    return np.einsum("mak,kn->man", _setup_jacobian(cm, label, Q) / norms, np.linalg.pinv(Gz / norms, rcond=1e-2))
+
+
+def _joint_angle_covariance(cm: Any, d: Any, label: str, Q: np.ndarray, E: np.ndarray,
+                            chunk: int = 500) -> np.ndarray:
+    """The joint-angle term's covariance (m, 3, 3) at station ``label``'s rows Q (base frame;
+    :meth:`~pin_kpi_oed.discrepancy.joint_angle.JointAngleTerm.covariance`), with the registration's share at a
+    station registered later; in chunks of rows (the registration map holds 9 k numbers per row)."""
+    Jq = _joint_jacobian(cm, label, Q)
+    if cm.setups[label].fitted_by == "identify" or label in d.param_stations:
+        return d.joint_term.covariance(Q, Jq, E)
+    Z = _registration_rows(cm, label)
+    if Z is None:
+        return d.joint_term.covariance(Q, Jq, E)
+    JZ = _joint_jacobian(cm, label, Z)
+    out = np.empty((len(Q), 3, 3))
+    for a in range(0, len(Q), chunk):
+        s = slice(a, a + chunk)
+        out[s] = d.joint_term.covariance(Q[s], Jq[s], E[s], (_registration_map(cm, label, Q[s], Z), Z, JZ))
+    return out
+
+
+def _never_below_white(Cb: np.ndarray, term: Any, E: np.ndarray) -> np.ndarray:
+    """Per row, the joint-angle errors' covariance Cb (m, 3, 3) or the white level's (diag(w²) + E C_w Eᵀ,
+    :meth:`~pin_kpi_oed.discrepancy.joint_angle.JointAngleTerm.white_covariance`), whichever has the larger trace:
+    the white level, corrected for the fitted parameters, is what the rows' residuals show at poses like them, which
+    a joint-angle kernel of the wrong shape can under-state near the rows (where its cross term takes back what the
+    fit absorbed); far from them the joint-angle errors carry the parameters' extrapolation."""
+    W = term.white_covariance(E)
+    if W is None:
+        return Cb
+    pick = np.einsum("maa->m", W) > np.einsum("maa->m", Cb)
+    Cb[pick] = W[pick]
+    return Cb
 
 
 def _discrepancy_jacobian(cm: Any, d: Any, label: str, Q: np.ndarray) -> np.ndarray:
@@ -183,6 +240,8 @@ def sigma_contents(cm: Any) -> str:
     d = cm.discrepancy
     if d is None:
         return "parameters + noise; no discrepancy (noise-only model)"
+    if d.kind == "white" and d.joint_term is not None:
+        return "parameters + joint-angle errors and a white level from the residuals; no Gaussian process"
     if d.kind == "white":
         return "parameters + a white residual level; no correlated discrepancy"
     return f"parameters + Gaussian-process discrepancy ({d.kind}, {d.n_rows} rows) + white level"
@@ -226,6 +285,8 @@ def predictive_sigma(cm: Any, Q: np.ndarray, aux: Any, station: str | None, labe
             out = extra[rows]
             if d.kind == "white":
                 Cb += d.parametric_covariance(Q[rows], E)
+                if d.joint_term is not None:
+                    Cb = _never_below_white(Cb + _joint_angle_covariance(cm, d, lab, Q[rows], E), d.joint_term, E)
             else:
                 for mask, inside in ((out, False), (~out, True)):
                     if mask.any():
@@ -282,7 +343,9 @@ def predictive_covariance(cm: Any, Q: np.ndarray, aux: Any, label: str) -> tuple
     (tracker frame, row-major: index 3 i + a), the σ of :func:`predictive_sigma` with the rows' correlations: the
     discrepancy's posterior covariance between the rows (per axis S_a² k_post(q_i, q_j)), the white level on the
     diagonal, the parametric part's error shared by every row (:meth:`Discrepancy.parametric_factor`; a noise-only
-    model: E C_p Eᵀ between rows), all rotated into the tracker frame and multiplied by the station's
+    model: E C_p Eᵀ between rows), the joint-angle errors of a white discrepancy between the rows
+    (:meth:`~pin_kpi_oed.discrepancy.joint_angle.JointAngleTerm.covariance_between`; at a station registered later
+    without the registration's share), all rotated into the tracker frame and multiplied by the station's
     ``sigma_scale``². Its 3 × 3 diagonal blocks hold :func:`predictive_sigma`'s σ² on their diagonals.
 
     Args:
@@ -317,6 +380,8 @@ def predictive_covariance(cm: Any, Q: np.ndarray, aux: Any, label: str) -> tuple
             cov = _coverage(cm)
             out = cov.extrapolation(Q) if cov is not None else np.zeros(m, bool)
             A = d.parametric_factor(Q, E, ~out if d.kind != "white" else np.zeros(m, bool))
+            if d.kind == "white" and d.joint_term is not None:
+                Cb += d.joint_term.covariance_between(Q, _joint_jacobian(cm, label, Q), E)
         noise2 = np.zeros((m, 3))
     Cb += np.einsum("iap,jbp->iajb", A, A)
     Ct = np.einsum("xa,iajb,yb->ixjy", R, Cb, R).reshape(3 * m, 3 * m)
