@@ -48,14 +48,29 @@ __all__ = ["DesignContext", "DesignObjective", "DesignCriterion", "information_c
 class DesignContext:
     """What an objective is built on: the measurement model linearised at ``p0``, the identifiable parameters
     ``base``, the KPI sensitivity ``E`` (3t, nb) at the working configurations ``q_work`` (t, n) rad. A
-    :class:`~pin_kpi_oed.design.optimize.DesignProblem` is one (with its cell, constraints, discrepancy);
-    ``evaluate`` builds one from a design file."""
+    :class:`~pin_kpi_oed.design.optimize.DesignProblem` has the same interface (with its cell, constraints,
+    discrepancy); ``evaluate`` builds a context from a design file, without a cell, an identifiability analysis or an
+    extended model unless given.
+
+    Attributes:
+        cell: the measurement cell (its working paths, orientation length), or None.
+        extended: the :class:`~pin_kpi_oed.oed.extended.ExtendedModel` the criteria of the information matrix are
+            taken on, or None (noise-only information).
+        ident: the identifiability analysis of ``model`` (checks a KPI's estimability), or None.
+    """
 
     model: Any
     base: np.ndarray
     E: np.ndarray | None
     p0: np.ndarray
     q_work: np.ndarray
+    cell: Any = None
+    extended: Any = None
+    ident: Any = None
+
+    def information_objective(self, crit: Criterion) -> DesignCriterion:
+        """A criterion of the information matrix on the noise-only information at ``p0``."""
+        return DesignCriterion(self.model, self.base, crit, self.E, self.p0)
 
 
 def information_criterion(criterion: Any) -> Criterion:
@@ -211,18 +226,16 @@ class DesignCriterion(DesignObjective):
         return select(Fp, m, K, seed=seed, fixed_info=M0, **kw)
 
 
-def criterion_with_E(problem: Any, crit: Criterion, E: np.ndarray) -> DesignCriterion:
+def criterion_with_E(problem: DesignContext, crit: Criterion, E: np.ndarray) -> DesignCriterion:
     """``crit`` with a sensitivity of its own (a working path's, a 6-D pose's: not the problem's KPI E) on the
-    problem's information: its ``information_objective`` when it has one (a
-    :class:`~pin_kpi_oed.design.optimize.DesignProblem`: the measured poses' rows included), else the noise-only
-    information at ``problem.p0``.
+    problem's information (its ``information_objective``: a
+    :class:`~pin_kpi_oed.design.optimize.DesignProblem`'s includes the measured poses' rows, a
+    :class:`DesignContext`'s is the noise-only information at ``p0``).
 
     Args:
         problem: a design problem or a :class:`DesignContext`; crit: a criterion of the information matrix;
         E: its sensitivity over the identifiable parameters (rows, nb).
     """
-    if hasattr(problem, "information_objective"):
-        obj = problem.information_objective(crit)
-        obj.E = E
-        return obj
-    return DesignCriterion(problem.model, problem.base, crit, E, problem.p0)
+    obj = problem.information_objective(crit)
+    obj.E = E
+    return obj

@@ -26,7 +26,7 @@ import numpy as np
 
 from pin_kpi_oed.errors import InputError
 from pin_kpi_oed.oed.criteria import ConfigurationCriterion, Criterion, SampleMeanTrace, register
-from pin_kpi_oed.oed.objective import DesignObjective, criterion_with_E
+from pin_kpi_oed.oed.objective import DesignContext, DesignObjective, criterion_with_E
 
 __all__ = ["PathTrace", "PathKpi", "path_sensitivity", "path_objective"]
 
@@ -40,7 +40,7 @@ class PathTrace(SampleMeanTrace):
     rows_per_sample = 3
 
 
-def path_sensitivity(problem: Any) -> np.ndarray:
+def path_sensitivity(problem: DesignContext) -> np.ndarray:
     """E of the TCP at every working path sample over the problem's identifiable parameters, (3S, nb) m per
     parameter unit.
 
@@ -50,11 +50,11 @@ def path_sensitivity(problem: Any) -> np.ndarray:
     """
     from pin_kpi_oed.oed.identifiability import check_kpi
 
-    cell = getattr(problem, "cell", None)
+    cell = problem.cell
     if cell is None or not getattr(cell, "paths", None):
         raise InputError("criterion kpi_path: needs a cell with working_paths (the cell file's working_paths key)")
     E_full = problem.model.kpi_jacobian(problem.p0, cell.q_path)
-    if getattr(problem, "ident", None) is not None:
+    if problem.ident is not None:
         check_kpi(problem.ident, problem.model, E_full, f"{cell.name}: the TCP along the working paths")
     return E_full[:, problem.base]
 
@@ -70,7 +70,7 @@ class PathKpi(ConfigurationCriterion):
         return path_objective(problem, PathTrace())
 
 
-def path_objective(problem: Any, crit: Criterion) -> DesignObjective:
+def path_objective(problem: DesignContext, crit: Criterion) -> DesignObjective:
     """A criterion of the path samples' covariance (``crit``: :class:`PathTrace`, ``kpi_path_max``'s smooth worst
     sample) on the problem's information model: the extended model when the problem has one, else the noise-only
     information with the measured poses' rows (:func:`~pin_kpi_oed.oed.objective.criterion_with_E`).
@@ -79,7 +79,7 @@ def path_objective(problem: Any, crit: Criterion) -> DesignObjective:
         InputError, IdentifiabilityError: as :func:`path_sensitivity`.
     """
     E = path_sensitivity(problem)
-    if getattr(problem, "extended", None) is not None:
+    if problem.extended is not None:
         from pin_kpi_oed.oed.extended import ExtendedDesignCriterion
 
         return ExtendedDesignCriterion(problem.extended, crit, problem.cell.q_path)

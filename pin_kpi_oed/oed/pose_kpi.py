@@ -63,10 +63,10 @@ class PoseKpi(ConfigurationCriterion):
     is_ratio, needs_kpi, uses_discrepancy = True, True, False
 
     def objective(self, problem: Any) -> DesignObjective:
-        if getattr(problem, "extended", None) is not None:
+        if problem.extended is not None:
             raise InputError("criterion kpi6: not available on the extended model of model_file (its effects carry "
                              "no orientation sensitivity); design kpi6 without model_file")
-        cell = getattr(problem, "cell", None)
+        cell = problem.cell
         if cell is None or not hasattr(cell, "orientation_length_m"):
             raise InputError("criterion kpi6: needs a design problem on a cell (its orientation_length_m)")
         L = float(cell.orientation_length_m)
