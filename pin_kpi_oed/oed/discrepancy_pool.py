@@ -112,20 +112,9 @@ class GreedyState(PoolState):
 
     def without(self, i: int) -> GreedyState:
         """The state with the chosen candidate ``i`` removed (exact rank-one downdate: a row of sign −1 in ``V``)."""
-        st = type(self).__new__(type(self))
-        st.__dict__.update(self.__dict__)
-        kap = self.kdiag[i]
-        w = self.w
-        g = kap * w / (w - kap) + w
-        kcol = (self.kcol(i) - self.V.T @ (self.sgn * self.V[:, i])) * (g / w)
-        u = self.Uc[:, i] * (g / w)
-        r = self.Rc[:, i] * (g / w)                              # (3, nb)
-        st.kdiag = self.kdiag + kcol ** 2 / g
-        st.Uc = self.Uc + np.outer(u, kcol) / g
+        st, kcol, u, r, g = self._downdated(i, slice(None))
         st.Uc[:, i] = u
-        st.Rc = self.Rc + kcol[None, :, None] * r[:, None, :] / g
         st.Rc[:, i] = r
-        self._downdate_information(st, u, r, g)
         st.V = np.vstack([self.V, kcol / np.sqrt(g)])
         st.sgn = np.append(self.sgn, -1.0)
         st.chosen = [c for c in self.chosen if c != i]
@@ -134,6 +123,14 @@ class GreedyState(PoolState):
     def values_without(self, i: int, among: np.ndarray) -> np.ndarray:
         """:meth:`values` of the candidates ``among`` (none of them chosen) for the set without the chosen ``i``:
         the downdate of :meth:`without` on those candidates' rows only (this state unchanged)."""
+        st = self._downdated(i, among)[0]
+        return st.values(np.zeros(len(among), bool))
+
+    def _downdated(self, i: int, among: np.ndarray | slice
+                   ) -> tuple[GreedyState, np.ndarray, np.ndarray, np.ndarray, float]:
+        """A copy of this state with the chosen ``i`` taken out on the candidates ``among`` (an index array, or
+        ``slice(None)``: all): their kernel diagonal and columns and the set-wide part downdated; with the downdate's
+        kernel column of ``i`` on them, its u, r and g."""
         st = type(self).__new__(type(self))
         st.__dict__.update(self.__dict__)
         kap = self.kdiag[i]
@@ -141,12 +138,12 @@ class GreedyState(PoolState):
         g = kap * w / (w - kap) + w
         kcol = (self.kcol(i)[among] - self.V[:, among].T @ (self.sgn * self.V[:, i])) * (g / w)
         u = self.Uc[:, i] * (g / w)
-        r = self.Rc[:, i] * (g / w)
+        r = self.Rc[:, i] * (g / w)                              # (3, nb)
         st.kdiag = self.kdiag[among] + kcol ** 2 / g
         st.Uc = self.Uc[:, among] + np.outer(u, kcol) / g
         st.Rc = self.Rc[:, among] + kcol[None, :, None] * r[:, None, :] / g
         self._downdate_information(st, u, r, g)
-        return st.values(np.zeros(len(among), bool))
+        return st, kcol, u, r, g
 
     def _downdate_information(self, st: GreedyState, u: np.ndarray, r: np.ndarray, g: float) -> None:
         """The set-wide part of :meth:`without` (H, T, M) into ``st``."""
