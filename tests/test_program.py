@@ -310,6 +310,8 @@ def test_ur10_program_stays_clear_when_the_design_moves_by_1e9_rad(ur10, seed):
     fine = TransitionChecker(ur10, 0.01, step_rad=np.radians(0.5))
     path = prog.path
     assert all(fine.check(a, b, stop_early=False).clear for a, b in zip(path[:-1], path[1:]))
+    meas = np.array([w.q for w in prog.waypoints if w.kind == "measure"])  # equivalents near home only
+    assert np.all(np.abs(meas - ur10.q_work[0]) <= 1.5 * np.pi)
 
 
 # ---------------------------------------------------------------------------- exports

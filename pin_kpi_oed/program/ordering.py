@@ -207,6 +207,10 @@ class ProgramOptions:
             checked); half of it for a pose's route home, four times it in the last attempt on
             the final tour.
         equivalents: choose among each pose's 2π-equivalent representatives (else the listed values).
+        home_window_rad: representatives turn every revolute joint at most this far from home (rad; all of a
+            pose's when none does; None: no limit). A representative beyond it turns a joint more than three
+            quarters of a turn away from home and back, and every representative is a node of each tour solve
+            (a UR5 with five ±360° joints: 32 per pose, 1,280 for 40 poses, where the window keeps 164).
     """
 
     margin_m: float = 0.0
@@ -220,6 +224,7 @@ class ProgramOptions:
     max_rounds: int = 20
     plan_checks: int = 15_000
     equivalents: bool = True
+    home_window_rad: float | None = 1.5 * np.pi
 
 
 def plan_program(cell: Cell, Q: np.ndarray, options: ProgramOptions | None = None) -> Program:
@@ -248,7 +253,8 @@ def plan_program(cell: Cell, Q: np.ndarray, options: ProgramOptions | None = Non
     home = np.asarray(o.home if o.home is not None else (cell.q_work[0] if len(cell.q_work) else cell.robot.neutral),
                       float)
     rev = np.asarray(cell.robot.is_revolute, bool)
-    reps = [_within(equivalents(q, cell.q_lower, cell.q_upper, rev), cell) if o.equivalents else q[None] for q in Q]
+    reps = [_near(_within(equivalents(q, cell.q_lower, cell.q_upper, rev), cell), home, rev, o.home_window_rad)
+            if o.equivalents else q[None] for q in Q]
     nodes = np.vstack([home, *reps])
     pose_of = np.concatenate([[-1], *[np.full(len(r), i) for i, r in enumerate(reps)]]).astype(int)
     groups = [[int(k) for k in np.flatnonzero(pose_of == i)] for i in range(len(Q))]
@@ -297,6 +303,14 @@ def plan_program(cell: Cell, Q: np.ndarray, options: ProgramOptions | None = Non
                    as_designed_colliding=int(sum(not m.clear for m in as_designed)),
                    min_move_clearance_m=min((m.min_clearance_m for m in per_move), default=float("inf")),
                    margin_m=o.margin_m, n_rounds=rounds)
+
+
+def _near(reps: np.ndarray, home: np.ndarray, revolute: np.ndarray, window: float | None) -> np.ndarray:
+    """The representatives whose revolute joints are within ``window`` (rad) of home (all of them when none is)."""
+    if window is None:
+        return reps
+    ok = np.all(np.abs(reps[:, revolute] - home[revolute]) <= window, axis=1)
+    return reps[ok] if ok.any() else reps
 
 
 def _within(reps: np.ndarray, cell: Cell) -> np.ndarray:
