@@ -130,8 +130,8 @@ class Monitor:
         self.rejected: set = set()
         self.asking = False
         self.design_Q: np.ndarray | None = None
-        self._use(model, model.station(station))
         self.filter: SetupFilter | None = None
+        self._use(model, model.station(station))
 
     def _use(self, model: CalibratedModel, label: str) -> None:
         """Follow ``model``'s station ``label``: its measurement model, the set-up Jacobian's columns, the honest σ at
