@@ -82,3 +82,12 @@ def test_monitor_follows_a_growing_and_truncated_file(rows, tmp_path, capsys):
     assert log["rows"] == 60 and len(log["error_m"]) == 60                  # nothing lost, nothing twice
     assert log["z_rms"] < 2.0
 
+
+
+@pytest.mark.parametrize("opt", ["--poll", "--idle"])
+def test_follow_timing_options_must_be_positive_seconds(tmp_path, capsys, opt):
+    """--poll / --idle of 0 s: one line naming the option, exit 2, before any file is read."""
+    code = main(["monitor", "--model", str(tmp_path / "none.json"), "--data", str(tmp_path / "none.csv"), "--follow",
+                 opt, "0"])
+    err = capsys.readouterr().err.strip()
+    assert code == 2 and len(err.splitlines()) == 1 and opt in err and "none.json" not in err
