@@ -192,7 +192,7 @@ def test_bad_kinematics_files_are_refused_in_one_line(tmp_path):
     bad.write_text("kinematics:\n  shoulder: {x: 0}\n")
     with pytest.raises(InputError, match="kinematics.shoulder.y must be a finite number"):
         read_ur_kinematics(bad)
-    with pytest.raises(InputError, match="not a Universal Robots arm"):
+    with pytest.raises(InputError, match="not a Universal Robots arm.*write model_format='urdf'"):
         export_model(_model(load_robot("kr15")), tmp_path / "x.yaml", "ur-yaml")
     assert not (tmp_path / "x.yaml").exists()
 
@@ -219,6 +219,7 @@ def test_export_model_cli(tmp_path, capsys):
                  "--out", str(tmp_path / "kr.yaml")]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "not a Universal Robots arm" in err and not (tmp_path / "kr.yaml").exists()
+    assert "write --format urdf" in err  # the library's model_format='urdf', in the command line's words
     assert main(["info", "ur10", "--kinematics", str(UR_KINEMATICS_DIR / "ur5.yaml")]) == 2
     assert "not a ur10's kinematics" in capsys.readouterr().err
     assert main(["info", "ur10", "--kinematics", str(tmp_path / "c.yaml"), "--json"]) == 0

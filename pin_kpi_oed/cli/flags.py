@@ -55,6 +55,9 @@ PARAMETER_FLAGS = {
     "kinematics": "--kinematics",
     "scheduler": "--scheduler",
     "discrepancy": "--discrepancy",
+    "effects": "--effects",
+    "station": "--station",
+    "cell": "--cell",
 }
 
 _NAMES = "|".join(map(re.escape, sorted(PARAMETER_FLAGS, key=len, reverse=True)))

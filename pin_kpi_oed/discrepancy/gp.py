@@ -456,7 +456,7 @@ class Discrepancy(DiscrepancyModel):
     @classmethod
     def _from_dict(cls, d: Any, names: list, where: str) -> Discrepancy:
         if not isinstance(d, dict):
-            raise ValueError(f"{where}: must be an object (write it with identify or diagnose --model-out)")
+            raise ValueError(f"{where}: must be an object (write it with identify or diagnose)")
         if d.get("format") != "pin_kpi_oed.discrepancy/1":
             raise ValueError(f"{where}.format: {d.get('format')!r} is not 'pin_kpi_oed.discrepancy/1'")
         kind = d.get("kind")

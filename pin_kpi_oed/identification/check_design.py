@@ -159,8 +159,8 @@ def design_check(model: CalibratedModel, *, m: int = 10, tolerance_m: float = 1e
     if qw is None and cell is not None:
         qw = cell.q_work
     if qw is None:
-        raise InputError("check design: no working configurations (the model file has none; give --cell with "
-                         "working configurations)")
+        raise InputError("check design: no working configurations (the model file has none; give a cell (parameter "
+                         "'cell') with working configurations)")
     Q_pool = check_pool(model, pool_size, seed, cell)
     sigma = np.median(model.predict_with_sigma(Q_pool, station=station)[1], axis=0)
     crit, wm, p = check_criterion(model, np.atleast_2d(qw), sigma, station, seed=seed)

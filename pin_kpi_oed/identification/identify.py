@@ -185,7 +185,7 @@ def _check_effects_determined(effects: Sequence[Any], data: MeasurementSet) -> N
         if note:
             why = note.replace(f"{eff.name}: skipped, ", "")
             raise InputError(f"{data.source or 'data'}: effect {eff.name} is not determined by the data: {why}; "
-                             "leave it out of the effects (--effects)")
+                             "leave it out of the effects (parameter 'effects')")
 
 
 def _gate(result: IdentificationResult, model: TrackerModel, opts: IdentifyOptions) -> None:

@@ -267,7 +267,8 @@ class CalibratedModel:
         if len(self.setups) == 1:
             return next(iter(self.setups))
         raise InputError(f"the model has {len(self.setups)} stations ({', '.join(self.setups)}) and no default: "
-                         "name one (--station), give the data a 'station' column, or register the set-up first")
+                         "name one (parameter 'station'), give the data a 'station' column, or register the set-up "
+                         "first")
 
     def station_model(self, label: str | None = None) -> tuple[TrackerModel, np.ndarray]:
         """The measurement model of a station and its raw parameter vector (set-up errors zero).
@@ -539,7 +540,7 @@ def _check_format(d: Any, where: str) -> None:
         raise InputError(f"{where}: model file format '{fmt}' is not supported by this version of pin_kpi_oed "
                          f"(it reads '{MODEL_FORMAT}')")
     raise InputError(f"{where}: not a pin_kpi_oed model file (field 'format' is {fmt!r}, expected '{MODEL_FORMAT}'; "
-                     "write one with identify --model-out)")
+                     "write one with identify)")
 
 
 def _load_model_robot(rob: dict, where: str) -> Robot:

@@ -209,7 +209,7 @@ def load_truth(path: str) -> tuple[TrackerModel, np.ndarray, list[tuple[Any, np.
     if not isinstance(d, dict) or d.get("format") != TRUTH_FORMAT:
         raise InputError(f"truth_file {path}: not a truth file (field 'format' is "
                          f"{d.get('format') if isinstance(d, dict) else None!r}, expected '{TRUTH_FORMAT}'; "
-                         "write one with simulate --truth FILE)")
+                         "write one with simulate truth_file='FILE')")
     try:
         nom = d["nominal"]
         robot = load_robot(d["robot_spec"], d["tool_frame"])

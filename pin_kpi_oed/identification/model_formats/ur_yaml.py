@@ -41,7 +41,7 @@ def ur_kinematics_of(cm, source: str = ""):
     key = str(rb.name).lower()
     if key not in UR_TYPES or tuple(rb.joint_names) != UR_JOINTS:
         raise InputError(f"robot '{rb.name}' is not a Universal Robots arm ({', '.join(UR_TYPES)}): the UR "
-                         "kinematics layout is for UR arms; write --format urdf")
+                         "kinematics layout is for UR arms; write model_format='urdf'")
     reference = rb.kinematics if rb.kinematics is not None else default_ur_kinematics(key)
     V = ur_values_of(rb.model, rb.joint_ids, rb.tool_frame_id, calibrated_placements(cm), reference=reference)
     return URKinematics.from_values(V, source)
