@@ -185,3 +185,8 @@ def test_library_errors_name_parameters_and_the_command_line_its_options():
     assert in_flags("declare the units (units='mm,deg')") == "declare the units (--units mm,deg)"
     assert in_flags("the units of sigma: m") == "the units of sigma: m"
     assert in_flags("parameter 'speed' and speed='1'") == "parameter 'speed' and speed='1'"  # not in the table
+    from pin_kpi_oed.cli.flags import in_flags_all
+
+    quality = {"advice": ["loss='soft_l1' (robust), sigma columns or sigma_xyz_m"], "dof": 3, "verdict": "suspect"}
+    assert in_flags_all(quality) == {"advice": ["--loss soft_l1 (robust), sigma columns or --sigma"], "dof": 3,
+                                     "verdict": "suspect"}

@@ -18,8 +18,9 @@ A name outside the table is left as written in every form.
 from __future__ import annotations
 
 import re
+from typing import Any
 
-__all__ = ["PARAMETER_FLAGS", "in_flags"]
+__all__ = ["PARAMETER_FLAGS", "in_flags", "in_flags_all"]
 
 #: Library parameter -> the option of the command line that sets it.
 PARAMETER_FLAGS = {
@@ -58,6 +59,9 @@ PARAMETER_FLAGS = {
     "effects": "--effects",
     "station": "--station",
     "cell": "--cell",
+    "loss": "--loss",
+    "sigma_xyz_m": "--sigma",
+    "reflector_m": "--reflector",
 }
 
 _NAMES = "|".join(map(re.escape, sorted(PARAMETER_FLAGS, key=len, reverse=True)))
@@ -72,3 +76,15 @@ def in_flags(message: str) -> str:
     message = _MARKED.sub(lambda m: PARAMETER_FLAGS[m.group(1)], message)
     message = _KEYWORD.sub(lambda m: f"{PARAMETER_FLAGS[m.group(1)]} {m.group(2)}", message)
     return _BARE.sub(lambda m: PARAMETER_FLAGS[m.group(1)], message)
+
+
+def in_flags_all(value: Any) -> Any:
+    """``value`` (a JSON-ready dict, list or string: a fit-quality verdict, a report) with :func:`in_flags` applied
+    to every string in it; keys and other values unchanged."""
+    if isinstance(value, str):
+        return in_flags(value)
+    if isinstance(value, dict):
+        return {k: in_flags_all(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return type(value)(in_flags_all(v) for v in value)
+    return value

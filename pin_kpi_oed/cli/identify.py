@@ -31,6 +31,7 @@ import numpy as np
 
 from pin_kpi_oed.cli.util import add_table_options, table_options
 from pin_kpi_oed.cli.util import parse_floats
+from pin_kpi_oed.cli.flags import in_flags, in_flags_all
 from pin_kpi_oed.errors import InputError
 from pin_kpi_oed.cli.tool import add_cell_arg, command_tool
 from pin_kpi_oed.model.robot import ROBOT_HELP, TOOL_HELP
@@ -353,7 +354,7 @@ def _report_and_write(args: argparse.Namespace, result: Any, out: dict, lines: l
         print("wrote " + ", ".join(written))
     if refuse:
         kept = [f for f in (args.urdf_out, args.model_out) if f]
-        print(f"pin-kpi-oed identify: error: {quality.line()}"
+        print(f"pin-kpi-oed identify: error: {in_flags(quality.line())}"
               + (f"; {', '.join(kept)} not written" if kept else "") + " (--accept-poor-fit to use it anyway)",
               file=sys.stderr)
         return 2
@@ -415,8 +416,8 @@ def run_identify(args: argparse.Namespace) -> int:
     if test is not None:
         out["validation"], lines = _validation(model, train, opts, result, test, reg, args)
     quality = assess_fit(result, out.get("validation"), nominal_reflector_m=reflector, reflector_estimated=estimated)
-    out["fit_quality"] = quality.to_dict()
-    lines.append(quality.line())
+    out["fit_quality"] = in_flags_all(quality.to_dict())
+    lines.append(in_flags(quality.line()))
     refuse = quality.poor and not args.accept_poor_fit
     # everything is computed and checked before the first file is written
     urdf_text = None

@@ -58,7 +58,9 @@ def stamp_model(model_dict: dict, args: argparse.Namespace, robot: Any, *, train
     if extra:
         step.update(extra)
     if quality is not None:
-        model_dict.setdefault("fit", {})["quality"] = quality.to_dict()
+        from pin_kpi_oed.cli.flags import in_flags_all
+
+        model_dict.setdefault("fit", {})["quality"] = in_flags_all(quality.to_dict())
     from pin_kpi_oed.data.atomic import to_jsonable
 
     model_dict["history"][-1] = to_jsonable(step)

@@ -93,7 +93,7 @@ class FitQuality:
         if self.verdict == "good":
             chi = (f"reduced chi2 {self.chi2_reduced:.3g} within [{self.chi2_interval[0]:.3g}, "
                    f"{self.chi2_interval[1]:.3g}]" if self.chi2_interval else
-                   "noise level unknown (no sigma columns, no --sigma): chi2 not tested")
+                   "noise level unknown (no sigma columns, no sigma_xyz_m): chi2 not tested")
             if self.explained_by_discrepancy:
                 chi = self.explained_by_discrepancy
             return f"fit quality: good ({chi})"
@@ -244,7 +244,7 @@ def _check_effects(f: _Findings, result: Any) -> None:
     f.reasons.append(f"{len(bad)} effect parameter(s) not determined by the data ({key} ± {s:.3g} {unit}, plausible "
                      f"size {lim:g} {unit})")
     f.causes.append("an effect the data do not excite (e.g. thermal expansion without a temperature change)")
-    f.advice.append(f"leave {key.split('.')[0]} out of --effects, or measure where it changes")
+    f.advice.append(f"leave {key.split('.')[0]} out of the effects (parameter 'effects'), or measure where it changes")
 
 
 @dataclass
@@ -274,13 +274,13 @@ def _check_outliers(f: _Findings, result: Any, we: np.ndarray, out_idx: np.ndarr
         f.worse("suspect")
         f.reasons.append(f"{large} outlier(s) beyond {OUTLIER_LARGE:g} sigma fitted with the plain loss")
         f.causes.append("outliers (gross measurement errors)")
-        f.advice.append("--loss soft_l1 (robust) or remove the flagged rows")
+        f.advice.append("loss='soft_l1' (robust) or remove the flagged rows")
     elif out_idx.size and not robust and not noise_known:
         f.worse("suspect")
         f.reasons.append(f"{out_idx.size} flagged outlier(s) fitted with the plain loss and the noise level unknown "
                          "(chi2 not tested)")
         f.causes.append("outliers (gross measurement errors)")
-        f.advice.append("--loss soft_l1 (robust), sigma columns or --sigma, or remove the flagged rows")
+        f.advice.append("loss='soft_l1' (robust), sigma columns or sigma_xyz_m, or remove the flagged rows")
     return large
 
 
@@ -302,7 +302,7 @@ def robust_loss_reason(result: Any) -> str:
     if large:
         return f"{large} outlier(s) far beyond the noise"
     if out_idx.size and bool(result.covariance_scaled):
-        return f"{out_idx.size} outlier(s) flagged and the noise level unknown (no sigma columns, no --sigma)"
+        return f"{out_idx.size} outlier(s) flagged and the noise level unknown (no sigma columns, no sigma_xyz_m)"
     return ""
 
 
@@ -326,14 +326,14 @@ def _check_chi2(f: _Findings, chi2_red: float, dof: int, alpha: float, chi2_poor
     if chi2_red > hi:
         refl = None if nominal_reflector_m is None else np.asarray(nominal_reflector_m, float)
         if refl is not None and not reflector_estimated and float(np.linalg.norm(refl)) < 1e-9:
-            f.causes.insert(0, "reflector/TCP offset (nominal --reflector 0,0,0 hides parameters it makes "
+            f.causes.insert(0, "reflector/TCP offset (nominal reflector_m 0,0,0 hides parameters it makes "
                                "identifiable)")
             f.advice.insert(0, "give the reflector offset (--reflector x,y,z in m) or leave --reflector out to "
                                "estimate it")
         else:
             f.causes.append("reflector/TCP offset")
         f.causes += ["sigma units (m) or an optimistic noise model", "wrong robot model or unmodelled effects"]
-        f.advice += ["check --sigma / sigma columns (m)", "run pin-kpi-oed diagnose"]
+        f.advice += ["check sigma_xyz_m / sigma columns (m)", "run pin-kpi-oed diagnose"]
     return (lo, hi)
 
 
@@ -372,7 +372,7 @@ def _check_heldout(f: _Findings, validation: dict | None, train_rms: float,
             f.worse("suspect")
             f.reasons.append(f"held-out RMS {after * 1e3:.4g} mm is more than 3x the training RMS "
                              f"{train_rms * 1e3:.4g} mm")
-            f.causes.append("over-fit or another session (re-register with --register-rows)")
+            f.causes.append("over-fit or another session (re-register with register_rows)")
     return before, after
 
 
