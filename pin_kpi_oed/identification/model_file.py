@@ -492,10 +492,9 @@ class CalibratedModel:
             raise InputError(f"{where}: field 'stations' must name at least one station set-up")
         setups = {str(k): Setup.from_dict(v, f"{where}: stations.{k}") for k, v in st.items()}
         for k, v in setups.items():
-            n_joints = len(robot.joint_names)
-            if v.registered_q_rad is not None and v.registered_q_rad.shape[1] != n_joints:
+            if v.registered_q_rad is not None and v.registered_q_rad.shape[1] != robot.nq:
                 raise InputError(f"{where}: stations.{k}.registered_q_rad: {v.registered_q_rad.shape[1]} joint "
-                                 f"values per row, the robot has {n_joints}")
+                                 f"values per row, the robot has {robot.nq}")
         default = d.get("default_station")
         if default is not None and str(default) not in setups:
             raise InputError(f"{where}: default_station '{default}' is not among the stations "
