@@ -52,7 +52,7 @@ from pin_kpi_oed.model.tracker import TrackerModel
 from pin_kpi_oed.oed.check_power import CheckGroup, CheckNull, CheckPower, check_groups
 from pin_kpi_oed.results import Result
 
-__all__ = ["CheckResult", "check_calibration", "check_criterion", "check_null", "CHECK_STATION"]
+__all__ = ["CheckResult", "check_calibration", "check_criterion", "check_null", "check_powers", "CHECK_STATION"]
 
 #: Station label of the set-up registered on the check rows.
 CHECK_STATION = "check"
@@ -272,8 +272,7 @@ def check_calibration(model: CalibratedModel, data: MeasurementSet, *, station: 
     reach = _setup_reach(cm, crit, F, E_w, qw)
     shift, dist = _setup_change(model.setups[old].tracker_T_base, cm.setups[CHECK_STATION].tracker_T_base,
                                 F[:, crit.setup], cm, Q, data)
-    mu = crit.mu(F.T @ F)[0]
-    power = {g.name: null.power(tolerance_m ** 2 * u, dof, alpha) for g, u in zip(crit.groups, mu)}
+    power = check_powers(crit, F, tolerance_m, alpha, null)
     out: dict[str, Any] = dict(n_rows=m, dof=dof, alpha=alpha, chi2=T, threshold=thr,
                                p_value=null.sf(T, dof), setup_shift_m=shift, setup_distance=dist,
                                power=power, tolerance_m=tolerance_m, registration_sigma_m=reach["reg"],
@@ -361,6 +360,16 @@ def _setup_reach(cm: CalibratedModel, crit: CheckPower, F: np.ndarray, E_w: np.n
     per = np.sum(np.diag(C).reshape(-1, 3), axis=1)
     tcp = np.sqrt(np.sum(sig_w ** 2, axis=1) + np.maximum(per, 0.0))
     return {"reg": reg, "honest": honest, "determined": bool(reg <= SETUP_FACTOR * honest), "tcp": tcp}
+
+
+def check_powers(crit: CheckPower, F: np.ndarray, tolerance_m: float, alpha: float, null: CheckNull | None = None
+                 ) -> dict:
+    """Group -> power of the check with whitened Jacobian F (3m, np) against the group's weakest change of size τ, under
+    the law ``null`` of the statistic (default the plain χ²; :func:`check_null`)."""
+    dof = F.shape[0] - crit.setup.size
+    mu = crit.mu(F.T @ F)[0]
+    law = null or CheckNull()
+    return {g.name: law.power(tolerance_m ** 2 * u, dof, alpha) for g, u in zip(crit.groups, mu)}
 
 
 def check_null(model: CalibratedModel) -> CheckNull:

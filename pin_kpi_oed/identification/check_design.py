@@ -18,13 +18,13 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from pin_kpi_oed.errors import IdentifiabilityError, InputError
-from pin_kpi_oed.identification.check import check_criterion, check_null
+from pin_kpi_oed.identification.check import check_criterion, check_null, check_powers
 from pin_kpi_oed.identification.model_file import CalibratedModel
-from pin_kpi_oed.oed.check_power import CheckNull, CheckPower
+from pin_kpi_oed.oed.check_power import CheckPower
 from pin_kpi_oed.oed.selection_result import PoolSelection
 from pin_kpi_oed.results import Result
 
-__all__ = ["CheckDesign", "design_check", "check_pool", "select_check", "check_powers"]
+__all__ = ["CheckDesign", "design_check", "check_pool", "select_check"]
 
 
 @dataclass(kw_only=True)
@@ -79,16 +79,6 @@ def check_pool(model: CalibratedModel, n: int, seed: int, cell=None) -> np.ndarr
     from pin_kpi_oed.cell.sampling import random_feasible
 
     return random_feasible(CollisionModel(cell), n, rng, cell.max_random_tries)[0]
-
-
-def check_powers(crit: CheckPower, F: np.ndarray, tolerance_m: float, alpha: float, null: CheckNull | None = None
-                 ) -> dict:
-    """Group -> power of the check with whitened Jacobian F (3m, np) against the group's weakest change of size τ, under
-    the law ``null`` of the statistic (default the plain χ²; :func:`~pin_kpi_oed.identification.check.check_null`)."""
-    dof = F.shape[0] - crit.setup.size
-    mu = crit.mu(F.T @ F)[0]
-    law = null or CheckNull()
-    return {g.name: law.power(tolerance_m ** 2 * u, dof, alpha) for g, u in zip(crit.groups, mu)}
 
 
 def select_check(crit: CheckPower, Fp: np.ndarray, m: int, seed: int = 0) -> PoolSelection:
