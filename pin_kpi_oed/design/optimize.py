@@ -67,6 +67,7 @@ from pin_kpi_oed.oed.objective import DesignCriterion, DesignObjective, informat
 from pin_kpi_oed.oed.path_kpi import PathKpi  # noqa: F401  (registers kpi_path)
 from pin_kpi_oed.oed.pose_kpi import PoseKpi  # noqa: F401  (registers kpi6)
 from pin_kpi_oed.oed.path_kpi_gp import PathDiscrepancyKpi  # noqa: F401  (registers kpi_path_gp)
+from pin_kpi_oed.oed.pose_kpi_gp import PoseDiscrepancyKpi  # noqa: F401  (registers kpi6_gp)
 from pin_kpi_oed.oed.path_kpi_max import PathMaxKpi  # noqa: F401  (registers kpi_path_max)
 from pin_kpi_oed.oed.identifiability import analyse, check_kpi
 from pin_kpi_oed.design.design_result import DesignResult

@@ -25,7 +25,7 @@ from pin_kpi_oed.errors import IdentifiabilityError, InputError
 from pin_kpi_oed.oed.covariance import prior_of
 from pin_kpi_oed.oed.criteria import KpiDiscrepancy
 from pin_kpi_oed.oed.discrepancy_pool import select_pool_gp
-from pin_kpi_oed.oed.kriging import kpi_gp_covariance, kpi_gp_value_and_grad
+from pin_kpi_oed.oed.kriging import kpi_gp_covariance, kpi_gp_value_and_grad, pad_rows
 from pin_kpi_oed.oed.objective import DesignObjective
 from pin_kpi_oed.oed.selection_result import PoolSelection
 from pin_kpi_oed.results import Result
@@ -142,12 +142,19 @@ class DiscrepancyDesignCriterion(DesignObjective):
             return Q, J
         return np.vstack([self.Q_given, Q]), np.concatenate([self.J_given, J])
 
+    def cross_covariance(self, Qa: np.ndarray) -> np.ndarray:
+        """K_WQ of the KPI rows (len(E), len(Qa)): the kernel between the working configurations and the poses Qa,
+        zero for KPI rows beyond the working configurations (they carry no discrepancy, :func:`pad_rows`)."""
+        return pad_rows(self.discrepancy.covariance(self.Q_work, Qa), self.E.shape[0])
+
     def covariance(self, Q: np.ndarray) -> np.ndarray:
         """C_s (3t, 3t) m² of the measured poses (``Q_given`` + Q), base frame."""
         Qa, Ja = self._all(np.atleast_2d(Q),
                            base_frame_jacobian(self.model, self.p, np.atleast_2d(Q), self.base, False)[0])
         d = self.discrepancy
-        C = kpi_gp_covariance(Ja, self.E, d.covariance(Qa), d.covariance(self.Q_work, Qa), self.Kww, d.scale_m, d.noise,
+        r = self.E.shape[0]
+        Kww = pad_rows(pad_rows(self.Kww, r).T, r)
+        C = kpi_gp_covariance(Ja, self.E, d.covariance(Qa), self.cross_covariance(Qa), Kww, d.scale_m, d.noise,
                               self.prior_info)
         return C if self.reg is None else C + self.reg.cov_m2
 
@@ -175,7 +182,7 @@ class DiscrepancyDesignCriterion(DesignObjective):
             raise IdentifiabilityError("no poses: the parameters are not identified")
         Qa, Ja = self._all(Q, base_frame_jacobian(self.model, self.p, Q, self.base, False)[0] if len(Q) else None)
         d = self.discrepancy
-        return kpi_gp_value_and_grad(Ja, self.E, d.covariance(Qa), d.covariance(self.Q_work, Qa), self.tr_kww,
+        return kpi_gp_value_and_grad(Ja, self.E, d.covariance(Qa), self.cross_covariance(Qa), self.tr_kww,
                                      d.scale_m, d.noise, self.prior_info, grad=False)[0] + self.tr_register
 
     def value_and_grad(self, Q: np.ndarray) -> tuple[float, np.ndarray]:
@@ -185,10 +192,10 @@ class DiscrepancyDesignCriterion(DesignObjective):
         Qa, Ja = self._all(Q, J)
         k = 0 if self.Q_given is None else len(self.Q_given)
         d = self.discrepancy
-        val, g = kpi_gp_value_and_grad(Ja, self.E, d.covariance(Qa), d.covariance(self.Q_work, Qa), self.tr_kww,
+        val, g = kpi_gp_value_and_grad(Ja, self.E, d.covariance(Qa), self.cross_covariance(Qa), self.tr_kww,
                                        d.scale_m, d.noise, self.prior_info)
         grad = chain_q(g, dJ, d, Q, Qa, k)
-        grad += np.einsum("ti,itk->ik", g["Kwq"][:, k:], d.grad_x(Q, self.Q_work))
+        grad += np.einsum("ti,itk->ik", g["Kwq"][:len(self.Q_work), k:], d.grad_x(Q, self.Q_work))
         return val + self.tr_register, grad
 
     def pool_jacobians(self, Q_pool: np.ndarray) -> np.ndarray:

@@ -14,7 +14,7 @@ from scipy.linalg import solve_triangular
 
 from pin_kpi_oed.discrepancy.prior import DiscrepancyPrior
 from pin_kpi_oed.errors import InputError
-from pin_kpi_oed.oed.kriging import kpi_gp_value_and_grad
+from pin_kpi_oed.oed.kriging import kpi_gp_value_and_grad, pad_rows
 from pin_kpi_oed.oed.pool_search import PoolState, greedy_exchange
 from pin_kpi_oed.oed.selection_result import PoolSelection
 
@@ -41,7 +41,8 @@ class GreedyState(PoolState):
 
     Args:
         Jc: the candidates' base-frame Jacobians (N, 3, nb); Qc: their configurations (N, n) rad.
-        E: KPI Jacobian (t, 3, nb), base frame; Qw: working configurations (t, n) rad.
+        E: KPI Jacobian (t, 3, nb), base frame (rows beyond Qw's: without discrepancy, :func:`pad_rows`); Qw: working
+            configurations (t, n) rad.
         disc: the :class:`DiscrepancyPrior`; prior_info: Σ₀⁻¹ (nb, nb) or None; eps_info: the ridge on M of
             :meth:`values` (0: exact).
     """
@@ -52,7 +53,7 @@ class GreedyState(PoolState):
         self.w = disc.noise
         N, _, nb = Jc.shape
         self.kdiag = np.full(N, 0.0) if disc.kernel is None else disc.kernel.diag(Qc)
-        self.Uc = disc.covariance(Qw, Qc)                              # (t, N) conditional cross-covariance
+        self.Uc = pad_rows(disc.covariance(Qw, Qc), E.shape[0])       # (t, N) conditional cross-covariance
         self.Ja = np.ascontiguousarray(np.swapaxes(Jc, 0, 1))    # (3, N, nb) the Jacobian rows, axis-major
         self.Rc = self.Ja.copy()                                 # (3, N, nb) conditional Jacobian rows
         self.H = np.moveaxis(E, 1, 0).copy()                     # (3, t, nb)
@@ -309,7 +310,8 @@ def select_pool_gp(J_pool: np.ndarray, Q_pool: np.ndarray, E: np.ndarray, Q_work
     idx, path, swaps = found.indices, found.path, found.swaps
     rows = np.concatenate([np.arange(k0), k0 + idx])
     Jsel, Qsel = Jall[rows], Qall[rows]
-    val = kpi_gp_value_and_grad(Jsel, E, discrepancy.covariance(Qsel), discrepancy.covariance(Q_work, Qsel),
+    val = kpi_gp_value_and_grad(Jsel, E, discrepancy.covariance(Qsel),
+                                pad_rows(discrepancy.covariance(Q_work, Qsel), E.shape[0]),
                                 float(np.trace(discrepancy.covariance(Q_work))), discrepancy.scale_m, discrepancy.noise,
                                 prior_info, grad=False)[0]
     return PoolSelection(indices=idx, value=float(val), path=np.array(path), nit=swaps,

@@ -38,7 +38,17 @@ import numpy as np
 from pin_kpi_oed.discrepancy.cholesky import jitter_cholesky
 from pin_kpi_oed.errors import IdentifiabilityError
 
-__all__ = ["kpi_gp_covariance", "kpi_gp_value_and_grad"]
+__all__ = ["kpi_gp_covariance", "kpi_gp_value_and_grad", "pad_rows"]
+
+
+def pad_rows(K: np.ndarray, rows: int) -> np.ndarray:
+    """K (t, …) with zero rows appended up to ``rows``: the kernel of KPI rows that carry no discrepancy (rows of E
+    beyond the t working configurations, e.g. the tool orientation of ``kpi6_gp``: H = E − UᵀJ is E there and they add
+    nothing to the kriging term)."""
+    K = np.asarray(K, float)
+    if K.shape[0] == rows:
+        return K
+    return np.concatenate([K, np.zeros((rows - K.shape[0],) + K.shape[1:])])
 
 
 def _prep(J, E, Kqq, Kwq, scale, w, P):
