@@ -128,7 +128,11 @@ def test_poor_registration_names_extrapolating_effects(case):
     assert gate.line() == res.quality[0].line()
     line = gate.line()
     assert gate.poor and "gear_harmonic extrapolates" in line and "geometry alone registers" in line
-    assert "--effects none" in line and "--term-prior" in line and "another robot" not in line
+    assert "diagnose effects=[]" in line and "transfer_prior_rad=1e-4" in line and "another robot" not in line
+    from pin_kpi_oed.cli.flags import in_flags  # the command line says its options
+
+    assert "(diagnose --effects none, or identify without --effects)" in in_flags(line)
+    assert "(diagnose --term-prior 1e-4)" in in_flags(line)
     good = register_setup(cm, sub, station="C")
     assert not good.poor and not good.quality[0].poor and ": good" in good.summary()
 
@@ -198,7 +202,7 @@ def test_real_ur10_series_b_to_c_refused_for_the_extrapolating_terms_geometry_re
     cm = identify(nominal, B, effects=[te], discrepancy="none").calibrated_model()
     (gate,) = registration_gates(register_setup(cm, C, station="C"), C, cm, register=register_setup)
     line = gate.line()
-    assert gate.poor and "transmission_error extrapolates" in line and "--effects none" in line, line
+    assert gate.poor and "transmission_error extrapolates" in line and "effects=[]" in line, line
 
 
 def test_diagnose_effects_none_writes_a_geometry_only_model(case, tmp_path, capsys):

@@ -9,8 +9,9 @@ How a message names a parameter so that :func:`in_flags` rewrites it, and never 
 - any name of the table, marked ``parameter 'name'`` (``parameter 'kfold' must be an integer``): the mark and the
   name become the option (``--kfold must be an integer``); this is how a one-word parameter (``kfold``, ``sigma``,
   ``units``) is named, since the bare word is never rewritten;
-- any name of the table with a value as a Python keyword, ``name='value'`` (``declare the units (units='mm,deg')``):
-  becomes the option and its value (``--units mm,deg``).
+- any name of the table with a value as a Python keyword, ``name='value'`` (``declare the units (units='mm,deg')``)
+  or ``name=NUMBER`` (``transfer_prior_rad=1e-4``): becomes the option and its value (``--units mm,deg``,
+  ``--term-prior 1e-4``); an empty list, ``name=[]`` (``effects=[]``), is the option's ``none``.
 
 A name outside the table is left as written in every form.
 """
@@ -68,13 +69,14 @@ _NAMES = "|".join(map(re.escape, sorted(PARAMETER_FLAGS, key=len, reverse=True))
 _BARE = re.compile(r"(?<![\w.`])(" + "|".join(re.escape(k) for k in PARAMETER_FLAGS if "_" in k)
                    + r")(?=[:\s(),]|$)")
 _MARKED = re.compile(r"\bparameter '(" + _NAMES + r")'")
-_KEYWORD = re.compile(r"(?<![\w.`'])(" + _NAMES + r")='([^']*)'")
+_KEYWORD = re.compile(r"(?<![\w.`'])(" + _NAMES + r")=(?:'([^']*)'|([-+]?[0-9.]+(?:e[-+]?[0-9]+)?)(?![\w.])|(\[\]))")
 
 
 def in_flags(message: str) -> str:
     """``message`` with every parameter named in it (see the module docstring) replaced by its option."""
     message = _MARKED.sub(lambda m: PARAMETER_FLAGS[m.group(1)], message)
-    message = _KEYWORD.sub(lambda m: f"{PARAMETER_FLAGS[m.group(1)]} {m.group(2)}", message)
+    message = _KEYWORD.sub(lambda m: f"{PARAMETER_FLAGS[m.group(1)]} "
+                                     f"{m.group(2) if m.group(2) is not None else m.group(3) or 'none'}", message)
     return _BARE.sub(lambda m: PARAMETER_FLAGS[m.group(1)], message)
 
 

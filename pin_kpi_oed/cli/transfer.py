@@ -22,6 +22,7 @@ import argparse
 
 import numpy as np
 
+from pin_kpi_oed.cli.flags import in_flags, in_flags_all
 from pin_kpi_oed.cli.tool import model_tool
 from pin_kpi_oed.cli.util import add_table_options, table_options
 
@@ -95,7 +96,8 @@ def run_register(args: argparse.Namespace) -> int:
     gates = res.quality
     replaced = [lab for lab in res.stations if lab in existing]
     model_dict = res.model.to_dict()
-    out = ({**res.to_dict(), "model": args.model, "data": args.data, "quality": [g.to_dict() for g in gates],
+    quality = [in_flags_all(g.to_dict()) for g in gates]  # the gates' advice in the options' words
+    out = ({**res.to_dict(), "model": args.model, "data": args.data, "quality": quality,
             "replaced_stations": replaced} if args.json else None)
     poor = [g for g in gates if g.poor]
     if poor and not args.accept_poor_fit:
@@ -106,7 +108,7 @@ def run_register(args: argparse.Namespace) -> int:
     if out is not None:
         atomic_write_json(args.json, out)
     if not args.quiet:
-        print(res.summary())  # the gate's line of every station included
+        print(in_flags(res.summary()))  # the gate's line of every station included, in the options' words
         for lab in replaced:
             old = existing[lab]
             print(f"station '{lab}' replaced: it was fitted by {old.fitted_by} on {old.n_rows} rows of "

@@ -23,7 +23,8 @@ When the registration is poor, the cause is tested, not guessed (:func:`poor_reg
    the model's effects are what fails here: terms fitted in one region of joint space (transmission-error
    harmonics, bending terms) extrapolate outside it. The share of the rows inside the model's joint coverage
    and the joint ranges the calibration did not measure are named, with the fixes: a geometry-only model
-   (``--effects none``), a prior on the terms (``--term-prior``), or measuring the missing ranges.
+   (``effects=[]``, ``--effects none``), a prior on the terms (``transfer_prior_rad``, ``--term-prior``), or
+   measuring the missing ranges.
 2. **Rows outside the coverage**, the geometry poor as well and the RMS below a gross 10 mm: the ranges to measure.
 3. Otherwise: another robot's or another session's data, the joint order, or units.
 """
@@ -167,8 +168,8 @@ def poor_registration_cause(model: CalibratedModel, data: MeasurementSet, label:
                 return (f"cause: the model's {what} {verb} outside the joint coverage of its "
                         f"calibration ({inside or 'coverage unknown'}): the geometry alone registers these rows at "
                         f"RMS {geo.rms_m * 1e3:.3g} mm ({np.sqrt(chi2_geo):.2g}x the expected level); fix: a "
-                        "geometry-only model (diagnose --effects none, or identify without --effects), a prior on "
-                        f"the terms (diagnose --term-prior 1e-4), or {measure}")
+                        "geometry-only model (diagnose effects=[], or identify without parameter 'effects'), a prior "
+                        f"on the terms (diagnose transfer_prior_rad=1e-4), or {measure}")
     rms_m = float(np.sqrt(chi2_full * np.mean(np.asarray(sigma_m, float) ** 2)))
     if share is not None and share < 0.5 and rms_m < GROSS_RMS_M:
         return (f"cause: the rows lie outside the joint coverage of the calibration ({inside}); fix: {measure}, "
