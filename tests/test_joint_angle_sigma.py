@@ -176,6 +176,17 @@ def test_panda_with_a_gear_harmonic_honest_at_35_poses(panda_model, tmp_path):
     Z = np.vstack(Z)
     z_rms, inside = float(np.sqrt(np.mean(Z ** 2))), float(np.mean(np.sum(Z ** 2, 1) <= 7.8147))
     assert found >= 6 and 0.8 < z_rms < 1.25 and inside >= 0.85, (found, z_rms, inside)
+    # the rows' joint covariance (what a check whitens by) holds predict's σ² on its diagonal; that σ is never below
+    # the white level's alone
+    from pin_kpi_oed.identification.prediction_sigma import predictive_covariance
+    Qc = np.vstack([last.discrepancy.joint_term.Q[:4], last.discrepancy.joint_term.Q[:4] + 0.8])
+    label = last.station(None)
+    _, C = predictive_covariance(last, Qc, None, label)
+    _, sig, _ = last.predict_with_sigma(Qc)
+    assert np.allclose(np.sqrt(np.diag(C)).reshape(-1, 3), sig, rtol=1e-9)
+    assert np.all(np.linalg.eigvalsh(0.5 * (C + C.T)) > -1e-12 * np.max(np.diag(C)))
+    white = last.discrepancy.joint_term.white_covariance(np.zeros((len(Qc), 3, 0)))
+    assert np.all(sig ** 2 >= np.einsum("maa->ma", white) * (1 - 1e-9))
     path = tmp_path / "m.json"
     last.save(path)
     back = load_model_file(path)

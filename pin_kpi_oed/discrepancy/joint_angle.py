@@ -39,8 +39,8 @@ C = F⁺ (τ² K + σ_n² I) F⁺ᵀ the parameters' covariance under this error
 (G → 0) the parameters' error and the joint-angle error add; near them the cross term takes back what the fit
 absorbed (checked against Monte-Carlo in ``tests/test_joint_angle_sigma.py``). It is the σ of the predictor the
 model uses (least-squares parameters, no kriging mean). A kernel of the wrong shape can make that cross term take
-back too much near the rows; the σ a model reports is therefore never below the white level's at the same pose
-(``identification.prediction_sigma``: per row, whichever covariance has the larger trace).
+back too much near the rows; the covariance a model reports is therefore never below the white level's at the same
+pose in any direction (``identification.prediction_sigma``: the positive part of the difference is added).
 """
 
 from __future__ import annotations

@@ -18,7 +18,7 @@ For a row q of station s (tracker rotation R_s), the covariance of measured − 
   - white discrepancy: the least-squares covariance under the white level, at every row; with joint-angle errors
     (few poses, :mod:`pin_kpi_oed.discrepancy.joint_angle`) their covariance τ² J_q J_qᵀ, the parameters' covariance
     under them and the cross term of what the fit absorbed (``JointAngleTerm.covariance``), per row never below the
-    white level's own covariance (:func:`_never_below_white`);
+    white level's own covariance in any direction (:func:`_white_excess`);
   - Gaussian process: the universal-kriging term (E − K_WQ Σ⁻¹F) C (E − K_WQ Σ⁻¹F)ᵀ on rows outside the
     coverage, the least-squares term E C_ls Eᵀ inside it
     (:meth:`~pin_kpi_oed.discrepancy.gp.Discrepancy.parametric_covariance`).
@@ -186,18 +186,18 @@ def _joint_angle_covariance(cm: Any, d: Any, label: str, Q: np.ndarray, E: np.nd
     return out
 
 
-def _never_below_white(Cb: np.ndarray, term: Any, E: np.ndarray) -> np.ndarray:
-    """Per row, the joint-angle errors' covariance Cb (m, 3, 3) or the white level's (diag(w²) + E C_w Eᵀ,
-    :meth:`~pin_kpi_oed.discrepancy.joint_angle.JointAngleTerm.white_covariance`), whichever has the larger trace:
-    the white level, corrected for the fitted parameters, is what the rows' residuals show at poses like them, which
+def _white_excess(Cb: np.ndarray, term: Any, E: np.ndarray) -> np.ndarray:
+    """(m, 3, 3): what the white level's covariance W (diag(w²) + E C_w Eᵀ,
+    :meth:`~pin_kpi_oed.discrepancy.joint_angle.JointAngleTerm.white_covariance`) holds beyond the joint-angle
+    errors' Cb (m, 3, 3) per row: the positive part of W − Cb, so that Cb + it is at least both in every direction.
+    The white level, corrected for the fitted parameters, is what the rows' residuals show at poses like them, which
     a joint-angle kernel of the wrong shape can under-state near the rows (where its cross term takes back what the
     fit absorbed); far from them the joint-angle errors carry the parameters' extrapolation."""
     W = term.white_covariance(E)
     if W is None:
-        return Cb
-    pick = np.einsum("maa->m", W) > np.einsum("maa->m", Cb)
-    Cb[pick] = W[pick]
-    return Cb
+        return np.zeros_like(Cb)
+    lam, U = np.linalg.eigh(0.5 * (W - Cb + np.swapaxes(W - Cb, 1, 2)))
+    return np.einsum("mak,mk,mbk->mab", U, np.maximum(lam, 0.0), U)
 
 
 def _discrepancy_jacobian(cm: Any, d: Any, label: str, Q: np.ndarray) -> np.ndarray:
@@ -286,7 +286,8 @@ def predictive_sigma(cm: Any, Q: np.ndarray, aux: Any, station: str | None, labe
             if d.kind == "white":
                 Cb += d.parametric_covariance(Q[rows], E)
                 if d.joint_term is not None:
-                    Cb = _never_below_white(Cb + _joint_angle_covariance(cm, d, lab, Q[rows], E), d.joint_term, E)
+                    Cb += _joint_angle_covariance(cm, d, lab, Q[rows], E)
+                    Cb += _white_excess(Cb, d.joint_term, E)
             else:
                 for mask, inside in ((out, False), (~out, True)):
                     if mask.any():
@@ -345,7 +346,8 @@ def predictive_covariance(cm: Any, Q: np.ndarray, aux: Any, label: str) -> tuple
     diagonal, the parametric part's error shared by every row (:meth:`Discrepancy.parametric_factor`; a noise-only
     model: E C_p Eᵀ between rows), the joint-angle errors of a white discrepancy between the rows
     (:meth:`~pin_kpi_oed.discrepancy.joint_angle.JointAngleTerm.covariance_between`; at a station registered later
-    without the registration's share), all rotated into the tracker frame and multiplied by the station's
+    without the registration's share) with each row's block raised to the white level's (:func:`_white_excess`),
+    all rotated into the tracker frame and multiplied by the station's
     ``sigma_scale``². Its 3 × 3 diagonal blocks hold :func:`predictive_sigma`'s σ² on their diagonals.
 
     Args:
@@ -384,6 +386,9 @@ def predictive_covariance(cm: Any, Q: np.ndarray, aux: Any, label: str) -> tuple
                 Cb += d.joint_term.covariance_between(Q, _joint_jacobian(cm, label, Q), E)
         noise2 = np.zeros((m, 3))
     Cb += np.einsum("iap,jbp->iajb", A, A)
+    if d is not None and d.kind == "white" and d.joint_term is not None and d.param_cov is not None:
+        i = np.arange(m)
+        Cb[i, :, i, :] += _white_excess(Cb[i, :, i, :], d.joint_term, E)
     Ct = np.einsum("xa,iajb,yb->ixjy", R, Cb, R).reshape(3 * m, 3 * m)
     Ct[np.diag_indices(3 * m)] += noise2.reshape(-1)
     return Y, Ct * st.sigma_scale ** 2
