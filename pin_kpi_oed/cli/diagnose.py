@@ -23,6 +23,7 @@ from typing import Any
 
 import numpy as np
 
+from pin_kpi_oed.cli.flags import in_flags, in_flags_all
 from pin_kpi_oed.cli.identify import add_discrepancy_arg, add_register_args
 from pin_kpi_oed.cli.util import add_table_options, table_options
 from pin_kpi_oed.cli.util import parse_floats
@@ -167,6 +168,7 @@ def _write_and_print(args: argparse.Namespace, rep: Any) -> None:
         rep.figures = diagnosis_figures(rep, args.figures)
     if args.json:
         out = rep.to_dict()
+        out["notes"], out["mismatch"] = in_flags_all(out["notes"]), in_flags_all(out["mismatch"])  # options' words
         out["train"] = list(args.train)
         out["validate"] = args.validate
         atomic_write_json(args.json, out)
@@ -175,7 +177,7 @@ def _write_and_print(args: argparse.Namespace, rep: Any) -> None:
               f"heldout_rms_before={rep.heldout_before['rms_m'] * 1e3:.4f}mm "
               f"after={rep.heldout_after['rms_m'] * 1e3:.4f}mm")
     else:
-        print(rep.summary())
+        print(in_flags(rep.summary()))
         if args.json:
             print(f"wrote {args.json}")
 
@@ -223,7 +225,7 @@ def run(args: argparse.Namespace) -> int:
 
         stamp_model(model_dict, args, robot, train=args.train, validate=args.validate, reflector_nominal_m=reflector,
                     extra={"step": "diagnose", "diagnosis": {"status": rep.status, "message": rep.message,
-                                                            "summary": rep.summary()}})
+                                                            "summary": in_flags(rep.summary())}})
     if cm is not None and val is not None and rep.transfer:
         rep.transfer["model_sigma"] = _model_sigma(args, rep, cm, val, reg)
     _write_and_print(args, rep)

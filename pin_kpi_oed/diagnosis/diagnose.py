@@ -106,8 +106,8 @@ def _verdict(gap: dict, remaining_gap: dict, selected: list[str], mismatch: bool
                          f"{floor * 1e6:.1f} µm): part of the error is not any modelled effect")
         return selected[0]
     if detected and not tried:
-        notes.append("a gap is detected and no candidate effect was tried (--effects none: geometry only): the "
-                     "remaining error is left to the model discrepancy (--discrepancy)")
+        notes.append("a gap is detected and no candidate effect was tried (effects=[]: geometry only): the "
+                     "remaining error is left to the model discrepancy (parameter 'discrepancy')")
     elif detected:
         notes.append("a gap is detected but no candidate effect explains a significant part of it on held-out data: "
                      "the remaining error is not any modelled effect")

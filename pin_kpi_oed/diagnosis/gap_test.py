@@ -106,7 +106,7 @@ def screen_mismatch(eng: Engine, geo_fit: Fit, geo: Scored, plan: Plan, notes: l
     rows = (ho_order[far] + 1).tolist()
     mismatch["rows"] = rows
     hint = "" if plan.mode == "transfer" else (" (a session with the tracker elsewhere? re-register the set-up "
-                                                "first: --register-rows N)")
+                                                "first: register_rows N)")
     if far.mean() >= 0.5:
         mismatch["message"] = (
             f"{int(far.sum())} of {far.size} held-out rows have errors beyond {limit * 1e3:.3g} mm "
