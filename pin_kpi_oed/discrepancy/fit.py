@@ -240,9 +240,9 @@ def _dof_rescale(post: dict, scale: np.ndarray, n: int, n_params: int, cv: dict)
 
 def _joint_angle(white: Discrepancy, Q: np.ndarray, R: np.ndarray, F: np.ndarray | None, Jq: np.ndarray | None,
                  floor_m: np.ndarray | None, periodic: np.ndarray | None) -> None:
-    """Give the white discrepancy the joint-angle errors its residuals show, when they predict left-out poses
-    better (:mod:`pin_kpi_oed.discrepancy.joint_angle`): its white level becomes that fit's σ_n and its decision
-    says so."""
+    """Give the white discrepancy the joint-angle errors its residuals show, when the restricted likelihood supports
+    them and they predict left-out poses not clearly worse (:mod:`pin_kpi_oed.discrepancy.joint_angle`): its white
+    level becomes that fit's σ_n and its decision says so."""
     if F is None or Jq is None:
         return
     from pin_kpi_oed.discrepancy.joint_angle import fit_joint_angle
@@ -259,11 +259,13 @@ def _joint_angle(white: Discrepancy, Q: np.ndarray, R: np.ndarray, F: np.ndarray
     white.cv.update({"joint_angle_tau_rad": float(np.sqrt(term.tau2)),
                      "joint_angle_length_scale_rad": float(term.length_scale_rad), "joint_angle_loo_gain": float(stat)})
     white.decision = (f"joint-angle errors of {np.sqrt(term.tau2) * 1e6:.1f} urad per joint, length scale "
-                      f"{term.length_scale_rad:g} rad (restricted maximum likelihood on the residuals; chosen over a "
-                      f"white level alone by the leave-one-pose-out log predictive density, +{stat:.1f}) and a "
+                      f"{term.length_scale_rad:g} rad (restricted maximum likelihood on the residuals, its test "
+                      f"against a white level alone passed; leave-one-pose-out log predictive density {stat:+.1f} "
+                      f"against the white level's, not worse by two standard errors) and a "
                       f"white level of {np.sqrt(term.noise_var_m2) * 1e3:.4f} mm per axis, each widened "
                       f"x{white.cv.get('small_sample_factor', 1.0):.3f} for its small-sample uncertainty; every sigma "
-                      f"adds the parameter covariance under them and takes back what the fit absorbed")
+                      f"adds the parameter covariance under them, takes back what the fit absorbed and is never "
+                      f"below the white level's alone")
 
 
 def _white(R: np.ndarray, names: list, n_params: int, floor_m: np.ndarray | None,
