@@ -53,6 +53,7 @@ PARAMETER_FLAGS = {
     "validate": "--validate",
     "sigma": "--sigma",
     "units": "--units",
+    "angle_unit": "--angle-unit",
     "columns": "--columns",
     "kinematics": "--kinematics",
     "scheduler": "--scheduler",

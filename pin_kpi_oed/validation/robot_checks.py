@@ -150,8 +150,9 @@ def check_points_against_joints(robot: Any, Q: np.ndarray, P: np.ndarray, points
         points, joints: the files, for messages.
         length_unit: the unit the points were read in; angle_unit: the joint log's (``deg`` / ``rad``).
         angle_scale: the factor that converted the joint log's revolute values to rad.
-        options: the command's unit options the advice names: ``tracker`` (``import-tracker``: ``--angle-unit``,
-            a 'Units:' comment or ``--units``) or ``table`` (a measurement CSV: ``--units``, e.g. ``mm,deg``).
+        options: the unit parameters the advice names: ``tracker`` (a tracker export and its joint log:
+            ``angle_unit``, a 'Units:' comment or ``units``) or ``table`` (a measurement CSV: ``units``, e.g.
+            ``mm,deg``); the command line says its options (``--angle-unit``, ``--units``).
 
     Returns:
         The ratio (about 1).
@@ -176,19 +177,19 @@ def check_points_against_joints(robot: Any, Q: np.ndarray, P: np.ndarray, points
             f"the joint values move the tool ({robot.name}, reach {robot.reach():.2f} m)")
     table = options == "table"
     if np.isfinite(ratio2) and 1 / SPREAD_RATIO <= ratio2 <= SPREAD_RATIO:
-        fix = (f"give --units {other}" if other == "deg" else "give the joints in rad (drop deg from --units)") \
-            if table else f"give --angle-unit {other}"
+        fix = (f"give units='{other}'" if other == "deg" else "give the joints in rad (drop deg from parameter "
+               "'units')") if table else f"give angle_unit='{other}'"
         raise InputError(f"{head}: the joint {'values look' if table else 'log looks'} like {other}, not {angle_unit}; "
                          f"{fix}")
     units = {"m": 1.0, "cm": 1e-2, "mm": 1e-3, "in": 0.0254, "um": 1e-6}
     here = units.get(length_unit, 1.0)
     true = min(units, key=lambda u: abs(math.log(ratio * units[u] / here)) if ratio > 0 else 0.0)
-    declare = f"--units {true}" if table else f"a 'Units: {true}' comment or --units {true}"
+    declare = f"units='{true}'" if table else f"a 'Units: {true}' comment or units='{true}'"
     hint = (f"the points look like {true}, not {length_unit} (declare it with {declare})"
             if abs(math.log(ratio * units[true] / here)) < math.log(SPREAD_RATIO) and true != length_unit
-            else ("check the length and angle units of the file (--units, e.g. mm,deg)" if table else
-                  "check the length unit of the points ('Units:' comment, --units) and the joint log's angle unit "
-                  "(--angle-unit)"))
+            else ("check the length and angle units of the file (parameter 'units', e.g. mm,deg)" if table else
+                  "check the length unit of the points ('Units:' comment, parameter 'units') and the joint log's "
+                  "angle unit (parameter 'angle_unit')"))
     raise InputError(f"{head}; {hint}")
 
 
