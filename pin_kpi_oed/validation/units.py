@@ -150,12 +150,12 @@ def check_position_spread_m(points: np.ndarray, reach_m: float, what: str,
 EFFECT_SIZE_MAX = {"rad": 0.05, "rad/(N*m)": 1e-4, "1": 0.05, "1/K": 1e-3, "m/s": 1e-3}
 
 
-def check_effect_sizes(effects: Iterable, what: str = "--effects") -> None:
+def check_effect_sizes(effects: Iterable, what: str = "parameter 'effects'") -> None:
     """Refuse simulated effect parameters beyond :data:`EFFECT_SIZE_MAX` of their unit.
 
     Args:
         effects: (effect, theta) pairs; an effect has ``name`` and ``unit``.
-        what: the option for the message.
+        what: the parameter (or option) the message names.
 
     Raises:
         InputError: naming the effect, the value, its unit and the bound.
