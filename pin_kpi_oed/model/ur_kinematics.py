@@ -312,7 +312,8 @@ def _ur_map(model: pin.Model, joint_ids: Sequence[int], tool_frame_id: int,
     lost_m, lost_rad = float(np.linalg.norm(rest.translation)), float(np.linalg.norm(pin.log3(rest.rotation)))
     if lost_m > _TOOL_TOL or lost_rad > _TOOL_TOL:
         raise InputError(f"tool frame '{frame.name}' lies {lost_m:.3g} m / {lost_rad:.3g} rad off the last joint's "
-                         "axis: the UR layout fixes wrist_3 → tool0 and cannot carry it (export with --tool tool0)")
+                         "axis: the UR layout fixes wrist_3 → tool0 and cannot carry it (export with "
+                         "tool_frame='tool0')")
     return S, screw
 
 

@@ -259,8 +259,8 @@ def sigma_kind(df: DesignFile, sigma: str | None = None) -> str:
     if sigma == "honest" and not have:
         missing = [d.criterion for d in df.designs if d.cov_s_honest_m2 is None]
         raise InputError(f"sigma='honest': design(s) {', '.join(missing)} of {df.source} have no "
-                         "discrepancy.cov_s_m2 (write the file with pin-kpi-oed design --model MODEL_JSON, a model "
-                         "with a discrepancy; or give sigma='paper')")
+                         "discrepancy.cov_s_m2 (write the file with a design on model_file, a model with a "
+                         "discrepancy; or give sigma='paper')")
     return sigma
 
 
