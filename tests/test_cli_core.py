@@ -174,9 +174,13 @@ def test_library_errors_name_parameters_and_the_command_line_its_options():
     from pin_kpi_oed.design.margins import with_margins
     from pin_kpi_oed.errors import InputError
 
-    with pytest.raises(InputError, match=r"^clearance_margin_m: must be in \[0, 1\) m") as err:
+    with pytest.raises(InputError, match=r"^parameter 'clearance_margin_m' must be in \[0, 1\) m") as err:
         with_margins(load_cell("kr15"), -0.01, 0.0)
-    assert in_flags(str(err.value)).startswith("--clearance-margin: must be in [0, 1) m")
+    assert in_flags(str(err.value)).startswith("--clearance-margin must be in [0, 1) m")
+    # a field of a file the command line reads stays the field: the cell file's reflector_m is no --reflector
+    assert in_flags("cell.yaml: reflector_m: 134.2 m from the tool frame") == \
+        "cell.yaml: reflector_m: 134.2 m from the tool frame"
+    assert in_flags("give reflector_m=0.1 or parameter 'tool_frame'") == "give --reflector 0.1 or --tool"
     assert in_flags("cell c: Q_given: 3 poses; target_sigma_m: 0") == "cell c: --given: 3 poses; --target-sigma: 0"
     assert in_flags("clearance_m of the cell file") == "clearance_m of the cell file"  # a word, not a parameter
     assert all(f.startswith("--") for f in PARAMETER_FLAGS.values())
@@ -187,6 +191,7 @@ def test_library_errors_name_parameters_and_the_command_line_its_options():
     assert in_flags("parameter 'speed' and speed='1'") == "parameter 'speed' and speed='1'"  # not in the table
     from pin_kpi_oed.cli.flags import in_flags_all
 
-    quality = {"advice": ["loss='soft_l1' (robust), sigma columns or sigma_xyz_m"], "dof": 3, "verdict": "suspect"}
+    quality = {"advice": ["loss='soft_l1' (robust), sigma columns or parameter 'sigma_xyz_m'"], "dof": 3,
+               "verdict": "suspect"}
     assert in_flags_all(quality) == {"advice": ["--loss soft_l1 (robust), sigma columns or --sigma"], "dof": 3,
                                      "verdict": "suspect"}

@@ -5,7 +5,9 @@
 How a message names a parameter so that :func:`in_flags` rewrites it, and never an ordinary word:
 
 - a name with an underscore, bare (``Q_given: 3 poses``, ``target_sigma_m (0)``): rewritten where it stands as a
-  word followed by ``:``, a space, ``(``, ``)``, ``,`` or the end of the message;
+  word followed by ``:``, a space, ``(``, ``)``, ``,`` or the end of the message — except the names that are also
+  fields of the files the command line reads (:data:`FILE_FIELDS`: a cell file's ``reflector_m: 134.2 m`` stays the
+  field), which need one of the two forms below;
 - any name of the table, marked ``parameter 'name'`` (``parameter 'kfold' must be an integer``): the mark and the
   name become the option (``--kfold must be an integer``); this is how a one-word parameter (``kfold``, ``sigma``,
   ``units``) is named, since the bare word is never rewritten;
@@ -21,7 +23,7 @@ from __future__ import annotations
 import re
 from typing import Any
 
-__all__ = ["PARAMETER_FLAGS", "in_flags", "in_flags_all"]
+__all__ = ["PARAMETER_FLAGS", "FILE_FIELDS", "in_flags", "in_flags_all"]
 
 #: Library parameter -> the option of the command line that sets it.
 PARAMETER_FLAGS = {
@@ -66,8 +68,14 @@ PARAMETER_FLAGS = {
     "reflector_m": "--reflector",
 }
 
+#: Parameters that are also fields of the files the command line reads (a cell file's ``reflector_m``,
+#: ``tool_frame``, ``clearance_margin_m``; a model file's ``sigma_xyz_m``): a message naming the field of a file
+#: means the field, so these are rewritten only when marked or given as keywords, never bare.
+FILE_FIELDS = frozenset({"reflector_m", "tool_frame", "clearance_margin_m", "sigma_xyz_m"})
+
 _NAMES = "|".join(map(re.escape, sorted(PARAMETER_FLAGS, key=len, reverse=True)))
-_BARE = re.compile(r"(?<![\w.`])(" + "|".join(re.escape(k) for k in PARAMETER_FLAGS if "_" in k)
+_BARE = re.compile(r"(?<![\w.`])(" + "|".join(re.escape(k) for k in PARAMETER_FLAGS
+                                                if "_" in k and k not in FILE_FIELDS)
                    + r")(?=[:\s(),]|$)")
 _MARKED = re.compile(r"\bparameter '(" + _NAMES + r")'")
 _KEYWORD = re.compile(r"(?<![\w.`'])(" + _NAMES + r")=(?:'([^']*)'|([-+]?[0-9.]+(?:e[-+]?[0-9]+)?)(?![\w.])|(\[\]))")

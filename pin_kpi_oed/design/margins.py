@@ -38,7 +38,7 @@ def with_margins(cell: Cell, clearance_margin_m: float = 0.0, incidence_margin_d
     """
     cm, im = float(clearance_margin_m), float(incidence_margin_deg)
     if not (cm >= 0.0 and cm < 1.0):
-        raise InputError(f"clearance_margin_m: must be in [0, 1) m, got {clearance_margin_m}")
+        raise InputError(f"parameter 'clearance_margin_m' must be in [0, 1) m, got {clearance_margin_m}")
     if not (0.0 <= im < cell.incidence_max_deg):
         raise InputError(f"incidence_margin_deg: must be in [0, {cell.incidence_max_deg:g}) deg (the cell's "
                          f"incidence limit), got {incidence_margin_deg}")

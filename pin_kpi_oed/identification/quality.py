@@ -280,7 +280,7 @@ def _check_outliers(f: _Findings, result: Any, we: np.ndarray, out_idx: np.ndarr
         f.reasons.append(f"{out_idx.size} flagged outlier(s) fitted with the plain loss and the noise level unknown "
                          "(chi2 not tested)")
         f.causes.append("outliers (gross measurement errors)")
-        f.advice.append("loss='soft_l1' (robust), sigma columns or sigma_xyz_m, or remove the flagged rows")
+        f.advice.append("loss='soft_l1' (robust), sigma columns or parameter 'sigma_xyz_m', or remove the flagged rows")
     return large
 
 
@@ -302,7 +302,8 @@ def robust_loss_reason(result: Any) -> str:
     if large:
         return f"{large} outlier(s) far beyond the noise"
     if out_idx.size and bool(result.covariance_scaled):
-        return f"{out_idx.size} outlier(s) flagged and the noise level unknown (no sigma columns, no sigma_xyz_m)"
+        return (f"{out_idx.size} outlier(s) flagged and the noise level unknown (no sigma columns, no parameter "
+                f"'sigma_xyz_m')")
     return ""
 
 
@@ -333,7 +334,7 @@ def _check_chi2(f: _Findings, chi2_red: float, dof: int, alpha: float, chi2_poor
         else:
             f.causes.append("reflector/TCP offset")
         f.causes += ["sigma units (m) or an optimistic noise model", "wrong robot model or unmodelled effects"]
-        f.advice += ["check sigma_xyz_m / sigma columns (m)", "run pin-kpi-oed diagnose"]
+        f.advice += ["check parameter 'sigma_xyz_m' / sigma columns (m)", "run pin-kpi-oed diagnose"]
     return (lo, hi)
 
 
