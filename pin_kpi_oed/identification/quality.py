@@ -93,7 +93,7 @@ class FitQuality:
         if self.verdict == "good":
             chi = (f"reduced chi2 {self.chi2_reduced:.3g} within [{self.chi2_interval[0]:.3g}, "
                    f"{self.chi2_interval[1]:.3g}]" if self.chi2_interval else
-                   "noise level unknown (no sigma columns, no sigma_xyz_m): chi2 not tested")
+                   "noise level unknown (no sigma columns, no parameter 'sigma_xyz_m'): chi2 not tested")
             if self.explained_by_discrepancy:
                 chi = self.explained_by_discrepancy
             return f"fit quality: good ({chi})"
@@ -327,8 +327,8 @@ def _check_chi2(f: _Findings, chi2_red: float, dof: int, alpha: float, chi2_poor
     if chi2_red > hi:
         refl = None if nominal_reflector_m is None else np.asarray(nominal_reflector_m, float)
         if refl is not None and not reflector_estimated and float(np.linalg.norm(refl)) < 1e-9:
-            f.causes.insert(0, "reflector/TCP offset (nominal reflector_m 0,0,0 hides parameters it makes "
-                               "identifiable)")
+            f.causes.insert(0, "reflector/TCP offset (a nominal reflector at 0,0,0, parameter 'reflector_m', hides "
+                               "parameters it makes identifiable)")
             f.advice.insert(0, "give the reflector offset (--reflector x,y,z in m) or leave --reflector out to "
                                "estimate it")
         else:
