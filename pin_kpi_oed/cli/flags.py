@@ -69,9 +69,9 @@ PARAMETER_FLAGS = {
 }
 
 #: Parameters that are also fields of the files the command line reads (a cell file's ``reflector_m``,
-#: ``tool_frame``, ``clearance_margin_m``; a model file's ``sigma_xyz_m``): a message naming the field of a file
+#: ``tool_frame``; a model file's ``sigma_xyz_m``): a message naming the field of a file
 #: means the field, so these are rewritten only when marked or given as keywords, never bare.
-FILE_FIELDS = frozenset({"reflector_m", "tool_frame", "clearance_margin_m", "sigma_xyz_m"})
+FILE_FIELDS = frozenset({"reflector_m", "tool_frame", "sigma_xyz_m"})
 
 _NAMES = "|".join(map(re.escape, sorted(PARAMETER_FLAGS, key=len, reverse=True)))
 _BARE = re.compile(r"(?<![\w.`])(" + "|".join(re.escape(k) for k in PARAMETER_FLAGS
