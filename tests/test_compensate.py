@@ -314,8 +314,13 @@ def test_compensation_uses_the_model_effects(world):
     assert np.linalg.norm(cm_eff.predict(res.q) - Yt, axis=1).max() < 1e-8
     assert np.linalg.norm(cm.predict(res.q) - Yt, axis=1).mean() > 1e-6  # the effect moved the solution
     cm_t = dataclasses.replace(cm, effects=[ThermalExpansion(robot)], thetas=[np.zeros(1)])
-    with pytest.raises(InputError, match="temperature"):
+    with pytest.raises(InputError, match="temperature") as err:
         compensate(cm_t, ts)  # the targets have no temperature column for the thermal effect
+    # the one line names the column and both fixes; the command line says its option
+    assert "needs a 'temperature' column" in str(err.value) and "diagnose effects=[]" in str(err.value)
+    from pin_kpi_oed.cli.flags import in_flags
+
+    assert "diagnose --effects none" in in_flags(str(err.value))
 
 
 def _line_program(robot, a, b, n=81):

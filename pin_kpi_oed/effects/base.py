@@ -99,13 +99,18 @@ class Effect(abc.ABC):
                          "(supported: gear_harmonic, transmission_error, link_bending); use pool selection")
 
     # -- extras -------------------------------------------------------------------
-    def check(self, aux: Any) -> str | None:
-        """Why this effect cannot be used with these measurements (a one-line note), or None."""
+    def missing_column(self, aux: Any) -> str | None:
+        """The first column this effect needs that ``aux`` (measurements or targets) lacks (``temperature``,
+        ``payload``, ``time``), or None."""
         for attr in self.requires:
             if aux is None or getattr(aux, attr, None) is None:
-                col = {"temperature_c": "temperature", "payload_kg": "payload", "time_s": "time"}.get(attr, attr)
-                return f"{self.name}: skipped, the measurements have no '{col}' column"
+                return {"temperature_c": "temperature", "payload_kg": "payload", "time_s": "time"}.get(attr, attr)
         return None
+
+    def check(self, aux: Any) -> str | None:
+        """Why this effect cannot be used with these measurements (a one-line note), or None."""
+        col = self.missing_column(aux)
+        return None if col is None else f"{self.name}: skipped, the measurements have no '{col}' column"
 
     def _theta(self, theta: np.ndarray) -> np.ndarray:
         th = np.asarray(theta, float).reshape(-1)

@@ -404,10 +404,11 @@ def _check_joints(cm: CalibratedModel, ts: TargetSet) -> None:
 
 def _check_effects(cm: CalibratedModel, aux: MeasurementSet) -> None:
     for eff in cm.effects:
-        why = eff.check(aux) if hasattr(eff, "check") else None
-        if why:
-            raise InputError(f"{aux.source or 'targets'}: the model's effect '{eff.name}' needs data the file lacks: "
-                             f"{why}")
+        col = eff.missing_column(aux) if hasattr(eff, "missing_column") else None
+        if col:
+            raise InputError(f"{aux.source or 'targets'}: the model's effect '{eff.name}' needs a '{col}' column "
+                             f"the file lacks (its value at each target): add it, or compensate with a model "
+                             f"without the effect (diagnose effects=[])")
 
 
 def _result(cm: CalibratedModel, ts: TargetSet, opt: CompensationOptions, pm: PoseModel, nom: _IK, cal: _IK,
