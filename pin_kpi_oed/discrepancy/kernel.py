@@ -93,28 +93,38 @@ def _chord2(X: np.ndarray, Y: np.ndarray, lin: np.ndarray | None = None) -> np.n
     return D
 
 
-def _value_on_line(X: np.ndarray, Y: np.ndarray, c: float, L: np.ndarray, a: np.ndarray, ell: np.ndarray,
-                  lin: np.ndarray, block: int = 128) -> np.ndarray:
-    """:meth:`JointKernel._value` with linear joints: their Δ²/L² = (x/L)² + (y/L)² − 2 (x/L)(y/L) joins the matrix
-    product (the coordinates centred on X's mean first, against cancellation), their one-joint parts exp(−Δ²/2ℓ²)."""
-    ang = ~lin
-    mid = X[:, lin].mean(axis=0)
-    xl, yl = (X[:, lin] - mid) / L[lin], (Y[:, lin] - mid) / L[lin]
-    cX, sX, cY, sY = np.cos(X), np.sin(X), np.cos(Y), np.sin(Y)
-    U = np.hstack([cX[:, ang] / L[ang], sX[:, ang] / L[ang], xl])
-    V = np.hstack([cY[:, ang] / L[ang], sY[:, ang] / L[ang], yl]).T
+def _value_blocks(X: np.ndarray, cY: np.ndarray, sY: np.ndarray, Y: np.ndarray | None, c: float, L: np.ndarray,
+                  a: np.ndarray, ell: np.ndarray, lin: np.ndarray | None, block: int = 128) -> np.ndarray:
+    """:meth:`JointKernel._value` on Y given by its circle points ``cY``, ``sY`` (and, with linear joints ``lin``, its
+    coordinates ``Y``): a revolute joint's 4 sin²(Δ/2)/L² = 2/L² − 2 (cx cy + sx sy)/L² and a linear joint's
+    Δ²/L² = (x/L)² + (y/L)² − 2 (x/L)(y/L) (centred on X's mean first, against cancellation) join one matrix
+    product; the one-joint parts are exp((cos Δ − 1)/ℓ²) and exp(−Δ²/2ℓ²), summed ``block`` rows at a time while in
+    the processor's cache."""
+    lin = np.zeros(X.shape[1], bool) if lin is None else lin
+    ang, on_line = ~lin, bool(lin.any())
+    cX, sX = np.cos(X), np.sin(X)
+    U = np.hstack([cX[:, ang] / L[ang], sX[:, ang] / L[ang]])
+    V = np.hstack([cY[:, ang] / L[ang], sY[:, ang] / L[ang]])
     s0 = float(np.sum(1.0 / L[ang] ** 2))
-    rx, ry = 0.5 * np.sum(xl ** 2, axis=1), 0.5 * np.sum(yl ** 2, axis=1)
+    if on_line:
+        if Y is None:
+            raise ValueError("a kernel with linear joints needs the configurations: pass features(Y)")
+        mid = X[:, lin].mean(axis=0)
+        xl, yl = (X[:, lin] - mid) / L[lin], (Y[:, lin] - mid) / L[lin]
+        U, V = np.hstack([U, xl]), np.hstack([V, yl])
+        rx, ry = 0.5 * np.sum(xl ** 2, axis=1), 0.5 * np.sum(yl ** 2, axis=1)
+    V = V.T
     inv = 1.0 / ell ** 2
-    K = np.empty((X.shape[0], Y.shape[0]))
-    T = np.empty((min(block, X.shape[0]), Y.shape[0]))
+    K = np.empty((X.shape[0], cY.shape[0]))
+    T = np.empty((min(block, X.shape[0]), cY.shape[0]))
     for b in range(0, X.shape[0], block):
         Kb = K[b:b + block]
         Tb = T[:len(Kb)]
         np.matmul(U[b:b + block], V, out=Kb)
         Kb -= s0
-        Kb -= rx[b:b + block, None]
-        Kb -= ry[None, :]
+        if on_line:
+            Kb -= rx[b:b + block, None]
+            Kb -= ry[None, :]
         np.minimum(Kb, 0.0, out=Kb)
         np.exp(Kb, out=Kb)
         Kb *= c ** 2
@@ -298,36 +308,12 @@ class JointKernel(StationaryKernelMixin, Kernel):
         """K without the gradient, without a trigonometric function per pair: cos(x − y) = cos x cos y + sin x sin y,
         so the product part is one matrix product of the scaled circle points and each one-joint part an outer
         product; ``block`` rows at a time, so that the one-joint parts are summed while in the processor's cache."""
-        if lin is not None:
-            Yv = Y if trig_Y is None else (trig_Y[2] if len(trig_Y) > 2 else None)
-            if Yv is None:
-                raise ValueError("a kernel with linear joints needs the configurations: pass features(Y)")
-            return _value_on_line(X, np.atleast_2d(Yv), c, L, a, ell, lin, block)
-        cX, sX = np.cos(X), np.sin(X)
-        cY, sY = (np.cos(Y), np.sin(Y)) if trig_Y is None else trig_Y[:2]
-        # Σ_j (2 − 2 cos Δ_j)/L_j² = Σ_j 2/L_j² − 2 [cX/L, sX/L] · [cY/L, sY/L]ᵀ
-        U, V = np.hstack([cX / L, sX / L]), np.hstack([cY / L, sY / L]).T
-        s0 = float(np.sum(1.0 / L ** 2))
-        inv = 1.0 / ell ** 2
-        K = np.empty((X.shape[0], cY.shape[0]))
-        T = np.empty((min(block, X.shape[0]), cY.shape[0]))
-        for b in range(0, X.shape[0], block):
-            Kb = K[b:b + block]
-            Tb = T[:len(Kb)]
-            np.matmul(U[b:b + block], V, out=Kb)
-            Kb -= s0
-            np.minimum(Kb, 0.0, out=Kb)
-            np.exp(Kb, out=Kb)
-            Kb *= c ** 2
-            for j in range(X.shape[1]):           # a_j² exp((cos Δ_j − 1)/ℓ_j²)
-                np.multiply.outer(cX[b:b + block, j] * inv[j], cY[:, j], out=Tb)
-                Tb += np.multiply.outer(sX[b:b + block, j] * inv[j], sY[:, j])
-                Tb -= inv[j]
-                np.minimum(Tb, 0.0, out=Tb)
-                np.exp(Tb, out=Tb)
-                Tb *= a[j] ** 2
-                Kb += Tb
-        return K
+        if trig_Y is None:
+            Y = np.atleast_2d(Y)
+            return _value_blocks(X, np.cos(Y), np.sin(Y), Y, c, L, a, ell, lin, block)
+        Yv = trig_Y[2] if len(trig_Y) > 2 else None
+        return _value_blocks(X, trig_Y[0], trig_Y[1], None if Yv is None else np.atleast_2d(Yv), c, L, a, ell, lin,
+                             block)
 
     def diag(self, X: np.ndarray) -> np.ndarray:
         """k(q, q) for each row: c² + Σ a_j²."""
