@@ -23,7 +23,7 @@ import statistics
 import time
 import tracemalloc
 
-from pin_kpi_oed.identification.simulate import default_tracker_pose
+from pin_kpi_oed.simulation.simulator import default_tracker_pose
 from pin_kpi_oed.model.robot import load_robot
 from pin_kpi_oed.model.tracker import TrackerModel
 from pin_kpi_oed.oed.identifiability import analyse

@@ -31,7 +31,7 @@ def _median(fn) -> float:
 
 def main() -> dict:
     from pin_kpi_oed.identification.identify import identify
-    from pin_kpi_oed.identification.model_file import load_model_file
+    from pin_kpi_oed.calibrated.model_file import load_model_file
     from pin_kpi_oed.identification.quality import assess_registration
     from pin_kpi_oed.validation.paths import check_outputs, release_outputs
     from pin_kpi_oed.validation.schema import validate_model_dict

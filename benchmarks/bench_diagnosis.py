@@ -33,7 +33,7 @@ def _data(n_total: int, seed: int = 0):
     from pin_kpi_oed.model.noise import NoiseModel
     from pin_kpi_oed.model.tracker import TrackerModel
     from pin_kpi_oed.model.robot import load_robot
-    from pin_kpi_oed.identification.simulate import Tolerances, default_tracker_pose, random_truth, simulate
+    from pin_kpi_oed.simulation.simulator import Tolerances, default_tracker_pose, random_truth, simulate
 
     rb = load_robot("ur10")
     refl = np.array([0.05, 0.02, 0.10])

@@ -1,7 +1,7 @@
 """Designs over the extended model: simulation with withheld effects, and the design time.
 
 **Simulation.** A UR10 measured by a laser tracker (σ = 10 µm and 100 µm per axis). Truth: random
-geometric errors (:class:`~pin_kpi_oed.identification.simulate.Tolerances`, 0.5 mm / 1 mrad) plus
+geometric errors (:class:`~pin_kpi_oed.simulation.simulator.Tolerances`, 0.5 mm / 1 mrad) plus
 transmission errors of four joints (orders of the real UR10's selected terms: shoulder_lift 20, elbow 18,
 shoulder_pan 12, wrist_1 10), each coefficient ~ N(0, a²), a growing (0, 100, 300, 1000 µrad). A fixed
 pool of 400 random configurations, 5 working configurations, 60 poses per design. KPI designs on the
@@ -68,7 +68,7 @@ def simulation(reps: int = 100, seed: int = 0, sizes: tuple[float, ...] = SIZES_
     from scipy import stats
 
     from pin_kpi_oed.effects.periodic import TransmissionError
-    from pin_kpi_oed.identification.simulate import Tolerances, default_tracker_pose, random_truth, simulate
+    from pin_kpi_oed.simulation.simulator import Tolerances, default_tracker_pose, random_truth, simulate
     from pin_kpi_oed.model.noise import NoiseModel
     from pin_kpi_oed.model.robot import load_robot
     from pin_kpi_oed.model.tracker import TrackerModel
@@ -76,7 +76,7 @@ def simulation(reps: int = 100, seed: int = 0, sizes: tuple[float, ...] = SIZES_
     from pin_kpi_oed.oed.extended import ExtendedModel, select_pool
     from pin_kpi_oed.oed.identifiability import analyse
     from pin_kpi_oed.oed.pool import select
-    from pin_kpi_oed.studies.design_trials import _fit_extended
+    from pin_kpi_oed.studies.design_trials import fit_extended
 
     rb = load_robot("ur10")
     model = TrackerModel(rb, tracker_T_base=default_tracker_pose(rb), reflector_m=np.array([0.05, 0.02, 0.10]),
@@ -120,7 +120,7 @@ def simulation(reps: int = 100, seed: int = 0, sizes: tuple[float, ...] = SIZES_
             for key in errs:
                 d, c = key.split("/")
                 data = simulate(model, Qp[designs[d]], p_true, effects=[(eff, th)], seed=s3, record_sigma=False)
-                x = _fit_extended(model, data, base, [eff], p0, calib[c][0])
+                x = fit_extended(model, data, base, [eff], p0, calib[c][0])
                 P = p0.copy()
                 P[base] = x[:base.size]
                 s_hat = model.kpi(P, Qw + eff.joint_offset(x[base.size:], Qw)[0])

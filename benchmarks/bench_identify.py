@@ -29,7 +29,7 @@ SIZES = (60, 100, 250, 500, 1000, 2000)
 
 def _case(m: int, seed: int = 0):
     from pin_kpi_oed import NoiseModel, TrackerModel, load_robot
-    from pin_kpi_oed.identification.simulate import Tolerances, default_tracker_pose, random_truth, simulate
+    from pin_kpi_oed.simulation.simulator import Tolerances, default_tracker_pose, random_truth, simulate
 
     robot = load_robot("kr15")
     noise = NoiseModel(sigma_xyz_m=(1e-5,) * 3)

@@ -29,7 +29,7 @@ def _model(d: Path, n_train: int = 3000, n_test: int = 1000) -> list[str]:
     from pin_kpi_oed.cli.app import main
     from pin_kpi_oed.data.measurements import MeasurementSet, write_measurements
     from pin_kpi_oed.effects.library import parse_effects_spec
-    from pin_kpi_oed.identification.simulate import Tolerances, default_tracker_pose, random_truth, simulate
+    from pin_kpi_oed.simulation.simulator import Tolerances, default_tracker_pose, random_truth, simulate
     from pin_kpi_oed.oed.identifiability import analyse
 
     robot = load_robot("ur10")

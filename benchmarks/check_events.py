@@ -17,7 +17,7 @@ checked on 10 seeded rows of the other half (``--splits`` seeded splits: *holds*
 10 seeded rows of Series D (another session, another region of joint space).
 
 Monitor (``--monitor N``): a model of 2,000 seeded rows of Series A, the next N other rows replayed in time order
-(:func:`~pin_kpi_oed.identification.monitor.monitor`: the set-up filter, a check every 10 rows): standardised RMS of
+(:func:`~pin_kpi_oed.upkeep.monitoring.monitor`: the set-up filter, a check every 10 rows): standardised RMS of
 the rows predicted before use (overall and per 1,000 rows), mean error and predicted σ, checks flagged, requests for
 poses, time per row (wall and CPU).
 
@@ -32,7 +32,7 @@ import time
 
 import numpy as np
 
-from pin_kpi_oed.identification.check_design import design_check
+from pin_kpi_oed.upkeep.check_design import design_check
 from pin_kpi_oed.model.robot import load_robot
 from pin_kpi_oed.oed.identifiability import analyse
 from pin_kpi_oed.oed.objective import DesignCriterion
@@ -96,7 +96,7 @@ def simulated(n_events: int, n_robots: int) -> None:
 def real(splits: int, draws: int = 0) -> None:
     from benchmarks.common import find_ipa_data, load_ipa_series
     from benchmarks.honest_sigma import calibrate
-    from pin_kpi_oed.identification.check import check_calibration
+    from pin_kpi_oed.upkeep.check import check_calibration
     from pin_kpi_oed.model.noise import NoiseModel
     from pin_kpi_oed.model.tracker import TrackerModel
 
@@ -151,7 +151,7 @@ def _transfer_errors(cm, r, rows, pick, seed: int) -> list[float]:
     """Mean 3-D error and mean honest σ (mm) on the rows of another series not used by the check: the model
     re-registered on the check rows, the verdict's model (re-fitted when it named a determined group), the model
     re-registered on 60 seeded other rows."""
-    from pin_kpi_oed.identification.transfer import register_setup
+    from pin_kpi_oed.upkeep.transfer import register_setup
 
     rest = np.setdiff1d(np.arange(len(rows)), pick)
     other = rows.subset(rest)
@@ -170,7 +170,7 @@ def _transfer_errors(cm, r, rows, pick, seed: int) -> list[float]:
 def replay(n_rows: int) -> None:
     from benchmarks.common import cpu_time, find_ipa_data, load_ipa_series
     from benchmarks.honest_sigma import calibrate
-    from pin_kpi_oed.identification.monitor import monitor
+    from pin_kpi_oed.upkeep.monitoring import monitor
     from pin_kpi_oed.model.noise import NoiseModel
     from pin_kpi_oed.model.tracker import TrackerModel
 

@@ -107,7 +107,7 @@ def withheld_ur10(n_rows: int):
 
     from pin_kpi_oed import NoiseModel, TrackerModel, load_robot
     from pin_kpi_oed.effects.library import GearHarmonic
-    from pin_kpi_oed.identification.simulate import Tolerances, default_tracker_pose, random_truth, simulate
+    from pin_kpi_oed.simulation.simulator import Tolerances, default_tracker_pose, random_truth, simulate
     from pin_kpi_oed.oed.identifiability import analyse
 
     rb = load_robot("ur10")

@@ -27,7 +27,7 @@ from benchmarks.learning_curves import ur10_model, prior_of_series
 def main(argv: list[str]) -> dict:
     from pin_kpi_oed.identification.identify import identify
     from pin_kpi_oed.identification.quality import assess_fit
-    from pin_kpi_oed.studies.learning_curves import _Designs, _make_split, _score
+    from pin_kpi_oed.studies.learning_curves import PoolDesigns, make_split, score_split
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seeds", type=int, default=20)
@@ -45,15 +45,15 @@ def main(argv: list[str]) -> dict:
     prior = prior_of_series(model, "D", S, cache)
     rows = []
     for seed in range(a.seeds):
-        sp = _make_split(S["D"], S["C"], np.random.default_rng(seed), 0.3, 5, 0.5, 5, None, 60)
-        des = _Designs(model, sp, prior, seed, 0.5, 5, 100)
+        sp = make_split(S["D"], S["C"], np.random.default_rng(seed), 0.3, 5, 0.5, 5, None, 60)
+        des = PoolDesigns(model, sp, prior, seed, 0.5, 5, 100)
         for m in (12, 20, 30):
             for meth in ("kpi_gp", "kpi", "D", "random"):
                 idx = np.sort(des.choose(meth, m))
                 res = identify(model, sp.pool.subset(idx), use_orientation=False, raise_on_failure=False)
                 flagged = "implausibly far" in assess_fit(res).line()
-                rows.append((meth, m, _score(model, sp.pool.subset(idx), sp, prior)[0], flagged,
-                             _score(weak, sp.pool.subset(idx), sp, prior)[0]))
+                rows.append((meth, m, score_split(model, sp.pool.subset(idx), sp, prior)[0], flagged,
+                             score_split(weak, sp.pool.subset(idx), sp, prior)[0]))
         print(f"seed {seed}: done", file=sys.stderr, flush=True)
     out = {}
     print(f"{'design':<8}{'m':>4}{'sets > 2 mm':>13}{'flagged of them':>17}{'flagged of the others':>23}"

@@ -32,7 +32,7 @@ from benchmarks.common import ipa_folder_or_say, ipa_ur10_model, load_ipa_series
 from pin_kpi_oed.data.atomic import atomic_write_json
 from pin_kpi_oed.data.measurements import MeasurementSet, concat_measurements
 from pin_kpi_oed.identification.identify import identify, validate
-from pin_kpi_oed.identification.transfer import register_setup, registration_split
+from pin_kpi_oed.upkeep.transfer import register_setup, registration_split
 
 CASES = ["C halves", "B->C", "C->B", "C->D", "D->C", "BCD 5-fold", "A halves", "BCD->A"]
 

@@ -35,7 +35,7 @@ from benchmarks.common import find_ipa_data, load_ipa_series
 from pin_kpi_oed import NoiseModel, TrackerModel, load_robot
 from pin_kpi_oed.data.atomic import atomic_write_json
 from pin_kpi_oed.discrepancy.prior import DiscrepancyPrior
-from pin_kpi_oed.studies.learning_curves import METHODS, LearningCurves, _n, curve_split, region_beyond
+from pin_kpi_oed.studies.learning_curves import METHODS, LearningCurves, poses_text, curve_split, region_beyond
 
 #: case -> (pool series, target series or None, prior series, pool size or None)
 CASES = {"C": ("C", None, "B", None), "A": ("A", None, "C", 2000), "B->C": ("B", "C", "B", None),
@@ -52,7 +52,7 @@ def ur10_model() -> TrackerModel:
 def prior_of_series(model: TrackerModel, series: str, S: dict, cache: Path) -> DiscrepancyPrior:
     """The discrepancy of ``identify(..., discrepancy="auto", seed=0)`` on all rows of ``series`` (cached)."""
     from pin_kpi_oed.identification.identify import identify
-    from pin_kpi_oed.identification.model_file import load_model_file
+    from pin_kpi_oed.calibrated.model_file import load_model_file
 
     path = cache / f"prior_{series}.json"
     if not path.exists():
@@ -152,7 +152,7 @@ def markdown(res: LearningCurves) -> str:
     for k in meths:
         if k != "random":
             rows.append(f"| {LABELS.get(k, k)} | " + " | ".join(
-                ", ".join(_n(v, res.sizes[-1], res.sizes[0]) for v in res.equivalent(k, key=key))
+                ", ".join(poses_text(v, res.sizes[-1], res.sizes[0]) for v in res.equivalent(k, key=key))
                 for key in ("error_mean_m", "pred_rms_scored_m")) + " |")
     rows += ["", "| m | " + " | ".join(f"{LABELS.get(k, k)}: predicted RMS / observed RMS (mm)" for k in meths)
              + " |", "|---" * (len(meths) + 1) + "|"]
@@ -198,7 +198,7 @@ def compact_markdown(results: list[LearningCurves], methods: tuple[str, ...] = (
     for res in results:
         need = res.needed()
         rows.append(f"| {res.case} | {res.splits[0]['n_pool']}, {np.median(res.full('error_mean_m')) * 1e3:.3f} | "
-                    + " | ".join(_n(need[k], res.largest(k), res.sizes[0]) for k in methods) + " |")
+                    + " | ".join(poses_text(need[k], res.largest(k), res.sizes[0]) for k in methods) + " |")
     return "\n".join(rows)
 
 

@@ -34,7 +34,7 @@ def _rms(R: np.ndarray) -> float:
 def heldout_rms(fit, target, seed: int) -> float:
     """3-D RMS (m) of ``fit`` on ``target`` after re-registering its set-up on 60 seeded rows (the others scored)."""
     from pin_kpi_oed.identification.problem import align_data
-    from pin_kpi_oed.identification.transfer import register_setup, registration_split
+    from pin_kpi_oed.upkeep.transfer import register_setup, registration_split
 
     reg, held = registration_split(len(target), 60, seed)
     rr = register_setup(fit.calibrated_model(), target.subset(reg), station="target")

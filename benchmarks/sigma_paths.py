@@ -75,7 +75,7 @@ def designed_poses(problem, m: int, pool: int, seed: int) -> np.ndarray:
 def one_robot(model, robot_name: str, Q: np.ndarray, Q_held: np.ndarray, amplitude: float, seed: int) -> dict:
     """Simulate, identify with the API's defaults, score the held-out rows (plain numbers)."""
     from pin_kpi_oed.identification.identify import identify, validate
-    from pin_kpi_oed.identification.simulate import simulate
+    from pin_kpi_oed.simulation.simulator import simulate
     from pin_kpi_oed.studies.kpi_withheld import withheld_truth
 
     p_true, effects = withheld_truth(model, amplitude, seed, joints=HARMONIC[robot_name])

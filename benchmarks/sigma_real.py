@@ -34,7 +34,7 @@ PAIRS = ("B->C", "C->B", "C->D", "D->C")
 def one_set(model, src, tgt, m: int, seed: int) -> dict:
     """Calibrate m seeded random rows of ``src``, register on 60 rows of ``tgt``, score the rest of ``tgt``."""
     from pin_kpi_oed.identification.identify import identify
-    from pin_kpi_oed.identification.transfer import register_setup, registration_split
+    from pin_kpi_oed.upkeep.transfer import register_setup, registration_split
 
     rows = np.sort(np.random.default_rng([seed, m]).permutation(len(src))[:m])
     fit = identify(model, src.subset(rows), scale_covariance=True, raise_on_failure=False, seed=seed)

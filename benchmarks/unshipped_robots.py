@@ -124,8 +124,8 @@ def compensation_table(truth: tuple, cm, res: dict, point_true_m: np.ndarray, X:
 
 def walk_cli(name: str, work: Path, seed: int = 0) -> dict:
     """The README's commands on one robot (module docstring, steps 1-5)."""
-    from pin_kpi_oed.identification.model_file import load_model_file
-    from pin_kpi_oed.identification.simulate import load_truth
+    from pin_kpi_oed.calibrated.model_file import load_model_file
+    from pin_kpi_oed.simulation.simulator import load_truth
 
     cell, spec = ROBOTS[name]
     w = work / name
@@ -160,7 +160,7 @@ def walk_api(name: str, work: Path) -> dict:
     """The same files through the Python API: read, identify (its defaults), held-out sigma, compensate."""
     import pin_kpi_oed as pko
     from pin_kpi_oed.identification.heldout import calibration_stats
-    from pin_kpi_oed.identification.simulate import load_truth
+    from pin_kpi_oed.simulation.simulator import load_truth
 
     cell_path, _ = ROBOTS[name]
     w = work / name

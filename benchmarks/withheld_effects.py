@@ -59,7 +59,7 @@ def make_case(effect: str | None, seed: int, n: int, robot_name: str = "ur10"):
     from pin_kpi_oed.model.noise import NoiseModel
     from pin_kpi_oed.model.tracker import TrackerModel
     from pin_kpi_oed.model.robot import load_robot
-    from pin_kpi_oed.identification.simulate import Tolerances, default_tracker_pose, random_truth, simulate
+    from pin_kpi_oed.simulation.simulator import Tolerances, default_tracker_pose, random_truth, simulate
 
     rb = load_robot(robot_name)
     rng = np.random.default_rng(1000 + seed)
@@ -123,7 +123,7 @@ def make_transfer_case(effect: str | None, seed: int, n: int, robot_name: str = 
     from pin_kpi_oed.model.noise import NoiseModel
     from pin_kpi_oed.model.tracker import TrackerModel
     from pin_kpi_oed.model.robot import load_robot
-    from pin_kpi_oed.identification.simulate import Tolerances, default_tracker_pose, random_truth, simulate
+    from pin_kpi_oed.simulation.simulator import Tolerances, default_tracker_pose, random_truth, simulate
 
     rb = load_robot(robot_name)
     rng = np.random.default_rng(5000 + seed)
@@ -174,7 +174,7 @@ def run_sigma(args: tuple) -> dict:
     effect, seed, n, where = args
     from pin_kpi_oed.data.measurements import MeasurementSet
     from pin_kpi_oed.identification.identify import identify, validate
-    from pin_kpi_oed.identification.transfer import register_setup, registration_split
+    from pin_kpi_oed.upkeep.transfer import register_setup, registration_split
 
     make = make_transfer_case if where == "transfer" else make_case
     nominal, train, val, k = make(effect, seed, n)

@@ -58,7 +58,7 @@ class SimulatedRobot:
 
     def measure(self, Q: np.ndarray):
         """Tracker measurements of the poses Q (a new noise draw per batch)."""
-        from pin_kpi_oed.identification.simulate import simulate
+        from pin_kpi_oed.simulation.simulator import simulate
 
         self.batches += 1
         return simulate(self.model, Q, self.p, effects=self.effects, seed=1000 * self.seed + self.batches)
@@ -72,7 +72,7 @@ class SimulatedRobot:
 
 def predicted_tcp(model_file: str, Q: np.ndarray, tcp_m: np.ndarray) -> np.ndarray:
     """TCP positions (tracker frame, m) a calibrated model file predicts at Q: geometry + the discrepancy's mean."""
-    from pin_kpi_oed.identification.model_file import load_model_file
+    from pin_kpi_oed.calibrated.model_file import load_model_file
     from pin_kpi_oed.studies import kpi_withheld
 
     return kpi_withheld.predicted_tcp(load_model_file(model_file), Q, tcp_m=tcp_m)
@@ -114,7 +114,7 @@ def main(argv: list[str] | None = None) -> int:
     from pin_kpi_oed.design.design_file import load_design
     from pin_kpi_oed.design.optimize import DesignProblem
     from pin_kpi_oed.identification.identify import validate
-    from pin_kpi_oed.identification.model_file import load_model_file
+    from pin_kpi_oed.calibrated.model_file import load_model_file
 
     cell = load_cell("ur10")
     robot = SimulatedRobot(cell, seed=a.seed)

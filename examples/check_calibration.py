@@ -24,9 +24,9 @@ import pinocchio as pin
 
 from pin_kpi_oed import load_robot
 from pin_kpi_oed.data.measurements import MeasurementSet
-from pin_kpi_oed.identification.check import check_calibration
-from pin_kpi_oed.identification.check_design import design_check
-from pin_kpi_oed.identification.monitor import monitor
+from pin_kpi_oed.upkeep.check import check_calibration
+from pin_kpi_oed.upkeep.check_design import design_check
+from pin_kpi_oed.upkeep.monitoring import monitor
 from pin_kpi_oed.studies.check_events import simulated_model
 
 SIGMA = 2e-5

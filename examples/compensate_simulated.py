@@ -10,7 +10,7 @@ with the nominal joints and with the compensated ones.
 
 Second route on the real UR10 (IPA Series C, when the data are present): calibrate on half of the
 rows; for the other half, the commanded joints -> where the compensation module says the TCP goes
-(:func:`pin_kpi_oed.identification.compensate.forward`), against the measured positions: the same
+(:func:`pin_kpi_oed.compensation.compensator.forward`), against the measured positions: the same
 figure as the model's held-out error; and the measured points compensated back to joints.
 
 Run: python examples/compensate_simulated.py   (PIN_KPI_OED_QUICK=1: fewer targets, no UR10 part)
@@ -27,9 +27,9 @@ from pin_kpi_oed import NoiseModel, TrackerModel, load_robot
 from pin_kpi_oed.data.measurements import MeasurementSet
 from pin_kpi_oed.data.targets import TargetSet
 from pin_kpi_oed.effects.library import parse_effects_spec, size_effect
-from pin_kpi_oed.identification.compensate import CompensationOptions, compensate, forward
+from pin_kpi_oed.compensation.compensator import CompensationOptions, compensate, forward
 from pin_kpi_oed.identification.identify import identify, predict, validate
-from pin_kpi_oed.identification.simulate import Tolerances, default_tracker_pose, random_truth, simulate
+from pin_kpi_oed.simulation.simulator import Tolerances, default_tracker_pose, random_truth, simulate
 from pin_kpi_oed.oed.identifiability import analyse
 
 QUICK = os.environ.get("PIN_KPI_OED_QUICK") == "1"
@@ -81,7 +81,7 @@ def simulated() -> None:
 
 def real_ur10() -> None:
     from pin_kpi_oed.data.ipa import import_ipa
-    from pin_kpi_oed.identification.transfer import registration_split
+    from pin_kpi_oed.upkeep.transfer import registration_split
 
     ms = import_ipa(IPA / "Series_C")
     ms = MeasurementSet(ms.joint_names, ms.q, ms.position_m, temperature_c=ms.temperature_c, source="C.csv")

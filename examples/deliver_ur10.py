@@ -21,7 +21,7 @@ from pin_kpi_oed import (IdentifyOptions, NoiseModel, Tolerances, TrackerModel, 
                          export_model, identify, load_robot, random_truth, simulate, write_certificate,
                          write_measurements)
 from pin_kpi_oed.data.provenance import file_record
-from pin_kpi_oed.identification.simulate import default_tracker_pose
+from pin_kpi_oed.simulation.simulator import default_tracker_pose
 from pin_kpi_oed.model.ur_kinematics import UR_KINEMATICS_DIR
 
 factory = UR_KINEMATICS_DIR / "ur10.yaml"   # your robot's file from ur_calibration

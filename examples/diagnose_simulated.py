@@ -26,7 +26,7 @@ from pin_kpi_oed.data.atomic import atomic_write_json
 from pin_kpi_oed.model.noise import NoiseModel
 from pin_kpi_oed.model.tracker import TrackerModel
 from pin_kpi_oed.model.robot import load_robot
-from pin_kpi_oed.identification.simulate import Tolerances, default_tracker_pose, random_truth, simulate
+from pin_kpi_oed.simulation.simulator import Tolerances, default_tracker_pose, random_truth, simulate
 
 QUICK = os.environ.get("PIN_KPI_OED_QUICK") == "1"
 N = 250 if QUICK else 800  # training = held-out measurements

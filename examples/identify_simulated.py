@@ -19,10 +19,10 @@ from pathlib import Path
 import numpy as np
 
 from pin_kpi_oed import NoiseModel, TrackerModel, load_robot
-from pin_kpi_oed.identification.urdf_export import export_result_urdf
+from pin_kpi_oed.calibrated.urdf_export import export_result_urdf
 from pin_kpi_oed.identification.identify import format_validation, identify, validate
 from pin_kpi_oed.data.atomic import atomic_write_json
-from pin_kpi_oed.identification.simulate import Tolerances, default_tracker_pose, random_truth, simulate
+from pin_kpi_oed.simulation.simulator import Tolerances, default_tracker_pose, random_truth, simulate
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -27,7 +27,7 @@ from pin_kpi_oed import NoiseModel, TrackerModel, load_robot
 from pin_kpi_oed.data.ipa import import_ipa
 from pin_kpi_oed.data.measurements import MeasurementSet, concat_measurements
 from pin_kpi_oed.identification.identify import error_stats, identify
-from pin_kpi_oed.identification.transfer import register_setup, registration_split
+from pin_kpi_oed.upkeep.transfer import register_setup, registration_split
 
 _HERE = Path(__file__).resolve()
 DATA = next((p / "shared" / "data" / "ipa_ur10" for p in (_HERE.parents[2], _HERE.parents[3])

@@ -71,7 +71,7 @@ def main(argv: list[str] | None = None) -> int:
     ok = va["mean_m"] <= 0.45e-3
     print(f"  target held-out mean ≤ 0.45 mm: {'met' if ok else 'NOT met'}")
     if a.out:
-        from pin_kpi_oed.identification.urdf_export import export_result_urdf
+        from pin_kpi_oed.calibrated.urdf_export import export_result_urdf
 
         out = Path(a.out)
         atomic_write_json(out / "result.json", {"result": after.to_dict(), "baseline": before.to_dict(),

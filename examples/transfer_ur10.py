@@ -9,7 +9,7 @@ Fourier pairs of orders 1–40 per joint and the arm-plane gravity terms) and re
 * within Series C: a seeded random half is held out (same session, nothing re-fitted);
 * directed pairs B→C, C→B, C→D, D→C and the two-series fits B+C→D, B+D→C, C+D→B: the set-up
   (tracker pose + reflector) is re-fitted on 60 seeded random rows of the target with the robot
-  held (:func:`~pin_kpi_oed.identification.transfer.register_setup`, the ``register``
+  held (:func:`~pin_kpi_oed.upkeep.transfer.register_setup`, the ``register``
   command), and the remaining target rows are predicted.
 
 Several source series are one :func:`~pin_kpi_oed.identification.identify.identify` with a
@@ -46,7 +46,7 @@ from pin_kpi_oed.diagnosis.selection import coverage, refit_with, select_terms
 from pin_kpi_oed.effects.drift import Drift
 from pin_kpi_oed.identification.identify import IdentificationResult, identify
 from pin_kpi_oed.identification.problem import align_data
-from pin_kpi_oed.identification.transfer import register_setup
+from pin_kpi_oed.upkeep.transfer import register_setup
 from pin_kpi_oed.model.noise import NoiseModel
 from pin_kpi_oed.model.tracker import TrackerModel
 from pin_kpi_oed.model.robot import load_robot

@@ -24,7 +24,7 @@ import numpy as np
 from pin_kpi_oed import NoiseModel, TrackerModel, load_robot
 from pin_kpi_oed.effects.library import GearHarmonic
 from pin_kpi_oed.identification.identify import identify
-from pin_kpi_oed.identification.simulate import Tolerances, default_tracker_pose, random_truth, simulate
+from pin_kpi_oed.simulation.simulator import Tolerances, default_tracker_pose, random_truth, simulate
 from pin_kpi_oed.oed.identifiability import analyse
 from pin_kpi_oed.viz.trust_map import plot_trust_map
 

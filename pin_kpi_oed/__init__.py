@@ -3,7 +3,8 @@
 The package reads as the pipeline it implements (Jost et al., J. Math. Industry 2017):
 
 robot -> parameters -> measurement -> identifiability / covariance -> criteria
--> design -> identification -> diagnosis, with the CLI and visualisation at the edge.
+-> design -> identification -> the calibrated model -> compensation, upkeep -> diagnosis,
+with the CLI and visualisation at the edge.
 
 The top level offers that pipeline by name (each subpackage exports its own names too)::
 
@@ -52,29 +53,32 @@ _PIPELINE = {
     "write_measurements": "pin_kpi_oed.data.measurements", "concat_measurements": "pin_kpi_oed.data.measurements",
     "read_targets": "pin_kpi_oed.data.targets",
     # simulation
-    "Tolerances": "pin_kpi_oed.model.tolerances", "random_truth": "pin_kpi_oed.identification.simulate",
-    "simulate": "pin_kpi_oed.identification.simulate",
+    "Tolerances": "pin_kpi_oed.model.tolerances", "random_truth": "pin_kpi_oed.simulation.simulator",
+    "simulate": "pin_kpi_oed.simulation.simulator",
     # identification, held-out validation, model files
     "identify": "pin_kpi_oed.identification.identify",
     "IdentifyOptions": "pin_kpi_oed.identification.identify_options",
     "IdentificationResult": "pin_kpi_oed.identification.identify_result",
     "validate": "pin_kpi_oed.identification.heldout",
-    "CalibratedModel": "pin_kpi_oed.identification.model_file",
-    "load_model_file": "pin_kpi_oed.identification.model_file",
-    "register_setup": "pin_kpi_oed.identification.transfer", "predict_table": "pin_kpi_oed.identification.transfer",
-    "write_model_urdf": "pin_kpi_oed.identification.urdf_export",
+    "CalibratedModel": "pin_kpi_oed.calibrated.model_file",
+    "load_model_file": "pin_kpi_oed.calibrated.model_file",
+    "register_setup": "pin_kpi_oed.upkeep.transfer", "predict_table": "pin_kpi_oed.upkeep.transfer",
+    "write_model_urdf": "pin_kpi_oed.calibrated.urdf_export",
     # model formats: UR kinematics files in and out, the calibrated URDF
     "read_ur_kinematics": "pin_kpi_oed.model.ur_kinematics", "URKinematics": "pin_kpi_oed.model.ur_kinematics",
-    "export_model": "pin_kpi_oed.identification.model_formats.registry",
-    "MODEL_FORMATS": "pin_kpi_oed.identification.model_formats.registry",
+    "export_model": "pin_kpi_oed.calibrated.formats.registry",
+    "MODEL_FORMATS": "pin_kpi_oed.calibrated.formats.registry",
     # the calibration certificate
     "build_certificate": "pin_kpi_oed.report.content", "write_certificate": "pin_kpi_oed.report.write",
     # diagnosis
     "diagnose": "pin_kpi_oed.diagnosis.diagnose", "DiagnoseOptions": "pin_kpi_oed.diagnosis.diagnose_options",
     "DiagnosisReport": "pin_kpi_oed.diagnosis.report",
     # compensation
-    "compensate": "pin_kpi_oed.identification.compensate",
-    "CompensationOptions": "pin_kpi_oed.identification.compensate",
+    "compensate": "pin_kpi_oed.compensation.compensator",
+    "CompensationOptions": "pin_kpi_oed.compensation.compensator",
+    "compensate_program": "pin_kpi_oed.compensation.compensator",
+    # keeping the calibration: the quick check
+    "check_calibration": "pin_kpi_oed.upkeep.check", "design_check": "pin_kpi_oed.upkeep.check_design",
     # measurement programs
     "plan_program": "pin_kpi_oed.program.ordering", "ProgramOptions": "pin_kpi_oed.program.ordering",
     "write_program": "pin_kpi_oed.program.export", "ProgramInfo": "pin_kpi_oed.program.export",

@@ -11,7 +11,8 @@ import pytest
 
 import pin_kpi_oed
 
-SUBPACKAGES = ["cell", "data", "design", "diagnosis", "effects", "identification", "model", "oed", "program", "viz"]
+SUBPACKAGES = ["calibrated", "calibrated.formats", "cell", "compensation", "data", "design", "diagnosis", "effects",
+               "identification", "model", "oed", "program", "simulation", "upkeep", "viz"]
 
 
 @pytest.mark.parametrize("name", ["", *SUBPACKAGES])
@@ -31,7 +32,7 @@ def test_pipeline_names_are_the_defining_objects() -> None:
     from pin_kpi_oed.cell.cell import load_cell
     from pin_kpi_oed.identification.heldout import validate
     from pin_kpi_oed.identification.identify import identify
-    from pin_kpi_oed.identification.simulate import simulate
+    from pin_kpi_oed.simulation.simulator import simulate
 
     assert pin_kpi_oed.load_cell is load_cell and pin_kpi_oed.identify is identify
     assert pin_kpi_oed.simulate is simulate and pin_kpi_oed.validate is validate

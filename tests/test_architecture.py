@@ -9,7 +9,8 @@ from pathlib import Path
 
 #: Upstream to downstream, as drawn in docs/ARCHITECTURE.md.
 ORDER = ["errors", "progress", "threads", "validation", "data", "results", "model", "effects", "discrepancy", "oed",
-         "cell", "design", "program", "identification", "diagnosis", "studies", "viz", "report", "cli"]
+         "cell", "simulation", "design", "program", "calibrated", "identification", "compensation", "upkeep",
+         "diagnosis", "studies", "viz", "report", "cli"]
 PKG = Path(__file__).resolve().parents[1] / "pin_kpi_oed"
 
 
@@ -56,15 +57,16 @@ def _module_name(f: Path) -> str:
     return ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
 
 
-def _import_graph() -> dict[str, set[str]]:
+def _import_graph(typing_too: bool = False) -> dict[str, set[str]]:
     """Module -> the pin_kpi_oed modules it imports at run time (lazy imports included, ``if TYPE_CHECKING:``
-    not; ``from pkg import module`` resolved)."""
+    only with ``typing_too``; ``from pkg import module`` resolved)."""
     files = {_module_name(f): f for f in PKG.rglob("*.py")}
     graph: dict[str, set[str]] = {m: set() for m in files}
     for m, f in files.items():
         tree = ast.parse(f.read_text())
-        typing_only = {id(n) for node in ast.walk(tree) if isinstance(node, ast.If)
-                       and "TYPE_CHECKING" in ast.unparse(node.test) for b in node.body for n in ast.walk(b)}
+        typing_only = set() if typing_too else {
+            id(n) for node in ast.walk(tree) if isinstance(node, ast.If)
+            and "TYPE_CHECKING" in ast.unparse(node.test) for b in node.body for n in ast.walk(b)}
         for node in ast.walk(tree):
             if id(node) in typing_only:
                 continue
@@ -124,6 +126,16 @@ def test_cycle_finder_finds_a_circle_through_a_lazy_import() -> None:
 def test_no_import_circle() -> None:
     circles = _cycles(_import_graph())
     assert not circles, "import circles (lazy imports included):\n" + "\n".join(" <-> ".join(c) for c in circles)
+
+
+def test_no_circle_inside_a_folder_not_even_for_typing() -> None:
+    """A type and the functions on it live in one place: no two modules of a folder name each other, not even in
+    an ``if TYPE_CHECKING:`` import (a lower module states what it reads as a Protocol instead)."""
+    graph = _import_graph(typing_too=True)
+    folder = {m: m.rsplit(".", 1)[0] for m in graph}
+    inside = {m: {w for w in ws if folder[w] == folder[m]} for m, ws in graph.items()}
+    circles = _cycles(inside)
+    assert not circles, "circles inside a folder:\n" + "\n".join(" <-> ".join(c) for c in circles)
 
 
 def test_no_module_over_600_lines_and_no_function_over_80() -> None:
@@ -186,3 +198,12 @@ def test_no_private_name_across_modules() -> None:
     bad = [f"{f.relative_to(PKG)}:{line} {text}" for f in sorted(PKG.rglob("*.py"))
            for line, text in _private_reaches(ast.parse(f.read_text()))]
     assert not bad, "private names reached across modules:\n" + "\n".join(bad)
+
+
+def test_benchmarks_and_examples_use_the_public_api() -> None:
+    """The benchmarks and examples are users of the package: they import no private name of it and read no private
+    attribute (what they need is public, documented API)."""
+    root = PKG.parent
+    bad = [f"{f.relative_to(root)}:{line} {text}" for d in ("benchmarks", "examples")
+           for f in sorted((root / d).rglob("*.py")) for line, text in _private_reaches(ast.parse(f.read_text()))]
+    assert not bad, "private names used by benchmarks / examples:\n" + "\n".join(bad)

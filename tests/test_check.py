@@ -14,8 +14,8 @@ from scipy import stats
 from pin_kpi_oed import load_robot
 from pin_kpi_oed.cli.app import main
 from pin_kpi_oed.data.measurements import MeasurementSet, write_measurements
-from pin_kpi_oed.identification.check_design import design_check
-from pin_kpi_oed.identification.check import check_criterion
+from pin_kpi_oed.upkeep.check_design import design_check
+from pin_kpi_oed.upkeep.check import check_criterion
 from pin_kpi_oed.oed.objective import DesignCriterion
 from pin_kpi_oed.studies.check_events import event_rates, simulate_event, simulated_model
 
@@ -165,7 +165,7 @@ def test_monitor_replay_predicts_first_and_follows_a_moved_tracker(setting, tmp_
 def test_rows_near_one_pose_name_the_poses_to_add(setting, tmp_path):
     """Check rows near one configuration determine the tracker on them but not at the working configurations: the
     verdict is still given, says so, and names poses (designed on top of the rows) that, measured too, determine it."""
-    from pin_kpi_oed.identification.check import check_calibration
+    from pin_kpi_oed.upkeep.check import check_calibration
 
     rb, model, Qc = setting
     rng = np.random.default_rng(11)

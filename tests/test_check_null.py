@@ -9,9 +9,9 @@ import pytest
 from scipy import stats
 
 from pin_kpi_oed.discrepancy.gp import DiscrepancyOptions
-from pin_kpi_oed.identification.check import check_null
+from pin_kpi_oed.upkeep.check import check_null
 from pin_kpi_oed.identification.identify import identify
-from pin_kpi_oed.identification.prediction_sigma import predictive_covariance
+from pin_kpi_oed.calibrated.prediction_sigma import predictive_covariance
 from pin_kpi_oed.oed.check_power import CheckNull
 from pin_kpi_oed.oed.check_power import test_threshold as chi2_threshold
 from tests.withheld import withheld_ur10
@@ -80,7 +80,7 @@ def test_check_null_is_the_models_kfold_check(gp_model):
 def test_naming_prefers_the_group_that_explains_far_better():
     """A one-column group that passes its fit test is not named when a three-column group explains the rows far
     better (Akaike's criterion, not the smallest passing group); the fit test of the named group is at α/5."""
-    from pin_kpi_oed.identification.check import FIT_SHARE, _name_group
+    from pin_kpi_oed.upkeep.check import FIT_SHARE, _name_group
     from pin_kpi_oed.oed.check_power import CheckGroup, CheckPower
 
     rng = np.random.default_rng(3)

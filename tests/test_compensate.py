@@ -15,10 +15,10 @@ from pin_kpi_oed.data.measurements import MeasurementSet
 from pin_kpi_oed.data.targets import TargetSet, read_targets
 from pin_kpi_oed.effects.library import parse_effects_spec, size_effect
 from pin_kpi_oed.errors import InputError
-from pin_kpi_oed.identification.compensate import (CompensationOptions, PoseModel, compensate, compensate_program,
+from pin_kpi_oed.compensation.compensator import (CompensationOptions, PoseModel, compensate, compensate_program,
                                                    forward)
 from pin_kpi_oed.identification.identify import identify, predict, validate
-from pin_kpi_oed.identification.simulate import Tolerances, default_tracker_pose, random_truth, simulate
+from pin_kpi_oed.simulation.simulator import Tolerances, default_tracker_pose, random_truth, simulate
 from pin_kpi_oed.oed.identifiability import analyse
 
 SIGMA = 1e-5
@@ -233,7 +233,7 @@ def test_real_ur10_compensated_predictions_match_held_out_rows():
     """Second route to the model's held-out error: commanded joints -> where the compensation module says the TCP
     goes, against the measured positions of held-out IPA rows; and the measured points compensated back."""
     from pin_kpi_oed.data.ipa import import_ipa
-    from pin_kpi_oed.identification.transfer import registration_split
+    from pin_kpi_oed.upkeep.transfer import registration_split
 
     ms = import_ipa(IPA / "Series_C")
     ms = MeasurementSet(ms.joint_names, ms.q, ms.position_m, temperature_c=ms.temperature_c, source="C.csv")
@@ -260,7 +260,7 @@ def test_real_ur10_compensated_predictions_match_held_out_rows():
 def test_calibrated_urdf_carries_tracker_reflector_and_tcp_frames(world, tmp_path):
     import yourdfpy
 
-    from pin_kpi_oed.identification.urdf_export import write_model_urdf
+    from pin_kpi_oed.calibrated.urdf_export import write_model_urdf
 
     robot, _, _, _, cm, _, _ = world
     out = tmp_path / "calibrated.urdf"

@@ -12,9 +12,9 @@ import pytest
 from pin_kpi_oed.cli.app import main
 from pin_kpi_oed.data.measurements import MeasurementSet, write_measurements
 from pin_kpi_oed.data.targets import TargetSet
-from pin_kpi_oed.identification.compensate import CompensationOptions, compensate
+from pin_kpi_oed.compensation.compensator import CompensationOptions, compensate
 from pin_kpi_oed.identification.identify import identify
-from pin_kpi_oed.identification.simulate import Tolerances, default_tracker_pose, random_truth, simulate
+from pin_kpi_oed.simulation.simulator import Tolerances, default_tracker_pose, random_truth, simulate
 from pin_kpi_oed.model.noise import NoiseModel
 from pin_kpi_oed.model.robot import load_robot
 from pin_kpi_oed.model.tracker import TrackerModel

@@ -11,7 +11,7 @@ import numpy as np
 from tests.cli_run import run_cli, without_times
 from pin_kpi_oed import NoiseModel, TrackerModel, load_cell
 from pin_kpi_oed.identification.identify import identify
-from pin_kpi_oed.identification.simulate import simulate
+from pin_kpi_oed.simulation.simulator import simulate
 
 
 def test_design_with_a_model_reports_predicts_sigma_at_the_working_configurations(tmp_path):
@@ -52,7 +52,7 @@ def test_design_with_a_model_reports_predicts_sigma_at_the_working_configuration
     from pin_kpi_oed.design.design_writer import write_design
     from pin_kpi_oed.design.runner import DesignSettings, design_run
     from pin_kpi_oed.identification.design_discrepancy import model_design_inputs
-    from pin_kpi_oed.identification.model_file import load_model_file
+    from pin_kpi_oed.calibrated.model_file import load_model_file
 
     loaded = load_model_file(f)
     inputs = model_design_inputs(loaded, cell, str(f))

@@ -15,7 +15,7 @@ from pin_kpi_oed.data.measurements import MeasurementSet, write_measurements
 from pin_kpi_oed.model.noise import NoiseModel
 from pin_kpi_oed.model.tracker import TrackerModel
 from pin_kpi_oed.model.robot import load_robot
-from pin_kpi_oed.identification.simulate import Tolerances, default_tracker_pose, random_truth, simulate
+from pin_kpi_oed.simulation.simulator import Tolerances, default_tracker_pose, random_truth, simulate
 from pin_kpi_oed.viz.diagnosis_plots import diagnosis_figures
 
 SIGMA = 1e-5
@@ -258,7 +258,7 @@ def test_coverage_advice_for_a_track_is_in_metres_and_never_wrapped():
     mod 2π, which would put 6.3 m next to 0.02 m) and the advice names them in m; a periodic wrist stays an arc in
     rad."""
     from pin_kpi_oed.diagnosis.transfer_gap import _joint_ranges, _poses_to_add
-    from pin_kpi_oed.identification.coverage import COVERAGE_TOL_RAD, covered_rows
+    from pin_kpi_oed.calibrated.coverage import COVERAGE_TOL_RAD, covered_rows
     from pin_kpi_oed.model.robot import load_robot
 
     robot = load_robot("kr15_track")

@@ -15,8 +15,8 @@ from pin_kpi_oed.data.measurements import write_measurements
 from pin_kpi_oed.discrepancy import Discrepancy, DiscrepancyOptions, JointKernel, fit_discrepancy
 from pin_kpi_oed.errors import InputError
 from pin_kpi_oed.identification.identify import identify, validate
-from pin_kpi_oed.identification.model_file import load_model_file
-from pin_kpi_oed.identification.transfer import predict_table
+from pin_kpi_oed.calibrated.model_file import load_model_file
+from pin_kpi_oed.upkeep.transfer import predict_table
 from tests.withheld import withheld_ur10
 
 NAMES = [f"j{i}" for i in range(6)]
@@ -237,7 +237,7 @@ def test_compensation_includes_the_discrepancy(withheld):
     """Compensated joints put the calibrated TCP — discrepancy included — on the targets; each carries its σ."""
     from pin_kpi_oed.data.measurements import MeasurementSet
     from pin_kpi_oed.data.targets import TargetSet
-    from pin_kpi_oed.identification.compensate import CompensationOptions, compensate, forward
+    from pin_kpi_oed.compensation.compensator import CompensationOptions, compensate, forward
 
     model, train, test = withheld
     cm = identify(model, train, discrepancy=DiscrepancyOptions(mode="on", n_fit=300, starts=(0.1,))).calibrated_model()
@@ -293,7 +293,7 @@ def test_fit_quality_counts_the_discrepancy_but_never_excuses_a_poor_fit(withhel
 def test_cli_diagnose_transfer_section_reports_the_written_models_sigma(withheld, tmp_path, capsys):
     """With validation data and --model-out, the transfer section scores the written model with the σ predict
     writes (same registration rows and seed): its figures equal validate_transfer's on the model file."""
-    from pin_kpi_oed.identification.transfer import validate_transfer
+    from pin_kpi_oed.upkeep.transfer import validate_transfer
     model, train, test = withheld
     write_measurements(train, tmp_path / "train.csv")
     write_measurements(test, tmp_path / "val.csv")

@@ -10,7 +10,7 @@ from pin_kpi_oed.effects.library import predict_with_effects
 from pin_kpi_oed.effects.periodic import TransmissionError
 from pin_kpi_oed.errors import InputError
 from pin_kpi_oed.identification.identify import identify
-from pin_kpi_oed.identification.simulate import simulate
+from pin_kpi_oed.simulation.simulator import simulate
 from pin_kpi_oed.model.noise import NoiseModel
 from pin_kpi_oed.model.robot import load_robot
 from pin_kpi_oed.model.tracker import TrackerModel

@@ -23,8 +23,8 @@ from pin_kpi_oed.effects.thermal import ThermalExpansion
 from pin_kpi_oed.errors import InputError, SolverError
 from pin_kpi_oed.identification.discrepancy_fit import position_outliers
 from pin_kpi_oed.identification.identify import identify
-from pin_kpi_oed.identification.model_file import load_model_file
-from pin_kpi_oed.identification.simulate import Tolerances, default_tracker_pose, random_truth, simulate
+from pin_kpi_oed.calibrated.model_file import load_model_file
+from pin_kpi_oed.simulation.simulator import Tolerances, default_tracker_pose, random_truth, simulate
 from pin_kpi_oed.model.noise import NoiseModel
 from pin_kpi_oed.model.robot import load_robot
 from pin_kpi_oed.model.tracker import TrackerModel
@@ -140,7 +140,7 @@ def test_coverage_judges_the_combination_of_angles():
 
 def test_coverage_wraps_only_joints_whose_range_spans_a_turn():
     """A linear track (m) and a revolute joint narrower than 2π are judged linearly; a joint of ±2π wraps."""
-    from pin_kpi_oed.identification.coverage import covered_rows
+    from pin_kpi_oed.calibrated.coverage import covered_rows
     from pin_kpi_oed.model.robot import load_robot
 
     track = load_robot("kr15_track")                     # joint_e1: prismatic, 0 .. 6.4 m; joint_a2: -2.71 .. 0.61

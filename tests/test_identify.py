@@ -12,7 +12,7 @@ import pytest
 
 from pin_kpi_oed import NoiseModel, TrackerModel, load_robot
 from pin_kpi_oed.errors import IdentifiabilityError, InputError, PinKpiOedError, SolverError
-from pin_kpi_oed.identification.urdf_export import (calibrated_urdf_text, check_urdf_fk, export_result_urdf,
+from pin_kpi_oed.calibrated.urdf_export import (calibrated_urdf_text, check_urdf_fk, export_result_urdf,
                                                     write_calibrated_urdf)
 from pin_kpi_oed.oed.identifiability import analyse
 from pin_kpi_oed.identification.problem import jl_inv
@@ -20,7 +20,7 @@ from pin_kpi_oed.identification.identify import (ResidualModel, format_validatio
                                                  register_points,
                                   validate)
 from pin_kpi_oed.data.measurements import MeasurementSet, read_measurements, write_measurements
-from pin_kpi_oed.identification.simulate import Tolerances, default_tracker_pose, random_truth, simulate
+from pin_kpi_oed.simulation.simulator import Tolerances, default_tracker_pose, random_truth, simulate
 
 SIGMA = 1e-5  # tracker noise (m) of the simulated round trips
 REFLECTOR = np.array([0.03, 0.02, 0.08])
@@ -512,7 +512,7 @@ def test_one_unit_guard_for_reader_and_identify(kr15_data, tmp_path):
 def test_fit_quality_names_extrapolation_when_validation_lies_outside_training(kr15_data):
     """A held-out error worse than the nominal robot's is 'extrapolation' when most validation rows lie outside the
     training's joint angles (coverage_summary), and 'wrong robot or joint order/zero' when they are covered."""
-    from pin_kpi_oed.identification.coverage import coverage_summary
+    from pin_kpi_oed.calibrated.coverage import coverage_summary
     from pin_kpi_oed.identification.quality import assess_fit
 
     robot, tm, nominal, data = kr15_data

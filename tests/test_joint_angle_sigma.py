@@ -13,8 +13,8 @@ from pin_kpi_oed import NoiseModel, TrackerModel, load_robot
 from pin_kpi_oed.discrepancy.joint_angle import LENGTH_SCALE_RAD, JointAngleTerm, fit_joint_angle, loo_log_density
 from pin_kpi_oed.errors import InputError
 from pin_kpi_oed.identification.identify import identify
-from pin_kpi_oed.identification.model_file import load_model_file
-from pin_kpi_oed.identification.simulate import simulate
+from pin_kpi_oed.calibrated.model_file import load_model_file
+from pin_kpi_oed.simulation.simulator import simulate
 from pin_kpi_oed.studies.kpi_withheld import withheld_truth
 
 
@@ -178,7 +178,7 @@ def test_panda_with_a_gear_harmonic_honest_at_35_poses(panda_model, tmp_path):
     assert found >= 6 and 0.8 < z_rms < 1.25 and inside >= 0.85, (found, z_rms, inside)
     # the rows' joint covariance (what a check whitens by) holds predict's σ² on its diagonal; that σ is never below
     # the white level's alone
-    from pin_kpi_oed.identification.prediction_sigma import predictive_covariance
+    from pin_kpi_oed.calibrated.prediction_sigma import predictive_covariance
     Qc = np.vstack([last.discrepancy.joint_term.Q[:4], last.discrepancy.joint_term.Q[:4] + 0.8])
     label = last.station(None)
     _, C = predictive_covariance(last, Qc, None, label)

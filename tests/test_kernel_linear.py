@@ -186,8 +186,8 @@ def test_identified_track_model_file_keeps_the_line(tmp_path):
     import json
 
     from pin_kpi_oed.identification.identify import identify
-    from pin_kpi_oed.identification.model_file import load_model_file
-    from pin_kpi_oed.identification.simulate import default_tracker_pose, simulate
+    from pin_kpi_oed.calibrated.model_file import load_model_file
+    from pin_kpi_oed.simulation.simulator import default_tracker_pose, simulate
     from pin_kpi_oed.errors import InputError
     from pin_kpi_oed.model.noise import NoiseModel
     from pin_kpi_oed.model.robot import load_robot

@@ -264,7 +264,7 @@ def test_cli_design_takes_the_discrepancy_of_a_model_file(tmp_path, capsys):
     from pin_kpi_oed.cli.app import main
     from pin_kpi_oed.discrepancy import Discrepancy, JointKernel
     from pin_kpi_oed.identification.identify import identify
-    from pin_kpi_oed.identification.simulate import default_tracker_pose, simulate
+    from pin_kpi_oed.simulation.simulator import default_tracker_pose, simulate
 
     cell = load_cell("ur10")
     robot = load_robot("ur10")
@@ -304,7 +304,7 @@ def test_cli_campaign_refits_the_discrepancy_on_the_measured_batch(tmp_path, cap
     from pin_kpi_oed.discrepancy import Discrepancy, DiscrepancyOptions, JointKernel
     from pin_kpi_oed.effects.library import GearHarmonic
     from pin_kpi_oed.identification.identify import identify
-    from pin_kpi_oed.identification.simulate import default_tracker_pose, simulate
+    from pin_kpi_oed.simulation.simulator import default_tracker_pose, simulate
 
     robot = load_robot("ur10")
     model = TrackerModel(robot, tracker_T_base=default_tracker_pose(robot), reflector_m=np.array([0.03, 0.02, 0.08]),

@@ -10,7 +10,7 @@ import pytest
 
 from pin_kpi_oed import NoiseModel, TrackerModel, load_robot
 from pin_kpi_oed.errors import InputError
-from pin_kpi_oed.identification.simulate import default_tracker_pose
+from pin_kpi_oed.simulation.simulator import default_tracker_pose
 from pin_kpi_oed.studies.kpi_withheld import (DESIGNS, paired_summary, predicted_tcp, true_tcp, withheld_case,
                                               withheld_truth, working_region)
 
@@ -55,7 +55,7 @@ def test_true_tcp_moves_by_the_harmonic_at_the_tcp(model):
 
 def test_predicted_tcp_is_the_geometry_plus_the_discrepancy_mean(model):
     from pin_kpi_oed.identification.identify import identify
-    from pin_kpi_oed.identification.simulate import simulate
+    from pin_kpi_oed.simulation.simulator import simulate
 
     p, eff = withheld_truth(model, 3e-4, seed=1)
     rng = np.random.default_rng(3)

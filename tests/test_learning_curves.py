@@ -10,7 +10,7 @@ import pytest
 from pin_kpi_oed import NoiseModel, TrackerModel, load_robot
 from pin_kpi_oed.data.measurements import MeasurementSet
 from pin_kpi_oed.discrepancy.kernel import JointKernel
-from pin_kpi_oed.identification.simulate import random_truth, simulate
+from pin_kpi_oed.simulation.simulator import random_truth, simulate
 from pin_kpi_oed.discrepancy.prior import DiscrepancyPrior
 from pin_kpi_oed.studies.learning_curves import (LearningCurves, calibrate_fixed, curve_split, poses_within,
                                                  region_beyond)

@@ -15,7 +15,7 @@ from pin_kpi_oed import NoiseModel, TrackerModel, load_robot
 from pin_kpi_oed.data.atomic import atomic_write_json
 from pin_kpi_oed.data.measurements import MeasurementSet, write_measurements
 from pin_kpi_oed.identification.identify import identify
-from pin_kpi_oed.identification.simulate import Tolerances, default_tracker_pose, random_truth, simulate
+from pin_kpi_oed.simulation.simulator import Tolerances, default_tracker_pose, random_truth, simulate
 from tests.cli_run import run_cli
 
 REFLECTOR = np.array([0.03, 0.02, 0.08])
@@ -142,8 +142,8 @@ def test_compensate_states_the_orientation_sigma(sim):
     """A 6-D calibration: compensated 6-D targets carry the orientation σ of the measured frame and the σ it causes
     at the tool length; the true robot's probe orientation error at the compensated joints lies within it."""
     from pin_kpi_oed.data.targets import TargetSet
-    from pin_kpi_oed.identification.compensate import CompensationOptions, PoseModel, compensate
-    from pin_kpi_oed.identification.prediction_sigma import orientation_sigma
+    from pin_kpi_oed.compensation.compensator import CompensationOptions, PoseModel, compensate
+    from pin_kpi_oed.calibrated.prediction_sigma import orientation_sigma
 
     tm, truth, _, te, cm = sim[2]
     robot = tm.robot

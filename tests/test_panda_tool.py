@@ -58,8 +58,8 @@ def true_tcp(truth, tcp_m: np.ndarray, Q: np.ndarray) -> np.ndarray:
 
 
 def test_panda_link8_tool_travels_and_compensation_keeps_the_branch(tmp_path):
-    from pin_kpi_oed.identification.model_file import load_model_file
-    from pin_kpi_oed.identification.simulate import load_truth
+    from pin_kpi_oed.calibrated.model_file import load_model_file
+    from pin_kpi_oed.simulation.simulator import load_truth
 
     cell = tmp_path / "cell.yaml"
     cell.write_text(CELL)
@@ -128,8 +128,8 @@ def test_redundant_arm_keeps_the_hint_or_working_branch_and_flags_limits(tmp_pat
     steps); a target whose solution needs a joint at its limit is 'joint_limit', never 'ok'."""
     from pin_kpi_oed.data.measurements import MeasurementSet
     from pin_kpi_oed.data.targets import TargetSet
-    from pin_kpi_oed.identification.compensate import CompensationOptions, PoseModel, compensate
-    from pin_kpi_oed.identification.model_file import CalibratedModel, Setup
+    from pin_kpi_oed.compensation.compensator import CompensationOptions, PoseModel, compensate
+    from pin_kpi_oed.calibrated.model_file import CalibratedModel, Setup
     from pin_kpi_oed.model.robot import load_robot
 
     robot = load_robot("panda", "panda_link8")
@@ -165,8 +165,8 @@ def test_unobservable_tcp_offset_matches_a_refit_of_the_true_robot():
     propagates (within 10 %), and nothing at the fitted reflector."""
     from pin_kpi_oed.data.tool_header import ToolSpec
     from pin_kpi_oed.identification.identify import identify
-    from pin_kpi_oed.identification.simulate import simulate
-    from pin_kpi_oed.identification.tool_offset import unobservable_map, unobservable_tcp_sigma
+    from pin_kpi_oed.simulation.simulator import simulate
+    from pin_kpi_oed.compensation.tool_offset import unobservable_map, unobservable_tcp_sigma
     from pin_kpi_oed.model.noise import NoiseModel
     from pin_kpi_oed.model.robot import load_robot
     from pin_kpi_oed.model.tracker import TrackerModel
@@ -203,8 +203,8 @@ def test_collision_and_branch_checks_are_never_ok(tmp_path):
     from pin_kpi_oed.cell.cell_model import CapsuleSpec
     from pin_kpi_oed.data.measurements import MeasurementSet
     from pin_kpi_oed.data.targets import TargetSet
-    from pin_kpi_oed.identification.compensate import CompensationOptions, PoseModel, compensate
-    from pin_kpi_oed.identification.model_file import CalibratedModel, Setup
+    from pin_kpi_oed.compensation.compensator import CompensationOptions, PoseModel, compensate
+    from pin_kpi_oed.calibrated.model_file import CalibratedModel, Setup
 
     (tmp_path / "cell.yaml").write_text(CELL)
     cell = load_cell(tmp_path / "cell.yaml")

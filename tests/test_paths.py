@@ -239,7 +239,7 @@ def test_orientation_sigma_matches_monte_carlo(seam_problem):
     errors within the tolerances, the cell's noise): realised / predicted mean square within sampling error."""
     from pin_kpi_oed.design.path_profile import path_profile
     from pin_kpi_oed.identification.identify import identify
-    from pin_kpi_oed.identification.simulate import random_truth, simulate
+    from pin_kpi_oed.simulation.simulator import random_truth, simulate
 
     model, cell = seam_problem.model, seam_problem.cell
     Q = cell.robot.random_q(np.random.default_rng(8), 30)
@@ -268,9 +268,9 @@ def test_compensated_seam_program_stays_continuous(seam_problem):
     between consecutive samples follow the program's (no branch change), within 1 mrad per joint."""
     from pin_kpi_oed.data.measurements import MeasurementSet
     from pin_kpi_oed.data.targets import TargetSet
-    from pin_kpi_oed.identification.compensate import compensate_program
+    from pin_kpi_oed.compensation.compensator import compensate_program
     from pin_kpi_oed.identification.identify import identify
-    from pin_kpi_oed.identification.simulate import random_truth, simulate
+    from pin_kpi_oed.simulation.simulator import random_truth, simulate
 
     model, cell = seam_problem.model, seam_problem.cell
     Q = cell.robot.random_q(np.random.default_rng(9), 40)

@@ -13,7 +13,7 @@ from pin_kpi_oed.cli.app import main
 from pin_kpi_oed.data.measurements import read_measurements, write_measurements
 from pin_kpi_oed.data.table import parse_columns, parse_units
 from pin_kpi_oed.errors import InputError
-from pin_kpi_oed.identification.simulate import default_tracker_pose, simulate
+from pin_kpi_oed.simulation.simulator import default_tracker_pose, simulate
 
 KUKA_NAMES = ["A1", "A2", "A3", "A4", "A5", "A6"]
 

@@ -12,8 +12,8 @@ import pytest
 from pin_kpi_oed import NoiseModel, TrackerModel, load_robot
 from pin_kpi_oed.effects.library import GearHarmonic
 from pin_kpi_oed.identification.identify import identify
-from pin_kpi_oed.identification.simulate import Tolerances, default_tracker_pose, random_truth, simulate
-from pin_kpi_oed.identification.transfer import register_setup
+from pin_kpi_oed.simulation.simulator import Tolerances, default_tracker_pose, random_truth, simulate
+from pin_kpi_oed.upkeep.transfer import register_setup
 from pin_kpi_oed.oed.identifiability import analyse
 
 T_NEW = pin.SE3(pin.rpy.rpyToMatrix(0.02, -0.01, -1.0), np.array([-2.5, 1.0, 0.2]))

@@ -11,9 +11,9 @@ import pytest
 from pin_kpi_oed import NoiseModel, TrackerModel, load_robot
 from pin_kpi_oed.errors import InputError
 from pin_kpi_oed.identification.identify import identify
-from pin_kpi_oed.identification.model_file import load_model_file
-from pin_kpi_oed.identification.simulate import Tolerances, default_tracker_pose, random_truth, simulate
-from pin_kpi_oed.identification.transfer import register_setup
+from pin_kpi_oed.calibrated.model_file import load_model_file
+from pin_kpi_oed.simulation.simulator import Tolerances, default_tracker_pose, random_truth, simulate
+from pin_kpi_oed.upkeep.transfer import register_setup
 from pin_kpi_oed.oed.identifiability import analyse
 
 SIGMA = 1e-5

@@ -17,12 +17,12 @@ from pin_kpi_oed.data.measurements import MeasurementSet, write_measurements
 from pin_kpi_oed.effects.library import GearHarmonic
 from pin_kpi_oed.errors import InputError
 from pin_kpi_oed.identification.identify import identify
-from pin_kpi_oed.identification.model_file import load_model_file
+from pin_kpi_oed.calibrated.model_file import load_model_file
 from pin_kpi_oed.identification.problem import align_data
-from pin_kpi_oed.identification.registration_check import (coverage_share, reference_sigma_m, registration_gates,
+from pin_kpi_oed.upkeep.registration_check import (coverage_share, reference_sigma_m, registration_gates,
                                                             uncovered_ranges)
-from pin_kpi_oed.identification.simulate import Tolerances, random_truth, simulate
-from pin_kpi_oed.identification.transfer import register_setup
+from pin_kpi_oed.simulation.simulator import Tolerances, random_truth, simulate
+from pin_kpi_oed.upkeep.transfer import register_setup
 from pin_kpi_oed.oed.identifiability import analyse
 
 NOISE = 1e-4  # m: the sessions' true noise per axis; the models state 1e-6 m (the default), as without --sigma

@@ -13,7 +13,7 @@ import pytest
 from pin_kpi_oed import NoiseModel, TrackerModel, load_robot
 from pin_kpi_oed.cli.app import main
 from pin_kpi_oed.data.measurements import MeasurementSet, write_measurements
-from pin_kpi_oed.identification.simulate import Tolerances, default_tracker_pose, random_truth, simulate
+from pin_kpi_oed.simulation.simulator import Tolerances, default_tracker_pose, random_truth, simulate
 from pin_kpi_oed.oed.identifiability import analyse
 from pin_kpi_oed.report.content import SECTIONS
 from pin_kpi_oed.report.iso9283 import clusters, iso_figures, pose_accuracy, repeatability
@@ -237,8 +237,8 @@ def test_bad_input_one_line_exit_2_nothing_written(calibrated, capsys, tmp_path)
 
 
 def test_a_hash_mismatch_of_the_kinematics_is_refused(tmp_path, capsys):
-    from pin_kpi_oed.identification.model_file import CalibratedModel, Setup
-    from pin_kpi_oed.identification.model_formats.registry import export_model
+    from pin_kpi_oed.calibrated.model_file import CalibratedModel, Setup
+    from pin_kpi_oed.calibrated.formats.registry import export_model
 
     robot = load_robot("ur10", kinematics=REPO / "urdf" / "ur" / "ur10.yaml")
     p = np.zeros(36)

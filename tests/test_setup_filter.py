@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from pin_kpi_oed.identification.setup_filter import LEVELS_M_PER_SQRT_S, SetupFilter
+from pin_kpi_oed.upkeep.setup_filter import LEVELS_M_PER_SQRT_S, SetupFilter
 
 
 def _run(level: float, seed: int, n: int = 1500, dt: float = 30.0, sigma: float = 5e-5):

@@ -148,8 +148,8 @@ def test_simulate_identify_carry_the_tool_and_refuse_a_contradiction(tmp_path):
 
 
 def test_model_file_keeps_working_configurations_and_the_tcp_source(tmp_path):
-    from pin_kpi_oed.identification.compensate import PoseModel
-    from pin_kpi_oed.identification.model_file import CalibratedModel, Setup, load_model_file
+    from pin_kpi_oed.compensation.compensator import PoseModel
+    from pin_kpi_oed.calibrated.model_file import CalibratedModel, Setup, load_model_file
     from pin_kpi_oed.model.robot import load_robot
 
     robot = load_robot("kr15")

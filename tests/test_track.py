@@ -12,7 +12,7 @@ from pin_kpi_oed.cell.cell import cell_from_dict
 from pin_kpi_oed.design.optimize import DesignOptions, DesignProblem, ipopt_options, run_designs
 from pin_kpi_oed.errors import InputError, RobotLoadError
 from pin_kpi_oed.identification.identify import identify, validate
-from pin_kpi_oed.identification.simulate import Tolerances, default_tracker_pose, random_truth, simulate
+from pin_kpi_oed.simulation.simulator import Tolerances, default_tracker_pose, random_truth, simulate
 from pin_kpi_oed.model import kuka
 from pin_kpi_oed.model.noise import NoiseModel
 from pin_kpi_oed.model.robot import load_robot

@@ -16,9 +16,9 @@ from pin_kpi_oed.effects.library import (GearHarmonic, JointAngleTable, JointCom
                                          ThermalExpansion)
 from pin_kpi_oed.errors import IdentifiabilityError, InputError
 from pin_kpi_oed.identification.identify import identify, validate
-from pin_kpi_oed.identification.model_file import MODEL_FORMAT, CalibratedModel, Setup, load_model_file
-from pin_kpi_oed.identification.simulate import Tolerances, default_tracker_pose, random_truth, simulate
-from pin_kpi_oed.identification.transfer import register_setup, registration_split, validate_transfer
+from pin_kpi_oed.calibrated.model_file import MODEL_FORMAT, CalibratedModel, Setup, load_model_file
+from pin_kpi_oed.simulation.simulator import Tolerances, default_tracker_pose, random_truth, simulate
+from pin_kpi_oed.upkeep.transfer import register_setup, registration_split, validate_transfer
 from pin_kpi_oed.oed.identifiability import analyse
 
 SIGMA = 1e-5
@@ -350,7 +350,7 @@ def test_model_file_stores_transfer_effects_with_their_selected_terms():
     from pin_kpi_oed.effects.coupled import LinkBending
     from pin_kpi_oed.effects.drift import Drift
     from pin_kpi_oed.effects.periodic import TransmissionError
-    from pin_kpi_oed.identification.model_file import effect_from_spec, effect_spec
+    from pin_kpi_oed.calibrated.model_file import effect_from_spec, effect_spec
     from pin_kpi_oed.model.robot import load_robot
 
     robot = load_robot("ur10")

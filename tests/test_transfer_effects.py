@@ -19,8 +19,8 @@ from pin_kpi_oed.effects.periodic import TransmissionError
 from pin_kpi_oed.errors import InputError
 from pin_kpi_oed.identification.identify import identify, validate
 from pin_kpi_oed.identification.problem import align_data
-from pin_kpi_oed.identification.transfer import register_setup
-from pin_kpi_oed.identification.simulate import Tolerances, default_tracker_pose, random_truth, simulate
+from pin_kpi_oed.upkeep.transfer import register_setup
+from pin_kpi_oed.simulation.simulator import Tolerances, default_tracker_pose, random_truth, simulate
 from pin_kpi_oed.model.noise import NoiseModel
 from pin_kpi_oed.model.tracker import TrackerModel
 from pin_kpi_oed.model.robot import load_robot

@@ -18,8 +18,8 @@ from pin_kpi_oed.discrepancy import Discrepancy, DiscrepancyOptions, JointKernel
 from pin_kpi_oed.discrepancy.coverage import JointCoverage
 from pin_kpi_oed.errors import InputError
 from pin_kpi_oed.identification.identify import identify
-from pin_kpi_oed.identification.model_file import load_model_file
-from pin_kpi_oed.identification.simulate import default_tracker_pose, simulate
+from pin_kpi_oed.calibrated.model_file import load_model_file
+from pin_kpi_oed.simulation.simulator import default_tracker_pose, simulate
 from pin_kpi_oed.viz.ellipsoids import confidence_ellipsoid
 from pin_kpi_oed.viz.scene import SceneOptions, build_scene
 from pin_kpi_oed.viz.trust_map import plot_trust_map

@@ -12,9 +12,9 @@ import yaml
 
 from pin_kpi_oed.cli.app import main
 from pin_kpi_oed.errors import InputError, RobotLoadError
-from pin_kpi_oed.identification.model_file import CalibratedModel, Setup, load_model_file
-from pin_kpi_oed.identification.model_formats.base import calibrated_placements
-from pin_kpi_oed.identification.model_formats.registry import MODEL_FORMATS, export_model
+from pin_kpi_oed.calibrated.model_file import CalibratedModel, Setup, load_model_file
+from pin_kpi_oed.calibrated.formats.base import calibrated_placements
+from pin_kpi_oed.calibrated.formats.registry import MODEL_FORMATS, export_model
 from pin_kpi_oed.model.robot import load_robot
 from pin_kpi_oed.model.ur_kinematics import (UR_KEYS, UR_SEGMENTS, UR_KINEMATICS_DIR, URKinematics,
                                              default_ur_kinematics, read_ur_kinematics, ur_values_of)

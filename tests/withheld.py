@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from pin_kpi_oed.effects.joint_angle import GearHarmonic
-from pin_kpi_oed.identification.simulate import Tolerances, default_tracker_pose, random_truth, simulate
+from pin_kpi_oed.simulation.simulator import Tolerances, default_tracker_pose, random_truth, simulate
 from pin_kpi_oed.model.noise import NoiseModel
 from pin_kpi_oed.model.robot import load_robot
 from pin_kpi_oed.model.tracker import TrackerModel

@@ -5,17 +5,14 @@ capsules overlapping by construction."""
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
-
 import numpy as np
 
 from pin_kpi_oed.cell.cell_model import Cell
 from pin_kpi_oed.cell.constraint_rows import INCID, PAIR
 from pin_kpi_oed.cell.segments import point_segment_distance, segment_closest
 from pin_kpi_oed.errors import InputError
+from pin_kpi_oed.cell.segment_model import SegmentModel
 
-if TYPE_CHECKING:
-    from pin_kpi_oed.cell.collision import CollisionModel
 
 
 def skip_hint(pairs: list[tuple[str, str]]) -> str:
@@ -36,7 +33,7 @@ def _clearance_parts(cell: Cell, actual_m: float) -> str:
             f"{margin * 1e3:g} mm; clearance_margin_m {fit:g} admits it)")
 
 
-def check_static(coll: CollisionModel) -> None:
+def check_static(coll: SegmentModel) -> None:
     """Fixed robot capsules vs obstacles/half-spaces, and the tracker outside every obstacle."""
     nr, cell = coll.n_robot, coll.cell
     T = coll.tracker
@@ -80,7 +77,7 @@ def check_static(coll: CollisionModel) -> None:
         raise InputError(f"{cell.source or cell.name}: " + "; ".join(problems) + "; " + skip_hint(pairs)
                          + ", otherwise move the obstacle or the robot base")
 
-def _tracker_in_environment(coll: CollisionModel, where: str) -> None:
+def _tracker_in_environment(coll: SegmentModel, where: str) -> None:
     """The tracker outside every environment solid (Coal's exact distance; the fitted capsules enclose more)."""
     from pin_kpi_oed.cell.environment import ball_distance
 
@@ -95,7 +92,7 @@ def _tracker_in_environment(coll: CollisionModel, where: str) -> None:
                                  f"obstacle '{s.name}' ({d * 1e3:.0f} mm clearance); move the tracker or the "
                                  "obstacle")
 
-def check_working(coll: CollisionModel) -> None:
+def check_working(coll: SegmentModel) -> None:
     """Every working configuration must be collision-free and in the tracker's line of sight."""
     cell = coll.cell
     saved = (coll.pairs, coll.half, coll.with_incidence, coll.info, coll.jac_rows, coll.jac_cols)

@@ -6,15 +6,12 @@ The ``backend="geometry"`` path of :meth:`pin_kpi_oed.cell.collision.CollisionMo
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
-
 import numpy as np
 import pinocchio as pin
 
 from pin_kpi_oed.cell.feasibility import coal_capsule
+from pin_kpi_oed.cell.segment_model import SegmentModel
 
-if TYPE_CHECKING:
-    from pin_kpi_oed.cell.collision import CollisionModel
 
 __all__ = ["GeometryDistances", "beam_frames"]
 
@@ -38,20 +35,22 @@ def beam_frames(a: np.ndarray, B: np.ndarray) -> tuple[np.ndarray, np.ndarray, n
 
 
 class GeometryDistances:
-    """The segments of a :class:`CollisionModel` as a Pinocchio ``GeometryModel`` (Coal capsules).
+    """The segments of a :class:`~pin_kpi_oed.cell.collision.CollisionModel` as a Pinocchio ``GeometryModel``
+    (Coal capsules).
 
     Robot capsules hang on their joints, obstacles on the universe, and the beam — a capsule from the
     tracker to the reflector whose length changes with q — is re-shaped and re-placed per
     configuration. One ``pin.computeDistances`` per configuration evaluates every pair of
     ``coll.pairs`` in C++; the witness points (on the capsules' surfaces) are projected back onto the
     segments, which gives the segment parameters (s, t) that the witness-point gradient of
-    :meth:`CollisionModel.evaluate` needs (∂d/∂q from the witness points and the joints' twists).
+    :meth:`~pin_kpi_oed.cell.collision.CollisionModel.evaluate` needs (∂d/∂q from the witness points and the
+    joints' twists).
 
     Args:
         coll: the constraint model whose segments and pairs are built.
     """
 
-    def __init__(self, coll: CollisionModel):
+    def __init__(self, coll: SegmentModel):
         rm = coll.robot.model
         self.model, self.data = rm, rm.createData()
         self.gm = pin.GeometryModel()
@@ -78,7 +77,8 @@ class GeometryDistances:
 
         Args:
             Q: configurations (m, n) rad.
-            EA, EB: the segments' end points at Q (m, S, 3), m (from :meth:`CollisionModel.endpoints`).
+            EA, EB: the segments' end points at Q (m, S, 3), m (from
+                :meth:`~pin_kpi_oed.cell.collision.CollisionModel.endpoints`).
             band: if given (m), witness points only for the pairs within ``band`` of their
                 configuration's closest pair (reading a witness point from Python costs ~10× a
                 distance); the others are marked ``far`` (their s, t, w are meaningless).

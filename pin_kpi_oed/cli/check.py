@@ -95,8 +95,8 @@ def run_monitor(args: argparse.Namespace) -> int:
     """Handler of ``pin-kpi-oed monitor``."""
     from pin_kpi_oed.data.atomic import atomic_write_json
     from pin_kpi_oed.data.measurements import read_measurements
-    from pin_kpi_oed.identification.model_file import load_model_file
-    from pin_kpi_oed.identification.monitor import Monitor, monitor
+    from pin_kpi_oed.calibrated.model_file import load_model_file
+    from pin_kpi_oed.upkeep.monitoring import Monitor, monitor
 
     model = load_model_file(args.model)
     model_tool(args, model, args.model, [args.data])
@@ -147,7 +147,7 @@ def _follow(mon, path: str, read: dict, poll_s: float, idle_s: float, quiet: boo
 def run_check(args: argparse.Namespace) -> int:
     """Handler of ``pin-kpi-oed check`` and ``check design``."""
     from pin_kpi_oed.errors import InputError
-    from pin_kpi_oed.identification.model_file import load_model_file
+    from pin_kpi_oed.calibrated.model_file import load_model_file
 
     model = load_model_file(args.model)
     if args.action == "design":
@@ -167,7 +167,7 @@ def run_check(args: argparse.Namespace) -> int:
 def _verdict(args: argparse.Namespace, model) -> int:
     from pin_kpi_oed.data.atomic import atomic_write_json
     from pin_kpi_oed.data.measurements import read_measurements
-    from pin_kpi_oed.identification.check import check_calibration
+    from pin_kpi_oed.upkeep.check import check_calibration
     from pin_kpi_oed.validation.robot_checks import check_points_against_joints
 
     spec = model_tool(args, model, args.model, [args.data])
@@ -191,7 +191,7 @@ def _verdict(args: argparse.Namespace, model) -> int:
 
 def _design(args: argparse.Namespace, model) -> int:
     from pin_kpi_oed.data.atomic import atomic_write_json, atomic_write_text
-    from pin_kpi_oed.identification.check_design import design_check
+    from pin_kpi_oed.upkeep.check_design import design_check
     from pin_kpi_oed.errors import InputError
     from pin_kpi_oed.program.export import ProgramInfo, write_program
 

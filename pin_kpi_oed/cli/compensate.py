@@ -3,7 +3,7 @@
 The controller keeps its nominal kinematics; ``compensate`` tells it other joint values so that the
 real TCP lands on the target according to the calibrated model (geometry + effects), by inverse
 kinematics on that model started from the nominal solution
-(:mod:`pin_kpi_oed.identification.compensate`). Per target it reports the predicted correction
+(:mod:`pin_kpi_oed.compensation.compensator`). Per target it reports the predicted correction
 (mm) and flags targets that are unreachable, off the branch of their joint hint / the model's working
 configurations, at a joint limit, in collision (``--cell``), near a singularity, or outside the calibration's
 joint-space coverage (``extrapolated``, with the widened σ ``predict`` gives there). The TCP (``--tcp``) is in the
@@ -79,9 +79,9 @@ def run(args: argparse.Namespace) -> int:
     from pin_kpi_oed.data.atomic import atomic_write_json
     from pin_kpi_oed.data.targets import read_targets
     from pin_kpi_oed.errors import InfeasibleError
-    from pin_kpi_oed.identification.compensate import (STATUSES, CompensationOptions, compensate,
+    from pin_kpi_oed.compensation.compensator import (STATUSES, CompensationOptions, compensate,
                                                        compensate_program, write_compensation)
-    from pin_kpi_oed.identification.model_file import load_model_file
+    from pin_kpi_oed.calibrated.model_file import load_model_file
 
     model = load_model_file(args.model)
     robot = model.robot

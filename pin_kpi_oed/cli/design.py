@@ -248,7 +248,7 @@ def _settings(args: argparse.Namespace, cell, criteria: list[str]) -> tuple[Desi
     if getattr(args, "model", None):
         from pin_kpi_oed.cli.tool import model_cell_tool
         from pin_kpi_oed.identification.design_discrepancy import model_design_inputs
-        from pin_kpi_oed.identification.model_file import load_model_file
+        from pin_kpi_oed.calibrated.model_file import load_model_file
 
         cm = load_model_file(args.model)
         model_cell_tool(cm, args.model, cell, args.cell)  # the model's robot, tool frame and TCP are the cell's
@@ -421,7 +421,7 @@ def discrepancy_table(results: list, scores: list[dict]) -> str:
 def _given_prior(path: str, cell):
     """``--given-prior``: the parameter covariance of a calibrated model file, the prior of the robot parameters."""
     from pin_kpi_oed.design.problem_options import ParameterPrior
-    from pin_kpi_oed.identification.model_file import load_model_file
+    from pin_kpi_oed.calibrated.model_file import load_model_file
 
     try:
         cm = load_model_file(path)

@@ -261,7 +261,7 @@ def _model_sigma(args: argparse.Namespace, rep: Any, cm: Any, val: Any, reg: Any
     """The written model scored on the validation rows with its σ (the σ ``predict`` writes): re-registered as the
     diagnosis did in transfer mode (same rows, same seed), as is otherwise."""
     from pin_kpi_oed.identification.identify import validate
-    from pin_kpi_oed.identification.transfer import validate_transfer
+    from pin_kpi_oed.upkeep.transfer import validate_transfer
 
     if args.register_rows is not None or reg is not None:
         st = validate_transfer(cm, val, register_rows=None if reg is not None else args.register_rows,

@@ -21,7 +21,7 @@ __all__ = ["register", "run"]
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     """Add the ``export-model`` subcommand."""
-    from pin_kpi_oed.identification.model_formats.registry import MODEL_FORMATS
+    from pin_kpi_oed.calibrated.formats.registry import MODEL_FORMATS
 
     p = subparsers.add_parser(
         "export-model", help="write a calibrated model as a UR kinematics file or a calibrated URDF",
@@ -41,8 +41,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     """Handler of ``pin-kpi-oed export-model``."""
     from pin_kpi_oed.cli.util import parse_floats
-    from pin_kpi_oed.identification.model_file import load_model_file
-    from pin_kpi_oed.identification.model_formats.registry import export_model
+    from pin_kpi_oed.calibrated.model_file import load_model_file
+    from pin_kpi_oed.calibrated.formats.registry import export_model
 
     tcp = parse_floats(args.tcp, 3, "--tcp") if args.tcp else None
     cm = load_model_file(args.model)

@@ -230,7 +230,7 @@ def _validation(model: Any, train: Any, opts: Any, result: Any, test: Any, reg: 
                 args: argparse.Namespace) -> tuple[dict, list[str]]:
     """Held-out errors before (nominal robot + fitted set-up) and after calibration, on the validation file."""
     from pin_kpi_oed.identification.identify import format_validation, identify, validate
-    from pin_kpi_oed.identification.transfer import validate_transfer
+    from pin_kpi_oed.upkeep.transfer import validate_transfer
 
     before = identify(model, train, opts, setup_only=True, discrepancy="none", on_poor_fit="ignore")
     if args.register_rows is None and reg is None:
@@ -248,7 +248,7 @@ def _validation(model: Any, train: Any, opts: Any, result: Any, test: Any, reg: 
                 f"held; scored on the other {va['n']} rows (row numbers in the JSON: validation.registration.rows)"]
         head += va["registration"]["notes"]
         out = {"registration": r, "scored_rows": va["scored_rows"]}
-    from pin_kpi_oed.identification.coverage import coverage_summary
+    from pin_kpi_oed.calibrated.coverage import coverage_summary
 
     out["coverage"] = coverage_summary(model.robot, train, test)
     out.update({"before": vb, "after": va, "before_means": "nominal robot + fitted tracker pose and reflector",
@@ -318,7 +318,7 @@ def _discrepancy(args: argparse.Namespace, result: Any, train: Any) -> Any:
 def _checked_urdf(args: argparse.Namespace, robot: Any, result: Any) -> tuple[str, float]:
     """(calibrated URDF text, its max FK position error (m)); raises SolverError if it does not reproduce the fit."""
     from pin_kpi_oed.errors import SolverError
-    from pin_kpi_oed.identification.urdf_export import (calibrated_urdf_text, check_urdf_fk, model_frames,
+    from pin_kpi_oed.calibrated.urdf_export import (calibrated_urdf_text, check_urdf_fk, model_frames,
                                                    result_urdf_comment)
     from pathlib import Path
 

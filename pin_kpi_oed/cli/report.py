@@ -60,7 +60,7 @@ def run(args: argparse.Namespace) -> int:
         raise InputError("give --register-rows or --register-data, not both")
     if args.validate:  # the data files' tool headers against the model: robot, tool frame, TCP
         from pin_kpi_oed.cli.tool import model_tool
-        from pin_kpi_oed.identification.model_file import load_model_file
+        from pin_kpi_oed.calibrated.model_file import load_model_file
 
         model_tool(args, load_model_file(args.model), args.model,
                    [*args.train, args.validate, *([args.register_data] if args.register_data else [])])

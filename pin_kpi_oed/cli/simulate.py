@@ -143,7 +143,7 @@ def _setup(args: argparse.Namespace, reuse: bool) -> tuple[Any, Any, np.ndarray,
     """(nominal model, cell or None, p*, [(effect, θ*)], tolerances or None, design entry or None)."""
     from pin_kpi_oed.cli.tool import canonical_robot, cell_tool_spec
     from pin_kpi_oed.data.tool_header import ToolSpec, resolve_tool
-    from pin_kpi_oed.identification.simulate import Tolerances, load_truth, random_truth
+    from pin_kpi_oed.simulation.simulator import Tolerances, load_truth, random_truth
 
     design = _design_poses(args.design, args.criterion) if args.design else None
     cell = design[0].cell if design else None
@@ -194,7 +194,7 @@ def _noise(args: argparse.Namespace, cell: Any, truth: Any) -> Any:
 
 def _nominal_model(args: argparse.Namespace, cell: Any, noise: Any) -> Any:
     """The nominal set-up: the cell's (tracker, reflector, TCP), else ``--robot`` with its options."""
-    from pin_kpi_oed.identification.simulate import default_tracker_pose
+    from pin_kpi_oed.simulation.simulator import default_tracker_pose
     from pin_kpi_oed.model.robot import load_robot
     from pin_kpi_oed.model.tracker import TrackerModel
 
@@ -216,7 +216,7 @@ def _nominal_model(args: argparse.Namespace, cell: Any, noise: Any) -> Any:
 
 def _poses(args: argparse.Namespace, model: Any, cell: Any, design: Any) -> tuple[np.ndarray, np.ndarray, str]:
     """(training poses, held-out poses, what the training poses are)."""
-    from pin_kpi_oed.identification.simulate import feasible_poses
+    from pin_kpi_oed.simulation.simulator import feasible_poses
 
     robot = model.robot
     rng = np.random.default_rng(args.seed + 1)
@@ -242,7 +242,7 @@ def run_simulate(args: argparse.Namespace) -> int:
     from pin_kpi_oed.data.atomic import atomic_write_json
     from pin_kpi_oed.data.measurements import write_measurements
     from pin_kpi_oed.data.tool_header import ToolSpec
-    from pin_kpi_oed.identification.simulate import simulate, truth_to_dict
+    from pin_kpi_oed.simulation.simulator import simulate, truth_to_dict
     from pin_kpi_oed.model.robot import portable_spec
 
     reuse = _check_args(args)

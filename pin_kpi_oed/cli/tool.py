@@ -144,7 +144,7 @@ def model_tool(args: argparse.Namespace, model: Any, model_path: str, data_paths
 
     Args:
         args: the parsed options (``cell`` where the command has it).
-        model: the :class:`~pin_kpi_oed.identification.model_file.CalibratedModel`.
+        model: the :class:`~pin_kpi_oed.calibrated.model_file.CalibratedModel`.
         model_path: its file (for messages).
         data_paths: measurement files used with it (their headers are compared).
 

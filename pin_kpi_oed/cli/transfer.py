@@ -81,8 +81,8 @@ def run_register(args: argparse.Namespace) -> int:
     from pin_kpi_oed.data.atomic import atomic_write_json
     from pin_kpi_oed.data.measurements import read_measurements
     from pin_kpi_oed.errors import InputError
-    from pin_kpi_oed.identification.model_file import load_model_file
-    from pin_kpi_oed.identification.transfer import register_setup
+    from pin_kpi_oed.calibrated.model_file import load_model_file
+    from pin_kpi_oed.upkeep.transfer import register_setup
     from pin_kpi_oed.validation.robot_checks import check_points_against_joints
 
     model = load_model_file(args.model)
@@ -121,8 +121,8 @@ def run_register(args: argparse.Namespace) -> int:
 def run_predict(args: argparse.Namespace) -> int:
     """Handler of ``pin-kpi-oed predict``."""
     from pin_kpi_oed.data.measurements import read_measurements
-    from pin_kpi_oed.identification.model_file import load_model_file
-    from pin_kpi_oed.identification.transfer import predict_table, write_predictions
+    from pin_kpi_oed.calibrated.model_file import load_model_file
+    from pin_kpi_oed.upkeep.transfer import predict_table, write_predictions
     from pin_kpi_oed.validation.robot_checks import check_points_against_joints
 
     model = load_model_file(args.model)
@@ -148,7 +148,7 @@ def run_predict(args: argparse.Namespace) -> int:
             msg += (f": error mean {e.mean() * 1e3:.4f} mm, RMS {np.sqrt(np.mean(e ** 2)) * 1e3:.4f} mm, "
                     f"max {e.max() * 1e3:.4f} mm")
         print(msg + f" -> {args.out}")
-        from pin_kpi_oed.identification.prediction_sigma import sigma_contents
+        from pin_kpi_oed.calibrated.prediction_sigma import sigma_contents
         s3 = np.linalg.norm(table[:, [cols.index(c) for c in ("sigma_x", "sigma_y", "sigma_z")]], axis=1)
         far = int(np.sum(table[:, cols.index("extrapolation")] > 0))
         print(f"predicted sigma (3-D): median {np.median(s3) * 1e3:.4f} mm, max {s3.max() * 1e3:.4f} mm "

@@ -6,19 +6,34 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from typing import Any, Protocol
 
 import numpy as np
 
 from pin_kpi_oed.cell.aggregate import AggregatedConstraints
 from pin_kpi_oed.errors import IdentifiabilityError, SolverError
-from pin_kpi_oed.oed.objective import DesignObjective
+from pin_kpi_oed.oed.design_objective import DesignObjective
 from pin_kpi_oed.results import Result
 
-if TYPE_CHECKING:
-    from pin_kpi_oed.design.optimize import DesignProblem
+__all__ = ["IpoptProblem", "IpoptRun", "ipopt_options", "solve_ipopt", "STALL_WINDOW", "STALL_TOL",
+           "CLEARANCE_BUFFER_M", "COS_BUFFER"]
 
-__all__ = ["IpoptRun", "ipopt_options", "solve_ipopt", "STALL_WINDOW", "STALL_TOL", "CLEARANCE_BUFFER_M", "COS_BUFFER"]
+
+class IpoptProblem(Protocol):
+    """What the IPOPT run reads of a design problem (:class:`~pin_kpi_oed.design.optimize.DesignProblem`).
+
+    Attributes:
+        cell: the cell (joint bounds ``q_lower`` / ``q_upper``, rad / m).
+        cons: the batched constraints (:class:`~pin_kpi_oed.cell.aggregate.AggregatedConstraints`).
+        coll: the full collision model (``feasible(Q)``: the independent feasibility of each configuration).
+    """
+
+    cell: Any
+    cons: AggregatedConstraints
+    coll: Any
+
+    def criterion(self, name: str) -> DesignObjective:
+        """The objective φ(Q) of criterion ``name``."""
 
 
 #: Stagnation test: stop when the lowest (scaled) objective of all iterates improved by less than
@@ -200,7 +215,7 @@ def ipopt_options(max_iter: int = 500, tol: float = 1e-3, acceptable_tol: float 
             "sb": "yes", "linear_solver": "mumps"}
 
 
-def solve_ipopt(problem: DesignProblem, criterion: str, Q0: np.ndarray, options: dict | None = None,
+def solve_ipopt(problem: IpoptProblem, criterion: str, Q0: np.ndarray, options: dict | None = None,
                 stall_window: int = STALL_WINDOW) -> IpoptRun:
     """One Ipopt run of the design problem from the start ``Q0``.
 
@@ -263,7 +278,7 @@ def _start_value(crit: DesignObjective, Q0: np.ndarray) -> float:
     return f0
 
 
-def _nlp_bounds(problem: DesignProblem, m: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+def _nlp_bounds(problem: IpoptProblem, m: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Variable bounds (joint limits, rad) and constraint bounds (buffers, m or cos β) of m configurations."""
     lb = np.tile(problem.cell.q_lower, m)
     ub = np.tile(problem.cell.q_upper, m)
@@ -272,7 +287,7 @@ def _nlp_bounds(problem: DesignProblem, m: int) -> tuple[np.ndarray, np.ndarray,
     return lb, ub, cl, np.full(cl.size, 2e19)
 
 
-def _finish_run(problem: DesignProblem, nlp: DesignNLP, x: np.ndarray, code: int, bounds: tuple[np.ndarray, np.ndarray],
+def _finish_run(problem: IpoptProblem, nlp: DesignNLP, x: np.ndarray, code: int, bounds: tuple[np.ndarray, np.ndarray],
                 dt: float, n_constraints: int) -> IpoptRun:
     """Ipopt's last iterate or, if it is infeasible, stalled or worse, the best feasible iterate, as a run."""
     lb, ub = bounds

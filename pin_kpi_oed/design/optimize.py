@@ -63,7 +63,8 @@ from pin_kpi_oed.cell.feasibility import FeasibilityChecker, FeasibilityReport
 from pin_kpi_oed.errors import IdentifiabilityError, InputError
 from pin_kpi_oed.oed.criteria import ConfigurationCriterion, Criterion, check_names, get_criterion
 from pin_kpi_oed.oed.covariance import prior_square_root
-from pin_kpi_oed.oed.objective import DesignCriterion, DesignObjective, information_criterion
+from pin_kpi_oed.oed.design_objective import DesignObjective
+from pin_kpi_oed.oed.objective import DesignCriterion, information_criterion
 from pin_kpi_oed.oed.path_kpi import PathKpi  # noqa: F401  (registers kpi_path)
 from pin_kpi_oed.oed.pose_kpi import PoseKpi  # noqa: F401  (registers kpi6)
 from pin_kpi_oed.oed.path_kpi_gp import PathDiscrepancyKpi  # noqa: F401  (registers kpi_path_gp)

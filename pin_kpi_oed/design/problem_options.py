@@ -46,7 +46,7 @@ class ParameterPrior:
 
     @classmethod
     def from_model_file(cls, cm: Any, source: str) -> ParameterPrior:
-        """The parameter covariance of a calibrated model (:class:`~pin_kpi_oed.identification.model_file.
+        """The parameter covariance of a calibrated model (:class:`~pin_kpi_oed.calibrated.model_file.
         CalibratedModel`) read from ``source``.
 
         Raises:

@@ -117,7 +117,7 @@ class Engine:
     def _registered(self, res: Any, test: MeasurementSet, S: np.ndarray) -> tuple[Any, np.ndarray, np.ndarray]:
         """Residual model of ``test`` at the set-up re-registered on the registration rows (robot held)."""
         from pin_kpi_oed.identification.problem import ResidualModel
-        from pin_kpi_oed.identification.transfer import register_setup
+        from pin_kpi_oed.upkeep.transfer import register_setup
 
         rr = register_setup(res.calibrated_model(), self.plan.registration, station="transfer", weights=self.weights)
         wm, p = rr.model.station_model("transfer")
@@ -187,7 +187,7 @@ def plan_folds(train: MeasurementSet, validate: MeasurementSet | None, opts: Dia
     if validate is not None and opts.register_rows is None and opts.register_data is None:
         return Plan("split", 1, [(train, validate)], [np.arange(len(validate))], None, validate)
     if validate is not None:
-        from pin_kpi_oed.identification.transfer import registration_split
+        from pin_kpi_oed.upkeep.transfer import registration_split
 
         if opts.register_data is not None:
             reg, reg_rows, scored = opts.register_data, np.arange(len(opts.register_data)), np.arange(len(validate))

@@ -50,7 +50,7 @@ does.
 
 Transfer
 --------
-Another day, the tracker moved: :func:`pin_kpi_oed.identification.transfer.register_setup`
+Another day, the tracker moved: :func:`pin_kpi_oed.upkeep.transfer.register_setup`
 re-fits only the set-up (tracker pose, reflector, and the set-up-specific effects such as
 :class:`~pin_kpi_oed.effects.drift.Drift`) on a few rows of the new data with the robot
 (geometry and transferable effects) held. :func:`coverage` says which share of the new rows
@@ -75,7 +75,7 @@ from pin_kpi_oed.effects.coupled import LinkBending
 from pin_kpi_oed.effects.library import Effect
 from pin_kpi_oed.effects.periodic import DEFAULT_MAX_ORDER, TransmissionError
 from pin_kpi_oed.errors import InputError
-from pin_kpi_oed.identification.coverage import coverage, covered_rows
+from pin_kpi_oed.calibrated.coverage import coverage, covered_rows
 from pin_kpi_oed.identification.identify import IdentificationResult, identify
 from pin_kpi_oed.identification.problem import ResidualModel, align_data
 from pin_kpi_oed.results import Result

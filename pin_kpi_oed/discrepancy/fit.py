@@ -87,7 +87,7 @@ def _kfold(kernel: JointKernel, noise: float, Q: np.ndarray, Y: np.ndarray, scal
            periodic: np.ndarray | None = None) -> dict:
     """K-fold held-out check with the hyper-parameters fixed: mean 3-D error (m) without and with δ,
     and the standardised errors z of the held-out rows (their RMS and excess kurtosis E z⁴ / (E z²)² − 3, pooled over
-    the axes: a check's test of few rows needs the tails, :mod:`pin_kpi_oed.identification.check`).
+    the axes: a check's test of few rows needs the tails, :mod:`pin_kpi_oed.upkeep.check`).
 
     Up to ``max_exact`` rows the folds come from one inverse of Σ = K + wI (block inversion: the
     held-out residuals of fold I are (Σ⁻¹)_II⁻¹ (Σ⁻¹y)_I with covariance (Σ⁻¹)_II⁻¹, exactly what refitting

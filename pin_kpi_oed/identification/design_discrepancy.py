@@ -45,7 +45,7 @@ def model_design_inputs(cm: Any, cell: Any, model_file: str, given_file: str | N
             neither re-fitted nor taken from the file (named ``Q_given``).
     """
     from pin_kpi_oed.design.declare import model_discrepancy
-    from pin_kpi_oed.identification.prediction_sigma import sigma_at
+    from pin_kpi_oed.calibrated.prediction_sigma import sigma_at
 
     model_sigma = sigma_line = refit_line = None
     prior = model_discrepancy(cell, cm, model_file)

@@ -7,7 +7,7 @@ from scipy.spatial.transform import Rotation
 
 from pin_kpi_oed.data.measurements import MeasurementSet
 from pin_kpi_oed.identification.identify_result import IdentificationResult
-from pin_kpi_oed.identification.model_file import CalibratedModel
+from pin_kpi_oed.calibrated.model_file import CalibratedModel
 from pin_kpi_oed.identification.problem import align_data, log3
 
 __all__ = ["error_stats", "validate", "format_validation"]

@@ -83,7 +83,7 @@ station lifted to all
 ``IdentificationResult.model`` and ``.p`` are the first station's working model and raw
 parameter vector: ``result.model.predict(result.p, Q)`` reproduces its fit (without effects);
 ``result.calibrated_model()`` holds every station's set-up, the geometry and the effects
-(:class:`~pin_kpi_oed.identification.model_file.CalibratedModel`, the model file).
+(:class:`~pin_kpi_oed.calibrated.model_file.CalibratedModel`, the model file).
 
 Uncertainty
 -----------
@@ -132,7 +132,7 @@ from pin_kpi_oed.identification.heldout import error_stats, format_validation, v
 from pin_kpi_oed.identification.identifiable import N_EXCITATION, build_problem, identifiable_set
 from pin_kpi_oed.identification.identify_options import ROBUST_LOSSES, IdentifyOptions, resolve_options
 from pin_kpi_oed.identification.identify_result import IdentificationResult
-from pin_kpi_oed.identification.model_file import Setup
+from pin_kpi_oed.calibrated.model_file import Setup
 from pin_kpi_oed.identification.quality import robust_loss_reason
 from pin_kpi_oed.identification.problem import (ResidualModel, align_data, effect_param_names, predict)
 from pin_kpi_oed.identification.solve import fit_covariance, settle_outliers, solve, tcp_std

@@ -10,7 +10,7 @@ import pinocchio as pin
 
 from pin_kpi_oed.data.measurements import MeasurementSet
 from pin_kpi_oed.errors import InputError
-from pin_kpi_oed.identification.model_file import CalibratedModel
+from pin_kpi_oed.calibrated.model_file import CalibratedModel
 from pin_kpi_oed.identification.problem import StationSet, effect_param_names, predict
 from pin_kpi_oed.model.tracker import TrackerModel
 from pin_kpi_oed.oed.identifiability import Identifiability

@@ -445,7 +445,7 @@ def assess_registration(station: str, X: np.ndarray, Y: np.ndarray, errors_m: np
         n_unknowns: set-up parameters fitted (6 for the tracker pose, 9 with the reflector).
         chi2_poor: reduced χ² above which the registration is poor (residuals 4× the noise).
         explain: called with the reduced χ² when the residuals are too large and the frame is not mirrored: the
-            tested cause and its fix (:func:`~pin_kpi_oed.identification.registration_check.poor_registration_cause`);
+            tested cause and its fix (:func:`~pin_kpi_oed.upkeep.registration_check.poor_registration_cause`);
             without it the likely causes are listed.
 
     Returns:

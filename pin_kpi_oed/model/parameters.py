@@ -28,6 +28,9 @@ import numpy as np
 
 from pin_kpi_oed.errors import InputError
 
+#: Separator between a set-up parameter group and its station label: ``tracker@B.tx``.
+STATION_SEP = "@"
+
 POSE_SUFFIXES = ("tx", "ty", "tz", "rx", "ry", "rz")
 POINT_SUFFIXES = ("x", "y", "z")
 ROT_SUFFIXES = ("rx", "ry", "rz")

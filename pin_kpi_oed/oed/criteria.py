@@ -55,41 +55,18 @@ from __future__ import annotations
 
 from abc import ABC, abstractmethod
 from collections.abc import Iterable
-from typing import TYPE_CHECKING, Any, ClassVar
+from typing import Any, ClassVar
 
 import numpy as np
 
 from pin_kpi_oed.errors import IdentifiabilityError, InputError
 from pin_kpi_oed.oed.covariance import information
+from pin_kpi_oed.oed.design_objective import CriterionInfo, DesignObjective
 
-if TYPE_CHECKING:
-    from pin_kpi_oed.oed.objective import DesignObjective
 
 __all__ = ["CriterionInfo", "Criterion", "CovarianceCriterion", "SampleMeanTrace", "SingularValueCriterion",
            "ConfigurationCriterion", "DiscrepancyForm", "CRITERIA", "register", "unregister", "get_criterion",
            "check_names", "criterion_names", "evaluate_all"]
-
-
-class CriterionInfo:
-    """What every criterion says about itself (both kinds, :class:`Criterion` and :class:`ConfigurationCriterion`).
-
-    Attributes:
-        name: registry key, as typed on the command line (``--criteria``).
-        label: one readable line (what it measures, where it comes from).
-        unit: unit of the value (``m^2``, ``1`` for dimensionless, ``log`` for logarithmic indices).
-        is_ratio: the value is a positive quantity (the design solver divides by its start value);
-            otherwise it is a logarithm (the solver subtracts its start value).
-        needs_kpi: the value needs the KPI sensitivity E (working configurations).
-    """
-
-    name: str = ""
-    label: str = ""
-    unit: str = ""
-    is_ratio: bool = False
-    needs_kpi: bool = False
-
-    def __repr__(self) -> str:
-        return f"<criterion {self.name}: {self.label} [{self.unit}]>"
 
 
 class Criterion(CriterionInfo, ABC):

@@ -60,7 +60,8 @@ from scipy.linalg import solve_triangular
 from pin_kpi_oed.errors import IdentifiabilityError, InputError
 from pin_kpi_oed.oed.covariance import prior_of
 from pin_kpi_oed.oed.criteria import Criterion, DiscrepancyForm, get_criterion
-from pin_kpi_oed.oed.objective import DesignObjective, information_criterion
+from pin_kpi_oed.oed.design_objective import DesignObjective
+from pin_kpi_oed.oed.objective import information_criterion
 from pin_kpi_oed.oed.selection_result import PoolSelection
 from pin_kpi_oed.discrepancy.cholesky import jitter_cholesky
 from pin_kpi_oed.discrepancy.prior import DiscrepancyPrior

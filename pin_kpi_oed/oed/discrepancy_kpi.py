@@ -26,7 +26,7 @@ from pin_kpi_oed.oed.covariance import prior_of
 from pin_kpi_oed.oed.criteria import KpiDiscrepancy
 from pin_kpi_oed.oed.discrepancy_pool import select_pool_gp
 from pin_kpi_oed.oed.kriging import kpi_gp_covariance, kpi_gp_value_and_grad, pad_rows
-from pin_kpi_oed.oed.objective import DesignObjective
+from pin_kpi_oed.oed.design_objective import DesignObjective
 from pin_kpi_oed.oed.selection_result import PoolSelection
 from pin_kpi_oed.results import Result
 

@@ -35,7 +35,8 @@ from pin_kpi_oed.errors import IdentifiabilityError, InputError
 from pin_kpi_oed.effects.library import effect_jacobian, sum_joint_offsets
 from pin_kpi_oed.oed.covariance import prior_square_root
 from pin_kpi_oed.oed.criteria import Criterion
-from pin_kpi_oed.oed.objective import DesignObjective, information_criterion
+from pin_kpi_oed.oed.design_objective import DesignObjective
+from pin_kpi_oed.oed.objective import information_criterion
 from pin_kpi_oed.oed.pool import PoolSelection, pool_phi, select
 from pin_kpi_oed.oed.pool_search import InformationState, greedy_exchange
 from pin_kpi_oed.threads import limit_threads
@@ -284,7 +285,7 @@ class ExtendedModel:
                               effect_sigma_rad: float | None = None, tolerances: Any = None,
                               base: np.ndarray | None = None, model: Any = None) -> ExtendedModel:
         """The extended model of a calibrated model file
-        (:class:`~pin_kpi_oed.identification.model_file.CalibratedModel`).
+        (:class:`~pin_kpi_oed.calibrated.model_file.CalibratedModel`).
 
         Args:
             cm: the calibrated model (geometry, effects, set-ups, parameter covariance).
@@ -294,7 +295,7 @@ class ExtendedModel:
                 ``effect_sigma_rad``) or None.
             effect_sigma_rad: prior σ of every effect parameter (rad) when ``prior="tolerances"``
                 (default each effect's ``plausible_max``/3).
-            tolerances: :class:`~pin_kpi_oed.identification.simulate.Tolerances` (default ones).
+            tolerances: :class:`~pin_kpi_oed.simulation.simulator.Tolerances` (default ones).
             base: identifiable raw parameter indices (default :func:`~pin_kpi_oed.oed.identifiability.analyse`).
             model: design for this measurement model (e.g. a cell's tracker placement) with the file's
                 calibrated geometry, instead of the file's station.

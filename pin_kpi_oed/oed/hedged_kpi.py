@@ -52,7 +52,7 @@ from pin_kpi_oed.oed.discrepancy_kpi import DiscrepancyDesignCriterion
 from pin_kpi_oed.oed.discrepancy_pool import GreedyState, after_given
 from pin_kpi_oed.oed.pool_search import PoolState, exchange
 from pin_kpi_oed.oed.kriging import kpi_gp_value_and_grad
-from pin_kpi_oed.oed.objective import DesignObjective
+from pin_kpi_oed.oed.design_objective import DesignObjective
 from pin_kpi_oed.oed.selection_result import PoolSelection
 
 __all__ = ["LENGTH_FACTORS", "LEVEL_FACTORS", "HEDGE_LINE", "prior_family", "HedgedDesignCriterion",

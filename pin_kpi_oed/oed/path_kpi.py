@@ -26,7 +26,8 @@ import numpy as np
 
 from pin_kpi_oed.errors import InputError
 from pin_kpi_oed.oed.criteria import ConfigurationCriterion, Criterion, SampleMeanTrace, register
-from pin_kpi_oed.oed.objective import DesignContext, DesignObjective, criterion_with_E
+from pin_kpi_oed.oed.design_objective import DesignObjective
+from pin_kpi_oed.oed.objective import DesignContext, criterion_with_E
 
 __all__ = ["PathTrace", "PathKpi", "path_sensitivity", "path_objective"]
 

@@ -15,7 +15,7 @@ from typing import Any
 
 from pin_kpi_oed.errors import InputError
 from pin_kpi_oed.oed.criteria import ConfigurationCriterion, register
-from pin_kpi_oed.oed.objective import DesignObjective
+from pin_kpi_oed.oed.design_objective import DesignObjective
 
 __all__ = ["PathDiscrepancyKpi"]
 

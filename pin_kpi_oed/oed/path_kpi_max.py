@@ -27,7 +27,7 @@ from typing import Any
 import numpy as np
 
 from pin_kpi_oed.oed.criteria import ConfigurationCriterion, CovarianceCriterion, register
-from pin_kpi_oed.oed.objective import DesignObjective
+from pin_kpi_oed.oed.design_objective import DesignObjective
 from pin_kpi_oed.oed.selection_result import PoolSelection
 
 __all__ = ["DEFAULT_SHARPNESS", "PathMaxTrace", "PathMaxKpi", "WorstSampleObjective", "sample_traces"]

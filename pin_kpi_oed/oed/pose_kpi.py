@@ -21,7 +21,8 @@ import numpy as np
 
 from pin_kpi_oed.errors import InputError
 from pin_kpi_oed.oed.criteria import ConfigurationCriterion, SampleMeanTrace, register
-from pin_kpi_oed.oed.objective import DesignObjective, criterion_with_E
+from pin_kpi_oed.oed.design_objective import DesignObjective
+from pin_kpi_oed.oed.objective import criterion_with_E
 
 __all__ = ["PoseTrace", "PoseKpi", "pose_sensitivity"]
 

@@ -30,7 +30,7 @@ import numpy as np
 from pin_kpi_oed.errors import InputError
 from pin_kpi_oed.oed.criteria import ConfigurationCriterion, register
 from pin_kpi_oed.oed.discrepancy_kpi import DiscrepancyDesignCriterion
-from pin_kpi_oed.oed.objective import DesignObjective
+from pin_kpi_oed.oed.design_objective import DesignObjective
 from pin_kpi_oed.oed.selection_result import PoolSelection
 
 __all__ = ["PoseDiscrepancyCriterion", "PoseDiscrepancyKpi"]

@@ -2,7 +2,7 @@ r"""The KPI after re-registration: what a calibration is worth in another sessio
 
 A calibration is used later, in another set-up: the tracker stands elsewhere (or the robot was moved) and its pose
 (with the reflector) is registered again on a few rows R measured there, the robot held
-(:func:`~pin_kpi_oed.identification.transfer.register_setup`). The registration fits the set-up s by least
+(:func:`~pin_kpi_oed.upkeep.transfer.register_setup`). The registration fits the set-up s by least
 squares to the residuals at R, so it absorbs the part of the robot's error that looks like a set-up change there
 (locally a rigid motion of the workspace). To first order, with Δθ the error of the calibrated parameters,
 J_R the measured point's Jacobian at R, G_R = J_R[:, s] its set-up columns and E the KPI Jacobian at the working

@@ -4,7 +4,7 @@ Before: the nominal robot with its set-up (tracker pose, reflector) fitted on th
 (``identify(..., setup_only=True)``, the options the calibration used); after: the calibrated model. Both are
 scored on the held-out rows by :func:`~pin_kpi_oed.identification.heldout.validate`, or, for another session,
 re-registered on some of its rows and scored on the others by
-:func:`~pin_kpi_oed.identification.transfer.validate_transfer` — the same calls, in the same order, as
+:func:`~pin_kpi_oed.upkeep.transfer.validate_transfer` — the same calls, in the same order, as
 ``identify --validate`` (``--register-rows`` / ``--register-data``), so every figure equals identify's.
 
 Added to those statistics (:func:`accuracy_figures`), from the same per-row residuals e_i = measured − predicted
@@ -94,11 +94,11 @@ def before_after(cm: Any, train: Any, test: Any, *, register_rows: int | None = 
     Raises:
         InputError: as ``validate`` / ``validate_transfer`` (joints, stations, too few rows).
     """
-    from pin_kpi_oed.identification.coverage import coverage_summary
+    from pin_kpi_oed.calibrated.coverage import coverage_summary
     from pin_kpi_oed.identification.heldout import validate
     from pin_kpi_oed.identification.identify import identify
     from pin_kpi_oed.identification.problem import align_data
-    from pin_kpi_oed.identification.transfer import register_setup, registration_split, validate_transfer
+    from pin_kpi_oed.upkeep.transfer import register_setup, registration_split, validate_transfer
     from pin_kpi_oed.model.tracker import TrackerModel
 
     opts, refl = fit_options(cm)

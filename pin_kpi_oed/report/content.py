@@ -198,7 +198,7 @@ def build_certificate(model_path: str, train_paths: Sequence[str], validate_path
         InputError: no held-out data, training files other than the recorded ones, a kinematics file of
             another robot or another hash, bad measurement files.
     """
-    from pin_kpi_oed.identification.model_file import load_model_file
+    from pin_kpi_oed.calibrated.model_file import load_model_file
     from pin_kpi_oed.report.accuracy import accuracy_figures, before_after
     from pin_kpi_oed.report.iso9283 import iso_figures
 

@@ -17,8 +17,8 @@ import numpy as np
 import pinocchio as pin
 
 from pin_kpi_oed.data.measurements import MeasurementSet
-from pin_kpi_oed.identification.check import check_calibration
-from pin_kpi_oed.identification.model_file import CalibratedModel, Setup
+from pin_kpi_oed.upkeep.check import check_calibration
+from pin_kpi_oed.calibrated.model_file import CalibratedModel, Setup
 from pin_kpi_oed.model.noise import NoiseModel
 
 __all__ = ["EVENT_KINDS", "CheckEvent", "simulated_model", "simulate_event", "event_rates", "tcp_error_m",
@@ -68,7 +68,7 @@ def _truth(model: CalibratedModel, kind: str, rng: np.random.Generator, size: di
     """The robot after the event (a copy of the model with the change)."""
     if kind == "joint_offset":
         j = int(rng.integers(1, model.robot.nq))          # the first joint's offset is a set-up change
-        from pin_kpi_oed.identification.check import check_criterion  # noqa: F401  (the same axes)
+        from pin_kpi_oed.upkeep.check import check_criterion  # noqa: F401  (the same axes)
 
         wm, _ = model.station_model()
         lin, ang = wm.joint_axes

@@ -29,7 +29,7 @@ import numpy as np
 from pin_kpi_oed.data.measurements import MeasurementSet
 from pin_kpi_oed.errors import InputError
 from pin_kpi_oed.identification.identify import identify, validate
-from pin_kpi_oed.identification.simulate import Tolerances, random_truth, simulate
+from pin_kpi_oed.simulation.simulator import Tolerances, random_truth, simulate
 from pin_kpi_oed.model.tracker import TrackerModel
 from pin_kpi_oed.oed.covariance import covariances, design_covariances, prior_of
 from pin_kpi_oed.oed.objective import information_criterion
@@ -324,7 +324,7 @@ class ExtendedDesignValidation(Result):
         return "\n".join(lines)
 
 
-def _fit_extended(model: TrackerModel, data: MeasurementSet, base: np.ndarray, effects: list, p_ref: np.ndarray,
+def fit_extended(model: TrackerModel, data: MeasurementSet, base: np.ndarray, effects: list, p_ref: np.ndarray,
                   prior_rad: float, held: list | None = None) -> np.ndarray:
     """MAP fit of (p_B, θ): weighted residuals plus θ/σ_prior rows (rad); returns x (p_B, θ)."""
     from scipy.optimize import least_squares
@@ -448,7 +448,7 @@ def _score_methods(fit: _SplitFit, pool: MeasurementSet, work: np.ndarray, score
     out = []
     for meth in methods:
         chosen = _choose(meth, fit, E_ext, rng, len(pool), n_meas, seed)
-        x = _fit_extended(fit.geo.model, pool.subset(np.sort(chosen)), fit.base, fit.effects, fit.p_ref, prior_rad)
+        x = fit_extended(fit.geo.model, pool.subset(np.sort(chosen)), fit.base, fit.effects, fit.p_ref, prior_rad)
         if reg is None:
             e = _errors(fit.geo.model, scored, fit.base, fit.effects, fit.p_ref, x)
         else:

@@ -126,7 +126,7 @@ def simulated_case(model: Any, Q_pool: np.ndarray, W: np.ndarray, kind: str, see
     Raises:
         InputError: an unknown kind.
     """
-    from pin_kpi_oed.identification.simulate import Tolerances, random_truth, simulate
+    from pin_kpi_oed.simulation.simulator import Tolerances, random_truth, simulate
     from pin_kpi_oed.model.noise import NoiseModel
     from pin_kpi_oed.oed.identifiability import analyse
     from pin_kpi_oed.studies.kpi_withheld import true_tcp, withheld_truth

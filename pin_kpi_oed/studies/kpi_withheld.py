@@ -60,7 +60,7 @@ def withheld_truth(model: Any, amplitude_rad: float, seed: int, joints: Sequence
     order) component with
     seeded random phases (the same phases for every amplitude of a seed)."""
     from pin_kpi_oed.effects.library import GearHarmonic
-    from pin_kpi_oed.identification.simulate import Tolerances, random_truth
+    from pin_kpi_oed.simulation.simulator import Tolerances, random_truth
 
     if not (np.isfinite(amplitude_rad) and amplitude_rad >= 0):
         raise InputError(f"withheld effect: amplitude must be >= 0 rad, got {amplitude_rad}")
@@ -129,7 +129,7 @@ def withheld_case(model: Any, Q_pool: np.ndarray, Q_pilot: np.ndarray, W: np.nda
         InputError: a size larger than the pool.
     """
     from pin_kpi_oed.identification.identify import identify
-    from pin_kpi_oed.identification.simulate import simulate
+    from pin_kpi_oed.simulation.simulator import simulate
     from pin_kpi_oed.model.noise import NoiseModel
     from pin_kpi_oed.discrepancy.prior import DiscrepancyPrior
     from pin_kpi_oed.oed.discrepancy_kpi import DiscrepancyDesignCriterion

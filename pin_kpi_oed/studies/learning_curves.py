@@ -49,7 +49,8 @@ from pin_kpi_oed.oed.pool import select
 from pin_kpi_oed.results import Result
 
 __all__ = ["SIZES", "METHODS", "calibrate_fixed", "curve_split", "region_beyond", "LearningCurves",
-           "learning_curves", "poses_within"]
+           "learning_curves", "poses_within", "Split", "make_split", "score_split", "PoolDesigns",
+           "poses_text"]
 
 #: Numbers of calibration poses of the curves.
 SIZES = (12, 20, 30, 60, 120)
@@ -62,7 +63,7 @@ def calibrate_fixed(model: TrackerModel, data: MeasurementSet, prior: Discrepanc
     fixed to ``prior`` (nothing of the discrepancy is re-fitted but its conditioning on these rows).
 
     Returns:
-        (the :class:`~pin_kpi_oed.identification.model_file.CalibratedModel` with the discrepancy (None for a white
+        (the :class:`~pin_kpi_oed.calibrated.model_file.CalibratedModel` with the discrepancy (None for a white
         prior), the same without it).
     """
     from pin_kpi_oed.discrepancy.gp import Discrepancy
@@ -84,7 +85,7 @@ def calibrate_fixed(model: TrackerModel, data: MeasurementSet, prior: Discrepanc
 
 
 @dataclass
-class _Split:
+class Split:
     """One split: the pool, the working configurations, the scored rows and the registration rows (or None)."""
 
     pool: MeasurementSet
@@ -93,8 +94,8 @@ class _Split:
     reg: MeasurementSet | None
 
 
-def _make_split(data: MeasurementSet, target: MeasurementSet | None, rng: np.random.Generator, test_frac: float,
-                n_work: int, radius_rad: float, joints: int, pool_size: int | None, n_register: int) -> _Split:
+def make_split(data: MeasurementSet, target: MeasurementSet | None, rng: np.random.Generator, test_frac: float,
+                n_work: int, radius_rad: float, joints: int, pool_size: int | None, n_register: int) -> Split:
     """The split of :func:`extended_design_validation` (same draws), the pool optionally subsampled to ``pool_size``."""
     from pin_kpi_oed.studies.design_trials import work_and_scored
 
@@ -106,7 +107,7 @@ def _make_split(data: MeasurementSet, target: MeasurementSet | None, rng: np.ran
         pool_rows = np.sort(rng.choice(pool_rows, pool_size, replace=False))
     if len(scored) == 0:
         raise InputError(f"{data.source}: no held-out row within {radius_rad} rad of the working configurations")
-    return _Split(data.subset(pool_rows), work, scored, reg)
+    return Split(data.subset(pool_rows), work, scored, reg)
 
 
 def _random_order(seed: int, n: int) -> np.ndarray:
@@ -114,14 +115,14 @@ def _random_order(seed: int, n: int) -> np.ndarray:
     return np.random.default_rng(seed).permutation(n)
 
 
-def _score(model: TrackerModel, rows: MeasurementSet, sp: _Split, prior: DiscrepancyPrior) -> tuple[float, ...]:
+def score_split(model: TrackerModel, rows: MeasurementSet, sp: Split, prior: DiscrepancyPrior) -> tuple[float, ...]:
     """(mean, RMS with the discrepancy's mean; mean without) 3-D error (m) of the scored rows after calibrating on
     ``rows`` (pairs: the target's set-up re-registered on the registration rows, robot and discrepancy held)."""
     out = []
     for cm in calibrate_fixed(model, rows, prior):
         station = None
         if sp.reg is not None:
-            from pin_kpi_oed.identification.transfer import register_setup
+            from pin_kpi_oed.upkeep.transfer import register_setup
 
             cm = register_setup(cm, sp.reg, station="target", use_orientation=False).model
             station = "target"
@@ -131,11 +132,11 @@ def _score(model: TrackerModel, rows: MeasurementSet, sp: _Split, prior: Discrep
     return float(e.mean()), float(np.sqrt(np.mean(e ** 2))), float(e0.mean())
 
 
-class _Designs:
+class PoolDesigns:
     """One split's pool quantities, computed once for every m: the design model (nominal robot, the pool's
     set-up), the base-frame and weighted Jacobians of the pool, and the criteria at W and at the scored rows."""
 
-    def __init__(self, model: TrackerModel, sp: _Split, prior: DiscrepancyPrior, seed: int, radius_rad: float,
+    def __init__(self, model: TrackerModel, sp: Split, prior: DiscrepancyPrior, seed: int, radius_rad: float,
                  joints: int, region_rows: int) -> None:
         from pin_kpi_oed.design.region import working_region
         from pin_kpi_oed.studies.design_trials import position_design_model
@@ -218,10 +219,10 @@ def curve_split(model: TrackerModel, data: MeasurementSet, prior: DiscrepancyPri
     """
     t0 = time.perf_counter()
     rng = np.random.default_rng(seed)
-    sp = _make_split(data, target, rng, test_frac, n_work, radius_rad, joints, pool_size, n_register)
+    sp = make_split(data, target, rng, test_frac, n_work, radius_rad, joints, pool_size, n_register)
     if max(sizes) > len(sp.pool):
         raise InputError(f"{data.source}: a pool of {len(sp.pool)} rows is too small for {max(sizes)} poses")
-    des = _Designs(model, sp, prior, seed, radius_rad, joints, region_rows)
+    des = PoolDesigns(model, sp, prior, seed, radius_rad, joints, region_rows)
     keys = ("error_mean_m", "error_rms_m", "error_geo_mean_m", "pred_sigma_work_m", "pred_rms_scored_m",
             "pred_rms_scored_exact_m")
     out: dict = {k: {meth: [] for meth in methods} for k in keys}
@@ -231,12 +232,12 @@ def curve_split(model: TrackerModel, data: MeasurementSet, prior: DiscrepancyPri
             ts = time.perf_counter()
             idx = np.sort(des.choose(meth, m))
             sel_time[meth] += time.perf_counter() - ts
-            vals = _score(model, sp.pool.subset(idx), sp, prior) + des.predicted(idx)
+            vals = score_split(model, sp.pool.subset(idx), sp, prior) + des.predicted(idx)
             for k, v in zip(keys, vals):
                 out[k][meth].append(v)
-    full = _score(model, sp.pool, sp, prior) + des.predicted(np.arange(len(sp.pool)))
+    full = score_split(model, sp.pool, sp, prior) + des.predicted(np.arange(len(sp.pool)))
     big = [m for m in random_beyond if m < len(sp.pool)]
-    beyond = {"sizes": big, "error_mean_m": [_score(model, sp.pool.subset(np.sort(des.order[:m])), sp, prior)[0]
+    beyond = {"sizes": big, "error_mean_m": [score_split(model, sp.pool.subset(np.sort(des.order[:m])), sp, prior)[0]
                                              for m in big]}
     return {"seed": seed, "n_pool": len(sp.pool), "n_scored": len(sp.scored), "sizes": list(sizes),
             "methods": list(methods), **out, "full": dict(zip(keys, full)), "random_beyond": beyond,
@@ -263,15 +264,15 @@ def region_beyond(model: TrackerModel, data: MeasurementSet, prior: DiscrepancyP
         raise InputError(f"method '{method}': larger sets are drawn for kpi_gp_region and random only")
     t0 = time.perf_counter()
     rng = np.random.default_rng(seed)
-    sp = _make_split(data, target, rng, test_frac, n_work, radius_rad, joints, pool_size, n_register)
+    sp = make_split(data, target, rng, test_frac, n_work, radius_rad, joints, pool_size, n_register)
     big = [m for m in sizes if m < len(sp.pool)]
     if method == "random":  # the nested random sets of curve_split, without the criteria
         order = _random_order(seed, len(sp.pool))
         choose = lambda m: order[:m]  # noqa: E731
     else:
-        des = _Designs(model, sp, prior, seed, radius_rad, joints, region_rows)
+        des = PoolDesigns(model, sp, prior, seed, radius_rad, joints, region_rows)
         choose = lambda m: des.choose("kpi_gp_region", m)  # noqa: E731
-    err = [_score(model, sp.pool.subset(np.sort(choose(m))), sp, prior)[0] for m in big]
+    err = [score_split(model, sp.pool.subset(np.sort(choose(m))), sp, prior)[0] for m in big]
     return {"sizes": big, "error_mean_m": err, "time_s": time.perf_counter() - t0}
 
 
@@ -424,11 +425,11 @@ class LearningCurves(Result):
         for key, word in (("error_mean_m", "observed"), ("pred_sigma_work_m", "predicted (sigma at W)")):
             need = self.needed(key)
             lines.append(f"poses to within 10 % of the full pool, {word}: "
-                         + ", ".join(f"{k} {_n(v, self.largest(k))}" for k, v in need.items()))
+                         + ", ".join(f"{k} {poses_text(v, self.largest(k))}" for k, v in need.items()))
         for meth in self.methods:
             if meth != "random" and "random" in self.methods:
                 lines.append(f"{meth}: poses to match random's {', '.join(str(m) for m in self.sizes)}: "
-                             + ", ".join(_n(v, self.sizes[-1], self.sizes[0]) for v in self.equivalent(meth)))
+                             + ", ".join(poses_text(v, self.sizes[-1], self.sizes[0]) for v in self.equivalent(meth)))
         return "\n".join(lines)
 
 
@@ -440,7 +441,7 @@ def _beyond_dict(big: tuple[np.ndarray, np.ndarray] | None) -> dict | None:
             "error_median_m": np.median(big[1], 0).tolist()}
 
 
-def _n(v: float, largest: int, smallest: int = 0) -> str:
+def poses_text(v: float, largest: int, smallest: int = 0) -> str:
     """A number of poses: ``> largest`` when not reached, ``<= smallest`` when reached at the smallest size."""
     return f"> {largest}" if not np.isfinite(v) else (f"<= {smallest}" if v <= smallest else f"{v:.0f}")
 

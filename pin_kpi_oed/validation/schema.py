@@ -10,7 +10,7 @@ and refuse, in one line naming the file and the field path:
 
 then the unit-plausibility checks of :mod:`pin_kpi_oed.validation.units` (a noise sigma of 1 m,
 degrees under a ``_rad`` key). :func:`validate_model_dict` does the same for calibrated model files
-(``identify --model-out``; read by :func:`pin_kpi_oed.identification.model_file.load_model_file`): every
+(``identify --model-out``; read by :func:`pin_kpi_oed.calibrated.model_file.load_model_file`): every
 field typed, numbers finite and in range, the parameter covariance square, symmetric and positive
 semi-definite; the optional ``discrepancy`` block is left to its own reader.
 """
@@ -258,7 +258,7 @@ _STATION = {"type": "object", "additionalProperties": False, "required": ["track
                            "sigma_scale": {"type": "number", "minimum": 1},
                            "registered_q_rad": {"type": "array", "minItems": 1,
                                                 "items": {"type": "array", "items": _NUM, "minItems": 1}}}}
-#: schema of a calibrated model file (``pin_kpi_oed.model/1``; see :mod:`pin_kpi_oed.identification.model_file`)
+#: schema of a calibrated model file (``pin_kpi_oed.model/1``; see :mod:`pin_kpi_oed.calibrated.model_file`)
 MODEL_SCHEMA: dict[str, Any] = {
     "type": "object", "additionalProperties": False, "required": ["format", "robot", "geometry", "stations"],
     "properties": {

@@ -1,7 +1,7 @@
 """The trust map: where a calibration can be trusted, drawn over the configurations it will be used at.
 
 A calibrated model with a model discrepancy predicts, for any configuration, both the reflector position and
-the standard deviation of measured − predicted (:meth:`~pin_kpi_oed.identification.model_file.CalibratedModel.
+the standard deviation of measured − predicted (:meth:`~pin_kpi_oed.calibrated.model_file.CalibratedModel.
 predict_with_sigma`: the discrepancy's posterior variance, its white level and, outside the measured coverage,
 the parametric part's error). :func:`plot_trust_map` puts that σ where the robot is: the reflector positions of
 the given rows in the robot base frame, a top view (x–y) and a side view (x–z), each point coloured by its
@@ -92,9 +92,9 @@ def trust_map(model: Any, Q: np.ndarray, aux: Any = None, station: str | None = 
     """The trust map's numbers: positions (base frame), predicted σ and extrapolation flags of the rows Q.
 
     Args:
-        model: a :class:`~pin_kpi_oed.identification.model_file.CalibratedModel`.
+        model: a :class:`~pin_kpi_oed.calibrated.model_file.CalibratedModel`.
         Q: configurations (m, n) rad, the robot's joint order.
-        aux, station: as :meth:`~pin_kpi_oed.identification.model_file.CalibratedModel.predict_with_sigma`.
+        aux, station: as :meth:`~pin_kpi_oed.calibrated.model_file.CalibratedModel.predict_with_sigma`.
 
     Raises:
         InputError: no rows, or what ``predict_with_sigma`` raises (unknown station, joints outside the limits).
@@ -111,8 +111,8 @@ def trust_map(model: Any, Q: np.ndarray, aux: Any = None, station: str | None = 
 
 def sigma_contents(model: Any) -> str:
     """What the predicted σ of ``model`` holds, for a title
-    (:func:`~pin_kpi_oed.identification.prediction_sigma.sigma_contents`, the words ``predict`` prints)."""
-    from pin_kpi_oed.identification.prediction_sigma import sigma_contents as contents
+    (:func:`~pin_kpi_oed.calibrated.prediction_sigma.sigma_contents`, the words ``predict`` prints)."""
+    from pin_kpi_oed.calibrated.prediction_sigma import sigma_contents as contents
 
     return "σ: " + contents(model)
 

@@ -7,9 +7,9 @@ import os
 import numpy as np
 
 from pin_kpi_oed.errors import InputError
-from pin_kpi_oed.identification.model_formats.base import ExportReport, ModelFormat
-from pin_kpi_oed.identification.model_formats.ur_yaml import UrYamlFormat
-from pin_kpi_oed.identification.model_formats.urdf import UrdfFormat
+from pin_kpi_oed.calibrated.formats.base import ExportReport, ModelFormat
+from pin_kpi_oed.calibrated.formats.ur_yaml import UrYamlFormat
+from pin_kpi_oed.calibrated.formats.urdf import UrdfFormat
 
 __all__ = ["MODEL_FORMATS", "export_model"]
 

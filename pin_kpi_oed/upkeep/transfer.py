@@ -54,8 +54,8 @@ from pin_kpi_oed.errors import InputError, SolverError
 from pin_kpi_oed.identification.fit_inputs import MIN_STATION_ROWS, default_station_label
 from pin_kpi_oed.identification.heldout import calibration_stats, error_stats
 from pin_kpi_oed.identification.tracker_start import proj_so3, register_points
-from pin_kpi_oed.identification.model_file import CalibratedModel, Setup
-from pin_kpi_oed.identification.prediction_sigma import DEFAULT_TOOL_LENGTH_M
+from pin_kpi_oed.calibrated.model_file import CalibratedModel, Setup
+from pin_kpi_oed.calibrated.prediction_sigma import DEFAULT_TOOL_LENGTH_M
 from pin_kpi_oed.identification.problem import ResidualModel, StationSet, align_data
 from pin_kpi_oed.model.parameters import ParameterLayout
 from pin_kpi_oed.results import Result
@@ -78,7 +78,7 @@ class RegistrationResult(Result):
         setup_thetas: fitted parameters of the ``setup_effects`` of the registration (one array each).
         notes: one line per station whose rows did not determine the reflector (the calibration's was kept).
         quality: the registration gate of every station against the calibration's own level
-            (:func:`~pin_kpi_oed.identification.registration_check.registration_gates`; what ``register`` refuses
+            (:func:`~pin_kpi_oed.upkeep.registration_check.registration_gates`; what ``register`` refuses
             on): :attr:`poor` flags a registration whose model must not be used without a look at the cause.
     """
 
@@ -346,7 +346,7 @@ def register_setup(model: CalibratedModel, data: MeasurementSet, *, station: str
                              rows=rows_used, errors_m=errors, source=data.source,
                              setup_thetas=[np.asarray(t, float) for t in own_thetas], notes=notes)
     if check:
-        from pin_kpi_oed.identification.registration_check import registration_gates
+        from pin_kpi_oed.upkeep.registration_check import registration_gates
 
         res.quality = registration_gates(res, data, model, hold_reflector, register=register_setup)
         res.time_s = time.perf_counter() - t0

@@ -111,12 +111,12 @@ class Setup:
         source: file(s) the rows came from.
         rms_m: RMS position error of those rows after the fit (m), or None.
         sigma_scale: factor (≥ 1) on every predicted σ at this station: a registration sets it from its
-            own rows' standardised errors (:func:`~pin_kpi_oed.identification.transfer.register_setup`), so
+            own rows' standardised errors (:func:`~pin_kpi_oed.upkeep.transfer.register_setup`), so
             a session that is worse than the calibrated one says so; 1 for a fitted station.
         registered_q_rad: the configurations a registration fitted the set-up on, (k, n) rad (at most
             :data:`REGISTERED_Q_MAX`, a seeded subset beyond): the predicted σ at this station counts the robot's
             error that the set-up fitted on them could not absorb
-            (:func:`~pin_kpi_oed.identification.prediction_sigma.predictive_sigma`); None for a fitted station and
+            (:func:`~pin_kpi_oed.calibrated.prediction_sigma.predictive_sigma`); None for a fitted station and
             for model files written before it was recorded.
     """
 
@@ -341,7 +341,7 @@ class CalibratedModel:
         exact universal-kriging term (its cross term K_WQ Σ⁻¹ F reproduces E only in part with short length
         scales), see docs/results.md. A white discrepancy (too few poses for a Gaussian process) and a model without
         one (the paper's noise-only model: the noise model's σ) add the parameter covariance's E C Eᵀ at every row
-        (:mod:`~pin_kpi_oed.identification.prediction_sigma`). Every σ of a station is multiplied by its
+        (:mod:`~pin_kpi_oed.calibrated.prediction_sigma`). Every σ of a station is multiplied by its
         :attr:`Setup.sigma_scale` (> 1 after a registration whose
         rows were worse than the model predicted).
 
@@ -354,7 +354,7 @@ class CalibratedModel:
         Raises:
             InputError: as :meth:`predict`.
         """
-        from pin_kpi_oed.identification.prediction_sigma import predictive_sigma
+        from pin_kpi_oed.calibrated.prediction_sigma import predictive_sigma
         Q = self.robot.check_q(np.atleast_2d(np.asarray(Q, float)), "predict: Q")
         return predictive_sigma(self, Q, aux, station, self.row_stations(len(Q), aux, station))
 
@@ -362,7 +362,7 @@ class CalibratedModel:
                                        station: str | None = None, length_m: float = 0.0
                                        ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """A 6-D model's predicted probe orientation with the σ of measured − predicted
-        (:func:`~pin_kpi_oed.identification.prediction_sigma.orientation_sigma`; Q, aux, station as :meth:`predict`).
+        (:func:`~pin_kpi_oed.calibrated.prediction_sigma.orientation_sigma`; Q, aux, station as :meth:`predict`).
 
         Returns:
             (rotation vectors (m, 3) rad, σ per axis (m, 3) rad, both in the station's tracker frame; the 3-D σ (m,)
@@ -371,7 +371,7 @@ class CalibratedModel:
         Raises:
             InputError: a position-only model or station, a negative length, as :meth:`predict`.
         """
-        from pin_kpi_oed.identification.prediction_sigma import orientation_sigma
+        from pin_kpi_oed.calibrated.prediction_sigma import orientation_sigma
         Q = self.robot.check_q(np.atleast_2d(np.asarray(Q, float)), "predict: Q")
         return orientation_sigma(self, Q, aux, station, self.row_stations(len(Q), aux, station), length_m)
 

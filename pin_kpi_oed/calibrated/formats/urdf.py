@@ -1,4 +1,4 @@
-"""The calibrated URDF (``export-model --format urdf``): :mod:`pin_kpi_oed.identification.urdf_export`.
+"""The calibrated URDF (``export-model --format urdf``): :mod:`pin_kpi_oed.calibrated.urdf_export`.
 
 ROS conventions: the robot's own link and joint names (``base_link`` … ``tool0``), metres and radians
 (REP 103), mesh references kept as the source URDF has them (``package://`` URIs unchanged, relative paths
@@ -13,7 +13,7 @@ import os
 
 import numpy as np
 
-from pin_kpi_oed.identification.model_formats.base import ExportReport, ModelFormat, lost_parts
+from pin_kpi_oed.calibrated.formats.base import ExportReport, ModelFormat, lost_parts
 
 __all__ = ["UrdfFormat"]
 
@@ -27,7 +27,7 @@ class UrdfFormat(ModelFormat):
 
     def write(self, cm, path: str | os.PathLike, *, tcp_m: np.ndarray | None = None, frames: bool = True,
               source: str = "") -> ExportReport:
-        from pin_kpi_oed.identification.urdf_export import write_model_urdf
+        from pin_kpi_oed.calibrated.urdf_export import write_model_urdf
 
         gap = write_model_urdf(cm, path, frames=frames, tcp_m=tcp_m)
         return ExportReport(str(path), self.name, gap, lost_parts(cm, keeps_setups=frames))

@@ -1,9 +1,9 @@
 r"""Keep a calibration: the verdict of a quick check on a few measured poses.
 
 On the check rows the set-up (tracker pose; the reflector held: a moved reflector is a tool change) is
-re-registered with the robot held (:func:`~pin_kpi_oed.identification.transfer.register_setup`) and the residuals r
+re-registered with the robot held (:func:`~pin_kpi_oed.upkeep.transfer.register_setup`) and the residuals r
 are whitened by the model's joint honest covariance Σ of the check rows
-(:func:`~pin_kpi_oed.identification.prediction_sigma.predictive_covariance`: the honest σ of
+(:func:`~pin_kpi_oed.calibrated.prediction_sigma.predictive_covariance`: the honest σ of
 :meth:`CalibratedModel.predict_with_sigma` on its diagonal, the discrepancy's posterior covariance and the
 parameters' error shared between rows and axes off it; the registration's own σ factor is *not* applied: it would
 hide the change under test): z = L⁻¹r (Σ = LLᵀ), the set-up's generalised least-squares step projected out. With the
@@ -44,10 +44,10 @@ import pinocchio as pin
 
 from pin_kpi_oed.data.measurements import MeasurementSet
 from pin_kpi_oed.errors import InputError
-from pin_kpi_oed.identification.check_poses import SETUP_FACTOR, poses_to_add, registration_sigma_m
-from pin_kpi_oed.identification.model_file import CalibratedModel
+from pin_kpi_oed.upkeep.check_poses import SETUP_FACTOR, poses_to_add, registration_sigma_m
+from pin_kpi_oed.calibrated.model_file import CalibratedModel
 from pin_kpi_oed.identification.problem import align_data
-from pin_kpi_oed.identification.transfer import register_setup
+from pin_kpi_oed.upkeep.transfer import register_setup
 from pin_kpi_oed.model.tracker import TrackerModel
 from pin_kpi_oed.oed.check_power import CheckGroup, CheckNull, CheckPower, check_groups
 from pin_kpi_oed.results import Result
@@ -86,11 +86,11 @@ class CheckResult(Result):
         groups: per group ``{name, chi2_remaining, dof, determined}``.
         registration_sigma_m: the σ the registration on the check rows alone leaves at the working configurations
             (RMS 3-D, m); honest_sigma_m: the model's honest σ there (RMS 3-D, m); setup_determined: the first at most
-            :data:`~pin_kpi_oed.identification.check_poses.SETUP_FACTOR` × the second.
+            :data:`~pin_kpi_oed.upkeep.check_poses.SETUP_FACTOR` × the second.
         setup_held: the re-fit kept the model's set-up (the group's change alone explains the rows, the tracker did
             not move): the change is then determined by the check rows with the calibration's set-up.
         poses_to_add: configurations (k, n) rad to measure next, with the check rows given
-            (:func:`~pin_kpi_oed.identification.check_poses.poses_to_add`): when the rows do not determine the
+            (:func:`~pin_kpi_oed.upkeep.check_poses.poses_to_add`): when the rows do not determine the
             set-up at the working configurations or the named group; empty otherwise.
     """
 
@@ -386,8 +386,8 @@ def check_null(model: CalibratedModel) -> CheckNull:
 
 def _joint_honest(cm: CalibratedModel, Q: np.ndarray, data: MeasurementSet) -> tuple[np.ndarray, np.ndarray]:
     """Predictions (m, 3) and the joint honest covariance (3m, 3m) of the check station's rows, its σ factor left
-    out (:func:`~pin_kpi_oed.identification.prediction_sigma.predictive_covariance`)."""
-    from pin_kpi_oed.identification.prediction_sigma import predictive_covariance
+    out (:func:`~pin_kpi_oed.calibrated.prediction_sigma.predictive_covariance`)."""
+    from pin_kpi_oed.calibrated.prediction_sigma import predictive_covariance
 
     st = dataclasses.replace(cm.setups[CHECK_STATION], sigma_scale=1.0)
     return predictive_covariance(cm.with_setup(CHECK_STATION, st), Q, data, CHECK_STATION)
@@ -412,7 +412,7 @@ def _project_out(z: np.ndarray, G: np.ndarray) -> np.ndarray:
 
 def _register(model: CalibratedModel, data: MeasurementSet) -> CalibratedModel:
     """The set-up registered on the check rows (reflector held), fitted to the model's full prediction (geometry,
-    effects and the discrepancy's mean, as :func:`~pin_kpi_oed.identification.transfer.register_setup` does)."""
+    effects and the discrepancy's mean, as :func:`~pin_kpi_oed.upkeep.transfer.register_setup` does)."""
     return register_setup(model, data, station=CHECK_STATION, hold_reflector=True).model
 
 

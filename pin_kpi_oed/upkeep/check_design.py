@@ -7,7 +7,7 @@ groups' columns) minimised over a pool of configurations that are feasible in th
 tracker line of sight and incidence: :func:`~pin_kpi_oed.cell.sampling.random_feasible`), by greedy forward
 selection (a ridge on the first poses, until the set-up is determined) and an exchange pass, with the rank-3
 information of every candidate computed once. The poses are whitened by the model's honest σ (the median over the
-pool of :meth:`~pin_kpi_oed.identification.model_file.CalibratedModel.predict_with_sigma`).
+pool of :meth:`~pin_kpi_oed.calibrated.model_file.CalibratedModel.predict_with_sigma`).
 """
 
 from __future__ import annotations
@@ -18,8 +18,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from pin_kpi_oed.errors import IdentifiabilityError, InputError
-from pin_kpi_oed.identification.check import check_criterion, check_null, check_powers
-from pin_kpi_oed.identification.model_file import CalibratedModel
+from pin_kpi_oed.upkeep.check import check_criterion, check_null, check_powers
+from pin_kpi_oed.calibrated.model_file import CalibratedModel
 from pin_kpi_oed.oed.check_power import CheckPower
 from pin_kpi_oed.oed.selection_result import PoolSelection
 from pin_kpi_oed.results import Result

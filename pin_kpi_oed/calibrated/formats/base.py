@@ -1,11 +1,11 @@
 """The abstract base of a model format: what a calibrated model becomes in a robot's or a tool's own file.
 
-A format writes a :class:`~pin_kpi_oed.identification.model_file.CalibratedModel` (geometry, effects,
+A format writes a :class:`~pin_kpi_oed.calibrated.model_file.CalibratedModel` (geometry, effects,
 set-ups) into a file another program reads. No such file holds everything the model file holds; each
 format says what it keeps and what it leaves out (:attr:`ExportReport.lost`), checks that the written
 file reproduces the calibrated forward kinematics (:attr:`ExportReport.check_m`) and writes atomically
 only when it does. Add a format: subclass :class:`ModelFormat` in a module of this package and add one
-line to :data:`~pin_kpi_oed.identification.model_formats.registry.MODEL_FORMATS`.
+line to :data:`~pin_kpi_oed.calibrated.formats.registry.MODEL_FORMATS`.
 """
 
 from __future__ import annotations

@@ -108,7 +108,7 @@ def model_frames(cm, tcp_m: np.ndarray | None = None, stations: Sequence[str] | 
     the model's ``tcp_m``) when it is not the tool frame itself.
 
     Args:
-        cm: a :class:`~pin_kpi_oed.identification.model_file.CalibratedModel`.
+        cm: a :class:`~pin_kpi_oed.calibrated.model_file.CalibratedModel`.
         tcp_m: TCP point in the tool frame (m).
         stations: the stations to include (default all).
 

@@ -66,7 +66,7 @@ def robot_parameter_covariance(cm: Any, label: str | None = None, probe: bool = 
     alone; its Jacobian is then projected (:func:`_registered`). ``probe``: a 6-D station's set-up includes the
     probe's orientation (what the measured orientation depends on besides the robot).
     """
-    from pin_kpi_oed.identification.problem import STATION_SEP
+    from pin_kpi_oed.model.parameters import STATION_SEP
     from pin_kpi_oed.model.parameters import ParameterLayout
 
     par = cm.parameters or {}
@@ -250,7 +250,7 @@ def sigma_contents(cm: Any) -> str:
 def predictive_sigma(cm: Any, Q: np.ndarray, aux: Any, station: str | None, labels: np.ndarray
                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(Y (m, 3) m, σ (m, 3) m tracker frame, extrapolation (m,) bool) of a
-    :class:`~pin_kpi_oed.identification.model_file.CalibratedModel` at checked configurations Q (module docstring).
+    :class:`~pin_kpi_oed.calibrated.model_file.CalibratedModel` at checked configurations Q (module docstring).
 
     ``labels``: the station of each row (:meth:`CalibratedModel.row_stations`).
     """
@@ -299,7 +299,7 @@ def predictive_sigma(cm: Any, Q: np.ndarray, aux: Any, station: str | None, labe
 def orientation_sigma(cm: Any, Q: np.ndarray, aux: Any, station: str | None, labels: np.ndarray,
                       length_m: float = 0.0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(ω (m, 3) rad, σ_ω (m, 3) rad, σ_L (m,) m) of a 6-D
-    :class:`~pin_kpi_oed.identification.model_file.CalibratedModel` at checked configurations Q (module docstring):
+    :class:`~pin_kpi_oed.calibrated.model_file.CalibratedModel` at checked configurations Q (module docstring):
     the predicted probe orientation (rotation vector, tracker frame), the σ per axis of measured − predicted
     orientation, and the 3-D σ of a point ``length_m`` along the tool axis that the orientation error moves.
 

@@ -8,7 +8,7 @@ kinematics (its own kinematics file, else the type's default), so the values sta
 calibrated model's at seeded configurations; it is written only within 1e-9 m. Every joint placement
 parameter is carried (a rotation about a joint's axis becomes part of that joint's roll / pitch / yaw);
 effects, discrepancy, set-ups, TCP and covariance are not
-(:func:`~pin_kpi_oed.identification.model_formats.base.lost_parts`).
+(:func:`~pin_kpi_oed.calibrated.formats.base.lost_parts`).
 """
 
 from __future__ import annotations
@@ -20,7 +20,7 @@ import numpy as np
 
 from pin_kpi_oed.data.atomic import atomic_write_text
 from pin_kpi_oed.errors import InputError, SolverError
-from pin_kpi_oed.identification.model_formats.base import (ExportReport, ModelFormat, calibrated_placements,
+from pin_kpi_oed.calibrated.formats.base import (ExportReport, ModelFormat, calibrated_placements,
                                                             lost_parts)
 
 __all__ = ["UrYamlFormat", "ur_kinematics_of", "CHECK_TOL_M"]

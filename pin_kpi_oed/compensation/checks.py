@@ -56,7 +56,7 @@ def start_configurations(pm0: Any, q_work: np.ndarray | None, Q_hint: np.ndarray
     """Start configurations: the hint, else the nearest working configuration, else neutral (module docstring).
 
     Args:
-        pm0: the nominal :class:`~pin_kpi_oed.identification.compensate.PoseModel` (target frame and TCP).
+        pm0: the nominal :class:`~pin_kpi_oed.compensation.compensator.PoseModel` (target frame and TCP).
         q_work: the model's working configurations (k, n), or None.
         Q_hint: joint hints of the targets (m, n), or None.
         pos_t: target positions (m, 3) m; R_t: target rotations (m, 3, 3) or None.
@@ -92,7 +92,7 @@ def nearest_to_reference(pm: Any, Q: np.ndarray, Q_ref: np.ndarray, pos_t: np.nd
     """Each redundant row of Q moved along its self-motion manifold to the solution nearest Q_ref (module docstring).
 
     Args:
-        pm: the :class:`~pin_kpi_oed.identification.compensate.PoseModel` the rows solve (the nominal one).
+        pm: the :class:`~pin_kpi_oed.compensation.compensator.PoseModel` the rows solve (the nominal one).
         Q: converged solutions (m, n); Q_ref: their references (m, n) (rad / m).
         pos_t, R_t: the targets (m, 3) and rotations (m, 3, 3) or None (position only).
         weights: the task rows' weights (3 or 6), orientation rows in m/rad.

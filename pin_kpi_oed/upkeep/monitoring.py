@@ -4,7 +4,7 @@ used; the set-up followed recursively, a check every few rows, poses asked for w
 Each new row is first *predicted* (:meth:`CalibratedModel.predict_with_sigma`, corrected by the set-up filter's
 state): its standardised error z = (measured − predicted)/σ is what the monitor promised before it saw the row, so
 the running standardised RMS of z says whether the σ stays honest (0.67–1.5 is honest). The σ is the model's honest
-σ with the set-up filter's own uncertainty (:class:`~pin_kpi_oed.identification.setup_filter.SetupFilter`: the
+σ with the set-up filter's own uncertainty (:class:`~pin_kpi_oed.upkeep.setup_filter.SetupFilter`: the
 tracker pose re-registered recursively, a random walk whose level is estimated from the rows' innovations). Every
 ``every`` rows the rows since the last check are a check (:func:`check_calibration`, the set-up re-registered on them,
 the residuals tested at α) when they determine the set-up at the working configurations (rows measured near one point
@@ -30,10 +30,10 @@ import pinocchio as pin
 
 from pin_kpi_oed.data.measurements import MeasurementSet
 from pin_kpi_oed.errors import InputError
-from pin_kpi_oed.identification.check import CHECK_STATION, check_calibration
-from pin_kpi_oed.identification.model_file import CalibratedModel
+from pin_kpi_oed.upkeep.check import CHECK_STATION, check_calibration
+from pin_kpi_oed.calibrated.model_file import CalibratedModel
 from pin_kpi_oed.identification.problem import align_data
-from pin_kpi_oed.identification.setup_filter import SetupFilter
+from pin_kpi_oed.upkeep.setup_filter import SetupFilter
 from pin_kpi_oed.results import Result
 
 __all__ = ["Monitor", "MonitorLog", "monitor"]
@@ -239,7 +239,7 @@ class Monitor:
         if self.design_Q is None and self.qw is None:
             self.design_Q = np.zeros((0, self.model.robot.nq))
         if self.design_Q is None:
-            from pin_kpi_oed.identification.check_design import design_check
+            from pin_kpi_oed.upkeep.check_design import design_check
 
             self.design_Q = design_check(self.model, m=10, tolerance_m=self.tolerance_m, alpha=self.alpha,
                                          seed=self.seed, station=self.label, n_random=1).Q

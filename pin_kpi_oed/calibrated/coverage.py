@@ -13,7 +13,7 @@ from typing import Any
 import numpy as np
 
 from pin_kpi_oed.discrepancy.coverage import JointCoverage, joint_distance
-from pin_kpi_oed.identification.problem import align_data
+from pin_kpi_oed.model.measured_joints import align_data
 
 __all__ = ["coverage", "covered_rows", "coverage_summary", "COVERAGE_TOL_RAD"]
 

@@ -33,7 +33,7 @@ from scipy.spatial.transform import Rotation
 
 from pin_kpi_oed.model.tolerances import Tolerances
 from pin_kpi_oed.errors import InputError
-from pin_kpi_oed.identification.identify import predict
+from pin_kpi_oed.effects.library import predict_with_effects
 from pin_kpi_oed.data.measurements import MeasurementSet
 from pin_kpi_oed.model.noise import NoiseModel
 from pin_kpi_oed.model.tracker import TrackerModel
@@ -134,7 +134,7 @@ def simulate(model: TrackerModel, Q: np.ndarray, truth_p: np.ndarray | None = No
                         time_s=cols.get("time_s"), source=source, extra=dict(cols.get("extra") or {}))
     eff = [e for e, _ in effects]
     thetas = [np.asarray(t, float) for _, t in effects]
-    Y = predict(model, p, Q, eff, thetas, ms)
+    Y = predict_with_effects(model, p, np.atleast_2d(np.asarray(Q, float)), ms, list(zip(eff, thetas)))
     rng = np.random.default_rng(seed)
     S = noise.sigma(Y[:, :3])
     pos = Y[:, :3] + rng.normal(size=(m, 3)) * S
@@ -167,7 +167,7 @@ def truth_to_dict(model: TrackerModel, truth_p: np.ndarray, tol: Tolerances | No
         InputError: an effect that cannot be stored.
     """
     from pin_kpi_oed.data.atomic import to_jsonable
-    from pin_kpi_oed.identification.model_file import effect_spec
+    from pin_kpi_oed.effects.spec import effect_spec
     from pin_kpi_oed.model.robot import portable_spec
 
     p = np.asarray(truth_p, float)
@@ -198,7 +198,7 @@ def load_truth(path: str) -> tuple[TrackerModel, np.ndarray, list[tuple[Any, np.
     import json
     from pathlib import Path
 
-    from pin_kpi_oed.identification.model_file import effect_from_spec
+    from pin_kpi_oed.effects.spec import effect_from_spec
     from pin_kpi_oed.model.kinematics import se3_from_matrix
     from pin_kpi_oed.model.robot import load_robot
 

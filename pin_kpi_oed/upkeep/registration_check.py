@@ -1,7 +1,7 @@
 r"""Is a new session's registration consistent with the calibration, and if not, why?
 
 ``register`` re-fits the set-up (tracker pose, reflector) of a calibrated model on a few rows of a new session
-with the robot held (:func:`~pin_kpi_oed.identification.transfer.register_setup`). Its residuals are judged
+with the robot held (:func:`~pin_kpi_oed.upkeep.transfer.register_setup`). Its residuals are judged
 (:func:`~pin_kpi_oed.identification.quality.assess_registration`: reduced χ² against ``CHI2_POOR``) against the
 level the calibration itself reached, per axis
 
@@ -13,7 +13,7 @@ where σ_noise is the data's sigma columns or the model's noise, s the calibrati
 discrepancy's prior σ (none without one). A model written without the tracker's noise keeps a default noise
 far below what the robot fits to; its residual level, not that default, is what a new session of the same robot
 is expected to reach. A session that is somewhat worse passes, and the station's σ factor
-(:attr:`~pin_kpi_oed.identification.model_file.Setup.sigma_scale`) carries it into every prediction.
+(:attr:`~pin_kpi_oed.calibrated.model_file.Setup.sigma_scale`) carries it into every prediction.
 
 When the registration is poor, the cause is tested, not guessed (:func:`poor_registration_cause`):
 
@@ -39,7 +39,7 @@ import numpy as np
 
 from pin_kpi_oed.data.measurements import MeasurementSet
 from pin_kpi_oed.errors import PinKpiOedError
-from pin_kpi_oed.identification.model_file import CalibratedModel
+from pin_kpi_oed.calibrated.model_file import CalibratedModel
 from pin_kpi_oed.identification.quality import CHI2_POOR, RegistrationQuality, assess_registration
 
 #: A registration RMS beyond this (m) is not a calibration extrapolating outside its coverage (a geometric model's
@@ -98,12 +98,12 @@ def coverage_share(model: CalibratedModel, Q: np.ndarray) -> float | None:
 
 def uncovered_ranges(model: CalibratedModel, Q: np.ndarray, limit: int = 3) -> list[str]:
     """The joints whose angles in Q (m, n) rad the calibration never measured (no training angle of that joint
-    within :data:`~pin_kpi_oed.identification.coverage.COVERAGE_TOL_RAD`, wrapped mod 2π for a periodic joint), most
+    within :data:`~pin_kpi_oed.calibrated.coverage.COVERAGE_TOL_RAD`, wrapped mod 2π for a periodic joint), most
     rows first:
     ``"shoulder_pan_joint -3.06..-1.06 rad (60 of 60 rows)"`` (the uncovered rows' own joint values, within the
     joint's limits), at most ``limit`` of them with at least 5 % of the rows; none when the model keeps no training
     configurations."""
-    from pin_kpi_oed.identification.coverage import COVERAGE_TOL_RAD, covered_rows
+    from pin_kpi_oed.calibrated.coverage import COVERAGE_TOL_RAD, covered_rows
 
     Z = training_configurations(model)
     Q = np.atleast_2d(np.asarray(Q, float))
@@ -137,7 +137,7 @@ def poor_registration_cause(model: CalibratedModel, data: MeasurementSet, label:
         chi2_full: the registration's reduced χ² against ``sigma_m``.
         sigma_m: the reference σ of the rows (:func:`reference_sigma_m`), (m, 3) or (3,) m.
         hold_reflector: the registration held the reflector.
-        register: :func:`~pin_kpi_oed.identification.transfer.register_setup` (passed in: the registration calls
+        register: :func:`~pin_kpi_oed.upkeep.transfer.register_setup` (passed in: the registration calls
             this check).
 
     Returns:
@@ -180,7 +180,7 @@ def poor_registration_cause(model: CalibratedModel, data: MeasurementSet, label:
 
 def registration_gates(res: Any, data: MeasurementSet, model: CalibratedModel, hold_reflector: bool = False, *,
                        register: Callable[..., Any]) -> list[RegistrationQuality]:
-    """The registration gate of every station of a :class:`~pin_kpi_oed.identification.transfer.RegistrationResult`,
+    """The registration gate of every station of a :class:`~pin_kpi_oed.upkeep.transfer.RegistrationResult`,
     against the calibration's own level (:func:`reference_sigma_m`), a poor one with its tested cause.
 
     Args:
@@ -188,7 +188,7 @@ def registration_gates(res: Any, data: MeasurementSet, model: CalibratedModel, h
         data: the registration data.
         model: the model registered (before the registration).
         hold_reflector: the registration held the reflector.
-        register: :func:`~pin_kpi_oed.identification.transfer.register_setup` (for the geometry-only registration of
+        register: :func:`~pin_kpi_oed.upkeep.transfer.register_setup` (for the geometry-only registration of
             a poor station's rows; :func:`register_setup` computes these gates itself, ``.quality``).
     """
     from pin_kpi_oed.identification.problem import align_data

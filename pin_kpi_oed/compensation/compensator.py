@@ -2,7 +2,7 @@ r"""Compensation ("program filtering"): joint values that put the real TCP on th
 
 The controller keeps its nominal kinematics. To make the real robot reach a Cartesian target,
 it must be told other joint values: those for which the **calibrated** model (geometry δ and
-effects θ of a :class:`~pin_kpi_oed.identification.model_file.CalibratedModel`) puts the TCP on
+effects θ of a :class:`~pin_kpi_oed.calibrated.model_file.CalibratedModel`) puts the TCP on
 the target. For target i (position t_i, optionally orientation R_i):
 
 1. nominal solution q⁰_i: inverse kinematics on the nominal robot (what the controller would
@@ -30,11 +30,11 @@ solution of the calibrated model (linearly, at a rate of that order). A position
 leaves the orientation free: the minimum-norm steps stay close to the nominal solution.
 
 The nominal IK starts from the target's joint hint, else from the model's working configuration nearest
-the target, else from the neutral configuration (:mod:`pin_kpi_oed.identification.compensate_checks`): the
+the target, else from the neutral configuration (:mod:`pin_kpi_oed.compensation.checks`): the
 solution stays on that branch, also on a redundant arm. The TCP c is given in the robot's tool frame
 (``CalibratedModel.robot.tool_frame``; the model's ``tcp_m`` when a cell or a measurement header stated it). The σ at
 a TCP away from the fitted reflector includes what one reflector cannot see there
-(:mod:`pin_kpi_oed.identification.tool_offset`).
+(:mod:`pin_kpi_oed.compensation.tool_offset`).
 
 Status per target: ``ok``; ``unreachable`` (the nominal or the calibrated IK ends farther from
 the target than ``reach_tol_m`` / ``reach_tol_rad``: outside the workspace, at a joint limit, or
@@ -62,13 +62,13 @@ from pin_kpi_oed.data.measurements import MeasurementSet
 from pin_kpi_oed.data.targets import TargetSet
 from pin_kpi_oed.effects.library import predict_with_effects, sum_joint_offsets
 from pin_kpi_oed.errors import InputError
-from pin_kpi_oed.identification.compensate_checks import (branch_step, collision_rows, joint_limit_rows,
+from pin_kpi_oed.compensation.checks import (branch_step, collision_rows, joint_limit_rows,
                                                           nearest_to_reference, start_configurations)
-from pin_kpi_oed.identification.compensation_file import write_compensation
-from pin_kpi_oed.identification.compensation_result import STATUSES, CompensationResult
-from pin_kpi_oed.identification.model_file import CalibratedModel
-from pin_kpi_oed.identification.prediction_sigma import DEFAULT_TOOL_LENGTH_M, sigma_at
-from pin_kpi_oed.identification.tool_offset import unobservable_tcp_sigma
+from pin_kpi_oed.compensation.result import write_compensation
+from pin_kpi_oed.compensation.result import STATUSES, CompensationResult
+from pin_kpi_oed.calibrated.model_file import CalibratedModel
+from pin_kpi_oed.calibrated.prediction_sigma import DEFAULT_TOOL_LENGTH_M, sigma_at
+from pin_kpi_oed.compensation.tool_offset import unobservable_tcp_sigma
 from pin_kpi_oed.model.kinematics import skew
 from pin_kpi_oed.model.parameters import ParameterLayout
 from pin_kpi_oed.model.tracker import TrackerModel
@@ -107,7 +107,7 @@ class CompensationOptions:
         tool_length_m: a 6-D model's orientation σ is also stated as the σ of the point this far along the tool
             axis (m).
         tool_tolerances: the manufacturing tolerances of the joint placements the calibration could not determine,
-            for the σ of a TCP away from the reflector (:mod:`pin_kpi_oed.identification.tool_offset`); default
+            for the σ of a TCP away from the reflector (:mod:`pin_kpi_oed.compensation.tool_offset`); default
             :class:`~pin_kpi_oed.model.tolerances.Tolerances` (0.5 mm, 1 mrad).
     """
 
@@ -466,7 +466,7 @@ def _status(i: int, opt: CompensationOptions, nom: _IK, cal: _IK, left_branch: b
 
 
 def _tcp_sigma(cm: CalibratedModel, Q: np.ndarray, aux: Any, station: str | None) -> tuple[np.ndarray, np.ndarray]:
-    """(3-D σ (m), extrapolation flag) of the TCP at Q: :func:`~pin_kpi_oed.identification.prediction_sigma.sigma_at`
+    """(3-D σ (m), extrapolation flag) of the TCP at Q: :func:`~pin_kpi_oed.calibrated.prediction_sigma.sigma_at`
     (one σ and one coverage for every command)."""
     return sigma_at(cm, Q, aux if isinstance(aux, MeasurementSet) else None, station)
 
@@ -476,7 +476,7 @@ def _orientation_sigma(cm: CalibratedModel, Q: np.ndarray, aux: Any, opt: Compen
     """(3-D σ of the orientation (rad), σ at ``opt.tool_length_m`` along the tool axis (m)) at Q of a 6-D model: of
     the frame the calibration measured (the probe's), which a tool rigidly mounted with it shares (its mounting
     relative to the probe is the nominal one, like a TCP away from the reflector); empty for a position-only model."""
-    from pin_kpi_oed.identification.prediction_sigma import orientation_sigma
+    from pin_kpi_oed.calibrated.prediction_sigma import orientation_sigma
 
     if not cm.pose6d or not len(Q):
         return np.zeros(0), np.zeros(0)

@@ -32,7 +32,7 @@ def unobservable_tcp_sigma(cm: Any, station: str | None, tcp_m: np.ndarray, Q: n
     """3-D standard deviation (m) at the TCP ``tcp_m`` of what the calibration cannot determine, per row of Q.
 
     Args:
-        cm: the :class:`~pin_kpi_oed.identification.model_file.CalibratedModel` (its ``parameters.names`` say
+        cm: the :class:`~pin_kpi_oed.calibrated.model_file.CalibratedModel` (its ``parameters.names`` say
             which joint-placement parameters were identified).
         station: the station whose set-up (tracker pose, fitted reflector) is used.
         tcp_m: the compensated point in the tool frame (m).
