@@ -189,9 +189,12 @@ def paired_by_size(recs: list[dict], sizes, methods: tuple[str, ...], scores: tu
 
 
 def paired_lines(summary: dict) -> list[str]:
-    """One line per paired test of :func:`paired_by_size`'s summary: m, the test, mean change, wins, Wilcoxon p."""
-    return [f"m={m} {name}: mean change {p['change_mean'] * 100:+.1f} %, wins {p['wins_a']}/{p['n']}, "
-            f"Wilcoxon p = {p['p']:.3g}" for m, s in summary.items() for name, p in s.get("paired", {}).items()]
+    """One line per paired test of :func:`paired_by_size`'s summary: m, the test, the paired median change with
+    wins and the sign test, then the Wilcoxon p and the change of the means
+    (:func:`~pin_kpi_oed.studies.paired.paired_text`)."""
+    from pin_kpi_oed.studies.paired import paired_text
+
+    return [f"m={m} {name}: {paired_text(p)}" for m, s in summary.items() for name, p in s.get("paired", {}).items()]
 
 
 def report(label: str, seconds: float, target: float | None = None) -> str:

@@ -139,3 +139,22 @@ def test_poses_needed_says_when_the_measured_poses_already_reach_the_target():
     assert curve.n_for_target == 0 and "already reach it" in curve.summary()
     curve = poses_needed(crit, Q[60:], 20, n_points=4, target_sigma_m=0.5 * now, n_random=2)
     assert curve.n_for_target != 0
+
+
+def test_paired_comparison_headline_is_the_median_with_the_sign_test():
+    """One pair where b fails (a ratio of means would say −90 %) moves neither the median nor the sign test."""
+    from pin_kpi_oed.studies.paired import paired_comparison, paired_text
+
+    b = np.full(20, 1.0)
+    b[0] = 100.0  # one reference that barely identifies the robot
+    a = np.full(20, 0.9)
+    a[15:] = 1.1  # 15 wins, 5 losses
+    c = paired_comparison(a, b)
+    assert c["change_median"] == pytest.approx(-0.1)
+    assert c["change_mean"] < -0.8
+    assert (c["wins_a"], c["losses_a"], c["ties"]) == (15, 5, 0)
+    from scipy.stats import binomtest
+    assert c["p_sign"] == pytest.approx(binomtest(15, 20, 0.5).pvalue)
+    assert 0.04 < c["p_sign"] < 0.05
+    assert paired_comparison(b, b)["p_sign"] == 1.0 and paired_comparison(b, b)["ties"] == 20
+    assert paired_text(c).startswith("median change -10.0 % (15/20 wins, sign test p = 0.041")

@@ -200,15 +200,10 @@ def _choose(d: str, m: int, model: Any, crit: Any, Q_pool: np.ndarray, Jp: np.nd
 
 
 def paired_summary(a: Sequence[float], b: Sequence[float]) -> dict:
-    """Paired comparison of a against b (smaller is better): means, median of the ratios a/b, wins of a, and the
-    two-sided Wilcoxon signed-rank p (scipy; 1.0 when every pair is equal)."""
-    from scipy.stats import wilcoxon
+    """Paired comparison of a against b (smaller is better): :func:`~pin_kpi_oed.studies.paired.paired_comparison`
+    with the older keys beside its own (``mean_a_m``, ``mean_b_m``, ``median_ratio``, ``p`` = the Wilcoxon p)."""
+    from pin_kpi_oed.studies.paired import paired_comparison
 
-    x, y = np.asarray(a, float), np.asarray(b, float)
-    if x.shape != y.shape or x.size == 0:
-        raise InputError(f"paired summary: {x.size} and {y.size} values")
-    diff = x - y
-    p = 1.0 if np.all(diff == 0) else float(wilcoxon(x, y).pvalue)
-    return {"n": int(x.size), "mean_a_m": float(x.mean()), "mean_b_m": float(y.mean()),
-            "median_ratio": float(np.median(x / y)), "change_mean": float(x.mean() / y.mean() - 1.0),
-            "wins_a": int(np.sum(diff < 0)), "p": p}
+    c = paired_comparison(a, b)
+    return {**c, "mean_a_m": c["mean_a"], "mean_b_m": c["mean_b"], "median_ratio": c["change_median"] + 1.0,
+            "p": c["p_wilcoxon"]}

@@ -108,14 +108,15 @@ def path_study(out_dir: Path, m: int = 60, seeds: tuple[int, ...] = (0, 1, 2, 3,
 
 def format_path_table(s: dict) -> str:
     """The study's table (means over the seeds) and its paired tests, as text with units."""
+    from pin_kpi_oed.studies.paired import paired_text
+
     head = f"{'design':<10}" + "".join(f"{label:>22}" for _, _, label in _SCORES)
     lines = [f"{s['cell']}: {s['measurements']} poses, seeds {s['seeds']}, {s['path_samples']} path samples "
              f"(means over the seeds; predicted sigma, 1 um per axis)", head, "-" * len(head)]
     for d in DESIGNS:
         lines.append(f"{d:<10}" + "".join(f"{s['means'][d][k] * f:>22.4f}" for k, f, _ in _SCORES))
     for name, p in s["paired"].items():
-        lines.append(f"{name}: mean change {p['change_mean'] * 100:+.1f} %, wins {p['wins_a']}/{p['n']}, "
-                     f"Wilcoxon p = {p['p']:.3g}")
+        lines.append(f"{name}: {paired_text(p)}")
     if "monte_carlo" in s:
         mc = s["monte_carlo"]
         lines.append(f"Monte-Carlo ({mc['reps']} identifications of the seed-{mc['seed']} kpi_path design): realised / "
