@@ -16,7 +16,7 @@ OTHER_RESULTS = {("oed.selection_result", "PoolSelection"), ("oed.relaxation", "
                  ("oed.identifiability", "Identifiability"), ("oed.discrepancy_kpi", "PosesNeeded"),
                  ("diagnosis.report", "DiagnosisReport"), ("program.ordering", "Program"),
                  ("studies.learning_curves", "LearningCurves"), ("design.ipopt", "IpoptRun"),
-                 ("identification.monitor", "MonitorLog")}
+                 ("upkeep.monitoring", "MonitorLog")}
 
 
 def _result_classes() -> list[tuple[str, str]]:

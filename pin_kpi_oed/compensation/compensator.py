@@ -107,7 +107,8 @@ class CompensationOptions:
         tool_length_m: a 6-D model's orientation σ is also stated as the σ of the point this far along the tool
             axis (m).
         tool_tolerances: the manufacturing tolerances of the joint placements the calibration could not determine,
-            for the σ of a TCP away from the reflector (:mod:`pin_kpi_oed.compensation.tool_offset`); default
+            for the σ of a TCP away from the reflector (:mod:`pin_kpi_oed.compensation.tool_offset`); default the
+            ones the fit stored (``identify``'s, the same σ it printed), else
             :class:`~pin_kpi_oed.model.tolerances.Tolerances` (0.5 mm, 1 mrad).
     """
 
@@ -422,7 +423,8 @@ def _result(cm: CalibratedModel, ts: TargetSet, opt: CompensationOptions, pm: Po
     at_limit = joint_limit_rows(cm.robot, cal.Q, opt.limit_margin)
     colliding, pair = (collision_rows(opt.cell, cal.Q) if opt.cell is not None
                        else (np.zeros(len(ts), bool), [""] * len(ts)))
-    unseen = unobservable_tcp_sigma(cm, opt.station, pm.tcp, cal.Q, opt.tool_tolerances, seed=opt.seed)
+    unseen = unobservable_tcp_sigma(cm, opt.station, pm.tcp, cal.Q, opt.tool_tolerances, seed=opt.seed,
+                                    frame=opt.frame)
     sig, extra = _tcp_sigma(cm, cal.Q, ts.aux, opt.station)
     rot, at_l = _orientation_sigma(cm, cal.Q, ts.aux, opt)
     status = [_status(i, opt, nom, cal, bool(left_branch[i]), step[i] > opt.max_branch_step_rad, at_limit[i],

@@ -40,7 +40,7 @@ C = F⁺ (τ² K + σ_n² I) F⁺ᵀ the parameters' covariance under this error
 absorbed (checked against Monte-Carlo in ``tests/test_joint_angle_sigma.py``). It is the σ of the predictor the
 model uses (least-squares parameters, no kriging mean). A kernel of the wrong shape can make that cross term take
 back too much near the rows; the covariance a model reports is therefore never below the white level's at the same
-pose in any direction (``identification.prediction_sigma``: the positive part of the difference is added).
+pose in any direction (``calibrated.prediction_sigma``: the positive part of the difference is added).
 """
 
 from __future__ import annotations

@@ -248,6 +248,18 @@ def identify(model: TrackerModel, data: MeasurementSet, options: IdentifyOptions
     return result
 
 
+def _working_configurations(model: TrackerModel, data: MeasurementSet, inp: FitInputs, opts: IdentifyOptions
+                            ) -> np.ndarray:
+    """Where the TCP's σ is stated: ``opts.Q_work``, else the data's tool header's working configurations, else
+    the measured configurations."""
+    if opts.Q_work is not None:
+        return model.robot.check_q(opts.Q_work, "Q_work")
+    qw = getattr(data.tool, "q_work", None) if data.tool is not None else None
+    if qw is not None and np.shape(qw)[-1:] == (model.robot.nq,):
+        return model.robot.check_q(np.atleast_2d(np.asarray(qw, float)), "the tool header's working configurations")
+    return inp.Q
+
+
 def _fit(model: TrackerModel, data: MeasurementSet, inp: FitInputs, effects: Sequence[Any], opts: IdentifyOptions,
          t_start: float) -> IdentificationResult:
     """One least-squares fit with ``opts.loss`` (steps 2–6 of the module docstring), before the discrepancy."""
@@ -261,8 +273,9 @@ def _fit(model: TrackerModel, data: MeasurementSet, inp: FitInputs, effects: Seq
     errors = np.linalg.norm(rpos, axis=1)
     C, std, corr, chi2_red = fit_covariance(prob, x, fw, opts)
     P_hat, th_hat = prob.unpack(x)
-    Qw = inp.Q if opts.Q_work is None else model.robot.check_q(opts.Q_work, "Q_work")
-    tcp_sigma = tcp_std(prob, P_hat, C, Qw)
+    Qw = _working_configurations(model, data, inp, opts)
+    Cu = C / chi2_red if opts.scale_covariance and chi2_red > 0 else C
+    tcp_sigma, tcp_held, held_term, contrib = tcp_std(prob, P_hat, C, Qw, x, Cu, opts.held_tolerances)
     setups = _setups(prob, P_hat, errors, inp, data)
     first = setups[stations.labels[0]]
     sol = solution.sol
@@ -272,7 +285,8 @@ def _fit(model: TrackerModel, data: MeasurementSet, inp: FitInputs, effects: Seq
         nit=solution.nit, nfev=solution.nfev, solver_status=int(sol.status),
         names=prob.names, values=x.copy(), std=std, covariance=C, correlation=corr,
         p=stations.station_p(P_hat, 0), theta=th_hat, residuals_m=-rpos, residuals_rad=None if rrot is None else -rrot,
-        errors_m=errors, weighted_errors=we, outliers=outliers, tcp_std_m=tcp_sigma, cost=float(sol.cost),
+        errors_m=errors, weighted_errors=we, outliers=outliers, tcp_std_m=tcp_sigma, tcp_held_m=tcp_held,
+        held_term=held_term, tcp_held_contrib_m=contrib, cost=float(sol.cost),
         chi2_reduced=chi2_red, tracker_T_base=first.tracker_T_base.copy(), tracker_T_base_init=T_init[0],
         reflector_m=first.reflector_m.copy(), probe_R=first.probe_R, model=stations.models[0],
         effects=list(effects), identifiability=ident, loss=opts.loss, f_scale=solution.f_scale,

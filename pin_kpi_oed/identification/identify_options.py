@@ -39,7 +39,11 @@ class IdentifyOptions:
         setup_only: estimate the set-up parameters only (tracker, reflector, probe): the
             "nominal robot" baseline.
         scale_covariance: multiply the covariance by the reduced χ² (relative weights only).
-        Q_work: working configurations of the TCP uncertainty (rad); default the data's.
+        Q_work: working configurations of the TCP uncertainty (rad); default the data's tool header's working
+            configurations, else the measured ones.
+        held_tolerances: the prior of the joint-placement parameters the fit holds at nominal (no reflector
+            measurement determines them), a :class:`~pin_kpi_oed.model.tolerances.Tolerances`; default its
+            defaults. They enter the TCP's σ (:mod:`pin_kpi_oed.oed.held`).
         ident: a precomputed identifiability analysis of one station's working model (default:
             computed on ``N_EXCITATION`` seeded random configurations).
         outlier_alpha: false-alarm probability of the outlier flag.
@@ -83,6 +87,7 @@ class IdentifyOptions:
     setup_only: bool = False
     scale_covariance: bool = False
     Q_work: np.ndarray | None = None
+    held_tolerances: Any = None
     ident: Identifiability | None = None
     outlier_alpha: float = 1e-3
     max_nfev: int | None = None

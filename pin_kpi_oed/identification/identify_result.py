@@ -13,6 +13,7 @@ from pin_kpi_oed.errors import InputError
 from pin_kpi_oed.calibrated.model_file import CalibratedModel
 from pin_kpi_oed.identification.problem import StationSet, effect_param_names, predict
 from pin_kpi_oed.model.tracker import TrackerModel
+from pin_kpi_oed.oed.held import held_advice
 from pin_kpi_oed.oed.identifiability import Identifiability
 from pin_kpi_oed.validation.units import SIGMA_MAX_M, SIGMA_ROT_MAX_RAD
 from pin_kpi_oed.results import Result
@@ -52,7 +53,8 @@ class IdentificationResult(Result):
         errors_m: position error norm per measurement, (m,) m.
         weighted_errors: ‖f_i‖ per measurement (dimensionless).
         outliers: indices of flagged measurements.
-        tcp_std_m: predicted TCP standard deviation sqrt(trace C_s) per working configuration, (t,) m.
+        tcp_std_m: predicted TCP standard deviation sqrt(trace C_s) per working configuration, (t,) m, with the
+            joint-placement parameters held at nominal under their tolerances (:mod:`pin_kpi_oed.oed.held`).
         cost: final cost ½ Σ ρ(f²) (dimensionless).
         chi2_reduced: Σ f² / (rows − unknowns) over the measurements in use.
         tracker_T_base: fitted pose of the robot base in the (first station's) tracker frame, 4×4 (m).
@@ -77,6 +79,9 @@ class IdentificationResult(Result):
         source: where the data came from.
         tool: the data's tool (:attr:`MeasurementSet.tool`: robot, tool frame, reflector, TCP, working
             configurations), carried into the model file; None: the data did not state it.
+        tcp_held_m: the held parameters' share of ``tcp_std_m``, (t,) m.
+        held_term: the held parameters and how the fit absorbed them (:class:`~pin_kpi_oed.oed.held.HeldTerm`),
+            or None; ``tcp_held_contrib_m`` each one's RMS σ at the TCP over the working configurations (m).
     """
 
     names: list[str]
@@ -122,6 +127,9 @@ class IdentificationResult(Result):
     tool: Any = field(default=None, repr=False)
     coverage: Any = field(default=None, repr=False)
     fit_quality: Any = field(default=None, repr=False)
+    tcp_held_m: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    held_term: Any = field(default=None, repr=False)
+    tcp_held_contrib_m: np.ndarray = field(default_factory=lambda: np.zeros(0))
 
     @property
     def converged(self) -> bool:
@@ -216,6 +224,12 @@ class IdentificationResult(Result):
             return self.tool.tcp_m.copy()
         return tcp.copy()
 
+    def held_advice(self) -> str:
+        """Which part of the TCP's σ no reflector measurement removes and what does (:func:`held_advice`), or ""."""
+        if self.held_term is None or not self.tcp_std_m.size:
+            return ""
+        return held_advice(self.held_term.names, self.tcp_held_contrib_m, float(np.sqrt(np.mean(self.tcp_std_m ** 2))))
+
     def calibrated_model(self) -> CalibratedModel:
         """Everything the fit found as a :class:`CalibratedModel` (what ``--model-out`` writes)."""
         nj = 6 * self.model.robot.nq
@@ -238,7 +252,8 @@ class IdentificationResult(Result):
             thetas=[t.copy() for t in self.all_effects()[1]], setups=dict(self.setups),
             noise=self.model.noise, tcp_m=self._tcp_m(), pose6d=bool(self.model.pose6d),
             parameters={"names": list(self.names), "values": self.values, "std": self.std,
-                        "units": [param_unit(n) for n in self.names], "covariance": self.covariance},
+                        "units": [param_unit(n) for n in self.names], "covariance": self.covariance,
+                        **({"held": self.held_term.to_dict()} if self.held_term is not None else {})},
             fit=fit, default_station=self.stations[0] if len(self.stations) == 1 else None,
             history=[{"step": "identify", "data": self.source, "stations": list(self.stations),
                       "n_measurements": self.n_measurements, "rms_m": self.rms_m}],
@@ -287,6 +302,10 @@ class IdentificationResult(Result):
             "discrepancy": None if self.discrepancy is None else {
                 "kind": self.discrepancy.kind, "decision": self.discrepancy.decision, "cv": self.discrepancy.cv},
             "tcp_std_m": self.tcp_std_m,
+            "tcp_held_m": self.tcp_held_m,
+            "held": None if self.held_term is None else {
+                "names": self.held_term.names, "sigma": self.held_term.sigma,
+                "tcp_contribution_m": self.tcp_held_contrib_m, "advice": self.held_advice()},
             "identifiability": self.identifiability.to_dict() if self.identifiability is not None else None,
         }
 
@@ -327,7 +346,12 @@ class IdentificationResult(Result):
             out.append(f"  {self.discrepancy.decision}")
         if self.tcp_std_m.size:
             out.append(f"  predicted TCP std at {self.tcp_std_m.size} working configurations: mean "
-                       f"{self.tcp_std_m.mean() * 1e6:.2f} µm, max {self.tcp_std_m.max() * 1e6:.2f} µm")
+                       f"{self.tcp_std_m.mean() * 1e6:.2f} µm, max {self.tcp_std_m.max() * 1e6:.2f} µm"
+                       + (f" (of which the parameters held at their tolerance: mean {self.tcp_held_m.mean() * 1e6:.2f}"
+                          " µm)" if self.tcp_held_m.size and self.tcp_held_m.max() > 0 else ""))
+            line = self.held_advice()
+            if line:
+                out.append(f"  {line}")
         out.append(f"  {len(self.names)} estimated parameters (value ± std; mm or mrad):")
         for n, v, s in zip(self.names, self.values, self.std):
             u = param_unit(n)

@@ -511,6 +511,22 @@ class ResidualModel:
             J[:, 3:, :] = jl_inv(rrot) @ J[:, 3:, :]
         return J * self.W[:, :, None]
 
+    def held_jacobian(self, x: np.ndarray, cols: np.ndarray) -> np.ndarray:
+        """Weighted Jacobian of every measurement w.r.t. joint-placement parameters the fit holds (raw indices
+        ``cols`` < 6 n), (m, nh, k): the rows of :meth:`jacobian_full` for parameters that are not unknowns."""
+        P, th = self.unpack(x)
+        pairs = self._pairs(th)
+        cols = np.asarray(cols, int)
+        J = np.zeros((self.m, self.nh, cols.size))
+        for s, rows in enumerate(self._take):
+            model, p = self.stations.models[s], self.stations.station_p(P, s)
+            Qs = self._Qs[s]
+            Qe = Qs + sum_joint_offsets(pairs, Qs, self.aux[s])[0] if pairs else Qs
+            J[rows] = model.jacobian(p, Qe)[:, :, cols]
+        if self.nh == 6:
+            J[:, 3:, :] = jl_inv(self.evaluate(x)[1]) @ J[:, 3:, :]
+        return J * self.W[:, :, None]
+
     def jacobian(self, x: np.ndarray) -> np.ndarray:
         """∂f/∂x, (rows, nx)."""
         J = self.jacobian_full(x)[self.mask].reshape(-1, self.nx)

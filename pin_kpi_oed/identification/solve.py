@@ -12,7 +12,9 @@ from scipy.stats import chi2 as _chi2
 from pin_kpi_oed.errors import IdentifiabilityError, SolverError
 from pin_kpi_oed.identification.identify_options import IdentifyOptions
 from pin_kpi_oed.identification.problem import ResidualModel
+from pin_kpi_oed.model.tolerances import Tolerances, held_columns
 from pin_kpi_oed.oed.covariance import param_covariance
+from pin_kpi_oed.oed.held import HeldTerm
 
 __all__ = ["Solution", "solve", "settle_outliers", "fit_covariance", "tcp_std"]
 
@@ -126,14 +128,40 @@ def fit_covariance(prob: ResidualModel, x: np.ndarray, fw: np.ndarray, opts: Ide
     return C, std, np.where(np.isfinite(corr), corr, 0.0), chi2_red
 
 
-def tcp_std(prob: ResidualModel, P: np.ndarray, C: np.ndarray, Qw: np.ndarray) -> np.ndarray:
-    """Step 7: sqrt(trace C_s) per working configuration (eq. 25), first station's tracker frame (m)."""
+def tcp_std(prob: ResidualModel, P: np.ndarray, C: np.ndarray, Qw: np.ndarray, x: np.ndarray | None = None,
+            C_unscaled: np.ndarray | None = None, tolerances: Tolerances | None = None
+            ) -> tuple[np.ndarray, np.ndarray, HeldTerm | None, np.ndarray]:
+    """Step 7: the TCP's σ per working configuration, first station's tracker frame (m): sqrt(trace C_s) with
+    C_s = E C Eᵀ + G Σ_N Gᵀ (:mod:`pin_kpi_oed.oed.held`): the fit's covariance and the joint-placement parameters
+    it held at nominal under their tolerances, absorbed as this fit absorbed them (A = C_unscaled F_Bᵀ F_N on its
+    rows in use).
+
+    Args:
+        prob: the residual model; P: the fitted global raw parameters; C: the fit's covariance (nx, nx);
+        Qw: working configurations (t, n) rad; x: the fitted unknowns (None: no held term);
+        C_unscaled: (FᵀF + P)⁻¹ before any χ² scaling (default C); tolerances: the held parameters' prior
+        (default :class:`~pin_kpi_oed.model.tolerances.Tolerances`).
+
+    Returns:
+        (σ with the held term (t,) m, σ of the held term alone (t,) m, the :class:`HeldTerm` or None, each held
+        parameter's RMS σ at the TCP over the working configurations (k,) m).
+    """
     st = prob.stations
     model, p0 = st.models[0], st.station_p(P, 0)
     E0 = model.kpi_jacobian(p0, Qw)  # (3t, n_station)
     cols = prob.x_columns[0]
-    E = np.zeros((E0.shape[0], prob.nb))
+    E = np.zeros((E0.shape[0], prob.nx))
     use = cols >= 0
     E[:, cols[use]] = E0[:, use]
-    var = np.einsum("ij,jk,ik->i", E, C[:prob.nb, :prob.nb], E).reshape(-1, 3).sum(axis=1)
-    return np.sqrt(np.clip(var, 0.0, None))
+    var = np.einsum("ij,jk,ik->i", E, C, E).reshape(-1, 3).sum(axis=1)
+    held = held_columns(model, [prob.layout.names[i] for i in prob.base]) if x is not None else np.zeros(0, int)
+    if not held.size:
+        return np.sqrt(np.clip(var, 0.0, None)), np.zeros(len(var)), None, np.zeros(0)
+    FB = prob.jacobian_full(x)[prob.mask].reshape(-1, prob.nx)
+    FN = prob.held_jacobian(x, held)[prob.mask].reshape(-1, held.size)
+    Cu = C if C_unscaled is None else C_unscaled
+    term = HeldTerm([model.layout.names[i] for i in held], (tolerances or Tolerances()).sigma_vector(model)[held],
+                    list(prob.names), Cu @ (FB.T @ FN))
+    G = term.gain(E, E0[:, held]).reshape(len(Qw), 3, -1)
+    vh = np.einsum("maa->m", term.covariance(G))
+    return np.sqrt(np.clip(var + vh, 0.0, None)), np.sqrt(vh), term, term.contributions(G)

@@ -12,7 +12,7 @@ import numpy as np
 from pin_kpi_oed.errors import InputError
 from pin_kpi_oed.model.tracker import TrackerModel
 
-__all__ = ["Tolerances"]
+__all__ = ["Tolerances", "held_columns"]
 
 
 @dataclass
@@ -53,3 +53,21 @@ class Tolerances:
         s[L.reflector] = self.reflector_m
         s[L.probe] = self.probe_rotation_rad
         return s
+
+
+def held_columns(model: TrackerModel, identified: list[str] | np.ndarray) -> np.ndarray:
+    """The joint-placement parameters a calibration holds at nominal although they are not known: free (not fixed
+    by the layout) and not among the identified ones (the identifiability analysis dropped them: no measurement of
+    the reflector determines them). Their manufacturing tolerance (:meth:`Tolerances.sigma_vector`) is their prior.
+
+    Args:
+        model: the measurement model (its layout).
+        identified: the identified parameters, as raw indices or layout names.
+
+    Returns:
+        Raw indices (ascending) of the held joint-placement parameters.
+    """
+    L = model.layout
+    ids = list(identified)
+    known = {L.names[int(i)] for i in ids} if ids and not isinstance(ids[0], str) else set(map(str, ids))
+    return np.array([i for i in range(6 * L.n_joints) if L.names[i] not in known and not L.fixed[i]], int)

@@ -20,6 +20,25 @@ Both are implemented; the tests check they agree. The constrained least-squares 
 rank [F₁; F₂] = n_v (eq. 15): (CQ) holds by construction (F₂ = [E, −I]), (PD) is what
 :mod:`pin_kpi_oed.oed.identifiability` secures by choosing identifiable parameters. The Lemma
 (eqs. 17–18) gives Δv = [I 0] K⁻¹ [F₁ᵀ Σ⁻¹; 0] Δη, whose covariance is eq. 19.
+
+**Parameters held at nominal** (:func:`held_absorption`, :func:`held_covariance`, :func:`tcp_covariances`). The
+raw parameters split into p = (p_B identified, p_N held at their nominal value: the ones no measurement of the
+reflector determines, e.g. the last joint's offset along its axis, aliased with the reflector offset). A real
+robot's p_N is not zero: it has the manufacturing tolerance prior p_N ~ N(0, Σ_N). The weighted least-squares
+estimate absorbs it,
+
+    p̂_B − p_B = A p_N + M⁻¹ F_Bᵀ ε,        A = M⁻¹ F_Bᵀ F_N,   M = F_BᵀF_B + P,
+
+and the TCP's error s(p̂) − s(p) = E_B (p̂_B − p_B) − E_N p_N has the covariance
+
+    C_s = E_B C_p E_Bᵀ + G Σ_N Gᵀ,        G = E_B A − E_N
+
+(p_N and the noise independent). A depends on the measurement design only (F), E_B and E_N on the working
+configurations and the TCP. At the reflector a structurally unidentifiable direction gives G = 0 (its effect is
+absorbed exactly: F_N = F_B A₀ at every configuration); at a TCP away from it G ≠ 0 in general: the held term is
+what no measurement of the reflector removes. For such a structural dependency A = A₀ for every design that
+identifies p_B without a prior on them, so the held term does not depend on the design (its gradient with
+respect to the measurement configurations is zero).
 """
 
 from __future__ import annotations
@@ -35,7 +54,7 @@ if TYPE_CHECKING:
     from pin_kpi_oed.model.tracker import TrackerModel
 
 __all__ = ["information", "prior_of", "param_covariance", "covariances", "kpi_covariance", "design_covariances",
-           "kpi_covariance_kkt", "prior_square_root"]
+           "kpi_covariance_kkt", "prior_square_root", "held_absorption", "held_covariance", "tcp_covariances"]
 
 
 def information(F: np.ndarray, prior_sigma: np.ndarray | None = None) -> np.ndarray:
@@ -178,3 +197,65 @@ def prior_square_root(P: np.ndarray, rtol: float = 1e-12) -> np.ndarray:
     w, V = np.linalg.eigh(P)
     keep = w > rtol * max(float(w.max(initial=0.0)), 0.0)
     return (V[:, keep] * np.sqrt(w[keep])).T
+
+
+def held_absorption(F_B: np.ndarray, F_N: np.ndarray, prior_sigma: np.ndarray | None = None) -> np.ndarray:
+    """A = M⁻¹ F_Bᵀ F_N: how the estimate of the identified parameters absorbs the held ones (module docstring).
+
+    Args:
+        F_B: weighted Jacobian over the identified parameters, (rows, nb) or (m, nh, nb).
+        F_N: weighted Jacobian over the held parameters on the same rows, (rows, k) or (m, nh, k).
+        prior_sigma: prior standard deviations of the identified parameters (MAP), (nb,), or None.
+
+    Returns:
+        (nb, k): p̂_B moves by A p_N (identified-parameter unit per held-parameter unit).
+
+    Raises:
+        IdentifiabilityError: F_B does not identify the parameters.
+    """
+    FB = F_B.reshape(-1, F_B.shape[-1])
+    FN = F_N.reshape(-1, F_N.shape[-1])
+    return param_covariance(FB, prior_sigma) @ (FB.T @ FN)
+
+
+def held_covariance(E_B: np.ndarray, E_N: np.ndarray, A: np.ndarray, sigma_N: np.ndarray
+                    ) -> tuple[np.ndarray, np.ndarray]:
+    """(G, G Σ_N Gᵀ): the KPI's error per unit held parameter G = E_B A − E_N and its covariance under the held
+    parameters' prior Σ_N = diag(σ_N²) (module docstring).
+
+    Args:
+        E_B: KPI sensitivity over the identified parameters, (n_s, nb) (m per parameter unit).
+        E_N: KPI sensitivity over the held parameters, (n_s, k).
+        A: :func:`held_absorption`, (nb, k).
+        sigma_N: the held parameters' prior standard deviations (m or rad), (k,).
+
+    Returns:
+        (G (n_s, k) m per parameter unit, covariance (n_s, n_s) m²).
+    """
+    G = E_B @ A - E_N
+    Gs = G * np.asarray(sigma_N, float)
+    return G, Gs @ Gs.T
+
+
+def tcp_covariances(F_B: np.ndarray, F_N: np.ndarray, E_B: np.ndarray, E_N: np.ndarray, sigma_N: np.ndarray,
+                    prior_sigma: np.ndarray | None = None, names: list[str] | None = None
+                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """C_p, the KPI covariance C_s = E_B C_p E_Bᵀ + G Σ_N Gᵀ and its held part G Σ_N Gᵀ (module docstring, m²).
+
+    Args:
+        F_B, F_N: weighted Jacobians over the identified and the held parameters, same rows.
+        E_B, E_N: KPI sensitivities over the same parameters, (n_s, nb), (n_s, k).
+        sigma_N: the held parameters' prior standard deviations, (k,).
+        prior_sigma: prior σ of the identified parameters, or None; names: their names for the error message.
+
+    Returns:
+        (C_p (nb, nb), C_s (n_s, n_s) m², held part (n_s, n_s) m²).
+
+    Raises:
+        IdentifiabilityError: F_B does not identify the parameters.
+    """
+    FB = F_B.reshape(-1, F_B.shape[-1])
+    C_p = param_covariance(FB, prior_sigma, names)
+    A = C_p @ (FB.T @ F_N.reshape(-1, F_N.shape[-1]))
+    _, C_h = held_covariance(E_B, E_N, A, sigma_N)
+    return C_p, E_B @ C_p @ E_B.T + C_h, C_h

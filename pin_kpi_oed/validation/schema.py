@@ -281,7 +281,15 @@ MODEL_SCHEMA: dict[str, Any] = {
                                                                                           "minimum": 0}},
                                                        "units": _STRS,
                                                        "covariance": {"anyOf": [{"type": "array", "items": {
-                                                           "type": "array", "items": _NUM}}, {"type": "null"}]}}}}},
+                                                           "type": "array", "items": _NUM}}, {"type": "null"}]},
+                                                       "held": {"type": ["object", "null"],
+                                                                "additionalProperties": False,
+                                                                "properties": {
+                                                                    "names": _STRS,
+                                                                    "sigma": {"type": "array", "items": {
+                                                                        "type": "number", "minimum": 0}},
+                                                                    "absorption": {"type": "array", "items": {
+                                                                        "type": "array", "items": _NUM}}}}}}}},
         "effects": {"type": ["array", "null"], "items": _EFFECT},
         "stations": {"type": "object", "minProperties": 1, "additionalProperties": _STATION},
         "default_station": {"type": ["string", "null"]},
@@ -410,3 +418,10 @@ def validate_model_dict(d: Any, source: str = "model file") -> None:
             raise InputError(f"{where}model field geometry.parameters.covariance: rows of different lengths (ragged)")
         check_covariance(par["covariance"], f"{where}model field geometry.parameters.covariance",
                          len(names) if names is not None else None)
+    held = par.get("held") or {}
+    if held:
+        k, rows = len(held.get("names") or []), np.asarray(held.get("absorption") or [], float)
+        if len(held.get("sigma") or []) != k or (k and rows.shape != (len(names or []), k)):
+            raise InputError(f"{where}model field geometry.parameters.held: {k} names, "
+                             f"{len(held.get('sigma') or [])} sigma and an absorption of shape {rows.shape}; "
+                             f"expected ({len(names or [])}, {k}) (one row per parameter name)")

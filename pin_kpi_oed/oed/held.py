@@ -1,0 +1,105 @@
+r"""The parameters a calibration holds at nominal, as a term of the TCP's covariance.
+
+A fit over the identified parameters p_B absorbs the held ones p_N (prior N(0, Σ_N), the manufacturing tolerances):
+p̂_B − p_B = A p_N + noise with A = M⁻¹ F_Bᵀ F_N (:func:`~pin_kpi_oed.oed.covariance.held_absorption`). A point s of
+the tool then errs by G p_N, G = E_B A − E_N (:func:`~pin_kpi_oed.oed.covariance.held_covariance`): zero at the
+reflector for a structural dependency, not at a TCP away from it. :class:`HeldTerm` keeps what the fit determined
+(the held parameters' names and σ, A over the fit's parameter names), so that every command computes the same σ at
+any TCP and configuration from E_B and E_N there; :func:`held_advice` says which held parameter contributes what and
+what removes it.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from pin_kpi_oed.errors import InputError
+
+__all__ = ["HeldTerm", "held_advice"]
+
+
+@dataclass
+class HeldTerm:
+    """The held parameters of a fit and how the fit absorbed them (SI units).
+
+    Attributes:
+        names: the held raw parameters' names (``joint_a6.tz``), (k,).
+        sigma: their prior standard deviations, the tolerances (m or rad), (k,).
+        rows: the names of the fit's parameters A's rows belong to, (nb,).
+        absorption: A, (nb, k): the fit's estimate moves by A p_N.
+    """
+
+    names: list[str]
+    sigma: np.ndarray
+    rows: list[str]
+    absorption: np.ndarray
+
+    def __post_init__(self) -> None:
+        self.sigma = np.asarray(self.sigma, float).reshape(-1)
+        self.absorption = np.asarray(self.absorption, float).reshape(len(self.rows), len(self.names))
+
+    @property
+    def k(self) -> int:
+        """Number of held parameters."""
+        return len(self.names)
+
+    def gain(self, E_B: np.ndarray, E_N: np.ndarray) -> np.ndarray:
+        """G = E_B A − E_N, (..., k) m per parameter unit: E_B over :attr:`rows` (..., nb), E_N over :attr:`names`."""
+        return E_B @ self.absorption - E_N
+
+    def covariance(self, G: np.ndarray) -> np.ndarray:
+        """G Σ_N Gᵀ per point: G (m, 3, k) → (m, 3, 3) m²."""
+        Gs = G * self.sigma
+        return np.einsum("mak,mbk->mab", Gs, Gs)
+
+    def contributions(self, G: np.ndarray) -> np.ndarray:
+        """RMS over the points of each held parameter's 3-D σ at them, (k,) m: sqrt(mean_i ‖G_i[:, k]‖² σ_k²)."""
+        return np.sqrt(np.mean(np.sum(G ** 2, axis=1), axis=0)) * self.sigma
+
+    def with_sigma(self, sigma: np.ndarray) -> HeldTerm:
+        """The same absorption under other tolerances (k,)."""
+        return HeldTerm(list(self.names), np.asarray(sigma, float), list(self.rows), self.absorption.copy())
+
+    def to_dict(self) -> dict:
+        """The model file's ``geometry.parameters.held`` block (A's rows are ``parameters.names``)."""
+        return {"names": list(self.names), "sigma": self.sigma.tolist(), "absorption": self.absorption.tolist()}
+
+    @classmethod
+    def from_dict(cls, d: dict, rows: list[str], where: str = "model file") -> HeldTerm:
+        """The block of :meth:`to_dict` with A's row names ``rows``.
+
+        Raises:
+            InputError: shapes that do not match (named with ``where``).
+        """
+        names = [str(n) for n in d.get("names") or []]
+        try:
+            return cls(names, np.asarray(d.get("sigma") or [], float), list(rows),
+                       np.asarray(d.get("absorption") or np.zeros((len(rows), 0)), float))
+        except ValueError:
+            raise InputError(f"{where}: field geometry.parameters.held: the absorption is not "
+                             f"{len(rows)} x {len(names)} numbers") from None
+
+
+def held_advice(names: list[str], contrib_m: np.ndarray, total_m: float, top: int = 2) -> str:
+    """One line: how much of the TCP's σ the held parameters make and what removes it, e.g. "0.41 mm of the TCP's σ
+    (RMS 0.45 mm) is from joint7.tz, which no reflector measurement determines; ...".
+
+    Args:
+        names: the held parameters; contrib_m: their contributions (:meth:`HeldTerm.contributions`), m;
+        total_m: the TCP's σ with them (RMS over the working configurations, m); top: parameters named.
+
+    Returns:
+        The line, or "" when the held parameters contribute nothing (below 1e-9 m).
+    """
+    contrib_m = np.asarray(contrib_m, float)
+    held = float(np.sqrt(np.sum(contrib_m ** 2)))
+    if held < 1e-9:
+        return ""
+    order = np.argsort(-contrib_m)[:top]
+    named = " and ".join(f"{names[i]} ({contrib_m[i] * 1e3:.3g} mm)" for i in order if contrib_m[i] > 0.05 * held)
+    return (f"{held * 1e3:.3g} mm of the TCP's sigma (RMS {total_m * 1e3:.3g} mm at the working configurations) is "
+            f"from parameters held at their tolerance, mostly {named}, which no measurement of this reflector "
+            "determines; a second reflector nest off the last joint axis, a 6-DoF probe, or measuring the TCP itself "
+            "removes it")
