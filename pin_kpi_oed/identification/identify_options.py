@@ -42,7 +42,8 @@ class IdentifyOptions:
         Q_work: working configurations of the TCP uncertainty (rad); default the data's.
         ident: a precomputed identifiability analysis of one station's working model (default:
             computed on ``N_EXCITATION`` seeded random configurations).
-        outlier_alpha: false-alarm probability of the outlier flag.
+        outlier_alpha: false-alarm probability of the outlier flag of a whole fit (family-wise: each of the m rows
+            is tested at ``outlier_alpha / m``, so an outlier-free fit flags any row with about this probability).
         max_nfev: maximum number of residual evaluations (default 50 × unknowns).
         tol: ftol, xtol and gtol of the solver.
         max_median_error_m: fail if the median position error after the fit exceeds it

@@ -53,6 +53,8 @@ class IdentificationResult(Result):
         weighted_errors: ‖f_i‖ per measurement (dimensionless).
         outliers: indices of flagged measurements.
         tcp_std_m: predicted TCP standard deviation sqrt(trace C_s) per working configuration, (t,) m.
+        tcp_std_at: where ``tcp_std_m`` is: ``working`` (the working configurations ``Q_work``) or ``training``
+            (the training poses, when no working configurations were given).
         cost: final cost ½ Σ ρ(f²) (dimensionless).
         chi2_reduced: Σ f² / (rows − unknowns) over the measurements in use.
         tracker_T_base: fitted pose of the robot base in the (first station's) tracker frame, 4×4 (m).
@@ -122,6 +124,7 @@ class IdentificationResult(Result):
     tool: Any = field(default=None, repr=False)
     coverage: Any = field(default=None, repr=False)
     fit_quality: Any = field(default=None, repr=False)
+    tcp_std_at: str = "training"
 
     @property
     def converged(self) -> bool:
@@ -243,8 +246,14 @@ class IdentificationResult(Result):
             history=[{"step": "identify", "data": self.source, "stations": list(self.stations),
                       "n_measurements": self.n_measurements, "rms_m": self.rms_m}],
             discrepancy=self.discrepancy, q_work=None if self.tool is None else self.tool.q_work,
-            tool_source="" if self.tool is None or self.tool.tcp_m is None else self.tool.source,
-            coverage=self.coverage)
+            tool_source=self._tool_source(), coverage=self.coverage)
+
+    def _tool_source(self) -> str:
+        """Where the model's TCP comes from: the data header's or the cell's tool, else a non-zero ``tcp_m`` the
+        measurement model was built with; "" when nothing stated a TCP (``compensate`` then asks for one)."""
+        if self.tool is not None and self.tool.tcp_m is not None:
+            return self.tool.source or "the measurement model's tool"
+        return "the measurement model's tcp_m" if np.any(np.asarray(self.model.tcp_m, float) != 0) else ""
 
     def to_dict(self) -> dict:
         """Plain JSON-able dict (SI units)."""
@@ -287,6 +296,7 @@ class IdentificationResult(Result):
             "discrepancy": None if self.discrepancy is None else {
                 "kind": self.discrepancy.kind, "decision": self.discrepancy.decision, "cv": self.discrepancy.cv},
             "tcp_std_m": self.tcp_std_m,
+            "tcp_std_at": self.tcp_std_at,
             "identifiability": self.identifiability.to_dict() if self.identifiability is not None else None,
         }
 
@@ -326,7 +336,10 @@ class IdentificationResult(Result):
         if self.discrepancy is not None:
             out.append(f"  {self.discrepancy.decision}")
         if self.tcp_std_m.size:
-            out.append(f"  predicted TCP std at {self.tcp_std_m.size} working configurations: mean "
+            n = self.tcp_std_m.size
+            at = (f"{n} working configuration{'s' if n > 1 else ''}" if self.tcp_std_at == "working" else
+                  f"the {n} training poses (no working configurations given)")
+            out.append(f"  predicted TCP std at {at}: mean "
                        f"{self.tcp_std_m.mean() * 1e6:.2f} µm, max {self.tcp_std_m.max() * 1e6:.2f} µm")
         out.append(f"  {len(self.names)} estimated parameters (value ± std; mm or mrad):")
         for n, v, s in zip(self.names, self.values, self.std):
