@@ -336,9 +336,9 @@ class IdentificationResult(Result):
         if self.discrepancy is not None:
             out.append(f"  {self.discrepancy.decision}")
         if self.tcp_std_m.size:
-            n = self.tcp_std_m.size
-            at = (f"{n} working configuration{'s' if n > 1 else ''}" if self.tcp_std_at == "working" else
-                  f"the {n} training poses (no working configurations given)")
+            t = self.tcp_std_m.size
+            at = (f"{t} working configuration{'s' if t > 1 else ''}" if self.tcp_std_at == "working" else
+                  f"the {t} training poses (no working configurations given)")
             out.append(f"  predicted TCP std at {at}: mean "
                        f"{self.tcp_std_m.mean() * 1e6:.2f} µm, max {self.tcp_std_m.max() * 1e6:.2f} µm")
         out.append(f"  {len(self.names)} estimated parameters (value ± std; mm or mrad):")
