@@ -65,7 +65,9 @@ def simulated() -> None:
     Yt = truth_tcp(Qt)
     ts = TargetSet([str(i) for i in range(N_TARGETS)], Yt, None, None, list(robot.joint_names),
                    no_aux(robot, N_TARGETS), "targets")
-    res = compensate(cm, ts, CompensationOptions(frame="cell"))
+    # the targets are where the true reflector goes: the TCP is the fitted reflector (a model that states no TCP is
+    # refused without one)
+    res = compensate(cm, ts, CompensationOptions(frame="cell", tcp_m=cm.setups[cm.station(None)].reflector_m))
     print(res.summary())
     e_nom = np.linalg.norm(truth_tcp(res.q_nominal) - Yt, axis=1)
     e_cmp = np.linalg.norm(truth_tcp(res.q) - Yt, axis=1)
@@ -94,7 +96,7 @@ def real_ur10() -> None:
     e = np.linalg.norm(forward(cm, held.q, held) - held.position_m, axis=1)
     ts = TargetSet([str(i) for i in range(len(held))], held.position_m, None, held.q, list(robot.joint_names),
                    held, "held")
-    res = compensate(cm, ts)
+    res = compensate(cm, ts, CompensationOptions(tcp_m=cm.setups[cm.station(None)].reflector_m))  # measured points
     ok = np.array([s == "ok" for s in res.target_status])
     dq = np.degrees(np.abs(res.q - held.q)[ok]).max(axis=1)
     print(f"\nreal UR10, IPA Series C: geometry calibrated on {len(tr_idx)} rows, {len(held)} held-out rows")

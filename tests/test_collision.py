@@ -256,18 +256,23 @@ def test_working_configuration_in_collision_is_named(coll15):
     q_bad = Q[np.flatnonzero(g[:, robot_rows].min(axis=1) < -0.05)[0]]
     d = _cell_dict()
     d["working_configurations_deg"] = [np.degrees(q_bad).tolist()]
-    with pytest.raises(InputError, match="working configuration 0 is in collision"):
+    with pytest.raises(InputError, match=r"working configuration\(s\) in collision: 0 \(robot:"):
         CollisionModel(cell_from_dict(d, "bad.yaml"))
 
 
-def test_working_configuration_out_of_sight_is_named(kr15, coll15):
+def test_working_configuration_out_of_sight_is_accepted_and_named(kr15, coll15):
+    """A working configuration whose beam is blocked is where the robot works, not where it is measured: the cell is
+    accepted, the summary names it and what blocks the beam."""
     refl = coll15._endpoints(kr15.q_work)[1][0, coll15.beam]  # reflector at the working configuration
     W_refl = kr15.W_T_base.act(refl)
     mid = 0.5 * (W_refl + kr15.W_T_tracker.translation)
     d = _cell_dict()
     d["obstacles"]["capsules"].append({"name": "screen", "a_m": mid.tolist(), "b_m": mid.tolist(), "radius_m": 0.2})
-    with pytest.raises(InputError, match="out of the tracker's sight.*screen"):
-        CollisionModel(cell_from_dict(d, "bad.yaml"))
+    cell = cell_from_dict(d, "hidden.yaml")
+    assert cell.hidden_work == {} and "out of the tracker's sight" not in cell.summary()
+    CollisionModel(cell)
+    assert list(cell.hidden_work) == [0] and cell.hidden_work[0] == "screen"
+    assert "working configuration(s) 0 (beam blocked by screen) out of the tracker's sight" in cell.summary()
 
 
 def test_no_feasible_random_pose_is_reported():
@@ -363,8 +368,11 @@ def test_every_overlap_is_listed_at_once_with_the_skip_pairs_hint(coll15):
     with pytest.raises(InputError) as err:
         CollisionModel(cell_from_dict(d, "bad.yaml"))
     msg = str(err.value)
-    assert "\n" not in msg and msg.count("working configuration 0 is in collision") >= len(bad) >= 2
+    # grouped by cause: the cause and its fix named once, the configuration once with every pair
+    assert "\n" not in msg and msg.count("in collision") == 1 and len(bad) >= 2
+    assert msg.count("list them under skip_pairs") == 1
+    assert msg.count("working configuration(s) in collision: 0 (") == 1
     hint = msg.split("skip_pairs: [", 1)[1]
     for pair in bad:
         a, b = pair.split("|")
-        assert f"({pair}," in msg.replace("robot:", "") and f"[{a}, {b}]" in hint
+        assert f"{pair}, " in msg.replace("robot:", "") and f"[{a}, {b}]" in hint

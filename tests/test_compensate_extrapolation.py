@@ -36,6 +36,7 @@ def narrow(request):
     rng = np.random.default_rng(21)
     Q = CENTRE + rng.uniform(-0.25, 0.25, (60, 6))
     cm = identify(tm, simulate(tm, Q, truth, seed=22), discrepancy=request.param).calibrated_model()
+    cm.tcp_m, cm.tool_source = cm.setups[cm.station(None)].reflector_m.copy(), "the test: the TCP is the reflector"
     Q_in = CENTRE + np.array([0.05, -0.04, 0.03, 0.05, -0.05, 0.02])
     Q_out = CENTRE + np.array([-2.2, 0.7, -2.4, 1.5, 0.3, 1.0])  # far from every training configuration
     Qt = np.vstack([Q_in, Q_out])

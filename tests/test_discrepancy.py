@@ -247,7 +247,8 @@ def test_compensation_includes_the_discrepancy(withheld):
     assert np.abs(goal - plain).max() > 1e-6                    # the discrepancy moves the predicted TCP
     ts = TargetSet([f"t{i}" for i in range(8)], goal, None, None, list(cm.robot.joint_names),
                    MeasurementSet(list(cm.robot.joint_names), Q, np.full((len(Q), 3), np.nan)))
-    res = compensate(cm, ts, CompensationOptions(frame="base"))
+    refl = cm.setups[cm.station(None)].reflector_m  # forward's point: the TCP these targets are at
+    res = compensate(cm, ts, CompensationOptions(frame="base", tcp_m=refl))
     ok = np.array([s in ("ok", "extrapolated") for s in res.target_status])  # reached (extrapolated: flagged)
     assert ok.sum() >= 6 and [s == "extrapolated" for s in res.target_status] == res.extrapolation.tolist()
     assert np.abs(forward(cm, res.q[ok], frame="base") - goal[ok]).max() < 1e-9

@@ -152,8 +152,8 @@ def test_compensate_states_the_orientation_sigma(sim):
     aux = MeasurementSet(robot.joint_names, np.zeros((40, robot.nq)), np.full((40, 3), np.nan))
     ts = TargetSet([str(i) for i in range(40)], pos, Rotation.from_matrix(R).as_rotvec(), Qt,
                    list(robot.joint_names), aux, "six")
-    res = compensate(cm, ts, CompensationOptions(frame="cell", tool_length_m=0.15))
     lab = cm.station(None)
+    res = compensate(cm, ts, CompensationOptions(frame="cell", tool_length_m=0.15, tcp_m=cm.setups[lab].reflector_m))
     W, s, sl = orientation_sigma(cm, res.q, None, lab, np.array([lab] * 40, dtype=object), 0.15)
     assert np.allclose(res.sigma_rot_rad, np.linalg.norm(s, axis=1), rtol=1e-12)
     assert np.allclose(res.sigma_at_length_m, sl, rtol=1e-12) and res.tool_length_m == 0.15
@@ -181,13 +181,14 @@ def test_cli_compensate_program_of_a_6d_model(sim, tmp_path):
         w = csv.writer(fh)
         w.writerow(names)
         w.writerows(te.q[:8].tolist())
+    tcp = ",".join(f"{v:.17g}" for v in cm.setups[cm.station(None)].reflector_m)  # the measured point
     rc, out, err = run_cli("compensate", "--model", tmp_path / "m.json", "--program", tmp_path / "prog.csv",
-                           "--out", tmp_path / "c.csv", "--tool-length", "0.25")
+                           "--out", tmp_path / "c.csv", "--tool-length", "0.25", "--tcp", tcp)
     assert rc == 0, err
     assert "predicted orientation sigma (3-D, the measured probe's frame)" in out and "at 250 mm" in out
     rows = list(csv.DictReader(open(tmp_path / "c.csv")))
     assert all(float(r["sigma_rot_rad"]) > 0 and float(r["sigma_at_length_m"]) > 0 for r in rows)
     rc, out, err = run_cli("compensate", "--model", tmp_path / "m.json", "--program", tmp_path / "prog.csv",
-                           "--out", tmp_path / "d.csv", "--tool-length", "250")
+                           "--out", tmp_path / "d.csv", "--tool-length", "250", "--tcp", tcp)
     assert rc == 2 and "--tool-length" in err and len(err.strip().splitlines()) == 1
     assert not (tmp_path / "d.csv").exists()

@@ -35,7 +35,8 @@ Schema (SI units; angles may be given in degrees with a ``_deg`` key instead of
     tracker: {xyz_m: [...], rpy_deg: [...]}              # tracker frame in the cell frame
     reflector_m: [x, y, z]           # reflector in the tool frame
     tcp_m: [x, y, z]                 # KPI point (TCP) in the tool frame
-    noise: {sigma_xyz_m: [sx, sy, sz]}                   # or {range_a_m: a, range_b: b}
+    noise: {sigma_xyz_m: [sx, sy, sz]}                   # or {range_a_m: a, range_b: b}; identify --cell takes it
+                                                         # for the tracker's noise when the data have no sigma columns
     joint_bounds: {lower_deg: [...], upper_deg: [...]}   # optional override of the URDF limits
     robot_capsules: urdf             # or urdf_visual, or a list of {name, link, a_m, b_m, radius_m} (link frame)
     extra_capsules: []               # more robot capsules, same fields (e.g. a tool)
@@ -47,7 +48,8 @@ Schema (SI units; angles may be given in degrees with a ``_deg`` key instead of
       - {name: fixture, mesh: fixture.stl, scale: 0.001, pose: {...}}
     skip_pairs: [[base_link, link_2], [link_1, pedestal]]   # capsule/link/obstacle/environment names
     beam: {radius_m: 0.005, skip: []}                    # laser beam capsule tracker -> reflector
-    incidence_max_deg: 30
+    incidence_max_deg: 30            # largest angle between the tool frame's z axis (the reflector's axis:
+                                     # mount the reflector facing along tool z) and the beam to the tracker (eq. 4)
     clearance_m: 0.0                 # required distance between any two capsules
     working_configurations_deg: [[a1, ..., a6]]
     working_targets:                 # and/or TCP targets (cell frame), solved by IK (pin_kpi_oed.cell.working_targets)
@@ -383,7 +385,8 @@ def cell_from_dict(d: dict, source: str = "", base_dir: Path | None = None, robo
                 W_T_base=W_T_base, W_T_tracker=W_T_tracker, reflector_m=reflector, tcp_m=tcp, noise=noise,
                 q_lower=lo, q_upper=hi, robot_capsules=caps, obstacles=obstacles, half_spaces=halfs,
                 skip_pairs=skips, beam_radius_m=beam_r, beam_skip=beam_skip, incidence_max_deg=inc,
-                clearance_m=clr, q_work=qw, measurements=m, max_random_tries=tries, environment=env)
+                clearance_m=clr, q_work=qw, measurements=m, max_random_tries=tries, environment=env,
+                noise_stated=bool(d.get("noise")))
     if d.get("working_targets"):
         from pin_kpi_oed.cell.working_targets import solve_working_targets
 

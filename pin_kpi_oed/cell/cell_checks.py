@@ -1,7 +1,8 @@
 """The cell's own consistency, checked when its constraint model is built: the robot's fixed capsules clear of the
-obstacles and half-spaces, the tracker outside every obstacle, every working configuration collision-free and in the
-tracker's line of sight. Each failure is one message naming the capsules, with the ``skip_pairs`` entry that fixes
-capsules overlapping by construction."""
+obstacles and half-spaces, the tracker outside every obstacle, every working configuration collision-free (its line
+of sight to the tracker is not required: the hidden ones are named in the cell's summary). Each failure is one
+message naming the capsules, grouped by cause, with the ``skip_pairs`` entry that fixes capsules overlapping by
+construction."""
 
 from __future__ import annotations
 
@@ -93,7 +94,15 @@ def _tracker_in_environment(coll: SegmentModel, where: str) -> None:
                                  "obstacle")
 
 def check_working(coll: SegmentModel) -> None:
-    """Every working configuration must be collision-free and in the tracker's line of sight."""
+    """Every working configuration must be collision-free (and clear by the required clearance); it need not be in
+    the tracker's line of sight: it is where the robot works, not where it is measured (a TCP inside a car body is
+    the common case). The hidden ones are kept in ``cell.hidden_work`` (index -> what blocks the beam), which the
+    cell's summary names.
+
+    Raises:
+        InputError: one line, the problems grouped by cause (each configuration once per cause, the first few
+            named) and each cause's fix named once.
+    """
     cell = coll.cell
     saved = (coll.pairs, coll.half, coll.with_incidence, coll.info, coll.jac_rows, coll.jac_cols)
     coll.set_rows(coll.rows_all)
@@ -103,21 +112,34 @@ def check_working(coll: SegmentModel) -> None:
         coll.pairs, coll.half, coll.with_incidence, coll.info, coll.jac_rows, coll.jac_cols = saved
     names = coll.rows_all["rows"].names
     kinds = coll.rows_all["rows"].kind
-    problems, pairs = [], []
+    hidden: dict[int, str] = {}
+    groups: dict[str, dict[int, list[str]]] = {}
+    pairs: list[tuple[str, str]] = []
     for i in range(g.shape[0]):
         for r in np.flatnonzero(g[i] < 0):
+            nm = names[r]
             if kinds[r] == INCID:
                 continue  # the reflector need not face the tracker while working
-            nm = names[r]
-            what = "is out of the tracker's sight: the laser beam is blocked" if nm.startswith("beam") \
-                else "is in collision"
+            if nm.startswith("beam"):
+                hidden.setdefault(i, nm.removeprefix("beam|").removeprefix("beam@"))
+                continue  # nor be seen by it
             if g[i, r] + cell.clearance_m >= 0:  # clear, but inside the required clearance (margins included)
-                what = (f"is closer than the required clearance of {cell.clearance_m * 1e3:g} mm"
-                        + _clearance_parts(cell, float(g[i, r]) + cell.clearance_m))
-            elif kinds[r] == PAIR and not nm.startswith("beam"):
-                pair = tuple(nm.removeprefix("robot:").split("|", 1))
-                pairs += [pair] if pair not in pairs else []
-            problems.append(f"working configuration {i} {what} ({nm}, {g[i, r] * 1e3:.1f} mm)")
-    if problems:
-        raise InputError(f"{cell.source or cell.name}: " + "; ".join(problems)
-                         + (f"; {skip_hint(pairs)}" if pairs else ""))
+                cause = (f"closer than the required clearance of {cell.clearance_m * 1e3:g} mm"
+                         + _clearance_parts(cell, float(g[i, r]) + cell.clearance_m))
+            else:
+                cause = "in collision"
+                if kinds[r] == PAIR:
+                    pair = tuple(nm.removeprefix("robot:").split("|", 1))
+                    pairs += [pair] if pair not in pairs else []
+            groups.setdefault(cause, {}).setdefault(i, []).append(f"{nm}, {g[i, r] * 1e3:.1f} mm")
+    cell.hidden_work = hidden
+    if groups:
+        parts = []
+        for cause, per_conf in groups.items():
+            shown = [f"{i} ({'; '.join(items[:6])}" + (f"; and {len(items) - 6} more)" if len(items) > 6 else ")")
+                     for i, items in list(per_conf.items())[:8]]
+            more = f" and {len(per_conf) - 8} more configuration(s)" if len(per_conf) > 8 else ""
+            parts.append(f"working configuration(s) {cause}: {', '.join(shown)}{more}")
+        raise InputError(f"{cell.source or cell.name}: " + "; ".join(parts)
+                         + (f"; {skip_hint(pairs)}" if pairs else "")
+                         + "; working configurations must be collision-free (their line of sight is not required)")

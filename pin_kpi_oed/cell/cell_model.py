@@ -10,6 +10,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import pinocchio as pin
 
+from pin_kpi_oed.data.tool_header import ToolSpec
 from pin_kpi_oed.model.noise import NoiseModel
 from pin_kpi_oed.model.robot import Robot
 from pin_kpi_oed.model.tracker import TrackerModel
@@ -81,6 +82,10 @@ class Cell:
         reflector_m: reflector in the tool frame (m).
         tcp_m: KPI point in the tool frame (m).
         noise: tracker noise model.
+        hidden_work: the working configurations out of the tracker's sight (index -> what blocks the beam), found
+            when the cell's constraint model is built; a working configuration need not be seen by the tracker.
+        noise_stated: the cell file states its noise (a ``noise`` field); a cell without one carries the
+            noise model's default, which ``identify --cell`` does not take for the tracker's noise.
         q_lower, q_upper: joint bounds of the design (rad).
         robot_capsules: robot capsules (link frames).
         obstacles: obstacle capsules (cell frame).
@@ -126,6 +131,8 @@ class Cell:
     clearance_margin_m: float = 0.0
     paths: list = field(default_factory=list)
     orientation_length_m: float = 0.2
+    noise_stated: bool = True
+    hidden_work: dict = field(default_factory=dict)
 
     @property
     def q_path(self) -> np.ndarray:
@@ -150,10 +157,25 @@ class Cell:
         """Tracker origin (beam start) in the robot base frame (m)."""
         return (self.W_T_base.inverse() * self.W_T_tracker).translation.copy()
 
+    def tool_spec(self, source: str = "") -> ToolSpec:
+        """What the cell states about the tool: robot URDF, tool frame, reflector, TCP, working configurations.
+
+        Args:
+            source: where the fields come from, for messages (default: ``cell <file or name>``).
+
+        Returns:
+            The :class:`~pin_kpi_oed.data.tool_header.ToolSpec` (SI units).
+        """
+        q_work = np.asarray(self.q_work, float) if self.q_work is not None and np.size(self.q_work) else None
+        return ToolSpec(robot=str(self.robot.urdf_path), tool_frame=self.robot.tool_frame,
+                        reflector_m=self.reflector_m.copy(), tcp_m=self.tcp_m.copy(), q_work=q_work,
+                        source=source or f"cell {self.source or self.name}")
+
     def tracker_model(self) -> TrackerModel:
-        """The measurement model of the cell (nominal parameters; robot bounds replaced by the cell's)."""
+        """The measurement model of the cell (nominal parameters; robot bounds replaced by the cell's), with the
+        cell's tool (TCP, working configurations: :meth:`tool_spec`) that a calibrated model keeps."""
         return TrackerModel(self.robot, tracker_T_base=self.tracker_T_base, reflector_m=self.reflector_m.copy(),
-                            tcp_m=self.tcp_m.copy(), noise=self.noise)
+                            tcp_m=self.tcp_m.copy(), noise=self.noise, tool=self.tool_spec())
 
     def to_dict(self) -> dict:
         """The cell in plain numbers (SI units, cell frame for obstacles)."""
@@ -186,11 +208,14 @@ class Cell:
         }
 
     def summary(self) -> str:
-        """Short readable description."""
+        """Short readable description (the working configurations out of the tracker's sight named)."""
+        hidden = ", ".join(f"{i} (beam blocked by {b})" for i, b in self.hidden_work.items())
         return (f"cell {self.name}: robot {self.robot.name} ({self.robot.tool_frame}), "
                 f"{len(self.robot_capsules)} robot capsules, {len(self.obstacles)} obstacle capsules, "
                 f"{len(self.half_spaces)} half-spaces, "
                 + (f"{len(self.environment)} environment file(s), " if self.environment else "")
                 + f"{self.q_work.shape[0]} working configuration(s), "
                 + (f"{len(self.paths)} working path(s) ({len(self.q_path)} samples), " if self.paths else "")
-                + f"incidence <= {self.incidence_max_deg:g} deg")
+                + f"incidence <= {self.incidence_max_deg:g} deg"
+                + (f"; working configuration(s) {hidden} out of the tracker's sight (where the robot works, not where "
+                   "it is measured)" if hidden else ""))

@@ -24,6 +24,7 @@ import numpy as np
 
 from pin_kpi_oed.cli.tool import model_cell_tool
 from pin_kpi_oed.cli.util import add_table_options, parse_floats, table_options
+from pin_kpi_oed.errors import InputError
 
 __all__ = ["register", "run"]
 
@@ -53,8 +54,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--station", default=None, help="station of the cell frame and default TCP (default: the model's)")
     p.add_argument("--tcp", default=None,
                    help="TCP point x,y,z (m) in the model's tool frame (printed; the frame the calibration used); "
-                        "default the model's TCP when its cell or data stated one, else the station's reflector "
-                        "(what was measured)")
+                        "default the model's TCP when its cell or data stated one, else the TCP of --cell; a model "
+                        "without either is refused (the reflector, what was measured, is not the TCP)")
     p.add_argument("--cell", default=None,
                    help="cell YAML file or shipped cell name: every compensated configuration is checked for "
                         "collisions in it (status 'collision'); its robot, tool frame and TCP must be the model's, "
@@ -93,6 +94,14 @@ def run(args: argparse.Namespace) -> int:
         model_cell_tool(model, args.model, cell, args.cell)  # the model's robot, tool frame and TCP are the cell's
     kw = table_options(args)
     tcp = parse_floats(args.tcp, 3, "--tcp") if args.tcp else None
+    if tcp is None and not model.tool_source:  # the TCP of --cell, else refused: the reflector is not the TCP
+        if cell is None:
+            refl = model.setups[model.station(args.station)].reflector_m
+            raise InputError(f"{args.model}: the model states no TCP (identified without --cell or a data header "
+                             f"stating tcp_m; only the reflector {np.round(refl, 6).tolist()} m was measured): give "
+                             f"--tcp x,y,z (m, in tool frame {robot.tool_frame}), or --cell CELL (its tcp_m), or "
+                             "identify with --cell CELL so that --model-out keeps the TCP")
+        tcp = np.asarray(cell.tcp_m, float).copy()
     opt = CompensationOptions(frame=args.frame, station=args.station, tcp_m=tcp, seed=args.seed, cell=cell,
                               max_branch_step_rad=args.max_branch_step, tool_length_m=args.tool_length)
     if args.program:

@@ -109,10 +109,12 @@ def _register_identify(subparsers: argparse._SubParsersAction) -> None:
                    help="write the calibrated model file here (geometry, effects, set-up per station, noise; "
                         "for pin-kpi-oed register / predict)")
     i.add_argument("--sigma", default=None,
-                   help="tracker noise sigma (m), 1 or 3 values; overrides the file's sigma columns. Without it "
-                        "and without sigma columns the weights are uniform and the covariance is scaled by the "
-                        "reduced chi2")
-    i.add_argument("--sigma-rot", default="1e-4", help="orientation noise of 6-D data (rad, default 1e-4)")
+                   help="tracker noise sigma (m), 1 or 3 values; overrides the file's sigma columns. Without it the "
+                        "noise level is the data's sigma columns, else the noise of --cell (its 'noise' field, as "
+                        "the Python identify with cell.tracker_model()), else unknown: the weights are uniform and "
+                        "the covariance is scaled by the reduced chi2")
+    i.add_argument("--sigma-rot", default=None,
+                   help="orientation noise of 6-D data (rad; default: the noise of --cell, else 1e-4)")
     i.add_argument("--position-only", action="store_true", help="ignore rx, ry, rz columns")
     i.add_argument("--loss", default=None, choices=["auto", "linear", "soft_l1", "huber", "cauchy"],
                    help="loss: linear (Levenberg-Marquardt) or robust (outliers flagged); default auto: linear, "
@@ -258,16 +260,32 @@ def _validation(model: Any, train: Any, opts: Any, result: Any, test: Any, reg: 
     return out, lines
 
 
-def _noise_and_weights(args: argparse.Namespace, train: Any) -> tuple[Any, str, bool]:
-    """(noise model, weighting, scale covariance by reduced chi2) from ``--sigma`` / ``--sigma-rot``."""
+def _noise_and_weights(args: argparse.Namespace, train: Any, cell: Any = None) -> tuple[Any, str, bool, str]:
+    """(noise model, weighting, scale covariance by reduced chi2, where the noise level comes from).
+
+    The noise level, in this order: ``--sigma``, the data's sigma columns, the noise of ``--cell`` (when the cell
+    file states one), else unknown (uniform weights, the covariance scaled by the reduced chi2). ``--sigma-rot``
+    (default: the cell's, else 1e-4 rad) is the orientation noise of 6-D data.
+    """
     from pin_kpi_oed.model.noise import NoiseModel
 
-    sigma_rot = _positive(args.sigma_rot, "--sigma-rot")
+    cell_noise = cell.noise if cell is not None and getattr(cell, "noise_stated", False) else None
+    default_rot = cell_noise.sigma_rot_rad if cell_noise is not None else 1e-4
+    sigma_rot = default_rot if args.sigma_rot is None else _positive(args.sigma_rot, "--sigma-rot")
     if args.sigma is not None:
         noise = NoiseModel(sigma_xyz_m=tuple(parse_floats(args.sigma, (1, 3), "--sigma")), sigma_rot_rad=sigma_rot)
-        return noise, "noise", False
+        return noise, "noise", False, "--sigma"
+    if cell_noise is not None:
+        noise = NoiseModel(sigma_xyz_m=tuple(cell_noise.sigma_xyz_m), range_a_m=cell_noise.range_a_m,
+                           range_b=cell_noise.range_b, sigma_rot_rad=sigma_rot)
+        if train.sigma_m is not None:
+            return noise, "auto", False, "the data's sigma columns"
+        return noise, "noise", False, f"the noise of --cell {args.cell}"
     noise = NoiseModel(sigma_xyz_m=(1e-5,) * 3, sigma_rot_rad=sigma_rot)
-    return noise, "auto", train.sigma_m is None
+    if train.sigma_m is not None:
+        return noise, "auto", False, "the data's sigma columns"
+    why = " (the cell file states no noise)" if cell is not None else ""
+    return noise, "auto", True, f"unknown{why}: uniform weights, the covariance scaled by the reduced chi2"
 
 
 def _nominal_reflector(args: argparse.Namespace, robot: Any, noise: Any, train: Any,
@@ -391,10 +409,12 @@ def run_identify(args: argparse.Namespace) -> int:
     train = read_data_files(args.data, robot, opts=table_options(args, robot))
     train.tool = ct.tool  # the agreed tool travels into the model file
     test, reg = read_validation(args, robot)
-    noise, weights, scale = _noise_and_weights(args, train)
+    noise, weights, scale, noise_source = _noise_and_weights(args, train, ct.cell)
+    if not args.quiet:
+        print(f"noise level: {noise_source}")
     effects = _effects(args.effects, robot, train)
     opts = IdentifyOptions(weights=weights, scale_covariance=scale, use_orientation=not args.position_only,
-                           loss=args.loss or "auto", max_nfev=args.max_nfev,
+                           loss=args.loss or "auto", max_nfev=args.max_nfev, Q_work=ct.tool.q_work,
                            reflector_per_station=args.reflector_per_station,
                            # the command runs the discrepancy (seeded by --seed) and the gate (with the validation
                            # rows and --accept-poor-fit) itself, on the final fit
@@ -402,6 +422,8 @@ def run_identify(args: argparse.Namespace) -> int:
     reflector, estimated = _nominal_reflector(args, robot, noise, train, opts, ct.tool)
     tcp = ct.tool.tcp_m if ct.tool.tcp_m is not None else np.zeros(3)
     model = TrackerModel(robot, reflector_m=reflector, tcp_m=tcp, noise=noise)
+    if ct.cell is not None:  # only the start of the registration: the same model as cell.tracker_model()
+        model.tracker_T_base = ct.cell.tracker_T_base
     if args.fix:
         model.layout.fix(args.fix)
     if geometry_prior is not None:
@@ -411,6 +433,7 @@ def run_identify(args: argparse.Namespace) -> int:
     out = {"result": result.to_dict(), "data": list(args.data), "validate": args.validate,
            "reflector_nominal_m": reflector.tolist(),
            "reflector_nominal_source": "estimated" if estimated else ("given" if args.reflector else "cell/header"),
+           "noise_source": noise_source,
            "tool": {"tool_frame": robot.tool_frame, **ct.tool.to_dict(), "source": ct.tool.source}}
     lines: list[str] = []
     if test is not None:

@@ -35,7 +35,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    + " (the program format registry, pin_kpi_oed.program.formats)")
     p.add_argument("--out", required=True, help="program file (krl: the .src; the .dat is written beside it)")
     p.add_argument("--design-name", dest="design_name", default=None,
-                   help="which design of the file (default: the file's q_meas design)")
+                   help="which design of the file (default: the file's q_meas design, the one simulate --design and "
+                        "evaluate take: the kpi design, else the file's last)")
     p.add_argument("--margin", type=float, default=None,
                    help="clearance every move keeps (m; default: half the design's --clearance-margin, which "
                         "the poses keep; 0 for designs made without one)")
@@ -108,7 +109,7 @@ def run_export(args: argparse.Namespace) -> int:
     if not (np.isfinite(args.dwell) and args.dwell >= 0):
         raise InputError(f"--dwell: must be a finite number >= 0 s, got {args.dwell}")
     df = load_design(args.design)
-    name = args.design_name or df.raw.get("q_meas_criterion") or df.designs[-1].criterion
+    name = args.design_name or df.default_criterion
     entry = df.design(name)
     force = bool(getattr(args, "force", False))
     quiet = bool(getattr(args, "quiet", False))

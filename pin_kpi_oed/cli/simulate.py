@@ -56,7 +56,8 @@ def register_simulate(subparsers: argparse._SubParsersAction) -> None:
                    help="design JSON (pin-kpi-oed design --json): measure its poses (--criterion) in its cell (robot, "
                         "tool frame, tracker pose, reflector, TCP), instead of random poses")
     s.add_argument("--criterion", default=None,
-                   help="which design of --design to measure (default: the file's last, e.g. kpi)")
+                   help="which design of --design to measure (default: the file's q_meas design, the one export "
+                        "and evaluate take: the kpi design, else the file's last)")
     s.add_argument("--poses", default=None,
                    help="CSV with the robot's joint columns (rad / m): measure these poses (other columns ignored)")
     s.add_argument("--tool", default=None, help=TOOL_HELP)
@@ -274,11 +275,12 @@ def run_simulate(args: argparse.Namespace) -> int:
 
 
 def _design_poses(path: str, criterion: str | None) -> tuple[Any, np.ndarray, str]:
-    """(design file, poses, criterion) of ``simulate --design``: the named design, else the file's last."""
+    """(design file, poses, criterion) of ``simulate --design``: the named design, else the file's default one
+    (:attr:`~pin_kpi_oed.design.design_file.DesignFile.default_criterion`, as ``export`` and ``evaluate``)."""
     from pin_kpi_oed.design.design_file import load_design
 
     df = load_design(path)
     if not df.designs:
         raise InputError(f"--design {path}: holds no design")
-    entry = df.design(criterion) if criterion else df.designs[-1]
+    entry = df.design(criterion or df.default_criterion)
     return df, np.asarray(entry.q_meas, float), entry.criterion

@@ -13,8 +13,6 @@ from dataclasses import dataclass
 from typing import Any
 from collections.abc import Sequence
 
-import numpy as np
-
 from pin_kpi_oed.data.tool_header import ToolSpec, resolve_tool
 from pin_kpi_oed.errors import InputError
 
@@ -57,9 +55,7 @@ def add_cell_arg(p: argparse.ArgumentParser) -> None:
 
 def cell_tool_spec(cell: Any, source: str) -> ToolSpec:
     """The tool fields a cell states (robot URDF, tool frame, reflector, TCP, working configurations)."""
-    q_work = np.asarray(cell.q_work, float) if cell.q_work is not None and np.size(cell.q_work) else None
-    return ToolSpec(robot=str(cell.robot.urdf_path), tool_frame=cell.robot.tool_frame, reflector_m=cell.reflector_m,
-                    tcp_m=cell.tcp_m, q_work=q_work, source=source)
+    return cell.tool_spec(source)
 
 
 def canonical_robot(spec: ToolSpec | None) -> ToolSpec | None:

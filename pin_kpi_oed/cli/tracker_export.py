@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import argparse
 
-from pin_kpi_oed.model.robot import TOOL_HELP
+from pin_kpi_oed.model.robot import TOOL_FRAME_HELP
 
 __all__ = ["register", "run"]
 
@@ -27,7 +27,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("export", help="tracker point export (text)")
     p.add_argument("--joints", required=True, help="joint log CSV: point name + one column per joint")
     p.add_argument("--robot", required=True, help="URDF path or robot name (its joints name the columns)")
-    p.add_argument("--tool", default=None, help=TOOL_HELP)
+    p.add_argument("--tool", default=None,
+                   help=TOOL_FRAME_HELP + "; written into the output's tool header when given. The reflector and "
+                        "the TCP are not measured here: identify takes them from --cell (or --reflector)")
     p.add_argument("--out", required=True, help="write the measurement CSV here")
     p.add_argument("--angle-unit", choices=("deg", "rad"), default="deg", help="unit of the joint log (default deg)")
     p.add_argument("--units", default=None, help="length unit of the export if it has no 'Units:' comment (default mm)")

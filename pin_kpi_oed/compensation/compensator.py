@@ -74,7 +74,7 @@ from pin_kpi_oed.model.parameters import ParameterLayout
 from pin_kpi_oed.model.tracker import TrackerModel
 
 __all__ = ["FRAMES", "STATUSES", "CompensationOptions", "PoseModel", "CompensationResult", "compensate",
-           "compensate_program", "write_compensation", "forward"]
+           "compensate_program", "write_compensation", "forward", "check_tcp_stated"]
 
 #: Frames a target can be given in.
 FRAMES = ("cell", "base")
@@ -88,7 +88,7 @@ class CompensationOptions:
         frame: ``cell`` (tracker frame of the station) or ``base`` (robot base frame).
         station: the station whose set-up defines the cell frame and default TCP (default: the
             model's default station).
-        tcp_m: TCP point in the tool frame (m); default the station's reflector offset.
+        tcp_m: TCP point in the tool frame (m); default the model's TCP (a model that states none is refused).
         length_m: weight of the orientation rows (m per rad) in the IK norm and the condition number.
         max_iter: iterations per IK start.
         tol_m, tol_rad: convergence of the IK (position m, orientation rad).
@@ -326,12 +326,14 @@ def compensate(cm: CalibratedModel, targets: TargetSet, options: CompensationOpt
 
     Raises:
         InputError: targets without positions, joint names that differ from the model's robot,
-            an effect that needs a column (temperature, payload, time) the targets lack.
+            an effect that needs a column (temperature, payload, time) the targets lack, no TCP (neither
+            ``options.tcp_m`` nor one the model states).
     """
     opt = options or CompensationOptions()
     t0 = time.perf_counter()
     if targets.position_m is None:
         raise InputError(f"{targets.source or 'targets'}: no TCP positions (x, y, z) to compensate")
+    check_tcp_stated(cm, opt)
     _check_joints(cm, targets)
     _check_effects(cm, targets.aux)
     pm = PoseModel(cm, opt.frame, opt.station, opt.tcp_m)
@@ -374,12 +376,14 @@ def compensate_program(cm: CalibratedModel, program: TargetSet, options: Compens
         The :class:`CompensationResult` (``q_nominal`` = the program).
 
     Raises:
-        InputError: a program without joint values, or with values outside the joint limits.
+        InputError: a program without joint values, or with values outside the joint limits, no TCP (neither
+            ``options.tcp_m`` nor one the model states).
     """
     opt = options or CompensationOptions()
     t0 = time.perf_counter()
     if program.q is None:
         raise InputError(f"{program.source or 'program'}: no joint columns")
+    check_tcp_stated(cm, opt)
     _check_joints(cm, program)
     _check_effects(cm, program.aux)
     opt = CompensationOptions(**{**opt.__dict__, "frame": "base"})
@@ -395,6 +399,23 @@ def compensate_program(cm: CalibratedModel, program: TargetSet, options: Compens
     res.orientation = bool(orientation)
     res.correction_jump_rad = np.r_[0.0, np.abs(np.diff(cal.Q - Q0, axis=0)).max(axis=1)] if len(Q0) else np.zeros(0)
     return res
+
+
+def check_tcp_stated(cm: CalibratedModel, opt: CompensationOptions, where: str = "the calibrated model") -> None:
+    """Refuse to compensate without a TCP: neither ``opt.tcp_m`` nor a TCP the model states (``cm.tool_source``:
+    a cell or a measurement header named it). The reflector is where the calibration measured, not the point the
+    robot works with; taking it for the TCP puts the tool off the targets by the lever between the two.
+
+    Raises:
+        InputError: one line naming ``where`` and the two fixes.
+    """
+    if opt.tcp_m is not None or cm.tool_source:
+        return
+    refl = cm.setups[cm.station(opt.station)].reflector_m
+    raise InputError(f"{where} states no TCP (identified without a cell or a data header stating tcp_m; only the "
+                     f"reflector {np.round(refl, 6).tolist()} m was measured): give the TCP, tcp_m=[x, y, z] (m, in "
+                     f"tool frame {cm.robot.tool_frame}), or identify with the cell (its tcp_m) so that the model "
+                     "keeps it")
 
 
 def _check_joints(cm: CalibratedModel, ts: TargetSet) -> None:

@@ -190,6 +190,22 @@ class DesignFile:
         c = self.model.incidence_cos(np.zeros(self.model.n_params), Q)
         return np.degrees(np.arccos(np.clip(c, -1.0, 1.0)))
 
+    @property
+    def default_criterion(self) -> str:
+        """The design a command takes when none is named (``export``, ``simulate --design``, ``evaluate``): the
+        file's ``q_meas`` design (``q_meas_criterion``: the ``kpi`` design, else the last one the run made), else
+        the file's last design.
+
+        Raises:
+            InputError: the file holds no design.
+        """
+        named = self.raw.get("q_meas_criterion") if isinstance(self.raw, Mapping) else None
+        if named and any(d.criterion == named for d in self.designs):
+            return str(named)
+        if not self.designs:
+            raise InputError(f"{self.source}: holds no design")
+        return self.designs[-1].criterion
+
     def design(self, criterion: str) -> DesignEntry:
         """The design of a criterion.
 

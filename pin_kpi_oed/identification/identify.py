@@ -93,8 +93,9 @@ when the weights are only relative (unknown σ). The predicted TCP uncertainty a
 configurations is ``C_s = E C_pp Eᵀ`` (eq. 25) with E = ds/dP_B (first station's tracker
 frame), reported per configuration as ``sqrt(trace C_s,i)`` (m).
 
-Outliers: measurement i is flagged when ``‖f_i‖ > sqrt(χ²_{nh}(1 − α)) · s`` with s the
-robust (MAD) scale of the weighted residual components, 1.4826 · median |f|. With a robust
+Outliers: measurement i of m is flagged when ``‖f_i‖ > sqrt(χ²_{nh}(1 − α/m)) · s`` with s the
+robust (MAD) scale of the weighted residual components, 1.4826 · median |f| (a family-wise test: an
+outlier-free fit flags any row with probability about α, however many rows it has). With a robust
 loss the sequence is: plain least squares (start), robust fit (f_scale = 3 s unless given),
 flag, then plain least squares on the inliers, re-flag, until the flags settle (≤ 3 rounds);
 the estimate, its covariance and χ² are those of the final inlier fit (a robust loss alone
@@ -123,6 +124,7 @@ import numpy as np
 import pinocchio as pin
 
 from pin_kpi_oed.data.measurements import MeasurementSet
+from pin_kpi_oed.data.tool_header import ToolSpec
 from pin_kpi_oed.discrepancy.coverage import JointCoverage
 from pin_kpi_oed.errors import InputError, SolverError
 from pin_kpi_oed.identification.discrepancy_fit import discrepancy_options, result_discrepancy
@@ -186,6 +188,18 @@ def _check_effects_determined(effects: Sequence[Any], data: MeasurementSet) -> N
             why = note.replace(f"{eff.name}: skipped, ", "")
             raise InputError(f"{data.source or 'data'}: effect {eff.name} is not determined by the data: {why}; "
                              "leave it out of the effects (parameter 'effects')")
+
+
+def _result_tool(model: TrackerModel, data: MeasurementSet) -> ToolSpec | None:
+    """The tool a result keeps: the data's header, its missing TCP and working configurations filled from the tool
+    the model was declared with (``model.tool``: a cell's), or the model's alone."""
+    dt, mt = data.tool, getattr(model, "tool", None)
+    if dt is None or mt is None:
+        return dt if mt is None else mt
+    return replace(dt, tcp_m=mt.tcp_m if dt.tcp_m is None else dt.tcp_m,
+                   q_work=mt.q_work if dt.q_work is None else dt.q_work,
+                   source=dt.source if dt.tcp_m is not None and dt.q_work is not None else
+                   f"{dt.source}, {mt.source}")
 
 
 def _gate(result: IdentificationResult, model: TrackerModel, opts: IdentifyOptions) -> None:
@@ -296,5 +310,5 @@ def _fit(model: TrackerModel, data: MeasurementSet, inp: FitInputs, effects: Seq
         station_rows=list(prob.rows), P=P_hat, param_names=list(stations.layout.names), station_set=stations,
         reflector_per_station=bool(opts.reflector_per_station), source=data.source,
         held=[(e, np.asarray(t, float)) for e, t in opts.held_effects], time_s=time.perf_counter() - t_start,
-        tool=data.tool)
+        tool=_result_tool(model, data), tcp_std_at="training" if opts.Q_work is None else "working")
     return result

@@ -46,7 +46,8 @@ class IdentifyOptions:
             defaults. They enter the TCP's σ (:mod:`pin_kpi_oed.oed.held`).
         ident: a precomputed identifiability analysis of one station's working model (default:
             computed on ``N_EXCITATION`` seeded random configurations).
-        outlier_alpha: false-alarm probability of the outlier flag.
+        outlier_alpha: false-alarm probability of the outlier flag of a whole fit (family-wise: each of the m rows
+            is tested at ``outlier_alpha / m``, so an outlier-free fit flags any row with about this probability).
         max_nfev: maximum number of residual evaluations (default 50 × unknowns).
         tol: ftol, xtol and gtol of the solver.
         max_median_error_m: fail if the median position error after the fit exceeds it

@@ -55,6 +55,8 @@ class IdentificationResult(Result):
         outliers: indices of flagged measurements.
         tcp_std_m: predicted TCP standard deviation sqrt(trace C_s) per working configuration, (t,) m, with the
             joint-placement parameters held at nominal under their tolerances (:mod:`pin_kpi_oed.oed.held`).
+        tcp_std_at: where ``tcp_std_m`` is: ``working`` (the working configurations ``Q_work``) or ``training``
+            (the training poses, when no working configurations were given).
         cost: final cost ½ Σ ρ(f²) (dimensionless).
         chi2_reduced: Σ f² / (rows − unknowns) over the measurements in use.
         tracker_T_base: fitted pose of the robot base in the (first station's) tracker frame, 4×4 (m).
@@ -130,6 +132,7 @@ class IdentificationResult(Result):
     tcp_held_m: np.ndarray = field(default_factory=lambda: np.zeros(0))
     held_term: Any = field(default=None, repr=False)
     tcp_held_contrib_m: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    tcp_std_at: str = "training"
 
     @property
     def converged(self) -> bool:
@@ -258,8 +261,14 @@ class IdentificationResult(Result):
             history=[{"step": "identify", "data": self.source, "stations": list(self.stations),
                       "n_measurements": self.n_measurements, "rms_m": self.rms_m}],
             discrepancy=self.discrepancy, q_work=None if self.tool is None else self.tool.q_work,
-            tool_source="" if self.tool is None or self.tool.tcp_m is None else self.tool.source,
-            coverage=self.coverage)
+            tool_source=self._tool_source(), coverage=self.coverage)
+
+    def _tool_source(self) -> str:
+        """Where the model's TCP comes from: the data header's or the cell's tool, else a non-zero ``tcp_m`` the
+        measurement model was built with; "" when nothing stated a TCP (``compensate`` then asks for one)."""
+        if self.tool is not None and self.tool.tcp_m is not None:
+            return self.tool.source or "the measurement model's tool"
+        return "the measurement model's tcp_m" if np.any(np.asarray(self.model.tcp_m, float) != 0) else ""
 
     def to_dict(self) -> dict:
         """Plain JSON-able dict (SI units)."""
@@ -306,6 +315,7 @@ class IdentificationResult(Result):
             "held": None if self.held_term is None else {
                 "names": self.held_term.names, "sigma": self.held_term.sigma,
                 "tcp_contribution_m": self.tcp_held_contrib_m, "advice": self.held_advice()},
+            "tcp_std_at": self.tcp_std_at,
             "identifiability": self.identifiability.to_dict() if self.identifiability is not None else None,
         }
 
@@ -345,7 +355,10 @@ class IdentificationResult(Result):
         if self.discrepancy is not None:
             out.append(f"  {self.discrepancy.decision}")
         if self.tcp_std_m.size:
-            out.append(f"  predicted TCP std at {self.tcp_std_m.size} working configurations: mean "
+            t = self.tcp_std_m.size
+            at = (f"{t} working configuration{'s' if t > 1 else ''}" if self.tcp_std_at == "working" else
+                  f"the {t} training poses (no working configurations given)")
+            out.append(f"  predicted TCP std at {at}: mean "
                        f"{self.tcp_std_m.mean() * 1e6:.2f} µm, max {self.tcp_std_m.max() * 1e6:.2f} µm"
                        + (f" (of which the parameters held at their tolerance: mean {self.tcp_held_m.mean() * 1e6:.2f}"
                           " µm)" if self.tcp_held_m.size and self.tcp_held_m.max() > 0 else ""))

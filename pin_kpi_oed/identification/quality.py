@@ -24,6 +24,12 @@ predicts:
    them as well as the true one (on the real UR10, 12-20 poses of one session: joint rotations of 0.08-0.9 rad
    and TCP errors of 4-40 mm in another session, at a residual as small as the good fits'): **poor**.
 
+5. **Determined effects**: an effect parameter whose σ exceeds ten times its plausible size is not determined.
+6. **A regular covariance**: a geometric parameter whose σ exceeds 100 times its manufacturing tolerance (0.5 mm,
+   1 mrad) or two parameters correlated beyond |r| = 0.999 are not determined by the data (a singular or
+   ill-conditioned covariance): **poor**, the parameters named with the fix (hold them at nominal, a weak prior,
+   or poses that determine them).
+
 The verdict is one line naming the likely causes (reflector/TCP offset, units, outliers, wrong
 robot or unmodelled effects) and what to try; :meth:`FitQuality.to_dict` puts it in the JSON.
 """
@@ -165,6 +171,7 @@ def assess_fit(result: Any, validation: dict | None = None, *, nominal_reflector
     before, after = _check_heldout(f, validation, train_rms, large)
     _check_geometry(f, result)
     _check_effects(f, result)
+    _check_covariance(f, result)
     causes = list(dict.fromkeys(f.causes))  # duplicates dropped, order kept
     advice = list(dict.fromkeys(f.advice))
     return FitQuality(verdict=f.verdict, chi2_reduced=chi2_red, chi2_interval=interval, dof=dof,
@@ -217,6 +224,72 @@ def _check_geometry(f: _Findings, result: Any) -> None:
     f.causes.append("poses that do not pin the geometry down (the fit found another solution that fits them)")
     f.advice.append("measure more or more varied poses (pin-kpi-oed design), or identify --geometry-prior 5e-3,1e-2 "
                     "(keeps every joint placement near the nominal model)")
+
+
+#: a geometric parameter whose standard deviation exceeds this many times its manufacturing tolerance is not
+#: determined by the data (the covariance is singular or ill-conditioned along it)
+SIGMA_TOLERANCE_FACTOR = 100.0
+#: two estimated parameters correlated beyond this are not told apart by the data
+CORRELATION_SINGULAR = 0.999
+
+
+def _tolerance_of(name: str) -> tuple[float, str] | None:
+    """(manufacturing tolerance, unit) of a geometric parameter by its name (joint placements, tracker, reflector:
+    the default :class:`~pin_kpi_oed.model.tolerances.Tolerances`, 0.5 mm and 1 mrad), None for an effect's."""
+    from pin_kpi_oed.model.tolerances import Tolerances
+
+    tol = Tolerances()
+    suffix = name.rsplit(".", 1)[-1]
+    if suffix in ("tx", "ty", "tz") or name.split(".")[0].split("@")[0] == "reflector":
+        return tol.joint_translation_m, "m"
+    if suffix in ("rx", "ry", "rz"):
+        return tol.joint_rotation_rad, "rad"
+    return None
+
+
+def _check_covariance(f: _Findings, result: Any) -> None:
+    """Check 6: a covariance that is singular or ill-conditioned: a geometric parameter whose σ exceeds
+    :data:`SIGMA_TOLERANCE_FACTOR` times its tolerance, or two parameters correlated beyond
+    :data:`CORRELATION_SINGULAR`, makes the fit poor (the parameters named): the data do not determine them, their
+    values are arbitrary along that direction and every σ computed from the covariance is meaningless."""
+    names = list(getattr(result, "names", []) or [])
+    std = np.asarray(getattr(result, "std", []), float)
+    if not names or std.size != len(names):
+        return
+    loose = []
+    for k, n in enumerate(names):
+        tu = _tolerance_of(n)
+        if tu is not None and not (std[k] <= SIGMA_TOLERANCE_FACTOR * tu[0]):
+            loose.append((std[k] / tu[0], n, std[k], tu))
+    corr = np.asarray(getattr(result, "correlation", np.zeros((0, 0))), float)
+    pairs = []
+    if corr.shape == (len(names), len(names)):
+        iu = np.triu_indices(len(names), 1)
+        r = np.abs(corr[iu])
+        pairs = sorted(((float(r[t]), iu[0][t], iu[1][t]) for t in np.flatnonzero(r > CORRELATION_SINGULAR)),
+                       reverse=True)
+    if not loose and not pairs:
+        return
+    what, named = [], []
+    if loose:
+        loose.sort(reverse=True)
+        shown = ", ".join(f"{n} ± {s * 1e3:.4g} {'mm' if u == 'm' else 'mrad'}" for _, n, s, (_, u) in loose[:3])
+        what.append(f"{len(loose)} parameter(s) with a sigma beyond {SIGMA_TOLERANCE_FACTOR:g}x their tolerance "
+                    f"({shown}; tolerances 0.5 mm, 1 mrad)")
+        named += [n for _, n, _, _ in loose[:3]]
+    if pairs:
+        rr, i, j = pairs[0]
+        what.append(f"{len(pairs)} parameter pair(s) correlated beyond |r| {CORRELATION_SINGULAR:g} ({names[i]} / "
+                    f"{names[j]}, r = {corr[i, j]:+.4f})")
+        named += [names[i], names[j]]
+    f.worse("poor")
+    f.reasons.append("singular or ill-conditioned covariance: " + "; ".join(what))
+    f.causes.append("parameters the poses do not determine (nearly parallel joint axes, e.g. a nominal model with "
+                    "rounded angles, or too few / too similar poses): their values and every sigma are arbitrary")
+    keep = [n for n in dict.fromkeys(named) if not n.startswith(("tracker", "reflector"))] or list(named)
+    f.advice.append(f"hold {', '.join(keep[:2])} at the nominal value (identify --fix '{','.join(keep[:2])}') or near "
+                    "it (identify --geometry-prior 5e-3,1e-2), or measure poses that determine them (pin-kpi-oed "
+                    "design)")
 
 
 #: an effect parameter whose standard deviation exceeds this many times its plausible size is not determined

@@ -71,10 +71,13 @@ def solve(prob: ResidualModel, opts: IdentifyOptions) -> Solution:
 
 
 def _flag(prob: ResidualModel, x: np.ndarray, alpha: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(weighted rows, their norms, flagged rows): a row is flagged when its norm exceeds
+    sqrt(χ²_nh(1 − α/m)) times the robust (MAD) scale of the weighted components, m the number of rows: the
+    family-wise test, so that an outlier-free fit flags any row with probability about α, whatever m."""
     fw = prob.weighted_rows(x)
     we = np.linalg.norm(fw, axis=1)
     s_rob = 1.4826 * float(np.median(np.abs(fw)))
-    thr = float(np.sqrt(_chi2.ppf(1.0 - alpha, prob.nh))) * max(s_rob, 1e-300)
+    thr = float(np.sqrt(_chi2.isf(alpha / max(fw.shape[0], 1), prob.nh))) * max(s_rob, 1e-300)
     return fw, we, np.flatnonzero(we > thr)
 
 

@@ -74,12 +74,13 @@ def _tool_help() -> str:
     for name, frame in default_tool_frames().items():
         by_frame.setdefault(frame, []).append(name)
     other = [f"{frame} for {', '.join(names)}" for frame, names in by_frame.items() if frame != "tool0"]
-    return ("tool frame of the URDF (default: " + "; ".join(other + ["tool0 for the other robots and URDFs"])
-            + "); taken from --cell or the data's header when given there")
+    return "tool frame of the URDF (default: " + "; ".join(other + ["tool0 for the other robots and URDFs"]) + ")"
 
 
-#: Help text of every ``--tool`` option: the real default tool frame of each robot name.
-TOOL_HELP = _tool_help()
+#: Help text of a ``--tool`` option of a command without ``--cell``: the real default tool frame of each robot name.
+TOOL_FRAME_HELP = _tool_help()
+#: Help text of every ``--tool`` option of a command that also reads ``--cell`` and data headers.
+TOOL_HELP = TOOL_FRAME_HELP + "; taken from --cell or the data's header when given there"
 
 #: Joint values beyond these magnitudes are in the wrong unit: degrees (revolute) or mm (prismatic).
 UNIT_GUARD = {"rad": 2.0 * np.pi + 0.1, "m": 100.0}

@@ -44,6 +44,7 @@ from collections.abc import Sequence
 import numpy as np
 import pinocchio as pin
 
+from pin_kpi_oed.data.tool_header import ToolSpec
 from pin_kpi_oed.model.device import MeasurementModel
 from pin_kpi_oed.model.kinematics import point_velocity, skew
 from pin_kpi_oed.model.noise import NoiseModel
@@ -66,6 +67,9 @@ class TrackerModel(MeasurementModel):
         pose6d: measurements include the probe orientation (6-DoF probe).
         probe_R: nominal probe orientation in the tool frame (6-D only).
         layout: the parameter layout (names, fixed, prior).
+        tool: what the model was declared with beyond its geometry (a
+            :class:`~pin_kpi_oed.data.tool_header.ToolSpec`: a cell's TCP and working configurations), or None;
+            :func:`~pin_kpi_oed.identification.identify.identify` keeps it in the calibrated model.
     """
 
     robot: Robot
@@ -76,6 +80,7 @@ class TrackerModel(MeasurementModel):
     pose6d: bool = False
     probe_R: np.ndarray = field(default_factory=lambda: np.eye(3))
     layout: ParameterLayout | None = None
+    tool: ToolSpec | None = field(default=None, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         self.reflector_m = np.asarray(self.reflector_m, float).reshape(3)

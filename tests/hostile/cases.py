@@ -249,7 +249,9 @@ def _issue24() -> list[Case]:
         Case("compensate-tcp-text", "compensate --model {d}/m.json --targets {d}/targets.csv --out {d}/o.csv "
              "--tcp a,b,c", "--tcp"),
         Case("compensate-all-unreachable", "compensate --model {d}/m.json --targets {d}/targets_far.csv --out "
-             "{d}/o.csv", "unreachable"),
+             "{d}/o.csv --tcp 0,0,0.1", "unreachable"),
+        Case("compensate-model-without-tcp", "compensate --model {d}/m.json --targets {d}/targets.csv --out "
+             "{d}/o.csv", "states no TCP"),
     ]
     # 5. model files through a schema: every field typed and ranged, covariances symmetric PSD, file named
     bad = {"m_str.json": "joint_a2.tx", "m_dict.json": "joint_a2.tx", "m_list.json": "tcp_m",
