@@ -12,7 +12,7 @@ design figure must not depend on it. Per arm (its URDF as it ships, found in the
    criterion of the information), and the KPI pool selection of 35 of 2,000 seeded candidates (the relaxation,
    rounding and exchange of ``pool.select``) with its tr C_s;
 3. exact against shipped and against rounded: identifiable set equal, every figure within 0.1 %, the same
-   selected poses.
+   selected poses; the residual shares on either side of the rank tolerance (smallest kept, largest dropped).
 
 An arm the loader refuses (a branch, a tool frame off the chain) is listed with the refusal's cause. No cell (no
 obstacles): the figures are those of the information, which is what rounding could change.
@@ -104,6 +104,22 @@ def tracker_model(robot):
                         tcp_m=s * np.array([0.0, 0.0, 0.15]), noise=NoiseModel(sigma_xyz_m=np.full(3, 1e-5)))
 
 
+def residual_margins(model, seed: int = 0) -> tuple[float, float]:
+    """(smallest residual share of a kept column, largest of a dropped one) of the identifiability analysis's
+    ordered selection on its default excitation: the margins on either side of ``RANK_TOL``."""
+    from pin_kpi_oed.oed import identifiability as idf
+
+    L = model.layout
+    F = model.weighted_jacobian(np.zeros(L.n), idf.excitation(model, seed=seed)).reshape(-1, L.n)
+    norms = np.linalg.norm(F, axis=0)
+    cand = [i for i in np.flatnonzero(~L.fixed) if norms[i] > 1e-12 * norms.max()]
+    setup = L.is_setup()
+    order = sorted(range(len(cand)), key=lambda c: (not setup[cand[c]], cand[c]))
+    kept, res = idf.ordered_selection(F[:, cand] / norms[cand], order)
+    dropped = [c for c in range(len(cand)) if c not in kept]
+    return float(res[kept].min()), float(res[dropped].max()) if dropped else 0.0
+
+
 def configurations(robot, seed: int = 0) -> dict[str, np.ndarray]:
     """The seeded configurations every copy of one arm is scored at (drawn within the exact copy's limits): the
     random design ``Q``, the working configurations ``W``, the candidate pool ``pool`` (rad)."""
@@ -134,7 +150,9 @@ def figures(path: Path, tool: str, conf: dict[str, np.ndarray], chosen_ref: np.n
             "pool bound tr C_s": sel.approx.lower_bound / M_MEAS,
             "pool poses tr C_s": score_design(model, pool[ref], W, ident=ident).trace_cs_m2}
     own = score_design(model, pool[chosen], W, ident=ident).trace_cs_m2
-    return {"n_joints": robot.nq, "rank": ident.rank, "identifiable": ident.base_names,
+    kept_min, dropped_max = residual_margins(model, seed)
+    return {"n_joints": robot.nq, "rank": ident.rank, "identifiable": ident.base_names, "kept_min": kept_min,
+            "dropped_max": dropped_max,
             "values": {k: float(v) for k, v in vals.items() if np.isfinite(v)}, "selected": chosen.tolist(),
             "own_selection_tr_cs": float(own), "robot": robot}
 
@@ -199,8 +217,11 @@ def _line(r: dict) -> str:
         sel = "same" if c["same_selection"] else f"{c['own_selection_rel'] * 100:+.2f}%"
         cells.append(f"{'=' if c['same_set'] else '≠'} {c['worst_rel'] * 100:8.4f} % {sel:<7} "
                      f"{'ok' if c['ok'] else 'FAIL'}")
+    f = r["figures"]
+    margins = (f"{min(x['kept_min'] for x in f.values()):.3f} "
+               f"{max(x['dropped_max'] for x in f.values()):8.1e}")
     return (f"{r['arm']:<19} {r['n_joints']:>2} {r['rank']:>4}  {'yes' if r['snapped'] else 'no ':<4}  "
-            + "   ".join(cells) + f"  {r['cpu_s']:5.1f}")
+            + "   ".join(cells) + f"  {margins}  {r['cpu_s']:5.1f}")
 
 
 def main(argv: list[str] | None = None) -> list[dict]:
@@ -213,9 +234,11 @@ def main(argv: list[str] | None = None) -> list[dict]:
           f"largest relative difference of tr C_s and every criterion of a seeded {M_MEAS}-pose random design, of the "
           f"KPI pool selection's certified bound ({M_MEAS} of {POOL} candidates) and of tr C_s at the poses it selects "
           f"on the exact copy; ok = same set, every figure within {REL_TOL * 100:g} %. 'poses': the selection made on "
-          "each copy itself, the same poses or the difference of its tr C_s (the exchange heuristic's own spread)")
-    print(f"{'arm':<19} nq rank snap  {'shipped: set  worst diff  poses':<31}    {'rounded: set  worst diff  poses':<31}"
-          "  cpu s")
+          "each copy itself, the same poses or the difference of its tr C_s (the exchange heuristic's own spread); "
+          "kept/dropped: the smallest residual share of a kept column and the largest of a dropped one over the "
+          "three copies (the rank tolerance 1e-2 lies between)")
+    head = ("shipped: set  worst diff  poses", "rounded: set  worst diff  poses")
+    print(f"{'arm':<19} nq rank snap  {head[0]:<31}    {head[1]:<31}  kept  dropped  cpu s")
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
         for label in [a.strip() for a in args.arms.split(",") if a.strip()]:

@@ -22,13 +22,14 @@ cross-checks it (a disagreement is noted).
 1e-4). Rounding does not change how many directions the measurements see (the
 structure of an arm's null space does not depend on its numbers), it tilts the
 exact dependencies: a column that the kept ones reproduce exactly at π/2
-keeps a residual of the size of the rounding error (measured: 3e-6 … 5e-6 for
-1.5708 on the xArm7, 0.3 … 1.4 × the angle error). A tolerance of 1e-6 kept
+keeps a residual of the size of the rounding error (measured: at most 4.5e-6
+on the 16 arms of ``benchmarks.urdf_rounding``, whose rounded angles are off
+by 3.7e-6: 1.2 × the angle error). A tolerance of 1e-6 kept
 such columns as "identifiable" in place of genuinely identifiable ones, and
 the design's information matrix was singular. 1e-2 is 100 × above the
 rounding of a 1e-4 rad angle and below real information: the smallest
 residual of a kept column on the serial arms of example-robot-data with a
-reflector off the tool axis is 0.06 … 0.3 (``python -m
+reflector off the tool axis is 0.13 (SO-101) … 0.49 (``python -m
 benchmarks.urdf_rounding``), and a column with a residual below 1e-2 holds
 less than 1e-4 of its effect apart from the others (its σ 100 × the σ it
 would have alone: a 1 mrad error at a 1 m lever then moves the measurements by
