@@ -191,8 +191,8 @@ def analyse(model: MeasurementModel, Q: np.ndarray | None = None, prefer: list[s
     F = model.weighted_jacobian(p0, Q).reshape(-1, L.n)
     free = np.flatnonzero(~L.fixed)
     norms = np.linalg.norm(F, axis=0)
-    zero = [i for i in free if norms[i] <= 1e-12 * max(norms.max(), 1e-300)]
-    cand = [i for i in free if i not in zero]
+    zero = [int(i) for i in free if norms[i] <= 1e-12 * max(norms.max(), 1e-300)]
+    cand = [int(i) for i in free if i not in zero]
     Fs = F[:, cand] / norms[cand]
     # ordered selection: user preference, then set-up parameters, then robot base-to-tip
     setup = L.is_setup()
