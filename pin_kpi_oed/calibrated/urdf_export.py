@@ -35,7 +35,7 @@ import pinocchio as pin
 from pin_kpi_oed.errors import InputError, RobotLoadError, SolverError
 from pin_kpi_oed.data.atomic import atomic_write_text
 from pin_kpi_oed.model.parameters import ParameterLayout
-from pin_kpi_oed.model.robot import Robot
+from pin_kpi_oed.model.robot import Robot, frame_id
 
 __all__ = ["ROOT", "FixedFrame", "model_frames", "write_model_urdf", "URDF_LIMITS_NOTE", "calibrated_urdf_text",
            "check_urdf_fk", "write_calibrated_urdf", "export_result_urdf",
@@ -246,7 +246,7 @@ def check_urdf_fk(text: str, robot: Robot, placements: Sequence[pin.SE3], n: int
     for k, j in enumerate(robot.joint_ids):
         ref.jointPlacements[j] = pin.SE3(placements[k])
     d_ref, d_new = ref.createData(), new.createData()
-    f_ref, f_new = robot.tool_frame_id, new.getFrameId(robot.tool_frame)
+    f_ref, f_new = robot.tool_frame_id, frame_id(new, robot.tool_frame)
     Q = np.vstack([robot.neutral(), robot.random_q(np.random.default_rng(seed), n)])
     dp = dr = 0.0
     for q in Q:

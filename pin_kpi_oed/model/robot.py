@@ -40,7 +40,7 @@ import pinocchio as pin
 
 from pin_kpi_oed.errors import InputError, RobotLoadError
 from pin_kpi_oed.model.kinematics import joint_unit, revolute_mask
-from pin_kpi_oed.validation.robot_checks import captured_stderr, check_robot_scale, check_urdf_tree
+from pin_kpi_oed.validation.robot_checks import captured_stderr, check_robot_scale, check_urdf_tree, xacro_refusal
 
 #: Folder of the URDFs shipped with the package (KUKA arms).
 URDF_DIR = Path(__file__).resolve().parents[2] / "urdf"
@@ -402,7 +402,7 @@ def load_robot(spec: str | os.PathLike, tool_frame: str | None = None, kinematic
         urdf_path=str(path),
         name=name,
         tool_frame=tool,
-        tool_frame_id=model.getFrameId(tool),
+        tool_frame_id=frame_id(model, tool),
         joint_ids=joint_ids,
         joint_names=[model.names[j] for j in joint_ids],
         q_lower=lower,
@@ -486,6 +486,8 @@ def _build_full_model(path: Path) -> pin.Model:
     try:
         root = ET.fromstring(text)
     except ET.ParseError as exc:
+        if "unbound prefix" in str(exc) and "<xacro:" in text:  # xacro elements without the xmlns:xacro declaration
+            raise xacro_refusal(path, f"xacro element without its namespace declaration, {exc}") from None
         raise RobotLoadError(f"{path}: malformed URDF (XML error: {exc})") from None
     if root.tag != "robot":
         raise RobotLoadError(f"{path}: not a URDF file (root element <{root.tag}>, expected <robot>)")
@@ -511,18 +513,38 @@ def _tool_frame(full: pin.Model, path: Path, tool_frame: str | None, default_too
     return tool
 
 
+def frame_id(model: pin.Model, name: str) -> int:
+    """The id of frame ``name``: the link's (BODY) frame where a joint or another frame bears the same name (the
+    SO-100's ``gripper`` is a link and a joint), else the first frame of that name.
+
+    Raises:
+        RobotLoadError: no frame of that name.
+    """
+    for kind in (pin.FrameType.BODY, pin.FrameType.OP_FRAME, pin.FrameType.FIXED_JOINT, pin.FrameType.JOINT):
+        if model.existFrame(name, kind):
+            return int(model.getFrameId(name, kind))
+    for k, f in enumerate(model.frames):
+        if f.name == name:
+            return k
+    raise RobotLoadError(f"no frame '{name}'")
+
+
 def _serial_chain_model(full: pin.Model, path: Path, tool: str) -> tuple[pin.Model, list[str]]:
     """(model reduced to the serial chain moving ``tool``, names of the locked joints).
 
     Raises:
         RobotLoadError: the tool is not moved by any joint, a multi-DoF joint, or a branch off the chain.
     """
-    chain = _chain_to_frame(full, full.getFrameId(tool))
+    chain = _chain_to_frame(full, frame_id(full, tool))
     if not chain:
         raise RobotLoadError(f"{path}: tool frame '{tool}' is not moved by any joint")
     for j in chain:
+        if full.joints[j].nq == 2 and full.joints[j].nv == 1:  # Pinocchio's unbounded revolute (cos, sin)
+            raise RobotLoadError(f"{path}: joint '{full.names[j]}' is continuous (an unbounded revolute joint), "
+                                 "which the calibration does not take: write it as type=\"revolute\" with "
+                                 "<limit lower=\"-6.2832\" upper=\"6.2832\" .../> (its real range)")
         if full.joints[j].nq != 1 or full.joints[j].nv != 1:
-            raise RobotLoadError(f"{path}: joint '{full.names[j]}' has {full.joints[j].nq} DoF: "
+            raise RobotLoadError(f"{path}: joint '{full.names[j]}' has {full.joints[j].nv} DoF: "
                                  "not a serial arm of 1-DoF joints")
     tip_subtree = _subtree(full, chain[-1])
     extra = [j for j in range(1, full.njoints) if j not in chain]
@@ -531,8 +553,25 @@ def _serial_chain_model(full: pin.Model, path: Path, tool: str) -> tuple[pin.Mod
         raise RobotLoadError(f"{path}: not a serial arm: joints {', '.join(full.names[j] for j in branches)} "
                              f"branch off the chain to '{tool}'")
     locked = [full.names[j] for j in extra]
+    if extra:
+        _rename_shadowed_joints(full, extra)
     model = pin.buildReducedModel(full, extra, pin.neutral(full)) if extra else full
     return model, locked
+
+
+def _rename_shadowed_joints(full: pin.Model, locked: list[int]) -> None:
+    """Rename (in ``full``) each joint to be locked that bears a link's name (the SO-100's joint and link
+    ``gripper``) to ``NAME__joint``: Pinocchio's reduction makes the locked joint a frame and refuses two frames of
+    one name; the link keeps its name (it may be the tool frame)."""
+    for j in locked:
+        name = full.names[j]
+        if not full.existFrame(name, pin.FrameType.BODY):
+            continue
+        full.names[j] = f"{name}__joint"
+        for k, f in enumerate(full.frames):
+            if f.name == name and f.type == pin.FrameType.JOINT:
+                f.name = f"{name}__joint"
+                full.frames[k] = f
 
 
 def _joint_limits(model: pin.Model, joint_ids: list[int], revolute: np.ndarray, path: Path

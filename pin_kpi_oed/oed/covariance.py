@@ -53,7 +53,8 @@ from pin_kpi_oed.errors import IdentifiabilityError
 if TYPE_CHECKING:
     from pin_kpi_oed.model.tracker import TrackerModel
 
-__all__ = ["information", "prior_of", "param_covariance", "covariances", "kpi_covariance", "design_covariances",
+__all__ = ["information", "prior_of", "param_covariance", "check_pivots", "check_covariance", "singular_error",
+           "weakest_direction", "MIN_SCALED_PIVOT", "covariances", "kpi_covariance", "design_covariances",
            "kpi_covariance_kkt", "prior_square_root", "held_absorption", "held_covariance", "tcp_covariances"]
 
 
@@ -85,25 +86,123 @@ def prior_of(model: TrackerModel, base: np.ndarray) -> np.ndarray | None:
     return prior if np.isfinite(prior).any() else None
 
 
+#: the smallest pivot of a Cholesky factor of the information scaled to a unit diagonal (each parameter's information
+#: relative to its own: the squared share of a parameter's effect the others leave it) from which a covariance is
+#: computed; below it C_p has lost its digits (condition beyond 1e12) and would show negative eigenvalues
+MIN_SCALED_PIVOT = 1e-12
+
+
+def weakest_direction(M: np.ndarray, names: list[str] | None = None, where: str = "every measured pose") -> str:
+    """The information's weakest direction in words: the parameters that move the measurements alike.
+
+    The information is scaled to a unit diagonal (each parameter measured by its own effect: units and scales
+    cancel); the eigenvector of its smallest eigenvalue names the parameters whose combination changes no
+    measurement, with their weights.
+
+    Args:
+        M: information matrix (n, n), 1/(parameter unit)².
+        names: parameter names (default ``column k``).
+        where: what the rows are, for the sentence (e.g. ``every pose of the pool``).
+
+    Returns:
+        e.g. "'joint3.ty' and 'joint2.tz' move the measurements alike in every pose of the pool (the combination
+        +0.71 joint3.ty -0.70 joint2.tz, each scaled to its own effect, changes them by 3e-06 of one parameter's
+        effect)".
+    """
+    M = 0.5 * (np.asarray(M, float) + np.asarray(M, float).T)
+    d = np.sqrt(np.clip(np.diag(M), 0.0, None))
+    names = names or [f"column {k}" for k in range(M.shape[0])]
+    if np.any(~np.isfinite(M)):
+        return f"the information of {where} is not finite"
+    if np.any(d <= 0.0):
+        k = int(np.flatnonzero(d <= 0.0)[0])
+        return f"'{names[k]}' moves no measurement in {where}"
+    w, V = np.linalg.eigh(M / np.outer(d, d))
+    v = V[:, 0] / np.abs(V[:, 0]).max()
+    top = [k for k in np.argsort(-np.abs(v)) if abs(v[k]) >= 0.2][:4]
+    combo = " ".join(f"{v[k]:+.2f} {names[k]}" for k in top)
+    share = np.sqrt(max(float(w[0]), 0.0))
+    size = f"{share:.1g} of one parameter's effect" if share >= 1e-8 else "less than 1e-8 of one parameter's effect"
+    if len(top) == 1:
+        return f"'{names[top[0]]}' barely moves the measurements in {where} (by {size})"
+    who = " and ".join(f"'{names[k]}'" for k in top[:2]) + (f" (and {len(top) - 2} more)" if len(top) > 2 else "")
+    return (f"{who} move the measurements alike in {where} (the combination {combo}, each scaled to its own effect, "
+            f"changes them by {size})")
+
+
+def check_pivots(M: np.ndarray, factor_diag: np.ndarray, names: list[str] | None = None,
+                 where: str = "every measured pose") -> None:
+    """Refuse an information matrix whose Cholesky factor has a scaled pivot below :data:`MIN_SCALED_PIVOT`.
+
+    A Cholesky factor L of M (M = L Lᵀ) gives the factor of the information scaled to a unit diagonal for free:
+    D⁻¹L with D = diag(M)^½, so (L_ii / d_i)² is the share of parameter i's information that the parameters before
+    it leave (0 … 1; units and scales cancel).
+
+    Args:
+        M: information matrix (n, n).
+        factor_diag: the diagonal of a Cholesky factor of M.
+        names: parameter names, for the message.
+        where: what the rows are, for the message.
+
+    Raises:
+        IdentifiabilityError: naming the parameters that move the measurements alike (:func:`weakest_direction`)
+            and what to change.
+    """
+    d = np.diag(M)
+    piv = np.asarray(factor_diag, float) ** 2 / np.where(d > 0, d, np.inf)
+    if not np.all(np.isfinite(piv)) or piv.size and float(piv.min()) < MIN_SCALED_PIVOT:
+        raise singular_error(M, names, where)
+
+
+def singular_error(M: np.ndarray, names: list[str] | None = None, where: str = "every measured pose"
+                   ) -> IdentifiabilityError:
+    """The one refusal of a singular information matrix: which parameters move the measurements alike, what to do."""
+    return IdentifiabilityError(f"singular information matrix: {weakest_direction(M, names, where)}; add measurement "
+                                "configurations that tell them apart (spread over the joint ranges), or fix one of "
+                                "them as known")
+
+
+def check_covariance(C: np.ndarray, what: str = "the covariance", rtol: float = 1e-9) -> None:
+    """Refuse a covariance that is no covariance: a non-finite entry or an eigenvalue below −``rtol`` × the largest
+    (a number printed from it would be meaningless: a negative variance, an infinite condition).
+
+    Args:
+        C: covariance (n, n) in any unit.
+        what: its name, for the message.
+        rtol: the relative round-off a positive semi-definite covariance may show.
+
+    Raises:
+        IdentifiabilityError: naming the covariance and its smallest eigenvalue, and what to change.
+    """
+    C = np.asarray(C, float)
+    if C.size == 0:
+        return
+    if not np.all(np.isfinite(C)):
+        raise IdentifiabilityError(f"{what} is not finite: the measurements do not determine the parameters; add "
+                                   "measurement configurations spread over the joint ranges")
+    w = np.linalg.eigvalsh(0.5 * (C + C.T))
+    if w[0] < -rtol * max(float(np.abs(w).max()), 1e-300):
+        raise IdentifiabilityError(f"{what} has a negative eigenvalue ({w[0]:.3g} against the largest {w[-1]:.3g}): "
+                                   "its information matrix is numerically singular; add measurement configurations "
+                                   "spread over the joint ranges, or fix the parameters they do not determine")
+
+
 def param_covariance(F: np.ndarray, prior_sigma: np.ndarray | None = None, names: list[str] | None = None
                      ) -> np.ndarray:
-    """C_p = (FᵀF + P)⁻¹ (eq. 19 upper-left block).
+    """C_p = (FᵀF + P)⁻¹ (eq. 19 upper-left block), refused when the scaled information is singular.
 
     Raises:
         IdentifiabilityError: the information matrix is singular (parameters not identifiable
-            from these measurements), naming the weakest parameter direction.
+            from these measurements), naming the parameters that move the measurements alike
+            (:func:`check_pivots`).
     """
     M = information(F, prior_sigma)
     try:
         c, low = sla.cho_factor(M)
-        return sla.cho_solve((c, low), np.eye(M.shape[0]))
-    except np.linalg.LinAlgError:
-        w, V = np.linalg.eigh(M)
-        k = int(np.argmax(np.abs(V[:, 0])))
-        who = names[k] if names else f"column {k}"
-        raise IdentifiabilityError(
-            f"the information matrix is singular (smallest eigenvalue {w[0]:.3g}): the measurements do not "
-            f"determine '{who}'; add measurement configurations that move it, or fix it as known") from None
+    except (np.linalg.LinAlgError, ValueError):
+        raise singular_error(M, names) from None
+    check_pivots(M, np.diag(c), names)
+    return sla.cho_solve((c, low), np.eye(M.shape[0]))
 
 
 def covariances(F: np.ndarray, E: np.ndarray, prior_sigma: np.ndarray | None = None,

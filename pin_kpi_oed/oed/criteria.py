@@ -60,7 +60,7 @@ from typing import Any, ClassVar
 import numpy as np
 
 from pin_kpi_oed.errors import IdentifiabilityError, InputError
-from pin_kpi_oed.oed.covariance import information
+from pin_kpi_oed.oed.covariance import check_pivots, information, singular_error
 from pin_kpi_oed.oed.design_objective import CriterionInfo, DesignObjective
 
 
@@ -169,8 +169,8 @@ class CovarianceCriterion(Criterion):
         try:
             L = np.linalg.cholesky(M)
         except np.linalg.LinAlgError:
-            raise IdentifiabilityError("singular information matrix: the design does not identify the "
-                                       "parameters; use more or more varied configurations") from None
+            raise singular_error(M) from None
+        check_pivots(M, np.diag(L))  # a near-singular M: refused, not a covariance with negative eigenvalues
         Linv = np.linalg.solve(L, np.eye(M.shape[0]))
         val, Gam = self.from_covariance(E, M, L, Linv.T @ Linv)
         return float(val), Gam
@@ -247,15 +247,18 @@ class DOptimality(CovarianceCriterion):
 
 
 class EOptimality(CovarianceCriterion):
-    """E-optimality: φ = λ_max(C_p) = 1/λ_min(M). Γ = −v vᵀ/λ_min², v the eigenvector of λ_min."""
+    """E-optimality: φ = λ_max(C_p) = 1/λ_min(M). Γ = −λ_max² v vᵀ, v the eigenvector of λ_max of C_p.
+
+    Taken from C_p itself (positive definite from the checked Cholesky factor), not as 1/λ_min of M, whose smallest
+    eigenvalue an ill-conditioned M can give negative."""
 
     name, label, unit = "E", "E-optimality: largest eigenvalue of C_p", "m^2 or rad^2"
     is_ratio = True
 
     def from_covariance(self, E, M, L, C):
-        w, V = np.linalg.eigh(M)
-        v = V[:, 0]
-        return float(1.0 / w[0]), -np.outer(v, v) / w[0] ** 2
+        w, V = np.linalg.eigh(0.5 * (C + C.T))
+        lam, v = float(w[-1]), V[:, -1]
+        return lam, -(lam ** 2) * np.outer(v, v)
 
 
 # ---------------------------------------------------------------------- singular-value criteria
@@ -513,8 +516,10 @@ for _cls in (KpiTrace, ParamTrace, DOptimality, EOptimality, ConditionNumber, O1
 
 
 def evaluate_all(model: Any, base: np.ndarray, Q: np.ndarray, E: np.ndarray | None,
-                 context: Any = None, not_scored: dict[str, str] | None = None) -> dict[str, float]:
-    """Every registered criterion for one design (NaN where undefined, e.g. kpi without E; inf if singular): those
+                 context: Any = None, not_scored: dict[str, str] | None = None,
+                 singular: dict[str, str] | None = None) -> dict[str, float]:
+    """Every registered criterion for one design (NaN where undefined, e.g. kpi without E; inf if singular, the
+    refusal's reason in ``singular`` when given: a singular value is no number to print): those
     of the information matrix on the noise-only information, those of the configurations on ``context`` (a
     :class:`~pin_kpi_oed.oed.objective.DesignContext` or a design problem) when given and they can be built on it
     (``kpi_gp`` needs a design problem's discrepancy, ``kpi_path`` a cell's working paths: left out otherwise, each
@@ -535,14 +540,18 @@ def evaluate_all(model: Any, base: np.ndarray, Q: np.ndarray, E: np.ndarray | No
                     continue
                 try:
                     out[name] = obj.value(Q)
-                except IdentifiabilityError:
+                except IdentifiabilityError as exc:
                     out[name] = float("inf")
+                    if singular is not None:
+                        singular[name] = str(exc)
             continue
         if crit.needs_kpi and E is None:
             out[name] = float("nan")
             continue
         try:
             out[name] = crit.value(F, E, prior)
-        except IdentifiabilityError:
+        except IdentifiabilityError as exc:
             out[name] = float("inf")
+            if singular is not None:
+                singular[name] = str(exc)
     return out

@@ -19,7 +19,7 @@ from pin_kpi_oed.data.atomic import atomic_write_json
 from pin_kpi_oed.errors import IdentifiabilityError, InputError
 from pin_kpi_oed.model.tracker import TrackerModel
 from pin_kpi_oed.model.serialize import model_from_dict, model_to_dict
-from pin_kpi_oed.oed.covariance import design_covariances
+from pin_kpi_oed.oed.covariance import check_covariance, design_covariances, weakest_direction
 from pin_kpi_oed.oed.criteria import CRITERIA, evaluate_all
 from pin_kpi_oed.oed.identifiability import Identifiability, analyse, check_kpi
 from pin_kpi_oed.oed.objective import DesignContext
@@ -43,6 +43,9 @@ class DesignScore(Result):
             None for a hand-written file), ``n_meas``, ``n_work``; else empty.
         not_scored: the registered criteria of the configurations this design cannot be scored under, each with
             the reason (``kpi_gp`` without a discrepancy, ``kpi_path`` without working paths).
+        singular: the criteria whose information is singular for this design (their value is inf: printed as
+            "singular", never as a number), each with the reason and what to change; ``status`` is then
+            ``singular`` and ``success`` False.
     """
 
     trace_cs_m2: float
@@ -56,6 +59,7 @@ class DesignScore(Result):
     setup: dict = field(default_factory=dict)
     design: dict = field(default_factory=dict)
     not_scored: dict[str, str] = field(default_factory=dict)
+    singular: dict[str, str] = field(default_factory=dict)
 
     def to_dict(self) -> dict:
         """Plain JSON-able dict (SI units): the common result keys, the scores, ``setup`` and ``design`` when known."""
@@ -64,7 +68,7 @@ class DesignScore(Result):
         return {**out, **self.result_dict(), "trace_cs_m2": self.trace_cs_m2, "tcp_sigma_m": self.tcp_sigma_m,
                 "cov_s_m2": self.cov_s_m2.tolist(), "trace_cp": self.trace_cp, "criteria": self.criteria,
                 "rank": self.rank, "n_meas": self.n_meas, "identifiable": self.identifiable,
-                "not_scored": self.not_scored}
+                "not_scored": self.not_scored, "singular": self.singular}
 
     def summary(self) -> str:
         """The design scored (from a file), every criterion with its unit and label, then tr(C_s) (mm²) and the TCP σ
@@ -77,9 +81,12 @@ class DesignScore(Result):
                          f"{d['n_work']} working configuration(s)")
         for k, v in self.criteria.items():
             crit = CRITERIA.get(k)
-            lines.append(f"{k:<7}{v: .6g}  [{crit.unit if crit else '?'}] {crit.label if crit else ''}".rstrip())
+            val = f"{v: .6g}" if np.isfinite(v) or np.isnan(v) else " singular"
+            lines.append(f"{k:<7}{val}  [{crit.unit if crit else '?'}] {crit.label if crit else ''}".rstrip())
         lines.extend(f"{k:<7}not scored: {why}" for k, why in self.not_scored.items())
         lines.append(f"tr(C_s) = {self.trace_cs_m2 * 1e6:.6g} mm^2   TCP sigma = {self.tcp_sigma_m * 1e6:.3f} um")
+        if self.singular:
+            lines.append(f"status: {self.status}: {self.message}")
         return "\n".join(lines)
 
 
@@ -115,13 +122,22 @@ def score_design(model: TrackerModel, Q_meas: np.ndarray, Q_work: np.ndarray,
     E = E_full[:, b]
     C_p, C_s = design_covariances(model, b, Q_meas, E, p0, ident.base_names)
     t = Q_work.shape[0]
+    check_covariance(C_s, "C_s at q_work")
     not_scored: dict[str, str] = {}
-    crit = evaluate_all(model, b, Q_meas, E, context=DesignContext(model, b, E, p0, Q_work), not_scored=not_scored)
+    singular: dict[str, str] = {}
+    crit = evaluate_all(model, b, Q_meas, E, context=DesignContext(model, b, E, p0, Q_work), not_scored=not_scored,
+                        singular=singular)
+    message = (f"{Q_meas.shape[0]} measurements, {ident.rank} identifiable parameters, "
+               f"{t} working configuration(s)")
+    if singular:
+        F = model.weighted_jacobian(p0, Q_meas)[:, :, b].reshape(-1, b.size)
+        message = (f"{', '.join(singular)} singular without the prior: "
+                   f"{weakest_direction(F.T @ F, ident.base_names)}; add measurement configurations that tell "
+                   "them apart (spread over the joint ranges)")
     return DesignScore(trace_cs_m2=float(np.trace(C_s)), tcp_sigma_m=float(np.sqrt(np.trace(C_s) / t)), cov_s_m2=C_s,
                        trace_cp=float(np.trace(C_p)), criteria=crit, rank=ident.rank, n_meas=Q_meas.shape[0],
-                       identifiable=ident.base_names, not_scored=not_scored, success=True, status="scored",
-                       message=f"{Q_meas.shape[0]} measurements, {ident.rank} identifiable parameters, "
-                               f"{t} working configuration(s)",
+                       identifiable=ident.base_names, not_scored=not_scored, singular=singular,
+                       success=not singular, status="singular" if singular else "scored", message=message,
                        time_s=time.perf_counter() - t0)
 
 

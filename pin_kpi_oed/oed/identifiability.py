@@ -8,10 +8,35 @@ its axis commute with the joint motion and are absorbed by the next placement;
 joint 1's placement is absorbed by the tracker pose; the last joint's two by
 the reflector offset.
 
-Selection (QR with ordered pivoting): columns are scaled to unit norm and
-visited in a preference order; a column is kept when its component orthogonal
-to the columns kept so far exceeds ``tol``. The rank is cross-checked with
-SciPy's QR with column pivoting. **Convention** (the paper's, implicitly):
+Selection (QR with ordered pivoting) on a scaled basis: every column of F is
+scaled to unit norm — the measurements' change for a parameter error of its own
+size, so metres and radians, a tolerance or any other physical scale of a
+parameter give the same decision — and the columns are visited in a preference
+order; a column is kept when the share of it that the columns kept so far cannot
+reproduce (its orthogonal residual, 0 … 1) exceeds :data:`RANK_TOL` = 1e-2. The
+rank is that count; SciPy's QR with column pivoting at the same tolerance
+cross-checks it (a disagreement is noted).
+
+**Why 1e-2.** A URDF states its numbers rounded (``rpy="1.5708 0 0"``, not
+π/2; 4 decimals leave errors up to 5e-5 rad and 5e-5 m, hand-written files
+1e-4). Rounding does not change how many directions the measurements see (the
+structure of an arm's null space does not depend on its numbers), it tilts the
+exact dependencies: a column that the kept ones reproduce exactly at π/2
+keeps a residual of the size of the rounding error (measured: at most 4.5e-6
+on the 16 arms of ``benchmarks.urdf_rounding``, whose rounded angles are off
+by 3.7e-6: 1.2 × the angle error). A tolerance of 1e-6 kept
+such columns as "identifiable" in place of genuinely identifiable ones, and
+the design's information matrix was singular. 1e-2 is 100 × above the
+rounding of a 1e-4 rad angle and below real information: the smallest
+residual of a kept column on the serial arms of example-robot-data with a
+reflector off the tool axis is 0.13 (SO-101) … 0.49 (``python -m
+benchmarks.urdf_rounding``), and a column with a residual below 1e-2 holds
+less than 1e-4 of its effect apart from the others (its σ 100 × the σ it
+would have alone: a 1 mrad error at a 1 m lever then moves the measurements by
+10 µm, the noise of a tracker), which no calibration can estimate. So the
+identifiable set and every design figure are the same for ``1.5708`` and π/2.
+
+**Convention** (the paper's, implicitly):
 measurement-set-up parameters (the device's groups: tracker, reflector, probe) come first, so when a
 robot parameter is confounded with a set-up parameter, the *robot* parameter is
 the one held at its nominal value. Every dropped parameter is reported with
@@ -111,8 +136,40 @@ def excitation(model: MeasurementModel, n: int = 200, seed: int = 0) -> np.ndarr
     return model.robot.random_q(np.random.default_rng(seed), n)
 
 
+#: the residual share below which a parameter's effect on the measurements counts as reproduced by the kept
+#: parameters (scaled basis: unit-norm columns); see the module docstring for the choice
+RANK_TOL = 1e-2
+
+
+def ordered_selection(Fs: np.ndarray, order: list[int], tol: float = RANK_TOL) -> tuple[list[int], np.ndarray]:
+    """Columns of ``Fs`` (unit norm) kept in the given order: each whose orthogonal residual to the columns kept
+    before it exceeds ``tol``.
+
+    Args:
+        Fs: unit-norm columns, (rows, k).
+        order: the visiting order (column indices of ``Fs``).
+        tol: the residual share (0 … 1) below which a column is reproduced by the kept ones.
+
+    Returns:
+        (kept column indices in visiting order, the residual share of every column in ``Fs``'s order).
+    """
+    basis: list[np.ndarray] = []
+    kept: list[int] = []
+    resid = np.zeros(Fs.shape[1])
+    for c in order:
+        v = Fs[:, c].copy()
+        for _ in range(2):  # modified Gram-Schmidt, twice for stability
+            for b in basis:
+                v -= (b @ v) * b
+        resid[c] = nv = float(np.linalg.norm(v))
+        if nv > tol:
+            basis.append(v / nv)
+            kept.append(c)
+    return kept, resid
+
+
 def analyse(model: MeasurementModel, Q: np.ndarray | None = None, prefer: list[str] | None = None,
-            tol: float = 1e-7, seed: int = 0) -> Identifiability:
+            tol: float = RANK_TOL, seed: int = 0) -> Identifiability:
     """Find the identifiable parameter set.
 
     Args:
@@ -120,7 +177,8 @@ def analyse(model: MeasurementModel, Q: np.ndarray | None = None, prefer: list[s
         Q: excitation configurations (rad); default 200 random ones (``seed``).
         prefer: name patterns to keep first (overrides the convention's order; e.g.
             ``["joint_a1.*"]`` keeps joint 1's placement instead of the tracker pose).
-        tol: relative threshold on the orthogonal residual of a unit-norm column.
+        tol: the residual share (0 … 1) of a unit-norm column below which the kept columns reproduce it
+            (:data:`RANK_TOL`; dimensionless, the same for every unit and scale of a parameter).
         seed: seed of the default excitation.
 
     Returns:
@@ -133,31 +191,44 @@ def analyse(model: MeasurementModel, Q: np.ndarray | None = None, prefer: list[s
     F = model.weighted_jacobian(p0, Q).reshape(-1, L.n)
     free = np.flatnonzero(~L.fixed)
     norms = np.linalg.norm(F, axis=0)
-    zero = [i for i in free if norms[i] <= 1e-12 * max(norms.max(), 1e-300)]
-    cand = [i for i in free if i not in zero]
+    zero = [int(i) for i in free if norms[i] <= 1e-12 * max(norms.max(), 1e-300)]
+    cand = [int(i) for i in free if i not in zero]
     Fs = F[:, cand] / norms[cand]
-    # rank by SciPy's pivoted QR
-    _, R, _ = sla.qr(Fs, mode="economic", pivoting=True)
-    d = np.abs(np.diag(R))
-    rank = int(np.sum(d > tol * d[0])) if d.size else 0
     # ordered selection: user preference, then set-up parameters, then robot base-to-tip
     setup = L.is_setup()
     pref = L.select(prefer) if prefer else np.zeros(L.n, bool)
     order = sorted(range(len(cand)), key=lambda c: (not pref[cand[c]], not setup[cand[c]], cand[c]))
-    basis: list[np.ndarray] = []
-    kept: list[int] = []
-    for c in order:
-        v = Fs[:, c].copy()
-        for b in basis:  # modified Gram-Schmidt, twice for stability
-            v -= (b @ v) * b
-        for b in basis:
-            v -= (b @ v) * b
-        nv = np.linalg.norm(v)
-        if nv > 1e-6 and len(kept) < rank:
-            basis.append(v / nv)
-            kept.append(c)
+    kept, _ = ordered_selection(Fs, order, tol)
     kept_idx = sorted(cand[c] for c in kept)
-    # confounding partners of each dropped parameter
+    rank = len(kept_idx)
+    dropped = _dropped(L, F, norms, free, zero, kept_idx, setup)
+    # null space over the free parameters (for KPI checks), unscaled
+    _, s, Vt = np.linalg.svd(F[:, free] / np.where(norms[free] > 0, norms[free], 1.0), full_matrices=False)
+    null_free = Vt[rank:].T / np.where(norms[free] > 0, norms[free], 1.0)[:, None]
+    N = np.zeros((L.n, null_free.shape[1]))
+    N[free] = null_free
+    notes = model.identifiability_notes()
+    qr_rank = _qr_rank(Fs, tol)
+    if qr_rank != rank:
+        notes.append(f"the ordered selection kept {rank} columns, the pivoted QR at the same tolerance {tol:g} "
+                     f"counts {qr_rank}: some parameters are nearly confounded")
+    return Identifiability(L.names, np.array(kept_idx, int), rank, L.n, len(free), dropped, notes, N,
+                           L.setup_groups, success=True, status="full rank" if rank == len(free) else "rank deficient",
+                           message=f"{rank} of {len(free)} free parameters identifiable")
+
+
+def _qr_rank(Fs: np.ndarray, tol: float) -> int:
+    """Rank of unit-norm columns by SciPy's QR with column pivoting: diagonal entries above ``tol`` (the greedy
+    residual shares)."""
+    if Fs.size == 0:
+        return 0
+    _, R, _ = sla.qr(Fs, mode="economic", pivoting=True)
+    return int(np.sum(np.abs(np.diag(R)) > tol))
+
+
+def _dropped(L, F: np.ndarray, norms: np.ndarray, free: np.ndarray, zero: list[int], kept_idx: list[int],
+             setup: np.ndarray) -> list[dict]:
+    """One entry per free parameter not kept: its name and the kept parameters it is confounded with."""
     B = F[:, kept_idx] / norms[kept_idx]
     dropped = []
     for i in [i for i in free if i not in kept_idx]:
@@ -170,17 +241,7 @@ def analyse(model: MeasurementModel, Q: np.ndarray | None = None, prefer: list[s
         partners = [L.names[kept_idx[k]] for k in big[:4] if abs(x[k]) > 1e-3 * np.abs(x).max()]
         conv = (not setup[i]) and any(setup[L.index(p)] for p in partners)
         dropped.append({"name": L.names[i], "confounded_with": partners, "convention": bool(conv)})
-    # null space over the free parameters (for KPI checks), unscaled
-    _, s, Vt = np.linalg.svd(F[:, free] / np.where(norms[free] > 0, norms[free], 1.0), full_matrices=False)
-    null_free = Vt[rank:].T / np.where(norms[free] > 0, norms[free], 1.0)[:, None]
-    N = np.zeros((L.n, null_free.shape[1]))
-    N[free] = null_free
-    notes = model.identifiability_notes()
-    if len(kept_idx) != rank:
-        notes.append(f"ordered selection kept {len(kept_idx)} columns but the pivoted QR rank is {rank}")
-    return Identifiability(L.names, np.array(kept_idx, int), rank, L.n, len(free), dropped, notes, N,
-                           L.setup_groups, success=True, status="full rank" if rank == len(free) else "rank deficient",
-                           message=f"{rank} of {len(free)} free parameters identifiable")
+    return dropped
 
 
 def check_kpi(ident: Identifiability, model: MeasurementModel, E: np.ndarray, what: str = "KPI", tol: float = 1e-6

@@ -157,6 +157,7 @@ class DesignCriterion(DesignObjective):
             P = np.diag(1.0 / np.asarray(self.prior, float) ** 2)
             M0 = P if M0 is None else M0 + P
         K = self.crit.pool_form(self.E, self.base.size)
+        kw.setdefault("names", [self.model.layout.names[i] for i in self.base])
         return select(Fp, m, K, seed=seed, fixed_info=M0, **kw)
 
 

@@ -55,7 +55,7 @@ def _exchange(Fp: np.ndarray, chosen: Sequence[int] | np.ndarray, K: np.ndarray 
 
 @limit_threads
 def select(Fp: np.ndarray, m: int, K: np.ndarray | None = None, tol: float = 1e-3, n_starts: int = 2,
-           seed: int = 0, fixed_info: np.ndarray | None = None) -> PoolSelection:
+           seed: int = 0, fixed_info: np.ndarray | None = None, names: list[str] | None = None) -> PoolSelection:
     """Choose m distinct candidates: relaxation (weights capped at 1/m), rounding to the largest weights, exchange.
 
     The exchange runs, over the support and the max(300, 5m) candidates with the largest d_i at the
@@ -71,6 +71,7 @@ def select(Fp: np.ndarray, m: int, K: np.ndarray | None = None, tol: float = 1e-
         seed: seed of those starts.
         fixed_info: information M₀ every design already has (poses measured before, a prior), (nb, nb):
             φ of M₀ + Σ_chosen F_iᵀF_i is minimised and certified (:func:`approximate_design`).
+        names: the identifiable parameters' names, for the refusal of a pool that does not identify them.
 
     Returns:
         The selection (``indices``, exact ``value`` φ) with the approximate design and its certificate;
@@ -78,13 +79,13 @@ def select(Fp: np.ndarray, m: int, K: np.ndarray | None = None, tol: float = 1e-
 
     Raises:
         InputError: m larger than the pool.
-        IdentifiabilityError: the pool does not identify the parameters.
+        IdentifiabilityError: the pool does not identify the parameters (naming those its poses move alike).
     """
     t0 = time.perf_counter()
     N = Fp.shape[0]
     if m > N:
         raise InputError(f"cannot choose {m} measurements from a pool of {N} candidates")
-    approx = approximate_design(Fp, K, tol=tol, m=m, fixed_info=fixed_info)
+    approx = approximate_design(Fp, K, tol=tol, m=m, fixed_info=fixed_info, names=names)
     M0 = None if fixed_info is None else np.asarray(fixed_info, float)
     cand, starts, d = _exchange_starts(Fp, m, K, approx, n_starts, seed, None if M0 is None else M0 / m)
     sub = Fp[cand]

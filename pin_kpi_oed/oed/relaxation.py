@@ -21,10 +21,11 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from pin_kpi_oed.errors import IdentifiabilityError, InputError
+from pin_kpi_oed.oed.covariance import check_pivots, weakest_direction
 from pin_kpi_oed.results import Result
 
-__all__ = ["ApproximateDesign", "approximate_design", "directional_derivatives", "efficiency", "pool_phi",
-           "WORKING_SET"]
+__all__ = ["ApproximateDesign", "approximate_design", "check_pool", "directional_derivatives", "efficiency",
+           "pool_phi", "WORKING_SET"]
 
 
 def pool_phi(M: np.ndarray, K: np.ndarray | None) -> float:
@@ -37,6 +38,26 @@ def pool_phi(M: np.ndarray, K: np.ndarray | None) -> float:
         return float(-2.0 * np.sum(np.log(np.diag(L))))
     X = np.linalg.solve(L, K.T)
     return float(np.sum(X * X))
+
+
+def check_pool(M: np.ndarray, names: list[str] | None = None) -> None:
+    """Refuse a candidate pool whose information M (uniform weights, with the fixed part) is singular on the scaled
+    basis, naming the parameters its poses cannot tell apart.
+
+    Raises:
+        IdentifiabilityError: "the candidate pool does not identify the parameters: 'a' and 'b' move the
+            measurements alike in every pose of the pool (...)" and what to change.
+    """
+    where = "every pose of the pool"
+    try:
+        L = np.linalg.cholesky(M)
+        check_pivots(M, np.diag(L), names, where)
+    except (np.linalg.LinAlgError, IdentifiabilityError):
+        raise IdentifiabilityError(
+            f"the candidate pool does not identify the parameters: {weakest_direction(M, names, where)}; "
+            "sample more, or more varied, feasible configurations (the cell's obstacles, the line of sight and the "
+            "incidence limit may keep the pool from the joint ranges that tell them apart), or fix one of them as "
+            "known") from None
 
 
 def _d(Fp: np.ndarray, M: np.ndarray, K: np.ndarray | None) -> np.ndarray:
@@ -299,8 +320,8 @@ def directional_derivatives(Fp: np.ndarray, w: np.ndarray, K: np.ndarray | None,
 
 
 def approximate_design(Fp: np.ndarray, K: np.ndarray | None = None, tol: float = 1e-3, max_iter: int = 20000,
-                       method: str = "newton", m: int | None = None, fixed_info: np.ndarray | None = None
-                       ) -> ApproximateDesign:
+                       method: str = "newton", m: int | None = None, fixed_info: np.ndarray | None = None,
+                       names: list[str] | None = None) -> ApproximateDesign:
     """Optimal approximate design on a candidate pool, with its certificate.
 
     ``method="newton"`` (default): candidate reduction by the equivalence theorem and an
@@ -338,19 +359,20 @@ def approximate_design(Fp: np.ndarray, K: np.ndarray | None = None, tol: float =
         m: cap the weights at 1/m (distinct-point designs of m candidates); None = no cap.
         fixed_info: information M₀ every design already has (nb, nb), same weighting as Fp; needs ``m``
             and the Newton method.
+        names: the identifiable parameters' names, for the refusal.
 
     Raises:
-        IdentifiabilityError: the whole pool (with M₀) does not identify the parameters.
+        IdentifiabilityError: the whole pool (with M₀) does not identify the parameters (its information, scaled to
+            a unit diagonal, singular: :func:`~pin_kpi_oed.oed.covariance.check_pivots`), naming the parameters
+            that move the measurements alike in every pose of the pool.
         InputError: unknown method, m larger than the pool, ``fixed_info`` without m or of the wrong shape.
     """
     t0 = time.perf_counter()
     N, nh, nb = Fp.shape
     mc, M0 = _relaxation_setup(N, nb, method, m, fixed_info)
     w = np.full(N, 1.0 / N)
+    check_pool(_info_w(Fp, w, M0), names)
     phi0 = pool_phi(_info_w(Fp, w, M0), K)
-    if not np.isfinite(phi0):
-        raise IdentifiabilityError("the candidate pool does not identify the parameters: sample more, or more "
-                                   "varied, feasible configurations")
     if method == "newton":
         w, total = _relax_newton(Fp, K, tol, max_iter, phi0, mc, M0)
     else:

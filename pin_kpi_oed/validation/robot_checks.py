@@ -1,6 +1,7 @@
 """Plausibility checks of a URDF before and after Pinocchio reads it (shared by every command).
 
-Before: a joint axis of zero length, a ``<limit>`` with lower > upper, an un-expanded xacro file.
+Before: a joint axis of zero length, a ``<limit>`` with lower > upper, an un-expanded xacro file (xacro elements
+or ``${...}`` / ``$(...)`` in attribute values; comments and element text do not count).
 After: a robot whose reach is kilometres (a URDF written in mm).
 """
 
@@ -13,22 +14,62 @@ import numpy as np
 
 from pin_kpi_oed.errors import InputError, RobotLoadError
 
-__all__ = ["check_urdf_tree", "check_robot_scale", "MAX_REACH_M", "kinematic_difference", "check_same_robot"]
+__all__ = ["check_urdf_tree", "xacro_construct", "xacro_refusal", "check_robot_scale", "MAX_REACH_M",
+           "kinematic_difference", "check_same_robot"]
 
 #: the largest plausible reach of an arm (m); a URDF in mm gives ~1000x its real reach
 MAX_REACH_M = 100.0
 
 
+#: the xacro namespace; an element in it (``<xacro:include>``, ``<xacro:macro>``, ...) is un-expanded xacro
+XACRO_NS = "http://www.ros.org/wiki/xacro"
+
+
+def xacro_construct(root: Any) -> str | None:
+    """The first un-expanded xacro construct of a parsed URDF, in words, or None for plain URDF.
+
+    Only what xacro itself would expand counts: an element in the xacro namespace, or an attribute value
+    with a property ``${...}`` or a substitution ``$(...)``. XML comments (which the parser drops) and element
+    text are never expanded by xacro, so a ``${prefix}`` or ``<xacro:...>`` left in a comment of a file that
+    xacro generated, or the ``xmlns:xacro`` declaration it keeps, does not make the file a xacro file.
+
+    Args:
+        root: the ``xml.etree`` root element.
+
+    Returns:
+        e.g. ``"element <xacro:include>"`` or ``"joint 'j1': origin rpy='${pi/2} 0 0'"``, or None.
+    """
+    for el in root.iter():
+        tag = el.tag if isinstance(el.tag, str) else ""
+        if tag.startswith("{" + XACRO_NS + "}"):
+            return f"element <xacro:{tag.split('}', 1)[1]}>"
+        for key, val in el.attrib.items():
+            if "${" in val or "$(" in val:
+                return f"<{tag}> {key}='{val}'"
+    return None
+
+
+def xacro_refusal(path: Any, what: str) -> RobotLoadError:
+    """The one refusal of an un-expanded xacro file: the file, what was found and the command that expands it."""
+    return RobotLoadError(f"{path}: a xacro file, not plain URDF ({what}): expand it first "
+                          f"('xacro {path} > robot.urdf') and pass the .urdf")
+
+
 def check_urdf_tree(root: Any, path: Any, text: str = "") -> None:
     """Check the parsed URDF XML (``xml.etree`` root) of ``path``.
 
+    Args:
+        root: the parsed XML (comments dropped by the parser).
+        path: the file, for messages.
+        text: the file's text (unused; kept for callers that pass it).
+
     Raises:
-        RobotLoadError: naming the file, the joint and the value: a xacro file, a zero joint axis,
-            reversed limits.
+        RobotLoadError: naming the file, the joint and the value: a xacro file (:func:`xacro_construct`),
+            a zero joint axis, reversed limits.
     """
-    if "<xacro:" in text or "${" in text:  # un-expanded macros or properties (an expanded file keeps only xmlns)
-        raise RobotLoadError(f"{path}: a xacro file, not plain URDF: expand it first "
-                             f"(e.g. 'xacro {path} > robot.urdf') and pass the .urdf")
+    found = xacro_construct(root)
+    if found is not None:
+        raise xacro_refusal(path, found)
     for j in root.iter("joint"):
         name, kind = j.get("name", "?"), j.get("type", "")
         if kind not in ("revolute", "continuous", "prismatic"):

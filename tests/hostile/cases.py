@@ -95,6 +95,8 @@ def _cases() -> list[Case]:
         Case("urdf-zero-axis", "info {d}/zaxis.urdf", "zero length"),
         Case("urdf-swapped-limits", "info {d}/swap.urdf", "reversed"),
         Case("urdf-xacro", "info {d}/robot.xacro.urdf", "xacro"),
+        Case("urdf-xacro-property", "info {d}/property.xacro.urdf", "property.xacro.urdf > robot.urdf"),
+        Case("urdf-xacro-no-xmlns", "info {d}/bare.xacro.urdf", "a xacro file"),
         Case("urdf-broken-parent", "info {d}/broken.urdf", "parent link [nolink]"),
         Case("cell-tracker-mm", "design --cell {d}/cell_tracker_mm.yaml", "tracker.xyz_m"),
         Case("identify-sigma-10", "identify --robot kr15 --data {d}/tr.csv --sigma 10", "give it in m"),
@@ -399,6 +401,9 @@ def build_inputs(d: Path) -> None:
     (d / "mm.urdf").write_text(re.sub(r'(?<=<origin )xyz="([^"]+)"',
                                       lambda mo: 'xyz="' + " ".join(str(float(x) * 1000) for x in mo.group(1).split())
                                       + '"', urdf))
+    (d / "property.xacro.urdf").write_text(re.sub(r'<axis xyz="[^"]*"', '<axis xyz="0 0 ${axis_sign}"', urdf,
+                                                  count=1))
+    (d / "bare.xacro.urdf").write_text(urdf.replace("</robot>", '<xacro:include filename="x.xacro"/></robot>'))
     (d / "robot.xacro.urdf").write_text(urdf.replace("<robot ", '<robot xmlns:xacro="http://www.ros.org/wiki/xacro" ',
                                                      1).replace("</robot>", '<xacro:include filename="x.xacro"/>'
                                                                 "</robot>"))
