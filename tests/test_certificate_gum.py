@@ -128,3 +128,90 @@ def test_budget_against_monte_carlo_and_the_held_out_errors(calibrated, tmp_path
     h = u["held_out"]
     assert abs(h["within_U"] - h["coverage_stated"]) < 0.06 and abs(h["within_U_axis"] - 0.9545) < 0.05
     assert u["conformity"]["verdict"] == "conforms"
+
+
+def test_no_legend_covers_data_in_the_certificate_figures(calibrated):  # noqa: F811
+    """Every legend of the certificate's figures lies outside its axes' plotting area (display coordinates after
+    drawing): it covers no point, bar or line."""
+    from matplotlib.figure import Figure
+
+    from pin_kpi_oed.report import figures
+
+    made = []
+    orig = figures.png_bytes
+
+    def keep(fig: Figure, dpi: int = figures.DPI) -> bytes:
+        made.append(fig)
+        return orig(fig, dpi)
+
+    figures.png_bytes = keep
+    try:
+        assert _report(calibrated, "test.csv", "--html", str(calibrated / "gum.html")) == 0
+    finally:
+        figures.png_bytes = orig
+    n = 0
+    for fig in made:
+        fig.canvas.draw()
+        r = fig.canvas.get_renderer()
+        for ax in fig.axes:
+            leg = ax.get_legend()
+            if leg is None:
+                continue
+            n += 1
+            lb, ab = leg.get_window_extent(r), ax.get_window_extent(r)
+            assert not lb.overlaps(ab) or lb.y0 >= ab.y1 - 1, "a legend overlaps its axes' data area"
+    assert n >= 2
+
+
+_LAYOUT_JS = """<script>window.addEventListener('load', function () {
+  var W = document.documentElement.clientWidth, bad = [];
+  document.querySelectorAll('pre, p, td, th, h1, h2, h3, code, li, div').forEach(function (el) {
+    var r = el.getBoundingClientRect();
+    if (el.scrollWidth > el.clientWidth + 1 && getComputedStyle(el).display !== 'inline')
+      bad.push('cut: ' + el.tagName + ' ' + el.textContent.slice(0, 40));
+    if (r.width > 0 && r.right > W + 1) bad.push('beyond the page: ' + el.tagName + ' ' + el.textContent.slice(0, 40));
+  });
+  var s = document.getElementById('summary').getBoundingClientRect();
+  var v = document.querySelector('#summary .verdict'), t = document.querySelector('#summary table');
+  var first = v && t && v.getBoundingClientRect().bottom <= window.innerHeight &&
+              t.getBoundingClientRect().top < window.innerHeight;
+  var out = document.createElement('pre'); out.id = 'layout-result';
+  out.textContent = JSON.stringify({bad: bad, first: !!first, summaryTop: s.top, W: W});
+  document.body.appendChild(out);
+});</script>"""
+
+
+def _layout(html_path: Path, browser: str, width: int = 794, height: int = 1123) -> dict:
+    """The page at an A4 width (794 × 1123 CSS px): elements whose text is cut or runs beyond the page, and whether
+    the verdict and the headline table are on the first screen."""
+    import re
+    import subprocess
+
+    page = html_path.with_name("layout.html")
+    page.write_text(html_path.read_text().replace("</body>", _LAYOUT_JS + "</body>"))
+    dom = subprocess.run([browser, "--headless", "--no-sandbox", "--disable-gpu", "--no-first-run",
+                          f"--window-size={width},{height}", "--virtual-time-budget=5000",
+                          f"--user-data-dir={html_path.parent / 'profile'}", "--dump-dom", page.resolve().as_uri()],
+                         capture_output=True, text=True, timeout=120).stdout
+    m = re.search(r'<pre id="layout-result">(.*?)</pre>', dom, re.S)
+    assert m, "the layout script did not run"
+    import html as _html
+
+    return json.loads(_html.unescape(m.group(1)))
+
+
+def _chromium():
+    from pin_kpi_oed.viz.render import find_browser
+
+    return find_browser()
+
+
+@pytest.mark.skipif(_chromium() is None, reason="no Chromium/Chrome browser (Debian: apt-get install chromium)")
+def test_page_layout_at_a4_width_in_chromium(calibrated, tmp_path):  # noqa: F811
+    """Headless Chromium at an A4 width: no text cut or beyond the page (bounding boxes, scroll widths), the verdict
+    and the headline figures on the first screen; the page ≤ 5 MB and the PDF printed."""
+    d = calibrated
+    assert _report(d, "test.csv", "--html", str(tmp_path / "c.html"), "--pdf", str(tmp_path / "c.pdf")) == 0
+    lay = _layout(tmp_path / "c.html", _chromium())
+    assert lay["bad"] == [] and lay["first"], lay
+    assert (tmp_path / "c.html").stat().st_size <= 5e6 and (tmp_path / "c.pdf").read_bytes()[:5] == b"%PDF-"
