@@ -13,6 +13,10 @@ a kinematics file of another robot or hash): one line, exit 2, nothing written.
 from __future__ import annotations
 
 import argparse
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from pin_kpi_oed.report.content import CertificateOptions
 
 __all__ = ["register", "run"]
 
@@ -99,7 +103,7 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def _options(args: argparse.Namespace) -> object:
+def _options(args: argparse.Namespace) -> CertificateOptions:
     """The :class:`CertificateOptions` of the command line (lengths checked in m)."""
     import numpy as np
 

@@ -77,7 +77,7 @@ def goal_groups(G: np.ndarray, radius_m: float = GOAL_RADIUS_M, min_size: int = 
     for i in range(len(G)):
         if not free[i]:
             continue
-        near = np.asarray(tree.query_ball_point(G[i], r=radius_m), int)  # type: ignore[union-attr]
+        near = np.asarray(tree.query_ball_point(G[i], r=radius_m), int)
         g = np.sort(near[free[near]])
         free[g] = False
         if g.size >= min_size:
