@@ -13,6 +13,10 @@ a kinematics file of another robot or hash): one line, exit 2, nothing written.
 from __future__ import annotations
 
 import argparse
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from pin_kpi_oed.report.content import CertificateOptions
 
 __all__ = ["register", "run"]
 
@@ -41,6 +45,24 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--json", default=None, help="write its content (JSON, SI units) here")
     p.add_argument("--pdf", default=None,
                    help="print it to PDF here (headless Chromium; skipped with a note if absent)")
+    p.add_argument("--lab", default=None,
+                   help="lab file (YAML: organisation, operator, customer, robot_serial, instrument make / model / "
+                        "serial / calibration_date / calibration_certificate); without it the page is a draft")
+    p.add_argument("--required-accuracy", type=float, default=None,
+                   help="required accuracy (m) of --accuracy-figure: ISO 14253-1 conformity statement")
+    p.add_argument("--accuracy-figure", default="p95", choices=["p95", "rms", "mean", "max"],
+                   help="the held-out figure the required accuracy is about (default p95)")
+    p.add_argument("--work", default=None,
+                   help="working configurations (joint-space program CSV) the uncertainty budget is stated at "
+                        "(default: the model's)")
+    p.add_argument("--goal-radius", type=float, default=1e-3,
+                   help="ISO 9283: rows whose goal lies within this distance (m) of a position's first goal are "
+                        "that commanded position (default 0.001)")
+    p.add_argument("--commanded-tcp", default=None,
+                   help="ISO 9283: the point x,y,z (m, tool frame) the goal columns command (default: the "
+                        "measured point)")
+    p.add_argument("--monte-carlo", type=int, default=0,
+                   help="draws of the Monte-Carlo check of the uncertainty budget (0: none)")
     p.add_argument("--quiet", action="store_true", help="print nothing")
     add_table_options(p)
     p.set_defaults(func=run)
@@ -67,7 +89,7 @@ def run(args: argparse.Namespace) -> int:
     cert = build_certificate(args.model, args.train, args.validate, register_rows=args.register_rows,
                              register_data_path=args.register_data, seed=args.seed, table_opts=table_options(args),
                              kinematics=args.kinematics, command=command_line(getattr(args, "argv", None) or []),
-                             figures=bool(args.html or args.pdf))
+                             figures=bool(args.html or args.pdf), options=_options(args))
     out = write_certificate(cert, html=args.html, json_path=args.json, pdf=args.pdf)
     if not args.quiet:
         a = cert.data["accuracy"]
@@ -75,5 +97,39 @@ def run(args: argparse.Namespace) -> int:
               f"({a['after']['n']} rows); {cert.data['fit_quality'].get('message')}")
         if out["pdf_skipped"]:
             print(out["pdf_skipped"])
+        s = cert.data["summary"]
+        print(f"{s['status']['kind']}: {s['verdict']['text']}")
         print("wrote " + ", ".join(out["written"]))
     return 0
+
+
+def _options(args: argparse.Namespace) -> CertificateOptions:
+    """The :class:`CertificateOptions` of the command line (lengths checked in m)."""
+    import numpy as np
+
+    from pin_kpi_oed.errors import InputError
+    from pin_kpi_oed.report.content import CertificateOptions
+
+    for flag, v in (("--required-accuracy", args.required_accuracy), ("--goal-radius", args.goal_radius)):
+        if v is not None and not (np.isfinite(v) and 0 < v < 0.1):
+            raise InputError(f"{flag} {v!r}: a positive length below 0.1 m (the option is in metres)")
+    tcp = None
+    if args.commanded_tcp:
+        try:
+            tcp = np.array([float(x) for x in args.commanded_tcp.split(",")])
+        except ValueError:
+            tcp = np.zeros(0)
+        if tcp.shape != (3,) or not np.all(np.isfinite(tcp)) or np.abs(tcp).max() > 2.0:
+            raise InputError(f"--commanded-tcp {args.commanded_tcp!r}: three numbers x,y,z in m")
+    work = None
+    if args.work:
+        from pin_kpi_oed.calibrated.model_file import load_model_file
+        from pin_kpi_oed.data.targets import read_targets
+
+        rb = load_model_file(args.model).robot
+        work = read_targets(args.work, rb.joint_names, program=True, revolute=rb.is_revolute).q
+    if args.monte_carlo < 0:
+        raise InputError(f"--monte-carlo {args.monte_carlo}: a number of draws >= 0")
+    return CertificateOptions(lab_path=args.lab, required_accuracy_m=args.required_accuracy,
+                              accuracy_figure=f"{args.accuracy_figure}_m", work_q=work, goal_radius_m=args.goal_radius,
+                              commanded_tcp_m=tcp, mc_draws=args.monte_carlo)

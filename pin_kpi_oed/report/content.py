@@ -26,16 +26,41 @@ import numpy as np
 
 from pin_kpi_oed.errors import InputError
 
-__all__ = ["Certificate", "build_certificate", "correlations", "sections_present", "portable_path",
-           "CERTIFICATE_FORMAT", "SECTIONS"]
+__all__ = ["Certificate", "CertificateOptions", "build_certificate", "correlations", "sections_present",
+           "portable_path", "CERTIFICATE_FORMAT", "SECTIONS"]
 
 #: Format tag of the certificate's JSON.
 CERTIFICATE_FORMAT = "pin_kpi_oed.certificate/1"
 #: The certificate's sections, in order: (id, title).
-SECTIONS = (("calibrated", "What was calibrated"), ("parameters", "Parameters"),
-            ("accuracy", "Accuracy on held-out rows"), ("fit_quality", "Fit quality"),
+SECTIONS = (("summary", "Summary"), ("identity", "Identity and traceability"),
+            ("calibrated", "What was calibrated"), ("parameters", "Parameters"),
+            ("accuracy", "Accuracy on held-out rows"), ("uncertainty", "Uncertainty (GUM)"),
+            ("fit_quality", "Fit quality"),
             ("honest_sigma", "Honest sigma"), ("trust_map", "Trust map"), ("iso9283", "ISO 9283 pose figures"),
             ("diagnosis", "Diagnosis"), ("reproduce", "Reproduce"))
+
+
+@dataclass(frozen=True)
+class CertificateOptions:
+    """What makes a page a certificate besides the model and its data.
+
+    Attributes:
+        lab_path: the lab file (:mod:`pin_kpi_oed.report.lab`); None: the page is a draft.
+        required_accuracy_m: the accuracy the user requires of ``accuracy_figure`` (m); None: no conformity statement.
+        accuracy_figure: the held-out figure the requirement is about (``p95_m``, ``rms_m``, ``mean_m``, ``max_m``).
+        work_q: working configurations (k, n) rad / m the budget is stated at (default: the model's).
+        goal_radius_m: the stated distance of a commanded position's rows to its goal (m).
+        commanded_tcp_m: the point the goal columns command in the tool frame (m); None: the measured point.
+        mc_draws: draws of the budget's Monte-Carlo check (0: none).
+    """
+
+    lab_path: str | None = None
+    required_accuracy_m: float | None = None
+    accuracy_figure: str = "p95_m"
+    work_q: Any = None
+    goal_radius_m: float = 1e-3
+    commanded_tcp_m: Any = None
+    mc_draws: int = 0
 
 
 @dataclass
@@ -181,7 +206,7 @@ def _read(paths: Sequence[str], robot: Any, opts: dict) -> tuple[Any, list[dict]
 def build_certificate(model_path: str, train_paths: Sequence[str], validate_path: str | None, *,
                       register_rows: int | None = None, register_data_path: str | None = None, seed: int = 0,
                       table_opts: dict | None = None, kinematics: str | None = None, command: str = "",
-                      figures: bool = True) -> Certificate:
+                      figures: bool = True, options: CertificateOptions | None = None) -> Certificate:
     """Collect a calibration certificate.
 
     Args:
@@ -193,26 +218,34 @@ def build_certificate(model_path: str, train_paths: Sequence[str], validate_path
         kinematics: a UR kinematics file the model's nominal robot must have (its hash and values checked).
         command: the ``report`` command line (printed in the certificate).
         figures: draw the figures (PNG).
+        options: the lab file, the required accuracy, the working configurations, the ISO 9283 grouping
+            (:class:`CertificateOptions`).
 
     Raises:
         InputError: no held-out data, training files other than the recorded ones, a kinematics file of
-            another robot or another hash, bad measurement files.
+            another robot or another hash, bad measurement files, a bad lab file, too few held-out rows once those
+            repeating training configurations are removed.
     """
     from pin_kpi_oed.calibrated.model_file import load_model_file
     from pin_kpi_oed.report.accuracy import accuracy_figures, before_after
+    from pin_kpi_oed.report.certify import commanded_section
     from pin_kpi_oed.report.iso9283 import iso_figures
+    from pin_kpi_oed.report.lab import read_lab
 
     if not validate_path:
         raise InputError("a certificate states accuracy on rows the model was not fitted on: give "
                          "validate_path='FILE' (held-out measurements)")
     cm = load_model_file(model_path)
     _check_kinematics(cm, kinematics)
+    o = options or CertificateOptions()
+    lab = read_lab(o.lab_path) if o.lab_path else None
     opts = dict(table_opts or {})
     train, train_recs = _read(train_paths, cm.robot, opts)
     test, val_recs = _read([validate_path], cm.robot, opts)
     if {r["sha256"] for r in val_recs} & {r["sha256"] for r in train_recs}:
         raise InputError(f"{validate_path}: the held-out file is one of the training files: give rows the model was "
                          "not fitted on")
+    test, repeats = _held_out(cm, train, test, lab, str(validate_path))
     checked = _check_recorded(cm, train_recs, str(model_path))
     reg = _read([register_data_path], cm.robot, opts)[0] if register_data_path else None
     ho = before_after(cm, train, test, register_rows=register_rows, register_data=reg, seed=seed)
@@ -222,7 +255,7 @@ def build_certificate(model_path: str, train_paths: Sequence[str], validate_path
            "before_means": "nominal robot + tracker pose and reflector fitted on the training rows",
            "after_means": "the calibrated model" + (" (set-up re-registered)" if ho.mode == "transfer" else ""),
            "before": accuracy_figures(ho.before, ho.Q, ho.reach_m, names),
-           "after": accuracy_figures(ho.after, ho.Q, ho.reach_m, names)}
+           "after": accuracy_figures(ho.after, ho.Q, ho.reach_m, names), "repeats_removed": repeats}
     quality = (cm.fit or {}).get("quality")
     after = ho.after
     data = {"format": CERTIFICATE_FORMAT, "title": f"Calibration certificate: {cm.robot.name}",
@@ -233,10 +266,13 @@ def build_certificate(model_path: str, train_paths: Sequence[str], validate_path
             "honest_sigma": {k: after.get(k) for k in ("z_rms", "inside_95", "sigma_mean_m", "extrapolation_share",
                                                         "sigma_scale")},
             "trust_map": None, "iso9283": iso_figures(scored, ho.Q, np.asarray(ho.before["residuals_m"]),
-                                                      np.asarray(after["residuals_m"])),
+                                                      np.asarray(after["residuals_m"]), goal_radius_m=o.goal_radius_m,
+                                                      commanded=commanded_section(scored, ho, o.goal_radius_m,
+                                                                                  o.commanded_tcp_m)),
             "diagnosis": next((h.get("diagnosis") for h in reversed(cm.history or []) if h.get("diagnosis")), None),
             "reproduce": {"calibration": [h.get("command") for h in cm.history if h.get("command")],
                           "report": command}}
+    _certify(data, cm, ho, lab, {"training": train, "held-out": scored}, o, seed)
     cert = Certificate(data)
     from pin_kpi_oed.report.figures import draw_figures, trust_numbers
 
@@ -244,6 +280,51 @@ def build_certificate(model_path: str, train_paths: Sequence[str], validate_path
     if figures:
         cert.figures = draw_figures(cm, ho, scored, data)
     return cert
+
+
+def _held_out(cm: Any, train: Any, test: Any, lab: dict | None, where: str) -> tuple[Any, dict]:
+    """The held-out rows that repeat no training configuration (:mod:`pin_kpi_oed.report.heldout_rows`) and the
+    record of those removed; the tracker's resolution from the lab file, else the default."""
+    from pin_kpi_oed.model.measured_joints import align_data
+    from pin_kpi_oed.report.heldout_rows import held_out_only
+    from pin_kpi_oed.report.lab import DEFAULT_RESOLUTION_M
+
+    res = (lab or {}).get("instrument", {}).get("resolution_m", DEFAULT_RESOLUTION_M)
+    keep, rec = held_out_only(align_data(cm.robot, train), align_data(cm.robot, test), cm.robot.reach(), res, where)
+    return (test.subset(keep) if rec["removed"] else test), rec
+
+
+def _certify(data: dict, cm: Any, ho: Any, lab: dict | None, sets: dict, o: CertificateOptions, seed: int) -> None:
+    """Identity, the uncertainty section and the conformity statement into ``data``, then the summary."""
+    from pin_kpi_oed.report.certify import conformity_section, figure_uncertainty, uncertainty_section
+    from pin_kpi_oed.report.lab import data_record, status
+    from pin_kpi_oed.report.summary import summary
+
+    rec = data_record(sets)
+    st = status(lab)
+    data["title"] = (f"Calibration certificate: {cm.robot.name}" if st["kind"] == "certificate" else
+                     f"DRAFT — not a certificate: {cm.robot.name}")
+    data["identity"] = {"status": st, "lab": lab, "data": rec, "report_time_utc": _now()}
+    u_instr = (lab or {}).get("instrument", {}).get("uncertainty_m")
+    temps = None
+    T = sets["training"].temperature_c
+    if T is not None and rec["temperature_c"] is not None:
+        tmean = float(np.mean(T))
+        temps = {"mean_c": tmean, "half_range_k": max(abs(rec["temperature_c"][0] - tmean),
+                                                      abs(rec["temperature_c"][1] - tmean), 1e-3)}
+    unc = uncertainty_section(cm, ho, work=o.work_q, instrument_u_m=u_instr, temps=temps, seed=seed,
+                              mc_draws=o.mc_draws)
+    unc["figures"] = figure_uncertainty(ho.after["errors_m"], u_instr or 0.0)
+    unc["conformity"] = conformity_section(data["accuracy"]["after"], unc["figures"], o.required_accuracy_m,
+                                           o.accuracy_figure)
+    data["uncertainty"] = unc
+    data["summary"] = summary(data)
+
+
+def _now() -> str:
+    import datetime as dt
+
+    return dt.datetime.now(dt.timezone.utc).replace(microsecond=0).isoformat()
 
 
 def _registration(reg: dict | None) -> dict | None:

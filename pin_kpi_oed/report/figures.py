@@ -14,7 +14,7 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["draw_figures", "trust_numbers", "png_bytes", "DPI"]
+__all__ = ["draw_figures", "trust_numbers", "png_bytes", "outside_legend", "DPI"]
 
 #: Resolution of the embedded figures (keeps the certificate small).
 DPI = 90
@@ -37,6 +37,12 @@ def png_bytes(fig: Any, dpi: int = DPI) -> bytes:
     return buf.getvalue()
 
 
+def outside_legend(ax: Any, fontsize: float = 9) -> Any:
+    """The axes' legend above its plotting area, never on the data."""
+    return ax.legend(loc="lower left", bbox_to_anchor=(0.0, 1.02), ncol=2, fontsize=fontsize, frameon=False,
+                     borderaxespad=0.0)
+
+
 def _histogram(acc: dict, ho: Any) -> bytes:
     fig = _fig(7.0, 3.2)
     ax = fig.subplots()
@@ -46,7 +52,7 @@ def _histogram(acc: dict, ho: Any) -> bytes:
     ax.hist(ea, bins=bins, color=AFTER, alpha=0.6, label=f"after (RMS {acc['after']['rms_m'] * 1e3:.3f} mm)")
     ax.set_xlabel("3-D position error (mm)")
     ax.set_ylabel("held-out rows")
-    ax.legend()
+    outside_legend(ax)
     return png_bytes(fig)
 
 
@@ -65,7 +71,7 @@ def _reach_and_joints(acc: dict, ho: Any) -> bytes:
     _binned_plot(axes[0], acc["before"]["vs_reach"], acc["after"]["vs_reach"], 1.0)
     axes[0].set_xlabel("reach (m)")
     axes[0].set_ylabel("mean error (mm)")
-    axes[0].legend(fontsize=7)
+    outside_legend(axes[0], fontsize=8)
     for ax, (name, b) in zip(axes[1:], acc["before"]["per_joint"].items()):
         _binned_plot(ax, b, acc["after"]["per_joint"][name], 180.0 / np.pi)
         ax.set_xlabel(f"{name} (deg)", fontsize=8)
@@ -85,8 +91,10 @@ def _correlation(data: dict, cm: Any) -> bytes | None:
     ax = fig.subplots()
     im = ax.imshow(C / np.outer(d, d), vmin=-1, vmax=1, cmap="RdBu_r")
     names = list(P["names"])
-    ax.set_xticks(range(len(names)), names, rotation=90, fontsize=5)
-    ax.set_yticks(range(len(names)), names, fontsize=5)
+    fs = float(np.clip(260.0 / max(len(names), 1), 6.0, 9.0))  # ≥ 6 pt: legible on an A4 print
+    fig.set_size_inches(max(6.5, 0.16 * len(names) + 3.0), max(5.5, 0.16 * len(names) + 2.5))
+    ax.set_xticks(range(len(names)), names, rotation=90, fontsize=fs)
+    ax.set_yticks(range(len(names)), names, fontsize=fs)
     fig.colorbar(im, ax=ax, label="correlation")
     return png_bytes(fig)
 
@@ -102,7 +110,7 @@ def _iso(data: dict) -> bytes | None:
         ax.hist(ap, bins=30, color=c, alpha=0.6, label=f"AP {k} (mean {ap.mean():.3f} mm)")
     ax.set_xlabel("AP per commanded position (mm)")
     ax.set_ylabel("positions")
-    ax.legend()
+    outside_legend(ax)
     return png_bytes(fig)
 
 

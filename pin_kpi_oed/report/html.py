@@ -23,7 +23,12 @@ table{border-collapse:collapse;margin:.6em 0}
 td,th{border:1px solid #ccc;padding:3px 8px;font-size:13px;text-align:right}
 th{background:#eef}td.l,th.l{text-align:left}
 code{background:#f4f4f4;padding:2px 4px;font-size:12px;word-break:break-all}
-.verdict{font-weight:bold}img{max-width:100%}.note{color:#555;font-size:13px}"""
+pre{white-space:pre-wrap;overflow-wrap:anywhere;font-size:12px}td{overflow-wrap:anywhere}
+.verdict{font-weight:bold}img{max-width:100%}.note{color:#555;font-size:13px}
+.status{font-size:18px;font-weight:bold;padding:6px 10px;border:2px solid}.status.draft{color:#a33;border-color:#a33}
+.status.certificate{color:#264;border-color:#264}.v-conforms{color:#264}.v-does-not-conform{color:#a33}
+.v-undetermined{color:#a60}.sign{margin-top:2em}
+@media print{section{break-inside:auto}#summary{break-after:page}body{max-width:none;margin:0}}"""
 
 
 def mm(v: Any, digits: int = 4) -> str:
@@ -162,7 +167,15 @@ def _iso(d: dict) -> str:
 
 
 def _section(sid: str, title: str, d: dict, figs: dict) -> str:
-    if sid == "calibrated":
+    from pin_kpi_oed.report.html_parts import commanded_html, identity_html, summary_html, uncertainty_html
+
+    if sid == "summary":
+        body = summary_html(d)
+    elif sid == "identity":
+        body = identity_html(d)
+    elif sid == "uncertainty":
+        body = uncertainty_html(d)
+    elif sid == "calibrated":
         body = _calibrated(d)
     elif sid == "parameters":
         body = _parameters(d) + _img(figs, "correlation", "correlations")
@@ -188,7 +201,7 @@ def _section(sid: str, title: str, d: dict, figs: dict) -> str:
                 + ("" if t["discrepancy"] else " The model has no discrepancy: σ is the noise model's.") + "</p>"
                 + _img(figs, "trust_map", "trust map"))
     elif sid == "iso9283":
-        body = _iso(d) + _img(figs, "iso_ap", "AP per position")
+        body = _iso(d) + commanded_html(d["iso9283"]) + _img(figs, "iso_ap", "AP per position")
     elif sid == "diagnosis":
         g = d["diagnosis"]
         body = (f"<p>{_e(g.get('message'))}</p><pre>{_e(g.get('summary'))}</pre>" if g else

@@ -9,11 +9,13 @@ ISO 9283:1998 defines, for a commanded pose measured n times (attained positions
 Here the robot is driven through a model: the position it should reach is what the model predicts for the
 configuration, so the attained-minus-commanded vector of row j is its residual e_j = measured − predicted
 (tracker frame; the "before" model: the nominal robot with its fitted set-up, "after": the calibration) and
-AP = ‖ē‖ over the rows of one commanded position. The rows of one commanded position are those whose commanded
-(goal) positions lie within 0.1 mm of each other (the data's ``goal_x, goal_y, goal_z`` columns, e.g. the IPA
-series); its directions are its distinct configurations (joints within 1 mrad: another orientation or another
-inverse-kinematics branch reaches the position another way), each direction's barycentre the mean residual of
-its rows. RP needs one configuration measured
+AP = ‖ē‖ over the rows of one commanded position (the *model-prediction variant*; against the commanded poses
+themselves: :mod:`pin_kpi_oed.report.iso_commanded`). The rows of one commanded position are those whose commanded
+(goal) positions lie within a stated distance (:data:`GOAL_RADIUS_M`, 1 mm) of the goal of the group's first row in
+file order (the data's ``goal_x, goal_y, goal_z`` columns, e.g. the IPA series): no group spans more than twice
+that distance, however densely the goals lie (no chaining of neighbours); its directions are its distinct
+configurations (joints within 1 mrad: another orientation or another inverse-kinematics branch reaches the position
+another way), each direction's barycentre the mean residual of its rows. RP needs one configuration measured
 repeatedly: rows whose joint values agree within 1 mrad on every joint form a cycle group (≥ 3 rows); RP is
 computed on their residuals (what stays when the commanded position is the same).
 
@@ -26,11 +28,13 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["GOAL_POSITION", "clusters", "commanded_groups", "direction_keys",
+__all__ = ["GOAL_POSITION", "GOAL_RADIUS_M", "clusters", "goal_groups", "commanded_groups", "direction_keys",
            "pose_accuracy", "repeatability", "iso_figures", "CLAUSES"]
 
 #: The data's commanded-position columns (m).
 GOAL_POSITION = ("goal_x", "goal_y", "goal_z")
+#: Rows whose commanded position lies within this distance of a group's first goal are one commanded position (m).
+GOAL_RADIUS_M = 1e-3
 #: Clauses of ISO 9283:1998 the figures follow.
 CLAUSES = {"AP": "ISO 9283:1998, 7.2.1 (pose accuracy)", "RP": "ISO 9283:1998, 7.2.2 (pose repeatability)",
            "vAP": "ISO 9283:1998, 7.3 (multi-directional pose accuracy variation)"}
@@ -52,11 +56,40 @@ def clusters(X: np.ndarray, tol: float, min_size: int = 2) -> list[np.ndarray]:
     return [g for g in groups if g.size >= min_size]
 
 
-def commanded_groups(data: Any, tol_m: float = 1e-4) -> list[np.ndarray] | None:
-    """Rows per commanded position (≥ 2 rows), or None when the data have no goal columns."""
+def goal_groups(G: np.ndarray, radius_m: float = GOAL_RADIUS_M, min_size: int = 2) -> list[np.ndarray]:
+    """Rows per commanded position: in file order, an unassigned row's goal opens a group that takes every unassigned
+    row whose goal lies within ``radius_m`` (Euclidean, m) of it; groups of at least ``min_size`` rows.
+
+    Args:
+        G: commanded positions (m, 3) m.
+        radius_m: the stated distance to the group's goal (m).
+        min_size: the fewest rows of a group returned.
+
+    Returns:
+        Row indices per group (ascending), in the order the groups were opened.
+    """
+    from scipy.spatial import cKDTree
+
+    G = np.asarray(G, float)
+    free = np.ones(len(G), bool)
+    tree = cKDTree(G) if len(G) else None
+    out = []
+    for i in range(len(G)):
+        if not free[i]:
+            continue
+        near = np.asarray(tree.query_ball_point(G[i], r=radius_m), int)
+        g = np.sort(near[free[near]])
+        free[g] = False
+        if g.size >= min_size:
+            out.append(g)
+    return out
+
+
+def commanded_groups(data: Any, radius_m: float = GOAL_RADIUS_M) -> list[np.ndarray] | None:
+    """Rows per commanded position (≥ 2 rows, :func:`goal_groups`), or None when the data have no goal columns."""
     if not all(k in data.extra for k in GOAL_POSITION):
         return None
-    return clusters(np.column_stack([data.extra[k] for k in GOAL_POSITION]), tol_m)
+    return goal_groups(np.column_stack([data.extra[k] for k in GOAL_POSITION]), radius_m)
 
 
 def direction_keys(Q: np.ndarray, tol_rad: float = 1e-3) -> np.ndarray:
@@ -117,21 +150,32 @@ def repeatability(resid_m: np.ndarray, groups: list[np.ndarray]) -> dict:
 
 
 def iso_figures(data: Any, Q: np.ndarray, resid_before_m: np.ndarray, resid_after_m: np.ndarray,
-                q_tol_rad: float = 1e-3) -> dict:
-    """The ISO 9283 section of a certificate: AP / vAP before and after, RP, or why a figure cannot be given.
+                q_tol_rad: float = 1e-3, goal_radius_m: float = GOAL_RADIUS_M,
+                commanded: dict | None = None) -> dict:
+    """The ISO 9283 section of a certificate: AP / vAP before and after (the model-prediction variant), RP, the
+    figures against the commanded poses where the rows carry them, or why a figure cannot be given.
 
     Args:
         data: the scored rows (their ``extra`` goal columns name the commanded poses).
         Q: their configurations (rad).
         resid_before_m, resid_after_m: residuals of the nominal and the calibrated model (m, 3) m.
         q_tol_rad: joint tolerance of a repeated configuration (rad).
+        goal_radius_m: the stated distance of a commanded position's rows to its goal (m, :func:`goal_groups`).
+        commanded: :func:`~pin_kpi_oed.report.iso_commanded.commanded_figures` of the same rows, or None.
+
+    Returns:
+        ``clauses``, ``statements``, ``variant`` (what AP is measured against), ``goal_radius_m``, ``AP_vAP``
+        (``before``, ``after``), ``RP``, ``commanded`` where the data give them.
     """
-    out: dict = {"clauses": CLAUSES, "statements": []}
-    groups = commanded_groups(data)
+    out: dict = {"clauses": CLAUSES, "statements": [], "goal_radius_m": float(goal_radius_m),
+                 "variant": "model prediction: AP of the residuals measured − predicted (the position the model "
+                            "says the measured joints reach), not of the commanded poses"}
+    groups = commanded_groups(data, goal_radius_m)
     if groups is None:
         out["statements"].append("no commanded positions in the data (goal_x, goal_y, goal_z columns): no AP, vAP")
     elif not groups:
-        out["statements"].append("no commanded position was measured more than once: no AP, vAP")
+        out["statements"].append(f"no commanded position was measured more than once (goals within "
+                                 f"{goal_radius_m * 1e3:g} mm): no AP, vAP")
     else:
         keys = direction_keys(Q, q_tol_rad)
         out["AP_vAP"] = {"before": pose_accuracy(resid_before_m, groups, keys),
@@ -146,4 +190,6 @@ def iso_figures(data: Any, Q: np.ndarray, resid_before_m: np.ndarray, resid_afte
     else:
         out["statements"].append(f"no configuration was measured 3 times or more (joints within {q_tol_rad * 1e3:g} "
                                  "mrad): no RP")
+    if commanded is not None:
+        out["commanded"] = commanded
     return out

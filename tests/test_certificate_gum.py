@@ -1,0 +1,217 @@
+"""What makes the report a certificate: the lab file (else a draft), held-out rows that are held out, goals grouped by
+a stated distance, ISO 9283 against the commanded poses by hand, the GUM budget against Monte-Carlo and the held-out
+errors, the ISO 14253-1 decision rule."""
+
+from __future__ import annotations
+
+import csv
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from pin_kpi_oed.cli.app import main
+from pin_kpi_oed.data.measurements import MeasurementSet, read_measurements, write_measurements
+from pin_kpi_oed.report.iso9283 import goal_groups
+from pin_kpi_oed.report.iso_commanded import commanded_figures, commanded_positions
+from pin_kpi_oed.report.uncertainty import conformity
+from tests.test_report import calibrated  # noqa: F401  (the simulated UR10 fixture)
+
+LAB = """organisation: Test Lab
+operator: T. Operator
+customer: Test Customer
+robot_serial: SIM-1
+instrument:
+  make: Leica
+  model: AT960
+  serial: "1"
+  calibration_date: 2020-01-01
+  calibration_certificate: C-1
+"""
+
+
+def _report(d: Path, test: str, *extra: str) -> int:
+    return main(["report", "--model", str(d / "model.json"), "--train", str(d / "train.csv"), "--validate",
+                 str(d / test), "--json", str(d / "gum.json"), "--quiet", *extra])
+
+
+def test_without_a_lab_file_a_draft_with_one_a_certificate(calibrated, tmp_path, capsys):  # noqa: F811
+    d = calibrated
+    assert _report(d, "test.csv") == 0
+    cert = json.loads((d / "gum.json").read_text())
+    assert cert["title"].startswith("DRAFT") and cert["summary"]["status"]["kind"] == "draft"
+    (tmp_path / "lab.yaml").write_text(LAB)
+    assert _report(d, "test.csv", "--lab", str(tmp_path / "lab.yaml")) == 0
+    cert = json.loads((d / "gum.json").read_text())
+    assert cert["title"].startswith("Calibration certificate") and cert["identity"]["lab"]["robot_serial"] == "SIM-1"
+    (tmp_path / "bad.yaml").write_text(LAB.replace("  serial: \"1\"\n", ""))
+    capsys.readouterr()
+    assert _report(d, "test.csv", "--lab", str(tmp_path / "bad.yaml")) == 2
+    err = capsys.readouterr().err
+    assert "instrument: field 'serial' is missing" in err and err.count("\n") == 1
+
+
+def test_reordered_training_rows_are_refused_and_mixed_ones_removed(calibrated, capsys):  # noqa: F811
+    d = calibrated
+    train = read_measurements(d / "train.csv")
+    write_measurements(train.subset(np.random.default_rng(0).permutation(len(train))), d / "reordered.csv")
+    assert _report(d, "reordered.csv") == 2
+    err = capsys.readouterr().err
+    assert "240 of 240 rows repeat training configurations" in err and err.count("\n") == 1
+    test = read_measurements(d / "test.csv")
+    mixed = MeasurementSet(test.joint_names, np.vstack([test.q, train.q[:30]]),
+                           np.vstack([test.position_m, train.position_m[:30]]), sigma_m=None)
+    write_measurements(mixed, d / "mixed.csv")
+    assert _report(d, "mixed.csv") == 0
+    cert = json.loads((d / "gum.json").read_text())
+    assert cert["accuracy"]["repeats_removed"]["removed"] == 30 and cert["accuracy"]["after"]["n"] == 150
+
+
+def test_goals_are_grouped_by_distance_never_by_chaining():
+    G = np.column_stack([np.arange(50) * 0.08e-3, np.zeros(50), np.zeros(50)])  # 0.08 mm apart: one chain
+    groups = goal_groups(G, 1e-3)
+    span = max(np.ptp(G[g, 0]) for g in groups)
+    assert span <= 2e-3 and sorted(np.concatenate(groups).tolist()) == list(range(50)) and len(groups) == 4
+    # by hand: the first goal opens a group that takes every goal within 1 mm of it (13 rows: 0 .. 0.96 mm)
+    assert groups[0].tolist() == list(range(13)) and groups[1].tolist() == list(range(13, 26))
+
+
+def test_commanded_pose_figures_equal_a_hand_computation():
+    rng = np.random.default_rng(3)
+    goals = np.repeat(rng.uniform(-0.5, 0.5, (5, 3)), 30, axis=0)  # 5 poses x 30 cycles
+    T = np.eye(4)
+    T[:3, 3] = [1.0, 2.0, 0.5]
+    bias = rng.normal(0, 2e-4, (5, 3)).repeat(30, axis=0)
+    meas = goals + T[:3, 3] + bias + rng.normal(0, 2e-5, goals.shape)
+    ms = MeasurementSet([f"j{i}" for i in range(6)], np.repeat(rng.uniform(-1, 1, (5, 6)), 30, axis=0), meas,
+                        sigma_m=None, extra={"goal_x": goals[:, 0], "goal_y": goals[:, 1], "goal_z": goals[:, 2]})
+    x_c = commanded_positions(ms, T, np.zeros(3))
+    groups = goal_groups(goals, 1e-3)
+    out = commanded_figures(ms, meas, x_c, ms.q, groups)
+    for k, g in enumerate(groups):
+        xb = [sum(meas[i][a] for i in g) / len(g) for a in range(3)]
+        xc = [goals[g[0]][a] + T[a, 3] for a in range(3)]
+        ap = sum((xb[a] - xc[a]) ** 2 for a in range(3)) ** 0.5
+        ell = [sum((meas[i][a] - xb[a]) ** 2 for a in range(3)) ** 0.5 for i in g]
+        lbar = sum(ell) / len(ell)
+        rp = lbar + 3 * (sum((v - lbar) ** 2 for v in ell) / (len(ell) - 1)) ** 0.5
+        assert out["AP_vAP"]["per_position"][k]["AP_m"] == pytest.approx(ap, rel=1e-10)
+        assert out["RP"]["per_group"][k]["RP_m"] == pytest.approx(rp, rel=1e-10)
+    assert out["drift"] is None and any("no drift" in s for s in out["statements"])
+
+
+def test_iso14253_decision_rule():
+    assert conformity(0.2e-3, 0.05e-3, 0.3e-3)["verdict"] == "conforms"
+    assert conformity(0.28e-3, 0.05e-3, 0.3e-3)["verdict"] == "undetermined"
+    assert conformity(0.32e-3, 0.05e-3, 0.3e-3)["verdict"] == "undetermined"
+    assert conformity(0.4e-3, 0.05e-3, 0.3e-3)["verdict"] == "does not conform"
+
+
+def test_budget_against_monte_carlo_and_the_held_out_errors(calibrated, tmp_path):  # noqa: F811
+    """The simulated UR10 (noise-only model, 150 held-out rows): the budget's parameter and tracker terms within 5 % of
+    draws of the parameters; the held-out rows within U near the coverage the budget states; a required accuracy
+    above the figure + U conforms."""
+    d = calibrated
+    with open(tmp_path / "work.csv", "w", newline="") as f:
+        w = csv.writer(f)
+        test = read_measurements(d / "test.csv")
+        w.writerow(test.joint_names)
+        w.writerows(test.q[:12].tolist())
+    assert _report(d, "test.csv", "--work", str(tmp_path / "work.csv"), "--monte-carlo", "2000",
+                   "--required-accuracy", "0.005") == 0
+    u = json.loads((d / "gum.json").read_text())["uncertainty"]
+    assert u["budget"]["n"] == 12 and u["where"].startswith("the working configurations given")
+    assert abs(u["monte_carlo"]["median_ratio"] - 1.0) < 0.05
+    shares = {c["key"]: c["share"] for c in u["budget"]["contributions"]}
+    assert sum(shares.values()) == pytest.approx(1.0) and shares["parameters"] > 0 and shares["tracker"] > 0
+    h = u["held_out"]
+    assert abs(h["within_U"] - h["coverage_stated"]) < 0.06 and abs(h["within_U_axis"] - 0.9545) < 0.05
+    assert u["conformity"]["verdict"] == "conforms"
+
+
+def test_no_legend_covers_data_in_the_certificate_figures(calibrated):  # noqa: F811
+    """Every legend of the certificate's figures lies outside its axes' plotting area (display coordinates after
+    drawing): it covers no point, bar or line."""
+    from matplotlib.figure import Figure
+
+    from pin_kpi_oed.report import figures
+
+    made = []
+    orig = figures.png_bytes
+
+    def keep(fig: Figure, dpi: int = figures.DPI) -> bytes:
+        made.append(fig)
+        return orig(fig, dpi)
+
+    figures.png_bytes = keep
+    try:
+        assert _report(calibrated, "test.csv", "--html", str(calibrated / "gum.html")) == 0
+    finally:
+        figures.png_bytes = orig
+    n = 0
+    for fig in made:
+        fig.canvas.draw()
+        r = fig.canvas.get_renderer()
+        for ax in fig.axes:
+            leg = ax.get_legend()
+            if leg is None:
+                continue
+            n += 1
+            lb, ab = leg.get_window_extent(r), ax.get_window_extent(r)
+            assert not lb.overlaps(ab) or lb.y0 >= ab.y1 - 1, "a legend overlaps its axes' data area"
+    assert n >= 2
+
+
+_LAYOUT_JS = """<script>window.addEventListener('load', function () {
+  var W = document.documentElement.clientWidth, bad = [];
+  document.querySelectorAll('pre, p, td, th, h1, h2, h3, code, li, div').forEach(function (el) {
+    var r = el.getBoundingClientRect();
+    if (el.scrollWidth > el.clientWidth + 1 && getComputedStyle(el).display !== 'inline')
+      bad.push('cut: ' + el.tagName + ' ' + el.textContent.slice(0, 40));
+    if (r.width > 0 && r.right > W + 1) bad.push('beyond the page: ' + el.tagName + ' ' + el.textContent.slice(0, 40));
+  });
+  var s = document.getElementById('summary').getBoundingClientRect();
+  var v = document.querySelector('#summary .verdict'), t = document.querySelector('#summary table');
+  var first = v && t && v.getBoundingClientRect().bottom <= window.innerHeight &&
+              t.getBoundingClientRect().top < window.innerHeight;
+  var out = document.createElement('pre'); out.id = 'layout-result';
+  out.textContent = JSON.stringify({bad: bad, first: !!first, summaryTop: s.top, W: W});
+  document.body.appendChild(out);
+});</script>"""
+
+
+def _layout(html_path: Path, browser: str, width: int = 794, height: int = 1123) -> dict:
+    """The page at an A4 width (794 × 1123 CSS px): elements whose text is cut or runs beyond the page, and whether
+    the verdict and the headline table are on the first screen."""
+    import re
+    import subprocess
+
+    page = html_path.with_name("layout.html")
+    page.write_text(html_path.read_text().replace("</body>", _LAYOUT_JS + "</body>"))
+    dom = subprocess.run([browser, "--headless", "--no-sandbox", "--disable-gpu", "--no-first-run",
+                          f"--window-size={width},{height}", "--virtual-time-budget=5000",
+                          f"--user-data-dir={html_path.parent / 'profile'}", "--dump-dom", page.resolve().as_uri()],
+                         capture_output=True, text=True, timeout=120).stdout
+    m = re.search(r'<pre id="layout-result">(.*?)</pre>', dom, re.S)
+    assert m, "the layout script did not run"
+    import html as _html
+
+    return json.loads(_html.unescape(m.group(1)))
+
+
+def _chromium():
+    from pin_kpi_oed.viz.render import find_browser
+
+    return find_browser()
+
+
+@pytest.mark.skipif(_chromium() is None, reason="no Chromium/Chrome browser (Debian: apt-get install chromium)")
+def test_page_layout_at_a4_width_in_chromium(calibrated, tmp_path):  # noqa: F811
+    """Headless Chromium at an A4 width: no text cut or beyond the page (bounding boxes, scroll widths), the verdict
+    and the headline figures on the first screen; the page ≤ 5 MB and the PDF printed."""
+    d = calibrated
+    assert _report(d, "test.csv", "--html", str(tmp_path / "c.html"), "--pdf", str(tmp_path / "c.pdf")) == 0
+    lay = _layout(tmp_path / "c.html", _chromium())
+    assert lay["bad"] == [] and lay["first"], lay
+    assert (tmp_path / "c.html").stat().st_size <= 5e6 and (tmp_path / "c.pdf").read_bytes()[:5] == b"%PDF-"
