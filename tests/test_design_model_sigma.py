@@ -1,5 +1,5 @@
-"""design --model states the model's σ at the working configurations as predict gives it (one function,
-prediction_sigma.sigma_at): widened outside the joint-space coverage and flagged there."""
+"""design --model states the model's σ at the TCP at the working configurations as predict --at tcp gives it (one
+function, calibrated.tcp_sigma.tcp_sigma): widened outside the joint-space coverage and flagged there."""
 
 from __future__ import annotations
 
@@ -16,7 +16,8 @@ from pin_kpi_oed.simulation.simulator import simulate
 
 def test_design_with_a_model_reports_predicts_sigma_at_the_working_configurations(tmp_path):
     """A UR10 calibrated on 40 poses near its first working configuration: design --model --json holds each working
-    configuration's 3-D σ equal to predict's on the same configurations to 1e-9 (relative) with the same flags, and
+    configuration's 3-D σ at the cell's TCP equal to predict --at tcp's on the same configurations to 1e-9
+    (relative) with the same flags, and
     at least one configuration outside the coverage with a σ above the covered one's; the Python API's run with the
     model's inputs writes the same design file."""
     cell = load_cell("ur10")
@@ -39,15 +40,16 @@ def test_design_with_a_model_reports_predicts_sigma_at_the_working_configuration
         wr = csv.writer(fh)
         wr.writerow(list(robot.joint_names))
         wr.writerows([[repr(float(v)) for v in q] for q in cell.q_work])
-    rc, _, err = run_cli("predict", "--model", f, "--data", w, "--out", tmp_path / "p.csv", "--quiet")
+    rc, _, err = run_cli("predict", "--model", f, "--data", w, "--out", tmp_path / "p.csv", "--quiet", "--at", "tcp",
+                         "--tcp", ",".join(repr(float(v)) for v in cell.tcp_m))
     assert rc == 0, err
     rows = list(csv.DictReader(open(tmp_path / "p.csv")))
-    sig = np.array([np.sqrt(sum(float(r[f"sigma_{a}"]) ** 2 for a in "xyz")) for r in rows])
+    sig = np.array([float(r["sigma_tcp"]) for r in rows])
     flags = [bool(float(r["extrapolation"])) for r in rows]
     assert np.allclose(got["sigma_m"], sig, rtol=1e-9, atol=0)
     assert got["extrapolated"] == flags and any(flags) and not flags[0]
     assert max(s for s, x in zip(sig, flags) if x) > sig[0]
-    assert "predicted sigma now at the working configurations" in out and "(outside the coverage)" in out
+    assert "predicted sigma now at the TCP at the working configurations" in out and "(outside the coverage)" in out
     # the same run through the Python API (the model's inputs, then design_run) writes the same file, times apart
     from pin_kpi_oed.design.design_writer import write_design
     from pin_kpi_oed.design.runner import DesignSettings, design_run

@@ -129,10 +129,11 @@ def test_round_trip_recovers_truth(name, m):
     assert 0.6 < res.chi2_reduced < 1.5
     v = validate(res, test)
     assert v["rms_m"] <= 1.5 * SIGMA * np.sqrt(3), format_validation(v)
-    # predicted TCP std (the tool-frame origin, away from the reflector): the fit's part at the µm level, below the
-    # noise σ√3 of a single reading; the last joint's axial offset, held at nominal, adds its 0.5 mm tolerance
+    # predicted TCP std (the tool-frame origin, away from the reflector), the calibrated model's σ there: its white
+    # level, about the noise σ√3 of a single reading, with the parameters' part at the µm level; the last joint's
+    # axial offset, held at nominal, adds its 0.5 mm tolerance
     fit_part = np.sqrt(res.tcp_std_m ** 2 - res.tcp_held_m ** 2)
-    assert np.all(fit_part > 0) and fit_part.max() < SIGMA * np.sqrt(3)
+    assert np.all(fit_part > 0.9 * SIGMA * np.sqrt(3)) and fit_part.max() < 1.25 * SIGMA * np.sqrt(3), fit_part
     assert np.all(np.abs(res.tcp_held_m - 5e-4) < 5e-5), res.tcp_held_m
     json.dumps(res.to_dict(), default=lambda o: o.tolist() if hasattr(o, "tolist") else str(o))
     assert "compliance" not in res.summary() and "reflector" in res.summary()

@@ -208,7 +208,10 @@ def test_cli_design_with_default_discrepancy_curve_and_plateau(tmp_path, capsys)
     assert doc["discrepancy"]["tcp_from_reflector_m"] == pytest.approx(0.1)
     assert doc["discrepancy"]["lever_arm_sigma_per_rad_m"] == pytest.approx(0.1 * np.sqrt(2))
     for d in doc["designs"]:
-        assert d["discrepancy"]["tcp_sigma_m"] > 10 * d["tcp_sigma_m"]     # the honest σ is far above the paper's
+        # the honest σ is far above the paper's (their identified parts; both σ add the same held term)
+        assert d["discrepancy"]["trace_cs_m2"] > 100 * d["trace_cs_m2"]
+        assert d["discrepancy"]["held_trace_m2"] == d["held_trace_m2"] > 0
+        assert d["discrepancy"]["tcp_sigma_m"] > d["tcp_sigma_m"]
     gp = {d["criterion"]: d["discrepancy"]["tcp_sigma_m"] for d in doc["designs"]}
     assert gp["kpi_gp"] < gp["random"]
     curve = doc["poses_needed"]

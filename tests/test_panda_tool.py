@@ -187,9 +187,10 @@ def test_unobservable_tcp_offset_matches_a_refit_of_the_true_robot():
         truth_tcp = TrackerModel(robot, tracker_T_base=nominal.tracker_T_base, reflector_m=tcp).predict(p_true, Qw)
         model_c, p_c = cm.station_model(None)
         cal_tcp = TrackerModel(robot, tracker_T_base=model_c.tracker_T_base, reflector_m=tcp).predict(p_c, Qw)
-        G, u, _ = unobservable_map(cm, None, tcp, Qw)
-        linear = np.einsum("mak,k->ma", G, p_true[u])  # how far the truth's undetermined errors move the TCP
-        assert np.linalg.norm(truth_tcp - cal_tcp - linear) < 0.1 * np.linalg.norm(linear), (truth_tcp - cal_tcp,
+        G, term = unobservable_map(cm, None, tcp, Qw)
+        u = [nominal.layout.names.index(n) for n in term.names]
+        linear = np.einsum("mak,k->ma", G, p_true[u])  # calibrated − true TCP: G = E_B A − E_N per unit error
+        assert np.linalg.norm(cal_tcp - truth_tcp - linear) < 0.1 * np.linalg.norm(linear), (cal_tcp - truth_tcp,
                                                                                           linear)
         refl = cm.setups[cm.station()].reflector_m
         assert np.all(unobservable_tcp_sigma(cm, None, refl, Qw) == 0.0)

@@ -46,16 +46,15 @@ robot's δ and effects (θ), the reflector in the tracker frame is
 (:func:`pin_kpi_oed.effects.library.predict_with_effects`), the same model the fit used:
 a model file loaded back predicts what the fit predicted (to ~1e-15 m, tested).
 
-With a discrepancy, :meth:`CalibratedModel.predict` adds ``R_s · δ̄(q)`` (its posterior mean, rotated
-into the station's tracker frame) and :meth:`CalibratedModel.predict_with_sigma` gives the standard
-deviation of measured − predicted per axis: the discrepancy's posterior variance plus its white
-level (tracker noise and repeatability), and flags rows outside the training coverage.
+With a discrepancy, :meth:`CalibratedModel.predict` adds ``R_s · δ̄(q)`` (its posterior mean in the station's
+tracker frame); :meth:`CalibratedModel.predict_with_sigma` gives the σ of measured − predicted per axis (posterior
+variance, white level, rows outside the training coverage flagged); :meth:`CalibratedModel.predict_tcp` the TCP's
+position and σ (:mod:`pin_kpi_oed.calibrated.tcp_sigma`: with the parameters held at nominal).
 
-Effects are stored as their library class and constructor options. An effect class of the
-library (default and opt-in effects of :mod:`pin_kpi_oed.effects`, ``joint_angle_table``, a subset of one)
-is stored from its attributes; any other effect can be stored if it has ``options() -> dict``
-(JSON-able keyword arguments of its constructor) and its class is registered under its
-``name``. The calibrated URDF (``--urdf-out``) carries the geometry only.
+Effects are stored as their library class and constructor options: a library effect (:mod:`pin_kpi_oed.effects`,
+``joint_angle_table``, a subset of one) from its attributes; any other one if it has ``options() -> dict``
+(JSON-able keyword arguments of its constructor) and its class is registered under its ``name``. The calibrated
+URDF (``--urdf-out``) carries the geometry only.
 """
 
 from __future__ import annotations
@@ -187,7 +186,6 @@ class Setup:
 
 
 @dataclass
-
 class CalibratedModel:
     """A calibrated robot with the set-up of every station: predicts tracker readings.
 
@@ -332,31 +330,33 @@ class CalibratedModel:
                            ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Predicted reflector positions with the standard deviation of measured − predicted.
 
-        σ² per axis (tracker frame of the row's station) = diag(R_s V R_sᵀ), V = diag(var δ(q) + white) — the
-        discrepancy's posterior variance and its white level (tracker noise, repeatability) — plus, on rows
-        outside the training coverage, the parametric part's error under the discrepancy
-        (:meth:`~pin_kpi_oed.discrepancy.gp.Discrepancy.parametric_covariance`: the robot parameters fitted in
-        another region of joint space). Inside the coverage the discrepancy's posterior already holds that
-        error: on the UR10 Series C halves the standardised RMS is 1.10 without the term and 0.55 with the
-        exact universal-kriging term (its cross term K_WQ Σ⁻¹ F reproduces E only in part with short length
-        scales), see docs/results.md. A white discrepancy (too few poses for a Gaussian process) and a model without
-        one (the paper's noise-only model: the noise model's σ) add the parameter covariance's E C Eᵀ at every row
-        (:mod:`~pin_kpi_oed.calibrated.prediction_sigma`). Every σ of a station is multiplied by its
-        :attr:`Setup.sigma_scale` (> 1 after a registration whose
-        rows were worse than the model predicted).
+        σ² per axis (tracker frame of the row's station) = diag(R_s V R_sᵀ), V the discrepancy's posterior variance
+        and white level (tracker noise, repeatability), plus the parametric part's error (noise-only and white
+        models at every row; a Gaussian process outside the training coverage, where its posterior does not hold
+        it: docs/results.md), every σ of a station times its :attr:`Setup.sigma_scale`
+        (:mod:`~pin_kpi_oed.calibrated.prediction_sigma`). At the TCP instead: :meth:`predict_tcp`.
 
-        Args:
-            Q, aux, station: as :meth:`predict`.
-
-        Returns:
-            (Y (m, 3) m, sigma (m, 3) m, extrapolation (m,) bool: outside the training's joint-space coverage).
-
-        Raises:
-            InputError: as :meth:`predict`.
+        Args: Q, aux, station: as :meth:`predict`.
+        Returns: (Y (m, 3) m, sigma (m, 3) m, extrapolation (m,) bool: outside the training's joint-space coverage).
+        Raises: InputError: as :meth:`predict`.
         """
         from pin_kpi_oed.calibrated.prediction_sigma import predictive_sigma
         Q = self.robot.check_q(np.atleast_2d(np.asarray(Q, float)), "predict: Q")
         return predictive_sigma(self, Q, aux, station, self.row_stations(len(Q), aux, station))
+
+    def predict_tcp(self, Q: np.ndarray, tcp_m: np.ndarray | None = None, station: str | None = None,
+                    aux: MeasurementSet | None = None, frame: str = "cell", tolerances: Any = None) -> Any:
+        """The TCP's position and the covariance of its error at configurations Q (rad): the one σ at the TCP,
+        :func:`~pin_kpi_oed.calibrated.tcp_sigma.tcp_sigma` (the discrepancy, the parameters through the TCP's
+        Jacobian and the joint-placement parameters held at nominal under their tolerance ``tolerances``).
+
+        Args: Q, station, aux as :meth:`predict`; tcp_m: the point in the tool frame (m), default :attr:`tcp_m`;
+        frame: ``cell`` (the station's tracker frame) or ``base`` (the robot base frame).
+        Returns: a :class:`~pin_kpi_oed.calibrated.tcp_sigma.TcpSigma` (``position_m``, ``sigma_m``, ...).
+        Raises: InputError as :meth:`predict`, or an unknown frame.
+        """
+        from pin_kpi_oed.calibrated.tcp_sigma import tcp_sigma
+        return tcp_sigma(self, Q, tcp_m, station=station, aux=aux, frame=frame, tolerances=tolerances)
 
     def predict_orientation_with_sigma(self, Q: np.ndarray, aux: MeasurementSet | None = None,
                                        station: str | None = None, length_m: float = 0.0

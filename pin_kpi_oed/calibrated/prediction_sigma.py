@@ -42,6 +42,9 @@ combination of the angles counts) are flagged; every σ of a station is multipli
 
 from __future__ import annotations
 
+import copy
+import dataclasses
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -52,8 +55,8 @@ from pin_kpi_oed.model.kinematics import skew
 #: "orientation at 200 mm", as a cell's ``orientation_length_m`` defaults to
 DEFAULT_TOOL_LENGTH_M = 0.2
 
-__all__ = ["DEFAULT_TOOL_LENGTH_M", "predictive_covariance", "predictive_sigma", "orientation_sigma",
-           "robot_parameter_covariance", "sigma_contents", "sigma_at"]
+__all__ = ["DEFAULT_TOOL_LENGTH_M", "SigmaPoint", "predictive_covariance", "predictive_sigma", "point_covariance",
+           "orientation_sigma", "robot_parameter_covariance", "sigma_contents", "sigma_at"]
 
 
 def robot_parameter_covariance(cm: Any, label: str | None = None, probe: bool = False
@@ -89,44 +92,62 @@ def robot_parameter_covariance(cm: Any, label: str | None = None, probe: bool = 
     return [names[i] for i in idx], generic, C[np.ix_(idx, idx)]
 
 
-def _jacobian_model(cm: Any, label: str) -> tuple[Any, np.ndarray]:
+def _jacobian_model(cm: Any, label: str, point: Any = None) -> tuple[Any, np.ndarray]:
     """Station ``label``'s measurement model for the σ's Jacobians: a station registered later with the reflector of
     the calibration (the first station ``identify`` fitted). Rows with a nearly constant flange axis barely
     determine the reflector, which a registration then trades against the tracker translation (on the UR10's
     Series D, 60 rows: 169 mm off along the flange axis), leaving the predictions unchanged but not the lever arms
-    of the robot's rotation errors."""
+    of the robot's rotation errors. With a :class:`SigmaPoint`, the model of that point of the tool instead."""
     model, p = cm.station_model(label)
-    if cm.setups[label].fitted_by != "identify":
+    if point is not None:
+        model.reflector_m = np.array(point.tcp_m, float)
+    elif cm.setups[label].fitted_by != "identify":
         ref = next((st for st in cm.setups.values() if st.fitted_by == "identify"), None)
         if ref is not None:
             model.reflector_m = np.array(ref.reflector_m, float)
     return model, p
 
 
-def _robot_jacobian(cm: Any, label: str, Q: np.ndarray, names: list[str]) -> np.ndarray:
-    """Base-frame Jacobian (m, 3, k) of station ``label``'s predictions w.r.t. the parameters ``names`` (layout
-    names)."""
+def _point_jacobian(cm: Any, label: str, Q: np.ndarray, cols: list[int], point: Any) -> np.ndarray:
+    """Base-frame Jacobian (m, 3, k) of station ``label``'s predictions (of ``point``'s, :class:`SigmaPoint`, when
+    given) w.r.t. the layout columns ``cols``. At a point of the tool the fitted reflector offset moves nothing (its
+    columns are zero), and in the robot base frame neither does the tracker pose."""
+    model, p = _jacobian_model(cm, label, point)
+    J = model.base_jacobian(p, np.atleast_2d(Q), cols)
+    if point is not None:
+        L = model.layout
+        still = set() if point.follows_reflector else set(range(L.reflector.start, L.reflector.stop))
+        if point.frame == "base":
+            still |= set(range(L.tracker.start, L.tracker.stop))
+        J[:, :, [k for k, c in enumerate(cols) if c in still]] = 0.0
+    return J
+
+
+def _robot_jacobian(cm: Any, label: str, Q: np.ndarray, names: list[str], point: Any = None) -> np.ndarray:
+    """Base-frame Jacobian (m, 3, k) of station ``label``'s predictions (of ``point``'s when given) w.r.t. the
+    parameters ``names`` (layout names)."""
     if not names:
         return np.zeros((len(Q), 3, 0))
-    model, p = _jacobian_model(cm, label)
-    return model.base_jacobian(p, Q, [model.layout.names.index(n) for n in names])
+    model, _ = _jacobian_model(cm, label)
+    return _point_jacobian(cm, label, Q, [model.layout.names.index(n) for n in names], point)
 
 
-def _joint_jacobian(cm: Any, label: str, Q: np.ndarray) -> np.ndarray:
-    """∂y/∂q (m, 3, d) m/rad of station ``label``'s predictions, robot base frame."""
-    model, p = _jacobian_model(cm, label)
+def _joint_jacobian(cm: Any, label: str, Q: np.ndarray, point: Any = None) -> np.ndarray:
+    """∂y/∂q (m, 3, d) m/rad of station ``label``'s predictions (of ``point``'s when given), robot base frame."""
+    model, p = _jacobian_model(cm, label, point)
     return np.einsum("ba,mbj->maj", model.tracker_pose(p).rotation, model.prediction_dq(p, np.atleast_2d(Q)))
 
 
-def _setup_jacobian(cm: Any, label: str, Q: np.ndarray) -> np.ndarray:
-    """Base-frame Jacobian (m, 3, 9) of station ``label``'s predictions w.r.t. its set-up (tracker pose, reflector)."""
-    model, p = _jacobian_model(cm, label)
-    L = model.layout
+def _setup_jacobian(cm: Any, label: str, Q: np.ndarray, point: Any = None) -> np.ndarray:
+    """Base-frame Jacobian (m, 3, 9) of station ``label``'s predictions (of ``point``'s when given) w.r.t. its
+    set-up (tracker pose, reflector)."""
+    L = _jacobian_model(cm, label)[0].layout
     cols = list(range(L.tracker.start, L.tracker.stop)) + list(range(L.reflector.start, L.reflector.stop))
-    return model.base_jacobian(p, np.atleast_2d(Q), cols)
+    return _point_jacobian(cm, label, Q, cols, point)
 
 
-def _registered(cm: Any, label: str, Q: np.ndarray, E: np.ndarray, names: list[str]) -> np.ndarray:
+def _registered(cm: Any, label: str, Q: np.ndarray, E: np.ndarray, names: list[str], point: Any = None
+                ) -> np.ndarray:
     """The robot Jacobian E (m, 3, R) over ``names`` of a station registered later, after its set-up absorbed what
     it can: Ẽ = E − G(q) (G_Zᵀ G_Z)⁻¹ G_Zᵀ J_Z (the re-registration formula of :mod:`pin_kpi_oed.oed.reregistration`)
     with Z the configurations the registration fitted the set-up on (:attr:`Setup.registered_q_rad`): the robot's
@@ -135,7 +156,8 @@ def _registered(cm: Any, label: str, Q: np.ndarray, E: np.ndarray, names: list[s
     after registration: standardised RMS 0.50); with the calibration's own configurations as the stand-in for Z,
     what the set-up absorbs in the other session's joint ranges is missed (the same case 0.33-0.48; 0.79-1.10 on the
     registration rows). A model file written before the rows were recorded uses the stand-in; without either, E
-    (conservative)."""
+    (conservative). With a :class:`SigmaPoint`, E and the set-up's move at q are the point's, the rows Z the
+    reflector's (what the registration measured)."""
     Z = _registration_rows(cm, label)
     if Z is None or not names:
         return E
@@ -145,7 +167,7 @@ def _registered(cm: Any, label: str, Q: np.ndarray, E: np.ndarray, names: list[s
     norms[norms == 0] = 1.0
     # set-up directions Z barely determines (relative singular value below 1 %) are left out, not amplified
     B, *_ = np.linalg.lstsq(Gz / norms, Jz, rcond=1e-2)
-    return E - np.einsum("mak,kr->mar", _setup_jacobian(cm, label, Q) / norms, B)
+    return E - np.einsum("mak,kr->mar", _setup_jacobian(cm, label, Q, point) / norms, B)
 
 
 def _registration_rows(cm: Any, label: str) -> np.ndarray | None:
@@ -158,21 +180,22 @@ def _registration_rows(cm: Any, label: str) -> np.ndarray | None:
     return None if Z is None or len(Z) < 3 else Z
 
 
-def _registration_map(cm: Any, label: str, Q: np.ndarray, Z: np.ndarray) -> np.ndarray:
+def _registration_map(cm: Any, label: str, Q: np.ndarray, Z: np.ndarray, point: Any = None) -> np.ndarray:
     """A (m, 3, 3k): the move of the set-up fitted on Z at each q per unit residual at Z's rows (base frame), the
     map of :func:`_registered` (Ẽ = E − A J_Z)."""
     Gz = _setup_jacobian(cm, label, Z).reshape(-1, 9)
     norms = np.linalg.norm(Gz, axis=0)
     norms[norms == 0] = 1.0
-    return np.einsum("mak,kn->man", _setup_jacobian(cm, label, Q) / norms, np.linalg.pinv(Gz / norms, rcond=1e-2))
+    return np.einsum("mak,kn->man", _setup_jacobian(cm, label, Q, point) / norms,
+                     np.linalg.pinv(Gz / norms, rcond=1e-2))
 
 
 def _joint_angle_covariance(cm: Any, d: Any, label: str, Q: np.ndarray, E: np.ndarray,
-                            chunk: int = 500) -> np.ndarray:
+                            chunk: int = 500, point: Any = None) -> np.ndarray:
     """The joint-angle term's covariance (m, 3, 3) at station ``label``'s rows Q (base frame;
     :meth:`~pin_kpi_oed.discrepancy.joint_angle.JointAngleTerm.covariance`), with the registration's share at a
     station registered later; in chunks of rows (the registration map holds 9 k numbers per row)."""
-    Jq = _joint_jacobian(cm, label, Q)
+    Jq = _joint_jacobian(cm, label, Q, point)
     if cm.setups[label].fitted_by == "identify" or label in d.param_stations:
         return d.joint_term.covariance(Q, Jq, E)
     Z = _registration_rows(cm, label)
@@ -182,7 +205,7 @@ def _joint_angle_covariance(cm: Any, d: Any, label: str, Q: np.ndarray, E: np.nd
     out = np.empty((len(Q), 3, 3))
     for a in range(0, len(Q), chunk):
         s = slice(a, a + chunk)
-        out[s] = d.joint_term.covariance(Q[s], Jq[s], E[s], (_registration_map(cm, label, Q[s], Z), Z, JZ))
+        out[s] = d.joint_term.covariance(Q[s], Jq[s], E[s], (_registration_map(cm, label, Q[s], Z, point), Z, JZ))
     return out
 
 
@@ -200,19 +223,19 @@ def _white_excess(Cb: np.ndarray, term: Any, E: np.ndarray) -> np.ndarray:
     return np.einsum("mak,mk,mbk->mab", U, np.maximum(lam, 0.0), U)
 
 
-def _discrepancy_jacobian(cm: Any, d: Any, label: str, Q: np.ndarray) -> np.ndarray:
+def _discrepancy_jacobian(cm: Any, d: Any, label: str, Q: np.ndarray, point: Any = None) -> np.ndarray:
     """Base-frame Jacobian of station ``label``'s predictions over the discrepancy's parameter columns: the robot's,
     then 9 per training station, (m, 3, R [+ 9 S]): a training station's own set-up columns filled (its set-up error
     is correlated with the robot's and partly cancels it); a station registered later: the robot's columns
     projected (:func:`_registered`), the set-up columns zero."""
-    E = _robot_jacobian(cm, label, Q, list(d.param_names))
+    E = _robot_jacobian(cm, label, Q, list(d.param_names), point)
     own = label in d.param_stations and cm.setups[label].fitted_by == "identify"
     if not own:
-        return _registered(cm, label, Q, E, list(d.param_names))
+        return _registered(cm, label, Q, E, list(d.param_names), point)
     s = d.param_stations.index(label)
     full = np.zeros((len(Q), 3, len(d.param_names) + 9 * len(d.param_stations)))
     full[:, :, :E.shape[2]] = E
-    full[:, :, len(d.param_names) + 9 * s: len(d.param_names) + 9 * (s + 1)] = _setup_jacobian(cm, label, Q)
+    full[:, :, len(d.param_names) + 9 * s: len(d.param_names) + 9 * (s + 1)] = _setup_jacobian(cm, label, Q, point)
     return full
 
 
@@ -247,6 +270,77 @@ def sigma_contents(cm: Any) -> str:
     return f"parameters + Gaussian-process discrepancy ({d.kind}, {d.n_rows} rows) + white level"
 
 
+@dataclass(frozen=True)
+class SigmaPoint:
+    """A point of the tool at which the σ is stated instead of the reflector's (:func:`point_covariance`).
+
+    Attributes:
+        tcp_m: the point in the tool frame, (3,) m.
+        frame: ``cell`` (the station's tracker frame) or ``base`` (the robot base frame: the tracker pose moves
+            nothing).
+        follows_reflector: the point is the fitted reflector itself (its offset's error moves it).
+    """
+
+    tcp_m: tuple[float, float, float]
+    frame: str = "cell"
+    follows_reflector: bool = False
+
+
+def _point_model(cm: Any, point: Any) -> Any:
+    """A copy of the model whose stations' "reflector" is ``point``'s TCP: its predictions are the TCP's."""
+    if point is None:
+        return cm
+    new = copy.copy(cm)
+    new.setups = {lab: dataclasses.replace(st, reflector_m=np.array(point.tcp_m, float))
+                  for lab, st in cm.setups.items()}
+    return new
+
+
+def _base_blocks(cm: Any, Q: np.ndarray, aux: Any, station: str | None, labels: np.ndarray, point: Any = None
+                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """(Y (m, 3) m tracker frame, the covariance of measured − predicted without the noise (m, 3, 3) m² in the robot
+    base frame, the noise model's variance per tracker axis (m, 3) m² (noise-only models), extrapolation (m,)):
+    the module docstring's terms before the rotation, the σ scale and the noise; at ``point``'s TCP when given."""
+    m = len(Q)
+    cov = _coverage(cm)
+    extra = cov.extrapolation(Q) if cov is not None else np.zeros(m, bool)
+    d = cm.discrepancy
+    if d is None:
+        Y = _point_model(cm, point).predict_rows(Q, aux, station, False, None)
+        noise2 = np.asarray(cm.noise.sigma(Y[:, :3]), float).reshape(m, 3) ** 2
+        V = np.zeros((m, 3))
+    else:
+        delta, var = d.predict(Q)                      # one kernel evaluation for the mean and the variance
+        Y = _point_model(cm, point).predict_rows(Q, aux, station, False, delta)
+        noise2 = np.zeros((m, 3))
+        V = var + d.noise_var_m2
+    Cb = np.einsum("na,ab->nab", V, np.eye(3))
+    for lab in dict.fromkeys(labels):
+        rows = np.flatnonzero(labels == lab)
+        if d is None:
+            _, names, Cp = robot_parameter_covariance(cm, lab)
+            if Cp is not None:
+                E = _robot_jacobian(cm, lab, Q[rows], names, point)
+                if cm.setups[lab].fitted_by != "identify":
+                    E = _registered(cm, lab, Q[rows], E, names, point)
+                Cb[rows] += np.einsum("map,pq,mbq->mab", E, Cp * _chi2_factor(cm), E)
+        elif d.param_cov is not None or d.param_cov_ls is not None:
+            E = _discrepancy_jacobian(cm, d, lab, Q[rows], point)
+            out = extra[rows]
+            if d.kind == "white":
+                C = d.parametric_covariance(Q[rows], E)
+                if d.joint_term is not None:
+                    C = C + Cb[rows] + _joint_angle_covariance(cm, d, lab, Q[rows], E, point=point)
+                    Cb[rows] = C + _white_excess(C, d.joint_term, E)
+                else:
+                    Cb[rows] += C
+            else:
+                for mask, inside in ((out, False), (~out, True)):
+                    if mask.any():
+                        Cb[rows[mask]] += d.parametric_covariance(Q[rows][mask], E[mask], inside=inside)
+    return Y, Cb, noise2, extra
+
+
 def predictive_sigma(cm: Any, Q: np.ndarray, aux: Any, station: str | None, labels: np.ndarray
                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(Y (m, 3) m, σ (m, 3) m tracker frame, extrapolation (m,) bool) of a
@@ -254,46 +348,44 @@ def predictive_sigma(cm: Any, Q: np.ndarray, aux: Any, station: str | None, labe
 
     ``labels``: the station of each row (:meth:`CalibratedModel.row_stations`).
     """
-    m = len(Q)
+    Y, Cb, noise2, extra = _base_blocks(cm, Q, aux, station, labels)
     scale = np.array([cm.setups[lab].sigma_scale for lab in labels], float)[:, None]
-    cov = _coverage(cm)
-    extra = cov.extrapolation(Q) if cov is not None else np.zeros(m, bool)
-    d = cm.discrepancy
-    if d is None:
-        Y = cm.predict_rows(Q, aux, station, False, None)
-        noise2 = np.asarray(cm.noise.sigma(Y[:, :3]), float).reshape(m, 3) ** 2
-        V = np.zeros((m, 3))
-    else:
-        delta, var = d.predict(Q)                      # one kernel evaluation for the mean and the variance
-        Y = cm.predict_rows(Q, aux, station, False, delta)
-        noise2 = np.zeros((m, 3))
-        V = var + d.noise_var_m2
-    sig = np.empty((m, 3))
+    sig = np.empty((len(Q), 3))
     for lab in dict.fromkeys(labels):
         rows = np.flatnonzero(labels == lab)
         R = cm.setups[lab].tracker_T_base[:3, :3]
-        Cb = np.einsum("na,ab->nab", V[rows], np.eye(3))
-        if d is None:
-            _, names, Cp = robot_parameter_covariance(cm, lab)
-            if Cp is not None:
-                E = _robot_jacobian(cm, lab, Q[rows], names)
-                if cm.setups[lab].fitted_by != "identify":
-                    E = _registered(cm, lab, Q[rows], E, names)
-                Cb += np.einsum("map,pq,mbq->mab", E, Cp * _chi2_factor(cm), E)
-        elif d.param_cov is not None or d.param_cov_ls is not None:
-            E = _discrepancy_jacobian(cm, d, lab, Q[rows])
-            out = extra[rows]
-            if d.kind == "white":
-                Cb += d.parametric_covariance(Q[rows], E)
-                if d.joint_term is not None:
-                    Cb += _joint_angle_covariance(cm, d, lab, Q[rows], E)
-                    Cb += _white_excess(Cb, d.joint_term, E)
-            else:
-                for mask, inside in ((out, False), (~out, True)):
-                    if mask.any():
-                        Cb[mask] += d.parametric_covariance(Q[rows][mask], E[mask], inside=inside)
-        sig[rows] = np.sqrt(np.einsum("ia,nab,ib->ni", R, Cb, R) + noise2[rows])
+        sig[rows] = np.sqrt(np.einsum("ia,nab,ib->ni", R, Cb[rows], R) + noise2[rows])
     return Y, scale * sig, extra
+
+
+def point_covariance(cm: Any, Q: np.ndarray, aux: Any, station: str | None, labels: np.ndarray,
+                     point: SigmaPoint) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(Y (m, 3) m, C (m, 3, 3) m², extrapolation (m,) bool): :func:`predictive_sigma`'s terms at a point of the tool
+    (``point``: its TCP and frame) as full 3 × 3 covariances: the discrepancy's posterior and white level, the
+    parametric part's error through the point's own Jacobian (the fitted reflector offset moves it not; in the base
+    frame, neither does the tracker pose), the station's σ factor. The parameters held at nominal are not in it
+    (:mod:`pin_kpi_oed.calibrated.tcp_sigma` adds them). The discrepancy is the reflector's, learnt there; its
+    rotation part at a TCP away from the reflector is what :mod:`pin_kpi_oed.discrepancy.lever_arm` states.
+
+    Raises:
+        InputError: ``point.frame`` neither ``cell`` nor ``base``.
+    """
+    from pin_kpi_oed.errors import InputError
+
+    if point.frame not in ("cell", "base"):
+        raise InputError(f"frame {point.frame!r}: must be 'cell' (the tracker frame) or 'base'")
+    Y, Cb, noise2, extra = _base_blocks(cm, Q, aux, station, labels, point)
+    C = np.empty_like(Cb)
+    for lab in dict.fromkeys(labels):
+        rows = np.flatnonzero(labels == lab)
+        st = cm.setups[lab]
+        R = st.tracker_T_base[:3, :3]
+        Ct = np.einsum("ia,nab,jb->nij", R, Cb[rows], R) + np.einsum("na,ab->nab", noise2[rows], np.eye(3))
+        if point.frame == "base":
+            Ct = np.einsum("ai,nab,bj->nij", R, Ct, R)
+            Y[rows] = (Y[rows] - st.tracker_T_base[:3, 3]) @ R
+        C[rows] = Ct * st.sigma_scale ** 2
+    return Y, C, extra
 
 
 def orientation_sigma(cm: Any, Q: np.ndarray, aux: Any, station: str | None, labels: np.ndarray,

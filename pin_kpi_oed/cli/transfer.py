@@ -19,12 +19,13 @@ Examples::
 from __future__ import annotations
 
 import argparse
+from typing import Any
 
 import numpy as np
 
 from pin_kpi_oed.cli.flags import in_flags, in_flags_all
 from pin_kpi_oed.cli.tool import model_tool
-from pin_kpi_oed.cli.util import add_table_options, table_options
+from pin_kpi_oed.cli.util import add_table_options, parse_floats, table_options
 
 __all__ = ["register", "run_register", "run_predict"]
 
@@ -67,6 +68,14 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="also write the trust map (PNG): the rows' reflector positions (robot base frame, top and "
                         "side view) coloured by the predicted sigma (mm), the rows outside the measured coverage "
                         "marked, the discrepancy's training configurations in grey")
+    p.add_argument("--at", choices=("reflector", "tcp"), default="reflector",
+                   help="predict the reflector (default: what the tracker measures, compared with x, y, z when the "
+                        "file has them) or the model's TCP: its position and sigma with the joint-placement "
+                        "parameters no reflector measurement determines (columns sigma_tcp, sigma_held; the sigma "
+                        "identify prints and compensate states)")
+    p.add_argument("--tcp", default=None, metavar="X,Y,Z",
+                   help="with --at tcp: the TCP point (m) in the model's tool frame; default the model's TCP (its "
+                        "cell or data stated it)")
     p.add_argument("--tool-length", dest="tool_length", type=float, default=0.2, metavar="M",
                    help="6-D models: the length along the tool axis (m) at which the orientation sigma is also "
                         "stated as the position sigma it causes there (column sigma_at_length; default 0.2 m)")
@@ -121,6 +130,7 @@ def run_register(args: argparse.Namespace) -> int:
 def run_predict(args: argparse.Namespace) -> int:
     """Handler of ``pin-kpi-oed predict``."""
     from pin_kpi_oed.data.measurements import read_measurements
+    from pin_kpi_oed.errors import InputError
     from pin_kpi_oed.calibrated.model_file import load_model_file
     from pin_kpi_oed.upkeep.transfer import predict_table, write_predictions
     from pin_kpi_oed.validation.robot_checks import check_points_against_joints
@@ -132,6 +142,10 @@ def run_predict(args: argparse.Namespace) -> int:
     if data.position_m is not None and np.all(np.isfinite(data.position_m)):
         check_points_against_joints(model.robot, data.q, data.position_m, args.data, args.data,
                                     **_declared_units(args))
+    if args.at == "tcp":
+        return _predict_tcp(args, model, data)
+    if args.tcp:
+        raise InputError("--tcp states the point of --at tcp: give both, or neither")
     cols, table = predict_table(model, data, station=args.station, tool_length_m=args.tool_length)
     if args.figure:  # the same predict_with_sigma as the table's sigma columns
         from pin_kpi_oed.identification.problem import align_data
@@ -160,6 +174,35 @@ def run_predict(args: argparse.Namespace) -> int:
             print(f"trust map: predicted sigma median {np.median(tm.sigma_m) * 1e3:.4f} mm, max "
                   f"{tm.sigma_m.max() * 1e3:.4f} mm; {tm.n_extrapolated} of {len(data)} rows outside the measured "
                   f"coverage -> {args.figure}")
+    return 0
+
+
+def _predict_tcp(args: argparse.Namespace, model: Any, data: Any) -> int:
+    """``predict --at tcp``: the TCP's position and its σ per row (:func:`~pin_kpi_oed.upkeep.transfer.tcp_table`).
+
+    Raises:
+        InputError: the model states no TCP (neither a cell nor the data's tool header gave one), or ``--figure``.
+    """
+    from pin_kpi_oed.errors import InputError
+    from pin_kpi_oed.upkeep.transfer import predict_table, write_predictions
+
+    tcp = parse_floats(args.tcp, 3, "--tcp") if args.tcp else None
+    if tcp is None and not model.tool_source:
+        raise InputError(f"{args.model}: the model states no TCP (no cell or tool header gave one when it was "
+                         "identified): give --tcp X,Y,Z (m, tool frame) with --at tcp")
+    if args.figure:
+        raise InputError("--figure draws the reflector's sigma: leave it out with --at tcp")
+    cols, table = predict_table(model, data, station=args.station, at="tcp", tcp_m=tcp)
+    write_predictions(args.out, data, cols, table)
+    if not args.quiet:
+        s, h = table[:, cols.index("sigma_tcp")], table[:, cols.index("sigma_held")]
+        far = int(np.sum(table[:, cols.index("extrapolation")] > 0))
+        print(f"predicted the TCP {np.array2string(model.tcp_m if tcp is None else tcp, precision=4)} m (tool frame "
+              f"{model.robot.tool_frame}) at {len(data)} rows of {args.data} with {args.model} -> {args.out}")
+        print(f"TCP sigma (3-D): RMS {np.sqrt(np.mean(s ** 2)) * 1e3:.4f} mm, max {s.max() * 1e3:.4f} mm, of which "
+              f"the joint-placement parameters no reflector measurement determines RMS "
+              f"{np.sqrt(np.mean(h ** 2)) * 1e3:.4f} mm; {far} of {len(data)} rows outside the calibration's "
+              "joint-space coverage")
     return 0
 
 

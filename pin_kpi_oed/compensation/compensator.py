@@ -67,8 +67,8 @@ from pin_kpi_oed.compensation.checks import (branch_step, collision_rows, joint_
 from pin_kpi_oed.compensation.result import write_compensation
 from pin_kpi_oed.compensation.result import STATUSES, CompensationResult
 from pin_kpi_oed.calibrated.model_file import CalibratedModel
-from pin_kpi_oed.calibrated.prediction_sigma import DEFAULT_TOOL_LENGTH_M, sigma_at
-from pin_kpi_oed.compensation.tool_offset import unobservable_tcp_sigma
+from pin_kpi_oed.calibrated.prediction_sigma import DEFAULT_TOOL_LENGTH_M
+from pin_kpi_oed.calibrated.tcp_sigma import TcpSigma, tcp_sigma
 from pin_kpi_oed.model.kinematics import skew
 from pin_kpi_oed.model.parameters import ParameterLayout
 from pin_kpi_oed.model.tracker import TrackerModel
@@ -444,9 +444,8 @@ def _result(cm: CalibratedModel, ts: TargetSet, opt: CompensationOptions, pm: Po
     at_limit = joint_limit_rows(cm.robot, cal.Q, opt.limit_margin)
     colliding, pair = (collision_rows(opt.cell, cal.Q) if opt.cell is not None
                        else (np.zeros(len(ts), bool), [""] * len(ts)))
-    unseen = unobservable_tcp_sigma(cm, opt.station, pm.tcp, cal.Q, opt.tool_tolerances, seed=opt.seed,
-                                    frame=opt.frame)
-    sig, extra = _tcp_sigma(cm, cal.Q, ts.aux, opt.station)
+    at = _tcp_sigma(cm, cal.Q, ts.aux, opt, pm.tcp)
+    unseen, extra = at.held_sigma_m, at.extrapolation
     rot, at_l = _orientation_sigma(cm, cal.Q, ts.aux, opt)
     status = [_status(i, opt, nom, cal, bool(left_branch[i]), step[i] > opt.max_branch_step_rad, at_limit[i],
                       colliding[i], bool(extra[i])) for i in range(len(ts))]
@@ -458,7 +457,7 @@ def _result(cm: CalibratedModel, ts: TargetSet, opt: CompensationOptions, pm: Po
         joint_names=list(cm.robot.joint_names), q_nominal=nom.Q, q=cal.Q, correction_m=correction,
         residual_m=cal.err_m, residual_rad=cal.err_rad, inv_cond=cal.inv_cond, target_status=status,
         frame=opt.frame, station=cm.station(opt.station), tcp_m=pm.tcp, orientation=ts.rotvec_rad is not None,
-        sigma_m=np.sqrt(sig ** 2 + unseen ** 2), tcp_unobservable_m=unseen, extrapolation=extra,
+        sigma_m=at.sigma_m, tcp_unobservable_m=unseen, extrapolation=extra,
         tcp_from_reflector_m=lever_arm_m(pm.tcp, cm.setups[cm.station(opt.station)].reflector_m),
         tool_frame=cm.robot.tool_frame, start=list(start), q_start=np.asarray(Q_start, float),
         branch_step_rad=step, from_start_rad=branch_step(cal.Q, Q_start), collision_pair=pair,
@@ -488,10 +487,12 @@ def _status(i: int, opt: CompensationOptions, nom: _IK, cal: _IK, left_branch: b
     return "ok"
 
 
-def _tcp_sigma(cm: CalibratedModel, Q: np.ndarray, aux: Any, station: str | None) -> tuple[np.ndarray, np.ndarray]:
-    """(3-D σ (m), extrapolation flag) of the TCP at Q: :func:`~pin_kpi_oed.calibrated.prediction_sigma.sigma_at`
-    (one σ and one coverage for every command)."""
-    return sigma_at(cm, Q, aux if isinstance(aux, MeasurementSet) else None, station)
+def _tcp_sigma(cm: CalibratedModel, Q: np.ndarray, aux: Any, opt: CompensationOptions, tcp: np.ndarray) -> TcpSigma:
+    """The TCP's σ at the compensated joints Q in the targets' frame:
+    :func:`~pin_kpi_oed.calibrated.tcp_sigma.tcp_sigma` (one σ at the TCP for every command: the model's at the TCP
+    and the joint-placement parameters it held at nominal under ``opt.tool_tolerances``)."""
+    return tcp_sigma(cm, Q, tcp, station=opt.station, aux=aux if isinstance(aux, MeasurementSet) else None,
+                     frame=opt.frame, tolerances=opt.tool_tolerances, seed=opt.seed)
 
 
 def _orientation_sigma(cm: CalibratedModel, Q: np.ndarray, aux: Any, opt: CompensationOptions

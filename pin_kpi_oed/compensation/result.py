@@ -36,9 +36,10 @@ class CompensationResult(Result):
         status: per target ``ok`` / ``unreachable`` / ``near_singular`` (``status`` of the
             result: ``ok`` if every target is ok, else a count).
         frame: ``cell`` or ``base``; tcp_m: the TCP point (tool frame, m); station.
-        sigma_m: predicted 3-D standard deviation of the TCP at q (m): the model's discrepancy
-            (posterior and white level; its noise model's σ without one) and, at a TCP away from the
-            reflector, ``tcp_unobservable_m``, (m,). Learnt at the reflector: a TCP
+        sigma_m: predicted 3-D standard deviation of the TCP at q (m), the one σ at the TCP
+            (:func:`~pin_kpi_oed.calibrated.tcp_sigma.tcp_sigma`, as ``predict --at tcp`` and ``identify`` state it):
+            the model's discrepancy (posterior and white level; its noise model's σ without one), the
+            parameters through the TCP's Jacobian and ``tcp_unobservable_m``, (m,). Learnt at the reflector: a TCP
             away from it adds the flange rotation's lever arm (:mod:`pin_kpi_oed.discrepancy.lever_arm`).
         tcp_from_reflector_m: the TCP's distance from the station's reflector (m).
         tool_frame: the tool frame ``tcp_m`` is given in.

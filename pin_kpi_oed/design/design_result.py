@@ -31,8 +31,13 @@ class DesignResult(Result):
     Attributes:
         criterion: ``random`` (heuristic) or a registered criterion name (:data:`~pin_kpi_oed.oed.criteria.CRITERIA`).
         q_meas: configurations (m, n) rad.
-        trace_cs_m2: tr(C_s) at the working configurations (m²).
-        tcp_sigma_m: sqrt(tr(C_s)/t), RMS 3-D TCP standard deviation per working configuration (m).
+        trace_cs_m2: tr(C_s) at the working configurations (m²): the identified parameters' part, what the criteria
+            compare and improvements are stated on.
+        tcp_sigma_m: sqrt((tr(C_s) + held_trace_m2)/t), RMS 3-D TCP standard deviation per working configuration
+            (m), with the joint-placement parameters held at nominal under their tolerance.
+        held_trace_m2: the held parameters' part of tr(C_s) (m²), which no measurement of the reflector removes
+            (:func:`~pin_kpi_oed.oed.held.design_held`; the same for every design of a problem); held_line: what it
+            is from and what removes it ("" when nothing is held).
         trace_cp: tr(C_p) over the identifiable parameters (mixed m², rad²).
         value: the criterion's own value (tr(C_s) for random), in its unit.
         min_clearance_m: smallest clearance over every pair checked by the independent check (m).
@@ -64,6 +69,8 @@ class DesignResult(Result):
     n_constraints: int = 0
     starts: list[dict] = field(default_factory=list)
     check: dict = field(default_factory=dict)
+    held_trace_m2: float = 0.0
+    held_line: str = ""
 
     @property
     def feasible(self) -> bool:
@@ -84,7 +91,8 @@ class DesignResult(Result):
                 "share_colliding": self.share_colliding, "share_infeasible": self.share_infeasible,
                 "solve_time_s": self.time_s, "iterations": self.nit, "solver_status": self.solver_status,
                 "collision_avoidance": self.collision_avoidance, "samples": self.samples,
-                "n_constraints": self.n_constraints, "starts": self.starts, "check": self.check}
+                "n_constraints": self.n_constraints, "starts": self.starts, "check": self.check,
+                "held_trace_m2": self.held_trace_m2, "held_line": self.held_line}
 
     def summary(self) -> str:
         """One readable line."""

@@ -64,6 +64,7 @@ from pin_kpi_oed.errors import IdentifiabilityError, InputError
 from pin_kpi_oed.oed.criteria import ConfigurationCriterion, Criterion, check_names, get_criterion
 from pin_kpi_oed.oed.covariance import prior_square_root
 from pin_kpi_oed.oed.design_objective import DesignObjective
+from pin_kpi_oed.oed.held import HeldShare, design_held
 from pin_kpi_oed.oed.objective import DesignCriterion, information_criterion
 from pin_kpi_oed.oed.path_kpi import PathKpi  # noqa: F401  (registers kpi_path)
 from pin_kpi_oed.oed.pose_kpi import PoseKpi  # noqa: F401  (registers kpi6)
@@ -370,9 +371,11 @@ class DesignProblem:
             **solver: further :class:`DesignResult` fields from the solver (``status``, ``message``,
                 ``nit``, ``nfev``, ``time_s``, ``solver_status``, ``samples``, ``n_constraints``, ``starts``).
         """
+        held = HeldShare()
         try:
             cs = self.kpi_criterion.value(Q)
             cp = self.param_criterion.value(Q)
+            held = design_held(self.model, self.base, Q, self.cell.q_work, p=self.p0)
         except IdentifiabilityError:
             cs = cp = float("inf")
         rep = report or self.checker.check(Q)
@@ -381,7 +384,8 @@ class DesignProblem:
         if not rep.all_feasible:
             message = (message + "; " if message else "") + "independent check: " + ", ".join(rep.violations(3))
         return DesignResult(criterion=criterion, q_meas=np.array(Q), trace_cs_m2=float(cs),
-                            tcp_sigma_m=float(np.sqrt(cs / t)), trace_cp=float(cp), value=float(value),
+                            tcp_sigma_m=float(np.sqrt((cs + held.trace_m2) / t)), trace_cp=float(cp),
+                            value=float(value), held_trace_m2=held.trace_m2, held_line=held.line(cs, t),
                             min_clearance_m=rep.min_clearance_m, max_incidence_deg=rep.max_incidence_deg,
                             success=rep.all_feasible, share_colliding=rep.share_colliding,
                             share_infeasible=rep.share_infeasible, collision_avoidance=self.collision,

@@ -49,8 +49,10 @@ def discrepancy_scores(problem: Any, results: list) -> list[dict]:
     """Honest TCP scores of every design with the problem's discrepancy (universal-kriging C_s, base frame).
 
     Returns:
-        Per design {"trace_cs_m2", "tcp_sigma_m" = sqrt(tr(C_s)/t), "cov_s_m2"} (m², m, m²) at the working
-        configurations W and, with a working region, {"trace_cs_region_m2", "tcp_sigma_region_m"} over W plus the
+        Per design {"trace_cs_m2", "tcp_sigma_m" = sqrt((tr(C_s) + held_trace_m2)/t), "cov_s_m2",
+        "held_trace_m2"} (m², m, m², m²) at the working configurations W (``trace_cs_m2`` and ``cov_s_m2`` the
+        identified part; the TCP σ with the joint-placement parameters held at nominal, the design's
+        ``held_trace_m2``) and, with a working region, {"trace_cs_region_m2", "tcp_sigma_region_m"} over W plus the
         region's configurations (sqrt(tr(C_s)/(t + k))); ``cov_s_m2`` is the full
         universal-kriging C_s (3t × 3t) rotated to the tracker frame, like the design's own ``cov_s_m2`` (the trace
         is the base frame's); NaN / None where the design does not identify the parameters.
@@ -69,8 +71,9 @@ def discrepancy_scores(problem: Any, results: list) -> list[dict]:
             cov = (0.5 * (C + C.T)).tolist()
         except IdentifiabilityError:
             tr, cov = float("nan"), None
-        out.append({"trace_cs_m2": tr, "tcp_sigma_m": math.sqrt(tr / t) if tr == tr else float("nan"),
-                    "cov_s_m2": cov})
+        held = float(getattr(r, "held_trace_m2", 0.0))
+        out.append({"trace_cs_m2": tr, "tcp_sigma_m": math.sqrt((tr + held) / t) if tr == tr else float("nan"),
+                    "cov_s_m2": cov, "held_trace_m2": held})
         if reg is not None:
             n = reg.Q_work.shape[0]
             try:
@@ -82,12 +85,16 @@ def discrepancy_scores(problem: Any, results: list) -> list[dict]:
 
 
 def sigma_given(problem: Any) -> float:
-    """Predicted TCP σ (m) at the working configurations of the measured poses alone, discrepancy included."""
+    """Predicted TCP σ (m) at the working configurations of the measured poses alone, discrepancy and the
+    joint-placement parameters held at nominal included (as every design's)."""
     from pin_kpi_oed.errors import IdentifiabilityError
+    from pin_kpi_oed.oed.held import design_held
 
     crit = problem.gp_criterion(region=False)
     try:
-        return math.sqrt(crit.value(np.zeros((0, problem.n))) / problem.cell.q_work.shape[0])
+        held = (design_held(problem.model, problem.base, problem.Q_given, problem.cell.q_work, p=problem.p0).trace_m2
+                if problem.Q_given is not None else 0.0)
+        return math.sqrt((crit.value(np.zeros((0, problem.n))) + held) / problem.cell.q_work.shape[0])
     except IdentifiabilityError:
         return float("inf")
 

@@ -45,16 +45,20 @@ def model_design_inputs(cm: Any, cell: Any, model_file: str, given_file: str | N
             neither re-fitted nor taken from the file (named ``Q_given``).
     """
     from pin_kpi_oed.design.declare import model_discrepancy
-    from pin_kpi_oed.calibrated.prediction_sigma import sigma_at
+    from pin_kpi_oed.calibrated.tcp_sigma import tcp_sigma
 
     model_sigma = sigma_line = refit_line = None
     prior = model_discrepancy(cell, cm, model_file)
     if prior is not None:
-        sig, far = sigma_at(cm, cell.q_work)
-        model_sigma = {"sigma_m": sig.tolist(), "extrapolated": far.tolist(), "note": "as predict gives it"}
-        sigma_line = (f"model_file {model_file}: predicted sigma now at the working configurations (as predict gives "
-                     "it): " + ", ".join(f"{s * 1e3:.4f} mm" + (" (outside the coverage)" if f else "")
-                                         for s, f in zip(sig, far))
+        at = tcp_sigma(cm, cell.q_work, cell.tcp_m)
+        sig, far = at.sigma_m, at.extrapolation
+        model_sigma = {"sigma_m": sig.tolist(), "extrapolated": far.tolist(),
+                       "held_sigma_m": at.held_sigma_m.tolist(),
+                       "note": "at the cell's TCP, as predict at='tcp' gives it (the held parameters included)"}
+        sigma_line = (f"model_file {model_file}: predicted sigma now at the TCP at the working configurations (as "
+                     "predict at='tcp' gives it): "
+                     + ", ".join(f"{s * 1e3:.4f} mm" + (" (outside the coverage)" if f else "")
+                                 for s, f in zip(sig, far))
                      + (f"; {int(far.sum())} of {len(far)} outside the calibration's joint-space coverage: its "
                         "discrepancy was not learnt there (the sigma is widened by the parameters' extrapolation "
                         "error, predict / compensate flag them); the design's poses near them measure it"

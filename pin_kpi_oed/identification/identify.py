@@ -90,8 +90,10 @@ Uncertainty
 C = (FᵀF + P)⁻¹ over x with F = ∂f/∂x at the solution (inlier rows) and P the prior
 (:func:`pin_kpi_oed.oed.covariance.param_covariance`); optionally scaled by the reduced χ²
 when the weights are only relative (unknown σ). The predicted TCP uncertainty at working
-configurations is ``C_s = E C_pp Eᵀ`` (eq. 25) with E = ds/dP_B (first station's tracker
-frame), reported per configuration as ``sqrt(trace C_s,i)`` (m).
+configurations is the calibrated model's at its TCP (:func:`~pin_kpi_oed.calibrated.tcp_sigma.tcp_sigma`, what
+``predict --at tcp`` states): the discrepancy, the parameters' C_s = E C_pp Eᵀ (eq. 25) with E = ds/dP_B, and the
+joint-placement parameters held at nominal under their tolerance (first station's tracker frame), reported per
+configuration as ``sqrt(trace C_s,i)`` (m).
 
 Outliers: measurement i of m is flagged when ``‖f_i‖ > sqrt(χ²_{nh}(1 − α/m)) · s`` with s the
 robust (MAD) scale of the weighted residual components, 1.4826 · median |f| (a family-wise test: an
@@ -135,6 +137,7 @@ from pin_kpi_oed.identification.identifiable import N_EXCITATION, build_problem,
 from pin_kpi_oed.identification.identify_options import ROBUST_LOSSES, IdentifyOptions, resolve_options
 from pin_kpi_oed.identification.identify_result import IdentificationResult
 from pin_kpi_oed.calibrated.model_file import Setup
+from pin_kpi_oed.calibrated.tcp_sigma import tcp_sigma
 from pin_kpi_oed.identification.quality import robust_loss_reason
 from pin_kpi_oed.identification.problem import (ResidualModel, align_data, effect_param_names, predict)
 from pin_kpi_oed.identification.solve import fit_covariance, settle_outliers, solve, tcp_std
@@ -257,6 +260,7 @@ def identify(model: TrackerModel, data: MeasurementSet, options: IdentifyOptions
                                 "keeps the plain fit)")
     result.coverage = JointCoverage.from_training(inp.Q, opts.seed, model.robot.periodic_joints)
     result.discrepancy = result_discrepancy(result, data, discrepancy_options(opts.discrepancy, opts.seed), inp.Q)
+    _state_tcp_sigma(result, _working_configurations(model, data, inp, opts), data)
     _gate(result, model, opts)
     result.time_s = time.perf_counter() - t_start
     return result
@@ -272,6 +276,20 @@ def _working_configurations(model: TrackerModel, data: MeasurementSet, inp: FitI
     if qw is not None and np.shape(qw)[-1:] == (model.robot.nq,):
         return model.robot.check_q(np.atleast_2d(np.asarray(qw, float)), "the tool header's working configurations")
     return inp.Q
+
+
+def _state_tcp_sigma(result: IdentificationResult, Qw: np.ndarray, data: MeasurementSet) -> None:
+    """Step 10: the TCP's σ at the working configurations, the calibrated model's own
+    (:func:`~pin_kpi_oed.calibrated.tcp_sigma.tcp_sigma`: the discrepancy, the parameters and the ones held at
+    nominal, first station's tracker frame), so that ``identify`` states what ``predict --at tcp`` gives; the
+    effects that read temperature, payload or time take the data's median there."""
+    cm = result.calibrated_model()
+    aux: dict[str, Any] = {k: np.full(len(Qw), float(np.median(v))) for k in ("temperature_c", "payload_kg", "time_s")
+                           if (v := getattr(data, k, None)) is not None}
+    work = MeasurementSet(q=Qw, position_m=np.zeros((len(Qw), 3)), joint_names=list(cm.robot.joint_names),
+                          **aux) if aux else None
+    ts = tcp_sigma(cm, Qw, cm.tcp_m, station=result.stations[0], aux=work)
+    result.tcp_std_m, result.tcp_held_m, result.tcp_held_contrib_m = ts.sigma_m, ts.held_sigma_m, ts.held_contrib_m
 
 
 def _fit(model: TrackerModel, data: MeasurementSet, inp: FitInputs, effects: Sequence[Any], opts: IdentifyOptions,

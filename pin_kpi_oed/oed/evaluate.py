@@ -21,6 +21,7 @@ from pin_kpi_oed.model.tracker import TrackerModel
 from pin_kpi_oed.model.serialize import model_from_dict, model_to_dict
 from pin_kpi_oed.oed.covariance import check_covariance, design_covariances, weakest_direction
 from pin_kpi_oed.oed.criteria import CRITERIA, evaluate_all
+from pin_kpi_oed.oed.held import HeldShare, design_held
 from pin_kpi_oed.oed.identifiability import Identifiability, analyse, check_kpi
 from pin_kpi_oed.oed.objective import DesignContext
 from pin_kpi_oed.results import Result
@@ -31,8 +32,12 @@ class DesignScore(Result):
     """Scores of one measurement design (a :class:`~pin_kpi_oed.results.Result`: ``status`` ``scored``).
 
     Attributes:
-        trace_cs_m2: tr(C_s) over all working configurations (m²).
-        tcp_sigma_m: sqrt(tr(C_s)/t): RMS TCP standard deviation per working configuration (m).
+        trace_cs_m2: tr(C_s) over all working configurations (m²): the identified parameters' part (eq. 19), what
+            the criteria and certificates use.
+        tcp_sigma_m: sqrt((tr(C_s) + held_trace_m2)/t): RMS TCP standard deviation per working configuration (m),
+            with the joint-placement parameters held at nominal under their tolerance.
+        held_trace_m2: tr(G Σ_N Gᵀ) (m²): the held parameters' part, which no measurement of the reflector removes
+            (:func:`~pin_kpi_oed.oed.held.design_held`); held: its :class:`~pin_kpi_oed.oed.held.HeldShare`.
         cov_s_m2: C_s (3t × 3t, m², tracker frame).
         trace_cp: tr(C_p) (mixed units m² and rad²).
         criteria: every registered criterion's value (units: :attr:`Criterion.unit`).
@@ -60,6 +65,8 @@ class DesignScore(Result):
     design: dict = field(default_factory=dict)
     not_scored: dict[str, str] = field(default_factory=dict)
     singular: dict[str, str] = field(default_factory=dict)
+    held_trace_m2: float = 0.0
+    held: HeldShare = field(default_factory=HeldShare, repr=False)
 
     def to_dict(self) -> dict:
         """Plain JSON-able dict (SI units): the common result keys, the scores, ``setup`` and ``design`` when known."""
@@ -68,7 +75,8 @@ class DesignScore(Result):
         return {**out, **self.result_dict(), "trace_cs_m2": self.trace_cs_m2, "tcp_sigma_m": self.tcp_sigma_m,
                 "cov_s_m2": self.cov_s_m2.tolist(), "trace_cp": self.trace_cp, "criteria": self.criteria,
                 "rank": self.rank, "n_meas": self.n_meas, "identifiable": self.identifiable,
-                "not_scored": self.not_scored, "singular": self.singular}
+                "not_scored": self.not_scored, "singular": self.singular, "held_trace_m2": self.held_trace_m2,
+                "held": {"names": self.held.names, "tcp_contribution_m": self.held.contrib_m.tolist()}}
 
     def summary(self) -> str:
         """The design scored (from a file), every criterion with its unit and label, then tr(C_s) (mm²) and the TCP σ
@@ -84,7 +92,13 @@ class DesignScore(Result):
             val = f"{v: .6g}" if np.isfinite(v) or np.isnan(v) else " singular"
             lines.append(f"{k:<7}{val}  [{crit.unit if crit else '?'}] {crit.label if crit else ''}".rstrip())
         lines.extend(f"{k:<7}not scored: {why}" for k, why in self.not_scored.items())
-        lines.append(f"tr(C_s) = {self.trace_cs_m2 * 1e6:.6g} mm^2   TCP sigma = {self.tcp_sigma_m * 1e6:.3f} um")
+        lines.append(f"tr(C_s) = {self.trace_cs_m2 * 1e6:.6g} mm^2   TCP sigma = {self.tcp_sigma_m * 1e6:.3f} um"
+                     + (f" (with the parameters held at nominal: {self.held_trace_m2 * 1e6:.6g} mm^2 more, "
+                        f"{100 * self.held_trace_m2 / (self.held_trace_m2 + self.trace_cs_m2):.0f} % of the variance)"
+                        if self.held_trace_m2 > 0 else ""))
+        line = self.held.line(self.trace_cs_m2, int(round(self.cov_s_m2.shape[0] / 3)))
+        if line:
+            lines.append(line)
         if self.singular:
             lines.append(f"status: {self.status}: {self.message}")
         return "\n".join(lines)
@@ -134,7 +148,9 @@ def score_design(model: TrackerModel, Q_meas: np.ndarray, Q_work: np.ndarray,
         message = (f"{', '.join(singular)} singular without the prior: "
                    f"{weakest_direction(F.T @ F, ident.base_names)}; add measurement configurations that tell "
                    "them apart (spread over the joint ranges)")
-    return DesignScore(trace_cs_m2=float(np.trace(C_s)), tcp_sigma_m=float(np.sqrt(np.trace(C_s) / t)), cov_s_m2=C_s,
+    held = design_held(model, b, Q_meas, Q_work, p=p0)
+    return DesignScore(trace_cs_m2=float(np.trace(C_s)), cov_s_m2=C_s, held_trace_m2=held.trace_m2, held=held,
+                       tcp_sigma_m=float(np.sqrt((np.trace(C_s) + held.trace_m2) / t)),
                        trace_cp=float(np.trace(C_p)), criteria=crit, rank=ident.rank, n_meas=Q_meas.shape[0],
                        identifiable=ident.base_names, not_scored=not_scored, singular=singular,
                        success=not singular, status="singular" if singular else "scored", message=message,

@@ -11,13 +11,18 @@ what removes it.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from pin_kpi_oed.errors import InputError
 
-__all__ = ["HeldTerm", "held_advice"]
+if TYPE_CHECKING:
+    from pin_kpi_oed.model.tolerances import Tolerances
+    from pin_kpi_oed.model.tracker import TrackerModel
+
+__all__ = ["HeldTerm", "HeldShare", "held_advice", "design_held"]
 
 
 @dataclass
@@ -103,3 +108,62 @@ def held_advice(names: list[str], contrib_m: np.ndarray, total_m: float, top: in
             f"from parameters held at their tolerance, mostly {named}, which no measurement of this reflector "
             "determines; a second reflector nest off the last joint axis, a 6-DoF probe, or measuring the TCP itself "
             "removes it")
+
+
+@dataclass
+class HeldShare:
+    """What the held parameters add to a design's tr C_s at the working configurations (SI units).
+
+    Attributes:
+        trace_m2: tr(G Σ_N Gᵀ) over the working configurations (m²): constant in the design (zero gradient for a
+            structural dependency), what no measurement of this reflector removes.
+        names: the held parameters; contrib_m: each one's RMS 3-D σ at the TCP over the working configurations (m).
+    """
+
+    trace_m2: float = 0.0
+    names: list[str] = field(default_factory=list)
+    contrib_m: np.ndarray = field(default_factory=lambda: np.zeros(0))
+
+    def line(self, trace_cs_m2: float, t: int) -> str:
+        """One line: the held share of tr C_s (the identified part ``trace_cs_m2``, m², at ``t`` working
+        configurations) and what removes it (:func:`held_advice`), or ""."""
+        if not self.names or self.trace_m2 <= 0:
+            return ""
+        total = trace_cs_m2 + self.trace_m2
+        head = (f"{self.trace_m2 * 1e6:.4g} mm^2 of tr(C_s) = {total * 1e6:.4g} mm^2 "
+                f"({100 * self.trace_m2 / total:.0f} %) no measurement of this reflector removes: ")
+        return head + held_advice(self.names, self.contrib_m, float(np.sqrt(total / max(t, 1))))
+
+
+def design_held(model: TrackerModel, base: np.ndarray, Q_meas: np.ndarray, Q_work: np.ndarray,
+                tolerances: Tolerances | None = None, p: np.ndarray | None = None) -> HeldShare:
+    """The held parameters' share of a design's C_s: tr(G Σ_N Gᵀ) with G = E_B A − E_N at the working
+    configurations and A = M⁻¹F_BᵀF_N of the measurement configurations (module docstring).
+
+    Args:
+        model: the measurement model (its TCP, layout and prior); base: the identified parameters' raw indices;
+        Q_meas: measurement configurations (m, n) rad; Q_work: working configurations (t, n) rad;
+        tolerances: the held parameters' prior (default :class:`~pin_kpi_oed.model.tolerances.Tolerances`);
+        p: the linearisation point (default nominal).
+
+    Returns:
+        The :class:`HeldShare` (zero when nothing is held).
+
+    Raises:
+        IdentifiabilityError: Q_meas does not identify the parameters.
+    """
+    from pin_kpi_oed.model.tolerances import Tolerances, held_columns
+    from pin_kpi_oed.oed.covariance import held_absorption, prior_of
+
+    N = held_columns(model, np.asarray(base, int))
+    if not N.size:
+        return HeldShare()
+    p0 = np.zeros(model.n_params) if p is None else np.asarray(p, float)
+    F = model.weighted_jacobian(p0, np.atleast_2d(Q_meas)).reshape(-1, model.n_params)
+    A = held_absorption(F[:, base], F[:, N], prior_of(model, np.asarray(base, int)))
+    E = model.kpi_jacobian(p0, np.atleast_2d(Q_work))
+    sig = (tolerances or Tolerances()).sigma_vector(model)[N]
+    Gs = (E[:, base] @ A - E[:, N]) * sig
+    t = E.shape[0] // 3
+    return HeldShare(float(np.sum(Gs ** 2)), [model.layout.names[i] for i in N],
+                     np.sqrt(np.sum(Gs ** 2, axis=0) / t))

@@ -36,7 +36,8 @@ SECTIONS = (("summary", "Summary"), ("identity", "Identity and traceability"),
             ("calibrated", "What was calibrated"), ("parameters", "Parameters"),
             ("accuracy", "Accuracy on held-out rows"), ("uncertainty", "Uncertainty (GUM)"),
             ("fit_quality", "Fit quality"),
-            ("honest_sigma", "Honest sigma"), ("trust_map", "Trust map"), ("iso9283", "ISO 9283 pose figures"),
+            ("honest_sigma", "Honest sigma"), ("tcp_sigma", "Sigma at the TCP"), ("trust_map", "Trust map"),
+            ("iso9283", "ISO 9283 pose figures"),
             ("diagnosis", "Diagnosis"), ("reproduce", "Reproduce"))
 
 
@@ -172,7 +173,24 @@ def _identifiable(cm: Any) -> dict:
             "in_words": (f"{len(est)} parameters estimated; {len(held)} of the {len(robot_names)} joint-placement "
                          "parameters are held at their nominal values: tracker positions cannot tell them apart "
                          "from the others or from the set-up (tracker pose, reflector), so any value of them "
-                         "gives the same predictions")}
+                         "gives the same predictions at the reflector; not at a TCP away from it, where their "
+                         "tolerance enters the TCP's sigma (section 'Sigma at the TCP')")}
+
+
+def _tcp_sigma(cm: Any, station: str | None, Q_held_out: np.ndarray) -> dict:
+    """The TCP's σ (:func:`~pin_kpi_oed.calibrated.tcp_sigma.tcp_sigma`, the one every command states) at the model's
+    working configurations, else at the held-out rows' configurations: RMS and max 3-D σ (m), the held parameters'
+    part and share, and the line saying which part no reflector measurement removes and what does."""
+    from pin_kpi_oed.calibrated.tcp_sigma import tcp_sigma
+
+    where = "working configurations" if cm.q_work is not None else "held-out configurations"
+    Q = cm.q_work if cm.q_work is not None else Q_held_out
+    at = tcp_sigma(cm, Q, station=station)
+    held = float(np.sqrt(np.mean(at.held_sigma_m ** 2)))
+    return {"tcp_m": at.tcp_m.tolist(), "stated": bool(cm.tool_source), "where": where, "n": int(len(Q)),
+            "rms_m": at.rms_m, "max_m": float(at.sigma_m.max()), "sigma_m": at.sigma_m.tolist(),
+            "held_rms_m": held, "held_share": at.held_share, "held_names": list(at.held_names),
+            "advice": at.advice()}
 
 
 def _parameters(cm: Any) -> dict:
@@ -265,6 +283,7 @@ def build_certificate(model_path: str, train_paths: Sequence[str], validate_path
                                        "message": "the model file holds no fit-quality verdict"},
             "honest_sigma": {k: after.get(k) for k in ("z_rms", "inside_95", "sigma_mean_m", "extrapolation_share",
                                                         "sigma_scale")},
+            "tcp_sigma": _tcp_sigma(ho.model, ho.station, ho.Q),
             "trust_map": None, "iso9283": iso_figures(scored, ho.Q, np.asarray(ho.before["residuals_m"]),
                                                       np.asarray(after["residuals_m"]), goal_radius_m=o.goal_radius_m,
                                                       commanded=commanded_section(scored, ho, o.goal_radius_m,

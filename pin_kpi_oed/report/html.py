@@ -194,6 +194,14 @@ def _section(sid: str, title: str, d: dict, figs: dict) -> str:
             mm(h["sigma_mean_m"]), f"{h['z_rms']:.2f}" if h["z_rms"] is not None else "—",
             f"{h['inside_95'] * 100:.1f} %" if h["inside_95"] is not None else "—",
             f"{(h['extrapolation_share'] or 0) * 100:.1f} %")
+    elif sid == "tcp_sigma":
+        t = d["tcp_sigma"]
+        body = (f"<p>The TCP ({', '.join(mm(v, 2) for v in t['tcp_m'])}, tool frame"
+                + ("" if t["stated"] else "; no cell or tool header stated it") + f"): predicted 3-D σ RMS "
+                f"{mm(t['rms_m'])}, max {mm(t['max_m'])} at the {t['n']} {_e(t['where'])}, with the discrepancy, the "
+                f"parameters and the joint-placement parameters held at nominal ({t['held_share'] * 100:.0f} % of "
+                f"the variance, RMS {mm(t['held_rms_m'])}).</p>" + (f"<p class=\"note\">{_e(t['advice'])}.</p>"
+                                                                   if t["advice"] else ""))
     elif sid == "trust_map":
         t = d["trust_map"]
         body = (f"<p>Predicted 3-D σ on the {t['n']} held-out rows: {mm(t['sigma_min_m'])} to {mm(t['sigma_max_m'])} "

@@ -46,6 +46,7 @@ from pin_kpi_oed.data.measurements import MeasurementSet
 from pin_kpi_oed.errors import InputError
 from pin_kpi_oed.upkeep.check_poses import SETUP_FACTOR, poses_to_add, registration_sigma_m
 from pin_kpi_oed.calibrated.model_file import CalibratedModel
+from pin_kpi_oed.calibrated.tcp_sigma import tcp_sigma
 from pin_kpi_oed.identification.problem import align_data
 from pin_kpi_oed.upkeep.transfer import register_setup
 from pin_kpi_oed.model.tracker import TrackerModel
@@ -75,7 +76,10 @@ class CheckResult(Result):
             Mahalanobis distance (χ²(6) under no change).
         power: group name -> power of the test against the weakest change of size ``tolerance_m``.
         tolerance_m: RMS TCP change at the working configurations the power is stated for (m).
-        tcp_sigma_m: TCP σ at the working configurations (norm, per configuration; m), the re-registered model's.
+        tcp_sigma_m: TCP σ at the working configurations (norm, per configuration; m): the re-registered model's
+            (:func:`~pin_kpi_oed.calibrated.tcp_sigma.tcp_sigma`) with the registration's share.
+        tcp_held_m: its part from the joint-placement parameters held at nominal (per configuration, m): no check of
+            a reflector sees a change of them (its power against them is zero).
         group: the named group (robot changed), or "".
         change: the group's fitted change in its columns (raw units: m, rad), std: its standard deviations.
         change_tcp_m: RMS TCP displacement of the change at the working configurations (m).
@@ -106,6 +110,7 @@ class CheckResult(Result):
     power: dict = field(default_factory=dict)
     tolerance_m: float = 1e-4
     tcp_sigma_m: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    tcp_held_m: np.ndarray = field(default_factory=lambda: np.zeros(0))
     group: str = ""
     change: np.ndarray = field(default_factory=lambda: np.zeros(0))
     std: np.ndarray = field(default_factory=lambda: np.zeros(0))
@@ -132,6 +137,9 @@ class CheckResult(Result):
         if self.verdict in ("holds", "setup_moved"):
             tcp = (f", TCP sigma at the working configurations median {np.median(self.tcp_sigma_m) * 1e3:.3f} mm, max "
                    f"{np.max(self.tcp_sigma_m) * 1e3:.3f} mm" if self.tcp_sigma_m.size else "")
+            if self.tcp_held_m.size and np.max(self.tcp_held_m) > 0:
+                tcp += (f" (of which {np.median(self.tcp_held_m) * 1e3:.3f} mm from joint-placement parameters held "
+                        "at their tolerance, which no check of this reflector sees)")
             head = "holds" if self.verdict == "holds" else (f"set-up moved by {self.setup_shift_m * 1e3:.3f} mm "
                                                              "(re-registered); the calibration holds")
             return f"check: {head}{tcp}; {stat}{pw}"
@@ -161,6 +169,7 @@ class CheckResult(Result):
                 "alpha": self.alpha, "chi2": self.chi2, "threshold": self.threshold, "p_value": self.p_value,
                 "setup_shift_m": self.setup_shift_m, "setup_distance": self.setup_distance, "power": self.power,
                 "tolerance_m": self.tolerance_m, "tcp_sigma_m": np.asarray(self.tcp_sigma_m).tolist(),
+                "tcp_held_m": np.asarray(self.tcp_held_m).tolist(),
                 "group": self.group, "change": np.asarray(self.change).tolist(),
                 "std": np.asarray(self.std).tolist(), "change_tcp_m": self.change_tcp_m,
                 "determined": self.determined, "sigma_factor": self.sigma_factor, "refit_chi2": self.refit_chi2,
@@ -289,6 +298,7 @@ def check_calibration(model: CalibratedModel, data: MeasurementSet, *, station: 
     if T <= thr:
         moved = dist > null.threshold(6, alpha)
         return CheckResult(verdict="setup_moved" if moved else "holds", tcp_sigma_m=reach["tcp"],
+                           tcp_held_m=reach["held"],
                            message="the residuals are within the model's sigma", time_s=time.perf_counter() - t0,
                            **out)
     named = _name_group(crit, F, z, dof, alpha, null)
@@ -349,8 +359,10 @@ def _changed(model: CalibratedModel, data: MeasurementSet, Q: np.ndarray, best: 
 
 def _setup_reach(cm: CalibratedModel, crit: CheckPower, F: np.ndarray, E_w: np.ndarray, qw: np.ndarray) -> dict:
     """What the registration on the check rows leaves at the working configurations: its own σ there (RMS 3-D, m),
-    the model's honest σ there, whether the first is at most :data:`SETUP_FACTOR` × the second, and the TCP σ per
-    working configuration with the registration's share (m)."""
+    the model's honest σ there, whether the first is at most :data:`SETUP_FACTOR` × the second, the TCP σ per
+    working configuration (:func:`~pin_kpi_oed.calibrated.tcp_sigma.tcp_sigma`, the one σ at the TCP, its σ factor
+    left out) with the registration's share, and the part of it from the joint-placement parameters held at nominal
+    (m)."""
     s = crit.setup
     Ms = F[:, s].T @ F[:, s]
     sig_w = _honest(cm, qw, None, CHECK_STATION)[1]
@@ -358,8 +370,11 @@ def _setup_reach(cm: CalibratedModel, crit: CheckPower, F: np.ndarray, E_w: np.n
     reg = registration_sigma_m(E_w[:, s], Ms)
     C = E_w[:, s] @ np.linalg.pinv(Ms, hermitian=True) @ E_w[:, s].T
     per = np.sum(np.diag(C).reshape(-1, 3), axis=1)
-    tcp = np.sqrt(np.sum(sig_w ** 2, axis=1) + np.maximum(per, 0.0))
-    return {"reg": reg, "honest": honest, "determined": bool(reg <= SETUP_FACTOR * honest), "tcp": tcp}
+    st = dataclasses.replace(cm.setups[CHECK_STATION], sigma_scale=1.0)
+    at = tcp_sigma(cm.with_setup(CHECK_STATION, st), qw, station=CHECK_STATION)
+    tcp = np.sqrt(at.sigma_m ** 2 + np.maximum(per, 0.0))
+    return {"reg": reg, "honest": honest, "determined": bool(reg <= SETUP_FACTOR * honest), "tcp": tcp,
+            "held": at.held_sigma_m}
 
 
 def check_powers(crit: CheckPower, F: np.ndarray, tolerance_m: float, alpha: float, null: CheckNull | None = None

@@ -61,7 +61,7 @@ from pin_kpi_oed.model.parameters import ParameterLayout
 from pin_kpi_oed.results import Result
 
 __all__ = ["RegistrationResult", "register_setup", "registration_split", "validate_transfer", "predict_table",
-           "write_predictions"]
+           "tcp_table", "write_predictions"]
 
 
 @dataclass
@@ -446,7 +446,8 @@ def validate_transfer(model: CalibratedModel, data: MeasurementSet, *, register_
 
 
 def predict_table(model: CalibratedModel, data: MeasurementSet, station: str | None = None,
-                  tool_length_m: float = DEFAULT_TOOL_LENGTH_M) -> tuple[list[str], np.ndarray]:
+                  tool_length_m: float = DEFAULT_TOOL_LENGTH_M, at: str = "reflector",
+                  tcp_m: np.ndarray | None = None) -> tuple[list[str], np.ndarray]:
     """Per row of ``data``: predicted reflector x, y, z (m, tracker frame), measured x, y, z and error if present.
 
     Args:
@@ -454,6 +455,8 @@ def predict_table(model: CalibratedModel, data: MeasurementSet, station: str | N
         data: joint values (and measured positions, optional); its ``station`` column picks the
             set-up per row unless ``station`` is given.
         station: station label for every row (default: the data's column, else the model's default).
+        at: ``reflector`` (what a tracker measures) or ``tcp``: the TCP ``tcp_m`` (tool frame, m; default the
+            model's) with the σ of :meth:`CalibratedModel.predict_tcp` (:func:`tcp_table`).
 
     Returns:
         (column names, table (m, k)): ``x_pred, y_pred, z_pred``, ``sigma_x, sigma_y, sigma_z`` (m: the
@@ -474,6 +477,8 @@ def predict_table(model: CalibratedModel, data: MeasurementSet, station: str | N
         raise InputError(f"{data.source or 'data'}: joint columns {', '.join(data.joint_names)} do not match the "
                          f"model's robot {model.robot.name} ({', '.join(names)})")
     Q = align_data(model.robot, data, need_position=False)
+    if at != "reflector":
+        return tcp_table(model, Q, data, station, at, tcp_m)
     Y, sig, extra = model.predict_with_sigma(Q, data, station=station)
     cols = ["x_pred", "y_pred", "z_pred", "sigma_x", "sigma_y", "sigma_z", "extrapolation"]
     table = [Y, sig, extra.astype(float)[:, None]]
@@ -489,6 +494,31 @@ def predict_table(model: CalibratedModel, data: MeasurementSet, station: str | N
             cols.append("rot_error")
             table.append(err[:, None])
     return cols, np.hstack(table)
+
+
+def tcp_table(model: CalibratedModel, Q: np.ndarray, data: MeasurementSet, station: str | None, at: str = "tcp",
+              tcp_m: np.ndarray | None = None) -> tuple[list[str], np.ndarray]:
+    """:func:`predict_table` at the TCP: per row ``x_pred, y_pred, z_pred`` (the TCP, m, tracker frame),
+    ``sigma_x, sigma_y, sigma_z`` (m, per axis), ``sigma_tcp`` (m, 3-D), ``sigma_held`` (m, 3-D: the part of the
+    joint-placement parameters no reflector measurement determines) and ``extrapolation``: the one σ at the TCP
+    (:func:`~pin_kpi_oed.calibrated.tcp_sigma.tcp_sigma`), per station of the rows. Measured positions are the
+    reflector's and are not compared.
+
+    Raises:
+        InputError: ``at`` neither ``reflector`` nor ``tcp``; as :func:`predict_table`.
+    """
+    if at != "tcp":
+        raise InputError(f"at={at!r}: must be 'reflector' or 'tcp'")
+    labels = model.row_stations(len(Q), data, station)
+    table = np.empty((len(Q), 9))
+    for lab in dict.fromkeys(labels):
+        rows = np.flatnonzero(labels == lab)
+        ts = model.predict_tcp(Q[rows], tcp_m, lab, data if rows.size == len(Q) else data.subset(rows))
+        sd = np.sqrt(np.maximum(np.einsum("maa->ma", ts.covariance_m2), 0.0))
+        table[rows] = np.hstack([ts.position_m, sd, ts.sigma_m[:, None], ts.held_sigma_m[:, None],
+                                 ts.extrapolation.astype(float)[:, None]])
+    return ["x_pred", "y_pred", "z_pred", "sigma_x", "sigma_y", "sigma_z", "sigma_tcp", "sigma_held",
+            "extrapolation"], table
 
 
 def write_predictions(path: str | os.PathLike, data: MeasurementSet, cols: list[str], table: np.ndarray) -> None:
