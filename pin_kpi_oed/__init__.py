@@ -24,7 +24,6 @@ line declares its options before any of them is needed).
 # BLAS / OpenMP threads are limited at run time around every entry point (threads.py, threadpoolctl),
 # whatever the caller imported first; environment variables are not used for that.
 from pin_kpi_oed._lazy import lazy_exports
-from pin_kpi_oed.threads import get_max_threads, limited_threads, set_max_threads
 from pin_kpi_oed.errors import (IdentifiabilityError, InfeasibleError, InputError, PinKpiOedError, RobotLoadError,
                                 SolverError)
 
@@ -32,6 +31,9 @@ __version__ = "0.1.0"
 
 #: The pipeline, imported on first use: public name -> module that defines it.
 _PIPELINE = {
+    # BLAS / OpenMP threads
+    "get_max_threads": "pin_kpi_oed.threads", "limited_threads": "pin_kpi_oed.threads",
+    "set_max_threads": "pin_kpi_oed.threads",
     # the robot and its measurement
     "Robot": "pin_kpi_oed.model.robot", "load_robot": "pin_kpi_oed.model.robot",
     "ParameterLayout": "pin_kpi_oed.model.parameters", "MeasurementModel": "pin_kpi_oed.model.device",
@@ -82,5 +84,5 @@ _PIPELINE = {
 
 __getattr__, __dir__ = lazy_exports(globals(), _PIPELINE)
 
-__all__ = ["get_max_threads", "limited_threads", "set_max_threads", "IdentifiabilityError", "InfeasibleError",
-           "InputError", "PinKpiOedError", "RobotLoadError", "SolverError", *_PIPELINE]
+__all__ = ["IdentifiabilityError", "InfeasibleError", "InputError", "PinKpiOedError", "RobotLoadError", "SolverError",
+           *_PIPELINE]

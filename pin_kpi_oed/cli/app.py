@@ -13,8 +13,11 @@ import argparse
 import importlib
 import importlib.util
 import json
+import os
+import signal
 import sys
 from pathlib import Path
+from typing import Any
 
 from pin_kpi_oed.cli.commands import COMMANDS, command_in, topic_of
 from pin_kpi_oed.errors import PinKpiOedError
@@ -140,6 +143,7 @@ def main(argv: list[str] | None = None) -> int:
     :class:`PinKpiOedError` or an operating-system error becomes one line and exit code 2. An interrupt at any
     moment after this module is loaded (the command's imports included) prints ``interrupted`` and returns 130.
     """
+    previous = _watch_interrupts()
     try:
         from pin_kpi_oed.validation.options import join_negative_values
 
@@ -148,8 +152,62 @@ def main(argv: list[str] | None = None) -> int:
         args.argv = given  # the command as given (model files record it)
         return _run(args)
     except KeyboardInterrupt:
-        print("interrupted", file=sys.stderr)
-        return 130
+        return _interrupted()
+    except Exception:
+        # a compiled module interrupted while it initialises reports another error ("initialization failed",
+        # "could not import module datetime"): the interrupt is the cause when the signal came
+        if not _SIGNALLED:
+            raise
+        return _interrupted()
+    finally:
+        if previous is not None:
+            signal.signal(signal.SIGINT, previous)
+
+
+#: Set while :func:`main` runs when an interrupt (SIGINT) came; ``_INTERRUPTED`` when main ended on one (:func:`run`
+#: then leaves without the interpreter's exit path).
+_SIGNALLED: list[bool] = []
+_INTERRUPTED: list[bool] = []
+
+
+def _on_interrupt(signum: int, frame: Any) -> None:
+    """SIGINT: recorded, then Python's own KeyboardInterrupt."""
+    _SIGNALLED.append(True)
+    raise KeyboardInterrupt
+
+
+def _watch_interrupts() -> Any:
+    """Record interrupts while the command runs (:data:`_SIGNALLED`), when SIGINT has Python's default handler and
+    this is the main thread; returns the handler to restore (None: nothing installed)."""
+    _SIGNALLED.clear()
+    try:
+        if signal.getsignal(signal.SIGINT) is not signal.default_int_handler:
+            return None
+        return signal.signal(signal.SIGINT, _on_interrupt)
+    except ValueError:  # not the main thread
+        return None
+
+
+def _interrupted() -> int:
+    """The one line of an interrupt; exit code 130."""
+    print("interrupted", file=sys.stderr)
+    _INTERRUPTED.append(True)
+    return 130
+
+
+def run() -> None:
+    """The console entry point (``pin-kpi-oed``, ``python -m pin_kpi_oed``): :func:`main`'s exit code as the process's.
+
+    After an interrupt the process leaves at once with code 130 (its output flushed, the command's outputs already
+    released): CPython ends a process by SIGINT instead (code -2, after a traceback-free "interrupted") when the
+    interrupt was raised inside Python code that a compiled extension ran, even though the command caught it.
+    """
+    code = main()
+    if _INTERRUPTED:
+        sys.stdout.flush()
+        sys.stderr.flush()
+        os._exit(130)
+    sys.exit(code)
 
 
 def _run(args: argparse.Namespace) -> int:
@@ -181,4 +239,4 @@ def _run(args: argparse.Namespace) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    run()

@@ -33,7 +33,6 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
-import scipy.linalg as sla
 
 from pin_kpi_oed.errors import IdentifiabilityError
 from pin_kpi_oed.model.device import MeasurementModel
@@ -106,6 +105,36 @@ class Identifiability(Result):
                 "notes": self.notes}
 
 
+def pivoted_qr_diagonal(A: np.ndarray) -> np.ndarray:
+    """|R_kk| of the QR factorisation with column pivoting of A (Householder, the column of largest remaining norm
+    first, as LAPACK's ``geqp3``; the remaining norms recomputed at each step), in NumPy: the rank needs no SciPy.
+
+    Args:
+        A: (m, n) matrix.
+
+    Returns:
+        (min(m, n),) the diagonal of R in absolute value, non-increasing up to rounding.
+    """
+    R = np.array(A, float, copy=True)
+    m, n = R.shape
+    out = np.zeros(min(m, n))
+    for k in range(min(m, n)):
+        rest = np.einsum("ij,ij->j", R[k:, k:], R[k:, k:])
+        j = k + int(np.argmax(rest))
+        if j != k:
+            R[:, [k, j]] = R[:, [j, k]]
+        x = R[k:, k]
+        alpha = float(np.linalg.norm(x))
+        out[k] = alpha
+        if alpha == 0.0:
+            break
+        v = x.copy()
+        v[0] += np.copysign(alpha, x[0])
+        v /= np.linalg.norm(v)
+        R[k:, k + 1:] -= 2.0 * np.outer(v, v @ R[k:, k + 1:])
+    return out
+
+
 def excitation(model: MeasurementModel, n: int = 200, seed: int = 0) -> np.ndarray:
     """Rich random excitation: ``n`` configurations uniform within the joint limits (rad)."""
     return model.robot.random_q(np.random.default_rng(seed), n)
@@ -136,9 +165,8 @@ def analyse(model: MeasurementModel, Q: np.ndarray | None = None, prefer: list[s
     zero = [i for i in free if norms[i] <= 1e-12 * max(norms.max(), 1e-300)]
     cand = [i for i in free if i not in zero]
     Fs = F[:, cand] / norms[cand]
-    # rank by SciPy's pivoted QR
-    _, R, _ = sla.qr(Fs, mode="economic", pivoting=True)
-    d = np.abs(np.diag(R))
+    # rank by the pivoted QR
+    d = pivoted_qr_diagonal(Fs)
     rank = int(np.sum(d > tol * d[0])) if d.size else 0
     # ordered selection: user preference, then set-up parameters, then robot base-to-tip
     setup = L.is_setup()
@@ -199,6 +227,8 @@ def check_kpi(ident: Identifiability, model: MeasurementModel, E: np.ndarray, wh
         setup_point[L.group_slice(g)] = True
     C = N[setup_point]
     if C.size:
+        import scipy.linalg as sla
+
         Z = sla.null_space(C)
         N = N @ Z
     if N.shape[1] == 0:
