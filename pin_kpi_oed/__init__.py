@@ -18,25 +18,27 @@ The top level offers that pipeline by name (each subpackage exports its own name
 
 (the README's example continues to the held-out error).
 
-Everything beyond the robot model is imported on first use (``import pin_kpi_oed`` stays cheap).
+Every name is imported on first use: ``import pin_kpi_oed`` loads neither NumPy nor Pinocchio (the command
+line declares its options before any of them is needed).
 """
 
 # BLAS / OpenMP threads are limited at run time around every entry point (threads.py, threadpoolctl),
 # whatever the caller imported first; environment variables are not used for that.
 from pin_kpi_oed._lazy import lazy_exports
-from pin_kpi_oed.threads import get_max_threads, limited_threads, set_max_threads
 from pin_kpi_oed.errors import (IdentifiabilityError, InfeasibleError, InputError, PinKpiOedError, RobotLoadError,
                                 SolverError)
-from pin_kpi_oed.model.robot import Robot, load_robot
-from pin_kpi_oed.model.parameters import ParameterLayout
-from pin_kpi_oed.model.device import MeasurementModel
-from pin_kpi_oed.model.noise import NoiseModel
-from pin_kpi_oed.model.tracker import TrackerModel
 
 __version__ = "0.1.0"
 
 #: The pipeline, imported on first use: public name -> module that defines it.
 _PIPELINE = {
+    # BLAS / OpenMP threads
+    "get_max_threads": "pin_kpi_oed.threads", "limited_threads": "pin_kpi_oed.threads",
+    "set_max_threads": "pin_kpi_oed.threads",
+    # the robot and its measurement
+    "Robot": "pin_kpi_oed.model.robot", "load_robot": "pin_kpi_oed.model.robot",
+    "ParameterLayout": "pin_kpi_oed.model.parameters", "MeasurementModel": "pin_kpi_oed.model.device",
+    "NoiseModel": "pin_kpi_oed.model.noise", "TrackerModel": "pin_kpi_oed.model.tracker",
     # cell
     "Cell": "pin_kpi_oed.cell.cell", "load_cell": "pin_kpi_oed.cell.cell",
     "FeasibilityChecker": "pin_kpi_oed.cell.feasibility",
@@ -86,6 +88,5 @@ _PIPELINE = {
 
 __getattr__, __dir__ = lazy_exports(globals(), _PIPELINE)
 
-__all__ = ["get_max_threads", "limited_threads", "set_max_threads", "IdentifiabilityError", "InfeasibleError",
-           "InputError", "PinKpiOedError", "RobotLoadError", "SolverError", "Robot", "load_robot", "ParameterLayout",
-           "MeasurementModel", "NoiseModel", "TrackerModel", *_PIPELINE]
+__all__ = ["IdentifiabilityError", "InfeasibleError", "InputError", "PinKpiOedError", "RobotLoadError", "SolverError",
+           *_PIPELINE]

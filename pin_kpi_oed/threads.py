@@ -27,8 +27,6 @@ from contextlib import contextmanager
 from typing import Any, TypeVar
 from collections.abc import Callable, Iterator
 
-from threadpoolctl import threadpool_limits
-
 from pin_kpi_oed.errors import InputError
 
 __all__ = ["get_max_threads", "set_max_threads", "limited_threads", "limit_threads", "limit_process_threads"]
@@ -86,6 +84,7 @@ def limited_threads() -> Iterator[None]:
     _depth = 1
     try:
         import scipy.linalg  # noqa: F401  (SciPy's own BLAS: loaded now, so the limit below covers it)
+        from threadpoolctl import threadpool_limits
 
         with threadpool_limits(limits=get_max_threads()):
             yield
@@ -108,7 +107,9 @@ def limit_process_threads() -> Any:
     """Limit the BLAS / OpenMP threads of the whole process to :func:`get_max_threads` (the command line does).
 
     The libraries loaded so far are limited now (threadpoolctl), those loaded later through their variables
-    (:data:`THREAD_VARIABLES`, set unless the user set them; subprocesses inherit them).
+    (:data:`THREAD_VARIABLES`, set unless the user set them; subprocesses inherit them). SciPy is not loaded for
+    that unless a variable the user set says another number (then its BLAS is loaded now and limited): a command
+    that needs no SciPy does not pay for its import.
 
     Returns:
         threadpoolctl's limiter: used as a context (``with limit_process_threads():``) it restores the loaded
@@ -117,6 +118,9 @@ def limit_process_threads() -> Any:
     n = get_max_threads()
     for var in THREAD_VARIABLES:
         os.environ.setdefault(var, str(n))
-    import scipy.linalg  # noqa: F401
+    if any(os.environ[var] != str(n) for var in THREAD_VARIABLES):
+        # a variable of the user's says otherwise: SciPy's own BLAS would read it, so load it now and limit it
+        import scipy.linalg  # noqa: F401
+    from threadpoolctl import threadpool_limits
 
     return threadpool_limits(limits=n)

@@ -81,3 +81,51 @@ def pytest_terminal_summary(terminalreporter):
         tr.write_line(f"{cpu:8.2f} s CPU  {nodeid}")
     tr.write_line(f"{sum(_CPU.values()):8.1f} s CPU in {len(_CPU)} tests; load average "
                   f"{', '.join(f'{x:.2f}' for x in os.getloadavg())} at the end on {os.cpu_count()} cores")
+
+
+# ---------------------------------------------------------------------- make test-fast: the change-test loop
+#: Each test's CPU time (s) as the last runs measured it: written at the end of every run, read by ``--fast``.
+CPU_RECORD = REPO / ".pytest_cpu.json"
+
+
+def pytest_addoption(parser):
+    parser.addoption("--fast", action="store_true",
+                     help="leave out the tests whose CPU time, as the last runs recorded it (.pytest_cpu.json), "
+                          "exceeds --fast-budget: the change-test loop (make test-fast); make test runs them all")
+    parser.addoption("--fast-budget", type=float, default=0.5, help="--fast: largest CPU time of a test kept (s)")
+
+
+def _record() -> dict[str, float]:
+    import json
+
+    try:
+        return {str(k): float(v) for k, v in json.loads(CPU_RECORD.read_text()).items()}
+    except (OSError, ValueError, AttributeError):
+        return {}
+
+
+def pytest_collection_modifyitems(config, items):
+    """``--fast``: deselect the tests recorded above the budget (a test never recorded is kept: it is new)."""
+    if not config.getoption("--fast"):
+        return
+    record, budget = _record(), config.getoption("--fast-budget")
+    slow = [it for it in items if record.get(it.nodeid, 0.0) > budget]
+    if slow:
+        config.hook.pytest_deselected(items=slow)
+        items[:] = [it for it in items if record.get(it.nodeid, 0.0) <= budget]
+
+
+def pytest_sessionfinish(session):
+    """Merge this run's CPU times into :data:`CPU_RECORD` (by the controller only, atomically)."""
+    if not _CPU or hasattr(session.config, "workerinput"):
+        return
+    import json
+    import os
+
+    merged = {**_record(), **_CPU}
+    tmp = CPU_RECORD.with_name(f"{CPU_RECORD.name}.{os.getpid()}")
+    try:
+        tmp.write_text(json.dumps(dict(sorted(merged.items())), indent=0))
+        os.replace(tmp, CPU_RECORD)
+    except OSError:
+        pass  # a read-only checkout: nothing recorded, nothing lost

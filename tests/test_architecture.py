@@ -174,6 +174,11 @@ def _annotation_nodes(tree: ast.AST) -> set[int]:
     return out
 
 
+#: Standard-library names with a leading underscore that are public, documented API: ``os._exit`` (leave the process
+#: without the interpreter's exit path; the command line's entry after an interrupt).
+PUBLIC_UNDERSCORE = {"os._exit"}
+
+
 def _private_reaches(tree: ast.AST) -> list[tuple[int, str]]:
     """(line, text) of every private name imported from another module (``from m import _x``, ``m._x``) and every
     private attribute read on an object other than ``self`` / ``cls`` (``problem._kpi``)."""
@@ -182,7 +187,8 @@ def _private_reaches(tree: ast.AST) -> list[tuple[int, str]]:
     for node in ast.walk(tree):
         if isinstance(node, ast.ImportFrom):
             out += [(node.lineno, f"from {node.module} import {a.name}") for a in node.names if _private(a.name)]
-        elif isinstance(node, ast.Attribute) and _private(node.attr) and id(node) not in skip:
+        elif isinstance(node, ast.Attribute) and _private(node.attr) and id(node) not in skip \
+                and ast.unparse(node) not in PUBLIC_UNDERSCORE:
             if not (isinstance(node.value, ast.Name) and node.value.id in ("self", "cls")):
                 out.append((node.lineno, ast.unparse(node)))
     return out

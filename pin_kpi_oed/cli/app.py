@@ -3,29 +3,33 @@
 Subcommands of the core live here (``info``, ``evaluate``, ``demo``); each
 topic module ``cli_<topic>.py`` adds its own with ``register(subparsers)``.
 Every :class:`~pin_kpi_oed.errors.PinKpiOedError` becomes one line on stderr
-and exit code 2, never a traceback.
+and exit code 2, never a traceback; an interrupt (Ctrl-C), at any moment, one
+line and exit code 130.
 """
 
 from __future__ import annotations
 
 import argparse
 import importlib
+import importlib.util
 import json
+import os
+import signal
 import sys
 from pathlib import Path
+from typing import Any
 
-from pin_kpi_oed.cli.util import parse_floats
+from pin_kpi_oed.cli.commands import COMMANDS, command_in, topic_of
 from pin_kpi_oed.errors import PinKpiOedError
-from pin_kpi_oed.model.robot import ROBOT_HELP, TOOL_HELP
+from pin_kpi_oed.model.robot_names import ROBOT_HELP, TOOL_HELP
 
-TOPICS = ("check", "design", "identify", "transfer", "diagnose", "view", "study", "compensate", "tracker_export",
-          "program", "export_model", "report")
-
-
+#: The topic modules of ``pin_kpi_oed.cli`` that declare subcommands (``register(subparsers)``), in ``--help`` order.
+TOPICS = tuple(dict.fromkeys(topic for _, topic, _ in COMMANDS if topic is not None))
 
 
 def cmd_info(args: argparse.Namespace) -> int:
     """``pin-kpi-oed info ROBOT``: joints, limits, parameter count, identifiable rank."""
+    from pin_kpi_oed.cli.util import parse_floats
     from pin_kpi_oed.oed.identifiability import analyse
     from pin_kpi_oed.model.tracker import TrackerModel
     from pin_kpi_oed.model.robot import load_robot
@@ -86,12 +90,34 @@ class OneLineParser(argparse.ArgumentParser):
         self.exit(2, f"{self.prog}: error: {message}; see {self.prog} --help\n")
 
 
-def build_parser() -> argparse.ArgumentParser:
-    """The argument parser with every available subcommand (their usage errors: one line, exit 2)."""
+def build_parser(command: str | None = None, lazy: bool = False) -> argparse.ArgumentParser:
+    """The argument parser of ``pin-kpi-oed`` (its usage errors: one line, exit 2).
+
+    Args:
+        command: with ``lazy``, the subcommand to run (:func:`~pin_kpi_oed.cli.commands.command_in`; None: none).
+        lazy: declare in full only ``command``'s topic module's subcommands (the others by their name and help
+            line, their modules not imported: what :func:`main` runs); False: every subcommand in full.
+    """
     parser = OneLineParser(prog="pin-kpi-oed", description=__doc__.splitlines()[0])
     parser.add_argument("--threads", type=int, default=None,
                         help="BLAS / OpenMP threads inside the package (default 1, or PIN_KPI_OED_THREADS)")
     sub = parser.add_subparsers(dest="command", required=True)
+    _add_core(sub)
+    chosen = topic_of(command) if command else None
+    declared: set[str] = set()
+    for name, topic, help_line in COMMANDS:
+        if topic is None or topic in declared or importlib.util.find_spec(f"pin_kpi_oed.cli.{topic}") is None:
+            continue
+        if not lazy or topic == chosen:
+            importlib.import_module(f"pin_kpi_oed.cli.{topic}").register(sub)
+            declared.add(topic)
+        else:
+            sub.add_parser(name, help=help_line, add_help=False)
+    return parser
+
+
+def _add_core(sub: argparse._SubParsersAction) -> None:
+    """Declare the core's own subcommands: ``info``, ``evaluate``, ``demo``."""
     p = sub.add_parser("info", help="joints, limits, parameter count and identifiable rank of a robot")
     p.add_argument("robot", help=ROBOT_HELP)
     p.add_argument("--tool", default=None, help=TOOL_HELP)
@@ -108,30 +134,87 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--json", default=None, help="write the result JSON here")
     p.set_defaults(func=cmd_demo)
-    for topic in TOPICS:
-        try:
-            mod = importlib.import_module(f"pin_kpi_oed.cli.{topic}")
-        except ImportError as exc:
-            if f"pin_kpi_oed.cli.{topic}" in str(exc):
-                continue
-            raise
-        mod.register(sub)
-    return parser
 
 
 def main(argv: list[str] | None = None) -> int:
     """Entry point of ``pin-kpi-oed``; returns the exit code.
 
     Options are checked (ranges, units, output paths) before any work; a
-    :class:`PinKpiOedError` or an operating-system error becomes one line and exit code 2.
+    :class:`PinKpiOedError` or an operating-system error becomes one line and exit code 2. An interrupt at any
+    moment after this module is loaded (the command's imports included) prints ``interrupted`` and returns 130.
     """
-    from pin_kpi_oed.validation.options import check_args, join_negative_values
+    previous = _watch_interrupts()
+    try:
+        from pin_kpi_oed.validation.options import join_negative_values
+
+        given = list(sys.argv[1:] if argv is None else argv)
+        args = build_parser(command_in(given), lazy=True).parse_args(join_negative_values(given))
+        args.argv = given  # the command as given (model files record it)
+        return _run(args)
+    except KeyboardInterrupt:
+        return _interrupted()
+    except Exception:
+        # a compiled module interrupted while it initialises reports another error ("initialization failed",
+        # "could not import module datetime"): the interrupt is the cause when the signal came
+        if not _SIGNALLED:
+            raise
+        return _interrupted()
+    finally:
+        if previous is not None:
+            signal.signal(signal.SIGINT, previous)
+
+
+#: Set while :func:`main` runs when an interrupt (SIGINT) came; ``_INTERRUPTED`` when main ended on one (:func:`run`
+#: then leaves without the interpreter's exit path).
+_SIGNALLED: list[bool] = []
+_INTERRUPTED: list[bool] = []
+
+
+def _on_interrupt(signum: int, frame: Any) -> None:
+    """SIGINT: recorded, then Python's own KeyboardInterrupt."""
+    _SIGNALLED.append(True)
+    raise KeyboardInterrupt
+
+
+def _watch_interrupts() -> Any:
+    """Record interrupts while the command runs (:data:`_SIGNALLED`), when SIGINT has Python's default handler and
+    this is the main thread; returns the handler to restore (None: nothing installed)."""
+    _SIGNALLED.clear()
+    try:
+        if signal.getsignal(signal.SIGINT) is not signal.default_int_handler:
+            return None
+        return signal.signal(signal.SIGINT, _on_interrupt)
+    except ValueError:  # not the main thread
+        return None
+
+
+def _interrupted() -> int:
+    """The one line of an interrupt; exit code 130."""
+    print("interrupted", file=sys.stderr)
+    _INTERRUPTED.append(True)
+    return 130
+
+
+def run() -> None:
+    """The console entry point (``pin-kpi-oed``, ``python -m pin_kpi_oed``): :func:`main`'s exit code as the process's.
+
+    After an interrupt the process leaves at once with code 130 (its output flushed, the command's outputs already
+    released): CPython ends a process by SIGINT instead (code -2, after a traceback-free "interrupted") when the
+    interrupt was raised inside Python code that a compiled extension ran, even though the command caught it.
+    """
+    code = main()
+    if _INTERRUPTED:
+        sys.stdout.flush()
+        sys.stderr.flush()
+        os._exit(130)
+    sys.exit(code)
+
+
+def _run(args: argparse.Namespace) -> int:
+    """Run the parsed command: its options checked, threads limited; errors as one line and exit code 2."""
+    from pin_kpi_oed.validation.options import check_args
     from pin_kpi_oed.validation.paths import release_outputs
 
-    parser = build_parser()
-    given = list(sys.argv[1:] if argv is None else argv)
-    args = parser.parse_args(join_negative_values(given))
-    args.argv = given  # the command as given (model files record it)
     try:
         check_args(args)
         if args.threads is not None:
@@ -151,12 +234,9 @@ def main(argv: list[str] | None = None) -> int:
         where = f"{exc.filename}: " if getattr(exc, "filename", None) else ""
         print(f"pin-kpi-oed {args.command}: error: {where}{exc.strerror or exc}", file=sys.stderr)
         return 2
-    except KeyboardInterrupt:
-        print("interrupted", file=sys.stderr)
-        return 130
     finally:
         release_outputs()  # the command's claims on its outputs end with it
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    run()

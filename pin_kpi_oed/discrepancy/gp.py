@@ -150,12 +150,12 @@ def white_level(R: np.ndarray, n_params: int = 0, floor_m: np.ndarray | None = N
     Returns:
         (level per axis (3,) m, k, f).
     """
-    from scipy.stats import chi2, f as fdist
+    from scipy.special import fdtri, gammaincinv  # scipy.stats' f.ppf and chi2.ppf, without importing it
 
     R = np.asarray(R, float).reshape(-1, 3)
     k = max(3 * len(R) - int(n_params), 1)
     s = np.sqrt(np.sum(R ** 2, axis=0) * 3.0 / k)
-    widen = float(np.sqrt(3.0 * fdist.ppf(0.95, 3, k) / chi2.ppf(0.95, 3)))
+    widen = float(np.sqrt(3.0 * fdtri(3, k, 0.95) / (2.0 * gammaincinv(1.5, 0.95))))
     s = s * widen
     if floor_m is not None:
         s = np.maximum(s, np.asarray(floor_m, float))

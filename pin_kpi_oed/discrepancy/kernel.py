@@ -28,9 +28,10 @@ not the same). Without linear joints every figure is the all-revolute kernel's, 
 
 The kernel is unit-free (amplitudes in units of the normalised residual); the per-axis scale in
 metres is held by :class:`~pin_kpi_oed.discrepancy.gp.Discrepancy`. It implements
-scikit-learn's :class:`~sklearn.gaussian_process.kernels.Kernel` (value and gradient in the
-log hyper-parameters) so that :class:`~sklearn.gaussian_process.GaussianProcessRegressor`
-fits it by maximum marginal likelihood, and adds :meth:`JointKernel.grad_x`, the exact
+scikit-learn's kernel protocol (value and gradient in the log hyper-parameters,
+:class:`~pin_kpi_oed.discrepancy.hyperparameters.HyperKernel`, without importing scikit-learn) so that
+:class:`~sklearn.gaussian_process.GaussianProcessRegressor` fits it by maximum marginal likelihood as the
+package's own :mod:`~pin_kpi_oed.discrepancy.marginal` does, and adds :meth:`JointKernel.grad_x`, the exact
 derivative in the joint angles a design needs (checked against finite differences).
 """
 
@@ -39,7 +40,7 @@ from __future__ import annotations
 from typing import Any
 
 import numpy as np
-from sklearn.gaussian_process.kernels import Hyperparameter, Kernel, StationaryKernelMixin
+from pin_kpi_oed.discrepancy.hyperparameters import HyperKernel, Hyperparameter
 
 __all__ = ["JointKernel"]
 
@@ -167,7 +168,7 @@ class _ChordCache:
 _CHORDS = _ChordCache()
 
 
-class JointKernel(StationaryKernelMixin, Kernel):
+class JointKernel(HyperKernel):
     """k(q, q') = c² Π_j SE_j(L_j) + Σ_j a_j² SE_j(ℓ_j) on the unit circle of each revolute joint and on the line
     of each linear one (see the module).
 
@@ -245,20 +246,21 @@ class JointKernel(StationaryKernelMixin, Kernel):
     # ------------------------------------------------------------------ scikit-learn hyper-parameters
     @property
     def hyperparameter_amplitude(self) -> Hyperparameter:
-        return Hyperparameter("amplitude", "numeric", self.amplitude_bounds)
+        return Hyperparameter.of("amplitude", "numeric", self.amplitude_bounds)
 
     @property
     def hyperparameter_length_scale(self) -> Hyperparameter:
-        return Hyperparameter("length_scale", "numeric", self.length_scale_bounds, np.size(self.length_scale))
+        return Hyperparameter.of("length_scale", "numeric", self.length_scale_bounds, np.size(self.length_scale))
 
     @property
     def hyperparameter_joint_amplitude(self) -> Hyperparameter:
-        return Hyperparameter("joint_amplitude", "numeric", self.joint_amplitude_bounds, np.size(self.joint_amplitude))
+        return Hyperparameter.of("joint_amplitude", "numeric", self.joint_amplitude_bounds,
+                                 np.size(self.joint_amplitude))
 
     @property
     def hyperparameter_joint_length_scale(self) -> Hyperparameter:
-        return Hyperparameter("joint_length_scale", "numeric", self.joint_length_scale_bounds,
-                              np.size(self.joint_length_scale))
+        return Hyperparameter.of("joint_length_scale", "numeric", self.joint_length_scale_bounds,
+                                 np.size(self.joint_length_scale))
 
     def parts(self, d: int) -> tuple[float, np.ndarray, np.ndarray, np.ndarray]:
         """(amplitude, length scales (d,), joint amplitudes (d,), joint length scales (d,)), scalars broadcast to d."""

@@ -61,11 +61,16 @@ class MarginalLikelihood:
         self.n, self.d = Q.shape
         i, j = np.triu_indices(self.n, 1)
         self.flat = i + j * self.n                                       # (i, j), i < j, in column-major order
+        self.flat_c = i * self.n + j                                     # the same pairs in row-major order
         self.D = 2.0 - 2.0 * np.cos(Q.T[:, i] - Q.T[:, j])                 # (d, pairs) chords 4 sin²(Δ/2)
         lin = linear_mask(linear, self.d)
         if lin is not None:
             self.D[lin] = (Q.T[lin][:, i] - Q.T[lin][:, j]) ** 2             # a linear joint's Δ²
         self.S = np.zeros((self.n, self.n), order="F")                    # Σ's upper triangle, factored in place
+        # work arrays of every evaluation, allocated once (a new array of this size costs its page faults each time)
+        self._A = np.empty_like(self.D)
+        self._pairs = np.empty((3, self.D.shape[1]))
+        self._W = np.empty((self.n, self.n))
         self.nfev = 0
 
     def split(self, theta: np.ndarray) -> tuple[float, np.ndarray, np.ndarray, np.ndarray, float]:
@@ -79,14 +84,18 @@ class MarginalLikelihood:
         self.nfev += 1
         c, a, ell, L, w = self.split(theta)
         n, m, d = self.n, self.Y.shape[1], self.d
-        P = np.exp((-0.5 / L ** 2) @ self.D)                             # (pairs,), c² not yet applied
+        P, K, Wp = self._pairs                                            # (pairs,) each, reused
+        np.matmul(-0.5 / L ** 2, self.D, out=P)
+        np.exp(P, out=P)                                                  # c² not yet applied
         P *= c ** 2
-        A = self.D * (-0.5 / ell ** 2)[:, None]                          # (d, pairs)
+        A = np.multiply(self.D, (-0.5 / ell ** 2)[:, None], out=self._A)  # (d, pairs)
         np.exp(A, out=A)
         A *= (a ** 2)[:, None]
         S = self.S
         Sf = S.reshape(-1, order="F")                                    # a view (column-major)
-        Sf[self.flat] = P + A.sum(0)
+        np.sum(A, axis=0, out=K)
+        K += P
+        Sf[self.flat] = K
         Sf[::n + 1] = c ** 2 + float(np.sum(a ** 2)) + w + REGRESSOR_JITTER
         Lc, info = sla.lapack.dpotrf(S, lower=0, clean=0, overwrite_a=1)   # Σ = UᵀU
         if info != 0:
@@ -97,12 +106,13 @@ class MarginalLikelihood:
         Si, info = sla.lapack.dpotri(Lc, lower=0, overwrite_c=1)               # Σ⁻¹ (upper triangle)
         if info != 0:
             return np.inf, np.zeros(len(theta))
-        W = alpha @ alpha.T
+        W = np.matmul(alpha, alpha.T, out=self._W)
         Wd = float(np.trace(W) - m * np.trace(Si))                            # the diagonal's sum
-        W -= m * Si
-        Wp = W.reshape(-1, order="F")[self.flat]                              # the pairs i < j ...
+        Si *= m
+        W -= Si
+        np.take(W.reshape(-1), self.flat_c, out=Wp)                           # the pairs i < j (W row-major) ...
         Wp *= 2.0                                                             # ... counted for both triangles
-        WP = Wp * P
+        WP = np.multiply(Wp, P, out=K)
         g = np.empty(len(theta))
         g[0] = float(WP.sum()) + c ** 2 * Wd
         g[1:1 + d] = A @ Wp + a ** 2 * Wd

@@ -49,10 +49,11 @@ def position_outliers(result: Any, alpha: float = POSITION_OUTLIER_ALPHA) -> np.
     the position residual components (m). For a 3-D fit these are the fit's own flags."""
     if getattr(result, "residuals_rad", None) is None:
         return np.asarray(result.outliers, int)
-    from scipy.stats import chi2
+    from scipy.special import gammaincinv  # scipy.stats.chi2.ppf's own formula
     r = np.asarray(result.residuals_m, float)
     s = 1.4826 * float(np.median(np.abs(r - np.median(r, axis=0))))
-    return np.flatnonzero(np.linalg.norm(r - np.median(r, axis=0), axis=1) > np.sqrt(chi2.ppf(1 - alpha, 3)) * s)
+    limit = np.sqrt(2.0 * gammaincinv(1.5, 1 - alpha)) * s
+    return np.flatnonzero(np.linalg.norm(r - np.median(r, axis=0), axis=1) > limit)
 
 
 def stated_noise_m(result: Any, data: MeasurementSet) -> np.ndarray | None:

@@ -41,7 +41,7 @@ from collections.abc import Callable
 from typing import Any
 
 import numpy as np
-from scipy.stats import chi2 as _chi2
+from scipy.special import gammaincinv  # the χ² quantiles below are scipy.stats.chi2.ppf's own formula
 
 __all__ = ["FitQuality", "assess_fit", "robust_loss_reason"]
 
@@ -383,7 +383,7 @@ def robust_loss_reason(result: Any) -> str:
 def _check_chi2(f: _Findings, chi2_red: float, dof: int, alpha: float, chi2_poor: float, nominal_reflector_m: Any,
                 reflector_estimated: bool) -> tuple[float, float]:
     """Check 1: reduced chi2 against its interval (absolute noise level known); the interval."""
-    lo, hi = (float(v) / dof for v in _chi2.ppf([alpha / 2, 1 - alpha / 2], dof))
+    lo, hi = (float(v) / dof for v in 2.0 * gammaincinv(dof / 2, np.array([alpha / 2, 1 - alpha / 2])))
     if chi2_red > max(chi2_poor, hi):
         f.worse("poor")
         f.reasons.append(f"reduced chi2 {chi2_red:.3g} (residual RMS {np.sqrt(chi2_red):.2g}x the stated noise; "

@@ -7,7 +7,7 @@ from typing import Any
 
 import numpy as np
 from scipy.optimize import least_squares
-from scipy.stats import chi2 as _chi2
+from scipy.special import gammainccinv  # the χ² quantile below is scipy.stats.chi2.isf's own formula: no scipy.stats
 
 from pin_kpi_oed.errors import IdentifiabilityError, SolverError
 from pin_kpi_oed.identification.identify_options import IdentifyOptions
@@ -77,7 +77,7 @@ def _flag(prob: ResidualModel, x: np.ndarray, alpha: float) -> tuple[np.ndarray,
     fw = prob.weighted_rows(x)
     we = np.linalg.norm(fw, axis=1)
     s_rob = 1.4826 * float(np.median(np.abs(fw)))
-    thr = float(np.sqrt(_chi2.isf(alpha / max(fw.shape[0], 1), prob.nh))) * max(s_rob, 1e-300)
+    thr = float(np.sqrt(2.0 * gammainccinv(prob.nh / 2, alpha / max(fw.shape[0], 1)))) * max(s_rob, 1e-300)
     return fw, we, np.flatnonzero(we > thr)
 
 

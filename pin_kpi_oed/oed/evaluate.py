@@ -24,6 +24,12 @@ from pin_kpi_oed.oed.criteria import CRITERIA, evaluate_all
 from pin_kpi_oed.oed.held import HeldShare, design_held
 from pin_kpi_oed.oed.identifiability import Identifiability, analyse, check_kpi
 from pin_kpi_oed.oed.objective import DesignContext
+# every criterion of the configurations the package defines is registered, so that a design is scored under each
+from pin_kpi_oed.oed.path_kpi import PathKpi  # noqa: F401  (registers kpi_path)
+from pin_kpi_oed.oed.pose_kpi import PoseKpi  # noqa: F401  (registers kpi6)
+from pin_kpi_oed.oed.path_kpi_gp import PathDiscrepancyKpi  # noqa: F401  (registers kpi_path_gp)
+from pin_kpi_oed.oed.pose_kpi_gp import PoseDiscrepancyKpi  # noqa: F401  (registers kpi6_gp)
+from pin_kpi_oed.oed.path_kpi_max import PathMaxKpi  # noqa: F401  (registers kpi_path_max)
 from pin_kpi_oed.results import Result
 
 

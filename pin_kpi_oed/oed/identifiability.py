@@ -58,7 +58,6 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
-import scipy.linalg as sla
 
 from pin_kpi_oed.errors import IdentifiabilityError
 from pin_kpi_oed.model.device import MeasurementModel
@@ -129,6 +128,36 @@ class Identifiability(Result):
         return {**self.result_dict(), "n_raw": self.n_raw, "n_free": self.n_free, "rank": self.rank,
                 "identifiable": self.base_names, "dropped": self.dropped, "groups": self.groups_text(),
                 "notes": self.notes}
+
+
+def pivoted_qr_diagonal(A: np.ndarray) -> np.ndarray:
+    """|R_kk| of the QR factorisation with column pivoting of A (Householder, the column of largest remaining norm
+    first, as LAPACK's ``geqp3``; the remaining norms recomputed at each step), in NumPy: the rank needs no SciPy.
+
+    Args:
+        A: (m, n) matrix.
+
+    Returns:
+        (min(m, n),) the diagonal of R in absolute value, non-increasing up to rounding.
+    """
+    R = np.array(A, float, copy=True)
+    m, n = R.shape
+    out = np.zeros(min(m, n))
+    for k in range(min(m, n)):
+        rest = np.einsum("ij,ij->j", R[k:, k:], R[k:, k:])
+        j = k + int(np.argmax(rest))
+        if j != k:
+            R[:, [k, j]] = R[:, [j, k]]
+        x = R[k:, k]
+        alpha = float(np.linalg.norm(x))
+        out[k] = alpha
+        if alpha == 0.0:
+            break
+        v = x.copy()
+        v[0] += np.copysign(alpha, x[0])
+        v /= np.linalg.norm(v)
+        R[k:, k + 1:] -= 2.0 * np.outer(v, v @ R[k:, k + 1:])
+    return out
 
 
 def excitation(model: MeasurementModel, n: int = 200, seed: int = 0) -> np.ndarray:
@@ -218,12 +247,11 @@ def analyse(model: MeasurementModel, Q: np.ndarray | None = None, prefer: list[s
 
 
 def _qr_rank(Fs: np.ndarray, tol: float) -> int:
-    """Rank of unit-norm columns by SciPy's QR with column pivoting: diagonal entries above ``tol`` (the greedy
-    residual shares)."""
+    """Rank of unit-norm columns by the QR with column pivoting (:func:`pivoted_qr_diagonal`): diagonal entries
+    above ``tol`` (the greedy residual shares)."""
     if Fs.size == 0:
         return 0
-    _, R, _ = sla.qr(Fs, mode="economic", pivoting=True)
-    return int(np.sum(np.abs(np.diag(R)) > tol))
+    return int(np.sum(pivoted_qr_diagonal(Fs) > tol))
 
 
 def _dropped(L, F: np.ndarray, norms: np.ndarray, free: np.ndarray, zero: list[int], kept_idx: list[int],
@@ -260,6 +288,8 @@ def check_kpi(ident: Identifiability, model: MeasurementModel, E: np.ndarray, wh
         setup_point[L.group_slice(g)] = True
     C = N[setup_point]
     if C.size:
+        import scipy.linalg as sla
+
         Z = sla.null_space(C)
         N = N @ Z
     if N.shape[1] == 0:

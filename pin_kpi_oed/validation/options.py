@@ -17,7 +17,6 @@ from collections.abc import Callable, Sequence
 
 from pin_kpi_oed.errors import InputError
 from pin_kpi_oed.validation.paths import check_figure_suffix, check_outputs
-from pin_kpi_oed.validation.units import MAX_TOOL_OFFSET_M, check_offset_m, check_sigma_m, check_sigma_rad
 
 __all__ = ["join_negative_values", "check_args", "RULES", "OUTPUTS", "INPUTS", "FOLDERS", "FIGURES", "floats",
            "check_discrepancy_options", "check_ignored_options", "IGNORED"]
@@ -69,16 +68,22 @@ def _open_unit(opt: str, v: Any) -> None:
 
 def _sigma_m(opt: str, v: Any) -> None:
     if v is not None:
+        from pin_kpi_oed.validation.units import check_sigma_m  # NumPy: only when the option is given
+
         check_sigma_m(floats(v, opt), opt)
 
 
 def _sigma_rad(opt: str, v: Any) -> None:
     if v is not None:
+        from pin_kpi_oed.validation.units import check_sigma_rad
+
         check_sigma_rad(floats(v, opt), opt)
 
 
 def _offset(opt: str, v: Any) -> None:
     if v is not None:
+        from pin_kpi_oed.validation.units import MAX_TOOL_OFFSET_M, check_offset_m
+
         a = floats(v, opt)
         if len(a) != 3:
             raise InputError(f"{opt}: expected x,y,z (m), got '{v}'")

@@ -1,0 +1,176 @@
+"""The command line starts at once: a command imports only what it uses, and an interrupt at any moment (the imports
+included) is one line and exit code 130, never a traceback.
+
+The import sets are pinned (the modules loaded), not times: the times are ``benchmarks/__main__.py``'s.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from pin_kpi_oed.cli.app import build_parser
+from pin_kpi_oed.cli.commands import COMMANDS, command_in
+
+ROOT = Path(__file__).resolve().parents[1]
+
+#: What neither ``--help`` nor ``info`` may load: scikit-learn, IPOPT, pandas, plotting, SciPy's optimisers and
+#: statistics, and the package's design, identification, discrepancy, cell, program and report stacks.
+HEAVY = ("sklearn", "cyipopt", "pandas", "matplotlib", "scipy.optimize", "scipy.stats", "scipy.spatial",
+         "pin_kpi_oed.design", "pin_kpi_oed.identification", "pin_kpi_oed.discrepancy", "pin_kpi_oed.cell",
+         "pin_kpi_oed.program", "pin_kpi_oed.report", "pin_kpi_oed.diagnosis", "pin_kpi_oed.viz",
+         "pin_kpi_oed.oed.criteria", "pin_kpi_oed.cli.design", "pin_kpi_oed.cli.identify")
+
+PROBE = """
+import json, sys
+from pin_kpi_oed.cli.app import main
+try:
+    code = main(sys.argv[1:])
+except SystemExit as exc:
+    code = exc.code
+sys.stdout.flush()
+print(json.dumps({"code": code, "modules": sorted(sys.modules)}), file=sys.stderr)
+"""
+
+
+def _modules(*argv: str) -> tuple[int, set[str]]:
+    env = {**os.environ, "PYTHONPATH": str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", "")}
+    res = subprocess.run([sys.executable, "-c", PROBE, *argv], capture_output=True, text=True, env=env, timeout=120)
+    got = json.loads(res.stderr.strip().splitlines()[-1])
+    return int(got["code"] or 0), set(got["modules"])
+
+
+def _loaded(modules: set[str], prefix: str) -> bool:
+    return any(m == prefix or m.startswith(prefix + ".") for m in modules)
+
+
+def test_help_loads_neither_numpy_nor_any_command_module() -> None:
+    code, mods = _modules("--help")
+    assert code == 0
+    assert _loaded(mods, "pin_kpi_oed.cli.app"), "the probe did not run the command line"
+    heavy = [m for m in HEAVY + ("numpy", "pinocchio", "scipy") if _loaded(mods, m)]
+    assert not heavy, f"pin-kpi-oed --help loads {heavy}"
+    topics = sorted(m for m in mods if m.startswith("pin_kpi_oed.cli.") and m not in
+                    ("pin_kpi_oed.cli.app", "pin_kpi_oed.cli.commands"))
+    assert not topics, f"pin-kpi-oed --help imports command modules {topics}"
+
+
+def test_info_loads_the_robot_model_only() -> None:
+    code, mods = _modules("info", "ur10")
+    assert code == 0
+    assert _loaded(mods, "pinocchio") and _loaded(mods, "pin_kpi_oed.oed.identifiability"), "info did not run"
+    heavy = [m for m in HEAVY if _loaded(mods, m)]
+    assert not heavy, f"pin-kpi-oed info ur10 loads {heavy}"
+
+
+def test_a_command_imports_its_own_topic_module_only() -> None:
+    code, mods = _modules("identify", "--help")
+    assert code == 0 and "pin_kpi_oed.cli.identify" in mods
+    others = sorted(m for m in mods if m.startswith("pin_kpi_oed.cli.") and m.split(".")[2] in
+                    {t for _, t, _ in COMMANDS if t not in (None, "identify")})
+    assert not others, f"identify --help imports {others}"
+    assert not _loaded(mods, "cyipopt") and not _loaded(mods, "sklearn")
+
+
+def test_every_listed_help_line_is_the_one_its_module_declares() -> None:
+    """The command table's help lines (what ``--help`` lists without importing the modules) against each topic
+    module's own declaration: one name, one line, in the same order."""
+    def listed(parser) -> list[tuple[str, str]]:
+        sub = next(a for a in parser._actions if a.dest == "command")
+        return [(a.dest, a.help) for a in sub._choices_actions]
+
+    full = listed(build_parser())
+    assert full == listed(build_parser(None, lazy=True))
+    assert full == [(name, help_line) for name, _, help_line in COMMANDS]
+    for name, _, _ in COMMANDS:  # a command's own parser declared in full, the others listed the same
+        assert listed(build_parser(name, lazy=True)) == full
+
+
+@pytest.mark.parametrize("argv, command", [
+    (["--help"], None), ([], None), (["identify", "--help"], "identify"), (["--threads", "2", "design"], "design"),
+    (["--threads=2", "info", "ur10"], "info"), (["--thr", "2", "export"], "export"), (["-h", "info"], "info"),
+    (["idnetify"], None), (["design", "--cell", "info"], "design")])
+def test_the_command_is_the_first_positional_argument(argv: list[str], command: str | None) -> None:
+    assert command_in(argv) == command
+
+
+def test_usage_errors_are_those_of_the_full_parser(capsys) -> None:
+    from pin_kpi_oed.cli.app import main
+
+    for argv in (["idnetify"], [], ["info"]):
+        with pytest.raises(SystemExit) as exc:
+            main(argv)
+        lazy = (exc.value.code, capsys.readouterr().err)
+        with pytest.raises(SystemExit) as exc:
+            build_parser().parse_args(argv)
+        assert lazy == (exc.value.code, capsys.readouterr().err) and lazy[0] == 2, argv
+
+
+def _interrupt_after(delay_s: float, argv: list[str], module: bool) -> tuple[int, str, float]:
+    """Run the command line, send SIGINT after ``delay_s``; (exit code, stderr, seconds it ran before the signal)."""
+    env = {**os.environ, "PYTHONPATH": str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", "")}
+    cmd = [sys.executable, "-m", "pin_kpi_oed", *argv] if module else \
+        [sys.executable, "-c", "from pin_kpi_oed.cli import run; run()", *argv]  # as the console script
+    # SIGINT as Python sees it by default, whatever the test runner's shell did with it (a background job ignores it)
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env,
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+    t0 = time.monotonic()
+    time.sleep(delay_s)
+    running = proc.poll() is None
+    proc.send_signal(signal.SIGINT)
+    _, err = proc.communicate(timeout=120)
+    assert running, "the command ended before the interrupt: the test would prove nothing"
+    return proc.returncode, err, time.monotonic() - t0
+
+
+def _entry_loaded_s() -> float:
+    """Wall seconds until the command line's entry is loaded (interpreter start-up + ``pin_kpi_oed.cli.app``): before
+    it no code of the package runs, so no package can turn an interrupt there into one line."""
+    t0 = time.monotonic()
+    subprocess.run([sys.executable, "-c", "import pin_kpi_oed.cli.app"], check=True,
+                   env={**os.environ, "PYTHONPATH": str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", "")})
+    return time.monotonic() - t0
+
+
+@pytest.mark.parametrize("delay_s, module", [(0.2, True), (0.6, False), (1.5, True), (1.5, False), (3.0, True)])
+def test_an_interrupt_at_any_moment_is_one_line_and_130(delay_s: float, module: bool) -> None:
+    """``design`` imports the design stack (seconds) and then designs: an interrupt in its imports or its work (0.2 s:
+    or as soon as the entry is loaded on a machine so busy that the interpreter takes longer to start)."""
+    argv = ["design", "--cell", "kr15", "--measurements", "30", "--criteria", "kpi", "--starts", "3"]
+    rc, err, _ = _interrupt_after(max(delay_s, 1.2 * _entry_loaded_s()), argv, module)
+    assert "Traceback" not in err, err
+    assert rc == 130 and err.strip().splitlines()[-1] == "interrupted", err
+
+
+def test_an_extension_interrupted_while_it_initialises_is_an_interrupt(monkeypatch, capsys) -> None:
+    """A compiled module interrupted in its initialisation may report another error (ImportError 'initialization
+    failed', NumPy's 'could not import module datetime'): after a SIGINT it is one line and 130 as well; the same
+    error without an interrupt stays an error."""
+    from pin_kpi_oed.cli import app
+
+    def interrupted_init(*_a, **_k):
+        try:
+            os.kill(os.getpid(), signal.SIGINT)
+            time.sleep(1.0)  # the handler raises here
+        except KeyboardInterrupt:
+            pass
+        raise ImportError("PyCapsule_Import could not import module \"datetime\"")
+
+    monkeypatch.setattr(app, "build_parser", interrupted_init)
+    assert app.main(["info", "ur10"]) == 130
+    assert capsys.readouterr().err == "interrupted\n"
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler, "the handler must be restored"
+
+    def broken(*_a, **_k):
+        raise ImportError("no module named x")
+
+    monkeypatch.setattr(app, "build_parser", broken)
+    with pytest.raises(ImportError, match="no module named x"):
+        app.main(["info", "ur10"])
