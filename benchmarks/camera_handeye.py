@@ -26,7 +26,8 @@ Per robot (a UR5; the Panda with ``--robots ur5,panda``) and seed:
 
 Paired over the seeds (median of the per-robot ratios, sign test: :mod:`pin_kpi_oed.studies.paired`).
 
-Run: ``python -m benchmarks.camera_handeye --seeds 10 [--seed 0] [--robots ur5,panda] [--json out.json]``.
+Run: ``python -m benchmarks.camera_handeye --seeds 10 [--seed 0] [--robots ur5,panda] [--json out.json]``
+(``--summary out.json`` prints the summary of an earlier run again).
 """
 
 from __future__ import annotations
@@ -181,9 +182,14 @@ def summarise(rows: list[dict]) -> None:
     def col(design, key, i=None):
         return np.array([r[design][key] if i is None else r[design][key][i] for r in rows])
 
-    for key in ("tcp_sigma_mm", "tcp_error_mm"):
-        c = paired_comparison(col("kpi", key), col("random", key))
-        print(f"{key:14s} kpi {c['median_a']:.4f} vs random {c['median_b']:.4f} (medians); kpi/random: "
+    def identified(design):  # the design's part of the TCP sigma, E C_p E^T (tr C_s = tr of it + tr of the held)
+        return np.sqrt(col(design, "tcp_sigma_mm") ** 2 - col(design, "held_sigma_mm") ** 2)
+
+    for key, a, b in (("tcp_sigma_mm", col("kpi", "tcp_sigma_mm"), col("random", "tcp_sigma_mm")),
+                      ("identified part", identified("kpi"), identified("random")),
+                      ("tcp_error_mm", col("kpi", "tcp_error_mm"), col("random", "tcp_error_mm"))):
+        c = paired_comparison(a, b)
+        print(f"{key:15s} kpi {c['median_a']:.4f} vs random {c['median_b']:.4f} (medians); kpi/random: "
               f"{paired_text(c)}")
     for design in ("kpi", "random"):
         d2 = np.concatenate([r[design]["d2"] for r in rows])
@@ -202,6 +208,14 @@ def summarise(rows: list[dict]) -> None:
                       + f" (medians); ours/{best}: {paired_text(c)}")
 
 
+def summarise_file(path: str) -> None:
+    """The summary of a ``--json`` file written before."""
+    rows = json.loads(Path(path).read_text())
+    for name in dict.fromkeys(r["robot"] for r in rows):
+        print(f"--- {name}")
+        summarise([r for r in rows if r["robot"] == name])
+
+
 def main(argv: list[str] | None = None) -> int:
     """Run the benchmark; one line per robot and seed, then the paired summary."""
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
@@ -209,7 +223,11 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--seeds", type=int, default=10, help="number of seeds (robots with errors) per robot type")
     ap.add_argument("--robots", default="ur5")
     ap.add_argument("--json", default=None, help="write the figures here")
+    ap.add_argument("--summary", default=None, help="only summarise this --json file of an earlier run")
     args = ap.parse_args(argv)
+    if args.summary:
+        summarise_file(args.summary)
+        return 0
     rows = []
     print("robot  seed | TCP sigma / error mm: kpi | random | hand-eye error (mm, mrad) vs identifiable truth: "
           "ours kpi, Tsai kpi | fit RMS px, chi2 | re-expression RMS px")
