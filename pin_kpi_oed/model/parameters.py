@@ -34,11 +34,14 @@ STATION_SEP = "@"
 POSE_SUFFIXES = ("tx", "ty", "tz", "rx", "ry", "rz")
 POINT_SUFFIXES = ("x", "y", "z")
 ROT_SUFFIXES = ("rx", "ry", "rz")
+#: a camera's intrinsics in OpenCV's convention: focal lengths and principal point (px), distortion (dimensionless)
+INTRINSIC_SUFFIXES = ("fx", "fy", "cx", "cy", "k1", "k2", "p1", "p2", "k3")
 
 #: Kinds of set-up parameter groups -> component suffixes. ``pose``: right perturbation exp6 of an
-#: SE(3) pose (m, rad); ``point``: additive offset (m); ``rotation``: right perturbation exp3 (rad).
+#: SE(3) pose (m, rad); ``point``: additive offset (m); ``rotation``: right perturbation exp3 (rad);
+#: ``intrinsics``: additive offsets of a camera's intrinsics (px, then dimensionless).
 GROUP_KINDS: dict[str, tuple[str, ...]] = {"pose": POSE_SUFFIXES, "point": POINT_SUFFIXES,
-                                           "rotation": ROT_SUFFIXES}
+                                           "rotation": ROT_SUFFIXES, "intrinsics": INTRINSIC_SUFFIXES}
 
 #: The laser tracker's set-up groups (3-D reflector), and with a 6-DoF probe.
 TRACKER_SETUP: tuple[tuple[str, str], ...] = (("tracker", "pose"), ("reflector", "point"))
