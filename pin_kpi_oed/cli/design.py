@@ -350,6 +350,9 @@ def print_results(results: list, criteria: list, cert, m: int, pool_file: str | 
     ext_of = {id(r): e for r, e in zip(results, ext_scores)} if ext_scores is not None else None
     print(table(shown, results[0], cert, [ext_of[id(r)] for r in shown] if ext_of else None,
                 ext_of[id(results[0])] if ext_of else None))
+    held = next((r for r in shown if getattr(r, "held_trace_m2", 0.0) > 0), None)
+    if held is not None:
+        print(f"TCP sigma = sqrt((tr(C_s) + held) / t), held the same for every design: {held.held_line}")
     if ext_of:
         print("ext = extended model (geometry + the model file's effects, with the prior: the criterion the designs "
               "optimised); geo = identifiable geometry + set-up only, no prior (the plain design's tr(C_s))")
