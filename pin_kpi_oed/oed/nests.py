@@ -61,7 +61,8 @@ class _Structure:
     """The structural identified set per set of nests, on one seeded excitation (cached)."""
 
     def __init__(self, model: TrackerModel, seed: int, n: int = 60):
-        self.model, self.Qx, self.cache = model, model.robot.random_q(np.random.default_rng(seed), n), {}
+        self.model, self.Qx = model, model.robot.random_q(np.random.default_rng(seed), n)
+        self.cache: dict[tuple[int, ...], np.ndarray] = {}
 
     def base(self, nests: tuple[int, ...]) -> np.ndarray:
         from pin_kpi_oed.oed.identifiability import analyse
