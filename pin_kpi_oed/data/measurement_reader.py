@@ -15,7 +15,8 @@ from collections.abc import Callable, Sequence
 import numpy as np
 import pandas as pd
 
-from pin_kpi_oed.data.measurement_set import (PAYLOAD_COLUMN, POSITION_COLUMNS, RESERVED_COLUMNS, ROTVEC_COLUMNS,
+from pin_kpi_oed.data.measurement_set import (NEST_COLUMN, PAYLOAD_COLUMN, POSITION_COLUMNS, RESERVED_COLUMNS,
+                                              ROTVEC_COLUMNS,
                                               SIGMA_AXIS_COLUMNS, SIGMA_COLUMN, STATION_COLUMN, TEMPERATURE_COLUMN,
                                               TIME_COLUMN, MeasurementSet)
 from pin_kpi_oed.data.table import Units, parse_columns, parse_text_table, parse_units, read_text_file, rename_header
@@ -210,10 +211,10 @@ def _check_header(header: list[str], header_line: int, src: str, joint_names: li
         (SIGMA_COLUMN,) * 3 if SIGMA_COLUMN in seen else ())
 
     if joint_names is None:
-        joints = [c for c in header if c not in RESERVED_COLUMNS]
+        joints = [c for c in header if c not in RESERVED_COLUMNS and c != NEST_COLUMN]
         if not joints:
             raise InputError(f"{src}: no joint columns found; columns found: {found}")
-        extra_names: list[str] = []
+        extra_names: list[str] = [NEST_COLUMN] if NEST_COLUMN in seen else []
     else:
         joints = [str(j) for j in joint_names]
         if len(set(joints)) != len(joints):

@@ -17,7 +17,7 @@ from pin_kpi_oed.data.tool_header import ToolSpec, resolve_tool
 from pin_kpi_oed.errors import InputError
 
 __all__ = ["POSITION_COLUMNS", "ROTVEC_COLUMNS", "SIGMA_COLUMN", "SIGMA_AXIS_COLUMNS", "TEMPERATURE_COLUMN",
-           "PAYLOAD_COLUMN", "TIME_COLUMN", "RESERVED_COLUMNS", "STATION_COLUMN", "MeasurementSet",
+           "PAYLOAD_COLUMN", "TIME_COLUMN", "RESERVED_COLUMNS", "STATION_COLUMN", "NEST_COLUMN", "MeasurementSet",
            "concat_measurements"]
 
 POSITION_COLUMNS: tuple[str, str, str] = ("x", "y", "z")
@@ -28,6 +28,9 @@ TEMPERATURE_COLUMN = "temperature"
 PAYLOAD_COLUMN = "payload"
 TIME_COLUMN = "time"
 STATION_COLUMN = "station"
+#: the column of the reflector nest a row was measured at (an integer; kept among the extra columns,
+#: :mod:`pin_kpi_oed.model.nests`)
+NEST_COLUMN = "nest"
 RESERVED_COLUMNS: frozenset[str] = frozenset(
     POSITION_COLUMNS
     + ROTVEC_COLUMNS

@@ -19,6 +19,7 @@ from typing import Any
 
 import numpy as np
 
+from pin_kpi_oed.model.nests import nest_column
 from pin_kpi_oed.data.measurements import MeasurementSet
 from pin_kpi_oed.discrepancy.fit import fit_discrepancy
 from pin_kpi_oed.discrepancy.gp import Discrepancy, DiscrepancyOptions
@@ -113,14 +114,15 @@ def result_discrepancy(result: Any, data: MeasurementSet, options: Any = "auto",
     rows, R = base_frame_residuals(result, keep_flagged=_keep_flagged(result, opts))
     Q = np.asarray(Q, float)
     n_out = position_outliers(result).size
-    F, names = parameter_jacobian(result, Q)
+    nest = nest_column(data, result.model.n_nests)
+    F, names = parameter_jacobian(result, Q, nest)
     try:
         disc = fit_discrepancy(Q[rows], R, list(result.model.robot.joint_names), opts, n_params=len(result.names),
                                noise_floor_m=stated_noise_m(result, data),
                                periodic=result.model.robot.periodic_joints,
                                linear=~result.model.robot.is_revolute,
                                joint_span=result.model.robot.q_upper - result.model.robot.q_lower,
-                               jacobian=F[rows], joint_jacobian=joint_jacobian(result, Q)[rows])
+                               jacobian=F[rows], joint_jacobian=joint_jacobian(result, Q, nest)[rows])
     except InputError as exc:
         left = np.setdiff1d(np.arange(len(Q)), rows)
         flagged = left if left.size else position_outliers(result)
@@ -140,21 +142,29 @@ def result_discrepancy(result: Any, data: MeasurementSet, options: Any = "auto",
     return disc
 
 
-def joint_jacobian(result: Any, Q: np.ndarray) -> np.ndarray:
-    """∂y/∂q of a fit's predictions at its rows, rotated into the robot base frame, (n, 3, d) m/rad."""
+def _row_model(result: Any, s: int, rows: np.ndarray, nest: np.ndarray | None) -> Any:
+    """Station ``s``'s model measuring its ``rows`` at their reflector nests (``nest``: every row's, or None)."""
+    model = result.station_models[s]
+    return model if nest is None else model.at_nests(nest[rows])
+
+
+def joint_jacobian(result: Any, Q: np.ndarray, nest: np.ndarray | None = None) -> np.ndarray:
+    """∂y/∂q of a fit's predictions at its rows (at their nests ``nest``, or the reflector), rotated into the robot
+    base frame, (n, 3, d) m/rad."""
     out = np.zeros((len(Q), 3, result.model.robot.nq))
     for s, rows in enumerate(result.station_rows):
-        model, p = result.station_models[s], result.station_p[s]
+        model, p = _row_model(result, s, rows, nest), result.station_p[s]
         out[rows] = np.einsum("ba,mbj->maj", model.tracker_pose(p).rotation, model.prediction_dq(p, Q[rows]))
     return out
 
 
-def parameter_jacobian(result: Any, Q: np.ndarray) -> tuple[np.ndarray, list[str]]:
+def parameter_jacobian(result: Any, Q: np.ndarray, nest: np.ndarray | None = None) -> tuple[np.ndarray, list[str]]:
     """Jacobian of a fit's predictions at its rows w.r.t. its robot parameters and every station's set-up,
     rotated into the robot base frame: ((n, 3, R + 9 S), the R robot parameters' names).
 
     The robot parameters are the estimated joint-placement errors of the fit (its identifiable set); each
-    station adds its tracker pose (6) and reflector (3) columns, zero on the other stations' rows.
+    station adds its tracker pose (6) and reflector (3) columns, zero on the other stations' rows. ``nest``: the
+    reflector nest of every row (:mod:`~pin_kpi_oed.model.nests`), or None.
     """
     robot = result.model.robot
     L0 = result.station_models[0].layout
@@ -162,7 +172,7 @@ def parameter_jacobian(result: Any, Q: np.ndarray) -> tuple[np.ndarray, list[str
     S = len(result.stations)
     F = np.zeros((len(Q), 3, len(robot_names) + 9 * S))
     for s, rows in enumerate(result.station_rows):
-        model, p = result.station_models[s], result.station_p[s]
+        model, p = _row_model(result, s, rows, nest), result.station_p[s]
         L = model.layout
         cols = [L.names.index(n) for n in robot_names]
         setup = list(range(L.tracker.start, L.tracker.stop)) + list(range(L.reflector.start, L.reflector.stop))

@@ -31,26 +31,40 @@ N_EXCITATION = 60
 IDENT_CACHE: dict[tuple, Identifiability] = {}
 
 
-def structural_identifiability(model: TrackerModel, seed: int) -> Identifiability:
-    """:func:`analyse` on a seeded random excitation, cached per robot geometry and set-up."""
+def structural_identifiability(model: TrackerModel, seed: int, nests: Sequence[int] = (0,)) -> Identifiability:
+    """:func:`analyse` on a seeded random excitation, cached per robot geometry and set-up.
+
+    Args:
+        model: the measurement model; seed: the excitation's seed;
+        nests: the reflector nests measured (each at every excitation configuration; :mod:`~pin_kpi_oed.model.nests`).
+
+    Returns:
+        The :class:`~pin_kpi_oed.oed.identifiability.Identifiability` (a copy).
+    """
     rb = model.robot
+    nests = sorted({int(i) for i in nests}) or [0]
     key = (rb.urdf_path, rb.tool_frame, tuple(rb.joint_names),
            np.array([rb.model.jointPlacements[j].homogeneous for j in rb.joint_ids]).round(12).tobytes(),
            model.reflector_m.round(12).tobytes(), bool(model.pose6d), model.layout.fixed.tobytes(),
-           repr(model.noise.to_dict()), seed)
+           repr(model.noise.to_dict()), seed, model.nests_m[nests].round(12).tobytes())
     hit = IDENT_CACHE.get(key)
     if hit is None:
         Qx = rb.random_q(np.random.default_rng(seed), N_EXCITATION)
-        hit = analyse(model, Q=Qx)
+        if nests == [0]:
+            hit = analyse(model, Q=Qx)
+        else:
+            hit = analyse(model.at_nests(np.repeat(nests, len(Qx))), Q=np.tile(Qx, (len(nests), 1)))
         if len(IDENT_CACHE) > 64:
             IDENT_CACHE.clear()
         IDENT_CACHE[key] = hit
     return copy.deepcopy(hit)  # callers may keep or modify their copy
 
 
-def identifiable_set(stations: StationSet, opts: IdentifyOptions) -> Identifiability:
-    """Step 3a: the structural identifiable set of one station, lifted to every station."""
-    ident = opts.ident if opts.ident is not None else structural_identifiability(stations.models[0], opts.seed)
+def identifiable_set(stations: StationSet, opts: IdentifyOptions, nests: Sequence[int] = (0,)) -> Identifiability:
+    """Step 3a: the structural identifiable set of one station (at the reflector ``nests`` the data measure),
+    lifted to every station."""
+    ident = (opts.ident if opts.ident is not None
+             else structural_identifiability(stations.models[0], opts.seed, nests))
     return stations.layout.lift(ident)
 
 

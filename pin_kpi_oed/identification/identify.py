@@ -133,6 +133,7 @@ from pin_kpi_oed.identification.discrepancy_fit import discrepancy_options, resu
 from pin_kpi_oed.identification.fit_inputs import (MIN_STATION_ROWS, FitInputs, check_inputs,
                                                    default_station_label)
 from pin_kpi_oed.identification.heldout import error_stats, format_validation, validate
+from pin_kpi_oed.model.nests import nest_column
 from pin_kpi_oed.identification.identifiable import N_EXCITATION, build_problem, identifiable_set
 from pin_kpi_oed.identification.identify_options import ROBUST_LOSSES, IdentifyOptions, resolve_options
 from pin_kpi_oed.identification.identify_result import IdentificationResult
@@ -296,7 +297,8 @@ def _fit(model: TrackerModel, data: MeasurementSet, inp: FitInputs, effects: Seq
          t_start: float) -> IdentificationResult:
     """One least-squares fit with ``opts.loss`` (steps 2–6 of the module docstring), before the discrepancy."""
     stations, P0, T_init = start_stations(model, data, inp, effects, opts)
-    ident = identifiable_set(stations, opts)
+    nest = nest_column(data, model.n_nests)
+    ident = identifiable_set(stations, opts, (0,) if nest is None else np.unique(nest).tolist())
     prob = build_problem(stations, data, inp, effects, P0, ident, opts)
     solution = solve(prob, opts)
     fw, we, outliers = settle_outliers(prob, solution, opts, inp.src)

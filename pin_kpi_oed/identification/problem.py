@@ -57,6 +57,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from pin_kpi_oed.data.measurements import MeasurementSet
+from pin_kpi_oed.model.nests import nest_column
 from pin_kpi_oed.effects.library import predict_with_effects, sum_joint_offsets, sum_tool_offsets
 from pin_kpi_oed.errors import InputError
 from pin_kpi_oed.model.tracker import TrackerModel
@@ -336,6 +337,10 @@ class ResidualModel:
         self.aux = [data if whole else data.subset(r) for r in self.rows]
         self._take = [slice(None) if whole else r for r in self.rows]
         self._Qs = [self.Q[t] for t in self._take]
+        nest = nest_column(data, model.n_nests)
+        # each station's model measuring its rows at their nests (the same layout: the same parameters)
+        self._models = [m_s if nest is None else m_s.at_nests(nest[t])
+                        for m_s, t in zip(stations.models, self._take)]
         self.sigma = model.noise.sigma(self.Y) if sigma is None else np.broadcast_to(sigma, (self.m, 3)).copy()
         self.sigma_rot = float(model.noise.sigma_rot_rad)
         self.base = np.asarray(base, int)
@@ -439,7 +444,7 @@ class ResidualModel:
         rpos = np.empty((self.m, 3))
         rrot = np.empty((self.m, 3)) if self.nh == 6 else None
         for s, rows in enumerate(self._take):
-            model, p = self.stations.models[s], self.stations.station_p(P, s)
+            model, p = self._models[s], self.stations.station_p(P, s)
             Qs = self._Qs[s]
             Y = predict_with_effects(model, p, Qs, self.aux[s], pairs) if pairs else model.predict(p, Qs)
             rpos[rows] = Y[:, :3] - self.Y[rows]
@@ -473,7 +478,7 @@ class ResidualModel:
         dQt = np.concatenate([np.asarray(d, float).reshape(ms, n, -1) for d in dq_ders], axis=2)
         dYt = np.concatenate([np.asarray(d, float).reshape(ms, 3, -1) for d in dy_ders], axis=2)
         RT = model.tracker_pose(p).rotation
-        kin = model.kinematics(p, Qe, model.reflector(p))
+        kin = model.kinematics(p, Qe, model.points(p))
         v, w = kin.twist[:, :3, :], kin.twist[:, 3:, :]
         pdot = v + np.cross(w, kin.p[:, :, None], axis=1)
         out[:, :3] = np.einsum("ab,mbn->man", RT, pdot) @ dQt + dYt
@@ -489,7 +494,7 @@ class ResidualModel:
         J = np.zeros((self.m, nh_, self.nx))
         n_held = len(self.held)
         for s, rows in enumerate(self._take):
-            model, p = self.stations.models[s], self.stations.station_p(P, s)
+            model, p = self._models[s], self.stations.station_p(P, s)
             Qs = self._Qs[s]
             if pairs:
                 dQ, dq_ders = sum_joint_offsets(pairs, Qs, self.aux[s])
@@ -519,7 +524,7 @@ class ResidualModel:
         cols = np.asarray(cols, int)
         J = np.zeros((self.m, self.nh, cols.size))
         for s, rows in enumerate(self._take):
-            model, p = self.stations.models[s], self.stations.station_p(P, s)
+            model, p = self._models[s], self.stations.station_p(P, s)
             Qs = self._Qs[s]
             Qe = Qs + sum_joint_offsets(pairs, Qs, self.aux[s])[0] if pairs else Qs
             J[rows] = model.jacobian(p, Qe)[:, :, cols]

@@ -22,6 +22,7 @@ from pin_kpi_oed.identification.fit_inputs import FitInputs
 from pin_kpi_oed.identification.identify_options import IdentifyOptions
 from pin_kpi_oed.identification.problem import StationLayout, StationSet
 from pin_kpi_oed.model.parameters import ParameterLayout
+from pin_kpi_oed.model.nests import nest_column
 from pin_kpi_oed.model.tracker import TrackerModel
 
 __all__ = ["register_points", "proj_so3", "working_layout", "start_stations"]
@@ -102,8 +103,11 @@ def start_stations(model: TrackerModel, data: MeasurementSet, inp: FitInputs, ef
             P[g] = p_user[model.layout.index(n)]
     T0 = model.tracker_pose(p_user)
     reflector0 = model.reflector(p_user)
+    nests0 = model.nests_m - model.nests_m[0] + reflector0  # the nests move with the start's offset
     models = [TrackerModel(robot, tracker_T_base=T0, reflector_m=reflector0, tcp_m=model.tcp_m, noise=model.noise,
-                           pose6d=inp.pose6d, probe_R=np.asarray(model.probe_R, float), layout=L) for _ in range(S)]
+                           pose6d=inp.pose6d, probe_R=np.asarray(model.probe_R, float), layout=L, nests_m=nests0)
+              for _ in range(S)]
+    nest = nest_column(data, model.n_nests)
     stations = StationSet(models, layout)
     if opts.register and not tracker_known:
         th0 = list(opts.theta0) if opts.theta0 is not None else [np.zeros(len(e.param_names(robot))) for e in effects]
@@ -114,7 +118,8 @@ def start_stations(model: TrackerModel, data: MeasurementSet, inp: FitInputs, ef
             wm.tracker_T_base = pin.SE3.Identity()
             p_s = stations.station_p(P, s)
             aux = data if rows.size == len(data) else data.subset(rows)
-            X = predict_with_effects(wm, p_s, inp.Q[rows], aux, pairs)[:, :3]  # base frame: tracker = identity
+            wn = wm if nest is None else wm.at_nests(nest[rows])
+            X = predict_with_effects(wn, p_s, inp.Q[rows], aux, pairs)[:, :3]  # base frame: tracker = identity
             w = None if inp.sigma is None else 1.0 / np.mean(inp.sigma[rows] ** 2, 1)
             R, t = register_points(X, data.position_m[rows], w)
             wm.tracker_T_base = pin.SE3(R, t)

@@ -288,7 +288,7 @@ class Chain:
 
         Args:
             Q: configurations, (m, n) (rad / m).
-            point_m: the point in the tool frame, (3,) m.
+            point_m: the point in the tool frame, (3,) m, or one per configuration, (m, 3) m.
             placements: joint placements to use (default the nominal ones).
 
         Returns:
@@ -299,7 +299,13 @@ class Chain:
         R_last, t_last = fr.R[:, -1], fr.t[:, -1]
         t = t_last + R_last @ Mt.translation
         R = R_last @ Mt.rotation
-        P = t + R @ np.asarray(point_m, float)
+        point = np.asarray(point_m, float)
+        if point.ndim == 2:
+            if point.shape != t.shape:
+                raise InputError(f"{point.shape[0]} tool points for {t.shape[0]} configurations")
+            P = t + np.einsum("mab,mb->ma", R, point)
+        else:
+            P = t + R @ point
         return Kinematics(P, R, fr.R_A, fr.t_A, fr.twist)
 
 

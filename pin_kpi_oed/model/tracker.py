@@ -38,7 +38,7 @@ from __future__ import annotations
 
 from typing import Literal, overload
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from collections.abc import Sequence
 
 import numpy as np
@@ -47,6 +47,7 @@ import pinocchio as pin
 from pin_kpi_oed.data.tool_header import ToolSpec
 from pin_kpi_oed.model.device import MeasurementModel
 from pin_kpi_oed.model.kinematics import point_velocity, skew
+from pin_kpi_oed.model.nests import check_nests, check_row_nest
 from pin_kpi_oed.model.noise import NoiseModel
 from pin_kpi_oed.model.parameters import PROBE_SETUP, TRACKER_SETUP, ParameterLayout
 from pin_kpi_oed.model.robot import Robot
@@ -70,6 +71,11 @@ class TrackerModel(MeasurementModel):
         tool: what the model was declared with beyond its geometry (a
             :class:`~pin_kpi_oed.data.tool_header.ToolSpec`: a cell's TCP and working configurations), or None;
             :func:`~pin_kpi_oed.identification.identify.identify` keeps it in the calibrated model.
+        nests_m: the reflector nests on the tool, (k, 3) m in the tool frame; nest 0 is ``reflector_m``
+            (default: that one nest). The nests are known relative to each other (bored in one holder): the
+            ``reflector`` group is one offset shared by every nest (:mod:`pin_kpi_oed.model.nests`).
+        row_nest: the nest of every row of the configurations this model is called with, (m,) int, or None
+            (every row at nest 0); set by :meth:`at_nests`.
     """
 
     robot: Robot
@@ -81,9 +87,14 @@ class TrackerModel(MeasurementModel):
     probe_R: np.ndarray = field(default_factory=lambda: np.eye(3))
     layout: ParameterLayout | None = None
     tool: ToolSpec | None = field(default=None, repr=False, compare=False)
+    nests_m: np.ndarray | None = None
+    row_nest: np.ndarray | None = field(default=None, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         self.reflector_m = np.asarray(self.reflector_m, float).reshape(3)
+        self.nests_m = check_nests(self.reflector_m, self.nests_m)
+        if self.row_nest is not None:
+            self.row_nest = check_row_nest(self.row_nest, len(self.nests_m))
         self.tcp_m = np.asarray(self.tcp_m, float).reshape(3)
         if self.layout is None:
             self.layout = self.make_layout()
@@ -122,6 +133,32 @@ class TrackerModel(MeasurementModel):
         """Reflector offset in the tool frame at parameters ``p`` (m)."""
         return self.reflector_m + np.asarray(p)[self.layout.reflector]
 
+    @property
+    def n_nests(self) -> int:
+        """Number of reflector nests on the tool."""
+        return len(self.nests_m)
+
+    def at_nests(self, nest: np.ndarray | None) -> TrackerModel:
+        """This model measuring row i at nest ``nest[i]`` (the same layout, so the same parameters).
+
+        Args:
+            nest: the nest of every row, (m,) int in 0 … k−1; None: every row at nest 0.
+
+        Returns:
+            A :class:`TrackerModel` whose predictions and Jacobians take (m, n) configurations, row i at its nest.
+
+        Raises:
+            InputError: a nest index that is not one of the model's nests.
+        """
+        return replace(self, row_nest=None if nest is None else np.asarray(nest))
+
+    def points(self, p: np.ndarray) -> np.ndarray:
+        """The measured reflector offsets in the tool frame at parameters ``p``: (3,) m, or (m, 3) per row when
+        the model measures several nests (:meth:`at_nests`); the shared offset ``p[reflector]`` moves all."""
+        if self.row_nest is None:
+            return self.reflector(p)
+        return self.nests_m[self.row_nest] + np.asarray(p)[self.layout.reflector]
+
     def _probe_rotation(self, p: np.ndarray) -> np.ndarray:
         return self.probe_R @ pin.exp3(np.asarray(p)[self.layout.probe])
 
@@ -131,7 +168,7 @@ class TrackerModel(MeasurementModel):
 
         For 6-D models, (m, 6): position and the rotation vector of the probe orientation (rad).
         """
-        kin = self.kinematics(p, Q, self.reflector(p))
+        kin = self.kinematics(p, Q, self.points(p))
         T = self.tracker_pose(p)
         Y = kin.p @ T.rotation.T + T.translation
         if not self.pose6d:
@@ -150,7 +187,7 @@ class TrackerModel(MeasurementModel):
     def _rotation_jacobian(self, p: np.ndarray, Q: np.ndarray, with_dq: bool) -> tuple[np.ndarray, np.ndarray | None]:
         """Angular Jacobian (tracker frame) of the probe orientation, (m, 3, np) and its q-derivative."""
         L = self.layout
-        kin = self.kinematics(p, Q, self.reflector(p))
+        kin = self.kinematics(p, Q, self.points(p))
         RT = self.tracker_pose(p).rotation
         m, n = kin.p.shape[0], L.n_joints
         R_probe = self._probe_rotation(p)
@@ -179,7 +216,7 @@ class TrackerModel(MeasurementModel):
         Exact at any ``p`` (includes the right Jacobian of exp6 at the current δ).
         """
         p = np.asarray(p, float)
-        J = self.sensor_point(p, Q, self.reflector(p), offset_group="reflector").J
+        J = self.sensor_point(p, Q, self.points(p), offset_group="reflector").J
         if self.pose6d:
             Jw, _ = self._rotation_jacobian(p, Q, with_dq=False)
             J = np.concatenate([J, Jw], axis=1)
@@ -209,7 +246,7 @@ class TrackerModel(MeasurementModel):
             Ydq: dy/dq of the positions, (m, 3, n).
         """
         p = np.asarray(p, float)
-        sp = self.sensor_point(p, Q, self.reflector(p), offset_group="reflector", with_dq=True)
+        sp = self.sensor_point(p, Q, self.points(p), offset_group="reflector", with_dq=True)
         Y, J, dJ, Ydq = sp.Y, sp.J, sp.dJ, sp.Ydq
         if self.pose6d:
             Jw, dJw = self._rotation_jacobian(p, Q, with_dq=True)
@@ -223,7 +260,7 @@ class TrackerModel(MeasurementModel):
     def prediction_dq(self, p: np.ndarray, Q: np.ndarray) -> np.ndarray:
         """dy/dq of the reflector positions (tracker frame), (m, 3, n), without the costly d²h/dp dq."""
         p = np.asarray(p, float)
-        kin = self.kinematics(p, Q, self.reflector(p))
+        kin = self.kinematics(p, Q, self.points(p))
         return np.einsum("ab,mbn->man", self.tracker_pose(p).rotation, point_velocity(kin))
 
     def kpi_jacobian(self, p: np.ndarray, Q_work: np.ndarray) -> np.ndarray:
@@ -293,7 +330,7 @@ class TrackerModel(MeasurementModel):
         z = reflector axis (tool z) and g = unit beam from the reflector to the tracker.
         """
         p = np.asarray(p, float)
-        kin = self.kinematics(p, Q, self.reflector(p))
+        kin = self.kinematics(p, Q, self.points(p))
         T = self.tracker_pose(p)
         RT = T.rotation
         y = kin.p @ RT.T + T.translation  # reflector in the tracker frame

@@ -35,6 +35,7 @@ from pin_kpi_oed.model.tolerances import Tolerances
 from pin_kpi_oed.errors import InputError
 from pin_kpi_oed.effects.library import predict_with_effects
 from pin_kpi_oed.data.measurements import MeasurementSet
+from pin_kpi_oed.model.nests import NEST_COLUMN
 from pin_kpi_oed.model.noise import NoiseModel
 from pin_kpi_oed.model.tracker import TrackerModel
 from pin_kpi_oed.model.robot import Robot
@@ -86,7 +87,8 @@ def default_tracker_pose(robot: Robot, distance_m: float | None = None, yaw_rad:
 def simulate(model: TrackerModel, Q: np.ndarray, truth_p: np.ndarray | None = None,
              effects: Sequence[tuple[Any, np.ndarray]] = (), aux: MeasurementSet | dict | None = None,
              noise: NoiseModel | None = None, seed: int = 0, record_sigma: bool = True,
-             outliers: tuple[float, float] | None = None, source: str = "simulated") -> MeasurementSet:
+             outliers: tuple[float, float] | None = None, source: str = "simulated",
+             nest: np.ndarray | Sequence[int] | None = None) -> MeasurementSet:
     """Simulate tracker measurements of a true robot at configurations ``Q``.
 
     Args:
@@ -105,6 +107,8 @@ def simulate(model: TrackerModel, Q: np.ndarray, truth_p: np.ndarray | None = No
             error of the given size in a random direction; their rows are marked 1 in
             ``extra['is_outlier']``.
         source: the ``source`` label of the set.
+        nest: the reflector nest of every row, (m,) int (:mod:`~pin_kpi_oed.model.nests`; written as the ``nest``
+            column); None: every row at the model's reflector.
 
     Returns:
         The :class:`MeasurementSet` (SI units, tracker frame).
@@ -132,6 +136,9 @@ def simulate(model: TrackerModel, Q: np.ndarray, truth_p: np.ndarray | None = No
     ms = MeasurementSet(joint_names=list(robot.joint_names), q=Q, position_m=np.zeros((m, 3)),
                         temperature_c=cols.get("temperature_c"), payload_kg=cols.get("payload_kg"),
                         time_s=cols.get("time_s"), source=source, extra=dict(cols.get("extra") or {}))
+    if nest is not None:
+        model = model.at_nests(np.asarray(nest).reshape(m))
+        ms.extra[NEST_COLUMN] = model.row_nest.astype(float)
     eff = [e for e, _ in effects]
     thetas = [np.asarray(t, float) for _, t in effects]
     Y = predict_with_effects(model, p, np.atleast_2d(np.asarray(Q, float)), ms, list(zip(eff, thetas)))
