@@ -102,12 +102,20 @@ def held_advice(names: list[str], contrib_m: np.ndarray, total_m: float, top: in
     held = float(np.sqrt(np.sum(contrib_m ** 2)))
     if held < 1e-9:
         return ""
-    order = np.argsort(-contrib_m)[:top]
-    named = " and ".join(f"{names[i]} ({contrib_m[i] * 1e3:.3g} mm)" for i in order if contrib_m[i] > 0.05 * held)
+    order = [i for i in np.argsort(-contrib_m)[:top] if contrib_m[i] > 0.05 * held]
+    named = " and ".join(f"{names[i]} ({contrib_m[i] * 1e3:.3g} mm)" for i in order)
+    moves = {names[i].rsplit(".", 1)[-1].startswith("t") for i in order}
+    fixes = []
+    if True in moves:  # a translation of the link carrying the tool: every point on it moves alike
+        fixes.append("a translation moves every reflector nest on the tool alike, so no set of nests determines it: "
+                     "measuring the TCP itself (a nest at the TCP, or the TCP's position relative to the nest from "
+                     "a tool calibration) removes it")
+    if False in moves:  # a rotation: points at different places on the tool move differently
+        fixes.append("a rotation is determined by a second reflector nest away from the first (off the last joint's "
+                     "axis) or a 6-DoF probe")
     return (f"{held * 1e3:.3g} mm of the TCP's sigma (RMS {total_m * 1e3:.3g} mm at the working configurations) is "
             f"from parameters held at their tolerance, mostly {named}, which no measurement of this reflector "
-            "determines; a second reflector nest off the last joint axis, a 6-DoF probe, or measuring the TCP itself "
-            "removes it")
+            "determines; " + "; ".join(fixes))
 
 
 @dataclass
