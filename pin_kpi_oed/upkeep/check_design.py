@@ -154,7 +154,7 @@ def select_check(crit: CheckPower, Fp: np.ndarray, m: int, seed: int = 0, exchan
 
 def design_check(model: CalibratedModel, *, m: int = 10, tolerance_m: float = 1e-4, alpha: float = 0.05,
                  cell=None, pool_size: int = 400, seed: int = 0, station: str | None = None,
-                 q_work: np.ndarray | None = None, n_random: int = 20) -> CheckDesign:
+                 q_work: np.ndarray | None = None, n_random: int = 20, size: bool = True) -> CheckDesign:
     """Design a check of ``m`` poses (module docstring).
 
     Args:
@@ -166,6 +166,7 @@ def design_check(model: CalibratedModel, *, m: int = 10, tolerance_m: float = 1e
         pool_size: candidate configurations; seed: their seed and the selection's.
         q_work: working configurations (t, n) rad; default the model's, else the cell's.
         n_random: random designs of m pool poses the power is compared with.
+        size: also find the poses the verdict needs (``poses_needed``; False: 0, not computed).
 
     Raises:
         InputError: no working configurations, m out of range, a tolerance ≤ 0.
@@ -194,7 +195,7 @@ def design_check(model: CalibratedModel, *, m: int = 10, tolerance_m: float = 1e
     vp = verdict_powers(crit, Fp[sel.indices].reshape(-1, Fp.shape[2]), tolerance_m, alpha, null, SIZE_FACTOR)
     return CheckDesign(Q=Q_pool[sel.indices], selection=sel, power=power, power_random=power_random,
                        tolerance_m=tolerance_m, alpha=alpha, sigma_m=sigma, verdict_power=vp,
-                       poses_needed=_poses_needed(crit, Fp, tolerance_m, alpha, null, seed),
+                       poses_needed=_poses_needed(crit, Fp, tolerance_m, alpha, null, seed) if size else 0,
                        feasible_in=getattr(cell, "name", "") if cell is not None else "", success=sel.success,
                        status="designed", message=sel.message, time_s=time.perf_counter() - t0)
 
