@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -48,10 +49,10 @@ class SimulatedRobot:
             reached) and its verdict power.
     """
 
-    nominal: object
+    nominal: Any
     p: np.ndarray
     effects: list
-    cm: object
+    cm: Any
     Q_cal: np.ndarray
     Q_check: np.ndarray
     qw: np.ndarray

@@ -368,7 +368,8 @@ def _tcp_change(rows: CheckRows, g: CheckGroup, delta: np.ndarray, cov_delta: np
     C = C * rows.null.factor ** 2
     size = float(np.linalg.norm(e))
     u = e / size if size > 0 else np.zeros_like(e)
-    return size / np.sqrt(t), float(np.sqrt(max(u @ C @ u, 0.0) / t)), float(np.sqrt(max(np.trace(C), 0.0) / t))
+    along, total = float(u @ C @ u), float(np.trace(C))
+    return size / np.sqrt(t), float(np.sqrt(max(along, 0.0) / t)), float(np.sqrt(max(total, 0.0) / t))
 
 
 def _changed(model: CalibratedModel, data: MeasurementSet, rows: CheckRows, best: tuple, out: dict, t0: float,
