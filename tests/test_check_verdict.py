@@ -145,3 +145,18 @@ def test_a_model_files_kfold_fields_are_range_checked(setting, tmp_path, capsys,
     assert main(["check", "--model", str(path), "--data", str(tmp_path / "rows.csv")]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and f"cv.{field}" in err and "Traceback" not in err
+
+
+def test_the_changes_sigma_at_the_tcp_matches_monte_carlo(setting):
+    """The σ of the change's size at the TCP against the spread of the size over seeded rows (a tool change: the
+    same displacement at every working TCP; a joint offset)."""
+    rb, model, Qc = setting
+    st = model.setups["A"]
+    tool = dataclasses.replace(model, setups={"A": dataclasses.replace(st, reflector_m=st.reflector_m
+                                                                       + np.array([0.0, 2e-4, 1e-4]))})
+    for truth, name in ((tool, "tool"), (_offset_truth(model, 3, 2 * TOL), rb.joint_names[3])):
+        res = [check_calibration(model, _rows(model, truth, Qc, 50 + s), tolerance_m=TOL) for s in range(16)]
+        assert all(r.group.startswith(name) for r in res)
+        sizes = np.array([r.change_tcp_m for r in res])
+        sd = np.median([r.change_tcp_sigma_m for r in res])
+        assert 0.5 < np.std(sizes, ddof=1) / sd < 1.8, (name, np.std(sizes, ddof=1), sd)

@@ -361,7 +361,7 @@ def _tcp_change(rows: CheckRows, g: CheckGroup, delta: np.ndarray, cov_delta: np
     estimation error at the TCP), m; the σ scaled by the model's held-out standardised RMS."""
     t = len(rows.qw)
     if g.kind == "tool":
-        e, C = np.tile(delta, t), np.kron(np.eye(t), cov_delta)
+        e, C = np.tile(delta, t), np.kron(np.ones((t, t)), cov_delta)    # one displacement at every TCP
     else:
         E = rows.E_w[:, g.cols]
         e, C = E @ delta, E @ cov_delta @ E.T
