@@ -1,9 +1,12 @@
 """CLI subcommand ``check`` of ``pin-kpi-oed``: does a calibration still hold, and if not, what changed.
 
 ``check`` takes the measured check rows, re-registers the set-up with the robot held and tests the residuals
-against the model's honest σ (χ² at the stated α, the false-alarm rate): *holds* / *set-up moved* / *the robot
-changed* (which group, by how much ± σ, the re-fitted model written with ``--model-out``) / *the discrepancy's
-level* / *re-calibrate*, in one line and in JSON. ``check design`` chooses the few poses (default 10) that give the
+against the model's honest σ: a change counts only when it is shown to move the working TCPs by more than
+``--tolerance`` (m, RMS over the working configurations); the whole verdict's false-alarm rate is ``--alpha``.
+*holds* (a significant change below the tolerance is stated in it) / *set-up moved* / *the robot changed* (which
+group, by how much ± σ, the re-fitted model written with ``--model-out``) / *the discrepancy's level* /
+*re-calibrate* (and by how much a re-calibration beats a re-fit on the expected TCP error), in one line and in JSON;
+the exit code says it: :data:`EXIT_HELP`. ``check design`` chooses the few poses (default 10) that give the
 check the largest power against a change of any group that moves the TCP by ``--tolerance`` (m, RMS over the
 working configurations), feasible in ``--cell``, written as a joint CSV (``--out``: measure it and give it back as
 ``--data``) and as a robot program (``--program`` with ``--format``).
@@ -24,7 +27,14 @@ import numpy as np
 from pin_kpi_oed.cli.tool import model_tool
 from pin_kpi_oed.cli.util import add_table_options, table_options
 
-__all__ = ["register", "run_check", "run_monitor"]
+__all__ = ["register", "run_check", "run_monitor", "EXIT_HELP"]
+
+#: The exit codes of ``check`` and ``monitor`` (their --help's epilog).
+EXIT_HELP = ("exit codes: 0 the calibration holds; 1 changed: the set-up moved or the robot changed (the re-registered "
+             "or re-fitted model is what --model-out writes); 3 re-calibrate (or the discrepancy's level changed); "
+             "2 bad input (one line naming the file, field or value)")
+#: monitor --fail-on: the verdicts whose exit code the monitor ends with.
+FAIL_ON = {"never": 99, "changed": 1, "recalibrate": 3}
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -32,17 +42,22 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p = subparsers.add_parser("check", help="does a calibration still hold? (check design: the poses to measure)",
                               description="On measured check rows: re-register the set-up, test the residuals "
                                           "against the model's honest sigma; the verdict in one line and JSON. "
-                                          "'check design': the poses that give that test the largest power.")
+                                          "'check design': the poses that give that test the largest power.",
+                              epilog=EXIT_HELP)
     p.add_argument("action", nargs="?", choices=["design"], default=None,
                    help="'design': choose the check poses instead of judging measured ones")
     p.add_argument("--model", required=True, help="calibrated model file (identify / register --model-out)")
     p.add_argument("--data", default=None, help="the measured check rows: CSV with joint columns and x, y, z (m)")
     p.add_argument("--station", default=None, help="the model's station the set-up is compared with (default: "
                                                    "the model's default station)")
-    p.add_argument("--alpha", type=float, default=0.05, help="level of the test: its false-alarm rate (default 0.05)")
+    p.add_argument("--alpha", type=float, default=0.05,
+                   help="the false-alarm rate of the whole verdict: the probability it says anything but 'holds' on "
+                        "an unchanged robot (its two tests, residuals and set-up, each at 1 - (1 - alpha)^(1/2); "
+                        "default 0.05)")
     p.add_argument("--tolerance", type=float, default=1e-4,
-                   help="the RMS change of the TCP at the working configurations the check must detect, in m "
-                        "(default 1e-4 = 0.1 mm)")
+                   help="the RMS change of the TCP at the working configurations that matters, in m (default 1e-4 = "
+                        "0.1 mm): a change is reported only when shown to exceed it; check design sizes the poses "
+                        "for that decision")
     p.add_argument("--cell", default=None, help="cell YAML file or shipped cell name: check design's poses are "
                                                 "feasible in it; its working configurations when the model has none")
     p.add_argument("--measurements", "-m", type=int, default=10, help="check design: number of poses (default 10)")
@@ -67,12 +82,18 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                                            "set-up followed by a Kalman filter whose drift level is estimated from the "
                                            "rows, every --every rows a check (set-up re-registered, chi2 at --alpha; "
                                            "--refit: also follow a re-fitted group); poses asked for when the rows "
-                                           "cannot tell. One line per event.")
+                                           "cannot tell. One line per event.", epilog=EXIT_HELP + "; monitor ends "
+                               "with the largest code of its checks' verdicts that --fail-on counts")
     mo.add_argument("--model", required=True, help="calibrated model file")
     mo.add_argument("--data", required=True, help="rows measured during work: CSV with joint columns and x, y, z (m)")
     mo.add_argument("--every", type=int, default=10, help="rows per check (default 10)")
-    mo.add_argument("--alpha", type=float, default=0.05, help="level of each check (default 0.05)")
-    mo.add_argument("--tolerance", type=float, default=1e-4, help="RMS TCP change the power is stated for, m")
+    mo.add_argument("--alpha", type=float, default=0.05, help="false-alarm rate of each check's verdict (default 0.05)")
+    mo.add_argument("--tolerance", type=float, default=1e-4,
+                    help="RMS TCP change at the working configurations that matters, m (default 1e-4)")
+    mo.add_argument("--fail-on", dest="fail_on", choices=list(FAIL_ON), default="recalibrate",
+                    help="which verdicts set the exit code at the end: 'recalibrate' (default: exit 3 when a check "
+                         "said re-calibrate or the discrepancy's level changed), 'changed' (also exit 1 when a check "
+                         "said the set-up moved or the robot changed), 'never' (exit 0)")
     mo.add_argument("--station", default=None, help="the model's station of the first rows (default station)")
     mo.add_argument("--refit", action="store_true",
                     help="also follow a re-fitted group of the robot (default: only a moved set-up; a robot change "
@@ -116,7 +137,7 @@ def run_monitor(args: argparse.Namespace) -> int:
         atomic_write_json(args.json, {**log.to_dict(), "model": args.model, "data": args.data})
     if not args.quiet:
         print(log.summary())
-    return 0
+    return log.exit_code(FAIL_ON[args.fail_on])
 
 
 def _follow(mon, path: str, read: dict, poll_s: float, idle_s: float, quiet: bool) -> None:
@@ -186,7 +207,7 @@ def _verdict(args: argparse.Namespace, model) -> int:
         written = [f for f in (args.model_out, args.json) if f]
         if written:
             print("wrote " + ", ".join(written))
-    return 0
+    return res.exit_code
 
 
 def _design(args: argparse.Namespace, model) -> int:

@@ -5,8 +5,11 @@ left for the next poll) with :func:`~pin_kpi_oed.data.measurements.read_measurem
 returned before. A file that shrank or whose earlier rows changed (truncated, rewritten, rotated) is not an error:
 the rows returned before stay returned (the caller keeps them), a one-line warning says how many of them are gone
 from the file, and the rows after the common beginning are returned as new. A file that cannot be read for the
-moment (a malformed line, fewer rows than a header check needs) gives a one-line warning — once per distinct
-message — and no rows; the next poll tries again.
+moment (fewer than :data:`MIN_ROWS` complete rows, which a header check may need) gives a one-line warning — once
+per distinct message — and no rows; the next poll tries again. From :data:`MIN_ROWS` complete rows on, a file the
+reader refuses (a malformed row, a value out of range) is refused as without following it: the reader's one line,
+naming the file (not the copy of its complete lines the reader was given) and the row. Rows are the same when their
+joint values, positions and times are.
 """
 
 from __future__ import annotations
@@ -22,7 +25,10 @@ import numpy as np
 from pin_kpi_oed.data.measurement_set import MeasurementSet
 from pin_kpi_oed.errors import InputError
 
-__all__ = ["FollowedFile"]
+__all__ = ["FollowedFile", "MIN_ROWS"]
+
+#: Complete rows from which a file the reader refuses is refused, not waited for.
+MIN_ROWS = 3
 
 
 @dataclass
@@ -39,11 +45,16 @@ class FollowedFile:
     read_options: dict = field(default_factory=dict)
     q: np.ndarray | None = None
     position_m: np.ndarray | None = None
+    time_s: np.ndarray | None = None
     returned: int = 0
     _last_warning: str = field(default="", repr=False)
 
     def poll(self) -> tuple[MeasurementSet | None, str]:
-        """(the new rows or None, a warning line or "")."""
+        """(the new rows or None, a warning line or "").
+
+        Raises:
+            InputError: the reader refuses a file of at least :data:`MIN_ROWS` complete rows (the file named).
+        """
         from pin_kpi_oed.data.measurements import read_measurements
 
         try:
@@ -59,20 +70,30 @@ class FollowedFile:
             try:
                 ms = read_measurements(part, **self.read_options)
             except InputError as exc:
-                return None, self._warn(f"{exc} (while following the file; waiting for it to change)")
+                line = str(exc).replace(str(part), str(self.path))
+                if _data_rows(text) >= MIN_ROWS:
+                    raise InputError(line) from None
+                return None, self._warn(f"{line} (while following the file; waiting for it to change)")
         self._last_warning = ""
         return self._new_rows(ms)
 
     def _new_rows(self, ms: MeasurementSet) -> tuple[MeasurementSet | None, str]:
         """The rows after the common beginning with the rows seen at the last poll."""
         warning = ""
+        times = None if ms.time_s is None else np.asarray(ms.time_s, float)
         start = 0 if self.q is None else _common_prefix(self.q, self.position_m, ms.q, ms.position_m)
+        if self.q is not None and (self.time_s is None) != (times is None):
+            start = 0
+        elif self.time_s is not None and times is not None:
+            start = min(start, _common_prefix(self.time_s[:, None], self.time_s[:, None], times[:, None],
+                                              times[:, None]))
         if self.q is not None and start < len(self.q):
             gone = len(self.q) - start
             warning = (f"{self.path}: the file was truncated or rewritten while read: {gone} row(s) used before are no "
                        f"longer in it (kept in the log); continuing with the {len(ms) - start} row(s) after its first "
                        f"{start}")
         self.q, self.position_m = ms.q.copy(), ms.position_m.copy()
+        self.time_s = None if times is None else times.copy()
         if start >= len(ms):
             return None, warning
         self.returned += len(ms) - start
@@ -91,3 +112,9 @@ def _common_prefix(qa: np.ndarray, pa: Any, qb: np.ndarray, pb: Any) -> int:
     same = np.all(qa[:n] == qb[:n], axis=1) & np.all(np.asarray(pa)[:n] == np.asarray(pb)[:n], axis=1)
     bad = np.flatnonzero(~same)
     return int(bad[0]) if bad.size else n
+
+
+def _data_rows(text: bytes) -> int:
+    """Lines of a CSV's complete text that are neither comments, blank, nor its column header."""
+    lines = [ln for ln in text.decode("utf-8", errors="replace").splitlines() if ln.strip() and not ln.startswith("#")]
+    return max(len(lines) - 1, 0)

@@ -554,11 +554,26 @@ def _file_int(d: dict, key: str, where: str) -> int:
     return int(v)
 
 
+#: the range of each number of a model file's K-fold check that a verdict depends on (the check's law of T: the
+#: standardised RMS and the excess kurtosis of the held-out errors; the factors the σ was widened by): a value outside
+#: it is an edited or damaged file, refused naming the field
+CV_RANGES = {"z_rms": (0.25, 4.0), "z_kurtosis": (-2.0, 50.0), "dof_factor": (1.0, 10.0),
+             "small_sample_factor": (1.0, 10.0), "inside_95": (0.0, 1.0), "mean_with_m": (0.0, FILE_SIGMA_MAX_M),
+             "mean_without_m": (0.0, 1.0), "rms_with_m": (0.0, FILE_SIGMA_MAX_M), "rms_without_m": (0.0, 1.0)}
+
+
 def _file_cv(cv: Any, where: str) -> dict:
     if cv is None:
         return {}
     if not isinstance(cv, dict):
         raise ValueError(f"{where}.cv: must be an object (the K-fold check's numbers), got {cv!r:.60}")
+    for key, (lo, hi) in CV_RANGES.items():
+        v = cv.get(key)
+        if v is None:
+            continue
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not np.isfinite(v) or not lo <= v <= hi:
+            raise ValueError(f"{where}.cv.{key}: must be a number in [{lo:g}, {hi:g}], got {v!r:.40} (was the file "
+                             "edited? the check's verdict depends on it)")
     return dict(cv)
 
 

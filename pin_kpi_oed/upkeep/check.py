@@ -1,35 +1,46 @@
-r"""Keep a calibration: the verdict of a quick check on a few measured poses.
+r"""Keep a calibration: the verdict of a quick check on a few measured rows, by the size of a change at the TCP.
 
-On the check rows the set-up (tracker pose; the reflector held: a moved reflector is a tool change) is
-re-registered with the robot held (:func:`~pin_kpi_oed.upkeep.transfer.register_setup`) and the residuals r
-are whitened by the model's joint honest covariance Σ of the check rows
-(:func:`~pin_kpi_oed.calibrated.prediction_sigma.predictive_covariance`: the honest σ of
-:meth:`CalibratedModel.predict_with_sigma` on its diagonal, the discrepancy's posterior covariance and the
-parameters' error shared between rows and axes off it; the registration's own σ factor is *not* applied: it would
-hide the change under test): z = L⁻¹r (Σ = LLᵀ), the set-up's generalised least-squares step projected out. With the
-marginal σ alone the rows' correlations (axes correlated by 0.3 on the real UR10) make T more spread than χ² and the
-check raises false alarms well above its stated rate. T = ‖z‖² has 3m − 6 degrees of freedom; its law under no
-change is the scaled χ² of :class:`~pin_kpi_oed.oed.check_power.CheckNull` — the standardised RMS f and the excess
-kurtosis κ of the model's own K-fold held-out errors (the plain χ²(3m − 6) for a model without a K-fold check) — so
-the check raises a false alarm with probability α (the stated level). Its power against the weakest change of RMS
-size τ at the working configurations of each parameter group is that law's non-central tail
-(:mod:`pin_kpi_oed.oed.check_power`).
+On the check rows the set-up (tracker pose; the reflector held: a moved reflector is a tool change) is re-registered
+with the robot held and the residuals are whitened by the model's joint honest covariance Σ of the rows
+(:mod:`~pin_kpi_oed.upkeep.check_rows`: the honest σ of :meth:`CalibratedModel.predict_with_sigma` on its diagonal,
+the discrepancy's posterior covariance and the parameters' error shared between rows and axes off it; the
+registration's own σ factor is *not* applied: it would hide the change under test): z = L⁻¹r, the set-up's
+generalised least-squares step projected out. T = ‖z‖² has 3m − 6 degrees of freedom; its law under no change is
+the scaled χ² of :class:`~pin_kpi_oed.oed.check_power.CheckNull` (the standardised RMS and the excess kurtosis of the
+model's own K-fold held-out errors; the plain χ² without a K-fold check).
+
+Two tests decide whether anything changed: T against its critical value (the robot or the discrepancy), and the
+set-up's displacement of the working TCPs against the tolerance τ (one-sided: the displacement less z₁₋ₐ' times its
+σ above τ). Each runs at α' = 1 − (1 − α)^{1/2} (Šidák; the two are independent under no change: T lies in the
+complement of the set-up's columns), so the whole verdict says anything but *holds* on an unchanged robot with
+probability at most α — the one false-alarm rate ``--alpha`` states. A change *matters* only when it is shown to
+exceed the user's tolerance τ at the working TCPs (RMS over the working configurations): its size less z₁₋ₐ times
+its σ above τ (an equivalence-style decision with the change's own uncertainty); a significant change below it is
+reported inside *holds*, with its size ± σ.
 
 The verdict, in this order:
 
-* **holds** — T below the critical value and the registered set-up within its uncertainty of the model's
-  station (Mahalanobis distance of the set-up change, χ²(6) at α); the TCP σ at the working configurations is stated;
-* **set-up moved** — T below the critical value, the set-up changed beyond its uncertainty: re-registered, by how much
-  (RMS displacement of the check points, mm);
-* **robot changed** — T above; a group g explains the residuals: the group's detectable directions fitted with the
-  set-up by least squares on the whitened rows, its remaining χ²(3m − 6 − r_g) below its critical value at α/5
-  (among such groups the least remaining χ² + 2 r_g, Akaike's criterion); the change with its standard deviation,
-  and the re-fitted model — when the check rows determine it; else the poses to add. The re-fit holds the model's
-  set-up when the group's change alone explains the rows (its fit with the set-up held passes at α/5: the tracker did
-  not move), else re-registers it on the check rows;
+* **holds** — nothing shown to exceed τ; the TCP σ at the working configurations, and any significant change below
+  the tolerance with its size ± σ at the TCP (a group's, the set-up's, or residuals beyond the model's σ);
+* **set-up moved** — the set-up's displacement of the working TCPs shown above τ, no change of the robot shown
+  above it: re-registered, by how much ± σ;
+* **robot changed** — T above its critical value; a group g explains the residuals (its detectable directions
+  fitted with the set-up, its remaining χ² below its critical value at α/5; among such groups the least remaining
+  χ² + 2 r_g, Akaike's criterion), its change moves the TCP by more than τ (shown), and re-fitting it is expected to
+  be within :data:`REFIT_MARGIN` of a full re-calibration: the expected TCP error of the re-fitted model (the
+  original calibration's own error at the working TCPs — the TCP σ: its parameters' covariance and the
+  discrepancy — plus the change's estimation error, plus the registration's share when the set-up is re-registered)
+  against a re-calibration of the same design (the calibration's own TCP σ). The re-fit holds the model's set-up when
+  the group's change alone explains the rows (its fit with the set-up held passes at α/5: the tracker did not move),
+  else re-registers it on the check rows;
 * **discrepancy level** — T above, no group explains it and none takes a significant share (χ²(r_g) at α over the
-  groups, Bonferroni): the residuals are larger everywhere alike, σ × √(T/(3m − 6));
-* **re-calibrate** — T above and no group explains it.
+  groups, Bonferroni), the residuals beyond the model's σ shown to move the TCP by more than τ
+  (σ_W × √(ρ − 1), ρ's lower bound T / T_crit(α)): the residuals are larger everywhere alike;
+* **re-calibrate** — a change above τ that a re-calibration corrects better than a re-fit (by more than
+  :data:`REFIT_MARGIN`, the verdict says by how much), or one no group explains.
+
+:attr:`CheckResult.exit_code`: 0 holds, 1 the set-up moved or the robot changed (the re-registered or re-fitted
+model is what ``--model-out`` writes), 3 re-calibrate or the discrepancy's level changed.
 """
 
 from __future__ import annotations
@@ -40,28 +51,34 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
-import pinocchio as pin
+from scipy import stats
 
+from pin_kpi_oed.calibrated.model_file import CalibratedModel
 from pin_kpi_oed.data.measurements import MeasurementSet
 from pin_kpi_oed.errors import InputError
-from pin_kpi_oed.upkeep.check_poses import SETUP_FACTOR, poses_to_add, registration_sigma_m
-from pin_kpi_oed.calibrated.model_file import CalibratedModel
-from pin_kpi_oed.calibrated.tcp_sigma import tcp_sigma
-from pin_kpi_oed.identification.problem import align_data
-from pin_kpi_oed.upkeep.transfer import register_setup
-from pin_kpi_oed.model.tracker import TrackerModel
-from pin_kpi_oed.oed.check_power import CheckGroup, CheckNull, CheckPower, check_groups
+from pin_kpi_oed.oed.check_power import CheckGroup, CheckNull, CheckPower
 from pin_kpi_oed.results import Result
+from pin_kpi_oed.upkeep.check_poses import poses_to_add
+from pin_kpi_oed.upkeep.check_rows import (CHECK_STATION, CheckRows, check_criterion, check_null,
+                                           joint_honest_factor, measure_rows, project_out, registered, whiten)
 
-__all__ = ["CheckResult", "check_calibration", "check_criterion", "check_null", "check_powers", "CHECK_STATION"]
+__all__ = ["CheckResult", "check_calibration", "check_criterion", "check_null", "check_powers", "sidak",
+           "CHECK_STATION", "EXIT_CODES", "REFIT_MARGIN"]
 
-#: Station label of the set-up registered on the check rows.
-CHECK_STATION = "check"
 VERDICTS = ("holds", "setup_moved", "robot_changed", "discrepancy_level", "recalibrate")
+#: The exit code of each verdict (the command line's): 0 holds, 1 changed (re-registered / re-fitted), 3 re-calibrate.
+EXIT_CODES = {"holds": 0, "setup_moved": 1, "robot_changed": 1, "discrepancy_level": 3, "recalibrate": 3}
 #: The named group's goodness of fit is tested at α / FIT_SHARE.
 FIT_SHARE = 5.0
+#: A re-fit is kept while its expected TCP error is at most (1 + REFIT_MARGIN) × a re-calibration's.
+REFIT_MARGIN = 0.10
 #: Candidate configurations (within the joint limits) the poses to add are chosen from.
 POOL_SIZE = 400
+
+
+def sidak(alpha: float, k: int = 2) -> float:
+    """The level of each of k independent tests whose union has level α: 1 − (1 − α)^{1/k}."""
+    return float(1.0 - (1.0 - alpha) ** (1.0 / k))
 
 
 @dataclass(kw_only=True)
@@ -70,32 +87,32 @@ class CheckResult(Result):
 
     Attributes:
         verdict: one of ``holds``, ``setup_moved``, ``robot_changed``, ``discrepancy_level``, ``recalibrate``.
-        n_rows: check rows; dof: degrees of freedom 3m − 6 of the test; alpha: its level (false-alarm rate).
-        chi2: T = Σ z²; threshold: χ²_{1−α}(dof); p_value: P(χ²(dof) > T).
-        setup_shift_m: RMS displacement of the check points by the set-up change (m); setup_distance: its
-            Mahalanobis distance (χ²(6) under no change).
-        power: group name -> power of the test against the weakest change of size ``tolerance_m``.
-        tolerance_m: RMS TCP change at the working configurations the power is stated for (m).
-        tcp_sigma_m: TCP σ at the working configurations (norm, per configuration; m): the re-registered model's
-            (:func:`~pin_kpi_oed.calibrated.tcp_sigma.tcp_sigma`) with the registration's share.
+        n_rows: check rows; dof: degrees of freedom 3m − 6 of T; alpha: the verdict's false-alarm rate;
+            alpha_each: the level of each of its two tests (Šidák).
+        chi2: T = Σ z²; threshold: its critical value at alpha_each; p_value: P(T' > T) under no change.
+        setup_shift_m: RMS displacement of the working TCPs by the set-up's change (m); setup_shift_sigma_m: its σ;
+            setup_distance: the set-up step's Mahalanobis distance (χ²(6) under no change).
+        power: group name -> power of the test T against the weakest change of size ``tolerance_m``.
+        tolerance_m: the RMS TCP change at the working configurations that matters (m).
+        tcp_sigma_m: TCP σ at the working configurations (norm, per configuration; m), the registration's and the
+            parameters held at nominal included (:func:`~pin_kpi_oed.calibrated.tcp_sigma.tcp_sigma`).
         tcp_held_m: its part from the joint-placement parameters held at nominal (per configuration, m): no check of
             a reflector sees a change of them (its power against them is zero).
-        group: the named group (robot changed), or "".
+        group: the group the residuals name (also below the tolerance), or "".
         change: the group's fitted change in its columns (raw units: m, rad), std: its standard deviations.
-        change_tcp_m: RMS TCP displacement of the change at the working configurations (m).
+        change_tcp_m: RMS TCP displacement of the change at the working configurations (m); change_tcp_sigma_m: its σ.
         determined: whether the check rows determine the named group's change.
-        sigma_factor: √(T/dof) (the discrepancy's level against the model's).
-        model: the re-registered (or re-fitted) model.
-        refit_chi2: T of the re-fitted model on the check rows (NaN if none).
-        groups: per group ``{name, chi2_remaining, dof, determined}``.
-        registration_sigma_m: the σ the registration on the check rows alone leaves at the working configurations
-            (RMS 3-D, m); honest_sigma_m: the model's honest σ there (RMS 3-D, m); setup_determined: the first at most
-            :data:`~pin_kpi_oed.upkeep.check_poses.SETUP_FACTOR` × the second.
-        setup_held: the re-fit kept the model's set-up (the group's change alone explains the rows, the tracker did
-            not move): the change is then determined by the check rows with the calibration's set-up.
-        poses_to_add: configurations (k, n) rad to measure next, with the check rows given
-            (:func:`~pin_kpi_oed.upkeep.check_poses.poses_to_add`): when the rows do not determine the
-            set-up at the working configurations or the named group; empty otherwise.
+        sigma_factor: √(T/dof) (the discrepancy's level against the model's); excess_tcp_m: the residuals beyond the
+            model's σ carried to the working TCPs, σ_W √(ρ − 1) (m; NaN unless no group explains them).
+        model: the re-registered (or re-fitted) model; refit_chi2: T of the re-fitted model on the check rows.
+        groups: per group ``{name, chi2_remaining, dof, determined, explains}``.
+        registration_sigma_m, honest_sigma_m, setup_determined: the registration's σ at the working configurations,
+            the model's honest σ there (RMS 3-D, m), and whether the first is at most twice the second.
+        setup_held: the re-fit kept the model's set-up (the group's change alone explains the rows).
+        refit_error_m, recalibrate_error_m: expected RMS TCP error at the working configurations of the re-fitted
+            model and of a re-calibration of the same design (m; NaN unless a change above τ was named).
+        note: what *holds* holds despite (a significant change below the tolerance), or "".
+        poses_to_add: configurations (k, n) rad to measure next (:func:`~pin_kpi_oed.upkeep.check_poses.poses_to_add`).
     """
 
     verdict: str
@@ -107,6 +124,8 @@ class CheckResult(Result):
     p_value: float
     setup_shift_m: float
     setup_distance: float
+    alpha_each: float = float("nan")
+    setup_shift_sigma_m: float = float("nan")
     power: dict = field(default_factory=dict)
     tolerance_m: float = 1e-4
     tcp_sigma_m: np.ndarray = field(default_factory=lambda: np.zeros(0))
@@ -115,8 +134,10 @@ class CheckResult(Result):
     change: np.ndarray = field(default_factory=lambda: np.zeros(0))
     std: np.ndarray = field(default_factory=lambda: np.zeros(0))
     change_tcp_m: float = float("nan")
+    change_tcp_sigma_m: float = float("nan")
     determined: bool = False
     sigma_factor: float = 1.0
+    excess_tcp_m: float = float("nan")
     model: CalibratedModel | None = field(default=None, repr=False)
     refit_chi2: float = float("nan")
     groups: list = field(default_factory=list)
@@ -125,31 +146,58 @@ class CheckResult(Result):
     setup_determined: bool = True
     poses_to_add: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
     setup_held: bool = False
+    refit_error_m: float = float("nan")
+    recalibrate_error_m: float = float("nan")
+    note: str = ""
+
+    @property
+    def exit_code(self) -> int:
+        """0 holds, 1 the set-up moved or the robot changed (re-registered / re-fitted), 3 re-calibrate."""
+        return EXIT_CODES[self.verdict]
 
     def summary(self) -> str:
         """One line (mm, mrad)."""
-        stat = (f"chi2 {self.chi2:.1f} on {self.dof} dof (threshold {self.threshold:.1f} at alpha {self.alpha:g}, "
-                f"p {self.p_value:.3g})")
+        stat = (f"chi2 {self.chi2:.1f} on {self.dof} dof (threshold {self.threshold:.1f}; false-alarm rate of the "
+                f"verdict {self.alpha:g}, each of its two tests at {self.alpha_each:.3g}, p {self.p_value:.3g})")
         weakest = min(self.power, key=self.power.get) if self.power else ""
         pw = (f"; power against a {self.tolerance_m * 1e3:.3g} mm change: {min(self.power.values()):.2f} "
               f"(weakest: {weakest})") if self.power else ""
         pw += self.undetermined_text()
-        if self.verdict in ("holds", "setup_moved"):
+        tol = f"the tolerance of {self.tolerance_m * 1e3:.3g} mm"
+        if self.verdict == "holds":
             tcp = (f", TCP sigma at the working configurations median {np.median(self.tcp_sigma_m) * 1e3:.3f} mm, max "
                    f"{np.max(self.tcp_sigma_m) * 1e3:.3f} mm" if self.tcp_sigma_m.size else "")
             if self.tcp_held_m.size and np.max(self.tcp_held_m) > 0:
                 tcp += (f" (of which {np.median(self.tcp_held_m) * 1e3:.3f} mm from joint-placement parameters held "
                         "at their tolerance, which no check of this reflector sees)")
-            head = "holds" if self.verdict == "holds" else (f"set-up moved by {self.setup_shift_m * 1e3:.3f} mm "
-                                                             "(re-registered); the calibration holds")
-            return f"check: {head}{tcp}; {stat}{pw}"
+            note = f" ({self.note})" if self.note else ""
+            return f"check: holds{note}{tcp}; {stat}{pw}"
+        if self.verdict == "setup_moved":
+            return (f"check: set-up moved by {_pm(self.setup_shift_m, self.setup_shift_sigma_m)} mm at the working "
+                    f"TCPs, above {tol} (re-registered); the calibration holds; {stat}{pw}")
         if self.verdict == "robot_changed":
             what = _change_text(self) + ("; the set-up unchanged (held)" if self.setup_held else "")
-            return f"check: the robot changed: {what}; {stat}{pw}"
+            return f"check: the robot changed: {what}, above {tol}; {self.action_text()}; {stat}{pw}"
+        if self.group:
+            return (f"check: re-calibrate: {_change_text(self)}, above {tol}; {self.action_text()}; {stat}{pw}")
+        level = (f"residuals {self.sigma_factor:.2f}x the model's sigma, {self.excess_tcp_m * 1e3:.3f} mm beyond it at "
+                 f"the working TCPs")
         if self.verdict == "discrepancy_level":
-            return (f"check: the discrepancy's level changed: residuals {self.sigma_factor:.2f}x the model's sigma "
-                    f"everywhere alike (no group explains them); {stat}{pw}")
-        return f"check: re-calibrate: no parameter group explains the residuals; {stat}{pw}"
+            return (f"check: the discrepancy's level changed: {level}, everywhere alike (no group explains them); "
+                    f"re-calibrate; {stat}{pw}")
+        return f"check: re-calibrate: no parameter group explains the residuals ({level}); {stat}{pw}"
+
+    def action_text(self) -> str:
+        """Which of re-fit and re-calibration is better on the expected TCP error, and by how much."""
+        a, b = self.refit_error_m, self.recalibrate_error_m
+        if not (np.isfinite(a) and np.isfinite(b)):
+            return "the change is not determined by the rows: no re-fit"
+        rel = (a / b - 1.0) * 100
+        if self.verdict == "robot_changed":
+            return (f"re-fitted (expected TCP error {a * 1e3:.3f} mm, a re-calibration of the same design "
+                    f"{b * 1e3:.3f} mm: the re-fit within {max(rel, 0):.0f} %)")
+        return (f"a re-calibration is better by {rel:.0f} % (expected TCP error {b * 1e3:.3f} mm against the "
+                f"re-fit's {a * 1e3:.3f} mm)")
 
     def undetermined_text(self) -> str:
         """What the check rows leave undetermined and the poses to add ("" when nothing)."""
@@ -159,79 +207,43 @@ class CheckResult(Result):
             return (f"; the {self.n_rows} rows do not determine the set-up at the working configurations (the "
                     f"registration alone leaves {self.registration_sigma_m * 1e3:.3f} mm there, the honest sigma is "
                     f"{self.honest_sigma_m * 1e3:.3f} mm): {add}")
-        if self.verdict == "robot_changed" and not self.determined:
+        if self.group and not self.determined:
             return f"; the rows do not determine the change of {self.group}: {add}"
         return ""
 
     def to_dict(self) -> dict:
         """Plain JSON-able dict (SI units)."""
-        return {**self.result_dict(), "verdict": self.verdict, "n_rows": self.n_rows, "dof": self.dof,
-                "alpha": self.alpha, "chi2": self.chi2, "threshold": self.threshold, "p_value": self.p_value,
-                "setup_shift_m": self.setup_shift_m, "setup_distance": self.setup_distance, "power": self.power,
-                "tolerance_m": self.tolerance_m, "tcp_sigma_m": np.asarray(self.tcp_sigma_m).tolist(),
-                "tcp_held_m": np.asarray(self.tcp_held_m).tolist(),
-                "group": self.group, "change": np.asarray(self.change).tolist(),
-                "std": np.asarray(self.std).tolist(), "change_tcp_m": self.change_tcp_m,
-                "determined": self.determined, "sigma_factor": self.sigma_factor, "refit_chi2": self.refit_chi2,
-                "groups": self.groups, "registration_sigma_m": self.registration_sigma_m,
-                "honest_sigma_m": self.honest_sigma_m, "setup_determined": self.setup_determined,
-                "poses_to_add": np.asarray(self.poses_to_add).tolist(), "setup_held": self.setup_held}
+        arrays = ("tcp_sigma_m", "tcp_held_m", "change", "std", "poses_to_add")
+        skip = {"model", "success", "status", "message", "nit", "nfev", "time_s"}
+        out = {f.name: getattr(self, f.name) for f in dataclasses.fields(self) if f.name not in skip}
+        out.update({k: np.asarray(out[k]).tolist() for k in arrays})
+        return {**self.result_dict(), **out, "exit_code": self.exit_code}
+
+
+def _pm(value_m: float, sigma_m: float) -> str:
+    return f"{value_m * 1e3:.3f} ± {sigma_m * 1e3:.3f}"
 
 
 def _change_text(r: CheckResult) -> str:
     if not r.determined:
         return f"{r.group} (not determined by the check rows)"
+    at = f"{_pm(r.change_tcp_m, r.change_tcp_sigma_m)} mm RMS at the TCP"
     if r.group.endswith(" offset"):
         k = int(np.argmax(np.abs(r.change)))
-        return (f"{r.group} by {r.change[k] * 1e3:+.3f} ± {r.std[k] * 1e3:.3f} mrad "
-                f"({r.change_tcp_m * 1e3:.3f} mm RMS at the TCP)")
+        return f"{r.group} by {r.change[k] * 1e3:+.3f} ± {r.std[k] * 1e3:.3f} mrad ({at})"
     if r.group == "tool":
         return (f"tool by [{', '.join(f'{v * 1e3:+.3f}' for v in r.change)}] ± "
-                f"[{', '.join(f'{v * 1e3:.3f}' for v in r.std)}] mm")
+                f"[{', '.join(f'{v * 1e3:.3f}' for v in r.std)}] mm ({at})")
     names = ("tx", "ty", "tz", "rx", "ry", "rz")
     big = [k for k in range(r.change.size) if abs(r.change[k]) > 3 * r.std[k]] or [int(np.argmax(np.abs(r.change)))]
     parts = [f"{names[k]} {r.change[k] * 1e3:+.3f} ± {r.std[k] * 1e3:.3f} {'mm' if k < 3 else 'mrad'}" for k in big]
-    return f"{r.group}: {', '.join(parts)} ({r.change_tcp_m * 1e3:.3f} mm RMS at the TCP)"
+    return f"{r.group}: {', '.join(parts)} ({at})"
 
 
-def check_criterion(model: CalibratedModel, q_work: np.ndarray, sigma_m: np.ndarray, station: str | None = None,
-                    n_ref: int = 300, seed: int = 0) -> tuple[CheckPower, TrackerModel, np.ndarray]:
-    """The :class:`~pin_kpi_oed.oed.check_power.CheckPower` of a calibrated model.
-
-    Args:
-        model: the calibrated model; station: its station whose set-up the check re-registers.
-        q_work: working configurations (t, n) rad.
-        sigma_m: honest σ per axis (3,) m the poses are whitened with.
-        n_ref: seeded random configurations within the joint limits that tell the groups' directions apart from
-            the set-up; seed: their seed.
-
-    Returns:
-        (criterion, the station's measurement model with noise σ = ``sigma_m``, its raw parameter vector p).
-    """
-    from pin_kpi_oed.model.noise import NoiseModel
-
-    wm, p = model.station_model(station)
-    wm.noise = NoiseModel(sigma_xyz_m=tuple(np.asarray(sigma_m, float).reshape(3)))
-    L = wm.layout
-    rb = model.robot
-    rng = np.random.default_rng(seed)
-    Q_ref = rng.uniform(rb.q_lower, rb.q_upper, size=(n_ref, rb.nq))
-    J_ref = wm.weighted_jacobian(p, Q_ref)[:, :3, :].reshape(-1, L.n)
-    E = wm.kpi_jacobian(p, np.atleast_2d(q_work))
-    lin, ang = wm.joint_axes
-    joint_cols = [np.arange(L.joint_slice(j).start, L.joint_slice(j).stop) for j in range(L.n_joints)]
-    setup = np.arange(L.tracker.start, L.tracker.stop)
-    tool = np.arange(L.reflector.start, L.reflector.stop)
-    groups = check_groups(J_ref, E, setup, joint_cols, list(rb.joint_names), np.hstack([lin, ang]), tool)
-    return CheckPower(setup, groups), wm, p
-
-
-def _honest(model: CalibratedModel, Q: np.ndarray, data: MeasurementSet | None, label: str
-            ) -> tuple[np.ndarray, np.ndarray]:
-    """Predictions and honest σ (m, 3) of station ``label``, its σ factor left out."""
-    st = dataclasses.replace(model.setups[label], sigma_scale=1.0)
-    Y, sig, _ = model.with_setup(label, st).predict_with_sigma(Q, data, station=label)
-    return Y, sig
+def shown_above(size_m: float, sigma_m: float, tolerance_m: float, alpha: float) -> bool:
+    """Whether a change of ``size_m`` ± ``sigma_m`` is shown to exceed the tolerance: size − z₁₋ₐ σ > τ."""
+    return bool(np.isfinite(size_m) and np.isfinite(sigma_m)
+                and size_m - float(stats.norm.isf(alpha)) * sigma_m > tolerance_m)
 
 
 def check_calibration(model: CalibratedModel, data: MeasurementSet, *, station: str | None = None,
@@ -242,8 +254,8 @@ def check_calibration(model: CalibratedModel, data: MeasurementSet, *, station: 
     Args:
         model: the calibrated model; station: the model's station the check compares the set-up with.
         data: the check rows (joint columns, x, y, z in m).
-        alpha: level of the test (its false-alarm rate), in (0, 0.5).
-        tolerance_m: RMS TCP change at the working configurations the power is stated for (m).
+        alpha: the verdict's false-alarm rate (anything but *holds* on an unchanged robot), in (0, 0.5).
+        tolerance_m: the RMS TCP change at the working configurations that matters (m).
         q_work: working configurations (t, n) rad; default the model's, else the check rows.
         seed: seed of the reference configurations of the groups (and of the poses to add).
         propose: design the poses to add when the rows do not determine the set-up at the working configurations or
@@ -260,71 +272,91 @@ def check_calibration(model: CalibratedModel, data: MeasurementSet, *, station: 
         raise InputError(f"check: alpha must be in (0, 0.5), got {alpha}")
     if not (np.isfinite(tolerance_m) and tolerance_m > 0):
         raise InputError(f"check: the tolerance must be > 0 m, got {tolerance_m}")
-    old = model.station(station)
-    Q = align_data(model.robot, data)
-    m = len(data)
-    if 3 * m - 6 < 3:
-        raise InputError(f"{data.source or 'check data'}: {m} check rows are too few to register the set-up and test "
-                         f"the rest (at least 3 rows; 10 recommended)")
-    cm = _register(model, data)
-    Y, Sigma = _joint_honest(cm, Q, data)
-    sig = np.sqrt(np.diag(Sigma)).reshape(m, 3)
-    dof = 3 * m - 6
-    null = check_null(model)
-    thr = null.threshold(dof, alpha)
-    qw = np.atleast_2d(q_work if q_work is not None else (model.q_work if model.q_work is not None else Q))
-    crit, wm, p = check_criterion(cm, qw, np.median(sig, axis=0), CHECK_STATION, seed=seed)
-    z, F = _whiten(Sigma, data.position_m - Y, wm.jacobian(p, Q)[:, :3, :])
-    z = _project_out(z, F[:, crit.setup])
-    T = float(z @ z)
-    E_w = wm.kpi_jacobian(p, qw)
-    reach = _setup_reach(cm, crit, F, E_w, qw)
-    shift, dist = _setup_change(model.setups[old].tracker_T_base, cm.setups[CHECK_STATION].tracker_T_base,
-                                F[:, crit.setup], cm, Q, data)
-    power = check_powers(crit, F, tolerance_m, alpha, null)
-    out: dict[str, Any] = dict(n_rows=m, dof=dof, alpha=alpha, chi2=T, threshold=thr,
-                               p_value=null.sf(T, dof), setup_shift_m=shift, setup_distance=dist,
-                               power=power, tolerance_m=tolerance_m, registration_sigma_m=reach["reg"],
-                               honest_sigma_m=reach["honest"], setup_determined=reach["determined"],
-                               sigma_factor=float(np.sqrt(T / dof)), model=cm, success=True, status="checked")
-
-    def add() -> np.ndarray:
-        pool = np.random.default_rng(seed).uniform(model.robot.q_lower, model.robot.q_upper,
-                                                   size=(POOL_SIZE, model.robot.nq))
-        return poses_to_add(crit, wm, p, F, E_w[:, crit.setup], reach["honest"], pool, seed=seed)[0]
-
-    if not reach["determined"] and propose:
-        out["poses_to_add"] = add()
-    if T <= thr:
-        moved = dist > null.threshold(6, alpha)
-        return CheckResult(verdict="setup_moved" if moved else "holds", tcp_sigma_m=reach["tcp"],
-                           tcp_held_m=reach["held"],
-                           message="the residuals are within the model's sigma", time_s=time.perf_counter() - t0,
-                           **out)
-    named = _name_group(crit, F, z, dof, alpha, null)
+    rows = measure_rows(model, data, station, q_work, seed)
+    a1 = sidak(alpha)
+    T, dof, null = rows.T, rows.dof, rows.null
+    out: dict[str, Any] = dict(n_rows=rows.m, dof=dof, alpha=alpha, alpha_each=a1, chi2=T,
+                               threshold=null.threshold(dof, a1), p_value=null.sf(T, dof),
+                               setup_shift_m=rows.setup_shift_m, setup_shift_sigma_m=rows.setup_shift_sigma_m,
+                               setup_distance=rows.setup_distance,
+                               power=check_powers(rows.crit, rows.F, tolerance_m, a1, null), tolerance_m=tolerance_m,
+                               registration_sigma_m=rows.registration_sigma_m, honest_sigma_m=rows.honest_sigma_m,
+                               setup_determined=rows.setup_determined, sigma_factor=float(np.sqrt(T / dof)),
+                               tcp_sigma_m=np.sqrt(rows.tcp_sigma_m ** 2 + rows.reg_share_m2 + rows.tcp_held_m ** 2),
+                               tcp_held_m=rows.tcp_held_m, model=rows.cm,
+                               success=True, status="checked")
+    if not rows.setup_determined and propose:
+        out["poses_to_add"] = _add(rows, model, seed)
+    moved = shown_above(rows.setup_shift_m, rows.setup_shift_sigma_m, tolerance_m, a1)
+    if not T > out["threshold"]:
+        return _quiet(rows, out, moved, t0)
+    named = _name_group(rows.crit, rows.F, rows.z, dof, alpha, null)
     out["groups"] = named["table"]
     if named["best"] is None:
-        verdict = "recalibrate" if named["significant"] else "discrepancy_level"
+        return _unexplained(rows, out, named["significant"], moved, t0)
+    if not named["best"][3] and "poses_to_add" not in out and propose:
+        out["poses_to_add"] = _add(rows, model, seed)
+    return _changed(model, data, rows, named["best"], out, t0, moved,
+                    held=_held_fit(rows, named["best"], null, alpha))
+
+
+def _add(rows: CheckRows, model: CalibratedModel, seed: int) -> np.ndarray:
+    """The poses to add (:func:`~pin_kpi_oed.upkeep.check_poses.poses_to_add`) from a seeded pool."""
+    rb = model.robot
+    pool = np.random.default_rng(seed).uniform(rb.q_lower, rb.q_upper, size=(POOL_SIZE, rb.nq))
+    return poses_to_add(rows.crit, rows.wm, rows.p, rows.F, rows.E_w[:, rows.crit.setup], rows.honest_sigma_m, pool,
+                        seed=seed)[0]
+
+
+def _setup_note(rows: CheckRows, a1: float) -> str:
+    """The set-up's significant displacement below the tolerance, or ""."""
+    if rows.setup_distance > rows.null.threshold(6, a1):
+        return (f"the set-up shifted by {_pm(rows.setup_shift_m, rows.setup_shift_sigma_m)} mm at the working TCPs, "
+                "re-registered; below the tolerance")
+    return ""
+
+
+def _quiet(rows: CheckRows, out: dict, moved: bool, t0: float) -> CheckResult:
+    """T below its critical value: *set-up moved* when its displacement is shown above τ, else *holds*."""
+    if moved:
+        return CheckResult(verdict="setup_moved", message="the set-up moved; the residuals are within the model's "
+                           "sigma", time_s=time.perf_counter() - t0, **out)
+    return CheckResult(verdict="holds", note=_setup_note(rows, out["alpha_each"]),
+                       message="the residuals are within the model's sigma", time_s=time.perf_counter() - t0, **out)
+
+
+def _unexplained(rows: CheckRows, out: dict, significant: bool, moved: bool, t0: float) -> CheckResult:
+    """T above, no group explains it: the residuals beyond the model's σ carried to the working TCPs, σ_W √(ρ − 1);
+    *discrepancy level* / *re-calibrate* when its lower bound (ρ ≥ T / T_crit(α)) exceeds τ, else *holds* (or *set-up
+    moved*) with the excess stated."""
+    null, T, dof, alpha = rows.null, rows.T, rows.dof, out["alpha"]
+    rho = T / (null.scale * dof)
+    excess = rows.honest_sigma_m * np.sqrt(max(rho - 1.0, 0.0))
+    low = rows.honest_sigma_m * np.sqrt(max(T / null.threshold(dof, alpha) - 1.0, 0.0))
+    out = {**out, "excess_tcp_m": float(excess)}
+    if low > out["tolerance_m"]:
+        verdict = "recalibrate" if significant else "discrepancy_level"
         return CheckResult(verdict=verdict, message="no parameter group explains the residuals",
                            time_s=time.perf_counter() - t0, **out)
-    if not named["best"][3] and "poses_to_add" not in out and propose:
-        out["poses_to_add"] = add()
-    return _changed(model, data, Q, named["best"], E_w, out, t0, held=_held_fit(model, data, Q, old, Sigma,
-                                                                             named["best"], null, alpha))
+    note = (f"residuals {np.sqrt(rho):.2f}x the model's sigma that no group explains, {excess * 1e3:.3f} mm beyond "
+            f"it at the working TCPs (at least {low * 1e3:.3f} mm), not shown above the tolerance")
+    if moved:
+        return CheckResult(verdict="setup_moved", note=note, message="the set-up moved",
+                           time_s=time.perf_counter() - t0, **out)
+    return CheckResult(verdict="holds", note=note, message="below the tolerance", time_s=time.perf_counter() - t0,
+                       **out)
 
 
-def _held_fit(model: CalibratedModel, data: MeasurementSet, Q: np.ndarray, old: str, Sigma: np.ndarray, best: tuple,
-              null: CheckNull, alpha: float) -> tuple | None:
-    """The named group fitted with the set-up *held* at the model's station ``old`` (the tracker did not move): (its
-    change, covariance of its basis coordinates, remaining χ²) when that simpler explanation passes its fit test at
+def _held_fit(rows: CheckRows, best: tuple, null: CheckNull, alpha: float) -> tuple | None:
+    """The named group fitted with the set-up *held* at the model's station (the tracker did not move): (its change,
+    covariance of its basis coordinates, remaining χ²) when that simpler explanation passes its fit test at
     α / :data:`FIT_SHARE` on 3m − r_g degrees of freedom, else None. The held set-up was determined by the
     calibration's many rows, so the change is determined better than with the set-up re-fitted on the check rows."""
     g, _, _, det = best
     if not det:
         return None
-    wm, p = model.station_model(old)
-    z0, F0 = _whiten(Sigma, data.position_m - model.predict(Q, data, station=old), wm.jacobian(p, Q)[:, :3, :])
-    A = F0[:, g.cols] @ g.basis
+    z0 = rows.z_old
+    A = rows.F[:, g.cols] @ g.basis
     x, *_ = np.linalg.lstsq(A, z0, rcond=None)
     rem = float(np.sum((z0 - A @ x) ** 2))
     if not rem <= null.threshold(len(z0) - A.shape[1], alpha / FIT_SHARE):
@@ -332,49 +364,52 @@ def _held_fit(model: CalibratedModel, data: MeasurementSet, Q: np.ndarray, old: 
     return g.basis @ x, np.linalg.pinv(A.T @ A), rem
 
 
-def _changed(model: CalibratedModel, data: MeasurementSet, Q: np.ndarray, best: tuple, E_w: np.ndarray,
-             out: dict, t0: float, held: tuple | None = None) -> CheckResult:
-    """The *robot changed* verdict of the named group: its change, the TCP displacement at the working
-    configurations, and the re-fitted model when the rows determine the group (the set-up held when ``held``, the
-    fit of :func:`_held_fit`, is given; else re-registered on the check rows)."""
+def _tcp_change(rows: CheckRows, g: CheckGroup, delta: np.ndarray, cov_delta: np.ndarray) -> tuple[float, float, float]:
+    """(RMS TCP displacement of the change at the working configurations, its σ along it, the RMS σ of the change's
+    estimation error at the TCP), m; the σ scaled by the model's held-out standardised RMS."""
+    t = len(rows.qw)
+    if g.kind == "tool":
+        e, C = np.tile(delta, t), np.kron(np.ones((t, t)), cov_delta)    # one displacement at every TCP
+    else:
+        E = rows.E_w[:, g.cols]
+        e, C = E @ delta, E @ cov_delta @ E.T
+    C = C * rows.null.factor ** 2
+    size = float(np.linalg.norm(e))
+    u = e / size if size > 0 else np.zeros_like(e)
+    along, total = float(u @ C @ u), float(np.trace(C))
+    return size / np.sqrt(t), float(np.sqrt(max(along, 0.0) / t)), float(np.sqrt(max(total, 0.0) / t))
+
+
+def _changed(model: CalibratedModel, data: MeasurementSet, rows: CheckRows, best: tuple, out: dict, t0: float,
+             moved: bool, held: tuple | None = None) -> CheckResult:
+    """A group explains the residuals: its change ± σ at the TCP; above τ (shown) the re-fitted model and the choice
+    between it and a re-calibration on the expected TCP error; below, *holds* (or *set-up moved*) saying so."""
     g, x, cov, det = best
     delta = g.basis @ x if held is None else held[0]
     cov = cov if held is None else held[1]
-    std = np.sqrt(np.maximum(np.diag(g.basis @ cov @ g.basis.T), 0.0))
-    E = E_w[:, g.cols]
-    tcp_m = (float(np.linalg.norm(delta)) if g.kind == "tool"
-             else float(np.sqrt(np.mean(np.sum((E @ delta).reshape(-1, 3) ** 2, axis=1)))))
-    refit, T2 = (None, float("nan"))
+    cov_delta = g.basis @ cov @ g.basis.T
+    std = np.sqrt(np.maximum(np.diag(cov_delta), 0.0)) * rows.null.factor
+    size, sd, est = _tcp_change(rows, g, delta, cov_delta) if det else (float("nan"),) * 3
+    out = {**out, "group": g.name, "change": delta, "std": std, "change_tcp_m": size, "change_tcp_sigma_m": sd,
+           "determined": det}
+    if not shown_above(size, sd, out["tolerance_m"], out["alpha"]):
+        what = (f"a change of {g.name} of {_pm(size, sd)} mm at the TCP, not shown above the tolerance" if det else
+                f"a change of {g.name} the rows do not determine")
+        verdict = "setup_moved" if moved else "holds"
+        return CheckResult(verdict=verdict, note=what, message=f"{g.name}: below the tolerance",
+                           time_s=time.perf_counter() - t0, **out)
+    cal2 = float(np.mean(rows.tcp_sigma_m ** 2))
+    reg2 = 0.0 if held is not None else float(np.mean(rows.reg_share_m2))
+    refit_err, recal_err = float(np.sqrt(cal2 + est ** 2 + reg2)), float(np.sqrt(cal2))
+    out = {**out, "refit_error_m": refit_err, "recalibrate_error_m": recal_err}
     if held is not None:
         refit, T2 = _apply(model, data, g, delta), held[2]
-        out = {**out, "setup_held": True}
-    elif det:
-        refit, T2 = _refit(model, data, Q, g, delta)
-    if refit is not None:
-        out = {**out, "model": refit}
-    return CheckResult(verdict="robot_changed", group=g.name, change=delta, std=std, change_tcp_m=tcp_m,
-                       determined=det, refit_chi2=T2, message=f"{g.name} changed",
-                       time_s=time.perf_counter() - t0, **out)
-
-
-def _setup_reach(cm: CalibratedModel, crit: CheckPower, F: np.ndarray, E_w: np.ndarray, qw: np.ndarray) -> dict:
-    """What the registration on the check rows leaves at the working configurations: its own σ there (RMS 3-D, m),
-    the model's honest σ there, whether the first is at most :data:`SETUP_FACTOR` × the second, the TCP σ per
-    working configuration (:func:`~pin_kpi_oed.calibrated.tcp_sigma.tcp_sigma`, the one σ at the TCP, its σ factor
-    left out) with the registration's share, and the part of it from the joint-placement parameters held at nominal
-    (m)."""
-    s = crit.setup
-    Ms = F[:, s].T @ F[:, s]
-    sig_w = _honest(cm, qw, None, CHECK_STATION)[1]
-    honest = float(np.sqrt(np.mean(np.sum(sig_w ** 2, axis=1))))
-    reg = registration_sigma_m(E_w[:, s], Ms)
-    C = E_w[:, s] @ np.linalg.pinv(Ms, hermitian=True) @ E_w[:, s].T
-    per = np.sum(np.diag(C).reshape(-1, 3), axis=1)
-    st = dataclasses.replace(cm.setups[CHECK_STATION], sigma_scale=1.0)
-    at = tcp_sigma(cm.with_setup(CHECK_STATION, st), qw, station=CHECK_STATION)
-    tcp = np.sqrt(at.sigma_m ** 2 + np.maximum(per, 0.0))
-    return {"reg": reg, "honest": honest, "determined": bool(reg <= SETUP_FACTOR * honest), "tcp": tcp,
-            "held": at.held_sigma_m}
+        out["setup_held"] = True
+    else:
+        refit, T2 = _refit(model, data, rows.Q, g, delta)
+    out = {**out, "model": refit, "refit_chi2": T2}
+    verdict = "robot_changed" if refit_err <= (1.0 + REFIT_MARGIN) * recal_err else "recalibrate"
+    return CheckResult(verdict=verdict, message=f"{g.name} changed", time_s=time.perf_counter() - t0, **out)
 
 
 def check_powers(crit: CheckPower, F: np.ndarray, tolerance_m: float, alpha: float, null: CheckNull | None = None
@@ -387,61 +422,21 @@ def check_powers(crit: CheckPower, F: np.ndarray, tolerance_m: float, alpha: flo
     return {g.name: law.power(tolerance_m ** 2 * u, dof, alpha) for g, u in zip(crit.groups, mu)}
 
 
-def check_null(model: CalibratedModel) -> CheckNull:
-    """The law of the check's statistic under no change (:class:`~pin_kpi_oed.oed.check_power.CheckNull`): the
-    standardised RMS and excess kurtosis of the model's own K-fold held-out errors (a Gaussian-process discrepancy's
-    ``cv``), else the plain χ²."""
-    d = model.discrepancy
-    cv = d.cv if d is not None and d.kind != "white" else {}
-    f, k = cv.get("z_rms"), cv.get("z_kurtosis")
-    ok = [v is not None and np.isfinite(v) for v in (f, k)]
-    return CheckNull(factor=float(np.clip(f, 0.5, 3.0)) if ok[0] else 1.0,
-                     kurtosis=float(np.clip(k, 0.0, 10.0)) if ok[1] else 0.0)
-
-
-def _joint_honest(cm: CalibratedModel, Q: np.ndarray, data: MeasurementSet) -> tuple[np.ndarray, np.ndarray]:
-    """Predictions (m, 3) and the joint honest covariance (3m, 3m) of the check station's rows, its σ factor left
-    out (:func:`~pin_kpi_oed.calibrated.prediction_sigma.predictive_covariance`)."""
-    from pin_kpi_oed.calibrated.prediction_sigma import predictive_covariance
-
-    st = dataclasses.replace(cm.setups[CHECK_STATION], sigma_scale=1.0)
-    return predictive_covariance(cm.with_setup(CHECK_STATION, st), Q, data, CHECK_STATION)
-
-
-def _whiten(Sigma: np.ndarray, r: np.ndarray, J: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Residuals r (m, 3) and Jacobian J (m, 3, n) whitened by the joint covariance: L⁻¹ r, L⁻¹ J (Σ = L Lᵀ)."""
-    import scipy.linalg as sla
-
-    L = np.linalg.cholesky(Sigma + 1e-12 * np.mean(np.diag(Sigma)) * np.eye(len(Sigma)))
-    z = sla.solve_triangular(L, r.reshape(-1), lower=True)
-    F = sla.solve_triangular(L, J.reshape(len(Sigma), -1), lower=True)
-    return z, F
-
-
-def _project_out(z: np.ndarray, G: np.ndarray) -> np.ndarray:
-    """z minus its least-squares fit by the columns G: the whitened residuals after the set-up's generalised
-    least-squares re-registration (the registration itself fits without the rows' correlations)."""
-    x, *_ = np.linalg.lstsq(G, z, rcond=None)
-    return z - G @ x
-
-
-def _register(model: CalibratedModel, data: MeasurementSet) -> CalibratedModel:
-    """The set-up registered on the check rows (reflector held), fitted to the model's full prediction (geometry,
-    effects and the discrepancy's mean, as :func:`~pin_kpi_oed.upkeep.transfer.register_setup` does)."""
-    return register_setup(model, data, station=CHECK_STATION, hold_reflector=True).model
-
-
-def _setup_change(T_old: np.ndarray, T_new: np.ndarray, G: np.ndarray, cm: CalibratedModel, Q: np.ndarray,
-                  data: MeasurementSet) -> tuple[float, float]:
-    """RMS displacement (m) of the check points between the old and the new set-up, and the Mahalanobis distance
-    of the change under the registration's covariance (GᵀG)⁻¹ (G the whitened set-up columns)."""
-    d = pin.log6(pin.SE3(T_old).inverse() * pin.SE3(T_new)).vector
-    X = cm.predict(Q, data, station=CHECK_STATION)
-    Rn, tn = T_new[:3, :3], T_new[:3, 3]
-    base = (X - tn) @ Rn                                      # points in the robot base frame
-    Xo = base @ T_old[:3, :3].T + T_old[:3, 3]
-    shift = float(np.sqrt(np.mean(np.sum((X - Xo) ** 2, axis=1))))
-    return shift, float(d @ (G.T @ G) @ d)
+def verdict_powers(crit: CheckPower, F: np.ndarray, tolerance_m: float, alpha: float, null: CheckNull,
+                   factor: float = 1.5) -> dict:
+    """Group -> the probability that the verdict says *the robot changed* for the group's weakest change of
+    ``factor`` × τ at the TCP: T above its critical value at α' (Šidák) and the change shown above τ (its TCP size
+    less z₁₋ₐ times its σ, 1/√μ_g scaled by the held-out standardised RMS, above τ); the product of the two (m)."""
+    a1 = sidak(alpha)
+    dof = F.shape[0] - crit.setup.size
+    mu = np.maximum(crit.mu(F.T @ F)[0], 1e-300)
+    z = float(stats.norm.isf(alpha))
+    out = {}
+    for g, u in zip(crit.groups, mu):
+        detect = null.power((factor * tolerance_m) ** 2 * u, dof, a1)
+        sd = null.factor / np.sqrt(u)
+        out[g.name] = float(detect * stats.norm.cdf((factor - 1.0) * tolerance_m / sd - z))
+    return out
 
 
 def _name_group(crit: CheckPower, F: np.ndarray, z: np.ndarray, dof: int, alpha: float, null: CheckNull) -> dict:
@@ -475,12 +470,12 @@ def _name_group(crit: CheckPower, F: np.ndarray, z: np.ndarray, dof: int, alpha:
 def _refit(model: CalibratedModel, data: MeasurementSet, Q: np.ndarray, g: CheckGroup, delta: np.ndarray
            ) -> tuple[CalibratedModel, float]:
     """The model with the group's change applied and the set-up re-registered on the check rows; its χ²."""
-    reg = _register(_apply(model, data, g, delta), data)
-    Y, Sigma = _joint_honest(reg, Q, data)
+    reg = registered(_apply(model, data, g, delta), data)
+    Y, L = joint_honest_factor(reg, Q, data)
     wm, p = reg.station_model(CHECK_STATION)
-    z, F = _whiten(Sigma, data.position_m - Y, wm.jacobian(p, Q)[:, :3, :])
-    L = wm.layout
-    z = _project_out(z, F[:, L.tracker.start:L.tracker.stop])
+    z, F = whiten(L, data.position_m - Y, wm.jacobian(p, Q)[:, :3, :])
+    lay = wm.layout
+    z = project_out(z, F[:, lay.tracker.start:lay.tracker.stop])
     return reg, float(z @ z)
 
 

@@ -8,6 +8,11 @@ tracker line of sight and incidence: :func:`~pin_kpi_oed.cell.sampling.random_fe
 selection (a ridge on the first poses, until the set-up is determined) and an exchange pass, with the rank-3
 information of every candidate computed once. The poses are whitened by the model's honest σ (the median over the
 pool of :meth:`~pin_kpi_oed.calibrated.model_file.CalibratedModel.predict_with_sigma`).
+
+The design is sized for the check's verdict, not only for its test: *the robot changed* needs the test T to reject
+and the change to be shown above the tolerance (:func:`~pin_kpi_oed.upkeep.check.verdict_powers`). The design states
+that power against the weakest change of :data:`SIZE_FACTOR` × τ of each group, and the fewest poses of the greedy
+order that reach :data:`TARGET_POWER` (``poses_needed``; 0 when :data:`MAX_POSES` do not).
 """
 
 from __future__ import annotations
@@ -18,13 +23,19 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from pin_kpi_oed.errors import IdentifiabilityError, InputError
-from pin_kpi_oed.upkeep.check import check_criterion, check_null, check_powers
+from pin_kpi_oed.upkeep.check import check_criterion, check_null, check_powers, verdict_powers
 from pin_kpi_oed.calibrated.model_file import CalibratedModel
 from pin_kpi_oed.oed.check_power import CheckPower
 from pin_kpi_oed.oed.selection_result import PoolSelection
 from pin_kpi_oed.results import Result
 
-__all__ = ["CheckDesign", "design_check", "check_pool", "select_check"]
+__all__ = ["CheckDesign", "design_check", "check_pool", "select_check", "SIZE_FACTOR", "TARGET_POWER"]
+
+#: The change (× the tolerance) the verdict's power is stated against, and the power the design is sized for.
+SIZE_FACTOR = 1.5
+TARGET_POWER = 0.95
+#: The most poses the sizing tries.
+MAX_POSES = 40
 
 
 @dataclass(kw_only=True)
@@ -37,6 +48,10 @@ class CheckDesign(Result):
         power_random: the same for m seeded random poses of the same pool (the median over ``n_random`` draws).
         tolerance_m, alpha: what the power is stated for; sigma_m: the honest σ per axis the poses are whitened with.
         feasible_in: the cell the pool is feasible in, or "" (joint limits only).
+        verdict_power: group -> probability that the verdict says *the robot changed* for the group's weakest change
+            of :data:`SIZE_FACTOR` × ``tolerance_m`` at the TCP.
+        poses_needed: the fewest poses of the greedy order whose weakest verdict power reaches :data:`TARGET_POWER`
+            (0: not within :data:`MAX_POSES` or the pool).
     """
 
     Q: np.ndarray
@@ -47,6 +62,8 @@ class CheckDesign(Result):
     alpha: float
     sigma_m: np.ndarray
     feasible_in: str = ""
+    verdict_power: dict = field(default_factory=dict)
+    poses_needed: int = 0
 
     def summary(self) -> str:
         """One line (mm)."""
@@ -55,13 +72,24 @@ class CheckDesign(Result):
         where = f"feasible in {self.feasible_in}" if self.feasible_in else "within the joint limits (no cell given)"
         return (f"check design: {len(self.Q)} poses ({where}); power against a {self.tolerance_m * 1e3:.3g} mm change "
                 f"at the TCP (alpha {self.alpha:g}): weakest {self.power[w]:.2f} ({w}); {len(self.Q)} random poses: "
-                f"{self.power_random[wr]:.2f} ({wr})")
+                f"{self.power_random[wr]:.2f} ({wr})" + self.sizing_text())
+
+    def sizing_text(self) -> str:
+        """The verdict's power against a change of 1.5 × τ and the poses it needs."""
+        if not self.verdict_power:
+            return ""
+        w = min(self.verdict_power, key=self.verdict_power.get)
+        need = (f"{self.poses_needed} poses reach {TARGET_POWER:.2f}" if self.poses_needed
+                else f"more than {MAX_POSES} poses would be needed for {TARGET_POWER:.2f}")
+        return (f"; the verdict says 'the robot changed' for a {SIZE_FACTOR:g} x tolerance change with probability "
+                f"{self.verdict_power[w]:.2f} (weakest: {w}); {need}")
 
     def to_dict(self) -> dict:
         """Plain JSON-able dict (SI units)."""
         return {**self.result_dict(), "q_check": np.asarray(self.Q).tolist(), "power": self.power,
                 "power_random": self.power_random, "tolerance_m": self.tolerance_m, "alpha": self.alpha,
                 "sigma_m": np.asarray(self.sigma_m).tolist(), "feasible_in": self.feasible_in,
+                "verdict_power": self.verdict_power, "poses_needed": self.poses_needed,
                 "selection": self.selection.to_dict()}
 
 
@@ -81,9 +109,10 @@ def check_pool(model: CalibratedModel, n: int, seed: int, cell=None) -> np.ndarr
     return random_feasible(CollisionModel(cell), n, rng, cell.max_random_tries)[0]
 
 
-def select_check(crit: CheckPower, Fp: np.ndarray, m: int, seed: int = 0) -> PoolSelection:
+def select_check(crit: CheckPower, Fp: np.ndarray, m: int, seed: int = 0, exchange: bool = True) -> PoolSelection:
     """m of the candidates (whitened Jacobians Fp (N, 3, np)) minimising the check criterion: greedy forward
-    selection (a ridge of 1e-6 of the mean information until the set-up is determined), one exchange pass.
+    selection (a ridge of 1e-6 of the mean information until the set-up is determined), one exchange pass (unless
+    ``exchange`` is False: the greedy order).
 
     Raises:
         InputError: m larger than the pool or below 3.
@@ -112,7 +141,7 @@ def select_check(crit: CheckPower, Fp: np.ndarray, m: int, seed: int = 0) -> Poo
         M = M + Mi[k]
         path.append(float(np.min(vals)))
     cur, swaps = phi(M), 0
-    for pos in range(m):
+    for pos in range(m if exchange else 0):
         base = M - Mi[chosen[pos]]
         vals = np.array([phi(base + Mi[i]) if i not in chosen else np.inf for i in range(N)])
         if vals.min() < cur:
@@ -125,7 +154,7 @@ def select_check(crit: CheckPower, Fp: np.ndarray, m: int, seed: int = 0) -> Poo
 
 def design_check(model: CalibratedModel, *, m: int = 10, tolerance_m: float = 1e-4, alpha: float = 0.05,
                  cell=None, pool_size: int = 400, seed: int = 0, station: str | None = None,
-                 q_work: np.ndarray | None = None, n_random: int = 20) -> CheckDesign:
+                 q_work: np.ndarray | None = None, n_random: int = 20, size: bool = True) -> CheckDesign:
     """Design a check of ``m`` poses (module docstring).
 
     Args:
@@ -137,6 +166,7 @@ def design_check(model: CalibratedModel, *, m: int = 10, tolerance_m: float = 1e
         pool_size: candidate configurations; seed: their seed and the selection's.
         q_work: working configurations (t, n) rad; default the model's, else the cell's.
         n_random: random designs of m pool poses the power is compared with.
+        size: also find the poses the verdict needs (``poses_needed``; False: 0, not computed).
 
     Raises:
         InputError: no working configurations, m out of range, a tolerance ≤ 0.
@@ -162,7 +192,26 @@ def design_check(model: CalibratedModel, *, m: int = 10, tolerance_m: float = 1e
     rand = [check_powers(crit, Fp[rng.choice(len(Q_pool), m, replace=False)].reshape(-1, Fp.shape[2]),
                          tolerance_m, alpha, null) for _ in range(n_random)]
     power_random = {k: float(np.median([r[k] for r in rand])) for k in power}
+    vp = verdict_powers(crit, Fp[sel.indices].reshape(-1, Fp.shape[2]), tolerance_m, alpha, null, SIZE_FACTOR)
     return CheckDesign(Q=Q_pool[sel.indices], selection=sel, power=power, power_random=power_random,
-                       tolerance_m=tolerance_m, alpha=alpha, sigma_m=sigma,
+                       tolerance_m=tolerance_m, alpha=alpha, sigma_m=sigma, verdict_power=vp,
+                       poses_needed=_poses_needed(crit, Fp, tolerance_m, alpha, null, seed) if size else 0,
                        feasible_in=getattr(cell, "name", "") if cell is not None else "", success=sel.success,
                        status="designed", message=sel.message, time_s=time.perf_counter() - t0)
+
+
+def _poses_needed(crit: CheckPower, Fp: np.ndarray, tolerance_m: float, alpha: float, null, seed: int) -> int:
+    """The fewest poses of the greedy order (no exchange) whose weakest verdict power reaches :data:`TARGET_POWER`
+    (0 when :data:`MAX_POSES` or the pool do not)."""
+    n = min(MAX_POSES, len(Fp))
+    if n < 3:
+        return 0
+    order = select_check(crit, Fp, n, seed, exchange=False).indices
+    for k in range(3, n + 1):
+        F = Fp[order[:k]].reshape(-1, Fp.shape[2])
+        try:
+            if min(verdict_powers(crit, F, tolerance_m, alpha, null, SIZE_FACTOR).values()) >= TARGET_POWER:
+                return k
+        except IdentifiabilityError:
+            continue
+    return 0

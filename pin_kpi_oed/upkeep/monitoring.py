@@ -30,7 +30,7 @@ import pinocchio as pin
 
 from pin_kpi_oed.data.measurements import MeasurementSet
 from pin_kpi_oed.errors import InputError
-from pin_kpi_oed.upkeep.check import CHECK_STATION, check_calibration
+from pin_kpi_oed.upkeep.check import CHECK_STATION, EXIT_CODES, check_calibration
 from pin_kpi_oed.calibrated.model_file import CalibratedModel
 from pin_kpi_oed.identification.problem import align_data
 from pin_kpi_oed.upkeep.setup_filter import SetupFilter
@@ -40,6 +40,12 @@ __all__ = ["Monitor", "MonitorLog", "monitor"]
 
 #: Verdicts after which the monitor asks for the check design's poses.
 ASK_VERDICTS = ("robot_changed", "discrepancy_level", "recalibrate")
+#: The band of an honest standardised RMS; outside it (over the replay, or a block of :data:`BLOCK_ROWS` rows) a
+#: warning line names the likely cause.
+HONEST_BAND = (0.67, 1.5)
+BLOCK_ROWS = 1000
+#: Rows whose time goes backwards or repeats named one by one before the rest are only counted.
+TIME_LINES = 3
 
 
 @dataclass(kw_only=True)
@@ -68,6 +74,16 @@ class MonitorLog(Result):
     drift_level_m_per_sqrt_s: float = 0.0
     outliers: int = 0
     time_per_row_s: float = float("nan")
+    time_backwards: int = 0
+    time_repeated: int = 0
+    work_source: str = ""
+
+    def exit_code(self, fail_on: int = 3) -> int:
+        """The largest exit code of the checks' verdicts that is at least ``fail_on`` (1: changed and re-calibrate;
+        3: re-calibrate only; above 3: never), else 0 (:data:`~pin_kpi_oed.upkeep.check.EXIT_CODES`)."""
+        codes = [EXIT_CODES[b["verdict"]] for b in self.batches]
+        codes = [c for c in codes if c >= fail_on]
+        return max(codes) if codes else 0
 
     @property
     def z_rms(self) -> float:
@@ -89,7 +105,9 @@ class MonitorLog(Result):
                 "error_m": self.error_m.tolist(), "sigma_m": self.sigma_m.tolist(), "batches": self.batches,
                 "asks": [{**a, "poses": np.asarray(a["poses"]).tolist()} for a in self.asks],
                 "events": self.events, "drift_level_m_per_sqrt_s": self.drift_level_m_per_sqrt_s,
-                "outliers": self.outliers, "time_per_row_s": self.time_per_row_s}
+                "outliers": self.outliers, "time_per_row_s": self.time_per_row_s,
+                "time_backwards": self.time_backwards, "time_repeated": self.time_repeated,
+                "work_source": self.work_source, "exit_code": self.exit_code()}
 
 
 class Monitor:
@@ -131,7 +149,15 @@ class Monitor:
         self.asking = False
         self.design_Q: np.ndarray | None = None
         self.filter: SetupFilter | None = None
+        self.extrapolated: list = []
+        self.t_last: float | None = None
+        self.t_first: float | None = None
+        self.t_constant = False
+        self.time_counts = {"backwards": 0, "repeated": 0}
+        self.blocks_done = 0
         self._use(model, model.station(station))
+        if self.work_source:
+            self._event(f"monitor: {self.work_source}")
 
     def _use(self, model: CalibratedModel, label: str) -> None:
         """Follow ``model``'s station ``label``: its measurement model, the set-up Jacobian's columns, the honest σ at
@@ -141,8 +167,7 @@ class Monitor:
         L = self.wm.layout
         self.tcols = np.arange(L.tracker.start, L.tracker.stop)
         self.filter = None
-        qw = model.q_work
-        self.qw = None if qw is None else np.atleast_2d(qw)
+        self.qw, self.work_source = working_configurations(model, self.seed)
         if self.qw is not None:
             s = model.predict_with_sigma(self.qw, station=label)[1]
             self.sigma_w = float(np.sqrt(np.mean(np.sum(s ** 2, axis=1))))
@@ -158,22 +183,87 @@ class Monitor:
         self.busy_s += time.perf_counter() - t
 
     def flush(self) -> None:
-        """Predict and use the rows that wait for a full check (the end of a replay)."""
+        """Predict and use the rows that wait for a full check (the end of a replay); a standardised RMS over the
+        replay outside :data:`HONEST_BAND` is a warning line with its likely cause; the rows whose time went
+        backwards or repeated are counted."""
         if self.all is not None and self.next < len(self.all):
             t = time.perf_counter()
             self._predict(self.all.subset(np.arange(self.next, len(self.all))))
             self.next = len(self.all)
             self.busy_s += time.perf_counter() - t
+        if self.z:
+            self._band(np.asarray(self.z), f"over the {self.seen} rows")
+        b, r = self.time_counts["backwards"], self.time_counts["repeated"]
+        if b or r:
+            self._event(f"warning: {b} row(s) whose time went backwards and {r} whose time repeated the previous row's "
+                        "(the set-up filter took no drift between them)")
+
+    def _band(self, z: np.ndarray, where: str) -> None:
+        """A warning line when the standardised RMS of ``z`` lies outside :data:`HONEST_BAND`, with its likely cause."""
+        rms = float(np.sqrt(np.mean(z ** 2)))
+        if HONEST_BAND[0] <= rms <= HONEST_BAND[1]:
+            return
+        self._event(f"warning: standardised RMS {rms:.2f} {where}, outside the honest {HONEST_BAND[0]}-"
+                    f"{HONEST_BAND[1]}: {self._cause(rms)}")
+
+    def _cause(self, rms: float) -> str:
+        """The likely cause of an out-of-band standardised RMS, from what the rows show."""
+        err = np.asarray(self.err)
+        axis_rms = float(np.sqrt(np.mean(err ** 2) / 3.0))
+        if rms < HONEST_BAND[0]:
+            noise = float(np.sqrt(np.mean(np.square(self.model.noise.sigma_xyz_m))))
+            if noise > 0.8 * axis_rms:
+                return (f"the sigma is too large: the model's stated noise {noise * 1e3:.3f} mm per axis (identify "
+                        f"--sigma) is above the rows' RMS error {axis_rms * 1e3:.3f} mm per axis; calibrate with the "
+                        "tracker's own sigma (or without --sigma)")
+            return (f"the sigma is too large: the predicted sigma (mean {np.mean(self.sig) * 1e3:.3f} mm) is above the "
+                    f"errors (RMS {np.sqrt(np.mean(err ** 2)) * 1e3:.3f} mm): the discrepancy's level or the "
+                    "parameters' covariance is overstated for these rows")
+        if self.extrapolated and np.mean(self.extrapolated) > 0.5:
+            return ("most rows lie outside the training's joint-space coverage (the sigma there extrapolates): "
+                    "measure poses there (design --given)")
+        if self.filter is not None and self.filter.level_m_per_sqrt_s >= max(self.filter.levels):
+            return "the set-up drifts faster than the set-up filter's largest level follows (a tracker knocked?)"
+        if any(b["verdict"] not in ("holds", "setup_moved") for b in self.batches):
+            return "the checks say the robot or the discrepancy's level changed: measure check design's poses"
+        return ("the rows' errors exceed the model's sigma everywhere alike: the robot or the discrepancy's level "
+                "changed since the calibration, or the rows are of another tool or tracker")
+
+    def _times(self, data: MeasurementSet) -> list:
+        """The rows' times for the set-up filter (None: one second per row), rows whose time goes backwards or repeats
+        named (the first :data:`TIME_LINES`, then counted); a time column constant over 10 rows is taken as none."""
+        if data.time_s is None:
+            return [None] * len(data)
+        out = []
+        for i, t in enumerate(np.asarray(data.time_s, float)):
+            row = self.seen + i + 1
+            if self.t_first is None:
+                self.t_first = t
+            if self.t_last is not None and t <= self.t_last:
+                kind = "backwards" if t < self.t_last else "repeated"
+                self.time_counts[kind] += 1
+                if sum(self.time_counts.values()) <= TIME_LINES:
+                    what = "goes backwards from" if kind == "backwards" else "repeats"
+                    self._event(f"warning: row {row}: its time {t:.6g} s {what} the previous row's {self.t_last:.6g} s "
+                                "(no drift taken between them)")
+            if not self.t_constant and row >= 10 and t == self.t_first and self.time_counts["repeated"] >= row - 1:
+                self.t_constant = True
+                self._event(f"warning: row {row}: the time column is constant ({t:.6g} s): one second per row is "
+                            "taken for the set-up's drift")
+            self.t_last = t if self.t_last is None else max(self.t_last, t)
+            out.append(None if self.t_constant else t)
+        return out
 
     def _predict(self, data: MeasurementSet) -> None:
         """Each row predicted with the filter's state, then used by the filter."""
         Q = align_data(self.model.robot, data)
-        Y0, s0, _ = self.model.predict_with_sigma(Q, data, station=self.label)
+        Y0, s0, extra = self.model.predict_with_sigma(Q, data, station=self.label)
+        self.extrapolated += np.asarray(extra, bool).tolist()
         if self.filter is None:
             self.filter = SetupFilter(lever_m=float(np.median(np.linalg.norm(data.position_m, axis=1))),
                                       forgetting=self.forgetting)
         G = self.wm.jacobian(self.p, Q)[:, :3][:, :, self.tcols]
-        times = data.time_s if data.time_s is not None else [None] * len(data)
+        times = self._times(data)
         for i in range(len(data)):
             self.filter.advance(times[i])
             mu, C = self.filter.predict(G[i], s0[i])
@@ -185,6 +275,10 @@ class Monitor:
             if not self.filter.update(data.position_m[i] - Y0[i], G[i], s0[i]):
                 self.rejected.add(self.seen + i)
         self.seen += len(data)
+        while self.seen >= (self.blocks_done + 1) * BLOCK_ROWS:
+            a = self.blocks_done * BLOCK_ROWS
+            self._band(np.asarray(self.z[a:a + BLOCK_ROWS]), f"in rows {a + 1}-{a + BLOCK_ROWS}")
+            self.blocks_done += 1
 
     def _chunk(self, idx: np.ndarray) -> None:
         assert self.all is not None
@@ -192,7 +286,9 @@ class Monitor:
         self.window = (self.window + idx.tolist())[-self.max_window:]
         win = self.all.subset(np.asarray(self.window))
         res = check_calibration(self.model, win, station=self.label, alpha=self.alpha, tolerance_m=self.tolerance_m,
-                                propose=False)
+                                q_work=self.qw, propose=False)
+        if self.qw is None:
+            res.power = {}      # no working configurations and no training region: no power to state
         if not res.setup_determined and len(win) < self.max_window:
             return
         self.window = []
@@ -242,7 +338,7 @@ class Monitor:
             from pin_kpi_oed.upkeep.check_design import design_check
 
             self.design_Q = design_check(self.model, m=10, tolerance_m=self.tolerance_m, alpha=self.alpha,
-                                         seed=self.seed, station=self.label, n_random=1).Q
+                                         seed=self.seed, station=self.label, q_work=self.qw, n_random=1).Q
         self.asks.append({"row": int(self.seen), "reason": reason, "poses": self.design_Q})
         what = (f"measure the {len(self.design_Q)} poses of 'check design' (in the JSON log)" if len(self.design_Q)
                 else "measure the poses of 'check design' (the model has no working configurations: give them)")
@@ -267,6 +363,8 @@ class Monitor:
                           asks=self.asks, events=self.events, model=cur,
                           drift_level_m_per_sqrt_s=self.filter.level_m_per_sqrt_s if self.filter else 0.0,
                           outliers=self.filter.outliers if self.filter else 0,
+                          time_backwards=self.time_counts["backwards"], time_repeated=self.time_counts["repeated"],
+                          work_source=self.work_source,
                           time_per_row_s=self.busy_s / max(self.seen, 1), success=True, status="monitored",
                           message=f"{len(self.batches)} checks of {self.every} rows or more",
                           time_s=time.perf_counter() - self.t0)
@@ -294,3 +392,19 @@ def monitor(model: CalibratedModel, data: MeasurementSet, **options) -> MonitorL
     mon.feed(data)
     mon.flush()
     return mon.log()
+
+
+def working_configurations(model: CalibratedModel, seed: int = 0, n: int = 20) -> tuple[np.ndarray | None, str]:
+    """The configurations the monitor's checks state their TCP σ and power at, and a line saying where they come
+    from when not the model's own working configurations ("" then): without them the training's region (``n``
+    seeded configurations of the training's joint-space coverage), else None (no power is stated)."""
+    if model.q_work is not None:
+        return np.atleast_2d(model.q_work), ""
+    cov = model.coverage if model.coverage is not None else getattr(model.discrepancy, "coverage", None)
+    Z = getattr(cov, "Z", None)
+    if Z is None or len(Z) == 0:
+        return None, ("the model has no working configurations and no training region: the checks state no power "
+                      "(give working configurations to identify, or a cell)")
+    pick = np.sort(np.random.default_rng(seed).choice(len(Z), min(n, len(Z)), replace=False))
+    return np.asarray(Z)[pick], (f"the model has no working configurations: the checks state the TCP sigma and power "
+                                 f"over the training's region ({len(pick)} seeded configurations of its coverage)")
