@@ -1,0 +1,54 @@
+"""Hostile inputs of the tool-point surfaces: hand-edited truth files, another robot's poses, options that would
+do nothing, outputs that cannot be written, industrial-arm URDFs (a joint range of a few turns, a robot link
+named in a cell's obstacles) and the frames of ``compensate``.
+
+``build_friction_inputs(folder)`` adds their inputs to the shared folder of :mod:`tests.hostile.cases`;
+``friction_cases()`` lists the cases.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import io
+import json
+from pathlib import Path
+
+
+def build_friction_inputs(d: Path) -> None:
+    """Add this module's inputs to ``d`` (needs ``d.json``, ``m.json``; about 2 s)."""
+    from pin_kpi_oed.cli.app import main
+
+    with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(io.StringIO()):
+        assert main(["simulate", "--robot", "ur10", "--n", "5", "--seed", "1", "--out", str(d / "t_ur10.csv"),
+                     "--truth", str(d / "t_ur10.json")]) == 0
+        assert main(["simulate", "--robot", "ur5", "--n", "5", "--seed", "1", "--out", str(d / "p_ur5.csv")]) == 0
+    truth = json.loads((d / "t_ur10.json").read_text())
+
+    def edited(name: str, edit) -> None:
+        t = json.loads(json.dumps(truth))
+        edit(t)
+        (d / name).write_text(json.dumps(t))
+
+    edited("t_base5mm.json", lambda t: t["tracker_T_base"][0].__setitem__(3, t["tracker_T_base"][0][3] + 0.005))
+    edited("t_refl.json", lambda t: t["reflector_m"].__setitem__(2, t["reflector_m"][2] + 0.005))
+    edited("t_joint.json", lambda t: t["joint_placements"][2][1].__setitem__(3, t["joint_placements"][2][1][3] + 5e-3))
+    edited("t_joint_short.json", lambda t: t["joint_placements"].pop())
+
+
+def friction_cases() -> list:
+    """The cases of this module (:class:`tests.hostile.cases.Case`)."""
+    from tests.hostile.cases import Case
+
+    again = "--poses {d}/t_ur10.csv --out {d}/o.csv"
+    c = [
+        # a truth file is p_raw with its nominal set-up: a derived field edited alone is refused, named
+        Case("f-truth-tracker-edited", "simulate --truth {d}/t_base5mm.json " + again, "'tracker_T_base' disagrees"),
+        Case("f-truth-reflector-edited", "simulate --truth {d}/t_refl.json " + again, "'reflector_m' disagrees"),
+        Case("f-truth-joint-placement-edited", "simulate --truth {d}/t_joint.json " + again,
+             "'joint_placements[2]' disagrees"),
+        Case("f-truth-joint-placements-short", "simulate --truth {d}/t_joint_short.json " + again,
+             "'joint_placements' is malformed"),
+        Case("f-truth-ur10-at-ur5-poses", "simulate --truth {d}/t_ur10.json --poses {d}/p_ur5.csv --out {d}/o.csv",
+             "robot 'ur5', but the true robot of --truth"),
+    ]
+    return c
