@@ -33,6 +33,21 @@ def build_friction_inputs(d: Path) -> None:
     edited("t_refl.json", lambda t: t["reflector_m"].__setitem__(2, t["reflector_m"][2] + 0.005))
     edited("t_joint.json", lambda t: t["joint_placements"][2][1].__setitem__(3, t["joint_placements"][2][1][3] + 5e-3))
     edited("t_joint_short.json", lambda t: t["joint_placements"].pop())
+    design = json.loads((d / "d.json").read_text())
+
+    def design_edit(name: str, where: str, edit) -> None:
+        e = json.loads(json.dumps(design))
+        edit(e["cell"] if where == "cell" else e)
+        (d / name).write_text(json.dumps(e))
+
+    def stretch(o):  # the rotation block scaled by 1.5: no rotation
+        o["tracker_T_base"] = [[v * 1.5 if i < 3 and j < 3 else v for j, v in enumerate(r)]
+                               for i, r in enumerate(o["tracker_T_base"])]
+
+    design_edit("d_cell_tracker_stretched.json", "cell", stretch)
+    design_edit("d_tracker_stretched.json", "top", stretch)
+    design_edit("d_cell_tracker_5mm.json", "cell", lambda o: o["tracker_T_base"][0].__setitem__(
+        3, o["tracker_T_base"][0][3] + 0.005))
 
 
 def friction_cases() -> list:
@@ -50,5 +65,14 @@ def friction_cases() -> list:
              "'joint_placements' is malformed"),
         Case("f-truth-ur10-at-ur5-poses", "simulate --truth {d}/t_ur10.json --poses {d}/p_ur5.csv --out {d}/o.csv",
              "robot 'ur5', but the true robot of --truth"),
+        # a design's tracker pose: a rigid transform, the one of the cell's world frames
+        Case("f-view-cell-tracker-not-rotation", "view {d}/d_cell_tracker_stretched.json --html {d}/o.html --no-open",
+             "cell.tracker_T_base: the rotation block is not a proper rotation"),
+        Case("f-view-tracker-not-rotation", "view {d}/d_tracker_stretched.json --html {d}/o.html --no-open",
+             "tracker_T_base: the rotation block is not a proper rotation"),
+        Case("f-view-cell-tracker-edited", "view {d}/d_cell_tracker_5mm.json --html {d}/o.html --no-open",
+             "cell.tracker_T_base disagrees with cell.W_T_tracker"),
+        Case("f-evaluate-tracker-not-rotation", "evaluate {d}/d_tracker_stretched.json",
+             "tracker_T_base: the rotation block"),
     ]
     return c
