@@ -83,8 +83,10 @@ def run(args: argparse.Namespace) -> int:
     from pin_kpi_oed.compensation.compensator import (STATUSES, CompensationOptions, compensate,
                                                        compensate_program, write_compensation)
     from pin_kpi_oed.calibrated.model_file import load_model_file
+    from pin_kpi_oed.validation.options import check_tool_length
 
     model = load_model_file(args.model)
+    check_tool_length(args, model.pose6d, args.model)
     robot = model.robot
     cell = None
     if args.cell:  # collisions checked in it; its working configurations when the model has none

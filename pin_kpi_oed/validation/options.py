@@ -20,7 +20,7 @@ from pin_kpi_oed.validation.paths import check_figure_suffix, check_outputs
 from pin_kpi_oed.validation.units import MAX_TOOL_OFFSET_M, check_offset_m, check_sigma_m, check_sigma_rad
 
 __all__ = ["join_negative_values", "check_args", "RULES", "OUTPUTS", "INPUTS", "FOLDERS", "FIGURES", "floats",
-           "check_discrepancy_options", "check_ignored_options", "IGNORED"]
+           "check_discrepancy_options", "check_ignored_options", "IGNORED", "check_tool_length"]
 
 
 def floats(text: Any, what: str) -> list[float]:
@@ -345,6 +345,15 @@ IGNORED: dict[str, list[tuple[str, Callable[[argparse.Namespace], bool], str]]] 
                  ("--term-prior", lambda a: _effects(a) is None or bool({"transmission_error", "link_bending"}
                                                                           & _effects(a)),
                   "is a prior on transmission_error / link_bending terms: add one of them to --effects")],
+    "export-model": [("--tcp", lambda a: getattr(a, "format", None) == "urdf" and not getattr(a, "no_frames", False),
+                      "places the URDF's 'tcp' frame: only with --format urdf and its frames (without --no-frames)"),
+                     ("--no-frames", lambda a: getattr(a, "format", None) == "urdf",
+                      "leaves the set-up frames out of a URDF; a UR kinematics file has none: only with --format "
+                      "urdf")],
+    "monitor": [(opt, lambda a: bool(getattr(a, "follow", False)),
+                 f"{does} while following a growing file: add --follow") for opt, does in
+                (("--poll", "sets the seconds between reads"),
+                 ("--idle", "sets the seconds without a new row to stop"))],
 }
 
 
@@ -357,6 +366,24 @@ def check_ignored_options(args: argparse.Namespace) -> None:
     for opt, acts, needs in IGNORED.get(getattr(args, "command", None), []):
         if _given(args, opt) and not acts(args):
             raise InputError(f"{opt}: {needs}, or drop {opt} (as given it would do nothing)")
+
+
+def check_tool_length(args: argparse.Namespace, pose6d: bool, model: str) -> None:
+    """``--tool-length`` (``predict``, ``compensate``) acts on a 6-D model's orientation σ only: refused, when given, on
+    a position-only model (whose file the command has read).
+
+    Args:
+        args: the parsed options.
+        pose6d: the model predicts orientations.
+        model: the model file (for the message).
+
+    Raises:
+        InputError: naming the option, why it would do nothing and the fix.
+    """
+    if _given(args, "--tool-length") and not pose6d:
+        raise InputError(f"--tool-length: states a 6-D model's orientation sigma at a length along the tool axis, but "
+                         f"--model {model} is a position-only (3-D) model: drop --tool-length (as given it would do "
+                         "nothing)")
 
 
 def check_discrepancy_options(args: argparse.Namespace, gp_criteria: bool, model_discrepancy: bool) -> None:

@@ -74,5 +74,22 @@ def friction_cases() -> list:
              "cell.tracker_T_base disagrees with cell.W_T_tracker"),
         Case("f-evaluate-tracker-not-rotation", "evaluate {d}/d_tracker_stretched.json",
              "tracker_T_base: the rotation block"),
+        # options that would do nothing are refused, saying why
+        Case("f-ignored-export-model-ur-yaml-tcp", "export-model --model {d}/m.json --format ur-yaml --tcp 0,0,0.1 "
+             "--out {d}/o.yaml", "--tcp: places the URDF's 'tcp' frame"),
+        Case("f-ignored-export-model-ur-yaml-no-frames", "export-model --model {d}/m.json --format ur-yaml "
+             "--no-frames --out {d}/o.yaml", "--no-frames: leaves the set-up frames out of a URDF"),
+        Case("f-ignored-export-model-urdf-tcp-no-frames", "export-model --model {d}/m.json --format urdf --no-frames "
+             "--tcp 0,0,0.1 --out {d}/o.urdf", "without --no-frames"),
+        Case("f-ignored-monitor-poll-without-follow", "monitor --model {d}/m.json --data {d}/te.csv --poll 2",
+             "--poll: sets the seconds between reads while following a growing file: add --follow"),
+        Case("f-ignored-monitor-idle-without-follow", "monitor --model {d}/m.json --data {d}/te.csv --idle 5",
+             "--idle: sets the seconds without a new row"),
+        Case("f-ignored-predict-tool-length-3d", "predict --model {d}/m.json --data {d}/te.csv --out {d}/o.csv "
+             "--tool-length 0.3", "--tool-length: states a 6-D model's orientation sigma"),
+        Case("f-ignored-compensate-program-tool-length-3d", "compensate --model {d}/m.json --program {d}/prog.csv "
+             "--out {d}/o.csv --tcp 0,0,0.1 --tool-length 0.3", "is a position-only (3-D) model"),
+        Case("f-ignored-compensate-targets-tool-length-3d", "compensate --model {d}/m.json --targets "
+             "{d}/targets.csv --out {d}/o.csv --tcp 0,0,0.1 --tool-length 0.3", "drop --tool-length"),
     ]
     return c
