@@ -91,5 +91,10 @@ def friction_cases() -> list:
              "--out {d}/o.csv --tcp 0,0,0.1 --tool-length 0.3", "is a position-only (3-D) model"),
         Case("f-ignored-compensate-targets-tool-length-3d", "compensate --model {d}/m.json --targets "
              "{d}/targets.csv --out {d}/o.csv --tcp 0,0,0.1 --tool-length 0.3", "drop --tool-length"),
+        # an output folder that takes no file is refused before any work, naming the output (not a temporary file)
+        Case("out-export-model-into-proc", "export-model --model {d}/m.json --format urdf --out /proc/x.urdf",
+             "--out /proc/x.urdf: "),
+        Case("out-identify-json-into-proc", "identify --robot kr15 --data {d}/tr.csv --json /proc/r.json",
+             "--json /proc/r.json: "),
     ]
     return c
