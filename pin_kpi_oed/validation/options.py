@@ -306,6 +306,8 @@ def check_args(args: argparse.Namespace) -> None:
             if Path(d).exists() and Path(args.validate).exists() and Path(d).resolve() == Path(args.validate).resolve():
                 raise InputError(f"--validate {args.validate}: is also --train; held-out data must not be training "
                                  "data")
+    if cmd == "check":
+        _check_design_sizes(args)
     check_ignored_options(args)
     outputs = _pairs(args, OUTPUTS.get(cmd, []))
     files_of = getattr(args, "output_files", None)  # a command whose option writes several files (KRL: .src + .dat)
@@ -316,6 +318,25 @@ def check_args(args: argparse.Namespace) -> None:
     check_outputs(outputs, _inputs(args, cmd), _pairs(args, FOLDERS.get(cmd, [])))
     for opt, path in _pairs(args, FIGURES.get(cmd, [])):
         check_figure_suffix(opt, path)
+
+
+#: the most candidate poses ``check design`` draws (each one checked in the cell; a check needs tens of poses)
+CHECK_POOL_MAX = 20_000
+
+
+def _check_design_sizes(args: argparse.Namespace) -> None:
+    """``check design``'s ``--measurements`` at most its ``--pool-size``, which is at most :data:`CHECK_POOL_MAX`.
+
+    Raises:
+        InputError: naming the option, its value and its limit.
+    """
+    m, pool = getattr(args, "measurements", None), getattr(args, "pool_size", None)
+    if pool is not None and pool > CHECK_POOL_MAX:
+        raise InputError(f"--pool-size: {pool} candidate poses is more than {CHECK_POOL_MAX} (each is checked in the "
+                         f"cell; a check needs tens of poses): give --pool-size 3..{CHECK_POOL_MAX}")
+    if m is not None and pool is not None and m > pool:
+        raise InputError(f"--measurements: {m} poses from --pool-size {pool} candidates: give --measurements "
+                         f"3..{pool} (or --pool-size up to {CHECK_POOL_MAX})")
 
 
 def _given(args: argparse.Namespace, opt: str) -> bool:

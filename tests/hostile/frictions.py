@@ -96,5 +96,11 @@ def friction_cases() -> list:
              "--out /proc/x.urdf: "),
         Case("out-identify-json-into-proc", "identify --robot kr15 --data {d}/tr.csv --json /proc/r.json",
              "--json /proc/r.json: "),
+        # a size beyond its limit names the option and the limit
+        Case("f-check-design-measurements-beyond-pool", "check design --model {d}/m.json --measurements 100000 "
+             "--json {d}/o.json", "--measurements: 100000 poses from --pool-size 400 candidates: give --measurements "
+             "3..400"),
+        Case("f-check-design-pool-beyond-limit", "check design --model {d}/m.json --pool-size 10000000 "
+             "--json {d}/o.json", "--pool-size: 10000000 candidate poses is more than 20000"),
     ]
     return c
