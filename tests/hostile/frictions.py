@@ -14,6 +14,21 @@ import json
 from pathlib import Path
 
 
+def wrist_400_urdf(path: Path) -> Path:
+    """The KR 15 URDF with its joint_a6 limits at ±400° (6.98 rad, as an industrial wrist's URDF states them)."""
+    import re
+
+    from pin_kpi_oed.model.robot import resolve_robot
+
+    urdf = Path(resolve_robot("kr15")[0]).read_text()
+    i = urdf.index('name="joint_a6"')
+    j = urdf.index("<limit", i)
+    k = urdf.index("/>", j)
+    lim = re.sub(r'upper="[^"]+"', 'upper="6.981317"', re.sub(r'lower="[^"]+"', 'lower="-6.981317"', urdf[j:k]))
+    path.write_text(urdf[:j] + lim + urdf[k:])
+    return path
+
+
 def build_friction_inputs(d: Path) -> None:
     """Add this module's inputs to ``d`` (needs ``d.json``, ``m.json``; about 2 s)."""
     from pin_kpi_oed.cli.app import main
@@ -22,6 +37,15 @@ def build_friction_inputs(d: Path) -> None:
         assert main(["simulate", "--robot", "ur10", "--n", "5", "--seed", "1", "--out", str(d / "t_ur10.csv"),
                      "--truth", str(d / "t_ur10.json")]) == 0
         assert main(["simulate", "--robot", "ur5", "--n", "5", "--seed", "1", "--out", str(d / "p_ur5.csv")]) == 0
+        wrist_400_urdf(d / "kr400.urdf")
+        assert main(["simulate", "--robot", str(d / "kr400.urdf"), "--n", "12", "--seed", "1", "--out",
+                     str(d / "kr400.csv")]) == 0
+    rows = [r for r in (d / "kr400.csv").read_text().splitlines() if not r.startswith("#")]  # tool header off
+    (d / "kr400.csv").unlink()
+    cells = rows[1].split(",")
+    cells[5] = "7.3"  # beyond the wrist's own limit (6.98 rad) + 0.1
+    rows[1] = ",".join(cells)
+    (d / "kr400_beyond.csv").write_text("\n".join(rows) + "\n")
     truth = json.loads((d / "t_ur10.json").read_text())
 
     def edited(name: str, edit) -> None:
@@ -102,5 +126,8 @@ def friction_cases() -> list:
              "3..400"),
         Case("f-check-design-pool-beyond-limit", "check design --model {d}/m.json --pool-size 10000000 "
              "--json {d}/o.json", "--pool-size: 10000000 candidate poses is more than 20000"),
+        # a wrist of a few turns: values beyond its own limit (not 2π) look like degrees
+        Case("f-units-wrist-400-beyond-own-limit", "identify --robot {d}/kr400.urdf --data {d}/kr400_beyond.csv",
+             "exceeds 7.081 rad (the joint's own limit + 0.1)"),
     ]
     return c
