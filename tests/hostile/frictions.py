@@ -46,6 +46,7 @@ def build_friction_inputs(d: Path) -> None:
     cells[5] = "7.3"  # beyond the wrist's own limit (6.98 rad) + 0.1
     rows[1] = ",".join(cells)
     (d / "kr400_beyond.csv").write_text("\n".join(rows) + "\n")
+    _build_cells(d)
     truth = json.loads((d / "t_ur10.json").read_text())
 
     def edited(name: str, edit) -> None:
@@ -72,6 +73,29 @@ def build_friction_inputs(d: Path) -> None:
     design_edit("d_tracker_stretched.json", "top", stretch)
     design_edit("d_cell_tracker_5mm.json", "cell", lambda o: o["tracker_T_base"][0].__setitem__(
         3, o["tracker_T_base"][0][3] + 0.005))
+
+
+def _build_cells(d: Path) -> None:
+    """KR 15 cells with a working target: the wrist's overlapping capsules not skipped (``cell_noskip.yaml``); a
+    fixture every solution's wrist hits (``cell_fixture.yaml``)."""
+    import yaml
+
+    from pin_kpi_oed.cell.cell import CELL_DIR
+
+    def cell(name: str, edit) -> None:
+        c = yaml.safe_load((CELL_DIR / "kr15.yaml").read_text())
+        c.pop("working_configurations_deg")
+        c["working_targets"] = [{"xyz_m": [1.1, 0.0, 1.65], "rpy_deg": [180, 0, 0]}]
+        edit(c)
+        (d / name).write_text(yaml.safe_dump(c))
+
+    def fixture(c):
+        c["obstacles"]["capsules"].append({"name": "fixture", "a_m": [1.1, -0.05, 1.86], "b_m": [1.1, 0.05, 1.86],
+                                           "radius_m": 0.03})
+        c["beam"]["skip"] = ["fixture"]
+
+    cell("cell_noskip.yaml", lambda c: c.update(skip_pairs=[p for p in c["skip_pairs"] if p != ["link_4", "link_6"]]))
+    cell("cell_fixture.yaml", fixture)
 
 
 def friction_cases() -> list:
@@ -129,5 +153,10 @@ def friction_cases() -> list:
         # a wrist of a few turns: values beyond its own limit (not 2π) look like degrees
         Case("f-units-wrist-400-beyond-own-limit", "identify --robot {d}/kr400.urdf --data {d}/kr400_beyond.csv",
              "exceeds 7.081 rad (the joint's own limit + 0.1)"),
+        # a robot's own links are named as such; a colliding working target says how to skip a pair
+        Case("f-cell-robot-links-overlap-named-as-links", "design --cell {d}/cell_noskip.yaml --measurements 10 "
+             "--criteria random --json {d}/o.json", "the robot's links 'link_4' and 'link_6' collide with each other"),
+        Case("f-cell-working-target-colliding-pair-skip-hint", "design --cell {d}/cell_fixture.yaml --measurements 10 "
+             "--criteria random --json {d}/o.json", "skip_pairs: [[link_5, fixture]]"),
     ]
     return c
