@@ -193,6 +193,15 @@ def _geometry_prior(opt: str, v: Any) -> None:
                          f"rad (e.g. {math.radians(a[1]):.3g} for {a[1]:g}°)")
 
 
+def _compensate_frame(opt: str, v: Any) -> None:
+    """``compensate --frame``: ``tracker`` or ``base``; ``cell`` (which named the station's tracker frame, not a cell
+    file's frame) refused, saying which to use."""
+    if v == "cell":
+        raise InputError(f"{opt} cell: ambiguous (it meant the tracker frame of the station, not the cell file's "
+                         f"frame): give {opt} tracker for targets in the tracker frame, {opt} base for the robot base "
+                         "frame")
+
+
 #: the range of a TCP sigma target (m): 0.1 µm .. 5 mm
 TARGET_SIGMA_MIN_M, TARGET_SIGMA_MAX_M = 1e-7, 5e-3
 #: the largest sigmas of a joint-placement prior: 0.1 m, 0.5 rad
@@ -226,7 +235,8 @@ RULES: dict[str, dict[str, Callable[[str, Any], None]]] = {
     "export": {**_SEED, "dwell": _finite_at_least(0.0, "s", 3600.0, " (a wait at each measurement point, in s)"),
                "margin": _finite_at_least(0.0, "m", 0.5, ": give the move clearance margin in m (e.g. 0.01 for 10 mm)"),
                "speed_override": _share},
-    "compensate": {**_SEED, "tcp": _offset, "tool_length": _TOOL_LENGTH}, "export-model": {"tcp": _offset},
+    "compensate": {**_SEED, "tcp": _offset, "tool_length": _TOOL_LENGTH, "frame": _compensate_frame},
+    "export-model": {"tcp": _offset},
     "predict": {"tool_length": _TOOL_LENGTH},
     "check": {**_SEED, "alpha": _open_unit, "tolerance": _TOLERANCE, "measurements": _int_at_least(3),
               "pool_size": _int_at_least(3)},

@@ -158,5 +158,8 @@ def friction_cases() -> list:
              "--criteria random --json {d}/o.json", "the robot's links 'link_4' and 'link_6' collide with each other"),
         Case("f-cell-working-target-colliding-pair-skip-hint", "design --cell {d}/cell_fixture.yaml --measurements 10 "
              "--criteria random --json {d}/o.json", "skip_pairs: [[link_5, fixture]]"),
+        # compensate's frames: the station's tracker frame or the base frame; 'cell' named neither a cell file's frame
+        Case("f-compensate-frame-cell-ambiguous", "compensate --model {d}/m.json --targets {d}/targets.csv --out "
+             "{d}/o.csv --tcp 0,0,0.1 --frame cell", "--frame cell: ambiguous"),
     ]
     return c
