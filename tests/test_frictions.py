@@ -40,3 +40,45 @@ def test_a_wrist_of_a_few_turns_is_read_in_its_own_range(tmp_path: Path):
     rc, out, err = _run("compensate", "--model", model, "--program", prog, "--tcp", "0,0,0.1", "--out",
                         tmp_path / "c.csv", "--quiet")
     assert rc == 0, err
+
+
+def _strict(text: str):
+    """JSON as the standard has it: a bare NaN / Infinity is an error (Python's reader accepts them by default)."""
+    import json
+
+    def refuse(name: str):
+        raise ValueError(f"bare {name} in JSON")
+
+    return json.loads(text, parse_constant=refuse)
+
+
+def _nan_free(obj) -> bool:
+    if isinstance(obj, dict):
+        return all(_nan_free(v) for v in obj.values())
+    if isinstance(obj, list):
+        return all(_nan_free(v) for v in obj)
+    return not (isinstance(obj, float) and not np.isfinite(obj))
+
+
+def test_json_outputs_are_strict_json(tmp_path: Path):
+    """compensate --json with an unreachable target and report --json parse as strict JSON (no bare NaN)."""
+    tr, te, model = tmp_path / "tr.csv", tmp_path / "te.csv", tmp_path / "m.json"
+    assert _run("simulate", "--robot", "kr15", "--n", "60", "--n-test", "20", "--seed", "3", "--out", tr,
+                "--test-out", te)[0] == 0
+    assert _run("identify", "--robot", "kr15", "--data", tr, "--discrepancy", "none", "--quiet", "--model-out",
+                model)[0] == 0
+    rows = [r.split(",") for r in te.read_text().splitlines() if not r.startswith("#")]
+    ix = [rows[0].index(c) for c in "xyz"]
+    pts = [[r[i] for i in ix] for r in rows[1:4]] + [["9.0", "9.0", "9.0"]]  # the last one out of reach
+    targets = tmp_path / "t.csv"
+    targets.write_text("x,y,z\n" + "\n".join(",".join(p) for p in pts) + "\n")
+    rc, out, err = _run("compensate", "--model", model, "--targets", targets, "--tcp", "0.03,0.02,0.08", "--out",
+                        tmp_path / "c.csv", "--json", tmp_path / "c.json", "--quiet")
+    assert rc == 0, err
+    text = (tmp_path / "c.json").read_text()
+    doc = _strict(text)
+    assert "unreachable" in doc["target_status"] and _nan_free(doc)
+    rc, out, err = _run("report", "--model", model, "--train", tr, "--validate", te, "--json", tmp_path / "r.json",
+                        "--quiet")
+    assert rc == 0, err
+    assert _nan_free(_strict((tmp_path / "r.json").read_text()))

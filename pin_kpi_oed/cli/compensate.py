@@ -128,8 +128,10 @@ def run(args: argparse.Namespace) -> int:
                               f"(--frame {args.frame}) and units (m); nothing written")
     write_compensation(args.out, res)
     if args.json:
-        atomic_write_json(args.json, {**res.to_dict(), "model": args.model,
-                                      "input": args.program or args.targets})
+        from pin_kpi_oed.data.atomic import to_jsonable
+
+        atomic_write_json(args.json, to_jsonable({**res.to_dict(), "model": args.model,  # JSON has no NaN: null
+                                                  "input": args.program or args.targets}))
     if not args.quiet:
         print(res.summary())
         print("wrote " + ", ".join(f for f in (args.out, args.json) if f))
