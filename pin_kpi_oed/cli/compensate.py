@@ -110,11 +110,11 @@ def run(args: argparse.Namespace) -> int:
                               max_branch_step_rad=args.max_branch_step, tool_length_m=args.tool_length)
     if args.program:
         prog = read_targets(args.program, robot.joint_names, program=True, revolute=robot.is_revolute,
-                            joint_guard=robot.unit_guard, **kw)
+                            joint_guard=robot.unit_guard.tolist(), **kw)
         res = compensate_program(model, prog, opt, orientation=not args.position_only)
     else:
-        ts = read_targets(args.targets, robot.joint_names, revolute=robot.is_revolute, joint_guard=robot.unit_guard,
-                          **kw)
+        ts = read_targets(args.targets, robot.joint_names, revolute=robot.is_revolute,
+                          joint_guard=robot.unit_guard.tolist(), **kw)
         res = compensate(model, ts, opt)
     if res.target_status and not {"ok", "extrapolated"} & set(res.target_status):  # nothing useful: exit 2
         n_un = res.target_status.count("unreachable")
