@@ -82,9 +82,8 @@ def read_targets(path: str | os.PathLike, joint_names: Sequence[str], *, program
         revolute: revolute mask of the joints (prismatic joint values are lengths); default all revolute.
         units: declared units of the file (``"mm,deg"``); None: SI, mm/degrees refused.
         columns: mapping of the package's column names to the file's (``"joint_a1=A1,x=X"``).
-        joint_guard: per joint, the largest magnitude of an undeclared value (rad / m;
-            :attr:`pin_kpi_oed.model.robot.Robot.unit_guard`: a joint of a few turns keeps its range); default
-            2π + 0.1 rad for every revolute joint.
+        joint_guard: per joint, the largest magnitude of an undeclared value (rad / m; default 2π + 0.1 rad):
+            :attr:`pin_kpi_oed.model.robot.Robot.unit_guard`, a joint of a few turns keeps its range.
 
     Returns:
         The :class:`TargetSet` (SI units).
