@@ -26,6 +26,7 @@ from collections.abc import Callable
 import numpy as np
 import pinocchio as pin
 
+from pin_kpi_oed.cell.cell_checks import skip_hint
 from pin_kpi_oed.cell.feasibility import FeasibilityChecker
 from pin_kpi_oed.cell.fields import read_angles, read_vec
 from pin_kpi_oed.errors import InputError
@@ -175,6 +176,11 @@ def _check_always_blocked(chk: FeasibilityChecker, cell, pre: str) -> None:
     env = next((e.name for e in cell.environment if b in {c.name for c in e.capsules}), None)
     fitted = (f" (an enclosing capsule the optimiser uses for '{env}'; a smaller max_radius_m of '{env}' fits it "
               "tighter)" if env else "")
+    robot_names = {chk.gm.geometryObjects[i].name for i in chk.robot_ids}
+    if a != "beam" and b in robot_names:  # two of the robot's own capsules: no obstacle to move
+        raise InputError(f"{pre}the robot's links '{a}' and '{b}' collide with each other in every one of {N_ALWAYS} "
+                         f"random configurations (at best {worst:.0f} mm, clearance_m {cell.clearance_m * 1e3:g} mm "
+                         f"included): {skip_hint([(a, b)])}")
     if a == "beam":
         where = "[" + ", ".join(f"{x:.3f}" for x in cell.W_T_tracker.translation) + "]"
         raise InputError(f"{pre}obstacle '{b}'{fitted} blocks the laser beam in every one of {N_ALWAYS} random "
@@ -220,7 +226,10 @@ def solve_working_targets(cell, targets: list, source: str = "") -> np.ndarray:
         d = chk.distances(q[None])[0]
         d[:chk.n_pairs] -= cell.clearance_m
         k = int(np.argmin(d)) if d.size else -1
-        return "" if k < 0 or d[k] >= -1e-9 else f"{chk.names[k]} at {d[k] * 1e3:.1f} mm"
+        if k < 0 or d[k] >= -1e-9:
+            return ""
+        hint = f"; {skip_hint([chk.pair_names[k]])}" if k < chk.n_pairs else ""
+        return f"{chk.names[k]} at {d[k] * 1e3:.1f} mm{hint}"
 
     out: list[np.ndarray] = []
     for i, t in enumerate(targets):

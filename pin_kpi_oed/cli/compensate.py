@@ -11,7 +11,7 @@ model's tool frame, which the summary names.
 
 Examples::
 
-    pin-kpi-oed compensate --model model.json --targets targets.csv --out joints.csv            # cell frame
+    pin-kpi-oed compensate --model model.json --targets targets.csv --out joints.csv            # tracker frame
     pin-kpi-oed compensate --model model.json --targets targets.csv --frame base --out joints.csv
     pin-kpi-oed compensate --model model.json --program prog.csv --out prog_compensated.csv
 """
@@ -35,8 +35,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "compensate", help="compensated joint values for Cartesian TCP targets or a joint-space program",
         description="Inverse kinematics on the calibrated model (geometry + effects), started from the nominal "
                     "solution: the joint values that put the real TCP on each target. --targets: CSV with x, y, z "
-                    "(m; rx, ry, rz rad optional; name; joint columns as start hints optional) in the cell frame "
-                    "(tracker frame of the station) or the robot base frame (--frame base). --program: CSV with "
+                    "(m; rx, ry, rz rad optional; name; joint columns as start hints optional) in the tracker frame "
+                    "of the station (--frame tracker) or the robot base frame (--frame base). --program: CSV with "
                     "the joint columns of a nominal program; each pose's nominal TCP pose (base frame) becomes the "
                     "target. Writes the compensated joints, the nominal ones, the predicted correction (m), the "
                     "residual and a status per target (ok / unreachable / off_branch / joint_limit / collision / "
@@ -49,8 +49,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     src.add_argument("--program", default=None, help="CSV of a joint-space program (the robot's joint columns)")
     p.add_argument("--model", required=True, help="calibrated model file (identify / register --model-out)")
     p.add_argument("--out", required=True, help="write the compensated joints (CSV) here")
-    p.add_argument("--frame", choices=("cell", "base"), default="cell",
-                   help="frame of --targets: cell = tracker frame of the station (default), base = robot base frame")
+    p.add_argument("--frame", choices=("tracker", "base", "cell"), default="tracker",
+                   help="frame of --targets: tracker = the tracker frame of the station (default), base = robot base "
+                        "frame ('cell' is refused: a cell file's frame is neither)")
     p.add_argument("--station", default=None, help="station of the cell frame and default TCP (default: the model's)")
     p.add_argument("--tcp", default=None,
                    help="TCP point x,y,z (m) in the model's tool frame (printed; the frame the calibration used); "
@@ -83,8 +84,10 @@ def run(args: argparse.Namespace) -> int:
     from pin_kpi_oed.compensation.compensator import (STATUSES, CompensationOptions, compensate,
                                                        compensate_program, write_compensation)
     from pin_kpi_oed.calibrated.model_file import load_model_file
+    from pin_kpi_oed.validation.options import check_tool_length
 
     model = load_model_file(args.model)
+    check_tool_length(args, model.pose6d, args.model)
     robot = model.robot
     cell = None
     if args.cell:  # collisions checked in it; its working configurations when the model has none
@@ -102,13 +105,16 @@ def run(args: argparse.Namespace) -> int:
                              f"--tcp x,y,z (m, in tool frame {robot.tool_frame}), or --cell CELL (its tcp_m), or "
                              "identify with --cell CELL so that --model-out keeps the TCP")
         tcp = np.asarray(cell.tcp_m, float).copy()
-    opt = CompensationOptions(frame=args.frame, station=args.station, tcp_m=tcp, seed=args.seed, cell=cell,
+    frame = "cell" if args.frame == "tracker" else args.frame  # the library's name of the station's tracker frame
+    opt = CompensationOptions(frame=frame, station=args.station, tcp_m=tcp, seed=args.seed, cell=cell,
                               max_branch_step_rad=args.max_branch_step, tool_length_m=args.tool_length)
     if args.program:
-        prog = read_targets(args.program, robot.joint_names, program=True, revolute=robot.is_revolute, **kw)
+        prog = read_targets(args.program, robot.joint_names, program=True, revolute=robot.is_revolute,
+                            joint_guard=robot.unit_guard.tolist(), **kw)
         res = compensate_program(model, prog, opt, orientation=not args.position_only)
     else:
-        ts = read_targets(args.targets, robot.joint_names, revolute=robot.is_revolute, **kw)
+        ts = read_targets(args.targets, robot.joint_names, revolute=robot.is_revolute,
+                          joint_guard=robot.unit_guard.tolist(), **kw)
         res = compensate(model, ts, opt)
     if res.target_status and not {"ok", "extrapolated"} & set(res.target_status):  # nothing useful: exit 2
         n_un = res.target_status.count("unreachable")
@@ -122,8 +128,10 @@ def run(args: argparse.Namespace) -> int:
                               f"(--frame {args.frame}) and units (m); nothing written")
     write_compensation(args.out, res)
     if args.json:
-        atomic_write_json(args.json, {**res.to_dict(), "model": args.model,
-                                      "input": args.program or args.targets})
+        from pin_kpi_oed.data.atomic import to_jsonable
+
+        atomic_write_json(args.json, to_jsonable({**res.to_dict(), "model": args.model,  # JSON has no NaN: null
+                                                  "input": args.program or args.targets}))
     if not args.quiet:
         print(res.summary())
         print("wrote " + ", ".join(f for f in (args.out, args.json) if f))

@@ -226,6 +226,8 @@ def _poses(args: argparse.Namespace, model: Any, cell: Any, design: Any) -> tupl
 
         ms = read_measurements(args.poses, joint_names=robot.joint_names, require_position=False,
                                joint_units=list(robot.joint_units))
+        if ms.tool is not None and ms.tool.robot is not None:
+            _same_robot(ms.tool.robot, robot, args)
         Q, what = robot.check_q(ms.q, args.poses), f"the poses of {args.poses}"
     elif design:
         Q, what = design[1], f"the poses of design '{design[2]}' of {args.design}"
@@ -236,6 +238,25 @@ def _poses(args: argparse.Namespace, model: Any, cell: Any, design: Any) -> tupl
     if cell is not None and args.n_test:
         return Q, feasible_poses(cell, args.n_test, args.seed + 5), what
     return Q, robot.random_q(rng, args.n_test), what
+
+
+def _same_robot(header_robot: str, robot: Any, args: argparse.Namespace) -> None:
+    """Refuse ``--poses`` whose tool header names another robot than the simulated one (their joint values are not
+    this robot's poses, even when the joint names agree).
+
+    Raises:
+        InputError: both robots named.
+    """
+    from pin_kpi_oed.cli.tool import canonical_robot
+    from pin_kpi_oed.data.tool_header import ToolSpec
+    from pin_kpi_oed.model.robot import portable_spec
+
+    mine = canonical_robot(ToolSpec(robot=portable_spec(robot)))
+    theirs = canonical_robot(ToolSpec(robot=header_robot))
+    if mine is not None and theirs is not None and mine.robot != theirs.robot:
+        simulated = f"the true robot of --truth {args.truth}" if args.truth else "the simulated robot"
+        raise InputError(f"--poses {args.poses}: its header says robot '{header_robot}', but {simulated} is "
+                         f"'{robot.name}'; give poses of '{robot.name}' (or simulate '{header_robot}')")
 
 
 def run_simulate(args: argparse.Namespace) -> int:

@@ -133,9 +133,11 @@ def run_predict(args: argparse.Namespace) -> int:
     from pin_kpi_oed.errors import InputError
     from pin_kpi_oed.calibrated.model_file import load_model_file
     from pin_kpi_oed.upkeep.transfer import predict_table, write_predictions
+    from pin_kpi_oed.validation.options import check_tool_length
     from pin_kpi_oed.validation.robot_checks import check_points_against_joints
 
     model = load_model_file(args.model)
+    check_tool_length(args, model.pose6d, args.model)
     model_tool(args, model, args.model, [args.data])
     data = read_measurements(args.data, joint_names=model.robot.joint_names, reach_m=model.robot.reach(),
                              require_position=False, **table_options(args, model.robot))

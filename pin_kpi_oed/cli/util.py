@@ -46,4 +46,5 @@ def table_options(args: argparse.Namespace, robot: Any = None) -> dict:
     out = {"units": parse_units(getattr(args, "units", None)), "columns": columns}
     if robot is not None:
         out["joint_units"] = list(robot.joint_units)
+        out["joint_guard"] = robot.unit_guard.tolist()  # a joint of a few turns (its own limit) keeps its range
     return out

@@ -103,7 +103,8 @@ class CompensationResult(Result):
                            if k in self.target_status)
         lines = [f"compensated {len(self.names)} targets "
                  f"({'position + orientation' if self.orientation else 'position'}"
-                 f", {self.frame} frame{' of station ' + self.station if self.frame == 'cell' else ''}): "
+                 f", {'tracker' if self.frame == 'cell' else self.frame} frame"
+                 f"{' of station ' + self.station if self.frame == 'cell' else ''}): "
                  f"{sum(ok)} ok" + (f", {counts}" if counts else ""),
                  f"TCP {np.round(self.tcp_m * 1e3, 3).tolist()} mm in tool frame {self.tool_frame}"
                  + ("; branch from: " + ", ".join(f"{self.start.count(k)} {k}" for k in dict.fromkeys(self.start))

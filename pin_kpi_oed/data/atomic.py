@@ -104,6 +104,9 @@ def atomic_write_bytes(path: str | os.PathLike[str], data: bytes) -> None:
             break
         except FileExistsError:  # pragma: no cover - 48 random bits
             continue
+        except OSError as exc:  # the folder takes no new file: named by the output, not the temporary file
+            raise InputError(f"cannot write '{target}': folder '{directory}' takes no new file "
+                             f"({exc.strerror or exc})") from None
     try:
         with os.fdopen(fd, "wb") as fh:
             fh.write(data)

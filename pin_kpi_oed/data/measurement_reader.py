@@ -282,8 +282,11 @@ def _check_values(ms: MeasurementSet, cols: _Columns, row_lines: list[int], src:
 
 
 def _check_units(ms: MeasurementSet, cols: _Columns, row_lines: list[int], src: str, reach_m: float | None,
-                 joint_units: Sequence[str] | None = None) -> None:
-    """Step 5: the unit guard (mm instead of m, degrees instead of rad, sigma in mm/µm)."""
+                 joint_units: Sequence[str] | None = None, joint_guard: Sequence[float] | None = None,
+                 declared: bool = False) -> None:
+    """Step 5: the unit guard (mm instead of m, degrees instead of rad, sigma in mm/µm). A revolute joint's values
+    are compared with its own ``joint_guard`` (rad; a joint of a few turns) when given, else with 2π + 0.1 rad;
+    joint values are not sniffed when the units are ``declared`` (the robot's limits still check them)."""
     pos = ms.position_m
     if cols.position:
         dist = np.linalg.norm(pos, axis=1)
@@ -302,15 +305,20 @@ def _check_units(ms: MeasurementSet, cols: _Columns, row_lines: list[int], src: 
             check_position_spread_m(pos[rows], float(reach_m), where,
                                     "convert to m/rad or declare the units (units='mm,deg')")
     rev = np.array([u != "m" for u in joint_units]) if joint_units is not None else np.ones(len(cols.joints), bool)
-    for arr, names, mask in ((ms.q, cols.joints, rev), (ms.rotvec_rad, ROTVEC_COLUMNS, np.ones(3, bool))):
+    nj = len(cols.joints)
+    guard = (np.maximum(np.asarray(joint_guard, float), ANGLE_LIMIT_RAD) if joint_guard is not None
+             and np.size(joint_guard) == nj else np.full(nj, ANGLE_LIMIT_RAD))
+    for arr, names, mask, lim in ((None if declared else ms.q, cols.joints, rev, guard),
+                                  (ms.rotvec_rad, ROTVEC_COLUMNS, np.ones(3, bool), np.full(3, ANGLE_LIMIT_RAD))):
         if arr is None:
             continue
-        big = (np.abs(arr) > ANGLE_LIMIT_RAD) & mask[None, :]  # prismatic joints (m) are not angles
+        big = (np.abs(arr) > lim[None, :]) & mask[None, :]  # prismatic joints (m) are not angles
         if np.any(big):
             r, c = np.argwhere(big)[0]
+            what = "2π+0.1 rad" if lim[c] == ANGLE_LIMIT_RAD else f"{lim[c]:.4g} rad (the joint's own limit + 0.1)"
             raise InputError(
                 f"{src}: column '{names[c]}', row {r + 1} (line {row_lines[r]}): value {float(arr[r, c])!r} "
-                f"exceeds 2π+0.1 rad in magnitude; looks like mm/degrees; "
+                f"exceeds {what} in magnitude; looks like mm/degrees; "
                 f"convert to m/rad or declare the units (units='mm,deg')"
             )
     if ms.sigma_m is not None:
@@ -377,6 +385,7 @@ def read_measurements(
     units: str | Units | None = None,
     columns: str | dict[str, str] | None = None,
     joint_units: Sequence[str] | None = None,
+    joint_guard: Sequence[float] | None = None,
 ) -> MeasurementSet:
     """Read and validate a measurement CSV file (format: see the module docstring).
 
@@ -399,6 +408,9 @@ def read_measurements(
             header before anything else.
         joint_units: ``"rad"`` or ``"m"`` per joint of ``joint_names`` (prismatic joints are
             lengths under ``units``); default all ``"rad"``.
+        joint_guard: per joint of ``joint_names``, the largest magnitude its values may have in their SI unit
+            (:attr:`pin_kpi_oed.model.robot.Robot.unit_guard`: a joint of a few turns keeps its range); default
+            2π + 0.1 rad for every revolute joint. Not applied when ``units`` are declared.
 
     Returns:
         The measurements, in file order, in SI units.
@@ -424,6 +436,6 @@ def read_measurements(
     ms = _apply_units(_build_set(data, rows, cols, src), u, joint_units)
     ms.tool = tool
     _check_values(ms, cols, row_lines, src)
-    _check_units(ms, cols, row_lines, src, reach_m, joint_units)
+    _check_units(ms, cols, row_lines, src, reach_m, joint_units, joint_guard, u.declared)
     _check_duplicates(ms, row_lines, src)
     return ms

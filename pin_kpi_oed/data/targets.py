@@ -71,7 +71,8 @@ class TargetSet:
 
 def read_targets(path: str | os.PathLike, joint_names: Sequence[str], *, program: bool = False,
                  revolute: Sequence[bool] | np.ndarray | None = None, units: str | Units | None = None,
-                 columns: str | Mapping[str, str] | None = None) -> TargetSet:
+                 columns: str | Mapping[str, str] | None = None,
+                 joint_guard: Sequence[float] | None = None) -> TargetSet:
     """Read a targets file (``program=False``) or a joint-space program (``program=True``).
 
     Args:
@@ -81,6 +82,8 @@ def read_targets(path: str | os.PathLike, joint_names: Sequence[str], *, program
         revolute: revolute mask of the joints (prismatic joint values are lengths); default all revolute.
         units: declared units of the file (``"mm,deg"``); None: SI, mm/degrees refused.
         columns: mapping of the package's column names to the file's (``"joint_a1=A1,x=X"``).
+        joint_guard: per joint, the largest magnitude of an undeclared value (rad / m; default 2π + 0.1 rad):
+            :attr:`pin_kpi_oed.model.robot.Robot.unit_guard`, a joint of a few turns keeps its range.
 
     Returns:
         The :class:`TargetSet` (SI units).
@@ -137,7 +140,7 @@ def read_targets(path: str | os.PathLike, joint_names: Sequence[str], *, program
     pos = None if program else block(list("xyz")) * u.length_m
     rv = block(["rx", "ry", "rz"]) * u.angle_rad if rot and not program else None
     if not u.declared:
-        _sniff(src, pos, rv, q, joints, rev, lines)
+        _sniff(src, pos, rv, q, joints, rev, lines, joint_guard)
     names = ([rows[r][seen[_NAME]].strip() for r in range(len(rows))] if _NAME in seen
              else [str(r + 1) for r in range(len(rows))])
     m = len(rows)
@@ -149,19 +152,24 @@ def read_targets(path: str | os.PathLike, joint_names: Sequence[str], *, program
 
 
 def _sniff(src: str, pos: np.ndarray | None, rv: np.ndarray | None, q: np.ndarray | None, joints: list[str],
-           rev: np.ndarray, lines: list[int]) -> None:
-    """Refuse undeclared files whose numbers look like mm or degrees (one line, naming the column)."""
+           rev: np.ndarray, lines: list[int], joint_guard: Sequence[float] | None = None) -> None:
+    """Refuse undeclared files whose numbers look like mm or degrees (one line, naming the column); a joint's values
+    against its own ``joint_guard`` (rad) when given and larger than 2π + 0.1 rad."""
     if pos is not None:
         med = float(np.median(np.linalg.norm(pos, axis=1)))
         if med > MAX_MEDIAN_DISTANCE_M:
             raise InputError(f"{src}: columns x, y, z: median distance {med:.6g} m exceeds {MAX_MEDIAN_DISTANCE_M:g} m;"
                              " looks like mm; declare the units (units='mm,deg') or convert to m/rad")
-    for arr, names, mask in ((q, joints, rev), (rv, ["rx", "ry", "rz"], np.ones(3, bool))):
+    guard = (np.maximum(np.asarray(joint_guard, float), ANGLE_LIMIT_RAD) if joint_guard is not None
+             and np.size(joint_guard) == len(joints) else np.full(len(joints), ANGLE_LIMIT_RAD))
+    for arr, names, mask, lim in ((q, joints, rev, guard), (rv, ["rx", "ry", "rz"], np.ones(3, bool),
+                                                            np.full(3, ANGLE_LIMIT_RAD))):
         if arr is None:
             continue
-        big = (np.abs(arr) > ANGLE_LIMIT_RAD) & mask[None, :]
+        big = (np.abs(arr) > lim[None, :]) & mask[None, :]
         if big.any():
             r, c = np.argwhere(big)[0]
+            what = "2π+0.1 rad" if lim[c] == ANGLE_LIMIT_RAD else f"{lim[c]:.4g} rad (the joint's own limit + 0.1)"
             raise InputError(f"{src}: column '{names[c]}', row {r + 1} (line {lines[r]}): "
                              f"value {float(arr[r, c]):.6g} exceeds "
-                             f"2π+0.1 rad; looks like degrees; declare the units (units='mm,deg') or convert to rad")
+                             f"{what}; looks like degrees; declare the units (units='mm,deg') or convert to rad")

@@ -25,7 +25,7 @@ from pin_kpi_oed.model.serialize import model_from_dict, se3_from_matrix
 from pin_kpi_oed.model.tracker import TrackerModel
 
 __all__ = ["Fields", "read_array", "read_json", "read_model", "read_q_work", "read_cell", "stored_cell",
-           "cell_file_dict", "read_stored_cell", "skip_what_collides_at_work"]
+           "cell_file_dict", "read_stored_cell", "check_stored_tracker", "skip_what_collides_at_work"]
 
 
 def read_array(v: Any, shape: tuple[int, ...] | None, what: str) -> np.ndarray:
@@ -298,8 +298,41 @@ def read_stored_cell(f: Fields, stored: Mapping, model: TrackerModel, where: str
     (:func:`~pin_kpi_oed.cell.cell.cell_from_dict`, the same checks as ``load_cell``) on :func:`cell_file_dict`,
     with the set-up's robot; the environment files read again (:func:`environment_from_dicts`)."""
     cell = cell_from_dict(cell_file_dict(f, stored, model.robot, where), f"{where}: cell", robot=model.robot)
+    check_stored_tracker(f.d, stored, cell, where)
     cell.environment = environment_from_dicts(stored.get("environment"), cell.obstacles, where, notes)
     return cell
+
+
+#: largest disagreement (m, rad) between a stored cell's ``tracker_T_base`` and its world frames: rounding in a file
+#: is far below it, a hand edit far above
+TRACKER_TOL = 1e-6
+
+
+def check_stored_tracker(d: Mapping, stored: Mapping, cell: Cell, where: str) -> None:
+    """The ``tracker_T_base`` of a design file that stores its cell (at the top level and under ``cell``) checked as
+    a model file checks it (a rigid transform) and against the cell's world frames it is derived from
+    (``W_T_tracker⁻¹ · W_T_base``, what the design used): an edit of it alone is refused, not drawn or ignored.
+
+    Args:
+        d: the design file's document.
+        stored: its stored cell (``cell``).
+        cell: the cell read from it.
+        where: the file (for messages).
+
+    Raises:
+        InputError: not a rigid transform, or disagreeing with the world frames (field named, by how much).
+    """
+    for field, M in (("tracker_T_base", d.get("tracker_T_base")),
+                     ("cell.tracker_T_base", stored.get("tracker_T_base"))):
+        if M is None:
+            continue
+        T = se3_from_matrix(M, f"{where}: {field}")
+        v = pin.log6(T.inverse() * cell.tracker_T_base).vector
+        gap_m, gap_rad = float(np.linalg.norm(v[:3])), float(np.linalg.norm(v[3:]))
+        if gap_m > TRACKER_TOL or gap_rad > TRACKER_TOL:
+            raise InputError(f"{where}: {field} disagrees with cell.W_T_tracker^-1 * cell.W_T_base (by "
+                             f"{gap_m * 1e3:.3g} mm, {gap_rad:.3g} rad); the tracker is placed by the cell's world "
+                             f"frames: edit cell.W_T_tracker / cell.W_T_base (or delete {field})")
 
 
 #: share of seeded random configurations in which a pair must collide to count as overlapping by construction

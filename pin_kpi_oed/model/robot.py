@@ -244,10 +244,16 @@ class Robot:
                 f"[{self.q_lower[j]:.6g}, {self.q_upper[j]:.6g}] {u}")
         return Q
 
+    @property
+    def unit_guard(self) -> np.ndarray:
+        """Per joint, the largest magnitude of a value in its unit (rad / m): :data:`UNIT_GUARD`, or the joint's own
+        limit + 0.1 when larger, up to two turns (a wrist of ±400°, a URDF's own limit, is no degree value)."""
+        own = np.nan_to_num(np.maximum(np.abs(self.q_lower), np.abs(self.q_upper)) + 0.1, posinf=0.0)
+        return np.maximum(np.array([UNIT_GUARD[u] for u in self.joint_units]), np.minimum(own, 4 * np.pi + 0.1))
+
     def check_units(self, q: np.ndarray, what: str = "q", first_row: int = 0) -> None:
-        """Reject joint values in the wrong unit: beyond 2π + 0.1 rad (revolute: degrees) or 100 m
-        (prismatic: mm) in magnitude (:data:`UNIT_GUARD`). For data read from files, before
-        :meth:`check_q`.
+        """Reject joint values in the wrong unit: beyond 2π + 0.1 rad (revolute: degrees) or 100 m (prismatic: mm),
+        or the joint's own limit + 0.1 if larger (:attr:`unit_guard`). For data read from files, before :meth:`check_q`.
 
         Args:
             q: joint values, (m, nq) (rad / m).
@@ -259,7 +265,7 @@ class Robot:
         """
         Q = np.atleast_2d(np.asarray(q, dtype=float))
         units = self.joint_units
-        guard = np.array([UNIT_GUARD[u] for u in units])
+        guard = self.unit_guard
         big = np.abs(Q) > guard
         if big.any():
             i, j = np.argwhere(big)[0]

@@ -31,7 +31,7 @@ def write_certificate(cert: Certificate, *, html: str | os.PathLike | None = Non
     from pin_kpi_oed.report.pdf import pdf_available, print_pdf
 
     text = render_html(cert)
-    doc = json.dumps(certificate_json(cert), indent=1)
+    doc = json.dumps(certificate_json(cert), indent=1, allow_nan=False)  # not finite: null (certificate_json)
     out: dict[str, Any] = {"written": [], "pdf_skipped": None, "html_bytes": len(text.encode())}
     if pdf is not None:
         if pdf_available() is None:

@@ -234,7 +234,49 @@ def load_truth(path: str) -> tuple[TrackerModel, np.ndarray, list[tuple[Any, np.
         raise InputError(f"truth_file {path}: missing or malformed field ({exc})") from None
     if not np.all(np.isfinite(p)):
         raise InputError(f"truth_file {path}: p_raw has values that are not finite")
+    check_derived_fields(model, p, d, path)
     return model, p, effects
+
+
+#: largest disagreement (m for translations, 1 for rotation entries) between a truth file's derived field and
+#: the value its ``p_raw`` gives: the file's own rounding is far below it, a hand edit far above
+DERIVED_TOL = 1e-9
+
+
+def check_derived_fields(model: TrackerModel, p: np.ndarray, d: dict, path: str) -> None:
+    """Refuse a truth file whose derived fields (``tracker_T_base``, ``reflector_m``, ``joint_placements``) are not
+    the ones its ``p_raw`` gives: the true robot is ``p_raw`` (with ``nominal``), and an edit of a derived field
+    alone would change nothing that is simulated.
+
+    Args:
+        model: the nominal model the file describes.
+        p: its raw parameters p* (``p_raw``).
+        d: the file's document.
+        path: the file (for messages).
+
+    Raises:
+        InputError: a derived field malformed or disagreeing with ``p_raw`` (named, with the disagreement in m).
+    """
+    derived = {"tracker_T_base": [model.tracker_pose(p).homogeneous], "reflector_m": [model.reflector(p)],
+               "joint_placements": [M.homogeneous for M in model.joint_placements(p)]}
+    for field, want in derived.items():
+        if field not in d:
+            continue
+        got = d[field] if field == "joint_placements" else [d[field]]
+        try:
+            arrays = [np.asarray(g, float) for g in got] if isinstance(got, list) else None
+        except (TypeError, ValueError):
+            arrays = None
+        if arrays is None or len(arrays) != len(want) or any(a.shape != w.shape for a, w in zip(arrays, want)):
+            raise InputError(f"truth_file {path}: field '{field}' is malformed (expected the values p_raw gives, "
+                             f"shape {tuple(np.shape(want if len(want) > 1 else want[0]))})")
+        for k, (a, w) in enumerate(zip(arrays, want)):
+            gap = float(np.max(np.abs(a - w))) if np.all(np.isfinite(a)) else float("inf")
+            if gap > DERIVED_TOL:
+                name = f"{field}[{k}]" if field == "joint_placements" else field
+                raise InputError(f"truth_file {path}: field '{name}' disagrees with p_raw (by {gap:.3g}); the true "
+                                 "robot is p_raw with 'nominal': edit p_raw (the derived fields follow it) or "
+                                 "delete the derived field")
 
 
 def feasible_poses(cell: Any, n: int, seed: int) -> np.ndarray:

@@ -19,7 +19,7 @@ from pin_kpi_oed.errors import InputError
 from pin_kpi_oed.validation.paths import check_figure_suffix, check_outputs
 
 __all__ = ["join_negative_values", "check_args", "RULES", "OUTPUTS", "INPUTS", "FOLDERS", "FIGURES", "floats",
-           "check_discrepancy_options", "check_ignored_options", "IGNORED"]
+           "check_discrepancy_options", "check_ignored_options", "IGNORED", "check_tool_length"]
 
 
 def floats(text: Any, what: str) -> list[float]:
@@ -198,6 +198,15 @@ def _geometry_prior(opt: str, v: Any) -> None:
                          f"rad (e.g. {math.radians(a[1]):.3g} for {a[1]:g}°)")
 
 
+def _compensate_frame(opt: str, v: Any) -> None:
+    """``compensate --frame``: ``tracker`` or ``base``; ``cell`` (which named the station's tracker frame, not a cell
+    file's frame) refused, saying which to use."""
+    if v == "cell":
+        raise InputError(f"{opt} cell: ambiguous (it meant the tracker frame of the station, not the cell file's "
+                         f"frame): give {opt} tracker for targets in the tracker frame, {opt} base for the robot base "
+                         "frame")
+
+
 #: the range of a TCP sigma target (m): 0.1 µm .. 5 mm
 TARGET_SIGMA_MIN_M, TARGET_SIGMA_MAX_M = 1e-7, 5e-3
 #: the largest sigmas of a joint-placement prior: 0.1 m, 0.5 rad
@@ -231,7 +240,8 @@ RULES: dict[str, dict[str, Callable[[str, Any], None]]] = {
     "export": {**_SEED, "dwell": _finite_at_least(0.0, "s", 3600.0, " (a wait at each measurement point, in s)"),
                "margin": _finite_at_least(0.0, "m", 0.5, ": give the move clearance margin in m (e.g. 0.01 for 10 mm)"),
                "speed_override": _share},
-    "compensate": {**_SEED, "tcp": _offset, "tool_length": _TOOL_LENGTH}, "export-model": {"tcp": _offset},
+    "compensate": {**_SEED, "tcp": _offset, "tool_length": _TOOL_LENGTH, "frame": _compensate_frame},
+    "export-model": {"tcp": _offset},
     "predict": {"tool_length": _TOOL_LENGTH},
     "check": {**_SEED, "alpha": _open_unit, "tolerance": _TOLERANCE, "measurements": _int_at_least(3),
               "pool_size": _int_at_least(3)},
@@ -311,6 +321,8 @@ def check_args(args: argparse.Namespace) -> None:
             if Path(d).exists() and Path(args.validate).exists() and Path(d).resolve() == Path(args.validate).resolve():
                 raise InputError(f"--validate {args.validate}: is also --train; held-out data must not be training "
                                  "data")
+    if cmd == "check":
+        _check_design_sizes(args)
     check_ignored_options(args)
     outputs = _pairs(args, OUTPUTS.get(cmd, []))
     files_of = getattr(args, "output_files", None)  # a command whose option writes several files (KRL: .src + .dat)
@@ -321,6 +333,25 @@ def check_args(args: argparse.Namespace) -> None:
     check_outputs(outputs, _inputs(args, cmd), _pairs(args, FOLDERS.get(cmd, [])))
     for opt, path in _pairs(args, FIGURES.get(cmd, [])):
         check_figure_suffix(opt, path)
+
+
+#: the most candidate poses ``check design`` draws (each one checked in the cell; a check needs tens of poses)
+CHECK_POOL_MAX = 20_000
+
+
+def _check_design_sizes(args: argparse.Namespace) -> None:
+    """``check design``'s ``--measurements`` at most its ``--pool-size``, which is at most :data:`CHECK_POOL_MAX`.
+
+    Raises:
+        InputError: naming the option, its value and its limit.
+    """
+    m, pool = getattr(args, "measurements", None), getattr(args, "pool_size", None)
+    if pool is not None and pool > CHECK_POOL_MAX:
+        raise InputError(f"--pool-size: {pool} candidate poses is more than {CHECK_POOL_MAX} (each is checked in the "
+                         f"cell; a check needs tens of poses): give --pool-size 3..{CHECK_POOL_MAX}")
+    if m is not None and pool is not None and m > pool:
+        raise InputError(f"--measurements: {m} poses from --pool-size {pool} candidates: give --measurements "
+                         f"3..{pool} (or --pool-size up to {CHECK_POOL_MAX})")
 
 
 def _given(args: argparse.Namespace, opt: str) -> bool:
@@ -350,6 +381,15 @@ IGNORED: dict[str, list[tuple[str, Callable[[argparse.Namespace], bool], str]]] 
                  ("--term-prior", lambda a: _effects(a) is None or bool({"transmission_error", "link_bending"}
                                                                           & _effects(a)),
                   "is a prior on transmission_error / link_bending terms: add one of them to --effects")],
+    "export-model": [("--tcp", lambda a: getattr(a, "format", None) == "urdf" and not getattr(a, "no_frames", False),
+                      "places the URDF's 'tcp' frame: only with --format urdf and its frames (without --no-frames)"),
+                     ("--no-frames", lambda a: getattr(a, "format", None) == "urdf",
+                      "leaves the set-up frames out of a URDF; a UR kinematics file has none: only with --format "
+                      "urdf")],
+    "monitor": [(opt, lambda a: bool(getattr(a, "follow", False)),
+                 f"{does} while following a growing file: add --follow") for opt, does in
+                (("--poll", "sets the seconds between reads"),
+                 ("--idle", "sets the seconds without a new row to stop"))],
 }
 
 
@@ -362,6 +402,24 @@ def check_ignored_options(args: argparse.Namespace) -> None:
     for opt, acts, needs in IGNORED.get(getattr(args, "command", None), []):
         if _given(args, opt) and not acts(args):
             raise InputError(f"{opt}: {needs}, or drop {opt} (as given it would do nothing)")
+
+
+def check_tool_length(args: argparse.Namespace, pose6d: bool, model: str) -> None:
+    """``--tool-length`` (``predict``, ``compensate``) acts on a 6-D model's orientation σ only: refused, when given, on
+    a position-only model (whose file the command has read).
+
+    Args:
+        args: the parsed options.
+        pose6d: the model predicts orientations.
+        model: the model file (for the message).
+
+    Raises:
+        InputError: naming the option, why it would do nothing and the fix.
+    """
+    if _given(args, "--tool-length") and not pose6d:
+        raise InputError(f"--tool-length: states a 6-D model's orientation sigma at a length along the tool axis, but "
+                         f"--model {model} is a position-only (3-D) model: drop --tool-length (as given it would do "
+                         "nothing)")
 
 
 def check_discrepancy_options(args: argparse.Namespace, gp_criteria: bool, model_discrepancy: bool) -> None:

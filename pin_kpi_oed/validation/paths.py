@@ -12,6 +12,7 @@ them while the command runs, the command's write is refused instead of silently 
 from __future__ import annotations
 
 import os
+import tempfile
 from pathlib import Path
 from collections.abc import Iterable
 
@@ -94,6 +95,26 @@ def _check_file_target(opt: str, path: Path) -> None:
         raise InputError(f"{opt} {path}: folder '{folder}' is not writable")
     if path.exists() and not os.access(path, os.W_OK):
         raise InputError(f"{opt} {path}: the file exists and is read-only")
+    _probe_folder(opt, path, folder)
+
+
+def _probe_folder(opt: str, path: Path, folder: Path) -> None:
+    """Create and remove a file in ``folder``: the writer's temporary file must be possible there (permission bits
+    do not tell for ``/proc``, a read-only mount or a full quota; a root user passes every ``os.access``).
+
+    Raises:
+        InputError: naming the option, the output path and the system's reason.
+    """
+    try:
+        fd, probe = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".probe", dir=folder)
+    except OSError as exc:
+        raise InputError(f"{opt} {path}: cannot create a file in folder '{folder}' ({exc.strerror or exc}); "
+                         "choose a writable folder") from None
+    os.close(fd)
+    try:
+        os.unlink(probe)
+    except OSError:
+        pass
 
 
 def _check_dir_target(opt: str, path: Path) -> None:

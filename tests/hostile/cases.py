@@ -151,9 +151,10 @@ def _cases() -> list[Case]:
              "--n-test"),
     ]
     c += [Case(f"seed-negative-{cmd.split()[0]}", cmd + " --seed -1", "--seed") for cmd in COMMANDS_WITH_SEED]
+    from tests.hostile.frictions import friction_cases
     from tests.hostile.surfaces import surface_cases
 
-    return c + _issue24() + _generated() + surface_cases()
+    return c + _issue24() + _generated() + surface_cases() + friction_cases()
 
 
 def _issue24() -> list[Case]:
@@ -542,6 +543,9 @@ def _build_issue24(d: Path, design: dict) -> None:
     from tests.hostile.surfaces import build_surface_inputs
 
     build_surface_inputs(d)
+    from tests.hostile.frictions import build_friction_inputs
+
+    build_friction_inputs(d)
     Qd = np.asarray(design["q_meas"], float)[:10]
     (d / "given.csv").write_text(",".join(f"joint_a{k}" for k in range(1, 7)) + "\n"
                                  + "\n".join(",".join(f"{v:.10f}" for v in q) for q in Qd) + "\n")
