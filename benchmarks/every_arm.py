@@ -252,6 +252,20 @@ def tcp_heldout(pred_csv: Path, truth: tuple, tcp_m: np.ndarray, Q: np.ndarray) 
             "error_rms_m": float(np.sqrt(np.mean(np.sum(E ** 2, axis=1))))}
 
 
+def held_draws(cm, truth: tuple, te) -> list[dict]:
+    """The parameters the σ at the TCP holds at their tolerance, each with its RMS 3-D σ at the TCP over the
+    held-out rows and its TRUE simulated value in units of that tolerance (one draw per simulated robot: the TCP's
+    standardised error over one robot's poses follows these few draws, not an average over robots)."""
+    from pin_kpi_oed.model.tolerances import Tolerances
+
+    ts = cm.predict_tcp(te.q, aux=te)
+    model, p, _ = truth
+    s = Tolerances().sigma_vector(model)
+    L = model.layout
+    return [{"name": n, "sigma_at_tcp_m": float(c), "true_over_tolerance": float(p[L.names.index(n)] / s[L.names.index(n)])}
+            for n, c in sorted(zip(ts.held_names, ts.held_contrib_m), key=lambda x: -x[1])[:3]]
+
+
 def compensation(truth: tuple, cm, res: dict, X: np.ndarray, frame: str) -> dict:
     """The true robot's TCP at the compensated joints against the targets: per target error, uncompensated error,
     95 % bound, status; and the verdicts over the targets marked ok."""
@@ -297,6 +311,7 @@ def walk_cli(f: dict[str, Path], urdf: Path, seed: int) -> dict:
     te = read_measurements(f["te"], joint_names=cm.robot.joint_names)
     out["reflector"] = heldout_stats(f["pr"])
     out["tcp"] = tcp_heldout(f["pt"], truth, cm.tcp_m, te.q)
+    out["held"] = held_draws(cm, truth, te)
     for frame, t, j, jj in (("cell", "t", "j", "jj"), ("base", "tb", "jb", "jjb")):
         X = targets(truth, cm, frame)
         write_targets(f[t], X)
@@ -380,8 +395,29 @@ def line(r: dict) -> str:
     diff = max(api["reflector_pred_m"], api["tcp_pred_m"])
     sdiff = max(api["reflector_sigma_rel"], api["tcp_sigma_rel"])
     fit = " (poor fit refused; --accept-poor-fit)" if "identify_refused" in r else ""
+    held = "; ".join(f"{h['name']} {h['sigma_at_tcp_m'] * 1e6:.0f} µm drawn at {h['true_over_tolerance']:+.2f} tol"
+                     for h in r["held"][:1])
     return (f"{r['arm']:<19} s{r['seed']}  " + "  ".join(cells)
-            + f"  {diff:.1e} {sdiff:.1e} {api['compensated_q_rad']:.1e}  {r['cpu_s']:5.0f}{fit}")
+            + f"  {diff:.1e} {sdiff:.1e} {api['compensated_q_rad']:.1e}  {r['cpu_s']:5.0f}{fit}  held: {held}")
+
+
+def pooled(rows: list[dict]) -> str:
+    """The standardised RMS and the share inside over every simulated robot (arm and seed) that ran: the σ's
+    honesty over robots, where each robot's own rows share one draw of the held parameters."""
+    ran = [r for r in rows if "refused" not in r]
+    if not ran:
+        return "no arm ran"
+    parts = []
+    for k in ("reflector", "tcp"):
+        z = np.sqrt(np.mean([r[k]["z_rms"] ** 2 for r in ran]))
+        inside = np.mean([r[k]["inside_95"] for r in ran])
+        parts.append(f"{k}: standardised RMS {z:.2f}, {inside * 100:.0f} % inside")
+    comp = [(r[f"compensate_{fr}"]["within_bound"], r[f"compensate_{fr}"]["not_worse"]) for r in ran
+            for fr in ("cell", "base")]
+    return (f"pooled over {len(ran)} simulated robots ({len({r['arm'] for r in ran})} arms): " + "; ".join(parts)
+            + f"; compensation: {sum(a for a, _ in comp)} of {len(comp)} runs with every ok target within its bound, "
+            f"{sum(b for _, b in comp)} of {len(comp)} with none farther than uncompensated; "
+            f"{len(rows) - len(ran)} rows refused")
 
 
 HEADER = ("arm                 seed  refl: z   in%  TCP: z   in%  σ µm   err µm  comp cell: ok "
@@ -417,6 +453,7 @@ def main(argv: list[str] | None = None) -> list[dict]:
                     break  # the same cause at every seed
                 if args.json:
                     Path(args.json).write_text(json.dumps(rows, indent=1, default=float))
+    print(pooled(rows), flush=True)
     if args.json:
         Path(args.json).write_text(json.dumps(rows, indent=1, default=float))
     return rows
