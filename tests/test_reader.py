@@ -203,3 +203,22 @@ def test_cli_import_tracker(tmp_path, capsys):
     assert main(argv + ["--columns", cols]) == 0
     ms = read_measurements(tmp_path / "m.csv", joint_names=robot.joint_names, reach_m=robot.reach())
     assert len(ms) == 3 and np.allclose(ms.time_s, [0.0, 6.625, 12.75]) and ms.temperature_c[2] == 21.5
+
+
+def test_joint_beyond_a_turn_within_its_own_limit(ur10_data, tmp_path):
+    """A wrist of ±400° (6.98 rad, an ABB's joint 6) is an angle up to its own limit, not degrees; beyond it, and
+    for a joint without such a limit, the guard still refuses."""
+    robot, ms = ur10_data
+    wide = ms.subset(np.arange(5))
+    wide.q = wide.q.copy()
+    wide.q[:, 5] = [6.9, -6.9, 6.5, 0.1, -0.2]
+    write_measurements(wide, tmp_path / "wide.csv")
+    with pytest.raises(InputError, match="2π"):
+        read_measurements(tmp_path / "wide.csv", joint_names=robot.joint_names)
+    limits = [2 * np.pi] * 5 + [6.9813]
+    back = read_measurements(tmp_path / "wide.csv", joint_names=robot.joint_names, joint_limits_rad=limits)
+    assert np.array_equal(back.q[:, 5], wide.q[:, 5])
+    wide.q[0, 5] = 7.2  # beyond 6.9813 + 0.1
+    write_measurements(wide, tmp_path / "wider.csv")
+    with pytest.raises(InputError, match=r"joint_wrist_3|wrist_3_joint.*limit \+ 0.1 rad \(7.081"):
+        read_measurements(tmp_path / "wider.csv", joint_names=robot.joint_names, joint_limits_rad=limits)

@@ -281,8 +281,9 @@ def _check_values(ms: MeasurementSet, cols: _Columns, row_lines: list[int], src:
 
 
 def _check_units(ms: MeasurementSet, cols: _Columns, row_lines: list[int], src: str, reach_m: float | None,
-                 joint_units: Sequence[str] | None = None) -> None:
-    """Step 5: the unit guard (mm instead of m, degrees instead of rad, sigma in mm/µm)."""
+                 joint_units: Sequence[str] | None = None, joint_limits_rad: Sequence[float] | None = None) -> None:
+    """Step 5: the unit guard (mm instead of m, degrees instead of rad, sigma in mm/µm). A joint whose own limit
+    reaches beyond 2π (a wrist of ±400°) is an angle up to that limit + 0.1 rad."""
     pos = ms.position_m
     if cols.position:
         dist = np.linalg.norm(pos, axis=1)
@@ -301,15 +302,20 @@ def _check_units(ms: MeasurementSet, cols: _Columns, row_lines: list[int], src: 
             check_position_spread_m(pos[rows], float(reach_m), where,
                                     "convert to m/rad or declare the units (units='mm,deg')")
     rev = np.array([u != "m" for u in joint_units]) if joint_units is not None else np.ones(len(cols.joints), bool)
-    for arr, names, mask in ((ms.q, cols.joints, rev), (ms.rotvec_rad, ROTVEC_COLUMNS, np.ones(3, bool))):
+    own = np.full(len(cols.joints), ANGLE_LIMIT_RAD)
+    if joint_limits_rad is not None:
+        own = np.maximum(own, np.abs(np.asarray(joint_limits_rad, float)) + 0.1)
+    for arr, names, mask, lim in ((ms.q, cols.joints, rev, own),
+                                  (ms.rotvec_rad, ROTVEC_COLUMNS, np.ones(3, bool), np.full(3, ANGLE_LIMIT_RAD))):
         if arr is None:
             continue
-        big = (np.abs(arr) > ANGLE_LIMIT_RAD) & mask[None, :]  # prismatic joints (m) are not angles
+        big = (np.abs(arr) > lim[None, :]) & mask[None, :]  # prismatic joints (m) are not angles
         if np.any(big):
             r, c = np.argwhere(big)[0]
+            bound = "2π+0.1 rad" if lim[c] == ANGLE_LIMIT_RAD else f"the joint's limit + 0.1 rad ({lim[c]:.4g} rad)"
             raise InputError(
                 f"{src}: column '{names[c]}', row {r + 1} (line {row_lines[r]}): value {float(arr[r, c])!r} "
-                f"exceeds 2π+0.1 rad in magnitude; looks like mm/degrees; "
+                f"exceeds {bound} in magnitude; looks like mm/degrees; "
                 f"convert to m/rad or declare the units (units='mm,deg')"
             )
     if ms.sigma_m is not None:
@@ -376,6 +382,7 @@ def read_measurements(
     units: str | Units | None = None,
     columns: str | dict[str, str] | None = None,
     joint_units: Sequence[str] | None = None,
+    joint_limits_rad: Sequence[float] | None = None,
 ) -> MeasurementSet:
     """Read and validate a measurement CSV file (format: see the module docstring).
 
@@ -398,6 +405,9 @@ def read_measurements(
             header before anything else.
         joint_units: ``"rad"`` or ``"m"`` per joint of ``joint_names`` (prismatic joints are
             lengths under ``units``); default all ``"rad"``.
+        joint_limits_rad: per joint of ``joint_names``, the largest magnitude of its limits (rad): a joint
+            whose range reaches beyond 2π (a wrist of ±400°) takes values up to it + 0.1 rad before the unit
+            guard calls them degrees; default 2π + 0.1 rad for every joint.
 
     Returns:
         The measurements, in file order, in SI units.
@@ -423,6 +433,6 @@ def read_measurements(
     ms = _apply_units(_build_set(data, rows, cols, src), u, joint_units)
     ms.tool = tool
     _check_values(ms, cols, row_lines, src)
-    _check_units(ms, cols, row_lines, src, reach_m, joint_units)
+    _check_units(ms, cols, row_lines, src, reach_m, joint_units, joint_limits_rad)
     _check_duplicates(ms, row_lines, src)
     return ms
