@@ -222,3 +222,18 @@ def test_joint_beyond_a_turn_within_its_own_limit(ur10_data, tmp_path):
     write_measurements(wide, tmp_path / "wider.csv")
     with pytest.raises(InputError, match=r"joint_wrist_3|wrist_3_joint.*limit \+ 0.1 rad \(7.081"):
         read_measurements(tmp_path / "wider.csv", joint_names=robot.joint_names, joint_limits_rad=limits)
+
+
+def test_robot_unit_guard_takes_a_wrist_beyond_a_turn():
+    """Robot.check_units: a revolute joint whose limits pass a turn takes values up to its limit + 0.1 rad."""
+    robot = load_robot("ur10")
+    robot.q_lower, robot.q_upper = robot.q_lower.copy(), robot.q_upper.copy()
+    q = np.zeros((1, 6))
+    q[0, 5] = 6.9
+    with pytest.raises(InputError, match="looks like degrees"):
+        robot.check_units(q, "m.csv")
+    robot.q_lower[5], robot.q_upper[5] = -6.9813, 6.9813
+    robot.check_units(q, "m.csv")
+    q[0, 5] = 7.2
+    with pytest.raises(InputError, match="wrist_3_joint.*beyond 7.081"):
+        robot.check_units(q, "m.csv")

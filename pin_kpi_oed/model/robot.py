@@ -281,8 +281,8 @@ class Robot:
 
     def check_units(self, q: np.ndarray, what: str = "q", first_row: int = 0) -> None:
         """Reject joint values in the wrong unit: beyond 2π + 0.1 rad (revolute: degrees) or 100 m
-        (prismatic: mm) in magnitude (:data:`UNIT_GUARD`). For data read from files, before
-        :meth:`check_q`.
+        (prismatic: mm) in magnitude (:data:`UNIT_GUARD`), or beyond the joint's own limit + 0.1 rad for a revolute
+        joint whose range passes a turn (a wrist of ±400°). For data read from files, before :meth:`check_q`.
 
         Args:
             q: joint values, (m, nq) (rad / m).
@@ -295,6 +295,8 @@ class Robot:
         Q = np.atleast_2d(np.asarray(q, dtype=float))
         units = self.joint_units
         guard = np.array([UNIT_GUARD[u] for u in units])
+        own = np.maximum(np.abs(self.q_lower), np.abs(self.q_upper)) + 0.1
+        guard = np.where(self.is_revolute, np.maximum(guard, own), guard)
         big = np.abs(Q) > guard
         if big.any():
             i, j = np.argwhere(big)[0]
