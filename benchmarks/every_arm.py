@@ -9,11 +9,11 @@ ros-industrial/abb; the pip package ``xacro`` on ``--xacro-path``):
    on a table (half-space z >= 0), a tracker ``max(1.5, reach + 1)`` m in front facing the robot, the reflector at
    (0.03, 0, 0.05) m on the tool frame and the TCP 0.15 m beyond it along the tool axis (the tool frame's z, the
    axis the docs' incidence limit uses), 10 µm per axis, ``robot_capsules: urdf``; as ``skip_pairs`` the capsule
-   pairs that touch by construction (closer than the clearance ``design`` requires by default in at least half of 64 seeded random configurations: neighbour links' fitted
-   capsules, the base on the table), the beam skipping the links of the last joint (the reflector sits on them);
-   three ``working_targets`` (the TCP pose of seeded configurations 5 mm beyond the clearance ``design``
-   requires by default, beam included, with the TCP above the table,
-   each with its configuration as ``seed_deg``);
+   pairs that touch by construction (closer than the clearance ``design`` requires by default in at least half of
+   64 seeded random configurations: neighbour links' fitted capsules, the base on the table), the beam skipping
+   the links of the last joint (the reflector sits on them); three ``working_targets`` (the TCP pose of seeded
+   configurations 5 mm beyond the clearance ``design`` requires by default, beam included, with the TCP above the
+   table, each with its configuration as ``seed_deg``);
 2. ``design --cell cell.yaml --criteria kpi_gp --seed S`` (the cell's 35 measurements, every other option default);
 3. ``simulate --design d.json --n-test 40 --effects gear_harmonic=5e-5 --seed S``: a true robot with errors on
    **every** joint-placement parameter (all six of every joint, those no reflector sees included: ``random_truth``
@@ -47,7 +47,6 @@ import contextlib
 import csv
 import io
 import json
-import math
 import shutil
 import sys
 import tempfile
@@ -246,7 +245,8 @@ def tcp_heldout(pred_csv: Path, truth: tuple, tcp_m: np.ndarray, Q: np.ndarray) 
     S = np.array([[float(r[f"sigma_{a}"]) for a in "xyz"] for r in rows])
     E = true_tcp(truth, tcp_m, Q, "cell") - P
     z2 = (E / S) ** 2
-    return {"n": len(rows), "z_rms": float(np.sqrt(z2.mean())), "inside_95": float(np.mean(z2.sum(axis=1) <= CHI2_3_95)),
+    return {"n": len(rows), "z_rms": float(np.sqrt(z2.mean())),
+            "inside_95": float(np.mean(z2.sum(axis=1) <= CHI2_3_95)),
             "sigma_mean_m": float(np.mean([float(r["sigma_tcp"]) for r in rows])),
             "held_mean_m": float(np.mean([float(r["sigma_held"]) for r in rows])),
             "error_rms_m": float(np.sqrt(np.mean(np.sum(E ** 2, axis=1))))}
@@ -262,7 +262,8 @@ def held_draws(cm, truth: tuple, te) -> list[dict]:
     model, p, _ = truth
     s = Tolerances().sigma_vector(model)
     L = model.layout
-    return [{"name": n, "sigma_at_tcp_m": float(c), "true_over_tolerance": float(p[L.names.index(n)] / s[L.names.index(n)])}
+    return [{"name": n, "sigma_at_tcp_m": float(c),
+             "true_over_tolerance": float(p[L.names.index(n)] / s[L.names.index(n)])}
             for n, c in sorted(zip(ts.held_names, ts.held_contrib_m), key=lambda x: -x[1])[:3]]
 
 
