@@ -206,13 +206,20 @@ def write_cell(label: str, urdf: Path, tool: str, folder: Path) -> Path:
 
 
 # ---------------------------------------------------------------------------------------------- measures
-def write_targets(path: Path, X: np.ndarray) -> Path:
-    """A targets CSV (name, x, y, z m, rx, ry, rz rad)."""
+def write_targets(path: Path, X: np.ndarray, orientation: bool = True) -> Path:
+    """A targets CSV (name, x, y, z m, rx, ry, rz rad; without the orientation: positions only, the targets of an
+    arm of fewer than six joints)."""
+    cols = ["x", "y", "z", "rx", "ry", "rz"][:6 if orientation else 3]
     with open(path, "w", newline="") as f:
         w = csv.writer(f)
-        w.writerow(["name", "x", "y", "z", "rx", "ry", "rz"])
-        w.writerows([[f"w{k}", *map(repr, map(float, x))] for k, x in enumerate(X)])
+        w.writerow(["name", *cols])
+        w.writerows([[f"w{k}", *map(repr, map(float, x[:len(cols)]))] for k, x in enumerate(X)])
     return path
+
+
+def limits(robot) -> list[float]:
+    """The largest magnitude of each joint's limits (rad / m): what the readers' unit guard allows."""
+    return [max(abs(float(a)), abs(float(b))) for a, b in zip(robot.q_lower, robot.q_upper)]
 
 
 def targets(truth: tuple, cm, frame: str) -> np.ndarray:
@@ -309,13 +316,13 @@ def walk_cli(f: dict[str, Path], urdf: Path, seed: int) -> dict:
     run_cli("predict", "--model", f["m"], "--data", f["te"], "--out", f["pr"], "--quiet")
     run_cli("predict", "--model", f["m"], "--data", f["te"], "--out", f["pt"], "--at", "tcp", "--quiet")
     truth, cm = load_truth(str(f["truth"])), load_model_file(f["m"])
-    te = read_measurements(f["te"], joint_names=cm.robot.joint_names)
+    te = read_measurements(f["te"], joint_names=cm.robot.joint_names, joint_limits_rad=limits(cm.robot))
     out["reflector"] = heldout_stats(f["pr"])
     out["tcp"] = tcp_heldout(f["pt"], truth, cm.tcp_m, te.q)
     out["held"] = held_draws(cm, truth, te)
     for frame, t, j, jj in (("cell", "t", "j", "jj"), ("base", "tb", "jb", "jjb")):
         X = targets(truth, cm, frame)
-        write_targets(f[t], X)
+        write_targets(f[t], X, cm.robot.nq >= 6)
         run_cli("compensate", "--model", f["m"], "--targets", f[t], "--cell", f["cell"], "--frame", frame,
                 "--out", f[j], "--json", f[jj], "--quiet")
         out[f"compensate_{frame}"] = compensation(truth, cm, json.loads(f[jj].read_text()), X, frame)
@@ -328,8 +335,9 @@ def walk_api(f: dict[str, Path], cli: dict) -> dict:
     from pin_kpi_oed.simulation.simulator import load_truth
 
     cell = pko.load_cell(f["cell"])
-    train = pko.read_measurements(f["tr"], joint_names=cell.robot.joint_names)
-    test = pko.read_measurements(f["te"], joint_names=cell.robot.joint_names)
+    lim = limits(cell.robot)
+    train = pko.read_measurements(f["tr"], joint_names=cell.robot.joint_names, joint_limits_rad=lim)
+    test = pko.read_measurements(f["te"], joint_names=cell.robot.joint_names, joint_limits_rad=lim)
     cm = pko.identify(cell.tracker_model(), train).calibrated_model()
     Y, S, _ = cm.predict_with_sigma(test.q, test)
     ts = cm.predict_tcp(test.q, aux=test)
@@ -356,7 +364,8 @@ def run_arm(label: str, seed: int, work: Path, args: argparse.Namespace) -> dict
     from pin_kpi_oed.model.robot import erd_root
 
     w = work / f"{label}_s{seed}"
-    w.mkdir(parents=True, exist_ok=True)
+    shutil.rmtree(w, ignore_errors=True)  # simulate --truth reads an existing truth file: start clean
+    w.mkdir(parents=True)
     f = _files(w)
     t0 = time.process_time()
     step = "URDF"
