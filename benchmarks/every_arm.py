@@ -399,8 +399,10 @@ def line(r: dict) -> str:
     for fr in ("cell", "base"):
         c = r[f"compensate_{fr}"]
         worst = max((e / b for e, b, s in zip(c["error_m"], c["bound95_m"], c["status"]) if s == "ok"), default=0.0)
-        cells.append(f"{c['n_ok']}/{len(c['status'])} {worst:5.2f} {'yes' if c['within_bound'] else 'NO':>3} "
-                     f"{'yes' if c['not_worse'] else 'NO':>3}")
+        every = sum(e <= b for e, b in zip(c["error_m"], c["bound95_m"]))
+        a, b = ("-", "-") if not c["n_ok"] else (
+            "yes" if c["within_bound"] else "NO", "yes" if c["not_worse"] else "NO")
+        cells.append(f"{c['n_ok']}/{len(c['status'])} {worst:5.2f} {a:>3} {b:>3} ({every} in b)")
     api = r["api_vs_cli"]
     diff = max(api["reflector_pred_m"], api["tcp_pred_m"])
     sdiff = max(api["reflector_sigma_rel"], api["tcp_sigma_rel"])
@@ -423,9 +425,10 @@ def pooled(rows: list[dict]) -> str:
         inside = np.mean([r[k]["inside_95"] for r in ran])
         parts.append(f"{k}: standardised RMS {z:.2f}, {inside * 100:.0f} % inside")
     comp = [(r[f"compensate_{fr}"]["within_bound"], r[f"compensate_{fr}"]["not_worse"]) for r in ran
-            for fr in ("cell", "base")]
+            for fr in ("cell", "base") if r[f"compensate_{fr}"]["n_ok"]]
     return (f"pooled over {len(ran)} simulated robots ({len({r['arm'] for r in ran})} arms): " + "; ".join(parts)
-            + f"; compensation: {sum(a for a, _ in comp)} of {len(comp)} runs with every ok target within its bound, "
+            + f"; compensation: {sum(a for a, _ in comp)} of {len(comp)} runs with an ok target had every ok "
+            f"target within its bound, "
             f"{sum(b for _, b in comp)} of {len(comp)} with none farther than uncompensated; "
             f"{len(rows) - len(ran)} rows refused")
 
@@ -448,7 +451,8 @@ def main(argv: list[str] | None = None) -> list[dict]:
     print(f"{len(seeds)} seed(s); z = standardised RMS (target 0.67-1.5), in% = share inside the 95 % ellipsoid "
           "(85-99); σ = mean predicted 3-D TCP σ, err = RMS true 3-D TCP error; comp: targets ok of all, worst "
           "true error / 95 % bound over the ok ones, every ok one within its bound, every ok one no farther than "
-          "uncompensated; ! = outside the target", flush=True)
+          "uncompensated ('-': none ok), (targets of any status within their bound); "
+          "! = outside the target", flush=True)
     print(HEADER, flush=True)
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
