@@ -12,7 +12,8 @@ import sys
 
 MODULES = ("bench_startup", "bench_core", "bench_identify", "bench_collision", "bench_design", "bench_diagnosis",
            "bench_certificate", "bench_study", "bench_program", "bench_extended", "bench_kpi_gp", "bench_discrepancy",
-           "bench_checks", "bench_report", "unshipped_robots", "bench_layer", "bench_paths", "urdf_rounding")
+           "bench_checks", "bench_report", "unshipped_robots", "bench_layer", "bench_paths", "urdf_rounding",
+           "every_arm")
 
 if __name__ == "__main__":
     wanted = sys.argv[1:] or MODULES

@@ -203,3 +203,37 @@ def test_cli_import_tracker(tmp_path, capsys):
     assert main(argv + ["--columns", cols]) == 0
     ms = read_measurements(tmp_path / "m.csv", joint_names=robot.joint_names, reach_m=robot.reach())
     assert len(ms) == 3 and np.allclose(ms.time_s, [0.0, 6.625, 12.75]) and ms.temperature_c[2] == 21.5
+
+
+def test_joint_beyond_a_turn_within_its_own_limit(ur10_data, tmp_path):
+    """A wrist of ±400° (6.98 rad, an ABB's joint 6) is an angle up to its own limit, not degrees; beyond it, and
+    for a joint without such a limit, the guard still refuses."""
+    robot, ms = ur10_data
+    wide = ms.subset(np.arange(5))
+    wide.q = wide.q.copy()
+    wide.q[:, 5] = [6.9, -6.9, 6.5, 0.1, -0.2]
+    write_measurements(wide, tmp_path / "wide.csv")
+    with pytest.raises(InputError, match="2π"):
+        read_measurements(tmp_path / "wide.csv", joint_names=robot.joint_names)
+    guard = [2 * np.pi + 0.1] * 5 + [6.9813 + 0.1]  # a wrist of ±400°: its own limit + 0.1 rad
+    back = read_measurements(tmp_path / "wide.csv", joint_names=robot.joint_names, joint_guard=guard)
+    assert np.array_equal(back.q[:, 5], wide.q[:, 5])
+    wide.q[0, 5] = 7.2  # beyond 6.9813 + 0.1
+    write_measurements(wide, tmp_path / "wider.csv")
+    with pytest.raises(InputError, match=r"wrist_3_joint.*7.081 rad \(the joint's own limit \+ 0.1\)"):
+        read_measurements(tmp_path / "wider.csv", joint_names=robot.joint_names, joint_guard=guard)
+
+
+def test_robot_unit_guard_takes_a_wrist_beyond_a_turn():
+    """Robot.check_units: a revolute joint whose limits pass a turn takes values up to its limit + 0.1 rad."""
+    robot = load_robot("ur10")
+    robot.q_lower, robot.q_upper = robot.q_lower.copy(), robot.q_upper.copy()
+    q = np.zeros((1, 6))
+    q[0, 5] = 6.9
+    with pytest.raises(InputError, match="looks like degrees"):
+        robot.check_units(q, "m.csv")
+    robot.q_lower[5], robot.q_upper[5] = -6.9813, 6.9813
+    robot.check_units(q, "m.csv")
+    q[0, 5] = 7.2
+    with pytest.raises(InputError, match="wrist_3_joint.*beyond 7.081"):
+        robot.check_units(q, "m.csv")

@@ -34,7 +34,8 @@ def add_table_options(p: argparse.ArgumentParser) -> None:
 
 
 def table_options(args: argparse.Namespace, robot: Any = None) -> dict:
-    """Keyword arguments of the readers from ``--units`` / ``--columns`` (and the robot's joint units).
+    """Keyword arguments of the readers from ``--units`` / ``--columns`` (and the robot's joint units and the
+    largest magnitude of each joint's limits: a wrist of ±400° is not read as degrees).
 
     Raises:
         InputError: an unknown unit or a malformed mapping (named with the option).
