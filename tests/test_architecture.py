@@ -213,3 +213,11 @@ def test_benchmarks_and_examples_use_the_public_api() -> None:
     bad = [f"{f.relative_to(root)}:{line} {text}" for d in ("benchmarks", "examples")
            for f in sorted((root / d).rglob("*.py")) for line, text in _private_reaches(ast.parse(f.read_text()))]
     assert not bad, "private names used by benchmarks / examples:\n" + "\n".join(bad)
+
+
+def test_tests_import_no_private_name_of_the_package() -> None:
+    """A test imports what it tests by its public name: no ``from pin_kpi_oed... import _x`` anywhere in tests/."""
+    root = PKG.parent
+    bad = [f"{f.relative_to(root)}:{line} {text}" for f in sorted((root / "tests").rglob("*.py"))
+           for line, text in _private_reaches(ast.parse(f.read_text())) if text.startswith("from pin_kpi_oed")]
+    assert not bad, "private names of the package imported by tests:\n" + "\n".join(bad)

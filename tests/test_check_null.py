@@ -80,7 +80,7 @@ def test_check_null_is_the_models_kfold_check(gp_model):
 def test_naming_prefers_the_group_that_explains_far_better():
     """A one-column group that passes its fit test is not named when a three-column group explains the rows far
     better (Akaike's criterion, not the smallest passing group); the fit test of the named group is at α/5."""
-    from pin_kpi_oed.upkeep.check import FIT_SHARE, _name_group
+    from pin_kpi_oed.upkeep.check import FIT_SHARE, check_group_name
     from pin_kpi_oed.oed.check_power import CheckGroup, CheckPower
 
     rng = np.random.default_rng(3)
@@ -94,7 +94,7 @@ def test_naming_prefers_the_group_that_explains_far_better():
               CheckGroup("tool", "tool", np.arange(7, 10), np.eye(3), np.eye(3))]
     crit = CheckPower(np.arange(6), groups)
     law = CheckNull()
-    out = _name_group(crit, F, z, 24, 0.05, law)
+    out = check_group_name(crit, F, z, 24, 0.05, law)
     rows = {t["name"]: t for t in out["table"]}
     assert rows["j offset"]["explains"] and rows["tool"]["explains"]      # both pass: the old rule named the offset
     assert rows["tool"]["chi2_remaining"] + 6 < rows["j offset"]["chi2_remaining"] + 2

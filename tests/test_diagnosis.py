@@ -219,34 +219,34 @@ def test_cli_diagnose(compliance_case, tmp_path, capsys):
 def test_terms_chosen_on_training_but_not_held_out_are_said_in_the_verdict():
     """15 transmission terms chosen by the K-fold selection and then not selected on the held-out rows: the verdict
     says so (message clause and a note with the numbers), never a bare 'dominant effect: none'."""
-    from pin_kpi_oed.diagnosis.diagnose import _unconfirmed_terms
+    from pin_kpi_oed.diagnosis.diagnose import unconfirmed_terms
     from pin_kpi_oed.diagnosis.report import EffectResult
 
     ts = {"terms": [{"text": f"t{k}"} for k in range(15)], "cv_rms_m": [178.6e-6, 34.2e-6]}
     e = EffectResult("transmission_error", heldout_rms_before_m=2.1e-4, heldout_rms_after_m=2.0e-4)
     e.heldout_pvalue = 0.4
     notes: list[str] = []
-    clause = _unconfirmed_terms(ts, ["transmission_error"], [], [e], notes)
+    clause = unconfirmed_terms(ts, ["transmission_error"], [], [e], notes)
     assert clause == "; the 15 term(s) chosen on the training rows are not confirmed held-out"
     assert len(notes) == 1 and "178.6 -> 34.2 µm" in notes[0] and "210.0 -> 200.0 µm, p_heldout 0.4" in notes[0]
-    assert _unconfirmed_terms(ts, ["transmission_error"], ["transmission_error"], [e], []) == ""
-    assert _unconfirmed_terms({}, [], [], [], []) == ""
+    assert unconfirmed_terms(ts, ["transmission_error"], ["transmission_error"], [e], []) == ""
+    assert unconfirmed_terms({}, [], [], [], []) == ""
 
 
 def test_coverage_advice_stays_within_the_joint_limits():
     """Uncovered validation angles of a ±2.90 rad joint on both sides of ±π are advised as their own values (within
     the limits, as intervals), never as a wrapped arc such as 0.51 .. 5.88 rad."""
-    from pin_kpi_oed.diagnosis.transfer_gap import _joint_ranges, _poses_to_add
+    from pin_kpi_oed.diagnosis.transfer_gap import joint_ranges_of, gap_poses_to_add
 
     rng = np.random.default_rng(0)
     Qt = rng.uniform(-0.5, 0.5, (40, 1))
     Qv = np.concatenate([rng.uniform(-2.9, -2.5, 10), rng.uniform(0.51, 2.9, 20)])[:, None]
     cov = np.abs(Qv - 0.0) < 0.5
-    joints = _joint_ranges(["panda_joint1"], Qt, Qv, cov)
+    joints = joint_ranges_of(["panda_joint1"], Qt, Qv, cov)
     iv = joints[0]["uncovered_intervals"]
     assert -2.9 <= joints[0]["uncovered_min"] and joints[0]["uncovered_max"] <= 2.9
     assert len(iv) == 2 and iv[0][1] < -2.4 and iv[1][0] > 0.5
-    text = _poses_to_add(joints, np.full(30, 1e-4), np.arange(30), 30)["text"]
+    text = gap_poses_to_add(joints, np.full(30, 1e-4), np.arange(30), 30)["text"]
     import re
     vals = [float(x) for x in re.findall(r"(-?\d+\.\d+) \.\. (-?\d+\.\d+)", text)[0] + re.findall(
         r"(-?\d+\.\d+) \.\. (-?\d+\.\d+)", text)[1]]
@@ -257,7 +257,7 @@ def test_coverage_advice_for_a_track_is_in_metres_and_never_wrapped():
     """A linear track (m) is compared on the line: its ranges are min .. max within its 6.4 m travel (never wrapped
     mod 2π, which would put 6.3 m next to 0.02 m) and the advice names them in m; a periodic wrist stays an arc in
     rad."""
-    from pin_kpi_oed.diagnosis.transfer_gap import _joint_ranges, _poses_to_add
+    from pin_kpi_oed.diagnosis.transfer_gap import joint_ranges_of, gap_poses_to_add
     from pin_kpi_oed.calibrated.coverage import COVERAGE_TOL_RAD, covered_rows
     from pin_kpi_oed.model.robot import load_robot
 
@@ -268,12 +268,12 @@ def test_coverage_advice_for_a_track_is_in_metres_and_never_wrapped():
     Qt[:, 0], Qv[:, 0] = rng.uniform(0.0, 3.0, 60), rng.uniform(5.0, 6.4, 30)
     Qt[:, 4], Qv[:, 4] = rng.uniform(-3.0, 3.0, 60), rng.uniform(-3.0, 3.0, 30)
     cov = covered_rows(Qt, Qv, COVERAGE_TOL_RAD, robot.periodic_joints)
-    joints = _joint_ranges(robot.joint_names, Qt, Qv, cov, robot.periodic_joints, robot.joint_units)
+    joints = joint_ranges_of(robot.joint_names, Qt, Qv, cov, robot.periodic_joints, robot.joint_units)
     track = joints[0]
     assert track["unit"] == "m" and not track["periodic"] and track["coverage"] == 0.0
     assert 5.0 <= track["validate_min"] < track["validate_max"] <= 6.4
     assert 0.0 <= track["train_min"] < track["train_max"] <= 3.0
     assert 5.0 <= track["uncovered_min"] and track["uncovered_max"] <= 6.4
     assert joints[4]["unit"] == "rad" and joints[4]["periodic"]
-    text = _poses_to_add(joints, np.full(30, 1e-4), np.arange(30), 30)["text"]
+    text = gap_poses_to_add(joints, np.full(30, 1e-4), np.arange(30), 30)["text"]
     assert f"joint_e1 {track['uncovered_min']:.2f} .. {track['uncovered_max']:.2f} m" in text, text

@@ -52,12 +52,12 @@ def test_kernel_gradients_match_finite_differences():
 def test_kernel_value_without_gradient_equals_the_chord_form():
     """K from outer products of the circle points equals the per-pair chord formula, and the cached chords of
     the gradient path give the same K."""
-    from pin_kpi_oed.discrepancy.kernel import _chord2
+    from pin_kpi_oed.discrepancy.kernel import chord_squared
     rng = np.random.default_rng(3)
     k = _kernel(rng)
     X, Y = rng.uniform(-7, 7, (40, 6)), rng.uniform(-7, 7, (25, 6))
     c, L, a, ell = k.parts(6)
-    D = _chord2(X, Y)
+    D = chord_squared(X, Y)
     K_ref = c ** 2 * np.exp(-0.5 * (D / L ** 2).sum(-1)) + (a ** 2 * np.exp(-0.5 * D / ell ** 2)).sum(-1)
     assert np.abs(k(X, Y) - K_ref).max() < 1e-12
     K_grad, _ = k(X, eval_gradient=True)
@@ -69,14 +69,14 @@ def test_kernel_value_without_gradient_equals_the_chord_form():
 
 def test_kfold_by_block_inversion_equals_refitting_each_fold():
     """The exact K-fold check from one inverse equals building each fold's posterior without its rows."""
-    from pin_kpi_oed.discrepancy.fit import _kfold
+    from pin_kpi_oed.discrepancy.fit import kfold_split
     rng = np.random.default_rng(4)
     k = _kernel(rng)
     Q = rng.uniform(-2, 2, (90, 6))
     Y = rng.normal(size=(90, 3))
     scale = np.array([1e-4, 2e-4, 1.5e-4])
-    fast = _kfold(k, 0.2, Q, Y, scale, DiscrepancyOptions(folds=5), NAMES)
-    slow = _kfold(k, 0.2, Q, Y, scale, DiscrepancyOptions(folds=5, max_exact=50, n_inducing=90), NAMES)
+    fast = kfold_split(k, 0.2, Q, Y, scale, DiscrepancyOptions(folds=5), NAMES)
+    slow = kfold_split(k, 0.2, Q, Y, scale, DiscrepancyOptions(folds=5, max_exact=50, n_inducing=90), NAMES)
     for key in ("mean_without_m", "mean_with_m", "rms_with_m", "z_rms", "inside_95"):
         assert fast[key] == pytest.approx(slow[key], rel=1e-6), key
     assert fast["mean_with_m"] < fast["mean_without_m"] * 1.5

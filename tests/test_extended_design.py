@@ -219,12 +219,12 @@ def test_bias_option_rescales_weights_only(ur10):
 
 
 def test_extended_design_validation_simulated(ur10):
-    from pin_kpi_oed.studies.design_trials import _near, extended_design_validation
+    from pin_kpi_oed.studies.design_trials import near_training, extended_design_validation
 
     robot, model, base = ur10
     Qw = np.zeros((2, 6))
     Q = np.array([[0.1, 0, 0, 0, 0, 3.0], [0.0, 0.6, 0, 0, 0, 0], [2.0, 0, 0, 0, 0, 0]])
-    assert _near(Q, Qw, 0.5, 5).tolist() == [0]
+    assert near_training(Q, Qw, 0.5, 5).tolist() == [0]
     eff = TransmissionError(robot, pairs=[("elbow_joint", 3)])
     data = simulate(model, robot.random_q(np.random.default_rng(13), 240), effects=[(eff, np.array([4e-4, 2e-4]))],
                     seed=2, record_sigma=False)

@@ -139,16 +139,16 @@ def test_study_folder_is_locked_against_a_second_writer(tmp_path):
 
 
 def test_task_record_without_designs_is_recomputed(tmp_path):
-    from pin_kpi_oed.studies.study import Task, _finished
+    from pin_kpi_oed.studies.study import Task, task_finished
 
     t = Task(key="k", cell="kr15", criteria=("random",), m=10, seed=0, collision=True, n_starts=1, meta={})
     (tmp_path / "tasks").mkdir()
     rec = {**t.to_dict(), "ok": True, "designs": []}
     (tmp_path / "tasks" / "k.json").write_text(json.dumps(rec))
-    assert _finished(tmp_path, t) is None
+    assert task_finished(tmp_path, t) is None
     rec["designs"] = [{"criterion": "random", "trace_cs_m2": 1.0}]
     (tmp_path / "tasks" / "k.json").write_text(json.dumps(rec))
-    assert _finished(tmp_path, t) is not None
+    assert task_finished(tmp_path, t) is not None
 
 
 def test_view_recomputes_a_negative_stored_covariance(inputs, tmp_path):
@@ -421,14 +421,14 @@ def test_a_criterion_that_is_not_finite_at_the_start_names_its_source():
     """'criterion kpi_gp is nan at the start design' names the discrepancy it was computed with (file and fields)."""
     from types import SimpleNamespace
 
-    from pin_kpi_oed.design.ipopt import _start_value
+    from pin_kpi_oed.design.ipopt import ipopt_start_value
     from pin_kpi_oed.errors import SolverError
 
     crit = SimpleNamespace(name="kpi_gp", is_ratio=True, value=lambda Q: float("nan"),
                            discrepancy=SimpleNamespace(source="--model m.json, fitted on 120 rows (exact)"))
     with pytest.raises(SolverError) as e:
-        _start_value(crit, np.zeros((3, 6)))
+        ipopt_start_value(crit, np.zeros((3, 6)))
     assert "kpi_gp is nan" in str(e.value) and "--model m.json" in str(e.value) and "scale_m" in str(e.value)
     plain = SimpleNamespace(name="kpi", is_ratio=True, value=lambda Q: 0.0)
     with pytest.raises(SolverError, match="cell's noise"):
-        _start_value(plain, np.zeros((3, 6)))
+        ipopt_start_value(plain, np.zeros((3, 6)))

@@ -108,19 +108,19 @@ def test_flagged_rows_feed_the_discrepancy_when_the_plain_fit_used_them():
     """With the plain loss the flagged rows stay in δ (they were in the parametric fit, and an unmodelled effect
     shows first in the largest residuals: left out, δ's level is too small); with a robust loss they stay out."""
     from pin_kpi_oed.discrepancy import DiscrepancyOptions
-    from pin_kpi_oed.identification.discrepancy_fit import _keep_flagged, base_frame_residuals
+    from pin_kpi_oed.identification.discrepancy_fit import keep_flagged_rows, base_frame_residuals
 
     opts = DiscrepancyOptions(mode="on")
     res = SimpleNamespace(residuals_m=np.ones((60, 3)), outliers=np.array([3, 7]), loss="linear",
                           stations=["s"], station_rows=[np.arange(60)],
                           setups={"s": SimpleNamespace(tracker_T_base=np.eye(4))})
-    assert _keep_flagged(res, opts)
+    assert keep_flagged_rows(res, opts)
     assert len(base_frame_residuals(res, keep_flagged=True)[0]) == 60
     assert len(base_frame_residuals(res)[0]) == 58
-    assert not _keep_flagged(SimpleNamespace(**{**res.__dict__, "loss": "soft_l1"}), opts)  # left out of the fit
+    assert not keep_flagged_rows(SimpleNamespace(**{**res.__dict__, "loss": "soft_l1"}), opts)  # left out of the fit
     big = SimpleNamespace(**{**res.__dict__, "residuals_m": np.ones((80, 3))})
-    assert _keep_flagged(big, opts)                                   # also when 78 rows would be enough
-    assert not _keep_flagged(SimpleNamespace(**{**res.__dict__, "outliers": np.array([], int)}), opts)
+    assert keep_flagged_rows(big, opts)                                   # also when 78 rows would be enough
+    assert not keep_flagged_rows(SimpleNamespace(**{**res.__dict__, "outliers": np.array([], int)}), opts)
 
 
 def test_poses_needed_says_when_the_measured_poses_already_reach_the_target():

@@ -115,7 +115,7 @@ def test_capped_relaxation_bound_is_tighter_and_still_bounds_every_distinct_desi
 
 
 def test_newton_parts_gradient_and_hessian_against_finite_differences(pool):
-    from pin_kpi_oed.oed.relaxation import _newton_parts
+    from pin_kpi_oed.oed.relaxation import newton_parts
 
     Fp, E = pool
     F = Fp[:40]
@@ -123,14 +123,14 @@ def test_newton_parts_gradient_and_hessian_against_finite_differences(pool):
     w = np.random.default_rng(0).random(k) + 0.5
     w /= w.sum()
     for K in (E / 1e-6, None, np.vstack([E, np.eye(nb)[:30]]) / 1e-6):  # A with ns < nb, D, A with ns > nb
-        phi, g, B = _newton_parts(F.reshape(-1, nb), k, nh, w, K)
+        phi, g, B = newton_parts(F.reshape(-1, nb), k, nh, w, K)
         H = B @ B.T
         h = 1e-6 * w.min()
         for i in (0, 7, 31):
             e = np.zeros(k)
             e[i] = h
-            pp, gp, _ = _newton_parts(F.reshape(-1, nb), k, nh, w + e, K)
-            pm, gm, _ = _newton_parts(F.reshape(-1, nb), k, nh, w - e, K)
+            pp, gp, _ = newton_parts(F.reshape(-1, nb), k, nh, w + e, K)
+            pm, gm, _ = newton_parts(F.reshape(-1, nb), k, nh, w - e, K)
             assert (pp - pm) / (2 * h) == pytest.approx(g[i], rel=1e-5)
             np.testing.assert_allclose((gp - gm) / (2 * h), H[:, i], rtol=1e-4, atol=1e-6 * np.abs(H).max())
 
@@ -151,7 +151,7 @@ def test_block_gains_against_numpy(nh):
 
 @pytest.mark.parametrize("r", [5, 60])
 def test_diagonal_plus_low_rank_solve_against_dense(r):
-    from pin_kpi_oed.oed.relaxation import _solve_diag_lowrank
+    from pin_kpi_oed.oed.relaxation import solve_diag_lowrank
 
     rng = np.random.default_rng(r)
     k = 40
@@ -159,8 +159,8 @@ def test_diagonal_plus_low_rank_solve_against_dense(r):
     B = rng.standard_normal((k, r))
     rhs = rng.standard_normal((k, 2))
     want = np.linalg.solve(np.diag(D) + B @ B.T, rhs)
-    np.testing.assert_allclose(_solve_diag_lowrank(D, B, rhs), want, rtol=1e-8, atol=1e-10 * np.abs(want).max())
-    np.testing.assert_allclose(_solve_diag_lowrank(D, B, rhs[:, 0]), want[:, 0], rtol=1e-8,
+    np.testing.assert_allclose(solve_diag_lowrank(D, B, rhs), want, rtol=1e-8, atol=1e-10 * np.abs(want).max())
+    np.testing.assert_allclose(solve_diag_lowrank(D, B, rhs[:, 0]), want[:, 0], rtol=1e-8,
                                atol=1e-10 * np.abs(want).max())
 
 
@@ -260,17 +260,17 @@ def test_near_duplicate_pool_is_certified_on_every_candidate(pool, kind):
 
 def test_onto_capped_gives_a_capped_measure():
     """The warm start's projection: weights above the cap are cut, the measure stays a probability ≤ cap."""
-    from pin_kpi_oed.oed.relaxation import _onto_capped
+    from pin_kpi_oed.oed.relaxation import onto_capped
 
     rng = np.random.default_rng(3)
     w = rng.exponential(size=200) ** 4
     w /= w.sum()
     cap = 1 / 60
     assert w.max() > cap  # the case that needs the cut
-    v = _onto_capped(w, cap)
+    v = onto_capped(w, cap)
     assert abs(v.sum() - 1) < 1e-12 and v.min() >= 0 and v.max() <= cap * (1 + 1e-12)
     small = np.full(100, 0.01)
-    np.testing.assert_array_equal(_onto_capped(small, cap), small)
+    np.testing.assert_array_equal(onto_capped(small, cap), small)
 
 
 def test_selection_efficiency_of_d_and_a_type(pool):

@@ -501,7 +501,7 @@ def test_sequential_design_beats_random_and_answers_how_many_more(kr15, tmp_path
 
 
 # ---------------------------------------------------------------------------- cells from meshes
-from pin_kpi_oed.cell.meshes import _vertices, capsule_of, fit_capsule, geometry_model  # noqa: E402
+from pin_kpi_oed.cell.meshes import mesh_vertices, capsule_of, fit_capsule, geometry_model  # noqa: E402
 from pin_kpi_oed.cell.segments import point_segment_distance  # noqa: E402
 
 
@@ -526,7 +526,7 @@ def test_ur10_capsules_enclose_its_collision_meshes():
     for go in gm.geometryObjects:
         a, b, r = capsule_of(rb, go)
         M = rb.model.frames[go.parentFrame].placement.inverse() * go.placement
-        V = _vertices(go) @ M.rotation.T + M.translation
+        V = mesh_vertices(go) @ M.rotation.T + M.translation
         assert np.all(point_segment_distance(V, a[None], b[None]) <= r + 1e-9), go.name
     cell = load_cell("ur10")  # shipped, robot_capsules: urdf on mesh geometry
     assert len(cell.robot_capsules) == len(gm.geometryObjects)

@@ -574,7 +574,7 @@ def test_withheld_effects_transfer_case_names_the_effect(effect):
 
 
 def test_low_order_transmission_terms_are_named_gear_harmonic():
-    from pin_kpi_oed.diagnosis.diagnose import _name_low_orders
+    from pin_kpi_oed.diagnosis.diagnose import name_low_orders
 
     def ts(*terms):
         return {"terms": [{"effect": "transmission_error", "group": g, "amplitude_rad": a} for g, a in terms]}
@@ -582,9 +582,9 @@ def test_low_order_transmission_terms_are_named_gear_harmonic():
     cands = ["joint_compliance", "gear_harmonic", "transmission_error"]
     notes: list[str] = []
     low = ts(("elbow order 1", 3e-4), ("shoulder_pan order 2", 2e-4), ("wrist_2 order 40", 2e-5))
-    assert _name_low_orders("transmission_error", low, cands, notes) == "gear_harmonic"
+    assert name_low_orders("transmission_error", low, cands, notes) == "gear_harmonic"
     assert "orders 1-2" in notes[-1]
     high = ts(("elbow order 1", 1e-4), ("elbow order 18", 2e-4))
-    assert _name_low_orders("transmission_error", high, cands, []) == "transmission_error"
-    assert _name_low_orders("transmission_error", low, ["transmission_error"], []) == "transmission_error"
-    assert _name_low_orders("joint_compliance", low, cands, []) == "joint_compliance"
+    assert name_low_orders("transmission_error", high, cands, []) == "transmission_error"
+    assert name_low_orders("transmission_error", low, ["transmission_error"], []) == "transmission_error"
+    assert name_low_orders("joint_compliance", low, cands, []) == "joint_compliance"

@@ -59,7 +59,7 @@ def fit_capsule(points: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
     return best[1], best[2], best[3]
 
 
-def _vertices(go: pin.GeometryObject) -> np.ndarray:
+def mesh_vertices(go: pin.GeometryObject) -> np.ndarray:
     """Vertices of a mesh or box geometry object in its own frame (m)."""
     import coal
 
@@ -116,7 +116,7 @@ def capsule_of(robot, go: pin.GeometryObject) -> tuple[np.ndarray, np.ndarray, f
         h = 0.0 if isinstance(g, coal.Sphere) else float(g.halfLength)
         return M.act(np.array([0.0, 0.0, -h])), M.act(np.array([0.0, 0.0, h])), float(g.radius)
     if isinstance(g, coal.Box) or go.meshPath:
-        V = _vertices(go)
+        V = mesh_vertices(go)
         a, b, r = fit_capsule(V @ M.rotation.T + M.translation)
         return a, b, r
     raise InputError(f"robot_capsules: the geometry of link '{robot.model.frames[go.parentFrame].name}' in "

@@ -237,7 +237,7 @@ def solve_ipopt(problem: IpoptProblem, criterion: str, Q0: np.ndarray, options: 
 
     crit = problem.criterion(criterion)
     m, n = Q0.shape
-    nlp = DesignNLP(crit, problem.cons, m, _start_value(crit, Q0))
+    nlp = DesignNLP(crit, problem.cons, m, ipopt_start_value(crit, Q0))
     lb, ub, cl, cu = _nlp_bounds(problem, m)
     x0 = np.clip(Q0.ravel(), lb, ub)
     t0 = time.perf_counter()
@@ -258,7 +258,7 @@ def solve_ipopt(problem: IpoptProblem, criterion: str, Q0: np.ndarray, options: 
                        time.perf_counter() - t0, cl.size)
 
 
-def _start_value(crit: DesignObjective, Q0: np.ndarray) -> float:
+def ipopt_start_value(crit: DesignObjective, Q0: np.ndarray) -> float:
     """φ at the start (the objective's scale or shift).
 
     Raises:

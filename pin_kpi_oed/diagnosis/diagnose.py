@@ -117,7 +117,7 @@ def _verdict(gap: dict, remaining_gap: dict, selected: list[str], mismatch: bool
     return "none"
 
 
-def _unconfirmed_terms(term_selection: dict, chosen: list[str], selected: list[str], singles: list,
+def unconfirmed_terms(term_selection: dict, chosen: list[str], selected: list[str], singles: list,
                        notes: list[str]) -> str:
     """The verdict's words when the terms chosen on the training rows (step 3b) are not selected on the held-out
     rows (step 7): a note with the numbers, and a clause for the one-line message ("" when they are, or none were)."""
@@ -139,7 +139,7 @@ def _unconfirmed_terms(term_selection: dict, chosen: list[str], selected: list[s
 LOW_ORDER_SHARE = 0.9
 
 
-def _name_low_orders(dominant: str, term_selection: dict, candidate_names: list[str], notes: list[str]) -> str:
+def name_low_orders(dominant: str, term_selection: dict, candidate_names: list[str], notes: list[str]) -> str:
     """Name selected transmission-error terms that are (almost) only orders 1–2 ``gear_harmonic``.
 
     :class:`~pin_kpi_oed.effects.library.GearHarmonic` is the model Δq_j = Σ_{o=1,2} a sin(o q_j) + b cos(o q_j)
@@ -269,8 +269,8 @@ def _diagnose_steps(model: TrackerModel, train: MeasurementSet, validate: Measur
     closed = (rb - ra) / (rb - floor) if rb is not None and rb - floor > 1e-3 * floor else float("nan")
     # (8) verdict
     dominant = _verdict(gap, remaining_gap, selected, validation_mismatch, floor, ra, notes, tried=bool(cands))
-    dominant = _name_low_orders(dominant, term_selection, [e.name for e in cands], notes)
-    unconfirmed = _unconfirmed_terms(term_selection, [e.name for e in chosen], selected, singles, notes)
+    dominant = name_low_orders(dominant, term_selection, [e.name for e in cands], notes)
+    unconfirmed = unconfirmed_terms(term_selection, [e.name for e in chosen], selected, singles, notes)
     for u in sorted(eng.unconverged):
         notes.append(f"the identification with {u} stopped at its evaluation limit before converging; its numbers "
                      "are those of the last iterate")

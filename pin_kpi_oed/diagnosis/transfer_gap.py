@@ -145,7 +145,7 @@ def _span(q: np.ndarray, periodic: bool) -> tuple[float, float]:
     return (float(np.min(q)), float(np.max(q))) if np.size(q) else (float("nan"), float("nan"))
 
 
-def _joint_ranges(joint_names: Sequence[str], Qt: np.ndarray, Qv: np.ndarray, cov: np.ndarray,
+def joint_ranges_of(joint_names: Sequence[str], Qt: np.ndarray, Qv: np.ndarray, cov: np.ndarray,
                   periodic: np.ndarray | None = None, units: Sequence[str] | None = None) -> list[dict]:
     """Per joint: training / validation ranges (the smallest arc, wrapped, for a ``periodic`` joint — None: every
     joint —, else min .. max), coverage and the uncovered validation values (as measured: within the joint's limits),
@@ -191,7 +191,7 @@ def _gap_texts(g: _GapNumbers, final_label: str) -> tuple[str, str, str]:
     return cov_txt, pred_txt, reg_txt
 
 
-def _poses_to_add(joints: Sequence[dict], use_sp: np.ndarray, ho_rows: np.ndarray, n_rows: int) -> dict:
+def gap_poses_to_add(joints: Sequence[dict], use_sp: np.ndarray, ho_rows: np.ndarray, n_rows: int) -> dict:
     """Joint ranges to measure and the validation rows (1-based) with the largest predicted σ (m)."""
     um = 1e6
     worst = np.argsort(-use_sp)[:N_WORST]
@@ -222,7 +222,7 @@ def _classify(g: _GapNumbers, texts: tuple[str, str, str], joints: Sequence[dict
     if g.overall < EXTRAPOLATION_COVERAGE or (g.excess > 0 and g.sp_rms >= PREDICTED_SHARE * g.excess):
         what = ("validation configurations mostly outside the training coverage" if g.overall < EXTRAPOLATION_COVERAGE
                 else "the parameters are poorly determined at the validation configurations")
-        return "extrapolation", f"{what}: {cov_txt}; {pred_txt}{reg_txt}", _poses_to_add(joints, use_sp, ho_rows,
+        return "extrapolation", f"{what}: {cov_txt}; {pred_txt}{reg_txt}", gap_poses_to_add(joints, use_sp, ho_rows,
                                                                                          n_rows)
     why = (f"validation mostly inside the training coverage and the model is confident there, yet the error is "
            f"above the training fit: {cov_txt}; {pred_txt}{reg_txt}")
@@ -267,7 +267,7 @@ def transfer_section(result: Any, train: MeasurementSet, ho_data: MeasurementSet
                     sp_rms=_rms(use_sp), sp_in=_rms(use_sp[inside]), sp_out=_rms(use_sp[~inside]),
                     excess=float(np.sqrt(max(rms ** 2 - floor_m ** 2, 0.0))), floor_m=floor_m,
                     registered=bool(registered), track=not bool(np.all(robot.is_revolute)))
-    joints = _joint_ranges(robot.joint_names, Qt, Qv, cov, robot.periodic_joints, robot.joint_units)
+    joints = joint_ranges_of(robot.joint_names, Qt, Qv, cov, robot.periodic_joints, robot.joint_units)
     cls, why, poses = _classify(g, _gap_texts(g, final_label), joints, use_sp, ho_rows, len(ho_data))
     return {"classification": cls, "reason": why, "joints": joints, "coverage_tol_rad": COVERAGE_TOL_RAD,
             "coverage_per_joint": [float(c) for c in cov.mean(axis=0)], "coverage_all_joints": g.overall,

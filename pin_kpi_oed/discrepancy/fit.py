@@ -82,7 +82,7 @@ def _spd_inverse(S: np.ndarray, keep: dict | None = None) -> np.ndarray:
     return Si + np.tril(Si, -1).T
 
 
-def _kfold(kernel: JointKernel, noise: float, Q: np.ndarray, Y: np.ndarray, scale: np.ndarray,
+def kfold_split(kernel: JointKernel, noise: float, Q: np.ndarray, Y: np.ndarray, scale: np.ndarray,
            opts: DiscrepancyOptions, names: list, keep: dict | None = None,
            periodic: np.ndarray | None = None) -> dict:
     """K-fold held-out check with the hyper-parameters fixed: mean 3-D error (m) without and with δ,
@@ -212,13 +212,13 @@ def fit_discrepancy(Q: np.ndarray, R: np.ndarray, joint_names: Sequence[str],
 def _best_start(Q: np.ndarray, Y: np.ndarray, scale: np.ndarray, opts: DiscrepancyOptions, names: list,
                 min_noise: float, cv_rows: np.ndarray, periodic: np.ndarray | None, joints: tuple) -> tuple:
     """The hyper-parameters from each of ``opts.starts`` (:func:`_hyper_fit`; ``joints`` = (linear mask, travel)),
-    the one of least K-fold held-out mean error (:func:`_kfold` on ``cv_rows``): (kernel, white level, the check, the
-    Cholesky factor of all rows or None)."""
+    the one of least K-fold held-out mean error (:func:`kfold_split` on ``cv_rows``): (kernel, white level, the
+    check, the Cholesky factor of all rows or None)."""
     best = None
     for a0 in opts.starts:
         kernel, noise = _hyper_fit(Q, Y, opts, float(a0), min_noise, *joints)
         keep: dict = {}  # the factor of all rows (reused by an exact posterior): only when the check uses them all
-        cv = _kfold(kernel, noise, Q[cv_rows], Y[cv_rows], scale, opts, names,
+        cv = kfold_split(kernel, noise, Q[cv_rows], Y[cv_rows], scale, opts, names,
                     keep if len(cv_rows) == len(Q) else None, periodic)
         if best is None or cv["mean_with_m"] < best[2]["mean_with_m"]:
             best = (kernel, noise, cv, keep.get("chol"))

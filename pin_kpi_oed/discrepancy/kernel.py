@@ -85,7 +85,7 @@ def length_units(linear: Any, span: Any, d: int) -> np.ndarray:
     return u
 
 
-def _chord2(X: np.ndarray, Y: np.ndarray, lin: np.ndarray | None = None) -> np.ndarray:
+def chord_squared(X: np.ndarray, Y: np.ndarray, lin: np.ndarray | None = None) -> np.ndarray:
     """4 sin²((x_j − y_j)/2) = 2 − 2 cos(x_j − y_j) per joint, (x_j − y_j)² for a linear joint: (n, m, d)."""
     D = 2.0 - 2.0 * np.cos(X[:, None, :] - Y[None, :, :])
     if lin is not None:
@@ -157,7 +157,7 @@ class _ChordCache:
             (b"" if lin is None else b"L" + lin.tobytes())
         entry = self.entry                       # one read: safe when two threads fit at once
         if entry is None or entry[0] != key:
-            D = _chord2(X, X, lin)
+            D = chord_squared(X, X, lin)
             D.flags.writeable = False
             entry = (key, D)
             self.entry = entry

@@ -69,7 +69,7 @@ def stated_noise_m(result: Any, data: MeasurementSet) -> np.ndarray | None:
     return np.full(3, float(np.sqrt(np.mean(sig ** 2))))
 
 
-def _keep_flagged(result: Any, opts: Any) -> bool:
+def keep_flagged_rows(result: Any, opts: Any) -> bool:
     """Whether the rows flagged as outliers go into the discrepancy too: when the plain (linear) loss kept them in the
     parametric fit. A fit that misses an effect flags its largest residuals, which are the discrepancy's information:
     left out, they made δ's level too small (designs of 70 poses with an unmodelled gear harmonic: held-out
@@ -111,7 +111,7 @@ def result_discrepancy(result: Any, data: MeasurementSet, options: Any = "auto",
         Q = align_data(result.model.robot, data)
     if len(Q) != len(result.residuals_m):
         raise InputError(f"discrepancy: {len(Q)} configurations for {len(result.residuals_m)} residuals")
-    rows, R = base_frame_residuals(result, keep_flagged=_keep_flagged(result, opts))
+    rows, R = base_frame_residuals(result, keep_flagged=keep_flagged_rows(result, opts))
     Q = np.asarray(Q, float)
     n_out = position_outliers(result).size
     nest = nest_column(data, result.model.n_nests)

@@ -124,7 +124,7 @@ def _info_w(Fp: np.ndarray, w: np.ndarray, M0: np.ndarray | None = None) -> np.n
     return Fw.T @ Fw if M0 is None else Fw.T @ Fw + M0
 
 
-def _newton_parts(F2: np.ndarray, k: int, nh: int, w: np.ndarray, K: np.ndarray | None,
+def newton_parts(F2: np.ndarray, k: int, nh: int, w: np.ndarray, K: np.ndarray | None,
                   M0: np.ndarray | None = None) -> tuple[float, np.ndarray, np.ndarray]:
     """φ(w), its gradient (−d) and a factor B of its Hessian H = B Bᵀ on a (sub)pool; F2 the stacked candidates
     (k·nh, nb).
@@ -136,7 +136,7 @@ def _newton_parts(F2: np.ndarray, k: int, nh: int, w: np.ndarray, K: np.ndarray 
     so B_i = (√c_ab X_i,ab) over the pairs a ≤ b with c_ab > 0: rank r ≤ nb(nb+1)/2, and for a KPI with ns
     rows r ≤ ns·nb − ns(ns−1)/2 (pairs inside P's null space drop out; ns = 3: 78 of 378).
     D: φ = −log det M, d_i = ‖G_i‖²_F, ∂²φ/∂w_i∂w_j = tr(M⁻¹A_iM⁻¹A_j) = tr(Ã_i Ã_j): the same with V = I,
-    λ_a = ½. The Newton system then costs O(k·r²) (Woodbury, :func:`_solve_diag_lowrank`) instead of O(k³).
+    λ_a = ½. The Newton system then costs O(k·r²) (Woodbury, :func:`solve_diag_lowrank`) instead of O(k³).
     A fixed part M0 (M = M0 + Σ w_i A_i) changes only M.
 
     Returns:
@@ -169,7 +169,7 @@ def _newton_parts(F2: np.ndarray, k: int, nh: int, w: np.ndarray, K: np.ndarray 
     return phi, g, X
 
 
-def _solve_diag_lowrank(D: np.ndarray, B: np.ndarray, rhs: np.ndarray) -> np.ndarray:
+def solve_diag_lowrank(D: np.ndarray, B: np.ndarray, rhs: np.ndarray) -> np.ndarray:
     """Solve (diag(D) + B Bᵀ) X = rhs for D > 0: Woodbury with the r×r capacitance matrix I + BᵀD⁻¹B
     (Cholesky) when B has fewer columns than rows, the dense k×k system otherwise.
 
@@ -206,7 +206,7 @@ def _top_mean(d: np.ndarray, m: int) -> float:
     return float(d.max()) if m <= 1 else float(np.mean(np.partition(d, d.size - m)[d.size - m:]))
 
 
-def _onto_capped(w: np.ndarray, cap: float) -> np.ndarray:
+def onto_capped(w: np.ndarray, cap: float) -> np.ndarray:
     """A measure of the capped simplex {v ≥ 0, Σv = 1, v ≤ cap} from w: weights above the cap are cut to it and
     the excess is spread over the others in proportion (repeated until none exceeds; the warm start's projection).
 
@@ -235,7 +235,7 @@ def _newton_simplex(Fa: np.ndarray, w: np.ndarray, K: np.ndarray | None, tol: fl
 
     KKT conditions: ∇φ + ν1 − z + y = 0, w∘z = μ, (1/m − w)∘y = μ, μ → 0 (the cap and its dual y
     only for m > 1). Each step solves the (k+1)-dimensional Newton system with the exact Hessian
-    (:func:`_newton_parts`: H = B Bᵀ of rank r ≤ nb(nb+1)/2, solved by Woodbury in O(k·r²)) and keeps the
+    (:func:`newton_parts`: H = B Bᵀ of rank r ≤ nb(nb+1)/2, solved by Woodbury in O(k·r²)) and keeps the
     iterates interior (fraction to the boundary 0.99). It converges
     in 15–40 steps, where the multiplicative algorithm needs thousands of iterations.
 
@@ -263,10 +263,10 @@ def _newton_simplex(Fa: np.ndarray, w: np.ndarray, K: np.ndarray | None, tol: fl
     w = w / w.sum()
     if m > 1:  # strictly inside the cap: mix with the uniform measure (1/k < 1/m)
         if warm:  # the previous round's weights, 10 % toward the uniform measure (strictly inside: ≤ 0.9 cap + 0.1/k)
-            w = 0.9 * _onto_capped(w, cap) + 0.1 / k
+            w = 0.9 * onto_capped(w, cap) + 0.1 / k
         else:
             w = 0.5 * np.minimum(w, cap) / np.minimum(w, cap).sum() + 0.5 / k
-    phi, g, B = _newton_parts(F2, k, nh, w, K, M0)
+    phi, g, B = newton_parts(F2, k, nh, w, K, M0)
     nu = float(-g.min())
     z = np.maximum(nu + g, 1e-3 * abs(nu))
     y = np.full(k, 1e-3 * abs(nu)) if m > 1 else np.zeros(k)
@@ -284,7 +284,7 @@ def _newton_simplex(Fa: np.ndarray, w: np.ndarray, K: np.ndarray | None, tol: fl
             D = D + y / s
             rhs += rcy / s
         # [[H + diag(D), 1], [1ᵀ, 0]] [dw; dnu] = [rhs; 1 − Σw], H = B Bᵀ: two solves with H + diag(D)
-        X = _solve_diag_lowrank(D, B, np.stack([rhs, np.ones(k)], axis=1))
+        X = solve_diag_lowrank(D, B, np.stack([rhs, np.ones(k)], axis=1))
         dnu = (X[:, 0].sum() - (1.0 - w.sum())) / X[:, 1].sum()
         dw = X[:, 0] - dnu * X[:, 1]
         dz = (-rcz - z * dw) / w
@@ -300,7 +300,7 @@ def _newton_simplex(Fa: np.ndarray, w: np.ndarray, K: np.ndarray | None, tol: fl
         w, z, nu = w + step * dw, z + step * dz, nu + step * dnu
         if m > 1:
             y = y + step * dy
-        phi, g, B = _newton_parts(F2, k, nh, w, K, M0)
+        phi, g, B = newton_parts(F2, k, nh, w, K, M0)
     return w / w.sum(), it
 
 

@@ -353,7 +353,7 @@ def _errors(model: TrackerModel, data: MeasurementSet, base: np.ndarray, effects
     return np.linalg.norm(prob.evaluate(x)[0], axis=1)
 
 
-def _near(Q: np.ndarray, Q_work: np.ndarray, radius: float, joints: int) -> np.ndarray:
+def near_training(Q: np.ndarray, Q_work: np.ndarray, radius: float, joints: int) -> np.ndarray:
     """Rows of Q within ``radius`` (Euclidean, rad, first ``joints`` joints) of any working configuration."""
     d = np.linalg.norm(Q[:, None, :joints] - Q_work[None, :, :joints], axis=2)
     return np.flatnonzero(d.min(axis=1) <= radius)
@@ -505,12 +505,12 @@ def work_and_scored(data: MeasurementSet, target: MeasurementSet | None, perm: n
         test_rows = np.sort(perm[:n_test])
         tq = data.q[test_rows]
         work = tq[rng.choice(test_rows.size, n_work, replace=False)]
-        return work, data.subset(test_rows[_near(tq, work, radius_rad, joints)]), None
+        return work, data.subset(test_rows[near_training(tq, work, radius_rad, joints)]), None
     tperm = rng.permutation(len(target))
     reg = target.subset(np.sort(tperm[:n_register]))
     rest = np.sort(tperm[n_register:])
     work = target.q[rest[rng.choice(rest.size, n_work, replace=False)]]
-    return work, target.subset(rest[_near(target.q[rest], work, radius_rad, joints)]), reg
+    return work, target.subset(rest[near_training(target.q[rest], work, radius_rad, joints)]), reg
 
 
 def _choose(meth: str, fit: _SplitFit, E_ext: np.ndarray, rng: np.random.Generator, n_pool: int, n_meas: int,

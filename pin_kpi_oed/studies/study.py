@@ -172,7 +172,7 @@ def run_task(task: Task, out_dir: str) -> dict:
     return rec
 
 
-def _finished(out_dir: Path, task: Task) -> dict | None:
+def task_finished(out_dir: Path, task: Task) -> dict | None:
     path = out_dir / "tasks" / f"{task.key}.json"
     if not path.exists():
         return None
@@ -214,7 +214,7 @@ def _run_tasks_locked(tasks: list[Task], out_dir: Path, workers: int | None, sch
     (out_dir / "tasks").mkdir(parents=True, exist_ok=True)
     for stale in (out_dir / "tasks").glob(".*.tmp"):  # left by a run killed while writing: never a result
         stale.unlink(missing_ok=True)
-    done = {t.key: r for t in tasks if (r := _finished(out_dir, t)) is not None}
+    done = {t.key: r for t in tasks if (r := task_finished(out_dir, t)) is not None}
     todo = [t for t in tasks if t.key not in done]
     if todo:
         if scheduler:

@@ -290,7 +290,7 @@ def check_calibration(model: CalibratedModel, data: MeasurementSet, *, station: 
     moved = shown_above(rows.setup_shift_m, rows.setup_shift_sigma_m, tolerance_m, a1)
     if not T > out["threshold"]:
         return _quiet(rows, out, moved, t0)
-    named = _name_group(rows.crit, rows.F, rows.z, dof, alpha, null)
+    named = check_group_name(rows.crit, rows.F, rows.z, dof, alpha, null)
     out["groups"] = named["table"]
     if named["best"] is None:
         return _unexplained(rows, out, named["significant"], moved, t0)
@@ -439,7 +439,7 @@ def verdict_powers(crit: CheckPower, F: np.ndarray, tolerance_m: float, alpha: f
     return out
 
 
-def _name_group(crit: CheckPower, F: np.ndarray, z: np.ndarray, dof: int, alpha: float, null: CheckNull) -> dict:
+def check_group_name(crit: CheckPower, F: np.ndarray, z: np.ndarray, dof: int, alpha: float, null: CheckNull) -> dict:
     """Each group fitted with the set-up; among the groups whose remaining χ² passes at α / :data:`FIT_SHARE` (the
     true group fails its own fit test at that rate, which caps the share named right at 1 − α / FIT_SHARE), the one
     of the least remaining χ² + 2 r_g (Akaike's criterion of the whitened rows: a larger group must explain more, a
