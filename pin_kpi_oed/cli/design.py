@@ -106,6 +106,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         "working configurations and the working region's); kpi_gp and the honest sigma then score "
                         "the TCP error after that registration instead of the parameter uncertainty carried in the "
                         "old set-up")
+    p.add_argument("--iso9283", default=None, metavar="PROGRAM",
+                   help="instead of a design: plan the ISO 9283 cube test around the working configurations (the "
+                        "largest cube that fits, P1..P5 on its diagonal plane, 30 cycles, every pose and move "
+                        "checked) and write it as a robot program (format from the suffix: .csv, .script, .src, .mod)")
     p.set_defaults(func=run)
 
 
@@ -183,6 +187,10 @@ def run(args: argparse.Namespace) -> int:
     from pin_kpi_oed.design.declare import design_problem
     from pin_kpi_oed.design.path_profile import profile_lines
 
+    if getattr(args, "iso9283", None):
+        from pin_kpi_oed.cli.iso9283 import run_iso9283
+
+        return run_iso9283(args)
     criteria = parse_criteria(getattr(args, "criteria", "random,param,kpi"))
     cell = load_cell(getattr(args, "cell", "kr15"))
     settings, quiet = _settings(args, cell, criteria)

@@ -1,0 +1,63 @@
+"""The ISO 9283 cube test: the test plane's geometry, poses in the shipped cells, refusals."""
+
+from __future__ import annotations
+
+import numpy as np
+import pinocchio as pin
+import pytest
+
+from pin_kpi_oed.cell.cell import load_cell
+from pin_kpi_oed.cell.feasibility import FeasibilityChecker
+from pin_kpi_oed.cli.app import main
+from pin_kpi_oed.design.iso9283 import N_CYCLES, plan_iso_cube, iso_test_plane
+from pin_kpi_oed.errors import InputError
+
+
+def test_positions_on_the_diagonal_plane_at_the_standard_fractions():
+    R = pin.rpy.rpyToMatrix(0.1, -0.2, 0.7)
+    centre, side = np.array([1.0, -0.5, 0.8]), 0.4
+    corners, P = iso_test_plane(centre, side, R)
+    local = (corners - centre) @ R  # base-frame coordinates of C1, C2, C7, C8
+    assert np.allclose(np.abs(local), side / 2)
+    # the plane through opposite cube edges: x = y in the base frame, containing the cube centre
+    assert np.allclose(local[:, 0], local[:, 1])
+    normal = R @ np.array([1.0, -1.0, 0.0]) / np.sqrt(2)
+    assert np.allclose((P - centre) @ normal, 0.0, atol=1e-12)
+    assert np.allclose(P[0], centre)
+    L = side * np.sqrt(3)  # the plane's diagonal C1-C7
+    assert np.isclose(np.linalg.norm(corners[0] - corners[2]), L)
+    for k in range(4):
+        assert np.isclose(np.linalg.norm(P[k + 1] - corners[k]), 0.1 * L)
+        # on the diagonal from the corner through the centre
+        assert np.allclose(np.cross(P[k + 1] - corners[k], centre - corners[k]), 0.0, atol=1e-12)
+
+
+@pytest.mark.parametrize("name", ["ur10", "kr15"])
+def test_shipped_cells_plan_a_collision_free_test(name):
+    cell = load_cell(name)
+    test = plan_iso_cube(cell)
+    assert test.side_m >= 0.05
+    rep = FeasibilityChecker(load_cell(name)).check(test.q)  # a fresh, independent checker
+    assert rep.feasible.all() and rep.collision_free.all(), rep.violations()
+    rb = cell.robot
+    for q, p in zip(test.q, test.positions_m):  # the poses reach the positions with the one orientation
+        pin.framesForwardKinematics(rb.model, rb.data, q)
+        M = cell.W_T_base * rb.data.oMf[rb.tool_frame_id]
+        assert np.linalg.norm(M.act(np.asarray(cell.tcp_m)) - p) < 1e-5
+        assert np.allclose(M.rotation, test.rotation, atol=1e-5)
+    Q, idx = test.cycle_poses()
+    assert Q.shape == (5 * N_CYCLES, rb.nq) and idx[:5] == [0, 4, 3, 2, 1]
+
+
+def test_a_cube_that_does_not_fit_is_refused_naming_what_to_change():
+    with pytest.raises(InputError, match="does not fit.*smaller side"):
+        plan_iso_cube(load_cell("kr15"), side_m=2.0)
+
+
+def test_cli_writes_the_program_and_refuses_an_unknown_suffix(tmp_path, capsys):
+    out = tmp_path / "iso.csv"
+    assert main(["design", "--cell", "ur10", "--iso9283", str(out)]) == 0
+    rows = [r for r in out.read_text().splitlines() if r and not r.startswith("#")]
+    assert len(rows) == 1 + 5 * N_CYCLES  # header + the poses of 30 cycles
+    assert main(["design", "--cell", "ur10", "--iso9283", str(tmp_path / "iso.txt")]) == 2
+    assert "unknown program suffix" in capsys.readouterr().err
