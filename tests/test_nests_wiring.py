@@ -75,3 +75,38 @@ def test_design_chooses_stores_and_simulate_measures_the_nests(tmp_path):
 
     ms = read_measurements(str(csv), joint_names=cell.robot.joint_names)
     assert ms.extra["nest"].astype(int).tolist() == d["nest"]
+
+
+def test_model_file_keeps_the_nests_and_predicts_each_row_at_its_nest(tmp_path):
+    """A fit on rows at two nests (a truth with joint errors, 1 µm noise): the model file written and read back holds
+    the fitted nests, and predicts held-out rows at their nests to the noise level; the same rows read as nest 0
+    are off by the nests' distance."""
+    from pin_kpi_oed.calibrated.model_file import load_model_file
+    from pin_kpi_oed.identification.identify import identify
+    from pin_kpi_oed.model.noise import NoiseModel
+    from pin_kpi_oed.model.robot import load_robot
+    from pin_kpi_oed.model.tracker import TrackerModel
+    from pin_kpi_oed.simulation.simulator import default_tracker_pose, random_truth, simulate
+
+    rb, nests = load_robot("ur5"), [[0.0, 0.0, 0.0], [0.06, 0.0, 0.05]]
+    model = TrackerModel(rb, tracker_T_base=default_tracker_pose(rb), reflector_m=nests[0], nests_m=nests,
+                         tcp_m=np.array([0.0, 0.0, 0.15]), noise=NoiseModel(sigma_xyz_m=(1e-6,) * 3))
+    truth, rng = random_truth(model, seed=2), np.random.default_rng(1)
+    Q, Qt = rb.random_q(rng, 36), rb.random_q(rng, 10)
+    train = simulate(model, Q, truth, nest=np.arange(36) % 2, seed=3)
+    test = simulate(model, Qt, truth, nest=np.arange(10) % 2, seed=4)
+    cm = identify(model, train, discrepancy="none").calibrated_model()
+    cm.save(tmp_path / "model.json")
+    back = load_model_file(tmp_path / "model.json")
+    st = next(iter(back.setups.values()))
+    assert st.nests_m is not None and st.nests_m.shape == (2, 3)
+    assert np.allclose(st.nests_m, next(iter(cm.setups.values())).nests_m, atol=0)
+    assert np.allclose(st.nests_m[1] - st.nests_m[0], np.subtract(nests[1], nests[0]), atol=1e-12)
+    err = np.linalg.norm(back.predict(test.q, aux=test) - test.position_m, axis=1)
+    assert err.max() < 2e-5
+    from pin_kpi_oed.identification.heldout import validate
+
+    assert np.abs(validate(back, test)["residuals_m"]).max() < 2e-5  # the held-out validation, row at its nest
+    test.extra.pop("nest")
+    err0 = np.linalg.norm(back.predict(test.q, aux=test) - test.position_m, axis=1)
+    assert np.all(err0[1::2] > 0.05) and err0[0::2].max() < 2e-5

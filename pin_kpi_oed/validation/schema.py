@@ -256,6 +256,7 @@ _EFFECT = {"type": "object", "required": ["kind"],
                                                                                              "minimum": 0}}}}
 _STATION = {"type": "object", "additionalProperties": False, "required": ["tracker_T_base", "reflector_m"],
             "properties": {"tracker_T_base": _MAT4, "reflector_m": _VEC3,
+                           "nests_m": {"type": ["array", "null"], "items": _VEC3, "minItems": 1},
                            "probe_R": {"anyOf": [_MAT3, {"type": "null"}]},
                            "n_rows": {"type": "integer", "minimum": 0}, "fitted_by": {"type": "string"},
                            "source": {"type": "string"}, "rms_m": {"type": ["number", "null"], "minimum": 0},
