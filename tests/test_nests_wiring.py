@@ -80,7 +80,7 @@ def test_design_chooses_stores_and_simulate_measures_the_nests(tmp_path):
 def test_model_file_keeps_the_nests_and_predicts_each_row_at_its_nest(tmp_path):
     """A fit on rows at two nests (a truth with joint errors, 1 µm noise): the model file written and read back holds
     the fitted nests, and predicts held-out rows at their nests to the noise level; the same rows read as nest 0
-    are off by the nests' distance."""
+    are off by the nests' distance. A registration of a moved tracker on rows at both nests keeps them too."""
     from pin_kpi_oed.calibrated.model_file import load_model_file
     from pin_kpi_oed.identification.identify import identify
     from pin_kpi_oed.model.noise import NoiseModel
@@ -107,6 +107,13 @@ def test_model_file_keeps_the_nests_and_predicts_each_row_at_its_nest(tmp_path):
     from pin_kpi_oed.identification.heldout import validate
 
     assert np.abs(validate(back, test)["residuals_m"]).max() < 2e-5  # the held-out validation, row at its nest
+    from pin_kpi_oed.upkeep.transfer import register_setup
+
+    moved = simulate(model, Qt, truth, nest=np.arange(10) % 2, seed=5)  # another session: the tracker moved
+    moved.position_m = moved.position_m @ np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]]).T + 0.5
+    reg = register_setup(back, moved, station="B", check=False).model
+    assert np.allclose(reg.setups["B"].nests_m[1] - reg.setups["B"].nests_m[0], np.subtract(nests[1], nests[0]))
+    assert np.linalg.norm(reg.predict(Qt, aux=moved, station="B") - moved.position_m, axis=1).max() < 2e-5
     test.extra.pop("nest")
     err0 = np.linalg.norm(back.predict(test.q, aux=test) - test.position_m, axis=1)
     assert np.all(err0[1::2] > 0.05) and err0[0::2].max() < 2e-5

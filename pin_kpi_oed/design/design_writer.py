@@ -50,6 +50,9 @@ def design_document(run: DesignRun) -> dict:
         "q_meas": main.q_meas.tolist(), "q_meas_criterion": main.criterion,
     }
     for d, nd in zip(doc["designs"], run.nests or ()):
+        if nd is None:  # poses that do not identify nest 0's parameters: no nest chosen, every pose at nest 0
+            d["nest"] = [0] * len(d["q_meas"])
+            continue
         d["nest"] = nd.nest.tolist()
         d["nests"] = {"line": nd.line(), "one": asdict(nd.one), "chosen": asdict(nd.chosen), "t": nd.t}
     if run.extended_scores is not None:

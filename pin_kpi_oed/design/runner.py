@@ -233,17 +233,21 @@ def design_nests(cell: Cell, results: Sequence[Any], seed: int = 0) -> list | No
         seed: the structural analysis's excitation.
 
     Returns:
-        One :class:`~pin_kpi_oed.oed.nests.NestDesign` per design, or None.
-
-    Raises:
-        IdentifiabilityError: a design's poses do not identify the parameters of nest 0.
+        One :class:`~pin_kpi_oed.oed.nests.NestDesign` per design (None for a design whose poses do not identify
+        the parameters of nest 0: it measures nest 0), or None.
     """
     if cell.nests_m is None or len(cell.nests_m) < 2 or cell.q_work.shape[0] == 0:
         return None
+    from pin_kpi_oed.errors import IdentifiabilityError
     from pin_kpi_oed.oed.nests import assign_nests
 
-    model = cell.tracker_model()
-    return [assign_nests(model, r.q_meas, cell.q_work, seed=seed) for r in results]
+    model, out = cell.tracker_model(), []
+    for r in results:
+        try:
+            out.append(assign_nests(model, r.q_meas, cell.q_work, seed=seed))
+        except IdentifiabilityError:
+            out.append(None)
+    return out
 
 
 def _silent(line: str) -> None:
