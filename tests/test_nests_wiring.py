@@ -68,6 +68,11 @@ def test_design_chooses_stores_and_simulate_measures_the_nests(tmp_path):
     again = assign_nests(cell.tracker_model(), np.asarray(d["q_meas"]), cell.q_work, seed=0)
     assert again.nest.tolist() == d["nest"] and again.line() == d["nests"]["line"] == line.split(": ", 1)[1]
     assert np.allclose(doc["cell"]["nests_m"], NESTS) and np.allclose(doc["nests_m"], NESTS)
+    from pin_kpi_oed.design.design_file import load_design
+
+    df = load_design(out)  # the stored cell read back (as simulate, view and export read it)
+    assert np.allclose(df.cell.nests_m, NESTS) and np.allclose(df.model.nests_m, NESTS)
+    assert df.designs[0].info["nest"] == d["nest"]
     csv = tmp_path / "train.csv"
     rc, _, err = run_cli("simulate", "--design", out, "--out", csv, "--n-test", "0", "--seed", "1")
     assert rc == 0, err
