@@ -20,7 +20,7 @@ key                  content (SI units: m, rad)
 ``stations``         per station label: ``tracker_T_base`` (pose of the robot base in the
                      tracker frame, 4×4), ``reflector_m`` (tool frame), ``probe_R`` (6-D),
                      ``n_rows``, ``fitted_by`` (``identify`` or ``register``), ``source``,
-                     ``rms_m``
+                     ``rms_m``, ``nests_m`` (the tool's reflector nests as fitted, tool frame)
 ``default_station``  the station used when none is named (the last registered one)
 ``noise``            the noise model (:meth:`NoiseModel.to_dict`)
 ``tcp_m``, ``pose6d`` KPI point in the tool frame; whether the model predicts orientations
@@ -40,11 +40,10 @@ key                  content (SI units: m, rad)
 ``history``          what produced the file, step by step (identify, register)
 ==================== ======================================================================
 
-Prediction (:meth:`CalibratedModel.predict`): for station s with set-up (T_s, r_s) and the
-robot's δ and effects (θ), the reflector in the tracker frame is
-``y = T_s · oMtool(δ, q + ΣΔq(θ)) · r_s + ΣΔy(θ)``
-(:func:`pin_kpi_oed.effects.library.predict_with_effects`), the same model the fit used:
-a model file loaded back predicts what the fit predicted (to ~1e-15 m, tested).
+Prediction (:meth:`CalibratedModel.predict`): for station s with set-up (T_s, r_s) (r_s the row's nest) and the
+robot's δ and effects (θ), the reflector in the tracker frame is ``y = T_s · oMtool(δ, q + ΣΔq(θ)) · r_s + ΣΔy(θ)``
+(:func:`pin_kpi_oed.effects.library.predict_with_effects`), the same model the fit used: a model file loaded back
+predicts what the fit predicted (to ~1e-15 m, tested).
 
 With a discrepancy, :meth:`CalibratedModel.predict` adds ``R_s · δ̄(q)`` (its posterior mean in the station's
 tracker frame); :meth:`CalibratedModel.predict_with_sigma` gives the σ of measured − predicted per axis (posterior
@@ -77,6 +76,7 @@ from pin_kpi_oed.discrepancy.gp import Discrepancy
 from pin_kpi_oed.effects.library import predict_with_effects
 from pin_kpi_oed.effects.spec import effect_from_spec, effect_spec
 from pin_kpi_oed.errors import InputError, PinKpiOedError
+from pin_kpi_oed.model.nests import check_nests, nest_column
 from pin_kpi_oed.model.noise import NoiseModel
 from pin_kpi_oed.model.tracker import TrackerModel
 from pin_kpi_oed.model.parameters import ParameterLayout
@@ -104,6 +104,7 @@ class Setup:
     Attributes:
         tracker_T_base: pose of the robot base in the tracker frame, 4×4 (m).
         reflector_m: reflector offset in the tool frame, (3,) m.
+        nests_m: the reflector nests as fitted, (k, 3) m, nest 0 = ``reflector_m`` (a row's ``nest`` picks one).
         probe_R: probe orientation in the tool frame (6-D only), 3×3; None otherwise.
         n_rows: measurements the set-up was fitted on.
         fitted_by: ``identify`` (fitted with the robot) or ``register`` (robot held).
@@ -128,6 +129,7 @@ class Setup:
     rms_m: float | None = None
     sigma_scale: float = 1.0
     registered_q_rad: np.ndarray | None = None
+    nests_m: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         self.sigma_scale = float(self.sigma_scale)
@@ -149,7 +151,8 @@ class Setup:
         return to_jsonable({"tracker_T_base": self.tracker_T_base, "reflector_m": self.reflector_m,
                             "probe_R": self.probe_R, "n_rows": int(self.n_rows), "fitted_by": self.fitted_by,
                             "source": self.source, "rms_m": self.rms_m, "sigma_scale": self.sigma_scale,
-                            **({} if self.registered_q_rad is None else {"registered_q_rad": self.registered_q_rad})})
+                            **{k: v for k, v in (("registered_q_rad", self.registered_q_rad),
+                                                 ("nests_m", self.nests_m)) if v is not None}})
 
     @classmethod
     def from_dict(cls, d: dict, where: str) -> Setup:
@@ -181,8 +184,9 @@ class Setup:
             if Qr.ndim != 2 or len(Qr) == 0 or not np.all(np.isfinite(Qr)):
                 raise InputError(f"{where}: 'registered_q_rad' must be rows of finite joint values (rad), one per "
                                  "registration row")
+        nests = None if d.get("nests_m") is None else check_nests(refl, d["nests_m"], f"{where}: nests_m")
         return cls(T, refl, R, int(d.get("n_rows", 0)), str(d.get("fitted_by", "identify")),
-                   str(d.get("source", "")), d.get("rms_m"), float(scale), Qr)
+                   str(d.get("source", "")), d.get("rms_m"), float(scale), Qr, nests)
 
 
 @dataclass
@@ -278,9 +282,8 @@ class CalibratedModel:
         L = ParameterLayout(list(self.robot.joint_names), pose6d=self.pose6d and st.probe_R is not None)
         model = TrackerModel(self.robot, tracker_T_base=pin.SE3(st.tracker_T_base), reflector_m=st.reflector_m,
                              tcp_m=self.tcp_m, noise=self.noise, pose6d=L.pose6d,
-                             probe_R=np.eye(3) if st.probe_R is None else st.probe_R, layout=L)
-        p = np.zeros(L.n)
-        p[:6 * self.robot.nq] = self.joint_p
+                             probe_R=np.eye(3) if st.probe_R is None else st.probe_R, layout=L, nests_m=st.nests_m)
+        p = np.concatenate([self.joint_p, np.zeros(L.n - self.joint_p.size)])
         return model, p
 
     def predict(self, Q: np.ndarray, aux: MeasurementSet | None = None, station: str | None = None,
@@ -318,6 +321,7 @@ class CalibratedModel:
         for lab, rows in groups:
             model, p = self.station_model(lab)
             sub = aux if (aux is None or rows.size == m) else aux.subset(rows)
+            model = model.at_nests(nest_column(sub, model.n_nests)) if sub is not None and model.n_nests > 1 else model
             Y = predict_with_effects(model, p, Q[rows], sub, pairs)
             if orientation and Y.shape[1] < 6:
                 raise InputError(f"station '{lab}' has no probe orientation: the model predicts positions only")
@@ -578,11 +582,7 @@ def _checked_fit(fit: Any, where: str) -> dict:
 def load_model_file(path: str | os.PathLike) -> CalibratedModel:
     """Read a calibrated model file (``identify --model-out``, ``register --model-out``).
 
-    Args:
-        path: the JSON file.
-
-    Returns:
-        The :class:`CalibratedModel`.
+    Args: path: the JSON file.  Returns: the :class:`CalibratedModel`.
 
     Raises:
         InputError: missing or unreadable file, not JSON, another format or version, a

@@ -291,7 +291,7 @@ def _point_model(cm: Any, point: Any) -> Any:
     if point is None:
         return cm
     new = copy.copy(cm)
-    new.setups = {lab: dataclasses.replace(st, reflector_m=np.array(point.tcp_m, float))
+    new.setups = {lab: dataclasses.replace(st, reflector_m=np.array(point.tcp_m, float), nests_m=None)
                   for lab, st in cm.setups.items()}
     return new
 

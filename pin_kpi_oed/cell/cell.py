@@ -34,6 +34,8 @@ Schema (SI units; angles may be given in degrees with a ``_deg`` key instead of
     base:    {xyz_m: [x, y, z], rpy_rad: [r, p, y]}      # robot base in the cell frame
     tracker: {xyz_m: [...], rpy_deg: [...]}              # tracker frame in the cell frame
     reflector_m: [x, y, z]           # reflector in the tool frame
+    nests_m: [[x, y, z], ...]        # optional: the reflector nests on the tool (tool frame), nest 0 = reflector_m;
+                                     # design then chooses each pose's nest (pin_kpi_oed.model.nests)
     tcp_m: [x, y, z]                 # KPI point (TCP) in the tool frame
     noise: {sigma_xyz_m: [sx, sy, sz]}                   # or {range_a_m: a, range_b: b}; identify --cell takes it
                                                          # for the tracker's noise when the data have no sigma columns
@@ -83,6 +85,7 @@ from pin_kpi_oed.cell.fields import read_pose as pose_of
 from pin_kpi_oed.cell.fields import read_vec as vec_of
 from pin_kpi_oed.cell.fields import where as at
 from pin_kpi_oed.errors import InputError, RobotLoadError
+from pin_kpi_oed.model.nests import check_nests
 from pin_kpi_oed.model.noise import NoiseModel
 from pin_kpi_oed.model.robot import Robot, is_robot_name, load_robot
 from pin_kpi_oed.validation.schema import validate_cell_dict
@@ -141,7 +144,7 @@ def capsules_from_urdf(robot: Robot, where: str = "robot_capsules", kind: str = 
 
 
 _KNOWN_KEYS = {"name", "description", "robot", "tool_frame", "base", "tracker", "reflector_m", "tcp_m", "noise",
-               "joint_bounds", "robot_capsules", "extra_capsules", "obstacles", "skip_pairs", "beam",
+               "nests_m", "joint_bounds", "robot_capsules", "extra_capsules", "obstacles", "skip_pairs", "beam",
                "incidence_max_deg", "clearance_m", "working_configurations_rad", "working_configurations_deg",
                "measurements", "max_random_tries", "environment", "working_targets", "kinematics",
                "working_paths", "orientation_length_m"}
@@ -387,6 +390,8 @@ def cell_from_dict(d: dict, source: str = "", base_dir: Path | None = None, robo
                 skip_pairs=skips, beam_radius_m=beam_r, beam_skip=beam_skip, incidence_max_deg=inc,
                 clearance_m=clr, q_work=qw, measurements=m, max_random_tries=tries, environment=env,
                 noise_stated=bool(d.get("noise")))
+    if d.get("nests_m") is not None:
+        cell.nests_m = check_nests(reflector, d["nests_m"], at(source, "nests_m"))
     if d.get("working_targets"):
         from pin_kpi_oed.cell.working_targets import solve_working_targets
 

@@ -80,6 +80,8 @@ class Cell:
         W_T_base: robot base pose in the cell frame.
         W_T_tracker: tracker pose in the cell frame.
         reflector_m: reflector in the tool frame (m).
+        nests_m: the reflector nests on the tool, (k, 3) m in the tool frame, nest 0 = ``reflector_m``; None: one
+            nest (:mod:`pin_kpi_oed.model.nests`).
         tcp_m: KPI point in the tool frame (m).
         noise: tracker noise model.
         hidden_work: the working configurations out of the tracker's sight (index -> what blocks the beam), found
@@ -133,6 +135,7 @@ class Cell:
     orientation_length_m: float = 0.2
     noise_stated: bool = True
     hidden_work: dict = field(default_factory=dict)
+    nests_m: np.ndarray | None = None
 
     @property
     def q_path(self) -> np.ndarray:
@@ -175,7 +178,8 @@ class Cell:
         """The measurement model of the cell (nominal parameters; robot bounds replaced by the cell's), with the
         cell's tool (TCP, working configurations: :meth:`tool_spec`) that a calibrated model keeps."""
         return TrackerModel(self.robot, tracker_T_base=self.tracker_T_base, reflector_m=self.reflector_m.copy(),
-                            tcp_m=self.tcp_m.copy(), noise=self.noise, tool=self.tool_spec())
+                            tcp_m=self.tcp_m.copy(), noise=self.noise, tool=self.tool_spec(),
+                            nests_m=None if self.nests_m is None else np.array(self.nests_m, float))
 
     def to_dict(self) -> dict:
         """The cell in plain numbers (SI units, cell frame for obstacles)."""
@@ -187,6 +191,7 @@ class Cell:
             "W_T_tracker": self.W_T_tracker.homogeneous.tolist(),
             "tracker_T_base": self.tracker_T_base.homogeneous.tolist(),
             "reflector_m": self.reflector_m.tolist(),
+            **({} if self.nests_m is None else {"nests_m": np.asarray(self.nests_m).tolist()}),
             "tcp_m": self.tcp_m.tolist(),
             "noise": self.noise.to_dict(),
             "joint_names": list(self.robot.joint_names),

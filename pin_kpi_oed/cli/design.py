@@ -211,6 +211,9 @@ def run(args: argparse.Namespace) -> int:
     print_results(results, criteria, run.certificate, m, settings.pool_file, quiet, problem.cell, cell, run.margins,
                   run.true_checks, settings.given_file, run.extended_scores)
     print(*profile_lines(run.path_profiles), sep="\n", end="\n" if run.path_profiles else "")
+    print(*(f"nests of {r.criterion}: " + (nd.line() if nd is not None else "its poses do not identify the "
+                                            "parameters of nest 0; every pose measures nest 0")
+            for r, nd in zip(results, run.nests or ())), sep="\n", end="\n" if run.nests else "")
     if run.discrepancy_scores is not None:  # opt-in: the paper's output is unchanged without
         _print_discrepancy(run, criteria)
     print(*(in_flags(line) for line in run.answers), sep="\n", end="\n" if run.answers else "")

@@ -204,7 +204,7 @@ def _nominal_model(args: argparse.Namespace, cell: Any, noise: Any) -> Any:
             raise InputError(f"--tracker: the cell places the tracker ({args.cell or args.design}); leave --tracker "
                              "out")
         return TrackerModel(cell.robot, tracker_T_base=cell.tracker_T_base, reflector_m=cell.reflector_m.copy(),
-                            tcp_m=cell.tcp_m.copy(), noise=noise, pose6d=args.pose6d)
+                            tcp_m=cell.tcp_m.copy(), noise=noise, pose6d=args.pose6d, nests_m=cell.nests_m)
     robot = load_robot(args.robot, args.tool, kinematics=args.kinematics)
     if args.tracker:
         v = parse_floats(args.tracker, (3, 6), "--tracker")
@@ -274,7 +274,8 @@ def run_simulate(args: argparse.Namespace) -> int:
     Q_all = np.vstack([Q, Q_test])
     t0, t1 = parse_floats(args.temperature, 2, "--temperature")
     aux = {"temperature_c": np.random.default_rng(args.seed + 4).uniform(t0, t1, len(Q_all))}
-    ms = simulate(model, Q_all, truth_p, effects=effects, aux=aux, seed=args.seed + 2)
+    nest = None if design is None or design[3] is None else np.concatenate([design[3], np.zeros(len(Q_test), int)])
+    ms = simulate(model, Q_all, truth_p, effects=effects, aux=aux, seed=args.seed + 2, nest=nest)
     ms.tool = ToolSpec(robot=portable_spec(robot), tool_frame=robot.tool_frame, reflector_m=model.reflector_m,
                        tcp_m=model.tcp_m if (cell is not None or np.any(model.tcp_m != 0)) else None,
                        q_work=cell.q_work if cell is not None and np.size(cell.q_work) else None)
@@ -295,13 +296,23 @@ def run_simulate(args: argparse.Namespace) -> int:
     return 0
 
 
-def _design_poses(path: str, criterion: str | None) -> tuple[Any, np.ndarray, str]:
-    """(design file, poses, criterion) of ``simulate --design``: the named design, else the file's default one
-    (:attr:`~pin_kpi_oed.design.design_file.DesignFile.default_criterion`, as ``export`` and ``evaluate``)."""
+def _design_poses(path: str, criterion: str | None) -> tuple[Any, np.ndarray, str, np.ndarray | None]:
+    """(design file, poses, criterion, each pose's reflector nest or None) of ``simulate --design``: the named
+    design, else the file's default one (:attr:`~pin_kpi_oed.design.design_file.DesignFile.default_criterion`, as
+    ``export`` and ``evaluate``); the nests are the design's ``nest`` (a cell listing several nests)."""
     from pin_kpi_oed.design.design_file import load_design
 
     df = load_design(path)
     if not df.designs:
         raise InputError(f"--design {path}: holds no design")
     entry = df.design(criterion or df.default_criterion)
-    return df, np.asarray(entry.q_meas, float), entry.criterion
+    Q, nest = np.asarray(entry.q_meas, float), entry.info.get("nest")
+    if nest is not None:
+        from pin_kpi_oed.model.nests import check_row_nest
+
+        k = 1 if df.cell.nests_m is None else len(df.cell.nests_m)
+        nest = check_row_nest(nest, k, f"--design {path}: designs.{entry.criterion}.nest")
+        if len(nest) != len(Q):
+            raise InputError(f"--design {path}: designs.{entry.criterion}.nest has {len(nest)} entries for "
+                             f"{len(Q)} poses")
+    return df, Q, entry.criterion, nest

@@ -85,7 +85,7 @@ def read_json(source: str | os.PathLike | Mapping) -> tuple[dict, str, Path]:
 def read_model(f: Fields, where: str, base_dir: Path, notes: list[str]) -> TrackerModel:
     """The measurement model; a moved ``robot.urdf_path`` falls back to ``robot.name``."""
     setup = {k: f.get(k) for k in ("robot", "tool_frame", "tracker_T_base", "reflector_m", "tcp_m", "noise",
-                                   "fixed", "prior") if f.get(k) is not None}
+                                   "fixed", "prior", "nests_m") if f.get(k) is not None}
     rob = setup.get("robot")
     if rob is None:
         raise InputError(f"{where}: missing field 'robot' (a name such as kr15, or {{urdf_path, tool_frame}})")
@@ -241,7 +241,8 @@ def read_cell(f: Fields, model: TrackerModel, where: str, notes: list[str]) -> C
                                               default=DEFAULT_INCIDENCE_MAX_DEG)),
                 clearance_m=float(f.get("clearance_m", default=0.0)),
                 q_work=read_q_work(f, robot, where, notes),
-                environment=environment_from_dicts(f.get("environment"), obstacles, where, notes))
+                environment=environment_from_dicts(f.get("environment"), obstacles, where, notes),
+                nests_m=model.nests_m.copy() if model.n_nests > 1 else None)
 
 
 def stored_cell(d: Mapping) -> Mapping | None:
@@ -277,6 +278,7 @@ def cell_file_dict(f: Fields, stored: Mapping, robot: Robot, where: str) -> dict
            "base": _pose(stored["W_T_base"], f"{where}: cell.W_T_base"),
            "tracker": _pose(stored["W_T_tracker"], f"{where}: cell.W_T_tracker"),
            "reflector_m": stored.get("reflector_m"), "tcp_m": stored.get("tcp_m", [0.0, 0.0, 0.0]),
+           **({"nests_m": stored["nests_m"]} if stored.get("nests_m") is not None else {}),
            "noise": {k: v for k, v in (stored.get("noise") or {}).items() if v is not None},
            "joint_bounds": {"lower_rad": stored["q_lower_rad"], "upper_rad": stored["q_upper_rad"]},
            "robot_capsules": f.get("capsules", "robot_capsules"),

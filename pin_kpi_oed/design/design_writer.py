@@ -6,6 +6,7 @@ and the discrepancy when the run had them. :mod:`pin_kpi_oed.design.design_file`
 from __future__ import annotations
 
 import os
+from dataclasses import asdict
 from pathlib import Path
 from typing import Any
 from collections.abc import Sequence
@@ -48,6 +49,12 @@ def design_document(run: DesignRun) -> dict:
                     for r in results],
         "q_meas": main.q_meas.tolist(), "q_meas_criterion": main.criterion,
     }
+    for d, nd in zip(doc["designs"], run.nests or ()):
+        if nd is None:  # poses that do not identify nest 0's parameters: no nest chosen, every pose at nest 0
+            d["nest"] = [0] * len(d["q_meas"])
+            continue
+        d["nest"] = nd.nest.tolist()
+        d["nests"] = {"line": nd.line(), "one": asdict(nd.one), "chosen": asdict(nd.chosen), "t": nd.t}
     if run.extended_scores is not None:
         _add_extended(doc, problem, run.extended_scores, run.model_file, run.prior)
     doc["clearance_margin_m"], doc["incidence_margin_deg"] = run.margins

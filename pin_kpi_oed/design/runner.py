@@ -119,6 +119,8 @@ class DesignRun:
             (:func:`~pin_kpi_oed.design.path_profile.path_profiles`), None without paths.
         answers: the lines answering ``target_sigma_m`` / the poses-needed curve (what they were taken over).
         model_sigma_at_work: the model file's own σ at the working configurations (:class:`DesignSettings`).
+        nests: with a cell listing several reflector nests, every design's
+            :class:`~pin_kpi_oed.oed.nests.NestDesign` (the nest of each pose by the TCP's tr C_s), else None.
     """
 
     cell: Cell
@@ -141,6 +143,7 @@ class DesignRun:
     path_profiles: Sequence[dict] | None = None
     answers: tuple[str, ...] = ()
     model_sigma_at_work: dict | None = None
+    nests: Sequence[Any] | None = None
 
 
 def true_checks(cell: Cell, results: Sequence[Any]) -> list:
@@ -217,7 +220,34 @@ def design_run(cell: Cell, settings: DesignSettings | None = None, problem: Any 
                      path_profiles=path_profiles(problem, results, discrepancy=bool(discrepancy)),
                      given_file=s.given_file, pool_file=s.pool_file,
                      model_file=s.model_file, prior=s.model_prior if s.model is not None else None, until=until,
-                     poses_needed=curve, answers=answers, model_sigma_at_work=s.model_sigma_at_work)
+                     poses_needed=curve, answers=answers, model_sigma_at_work=s.model_sigma_at_work,
+                     nests=design_nests(cell, results, s.seed))
+
+
+def design_nests(cell: Cell, results: Sequence[Any], seed: int = 0) -> list | None:
+    """Each design's nests (:func:`~pin_kpi_oed.oed.nests.assign_nests` on its poses at the cell's working
+    configurations) when the cell lists several reflector nests, else None.
+
+    Args:
+        cell: the cell (``nests_m``, TCP, working configurations); results: the designs (``q_meas`` (m, n) rad);
+        seed: the structural analysis's excitation.
+
+    Returns:
+        One :class:`~pin_kpi_oed.oed.nests.NestDesign` per design (None for a design whose poses do not identify
+        the parameters of nest 0: it measures nest 0), or None.
+    """
+    if cell.nests_m is None or len(cell.nests_m) < 2 or cell.q_work.shape[0] == 0:
+        return None
+    from pin_kpi_oed.errors import IdentifiabilityError
+    from pin_kpi_oed.oed.nests import assign_nests
+
+    model, out = cell.tracker_model(), []
+    for r in results:
+        try:
+            out.append(assign_nests(model, r.q_meas, cell.q_work, seed=seed))
+        except IdentifiabilityError:
+            out.append(None)
+    return out
 
 
 def _silent(line: str) -> None:

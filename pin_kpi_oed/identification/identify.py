@@ -174,8 +174,10 @@ def _setups(prob: ResidualModel, P: np.ndarray, errors: np.ndarray, inp: FitInpu
     for s, (lab, rows) in enumerate(zip(st.labels, prob.rows)):
         model, p = st.models[s], st.station_p(P, s)
         R_probe = model.probe_R @ pin.exp3(p[model.layout.probe]) if model.pose6d else None
-        out[lab] = Setup(model.tracker_pose(p).homogeneous.copy(), model.reflector(p), R_probe, int(rows.size),
-                         "identify", data.source, float(np.sqrt(np.mean(errors[rows] ** 2))))
+        refl = model.reflector(p)  # the nests move with the fitted offset they share
+        out[lab] = Setup(model.tracker_pose(p).homogeneous.copy(), refl, R_probe, int(rows.size),
+                         "identify", data.source, float(np.sqrt(np.mean(errors[rows] ** 2))),
+                         nests_m=model.nests_m - model.nests_m[0] + refl if model.n_nests > 1 else None)
     return out
 
 

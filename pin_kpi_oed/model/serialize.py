@@ -7,6 +7,7 @@ design and identification JSON files::
      "tool_frame": "tool0",                 # optional
      "tracker_T_base": 4x4 (m),             # pose of the robot base in the tracker frame
      "reflector_m": [x, y, z],              # reflector offset in the tool frame (m)
+     "nests_m": [[x, y, z], ...],           # optional: the reflector nests (tool frame, m), nest 0 = reflector_m
      "tcp_m": [x, y, z],                    # KPI point in the tool frame (m), default origin
      "noise": {"sigma_xyz_m": [...], "range_a_m": null, "range_b": 0},
      "fixed": ["tracker.*", ...],           # known parameters (optional)
@@ -21,6 +22,7 @@ import numpy as np
 
 from pin_kpi_oed.errors import InputError
 from pin_kpi_oed.model.kinematics import se3_from_matrix
+from pin_kpi_oed.model.nests import check_nests
 from pin_kpi_oed.model.noise import NoiseModel
 from pin_kpi_oed.model.robot import load_robot
 from pin_kpi_oed.model.tracker import TrackerModel
@@ -56,7 +58,9 @@ def model_from_dict(d: dict, where: str = "set-up") -> TrackerModel:
     T = se3_from_matrix(d.get("tracker_T_base", np.eye(4)), f"{where}: tracker_T_base")
     noise = NoiseModel.from_dict(d.get("noise", {}))
     model = TrackerModel(robot, tracker_T_base=T, reflector_m=_vec(d, "reflector_m", 3, where=where),
-                         tcp_m=_vec(d, "tcp_m", 3, default=[0.0, 0.0, 0.0], where=where), noise=noise)
+                         tcp_m=_vec(d, "tcp_m", 3, default=[0.0, 0.0, 0.0], where=where), noise=noise,
+                         nests_m=check_nests(_vec(d, "reflector_m", 3, where=where), d.get("nests_m"),
+                                             f"{where}: nests_m"))
     if d.get("fixed"):
         model.layout.fix(d["fixed"])
     for pat, sig in (d.get("prior") or {}).items():
@@ -73,4 +77,5 @@ def model_to_dict(model: TrackerModel) -> dict:
         "tcp_m": model.tcp_m.tolist(),
         "noise": model.noise.to_dict(),
         "fixed": [n for n, f in zip(model.layout.names, model.layout.fixed) if f],
+        **({"nests_m": model.nests_m.tolist()} if model.n_nests > 1 else {}),
     }

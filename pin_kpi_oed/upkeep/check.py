@@ -482,7 +482,9 @@ def _refit(model: CalibratedModel, data: MeasurementSet, Q: np.ndarray, g: Check
 def _apply(model: CalibratedModel, data: MeasurementSet, g: CheckGroup, delta: np.ndarray) -> CalibratedModel:
     """The model with the group's change applied (its stations' set-ups kept)."""
     if g.kind == "tool":
-        setups = {k: dataclasses.replace(s, reflector_m=s.reflector_m + delta) for k, s in model.setups.items()}
+        setups = {k: dataclasses.replace(s, reflector_m=s.reflector_m + delta,
+                                         nests_m=None if s.nests_m is None else s.nests_m + delta)
+                  for k, s in model.setups.items()}
         new = dataclasses.replace(model, setups=setups, tcp_m=model.tcp_m + delta)
     else:
         jp = model.joint_p.copy()

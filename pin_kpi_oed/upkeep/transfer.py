@@ -57,6 +57,7 @@ from pin_kpi_oed.identification.tracker_start import proj_so3, register_points
 from pin_kpi_oed.calibrated.model_file import CalibratedModel, Setup
 from pin_kpi_oed.calibrated.prediction_sigma import DEFAULT_TOOL_LENGTH_M
 from pin_kpi_oed.identification.problem import ResidualModel, StationSet, align_data
+from pin_kpi_oed.model.nests import nest_column
 from pin_kpi_oed.model.parameters import ParameterLayout
 from pin_kpi_oed.results import Result
 
@@ -191,12 +192,13 @@ def _register_one(model: CalibratedModel, data: MeasurementSet, Q: np.ndarray, l
     L = ParameterLayout(list(model.robot.joint_names), pose6d=pose6d)
     pairs = transferable(model)
     cm = CalibratedModel(model.robot, model.joint_p, [e for e, _ in pairs], [t for _, t in pairs],
-                         {label: Setup(np.eye(4), ref.reflector_m, ref.probe_R if pose6d else None)},
+                         {label: Setup(np.eye(4), ref.reflector_m, ref.probe_R if pose6d else None,
+                                       nests_m=ref.nests_m)},
                          model.noise, model.tcp_m, pose6d)
     wm, p = cm.station_model(label)
     if model.discrepancy is not None:  # the prediction the registered model makes: the discrepancy's mean on top
         pairs = pairs + [(_DiscrepancyMean(model.discrepancy), np.zeros(0))]
-    X = predict_with_effects(wm, p, Q, data, pairs)[:, :3]  # base frame (tracker = identity)
+    X = predict_with_effects(wm.at_nests(nest_column(data, wm.n_nests)), p, Q, data, pairs)[:, :3]  # base frame
     use_sigma = data.sigma_m is not None and weights in ("auto", "data")
     sigma = np.asarray(data.sigma_m, float) if use_sigma else None
     R, t = register_points(X, data.position_m, None if sigma is None else 1.0 / np.mean(sigma ** 2, 1))
@@ -232,7 +234,8 @@ def _register_one(model: CalibratedModel, data: MeasurementSet, Q: np.ndarray, l
     err = np.linalg.norm(prob.evaluate(sol.x)[0], axis=1)
     R_probe = wm.probe_R @ pin.exp3(P[L.probe]) if pose6d else None
     setup = Setup(wm.tracker_pose(P).homogeneous.copy(), wm.reflector(P), R_probe, m, "register", data.source,
-                  float(np.sqrt(np.mean(err ** 2))), registered_q_rad=np.asarray(Q, float))
+                  float(np.sqrt(np.mean(err ** 2))), registered_q_rad=np.asarray(Q, float),
+                  nests_m=None if ref.nests_m is None else ref.nests_m - ref.nests_m[0] + wm.reflector(P))
     noise_m = float(np.sqrt(np.mean(np.sum(1.0 / prob.W[:, :3] ** 2, axis=1))))  # the weights' 3-D σ
     note = "" if hold_reflector else _undetermined_reflector(sol, prob.names, setup, ref.reflector_m, label, src,
                                                              noise_m)

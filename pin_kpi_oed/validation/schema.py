@@ -72,7 +72,7 @@ CELL_SCHEMA: dict[str, Any] = {
     "properties": {
         "name": {"type": "string"}, "description": {"type": "string"}, "robot": {"type": "string"},
         "kinematics": {"type": "string"}, "tool_frame": {"type": ["string", "null"]}, "base": _POSE, "tracker": _POSE,
-        "reflector_m": _VEC3,
+        "reflector_m": _VEC3, "nests_m": {"type": ["array", "null"], "items": _VEC3, "minItems": 1},
         "tcp_m": _VEC3, "noise": _NOISE,
         "joint_bounds": {"type": "object", "additionalProperties": False,
                          "properties": {k: _NUMS for k in ("lower_rad", "upper_rad", "lower_deg", "upper_deg")}},
@@ -206,6 +206,10 @@ def validate_cell_dict(d: Any, source: str = "") -> None:
         if key in d and float(np.linalg.norm(np.asarray(d[key], float))) > limit:
             raise InputError(f"{where}{key}: {float(np.linalg.norm(np.asarray(d[key], float))):.4g} m from the tool "
                              f"frame, more than {limit:g} m: the values look like mm; give them in m")
+    for i, x in enumerate(d.get("nests_m") or []):
+        if float(np.linalg.norm(np.asarray(x, float))) > MAX_TOOL_OFFSET_M:
+            raise InputError(f"{where}nests_m[{i}]: {float(np.linalg.norm(np.asarray(x, float))):.4g} m from the tool "
+                             f"frame, more than {MAX_TOOL_OFFSET_M:g} m: the values look like mm; give them in m")
     for key in ("base", "tracker"):
         xyz = (d.get(key) or {}).get("xyz_m")
         if xyz is not None and float(np.linalg.norm(np.asarray(xyz, float))) > MAX_CELL_M:
@@ -252,6 +256,7 @@ _EFFECT = {"type": "object", "required": ["kind"],
                                                                                              "minimum": 0}}}}
 _STATION = {"type": "object", "additionalProperties": False, "required": ["tracker_T_base", "reflector_m"],
             "properties": {"tracker_T_base": _MAT4, "reflector_m": _VEC3,
+                           "nests_m": {"type": ["array", "null"], "items": _VEC3, "minItems": 1},
                            "probe_R": {"anyOf": [_MAT3, {"type": "null"}]},
                            "n_rows": {"type": "integer", "minimum": 0}, "fitted_by": {"type": "string"},
                            "source": {"type": "string"}, "rms_m": {"type": ["number", "null"], "minimum": 0},
