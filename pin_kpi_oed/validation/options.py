@@ -253,7 +253,7 @@ RULES: dict[str, dict[str, Callable[[str, Any], None]]] = {
 }
 
 #: command -> argparse dests of output files
-OUTPUTS = {"evaluate": ["json"], "demo": ["json"], "design": ["json", "curve"],
+OUTPUTS = {"evaluate": ["json"], "demo": ["json"], "design": ["json", "curve", "iso9283"],
            "simulate": ["out", "test_out", "truth_json"],
            "identify": ["json", "urdf_out", "model_out"], "import-ipa": ["out", "train", "test"],
            "register": ["model_out", "json"], "predict": ["out", "figure"], "diagnose": ["json", "model_out"],
