@@ -376,3 +376,24 @@ def test_every_overlap_is_listed_at_once_with_the_skip_pairs_hint(coll15):
     for pair in bad:
         a, b = pair.split("|")
         assert f"{pair}, " in msg.replace("robot:", "") and f"[{a}, {b}]" in hint
+
+
+def test_working_target_out_of_sight_is_solved_and_named(kr15, coll15):
+    """A working target whose only solutions leave the beam blocked is solved all the same (a working configuration
+    need not be in the tracker's sight) and named as hidden; before, the target solver refused it."""
+    import pinocchio as pin
+
+    refl = coll15._endpoints(kr15.q_work)[1][0, coll15.beam]
+    W_refl = kr15.W_T_base.act(refl)
+    mid = 0.5 * (W_refl + kr15.W_T_tracker.translation)
+    d = _cell_dict()
+    d["obstacles"]["capsules"].append({"name": "screen", "a_m": mid.tolist(), "b_m": mid.tolist(), "radius_m": 0.2})
+    M = kr15.W_T_base * kr15.robot.oMtool(kr15.q_work[0])
+    d.pop("working_configurations_deg", None)
+    d["working_targets"] = [{"xyz_m": M.act(kr15.tcp_m).tolist(), "rpy_rad": pin.rpy.matrixToRpy(M.rotation).tolist(),
+                             "seed_rad": np.asarray(kr15.q_work[0]).tolist()}]
+    cell = cell_from_dict(d, "hidden_target.yaml")
+    M2 = cell.W_T_base * cell.robot.oMtool(cell.q_work[0])
+    assert np.linalg.norm(M2.act(cell.tcp_m) - M.act(kr15.tcp_m)) <= 1e-6
+    CollisionModel(cell)
+    assert list(cell.hidden_work) == [0] and "out of the tracker's sight" in cell.summary()

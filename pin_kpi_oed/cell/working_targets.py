@@ -14,8 +14,9 @@ least squares on Pinocchio's frame Jacobian (``pin.computeFrameJacobian``, LOCAL
 TCP point's rows ``J_v − [r]× J_ω``) with steps through ``pin.integrate``, each iterate projected on
 the joint bounds, from the given seed, then the explicit working configurations, the bounds'
 middle and seeded random starts; the first solution within ``tol`` that the cell check accepts
-(every capsule pair clear of the required clearance and the beam unblocked, in the optimiser's
-capsules: :class:`~pin_kpi_oed.cell.feasibility.FeasibilityChecker`) is kept.
+(every capsule pair clear of the required clearance, in the optimiser's capsules:
+:class:`~pin_kpi_oed.cell.feasibility.FeasibilityChecker`; the beam may be blocked, as for every working
+configuration) is kept.
 """
 
 from __future__ import annotations
@@ -223,8 +224,9 @@ def solve_working_targets(cell, targets: list, source: str = "") -> np.ndarray:
     _check_always_blocked(chk, cell, pre)
 
     def accept(q: np.ndarray) -> str:
-        d = chk.distances(q[None])[0]
-        d[:chk.n_pairs] -= cell.clearance_m
+        # collision-free by the required clearance; the beam may be blocked: a working configuration is where the
+        # robot works, not where it is measured (the cell's summary names the hidden ones)
+        d = chk.distances(q[None])[0][:chk.n_pairs] - cell.clearance_m
         k = int(np.argmin(d)) if d.size else -1
         if k < 0 or d[k] >= -1e-9:
             return ""
@@ -243,7 +245,7 @@ def solve_working_targets(cell, targets: list, source: str = "") -> np.ndarray:
         res = solve_tcp_target(robot, cell.W_T_base, cell.tcp_m, xyz, None if rpy is None else
                                pin.rpy.rpyToMatrix(*rpy), seeds=seeds, accept=accept, seed=i)
         if not res.success:
-            what = (f"every solution within the joint bounds collides or blocks the beam ({res.message})"
+            what = (f"every solution within the joint bounds collides ({res.message})"
                     if res.message else "unreachable within the joint bounds")
             raise InputError(f"{w}: {what}; best residual {res.residual_m * 1e3:.3f} mm"
                              + (f", {np.degrees(res.residual_rad):.3f} deg" if rpy is not None else "")
