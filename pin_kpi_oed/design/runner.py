@@ -209,9 +209,6 @@ def design_run(cell: Cell, settings: DesignSettings | None = None, problem: Any 
             cert = certify(problem, m, pool_size=s.certificate_pool_size, seed=s.seed,
                            extra=[r.q_meas for r in results if r.feasible],
                            fixed_info=problem.fixed_information() if problem.F_given is not None else None)
-    held = next((r.held_line for r in results if r.held_line), "")
-    if held:  # the same for every design of the problem: the TCP sigma the table prints includes it
-        say(held)
     until, curve, answers = _answers(problem, s, m, bool(discrepancy), checked, results)
     return DesignRun(cell=cell, problem=problem, results=results, m=m, seed=s.seed, collision=s.collision,
                      margins=margins, true_checks=true_checks(cell, results) if problem.cell is not cell else None,
