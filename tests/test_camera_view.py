@@ -5,7 +5,6 @@ against the independent check (OpenCV's projection, Coal's distances)."""
 from __future__ import annotations
 
 import numpy as np
-import pinocchio as pin
 import pytest
 
 from pin_kpi_oed.cell.camera_check import check_camera_poses
@@ -13,31 +12,13 @@ from pin_kpi_oed.cell.camera_view import CameraView, ViewLimits, camera_cell, ca
 from pin_kpi_oed.cell.cell_model import CapsuleSpec, HalfSpace
 from pin_kpi_oed.cell.collision import CollisionModel
 from pin_kpi_oed.errors import InputError
-from pin_kpi_oed.model.camera import Board, CameraModel, Intrinsics
-from pin_kpi_oed.model.robot import load_robot
-
-Q0 = np.array([0.0, -1.57, 1.57, -1.57, -1.57, 0.0])  # the UR5's tool looking down at the table
-
-
-def _camera(mode: str) -> CameraModel:
-    """A UR5 and an 8 x 6 board of 25 mm squares: on the table seen by a camera beside the flange (eye-in-hand),
-    or on the tool seen by a camera 1.2 m above the table (eye-to-hand)."""
-    intr = Intrinsics(1200.0, 1210.0, 640.0, 512.0, np.array([-0.1, 0.05, 1e-3, -5e-4, 0.01]))
-    if mode == "eye_in_hand":
-        cam = pin.SE3(pin.rpy.rpyToMatrix(0.0, 0.0, 0.3), np.array([0.05, 0.0, 0.03]))
-        brd = pin.SE3(np.eye(3), np.array([0.4125, 0.0375, 0.0])).inverse()
-    else:
-        cam = pin.SE3(pin.rpy.rpyToMatrix(np.pi, 0, 0), np.array([0.5, 0.1, 1.2])).inverse()
-        brd = pin.SE3(pin.rpy.rpyToMatrix(np.pi, 0, 0), np.array([-0.0875, -0.0625, 0.02]))
-    return CameraModel(load_robot("ur5"), intr, Board(6, 8, 0.025), mode=mode, camera_pose=cam, board_pose=brd,
-                       tcp_m=np.array([0.0, 0.0, 0.15]))
-
+from tests.camera_setup import Q0, UR5_SKIP, ur5_camera
 
 def _view(mode: str, limits: ViewLimits | None = None) -> CameraView:
-    cam = _camera(mode)
+    cam = ur5_camera(mode)
     post = CapsuleSpec("post", np.array([0.2, -0.4, 0.0]), np.array([0.2, -0.4, 0.8]), 0.05)
     cell = camera_cell(cam.robot, obstacles=[post], half_spaces=[HalfSpace("table", np.array([0, 0, 1.0]), -0.01)],
-                       skip_pairs=[("base_link", "table")])
+                       skip_pairs=UR5_SKIP)
     return CameraView(cam, limits, CollisionModel(cell, collision=True, incidence=False))
 
 
@@ -99,13 +80,13 @@ def test_an_obstacle_between_camera_and_board_is_refused():
     the image, depth and angle rows do not."""
     from pin_kpi_oed.model.kinematics import Chain
 
-    cam = _camera("eye_in_hand")
+    cam = ur5_camera("eye_in_hand")
     centre_cam = Chain.from_robot(cam.robot).tool_point(Q0[None], cam.camera_pose.translation).p[0]
     centre_board = cam.board_pose.inverse().act(cam.board.corners().mean(axis=0))
     mid = 0.5 * (centre_cam + centre_board)
     ball = CapsuleSpec("ball", mid, mid + [0.0, 0.0, 0.01], 0.02)
     cell = camera_cell(cam.robot, obstacles=[ball], half_spaces=[HalfSpace("table", np.array([0, 0, 1.0]), -0.01)],
-                       skip_pairs=[("base_link", "table")])
+                       skip_pairs=UR5_SKIP)
     view = CameraView(cam, None, CollisionModel(cell, collision=True, incidence=False))
     g, _ = view.evaluate(Q0[None], with_grad=False)
     assert g[0, view.kinds == 3].min() < 0 and g[0, view.kinds != 3].min() >= 0

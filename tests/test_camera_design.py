@@ -1,0 +1,56 @@
+"""The KPI design of a camera calibration whose every pose sees the board: pool selection with its certificate and
+IPOPT with the camera's constraints, each pose re-checked independently (OpenCV's re-projection, Coal's rays)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from pin_kpi_oed.cell.camera_view import ViewLimits, camera_cell
+from pin_kpi_oed.cell.cell_model import CapsuleSpec, HalfSpace
+from pin_kpi_oed.design.camera_design import CameraDesignProblem, design_camera, square_roots
+from pin_kpi_oed.design.ipopt import ipopt_options
+from pin_kpi_oed.errors import InputError
+from tests.camera_setup import Q0, UR5_SKIP, ur5_camera
+
+
+@pytest.fixture(scope="module")
+def problem():
+    cam = ur5_camera("eye_in_hand")
+    post = CapsuleSpec("post", np.array([0.3, -0.35, 0.0]), np.array([0.3, -0.35, 0.7]), 0.05)
+    cell = camera_cell(cam.robot, obstacles=[post], half_spaces=[HalfSpace("table", np.array([0, 0, 1.0]), -0.01)],
+                       skip_pairs=UR5_SKIP)
+    return CameraDesignProblem(cell, cam, ViewLimits(margin_px=20.0, max_angle_deg=45.0, near_m=0.2, far_m=1.0),
+                               Q0[None])
+
+
+def test_ur5_eye_in_hand_design_sees_the_board_at_every_pose(problem):
+    d = design_camera(problem, 8, seed=0, pool_size=120, ipopt_options=ipopt_options(max_iter=15))
+    assert d.Q.shape == (8, 6)
+    # the independent check: OpenCV re-projects every corner inside the image, Coal finds every ray clear
+    assert np.all(d.check.corners_inside == problem.model.board.n)
+    assert np.all(d.check.ray_clearance_m > 0) and np.all(d.check.angle_deg <= 45.0)
+    assert np.all((d.check.depth_m >= 0.2) & (d.check.depth_m <= 1.0))
+    assert d.success and d.check.ok.all()
+    # the certificate: no selection from the pool beats its bound; IPOPT never returns a worse design
+    assert d.certificate.lower_bound_trace_cs_m2 <= d.selection_trace_cs_m2 * (1 + 1e-9)
+    assert d.trace_cs_m2 <= d.selection_trace_cs_m2 * (1 + 1e-12)
+    assert d.ipopt is not None and d.source in ("ipopt", "selection")
+    # the selection beats random feasible poses of the same pool on tr C_s (the criterion it minimises)
+    Q_pool = d.certificate.Q_pool
+    rnd = [problem.trace_cs(Q_pool[np.random.default_rng(s).choice(len(Q_pool), 8, replace=False)])
+           for s in range(5)]
+    assert d.selection_trace_cs_m2 < min(rnd)
+
+
+def test_square_roots_keep_the_information(problem):
+    F = problem.criterion("kpi").jacobians(problem.pool(3, seed=1)[0])
+    R = square_roots(F)
+    assert R.shape[1] == F.shape[2] < F.shape[1]
+    M, MR = np.einsum("nra,nrb->nab", F, F), np.einsum("nra,nrb->nab", R, R)
+    assert np.abs(M - MR).max() < 1e-9 * np.abs(M).max()
+
+
+def test_too_few_images_refused(problem):
+    with pytest.raises(InputError, match="cannot identify"):
+        design_camera(problem, 0)
