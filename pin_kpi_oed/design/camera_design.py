@@ -202,7 +202,7 @@ def square_roots(Fp: np.ndarray) -> np.ndarray:
     has 2 rows per corner, 96 for an 8 x 6 board, against some 30 parameters)."""
     if Fp.shape[1] <= Fp.shape[2]:
         return Fp
-    return np.linalg.qr(Fp, mode="r")
+    return np.asarray(np.linalg.qr(Fp, mode="r"))
 
 
 @limit_threads

@@ -10,13 +10,38 @@ from typing import Any, Protocol
 
 import numpy as np
 
-from pin_kpi_oed.cell.aggregate import AggregatedConstraints
 from pin_kpi_oed.errors import IdentifiabilityError, SolverError
 from pin_kpi_oed.oed.design_objective import DesignObjective
 from pin_kpi_oed.results import Result
 
-__all__ = ["IpoptProblem", "IpoptRun", "ipopt_options", "solve_ipopt", "STALL_WINDOW", "STALL_TOL",
+__all__ = ["ConstraintSet", "IpoptProblem", "IpoptRun", "ipopt_options", "solve_ipopt", "STALL_WINDOW", "STALL_TOL",
            "CLEARANCE_BUFFER_M", "COS_BUFFER"]
+
+
+class ConstraintSet(Protocol):
+    """The batched constraints g(q) ≥ 0 the IPOPT run reads: the cell's
+    (:class:`~pin_kpi_oed.cell.aggregate.AggregatedConstraints`) or a device's added to them (a camera's,
+    :class:`~pin_kpi_oed.design.camera_design.CameraConstraints`).
+
+    Attributes:
+        n: joints per configuration; n_rows: rows per configuration; units: each row's unit (``m`` for distances:
+            the clearance buffer, else the cosine buffer); jac_rows, jac_cols: the structural non-zeros of one
+            configuration's Jacobian.
+    """
+
+    @property
+    def n(self) -> int: ...
+    @property
+    def n_rows(self) -> int: ...
+    @property
+    def units(self) -> list[str]: ...
+    @property
+    def jac_rows(self) -> np.ndarray: ...
+    @property
+    def jac_cols(self) -> np.ndarray: ...
+
+    def evaluate(self, Q: np.ndarray, with_grad: bool = True) -> Any:
+        """Rows (m, n_rows) and, with ``with_grad``, their gradients (m, n_rows, n)."""
 
 
 class IpoptProblem(Protocol):
@@ -24,12 +49,14 @@ class IpoptProblem(Protocol):
 
     Attributes:
         cell: the cell (joint bounds ``q_lower`` / ``q_upper``, rad / m).
-        cons: the batched constraints (:class:`~pin_kpi_oed.cell.aggregate.AggregatedConstraints`).
+        cons: the batched constraints (:class:`ConstraintSet`).
         coll: the full collision model (``feasible(Q)``: the independent feasibility of each configuration).
     """
 
     cell: Any
-    cons: AggregatedConstraints
+    @property
+    def cons(self) -> ConstraintSet:
+        """The batched constraints (read-only: a problem's own constraint set, of any :class:`ConstraintSet` type)."""
     coll: Any
 
     def criterion(self, name: str) -> DesignObjective:
@@ -103,7 +130,7 @@ class IpoptRun(Result):
 class DesignNLP:
     """cyipopt problem: scaled criterion, batched cached constraints, block-sparse Jacobian."""
 
-    def __init__(self, crit: DesignObjective, cons: AggregatedConstraints, m: int, f0: float):
+    def __init__(self, crit: DesignObjective, cons: ConstraintSet, m: int, f0: float):
         self.crit, self.cons, self.m, self.n = crit, cons, m, cons.n
         self.ratio = crit.is_ratio
         self.f0 = f0
