@@ -1,22 +1,31 @@
 """How fast a command starts and how fast the default ``identify`` runs, in CPU time of the whole process.
 
 Each figure is the CPU time (user + system) of ``python -m pin_kpi_oed ...`` as a process, as a user's script pays
-it: the median of ``REPEAT`` runs, with the machine's load at the start (CPU time grows a little under load, wall
-time a lot). Targets: ``--help`` and ``info ur10`` ≤ 0.3 s; ``identify --discrepancy auto --validate`` on the real
-UR10 Series C (``shared/data/ipa_ur10``, the README's example: 50 % split, seed 0: 1,386 training rows) ≤ 4 s and on
-all 2,773 rows ≤ 8 s (validated on the same held-out half). The import sets of ``--help`` and ``info`` are pinned by
-``tests/test_cli_startup.py``; whether identify's numbers stay the same, by ``benchmarks.identify_unchanged``.
+it: the median of ``REPEAT`` runs, with the machine's load at the start of the benchmark and of each figure (CPU time
+grows a little under load, wall time a lot). The package's bytecode is compiled first (``compileall``), as an
+installed package's is: where ``PYTHONDONTWRITEBYTECODE`` is set, every run would otherwise compile the ~80 modules
+identify imports again (about 0.5 s of CPU) and measure the interpreter's compiler rather than the package.
+
+Targets: ``--help`` and ``info ur10`` ≤ 0.3 s; ``identify --discrepancy auto --validate`` on the real UR10 Series C
+(``shared/data/ipa_ur10``, the README's example: 50 % split, seed 0: 1,386 training rows) ≤ 4 s, on all 2,773 rows
+≤ 8 s and on 12,000 rows (Series A's 11,911 grid poses and the first 89 rows of Series C, two stations, as
+``benchmarks.bench_discrepancy`` builds them) ≤ 20 s, each validated on the same held-out half of Series C; the pool
+selection of 60 of 1,000 UR5 candidates (``benchmarks.bench_certificate``'s pool, KPI) ≤ 0.3 s, in process (the
+selection alone). The import sets of ``--help`` and ``info`` are pinned by ``tests/test_cli_startup.py``; whether
+identify's numbers stay the same, by ``benchmarks.identify_unchanged``.
 
 Run:  python -m benchmarks bench_startup   (``make bench`` runs it with the others)
 """
 
 from __future__ import annotations
 
+import compileall
 import os
 import resource
 import subprocess
 import sys
 import tempfile
+import time
 from pathlib import Path
 
 import numpy as np
@@ -27,6 +36,8 @@ ROOT = Path(__file__).resolve().parents[1]
 REPEAT = 3
 #: (arguments, target CPU s)
 STARTUP = ((["--help"], 0.3), (["info", "ur10"], 0.3))
+#: target CPU s of the pool selection 1,000 -> 60
+POOL_TARGET = 0.3
 
 
 def process_cpu(argv: list[str], cwd: Path | None = None) -> float:
@@ -50,26 +61,66 @@ def median_cpu(argv: list[str], cwd: Path | None = None, repeat: int = REPEAT) -
     return float(np.median([process_cpu(argv, cwd) for _ in range(repeat)]))
 
 
+def data_rows(path: Path) -> int:
+    """Measurement rows of a CSV (lines starting with a number)."""
+    return sum(1 for line in path.read_text().splitlines() if line[:1].isdigit() or line[:1] == "-")
+
+
 def identify_cases(work: Path, ipa: Path) -> list[tuple[str, list[str], float]]:
-    """(label, arguments, target CPU s) of the default identify on Series C: the README's split, and all rows."""
+    """(label, arguments, target CPU s) of the default identify on Series C: the README's split and all rows; and on
+    12,000 rows of Series A + C (two stations, the held-out file labelled with Series C's station)."""
     train, test = work / "c_train.csv", work / "c_test.csv"
     process_cpu(["import-ipa", str(ipa / "Series_C"), "--position-only", "--split", "0.5", "--seed", "0",
                  "--train", str(train), "--test", str(test)], work)
     every = work / "c_all.csv"
     process_cpu(["import-ipa", str(ipa / "Series_C"), "--position-only", "--out", str(every)], work)
-    rows = {p: sum(1 for line in p.read_text().splitlines() if line[:1].isdigit() or line[:1] == "-")
-            for p in (train, every)}
-    common = ["--robot", "ur10", "--validate", str(test), "--reflector", "0,0,0.109", "--discrepancy", "auto"]
-    return [(f"identify auto --validate, {rows[train]:,} rows (CPU s)", ["identify", "--data", str(train), *common],
-             4.0),
-            (f"identify auto --validate, {rows[every]:,} rows (CPU s)", ["identify", "--data", str(every), *common],
-             8.0)]
+    common = ["--robot", "ur10", "--reflector", "0,0,0.109", "--discrepancy", "auto"]
+    cases = [(f"identify auto --validate, {data_rows(train):,} rows (CPU s)",
+              ["identify", "--data", str(train), "--validate", str(test), *common], 4.0),
+             (f"identify auto --validate, {data_rows(every):,} rows (CPU s)",
+              ["identify", "--data", str(every), "--validate", str(test), *common], 8.0)]
+    if not (ipa / "Series_A").is_dir():
+        return cases
+    grid, rest, test_c = work / "a_all.csv", work / "c_rest.csv", work / "c_test_station.csv"
+    process_cpu(["import-ipa", str(ipa / "Series_A"), "--position-only", "--out", str(grid)], work)
+    lines = every.read_text().splitlines(keepends=True)
+    head = sum(1 for x in lines if not (x[:1].isdigit() or x[:1] == "-"))
+    rest.write_text("".join(lines[:head + max(0, 12_000 - data_rows(grid))]))
+    held = test.read_text().splitlines()
+    top = sum(1 for x in held if not (x[:1].isdigit() or x[:1] == "-"))
+    test_c.write_text("\n".join(held[:top - 1] + [held[top - 1] + ",station"]
+                                + [x + "," + rest.stem for x in held[top:]]) + "\n")
+    cases.append((f"identify auto --validate, {data_rows(grid) + data_rows(rest):,} rows, 2 stations (CPU s)",
+                  ["identify", "--data", str(grid), "--data", str(rest), "--validate", str(test_c), *common], 20.0))
+    return cases
+
+
+def pool_cpu(repeat: int = REPEAT) -> float:
+    """Median CPU seconds of the pool selection of 60 of 1,000 UR5 candidates (KPI; the selection alone, in process,
+    one BLAS thread)."""
+    from benchmarks.bench_certificate import ur5_pool
+    from pin_kpi_oed.oed.pool import select
+    from pin_kpi_oed.threads import limited_threads
+
+    Fp, E = ur5_pool(1000)
+    times = []
+    with limited_threads():
+        for _ in range(repeat):
+            c0 = time.process_time()
+            select(Fp, 60, E)
+            times.append(time.process_time() - c0)
+    return float(np.median(times))
 
 
 def main() -> None:
-    """Print each figure: CPU seconds, target, ratio."""
+    """Print the load, then each figure: CPU seconds, target, ratio."""
+    print(f"load average {', '.join(f'{x:.2f}' for x in os.getloadavg())} on {os.cpu_count()} cores at the start; "
+          f"bytecode compiled first", flush=True)
+    compileall.compile_dir(str(ROOT / "pin_kpi_oed"), quiet=1)
     for argv, target in STARTUP:
         figure(f"pin-kpi-oed {' '.join(argv)} (CPU s, load {load_average():.1f})", median_cpu(argv), target)
+    figure(f"pool selection 1,000 -> 60, UR5, KPI, in process (CPU s, load {load_average():.1f})", pool_cpu(),
+           POOL_TARGET)
     ipa = ipa_folder_or_say("C")
     if ipa is None:
         return

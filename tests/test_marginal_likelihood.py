@@ -154,3 +154,25 @@ def test_posterior_from_the_kfold_factor_equals_the_one_formed_again():
     W = np.random.default_rng(1).uniform(-np.pi, np.pi, (40, 6))
     (m1, v1), (m2, v2) = fit.predict(W), again.predict(W)
     assert np.allclose(m1, m2, rtol=1e-9, atol=1e-18) and np.allclose(v1, v2, rtol=1e-9, atol=1e-22)
+
+
+def test_blocked_kernel_equals_the_whole_arrays_to_the_last_bit():
+    """The kernel of the pairs is formed a block of pairs at a time; the optimiser's 60-iteration path depends on
+    every bit of it (a rounding-level change moves the hyper-parameters it stops at), so the blocks must give exactly
+    what the operations over all pairs at once give, here across several blocks and a linear joint."""
+    from pin_kpi_oed.discrepancy.marginal import PAIR_BLOCK
+
+    Q, Y = _gp_rows(150, 6, 3, seed=7)
+    Q[:, 5] *= 0.2
+    linear = np.array([False] * 5 + [True])
+    f = MarginalLikelihood(Q, Y, linear)
+    assert f.D.shape[1] > 2 * PAIR_BLOCK, "the case must span several blocks"
+    theta = np.log(np.r_[0.6, np.linspace(0.1, 0.3, 6), np.linspace(0.2, 0.7, 6), np.linspace(0.5, 2.0, 6), 0.05])
+    c, a, ell, L, _ = f.split(theta)
+    f._kernel_pairs(c, a, ell, L)       # what an evaluation forms first (its later steps reuse the arrays)
+    P = np.exp(np.matmul(-0.5 / L ** 2, f.D)) * c ** 2
+    A = np.exp(f.D * (-0.5 / ell ** 2)[:, None]) * (a ** 2)[:, None]
+    K = np.sum(A, axis=0) + P
+    assert np.array_equal(f._pairs[0], P)
+    assert np.array_equal(f._A, A)
+    assert np.array_equal(f._pairs[1], K)
