@@ -59,8 +59,9 @@ from pin_kpi_oed.errors import InputError
 from pin_kpi_oed.oed.check_power import CheckGroup, CheckNull, CheckPower
 from pin_kpi_oed.results import Result
 from pin_kpi_oed.upkeep.check_poses import poses_to_add
-from pin_kpi_oed.upkeep.check_rows import (CHECK_STATION, CheckRows, check_criterion, check_null,
-                                           joint_honest_factor, measure_rows, project_out, registered, whiten)
+from pin_kpi_oed.calibrated.check_view import check_view
+from pin_kpi_oed.upkeep.check_rows import (CHECK_STATION, CheckRows, check_criterion, check_null, measure_rows,
+                                           project_out, registered)
 
 __all__ = ["CheckResult", "check_calibration", "check_criterion", "check_null", "check_powers", "sidak",
            "CHECK_STATION", "EXIT_CODES", "REFIT_MARGIN"]
@@ -471,11 +472,9 @@ def _refit(model: CalibratedModel, data: MeasurementSet, Q: np.ndarray, g: Check
            ) -> tuple[CalibratedModel, float]:
     """The model with the group's change applied and the set-up re-registered on the check rows; its χ²."""
     reg = registered(_apply(model, data, g, delta), data)
-    Y, L = joint_honest_factor(reg, Q, data)
-    wm, p = reg.station_model(CHECK_STATION)
-    z, F = whiten(L, data.position_m - Y, wm.jacobian(p, Q)[:, :3, :])
-    lay = wm.layout
-    z = project_out(z, F[:, lay.tracker.start:lay.tracker.stop])
+    v = check_view(reg, data, Q, CHECK_STATION)
+    lay = v.wm.layout
+    z = project_out(v.z, v.F[:, lay.tracker.start:lay.tracker.stop])
     return reg, float(z @ z)
 
 
