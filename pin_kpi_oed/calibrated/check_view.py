@@ -31,7 +31,7 @@ from pin_kpi_oed.model.noise import NoiseModel
 from pin_kpi_oed.model.tracker import TrackerModel
 from pin_kpi_oed.oed.check_power import CheckNull, CheckPower, check_groups
 
-__all__ = ["CheckView", "check_view", "check_criterion", "check_null", "whiten", "NULL_FACTOR_RANGE",
+__all__ = ["CheckView", "check_view", "check_criterion", "check_null", "whiten", "project_out", "NULL_FACTOR_RANGE",
            "NULL_KURTOSIS_RANGE"]
 
 #: Bounds of the fields of a model file's K-fold check the check's law of T depends on (checked on reading too).
@@ -46,10 +46,12 @@ class CheckView:
     Attributes:
         Y: predictions of the rows at the registered station (m, 3) m; Sigma: their joint honest covariance
             (3m, 3m) m²; sig: its marginal σ (m, 3) m.
-        z: whitened residuals under the registered set-up (3m,); F: whitened Jacobian of the rows (3m, np).
+        z: whitened residuals under the registered set-up after the set-up's generalised least-squares step (the
+            set-up's columns of F projected out; T = ‖z‖²) (3m,); F: whitened Jacobian of the rows (3m, np).
         wm, p: the registered station's measurement model (noise σ = the rows' median honest σ per axis when the
             working configurations were asked for) and its raw parameter vector.
-        z_old: whitened residuals under the reference station's set-up (3m,), or None without a reference.
+        z_old: whitened residuals under the reference station's set-up (3m,), or None without a reference;
+            setup_distance: ‖P_G z_old‖², the set-up's step in its own metric (χ²(6) under no change), NaN without.
         shift: displacement of the working TCPs from the reference set-up to the registered one (3t,) m, or None.
         E_w: KPI Jacobian at the working configurations (3t, np), or None without them.
         tcp_sigma_m, tcp_held_m: the TCP σ per working configuration (t,) m: the part the calibration determined
@@ -67,6 +69,7 @@ class CheckView:
     p: np.ndarray
     null: CheckNull
     z_old: np.ndarray | None = None
+    setup_distance: float = float("nan")
     shift: np.ndarray | None = None
     E_w: np.ndarray | None = None
     tcp_sigma_m: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros(0))
@@ -95,24 +98,29 @@ def check_view(cm: Any, data: Any, Q: np.ndarray, station: str, *, reference: tu
     Y, Sigma = predictive_covariance(st1, Q, data, station)
     sig = np.sqrt(np.diag(Sigma)).reshape(len(Q), 3)
     L = cholesky(Sigma)
-    at_w: dict[str, Any] = {}
-    if q_work is None:
-        wm, p = cm.station_model(station)
-    else:
-        qw = np.atleast_2d(q_work)
-        at_w["crit"], wm, p, at_w["E_w"] = _criterion(cm, qw, np.median(sig, axis=0), station, 300, seed)
-        at = tcp_sigma(st1, qw, station=station)
-        at_w["tcp_held_m"] = at.held_sigma_m
-        at_w["tcp_sigma_m"] = np.sqrt(np.maximum(at.sigma_m ** 2 - at.held_sigma_m ** 2, 0.0))
+    wm, p = cm.station_model(station)
     z, F = whiten(L, data.position_m - Y, wm.jacobian(p, Q)[:, :3, :])
+    G = F[:, np.arange(wm.layout.tracker.start, wm.layout.tracker.stop)]
+    more: dict[str, Any] = {}
     if reference is not None:
         model, old = reference
-        at_w["z_old"] = whiten(L, data.position_m - model.predict(Q, data, station=old))
-        if q_work is not None:
-            a_m, a_p = model.station_model(old)
-            at_w["shift"] = (wm.kpi(p, qw) - a_m.kpi(a_p, qw)).reshape(-1)
-    null = check_null(cm if reference is None else reference[0])
-    return CheckView(Y=Y, Sigma=Sigma, sig=sig, z=z, F=F, wm=wm, p=p, null=null, **at_w)
+        more["z_old"] = z_old = whiten(L, data.position_m - model.predict(Q, data, station=old))
+        step = z_old - project_out(z_old, G)
+        more["setup_distance"] = float(step @ step)
+    view = CheckView(Y=Y, Sigma=Sigma, sig=sig, z=project_out(z, G), F=F, wm=wm, p=p,
+                     null=check_null(cm if reference is None else reference[0]), **more)
+    if q_work is not None:
+        qw = np.atleast_2d(q_work)
+        view.E_w = wm.kpi_jacobian(p, qw)
+        at = tcp_sigma(st1, qw, station=station)
+        view.tcp_held_m = at.held_sigma_m
+        view.tcp_sigma_m = np.sqrt(np.maximum(at.sigma_m ** 2 - at.held_sigma_m ** 2, 0.0))
+        if reference is not None:
+            a_m, a_p = reference[0].station_model(reference[1])
+            view.shift = (wm.kpi(p, qw) - a_m.kpi(a_p, qw)).reshape(-1)
+        wm.noise = NoiseModel(sigma_xyz_m=tuple(np.median(sig, axis=0).reshape(3)))
+        view.crit = _group_criterion(wm, p, cm.robot, view.E_w, 300, seed)
+    return view
 
 
 def check_criterion(model: Any, q_work: np.ndarray, sigma_m: np.ndarray, station: str | None = None,
@@ -129,27 +137,24 @@ def check_criterion(model: Any, q_work: np.ndarray, sigma_m: np.ndarray, station
     Returns:
         (criterion, the station's measurement model with noise σ = ``sigma_m``, its raw parameter vector p).
     """
-    crit, wm, p, _ = _criterion(model, np.atleast_2d(q_work), sigma_m, station, n_ref, seed)
-    return crit, wm, p
-
-
-def _criterion(model: Any, qw: np.ndarray, sigma_m: np.ndarray, station: str | None, n_ref: int, seed: int
-               ) -> tuple[CheckPower, TrackerModel, np.ndarray, np.ndarray]:
-    """:func:`check_criterion` and the KPI Jacobian E at ``qw`` it was built on."""
     wm, p = model.station_model(station)
     wm.noise = NoiseModel(sigma_xyz_m=tuple(np.asarray(sigma_m, float).reshape(3)))
+    return _group_criterion(wm, p, model.robot, wm.kpi_jacobian(p, np.atleast_2d(q_work)), n_ref, seed), wm, p
+
+
+def _group_criterion(wm: TrackerModel, p: np.ndarray, rb: Any, E: np.ndarray, n_ref: int, seed: int) -> CheckPower:
+    """:func:`check_criterion` on a station's measurement model (its noise σ the whitening's) and the KPI Jacobian E
+    at the working configurations."""
     L = wm.layout
-    rb = model.robot
     rng = np.random.default_rng(seed)
     Q_ref = rng.uniform(rb.q_lower, rb.q_upper, size=(n_ref, rb.nq))
     J_ref = wm.weighted_jacobian(p, Q_ref)[:, :3, :].reshape(-1, L.n)
-    E = wm.kpi_jacobian(p, qw)
     lin, ang = wm.joint_axes
     joint_cols = [np.arange(L.joint_slice(j).start, L.joint_slice(j).stop) for j in range(L.n_joints)]
     setup = np.arange(L.tracker.start, L.tracker.stop)
     tool = np.arange(L.reflector.start, L.reflector.stop)
-    groups = check_groups(J_ref, E, setup, joint_cols, list(rb.joint_names), np.hstack([lin, ang]), tool)
-    return CheckPower(setup, groups), wm, p, E
+    return CheckPower(setup, check_groups(J_ref, E, setup, joint_cols, list(rb.joint_names), np.hstack([lin, ang]),
+                                          tool))
 
 
 def check_null(model: Any) -> CheckNull:
@@ -177,3 +182,10 @@ def whiten(L: np.ndarray, r: np.ndarray, J: np.ndarray | None = None) -> Any:
     if J is None:
         return z
     return z, sla.solve_triangular(L, J.reshape(len(L), -1), lower=True)
+
+
+def project_out(z: np.ndarray, G: np.ndarray) -> np.ndarray:
+    """z minus its least-squares fit by the columns G: the whitened residuals after the set-up's generalised
+    least-squares re-registration (the registration itself fits without the rows' correlations)."""
+    x, *_ = np.linalg.lstsq(G, z, rcond=None)
+    return z - G @ x

@@ -30,8 +30,7 @@ from pin_kpi_oed.oed.check_power import CheckNull, CheckPower
 from pin_kpi_oed.upkeep.check_poses import SETUP_FACTOR, registration_sigma_m
 from pin_kpi_oed.upkeep.transfer import register_setup
 
-__all__ = ["CHECK_STATION", "CheckRows", "measure_rows", "check_criterion", "check_null", "project_out",
-           "registered"]
+__all__ = ["CHECK_STATION", "CheckRows", "measure_rows", "check_criterion", "check_null", "registered"]
 
 #: Station label of the set-up registered on the check rows.
 CHECK_STATION = "check"
@@ -125,11 +124,10 @@ def measure_rows(model: CalibratedModel, data: MeasurementSet, station: str | No
     honest = float(np.sqrt(np.mean(v.tcp_sigma_m ** 2)))
     reg = registration_sigma_m(E_s, Ms)
     shift, shift_sd = _setup_shift(v.shift, len(qw), E_s, Ms)
-    step = v.z_old - project_out(v.z_old, G)
-    return CheckRows(Q=Q, m=m, old=old, cm=cm, Sigma=v.Sigma, sig=v.sig, z=project_out(v.z, G), F=v.F,
+    return CheckRows(Q=Q, m=m, old=old, cm=cm, Sigma=v.Sigma, sig=v.sig, z=v.z, F=v.F,
                      z_old=v.z_old, crit=v.crit, wm=v.wm, p=v.p, E_w=v.E_w, qw=qw, null=v.null,
                      tcp_sigma_m=v.tcp_sigma_m, reg_share_m2=per, registration_sigma_m=reg, honest_sigma_m=honest,
-                     setup_determined=bool(reg <= SETUP_FACTOR * honest), setup_distance=float(step @ step),
+                     setup_determined=bool(reg <= SETUP_FACTOR * honest), setup_distance=v.setup_distance,
                      setup_shift_m=shift, setup_shift_sigma_m=shift_sd, tcp_held_m=v.tcp_held_m)
 
 
@@ -143,13 +141,6 @@ def _setup_shift(s: np.ndarray, t: int, E_s: np.ndarray, Ms: np.ndarray) -> tupl
     u = s / size
     var = float(u @ E_s @ np.linalg.pinv(Ms, hermitian=True) @ E_s.T @ u)
     return size / np.sqrt(t), float(np.sqrt(max(var, 0.0) / t))
-
-
-def project_out(z: np.ndarray, G: np.ndarray) -> np.ndarray:
-    """z minus its least-squares fit by the columns G: the whitened residuals after the set-up's generalised
-    least-squares re-registration (the registration itself fits without the rows' correlations)."""
-    x, *_ = np.linalg.lstsq(G, z, rcond=None)
-    return z - G @ x
 
 
 def registered(model: CalibratedModel, data: MeasurementSet) -> CalibratedModel:
