@@ -24,7 +24,7 @@ from pin_kpi_oed.calibrated.check_view import check_criterion, check_null, check
 from pin_kpi_oed.calibrated.model_file import CalibratedModel
 from pin_kpi_oed.data.measurements import MeasurementSet
 from pin_kpi_oed.errors import InputError
-from pin_kpi_oed.identification.problem import align_data
+from pin_kpi_oed.model.measured_joints import align_data
 from pin_kpi_oed.model.tracker import TrackerModel
 from pin_kpi_oed.oed.check_power import CheckNull, CheckPower
 from pin_kpi_oed.upkeep.check_poses import SETUP_FACTOR, registration_sigma_m
