@@ -1,6 +1,6 @@
 """The package reads as its pipeline (docs/ARCHITECTURE.md): nothing upstream imports from downstream, no import
 circle (lazy imports included), no module over 600 lines, no function over 80 lines, no private name reached across
-modules."""
+modules, the check's modules asking the calibrated model through its view of the check rows."""
 
 from __future__ import annotations
 
@@ -221,3 +221,31 @@ def test_tests_import_no_private_name_of_the_package() -> None:
     bad = [f"{f.relative_to(root)}:{line} {text}" for f in sorted((root / "tests").rglob("*.py"))
            for line, text in _private_reaches(ast.parse(f.read_text())) if text.startswith("from pin_kpi_oed")]
     assert not bad, "private names of the package imported by tests:\n" + "\n".join(bad)
+
+
+#: The check's own modules and what each may import of the layers it asks questions of: the calibrated model through
+#: its view of the check rows (and the model's type), the fit only through the registration of a set-up.
+CHECK_MODULES = ("upkeep/check.py", "upkeep/check_rows.py", "upkeep/check_poses.py")
+CHECK_MAY_IMPORT = {"pin_kpi_oed.calibrated.model_file", "pin_kpi_oed.calibrated.check_view",
+                    "pin_kpi_oed.upkeep.transfer"}
+
+
+def _check_route_imports(tree: ast.AST) -> set[str]:
+    """The calibrated, identification and upkeep modules outside the check that a module imports (lazy included)."""
+    check = {"pin_kpi_oed." + m.removesuffix(".py").replace("/", ".") for m in CHECK_MODULES}
+    return {mod for _, mod in _runtime_imports(tree)
+            if mod.split(".")[1] in ("calibrated", "identification", "upkeep") and mod not in check}
+
+
+def test_check_route_finder_sees_a_lazy_import_of_the_sigma() -> None:
+    tree = ast.parse("from pin_kpi_oed.calibrated.check_view import check_view\n"
+                     "def f():\n    from pin_kpi_oed.calibrated.prediction_sigma import predictive_covariance\n")
+    assert _check_route_imports(tree) - CHECK_MAY_IMPORT == {"pin_kpi_oed.calibrated.prediction_sigma"}
+
+
+def test_the_check_asks_the_calibrated_model_through_its_view() -> None:
+    """The check calls down once per question: what the model says on the rows (``calibrated/check_view.py``) and
+    the registration of a set-up (``upkeep/transfer.py``); none of its modules reaches into the model's σ, its TCP σ
+    or the fit's residual model by itself (that weave is what the view replaced)."""
+    bad = {m: sorted(_check_route_imports(ast.parse((PKG / m).read_text())) - CHECK_MAY_IMPORT) for m in CHECK_MODULES}
+    assert not any(bad.values()), f"the check reaches past its questions: {bad}"

@@ -56,7 +56,8 @@ from pin_kpi_oed.model.kinematics import skew
 DEFAULT_TOOL_LENGTH_M = 0.2
 
 __all__ = ["DEFAULT_TOOL_LENGTH_M", "SigmaPoint", "predictive_covariance", "predictive_sigma", "point_covariance",
-           "orientation_sigma", "robot_parameter_covariance", "sigma_contents", "sigma_at"]
+           "orientation_sigma", "robot_parameter_covariance", "sigma_contents", "sigma_at", "with_registered_station",
+           "station_sigma_factor"]
 
 
 def robot_parameter_covariance(cm: Any, label: str | None = None, probe: bool = False
@@ -493,3 +494,49 @@ def sigma_at(cm: Any, Q: np.ndarray, aux: Any = None, station: str | None = None
     targets, ``design --model``'s working configurations)."""
     _, sig, extra = cm.predict_with_sigma(np.atleast_2d(np.asarray(Q, float)), aux, station=cm.station(station))
     return np.sqrt((sig ** 2).sum(axis=1)), np.asarray(extra, bool)
+
+
+def with_registered_station(cm: Any, label: str, setup: Any, data: Any, Q: np.ndarray, n_unknowns: int,
+                            step: dict) -> Any:
+    """The model with a station a registration fitted, the default: its σ factor set from the registration rows
+    (:func:`station_sigma_factor`, written into ``setup.sigma_scale``), the step in the model's history with the rows'
+    standardised RMS and the factor.
+
+    Args:
+        cm: the :class:`~pin_kpi_oed.calibrated.model_file.CalibratedModel`; label: the station; setup: its fitted
+            :class:`~pin_kpi_oed.calibrated.model_file.Setup`.
+        data: the registration rows (x, y, z in m); Q: their configurations (m, n) rad.
+        n_unknowns: the set-up's fitted unknowns; step: the history entry of the registration.
+
+    Returns:
+        The new model.
+    """
+    probe = cm.with_setup(label, setup, default=True)
+    setup.sigma_scale, z_reg = station_sigma_factor(probe, data, Q, label, n_unknowns)
+    return cm.with_setup(label, setup, default=True,
+                         step={**step, "standardised_rms": z_reg, "sigma_scale": setup.sigma_scale})
+
+
+def station_sigma_factor(cm: Any, data: Any, Q: np.ndarray, label: str, n_unknowns: int) -> tuple[float, float | None]:
+    """The σ factor of a newly registered station: s = √(Σ z² / (3m − k)) over its m registration rows
+    (z = residual / predicted σ per axis, k the set-up's unknowns), kept only when above 1.
+
+    A session unlike the calibrated one (another day, set-up or temperature) shows in the registration rows'
+    residuals before any other row is measured; scaling by s keeps the predicted σ honest there. The factor never
+    shrinks σ: 60 rows of a session that happen to fit well are no evidence that the rest will.
+
+    Args:
+        cm: the model with the station; data: its registration rows (x, y, z in m); Q: their configurations (m, n)
+            rad; label: the station; n_unknowns: the set-up's fitted unknowns k.
+
+    Returns:
+        (factor ≥ 1, the registration rows' standardised RMS, or None when 3m ≤ k).
+    """
+    dof = 3 * len(Q) - int(n_unknowns)
+    if dof <= 0:
+        return 1.0, None
+    Y, sig, _ = cm.predict_with_sigma(Q, data, station=label)
+    z2 = float(np.sum(((np.asarray(data.position_m, float) - Y[:, :3]) / sig) ** 2))
+    if not np.isfinite(z2):
+        return 1.0, None
+    return max(1.0, float(np.sqrt(z2 / dof))), float(np.sqrt(z2 / (3 * len(Q))))

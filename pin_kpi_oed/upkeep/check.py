@@ -59,8 +59,9 @@ from pin_kpi_oed.errors import InputError
 from pin_kpi_oed.oed.check_power import CheckGroup, CheckNull, CheckPower
 from pin_kpi_oed.results import Result
 from pin_kpi_oed.upkeep.check_poses import poses_to_add
-from pin_kpi_oed.upkeep.check_rows import (CHECK_STATION, CheckRows, check_criterion, check_null,
-                                           joint_honest_factor, measure_rows, project_out, registered, whiten)
+from pin_kpi_oed.calibrated.check_view import check_view
+from pin_kpi_oed.upkeep.check_rows import (CHECK_STATION, CheckRows, check_criterion, check_null, measure_rows,
+                                           registered)
 
 __all__ = ["CheckResult", "check_calibration", "check_criterion", "check_null", "check_powers", "sidak",
            "CHECK_STATION", "EXIT_CODES", "REFIT_MARGIN"]
@@ -296,8 +297,8 @@ def check_calibration(model: CalibratedModel, data: MeasurementSet, *, station: 
         return _unexplained(rows, out, named["significant"], moved, t0)
     if not named["best"][3] and "poses_to_add" not in out and propose:
         out["poses_to_add"] = _add(rows, model, seed)
-    return _changed(model, data, rows, named["best"], out, t0, moved,
-                    held=_held_fit(rows, named["best"], null, alpha))
+    held = _held_fit(rows, named["best"], null, alpha)
+    return _changed(model, data, rows, named["best"], out, t0, moved, held=held)
 
 
 def _add(rows: CheckRows, model: CalibratedModel, seed: int) -> np.ndarray:
@@ -471,12 +472,8 @@ def _refit(model: CalibratedModel, data: MeasurementSet, Q: np.ndarray, g: Check
            ) -> tuple[CalibratedModel, float]:
     """The model with the group's change applied and the set-up re-registered on the check rows; its χ²."""
     reg = registered(_apply(model, data, g, delta), data)
-    Y, L = joint_honest_factor(reg, Q, data)
-    wm, p = reg.station_model(CHECK_STATION)
-    z, F = whiten(L, data.position_m - Y, wm.jacobian(p, Q)[:, :3, :])
-    lay = wm.layout
-    z = project_out(z, F[:, lay.tracker.start:lay.tracker.stop])
-    return reg, float(z @ z)
+    v = check_view(reg, data, Q, CHECK_STATION)
+    return reg, float(v.z @ v.z)
 
 
 def _apply(model: CalibratedModel, data: MeasurementSet, g: CheckGroup, delta: np.ndarray) -> CalibratedModel:

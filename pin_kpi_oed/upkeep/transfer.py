@@ -55,7 +55,7 @@ from pin_kpi_oed.identification.fit_inputs import MIN_STATION_ROWS, default_stat
 from pin_kpi_oed.identification.heldout import calibration_stats, error_stats
 from pin_kpi_oed.identification.tracker_start import proj_so3, register_points
 from pin_kpi_oed.calibrated.model_file import CalibratedModel, Setup
-from pin_kpi_oed.calibrated.prediction_sigma import DEFAULT_TOOL_LENGTH_M
+from pin_kpi_oed.calibrated.prediction_sigma import DEFAULT_TOOL_LENGTH_M, with_registered_station
 from pin_kpi_oed.identification.problem import ResidualModel, StationSet, align_data
 from pin_kpi_oed.model.nests import nest_column
 from pin_kpi_oed.model.parameters import ParameterLayout
@@ -314,6 +314,7 @@ def register_setup(model: CalibratedModel, data: MeasurementSet, *, station: str
     if setup_effects and len(groups) > 1:
         raise InputError(f"{data.source or 'registration data'}: set-up effects are fitted for one station at a "
                          f"time; the data have {len(groups)} ({', '.join(groups)}); give station=")
+    robot_pairs = transferable(model)
     new = model
     own_thetas: list[np.ndarray] = []
     setups: dict[str, Setup] = {}
@@ -332,16 +333,14 @@ def register_setup(model: CalibratedModel, data: MeasurementSet, *, station: str
         nit += int(sol.njev or 0)
         nfev += int(sol.nfev)
         ok &= bool(sol.status > 0)
-        probe = new.with_setup(label, setup, default=True)
-        setup.sigma_scale, z_reg = _sigma_scale(probe, sub, Q[rows], label, int(sol.x.size))
+        new = with_registered_station(new, label, setup, sub, Q[rows], int(sol.x.size),
+                                      {"step": "register", "data": data.source, "station": label,
+                                       "n_rows": int(rows.size), "rms_m": setup.rms_m,
+                                       "hold_reflector": bool(hold_reflector or note)})
         setups[label] = setup
         rows_used[label] = rows
-        new = new.with_setup(label, setup, default=True,
-                             step={"step": "register", "data": data.source, "station": label, "n_rows": int(rows.size),
-                                   "rms_m": setup.rms_m, "hold_reflector": bool(hold_reflector or note),
-                                   "standardised_rms": z_reg, "sigma_scale": setup.sigma_scale})
-    if setup_effects or len(transferable(model)) != len(model.effects):
-        pairs = transferable(model) + list(zip(setup_effects, own_thetas))
+    if setup_effects or len(robot_pairs) != len(model.effects):
+        pairs = robot_pairs + list(zip(setup_effects, own_thetas))
         new = dataclasses.replace(new, effects=[e for e, _ in pairs], thetas=[t for _, t in pairs])
     res = RegistrationResult(success=ok, status="converged" if ok else "max_nfev",
                              message="set-up registered with the robot held", nit=nit, nfev=nfev,
@@ -354,28 +353,6 @@ def register_setup(model: CalibratedModel, data: MeasurementSet, *, station: str
         res.quality = registration_gates(res, data, model, hold_reflector, register=register_setup)
         res.time_s = time.perf_counter() - t0
     return res
-
-
-def _sigma_scale(model: CalibratedModel, data: MeasurementSet, Q: np.ndarray, label: str, n_unknowns: int
-                 ) -> tuple[float, float | None]:
-    """The σ factor of a newly registered station: s = √(Σ z² / (3m − k)) over its m registration rows
-    (z = residual / predicted σ per axis, k the set-up's unknowns), kept only when above 1.
-
-    A session unlike the calibrated one (another day, set-up or temperature) shows in the registration rows'
-    residuals before any other row is measured; scaling by s keeps the predicted σ honest there. The factor never
-    shrinks σ: 60 rows of a session that happen to fit well are no evidence that the rest will.
-
-    Returns:
-        (factor ≥ 1, the registration rows' standardised RMS, or None when 3m ≤ k).
-    """
-    dof = 3 * len(Q) - int(n_unknowns)
-    if dof <= 0:
-        return 1.0, None
-    Y, sig, _ = model.predict_with_sigma(Q, data, station=label)
-    z2 = float(np.sum(((np.asarray(data.position_m, float) - Y[:, :3]) / sig) ** 2))
-    if not np.isfinite(z2):
-        return 1.0, None
-    return max(1.0, float(np.sqrt(z2 / dof))), float(np.sqrt(z2 / (3 * len(Q))))
 
 
 def registration_split(n: int, register_rows: int, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
