@@ -40,7 +40,7 @@ from pin_kpi_oed.errors import InputError
 from pin_kpi_oed.model.camera import CAMERA_MODES, Board, CameraModel, Intrinsics
 from pin_kpi_oed.model.robot import Robot
 
-__all__ = ["CameraSetup", "read_camera_setup", "BOARD_TYPES"]
+__all__ = ["CameraSetup", "read_camera_setup", "read_board", "BOARD_TYPES"]
 
 #: the calibration boards the package reads
 BOARD_TYPES = ("chessboard", "charuco")
@@ -156,7 +156,13 @@ def _intrinsics(d: Any, what: str) -> Intrinsics:
     return Intrinsics(f["fx"], f["fy"], f["cx"], f["cy"], dist, size[0], size[1])
 
 
-def _board(d: Any, what: str) -> tuple[Board, str, float | None, str | None, pin.SE3]:
+def read_board(d: Any, what: str) -> tuple[Board, str, float | None, str | None, pin.SE3]:
+    """The ``board`` fields (module docstring): (the board's inner corners, type, marker side (m) or None,
+    dictionary or None, pose (identity when not given)).
+
+    Raises:
+        InputError: an unknown or missing field or a bad value, naming ``what`` and the field.
+    """
     d = _mapping(d, _BOARD_KEYS, what)
     kind = d.get("type", "chessboard")
     if kind not in BOARD_TYPES:
@@ -214,5 +220,5 @@ def read_camera_setup(d: dict, source: str = "") -> CameraSetup | None:
     if "pose" not in (d["board"] or {}):
         raise InputError(f"{bwhat}.pose: missing field (the board in the "
                          f"{'cell' if mode == 'eye_in_hand' else 'tool'} frame: xyz_m, rpy_deg)")
-    board, kind, marker, dictionary, bpose = _board(d["board"], bwhat)
+    board, kind, marker, dictionary, bpose = read_board(d["board"], bwhat)
     return CameraSetup(mode, intr, board, pose, bpose, sigma, kind, marker, dictionary)
