@@ -62,7 +62,7 @@ def _info_cell(args: argparse.Namespace) -> int:
     cell = load_cell(args.robot)
     model = cell.measurement_model()
     views = getattr(model, "views", None)
-    Q = views(200, args.seed, cell.q_work) if views is not None else None
+    Q = views(60, args.seed, cell.q_work) if views is not None else None
     ident = analyse(model, Q=Q, seed=args.seed)
     absorbed = [d["name"] for d in ident.dropped
                 if d["confounded_with"] and all(c.split(".")[0] in model.target_groups for c in d["confounded_with"])]
