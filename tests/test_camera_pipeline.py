@@ -149,3 +149,31 @@ def test_tracker_only_pieces_are_refused_in_one_line(calibrated):
               d / "r.html"), "ISO 9283 AP, RP): not for a camera's model")):
         rc, out, err = run_cli(*argv)
         assert rc == 2 and says in err and len(err.strip().splitlines()) == 1, (argv, err)
+
+
+def test_eye_to_hand_camera_through_simulate_and_identify(tmp_path):
+    """A camera fixed above the robot, the board on the tool: the TCP (camera frame) within 3 sigma of the truth."""
+    import yaml
+
+    from tests.camera_cell import CAMERA_CELL
+
+    cam = {**CAMERA_CELL["camera"], "mount": "eye_to_hand",
+           "pose": {"xyz_m": [0.49, 0.11, 1.2], "rpy_rad": [np.pi, 0.0, 0.0]}}
+    board = {**CAMERA_CELL["board"], "pose": {"xyz_m": [-0.1, -0.075, 0.05], "rpy_rad": [np.pi, 0.0, 0.0]}}
+    cell_path = camera_cell(tmp_path, camera=cam, board=board,
+                            working_configurations_rad=[[0.0, -1.57, 1.57, -1.57, -1.57, 0.0]])
+    assert yaml.safe_load(cell_path.read_text())["camera"]["mount"] == "eye_to_hand"
+    rc, out, err = run_cli("simulate", "--cell", cell_path, "--n", 20, "--out", tmp_path / "t.csv", "--truth-json",
+                           tmp_path / "truth.json", "--seed", 4)
+    assert rc == 0, err
+    rc, out, err = run_cli("identify", "--data", tmp_path / "t.csv", "--cell", cell_path, "--model-out",
+                           tmp_path / "m.json")
+    assert rc == 0, err
+    assert "(in the camera frame)" in out and "the fitted board pose on the tool absorbs it" in out
+    model = load_cell(cell_path).measurement_model()
+    truth = json.loads((tmp_path / "truth.json").read_text())
+    p_true = np.array([truth["raw_parameters"][n] for n in model.layout.names])
+    Q = model.views(8, seed=9, around=load_cell(cell_path).q_work)
+    ts = load_model_file(tmp_path / "m.json").predict_tcp(Q)
+    e = np.linalg.norm(true_tcp(model, Q, p_true) - ts.position_m, axis=1)
+    assert np.all(e < 3 * ts.sigma_m), (e, ts.sigma_m)

@@ -142,10 +142,12 @@ def identify_camera_cli(args: argparse.Namespace) -> int:
                      f"{model.frame_group} frame): RMS {ts.rms_m * 1e3:.4f} mm, of which held at nominal "
                      f"{np.sqrt(np.mean(ts.held_sigma_m ** 2)) * 1e3:.4f} mm")
         if ts.held_names and ts.held_share > 0.1:
+            mounted = model.target_groups[0]
             top = np.argsort(-ts.held_contrib_m)[:2]
-            lines.append(f"mostly {', '.join(f'{ts.held_names[i]} ({ts.held_contrib_m[i] * 1e3:.3g} mm)' for i in top)}"
-                         f" held at its tolerance: the hand-eye transform absorbs it, no image of the board determines "
-                         "it; the TCP's position relative to the camera (a tool calibration) removes it")
+            held = ", ".join(f"{ts.held_names[i]} ({ts.held_contrib_m[i] * 1e3:.3g} mm)" for i in top)
+            lines.append(f"mostly {held} held at its tolerance: the fitted {mounted} pose on the tool absorbs it, no "
+                         f"image of the board determines it; the TCP's position relative to the {mounted} (a tool "
+                         "calibration) removes it")
     out = {"device": "camera", "fit": res.fit.to_dict(), "identified": res.stored_names(), "data": args.data[0]}
     if args.validate:
         rms = _heldout_rms(res, args.validate)
