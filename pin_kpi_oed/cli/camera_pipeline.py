@@ -157,7 +157,7 @@ def identify_camera_cli(args: argparse.Namespace) -> int:
     if poor:
         lines.append(f"poor fit: reduced chi2 {res.fit.chi2_reduced:.2f} > {CHI2_POOR:g} (the pixel noise "
                      f"sigma_px {model.sigma_px:g} px is too small, or the model misses an effect)")
-    for line in lines if not args.quiet else lines[-1:]:
+    for line in lines if not args.quiet else [x for x in lines if x.startswith(("held-out", "poor fit"))]:
         print(line)
     if poor and not args.accept_poor_fit:
         raise InputError("identify: poor fit, no model written (see above); --accept-poor-fit writes it anyway")
