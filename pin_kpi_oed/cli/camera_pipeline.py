@@ -90,15 +90,19 @@ CHI2_POOR = 4.0
 
 
 def is_camera_data(paths: list[str]) -> bool:
-    """Whether the first measurement file is a camera's (its header has pose, corner, u_px, v_px)."""
+    """Whether the first measurement file is a camera's: its column header (the first line that is neither blank
+    nor a ``#`` comment) has pose, corner, u_px, v_px. A file that cannot be read is left to the tracker's reader,
+    which names what is wrong with it."""
     from pin_kpi_oed.data.corner_measurements import is_corner_file
-    from pin_kpi_oed.data.table import read_text_table
 
     try:
-        header = read_text_table(paths[0], paths[0], "measurement file")[0]
-    except InputError:
-        return False  # the tracker's reader names what is wrong with it
-    return is_corner_file(header)
+        with open(paths[0], encoding="utf-8-sig") as f:
+            for line in f:
+                if line.strip() and not line.lstrip().startswith("#"):
+                    return is_corner_file([c.strip().strip('"') for c in line.split(",")])
+    except (OSError, UnicodeDecodeError, IndexError):
+        return False
+    return False
 
 
 def identify_camera_cli(args: argparse.Namespace) -> int:

@@ -159,8 +159,8 @@ def read_corners(path: str | os.PathLike[str]) -> CornerSet:
         q.append([_number(row[col[j]], src, r, j) for j in joints])
     Q = np.asarray(q, float)
     if np.abs(Q).max() > 4 * math.pi:
-        r, j = np.unravel_index(int(np.argmax(np.abs(Q))), Q.shape)
-        raise InputError(f"{src}: line {lines[r]}, column '{joints[j]}': {Q[r, j]:g} is beyond ±4π rad: the joint "
+        i, j = (int(x) for x in np.unravel_index(int(np.argmax(np.abs(Q))), Q.shape))
+        raise InputError(f"{src}: line {lines[i]}, column '{joints[j]}': {Q[i, j]:g} is beyond ±4π rad: the joint "
                          "values look like degrees; give them in rad")
     return CornerSet(np.asarray(pose, dtype=str), np.asarray(corner, int), np.asarray(uv, float), joints, Q)
 
