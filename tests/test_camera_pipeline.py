@@ -145,6 +145,8 @@ def test_tracker_only_pieces_are_refused_in_one_line(calibrated):
             (("simulate", "--cell", cell_path, "--out", d / "z.csv", "--noise", "1e-5"),
              "simulate --noise: a laser tracker's option"),
             (("check", "design", "--model", d / "m.json", "--out", d / "c.csv"), "not for a camera's model yet"),
+            (("register", "--model", d / "m.json", "--data", d / "check.csv", "--model-out", d / "r.json"),
+             "a camera's measurement file (one row per board corner"),
             (("report", "--model", d / "m.json", "--train", d / "train.csv", "--validate", d / "check.csv", "--html",
               d / "r.html"), "ISO 9283 AP, RP): not for a camera's model")):
         rc, out, err = run_cli(*argv)
