@@ -134,7 +134,7 @@ def identify_camera_cli(args: argparse.Namespace) -> int:
     cell = load_cell(args.cell)
     if cell.camera is None:
         raise InputError(f"--cell {args.cell}: has no camera, but {args.data[0]} holds camera measurements")
-    model = cell.measurement_model()
+    model = cell.camera.model(cell.robot, cell.W_T_base, cell.tcp_m)
     loss = "linear" if args.loss in (None, "auto") else args.loss
     res = identify_camera(model, read_corners(args.data[0]), source=args.data[0], seed=args.seed, loss=loss,
                           device=cell.camera.to_dict())
