@@ -58,6 +58,8 @@ Schema (SI units; angles may be given in degrees with a ``_deg`` key instead of
       - {xyz_m: [x, y, z], rpy_deg: [r, p, y], seed_deg: [a1, ..., a6]}   # rpy and seed optional
     working_paths:                   # and/or paths the TCP follows (pin_kpi_oed.cell.paths): the path KPI
       - {name: seam, waypoints: [{xyz_m: [...], rpy_deg: [...]}, ...], step_m: 0.005}
+    camera: {...}                    # a camera instead of the tracker, with its board (pin_kpi_oed.cell.camera_setup)
+    board: {...}
     orientation_length_m: 0.2        # the 6-D KPI's weight of the tool orientation (position + L x rotation)
     measurements: 60
     max_random_tries: 200000         # rejection-sampling budget of the heuristic design
@@ -79,6 +81,7 @@ from typing import Any
 import numpy as np
 import pinocchio as pin
 
+from pin_kpi_oed.cell.camera_setup import CameraSetup, read_camera_setup
 from pin_kpi_oed.cell.cell_model import DEFAULT_BEAM_RADIUS_M, DEFAULT_INCIDENCE_MAX_DEG, CapsuleSpec, Cell, HalfSpace
 from pin_kpi_oed.cell.fields import read_angles as angles_of
 from pin_kpi_oed.cell.fields import read_pose as pose_of
@@ -147,7 +150,7 @@ _KNOWN_KEYS = {"name", "description", "robot", "tool_frame", "base", "tracker", 
                "nests_m", "joint_bounds", "robot_capsules", "extra_capsules", "obstacles", "skip_pairs", "beam",
                "incidence_max_deg", "clearance_m", "working_configurations_rad", "working_configurations_deg",
                "measurements", "max_random_tries", "environment", "working_targets", "kinematics",
-               "working_paths", "orientation_length_m"}
+               "working_paths", "orientation_length_m", "camera", "board"}
 
 
 def _check_top_level(d: Any, source: str) -> None:
@@ -177,15 +180,24 @@ def _read_robot(d: dict, source: str, base_dir: Path | None) -> Robot:
         raise RobotLoadError(f"{at(source, 'robot')}: {exc}") from None
 
 
-def _read_tracker_setup(d: dict, source: str) -> tuple[pin.SE3, pin.SE3, np.ndarray, np.ndarray, NoiseModel]:
-    """(W_T_base, W_T_tracker, reflector in the tool frame (m), TCP in the tool frame (m), noise)."""
+def _read_tracker_setup(d: dict, source: str, camera: CameraSetup | None = None
+                        ) -> tuple[pin.SE3, pin.SE3, np.ndarray, np.ndarray, NoiseModel]:
+    """(W_T_base, W_T_tracker, reflector in the tool frame (m), TCP in the tool frame (m), noise); with a camera the
+    device frame (board or camera) stands for the tracker and the tool-mounted part's origin for the reflector."""
     W_T_base = pose_of(d.get("base"), at(source, "base"))
-    if "tracker" not in d:
-        raise InputError(f"{at(source, 'tracker')}: missing field (tracker pose xyz_m, rpy_rad)")
-    W_T_tracker = pose_of(d["tracker"], at(source, "tracker"))
-    if "reflector_m" not in d:
-        raise InputError(f"{at(source, 'reflector_m')}: missing field (reflector in the tool frame, m)")
-    reflector = vec_of(d["reflector_m"], 3, at(source, "reflector_m"))
+    if camera is not None:
+        for key in ("tracker", "reflector_m", "nests_m"):
+            if key in d:
+                raise InputError(f"{at(source, key)}: a camera cell has no {key} (the camera and its board are the "
+                                 "measuring device)")
+        W_T_tracker, reflector = camera.device_in_cell(), camera.tool_mounted().translation.copy()
+    else:
+        if "tracker" not in d:
+            raise InputError(f"{at(source, 'tracker')}: missing field (tracker pose xyz_m, rpy_rad)")
+        W_T_tracker = pose_of(d["tracker"], at(source, "tracker"))
+        if "reflector_m" not in d:
+            raise InputError(f"{at(source, 'reflector_m')}: missing field (reflector in the tool frame, m)")
+        reflector = vec_of(d["reflector_m"], 3, at(source, "reflector_m"))
     tcp = vec_of(d.get("tcp_m", [0.0, 0.0, 0.0]), 3, at(source, "tcp_m"))
     try:
         noise = NoiseModel.from_dict(d.get("noise") or {})
@@ -372,7 +384,8 @@ def cell_from_dict(d: dict, source: str = "", base_dir: Path | None = None, robo
     _check_top_level(d, source)
     validate_cell_dict(d, source)
     robot = _read_robot(d, source, base_dir) if robot is None else robot
-    W_T_base, W_T_tracker, reflector, tcp, noise = _read_tracker_setup(d, source)
+    camera = read_camera_setup(d, source)
+    W_T_base, W_T_tracker, reflector, tcp, noise = _read_tracker_setup(d, source, camera)
     lo, hi = _read_joint_bounds(d, robot, source)
     robot.q_lower, robot.q_upper = lo.copy(), hi.copy()
     caps = _read_robot_capsules(d, robot, source)
@@ -389,7 +402,7 @@ def cell_from_dict(d: dict, source: str = "", base_dir: Path | None = None, robo
                 q_lower=lo, q_upper=hi, robot_capsules=caps, obstacles=obstacles, half_spaces=halfs,
                 skip_pairs=skips, beam_radius_m=beam_r, beam_skip=beam_skip, incidence_max_deg=inc,
                 clearance_m=clr, q_work=qw, measurements=m, max_random_tries=tries, environment=env,
-                noise_stated=bool(d.get("noise")))
+                noise_stated=bool(d.get("noise")), camera=camera)
     if d.get("nests_m") is not None:
         cell.nests_m = check_nests(reflector, d["nests_m"], at(source, "nests_m"))
     if d.get("working_targets"):

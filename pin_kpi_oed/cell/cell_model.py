@@ -10,8 +10,10 @@ from dataclasses import dataclass, field
 import numpy as np
 import pinocchio as pin
 
+from pin_kpi_oed.cell.camera_setup import CameraSetup
 from pin_kpi_oed.data.tool_header import ToolSpec
 from pin_kpi_oed.model.noise import NoiseModel
+from pin_kpi_oed.model.device import MeasurementModel
 from pin_kpi_oed.model.robot import Robot
 from pin_kpi_oed.model.tracker import TrackerModel
 
@@ -106,6 +108,9 @@ class Cell:
         paths: the working paths (:class:`~pin_kpi_oed.cell.paths.WorkingPath`: samples solved by IK).
         orientation_length_m: the length L weighting the tool's orientation in the 6-D KPI (position + L x
             rotation, "orientation at L"), m.
+        camera: the cell's camera and board (:class:`~pin_kpi_oed.cell.camera_setup.CameraSetup`) when a camera
+            measures instead of the tracker (then ``W_T_tracker`` is the device frame, the board or the camera, and
+            ``reflector_m`` the tool-mounted part's origin), else None.
     """
 
     name: str
@@ -136,6 +141,7 @@ class Cell:
     noise_stated: bool = True
     hidden_work: dict = field(default_factory=dict)
     nests_m: np.ndarray | None = None
+    camera: CameraSetup | None = None
 
     @property
     def q_path(self) -> np.ndarray:
@@ -181,6 +187,13 @@ class Cell:
                             tcp_m=self.tcp_m.copy(), noise=self.noise, tool=self.tool_spec(),
                             nests_m=None if self.nests_m is None else np.array(self.nests_m, float))
 
+    def measurement_model(self) -> MeasurementModel:
+        """The cell's measuring device's model (nominal parameters): the camera's when the cell has one
+        (:mod:`pin_kpi_oed.cell.camera_setup`), else the tracker's (:meth:`tracker_model`)."""
+        if self.camera is not None:
+            return self.camera.model(self.robot, self.W_T_base, self.tcp_m)
+        return self.tracker_model()
+
     def to_dict(self) -> dict:
         """The cell in plain numbers (SI units, cell frame for obstacles)."""
         return {
@@ -210,6 +223,7 @@ class Cell:
             "environment": [e.to_dict() for e in self.environment],
             "paths": [p.to_dict() for p in self.paths],
             "orientation_length_m": self.orientation_length_m,
+            **(self.camera.to_dict() if self.camera is not None else {}),
         }
 
     def summary(self) -> str:

@@ -28,12 +28,14 @@ TOPICS = tuple(dict.fromkeys(topic for _, topic, _ in COMMANDS if topic is not N
 
 
 def cmd_info(args: argparse.Namespace) -> int:
-    """``pin-kpi-oed info ROBOT``: joints, limits, parameter count, identifiable rank."""
+    """``pin-kpi-oed info ROBOT|CELL.yaml``: joints, limits, parameter count, identifiable rank (of a cell's device)."""
     from pin_kpi_oed.cli.util import parse_floats
     from pin_kpi_oed.oed.identifiability import analyse
     from pin_kpi_oed.model.tracker import TrackerModel
     from pin_kpi_oed.model.robot import load_robot
 
+    if Path(args.robot).suffix.lower() in (".yaml", ".yml"):
+        return _info_cell(args)
     robot = load_robot(args.robot, args.tool, kinematics=args.kinematics)
     refl = parse_floats(args.reflector, 3, "--reflector")
     model = TrackerModel(robot, reflector_m=refl)
@@ -48,6 +50,34 @@ def cmd_info(args: argparse.Namespace) -> int:
     print("\n".join(robot.limits_table()))
     print(f"reflector in {robot.tool_frame}: {', '.join(f'{x * 1e3:.1f}' for x in refl)} mm")
     print(ident.summary())
+    return 0
+
+
+def _info_cell(args: argparse.Namespace) -> int:
+    """``info CELL.yaml``: the identifiability of the cell's measuring device (tracker or camera) on configurations
+    it measures (a camera's: seeded configurations around the working ones that see the whole board)."""
+    from pin_kpi_oed.cell.cell import load_cell
+    from pin_kpi_oed.oed.identifiability import analyse
+
+    cell = load_cell(args.robot)
+    model = cell.measurement_model()
+    views = getattr(model, "views", None)
+    Q = views(60, args.seed, cell.q_work) if views is not None else None
+    ident = analyse(model, Q=Q, seed=args.seed)
+    absorbed = [d["name"] for d in ident.dropped
+                if d["confounded_with"] and all(c.split(".")[0] in model.target_groups for c in d["confounded_with"])]
+    mounted = ", ".join(model.target_groups)
+    if args.json:
+        print(json.dumps({"cell": cell.name, "robot": cell.robot.summary(), "device": type(model).__name__,
+                          "identifiability": ident.to_dict(), "absorbed_by_tool_mounted": absorbed}, indent=2))
+        return 0
+    print(cell.summary())
+    print(f"robot: {cell.robot.name}  ({cell.robot.urdf_path}), tool frame {cell.robot.tool_frame}")
+    print(f"device: {type(model).__name__}, the fixed frame '{model.frame_group}', on the tool '{mounted}'")
+    print(ident.summary())
+    if absorbed:
+        print(f"  what the tool-mounted part ({mounted}) absorbs: {', '.join(absorbed)} (its fitted pose carries "
+              "them: they move no measurement of their own)")
     return 0
 
 
@@ -119,7 +149,7 @@ def build_parser(command: str | None = None, lazy: bool = False) -> argparse.Arg
 def _add_core(sub: argparse._SubParsersAction) -> None:
     """Declare the core's own subcommands: ``info``, ``evaluate``, ``demo``."""
     p = sub.add_parser("info", help="joints, limits, parameter count and identifiable rank of a robot")
-    p.add_argument("robot", help=ROBOT_HELP)
+    p.add_argument("robot", help=ROBOT_HELP + "; or a cell file (.yaml): its measuring device's identifiability")
     p.add_argument("--tool", default=None, help=TOOL_HELP)
     p.add_argument("--kinematics", default=None, help="UR kinematics file (ur_description layout) of a UR robot")
     p.add_argument("--reflector", default="0.05,0.0,0.05", help="reflector offset x,y,z in the tool frame (m)")

@@ -171,6 +171,10 @@ def run_check(args: argparse.Namespace) -> int:
     from pin_kpi_oed.calibrated.model_file import load_model_file
 
     model = load_model_file(args.model)
+    from pin_kpi_oed.identification.camera_identify import camera_device
+
+    if camera_device(model) is not None:
+        return _camera_verdict(args, model)
     if args.action == "design":
         if args.data or args.model_out:
             raise InputError("check design: --data and --model-out belong to the check itself (without 'design')")
@@ -183,6 +187,30 @@ def run_check(args: argparse.Namespace) -> int:
     if args.out or args.program:
         raise InputError("check: --out and --program belong to 'check design'")
     return _verdict(args, model)
+
+
+def _camera_verdict(args: argparse.Namespace, model) -> int:
+    """``check --model CAMERA_MODEL --data CHECK_CORNERS.csv`` (:mod:`pin_kpi_oed.upkeep.camera_check`)."""
+    from pin_kpi_oed.data.atomic import atomic_write_json
+    from pin_kpi_oed.data.corner_measurements import read_corners
+    from pin_kpi_oed.errors import InputError
+    from pin_kpi_oed.upkeep.camera_check import check_camera
+
+    if args.action == "design":
+        raise InputError(f"check design --model {args.model}: not for a camera's model yet (its poses must see the "
+                         "board); take check images at the calibration's working configurations")
+    if not args.data:
+        raise InputError("check: give --data (the check images' corners, import-images' CSV)")
+    for opt, v in (("--model-out", args.model_out), ("--out", args.out), ("--program", args.program),
+                   ("--station", args.station)):
+        if v:
+            raise InputError(f"check {opt}: not for a camera's model (a camera check re-fits nothing it writes)")
+    res = check_camera(model, read_corners(args.data), alpha=args.alpha, source=args.data)
+    if args.json:
+        atomic_write_json(args.json, {**res.to_dict(), "model": args.model, "data": args.data})
+    if not args.quiet:
+        print(res.summary())
+    return res.exit_code
 
 
 def _verdict(args: argparse.Namespace, model) -> int:

@@ -32,6 +32,7 @@ COMMANDS: tuple[tuple[str, str | None, str], ...] = (
                        "study"),
     ("compensate", "compensate", "compensated joint values for Cartesian TCP targets or a joint-space program"),
     ("import-tracker", "tracker_export", "convert a tracker point export + joint log to a measurement CSV"),
+    ("import-images", "camera_import", "detect a calibration board in images: the camera measurement CSV"),
     ("export", "program", "ordered, collision-checked robot program of a design (csv, urscript, krl, rapid)"),
     ("export-model", "export_model", "write a calibrated model as a UR kinematics file or a calibrated URDF"),
     ("report", "report", "calibration certificate (HTML with embedded figures, JSON, PDF) of a model file"),

@@ -398,7 +398,10 @@ def run_identify(args: argparse.Namespace) -> int:
     from pin_kpi_oed.identification.identify import IdentifyOptions
     from pin_kpi_oed.identification.quality import assess_fit
     from pin_kpi_oed.model.tracker import TrackerModel
+    from pin_kpi_oed.cli.camera_pipeline import identify_camera_cli, is_camera_data
 
+    if is_camera_data(args.data):
+        return identify_camera_cli(args)
     _check_outputs(args.json, args.urdf_out, args.model_out)
     geometry_prior = _geometry_prior(getattr(args, "geometry_prior", None))
     ct = command_tool(args, args.data, other_paths=[p for p in (args.validate, args.register_data) if p],

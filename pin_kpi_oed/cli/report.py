@@ -80,6 +80,13 @@ def run(args: argparse.Namespace) -> int:
         raise InputError("give --html FILE, --json FILE and/or --pdf FILE")
     if args.register_rows is not None and args.register_data:
         raise InputError("give --register-rows or --register-data, not both")
+    from pin_kpi_oed.cli.camera_pipeline import is_camera_data
+
+    if is_camera_data(list(args.train)):
+        raise InputError(f"report --train {args.train[0]}: camera measurements; the certificate scores a "
+                         "tracker's held-out positions (accuracy before / after, ISO 9283 AP, RP): not for a camera's "
+                         "model (identify --validate states its held-out reprojection RMS, predict --at tcp its TCP "
+                         "sigma)")
     if args.validate:  # the data files' tool headers against the model: robot, tool frame, TCP
         from pin_kpi_oed.cli.tool import model_tool
         from pin_kpi_oed.calibrated.model_file import load_model_file

@@ -140,18 +140,15 @@ def _check_args(args: argparse.Namespace) -> bool:
     return reuse
 
 
-def _setup(args: argparse.Namespace, reuse: bool) -> tuple[Any, Any, np.ndarray, list, Any, Any]:
-    """(nominal model, cell or None, p*, [(effect, θ*)], tolerances or None, design entry or None)."""
+def _setup(args: argparse.Namespace, reuse: bool, cell: Any = None) -> tuple[Any, Any, np.ndarray, list, Any, Any]:
+    """(nominal model, cell or None, p*, [(effect, θ*)], tolerances or None, design entry or None); ``cell``: the
+    ``--cell`` already read."""
     from pin_kpi_oed.cli.tool import canonical_robot, cell_tool_spec
     from pin_kpi_oed.data.tool_header import ToolSpec, resolve_tool
     from pin_kpi_oed.simulation.simulator import Tolerances, load_truth, random_truth
 
     design = _design_poses(args.design, args.criterion) if args.design else None
-    cell = design[0].cell if design else None
-    if args.cell:
-        from pin_kpi_oed.cell.cell import load_cell
-
-        cell = load_cell(args.cell)
+    cell = cell if cell is not None else (design[0].cell if design else None)
     truth = load_truth(args.truth) if reuse else None
     specs = [ToolSpec(robot=args.robot, source=f"--robot {args.robot}") if args.robot else None,
              ToolSpec(tool_frame=args.tool, source=f"--tool {args.tool}") if args.tool else None,
@@ -268,7 +265,18 @@ def run_simulate(args: argparse.Namespace) -> int:
     from pin_kpi_oed.model.robot import portable_spec
 
     reuse = _check_args(args)
-    model, cell, truth_p, effects, tol, design = _setup(args, reuse)
+    cell = None
+    if args.cell:
+        from pin_kpi_oed.cell.cell import load_cell
+
+        cell = load_cell(args.cell)
+        if cell.camera is not None:
+            from pin_kpi_oed.cli.camera_pipeline import simulate_camera
+
+            if reuse:
+                raise InputError(f"--truth {args.truth}: a camera cell draws its true robot anew; name a new file")
+            return simulate_camera(args, cell)
+    model, cell, truth_p, effects, tol, design = _setup(args, reuse, cell)
     Q, Q_test, what = _poses(args, model, cell, design)
     robot = model.robot
     Q_all = np.vstack([Q, Q_test])

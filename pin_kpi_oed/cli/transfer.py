@@ -146,6 +146,11 @@ def run_predict(args: argparse.Namespace) -> int:
                                     **_declared_units(args))
     if args.at == "tcp":
         return _predict_tcp(args, model, data)
+    from pin_kpi_oed.identification.camera_identify import camera_device
+
+    if camera_device(model) is not None:
+        raise InputError(f"predict --model {args.model}: a camera's model predicts the TCP (--at tcp); the camera "
+                         "measures pixels, not a reflector")
     if args.tcp:
         raise InputError("--tcp states the point of --at tcp: give both, or neither")
     cols, table = predict_table(model, data, station=args.station, tool_length_m=args.tool_length)

@@ -21,6 +21,7 @@ from pin_kpi_oed.data.measurement_set import (NEST_COLUMN, PAYLOAD_COLUMN, POSIT
                                               TIME_COLUMN, MeasurementSet)
 from pin_kpi_oed.data.table import Units, parse_columns, parse_text_table, parse_units, read_text_file, rename_header
 from pin_kpi_oed.data.tool_header import ToolSpec, parse_tool_header, split_tool_header
+from pin_kpi_oed.data.corner_measurements import CORNER_COLUMNS
 from pin_kpi_oed.errors import InputError
 from pin_kpi_oed.validation.units import check_position_spread_m
 
@@ -189,6 +190,9 @@ def _check_header(header: list[str], header_line: int, src: str, joint_names: li
         seen[name] = i
     found = ", ".join(header)
     missing_xyz = [c for c in POSITION_COLUMNS if c not in seen]
+    if missing_xyz and require_position and all(c in seen for c in CORNER_COLUMNS):
+        raise InputError(f"{src}: a camera's measurement file (one row per board corner: pose, corner, u_px, v_px); "
+                         "this reads a tracker's positions (x, y, z): camera files go to identify --cell and check")
     if missing_xyz and (require_position or len(missing_xyz) != 3):
         raise InputError(
             f"{src}: missing position column(s) {', '.join(missing_xyz)} (m, tracker frame); "

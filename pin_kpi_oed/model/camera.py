@@ -393,6 +393,39 @@ class CameraModel(MeasurementModel):
         cosang = np.abs(np.einsum("ma,ma->m", nrm, ctr)) / (np.linalg.norm(nrm, axis=1) * np.linalg.norm(ctr, axis=1))
         return ok & (cosang >= np.cos(max_angle_rad))
 
+    def views(self, n: int, seed: int = 0, around: np.ndarray | None = None, spread_rad: float = 0.7,
+              max_tries: int = 200) -> np.ndarray:
+        """``n`` seeded configurations that see the whole board (:meth:`in_view` at the nominal parameters): a
+        camera's excitation (random configurations over the joint limits mostly look away from the board).
+
+        Args:
+            n: how many; seed: the random draw's seed.
+            around: configurations (k, n_joints) rad to perturb uniformly by ±``spread_rad`` (e.g. the working
+                configurations); None: uniform within the joint limits.
+            max_tries: batches of 20 n draws before giving up.
+
+        Returns:
+            (n, n_joints) rad.
+
+        Raises:
+            InputError: fewer than ``n`` configurations seeing the board after ``max_tries`` batches.
+        """
+        rng = np.random.default_rng(seed)
+        lo, hi = self.robot.q_lower, self.robot.q_upper
+        p0 = np.zeros(self.n_params)
+        out: list[np.ndarray] = []
+        for _ in range(max_tries):
+            if around is None or len(around) == 0:
+                Q = self.robot.random_q(rng, 20 * n)
+            else:
+                base = np.atleast_2d(around)[rng.integers(0, len(np.atleast_2d(around)), 20 * n)]
+                Q = np.clip(base + rng.uniform(-spread_rad, spread_rad, base.shape), lo, hi)
+            out.append(Q[self.in_view(p0, Q)])
+            if sum(len(o) for o in out) >= n:
+                return np.concatenate(out)[:n]
+        raise InputError(f"camera: fewer than {n} configurations see the whole board (found "
+                         f"{sum(len(o) for o in out)}): check the board's and the camera's poses")
+
     def identifiability_notes(self) -> list[str]:
         """What a camera cannot see, in plain words (the scale comes from the board's square size)."""
         frame = "board" if self.eye_in_hand else "camera"

@@ -74,6 +74,7 @@ CELL_SCHEMA: dict[str, Any] = {
         "kinematics": {"type": "string"}, "tool_frame": {"type": ["string", "null"]}, "base": _POSE, "tracker": _POSE,
         "reflector_m": _VEC3, "nests_m": {"type": ["array", "null"], "items": _VEC3, "minItems": 1},
         "tcp_m": _VEC3, "noise": _NOISE,
+        "camera": {"type": "object"}, "board": {"type": "object"},  # read by pin_kpi_oed.cell.camera_setup
         "joint_bounds": {"type": "object", "additionalProperties": False,
                          "properties": {k: _NUMS for k in ("lower_rad", "upper_rad", "lower_deg", "upper_deg")}},
         "robot_capsules": {"anyOf": [{"enum": ["urdf", "urdf_visual"]}, {"type": "null"},

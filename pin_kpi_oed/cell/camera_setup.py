@@ -1,0 +1,224 @@
+"""A cell's camera and calibration board: the ``camera:`` and ``board:`` fields of the cell file (SI units, px).
+
+Schema (a camera cell needs no ``tracker`` nor ``reflector_m``)::
+
+    camera:
+      mount: eye_in_hand             # or eye_to_hand
+      pose: {xyz_m: [...], rpy_deg: [...]}   # eye_in_hand: the camera in the tool frame (tool_T_camera);
+                                             # eye_to_hand: the camera in the cell frame (W_T_camera)
+      intrinsics: {fx: 1200, fy: 1200, cx: 640, cy: 512,      # px
+                   distortion: [k1, k2, p1, p2, k3],           # dimensionless, OpenCV's order (default zeros)
+                   image_size_px: [1280, 1024]}                # width, height
+      sigma_px: 0.2                  # corner noise per image coordinate (px)
+    board:
+      type: chessboard               # or charuco
+      rows: 7                        # squares along the board's y axis
+      columns: 9                     # squares along its x axis
+      square_m: 0.025
+      marker_m: 0.018                # charuco only: the ArUco marker's side (m)
+      dictionary: DICT_5X5_100       # charuco only: cv2.aruco's predefined dictionary
+      pose: {xyz_m: [...], rpy_deg: [...]}   # eye_in_hand: the board in the cell frame (W_T_board);
+                                             # eye_to_hand: the board in the tool frame (tool_T_board)
+
+The board frame has its origin at the first inner corner, x along a row of squares, z out of the printed side; the
+(rows − 1) × (columns − 1) inner corners are numbered row by row (id = row · (columns − 1) + column), OpenCV's
+order for a chessboard and ChArUco's corner ids. A chessboard's corners are ordered by OpenCV from the image alone
+(a board seen upside down is numbered from the other end); a ChArUco board's ids are printed on it.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+import pinocchio as pin
+
+from pin_kpi_oed.cell.fields import read_pose, read_vec, where
+from pin_kpi_oed.errors import InputError
+from pin_kpi_oed.model.camera import CAMERA_MODES, Board, CameraModel, Intrinsics
+from pin_kpi_oed.model.robot import Robot
+
+__all__ = ["CameraSetup", "read_camera_setup", "read_board", "BOARD_TYPES"]
+
+#: the calibration boards the package reads
+BOARD_TYPES = ("chessboard", "charuco")
+_CAMERA_KEYS = {"mount", "pose", "intrinsics", "sigma_px"}
+_INTRINSIC_KEYS = {"fx", "fy", "cx", "cy", "distortion", "image_size_px"}
+_BOARD_KEYS = {"type", "rows", "columns", "square_m", "marker_m", "dictionary", "pose"}
+
+
+@dataclass
+class CameraSetup:
+    """A camera and its board as the cell file states them (nominal values).
+
+    Attributes:
+        mode: ``eye_in_hand`` or ``eye_to_hand``.
+        intrinsics: the camera's intrinsics (px; distortion dimensionless).
+        board: the board's inner corners (:class:`~pin_kpi_oed.model.camera.Board`).
+        camera_pose: tool_T_camera (eye-in-hand) or W_T_camera (eye-to-hand), m / rad.
+        board_pose: W_T_board (eye-in-hand) or tool_T_board (eye-to-hand), m / rad.
+        sigma_px: corner noise per image coordinate (px).
+        board_type: ``chessboard`` or ``charuco``; marker_m: a ChArUco marker's side (m); dictionary: its name.
+    """
+
+    mode: str
+    intrinsics: Intrinsics
+    board: Board
+    camera_pose: pin.SE3
+    board_pose: pin.SE3
+    sigma_px: float = 0.2
+    board_type: str = "chessboard"
+    marker_m: float | None = None
+    dictionary: str | None = None
+
+    @property
+    def eye_in_hand(self) -> bool:
+        """The camera rides on the tool."""
+        return self.mode == "eye_in_hand"
+
+    def device_in_cell(self) -> pin.SE3:
+        """The fixed device frame in the cell frame: the board (eye-in-hand) or the camera (eye-to-hand)."""
+        return self.board_pose if self.eye_in_hand else self.camera_pose
+
+    def tool_mounted(self) -> pin.SE3:
+        """What rides on the tool, in the tool frame: the camera (eye-in-hand) or the board (eye-to-hand)."""
+        return self.camera_pose if self.eye_in_hand else self.board_pose
+
+    def model(self, robot: Robot, W_T_base: pin.SE3, tcp_m: np.ndarray) -> CameraModel:
+        """The camera's measurement model with the robot base at ``W_T_base`` (cell frame) and the TCP (tool frame, m).
+
+        Returns:
+            The nominal :class:`~pin_kpi_oed.model.camera.CameraModel` (board_T_base or camera_T_base from the
+            cell-frame poses).
+        """
+        fixed_T_base = self.device_in_cell().inverse() * W_T_base
+        cam, brd = (self.camera_pose, fixed_T_base) if self.eye_in_hand else (fixed_T_base, self.board_pose)
+        return CameraModel(robot, self.intrinsics, self.board, mode=self.mode, camera_pose=cam, board_pose=brd,
+                           tcp_m=np.asarray(tcp_m, float), sigma_px=self.sigma_px)
+
+    def to_dict(self) -> dict:
+        """The ``camera`` and ``board`` fields (the cell file's syntax, rad), for a design or model file."""
+        def pose(T: pin.SE3) -> dict:
+            return {"xyz_m": T.translation.tolist(), "rpy_rad": pin.rpy.matrixToRpy(T.rotation).tolist()}
+
+        k = self.intrinsics
+        board = {"type": self.board_type, "rows": self.board.rows + 1, "columns": self.board.cols + 1,
+                 "square_m": self.board.square_m, "pose": pose(self.board_pose)}
+        if self.board_type == "charuco":
+            board.update(marker_m=self.marker_m, dictionary=self.dictionary)
+        return {"camera": {"mount": self.mode, "pose": pose(self.camera_pose), "sigma_px": self.sigma_px,
+                           "intrinsics": {"fx": k.fx, "fy": k.fy, "cx": k.cx, "cy": k.cy,
+                                          "distortion": k.dist.tolist(), "image_size_px": [k.width, k.height]}},
+                "board": board}
+
+
+def _mapping(d: Any, keys: set[str], what: str) -> dict:
+    if not isinstance(d, dict):
+        raise InputError(f"{what}: expected a mapping, got {d!r}")
+    unknown = set(d) - keys
+    if unknown:
+        raise InputError(f"{what}: unknown field(s) {', '.join(sorted(unknown))} (expected {', '.join(sorted(keys))})")
+    return d
+
+
+def _positive(d: dict, key: str, what: str, limit: float | None = None, unit: str = "") -> float:
+    v = d.get(key)
+    if v is None:
+        raise InputError(f"{what}.{key}: missing field")
+    if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v <= 0:
+        raise InputError(f"{what}.{key}: expected a positive number{unit}, got {v!r}")
+    if limit is not None and v > limit:
+        raise InputError(f"{what}.{key}: {v:g} is more than {limit:g}{unit}: the value looks like mm; give it in m")
+    return float(v)
+
+
+def _count(d: dict, key: str, what: str) -> int:
+    v = d.get(key)
+    if isinstance(v, bool) or not isinstance(v, int) or v < 3:
+        raise InputError(f"{what}.{key}: expected a whole number of squares >= 3, got {v!r}")
+    return v
+
+
+def _intrinsics(d: Any, what: str) -> Intrinsics:
+    d = _mapping(d, _INTRINSIC_KEYS, what)
+    f = {k: _positive(d, k, what, unit=" px") for k in ("fx", "fy", "cx", "cy")}
+    dist = read_vec(d.get("distortion", [0.0] * 5), 5, f"{what}.distortion (k1, k2, p1, p2, k3)")
+    size = d.get("image_size_px")
+    if (not isinstance(size, list) or len(size) != 2
+            or not all(isinstance(s, int) and not isinstance(s, bool) and s > 0 for s in size)):
+        raise InputError(f"{what}.image_size_px: expected [width, height], two positive whole numbers (px), "
+                         f"got {size!r}")
+    if not (f["cx"] < size[0] and f["cy"] < size[1]):
+        raise InputError(f"{what}: the principal point ({f['cx']:g}, {f['cy']:g}) px lies outside the image "
+                         f"{size[0]} x {size[1]} px")
+    return Intrinsics(f["fx"], f["fy"], f["cx"], f["cy"], dist, size[0], size[1])
+
+
+def read_board(d: Any, what: str) -> tuple[Board, str, float | None, str | None, pin.SE3]:
+    """The ``board`` fields (module docstring): (the board's inner corners, type, marker side (m) or None,
+    dictionary or None, pose (identity when not given)).
+
+    Raises:
+        InputError: an unknown or missing field or a bad value, naming ``what`` and the field.
+    """
+    d = _mapping(d, _BOARD_KEYS, what)
+    kind = d.get("type", "chessboard")
+    if kind not in BOARD_TYPES:
+        raise InputError(f"{what}.type: '{kind}' is not one of {', '.join(BOARD_TYPES)}")
+    rows, cols = _count(d, "rows", what), _count(d, "columns", what)
+    square = _positive(d, "square_m", what, limit=0.5, unit=" m")
+    marker, dictionary = None, None
+    if kind == "charuco":
+        marker = _positive(d, "marker_m", what, limit=0.5, unit=" m")
+        if marker >= square:
+            raise InputError(f"{what}.marker_m: {marker:g} m must be smaller than square_m {square:g} m")
+        dictionary = d.get("dictionary")
+        import cv2
+
+        if not isinstance(dictionary, str) or not dictionary.startswith("DICT_") or not hasattr(cv2.aruco,
+                                                                                              dictionary):
+            raise InputError(f"{what}.dictionary: {dictionary!r} is not a cv2.aruco dictionary (e.g. DICT_5X5_100)")
+    else:
+        for key in ("marker_m", "dictionary"):
+            if key in d:
+                raise InputError(f"{what}.{key}: only a charuco board has it (type is {kind})")
+    return Board(rows - 1, cols - 1, square), kind, marker, dictionary, read_pose(d.get("pose"), f"{what}.pose")
+
+
+def read_camera_setup(d: dict, source: str = "") -> CameraSetup | None:
+    """The ``camera`` and ``board`` fields of a cell mapping (module docstring), or None without a camera.
+
+    Args:
+        d: the parsed cell mapping; source: the file, for messages.
+
+    Returns:
+        The :class:`CameraSetup`, or None when the mapping has neither field.
+
+    Raises:
+        InputError: one of the two fields without the other, an unknown or missing field or a bad value, named with
+            the file and the field.
+    """
+    if "camera" not in d and "board" not in d:
+        return None
+    for key, other in (("camera", "board"), ("board", "camera")):
+        if key not in d:
+            raise InputError(f"{where(source, key)}: missing field (a cell with a {other} needs its {key})")
+    what = where(source, "camera")
+    cam = _mapping(d["camera"], _CAMERA_KEYS, what)
+    mode = cam.get("mount")
+    if mode not in CAMERA_MODES:
+        raise InputError(f"{what}.mount: {mode!r} is not one of {', '.join(CAMERA_MODES)}")
+    if "pose" not in cam:
+        raise InputError(f"{what}.pose: missing field (the camera in the "
+                         f"{'tool' if mode == 'eye_in_hand' else 'cell'} frame: xyz_m, rpy_deg)")
+    pose = read_pose(cam["pose"], f"{what}.pose")
+    sigma = _positive(cam, "sigma_px", what, limit=50.0, unit=" px") if "sigma_px" in cam else 0.2
+    intr = _intrinsics(cam.get("intrinsics"), f"{what}.intrinsics")
+    bwhat = where(source, "board")
+    if "pose" not in (d["board"] or {}):
+        raise InputError(f"{bwhat}.pose: missing field (the board in the "
+                         f"{'cell' if mode == 'eye_in_hand' else 'tool'} frame: xyz_m, rpy_deg)")
+    board, kind, marker, dictionary, bpose = read_board(d["board"], bwhat)
+    return CameraSetup(mode, intr, board, pose, bpose, sigma, kind, marker, dictionary)

@@ -1,0 +1,135 @@
+r"""Does a camera calibration still hold? New images of the board against the calibrated model.
+
+For check images at configurations q_i with corners η_i, the calibrated camera model
+(:func:`~pin_kpi_oed.identification.camera_identify.camera_model_of`: the robot, hand-eye transform and board as
+fitted) gives the standardised residual r = (h(p̂, q) − η)/σ_px on every detected corner coordinate. Two χ² tests,
+each at the Šidák level α₁ = 1 − (1 − α)^{1/2} so that the verdict's false-alarm rate is α, the statistics divided
+by the calibration's own reduced χ² (at least 1: a fit whose residuals exceed σ_px says so):
+
+1. T₀ = Σ r² on every row (n dof): consistent → ``holds``;
+2. else the set-up re-fitted (hand-eye transform and board pose, 12 parameters, the robot held) and
+   T₁ = Σ r₁² (n − 12 dof): consistent → ``setup_moved`` (the camera or the board moved: re-identify the set-up);
+   else ``recalibrate`` (the robot changed).
+
+The exit codes are the tracker check's (:data:`~pin_kpi_oed.upkeep.check.EXIT_CODES`): 0 holds, 1 the set-up
+moved, 3 re-calibrate. The TCP's displacement is not judged against a tolerance here (the tracker's check does);
+the set-up's shift is stated.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from scipy.stats import chi2
+
+from pin_kpi_oed.data.corner_measurements import CornerSet
+from pin_kpi_oed.errors import InputError
+from pin_kpi_oed.identification.camera_fit import fit_camera
+from pin_kpi_oed.identification.camera_identify import camera_model_of
+from pin_kpi_oed.results import Result
+
+__all__ = ["CameraCheck", "check_camera", "CAMERA_EXIT_CODES"]
+
+#: exit code per verdict (the tracker check's :data:`~pin_kpi_oed.upkeep.check.EXIT_CODES`)
+CAMERA_EXIT_CODES = {"holds": 0, "setup_moved": 1, "recalibrate": 3}
+
+
+@dataclass(kw_only=True)
+class CameraCheck(Result):
+    """The verdict of :func:`check_camera` (a :class:`~pin_kpi_oed.results.Result`).
+
+    Attributes:
+        verdict: ``holds``, ``setup_moved`` or ``recalibrate``.
+        chi2_fixed, dof_fixed, p_fixed: the test with everything as calibrated.
+        chi2_refit, dof_refit, p_refit: the test with the set-up re-fitted (NaN when not needed).
+        rms_px: RMS reprojection error as calibrated (px); scale: the calibration's reduced χ² the statistics are
+            divided by; alpha, alpha_each: the verdict's and each test's false-alarm rate.
+        setup_shift_m: the re-fitted hand-eye transform's and board's translation change (m), (2,) or NaN.
+        n_images: images used.
+    """
+
+    verdict: str
+    chi2_fixed: float
+    dof_fixed: int
+    p_fixed: float
+    chi2_refit: float
+    dof_refit: int
+    p_refit: float
+    rms_px: float
+    scale: float
+    alpha: float
+    alpha_each: float
+    setup_shift_m: np.ndarray
+    n_images: int
+
+    @property
+    def exit_code(self) -> int:
+        """0 holds, 1 the set-up moved, 3 re-calibrate."""
+        return CAMERA_EXIT_CODES[self.verdict]
+
+    def summary(self) -> str:
+        """Readable lines (px, mm)."""
+        out = [f"camera check on {self.n_images} images: RMS {self.rms_px:.3f} px as calibrated, chi2 "
+               f"{self.chi2_fixed:.1f} on {self.dof_fixed} dof (p {self.p_fixed:.3g}; each test at "
+               f"{self.alpha_each:.3g}, the verdict's false-alarm rate {self.alpha:g}; scaled by the calibration's "
+               f"reduced chi2 {self.scale:.2f})"]
+        if np.isfinite(self.chi2_refit):
+            out.append(f"set-up re-fitted: chi2 {self.chi2_refit:.1f} on {self.dof_refit} dof (p {self.p_refit:.3g}); "
+                       f"the hand-eye transform moved {self.setup_shift_m[0] * 1e3:.3g} mm, the board "
+                       f"{self.setup_shift_m[1] * 1e3:.3g} mm")
+        out.append({"holds": "verdict: holds (the images agree with the calibration)",
+                    "setup_moved": "verdict: setup_moved (the camera or the board moved: identify the set-up again; "
+                                   "the robot agrees)",
+                    "recalibrate": "verdict: recalibrate (a moved set-up does not explain the images: the robot "
+                                   "changed)"}[self.verdict])
+        return "\n".join(out)
+
+
+def check_camera(cm: Any, cs: CornerSet, alpha: float = 0.05, source: str = "check images") -> CameraCheck:
+    """The verdict on check images (module docstring).
+
+    Args:
+        cm: a calibrated camera model; cs: the check images' corners; alpha: the verdict's false-alarm rate.
+        source: the file, for messages.
+
+    Returns:
+        The :class:`CameraCheck`.
+
+    Raises:
+        InputError: alpha outside (0, 1), joint columns not the robot's, fewer pixel rows than 13.
+    """
+    if not 0 < alpha < 1:
+        raise InputError(f"check: alpha must lie in (0, 1), got {alpha}")
+    model, p = camera_model_of(cm)
+    _, Q, uv = cs.arrays(model.board.n, source)
+    names = list(model.robot.joint_names)
+    if sorted(cs.joint_names) != sorted(names):
+        raise InputError(f"{source}: joint columns {', '.join(cs.joint_names)} are not the robot's "
+                         f"({', '.join(names)})")
+    Q = model.robot.check_q(Q[:, [cs.joint_names.index(n) for n in names]], source)
+    rows = np.isfinite(uv)
+    n = int(rows.sum())
+    if n <= 12:
+        raise InputError(f"{source}: {n // 2} corners; a camera check needs at least 7")
+    scale = max(1.0, float((cm.fit or {}).get("chi2_reduced") or 1.0))
+    a1 = 1.0 - (1.0 - alpha) ** 0.5
+    r = (model.predict(p, Q) - uv)[rows]
+    T0 = float(np.sum((r / model.sigma_px) ** 2))
+    p0 = float(chi2.sf(T0 / scale, n))
+    T1, p1, shift = np.nan, np.nan, np.full(2, np.nan)
+    verdict = "holds"
+    if p0 < a1:
+        L = model.layout
+        setup = np.r_[np.arange(L.group_slice("camera").start, L.group_slice("camera").stop),
+                      np.arange(L.group_slice("board").start, L.group_slice("board").stop)]
+        fit = fit_camera(model, Q, uv, setup, p_ref=p)
+        T1 = fit.chi2_reduced * (n - setup.size)
+        p1 = float(chi2.sf(T1 / scale, n - setup.size))
+        shift = np.array([np.linalg.norm(fit.p[L.group_slice(g)][:3]) for g in ("camera", "board")])
+        verdict = "setup_moved" if p1 >= a1 else "recalibrate"
+    return CameraCheck(verdict=verdict, chi2_fixed=T0, dof_fixed=n, p_fixed=p0, chi2_refit=float(T1),
+                       dof_refit=n - 12, p_refit=float(p1), rms_px=float(np.sqrt(np.mean(r ** 2))), scale=scale,
+                       alpha=alpha, alpha_each=a1, setup_shift_m=shift, n_images=len(Q), success=True,
+                       status=verdict, message=verdict)
