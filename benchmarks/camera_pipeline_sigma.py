@@ -21,7 +21,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import tempfile
 import time
 from pathlib import Path
 
@@ -62,11 +61,10 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--json", default=None)
     args = ap.parse_args(argv)
     from pin_kpi_oed.threads import limited_threads
-    from tests.camera_cell import camera_cell
 
     t0 = time.perf_counter()
-    with tempfile.TemporaryDirectory() as d, limited_threads():
-        cell_path = camera_cell(Path(d))
+    with limited_threads():
+        cell_path = Path(__file__).resolve().parents[1] / "examples" / "ur5_camera_cell.yaml"
         runs = [one_seed(cell_path, s, args.images) for s in range(args.seed, args.seed + args.seeds)]
     z = np.concatenate([r["z"] for r in runs])
     e = np.concatenate([r["e_m"] for r in runs])
