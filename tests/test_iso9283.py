@@ -9,6 +9,7 @@ import pytest
 from pin_kpi_oed.cell.cell import load_cell
 from pin_kpi_oed.cell.feasibility import FeasibilityChecker
 from pin_kpi_oed.cli.app import main
+from pin_kpi_oed.cli.iso9283 import cycle_moves
 from pin_kpi_oed.design.iso9283 import N_CYCLES, plan_iso_cube, iso_test_plane
 from pin_kpi_oed.errors import InputError
 from pin_kpi_oed.program.transitions import TransitionChecker
@@ -59,7 +60,7 @@ def test_shipped_cells_plan_a_collision_free_test(name, side):
 
 def test_the_centre_search_grows_the_cube_within_its_shift():
     cell = load_cell("kr15")
-    test = plan_iso_cube(cell, max_shift_m=0.1)
+    test = plan_iso_cube(cell, max_shift_m=0.1, moves=cycle_moves(cell))
     assert test.side_at_mean_m is not None and test.side_m > test.side_at_mean_m + 0.03
     assert 0.0 < test.shift_m <= 0.1 + 1e-9
     rep = FeasibilityChecker(load_cell("kr15")).check(test.q)
@@ -70,7 +71,8 @@ def test_the_centre_search_grows_the_cube_within_its_shift():
 @pytest.mark.slow
 @pytest.mark.parametrize("name", ["ur10", "kr15"])
 def test_the_largest_cube_of_the_shipped_cells_is_collision_free(name):
-    test = plan_iso_cube(load_cell(name))
+    cell = load_cell(name)
+    test = plan_iso_cube(cell, moves=cycle_moves(cell))
     assert test.side_m > test.side_at_mean_m
     rep = FeasibilityChecker(load_cell(name)).check(test.q)
     assert rep.feasible.all() and rep.collision_free.all(), rep.violations()

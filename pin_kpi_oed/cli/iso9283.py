@@ -14,13 +14,34 @@ is written when a pose or a move collides.
 from __future__ import annotations
 
 import argparse
+from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
 from pin_kpi_oed.errors import InfeasibleError, InputError
 
-__all__ = ["run_iso9283", "format_of"]
+__all__ = ["run_iso9283", "format_of", "cycle_moves"]
+
+
+def cycle_moves(cell: Any) -> Callable[[np.ndarray], str]:
+    """The check of a test cycle's moves P1, P5, P4, P3, P2, P1 in ``cell`` (dense, Coal): poses (5, n) rad / m ->
+    "" when every move is clear, else the first that collides."""
+    from pin_kpi_oed.design.iso9283 import CYCLE_ORDER
+    from pin_kpi_oed.program.transitions import TransitionChecker
+
+    tc = TransitionChecker(cell)
+    loop = list(CYCLE_ORDER) + [CYCLE_ORDER[0]]
+
+    def check(q: np.ndarray) -> str:
+        for a, b in zip(loop[:-1], loop[1:]):
+            mv = tc.check(q[a], q[b])
+            if not mv.clear:
+                return (f"the move P{a + 1} -> P{b + 1} collides ({mv.min_clearance_m * 1e3:.1f} mm at "
+                        f"{mv.worst_fraction:.0%} of it)")
+        return ""
+    return check
 
 
 def format_of(out: str) -> str:
@@ -58,7 +79,7 @@ def run_iso9283(args: argparse.Namespace) -> int:
     fmt = format_of(out)
     files = program_files(fmt, out)
     cell = load_cell(getattr(args, "cell", "kr15"))
-    test = plan_iso_cube(cell, side_m=getattr(args, "iso_side", None))
+    test = plan_iso_cube(cell, side_m=getattr(args, "iso_side", None), moves=cycle_moves(cell))
     rep = FeasibilityChecker(cell).check(test.q)
     if not rep.feasible.all():
         raise InfeasibleError(f"--iso9283: pose P{int(np.argmin(rep.feasible)) + 1} fails the independent check")

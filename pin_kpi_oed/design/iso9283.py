@@ -25,6 +25,7 @@ is the cube ("largest" up to the bisection's resolution :data:`SIDE_TOL_M`, and 
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -244,8 +245,8 @@ def facing_tracker(R: np.ndarray, g: np.ndarray, keep_rad: float = 0.0) -> np.nd
     return pin.exp3(axis / s * max(0.0, float(np.arctan2(s, c)) - keep_rad)) @ R
 
 
-def plan_iso_cube(cell, side_m: float | None = None, n_random: int = 6, max_shift_m: float = MAX_SHIFT_M
-                  ) -> IsoCubeTest:
+def plan_iso_cube(cell, side_m: float | None = None, n_random: int = 6, max_shift_m: float = MAX_SHIFT_M,
+                  moves: Callable[[np.ndarray], str] | None = None) -> IsoCubeTest:
     """Plan the ISO 9283 cube test in a cell (see the module docstring).
 
     Args:
@@ -255,6 +256,8 @@ def plan_iso_cube(cell, side_m: float | None = None, n_random: int = 6, max_shif
             searched centre.
         n_random: random IK starts per point after the seeds (seeded).
         max_shift_m: the largest shift of the centre from the working configurations' mean TCP (m; 0: the mean).
+        moves: the check of a cycle's moves (P1..P5 poses (5, n) rad / m -> "" when every move P1, P5, P4, P3, P2,
+            P1 is clear, else why not), part of a size's acceptance; None: the poses only.
 
     Returns:
         The :class:`IsoCubeTest`.
@@ -267,7 +270,7 @@ def plan_iso_cube(cell, side_m: float | None = None, n_random: int = 6, max_shif
         raise InputError(f"ISO 9283 cube side: must be a finite number > 0 m, got {side_m}")
     mean, R = _orientation(cell)
     R_base = cell.W_T_base.rotation
-    search = _CentreSearch(cell, R, mean, n_random, max(0.0, float(max_shift_m)))
+    search = _CentreSearch(cell, R, mean, n_random, max(0.0, float(max_shift_m)), moves)
     at_mean = search.largest(mean, 0.0, side_m)
     centre, side = mean, at_mean
     if side_m is None or at_mean < side_m:
@@ -291,8 +294,10 @@ def plan_iso_cube(cell, side_m: float | None = None, n_random: int = 6, max_shif
 class _CentreSearch:
     """The largest cube side per centre (bisection) and the pattern search of the centre (module docstring)."""
 
-    def __init__(self, cell, R: np.ndarray, mean: np.ndarray, n_random: int, max_shift_m: float):
+    def __init__(self, cell, R: np.ndarray, mean: np.ndarray, n_random: int, max_shift_m: float,
+                 moves: Callable[[np.ndarray], str] | None):
         self.cell, self.R, self.mean, self.n_random, self.max_shift = cell, R, mean, n_random, max_shift_m
+        self.moves = moves
         self.R_base = cell.W_T_base.rotation
         self.hi = 2.0 * float(np.linalg.norm(mean - cell.W_T_base.translation)) + 2.0
         self._cand: dict[tuple, _Candidates] = {}
@@ -305,7 +310,10 @@ class _CentreSearch:
         return self._cand[key]
 
     def fits(self, centre: np.ndarray, side: float) -> bool:
-        sol = self.candidates(centre).solve(_cube_points(centre, side, self.R_base))
+        cand = self.candidates(centre)
+        sol = cand.solve(_cube_points(centre, side, self.R_base))
+        if sol is not None and self.moves is not None and (why := self.moves(sol[0][8:])):
+            cand.last, sol = why, None
         if sol is not None:
             self.solved[(tuple(np.round(centre, 9)), side)] = (sol[0][8:], sol[1][8:])
         return sol is not None
