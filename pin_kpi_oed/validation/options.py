@@ -273,7 +273,8 @@ INPUTS = {"evaluate": ["design"], "design": ["cell", "pool", "given", "given_pri
           "view": ["design"], "info": ["robot"], "export": ["design"],
           "compensate": ["model", "targets", "program", "cell"],
           "import-tracker": ["export", "joints", "robot"], "export-model": ["model"],
-          "report": ["model", "train", "validate", "register_data", "kinematics"], "check": ["model", "data", "cell"],
+          "report": ["model", "train", "validate", "register_data", "kinematics", "cell"],
+          "check": ["model", "data", "cell"],
           "monitor": ["model", "data"]}
 #: command -> argparse dests of output folders
 FOLDERS = {"diagnose": ["figures"], "view": ["figures"], "study": ["out"]}
