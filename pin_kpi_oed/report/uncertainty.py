@@ -159,8 +159,9 @@ def ball_coverage(C: np.ndarray, U: np.ndarray, n: int = 20000, seed: int = 0) -
 
 def _parameter_draws(cm: Any, Q: np.ndarray, label: str, n: int, rng: np.random.Generator) -> np.ndarray | None:
     """(n, m, 3) tracker-frame prediction errors with parameters drawn from the covariance the model's σ uses (a
-    Gaussian-process model's least-squares one inside the training's coverage and, outside it, its universal-kriging
-    one with the kriging correction −K_WQ Σ⁻¹F, the parts of ``Discrepancy.parametric_covariance``; the fit's
+    Gaussian-process model's least-squares one inside the training's coverage and, outside it (everywhere for a white
+    discrepancy), its universal-kriging one with the kriging correction −K_WQ Σ⁻¹F, the parts of
+    ``Discrepancy.parametric_covariance``; the fit's
     χ²-scaled one of a noise-only model), each draw propagated through the model's Jacobian at the rows: the fitted
     covariance holds directions of several centiradians (confounded parameters) whose first-order effects cancel,
     which the non-linear model does not reproduce. At a station registered later each draw is registered again
@@ -189,7 +190,7 @@ def _parameter_draws(cm: Any, Q: np.ndarray, label: str, n: int, rng: np.random.
         cols += list(range(L.tracker.start, L.tracker.stop)) + list(range(L.reflector.start, L.reflector.stop))
     J = _reregistered(cm, label, Q, cols) if not own else model.jacobian(p, Q)[:, :3, :][:, :, cols]
     R = st.tracker_T_base[:3, :3]
-    inside = ~np.asarray(d.extrapolation(Q), bool)
+    inside = ~np.asarray(d.extrapolation(Q), bool) if d.kind != "white" else np.zeros(len(Q), bool)
     out = np.zeros((n, len(Q), 3))
     for mask, ins in ((inside, True), (~inside, False)):
         C = d.param_cov_ls if (ins or d.param_cov is None) and d.param_cov_ls is not None else d.param_cov
