@@ -232,9 +232,12 @@ def test_u_along_a_working_path_against_monte_carlo(calibrated, tmp_path, capsys
         "tcp_m: [0.0, 0.05, 0.2]\nnoise: {sigma_xyz_m: [1.0e-5, 1.0e-5, 1.0e-5]}\nrobot_capsules: urdf\n"
         "skip_pairs: [[base_link, upper_arm_link], [forearm_link, wrist_2_link], [wrist_1_link, wrist_3_link]]\n"
         "working_paths:\n  - {name: sweep, program: path.csv, samples: 80}\n")
-    assert _report(d, "test.csv", "--cell", str(tmp_path / "cell.yaml"), "--monte-carlo", "2000") == 0
+    assert _report(d, "test.csv", "--cell", str(tmp_path / "cell.yaml"), "--monte-carlo", "2000", "--html",
+                   str(tmp_path / "path.html")) == 0
     u = json.loads((d / "gum.json").read_text())["uncertainty"]
     (p,) = u["paths"]
+    page = (tmp_path / "path.html").read_text()
+    assert "along each working path" in page and f"{p['U_max_m'] * 1e3:.3f} mm" in page
     assert p["name"] == "sweep" and p["n"] == len(p["U_m"]) >= 80
     assert p["U_max_m"] == pytest.approx(max(p["U_m"])) and min(p["U_m"]) <= p["U_median_m"] <= p["U_max_m"]
     assert abs(p["monte_carlo"]["median_ratio"] - 1.0) < 0.05
