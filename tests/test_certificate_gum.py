@@ -215,3 +215,35 @@ def test_page_layout_at_a4_width_in_chromium(calibrated, tmp_path):  # noqa: F81
     lay = _layout(tmp_path / "c.html", _chromium())
     assert lay["bad"] == [] and lay["first"], lay
     assert (tmp_path / "c.html").stat().st_size <= 5e6 and (tmp_path / "c.pdf").read_bytes()[:5] == b"%PDF-"
+
+
+def test_u_along_a_working_path_against_monte_carlo(calibrated, tmp_path, capsys):  # noqa: F811
+    """A cell with a working path (a joint-space program between two configurations): U (k = 2) at each of its
+    samples at the cell's TCP, its largest and median in the page, the budget's parameter and tracker terms within 5 %
+    of draws of the parameters on the path; a cell of another robot refused in one line."""
+    d = calibrated
+    with open(tmp_path / "path.csv", "w", newline="") as f:
+        w = csv.writer(f)
+        w.writerow(read_measurements(d / "test.csv").joint_names[:6])
+        w.writerows([[0.0, -1.745, 1.921, -1.746, -1.571, 0.0], [-0.552, -1.216, 1.686, -2.04, -1.571, -0.552]])
+    (tmp_path / "cell.yaml").write_text(
+        "name: path_cell\nrobot: ur10\ntool_frame: tool0\nbase: {xyz_m: [0, 0, 0], rpy_deg: [0, 0, 0]}\n"
+        "tracker: {xyz_m: [0.3, -2.6, 0.5], rpy_deg: [0, 0, 90]}\nreflector_m: [0.02, 0.01, 0.1]\n"
+        "tcp_m: [0.0, 0.05, 0.2]\nnoise: {sigma_xyz_m: [1.0e-5, 1.0e-5, 1.0e-5]}\nrobot_capsules: urdf\n"
+        "skip_pairs: [[base_link, upper_arm_link], [forearm_link, wrist_2_link], [wrist_1_link, wrist_3_link]]\n"
+        "working_paths:\n  - {name: sweep, program: path.csv, samples: 80}\n")
+    assert _report(d, "test.csv", "--cell", str(tmp_path / "cell.yaml"), "--monte-carlo", "2000", "--html",
+                   str(tmp_path / "path.html")) == 0
+    u = json.loads((d / "gum.json").read_text())["uncertainty"]
+    (p,) = u["paths"]
+    page = (tmp_path / "path.html").read_text()
+    assert "along each working path" in page and f"{p['U_max_m'] * 1e3:.3f} mm" in page
+    assert p["name"] == "sweep" and p["n"] == len(p["U_m"]) >= 80
+    assert p["U_max_m"] == pytest.approx(max(p["U_m"])) and min(p["U_m"]) <= p["U_median_m"] <= p["U_max_m"]
+    assert abs(p["monte_carlo"]["median_ratio"] - 1.0) < 0.05
+    shares = {c["key"]: c["share"] for c in p["budget"]["contributions"]}
+    assert sum(shares.values()) == pytest.approx(1.0) and shares["held"] > 0  # the cell's TCP is not the reflector
+    capsys.readouterr()
+    assert _report(d, "test.csv", "--cell", "kr15") == 2
+    err = capsys.readouterr().err
+    assert "--cell kr15" in err and err.count("\n") == 1

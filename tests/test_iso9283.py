@@ -9,8 +9,10 @@ import pytest
 from pin_kpi_oed.cell.cell import load_cell
 from pin_kpi_oed.cell.feasibility import FeasibilityChecker
 from pin_kpi_oed.cli.app import main
+from pin_kpi_oed.cli.iso9283 import cycle_moves
 from pin_kpi_oed.design.iso9283 import N_CYCLES, plan_iso_cube, iso_test_plane
 from pin_kpi_oed.errors import InputError
+from pin_kpi_oed.program.transitions import TransitionChecker
 
 
 def test_positions_on_the_diagonal_plane_at_the_standard_fractions():
@@ -32,11 +34,17 @@ def test_positions_on_the_diagonal_plane_at_the_standard_fractions():
         assert np.allclose(np.cross(P[k + 1] - corners[k], centre - corners[k]), 0.0, atol=1e-12)
 
 
-@pytest.mark.parametrize("name", ["ur10", "kr15"])
-def test_shipped_cells_plan_a_collision_free_test(name):
+def _moves_clear(cell, test) -> bool:
+    tc = TransitionChecker(cell)
+    loop = [0, 4, 3, 2, 1, 0]
+    return all(tc.check(test.q[a], test.q[b]).clear for a, b in zip(loop[:-1], loop[1:]))
+
+
+@pytest.mark.parametrize("name, side", [("ur10", 0.12), ("kr15", 0.08)])
+def test_shipped_cells_plan_a_collision_free_test(name, side):
     cell = load_cell(name)
-    test = plan_iso_cube(cell)
-    assert test.side_m >= 0.05
+    test = plan_iso_cube(cell, side_m=side)
+    assert test.side_m == side and test.shift_m == 0.0  # fits on the working configurations' mean TCP
     rep = FeasibilityChecker(load_cell(name)).check(test.q)  # a fresh, independent checker
     assert rep.feasible.all() and rep.collision_free.all(), rep.violations()
     rb = cell.robot
@@ -44,20 +52,47 @@ def test_shipped_cells_plan_a_collision_free_test(name):
         pin.framesForwardKinematics(rb.model, rb.data, q)
         M = cell.W_T_base * rb.data.oMf[rb.tool_frame_id]
         assert np.linalg.norm(M.act(np.asarray(cell.tcp_m)) - p) < 1e-5
-        assert np.allclose(M.rotation, test.rotation, atol=1e-5)
+        assert any(np.allclose(M.rotation, R, atol=1e-5) for R in test.rotations)
     Q, idx = test.cycle_poses()
     assert Q.shape == (5 * N_CYCLES, rb.nq) and idx[:5] == [0, 4, 3, 2, 1]
+    assert _moves_clear(load_cell(name), test)
 
 
-def test_a_cube_that_does_not_fit_is_refused_naming_what_to_change():
-    with pytest.raises(InputError, match="does not fit.*smaller side"):
-        plan_iso_cube(load_cell("kr15"), side_m=2.0)
+def test_the_centre_search_grows_the_cube_within_its_shift():
+    cell = load_cell("kr15")
+    test = plan_iso_cube(cell, max_shift_m=0.1, moves=cycle_moves(cell))
+    assert test.side_at_mean_m is not None and test.side_m > test.side_at_mean_m + 0.03
+    assert 0.0 < test.shift_m <= 0.1 + 1e-9
+    rep = FeasibilityChecker(load_cell("kr15")).check(test.q)
+    assert rep.feasible.all() and rep.collision_free.all(), rep.violations()
+    assert _moves_clear(load_cell("kr15"), test)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", ["ur10", "kr15"])
+def test_the_largest_cube_of_the_shipped_cells_is_collision_free(name):
+    cell = load_cell(name)
+    test = plan_iso_cube(cell, moves=cycle_moves(cell))
+    assert test.side_m > test.side_at_mean_m
+    rep = FeasibilityChecker(load_cell(name)).check(test.q)
+    assert rep.feasible.all() and rep.collision_free.all(), rep.violations()
+    assert _moves_clear(load_cell(name), test)
+
+
+def test_a_cube_that_does_not_fit_is_refused_naming_the_largest_that_fits():
+    with pytest.raises(InputError, match=r"does not fit.*the largest that fits is 0\.\d+ m.*smaller side"):
+        plan_iso_cube(load_cell("kr15"), side_m=2.0, max_shift_m=0.0)
 
 
 def test_cli_writes_the_program_and_refuses_an_unknown_suffix(tmp_path, capsys):
     out = tmp_path / "iso.csv"
-    assert main(["design", "--cell", "ur10", "--iso9283", str(out)]) == 0
+    assert main(["design", "--cell", "ur10", "--iso9283", str(out), "--iso-side", "0.1"]) == 0
+    assert "side 100 mm" in capsys.readouterr().out
     rows = [r for r in out.read_text().splitlines() if r and not r.startswith("#")]
     assert len(rows) == 1 + 5 * N_CYCLES  # header + the poses of 30 cycles
+    assert main(["design", "--cell", "ur10", "--iso9283", str(out), "--iso-side", "0"]) == 2
+    assert "--iso-side: must be positive" in capsys.readouterr().err
+    assert main(["design", "--cell", "ur10", "--iso-side", "0.1"]) == 2
+    assert "add --iso9283" in capsys.readouterr().err
     assert main(["design", "--cell", "ur10", "--iso9283", str(tmp_path / "iso.txt")]) == 2
     assert "unknown program suffix" in capsys.readouterr().err

@@ -5,21 +5,43 @@ Example::
     pin-kpi-oed design --cell ur10 --iso9283 iso_ur10.script
 
 plans the test cube around the working configurations (:func:`~pin_kpi_oed.design.iso9283.plan_iso_cube`:
-the largest that fits, its test plane and P1..P5), checks every pose (independent check) and every move of the
-cycle P1, P5, P4, P3, P2, P1 densely (≤ 1° joint steps, Coal), and writes the 30 cycles with the program export
-(format from the file's suffix: .csv, .script, .src, .mod). Nothing is written when a pose or a move collides.
+the largest that fits, or the side ``--iso-side`` gives in m, its test plane and P1..P5), checks every pose
+(independent check) and every move of the cycle P1, P5, P4, P3, P2, P1 densely (≤ 1° joint steps, Coal), and
+writes the 30 cycles with the program export (format from the file's suffix: .csv, .script, .src, .mod). Nothing
+is written when a pose or a move collides.
 """
 
 from __future__ import annotations
 
 import argparse
+from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
 from pin_kpi_oed.errors import InfeasibleError, InputError
 
-__all__ = ["run_iso9283", "format_of"]
+__all__ = ["run_iso9283", "format_of", "cycle_moves"]
+
+
+def cycle_moves(cell: Any) -> Callable[[np.ndarray], str]:
+    """The check of a test cycle's moves P1, P5, P4, P3, P2, P1 in ``cell`` (dense, Coal): poses (5, n) rad / m ->
+    "" when every move is clear, else the first that collides."""
+    from pin_kpi_oed.design.iso9283 import CYCLE_ORDER
+    from pin_kpi_oed.program.transitions import TransitionChecker
+
+    tc = TransitionChecker(cell)
+    loop = list(CYCLE_ORDER) + [CYCLE_ORDER[0]]
+
+    def check(q: np.ndarray) -> str:
+        for a, b in zip(loop[:-1], loop[1:]):
+            mv = tc.check(q[a], q[b])
+            if not mv.clear:
+                return (f"the move P{a + 1} -> P{b + 1} collides ({mv.min_clearance_m * 1e3:.1f} mm at "
+                        f"{mv.worst_fraction:.0%} of it)")
+        return ""
+    return check
 
 
 def format_of(out: str) -> str:
@@ -57,7 +79,7 @@ def run_iso9283(args: argparse.Namespace) -> int:
     fmt = format_of(out)
     files = program_files(fmt, out)
     cell = load_cell(getattr(args, "cell", "kr15"))
-    test = plan_iso_cube(cell)
+    test = plan_iso_cube(cell, side_m=getattr(args, "iso_side", None), moves=cycle_moves(cell))
     rep = FeasibilityChecker(cell).check(test.q)
     if not rep.feasible.all():
         raise InfeasibleError(f"--iso9283: pose P{int(np.argmin(rep.feasible)) + 1} fails the independent check")
@@ -78,8 +100,11 @@ def run_iso9283(args: argparse.Namespace) -> int:
                                       joint_names=list(robot.joint_names),
                                       revolute=np.asarray(robot.is_revolute, bool), cycle_time_s=cycle_s,
                                       name=files[next(iter(files))].stem, speeds=speeds))
+    at_mean = "" if test.side_at_mean_m is None else f" (on that mean: {test.side_at_mean_m * 1e3:.0f} mm)"
     print(f"ISO 9283 cube in {cell.name}: side {test.side_m * 1e3:.0f} mm, centre "
-          f"({', '.join(f'{v:.3f}' for v in test.centre_m)}) m (cell frame)")
+          f"({', '.join(f'{v:.3f}' for v in test.centre_m)}) m (cell frame), {test.shift_m * 1e3:.0f} mm from the "
+          f"working configurations' mean TCP{at_mean}; {len({r.tobytes() for r in test.rotations})} tool "
+          f"orientation(s)")
     for i, (p, c) in enumerate(zip(test.positions_m, rep.clearance_m)):
         print(f"  P{i + 1}: ({', '.join(f'{v:.4f}' for v in p)}) m, clearance {c * 1e3:.1f} mm, "
               f"incidence {rep.incidence_deg[i]:.1f} deg")

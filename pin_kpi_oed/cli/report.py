@@ -13,7 +13,7 @@ a kinematics file of another robot or hash): one line, exit 2, nothing written.
 from __future__ import annotations
 
 import argparse
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
     from pin_kpi_oed.report.content import CertificateOptions
@@ -55,6 +55,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--work", default=None,
                    help="working configurations (joint-space program CSV) the uncertainty budget is stated at "
                         "(default: the model's)")
+    p.add_argument("--cell", default=None,
+                   help="a work cell (shipped name or YAML) whose working paths the TCP's expanded uncertainty is "
+                        "stated along (its TCP; the cell's robot must be the model's)")
     p.add_argument("--goal-radius", type=float, default=1e-3,
                    help="ISO 9283: rows whose goal lies within this distance (m) of a position's first goal are "
                         "that commanded position (default 0.001)")
@@ -135,8 +138,27 @@ def _options(args: argparse.Namespace) -> CertificateOptions:
 
         rb = load_model_file(args.model).robot
         work = read_targets(args.work, rb.joint_names, program=True, revolute=rb.is_revolute).q
+    cell = _cell(args.cell, args.model) if args.cell else None
     if args.monte_carlo < 0:
         raise InputError(f"--monte-carlo {args.monte_carlo}: a number of draws >= 0")
     return CertificateOptions(lab_path=args.lab, required_accuracy_m=args.required_accuracy,
                               accuracy_figure=f"{args.accuracy_figure}_m", work_q=work, goal_radius_m=args.goal_radius,
-                              commanded_tcp_m=tcp, mc_draws=args.monte_carlo)
+                              commanded_tcp_m=tcp, mc_draws=args.monte_carlo, cell=cell)
+
+
+def _cell(spec: str, model: str) -> Any:
+    """The cell of ``--cell``; its robot's joints must be the model's.
+
+    Raises:
+        InputError: a cell of another robot (naming both).
+    """
+    from pin_kpi_oed.calibrated.model_file import load_model_file
+    from pin_kpi_oed.cell.cell import load_cell
+    from pin_kpi_oed.errors import InputError
+
+    cell = load_cell(spec)
+    rb = load_model_file(model).robot
+    if list(cell.robot.joint_names) != list(rb.joint_names):
+        raise InputError(f"--cell {spec}: its robot {cell.robot.name} has joints {', '.join(cell.robot.joint_names)}, "
+                         f"the model {model} {', '.join(rb.joint_names)}")
+    return cell

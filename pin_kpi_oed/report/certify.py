@@ -11,6 +11,9 @@ rows counted, ISO 9283 against the commanded poses.
   joint-space program given with ``--work``; else at most :data:`BUDGET_ROWS` seeded held-out rows, said so) and the
   expanded uncertainty at every held-out row from the model's σ there (``validate``'s per-axis σ, the one
   ``predict`` prints) with the held term and the temperature: the share of rows within U against the stated coverage.
+* **along each working path** (a cell's ``working_paths``, ``report --cell``): the same budget at every sample of the
+  path with the cell's TCP (:func:`path_uncertainty`): U's largest value (and where, as arc length) and median, and
+  the budget's shares over the samples; with ``--monte-carlo`` its check on each path.
 """
 
 from __future__ import annotations
@@ -20,7 +23,7 @@ from typing import Any
 import numpy as np
 
 __all__ = ["figure_uncertainty", "uncertainty_section", "held_out_coverage", "conformity_section",
-           "commanded_section", "BUDGET_ROWS", "FIGURES"]
+           "commanded_section", "path_uncertainty", "BUDGET_ROWS", "FIGURES"]
 
 #: The most held-out rows the full budget is computed at when the model names no working configurations.
 BUDGET_ROWS = 60
@@ -80,10 +83,43 @@ def held_out_coverage(cm: Any, ho: Any, station: str, tcp_m: np.ndarray, temps: 
             "U_median_m": float(np.median(U)), "U_p95_m": float(np.percentile(U, 95))}
 
 
+def path_uncertainty(model: Any, station: str, path: Any, tcp_m: np.ndarray, *, instrument_u_m: float | None = None,
+                     temps: dict | None = None, seed: int = 0, mc_draws: int = 0) -> dict:
+    """The TCP's expanded uncertainty (k = 2) along one working path (module docstring).
+
+    Args:
+        model: the calibrated model (registered to ``station``); station: the set-up the budget is stated in.
+        path: a :class:`~pin_kpi_oed.cell.paths.WorkingPath` (``name``, samples ``Q`` (S, n) rad / m, ``s_m`` (S,) m).
+        tcp_m: the cell's TCP in the tool frame (3,) m.
+        instrument_u_m, temps, seed: as :func:`~pin_kpi_oed.report.uncertainty.budget`.
+        mc_draws: draws of the Monte-Carlo check on the path's samples (0: none).
+
+    Returns:
+        ``name``, ``n``, ``U_max_m``, ``s_at_max_m`` (arc length of the largest U, m), ``U_median_m``, ``U_m``
+        (per sample, m), ``budget`` (:func:`~pin_kpi_oed.report.uncertainty.budget_summary`), with ``mc_draws``
+        ``monte_carlo`` (median ratio sampled / budget and its 5–95 % range).
+    """
+    from pin_kpi_oed.report.uncertainty import budget, budget_summary, monte_carlo
+
+    Q = np.asarray(path.Q, float)
+    bud = budget(model, Q, station, tcp_m=tcp_m, instrument_u_m=instrument_u_m, temperatures=temps, seed=seed)
+    U = np.asarray(bud["U_m"], float)
+    out = {"name": path.name, "n": int(len(Q)), "U_max_m": float(U.max()),
+           "s_at_max_m": float(np.asarray(path.s_m, float)[int(np.argmax(U))]), "U_median_m": float(np.median(U)),
+           "U_m": U.tolist(), "budget": budget_summary(bud)}
+    if mc_draws:
+        mc = monte_carlo(model, Q, bud, n=mc_draws, seed=seed)
+        out["monte_carlo"] = {"n": mc["n"], "median_ratio": mc["median_ratio"],
+                              "ratio_p5": float(np.percentile(mc["ratio"], 5)),
+                              "ratio_p95": float(np.percentile(mc["ratio"], 95))}
+    return out
+
+
 def uncertainty_section(cm: Any, ho: Any, *, work: Any = None, instrument_u_m: float | None = None,
-                        temps: dict | None = None, seed: int = 0, mc_draws: int = 0) -> dict:
+                        temps: dict | None = None, seed: int = 0, mc_draws: int = 0, cell: Any = None) -> dict:
     """The certificate's uncertainty section (module docstring): the budget at the working configurations, the
-    held-out rows against U, and (``mc_draws`` > 0) the Monte-Carlo check of the budget."""
+    held-out rows against U, along the ``cell``'s working paths, and (``mc_draws`` > 0) the Monte-Carlo check of the
+    budget."""
     from pin_kpi_oed.report.uncertainty import budget, budget_summary, monte_carlo
 
     station = ho.station or cm.station(None)
@@ -93,8 +129,14 @@ def uncertainty_section(cm: Any, ho: Any, *, work: Any = None, instrument_u_m: f
     out = {"where": where, "budget": budget_summary(bud),
            "per_configuration": [{"U_m": float(u), "coverage": float(c), "U_axis_m": ua.tolist()}
                                  for u, c, ua in zip(bud["U_m"], bud["coverage"], bud["U_axis_m"])],
-           "held_out": held_out_coverage(cm, ho, station, tcp, temps, seed),
-           "paths": "the model file stores no working paths: U along a path is not stated"}
+           "held_out": held_out_coverage(cm, ho, station, tcp, temps, seed)}
+    if cell is None or not getattr(cell, "paths", None):
+        out["paths"] = ("no cell with working paths was given (report --cell): U along a path is not stated"
+                        if cell is None else f"cell {cell.name} has no working paths: U along a path is not stated")
+    else:
+        out["paths"] = [path_uncertainty(ho.model, station, pth, np.asarray(cell.tcp_m, float),
+                                         instrument_u_m=instrument_u_m, temps=temps, seed=seed, mc_draws=mc_draws)
+                        for pth in cell.paths]
     if mc_draws:
         mc = monte_carlo(ho.model, Qw, bud, n=mc_draws, seed=seed)
         out["monte_carlo"] = {"n": mc["n"], "median_ratio": mc["median_ratio"],

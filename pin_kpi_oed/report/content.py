@@ -53,6 +53,8 @@ class CertificateOptions:
         goal_radius_m: the stated distance of a commanded position's rows to its goal (m).
         commanded_tcp_m: the point the goal columns command in the tool frame (m); None: the measured point.
         mc_draws: draws of the budget's Monte-Carlo check (0: none).
+        cell: a work cell (:func:`~pin_kpi_oed.cell.cell.load_cell`) whose working paths the TCP's U is stated
+            along (its TCP); None: none.
     """
 
     lab_path: str | None = None
@@ -62,6 +64,7 @@ class CertificateOptions:
     goal_radius_m: float = 1e-3
     commanded_tcp_m: Any = None
     mc_draws: int = 0
+    cell: Any = None
 
 
 @dataclass
@@ -294,10 +297,12 @@ def build_certificate(model_path: str, train_paths: Sequence[str], validate_path
     _certify(data, cm, ho, lab, {"training": train, "held-out": scored}, o, seed)
     cert = Certificate(data)
     from pin_kpi_oed.report.figures import draw_figures, trust_numbers
+    from pin_kpi_oed.viz.trust_map import trust_map
 
-    data["trust_map"] = trust_numbers(ho.model, ho.Q, scored, ho.station)
+    tm = trust_map(ho.model, ho.Q, scored, ho.station)  # once: its numbers and its figure
+    data["trust_map"] = trust_numbers(ho.model, ho.Q, scored, ho.station, tm)
     if figures:
-        cert.figures = draw_figures(cm, ho, scored, data)
+        cert.figures = draw_figures(cm, ho, scored, data, tm)
     return cert
 
 
@@ -332,7 +337,7 @@ def _certify(data: dict, cm: Any, ho: Any, lab: dict | None, sets: dict, o: Cert
         temps = {"mean_c": tmean, "half_range_k": max(abs(rec["temperature_c"][0] - tmean),
                                                       abs(rec["temperature_c"][1] - tmean), 1e-3)}
     unc = uncertainty_section(cm, ho, work=o.work_q, instrument_u_m=u_instr, temps=temps, seed=seed,
-                              mc_draws=o.mc_draws)
+                              mc_draws=o.mc_draws, cell=o.cell)
     unc["figures"] = figure_uncertainty(ho.after["errors_m"], u_instr or 0.0)
     unc["conformity"] = conformity_section(data["accuracy"]["after"], unc["figures"], o.required_accuracy_m,
                                            o.accuracy_figure)

@@ -114,31 +114,34 @@ def _iso(data: dict) -> bytes | None:
     return png_bytes(fig)
 
 
-def trust_numbers(cm: Any, Q: np.ndarray, scored: Any, station: str | None = None) -> dict:
+def trust_numbers(cm: Any, Q: np.ndarray, scored: Any, station: str | None = None, tm: Any = None) -> dict:
     """The trust map's numbers on the scored rows: predicted 3-D σ (min, median, max, m) and extrapolated share
-    (``cm``'s ``station``, default its default or first)."""
+    (``cm``'s ``station``, default its default or first; ``tm``: the :func:`trust_map` of these arguments, when
+    computed already)."""
     from pin_kpi_oed.viz.trust_map import trust_map
 
-    tm = trust_map(cm, Q, scored, station or cm.default_station or next(iter(cm.setups)))
+    if tm is None:
+        tm = trust_map(cm, Q, scored, station or cm.default_station or next(iter(cm.setups)))
     return {"n": int(len(Q)), "sigma_min_m": float(tm.sigma_m.min()), "sigma_median_m": float(np.median(tm.sigma_m)),
             "sigma_max_m": float(tm.sigma_m.max()), "extrapolated": int(np.sum(tm.extrapolation)),
             "discrepancy": cm.discrepancy is not None}
 
 
-def _trust_png(cm: Any, Q: np.ndarray, scored: Any, station: str) -> bytes:
+def _trust_png(cm: Any, Q: np.ndarray, scored: Any, station: str, tm: Any = None) -> bytes:
     from pin_kpi_oed.viz.trust_map import plot_trust_map
 
     with tempfile.TemporaryDirectory() as tmp:
         out = Path(tmp) / "trust.png"
         plot_trust_map(cm, Q, scored, station, out=out,
-                       title=f"{cm.robot.name}: predicted σ on the held-out rows")
+                       title=f"{cm.robot.name}: predicted σ on the held-out rows", computed=tm)
         return out.read_bytes()
 
 
-def draw_figures(cm: Any, ho: Any, scored: Any, data: dict) -> dict:
-    """The certificate's figures, name -> PNG bytes (absent where the data give none)."""
+def draw_figures(cm: Any, ho: Any, scored: Any, data: dict, tm: Any = None) -> dict:
+    """The certificate's figures, name -> PNG bytes (absent where the data give none); ``tm``: the held-out rows'
+    trust map when computed already (:func:`~pin_kpi_oed.viz.trust_map.trust_map`)."""
     acc = data["accuracy"]
     out = {"histogram": _histogram(acc, ho), "reach_joints": _reach_and_joints(acc, ho),
            "correlation": _correlation(data, cm), "iso_ap": _iso(data)}
-    out["trust_map"] = _trust_png(ho.model, ho.Q, scored, ho.station)
+    out["trust_map"] = _trust_png(ho.model, ho.Q, scored, ho.station, tm)
     return {k: v for k, v in out.items() if v is not None}

@@ -76,6 +76,24 @@ def identity_html(d: dict) -> str:
     return out
 
 
+def _paths_html(paths: list) -> str:
+    """U (k = 2) of the TCP along each working path: largest (where), median, the budget's shares, Monte-Carlo."""
+    keys = [c["key"] for c in paths[0]["budget"]["contributions"]]
+    labels = {c["key"]: c["label"] for c in paths[0]["budget"]["contributions"]}
+    head = ("<tr><th class=\"l\">working path</th><th>samples</th><th>U largest (at arc length)</th><th>U median</th>"
+            + "".join(f"<th>{_e(labels[k])}</th>" for k in keys) + "<th>Monte-Carlo / budget</th></tr>")
+    body = ""
+    for p in paths:
+        sh = {c["key"]: c["share"] for c in p["budget"]["contributions"]}
+        mc = p.get("monte_carlo")
+        body += (f'<tr><td class="l">{_e(p["name"])}</td><td>{p["n"]}</td><td>{_mm(p["U_max_m"])} '
+                 f'({p["s_at_max_m"] * 1e3:.0f} mm)</td><td>{_mm(p["U_median_m"])}</td>'
+                 + "".join(f"<td>{sh[k] * 100:.1f} %</td>" for k in keys)
+                 + f"<td>{'—' if mc is None else format(mc['median_ratio'], '.3f')}</td></tr>")
+    return ("<p>Expanded uncertainty U (k = 2) of the TCP position along each working path of the cell (every "
+            "sample; shares of u² averaged over the samples):</p><table>" + head + body + "</table>")
+
+
 def uncertainty_html(d: dict) -> str:
     """The budget table, U at the working configurations, the held-out rows against U, conformity."""
     u = d["uncertainty"]
@@ -99,8 +117,8 @@ def uncertainty_html(d: dict) -> str:
                 f"median {m['median_ratio']:.3f} (5–95 %: {m['ratio_p5']:.3f}–{m['ratio_p95']:.3f}).</p>")
     f = u["figures"]
     out += (f"<p>Uncertainty of the held-out figures (k = 2, {f['n']} rows): RMS ± {_mm(f['rms_m'], 4)}, mean ± "
-            f"{_mm(f['mean_m'], 4)}, 95th percentile ± {_mm(f['p95_m'], 4)}.</p><p class=\"note\">{_e(f['note'])}; "
-            f"{_e(u['paths'])}.</p>")
+            f"{_mm(f['mean_m'], 4)}, 95th percentile ± {_mm(f['p95_m'], 4)}.</p><p class=\"note\">{_e(f['note'])}"
+            + (f"; {_e(u['paths'])}.</p>" if isinstance(u["paths"], str) else ".</p>" + _paths_html(u["paths"])))
     c = u.get("conformity")
     if c:
         out += (f'<p class="verdict">Conformity: {_e(c["verdict"])} — {_e(c["figure_label"])} {_mm(c["figure_m"])} ± '

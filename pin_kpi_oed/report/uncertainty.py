@@ -158,16 +158,20 @@ def ball_coverage(C: np.ndarray, U: np.ndarray, n: int = 20000, seed: int = 0) -
 
 
 def _parameter_draws(cm: Any, Q: np.ndarray, label: str, n: int, rng: np.random.Generator) -> np.ndarray | None:
-    """(n, m, 3) tracker-frame prediction errors with parameters drawn from the covariance the model's σ uses (the
-    least-squares one of a Gaussian-process model, the fit's χ²-scaled one of a noise-only model), each draw
-    propagated through the model's Jacobian at the rows: the fitted covariance holds directions of several
-    centiradians (confounded parameters) whose first-order effects cancel, which the non-linear model does not
-    reproduce."""
+    """(n, m, 3) tracker-frame prediction errors with parameters drawn from the covariance the model's σ uses (a
+    Gaussian-process model's least-squares one inside the training's coverage and, outside it (everywhere for a white
+    discrepancy), its universal-kriging one with the kriging correction −K_WQ Σ⁻¹F, the parts of
+    ``Discrepancy.parametric_covariance``; the fit's
+    χ²-scaled one of a noise-only model), each draw propagated through the model's Jacobian at the rows: the fitted
+    covariance holds directions of several centiradians (confounded parameters) whose first-order effects cancel,
+    which the non-linear model does not reproduce. At a station registered later each draw is registered again
+    (:func:`_reregistered`) and every draw is scaled by the station's σ factor."""
     from pin_kpi_oed.calibrated.prediction_sigma import robot_parameter_covariance
 
     model, p = cm.station_model(label)
     L = model.layout
     d = cm.discrepancy
+    st = cm.setups[label]
     if d is None:
         _, names, C = robot_parameter_covariance(cm, label)
         if C is None:
@@ -177,18 +181,58 @@ def _parameter_draws(cm: Any, Q: np.ndarray, label: str, n: int, rng: np.random.
         if not fit.get("covariance_scaled") and chi2 is not None and np.isfinite(chi2):
             C = C * max(1.0, float(chi2))
         cols = [L.names.index(n_) for n_ in names]
-    else:
-        C = d.param_cov_ls if d.param_cov_ls is not None else d.param_cov
-        if C is None:
-            return None
-        cols = [L.names.index(n_) for n_ in d.param_names]
-        if label in d.param_stations and cm.setups[label].fitted_by == "identify":
-            cols += list(range(L.tracker.start, L.tracker.stop)) + list(range(L.reflector.start, L.reflector.stop))
-        C = C[:len(cols), :len(cols)]
+        return _draw(model.jacobian(p, Q)[:, :3, :][:, :, cols], C, n, rng)
+    if d.param_cov is None and d.param_cov_ls is None:
+        return None
+    cols = [L.names.index(n_) for n_ in d.param_names]
+    own = label in d.param_stations and st.fitted_by == "identify"
+    if own:
+        cols += list(range(L.tracker.start, L.tracker.stop)) + list(range(L.reflector.start, L.reflector.stop))
+    J = _reregistered(cm, label, Q, cols) if not own else model.jacobian(p, Q)[:, :3, :][:, :, cols]
+    R = st.tracker_T_base[:3, :3]
+    inside = ~np.asarray(d.extrapolation(Q), bool) if d.kind != "white" else np.zeros(len(Q), bool)
+    out = np.zeros((n, len(Q), 3))
+    for mask, ins in ((inside, True), (~inside, False)):
+        C = d.param_cov_ls if (ins or d.param_cov is None) and d.param_cov_ls is not None else d.param_cov
+        if not mask.any() or C is None:
+            continue
+        D = np.zeros((int(mask.sum()), 3, C.shape[0]))
+        k = min(len(cols), C.shape[0])
+        D[:, :, :k] = J[mask][:, :, :k]
+        if d.Bn is not None and C is d.param_cov:
+            D -= np.einsum("ab,mbp->map", R, np.einsum("mz,zbp->mbp", d.kernel(Q[mask], d.Z), d.Bn))
+        out[:, mask] = _draw(D, C, n, rng)
+    return st.sigma_scale * out
+
+
+def _reregistered(cm: Any, label: str, Q: np.ndarray, cols: list[int]) -> np.ndarray:
+    """(m, 3, len(cols)) the tracker-frame Jacobian of the error left at Q after a set-up registered on the station's
+    registration rows Z absorbed what it can of a parameter error: J_q − G_q (G_Zᵀ G_Z)⁺ G_Zᵀ J_Z, with the station
+    model's own Jacobians (tracker pose and reflector columns G, unit-norm, directions below 1 % of the largest
+    singular value left out); Z the rows the model file records, else the training's coverage rows."""
+    model, p = cm.station_model(label)
+    L = model.layout
+    J = model.jacobian(p, Q)[:, :3, :]
+    Z = cm.setups[label].registered_q_rad
+    if Z is None or len(Z) < 3:
+        cov = cm.discrepancy.coverage if cm.discrepancy is not None else None
+        Z = None if cov is None else cov.Z
+    if Z is None:
+        return J[:, :, cols]
+    sc = list(range(L.tracker.start, L.tracker.stop)) + list(range(L.reflector.start, L.reflector.stop))
+    Jz = model.jacobian(p, np.asarray(Z, float))[:, :3, :]
+    Gz = Jz[:, :, sc].reshape(-1, len(sc))
+    norms = np.linalg.norm(Gz, axis=0)
+    norms[norms == 0] = 1.0
+    B, *_ = np.linalg.lstsq(Gz / norms, Jz[:, :, cols].reshape(-1, len(cols)), rcond=1e-2)
+    return J[:, :, cols] - np.einsum("mak,kr->mar", J[:, :, sc] / norms, B)
+
+
+def _draw(D: np.ndarray, C: np.ndarray, n: int, rng: np.random.Generator) -> np.ndarray:
+    """(n, m, 3) draws of D β with β ~ N(0, C): D (m, 3, P), C (P, P)."""
     w, V = np.linalg.eigh(0.5 * (C + C.T))
     F = V * np.sqrt(np.maximum(w, 0.0))
-    J = model.jacobian(p, Q)[:, :3, :][:, :, cols]          # (m, 3, P) tracker frame
-    return np.einsum("map,pk,nk->nma", J, F, rng.standard_normal((n, F.shape[1])))
+    return np.einsum("map,pk,nk->nma", D, F, rng.standard_normal((n, F.shape[1])))
 
 
 def monte_carlo(cm: Any, Q: np.ndarray, bud: dict, n: int = 2000, seed: int = 0) -> dict:

@@ -227,7 +227,7 @@ RULES: dict[str, dict[str, Callable[[str, Any], None]]] = {
                "work_samples": _int_at_least(0),
                "clearance_margin": _finite_at_least(0.0, "m", 0.5, ": give the clearance margin in m (e.g. 0.02 for "
                                                                     "20 mm)"),
-               "incidence_margin": _finite_at_least(0.0, "deg", 89.0)},
+               "incidence_margin": _finite_at_least(0.0, "deg", 89.0), "iso_side": _positive_float},
     "simulate": {**_SEED, "n": _int_at_least(1), "n_test": _int_at_least(0), "noise": _sigma_m,
                  "sigma_rot": _sigma_rad, "tol_translation": _nonneg_float, "tol_rotation": _nonneg_float,
                  "tol_reflector": _nonneg_float, "temperature": _temperature, "reflector": _offset},
@@ -273,7 +273,8 @@ INPUTS = {"evaluate": ["design"], "design": ["cell", "pool", "given", "given_pri
           "view": ["design"], "info": ["robot"], "export": ["design"],
           "compensate": ["model", "targets", "program", "cell"],
           "import-tracker": ["export", "joints", "robot"], "export-model": ["model"],
-          "report": ["model", "train", "validate", "register_data", "kinematics"], "check": ["model", "data", "cell"],
+          "report": ["model", "train", "validate", "register_data", "kinematics", "cell"],
+          "check": ["model", "data", "cell"],
           "monitor": ["model", "data"]}
 #: command -> argparse dests of output folders
 FOLDERS = {"diagnose": ["figures"], "view": ["figures"], "study": ["out"]}
@@ -372,6 +373,8 @@ def _effects(args: argparse.Namespace) -> set[str] | None:
 IGNORED: dict[str, list[tuple[str, Callable[[argparse.Namespace], bool], str]]] = {
     "identify": [("--urdf-frames", lambda a: bool(getattr(a, "urdf_out", None)),
                   "adds frames to the calibrated URDF: add --urdf-out FILE")],
+    "design": [("--iso-side", lambda a: bool(getattr(a, "iso9283", None)),
+                "is the side of the ISO 9283 test cube: add --iso9283 PROGRAM")],
     "simulate": [("--sigma-rot", lambda a: bool(getattr(a, "pose6d", False)),
                   "is the orientation noise of --pose6d: add --pose6d")],
     "compensate": [("--position-only", lambda a: bool(getattr(a, "program", None)),

@@ -118,7 +118,7 @@ def sigma_contents(model: Any) -> str:
 
 
 def plot_trust_map(model: Any, Q: np.ndarray, aux: Any = None, station: str | None = None, *,
-                   out: str | os.PathLike, title: str | None = None) -> TrustMap:
+                   out: str | os.PathLike, title: str | None = None, computed: TrustMap | None = None) -> TrustMap:
     """Write the trust map (PNG): top (x–y) and side (x–z) views of the rows' reflector positions, base frame,
     coloured by the predicted σ (mm); extrapolated rows marked and counted; the training configurations in grey.
 
@@ -126,6 +126,7 @@ def plot_trust_map(model: Any, Q: np.ndarray, aux: Any = None, station: str | No
         model, Q, aux, station: as :func:`trust_map`.
         out: the PNG to write (atomically).
         title: figure title (default: the robot and the number of rows).
+        computed: the :class:`TrustMap` of these arguments when the caller already has it (not computed again).
 
     Returns:
         The :class:`TrustMap` drawn (``path`` and ``figure`` set).
@@ -133,7 +134,7 @@ def plot_trust_map(model: Any, Q: np.ndarray, aux: Any = None, station: str | No
     Raises:
         InputError: as :func:`trust_map`; the target folder does not exist, or ``out`` is a folder.
     """
-    tm = trust_map(model, Q, aux, station)
+    tm = trust_map(model, Q, aux, station) if computed is None else computed
     P, T = tm.positions_base_m * 1e3, tm.training_base_m * 1e3       # mm for display
     s_mm = tm.sigma_m * 1e3
     far = tm.extrapolation
