@@ -230,7 +230,7 @@ def select_with_nests(model: TrackerModel, pool: np.ndarray, m: int, Q_work: np.
     """
     import time
 
-    from pin_kpi_oed.oed.criteria import get_criterion
+    from pin_kpi_oed.oed.objective import information_criterion
     from pin_kpi_oed.oed.pool import select
 
     t0 = time.perf_counter()
@@ -242,7 +242,7 @@ def select_with_nests(model: TrackerModel, pool: np.ndarray, m: int, Q_work: np.
     p0 = np.zeros(model.n_params)
     Fp = model.at_nests(cand_nest).weighted_jacobian(p0, cand_q)[:, :, B]
     E = model.kpi_jacobian(p0, np.atleast_2d(Q_work))[:, B]
-    K = get_criterion("kpi").pool_form(E, B.size)
+    K = information_criterion("kpi").pool_form(E, B.size)
     idx = np.asarray(select(Fp, m, K, seed=seed, names=[model.layout.names[i] for i in B]).indices, int)
     Q, start = cand_q[idx], cand_nest[idx]
     one = nest_trace(model, Q, np.zeros(len(Q), int), Q_work, tolerances, seed, st)
