@@ -290,7 +290,8 @@ def compensation(truth: tuple, cm, res: dict, X: np.ndarray, frame: str) -> dict
             "not_worse": bool(np.all(err[ok] <= nom[ok]))}
 
 
-def _files(w: Path) -> dict[str, Path]:
+def work_files(w: Path) -> dict[str, Path]:
+    """The walk's files in the work folder ``w``, by key."""
     names = dict(cell="cell.yaml", d="d.json", tr="tr.csv", te="te.csv", truth="truth.json", m="m.json",
                  pr="pred.csv", pt="pred_tcp.csv", t="t.csv", tb="t_base.csv", j="j.csv", jj="j.json",
                  jb="jb.csv", jjb="jb.json")
@@ -369,7 +370,7 @@ def run_arm(label: str, seed: int, work: Path, args: argparse.Namespace) -> dict
     w = work / f"{label}_s{seed}"
     shutil.rmtree(w, ignore_errors=True)  # simulate --truth reads an existing truth file: start clean
     w.mkdir(parents=True)
-    f = _files(w)
+    f = work_files(w)
     t0 = time.process_time()
     step = "URDF"
     try:

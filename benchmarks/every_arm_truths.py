@@ -30,8 +30,8 @@ from typing import Any
 
 import numpy as np
 
-from benchmarks.every_arm import (HARMONIC, N_TEST, _files, arm_urdf, compensation, limits, run_cli, targets,
-                                  tcp_heldout, true_tcp, write_cell, write_targets)
+from benchmarks.every_arm import (HARMONIC, N_TEST, arm_urdf, compensation, limits, run_cli, targets, tcp_heldout,
+                                  true_tcp, work_files, write_cell, write_targets)
 
 BAND = (0.67, 1.5)
 
@@ -88,7 +88,7 @@ def run_truths(label: str, seed: int, k_truths: int, work: Path, args: Any) -> d
     w = work / f"{label}_s{seed}_truths"
     shutil.rmtree(w, ignore_errors=True)
     w.mkdir(parents=True)
-    f = _files(w)
+    f = work_files(w)
     t0 = time.process_time()
     step = "URDF"
     rows = []
