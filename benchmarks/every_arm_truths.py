@@ -4,8 +4,8 @@ One simulated robot's standardised TCP error over its held-out rows follows the 
 parameters no reflector measurement determines (e.g. the last joint's translation along its axis, 0.5 mm under the
 tolerances): with one truth per robot, a robot's figure is ≈ |its draw| / its σ, whatever the σ's honesty. Here each
 arm (and seed) is designed once (``design --cell cell.yaml --criteria kpi_gp --seed S``), and K true robots are drawn
-on the same designed poses (``simulate --design d.json --seed S + 1000 k``, k = 0..K-1; k = 0 is the plain walk's
-truth), each identified (``identify``, ``--accept-poor-fit`` after a refusal), predicted at the TCP
+on the same designed poses (``simulate --design d.json --seed S + 1000 k``, k = 0..K-1; k = 0 draws the plain walk's
+truth), each identified (``identify`` without ``--validate``, ``--accept-poor-fit`` after a refusal), predicted at the TCP
 (``predict --at tcp``, true noise-free TCP against the predicted one) and compensated (``compensate`` in the tracker
 and the base frame, the true robot driven to the compensated joints). Per robot:
 

@@ -114,6 +114,8 @@ def main(argv: list[str] | None = None) -> int:
               f" | {f(two['sigma_m'] * 1e3, two['error_m'] * 1e3, two['z'], two['in95'])}"
               f" | {r['n_nest1_joint']:3d}/35 {f(jo['sigma_m'] * 1e3, jo['error_m'] * 1e3, jo['z'], jo['in95'])}"
               f"   ({r['time_s']:.0f} s)", flush=True)
+        if args.json:  # after every seed: a run stopped early keeps the seeds it finished
+            Path(args.json).write_text(json.dumps(rows, indent=1))
     print(rows[0]["design_line"])
     for arm in ("one", "two", "joint"):
         d2 = np.concatenate([r[arm]["d2"] for r in rows])
