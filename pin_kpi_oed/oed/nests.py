@@ -215,7 +215,8 @@ def select_with_nests(model: TrackerModel, pool: np.ndarray, m: int, Q_work: np.
     over), then the chosen rows' nests are refined by the descent of :func:`assign_nests` on the full tr C_s (held
     term included) from the chosen ones. The nests are kept only where they remove ``min_gain`` of nest 0 alone's
     tr C_s at the same poses (as :func:`assign_nests`: moving the reflector costs time); otherwise every pose
-    measures nest 0.
+    measures nest 0. Where the selection over every nest's parameters fails (the exchange's information loses
+    definiteness), the poses are chosen at nest 0 and their nests assigned after, as :func:`assign_nests` does.
 
     Args:
         model: the measurement model with its nests and TCP; pool: candidate poses (N, n) rad; m: rows to choose;
@@ -243,7 +244,13 @@ def select_with_nests(model: TrackerModel, pool: np.ndarray, m: int, Q_work: np.
     Fp = model.at_nests(cand_nest).weighted_jacobian(p0, cand_q)[:, :, B]
     E = model.kpi_jacobian(p0, np.atleast_2d(Q_work))[:, B]
     K = information_criterion("kpi").pool_form(E, B.size)
-    idx = np.asarray(select(Fp, m, K, seed=seed, names=[model.layout.names[i] for i in B]).indices, int)
+    try:
+        idx = np.asarray(select(Fp, m, K, seed=seed, names=[model.layout.names[i] for i in B]).indices, int)
+    except IdentifiabilityError:  # the rows over every nest's parameters lost definiteness in the exchange:
+        B0 = st.base((0,))       # the poses at nest 0, their nests assigned after (what assign_nests does)
+        F0 = model.weighted_jacobian(p0, pool)[:, :, B0]
+        K0 = information_criterion("kpi").pool_form(model.kpi_jacobian(p0, np.atleast_2d(Q_work))[:, B0], B0.size)
+        idx = np.asarray(select(F0, m, K0, seed=seed, names=[model.layout.names[i] for i in B0]).indices, int)
     Q, start = cand_q[idx], cand_nest[idx]
     one = nest_trace(model, Q, np.zeros(len(Q), int), Q_work, tolerances, seed, st)
     nest, best, passes, nfev = _descend(model, Q, start, Q_work, tolerances, seed, st, 4)
