@@ -5,10 +5,7 @@ Per seed (a UR5 of example-robot-data):
 1. two nests on the tool: nest 0 on the last joint's axis at the flange, nest 1 0.06 m off the axis and 0.05 m out;
    the TCP 0.15 m out along the axis (0.15 m from nest 0); 35 poses chosen by the ``kpi`` criterion at nest 0 from
    400 random candidates for the TCP at 5 working configurations; the nest of each pose chosen by the TCP's tr C_s
-   (:func:`pin_kpi_oed.oed.nests.assign_nests`: nests assigned after the poses), against every pose at nest 0 (the
-   same poses), and against 35 rows chosen over pose × nest together from the same candidates
-   (:func:`pin_kpi_oed.oed.nests.select_with_nests`: every candidate at every nest, the ``kpi`` criterion over the
-   parameters both nests identify, then the nests refined on tr C_s);
+   (:func:`pin_kpi_oed.oed.nests.assign_nests`), against every pose at nest 0 (the same poses);
 2. a true robot with errors on EVERY joint parameter (0.5 mm, 1 mrad: also those no reflector measurement sees),
    the nests' shared offset 1 mm off nominal, and an unmodelled gear harmonic (σ 50 µrad per coefficient),
    measured at the designed poses at their nests (tracker noise 25 µm per axis);
@@ -17,9 +14,7 @@ Per seed (a UR5 of example-robot-data):
    frame) − the calibrated model's TCP against the one σ at the TCP (``tcp_sigma``): standardised RMS
    sqrt(mean(eᵀ C⁻¹ e) / 3) and the share inside the 95 % ellipsoid, per seed and pooled; the σ (RMS over the
    rows of sqrt(tr C)) and the realised error (RMS |e|) of two nests against one, paired over the seeds (median of
-   the ratios, sign test: :func:`pin_kpi_oed.studies.paired.paired_comparison`), and of pose × nest together
-   against nests assigned after the poses (the design's tr C_s at the working configurations, the σ at the
-   held-out configurations and the realised error).
+   the ratios, sign test: :func:`pin_kpi_oed.studies.paired.paired_comparison`).
 
 Run: ``python -m benchmarks.nests --seed 0 --seeds 10 [--json out.json]``.
 """
@@ -59,7 +54,7 @@ def run_one(seed: int) -> dict:
     from pin_kpi_oed.model.tolerances import Tolerances
     from pin_kpi_oed.model.tracker import TrackerModel
     from pin_kpi_oed.oed.identifiability import analyse
-    from pin_kpi_oed.oed.nests import assign_nests, select_with_nests
+    from pin_kpi_oed.oed.nests import assign_nests
     from pin_kpi_oed.oed.objective import DesignCriterion
     from pin_kpi_oed.simulation.simulator import default_tracker_pose, random_truth, simulate
 
@@ -74,7 +69,6 @@ def run_one(seed: int) -> dict:
     E = model.kpi_jacobian(np.zeros(model.n_params), Qw)[:, base]
     Qd = pool[DesignCriterion(model, base, "kpi", E).select(pool, 35, seed=seed).indices]
     chosen = assign_nests(model, Qd, Qw, seed=seed)
-    Qj, joint = select_with_nests(model, pool, 35, Qw, seed=seed)
     p = random_truth(model, Tolerances(5e-4, 1e-3, reflector_m=1e-3), seed=seed)
     eff = GearHarmonic(rb)
     theta = rng.normal(size=len(eff.param_names(rb))) * 5e-5
@@ -82,10 +76,9 @@ def run_one(seed: int) -> dict:
     e_true = true_point((model, p, [(eff, theta)]), TCP_M, Qt)
     nominal = TrackerModel(rb, reflector_m=NESTS_M[0], tcp_m=TCP_M, noise=noise, nests_m=NESTS_M)
     out: dict = {"seed": seed, "design_line": chosen.line(), "n_nest1": int(np.sum(chosen.nest == 1)),
-                 "trace_one_mm2": chosen.one.total_m2 * 1e6, "trace_two_mm2": chosen.chosen.total_m2 * 1e6,
-                 "trace_joint_mm2": joint.chosen.total_m2 * 1e6, "n_nest1_joint": int(np.sum(joint.nest == 1))}
-    for arm, Q, nest in (("one", Qd, np.zeros(len(Qd), int)), ("two", Qd, chosen.nest), ("joint", Qj, joint.nest)):
-        train = simulate(model, Q, p, [(eff, theta)], seed=seed + 1, nest=nest)
+                 "trace_one_mm2": chosen.one.total_m2 * 1e6, "trace_two_mm2": chosen.chosen.total_m2 * 1e6}
+    for arm, nest in (("one", np.zeros(len(Qd), int)), ("two", chosen.nest)):
+        train = simulate(model, Qd, p, [(eff, theta)], seed=seed + 1, nest=nest)
         cm = identify(nominal, train, Q_work=Qt).calibrated_model()
         at = tcp_sigma(cm, Qt, TCP_M)
         out[arm] = _stats(e_true - forward(cm, Qt, frame="cell", tcp_m=TCP_M), at.covariance_m2)
@@ -103,32 +96,23 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--json", default=None, help="write the figures here")
     args = ap.parse_args(argv)
     rows = []
-    print("seed  nest-1 poses | one nest: sigma, error (mm), z, in95 | nests after poses: sigma, error (mm), z, in95"
-          " | pose x nest: nest-1 rows, sigma, error (mm), z, in95")
+    print("seed  nest-1 poses | one nest: sigma, error (mm), z, in95 | design's nests: sigma, error (mm), z, in95")
     for s in range(args.seed, args.seed + args.seeds):
         r = run_one(s)
         rows.append(r)
         f = "{:6.3f} {:6.3f} {:5.2f} {:4.0%}".format
-        one, two, jo = r["one"], r["two"], r["joint"]
+        one, two = r["one"], r["two"]
         print(f"{s:4d}  {r['n_nest1']:3d}/35 | {f(one['sigma_m'] * 1e3, one['error_m'] * 1e3, one['z'], one['in95'])}"
-              f" | {f(two['sigma_m'] * 1e3, two['error_m'] * 1e3, two['z'], two['in95'])}"
-              f" | {r['n_nest1_joint']:3d}/35 {f(jo['sigma_m'] * 1e3, jo['error_m'] * 1e3, jo['z'], jo['in95'])}"
-              f"   ({r['time_s']:.0f} s)", flush=True)
-        if args.json:  # after every seed: a run stopped early keeps the seeds it finished
-            Path(args.json).write_text(json.dumps(rows, indent=1))
+              f" | {f(two['sigma_m'] * 1e3, two['error_m'] * 1e3, two['z'], two['in95'])}   ({r['time_s']:.0f} s)",
+              flush=True)
     print(rows[0]["design_line"])
-    for arm in ("one", "two", "joint"):
+    for arm in ("one", "two"):
         d2 = np.concatenate([r[arm]["d2"] for r in rows])
         print(f"pooled {arm}: standardised RMS {np.sqrt(np.mean(d2) / 3):.2f}, inside 95 % "
               f"{np.mean(d2 <= CHI2_3_95):.0%} ({len(d2)} rows)")
     for what in ("sigma_m", "error_m"):
         c = paired_comparison([r["two"][what] for r in rows], [r["one"][what] for r in rows])
         print(f"two nests vs one, {what}: {paired_text(c)}")
-    for what in ("trace", "sigma_m", "error_m"):
-        a, b = ([r[f"trace_{k}_mm2"] if what == "trace" else r[k][what] for r in rows] for k in ("joint", "two"))
-        c = paired_comparison(a, b)
-        print(f"pose x nest together vs nests after the poses, {what if what != 'trace' else 'design tr(C_s)'}: "
-              f"{paired_text(c)}")
     if args.json:
         Path(args.json).write_text(json.dumps(rows, indent=1))
     return 0

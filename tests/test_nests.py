@@ -87,18 +87,3 @@ def test_design_measures_the_second_nest_where_it_helps(ur5):
     near = assign_nests(_model(ur5, tcp=NESTS[0]), Q, Qw)
     assert set(near.nest.tolist()) == {0}
     assert "no other nest lowers it" in near.line()
-
-
-def test_poses_and_nests_chosen_together_from_a_pool(ur5):
-    """select_with_nests picks rows over pose x nest: its tr C_s is the exact one of the rows and nests it returns,
-    below nest 0 alone at the same poses; with the TCP at nest 0 no second nest is measured."""
-    from pin_kpi_oed.oed.nests import nest_trace, select_with_nests
-
-    rng = np.random.default_rng(1)
-    pool, Qw = ur5.random_q(rng, 120), ur5.random_q(rng, 4)
-    Q, d = select_with_nests(_model(ur5), pool, 25, Qw, seed=2)
-    assert Q.shape == (25, 6) and all(np.any(np.all(np.isclose(pool, q), axis=1)) for q in Q)
-    assert d.chosen.total_m2 == pytest.approx(nest_trace(_model(ur5), Q, d.nest, Qw).total_m2, rel=1e-12)
-    assert d.chosen.total_m2 < 0.5 * d.one.total_m2 and set(d.nest.tolist()) & {1}
-    Qn, near = select_with_nests(_model(ur5, tcp=NESTS[0]), pool, 25, Qw, seed=2)
-    assert set(near.nest.tolist()) == {0} and near.chosen.total_m2 == near.one.total_m2

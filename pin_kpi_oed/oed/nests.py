@@ -33,7 +33,7 @@ if TYPE_CHECKING:
     from pin_kpi_oed.model.tolerances import Tolerances
     from pin_kpi_oed.model.tracker import TrackerModel
 
-__all__ = ["NestTrace", "NestDesign", "nest_trace", "assign_nests", "select_with_nests"]
+__all__ = ["NestTrace", "NestDesign", "nest_trace", "assign_nests"]
 
 
 @dataclass
@@ -202,60 +202,3 @@ def _descend(model: TrackerModel, Q: np.ndarray, nest: np.ndarray, Q_work: np.nd
         if not changed:
             break
     return nest, best, passes, nfev
-
-
-def select_with_nests(model: TrackerModel, pool: np.ndarray, m: int, Q_work: np.ndarray,
-                      tolerances: Tolerances | None = None, seed: int = 0, min_gain: float = 0.01
-                      ) -> tuple[np.ndarray, NestDesign]:
-    """Poses and nests chosen together from a pool, instead of poses at nest 0 and their nests afterwards.
-
-    Every candidate pose at every nest is a candidate row; ``m`` of them are selected by the pool selection
-    (:func:`~pin_kpi_oed.oed.pool.select`: relaxation, rounding, exchange) on the ``kpi`` criterion over the
-    parameters every nest together identifies (what the poses can still shrink; the held term is what is left
-    over), then the chosen rows' nests are refined by the descent of :func:`assign_nests` on the full tr C_s (held
-    term included) from the chosen ones. The nests are kept only where they remove ``min_gain`` of nest 0 alone's
-    tr C_s at the same poses (as :func:`assign_nests`: moving the reflector costs time); otherwise every pose
-    measures nest 0. Where the selection over every nest's parameters fails (the exchange's information loses
-    definiteness), the poses are chosen at nest 0 and their nests assigned after, as :func:`assign_nests` does.
-
-    Args:
-        model: the measurement model with its nests and TCP; pool: candidate poses (N, n) rad; m: rows to choose;
-        Q_work: working configurations (t, n) rad; tolerances: the held parameters' prior; seed: the selection's
-        and the structural analysis's seed; min_gain: the share of tr C_s other nests must remove.
-
-    Returns:
-        (the chosen poses (m, n) rad, their :class:`NestDesign`).
-
-    Raises:
-        IdentifiabilityError: the chosen poses at nest 0 do not identify its parameters.
-    """
-    import time
-
-    from pin_kpi_oed.oed.objective import information_criterion
-    from pin_kpi_oed.oed.pool import select
-
-    t0 = time.perf_counter()
-    pool = np.atleast_2d(np.asarray(pool, float))
-    k = model.n_nests
-    st = _Structure(model, seed)
-    B = st.base(tuple(range(k)))
-    cand_q, cand_nest = np.tile(pool, (k, 1)), np.repeat(np.arange(k), len(pool))
-    p0 = np.zeros(model.n_params)
-    Fp = model.at_nests(cand_nest).weighted_jacobian(p0, cand_q)[:, :, B]
-    E = model.kpi_jacobian(p0, np.atleast_2d(Q_work))[:, B]
-    K = information_criterion("kpi").pool_form(E, B.size)
-    try:
-        idx = np.asarray(select(Fp, m, K, seed=seed, names=[model.layout.names[i] for i in B]).indices, int)
-    except IdentifiabilityError:  # the rows over every nest's parameters lost definiteness in the exchange:
-        B0 = st.base((0,))       # the poses at nest 0, their nests assigned after (what assign_nests does)
-        F0 = model.weighted_jacobian(p0, pool)[:, :, B0]
-        K0 = information_criterion("kpi").pool_form(model.kpi_jacobian(p0, np.atleast_2d(Q_work))[:, B0], B0.size)
-        idx = np.asarray(select(F0, m, K0, seed=seed, names=[model.layout.names[i] for i in B0]).indices, int)
-    Q, start = cand_q[idx], cand_nest[idx]
-    one = nest_trace(model, Q, np.zeros(len(Q), int), Q_work, tolerances, seed, st)
-    nest, best, passes, nfev = _descend(model, Q, start, Q_work, tolerances, seed, st, 4)
-    if best.total_m2 >= (1.0 - min_gain) * one.total_m2:
-        nest, best = np.zeros(len(Q), int), one
-    return Q, NestDesign(nest=nest, one=one, chosen=best, t=len(np.atleast_2d(Q_work)), success=True,
-                         status="converged", nit=passes, nfev=nfev + 1, time_s=time.perf_counter() - t0,
-                         message=f"{len(Q)} poses and their nests chosen together from {len(pool)} candidates")
