@@ -37,7 +37,8 @@ ros-industrial/abb; the pip package ``xacro`` on ``--xacro-path``):
 An arm the loader refuses, or a step that refuses, is a line naming the cause.
 
 Run: ``python -m benchmarks.every_arm [--robots ur5,panda] [--seed S] [--ros-industrial DIR] [--json out.json]``
-(about 1–3 minutes per arm and seed on one core).
+(about 1–3 minutes per arm and seed on one core). ``--truths K``: K seeded true robots per arm and seed on the same
+designed poses, the per-robot honesty of the TCP's σ (:mod:`benchmarks.every_arm_truths`).
 """
 
 from __future__ import annotations
@@ -289,7 +290,8 @@ def compensation(truth: tuple, cm, res: dict, X: np.ndarray, frame: str) -> dict
             "not_worse": bool(np.all(err[ok] <= nom[ok]))}
 
 
-def _files(w: Path) -> dict[str, Path]:
+def work_files(w: Path) -> dict[str, Path]:
+    """The walk's files in the work folder ``w``, by key."""
     names = dict(cell="cell.yaml", d="d.json", tr="tr.csv", te="te.csv", truth="truth.json", m="m.json",
                  pr="pred.csv", pt="pred_tcp.csv", t="t.csv", tb="t_base.csv", j="j.csv", jj="j.json",
                  jb="jb.csv", jjb="jb.json")
@@ -324,7 +326,8 @@ def walk_cli(f: dict[str, Path], urdf: Path, seed: int) -> dict:
     for frame, t, j, jj in (("cell", "t", "j", "jj"), ("base", "tb", "jb", "jjb")):
         X = targets(truth, cm, frame)
         write_targets(f[t], X, cm.robot.nq >= 6)
-        run_cli("compensate", "--model", f["m"], "--targets", f[t], "--cell", f["cell"], "--frame", frame,
+        run_cli("compensate", "--model", f["m"], "--targets", f[t], "--cell", f["cell"],
+                "--frame", "tracker" if frame == "cell" else frame,
                 "--out", f[j], "--json", f[jj], "--quiet")
         out[f"compensate_{frame}"] = compensation(truth, cm, json.loads(f[jj].read_text()), X, frame)
     return out
@@ -367,7 +370,7 @@ def run_arm(label: str, seed: int, work: Path, args: argparse.Namespace) -> dict
     w = work / f"{label}_s{seed}"
     shutil.rmtree(w, ignore_errors=True)  # simulate --truth reads an existing truth file: start clean
     w.mkdir(parents=True)
-    f = _files(w)
+    f = work_files(w)
     t0 = time.process_time()
     step = "URDF"
     try:
@@ -447,8 +450,20 @@ def main(argv: list[str] | None = None) -> list[dict]:
     ap.add_argument("--xacro-path", default=None, help="folder holding the pip package xacro, if not importable")
     ap.add_argument("--out", default=None, help="work folder (default: a temporary one)")
     ap.add_argument("--json", default=None, help="write the rows to this JSON file")
+    ap.add_argument("--truths", type=int, default=0,
+                    help="K > 0: K seeded true robots per arm and seed on the same designed poses, the per-robot TCP "
+                         "honesty (benchmarks.every_arm_truths)")
     args = ap.parse_args(argv if argv is not None else [])
     seeds = [int(s) for s in str(args.seed).split(",") if s.strip()]
+    if args.truths > 0:
+        from benchmarks.every_arm_truths import main_truths
+
+        labels = [a.strip() for a in args.robots.split(",") if a.strip()]
+        unknown = [a for a in labels if a not in ARMS and a not in ROS_ARMS]
+        if unknown:
+            raise SystemExit(f"unknown arm '{unknown[0]}' (arms: {', '.join([*ARMS, *ROS_ARMS])})")
+        with tempfile.TemporaryDirectory() as tmp:
+            return main_truths(labels, seeds, args.truths, Path(args.out) if args.out else Path(tmp), args)
     print(f"{len(seeds)} seed(s); z = standardised RMS (target 0.67-1.5), in% = share inside the 95 % ellipsoid "
           "(85-99); σ = mean predicted 3-D TCP σ, err = RMS true 3-D TCP error; comp: targets ok of all, worst "
           "true error / 95 % bound over the ok ones, every ok one within its bound, every ok one no farther than "

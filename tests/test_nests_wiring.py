@@ -122,3 +122,27 @@ def test_model_file_keeps_the_nests_and_predicts_each_row_at_its_nest(tmp_path):
     test.extra.pop("nest")
     err0 = np.linalg.norm(back.predict(test.q, aux=test) - test.position_m, axis=1)
     assert np.all(err0[1::2] > 0.05) and err0[0::2].max() < 2e-5
+
+
+def test_measurement_header_carries_the_nests_and_identify_needs_no_cell(tmp_path):
+    """simulate --design writes the cell's nests in the measurement file's tool header; identify on that file
+    alone (robot, tool and nests from the header) fits each row at its nest, the same model as with the cell."""
+    from pin_kpi_oed.calibrated.model_file import load_model_file
+    from pin_kpi_oed.data.measurements import read_measurement_tool
+
+    cell_file, design = _cell_with_nests(tmp_path), tmp_path / "design.json"
+    assert run_cli("design", "--cell", cell_file, "--criteria", "random", "--measurements", "40", "--seed", "0",
+                   "--json", design, "--quiet")[0] == 0
+    csv = tmp_path / "train.csv"
+    assert run_cli("simulate", "--design", design, "--out", csv, "--n-test", "0", "--seed", "1")[0] == 0
+    assert np.allclose(read_measurement_tool(str(csv)).nests_m, NESTS)
+    rc, _, err = run_cli("identify", "--data", csv, "--model-out", tmp_path / "alone.json", "--accept-poor-fit")
+    assert rc == 0, err
+    rc, _, err = run_cli("identify", "--data", csv, "--cell", cell_file, "--model-out", tmp_path / "cell.json",
+                         "--accept-poor-fit")
+    assert rc == 0, err
+    alone, with_cell = load_model_file(tmp_path / "alone.json"), load_model_file(tmp_path / "cell.json")
+    st = next(iter(alone.setups.values()))
+    assert st.nests_m is not None and np.allclose(st.nests_m[1] - st.nests_m[0], np.subtract(NESTS[1], NESTS[0]))
+    assert st.rms_m < 1e-4  # each row fitted at its own nest (at nest 0 they would be ~60 mm off)
+    np.testing.assert_allclose(alone.joint_p, with_cell.joint_p, atol=1e-7)

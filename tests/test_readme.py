@@ -95,9 +95,18 @@ def test_readme_own_robot_recipe_runs(tmp_path, monkeypatch, capsys) -> None:
 
     rows = (tmp_path / "ur5_joints.csv").read_text().splitlines()
     head = rows[0].split(",")
-    assert len(rows) == 1 + 3  # reached; a target outside the 40 poses' joint-space coverage is flagged, never "ok"
-    assert all(r.split(",")[head.index("status")] == ("extrapolated" if r.split(",")[head.index("extrapolation")]
-                                                       == "1" else "ok") for r in rows[1:])
+    assert len(rows) == 1 + 3  # reached; a target outside the 40 poses' joint-space coverage is flagged, never "ok",
+    # and so is one whose TCP sigma is mostly the parameters no reflector measurement determines (tcp_unmeasured)
+    from pin_kpi_oed import load_model_file
+    from pin_kpi_oed.calibrated.tcp_sigma import tcp_sigma
+
+    cm = load_model_file(tmp_path / "ur5_model.json")
+    Q = np.array([[float(r.split(",")[head.index(j)]) for j in cm.robot.joint_names] for r in rows[1:]])
+    at = tcp_sigma(cm, Q, frame="base")
+    mostly_held = at.held_sigma_m ** 2 > 0.5 * at.sigma_m ** 2
+    assert [r.split(",")[head.index("status")] for r in rows[1:]] == [
+        "extrapolated" if r.split(",")[head.index("extrapolation")] == "1" else ("tcp_unmeasured" if h else "ok")
+        for r, h in zip(rows[1:], mostly_held)]
     corr = np.array([float(r.split(",")[head.index("correction_m")]) for r in rows[1:]])
     assert np.all((corr > 1e-4) & (corr < 1e-2))  # the calibrated model moves the joints by a millimetre or so
 

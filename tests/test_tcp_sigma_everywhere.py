@@ -104,6 +104,36 @@ def test_compensate_states_the_same_sigma(case):
         np.testing.assert_allclose(r.tcp_unobservable_m, at.held_sigma_m, rtol=1e-12)
 
 
+def test_compensate_does_not_call_a_held_dominated_tcp_ok(case):
+    """A target whose TCP σ² is mostly the held parameters' is ``tcp_unmeasured`` and the result's status says "ok at
+    the measured part ... measure the TCP" with the held and the total σ; at the fitted reflector nothing is held and
+    every target is plainly ok."""
+    from pin_kpi_oed.compensation.compensator import CompensationOptions, compensate, forward
+    from pin_kpi_oed.compensation.result import HELD_SHARE_MAX
+    from pin_kpi_oed.data.measurements import MeasurementSet
+    from pin_kpi_oed.data.targets import TargetSet
+
+    _, cm, _, _, data = case
+    refl = cm.setups[cm.station()].reflector_m
+    Qw = data.q[:6]  # measured configurations: inside the calibration's coverage, nothing extrapolated
+
+    def run(tcp):
+        pos = forward(cm, Qw, tcp_m=tcp) + 2e-4
+        ts = TargetSet([f"t{i}" for i in range(len(Qw))], pos, None, Qw, list(cm.robot.joint_names),
+                       MeasurementSet(q=Qw, position_m=np.zeros((len(Qw), 3)), joint_names=list(cm.robot.joint_names)))
+        return compensate(cm, ts, CompensationOptions(tcp_m=tcp))
+
+    r = run(TCP_M)
+    held = r.tcp_unobservable_m ** 2 > HELD_SHARE_MAX * r.sigma_m ** 2
+    assert held.any()
+    assert r.target_status == ["tcp_unmeasured" if h else "ok" for h in held]
+    h = np.sqrt(np.mean(r.tcp_unobservable_m[held] ** 2)) * 1e3
+    assert r.success and r.status.startswith("ok at the measured part") and r.status.endswith("measure the TCP")
+    assert f"({h:.3g} mm of " in r.status and "tcp unmeasured" in r.summary()
+    at = run(refl)
+    assert at.target_status == ["ok"] * len(Qw) and at.status == "ok" and np.all(at.tcp_unobservable_m == 0)
+
+
 def test_check_and_report_state_the_same_sigma(case, tmp_path):
     """check's TCP σ at the working configurations is the re-registered model's σ at the TCP plus the
     registration's share (its held part equal to 1e-12); the certificate's is the model's at its working

@@ -167,3 +167,24 @@ def test_model_file_keeps_working_configurations_and_the_tcp_source(tmp_path):
     (tmp_path / "bad.json").write_text(json.dumps(d))
     with pytest.raises(InputError, match="q_work"):
         load_model_file(tmp_path / "bad.json")
+
+
+def test_header_carries_the_nests_and_refuses_bad_or_contradicting_ones(tmp_path):
+    """The reflector nests (k, 3) m travel in the header and back; nest 0 must be the reflector; a header whose
+    nests differ from the cell's relative to nest 0 is a contradiction, one that only moves them all is not."""
+    nests = [[0.0, 0.06, 0.07], [0.05, 0.0, 0.07]]
+    tool = ToolSpec(robot="panda", reflector_m=nests[0], nests_m=nests)
+    f = tmp_path / "m.csv"
+    write_measurements(_set(tool), f)
+    assert '# nests_m: [[0.0, 0.06, 0.07], [0.05, 0.0, 0.07]]' in f.read_text()
+    back = read_measurements(f)
+    assert np.array_equal(back.tool.nests_m, nests) and np.array_equal(read_measurement_tool(f).nests_m, nests)
+    with pytest.raises(InputError, match="field 'nests_m': nest 0"):
+        ToolSpec(reflector_m=nests[1], nests_m=nests, source="h.csv")
+    with pytest.raises(InputError, match="field 'nests_m' must be a list of"):
+        ToolSpec(nests_m=[0.0, 0.06, 0.07], source="h.csv")
+    moved = ToolSpec(nests_m=np.array(nests) + 0.01, source="b.csv")  # another station's reflector: not compared
+    assert np.array_equal(resolve_tool([tool, moved]).nests_m, nests)
+    other = ToolSpec(nests_m=[nests[0], [0.09, 0.0, 0.07]], source="c.csv")
+    with pytest.raises(InputError, match="c.csv: reflector nests"):
+        resolve_tool([tool, other])

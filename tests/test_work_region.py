@@ -112,3 +112,32 @@ def test_cli_rejects_a_negative_region(bad, capsys):
     from pin_kpi_oed.cli.app import main
 
     assert main(["design", "--cell", "kr15", "--criteria", "random,kpi_gp", "--measurements", "20", *bad]) == 2
+
+
+def test_region_sigma_holds_the_held_term_as_tcp_sigma_does():
+    """The design's TCP σ over the working region includes G Σ_N Gᵀ at the region's configurations: its held part
+    equals tcp_sigma's at the same points (a calibrated model at nominal holding the design's absorption) to
+    1e-12, and the region's σ is sqrt((tr C_s + held) / n)."""
+    from pin_kpi_oed.calibrated.model_file import CalibratedModel, Setup
+    from pin_kpi_oed.calibrated.tcp_sigma import tcp_sigma
+    from pin_kpi_oed.cell.cell import load_cell
+    from pin_kpi_oed.design.optimize import DesignProblem
+    from pin_kpi_oed.design.scores import discrepancy_scores
+    from pin_kpi_oed.oed.held import design_term
+
+    cell = load_cell("ur10")
+    problem = DesignProblem(cell, region=region_in_cell(cell, 0.5, 25, seed=1))
+    Q, _ = problem.random_design(25, 3)
+    sc = discrepancy_scores(problem, [problem.result("random", Q, 0.0)])[0]
+    Qr = problem.gp_criterion().Q_work
+    held = sc["held_trace_region_m2"]
+    assert held > 0.05 * sc["trace_cs_region_m2"]       # the held term is not negligible at a TCP off the reflector
+    assert sc["tcp_sigma_region_m"] ** 2 * len(Qr) == pytest.approx(sc["trace_cs_region_m2"] + held, rel=1e-12)
+
+    model = problem.model
+    term = design_term(model, problem.base, Q, p=problem.p0)
+    setup = Setup(np.asarray(model.tracker_T_base.homogeneous), model.reflector_m)
+    cm = CalibratedModel(cell.robot, np.zeros(6 * cell.robot.nq), setups={"s": setup}, noise=model.noise,
+                         tcp_m=model.tcp_m, parameters={"names": list(term.rows), "held": term})
+    at = tcp_sigma(cm, Qr)
+    assert float(np.einsum("maa->", at.held_m2)) == pytest.approx(held, rel=1e-12)

@@ -167,7 +167,8 @@ class Cell:
         return (self.W_T_base.inverse() * self.W_T_tracker).translation.copy()
 
     def tool_spec(self, source: str = "") -> ToolSpec:
-        """What the cell states about the tool: robot URDF, tool frame, reflector, TCP, working configurations.
+        """What the cell states about the tool: robot URDF, tool frame, reflector, TCP, working configurations, and
+        its reflector nests when it lists several.
 
         Args:
             source: where the fields come from, for messages (default: ``cell <file or name>``).
@@ -176,8 +177,9 @@ class Cell:
             The :class:`~pin_kpi_oed.data.tool_header.ToolSpec` (SI units).
         """
         q_work = np.asarray(self.q_work, float) if self.q_work is not None and np.size(self.q_work) else None
+        nests = None if self.nests_m is None or len(self.nests_m) < 2 else np.array(self.nests_m, float)
         return ToolSpec(robot=str(self.robot.urdf_path), tool_frame=self.robot.tool_frame,
-                        reflector_m=self.reflector_m.copy(), tcp_m=self.tcp_m.copy(), q_work=q_work,
+                        reflector_m=self.reflector_m.copy(), tcp_m=self.tcp_m.copy(), q_work=q_work, nests_m=nests,
                         source=source or f"cell {self.source or self.name}")
 
     def tracker_model(self) -> TrackerModel:

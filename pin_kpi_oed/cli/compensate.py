@@ -81,7 +81,7 @@ def run(args: argparse.Namespace) -> int:
     from pin_kpi_oed.data.atomic import atomic_write_json
     from pin_kpi_oed.data.targets import read_targets
     from pin_kpi_oed.errors import InfeasibleError
-    from pin_kpi_oed.compensation.compensator import (STATUSES, CompensationOptions, compensate,
+    from pin_kpi_oed.compensation.compensator import (SENDABLE, STATUSES, CompensationOptions, compensate,
                                                        compensate_program, write_compensation)
     from pin_kpi_oed.calibrated.model_file import load_model_file
     from pin_kpi_oed.validation.options import check_tool_length
@@ -116,7 +116,7 @@ def run(args: argparse.Namespace) -> int:
         ts = read_targets(args.targets, robot.joint_names, revolute=robot.is_revolute,
                           joint_guard=robot.unit_guard.tolist(), **kw)
         res = compensate(model, ts, opt)
-    if res.target_status and not {"ok", "extrapolated"} & set(res.target_status):  # nothing useful: exit 2
+    if res.target_status and not set(SENDABLE) & set(res.target_status):  # nothing useful: exit 2
         n_un = res.target_status.count("unreachable")
         hint = (f"; the TCP {', '.join(f'{x:g}' for x in tcp)} m is {float(np.linalg.norm(tcp)):.3g} m from the tool "
                 "frame" if tcp is not None else "")

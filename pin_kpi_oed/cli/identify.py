@@ -424,7 +424,8 @@ def run_identify(args: argparse.Namespace) -> int:
                            discrepancy="none", on_poor_fit="ignore")
     reflector, estimated = _nominal_reflector(args, robot, noise, train, opts, ct.tool)
     tcp = ct.tool.tcp_m if ct.tool.tcp_m is not None else np.zeros(3)
-    nests = None if ct.cell is None or ct.cell.nests_m is None else ct.cell.nests_m - ct.cell.nests_m[0] + reflector
+    # the nests the cell or the data's tool header lists (agreed by command_tool), moved with the nominal reflector
+    nests = None if ct.tool.nests_m is None else ct.tool.nests_m - ct.tool.nests_m[0] + reflector
     model = TrackerModel(robot, reflector_m=reflector, tcp_m=tcp, noise=noise, nests_m=nests)
     if ct.cell is not None:  # only the start of the registration: the same model as cell.tracker_model()
         model.tracker_T_base = ct.cell.tracker_T_base

@@ -286,7 +286,8 @@ def run_simulate(args: argparse.Namespace) -> int:
     ms = simulate(model, Q_all, truth_p, effects=effects, aux=aux, seed=args.seed + 2, nest=nest)
     ms.tool = ToolSpec(robot=portable_spec(robot), tool_frame=robot.tool_frame, reflector_m=model.reflector_m,
                        tcp_m=model.tcp_m if (cell is not None or np.any(model.tcp_m != 0)) else None,
-                       q_work=cell.q_work if cell is not None and np.size(cell.q_work) else None)
+                       q_work=cell.q_work if cell is not None and np.size(cell.q_work) else None,
+                       nests_m=model.nests_m if model.n_nests > 1 else None)
     doc = None if reuse and not args.truth_json else truth_to_dict(model, truth_p, tol, args.seed, effects)
     write_measurements(ms.subset(slice(0, len(Q))), args.out)
     if args.n_test:

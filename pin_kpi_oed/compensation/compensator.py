@@ -46,7 +46,11 @@ check); ``near_singular`` (reached, but the inverse condition number σ_min/σ_m
 is below ``singular_ratio``: small TCP corrections there need large joint motions); ``extrapolated`` (every check
 passed, but the compensated configuration lies outside the calibration's joint-space coverage,
 :class:`~pin_kpi_oed.discrepancy.coverage.JointCoverage`: the model was not measured near it, the correction there is
-an extrapolation and its σ the widened one ``predict`` gives for the same configuration). Only ``ok`` is safe to send.
+an extrapolation and its σ the widened one ``predict`` gives for the same configuration); ``tcp_unmeasured`` (every
+check passed, but more than half the TCP's σ² is the joint-placement parameters no measurement determined,
+:mod:`pin_kpi_oed.compensation.tool_offset`: the compensation is right at the measured part and unknown at the TCP
+by that much; the result's status says so, "ok at the measured part; ...: measure the TCP"). Only ``ok`` is safe to
+send as it is.
 """
 
 from __future__ import annotations
@@ -65,7 +69,8 @@ from pin_kpi_oed.errors import InputError
 from pin_kpi_oed.compensation.checks import (branch_step, collision_rows, joint_limit_rows,
                                                           nearest_to_reference, start_configurations)
 from pin_kpi_oed.compensation.result import write_compensation
-from pin_kpi_oed.compensation.result import STATUSES, CompensationResult
+from pin_kpi_oed.compensation.result import (HELD_SHARE_MAX, SENDABLE, STATUSES, CompensationResult,
+                                            held_status_line)
 from pin_kpi_oed.calibrated.model_file import CalibratedModel
 from pin_kpi_oed.calibrated.prediction_sigma import DEFAULT_TOOL_LENGTH_M
 from pin_kpi_oed.calibrated.tcp_sigma import TcpSigma, tcp_sigma
@@ -73,7 +78,7 @@ from pin_kpi_oed.model.kinematics import skew
 from pin_kpi_oed.model.parameters import ParameterLayout
 from pin_kpi_oed.model.tracker import TrackerModel
 
-__all__ = ["FRAMES", "STATUSES", "CompensationOptions", "PoseModel", "CompensationResult", "compensate",
+__all__ = ["FRAMES", "STATUSES", "SENDABLE", "CompensationOptions", "PoseModel", "CompensationResult", "compensate",
            "compensate_program", "write_compensation", "forward", "check_tcp_stated"]
 
 #: Frames a target can be given in.
@@ -447,11 +452,14 @@ def _result(cm: CalibratedModel, ts: TargetSet, opt: CompensationOptions, pm: Po
     at = _tcp_sigma(cm, cal.Q, ts.aux, opt, pm.tcp)
     unseen, extra = at.held_sigma_m, at.extrapolation
     rot, at_l = _orientation_sigma(cm, cal.Q, ts.aux, opt)
+    held = unseen ** 2 > HELD_SHARE_MAX * at.sigma_m ** 2
     status = [_status(i, opt, nom, cal, bool(left_branch[i]), step[i] > opt.max_branch_step_rad, at_limit[i],
-                      colliding[i], bool(extra[i])) for i in range(len(ts))]
-    n_bad = sum(s != "ok" for s in status)
+                      colliding[i], bool(extra[i]), bool(held[i])) for i in range(len(ts))]
+    n_bad = sum(s not in ("ok", "tcp_unmeasured") for s in status)
+    un = np.array([s == "tcp_unmeasured" for s in status], bool)
+    text = "ok" if not un.any() else held_status_line(unseen[un], at.sigma_m[un])
     return CompensationResult(
-        success=n_bad == 0, status="ok" if n_bad == 0 else f"{n_bad} of {len(ts)} targets not ok",
+        success=n_bad == 0, status=text if n_bad == 0 else f"{n_bad} of {len(ts)} targets not ok",
         message="" if n_bad == 0 else "see the per-target status (" + " / ".join(STATUSES[1:]) + ")",
         nit=int(nom.nit + cal.nit), time_s=time.perf_counter() - t0, names=list(ts.names),
         joint_names=list(cm.robot.joint_names), q_nominal=nom.Q, q=cal.Q, correction_m=correction,
@@ -465,10 +473,11 @@ def _result(cm: CalibratedModel, ts: TargetSet, opt: CompensationOptions, pm: Po
 
 
 def _status(i: int, opt: CompensationOptions, nom: _IK, cal: _IK, left_branch: bool, big_step: bool,
-            at_limit: bool, colliding: bool, outside: bool) -> str:
+            at_limit: bool, colliding: bool, outside: bool, held: bool = False) -> str:
     """The status of target i (module docstring): the first failed check. Near a singularity compensation needs
     large joint steps, so ``near_singular`` is named before a step too large for the branch; ``extrapolated`` (outside
-    the calibration's joint-space coverage) comes last: every other check passed."""
+    the calibration's joint-space coverage) comes after the others, ``tcp_unmeasured`` (``held``: the TCP's σ
+    dominated by parameters no measurement determined) last: every other check passed."""
     if (nom.err_m[i] > opt.reach_tol_m or nom.err_rad[i] > opt.reach_tol_rad
             or cal.err_m[i] > opt.reach_tol_m or cal.err_rad[i] > opt.reach_tol_rad):
         return "unreachable"
@@ -484,7 +493,7 @@ def _status(i: int, opt: CompensationOptions, nom: _IK, cal: _IK, left_branch: b
         return "collision"
     if outside:
         return "extrapolated"
-    return "ok"
+    return "tcp_unmeasured" if held else "ok"
 
 
 def _tcp_sigma(cm: CalibratedModel, Q: np.ndarray, aux: Any, opt: CompensationOptions, tcp: np.ndarray) -> TcpSigma:

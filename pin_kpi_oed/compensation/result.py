@@ -15,10 +15,32 @@ import numpy as np
 from pin_kpi_oed.data.atomic import atomic_write_text
 from pin_kpi_oed.results import Result
 
-__all__ = ["STATUSES", "CompensationResult", "write_compensation"]
+__all__ = ["STATUSES", "SENDABLE", "HELD_SHARE_MAX", "CompensationResult", "write_compensation", "held_status_line"]
 
-#: Status of a compensated target; only the first is safe to send.
-STATUSES = ("ok", "unreachable", "off_branch", "joint_limit", "collision", "near_singular", "extrapolated")
+#: Status of a compensated target; only the first is safe to send as it is.
+STATUSES = ("ok", "unreachable", "off_branch", "joint_limit", "collision", "near_singular", "extrapolated",
+            "tcp_unmeasured")
+#: The statuses whose compensated joints may be sent, with the caveat the status names (``extrapolated``: outside the
+#: calibration's coverage; ``tcp_unmeasured``: ok at the measured part, the TCP's σ dominated by held parameters).
+SENDABLE = ("ok", "extrapolated", "tcp_unmeasured")
+#: A target whose TCP σ² is more than this share held parameters (G Σ_N Gᵀ) is ``tcp_unmeasured``, not ``ok``.
+HELD_SHARE_MAX = 0.5
+
+
+def held_status_line(held_m: np.ndarray, sigma_m: np.ndarray) -> str:
+    """The status of a compensation whose targets passed every check but whose TCP σ is dominated by held
+    parameters: "ok at the measured part; ... (x mm of y mm): measure the TCP".
+
+    Args:
+        held_m: the held parameters' 3-D σ at those targets (m); sigma_m: their TCP 3-D σ (m).
+
+    Returns:
+        The line (RMS over the targets, mm).
+    """
+    h = float(np.sqrt(np.mean(np.square(held_m))))
+    t = float(np.sqrt(np.mean(np.square(sigma_m))))
+    return (f"ok at the measured part; the TCP's sigma is dominated by parameters no measurement determined "
+            f"({h * 1e3:.3g} mm of {t * 1e3:.3g} mm): measure the TCP")
 
 
 @dataclass(kw_only=True)
@@ -33,8 +55,10 @@ class CompensationResult(Result):
         correction_m: predicted TCP correction |F_cal(q_nominal) − target|, (m,) m.
         residual_m, residual_rad: calibrated-model distance of q's TCP from the target (m, rad).
         inv_cond: inverse condition number of the scaled Jacobian at q.
-        status: per target ``ok`` / ``unreachable`` / ``near_singular`` (``status`` of the
-            result: ``ok`` if every target is ok, else a count).
+        status: per target ``ok`` / ``unreachable`` / ``near_singular`` / ... / ``tcp_unmeasured`` (every check
+            passed but more than :data:`HELD_SHARE_MAX` of the TCP's σ² is the held parameters': no measurement
+            determined the error there); ``status`` of the result: ``ok`` if every target is ok, the
+            :func:`held_status_line` when the others are ``tcp_unmeasured``, else a count.
         frame: ``cell`` or ``base``; tcp_m: the TCP point (tool frame, m); station.
         sigma_m: predicted 3-D standard deviation of the TCP at q (m), the one σ at the TCP
             (:func:`~pin_kpi_oed.calibrated.tcp_sigma.tcp_sigma`, as ``predict --at tcp`` and ``identify`` state it):
@@ -128,6 +152,12 @@ class CompensationResult(Result):
                              "along the tool axis it moves the tool by sigma mean "
                              f"{np.mean(self.sigma_at_length_m) * 1e3:.4f} mm, max "
                              f"{np.max(self.sigma_at_length_m) * 1e3:.4f} mm")
+            n_held = self.target_status.count("tcp_unmeasured")
+            if n_held:
+                lines.append(f"{n_held} of {len(self.names)} targets tcp unmeasured: every check passed, but more "
+                             f"than {HELD_SHARE_MAX:.0%} of their TCP sigma^2 is from joint-placement parameters no "
+                             "measurement determined; the compensation is right at the measured reflector, not "
+                             "known at the TCP: measure the TCP (a reflector nest at it, or a tool calibration)")
             if self.tcp_unobservable_m.size and np.max(self.tcp_unobservable_m) > 0:
                 lines.append(f"of which {np.max(self.tcp_unobservable_m) * 1e3:.4f} mm (3-D, 1 sigma) the reflector "
                              "cannot see at this TCP: joint-placement errors the calibration could not determine "
@@ -154,7 +184,7 @@ class CompensationResult(Result):
     def _continuity_line(self) -> str:
         """The program's continuity: the largest change of the correction between consecutive rows, over the rows
         that may be sent (ok and extrapolated) against the program's own largest joint step."""
-        good = np.array([s in ("ok", "extrapolated") for s in self.target_status])
+        good = np.array([s in SENDABLE for s in self.target_status])
         pair = good[1:] & good[:-1]
         step = np.abs(np.diff(self.q_nominal, axis=0)).max(axis=1)
         jump = self.correction_jump_rad[1:]

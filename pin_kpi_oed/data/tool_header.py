@@ -11,9 +11,12 @@ per line, the value in JSON::
     # reflector_m: [0.05, 0.0, 0.1]
     # tcp_m: [0.0, 0.0, 0.1034]
     # q_work: [[0.0, -0.3, 0.0, -2.2, 0.0, 1.9, 0.785]]
+    # nests_m: [[0.05, 0.0, 0.1], [0.05, 0.08, 0.1]]
 
 ``q_work`` are the working configurations of the cell (rad / m per joint), from which compensation takes
-its branch. Every field is optional; other comment lines are ignored. A reader keeps the fields
+its branch. ``nests_m`` are the tool's reflector nests (k, 3) m in the tool frame, nest 0 the reflector, when the
+rows were measured at several (the file's ``nest`` column picks one per row): a file with them identifies without
+the cell that declared them. Every field is optional; other comment lines are ignored. A reader keeps the fields
 (:attr:`~pin_kpi_oed.data.measurement_set.MeasurementSet.tool`) and the writer writes them back.
 
 :func:`resolve_tool` joins what several sources say (a command's options, a cell file, the headers of
@@ -39,7 +42,7 @@ __all__ = ["TOOL_HEADER_MAGIC", "TOOL_FIELDS", "ToolSpec", "parse_tool_header", 
 #: First comment line of the header (format name and version).
 TOOL_HEADER_MAGIC = "pin_kpi_oed.tool/1"
 #: The header's fields, in the order they are written.
-TOOL_FIELDS = ("robot", "tool_frame", "reflector_m", "tcp_m", "q_work")
+TOOL_FIELDS = ("robot", "tool_frame", "reflector_m", "tcp_m", "q_work", "nests_m")
 #: Two lengths (m) or angles (rad) closer than this are the same value.
 SAME_TOL = 1e-9
 
@@ -54,6 +57,7 @@ class ToolSpec:
         reflector_m: reflector in the tool frame, (3,) m.
         tcp_m: TCP (the point whose accuracy matters) in the tool frame, (3,) m.
         q_work: working configurations, (k, n) rad / m.
+        nests_m: the reflector nests in the tool frame, (k, 3) m, nest 0 the reflector (several nests only).
         source: where the fields come from (for messages), e.g. ``"train.csv"`` or ``"--cell cell.yaml"``.
     """
 
@@ -62,6 +66,7 @@ class ToolSpec:
     reflector_m: np.ndarray | None = None
     tcp_m: np.ndarray | None = None
     q_work: np.ndarray | None = None
+    nests_m: np.ndarray | None = None
     source: str = ""
 
     def __post_init__(self) -> None:
@@ -83,6 +88,15 @@ class ToolSpec:
             if Q.ndim != 2 or Q.size == 0:
                 raise InputError(f"{where}: field 'q_work' must be a list of joint vectors, got shape {Q.shape}")
             self.q_work = Q
+        if self.nests_m is not None:
+            N = _floats(self.nests_m, f"{where}: field 'nests_m'")
+            if N.ndim != 2 or N.shape[1] != 3 or len(N) < 1:
+                raise InputError(f"{where}: field 'nests_m' must be a list of [x, y, z] positions (m), got shape "
+                                 f"{N.shape}")
+            if self.reflector_m is not None and np.linalg.norm(N[0] - self.reflector_m) > SAME_TOL:
+                raise InputError(f"{where}: field 'nests_m': nest 0 {N[0].tolist()} is not the reflector_m "
+                                 f"{self.reflector_m.tolist()}")
+            self.nests_m = N
 
     @property
     def empty(self) -> bool:
@@ -190,7 +204,7 @@ def _show(v: object) -> str:
 
 
 _LABEL = {"robot": "robot", "tool_frame": "tool frame", "reflector_m": "reflector", "tcp_m": "TCP",
-          "q_work": "working configurations"}
+          "q_work": "working configurations", "nests_m": "reflector nests (relative to nest 0)"}
 
 
 def resolve_tool(specs: Sequence[ToolSpec | None], skip: Sequence[str] = ()) -> ToolSpec:
@@ -198,7 +212,8 @@ def resolve_tool(specs: Sequence[ToolSpec | None], skip: Sequence[str] = ()) -> 
 
     Args:
         specs: the sources in order of precedence (None entries are skipped), each naming its ``source``.
-        skip: fields not compared (e.g. ``reflector_m`` when every station has its own reflector).
+        skip: fields not compared (e.g. ``reflector_m`` when every station has its own reflector). The nests are
+            compared relative to nest 0 (a station's own reflector moves them all).
 
     Returns:
         A :class:`ToolSpec` with every field some source gives; ``source`` names, per field, where it came from
@@ -218,7 +233,7 @@ def resolve_tool(specs: Sequence[ToolSpec | None], skip: Sequence[str] = ()) -> 
                 continue
             if k not in out:
                 out[k], origin[k] = v, spec.source
-            elif k not in skip and not _same(out[k], v):
+            elif k not in skip and not _same(*((out[k] - out[k][0], v - v[0]) if k == "nests_m" else (out[k], v))):
                 raise InputError(f"{spec.source}: {_LABEL[k]} {_show(v)} contradicts {_show(out[k])} from "
                                  f"{origin[k]}; the tool must be the one the data were measured with: drop or "
                                  "correct one of them")

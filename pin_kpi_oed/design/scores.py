@@ -52,8 +52,9 @@ def discrepancy_scores(problem: Any, results: list) -> list[dict]:
         Per design {"trace_cs_m2", "tcp_sigma_m" = sqrt((tr(C_s) + held_trace_m2)/t), "cov_s_m2",
         "held_trace_m2"} (m², m, m², m²) at the working configurations W (``trace_cs_m2`` and ``cov_s_m2`` the
         identified part; the TCP σ with the joint-placement parameters held at nominal, the design's
-        ``held_trace_m2``) and, with a working region, {"trace_cs_region_m2", "tcp_sigma_region_m"} over W plus the
-        region's configurations (sqrt(tr(C_s)/(t + k))); ``cov_s_m2`` is the full
+        ``held_trace_m2``) and, with a working region, {"trace_cs_region_m2", "held_trace_region_m2",
+        "tcp_sigma_region_m"} over W plus the region's configurations (sqrt((tr(C_s) + held)/(t + k)), the held
+        parameters' G Σ_N Gᵀ at the region's configurations included like every TCP σ); ``cov_s_m2`` is the full
         universal-kriging C_s (3t × 3t) rotated to the tracker frame, like the design's own ``cov_s_m2`` (the trace
         is the base frame's); NaN / None where the design does not identify the parameters.
     """
@@ -75,13 +76,26 @@ def discrepancy_scores(problem: Any, results: list) -> list[dict]:
         out.append({"trace_cs_m2": tr, "tcp_sigma_m": math.sqrt((tr + held) / t) if tr == tr else float("nan"),
                     "cov_s_m2": cov, "held_trace_m2": held})
         if reg is not None:
-            n = reg.Q_work.shape[0]
-            try:
-                tr_r = float(reg.value(r.q_meas))
-            except IdentifiabilityError:
-                tr_r = float("nan")
-            out[-1].update({"trace_cs_region_m2": tr_r, "tcp_sigma_region_m": math.sqrt(tr_r / n)})
+            out[-1].update(_region_scores(problem, reg, r.q_meas))
     return out
+
+
+def _region_scores(problem: Any, reg: Any, Q_meas: np.ndarray) -> dict:
+    """The honest scores over the working region (W plus the region's configurations, n of them): the
+    universal-kriging tr(C_s) and the held parameters' tr(G Σ_N Gᵀ) there
+    (:func:`~pin_kpi_oed.oed.held.design_held`, as every other TCP σ), and the TCP σ sqrt((both)/n), m², m² and m;
+    NaN where the design does not identify the parameters."""
+    from pin_kpi_oed.errors import IdentifiabilityError
+    from pin_kpi_oed.oed.held import design_held
+
+    Q_region = reg.Q_work
+    try:
+        tr_r = float(reg.value(Q_meas))
+        held_r = design_held(problem.model, problem.base, Q_meas, Q_region, p=problem.p0).trace_m2
+    except IdentifiabilityError:
+        tr_r = held_r = float("nan")
+    return {"trace_cs_region_m2": tr_r, "held_trace_region_m2": held_r,
+            "tcp_sigma_region_m": math.sqrt((tr_r + held_r) / Q_region.shape[0])}
 
 
 def sigma_given(problem: Any) -> float:
@@ -124,6 +138,8 @@ def add_discrepancy_section(doc: dict, problem: Any, gp_scores: list[dict], mode
     region = problem.region
     doc["working_region"] = None if region is None else {
         **region.to_dict(), "note": "kpi_gp's KPI is tr(C_s) over the working configurations and these; "
-                                    "designs[i].discrepancy.tcp_sigma_region_m is sqrt(tr(C_s)/(t + kept)) over them"}
+                                    "designs[i].discrepancy.tcp_sigma_region_m is "
+                                    "sqrt((tr(C_s) + held_trace_region_m2)/(t + kept)) over them, the parameters "
+                                    "held at nominal included"}
     for dd, sc in zip(doc["designs"], gp_scores):
         dd["discrepancy"] = sc

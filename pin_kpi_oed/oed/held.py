@@ -22,7 +22,7 @@ if TYPE_CHECKING:
     from pin_kpi_oed.model.tolerances import Tolerances
     from pin_kpi_oed.model.tracker import TrackerModel
 
-__all__ = ["HeldTerm", "HeldShare", "held_advice", "design_held"]
+__all__ = ["HeldTerm", "HeldShare", "held_advice", "design_term", "design_held"]
 
 
 @dataclass
@@ -143,10 +143,41 @@ class HeldShare:
         return head + held_advice(self.names, self.contrib_m, float(np.sqrt(total / max(t, 1))))
 
 
+def design_term(model: TrackerModel, base: np.ndarray, Q_meas: np.ndarray, tolerances: Tolerances | None = None,
+                p: np.ndarray | None = None) -> HeldTerm | None:
+    """The :class:`HeldTerm` a fit on the measurement configurations would store: the held joint-placement
+    parameters, their tolerances and A = M⁻¹F_BᵀF_N over the identified parameters (module docstring).
+
+    Args:
+        model: the measurement model (its layout and prior); base: the identified parameters' raw indices;
+        Q_meas: measurement configurations (m, n) rad; tolerances: the held parameters' prior (default
+        :class:`~pin_kpi_oed.model.tolerances.Tolerances`); p: the linearisation point (default nominal).
+
+    Returns:
+        The term (A's rows named by the layout's names of ``base``), or None when nothing is held.
+
+    Raises:
+        IdentifiabilityError: Q_meas does not identify the parameters.
+    """
+    from pin_kpi_oed.model.tolerances import Tolerances, held_columns
+    from pin_kpi_oed.oed.covariance import held_absorption, prior_of
+
+    base = np.asarray(base, int)
+    N = held_columns(model, base)
+    if not N.size:
+        return None
+    p0 = np.zeros(model.n_params) if p is None else np.asarray(p, float)
+    F = model.weighted_jacobian(p0, np.atleast_2d(Q_meas)).reshape(-1, model.n_params)
+    A = held_absorption(F[:, base], F[:, N], prior_of(model, base))
+    names = model.layout.names
+    return HeldTerm([names[i] for i in N], (tolerances or Tolerances()).sigma_vector(model)[N],
+                    [names[i] for i in base], A)
+
+
 def design_held(model: TrackerModel, base: np.ndarray, Q_meas: np.ndarray, Q_work: np.ndarray,
                 tolerances: Tolerances | None = None, p: np.ndarray | None = None) -> HeldShare:
     """The held parameters' share of a design's C_s: tr(G Σ_N Gᵀ) with G = E_B A − E_N at the working
-    configurations and A = M⁻¹F_BᵀF_N of the measurement configurations (module docstring).
+    configurations and A = M⁻¹F_BᵀF_N of the measurement configurations (module docstring, :func:`design_term`).
 
     Args:
         model: the measurement model (its TCP, layout and prior); base: the identified parameters' raw indices;
@@ -160,18 +191,13 @@ def design_held(model: TrackerModel, base: np.ndarray, Q_meas: np.ndarray, Q_wor
     Raises:
         IdentifiabilityError: Q_meas does not identify the parameters.
     """
-    from pin_kpi_oed.model.tolerances import Tolerances, held_columns
-    from pin_kpi_oed.oed.covariance import held_absorption, prior_of
-
-    N = held_columns(model, np.asarray(base, int))
-    if not N.size:
+    base = np.asarray(base, int)
+    term = design_term(model, base, Q_meas, tolerances, p)
+    if term is None:
         return HeldShare()
     p0 = np.zeros(model.n_params) if p is None else np.asarray(p, float)
-    F = model.weighted_jacobian(p0, np.atleast_2d(Q_meas)).reshape(-1, model.n_params)
-    A = held_absorption(F[:, base], F[:, N], prior_of(model, np.asarray(base, int)))
     E = model.kpi_jacobian(p0, np.atleast_2d(Q_work))
-    sig = (tolerances or Tolerances()).sigma_vector(model)[N]
-    Gs = (E[:, base] @ A - E[:, N]) * sig
+    N = [model.layout.names.index(n) for n in term.names]
+    Gs = term.gain(E[:, base], E[:, N]) * term.sigma
     t = E.shape[0] // 3
-    return HeldShare(float(np.sum(Gs ** 2)), [model.layout.names[i] for i in N],
-                     np.sqrt(np.sum(Gs ** 2, axis=0) / t))
+    return HeldShare(float(np.sum(Gs ** 2)), list(term.names), np.sqrt(np.sum(Gs ** 2, axis=0) / t))
