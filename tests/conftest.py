@@ -30,6 +30,18 @@ def kr15_model() -> TrackerModel:
     return make_model("kr15")
 
 
+# ---------------------------------------------------------------------- one BLAS thread per test process
+def pytest_configure(config):
+    """One BLAS / OpenMP thread in each test process (the libraries loaded now limited, those loaded later and every
+    subprocess through their variables; values the user set are kept), as the command line runs: the tests'
+    matrices are small, and ``pytest -n 2`` on two cores with a BLAS thread per core in each worker made the
+    libraries spin against each other (a joint-angle fit test: 6 s CPU with one thread, 70 s CPU and 200 s wall
+    without). tests/test_threads.py clears the variables for its probes."""
+    from pin_kpi_oed.threads import limit_process_threads
+
+    limit_process_threads()
+
+
 # ---------------------------------------------------------------------- CPU time per test (printed by the run)
 def _cpu_s() -> float:
     import resource

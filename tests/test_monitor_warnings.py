@@ -68,9 +68,22 @@ def test_without_working_configurations_the_training_region_is_used_and_said(set
     assert "no power" in log2.work_source
 
 
-def test_monitor_exit_code_and_fail_on(setting, tmp_path, capsys):
+def test_monitor_exit_code_and_fail_on(setting, tmp_path, capsys, monkeypatch):
     import pinocchio as pin
 
+    from pin_kpi_oed.upkeep import check_design
+
+    # the runs on one file ask for the same check design (seeded, the same model file): designed once, then reused,
+    # since the check design is most of a run's time and this test is about the exit codes
+    designed, real = {}, check_design.design_check
+
+    def design_once(model, **kw):
+        key = repr(sorted((k, np.asarray(v).tobytes() if isinstance(v, np.ndarray) else v) for k, v in kw.items()))
+        if key not in designed:
+            designed[key] = real(model, **kw)
+        return designed[key]
+
+    monkeypatch.setattr(check_design, "design_check", design_once)
     rb, model, Q, Y = setting
     mp = tmp_path / "m.json"
     model.save(mp)
@@ -87,6 +100,7 @@ def test_monitor_exit_code_and_fail_on(setting, tmp_path, capsys):
         size=Y.shape) * 10 * SIGMA), noisy)
     assert main(["monitor", "--model", str(mp), "--data", str(noisy)]) == 3
     assert main(["monitor", "--model", str(mp), "--data", str(noisy), "--fail-on", "never"]) == 0
+    assert len(designed) == 1                      # the two runs on the noisy file asked for the same poses
     capsys.readouterr()
 
 

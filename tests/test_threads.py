@@ -70,17 +70,19 @@ def test_set_max_threads_validates_and_resets() -> None:
 
 def test_nested_contexts_are_cheap_and_restore() -> None:
     import scipy.linalg  # noqa: F401  (every BLAS the context limits is loaded before ``before``)
-    from threadpoolctl import threadpool_info
+    from threadpoolctl import threadpool_info, threadpool_limits
 
     def blas():
         return [i["num_threads"] for i in threadpool_info() if i["user_api"] == "blas"]
 
-    before = blas()
-    with limited_threads():
+    with threadpool_limits(limits=2):       # the test processes run one thread (conftest): start from two
+        before = blas()
+        assert max(before) == 2, "BLAS could not be given two threads: the test would prove nothing"
         with limited_threads():
+            with limited_threads():
+                assert all(n == 1 for n in blas())
             assert all(n == 1 for n in blas())
-        assert all(n == 1 for n in blas())
-    assert blas() == before
+        assert blas() == before
 
 
 def test_entry_points_run_single_threaded_with_numpy_imported_first() -> None:
