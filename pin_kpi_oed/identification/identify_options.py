@@ -46,8 +46,10 @@ class IdentifyOptions:
             defaults. They enter the TCP's σ (:mod:`pin_kpi_oed.oed.held`).
         ident: a precomputed identifiability analysis of one station's working model (default:
             computed on ``N_EXCITATION`` seeded random configurations).
-        outlier_alpha: false-alarm probability of the outlier flag of a whole fit (family-wise: each of the m rows
-            is tested at ``outlier_alpha / m``, so an outlier-free fit flags any row with about this probability).
+        outlier_alpha: false-alarm probability of the outlier flag of a whole least-squares fit (family-wise: each
+            of the m rows is tested at ``outlier_alpha / m``, so an outlier-free fit flags any row, and ``loss='auto'``
+            switches to the robust loss, with about this probability); with a robust loss each row is tested at
+            ``outlier_alpha`` (which rows the refit leaves out).
         max_nfev: maximum number of residual evaluations (default 50 × unknowns).
         tol: ftol, xtol and gtol of the solver.
         max_median_error_m: fail if the median position error after the fit exceeds it

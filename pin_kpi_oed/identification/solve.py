@@ -70,14 +70,18 @@ def solve(prob: ResidualModel, opts: IdentifyOptions) -> Solution:
     return Solution(sol.x, sol, fs, pre_iter + int(sol.njev or 0), pre_fev + int(sol.nfev))
 
 
-def _flag(prob: ResidualModel, x: np.ndarray, alpha: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(weighted rows, their norms, flagged rows): a row is flagged when its norm exceeds
-    sqrt(χ²_nh(1 − α/m)) times the robust (MAD) scale of the weighted components, m the number of rows: the
-    family-wise test, so that an outlier-free fit flags any row with probability about α, whatever m."""
+def _flag(prob: ResidualModel, x: np.ndarray, alpha: float, family_wise: bool = True
+          ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(weighted rows, their norms, flagged rows): a row is flagged when its norm exceeds sqrt(χ²_nh(1 − α'))
+    times the robust (MAD) scale of the weighted components. ``family_wise``: α' = α/m, m the number of rows, so
+    that an outlier-free fit flags any row with probability about α whatever m (the test that decides whether
+    outliers are there at all); otherwise α' = α per row (which rows to leave out once the robust loss is in use:
+    heavy-tailed real data lose their tail rows, not only the few beyond the family-wise bound)."""
     fw = prob.weighted_rows(x)
     we = np.linalg.norm(fw, axis=1)
     s_rob = 1.4826 * float(np.median(np.abs(fw)))
-    thr = float(np.sqrt(2.0 * gammainccinv(prob.nh / 2, alpha / max(fw.shape[0], 1)))) * max(s_rob, 1e-300)
+    level = alpha / max(fw.shape[0], 1) if family_wise else alpha
+    thr = float(np.sqrt(2.0 * gammainccinv(prob.nh / 2, level))) * max(s_rob, 1e-300)
     return fw, we, np.flatnonzero(we > thr)
 
 
@@ -89,8 +93,9 @@ def settle_outliers(prob: ResidualModel, solution: Solution, opts: IdentifyOptio
         (weighted rows (m, nh), weighted error norms (m,), outlier indices); ``solution`` and
         ``prob.mask`` are updated.
     """
-    fw, we, outliers = _flag(prob, solution.x, opts.outlier_alpha)
-    if opts.loss == "linear":
+    robust = opts.loss != "linear"
+    fw, we, outliers = _flag(prob, solution.x, opts.outlier_alpha, family_wise=not robust)
+    if not robust:
         return fw, we, outliers
     nfev_max = opts.max_nfev if opts.max_nfev is not None else 50 * max(prob.nx, 1)
     for _ in range(3):
@@ -104,7 +109,7 @@ def settle_outliers(prob: ResidualModel, solution: Solution, opts: IdentifyOptio
         solution.x = sol2.x
         solution.nit += int(sol2.njev or 0)
         solution.nfev += int(sol2.nfev)
-        fw, we, new_out = _flag(prob, solution.x, opts.outlier_alpha)
+        fw, we, new_out = _flag(prob, solution.x, opts.outlier_alpha, family_wise=False)
         if np.array_equal(new_out, outliers):
             break
         outliers = new_out
