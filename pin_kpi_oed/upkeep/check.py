@@ -37,7 +37,11 @@ The verdict, in this order:
   groups, Bonferroni), the residuals beyond the model's σ shown to move the TCP by more than τ
   (σ_W × √(ρ − 1), ρ's lower bound T / T_crit(α)): the residuals are larger everywhere alike;
 * **re-calibrate** — a change above τ that a re-calibration corrects better than a re-fit (by more than
-  :data:`REFIT_MARGIN`, the verdict says by how much), or one no group explains.
+  :data:`REFIT_MARGIN`, the verdict says by how much), or one no group explains, or one the check cannot size: its
+  linear estimate moves the working TCPs by more than :data:`PLAUSIBLE_TCP_M`, or the model with the change applied
+  (the re-fit, not linearised) fails the named group's fit test at α / :data:`FIT_SHARE` on the check rows — the
+  change lies beyond what the check poses estimate linearly. Such a verdict states no size ("the check cannot size
+  this change: re-calibrate").
 
 :attr:`CheckResult.exit_code`: 0 holds, 1 the set-up moved or the robot changed (the re-registered or re-fitted
 model is what ``--model-out`` writes), 3 re-calibrate or the discrepancy's level changed.
@@ -74,6 +78,9 @@ FIT_SHARE = 5.0
 REFIT_MARGIN = 0.10
 #: Candidate configurations (within the joint limits) the poses to add are chosen from.
 POOL_SIZE = 400
+#: A change of a group moving the working TCPs by more than this (RMS, m) is not sized: no calibrated robot's joint
+#: or tool drifts by centimetres unnoticed, and a change that large is a crash, a new tool or a wrong model file.
+PLAUSIBLE_TCP_M = 5e-3
 
 
 def sidak(alpha: float, k: int = 2) -> float:
@@ -111,7 +118,9 @@ class CheckResult(Result):
         setup_held: the re-fit kept the model's set-up (the group's change alone explains the rows).
         refit_error_m, recalibrate_error_m: expected RMS TCP error at the working configurations of the re-fitted
             model and of a re-calibration of the same design (m; NaN unless a change above τ was named).
-        note: what *holds* holds despite (a significant change below the tolerance), or "".
+        note: what *holds* holds despite (a significant change below the tolerance), or why the check cannot size
+            a change, or "".
+        sized: False when a change shown above τ is beyond what the check can size (no size is stated; *re-calibrate*).
         poses_to_add: configurations (k, n) rad to measure next (:func:`~pin_kpi_oed.upkeep.check_poses.poses_to_add`).
     """
 
@@ -149,6 +158,7 @@ class CheckResult(Result):
     refit_error_m: float = float("nan")
     recalibrate_error_m: float = float("nan")
     note: str = ""
+    sized: bool = True
 
     @property
     def exit_code(self) -> int:
@@ -178,6 +188,13 @@ class CheckResult(Result):
         if self.verdict == "robot_changed":
             what = _change_text(self) + ("; the set-up unchanged (held)" if self.setup_held else "")
             return f"check: the robot changed: {what}, above {tol}; {self.action_text()}; {stat}{pw}"
+        if self.group and not self.sized:
+            return (f"check: re-calibrate: the check cannot size this change ({self.note}; linearly closest: "
+                    f"{self.group}); {stat}{pw}")
+        if not self.sized:
+            return (f"check: re-calibrate: the check cannot size this change (residuals {self.sigma_factor:.0f}x the "
+                    f"model's sigma, beyond {PLAUSIBLE_TCP_M * 1e3:g} mm at the working TCPs; no parameter group "
+                    f"explains them); {stat}{pw}")
         if self.group:
             return (f"check: re-calibrate: {_change_text(self)}, above {tol}; {self.action_text()}; {stat}{pw}")
         level = (f"residuals {self.sigma_factor:.2f}x the model's sigma, {self.excess_tcp_m * 1e3:.3f} mm beyond it at "
@@ -336,6 +353,8 @@ def _unexplained(rows: CheckRows, out: dict, significant: bool, moved: bool, t0:
     out = {**out, "excess_tcp_m": float(excess)}
     if low > out["tolerance_m"]:
         verdict = "recalibrate" if significant else "discrepancy_level"
+        if excess > PLAUSIBLE_TCP_M:        # a level that large is no discrepancy's: a change the check cannot size
+            verdict, out = "recalibrate", {**out, "excess_tcp_m": float("nan"), "sized": False}
         return CheckResult(verdict=verdict, message="no parameter group explains the residuals",
                            time_s=time.perf_counter() - t0, **out)
     note = (f"residuals {np.sqrt(rho):.2f}x the model's sigma that no group explains, {excess * 1e3:.3f} mm beyond "
@@ -392,24 +411,48 @@ def _changed(model: CalibratedModel, data: MeasurementSet, rows: CheckRows, best
     size, sd, est = _tcp_change(rows, g, delta, cov_delta) if det else (float("nan"),) * 3
     out = {**out, "group": g.name, "change": delta, "std": std, "change_tcp_m": size, "change_tcp_sigma_m": sd,
            "determined": det}
+    implausible = bool(det and size > PLAUSIBLE_TCP_M)
     if not shown_above(size, sd, out["tolerance_m"], out["alpha"]):
-        what = (f"a change of {g.name} of {_pm(size, sd)} mm at the TCP, not shown above the tolerance" if det else
-                f"a change of {g.name} the rows do not determine")
+        what = (f"a change of {g.name} the rows do not determine" if not det else
+                f"a change of {g.name} the check cannot size, not shown above the tolerance" if implausible else
+                f"a change of {g.name} of {_pm(size, sd)} mm at the TCP, not shown above the tolerance")
         verdict = "setup_moved" if moved else "holds"
         return CheckResult(verdict=verdict, note=what, message=f"{g.name}: below the tolerance",
                            time_s=time.perf_counter() - t0, **out)
-    cal2 = float(np.mean(rows.tcp_sigma_m ** 2))
-    reg2 = 0.0 if held is not None else float(np.mean(rows.reg_share_m2))
-    refit_err, recal_err = float(np.sqrt(cal2 + est ** 2 + reg2)), float(np.sqrt(cal2))
-    out = {**out, "refit_error_m": refit_err, "recalibrate_error_m": recal_err}
+    if implausible:
+        return _unsized(out, f"its linear estimate moves the working TCPs by more than {PLAUSIBLE_TCP_M * 1e3:g} mm",
+                        t0)
     if held is not None:
-        refit, T2 = _apply(model, data, g, delta), held[2]
+        refit = _apply(model, data, g, delta)
+        T2, dof2 = _held_chi2(refit, data, rows), 3 * rows.m - g.basis.shape[1]
         out["setup_held"] = True
     else:
         refit, T2 = _refit(model, data, rows.Q, g, delta)
-    out = {**out, "model": refit, "refit_chi2": T2}
+        dof2 = rows.dof - g.basis.shape[1]
+    if not T2 <= rows.null.threshold(dof2, out["alpha"] / FIT_SHARE):
+        return _unsized({**out, "refit_chi2": T2}, f"the model with the change applied leaves chi2 {T2:.1f} on "
+                        f"{dof2} dof: the change lies beyond what the check poses estimate linearly", t0)
+    cal2 = float(np.mean(rows.tcp_sigma_m ** 2))
+    reg2 = 0.0 if held is not None else float(np.mean(rows.reg_share_m2))
+    refit_err, recal_err = float(np.sqrt(cal2 + est ** 2 + reg2)), float(np.sqrt(cal2))
+    out = {**out, "refit_error_m": refit_err, "recalibrate_error_m": recal_err, "model": refit, "refit_chi2": T2}
     verdict = "robot_changed" if refit_err <= (1.0 + REFIT_MARGIN) * recal_err else "recalibrate"
     return CheckResult(verdict=verdict, message=f"{g.name} changed", time_s=time.perf_counter() - t0, **out)
+
+
+def _unsized(out: dict, why: str, t0: float) -> CheckResult:
+    """A change shown above τ that the check cannot size (module docstring): *re-calibrate*, no size stated, the
+    model re-registered only."""
+    out = {**out, "change_tcp_m": float("nan"), "change_tcp_sigma_m": float("nan"), "sized": False, "note": why}
+    return CheckResult(verdict="recalibrate", message=f"{out['group']}: the check cannot size this change",
+                       time_s=time.perf_counter() - t0, **out)
+
+
+def _held_chi2(applied: CalibratedModel, data: MeasurementSet, rows: CheckRows) -> float:
+    """T of the model with a change applied under the model's own set-up (not linearised), whitened as the rows."""
+    r = data.position_m - applied.predict(rows.Q, data, station=rows.old)
+    z = whiten(rows.L, r)
+    return float(z @ z)
 
 
 def check_powers(crit: CheckPower, F: np.ndarray, tolerance_m: float, alpha: float, null: CheckNull | None = None
