@@ -120,6 +120,8 @@ class CheckResult(Result):
             model and of a re-calibration of the same design (m; NaN unless a change above τ was named).
         note: what *holds* holds despite (a significant change below the tolerance), or why the check cannot size
             a change, or "".
+        alike: the other parts (a joint, ``tool``) the check rows do not tell apart from the named group's (they fit
+            the rows as well: :func:`check_group_name`); the verdict names "group or part ...".
         sized: False when a change shown above τ is beyond what the check can size (no size is stated; *re-calibrate*).
         poses_to_add: configurations (k, n) rad to measure next (:func:`~pin_kpi_oed.upkeep.check_poses.poses_to_add`).
     """
@@ -159,6 +161,7 @@ class CheckResult(Result):
     recalibrate_error_m: float = float("nan")
     note: str = ""
     sized: bool = True
+    alike: list = field(default_factory=list)
 
     @property
     def exit_code(self) -> int:
@@ -189,8 +192,9 @@ class CheckResult(Result):
             what = _change_text(self) + ("; the set-up unchanged (held)" if self.setup_held else "")
             return f"check: the robot changed: {what}, above {tol}; {self.action_text()}; {stat}{pw}"
         if self.group and not self.sized:
+            closest = " or ".join([self.group, *self.alike])
             return (f"check: re-calibrate: the check cannot size this change ({self.note}; linearly closest: "
-                    f"{self.group}); {stat}{pw}")
+                    f"{closest}); {stat}{pw}")
         if not self.sized:
             return (f"check: re-calibrate: the check cannot size this change (residuals {self.sigma_factor:.0f}x the "
                     f"model's sigma, beyond {PLAUSIBLE_TCP_M * 1e3:g} mm at the working TCPs; no parameter group "
@@ -242,6 +246,14 @@ def _pm(value_m: float, sigma_m: float) -> str:
 
 
 def _change_text(r: CheckResult) -> str:
+    text = _group_text(r)
+    if r.alike:
+        text += (f", or a change of {' or '.join(r.alike)} (the check rows do not tell "
+                 f"{'them' if len(r.alike) > 1 else 'the two'} apart: the size is the named group's)")
+    return text
+
+
+def _group_text(r: CheckResult) -> str:
     if not r.determined:
         return f"{r.group} (not determined by the check rows)"
     at = f"{_pm(r.change_tcp_m, r.change_tcp_sigma_m)} mm RMS at the TCP"
@@ -308,7 +320,7 @@ def check_calibration(model: CalibratedModel, data: MeasurementSet, *, station: 
     if not T > out["threshold"]:
         return _quiet(rows, out, moved, t0)
     named = check_group_name(rows.crit, rows.F, rows.z, dof, alpha, null)
-    out["groups"] = named["table"]
+    out["groups"], out["alike"] = named["table"], named["alike"]
     if named["best"] is None:
         return _unexplained(rows, out, named["significant"], moved, t0)
     if not named["best"][3] and "poses_to_add" not in out and propose:
@@ -505,9 +517,25 @@ def check_group_name(crit: CheckPower, F: np.ndarray, z: np.ndarray, dof: int, a
             k = g.basis.shape[1]
             cov = np.linalg.pinv(A.T @ A, rcond=1e-12)[-k:, -k:]
             passing.append((r, rem, g, x[-k:], cov, det))
-    best = min(passing, key=lambda c: c[1] + 2 * c[0])[2:] if passing else None
+    best = min(passing, key=lambda c: c[1] + 2 * c[0]) if passing else None
     significant = bool(min(gains) < alpha / len(crit.groups)) if gains else False
-    return {"best": best, "table": table, "significant": significant}
+    return {"best": best[2:] if best else None, "table": table, "significant": significant,
+            "alike": _alike(best, passing, null, alpha) if best else []}
+
+
+def _alike(best: tuple, passing: list, null: CheckNull, alpha: float) -> list[str]:
+    """The other parts (a joint, the tool) the rows do not tell apart from the named group's: a group that explains
+    the rows whose Akaike criterion exceeds the named one's by at most χ²₁₋ₐ(1) (in the law's scale: the rows reject
+    neither at α). A joint's offset and placement are one part (its joint is named either way)."""
+    part = best[2].name.rsplit(" ", 1)[0]
+    lim = float(stats.chi2.isf(alpha, 1)) * null.scale
+    ref = best[1] + 2 * best[0]
+    out: dict[str, float] = {}
+    for r, rem, g, *_ in passing:
+        other = g.name.rsplit(" ", 1)[0]
+        if other != part and rem + 2 * r - ref <= lim and rem + 2 * r < out.get(other, np.inf):
+            out[other] = rem + 2 * r
+    return sorted(out, key=out.get)
 
 
 def _refit(model: CalibratedModel, data: MeasurementSet, Q: np.ndarray, g: CheckGroup, delta: np.ndarray
