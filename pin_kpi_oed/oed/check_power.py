@@ -193,8 +193,10 @@ class CheckPower(Criterion):
         self.kappa = float(kappa)
         # index grids taken once (μ is evaluated thousands of times by a pool selection)
         cols = np.unique(np.concatenate([g.cols for g in self.groups]))
-        self.index = {"ss": np.ix_(self.setup, self.setup), "s_all": np.ix_(self.setup, cols),
-                      "groups": [(np.searchsorted(cols, g.cols), np.ix_(g.cols, g.cols)) for g in self.groups]}
+        self.ix_ss: tuple = np.ix_(self.setup, self.setup)
+        self.ix_s_all: tuple = np.ix_(self.setup, cols)
+        self.ix_groups: list[tuple[np.ndarray, tuple]] = [(np.searchsorted(cols, g.cols), np.ix_(g.cols, g.cols))
+                                                          for g in self.groups]
 
     def mu(self, M0: np.ndarray) -> tuple[np.ndarray, list[np.ndarray], np.ndarray]:
         """μ_g per group (G,), the direction w_g = C_g v of each (v the eigenvector of μ_g; raw units) and the
@@ -203,15 +205,15 @@ class CheckPower(Criterion):
         Raises:
             IdentifiabilityError: the poses do not determine the set-up.
         """
-        Mss = M0[self.index["ss"]]
+        Mss = M0[self.ix_ss]
         try:
             Lss = np.linalg.cholesky(Mss)
         except np.linalg.LinAlgError:
             raise IdentifiabilityError("the check poses do not determine the set-up; use at least 3 poses spread "
                                        "over the workspace") from None
-        X_all = np.linalg.solve(Lss, M0[self.index["s_all"]])      # L_ss⁻¹ M_sg of every group's columns at once
+        X_all = np.linalg.solve(Lss, M0[self.ix_s_all])      # L_ss⁻¹ M_sg of every group's columns at once
         mus, ws = [], []
-        for g, (pos, gg) in zip(self.groups, self.index["groups"]):
+        for g, (pos, gg) in zip(self.groups, self.ix_groups):
             X = X_all[:, pos]
             S = M0[gg] - X.T @ X
             H = g.C.T @ S @ g.C
