@@ -19,8 +19,8 @@ Monitor (``--monitor N``): a model of 2,000 seeded rows of Series A, the next N 
 the rows predicted before use (overall and per 1,000 rows), mean error and predicted σ, checks flagged, requests for
 poses, time per row (wall and CPU).
 
-Run:  python -m benchmarks.check_events [--robots 2] [--none 5] [--changes 2] [--events-json ev.json] [--real]
-      [--splits 3] [--draws 0] [--monitor 1500]
+Run:  python -m benchmarks.check_events [--robots 2] [--first 0] [--none 5] [--changes 2] [--events-json ev.json]
+      [--real] [--splits 3] [--draws 0] [--monitor 1500]
       (the figures of docs/results.md: --robots 40 --events-json ev.json; --robots 0 --real --splits 20 --draws 30;
       --robots 0 --monitor 9911)
 """
@@ -42,10 +42,11 @@ ALPHA = 0.05
 FACTORS = (0.25, 0.4, 0.75, 1.0, 1.5, 2.0, 3.0)
 
 
-def simulated(n_robots: int, n_none: int = 5, n_changes: int = 2, out: str | None = None) -> None:
+def simulated(n_robots: int, n_none: int = 5, n_changes: int = 2, out: str | None = None, first: int = 0) -> None:
     """Robots that are not the model (:mod:`pin_kpi_oed.studies.check_robots`): per robot ``n_none`` unchanged
     checks and ``n_changes`` changes of each kind, sizes k × τ with k from :data:`FACTORS`; rates with their
-    Clopper–Pearson 95 % intervals."""
+    Clopper–Pearson 95 % intervals. ``first``: the first robot's seed (a run in chunks of robots: ``--first 20
+    --robots 20``, the chunks' JSONs reported together by ``--report a.json b.json``)."""
     import json
 
     from pin_kpi_oed.studies.check_robots import robot_event, simulated_robot
@@ -56,7 +57,7 @@ def simulated(n_robots: int, n_none: int = 5, n_changes: int = 2, out: str | Non
           flush=True)
     events = []
     t0 = time.perf_counter()
-    for r in range(n_robots):
+    for r in range(first, first + n_robots):
         robot = simulated_robot(r, noise_m=SIGMA, tolerance_m=TOL, alpha=ALPHA)
         rng = np.random.default_rng(5000 + r)
         plan = [("none", 0.0)] * n_none + [(k, float(rng.choice(FACTORS))) for k in EVENT_KINDS[1:]
@@ -99,6 +100,13 @@ def report_simulated(events: list[dict]) -> None:
     rate("every change >= 1.5x tolerance: detected", [e["verdict"] != "holds" for e in big])
     rate("every change >= 1.5x tolerance: named right", [e["right"] for e in big])
     rate("every change < 0.5x tolerance: holds", [e["verdict"] == "holds" for e in ch if e["tcp_change_m"] < 0.5 * TOL])
+    print(f"  named 'X or Y' (parts the check rows do not tell apart): {sum(bool(e.get('alike')) for e in big)} of "
+          f"{len(big)} changes >= 1.5x tolerance; 'cannot size': {sum(not e.get('sized', True) for e in ch)} of "
+          f"{len(ch)} changes")
+    for e in big:
+        if not e["right"]:
+            print(f"    misnamed: robot {e['robot']} {e['kind']} {e['joint']} {e['tcp_change_m'] * 1e3:.3f} mm -> "
+                  f"{e['verdict']} {e['group']!r} {e.get('alike', [])}")
     both = [e for e in events if np.isfinite(e["refit_error_m"]) and np.isfinite(e["recal_error_m"])]
     for choice in ("robot_changed", "recalibrate"):
         sel = [e for e in both if e["verdict"] == choice]
@@ -115,6 +123,10 @@ def report_simulated(events: list[dict]) -> None:
         pa = np.array([e["predicted_refit_m"] for e in sel])
         pb = np.array([e["predicted_recal_m"] for e in sel])
         print(f"    expected (the verdict's): re-fit {pa.mean() * 1e3:.4f} mm, re-calibration {pb.mean() * 1e3:.4f} mm")
+        k = int(np.argmax(chosen / other))
+        print(f"    worst case: chosen {chosen[k] * 1e3:.4f} mm against the other's {other[k] * 1e3:.4f} mm (ratio "
+              f"{chosen[k] / other[k]:.3f}; robot {sel[k]['robot']}, {sel[k]['kind']} {sel[k]['joint']} "
+              f"{sel[k]['tcp_change_m'] * 1e3:.3f} mm)")
 
 
 def real(splits: int, draws: int = 0) -> None:
@@ -237,7 +249,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--none", type=int, default=5, help="unchanged checks per robot (default 5)")
     ap.add_argument("--changes", type=int, default=2, help="changes of each kind per robot (default 2)")
     ap.add_argument("--events-json", dest="events_json", default=None, help="write every simulated event here")
-    ap.add_argument("--report", default=None, help="only report the events of this JSON (--events-json)")
+    ap.add_argument("--first", type=int, default=0, help="the first simulated robot's seed (runs in chunks)")
+    ap.add_argument("--report", nargs="+", default=None,
+                    help="only report the events of these JSONs (--events-json of one run or of its chunks)")
     ap.add_argument("--real", action="store_true", help="also the real UR10 checks (IPA data)")
     ap.add_argument("--splits", type=int, default=3, help="seeded splits of Series C (the figures: 20)")
     ap.add_argument("--draws", type=int, default=0,
@@ -247,10 +261,10 @@ def main(argv: list[str] | None = None) -> int:
     if args.report:
         import json
 
-        report_simulated(json.loads(open(args.report).read()))
+        report_simulated([e for path in args.report for e in json.loads(open(path).read())])
         return 0
     if args.robots:
-        simulated(args.robots, args.none, args.changes, args.events_json)
+        simulated(args.robots, args.none, args.changes, args.events_json, args.first)
     if args.real:
         real(args.splits, args.draws)
     if args.monitor:

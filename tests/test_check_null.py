@@ -101,3 +101,46 @@ def test_naming_prefers_the_group_that_explains_far_better():
     assert out["best"][0].name == "tool"
     np.testing.assert_allclose(out["best"][1], 2.0 * delta, atol=0.5)
     assert FIT_SHARE == 5.0 and law.threshold(21, 0.05 / FIT_SHARE) > law.threshold(21, 0.05)
+
+
+def test_parts_the_rows_do_not_tell_apart_are_named_together():
+    """A joint's placement whose columns the check rows see exactly as the tool's: the verdict names both ("tool or
+    wrist"); with the joint's columns independent of the tool's, the tool alone. A joint's offset and placement are
+    one part (never named "or" each other)."""
+    from pin_kpi_oed.upkeep.check import check_group_name
+    from pin_kpi_oed.oed.check_power import CheckGroup, CheckPower
+
+    rng = np.random.default_rng(4)
+    delta = np.array([1.0, -0.8, 0.6])
+
+    def named(same: bool) -> dict:
+        F = rng.standard_normal((36, 13))
+        if same:
+            F[:, 10:13] = F[:, 7:10] @ np.diag([1.0, -1.0, 2.0])            # the wrist's columns: the tool's
+        z = F[:, 7:10] @ (3.0 * delta) + rng.standard_normal(36)
+        G = F[:, :6]
+        z = z - G @ np.linalg.lstsq(G, z, rcond=None)[0]
+        groups = [CheckGroup("j offset", "offset", np.array([6]), np.eye(1), np.eye(1)),
+                  CheckGroup("tool", "tool", np.arange(7, 10), np.eye(3), np.eye(3)),
+                  CheckGroup("wrist offset", "offset", np.array([10]), np.eye(1), np.eye(1)),
+                  CheckGroup("wrist placement", "placement", np.arange(10, 13), np.eye(3), np.eye(3))]
+        return check_group_name(CheckPower(np.arange(6), groups), F, z, 30, 0.05, CheckNull())
+
+    alike = named(True)
+    assert alike["best"][0].name in ("tool", "wrist placement")
+    assert alike["alike"] == (["wrist"] if alike["best"][0].name == "tool" else ["tool"])
+    apart = named(False)
+    assert apart["best"][0].name == "tool" and apart["alike"] == []
+
+
+def test_the_verdict_line_names_the_parts_together():
+    from pin_kpi_oed.upkeep.check import CheckResult
+
+    r = CheckResult(verdict="robot_changed", n_rows=20, dof=54, alpha=0.05, chi2=300.0, threshold=75.0, p_value=0.0,
+                    setup_shift_m=0.0, setup_distance=1.0, group="tool", alike=["wrist_3_joint"], determined=True,
+                    change=np.array([2e-4, 0.0, 0.0]), std=np.full(3, 1e-5), change_tcp_m=2e-4,
+                    change_tcp_sigma_m=1e-5, refit_error_m=3e-5, recalibrate_error_m=3e-5)
+    line = r.summary()
+    assert "tool by [+0.200" in line and "or a change of wrist_3_joint (the check rows do not tell the two apart" \
+        in line, line
+    assert r.to_dict()["alike"] == ["wrist_3_joint"]

@@ -160,3 +160,26 @@ def test_the_changes_sigma_at_the_tcp_matches_monte_carlo(setting):
         sizes = np.array([r.change_tcp_m for r in res])
         sd = np.median([r.change_tcp_sigma_m for r in res])
         assert 0.5 < np.std(sizes, ddof=1) / sd < 1.8, (name, np.std(sizes, ddof=1), sd)
+
+
+def test_a_change_the_check_cannot_size_says_re_calibrate_without_a_size(setting, tmp_path, capsys):
+    """Changes far beyond the linear range (an elbow offset moving the TCP by 6 mm, 20 mm, 0.1 m) and a tool change
+    the rows fit exactly but no calibrated robot has (20 mm): *re-calibrate*, "the check cannot size this change", no
+    size in mm; a change of 3 τ on the same rows is still sized."""
+    rb, model, Qc = setting
+    for tcp_m in (6e-3, 0.02, 0.1):
+        r = check_calibration(model, _rows(model, _offset_truth(model, 2, tcp_m), Qc, 7), tolerance_m=TOL)
+        assert r.verdict == "recalibrate" and r.exit_code == 3 and not r.sized, (tcp_m, r.summary())
+        assert np.isnan(r.change_tcp_m) and np.isnan(r.refit_error_m) and np.isnan(r.excess_tcp_m)
+        line = r.summary()
+        assert "the check cannot size this change" in line and " mm RMS at the TCP" not in line, line
+        assert "mm beyond it" not in line, line
+    st = model.setups["A"]
+    tool = dataclasses.replace(model, setups={"A": dataclasses.replace(st, reflector_m=st.reflector_m
+                                                                       + np.array([0.0, 0.02, 0.0]))})
+    r2 = check_calibration(model, _rows(model, tool, Qc, 8), tolerance_m=TOL)
+    assert r2.verdict == "recalibrate" and not r2.sized and "cannot size" in r2.summary(), r2.summary()
+    assert "5 mm" in r2.summary() and " mm RMS at the TCP" not in r2.summary()
+    assert r2.to_dict()["sized"] is False
+    ok = check_calibration(model, _rows(model, _offset_truth(model, 2, 3 * TOL), Qc, 2), tolerance_m=TOL)
+    assert ok.sized and ok.verdict == "robot_changed"

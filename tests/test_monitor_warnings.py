@@ -142,3 +142,27 @@ def test_a_rewritten_file_with_other_times_is_named():
         write_measurements(MeasurementSet(list(rb.joint_names), Q, Y, time_s=100 + np.arange(6.0)), path)
         new, warn = f.poll()
         assert len(new) == 6 and "rewritten" in warn
+
+
+def test_every_block_of_rows_has_its_standardised_rms(setting, monkeypatch, tmp_path, capsys):
+    """The standardised RMS of every block of rows (the last one as long as it is), from the rows' own z, in the log
+    and in one line of the command; a second flush does not count the last block twice."""
+    from pin_kpi_oed.upkeep import monitoring
+
+    rb, model, Q, Y = setting
+    monkeypatch.setattr(monitoring, "BLOCK_ROWS", 15)
+    mon = monitoring.Monitor(model, every=10)
+    mon.feed(MeasurementSet(list(rb.joint_names), Q, Y))
+    mon.flush()
+    mon.flush()
+    log = mon.log()
+    assert [(b["first_row"], b["last_row"]) for b in log.blocks] == [(1, 15), (16, 30), (31, 40)]
+    for b in log.blocks:
+        z = log.z[b["first_row"] - 1:b["last_row"]]
+        assert b["z_rms"] == pytest.approx(np.sqrt(np.mean(z ** 2)))
+    assert 0.5 < log.blocks[0]["z_rms"] < 2.0
+    model.save(tmp_path / "m.json")
+    write_measurements(MeasurementSet(list(rb.joint_names), Q, Y), tmp_path / "rows.csv")
+    assert main(["monitor", "--model", str(tmp_path / "m.json"), "--data", str(tmp_path / "rows.csv")]) == 0
+    out = [ln for ln in capsys.readouterr().out.splitlines() if "per block of 15 rows" in ln]
+    assert len(out) == 1 and "1-15 " in out[0] and "31-40 " in out[0] and "outside the band: " in out[0]

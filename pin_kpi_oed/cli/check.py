@@ -137,6 +137,8 @@ def run_monitor(args: argparse.Namespace) -> int:
         atomic_write_json(args.json, {**log.to_dict(), "model": args.model, "data": args.data})
     if not args.quiet:
         print(log.summary())
+        if log.blocks:
+            print(log.block_text())
     return log.exit_code(FAIL_ON[args.fail_on])
 
 

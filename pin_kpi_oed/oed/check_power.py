@@ -191,6 +191,12 @@ class CheckPower(Criterion):
         self.setup = np.asarray(setup, int)
         self.groups = list(groups)
         self.kappa = float(kappa)
+        # index grids taken once (μ is evaluated thousands of times by a pool selection)
+        cols = np.unique(np.concatenate([g.cols for g in self.groups]))
+        self.ix_ss: tuple = np.ix_(self.setup, self.setup)
+        self.ix_s_all: tuple = np.ix_(self.setup, cols)
+        self.ix_groups: list[tuple[np.ndarray, tuple]] = [(np.searchsorted(cols, g.cols), np.ix_(g.cols, g.cols))
+                                                          for g in self.groups]
 
     def mu(self, M0: np.ndarray) -> tuple[np.ndarray, list[np.ndarray], np.ndarray]:
         """μ_g per group (G,), the direction w_g = C_g v of each (v the eigenvector of μ_g; raw units) and the
@@ -199,17 +205,17 @@ class CheckPower(Criterion):
         Raises:
             IdentifiabilityError: the poses do not determine the set-up.
         """
-        Mss = M0[np.ix_(self.setup, self.setup)]
+        Mss = M0[self.ix_ss]
         try:
             Lss = np.linalg.cholesky(Mss)
         except np.linalg.LinAlgError:
             raise IdentifiabilityError("the check poses do not determine the set-up; use at least 3 poses spread "
                                        "over the workspace") from None
+        X_all = np.linalg.solve(Lss, M0[self.ix_s_all])      # L_ss⁻¹ M_sg of every group's columns at once
         mus, ws = [], []
-        for g in self.groups:
-            Mgs = M0[np.ix_(g.cols, self.setup)]
-            X = np.linalg.solve(Lss, Mgs.T)
-            S = M0[np.ix_(g.cols, g.cols)] - X.T @ X
+        for g, (pos, gg) in zip(self.groups, self.ix_groups):
+            X = X_all[:, pos]
+            S = M0[gg] - X.T @ X
             H = g.C.T @ S @ g.C
             lam, V = np.linalg.eigh(0.5 * (H + H.T))
             mus.append(lam[0])

@@ -69,6 +69,8 @@ class RobotEvent:
             tolerance (asked); tcp_change_m: its true RMS displacement of the working TCPs (m).
         verdict, group, exit_code: the check's; change_tcp_m, change_tcp_sigma_m: what it estimated.
         right: whether the verdict is the right one (module docstring).
+        alike: the other parts the verdict named ("X or Y"); sized: False when it could not size the change.
+        groups: the four groups of least remaining χ² (the check's table: what the naming chose among).
         refit_error_m, recal_error_m: the true RMS TCP error at the working configurations of the verdict's
             re-fitted model and of a re-calibration (NaN unless a change was shown above τ);
         predicted_refit_m, predicted_recal_m: the verdict's expected TCP errors of each.
@@ -89,6 +91,9 @@ class RobotEvent:
     predicted_refit_m: float = float("nan")
     predicted_recal_m: float = float("nan")
     time_s: float = 0.0
+    alike: list = field(default_factory=list)
+    sized: bool = True
+    groups: list = field(default_factory=list)
 
 
 def simulated_robot(seed: int, *, n_cal: int = 60, noise_m: float = 2.5e-5, tolerance_m: float = 1e-4,
@@ -177,15 +182,16 @@ def _changed_truth(robot: SimulatedRobot, kind: str, factor: float, tol: float, 
     return p, ""
 
 
-def _right(kind: str, joint: str, verdict: str, group: str, big: bool) -> bool:
+def _right(kind: str, joint: str, verdict: str, group: str, big: bool, alike: tuple = ()) -> bool:
+    """Whether the verdict is right (module docstring); a verdict naming "X or Y" (parts the check rows do not tell
+    apart) is right when the truth is among them."""
     if kind == "none" or not big:
         return verdict == "holds"
     if kind == "tracker":
         return verdict == "setup_moved"
     named = verdict in ("robot_changed", "recalibrate")
-    if kind == "tool":
-        return named and group == "tool"
-    return named and group.startswith(joint + " ")
+    parts = [group.rsplit(" ", 1)[0] if group != "tool" else "tool", *alike]
+    return named and bool(group) and (("tool" if kind == "tool" else joint) in parts)
 
 
 def robot_event(robot: SimulatedRobot, kind: str, factor: float, seed: int, *, tolerance_m: float = 1e-4,
@@ -216,8 +222,10 @@ def robot_event(robot: SimulatedRobot, kind: str, factor: float, seed: int, *, t
     r = check_calibration(robot.cm, rows, alpha=alpha, tolerance_m=tolerance_m, seed=seed)
     big = tcp_change >= tolerance_m
     ev = RobotEvent(kind, joint, factor, tcp_change, r.verdict, r.group, r.exit_code,
-                    _right(kind, joint, r.verdict, r.group, big), r.change_tcp_m, r.change_tcp_sigma_m,
-                    predicted_refit_m=r.refit_error_m, predicted_recal_m=r.recalibrate_error_m)
+                    _right(kind, joint, r.verdict, r.group, big, tuple(r.alike)), r.change_tcp_m,
+                    r.change_tcp_sigma_m, predicted_refit_m=r.refit_error_m, predicted_recal_m=r.recalibrate_error_m,
+                    alike=list(r.alike), sized=r.sized,
+                    groups=sorted(r.groups, key=lambda g: g["chi2_remaining"])[:4])
     if np.isfinite(r.refit_error_m) and r.model is not None and recalibrate:
         ev.refit_error_m = _tcp_error(r.model.predict(robot.qw), after)
         data = simulate(robot.nominal, robot.Q_cal, p, robot.effects, seed=seed + 13)

@@ -37,7 +37,11 @@ The verdict, in this order:
   groups, Bonferroni), the residuals beyond the model's σ shown to move the TCP by more than τ
   (σ_W × √(ρ − 1), ρ's lower bound T / T_crit(α)): the residuals are larger everywhere alike;
 * **re-calibrate** — a change above τ that a re-calibration corrects better than a re-fit (by more than
-  :data:`REFIT_MARGIN`, the verdict says by how much), or one no group explains.
+  :data:`REFIT_MARGIN`, the verdict says by how much), or one no group explains, or one the check cannot size: its
+  linear estimate moves the working TCPs by more than :data:`PLAUSIBLE_TCP_M`, or the model with the change applied
+  (the re-fit, not linearised) fails the named group's fit test at α / :data:`FIT_SHARE` on the check rows — the
+  change lies beyond what the check poses estimate linearly. Such a verdict states no size ("the check cannot size
+  this change: re-calibrate").
 
 :attr:`CheckResult.exit_code`: 0 holds, 1 the set-up moved or the robot changed (the re-registered or re-fitted
 model is what ``--model-out`` writes), 3 re-calibrate or the discrepancy's level changed.
@@ -75,6 +79,9 @@ FIT_SHARE = 5.0
 REFIT_MARGIN = 0.10
 #: Candidate configurations (within the joint limits) the poses to add are chosen from.
 POOL_SIZE = 400
+#: A change of a group moving the working TCPs by more than this (RMS, m) is not sized: no calibrated robot's joint
+#: or tool drifts by centimetres unnoticed, and a change that large is a crash, a new tool or a wrong model file.
+PLAUSIBLE_TCP_M = 5e-3
 
 
 def sidak(alpha: float, k: int = 2) -> float:
@@ -112,7 +119,11 @@ class CheckResult(Result):
         setup_held: the re-fit kept the model's set-up (the group's change alone explains the rows).
         refit_error_m, recalibrate_error_m: expected RMS TCP error at the working configurations of the re-fitted
             model and of a re-calibration of the same design (m; NaN unless a change above τ was named).
-        note: what *holds* holds despite (a significant change below the tolerance), or "".
+        note: what *holds* holds despite (a significant change below the tolerance), or why the check cannot size
+            a change, or "".
+        alike: the other parts (a joint, ``tool``) the check rows do not tell apart from the named group's (they fit
+            the rows as well: :func:`check_group_name`); the verdict names "group or part ...".
+        sized: False when a change shown above τ is beyond what the check can size (no size is stated; *re-calibrate*).
         poses_to_add: configurations (k, n) rad to measure next (:func:`~pin_kpi_oed.upkeep.check_poses.poses_to_add`).
     """
 
@@ -150,6 +161,8 @@ class CheckResult(Result):
     refit_error_m: float = float("nan")
     recalibrate_error_m: float = float("nan")
     note: str = ""
+    sized: bool = True
+    alike: list = field(default_factory=list)
 
     @property
     def exit_code(self) -> int:
@@ -179,6 +192,14 @@ class CheckResult(Result):
         if self.verdict == "robot_changed":
             what = _change_text(self) + ("; the set-up unchanged (held)" if self.setup_held else "")
             return f"check: the robot changed: {what}, above {tol}; {self.action_text()}; {stat}{pw}"
+        if self.group and not self.sized:
+            closest = " or ".join([self.group, *self.alike])
+            return (f"check: re-calibrate: the check cannot size this change ({self.note}; linearly closest: "
+                    f"{closest}); {stat}{pw}")
+        if not self.sized:
+            return (f"check: re-calibrate: the check cannot size this change (residuals {self.sigma_factor:.0f}x the "
+                    f"model's sigma, beyond {PLAUSIBLE_TCP_M * 1e3:g} mm at the working TCPs; no parameter group "
+                    f"explains them); {stat}{pw}")
         if self.group:
             return (f"check: re-calibrate: {_change_text(self)}, above {tol}; {self.action_text()}; {stat}{pw}")
         level = (f"residuals {self.sigma_factor:.2f}x the model's sigma, {self.excess_tcp_m * 1e3:.3f} mm beyond it at "
@@ -226,6 +247,14 @@ def _pm(value_m: float, sigma_m: float) -> str:
 
 
 def _change_text(r: CheckResult) -> str:
+    text = _group_text(r)
+    if r.alike:
+        text += (f", or a change of {' or '.join(r.alike)} (the check rows do not tell "
+                 f"{'them' if len(r.alike) > 1 else 'the two'} apart: the size is the named group's)")
+    return text
+
+
+def _group_text(r: CheckResult) -> str:
     if not r.determined:
         return f"{r.group} (not determined by the check rows)"
     at = f"{_pm(r.change_tcp_m, r.change_tcp_sigma_m)} mm RMS at the TCP"
@@ -292,7 +321,7 @@ def check_calibration(model: CalibratedModel, data: MeasurementSet, *, station: 
     if not T > out["threshold"]:
         return _quiet(rows, out, moved, t0)
     named = check_group_name(rows.crit, rows.F, rows.z, dof, alpha, null)
-    out["groups"] = named["table"]
+    out["groups"], out["alike"] = named["table"], named["alike"]
     if named["best"] is None:
         return _unexplained(rows, out, named["significant"], moved, t0)
     if not named["best"][3] and "poses_to_add" not in out and propose:
@@ -337,6 +366,8 @@ def _unexplained(rows: CheckRows, out: dict, significant: bool, moved: bool, t0:
     out = {**out, "excess_tcp_m": float(excess)}
     if low > out["tolerance_m"]:
         verdict = "recalibrate" if significant else "discrepancy_level"
+        if excess > PLAUSIBLE_TCP_M:        # a level that large is no discrepancy's: a change the check cannot size
+            verdict, out = "recalibrate", {**out, "excess_tcp_m": float("nan"), "sized": False}
         return CheckResult(verdict=verdict, message="no parameter group explains the residuals",
                            time_s=time.perf_counter() - t0, **out)
     note = (f"residuals {np.sqrt(rho):.2f}x the model's sigma that no group explains, {excess * 1e3:.3f} mm beyond "
@@ -393,24 +424,48 @@ def _changed(model: CalibratedModel, data: MeasurementSet, rows: CheckRows, best
     size, sd, est = _tcp_change(rows, g, delta, cov_delta) if det else (float("nan"),) * 3
     out = {**out, "group": g.name, "change": delta, "std": std, "change_tcp_m": size, "change_tcp_sigma_m": sd,
            "determined": det}
+    implausible = bool(det and size > PLAUSIBLE_TCP_M)
     if not shown_above(size, sd, out["tolerance_m"], out["alpha"]):
-        what = (f"a change of {g.name} of {_pm(size, sd)} mm at the TCP, not shown above the tolerance" if det else
-                f"a change of {g.name} the rows do not determine")
+        what = (f"a change of {g.name} the rows do not determine" if not det else
+                f"a change of {g.name} the check cannot size, not shown above the tolerance" if implausible else
+                f"a change of {g.name} of {_pm(size, sd)} mm at the TCP, not shown above the tolerance")
         verdict = "setup_moved" if moved else "holds"
         return CheckResult(verdict=verdict, note=what, message=f"{g.name}: below the tolerance",
                            time_s=time.perf_counter() - t0, **out)
-    cal2 = float(np.mean(rows.tcp_sigma_m ** 2))
-    reg2 = 0.0 if held is not None else float(np.mean(rows.reg_share_m2))
-    refit_err, recal_err = float(np.sqrt(cal2 + est ** 2 + reg2)), float(np.sqrt(cal2))
-    out = {**out, "refit_error_m": refit_err, "recalibrate_error_m": recal_err}
+    if implausible:
+        return _unsized(out, f"its linear estimate moves the working TCPs by more than {PLAUSIBLE_TCP_M * 1e3:g} mm",
+                        t0)
     if held is not None:
-        refit, T2 = _apply(model, data, g, delta), held[2]
+        refit = _apply(model, data, g, delta)
+        T2, dof2 = _held_chi2(refit, data, rows), 3 * rows.m - g.basis.shape[1]
         out["setup_held"] = True
     else:
         refit, T2 = _refit(model, data, rows.Q, g, delta)
-    out = {**out, "model": refit, "refit_chi2": T2}
+        dof2 = rows.dof - g.basis.shape[1]
+    if not T2 <= rows.null.threshold(dof2, out["alpha"] / FIT_SHARE):
+        return _unsized({**out, "refit_chi2": T2}, f"the model with the change applied leaves chi2 {T2:.1f} on "
+                        f"{dof2} dof: the change lies beyond what the check poses estimate linearly", t0)
+    cal2 = float(np.mean(rows.tcp_sigma_m ** 2))
+    reg2 = 0.0 if held is not None else float(np.mean(rows.reg_share_m2))
+    refit_err, recal_err = float(np.sqrt(cal2 + est ** 2 + reg2)), float(np.sqrt(cal2))
+    out = {**out, "refit_error_m": refit_err, "recalibrate_error_m": recal_err, "model": refit, "refit_chi2": T2}
     verdict = "robot_changed" if refit_err <= (1.0 + REFIT_MARGIN) * recal_err else "recalibrate"
     return CheckResult(verdict=verdict, message=f"{g.name} changed", time_s=time.perf_counter() - t0, **out)
+
+
+def _unsized(out: dict, why: str, t0: float) -> CheckResult:
+    """A change shown above τ that the check cannot size (module docstring): *re-calibrate*, no size stated, the
+    model re-registered only."""
+    out = {**out, "change_tcp_m": float("nan"), "change_tcp_sigma_m": float("nan"), "sized": False, "note": why}
+    return CheckResult(verdict="recalibrate", message=f"{out['group']}: the check cannot size this change",
+                       time_s=time.perf_counter() - t0, **out)
+
+
+def _held_chi2(applied: CalibratedModel, data: MeasurementSet, rows: CheckRows) -> float:
+    """T of the model with a change applied under the model's own set-up (not linearised), whitened as the rows."""
+    r = data.position_m - applied.predict(rows.Q, data, station=rows.old)
+    z = whiten(rows.L, r)
+    return float(z @ z)
 
 
 def check_powers(crit: CheckPower, F: np.ndarray, tolerance_m: float, alpha: float, null: CheckNull | None = None
@@ -463,9 +518,25 @@ def check_group_name(crit: CheckPower, F: np.ndarray, z: np.ndarray, dof: int, a
             k = g.basis.shape[1]
             cov = np.linalg.pinv(A.T @ A, rcond=1e-12)[-k:, -k:]
             passing.append((r, rem, g, x[-k:], cov, det))
-    best = min(passing, key=lambda c: c[1] + 2 * c[0])[2:] if passing else None
+    best = min(passing, key=lambda c: c[1] + 2 * c[0]) if passing else None
     significant = bool(min(gains) < alpha / len(crit.groups)) if gains else False
-    return {"best": best, "table": table, "significant": significant}
+    return {"best": best[2:] if best else None, "table": table, "significant": significant,
+            "alike": _alike(best, passing, null, alpha) if best else []}
+
+
+def _alike(best: tuple, passing: list, null: CheckNull, alpha: float) -> list[str]:
+    """The other parts (a joint, the tool) the rows do not tell apart from the named group's: a group that explains
+    the rows whose Akaike criterion exceeds the named one's by at most χ²₁₋ₐ(1) (in the law's scale: the rows reject
+    neither at α). A joint's offset and placement are one part (its joint is named either way)."""
+    part = best[2].name.rsplit(" ", 1)[0]
+    lim = float(stats.chi2.isf(alpha, 1)) * null.scale
+    ref = best[1] + 2 * best[0]
+    out: dict[str, float] = {}
+    for r, rem, g, *_ in passing:
+        other = g.name.rsplit(" ", 1)[0]
+        if other != part and rem + 2 * r - ref <= lim and rem + 2 * r < out.get(other, np.inf):
+            out[other] = rem + 2 * r
+    return sorted(out, key=out.get)
 
 
 def _refit(model: CalibratedModel, data: MeasurementSet, Q: np.ndarray, g: CheckGroup, delta: np.ndarray

@@ -94,6 +94,11 @@ class CheckRows:
         """T = ‖z‖²."""
         return float(self.z @ self.z)
 
+    @property
+    def L(self) -> np.ndarray:
+        """The Cholesky factor of :attr:`Sigma` (the rows' whitening)."""
+        return _cholesky(self.Sigma)
+
 
 def measure_rows(model: CalibratedModel, data: MeasurementSet, station: str | None, q_work: np.ndarray | None,
                  seed: int) -> CheckRows:

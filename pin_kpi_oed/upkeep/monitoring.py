@@ -62,6 +62,8 @@ class MonitorLog(Result):
         model: the model at the end (the set-up filter's state applied to its station).
         drift_level_m_per_sqrt_s: the set-up drift level most probable at the end; outliers: rows not used.
         time_per_row_s: wall time per row (prediction, filter and the checks).
+        blocks: per block of :data:`BLOCK_ROWS` rows (the last one as long as it is) ``{first_row, last_row,
+            z_rms}``: the standardised RMS of the rows predicted before use (honest within :data:`HONEST_BAND`).
     """
 
     z: np.ndarray
@@ -77,6 +79,7 @@ class MonitorLog(Result):
     time_backwards: int = 0
     time_repeated: int = 0
     work_source: str = ""
+    blocks: list = field(default_factory=list)
 
     def exit_code(self, fail_on: int = 3) -> int:
         """The largest exit code of the checks' verdicts that is at least ``fail_on`` (1: changed and re-calibrate;
@@ -99,9 +102,18 @@ class MonitorLog(Result):
                 f"{np.mean(self.sigma_m) * 1e3:.3f} mm, set-up drift level {self.drift_level_m_per_sqrt_s * 1e9:.3g} "
                 f"nm/sqrt(s), {self.outliers} outlier rows, {self.time_per_row_s * 1e3:.1f} ms per row")
 
+    def block_text(self) -> str:
+        """One line: the standardised RMS of every block of rows ("" without rows)."""
+        if not self.blocks:
+            return ""
+        lo, hi = HONEST_BAND
+        return (f"monitor: standardised RMS per block of {BLOCK_ROWS:,} rows (honest within {lo}-{hi}): " + ", ".join(
+            f"{b['first_row']}-{b['last_row']} {b['z_rms']:.2f}" for b in self.blocks)
+            + f"; outside the band: {sum(not lo <= b['z_rms'] <= hi for b in self.blocks)} of {len(self.blocks)}")
+
     def to_dict(self) -> dict:
         """Plain JSON-able dict (SI units)."""
-        return {**self.result_dict(), "rows": int(len(self.error_m)), "z_rms": self.z_rms,
+        return {**self.result_dict(), "rows": int(len(self.error_m)), "z_rms": self.z_rms, "blocks": self.blocks,
                 "error_m": self.error_m.tolist(), "sigma_m": self.sigma_m.tolist(), "batches": self.batches,
                 "asks": [{**a, "poses": np.asarray(a["poses"]).tolist()} for a in self.asks],
                 "events": self.events, "drift_level_m_per_sqrt_s": self.drift_level_m_per_sqrt_s,
@@ -155,6 +167,7 @@ class Monitor:
         self.t_constant = False
         self.time_counts = {"backwards": 0, "repeated": 0}
         self.blocks_done = 0
+        self.block_list: list = []
         self._use(model, model.station(station))
         if self.work_source:
             self._event(f"monitor: {self.work_source}")
@@ -192,6 +205,10 @@ class Monitor:
             self.next = len(self.all)
             self.busy_s += time.perf_counter() - t
         if self.z:
+            a = self.blocks_done * BLOCK_ROWS
+            self.block_list = [k for k in self.block_list if k["last_row"] <= a]    # a partial block: once
+            if self.seen > a:
+                self._block(a, self.seen)
             self._band(np.asarray(self.z), f"over the {self.seen} rows")
         b, r = self.time_counts["backwards"], self.time_counts["repeated"]
         if b or r:
@@ -277,8 +294,14 @@ class Monitor:
         self.seen += len(data)
         while self.seen >= (self.blocks_done + 1) * BLOCK_ROWS:
             a = self.blocks_done * BLOCK_ROWS
+            self._block(a, a + BLOCK_ROWS)
             self._band(np.asarray(self.z[a:a + BLOCK_ROWS]), f"in rows {a + 1}-{a + BLOCK_ROWS}")
             self.blocks_done += 1
+
+    def _block(self, a: int, b: int) -> None:
+        """Record the standardised RMS of rows a+1..b (the rows' z, predicted before use)."""
+        z = np.asarray(self.z[a:b])
+        self.block_list.append({"first_row": a + 1, "last_row": b, "z_rms": float(np.sqrt(np.mean(z ** 2)))})
 
     def _chunk(self, idx: np.ndarray) -> None:
         assert self.all is not None
@@ -364,7 +387,7 @@ class Monitor:
                           drift_level_m_per_sqrt_s=self.filter.level_m_per_sqrt_s if self.filter else 0.0,
                           outliers=self.filter.outliers if self.filter else 0,
                           time_backwards=self.time_counts["backwards"], time_repeated=self.time_counts["repeated"],
-                          work_source=self.work_source,
+                          work_source=self.work_source, blocks=list(self.block_list),
                           time_per_row_s=self.busy_s / max(self.seen, 1), success=True, status="monitored",
                           message=f"{len(self.batches)} checks of {self.every} rows or more",
                           time_s=time.perf_counter() - self.t0)
