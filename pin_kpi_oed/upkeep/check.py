@@ -63,7 +63,7 @@ from pin_kpi_oed.errors import InputError
 from pin_kpi_oed.oed.check_power import CheckGroup, CheckNull, CheckPower
 from pin_kpi_oed.results import Result
 from pin_kpi_oed.upkeep.check_poses import poses_to_add
-from pin_kpi_oed.calibrated.check_view import check_view
+from pin_kpi_oed.calibrated.check_view import check_view, whiten
 from pin_kpi_oed.upkeep.check_rows import (CHECK_STATION, CheckRows, check_criterion, check_null, measure_rows,
                                            registered)
 

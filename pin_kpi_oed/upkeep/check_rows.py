@@ -20,7 +20,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from pin_kpi_oed.calibrated.check_view import check_criterion, check_null, check_view
+from pin_kpi_oed.calibrated.check_view import check_criterion, check_null, check_view, cholesky
 from pin_kpi_oed.calibrated.model_file import CalibratedModel
 from pin_kpi_oed.data.measurements import MeasurementSet
 from pin_kpi_oed.errors import InputError
@@ -97,7 +97,7 @@ class CheckRows:
     @property
     def L(self) -> np.ndarray:
         """The Cholesky factor of :attr:`Sigma` (the rows' whitening)."""
-        return _cholesky(self.Sigma)
+        return cholesky(self.Sigma)
 
 
 def measure_rows(model: CalibratedModel, data: MeasurementSet, station: str | None, q_work: np.ndarray | None,
