@@ -40,8 +40,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--cell", default="kr15", help="shipped cell (kr15, kr300, kr500, ur10) or a cell YAML file")
     p.add_argument("--criteria", default="random,param,kpi",
                    help="comma-separated: random (heuristic) and registered criteria: " + ", ".join(criterion_names()))
-    p.add_argument("--measurements", "--n", type=int, default=None, help="number of measurement configurations "
+    p.add_argument("--measurements", type=int, default=None, help="number of measurement configurations "
                    "(default: the cell's)")
+    p.add_argument("--n", dest="measurements", type=int, default=None, help="the same as --measurements")
     p.add_argument("--seed", type=int, default=0, help="seed of the heuristic design and of the starts")
     p.add_argument("--json", default=None, help="write the designs to this JSON file")
     p.add_argument("--no-collision", dest="no_collision", action="store_true",
