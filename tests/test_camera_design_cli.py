@@ -168,3 +168,9 @@ def test_view_limits_come_from_the_cell_file_in_si_units(tmp_path):
 def test_bad_view_limits_refused_in_one_line(tmp_path, view, named):
     rc, _, err = run_cli("design", "--cell", _cell_with_view(tmp_path, view), "--n", 8)
     assert rc == 2 and named in err and "Traceback" not in err and len(err.strip().splitlines()) == 1, err
+
+
+def test_evaluate_refuses_a_camera_design(pipeline):
+    d, _, _, _ = pipeline
+    rc, _, err = run_cli("evaluate", d / "design.json")
+    assert rc == 2 and "a camera's design file; evaluate scores a laser tracker's poses" in err

@@ -71,8 +71,9 @@ def _table(design: Any, held_sel: Any, held: Any, t: int) -> str:
     lines = [head, "-" * len(head)]
     for name, tr, h, it, c in rows:
         ok = "-" if c is None else ("ok" if c.ok.all() else f"{int((~c.ok).sum())} of {len(c.ok)} do not see")
+        secs = f"{design.time_s:.2f}" if c is not None else "-"
         lines.append(f"{name:<12}{tr * 1e6:>14.4e}{h * 1e6:>12.4e}{np.sqrt((tr + h) / t) * 1e6:>14.2f}{it:>7}"
-                     f"{design.time_s if c is not None else 0.0:>8.2f}{100 * cert.efficiency(tr):>10.1f}  {ok}")
+                     f"{secs:>8}{100 * cert.efficiency(tr):>10.1f}  {ok}")
     return "\n".join(lines)
 
 
@@ -124,7 +125,8 @@ def run_camera_design(args: argparse.Namespace, cell: Any) -> int:
     cert, chk = design.certificate, design.check
     print(f"certificate: every {m}-pose design from the {cert.pool_size} feasible candidates has tr(C_s) >= "
           f"{cert.lower_bound_trace_cs_m2 * 1e6:.4e} mm^2 (equivalence theorem: mean of the {m} largest d / phi = "
-          f"{cert.approx.max_d_ratio:.4f}); tr(C_s) in the {model.frame_group} frame, identified parameters only")
+          f"{cert.approx.max_d_ratio:.4f}); tr(C_s) in the {model.frame_group} frame, identified parameters only"
+          + ("; IPOPT's poses leave the pool, so its efficiency may exceed 100 %" if design.efficiency > 1 else ""))
     if not quiet:
         ray = chk.ray_clearance_m[np.isfinite(chk.ray_clearance_m)]
         print(f"independent check (OpenCV projection, Coal ray distances): {int(chk.ok.sum())} of {m} poses see the "
