@@ -10,6 +10,12 @@ Schema (a camera cell needs no ``tracker`` nor ``reflector_m``)::
                    distortion: [k1, k2, p1, p2, k3],           # dimensionless, OpenCV's order (default zeros)
                    image_size_px: [1280, 1024]}                # width, height
       sigma_px: 0.2                  # corner noise per image coordinate (px)
+      view:                          # what the camera needs to see the board (design and pool; all optional)
+        margin_px: 20.0              # every corner at least this far inside the image (px, >= 0)
+        max_angle_rad: 1.0472        # largest angle between the board's normal and the ray to the camera (rad,
+                                     # in (0, pi/2); 60 deg)
+        near_m: 0.15                 # depth of field: every outer corner's depth within [near_m, far_m] (m)
+        far_m: 2.0
     board:
       type: chessboard               # or charuco
       rows: 7                        # squares along the board's y axis
@@ -29,7 +35,7 @@ order for a chessboard and ChArUco's corner ids. A chessboard's corners are orde
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -40,11 +46,15 @@ from pin_kpi_oed.errors import InputError
 from pin_kpi_oed.model.camera import CAMERA_MODES, Board, CameraModel, Intrinsics
 from pin_kpi_oed.model.robot import Robot
 
-__all__ = ["CameraSetup", "read_camera_setup", "read_board", "BOARD_TYPES"]
+__all__ = ["CameraSetup", "read_camera_setup", "read_board", "read_view", "BOARD_TYPES", "VIEW_DEFAULTS"]
 
 #: the calibration boards the package reads
 BOARD_TYPES = ("chessboard", "charuco")
-_CAMERA_KEYS = {"mount", "pose", "intrinsics", "sigma_px"}
+_CAMERA_KEYS = {"mount", "pose", "intrinsics", "sigma_px", "view"}
+_VIEW_KEYS = {"margin_px", "max_angle_rad", "near_m", "far_m"}
+#: the view limits a camera block without ``view`` (or a ``view`` without a field) states: margin (px), largest
+#: viewing angle (rad, 60 deg), depth of field near and far (m)
+VIEW_DEFAULTS = {"margin_px": 20.0, "max_angle_rad": math.radians(60.0), "near_m": 0.15, "far_m": 2.0}
 _INTRINSIC_KEYS = {"fx", "fy", "cx", "cy", "distortion", "image_size_px"}
 _BOARD_KEYS = {"type", "rows", "columns", "square_m", "marker_m", "dictionary", "pose"}
 
@@ -61,6 +71,9 @@ class CameraSetup:
         board_pose: W_T_board (eye-in-hand) or tool_T_board (eye-to-hand), m / rad.
         sigma_px: corner noise per image coordinate (px).
         board_type: ``chessboard`` or ``charuco``; marker_m: a ChArUco marker's side (m); dictionary: its name.
+        view: what the camera needs to see the board (``margin_px`` px, ``max_angle_rad`` rad, ``near_m`` and
+            ``far_m`` m; :data:`VIEW_DEFAULTS` where the file says nothing), read by
+            :func:`~pin_kpi_oed.cell.camera_view.cell_view_limits`.
     """
 
     mode: str
@@ -72,6 +85,7 @@ class CameraSetup:
     board_type: str = "chessboard"
     marker_m: float | None = None
     dictionary: str | None = None
+    view: dict = field(default_factory=lambda: dict(VIEW_DEFAULTS))
 
     @property
     def eye_in_hand(self) -> bool:
@@ -109,6 +123,7 @@ class CameraSetup:
         if self.board_type == "charuco":
             board.update(marker_m=self.marker_m, dictionary=self.dictionary)
         return {"camera": {"mount": self.mode, "pose": pose(self.camera_pose), "sigma_px": self.sigma_px,
+                           "view": dict(self.view),
                            "intrinsics": {"fx": k.fx, "fy": k.fy, "cx": k.cx, "cy": k.cy,
                                           "distortion": k.dist.tolist(), "image_size_px": [k.width, k.height]}},
                 "board": board}
@@ -221,4 +236,38 @@ def read_camera_setup(d: dict, source: str = "") -> CameraSetup | None:
         raise InputError(f"{bwhat}.pose: missing field (the board in the "
                          f"{'cell' if mode == 'eye_in_hand' else 'tool'} frame: xyz_m, rpy_deg)")
     board, kind, marker, dictionary, bpose = read_board(d["board"], bwhat)
-    return CameraSetup(mode, intr, board, pose, bpose, sigma, kind, marker, dictionary)
+    view = read_view(cam.get("view", {}), f"{what}.view")
+    return CameraSetup(mode, intr, board, pose, bpose, sigma, kind, marker, dictionary, view)
+
+
+def read_view(d: Any, what: str) -> dict:
+    """The camera's ``view`` fields (module docstring), :data:`VIEW_DEFAULTS` for those not given.
+
+    Args:
+        d: the ``view`` mapping; what: the file and field, for messages.
+
+    Returns:
+        ``{margin_px: px, max_angle_rad: rad, near_m: m, far_m: m}``.
+
+    Raises:
+        InputError: an unknown field, a value that is not a number, a negative margin, an angle outside
+            (0, pi/2) rad (one in degrees named as such), a depth of field not 0 < near_m < far_m or beyond 50 m.
+    """
+    d = _mapping(d if d is not None else {}, _VIEW_KEYS, what)
+    out = dict(VIEW_DEFAULTS)
+    for key, v in d.items():
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+            raise InputError(f"{what}.{key}: expected a number, got {v!r}")
+        out[key] = float(v)
+    if out["margin_px"] < 0:
+        raise InputError(f"{what}.margin_px: must be >= 0 px, got {out['margin_px']:g}")
+    a = out["max_angle_rad"]
+    if not 0.0 < a < math.pi / 2:
+        hint = " (it looks like degrees: give it in rad)" if 1.0 <= a < 90.0 else ""
+        raise InputError(f"{what}.max_angle_rad: must be in (0, {math.pi / 2:.4f}) rad, got {a:g}{hint}")
+    near, far = out["near_m"], out["far_m"]
+    if not 0.0 < near < far:
+        raise InputError(f"{what}: need 0 < near_m < far_m (m), got near_m {near:g}, far_m {far:g}")
+    if far > 50.0:
+        raise InputError(f"{what}.far_m: {far:g} is more than 50 m: the value looks like mm; give it in m")
+    return out

@@ -42,7 +42,7 @@ from pin_kpi_oed.errors import InputError
 from pin_kpi_oed.model.camera import CameraModel, project
 from pin_kpi_oed.model.kinematics import Chain
 
-__all__ = ["ViewLimits", "CameraView", "camera_constraints", "VIEW_KINDS"]
+__all__ = ["ViewLimits", "CameraView", "camera_constraints", "cell_view_limits", "cell_camera_view", "VIEW_KINDS"]
 
 #: the kinds of rows, in the order of :meth:`CameraView.evaluate`, and their units
 VIEW_KINDS = (("image", "px"), ("depth", "m"), ("angle", "cos"), ("rays", "m"))
@@ -337,6 +337,45 @@ def camera_constraints(camera: CameraModel, Q: np.ndarray, limits: ViewLimits | 
     g, G = view.evaluate(np.atleast_2d(np.asarray(Q, float)))
     assert G is not None
     return g, G, view.names
+
+
+def cell_view_limits(cell) -> ViewLimits:
+    """The :class:`ViewLimits` a cell file's camera states (its ``camera.view`` block,
+    :mod:`pin_kpi_oed.cell.camera_setup`: margin px, largest viewing angle rad, depth of field m; the defaults where
+    it says nothing), the rays' clearance the cell's ``clearance_m``.
+
+    Args:
+        cell: a :class:`~pin_kpi_oed.cell.cell_model.Cell` with a camera.
+
+    Returns:
+        The view limits.
+
+    Raises:
+        InputError: the cell has no camera.
+    """
+    if getattr(cell, "camera", None) is None:
+        raise InputError(f"cell {cell.source or cell.name}: has no camera (no view limits)")
+    v = cell.camera.view
+    return ViewLimits(margin_px=v["margin_px"], max_angle_deg=float(np.degrees(v["max_angle_rad"])),
+                      near_m=v["near_m"], far_m=v["far_m"], clearance_m=float(cell.clearance_m))
+
+
+def cell_camera_view(cell, coll: CollisionModel | None = None) -> CameraView:
+    """The camera's constraints in a cell: its nominal camera model (:meth:`Cell.measurement_model`) and the cell
+    file's view limits (:func:`cell_view_limits`).
+
+    Args:
+        cell: a :class:`~pin_kpi_oed.cell.cell_model.Cell` with a camera.
+        coll: the cell's collision model (the rays' blockers), or None: no ray rows.
+
+    Returns:
+        The :class:`CameraView`.
+
+    Raises:
+        InputError: the cell has no camera.
+    """
+    limits = cell_view_limits(cell)
+    return CameraView(cell.measurement_model(), limits, coll)
 
 
 def camera_cell(robot, obstacles: list | None = None, half_spaces: list | None = None,

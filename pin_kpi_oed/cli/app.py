@@ -20,7 +20,7 @@ from pathlib import Path
 from typing import Any
 
 from pin_kpi_oed.cli.commands import COMMANDS, command_in, topic_of
-from pin_kpi_oed.errors import PinKpiOedError
+from pin_kpi_oed.errors import InputError, PinKpiOedError
 from pin_kpi_oed.model.robot_names import ROBOT_HELP, TOOL_HELP
 
 #: The topic modules of ``pin_kpi_oed.cli`` that declare subcommands (``register(subparsers)``), in ``--help`` order.
@@ -83,8 +83,12 @@ def _info_cell(args: argparse.Namespace) -> int:
 
 def cmd_evaluate(args: argparse.Namespace) -> int:
     """``pin-kpi-oed evaluate DESIGN.json``: score given measurement configurations under every criterion."""
+    from pin_kpi_oed.design.camera_design_file import is_camera_design
     from pin_kpi_oed.oed.evaluate import evaluate_file
 
+    if is_camera_design(args.design):  # its stand-in tracker fields would score a tracker, not the camera
+        raise InputError(f"evaluate {args.design}: a camera's design file; evaluate scores a laser tracker's poses "
+                         "(the camera design's scores are in the file: designs[0].trace_cs_m2, tcp_sigma_m)")
     score = evaluate_file(Path(args.design), Path(args.json) if args.json else None)
     print(score.summary())
     return 0

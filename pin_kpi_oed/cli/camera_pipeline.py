@@ -25,8 +25,8 @@ __all__ = ["simulate_camera", "identify_camera_cli", "is_camera_data", "TRACKER_
 TRACKER_ONLY = ("reflector", "tracker", "noise", "pose6d", "design", "poses", "tol_reflector")
 
 
-def _refuse_tracker_options(args: argparse.Namespace, command: str) -> None:
-    for name in TRACKER_ONLY:
+def _refuse_tracker_options(args: argparse.Namespace, command: str, allowed: tuple[str, ...] = ()) -> None:
+    for name in (n for n in TRACKER_ONLY if n not in allowed):
         v = getattr(args, name, None)
         if v not in (None, False, [], ""):
             opt = "--" + name.replace("_", "-")
@@ -34,8 +34,18 @@ def _refuse_tracker_options(args: argparse.Namespace, command: str) -> None:
                              "and pixel noise (leave it out)")
 
 
-def simulate_camera(args: argparse.Namespace, cell: Any) -> int:
-    """``simulate --cell CAMERA_CELL``: the corner CSV (and ``--test-out``) of a true robot (module docstring).
+def simulate_camera(args: argparse.Namespace, cell: Any, Q_design: np.ndarray | None = None,
+                    what: str = "") -> int:
+    """``simulate --cell CAMERA_CELL`` or ``simulate --design CAMERA_DESIGN.json``: the corner CSV (and
+    ``--test-out``) of a true robot (module docstring).
+
+    Args:
+        args: the parsed ``simulate`` options; cell: the camera cell.
+        Q_design: the design's poses (m, n) rad, measured instead of ``--n`` seeded views (``--n-test`` held-out
+            views are seeded as without a design); what: the poses, for the printed line.
+
+    Returns:
+        0.
 
     Raises:
         InputError: a tracker's option, a bad tolerance or effect, no configuration seeing the board.
@@ -46,7 +56,7 @@ def simulate_camera(args: argparse.Namespace, cell: Any) -> int:
     from pin_kpi_oed.effects.spec import effect_spec
     from pin_kpi_oed.simulation.camera_sim import CameraTolerances, camera_truth, simulate_corners
 
-    _refuse_tracker_options(args, "simulate")
+    _refuse_tracker_options(args, "simulate", ("design",) if Q_design is not None else ())
     model = cell.measurement_model()
     tol = CameraTolerances(
         joint_translation_m=float(parse_floats(args.tol_translation or "5e-4", 1, "--tol-translation")[0]),
@@ -61,7 +71,13 @@ def simulate_camera(args: argparse.Namespace, cell: Any) -> int:
         if any(e.joint_offset(th, cell.q_work[:1], None)[0] is None for e, th in effects):
             raise InputError("--effects: a camera simulation takes joint-angle effects only")
     p_true = camera_truth(model, tol, seed=args.seed)
-    Q_all = model.views(args.n + args.n_test, seed=args.seed + 1, around=cell.q_work)
+    if Q_design is None:
+        Q_all = model.views(args.n + args.n_test, seed=args.seed + 1, around=cell.q_work)
+        what = what or f"seeded poses around the working configurations of cell {cell.name}"
+    else:
+        args.n = len(Q_design)
+        Q_test = model.views(args.n_test, seed=args.seed + 1, around=cell.q_work) if args.n_test else Q_design[:0]
+        Q_all = np.vstack([np.asarray(Q_design, float), Q_test])
     uv = simulate_corners(model, Q_all, p_true, effects, seed=args.seed + 2)
     names = list(model.robot.joint_names)
     labels = [f"pose_{i:04d}" for i in range(len(Q_all))]
@@ -74,8 +90,8 @@ def simulate_camera(args: argparse.Namespace, cell: Any) -> int:
     for path in [p for p in (args.truth, args.truth_json) if p]:
         atomic_write_json(path, truth)
     seen = int(np.isfinite(uv[:args.n, ::2]).sum())
-    print(f"simulated {args.n} images of the board ({model.board.n} corners each, {seen} detected) at seeded poses "
-          f"around the working configurations of cell {cell.name} -> {args.out}"
+    print(f"simulated {args.n} images of the board ({model.board.n} corners each, {seen} detected) at {what} "
+          f"-> {args.out}"
           + (f", {args.n_test} held-out -> {args.test_out}" if args.n_test else "")
           + f" (camera {model.mode}, pixel noise {model.sigma_px:g} px, seed {args.seed}"
           + (f", effects: {', '.join(e.name for e, _ in effects)}" if effects else "") + ")")

@@ -42,6 +42,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="comma-separated: random (heuristic) and registered criteria: " + ", ".join(criterion_names()))
     p.add_argument("--measurements", type=int, default=None, help="number of measurement configurations "
                    "(default: the cell's)")
+    p.add_argument("--n", dest="measurements", type=int, default=None, help="the same as --measurements")
     p.add_argument("--seed", type=int, default=0, help="seed of the heuristic design and of the starts")
     p.add_argument("--json", default=None, help="write the designs to this JSON file")
     p.add_argument("--no-collision", dest="no_collision", action="store_true",
@@ -61,8 +62,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    "(transmission_error, gear_harmonic, link_bending) instead of the nominal geometry")
     p.add_argument("--prior", choices=["model", "tolerances", "none"], default="model",
                    help="with --model: prior of the parameters (the file's covariance, manufacturing tolerances, none)")
-    p.add_argument("--pool-size", dest="pool_size", type=int, default=5000,
-                   help="feasible candidates of the certificate's pool (default 5000)")
+    p.add_argument("--pool-size", dest="pool_size", type=int, default=None,
+                   help="feasible candidates of the certificate's pool (default 5000; a camera cell's 600)")
     p.add_argument("--clearance-margin", dest="clearance_margin", type=float, default=DEFAULT_CLEARANCE_MARGIN_M,
                    help="clearance the optimiser keeps on top of the cell's (m, default "
                         f"{DEFAULT_CLEARANCE_MARGIN_M:g}; the check reports the true clearance)")
@@ -195,6 +196,10 @@ def run(args: argparse.Namespace) -> int:
         return run_iso9283(args)
     criteria = parse_criteria(getattr(args, "criteria", "random,param,kpi"))
     cell = load_cell(getattr(args, "cell", "kr15"))
+    if cell.camera is not None:  # the camera's design (pin_kpi_oed.cli.camera_design_cmd)
+        from pin_kpi_oed.cli.camera_design_cmd import run_camera_design
+
+        return run_camera_design(args, cell)
     settings, quiet = _settings(args, cell, criteria)
     problem = design_problem(cell, settings)
     disc_on = problem.discrepancy is not None or bool(_gp_names(criteria))

@@ -266,6 +266,17 @@ def run_simulate(args: argparse.Namespace) -> int:
 
     reuse = _check_args(args)
     cell = None
+    if args.design:
+        from pin_kpi_oed.design.camera_design_file import is_camera_design, load_camera_design
+
+        if is_camera_design(args.design):  # a camera's design: its cell's camera images at the design's poses
+            from pin_kpi_oed.cli.camera_pipeline import simulate_camera
+
+            if reuse:
+                raise InputError(f"--truth {args.truth}: a camera cell draws its true robot anew; name a new file")
+            cd = load_camera_design(args.design, args.criterion)
+            return simulate_camera(args, cd.cell, cd.Q, f"the {len(cd.Q)} poses of design {cd.criterion} of "
+                                                       f"{args.design}")
     if args.cell:
         from pin_kpi_oed.cell.cell import load_cell
 

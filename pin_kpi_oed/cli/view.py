@@ -153,6 +153,10 @@ def run(args: argparse.Namespace) -> int:
     from pin_kpi_oed.viz.scene import MAX_GHOSTS, SceneOptions, build_scene
 
     _check_args(args)
+    from pin_kpi_oed.design.camera_design_file import is_camera_design
+
+    if is_camera_design(args.design):
+        return _run_camera(args)
     criteria = [c.strip() for c in args.criteria.split(",") if c.strip()] if args.criteria else None
     df = load_design(args.design, criteria=criteria)
     for n in df.notes:
@@ -172,6 +176,40 @@ def run(args: argparse.Namespace) -> int:
     if args.html is None:
         return _serve_until_stopped(scene, open_browser=not args.no_open)
     scene.write_html(args.html, pose=pose)
+    print(f"wrote {args.html} (self-contained; open it in any browser, offline)")
+    if not args.no_open:
+        import webbrowser
+
+        webbrowser.open(Path(args.html).resolve().as_uri(), new=2)
+    return 0
+
+
+#: view options a camera's design has no use for (the tracker's ellipsoids, ghosts, capsules, figures)
+_CAMERA_REFUSED = (("criteria", None), ("scale", None), ("level", 0.95), ("no_ghosts", False), ("all_ghosts", False),
+                   ("capsules", False), ("pose", None), ("sigma", None), ("figures", None))
+
+
+def _run_camera(args: argparse.Namespace) -> int:
+    """``view CAMERA_DESIGN.json``: the robot, the board, and each pose's frustum and rays
+    (:func:`~pin_kpi_oed.viz.camera_scene.camera_design_scene`), as a page (``--html``) or live."""
+    from typing import cast
+
+    from pin_kpi_oed.viz.camera_scene import camera_design_scene
+
+    for dest, default in _CAMERA_REFUSED:
+        if getattr(args, dest, default) != default:
+            raise InputError(f"view --{dest.replace('_', '-')}: not for a camera's design (it draws the board, and "
+                             "each pose's viewing frustum and rays; --html and --no-open apply)")
+    rec, cd = camera_design_scene(args.design)
+    print(f"{cd.cell.robot.name}: camera design {cd.criterion}, {len(cd.Q)} poses ({cd.cell.camera.mode}); "
+          "camera/pose_k: the frustum and the rays to the board of pose k (the first shown)")
+    if args.html is None:
+        from types import SimpleNamespace
+
+        return _serve_until_stopped(cast("Scene", SimpleNamespace(recorder=rec)), open_browser=not args.no_open)
+    from pin_kpi_oed.data.atomic import atomic_write_text
+
+    atomic_write_text(args.html, rec.get_scene(title=f"{cd.cell.name}: camera design"))
     print(f"wrote {args.html} (self-contained; open it in any browser, offline)")
     if not args.no_open:
         import webbrowser

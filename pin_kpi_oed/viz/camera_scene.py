@@ -16,7 +16,7 @@ import pinocchio as pin
 from pin_kpi_oed.cell.camera_view import CameraView
 from pin_kpi_oed.model.kinematics import Chain
 
-__all__ = ["frustum_corners", "camera_pose_in_base", "draw_camera_design"]
+__all__ = ["frustum_corners", "camera_pose_in_base", "draw_camera_design", "camera_design_scene"]
 
 FRUSTUM_COLOUR = 0x2277CC
 RAY_COLOUR = 0xDD8800
@@ -119,3 +119,30 @@ def draw_camera_design(vis: Any, view: CameraView, Q: np.ndarray, depth_m: float
             viz.loadViewerModel(rootNodeName="robot")
             viz.display(Q[0])
     return vis
+
+
+def camera_design_scene(path: str, criterion: str | None = None, robot: bool = True) -> tuple[Any, Any]:
+    """The scene of a camera's design file (``design --cell CAMERA_CELL --json``), recorded without a server:
+    :func:`draw_camera_design` with the camera and view limits of the file's cell
+    (:func:`~pin_kpi_oed.design.camera_design_file.load_camera_design`,
+    :func:`~pin_kpi_oed.cell.camera_view.cell_camera_view`).
+
+    Args:
+        path: the design file; criterion: its design (default the file's ``q_meas`` design); robot: draw the robot.
+
+    Returns:
+        (the :class:`~pin_kpi_oed.viz.recorder.SceneRecorder` holding the scene, the
+        :class:`~pin_kpi_oed.design.camera_design_file.CameraDesignFile`).
+
+    Raises:
+        InputError: not a camera's design file, or a damaged field (named).
+    """
+    from pin_kpi_oed.cell.camera_view import cell_camera_view
+    from pin_kpi_oed.design.camera_design_file import load_camera_design
+    from pin_kpi_oed.viz.recorder import SceneRecorder, import_meshcat
+
+    meshcat = import_meshcat()
+    cd = load_camera_design(path, criterion)
+    rec = SceneRecorder()
+    draw_camera_design(meshcat.Visualizer(window=rec), cell_camera_view(cd.cell), cd.Q, robot=robot)
+    return rec, cd
