@@ -96,3 +96,41 @@ def test_cli_writes_the_program_and_refuses_an_unknown_suffix(tmp_path, capsys):
     assert "add --iso9283" in capsys.readouterr().err
     assert main(["design", "--cell", "ur10", "--iso9283", str(tmp_path / "iso.txt")]) == 2
     assert "unknown program suffix" in capsys.readouterr().err
+
+
+def test_planned_cube_on_a_simulated_robot_gives_the_hand_computed_ap_and_rp():
+    """The UR10 cell's planned cube (0.3 m, 30 cycles) run by a simulated robot that is not the nominal one
+    (joint-placement errors) with 20 µm of repeatability noise per sample: AP, vAP and RP of the module against the
+    standard's formulas written out here (AP_j = ‖x̄_j − x_c,j‖; RP_l = l̄ + 3 S_l, l_i = ‖x_i − x̄‖), and the
+    figures where they must be: AP of the size of the robot's error at the cube, RP a few times the noise."""
+    from types import SimpleNamespace
+
+    from pin_kpi_oed.report.iso9283 import direction_keys, goal_groups
+    from pin_kpi_oed.report.iso_commanded import commanded_figures
+    from pin_kpi_oed.simulation.simulator import random_truth
+
+    cell = load_cell("ur10")
+    test = plan_iso_cube(cell, side_m=0.3)
+    Q, idx = test.cycle_poses()
+    tm = cell.tracker_model()
+    truth = random_truth(tm, seed=3)
+    x_c = tm.predict(np.zeros_like(truth), Q)  # commanded: the nominal robot's point at the commanded joints
+    clean = tm.predict(truth, Q)
+    rng = np.random.default_rng(4)
+    measured = clean + rng.normal(0.0, 20e-6 / np.sqrt(3), clean.shape)
+    groups = goal_groups(x_c)
+    assert len(groups) == 5 and all(g.size == N_CYCLES for g in groups)
+    out = commanded_figures(SimpleNamespace(time_s=np.arange(len(Q), dtype=float)), measured, x_c, Q, groups)
+    keys = direction_keys(Q)
+    for g, row in zip(groups, out["AP_vAP"]["per_position"]):
+        assert row["AP_m"] == pytest.approx(np.linalg.norm(measured[g].mean(axis=0) - x_c[g].mean(axis=0)), abs=1e-12)
+    rp_hand = []
+    for g in groups:
+        for k in np.unique(keys[g]):
+            c = g[keys[g] == k]
+            ell = np.linalg.norm(measured[c] - measured[c].mean(axis=0), axis=1)
+            rp_hand.append(ell.mean() + 3.0 * ell.std(ddof=1))
+    assert [r["RP_m"] for r in out["RP"]["per_group"]] == pytest.approx(rp_hand, abs=1e-12)
+    err = np.linalg.norm(clean - x_c, axis=1)
+    assert 0.5 * err.min() < out["AP_vAP"]["AP"]["mean_m"] < 1.5 * err.max()  # the robot's own error, not the noise
+    assert 20e-6 < out["RP"]["median_m"] < 80e-6  # l̄ + 3 S_l of 20 µm noise: about 2-4x it
