@@ -108,7 +108,9 @@ def test_compensated_joints_put_the_true_tcp_within_3_sigma_of_the_target(calibr
                            "tracker", "--out", d / "comp.csv")
     assert rc == 0, err
     rows = _rows(d / "comp.csv")
-    assert all(r["status"] == "ok" for r in rows)
+    # sendable, and said to rest on a TCP no image measured: the flange's axial offset held at its tolerance
+    # dominates the σ (0.5 mm of about 0.51 mm)
+    assert all(r["status"] == "tcp_unmeasured" for r in rows), [r["status"] for r in rows]
     Qc = np.array([[float(r[n]) for n in names] for r in rows])
     sigma = np.array([float(r["sigma_m"]) for r in rows])
     e = np.linalg.norm(true_tcp(model, Qc, p_true, effects) - target, axis=1)

@@ -107,13 +107,18 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         "working configurations and the working region's); kpi_gp and the honest sigma then score "
                         "the TCP error after that registration instead of the parameter uncertainty carried in the "
                         "old set-up")
+    _iso_options(p)
+    p.set_defaults(func=run)
+
+
+def _iso_options(p: argparse.ArgumentParser) -> None:
+    """The ISO 9283 cube test's options of ``design``."""
     p.add_argument("--iso9283", default=None, metavar="PROGRAM",
                    help="instead of a design: plan the ISO 9283 cube test around the working configurations (the "
                         "largest cube that fits, P1..P5 on its diagonal plane, 30 cycles, every pose and move "
                         "checked) and write it as a robot program (format from the suffix: .csv, .script, .src, .mod)")
     p.add_argument("--iso-side", dest="iso_side", type=float, default=None, metavar="M", help="with --iso9283: the "
                    "cube's side in m (default: the largest that fits; refused, naming it, when the given one does not)")
-    p.set_defaults(func=run)
 
 
 def parse_criteria(text: str) -> list[str]:
