@@ -10,6 +10,7 @@ import json
 import numpy as np
 import pytest
 
+from pin_kpi_oed.compensation.result import SENDABLE
 from pin_kpi_oed.cli.app import main
 from pin_kpi_oed.data.measurements import write_measurements
 from pin_kpi_oed.discrepancy import Discrepancy, DiscrepancyOptions, JointKernel, fit_discrepancy
@@ -249,7 +250,7 @@ def test_compensation_includes_the_discrepancy(withheld):
                    MeasurementSet(list(cm.robot.joint_names), Q, np.full((len(Q), 3), np.nan)))
     refl = cm.setups[cm.station(None)].reflector_m  # forward's point: the TCP these targets are at
     res = compensate(cm, ts, CompensationOptions(frame="base", tcp_m=refl))
-    ok = np.array([s in ("ok", "extrapolated") for s in res.target_status])  # reached (extrapolated: flagged)
+    ok = np.array([s in SENDABLE for s in res.target_status])  # reached (extrapolated, TCP unmeasured: flagged)
     assert ok.sum() >= 6 and [s == "extrapolated" for s in res.target_status] == res.extrapolation.tolist()
     assert np.abs(forward(cm, res.q[ok], frame="base") - goal[ok]).max() < 1e-9
     assert res.sigma_m.shape == (8,) and np.all(res.sigma_m > 0)

@@ -282,7 +282,8 @@ def test_compensated_seam_program_stays_continuous(seam_problem):
     aux = MeasurementSet(names, Qp, np.full((len(Qp), 3), np.nan))
     prog = TargetSet([str(i) for i in range(len(Qp))], None, None, Qp, names, aux, "seam")
     res = compensate_program(cm, prog)
-    assert all(s == "ok" for s in res.target_status), set(res.target_status)
+    # reached, none extrapolated; the TCP 0.1 m from the reflector rests on the flange's axial offset no reflector sees
+    assert set(res.target_status) <= {"ok", "tcp_unmeasured"}, set(res.target_status)
     assert np.abs(res.q - Qp).max() > 1e-6  # the calibration changes the joints
     jump = np.abs(np.diff(res.q, axis=0) - np.diff(Qp, axis=0)).max()
     print(f"compensation: largest joint change {np.abs(res.q - Qp).max():.2e} rad, "

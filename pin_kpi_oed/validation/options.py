@@ -258,7 +258,7 @@ OUTPUTS = {"evaluate": ["json"], "demo": ["json"], "design": ["json", "curve", "
            "identify": ["json", "urdf_out", "model_out"], "import-ipa": ["out", "train", "test"],
            "register": ["model_out", "json"], "predict": ["out", "figure"], "diagnose": ["json", "model_out"],
            "view": ["html"], "export": ["out", "json", "html"], "compensate": ["out", "json"],
-           "import-tracker": ["out"],
+           "import-tracker": ["out"], "import-images": ["out"],
            "export-model": ["out"], "report": ["html", "json", "pdf"], "check": ["model_out", "json", "out", "program"],
            "monitor": ["model_out", "json"]}
 #: command -> argparse dests of figure outputs (their names end in a format the package writes)
@@ -272,7 +272,8 @@ INPUTS = {"evaluate": ["design"], "design": ["cell", "pool", "given", "given_pri
           "diagnose": ["train", "validate", "register_data", "robot", "kinematics", "cell"],
           "view": ["design"], "info": ["robot"], "export": ["design"],
           "compensate": ["model", "targets", "program", "cell"],
-          "import-tracker": ["export", "joints", "robot"], "export-model": ["model"],
+          "import-tracker": ["export", "joints", "robot"], "import-images": ["images", "board", "joints"],
+          "export-model": ["model"],
           "report": ["model", "train", "validate", "register_data", "kinematics", "cell"],
           "check": ["model", "data", "cell"],
           "monitor": ["model", "data"]}
