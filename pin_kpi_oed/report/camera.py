@@ -119,7 +119,7 @@ def _tcp_uncertainty(cm: Any, Q: np.ndarray, where: str, mounted: str) -> dict:
              "axial": _axial(cm.robot, ts.held_names[i])} for i in top]
     axial = next((h["name"] for h in held if h["axial"]), None)
     what = ("held at nominal, mostly " + (f"the flange's axial offset ({axial})" if axial else
-                                           "the joint placements " + ", ".join(h["name"] for h in held)))
+                                           "the joint placements " + ", ".join(str(h["name"]) for h in held)))
     return {"k": k, "where": where, "n": int(len(Q)), "frame": f"the {cm.station(None)} station's device frame",
             "tcp_m": ts.tcp_m.tolist(), "U_m": (k * ts.sigma_m).tolist(), "sigma_m": ts.sigma_m.tolist(),
             "U_median_m": float(k * np.median(ts.sigma_m)), "U_max_m": float(k * ts.sigma_m.max()),
