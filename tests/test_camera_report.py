@@ -144,3 +144,17 @@ def test_bad_camera_report_input_is_one_line(certified, tmp_path):
         rc, out, err = run_cli(*argv)
         assert rc == 2 and says in err and len(err.strip().splitlines()) == 1, (argv, err)
     assert not (tmp_path / "x.html").exists()
+
+
+def test_a_lab_file_makes_the_page_a_certificate(certified, tmp_path):
+    d, _, _ = certified
+    lab = tmp_path / "lab.yaml"
+    lab.write_text("organisation: Test Lab\noperator: T. Operator\ncustomer: Test Customer\nrobot_serial: SIM-1\n"
+                   "instrument:\n  make: Basler\n  model: acA1300\n  serial: \"7\"\n  calibration_date: 2020-01-01\n"
+                   "  calibration_certificate: C-7\n")
+    rc, out, err = run_cli("report", "--model", d / "m.json", "--train", d / "train.csv", "--validate", d / "test.csv",
+                           "--lab", lab, "--html", tmp_path / "c.html")
+    assert rc == 0, err
+    page = (tmp_path / "c.html").read_text()
+    assert "<title>Calibration certificate: ur5 (camera)</title>" in page and "Basler acA1300, serial 7" in page
+    assert "DRAFT" not in page and "certificate: no required accuracy stated" in out

@@ -219,11 +219,20 @@ def _parameters(cm: Any) -> dict:
     rows = [{"name": n, "value": float(v), "std": float(s), "unit": u}
             for n, v, s, u in zip(names, P.get("values", []), P.get("std", []), P.get("units", [""] * len(names)))]
     held = (P.get("held") or {}).get("names") or []
+    dev = _mode(cm)
+    fixed = "board" if dev == "eye_in_hand" else "camera"
     return {"rows": rows, "correlations": correlations(names, P.get("covariance")), "held_at_nominal": list(held),
             "in_words": f"{len(names)} parameters estimated on the images (joint placements, the hand-eye transform "
                         f"and the board); {len(held)} joint-placement parameters held at nominal under their "
                         "tolerances: the images cannot tell them from the hand-eye transform, whose fitted value "
-                        "absorbs them; at the TCP they enter its sigma (section 'Uncertainty at the TCP')"}
+                        "absorbs them; at the TCP they enter its sigma (section 'Uncertainty at the TCP'); "
+                        f"tracker.* are the {fixed} pose (the fixed device frame, stored as the station's set-up as "
+                        "a tracker's pose is)"}
+
+
+def _mode(cm: Any) -> str:
+    """``eye_in_hand`` or ``eye_to_hand``: the mount of the camera a model was identified with."""
+    return str(((cm.fit or {}).get("device") or {}).get("mode", "eye_in_hand"))
 
 
 def _work(cm: Any, o: CertificateOptions, Q_held_out: np.ndarray) -> tuple[np.ndarray, str]:

@@ -62,7 +62,8 @@ def _calibrated(d: dict) -> str:
 def _identity(d: dict) -> str:
     from pin_kpi_oed.report.html_parts import identity_html
 
-    return identity_html(d)
+    return identity_html(d).replace("the positions were measured with the instrument above",
+                                    "the board images were taken with the camera above")
 
 
 def _fit(d: dict) -> str:
