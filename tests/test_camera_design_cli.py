@@ -130,7 +130,8 @@ def test_view_scene_draws_every_pose(pipeline):
     (("--clearance-margin", "0.02"), "design --clearance-margin"),
     (("--starts", "2"), "design --starts"),
     (("--no-collision",), "design --no-collision"),
-    (("--robot-class", "industrial"), "design --robot-class")])
+    (("--robot-class", "industrial"), "design --robot-class"),
+    (("--certificate",), "design --certificate: a camera cell (")])
 def test_tracker_design_options_refused_with_a_camera_cell(tmp_path, args, named):
     rc, out, err = run_cli("design", "--cell", CELL, "--n", 8, *args, "--json", tmp_path / "x.json")
     assert rc == 2 and named in err and "Traceback" not in err and len(err.strip().splitlines()) == 1, err

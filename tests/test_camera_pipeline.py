@@ -150,7 +150,7 @@ def test_tracker_only_pieces_are_refused_in_one_line(calibrated):
             (("register", "--model", d / "m.json", "--data", d / "check.csv", "--model-out", d / "r.json"),
              "a camera's measurement file (one row per board corner"),
             (("report", "--model", d / "m.json", "--train", d / "train.csv", "--validate", d / "check.csv", "--html",
-              d / "r.html"), "ISO 9283 AP, RP): not for a camera's model")):
+              d / "r.html", "--register-rows", 3), "report --register-rows: not for camera measurements")):
         rc, out, err = run_cli(*argv)
         assert rc == 2 and says in err and len(err.strip().splitlines()) == 1, (argv, err)
 

@@ -6,7 +6,8 @@ The camera cell states its device and what the camera needs to see the board (``
 shape the tracker's design (criteria other than kpi, margins, starts, a model, a pool, measured poses, the
 discrepancy) are refused with the option named. ``--n`` / ``--measurements`` (poses), ``--seed`` (the pool),
 ``--pool-size`` (feasible candidates, default :data:`CAMERA_POOL_SIZE`), ``--max-iter`` (IPOPT), ``--json`` and
-``--quiet`` act as for the tracker; the certificate is always computed.
+``--quiet`` act as for the tracker; the certificate is always computed (``--certificate``, which asks the tracker's
+design for it, is refused as saying nothing).
 """
 
 from __future__ import annotations
@@ -38,6 +39,9 @@ def _refuse_tracker_options(args: argparse.Namespace, cell_name: str) -> None:
     if crit not in ("kpi", "random,param,kpi"):
         raise InputError(f"design --criteria {crit}: a camera cell ({cell_name}) is designed for the KPI "
                          "criterion alone; leave --criteria out")
+    if getattr(args, "certificate", False):
+        raise InputError(f"design --certificate: a camera cell ({cell_name}) always computes its design's optimality "
+                         "certificate (the efficiency column and the 'certificate:' line); leave it out")
     for dest, default in DESIGN_TRACKER_ONLY.items():
         opt = "--" + dest.replace("_", "-")
         on_line = any(a == opt or a.startswith(opt + "=") for a in argv)

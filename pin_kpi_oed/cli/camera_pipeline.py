@@ -155,6 +155,7 @@ def identify_camera_cli(args: argparse.Namespace) -> int:
     res = identify_camera(model, read_corners(args.data[0]), source=args.data[0], seed=args.seed, loss=loss,
                           device=cell.camera.to_dict())
     cm = res.calibrated_model(cell.q_work if len(cell.q_work) else None, f"cell {cell.source or cell.name}")
+    _stamp(cm, args, len(read_corners(args.validate)) if args.validate else 0)
     lines = [res.summary()]
     if len(cell.q_work):
         ts = tcp_sigma(cm, cell.q_work)
@@ -188,6 +189,18 @@ def identify_camera_cli(args: argparse.Namespace) -> int:
         if not args.quiet:
             print(f"wrote {args.model_out}")
     return 0
+
+
+def _stamp(cm: Any, args: argparse.Namespace, n_validate: int) -> None:
+    """The provenance of this run in the model's last history step: the command line, the corner files (path, rows,
+    SHA-256; what ``report`` checks its training file against), the software versions."""
+    from pin_kpi_oed.data.provenance import command_line, file_record, software_versions
+
+    step = cm.history[-1]
+    step["command"] = command_line(getattr(args, "argv", None) or [])
+    step["train_files"] = [file_record(args.data[0], int(cm.fit["n_rows"]) // 2)]
+    step["validate_files"] = [file_record(args.validate, n_validate)] if args.validate else []
+    step["software"] = software_versions()
 
 
 def _heldout_rms(res: Any, path: str) -> float:

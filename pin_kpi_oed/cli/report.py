@@ -4,6 +4,12 @@ Examples::
 
     pin-kpi-oed report --model model.json --train c_train.csv --validate c_test.csv --html cert.html --json cert.json
     pin-kpi-oed report --model model.json --train C.csv --validate D.csv --register-rows 60 --html cert_d.html
+    pin-kpi-oed report --model cam_model.json --train corners.csv --validate corners_test.csv --html cam.html
+
+A camera's corner files (``--train CORNERS.csv``) get a camera's certificate (:mod:`pin_kpi_oed.report.camera`):
+the fit in px on training and held-out images, the TCP's U (k = 2) with its budget, the hand-eye transform and the
+board with their sigma; ``--required-accuracy`` is then about the TCP's position (its largest U); the options about a
+tracker's measured positions are refused by name.
 
 Every figure is the one ``identify --validate`` / ``predict`` / ``diagnose`` compute for the same inputs
 (:mod:`pin_kpi_oed.report`). Bad input (no held-out data, training files other than the model file recorded,
@@ -49,7 +55,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="lab file (YAML: organisation, operator, customer, robot_serial, instrument make / model / "
                         "serial / calibration_date / calibration_certificate); without it the page is a draft")
     p.add_argument("--required-accuracy", type=float, default=None,
-                   help="required accuracy (m) of --accuracy-figure: ISO 14253-1 conformity statement")
+                   help="required accuracy (m) of --accuracy-figure: ISO 14253-1 conformity statement (camera "
+                        "data: of the TCP's position, on its largest U at the working configurations)")
     p.add_argument("--accuracy-figure", default="p95", choices=["p95", "rms", "mean", "max"],
                    help="the held-out figure the required accuracy is about (default p95)")
     p.add_argument("--work", default=None,
@@ -86,10 +93,7 @@ def run(args: argparse.Namespace) -> int:
     from pin_kpi_oed.cli.camera_pipeline import is_camera_data
 
     if is_camera_data(list(args.train)):
-        raise InputError(f"report --train {args.train[0]}: camera measurements; the certificate scores a "
-                         "tracker's held-out positions (accuracy before / after, ISO 9283 AP, RP): not for a camera's "
-                         "model (identify --validate states its held-out reprojection RMS, predict --at tcp its TCP "
-                         "sigma)")
+        return _camera_report(args)
     if args.validate:  # the data files' tool headers against the model: robot, tool frame, TCP
         from pin_kpi_oed.cli.tool import model_tool
         from pin_kpi_oed.calibrated.model_file import load_model_file
@@ -108,6 +112,43 @@ def run(args: argparse.Namespace) -> int:
         if out["pdf_skipped"]:
             print(out["pdf_skipped"])
         s = cert.data["summary"]
+        print(f"{s['status']['kind']}: {s['verdict']['text']}")
+        print("wrote " + ", ".join(out["written"]))
+    return 0
+
+
+#: report options about a tracker's held-out positions (ISO 9283, re-registration, paths): dest -> default
+_CAMERA_REFUSED = {"register_rows": None, "register_data": None, "goal_radius": 1e-3, "commanded_tcp": None,
+                   "cell": None, "accuracy_figure": "p95", "kinematics": None}
+
+
+def _camera_report(args: argparse.Namespace) -> int:
+    """``report --train CORNERS.csv``: a camera calibration's certificate (:mod:`pin_kpi_oed.report.camera`).
+
+    Raises:
+        InputError: an option about a tracker's positions (named), as :func:`build_camera_certificate`.
+    """
+    from pin_kpi_oed.data.provenance import command_line
+    from pin_kpi_oed.errors import InputError
+    from pin_kpi_oed.report.camera import build_camera_certificate
+    from pin_kpi_oed.report.write import write_certificate
+
+    for dest, default in _CAMERA_REFUSED.items():
+        if getattr(args, dest, default) != default:
+            raise InputError(f"report --{dest.replace('_', '-')}: not for camera measurements (it is about a "
+                             "tracker's measured positions); leave it out")
+    cert = build_camera_certificate(args.model, list(args.train), args.validate, seed=args.seed,
+                                    command=command_line(getattr(args, "argv", None) or []), options=_options(args))
+    out = write_certificate(cert, html=args.html, json_path=args.json, pdf=args.pdf)
+    if not args.quiet:
+        d = cert.data
+        f, u = d["fit"], d["uncertainty"]
+        print(f"reprojection RMS {f['training']['rms_px']:.3f} px training, {f['held_out']['rms_px']:.3f} px held-out "
+              f"({f['held_out']['images']} images); TCP U (k = 2) median {u['U_median_m'] * 1e3:.4f} mm, largest "
+              f"{u['U_max_m'] * 1e3:.4f} mm at {u['n']} configurations; {u['held_statement']}")
+        if out["pdf_skipped"]:
+            print(out["pdf_skipped"])
+        s = d["summary"]
         print(f"{s['status']['kind']}: {s['verdict']['text']}")
         print("wrote " + ", ".join(out["written"]))
     return 0

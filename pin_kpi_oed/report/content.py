@@ -26,8 +26,8 @@ import numpy as np
 
 from pin_kpi_oed.errors import InputError
 
-__all__ = ["Certificate", "CertificateOptions", "build_certificate", "correlations", "sections_present",
-           "portable_path", "CERTIFICATE_FORMAT", "SECTIONS"]
+__all__ = ["Certificate", "CertificateOptions", "build_certificate", "check_recorded", "correlations",
+           "sections_present", "portable_path", "CERTIFICATE_FORMAT", "SECTIONS"]
 
 #: Format tag of the certificate's JSON.
 CERTIFICATE_FORMAT = "pin_kpi_oed.certificate/1"
@@ -92,7 +92,7 @@ def _sha256_text(text: str) -> str:
     return hashlib.sha256(text.encode()).hexdigest()
 
 
-def _check_recorded(cm: Any, records: list[dict], model_path: str) -> dict:
+def check_recorded(cm: Any, records: list[dict], model_path: str) -> dict:
     """Compare the given training files with those the model file recorded; refuse another data set."""
     step = (cm.history or [{}])[-1]
     recorded = step.get("train_files")
@@ -267,7 +267,7 @@ def build_certificate(model_path: str, train_paths: Sequence[str], validate_path
         raise InputError(f"{validate_path}: the held-out file is one of the training files: give rows the model was "
                          "not fitted on")
     test, repeats = _held_out(cm, train, test, lab, str(validate_path))
-    checked = _check_recorded(cm, train_recs, str(model_path))
+    checked = check_recorded(cm, train_recs, str(model_path))
     reg = _read([register_data_path], cm.robot, opts)[0] if register_data_path else None
     ho = before_after(cm, train, test, register_rows=register_rows, register_data=reg, seed=seed)
     scored = test if ho.mode == "split" or reg is not None else test.subset(np.asarray(ho.after["scored_rows"]) - 1)

@@ -223,10 +223,17 @@ def _section(sid: str, title: str, d: dict, figs: dict) -> str:
 
 
 def render_html(cert: Certificate) -> str:
-    """The certificate as one self-contained HTML page."""
+    """The certificate as one self-contained HTML page (a camera's: the sections of
+    :data:`~pin_kpi_oed.report.camera.CAMERA_SECTIONS`)."""
     d = cert.data
     parts = [f"<!DOCTYPE html><html><head><meta charset=\"utf-8\"><title>{_e(d['title'])}</title><style>{_CSS}</style>"
              f"</head><body><h1>{_e(d['title'])}</h1>"]
-    parts += [_section(sid, title, d, cert.figures) for sid, title in SECTIONS]
+    if d.get("device") == "camera":
+        from pin_kpi_oed.report.camera import CAMERA_SECTIONS
+        from pin_kpi_oed.report.camera_html import camera_section_html
+
+        parts += [camera_section_html(sid, title, d) for sid, title in CAMERA_SECTIONS]
+    else:
+        parts += [_section(sid, title, d, cert.figures) for sid, title in SECTIONS]
     parts.append("</body></html>")
     return "".join(parts)
