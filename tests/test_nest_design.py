@@ -79,6 +79,12 @@ def test_design_problem_accepts_nests_that_together_determine_the_tcp(problem):
     assert problem.model.n_nests == 2 and problem.E.shape[0] == 3 * len(problem.cell.q_work)
     with pytest.raises(IdentifiabilityError, match="not estimable"):
         DesignProblem(_cell(NESTS[:1]))  # one nest on the axis: refused as before
+    from pin_kpi_oed.oed.evaluate import score_design
+
+    Q = problem.random_design(14, 0)[0]  # a design file's scores: the same rule
+    assert np.isfinite(score_design(problem.model, Q, problem.cell.q_work).trace_cs_m2)
+    with pytest.raises(IdentifiabilityError, match="not estimable"):
+        score_design(_cell(NESTS[:1]).tracker_model(), Q, problem.cell.q_work)
 
 
 def test_alternating_design_is_no_worse_than_assign_after_and_feasible(problem):
