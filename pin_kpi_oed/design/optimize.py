@@ -72,6 +72,7 @@ from pin_kpi_oed.oed.path_kpi_gp import PathDiscrepancyKpi  # noqa: F401  (regis
 from pin_kpi_oed.oed.pose_kpi_gp import PoseDiscrepancyKpi  # noqa: F401  (registers kpi6_gp)
 from pin_kpi_oed.oed.path_kpi_max import PathMaxKpi  # noqa: F401  (registers kpi_path_max)
 from pin_kpi_oed.oed.identifiability import analyse, check_kpi
+from pin_kpi_oed.oed.nests import nests_identifiability
 from pin_kpi_oed.design.design_result import DesignResult
 from pin_kpi_oed.design.problem_options import ParameterPrior, ProblemOptions, prior_information
 from pin_kpi_oed.threads import limit_threads
@@ -144,7 +145,9 @@ class DesignProblem:
         self.p0 = np.zeros(self.model.n_params)
         self.ident = analyse(self.model)
         E_full = self.model.kpi_jacobian(self.p0, cell.q_work)
-        check_kpi(self.ident, self.model, E_full, f"{cell.name}: the TCP at the working configuration")
+        # several nests: the TCP need be estimable with all of them (nest 0 alone may leave part of it held)
+        check_kpi(self.ident if self.model.n_nests < 2 else nests_identifiability(self.model), self.model, E_full,
+                  f"{cell.name}: the TCP at the working configuration")
         self.base = self.ident.base
         self.E = E_full[:, self.base]
         self.coll = CollisionModel(cell, collision=o.collision, prune=o.prune, model=self.model)

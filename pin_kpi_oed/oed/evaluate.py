@@ -133,7 +133,12 @@ def score_design(model: TrackerModel, Q_meas: np.ndarray, Q_work: np.ndarray,
     ident = ident or analyse(model)
     p0 = np.zeros(model.n_params)
     E_full = model.kpi_jacobian(p0, Q_work)
-    check_kpi(ident, model, E_full, "the TCP at q_work")
+    if getattr(model, "n_nests", 1) > 1:  # several nests: the TCP need be estimable with all of them
+        from pin_kpi_oed.oed.nests import nests_identifiability
+
+        check_kpi(nests_identifiability(model), model, E_full, "the TCP at q_work")
+    else:
+        check_kpi(ident, model, E_full, "the TCP at q_work")
     if Q_meas.shape[0] * model.nh < ident.rank:
         raise IdentifiabilityError(f"{Q_meas.shape[0]} measurements give {Q_meas.shape[0] * model.nh} equations "
                                    f"for {ident.rank} identifiable parameters: measure at least "

@@ -31,9 +31,10 @@ from pin_kpi_oed.results import Result
 
 if TYPE_CHECKING:
     from pin_kpi_oed.model.tolerances import Tolerances
+    from pin_kpi_oed.oed.identifiability import Identifiability
     from pin_kpi_oed.model.tracker import TrackerModel
 
-__all__ = ["NestTrace", "NestDesign", "nest_trace", "assign_nests"]
+__all__ = ["NestTrace", "NestDesign", "NestStructure", "nest_trace", "assign_nests", "nests_identifiability"]
 
 
 @dataclass
@@ -57,24 +58,46 @@ class NestTrace:
         return self.identified_m2 + self.held_m2
 
 
-class _Structure:
-    """The structural identified set per set of nests, on one seeded excitation (cached)."""
+class NestStructure:
+    """The structural identified set per set of nests, on one seeded excitation (cached).
+
+    Args:
+        model: the measurement model with its nests; seed: the excitation's seed; n: its configurations.
+    """
 
     def __init__(self, model: TrackerModel, seed: int, n: int = 60):
         self.model, self.Qx = model, model.robot.random_q(np.random.default_rng(seed), n)
         self.cache: dict[tuple[int, ...], np.ndarray] = {}
 
-    def base(self, nests: tuple[int, ...]) -> np.ndarray:
+    def analysis(self, nests: tuple[int, ...]) -> Identifiability:
+        """The identifiability analysis of a design measuring every one of the nests ``nests`` (not cached)."""
         from pin_kpi_oed.oed.identifiability import analyse
 
+        mx = self.model.at_nests(np.repeat(nests, len(self.Qx)))
+        return analyse(mx, Q=np.tile(self.Qx, (len(nests), 1)))
+
+    def base(self, nests: tuple[int, ...]) -> np.ndarray:
+        """Raw indices of the parameters a design measuring the nests ``nests`` (sorted, distinct) identifies."""
         if nests not in self.cache:
-            mx = self.model.at_nests(np.repeat(nests, len(self.Qx)))
-            self.cache[nests] = np.asarray(analyse(mx, Q=np.tile(self.Qx, (len(nests), 1))).base, int)
+            self.cache[nests] = np.asarray(self.analysis(nests).base, int)
         return self.cache[nests]
 
 
+def nests_identifiability(model: TrackerModel, seed: int = 0) -> Identifiability:
+    """What a design measuring every nest of the model identifies (the structural analysis at all its nests): a
+    cell's TCP need only be estimable with all its nests, nest 0 alone may leave part of it held.
+
+    Args:
+        model: the measurement model with its nests; seed: the excitation's seed.
+
+    Returns:
+        The :class:`~pin_kpi_oed.oed.identifiability.Identifiability` over all nests.
+    """
+    return NestStructure(model, seed).analysis(tuple(range(model.n_nests)))
+
+
 def nest_trace(model: TrackerModel, Q: np.ndarray, nest: np.ndarray, Q_work: np.ndarray,
-               tolerances: Tolerances | None = None, seed: int = 0, structure: _Structure | None = None
+               tolerances: Tolerances | None = None, seed: int = 0, structure: NestStructure | None = None
                ) -> NestTrace:
     """tr C_s at the working configurations of a design measuring pose i at nest ``nest[i]`` (module docstring).
 
@@ -95,7 +118,7 @@ def nest_trace(model: TrackerModel, Q: np.ndarray, nest: np.ndarray, Q_work: np.
 
     nest = np.asarray(nest, int)
     used = tuple(sorted(set(nest.tolist())))
-    B = (structure or _Structure(model, seed)).base(used)
+    B = (structure or NestStructure(model, seed)).base(used)
     N = held_columns(model, B)
     p0 = np.zeros(model.n_params)
     F = model.at_nests(nest).weighted_jacobian(p0, np.atleast_2d(Q)).reshape(-1, model.n_params)
@@ -138,14 +161,16 @@ class NestDesign(Result):
 
 
 def assign_nests(model: TrackerModel, Q: np.ndarray, Q_work: np.ndarray, tolerances: Tolerances | None = None,
-                 seed: int = 0, max_passes: int = 4, min_gain: float = 0.01) -> NestDesign:
+                 seed: int = 0, max_passes: int = 4, min_gain: float = 0.01, start: np.ndarray | None = None
+                 ) -> NestDesign:
     """Each pose's nest by coordinate descent on tr C_s (module docstring).
 
     Args:
         model: the measurement model with its nests and TCP; Q: the design's poses (m, n) rad;
         Q_work: working configurations (t, n) rad; tolerances: the held parameters' prior;
         seed: the structural analysis's excitation; max_passes: passes over the poses at most;
-        min_gain: the share of tr C_s other nests must remove to be measured (moving the reflector costs time).
+        min_gain: the share of tr C_s other nests must remove to be measured (moving the reflector costs time);
+        start: a further start of the descent, (m,) int (e.g. the nests the poses were designed for), or None.
 
     Returns:
         The :class:`NestDesign` (``success``; ``nit`` the passes made).
@@ -157,14 +182,19 @@ def assign_nests(model: TrackerModel, Q: np.ndarray, Q_work: np.ndarray, toleran
 
     t0 = time.perf_counter()
     Q = np.atleast_2d(np.asarray(Q, float))
-    st = _Structure(model, seed)
+    st = NestStructure(model, seed)
     one = nest_trace(model, Q, np.zeros(len(Q), int), Q_work, tolerances, seed, st)
     best_nest, best, passes, nfev = np.zeros(len(Q), int), one, 0, 1
+    starts = []
     for k in range(1, model.n_nests):  # a start measuring nest k at every second pose
-        start = np.zeros(len(Q), int)
-        start[1::2] = k
+        s0 = np.zeros(len(Q), int)
+        s0[1::2] = k
+        starts.append(s0)
+    if start is not None:
+        starts.append(np.asarray(start, int).copy())
+    for s0 in starts:
         try:
-            nest, tr, p, f = _descend(model, Q, start, Q_work, tolerances, seed, st, max_passes)
+            nest, tr, p, f = _descend(model, Q, s0, Q_work, tolerances, seed, st, max_passes)
         except IdentifiabilityError:
             continue
         passes, nfev = passes + p, nfev + f
@@ -178,7 +208,7 @@ def assign_nests(model: TrackerModel, Q: np.ndarray, Q_work: np.ndarray, toleran
 
 
 def _descend(model: TrackerModel, Q: np.ndarray, nest: np.ndarray, Q_work: np.ndarray,
-             tolerances: Tolerances | None, seed: int, st: _Structure, max_passes: int
+             tolerances: Tolerances | None, seed: int, st: NestStructure, max_passes: int
              ) -> tuple[np.ndarray, NestTrace, int, int]:
     """Coordinate descent from ``nest``: (nests, their trace, passes, evaluations)."""
     best = nest_trace(model, Q, nest, Q_work, tolerances, seed, st)
