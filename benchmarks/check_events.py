@@ -7,7 +7,10 @@ poses from ``check design`` sized for the verdict (the fewest poses whose verdic
 the tolerance reaches 0.95; at least 10, at most 30); then ``--none`` unchanged checks and ``--changes`` of each kind
 (a joint offset, the tool, the tracker) of k × the tolerance (k from :data:`FACTORS`), the tolerance 0.1 mm at 5
 working TCPs, α = 0.05. Rates with Clopper–Pearson 95 % intervals; for every change shown above the tolerance the
-true TCP error of the verdict's re-fit and of a re-calibration on the 60 poses.
+true TCP error of the verdict's re-fit and of a re-calibration on the 60 poses; the choice between them per band of
+the verdict's expected-error ratio (in expectation: the chosen action's mean true error against the other's), and
+with ``--recal-draws k`` the spread of k re-calibrations on fresh noise draws and the calibration's own error the
+re-fit carries (what one event's choice cannot foresee).
 
 Real UR10 (IPA data, ``--real``): a model (``identify`` with ``discrepancy="auto"``) of a seeded half of Series C
 checked on 10 seeded rows of the other half (``--splits`` seeded splits: *holds* expected; with ``--draws k`` also k
@@ -20,7 +23,7 @@ the rows predicted before use (overall and per 1,000 rows), mean error and predi
 poses, time per row (wall and CPU).
 
 Run:  python -m benchmarks.check_events [--robots 2] [--first 0] [--none 5] [--changes 2] [--events-json ev.json]
-      [--real] [--splits 3] [--draws 0] [--monitor 1500]
+      [--recal-draws 1] [--real] [--splits 3] [--draws 0] [--monitor 1500]
       (the figures of docs/results.md: --robots 40 --events-json ev.json; --robots 0 --real --splits 20 --draws 30;
       --robots 0 --monitor 9911)
 """
@@ -132,6 +135,12 @@ def report_simulated(events: list[dict]) -> None:
     report_choice(both)
 
 
+def _worse_pairs(d: np.ndarray) -> float:
+    """The share of ordered pairs (j ≠ k) of realisations with d_j > 1.1 d_k."""
+    m = d[:, None] > 1.1 * d[None, :]
+    return float(m.sum() / max(len(d) * (len(d) - 1), 1))
+
+
 #: bands of the verdict's expected-error ratio re-fit / re-calibration (the choice's margin is 1.1)
 RATIO_BANDS = (0.0, 1.01, 1.03, 1.1, 1.3, np.inf)
 
@@ -169,11 +178,13 @@ def report_choice(both: list[dict]) -> None:
         cv = [np.std(e["recal_draws_m"], ddof=1) / np.mean(e["recal_draws_m"]) for e in draws]
         lo_hi = [max(e["recal_draws_m"]) / min(e["recal_draws_m"]) for e in draws]
         within = [np.mean(np.array(e["recal_draws_m"]) * 1.1 >= e["refit_error_m"]) for e in draws]
+        pairs = [_worse_pairs(np.array(e["recal_draws_m"])) for e in draws]
         print(f"  re-calibrations on {len(draws[0]['recal_draws_m'])} fresh noise draws, {len(draws)} events: their "
               f"true TCP error varies by {np.median(cv) * 100:.1f} % (median coefficient of variation; largest / "
               f"smallest draw median {np.median(lo_hi):.2f}, max {max(lo_hi):.2f}); the re-fit within 10 % of a "
               f"draw in {np.mean(within) * 100:.0f} % of the draws; the re-fit / the draws' mean: median "
-              f"{np.median([e['refit_error_m'] / np.mean(e['recal_draws_m']) for e in draws]):.3f}")
+              f"{np.median([e['refit_error_m'] / np.mean(e['recal_draws_m']) for e in draws]):.3f}; one re-calibration "
+              f"worse than another of the same event by > 10 % in {np.mean(pairs) * 100:.0f} % of the pairs")
     cal = [e for e in both if np.isfinite(e.get("calibration_error_m", np.nan))]
     if cal:
         a = np.array([e["refit_error_m"] for e in cal])
