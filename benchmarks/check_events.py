@@ -179,11 +179,15 @@ def report_choice(both: list[dict]) -> None:
         lo_hi = [max(e["recal_draws_m"]) / min(e["recal_draws_m"]) for e in draws]
         within = [np.mean(np.array(e["recal_draws_m"]) * 1.1 >= e["refit_error_m"]) for e in draws]
         pairs = [_worse_pairs(np.array(e["recal_draws_m"])) for e in draws]
+        means = np.mean([e["refit_error_m"] for e in draws]) / np.mean([np.mean(e["recal_draws_m"]) for e in draws])
+        expected = np.sqrt(np.mean([e["predicted_refit_m"] ** 2 for e in draws])
+                           / np.mean([e["predicted_recal_m"] ** 2 for e in draws]))
         print(f"  re-calibrations on {len(draws[0]['recal_draws_m'])} fresh noise draws, {len(draws)} events: their "
               f"true TCP error varies by {np.median(cv) * 100:.1f} % (median coefficient of variation; largest / "
               f"smallest draw median {np.median(lo_hi):.2f}, max {max(lo_hi):.2f}); the re-fit within 10 % of a "
               f"draw in {np.mean(within) * 100:.0f} % of the draws; the re-fit / the draws' mean: median "
-              f"{np.median([e['refit_error_m'] / np.mean(e['recal_draws_m']) for e in draws]):.3f}; one re-calibration "
+              f"{np.median([e['refit_error_m'] / np.mean(e['recal_draws_m']) for e in draws]):.3f}, ratio of the means "
+              f"{means:.3f} (expected {expected:.3f}); one re-calibration "
               f"worse than another of the same event by > 10 % in {np.mean(pairs) * 100:.0f} % of the pairs")
     cal = [e for e in both if np.isfinite(e.get("calibration_error_m", np.nan))]
     if cal:
