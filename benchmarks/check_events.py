@@ -173,6 +173,13 @@ def report_choice(both: list[dict]) -> None:
               f"{a.mean() * 1e3:.4f} mm, the other {b.mean() * 1e3:.4f} mm, ratio of the means "
               f"{a.mean() / b.mean():.3f} (expected {expected:.3f} for the re-fit); paired median ratio "
               f"{np.median(a / b):.3f}, chosen worse in {worse} of {len(a)} (sign test p {p:.2g})")
+        if all(len(e.get("recal_draws_m", [])) > 1 for e in band):
+            m = np.array([np.mean(e["recal_draws_m"]) for e in band])
+            r = np.array([e["refit_error_m"] for e in band])
+            k = int(np.sum(r > m))
+            print(f"      the re-fit against the mean of the re-calibration draws: ratio of the means "
+                  f"{r.mean() / m.mean():.3f}, paired median ratio {np.median(r / m):.3f}, the re-fit worse in "
+                  f"{k} of {len(r)} (sign test p {stats.binomtest(k, len(r)).pvalue:.2g})")
     draws = [e for e in both if len(e.get("recal_draws_m", [])) > 1]
     if draws:
         cv = [np.std(e["recal_draws_m"], ddof=1) / np.mean(e["recal_draws_m"]) for e in draws]
