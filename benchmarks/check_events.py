@@ -7,7 +7,10 @@ poses from ``check design`` sized for the verdict (the fewest poses whose verdic
 the tolerance reaches 0.95; at least 10, at most 30); then ``--none`` unchanged checks and ``--changes`` of each kind
 (a joint offset, the tool, the tracker) of k × the tolerance (k from :data:`FACTORS`), the tolerance 0.1 mm at 5
 working TCPs, α = 0.05. Rates with Clopper–Pearson 95 % intervals; for every change shown above the tolerance the
-true TCP error of the verdict's re-fit and of a re-calibration on the 60 poses.
+true TCP error of the verdict's re-fit and of a re-calibration on the 60 poses; the choice between them per band of
+the verdict's expected-error ratio (in expectation: the chosen action's mean true error against the other's), and
+with ``--recal-draws k`` the spread of k re-calibrations on fresh noise draws and the calibration's own error the
+re-fit carries (what one event's choice cannot foresee).
 
 Real UR10 (IPA data, ``--real``): a model (``identify`` with ``discrepancy="auto"``) of a seeded half of Series C
 checked on 10 seeded rows of the other half (``--splits`` seeded splits: *holds* expected; with ``--draws k`` also k
@@ -20,7 +23,7 @@ the rows predicted before use (overall and per 1,000 rows), mean error and predi
 poses, time per row (wall and CPU).
 
 Run:  python -m benchmarks.check_events [--robots 2] [--first 0] [--none 5] [--changes 2] [--events-json ev.json]
-      [--real] [--splits 3] [--draws 0] [--monitor 1500]
+      [--recal-draws 1] [--real] [--splits 3] [--draws 0] [--monitor 1500]
       (the figures of docs/results.md: --robots 40 --events-json ev.json; --robots 0 --real --splits 20 --draws 30;
       --robots 0 --monitor 9911)
 """
@@ -42,11 +45,13 @@ ALPHA = 0.05
 FACTORS = (0.25, 0.4, 0.75, 1.0, 1.5, 2.0, 3.0)
 
 
-def simulated(n_robots: int, n_none: int = 5, n_changes: int = 2, out: str | None = None, first: int = 0) -> None:
+def simulated(n_robots: int, n_none: int = 5, n_changes: int = 2, out: str | None = None, first: int = 0,
+              recal_draws: int = 1) -> None:
     """Robots that are not the model (:mod:`pin_kpi_oed.studies.check_robots`): per robot ``n_none`` unchanged
     checks and ``n_changes`` changes of each kind, sizes k × τ with k from :data:`FACTORS`; rates with their
     Clopper–Pearson 95 % intervals. ``first``: the first robot's seed (a run in chunks of robots: ``--first 20
-    --robots 20``, the chunks' JSONs reported together by ``--report a.json b.json``)."""
+    --robots 20``, the chunks' JSONs reported together by ``--report a.json b.json``). ``recal_draws``: re-calibrations
+    on this many seeded noise draws per event that re-fits (the realisation's spread)."""
     import json
 
     from pin_kpi_oed.studies.check_robots import robot_event, simulated_robot
@@ -63,7 +68,7 @@ def simulated(n_robots: int, n_none: int = 5, n_changes: int = 2, out: str | Non
         plan = [("none", 0.0)] * n_none + [(k, float(rng.choice(FACTORS))) for k in EVENT_KINDS[1:]
                                            for _ in range(n_changes)]
         for i, (kind, k) in enumerate(plan):
-            ev = robot_event(robot, kind, k, 100_000 * r + i, tolerance_m=TOL, alpha=ALPHA)
+            ev = robot_event(robot, kind, k, 100_000 * r + i, tolerance_m=TOL, alpha=ALPHA, recal_draws=recal_draws)
             events.append({**ev.__dict__, "robot": r, "check_poses": len(robot.Q_check), **robot.sizing})
         print(f"robot {r}: {len(robot.Q_check)} check poses (sized: {robot.sizing['poses_needed']}), "
               f"{sum(e['verdict'] != 'holds' for e in events if e['robot'] == r and e['kind'] == 'none')} of {n_none} "
@@ -127,6 +132,78 @@ def report_simulated(events: list[dict]) -> None:
         print(f"    worst case: chosen {chosen[k] * 1e3:.4f} mm against the other's {other[k] * 1e3:.4f} mm (ratio "
               f"{chosen[k] / other[k]:.3f}; robot {sel[k]['robot']}, {sel[k]['kind']} {sel[k]['joint']} "
               f"{sel[k]['tcp_change_m'] * 1e3:.3f} mm)")
+    report_choice(both)
+
+
+def _worse_pairs(d: np.ndarray) -> float:
+    """The share of ordered pairs (j ≠ k) of realisations with d_j > 1.1 d_k."""
+    m = d[:, None] > 1.1 * d[None, :]
+    return float(m.sum() / max(len(d) * (len(d) - 1), 1))
+
+
+#: bands of the verdict's expected-error ratio re-fit / re-calibration (the choice's margin is 1.1)
+RATIO_BANDS = (0.0, 1.01, 1.03, 1.1, 1.3, np.inf)
+
+
+def report_choice(both: list[dict]) -> None:
+    """The choice between re-fit and re-calibration in expectation: per band of the verdict's expected-error ratio
+    (re-fit / re-calibration, :data:`RATIO_BANDS`), the mean true TCP error of the chosen action over the band's
+    events against the other's (target: within 10 %), the paired median ratio and a sign test of chosen > other;
+    then what a single event cannot foresee: the spread of re-calibrations on fresh noise draws of the same rows
+    and the calibration's own error the re-fit carries (events run with ``--recal-draws``)."""
+    from scipy import stats
+
+    if not both:
+        return
+    ratio = np.array([e["predicted_refit_m"] / e["predicted_recal_m"] for e in both])
+    print("  the choice in expectation, per band of the expected ratio re-fit / re-calibration:")
+    for lo, hi in zip(RATIO_BANDS[:-1], RATIO_BANDS[1:]):
+        band = [e for e, x in zip(both, ratio) if lo <= x < hi]
+        if not band:
+            continue
+        refit = [e["verdict"] == "robot_changed" for e in band]
+        a = np.array([e["refit_error_m"] if f else e["recal_error_m"] for e, f in zip(band, refit)])
+        b = np.array([e["recal_error_m"] if f else e["refit_error_m"] for e, f in zip(band, refit)])
+        worse = int(np.sum(a > b))
+        p = stats.binomtest(worse, len(a)).pvalue
+        expected = np.sqrt(np.mean([e["predicted_refit_m"] ** 2 for e in band])
+                           / np.mean([e["predicted_recal_m"] ** 2 for e in band]))
+        print(f"    [{lo:.2f}, {hi:.2f}): {len(band)} events ({sum(refit)} re-fit, {len(band) - sum(refit)} "
+              f"re-calibrate) on {len({e['robot'] for e in band})} robots; mean true TCP error chosen "
+              f"{a.mean() * 1e3:.4f} mm, the other {b.mean() * 1e3:.4f} mm, ratio of the means "
+              f"{a.mean() / b.mean():.3f} (expected {expected:.3f} for the re-fit); paired median ratio "
+              f"{np.median(a / b):.3f}, chosen worse in {worse} of {len(a)} (sign test p {p:.2g})")
+        if all(len(e.get("recal_draws_m", [])) > 1 for e in band):
+            m = np.array([np.mean(e["recal_draws_m"]) for e in band])
+            r = np.array([e["refit_error_m"] for e in band])
+            k = int(np.sum(r > m))
+            print(f"      the re-fit against the mean of the re-calibration draws: ratio of the means "
+                  f"{r.mean() / m.mean():.3f}, paired median ratio {np.median(r / m):.3f}, the re-fit worse in "
+                  f"{k} of {len(r)} (sign test p {stats.binomtest(k, len(r)).pvalue:.2g})")
+    draws = [e for e in both if len(e.get("recal_draws_m", [])) > 1]
+    if draws:
+        cv = [np.std(e["recal_draws_m"], ddof=1) / np.mean(e["recal_draws_m"]) for e in draws]
+        lo_hi = [max(e["recal_draws_m"]) / min(e["recal_draws_m"]) for e in draws]
+        within = [np.mean(np.array(e["recal_draws_m"]) * 1.1 >= e["refit_error_m"]) for e in draws]
+        pairs = [_worse_pairs(np.array(e["recal_draws_m"])) for e in draws]
+        means = np.mean([e["refit_error_m"] for e in draws]) / np.mean([np.mean(e["recal_draws_m"]) for e in draws])
+        expected = np.sqrt(np.mean([e["predicted_refit_m"] ** 2 for e in draws])
+                           / np.mean([e["predicted_recal_m"] ** 2 for e in draws]))
+        print(f"  re-calibrations on {len(draws[0]['recal_draws_m'])} fresh noise draws, {len(draws)} events: their "
+              f"true TCP error varies by {np.median(cv) * 100:.1f} % (median coefficient of variation; largest / "
+              f"smallest draw median {np.median(lo_hi):.2f}, max {max(lo_hi):.2f}); the re-fit within 10 % of a "
+              f"draw in {np.mean(within) * 100:.0f} % of the draws; the re-fit / the draws' mean: median "
+              f"{np.median([e['refit_error_m'] / np.mean(e['recal_draws_m']) for e in draws]):.3f}, ratio of the means "
+              f"{means:.3f} (expected {expected:.3f}); one re-calibration "
+              f"worse than another of the same event by > 10 % in {np.mean(pairs) * 100:.0f} % of the pairs")
+    cal = [e for e in both if np.isfinite(e.get("calibration_error_m", np.nan))]
+    if cal:
+        a = np.array([e["refit_error_m"] for e in cal])
+        c = np.array([e["calibration_error_m"] for e in cal])
+        b = np.array([np.mean(e.get("recal_draws_m") or [e["recal_error_m"]]) for e in cal])
+        print(f"  the calibration's own true TCP error before the change ({len(cal)} events): re-fit / it median "
+              f"{np.median(a / c):.3f}; correlation of (re-fit - re-calibration) with (it - re-calibration) "
+              f"{np.corrcoef(a - b, c - b)[0, 1]:.2f}")
 
 
 def real(splits: int, draws: int = 0) -> None:
@@ -152,6 +229,7 @@ def real(splits: int, draws: int = 0) -> None:
     extra: list[bool] = []
     per_split: dict[int, int] = {}
     transfer: list[list[float]] = []
+    d_verdicts: list[str] = []
     for s in range(splits):
         tr, te = C.split(0.5, seed=s)
         cm = calibrate(model, tr, s)
@@ -168,7 +246,9 @@ def real(splits: int, draws: int = 0) -> None:
             undetermined[name] += not r.setup_determined
             print(f"{s:>5} {name:<12} {r.verdict:<14} {r.chi2:>7.1f} {r.dof:>4} {r.p_value:>8.3g} "
                   f"{min(r.power.values()):>9.2f} {r.registration_sigma_m * 1e3:>7.3f} {len(r.poses_to_add):>4}  "
-                  f"{r.group}")
+                  f"{_named(r)}")
+            if name == "D":
+                d_verdicts.append(f"{r.verdict} {_named(r)}".strip())
             if name == "D":
                 transfer.append(_transfer_errors(cm, r, rows, pick, s))
     if extra:
@@ -182,12 +262,26 @@ def real(splits: int, draws: int = 0) -> None:
     for name, k in flagged.items():
         print(f"anything but holds on {name}: {k} of {splits}; set-up not determined at the working configurations by "
               f"the 10 rows (poses to add named): {undetermined[name]} (stated false-alarm rate: {ALPHA:.0%})")
+    if d_verdicts:
+        from collections import Counter
+
+        print(f"C's model checked on {len(d_verdicts)} seeded draws of 10 rows of D (re-registered by the check): "
+              + "; ".join(f"{n} x {v}" for v, n in Counter(v.split(' (')[0] for v in d_verdicts).most_common()))
     if transfer:
         t = np.array(transfer)
         print("on D's other rows (mean 3-D error / mean honest sigma, mm; median over splits): re-registered on the 10 "
               f"check rows {np.median(t[:, 0]):.3f} / {np.median(t[:, 1]):.3f}; the verdict's model "
               f"{np.median(t[:, 2]):.3f} / {np.median(t[:, 3]):.3f}; re-registered on 60 rows {np.median(t[:, 4]):.3f} "
               f"/ {np.median(t[:, 5]):.3f}")
+
+
+def _named(r) -> str:
+    """The verdict's named part with its size: the group (or the parts the rows do not tell apart), the RMS TCP
+    change at the working configurations ± its σ (mm), the set-up's shift (mm), "cannot size" when not sized."""
+    what = " or ".join([r.group, *r.alike]) if r.group else "-"
+    size = (f"change {r.change_tcp_m * 1e3:.3f} +- {r.change_tcp_sigma_m * 1e3:.3f} mm" if r.sized
+            else "the check cannot size this change")
+    return f"{what} ({size}; set-up shift {r.setup_shift_m * 1e3:.3f} mm)"
 
 
 def _transfer_errors(cm, r, rows, pick, seed: int) -> list[float]:
@@ -252,6 +346,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--first", type=int, default=0, help="the first simulated robot's seed (runs in chunks)")
     ap.add_argument("--report", nargs="+", default=None,
                     help="only report the events of these JSONs (--events-json of one run or of its chunks)")
+    ap.add_argument("--recal-draws", dest="recal_draws", type=int, default=1,
+                    help="re-calibrations on this many seeded noise draws per re-fitting event (default 1)")
     ap.add_argument("--real", action="store_true", help="also the real UR10 checks (IPA data)")
     ap.add_argument("--splits", type=int, default=3, help="seeded splits of Series C (the figures: 20)")
     ap.add_argument("--draws", type=int, default=0,
@@ -264,7 +360,7 @@ def main(argv: list[str] | None = None) -> int:
         report_simulated([e for path in args.report for e in json.loads(open(path).read())])
         return 0
     if args.robots:
-        simulated(args.robots, args.none, args.changes, args.events_json, args.first)
+        simulated(args.robots, args.none, args.changes, args.events_json, args.first, args.recal_draws)
     if args.real:
         real(args.splits, args.draws)
     if args.monitor:

@@ -74,6 +74,10 @@ class RobotEvent:
         refit_error_m, recal_error_m: the true RMS TCP error at the working configurations of the verdict's
             re-fitted model and of a re-calibration (NaN unless a change was shown above τ);
         predicted_refit_m, predicted_recal_m: the verdict's expected TCP errors of each.
+        calibration_error_m: the true RMS TCP error of the robot's calibration before the change (m): the part of
+            its error a re-fit carries and a re-calibration draws afresh.
+        recal_draws_m: the true TCP errors of re-calibrations on ``recal_draws`` fresh noisy draws of the rows (m;
+            the first is ``recal_error_m``): the spread of the realisation a verdict cannot foresee.
     """
 
     kind: str
@@ -94,6 +98,8 @@ class RobotEvent:
     alike: list = field(default_factory=list)
     sized: bool = True
     groups: list = field(default_factory=list)
+    calibration_error_m: float = float("nan")
+    recal_draws_m: list = field(default_factory=list)
 
 
 def simulated_robot(seed: int, *, n_cal: int = 60, noise_m: float = 2.5e-5, tolerance_m: float = 1e-4,
@@ -195,7 +201,7 @@ def _right(kind: str, joint: str, verdict: str, group: str, big: bool, alike: tu
 
 
 def robot_event(robot: SimulatedRobot, kind: str, factor: float, seed: int, *, tolerance_m: float = 1e-4,
-                alpha: float = 0.05, recalibrate: bool = True) -> RobotEvent:
+                alpha: float = 0.05, recalibrate: bool = True, recal_draws: int = 1) -> RobotEvent:
     """One event on a simulated robot (module docstring): the change, the check rows, the verdict, and for a change
     shown above τ the true TCP errors of the re-fit and of a re-calibration.
 
@@ -203,6 +209,10 @@ def robot_event(robot: SimulatedRobot, kind: str, factor: float, seed: int, *, t
         robot: the robot; kind: one of :data:`CHANGE_KINDS`; factor: the change's size in units of τ.
         seed: seed of the change's direction and of the rows' noise.
         recalibrate: also re-calibrate when a change is shown above τ (the expensive part).
+        recal_draws: re-calibrations on this many seeded fresh draws of the rows' noise (the first is the event's).
+
+    Returns:
+        The event (:class:`RobotEvent`).
     """
     from pin_kpi_oed.identification.identify import identify
     from pin_kpi_oed.model.tracker import TrackerModel
@@ -228,11 +238,14 @@ def robot_event(robot: SimulatedRobot, kind: str, factor: float, seed: int, *, t
                     groups=sorted(r.groups, key=lambda g: g["chi2_remaining"])[:4])
     if np.isfinite(r.refit_error_m) and r.model is not None and recalibrate:
         ev.refit_error_m = _tcp_error(r.model.predict(robot.qw), after)
-        data = simulate(robot.nominal, robot.Q_cal, p, robot.effects, seed=seed + 13)
+        ev.calibration_error_m = _tcp_error(robot.cm.predict(robot.qw), before)
         nominal = TrackerModel(robot.nominal.robot, reflector_m=REFLECTOR_M, tcp_m=REFLECTOR_M,
                                noise=robot.nominal.noise)
-        recal = identify(nominal, data, Q_work=robot.qw).calibrated_model()
-        ev.recal_error_m = _tcp_error(recal.predict(robot.qw), after)
+        for j in range(max(recal_draws, 1)):
+            data = simulate(robot.nominal, robot.Q_cal, p, robot.effects, seed=seed + 13 + 1_000_003 * j)
+            recal = identify(nominal, data, Q_work=robot.qw).calibrated_model()
+            ev.recal_draws_m.append(_tcp_error(recal.predict(robot.qw), after))
+        ev.recal_error_m = ev.recal_draws_m[0]
     ev.time_s = time.perf_counter() - t0
     return ev
 
