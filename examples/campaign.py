@@ -30,12 +30,14 @@ import contextlib
 import io
 import json
 import os
+import sys
 import tempfile
 from pathlib import Path
 
 import numpy as np
 
-QUICK = os.environ.get("PIN_KPI_OED_QUICK") == "1"
+#: --quick (or PIN_KPI_OED_QUICK=1): smaller sizes, the same steps (the tests' run)
+QUICK = os.environ.get("PIN_KPI_OED_QUICK") == "1" or "--quick" in sys.argv[1:]
 NOISE_M = 1e-5                     # tracker noise of the simulated measurements, per axis (m)
 HARMONIC_RAD = 3e-4                # amplitude of each withheld gear-harmonic component (rad)
 
@@ -100,6 +102,7 @@ def cli(args: list[str], log: Path | None = None, show: tuple[str, ...] = ()) ->
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--quick", action="store_true", help="smaller sizes, the same steps")
     ap.add_argument("--out", default=None, help="folder of the campaign's files (default: a temporary folder)")
     ap.add_argument("--target-sigma", dest="target", type=float, default=3.5e-5,
                     help="target TCP sigma at the working configurations (m, default 3.5e-5)")

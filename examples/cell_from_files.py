@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -24,9 +25,11 @@ from pin_kpi_oed.cell.cell import CELL_DIR, load_cell
 from pin_kpi_oed.cell.feasibility import FeasibilityChecker
 from pin_kpi_oed.design.optimize import run_designs
 
-QUICK = os.environ.get("PIN_KPI_OED_QUICK") == "1"
+#: --quick (or PIN_KPI_OED_QUICK=1): smaller sizes, the same steps (the tests' run)
+QUICK = os.environ.get("PIN_KPI_OED_QUICK") == "1" or "--quick" in sys.argv[1:]
 
 ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+ap.add_argument("--quick", action="store_true", help="smaller sizes, the same steps")
 ap.add_argument("--out", default="cell_from_files", help="folder for the mesh and the cell file")
 ap.add_argument("--measurements", type=int, default=30 if QUICK else 60)
 a = ap.parse_args()

@@ -19,6 +19,7 @@ Run: python examples/compensate_simulated.py   (PIN_KPI_OED_QUICK=1: fewer targe
 from __future__ import annotations
 
 import os
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -32,7 +33,8 @@ from pin_kpi_oed.identification.identify import identify, predict, validate
 from pin_kpi_oed.simulation.simulator import Tolerances, default_tracker_pose, random_truth, simulate
 from pin_kpi_oed.oed.identifiability import analyse
 
-QUICK = os.environ.get("PIN_KPI_OED_QUICK") == "1"
+#: --quick (or PIN_KPI_OED_QUICK=1): smaller sizes, the same steps (the tests' run)
+QUICK = os.environ.get("PIN_KPI_OED_QUICK") == "1" or "--quick" in sys.argv[1:]
 N_TARGETS = 50 if QUICK else 200
 SIGMA = 1e-5
 _HERE = Path(__file__).resolve()

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import sys
 
 import yaml
 
@@ -20,9 +21,11 @@ from pin_kpi_oed.design.optimize import DesignProblem, run_designs
 from pin_kpi_oed.design.path_profile import path_profile
 from pin_kpi_oed.errors import InputError
 
-QUICK = os.environ.get("PIN_KPI_OED_QUICK") == "1"
+#: --quick (or PIN_KPI_OED_QUICK=1): smaller sizes, the same steps (the tests' run)
+QUICK = os.environ.get("PIN_KPI_OED_QUICK") == "1" or "--quick" in sys.argv[1:]
 
 ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+ap.add_argument("--quick", action="store_true", help="smaller sizes, the same steps")
 ap.add_argument("--measurements", type=int, default=20 if QUICK else 60)
 ap.add_argument("--seed", type=int, default=0)
 a = ap.parse_args()

@@ -15,6 +15,7 @@ Writes sim_train.csv, sim_test.csv, sim_report.json and sim_figures/ into the cu
 from __future__ import annotations
 
 import os
+import sys
 
 import numpy as np
 
@@ -28,7 +29,8 @@ from pin_kpi_oed.model.tracker import TrackerModel
 from pin_kpi_oed.model.robot import load_robot
 from pin_kpi_oed.simulation.simulator import Tolerances, default_tracker_pose, random_truth, simulate
 
-QUICK = os.environ.get("PIN_KPI_OED_QUICK") == "1"
+#: --quick (or PIN_KPI_OED_QUICK=1): smaller sizes, the same steps (the tests' run)
+QUICK = os.environ.get("PIN_KPI_OED_QUICK") == "1" or "--quick" in sys.argv[1:]
 N = 250 if QUICK else 800  # training = held-out measurements
 SIGMA = 1e-5
 rng = np.random.default_rng(7)

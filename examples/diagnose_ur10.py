@@ -26,6 +26,7 @@ Writes ur10_diagnosis.json and ur10_figures/ into the current folder.
 from __future__ import annotations
 
 import os
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -41,7 +42,8 @@ from pin_kpi_oed.model.noise import NoiseModel
 from pin_kpi_oed.model.tracker import TrackerModel
 from pin_kpi_oed.model.robot import load_robot
 
-QUICK = os.environ.get("PIN_KPI_OED_QUICK") == "1"
+#: --quick (or PIN_KPI_OED_QUICK=1): smaller sizes, the same steps (the tests' run)
+QUICK = os.environ.get("PIN_KPI_OED_QUICK") == "1" or "--quick" in sys.argv[1:]
 _HERE = Path(__file__).resolve()
 DATA = next((p / "shared" / "data" / "ipa_ur10" for p in (_HERE.parents[2], _HERE.parents[3])
              if (p / "shared" / "data" / "ipa_ur10").is_dir()), _HERE.parents[2] / "shared" / "data" / "ipa_ur10")

@@ -14,11 +14,13 @@ it calibrates B + C + D jointly (three stations, one robot) and prints that fit'
 are the geometric baselines of the transfer study (docs/results.md) (≈ 0.55 / 0.84 / 0.71–0.76 / 0.54 mm mean).
 
 Run:  python examples/identify_transfer_ur10.py [--data DIR] [--rows 60] [--seed 0]
+(``--quick`` or PIN_KPI_OED_QUICK=1: the same steps on 150 seeded random rows of each series, for the tests)
 """
 
 from __future__ import annotations
 
 import argparse
+import os
 from pathlib import Path
 
 import numpy as np
@@ -33,6 +35,7 @@ _HERE = Path(__file__).resolve()
 DATA = next((p / "shared" / "data" / "ipa_ur10" for p in (_HERE.parents[2], _HERE.parents[3])
              if (p / "shared" / "data" / "ipa_ur10").is_dir()), _HERE.parents[2] / "shared" / "data" / "ipa_ur10")
 PAIRS = (("B", "C"), ("C", "B"), ("C", "D"), ("D", "C"))
+QUICK_ROWS = 150  # rows kept of each series by --quick
 
 
 def load(folder: Path, series: str) -> MeasurementSet:
@@ -47,6 +50,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--data", default=str(DATA), help="folder with Series_B, Series_C, Series_D")
     ap.add_argument("--rows", type=int, default=60, help="registration rows of the second series")
     ap.add_argument("--seed", type=int, default=0, help="seed of the registration rows")
+    ap.add_argument("--quick", action="store_true", default=os.environ.get("PIN_KPI_OED_QUICK") == "1",
+                    help=f"the same steps on {QUICK_ROWS} seeded random rows of each series")
     a = ap.parse_args(argv)
     folder = Path(a.data)
     if not (folder / "Series_C").is_dir():
@@ -55,6 +60,11 @@ def main(argv: list[str] | None = None) -> int:
     robot = load_robot("ur10")
     model = TrackerModel(robot, reflector_m=np.array([0.0, 0.0, 0.109]), noise=NoiseModel(sigma_xyz_m=(1e-4,) * 3))
     series = {s: load(folder, s) for s in "BCD"}
+    if a.quick:
+        rng = np.random.default_rng(a.seed)
+        series = {s: ms.subset(np.sort(rng.choice(len(ms), min(QUICK_ROWS, len(ms)), replace=False)))
+                  for s, ms in series.items()}
+        print(f"quick run: {QUICK_ROWS} seeded random rows of each series (the figures below are not the study's)")
     calibrated = {s: identify(model, series[s], scale_covariance=True).calibrated_model() for s in "BCD"}
 
     print(f"geometric calibration on all rows of X; set-up re-registered (robot held) on {a.rows} seeded random "

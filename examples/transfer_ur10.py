@@ -34,6 +34,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import sys
 import time
 from pathlib import Path
 
@@ -51,7 +52,8 @@ from pin_kpi_oed.model.noise import NoiseModel
 from pin_kpi_oed.model.tracker import TrackerModel
 from pin_kpi_oed.model.robot import load_robot
 
-QUICK = os.environ.get("PIN_KPI_OED_QUICK") == "1"
+#: --quick (or PIN_KPI_OED_QUICK=1): smaller sizes, the same steps (the tests' run)
+QUICK = os.environ.get("PIN_KPI_OED_QUICK") == "1" or "--quick" in sys.argv[1:]
 ROOT = Path(__file__).resolve().parents[1]
 REFLECTOR = np.array([0.0, 0.0, 0.109])  # T-Mac origin on tool0's z axis (Trafo_TM_F_init.txt)
 SIGMA = 1e-4  # m, uniform weights
@@ -137,6 +139,7 @@ def report_terms(sel, n: int = 6) -> str:
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--quick", action="store_true", help="smaller sizes, the same steps")
     ap.add_argument("--data", default=None, help="folder with Series_B, Series_C, Series_D")
     ap.add_argument("--max-order", type=int, default=20 if QUICK else 40, help="highest Fourier order")
     ap.add_argument("--reg-seeds", default="0" if QUICK else "0,1,2,3,4", help="seeds of the registration rows")

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import sys
 import tempfile
 from pathlib import Path
 
@@ -28,11 +29,13 @@ from pin_kpi_oed.simulation.simulator import Tolerances, default_tracker_pose, r
 from pin_kpi_oed.oed.identifiability import analyse
 from pin_kpi_oed.viz.trust_map import plot_trust_map
 
-QUICK = os.environ.get("PIN_KPI_OED_QUICK") == "1"
+#: --quick (or PIN_KPI_OED_QUICK=1): smaller sizes, the same steps (the tests' run)
+QUICK = os.environ.get("PIN_KPI_OED_QUICK") == "1" or "--quick" in sys.argv[1:]
 
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--quick", action="store_true", help="smaller sizes, the same steps")
     ap.add_argument("--out", default=None, help="PNG to write (default: trust_map.png in a temporary folder)")
     ap.add_argument("--n", type=int, default=150 if QUICK else 300, help="measured (training) rows")
     a = ap.parse_args(argv)

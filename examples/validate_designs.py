@@ -24,6 +24,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -35,11 +36,13 @@ from pin_kpi_oed.data.ipa import import_ipa
 from pin_kpi_oed.studies.design_trials import monte_carlo, real_data_validation
 
 SERIES_C = Path(__file__).resolve().parents[2] / "shared" / "data" / "ipa_ur10" / "Series_C"
-QUICK = os.environ.get("PIN_KPI_OED_QUICK") == "1"
+#: --quick (or PIN_KPI_OED_QUICK=1): smaller sizes, the same steps (the tests' run)
+QUICK = os.environ.get("PIN_KPI_OED_QUICK") == "1" or "--quick" in sys.argv[1:]
 
 
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--quick", action="store_true", help="smaller sizes, the same steps")
     ap.add_argument("--splits", type=int, default=2 if QUICK else 20)
     ap.add_argument("--reps", type=int, default=40 if QUICK else 200)
     ap.add_argument("--series", type=Path, default=SERIES_C)

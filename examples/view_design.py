@@ -23,7 +23,8 @@ from pin_kpi_oed.viz.ellipsoids import fmt_factor
 from pin_kpi_oed.viz.figures import design_figures
 from pin_kpi_oed.viz.scene import build_scene
 
-quick = os.environ.get("PIN_KPI_OED_QUICK") == "1"  # the examples test runs a smaller problem
+#: --quick (or PIN_KPI_OED_QUICK=1): the examples test runs a smaller problem
+quick = os.environ.get("PIN_KPI_OED_QUICK") == "1" or "--quick" in sys.argv[1:]
 args = [a for a in sys.argv[1:] if not a.startswith("--")]
 if args:
     design_json = Path(args[0])

@@ -190,3 +190,37 @@ def test_rows_near_one_pose_name_the_poses_to_add(setting, tmp_path):
     r2 = check_calibration(model, more, seed=0)
     assert r2.setup_determined and r2.poses_to_add.size == 0 and r2.verdict == "holds"
     assert r2.registration_sigma_m <= 2 * r2.honest_sigma_m
+
+
+def test_stacked_criterion_equals_the_one_matrix_form(setting):
+    """The pool selection's stacked φ (all candidates at once) is φ of each sum, the same number as
+    ``CheckPower.value_M``, inf where the poses do not determine the set-up; so the chosen poses are the ones a
+    candidate-by-candidate greedy chooses (here the first 4 greedy poses, recomputed one matrix at a time)."""
+    from pin_kpi_oed.errors import IdentifiabilityError
+    from pin_kpi_oed.upkeep.check_design import phi_batch, select_check
+
+    rb, model, Qc = setting
+    crit, wm, p = check_criterion(model, model.q_work, np.full(3, SIGMA))
+    Q = 0.7 * np.random.default_rng(5).uniform(rb.q_lower, rb.q_upper, size=(30, rb.nq))
+    Fp = wm.weighted_jacobian(p, Q)[:, :3, :]
+    Mi = np.einsum("nap,naq->npq", Fp, Fp)
+    base = Mi[:4].sum(axis=0)
+    idx = np.arange(4, 30)
+    got = phi_batch(crit, base, Mi, idx, chunk=7)
+    want = [crit.value_M(base + Mi[i]) for i in idx]
+    np.testing.assert_allclose(got, want, rtol=1e-12, atol=0)
+    assert np.all(np.isinf(phi_batch(crit, np.zeros_like(base), Mi, idx)))    # 3 rows: no set-up
+    with pytest.raises(IdentifiabilityError):
+        crit.value_M(Mi[4])
+    ridge = 1e-6 * np.mean(np.einsum("npp->np", Mi), axis=0).max() * np.eye(Mi.shape[1])
+    order, chosen, M = np.random.default_rng(0).permutation(30), [], np.zeros_like(base)
+    for _ in range(4):
+        vals = []
+        for i in order:
+            try:
+                vals.append(np.inf if i in chosen else crit.value_M(M + Mi[i] + ridge))
+            except IdentifiabilityError:
+                vals.append(np.inf)
+        chosen.append(int(order[int(np.argmin(vals))]))
+        M = M + Mi[chosen[-1]]
+    assert select_check(crit, Fp, 4, seed=0, exchange=False).indices.tolist() == chosen

@@ -105,17 +105,17 @@ def test_covariance_matches_monte_carlo(with_prior):
     Cs = kpi_gp_covariance(J, E, Kall[:m, :m], Kall[m:, :m], Kall[m:, m:], disc.scale_m, disc.noise, P)
     n = 40000
     Lk = np.linalg.cholesky(Kall + 1e-12 * np.eye(m + t))
-    delta = np.einsum("ij,njb->nib", Lk, rng.normal(size=(n, m + t, 3))) * disc.scale_m      # (n, m+t, 3)
+    delta = np.einsum("ij,njb->nib", Lk, rng.normal(size=(n, m + t, 3)), optimize=True) * disc.scale_m  # (n, m+t, 3)
     eps = rng.normal(size=(n, m, 3)) * disc.scale_m * np.sqrt(disc.noise)
     theta = rng.normal(size=(n, nb)) * sig0 if with_prior else np.tile(rng.normal(size=nb), (n, 1))
     y = np.einsum("iac,nc->nia", J, theta) + delta[:, :m] + eps
     A = np.linalg.inv(Kall[:m, :m] + disc.noise * np.eye(m))
     s2 = disc.scale_m ** 2
     M = np.einsum("a,iac,ij,jad->cd", 1 / s2, J, A, J) + (P if P is not None else 0)
-    b = np.einsum("a,iac,ij,nja->nc", 1 / s2, J, A, y)
+    b = np.einsum("a,iac,ij,nja->nc", 1 / s2, J, A, y, optimize=True)     # optimize: a chain of products, not one loop
     th = np.linalg.solve(M, b.T).T
     res = y - np.einsum("iac,nc->nia", J, th)
-    pred = np.einsum("tac,nc->nta", E, th) + np.einsum("ti,ij,nja->nta", Kall[m:, :m], A, res)
+    pred = np.einsum("tac,nc->nta", E, th) + np.einsum("ti,ij,nja->nta", Kall[m:, :m], A, res, optimize=True)
     true = np.einsum("tac,nc->nta", E, theta) + delta[:, m:]
     err = (pred - true).reshape(n, 3 * t)
     emp = err.T @ err / n

@@ -46,15 +46,15 @@ def test_reregistered_covariance_matches_monte_carlo(white):
     n = 40000
     s2 = disc.scale_m ** 2
     Lk = np.linalg.cholesky(Kall + 1e-12 * np.eye(m + t + r))
-    delta = np.einsum("ij,njb->nib", Lk, rng.normal(size=(n, m + t + r, 3))) * disc.scale_m
+    delta = np.einsum("ij,njb->nib", Lk, rng.normal(size=(n, m + t + r, 3)), optimize=True) * disc.scale_m
     eps = rng.normal(size=(n, m + r, 3)) * disc.scale_m * np.sqrt(disc.noise)
     theta = np.tile(rng.normal(size=nb), (n, 1))
     y = np.einsum("iac,nc->nia", J, theta) + delta[:, :m] + eps[:, :m]
     A = np.linalg.inv(Kall[:m, :m] + disc.noise * np.eye(m))
     M = np.einsum("a,iac,ij,jad->cd", 1 / s2, J, A, J)
-    th = np.linalg.solve(M, np.einsum("a,iac,ij,nja->nc", 1 / s2, J, A, y).T).T
+    th = np.linalg.solve(M, np.einsum("a,iac,ij,nja->nc", 1 / s2, J, A, y, optimize=True).T).T
     res = y - np.einsum("iac,nc->nia", J, th)
-    krig = np.einsum("ti,ij,nja->nta", Kall[m:, :m], A, res)    # the kriged discrepancy at W and R
+    krig = np.einsum("ti,ij,nja->nta", Kall[m:, :m], A, res, optimize=True)   # the kriged discrepancy at W and R
     # the new session: another set-up; its registration rows measured, the calibrated prediction subtracted
     theta_T = theta.copy()
     theta_T[:, setup] = rng.normal(size=3)

@@ -213,6 +213,22 @@ def _nll(x: np.ndarray, lam: np.ndarray, zt: np.ndarray) -> float:
     return 0.5 * float(np.sum(zt ** 2 / v + np.log(v)))
 
 
+def nll_and_grad(x: np.ndarray, lam: np.ndarray, zt: np.ndarray) -> tuple[float, np.ndarray]:
+    """:func:`_nll` and its gradient in x = (log τ², log σ_n²): with v = τ²λ + σ_n², ∂(−ℓ)/∂v = ½(1/v − z̃²/v²),
+    ∂v/∂log τ² = τ²λ, ∂v/∂log σ_n² = σ_n².
+
+    Args:
+        x: (log τ², log σ_n²) in normalised units; lam: the eigenvalues λ (k,); zt: the rotated residuals z̃ (k,).
+
+    Returns:
+        (−ℓ up to a constant, its gradient (2,)).
+    """
+    a, b = np.exp(x[0]), np.exp(x[1])
+    v = a * lam + b
+    w = 0.5 * (1.0 / v - zt ** 2 / v ** 2)
+    return 0.5 * float(np.sum(zt ** 2 / v + np.log(v))), np.array([a * float(w @ lam), b * float(np.sum(w))])
+
+
 def _fit_one(K: np.ndarray, r: np.ndarray, Fs: np.ndarray, floor: float) -> tuple[float, np.ndarray, float] | None:
     """REML of (τ², σ_n²) for one kernel matrix K (normalised units): (−ℓ, x = (log τ², log σ_n²), 2 Δℓ against the
     white level), or None when nothing lies above the floor."""
@@ -222,7 +238,7 @@ def _fit_one(K: np.ndarray, r: np.ndarray, Fs: np.ndarray, floor: float) -> tupl
         return None
     lo = np.log(max(floor, 1e-12))
     bounds = [(np.log(1e-12), np.log(1e6)), (lo, np.log(1e6))]
-    best = min((minimize(_nll, np.array(x0), args=(lam, zt), method="L-BFGS-B", bounds=bounds)
+    best = min((minimize(nll_and_grad, np.array(x0), args=(lam, zt), jac=True, method="L-BFGS-B", bounds=bounds)
                 for x0 in ([np.log(white), np.log(max(0.3 * white, floor, 1e-12))],
                            [np.log(0.1 * white), np.log(max(white, floor))])), key=lambda o: o.fun)
     stat = 2.0 * (_nll(np.array([np.log(1e-12), np.log(white)]), lam, zt) - float(best.fun))

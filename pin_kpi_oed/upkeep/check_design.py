@@ -125,31 +125,78 @@ def select_check(crit: CheckPower, Fp: np.ndarray, m: int, seed: int = 0, exchan
     ridge = 1e-6 * np.mean(np.einsum("npp->np", Mi), axis=0).max() * np.eye(Mi.shape[1])
     order = np.random.default_rng(seed).permutation(N)
 
-    def phi(M: np.ndarray) -> float:
-        try:
-            return crit.value_M(M)
-        except IdentifiabilityError:
-            return np.inf
-
     chosen: list[int] = []
     path = []
     M = np.zeros_like(ridge)
     for _ in range(m):
-        vals = np.array([phi(M + Mi[i] + ridge) if i not in chosen else np.inf for i in order])
-        k = int(order[int(np.argmin(vals))])
-        chosen.append(k)
-        M = M + Mi[k]
-        path.append(float(np.min(vals)))
-    cur, swaps = phi(M), 0
+        cand = np.array([i for i in order if i not in chosen])
+        vals = phi_batch(crit, M, Mi, cand, ridge)
+        j = int(np.argmin(vals))
+        chosen.append(int(cand[j]))
+        M = M + Mi[cand[j]]
+        path.append(float(vals[j]))
+    cur, swaps = _phi_one(crit, M), 0
     for pos in range(m if exchange else 0):
         base = M - Mi[chosen[pos]]
-        vals = np.array([phi(base + Mi[i]) if i not in chosen else np.inf for i in range(N)])
+        vals = np.full(N, np.inf)
+        free = np.setdiff1d(np.arange(N), chosen)
+        vals[free] = phi_batch(crit, base, Mi, free)
         if vals.min() < cur:
             k = int(np.argmin(vals))
             chosen[pos], M, cur, swaps = k, base + Mi[k], float(vals[k]), swaps + 1
     return PoolSelection(indices=np.array(chosen), value=float(cur), path=np.array(path), nit=swaps,
                          time_s=time.perf_counter() - t0, success=bool(np.isfinite(cur)), status="selected",
                          message=f"greedy + one exchange pass ({swaps} swaps) on the check criterion; no certificate")
+
+
+def phi_batch(crit: CheckPower, base: np.ndarray, Mi: np.ndarray, idx: np.ndarray, ridge: np.ndarray | None = None,
+              chunk: int = 256) -> np.ndarray:
+    """The criterion φ(base + Mi[i] (+ ridge)) of each candidate i in ``idx`` (inf where the poses do not determine
+    the set-up or a group): :meth:`CheckPower.value_M` evaluated on a stack of information matrices at once, the
+    same algebra (Cholesky of the set-up block, its solve, each group's Schur complement and smallest eigenvalue,
+    the smooth maximum) as the one-matrix form, in chunks of ``chunk`` candidates.
+
+    Args:
+        crit: the check criterion; base: (np, np) information of the poses already chosen.
+        Mi: (N, np, np) rank-3 information of each candidate; idx: (B,) the candidates evaluated.
+        ridge: (np, np) added to each sum, or None; chunk: candidates stacked at once.
+
+    Returns:
+        (B,) φ per candidate (log units).
+    """
+    out = np.empty(len(idx))
+    for a in range(0, len(idx), chunk):
+        Ms = base + Mi[idx[a:a + chunk]]
+        out[a:a + chunk] = _phi_stack(crit, Ms if ridge is None else Ms + ridge)
+    return out
+
+
+def _phi_stack(crit: CheckPower, Ms: np.ndarray) -> np.ndarray:
+    """φ of each matrix of the stack Ms (B, np, np); inf where :meth:`CheckPower.value_M` raises."""
+    every = (slice(None),)
+    try:
+        Lss = np.linalg.cholesky(Ms[every + crit.ix_ss])
+    except np.linalg.LinAlgError:           # one of them does not determine the set-up: one at a time
+        return np.array([_phi_one(crit, M) for M in Ms])
+    X_all = np.linalg.solve(Lss, Ms[every + crit.ix_s_all])
+    mu = np.empty((len(Ms), len(crit.groups)))
+    for j, (g, (pos, gg)) in enumerate(zip(crit.groups, crit.ix_groups)):
+        X = X_all[:, :, pos]
+        H = g.C.T @ (Ms[every + gg] - np.swapaxes(X, 1, 2) @ X) @ g.C
+        mu[:, j] = np.linalg.eigh(0.5 * (H + np.swapaxes(H, 1, 2)))[0][:, 0]
+    bad = np.any(mu <= 0, axis=1)
+    lw = -crit.kappa * np.log(np.where(bad[:, None], 1.0, mu))
+    top = lw.max(axis=1)
+    val = (top + np.log(np.exp(lw - top[:, None]).sum(axis=1))) / crit.kappa
+    return np.where(bad, np.inf, val)
+
+
+def _phi_one(crit: CheckPower, M: np.ndarray) -> float:
+    """φ(M), inf where the poses do not determine the set-up or a group."""
+    try:
+        return crit.value_M(M)
+    except IdentifiabilityError:
+        return np.inf
 
 
 def design_check(model: CalibratedModel, *, m: int = 10, tolerance_m: float = 1e-4, alpha: float = 0.05,
