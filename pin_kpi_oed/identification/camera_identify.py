@@ -214,7 +214,7 @@ def camera_model_of(cm: Any) -> tuple[CameraModel, np.ndarray]:
                              f"{', '.join(INTRINSIC_NAMES)}, got {fitted!r}") from None
         if not np.all(np.isfinite(k)):
             raise InputError(f"model file: fit.device.fitted_intrinsics: a value is not finite ({fitted!r})")
-        intr = Intrinsics(*k[:4], k[4:], intr.width, intr.height)
+        intr = Intrinsics(float(k[0]), float(k[1]), float(k[2]), float(k[3]), k[4:], intr.width, intr.height)
     model = CameraModel(cm.robot, intr, setup.board, mode=setup.mode, camera_pose=cam, board_pose=brd,
                         tcp_m=cm.tcp_m.copy(), sigma_px=setup.sigma_px)
     p = np.zeros(model.n_params)
