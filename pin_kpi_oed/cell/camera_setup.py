@@ -10,6 +10,7 @@ Schema (a camera cell needs no ``tracker`` nor ``reflector_m``)::
                    distortion: [k1, k2, p1, p2, k3],           # dimensionless, OpenCV's order (default zeros)
                    image_size_px: [1280, 1024]}                # width, height
       sigma_px: 0.2                  # corner noise per image coordinate (px)
+      intrinsics_sigma: {fx: 5.0, fy: 5.0, cx: 5.0, cy: 5.0}   # optional: estimate these intrinsics (module text)
       view:                          # what the camera needs to see the board (design and pool; all optional)
         margin_px: 20.0              # every corner at least this far inside the image (px, >= 0)
         max_angle_rad: 1.0472        # largest angle between the board's normal and the ray to the camera (rad,
@@ -25,6 +26,12 @@ Schema (a camera cell needs no ``tracker`` nor ``reflector_m``)::
       dictionary: DICT_5X5_100       # charuco only: cv2.aruco's predefined dictionary
       pose: {xyz_m: [...], rpy_deg: [...]}   # eye_in_hand: the board in the cell frame (W_T_board);
                                              # eye_to_hand: the board in the tool frame (tool_T_board)
+
+``intrinsics_sigma`` (optional) asks the calibration to estimate the named intrinsics with the robot: a mapping from
+an intrinsic's name (fx, fy, cx, cy in px; k1, k2, p1, p2, k3 dimensionless) to the σ of its Gaussian prior around
+the nominal value in ``intrinsics`` (the σ of a separate intrinsic calibration, or a generous bound on what is
+known). The intrinsics it does not name are held at their nominal values; without the field all are. Every σ is
+positive and finite.
 
 The board frame has its origin at the first inner corner, x along a row of squares, z out of the printed side; the
 (rows − 1) × (columns − 1) inner corners are numbered row by row (id = row · (columns − 1) + column), OpenCV's
@@ -43,14 +50,15 @@ import pinocchio as pin
 
 from pin_kpi_oed.cell.fields import read_pose, read_vec, where
 from pin_kpi_oed.errors import InputError
-from pin_kpi_oed.model.camera import CAMERA_MODES, Board, CameraModel, Intrinsics
+from pin_kpi_oed.model.camera import CAMERA_MODES, INTRINSIC_NAMES, Board, CameraModel, Intrinsics
 from pin_kpi_oed.model.robot import Robot
 
-__all__ = ["CameraSetup", "read_camera_setup", "read_board", "read_view", "BOARD_TYPES", "VIEW_DEFAULTS"]
+__all__ = ["CameraSetup", "read_camera_setup", "read_board", "read_view", "read_intrinsics_sigma", "BOARD_TYPES",
+           "VIEW_DEFAULTS"]
 
 #: the calibration boards the package reads
 BOARD_TYPES = ("chessboard", "charuco")
-_CAMERA_KEYS = {"mount", "pose", "intrinsics", "sigma_px", "view"}
+_CAMERA_KEYS = {"mount", "pose", "intrinsics", "sigma_px", "view", "intrinsics_sigma"}
 _VIEW_KEYS = {"margin_px", "max_angle_rad", "near_m", "far_m"}
 #: the view limits a camera block without ``view`` (or a ``view`` without a field) states: margin (px), largest
 #: viewing angle (rad, 60 deg), depth of field near and far (m)
@@ -74,6 +82,8 @@ class CameraSetup:
         view: what the camera needs to see the board (``margin_px`` px, ``max_angle_rad`` rad, ``near_m`` and
             ``far_m`` m; :data:`VIEW_DEFAULTS` where the file says nothing), read by
             :func:`~pin_kpi_oed.cell.camera_view.cell_view_limits`.
+        intrinsics_sigma: the prior σ of the intrinsics the calibration estimates, by name (px; distortion
+            dimensionless), or None: the intrinsics are known.
     """
 
     mode: str
@@ -86,6 +96,7 @@ class CameraSetup:
     marker_m: float | None = None
     dictionary: str | None = None
     view: dict = field(default_factory=lambda: dict(VIEW_DEFAULTS))
+    intrinsics_sigma: dict[str, float] | None = None
 
     @property
     def eye_in_hand(self) -> bool:
@@ -105,12 +116,23 @@ class CameraSetup:
 
         Returns:
             The nominal :class:`~pin_kpi_oed.model.camera.CameraModel` (board_T_base or camera_T_base from the
-            cell-frame poses).
+            cell-frame poses); with ``intrinsics_sigma`` it estimates the named intrinsics with their prior (group
+            ``intrinsics``), the others fixed at nominal.
         """
         fixed_T_base = self.device_in_cell().inverse() * W_T_base
         cam, brd = (self.camera_pose, fixed_T_base) if self.eye_in_hand else (fixed_T_base, self.board_pose)
-        return CameraModel(robot, self.intrinsics, self.board, mode=self.mode, camera_pose=cam, board_pose=brd,
-                           tcp_m=np.asarray(tcp_m, float), sigma_px=self.sigma_px)
+        model = CameraModel(robot, self.intrinsics, self.board, mode=self.mode, camera_pose=cam, board_pose=brd,
+                            tcp_m=np.asarray(tcp_m, float), sigma_px=self.sigma_px,
+                            estimate_intrinsics=bool(self.intrinsics_sigma))
+        if self.intrinsics_sigma:
+            L = model.layout
+            assert L is not None
+            for name in INTRINSIC_NAMES:
+                if name in self.intrinsics_sigma:
+                    L.set_prior(f"intrinsics.{name}", self.intrinsics_sigma[name])
+                else:
+                    L.fix(f"intrinsics.{name}")
+        return model
 
     def to_dict(self) -> dict:
         """The ``camera`` and ``board`` fields (the cell file's syntax, rad), for a design or model file."""
@@ -118,6 +140,7 @@ class CameraSetup:
             return {"xyz_m": T.translation.tolist(), "rpy_rad": pin.rpy.matrixToRpy(T.rotation).tolist()}
 
         k = self.intrinsics
+        extra = {"intrinsics_sigma": dict(self.intrinsics_sigma)} if self.intrinsics_sigma else {}
         board = {"type": self.board_type, "rows": self.board.rows + 1, "columns": self.board.cols + 1,
                  "square_m": self.board.square_m, "pose": pose(self.board_pose)}
         if self.board_type == "charuco":
@@ -125,7 +148,8 @@ class CameraSetup:
         return {"camera": {"mount": self.mode, "pose": pose(self.camera_pose), "sigma_px": self.sigma_px,
                            "view": dict(self.view),
                            "intrinsics": {"fx": k.fx, "fy": k.fy, "cx": k.cx, "cy": k.cy,
-                                          "distortion": k.dist.tolist(), "image_size_px": [k.width, k.height]}},
+                                          "distortion": k.dist.tolist(), "image_size_px": [k.width, k.height]},
+                           **extra},
                 "board": board}
 
 
@@ -237,7 +261,36 @@ def read_camera_setup(d: dict, source: str = "") -> CameraSetup | None:
                          f"{'cell' if mode == 'eye_in_hand' else 'tool'} frame: xyz_m, rpy_deg)")
     board, kind, marker, dictionary, bpose = read_board(d["board"], bwhat)
     view = read_view(cam.get("view", {}), f"{what}.view")
-    return CameraSetup(mode, intr, board, pose, bpose, sigma, kind, marker, dictionary, view)
+    isig = read_intrinsics_sigma(cam["intrinsics_sigma"], f"{what}.intrinsics_sigma") if (
+        "intrinsics_sigma" in cam) else None
+    return CameraSetup(mode, intr, board, pose, bpose, sigma, kind, marker, dictionary, view, isig)
+
+
+def read_intrinsics_sigma(d: Any, what: str) -> dict[str, float]:
+    """The camera's ``intrinsics_sigma`` (module docstring): the prior σ of the intrinsics to estimate, by name.
+
+    Args:
+        d: the mapping {name: σ} (fx, fy, cx, cy in px; k1, k2, p1, p2, k3 dimensionless); what: the file and field.
+
+    Returns:
+        {name: σ} in the model's intrinsic order.
+
+    Raises:
+        InputError: not a mapping (e.g. a list), empty, an unknown name, or a σ that is not a positive finite number.
+    """
+    if not isinstance(d, dict):
+        raise InputError(f"{what}: expected a mapping from intrinsic name to prior sigma (e.g. {{fx: 5.0, cx: 5.0}}; "
+                         f"names {', '.join(INTRINSIC_NAMES)}), got {d!r}")
+    if not d:
+        raise InputError(f"{what}: empty; name the intrinsics to estimate ({', '.join(INTRINSIC_NAMES)}) or leave "
+                         "the field out")
+    d = _mapping(d, set(INTRINSIC_NAMES), what)
+    for key, v in d.items():
+        unit = " px" if key in ("fx", "fy", "cx", "cy") else " (dimensionless)"
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v <= 0:
+            raise InputError(f"{what}.{key}: expected a positive finite prior sigma{unit}, got {v!r} (leave the "
+                             "intrinsic out to hold it at its nominal value)")
+    return {k: float(d[k]) for k in INTRINSIC_NAMES if k in d}
 
 
 def read_view(d: Any, what: str) -> dict:

@@ -3,7 +3,8 @@ measurement file (one row per detected corner, :mod:`pin_kpi_oed.data.corner_mea
 
 ``simulate --cell CAMERA_CELL`` writes the corners of a true robot that is not the model
 (:mod:`pin_kpi_oed.simulation.camera_sim`: every joint placement, the hand-eye transform and the board off nominal,
-``--effects`` the model lacks) at seeded configurations around the cell's working ones that see the whole board;
+the intrinsics the cell's ``intrinsics_sigma`` names off nominal by N(0, σ²), ``--effects`` the model lacks) at
+seeded configurations around the cell's working ones that see the whole board;
 ``identify CORNERS.csv --cell CAMERA_CELL --model-out MODEL.json`` fits the robot on the reprojection error
 (:mod:`pin_kpi_oed.identification.camera_identify`) and writes the calibrated model, which ``predict --at tcp``,
 ``compensate`` and ``report`` read like any other. The tracker's options that describe a tracker (``--reflector``,
@@ -60,7 +61,8 @@ def simulate_camera(args: argparse.Namespace, cell: Any, Q_design: np.ndarray | 
     model = cell.measurement_model()
     tol = CameraTolerances(
         joint_translation_m=float(parse_floats(args.tol_translation or "5e-4", 1, "--tol-translation")[0]),
-        joint_rotation_rad=float(parse_floats(args.tol_rotation or "1e-3", 1, "--tol-rotation")[0]))
+        joint_rotation_rad=float(parse_floats(args.tol_rotation or "1e-3", 1, "--tol-rotation")[0]),
+        intrinsics=_true_intrinsics_sigma(cell.camera.intrinsics_sigma))
     effects = []
     if args.effects:
         from pin_kpi_oed.effects.library import parse_effects_spec
@@ -96,6 +98,14 @@ def simulate_camera(args: argparse.Namespace, cell: Any, Q_design: np.ndarray | 
           + f" (camera {model.mode}, pixel noise {model.sigma_px:g} px, seed {args.seed}"
           + (f", effects: {', '.join(e.name for e, _ in effects)}" if effects else "") + ")")
     return 0
+
+
+def _true_intrinsics_sigma(sigma: dict | None) -> tuple[float, ...]:
+    """σ of the simulated truth's intrinsic offsets in the model's order: the cell's prior σ for the intrinsics it
+    estimates, 0 for the others (an empty tuple: the intrinsics are known)."""
+    from pin_kpi_oed.model.camera import INTRINSIC_NAMES
+
+    return tuple(float(sigma.get(n, 0.0)) for n in INTRINSIC_NAMES) if sigma else ()
 
 
 #: options of identify a camera fit has no use for (tracker stations, reflector, effects, orientation rows)

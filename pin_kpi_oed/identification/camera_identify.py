@@ -19,7 +19,10 @@ need nothing of their own for a camera:
   eye-in-hand): the TCP's σ through the model's Jacobian is E C_p Eᵀ over the robot and the device frame (the part
   on the tool does not move the TCP), plus the held term G Σ_N Gᵀ;
 * the device itself (``fit.device``: mount, intrinsics, board, fitted poses, reprojection RMS in px), read back by
-  :func:`camera_device`. The model's noise is 1 nm: a camera does not measure the TCP, its pixel noise is in C_p.
+  :func:`camera_device`; a model that estimated intrinsics (the cell's ``intrinsics_sigma``) adds
+  ``fitted_intrinsics`` (all nine by name, px and dimensionless) and ``intrinsics_std`` (the σ of the estimated
+  ones, by name), and :func:`camera_model_of` takes the fitted intrinsics as its nominal ones. The model's noise
+  is 1 nm: a camera does not measure the TCP, its pixel noise is in C_p.
 """
 
 from __future__ import annotations
@@ -34,7 +37,7 @@ from pin_kpi_oed.data.corner_measurements import CornerSet
 from pin_kpi_oed.errors import InputError
 from pin_kpi_oed.identification.camera_fit import CameraFit, fit_camera
 from pin_kpi_oed.identification.identify_result import param_unit
-from pin_kpi_oed.model.camera import CameraModel
+from pin_kpi_oed.model.camera import INTRINSIC_NAMES, CameraModel, Intrinsics
 from pin_kpi_oed.model.noise import NoiseModel
 from pin_kpi_oed.model.tolerances import Tolerances
 from pin_kpi_oed.oed.covariance import held_absorption
@@ -74,6 +77,15 @@ class CameraIdentification:
         frame = self.model.frame_group
         return [f"tracker.{n.split('.', 1)[1]}" if n.split(".", 1)[0] == frame else n for n in self.fit.names]
 
+    def fitted_intrinsics(self) -> tuple[dict[str, float], dict[str, float]]:
+        """The intrinsics at the fit ({name: value}, all nine, px or dimensionless) and the σ of the estimated ones
+        ({name: σ}; empty when the model holds every intrinsic at nominal)."""
+        m, f = self.model, self.fit
+        values = dict(zip(INTRINSIC_NAMES, m.intrinsic_vector(f.p).tolist()))
+        std = np.sqrt(np.maximum(np.diag(f.covariance), 0.0))
+        sig = {n.split(".", 1)[1]: float(s) for n, s in zip(f.names, std) if n.startswith("intrinsics.")}
+        return values, sig
+
     def calibrated_model(self, q_work: np.ndarray | None = None, tool_source: str = "") -> CalibratedModel:
         """The calibration as a :class:`CalibratedModel` (module docstring)."""
         m, p = self.model, self.fit.p
@@ -86,6 +98,9 @@ class CameraIdentification:
         device = {**self.device, "mode": m.mode, "fitted_camera_pose": m.pose_of("camera", p).homogeneous.tolist(),
                   "fitted_board_pose": m.pose_of("board", p).homogeneous.tolist(), "rms_px": self.fit.rms_px,
                   "sigma_px": m.sigma_px}
+        values, sig = self.fitted_intrinsics()
+        if m.estimate_intrinsics:
+            device.update(fitted_intrinsics=values, intrinsics_std=sig)
         fit = {"device": device, "n_measurements": self.fit.n_images, "n_rows": self.fit.n_rows,
                "rms_px": self.fit.rms_px, "chi2_reduced": self.fit.chi2_reduced, "covariance_scaled": False,
                "loss": "linear", "success": bool(self.fit.success), "status": self.fit.status,
@@ -102,12 +117,17 @@ class CameraIdentification:
             q_work=q_work, tool_source=tool_source)
 
     def summary(self) -> str:
-        """Readable lines: images, corners, reprojection RMS, χ², identified and held parameters."""
+        """Readable lines: images, corners, reprojection RMS, χ², identified and held parameters, the estimated
+        intrinsics with their σ."""
         f = self.fit
+        values, sig = self.fitted_intrinsics()
+        unit = {n: " px" if n in ("fx", "fy", "cx", "cy") else "" for n in sig}
+        intr = ("\nfitted intrinsics: " + ", ".join(f"{n} {values[n]:.6g}{unit[n]} (sigma {s:.2g}{unit[n]})"
+                                                     for n, s in sig.items()) if sig else "")
         return (f"camera fit: {f.n_images} images, {f.n_rows // 2} corners, reprojection RMS {f.rms_px:.3f} px, "
                 f"reduced chi2 {f.chi2_reduced:.2f}, {len(f.base)} parameters identified"
                 + (f", {self.held.k} joint-placement parameters held at nominal (tolerance prior)"
-                   if self.held is not None else ""))
+                   if self.held is not None else "") + intr)
 
 
 def _aligned(cs: CornerSet, model: CameraModel, source: str) -> tuple[list[str], np.ndarray, np.ndarray]:
@@ -184,7 +204,18 @@ def camera_model_of(cm: Any) -> tuple[CameraModel, np.ndarray]:
     setup = read_camera_setup({"camera": dev.get("camera"), "board": dev.get("board")}, "model file: fit.device")
     cam = se3_from_matrix(dev.get("fitted_camera_pose"), "model file: fit.device.fitted_camera_pose")
     brd = se3_from_matrix(dev.get("fitted_board_pose"), "model file: fit.device.fitted_board_pose")
-    model = CameraModel(cm.robot, setup.intrinsics, setup.board, mode=setup.mode, camera_pose=cam, board_pose=brd,
+    intr = setup.intrinsics
+    fitted = dev.get("fitted_intrinsics")
+    if fitted is not None:
+        try:
+            k = np.array([float(fitted[n]) for n in INTRINSIC_NAMES])
+        except (TypeError, KeyError, ValueError):
+            raise InputError(f"model file: fit.device.fitted_intrinsics: expected a number for each of "
+                             f"{', '.join(INTRINSIC_NAMES)}, got {fitted!r}") from None
+        if not np.all(np.isfinite(k)):
+            raise InputError(f"model file: fit.device.fitted_intrinsics: a value is not finite ({fitted!r})")
+        intr = Intrinsics(float(k[0]), float(k[1]), float(k[2]), float(k[3]), k[4:], intr.width, intr.height)
+    model = CameraModel(cm.robot, intr, setup.board, mode=setup.mode, camera_pose=cam, board_pose=brd,
                         tcp_m=cm.tcp_m.copy(), sigma_px=setup.sigma_px)
     p = np.zeros(model.n_params)
     p[:cm.joint_p.size] = cm.joint_p

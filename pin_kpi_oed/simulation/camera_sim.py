@@ -1,7 +1,8 @@
 """Simulated camera measurements: the board's corner pixels of a true robot that is not the package's model.
 
 The truth (:func:`camera_truth`): every joint placement off by the tolerances (N(0, σ²) per translation and
-rotation), the hand-eye transform and the board's (or the camera's) pose off their nominal values, and, with
+rotation), the hand-eye transform and the board's (or the camera's) pose off their nominal values, with
+``intrinsics`` σ the camera's intrinsics off their nominal ones (a model that estimates them), and, with
 ``effects``, joint-angle errors the camera model lacks (a gear harmonic, joint compliance, ...: the effects'
 ``joint_offset``, added to the commanded joints before the true kinematics). The pixels
 (:func:`simulate_corners`) are the truth's projection with N(0, σ_px²) noise per coordinate (seeded); a corner
@@ -15,6 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from pin_kpi_oed.effects.compose import sum_joint_offsets
+from pin_kpi_oed.errors import InputError
 from pin_kpi_oed.model.camera import CameraModel
 
 __all__ = ["CameraTolerances", "camera_truth", "simulate_corners", "true_tcp"]
@@ -28,6 +30,8 @@ class CameraTolerances:
         joint_translation_m, joint_rotation_rad: every joint placement's.
         hand_eye_translation_m, hand_eye_rotation_rad: the camera on the tool (eye-in-hand) or in the cell.
         board_translation_m, board_rotation_rad: the board in the cell (eye-in-hand) or on the tool.
+        intrinsics: σ of the true intrinsics' offsets from the nominal ones in the model's order (fx, fy, cx, cy
+            px, then k1, k2, p1, p2, k3 dimensionless; fewer values: the rest 0); empty: the intrinsics are known.
     """
 
     joint_translation_m: float = 5e-4
@@ -36,9 +40,15 @@ class CameraTolerances:
     hand_eye_rotation_rad: float = 1e-2
     board_translation_m: float = 5e-3
     board_rotation_rad: float = 2e-2
+    intrinsics: tuple[float, ...] = ()
 
     def sigma_vector(self, model: CameraModel) -> np.ndarray:
-        """σ of every raw parameter of ``model`` (m, rad; the intrinsics' offsets 0: known)."""
+        """σ of every raw parameter of ``model`` (m, rad; the intrinsics' offsets px or dimensionless).
+
+        Raises:
+            InputError: more than 9 or negative or non-finite intrinsic σ, or intrinsic σ for a model that does not
+                estimate its intrinsics (it has no parameters for them).
+        """
         L = model.layout
         s = np.zeros(L.n)
         n = L.n_joints
@@ -48,11 +58,22 @@ class CameraTolerances:
                             ("board", self.board_translation_m, self.board_rotation_rad)):
             g = L.group_slice(group)
             s[g.start:g.start + 3], s[g.start + 3:g.stop] = t, r
+        k = np.asarray(self.intrinsics, float)
+        if k.size > 9 or not np.all(np.isfinite(k)) or np.any(k < 0):
+            raise InputError(f"camera tolerances: intrinsics takes up to 9 finite sigma >= 0 (fx, fy, cx, cy px, "
+                             f"then distortion), got {list(self.intrinsics)}")
+        if np.any(k > 0):
+            if not model.estimate_intrinsics:
+                raise InputError("camera tolerances: true intrinsics off nominal need a model that estimates them "
+                                 "(estimate_intrinsics, the cell's intrinsics_sigma)")
+            g = L.group_slice("intrinsics")
+            s[g.start:g.start + k.size] = k
         return s
 
 
 def camera_truth(model: CameraModel, tol: CameraTolerances | None = None, seed: int = 0) -> np.ndarray:
-    """A true raw parameter vector p* ~ N(0, diag(σ²)) of :class:`CameraTolerances` (seeded), (n_params,) m, rad."""
+    """A true raw parameter vector p* ~ N(0, diag(σ²)) of :class:`CameraTolerances` (seeded), (n_params,) m, rad
+    (px and dimensionless for the intrinsics)."""
     s = (tol or CameraTolerances()).sigma_vector(model)
     return np.random.default_rng(seed).normal(0.0, 1.0, s.size) * s
 
