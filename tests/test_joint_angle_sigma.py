@@ -109,13 +109,13 @@ def test_leave_one_pose_out_errors_are_those_of_a_refit():
 def test_restricted_likelihood_gradient_matches_finite_differences():
     """The restricted likelihood's analytic gradient in (log τ², log σ_n²) (the level's L-BFGS-B fit) against central
     differences, at points on both sides of its optimum, with eigenvalues and residuals of a real kernel matrix."""
-    from pin_kpi_oed.discrepancy.joint_angle import _cross, _restricted, nll_and_grad
+    from pin_kpi_oed.discrepancy.joint_angle import joint_angle_kernel, nll_and_grad, restricted_space
 
     Q, Jq, F, _ = _toy(4, n=20)
     n = len(F)
-    K = _cross(Q[:n], Jq[:n], Q[:n], Jq[:n], LENGTH_SCALE_RAD).reshape(3 * n, 3 * n)
+    K = joint_angle_kernel(Q[:n], Jq[:n], Q[:n], Jq[:n], LENGTH_SCALE_RAD).reshape(3 * n, 3 * n)
     r = np.random.default_rng(1).standard_normal(3 * n)
-    lam, zt, _ = _restricted(K, r, F.reshape(3 * n, -1))
+    lam, zt, _ = restricted_space(K, r, F.reshape(3 * n, -1))
     h = 1e-6
     for x in ([0.0, 0.0], [-3.0, 0.5], [2.0, -4.0], [-8.0, 1.5]):
         x = np.array(x)

@@ -54,7 +54,7 @@ from scipy.optimize import minimize
 from pin_kpi_oed.discrepancy.arrays import decode_array, encode_array
 
 __all__ = ["JointAngleTerm", "fit_joint_angle", "loo_log_density", "LENGTH_SCALE_RAD", "LENGTH_SCALES_RAD",
-           "LR_CRITICAL", "VETO_SE", "MAX_ROWS"]
+           "LR_CRITICAL", "VETO_SE", "MAX_ROWS", "joint_angle_kernel", "restricted_space", "nll_and_grad"]
 
 #: ℓ of κ (rad): the one-joint length scale of the design's prior kernel
 LENGTH_SCALE_RAD = 0.5
@@ -74,7 +74,7 @@ def _kappa(A: np.ndarray, B: np.ndarray, ell: float) -> np.ndarray:
     return np.exp(-(2.0 - 2.0 * np.cos(A[:, None, :] - B[None, :, :])) / (2.0 * ell ** 2))
 
 
-def _cross(Qa: np.ndarray, Ja: np.ndarray, Qb: np.ndarray, Jb: np.ndarray, ell: float) -> np.ndarray:
+def joint_angle_kernel(Qa: np.ndarray, Ja: np.ndarray, Qb: np.ndarray, Jb: np.ndarray, ell: float) -> np.ndarray:
     """Covariance of δ (per unit τ²) between rows a and b: (n, 3, m, 3)."""
     return np.einsum("iaj,ikj,kbj->iakb", Ja, _kappa(Qa, Qb, ell), Jb)
 
@@ -132,13 +132,13 @@ class JointAngleTerm:
         D[:, :, :E.shape[2]] = E
         t2, ell, n3 = self.tau2, self.length_scale_rad, 3 * len(self.Q)
         own = t2 * np.einsum("maj,mbj->mab", Jq, Jq)
-        k = t2 * _cross(self.Q, self.Jq, Q, Jq, ell).reshape(n3, m, 3)                # cov(δ_Q, δ(q))
+        k = t2 * joint_angle_kernel(self.Q, self.Jq, Q, Jq, ell).reshape(n3, m, 3)                # cov(δ_Q, δ(q))
         if registration is not None:
             A, QR, JR = registration
             r3 = 3 * len(QR)
-            KRq = t2 * _cross(QR, JR, Q, Jq, ell).reshape(r3, m, 3)
-            KRR = t2 * _cross(QR, JR, QR, JR, ell).reshape(r3, r3)
-            KQR = t2 * _cross(self.Q, self.Jq, QR, JR, ell).reshape(n3, r3)
+            KRq = t2 * joint_angle_kernel(QR, JR, Q, Jq, ell).reshape(r3, m, 3)
+            KRR = t2 * joint_angle_kernel(QR, JR, QR, JR, ell).reshape(r3, r3)
+            KQR = t2 * joint_angle_kernel(self.Q, self.Jq, QR, JR, ell).reshape(n3, r3)
             AK = np.einsum("man,nmb->mab", A, KRq)
             own = (own - AK - AK.transpose(0, 2, 1) + np.einsum("man,nk,mbk->mab", A, KRR, A)
                    + self.noise_var_m2 * np.einsum("man,mbn->mab", A, A))
@@ -155,8 +155,8 @@ class JointAngleTerm:
         m, P = len(Q), self.Fplus.shape[0]
         D = np.zeros((m, 3, P))
         D[:, :, :E.shape[2]] = E
-        own = self.tau2 * _cross(Q, Jq, Q, Jq, self.length_scale_rad)
-        k = self.tau2 * _cross(self.Q, self.Jq, Q, Jq, self.length_scale_rad).reshape(3 * len(self.Q), m, 3)
+        own = self.tau2 * joint_angle_kernel(Q, Jq, Q, Jq, self.length_scale_rad)
+        k = self.tau2 * joint_angle_kernel(self.Q, self.Jq, Q, Jq, self.length_scale_rad).reshape(3 * len(self.Q), m, 3)
         EG = np.einsum("iap,kpb->iakb", D, np.einsum("pn,nmb->mpb", self.Fplus, k))
         return own - EG - EG.transpose(2, 3, 0, 1)
 
@@ -197,7 +197,7 @@ class JointAngleTerm:
                    param_cov, white)
 
 
-def _restricted(K: np.ndarray, r: np.ndarray, Fs: np.ndarray) -> tuple[np.ndarray, np.ndarray, int]:
+def restricted_space(K: np.ndarray, r: np.ndarray, Fs: np.ndarray) -> tuple[np.ndarray, np.ndarray, int]:
     """(eigenvalues λ of NᵀKN, Vᵀ Nᵀ r, k) with N an orthonormal basis of what a fit of Fs leaves."""
     U, s, _ = np.linalg.svd(Fs, full_matrices=True)
     rank = int(np.sum(s > 1e-10 * (s[0] if s.size else 1.0)))
@@ -232,7 +232,7 @@ def nll_and_grad(x: np.ndarray, lam: np.ndarray, zt: np.ndarray) -> tuple[float,
 def _fit_one(K: np.ndarray, r: np.ndarray, Fs: np.ndarray, floor: float) -> tuple[float, np.ndarray, float] | None:
     """REML of (τ², σ_n²) for one kernel matrix K (normalised units): (−ℓ, x = (log τ², log σ_n²), 2 Δℓ against the
     white level), or None when nothing lies above the floor."""
-    lam, zt, k = _restricted(K, r, Fs)
+    lam, zt, k = restricted_space(K, r, Fs)
     white = float(np.sum(zt ** 2)) / max(k, 1)
     if k < 3 or white <= floor:
         return None
@@ -298,7 +298,7 @@ def fit_joint_angle(Q: np.ndarray, R: np.ndarray, Jq: np.ndarray, F: np.ndarray,
     white = loo_log_density(np.diag(np.tile(np.asarray(white_var_m2, float).reshape(3), n)), Fs, r, groups)
     best = None
     for ell in length_scales_rad:
-        K = _cross(Q, Jq, Q, Jq, float(ell)).reshape(3 * n, 3 * n)
+        K = joint_angle_kernel(Q, Jq, Q, Jq, float(ell)).reshape(3 * n, 3 * n)
         got = _fit_one(K / jn ** 2, r / unit, Fs, floor)
         if got is None or got[2] <= LR_CRITICAL:                  # the restricted evidence does not support it
             continue
