@@ -189,15 +189,11 @@ def _records(paths: Sequence[str], counts: Sequence[int]) -> list[dict]:
 
 def _calibrated(cm: Any, dev: dict, model_path: str, files: dict, checked: dict) -> dict:
     from pin_kpi_oed.data.provenance import sha256_of, software_versions
-    from pin_kpi_oed.report.content import portable_path
+    from pin_kpi_oed.report.content import robot_identity
 
-    rb = cm.robot
     step = (cm.history or [{}])[-1]
-    return {"robot": rb.name, "urdf_path": portable_path(str(rb.urdf_path)),
-            "urdf_sha256": _sha256_text(rb.read_urdf_text()),
-            "kinematics_hash": rb.kinematics.hash if rb.kinematics is not None else None,
-            "tool_frame": rb.tool_frame, "joints": list(rb.joint_names), "tcp_m": np.asarray(cm.tcp_m).tolist(),
-            "tcp_stated_by": cm.tool_source or None, "camera": dev.get("camera"), "board": dev.get("board"),
+    return {**robot_identity(cm), "tcp_stated_by": cm.tool_source or None, "camera": dev.get("camera"),
+            "board": dev.get("board"),
             "mode": dev.get("mode"), "sigma_px": dev.get("sigma_px"),
             "model_file": {"path": str(model_path), "sha256": sha256_of(model_path)},
             "train_files": files["train"], "validate_files": files["validate"], "train_files_check": checked,

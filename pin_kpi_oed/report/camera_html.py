@@ -96,20 +96,15 @@ def _camera_setup(d: dict) -> str:
 
 
 def _parameters(d: dict) -> str:
-    p = d["parameters"]
+    from pin_kpi_oed.report.html_parts import correlations_html, parameter_value as val
 
-    def val(v: float, u: str) -> str:
-        if u in ("m", "rad"):
-            return f"{v * 1e3:+.4f} {'mm' if u == 'm' else 'mrad'}"
-        return f"{v:+.6g} {u}"
+    p = d["parameters"]
 
     out = f"<p>{_e(p['in_words'])}.</p>" + _rows([[r["name"], val(r["value"], r["unit"]),
                                                     val(r["std"], r["unit"]).lstrip("+")] for r in p["rows"]],
                                                   ["parameter", "value", "std"])
     cor = p["correlations"]
-    out += ("<p>Strongest correlations (|r| ≥ 0.9): " + ", ".join(f"{_e(c['a'])} / {_e(c['b'])} ({c['r']:+.3f})"
-                                                               for c in cor[:12]) + "</p>") if cor else \
-        "<p>No two parameters correlate with |r| ≥ 0.9.</p>"
+    out += correlations_html(cor)
     if p["held_at_nominal"]:
         out += f"<p class=\"note\">Held at nominal: {_e(', '.join(p['held_at_nominal']))}</p>"
     return out

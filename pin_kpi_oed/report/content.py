@@ -26,7 +26,7 @@ import numpy as np
 
 from pin_kpi_oed.errors import InputError
 
-__all__ = ["Certificate", "CertificateOptions", "build_certificate", "check_recorded", "correlations",
+__all__ = ["Certificate", "CertificateOptions", "build_certificate", "check_recorded", "robot_identity", "correlations",
            "sections_present", "portable_path", "CERTIFICATE_FORMAT", "SECTIONS"]
 
 #: Format tag of the certificate's JSON.
@@ -146,15 +146,21 @@ def portable_path(path: str) -> str:
     return str(path)
 
 
-def _calibrated(cm: Any, model_path: str, train_recs: list[dict], val_recs: list[dict], checked: dict) -> dict:
-    from pin_kpi_oed.data.provenance import sha256_of, software_versions
-
+def robot_identity(cm: Any) -> dict:
+    """The calibrated robot as a certificate names it: robot, URDF (portable path, SHA-256 of its text), the
+    kinematics file's hash, tool frame, joints and the TCP (m, tool frame)."""
     rb = cm.robot
-    step = (cm.history or [{}])[-1]
     return {"robot": rb.name, "urdf_path": portable_path(str(rb.urdf_path)),
             "urdf_sha256": _sha256_text(rb.read_urdf_text()),
             "kinematics_hash": rb.kinematics.hash if rb.kinematics is not None else None,
-            "tool_frame": rb.tool_frame, "joints": list(rb.joint_names), "tcp_m": np.asarray(cm.tcp_m).tolist(),
+            "tool_frame": rb.tool_frame, "joints": list(rb.joint_names), "tcp_m": np.asarray(cm.tcp_m).tolist()}
+
+
+def _calibrated(cm: Any, model_path: str, train_recs: list[dict], val_recs: list[dict], checked: dict) -> dict:
+    from pin_kpi_oed.data.provenance import sha256_of, software_versions
+
+    step = (cm.history or [{}])[-1]
+    return {**robot_identity(cm),
             "pose6d": bool(cm.pose6d), "stations": _stations(cm), "noise": cm.noise.to_dict(),
             "sigma_source": (cm.fit or {}).get("sigma_source"),
             "model_file": {"path": str(model_path), "sha256": sha256_of(model_path)},

@@ -80,19 +80,14 @@ def _calibrated(d: dict) -> str:
 
 
 def _parameters(d: dict) -> str:
-    p = d["parameters"]
+    from pin_kpi_oed.report.html_parts import correlations_html, parameter_value as val
 
-    def val(v: float, u: str) -> str:
-        if u in ("m", "rad"):
-            return f"{v * 1e3:+.4f} {'mm' if u == 'm' else 'mrad'}"
-        return f"{v:+.6g} {u}"
+    p = d["parameters"]
 
     out = _table(["parameter", "value", "std"], [[r["name"], val(r["value"], r["unit"]),
                                                   val(r["std"], r["unit"]).lstrip("+")] for r in p["rows"]])
     cor = p["correlations"]
-    out += ("<p>Strongest correlations (|r| ≥ 0.9): " + ", ".join(f"{_e(c['a'])} / {_e(c['b'])} ({c['r']:+.3f})"
-                                                               for c in cor[:12]) + "</p>") if cor else \
-        "<p>No two parameters correlate with |r| ≥ 0.9.</p>"
+    out += correlations_html(cor)
     ident = p["identifiable"]
     out += f"<h3>Identifiable set</h3><p>{_e(ident['in_words'])}</p>"
     if ident["held_at_nominal"]:

@@ -14,6 +14,21 @@ def _e(x: Any) -> str:
     return html.escape(str(x))
 
 
+def parameter_value(v: float, unit: str) -> str:
+    """A parameter's value for display: m as mm, rad as mrad (signed, 4 decimals); other units as given."""
+    if unit in ("m", "rad"):
+        return f"{v * 1e3:+.4f} {'mm' if unit == 'm' else 'mrad'}"
+    return f"{v:+.6g} {unit}"
+
+
+def correlations_html(cor: list[dict]) -> str:
+    """The strongest parameter correlations (|r| ≥ 0.9, at most 12) as one paragraph."""
+    if not cor:
+        return "<p>No two parameters correlate with |r| ≥ 0.9.</p>"
+    return "<p>Strongest correlations (|r| ≥ 0.9): " + ", ".join(
+        f"{_e(c['a'])} / {_e(c['b'])} ({c['r']:+.3f})" for c in cor[:12]) + "</p>"
+
+
 def _mm(v: Any, digits: int = 3) -> str:
     return "—" if v is None else f"{float(v) * 1e3:.{digits}f} mm"
 
