@@ -48,6 +48,7 @@ import contextlib
 import csv
 import io
 import json
+from typing import Any
 import shutil
 import sys
 import tempfile
@@ -323,13 +324,23 @@ def walk_cli(f: dict[str, Path], urdf: Path, seed: int) -> dict:
     out["reflector"] = heldout_stats(f["pr"])
     out["tcp"] = tcp_heldout(f["pt"], truth, cm.tcp_m, te.q)
     out["held"] = held_draws(cm, truth, te)
+    for frame, (_, c) in compensate_both_frames(f, truth, cm).items():
+        out[f"compensate_{frame}"] = c
+    return out
+
+
+def compensate_both_frames(f: dict, truth: Any, cm: Any) -> dict[str, tuple[dict, dict]]:
+    """``compensate`` the true TCPs' targets in the cell (tracker) and the base frame: frame -> (the command's JSON,
+    :func:`compensation` of it against the truth)."""
+    out = {}
     for frame, t, j, jj in (("cell", "t", "j", "jj"), ("base", "tb", "jb", "jjb")):
         X = targets(truth, cm, frame)
         write_targets(f[t], X, cm.robot.nq >= 6)
         run_cli("compensate", "--model", f["m"], "--targets", f[t], "--cell", f["cell"],
                 "--frame", "tracker" if frame == "cell" else frame,
                 "--out", f[j], "--json", f[jj], "--quiet")
-        out[f"compensate_{frame}"] = compensation(truth, cm, json.loads(f[jj].read_text()), X, frame)
+        res = json.loads(f[jj].read_text())
+        out[frame] = (res, compensation(truth, cm, res, X, frame))
     return out
 
 

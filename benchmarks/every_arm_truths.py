@@ -30,8 +30,8 @@ from typing import Any
 
 import numpy as np
 
-from benchmarks.every_arm import (HARMONIC, N_TEST, arm_urdf, compensation, limits, run_cli, targets, tcp_heldout,
-                                  true_tcp, work_files, write_cell, write_targets)
+from benchmarks.every_arm import (HARMONIC, N_TEST, arm_urdf, compensate_both_frames, limits, run_cli, tcp_heldout,
+                                  true_tcp, work_files, write_cell)
 
 BAND = (0.67, 1.5)
 
@@ -67,14 +67,7 @@ def one_truth(f: dict[str, Path], urdf: Path, seed: int) -> dict:
     te = read_measurements(f["te"], joint_names=cm.robot.joint_names, joint_guard=limits(cm.robot))
     out["z2"] = truth_rows(f["pt"], truth, cm.tcp_m, te.q).tolist()
     out["tcp"] = tcp_heldout(f["pt"], truth, cm.tcp_m, te.q)
-    for frame, t, j, jj in (("cell", "t", "j", "jj"), ("base", "tb", "jb", "jjb")):
-        X = targets(truth, cm, frame)
-        write_targets(f[t], X, cm.robot.nq >= 6)
-        run_cli("compensate", "--model", f["m"], "--targets", f[t], "--cell", f["cell"],
-                "--frame", "tracker" if frame == "cell" else frame,
-                "--out", f[j], "--json", f[jj], "--quiet")
-        res = json.loads(f[jj].read_text())
-        c = compensation(truth, cm, res, X, frame)
+    for frame, (res, c) in compensate_both_frames(f, truth, cm).items():
         c["held_m"] = res.get("tcp_unobservable_m", [])
         out[f"compensate_{frame}"] = c
     return out
