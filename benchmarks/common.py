@@ -9,6 +9,22 @@ from contextlib import contextmanager
 from collections.abc import Callable, Iterator
 
 
+def cli_in_process(*argv: object) -> tuple[int, str, str]:
+    """Run one ``pin-kpi-oed`` command in this process: (exit code, stdout, stderr)."""
+    import contextlib
+    import io
+
+    from pin_kpi_oed.cli.app import main
+
+    out, err = io.StringIO(), io.StringIO()
+    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+        try:
+            rc = main([str(a) for a in argv])
+        except SystemExit as exc:
+            rc = int(exc.code or 0)
+    return rc, out.getvalue(), err.getvalue()
+
+
 def cpu_time() -> float:
     """CPU time (s) of this process and its finished children (user + system)."""
     own, kids = resource.getrusage(resource.RUSAGE_SELF), resource.getrusage(resource.RUSAGE_CHILDREN)

@@ -44,9 +44,7 @@ designed poses, the per-robot honesty of the TCP's σ (:mod:`benchmarks.every_ar
 from __future__ import annotations
 
 import argparse
-import contextlib
 import csv
-import io
 import json
 from typing import Any
 import shutil
@@ -78,18 +76,13 @@ def run_cli(*argv: object) -> str:
     Raises:
         RuntimeError: the command exited non-zero (its stderr's last line).
     """
-    from pin_kpi_oed.cli.app import main
+    from benchmarks.common import cli_in_process
 
-    out, err = io.StringIO(), io.StringIO()
-    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
-        try:
-            rc = main([str(a) for a in argv])
-        except SystemExit as exc:
-            rc = int(exc.code or 0)
+    rc, out, err = cli_in_process(*argv)
     if rc != 0:
-        msg = err.getvalue().strip().splitlines()
+        msg = err.strip().splitlines()
         raise RuntimeError(f"{argv[0]} exited {rc}: {msg[-1] if msg else ''}")
-    return out.getvalue()
+    return out
 
 
 # ---------------------------------------------------------------------------------------------- URDFs

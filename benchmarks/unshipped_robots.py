@@ -28,9 +28,7 @@ about 2 minutes per robot on one core).
 from __future__ import annotations
 
 import argparse
-import contextlib
 import csv
-import io
 import json
 import tempfile
 from pathlib import Path
@@ -48,17 +46,12 @@ BRANCH_DEG = 5.0
 
 def _cli(*argv: object) -> str:
     """Run one pin-kpi-oed command in-process; its stdout. Raises RuntimeError with its stderr on a refusal."""
-    from pin_kpi_oed.cli.app import main
+    from benchmarks.common import cli_in_process
 
-    out, err = io.StringIO(), io.StringIO()
-    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
-        try:
-            rc = main([str(a) for a in argv])
-        except SystemExit as exc:
-            rc = int(exc.code or 0)
+    rc, out, err = cli_in_process(*argv)
     if rc != 0:
-        raise RuntimeError(f"pin-kpi-oed {' '.join(map(str, argv[:1]))} exited {rc}: {err.getvalue().strip()}")
-    return out.getvalue()
+        raise RuntimeError(f"pin-kpi-oed {' '.join(map(str, argv[:1]))} exited {rc}: {err.strip()}")
+    return out
 
 
 def true_point(truth: tuple, point_m: np.ndarray, Q: np.ndarray) -> np.ndarray:
