@@ -225,7 +225,7 @@ def test_tests_import_no_private_name_of_the_package() -> None:
 
 #: The check's own modules and what each may import of the layers it asks questions of: the calibrated model through
 #: its view of the check rows (and the model's type), the fit only through the registration of a set-up.
-CHECK_MODULES = ("upkeep/check.py", "upkeep/check_rows.py", "upkeep/check_poses.py")
+CHECK_MODULES = ("upkeep/check.py", "upkeep/check_rows.py", "upkeep/check_poses.py", "upkeep/check_stats.py")
 CHECK_MAY_IMPORT = {"pin_kpi_oed.calibrated.model_file", "pin_kpi_oed.calibrated.check_view",
                     "pin_kpi_oed.upkeep.transfer"}
 

@@ -4,6 +4,8 @@ A check (``upkeep/check.py``) compares measured rows with a calibrated model who
 Everything it needs of the model is asked here, once per question, so that the check works on arrays and on the
 model only to apply a change:
 
+* the rows' configurations in the robot's joint order (:func:`~pin_kpi_oed.model.measured_joints.align_data`), the
+  reference station resolved, the working configurations defaulted (the reference model's, else the rows');
 * the predictions Y of the rows at the registered station and their joint honest covariance Σ = LLᵀ
   (:func:`~pin_kpi_oed.calibrated.prediction_sigma.predictive_covariance`, the registration's σ factor left out: it
   would hide the change under test), the residuals and the station's Jacobian whitened by L;
@@ -13,7 +15,8 @@ model only to apply a change:
   (:func:`~pin_kpi_oed.calibrated.tcp_sigma.tcp_sigma`: what the calibration determined, and the joint-placement
   parameters held at nominal), and the check criterion of the model's parameter groups
   (:func:`check_criterion`);
-* the law of the check's statistic under no change (:func:`check_null`, the model's own K-fold held-out errors).
+* the law of the check's statistic under no change (:func:`check_null`, the model's own K-fold held-out errors);
+* a model with a change applied on the same rows (:func:`rows_chi2`: its T, the set-up re-registered or held).
 """
 
 from __future__ import annotations
@@ -27,12 +30,13 @@ import scipy.linalg as sla
 
 from pin_kpi_oed.calibrated.prediction_sigma import predictive_covariance
 from pin_kpi_oed.calibrated.tcp_sigma import tcp_sigma
+from pin_kpi_oed.model.measured_joints import align_data
 from pin_kpi_oed.model.noise import NoiseModel
 from pin_kpi_oed.model.tracker import TrackerModel
 from pin_kpi_oed.oed.check_power import CheckNull, CheckPower, check_groups
 
-__all__ = ["CheckView", "check_view", "check_criterion", "check_null", "whiten", "project_out", "NULL_FACTOR_RANGE",
-           "NULL_KURTOSIS_RANGE"]
+__all__ = ["CheckView", "check_view", "rows_chi2", "check_criterion", "check_null", "whiten", "project_out",
+           "NULL_FACTOR_RANGE", "NULL_KURTOSIS_RANGE"]
 
 #: Bounds of the fields of a model file's K-fold check the check's law of T depends on (checked on reading too).
 NULL_FACTOR_RANGE = (0.5, 3.0)
@@ -58,6 +62,8 @@ class CheckView:
             and the part of the joint-placement parameters held at nominal (empty without working configurations).
         crit: the check criterion of the model's parameter groups, or None without working configurations.
         null: the law of the check's statistic under no change.
+        Q: the rows' configurations in the robot's joint order (m, n) rad; old: the reference station, or None.
+        qw: the working configurations (t, n) rad, or None.
     """
 
     Y: np.ndarray
@@ -75,25 +81,41 @@ class CheckView:
     tcp_sigma_m: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros(0))
     tcp_held_m: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros(0))
     crit: CheckPower | None = None
+    Q: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros((0, 0)))
+    old: str | None = None
+    qw: np.ndarray | None = None
 
 
-def check_view(cm: Any, data: Any, Q: np.ndarray, station: str, *, reference: tuple[Any, str] | None = None,
-               q_work: np.ndarray | None = None, seed: int = 0) -> CheckView:
+def check_view(cm: Any, data: Any, Q: np.ndarray | None, station: str, *,
+               reference: tuple[Any, str | None] | None = None, q_work: np.ndarray | None = None,
+               default_work: bool = False, seed: int = 0) -> CheckView:
     """The calibrated model on check rows (module docstring).
 
     Args:
         cm: the :class:`~pin_kpi_oed.calibrated.model_file.CalibratedModel` with the set-up registered on the rows;
             station: that set-up's station.
         data: the check rows (:class:`~pin_kpi_oed.data.measurements.MeasurementSet`, x, y, z in m); Q: their
-            configurations in the robot's joint order (m, n) rad.
-        reference: (model, station) whose set-up the rows are compared with (the model before the registration), or
-            None.
-        q_work: working configurations (t, n) rad, or None (no TCP σ, KPI Jacobian or criterion).
+            configurations in the robot's joint order (m, n) rad, or None: aligned here
+            (:func:`~pin_kpi_oed.model.measured_joints.align_data`).
+        reference: (model, station) whose set-up the rows are compared with (the model before the registration;
+            station None: its default), or None.
+        q_work: working configurations (t, n) rad, or None (no TCP σ, KPI Jacobian or criterion unless
+            ``default_work``).
+        default_work: without ``q_work``, the reference model's working configurations, else the rows'.
         seed: seed of the criterion's reference configurations.
 
     Returns:
         The :class:`CheckView`.
+
+    Raises:
+        InputError: joint columns that are not the robot's (aligning the rows), an unknown reference station.
     """
+    Q = align_data(cm.robot, data) if Q is None else Q
+    if reference is not None:
+        reference = (reference[0], reference[0].station(reference[1]))
+    if q_work is None and default_work:
+        own = None if reference is None else reference[0].q_work
+        q_work = own if own is not None else Q
     st1 = cm.with_setup(station, dataclasses.replace(cm.setups[station], sigma_scale=1.0))
     Y, Sigma = predictive_covariance(st1, Q, data, station)
     sig = np.sqrt(np.diag(Sigma)).reshape(len(Q), 3)
@@ -108,9 +130,10 @@ def check_view(cm: Any, data: Any, Q: np.ndarray, station: str, *, reference: tu
         step = z_old - project_out(z_old, G)
         more["setup_distance"] = float(step @ step)
     view = CheckView(Y=Y, Sigma=Sigma, sig=sig, z=project_out(z, G), F=F, wm=wm, p=p,
-                     null=check_null(cm if reference is None else reference[0]), **more)
+                     null=check_null(cm if reference is None else reference[0]), Q=Q,
+                     old=None if reference is None else reference[1], **more)
     if q_work is not None:
-        qw = np.atleast_2d(q_work)
+        view.qw = qw = np.atleast_2d(q_work)
         view.E_w = wm.kpi_jacobian(p, qw)
         at = tcp_sigma(st1, qw, station=station)
         view.tcp_held_m = at.held_sigma_m
@@ -121,6 +144,28 @@ def check_view(cm: Any, data: Any, Q: np.ndarray, station: str, *, reference: tu
         wm.noise = NoiseModel(sigma_xyz_m=tuple(np.median(sig, axis=0).reshape(3)))
         view.crit = _group_criterion(wm, p, cm.robot, view.E_w, 300, seed)
     return view
+
+
+def rows_chi2(cm: Any, data: Any, Q: np.ndarray, station: str, L: np.ndarray | None = None) -> float:
+    """T = ‖z‖² of a model on the check rows: without ``L``, under the set-up registered at ``station``, whitened
+    by the model's own joint honest covariance of the rows and the set-up's step projected out (:func:`check_view`);
+    with ``L``, under the set-up held at ``station``, whitened by ``L`` (the factor of the rows' covariance a check
+    computed before a change was applied), nothing projected out.
+
+    Args:
+        cm: the :class:`~pin_kpi_oed.calibrated.model_file.CalibratedModel`; station: its station the rows are
+            predicted at.
+        data: the check rows (x, y, z in m); Q: their configurations in the robot's joint order (m, n) rad.
+        L: the whitening factor (3m, 3m) m, or None.
+
+    Returns:
+        T (dimensionless).
+    """
+    if L is None:
+        z = check_view(cm, data, Q, station).z
+    else:
+        z = whiten(L, data.position_m - cm.predict(Q, data, station=station))
+    return float(z @ z)
 
 
 def check_criterion(model: Any, q_work: np.ndarray, sigma_m: np.ndarray, station: str | None = None,

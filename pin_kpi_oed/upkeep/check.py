@@ -55,38 +55,28 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
-from scipy import stats
 
 from pin_kpi_oed.calibrated.model_file import CalibratedModel
 from pin_kpi_oed.data.measurements import MeasurementSet
 from pin_kpi_oed.errors import InputError
-from pin_kpi_oed.oed.check_power import CheckGroup, CheckNull, CheckPower
+from pin_kpi_oed.oed.check_power import CheckGroup
 from pin_kpi_oed.results import Result
-from pin_kpi_oed.upkeep.check_poses import poses_to_add
-from pin_kpi_oed.calibrated.check_view import check_view, whiten
-from pin_kpi_oed.upkeep.check_rows import (CHECK_STATION, CheckRows, check_criterion, check_null, measure_rows,
-                                           registered)
+from pin_kpi_oed.upkeep.check_rows import CHECK_STATION, POOL_SIZE, CheckRows, check_criterion, check_null, measure_rows
+from pin_kpi_oed.upkeep.check_stats import (FIT_SHARE, check_group_name, check_powers, shown_above, sidak,
+                                            verdict_powers)
 
-__all__ = ["CheckResult", "check_calibration", "check_criterion", "check_null", "check_powers", "sidak",
-           "CHECK_STATION", "EXIT_CODES", "REFIT_MARGIN"]
+__all__ = ["CheckResult", "check_calibration", "check_criterion", "check_group_name", "check_null", "check_powers",
+           "shown_above", "sidak", "verdict_powers", "CHECK_STATION", "EXIT_CODES", "FIT_SHARE", "POOL_SIZE",
+           "REFIT_MARGIN"]
 
 VERDICTS = ("holds", "setup_moved", "robot_changed", "discrepancy_level", "recalibrate")
 #: The exit code of each verdict (the command line's): 0 holds, 1 changed (re-registered / re-fitted), 3 re-calibrate.
 EXIT_CODES = {"holds": 0, "setup_moved": 1, "robot_changed": 1, "discrepancy_level": 3, "recalibrate": 3}
-#: The named group's goodness of fit is tested at α / FIT_SHARE.
-FIT_SHARE = 5.0
 #: A re-fit is kept while its expected TCP error is at most (1 + REFIT_MARGIN) × a re-calibration's.
 REFIT_MARGIN = 0.10
-#: Candidate configurations (within the joint limits) the poses to add are chosen from.
-POOL_SIZE = 400
 #: A change of a group moving the working TCPs by more than this (RMS, m) is not sized: no calibrated robot's joint
 #: or tool drifts by centimetres unnoticed, and a change that large is a crash, a new tool or a wrong model file.
 PLAUSIBLE_TCP_M = 5e-3
-
-
-def sidak(alpha: float, k: int = 2) -> float:
-    """The level of each of k independent tests whose union has level α: 1 − (1 − α)^{1/k}."""
-    return float(1.0 - (1.0 - alpha) ** (1.0 / k))
 
 
 @dataclass(kw_only=True)
@@ -270,12 +260,6 @@ def _group_text(r: CheckResult) -> str:
     return f"{r.group}: {', '.join(parts)} ({at})"
 
 
-def shown_above(size_m: float, sigma_m: float, tolerance_m: float, alpha: float) -> bool:
-    """Whether a change of ``size_m`` ± ``sigma_m`` is shown to exceed the tolerance: size − z₁₋ₐ σ > τ."""
-    return bool(np.isfinite(size_m) and np.isfinite(sigma_m)
-                and size_m - float(stats.norm.isf(alpha)) * sigma_m > tolerance_m)
-
-
 def check_calibration(model: CalibratedModel, data: MeasurementSet, *, station: str | None = None,
                       alpha: float = 0.05, tolerance_m: float = 1e-4, q_work: np.ndarray | None = None,
                       seed: int = 0, propose: bool = True) -> CheckResult:
@@ -302,40 +286,25 @@ def check_calibration(model: CalibratedModel, data: MeasurementSet, *, station: 
         raise InputError(f"check: alpha must be in (0, 0.5), got {alpha}")
     if not (np.isfinite(tolerance_m) and tolerance_m > 0):
         raise InputError(f"check: the tolerance must be > 0 m, got {tolerance_m}")
-    rows = measure_rows(model, data, station, q_work, seed)
-    a1 = sidak(alpha)
-    T, dof, null = rows.T, rows.dof, rows.null
-    out: dict[str, Any] = dict(n_rows=rows.m, dof=dof, alpha=alpha, alpha_each=a1, chi2=T,
-                               threshold=null.threshold(dof, a1), p_value=null.sf(T, dof),
-                               setup_shift_m=rows.setup_shift_m, setup_shift_sigma_m=rows.setup_shift_sigma_m,
-                               setup_distance=rows.setup_distance,
-                               power=check_powers(rows.crit, rows.F, tolerance_m, a1, null), tolerance_m=tolerance_m,
+    rows = measure_rows(model, data, station, q_work, seed, alpha=alpha, tolerance_m=tolerance_m, propose=propose)
+    a1, T, dof = rows.alpha_each, rows.T, rows.dof
+    out: dict[str, Any] = dict(n_rows=rows.m, dof=dof, alpha=alpha, alpha_each=a1, chi2=T, threshold=rows.threshold,
+                               p_value=rows.p_value, setup_shift_m=rows.setup_shift_m,
+                               setup_shift_sigma_m=rows.setup_shift_sigma_m, setup_distance=rows.setup_distance,
+                               power=rows.power, tolerance_m=tolerance_m,
                                registration_sigma_m=rows.registration_sigma_m, honest_sigma_m=rows.honest_sigma_m,
                                setup_determined=rows.setup_determined, sigma_factor=float(np.sqrt(T / dof)),
                                tcp_sigma_m=np.sqrt(rows.tcp_sigma_m ** 2 + rows.reg_share_m2 + rows.tcp_held_m ** 2),
-                               tcp_held_m=rows.tcp_held_m, model=rows.cm,
+                               tcp_held_m=rows.tcp_held_m, model=rows.cm, poses_to_add=rows.poses_to_add,
                                success=True, status="checked")
-    if not rows.setup_determined and propose:
-        out["poses_to_add"] = _add(rows, model, seed)
     moved = shown_above(rows.setup_shift_m, rows.setup_shift_sigma_m, tolerance_m, a1)
-    if not T > out["threshold"]:
+    if rows.named is None:
         return _quiet(rows, out, moved, t0)
-    named = check_group_name(rows.crit, rows.F, rows.z, dof, alpha, null)
+    named = rows.named
     out["groups"], out["alike"] = named["table"], named["alike"]
     if named["best"] is None:
         return _unexplained(rows, out, named["significant"], moved, t0)
-    if not named["best"][3] and "poses_to_add" not in out and propose:
-        out["poses_to_add"] = _add(rows, model, seed)
-    held = _held_fit(rows, named["best"], null, alpha)
-    return _changed(model, data, rows, named["best"], out, t0, moved, held=held)
-
-
-def _add(rows: CheckRows, model: CalibratedModel, seed: int) -> np.ndarray:
-    """The poses to add (:func:`~pin_kpi_oed.upkeep.check_poses.poses_to_add`) from a seeded pool."""
-    rb = model.robot
-    pool = np.random.default_rng(seed).uniform(rb.q_lower, rb.q_upper, size=(POOL_SIZE, rb.nq))
-    return poses_to_add(rows.crit, rows.wm, rows.p, rows.F, rows.E_w[:, rows.crit.setup], rows.honest_sigma_m, pool,
-                        seed=seed)[0]
+    return _changed(data, rows, named["best"], out, t0, moved)
 
 
 def _setup_note(rows: CheckRows, a1: float) -> str:
@@ -379,23 +348,6 @@ def _unexplained(rows: CheckRows, out: dict, significant: bool, moved: bool, t0:
                        **out)
 
 
-def _held_fit(rows: CheckRows, best: tuple, null: CheckNull, alpha: float) -> tuple | None:
-    """The named group fitted with the set-up *held* at the model's station (the tracker did not move): (its change,
-    covariance of its basis coordinates, remaining χ²) when that simpler explanation passes its fit test at
-    α / :data:`FIT_SHARE` on 3m − r_g degrees of freedom, else None. The held set-up was determined by the
-    calibration's many rows, so the change is determined better than with the set-up re-fitted on the check rows."""
-    g, _, _, det = best
-    if not det:
-        return None
-    z0 = rows.z_old
-    A = rows.F[:, g.cols] @ g.basis
-    x, *_ = np.linalg.lstsq(A, z0, rcond=None)
-    rem = float(np.sum((z0 - A @ x) ** 2))
-    if not rem <= null.threshold(len(z0) - A.shape[1], alpha / FIT_SHARE):
-        return None
-    return g.basis @ x, np.linalg.pinv(A.T @ A), rem
-
-
 def _tcp_change(rows: CheckRows, g: CheckGroup, delta: np.ndarray, cov_delta: np.ndarray) -> tuple[float, float, float]:
     """(RMS TCP displacement of the change at the working configurations, its σ along it, the RMS σ of the change's
     estimation error at the TCP), m; the σ scaled by the model's held-out standardised RMS."""
@@ -412,11 +364,12 @@ def _tcp_change(rows: CheckRows, g: CheckGroup, delta: np.ndarray, cov_delta: np
     return size / np.sqrt(t), float(np.sqrt(max(along, 0.0) / t)), float(np.sqrt(max(total, 0.0) / t))
 
 
-def _changed(model: CalibratedModel, data: MeasurementSet, rows: CheckRows, best: tuple, out: dict, t0: float,
-             moved: bool, held: tuple | None = None) -> CheckResult:
-    """A group explains the residuals: its change ± σ at the TCP; above τ (shown) the re-fitted model and the choice
-    between it and a re-calibration on the expected TCP error; below, *holds* (or *set-up moved*) saying so."""
+def _changed(data: MeasurementSet, rows: CheckRows, best: tuple, out: dict, t0: float, moved: bool) -> CheckResult:
+    """A group explains the residuals: its change ± σ at the TCP — fitted with the model's set-up held when that
+    explains the rows (:attr:`CheckRows.held`) —; above τ (shown) the re-fitted model and the choice between it and a
+    re-calibration on the expected TCP error; below, *holds* (or *set-up moved*) saying so."""
     g, x, cov, det = best
+    held = rows.held
     delta = g.basis @ x if held is None else held[0]
     cov = cov if held is None else held[1]
     cov_delta = g.basis @ cov @ g.basis.T
@@ -435,13 +388,9 @@ def _changed(model: CalibratedModel, data: MeasurementSet, rows: CheckRows, best
     if implausible:
         return _unsized(out, f"its linear estimate moves the working TCPs by more than {PLAUSIBLE_TCP_M * 1e3:g} mm",
                         t0)
-    if held is not None:
-        refit = _apply(model, data, g, delta)
-        T2, dof2 = _held_chi2(refit, data, rows), 3 * rows.m - g.basis.shape[1]
-        out["setup_held"] = True
-    else:
-        refit, T2 = _refit(model, data, rows.Q, g, delta)
-        dof2 = rows.dof - g.basis.shape[1]
+    refit, T2 = rows.refit(data, g, delta, hold_setup=held is not None)
+    dof2 = (3 * rows.m if held is not None else rows.dof) - g.basis.shape[1]
+    out["setup_held"] = held is not None
     if not T2 <= rows.null.threshold(dof2, out["alpha"] / FIT_SHARE):
         return _unsized({**out, "refit_chi2": T2}, f"the model with the change applied leaves chi2 {T2:.1f} on "
                         f"{dof2} dof: the change lies beyond what the check poses estimate linearly", t0)
@@ -459,105 +408,3 @@ def _unsized(out: dict, why: str, t0: float) -> CheckResult:
     out = {**out, "change_tcp_m": float("nan"), "change_tcp_sigma_m": float("nan"), "sized": False, "note": why}
     return CheckResult(verdict="recalibrate", message=f"{out['group']}: the check cannot size this change",
                        time_s=time.perf_counter() - t0, **out)
-
-
-def _held_chi2(applied: CalibratedModel, data: MeasurementSet, rows: CheckRows) -> float:
-    """T of the model with a change applied under the model's own set-up (not linearised), whitened as the rows."""
-    r = data.position_m - applied.predict(rows.Q, data, station=rows.old)
-    z = whiten(rows.L, r)
-    return float(z @ z)
-
-
-def check_powers(crit: CheckPower, F: np.ndarray, tolerance_m: float, alpha: float, null: CheckNull | None = None
-                 ) -> dict:
-    """Group -> power of the check with whitened Jacobian F (3m, np) against the group's weakest change of size τ, under
-    the law ``null`` of the statistic (default the plain χ²; :func:`check_null`)."""
-    dof = F.shape[0] - crit.setup.size
-    mu = crit.mu(F.T @ F)[0]
-    law = null or CheckNull()
-    return {g.name: law.power(tolerance_m ** 2 * u, dof, alpha) for g, u in zip(crit.groups, mu)}
-
-
-def verdict_powers(crit: CheckPower, F: np.ndarray, tolerance_m: float, alpha: float, null: CheckNull,
-                   factor: float = 1.5) -> dict:
-    """Group -> the probability that the verdict says *the robot changed* for the group's weakest change of
-    ``factor`` × τ at the TCP: T above its critical value at α' (Šidák) and the change shown above τ (its TCP size
-    less z₁₋ₐ times its σ, 1/√μ_g scaled by the held-out standardised RMS, above τ); the product of the two (m)."""
-    a1 = sidak(alpha)
-    dof = F.shape[0] - crit.setup.size
-    mu = np.maximum(crit.mu(F.T @ F)[0], 1e-300)
-    z = float(stats.norm.isf(alpha))
-    out = {}
-    for g, u in zip(crit.groups, mu):
-        detect = null.power((factor * tolerance_m) ** 2 * u, dof, a1)
-        sd = null.factor / np.sqrt(u)
-        out[g.name] = float(detect * stats.norm.cdf((factor - 1.0) * tolerance_m / sd - z))
-    return out
-
-
-def check_group_name(crit: CheckPower, F: np.ndarray, z: np.ndarray, dof: int, alpha: float, null: CheckNull) -> dict:
-    """Each group fitted with the set-up; among the groups whose remaining χ² passes at α / :data:`FIT_SHARE` (the
-    true group fails its own fit test at that rate, which caps the share named right at 1 − α / FIT_SHARE), the one
-    of the least remaining χ² + 2 r_g (Akaike's criterion of the whitened rows: a larger group must explain more, a
-    one-column group is not preferred when a three-column one fits far better)."""
-    Gs = F[:, crit.setup]
-    T = float(z @ z)
-    table, passing, gains = [], [], []
-    for g in crit.groups:
-        A = np.hstack([Gs, F[:, g.cols] @ g.basis])
-        x, *_ = np.linalg.lstsq(A, z, rcond=1e-6)
-        sv = np.linalg.svd(A / np.maximum(np.linalg.norm(A, axis=0), 1e-300), compute_uv=False)
-        det = bool(sv[-1] > 1e-6 * sv[0]) and A.shape[0] > A.shape[1]
-        r = g.basis.shape[1] if det else max(int(np.sum(sv > 1e-6 * sv[0])) - Gs.shape[1], 0)
-        rem = float(np.sum((z - A @ x) ** 2))
-        # a group the rows do not determine may still explain them: named, with the poses that determine it
-        ok = r > 0 and rem <= null.threshold(dof - r, alpha / FIT_SHARE)
-        table.append({"name": g.name, "chi2_remaining": rem, "dof": dof - r, "determined": det, "explains": ok})
-        gains.append(null.sf(T - rem, r))
-        if ok:
-            k = g.basis.shape[1]
-            cov = np.linalg.pinv(A.T @ A, rcond=1e-12)[-k:, -k:]
-            passing.append((r, rem, g, x[-k:], cov, det))
-    best = min(passing, key=lambda c: c[1] + 2 * c[0]) if passing else None
-    significant = bool(min(gains) < alpha / len(crit.groups)) if gains else False
-    return {"best": best[2:] if best else None, "table": table, "significant": significant,
-            "alike": _alike(best, passing, null, alpha) if best else []}
-
-
-def _alike(best: tuple, passing: list, null: CheckNull, alpha: float) -> list[str]:
-    """The other parts (a joint, the tool) the rows do not tell apart from the named group's: a group that explains
-    the rows whose Akaike criterion exceeds the named one's by at most χ²₁₋ₐ(1) (in the law's scale: the rows reject
-    neither at α). A joint's offset and placement are one part (its joint is named either way)."""
-    part = best[2].name.rsplit(" ", 1)[0]
-    lim = float(stats.chi2.isf(alpha, 1)) * null.scale
-    ref = best[1] + 2 * best[0]
-    out: dict[str, float] = {}
-    for r, rem, g, *_ in passing:
-        other = g.name.rsplit(" ", 1)[0]
-        if other != part and rem + 2 * r - ref <= lim and rem + 2 * r < out.get(other, np.inf):
-            out[other] = rem + 2 * r
-    return sorted(out, key=out.get)
-
-
-def _refit(model: CalibratedModel, data: MeasurementSet, Q: np.ndarray, g: CheckGroup, delta: np.ndarray
-           ) -> tuple[CalibratedModel, float]:
-    """The model with the group's change applied and the set-up re-registered on the check rows; its χ²."""
-    reg = registered(_apply(model, data, g, delta), data)
-    v = check_view(reg, data, Q, CHECK_STATION)
-    return reg, float(v.z @ v.z)
-
-
-def _apply(model: CalibratedModel, data: MeasurementSet, g: CheckGroup, delta: np.ndarray) -> CalibratedModel:
-    """The model with the group's change applied (its stations' set-ups kept)."""
-    if g.kind == "tool":
-        setups = {k: dataclasses.replace(s, reflector_m=s.reflector_m + delta,
-                                         nests_m=None if s.nests_m is None else s.nests_m + delta)
-                  for k, s in model.setups.items()}
-        new = dataclasses.replace(model, setups=setups, tcp_m=model.tcp_m + delta)
-    else:
-        jp = model.joint_p.copy()
-        jp[g.cols] += delta
-        new = dataclasses.replace(model, joint_p=jp)
-    new.history = list(model.history) + [{"step": "check", "data": data.source, "group": g.name,
-                                          "change": delta.tolist()}]
-    return new
