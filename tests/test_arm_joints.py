@@ -133,6 +133,16 @@ def test_kinova_model_file_and_calibrated_urdf_round_trip(kinova_fit, tmp_path):
         assert np.abs(cal.oMtool(q).translation - rd.oMf[rb.tool_frame_id].translation).max() < 1e-9
 
 
+def test_kinova_visual_model_has_the_robots_joints(kinova_fit):
+    """The scene's visual model reads the continuous joints as the robot does: six joints, the URDF's meshes."""
+    from pin_kpi_oed.viz.robot_geometry import visual_model
+
+    rb = kinova_fit[0]
+    model, visual, notes = visual_model(rb)
+    assert model.nq == rb.nq == 6 and [model.names[j] for j in rb.joint_ids] == rb.joint_names
+    assert visual is not None and len(visual.geometryObjects) > 6 and notes == []
+
+
 def test_branched_robot_locks_the_other_limbs_at_neutral():
     """Baxter's right arm: the head and the left arm (gripper fingers included) branch off the chain and are locked at
     neutral (the note says so), the right gripper's fingers beyond the tool as before; the locked links keep their
