@@ -111,6 +111,7 @@ def test_kinova_model_file_and_calibrated_urdf_round_trip(kinova_fit, tmp_path):
 
     rb, tm, res = kinova_fit
     assert res.converged and 0.5 < res.chi2_reduced < 1.5
+    assert f"  note: {rb.notes[0]}" in res.summary().splitlines()
     cm = res.calibrated_model()
     cm.save(tmp_path / "m.json")
     back = load_model_file(tmp_path / "m.json")
