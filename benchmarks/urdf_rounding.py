@@ -14,7 +14,9 @@ design figure must not depend on it. Per arm (its URDF as it ships, found in the
 3. exact against shipped and against rounded: identifiable set equal, every figure within 0.1 %, the same
    selected poses; the residual shares on either side of the rank tolerance (smallest kept, largest dropped).
 
-An arm the loader refuses (a branch, a tool frame off the chain) is listed with the refusal's cause. No cell (no
+An arm the loader refuses (a tool frame no joint moves, a multi-DoF joint on the chain) is listed with the refusal's
+cause; continuous joints are read as revolute of ±2π rad and limbs branching off the chain locked at neutral, as
+``load_robot`` does for every command. No cell (no
 obstacles): the figures are those of the information, which is what rounding could change.
 
 Run: ``python -m benchmarks.urdf_rounding [--arms xarm7,panda] [--json out.json]`` (about 1 minute on one core).

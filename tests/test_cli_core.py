@@ -54,7 +54,6 @@ BRANCHED = """<robot name="branched">
     ("<robot name='x'><link name='a'>", None, "malformed URDF"),
     ("hello world", None, "malformed URDF"),
     ("<sdf version='1.6'/>", None, "not a URDF"),
-    (BRANCHED, "c", "not a serial arm"),
 ])
 def test_bad_urdf_gives_one_line(tmp_path, content, tool, needle):
     path = tmp_path / "robot.urdf"
@@ -62,6 +61,18 @@ def test_bad_urdf_gives_one_line(tmp_path, content, tool, needle):
         path.write_text(content)
     args = ["info", str(path)] + (["--tool", tool] if tool else [])
     assert_clean_error(run(*args), needle, str(path))
+
+
+def test_branch_off_the_chain_is_locked_at_neutral_and_said(tmp_path):
+    """j2 branches off the chain base -> j1 -> j3 -> c: the arm is j1, j3; j2 is locked at neutral, in the note."""
+    path = tmp_path / "robot.urdf"
+    path.write_text(BRANCHED)
+    res = run("info", str(path), "--tool", "c")
+    assert res.returncode == 0, res.stderr
+    assert "locked joints: j2" in res.stdout
+    assert ("note: joint(s) j2 branch off the chain to 'c': locked at neutral (their links stay in the model and its "
+            "collision geometry at that posture)") in res.stdout.splitlines()
+    assert load_robot(str(path), tool_frame="c").joint_names == ["j1", "j3"]
 
 
 def test_unknown_tool_frame():

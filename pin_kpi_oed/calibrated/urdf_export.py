@@ -36,6 +36,7 @@ from pin_kpi_oed.errors import InputError, RobotLoadError, SolverError
 from pin_kpi_oed.data.atomic import atomic_write_text
 from pin_kpi_oed.model.parameters import ParameterLayout
 from pin_kpi_oed.model.robot import Robot, frame_id
+from pin_kpi_oed.model.urdf_joints import model_from_urdf_text
 
 __all__ = ["ROOT", "FixedFrame", "model_frames", "write_model_urdf", "URDF_LIMITS_NOTE", "calibrated_urdf_text",
            "check_urdf_fk", "write_calibrated_urdf", "export_result_urdf",
@@ -182,7 +183,7 @@ def calibrated_urdf_text(robot: Robot, placements: Sequence[pin.SE3], comment: s
     joints = {j.get("name"): j for j in root.findall("joint")}
     # the template's own placements (a kinematics file may have replaced the robot's): F_k = M_k O_k^-1
     template = (robot.model if robot.kinematics is None
-                else _reduced(pin.buildModelFromXML(robot.read_urdf_text()), robot))
+                else _reduced(model_from_urdf_text(robot.read_urdf_text())[0], robot))
     for k, (name, jid) in enumerate(zip(robot.joint_names, robot.joint_ids)):
         el = joints.get(name)
         if el is None:
@@ -233,7 +234,7 @@ def check_urdf_fk(text: str, robot: Robot, placements: Sequence[pin.SE3], n: int
         RobotLoadError: Pinocchio cannot load the text or the tool frame / joints differ.
     """
     try:
-        full = pin.buildModelFromXML(text)
+        full = model_from_urdf_text(text)[0]  # the file keeps a continuous joint's type: read as the robot's
     except Exception as exc:  # Pinocchio raises various types with long texts
         raise RobotLoadError(f"the calibrated URDF does not load in Pinocchio ({str(exc).splitlines()[0]})") from None
     new = _reduced(full, robot)

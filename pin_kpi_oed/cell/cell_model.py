@@ -229,7 +229,8 @@ class Cell:
         }
 
     def summary(self) -> str:
-        """Short readable description (the working configurations out of the tracker's sight named)."""
+        """Short readable description (the working configurations out of the tracker's sight named), then the robot
+        loader's notes (:attr:`Robot.notes`), one ``note:`` line each."""
         hidden = ", ".join(f"{i} (beam blocked by {b})" for i, b in self.hidden_work.items())
         return (f"cell {self.name}: robot {self.robot.name} ({self.robot.tool_frame}), "
                 f"{len(self.robot_capsules)} robot capsules, {len(self.obstacles)} obstacle capsules, "
@@ -239,4 +240,5 @@ class Cell:
                 + (f"{len(self.paths)} working path(s) ({len(self.q_path)} samples), " if self.paths else "")
                 + f"incidence <= {self.incidence_max_deg:g} deg"
                 + (f"; working configuration(s) {hidden} out of the tracker's sight (where the robot works, not where "
-                   "it is measured)" if hidden else ""))
+                   "it is measured)" if hidden else "")
+                + "".join(f"\nnote: {n}" for n in self.robot.notes))

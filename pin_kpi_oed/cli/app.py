@@ -47,6 +47,8 @@ def cmd_info(args: argparse.Namespace) -> int:
     print(f"robot: {robot.name}  ({robot.urdf_path})")
     print(f"tool frame: {robot.tool_frame}" + (f"   locked joints: {', '.join(robot.locked_joints)}"
                                                if robot.locked_joints else ""))
+    for note in robot.notes:
+        print(f"note: {note}")
     print("\n".join(robot.limits_table()))
     print(f"reflector in {robot.tool_frame}: {', '.join(f'{x * 1e3:.1f}' for x in refl)} mm")
     print(ident.summary())

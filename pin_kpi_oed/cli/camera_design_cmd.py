@@ -113,7 +113,7 @@ def run_camera_design(args: argparse.Namespace, cell: Any) -> int:
     problem = CameraDesignProblem(cell, model, limits, cell.q_work)
     t = cell.q_work.shape[0]
     if not quiet:
-        print(cell.summary().split(", incidence")[0])
+        print(cell.summary().split(", incidence")[0] + "".join(f"\nnote: {n}" for n in cell.robot.notes))
         print(f"camera {model.mode}: {m} images of the board ({model.board.n} corners, {model.sigma_px:g} px), seed "
               f"{seed}; {problem.base.size} identifiable parameters; view: margin {limits.margin_px:g} px, angle <= "
               f"{limits.max_angle_deg:.1f} deg, depth {limits.near_m:g}..{limits.far_m:g} m, rays clear of the "

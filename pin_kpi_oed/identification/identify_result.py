@@ -320,7 +320,8 @@ class IdentificationResult(Result):
         }
 
     def summary(self) -> str:
-        """Readable multi-line summary (display units: mm, µm, mrad)."""
+        """Readable multi-line summary (display units: mm, µm, mrad), the robot loader's notes included
+        (:attr:`~pin_kpi_oed.model.robot.Robot.notes`)."""
         e = self.errors_m * 1e3
         st = "converged" if self.converged else "NOT converged"
         S = len(self.stations)
@@ -333,6 +334,7 @@ class IdentificationResult(Result):
                f"{', covariance scaled by it' if self.covariance_scaled else ''})"]
         if self.loss_decision:
             out.append(f"  {self.loss_decision}")
+        out += [f"  note: {n}" for n in self.model.robot.notes]  # what the loader made of the URDF
         if self.residuals_rad is not None:
             a = np.linalg.norm(self.residuals_rad, axis=1) * 1e3
             out.append(f"  orientation residuals: RMS {np.sqrt(np.mean(a ** 2)):.4f} mrad, max {a.max():.4f} mrad")

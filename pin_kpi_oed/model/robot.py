@@ -11,13 +11,15 @@ its parent joint frame, ``S_j`` its motion axis and ``M_tool`` the fixed
 placement of the tool frame in the last joint frame. The geometric errors of
 :mod:`pin_kpi_oed.model.parameters` perturb the ``M_j``.
 
-Joints that hang off the end effector (gripper fingers, as on the Panda) are
-locked at their neutral value; any other branch makes the model non-serial
-and is refused with :class:`~pin_kpi_oed.errors.RobotLoadError`.
+Joints that hang off the end effector (gripper fingers, as on the Panda) and joints that branch off the
+chain to the tool (Baxter's other arm and head, the legs of a legged base under an arm) are locked at their
+neutral value: their links stay in the model, and in its collision geometry, at that posture. A continuous joint
+(a revolute joint without stops) is read as a revolute joint with limits ±2π rad
+(:mod:`pin_kpi_oed.model.urdf_joints`). Both are said in :attr:`Robot.notes`.
 
 Joints are revolute (values in rad) or prismatic (values in m, e.g. a linear track); the type
 comes from Pinocchio (:func:`~pin_kpi_oed.model.kinematics.revolute_mask`). Limits, unit checks
-and printed tables follow each joint's type: a continuous revolute joint falls back to ±2π rad,
+and printed tables follow each joint's type: a revolute joint without finite limits falls back to ±2π rad,
 a prismatic joint must have finite limits in the URDF (metres).
 
 Robots are given either as a URDF path or as a name: ``kr15``, ``kr300``,
@@ -40,6 +42,7 @@ import pinocchio as pin
 
 from pin_kpi_oed.errors import InputError, RobotLoadError
 from pin_kpi_oed.model.kinematics import joint_unit, revolute_mask
+from pin_kpi_oed.model.urdf_joints import continuous_as_revolute, model_from_urdf_text
 from pin_kpi_oed.model.robot_names import (ERD_ROBOTS, ROBOT_HELP, ROBOT_NAMES, SHIPPED_ROBOTS, TOOL_FRAME_HELP,  # noqa: F401
                                           TOOL_HELP, UR_E_SERIES, default_tool_frames)
 from pin_kpi_oed.validation.robot_checks import captured_stderr, check_robot_scale, check_urdf_tree, xacro_refusal
@@ -126,12 +129,14 @@ class Robot:
         joint_names: their URDF names.
         q_lower: lower joint limits (rad for revolute, m for prismatic joints), shape (n,).
         q_upper: upper joint limits (rad or m), shape (n,).
-        locked_joints: names of joints locked at neutral (end-effector branches).
+        locked_joints: names of joints locked at neutral (beyond the tool, or branching off the chain to it).
         revolute: revolute (True) / prismatic (False) mask of the joints; computed from the model if None.
         kinematics: the UR kinematics file the nominal model comes from
             (:class:`~pin_kpi_oed.model.ur_kinematics.URKinematics`), or None (the URDF's own).
         urdf_text: the URDF text the model was built from when it is not the file at ``urdf_path``
             (a UR kinematics file's chain), else None.
+        notes: what the loader made of the URDF that the user must be told (one line each): the continuous
+            joints taken as revolute of ±2π rad, the joints branching off the chain locked at neutral.
     """
 
     model: pin.Model
@@ -148,6 +153,7 @@ class Robot:
     revolute: np.ndarray | None = field(default=None, repr=False, compare=False)
     kinematics: Any = field(default=None, repr=False, compare=False)
     urdf_text: str | None = field(default=None, repr=False, compare=False)
+    notes: list[str] = field(default_factory=list, repr=False, compare=False)
 
     def read_urdf_text(self) -> str:
         """The URDF text of the model: :attr:`urdf_text`, else the file at :attr:`urdf_path`."""
@@ -300,6 +306,7 @@ class Robot:
             "tool_frame": self.tool_frame,
             "joints": joints,
             "locked_joints": list(self.locked_joints),
+            "notes": list(self.notes),
         }
 
 
@@ -343,22 +350,22 @@ def load_robot(spec: str | os.PathLike, tool_frame: str | None = None, kinematic
 
     Raises:
         RobotLoadError: missing or malformed URDF, unknown tool frame, a
-            non-serial model (free-flyer, multi-DoF joint, branch), a joint that is neither
+            multi-DoF joint on the chain (a free-flyer), a joint that is neither
             revolute nor prismatic, or a prismatic joint without finite limits (m).
     """
     kin = _ur_kinematics(str(spec), kinematics)
     text = None
     if kin is None or str(spec).lower() in ERD_ROBOTS:
         path, default_tool = resolve_robot(str(spec))
-        full = _build_full_model(path)
+        full, continuous = _build_full_model(path)
     else:
         from pin_kpi_oed.model.ur_kinematics import ur_urdf_text
 
         text = ur_urdf_text(kin, str(spec).lower())
         path, default_tool = resolve_robot(str(spec))  # the type's file: one identity whatever kinematics
-        full = pin.buildModelFromXML(text)
+        full, continuous = model_from_urdf_text(text)
     tool = _tool_frame(full, path, tool_frame, default_tool)
-    model, locked = _serial_chain_model(full, path, tool)
+    model, locked, branches = _serial_chain_model(full, path, tool)
 
     joint_ids = list(range(1, model.njoints))
     try:
@@ -382,6 +389,7 @@ def load_robot(spec: str | os.PathLike, tool_frame: str | None = None, kinematic
         revolute=revolute,
         kinematics=kin,
         urdf_text=text,
+        notes=_load_notes(model, continuous, branches, tool),
     )
     if kin is not None and text is None:
         _take_ur_kinematics(robot, kin)
@@ -439,8 +447,25 @@ def _ur_kinematics(spec: str, kinematics: Any) -> Any:
     return kin
 
 
-def _build_full_model(path: Path) -> pin.Model:
-    """Read, parse and check the URDF at ``path`` and build its full Pinocchio model.
+def _load_notes(model: pin.Model, continuous: list[str], branches: list[str], tool: str) -> list[str]:
+    """The loader's note lines: continuous joints of the chain taken as revolute, branches locked at neutral."""
+    notes = []
+    on_chain = [n for n in continuous if model.existJointName(n)]
+    if on_chain:
+        notes.append(f"continuous joint(s) {', '.join(on_chain)} taken as revolute with limits ±2π rad "
+                     "(one turn either way)")
+    if branches:
+        notes.append(f"joint(s) {', '.join(branches)} branch off the chain to '{tool}': locked at neutral "
+                     "(their links stay in the model and its collision geometry at that posture)")
+    return notes
+
+
+def _build_full_model(path: Path) -> tuple[pin.Model, list[str]]:
+    """Read, parse and check the URDF at ``path`` and build its full Pinocchio model, its continuous joints
+    revolute of ±2π rad (:func:`~pin_kpi_oed.model.urdf_joints.continuous_as_revolute`).
+
+    Returns:
+        (the full model, the names of the joints taken from continuous to revolute).
 
     Raises:
         RobotLoadError: missing, unreadable or malformed URDF (one line naming the file).
@@ -463,14 +488,16 @@ def _build_full_model(path: Path) -> pin.Model:
     if root.tag != "robot":
         raise RobotLoadError(f"{path}: not a URDF file (root element <{root.tag}>, expected <robot>)")
     check_urdf_tree(root, path, text)
+    continuous = continuous_as_revolute(root)
     try:
         with captured_stderr() as cap:  # urdfdom prints its reasons on fd 2: put them in the one line
-            full = pin.buildModelFromUrdf(str(path))
+            full = (pin.buildModelFromXML(ET.tostring(root, encoding="unicode")) if continuous
+                    else pin.buildModelFromUrdf(str(path)))
     except Exception as exc:  # Pinocchio raises ValueError/RuntimeError with long texts
         first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
         why = cap.first_line()
         raise RobotLoadError(f"{path}: malformed URDF ({why.split('  ')[0] if why else first})") from None
-    return full
+    return full, continuous
 
 
 def _tool_frame(full: pin.Model, path: Path, tool_frame: str | None, default_tool: str | None) -> str:
@@ -500,34 +527,30 @@ def frame_id(model: pin.Model, name: str) -> int:
     raise RobotLoadError(f"no frame '{name}'")
 
 
-def _serial_chain_model(full: pin.Model, path: Path, tool: str) -> tuple[pin.Model, list[str]]:
-    """(model reduced to the serial chain moving ``tool``, names of the locked joints).
+def _serial_chain_model(full: pin.Model, path: Path, tool: str) -> tuple[pin.Model, list[str], list[str]]:
+    """(model reduced to the serial chain moving ``tool``, names of the locked joints, the names of those among
+    them that branch off the chain rather than hang beyond the tool). Every joint off the chain is locked at its
+    neutral value (:func:`pinocchio.buildReducedModel`): a joint off the chain moves no link of the chain, so the
+    chain's kinematics is the same at any of its values; its links stay as fixed bodies at that posture.
 
     Raises:
-        RobotLoadError: the tool is not moved by any joint, a multi-DoF joint, or a branch off the chain.
+        RobotLoadError: the tool is not moved by any joint, or a multi-DoF joint on the chain.
     """
     chain = _chain_to_frame(full, frame_id(full, tool))
     if not chain:
         raise RobotLoadError(f"{path}: tool frame '{tool}' is not moved by any joint")
     for j in chain:
-        if full.joints[j].nq == 2 and full.joints[j].nv == 1:  # Pinocchio's unbounded revolute (cos, sin)
-            raise RobotLoadError(f"{path}: joint '{full.names[j]}' is continuous (an unbounded revolute joint), "
-                                 "which the calibration does not take: write it as type=\"revolute\" with "
-                                 "<limit lower=\"-6.2832\" upper=\"6.2832\" .../> (its real range)")
         if full.joints[j].nq != 1 or full.joints[j].nv != 1:
             raise RobotLoadError(f"{path}: joint '{full.names[j]}' has {full.joints[j].nv} DoF: "
                                  "not a serial arm of 1-DoF joints")
     tip_subtree = _subtree(full, chain[-1])
     extra = [j for j in range(1, full.njoints) if j not in chain]
-    branches = [j for j in extra if j not in tip_subtree]
-    if branches:
-        raise RobotLoadError(f"{path}: not a serial arm: joints {', '.join(full.names[j] for j in branches)} "
-                             f"branch off the chain to '{tool}'")
+    branches = [full.names[j] for j in extra if j not in tip_subtree]
     locked = [full.names[j] for j in extra]
     if extra:
         _rename_shadowed_joints(full, extra)
     model = pin.buildReducedModel(full, extra, pin.neutral(full)) if extra else full
-    return model, locked
+    return model, locked, branches
 
 
 def _rename_shadowed_joints(full: pin.Model, locked: list[int]) -> None:

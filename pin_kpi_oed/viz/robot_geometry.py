@@ -6,6 +6,7 @@ from __future__ import annotations
 import re
 import warnings
 from collections.abc import Sequence
+from pathlib import Path
 
 import numpy as np
 import pinocchio as pin
@@ -14,6 +15,7 @@ from pin_kpi_oed.cell.cell import CapsuleSpec
 from pin_kpi_oed.cell.meshes import package_dirs
 from pin_kpi_oed.errors import RobotLoadError
 from pin_kpi_oed.model.robot import Robot
+from pin_kpi_oed.model.urdf_joints import model_from_urdf_text
 from pin_kpi_oed.viz.style import CAPSULE_RGBA, ROBOT_RGBA
 
 
@@ -33,7 +35,7 @@ def visual_model(robot: Robot) -> tuple[pin.Model, pin.GeometryModel | None, lis
         RobotLoadError: the reduced visual model does not have the robot's joints.
     """
     notes: list[str] = []
-    full = pin.buildModelFromUrdf(robot.urdf_path)
+    full = model_from_urdf_text(Path(robot.urdf_path).read_text())[0]  # continuous joints revolute, as the robot's
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
