@@ -171,7 +171,7 @@ def prediction_covariance(cm: Any, model: Any, F: np.ndarray) -> np.ndarray:
     names = [str(x) for x in par.get("names") or []]
     cols = np.array([column(x) for x in names], int)
     S = np.eye(F.shape[0])
-    C = np.asarray(par.get("covariance", np.zeros((len(names), len(names)))), float)
+    C = np.asarray(par.get("covariance") if par.get("covariance") is not None else np.zeros((0, 0)), float)
     fit = cm.fit or {}
     if fit.get("covariance_scaled"):  # back to the stated noise: the statistics are divided by the χ² themselves
         C = C / max(1.0, float(fit.get("chi2_reduced") or 1.0))
@@ -181,7 +181,7 @@ def prediction_covariance(cm: Any, model: Any, F: np.ndarray) -> np.ndarray:
         S += FB @ C[np.ix_(keep, keep)] @ FB.T
     held = par.get("held") or {}
     h_names = [str(x) for x in held.get("names") or []]
-    A = np.asarray(held.get("absorption") or np.zeros((len(names), 0)), float)
+    A = np.asarray(held.get("absorption") if held.get("absorption") is not None else np.zeros((0, 0)), float)
     if h_names and A.shape == (len(names), len(h_names)) and all(x in layout for x in h_names):
         keep = cols >= 0
         H = F[:, [layout.index(x) for x in h_names]] - F[:, cols[keep]] @ A[keep]
