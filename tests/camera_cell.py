@@ -20,3 +20,16 @@ def camera_cell(folder: Path, name: str = "cam.yaml", **changes) -> Path:
     path = Path(folder) / name
     path.write_text(yaml.safe_dump(d))
     return path
+
+
+#: the eye-to-hand UR5 (the geometry of ``benchmarks.camera_design``): the board 2 cm in front of the flange facing
+#: along the tool axis, the camera on the table 0.38 m below it at the looking-down configuration, looking up
+EYE_TO_HAND = {
+    "camera": {**CAMERA_CELL["camera"], "mount": "eye_to_hand",
+               "pose": {"xyz_m": [0.487, 0.11, 0.03], "rpy_rad": [0.0, 0.0, 0.0]}},
+    "board": {**CAMERA_CELL["board"], "pose": {"xyz_m": [-0.0875, -0.0625, 0.02], "rpy_rad": [0.0, 0.0, 0.0]}},
+    "obstacles": {"half_spaces": [{"name": "table", "normal": [0.0, 0.0, 1.0], "offset_m": 0.0}]},
+    "skip_pairs": [["base_link", "upper_arm_link"], ["base_link", "table"], ["shoulder_link", "table"],
+                   ["upper_arm_link", "table"]],
+    "working_configurations_rad": [[0.0, -1.57, 1.57, -1.57, -1.57, 0.0]],
+}

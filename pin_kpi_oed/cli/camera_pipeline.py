@@ -8,7 +8,10 @@ seeded configurations around the cell's working ones that see the whole board;
 ``identify CORNERS.csv --cell CAMERA_CELL --model-out MODEL.json`` fits the robot on the reprojection error
 (:mod:`pin_kpi_oed.identification.camera_identify`) and writes the calibrated model, which ``predict --at tcp``,
 ``compensate`` and ``report`` read like any other. The tracker's options that describe a tracker (``--reflector``,
-``--tracker``, ``--noise``, ``--pose6d``, ...) are refused with the option named.
+``--tracker``, ``--noise``, ``--pose6d``, ...) are refused with the option named. A camera's model has no
+Gaussian-process discrepancy: ``--discrepancy auto`` (the default) and ``none`` print that decision and the residual
+level every TCP σ carries (the parameters' covariance scaled by the fit's reduced χ² when above 1), ``--discrepancy
+on`` is refused with the reason.
 """
 
 from __future__ import annotations
@@ -113,6 +116,19 @@ _IDENTIFY_TRACKER_ONLY = ("reflector", "reflector_per_station", "effects", "sigm
                           "fix", "geometry_prior", "urdf_out", "urdf_frames", "register_rows", "register_data")
 #: a reduced χ² above this says the pixel noise or the model is wrong (refused without --accept-poor-fit)
 CHI2_POOR = 4.0
+#: why a camera's model has no Gaussian-process discrepancy (``identify --discrepancy``)
+NO_DISCREPANCY = ("the discrepancy is a Gaussian process on a tracker's TCP position residuals; a camera measures "
+                  "board corners' pixels, whose residuals are not the TCP's")
+
+
+def _discrepancy_line(args: argparse.Namespace, chi2_reduced: float) -> str:
+    """The printed decision of ``--discrepancy auto`` / ``none`` for a camera: no Gaussian process; every TCP σ
+    (:func:`~pin_kpi_oed.calibrated.tcp_sigma.tcp_sigma`) scales the parameters' covariance by the fit's reduced χ²
+    when above 1 (the residual level, never below the stated pixel noise)."""
+    level = (f"the parameters' covariance scaled by the fit's reduced chi2 {chi2_reduced:.2f} in every TCP sigma "
+             "(the residual level)" if chi2_reduced > 1 else
+             f"the fit's reduced chi2 {chi2_reduced:.2f} <= 1: the stated pixel noise kept")
+    return f"discrepancy ({getattr(args, 'discrepancy', 'auto')}): none for a camera ({NO_DISCREPANCY}); {level}"
 
 
 def is_camera_data(paths: list[str]) -> bool:
@@ -136,8 +152,8 @@ def identify_camera_cli(args: argparse.Namespace) -> int:
     docstring); ``--validate`` a held-out corner file's reprojection RMS.
 
     Raises:
-        InputError: no camera cell, several data files, a tracker's option, a bad file; a poor fit (reduced χ² above
-            :data:`CHI2_POOR`) without ``--accept-poor-fit``.
+        InputError: no camera cell, several data files, a tracker's option, ``--discrepancy on``, a bad file; a poor
+            fit (reduced χ² above :data:`CHI2_POOR`) without ``--accept-poor-fit``.
     """
     from pin_kpi_oed.calibrated.tcp_sigma import tcp_sigma
     from pin_kpi_oed.cell.cell import load_cell
@@ -152,6 +168,9 @@ def identify_camera_cli(args: argparse.Namespace) -> int:
                              "option); leave it out")
     if len(args.data) != 1:
         raise InputError(f"identify: camera measurements come in one file (one camera set-up), got {len(args.data)}")
+    if getattr(args, "discrepancy", "auto") == "on":
+        raise InputError(f"identify --discrepancy on: not for camera measurements ({NO_DISCREPANCY}); leave it "
+                         "out (auto) or give none")
     if not args.cell:
         raise InputError(f"identify --data {args.data[0]}: camera measurements need --cell with the camera and its "
                          "board (intrinsics, mount, board size)")
@@ -166,7 +185,7 @@ def identify_camera_cli(args: argparse.Namespace) -> int:
                           device=cell.camera.to_dict())
     cm = res.calibrated_model(cell.q_work if len(cell.q_work) else None, f"cell {cell.source or cell.name}")
     _stamp(cm, args, len(read_corners(args.validate)) if args.validate else 0)
-    lines = [res.summary()]
+    lines = [res.summary(), _discrepancy_line(args, res.fit.chi2_reduced)]
     if len(cell.q_work):
         ts = tcp_sigma(cm, cell.q_work)
         lines.append(f"predicted TCP std at the {len(cell.q_work)} working configuration(s) (in the "

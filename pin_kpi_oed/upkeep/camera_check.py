@@ -2,14 +2,19 @@ r"""Does a camera calibration still hold? New images of the board against the ca
 
 For check images at configurations q_i with corners η_i, the calibrated camera model
 (:func:`~pin_kpi_oed.identification.camera_identify.camera_model_of`: the robot, hand-eye transform and board as
-fitted) gives the standardised residual r = (h(p̂, q) − η)/σ_px on every detected corner coordinate. Two χ² tests,
-each at the Šidák level α₁ = 1 − (1 − α)^{1/2} so that the verdict's false-alarm rate is α, the statistics divided
-by the calibration's own reduced χ² (at least 1: a fit whose residuals exceed σ_px says so):
+fitted) gives the standardised residual r = (h(p̂, q) − η)/σ_px on every detected corner coordinate. On images the
+calibration did not see, r is not white: the fitted parameters' error moves every corner of an image together, so
+its covariance is S = I + F C_p Fᵀ + H Σ_N Hᵀ (F the σ-weighted Jacobian at the check's poses, C_p the model file's
+parameter covariance, H = F_N − F_B A the held joint placements' effect left after the fit's absorption A, Σ_N their
+tolerances; intrinsics the model estimated are not in F: their part is left out). Two χ² tests, each at the Šidák
+level α₁ = 1 − (1 − α)^{1/2} so that the verdict's false-alarm rate is α, the statistics divided by the
+calibration's own reduced χ² (at least 1: a fit whose residuals exceed σ_px says so):
 
-1. T₀ = Σ r² on every row (n dof): consistent → ``holds``;
-2. else the set-up re-fitted (hand-eye transform and board pose, 12 parameters, the robot held) and
-   T₁ = Σ r₁² (n − 12 dof): consistent → ``setup_moved`` (the camera or the board moved: re-identify the set-up);
-   else ``recalibrate`` (the robot changed).
+1. T₀ = rᵀ S⁻¹ r on every row (n dof): consistent → ``holds``;
+2. else the set-up re-fitted (hand-eye transform and board pose, 12 parameters, the robot held; the re-fit's
+   residual r₁ then one generalised least-squares step in S's metric) and T₁ = r₁ᵀ S⁻¹ r₁ (n − 12 dof):
+   consistent → ``setup_moved`` (the camera or the board moved: re-identify the set-up); else ``recalibrate``
+   (the robot changed).
 
 The exit codes are the tracker check's (:data:`~pin_kpi_oed.upkeep.check.EXIT_CODES`): 0 holds, 1 the set-up
 moved, 3 re-calibrate. The TCP's displacement is not judged against a tolerance here (the tracker's check does);
@@ -22,6 +27,7 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+from scipy.linalg import cho_factor, cho_solve
 from scipy.stats import chi2
 
 from pin_kpi_oed.data.corner_measurements import CornerSet
@@ -30,7 +36,7 @@ from pin_kpi_oed.identification.camera_fit import fit_camera
 from pin_kpi_oed.identification.camera_identify import camera_model_of
 from pin_kpi_oed.results import Result
 
-__all__ = ["CameraCheck", "check_camera", "CAMERA_EXIT_CODES"]
+__all__ = ["CameraCheck", "check_camera", "prediction_covariance", "CAMERA_EXIT_CODES"]
 
 #: exit code per verdict (the tracker check's :data:`~pin_kpi_oed.upkeep.check.EXIT_CODES`)
 CAMERA_EXIT_CODES = {"holds": 0, "setup_moved": 1, "recalibrate": 3}
@@ -116,16 +122,22 @@ def check_camera(cm: Any, cs: CornerSet, alpha: float = 0.05, source: str = "che
     scale = max(1.0, float((cm.fit or {}).get("chi2_reduced") or 1.0))
     a1 = 1.0 - (1.0 - alpha) ** 0.5
     r = (model.predict(p, Q) - uv)[rows]
-    T0 = float(np.sum((r / model.sigma_px) ** 2))
+    L = model.layout
+    setup = np.r_[np.arange(L.group_slice("camera").start, L.group_slice("camera").stop),
+                  np.arange(L.group_slice("board").start, L.group_slice("board").stop)]
+    F = model.weighted_jacobian(p, Q).reshape(-1, model.n_params)[rows.ravel()]
+    chol = cho_factor(prediction_covariance(cm, model, F))
+    T0 = float(r @ cho_solve(chol, r)) / model.sigma_px ** 2
     p0 = float(chi2.sf(T0 / scale, n))
     T1, p1, shift = np.nan, np.nan, np.full(2, np.nan)
     verdict = "holds"
     if p0 < a1:
-        L = model.layout
-        setup = np.r_[np.arange(L.group_slice("camera").start, L.group_slice("camera").stop),
-                      np.arange(L.group_slice("board").start, L.group_slice("board").stop)]
         fit = fit_camera(model, Q, uv, setup, p_ref=p)
-        T1 = fit.chi2_reduced * (n - setup.size)
+        r1 = (model.predict(fit.p, Q) - uv)[rows] / model.sigma_px
+        Fs = model.weighted_jacobian(fit.p, Q).reshape(-1, model.n_params)[rows.ravel()][:, setup]
+        SiF = cho_solve(chol, Fs)
+        r1 = r1 - Fs @ np.linalg.lstsq(Fs.T @ SiF, SiF.T @ r1, rcond=None)[0]
+        T1 = float(r1 @ cho_solve(chol, r1))
         p1 = float(chi2.sf(T1 / scale, n - setup.size))
         shift = np.array([np.linalg.norm(fit.p[L.group_slice(g)][:3]) for g in ("camera", "board")])
         verdict = "setup_moved" if p1 >= a1 else "recalibrate"
@@ -133,3 +145,45 @@ def check_camera(cm: Any, cs: CornerSet, alpha: float = 0.05, source: str = "che
                        dof_refit=n - 12, p_refit=float(p1), rms_px=float(np.sqrt(np.mean(r ** 2))), scale=scale,
                        alpha=alpha, alpha_each=a1, setup_shift_m=shift, n_images=len(Q), success=True,
                        status=verdict, message=verdict)
+
+
+def prediction_covariance(cm: Any, model: Any, F: np.ndarray) -> np.ndarray:
+    """S = I + F C_p Fᵀ + H Σ_N Hᵀ: the covariance of the σ-weighted residuals of images the calibration did not see
+    (module docstring).
+
+    Args:
+        cm: the calibrated camera model (its ``parameters``: names, covariance, held block).
+        model: the camera model of :func:`camera_model_of` (its layout names the columns of F).
+        F: the σ-weighted Jacobian of the check's detected rows, (n, model.n_params), dimensionless per parameter
+            unit (m or rad).
+
+    Returns:
+        S, (n, n), in units of σ_px².
+    """
+    par = cm.parameters or {}
+    frame = model.frame_group
+    layout = list(model.layout.names)
+
+    def column(name: str) -> int:
+        raw = f"{frame}.{name.split('.', 1)[1]}" if name.startswith("tracker.") else name
+        return layout.index(raw) if raw in layout else -1
+
+    names = [str(x) for x in par.get("names") or []]
+    cols = np.array([column(x) for x in names], int)
+    S = np.eye(F.shape[0])
+    C = np.asarray(par.get("covariance") if par.get("covariance") is not None else np.zeros((0, 0)), float)
+    fit = cm.fit or {}
+    if fit.get("covariance_scaled"):  # back to the stated noise: the statistics are divided by the χ² themselves
+        C = C / max(1.0, float(fit.get("chi2_reduced") or 1.0))
+    if names and C.shape == (len(names), len(names)):
+        keep = cols >= 0
+        FB = F[:, cols[keep]]
+        S += FB @ C[np.ix_(keep, keep)] @ FB.T
+    held = par.get("held") or {}
+    h_names = [str(x) for x in held.get("names") or []]
+    A = np.asarray(held.get("absorption") if held.get("absorption") is not None else np.zeros((0, 0)), float)
+    if h_names and A.shape == (len(names), len(h_names)) and all(x in layout for x in h_names):
+        keep = cols >= 0
+        H = F[:, [layout.index(x) for x in h_names]] - F[:, cols[keep]] @ A[keep]
+        S += (H * np.asarray(held.get("sigma"), float) ** 2) @ H.T
+    return S
