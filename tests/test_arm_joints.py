@@ -155,8 +155,9 @@ def test_branched_robot_locks_the_other_limbs_at_neutral():
     branch = ["head_pan", "left_s0", "left_s1", "left_e0", "left_e1", "left_w0", "left_w1", "left_w2",
               "l_gripper_l_finger_joint", "l_gripper_r_finger_joint"]
     assert rb.locked_joints == branch + ["r_gripper_l_finger_joint", "r_gripper_r_finger_joint"]
-    assert rb.notes == [f"joint(s) {', '.join(branch)} branch off the chain to 'right_gripper': locked at neutral "
-                        "(their links stay in the model and its collision geometry at that posture)"]
+    assert rb.notes == [f"joint(s) {', '.join(branch)} branch off the chain to 'right_gripper': locked at neutral, "
+                        "clipped into their limits (their links stay in the model and its collision geometry at that "
+                        "posture)"]
     caps = capsules_from_urdf(rb)
     left = [c for c in caps if c.link.startswith("left_")]
     assert len(left) >= 5 and any(c.link.startswith("right_") for c in caps)
@@ -181,3 +182,43 @@ def test_cli_info_of_a_branched_robot_says_what_it_locked():
     summary = json.loads(res.stdout)["robot"]
     assert [j["name"] for j in summary["joints"]][0] == "right_s0" and "left_s0" in summary["locked_joints"]
     assert len(summary["notes"]) == 1 and "locked at neutral" in summary["notes"][0]
+
+
+#: j2 branches off the chain base -> j1 -> j3 -> tip; its limits [-2.6, -0.6] rad exclude Pinocchio's neutral 0
+BRANCH_OUTSIDE_ZERO = """<robot name="calf">
+  <link name="base"/><link name="a"/><link name="leg"/><link name="foot"/><link name="tip"/>
+  <joint name="j1" type="revolute"><parent link="base"/><child link="a"/><axis xyz="0 0 1"/>
+    <limit lower="-1" upper="1" effort="1" velocity="1"/></joint>
+  <joint name="j2" type="revolute"><parent link="base"/><child link="leg"/><axis xyz="0 1 0"/>
+    <origin xyz="0 0.2 0"/><limit lower="-2.6" upper="-0.6" effort="1" velocity="1"/></joint>
+  <joint name="foot_joint" type="fixed"><parent link="leg"/><child link="foot"/><origin xyz="0.3 0 0"/></joint>
+  <joint name="j3" type="revolute"><parent link="a"/><child link="tip"/><axis xyz="0 1 0"/>
+    <origin xyz="0.5 0 0"/><limit lower="-1" upper="1" effort="1" velocity="1"/></joint>
+</robot>
+"""
+
+
+def test_a_branch_whose_limits_exclude_neutral_is_locked_at_its_nearest_limit(tmp_path):
+    """A B1's calf (0 rad outside [-2.6, -0.6] rad) is locked at -0.6 rad, a posture the robot can take: the locked
+    leg's foot is where the full model puts it at j2 = -0.6 rad, not at the straight leg of j2 = 0."""
+    from pin_kpi_oed.model.urdf_joints import locked_posture
+
+    path = tmp_path / "calf.urdf"
+    path.write_text(BRANCH_OUTSIDE_ZERO)
+    full = pin.buildModelFromUrdf(str(path))
+    q_lock = locked_posture(full)
+    assert q_lock[full.joints[full.getJointId("j2")].idx_q] == -0.6
+    rb = load_robot(str(path), tool_frame="tip")
+    assert rb.joint_names == ["j1", "j3"] and rb.locked_joints == ["j2"]
+    assert "clipped into their limits" in rb.notes[0]
+    fd = full.createData()
+    q_full = pin.neutral(full)
+    q_full[full.joints[full.getJointId("j2")].idx_q] = -0.6
+    pin.framesForwardKinematics(full, fd, q_full)
+    pin.framesForwardKinematics(rb.model, rb.data, np.zeros(2))
+    foot = full.getFrameId("foot")
+    np.testing.assert_allclose(rb.data.oMf[rb.model.getFrameId("foot")].translation, fd.oMf[foot].translation,
+                               atol=1e-15)
+    q_full[full.joints[full.getJointId("j2")].idx_q] = 0.0
+    pin.framesForwardKinematics(full, fd, q_full)
+    assert np.linalg.norm(rb.data.oMf[rb.model.getFrameId("foot")].translation - fd.oMf[foot].translation) > 0.1

@@ -70,8 +70,8 @@ def test_branch_off_the_chain_is_locked_at_neutral_and_said(tmp_path):
     res = run("info", str(path), "--tool", "c")
     assert res.returncode == 0, res.stderr
     assert "locked joints: j2" in res.stdout
-    assert ("note: joint(s) j2 branch off the chain to 'c': locked at neutral (their links stay in the model and its "
-            "collision geometry at that posture)") in res.stdout.splitlines()
+    assert ("note: joint(s) j2 branch off the chain to 'c': locked at neutral, clipped into their limits (their links "
+            "stay in the model and its collision geometry at that posture)") in res.stdout.splitlines()
     assert load_robot(str(path), tool_frame="c").joint_names == ["j1", "j3"]
 
 

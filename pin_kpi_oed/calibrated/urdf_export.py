@@ -36,7 +36,7 @@ from pin_kpi_oed.errors import InputError, RobotLoadError, SolverError
 from pin_kpi_oed.data.atomic import atomic_write_text
 from pin_kpi_oed.model.parameters import ParameterLayout
 from pin_kpi_oed.model.robot import Robot, frame_id
-from pin_kpi_oed.model.urdf_joints import model_from_urdf_text
+from pin_kpi_oed.model.urdf_joints import locked_posture, model_from_urdf_text
 
 __all__ = ["ROOT", "FixedFrame", "model_frames", "write_model_urdf", "URDF_LIMITS_NOTE", "calibrated_urdf_text",
            "check_urdf_fk", "write_calibrated_urdf", "export_result_urdf",
@@ -213,7 +213,7 @@ def _reduced(model: pin.Model, robot: Robot) -> pin.Model:
     if not robot.locked_joints:
         return model
     ids = [model.getJointId(n) for n in robot.locked_joints if model.existJointName(n)]
-    return pin.buildReducedModel(model, ids, pin.neutral(model)) if ids else model
+    return pin.buildReducedModel(model, ids, locked_posture(model)) if ids else model
 
 
 def check_urdf_fk(text: str, robot: Robot, placements: Sequence[pin.SE3], n: int = 50, seed: int = 0

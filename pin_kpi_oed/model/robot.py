@@ -42,7 +42,7 @@ import pinocchio as pin
 
 from pin_kpi_oed.errors import InputError, RobotLoadError
 from pin_kpi_oed.model.kinematics import joint_unit, revolute_mask
-from pin_kpi_oed.model.urdf_joints import continuous_as_revolute, model_from_urdf_text
+from pin_kpi_oed.model.urdf_joints import continuous_as_revolute, locked_posture, model_from_urdf_text
 from pin_kpi_oed.model.robot_names import (ERD_ROBOTS, ROBOT_HELP, ROBOT_NAMES, SHIPPED_ROBOTS, TOOL_FRAME_HELP,  # noqa: F401
                                           TOOL_HELP, UR_E_SERIES, default_tool_frames)
 from pin_kpi_oed.validation.robot_checks import captured_stderr, check_robot_scale, check_urdf_tree, xacro_refusal
@@ -455,8 +455,9 @@ def _load_notes(model: pin.Model, continuous: list[str], branches: list[str], to
         notes.append(f"continuous joint(s) {', '.join(on_chain)} taken as revolute with limits ±2π rad "
                      "(one turn either way)")
     if branches:
-        notes.append(f"joint(s) {', '.join(branches)} branch off the chain to '{tool}': locked at neutral "
-                     "(their links stay in the model and its collision geometry at that posture)")
+        notes.append(f"joint(s) {', '.join(branches)} branch off the chain to '{tool}': locked at neutral, "
+                     "clipped into their limits (their links stay in the model and its collision geometry at that "
+                     "posture)")
     return notes
 
 
@@ -530,7 +531,8 @@ def frame_id(model: pin.Model, name: str) -> int:
 def _serial_chain_model(full: pin.Model, path: Path, tool: str) -> tuple[pin.Model, list[str], list[str]]:
     """(model reduced to the serial chain moving ``tool``, names of the locked joints, the names of those among
     them that branch off the chain rather than hang beyond the tool). Every joint off the chain is locked at its
-    neutral value (:func:`pinocchio.buildReducedModel`): a joint off the chain moves no link of the chain, so the
+    neutral value clipped into its limits (:func:`locked_posture`, :func:`pinocchio.buildReducedModel`): a joint
+    off the chain moves no link of the chain, so the
     chain's kinematics is the same at any of its values; its links stay as fixed bodies at that posture.
 
     Raises:
@@ -549,7 +551,7 @@ def _serial_chain_model(full: pin.Model, path: Path, tool: str) -> tuple[pin.Mod
     locked = [full.names[j] for j in extra]
     if extra:
         _rename_shadowed_joints(full, extra)
-    model = pin.buildReducedModel(full, extra, pin.neutral(full)) if extra else full
+    model = pin.buildReducedModel(full, extra, locked_posture(full)) if extra else full
     return model, locked, branches
 
 

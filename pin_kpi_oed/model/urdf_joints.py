@@ -13,6 +13,7 @@ from __future__ import annotations
 import math
 import xml.etree.ElementTree as ET
 
+import numpy as np
 import pinocchio as pin
 
 #: The range a continuous joint is given either way (rad): one turn.
@@ -75,3 +76,26 @@ def model_from_urdf_text(text: str) -> tuple[pin.Model, list[str]]:
     """
     fixed, names = revolute_urdf_text(text)
     return pin.buildModelFromXML(fixed), names
+
+
+def locked_posture(model: pin.Model) -> np.ndarray:
+    """The configuration at which the joints off the chain are locked: Pinocchio's neutral, each 1-DoF joint's value
+    clipped into its finite limits (a B1's calf has 0 rad outside [−2.6, −0.6] rad: locked at −0.6 rad, a posture the
+    robot can take).
+
+    Args:
+        model: the full model, before the reduction.
+
+    Returns:
+        (model.nq,) configuration (rad / m; (cos, sin) pairs of unbounded joints as neutral).
+    """
+    q = pin.neutral(model).copy()
+    for j in range(1, model.njoints):
+        jm = model.joints[j]
+        if jm.nq != 1:
+            continue
+        i = jm.idx_q
+        lo, hi = model.lowerPositionLimit[i], model.upperPositionLimit[i]
+        if np.isfinite(lo) and np.isfinite(hi) and lo <= hi:
+            q[i] = min(max(q[i], lo), hi)
+    return q

@@ -15,7 +15,7 @@ from pin_kpi_oed.cell.cell import CapsuleSpec
 from pin_kpi_oed.cell.meshes import package_dirs
 from pin_kpi_oed.errors import RobotLoadError
 from pin_kpi_oed.model.robot import Robot
-from pin_kpi_oed.model.urdf_joints import model_from_urdf_text
+from pin_kpi_oed.model.urdf_joints import locked_posture, model_from_urdf_text
 from pin_kpi_oed.viz.style import CAPSULE_RGBA, ROBOT_RGBA
 
 
@@ -51,9 +51,9 @@ def visual_model(robot: Robot) -> tuple[pin.Model, pin.GeometryModel | None, lis
     locked = [full.getJointId(n) for n in robot.locked_joints]
     if locked:
         if visual is not None:
-            model, visual = pin.buildReducedModel(full, visual, locked, pin.neutral(full))
+            model, visual = pin.buildReducedModel(full, visual, locked, locked_posture(full))
         else:
-            model = pin.buildReducedModel(full, locked, pin.neutral(full))
+            model = pin.buildReducedModel(full, locked, locked_posture(full))
     else:
         model = full
     if model.nq != robot.nq:
