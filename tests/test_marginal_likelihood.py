@@ -210,3 +210,21 @@ def test_gradient_weights_at_the_pairs_equal_the_whole_matrices_to_the_last_bit(
               0.5 * np.einsum("p,jp,jp->j", Wp, f._A, f.D) / ell ** 2, 0.5 * (f.D @ WP) / L ** 2, 0.5 * w * Wd]
     assert value == -lml
     assert np.array_equal(grad, -g)
+
+
+@pytest.mark.parametrize("n, linear", [(300, None), (257, [True] + [False] * 5), (128, None), (1, None)])
+def test_lower_triangle_equals_the_whole_kernel_to_the_last_bit(n, linear):
+    """The K-fold check and the inducing posterior factor the kernel matrix from its lower triangle alone
+    (``JointKernel.lower``): every entry of it must be exactly the whole matrix's, so that the factor, the check's
+    figures and the decision do not change, across several blocks of rows and with a linear joint."""
+    rng = np.random.default_rng(n)
+    Q = rng.uniform(-np.pi, np.pi, (n, 6))
+    lin = None if linear is None else np.array(linear)
+    k = JointKernel(0.6, rng.uniform(0.5, 2, 6), rng.uniform(0.1, 0.4, 6), rng.uniform(0.2, 0.8, 6), linear=lin)
+    low, whole = k.lower(Q), k(Q)
+    il = np.tril_indices(n)
+    assert np.array_equal(low[il], whole[il])
+    if n > 128:
+        assert np.count_nonzero(low) < 0.75 * n * n, "the entries above the diagonal blocks are not formed"
+    S = low + 0.05 * np.eye(n)
+    assert np.array_equal(np.linalg.cholesky(S), np.linalg.cholesky(whole + 0.05 * np.eye(n)))
