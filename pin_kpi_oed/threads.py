@@ -23,7 +23,8 @@ from __future__ import annotations
 
 import functools
 import os
-from contextlib import contextmanager
+import sys
+from contextlib import contextmanager, nullcontext
 from typing import Any, TypeVar
 from collections.abc import Callable, Iterator
 
@@ -113,7 +114,9 @@ def limit_process_threads() -> Any:
 
     Returns:
         threadpoolctl's limiter: used as a context (``with limit_process_threads():``) it restores the loaded
-        libraries' limits on exit.
+        libraries' limits on exit. When no NumPy or SciPy is loaded yet (``info``, a command line before its
+        imports) and the variables say ``n``, there is nothing to limit now: a context that does nothing, and
+        threadpoolctl is not loaded.
     """
     n = get_max_threads()
     for var in THREAD_VARIABLES:
@@ -121,6 +124,8 @@ def limit_process_threads() -> Any:
     if any(os.environ[var] != str(n) for var in THREAD_VARIABLES):
         # a variable of the user's says otherwise: SciPy's own BLAS would read it, so load it now and limit it
         import scipy.linalg  # noqa: F401
+    elif not any(name in sys.modules for name in ("numpy", "scipy")):
+        return nullcontext()  # every BLAS / OpenMP library loaded from now on reads the variables just set
     from threadpoolctl import threadpool_limits
 
     return threadpool_limits(limits=n)

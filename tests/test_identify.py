@@ -583,3 +583,24 @@ def test_geometry_prior_changes_nothing_the_data_determine(kr15_data, tmp_path, 
     assert main(["identify", "--robot", "kr15", "--data", str(path), "--geometry-prior", "5e-3"]) == 2
     err = capsys.readouterr().err
     assert "--geometry-prior" in err and len(err.strip().splitlines()) == 1
+
+
+def test_auto_loss_refits_from_the_plain_fit_it_made(monkeypatch):
+    """loss='auto' refits with soft_l1 from its own plain fit (the same problem and start) instead of making that fit
+    again: exactly the result of loss='soft_l1', with one least-squares solve fewer."""
+    import pin_kpi_oed.identification.solve as solve_module
+
+    robot, tm, nominal = _setup("ur10")
+    truth = random_truth(tm, _tol(), seed=51)
+    train = simulate(tm, robot.random_q(np.random.default_rng(1), 100), truth, seed=2, outliers=(0.05, 2e-3))
+    calls = []
+    real = solve_module._least_squares
+    monkeypatch.setattr(solve_module, "_least_squares", lambda *a, **k: calls.append(a[2]) or real(*a, **k))
+    # the noise level unknown (the covariance scaled by chi2): the flagged outliers make 'auto' refit robustly
+    auto = identify(nominal, train, loss="auto", scale_covariance=True)
+    n_auto, calls[:] = len(calls), []
+    robust = identify(nominal, train, loss="soft_l1", scale_covariance=True)
+    assert auto.loss == "soft_l1" and auto.loss_decision, "the case must refit with the robust loss"
+    assert np.array_equal(auto.values, robust.values) and np.array_equal(auto.covariance, robust.covariance)
+    assert (auto.nit, auto.nfev) == (robust.nit, robust.nfev)
+    assert n_auto == len(calls), f"'auto' made {n_auto} least-squares solves, 'soft_l1' {len(calls)}"

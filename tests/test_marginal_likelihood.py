@@ -176,3 +176,55 @@ def test_blocked_kernel_equals_the_whole_arrays_to_the_last_bit():
     assert np.array_equal(f._pairs[0], P)
     assert np.array_equal(f._A, A)
     assert np.array_equal(f._pairs[1], K)
+
+
+def test_gradient_weights_at_the_pairs_equal_the_whole_matrices_to_the_last_bit():
+    """W = ααᵀ − mΣ⁻¹ is formed at the pairs i < j only; value and gradient must be exactly those of W formed over the
+    whole matrices (the optimiser's path depends on every bit), here with a linear joint and several blocks."""
+    from scipy import linalg as sla
+
+    from pin_kpi_oed.discrepancy.marginal import REGRESSOR_JITTER
+
+    Q, Y = _gp_rows(150, 6, 3, seed=8)
+    Q[:, 5] *= 0.2
+    f = MarginalLikelihood(Q, Y, np.array([False] * 5 + [True]))
+    theta = np.log(np.r_[0.6, np.linspace(0.1, 0.3, 6), np.linspace(0.2, 0.7, 6), np.linspace(0.5, 2.0, 6), 0.05])
+    value, grad = f(theta)
+    c, a, ell, L, w = f.split(theta)
+    n, m = f.n, Y.shape[1]
+    f._kernel_pairs(c, a, ell, L)
+    P, K = f._pairs[0].copy(), f._pairs[1].copy()
+    S = np.zeros((n, n), order="F")
+    S.reshape(-1, order="F")[f.flat] = K
+    S.reshape(-1, order="F")[::n + 1] = c ** 2 + float(np.sum(a ** 2)) + w + REGRESSOR_JITTER
+    U, _ = sla.lapack.dpotrf(S, lower=0, clean=0)
+    alpha, _ = sla.lapack.dpotrs(U, Y, lower=0)
+    lml = -0.5 * float(np.sum(Y * alpha)) - m * float(np.sum(np.log(np.diag(U)))) - 0.5 * m * n * np.log(2.0 * np.pi)
+    Si, _ = sla.lapack.dpotri(U, lower=0)
+    W = alpha @ alpha.T
+    Wd = float(np.trace(W) - m * np.trace(Si))
+    W -= m * Si
+    Wp = 2.0 * W.reshape(-1)[f.flat_c]
+    WP = Wp * P
+    g = np.r_[float(WP.sum()) + c ** 2 * Wd, f._A @ Wp + a ** 2 * Wd,
+              0.5 * np.einsum("p,jp,jp->j", Wp, f._A, f.D) / ell ** 2, 0.5 * (f.D @ WP) / L ** 2, 0.5 * w * Wd]
+    assert value == -lml
+    assert np.array_equal(grad, -g)
+
+
+@pytest.mark.parametrize("n, linear", [(300, None), (257, [True] + [False] * 5), (128, None), (1, None)])
+def test_lower_triangle_equals_the_whole_kernel_to_the_last_bit(n, linear):
+    """The K-fold check and the inducing posterior factor the kernel matrix from its lower triangle alone
+    (``JointKernel.lower``): every entry of it must be exactly the whole matrix's, so that the factor, the check's
+    figures and the decision do not change, across several blocks of rows and with a linear joint."""
+    rng = np.random.default_rng(n)
+    Q = rng.uniform(-np.pi, np.pi, (n, 6))
+    lin = None if linear is None else np.array(linear)
+    k = JointKernel(0.6, rng.uniform(0.5, 2, 6), rng.uniform(0.1, 0.4, 6), rng.uniform(0.2, 0.8, 6), linear=lin)
+    low, whole = k.lower(Q), k(Q)
+    il = np.tril_indices(n)
+    assert np.array_equal(low[il], whole[il])
+    if n > 128:
+        assert np.count_nonzero(low) < 0.75 * n * n, "the entries above the diagonal blocks are not formed"
+    S = low + 0.05 * np.eye(n)
+    assert np.array_equal(np.linalg.cholesky(S), np.linalg.cholesky(whole + 0.05 * np.eye(n)))

@@ -252,14 +252,15 @@ def _run(args: argparse.Namespace) -> int:
     from pin_kpi_oed.validation.paths import release_outputs
 
     try:
-        check_args(args)
         if args.threads is not None:
             from pin_kpi_oed.threads import set_max_threads
 
             set_max_threads(args.threads)
         from pin_kpi_oed.threads import limit_process_threads
 
+        # the thread variables set before the option checks load NumPy: its BLAS starts with them (no threadpoolctl)
         with limit_process_threads():
+            check_args(args)
             return int(args.func(args) or 0)
     except PinKpiOedError as exc:
         from pin_kpi_oed.cli.flags import in_flags

@@ -17,7 +17,6 @@ from __future__ import annotations
 import contextlib
 import json
 import os
-import secrets
 import time
 from pathlib import Path
 from typing import Any
@@ -98,7 +97,7 @@ def atomic_write_bytes(path: str | os.PathLike[str], data: bytes) -> None:
     target = check_writable(path)
     directory = target.parent if str(target.parent) else Path(".")
     while True:
-        tmp = directory / f".{target.name}.{secrets.token_hex(6)}.tmp"
+        tmp = directory / f".{target.name}.{os.urandom(6).hex()}.tmp"
         try:
             fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666)
             break

@@ -50,7 +50,8 @@ def _posterior(kernel: JointKernel, noise: float, Q: np.ndarray, Y: np.ndarray, 
         return {"kind": "exact", "Z": Q.copy(), "y": Y.copy()}
     Z = Q[np.sort(rng.permutation(n)[:opts.n_inducing])]
     m = len(Z)
-    Lz = jitter_cholesky(kernel(Z), (1e-8, 1e-6, 1e-4, 1e-2), "the inducing configurations' kernel matrix")
+    # the lower triangle alone: the Cholesky factor reads nothing else
+    Lz = jitter_cholesky(kernel.lower(Z), (1e-8, 1e-6, 1e-4, 1e-2), "the inducing configurations' kernel matrix")
     # A = K_ZZ + w⁻¹ K_ZQ K_QZ = L_z B L_zᵀ with B = I + w⁻¹ V Vᵀ, V = L_z⁻¹ K_ZQ (eigenvalues of B ≥ 1)
     B = np.eye(m)
     c = np.zeros((m, 3))
@@ -68,8 +69,8 @@ def _posterior(kernel: JointKernel, noise: float, Q: np.ndarray, Y: np.ndarray, 
 
 
 def _spd_inverse(S: np.ndarray, keep: dict | None = None) -> np.ndarray:
-    """Inverse of a symmetric positive-definite matrix from its Cholesky factor (LAPACK potrf + potri); the lower
-    factor is stored in ``keep["chol"]`` when ``keep`` is given."""
+    """Inverse of a symmetric positive-definite matrix from its Cholesky factor (LAPACK potrf + potri; S's lower
+    triangle is all that is read); the lower factor is stored in ``keep["chol"]`` when ``keep`` is given."""
     Lc, info = sla.lapack.dpotrf(S, lower=1, clean=1, overwrite_a=0)
     if info != 0:
         raise np.linalg.LinAlgError("the discrepancy covariance is not positive definite")
@@ -99,7 +100,7 @@ def kfold_split(kernel: JointKernel, noise: float, Q: np.ndarray, Y: np.ndarray,
     e0, e1, z2, inside = [], [], [], []
     exact = len(Q) <= opts.max_exact
     if exact:
-        S = kernel(Q)
+        S = kernel.lower(Q)  # the lower triangle alone: _spd_inverse's factor reads nothing else
         S[np.diag_indices_from(S)] += noise + JITTER
         Si = _spd_inverse(S, keep)
         alpha = Si @ Y

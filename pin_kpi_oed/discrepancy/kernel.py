@@ -95,12 +95,15 @@ def chord_squared(X: np.ndarray, Y: np.ndarray, lin: np.ndarray | None = None) -
 
 
 def _value_blocks(X: np.ndarray, cY: np.ndarray, sY: np.ndarray, Y: np.ndarray | None, c: float, L: np.ndarray,
-                  a: np.ndarray, ell: np.ndarray, lin: np.ndarray | None, block: int = 128) -> np.ndarray:
+                  a: np.ndarray, ell: np.ndarray, lin: np.ndarray | None, block: int = 128,
+                  lower: bool = False) -> np.ndarray:
     """:meth:`JointKernel._value` on Y given by its circle points ``cY``, ``sY`` (and, with linear joints ``lin``, its
     coordinates ``Y``): a revolute joint's 4 sin²(Δ/2)/L² = 2/L² − 2 (cx cy + sx sy)/L² and a linear joint's
     Δ²/L² = (x/L)² + (y/L)² − 2 (x/L)(y/L) (centred on X's mean first, against cancellation) join one matrix
     product; the one-joint parts are exp((cos Δ − 1)/ℓ²) and exp(−Δ²/2ℓ²), summed ``block`` rows at a time while in
-    the processor's cache."""
+    the processor's cache. ``lower`` (Y is X): each block of rows up to its diagonal block only, the columns beyond
+    left 0 (every entry formed is the one of the whole matrix, to the last bit: a lower Cholesky factor reads
+    nothing else)."""
     lin = np.zeros(X.shape[1], bool) if lin is None else lin
     ang, on_line = ~lin, bool(lin.any())
     cX, sX = np.cos(X), np.sin(X)
@@ -116,27 +119,28 @@ def _value_blocks(X: np.ndarray, cY: np.ndarray, sY: np.ndarray, Y: np.ndarray |
         rx, ry = 0.5 * np.sum(xl ** 2, axis=1), 0.5 * np.sum(yl ** 2, axis=1)
     V = V.T
     inv = 1.0 / ell ** 2
-    K = np.empty((X.shape[0], cY.shape[0]))
+    K = (np.zeros if lower else np.empty)((X.shape[0], cY.shape[0]))
     T = np.empty((min(block, X.shape[0]), cY.shape[0]))
     for b in range(0, X.shape[0], block):
-        Kb = K[b:b + block]
-        Tb = T[:len(Kb)]
-        np.matmul(U[b:b + block], V, out=Kb)
+        end = b + block if lower else cY.shape[0]  # the columns formed
+        Kb = K[b:b + block, :end]
+        Tb = T[:Kb.shape[0], :Kb.shape[1]]
+        np.matmul(U[b:b + block], V[:, :end], out=Kb)
         Kb -= s0
         if on_line:
             Kb -= rx[b:b + block, None]
-            Kb -= ry[None, :]
+            Kb -= ry[None, :end]
         np.minimum(Kb, 0.0, out=Kb)
         np.exp(Kb, out=Kb)
         Kb *= c ** 2
         for j in range(X.shape[1]):
             if lin[j]:                        # a_j² exp(−Δ_j²/(2ℓ_j²))
-                np.subtract.outer(X[b:b + block, j], Y[:, j], out=Tb)
+                np.subtract.outer(X[b:b + block, j], Y[:end, j], out=Tb)
                 Tb *= Tb
                 Tb *= -0.5 * inv[j]
             else:                             # a_j² exp((cos Δ_j − 1)/ℓ_j²), cos Δ = cos x cos y + sin x sin y
-                np.multiply.outer(cX[b:b + block, j] * inv[j], cY[:, j], out=Tb)
-                Tb += np.multiply.outer(sX[b:b + block, j] * inv[j], sY[:, j])
+                np.multiply.outer(cX[b:b + block, j] * inv[j], cY[:end, j], out=Tb)
+                Tb += np.multiply.outer(sX[b:b + block, j] * inv[j], sY[:end, j])
                 Tb -= inv[j]
                 np.minimum(Tb, 0.0, out=Tb)
             np.exp(Tb, out=Tb)
@@ -295,6 +299,20 @@ class JointKernel(HyperKernel):
                  A * Da if np.size(self.joint_length_scale) > 1 else (A * Da).sum(-1, keepdims=True),
                  P[..., None] * Dp if np.size(self.length_scale) > 1 else (P * Dp.sum(-1))[..., None]]
         return K, np.concatenate(grads, axis=-1)
+
+    def lower(self, X: np.ndarray) -> np.ndarray:
+        """K(X, X)'s lower triangle (n, n), every entry to the last bit that of ``self(X)``, for a lower Cholesky
+        factor (which reads nothing else): about half the work.
+
+        Args:
+            X: configurations (n, d) rad (m for a linear joint).
+
+        Returns:
+            K with its entries above the diagonal blocks of 128 rows left 0 (those inside the blocks are formed).
+        """
+        X = np.atleast_2d(np.asarray(X, float))
+        c, L, a, ell = self.parts(X.shape[1])
+        return _value_blocks(X, np.cos(X), np.sin(X), X, c, L, a, ell, self.linear_joints(X.shape[1]), lower=True)
 
     def against(self, X: np.ndarray, trig_Y: tuple[np.ndarray, ...]) -> np.ndarray:
         """K(X, Y) (n, m) for configurations Y given by ``trig_Y`` = :meth:`features` of Y ((cos Y, sin Y, Y), each

@@ -74,6 +74,7 @@ class MarginalLikelihood:
         # work arrays of every evaluation, allocated once (a new array of this size costs its page faults each time)
         self._A = np.empty_like(self.D)
         self._pairs = np.empty((3, self.D.shape[1]))
+        self._Sp = np.empty(self.D.shape[1])
         self._W = np.empty((self.n, self.n))
         self.nfev = 0
 
@@ -128,10 +129,12 @@ class MarginalLikelihood:
             return np.inf, np.zeros(len(theta))
         W = np.matmul(alpha, alpha.T, out=self._W)
         Wd = float(np.trace(W) - m * np.trace(Si))                            # the diagonal's sum
-        Si *= m
-        W -= Si
-        np.take(W.reshape(-1), self.flat_c, out=Wp)                           # the pairs i < j (W row-major) ...
-        Wp *= 2.0                                                             # ... counted for both triangles
+        # W − mΣ⁻¹ at the pairs i < j only: the same operations on each pair as over the whole matrices
+        np.take(W.reshape(-1), self.flat_c, out=Wp)                           # (ααᵀ)_ij, W row-major
+        Sp = np.take(Si.reshape(-1, order="F"), self.flat, out=self._Sp)      # (Σ⁻¹)_ij, i < j: its upper triangle
+        Sp *= m
+        Wp -= Sp
+        Wp *= 2.0                                                             # counted for both triangles
         WP = np.multiply(Wp, P, out=K)
         g = np.empty(len(theta))
         g[0] = float(WP.sum()) + c ** 2 * Wd

@@ -255,10 +255,11 @@ def identify(model: TrackerModel, data: MeasurementSet, options: IdentifyOptions
     check_tool(model.robot, model.tcp_m, data)
     inp = check_inputs(model, data, opts)
     _check_effects_determined(effects, data)
-    result = _fit(model, data, inp, effects, replace(opts, loss="linear") if opts.loss == "auto" else opts, t_start)
+    result, plain = _fit(model, data, inp, effects, replace(opts, loss="linear") if opts.loss == "auto" else opts,
+                         t_start)
     why = robust_loss_reason(result) if opts.loss == "auto" else ""
-    if why:
-        result = _fit(model, data, inp, effects, replace(opts, loss="soft_l1"), t_start)
+    if why:  # the robust fit starts from the plain fit just made (the same problem and start)
+        result, _ = _fit(model, data, inp, effects, replace(opts, loss="soft_l1"), t_start, plain)
         result.loss_decision = (f"{why}: refitted with the robust loss soft_l1 (--loss linear, loss='linear', "
                                 "keeps the plain fit)")
     result.coverage = JointCoverage.from_training(inp.Q, opts.seed, model.robot.periodic_joints)
@@ -296,13 +297,16 @@ def _state_tcp_sigma(result: IdentificationResult, Qw: np.ndarray, data: Measure
 
 
 def _fit(model: TrackerModel, data: MeasurementSet, inp: FitInputs, effects: Sequence[Any], opts: IdentifyOptions,
-         t_start: float) -> IdentificationResult:
-    """One least-squares fit with ``opts.loss`` (steps 2–6 of the module docstring), before the discrepancy."""
+         t_start: float, plain: tuple[np.ndarray, Any] | None = None) -> tuple[IdentificationResult, Any]:
+    """One least-squares fit with ``opts.loss`` (steps 2–6 of the module docstring), before the discrepancy: (the
+    result, (start, least-squares result) of a plain fit — ``loss='linear'`` — else None). ``plain``: that of a plain
+    fit of the same problem, where a robust loss starts (:func:`~pin_kpi_oed.identification.solve.solve`)."""
     stations, P0, T_init = start_stations(model, data, inp, effects, opts)
     nest = nest_column(data, model.n_nests)
     ident = identifiable_set(stations, opts, (0,) if nest is None else np.unique(nest).tolist())
     prob = build_problem(stations, data, inp, effects, P0, ident, opts)
-    solution = solve(prob, opts)
+    x_start = prob.x0()
+    solution = solve(prob, opts, plain)
     fw, we, outliers = settle_outliers(prob, solution, opts, inp.src)
     x = solution.x
     rpos, rrot = prob.evaluate(x)
@@ -333,4 +337,4 @@ def _fit(model: TrackerModel, data: MeasurementSet, inp: FitInputs, effects: Seq
         reflector_per_station=bool(opts.reflector_per_station), source=data.source,
         held=[(e, np.asarray(t, float)) for e, t in opts.held_effects], time_s=time.perf_counter() - t_start,
         tool=_result_tool(model, data), tcp_std_at="training" if opts.Q_work is None else "working")
-    return result
+    return result, ((x_start, sol) if opts.loss == "linear" else None)

@@ -37,8 +37,21 @@ def _least_squares(prob: ResidualModel, x_init: np.ndarray, loss: str, f_scale: 
         raise SolverError(f"identification failed: {str(exc).splitlines()[0]}") from None
 
 
-def solve(prob: ResidualModel, opts: IdentifyOptions) -> Solution:
-    """Step 4: Levenberg–Marquardt (or a plain fit then the robust loss), checked for divergence and reach."""
+def solve(prob: ResidualModel, opts: IdentifyOptions, plain: tuple[np.ndarray, Any] | None = None) -> Solution:
+    """Step 4: Levenberg–Marquardt (or a plain fit then the robust loss), checked for divergence and reach.
+
+    Args:
+        prob: the residual model; opts: the options (``loss``, tolerances, ``max_nfev``).
+        plain: (start, least-squares result) of the plain fit of this same problem (a fit with ``loss='linear'``
+            and otherwise the same options: its :attr:`Solution.sol`): the robust loss starts from it instead of
+            computing it again; used only when its start is this problem's start.
+
+    Returns:
+        The :class:`Solution`.
+
+    Raises:
+        SolverError: divergence, no convergence (``raise_on_failure``), or the fit does not reach the data.
+    """
     nfev_max = opts.max_nfev if opts.max_nfev is not None else 50 * max(prob.nx, 1)
     x0 = prob.x0()
     lm_ok = prob.n_rows >= prob.nx
@@ -46,7 +59,10 @@ def solve(prob: ResidualModel, opts: IdentifyOptions) -> Solution:
     if opts.loss == "linear":
         sol = _least_squares(prob, x0, "linear", 1.0, "lm" if lm_ok else "trf", opts, nfev_max)
     else:
-        first = _least_squares(prob, x0, "linear", 1.0, "lm" if lm_ok else "trf", opts, nfev_max)
+        if plain is not None and np.array_equal(plain[0], x0):
+            first = plain[1]  # the same call on the same problem: the same result
+        else:
+            first = _least_squares(prob, x0, "linear", 1.0, "lm" if lm_ok else "trf", opts, nfev_max)
         if opts.f_scale is None:
             f_lin = prob.weighted_rows(first.x).ravel()
             fs = 3.0 * 1.4826 * float(np.median(np.abs(f_lin))) or 1.0

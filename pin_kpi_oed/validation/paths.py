@@ -12,7 +12,6 @@ them while the command runs, the command's write is refused instead of silently 
 from __future__ import annotations
 
 import os
-import tempfile
 from pathlib import Path
 from collections.abc import Iterable
 
@@ -105,6 +104,8 @@ def _probe_folder(opt: str, path: Path, folder: Path) -> None:
     Raises:
         InputError: naming the option, the output path and the system's reason.
     """
+    import tempfile  # here, not at the top: a command that writes nothing does not load it
+
     try:
         fd, probe = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".probe", dir=folder)
     except OSError as exc:

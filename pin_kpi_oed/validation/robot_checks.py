@@ -115,7 +115,6 @@ class captured_stderr:
     def __enter__(self) -> captured_stderr:
         import os
         import sys
-        import tempfile
 
         self.text = ""
         try:
@@ -123,7 +122,13 @@ class captured_stderr:
             self._fd = sys.stderr.fileno() if hasattr(sys.stderr, "fileno") else 2
         except (OSError, ValueError, AttributeError):
             self._fd = 2
-        self._tmp = tempfile.TemporaryFile()
+        memfd = getattr(os, "memfd_create", None)  # Linux: an anonymous file without loading tempfile
+        if memfd is not None:
+            self._tmp = os.fdopen(memfd("captured_stderr"), "w+b")
+        else:  # pragma: no cover - other systems
+            import tempfile
+
+            self._tmp = tempfile.TemporaryFile()
         try:
             self._saved = os.dup(2)
             os.dup2(self._tmp.fileno(), 2)
