@@ -11,7 +11,8 @@ import pinocchio as pin
 import pytest
 
 from pin_kpi_oed import load_robot
-from pin_kpi_oed.calibrated.shared_tables import StationTracker, discrepancy_at, remembered, row_tables
+from pin_kpi_oed.calibrated.shared_tables import (StationTracker, discrepancy_at, posterior_covariance_at, remembered,
+                                                  row_tables)
 from pin_kpi_oed.data.measurements import MeasurementSet
 from pin_kpi_oed.discrepancy.gp import DiscrepancyOptions
 from pin_kpi_oed.discrepancy.fit import fit_discrepancy
@@ -85,6 +86,18 @@ def test_discrepancy_rows_are_computed_once_and_equal_the_processes(setting):
     assert np.array_equal(first[0], both[0][:30])
     discrepancy_at(c, Q)
     assert c.rows == 130                                 # the tables are emptied at the end
+
+
+def test_posterior_covariance_from_the_rows_columns_is_the_processes(setting):
+    rb, model, rng = setting
+    d = model.discrepancy
+    Q = 0.6 * rng.uniform(rb.q_lower, rb.q_upper, size=(40, rb.nq))
+    with row_tables():
+        for window in (Q[:10], Q[:20], Q[10:40], Q[::-1]):     # growing, sliding, reordered windows
+            K, ref = posterior_covariance_at(d, window), d.posterior_covariance(window)
+            np.testing.assert_allclose(K, ref, rtol=1e-9, atol=1e-12 * np.max(np.abs(ref)))
+        white = dataclasses.replace(d, kind="white")
+        assert np.array_equal(posterior_covariance_at(white, Q[:5]), np.zeros((5, 5)))
 
 
 def test_remembered_results_are_copies_and_only_inside_the_tables():

@@ -49,7 +49,7 @@ from typing import Any
 
 import numpy as np
 
-from pin_kpi_oed.calibrated.shared_tables import discrepancy_at, outside_coverage, remembered
+from pin_kpi_oed.calibrated.shared_tables import discrepancy_at, outside_coverage, posterior_covariance_at, remembered
 from pin_kpi_oed.model.kinematics import skew
 
 #: the length along the tool axis at which ``predict`` and ``compensate`` state the orientation's effect (m):
@@ -474,7 +474,7 @@ def predictive_covariance(cm: Any, Q: np.ndarray, aux: Any, label: str) -> tuple
     else:
         delta, _ = discrepancy_at(d, Q, False)
         Y = cm.predict_rows(Q, aux, label, False, delta)
-        K = d.posterior_covariance(Q)
+        K = posterior_covariance_at(d, Q)
         for a in range(3):
             Cb[:, a, :, a] = K * d.scale_m[a] ** 2 + np.eye(m) * d.noise_var_m2[a]
         A = np.zeros((m, 3, 0))

@@ -22,9 +22,12 @@ coverage object) and compute only the rows not in it, in one batch — inside :f
 replay), where the model's discrepancy and coverage stay as they are; outside it they ask the objects every time.
 A row's mean and variance come from the batch they were first computed in: the Gaussian process evaluates each row
 on its own (its kernel row, its triangular solve), so another batch changes them by rounding only (relative 1e-16).
-Inside :func:`row_tables` too, :func:`remembered` keeps a few results (a station's Jacobian at the registration
-rows, asked by the registration's σ factor, the rows' covariance and the TCP σ alike) under a key naming all they
-depend on.
+The posterior covariance between a window's rows (:func:`posterior_covariance_at`) is k(Q, Q) − VᵀV with V the
+kernel's columns at the rows whitened by the training rows' Cholesky factor: each row's column, computed once, serves
+every window it is in (the factor formed once per discrepancy, as the process forms its own, and checked against
+the process's covariance on its first rows). Inside :func:`row_tables` too, :func:`remembered` keeps a few results
+(a station's Jacobian at the registration rows, asked by the registration's σ factor, the rows' covariance and the
+TCP σ alike) under a key naming all they depend on.
 """
 
 from __future__ import annotations
@@ -35,12 +38,15 @@ from contextlib import contextmanager
 from typing import Any
 
 import numpy as np
+import scipy.linalg as sla
 
+from pin_kpi_oed.discrepancy.gp import JITTER
 from pin_kpi_oed.model.kinematics import Chain, Kinematics
 from pin_kpi_oed.model.tracker import TrackerModel
 
 __all__ = ["StationTracker", "KINEMATICS_TABLE_SIZE", "KINEMATICS_TABLE_ROWS", "clear_shared_kinematics",
-           "discrepancy_at", "outside_coverage", "remembered", "row_tables", "ROW_TABLE_SIZE", "RESULT_TABLE_SIZE"]
+           "discrepancy_at", "outside_coverage", "posterior_covariance_at", "remembered", "row_tables",
+           "ROW_TABLE_SIZE", "COLUMN_TABLE_SIZE", "RESULT_TABLE_SIZE"]
 
 #: Entries the shared table keeps (the least recently used leaves first): a check asks for a handful of
 #: (configurations, tool point) pairs.
@@ -113,11 +119,15 @@ class StationTracker(TrackerModel):
 
 #: Configurations each table keeps (the least recently asked leave first).
 ROW_TABLE_SIZE = 4096
+#: Whitened kernel columns :func:`posterior_covariance_at` keeps (a column holds the training rows' count of
+#: numbers; a monitor's window holds at most a few hundred rows).
+COLUMN_TABLE_SIZE = 600
 #: Results :func:`remembered` keeps (the least recently asked leave first).
 RESULT_TABLE_SIZE = 64
 
 _TABLES: OrderedDict[int, tuple[Any, OrderedDict]] = OrderedDict()
 _RESULTS: OrderedDict[tuple, np.ndarray] = OrderedDict()
+_FACTORS: dict[int, tuple[Any, np.ndarray | None]] = {}
 _ACTIVE = [0]
 
 
@@ -133,6 +143,7 @@ def row_tables() -> Iterator[None]:
         if not _ACTIVE[0]:
             _TABLES.clear()
             _RESULTS.clear()
+            _FACTORS.clear()
 
 
 def remembered(key: tuple, compute: Callable[[], np.ndarray]) -> np.ndarray:
@@ -169,7 +180,7 @@ def _table(owner: Any) -> OrderedDict:
     return entry[1]
 
 
-def _rows(owner: Any, Q: np.ndarray, need: Any, compute: Any) -> list:
+def _rows(owner: Any, Q: np.ndarray, need: Any, compute: Any, size: int = ROW_TABLE_SIZE) -> list:
     """Each row's entry of ``owner``'s table; the rows without one, or whose entry fails ``need``, computed by
     ``compute(rows, old_entries)`` in one batch."""
     table = _table(owner)
@@ -182,7 +193,7 @@ def _rows(owner: Any, Q: np.ndarray, need: Any, compute: Any) -> list:
             got[i] = table[keys[i]] = e
     for k in keys:
         table.move_to_end(k)
-    while len(table) > ROW_TABLE_SIZE:
+    while len(table) > size:
         table.popitem(last=False)
     return got
 
@@ -215,3 +226,36 @@ def outside_coverage(cov: Any, Q: np.ndarray) -> np.ndarray:
         return np.asarray(cov.extrapolation(Q), bool)
     got = _rows(cov, Q, lambda e: True, lambda rows, old: list(np.asarray(cov.extrapolation(Q[rows]), bool)))
     return np.array(got, bool)
+
+
+def posterior_covariance_at(d: Any, Q: np.ndarray) -> np.ndarray:
+    """:meth:`~pin_kpi_oed.discrepancy.gp.Discrepancy.posterior_covariance` of the discrepancy ``d`` between the
+    configurations Q (m, n) rad, (m, m) in normalised units; inside :func:`row_tables`, for an exact Gaussian
+    process, from each row's whitened kernel column computed once (module docstring)."""
+    Q = np.ascontiguousarray(np.atleast_2d(np.asarray(Q, float)))
+    if not _ACTIVE[0] or getattr(d, "kind", None) != "exact" or len(Q) == 0:
+        return d.posterior_covariance(Q)
+    entry = _FACTORS.get(id(d))
+    if entry is None or entry[0] is not d:
+        entry = _FACTORS[id(d)] = (d, _checked_factor(d, Q))
+    L = entry[1]
+    if L is None:
+        return d.posterior_covariance(Q)
+
+    def compute(rows: np.ndarray, old: list) -> list:
+        V = sla.solve_triangular(L, d.kernel(Q[rows], d.Z).T, lower=True, check_finite=False)
+        return list(V.T)
+
+    V = np.array(_rows(L, Q, lambda e: True, compute, COLUMN_TABLE_SIZE)).T
+    return d.kernel(Q) - V.T @ V
+
+
+def _checked_factor(d: Any, Q: np.ndarray) -> np.ndarray | None:
+    """The lower Cholesky factor of K(Z, Z) + (w + jitter) I of an exact process, formed as the process forms its
+    own; None (the process asked every time) when the covariance it gives at Q differs from the process's."""
+    K = d.kernel(d.Z) + (d.noise + JITTER) * np.eye(len(d.Z))
+    L = sla.cholesky(K, lower=True, check_finite=False)
+    V = sla.solve_triangular(L, d.kernel(Q, d.Z).T, lower=True, check_finite=False)
+    ours, theirs = d.kernel(Q) - V.T @ V, d.posterior_covariance(Q)
+    same = np.allclose(ours, theirs, rtol=1e-8, atol=1e-10 * float(np.max(np.abs(theirs))))
+    return L if same else None
