@@ -32,6 +32,7 @@ TCP σ alike) under a key naming all they depend on.
 
 from __future__ import annotations
 
+import threading
 from collections import OrderedDict
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
@@ -56,6 +57,7 @@ KINEMATICS_TABLE_ROWS = 20000
 
 _TABLE: OrderedDict[tuple, tuple[Any, Kinematics]] = OrderedDict()
 _CHAINS: OrderedDict[int, tuple[Any, Chain]] = OrderedDict()
+_LOCK = threading.Lock()        # the tables' bookkeeping (the kinematics themselves are computed outside it)
 
 
 def clear_shared_kinematics() -> None:
@@ -71,14 +73,15 @@ class StationTracker(TrackerModel):
 
     def init_kinematics(self) -> None:
         """:meth:`TrackerModel.init_kinematics` with the chain built once per robot (the eight robots used last)."""
-        entry = _CHAINS.get(id(self.robot))
+        with _LOCK:
+            entry = _CHAINS.get(id(self.robot))
         if entry is None or entry[0] is not self.robot:
             super().init_kinematics()
-            _CHAINS[id(self.robot)] = (self.robot, self.chain)
-            while len(_CHAINS) > 8:
-                _CHAINS.popitem(last=False)
+            with _LOCK:
+                _CHAINS[id(self.robot)] = (self.robot, self.chain)
+                while len(_CHAINS) > 8:
+                    _CHAINS.popitem(last=False)
             return
-        _CHAINS.move_to_end(id(self.robot))
         self._chain = entry[1]
         self._nominal = [M.copy() for M in self._chain.placements]
         self._placements = list(self._nominal)
@@ -105,15 +108,17 @@ class StationTracker(TrackerModel):
             return super().kinematics(p, Q, point_m)
         joints = np.concatenate([p[L.joint_slice(j)] for j in range(L.n_joints)])
         key = (id(self.robot), joints.tobytes(), Qa.shape, Qa.tobytes(), np.asarray(point_m, float).tobytes())
-        hit = _TABLE.get(key)
-        if hit is not None and hit[0] is self.robot:
-            _TABLE.move_to_end(key)
-            return hit[1]
+        with _LOCK:
+            hit = _TABLE.get(key)
+            if hit is not None and hit[0] is self.robot:
+                _TABLE.move_to_end(key)
+                return hit[1]
         kin = super().kinematics(p, Qa, point_m)
         if len(Qa) <= KINEMATICS_TABLE_ROWS:
-            _TABLE[key] = (self.robot, kin)
-            while len(_TABLE) > KINEMATICS_TABLE_SIZE or sum(k[2][0] for k in _TABLE) > KINEMATICS_TABLE_ROWS:
-                _TABLE.popitem(last=False)
+            with _LOCK:
+                _TABLE[key] = (self.robot, kin)
+                while len(_TABLE) > KINEMATICS_TABLE_SIZE or sum(k[2][0] for k in _TABLE) > KINEMATICS_TABLE_ROWS:
+                    _TABLE.popitem(last=False)
         return kin
 
 
