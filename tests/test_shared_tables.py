@@ -11,8 +11,8 @@ import pinocchio as pin
 import pytest
 
 from pin_kpi_oed import load_robot
-from pin_kpi_oed.calibrated.shared_tables import (StationTracker, discrepancy_at, posterior_covariance_at, remembered,
-                                                  row_tables)
+from pin_kpi_oed.calibrated.shared_tables import (RESULT_TABLE_NUMBERS, StationTracker, discrepancy_at,
+                                                  posterior_covariance_at, remembered, row_tables)
 from pin_kpi_oed.data.measurements import MeasurementSet
 from pin_kpi_oed.discrepancy.gp import DiscrepancyOptions
 from pin_kpi_oed.discrepancy.fit import fit_discrepancy
@@ -114,6 +114,10 @@ def test_remembered_results_are_copies_and_only_inside_the_tables():
         a = remembered(("k",), compute)
         a[0] = 99.0
         assert remembered(("k",), compute)[0] == 0.0 and len(calls) == 3
+        big = []
+        for _ in range(2):          # a result too large for the table is computed every time
+            remembered(("big",), lambda: big.append(1) or np.zeros(RESULT_TABLE_NUMBERS))
+        assert len(big) == 2
 
 
 def test_a_check_inside_the_tables_is_the_check_outside(setting):

@@ -47,7 +47,7 @@ from pin_kpi_oed.model.tracker import TrackerModel
 
 __all__ = ["StationTracker", "KINEMATICS_TABLE_SIZE", "KINEMATICS_TABLE_ROWS", "clear_shared_kinematics",
            "discrepancy_at", "outside_coverage", "posterior_covariance_at", "remembered", "row_tables",
-           "ROW_TABLE_SIZE", "COLUMN_TABLE_SIZE", "RESULT_TABLE_SIZE"]
+           "ROW_TABLE_SIZE", "COLUMN_TABLE_SIZE", "RESULT_TABLE_SIZE", "RESULT_TABLE_NUMBERS"]
 
 #: Entries the shared table keeps (the least recently used leaves first): a check asks for a handful of
 #: (configurations, tool point) pairs.
@@ -127,8 +127,10 @@ ROW_TABLE_SIZE = 4096
 #: Whitened kernel columns :func:`posterior_covariance_at` keeps (a column holds the training rows' count of
 #: numbers; a monitor's window holds at most a few hundred rows).
 COLUMN_TABLE_SIZE = 600
-#: Results :func:`remembered` keeps (the least recently asked leave first).
+#: Results :func:`remembered` keeps (the least recently asked leave first), and the most numbers they hold together
+#: (8 MB); a larger result is not kept.
 RESULT_TABLE_SIZE = 64
+RESULT_TABLE_NUMBERS = 1_000_000
 
 _TABLES: OrderedDict[int, tuple[Any, OrderedDict]] = OrderedDict()
 _RESULTS: OrderedDict[tuple, np.ndarray] = OrderedDict()
@@ -165,8 +167,11 @@ def remembered(key: tuple, compute: Callable[[], np.ndarray]) -> np.ndarray:
         return compute()
     hit = _RESULTS.get(key)
     if hit is None:
-        hit = _RESULTS[key] = np.asarray(compute())
-        while len(_RESULTS) > RESULT_TABLE_SIZE:
+        hit = np.asarray(compute())
+        if hit.size > RESULT_TABLE_NUMBERS // 4:
+            return hit
+        _RESULTS[key] = hit
+        while len(_RESULTS) > RESULT_TABLE_SIZE or sum(a.size for a in _RESULTS.values()) > RESULT_TABLE_NUMBERS:
             _RESULTS.popitem(last=False)
     _RESULTS.move_to_end(key)
     return hit.copy()
