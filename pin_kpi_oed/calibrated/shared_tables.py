@@ -88,6 +88,22 @@ class StationTracker(TrackerModel):
         self._p_applied = None
         self._apply(np.zeros(self.n_params))
 
+    def at_nests(self, nest: np.ndarray | None) -> StationTracker:
+        """:meth:`TrackerModel.at_nests`: the same model measuring each row at its nest, a station tracker too.
+
+        Args:
+            nest: the nest of every row, (m,) int; None: every row at nest 0.
+
+        Returns:
+            The :class:`StationTracker` (its kinematics from the same table).
+
+        Raises:
+            InputError: a nest index that is not one of the model's nests.
+        """
+        out = super().at_nests(nest)
+        assert isinstance(out, StationTracker)
+        return out
+
     def kinematics(self, p: np.ndarray, Q: np.ndarray, point_m: np.ndarray) -> Kinematics:
         """:meth:`TrackerModel.kinematics`, looked up first in the shared table.
 
