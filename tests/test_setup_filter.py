@@ -46,3 +46,25 @@ def test_a_still_setup_is_found_still_and_outliers_are_not_used():
     assert f.update(np.full(3, 0.01), G, np.full(3, 5e-5)) is False and f.outliers == 1   # 10 mm off: not used
     assert np.allclose(f.state()[0], x0)
     assert LEVELS_M_PER_SQRT_S[0] == 0.0
+
+
+def test_the_banks_update_is_each_levels_kalman_update():
+    """Every level of the bank is updated at once; each equals the Kalman update of its own filter written out."""
+    rng = np.random.default_rng(4)
+    f = SetupFilter(lever_m=2.0)
+    for _ in range(5):
+        G, sigma, r0 = rng.normal(size=(3, 6)), np.array([4e-5, 5e-5, 6e-5]), rng.normal(size=3) * 5e-5
+        f.advance(None)
+        x0, P0, ll0 = f.x.copy(), f.P.copy(), f.loglik.copy()
+        assert f.update(r0, G, sigma)
+        R = np.diag(sigma ** 2)
+        for k in range(len(f.levels)):
+            S = G @ P0[k] @ G.T + R
+            r = r0 - G @ x0[k]
+            K = P0[k] @ G.T @ np.linalg.inv(S)
+            A = np.eye(6) - K @ G
+            np.testing.assert_allclose(f.x[k], x0[k] + K @ r, rtol=1e-10, atol=1e-18)
+            np.testing.assert_allclose(f.P[k], A @ P0[k] @ A.T + K @ R @ K.T, rtol=1e-10, atol=1e-30)
+            ll = f.forgetting * ll0[k] - 0.5 * (r @ np.linalg.solve(S, r) + np.linalg.slogdet(S)[1]
+                                                 + 3 * np.log(2 * np.pi))
+            np.testing.assert_allclose(f.loglik[k], ll, rtol=1e-10)

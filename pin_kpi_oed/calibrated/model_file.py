@@ -78,7 +78,7 @@ from pin_kpi_oed.effects.spec import effect_from_spec, effect_spec
 from pin_kpi_oed.errors import InputError, PinKpiOedError
 from pin_kpi_oed.model.nests import check_nests, nest_column
 from pin_kpi_oed.model.noise import NoiseModel
-from pin_kpi_oed.model.tracker import TrackerModel
+from pin_kpi_oed.calibrated.shared_tables import StationTracker, discrepancy_at
 from pin_kpi_oed.model.parameters import ParameterLayout
 from pin_kpi_oed.model.robot import Robot, load_robot, portable_spec
 from pin_kpi_oed.model.serialize import se3_from_matrix
@@ -272,7 +272,7 @@ class CalibratedModel:
                          "name one (parameter 'station'), give the data a 'station' column, or register the set-up "
                          "first")
 
-    def station_model(self, label: str | None = None) -> tuple[TrackerModel, np.ndarray]:
+    def station_model(self, label: str | None = None) -> tuple[StationTracker, np.ndarray]:
         """The measurement model of a station and its raw parameter vector (set-up errors zero).
 
         Returns:
@@ -280,7 +280,7 @@ class CalibratedModel:
         """
         st = self.setups[self.station(label)]
         L = ParameterLayout(list(self.robot.joint_names), pose6d=self.pose6d and st.probe_R is not None)
-        model = TrackerModel(self.robot, tracker_T_base=pin.SE3(st.tracker_T_base), reflector_m=st.reflector_m,
+        model = StationTracker(self.robot, tracker_T_base=pin.SE3(st.tracker_T_base), reflector_m=st.reflector_m,
                              tcp_m=self.tcp_m, noise=self.noise, pose6d=L.pose6d,
                              probe_R=np.eye(3) if st.probe_R is None else st.probe_R, layout=L, nests_m=st.nests_m)
         p = np.concatenate([self.joint_p, np.zeros(L.n - self.joint_p.size)])
@@ -302,7 +302,7 @@ class CalibratedModel:
             InputError: unknown station, wrong shape, joint values outside the limits.
         """
         Q = self.robot.check_q(np.atleast_2d(np.asarray(Q, float)), "predict: Q")
-        delta = self.discrepancy.predict(Q, return_var=False)[0] if self.discrepancy is not None else None
+        delta = discrepancy_at(self.discrepancy, Q, False)[0] if self.discrepancy is not None else None
         return self.predict_rows(Q, aux, station, orientation, delta)
 
     def predict_rows(self, Q: np.ndarray, aux: MeasurementSet | None, station: str | None, orientation: bool,

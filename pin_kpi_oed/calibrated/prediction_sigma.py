@@ -49,6 +49,7 @@ from typing import Any
 
 import numpy as np
 
+from pin_kpi_oed.calibrated.shared_tables import discrepancy_at, outside_coverage, posterior_covariance_at, remembered
 from pin_kpi_oed.model.kinematics import skew
 
 #: the length along the tool axis at which ``predict`` and ``compensate`` state the orientation's effect (m):
@@ -114,14 +115,21 @@ def _point_jacobian(cm: Any, label: str, Q: np.ndarray, cols: list[int], point: 
     given) w.r.t. the layout columns ``cols``. At a point of the tool the fitted reflector offset moves nothing (its
     columns are zero), and in the robot base frame neither does the tracker pose."""
     model, p = _jacobian_model(cm, label, point)
-    J = model.base_jacobian(p, np.atleast_2d(Q), cols)
-    if point is not None:
-        L = model.layout
-        still = set() if point.follows_reflector else set(range(L.reflector.start, L.reflector.stop))
-        if point.frame == "base":
-            still |= set(range(L.tracker.start, L.tracker.stop))
-        J[:, :, [k for k, c in enumerate(cols) if c in still]] = 0.0
-    return J
+    Q = np.ascontiguousarray(np.atleast_2d(np.asarray(Q, float)))
+
+    def compute() -> np.ndarray:
+        J = model.base_jacobian(p, Q, cols)
+        if point is not None:
+            L = model.layout
+            still = set() if point.follows_reflector else set(range(L.reflector.start, L.reflector.stop))
+            if point.frame == "base":
+                still |= set(range(L.tracker.start, L.tracker.stop))
+            J[:, :, [k for k, c in enumerate(cols) if c in still]] = 0.0
+        return J
+
+    parts = (p, model.tracker_T_base.homogeneous, model.reflector_m, model.probe_R, model.nests_m, model.tcp_m, Q)
+    return remembered(("point_jacobian", id(cm.robot), model.pose6d, Q.shape, tuple(cols), point)
+                      + tuple(np.asarray(a, float).tobytes() for a in parts), compute)
 
 
 def _robot_jacobian(cm: Any, label: str, Q: np.ndarray, names: list[str], point: Any = None) -> np.ndarray:
@@ -304,14 +312,14 @@ def _base_blocks(cm: Any, Q: np.ndarray, aux: Any, station: str | None, labels: 
     the module docstring's terms before the rotation, the σ scale and the noise; at ``point``'s TCP when given."""
     m = len(Q)
     cov = _coverage(cm)
-    extra = cov.extrapolation(Q) if cov is not None else np.zeros(m, bool)
+    extra = outside_coverage(cov, Q) if cov is not None else np.zeros(m, bool)
     d = cm.discrepancy
     if d is None:
         Y = _point_model(cm, point).predict_rows(Q, aux, station, False, None)
         noise2 = np.asarray(cm.noise.sigma(Y[:, :3]), float).reshape(m, 3) ** 2
         V = np.zeros((m, 3))
     else:
-        delta, var = d.predict(Q)                      # one kernel evaluation for the mean and the variance
+        delta, var = discrepancy_at(d, Q)               # one kernel evaluation for the mean and the variance
         Y = _point_model(cm, point).predict_rows(Q, aux, station, False, delta)
         noise2 = np.zeros((m, 3))
         V = var + d.noise_var_m2
@@ -464,16 +472,16 @@ def predictive_covariance(cm: Any, Q: np.ndarray, aux: Any, label: str) -> tuple
             A = E @ (U * np.sqrt(np.maximum(w, 0.0)))
         noise2 = np.asarray(cm.noise.sigma(Y[:, :3]), float).reshape(m, 3) ** 2
     else:
-        delta, _ = d.predict(Q, return_var=False)
+        delta, _ = discrepancy_at(d, Q, False)
         Y = cm.predict_rows(Q, aux, label, False, delta)
-        K = d.posterior_covariance(Q)
+        K = posterior_covariance_at(d, Q)
         for a in range(3):
             Cb[:, a, :, a] = K * d.scale_m[a] ** 2 + np.eye(m) * d.noise_var_m2[a]
         A = np.zeros((m, 3, 0))
         if d.param_cov is not None or d.param_cov_ls is not None:
             E = _discrepancy_jacobian(cm, d, label, Q)
             cov = _coverage(cm)
-            out = cov.extrapolation(Q) if cov is not None else np.zeros(m, bool)
+            out = outside_coverage(cov, Q) if cov is not None else np.zeros(m, bool)
             A = d.parametric_factor(Q, E, ~out if d.kind != "white" else np.zeros(m, bool))
             if d.kind == "white" and d.joint_term is not None:
                 Cb += d.joint_term.covariance_between(Q, _joint_jacobian(cm, label, Q), E)

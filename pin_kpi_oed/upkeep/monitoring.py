@@ -32,6 +32,7 @@ from pin_kpi_oed.data.measurements import MeasurementSet
 from pin_kpi_oed.errors import InputError
 from pin_kpi_oed.upkeep.check import CHECK_STATION, EXIT_CODES, check_calibration
 from pin_kpi_oed.calibrated.model_file import CalibratedModel
+from pin_kpi_oed.calibrated.shared_tables import row_tables
 from pin_kpi_oed.identification.problem import align_data
 from pin_kpi_oed.upkeep.setup_filter import SetupFilter
 from pin_kpi_oed.results import Result
@@ -190,9 +191,10 @@ class Monitor:
         """Take new rows (in time order): predict, filter, check every ``every`` rows."""
         t = time.perf_counter()
         self.all = rows if self.all is None else _concat(self.all, rows)
-        while len(self.all) - self.next >= self.every:
-            self._chunk(np.arange(self.next, self.next + self.every))
-            self.next += self.every
+        with row_tables():   # a row's discrepancy and coverage, computed once for its prediction and its checks
+            while len(self.all) - self.next >= self.every:
+                self._chunk(np.arange(self.next, self.next + self.every))
+                self.next += self.every
         self.busy_s += time.perf_counter() - t
 
     def flush(self) -> None:
@@ -412,8 +414,9 @@ def monitor(model: CalibratedModel, data: MeasurementSet, **options) -> MonitorL
         raise InputError(f"{data.source or 'monitor data'}: {len(data)} rows, checks of {every} rows (at least 3, and "
                          f"at least one check's rows)")
     mon = Monitor(model, **options)
-    mon.feed(data)
-    mon.flush()
+    with row_tables():
+        mon.feed(data)
+        mon.flush()
     return mon.log()
 
 

@@ -116,16 +116,17 @@ class SetupFilter:
         if float(e @ np.linalg.solve(C, e)) > OUTLIER_CHI2:
             self.outliers += 1
             return False
-        R = np.diag(sigma ** 2)
-        for k in range(len(self.levels)):
-            P = self.P[k]
-            S = G @ P @ G.T + R
-            r = r0 - G @ self.x[k]
-            Si = np.linalg.inv(S)
-            K = P @ G.T @ Si
-            self.x[k] = self.x[k] + K @ r
-            A = np.eye(6) - K @ G
-            self.P[k] = A @ P @ A.T + K @ R @ K.T
-            _, logdet = np.linalg.slogdet(S)
-            self.loglik[k] = self.forgetting * self.loglik[k] - 0.5 * (r @ Si @ r + logdet + 3 * np.log(2 * np.pi))
+        R = np.diag(sigma ** 2)                                  # every level at once, (k, ...) stacks
+        P = self.P
+        PGt = P @ G.T                                            # (k, 6, 3)
+        S = G @ PGt + R
+        r = r0 - self.x @ G.T                                    # (k, 3)
+        Si = np.linalg.inv(S)
+        K = PGt @ Si                                             # (k, 6, 3)
+        self.x = self.x + np.einsum("kab,kb->ka", K, r)
+        A = np.eye(6) - K @ G
+        self.P = A @ P @ np.swapaxes(A, 1, 2) + K @ R @ np.swapaxes(K, 1, 2)
+        _, logdet = np.linalg.slogdet(S)
+        self.loglik = self.forgetting * self.loglik - 0.5 * (np.einsum("ka,kab,kb->k", r, Si, r) + logdet
+                                                             + 3 * np.log(2 * np.pi))
         return True

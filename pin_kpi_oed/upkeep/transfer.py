@@ -56,6 +56,7 @@ from pin_kpi_oed.identification.heldout import calibration_stats, error_stats
 from pin_kpi_oed.identification.tracker_start import proj_so3, register_points
 from pin_kpi_oed.calibrated.model_file import CalibratedModel, Setup
 from pin_kpi_oed.calibrated.prediction_sigma import DEFAULT_TOOL_LENGTH_M, with_registered_station
+from pin_kpi_oed.calibrated.shared_tables import discrepancy_at
 from pin_kpi_oed.identification.problem import ResidualModel, StationSet, align_data
 from pin_kpi_oed.model.nests import nest_column
 from pin_kpi_oed.model.parameters import ParameterLayout
@@ -157,7 +158,7 @@ class _DiscrepancyMean:
     def _delta(self, Q: np.ndarray) -> np.ndarray:
         key = np.ascontiguousarray(Q).tobytes()
         if self._cache is None or self._cache[0] != key:
-            self._cache = (key, np.asarray(self.discrepancy.predict(Q, return_var=False)[0], float))
+            self._cache = (key, np.asarray(discrepancy_at(self.discrepancy, Q, False)[0], float))
         return self._cache[1]
 
     def joint_offset(self, theta: np.ndarray, Q: np.ndarray, aux: Any = None) -> tuple[np.ndarray, np.ndarray]:
