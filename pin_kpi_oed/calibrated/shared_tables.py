@@ -71,8 +71,11 @@ class StationTracker(TrackerModel):
     station models of its robot (module docstring), its chain the one built for its robot; everything else is the
     tracker model's."""
 
-    def init_kinematics(self) -> None:
+    def init_kinematics(self, chain: Chain | None = None) -> None:
         """:meth:`TrackerModel.init_kinematics` with the chain built once per robot (the eight robots used last)."""
+        if chain is not None:
+            super().init_kinematics(chain=chain)
+            return
         with _LOCK:
             entry = _CHAINS.get(id(self.robot))
         if entry is None or entry[0] is not self.robot:
@@ -82,11 +85,7 @@ class StationTracker(TrackerModel):
                 while len(_CHAINS) > 8:
                     _CHAINS.popitem(last=False)
             return
-        self._chain = entry[1]
-        self._nominal = [M.copy() for M in self._chain.placements]
-        self._placements = list(self._nominal)
-        self._p_applied = None
-        self._apply(np.zeros(self.n_params))
+        super().init_kinematics(chain=entry[1])
 
     def at_nests(self, nest: np.ndarray | None) -> StationTracker:
         """:meth:`TrackerModel.at_nests`: the same model measuring each row at its nest, a station tracker too.

@@ -171,9 +171,14 @@ class MeasurementModel(ABC):
         return Jr
 
     # ------------------------------------------------------------------ robot kinematics at p
-    def init_kinematics(self) -> None:
-        """Set up the batched kinematics of ``robot`` (call once ``robot`` and ``layout`` are set)."""
-        self._chain = Chain.from_robot(self.robot)
+    def init_kinematics(self, chain: Chain | None = None) -> None:
+        """Set up the batched kinematics of ``robot`` (call once ``robot`` and ``layout`` are set).
+
+        Args:
+            chain: the robot's chain when it is already built (shared between models of one robot; only read);
+                None: built here.
+        """
+        self._chain = Chain.from_robot(self.robot) if chain is None else chain
         self._nominal = [M.copy() for M in self._chain.placements]
         self._placements = list(self._nominal)
         self._p_applied: np.ndarray | None = None
