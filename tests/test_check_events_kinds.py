@@ -44,3 +44,5 @@ def test_report_pairs_the_chosen_action_with_the_other_per_choice(capsys) -> Non
     assert "worse by > 10 % in 1" in recal
     refit = out.split("chose re-fit in 4 events")[1].split("chose re-calibrate")[0]
     assert "chosen worse in 0 of 4" in refit and "(ratio 1.050-1.050)" in refit
+    # the re-fits here carry exactly the calibration's own error: they add none of the variance expected
+    assert "re-calibrate chosen (6 events): the re-fit adds to the calibration's own error 0.00 x" in out
