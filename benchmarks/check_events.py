@@ -247,10 +247,19 @@ def report_added(events: list[dict], n_boot: int = 2000, seed: int = 0) -> None:
             idx = np.concatenate([rows[k] for k in rng.integers(0, len(ids), len(ids))])
             boot.append(real[idx].mean() / expected[idx].mean())
         lo, hi = np.percentile(boot, [2.5, 97.5])
+        a = np.array([e["refit_error_m"] for e in sel])
+        m = np.array([np.mean(e.get("recal_draws_m") or [e["recal_error_m"]]) for e in sel])
+
+        def rms(x: np.ndarray) -> float:
+            return float(np.sqrt(np.mean(x ** 2)))
+
         print(f"    {'re-fit' if choice == 'robot_changed' else 're-calibrate'} chosen ({len(sel)} events): the "
               f"re-fit adds to the calibration's own error {real.mean() / expected.mean():.2f} x the variance the "
               f"verdict expects it to add ({np.sqrt(expected.mean()) * 1e3:.4f} mm RMS; bootstrap over "
-              f"{len(ids)} robots 95 % {lo:.2f}-{hi:.2f})")
+              f"{len(ids)} robots 95 % {lo:.2f}-{hi:.2f}); re-fit / the calibration's own error median "
+              f"{np.median(a / np.array([e['calibration_error_m'] for e in sel])):.3f}; realised RMS / expected: "
+              f"re-fit {rms(a) / rms(np.array([e['predicted_refit_m'] for e in sel])):.2f}, re-calibration (the "
+              f"draws' mean) {rms(m) / rms(np.array([e['predicted_recal_m'] for e in sel])):.2f}")
 
 
 def real(splits: int, draws: int = 0) -> None:
