@@ -10,7 +10,10 @@ working TCPs, α = 0.05. Rates with Clopper–Pearson 95 % intervals; for every 
 true TCP error of the verdict's re-fit and of a re-calibration on the 60 poses; the choice between them per band of
 the verdict's expected-error ratio (in expectation: the chosen action's mean true error against the other's), and
 with ``--recal-draws k`` the spread of k re-calibrations on fresh noise draws and the calibration's own error the
-re-fit carries (what one event's choice cannot foresee).
+re-fit carries (what one event's choice cannot foresee). ``--kinds placement_tracker`` simulates instead a joint's
+placement changed with the tracker moved (:data:`~pin_kpi_oed.studies.check_robots.COMBINED_KINDS`): the re-fit
+re-registers the set-up on the check rows and estimates a change of many columns, the kind where a re-calibration is
+expected better; per choice the paired comparison of the true TCP errors (median ratio, sign test).
 
 Real UR10 (IPA data, ``--real``): a model (``identify`` with ``discrepancy="auto"``) of a seeded half of Series C
 checked on 10 seeded rows of the other half (``--splits`` seeded splits: *holds* expected; with ``--draws k`` also k
@@ -23,8 +26,9 @@ the rows predicted before use (overall and per 1,000 rows), mean error and predi
 poses, time per row (wall, and CPU against the target :data:`MONITOR_CPU_TARGET_S`).
 
 Run:  python -m benchmarks.check_events [--robots 2] [--first 0] [--none 5] [--changes 2] [--events-json ev.json]
-      [--recal-draws 1] [--real] [--splits 3] [--draws 0] [--monitor 1500]
-      (the figures of docs/results.md: --robots 40 --events-json ev.json; --robots 0 --real --splits 20 --draws 30;
+      [--kinds joint_offset tool tracker] [--recal-draws 1] [--real] [--splits 3] [--draws 0] [--monitor 1500]
+      (the figures of docs/results.md: --robots 40 --events-json ev.json; --robots 40 --none 0 --changes 6 --kinds
+      placement_tracker --recal-draws 4 (the choice of a re-calibration); --robots 0 --real --splits 20 --draws 30;
       --robots 0 --monitor 9911)
 """
 
@@ -37,6 +41,7 @@ import numpy as np
 
 from pin_kpi_oed.model.robot import load_robot
 from pin_kpi_oed.studies.check_robots import CHANGE_KINDS as EVENT_KINDS
+from pin_kpi_oed.studies.check_robots import COMBINED_KINDS
 
 SIGMA = 2.5e-5
 TOL = 1e-4
@@ -48,26 +53,28 @@ FACTORS = (0.25, 0.4, 0.75, 1.0, 1.5, 2.0, 3.0)
 
 
 def simulated(n_robots: int, n_none: int = 5, n_changes: int = 2, out: str | None = None, first: int = 0,
-              recal_draws: int = 1) -> None:
+              recal_draws: int = 1, kinds: tuple[str, ...] = EVENT_KINDS[1:]) -> None:
     """Robots that are not the model (:mod:`pin_kpi_oed.studies.check_robots`): per robot ``n_none`` unchanged
     checks and ``n_changes`` changes of each kind, sizes k × τ with k from :data:`FACTORS`; rates with their
     Clopper–Pearson 95 % intervals. ``first``: the first robot's seed (a run in chunks of robots: ``--first 20
     --robots 20``, the chunks' JSONs reported together by ``--report a.json b.json``). ``recal_draws``: re-calibrations
-    on this many seeded noise draws per event that re-fits (the realisation's spread)."""
+    on this many seeded noise draws per event that re-fits (the realisation's spread). ``kinds``: the changes
+    (default the single-part kinds of the published figures; :data:`COMBINED_KINDS` change two parts at once)."""
     import json
 
     from pin_kpi_oed.studies.check_robots import robot_event, simulated_robot
 
     print(f"simulated UR10s that are not the model: errors on every joint parameter, a gear harmonic (50 urad), "
           f"calibrated on 60 D-optimal poses (noise {SIGMA * 1e3:.3g} mm per axis); tolerance {TOL * 1e3:.3g} mm at "
-          f"5 working TCPs, alpha {ALPHA}; {n_robots} robots x ({n_none} unchanged + {n_changes} of each change)",
+          f"5 working TCPs, alpha {ALPHA}; {n_robots} robots x ({n_none} unchanged + {n_changes} of each change: "
+          f"{', '.join(kinds)})",
           flush=True)
     events = []
     t0 = time.perf_counter()
     for r in range(first, first + n_robots):
         robot = simulated_robot(r, noise_m=SIGMA, tolerance_m=TOL, alpha=ALPHA)
         rng = np.random.default_rng(5000 + r)
-        plan = [("none", 0.0)] * n_none + [(k, float(rng.choice(FACTORS))) for k in EVENT_KINDS[1:]
+        plan = [("none", 0.0)] * n_none + [(k, float(rng.choice(FACTORS))) for k in kinds
                                            for _ in range(n_changes)]
         for i, (kind, k) in enumerate(plan):
             ev = robot_event(robot, kind, k, 100_000 * r + i, tolerance_m=TOL, alpha=ALPHA, recal_draws=recal_draws)
@@ -95,7 +102,7 @@ def report_simulated(events: list[dict]) -> None:
     rate("unchanged: anything but holds", [e["verdict"] != "holds" for e in none])
     rate("unchanged: the robot changed / re-calibrate", [e["verdict"] in ("robot_changed", "recalibrate",
                                                                           "discrepancy_level") for e in none])
-    for kind in EVENT_KINDS[1:]:
+    for kind in [k for k in (*EVENT_KINDS[1:], *COMBINED_KINDS) if any(e["kind"] == k for e in events)]:
         ch = [e for e in events if e["kind"] == kind]
         big = [e for e in ch if e["tcp_change_m"] >= 1.5 * TOL]
         small = [e for e in ch if e["tcp_change_m"] < 0.5 * TOL]
@@ -129,12 +136,25 @@ def report_simulated(events: list[dict]) -> None:
               f"{np.mean(chosen > 1.1 * other) * 100:.0f} % of the events")
         pa = np.array([e["predicted_refit_m"] for e in sel])
         pb = np.array([e["predicted_recal_m"] for e in sel])
-        print(f"    expected (the verdict's): re-fit {pa.mean() * 1e3:.4f} mm, re-calibration {pb.mean() * 1e3:.4f} mm")
+        print(f"    expected (the verdict's): re-fit {pa.mean() * 1e3:.4f} mm, re-calibration {pb.mean() * 1e3:.4f} mm "
+              f"(ratio {np.min(pa / pb):.3f}-{np.max(pa / pb):.3f})")
+        _paired(chosen, other, len({e["robot"] for e in sel}))
         k = int(np.argmax(chosen / other))
         print(f"    worst case: chosen {chosen[k] * 1e3:.4f} mm against the other's {other[k] * 1e3:.4f} mm (ratio "
               f"{chosen[k] / other[k]:.3f}; robot {sel[k]['robot']}, {sel[k]['kind']} {sel[k]['joint']} "
               f"{sel[k]['tcp_change_m'] * 1e3:.3f} mm)")
     report_choice(both)
+
+
+def _paired(chosen: np.ndarray, other: np.ndarray, n_robots: int) -> None:
+    """The paired comparison of the chosen action's true TCP errors with the other's (the project's): the median of
+    the ratios, the sign test of chosen > other (two-sided), the share worse by more than 10 %."""
+    from scipy import stats
+
+    worse = int(np.sum(chosen > other))
+    print(f"    paired ({len(chosen)} events on {n_robots} robots): median ratio chosen / other "
+          f"{np.median(chosen / other):.3f}, chosen worse in {worse} of {len(chosen)} (sign test p "
+          f"{stats.binomtest(worse, len(chosen)).pvalue:.2g}), worse by > 10 % in {int(np.sum(chosen > 1.1 * other))}")
 
 
 def _worse_pairs(d: np.ndarray) -> float:
@@ -206,6 +226,42 @@ def report_choice(both: list[dict]) -> None:
         print(f"  the calibration's own true TCP error before the change ({len(cal)} events): re-fit / it median "
               f"{np.median(a / c):.3f}; correlation of (re-fit - re-calibration) with (it - re-calibration) "
               f"{np.corrcoef(a - b, c - b)[0, 1]:.2f}")
+        report_added(cal)
+
+
+def report_added(events: list[dict], n_boot: int = 2000, seed: int = 0) -> None:
+    """What the re-fit adds to the calibration's own error, realised against expected, per choice: the mean of
+    (re-fit² − the calibration's own error²) over the mean of what the verdict adds for the re-fit (its expected
+    error² less a re-calibration's: the change's estimation error and the registration's share), with a 95 %
+    bootstrap interval over robots (seeded)."""
+    rng = np.random.default_rng(seed)
+    for choice in ("robot_changed", "recalibrate"):
+        sel = [e for e in events if e["verdict"] == choice]
+        if not sel:
+            continue
+        real = np.array([e["refit_error_m"] ** 2 - e["calibration_error_m"] ** 2 for e in sel])
+        expected = np.array([e["predicted_refit_m"] ** 2 - e["predicted_recal_m"] ** 2 for e in sel])
+        robots = np.array([e["robot"] for e in sel])
+        ids = np.unique(robots)
+        rows = [np.flatnonzero(robots == r) for r in ids]
+        boot = []
+        for _ in range(n_boot):
+            idx = np.concatenate([rows[k] for k in rng.integers(0, len(ids), len(ids))])
+            boot.append(real[idx].mean() / expected[idx].mean())
+        lo, hi = np.percentile(boot, [2.5, 97.5])
+        a = np.array([e["refit_error_m"] for e in sel])
+        m = np.array([np.mean(e.get("recal_draws_m") or [e["recal_error_m"]]) for e in sel])
+
+        def rms(x: np.ndarray) -> float:
+            return float(np.sqrt(np.mean(x ** 2)))
+
+        print(f"    {'re-fit' if choice == 'robot_changed' else 're-calibrate'} chosen ({len(sel)} events): the "
+              f"re-fit adds to the calibration's own error {real.mean() / expected.mean():.2f} x the variance the "
+              f"verdict expects it to add ({np.sqrt(expected.mean()) * 1e3:.4f} mm RMS; bootstrap over "
+              f"{len(ids)} robots 95 % {lo:.2f}-{hi:.2f}); re-fit / the calibration's own error median "
+              f"{np.median(a / np.array([e['calibration_error_m'] for e in sel])):.3f}; realised RMS / expected: "
+              f"re-fit {rms(a) / rms(np.array([e['predicted_refit_m'] for e in sel])):.2f}, re-calibration (the "
+              f"draws' mean) {rms(m) / rms(np.array([e['predicted_recal_m'] for e in sel])):.2f}")
 
 
 def real(splits: int, draws: int = 0) -> None:
@@ -342,7 +398,8 @@ def replay(n_rows: int) -> None:
     print("requests for poses at rows: " + (", ".join(f"{a['row']} ({a['reason']})" for a in log.asks) or "none"))
 
 
-def main(argv: list[str] | None = None) -> int:
+def parser() -> argparse.ArgumentParser:
+    """The benchmark's options (module docstring)."""
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--robots", type=int, default=2, help="simulated robots that are not the model (the figures: 40)")
     ap.add_argument("--none", type=int, default=5, help="unchanged checks per robot (default 5)")
@@ -351,6 +408,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--first", type=int, default=0, help="the first simulated robot's seed (runs in chunks)")
     ap.add_argument("--report", nargs="+", default=None,
                     help="only report the events of these JSONs (--events-json of one run or of its chunks)")
+    ap.add_argument("--kinds", nargs="+", default=list(EVENT_KINDS[1:]), choices=[*EVENT_KINDS[1:], *COMBINED_KINDS],
+                    help="the changes simulated (default: joint_offset tool tracker, the published figures); "
+                         "placement_tracker: a joint's placement changed and the tracker moved at once")
     ap.add_argument("--recal-draws", dest="recal_draws", type=int, default=1,
                     help="re-calibrations on this many seeded noise draws per re-fitting event (default 1)")
     ap.add_argument("--real", action="store_true", help="also the real UR10 checks (IPA data)")
@@ -358,14 +418,19 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--draws", type=int, default=0,
                     help="also this many seeded draws of 10 check rows per split of Series C (the false-alarm rate)")
     ap.add_argument("--monitor", type=int, default=0, help="replay this many rows of Series A (0: none)")
-    args = ap.parse_args(argv)
+    return ap
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = parser().parse_args(argv)
     if args.report:
         import json
 
         report_simulated([e for path in args.report for e in json.loads(open(path).read())])
         return 0
     if args.robots:
-        simulated(args.robots, args.none, args.changes, args.events_json, args.first, args.recal_draws)
+        simulated(args.robots, args.none, args.changes, args.events_json, args.first, args.recal_draws,
+                  tuple(args.kinds))
     if args.real:
         real(args.splits, args.draws)
     if args.monitor:

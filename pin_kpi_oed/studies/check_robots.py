@@ -14,26 +14,35 @@ configurations, linearised) and measures the check poses on it:
 * ``none`` — nothing changes (fresh noise);
 * ``joint_offset`` — one joint's offset (joints 2–6; the first is a set-up change);
 * ``tool`` — the reflector (with the TCP) moves by k τ in a random direction;
-* ``tracker`` — the tracker pose moves by a random twist that displaces the working TCPs by k τ.
+* ``tracker`` — the tracker pose moves by a random twist that displaces the working TCPs by k τ;
+* ``placement_tracker`` (:data:`COMBINED_KINDS`) — one joint's placement (joints 2–6, every parameter of it) moves
+  in a random direction that displaces the working TCPs by k τ, and the tracker moves as in ``tracker``: a change of
+  many columns whose re-fit needs the set-up re-registered on the check rows (the kind where a re-calibration is
+  expected better).
 
-The verdict is right when: no change (or a change below τ) → ``holds``; a joint offset above τ → the robot changed
-(or re-calibrate) naming that joint (its offset or placement); the tool above τ → naming the tool; the tracker above
-τ → ``setup_moved``. For every change shown above τ, the TCP error at the working configurations (RMS 3-D, the true
-tracker frame) of the verdict's re-fitted model and of a re-calibration (``identify`` on fresh rows of the changed
-robot at the calibration's poses) are measured, to judge the verdict's choice between them.
+The verdict is right when: no change (or a change below τ) → ``holds``; a joint offset or placement above τ (with the
+tracker moved or not) → the robot changed (or re-calibrate) naming that joint (its offset or placement); the tool above
+τ → naming the tool; the tracker above τ → ``setup_moved``. For every change shown above τ, the TCP error at the working
+configurations (RMS 3-D, the true tracker frame) of the verdict's re-fitted model and of a re-calibration (``identify``
+on fresh rows of the changed robot at the calibration's poses) are measured, to judge the verdict's choice between them.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 
-__all__ = ["CHANGE_KINDS", "SimulatedRobot", "RobotEvent", "simulated_robot", "robot_event", "clopper_pearson"]
+__all__ = ["CHANGE_KINDS", "COMBINED_KINDS", "SimulatedRobot", "RobotEvent", "simulated_robot", "robot_event",
+           "clopper_pearson"]
 
 CHANGE_KINDS = ("none", "joint_offset", "tool", "tracker")
+#: Changes of two parts at once (not in :data:`CHANGE_KINDS`, whose events the published figures are):
+#: ``placement_tracker``, a joint's placement (all its parameters) changed and the tracker moved, each by k τ.
+COMBINED_KINDS = ("placement_tracker",)
 REFLECTOR_M = np.array([0.05, 0.0, 0.1])
 
 
@@ -78,6 +87,7 @@ class RobotEvent:
             its error a re-fit carries and a re-calibration draws afresh.
         recal_draws_m: the true TCP errors of re-calibrations on ``recal_draws`` fresh noisy draws of the rows (m;
             the first is ``recal_error_m``): the spread of the realisation a verdict cannot foresee.
+        setup_held: the verdict's re-fit kept the model's set-up (False: re-registered on the check rows).
     """
 
     kind: str
@@ -100,6 +110,7 @@ class RobotEvent:
     groups: list = field(default_factory=list)
     calibration_error_m: float = float("nan")
     recal_draws_m: list = field(default_factory=list)
+    setup_held: bool = False
 
 
 def simulated_robot(seed: int, *, n_cal: int = 60, noise_m: float = 2.5e-5, tolerance_m: float = 1e-4,
@@ -185,6 +196,15 @@ def _changed_truth(robot: SimulatedRobot, kind: str, factor: float, tol: float, 
         cols = np.arange(L.tracker.start, L.tracker.stop)
         p[cols] += scaled(cols, np.r_[rng.normal(size=3), rng.normal(size=3) / 1.5])
         return p, ""
+    if kind == "placement":
+        j = int(rng.integers(1, wm.robot.nq))
+        cols = np.arange(L.joint_slice(j).start, L.joint_slice(j).stop)
+        p[cols] += scaled(cols, np.r_[rng.normal(size=3), rng.normal(size=3) / 1.5][:len(cols)])
+        return p, wm.robot.joint_names[j]
+    if kind == "placement_tracker":
+        moved, joint = _changed_truth(robot, "placement", factor, tol, rng)
+        both, _ = _changed_truth(dataclasses.replace(robot, p=moved), "tracker", factor, tol, rng)
+        return both, joint
     return p, ""
 
 
@@ -225,9 +245,13 @@ def robot_event(robot: SimulatedRobot, kind: str, factor: float, seed: int, *, t
     before, after = _true_tcp(robot, robot.p, robot.qw), _true_tcp(robot, p, robot.qw)
     if kind == "tracker":        # the set-up's change: the working TCPs as the tracker sees them
         tcp_change = float(np.sqrt(np.mean(np.sum((after - before) ** 2, axis=1))))
-    else:                        # the robot's change: the TCP in the robot's base frame
-        T = robot.nominal.tracker_pose(p)
-        tcp_change = float(np.sqrt(np.mean(np.sum(((after - before) @ T.rotation) ** 2, axis=1))))
+    else:                        # the robot's change: the TCP in the robot's base frame (the tracker as before)
+        tracker = robot.nominal.layout.tracker
+        robot_only = p.copy()
+        robot_only[tracker] = robot.p[tracker]
+        T = robot.nominal.tracker_pose(robot.p)
+        moved = _true_tcp(robot, robot_only, robot.qw)
+        tcp_change = float(np.sqrt(np.mean(np.sum(((moved - before) @ T.rotation) ** 2, axis=1))))
     rows = simulate(robot.nominal, robot.Q_check, p, robot.effects, seed=seed + 11)
     r = check_calibration(robot.cm, rows, alpha=alpha, tolerance_m=tolerance_m, seed=seed)
     big = tcp_change >= tolerance_m
@@ -235,7 +259,7 @@ def robot_event(robot: SimulatedRobot, kind: str, factor: float, seed: int, *, t
                     _right(kind, joint, r.verdict, r.group, big, tuple(r.alike)), r.change_tcp_m,
                     r.change_tcp_sigma_m, predicted_refit_m=r.refit_error_m, predicted_recal_m=r.recalibrate_error_m,
                     alike=list(r.alike), sized=r.sized,
-                    groups=sorted(r.groups, key=lambda g: g["chi2_remaining"])[:4])
+                    groups=sorted(r.groups, key=lambda g: g["chi2_remaining"])[:4], setup_held=r.setup_held)
     if np.isfinite(r.refit_error_m) and r.model is not None and recalibrate:
         ev.refit_error_m = _tcp_error(r.model.predict(robot.qw), after)
         ev.calibration_error_m = _tcp_error(robot.cm.predict(robot.qw), before)
