@@ -41,6 +41,7 @@ def test_without_a_lab_file_a_draft_with_one_a_certificate(calibrated, tmp_path,
     assert _report(d, "test.csv") == 0
     cert = json.loads((d / "gum.json").read_text())
     assert cert["title"].startswith("DRAFT") and cert["summary"]["status"]["kind"] == "draft"
+    assert "report --lab LAB.yaml" in cert["summary"]["status"]["reason"]  # the fix in the command's words
     (tmp_path / "lab.yaml").write_text(LAB)
     assert _report(d, "test.csv", "--lab", str(tmp_path / "lab.yaml")) == 0
     cert = json.loads((d / "gum.json").read_text())
