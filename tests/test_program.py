@@ -552,3 +552,13 @@ def test_program_animation_holds_every_measurement_point(small_design, tmp_path)
     out = tmp_path / "p.html"
     scene.write_html(out)
     assert out.stat().st_size > 100_000
+
+
+def test_design_header_states_the_cell_as_given(tmp_path, capsys):
+    """The header's cell line is the cell file's (incidence limit 30 deg), the margins line the tightening the
+    optimiser designed with: one incidence limit per meaning, not the tightened one under the cell's name."""
+    assert main(["design", "--cell", "kr15", "--criteria", "random", "--measurements", "10", "--incidence-margin",
+                 "2", "--json", str(tmp_path / "d.json")]) == 0
+    out = capsys.readouterr().out.splitlines()
+    assert out[0].startswith("cell kr15_fms") and "incidence <= 30 deg" in out[0]
+    assert any(s.startswith("margins:") and "incidence 2 deg" in s and "incidence limit 30 deg" in s for s in out)
