@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import re
 from pathlib import Path
 from typing import Any
 
@@ -181,7 +182,9 @@ def _setup(args: argparse.Namespace, reuse: bool, cell: Any = None) -> tuple[Any
         from pin_kpi_oed.validation.units import check_effect_sizes
 
         effects = parse_effects_spec(args.effects, model.robot, np.random.default_rng(args.seed + 3))
-        check_effect_sizes(effects)  # a size in degrees or µrad refused, naming the unit
+        given = {m.group(1): m.group(2) for m in re.finditer(r"(\w+)(?:\[[^\]]*\])?\s*=\s*([^,\s]+)",
+                                                              args.effects)}
+        check_effect_sizes(effects, given=given)  # the size as written, in degrees or µrad, refused naming the unit
     return model, cell, random_truth(model, tol, seed=args.seed), effects, tol, design
 
 

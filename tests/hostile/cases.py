@@ -88,6 +88,8 @@ def _cases() -> list[Case]:
         Case("cell-degrees-under-rad", "design --cell {d}/cell_deg_as_rad.yaml", "joint_bounds.lower_rad"),
         Case("cell-sigma-1m", "design --cell {d}/cell_sigma1.yaml", "noise.sigma_xyz_m"),
         Case("cell-nested-typo", "design --cell {d}/cell_typo.yaml", "sigma_xyz"),
+        Case("simulate-effect-size-named-as-written", "simulate --robot kr15 --out {d}/new.csv --effects "
+             "joint_compliance=1.5e-4", "joint_compliance=1.5e-4 rad/(N*m) is more than 0.0001"),
         Case("simulate-n-ignored-with-design", "simulate --design {d}/d.json --n 50 --out {d}/new.csv",
              "--n 50: not with --design"),
         Case("report-required-accuracy-in-mm", "report --model {d}/m.json --train {d}/tr.csv --validate {d}/te.csv "
