@@ -60,6 +60,9 @@ def test_eye_to_hand_camera_is_the_device_frame(tmp_path):
     ("camera", {**CAMERA_CELL["camera"], "intrinsics": {**CAMERA_CELL["camera"]["intrinsics"],
                                                         "distortion": [0.1, 0.2]}}, "camera.intrinsics.distortion"),
     ("board", {**CAMERA_CELL["board"], "square_m": 25}, "board.square_m"),
+    ("camera", {**CAMERA_CELL["camera"], "intrinsics": {**CAMERA_CELL["camera"]["intrinsics"], "fx": 8.0}},
+     "camera.intrinsics.fx: 8 px is less than 50 px"),   # the lens's focal length in mm
+    ("camera", {**CAMERA_CELL["camera"], "sigma_px": 200}, "a corner's detection noise is a fraction of a pixel"),
     ("board", {**CAMERA_CELL["board"], "type": "circles"}, "board.type"),
     ("board", {**CAMERA_CELL["board"], "rows": 2}, "board.rows"),
     ("board", {**CAMERA_CELL["board"], "type": "charuco", "marker_m": 0.018, "dictionary": "DICT_NOPE"},

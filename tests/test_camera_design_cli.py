@@ -176,3 +176,24 @@ def test_evaluate_refuses_a_camera_design(pipeline):
     d, _, _, _ = pipeline
     rc, _, err = run_cli("evaluate", d / "design.json")
     assert rc == 2 and "a camera's design file; evaluate scores a laser tracker's poses" in err
+
+
+def test_predict_at_tcp_takes_a_corners_file_and_refuses_it_without_at_tcp(pipeline):
+    """The corners file identify read is a valid --data of predict --at tcp (one row per image, its joint values, the
+    same TCP and sigma as the joint values alone); without --at tcp it is refused in one line naming the fix."""
+    d, cell, _, _ = pipeline
+    cs = read_corners(d / "corners.csv")
+    labels, Qs, _ = cs.arrays(cell.measurement_model().board.n)
+    (d / "img_joints.csv").write_text(",".join(cs.joint_names) + "\n"
+                                      + "".join(",".join(repr(float(v)) for v in q) + "\n" for q in Qs))
+    rc, out, err = run_cli("predict", "--model", d / "m.json", "--data", d / "corners.csv", "--at", "tcp",
+                           "--out", d / "pred_corners.csv")
+    assert rc == 0, err
+    assert f"at {len(labels)} rows of" in out
+    rc, _, err = run_cli("predict", "--model", d / "m.json", "--data", d / "img_joints.csv", "--at", "tcp",
+                         "--out", d / "pred_joints.csv")
+    assert rc == 0, err
+    assert (d / "pred_corners.csv").read_text() == (d / "pred_joints.csv").read_text()
+    rc, _, err = run_cli("predict", "--model", d / "m.json", "--data", d / "corners.csv", "--out", d / "no.csv")
+    assert rc == 2 and "give --at tcp" in err and len(err.strip().splitlines()) == 1
+    assert not (d / "no.csv").exists()

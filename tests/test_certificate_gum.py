@@ -41,6 +41,7 @@ def test_without_a_lab_file_a_draft_with_one_a_certificate(calibrated, tmp_path,
     assert _report(d, "test.csv") == 0
     cert = json.loads((d / "gum.json").read_text())
     assert cert["title"].startswith("DRAFT") and cert["summary"]["status"]["kind"] == "draft"
+    assert "report --lab LAB.yaml" in cert["summary"]["status"]["reason"]  # the fix in the command's words
     (tmp_path / "lab.yaml").write_text(LAB)
     assert _report(d, "test.csv", "--lab", str(tmp_path / "lab.yaml")) == 0
     cert = json.loads((d / "gum.json").read_text())
@@ -247,3 +248,46 @@ def test_u_along_a_working_path_against_monte_carlo(calibrated, tmp_path, capsys
     assert _report(d, "test.csv", "--cell", "kr15") == 2
     err = capsys.readouterr().err
     assert "--cell kr15" in err and err.count("\n") == 1
+
+
+def test_a_reflector_that_conforms_does_not_stand_for_a_tcp_whose_u_exceeds_the_requirement():
+    """ISO 14253-1 on the held-out figure (the reflector's) is qualified by the TCP's U at the working
+    configurations: above the required accuracy a 'conforms' becomes 'undetermined' with the reason; below it, or
+    without a budget, the figure's verdict stands."""
+    from pin_kpi_oed.report.certify import conformity_section
+
+    acc, unc = {"p95_m": 0.035e-3}, {"p95_m": 0.006e-3}
+    tcp = {"U_max_m": 1.0e-3, "tcp_m": [0.15, 0.0, 0.0]}
+    c = conformity_section(acc, unc, 0.05e-3, "p95_m", tcp)
+    assert c["verdict"] == "undetermined" and c["tcp_U_max_m"] == pytest.approx(1.0e-3)
+    assert "at the TCP ((150, 0, 0) mm in the tool frame) not shown" in c["at_tcp"] and "1.000 mm" in c["at_tcp"]
+    assert conformity_section(acc, unc, 2e-3, "p95_m", tcp)["verdict"] == "conforms"
+    assert "at_tcp" not in conformity_section(acc, unc, 2e-3, "p95_m", tcp)
+    assert conformity_section(acc, unc, 0.05e-3, "p95_m")["verdict"] == "conforms"
+    bad = conformity_section({"p95_m": 0.2e-3}, unc, 0.05e-3, "p95_m", tcp)
+    assert bad["verdict"] == "does not conform" and "at_tcp" in bad
+
+
+def test_report_states_the_tcp_when_only_the_reflector_conforms(calibrated, tmp_path):  # noqa: F811
+    """Through the command: a required accuracy between the reflector's held-out figure + U and the TCP's U is
+    'undetermined' in the summary, the JSON and the page, naming the TCP's U."""
+    d = calibrated
+    doc = json.loads((d / "model.json").read_text())  # the model with a TCP 15 cm out along the tool axis
+    doc["tcp_m"], doc["tool_source"] = [0.02, 0.01, 0.25], "the test: a TCP away from the reflector"
+    (tmp_path / "model.json").write_text(json.dumps(doc))
+    for f in ("train.csv", "test.csv"):
+        (tmp_path / f).write_text((d / f).read_text())
+    assert _report(tmp_path, "test.csv") == 0
+    cert = json.loads((tmp_path / "gum.json").read_text())
+    fig = cert["accuracy"]["after"]["p95_m"] + cert["uncertainty"]["figures"]["p95_m"]
+    U_tcp = cert["uncertainty"]["budget"]["U_max_m"]
+    assert U_tcp > 3 * fig  # the held parameters' tolerance at the TCP, which no reflector row sees
+    req = 0.5 * (fig + U_tcp)
+    html = tmp_path / "c.html"
+    assert _report(tmp_path, "test.csv", "--required-accuracy", repr(req), "--html", str(html)) == 0
+    d = tmp_path
+    cert = json.loads((d / "gum.json").read_text())
+    con = cert["uncertainty"]["conformity"]
+    assert con["verdict"] == "undetermined" and con["tcp_U_max_m"] == pytest.approx(U_tcp)
+    assert cert["summary"]["verdict"]["kind"] == "undetermined" and "at the TCP" in cert["summary"]["verdict"]["text"]
+    assert "not shown: its U (k = 2)" in html.read_text()

@@ -123,8 +123,9 @@ def test_cli_verdict_design_and_bad_input(setting, tmp_path, capsys):
     assert main(["check", "--model", str(mp), "--data", ok, "--json", str(tmp_path / "v.json"), "--alpha", "0.01"]) == 0
     out = capsys.readouterr().out
     assert out.startswith("check: holds")
-    v = json.loads((tmp_path / "v.json").read_text())
+    v = json.loads((tmp_path / "v.json").read_text(), parse_constant=lambda c: pytest.fail(f"{c} in the JSON"))
     assert v["verdict"] == "holds" and v["dof"] == 24 and v["alpha"] == 0.01
+    assert v["refit_chi2"] is None  # nothing re-fitted: null, not NaN (strict JSON)
     assert v["threshold"] == pytest.approx(stats.chi2.isf(1 - np.sqrt(0.99), 24))   # Šidák: two tests at 0.01
     assert v["exit_code"] == 0 and v["tolerance_m"] == 1e-4
     two = _write(tmp_path / "two.csv", rb, Qc[:2], model.predict(Qc[:2]))

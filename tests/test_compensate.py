@@ -372,3 +372,34 @@ def test_cli_program_csv_has_the_continuity_column(world, tmp_path):
     assert 0 < max(float(r["correction_jump_rad"]) for r in rows) < 1e-3
     assert "sigma_rot_rad" not in rows[0]  # a position-only model states no orientation sigma
     assert "continuity:" in out
+
+
+def test_base_frame_sigma_names_the_base_placement_apart_from_the_tool(world):
+    """In the base frame the held σ at a TCP off the reflector has two parts: the tool's (what the tracker frame
+    states too; a reflector at the TCP removes it) and the base frame's own placement (the held parameters that
+    move no point in the tracker frame: joint 1's placement and what the tracker pose absorbs). The summary names
+    each with its fix; the tracker frame has no base part."""
+    from pin_kpi_oed.calibrated.tcp_sigma import tcp_sigma
+
+    robot, _, _, _, cm, _, _ = world
+    tcp = np.array([0.01, -0.02, 0.15])
+    Q = _regular(robot.random_q(np.random.default_rng(12), 3) * 0.8)
+    res = {}
+    for frame in ("base", "cell"):
+        y = PoseModel(cm, frame, tcp_m=tcp).pose(Q)[0]
+        ts = TargetSet(["a", "b", "c"], y, None, Q, list(robot.joint_names), _aux(robot, 3), frame)
+        res[frame] = compensate(cm, ts, CompensationOptions(frame=frame, tcp_m=tcp))
+    b, c = res["base"], res["cell"]
+    assert c.base_unobservable_m.size == 0 and "--frame tracker" not in c.summary()
+    assert np.allclose(b.tcp_unobservable_m ** 2, c.tcp_unobservable_m ** 2 + b.base_unobservable_m ** 2, rtol=1e-3)
+    # the base part, parameter by parameter: the held parameters that move no point in the tracker frame
+    for i in range(3):
+        tb, tc = (tcp_sigma(cm, b.q[i:i + 1], tcp, frame=f) for f in ("base", "cell"))
+        base_only = [k for k, n in enumerate(tb.held_names)
+                     if tc.held_contrib_m[tc.held_names.index(n)] < 1e-3 * tb.held_contrib_m[k]]
+        assert base_only and any(tb.held_names[k].startswith(robot.joint_names[0]) for k in base_only)
+        assert b.base_unobservable_m[i] == pytest.approx(np.sqrt(np.sum(tb.held_contrib_m[base_only] ** 2)), rel=1e-2)
+    assert b.base_unobservable_m.min() > 1e-4  # joint 1's 0.5 mm tolerance
+    line = next(s for s in b.summary().splitlines() if s.startswith("of which"))
+    assert "base frame's own placement" in line and "--frame tracker" in line and "at the tool" in line
+    assert b.to_dict()["base_unobservable_m"] == pytest.approx(b.base_unobservable_m.tolist())

@@ -299,6 +299,10 @@ def test_ipopt_design_over_the_extended_model_kr15():
     assert np.isclose(sc[1]["trace_cs_m2"], crit.value(kpi.q_meas), rtol=1e-9, atol=0.0)
     assert np.isclose(np.trace(sc[0]["cov_s_m2"]), crit.value(rnd.q_meas), rtol=1e-9, atol=0.0)
     assert not np.isclose(sc[1]["trace_cs_m2"], kpi.trace_cs_m2, rtol=1e-3, atol=0.0)  # not the geometric value
+    t = len(cell.q_work)  # the TCP sigma holds what no reflector measurement determines, as the geometric one does
+    for s_, r in zip(sc, (rnd, kpi)):
+        assert s_["held_trace_m2"] == r.held_trace_m2 and r.held_trace_m2 > 0
+        assert s_["tcp_sigma_m"] == pytest.approx(np.sqrt((s_["trace_cs_m2"] + r.held_trace_m2) / t), rel=1e-12)
     txt = table([rnd, kpi], rnd, None, sc)
     assert f"{100 * (sc[1]['trace_cs_m2'] / sc[0]['trace_cs_m2'] - 1):+.1f}" in txt.splitlines()[-1]  # ext vs random
     assert "ext tr(C_s) mm^2" in txt and "geo tr(C_s) mm^2" in txt

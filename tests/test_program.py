@@ -370,6 +370,27 @@ def test_export_cli_writes_a_checked_program(small_design, tmp_path):
     np.testing.assert_allclose(Q, [w["q"] for w in doc["waypoints"]], atol=1e-6)
 
 
+def test_export_html_that_fails_writes_no_program(small_design, tmp_path, capsys, monkeypatch):
+    """The animation page is built before any file is written: when it fails (one line, exit 2), neither the program
+    nor the JSON is left behind; when it succeeds both files are written."""
+    import pin_kpi_oed.viz.program_animation as anim
+    from pin_kpi_oed.errors import InputError
+
+    def broken(*_a, **_k):
+        raise InputError("the scene cannot be drawn")
+
+    monkeypatch.setattr(anim, "animate_program", broken)
+    out, page, js = tmp_path / "prog.script", tmp_path / "prog.html", tmp_path / "prog.json"
+    assert main(["export", str(small_design), "--format", "urscript", "--out", str(out), "--html", str(page),
+                 "--json", str(js), "--quiet"]) == 2
+    assert "the scene cannot be drawn" in capsys.readouterr().err
+    assert not out.exists() and not page.exists() and not js.exists()
+    monkeypatch.undo()
+    assert main(["export", str(small_design), "--format", "urscript", "--out", str(out), "--html", str(page),
+                 "--quiet"]) == 0
+    assert out.read_text().startswith("# pin-kpi-oed") and "<html" in page.read_text()[:2000].lower()
+
+
 def test_export_shows_progress_on_a_terminal_only(small_design, tmp_path, capsys, monkeypatch):
     """Ordering and move checks take a minute on the UR10: a bar on stderr when forced / on a terminal, none in
     pipes."""
@@ -552,3 +573,13 @@ def test_program_animation_holds_every_measurement_point(small_design, tmp_path)
     out = tmp_path / "p.html"
     scene.write_html(out)
     assert out.stat().st_size > 100_000
+
+
+def test_design_header_states_the_cell_as_given(tmp_path, capsys):
+    """The header's cell line is the cell file's (incidence limit 30 deg), the margins line the tightening the
+    optimiser designed with: one incidence limit per meaning, not the tightened one under the cell's name."""
+    assert main(["design", "--cell", "kr15", "--criteria", "random", "--measurements", "10", "--incidence-margin",
+                 "2", "--json", str(tmp_path / "d.json")]) == 0
+    out = capsys.readouterr().out.splitlines()
+    assert out[0].startswith("cell kr15_fms") and "incidence <= 30 deg" in out[0]
+    assert any(s.startswith("margins:") and "incidence 2 deg" in s and "incidence limit 30 deg" in s for s in out)

@@ -184,3 +184,27 @@ def test_evaluate_counts_the_held_term_as_identify_does(case):
     assert sc.held_trace_m2 == pytest.approx(float(np.sum(res.tcp_held_m ** 2)), rel=0.02)
     assert sc.tcp_sigma_m == pytest.approx(np.sqrt((sc.trace_cs_m2 + sc.held_trace_m2) / len(Qw)), rel=1e-12)
     assert "no measurement of this reflector removes" in sc.summary()
+
+
+def test_identify_command_states_the_sigma_of_the_model_file_it_writes(case, tmp_path, capsys):
+    """The command fits the discrepancy after the parametric fit: the TCP std it prints (and its JSON) is the one the
+    model file it writes gives at the tool header's working configurations (what predict --at tcp, check and report
+    state), not the one before the discrepancy was fitted."""
+    import json
+
+    from pin_kpi_oed.calibrated.model_file import load_model_file
+    from pin_kpi_oed.cli.app import main
+    from pin_kpi_oed.data.measurements import write_measurements
+
+    _, _, Qw, _, data = case
+    write_measurements(data, tmp_path / "train.csv")
+    assert main(["identify", "--robot", "ur5", "--data", str(tmp_path / "train.csv"), "--reflector",
+                 ",".join(map(str, REFLECTOR_M)),
+                 "--model-out", str(tmp_path / "m.json"), "--json", str(tmp_path / "r.json")]) == 0
+    out = capsys.readouterr().out
+    cm = load_model_file(tmp_path / "m.json")
+    assert cm.discrepancy is not None  # the command's own discrepancy (auto: a white level at 40 poses)
+    at = cm.predict_tcp(Qw)
+    doc = json.loads((tmp_path / "r.json").read_text())
+    np.testing.assert_allclose(doc["result"]["tcp_std_m"], at.sigma_m, rtol=1e-9, atol=0)
+    assert f"predicted TCP std at 5 working configurations: mean {np.mean(at.sigma_m) * 1e6:.2f} µm" in out

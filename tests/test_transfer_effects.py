@@ -458,9 +458,9 @@ def test_diagnose_transfer_section_names_extrapolation(model, tmp_path, capsys):
     sl = tf["joints"][1]
     assert sl["train_max"] <= -1.9 + 1e-9 and sl["validate_min"] >= -1.2 - 1e-9
     assert tf["rms_before_registration_m"] > 10 * tf["heldout_rms_m"]  # the tracker moved: registration needed
-    # predicted TCP uncertainty at the validation configurations vs the observed error, and the poses to add
+    # predicted uncertainty of the measured point at the validation rows vs the observed error, the poses to add
     assert 0 < tf["predicted_sigma_rms_m"] <= tf["predicted_sigma_max_m"] and tf["predicted_sigma_inside_m"] is None
-    assert "predicted TCP sigma at the validation configurations" in tf["reason"]
+    assert "predicted sigma of the measured point (not the TCP) at the validation configurations" in tf["reason"]
     pa = tf["poses_to_add"]
     sl_range = next(r for r in pa["joint_ranges"] if r["joint"] == "shoulder_lift_joint")
     assert -1.2 - 1e-9 <= sl_range["min"] < sl_range["max"] <= -0.3 + 1e-9  # the unseen shoulder range

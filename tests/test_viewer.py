@@ -621,3 +621,47 @@ def test_program_animation_passes_the_via_poses_and_draws_the_ordered_path():
     np.testing.assert_allclose(np.frombuffer(vias["array"].data, np.float32).reshape(-1, 3), refl[[3]], atol=1e-5)
     meas = rec.object_dict("/meshcat/program/measure")["object"]["geometries"][0]["data"]["attributes"]["position"]
     assert np.frombuffer(meas["array"].data, np.float32).size == 3 * 4
+
+
+def test_cli_view_states_the_tcp_sigma_design_states(design_dict, tmp_path, capsys):
+    """The TCP sigma view prints is the design's: sqrt((tr(C_s) + held) / t) with the file's held_trace_m2 (what no
+    measurement of the reflector determines), the number design writes as tcp_sigma_m, and one line says so."""
+    from pin_kpi_oed.cli.app import main
+
+    doc = json.loads(json.dumps(design_dict))
+    t = len(doc["q_work"]) if "q_work" in doc else len(doc["cell"]["q_work"])
+    held = 0.25e-6  # 0.5 mm of a held flange offset, m^2
+    for e in doc["designs"]:
+        e["held_trace_m2"] = held
+        e["tcp_sigma_m"] = float(np.sqrt((e["trace_cs_m2"] + held) / t))
+    p = tmp_path / "held.json"
+    p.write_text(json.dumps(doc))
+    assert main(["view", str(p), "--html", str(tmp_path / "v.html"), "--no-open", "--criteria", "random,kpi"]) == 0
+    text = capsys.readouterr().out
+    for e in doc["designs"]:
+        if e["criterion"] in ("random", "kpi"):
+            assert f"TCP sigma = {e['tcp_sigma_m'] * 1e6:10.4f} um" in text, (e["tcp_sigma_m"], text)
+    assert "sqrt((tr(C_s) + held) / t)" in text and "held 0.25 mm^2" in text
+
+
+def test_capsules_attach_to_a_link_that_shares_its_fixed_joints_name(tmp_path):
+    """A URDF whose fixed joint and child link have one name (example-robot-data's Z1: 'gripperStator') has two
+    Pinocchio frames of that name: the capsule goes on the link's body frame, not a refusal by Pinocchio."""
+    from pin_kpi_oed.cell.cell import CapsuleSpec
+    from pin_kpi_oed.viz.robot_geometry import capsule_geometry
+
+    limit = '<limit lower="-3" upper="3" effort="1" velocity="1"/>'
+    (tmp_path / "twin.urdf").write_text(
+        '<robot name="twin"><link name="base_link"/>'
+        f'<joint name="j1" type="revolute"><parent link="base_link"/><child link="l1"/><origin xyz="0 0 0.1"/>'
+        f'<axis xyz="0 0 1"/>{limit}</joint><link name="l1"/>'
+        f'<joint name="j2" type="revolute"><parent link="l1"/><child link="l2"/><origin xyz="0 0 0.3"/>'
+        f'<axis xyz="0 1 0"/>{limit}</joint><link name="l2"/>'
+        '<joint name="gripper" type="fixed"><parent link="l2"/><child link="gripper"/><origin xyz="0.2 0 0"/>'
+        '</joint><link name="gripper"/></robot>')
+    rb = load_robot(str(tmp_path / "twin.urdf"), tool_frame="gripper")
+    assert sum(f.name == "gripper" for f in rb.model.frames) == 2  # the ambiguity the fix resolves
+    gm = capsule_geometry(rb.model, [CapsuleSpec("gripper", np.zeros(3), np.array([0.05, 0.0, 0.0]), 0.02,
+                                                 "gripper")])
+    fr = rb.model.frames[gm.geometryObjects[0].parentFrame]
+    assert fr.name == "gripper" and fr.type == pin.FrameType.BODY

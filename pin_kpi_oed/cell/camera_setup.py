@@ -162,15 +162,21 @@ def _mapping(d: Any, keys: set[str], what: str) -> dict:
     return d
 
 
-def _positive(d: dict, key: str, what: str, limit: float | None = None, unit: str = "") -> float:
+def _positive(d: dict, key: str, what: str, limit: float | None = None, unit: str = "",
+              hint: str = "the value looks like mm; give it in m") -> float:
     v = d.get(key)
     if v is None:
         raise InputError(f"{what}.{key}: missing field")
     if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v <= 0:
         raise InputError(f"{what}.{key}: expected a positive number{unit}, got {v!r}")
     if limit is not None and v > limit:
-        raise InputError(f"{what}.{key}: {v:g} is more than {limit:g}{unit}: the value looks like mm; give it in m")
+        raise InputError(f"{what}.{key}: {v:g} is more than {limit:g}{unit}: {hint}")
     return float(v)
+
+
+#: the smallest focal length (px) a camera file may state: below, a field of view near 180 deg over a 1000 px
+#: image; a focal length in mm (the lens's) is what such a value usually is
+FOCAL_MIN_PX = 50.0
 
 
 def _count(d: dict, key: str, what: str) -> int:
@@ -183,6 +189,10 @@ def _count(d: dict, key: str, what: str) -> int:
 def _intrinsics(d: Any, what: str) -> Intrinsics:
     d = _mapping(d, _INTRINSIC_KEYS, what)
     f = {k: _positive(d, k, what, unit=" px") for k in ("fx", "fy", "cx", "cy")}
+    for k in ("fx", "fy"):
+        if f[k] < FOCAL_MIN_PX:
+            raise InputError(f"{what}.{k}: {f[k]:g} px is less than {FOCAL_MIN_PX:g} px: a focal length in px (the "
+                             "lens's in mm divided by the pixel pitch in mm, e.g. 8 mm / 0.0055 mm = 1455 px), not mm")
     dist = read_vec(d.get("distortion", [0.0] * 5), 5, f"{what}.distortion (k1, k2, p1, p2, k3)")
     size = d.get("image_size_px")
     if (not isinstance(size, list) or len(size) != 2
@@ -253,7 +263,9 @@ def read_camera_setup(d: dict, source: str = "") -> CameraSetup | None:
         raise InputError(f"{what}.pose: missing field (the camera in the "
                          f"{'tool' if mode == 'eye_in_hand' else 'cell'} frame: xyz_m, rpy_deg)")
     pose = read_pose(cam["pose"], f"{what}.pose")
-    sigma = _positive(cam, "sigma_px", what, limit=50.0, unit=" px") if "sigma_px" in cam else 0.2
+    sigma = (_positive(cam, "sigma_px", what, limit=50.0, unit=" px",
+                       hint="a corner's detection noise is a fraction of a pixel (e.g. 0.2)")
+             if "sigma_px" in cam else 0.2)
     intr = _intrinsics(cam.get("intrinsics"), f"{what}.intrinsics")
     bwhat = where(source, "board")
     if "pose" not in (d["board"] or {}):

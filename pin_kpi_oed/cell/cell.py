@@ -153,13 +153,27 @@ _KNOWN_KEYS = {"name", "description", "robot", "tool_frame", "base", "tracker", 
                "working_paths", "orientation_length_m", "camera", "board"}
 
 
+def _did_you_mean(unknown: set, known: set[str]) -> str:
+    """"; did you mean 'tool_frame' (for 'tool_fram')?" for the unknown keys close to a known one (difflib), else
+    the known keys listed."""
+    import difflib
+
+    names = sorted(known)
+    close = {u: difflib.get_close_matches(u, names, n=1, cutoff=0.6) for u in sorted(map(str, unknown))}
+    hints = [f"'{m[0]}' (for '{u}')" for u, m in close.items() if m]
+    if hints:
+        return "; did you mean " + ", ".join(hints) + "?"
+    return f" (known: {', '.join(sorted(known))})"
+
+
 def _check_top_level(d: Any, source: str) -> None:
     """The file is a mapping of known fields naming a robot."""
     if not isinstance(d, dict):
         raise InputError(f"{source or 'cell'}: expected a YAML mapping at the top level")
     unknown = set(d) - _KNOWN_KEYS
     if unknown:
-        raise InputError(f"{at(source, 'cell')}: unknown field(s) {', '.join(sorted(unknown))}")
+        raise InputError(f"{at(source, 'cell')}: unknown field(s) {', '.join(sorted(map(str, unknown)))}"
+                         + _did_you_mean(unknown, _KNOWN_KEYS))
     if "robot" not in d:
         raise InputError(f"{at(source, 'robot')}: missing field (shipped name or URDF path)")
 
@@ -255,7 +269,8 @@ def _read_obstacles(d: dict, source: str) -> tuple[list[CapsuleSpec], list[HalfS
         raise InputError(f"{at(source, 'obstacles')}: expected a mapping with 'capsules' and 'half_spaces'")
     unknown = set(obs) - {"capsules", "half_spaces"}
     if unknown:
-        raise InputError(f"{at(source, 'obstacles')}: unknown field(s) {', '.join(sorted(unknown))}")
+        raise InputError(f"{at(source, 'obstacles')}: unknown field(s) {', '.join(sorted(map(str, unknown)))}"
+                         + _did_you_mean(unknown, {"capsules", "half_spaces"}))
     obstacles = [_capsule(c, at(source, f"obstacles.capsules[{i}]"), False)
                  for i, c in enumerate(obs.get("capsules") or [])]
     halfs = []

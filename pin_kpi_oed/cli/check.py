@@ -114,7 +114,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 def run_monitor(args: argparse.Namespace) -> int:
     """Handler of ``pin-kpi-oed monitor``."""
-    from pin_kpi_oed.data.atomic import atomic_write_json
+    from pin_kpi_oed.data.atomic import atomic_write_json, to_jsonable
     from pin_kpi_oed.data.measurements import read_measurements
     from pin_kpi_oed.calibrated.model_file import load_model_file
     from pin_kpi_oed.upkeep.monitoring import Monitor, monitor
@@ -134,7 +134,7 @@ def run_monitor(args: argparse.Namespace) -> int:
     if args.model_out:
         atomic_write_json(args.model_out, log.model.to_dict())
     if args.json:
-        atomic_write_json(args.json, {**log.to_dict(), "model": args.model, "data": args.data})
+        atomic_write_json(args.json, to_jsonable({**log.to_dict(), "model": args.model, "data": args.data}))
     if not args.quiet:
         print(log.summary())
         if log.blocks:
@@ -193,7 +193,7 @@ def run_check(args: argparse.Namespace) -> int:
 
 def _camera_verdict(args: argparse.Namespace, model) -> int:
     """``check --model CAMERA_MODEL --data CHECK_CORNERS.csv`` (:mod:`pin_kpi_oed.upkeep.camera_check`)."""
-    from pin_kpi_oed.data.atomic import atomic_write_json
+    from pin_kpi_oed.data.atomic import atomic_write_json, to_jsonable
     from pin_kpi_oed.data.corner_measurements import read_corners
     from pin_kpi_oed.errors import InputError
     from pin_kpi_oed.upkeep.camera_check import check_camera
@@ -209,14 +209,14 @@ def _camera_verdict(args: argparse.Namespace, model) -> int:
             raise InputError(f"check {opt}: not for a camera's model (a camera check re-fits nothing it writes)")
     res = check_camera(model, read_corners(args.data), alpha=args.alpha, source=args.data)
     if args.json:
-        atomic_write_json(args.json, {**res.to_dict(), "model": args.model, "data": args.data})
+        atomic_write_json(args.json, to_jsonable({**res.to_dict(), "model": args.model, "data": args.data}))
     if not args.quiet:
         print(res.summary())
     return res.exit_code
 
 
 def _verdict(args: argparse.Namespace, model) -> int:
-    from pin_kpi_oed.data.atomic import atomic_write_json
+    from pin_kpi_oed.data.atomic import atomic_write_json, to_jsonable
     from pin_kpi_oed.data.measurements import read_measurements
     from pin_kpi_oed.upkeep.check import check_calibration
     from pin_kpi_oed.validation.robot_checks import check_points_against_joints
@@ -231,7 +231,7 @@ def _verdict(args: argparse.Namespace, model) -> int:
     if args.model_out:
         atomic_write_json(args.model_out, res.model.to_dict())
     if args.json:
-        atomic_write_json(args.json, doc)
+        atomic_write_json(args.json, to_jsonable(doc))  # strict JSON: what was not computed is null
     if not args.quiet:
         print(res.summary())
         written = [f for f in (args.model_out, args.json) if f]
@@ -241,7 +241,7 @@ def _verdict(args: argparse.Namespace, model) -> int:
 
 
 def _design(args: argparse.Namespace, model) -> int:
-    from pin_kpi_oed.data.atomic import atomic_write_json, atomic_write_text
+    from pin_kpi_oed.data.atomic import atomic_write_json, atomic_write_text, to_jsonable
     from pin_kpi_oed.upkeep.check_design import design_check
     from pin_kpi_oed.errors import InputError
     from pin_kpi_oed.program.export import ProgramInfo, write_program
@@ -271,7 +271,7 @@ def _design(args: argparse.Namespace, model) -> int:
     for path, text in texts.items():
         atomic_write_text(path, text)
     if args.json:
-        atomic_write_json(args.json, {**d.to_dict(), "model": args.model, "cell": args.cell})
+        atomic_write_json(args.json, to_jsonable({**d.to_dict(), "model": args.model, "cell": args.cell}))
     if not args.quiet:
         print(d.summary())
         print("wrote " + ", ".join(f for f in (args.out, args.program, args.json) if f))

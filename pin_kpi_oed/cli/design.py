@@ -215,8 +215,8 @@ def run(args: argparse.Namespace) -> int:
         if problem.extended is not None:
             print(f"extended model from {settings.model_file}: {problem.extended.nb} geometric + "
                   f"{problem.extended.k} effect parameters, prior: {settings.model_prior}")
-        print_header(problem.cell, problem, settings.measurements, settings.seed, settings.collision,
-                     settings.n_starts)
+        print_header(cell, problem, settings.measurements, settings.seed, settings.collision,
+                     settings.n_starts)  # the cell as given: the margins' line after the table names the tightening
     _print_declared(problem, settings.reregister)
     run = design_run(cell, settings, problem, discrepancy=disc_on, say=_say)
     results, m = list(run.results), run.m

@@ -321,6 +321,14 @@ def _fit(model: Any, train: Any, opts: Any, effects: list) -> tuple[Any, Any]:
     return result, replace(opts, loss=result.loss)
 
 
+def _restate_tcp_sigma(result: Any, train: Any, q_work: Any) -> None:
+    """The TCP σ the summary prints, with the discrepancy just fitted: the model file's own (what ``predict --at
+    tcp``, ``check`` and ``report`` state), at the tool's working configurations, else the training poses."""
+    from pin_kpi_oed.identification.identify import restate_tcp_sigma
+
+    restate_tcp_sigma(result, train, train.q if q_work is None else q_work)
+
+
 def _discrepancy(args: argparse.Namespace, result: Any, train: Any) -> Any:
     """The discrepancy of the final fit (``--discrepancy``), its decision printed on one line."""
     from pin_kpi_oed.identification.discrepancy_fit import discrepancy_options, result_discrepancy
@@ -435,6 +443,7 @@ def run_identify(args: argparse.Namespace) -> int:
         model.layout.set_joint_prior(*geometry_prior)
     result, opts = _fit(model, train, opts, effects)
     result.discrepancy = _discrepancy(args, result, train)
+    _restate_tcp_sigma(result, train, ct.tool.q_work)
     out = {"result": result.to_dict(), "data": list(args.data), "validate": args.validate,
            "reflector_nominal_m": reflector.tolist(),
            "reflector_nominal_source": "estimated" if estimated else ("given" if args.reflector else "cell/header"),

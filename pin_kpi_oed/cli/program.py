@@ -150,6 +150,7 @@ def run_export(args: argparse.Namespace) -> int:
                                       revolute=np.asarray(df.robot.is_revolute, bool),
                                       cycle_time_s=prog.cycle_time_s, dwell_s=args.dwell,
                                       name=files[next(iter(files))].stem, speeds=prog.speeds))
+    page = _animation_page(args.design, name, prog, args.html) if getattr(args, "html", None) else None
     for suffix in sorted(texts, key=lambda s: s != ".dat"):  # KRL: the data list first, the program last
         atomic_write_text(files[suffix], texts[suffix])
     if getattr(args, "json", None):
@@ -157,8 +158,8 @@ def run_export(args: argparse.Namespace) -> int:
                                       "pose_clearance_m": rep.clearance_m, "pose_incidence_deg": rep.incidence_deg,
                                       "incidence_max_deg": df.cell.incidence_max_deg,
                                       "forced_problems": problems if force else []})
-    if getattr(args, "html", None):
-        _write_animation(args.design, name, prog, args.html)
+    if page is not None:  # built before the first file was written: a page that fails writes nothing
+        atomic_write_text(args.html, page)
     if not quiet:
         print("wrote " + ", ".join(str(files[s]) for s in texts) + (f", {args.html}" if getattr(args, "html", None)
                                                                     else ""))
@@ -183,8 +184,9 @@ def _check_same_poses(prog, Q: np.ndarray, revolute: np.ndarray, design: str) ->
                               f"{np.max(np.abs(d)):.3g} (not a whole turn); nothing written")
 
 
-def _write_animation(design: str, name: str, prog, html: str) -> None:
-    """The design's meshcat scene (one design, ghosts only for a handful of poses) animating the program."""
+def _animation_page(design: str, name: str, prog, html: str) -> str:
+    """The page (self-contained HTML text) of the design's meshcat scene (one design, ghosts only for a handful of
+    poses) animating the program, for ``html``."""
     from pin_kpi_oed.data.atomic import check_writable
     from pin_kpi_oed.design.design_file import load_design
     from pin_kpi_oed.viz.program_animation import animate_program
@@ -194,4 +196,4 @@ def _write_animation(design: str, name: str, prog, html: str) -> None:
     df = load_design(design, criteria=[name])
     scene = build_scene(df, SceneOptions(ghosts=len(prog.order) <= 8, animate=False))
     animate_program(scene, prog.path, [w.kind for w in prog.waypoints])
-    scene.write_html(html)
+    return scene.static_html()

@@ -55,7 +55,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="lab file (YAML: organisation, operator, customer, robot_serial, instrument make / model / "
                         "serial / calibration_date / calibration_certificate); without it the page is a draft")
     p.add_argument("--required-accuracy", type=float, default=None,
-                   help="required accuracy (m) of --accuracy-figure: ISO 14253-1 conformity statement (camera "
+                   help="required accuracy (m, at most 0.01) of --accuracy-figure: ISO 14253-1 conformity "
+                        "statement (undetermined where the TCP's U at the working configurations exceeds it; camera "
                         "data: of the TCP's position, on its largest U at the working configurations)")
     p.add_argument("--accuracy-figure", default="p95", choices=["p95", "rms", "mean", "max"],
                    help="the held-out figure the required accuracy is about (default p95)")
@@ -161,9 +162,11 @@ def _options(args: argparse.Namespace) -> CertificateOptions:
     from pin_kpi_oed.errors import InputError
     from pin_kpi_oed.report.content import CertificateOptions
 
-    for flag, v in (("--required-accuracy", args.required_accuracy), ("--goal-radius", args.goal_radius)):
-        if v is not None and not (np.isfinite(v) and 0 < v < 0.1):
-            raise InputError(f"{flag} {v!r}: a positive length below 0.1 m (the option is in metres)")
+    for flag, v, top in (("--required-accuracy", args.required_accuracy, 0.01), ("--goal-radius", args.goal_radius,
+                                                                                  0.1)):
+        if v is not None and not (np.isfinite(v) and 0 < v <= top):
+            raise InputError(f"{flag} {v!r}: a positive length of at most {top:g} m (the option is in metres"
+                             + (f": {v:g} mm is {v * 1e-3:g})" if np.isfinite(v) and v > top else ")"))
     tcp = None
     if args.commanded_tcp:
         try:

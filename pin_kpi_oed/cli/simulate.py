@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import re
 from pathlib import Path
 from typing import Any
 
@@ -33,6 +34,9 @@ from pin_kpi_oed.errors import InputError
 from pin_kpi_oed.model.robot import ROBOT_HELP, TOOL_HELP
 
 __all__ = ["register_simulate", "run_simulate"]
+
+#: random training measurements without --design or --poses
+DEFAULT_N = 80
 
 #: Fallbacks of the options that describe the set-up without a cell.
 _DEFAULT_REFLECTOR = "0.03,0.02,0.08"
@@ -61,8 +65,9 @@ def register_simulate(subparsers: argparse._SubParsersAction) -> None:
     s.add_argument("--poses", default=None,
                    help="CSV with the robot's joint columns (rad / m): measure these poses (other columns ignored)")
     s.add_argument("--tool", default=None, help=TOOL_HELP)
-    s.add_argument("--n", type=int, default=80,
-                   help="number of random training measurements (default 80; not used with --design or --poses)")
+    s.add_argument("--n", type=int, default=None,
+                   help="number of random training measurements (default 80; refused with --design or --poses, "
+                        "whose poses set the number)")
     s.add_argument("--n-test", type=int, default=0,
                    help="number of held-out measurements at random poses, feasible in the cell when there is one "
                         "(default 0)")
@@ -109,6 +114,10 @@ def _check_args(args: argparse.Namespace) -> bool:
     """Option checks before any work; returns whether ``--truth`` names an existing file (reuse)."""
     from pin_kpi_oed.data.atomic import check_writable, claim_output
 
+    if args.n is not None and (args.design or args.poses):
+        raise InputError(f"--n {args.n}: not with {'--design' if args.design else '--poses'} (its poses are measured, "
+                         "as many as it has): leave --n out")
+    args.n = DEFAULT_N if args.n is None else args.n
     if args.n < 1 or args.n_test < 0:
         raise InputError(f"--n must be >= 1 and --n-test >= 0, got {args.n} and {args.n_test}")
     if args.n_test and not args.test_out:
@@ -173,7 +182,9 @@ def _setup(args: argparse.Namespace, reuse: bool, cell: Any = None) -> tuple[Any
         from pin_kpi_oed.validation.units import check_effect_sizes
 
         effects = parse_effects_spec(args.effects, model.robot, np.random.default_rng(args.seed + 3))
-        check_effect_sizes(effects)  # a size in degrees or µrad refused, naming the unit
+        given = {m.group(1): m.group(2) for m in re.finditer(r"(\w+)(?:\[[^\]]*\])?\s*=\s*([^,\s]+)",
+                                                              args.effects)}
+        check_effect_sizes(effects, given=given)  # the size as written, in degrees or µrad, refused naming the unit
     return model, cell, random_truth(model, tol, seed=args.seed), effects, tol, design
 
 

@@ -139,6 +139,9 @@ def run_predict(args: argparse.Namespace) -> int:
     model = load_model_file(args.model)
     check_tool_length(args, model.pose6d, args.model)
     model_tool(args, model, args.model, [args.data])
+    camera_rows = _camera_poses(args, model)
+    if camera_rows is not None:  # a camera's corners file: its images' joint values, the TCP at each
+        return _predict_tcp(args, model, camera_rows)
     data = read_measurements(args.data, joint_names=model.robot.joint_names, reach_m=model.robot.reach(),
                              require_position=False, **table_options(args, model.robot))
     if data.position_m is not None and np.all(np.isfinite(data.position_m)):
@@ -182,6 +185,40 @@ def run_predict(args: argparse.Namespace) -> int:
                   f"{tm.sigma_m.max() * 1e3:.4f} mm; {tm.n_extrapolated} of {len(data)} rows outside the measured "
                   f"coverage -> {args.figure}")
     return 0
+
+
+def _camera_poses(args: argparse.Namespace, model: Any) -> Any:
+    """The joint values of the images of a camera's corners file (``pose, corner, u_px, v_px`` and the joints), one
+    row per image in the file's order, as a :class:`~pin_kpi_oed.data.measurement_set.MeasurementSet` without
+    positions; None when ``--data`` is not a corners file.
+
+    Raises:
+        InputError: a corners file for a model that is not a camera's, or without ``--at tcp`` (a camera measures
+            pixels: the TCP is what its model predicts), or whose joints are not the model's robot's.
+    """
+    from pin_kpi_oed.cli.camera_pipeline import is_camera_data
+    from pin_kpi_oed.data.corner_measurements import read_corners
+    from pin_kpi_oed.data.measurement_set import MeasurementSet
+    from pin_kpi_oed.errors import InputError
+    from pin_kpi_oed.identification.camera_identify import camera_device
+
+    if not is_camera_data([args.data]):
+        return None
+    if camera_device(model) is None:
+        raise InputError(f"{args.data}: a camera's corners file (pose, corner, u_px, v_px); {args.model} is a "
+                         "tracker's calibration: give a measurement CSV (joints, x, y, z) or the joint values alone")
+    if args.at != "tcp":
+        raise InputError(f"predict --model {args.model}: a camera's model predicts the TCP: give --at tcp (the "
+                         f"joint values of {args.data}'s images are used)")
+    cs = read_corners(args.data)
+    names = list(model.robot.joint_names)
+    if sorted(cs.joint_names) != sorted(names):
+        raise InputError(f"{args.data}: joint columns {', '.join(cs.joint_names)} are not the joints of "
+                         f"{args.model}'s robot {model.robot.name} ({', '.join(names)})")
+    first = {lab: k for k, lab in reversed(list(enumerate(cs.pose.tolist())))}
+    rows = [first[lab] for lab in cs.poses]
+    Q = cs.q[rows][:, [cs.joint_names.index(n) for n in names]]
+    return MeasurementSet(names, Q, np.full((len(Q), 3), np.nan), source=args.data)
 
 
 def _predict_tcp(args: argparse.Namespace, model: Any, data: Any) -> int:

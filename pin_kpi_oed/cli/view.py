@@ -17,7 +17,7 @@ import signal
 import sys
 import time
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -83,12 +83,29 @@ def _print_designs(df: DesignFile, scene: Scene, level: float) -> None:
     print(f"{df.robot.name}: {len(df.designs)} design(s), {t} working configuration(s); "
           f"{int(round(level * 100))} % TCP ellipsoids magnified x{fmt_factor(scene.scale)}; C_s {scene.sigma} "
           f"({SIGMA_TEXT[scene.sigma]})")
+    held_any = 0.0
     for d in df.designs:
         tr = float(np.trace(d.cov_s_honest_m2)) if scene.sigma == "honest" else d.trace_cs_m2
+        held = _held_trace_m2(d)
+        held_any = max(held_any, held)
         print(f"  {d.label:<18} {d.q_meas.shape[0]:>4} poses  tr(C_s) = {tr * 1e6:.4e} mm^2  "
-              f"TCP sigma = {(max(tr, 0.0) / t) ** 0.5 * 1e6:8.4g} um  "
+              f"TCP sigma = {((max(tr, 0.0) + held) / t) ** 0.5 * 1e6:10.4f} um  "
               f"colour #{scene.colours[d.criterion]:06x}"
               + ("  (C_s recomputed)" if d.cov_source == "computed" else ""))
+    if held_any > 0.0:
+        print(f"TCP sigma = sqrt((tr(C_s) + held) / t), as design states it: held {held_any * 1e6:.4g} mm^2 from "
+              "parameters held at their tolerance, which no measurement of this reflector determines (the design "
+              "file's held_line); the ellipsoids show C_s alone, the part the design controls")
+
+
+def _held_trace_m2(d: Any) -> float:
+    """The design entry's ``held_trace_m2`` (m²: what the parameters no measurement of the reflector determines add
+    to tr C_s at the working configurations, as ``design`` wrote it), 0 for a file without one."""
+    try:
+        v = float(d.info.get("held_trace_m2") or 0.0)
+    except (TypeError, ValueError):
+        return 0.0
+    return v if np.isfinite(v) and v > 0.0 else 0.0
 
 
 def _write_figures(df: DesignFile, folder: str, sigma: str = "honest") -> None:

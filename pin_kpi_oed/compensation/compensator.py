@@ -56,7 +56,7 @@ send as it is.
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -458,6 +458,10 @@ def _result(cm: CalibratedModel, ts: TargetSet, opt: CompensationOptions, pm: Po
     n_bad = sum(s not in ("ok", "tcp_unmeasured") for s in status)
     un = np.array([s == "tcp_unmeasured" for s in status], bool)
     text = "ok" if not un.any() else held_status_line(unseen[un], at.sigma_m[un])
+    base_part = np.zeros(0)
+    if opt.frame == "base":  # the part of the held σ that is the base frame's own placement, not the tool's
+        tool = _tcp_sigma(cm, cal.Q, ts.aux, replace(opt, frame="cell"), pm.tcp).held_sigma_m
+        base_part = np.sqrt(np.maximum(unseen ** 2 - tool ** 2, 0.0))
     return CompensationResult(
         success=n_bad == 0, status=text if n_bad == 0 else f"{n_bad} of {len(ts)} targets not ok",
         message="" if n_bad == 0 else "see the per-target status (" + " / ".join(STATUSES[1:]) + ")",
@@ -465,7 +469,7 @@ def _result(cm: CalibratedModel, ts: TargetSet, opt: CompensationOptions, pm: Po
         joint_names=list(cm.robot.joint_names), q_nominal=nom.Q, q=cal.Q, correction_m=correction,
         residual_m=cal.err_m, residual_rad=cal.err_rad, inv_cond=cal.inv_cond, target_status=status,
         frame=opt.frame, station=cm.station(opt.station), tcp_m=pm.tcp, orientation=ts.rotvec_rad is not None,
-        sigma_m=at.sigma_m, tcp_unobservable_m=unseen, extrapolation=extra,
+        sigma_m=at.sigma_m, tcp_unobservable_m=unseen, base_unobservable_m=base_part, extrapolation=extra,
         tcp_from_reflector_m=lever_arm_m(pm.tcp, cm.setups[cm.station(opt.station)].reflector_m),
         tool_frame=cm.robot.tool_frame, start=list(start), q_start=np.asarray(Q_start, float),
         branch_step_rad=step, from_start_rad=branch_step(cal.Q, Q_start), collision_pair=pair,

@@ -75,6 +75,10 @@ class CompensationResult(Result):
         tcp_unobservable_m: per target, the 3-D σ (m) at the TCP of what one reflector cannot see (joint-placement
             errors the fit could not determine, under the tolerances; 0 at the fitted reflector), included in
             ``sigma_m``.
+        base_unobservable_m: targets in the base frame (``frame`` ``base``): per target, the part of
+            ``tcp_unobservable_m`` (3-D σ, m, in quadrature) that is the base frame's own placement on the robot
+            (joint 1's placement and what the tracker pose absorbs, held at their tolerance), which a reflector at
+            the TCP does not remove and targets in the tracker frame leave out; empty in the tracker frame.
         extrapolation: per target, the compensated joints lie outside the calibration's joint-space coverage
             (:class:`~pin_kpi_oed.discrepancy.coverage.JointCoverage`): the model extrapolates there and its σ
             includes the parameters' extrapolation error, (m,) bool.
@@ -113,6 +117,7 @@ class CompensationResult(Result):
     from_start_rad: np.ndarray = field(default_factory=lambda: np.zeros(0))
     collision_pair: list[str] = field(default_factory=list)
     tcp_unobservable_m: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    base_unobservable_m: np.ndarray = field(default_factory=lambda: np.zeros(0))
     extrapolation: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))
     sigma_rot_rad: np.ndarray = field(default_factory=lambda: np.zeros(0))
     tool_length_m: float = 0.0
@@ -159,10 +164,7 @@ class CompensationResult(Result):
                              "measurement determined; the compensation is right at the measured reflector, not "
                              "known at the TCP: measure the TCP (a reflector nest at it, or a tool calibration)")
             if self.tcp_unobservable_m.size and np.max(self.tcp_unobservable_m) > 0:
-                lines.append(f"of which {np.max(self.tcp_unobservable_m) * 1e3:.4f} mm (3-D, 1 sigma) the reflector "
-                             "cannot see at this TCP: joint-placement errors the calibration could not determine "
-                             "(e.g. along and about the last joint axis), from the manufacturing tolerances; a "
-                             "reflector at the TCP (or the TCP measured) removes it")
+                lines.append(self._unobservable_line())
         if np.any(self.extrapolation):
             far = [n for n, e in zip(self.names, self.extrapolation) if e]
             n_st = self.target_status.count("extrapolated")
@@ -180,6 +182,23 @@ class CompensationResult(Result):
         if len(bad) > 10:
             lines.append(f"  ... and {len(bad) - 10} more")
         return "\n".join(lines)
+
+    def _unobservable_line(self) -> str:
+        """What no reflector measurement determines at the TCP (largest over the targets, mm), split in the base
+        frame into the tool's part (a reflector at the TCP removes it) and the base frame's own placement (no
+        tracker measurement determines it)."""
+        held = float(np.max(self.tcp_unobservable_m))
+        line = (f"of which {held * 1e3:.4f} mm (3-D, 1 sigma) the reflector cannot see at this TCP: joint-placement "
+                "errors the calibration could not determine, from the manufacturing tolerances")
+        base = float(np.max(self.base_unobservable_m)) if self.base_unobservable_m.size else 0.0
+        if base <= 0.05 * held:
+            return line + (" (e.g. along and about the last joint axis); a reflector at the TCP (or the TCP measured) "
+                           "removes it")
+        tool = float(np.max(np.sqrt(np.maximum(self.tcp_unobservable_m ** 2 - self.base_unobservable_m ** 2, 0.0))))
+        return (line + f": {tool * 1e3:.4f} mm at the tool (along and about the last joint axis; a reflector at the "
+                f"TCP, or the TCP measured, removes it) and {base * 1e3:.4f} mm the base frame's own placement on the "
+                "robot (joint 1's placement and what the tracker pose absorbs), which no tracker measurement "
+                "determines: targets in the tracker frame (--frame tracker) leave it out")
 
     def _continuity_line(self) -> str:
         """The program's continuity: the largest change of the correction between consecutive rows, over the rows
@@ -208,6 +227,7 @@ class CompensationResult(Result):
                             "tool_frame": self.tool_frame, "start": self.start, "q_start": self.q_start,
                             "branch_step_rad": self.branch_step_rad, "from_start_rad": self.from_start_rad,
                             "collision_pair": self.collision_pair, "tcp_unobservable_m": self.tcp_unobservable_m,
+                            "base_unobservable_m": self.base_unobservable_m,
                             "extrapolation": self.extrapolation, "sigma_rot_rad": self.sigma_rot_rad,
                             "tool_length_m": self.tool_length_m, "sigma_at_length_m": self.sigma_at_length_m,
                             "correction_jump_rad": self.correction_jump_rad})

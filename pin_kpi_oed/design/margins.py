@@ -11,6 +11,7 @@ cell) then reports every pose's true clearance and incidence.
 from __future__ import annotations
 
 import dataclasses
+import math
 
 from pin_kpi_oed.cell.cell import Cell
 from pin_kpi_oed.errors import InputError
@@ -39,9 +40,14 @@ def with_margins(cell: Cell, clearance_margin_m: float = 0.0, incidence_margin_d
     cm, im = float(clearance_margin_m), float(incidence_margin_deg)
     if not (cm >= 0.0 and cm < 1.0):
         raise InputError(f"parameter 'clearance_margin_m' must be in [0, 1) m, got {clearance_margin_m}")
-    if not (0.0 <= im < cell.incidence_max_deg):
-        raise InputError(f"incidence_margin_deg: must be in [0, {cell.incidence_max_deg:g}) deg (the cell's "
-                         f"incidence limit), got {incidence_margin_deg}")
+    lim = cell.incidence_max_deg
+    if not im >= 0.0:
+        raise InputError(f"incidence_margin_deg: must be >= 0 deg, got {incidence_margin_deg}")
+    if not im < lim:
+        raise InputError(f"incidence_margin_deg: {incidence_margin_deg} deg leaves no angle under the cell's "
+                         f"incidence_max_deg {lim:g} deg, which it is subtracted from: give a smaller margin (0: none)"
+                         + (f", or the cell's limit in degrees ({lim:g} rad = {math.degrees(lim):.3g} deg)"
+                            if lim <= math.pi / 2 else ""))
     if cm == 0.0 and im == 0.0:
         return cell
     return dataclasses.replace(cell, clearance_m=cell.clearance_m + cm, incidence_max_deg=cell.incidence_max_deg - im,

@@ -25,8 +25,10 @@ def extended_scores(problem: Any, results: list, q_work: np.ndarray) -> list[dic
         q_work: working configurations (rad).
 
     Returns:
-        Per design {"trace_cs_m2", "tcp_sigma_m" = sqrt(tr(C_s)/t), "cov_s_m2"} (m², m); NaN where the
-        design with the prior does not determine the parameters.
+        Per design {"trace_cs_m2", "tcp_sigma_m" = sqrt((tr(C_s) + held_trace_m2)/t), "cov_s_m2", "held_trace_m2"}
+        (m², m, m², m²): the TCP σ as the geometric design states it, with the design's held parameters (the joint
+        placements no measurement of the reflector determines, which the extended model holds as well); NaN where
+        the design with the prior does not determine the parameters.
     """
     from pin_kpi_oed.errors import IdentifiabilityError
 
@@ -36,12 +38,15 @@ def extended_scores(problem: Any, results: list, q_work: np.ndarray) -> list[dic
     t = np.atleast_2d(q_work).shape[0]
     out = []
     for r in results:
+        held = float(getattr(r, "held_trace_m2", 0.0) or 0.0)
         try:
             Cs = ext.covariances(r.q_meas, q_work)[1]
             tr = float(np.trace(Cs))
-            out.append({"trace_cs_m2": tr, "tcp_sigma_m": math.sqrt(tr / t), "cov_s_m2": Cs.tolist()})
+            out.append({"trace_cs_m2": tr, "tcp_sigma_m": math.sqrt((tr + held) / t), "cov_s_m2": Cs.tolist(),
+                        "held_trace_m2": held})
         except (IdentifiabilityError, ValueError):
-            out.append({"trace_cs_m2": float("nan"), "tcp_sigma_m": float("nan"), "cov_s_m2": None})
+            out.append({"trace_cs_m2": float("nan"), "tcp_sigma_m": float("nan"), "cov_s_m2": None,
+                        "held_trace_m2": held})
     return out
 
 

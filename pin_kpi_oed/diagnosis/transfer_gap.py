@@ -82,7 +82,8 @@ def circular_range(q: np.ndarray) -> tuple[float, float]:
 
 
 def predicted_sigma(V: np.ndarray, S: np.ndarray) -> np.ndarray:
-    """Predicted TCP standard deviation per row, sqrt(Σ_a V_ia σ_ia²) (m), from the weighted variance V (n, 3)."""
+    """Predicted standard deviation of the measured point (the reflector, what the held-out rows measure) per row,
+    sqrt(Σ_a V_ia σ_ia²) (m), from the weighted variance V (n, 3)."""
     return np.sqrt(np.clip(np.sum(np.asarray(V, float) * np.asarray(S, float) ** 2, axis=1), 0.0, None))
 
 
@@ -182,7 +183,8 @@ def _gap_texts(g: _GapNumbers, final_label: str) -> tuple[str, str, str]:
                f"every joint; held-out RMS {_f3(g.rms)} mm (inside the coverage {_f3(g.rms_in)}, outside "
                f"{_f3(g.rms_out)} mm); training RMS {_f3(g.train_rms)} mm")
     model_txt = f" ({final_label})" if final_label else ""
-    pred_txt = (f"predicted TCP sigma at the validation configurations{model_txt} {g.sp_rms * um:.1f} µm RMS "
+    pred_txt = (f"predicted sigma of the measured point (not the TCP) at the validation configurations{model_txt} "
+                f"{g.sp_rms * um:.1f} µm RMS "
                 f"(inside {'-' if not np.isfinite(g.sp_in) else f'{g.sp_in * um:.1f}'}, outside "
                 f"{'-' if not np.isfinite(g.sp_out) else f'{g.sp_out * um:.1f}'} µm) vs observed {g.rms * um:.1f} µm "
                 f"RMS ({g.excess * um:.1f} µm above the noise floor {g.floor_m * um:.1f} µm)")
@@ -240,7 +242,7 @@ def transfer_section(result: Any, train: MeasurementSet, ho_data: MeasurementSet
         train: its data; ho_data: the scored validation rows; ho_rows: their 0-based row numbers in
             the validation file.
         R: held-out residuals of the geometric fit (n, 3) m (after the registration if ``registered``).
-        sigma_pred: its predicted TCP σ at the held-out rows (n,) m (:func:`predicted_sigma`).
+        sigma_pred: its predicted σ of the measured point at the held-out rows (n,) m (:func:`predicted_sigma`).
         floor_m: noise floor (3-D RMS, m).
         registered: the set-up was re-registered on rows of the validation session.
         final_R, final_sigma_pred, final_label: the same for the model with the selected effects

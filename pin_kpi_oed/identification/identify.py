@@ -153,6 +153,7 @@ __all__ = [
     "IdentificationResult",
     "ResidualModel",
     "identify",
+    "restate_tcp_sigma",
     "validate",
     "format_validation",
     "predict",
@@ -268,6 +269,19 @@ def identify(model: TrackerModel, data: MeasurementSet, options: IdentifyOptions
     _gate(result, model, opts)
     result.time_s = time.perf_counter() - t_start
     return result
+
+
+def restate_tcp_sigma(result: IdentificationResult, data: MeasurementSet, Q_work: np.ndarray) -> None:
+    """Step 10 again, on a result whose discrepancy was set after the fit (the command line fits it on the final
+    fit): ``result.tcp_std_m`` and its held part become the calibrated model's own σ at the TCP, what the model file
+    gives ``predict --at tcp``, ``check`` and ``report``.
+
+    Args:
+        result: the identification result, its ``discrepancy`` final.
+        data: the training rows (their median temperature, payload and time for the effects that read them).
+        Q_work: where the σ is stated, (t, n) rad / m (the working configurations, else the training poses).
+    """
+    _state_tcp_sigma(result, np.atleast_2d(np.asarray(Q_work, float)), data)
 
 
 def _working_configurations(model: TrackerModel, data: MeasurementSet, inp: FitInputs, opts: IdentifyOptions

@@ -145,8 +145,25 @@ def uncertainty_section(cm: Any, ho: Any, *, work: Any = None, instrument_u_m: f
     return out
 
 
-def conformity_section(acc_after: dict, unc: dict, required_m: float | None, figure: str) -> dict | None:
-    """The ISO 14253-1 statement of the held-out figure ``figure`` against ``required_m`` (None without one)."""
+def conformity_section(acc_after: dict, unc: dict, required_m: float | None, figure: str,
+                       budget: dict | None = None) -> dict | None:
+    """The ISO 14253-1 statement of the held-out figure ``figure`` against ``required_m`` (None without one).
+
+    The held-out figure is the measured point's (the reflector's); the accuracy a user requires is the TCP's. With
+    ``budget`` (:func:`~pin_kpi_oed.report.uncertainty.budget_summary` at the working configurations, the TCP's
+    U), a U (k = 2) above ``required_m`` there keeps a ``conforms`` of the reflector from standing for the TCP: the
+    verdict is then ``undetermined`` and ``at_tcp`` says why (the TCP may lie anywhere within its U).
+
+    Args:
+        acc_after: the held-out figures after calibration (m); unc: their expanded uncertainties (m, k = 2);
+        required_m: the required accuracy (m) or None;
+        figure: which figure (``p95_m``, ``rms_m``, ``mean_m``, ``max_m``);
+        budget: the TCP's budget summary (``U_max_m``, ``tcp_m``), or None.
+
+    Returns:
+        :func:`~pin_kpi_oed.report.uncertainty.conformity`'s dict with ``figure``, ``figure_label`` and, when the
+        TCP's U exceeds the requirement, ``at_tcp`` (the line) and ``tcp_U_max_m`` (m); None without ``required_m``.
+    """
     from pin_kpi_oed.report.uncertainty import conformity
 
     if required_m is None:
@@ -154,6 +171,16 @@ def conformity_section(acc_after: dict, unc: dict, required_m: float | None, fig
     out = conformity(acc_after[figure], unc[figure], required_m)
     out["figure"] = figure
     out["figure_label"] = FIGURES[figure]
+    U_tcp = None if budget is None else budget.get("U_max_m")
+    if U_tcp is not None and U_tcp > required_m:
+        tcp = ", ".join(f"{v * 1e3:.3g}" for v in budget.get("tcp_m") or [])
+        out["tcp_U_max_m"] = float(U_tcp)
+        out["at_tcp"] = (f"at the TCP (({tcp}) mm in the tool frame) not shown: its U (k = 2) at the working "
+                         f"configurations is up to {U_tcp * 1e3:.3f} mm, above the required {required_m * 1e3:.3f} "
+                         "mm (section 'Sigma at the TCP' names what no reflector measurement determines and what "
+                         "removes it)")
+        if out["verdict"] == "conforms":
+            out["verdict"] = "undetermined"
     return out
 
 

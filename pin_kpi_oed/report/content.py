@@ -346,7 +346,7 @@ def _certify(data: dict, cm: Any, ho: Any, lab: dict | None, sets: dict, o: Cert
                               mc_draws=o.mc_draws, cell=o.cell)
     unc["figures"] = figure_uncertainty(ho.after["errors_m"], u_instr or 0.0)
     unc["conformity"] = conformity_section(data["accuracy"]["after"], unc["figures"], o.required_accuracy_m,
-                                           o.accuracy_figure)
+                                           o.accuracy_figure, unc["budget"])
     data["uncertainty"] = unc
     data["summary"] = summary(data)
 

@@ -137,7 +137,8 @@ def uncertainty_html(d: dict) -> str:
     c = u.get("conformity")
     if c:
         out += (f'<p class="verdict">Conformity: {_e(c["verdict"])} — {_e(c["figure_label"])} {_mm(c["figure_m"])} ± '
-                f'{_mm(c["U_m"])} against {_mm(c["required_m"])}.</p><p class="note">{_e(c["rule"])}.</p>')
+                f'{_mm(c["U_m"])} against {_mm(c["required_m"])}'
+                + (f'; {_e(c["at_tcp"])}' if c.get("at_tcp") else "") + f'.</p><p class="note">{_e(c["rule"])}.</p>')
     else:
         out += "<p>No required accuracy was stated: no conformity statement.</p>"
     return out

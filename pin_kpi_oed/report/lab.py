@@ -161,5 +161,6 @@ def status(lab: dict | None) -> dict:
     """``certificate`` with a lab file, else ``draft`` with the reason (the page says which in its title)."""
     if lab is None:
         return {"kind": "draft", "reason": "no lab file (organisation, operator, instrument and its calibration, "
-                                           "robot serial, customer): give lab='LAB.yaml'"}
+                                           "robot serial, customer): give one, report --lab LAB.yaml "
+                                           "(CertificateOptions(lab_path=...) in Python)"}
     return {"kind": "certificate", "reason": f"identity and traceability from {lab['file']}"}

@@ -27,7 +27,8 @@ def summary(data: dict) -> dict:
             ("held-out rows within their U", ho["within_U"], None)]
     if con is not None:
         verdict = {"text": f"{con['verdict']}: {con['figure_label']} {con['figure_m'] * 1e3:.3f} mm ± "
-                           f"{con['U_m'] * 1e3:.3f} mm (k = 2) against the required {con['required_m'] * 1e3:.3f} mm",
+                           f"{con['U_m'] * 1e3:.3f} mm (k = 2) against the required {con['required_m'] * 1e3:.3f} mm"
+                           + (f"; {con['at_tcp']}" if con.get("at_tcp") else ""),
                    "kind": con["verdict"]}
     else:
         verdict = {"text": "no required accuracy stated: no conformity statement "

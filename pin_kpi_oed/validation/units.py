@@ -150,20 +150,28 @@ def check_position_spread_m(points: np.ndarray, reach_m: float, what: str,
 EFFECT_SIZE_MAX = {"rad": 0.05, "rad/(N*m)": 1e-4, "1": 0.05, "1/K": 1e-3, "m/s": 1e-3}
 
 
-def check_effect_sizes(effects: Iterable, what: str = "parameter 'effects'") -> None:
+def check_effect_sizes(effects: Iterable, what: str = "parameter 'effects'",
+                       given: dict[str, str] | None = None) -> None:
     """Refuse simulated effect parameters beyond :data:`EFFECT_SIZE_MAX` of their unit.
 
     Args:
         effects: (effect, theta) pairs; an effect has ``name`` and ``unit``.
         what: the parameter (or option) the message names.
+        given: the values as the user wrote them, by effect name (``{"joint_compliance": "3"}``): checked instead
+            of the parameters drawn from them (a size draws parameters of 0.5 to 1 times it), and named.
 
     Raises:
         InputError: naming the effect, the value, its unit and the bound.
     """
     for eff, theta in effects:
         big = EFFECT_SIZE_MAX.get(getattr(eff, "unit", ""))
-        a = np.abs(np.asarray(theta, float))
+        text = (given or {}).get(eff.name)
+        try:
+            a = np.abs(np.array([float(v) for v in text.split(":")])) if text else np.abs(np.asarray(theta, float))
+        except ValueError:
+            a = np.abs(np.asarray(theta, float))
         if big is not None and a.size and float(a.max()) > big:
-            raise InputError(f"{what}: {eff.name} of size {float(a.max()):g} {eff.unit} is more than {big:g} "
+            value = f"{eff.name}={text}" if text else f"{eff.name} of size {float(a.max()):g}"
+            raise InputError(f"{what}: {value} {eff.unit} is more than {big:g} "
                              f"{eff.unit}: give it in SI units ({eff.unit}), e.g. gear_harmonic=5e-5 (rad), "
                              "joint_compliance=2e-6 (rad/(N*m))")

@@ -67,7 +67,7 @@ def capsule_geometry(model: pin.Model, capsules: Sequence[CapsuleSpec], prefix: 
 
     gm = pin.GeometryModel()
     for i, c in enumerate(capsules):
-        fid = model.getFrameId(c.link)
+        fid = model.getFrameId(c.link, pin.FrameType.BODY)  # a fixed joint may share the link's name
         fr = model.frames[fid]
         d = c.b - c.a
         L = float(np.linalg.norm(d))

@@ -88,6 +88,14 @@ def _cases() -> list[Case]:
         Case("cell-degrees-under-rad", "design --cell {d}/cell_deg_as_rad.yaml", "joint_bounds.lower_rad"),
         Case("cell-sigma-1m", "design --cell {d}/cell_sigma1.yaml", "noise.sigma_xyz_m"),
         Case("cell-nested-typo", "design --cell {d}/cell_typo.yaml", "sigma_xyz"),
+        Case("simulate-effect-size-named-as-written", "simulate --robot kr15 --out {d}/new.csv --effects "
+             "joint_compliance=1.5e-4", "joint_compliance=1.5e-4 rad/(N*m) is more than 0.0001"),
+        Case("simulate-n-ignored-with-design", "simulate --design {d}/d.json --n 50 --out {d}/new.csv",
+             "--n 50: not with --design"),
+        Case("report-required-accuracy-in-mm", "report --model {d}/m.json --train {d}/tr.csv --validate {d}/te.csv "
+             "--required-accuracy 0.05 --json {d}/cert.json", "0.05 mm is 5e-05"),
+        Case("cell-incidence-in-rad", "design --cell {d}/cell_incidence_rad.yaml", "0.5 rad = 28.6 deg"),
+        Case("cell-top-level-typo", "design --cell {d}/cell_top_typo.yaml", "did you mean 'reflector_m'"),
         Case("cell-reflector-mm", "design --cell {d}/cell_refl_mm.yaml", "reflector_m"),
         Case("cell-text-for-number", "design --cell {d}/cell_sixty.yaml", "measurements"),
         Case("cell-ragged-working", "design --cell {d}/cell_ragged.yaml", "working_configurations"),
@@ -390,6 +398,9 @@ def build_inputs(d: Path) -> None:
                                                   "upper_rad": cell["joint_bounds"]["upper_deg"]})
     variant("cell_sigma1.yaml", noise={"sigma_xyz_m": [1, 1, 1]})
     variant("cell_typo.yaml", noise={"sigma_xyz": [1e-6, 1e-6, 1e-6]})
+    variant("cell_incidence_rad.yaml", incidence_max_deg=0.5)  # radians under a _deg key
+    typo = {("reflector" if k == "reflector_m" else k): v for k, v in cell.items()}  # the unit suffix forgotten
+    (d / "cell_top_typo.yaml").write_text(yaml.safe_dump(typo))
     variant("cell_refl_mm.yaml", reflector_m=[60.0, 0.0, 120.0])
     variant("cell_sixty.yaml", measurements="sixty")
     variant("cell_tracker_mm.yaml", tracker={"xyz_m": [-200.0, -2300.0, 1400.0], "rpy_deg": [0.0, 0.0, 90.0]})
