@@ -166,3 +166,23 @@ def test_the_check_holds_on_new_images_of_a_robot_with_joint_errors_its_calibrat
     assert verdicts == ["holds"] * 6
     assert 0.8 < np.mean(t_with) < 1.2
     assert np.mean(t_without) > np.mean(t_with) + 0.05
+
+
+def test_predict_says_what_the_sigma_holds(cameras):
+    from pin_kpi_oed.calibrated.prediction_sigma import sigma_contents
+
+    out, _ = cameras
+    assert "joint-angle errors the camera's images showed" in sigma_contents(out["harmonic"].calibrated_model())
+    assert "joint-angle" not in sigma_contents(out["plain"].calibrated_model())
+
+
+def test_the_term_survives_the_model_file(cameras, tmp_path):
+    from pin_kpi_oed.calibrated.model_file import load_model_file
+
+    out, cell = cameras
+    cm = out["harmonic"].calibrated_model()
+    cm.save(tmp_path / "m.json")
+    back = load_model_file(tmp_path / "m.json")
+    assert back.fit["joint_angle_sigma_rad"] == pytest.approx(cm.fit["joint_angle_sigma_rad"])
+    assert tcp_sigma(back, cell.q_work).covariance_m2 == pytest.approx(tcp_sigma(cm, cell.q_work).covariance_m2,
+                                                                       rel=1e-9, abs=1e-15)

@@ -126,13 +126,15 @@ class RemlBlocks:
         return -0.5 * (logdetV + 2.0 * np.log(np.diag(Lf)).sum() + rVr - z @ z)
 
 
-def reml_levels(F: np.ndarray, B: np.ndarray, r: np.ndarray, img: np.ndarray, m: int) -> JointLevels:
+def reml_levels(F: np.ndarray, B: np.ndarray, r: np.ndarray, img: np.ndarray, m: int,
+                start: JointLevels | None = None) -> JointLevels:
     """σ² ≥ 1 and s ∈ [0, MAX_SIGMA_RAD] by restricted maximum likelihood (module docstring).
 
     Args:
         F: the σ-weighted parameter Jacobian of the pixel rows, (n, b) per parameter unit.
         B: the σ-weighted joint Jacobian of the same rows, (n, d) per rad (m for a prismatic joint).
         r: the σ-weighted residuals, (n,); img: each row's image index in 0..m-1, (n,); m: the images.
+        start: levels to start the search from (the whole data's, for a fold of them), or None.
 
     Returns:
         The :class:`JointLevels`.
@@ -148,7 +150,9 @@ def reml_levels(F: np.ndarray, B: np.ndarray, r: np.ndarray, img: np.ndarray, m:
     white = max(1.0, _white_var(bl) * bl.n / dof)  # the REML σ² at s = 0 (closed form), floored at 1
     ll_white = bl.loglik(white, np.zeros(d))
     bounds = [(0.0, 10.0)] + [(0.0, MAX_SIGMA_RAD / s) for s in scale]
-    res = minimize(nll, np.r_[np.log(white), np.full(d, 0.3)], method="L-BFGS-B", bounds=bounds)
+    x0 = (np.r_[np.log(white), np.full(d, 0.3)] if start is None or not np.any(start.sigma_rad > 0) else
+          np.r_[np.log(max(start.noise_var, 1.0)), np.maximum(start.sigma_rad / scale, 0.05)])
+    res = minimize(nll, x0, method="L-BFGS-B", bounds=bounds)
     if res.fun >= -ll_white:
         return JointLevels(white, np.zeros(d), ll_white, ll_white)
     return JointLevels(float(np.exp(res.x[0])), res.x[1:] * scale, float(-res.fun), ll_white)
@@ -198,7 +202,7 @@ def joint_noise(F: np.ndarray, B: np.ndarray, r: np.ndarray, img: np.ndarray, m:
     lv = reml_levels(F, B, r, img, m)
     lr = max(2.0 * (lv.loglik - lv.loglik_white), 0.0)
     crit = float(chi2.ppf(1.0 - LR_LEVEL, d))
-    gains = _heldout_gains(F, B, r, img, m, prior_info, min(n_folds, m), seed)
+    gains = _heldout_gains(F, B, r, img, m, prior_info, min(n_folds, m), seed, lv)
     gain = float(sum(gains))
     used = lr > crit and gain > 0.0 and bool(np.any(lv.sigma_rad > 0))
     if used:
@@ -216,7 +220,7 @@ def _fmt(s: np.ndarray) -> str:
 
 
 def _heldout_gains(F: np.ndarray, B: np.ndarray, r: np.ndarray, img: np.ndarray, m: int, P: np.ndarray,
-                   k: int, seed: int) -> list[float]:
+                   k: int, seed: int, start: JointLevels | None = None) -> list[float]:
     """Per fold: the held-out images' log density under the joint structure (levels re-estimated without the fold)
     minus under the white level (the χ² of the fit without the fold), the fold predicted by the fit without it
     linearised at the solution."""
@@ -237,7 +241,7 @@ def _heldout_gains(F: np.ndarray, B: np.ndarray, r: np.ndarray, img: np.ndarray,
         beta = np.linalg.solve(Mo, Fo.T @ ro)
         w = max(1.0, float(np.sum((ro - Fo @ beta) ** 2)) / dof)
         Ci_white = w * np.linalg.inv(Mo)
-        lv = reml_levels(Fo, B[~ho], ro, io, keep.size)
+        lv = reml_levels(Fo, B[~ho], ro, io, keep.size, start)
         ik = np.searchsorted(np.flatnonzero(fold == f), img[ho])
         Co = _sandwich(Fo, B[~ho], io, keep.size, lv.noise_var, lv.sigma_rad, P)
         g = 0.0
