@@ -65,7 +65,8 @@ class JointNoise:
         covariance: the parameters' covariance under the kept structure (the sandwich), or the white level's
             M⁻¹ max(1, χ²_red) when not used, (b, b).
         lr: 2 Δℓ of the REML against s = 0; lr_critical: its 95 % point.
-        heldout_gain: Σ over held-out images of the log density under the joint structure minus the white one's.
+        heldout_gain: Σ over held-out images of the log density under the joint structure minus the white one's
+            (NaN when the likelihood ratio alone says no: the check is then not run).
         reason: one line saying why it is (not) used.
     """
 
@@ -83,7 +84,8 @@ class JointNoise:
         """The model file's ``fit.joint_noise`` block (rad, σ_px² units)."""
         return {"used": bool(self.used), "sigma_rad": [float(v) for v in self.sigma_rad],
                 "noise_var_px2_units": float(self.noise_var), "lr": float(self.lr),
-                "lr_critical": float(self.lr_critical), "heldout_gain": float(self.heldout_gain),
+                "lr_critical": float(self.lr_critical),
+                "heldout_gain": float(self.heldout_gain) if np.isfinite(self.heldout_gain) else None,
                 "reason": self.reason}
 
 
@@ -202,16 +204,18 @@ def joint_noise(F: np.ndarray, B: np.ndarray, r: np.ndarray, img: np.ndarray, m:
     lv = reml_levels(F, B, r, img, m)
     lr = max(2.0 * (lv.loglik - lv.loglik_white), 0.0)
     crit = float(chi2.ppf(1.0 - LR_LEVEL, d))
-    gains = _heldout_gains(F, B, r, img, m, prior_info, min(n_folds, m), seed, lv)
-    gain = float(sum(gains))
+    # the held-out check only when the likelihood ratio asks for the term (both must)
+    gains = _heldout_gains(F, B, r, img, m, prior_info, min(n_folds, m), seed, lv) if lr > crit else []
+    gain = float(sum(gains)) if gains else float("nan")
     used = lr > crit and gain > 0.0 and bool(np.any(lv.sigma_rad > 0))
     if used:
         C = _sandwich(F, B, img, m, lv.noise_var, lv.sigma_rad, prior_info)
         why = (f"joint-angle errors of {_fmt(lv.sigma_rad)} urad per joint: likelihood ratio {lr:.1f} > {crit:.1f}, "
                f"held-out images' log density +{gain:.1f} over the white level")
         return JointNoise(True, lv.sigma_rad, lv.noise_var, C, lr, crit, gain, why, gains)
-    why = (f"no joint-angle term: likelihood ratio {lr:.1f} ({'>' if lr > crit else '<='} {crit:.1f}), held-out "
-           f"images' log density {gain:+.1f} against the white level")
+    why = (f"no joint-angle term: likelihood ratio {lr:.1f} <= {crit:.1f}" if not gains else
+           f"no joint-angle term: likelihood ratio {lr:.1f} > {crit:.1f} but held-out images' log density {gain:+.1f} "
+           "against the white level")
     return JointNoise(False, np.zeros(d), white, C_white, lr, crit, gain, why, gains)
 
 
