@@ -268,8 +268,12 @@ def _coverage(cm: Any) -> Any:
 def sigma_contents(cm: Any) -> str:
     """What a model's σ holds, in a few words: the parameters' covariance and noise always; a Gaussian-process
     discrepancy only when the model holds one (a white level is not one). Printed by ``predict``; the trust map's
-    title (:func:`pin_kpi_oed.viz.trust_map.sigma_contents`)."""
+    title (:func:`pin_kpi_oed.viz.trust_map.sigma_contents`). A camera calibration whose images showed joint-angle
+    errors (``fit.joint_angle_sigma_rad``) says so: the TCP's σ carries them
+    (:mod:`pin_kpi_oed.calibrated.tcp_sigma`)."""
     d = cm.discrepancy
+    if d is None and isinstance(cm.fit, dict) and cm.fit.get("joint_angle_sigma_rad") is not None:
+        return "parameters + the joint-angle errors the camera's images showed (in the TCP's sigma); no discrepancy"
     if d is None:
         return "parameters + noise; no discrepancy (noise-only model)"
     if d.kind == "white" and d.joint_term is not None:

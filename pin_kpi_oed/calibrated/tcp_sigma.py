@@ -15,6 +15,10 @@ covariance of the TCP's error (true − predicted, in the station's tracker fram
   fitted reflector in the tracker frame; in the base frame joint 1's placement, held for the tracker pose, counts.
   A model file written before the absorption was stored gets the structural one
   (:func:`~pin_kpi_oed.oed.covariance.held_absorption` on seeded configurations: the same for an exact dependency).
+* a camera calibration whose images showed joint-angle errors the geometry lacks (the model file's
+  ``fit.joint_angle_sigma_rad``, s per joint, written by ``identify`` when a K-fold check on the images kept it:
+  :mod:`~pin_kpi_oed.identification.camera_joint_noise`) adds J_q(q) diag(s²) J_q(q)ᵀ, J_q the TCP's joint
+  Jacobian (:func:`joint_angle_covariance`); its parameters' covariance is then already the one under that error.
 
 :func:`tcp_sigma` computes it; ``identify`` (its printed "predicted TCP std"), ``predict --at tcp``
 (``CalibratedModel.predict_tcp``), ``compensate``, ``check``, ``monitor`` and ``report`` all call it, so the same
@@ -29,13 +33,14 @@ from typing import Any
 import numpy as np
 
 from pin_kpi_oed.calibrated.prediction_sigma import SigmaPoint, point_covariance
+from pin_kpi_oed.errors import InputError
 from pin_kpi_oed.model.parameters import STATION_SEP
 from pin_kpi_oed.model.tolerances import Tolerances, held_columns
 from pin_kpi_oed.model.tracker import TrackerModel
 from pin_kpi_oed.oed.covariance import held_absorption
 from pin_kpi_oed.oed.held import HeldTerm, held_advice
 
-__all__ = ["TcpSigma", "tcp_sigma", "held_map"]
+__all__ = ["TcpSigma", "tcp_sigma", "held_map", "joint_angle_covariance"]
 
 
 @dataclass
@@ -119,11 +124,42 @@ def tcp_sigma(cm: Any, Q: np.ndarray, tcp_m: np.ndarray | None = None, *, statio
     follows = np.allclose(tcp, cm.setups[label].reflector_m, rtol=0.0, atol=1e-12)
     point = SigmaPoint((float(tcp[0]), float(tcp[1]), float(tcp[2])), frame, follows)
     Y, C, extra = point_covariance(cm, Q, aux, label, np.array([label] * len(Q), dtype=object), point)
+    Cj = joint_angle_covariance(cm, label, tcp, Q, frame)
+    if Cj is not None:
+        C = C + Cj
     G, term = held_map(cm, label, tcp, Q, seed, n_fit, tolerances, frame)
     if term is None:
         return TcpSigma(tcp, frame, label, Y, C, np.zeros_like(C), extra)
     Ch = term.covariance(G)
     return TcpSigma(tcp, frame, label, Y, C + Ch, Ch, extra, list(term.names), term.contributions(G))
+
+
+def joint_angle_covariance(cm: Any, station: str | None, tcp_m: np.ndarray, Q: np.ndarray,
+                           frame: str = "cell") -> np.ndarray | None:
+    """J_q diag(s²) J_qᵀ (m, 3, 3) m² of the point ``tcp_m`` (tool frame, m) at configurations Q (rad): the joint-angle
+    errors s (rad per joint) a camera calibration's images showed (``fit.joint_angle_sigma_rad``), in the station's
+    frame (``cell``) or the base frame (``base``); None when the model has none.
+
+    Raises:
+        InputError: ``fit.joint_angle_sigma_rad`` is not one finite number >= 0 per joint.
+    """
+    s = (cm.fit or {}).get("joint_angle_sigma_rad") if isinstance(cm.fit, dict) else None
+    if s is None:
+        return None
+    try:
+        s = np.asarray(s, float).reshape(-1)
+    except (TypeError, ValueError):
+        s = np.array([np.nan])
+    if s.size != cm.robot.nq or not np.all(np.isfinite(s)) or np.any(s < 0):
+        raise InputError(f"model file: field fit.joint_angle_sigma_rad must be {cm.robot.nq} finite numbers >= 0 "
+                         f"(rad, one per joint), got {(cm.fit or {}).get('joint_angle_sigma_rad')!r}")
+    model_r, p = cm.station_model(station)
+    model_c = TrackerModel(cm.robot, tracker_T_base=model_r.tracker_T_base, reflector_m=np.asarray(tcp_m, float),
+                           noise=cm.noise, layout=model_r.layout)
+    J = model_c.prediction_dq(p, np.atleast_2d(np.asarray(Q, float)))  # the station's frame
+    if frame == "base":
+        J = np.einsum("ba,mbn->man", model_r.tracker_pose(p).rotation, J)
+    return np.einsum("maj,j,mbj->mab", J, s ** 2, J)
 
 
 def held_map(cm: Any, station: str | None, tcp_m: np.ndarray, Q: np.ndarray, seed: int = 0, n_fit: int = 60,

@@ -121,13 +121,20 @@ NO_DISCREPANCY = ("the discrepancy is a Gaussian process on a tracker's TCP posi
                   "board corners' pixels, whose residuals are not the TCP's")
 
 
-def _discrepancy_line(args: argparse.Namespace, chi2_reduced: float) -> str:
+def _discrepancy_line(args: argparse.Namespace, chi2_reduced: float, joint_used: bool = False) -> str:
     """The printed decision of ``--discrepancy auto`` / ``none`` for a camera: no Gaussian process; every TCP σ
     (:func:`~pin_kpi_oed.calibrated.tcp_sigma.tcp_sigma`) scales the parameters' covariance by the fit's reduced χ²
-    when above 1 (the residual level, never below the stated pixel noise)."""
-    level = (f"the parameters' covariance scaled by the fit's reduced chi2 {chi2_reduced:.2f} in every TCP sigma "
-             "(the residual level)" if chi2_reduced > 1 else
-             f"the fit's reduced chi2 {chi2_reduced:.2f} <= 1: the stated pixel noise kept")
+    when above 1 (the residual level, never below the stated pixel noise), or, when the images showed joint-angle
+    errors (``joint_used``: :mod:`~pin_kpi_oed.identification.camera_joint_noise`), carries them and the
+    parameters' covariance under them."""
+    if joint_used:
+        level = ("every TCP sigma carries the images' joint-angle errors J_q diag(s^2) J_q^T and the parameters' "
+                 "covariance under them")
+    elif chi2_reduced > 1:
+        level = (f"the parameters' covariance scaled by the fit's reduced chi2 {chi2_reduced:.2f} in every TCP sigma "
+                 "(the residual level)")
+    else:
+        level = f"the fit's reduced chi2 {chi2_reduced:.2f} <= 1: the stated pixel noise kept"
     return f"discrepancy ({getattr(args, 'discrepancy', 'auto')}): none for a camera ({NO_DISCREPANCY}); {level}"
 
 
@@ -185,7 +192,7 @@ def identify_camera_cli(args: argparse.Namespace) -> int:
                           device=cell.camera.to_dict())
     cm = res.calibrated_model(cell.q_work if len(cell.q_work) else None, f"cell {cell.source or cell.name}")
     _stamp(cm, args, len(read_corners(args.validate)) if args.validate else 0)
-    lines = [res.summary(), _discrepancy_line(args, res.fit.chi2_reduced)]
+    lines = [res.summary(), _discrepancy_line(args, res.fit.chi2_reduced, res.joint is not None and res.joint.used)]
     if len(cell.q_work):
         ts = tcp_sigma(cm, cell.q_work)
         lines.append(f"predicted TCP std at the {len(cell.q_work)} working configuration(s) (in the "

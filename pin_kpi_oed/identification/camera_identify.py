@@ -36,6 +36,7 @@ from pin_kpi_oed.calibrated.model_file import CalibratedModel, Setup
 from pin_kpi_oed.data.corner_measurements import CornerSet
 from pin_kpi_oed.errors import InputError
 from pin_kpi_oed.identification.camera_fit import CameraFit, fit_camera
+from pin_kpi_oed.identification.camera_joint_noise import N_FOLDS, JointNoise, camera_joint_noise
 from pin_kpi_oed.identification.identify_result import param_unit
 from pin_kpi_oed.model.camera import INTRINSIC_NAMES, CameraModel, Intrinsics
 from pin_kpi_oed.model.noise import NoiseModel
@@ -61,6 +62,8 @@ class CameraIdentification:
         Q: their joint values (m, n) rad; uv: their corners (m, 2N) px (NaN: not detected).
         held: the joint-placement parameters held at nominal with their absorption, or None.
         source: the measurement file; device: the camera's description (the cell's ``camera``/``board``).
+        joint: the joint-angle error level of the images and whether the σ carries it
+            (:mod:`~pin_kpi_oed.identification.camera_joint_noise`), or None (not estimated).
     """
 
     model: CameraModel
@@ -71,6 +74,7 @@ class CameraIdentification:
     held: HeldTerm | None
     source: str = ""
     device: dict = field(default_factory=dict)
+    joint: JointNoise | None = None
 
     def stored_names(self) -> list[str]:
         """The fit's parameter names in the calibrated model's vocabulary (the device frame as ``tracker``)."""
@@ -94,7 +98,9 @@ class CameraIdentification:
         setup = Setup(m.sensor_pose(p).homogeneous, mounted.translation.copy(), n_rows=self.fit.n_rows,
                       fitted_by="identify", source=self.source)
         names = self.stored_names()
-        std = np.sqrt(np.maximum(np.diag(self.fit.covariance), 0.0))
+        jn = self.joint if self.joint is not None and self.joint.used else None
+        cov = self.fit.covariance if jn is None else jn.covariance
+        std = np.sqrt(np.maximum(np.diag(cov), 0.0))
         device = {**self.device, "mode": m.mode, "fitted_camera_pose": m.pose_of("camera", p).homogeneous.tolist(),
                   "fitted_board_pose": m.pose_of("board", p).homogeneous.tolist(), "rms_px": self.fit.rms_px,
                   "sigma_px": m.sigma_px}
@@ -102,14 +108,18 @@ class CameraIdentification:
         if m.estimate_intrinsics:
             device.update(fitted_intrinsics=values, intrinsics_std=sig)
         fit = {"device": device, "n_measurements": self.fit.n_images, "n_rows": self.fit.n_rows,
-               "rms_px": self.fit.rms_px, "chi2_reduced": self.fit.chi2_reduced, "covariance_scaled": False,
-               "loss": "linear", "success": bool(self.fit.success), "status": self.fit.status,
-               "nfev": int(self.fit.nfev), "time_s": float(self.fit.time_s)}
+               "rms_px": self.fit.rms_px, "chi2_reduced": self.fit.chi2_reduced,
+               "covariance_scaled": jn is not None, "loss": "linear", "success": bool(self.fit.success),
+               "status": self.fit.status, "nfev": int(self.fit.nfev), "time_s": float(self.fit.time_s)}
+        if self.joint is not None:
+            fit["joint_noise"] = self.joint.to_dict()
+        if jn is not None:  # the σ at the TCP adds J_q diag(s²) J_qᵀ (calibrated.tcp_sigma)
+            fit["joint_angle_sigma_rad"] = [float(v) for v in jn.sigma_rad]
         return CalibratedModel(
             robot=m.robot, joint_p=np.asarray(p[:nj], float).copy(), setups={STATION: setup},
             noise=NoiseModel(sigma_xyz_m=(_NO_TCP_NOISE_M,) * 3), tcp_m=m.tcp_m.copy(),
             parameters={"names": names, "values": p[self.fit.base], "std": std, "units": [param_unit(n) for n in names],
-                        "covariance": self.fit.covariance,
+                        "covariance": cov,
                         **({"held": self.held.to_dict()} if self.held is not None else {})},
             fit=fit, default_station=STATION,
             history=[{"step": "identify", "device": "camera", "data": self.source, "n_images": self.fit.n_images,
@@ -127,7 +137,8 @@ class CameraIdentification:
         return (f"camera fit: {f.n_images} images, {f.n_rows // 2} corners, reprojection RMS {f.rms_px:.3f} px, "
                 f"reduced chi2 {f.chi2_reduced:.2f}, {len(f.base)} parameters identified"
                 + (f", {self.held.k} joint-placement parameters held at nominal (tolerance prior)"
-                   if self.held is not None else "") + intr)
+                   if self.held is not None else "") + intr
+                + (f"\n{self.joint.reason}" if self.joint is not None else ""))
 
 
 def _aligned(cs: CornerSet, model: CameraModel, source: str) -> tuple[list[str], np.ndarray, np.ndarray]:
@@ -143,7 +154,7 @@ def _aligned(cs: CornerSet, model: CameraModel, source: str) -> tuple[list[str],
 
 def identify_camera(model: CameraModel, cs: CornerSet, *, source: str = "camera measurements", seed: int = 0,
                     loss: str = "linear", device: dict | None = None,
-                    tolerances: Tolerances | None = None) -> CameraIdentification:
+                    tolerances: Tolerances | None = None, joint_noise: bool = True) -> CameraIdentification:
     """Identify the robot, the hand-eye transform and the board from a camera measurement set (module docstring).
 
     Args:
@@ -153,6 +164,8 @@ def identify_camera(model: CameraModel, cs: CornerSet, *, source: str = "camera 
         loss: ``linear`` or a robust loss of :func:`fit_camera`.
         device: the camera's description to store (the cell's ``camera`` and ``board`` fields).
         tolerances: the held joint-placement parameters' prior (default :class:`Tolerances`).
+        joint_noise: estimate the images' joint-angle error level and let the K-fold check on images decide
+            whether the σ carries it (:mod:`~pin_kpi_oed.identification.camera_joint_noise`; seeded by ``seed``).
 
     Returns:
         The :class:`CameraIdentification`.
@@ -178,7 +191,9 @@ def identify_camera(model: CameraModel, cs: CornerSet, *, source: str = "camera 
         A = held_absorption(F[:, fit.base], F[:, held_idx])
         stored = CameraIdentification(model, fit, labels, Q, uv, None).stored_names()
         held = HeldTerm([model.layout.names[i] for i in held_idx], sig, stored, A)
-    return CameraIdentification(model, fit, labels, Q, uv, held, source, dict(device or {}))
+    joint = (camera_joint_noise(model, fit.p, fit.base, Q, uv, fit.chi2_reduced, seed=seed)
+             if joint_noise and len(Q) >= 2 * N_FOLDS else None)
+    return CameraIdentification(model, fit, labels, Q, uv, held, source, dict(device or {}), joint)
 
 
 def camera_device(cm: Any) -> dict | None:

@@ -8,7 +8,11 @@ its covariance is S = I + F C_p Fᵀ + H Σ_N Hᵀ (F the σ-weighted Jacobian a
 parameter covariance, H = F_N − F_B A the held joint placements' effect left after the fit's absorption A, Σ_N their
 tolerances; intrinsics the model estimated are not in F: their part is left out). Two χ² tests, each at the Šidák
 level α₁ = 1 − (1 − α)^{1/2} so that the verdict's false-alarm rate is α, the statistics divided by the
-calibration's own reduced χ² (at least 1: a fit whose residuals exceed σ_px says so):
+calibration's own reduced χ² (at least 1: a fit whose residuals exceed σ_px says so). A calibration whose images
+showed joint-angle errors (the model file's ``fit.joint_angle_sigma_rad`` s and ``fit.joint_noise``'s pixel level
+ν, :mod:`~pin_kpi_oed.identification.camera_joint_noise`) adds their part B_i diag(s²) B_iᵀ / ν per image (B_i the
+image's σ-weighted joint Jacobian; its stored C_p is already the covariance under that error, so C_p / ν) and divides
+by ν instead:
 
 1. T₀ = rᵀ S⁻¹ r on every row (n dof): consistent → ``holds``;
 2. else the set-up re-fitted (hand-eye transform and board pose, 12 parameters, the robot held; the re-fit's
@@ -36,7 +40,7 @@ from pin_kpi_oed.identification.camera_fit import fit_camera
 from pin_kpi_oed.identification.camera_identify import camera_model_of
 from pin_kpi_oed.results import Result
 
-__all__ = ["CameraCheck", "check_camera", "prediction_covariance", "CAMERA_EXIT_CODES"]
+__all__ = ["CameraCheck", "check_camera", "prediction_covariance", "residual_level", "CAMERA_EXIT_CODES"]
 
 #: exit code per verdict (the tracker check's :data:`~pin_kpi_oed.upkeep.check.EXIT_CODES`)
 CAMERA_EXIT_CODES = {"holds": 0, "setup_moved": 1, "recalibrate": 3}
@@ -50,8 +54,9 @@ class CameraCheck(Result):
         verdict: ``holds``, ``setup_moved`` or ``recalibrate``.
         chi2_fixed, dof_fixed, p_fixed: the test with everything as calibrated.
         chi2_refit, dof_refit, p_refit: the test with the set-up re-fitted (NaN when not needed).
-        rms_px: RMS reprojection error as calibrated (px); scale: the calibration's reduced χ² the statistics are
-            divided by; alpha, alpha_each: the verdict's and each test's false-alarm rate.
+        rms_px: RMS reprojection error as calibrated (px); scale: the calibration's residual level the statistics
+            are divided by (:func:`residual_level`); alpha, alpha_each: the verdict's and each test's false-alarm
+            rate.
         setup_shift_m: the re-fitted hand-eye transform's and board's translation change (m), (2,) or NaN.
         n_images: images used.
     """
@@ -80,7 +85,7 @@ class CameraCheck(Result):
         out = [f"camera check on {self.n_images} images: RMS {self.rms_px:.3f} px as calibrated, chi2 "
                f"{self.chi2_fixed:.1f} on {self.dof_fixed} dof (p {self.p_fixed:.3g}; each test at "
                f"{self.alpha_each:.3g}, the verdict's false-alarm rate {self.alpha:g}; scaled by the calibration's "
-               f"reduced chi2 {self.scale:.2f})"]
+               f"residual level {self.scale:.2f})"]
         if np.isfinite(self.chi2_refit):
             out.append(f"set-up re-fitted: chi2 {self.chi2_refit:.1f} on {self.dof_refit} dof (p {self.p_refit:.3g}); "
                        f"the hand-eye transform moved {self.setup_shift_m[0] * 1e3:.3g} mm, the board "
@@ -119,14 +124,16 @@ def check_camera(cm: Any, cs: CornerSet, alpha: float = 0.05, source: str = "che
     n = int(rows.sum())
     if n <= 12:
         raise InputError(f"{source}: {n // 2} corners; a camera check needs at least 7")
-    scale = max(1.0, float((cm.fit or {}).get("chi2_reduced") or 1.0))
+    scale = residual_level(cm)
     a1 = 1.0 - (1.0 - alpha) ** 0.5
     r = (model.predict(p, Q) - uv)[rows]
     L = model.layout
     setup = np.r_[np.arange(L.group_slice("camera").start, L.group_slice("camera").stop),
                   np.arange(L.group_slice("board").start, L.group_slice("board").stop)]
     F = model.weighted_jacobian(p, Q).reshape(-1, model.n_params)[rows.ravel()]
-    chol = cho_factor(prediction_covariance(cm, model, F))
+    B = (model.prediction_dq(p, Q) / model.sigma_px)[rows]
+    img = np.broadcast_to(np.arange(len(Q))[:, None], rows.shape)[rows]
+    chol = cho_factor(prediction_covariance(cm, model, F, B, img))
     T0 = float(r @ cho_solve(chol, r)) / model.sigma_px ** 2
     p0 = float(chi2.sf(T0 / scale, n))
     T1, p1, shift = np.nan, np.nan, np.full(2, np.nan)
@@ -147,18 +154,37 @@ def check_camera(cm: Any, cs: CornerSet, alpha: float = 0.05, source: str = "che
                        status=verdict, message=verdict)
 
 
-def prediction_covariance(cm: Any, model: Any, F: np.ndarray) -> np.ndarray:
-    """S = I + F C_p Fᵀ + H Σ_N Hᵀ: the covariance of the σ-weighted residuals of images the calibration did not see
-    (module docstring).
+def residual_level(cm: Any) -> float:
+    """The calibration's own residual level in σ_px² units: the joint-angle structure's pixel level ν when its
+    images showed joint-angle errors (``fit.joint_noise``), else the reduced χ² (at least 1 each)."""
+    fit = cm.fit or {}
+    jn = fit.get("joint_noise") if fit.get("joint_angle_sigma_rad") is not None else None
+    level = (jn or {}).get("noise_var_px2_units") if isinstance(jn, dict) else None
+    if level is None:
+        level = fit.get("chi2_reduced")
+    try:
+        level = float(level or 1.0)
+    except (TypeError, ValueError):
+        raise InputError(f"model file: fit: the residual level must be a number, got {level!r}") from None
+    return max(1.0, level) if np.isfinite(level) else 1.0
+
+
+def prediction_covariance(cm: Any, model: Any, F: np.ndarray, B: np.ndarray | None = None,
+                          img: np.ndarray | None = None) -> np.ndarray:
+    """S = I + F C_p Fᵀ + H Σ_N Hᵀ (+ the joint-angle errors' B_i diag(s²) B_iᵀ / ν per image): the covariance of the
+    σ-weighted residuals of images the calibration did not see (module docstring).
 
     Args:
-        cm: the calibrated camera model (its ``parameters``: names, covariance, held block).
+        cm: the calibrated camera model (its ``parameters``: names, covariance, held block; its ``fit``'s
+            joint-angle level, if any).
         model: the camera model of :func:`camera_model_of` (its layout names the columns of F).
         F: the σ-weighted Jacobian of the check's detected rows, (n, model.n_params), dimensionless per parameter
             unit (m or rad).
+        B: the same rows' σ-weighted joint Jacobian, (n, n_joints) per rad, and img: each row's image (n,); without
+            them no joint-angle part is added.
 
     Returns:
-        S, (n, n), in units of σ_px².
+        S, (n, n), in units of σ_px² times the calibration's residual level (:func:`residual_level`).
     """
     par = cm.parameters or {}
     frame = model.frame_group
@@ -173,8 +199,8 @@ def prediction_covariance(cm: Any, model: Any, F: np.ndarray) -> np.ndarray:
     S = np.eye(F.shape[0])
     C = np.asarray(par.get("covariance") if par.get("covariance") is not None else np.zeros((0, 0)), float)
     fit = cm.fit or {}
-    if fit.get("covariance_scaled"):  # back to the stated noise: the statistics are divided by the χ² themselves
-        C = C / max(1.0, float(fit.get("chi2_reduced") or 1.0))
+    if fit.get("covariance_scaled"):  # back to the stated noise: the statistics are divided by the level themselves
+        C = C / residual_level(cm)
     if names and C.shape == (len(names), len(names)):
         keep = cols >= 0
         FB = F[:, cols[keep]]
@@ -186,4 +212,8 @@ def prediction_covariance(cm: Any, model: Any, F: np.ndarray) -> np.ndarray:
         keep = cols >= 0
         H = F[:, [layout.index(x) for x in h_names]] - F[:, cols[keep]] @ A[keep]
         S += (H * np.asarray(held.get("sigma"), float) ** 2) @ H.T
+    sj = fit.get("joint_angle_sigma_rad")
+    if sj is not None and B is not None and img is not None:
+        Bs = B * (np.asarray(sj, float) / np.sqrt(residual_level(cm)))[None, :]
+        S += np.where(np.asarray(img)[:, None] == np.asarray(img)[None, :], Bs @ Bs.T, 0.0)
     return S
