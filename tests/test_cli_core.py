@@ -2,37 +2,15 @@
 
 from __future__ import annotations
 
-import contextlib
-import io
 import json
 import subprocess
-import traceback
-import warnings
 
 import numpy as np
 import pytest
 
-from pin_kpi_oed.cli.app import main
 from pin_kpi_oed.model.robot import load_robot
 
-
-def run(*args: str) -> subprocess.CompletedProcess:
-    """``pin-kpi-oed ARGS`` in this process (these tests are about the command's output and exit code, not its
-    process; tests/test_cli_startup.py runs the real one): stdout, stderr and the exit code as a process would give
-    them, an escaped exception as its traceback on stderr and exit code 1, each warning printed on stderr."""
-    out, err = io.StringIO(), io.StringIO()
-    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err), warnings.catch_warnings():
-        warnings.simplefilter("default")
-        warnings.showwarning = lambda message, category, filename, lineno, file=None, line=None: err.write(
-            warnings.formatwarning(message, category, filename, lineno, line))
-        try:
-            code = main(list(args))
-        except SystemExit as stop:
-            code = stop.code if isinstance(stop.code, int) else (0 if stop.code is None else 1)
-        except Exception:  # noqa: BLE001 - a traceback is what the tests must never see
-            err.write(traceback.format_exc())
-            code = 1
-    return subprocess.CompletedProcess(["pin-kpi-oed", *args], code, out.getvalue(), err.getvalue())
+from .conftest import run_cli as run
 
 
 def assert_clean_error(res: subprocess.CompletedProcess, *needles: str) -> None:
