@@ -1,12 +1,7 @@
-"""Shared fixtures: robots, a tracker set-up, the path to ../shared, the command line run in the test's process."""
+"""Shared fixtures: robots, a tracker set-up, the path to ../shared."""
 
 from __future__ import annotations
 
-import contextlib
-import io
-import subprocess
-import traceback
-import warnings
 from pathlib import Path
 
 import numpy as np
@@ -19,29 +14,6 @@ from pin_kpi_oed.model.robot import load_robot
 
 SHARED = Path(__file__).resolve().parents[2] / "shared"
 REPO = Path(__file__).resolve().parents[1]
-
-
-# ---------------------------------------------------------------------- the command line in this process
-def run_cli(*args: str) -> subprocess.CompletedProcess:
-    """``pin-kpi-oed ARGS`` in this process, for the tests about a command's output and exit code rather than its
-    process (tests/test_cli_startup.py runs the real one; a fresh interpreter costs about 1.5 s CPU a call): stdout,
-    stderr and the exit code as the process gives them, an escaped exception as its traceback on stderr and exit
-    code 1, each warning printed on stderr."""
-    from pin_kpi_oed.cli.app import main
-
-    out, err = io.StringIO(), io.StringIO()
-    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err), warnings.catch_warnings():
-        warnings.simplefilter("default")
-        warnings.showwarning = lambda message, category, filename, lineno, file=None, line=None: err.write(
-            warnings.formatwarning(message, category, filename, lineno, line))
-        try:
-            code = main([str(a) for a in args])
-        except SystemExit as stop:
-            code = stop.code if isinstance(stop.code, int) else (0 if stop.code is None else 1)
-        except Exception:  # noqa: BLE001 - a traceback is what the tests must never see
-            err.write(traceback.format_exc())
-            code = 1
-    return subprocess.CompletedProcess(["pin-kpi-oed", *args], code, out.getvalue(), err.getvalue())
 
 
 def make_model(name: str = "kr15", reflector=(0.05, 0.03, 0.08), noise: NoiseModel | None = None,

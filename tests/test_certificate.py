@@ -11,7 +11,7 @@ from pin_kpi_oed.cell.cell import load_cell
 from pin_kpi_oed.design.optimality import certify
 from pin_kpi_oed.design.optimize import DesignProblem
 
-from .conftest import run_cli
+from .cli_run import run_cli_as_process
 
 
 @pytest.fixture(scope="module")
@@ -37,8 +37,9 @@ def test_certificate_bounds_pool_designs_and_pool_is_feasible(problem):
 
 def test_design_cli_certificate_fields(tmp_path):
     out = tmp_path / "d.json"
-    res = run_cli("design", "--cell", "kr15", "--measurements", "15", "--criteria", "random,kpi", "--starts", "1",
-                  "--max-iter", "40", "--certificate", "--pool-size", "300", "--json", str(out))
+    res = run_cli_as_process("design", "--cell", "kr15", "--measurements", "15", "--criteria", "random,kpi",
+                             "--starts", "1", "--max-iter", "40", "--certificate", "--pool-size", "300", "--json",
+                             str(out))
     assert res.returncode == 0, res.stderr
     assert "effic. %" in res.stdout
     d = json.loads(out.read_text())

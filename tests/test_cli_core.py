@@ -10,7 +10,7 @@ import pytest
 
 from pin_kpi_oed.model.robot import load_robot
 
-from .conftest import run_cli as run
+from .cli_run import run_cli_as_process as run
 
 
 def assert_clean_error(res: subprocess.CompletedProcess, *needles: str) -> None:
