@@ -4,6 +4,9 @@ from __future__ import annotations
 
 import contextlib
 import io
+import subprocess
+import traceback
+import warnings
 
 
 def run_cli(*argv) -> tuple[int, str, str]:
@@ -17,6 +20,28 @@ def run_cli(*argv) -> tuple[int, str, str]:
         except SystemExit as exc:
             rc = int(exc.code)
     return rc, out.getvalue(), err.getvalue()
+
+
+def run_cli_as_process(*argv) -> subprocess.CompletedProcess:
+    """``pin-kpi-oed argv...`` in this process as a process would end, for the tests of a command's output and exit
+    code rather than of its process (tests/test_cli_startup.py runs the real one; a fresh interpreter costs about
+    1.5 s CPU a call): stdout, stderr and the exit code; an escaped exception is its traceback on stderr and exit
+    code 1, and each warning is printed on stderr (not collected by pytest), as the interpreter would do."""
+    from pin_kpi_oed.cli.app import main
+
+    out, err = io.StringIO(), io.StringIO()
+    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err), warnings.catch_warnings():
+        warnings.simplefilter("default")
+        warnings.showwarning = lambda message, category, filename, lineno, file=None, line=None: err.write(
+            warnings.formatwarning(message, category, filename, lineno, line))
+        try:
+            code = main([str(a) for a in argv])
+        except SystemExit as stop:
+            code = stop.code if isinstance(stop.code, int) else (0 if stop.code is None else 1)
+        except Exception:  # noqa: BLE001 - a traceback is what the tests must never see
+            err.write(traceback.format_exc())
+            code = 1
+    return subprocess.CompletedProcess(["pin-kpi-oed", *map(str, argv)], code, out.getvalue(), err.getvalue())
 
 
 def without_times(doc):

@@ -5,6 +5,7 @@ modules, the check's modules asking the calibrated model through its view of the
 from __future__ import annotations
 
 import ast
+import functools
 from pathlib import Path
 
 #: Upstream to downstream, as drawn in docs/ARCHITECTURE.md.
@@ -12,6 +13,12 @@ ORDER = ["errors", "progress", "threads", "validation", "data", "results", "mode
          "cell", "simulation", "design", "program", "calibrated", "identification", "compensation", "upkeep",
          "diagnosis", "studies", "viz", "report", "cli"]
 PKG = Path(__file__).resolve().parents[1] / "pin_kpi_oed"
+
+
+@functools.cache
+def _tree(f: Path) -> ast.Module:
+    """The parsed source of ``f``, parsed once for all the tests here (they only read the trees)."""
+    return ast.parse(f.read_text())
 
 
 def _runtime_imports(tree: ast.AST):
@@ -40,7 +47,7 @@ def test_nothing_upstream_imports_downstream() -> None:
         top = f.relative_to(PKG).with_suffix("").parts[0]
         if top not in rank:
             continue
-        for line, mod in _runtime_imports(ast.parse(f.read_text())):
+        for line, mod in _runtime_imports(_tree(f)):
             other = mod.split(".")[1]
             if other in rank and rank[other] > rank[top]:
                 bad.append(f"{f.relative_to(PKG)}:{line} ({top}) imports {mod}")
@@ -63,7 +70,7 @@ def _import_graph(typing_too: bool = False) -> dict[str, set[str]]:
     files = {_module_name(f): f for f in PKG.rglob("*.py")}
     graph: dict[str, set[str]] = {m: set() for m in files}
     for m, f in files.items():
-        tree = ast.parse(f.read_text())
+        tree = _tree(f)
         typing_only = set() if typing_too else {
             id(n) for node in ast.walk(tree) if isinstance(node, ast.If)
             and "TYPE_CHECKING" in ast.unparse(node.test) for b in node.body for n in ast.walk(b)}
@@ -145,7 +152,7 @@ def test_no_module_over_600_lines_and_no_function_over_80() -> None:
         n = len(text.splitlines())
         if n > MAX_MODULE_LINES:
             long_modules.append(f"{f.relative_to(PKG)}: {n} lines")
-        for node in ast.walk(ast.parse(text)):
+        for node in ast.walk(_tree(f)):
             if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
                 length = node.end_lineno - node.lineno + 1
                 if length > MAX_FUNCTION_LINES:
@@ -202,7 +209,7 @@ def test_private_finder_sees_imports_and_attributes() -> None:
 
 def test_no_private_name_across_modules() -> None:
     bad = [f"{f.relative_to(PKG)}:{line} {text}" for f in sorted(PKG.rglob("*.py"))
-           for line, text in _private_reaches(ast.parse(f.read_text()))]
+           for line, text in _private_reaches(_tree(f))]
     assert not bad, "private names reached across modules:\n" + "\n".join(bad)
 
 
@@ -211,7 +218,7 @@ def test_benchmarks_and_examples_use_the_public_api() -> None:
     attribute (what they need is public, documented API)."""
     root = PKG.parent
     bad = [f"{f.relative_to(root)}:{line} {text}" for d in ("benchmarks", "examples")
-           for f in sorted((root / d).rglob("*.py")) for line, text in _private_reaches(ast.parse(f.read_text()))]
+           for f in sorted((root / d).rglob("*.py")) for line, text in _private_reaches(_tree(f))]
     assert not bad, "private names used by benchmarks / examples:\n" + "\n".join(bad)
 
 
@@ -219,7 +226,7 @@ def test_tests_import_no_private_name_of_the_package() -> None:
     """A test imports what it tests by its public name: no ``from pin_kpi_oed... import _x`` anywhere in tests/."""
     root = PKG.parent
     bad = [f"{f.relative_to(root)}:{line} {text}" for f in sorted((root / "tests").rglob("*.py"))
-           for line, text in _private_reaches(ast.parse(f.read_text())) if text.startswith("from pin_kpi_oed")]
+           for line, text in _private_reaches(_tree(f)) if text.startswith("from pin_kpi_oed")]
     assert not bad, "private names of the package imported by tests:\n" + "\n".join(bad)
 
 
@@ -247,5 +254,5 @@ def test_the_check_asks_the_calibrated_model_through_its_view() -> None:
     """The check calls down once per question: what the model says on the rows (``calibrated/check_view.py``) and
     the registration of a set-up (``upkeep/transfer.py``); none of its modules reaches into the model's σ, its TCP σ
     or the fit's residual model by itself (that weave is what the view replaced)."""
-    bad = {m: sorted(_check_route_imports(ast.parse((PKG / m).read_text())) - CHECK_MAY_IMPORT) for m in CHECK_MODULES}
+    bad = {m: sorted(_check_route_imports(_tree(PKG / m)) - CHECK_MAY_IMPORT) for m in CHECK_MODULES}
     assert not any(bad.values()), f"the check reaches past its questions: {bad}"

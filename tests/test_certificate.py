@@ -3,8 +3,6 @@
 from __future__ import annotations
 
 import json
-import subprocess
-import sys
 
 import numpy as np
 import pytest
@@ -13,7 +11,7 @@ from pin_kpi_oed.cell.cell import load_cell
 from pin_kpi_oed.design.optimality import certify
 from pin_kpi_oed.design.optimize import DesignProblem
 
-from .conftest import REPO
+from .cli_run import run_cli_as_process
 
 
 @pytest.fixture(scope="module")
@@ -39,10 +37,9 @@ def test_certificate_bounds_pool_designs_and_pool_is_feasible(problem):
 
 def test_design_cli_certificate_fields(tmp_path):
     out = tmp_path / "d.json"
-    res = subprocess.run([sys.executable, "-m", "pin_kpi_oed", "design", "--cell", "kr15", "--measurements", "15",
-                          "--criteria", "random,kpi", "--starts", "1", "--max-iter", "40", "--certificate",
-                          "--pool-size", "300", "--json", str(out)], cwd=REPO, capture_output=True, text=True,
-                         timeout=600)
+    res = run_cli_as_process("design", "--cell", "kr15", "--measurements", "15", "--criteria", "random,kpi",
+                             "--starts", "1", "--max-iter", "40", "--certificate", "--pool-size", "300", "--json",
+                             str(out))
     assert res.returncode == 0, res.stderr
     assert "effic. %" in res.stdout
     d = json.loads(out.read_text())

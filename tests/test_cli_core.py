@@ -4,19 +4,13 @@ from __future__ import annotations
 
 import json
 import subprocess
-import sys
 
 import numpy as np
 import pytest
 
 from pin_kpi_oed.model.robot import load_robot
 
-from .conftest import REPO
-
-
-def run(*args: str, cwd=None) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "pin_kpi_oed", *args], capture_output=True, text=True,
-                          cwd=cwd or REPO, timeout=300)
+from .cli_run import run_cli_as_process as run
 
 
 def assert_clean_error(res: subprocess.CompletedProcess, *needles: str) -> None:

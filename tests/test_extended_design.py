@@ -316,14 +316,12 @@ def test_ipopt_design_over_the_extended_model_kr15():
 
 
 def test_cli_design_model_bad_inputs(tmp_path):
-    import subprocess
-    import sys
+    from .cli_run import run_cli_as_process
 
     bad = tmp_path / "m.json"
     bad.write_text('{"format": "something else"}')
     for name, args in (("missing.json", ["--model", str(tmp_path / "missing.json")]),
                        ("m.json", ["--model", str(bad)])):
-        res = subprocess.run([sys.executable, "-m", "pin_kpi_oed", "design", "--cell", "kr15", "--criteria", "kpi",
-                              "--quiet", *args], capture_output=True, text=True, timeout=300)
+        res = run_cli_as_process("design", "--cell", "kr15", "--criteria", "kpi", "--quiet", *args)
         assert res.returncode == 2, res.stderr
         assert "Traceback" not in res.stderr and name in res.stderr.splitlines()[-1]

@@ -5,8 +5,6 @@ from __future__ import annotations
 
 import copy
 import json
-import subprocess
-import sys
 
 import numpy as np
 import pinocchio as pin
@@ -18,6 +16,8 @@ from pin_kpi_oed.design.optimize import DesignProblem
 from pin_kpi_oed.errors import InputError
 from pin_kpi_oed.oed.covariance import information
 from pin_kpi_oed.oed.criteria import get_criterion
+
+from .cli_run import run_cli_as_process
 
 
 @pytest.fixture(scope="module")
@@ -190,8 +190,7 @@ def test_cli_refuses_a_path_through_the_car_in_one_line(tmp_path):
     d = _seam_dict()
     d["working_paths"][0]["waypoints"][1]["xyz_m"] = [1.3, 0.4, 0.9]
     (tmp_path / "bad.yaml").write_text(yaml.safe_dump(d))
-    res = subprocess.run([sys.executable, "-m", "pin_kpi_oed", "design", "--cell", str(tmp_path / "bad.yaml"),
-                          "--criteria", "kpi_path"], capture_output=True, text=True, timeout=300)
+    res = run_cli_as_process("design", "--cell", str(tmp_path / "bad.yaml"), "--criteria", "kpi_path")
     lines = [ln for ln in res.stderr.strip().splitlines() if ln.strip()]
     assert res.returncode == 2 and len(lines) == 1 and "Traceback" not in res.stderr, res.stderr
     assert "working_paths[0] 'seam': sample" in lines[0] and "clear" in lines[0]

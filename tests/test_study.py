@@ -16,11 +16,13 @@ from pin_kpi_oed.studies import study
 from .conftest import REPO
 
 
-def test_four_arm_study_on_local_dask_cluster(tmp_path):
+def test_two_arm_study_on_local_dask_cluster(tmp_path):
+    """Two arms on a local Dask cluster of two workers (one arm each: the tasks are spread, their records
+    gathered); the KPI design beats random poses; a rerun recomputes nothing and states the same result."""
     from pin_kpi_oed.viz.figures import plot_notional
 
-    s = study.notional_study(tmp_path, m=20, seed=0, arms=4, workers=2, scheduler="local-dask", plot=plot_notional)
-    assert s["arms"] == 4 and not s["failed_arms"]
+    s = study.notional_study(tmp_path, m=20, seed=0, arms=2, workers=2, scheduler="local-dask", plot=plot_notional)
+    assert s["arms"] == 2 and not s["failed_arms"]
     assert s["all_collision_free"]
     assert s["mean_improvement_vs_heuristic"] > 0.2  # the KPI design beats random poses on every arm
     summary = json.loads((tmp_path / "summary.json").read_text())
@@ -28,15 +30,15 @@ def test_four_arm_study_on_local_dask_cluster(tmp_path):
                 "wall_time_s"):
         assert key in summary
     assert (tmp_path / "notional90.png").stat().st_size > 1000
-    assert len((tmp_path / "arms.csv").read_text().splitlines()) == 5
+    assert len((tmp_path / "arms.csv").read_text().splitlines()) == 3
     # a rerun recomputes nothing
-    again = study.notional_study(tmp_path, m=20, seed=0, arms=4, workers=1)
+    again = study.notional_study(tmp_path, m=20, seed=0, arms=2, workers=1)
     assert again["tasks_computed_now"] == 0
     assert again["mean_improvement_vs_heuristic"] == pytest.approx(s["mean_improvement_vs_heuristic"])
 
 
 def test_killed_study_resumes_without_losing_or_corrupting_work(tmp_path):
-    cmd = [sys.executable, "-m", "pin_kpi_oed", "study", "notional90", "--out", str(tmp_path), "--arms", "3",
+    cmd = [sys.executable, "-m", "pin_kpi_oed", "study", "notional90", "--out", str(tmp_path), "--arms", "2",
            "--measurements", "20", "--workers", "1"]
     proc = subprocess.Popen(cmd, cwd=REPO, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
                             start_new_session=True)
@@ -44,18 +46,18 @@ def test_killed_study_resumes_without_losing_or_corrupting_work(tmp_path):
     deadline = time.time() + 240
     while time.time() < deadline and not (tasks.exists() and list(tasks.glob("*.json"))):
         time.sleep(0.2)
-    os.killpg(proc.pid, signal.SIGKILL)  # kill midway: the first arm is done, the others are not
+    os.killpg(proc.pid, signal.SIGKILL)  # kill midway: the first arm is done, the second is not
     proc.wait()
     first = sorted(tasks.glob("*.json"))
-    assert 1 <= len(first) < 3
+    assert len(first) == 1
     before = {p.name: p.read_text() for p in first}
     for p in first:
         json.loads(p.read_text())  # every file present is complete JSON (atomic writes)
     res = subprocess.run(cmd, cwd=REPO, capture_output=True, text=True, timeout=600)
     assert res.returncode == 0, res.stderr
     summary = json.loads((tmp_path / "summary.json").read_text())
-    assert summary["arms"] == 3
-    assert summary["tasks_computed_now"] == 3 - len(first)  # finished arms were not recomputed
+    assert summary["arms"] == 2
+    assert summary["tasks_computed_now"] == 1  # the finished arm was not recomputed
     for name, text in before.items():
         assert (tasks / name).read_text() == text
     assert not list(tmp_path.rglob("*.tmp"))

@@ -564,11 +564,25 @@ def _build_issue24(d: Path, design: dict) -> None:
                                     + ",".join(f"{v:.10f}" for v in Qd[0]) + "\n")
 
 
+#: SHA-256 of a file by (path below the snapshot's folder, size, modification time in ns): a case's inputs are
+#: copies keeping the originals' times (shutil.copytree), so each input is hashed once for all cases, and any
+#: write gives its file a new time, hence a new key and a fresh hash.
+_DIGESTS: dict[tuple[str, int, int], str] = {}
+
+
 def snapshot(d: Path) -> dict[str, str]:
     """Path -> SHA-256 of every file below ``d`` (symlinks by target), folders as ``<dir>``."""
     out = {}
     for p in sorted(d.rglob("*")):
-        out[str(p.relative_to(d))] = "<dir>" if p.is_dir() else hashlib.sha256(p.read_bytes()).hexdigest()
+        rel = str(p.relative_to(d))
+        if p.is_dir():
+            out[rel] = "<dir>"
+            continue
+        st = p.stat()
+        key = (rel, st.st_size, st.st_mtime_ns)
+        if key not in _DIGESTS:
+            _DIGESTS[key] = hashlib.sha256(p.read_bytes()).hexdigest()
+        out[rel] = _DIGESTS[key]
     return out
 
 
