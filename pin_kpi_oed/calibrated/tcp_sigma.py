@@ -8,7 +8,8 @@ covariance of the TCP's error (true − predicted, in the station's tracker fram
 * C_model: what ``predict`` states at the reflector, evaluated at the TCP
   (:func:`~pin_kpi_oed.calibrated.prediction_sigma.point_covariance`): the discrepancy's posterior and white level,
   the parametric part's error through the TCP's own Jacobian (the fitted reflector offset does not move the TCP; in
-  the base frame the tracker pose does not either), the station's σ factor;
+  the base frame the tracker pose does not either; off the reflector of a 6-D fit with the fit's covariance, which
+  its orientation rows determine, not the discrepancy's of the positions alone), the station's σ factor;
 * G Σ_N Gᵀ: the joint-placement parameters no reflector measurement determines, held at nominal under their
   tolerance prior Σ_N, absorbed by the fit as A = M⁻¹F_BᵀF_N (stored by ``identify`` in the model file,
   ``geometry.parameters.held``; :class:`~pin_kpi_oed.oed.held.HeldTerm`), G = E_B A − E_N at the TCP. Zero at the
