@@ -58,7 +58,7 @@ def simulate_camera(args: argparse.Namespace, cell: Any, Q_design: np.ndarray | 
     from pin_kpi_oed.data.atomic import atomic_write_json
     from pin_kpi_oed.data.corner_measurements import CornerSet, write_corners
     from pin_kpi_oed.effects.spec import effect_spec
-    from pin_kpi_oed.simulation.camera_sim import CameraTolerances, camera_truth, simulate_corners
+    from pin_kpi_oed.simulation.camera_sim import CameraTolerances, camera_truth, simulate_detections
 
     _refuse_tracker_options(args, "simulate", ("design",) if Q_design is not None else ())
     model = cell.measurement_model()
@@ -83,7 +83,7 @@ def simulate_camera(args: argparse.Namespace, cell: Any, Q_design: np.ndarray | 
         args.n = len(Q_design)
         Q_test = model.views(args.n_test, seed=args.seed + 1, around=cell.q_work) if args.n_test else Q_design[:0]
         Q_all = np.vstack([np.asarray(Q_design, float), Q_test])
-    uv = simulate_corners(model, Q_all, p_true, effects, seed=args.seed + 2)
+    uv, lost = simulate_detections(model, Q_all, p_true, effects, seed=args.seed + 2)
     names = list(model.robot.joint_names)
     labels = [f"pose_{i:04d}" for i in range(len(Q_all))]
     write_corners(CornerSet.from_arrays(labels[:args.n], Q_all[:args.n], uv[:args.n], names), args.out)
@@ -99,8 +99,28 @@ def simulate_camera(args: argparse.Namespace, cell: Any, Q_design: np.ndarray | 
           f"-> {args.out}"
           + (f", {args.n_test} held-out -> {args.test_out}" if args.n_test else "")
           + f" (camera {model.mode}, pixel noise {model.sigma_px:g} px, seed {args.seed}"
-          + (f", effects: {', '.join(e.name for e, _ in effects)}" if effects else "") + ")")
+          + (f", effects: {', '.join(e.name for e, _ in effects)}" if effects else "") + ")"
+          + _lost_text({k: int(v[:args.n].sum()) for k, v in lost.items()}, Q_design is not None))
     return 0
+
+
+def _lost_text(lost: dict[str, int], designed: bool) -> str:
+    """Why corners of the written images were not detected: a count per cause ("" when none was lost).
+
+    Args:
+        lost: cause -> corners lost to it (:func:`~pin_kpi_oed.simulation.camera_sim.simulate_detections`);
+        designed: the poses are a design's (checked to see every corner inside its image margin at nominal).
+
+    Returns:
+        "; corners lost: ..." naming each cause's count, why a design's corners go, and the causes not simulated.
+    """
+    if not sum(lost.values()):
+        return ""
+    why = (": the truth's joint, hand-eye and board errors move corners the design saw inside its image margin "
+           "at the nominal model" if designed else "")
+    counts = ", ".join(f"{n} {cause}" for cause, n in lost.items() if n)
+    return (f"; corners lost: {counts}{why} (none to the viewing angle or to occlusion: the simulation does not "
+            "model either)")
 
 
 def _true_intrinsics_sigma(sigma: dict | None) -> tuple[float, ...]:
