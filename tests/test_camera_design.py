@@ -62,19 +62,18 @@ def test_an_efficiency_beyond_the_pools_bound_is_not_stated_and_a_stopped_ipopt_
     said to be not converged (as the tracker's design says ``max_iter``)."""
     import dataclasses
 
-    from pin_kpi_oed.cli.camera_design_cmd import _ipopt_note
     from pin_kpi_oed.design.ipopt import IpoptRun
 
     d = design_camera(problem, 8, seed=0, pool_size=120, ipopt=False)
     assert d.stated_efficiency == pytest.approx(d.efficiency) and d.efficiency <= 1 + 1e-9
-    assert f"efficiency {d.efficiency:.1%} of the pool's bound" in d.message and _ipopt_note(d, 500) == ""
+    assert f"efficiency {d.efficiency:.1%} of the pool's bound" in d.message and d.ipopt_note() == ""
     stopped = IpoptRun(Q=d.Q, f=0.5, value=d.trace_cs_m2 / 2.318, success=True, status="max_iter", nit=500,
                        solver_status="Maximum_Iterations_Exceeded")
     off = dataclasses.replace(d, efficiency=2.318, source="ipopt", ipopt=stopped, trace_cs_m2=d.trace_cs_m2 / 2.318)
     assert off.stated_efficiency is None
     assert "no efficiency" in off.efficiency_text() and "231.8" not in off.efficiency_text()
-    note = _ipopt_note(off, 500)
+    note = off.ipopt_note()
     assert note.startswith("note: IPOPT not converged: stopped at its iteration limit (500) after 500 iterations")
     assert "raise --max-iter" in note
     done = dataclasses.replace(off, ipopt=dataclasses.replace(stopped, status="converged"))
-    assert _ipopt_note(done, 500) == ""
+    assert done.ipopt_note() == ""

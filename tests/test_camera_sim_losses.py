@@ -6,9 +6,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from pin_kpi_oed.cli.camera_pipeline import _lost_text
-from pin_kpi_oed.simulation.camera_sim import (LOSS_CAUSES, CameraTolerances, camera_truth, simulate_corners,
-                                               simulate_detections)
+from pin_kpi_oed.simulation.camera_sim import (LOSS_CAUSES, CameraTolerances, camera_truth, lost_corners_text,
+                                               simulate_corners, simulate_detections)
 from tests.camera_setup import Q0, ur5_camera
 
 
@@ -23,7 +22,7 @@ def test_every_lost_corner_is_counted_under_one_cause():
     assert nan.sum() > 0 and np.array_equal(nan, lost["behind the camera"] + lost["outside the image"])
     assert lost["outside the image"].sum() > 0
     np.testing.assert_array_equal(uv, simulate_corners(model, Q, p, seed=2))   # the same pixels, the same noise
-    text = _lost_text({k: int(v.sum()) for k, v in lost.items()}, designed=True)
+    text = lost_corners_text({k: int(v.sum()) for k, v in lost.items()}, designed=True)
     assert f"{int(lost['outside the image'].sum())} outside the image" in text and "image margin" in text
     assert "none to the viewing angle or to occlusion" in text
-    assert _lost_text({c: 0 for c in LOSS_CAUSES}, designed=True) == ""
+    assert lost_corners_text({c: 0 for c in LOSS_CAUSES}, designed=True) == ""

@@ -83,27 +83,6 @@ def _table(design: Any, held_sel: Any, held: Any, t: int) -> str:
     return "\n".join(lines)
 
 
-def _ipopt_note(design: Any, max_iter: int) -> str:
-    """A note when IPOPT did not converge (its iteration or time limit, a stall, a failure), "" when it did or did
-    not run; the design returned is then the best feasible point found, not a local optimum.
-
-    Args:
-        design: the :class:`~pin_kpi_oed.design.camera_design.CameraDesign`; max_iter: IPOPT's iteration limit.
-
-    Returns:
-        One line starting ``note: IPOPT not converged``, or "".
-    """
-    run = design.ipopt
-    if run is None or run.status in ("converged", "acceptable"):
-        return ""
-    why = {"max_iter": f"stopped at its iteration limit ({max_iter})", "max_time": "stopped at its time limit",
-           "stalled": "stalled"}.get(run.status, "failed")
-    kept = ("its last feasible point is the design" if design.source == "ipopt"
-            else "the pool selection is the design")
-    return (f"note: IPOPT not converged: {why} after {run.nit} iterations ({run.status}: {run.solver_status}); "
-            f"{kept}, not a local optimum" + (": raise --max-iter" if run.status == "max_iter" else ""))
-
-
 def run_camera_design(args: argparse.Namespace, cell: Any) -> int:
     """``design --cell CAMERA_CELL`` (module docstring); returns the exit code.
 
@@ -157,7 +136,7 @@ def run_camera_design(args: argparse.Namespace, cell: Any) -> int:
              f"; IPOPT's design leaves the pool and is {design.efficiency:.2f}x below this bound of the pool's "
              "designs, which it does not bound: no efficiency is stated for it (the pool misses the best poses; a "
              "larger --pool-size tightens the bound)"))
-    note = _ipopt_note(design, max_iter)
+    note = design.ipopt_note()
     if note:
         print(note)
     if not quiet:

@@ -58,7 +58,8 @@ def simulate_camera(args: argparse.Namespace, cell: Any, Q_design: np.ndarray | 
     from pin_kpi_oed.data.atomic import atomic_write_json
     from pin_kpi_oed.data.corner_measurements import CornerSet, write_corners
     from pin_kpi_oed.effects.spec import effect_spec
-    from pin_kpi_oed.simulation.camera_sim import CameraTolerances, camera_truth, simulate_detections
+    from pin_kpi_oed.simulation.camera_sim import (CameraTolerances, camera_truth, lost_corners_text,
+                                                   simulate_detections)
 
     _refuse_tracker_options(args, "simulate", ("design",) if Q_design is not None else ())
     model = cell.measurement_model()
@@ -100,27 +101,8 @@ def simulate_camera(args: argparse.Namespace, cell: Any, Q_design: np.ndarray | 
           + (f", {args.n_test} held-out -> {args.test_out}" if args.n_test else "")
           + f" (camera {model.mode}, pixel noise {model.sigma_px:g} px, seed {args.seed}"
           + (f", effects: {', '.join(e.name for e, _ in effects)}" if effects else "") + ")"
-          + _lost_text({k: int(v[:args.n].sum()) for k, v in lost.items()}, Q_design is not None))
+          + lost_corners_text({k: int(v[:args.n].sum()) for k, v in lost.items()}, Q_design is not None))
     return 0
-
-
-def _lost_text(lost: dict[str, int], designed: bool) -> str:
-    """Why corners of the written images were not detected: a count per cause ("" when none was lost).
-
-    Args:
-        lost: cause -> corners lost to it (:func:`~pin_kpi_oed.simulation.camera_sim.simulate_detections`);
-        designed: the poses are a design's (checked to see every corner inside its image margin at nominal).
-
-    Returns:
-        "; corners lost: ..." naming each cause's count, why a design's corners go, and the causes not simulated.
-    """
-    if not sum(lost.values()):
-        return ""
-    why = (": the truth's joint, hand-eye and board errors move corners the design saw inside its image margin "
-           "at the nominal model" if designed else "")
-    counts = ", ".join(f"{n} {cause}" for cause, n in lost.items() if n)
-    return (f"; corners lost: {counts}{why} (none to the viewing angle or to occlusion: the simulation does not "
-            "model either)")
 
 
 def _true_intrinsics_sigma(sigma: dict | None) -> tuple[float, ...]:

@@ -212,6 +212,24 @@ class CameraDesign(Result):
                 f"the pool selection's is {self.certificate.efficiency(self.selection_trace_cs_m2):.1%})")
 
 
+    def ipopt_note(self) -> str:
+        """A note when IPOPT ran and did not converge (its iteration or time limit, a stall, a failure): the design
+        is then the best feasible point found, not a local optimum.
+
+        Returns:
+            One line starting ``note: IPOPT not converged``, or "" when IPOPT converged or did not run.
+        """
+        run = self.ipopt
+        if run is None or run.status in ("converged", "acceptable"):
+            return ""
+        why = {"max_iter": f"stopped at its iteration limit ({run.nit})", "max_time": "stopped at its time limit",
+               "stalled": "stalled"}.get(run.status, "failed")
+        kept = ("its last feasible point is the design" if self.source == "ipopt"
+                else "the pool selection is the design")
+        return (f"note: IPOPT not converged: {why} after {run.nit} iterations ({run.status}: {run.solver_status}); "
+                f"{kept}, not a local optimum" + (": raise --max-iter" if run.status == "max_iter" else ""))
+
+
 #: Rounding slack of an efficiency (a pool design's tr C_s recomputed is at the bound to ~1e-12).
 EFFICIENCY_SLACK = 1e-9
 

@@ -19,7 +19,8 @@ from pin_kpi_oed.effects.compose import sum_joint_offsets
 from pin_kpi_oed.errors import InputError
 from pin_kpi_oed.model.camera import CameraModel
 
-__all__ = ["CameraTolerances", "camera_truth", "simulate_corners", "simulate_detections", "LOSS_CAUSES", "true_tcp"]
+__all__ = ["CameraTolerances", "camera_truth", "simulate_corners", "simulate_detections", "LOSS_CAUSES",
+           "lost_corners_text", "true_tcp"]
 
 
 @dataclass(frozen=True)
@@ -124,6 +125,25 @@ def simulate_detections(model: CameraModel, Q: np.ndarray, truth_p: np.ndarray, 
                          | (pix[..., 1] > k.height - 1))
     pix[behind | outside] = np.nan
     return pix.reshape(len(Q), -1), dict(zip(LOSS_CAUSES, (behind.sum(axis=1), outside.sum(axis=1))))
+
+
+def lost_corners_text(lost: dict[str, int], designed: bool) -> str:
+    """Why corners of the written images were not detected: a count per cause ("" when none was lost).
+
+    Args:
+        lost: cause -> corners lost to it (:func:`~pin_kpi_oed.simulation.camera_sim.simulate_detections`);
+        designed: the poses are a design's (checked to see every corner inside its image margin at nominal).
+
+    Returns:
+        "; corners lost: ..." naming each cause's count, why a design's corners go, and the causes not simulated.
+    """
+    if not sum(lost.values()):
+        return ""
+    why = (": the truth's joint, hand-eye and board errors move corners the design saw inside its image margin "
+           "at the nominal model" if designed else "")
+    counts = ", ".join(f"{n} {cause}" for cause, n in lost.items() if n)
+    return (f"; corners lost: {counts}{why} (none to the viewing angle or to occlusion: the simulation does not "
+            "model either)")
 
 
 def true_tcp(model: CameraModel, Q: np.ndarray, truth_p: np.ndarray, effects: list | None = None) -> np.ndarray:
