@@ -54,3 +54,26 @@ def test_square_roots_keep_the_information(problem):
 def test_too_few_images_refused(problem):
     with pytest.raises(InputError, match="cannot identify"):
         design_camera(problem, 0)
+
+
+def test_an_efficiency_beyond_the_pools_bound_is_not_stated_and_a_stopped_ipopt_is_noted(problem):
+    """The pool's bound covers the designs made of its candidates: a selection's efficiency is stated (≤ 100 %); an
+    IPOPT design below the bound (its poses left the pool) gets none, and IPOPT stopped at its iteration limit is
+    said to be not converged (as the tracker's design says ``max_iter``)."""
+    import dataclasses
+
+    from pin_kpi_oed.design.ipopt import IpoptRun
+
+    d = design_camera(problem, 8, seed=0, pool_size=120, ipopt=False)
+    assert d.stated_efficiency == pytest.approx(d.efficiency) and d.efficiency <= 1 + 1e-9
+    assert f"efficiency {d.efficiency:.1%} of the pool's bound" in d.message and d.ipopt_note() == ""
+    stopped = IpoptRun(Q=d.Q, f=0.5, value=d.trace_cs_m2 / 2.318, success=True, status="max_iter", nit=500,
+                       solver_status="Maximum_Iterations_Exceeded")
+    off = dataclasses.replace(d, efficiency=2.318, source="ipopt", ipopt=stopped, trace_cs_m2=d.trace_cs_m2 / 2.318)
+    assert off.stated_efficiency is None
+    assert "no efficiency" in off.efficiency_text() and "231.8" not in off.efficiency_text()
+    note = off.ipopt_note()
+    assert note.startswith("note: IPOPT not converged: stopped at its iteration limit (500) after 500 iterations")
+    assert "raise --max-iter" in note
+    done = dataclasses.replace(off, ipopt=dataclasses.replace(stopped, status="converged"))
+    assert done.ipopt_note() == ""

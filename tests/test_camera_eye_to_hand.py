@@ -109,7 +109,11 @@ def test_the_identified_board_on_the_tool_is_the_truth_within_its_sigma(pipeline
 
 
 def test_predict_and_compensate_state_a_tcp_sigma_that_holds_the_true_error(pipeline):
-    d, _, model, p_true, effects, Q, target, _ = pipeline
+    d, _, model, p_true, effects, Q, target, steps = pipeline
+    out = steps["compensate"][1]
+    # the messages speak of the camera: its frame (eye-to-hand), the board it measured; no reflector or tracker
+    assert "the camera's frame" in out and "the measured board" in out, out
+    assert "reflector" not in out and "tracker" not in out and "lever arm" not in out, out
     pred = _rows(d / "pred.csv")
     y = np.array([[float(r[k]) for k in ("x_pred", "y_pred", "z_pred")] for r in pred])
     sigma = np.array([float(r["sigma_tcp"]) for r in pred])

@@ -107,6 +107,9 @@ def test_compensated_joints_put_the_true_tcp_within_3_sigma_of_the_target(calibr
     rc, out, err = run_cli("compensate", "--model", d / "m.json", "--targets", d / "targets.csv", "--frame",
                            "tracker", "--out", d / "comp.csv")
     assert rc == 0, err
+    # the messages speak of the camera's set-up: the board's frame (eye-in-hand), no reflector, tracker or lever arm
+    assert "the board's frame" in out and "the measured camera" in out, out
+    assert "reflector" not in out and "tracker" not in out and "lever arm" not in out, out
     rows = _rows(d / "comp.csv")
     # sendable, and said to rest on a TCP no image measured: the flange's axial offset held at its tolerance
     # dominates the σ (0.5 mm of about 0.51 mm)

@@ -18,7 +18,7 @@ from pin_kpi_oed.data.measurements import MeasurementSet, write_measurements
 from pin_kpi_oed.discrepancy.gp import Discrepancy
 from pin_kpi_oed.errors import InputError
 from pin_kpi_oed.studies.check_events import simulated_model
-from pin_kpi_oed.upkeep.check import check_calibration, shown_above, sidak
+from pin_kpi_oed.upkeep.check import CheckResult, check_calibration, shown_above, sidak
 
 SIGMA = 2e-5
 TOL = 1e-4
@@ -183,3 +183,19 @@ def test_a_change_the_check_cannot_size_says_re_calibrate_without_a_size(setting
     assert r2.to_dict()["sized"] is False
     ok = check_calibration(model, _rows(model, _offset_truth(model, 2, 3 * TOL), Qc, 2), tolerance_m=TOL)
     assert ok.sized and ok.verdict == "robot_changed"
+
+
+def test_the_action_line_states_the_held_part_it_leaves_out():
+    """The re-fit / re-calibration comparison leaves out the TCP σ of the held joint placements (common to both):
+    the line says how much, as the RMS over the working configurations; nothing is said when there is none."""
+    base = dict(n_rows=12, dof=30, alpha=0.01, chi2=80.0, threshold=50.0, p_value=1e-6, setup_shift_m=0.0,
+                setup_distance=1.0, group="joint_a6 placement", refit_error_m=3.2e-5, recalibrate_error_m=2.8e-5)
+    held = np.array([4e-4, 5e-4, 6e-4])
+    r = CheckResult(verdict="recalibrate", tcp_held_m=held, **base)
+    rms = np.sqrt(np.mean(held ** 2)) * 1e3
+    text = r.action_text()
+    assert "0.028 mm against the re-fit's 0.032 mm" in text
+    assert f"the {rms:.3f} mm of the TCP's sigma that no measurement determines" in text
+    assert "same either way and left out" in text
+    assert "left out" in CheckResult(verdict="robot_changed", tcp_held_m=held, **base).action_text()
+    assert "left out" not in CheckResult(verdict="recalibrate", tcp_held_m=np.zeros(3), **base).action_text()

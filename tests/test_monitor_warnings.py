@@ -166,3 +166,12 @@ def test_every_block_of_rows_has_its_standardised_rms(setting, monkeypatch, tmp_
     assert main(["monitor", "--model", str(tmp_path / "m.json"), "--data", str(tmp_path / "rows.csv")]) == 0
     out = [ln for ln in capsys.readouterr().out.splitlines() if "per block of 15 rows" in ln]
     assert len(out) == 1 and "1-15 " in out[0] and "31-40 " in out[0] and "outside the band: " in out[0]
+
+
+def test_without_a_time_column_the_drift_level_is_per_row_and_said_so(setting):
+    rb, model, Q, Y = setting
+    untimed = monitor(model, MeasurementSet(list(rb.joint_names), Q, Y), every=10)
+    assert not untimed.timed and "nm/sqrt(row) (no time column: one row taken as one second)" in untimed.summary()
+    assert "nm/sqrt(s)" not in untimed.summary() and untimed.to_dict()["timed"] is False
+    timed = monitor(model, MeasurementSet(list(rb.joint_names), Q, Y, time_s=np.arange(40.0) * 5), every=10)
+    assert timed.timed and "nm/sqrt(s)" in timed.summary() and "sqrt(row)" not in timed.summary()

@@ -72,12 +72,14 @@ def _table(design: Any, held_sel: Any, held: Any, t: int) -> str:
     cert, chk = design.certificate, design.check
     rows = [("selection", design.selection_trace_cs_m2, held_sel.trace_m2, "-", None),
             (f"kpi ({design.source})", design.trace_cs_m2, held.trace_m2, str(design.nit), chk)]
+    eff_ok = design.stated_efficiency is not None
     lines = [head, "-" * len(head)]
     for name, tr, h, it, c in rows:
         ok = "-" if c is None else ("ok" if c.ok.all() else f"{int((~c.ok).sum())} of {len(c.ok)} do not see")
         secs = f"{design.time_s:.2f}" if c is not None else "-"
+        eff = f"{100 * cert.efficiency(tr):.1f}" if (c is None or eff_ok) else "off pool"
         lines.append(f"{name:<12}{tr * 1e6:>14.4e}{h * 1e6:>12.4e}{np.sqrt((tr + h) / t) * 1e6:>14.2f}{it:>7}"
-                     f"{secs:>8}{100 * cert.efficiency(tr):>10.1f}  {ok}")
+                     f"{secs:>8}{eff:>10}  {ok}")
     return "\n".join(lines)
 
 
@@ -130,7 +132,13 @@ def run_camera_design(args: argparse.Namespace, cell: Any) -> int:
     print(f"certificate: every {m}-pose design from the {cert.pool_size} feasible candidates has tr(C_s) >= "
           f"{cert.lower_bound_trace_cs_m2 * 1e6:.4e} mm^2 (equivalence theorem: mean of the {m} largest d / phi = "
           f"{cert.approx.max_d_ratio:.4f}); tr(C_s) in the {model.frame_group} frame, identified parameters only"
-          + ("; IPOPT's poses leave the pool, so its efficiency may exceed 100 %" if design.efficiency > 1 else ""))
+          + ("" if design.stated_efficiency is not None else
+             f"; IPOPT's design leaves the pool and is {design.efficiency:.2f}x below this bound of the pool's "
+             "designs, which it does not bound: no efficiency is stated for it (the pool misses the best poses; a "
+             "larger --pool-size tightens the bound)"))
+    note = design.ipopt_note()
+    if note:
+        print(note)
     if not quiet:
         ray = chk.ray_clearance_m[np.isfinite(chk.ray_clearance_m)]
         print(f"independent check (OpenCV projection, Coal ray distances): {int(chk.ok.sum())} of {m} poses see the "

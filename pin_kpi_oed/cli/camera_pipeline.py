@@ -58,7 +58,8 @@ def simulate_camera(args: argparse.Namespace, cell: Any, Q_design: np.ndarray | 
     from pin_kpi_oed.data.atomic import atomic_write_json
     from pin_kpi_oed.data.corner_measurements import CornerSet, write_corners
     from pin_kpi_oed.effects.spec import effect_spec
-    from pin_kpi_oed.simulation.camera_sim import CameraTolerances, camera_truth, simulate_corners
+    from pin_kpi_oed.simulation.camera_sim import (CameraTolerances, camera_truth, lost_corners_text,
+                                                   simulate_detections)
 
     _refuse_tracker_options(args, "simulate", ("design",) if Q_design is not None else ())
     model = cell.measurement_model()
@@ -83,7 +84,7 @@ def simulate_camera(args: argparse.Namespace, cell: Any, Q_design: np.ndarray | 
         args.n = len(Q_design)
         Q_test = model.views(args.n_test, seed=args.seed + 1, around=cell.q_work) if args.n_test else Q_design[:0]
         Q_all = np.vstack([np.asarray(Q_design, float), Q_test])
-    uv = simulate_corners(model, Q_all, p_true, effects, seed=args.seed + 2)
+    uv, lost = simulate_detections(model, Q_all, p_true, effects, seed=args.seed + 2)
     names = list(model.robot.joint_names)
     labels = [f"pose_{i:04d}" for i in range(len(Q_all))]
     write_corners(CornerSet.from_arrays(labels[:args.n], Q_all[:args.n], uv[:args.n], names), args.out)
@@ -99,7 +100,8 @@ def simulate_camera(args: argparse.Namespace, cell: Any, Q_design: np.ndarray | 
           f"-> {args.out}"
           + (f", {args.n_test} held-out -> {args.test_out}" if args.n_test else "")
           + f" (camera {model.mode}, pixel noise {model.sigma_px:g} px, seed {args.seed}"
-          + (f", effects: {', '.join(e.name for e, _ in effects)}" if effects else "") + ")")
+          + (f", effects: {', '.join(e.name for e, _ in effects)}" if effects else "") + ")"
+          + lost_corners_text({k: int(v[:args.n].sum()) for k, v in lost.items()}, Q_design is not None))
     return 0
 
 

@@ -473,7 +473,15 @@ def _result(cm: CalibratedModel, ts: TargetSet, opt: CompensationOptions, pm: Po
         tcp_from_reflector_m=lever_arm_m(pm.tcp, cm.setups[cm.station(opt.station)].reflector_m),
         tool_frame=cm.robot.tool_frame, start=list(start), q_start=np.asarray(Q_start, float),
         branch_step_rad=step, from_start_rad=branch_step(cal.Q, Q_start), collision_pair=pair,
-        sigma_rot_rad=rot, tool_length_m=float(opt.tool_length_m), sigma_at_length_m=at_l)
+        sigma_rot_rad=rot, tool_length_m=float(opt.tool_length_m), sigma_at_length_m=at_l, **_device_of(cm))
+
+
+def _device_of(cm: CalibratedModel) -> dict:
+    """The device the model was calibrated with: ``{device, camera_mode}`` (a camera's model has ``fit.device``)."""
+    dev = (cm.fit or {}).get("device")
+    if not isinstance(dev, dict):
+        return {"device": "tracker", "camera_mode": ""}
+    return {"device": "camera", "camera_mode": str(dev.get("mode", "eye_in_hand"))}
 
 
 def _status(i: int, opt: CompensationOptions, nom: _IK, cal: _IK, left_branch: bool, big_step: bool,

@@ -93,6 +93,9 @@ class CompensationResult(Result):
             from the previous row's (rad / m; 0 for the first row, empty for Cartesian targets). Compensation keeps
             the program's branch when it stays far below the program's own steps; the rows where it does not are
             not ``ok`` (a singularity, another branch).
+        device: what the calibration measured with, ``tracker`` or ``camera`` (the model's ``fit.device``);
+            camera_mode: ``eye_in_hand`` or ``eye_to_hand`` for a camera, else "". The messages name the device's
+            frame and the mounted target it measured (reflector, board, camera).
     """
 
     names: list[str] = field(default_factory=list)
@@ -123,6 +126,31 @@ class CompensationResult(Result):
     tool_length_m: float = 0.0
     sigma_at_length_m: np.ndarray = field(default_factory=lambda: np.zeros(0))
     correction_jump_rad: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    device: str = "tracker"
+    camera_mode: str = ""
+
+    @property
+    def measured_text(self) -> str:
+        """What the calibration measured on the tool: ``reflector``, ``board`` (eye-to-hand) or ``camera``."""
+        if self.device != "camera":
+            return "reflector"
+        return "board" if self.camera_mode == "eye_to_hand" else "camera"
+
+    def frame_text(self) -> str:
+        """The targets' frame as the summary names it: the station's tracker frame, the camera's frame (eye-to-hand:
+        the camera fixed in the cell), the board's frame (eye-in-hand: the board fixed in the cell), or ``base``."""
+        if self.frame != "cell":
+            return f"{self.frame} frame"
+        if self.device != "camera":
+            return f"tracker frame of station {self.station}"
+        return self.device_frame_text()
+
+    def device_frame_text(self) -> str:
+        """The device's frame: ``the tracker frame``, ``the camera's frame`` (eye-to-hand) or ``the board's frame``
+        (eye-in-hand)."""
+        if self.device != "camera":
+            return "the tracker frame"
+        return "the camera's frame" if self.camera_mode == "eye_to_hand" else "the board's frame"
 
     def summary(self) -> str:
         """Counts, correction statistics (mm), and the targets that are not ok."""
@@ -132,8 +160,7 @@ class CompensationResult(Result):
                            if k in self.target_status)
         lines = [f"compensated {len(self.names)} targets "
                  f"({'position + orientation' if self.orientation else 'position'}"
-                 f", {'tracker' if self.frame == 'cell' else self.frame} frame"
-                 f"{' of station ' + self.station if self.frame == 'cell' else ''}): "
+                 f", {self.frame_text()}): "
                  f"{sum(ok)} ok" + (f", {counts}" if counts else ""),
                  f"TCP {np.round(self.tcp_m * 1e3, 3).tolist()} mm in tool frame {self.tool_frame}"
                  + ("; branch from: " + ", ".join(f"{self.start.count(k)} {k}" for k in dict.fromkeys(self.start))
@@ -148,7 +175,7 @@ class CompensationResult(Result):
                          f"mm, max {np.max(self.sigma_m) * 1e3:.4f} mm")
             from pin_kpi_oed.discrepancy.lever_arm import LEVER_ARM_NOTE_M, lever_arm_line
 
-            if self.tcp_from_reflector_m >= LEVER_ARM_NOTE_M:
+            if self.device != "camera" and self.tcp_from_reflector_m >= LEVER_ARM_NOTE_M:  # a camera sees 6-D
                 lines.append(lever_arm_line(self.tcp_from_reflector_m, "this sigma"))
             if self.sigma_rot_rad.size:
                 lines.append(f"predicted orientation sigma (3-D, the measured probe's frame): mean "
@@ -161,8 +188,10 @@ class CompensationResult(Result):
             if n_held:
                 lines.append(f"{n_held} of {len(self.names)} targets tcp unmeasured: every check passed, but more "
                              f"than {HELD_SHARE_MAX:.0%} of their TCP sigma^2 is from joint-placement parameters no "
-                             "measurement determined; the compensation is right at the measured reflector, not "
-                             "known at the TCP: measure the TCP (a reflector nest at it, or a tool calibration)")
+                             f"measurement determined; the compensation is right at the measured {self.measured_text}"
+                             ", not known at the TCP: measure the TCP ("
+                             + ("a reflector nest at it, or " if self.device != "camera" else "")
+                             + "a tool calibration)")
             if self.tcp_unobservable_m.size and np.max(self.tcp_unobservable_m) > 0:
                 lines.append(self._unobservable_line())
         if np.any(self.extrapolation):
@@ -188,17 +217,22 @@ class CompensationResult(Result):
         frame into the tool's part (a reflector at the TCP removes it) and the base frame's own placement (no
         tracker measurement determines it)."""
         held = float(np.max(self.tcp_unobservable_m))
-        line = (f"of which {held * 1e3:.4f} mm (3-D, 1 sigma) the reflector cannot see at this TCP: joint-placement "
+        camera = self.device == "camera"
+        seer = "the camera's images" if camera else "the reflector"
+        line = (f"of which {held * 1e3:.4f} mm (3-D, 1 sigma) {seer} cannot see at this TCP: joint-placement "
                 "errors the calibration could not determine, from the manufacturing tolerances")
+        fix = "the TCP measured (a tool calibration)" if camera else "a reflector at the TCP (or the TCP measured)"
         base = float(np.max(self.base_unobservable_m)) if self.base_unobservable_m.size else 0.0
         if base <= 0.05 * held:
-            return line + (" (e.g. along and about the last joint axis); a reflector at the TCP (or the TCP measured) "
-                           "removes it")
+            return line + f" (e.g. along and about the last joint axis); {fix} removes it"
         tool = float(np.max(np.sqrt(np.maximum(self.tcp_unobservable_m ** 2 - self.base_unobservable_m ** 2, 0.0))))
-        return (line + f": {tool * 1e3:.4f} mm at the tool (along and about the last joint axis; a reflector at the "
-                f"TCP, or the TCP measured, removes it) and {base * 1e3:.4f} mm the base frame's own placement on the "
-                "robot (joint 1's placement and what the tracker pose absorbs), which no tracker measurement "
-                "determines: targets in the tracker frame (--frame tracker) leave it out")
+        where = self.device_frame_text()
+        pose = where.replace(" frame", " pose") if camera else "the tracker pose"
+        own = "camera" if camera else "tracker"
+        return (line + f": {tool * 1e3:.4f} mm at the tool (along and about the last joint axis; {fix} removes it) "
+                f"and {base * 1e3:.4f} mm the base frame's own placement on the robot (joint 1's placement and what "
+                f"{pose} absorbs), which no {own} measurement determines: targets in {where} (--frame tracker) "
+                "leave it out")
 
     def _continuity_line(self) -> str:
         """The program's continuity: the largest change of the correction between consecutive rows, over the rows
@@ -230,7 +264,8 @@ class CompensationResult(Result):
                             "base_unobservable_m": self.base_unobservable_m,
                             "extrapolation": self.extrapolation, "sigma_rot_rad": self.sigma_rot_rad,
                             "tool_length_m": self.tool_length_m, "sigma_at_length_m": self.sigma_at_length_m,
-                            "correction_jump_rad": self.correction_jump_rad})
+                            "correction_jump_rad": self.correction_jump_rad, "device": self.device,
+                            "camera_mode": self.camera_mode})
 
 
 def write_compensation(path: str | os.PathLike, res: CompensationResult) -> None:

@@ -180,7 +180,8 @@ class CameraDesign(Result):
         Q_selection: the pool selection (IPOPT's start); selection_trace_cs_m2: its tr C_s (m²).
         certificate: the pool's relaxation bound (:class:`~pin_kpi_oed.oed.certificate.Certificate`).
         efficiency: bound / tr C_s of the design (1 = certified optimal over the pool; the bound covers the designs
-            made of the pool's candidates, and IPOPT's poses leave the pool, so an IPOPT design may exceed 1).
+            made of the pool's candidates, and IPOPT's poses leave the pool, so an IPOPT design may exceed 1: then it
+            is no efficiency, :attr:`stated_efficiency` is None).
         ipopt: the IPOPT run, or None; source: ``ipopt`` or ``selection`` (the design returned).
         check: the independent check of the returned design.
     """
@@ -194,6 +195,43 @@ class CameraDesign(Result):
     ipopt: IpoptRun | None
     source: str
     check: CameraCheck
+
+    @property
+    def stated_efficiency(self) -> float | None:
+        """The efficiency when it is one (at most 1 + :data:`EFFICIENCY_SLACK`: a design of the pool's candidates,
+        or an IPOPT design the bound still covers), else None: the design left the pool and beat the bound of the
+        pool's designs, which says the pool misses the best poses, not how near the optimum the design is."""
+        return self.efficiency if self.efficiency <= 1.0 + EFFICIENCY_SLACK else None
+
+    def efficiency_text(self) -> str:
+        """``efficiency X % of the pool's bound``, or why none is stated."""
+        eff = self.stated_efficiency
+        if eff is not None:
+            return f"efficiency {eff:.1%} of the pool's bound"
+        return (f"below the pool's bound by a factor {self.efficiency:.2f} (its poses leave the pool: no efficiency; "
+                f"the pool selection's is {self.certificate.efficiency(self.selection_trace_cs_m2):.1%})")
+
+
+    def ipopt_note(self) -> str:
+        """A note when IPOPT ran and did not converge (its iteration or time limit, a stall, a failure): the design
+        is then the best feasible point found, not a local optimum.
+
+        Returns:
+            One line starting ``note: IPOPT not converged``, or "" when IPOPT converged or did not run.
+        """
+        run = self.ipopt
+        if run is None or run.status in ("converged", "acceptable"):
+            return ""
+        why = {"max_iter": f"stopped at its iteration limit ({run.nit})", "max_time": "stopped at its time limit",
+               "stalled": "stalled"}.get(run.status, "failed")
+        kept = ("its last feasible point is the design" if self.source == "ipopt"
+                else "the pool selection is the design")
+        return (f"note: IPOPT not converged: {why} after {run.nit} iterations ({run.status}: {run.solver_status}); "
+                f"{kept}, not a local optimum" + (": raise --max-iter" if run.status == "max_iter" else ""))
+
+
+#: Rounding slack of an efficiency (a pool design's tr C_s recomputed is at the bound to ~1e-12).
+EFFICIENCY_SLACK = 1e-9
 
 
 def square_roots(Fp: np.ndarray) -> np.ndarray:
@@ -240,10 +278,10 @@ def design_camera(problem: CameraDesignProblem, m: int, seed: int = 0, pool_size
             Q, v, source = run.Q, problem.trace_cs(run.Q), "ipopt"
     chk = check_camera_poses(problem.view, Q)
     ok = bool(chk.ok.all())
-    eff = cert.efficiency(v)
-    return CameraDesign(Q=Q, trace_cs_m2=v, Q_selection=Q_sel, selection_trace_cs_m2=v_sel, certificate=cert,
-                        efficiency=eff, ipopt=run, source=source, check=chk, success=ok,
-                        status="feasible" if ok else "infeasible", nit=run.nit if run else 0,
-                        nfev=run.nfev if run else 0, time_s=time.perf_counter() - t0,
-                        message=f"{m} poses ({source}): tr C_s {v:.4g} m^2, efficiency {eff:.1%} of the pool's "
-                                f"bound; independent check: {int(chk.ok.sum())} of {m} poses see the board")
+    design = CameraDesign(Q=Q, trace_cs_m2=v, Q_selection=Q_sel, selection_trace_cs_m2=v_sel, certificate=cert,
+                          efficiency=cert.efficiency(v), ipopt=run, source=source, check=chk, success=ok,
+                          status="feasible" if ok else "infeasible", nit=run.nit if run else 0,
+                          nfev=run.nfev if run else 0, time_s=time.perf_counter() - t0)
+    design.message = (f"{m} poses ({source}): tr C_s {v:.4g} m^2, {design.efficiency_text()}; independent check: "
+                      f"{int(chk.ok.sum())} of {m} poses see the board")
+    return design

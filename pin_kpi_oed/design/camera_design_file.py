@@ -53,7 +53,7 @@ def camera_design_document(cell: Cell, problem: Any, design: Any, held: Any, see
              "trace_cs_m2": design.trace_cs_m2, "held_trace_m2": held.trace_m2,
              "tcp_sigma_m": float(np.sqrt((design.trace_cs_m2 + held.trace_m2) / t)),
              "held": {"names": list(held.names), "contrib_m": np.asarray(held.contrib_m).tolist()},
-             "cov_s_m2": score.cov_s_m2.tolist(), "efficiency": design.efficiency, "source": design.source,
+             "cov_s_m2": score.cov_s_m2.tolist(), "efficiency": design.stated_efficiency, "source": design.source,
              "q_selection": design.Q_selection.tolist(), "selection_trace_cs_m2": design.selection_trace_cs_m2,
              "nit": design.nit, "time_s": design.time_s, "feasible": bool(design.success),
              "check": {"ok": chk.ok.tolist(), "corners_inside": chk.corners_inside.tolist(),

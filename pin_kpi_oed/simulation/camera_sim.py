@@ -19,7 +19,8 @@ from pin_kpi_oed.effects.compose import sum_joint_offsets
 from pin_kpi_oed.errors import InputError
 from pin_kpi_oed.model.camera import CameraModel
 
-__all__ = ["CameraTolerances", "camera_truth", "simulate_corners", "true_tcp"]
+__all__ = ["CameraTolerances", "camera_truth", "simulate_corners", "simulate_detections", "LOSS_CAUSES",
+           "lost_corners_text", "true_tcp"]
 
 
 @dataclass(frozen=True)
@@ -90,6 +91,28 @@ def simulate_corners(model: CameraModel, Q: np.ndarray, truth_p: np.ndarray, eff
     Returns:
         (m, 2N) px, NaN for a corner not detected.
     """
+    return simulate_detections(model, Q, truth_p, effects, seed)[0]
+
+
+#: Why the simulation loses a corner (:func:`simulate_detections`), in the order a corner is counted under.
+LOSS_CAUSES = ("behind the camera", "outside the image")
+
+
+def simulate_detections(model: CameraModel, Q: np.ndarray, truth_p: np.ndarray, effects: list | None = None,
+                        seed: int = 0) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+    """:func:`simulate_corners` with the count of the corners lost per cause.
+
+    Args:
+        model: the nominal camera model (its ``sigma_px`` is the noise); Q: commanded joints (m, n) rad.
+        truth_p: the true raw parameters; effects: [(effect, θ*)] the model lacks (joint offsets only).
+        seed: the noise's seed.
+
+    Returns:
+        ((m, 2N) px, NaN for a corner not detected; cause of :data:`LOSS_CAUSES` -> corners lost to it per
+        configuration, (m,) int, each lost corner counted once, under the first cause that holds). The simulation
+        loses corners to these causes only: not to a grazing viewing angle, nor to an obstacle between the camera
+        and the board.
+    """
     Q = np.atleast_2d(np.asarray(Q, float))
     Qt = Q + sum_joint_offsets(effects, Q)[0] if effects else Q
     X = model.camera_points(truth_p, Qt)
@@ -97,10 +120,30 @@ def simulate_corners(model: CameraModel, Q: np.ndarray, truth_p: np.ndarray, eff
     uv = uv + np.random.default_rng(seed).normal(0.0, model.sigma_px, uv.shape)
     k = model.intrinsics
     pix = uv.reshape(len(Q), -1, 2)
-    lost = (X[..., 2] <= 0) | (pix[..., 0] < 0) | (pix[..., 0] > k.width - 1) | (pix[..., 1] < 0) | (
-        pix[..., 1] > k.height - 1)
-    pix[lost] = np.nan
-    return pix.reshape(len(Q), -1)
+    behind = X[..., 2] <= 0
+    outside = ~behind & ((pix[..., 0] < 0) | (pix[..., 0] > k.width - 1) | (pix[..., 1] < 0)
+                         | (pix[..., 1] > k.height - 1))
+    pix[behind | outside] = np.nan
+    return pix.reshape(len(Q), -1), dict(zip(LOSS_CAUSES, (behind.sum(axis=1), outside.sum(axis=1))))
+
+
+def lost_corners_text(lost: dict[str, int], designed: bool) -> str:
+    """Why corners of the written images were not detected: a count per cause ("" when none was lost).
+
+    Args:
+        lost: cause -> corners lost to it (:func:`~pin_kpi_oed.simulation.camera_sim.simulate_detections`);
+        designed: the poses are a design's (checked to see every corner inside its image margin at nominal).
+
+    Returns:
+        "; corners lost: ..." naming each cause's count, why a design's corners go, and the causes not simulated.
+    """
+    if not sum(lost.values()):
+        return ""
+    why = (": the truth's joint, hand-eye and board errors move corners the design saw inside its image margin "
+           "at the nominal model" if designed else "")
+    counts = ", ".join(f"{n} {cause}" for cause, n in lost.items() if n)
+    return (f"; corners lost: {counts}{why} (none to the viewing angle or to occlusion: the simulation does not "
+            "model either)")
 
 
 def true_tcp(model: CameraModel, Q: np.ndarray, truth_p: np.ndarray, effects: list | None = None) -> np.ndarray:

@@ -207,9 +207,23 @@ class CheckResult(Result):
         rel = (a / b - 1.0) * 100
         if self.verdict == "robot_changed":
             return (f"re-fitted (expected TCP error {a * 1e3:.3f} mm, a re-calibration of the same design "
-                    f"{b * 1e3:.3f} mm: the re-fit within {max(rel, 0):.0f} %)")
+                    f"{b * 1e3:.3f} mm: the re-fit within {max(rel, 0):.0f} %{self.held_left_out_text()})")
         return (f"a re-calibration is better by {rel:.0f} % (expected TCP error {b * 1e3:.3f} mm against the "
-                f"re-fit's {a * 1e3:.3f} mm)")
+                f"re-fit's {a * 1e3:.3f} mm{self.held_left_out_text()})")
+
+    def held_left_out_text(self) -> str:
+        """The part of the TCP's σ no measurement determines, left out of both expected errors ("" when none).
+
+        Returns:
+            "; the X mm of the TCP's sigma that no measurement determines ... left out" with X the RMS over the
+            working configurations of :attr:`tcp_held_m` (mm), or "" when it is zero or unknown.
+        """
+        held = np.asarray(self.tcp_held_m, dtype=float)
+        if not held.size or not np.max(held) > 0:
+            return ""
+        rms = float(np.sqrt(np.mean(held ** 2)))
+        return (f"; the {rms * 1e3:.3f} mm of the TCP's sigma that no measurement determines (joint-placement "
+                "parameters held at their tolerance) is the same either way and left out")
 
     def undetermined_text(self) -> str:
         """What the check rows leave undetermined and the poses to add ("" when nothing)."""

@@ -61,7 +61,10 @@ class MonitorLog(Result):
         asks: per request for poses ``{row, reason, poses}`` (poses (k, n) rad: the check design's).
         events: the lines printed.
         model: the model at the end (the set-up filter's state applied to its station).
-        drift_level_m_per_sqrt_s: the set-up drift level most probable at the end; outliers: rows not used.
+        drift_level_m_per_sqrt_s: the set-up drift level most probable at the end (m/√s; m/√row when
+            ``timed`` is False); outliers: rows not used.
+        timed: the rows had a time column (not constant); without one the filter takes one second per row and the
+            drift level is per √row.
         time_per_row_s: wall time per row (prediction, filter and the checks).
         blocks: per block of :data:`BLOCK_ROWS` rows (the last one as long as it is) ``{first_row, last_row,
             z_rms}``: the standardised RMS of the rows predicted before use (honest within :data:`HONEST_BAND`).
@@ -80,6 +83,7 @@ class MonitorLog(Result):
     time_backwards: int = 0
     time_repeated: int = 0
     work_source: str = ""
+    timed: bool = True
     blocks: list = field(default_factory=list)
 
     def exit_code(self, fail_on: int = 3) -> int:
@@ -101,7 +105,11 @@ class MonitorLog(Result):
                 f"{len(self.asks)} requests for poses, standardised RMS {self.z_rms:.2f} (honest within 0.67-1.5), "
                 f"mean error {np.mean(self.error_m) * 1e3:.3f} mm, mean predicted sigma "
                 f"{np.mean(self.sigma_m) * 1e3:.3f} mm, set-up drift level {self.drift_level_m_per_sqrt_s * 1e9:.3g} "
-                f"nm/sqrt(s), {self.outliers} outlier rows, {self.time_per_row_s * 1e3:.1f} ms per row")
+                f"{self.drift_unit_text()}, {self.outliers} outlier rows, {self.time_per_row_s * 1e3:.1f} ms per row")
+
+    def drift_unit_text(self) -> str:
+        """The drift level's unit: nm/sqrt(s) with a time column, else per row (said so)."""
+        return "nm/sqrt(s)" if self.timed else "nm/sqrt(row) (no time column: one row taken as one second)"
 
     def block_text(self) -> str:
         """One line: the standardised RMS of every block of rows ("" without rows)."""
@@ -117,7 +125,7 @@ class MonitorLog(Result):
         return {**self.result_dict(), "rows": int(len(self.error_m)), "z_rms": self.z_rms, "blocks": self.blocks,
                 "error_m": self.error_m.tolist(), "sigma_m": self.sigma_m.tolist(), "batches": self.batches,
                 "asks": [{**a, "poses": np.asarray(a["poses"]).tolist()} for a in self.asks],
-                "events": self.events, "drift_level_m_per_sqrt_s": self.drift_level_m_per_sqrt_s,
+                "events": self.events, "drift_level_m_per_sqrt_s": self.drift_level_m_per_sqrt_s, "timed": self.timed,
                 "outliers": self.outliers, "time_per_row_s": self.time_per_row_s,
                 "time_backwards": self.time_backwards, "time_repeated": self.time_repeated,
                 "work_source": self.work_source, "exit_code": self.exit_code()}
@@ -166,6 +174,7 @@ class Monitor:
         self.t_last: float | None = None
         self.t_first: float | None = None
         self.t_constant = False
+        self.untimed = False
         self.time_counts = {"backwards": 0, "repeated": 0}
         self.blocks_done = 0
         self.block_list: list = []
@@ -252,6 +261,7 @@ class Monitor:
         """The rows' times for the set-up filter (None: one second per row), rows whose time goes backwards or repeats
         named (the first :data:`TIME_LINES`, then counted); a time column constant over 10 rows is taken as none."""
         if data.time_s is None:
+            self.untimed = True
             return [None] * len(data)
         out = []
         for i, t in enumerate(np.asarray(data.time_s, float)):
@@ -389,7 +399,8 @@ class Monitor:
                           drift_level_m_per_sqrt_s=self.filter.level_m_per_sqrt_s if self.filter else 0.0,
                           outliers=self.filter.outliers if self.filter else 0,
                           time_backwards=self.time_counts["backwards"], time_repeated=self.time_counts["repeated"],
-                          work_source=self.work_source, blocks=list(self.block_list),
+                          work_source=self.work_source, timed=not (self.untimed or self.t_constant),
+                          blocks=list(self.block_list),
                           time_per_row_s=self.busy_s / max(self.seen, 1), success=True, status="monitored",
                           message=f"{len(self.batches)} checks of {self.every} rows or more",
                           time_s=time.perf_counter() - self.t0)

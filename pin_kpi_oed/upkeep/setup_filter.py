@@ -24,6 +24,12 @@ forgetting factor λ (memory ≈ 1/(1 − λ) rows); the prediction is the mixtu
 softmax(log-likelihood) — the posterior over the levels —, its covariance the mixture's (the spread of the filters'
 means included). A row whose innovation is beyond χ²₃ at 1 − 10⁻⁴ against the mixture is an outlier: predicted and
 counted, not used.
+
+Every filter of the bank starts from the same prior on the set-up correction, P₀ = s₀² D (s₀ =
+:data:`SETUP_PRIOR_M`): the set-up the rows are measured in is not exactly the model's (its registration's own error,
+a tracker set up again), and a constant offset must be absorbed alike by every level — with P₀ = 0 only a level
+whose walk accumulates that offset over the memory could follow it, and a set-up that does not move would be scored
+as drifting (about 1 µm/√row for an offset of tens of µm over a few hundred rows).
 """
 
 from __future__ import annotations
@@ -36,6 +42,8 @@ __all__ = ["SetupFilter", "LEVELS_M_PER_SQRT_S"]
 
 #: Random-walk levels of the set-up's drift the bank holds (m/√s): none, then 1 nm/√s .. 10 µm/√s.
 LEVELS_M_PER_SQRT_S = (0.0, 1e-9, 1e-8, 3e-8, 1e-7, 3e-7, 1e-6, 1e-5)
+#: σ of the set-up's prior offset at the rows (m): every level's starting covariance s₀² D (module docstring).
+SETUP_PRIOR_M = 1e-4
 #: Innovations beyond this χ²₃ value (1 − 10⁻⁴) are outliers: not used for the update.
 OUTLIER_CHI2 = 21.108
 
@@ -48,6 +56,7 @@ class SetupFilter:
         lever_m: L, the rows' typical distance from the tracker (m): rotation noise q/L.
         forgetting: λ of the levels' log-likelihoods, in (0, 1].
         levels: the random-walk levels (m/√s).
+        prior_m: s₀, the σ of the set-up's offset before the first row (m; rotations s₀/L).
         x: per level the state (k, 6); P: per level its covariance (k, 6, 6); loglik: per level (k,).
         outliers: rows not used for the update; rows: rows seen.
     """
@@ -55,6 +64,7 @@ class SetupFilter:
     lever_m: float
     forgetting: float = 0.995
     levels: tuple = LEVELS_M_PER_SQRT_S
+    prior_m: float = SETUP_PRIOR_M
     x: np.ndarray = field(init=False)
     P: np.ndarray = field(init=False)
     loglik: np.ndarray = field(init=False)
@@ -65,9 +75,9 @@ class SetupFilter:
     def __post_init__(self) -> None:
         k = len(self.levels)
         self.x = np.zeros((k, 6))
-        self.P = np.zeros((k, 6, 6))
         self.loglik = np.zeros(k)
         self.D = np.diag([1.0, 1.0, 1.0] + [1.0 / self.lever_m ** 2] * 3)
+        self.P = np.repeat((self.prior_m ** 2 * self.D)[None], k, axis=0)
         self.q2 = np.asarray(self.levels, float) ** 2
 
     @property
