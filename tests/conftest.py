@@ -98,6 +98,9 @@ def pytest_terminal_summary(terminalreporter):
 # ---------------------------------------------------------------------- make test-fast: the change-test loop
 #: Each test's CPU time (s) as the last runs measured it: written at the end of every run, read by ``--fast``.
 CPU_RECORD = REPO / ".pytest_cpu.json"
+#: The CPU times (s) of one full run, kept with the tests: what ``--fast`` reads on a fresh clone (the local record,
+#: where a test has one, wins).
+CPU_BASELINE = REPO / "tests" / "cpu_baseline.json"
 
 
 def pytest_addoption(parser):
@@ -107,13 +110,18 @@ def pytest_addoption(parser):
     parser.addoption("--fast-budget", type=float, default=0.5, help="--fast: largest CPU time of a test kept (s)")
 
 
-def _record() -> dict[str, float]:
+def _read_times(path) -> dict[str, float]:
     import json
 
     try:
-        return {str(k): float(v) for k, v in json.loads(CPU_RECORD.read_text()).items()}
+        return {str(k): float(v) for k, v in json.loads(path.read_text()).items()}
     except (OSError, ValueError, AttributeError):
         return {}
+
+
+def _record() -> dict[str, float]:
+    """The local record of each test's CPU time (s) over the kept baseline."""
+    return {**_read_times(CPU_BASELINE), **_read_times(CPU_RECORD)}
 
 
 def pytest_collection_modifyitems(config, items):
@@ -134,7 +142,7 @@ def pytest_sessionfinish(session):
     import json
     import os
 
-    merged = {**_record(), **_CPU}
+    merged = {**_read_times(CPU_RECORD), **_CPU}
     tmp = CPU_RECORD.with_name(f"{CPU_RECORD.name}.{os.getpid()}")
     try:
         tmp.write_text(json.dumps(dict(sorted(merged.items())), indent=0))
