@@ -23,7 +23,7 @@ from pin_kpi_oed.viz.ellipsoids import fmt_factor
 from pin_kpi_oed.viz.figures import design_figures
 from pin_kpi_oed.viz.scene import build_scene
 
-#: --quick (or PIN_KPI_OED_QUICK=1): the examples test runs a smaller problem
+#: --quick (or PIN_KPI_OED_QUICK=1): the examples test runs a smaller problem (fewer poses, one IPOPT start)
 quick = os.environ.get("PIN_KPI_OED_QUICK") == "1" or "--quick" in sys.argv[1:]
 args = [a for a in sys.argv[1:] if not a.startswith("--")]
 if args:
@@ -34,8 +34,9 @@ else:
         from pin_kpi_oed.cli.app import main as cli
 
         m = 30 if quick else 60
+        knobs = ["--starts", "1", "--max-iter", "80"] if quick else []  # quick: one IPOPT start, fewer iterations
         rc = cli(["design", "--cell", "kr15", "--criteria", "random,param,kpi", "--measurements", str(m),
-                  "--seed", "0", "--json", str(design_json)])
+                  "--seed", "0", "--json", str(design_json), *knobs])
     except Exception as exc:  # the design optimiser is not available: preview random designs instead
         print(f"design step not available ({exc}); using a stand-in")
         rc = 1

@@ -321,9 +321,11 @@ def test_real_ur10_joint_bcd_and_transfer(tmp_path):
     """B + C + D in one calibration (three stations); C calibrated, transferred to D on 60 re-registered rows."""
     for s in "BCD":
         assert _cli("import-ipa", IPA / f"Series_{s}", "--position-only", "--out", tmp_path / f"{s}.csv") == 0
+    # the joint three-station fit is the point here, not the discrepancy on its 4,900 rows (most of this test's cost;
+    # the parametric fit's figures do not depend on it)
     assert _cli("identify", "--robot", "ur10", "--data", tmp_path / "B.csv", "--data", tmp_path / "C.csv", "--data",
-                tmp_path / "D.csv", "--reflector", "0,0,0.109", "--sigma", "1e-4", "--model-out", tmp_path / "m.json",
-                "--quiet") == 0
+                tmp_path / "D.csv", "--reflector", "0,0,0.109", "--sigma", "1e-4", "--discrepancy", "none",
+                "--model-out", tmp_path / "m.json", "--quiet") == 0
     cm = load_model_file(tmp_path / "m.json")
     assert cm.stations == ["B", "C", "D"] and 0.40e-3 < cm.fit["mean_m"] < 0.50e-3
     assert _cli("identify", "--robot", "ur10", "--data", tmp_path / "C.csv", "--validate", tmp_path / "D.csv",
