@@ -55,7 +55,7 @@ from pathlib import Path
 import numpy as np
 import pinocchio as pin
 
-from benchmarks.camera_handeye import CHI2_3_95, LOOK_DOWN, METHODS, pose_error, truth
+from benchmarks.camera_handeye import CHI2_3_95, LOOK_DOWN, METHODS, opencv_hand_eye, pose_error, truth
 
 SETUPS = ("ur5:eye_in_hand", "ur5:eye_to_hand", "panda:eye_in_hand", "panda:eye_to_hand")
 M = 15
@@ -102,34 +102,6 @@ def set_up(name: str, mode: str):
     skip += [(n.split("@")[0], "table") for i, n in enumerate(coll.names) if "@table" in n and g[i] < 0]
     cell = camera_cell(rb, half_spaces=[tab], skip_pairs=fixed + skip, capsules=caps)
     return model, q0, cell, ViewLimits(margin_px=20.0, max_angle_deg=60.0, near_m=0.15, far_m=2.0)
-
-
-def opencv_hand_eye(model, Q: np.ndarray, uv: np.ndarray) -> dict[str, pin.SE3]:
-    """The hand-eye transform by ``cv2.calibrateHandEye`` (each method): tool_T_camera (eye-in-hand), or
-    camera_T_base (eye-to-hand: the flange poses inverted, OpenCV's eye-to-hand use), from solvePnP per image."""
-    import cv2
-
-    from pin_kpi_oed.model.kinematics import Chain
-
-    kin = Chain.from_robot(model.robot).tool_point(Q, np.zeros(3))
-    obj = model.board.corners()
-    K, dist = model.intrinsics.matrix(), model.intrinsics.dist
-    Rt, tt = [], []
-    for i in range(len(Q)):
-        _, rvec, tvec = cv2.solvePnP(obj, uv[i].reshape(-1, 1, 2), K, dist, flags=cv2.SOLVEPNP_ITERATIVE)
-        Rt.append(cv2.Rodrigues(rvec)[0])
-        tt.append(tvec.ravel())
-    if model.eye_in_hand:
-        Rg, tg = list(kin.R_tool), list(kin.p)
-    else:
-        Rg = [R.T for R in kin.R_tool]
-        tg = [-R.T @ p for R, p in zip(kin.R_tool, kin.p)]
-    out = {}
-    for m in METHODS:
-        R, t = cv2.calibrateHandEye(Rg, tg, Rt, tt, method=getattr(cv2, f"CALIB_HAND_EYE_{m}"))
-        T = pin.SE3(R, t.ravel())
-        out[m] = T if model.eye_in_hand else T.inverse()  # eye-to-hand: OpenCV returns base_T_camera
-    return out
 
 
 def score(model, base, Q, p, eff, theta, Qw, seed, held, sig_held, he_truth) -> dict:

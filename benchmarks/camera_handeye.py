@@ -89,7 +89,9 @@ def truth(model, rng: np.random.Generator) -> np.ndarray:
 
 
 def opencv_hand_eye(model, Q: np.ndarray, uv: np.ndarray) -> dict[str, pin.SE3]:
-    """tool_T_camera by cv2.calibrateHandEye (each method) from the images: solvePnP per image, nominal flanges."""
+    """The hand-eye transform by ``cv2.calibrateHandEye`` (each method) from the images, solvePnP per image and the
+    nominal flanges: tool_T_camera (eye-in-hand), or camera_T_base (eye-to-hand: the flange poses inverted, OpenCV's
+    eye-to-hand use)."""
     import cv2
 
     from pin_kpi_oed.model.kinematics import Chain
@@ -104,11 +106,16 @@ def opencv_hand_eye(model, Q: np.ndarray, uv: np.ndarray) -> dict[str, pin.SE3]:
             raise RuntimeError(f"solvePnP failed on image {i}")
         Rt.append(cv2.Rodrigues(rvec)[0])
         tt.append(tvec.ravel())
+    if model.eye_in_hand:
+        Rg, tg = list(kin.R_tool), list(kin.p)
+    else:
+        Rg = [R.T for R in kin.R_tool]
+        tg = [-R.T @ p for R, p in zip(kin.R_tool, kin.p)]
     out = {}
     for m in METHODS:
-        R, t = cv2.calibrateHandEye(list(kin.R_tool), list(kin.p), Rt, tt,
-                                    method=getattr(cv2, f"CALIB_HAND_EYE_{m}"))
-        out[m] = pin.SE3(R, t.ravel())
+        R, t = cv2.calibrateHandEye(Rg, tg, Rt, tt, method=getattr(cv2, f"CALIB_HAND_EYE_{m}"))
+        T = pin.SE3(R, t.ravel())
+        out[m] = T if model.eye_in_hand else T.inverse()  # eye-to-hand: OpenCV returns base_T_camera
     return out
 
 
