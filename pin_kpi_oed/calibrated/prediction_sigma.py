@@ -362,9 +362,7 @@ def _base_blocks(cm: Any, Q: np.ndarray, aux: Any, station: str | None, labels: 
     Cb = np.einsum("na,ab->nab", V, np.eye(3))
     for lab in dict.fromkeys(labels):
         rows = np.flatnonzero(labels == lab)
-        if d is None:
-            Cb[rows] += _fit_parametric(cm, lab, Q[rows], point)
-        elif _orientation_informed(cm, d, point):
+        if d is None or _orientation_informed(cm, d, point):
             Cb[rows] += _fit_parametric(cm, lab, Q[rows], point)
         elif d.param_cov is not None or d.param_cov_ls is not None:
             E = _discrepancy_jacobian(cm, d, lab, Q[rows], point)
