@@ -13,8 +13,8 @@ placement of the tool frame in the last joint frame. The geometric errors of
 
 Joints that hang off the end effector (gripper fingers, as on the Panda) and joints that branch off the
 chain to the tool (Baxter's other arm and head, the legs of a legged base under an arm) are locked at their
-neutral value clipped into their limits: their links stay in the model, and in its collision geometry, at that posture. A continuous joint
-(a revolute joint without stops) is read as a revolute joint with limits ±2π rad
+neutral value clipped into their limits: their links stay in the model, and in its collision geometry, at that
+posture. A continuous joint (a revolute joint without stops) is read as a revolute joint with limits ±2π rad
 (:mod:`pin_kpi_oed.model.urdf_joints`). Both are said in :attr:`Robot.notes`.
 
 Joints are revolute (values in rad) or prismatic (values in m, e.g. a linear track); the type
