@@ -22,11 +22,11 @@ demo: $(STAMP)
 test: $(STAMP)
 	$(PY) -m ruff check pin_kpi_oed tests
 	$(PY) -m mypy pin_kpi_oed
-	$(PY) -m pytest -n 2 -q --durations=15
+	$(PY) -m pytest -n 2 --dist loadgroup -q --durations=15
 
 test-fast: $(STAMP)
 	$(PY) -m ruff check pin_kpi_oed tests
-	$(PY) -m pytest -n 2 -q --fast
+	$(PY) -m pytest -n 2 --dist loadgroup -q --fast
 
 bench: $(STAMP)
 	$(PY) -m benchmarks
