@@ -23,7 +23,7 @@ import yaml
 
 from pin_kpi_oed.cell.cell import CELL_DIR, load_cell
 from pin_kpi_oed.cell.feasibility import FeasibilityChecker
-from pin_kpi_oed.design.optimize import run_designs
+from pin_kpi_oed.design.optimize import DesignOptions, ipopt_options, run_designs
 
 #: --quick (or PIN_KPI_OED_QUICK=1): smaller sizes, the same steps (the tests' run)
 QUICK = os.environ.get("PIN_KPI_OED_QUICK") == "1" or "--quick" in sys.argv[1:]
@@ -64,7 +64,9 @@ print(f"working target solved by IK: q = {np.round(np.degrees(q), 2).tolist()} d
       f"TCP error {np.linalg.norm(tcp - np.array(d['working_targets'][0]['xyz_m'])) * 1e9:.3f} nm")
 
 # 3. a KPI design in this cell; the independent check sees the bracket itself
-results = run_designs(cell, ["random", "kpi"], a.measurements, 0)
+# quick: a smaller pool for the first start and fewer Ipopt iterations (the full run: the defaults)
+opts = DesignOptions(pool_size=300, ipopt=ipopt_options(max_iter=40)) if QUICK else None
+results = run_designs(cell, ["random", "kpi"], a.measurements, 0, opts)
 chk = FeasibilityChecker(cell)
 for r in results:
     dist = chk.distances(r.q_meas)

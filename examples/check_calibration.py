@@ -9,7 +9,8 @@ re-fitted change with its standard deviation. Ten rows near one pose are judged 
 ``monitor`` follows 300 rows measured during work while the tracker drifts by 20 µm per hour (each row predicted
 before it is used, the set-up filter's drift level estimated from the rows).
 
-Run:  python examples/check_calibration.py [--seed 0]
+Run:  python examples/check_calibration.py [--seed 0]   (``--quick`` or PIN_KPI_OED_QUICK=1: the same steps, 120 rows
+monitored)
 (the same with the command line: ``pin-kpi-oed check design --model M --out poses.csv``, then
 ``pin-kpi-oed check --model M --data rows.csv --json verdict.json --model-out refit.json``)
 """
@@ -18,6 +19,8 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import os
+import sys
 
 import numpy as np
 import pinocchio as pin
@@ -30,11 +33,15 @@ from pin_kpi_oed.upkeep.monitoring import monitor
 from pin_kpi_oed.studies.check_events import simulated_model
 
 SIGMA = 2e-5
+#: --quick (or PIN_KPI_OED_QUICK=1): smaller sizes, the same steps (the tests' run)
+QUICK = os.environ.get("PIN_KPI_OED_QUICK") == "1" or "--quick" in sys.argv[1:]
 
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--quick", action="store_true", help="smaller sizes, the same steps")
+    ap.add_argument("--monitored", type=int, default=120 if QUICK else 300, help="rows measured during work")
     args = ap.parse_args(argv)
     rb = load_robot("ur10")
     rng = np.random.default_rng(args.seed)
@@ -59,12 +66,13 @@ def main(argv: list[str] | None = None) -> int:
                           source="near one pose")
     r = check_calibration(model, near, seed=args.seed)
     print(f"rows near one pose: {r.summary()}")
-    # monitoring during work: 300 rows, the tracker drifting 20 µm per hour in x, one row a minute
-    Qm = 0.7 * rng.uniform(rb.q_lower, rb.q_upper, size=(300, rb.nq))
-    t = 60.0 * np.arange(300)
+    # monitoring during work: --monitored rows (300), the tracker drifting 20 µm per hour in x, one row a minute
+    n = args.monitored
+    Qm = 0.7 * rng.uniform(rb.q_lower, rb.q_upper, size=(n, rb.nq))
+    t = 60.0 * np.arange(n)
     Ym = np.vstack([model.with_setup("A", dataclasses.replace(model.setups["A"], tracker_T_base=(
         pin.SE3(model.setups["A"].tracker_T_base) * pin.exp6(np.r_[2e-5 * ti / 3600, 0, 0, 0, 0, 0])).homogeneous))
-        .predict(q[None], station="A") for q, ti in zip(Qm, t)]) + rng.normal(size=(300, 3)) * SIGMA
+        .predict(q[None], station="A") for q, ti in zip(Qm, t)]) + rng.normal(size=(n, 3)) * SIGMA
     log = monitor(model, MeasurementSet(list(rb.joint_names), Qm, Ym, time_s=t, source="work"), every=10)
     print(log.summary())
     return 0

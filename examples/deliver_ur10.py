@@ -8,11 +8,14 @@ Steps (Python API; the command-line equivalents are in docs/deliver.md):
 3. identification, the model file (with the data files it was fitted on, so the certificate can check them);
 4. the certificate (HTML, JSON) and ``export_model(..., "ur-yaml")``, read back within 1e-9 m before it is written.
 
-Run: ``python examples/deliver_ur10.py`` (writes into the current folder).
+Run: ``python examples/deliver_ur10.py`` (writes into the current folder; ``--quick`` or PIN_KPI_OED_QUICK=1: the same
+steps on 120 training and 60 held-out rows).
 """
 
 from __future__ import annotations
 
+import os
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -24,6 +27,10 @@ from pin_kpi_oed.data.provenance import file_record
 from pin_kpi_oed.simulation.simulator import default_tracker_pose
 from pin_kpi_oed.model.ur_kinematics import UR_KINEMATICS_DIR
 
+#: --quick (or PIN_KPI_OED_QUICK=1): smaller sizes, the same steps (the tests' run)
+QUICK = os.environ.get("PIN_KPI_OED_QUICK") == "1" or "--quick" in sys.argv[1:]
+N_TRAIN, N_HELD = (120, 60) if QUICK else (240, 120)
+
 factory = UR_KINEMATICS_DIR / "ur10.yaml"   # your robot's file from ur_calibration
 robot = load_robot("ur10", kinematics=factory)
 print(f"nominal model: {robot.name} with kinematics {robot.kinematics.hash}")
@@ -34,7 +41,7 @@ tm = TrackerModel(robot, tracker_T_base=default_tracker_pose(robot), reflector_m
 base = [i for i in analyse(tm).base if i < 6 * robot.nq]
 truth = random_truth(tm, Tolerances(5e-4, 1e-3, 0.01, 0.01), seed=4, only=base)
 rng = np.random.default_rng(2)
-for name, n, seed in (("train", 240, 5), ("held", 120, 6)):
+for name, n, seed in (("train", N_TRAIN, 5), ("held", N_HELD, 6)):
     write_measurements(simulate(tm, robot.random_q(rng, n), truth, seed=seed, record_sigma=False), f"ur10_{name}.csv")
 
 from pin_kpi_oed import read_measurements  # noqa: E402  (after the files exist)

@@ -14,7 +14,7 @@ import sys
 
 from pin_kpi_oed.cell.cell import load_cell
 from pin_kpi_oed.design.optimality import certify
-from pin_kpi_oed.design.optimize import DesignProblem, run_designs
+from pin_kpi_oed.design.optimize import DesignOptions, DesignProblem, ipopt_options, run_designs
 
 #: --quick (or PIN_KPI_OED_QUICK=1): smaller sizes, the same steps (the tests' run)
 QUICK = os.environ.get("PIN_KPI_OED_QUICK") == "1" or "--quick" in sys.argv[1:]
@@ -28,7 +28,9 @@ a = ap.parse_args()
 cell = load_cell("kr15")  # or a path to your own cell YAML
 print(cell.summary())
 problem = DesignProblem(cell)
-results = run_designs(cell, ["random", "param", "kpi"], a.measurements, a.seed, problem=problem)
+# quick: a smaller pool for the first start and fewer Ipopt iterations (the full run: the defaults)
+opts = DesignOptions(pool_size=300, ipopt=ipopt_options(max_iter=40)) if QUICK else None
+results = run_designs(cell, ["random", "param", "kpi"], a.measurements, a.seed, opts, problem)
 cert = certify(problem, a.measurements, pool_size=1000 if QUICK else 5000, seed=a.seed,
                extra=[r.q_meas for r in results])
 heur = results[0]

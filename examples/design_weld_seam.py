@@ -17,7 +17,7 @@ import sys
 import yaml
 
 from pin_kpi_oed.cell.cell import CELL_DIR, cell_from_dict, load_cell
-from pin_kpi_oed.design.optimize import DesignProblem, run_designs
+from pin_kpi_oed.design.optimize import DesignOptions, DesignProblem, ipopt_options, run_designs
 from pin_kpi_oed.design.path_profile import path_profile
 from pin_kpi_oed.errors import InputError
 
@@ -33,7 +33,9 @@ a = ap.parse_args()
 cell = load_cell("kr15_seam")
 print(cell.summary())
 problem = DesignProblem(cell)
-results = run_designs(cell, ["random", "kpi", "kpi_path", "kpi6"], a.measurements, a.seed, problem=problem)
+# quick: a smaller pool for the first start and fewer Ipopt iterations (the full run: the defaults)
+opts = DesignOptions(pool_size=300, ipopt=ipopt_options(max_iter=40)) if QUICK else None
+results = run_designs(cell, ["random", "kpi", "kpi_path", "kpi6"], a.measurements, a.seed, opts, problem)
 for r in results:
     p = path_profile(problem, r.q_meas, cell.q_path, cell.orientation_length_m)
     print(f"{r.criterion:<9} along the seam: TCP sigma RMS {p['rms_sigma_pos_m'] * 1e6:6.3f} um, worst "

@@ -41,13 +41,16 @@ a = ap.parse_args()
 cell = load_cell("kr15")
 design_cell = with_margins(cell, clearance_margin_m=0.02, incidence_margin_deg=1.0)
 problem = DesignProblem(design_cell)
-opts = DesignOptions(n_starts=1 if QUICK else 2, ipopt=ipopt_options(max_iter=100 if QUICK else 500))
+# quick: one start from a pool of 300 candidates, at most 40 Ipopt iterations
+opts = (DesignOptions(n_starts=1, pool_size=300, ipopt=ipopt_options(max_iter=40)) if QUICK
+        else DesignOptions(n_starts=2, ipopt=ipopt_options(max_iter=500)))
 kpi = run_designs(design_cell, ["kpi"], a.measurements, a.seed, opts, problem)[-1]
 rep = FeasibilityChecker(cell).check(kpi.q_meas)  # the true cell
 print(f"KPI design: {a.measurements} poses, TCP sigma {kpi.tcp_sigma_m * 1e6:.3f} um; true clearance >= "
       f"{rep.clearance_m.min() * 1e3:.1f} mm, incidence <= {rep.incidence_deg.max():.1f} deg (limit 30)")
 
-prog = plan_program(cell, kpi.q_meas, ProgramOptions(margin_m=0.01, seed=a.seed))
+# quick: fewer safe via poses sampled for the repairs of colliding moves
+prog = plan_program(cell, kpi.q_meas, ProgramOptions(margin_m=0.01, seed=a.seed, via_pool=100 if QUICK else 300))
 print(prog.summary())
 info = ProgramInfo(cell=cell.name, design=f"examples/program_kr15.py (kpi, seed {a.seed})", robot=cell.robot.name,
                    joint_names=list(cell.robot.joint_names), revolute=np.asarray(cell.robot.is_revolute, bool),

@@ -19,7 +19,7 @@ QUICK = os.environ.get("PIN_KPI_OED_QUICK") == "1" or "--quick" in sys.argv[1:]
 ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
 ap.add_argument("--quick", action="store_true", help="smaller sizes, the same steps")
 ap.add_argument("--arms", type=int, default=2)
-ap.add_argument("--measurements", type=int, default=20 if QUICK else 60)
+ap.add_argument("--measurements", type=int, default=10 if QUICK else 60)
 ap.add_argument("--out", default="study_out")
 a = ap.parse_args()
 

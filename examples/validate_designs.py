@@ -30,7 +30,7 @@ from pathlib import Path
 import numpy as np
 from pin_kpi_oed import NoiseModel, TrackerModel, load_robot
 from pin_kpi_oed.cell.cell import load_cell
-from pin_kpi_oed.design.optimize import run_designs
+from pin_kpi_oed.design.optimize import DesignOptions, ipopt_options, run_designs
 from pin_kpi_oed.data.atomic import atomic_write_json
 from pin_kpi_oed.data.ipa import import_ipa
 from pin_kpi_oed.studies.design_trials import monte_carlo, real_data_validation
@@ -44,7 +44,7 @@ def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="smaller sizes, the same steps")
     ap.add_argument("--splits", type=int, default=2 if QUICK else 20)
-    ap.add_argument("--reps", type=int, default=40 if QUICK else 200)
+    ap.add_argument("--reps", type=int, default=20 if QUICK else 200)
     ap.add_argument("--series", type=Path, default=SERIES_C)
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--json", type=Path, default=None)
@@ -68,7 +68,9 @@ def main() -> int:
 
     # the KPI design of the KR 15 cell (60 poses), then simulated identifications of it
     cell = load_cell("kr15")
-    kpi = run_designs(cell, ["kpi"], 30 if QUICK else 60, a.seed)[-1]
+    # quick: 30 poses, a pool of 300 candidates for the first start, at most 40 Ipopt iterations
+    opts = DesignOptions(pool_size=300, ipopt=ipopt_options(max_iter=40)) if QUICK else None
+    kpi = run_designs(cell, ["kpi"], 30 if QUICK else 60, a.seed, opts)[-1]
     model = cell.tracker_model()
     model.noise = NoiseModel(sigma_xyz_m=(1e-5,) * 3)  # a 10 um tracker (ratios do not depend on sigma)
     mc = monte_carlo(model, kpi.q_meas, cell.q_work, n_rep=a.reps, seed=a.seed)
@@ -82,7 +84,7 @@ def main() -> int:
         ur10 = TrackerModel(load_robot("ur10"), reflector_m=np.array([0.0, 0.0, 0.109]),
                             noise=NoiseModel(sigma_xyz_m=(5e-5,) * 3))
         if QUICK:
-            data = data.subset(np.arange(400))
+            data = data.subset(np.arange(200))
         rd = real_data_validation(ur10, data, n_splits=a.splits, seed=a.seed)
         print(rd.summary())
         out["real_data"] = rd.to_dict()
