@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 import pinocchio as pin
 import pytest
@@ -34,16 +36,24 @@ def test_positions_on_the_diagonal_plane_at_the_standard_fractions():
         assert np.allclose(np.cross(P[k + 1] - corners[k], centre - corners[k]), 0.0, atol=1e-12)
 
 
+@functools.cache
+def _planned(name: str, side_m: float):
+    """The cell and its planned cube of the given side (m), planned once per process: the UR10's 0.12 m cube is
+    both a shipped-cell test and the simulated robot's test (xdist group ``test_iso9283_planned``)."""
+    cell = load_cell(name)
+    return cell, plan_iso_cube(cell, side_m=side_m)
+
+
 def _moves_clear(cell, test) -> bool:
     tc = TransitionChecker(cell)
     loop = [0, 4, 3, 2, 1, 0]
     return all(tc.check(test.q[a], test.q[b]).clear for a, b in zip(loop[:-1], loop[1:]))
 
 
+@pytest.mark.xdist_group("test_iso9283_planned")
 @pytest.mark.parametrize("name, side", [("ur10", 0.12), ("kr15", 0.08)])
 def test_shipped_cells_plan_a_collision_free_test(name, side):
-    cell = load_cell(name)
-    test = plan_iso_cube(cell, side_m=side)
+    cell, test = _planned(name, side)
     assert test.side_m == side and test.shift_m == 0.0  # fits on the working configurations' mean TCP
     rep = FeasibilityChecker(load_cell(name)).check(test.q)  # a fresh, independent checker
     assert rep.feasible.all() and rep.collision_free.all(), rep.violations()
@@ -98,19 +108,23 @@ def test_cli_writes_the_program_and_refuses_an_unknown_suffix(tmp_path, capsys):
     assert "unknown program suffix" in capsys.readouterr().err
 
 
+@pytest.mark.xdist_group("test_iso9283_planned")
 def test_planned_cube_on_a_simulated_robot_gives_the_hand_computed_ap_and_rp():
-    """The UR10 cell's planned cube (0.3 m, 30 cycles) run by a simulated robot that is not the nominal one
+    """The UR10 cell's planned cube (30 cycles) run by a simulated robot that is not the nominal one
     (joint-placement errors) with 20 µm of repeatability noise per sample: AP, vAP and RP of the module against the
     standard's formulas written out here (AP_j = ‖x̄_j − x_c,j‖; RP_l = l̄ + 3 S_l, l_i = ‖x_i − x̄‖), and the
-    figures where they must be: AP of the size of the robot's error at the cube, RP a few times the noise."""
+    figures where they must be: AP of the size of the robot's error at the cube, RP a few times the noise.
+
+    The cube is the 0.12 m one the shipped-cell test plans (on the working configurations' mean TCP, no centre
+    search): the formulas and the figures' sizes do not depend on the side, and five positions of 30 cycles each
+    are what the standard's statistics need."""
     from types import SimpleNamespace
 
     from pin_kpi_oed.report.iso9283 import direction_keys, goal_groups
     from pin_kpi_oed.report.iso_commanded import commanded_figures
     from pin_kpi_oed.simulation.simulator import random_truth
 
-    cell = load_cell("ur10")
-    test = plan_iso_cube(cell, side_m=0.3)
+    cell, test = _planned("ur10", 0.12)
     Q, idx = test.cycle_poses()
     tm = cell.tracker_model()
     truth = random_truth(tm, seed=3)
