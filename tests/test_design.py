@@ -327,16 +327,19 @@ def test_api_writes_the_design_file_view_and_export_read(problem, tmp_path):
 
 def test_cli_json_is_the_library_run_written(tmp_path):
     """``design --json`` and ``pko.write_design`` of the same run (``design_run`` with the same settings) write
-    the same file: the same keys and numbers, wall times apart; ``demo`` goes through the same calls."""
+    the same file: the same keys and numbers, wall times apart; ``demo`` goes through the same calls. The designs
+    start from the heuristic design (``--start random``, ``start="random"``): the option reaches the settings like
+    the others, and the pool start's 1,000 candidates per run are left to the ``--given`` case below."""
     import pin_kpi_oed as pko
     from pin_kpi_oed.cli.app import main
 
     args = ["--cell", "kr15", "--criteria", "random,kpi", "--measurements", "14", "--starts", "1", "--max-iter", "15",
-            "--certificate", "--pool-size", "300", "--clearance-margin", "0.01", "--seed", "2", "--quiet"]
+            "--start", "random", "--certificate", "--pool-size", "300", "--clearance-margin", "0.01", "--seed", "2",
+            "--quiet"]
     assert main(["design", *args, "--json", str(tmp_path / "cli.json")]) == 0
     settings = pko.DesignSettings(criteria=("random", "kpi"), measurements=14, seed=2, n_starts=1, max_iter=15,
-                                  certificate=True, certificate_pool_size=300, clearance_margin_m=0.01,
-                                  incidence_margin_deg=1.0)
+                                  start="random", certificate=True, certificate_pool_size=300,
+                                  clearance_margin_m=0.01, incidence_margin_deg=1.0)
     run = pko.design_run(pko.load_cell("kr15"), settings)
     pko.write_design(tmp_path / "api.json", run)
     cli, api = (json.loads((tmp_path / f"{n}.json").read_text()) for n in ("cli", "api"))
