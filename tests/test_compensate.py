@@ -245,7 +245,10 @@ def test_read_targets_refusals(tmp_path):
 @needs_ipa
 def test_real_ur10_compensated_predictions_match_held_out_rows():
     """Second route to the model's held-out error: commanded joints -> where the compensation module says the TCP
-    goes, against the measured positions of held-out IPA rows; and the measured points compensated back."""
+    goes, against the measured positions of held-out IPA rows; and the measured points of 200 of those rows (spread
+    evenly over the series) compensated back: each an IK with a branch search, the test's whole cost; 200 still
+    tell a share of 95 % "ok" from one of 90 % (the binomial standard error is 1.5 %), and the identity of the
+    moved distance holds row by row."""
     from pin_kpi_oed.data.ipa import import_ipa
     from pin_kpi_oed.upkeep.transfer import registration_split
 
@@ -259,15 +262,17 @@ def test_real_ur10_compensated_predictions_match_held_out_rows():
     v = validate(cm, held)
     e = np.linalg.norm(forward(cm, held.q, held) - held.position_m, axis=1)
     assert abs(e.mean() - v["mean_m"]) < 1e-12 and v["mean_m"] < 1e-3
-    ts = TargetSet([str(i) for i in range(len(held))], held.position_m, None, held.q, list(robot.joint_names),
-                   held, "held")
+    pick = np.unique(np.linspace(0, len(held) - 1, 200).astype(int))
+    part = held.subset(pick)
+    ts = TargetSet([str(i) for i in range(len(part))], part.position_m, None, part.q, list(robot.joint_names),
+                   part, "held")
     res = compensate(cm, ts)
     ok = np.array([s == "ok" for s in res.target_status])
     assert ok.mean() > 0.95
     # the compensated joints differ from the commanded ones by what the model error amounts to in joint space
-    moved = np.linalg.norm(forward(cm, res.q[ok], held.subset(np.flatnonzero(ok))) -
-                           forward(cm, held.q[ok], held.subset(np.flatnonzero(ok))), axis=1)
-    assert abs(moved.mean() - e[ok].mean()) < 1e-8
+    moved = np.linalg.norm(forward(cm, res.q[ok], part.subset(np.flatnonzero(ok))) -
+                           forward(cm, part.q[ok], part.subset(np.flatnonzero(ok))), axis=1)
+    assert abs(moved.mean() - e[pick][ok].mean()) < 1e-8
 
 
 # --------------------------------------------------------------------------- calibrated URDF with set-up frames
