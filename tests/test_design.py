@@ -97,11 +97,14 @@ def test_bad_requests_are_named(problem):
 
 
 def test_cli_design_writes_the_json(tmp_path, capsys):
+    """The handler on a namespace that holds only some options (the others take their defaults): the table's
+    columns, the file's keys, and the file read back by ``evaluate``. The design starts from the heuristic design
+    (``start="random"``): the file's content does not depend on the start."""
     from pin_kpi_oed.cli import design as cli_design
 
     out = tmp_path / "design.json"
     ns = argparse.Namespace(cell="kr15", criteria="random,kpi", measurements=M, seed=0, json=str(out),
-                            no_collision=False, starts=1, max_iter=25, quiet=False)
+                            no_collision=False, starts=1, max_iter=25, quiet=False, start="random")
     assert cli_design.run(ns) == 0
     text = capsys.readouterr().out
     for col in ("criterion", "tr(C_s) mm^2", "TCP sigma um", "vs random %", "min clr mm", "max inc deg", "iters",
