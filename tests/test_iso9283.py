@@ -69,8 +69,11 @@ def test_shipped_cells_plan_a_collision_free_test(name, side):
 
 
 def test_the_centre_search_grows_the_cube_within_its_shift():
+    """The largest cube of the KR 15 cell with its centre within 0.1 m of the mean TCP: larger than at the mean by
+    more than 3 cm, every pose and move clear. Two random IK starts per point after the seeds (not the default six,
+    which the other tests take): the search, the subject here, finds the same centre and side with them."""
     cell = load_cell("kr15")
-    test = plan_iso_cube(cell, max_shift_m=0.1, moves=cycle_moves(cell))
+    test = plan_iso_cube(cell, max_shift_m=0.1, moves=cycle_moves(cell), n_random=2)
     assert test.side_at_mean_m is not None and test.side_m > test.side_at_mean_m + 0.03
     assert 0.0 < test.shift_m <= 0.1 + 1e-9
     rep = FeasibilityChecker(load_cell("kr15")).check(test.q)
