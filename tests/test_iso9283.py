@@ -93,8 +93,9 @@ def test_the_largest_cube_of_the_shipped_cells_is_collision_free(name):
 
 
 def test_a_cube_that_does_not_fit_is_refused_naming_the_largest_that_fits():
+    """The refusal's one line (two random IK starts per point: the message, not the size, is the subject)."""
     with pytest.raises(InputError, match=r"does not fit.*the largest that fits is 0\.\d+ m.*smaller side"):
-        plan_iso_cube(load_cell("kr15"), side_m=2.0, max_shift_m=0.0)
+        plan_iso_cube(load_cell("kr15"), side_m=2.0, max_shift_m=0.0, n_random=2)
 
 
 def test_cli_writes_the_program_and_refuses_an_unknown_suffix(tmp_path, capsys):
