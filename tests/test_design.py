@@ -81,8 +81,8 @@ def test_naive_formulation_gives_the_same_kind_of_design(start):
 
 def test_run_designs_without_collision_reports_colliding_share():
     cell = load_cell("kr15")
-    res = run_designs(cell, ["random", "kpi"], m=M, seed=1,
-                      options=DesignOptions(collision=False, ipopt=ipopt_options(max_iter=40)))
+    res = run_designs(cell, ["random", "kpi"], m=M, seed=1,  # IPOPT from the heuristic design: no 1,000-pose pool
+                      options=DesignOptions(collision=False, ipopt=ipopt_options(max_iter=40), start="random"))
     rnd, kpi = res
     assert rnd.criterion == "random" and rnd.feasible and rnd.samples >= M  # the heuristic is always collision-free
     assert not kpi.collision_avoidance and 0.0 <= kpi.share_colliding <= 1.0
@@ -184,7 +184,7 @@ def test_pool_feasible_set_equals_the_independent_coal_check(name):
                 hi = t
         edge += [Q[a] + lo * (Q[b] - Q[a]), Q[a] + hi * (Q[b] - Q[a])]
     Q = np.vstack([Q, edge])
-    coal = prob.checker.check(Q).feasible
+    coal = np.concatenate([coal, prob.checker.check(np.array(edge)).feasible])  # the check is pose by pose
     ok, Fp, n_coal = check_candidates(prob, Q)
     np.testing.assert_array_equal(ok, coal)
     assert 0 < coal.sum() < len(Q) and n_coal >= 12  # the boundary pairs went to Coal ...
