@@ -75,20 +75,26 @@ def world():
 
 
 def test_simulated_targets_reach_within_twice_the_held_out_error(world, capsys):
+    """60 reachable Cartesian targets compensated on the calibrated UR10: each reached by the model, the mean true
+    error within twice the calibration's held-out mean and far below the nominal solutions'. 60 targets (each an
+    IK with a branch search, the test's whole cost) still make the means real tests: the compensated errors scatter
+    by at most about their mean, so the mean of 60 has a standard error of at most about 13 % of it, well inside
+    the factor 2; at least three quarters reached as "ok" is the same share as 150 of 200."""
     robot, tm, truth, _, cm, held_err, truth_tcp = world
-    Qt = robot.random_q(np.random.default_rng(5), 200) * 0.9
-    Yt = truth_tcp(Qt)  # 200 reachable Cartesian targets in the cell (tracker) frame
-    ts = TargetSet([f"P{i}" for i in range(200)], Yt, None, None, list(robot.joint_names), _aux(robot, 200), "sim")
+    n = 60
+    Qt = robot.random_q(np.random.default_rng(5), n) * 0.9
+    Yt = truth_tcp(Qt)  # reachable Cartesian targets in the cell (tracker) frame
+    ts = TargetSet([f"P{i}" for i in range(n)], Yt, None, None, list(robot.joint_names), _aux(robot, n), "sim")
     res = compensate(cm, ts, CompensationOptions(frame="cell"))
     # every target reached; the ones outside the calibration's joint-space coverage say so (never "ok")
-    assert set(res.target_status) <= {"ok", "extrapolated"} and res.target_status.count("ok") >= 150
+    assert set(res.target_status) <= {"ok", "extrapolated"} and res.target_status.count("ok") >= 0.75 * n
     assert [s == "extrapolated" for s in res.target_status] == res.extrapolation.tolist()
-    assert res.success == (res.target_status.count("ok") == 200)
+    assert res.success == (res.target_status.count("ok") == n)
     assert res.residual_m.max() < 1e-8  # the calibrated model puts the TCP on the target
     e_comp = np.linalg.norm(truth_tcp(res.q) - Yt, axis=1)
     e_nom = np.linalg.norm(truth_tcp(res.q_nominal) - Yt, axis=1)
     with capsys.disabled():
-        print(f"\n[compensate] 200 targets: mean error nominal {e_nom.mean() * 1e3:.3f} mm, compensated "
+        print(f"\n[compensate] {n} targets: mean error nominal {e_nom.mean() * 1e3:.3f} mm, compensated "
               f"{e_comp.mean() * 1e3:.4f} mm; calibration held-out mean {held_err['mean_m'] * 1e3:.4f} mm")
     assert e_comp.mean() <= 2.0 * held_err["mean_m"]
     assert e_nom.mean() > 20.0 * e_comp.mean()
@@ -239,7 +245,10 @@ def test_read_targets_refusals(tmp_path):
 @needs_ipa
 def test_real_ur10_compensated_predictions_match_held_out_rows():
     """Second route to the model's held-out error: commanded joints -> where the compensation module says the TCP
-    goes, against the measured positions of held-out IPA rows; and the measured points compensated back."""
+    goes, against the measured positions of held-out IPA rows; and the measured points of 200 of those rows (spread
+    evenly over the series) compensated back: each an IK with a branch search, the test's whole cost; 200 still
+    tell a share of 95 % "ok" from one of 90 % (the binomial standard error is 1.5 %), and the identity of the
+    moved distance holds row by row."""
     from pin_kpi_oed.data.ipa import import_ipa
     from pin_kpi_oed.upkeep.transfer import registration_split
 
@@ -253,15 +262,17 @@ def test_real_ur10_compensated_predictions_match_held_out_rows():
     v = validate(cm, held)
     e = np.linalg.norm(forward(cm, held.q, held) - held.position_m, axis=1)
     assert abs(e.mean() - v["mean_m"]) < 1e-12 and v["mean_m"] < 1e-3
-    ts = TargetSet([str(i) for i in range(len(held))], held.position_m, None, held.q, list(robot.joint_names),
-                   held, "held")
+    pick = np.unique(np.linspace(0, len(held) - 1, 200).astype(int))
+    part = held.subset(pick)
+    ts = TargetSet([str(i) for i in range(len(part))], part.position_m, None, part.q, list(robot.joint_names),
+                   part, "held")
     res = compensate(cm, ts)
     ok = np.array([s == "ok" for s in res.target_status])
     assert ok.mean() > 0.95
     # the compensated joints differ from the commanded ones by what the model error amounts to in joint space
-    moved = np.linalg.norm(forward(cm, res.q[ok], held.subset(np.flatnonzero(ok))) -
-                           forward(cm, held.q[ok], held.subset(np.flatnonzero(ok))), axis=1)
-    assert abs(moved.mean() - e[ok].mean()) < 1e-8
+    moved = np.linalg.norm(forward(cm, res.q[ok], part.subset(np.flatnonzero(ok))) -
+                           forward(cm, part.q[ok], part.subset(np.flatnonzero(ok))), axis=1)
+    assert abs(moved.mean() - e[pick][ok].mean()) < 1e-8
 
 
 # --------------------------------------------------------------------------- calibrated URDF with set-up frames

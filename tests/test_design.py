@@ -81,8 +81,8 @@ def test_naive_formulation_gives_the_same_kind_of_design(start):
 
 def test_run_designs_without_collision_reports_colliding_share():
     cell = load_cell("kr15")
-    res = run_designs(cell, ["random", "kpi"], m=M, seed=1,
-                      options=DesignOptions(collision=False, ipopt=ipopt_options(max_iter=40)))
+    res = run_designs(cell, ["random", "kpi"], m=M, seed=1,  # IPOPT from the heuristic design: no 1,000-pose pool
+                      options=DesignOptions(collision=False, ipopt=ipopt_options(max_iter=40), start="random"))
     rnd, kpi = res
     assert rnd.criterion == "random" and rnd.feasible and rnd.samples >= M  # the heuristic is always collision-free
     assert not kpi.collision_avoidance and 0.0 <= kpi.share_colliding <= 1.0
@@ -97,11 +97,14 @@ def test_bad_requests_are_named(problem):
 
 
 def test_cli_design_writes_the_json(tmp_path, capsys):
+    """The handler on a namespace that holds only some options (the others take their defaults): the table's
+    columns, the file's keys, and the file read back by ``evaluate``. The design starts from the heuristic design
+    (``start="random"``): the file's content does not depend on the start."""
     from pin_kpi_oed.cli import design as cli_design
 
     out = tmp_path / "design.json"
     ns = argparse.Namespace(cell="kr15", criteria="random,kpi", measurements=M, seed=0, json=str(out),
-                            no_collision=False, starts=1, max_iter=25, quiet=False)
+                            no_collision=False, starts=1, max_iter=25, quiet=False, start="random")
     assert cli_design.run(ns) == 0
     text = capsys.readouterr().out
     for col in ("criterion", "tr(C_s) mm^2", "TCP sigma um", "vs random %", "min clr mm", "max inc deg", "iters",
@@ -181,7 +184,7 @@ def test_pool_feasible_set_equals_the_independent_coal_check(name):
                 hi = t
         edge += [Q[a] + lo * (Q[b] - Q[a]), Q[a] + hi * (Q[b] - Q[a])]
     Q = np.vstack([Q, edge])
-    coal = prob.checker.check(Q).feasible
+    coal = np.concatenate([coal, prob.checker.check(np.array(edge)).feasible])  # the check is pose by pose
     ok, Fp, n_coal = check_candidates(prob, Q)
     np.testing.assert_array_equal(ok, coal)
     assert 0 < coal.sum() < len(Q) and n_coal >= 12  # the boundary pairs went to Coal ...
@@ -327,16 +330,19 @@ def test_api_writes_the_design_file_view_and_export_read(problem, tmp_path):
 
 def test_cli_json_is_the_library_run_written(tmp_path):
     """``design --json`` and ``pko.write_design`` of the same run (``design_run`` with the same settings) write
-    the same file: the same keys and numbers, wall times apart; ``demo`` goes through the same calls."""
+    the same file: the same keys and numbers, wall times apart; ``demo`` goes through the same calls. The designs
+    start from the heuristic design (``--start random``, ``start="random"``): the option reaches the settings like
+    the others, and the pool start's 1,000 candidates per run are left to the ``--given`` case below."""
     import pin_kpi_oed as pko
     from pin_kpi_oed.cli.app import main
 
     args = ["--cell", "kr15", "--criteria", "random,kpi", "--measurements", "14", "--starts", "1", "--max-iter", "15",
-            "--certificate", "--pool-size", "300", "--clearance-margin", "0.01", "--seed", "2", "--quiet"]
+            "--start", "random", "--certificate", "--pool-size", "300", "--clearance-margin", "0.01", "--seed", "2",
+            "--quiet"]
     assert main(["design", *args, "--json", str(tmp_path / "cli.json")]) == 0
     settings = pko.DesignSettings(criteria=("random", "kpi"), measurements=14, seed=2, n_starts=1, max_iter=15,
-                                  certificate=True, certificate_pool_size=300, clearance_margin_m=0.01,
-                                  incidence_margin_deg=1.0)
+                                  start="random", certificate=True, certificate_pool_size=300,
+                                  clearance_margin_m=0.01, incidence_margin_deg=1.0)
     run = pko.design_run(pko.load_cell("kr15"), settings)
     pko.write_design(tmp_path / "api.json", run)
     cli, api = (json.loads((tmp_path / f"{n}.json").read_text()) for n in ("cli", "api"))

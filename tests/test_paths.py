@@ -235,7 +235,9 @@ def test_kpi_path_gp_is_the_kriging_kpi_over_the_path_samples(seam_problem):
 
 def test_orientation_sigma_matches_monte_carlo(seam_problem):
     """The tool orientation's predicted σ along the seam against 40 simulated identifications (random true geometric
-    errors within the tolerances, the cell's noise): realised / predicted mean square within sampling error."""
+    errors within the tolerances, the cell's noise): realised / predicted mean square within sampling error. The
+    fits skip the discrepancy term (``discrepancy="none"``): it is fitted after the parameters and leaves them, the
+    only thing read here, unchanged, at half the fit's cost."""
     from pin_kpi_oed.design.path_profile import path_profile
     from pin_kpi_oed.identification.identify import identify
     from pin_kpi_oed.simulation.simulator import random_truth, simulate
@@ -254,7 +256,7 @@ def test_orientation_sigma_matches_monte_carlo(seam_problem):
     for k in range(40):
         p_true = random_truth(model, seed=100 + k, only=seam_problem.base)
         res = identify(model, simulate(model, Q, p_true, seed=200 + k, record_sigma=False), ident=seam_problem.ident,
-                       raise_on_failure=False)
+                       raise_on_failure=False, discrepancy="none")
         R_hat, R_true = orientation(res.model, res.p), orientation(model, p_true)
         errs.append([np.sum(pin.log3(R_hat[i] @ R_true[i].T) ** 2) for i in range(len(Qs))])
     ratio = float(np.mean(errs)) / predicted

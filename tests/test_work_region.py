@@ -75,11 +75,15 @@ def _design(tmp_path, name, *extra):
 
     out = tmp_path / f"{name}.json"
     assert main(["design", "--cell", "kr15", "--criteria", "random,kpi_gp", "--measurements", "20", "--starts", "1",
-                 "--max-iter", "8", "--json", str(out), "--quiet", *extra]) == 0
+                 "--max-iter", "8", "--start", "random", "--json", str(out), "--quiet", *extra]) == 0
     return json.loads(out.read_text())
 
 
 def test_cli_design_records_the_region_and_r0_is_the_plain_design(tmp_path, capsys):
+    """``design --work-radius/--work-samples`` records the region, seeded (two runs: the same region and designs);
+    ``--work-radius 0`` is the plain design of the API. The designs start from the heuristic design (``--start
+    random``), not from a selection out of 1,000 feasible candidates per run: the region enters the KPI IPOPT
+    optimises either way, and the API run takes the same start."""
     from pin_kpi_oed.cell.cell import load_cell
     from pin_kpi_oed.design.margins import with_margins
     from pin_kpi_oed.design.optimize import DesignOptions, DesignProblem, ipopt_options, run_designs
@@ -99,8 +103,8 @@ def test_cli_design_records_the_region_and_r0_is_the_plain_design(tmp_path, caps
     assert z["working_region"] is None
     assert all("tcp_sigma_region_m" not in d["discrepancy"] for d in z["designs"])
     cell = with_margins(load_cell("kr15"), 0.02, 1.0)
-    plain = run_designs(cell, ["random", "kpi_gp"], 20, 0, DesignOptions(n_starts=1, ipopt=ipopt_options(max_iter=8)),
-                        DesignProblem(cell))
+    plain = run_designs(cell, ["random", "kpi_gp"], 20, 0, DesignOptions(n_starts=1, ipopt=ipopt_options(max_iter=8),
+                                                                          start="random"), DesignProblem(cell))
     for d, r in zip(z["designs"], plain):
         assert d["criterion"] == r.criterion
         np.testing.assert_allclose(np.array(d["q_meas"]), r.q_meas, atol=1e-12)
