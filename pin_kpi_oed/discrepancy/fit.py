@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Sequence
+from typing import TYPE_CHECKING
 
 import numpy as np
 from scipy import linalg as sla
@@ -18,18 +19,22 @@ from pin_kpi_oed.discrepancy.gp import JITTER, Discrepancy, DiscrepancyOptions, 
 from pin_kpi_oed.discrepancy.kernel import JointKernel
 from pin_kpi_oed.errors import InputError
 
+if TYPE_CHECKING:
+    from pin_kpi_oed.discrepancy.marginal import StartRace
+
 __all__ = ["fit_discrepancy"]
 
 
 def _hyper_fit(Q: np.ndarray, Y: np.ndarray, opts: DiscrepancyOptions, joint_amplitude: float,
                min_noise: float = 1e-5, linear: np.ndarray | None = None,
-               joint_span: np.ndarray | None = None) -> tuple[JointKernel, float]:
+               joint_span: np.ndarray | None = None, race: StartRace | None = None) -> tuple[JointKernel, float]:
     """Maximum marginal likelihood of the kernel and the white level on a seeded subset (normalised Y),
     from a start whose additive (one-joint) amplitudes are ``joint_amplitude``; the white level at least
     ``min_noise`` (the data's stated noise in normalised units)
     (:func:`~pin_kpi_oed.discrepancy.marginal.maximise_marginal_likelihood`). Length scales start at 1 rad (whole
     configuration) and 0.5 rad (one joint), a ``linear`` joint's at the same share of its travel ``joint_span``
-    (m) / 2π (:meth:`JointKernel.for_joints`)."""
+    (m) / 2π (:meth:`JointKernel.for_joints`); the search raced against the fit's earlier starts in ``race``
+    (:class:`~pin_kpi_oed.discrepancy.marginal.StartRace`, which records it), None: not raced."""
     from pin_kpi_oed.discrepancy.marginal import maximise_marginal_likelihood
 
     d = Q.shape[1]
@@ -38,7 +43,7 @@ def _hyper_fit(Q: np.ndarray, Y: np.ndarray, opts: DiscrepancyOptions, joint_amp
     k0 = JointKernel.for_joints(0.7, np.ones(d), np.full(d, joint_amplitude), np.full(d, 0.5), linear, joint_span)
     kernel, noise, _ = maximise_marginal_likelihood(Q[sub], Y[sub], k0, max(0.3, 1.5 * min_noise),
                                                     (min_noise, max(10.0, 4.0 * min_noise)), opts.max_iter,
-                                                    opts.restarts, opts.seed)
+                                                    opts.restarts, opts.seed, race)
     return kernel, noise
 
 
@@ -214,16 +219,28 @@ def _best_start(Q: np.ndarray, Y: np.ndarray, scale: np.ndarray, opts: Discrepan
                 min_noise: float, cv_rows: np.ndarray, periodic: np.ndarray | None, joints: tuple) -> tuple:
     """The hyper-parameters from each of ``opts.starts`` (:func:`_hyper_fit`; ``joints`` = (linear mask, travel)),
     the one of least K-fold held-out mean error (:func:`kfold_split` on ``cv_rows``): (kernel, white level, the
-    check, the Cholesky factor of all rows or None)."""
+    check, the Cholesky factor of all rows or None).
+
+    The starts' searches are raced on their log marginal likelihood (same rows, :class:`StartRace`): a start that
+    trails the best by more than ``StartRace.nats`` at its iteration ``StartRace.at`` is stopped there, and only the
+    starts that finish within that margin of the best are checked (the K-fold check inverts the covariance of all
+    rows, the largest cost on a few thousand rows); with ``opts.restarts`` every start that finished is checked."""
+    from pin_kpi_oed.discrepancy import marginal
+
+    race = marginal.StartRace(marginal.RACE_AT, marginal.RACE_NATS)
+    fits = [_hyper_fit(Q, Y, opts, float(a0), min_noise, *joints, race=race) for a0 in opts.starts]
+    assert fits, "DiscrepancyOptions.starts is empty"
+    raced = race.contenders() if len(race.finals) == len(fits) else [True] * len(fits)
     best = None
-    for a0 in opts.starts:
-        kernel, noise = _hyper_fit(Q, Y, opts, float(a0), min_noise, *joints)
+    for (kernel, noise), contender in zip(fits, raced):
+        if not contender:
+            continue
         keep: dict = {}  # the factor of all rows (reused by an exact posterior): only when the check uses them all
         cv = kfold_split(kernel, noise, Q[cv_rows], Y[cv_rows], scale, opts, names,
-                    keep if len(cv_rows) == len(Q) else None, periodic)
+                         keep if len(cv_rows) == len(Q) else None, periodic)
         if best is None or cv["mean_with_m"] < best[2]["mean_with_m"]:
             best = (kernel, noise, cv, keep.get("chol"))
-    assert best is not None, "DiscrepancyOptions.starts is empty"
+    assert best is not None, "no start finished the race"
     return best
 
 
