@@ -228,7 +228,8 @@ def _best_start(Q: np.ndarray, Y: np.ndarray, scale: np.ndarray, opts: Discrepan
     from pin_kpi_oed.discrepancy import marginal
 
     race = marginal.StartRace(marginal.RACE_AT, marginal.RACE_NATS)
-    fits = [_hyper_fit(Q, Y, opts, float(a0), min_noise, *joints, race=race) for a0 in opts.starts]
+    linear, span = joints
+    fits = [_hyper_fit(Q, Y, opts, float(a0), min_noise, linear, span, race=race) for a0 in opts.starts]
     assert fits, "DiscrepancyOptions.starts is empty"
     raced = race.contenders() if len(race.finals) == len(fits) else [True] * len(fits)
     best = None
