@@ -15,10 +15,13 @@ selection alone). The import sets of ``--help`` and ``info`` are pinned by ``tes
 identify's numbers stay the same, by ``benchmarks.identify_unchanged``.
 
 Run:  python -m benchmarks bench_startup   (``make bench`` runs it with the others)
+      python -m benchmarks.bench_startup --before OTHER_CHECKOUT [--identify-only]
+          (each identify figure also for another checkout's package, the runs interleaved: before, after, before, ...)
 """
 
 from __future__ import annotations
 
+import argparse
 import compileall
 import os
 import resource
@@ -40,13 +43,13 @@ STARTUP = ((["--help"], 0.3), (["info", "ur10"], 0.3))
 POOL_TARGET = 0.3
 
 
-def process_cpu(argv: list[str], cwd: Path | None = None) -> float:
-    """CPU seconds (user + system) of ``python -m pin_kpi_oed argv`` run as a process.
+def process_cpu(argv: list[str], cwd: Path | None = None, root: Path = ROOT) -> float:
+    """CPU seconds (user + system) of ``python -m pin_kpi_oed argv`` run as a process with ``root``'s package.
 
     Raises:
         RuntimeError: a non-zero exit code, with its stderr.
     """
-    env = {**os.environ, "PYTHONPATH": str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", "")}
+    env = {**os.environ, "PYTHONPATH": str(root) + os.pathsep + os.environ.get("PYTHONPATH", "")}
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
     res = subprocess.run([sys.executable, "-m", "pin_kpi_oed", *argv], cwd=cwd, env=env, capture_output=True,
                          text=True)
@@ -59,6 +62,13 @@ def process_cpu(argv: list[str], cwd: Path | None = None) -> float:
 def median_cpu(argv: list[str], cwd: Path | None = None, repeat: int = REPEAT) -> float:
     """The median CPU seconds of ``repeat`` runs (:func:`process_cpu`)."""
     return float(np.median([process_cpu(argv, cwd) for _ in range(repeat)]))
+
+
+def paired_cpu(argv: list[str], cwd: Path, before: Path, repeat: int = REPEAT) -> tuple[list[float], list[float]]:
+    """CPU seconds of ``repeat`` runs with ``before``'s package and as many with this checkout's, interleaved
+    (before, after, before, ...): (before's, after's)."""
+    pairs = [(process_cpu(argv, cwd, before), process_cpu(argv, cwd)) for _ in range(repeat)]
+    return [b for b, _ in pairs], [a for _, a in pairs]
 
 
 def data_rows(path: Path) -> int:
@@ -112,22 +122,38 @@ def pool_cpu(repeat: int = REPEAT) -> float:
     return float(np.median(times))
 
 
-def main() -> None:
-    """Print the load, then each figure: CPU seconds, target, ratio."""
+def main(argv: list[str] | None = None) -> None:
+    """Print the load, then each figure: CPU seconds, target, ratio (with ``--before``: the identify figures of both
+    checkouts, interleaved, and how many pairs the after won)."""
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--before", type=Path, default=None, help="another checkout: its identify figures interleaved")
+    ap.add_argument("--identify-only", action="store_true", help="the identify figures only")
+    args = ap.parse_args([] if argv is None else argv)  # ``python -m benchmarks`` calls main() with its own argv
     print(f"load average {', '.join(f'{x:.2f}' for x in os.getloadavg())} on {os.cpu_count()} cores at the start; "
           f"bytecode compiled first", flush=True)
     compileall.compile_dir(str(ROOT / "pin_kpi_oed"), quiet=1)
-    for argv, target in STARTUP:
-        figure(f"pin-kpi-oed {' '.join(argv)} (CPU s, load {load_average():.1f})", median_cpu(argv), target)
-    figure(f"pool selection 1,000 -> 60, UR5, KPI, in process (CPU s, load {load_average():.1f})", pool_cpu(),
-           POOL_TARGET)
+    if args.before is not None:
+        compileall.compile_dir(str(args.before / "pin_kpi_oed"), quiet=1)
+    if not args.identify_only:
+        for cmd, target in STARTUP:
+            figure(f"pin-kpi-oed {' '.join(cmd)} (CPU s, load {load_average():.1f})", median_cpu(cmd), target)
+        figure(f"pool selection 1,000 -> 60, UR5, KPI, in process (CPU s, load {load_average():.1f})", pool_cpu(),
+               POOL_TARGET)
     ipa = ipa_folder_or_say("C")
     if ipa is None:
         return
     with tempfile.TemporaryDirectory() as tmp:
-        for label, argv, target in identify_cases(Path(tmp), ipa):
-            figure(f"{label}, load {load_average():.1f}", median_cpu(argv, Path(tmp)), target)
+        for label, cmd, target in identify_cases(Path(tmp), ipa):
+            if args.before is None:
+                figure(f"{label}, load {load_average():.1f}", median_cpu(cmd, Path(tmp)), target)
+                continue
+            load = load_average()
+            b, a = paired_cpu(cmd, Path(tmp), args.before.resolve())
+            print(f"  before: {', '.join(f'{x:.2f}' for x in b)} s; after: {', '.join(f'{x:.2f}' for x in a)} s; "
+                  f"after faster in {sum(x < y for x, y in zip(a, b))} of {len(a)} pairs", flush=True)
+            figure(f"{label}, before {np.median(b):.2f} s, load {load:.1f} -> {load_average():.1f}",
+                   float(np.median(a)), target)
 
 
 if __name__ == "__main__":
-    main()
+    main(sys.argv[1:])

@@ -65,7 +65,7 @@ def test_gradient_matches_finite_differences():
         assert (vp - vm) / (2 * eps) == pytest.approx(g[k], rel=1e-5, abs=1e-5)
 
 
-def _sklearn_hyper_fit(Q, Y, opts, joint_amplitude, min_noise=1e-5, linear=None, joint_span=None):
+def _sklearn_hyper_fit(Q, Y, opts, joint_amplitude, min_noise=1e-5, linear=None, joint_span=None, race=None):
     """The optimisation the marginal likelihood on pairs replaced: scikit-learn's regressor, L-BFGS-B."""
     assert linear is None, "the scikit-learn reference knows no linear joints"
     import warnings
@@ -228,3 +228,56 @@ def test_lower_triangle_equals_the_whole_kernel_to_the_last_bit(n, linear):
         assert np.count_nonzero(low) < 0.75 * n * n, "the entries above the diagonal blocks are not formed"
     S = low + 0.05 * np.eye(n)
     assert np.array_equal(np.linalg.cholesky(S), np.linalg.cholesky(whole + 0.05 * np.eye(n)))
+
+
+def test_start_race_stops_and_leaves_out_only_a_start_far_behind():
+    from pin_kpi_oed.discrepancy.marginal import StartRace
+
+    race = StartRace(at=3, nats=100.0)
+    race.record([-900.0, -700.0, -600.0, -500.0], -400.0)
+    assert not race.behind(2, -2000.0)                         # compared at iteration `at` only
+    assert race.behind(3, -700.5) and not race.behind(3, -699.5)
+    race.record([-950.0, -800.0, -650.0], None)                # a start stopped there
+    race.record([-990.0, -880.0, -690.0, -520.0], -450.0)      # 50 nats behind at the end: still a contender
+    race.record([-990.0, -880.0, -690.0, -600.0], -501.0)      # 101 nats behind
+    assert race.lead == [-900.0, -700.0, -600.0]
+    assert race.contenders() == [True, False, True, False]
+
+
+def _additive_rows(n: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
+    """Residuals of one-joint functions of the joint angles: the second start (small one-joint amplitudes) explains
+    them far worse than the first."""
+    rng = np.random.default_rng(seed)
+    Q = rng.uniform(-np.pi, np.pi, (n, 6))
+    Y = np.stack([np.sin(2 * Q[:, 1]) + 0.5 * np.cos(Q[:, 2]), np.cos(3 * Q[:, 1]) - 0.4 * np.sin(2 * Q[:, 3]),
+                  np.sin(Q[:, 2] + 0.3)], 1)
+    return Q, 1e-4 * (Y + 0.05 * rng.standard_normal((n, 3)))
+
+
+def test_a_start_far_behind_is_stopped_and_the_fit_is_the_one_without_the_race(monkeypatch):
+    from pin_kpi_oed.discrepancy import marginal
+
+    Q, R = _additive_rows(200, seed=2)
+    opts = DiscrepancyOptions(mode="on", n_fit=150)
+    checked: list[float] = []
+    kfold = gp_module.kfold_split
+
+    def counting(*args, **kw):
+        out = kfold(*args, **kw)
+        checked.append(out["mean_with_m"])
+        return out
+    monkeypatch.setattr(gp_module, "kfold_split", counting)
+    evaluations = []
+    call = marginal.MarginalLikelihood.__call__
+    monkeypatch.setattr(marginal.MarginalLikelihood, "__call__", lambda f, t: evaluations.append(1) or call(f, t))
+    raced = fit_discrepancy(Q, R, NAMES, opts)
+    n_raced, cv_raced = len(evaluations), list(checked)
+    monkeypatch.setattr(marginal, "RACE_NATS", np.inf)
+    evaluations.clear()
+    checked.clear()
+    full = fit_discrepancy(Q, R, NAMES, opts)
+    assert len(cv_raced) == 1 and len(checked) == 2, "the second start must be left out of the check by the race"
+    assert checked[1] > checked[0], "the start the race stopped loses the K-fold check without the race"
+    assert n_raced < len(evaluations) - 30                     # stopped at iteration 10 of 60
+    assert raced.kernel.to_dict() == full.kernel.to_dict() and raced.noise == full.noise
+    assert raced.cv == full.cv

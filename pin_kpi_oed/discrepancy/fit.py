@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Sequence
+from typing import TYPE_CHECKING
 
 import numpy as np
 from scipy import linalg as sla
@@ -18,18 +19,22 @@ from pin_kpi_oed.discrepancy.gp import JITTER, Discrepancy, DiscrepancyOptions, 
 from pin_kpi_oed.discrepancy.kernel import JointKernel
 from pin_kpi_oed.errors import InputError
 
+if TYPE_CHECKING:
+    from pin_kpi_oed.discrepancy.marginal import StartRace
+
 __all__ = ["fit_discrepancy"]
 
 
 def _hyper_fit(Q: np.ndarray, Y: np.ndarray, opts: DiscrepancyOptions, joint_amplitude: float,
                min_noise: float = 1e-5, linear: np.ndarray | None = None,
-               joint_span: np.ndarray | None = None) -> tuple[JointKernel, float]:
+               joint_span: np.ndarray | None = None, race: StartRace | None = None) -> tuple[JointKernel, float]:
     """Maximum marginal likelihood of the kernel and the white level on a seeded subset (normalised Y),
     from a start whose additive (one-joint) amplitudes are ``joint_amplitude``; the white level at least
     ``min_noise`` (the data's stated noise in normalised units)
     (:func:`~pin_kpi_oed.discrepancy.marginal.maximise_marginal_likelihood`). Length scales start at 1 rad (whole
     configuration) and 0.5 rad (one joint), a ``linear`` joint's at the same share of its travel ``joint_span``
-    (m) / 2π (:meth:`JointKernel.for_joints`)."""
+    (m) / 2π (:meth:`JointKernel.for_joints`); the search raced against the fit's earlier starts in ``race``
+    (:class:`~pin_kpi_oed.discrepancy.marginal.StartRace`, which records it), None: not raced."""
     from pin_kpi_oed.discrepancy.marginal import maximise_marginal_likelihood
 
     d = Q.shape[1]
@@ -38,7 +43,7 @@ def _hyper_fit(Q: np.ndarray, Y: np.ndarray, opts: DiscrepancyOptions, joint_amp
     k0 = JointKernel.for_joints(0.7, np.ones(d), np.full(d, joint_amplitude), np.full(d, 0.5), linear, joint_span)
     kernel, noise, _ = maximise_marginal_likelihood(Q[sub], Y[sub], k0, max(0.3, 1.5 * min_noise),
                                                     (min_noise, max(10.0, 4.0 * min_noise)), opts.max_iter,
-                                                    opts.restarts, opts.seed)
+                                                    opts.restarts, opts.seed, race)
     return kernel, noise
 
 
@@ -68,19 +73,31 @@ def _posterior(kernel: JointKernel, noise: float, Q: np.ndarray, Y: np.ndarray, 
     return {"kind": "inducing", "Z": Z, "alpha": alpha, "Minv": 0.5 * (Minv + Minv.T)}
 
 
-def _spd_inverse(S: np.ndarray, keep: dict | None = None) -> np.ndarray:
-    """Inverse of a symmetric positive-definite matrix from its Cholesky factor (LAPACK potrf + potri; S's lower
-    triangle is all that is read); the lower factor is stored in ``keep["chol"]`` when ``keep`` is given."""
+def _inverse_blocks(S: np.ndarray, Y: np.ndarray, fold: np.ndarray, n_folds: int, keep: dict | None = None
+                   ) -> tuple[np.ndarray, list[np.ndarray]]:
+    """(Σ⁻¹Y, the diagonal blocks (Σ⁻¹)_II of the folds) of a symmetric positive-definite Σ from its Cholesky factor
+    Σ = LLᵀ (LAPACK potrf; S's lower triangle is all that is read): (Σ⁻¹)_II = (L⁻¹)_{:,I}ᵀ (L⁻¹)_{:,I} from the
+    columns of L⁻¹ (trtri) of fold I, the rows from its first one down (L⁻¹ is lower triangular), about half the work
+    of the whole inverse (potri); the lower factor is stored in ``keep["chol"]`` when ``keep`` is given.
+
+    Raises:
+        numpy.linalg.LinAlgError: Σ not positive definite.
+    """
     Lc, info = sla.lapack.dpotrf(S, lower=1, clean=1, overwrite_a=0)
     if info != 0:
         raise np.linalg.LinAlgError("the discrepancy covariance is not positive definite")
     if keep is not None:
-        keep["chol"] = Lc.copy()
-    Si, info = sla.lapack.dpotri(Lc, lower=1, overwrite_c=1)
+        keep["chol"] = Lc
+    alpha = sla.cho_solve((Lc, True), Y, check_finite=False)
+    Li, info = sla.lapack.dtrtri(Lc, lower=1, overwrite_c=0)
     if info != 0:
         raise np.linalg.LinAlgError("the discrepancy covariance could not be inverted")
-    Si = np.tril(Si)
-    return Si + np.tril(Si, -1).T
+    blocks = []
+    for k in range(n_folds):
+        cols = np.flatnonzero(fold == k)
+        C = Li[cols[0]:, cols]
+        blocks.append(C.T @ C)
+    return alpha, blocks
 
 
 def kfold_split(kernel: JointKernel, noise: float, Q: np.ndarray, Y: np.ndarray, scale: np.ndarray,
@@ -90,9 +107,10 @@ def kfold_split(kernel: JointKernel, noise: float, Q: np.ndarray, Y: np.ndarray,
     and the standardised errors z of the held-out rows (their RMS and excess kurtosis E z⁴ / (E z²)² − 3, pooled over
     the axes: a check's test of few rows needs the tails, :mod:`pin_kpi_oed.upkeep.check`).
 
-    Up to ``max_exact`` rows the folds come from one inverse of Σ = K + wI (block inversion: the
+    Up to ``max_exact`` rows the folds come from one Cholesky factor of Σ = K + wI (block inversion: the
     held-out residuals of fold I are (Σ⁻¹)_II⁻¹ (Σ⁻¹y)_I with covariance (Σ⁻¹)_II⁻¹, exactly what refitting
-    the posterior without fold I gives); above it each fold's DTC posterior is built. Σ is the exact posterior's
+    the posterior without fold I gives; only the folds' diagonal blocks of Σ⁻¹ are formed, :func:`_inverse_blocks`);
+    above it each fold's DTC posterior is built. Σ is the exact posterior's
     (jitter included), and its Cholesky factor is stored in ``keep["chol"]`` for the posterior when ``keep`` is given.
     """
     fold, _ = grouped_folds(Q, opts.folds, opts.seed + 1, periodic)
@@ -100,14 +118,13 @@ def kfold_split(kernel: JointKernel, noise: float, Q: np.ndarray, Y: np.ndarray,
     e0, e1, z2, inside = [], [], [], []
     exact = len(Q) <= opts.max_exact
     if exact:
-        S = kernel.lower(Q)  # the lower triangle alone: _spd_inverse's factor reads nothing else
+        S = kernel.lower(Q)  # the lower triangle alone: the Cholesky factor reads nothing else
         S[np.diag_indices_from(S)] += noise + JITTER
-        Si = _spd_inverse(S, keep)
-        alpha = Si @ Y
+        alpha, blocks = _inverse_blocks(S, Y, fold, n_folds, keep)
     for k in range(n_folds):
         tr, te = fold != k, fold == k
         if exact:
-            c = sla.cho_factor(Si[np.ix_(te, te)], lower=True, check_finite=False)
+            c = sla.cho_factor(blocks[k], lower=True, check_finite=False)
             r = sla.cho_solve(c, alpha[te], check_finite=False)                  # y_I − μ_I (normalised)
             var = np.diag(sla.cho_solve(c, np.eye(int(te.sum())), check_finite=False))
         else:
@@ -214,16 +231,29 @@ def _best_start(Q: np.ndarray, Y: np.ndarray, scale: np.ndarray, opts: Discrepan
                 min_noise: float, cv_rows: np.ndarray, periodic: np.ndarray | None, joints: tuple) -> tuple:
     """The hyper-parameters from each of ``opts.starts`` (:func:`_hyper_fit`; ``joints`` = (linear mask, travel)),
     the one of least K-fold held-out mean error (:func:`kfold_split` on ``cv_rows``): (kernel, white level, the
-    check, the Cholesky factor of all rows or None)."""
+    check, the Cholesky factor of all rows or None).
+
+    The starts' searches are raced on their log marginal likelihood (same rows, :class:`StartRace`): a start that
+    trails the best by more than ``StartRace.nats`` at its iteration ``StartRace.at`` is stopped there, and only the
+    starts that finish within that margin of the best are checked (the K-fold check inverts the covariance of all
+    rows, the largest cost on a few thousand rows); with ``opts.restarts`` every start that finished is checked."""
+    from pin_kpi_oed.discrepancy import marginal
+
+    race = marginal.StartRace(marginal.RACE_AT, marginal.RACE_NATS)
+    linear, span = joints
+    fits = [_hyper_fit(Q, Y, opts, float(a0), min_noise, linear, span, race=race) for a0 in opts.starts]
+    assert fits, "DiscrepancyOptions.starts is empty"
+    raced = race.contenders() if len(race.finals) == len(fits) else [True] * len(fits)
     best = None
-    for a0 in opts.starts:
-        kernel, noise = _hyper_fit(Q, Y, opts, float(a0), min_noise, *joints)
+    for (kernel, noise), contender in zip(fits, raced):
+        if not contender:
+            continue
         keep: dict = {}  # the factor of all rows (reused by an exact posterior): only when the check uses them all
         cv = kfold_split(kernel, noise, Q[cv_rows], Y[cv_rows], scale, opts, names,
-                    keep if len(cv_rows) == len(Q) else None, periodic)
+                         keep if len(cv_rows) == len(Q) else None, periodic)
         if best is None or cv["mean_with_m"] < best[2]["mean_with_m"]:
             best = (kernel, noise, cv, keep.get("chol"))
-    assert best is not None, "DiscrepancyOptions.starts is empty"
+    assert best is not None, "no start finished the race"
     return best
 
 

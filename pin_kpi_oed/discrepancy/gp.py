@@ -22,8 +22,8 @@ residuals carry less information.
 Hyper-parameters (k's amplitudes and length scales, w) by maximum marginal likelihood
 (:mod:`~pin_kpi_oed.discrepancy.marginal`: scikit-learn's regressor's objective, evaluated on the pairs of rows;
 L-BFGS-B from each deterministic start, at most ``max_iter`` iterations: more change the hyper-parameters but not the
-held-out error) on a seeded subset of at most ``n_fit`` rows; the K-fold check of each start comes
-from one inverse of Σ = K + wI (block inversion, no refit per fold); the posterior uses every row: exactly up to
+held-out error; the starts raced on it) on a seeded subset of at most ``n_fit`` rows; the K-fold check of each start
+comes from one inverse of Σ = K + wI (block inversion, no refit per fold); the posterior uses every row: exactly up to
 ``max_exact`` rows, above that the projected-process (DTC) approximation on ``n_inducing``
 seeded inducing configurations (Titsias 2009; Rasmussen & Williams §8.3), built in chunks so a
 100,000-row file needs O(n · m) time and O(m²) memory.
@@ -82,7 +82,8 @@ class DiscrepancyOptions:
             bounds).
         starts: the additive part's amplitude at each deterministic start; the marginal likelihood of
             this kernel has local optima (the product or the one-joint part explaining the residuals), so
-            each start is fitted and the one with the smaller K-fold held-out error kept.
+            each start is fitted and the one with the smaller K-fold held-out error kept (a start far behind the
+            others on the likelihood is stopped and not checked: :class:`~pin_kpi_oed.discrepancy.marginal.StartRace`).
         seed: seed of every random choice (subsets, folds, restarts).
     """
 
