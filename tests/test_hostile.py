@@ -44,6 +44,12 @@ def test_hostile_input_is_refused_in_one_line(case, inputs, work):
                                                  out.err)
 
 
+#: the fit-quality gate's and the robust loss's tests fit without a discrepancy (the default fits a Gaussian process
+#: to decide, most of a fit's time here): what they test is the parametric fit's verdict and loss; a discrepancy's part
+#: in the verdict (it never excuses a poor fit) is tests/test_discrepancy.py's
+NO_GP = ("--discrepancy", "none")
+
+
 def _run(*argv) -> tuple[int, str, str]:
     o, e = io.StringIO(), io.StringIO()
     with contextlib.redirect_stdout(o), contextlib.redirect_stderr(e):
@@ -74,7 +80,8 @@ def test_zero_reflector_assumed_is_refused_as_poor_fit(offset_data, tmp_path):
     """Hostile case 1: --reflector 0,0,0 on data with an offset: refused, verdict in the JSON, no URDF."""
     d = offset_data
     rc, out, err = _run("identify", "--robot", "kr15", "--data", d / "tr.csv", "--validate", d / "te.csv",
-                        "--reflector", "0,0,0", "--json", tmp_path / "r.json", "--urdf-out", tmp_path / "c.urdf")
+                        "--reflector", "0,0,0", "--json", tmp_path / "r.json", "--urdf-out", tmp_path / "c.urdf",
+                        *NO_GP)
     assert rc == 2 and "POOR" in err and "reflector" in err and len(err.strip().splitlines()) == 1
     assert not (tmp_path / "c.urdf").exists()
     q = json.loads((tmp_path / "r.json").read_text())["fit_quality"]
@@ -84,7 +91,7 @@ def test_zero_reflector_assumed_is_refused_as_poor_fit(offset_data, tmp_path):
 def test_default_reflector_is_estimated_and_fit_is_good(offset_data, tmp_path):
     d = offset_data
     rc, out, err = _run("identify", "--robot", "kr15", "--data", d / "tr.csv", "--validate", d / "te.csv",
-                        "--json", tmp_path / "r.json")
+                        "--json", tmp_path / "r.json", *NO_GP)
     assert rc == 0, err
     doc = json.loads((tmp_path / "r.json").read_text())
     assert doc["reflector_nominal_source"] == "estimated"
@@ -97,15 +104,15 @@ def test_large_outliers_switch_to_robust_loss(offset_data, tmp_path):
     """Hostile case 2: four 10 cm outliers: the default switches to soft_l1; --loss linear is refused."""
     d = offset_data
     rc, out, err = _run("identify", "--robot", "kr15", "--data", d / "out4.csv", "--validate", d / "te.csv",
-                        "--json", tmp_path / "r.json")
+                        "--json", tmp_path / "r.json", *NO_GP)
     assert rc == 0 and "robust loss soft_l1" in out
     doc = json.loads((tmp_path / "r.json").read_text())
     assert doc["result"]["loss"] == "soft_l1" and doc["validation"]["after"]["rms_m"] < 30e-6
     rc, out, err = _run("identify", "--robot", "kr15", "--data", d / "out4.csv", "--validate", d / "te.csv",
-                        "--loss", "linear", "--urdf-out", tmp_path / "c.urdf")
+                        "--loss", "linear", "--urdf-out", tmp_path / "c.urdf", *NO_GP)
     assert rc == 2 and "--loss soft_l1" in err and not (tmp_path / "c.urdf").exists()
     rc, *_ = _run("identify", "--robot", "kr15", "--data", d / "out4.csv", "--loss", "linear", "--accept-poor-fit",
-                  "--urdf-out", tmp_path / "c.urdf")
+                  "--urdf-out", tmp_path / "c.urdf", *NO_GP)
     assert rc == 0 and (tmp_path / "c.urdf").exists()
 
 
@@ -266,11 +273,11 @@ def test_outliers_with_unknown_noise_use_the_robust_loss(tmp_path):
         rows[k][xi] = repr(float(rows[k][xi]) + 0.005)
     (tmp_path / "o.csv").write_text("\n".join([",".join(head[i] for i in keep)] + [",".join(r) for r in rows]) + "\n")
     rc, out, err = _run("identify", "--robot", "kr15", "--data", tmp_path / "o.csv", "--validate", tmp_path / "te.csv",
-                        "--json", tmp_path / "r.json")
+                        "--json", tmp_path / "r.json", *NO_GP)
     assert rc == 0 and "robust loss soft_l1" in out
     doc = json.loads((tmp_path / "r.json").read_text())
     assert doc["result"]["loss"] == "soft_l1" and doc["validation"]["after"]["rms_m"] < 0.1e-3
-    rc, out, err = _run("identify", "--robot", "kr15", "--data", tmp_path / "o.csv", "--loss", "linear")
+    rc, out, err = _run("identify", "--robot", "kr15", "--data", tmp_path / "o.csv", "--loss", "linear", *NO_GP)
     assert "fit quality: good" not in out and "SUSPECT" in out
 
 
