@@ -190,8 +190,8 @@ def test_cli_design_with_default_discrepancy_curve_and_plateau(tmp_path, capsys)
     """design --criteria random,kpi_gp: the default discrepancy is stated, the honest σ is reported beside the
     paper's, a target below the plateau is answered with the plateau, the curve goes to the JSON and a figure.
 
-    A pool of 150 random candidates (the hedged selection's start pool and the curve's candidates): the curve still
-    runs to its cap of max(4 m, 120) = 120 poses out of 170 candidates (with the design's 20), as with 300."""
+    The curve's candidates: 150 random feasible poses (--pool-size) and the design's 20; the curve still runs to its
+    cap of max(4 m, 120) = 120 poses, as with 300."""
     import json
 
     from pin_kpi_oed.cli.app import main
