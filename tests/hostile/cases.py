@@ -573,18 +573,22 @@ _DIGESTS: dict[tuple[str, int, int], str] = {}
 
 
 def snapshot(d: Path) -> dict[str, str]:
-    """Path -> SHA-256 of every file below ``d`` (symlinks by target), folders as ``<dir>``."""
+    """Path (relative to ``d``, '/'-separated) -> SHA-256 of every file below ``d`` (symlinks by target), folders as
+    ``<dir>`` (a walk of plain strings: the cases take two snapshots each)."""
     out = {}
-    for p in sorted(d.rglob("*")):
-        rel = str(p.relative_to(d))
-        if p.is_dir():
-            out[rel] = "<dir>"
-            continue
-        st = p.stat()
-        key = (rel, st.st_size, st.st_mtime_ns)
-        if key not in _DIGESTS:
-            _DIGESTS[key] = hashlib.sha256(p.read_bytes()).hexdigest()
-        out[rel] = _DIGESTS[key]
+    root = str(d)
+    for top, dirs, files in os.walk(root):
+        rel = os.path.relpath(top, root)
+        prefix = "" if rel == "." else rel.replace(os.sep, "/") + "/"
+        for name in dirs:
+            out[prefix + name] = "<dir>"
+        for name in files:
+            st = os.stat(os.path.join(top, name))
+            key = (prefix + name, st.st_size, st.st_mtime_ns)
+            if key not in _DIGESTS:
+                with open(os.path.join(top, name), "rb") as f:
+                    _DIGESTS[key] = hashlib.sha256(f.read()).hexdigest()
+            out[prefix + name] = _DIGESTS[key]
     return out
 
 
