@@ -188,17 +188,14 @@ def test_registered_and_evaluated_through_the_problem(problem):
 
 def test_cli_design_with_default_discrepancy_curve_and_plateau(tmp_path, capsys):
     """design --criteria random,kpi_gp: the default discrepancy is stated, the honest σ is reported beside the
-    paper's, a target below the plateau is answered with the plateau, the curve goes to the JSON and a figure.
-
-    The curve's candidates: 150 random feasible poses (--pool-size) and the design's 20; the curve still runs to its
-    cap of max(4 m, 120) = 120 poses, as with 300."""
+    paper's, a target below the plateau is answered with the plateau, the curve goes to the JSON and a figure."""
     import json
 
     from pin_kpi_oed.cli.app import main
 
     out_json, png = tmp_path / "d.json", tmp_path / "curve.png"
     assert main(["design", "--cell", "kr15", "--criteria", "random,kpi_gp", "--measurements", "20", "--starts", "1",
-                 "--max-iter", "15", "--pool-size", "150", "--target-sigma", "1e-5", "--curve", str(png),
+                 "--max-iter", "15", "--pool-size", "300", "--target-sigma", "1e-5", "--curve", str(png),
                  "--json", str(out_json), "--quiet"]) == 0
     out = capsys.readouterr().out
     assert "discrepancy (default for the industrial class, from the name 'kr15': S = 0.1 mm" in out
@@ -225,7 +222,7 @@ def test_cli_design_with_default_discrepancy_curve_and_plateau(tmp_path, capsys)
     assert "random + the designs' poses" in out   # the designs' own poses are candidates of the curve
     # a reachable target (the same designs, so the same candidates): the fewest designed poses, verified
     assert main(["design", "--cell", "kr15", "--criteria", "random,kpi_gp", "--measurements", "20", "--starts", "1",
-                 "--max-iter", "15", "--pool-size", "150", "--target-sigma", str(1.05 * des[-1]), "--quiet"]) == 0
+                 "--max-iter", "15", "--pool-size", "300", "--target-sigma", str(1.05 * des[-1]), "--quiet"]) == 0
     assert "designed pose(s) reach it" in capsys.readouterr().out
 
 
