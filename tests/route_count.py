@@ -16,6 +16,8 @@ import ast
 import sys
 from pathlib import Path
 
+from tests._cache_misc import nodes, parsed
+
 MODEL = "CalibratedModel"
 START = ("pin_kpi_oed.upkeep.check", "check_calibration", "model")
 BLOCKS = ("body", "orelse", "finalbody", "handlers")
@@ -27,10 +29,10 @@ class Route:
 
     def __init__(self, root: Path) -> None:
         self.mods = {".".join(f.relative_to(root).with_suffix("").parts).removesuffix(".__init__"):
-                     ast.parse(f.read_text()) for f in sorted((root / "pin_kpi_oed").rglob("*.py"))}
+                     parsed(f.resolve()) for f in sorted((root / "pin_kpi_oed").rglob("*.py"))}
         self.funcs = {(m, n.name): n for m, t in self.mods.items() for n in t.body if isinstance(n, ast.FunctionDef)}
         self.classes = {n.name: (m, n) for m, t in self.mods.items() for n in t.body if isinstance(n, ast.ClassDef)}
-        self.imports = {m: {a.asname or a.name: (i.module, a.name) for i in ast.walk(t)
+        self.imports = {m: {a.asname or a.name: (i.module, a.name) for i in nodes(t)
                             if isinstance(i, ast.ImportFrom) and (i.module or "").startswith("pin_kpi_oed")
                             for a in i.names} for m, t in self.mods.items()}
         self.fields = {c: {s.target.id: self.cls(s.annotation) for s in n.body

@@ -5,8 +5,11 @@ modules, the check's modules asking the calibrated model through its view of the
 from __future__ import annotations
 
 import ast
-import functools
 from pathlib import Path
+
+import pytest
+
+from tests._cache_misc import PARSED_GROUP, nodes, parsed
 
 #: Upstream to downstream, as drawn in docs/ARCHITECTURE.md.
 ORDER = ["errors", "progress", "threads", "validation", "data", "results", "model", "effects", "discrepancy", "oed",
@@ -15,19 +18,22 @@ ORDER = ["errors", "progress", "threads", "validation", "data", "results", "mode
 PKG = Path(__file__).resolve().parents[1] / "pin_kpi_oed"
 
 
-@functools.cache
+#: the tests that read the parsed sources: on one xdist worker, so that each file is parsed once (tests/_cache_misc.py)
+shares_trees = pytest.mark.xdist_group(PARSED_GROUP)
+
+
 def _tree(f: Path) -> ast.Module:
-    """The parsed source of ``f``, parsed once for all the tests here (they only read the trees)."""
-    return ast.parse(f.read_text())
+    """The parsed source of ``f``, parsed once for all the tests of the session (they only read the trees)."""
+    return parsed(f.resolve())
 
 
 def _runtime_imports(tree: ast.AST):
     """(line, module) of every pin_kpi_oed import, lazy ones included, except under ``if TYPE_CHECKING:``."""
     skip: set[int] = set()
-    for node in ast.walk(tree):
+    for node in nodes(tree):
         if isinstance(node, ast.If) and "TYPE_CHECKING" in ast.unparse(node.test):
             skip.update(id(n) for b in node.body for n in ast.walk(b))
-    for node in ast.walk(tree):
+    for node in nodes(tree):
         if id(node) in skip:
             continue
         if isinstance(node, ast.ImportFrom) and node.module and node.module.startswith("pin_kpi_oed."):
@@ -38,6 +44,7 @@ def _runtime_imports(tree: ast.AST):
                     yield node.lineno, a.name
 
 
+@shares_trees
 def test_nothing_upstream_imports_downstream() -> None:
     rank = {name: i for i, name in enumerate(ORDER)}
     tops = {p.stem if p.is_file() else p.name for p in PKG.iterdir() if not p.name.startswith(("_", "."))}
@@ -72,9 +79,9 @@ def _import_graph(typing_too: bool = False) -> dict[str, set[str]]:
     for m, f in files.items():
         tree = _tree(f)
         typing_only = set() if typing_too else {
-            id(n) for node in ast.walk(tree) if isinstance(node, ast.If)
+            id(n) for node in nodes(tree) if isinstance(node, ast.If)
             and "TYPE_CHECKING" in ast.unparse(node.test) for b in node.body for n in ast.walk(b)}
-        for node in ast.walk(tree):
+        for node in nodes(tree):
             if id(node) in typing_only:
                 continue
             if isinstance(node, ast.ImportFrom) and node.module and node.module.startswith("pin_kpi_oed"):
@@ -130,11 +137,13 @@ def test_cycle_finder_finds_a_circle_through_a_lazy_import() -> None:
     assert [m for _, m in _runtime_imports(tree)] == ["pin_kpi_oed.cell.cell"]
 
 
+@shares_trees
 def test_no_import_circle() -> None:
     circles = _cycles(_import_graph())
     assert not circles, "import circles (lazy imports included):\n" + "\n".join(" <-> ".join(c) for c in circles)
 
 
+@shares_trees
 def test_no_circle_inside_a_folder_not_even_for_typing() -> None:
     """A type and the functions on it live in one place: no two modules of a folder name each other, not even in
     an ``if TYPE_CHECKING:`` import (a lower module states what it reads as a Protocol instead)."""
@@ -145,6 +154,7 @@ def test_no_circle_inside_a_folder_not_even_for_typing() -> None:
     assert not circles, "circles inside a folder:\n" + "\n".join(" <-> ".join(c) for c in circles)
 
 
+@shares_trees
 def test_no_module_over_600_lines_and_no_function_over_80() -> None:
     long_modules, long_functions = [], []
     for f in sorted(PKG.rglob("*.py")):
@@ -152,7 +162,7 @@ def test_no_module_over_600_lines_and_no_function_over_80() -> None:
         n = len(text.splitlines())
         if n > MAX_MODULE_LINES:
             long_modules.append(f"{f.relative_to(PKG)}: {n} lines")
-        for node in ast.walk(_tree(f)):
+        for node in nodes(_tree(f)):
             if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
                 length = node.end_lineno - node.lineno + 1
                 if length > MAX_FUNCTION_LINES:
@@ -169,7 +179,7 @@ def _annotation_nodes(tree: ast.AST) -> set[int]:
     """ids of the nodes inside annotations (arguments, returns, annotated assignments): typing may name a
     library's private class (``argparse._SubParsersAction``), the code may not use it."""
     out: set[int] = set()
-    for node in ast.walk(tree):
+    for node in nodes(tree):
         anns: list[ast.AST | None] = []
         if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
             a = node.args
@@ -191,13 +201,13 @@ def _private_reaches(tree: ast.AST) -> list[tuple[int, str]]:
     private attribute read on an object other than ``self`` / ``cls`` (``problem._kpi``)."""
     skip = _annotation_nodes(tree)
     out = []
-    for node in ast.walk(tree):
+    for node in nodes(tree):
         if isinstance(node, ast.ImportFrom):
             out += [(node.lineno, f"from {node.module} import {a.name}") for a in node.names if _private(a.name)]
         elif isinstance(node, ast.Attribute) and _private(node.attr) and id(node) not in skip \
+                and not (isinstance(node.value, ast.Name) and node.value.id in ("self", "cls")) \
                 and ast.unparse(node) not in PUBLIC_UNDERSCORE:
-            if not (isinstance(node.value, ast.Name) and node.value.id in ("self", "cls")):
-                out.append((node.lineno, ast.unparse(node)))
+            out.append((node.lineno, ast.unparse(node)))
     return out
 
 
@@ -207,6 +217,7 @@ def test_private_finder_sees_imports_and_attributes() -> None:
     assert [t for _, t in _private_reaches(tree)] == ["from pin_kpi_oed.a import _x", "q._bad", "argparse._Act"]
 
 
+@shares_trees
 def test_no_private_name_across_modules() -> None:
     bad = [f"{f.relative_to(PKG)}:{line} {text}" for f in sorted(PKG.rglob("*.py"))
            for line, text in _private_reaches(_tree(f))]
@@ -250,6 +261,7 @@ def test_check_route_finder_sees_a_lazy_import_of_the_sigma() -> None:
     assert _check_route_imports(tree) - CHECK_MAY_IMPORT == {"pin_kpi_oed.calibrated.prediction_sigma"}
 
 
+@shares_trees
 def test_the_check_asks_the_calibrated_model_through_its_view() -> None:
     """The check calls down once per question: what the model says on the rows (``calibrated/check_view.py``) and
     the registration of a set-up (``upkeep/transfer.py``); none of its modules reaches into the model's σ, its TCP σ

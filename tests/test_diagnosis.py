@@ -47,6 +47,10 @@ def make_case(rb, effect, seed, n, k=5.0, temperature=True):
     return nominal, data.subset(np.arange(n)), data.subset(np.arange(n, m))
 
 
+#: the tests that read :func:`compliance_case`: on one xdist worker, so that its diagnosis and figures are made once
+shares_compliance_case = pytest.mark.xdist_group("diagnosis_compliance_case")
+
+
 @pytest.fixture(scope="module")
 def compliance_case(ur10, tmp_path_factory):
     nominal, tr, te = make_case(ur10, "joint_compliance", 0, 250, k=4.0)
@@ -56,6 +60,7 @@ def compliance_case(ur10, tmp_path_factory):
     return nominal, tr, te, rep, figs
 
 
+@shares_compliance_case
 def test_compliance_named_and_gap_closed(compliance_case):
     _, _, _, rep, figs = compliance_case
     assert rep.gap_detected
@@ -79,6 +84,7 @@ def test_compliance_named_and_gap_closed(compliance_case):
     assert not list(figs.glob(".*.tmp"))
 
 
+@shares_compliance_case
 def test_report_dict_is_json(compliance_case):
     rep = compliance_case[3]
     d = rep.to_dict()
@@ -115,6 +121,7 @@ def test_no_effect_no_gap(ur10, seed):
     assert rep.heldout_before["rms_m"] <= 1.1 * rep.noise_floor_m
 
 
+@shares_compliance_case
 def test_validation_from_other_tracker_placement(compliance_case):
     nominal, tr, te, _, _ = compliance_case
     moved = MeasurementSet(te.joint_names, te.q, te.position_m + np.array([0.03, -0.01, 0.0]), sigma_m=te.sigma_m,
@@ -126,6 +133,7 @@ def test_validation_from_other_tracker_placement(compliance_case):
     assert len(rep.effects) == len(EFFECT_NAMES)  # the rest of the report is still produced
 
 
+@shares_compliance_case
 def test_transfer_validation_reregisters_the_setup(compliance_case, tmp_path, capsys):
     """Validation from another session (tracker moved by metres and turned): re-registered on 40 rows, the
     rest scored; without the registration it is a mismatch."""
@@ -156,12 +164,15 @@ def test_transfer_validation_reregisters_the_setup(compliance_case, tmp_path, ca
     assert "need --validate" in capsys.readouterr().err
 
 
+@shares_compliance_case
 def test_some_rows_from_elsewhere_are_named_and_left_out(compliance_case):
     nominal, tr, te, _, _ = compliance_case
     pos = te.position_m.copy()
     pos[[3, 7, 11]] += 0.05
     bad = MeasurementSet(te.joint_names, te.q, pos, sigma_m=te.sigma_m, temperature_c=te.temperature_c)
-    rep = diagnose(nominal, tr, bad)
+    # two candidates (the withheld one and one with nothing to fit): the rows are named before any effect is fitted,
+    # and the named effect is the withheld one with the three rows left out
+    rep = diagnose(nominal, tr, bad, effects=["joint_compliance", "joint_scale"])
     assert not rep.validation_mismatch
     assert rep.mismatch["rows"] == [4, 8, 12]
     assert rep.n_heldout == len(te) - 3
@@ -180,6 +191,7 @@ def test_missing_temperature_and_too_few_rows(ur10):
     assert any("temperature" in n for n in rep.notes)
 
 
+@shares_compliance_case
 def test_kfold_on_one_file(compliance_case):
     nominal, tr, _, _, _ = compliance_case
     rep = diagnose(nominal, tr, kfold=3, effects=["joint_compliance", "joint_scale"])
@@ -192,6 +204,7 @@ def test_kfold_on_one_file(compliance_case):
         diagnose(nominal, tr)
 
 
+@shares_compliance_case
 def test_cli_diagnose(compliance_case, tmp_path, capsys):
     _, tr, te, _, _ = compliance_case
     write_measurements(tr, tmp_path / "a.csv")

@@ -24,20 +24,30 @@ def inputs(tmp_path_factory) -> Path:
     return d
 
 
+@pytest.fixture(scope="module")
+def work(inputs) -> Path:
+    """The one work folder of the cases: each case empties it and links the inputs afresh (``prepare``)."""
+    return inputs.parent / "work"
+
+
 @pytest.mark.parametrize("case", [pytest.param(c, marks=pytest.mark.slow) if c.slow else c for c in CASES],
                          ids=[c.id for c in CASES])
-def test_hostile_input_is_refused_in_one_line(case, inputs, tmp_path):
+def test_hostile_input_is_refused_in_one_line(case, inputs, work):
     """A refusal: exit 2, one line naming the expected text, nothing written; a warning: said, no input changed;
-    never a traceback, never past the case's time bound."""
-    out = run_case(case, inputs, tmp_path / "work")
+    never a traceback, never past the case's time bound. An output-path problem (``out-`` cases) is reported before
+    any work: under 2 s CPU."""
+    out = run_case(case, inputs, work)
     assert out.verdict(case) == "ok", (out.verdict(case), out.rc, out.err[-600:], out.out[-300:], out.changed,
                                        round(out.time_s, 1))
+    if case.id.startswith("out-"):
+        assert out.rc == 2 and out.cpu_s < 2.0, ("output-path problem not reported before any work", out.cpu_s,
+                                                 out.err)
 
 
-@pytest.mark.parametrize("case", [c for c in CASES if c.id.startswith("out-")], ids=lambda c: c.id)
-def test_output_path_problems_reported_before_any_work(case, inputs, tmp_path):
-    out = run_case(case, inputs, tmp_path / "work")
-    assert out.rc == 2 and out.time_s < 2.0, (out.time_s, out.err)
+#: the fit-quality gate's and the robust loss's tests fit without a discrepancy (the default fits a Gaussian process
+#: to decide, most of a fit's time here): what they test is the parametric fit's verdict and loss; a discrepancy's part
+#: in the verdict (it never excuses a poor fit) is tests/test_discrepancy.py's
+NO_GP = ("--discrepancy", "none")
 
 
 def _run(*argv) -> tuple[int, str, str]:
@@ -70,7 +80,8 @@ def test_zero_reflector_assumed_is_refused_as_poor_fit(offset_data, tmp_path):
     """Hostile case 1: --reflector 0,0,0 on data with an offset: refused, verdict in the JSON, no URDF."""
     d = offset_data
     rc, out, err = _run("identify", "--robot", "kr15", "--data", d / "tr.csv", "--validate", d / "te.csv",
-                        "--reflector", "0,0,0", "--json", tmp_path / "r.json", "--urdf-out", tmp_path / "c.urdf")
+                        "--reflector", "0,0,0", "--json", tmp_path / "r.json", "--urdf-out", tmp_path / "c.urdf",
+                        *NO_GP)
     assert rc == 2 and "POOR" in err and "reflector" in err and len(err.strip().splitlines()) == 1
     assert not (tmp_path / "c.urdf").exists()
     q = json.loads((tmp_path / "r.json").read_text())["fit_quality"]
@@ -80,7 +91,7 @@ def test_zero_reflector_assumed_is_refused_as_poor_fit(offset_data, tmp_path):
 def test_default_reflector_is_estimated_and_fit_is_good(offset_data, tmp_path):
     d = offset_data
     rc, out, err = _run("identify", "--robot", "kr15", "--data", d / "tr.csv", "--validate", d / "te.csv",
-                        "--json", tmp_path / "r.json")
+                        "--json", tmp_path / "r.json", *NO_GP)
     assert rc == 0, err
     doc = json.loads((tmp_path / "r.json").read_text())
     assert doc["reflector_nominal_source"] == "estimated"
@@ -93,15 +104,15 @@ def test_large_outliers_switch_to_robust_loss(offset_data, tmp_path):
     """Hostile case 2: four 10 cm outliers: the default switches to soft_l1; --loss linear is refused."""
     d = offset_data
     rc, out, err = _run("identify", "--robot", "kr15", "--data", d / "out4.csv", "--validate", d / "te.csv",
-                        "--json", tmp_path / "r.json")
+                        "--json", tmp_path / "r.json", *NO_GP)
     assert rc == 0 and "robust loss soft_l1" in out
     doc = json.loads((tmp_path / "r.json").read_text())
     assert doc["result"]["loss"] == "soft_l1" and doc["validation"]["after"]["rms_m"] < 30e-6
     rc, out, err = _run("identify", "--robot", "kr15", "--data", d / "out4.csv", "--validate", d / "te.csv",
-                        "--loss", "linear", "--urdf-out", tmp_path / "c.urdf")
+                        "--loss", "linear", "--urdf-out", tmp_path / "c.urdf", *NO_GP)
     assert rc == 2 and "--loss soft_l1" in err and not (tmp_path / "c.urdf").exists()
     rc, *_ = _run("identify", "--robot", "kr15", "--data", d / "out4.csv", "--loss", "linear", "--accept-poor-fit",
-                  "--urdf-out", tmp_path / "c.urdf")
+                  "--urdf-out", tmp_path / "c.urdf", *NO_GP)
     assert rc == 0 and (tmp_path / "c.urdf").exists()
 
 
@@ -206,13 +217,18 @@ def test_export_force_writes_the_design_value_beyond_a_limit(inputs, tmp_path):
 
 
 def test_route_planner_is_seeded_per_call():
-    """The same move planned twice (after other plans) gives the same route: the seed is per call."""
+    """The same move planned twice (after other plans) gives the same route: the seed is per call. (The first two
+    blocked moves of the pool are the ones planned: the pairs are checked until they are found, not all of them.)"""
+    import itertools
+
     from pin_kpi_oed.cell.cell import load_cell
     from pin_kpi_oed.program.transitions import TransitionChecker
 
     tc = TransitionChecker(load_cell("kr15"), 0.01)
     pool = tc.safe_pool(30, seed=2)
-    pairs = [(a, b) for a in range(len(pool)) for b in range(a + 1, len(pool)) if not tc.check(pool[a], pool[b]).clear]
+    blocked = ((a, b) for a in range(len(pool)) for b in range(a + 1, len(pool))
+               if not tc.check(pool[a], pool[b]).clear)
+    pairs = list(itertools.islice(blocked, 2))
     assert pairs
     a, b = pairs[0]
     r1 = tc.plan_route(pool[a], pool[b], seed=5, max_checks=4000)
@@ -262,11 +278,11 @@ def test_outliers_with_unknown_noise_use_the_robust_loss(tmp_path):
         rows[k][xi] = repr(float(rows[k][xi]) + 0.005)
     (tmp_path / "o.csv").write_text("\n".join([",".join(head[i] for i in keep)] + [",".join(r) for r in rows]) + "\n")
     rc, out, err = _run("identify", "--robot", "kr15", "--data", tmp_path / "o.csv", "--validate", tmp_path / "te.csv",
-                        "--json", tmp_path / "r.json")
+                        "--json", tmp_path / "r.json", *NO_GP)
     assert rc == 0 and "robust loss soft_l1" in out
     doc = json.loads((tmp_path / "r.json").read_text())
     assert doc["result"]["loss"] == "soft_l1" and doc["validation"]["after"]["rms_m"] < 0.1e-3
-    rc, out, err = _run("identify", "--robot", "kr15", "--data", tmp_path / "o.csv", "--loss", "linear")
+    rc, out, err = _run("identify", "--robot", "kr15", "--data", tmp_path / "o.csv", "--loss", "linear", *NO_GP)
     assert "fit quality: good" not in out and "SUSPECT" in out
 
 
@@ -282,11 +298,11 @@ def test_new_checks_are_fast(inputs):
     robot = load_robot("kr15")
     Q = robot.random_q(np.random.default_rng(0), 2000)
     P = np.array([robot.oMtool(q).translation for q in Q])
-    t0 = time.perf_counter()
+    t0 = time.process_time()  # CPU time: the checks' cost, not the machine's load
     validate_model_dict(d, "m.json")
     check_points_against_joints(robot, Q, P, "a", "b")
     assess_registration("s", P, P, np.full(2000, 1e-5), np.full(3, 1e-5), 9)
-    assert time.perf_counter() - t0 < 0.05 * 2  # two commands' worth on a loaded machine
+    assert time.process_time() - t0 < 0.05 * 2  # two commands' worth
 
 
 def test_move_check_bound_gives_the_exact_decisions(inputs):

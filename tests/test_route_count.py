@@ -6,11 +6,15 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import pytest
+
+from tests._cache_misc import PARSED_GROUP
 from tests.route_count import route
 
 ROOT = Path(__file__).resolve().parents[1]
 
 
+@pytest.mark.xdist_group(PARSED_GROUP)  # the package's trees, parsed once with tests/test_architecture.py's
 def test_the_model_flows_down_the_check_in_one_pass():
     files, climbs = route(ROOT)
     assert files[0] == files[-1] == "upkeep.check"

@@ -11,10 +11,12 @@ arm's model file, outputs onto inputs) are in :mod:`tests.hostile.surfaces`.
 
 from __future__ import annotations
 
+import argparse
 import contextlib
 import hashlib
 import io
 import json
+import os
 import re
 import shutil
 import time
@@ -571,18 +573,22 @@ _DIGESTS: dict[tuple[str, int, int], str] = {}
 
 
 def snapshot(d: Path) -> dict[str, str]:
-    """Path -> SHA-256 of every file below ``d`` (symlinks by target), folders as ``<dir>``."""
+    """Path (relative to ``d``, '/'-separated) -> SHA-256 of every file below ``d`` (symlinks by target), folders as
+    ``<dir>`` (a walk of plain strings: the cases take two snapshots each)."""
     out = {}
-    for p in sorted(d.rglob("*")):
-        rel = str(p.relative_to(d))
-        if p.is_dir():
-            out[rel] = "<dir>"
-            continue
-        st = p.stat()
-        key = (rel, st.st_size, st.st_mtime_ns)
-        if key not in _DIGESTS:
-            _DIGESTS[key] = hashlib.sha256(p.read_bytes()).hexdigest()
-        out[rel] = _DIGESTS[key]
+    root = str(d)
+    for top, dirs, files in os.walk(root):
+        rel = os.path.relpath(top, root)
+        prefix = "" if rel == "." else rel.replace(os.sep, "/") + "/"
+        for name in dirs:
+            out[prefix + name] = "<dir>"
+        for name in files:
+            st = os.stat(os.path.join(top, name))
+            key = (prefix + name, st.st_size, st.st_mtime_ns)
+            if key not in _DIGESTS:
+                with open(os.path.join(top, name), "rb") as f:
+                    _DIGESTS[key] = hashlib.sha256(f.read()).hexdigest()
+            out[prefix + name] = _DIGESTS[key]
     return out
 
 
@@ -633,21 +639,83 @@ def argv_of(case: Case, d: Path) -> list[str]:
     return [a.replace("{d}", str(d)) for a in case.argv.split()]
 
 
+#: base folder -> (its pristine copy, each file's (size, modification time in ns) as built): :func:`prepare`'s guard
+_PRISTINE: dict[Path, tuple[Path, dict[str, tuple[int, int]]]] = {}
+
+
+def _stat_key(p: Path) -> tuple[int, int]:
+    st = p.stat()
+    return st.st_size, st.st_mtime_ns
+
+
+def _guard_base(base: Path) -> None:
+    """Keep ``base`` as built: a pristine copy made on the first call; later calls put back from it any file a case
+    changed through its hard link (a command writing an input in place: the case fails on it, the next cases still
+    get the inputs as built)."""
+    if base not in _PRISTINE:
+        pristine = base.with_name(f".{base.name}.pristine")
+        if pristine.exists():
+            shutil.rmtree(pristine)
+        shutil.copytree(base, pristine, symlinks=True)
+        _PRISTINE[base] = pristine, {str(p.relative_to(base)): _stat_key(p) for p in base.rglob("*")
+                                     if p.is_file() and not p.is_symlink()}
+        return
+    pristine, built = _PRISTINE[base]
+    for rel, key in built.items():
+        p = base / rel
+        if not p.is_file() or _stat_key(p) != key:
+            p.unlink(missing_ok=True)
+            shutil.copy2(pristine / rel, p)
+            built[rel] = _stat_key(p)
+
+
 def prepare(case: Case, base: Path, work: Path) -> None:
-    """Copy the inputs ``base`` to ``work`` (the symlink pointing into ``work``) and build what the case needs."""
+    """Give ``work`` the inputs ``base`` (the symlink pointing into ``work``) and build what the case needs.
+
+    The files are hard links to ``base``'s (a copy costs about 10 ms a case, a link a fraction of it): a command's
+    output replaces a file (written aside, then renamed) and leaves ``base`` as it was; a write into an input in
+    place shows in the case's snapshot (the input changed: the case fails) and :func:`_guard_base` puts the file
+    back before the next case.
+    """
     from tests.hostile.surfaces import EXTRA
 
+    _guard_base(base)
     if work.exists():
         shutil.rmtree(work)
-    shutil.copytree(base, work, symlinks=False)
+    shutil.copytree(base, work, symlinks=True, copy_function=os.link)
     (work / "link.csv").unlink()
     (work / "link.csv").symlink_to(work / "tr.csv")
     if case.needs:
         EXTRA[case.needs](work)
 
 
+#: (command, lazy) -> the argument parser :func:`pin_kpi_oed.cli.app.build_parser` built for it
+_PARSERS: dict[tuple[str | None, bool], argparse.ArgumentParser] = {}
+
+
+@contextlib.contextmanager
+def _parsers_built_once():
+    """:func:`pin_kpi_oed.cli.app.main` with each command's parser built once for all cases (5 to 12 ms a case
+    otherwise): parsing makes a new namespace each time and changes nothing of the parser (no option of the command
+    line has a mutable default; ``append`` options start from a new list), so a case parses as with a fresh parser."""
+    from pin_kpi_oed.cli import app
+
+    build = app.build_parser
+
+    def cached(command: str | None = None, lazy: bool = False) -> argparse.ArgumentParser:
+        if (command, lazy) not in _PARSERS:
+            _PARSERS[command, lazy] = build(command, lazy)
+        return _PARSERS[command, lazy]
+
+    app.build_parser = cached
+    try:
+        yield
+    finally:
+        app.build_parser = build
+
+
 def run_case(case: Case, base: Path, work: Path) -> Outcome:
-    """Copy the inputs ``base`` to ``work``, run the case in-process, compare the files before and after."""
+    """Give ``work`` the inputs ``base``, run the case in-process, compare the files before and after."""
     prepare(case, base, work)
     before = snapshot(work)
     from pin_kpi_oed.cli.app import main
@@ -656,7 +724,7 @@ def run_case(case: Case, base: Path, work: Path) -> Outcome:
     t0, c0 = time.perf_counter(), time.process_time()
     tb = False
     try:
-        with contextlib.redirect_stderr(err), contextlib.redirect_stdout(out):
+        with contextlib.redirect_stderr(err), contextlib.redirect_stdout(out), _parsers_built_once():
             rc = main(argv_of(case, work))
     except SystemExit as exc:  # argparse
         rc = int(exc.code or 0)

@@ -1,0 +1,33 @@
+"""Caches shared by the architecture and route tests (tests/test_architecture.py, tests/test_route_count.py): each
+source file parsed once per test process, and each tree's nodes listed once (the tests only read them).
+
+Their tests that read the package's trees are marked ``xdist_group("misc_parsed_sources")``: on one worker, the
+package is parsed once for all of them.
+"""
+
+from __future__ import annotations
+
+import ast
+import functools
+from pathlib import Path
+
+#: the xdist group of the tests that read the package's parsed source
+PARSED_GROUP = "misc_parsed_sources"
+
+
+@functools.cache
+def parsed(path: Path) -> ast.Module:
+    """The parsed source of the file ``path`` (an absolute path; parsed on the first call only)."""
+    return ast.parse(Path(path).read_text())
+
+
+#: id of a tree -> (the tree, kept alive so that its id names it alone; its nodes in ``ast.walk`` order)
+_NODES: dict[int, tuple[ast.AST, tuple[ast.AST, ...]]] = {}
+
+
+def nodes(tree: ast.AST) -> tuple[ast.AST, ...]:
+    """Every node of ``tree`` in ``ast.walk`` order, listed on the first call for that tree."""
+    hit = _NODES.get(id(tree))
+    if hit is None or hit[0] is not tree:
+        hit = _NODES[id(tree)] = (tree, tuple(ast.walk(tree)))
+    return hit[1]
