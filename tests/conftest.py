@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 import numpy as np
@@ -40,6 +41,37 @@ def pytest_configure(config):
     from pin_kpi_oed.threads import limit_process_threads
 
     limit_process_threads()
+    config.pluginmanager.register(_GroupCheck(), "pin_kpi_oed_group_check")
+
+
+# ---------------------------------------------------------------------- tests that share one fixture, one worker
+#: The suffix pytest-xdist's ``--dist loadgroup`` appends to the id of a test marked ``xdist_group``.
+_GROUP_SUFFIX = re.compile(r"@[A-Za-z0-9_]+$")
+
+
+def test_id(nodeid: str) -> str:
+    """A test's id without the ``@group`` suffix ``--dist loadgroup`` gives it (the CPU records' key)."""
+    return _GROUP_SUFFIX.sub("", nodeid)
+
+
+class _GroupCheck:
+    """``make test`` runs ``--dist loadgroup`` so that the tests marked ``xdist_group`` (one expensive fixture
+    shared) run on one worker. pytest-xdist groups them by a suffix it writes into each test's id; a pytest whose
+    node ids are stored elsewhere (9.2 with xdist 3.8) drops it and the marks silently do nothing, each worker
+    computing the fixture again: refused here, naming the versions."""
+
+    @pytest.hookimpl(trylast=True)
+    def pytest_collection_modifyitems(self, config, items):
+        if not getattr(config.option, "loadgroup", False) or not hasattr(config, "workerinput"):
+            return
+        lost = [it.nodeid for it in items if it.get_closest_marker("xdist_group") and "@" not in it.nodeid]
+        if lost:
+            import xdist
+
+            raise pytest.UsageError(
+                f"--dist loadgroup: pytest {pytest.__version__} with pytest-xdist {xdist.__version__} drops the "
+                f"group of {len(lost)} marked tests (e.g. {lost[0]}); install the versions pyproject.toml pins "
+                f"(make test does)")
 
 
 # ---------------------------------------------------------------------- CPU time per test (printed by the run)
@@ -77,7 +109,7 @@ def pytest_runtest_logreport(report):
     if report.when == "teardown":
         cpu = dict(report.user_properties).get("cpu_s")
         if cpu is not None:
-            _CPU[report.nodeid] = float(cpu)
+            _CPU[test_id(report.nodeid)] = float(cpu)
 
 
 def pytest_terminal_summary(terminalreporter):
@@ -129,10 +161,10 @@ def pytest_collection_modifyitems(config, items):
     if not config.getoption("--fast"):
         return
     record, budget = _record(), config.getoption("--fast-budget")
-    slow = [it for it in items if record.get(it.nodeid, 0.0) > budget]
+    slow = [it for it in items if record.get(test_id(it.nodeid), 0.0) > budget]
     if slow:
         config.hook.pytest_deselected(items=slow)
-        items[:] = [it for it in items if record.get(it.nodeid, 0.0) <= budget]
+        items[:] = [it for it in items if record.get(test_id(it.nodeid), 0.0) <= budget]
 
 
 def pytest_sessionfinish(session):
