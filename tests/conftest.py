@@ -2,15 +2,22 @@
 
 from __future__ import annotations
 
+import sys
 from pathlib import Path
 
-import numpy as np
-import pinocchio as pin
-import pytest
+# Collection's cost: pytest rewrites every test module's asserts and Python compiles every module of the package the
+# tests import; where PYTHONDONTWRITEBYTECODE is set neither is cached and every run (every xdist worker) pays both
+# again: collection took 10.8 s CPU so, 4.3 s with the bytecode cached (`python -m pytest --collect-only -q`). The
+# bytecode goes to __pycache__ (git-ignored); where the checkout is read-only nothing is written and nothing fails.
+sys.dont_write_bytecode = False
 
-from pin_kpi_oed.model.noise import NoiseModel
-from pin_kpi_oed.model.tracker import TrackerModel
-from pin_kpi_oed.model.robot import load_robot
+import numpy as np  # noqa: E402
+import pinocchio as pin  # noqa: E402
+import pytest  # noqa: E402
+
+from pin_kpi_oed.model.noise import NoiseModel  # noqa: E402
+from pin_kpi_oed.model.tracker import TrackerModel  # noqa: E402
+from pin_kpi_oed.model.robot import load_robot  # noqa: E402
 
 SHARED = Path(__file__).resolve().parents[2] / "shared"
 REPO = Path(__file__).resolve().parents[1]
