@@ -32,6 +32,7 @@ from __future__ import annotations
 import argparse
 import compileall
 import json
+import math
 import os
 import re
 import shlex
@@ -256,23 +257,46 @@ def cell_text(rows: list[dict]) -> str:
     return f"{np.median([r['cpu_s'] for r in rows]):.2f} / {np.median([r['wall_s'] for r in rows]):.2f}"
 
 
+def sign_test_p(wins: int, n: int) -> float:
+    """Two-sided sign test: the probability of a split at least as uneven as ``wins`` of ``n`` pairs under no
+    difference."""
+    k = min(wins, n - wins)
+    return min(1.0, 2.0 * sum(math.comb(n, i) for i in range(k + 1)) / 2.0 ** n) if n else 1.0
+
+
+def paired_wins(before: list[dict], after: list[dict]) -> tuple[int, int]:
+    """(pairs whose after CPU time is below the before's, pairs), the runs paired in order (interleaved), where
+    both ran."""
+    pairs = [(b["cpu_s"], a["cpu_s"]) for b, a in zip(before, after) if b["rc"] == 0 and a["rc"] == 0]
+    return sum(a < b for b, a in pairs), len(pairs)
+
+
 def readme_table(runs: dict[str, list[list]], cmds: list[list[str]]) -> list[str]:
-    """The table's lines (Markdown): per command, per checkout 'CPU s / wall s' (medians), the loads at the starts
-    of its runs; then the whole sequence (where every command ran)."""
+    """The table's lines (Markdown): per command, per checkout 'CPU s / wall s' (medians), with a before the
+    interleaved pairs in which after took less CPU, the loads at the starts of its runs; then the whole sequence
+    (where every command ran) and the sign test over every command's pairs."""
     labels = list(runs)
-    lines = ["| command | " + " | ".join(f"{x}: CPU / wall s" for x in labels) + " | load at the starts |",
-             "|---|" + "---|" * len(labels) + "---|"]
+    paired = labels == ["before", "after"]
+    lines = ["| command | " + " | ".join(f"{x}: CPU / wall s" for x in labels)
+             + (" | after less CPU |" if paired else " |") + " load at the starts |",
+             "|---|" + "---|" * (len(labels) + paired) + "---|"]
+    wins = n = 0
     for k, label in enumerate(step_labels(cmds)):
         per = {x: [run[k] for run in runs[x]] for x in labels}
         loads = [r["load"] for x in labels for r in per[x]]
-        lines.append(f"| `{label}` | " + " | ".join(cell_text(per[x]) for x in labels)
-                     + f" | {min(loads):.1f}–{max(loads):.1f} |")
+        pair = ""
+        if paired:
+            w, m = paired_wins(per["before"], per["after"])
+            wins, n, pair = wins + w, n + m, f" {w} of {m} pairs |"
+        lines.append(f"| `{label}` | " + " | ".join(cell_text(per[x]) for x in labels) + " |" + pair
+                     + f" {min(loads):.1f}–{max(loads):.1f} |")
     total = []
     for x in labels:
         ok = [run for run in runs[x] if all(r["rc"] == 0 for r in run)]
         total.append(f"{np.median([sum(r['cpu_s'] for r in run) for run in ok]):.2f} / "
                      f"{np.median([sum(r['wall_s'] for r in run) for run in ok]):.2f}" if ok else "—")
-    lines.append("| whole example | " + " | ".join(total) + " | |")
+    lines.append("| whole example | " + " | ".join(total) + " |"
+                 + (f" {wins} of {n} pairs (sign test p = {sign_test_p(wins, n):.2g}) |" if paired else "") + " |")
     return lines
 
 
