@@ -114,7 +114,7 @@ def pytest_addoption(parser):
     parser.addoption("--fast", action="store_true",
                      help="leave out the tests whose CPU time, as the last runs recorded it (.pytest_cpu.json), "
                           "exceeds --fast-budget: the change-test loop (make test-fast); make test runs them all")
-    parser.addoption("--fast-budget", type=float, default=0.5, help="--fast: largest CPU time of a test kept (s)")
+    parser.addoption("--fast-budget", type=float, default=0.2, help="--fast: largest CPU time of a test kept (s)")
 
 
 def _read_times(path) -> dict[str, float]:
