@@ -323,7 +323,8 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--before", type=Path, help="a checkout of the package before a change (its folder)")
     ap.add_argument("--repeat", type=int, default=REPEAT, help="runs of the README example per checkout (median)")
     ap.add_argument("--readme-only", action="store_true", help="the README example's table alone")
-    ap.add_argument("--cache", type=Path, help="JSON file keeping finished runs of the README example (resume)")
+    ap.add_argument("--cache", type=Path, help="JSON file keeping finished runs of the README example (resume; "
+                    "another README starts it afresh, a changed checkout does not: delete the file)")
     args = ap.parse_args(argv or [])
     if args.before is not None and not (args.before / "pin_kpi_oed" / "__init__.py").is_file():
         ap.error(f"--before {args.before}: no pin_kpi_oed package in that folder")
