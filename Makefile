@@ -1,5 +1,5 @@
 # Set-up commands: `make demo` and `make test` (ruff, then mypy beside pytest); `make test-fast` (ruff, then the tests the
-# last runs measured at most 0.5 s CPU each: the change-test loop). Each bootstraps .venv on its own.
+# last runs measured at most 0.2 s CPU each: the change-test loop). Each bootstraps .venv on its own.
 PYTHON ?= python3
 VENV   := .venv
 PY     := $(VENV)/bin/python

@@ -14,16 +14,31 @@ selection of 60 of 1,000 UR5 candidates (``benchmarks.bench_certificate``'s pool
 selection alone). The import sets of ``--help`` and ``info`` are pinned by ``tests/test_cli_startup.py``; whether
 identify's numbers stay the same, by ``benchmarks.identify_unchanged``.
 
+The README's worked example (a UR5: design, export, simulate, identify, diagnose, identify --effects, compensate),
+each command as a process in a temporary folder holding the example's files, in order, each command's outputs feeding
+the next: CPU (user + system of the whole process) and wall time of each, the median of ``--repeat`` runs of the whole
+sequence, every exit code checked. With ``--before PATH`` the same sequence runs on that checkout too (its folder
+first on ``PYTHONPATH``), interleaved (before, after, before, after ...), so both see the same load; a command the
+before checkout cannot run (an option it lacked) is named in its row. Each checkout's ``pin_kpi_oed`` and ``urdf``
+are copied to the temporary folder and compiled there (nothing is written into either checkout); ``--cache FILE``
+keeps each finished sequence, so an interrupted run resumes where it stopped.
+
 Run:  python -m benchmarks bench_startup   (``make bench`` runs it with the others)
       python -m benchmarks.bench_startup --before OTHER_CHECKOUT [--identify-only]
           (each identify figure also for another checkout's package, the runs interleaved: before, after, before, ...)
+      python -m benchmarks.bench_startup --readme-only --before ../other-checkout --repeat 3
 """
 
 from __future__ import annotations
 
 import argparse
 import compileall
+import json
+import math
 import os
+import re
+import shlex
+import shutil
 import resource
 import subprocess
 import sys
@@ -122,19 +137,15 @@ def pool_cpu(repeat: int = REPEAT) -> float:
     return float(np.median(times))
 
 
-def main(argv: list[str] | None = None) -> None:
-    """Print the load, then each figure: CPU seconds, target, ratio (with ``--before``: the identify figures of both
-    checkouts, interleaved, and how many pairs the after won)."""
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--before", type=Path, default=None, help="another checkout: its identify figures interleaved")
-    ap.add_argument("--identify-only", action="store_true", help="the identify figures only")
-    args = ap.parse_args([] if argv is None else argv)  # ``python -m benchmarks`` calls main() with its own argv
+def startup_figures(before: Path | None = None, identify_only: bool = False) -> None:
+    """Print the load, then each start-up figure: CPU seconds, target, ratio (with ``before``: the identify figures of
+    both checkouts, interleaved, and how many pairs the after won; ``identify_only``: those alone)."""
     print(f"load average {', '.join(f'{x:.2f}' for x in os.getloadavg())} on {os.cpu_count()} cores at the start; "
           f"bytecode compiled first", flush=True)
     compileall.compile_dir(str(ROOT / "pin_kpi_oed"), quiet=1)
-    if args.before is not None:
-        compileall.compile_dir(str(args.before / "pin_kpi_oed"), quiet=1)
-    if not args.identify_only:
+    if before is not None:
+        compileall.compile_dir(str(before / "pin_kpi_oed"), quiet=1)
+    if not identify_only:
         for cmd, target in STARTUP:
             figure(f"pin-kpi-oed {' '.join(cmd)} (CPU s, load {load_average():.1f})", median_cpu(cmd), target)
         figure(f"pool selection 1,000 -> 60, UR5, KPI, in process (CPU s, load {load_average():.1f})", pool_cpu(),
@@ -144,15 +155,207 @@ def main(argv: list[str] | None = None) -> None:
         return
     with tempfile.TemporaryDirectory() as tmp:
         for label, cmd, target in identify_cases(Path(tmp), ipa):
-            if args.before is None:
+            if before is None:
                 figure(f"{label}, load {load_average():.1f}", median_cpu(cmd, Path(tmp)), target)
                 continue
             load = load_average()
-            b, a = paired_cpu(cmd, Path(tmp), args.before.resolve())
+            b, a = paired_cpu(cmd, Path(tmp), before.resolve())
             print(f"  before: {', '.join(f'{x:.2f}' for x in b)} s; after: {', '.join(f'{x:.2f}' for x in a)} s; "
                   f"after faster in {sum(x < y for x, y in zip(a, b))} of {len(a)} pairs", flush=True)
             figure(f"{label}, before {np.median(b):.2f} s, load {load:.1f} -> {load_average():.1f}",
                    float(np.median(a)), target)
+
+
+# ---------------------------------------------------------------------- the README's worked example, before and after
+#: The README's block that the example is read from (the first ```bash block after this text).
+README_EXAMPLE = "**Worked example: a UR5**"
+
+
+def readme_commands(readme: Path = ROOT / "README.md") -> list[list[str]]:
+    """The worked example's ``pin-kpi-oed`` commands (arguments only), continuations joined, comments dropped, shell
+    variables substituted; a path under the example's variable (``$EX/x``) becomes ``x`` (the file is copied to the
+    run's folder, :func:`example_files`).
+
+    Raises:
+        ValueError: no such block, or a line that is neither a variable nor a ``pin-kpi-oed`` command.
+    """
+    text = readme.read_text()
+    m = re.compile(r"^```bash\n(.*?)^```", re.S | re.M).search(text, text.index(README_EXAMPLE))
+    if m is None:
+        raise ValueError(f"README.md: no bash block after {README_EXAMPLE!r}")
+    cmds = []
+    for line in m.group(1).replace("\\\n", " ").splitlines():
+        words = shlex.split(line, comments=True)
+        if len(words) == 1 and re.fullmatch(r"[A-Z_]+=\S+", words[0]):
+            continue  # the examples folder's variable: its files are copied to the run's folder
+        if words and words[0] == "pin-kpi-oed":
+            cmds.append([re.sub(r"^\$[A-Z_]+/", "", w) for w in words[1:]])
+        elif words:
+            raise ValueError(f"README.md's worked example: unexpected line {line!r}")
+    return cmds
+
+
+def example_files(readme: Path = ROOT / "README.md") -> list[str]:
+    """The examples folder's files the worked example reads (``$EX/name``)."""
+    text = readme.read_text()
+    block = text[text.index(README_EXAMPLE):].split("```bash", 1)[1].split("```", 1)[0]
+    return sorted(set(re.findall(r"\$[A-Z_]+/([\w.\-]+)", block)))
+
+
+def step_labels(cmds: list[list[str]]) -> list[str]:
+    """A row label per command: its name, and ``--effects`` where the same command ran before without it."""
+    labels: list[str] = []
+    for c in cmds:
+        label = c[0] + (" --effects" if "--effects" in c and c[0] in labels else "")
+        labels.append(label + (f" ({labels.count(label) + 1})" if label in labels else ""))
+    return labels
+
+
+def checkout_copy(src: Path, dst: Path) -> Path:
+    """``src``'s ``pin_kpi_oed`` and ``urdf`` copied to ``dst`` and compiled there (as an installed package's
+    bytecode is; nothing is written into ``src``); returns ``dst``."""
+    skip = shutil.ignore_patterns("__pycache__", "*.pyc")
+    for part in ("pin_kpi_oed", "urdf"):
+        if (src / part).is_dir():
+            shutil.copytree(src / part, dst / part, ignore=skip, dirs_exist_ok=True)
+    compileall.compile_dir(str(dst / "pin_kpi_oed"), quiet=1)
+    return dst
+
+
+def run_sequence(code: Path, cmds: list[list[str]], work: Path) -> list[dict]:
+    """Every command in ``work`` (the example's files copied in), in order, as a process on the checkout ``code``:
+    per command its CPU s (user + system of the process), wall s, load at its start, exit code and error line."""
+    work.mkdir(parents=True)
+    for name in example_files():
+        shutil.copy(ROOT / "examples" / name, work / name)
+    env = {**os.environ, "PYTHONPATH": str(code) + os.pathsep + os.environ.get("PYTHONPATH", "")}
+    rows = []
+    for argv in cmds:
+        load, before, t0 = load_average(), resource.getrusage(resource.RUSAGE_CHILDREN), time.perf_counter()
+        res = subprocess.run([sys.executable, "-m", "pin_kpi_oed", *argv], cwd=work, env=env, capture_output=True,
+                             text=True)
+        wall, after = time.perf_counter() - t0, resource.getrusage(resource.RUSAGE_CHILDREN)
+        err = [x for x in res.stderr.strip().splitlines() if x.strip()]
+        rows.append({"cpu_s": (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime),
+                     "wall_s": wall, "load": load, "rc": res.returncode,
+                     "error": err[-1][:160] if res.returncode != 0 and err else ""})
+    return rows
+
+
+def readme_runs(checkouts: dict[str, Path], repeat: int, cache: Path | None, tmp: Path) -> dict[str, list[list]]:
+    """The sequence ``repeat`` times per checkout, interleaved (one of each in turn); finished sequences are read
+    from and written to ``cache`` (JSON, keyed by checkout label and run) so an interrupted run resumes.
+
+    Returns:
+        {label: [the rows of each run (:func:`run_sequence`)]}.
+    """
+    cmds = readme_commands()
+    done = json.loads(cache.read_text()) if cache is not None and cache.exists() else {}
+    key = " ".join(shlex.join(c) for c in cmds)
+    if done.get("commands") != key:
+        done = {"commands": key}  # another README: nothing kept applies
+    copies = {label: checkout_copy(path, tmp / "code" / label) for label, path in checkouts.items()}
+    runs: dict[str, list[list]] = {label: [] for label in checkouts}
+    for i in range(repeat):
+        for label in checkouts:
+            name = f"{label} {i}"
+            if name not in done:
+                done[name] = run_sequence(copies[label], cmds, tmp / "runs" / f"{label}_{i}")
+                if cache is not None:
+                    cache.write_text(json.dumps(done, indent=1))
+            runs[label].append(done[name])
+            print(f"  {label} run {i + 1} of {repeat}: {sum(r['cpu_s'] for r in done[name]):.1f} s CPU, "
+                  f"{sum(r['wall_s'] for r in done[name]):.1f} s wall, load {done[name][0]['load']:.1f} at its "
+                  f"start", flush=True)
+    return runs
+
+
+def cell_text(rows: list[dict]) -> str:
+    """One table cell: 'CPU s / wall s' (medians over the runs), or the error of a run that failed."""
+    failed = [r for r in rows if r["rc"] != 0]
+    if failed:
+        return f"failed ({len(failed)} of {len(rows)} runs, exit {failed[0]['rc']}): {failed[0]['error']}"
+    return f"{np.median([r['cpu_s'] for r in rows]):.2f} / {np.median([r['wall_s'] for r in rows]):.2f}"
+
+
+def sign_test_p(wins: int, n: int) -> float:
+    """Two-sided sign test: the probability of a split at least as uneven as ``wins`` of ``n`` pairs under no
+    difference."""
+    k = min(wins, n - wins)
+    return min(1.0, 2.0 * sum(math.comb(n, i) for i in range(k + 1)) / 2.0 ** n) if n else 1.0
+
+
+def paired_wins(before: list[dict], after: list[dict]) -> tuple[int, int]:
+    """(pairs whose after CPU time is below the before's, pairs), the runs paired in order (interleaved), where
+    both ran."""
+    pairs = [(b["cpu_s"], a["cpu_s"]) for b, a in zip(before, after) if b["rc"] == 0 and a["rc"] == 0]
+    return sum(a < b for b, a in pairs), len(pairs)
+
+
+def readme_table(runs: dict[str, list[list]], cmds: list[list[str]]) -> list[str]:
+    """The table's lines (Markdown): per command, per checkout 'CPU s / wall s' (medians), with a before the
+    interleaved pairs in which after took less CPU, the loads at the starts of its runs; then the whole sequence
+    (where every command ran) and the sign test over every command's pairs."""
+    labels = list(runs)
+    paired = labels == ["before", "after"]
+    lines = ["| command | " + " | ".join(f"{x}: CPU / wall s" for x in labels)
+             + (" | after less CPU |" if paired else " |") + " load at the starts |",
+             "|---|" + "---|" * (len(labels) + paired) + "---|"]
+    wins = n = 0
+    for k, label in enumerate(step_labels(cmds)):
+        per = {x: [run[k] for run in runs[x]] for x in labels}
+        loads = [r["load"] for x in labels for r in per[x]]
+        pair = ""
+        if paired:
+            w, m = paired_wins(per["before"], per["after"])
+            wins, n, pair = wins + w, n + m, f" {w} of {m} pairs |"
+        lines.append(f"| `{label}` | " + " | ".join(cell_text(per[x]) for x in labels) + " |" + pair
+                     + f" {min(loads):.1f}–{max(loads):.1f} |")
+    total = []
+    for x in labels:
+        ok = [run for run in runs[x] if all(r["rc"] == 0 for r in run)]
+        total.append(f"{np.median([sum(r['cpu_s'] for r in run) for run in ok]):.2f} / "
+                     f"{np.median([sum(r['wall_s'] for r in run) for run in ok]):.2f}" if ok else "—")
+    lines.append("| whole example | " + " | ".join(total) + " |"
+                 + (f" {wins} of {n} pairs (sign test p = {sign_test_p(wins, n):.2g}) |" if paired else "") + " |")
+    return lines
+
+
+def readme_figures(before: Path | None, repeat: int, cache: Path | None) -> None:
+    """Print the README example's table: this checkout, and ``before`` interleaved with it when given."""
+    checkouts = {"after": ROOT} if before is None else {"before": before.resolve(), "after": ROOT}
+    print(f"README worked example (UR5), {repeat} run(s) per checkout, load {load_average():.1f} at the start",
+          flush=True)
+    with tempfile.TemporaryDirectory() as tmp:
+        runs = readme_runs(checkouts, repeat, cache, Path(tmp))
+    print("\n".join(readme_table(runs, readme_commands())))
+    if before is None:
+        print("before: python -m benchmarks.bench_startup --readme-only --before OTHER_CHECKOUT (a checkout of the "
+              "package before a change, run interleaved with this one)")
+
+
+def main(argv: list[str] | None = None) -> None:
+    """The start-up figures, then the README example's table (``--readme-only``: the table alone).
+
+    Args:
+        argv: command-line arguments (none when ``python -m benchmarks`` runs every benchmark).
+    """
+    ap = argparse.ArgumentParser(prog="python -m benchmarks.bench_startup", description=__doc__.split("\n")[0])
+    ap.add_argument("--before", type=Path, help="a checkout of the package before a change (its folder)")
+    ap.add_argument("--repeat", type=int, default=REPEAT, help="runs of the README example per checkout (median)")
+    ap.add_argument("--readme-only", action="store_true", help="the README example's table alone")
+    ap.add_argument("--identify-only", action="store_true", help="the identify figures alone")
+    ap.add_argument("--cache", type=Path, help="JSON file keeping finished runs of the README example (resume; "
+                    "another README starts it afresh, a changed checkout does not: delete the file)")
+    args = ap.parse_args(argv or [])
+    if args.before is not None and not (args.before / "pin_kpi_oed" / "__init__.py").is_file():
+        ap.error(f"--before {args.before}: no pin_kpi_oed package in that folder")
+    if args.repeat < 1:
+        ap.error(f"--repeat {args.repeat}: at least 1")
+    if not args.readme_only:
+        startup_figures(args.before, args.identify_only)
+    if not args.identify_only:
+        readme_figures(args.before, args.repeat, args.cache)
 
 
 if __name__ == "__main__":

@@ -12,7 +12,6 @@ from __future__ import annotations
 import argparse
 import importlib
 import importlib.util
-import json
 import os
 import signal
 import sys
@@ -41,6 +40,8 @@ def cmd_info(args: argparse.Namespace) -> int:
     model = TrackerModel(robot, reflector_m=refl)
     ident = analyse(model, seed=args.seed)
     if args.json:
+        import json
+
         out = {"robot": robot.summary(), "reflector_m": refl.tolist(), "identifiability": ident.to_dict()}
         print(json.dumps(out, indent=2))
         return 0
@@ -70,6 +71,8 @@ def _info_cell(args: argparse.Namespace) -> int:
                 if d["confounded_with"] and all(c.split(".")[0] in model.target_groups for c in d["confounded_with"])]
     mounted = ", ".join(model.target_groups)
     if args.json:
+        import json
+
         print(json.dumps({"cell": cell.name, "robot": cell.robot.summary(), "device": type(model).__name__,
                           "identifiability": ident.to_dict(), "absorbed_by_tool_mounted": absorbed}, indent=2))
         return 0

@@ -49,7 +49,6 @@ is not the controller's factory calibration, which is true: the robot controller
 
 from __future__ import annotations
 
-import hashlib
 import os
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -144,6 +143,8 @@ class URKinematics:
     @staticmethod
     def content_hash(values: np.ndarray) -> str:
         """``calib_<digits>`` from the SHA-256 of the 36 values as written (first 8 bytes, decimal)."""
+        import hashlib  # here, not at the top: OpenSSL's library is loaded only when a hash is asked for
+
         text = ",".join(_num(v) for v in np.asarray(values, float).ravel())
         return f"calib_{int.from_bytes(hashlib.sha256(text.encode()).digest()[:8], 'big')}"
 

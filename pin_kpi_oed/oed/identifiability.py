@@ -161,8 +161,12 @@ def pivoted_qr_diagonal(A: np.ndarray) -> np.ndarray:
 
 
 def excitation(model: MeasurementModel, n: int = 200, seed: int = 0) -> np.ndarray:
-    """Rich random excitation: ``n`` configurations uniform within the joint limits (rad)."""
-    return model.robot.random_q(np.random.default_rng(seed), n)
+    """Rich random excitation: ``n`` configurations uniform within the joint limits (rad), those of
+    ``model.robot.random_q(numpy.random.default_rng(seed), n)`` bit for bit, drawn without loading ``numpy.random``
+    (:mod:`~pin_kpi_oed.oed.seeded_uniform`: ``info`` starts faster)."""
+    from pin_kpi_oed.oed.seeded_uniform import uniform_rows
+
+    return uniform_rows(seed, model.robot.q_lower, model.robot.q_upper, n)
 
 
 #: the residual share below which a parameter's effect on the measurements counts as reproduced by the kept
@@ -182,17 +186,17 @@ def ordered_selection(Fs: np.ndarray, order: list[int], tol: float = RANK_TOL) -
     Returns:
         (kept column indices in visiting order, the residual share of every column in ``Fs``'s order).
     """
-    basis: list[np.ndarray] = []
+    basis = np.zeros((Fs.shape[1], Fs.shape[0]))  # the kept columns' orthonormal directions, one per row
     kept: list[int] = []
     resid = np.zeros(Fs.shape[1])
     for c in order:
         v = Fs[:, c].copy()
-        for _ in range(2):  # modified Gram-Schmidt, twice for stability
-            for b in basis:
-                v -= (b @ v) * b
+        B = basis[:len(kept)]
+        for _ in range(2):  # classical Gram-Schmidt, twice for stability (CGS2: orthogonal to rounding)
+            v -= B.T @ (B @ v)
         resid[c] = nv = float(np.linalg.norm(v))
         if nv > tol:
-            basis.append(v / nv)
+            basis[len(kept)] = v / nv
             kept.append(c)
     return kept, resid
 
@@ -259,12 +263,15 @@ def _dropped(L, F: np.ndarray, norms: np.ndarray, free: np.ndarray, zero: list[i
     """One entry per free parameter not kept: its name and the kept parameters it is confounded with."""
     B = F[:, kept_idx] / norms[kept_idx]
     dropped = []
+    others = [int(i) for i in free if i not in kept_idx and i not in zero]
+    # every dropped column on the kept ones in one least-squares solve (B has full column rank)
+    X = np.linalg.lstsq(B, F[:, others] / norms[others], rcond=None)[0] if others else np.zeros((0, 0))
     for i in [i for i in free if i not in kept_idx]:
         if i in zero:
             dropped.append({"name": L.names[i], "confounded_with": [], "convention": False,
                             "reason": "moves no measurement"})
             continue
-        x, *_ = np.linalg.lstsq(B, F[:, i] / norms[i], rcond=None)
+        x = X[:, others.index(int(i))]
         big = np.argsort(-np.abs(x))
         partners = [L.names[kept_idx[k]] for k in big[:4] if abs(x[k]) > 1e-3 * np.abs(x).max()]
         conv = (not setup[i]) and any(setup[L.index(p)] for p in partners)
