@@ -186,17 +186,17 @@ def ordered_selection(Fs: np.ndarray, order: list[int], tol: float = RANK_TOL) -
     Returns:
         (kept column indices in visiting order, the residual share of every column in ``Fs``'s order).
     """
-    basis = np.zeros((Fs.shape[1], Fs.shape[0]))  # the kept columns' orthonormal directions, one per row
+    basis: list[np.ndarray] = []
     kept: list[int] = []
     resid = np.zeros(Fs.shape[1])
     for c in order:
         v = Fs[:, c].copy()
-        B = basis[:len(kept)]
-        for _ in range(2):  # classical Gram-Schmidt, twice for stability (CGS2: orthogonal to rounding)
-            v -= B.T @ (B @ v)
+        for _ in range(2):  # modified Gram-Schmidt, twice for stability
+            for b in basis:
+                v -= (b @ v) * b
         resid[c] = nv = float(np.linalg.norm(v))
         if nv > tol:
-            basis[len(kept)] = v / nv
+            basis.append(v / nv)
             kept.append(c)
     return kept, resid
 
