@@ -10,7 +10,6 @@ from __future__ import annotations
 import copy
 import json
 import re
-from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 import numpy as np
@@ -460,7 +459,9 @@ def test_static_page_renders_robot_and_ellipsoids_in_chromium(design_path, tmp_p
     """Render the static page four times (all; without the ellipsoids; without the robot; paused at a
     measurement configuration) and check that the pixels that change are where the scene's camera
     projects the ellipsoids and the robot, that each ellipsoid shows its design's colour, and that
-    the animation moves the robot to the measurement configuration."""
+    the animation moves the robot to the measurement configuration. The four pages are drawn by one
+    browser launch: each in its own W × H frame of a 2 × 2 grid page (a frame is a window of that size
+    to the page in it), cut apart from one screenshot."""
     browser = find_browser()
     df = load_design(design_path)
     tcp = df.tcp_world()[0]
@@ -481,11 +482,21 @@ def test_static_page_renders_robot_and_ellipsoids_in_chromium(design_path, tmp_p
     for k, page in pages.items():
         (tmp_path / f"{k}.html").write_text(page)
 
-    def shoot(k: str, timeout_ms: int) -> np.ndarray | None:
+    grid = "".join(f'<iframe src="{k}.html" style="left:{W * (i % 2)}px;top:{H * (i // 2)}px"></iframe>'
+                   for i, k in enumerate(pages))
+    (tmp_path / "grid.html").write_text(
+        "<!DOCTYPE html><html><head><style>html, body {margin: 0; padding: 0; overflow: hidden} "
+        f"iframe {{border: 0; width: {W}px; height: {H}px; position: absolute}}</style></head>"
+        f"<body>{grid}</body></html>")
+
+    def shoot_all(timeout_ms: int) -> dict[str, np.ndarray | None]:
+        """The four pages from one screenshot of the grid page (None each when no screenshot was written)."""
         try:
-            return load_rgb(render_png(tmp_path / f"{k}.html", tmp_path / f"{k}.png", W, H, timeout_ms, browser))
+            img = load_rgb(render_png(tmp_path / "grid.html", tmp_path / "grid.png", 2 * W, 2 * H, timeout_ms,
+                                      browser))
         except PinKpiOedError:  # no screenshot written
-            return None
+            return dict.fromkeys(pages)
+        return {k: img[H * (i // 2):H * (i // 2 + 1), W * (i % 2):W * (i % 2 + 1)] for i, k in enumerate(pages)}
 
     def rendered(img: np.ndarray | None) -> bool:
         # the scene is drawn when the robot's orange is on screen or (robot hidden) the floor's grey is
@@ -518,14 +529,9 @@ def test_static_page_renders_robot_and_ellipsoids_in_chromium(design_path, tmp_p
 
     imgs: dict[str, np.ndarray | None] = {}
     for timeout_ms in (5000, 15000):  # a loaded machine may need longer for the first frame and the step
-        todo = [k for k in pages if not rendered(imgs.get(k))]
-        if "pose" not in todo and "no_robot" not in todo and not stepped(imgs):
-            todo.append("pose")
-        if not todo:
+        imgs = shoot_all(timeout_ms)
+        if all(rendered(imgs[k]) for k in pages) and stepped(imgs):
             break
-        with ThreadPoolExecutor(len(todo)) as ex:
-            for k, img in zip(todo, ex.map(lambda k, t=timeout_ms: shoot(k, t), todo)):
-                imgs[k] = img
     for k in pages:
         assert rendered(imgs[k]), f"{k}: Chromium did not render the scene (WebGL?)"
     A, B, C = imgs["all"], imgs["no_ellipsoids"], imgs["no_robot"]
