@@ -532,7 +532,9 @@ def test_static_page_renders_robot_and_ellipsoids_in_chromium(design_path, tmp_p
         return len(hits) >= 4 and np.mean(hits) >= 0.8
 
     imgs: dict[str, np.ndarray | None] = {}
-    for timeout_ms in (5000, 15000):  # a loaded machine may need longer for the first frame and the step
+    # the four pages share the browser: three times one page's 5 s before the screenshot, a loaded machine may need
+    # longer for the first frame and the step
+    for timeout_ms in (15000, 30000):
         imgs = shoot_all(timeout_ms)
         if all(rendered(imgs[k]) for k in pages) and stepped(imgs):
             break
