@@ -403,8 +403,8 @@ def test_nice_factor_and_ellipsoid():
 def test_cli_view_writes_the_static_page(design_path, tmp_path, capsys):
     """``view --criteria --figures --pose``: the page shows the chosen designs, paused at the chosen pose, the printed
     tr(C_s) are the file's, the figures are written; bad files, folders and poses are refused with exit code 2;
-    ``--all-ghosts`` draws every pose (the page grows by more than 2 kB a ghost). The page of ``--pose`` is the page
-    of the first command (one command line run per claim, not two pages of the same designs)."""
+    ``--all-ghosts`` draws every pose (the page grows by more than 2 kB a ghost). The page paused by ``--pose`` is the
+    first command's page: one run of the command draws what two runs drew."""
     from pin_kpi_oed.cli.app import main
 
     out = tmp_path / "view.html"
@@ -532,8 +532,8 @@ def test_static_page_renders_robot_and_ellipsoids_in_chromium(design_path, tmp_p
         return len(hits) >= 4 and np.mean(hits) >= 0.8
 
     imgs: dict[str, np.ndarray | None] = {}
-    # the four pages share the browser: three times one page's 5 s before the screenshot, a loaded machine may need
-    # longer for the first frame and the step
+    # the screenshot is taken once the page has loaded, at the latest after timeout_ms: the four pages load in one
+    # browser (three times the 5 s one page had); a loaded machine may need longer for the first frame and the step
     for timeout_ms in (15000, 30000):
         imgs = shoot_all(timeout_ms)
         if all(rendered(imgs[k]) for k in pages) and stepped(imgs):
