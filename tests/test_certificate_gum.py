@@ -16,7 +16,7 @@ from pin_kpi_oed.data.measurements import MeasurementSet, read_measurements, wri
 from pin_kpi_oed.report.iso9283 import goal_groups
 from pin_kpi_oed.report.iso_commanded import commanded_figures, commanded_positions
 from pin_kpi_oed.report.uncertainty import conformity
-from tests.test_report import calibrated  # noqa: F401  (the simulated UR10 fixture)
+from tests._cache_render import A4_PX, GROUP, browser, browser_view, calibrated_folder, plain_certificate
 
 LAB = """organisation: Test Lab
 operator: T. Operator
@@ -31,12 +31,20 @@ instrument:
 """
 
 
+@pytest.fixture(scope="module")
+def calibrated(tmp_path_factory):
+    """The simulated UR10 of tests/test_report.py (240 training rows, 150 held-out rows, identified by the CLI),
+    made once per process for both files (tests/_cache_render.py)."""
+    return calibrated_folder(tmp_path_factory)
+
+
 def _report(d: Path, test: str, *extra: str) -> int:
     return main(["report", "--model", str(d / "model.json"), "--train", str(d / "train.csv"), "--validate",
                  str(d / test), "--json", str(d / "gum.json"), "--quiet", *extra])
 
 
-def test_without_a_lab_file_a_draft_with_one_a_certificate(calibrated, tmp_path, capsys):  # noqa: F811
+@pytest.mark.xdist_group(GROUP)
+def test_without_a_lab_file_a_draft_with_one_a_certificate(calibrated, tmp_path, capsys):
     d = calibrated
     assert _report(d, "test.csv") == 0
     cert = json.loads((d / "gum.json").read_text())
@@ -53,7 +61,8 @@ def test_without_a_lab_file_a_draft_with_one_a_certificate(calibrated, tmp_path,
     assert "instrument: field 'serial' is missing" in err and err.count("\n") == 1
 
 
-def test_reordered_training_rows_are_refused_and_mixed_ones_removed(calibrated, capsys):  # noqa: F811
+@pytest.mark.xdist_group(GROUP)
+def test_reordered_training_rows_are_refused_and_mixed_ones_removed(calibrated, capsys):
     d = calibrated
     train = read_measurements(d / "train.csv")
     write_measurements(train.subset(np.random.default_rng(0).permutation(len(train))), d / "reordered.csv")
@@ -109,7 +118,8 @@ def test_iso14253_decision_rule():
     assert conformity(0.4e-3, 0.05e-3, 0.3e-3)["verdict"] == "does not conform"
 
 
-def test_budget_against_monte_carlo_and_the_held_out_errors(calibrated, tmp_path):  # noqa: F811
+@pytest.mark.xdist_group(GROUP)
+def test_budget_against_monte_carlo_and_the_held_out_errors(calibrated, tmp_path):
     """The simulated UR10 (noise-only model, 150 held-out rows): the budget's parameter and tracker terms within 5 % of
     draws of the parameters; the held-out rows within U near the coverage the budget states; a required accuracy
     above the figure + U conforms."""
@@ -131,25 +141,12 @@ def test_budget_against_monte_carlo_and_the_held_out_errors(calibrated, tmp_path
     assert u["conformity"]["verdict"] == "conforms"
 
 
-def test_no_legend_covers_data_in_the_certificate_figures(calibrated):  # noqa: F811
+@pytest.mark.xdist_group(GROUP)
+def test_no_legend_covers_data_in_the_certificate_figures(calibrated):
     """Every legend of the certificate's figures lies outside its axes' plotting area (display coordinates after
-    drawing): it covers no point, bar or line."""
-    from matplotlib.figure import Figure
-
-    from pin_kpi_oed.report import figures
-
-    made = []
-    orig = figures.png_bytes
-
-    def keep(fig: Figure, dpi: int = figures.DPI) -> bytes:
-        made.append(fig)
-        return orig(fig, dpi)
-
-    figures.png_bytes = keep
-    try:
-        assert _report(calibrated, "test.csv", "--html", str(calibrated / "gum.html")) == 0
-    finally:
-        figures.png_bytes = orig
+    drawing): it covers no point, bar or line. The figures are those the plain report drew
+    (``report.figures.png_bytes``: the report made once for this file and tests/test_report.py)."""
+    made = plain_certificate(calibrated).figures
     n = 0
     for fig in made:
         fig.canvas.draw()
@@ -164,61 +161,26 @@ def test_no_legend_covers_data_in_the_certificate_figures(calibrated):  # noqa: 
     assert n >= 2
 
 
-_LAYOUT_JS = """<script>window.addEventListener('load', function () {
-  var W = document.documentElement.clientWidth, bad = [];
-  document.querySelectorAll('pre, p, td, th, h1, h2, h3, code, li, div').forEach(function (el) {
-    var r = el.getBoundingClientRect();
-    if (el.scrollWidth > el.clientWidth + 1 && getComputedStyle(el).display !== 'inline')
-      bad.push('cut: ' + el.tagName + ' ' + el.textContent.slice(0, 40));
-    if (r.width > 0 && r.right > W + 1) bad.push('beyond the page: ' + el.tagName + ' ' + el.textContent.slice(0, 40));
-  });
-  var s = document.getElementById('summary').getBoundingClientRect();
-  var v = document.querySelector('#summary .verdict'), t = document.querySelector('#summary table');
-  var first = v && t && v.getBoundingClientRect().bottom <= window.innerHeight &&
-              t.getBoundingClientRect().top < window.innerHeight;
-  var out = document.createElement('pre'); out.id = 'layout-result';
-  out.textContent = JSON.stringify({bad: bad, first: !!first, summaryTop: s.top, W: W});
-  document.body.appendChild(out);
-});</script>"""
-
-
-def _layout(html_path: Path, browser: str, width: int = 794, height: int = 1123) -> dict:
-    """The page at an A4 width (794 × 1123 CSS px): elements whose text is cut or runs beyond the page, and whether
-    the verdict and the headline table are on the first screen."""
-    import re
-    import subprocess
-
-    page = html_path.with_name("layout.html")
-    page.write_text(html_path.read_text().replace("</body>", _LAYOUT_JS + "</body>"))
-    dom = subprocess.run([browser, "--headless", "--no-sandbox", "--disable-gpu", "--no-first-run",
-                          f"--window-size={width},{height}", "--virtual-time-budget=5000",
-                          f"--user-data-dir={html_path.parent / 'profile'}", "--dump-dom", page.resolve().as_uri()],
-                         capture_output=True, text=True, timeout=120).stdout
-    m = re.search(r'<pre id="layout-result">(.*?)</pre>', dom, re.S)
-    assert m, "the layout script did not run"
-    import html as _html
-
-    return json.loads(_html.unescape(m.group(1)))
-
-
 def _chromium():
-    from pin_kpi_oed.viz.render import find_browser
-
-    return find_browser()
+    return browser()
 
 
+@pytest.mark.xdist_group(GROUP)
 @pytest.mark.skipif(_chromium() is None, reason="no Chromium/Chrome browser (Debian: apt-get install chromium)")
-def test_page_layout_at_a4_width_in_chromium(calibrated, tmp_path):  # noqa: F811
-    """Headless Chromium at an A4 width: no text cut or beyond the page (bounding boxes, scroll widths), the verdict
-    and the headline figures on the first screen; the page ≤ 5 MB and the PDF printed."""
-    d = calibrated
-    assert _report(d, "test.csv", "--html", str(tmp_path / "c.html"), "--pdf", str(tmp_path / "c.pdf")) == 0
-    lay = _layout(tmp_path / "c.html", _chromium())
+def test_page_layout_at_a4_width_in_chromium(calibrated):
+    """Headless Chromium at an A4 width (794 × 1123 CSS px): no text cut or beyond the page (bounding boxes, scroll
+    widths), the verdict and the headline figures on the first screen; the page ≤ 5 MB and the PDF printed. The page
+    is the plain certificate ``report --html --pdf`` made once for this file and tests/test_report.py, opened in one
+    browser launch shared with tests/test_report.py's rendering test."""
+    cert = plain_certificate(calibrated)
+    lay = browser_view(cert).layout
+    assert 700 < lay["W"] <= A4_PX[0], lay  # the page was laid out at the A4 width
     assert lay["bad"] == [] and lay["first"], lay
-    assert (tmp_path / "c.html").stat().st_size <= 5e6 and (tmp_path / "c.pdf").read_bytes()[:5] == b"%PDF-"
+    assert len(cert.html.encode()) <= 5e6 and cert.pdf.read_bytes()[:5] == b"%PDF-"
 
 
-def test_u_along_a_working_path_against_monte_carlo(calibrated, tmp_path, capsys):  # noqa: F811
+@pytest.mark.xdist_group(GROUP)
+def test_u_along_a_working_path_against_monte_carlo(calibrated, tmp_path, capsys):
     """A cell with a working path (a joint-space program between two configurations): U (k = 2) at each of its
     samples at the cell's TCP, its largest and median in the page, the budget's parameter and tracker terms within 5 %
     of draws of the parameters on the path; a cell of another robot refused in one line."""
@@ -268,7 +230,8 @@ def test_a_reflector_that_conforms_does_not_stand_for_a_tcp_whose_u_exceeds_the_
     assert bad["verdict"] == "does not conform" and "at_tcp" in bad
 
 
-def test_report_states_the_tcp_when_only_the_reflector_conforms(calibrated, tmp_path):  # noqa: F811
+@pytest.mark.xdist_group(GROUP)
+def test_report_states_the_tcp_when_only_the_reflector_conforms(calibrated, tmp_path):
     """Through the command: a required accuracy between the reflector's held-out figure + U and the TCP's U is
     'undetermined' in the summary, the JSON and the page, naming the TCP's U."""
     d = calibrated

@@ -10,66 +10,35 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from pin_kpi_oed import NoiseModel, TrackerModel, load_robot
+from pin_kpi_oed import TrackerModel, load_robot
 from pin_kpi_oed.cli.app import main
 from pin_kpi_oed.data.measurements import MeasurementSet, write_measurements
-from pin_kpi_oed.simulation.simulator import Tolerances, default_tracker_pose, random_truth, simulate
-from pin_kpi_oed.oed.identifiability import analyse
+from pin_kpi_oed.simulation.simulator import simulate
 from pin_kpi_oed.report.content import SECTIONS
 from pin_kpi_oed.report.iso9283 import clusters, iso_figures, pose_accuracy, repeatability
 
+from tests._cache_render import GROUP, SIGMA, browser_view, calibrated_folder, plain_certificate
+
 REPO = Path(__file__).resolve().parents[1]
-SIGMA = 2e-5
-
-
-def _with_goals(ms: MeasurementSet, goals: np.ndarray) -> MeasurementSet:
-    return MeasurementSet(ms.joint_names, ms.q, ms.position_m, sigma_m=None, source=ms.source,
-                          extra={"goal_x": goals[:, 0], "goal_y": goals[:, 1], "goal_z": goals[:, 2]})
 
 
 @pytest.fixture(scope="module")
 def calibrated(tmp_path_factory):
     """A simulated UR10 (random geometric errors), 240 training rows, 150 held-out rows (30 commanded positions of 5
-    rows, and 4 configurations measured 3 times), identified by the CLI with --validate, --json and --model-out."""
-    d = tmp_path_factory.mktemp("report")
-    robot = load_robot("ur10")
-    tm = TrackerModel(robot, tracker_T_base=default_tracker_pose(robot), reflector_m=np.array([0.02, 0.01, 0.1]),
-                      noise=NoiseModel((SIGMA,) * 3))
-    base = [i for i in analyse(tm).base if i < 6 * robot.nq]
-    truth = random_truth(tm, Tolerances(5e-4, 1e-3, 0.01, 0.01), seed=4, only=base)
-    rng = np.random.default_rng(2)
-    Qt = robot.random_q(rng, 240)
-    Qv = robot.random_q(rng, 150)
-    Qv[138:141] = Qv[137]  # repeated configurations: 4 groups of 3 (rows 137-140 are 4 repeats)
-    Qv[141:144] = Qv[141]
-    Qv[144:147] = Qv[144]
-    Qv[147:150] = Qv[147]
-    train = simulate(tm, Qt, truth, seed=5, record_sigma=False)
-    test = simulate(tm, Qv, truth, seed=6, record_sigma=False)
-    goals = np.repeat(rng.uniform(-1, 1, size=(30, 3)), 5, axis=0)
-    write_measurements(_with_goals(train, rng.uniform(-1, 1, size=(240, 3))), d / "train.csv")
-    write_measurements(_with_goals(test, goals), d / "test.csv")
-    args = ["identify", "--robot", "ur10", "--data", str(d / "train.csv"), "--validate", str(d / "test.csv"),
-            "--reflector", "0.02,0.01,0.1", "--sigma", str(SIGMA), "--json", str(d / "id.json"),
-            "--model-out", str(d / "model.json"), "--quiet"]
-    assert main(args) == 0
-    return d
-
-
-def _report(d: Path, *extra: str) -> dict:
-    assert main(["report", "--model", str(d / "model.json"), "--train", str(d / "train.csv"), "--validate",
-                 str(d / "test.csv"), "--json", str(d / "cert.json"), "--html", str(d / "cert.html"), *extra]) == 0
-    return json.loads((d / "cert.json").read_text())
+    rows, and 4 configurations measured 3 times), identified by the CLI with --validate, --json and --model-out
+    (made once per process for this file and tests/test_certificate_gum.py: tests/_cache_render.py)."""
+    return calibrated_folder(tmp_path_factory)
 
 
 @pytest.fixture(scope="module")
 def report(calibrated) -> tuple[dict, str]:
-    """The plain report of the calibrated model (its JSON and its HTML page), made once for the tests that only read
-    it (the same command every one of them ran)."""
-    cert = _report(calibrated)
-    return cert, (calibrated / "cert.html").read_text()
+    """The plain report of the calibrated model (its JSON and its HTML page; the PDF too where a browser is
+    installed), made once for the tests that only read it (the same command every one of them ran)."""
+    cert = plain_certificate(calibrated)
+    return cert.cert, cert.html
 
 
+@pytest.mark.xdist_group(GROUP)
 def test_every_accuracy_figure_equals_identify_validate(calibrated, report):
     d = calibrated
     cert = report[0]
@@ -93,6 +62,7 @@ def test_every_accuracy_figure_equals_identify_validate(calibrated, report):
     assert cert["calibrated"]["train_files"][0]["rows"] == 240 and cert["calibrated"]["train_files_check"]["checked"]
 
 
+@pytest.mark.xdist_group(GROUP)
 def test_another_session_re_registered_equals_identify_validate(calibrated, capsys):
     d = calibrated
     args = ["identify", "--robot", "ur10", "--data", str(d / "train.csv"), "--validate", str(d / "test.csv"),
@@ -115,6 +85,7 @@ def test_another_session_re_registered_equals_identify_validate(calibrated, caps
     assert cert["trust_map"]["sigma_max_m"] == pytest.approx(s3.max(), rel=1e-9)
 
 
+@pytest.mark.xdist_group(GROUP)
 def test_trust_map_numbers_equal_predict(calibrated, report, capsys):
     d = calibrated
     cert = report[0]
@@ -133,6 +104,7 @@ def test_trust_map_numbers_equal_predict(calibrated, report, capsys):
     assert cert["accuracy"]["after"]["max_m"] == pytest.approx(err.max(), rel=1e-9)
 
 
+@pytest.mark.xdist_group(GROUP)
 def test_html_is_self_contained_with_every_section(report):
     cert, html = report
     for sid, title in SECTIONS:
@@ -212,6 +184,7 @@ def test_iso_helpers_on_known_values():
     assert [g.tolist() for g in clusters(np.array([[0.0], [0.5e-3], [0.9e-3], [5.0]]), 1e-3)] == [[0, 1, 2]]
 
 
+@pytest.mark.xdist_group(GROUP)
 def test_bad_input_one_line_exit_2_nothing_written(calibrated, capsys, tmp_path):
     d = calibrated
     out = tmp_path / "c.html"
@@ -269,26 +242,25 @@ def _browser():
     return find_browser()
 
 
+@pytest.mark.xdist_group(GROUP)
 @pytest.mark.skipif(_browser() is None, reason="no Chromium/Chrome browser (Debian: apt-get install chromium)")
-def test_certificate_renders_in_headless_chromium(calibrated, tmp_path):
+def test_certificate_renders_in_headless_chromium(calibrated, report):
+    """The plain certificate printed to PDF by ``report --pdf`` and opened in headless Chromium (one launch at an A4
+    width, shared with tests/test_certificate_gum.py's layout test): the screenshot of its first screen is not blank
+    (text and tables), every figure is an image the browser decoded, every section is in the page the browser
+    built."""
     from matplotlib.image import imread
 
-    from pin_kpi_oed.viz.render import render_png
-
-    d = calibrated
-    _report(d, "--pdf", str(tmp_path / "cert.pdf"))
-    png = render_png(d / "cert.html", tmp_path / "shot.png", width=1200, height=3000)
-    img = imread(png)
-    assert img.std() > 0.02 and len(np.unique(img)) > 50  # not blank: text, tables and figures
-    import subprocess
-
-    dom = subprocess.run([_browser(), "--headless", "--no-sandbox", "--disable-gpu", "--dump-dom",
-                          (d / "cert.html").resolve().as_uri()], capture_output=True, text=True, timeout=120).stdout
+    view = browser_view(plain_certificate(calibrated))
+    img = imread(view.screenshot)
+    assert img.std() > 0.02 and len(np.unique(img)) > 50, "the screenshot is blank"  # text and tables
+    assert view.layout["images"] == view.layout["images_drawn"] >= 4, view.layout  # the figures, decoded
     for sid, title in SECTIONS:  # every section is in the page the browser built
-        assert f'id="{sid}"' in dom and title in dom
-    assert (tmp_path / "cert.pdf").read_bytes()[:5] == b"%PDF-"
+        assert f'id="{sid}"' in view.dom and title in view.dom
+    assert plain_certificate(calibrated).pdf.read_bytes()[:5] == b"%PDF-"
 
 
+@pytest.mark.xdist_group(GROUP)
 @pytest.mark.skipif(_browser() is not None, reason="a browser is installed: the PDF is made")
 def test_without_a_browser_the_pdf_is_skipped_with_a_note(calibrated, capsys, tmp_path):
     d = calibrated
@@ -298,6 +270,7 @@ def test_without_a_browser_the_pdf_is_skipped_with_a_note(calibrated, capsys, tm
     assert "PDF not made" in out and (tmp_path / "c.html").exists() and not (tmp_path / "c.pdf").exists()
 
 
+@pytest.mark.xdist_group(GROUP)
 def test_diagnosis_recorded_by_diagnose_is_in_the_certificate(calibrated, capsys):
     d = calibrated
     argv = ["diagnose", "--robot", "ur10", "--train", str(d / "train.csv"), "--validate", str(d / "test.csv"),
@@ -348,16 +321,17 @@ def test_iso_groups_on_the_ipa_series_match_an_independent_computation(series, c
     want = sorted(want)
     assert sorted(sorted(g.tolist()) for g in groups) == want and len(want) > 20
     assert max(np.ptp(goal[g], axis=0).max() for g in want) <= 2e-3
-    # configurations: rows linked by max |dq| < 1 mrad, by a plain union-find over every pair of a position's rows
+    # configurations: rows linked by max |dq| < 1 mrad, by a plain union-find over every linked pair of a position's
+    # rows (all pairs' max |dq| at once: the same pairs as a double loop)
     keys = direction_keys(ms.q)
     resid = ms.position_m - ms.position_m.mean(axis=0)
     vap = []
     for rows in want:
         link = {i: i for i in rows}
-        for a in rows:
-            for b in rows:
-                if a < b and np.abs(ms.q[a] - ms.q[b]).max() <= 1e-3:
-                    link[_root(link, a)] = _root(link, b)
+        Qr = ms.q[rows]
+        close = np.abs(Qr[:, None, :] - Qr[None, :, :]).max(axis=2) <= 1e-3
+        for a, b in zip(*np.nonzero(np.triu(close, 1))):
+            link[_root(link, rows[a])] = _root(link, rows[b])
         mine = {}
         for i in rows:
             mine.setdefault(keys[i], set()).add(i)
@@ -367,7 +341,8 @@ def test_iso_groups_on_the_ipa_series_match_an_independent_computation(series, c
         assert sorted(map(sorted, mine.values())) == sorted(map(sorted, theirs.values()))
         bary = [resid[sorted(v)].mean(axis=0) for v in theirs.values()]
         if len(bary) > 1:
-            vap.append(max(float(np.linalg.norm(x - y)) for x in bary for y in bary))
+            B = np.array(bary)
+            vap.append(float(np.sqrt(((B[:, None, :] - B[None, :, :]) ** 2).sum(axis=2)).max()))
     out = iso_figures(ms, ms.q, resid, resid)
     ap = [sum((sum(resid[i][a] for i in g) / len(g)) ** 2 for a in range(3)) ** 0.5 for g in want]
     got = out["AP_vAP"]["after"]
