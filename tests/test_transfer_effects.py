@@ -318,7 +318,7 @@ def test_selection_folds_keep_repeated_poses_together(model):
 def test_selection_transfers_to_another_region_and_tracker_pose(model):
     """Train in one region of joint space, validate in another after the tracker moved (60 rows re-register). The
     geometric fit has no discrepancy: the comparison is of the parametric models' transfer (a Gaussian process on
-    the training region adds nothing to rows outside it; r_geo 0.26 mm without, 0.27 mm with it)."""
+    the training region adds little to rows outside it: r_geo 0.26 mm without, 0.27 mm with it)."""
     ur10 = model.robot
     rng = np.random.default_rng(21)
     truth = random_truth(model, Tolerances(joint_translation_m=2e-4, joint_rotation_rad=5e-4), seed=5)
@@ -576,10 +576,14 @@ def test_cli_term_prior_shrinks_the_selected_terms(model, tmp_path, capsys):
 
 @pytest.mark.parametrize("effect", ["transmission_error", "joint_compliance"])
 def test_withheld_effects_transfer_case_names_the_effect(effect):
-    """Quick version of ``python -m benchmarks.withheld_effects --mode transfer``: another region, tracker moved."""
+    """Quick version of ``python -m benchmarks.withheld_effects --mode transfer``: another region, tracker moved.
+    200 rows per session (300 cost a quarter more): 140 validation rows are scored after the 60 that register the
+    set-up, so the held-out RMS of 420 components has a sampling error of about 3.5 %; a model that transfers is
+    expected near 1.05 x the floor (some 30 fitted parameters on 600 equations, 9 set-up parameters on 180), and
+    1.2 x the floor still separates it (1.11 and 1.05 x at seed 0) from the geometric model (4.8 and 7.7 x)."""
     from benchmarks.withheld_effects import run_transfer
 
-    r = run_transfer((effect, 0, 300))
+    r = run_transfer((effect, 0, 200))
     assert r["dominant"] == effect, r
     assert r["coverage"] < 0.5  # the validation region is mostly unseen
     assert r["rms_after_m"] < 1.2 * r["floor_m"] < r["rms_before_m"]
