@@ -187,8 +187,10 @@ def test_shipped_ur10_cell_is_built_from_files_and_designs(tmp_path):
         assert _inside_some(s.vertices, env.capsules).min() >= -1e-9
     assert FeasibilityChecker(cell).check(cell.q_work).collision_free.all()
     out = tmp_path / "d.json"
-    assert main(["design", "--cell", "ur10", "--criteria", "random,kpi", "--measurements", "14", "--json",
-                 str(out)]) == 0
+    # one Ipopt start (the default is two): the claim is that what design returns in this cell is collision-free and
+    # feasible and keeps the environment, whichever start it comes from
+    assert main(["design", "--cell", "ur10", "--criteria", "random,kpi", "--measurements", "14", "--starts", "1",
+                 "--json", str(out)]) == 0
     res = json.loads(out.read_text())
     assert all(e["check"]["n_colliding"] == 0 and e["check"]["all_feasible"] for e in res["designs"])
     assert res["cell"]["environment"][0]["name"] == "table"

@@ -37,6 +37,7 @@ def setting():
     return model, data, prior, runs
 
 
+@pytest.mark.xdist_group("test_learning_curves_setting")
 def test_every_method_gives_finite_curves_of_each_size(setting):
     _, _, _, runs = setting
     r = runs[0]
@@ -50,6 +51,7 @@ def test_every_method_gives_finite_curves_of_each_size(setting):
     assert np.all(np.array(r["error_rms_m"]["random"]) >= np.array(r["error_mean_m"]["random"]))
 
 
+@pytest.mark.xdist_group("test_learning_curves_setting")
 def test_discrepancy_mean_pays_with_the_full_pool_and_more_poses_help(setting):
     _, _, _, runs = setting
     for r in runs:
@@ -59,6 +61,7 @@ def test_discrepancy_mean_pays_with_the_full_pool_and_more_poses_help(setting):
         assert full["pred_sigma_work_m"] < r["pred_sigma_work_m"]["random"][-1]
 
 
+@pytest.mark.xdist_group("test_learning_curves_setting")
 def test_discrepancy_aware_design_lowers_its_own_predicted_sigma(setting):
     _, _, _, runs = setting
     for r in runs:
@@ -67,6 +70,7 @@ def test_discrepancy_aware_design_lowers_its_own_predicted_sigma(setting):
         assert gp[1] < gp[0]
 
 
+@pytest.mark.xdist_group("test_learning_curves_setting")
 def test_calibrate_fixed_keeps_the_geometry_and_adds_the_posterior_mean(setting):
     model, data, prior, _ = setting
     cm, plain = calibrate_fixed(model, data.subset(np.arange(150)), prior)
@@ -81,6 +85,7 @@ def test_calibrate_fixed_keeps_the_geometry_and_adds_the_posterior_mean(setting)
     assert a is b and a.discrepancy is None
 
 
+@pytest.mark.xdist_group("test_learning_curves_setting")
 def test_summary_paired_tests_and_poses_needed(setting):
     _, _, prior, runs = setting
     res = LearningCurves(case="simulated", prior=prior.source, sizes=list(SIZES), methods=runs[0]["methods"],
@@ -97,6 +102,7 @@ def test_summary_paired_tests_and_poses_needed(setting):
     assert pred[-1]["change"] < 0          # the design lowers its own prediction against random's
 
 
+@pytest.mark.xdist_group("test_learning_curves_setting")
 def test_region_form_beyond_the_grid_is_the_same_split_and_extends_poses_needed(setting):
     """region_beyond draws the split of curve_split (same seed, same pool): its sets of the grid sizes are the
     curve's; larger ones extend the region form's curve in poses_needed and largest()."""
@@ -115,6 +121,7 @@ def test_region_form_beyond_the_grid_is_the_same_split_and_extends_poses_needed(
 
 
 
+@pytest.mark.xdist_group("test_learning_curves_setting")
 def test_random_sets_beyond_the_grid_are_the_curves_nested_random_sets(setting):
     """method="random" draws the split's own permutation: its sets of the grid's and of random_beyond's sizes
     are the curve's (the same scores), without building the design criteria; other methods are refused."""

@@ -4,7 +4,6 @@ identifications, the whole against held-out orientation errors (simulated and th
 from __future__ import annotations
 
 import csv
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -16,14 +15,11 @@ from pin_kpi_oed.data.atomic import atomic_write_json
 from pin_kpi_oed.data.measurements import MeasurementSet, write_measurements
 from pin_kpi_oed.identification.identify import identify
 from pin_kpi_oed.simulation.simulator import Tolerances, default_tracker_pose, random_truth, simulate
+from tests._cache_real import C6D_GROUP, needs_ipa, series_c_6d_half
 from tests.cli_run import run_cli
 
 REFLECTOR = np.array([0.03, 0.02, 0.08])
 NOISE = NoiseModel((1e-5,) * 3, sigma_rot_rad=5e-5)
-_here = Path(__file__).resolve()
-IPA = next((p / "shared" / "data" / "ipa_ur10" for p in (_here.parents[2], _here.parents[3])
-            if (p / "shared" / "data" / "ipa_ur10").is_dir()), _here.parents[2] / "shared" / "data" / "ipa_ur10")
-needs_ipa = pytest.mark.skipif(not IPA.is_dir(), reason=f"IPA data not found at {IPA}")
 
 
 def _tm(robot, pose=None):
@@ -123,15 +119,12 @@ def test_cli_predict_writes_orientation_sigma_and_refuses_mm(sim, tmp_path):
 
 
 @needs_ipa
+@pytest.mark.xdist_group(C6D_GROUP)
 def test_real_ur10_series_c_orientation_sigma_on_held_out_half():
-    from pin_kpi_oed.data.ipa import import_ipa
-
-    ms = import_ipa(IPA / "Series_C")
-    tr, te = ms.split(0.5, seed=0)
-    model = TrackerModel(load_robot("ur10"), reflector_m=np.array([0.0, 0.0, 0.109]),
-                         noise=NoiseModel(sigma_xyz_m=(1e-4,) * 3, sigma_rot_rad=1e-4), pose6d=True)
-    cm = identify(model, tr, discrepancy="auto", seed=0, raise_on_failure=False,
-                  scale_covariance=True).calibrated_model()
+    """The 6-D calibration of Series C's first half (tests/_cache_real.py: the data's sigma columns and 0.1 mrad as
+    relative weights, the discrepancy auto; made once per process, test_sigma_6d_registered registers the same
+    model on Series D): the orientation σ is honest on the held-out half."""
+    _, te, cm = series_c_6d_half()
     W, s, sl = cm.predict_orientation_with_sigma(te.q, te, length_m=0.2)
     z = _rot_errors(te, W) / s
     assert 0.8 < np.sqrt(np.mean(z ** 2)) < 1.25

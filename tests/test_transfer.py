@@ -328,9 +328,13 @@ def test_real_ur10_joint_bcd_and_transfer(tmp_path):
                 "--model-out", tmp_path / "m.json", "--quiet") == 0
     cm = load_model_file(tmp_path / "m.json")
     assert cm.stations == ["B", "C", "D"] and 0.40e-3 < cm.fit["mean_m"] < 0.50e-3
+    # the transfer of C's calibration is the point, not the discrepancy on C's 2,773 rows (three quarters of this
+    # test's cost): with it, its mean fitted on C adds to the prediction on D, which lies outside C's coverage (0.80 mm
+    # instead of 0.73 mm); the 6-D calibration's σ registered on D, with its discrepancy, is
+    # test_sigma_6d_registered's
     assert _cli("identify", "--robot", "ur10", "--data", tmp_path / "C.csv", "--validate", tmp_path / "D.csv",
                 "--register-rows", 60, "--seed", 0, "--reflector", "0,0,0.109", "--sigma", "1e-4", "--json",
-                tmp_path / "cd.json", "--quiet", "--accept-poor-fit") == 0
+                tmp_path / "cd.json", "--quiet", "--accept-poor-fit", "--discrepancy", "none") == 0
     doc = json.loads((tmp_path / "cd.json").read_text())
     v = doc["validation"]
     # D's 60 registration rows barely turn the flange: they leave the reflector free (a free fit slides it 0.1 m
@@ -339,9 +343,7 @@ def test_real_ur10_joint_bcd_and_transfer(tmp_path):
     notes = v["registration"]["notes"]
     assert v["registration"]["hold_reflector"] and len(notes) == 1 and "poorly determined" in notes[0]
     assert v["after"]["rms_m"] < v["before"]["rms_m"] and doc["fit_quality"]["verdict"] != "poor"
-    # 0.835 mm since the discrepancy also learns from the 26 rows the plain fit flags on C (0.75 mm without them): its
-    # mean extrapolates to D, where C's calibration does not transfer anyway (the gate above)
-    assert v["after"]["n"] == 572 and 0.65e-3 < v["after"]["mean_m"] < 0.86e-3
+    assert v["after"]["n"] == 572 and 0.65e-3 < v["after"]["mean_m"] < 0.80e-3
 
 
 def test_model_file_stores_transfer_effects_with_their_selected_terms():

@@ -25,7 +25,7 @@ from pin_kpi_oed.model.noise import NoiseModel
 from pin_kpi_oed.model.tracker import TrackerModel
 from pin_kpi_oed.model.robot import load_robot
 
-from .conftest import SHARED
+from ._cache_real import ipa_series, needs_ipa
 
 SIG = 2e-5  # m, per axis
 FLOOR = np.sqrt(3) * SIG  # 3-D RMS of the noise alone
@@ -259,13 +259,16 @@ def _transfer_rms(res, reg, held):
 
 
 def test_selection_recovers_withheld_transmission_error(model):
+    """A withheld transmission error (shoulder order 7, elbow order 18) selected from 900 rows, its amplitudes
+    recovered, fresh data predicted to the noise floor. The fits carry no discrepancy: every figure asserted here is
+    the parametric fit's (its RMS, the selection from its Jacobian, the refit's held-out RMS, which never has one)."""
     ur10 = model.robot
     rng = np.random.default_rng(11)
     Q = _uniform(ur10, rng, 900)
     truth = random_truth(model, Tolerances(joint_translation_m=2e-4, joint_rotation_rad=5e-4), seed=1)
     te, th = _truth_effect(model, Q, 7 * SIG)
     data = simulate(model, Q, truth, [(te, th)], seed=2, record_sigma=False)
-    geo = identify(model, data)
+    geo = identify(model, data, discrepancy="none")
     assert geo.rms_m > 3 * FLOOR  # the geometric model leaves the effect
     t0 = time.perf_counter()
     sel = select_terms(geo, data, max_order=40, show_progress=False)
@@ -282,7 +285,7 @@ def test_selection_recovers_withheld_transmission_error(model):
     fresh = simulate(model, _uniform(ur10, rng, 300), truth, [(te, th)], seed=3, record_sigma=False)
     assert validate(sel.fit, fresh)["rms_m"] <= 1.1 * FLOOR
     # the effects are ready for identify
-    res = identify(model, data, effects=sel.effects)
+    res = identify(model, data, effects=sel.effects, discrepancy="none")
     assert res.rms_m <= 1.1 * FLOOR
     d = sel.to_dict()
     assert d["status"] == "selected" and len(d["terms"]) == 2 and "transmission_error" in sel.summary()
@@ -313,7 +316,9 @@ def test_selection_folds_keep_repeated_poses_together(model):
 
 
 def test_selection_transfers_to_another_region_and_tracker_pose(model):
-    """Train in one region of joint space, validate in another after the tracker moved (60 rows re-register)."""
+    """Train in one region of joint space, validate in another after the tracker moved (60 rows re-register). The
+    geometric fit has no discrepancy: the comparison is of the parametric models' transfer (a Gaussian process on
+    the training region adds little to rows outside it: r_geo 0.26 mm without, 0.27 mm with it)."""
     ur10 = model.robot
     rng = np.random.default_rng(21)
     truth = random_truth(model, Tolerances(joint_translation_m=2e-4, joint_rotation_rad=5e-4), seed=5)
@@ -326,7 +331,7 @@ def test_selection_transfers_to_another_region_and_tracker_pose(model):
     target = simulate(moved, Q_b, truth, [(te, th)], seed=7, record_sigma=False)
     per, _ = coverage(Q_a, Q_b)
     assert per[0] == 0 and per[1] == 0 and per[2] == 0  # the second region is unseen on joints 1-3
-    geo = identify(model, train)
+    geo = identify(model, train, discrepancy="none")
     sel = select_terms(geo, train, max_order=40, show_progress=False)
     assert {t["group"] for t in sel.terms[:2]} == {"shoulder_lift order 7", "elbow order 18"}
     idx = np.random.default_rng(0).permutation(len(target))
@@ -340,6 +345,8 @@ def test_selection_transfers_to_another_region_and_tracker_pose(model):
 
 
 def test_drift_recovered_and_refitted_at_registration(model):
+    """Drift in time recovered by the fit and re-fitted per session at registration (the robot held). No
+    discrepancy: the rates, RMS values and the registration asserted here are the parametric fit's."""
     ur10 = model.robot
     rng = np.random.default_rng(31)
     Q = _uniform(ur10, rng, 400)
@@ -347,7 +354,7 @@ def test_drift_recovered_and_refitted_at_registration(model):
     v_true = np.array([2e-8, -1e-8, 1e-7])  # m/s: 0.36 mm per hour in z
     drift = Drift(ur10, t_ref_s=1800.0)
     data = simulate(model, Q, None, [(drift, v_true)], aux={"time_s": t}, seed=8, record_sigma=False)
-    res = identify(model, data, effects=[Drift.from_data(ur10, data)])
+    res = identify(model, data, effects=[Drift.from_data(ur10, data)], discrepancy="none")
     assert np.allclose(res.theta[0], v_true, atol=3e-9)  # σ/(√n · std(t)) ≈ 1e-9 m/s
     assert "mm per hour" in res.effects[0].describe(res.theta[0])[0]
     assert res.rms_m < 1.1 * FLOOR
@@ -365,15 +372,17 @@ def test_drift_recovered_and_refitted_at_registration(model):
     assert register_setup(cm, data2, station="new").rms_m > 1.3 * FLOOR
 
 
-@pytest.mark.skipif(not (SHARED / "data" / "ipa_ur10" / "Series_C").is_dir(), reason="IPA UR10 data not available")
+@needs_ipa
 def test_selection_on_series_c_is_fast():
-    from pin_kpi_oed.data.ipa import import_ipa
-
-    full = import_ipa(SHARED / "data" / "ipa_ur10" / "Series_C")
+    """The selection on the real UR10's Series C (position rows): the held-out RMS falls from above 0.4 mm to below
+    0.15 mm. The geometric fit it starts from has no discrepancy: the selection reads the fit's parameters and
+    residual Jacobian only (the same held-out RMS path with or without one), and the Gaussian process on 2,773 rows
+    was most of this test's cost."""
+    full = ipa_series("C")
     data = MeasurementSet(full.joint_names, full.q, full.position_m, source=full.source)
     m = TrackerModel(load_robot("ur10"), reflector_m=np.array([0.0, 0.0, 0.109]),
                      noise=NoiseModel(sigma_xyz_m=(1e-4,) * 3))
-    geo = identify(m, data)
+    geo = identify(m, data, discrepancy="none")
     t0 = time.perf_counter()
     sel = select_terms(geo, data, max_order=40, refit=False, show_progress=False)
     assert time.perf_counter() - t0 < 60
@@ -504,22 +513,25 @@ def test_residual_model_effect_prior_and_start_match_finite_differences(model):
 
 
 def test_identify_effect_prior_shrinks_and_held_effects_are_kept(model):
+    """An effect prior shrinks θ and enters the covariance; held effects are applied, not estimated, and carried
+    into the model file. The fits carry no discrepancy: θ, its σ and the RMS values are the parametric fit's, and
+    validate() then predicts with the parametric model alone, what the held-effect comparison is about."""
     ur10 = model.robot
     rng = np.random.default_rng(41)
     Q = _uniform(ur10, rng, 300)
     te = TransmissionError(ur10, pairs=[("elbow_joint", 18)])
     th = np.array([1.5e-4, -1e-4])
     data = simulate(model, Q, None, [(te, th)], seed=42, record_sigma=False)
-    free = identify(model, data, effects=[te])
+    free = identify(model, data, effects=[te], discrepancy="none")
     assert np.allclose(free.theta[0], th, atol=1e-5)
-    tight = identify(model, data, effects=[te], effect_prior_rad=1e-7)
+    tight = identify(model, data, effects=[te], effect_prior_rad=1e-7, discrepancy="none")
     assert np.linalg.norm(tight.theta[0]) < 0.1 * np.linalg.norm(th)  # the prior dominates
     assert "elbow" in tight.names[-1] and tight.std[-1] < 1e-7 < free.std[-1]  # the prior enters the covariance
     with pytest.raises(InputError, match="effect_prior_rad"):
         identify(model, data, effects=[te], effect_prior_rad=-1.0)
     # held effects: applied with their θ, not estimated, carried into the model file and predictions
-    held = identify(model, data, held_effects=[(te, th)])
-    assert held.rms_m < 1.1 * FLOOR < identify(model, data).rms_m
+    held = identify(model, data, held_effects=[(te, th)], discrepancy="none")
+    assert held.rms_m < 1.1 * FLOOR < identify(model, data, discrepancy="none").rms_m
     assert not any("transmission" in n for n in held.names)
     assert validate(held, data)["rms_m"] == pytest.approx(held.rms_m, rel=1e-6)
     cm = held.calibrated_model()
@@ -564,10 +576,14 @@ def test_cli_term_prior_shrinks_the_selected_terms(model, tmp_path, capsys):
 
 @pytest.mark.parametrize("effect", ["transmission_error", "joint_compliance"])
 def test_withheld_effects_transfer_case_names_the_effect(effect):
-    """Quick version of ``python -m benchmarks.withheld_effects --mode transfer``: another region, tracker moved."""
+    """Quick version of ``python -m benchmarks.withheld_effects --mode transfer``: another region, tracker moved.
+    200 rows per session (300 cost a quarter more): 140 validation rows are scored after the 60 that register the
+    set-up, so the held-out RMS of 420 components has a sampling error of about 3.5 %; a model that transfers is
+    expected near 1.05 x the floor (some 30 fitted parameters on 600 equations, 9 set-up parameters on 180), and
+    1.2 x the floor still separates it (1.11 and 1.05 x at seed 0) from the geometric model (4.8 and 7.7 x)."""
     from benchmarks.withheld_effects import run_transfer
 
-    r = run_transfer((effect, 0, 300))
+    r = run_transfer((effect, 0, 200))
     assert r["dominant"] == effect, r
     assert r["coverage"] < 0.5  # the validation region is mostly unseen
     assert r["rms_after_m"] < 1.2 * r["floor_m"] < r["rms_before_m"]
