@@ -40,20 +40,30 @@ CLAUSES = {"AP": "ISO 9283:1998, 7.2.1 (pose accuracy)", "RP": "ISO 9283:1998, 7
            "vAP": "ISO 9283:1998, 7.3 (multi-directional pose accuracy variation)"}
 
 
-def clusters(X: np.ndarray, tol: float, min_size: int = 2) -> list[np.ndarray]:
-    """Rows of X linked by chains of neighbours within ``tol`` (max-norm), groups of at least ``min_size``."""
+def _labels(X: np.ndarray, tol: float) -> np.ndarray:
+    """The component 0, 1, ... of each row of X (non-empty) linked by chains of neighbours within ``tol``
+    (max-norm)."""
     from scipy.sparse import coo_matrix
     from scipy.sparse.csgraph import connected_components
     from scipy.spatial import cKDTree
 
-    X = np.asarray(X, float)
-    if len(X) == 0:
-        return []
     pairs = cKDTree(X).query_pairs(r=tol, p=np.inf, output_type="ndarray")
     A = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(len(X), len(X)))
-    _, lab = connected_components(A, directed=False)
-    groups = [np.flatnonzero(lab == k) for k in np.unique(lab)]
-    return [g for g in groups if g.size >= min_size]
+    return connected_components(A, directed=False)[1].astype(int)
+
+
+def clusters(X: np.ndarray, tol: float, min_size: int = 2) -> list[np.ndarray]:
+    """Rows of X linked by chains of neighbours within ``tol`` (max-norm), groups of at least ``min_size``
+    (rows ascending within a group, groups in the order of their labels)."""
+    X = np.asarray(X, float)
+    return _groups_of(_labels(X, tol), min_size) if len(X) else []
+
+
+def _groups_of(lab: np.ndarray, min_size: int) -> list[np.ndarray]:
+    """The rows of each label 0, 1, ... (ascending) that at least ``min_size`` rows carry, in label order."""
+    rows = np.flatnonzero(np.isin(lab, np.flatnonzero(np.bincount(lab) >= min_size)))
+    order = rows[np.argsort(lab[rows], kind="stable")]
+    return np.split(order, np.flatnonzero(np.diff(lab[order])) + 1) if order.size else []
 
 
 def goal_groups(G: np.ndarray, radius_m: float = GOAL_RADIUS_M, min_size: int = 2) -> list[np.ndarray]:
@@ -95,10 +105,8 @@ def commanded_groups(data: Any, radius_m: float = GOAL_RADIUS_M) -> list[np.ndar
 def direction_keys(Q: np.ndarray, tol_rad: float = 1e-3) -> np.ndarray:
     """An integer per row naming its configuration: rows whose joints agree within ``tol_rad`` share one (the
     same commanded pose reached the same way); the directions of a commanded position are its configurations."""
-    key = np.full(len(Q), -1)
-    for k, g in enumerate(clusters(Q, tol_rad, min_size=1)):
-        key[g] = k
-    return key
+    Q = np.asarray(Q, float)
+    return _labels(Q, tol_rad) if len(Q) else np.full(0, -1)
 
 
 def pose_accuracy(resid_m: np.ndarray, groups: list[np.ndarray], directions: np.ndarray) -> dict:
@@ -114,16 +122,23 @@ def pose_accuracy(resid_m: np.ndarray, groups: list[np.ndarray], directions: np.
         ``max_m``, ``n_positions``: those with ≥ 2 directions, ``directions_mean``), ``per_position`` (AP_m,
         AP_xyz_m, vAP_m, n, directions).
     """
+    resid_m = np.asarray(resid_m, float)
+    sizes = np.array([len(g) for g in groups], int)
+    at = np.concatenate([np.asarray(g, int) for g in groups]) if groups else np.zeros(0, int)
+    group = np.repeat(np.arange(len(groups)), sizes)  # each row of each group (groups may share rows)
+    E = resid_m[at]
+    _, code = np.unique(np.asarray(directions)[at], return_inverse=True)
+    width = int(code.max(initial=0)) + 1
+    cells, cell = np.unique(group * width + code.reshape(-1), return_inverse=True)  # (position, direction) pairs
+    bary = _sums(group, E, len(groups)) / sizes[:, None]  # each position's barycentre
+    B = _sums(cell, E, len(cells)) / np.bincount(cell, minlength=len(cells))[:, None]  # each direction's
+    first = np.searchsorted(cells // width, np.arange(len(groups) + 1))  # a position's directions: B[first[k]:...]
     rows: list[dict] = []
-    for g in groups:
-        e = resid_m[g]
-        bary = e.mean(axis=0)
-        dirs = np.unique(directions[g])
-        B = np.array([e[directions[g] == d].mean(axis=0) for d in dirs])
-        vap = float(max(np.linalg.norm(B[i] - B[j]) for i in range(len(B)) for j in range(i + 1, len(B)))) \
-            if len(B) > 1 else None
-        rows.append({"AP_m": float(np.linalg.norm(bary)), "AP_xyz_m": bary.tolist(), "vAP_m": vap, "n": int(g.size),
-                     "directions": int(len(dirs))})
+    for k in range(len(groups)):
+        Bk = B[first[k]:first[k + 1]]
+        vap = float(np.sqrt(((Bk[:, None, :] - Bk[None, :, :]) ** 2).sum(axis=2).max())) if len(Bk) > 1 else None
+        rows.append({"AP_m": float(np.linalg.norm(bary[k])), "AP_xyz_m": bary[k].tolist(), "vAP_m": vap,
+                     "n": int(sizes[k]), "directions": int(len(Bk))})
     ap = np.array([r["AP_m"] for r in rows])
     axes = np.array([r["AP_xyz_m"] for r in rows]).reshape(-1, 3)
     vaps = np.array([r["vAP_m"] for r in rows if r["vAP_m"] is not None])
@@ -134,6 +149,11 @@ def pose_accuracy(resid_m: np.ndarray, groups: list[np.ndarray], directions: np.
                     "max_m": float(vaps.max()) if vaps.size else None, "n_positions": int(vaps.size),
                     "directions_mean": float(np.mean([r["directions"] for r in rows])) if rows else None},
             "per_position": rows}
+
+
+def _sums(label: np.ndarray, E: np.ndarray, n: int) -> np.ndarray:
+    """Column sums of the rows of E (k, 3) per label 0..n-1, (n, 3)."""
+    return np.column_stack([np.bincount(label, weights=E[:, a], minlength=n) for a in range(3)])
 
 
 def repeatability(resid_m: np.ndarray, groups: list[np.ndarray]) -> dict:
@@ -171,18 +191,18 @@ def iso_figures(data: Any, Q: np.ndarray, resid_before_m: np.ndarray, resid_afte
                  "variant": "model prediction: AP of the residuals measured − predicted (the position the model "
                             "says the measured joints reach), not of the commanded poses"}
     groups = commanded_groups(data, goal_radius_m)
+    keys = direction_keys(Q, q_tol_rad)  # one configuration per key: the directions and the cycle groups
     if groups is None:
         out["statements"].append("no commanded positions in the data (goal_x, goal_y, goal_z columns): no AP, vAP")
     elif not groups:
         out["statements"].append(f"no commanded position was measured more than once (goals within "
                                  f"{goal_radius_m * 1e3:g} mm): no AP, vAP")
     else:
-        keys = direction_keys(Q, q_tol_rad)
         out["AP_vAP"] = {"before": pose_accuracy(resid_before_m, groups, keys),
                          "after": pose_accuracy(resid_after_m, groups, keys)}
         if out["AP_vAP"]["after"]["vAP"]["n_positions"] == 0:
             out["statements"].append("every commanded position was reached in one configuration only: no vAP")
-    cycles = [g for g in clusters(Q, q_tol_rad) if g.size >= 3]
+    cycles = _groups_of(keys, 3)
     if cycles:
         out["RP"] = repeatability(resid_after_m, cycles)
         out["RP"]["note"] = (f"repeated configurations (all joints within {q_tol_rad * 1e3:g} mrad, ≥ 3 rows); "
