@@ -8,10 +8,18 @@ capsules are conservative), its axis a principal axis of the vertices (of the th
 volume) through the centre of their bounding box across it, its radius the largest distance of a vertex
 from that axis, and its segment the shortest one whose spherical caps still cover the vertices
 beyond the ends.
+
+What is read from mesh files is kept per process (two cells of one robot in one process read its meshes
+once): the meshes Coal loads (one shared ``coal.CachedMeshLoader``, dropped as soon as a file it read
+changed), the vertices trimesh reads (keyed by :func:`file_stamp`: resolved path, size and modification
+time in ns) and the capsules fitted to a point set or mesh (keyed by the points' bytes). A changed file is
+read again; what a caller gets is a copy or a read-only array, never the cached object itself.
 """
 
 from __future__ import annotations
 
+import hashlib
+from collections import OrderedDict
 from pathlib import Path
 from typing import Any
 
@@ -20,9 +28,120 @@ import pinocchio as pin
 
 from pin_kpi_oed.errors import InputError
 
+#: the most fitted results kept per process (least recently used dropped first)
+FIT_CACHE_SIZE = 256
+
+
+def file_stamp(path: str | Path) -> tuple[str, int, int] | None:
+    """What the per-process mesh caches key a file on.
+
+    Args:
+        path: a file.
+
+    Returns:
+        (resolved path, size in bytes, modification time in ns), or None when the file cannot be stat'ed
+        (then nothing is cached and the reader reports the error).
+    """
+    try:
+        p = Path(path).resolve()
+        st = p.stat()
+    except (OSError, RuntimeError, ValueError):
+        return None
+    return str(p), int(st.st_size), int(st.st_mtime_ns)
+
+
+class _MeshCaches:
+    """The process's mesh caches (see the module docstring)."""
+
+    def __init__(self) -> None:
+        self.loader: Any = None                 # coal.CachedMeshLoader shared by every URDF geometry
+        self.loaded: dict[str, tuple[str, int, int] | None] = {}   # mesh file -> stamp when the loader read it
+        self.vertices: dict[str, tuple[tuple[str, int, int], np.ndarray]] = {}   # resolved path -> (stamp, V)
+        self.fits: OrderedDict[tuple, Any] = OrderedDict()
+
+    def mesh_loader(self) -> Any:
+        """The shared Coal loader, a new one when a mesh file it read has changed since."""
+        import coal
+
+        if self.loader is None or any(file_stamp(f) != s for f, s in self.loaded.items()):
+            self.loader, self.loaded = coal.CachedMeshLoader(), {}
+        return self.loader
+
+    def note_loaded(self, gm: pin.GeometryModel) -> None:
+        """Records the stamps of the mesh files of a geometry model built with :meth:`mesh_loader`."""
+        for go in gm.geometryObjects:
+            if go.meshPath and go.meshPath not in self.loaded:
+                self.loaded[go.meshPath] = file_stamp(go.meshPath)
+
+    def fit(self, key: tuple, compute: Any) -> Any:
+        """``compute()``, kept under ``key`` (least recently used dropped beyond :data:`FIT_CACHE_SIZE`)."""
+        if key in self.fits:
+            self.fits.move_to_end(key)
+            return self.fits[key]
+        value = compute()
+        self.fits[key] = value
+        while len(self.fits) > FIT_CACHE_SIZE:
+            self.fits.popitem(last=False)
+        return value
+
+
+_CACHES = _MeshCaches()
+
+
+def clear_mesh_caches() -> None:
+    """Forgets every mesh, vertex set and fit this process read or computed (the next read is from the files)."""
+    global _CACHES
+    _CACHES = _MeshCaches()
+
+
+def build_geometry(model: pin.Model, urdf_path: str | Path, geom_type: pin.GeometryType,
+                   dirs: list[str]) -> pin.GeometryModel:
+    """A URDF's geometry model with its meshes loaded once per process (``pin.buildGeomFromUrdf`` with the
+    process's shared ``coal.CachedMeshLoader``; a mesh file changed since is loaded again).
+
+    The geometry model and its objects are new on every call (a caller may add objects or colour them); the
+    Coal meshes inside are shared and must not be modified.
+
+    Args:
+        model: the Pinocchio model of the URDF.
+        urdf_path: the URDF file.
+        geom_type: ``pin.GeometryType.COLLISION`` or ``VISUAL``.
+        dirs: folders resolving ``package://`` URIs.
+
+    Returns:
+        The geometry model.
+
+    Raises:
+        Whatever ``pin.buildGeomFromUrdf`` raises for an unreadable URDF or mesh.
+    """
+    caches = _CACHES
+    gm = pin.buildGeomFromUrdf(model, str(urdf_path), geom_type, package_dirs=dirs,
+                               mesh_loader=caches.mesh_loader())
+    caches.note_loaded(gm)
+    return gm
+
+
+def _points_key(kind: str, *arrays: np.ndarray | None, params: tuple = ()) -> tuple:
+    """A cache key of arrays' exact values (shape, dtype and a BLAKE2 digest of their bytes) and parameters."""
+    h = hashlib.blake2b(digest_size=20)
+    shapes: list[tuple | None] = []
+    for a in arrays:
+        if a is None:
+            shapes.append(None)
+            continue
+        c = np.ascontiguousarray(a)
+        shapes.append((c.shape, c.dtype.str))
+        h.update(c.tobytes())
+    return (kind, tuple(shapes), h.hexdigest(), params)
+
+
+def _copy_caps(caps: list) -> list[tuple[np.ndarray, np.ndarray, float]]:
+    return [(np.array(a, float), np.array(b, float), float(r)) for a, b, r in caps]
+
 
 def fit_capsule(points: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
-    """The enclosing capsule of a point set (see the module docstring).
+    """The enclosing capsule of a point set (see the module docstring); a point set fitted before in this
+    process is not fitted again (the same numbers, new arrays).
 
     Args:
         points: (k, 3) points (m).
@@ -36,6 +155,11 @@ def fit_capsule(points: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
     P = np.asarray(points, float).reshape(-1, 3)
     if P.shape[0] == 0 or not np.all(np.isfinite(P)):
         raise InputError("fit_capsule: need finite points")
+    return _copy_caps(_CACHES.fit(_points_key("capsule", P), lambda: [_fit_capsule(P)]))[0]
+
+
+def _fit_capsule(P: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
+    """:func:`fit_capsule` of finite (k, 3) points, computed."""
     c = P.mean(axis=0)
     X = P - c
     _, _, Vt = np.linalg.svd(X, full_matrices=False) if P.shape[0] > 1 else (None, None, np.eye(3))
@@ -60,17 +184,49 @@ def fit_capsule(points: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
 
 
 def mesh_vertices(go: pin.GeometryObject) -> np.ndarray:
-    """Vertices of a mesh or box geometry object in its own frame (m)."""
+    """Vertices of a mesh or box geometry object in its own frame (m).
+
+    A mesh file is read (trimesh) once per process while its :func:`file_stamp` stays the same.
+
+    Args:
+        go: the geometry object (a Coal box, or a mesh with ``meshPath`` and ``meshScale``).
+
+    Returns:
+        (k, 3) vertices (m), a new array.
+    """
     import coal
 
     g = go.geometry
     if isinstance(g, coal.Box):
         h = np.asarray(g.halfSide, float)
         return np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)]) * h
+    return file_vertices(go.meshPath) * np.asarray(go.meshScale, float)
+
+
+def file_vertices(path: str | Path) -> np.ndarray:
+    """A mesh file's vertices as trimesh reads them (file units), read once per process per :func:`file_stamp`.
+
+    Args:
+        path: the mesh file (STL, OBJ, DAE, ...).
+
+    Returns:
+        (k, 3) vertices, read-only (the cached array: copy it to change it).
+
+    Raises:
+        Whatever ``trimesh.load`` raises for a missing or unreadable file.
+    """
     import trimesh
 
-    mesh: Any = trimesh.load(go.meshPath, force="mesh")
-    return np.asarray(mesh.vertices, float) * np.asarray(go.meshScale, float)
+    stamp = file_stamp(path)
+    cached = _CACHES.vertices.get(stamp[0]) if stamp is not None else None
+    if cached is not None and cached[0] == stamp:
+        return cached[1]
+    mesh: Any = trimesh.load(str(path), force="mesh")
+    V = np.array(mesh.vertices, float)
+    V.flags.writeable = False
+    if stamp is not None:
+        _CACHES.vertices[stamp[0]] = (stamp, V)
+    return V
 
 
 def package_dirs(urdf_path: str | Path) -> list[str]:
@@ -96,8 +252,7 @@ def geometry_model(robot, kind: str = "collision") -> pin.GeometryModel:
     if kind not in types:
         raise InputError(f"robot_capsules: unknown geometry kind '{kind}' (collision or visual)")
     try:
-        return pin.buildGeomFromUrdf(robot.model, robot.urdf_path, types[kind],
-                                     package_dirs=package_dirs(robot.urdf_path))
+        return build_geometry(robot.model, robot.urdf_path, types[kind], package_dirs(robot.urdf_path))
     except Exception as exc:
         first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
         raise InputError(f"robot_capsules: cannot read the {kind} geometry of {robot.urdf_path} ({first}); "
@@ -147,15 +302,25 @@ def fit_capsules(vertices: np.ndarray, faces: np.ndarray | None, max_radius: flo
     Raises:
         InputError: no finite vertices.
     """
+    V = np.asarray(vertices, float).reshape(-1, 3)
+    if V.shape[0] == 0 or not np.all(np.isfinite(V)):
+        raise InputError("fit_capsule: need finite points")
+    F = None if faces is None else np.asarray(faces, np.int64)
+    key = _points_key("capsules", V, F, params=(float(max_radius), int(max_pieces)))
+    return _copy_caps(_CACHES.fit(key, lambda: _fit_capsules(V, F, max_radius, max_pieces)))
+
+
+def _fit_capsules(V: np.ndarray, faces: np.ndarray | None, max_radius: float,
+                  max_pieces: int) -> list[tuple[np.ndarray, np.ndarray, float]]:
+    """:func:`fit_capsules` of finite (k, 3) vertices, computed."""
     import heapq
 
-    V = np.asarray(vertices, float).reshape(-1, 3)
-    a, b, r = fit_capsule(V)
+    a, b, r = _fit_capsule(V)
     if faces is None or len(faces) == 0 or r <= max_radius or max_pieces <= 1:
         return [(a, b, r)]
     import trimesh
 
-    heap: list = [(-r, 0, (a, b, r), trimesh.Trimesh(V, np.asarray(faces, np.int64), process=False))]
+    heap: list = [(-r, 0, (a, b, r), trimesh.Trimesh(V, faces, process=False))]
     done: list[tuple[np.ndarray, np.ndarray, float]] = []
     tick = 1
     while heap and len(heap) + len(done) < max_pieces:
@@ -168,7 +333,7 @@ def fit_capsules(vertices: np.ndarray, faces: np.ndarray | None, max_radius: flo
             done.append(cap)
             continue
         for h in halves:
-            ca = fit_capsule(h.vertices)
+            ca = _fit_capsule(np.asarray(h.vertices, float).reshape(-1, 3))
             heapq.heappush(heap, (-ca[2], tick, ca, h))
             tick += 1
     return done + [c for _, _, c, _ in heap]

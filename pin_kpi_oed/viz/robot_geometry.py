@@ -12,7 +12,7 @@ import numpy as np
 import pinocchio as pin
 
 from pin_kpi_oed.cell.cell import CapsuleSpec
-from pin_kpi_oed.cell.meshes import package_dirs
+from pin_kpi_oed.cell.meshes import build_geometry, package_dirs
 from pin_kpi_oed.errors import RobotLoadError
 from pin_kpi_oed.model.robot import Robot
 from pin_kpi_oed.model.urdf_joints import locked_posture, model_from_urdf_text
@@ -28,6 +28,12 @@ def slug(name: str) -> str:
 def visual_model(robot: Robot) -> tuple[pin.Model, pin.GeometryModel | None, list[str]]:
     """Pinocchio model of the serial chain (as the robot's) and its URDF visual geometry.
 
+    The visual meshes are loaded once per process (:func:`~pin_kpi_oed.cell.meshes.build_geometry`); the model and
+    the geometry model are new on every call (a scene adds its reflector to them and colours them).
+
+    Args:
+        robot: the robot (its URDF file and locked joints).
+
     Returns:
         (model, visual geometry or None when the URDF has none or its meshes are missing, notes).
 
@@ -39,8 +45,7 @@ def visual_model(robot: Robot) -> tuple[pin.Model, pin.GeometryModel | None, lis
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
-            visual = pin.buildGeomFromUrdf(full, robot.urdf_path, pin.GeometryType.VISUAL,
-                                           package_dirs=package_dirs(robot.urdf_path))
+            visual = build_geometry(full, robot.urdf_path, pin.GeometryType.VISUAL, package_dirs(robot.urdf_path))
     except Exception as exc:  # missing mesh files etc.
         notes.append(f"URDF visuals not loaded ({str(exc).strip().splitlines()[0][:120] if str(exc).strip() else exc}):"
                      " drawing primitives")
