@@ -88,13 +88,15 @@ def test_the_design_sees_the_board_and_its_program_moves_to_every_pose(pipeline)
 def test_the_identified_board_on_the_tool_is_the_truth_within_its_sigma(pipeline):
     """The hand-eye transform of an eye-to-hand camera is the board on the tool (tool_T_board). Its truth in the
     identifiable parameterisation (the flange's axial offset, held at nominal, moves into it) is the fit of the
-    noise- and harmonic-free images of the true robot at 40 configurations."""
+    noise- and harmonic-free images of the true robot at 16 configurations (without noise the fit is exact at any
+    number of images that identifies the parameters: 16 images, 1536 pixel coordinates for some 30 parameters)."""
     d, cell, model, p_true, _, _, _, steps = pipeline
     assert "(in the camera frame)" in steps["identify"][1]
     cm = load_model_file(d / "m.json")
-    Qbig = model.views(40, seed=5, around=cell.q_work)
-    exact = identify_camera(model, CornerSet.from_arrays([f"b{i}" for i in range(40)], Qbig,
+    Qbig = model.views(16, seed=5, around=cell.q_work)
+    exact = identify_camera(model, CornerSet.from_arrays([f"b{i}" for i in range(16)], Qbig,
                                                          model.predict(p_true, Qbig), list(model.robot.joint_names)))
+    assert exact.fit.rms_px < 1e-6, "the noise-free images fitted exactly"
     ident = dict(zip(exact.stored_names(), exact.fit.p[exact.fit.base]))
     par = cm.parameters
     board = [i for i, n in enumerate(par["names"]) if n.startswith("board.")]
