@@ -14,6 +14,10 @@ from pin_kpi_oed.errors import InputError
 from tests.camera_setup import Q0, UR5_SKIP, ur5_camera
 
 
+#: the tests sharing the module fixture ``problem``: on one worker under ``--dist loadgroup``, computed once
+GROUP = "test_camera_design_problem"
+
+
 @pytest.fixture(scope="module")
 def problem():
     cam = ur5_camera("eye_in_hand")
@@ -24,6 +28,7 @@ def problem():
                                Q0[None])
 
 
+@pytest.mark.xdist_group(GROUP)
 def test_ur5_eye_in_hand_design_sees_the_board_at_every_pose(problem):
     """8 poses from a pool of 60 feasible candidates (120 before: the pool and its certificate cost in proportion;
     from 60 IPOPT's 15 iterations end below the selection, so its own poses, not the selection's, are checked)."""
@@ -45,6 +50,7 @@ def test_ur5_eye_in_hand_design_sees_the_board_at_every_pose(problem):
     assert d.selection_trace_cs_m2 < min(rnd)
 
 
+@pytest.mark.xdist_group(GROUP)
 def test_square_roots_keep_the_information(problem):
     F = problem.criterion("kpi").jacobians(problem.pool(3, seed=1)[0])
     R = square_roots(F)
@@ -53,11 +59,13 @@ def test_square_roots_keep_the_information(problem):
     assert np.abs(M - MR).max() < 1e-9 * np.abs(M).max()
 
 
+@pytest.mark.xdist_group(GROUP)
 def test_too_few_images_refused(problem):
     with pytest.raises(InputError, match="cannot identify"):
         design_camera(problem, 0)
 
 
+@pytest.mark.xdist_group(GROUP)
 def test_an_efficiency_beyond_the_pools_bound_is_not_stated_and_a_stopped_ipopt_is_noted(problem):
     """The pool's bound covers the designs made of its candidates: a selection's efficiency is stated (≤ 100 %); an
     IPOPT design below the bound (its poses left the pool) gets none, and IPOPT stopped at its iteration limit is

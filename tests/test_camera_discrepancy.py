@@ -15,6 +15,10 @@ from tests.camera_cell import CAMERA_CELL, camera_cell
 from tests.cli_run import run_cli
 
 
+#: the tests sharing the module fixture ``fits``: on one worker under ``--dist loadgroup``, computed once
+GROUP = "test_camera_discrepancy_fits"
+
+
 @pytest.fixture(scope="module")
 def fits(tmp_path_factory):
     """Images of 0.2 px noise identified with the noise stated right and stated 0.12 px (auto, none)."""
@@ -31,6 +35,7 @@ def fits(tmp_path_factory):
     return d, low, runs
 
 
+@pytest.mark.xdist_group(GROUP)
 def test_on_is_refused_in_one_line_naming_the_reason(fits):
     d, low, _ = fits
     rc, out, err = run_cli("identify", "--data", d / "c.csv", "--cell", low, "--discrepancy", "on",
@@ -39,6 +44,7 @@ def test_on_is_refused_in_one_line_naming_the_reason(fits):
     assert "--discrepancy on: not for camera measurements" in err and "board corners' pixels" in err
 
 
+@pytest.mark.xdist_group(GROUP)
 def test_auto_says_no_gaussian_process_and_the_residual_level(fits):
     _, _, runs = fits
     out = runs["auto"][1]
@@ -50,6 +56,7 @@ def test_auto_says_no_gaussian_process_and_the_residual_level(fits):
     assert "discrepancy (auto): none for a camera" in runs["right"][1]
 
 
+@pytest.mark.xdist_group(GROUP)
 def test_the_tcp_sigma_at_the_residual_level_is_the_sigma_with_the_noise_stated_right(fits):
     d, low, _ = fits
     q = load_cell(str(low)).q_work

@@ -31,6 +31,10 @@ def _joints_csv(path, names, Q):
     path.write_text(",".join(names) + "\n" + "".join(",".join(repr(float(v)) for v in q) + "\n" for q in Q))
 
 
+#: the tests sharing the module fixture ``pipeline``: on one worker under ``--dist loadgroup``, computed once
+GROUP = "test_camera_eye_to_hand_pipeline"
+
+
 @pytest.fixture(scope="module")
 def pipeline(tmp_path_factory):
     """Every step's (exit code, stdout, stderr), the cell, its camera model, the truth and fresh configurations."""
@@ -68,6 +72,7 @@ def pipeline(tmp_path_factory):
     return d, cell, model, p_true, effects, Q, target, steps
 
 
+@pytest.mark.xdist_group(GROUP)
 def test_every_step_but_check_exits_0_and_check_holds_on_fresh_images(pipeline):
     *_, steps = pipeline
     for name, (rc, out, err) in steps.items():
@@ -75,6 +80,7 @@ def test_every_step_but_check_exits_0_and_check_holds_on_fresh_images(pipeline):
     assert "verdict: holds" in steps["check"][1]
 
 
+@pytest.mark.xdist_group(GROUP)
 def test_the_design_sees_the_board_and_its_program_moves_to_every_pose(pipeline):
     d, *_, steps = pipeline
     assert "8 of 8 poses see the board" in steps["design"][1]
@@ -86,6 +92,7 @@ def test_the_design_sees_the_board_and_its_program_moves_to_every_pose(pipeline)
     assert "0 colliding" in steps["export"][1]
 
 
+@pytest.mark.xdist_group(GROUP)
 def test_the_identified_board_on_the_tool_is_the_truth_within_its_sigma(pipeline):
     """The hand-eye transform of an eye-to-hand camera is the board on the tool (tool_T_board). Its truth in the
     identifiable parameterisation (the flange's axial offset, held at nominal, moves into it) is the fit of the
@@ -111,6 +118,7 @@ def test_the_identified_board_on_the_tool_is_the_truth_within_its_sigma(pipeline
     assert np.linalg.norm(fitted[:3] - truth[:3]) < 2e-4 and np.linalg.norm(fitted[3:] - truth[3:]) < 1e-3
 
 
+@pytest.mark.xdist_group(GROUP)
 def test_predict_and_compensate_state_a_tcp_sigma_that_holds_the_true_error(pipeline):
     d, _, model, p_true, effects, Q, target, steps = pipeline
     out = steps["compensate"][1]
@@ -134,6 +142,7 @@ def test_predict_and_compensate_state_a_tcp_sigma_that_holds_the_true_error(pipe
     assert np.median(e) < 0.5 * np.median(e_uncompensated)
 
 
+@pytest.mark.xdist_group(GROUP)
 def test_report_without_a_lab_file_writes_a_draft_page(pipeline):
     d, *_, steps = pipeline
     page = (d / "report.html").read_text()
@@ -141,6 +150,7 @@ def test_report_without_a_lab_file_writes_a_draft_page(pipeline):
     assert "draft" in steps["report"][1]
 
 
+@pytest.mark.xdist_group(GROUP)
 def test_check_says_the_setup_moved_when_the_camera_moved(pipeline, tmp_path):
     """The same check on images of the same robot after the camera moved 3 mm does not hold."""
     _, cell, model, p_true, effects, *_ = pipeline

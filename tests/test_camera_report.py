@@ -20,6 +20,10 @@ from tests.camera_cell import camera_cell
 from tests.cli_run import run_cli
 
 
+#: the tests sharing the module fixture ``certified``: on one worker under ``--dist loadgroup``, computed once
+GROUP = "test_camera_report_certified"
+
+
 @pytest.fixture(scope="module")
 def certified(tmp_path_factory):
     """The corner files, the model file, predict --at tcp at the cell's working configurations, the certificate."""
@@ -42,6 +46,7 @@ def certified(tmp_path_factory):
     return d, cell, steps
 
 
+@pytest.mark.xdist_group(GROUP)
 def test_the_pages_U_is_twice_the_tcp_sigma_predict_states(certified):
     d, cell, _ = certified
     with open(d / "pred.csv") as f:
@@ -54,6 +59,7 @@ def test_the_pages_U_is_twice_the_tcp_sigma_predict_states(certified):
     assert 1e-4 < u["U_max_m"] < 5e-3  # a TCP uncertainty of a camera calibration, not a vacuous number
 
 
+@pytest.mark.xdist_group(GROUP)
 def test_the_page_states_the_held_share_and_what_removes_it(certified):
     d, cell, _ = certified
     doc = json.loads((d / "cert.json").read_text())
@@ -68,6 +74,7 @@ def test_the_page_states_the_held_share_and_what_removes_it(certified):
     assert "the flange's axial offset (wrist_3_joint.ty)" in page and "only a measurement of the TCP" in page
 
 
+@pytest.mark.xdist_group(GROUP)
 def test_the_json_is_valid_and_the_page_has_every_section(certified):
     d, _, steps = certified
     doc = json.loads((d / "cert.json").read_text(), parse_constant=lambda c: pytest.fail(f"{c} in the JSON"))
@@ -103,6 +110,7 @@ def _tcp_by_pinocchio(model, p, q, pm, data):
     return model.sensor_pose(p).act(data.oMf[rb.tool_frame_id].act(model.tcp_m))
 
 
+@pytest.mark.xdist_group(GROUP)
 def test_monte_carlo_of_U_on_one_configuration(certified):
     """U against draws of the fitted parameters from their covariance and the held joint placements from their
     tolerances (absorbed by the fit as stored), the TCP through Pinocchio's forward kinematics of each drawn robot
@@ -140,6 +148,7 @@ def test_monte_carlo_of_U_on_one_configuration(certified):
     assert mc["n"] == 2000 and all(abs(r - 1.0) < 0.05 for r in mc["ratio"]), "the page's own Monte-Carlo"
 
 
+@pytest.mark.xdist_group(GROUP)
 def test_conformity_is_undetermined_when_U_exceeds_the_requirement(certified):
     d, _, _ = certified
     u_max = json.loads((d / "cert.json").read_text())["uncertainty"]["U_max_m"]
@@ -149,6 +158,7 @@ def test_conformity_is_undetermined_when_U_exceeds_the_requirement(certified):
     assert c["verdict"] == "undetermined" and c["U_m"] == pytest.approx(u_max, rel=1e-9)
 
 
+@pytest.mark.xdist_group(GROUP)
 def test_bad_camera_report_input_is_one_line(certified, tmp_path):
     d, _, _ = certified
     other = tmp_path / "other.csv"
@@ -165,6 +175,7 @@ def test_bad_camera_report_input_is_one_line(certified, tmp_path):
     assert not (tmp_path / "x.html").exists()
 
 
+@pytest.mark.xdist_group(GROUP)
 def test_a_lab_file_makes_the_page_a_certificate(certified, tmp_path):
     d, _, _ = certified
     lab = tmp_path / "lab.yaml"
