@@ -60,14 +60,14 @@ def test_auto_says_no_gaussian_process_and_the_residual_level(fits):
 def test_the_tcp_sigma_at_the_residual_level_is_the_sigma_with_the_noise_stated_right(fits):
     d, low, _ = fits
     q = load_cell(str(low)).q_work
-    sig = {}
+    sig, cms = {}, {}
     for name in ("right", "auto", "none"):
-        cm = load_model_file(d / f"{name}.json")
+        cm = cms[name] = load_model_file(d / f"{name}.json")
         assert cm.discrepancy is None
         ts = tcp_sigma(cm, q)
         sig[name] = np.sqrt(np.maximum(ts.sigma_m ** 2 - ts.held_sigma_m ** 2, 0.0))  # the fitted parameters' part
     assert np.allclose(sig["auto"], sig["none"], rtol=1e-9)
     assert np.allclose(sig["auto"], sig["right"], rtol=0.15), sig
     # the scaling is what makes it so: the covariance the fit states at 0.12 px is (0.12 / 0.2)² of the right one
-    std = {k: np.asarray(load_model_file(d / f"{k}.json").parameters["std"]) for k in ("right", "auto")}
+    std = {k: np.asarray(cms[k].parameters["std"]) for k in ("right", "auto")}
     assert np.median(std["auto"] / std["right"]) == pytest.approx(0.6, rel=0.05)
