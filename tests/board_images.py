@@ -9,29 +9,32 @@ import numpy as np
 SQUARE_PX, MARGIN_PX = 60, 60
 
 
-def flat_board(kind: str, rows: int, cols: int, dictionary: str = "DICT_5X5_100") -> np.ndarray:
-    """The board of rows x cols squares drawn flat (8 bit grey), SQUARE_PX per square, MARGIN_PX white around."""
+def flat_board(kind: str, rows: int, cols: int, dictionary: str = "DICT_5X5_100", px: float = 1.0) -> np.ndarray:
+    """The board of rows x cols squares drawn flat (8 bit grey), px · SQUARE_PX per square, px · MARGIN_PX white
+    around (px: the resolution against the default one)."""
     import cv2
 
-    w, h = cols * SQUARE_PX + 2 * MARGIN_PX, rows * SQUARE_PX + 2 * MARGIN_PX
+    sq, mg = round(px * SQUARE_PX), round(px * MARGIN_PX)
+    w, h = cols * sq + 2 * mg, rows * sq + 2 * mg
     if kind == "charuco":
         d = cv2.aruco.getPredefinedDictionary(getattr(cv2.aruco, dictionary))
         board = cv2.aruco.CharucoBoard((cols, rows), 0.03, 0.022, d)
-        return board.generateImage((w, h), marginSize=MARGIN_PX)
+        return board.generateImage((w, h), marginSize=mg)
     img = np.full((h, w), 255, np.uint8)
     for r in range(rows):
         for c in range(cols):
             if (r + c) % 2 == 0:
-                y, x = MARGIN_PX + r * SQUARE_PX, MARGIN_PX + c * SQUARE_PX
-                img[y:y + SQUARE_PX, x:x + SQUARE_PX] = 0
+                y, x = mg + r * sq, mg + c * sq
+                img[y:y + sq, x:x + sq] = 0
     return img
 
 
-def flat_corners(rows: int, cols: int) -> np.ndarray:
-    """The inner corners' pixels in the flat image, (rows-1)(cols-1) x 2, row by row (pixel centres at whole
-    numbers: a square's edge lies half a pixel before its first pixel)."""
+def flat_corners(rows: int, cols: int, px: float = 1.0) -> np.ndarray:
+    """The inner corners' pixels in the flat image of :func:`flat_board` at resolution px, (rows-1)(cols-1) x 2,
+    row by row (pixel centres at whole numbers: a square's edge lies half a pixel before its first pixel)."""
+    sq, mg = round(px * SQUARE_PX), round(px * MARGIN_PX)
     r, c = np.divmod(np.arange((rows - 1) * (cols - 1)), cols - 1)
-    return np.stack([MARGIN_PX + (c + 1) * SQUARE_PX - 0.5, MARGIN_PX + (r + 1) * SQUARE_PX - 0.5], axis=1)
+    return np.stack([mg + (c + 1) * sq - 0.5, mg + (r + 1) * sq - 0.5], axis=1)
 
 
 def warped(flat: np.ndarray, H: np.ndarray, size=(1280, 1024)) -> np.ndarray:
@@ -47,8 +50,9 @@ def apply(H: np.ndarray, xy: np.ndarray) -> np.ndarray:
     return p[:, :2] / p[:, 2:]
 
 
-def homography(seed: int, scale: float = 0.9) -> np.ndarray:
-    """A seeded, moderate view: scale, a small rotation and perspective, a shift into a 1280 x 1024 image."""
+def homography(seed: int, scale: float = 0.9, px: float = 1.0) -> np.ndarray:
+    """A seeded, moderate view: scale, a small rotation and perspective, a shift into a 1280 x 1024 image; at
+    resolution px the same view of the board of :func:`flat_board` at px into a px · (1280 x 1024) image."""
     rng = np.random.default_rng(seed)
     a = rng.uniform(-0.25, 0.25)
     R = np.array([[np.cos(a), -np.sin(a)], [np.sin(a), np.cos(a)]]) * scale
@@ -56,4 +60,4 @@ def homography(seed: int, scale: float = 0.9) -> np.ndarray:
     H[:2, :2] = R
     H[:2, 2] = [150 + rng.uniform(-40, 40), 150 + rng.uniform(-40, 40)]
     H[2, :2] = rng.uniform(-1.5e-4, 1.5e-4, 2)
-    return H
+    return np.diag([px, px, 1.0]) @ H @ np.diag([1.0 / px, 1.0 / px, 1.0])

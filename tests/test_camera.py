@@ -139,8 +139,12 @@ def test_what_a_camera_sees_and_cannot_see(mode, fixed, on_tool):
 
 
 def test_fit_recovers_the_geometry_and_its_tcp_sigma_agrees_with_monte_carlo():
+    """40 noise draws of 12 images (the draws make the statistic; 12 images of 96 pixel coordinates identify the
+    geometry, as in the robust-loss test, and each fit costs 12/20 of one on 20 images). The first draw's fit starts
+    at the nominal model and recovers the truth from there; the others start at that estimate (a warm start: fewer
+    iterations to the same least-squares minimum, whose spread over the draws is the statistic)."""
     cam = _camera()
-    Q = _poses(cam, 20, 6)
+    Q = _poses(cam, 12, 6)
     ident = analyse(cam, Q=Q)
     base = ident.base
     rng = np.random.default_rng(7)
@@ -149,11 +153,15 @@ def test_fit_recovers_the_geometry_and_its_tcp_sigma_agrees_with_monte_carlo():
     clean = cam.predict(p_true, Q)
     Qw = _poses(cam, 2, 8)
     s_true = cam.kpi(p_true, Qw)
-    est, chi2 = [], []
+    est, chi2, start = [], [], None
     for r in range(40):
         uv = clean + np.random.default_rng(100 + r).normal(scale=cam.sigma_px, size=clean.shape)
-        fit = fit_camera(cam, Q, uv, base)
+        fit = fit_camera(cam, Q, uv, base, p_ref=start)
         assert fit.success
+        if start is None:  # from nominal: the truth within 5 of its σ in every identifiable parameter
+            z = (fit.p[base] - p_true[base]) / np.sqrt(np.diag(fit.covariance))
+            assert np.abs(z).max() < 5, z
+            start = fit.p
         est.append((cam.kpi(fit.p, Qw) - s_true).ravel())
         chi2.append(fit.chi2_reduced)
     Cs = camera_tcp_covariance(cam, fit, Q, Qw)[0]

@@ -14,6 +14,10 @@ from pin_kpi_oed.errors import InputError
 from tests.camera_setup import Q0, UR5_SKIP, ur5_camera
 
 
+#: the tests sharing the module fixture ``problem``: on one worker under ``--dist loadgroup``, computed once
+GROUP = "test_camera_design_problem"
+
+
 @pytest.fixture(scope="module")
 def problem():
     cam = ur5_camera("eye_in_hand")
@@ -24,8 +28,11 @@ def problem():
                                Q0[None])
 
 
+@pytest.mark.xdist_group(GROUP)
 def test_ur5_eye_in_hand_design_sees_the_board_at_every_pose(problem):
-    d = design_camera(problem, 8, seed=0, pool_size=120, ipopt_options=ipopt_options(max_iter=15))
+    """8 poses from a pool of 60 feasible candidates (120 before: the pool and its certificate cost in proportion;
+    from 60 IPOPT's 15 iterations end below the selection, so its own poses, not the selection's, are checked)."""
+    d = design_camera(problem, 8, seed=0, pool_size=60, ipopt_options=ipopt_options(max_iter=15))
     assert d.Q.shape == (8, 6)
     # the independent check: OpenCV re-projects every corner inside the image, Coal finds every ray clear
     assert np.all(d.check.corners_inside == problem.model.board.n)
@@ -43,6 +50,7 @@ def test_ur5_eye_in_hand_design_sees_the_board_at_every_pose(problem):
     assert d.selection_trace_cs_m2 < min(rnd)
 
 
+@pytest.mark.xdist_group(GROUP)
 def test_square_roots_keep_the_information(problem):
     F = problem.criterion("kpi").jacobians(problem.pool(3, seed=1)[0])
     R = square_roots(F)
@@ -51,11 +59,13 @@ def test_square_roots_keep_the_information(problem):
     assert np.abs(M - MR).max() < 1e-9 * np.abs(M).max()
 
 
+@pytest.mark.xdist_group(GROUP)
 def test_too_few_images_refused(problem):
     with pytest.raises(InputError, match="cannot identify"):
         design_camera(problem, 0)
 
 
+@pytest.mark.xdist_group(GROUP)
 def test_an_efficiency_beyond_the_pools_bound_is_not_stated_and_a_stopped_ipopt_is_noted(problem):
     """The pool's bound covers the designs made of its candidates: a selection's efficiency is stated (≤ 100 %); an
     IPOPT design below the bound (its poses left the pool) gets none, and IPOPT stopped at its iteration limit is
@@ -64,7 +74,7 @@ def test_an_efficiency_beyond_the_pools_bound_is_not_stated_and_a_stopped_ipopt_
 
     from pin_kpi_oed.design.ipopt import IpoptRun
 
-    d = design_camera(problem, 8, seed=0, pool_size=120, ipopt=False)
+    d = design_camera(problem, 8, seed=0, pool_size=60, ipopt=False)
     assert d.stated_efficiency == pytest.approx(d.efficiency) and d.efficiency <= 1 + 1e-9
     assert f"efficiency {d.efficiency:.1%} of the pool's bound" in d.message and d.ipopt_note() == ""
     stopped = IpoptRun(Q=d.Q, f=0.5, value=d.trace_cs_m2 / 2.318, success=True, status="max_iter", nit=500,

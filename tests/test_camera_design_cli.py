@@ -24,6 +24,10 @@ from tests.cli_run import run_cli
 CELL = Path(__file__).resolve().parents[1] / "examples" / "ur5_camera_cell.yaml"
 
 
+#: the tests sharing the module fixture ``pipeline``: on one worker under ``--dist loadgroup``, computed once
+GROUP = "test_camera_design_cli_pipeline"
+
+
 @pytest.fixture(scope="module")
 def pipeline(tmp_path_factory):
     """design -> simulate --design -> identify -> predict --at tcp, each step's (exit code, stdout, stderr)."""
@@ -42,12 +46,14 @@ def pipeline(tmp_path_factory):
     return d, cell, Q, steps
 
 
+@pytest.mark.xdist_group(GROUP)
 def test_every_step_exits_0(pipeline):
     _, _, _, steps = pipeline
     for name, (rc, _, err) in steps.items():
         assert rc == 0, (name, err)
 
 
+@pytest.mark.xdist_group(GROUP)
 def test_design_prints_the_table_and_writes_poses_that_see_the_board(pipeline):
     d, cell, _, steps = pipeline
     out = steps["design"][1]
@@ -74,6 +80,7 @@ def test_design_prints_the_table_and_writes_poses_that_see_the_board(pipeline):
     assert check_camera_poses(view, Q).ok.all()
 
 
+@pytest.mark.xdist_group(GROUP)
 def test_simulate_design_writes_the_corners_at_the_design_poses(pipeline):
     d, cell, _, steps = pipeline
     Q = np.array(json.loads((d / "design.json").read_text())["q_meas"])
@@ -84,6 +91,7 @@ def test_simulate_design_writes_the_corners_at_the_design_poses(pipeline):
     assert "at the 8 poses of design kpi" in steps["simulate"][1]
 
 
+@pytest.mark.xdist_group(GROUP)
 def test_identified_tcp_is_within_3_sigma_of_the_truth(pipeline):
     d, cell, Q, _ = pipeline
     model = cell.measurement_model()
@@ -98,6 +106,7 @@ def test_identified_tcp_is_within_3_sigma_of_the_truth(pipeline):
     assert np.median(e / sigma) > 0.05  # the sigma is not vacuous
 
 
+@pytest.mark.xdist_group(GROUP)
 def test_export_writes_the_program_of_the_camera_design(pipeline):
     d, cell, _, _ = pipeline
     rc, out, err = run_cli("export", d / "design.json", "--format", "csv", "--out", d / "prog.csv")
@@ -116,6 +125,7 @@ def test_export_writes_the_program_of_the_camera_design(pipeline):
         assert np.min(dq.max(axis=1)) < 1e-6
 
 
+@pytest.mark.xdist_group(GROUP)
 def test_view_scene_draws_every_pose(pipeline):
     from pin_kpi_oed.viz.camera_scene import camera_design_scene
 
@@ -141,6 +151,7 @@ def test_tracker_design_options_refused_with_a_camera_cell(tmp_path, args, named
     assert not (tmp_path / "x.json").exists()
 
 
+@pytest.mark.xdist_group(GROUP)
 def test_view_refuses_the_tracker_options_of_a_camera_design(pipeline):
     d, _, _, _ = pipeline
     rc, _, err = run_cli("view", d / "design.json", "--scale", 3, "--html", d / "v.html", "--no-open")
@@ -175,12 +186,14 @@ def test_bad_view_limits_refused_in_one_line(tmp_path, view, named):
     assert rc == 2 and named in err and "Traceback" not in err and len(err.strip().splitlines()) == 1, err
 
 
+@pytest.mark.xdist_group(GROUP)
 def test_evaluate_refuses_a_camera_design(pipeline):
     d, _, _, _ = pipeline
     rc, _, err = run_cli("evaluate", d / "design.json")
     assert rc == 2 and "a camera's design file; evaluate scores a laser tracker's poses" in err
 
 
+@pytest.mark.xdist_group(GROUP)
 def test_predict_at_tcp_takes_a_corners_file_and_refuses_it_without_at_tcp(pipeline):
     """The corners file identify read is a valid --data of predict --at tcp (one row per image, its joint values, the
     same TCP and sigma as the joint values alone); without --at tcp it is refused in one line naming the fix."""

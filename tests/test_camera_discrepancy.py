@@ -15,6 +15,10 @@ from tests.camera_cell import CAMERA_CELL, camera_cell
 from tests.cli_run import run_cli
 
 
+#: the tests sharing the module fixture ``fits``: on one worker under ``--dist loadgroup``, computed once
+GROUP = "test_camera_discrepancy_fits"
+
+
 @pytest.fixture(scope="module")
 def fits(tmp_path_factory):
     """Images of 0.2 px noise identified with the noise stated right and stated 0.12 px (auto, none)."""
@@ -31,6 +35,7 @@ def fits(tmp_path_factory):
     return d, low, runs
 
 
+@pytest.mark.xdist_group(GROUP)
 def test_on_is_refused_in_one_line_naming_the_reason(fits):
     d, low, _ = fits
     rc, out, err = run_cli("identify", "--data", d / "c.csv", "--cell", low, "--discrepancy", "on",
@@ -39,6 +44,7 @@ def test_on_is_refused_in_one_line_naming_the_reason(fits):
     assert "--discrepancy on: not for camera measurements" in err and "board corners' pixels" in err
 
 
+@pytest.mark.xdist_group(GROUP)
 def test_auto_says_no_gaussian_process_and_the_residual_level(fits):
     _, _, runs = fits
     out = runs["auto"][1]
@@ -50,17 +56,18 @@ def test_auto_says_no_gaussian_process_and_the_residual_level(fits):
     assert "discrepancy (auto): none for a camera" in runs["right"][1]
 
 
+@pytest.mark.xdist_group(GROUP)
 def test_the_tcp_sigma_at_the_residual_level_is_the_sigma_with_the_noise_stated_right(fits):
     d, low, _ = fits
     q = load_cell(str(low)).q_work
-    sig = {}
+    sig, cms = {}, {}
     for name in ("right", "auto", "none"):
-        cm = load_model_file(d / f"{name}.json")
+        cm = cms[name] = load_model_file(d / f"{name}.json")
         assert cm.discrepancy is None
         ts = tcp_sigma(cm, q)
         sig[name] = np.sqrt(np.maximum(ts.sigma_m ** 2 - ts.held_sigma_m ** 2, 0.0))  # the fitted parameters' part
     assert np.allclose(sig["auto"], sig["none"], rtol=1e-9)
     assert np.allclose(sig["auto"], sig["right"], rtol=0.15), sig
     # the scaling is what makes it so: the covariance the fit states at 0.12 px is (0.12 / 0.2)² of the right one
-    std = {k: np.asarray(load_model_file(d / f"{k}.json").parameters["std"]) for k in ("right", "auto")}
+    std = {k: np.asarray(cms[k].parameters["std"]) for k in ("right", "auto")}
     assert np.median(std["auto"] / std["right"]) == pytest.approx(0.6, rel=0.05)

@@ -1,7 +1,8 @@
 """The eye-to-hand camera (the camera fixed on the table, the board on the tool) through the whole command line:
 design -> export -> simulate --design -> identify -> predict --at tcp -> compensate -> report -> check, at the
-smallest sizes (8 designed poses from 100 candidates, 5 IPOPT iterations), on a true robot that is not the
-package's model (every joint placement, the camera and the board off nominal, an unmodelled gear harmonic)."""
+smallest sizes (8 designed poses from 50 candidates, 5 IPOPT iterations: IPOPT's design, off the pool, is the one the
+later steps measure), on a true robot that is not the package's model (every joint placement, the camera and the
+board off nominal, an unmodelled gear harmonic)."""
 
 from __future__ import annotations
 
@@ -30,12 +31,16 @@ def _joints_csv(path, names, Q):
     path.write_text(",".join(names) + "\n" + "".join(",".join(repr(float(v)) for v in q) + "\n" for q in Q))
 
 
+#: the tests sharing the module fixture ``pipeline``: on one worker under ``--dist loadgroup``, computed once
+GROUP = "test_camera_eye_to_hand_pipeline"
+
+
 @pytest.fixture(scope="module")
 def pipeline(tmp_path_factory):
     """Every step's (exit code, stdout, stderr), the cell, its camera model, the truth and fresh configurations."""
     d = tmp_path_factory.mktemp("camera_eye_to_hand")
     cell_path = camera_cell(d, "e2h.yaml", **EYE_TO_HAND)
-    steps = {"design": run_cli("design", "--cell", cell_path, "--n", 8, "--pool-size", 100, "--max-iter", 5,
+    steps = {"design": run_cli("design", "--cell", cell_path, "--n", 8, "--pool-size", 50, "--max-iter", 5,
                                "--seed", 0, "--json", d / "design.json")}
     steps["export"] = run_cli("export", d / "design.json", "--format", "urscript", "--out", d / "design.script")
     steps["simulate"] = run_cli("simulate", "--design", d / "design.json", "--out", d / "corners.csv", "--n-test", 6,
@@ -67,6 +72,7 @@ def pipeline(tmp_path_factory):
     return d, cell, model, p_true, effects, Q, target, steps
 
 
+@pytest.mark.xdist_group(GROUP)
 def test_every_step_but_check_exits_0_and_check_holds_on_fresh_images(pipeline):
     *_, steps = pipeline
     for name, (rc, out, err) in steps.items():
@@ -74,6 +80,7 @@ def test_every_step_but_check_exits_0_and_check_holds_on_fresh_images(pipeline):
     assert "verdict: holds" in steps["check"][1]
 
 
+@pytest.mark.xdist_group(GROUP)
 def test_the_design_sees_the_board_and_its_program_moves_to_every_pose(pipeline):
     d, *_, steps = pipeline
     assert "8 of 8 poses see the board" in steps["design"][1]
@@ -85,16 +92,20 @@ def test_the_design_sees_the_board_and_its_program_moves_to_every_pose(pipeline)
     assert "0 colliding" in steps["export"][1]
 
 
+@pytest.mark.xdist_group(GROUP)
 def test_the_identified_board_on_the_tool_is_the_truth_within_its_sigma(pipeline):
     """The hand-eye transform of an eye-to-hand camera is the board on the tool (tool_T_board). Its truth in the
     identifiable parameterisation (the flange's axial offset, held at nominal, moves into it) is the fit of the
-    noise- and harmonic-free images of the true robot at 40 configurations."""
+    noise- and harmonic-free images of the true robot at 16 configurations (without noise the fit is exact at any
+    number of images that identifies the parameters: 16 images, 1536 pixel coordinates for some 30 parameters)."""
     d, cell, model, p_true, _, _, _, steps = pipeline
     assert "(in the camera frame)" in steps["identify"][1]
     cm = load_model_file(d / "m.json")
-    Qbig = model.views(40, seed=5, around=cell.q_work)
-    exact = identify_camera(model, CornerSet.from_arrays([f"b{i}" for i in range(40)], Qbig,
-                                                         model.predict(p_true, Qbig), list(model.robot.joint_names)))
+    Qbig = model.views(16, seed=5, around=cell.q_work)
+    exact = identify_camera(model, CornerSet.from_arrays([f"b{i}" for i in range(16)], Qbig,
+                                                         model.predict(p_true, Qbig), list(model.robot.joint_names)),
+                            joint_noise=False)  # the fit's values alone: no joint-angle level of exact images
+    assert exact.fit.rms_px < 1e-6, "the noise-free images fitted exactly"
     ident = dict(zip(exact.stored_names(), exact.fit.p[exact.fit.base]))
     par = cm.parameters
     board = [i for i, n in enumerate(par["names"]) if n.startswith("board.")]
@@ -108,6 +119,7 @@ def test_the_identified_board_on_the_tool_is_the_truth_within_its_sigma(pipeline
     assert np.linalg.norm(fitted[:3] - truth[:3]) < 2e-4 and np.linalg.norm(fitted[3:] - truth[3:]) < 1e-3
 
 
+@pytest.mark.xdist_group(GROUP)
 def test_predict_and_compensate_state_a_tcp_sigma_that_holds_the_true_error(pipeline):
     d, _, model, p_true, effects, Q, target, steps = pipeline
     out = steps["compensate"][1]
@@ -131,6 +143,7 @@ def test_predict_and_compensate_state_a_tcp_sigma_that_holds_the_true_error(pipe
     assert np.median(e) < 0.5 * np.median(e_uncompensated)
 
 
+@pytest.mark.xdist_group(GROUP)
 def test_report_without_a_lab_file_writes_a_draft_page(pipeline):
     d, *_, steps = pipeline
     page = (d / "report.html").read_text()
@@ -138,6 +151,7 @@ def test_report_without_a_lab_file_writes_a_draft_page(pipeline):
     assert "draft" in steps["report"][1]
 
 
+@pytest.mark.xdist_group(GROUP)
 def test_check_says_the_setup_moved_when_the_camera_moved(pipeline, tmp_path):
     """The same check on images of the same robot after the camera moved 3 mm does not hold."""
     _, cell, model, p_true, effects, *_ = pipeline

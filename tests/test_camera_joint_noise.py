@@ -87,6 +87,10 @@ def test_the_term_switches_on_only_when_the_data_ask_for_it():
     assert on.used and on.lr > on.lr_critical and on.heldout_gain > 0
 
 
+#: the tests sharing the module fixture ``cameras``: on one worker under ``--dist loadgroup``, computed once
+GROUP = "test_camera_joint_noise_cameras"
+
+
 @pytest.fixture(scope="module")
 def cameras():
     """One true UR5 (every joint placement off, eye-in-hand) seen in 12 images: without an unmodelled effect, and with
@@ -105,6 +109,7 @@ def cameras():
     return out, cell
 
 
+@pytest.mark.xdist_group(GROUP)
 def test_a_camera_calibration_carries_the_term_only_when_its_images_show_joint_errors(cameras):
     out, cell = cameras
     plain, harm = out["plain"], out["harmonic"]
@@ -119,6 +124,7 @@ def test_a_camera_calibration_carries_the_term_only_when_its_images_show_joint_e
     assert "joint-angle errors of" in harm.summary()
 
 
+@pytest.mark.xdist_group(GROUP)
 def test_the_tcp_joint_jacobian_is_the_tcps_finite_difference(cameras):
     out, cell = cameras
     cm = out["harmonic"].calibrated_model()
@@ -136,6 +142,7 @@ def test_the_tcp_joint_jacobian_is_the_tcps_finite_difference(cameras):
         assert C == pytest.approx(np.outer(fd, fd), rel=1e-5, abs=1e-12)
 
 
+@pytest.mark.xdist_group(GROUP)
 def test_a_bad_joint_sigma_field_is_refused_in_one_line(cameras):
     out, cell = cameras
     cm = out["harmonic"].calibrated_model()
@@ -144,6 +151,7 @@ def test_a_bad_joint_sigma_field_is_refused_in_one_line(cameras):
         tcp_sigma(cm, cell.q_work)
 
 
+@pytest.mark.xdist_group(GROUP)
 def test_the_check_holds_on_new_images_of_a_robot_with_joint_errors_its_calibration_showed(cameras):
     """New images of the same true robot (its harmonic included): with the joint-angle part in S the statistic per
     dof is near 1 and every check holds; without it (the white level alone) it is larger and some checks alarm."""
@@ -168,6 +176,7 @@ def test_the_check_holds_on_new_images_of_a_robot_with_joint_errors_its_calibrat
     assert np.mean(t_without) > np.mean(t_with) + 0.05
 
 
+@pytest.mark.xdist_group(GROUP)
 def test_predict_says_what_the_sigma_holds(cameras):
     from pin_kpi_oed.calibrated.prediction_sigma import sigma_contents
 
@@ -176,6 +185,7 @@ def test_predict_says_what_the_sigma_holds(cameras):
     assert "joint-angle" not in sigma_contents(out["plain"].calibrated_model())
 
 
+@pytest.mark.xdist_group(GROUP)
 def test_the_term_survives_the_model_file(cameras, tmp_path):
     from pin_kpi_oed.calibrated.model_file import load_model_file
 

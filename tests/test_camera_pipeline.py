@@ -26,6 +26,10 @@ def _rows(path):
         return list(csv.DictReader(f))
 
 
+#: the tests sharing the module fixture ``calibrated``: on one worker under ``--dist loadgroup``, computed once
+GROUP = "test_camera_pipeline_calibrated"
+
+
 @pytest.fixture(scope="module")
 def calibrated(tmp_path_factory):
     """The simulated images, the identified model file and the truth."""
@@ -49,6 +53,7 @@ def calibrated(tmp_path_factory):
     return d, cell_path, cell, model, p_true, effects, Q, out
 
 
+@pytest.mark.xdist_group(GROUP)
 def test_simulate_writes_the_corners_of_a_truth_that_is_not_the_model(calibrated):
     d, _, _, model, p_true, effects, _, _ = calibrated
     cs = read_corners(d / "train.csv")
@@ -64,6 +69,7 @@ def test_simulate_writes_the_corners_of_a_truth_that_is_not_the_model(calibrated
     assert np.sqrt(np.mean(r_nom ** 2)) > 20
 
 
+@pytest.mark.xdist_group(GROUP)
 def test_identify_prints_the_fit_and_writes_a_model_file_that_loads_back(calibrated):
     d, _, _, model, _, _, _, out = calibrated
     assert "camera fit: 25 images" in out and "held-out" in out
@@ -80,6 +86,7 @@ def test_identify_prints_the_fit_and_writes_a_model_file_that_loads_back(calibra
     assert np.allclose(a.position_m, b.position_m, atol=1e-12) and np.allclose(a.sigma_m, b.sigma_m, rtol=1e-9)
 
 
+@pytest.mark.xdist_group(GROUP)
 def test_predicted_tcp_error_is_within_3_sigma_of_the_truth(calibrated):
     d, _, _, model, p_true, effects, Q, _ = calibrated
     rc, out, err = run_cli("predict", "--model", d / "m.json", "--data", d / "joints.csv", "--at", "tcp",
@@ -95,6 +102,7 @@ def test_predicted_tcp_error_is_within_3_sigma_of_the_truth(calibrated):
     assert np.median(e) < 0.5 * np.median(e_nominal)  # the calibration moved the TCP towards the truth
 
 
+@pytest.mark.xdist_group(GROUP)
 def test_compensated_joints_put_the_true_tcp_within_3_sigma_of_the_target(calibrated):
     """Targets in the board frame (the frame a camera calibration knows the TCP in; the base frame adds joint 1's
     placement, which the board's pose absorbs), with the program's joints as hints."""
@@ -122,6 +130,7 @@ def test_compensated_joints_put_the_true_tcp_within_3_sigma_of_the_target(calibr
     assert np.median(e) < 0.5 * np.median(e_uncompensated)
 
 
+@pytest.mark.xdist_group(GROUP)
 def test_check_holds_on_new_images_and_names_a_moved_board_and_a_changed_robot(calibrated):
     d, _, cell, model, p_true, effects, _, _ = calibrated
     rc, out, err = run_cli("check", "--model", d / "m.json", "--data", d / "check.csv")
@@ -139,6 +148,7 @@ def test_check_holds_on_new_images_and_names_a_moved_board_and_a_changed_robot(c
     assert verdicts == {"board moved": "setup_moved", "robot changed": "recalibrate"}
 
 
+@pytest.mark.xdist_group(GROUP)
 def test_tracker_only_pieces_are_refused_in_one_line(calibrated):
     d, cell_path, *_ = calibrated
     for argv, says in (
