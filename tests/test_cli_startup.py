@@ -28,9 +28,6 @@ HEAVY = ("sklearn", "cyipopt", "pandas", "matplotlib", "scipy.optimize", "scipy.
          "pin_kpi_oed.program", "pin_kpi_oed.report", "pin_kpi_oed.diagnosis", "pin_kpi_oed.viz",
          "pin_kpi_oed.oed.criteria", "pin_kpi_oed.cli.design", "pin_kpi_oed.cli.identify")
 
-#: What ``info`` needs no more: ``numpy.random`` (the excitation is drawn without it, bit for bit the same), the
-#: ``secrets`` / ``hmac`` it brings, and OpenSSL's ``hashlib`` (a UR kinematics file's hash, asked for only on writing).
-INFO_NEEDS_NOT = ("numpy.random", "secrets", "hmac", "hashlib")
 
 PROBE = """
 import json, sys
@@ -70,7 +67,7 @@ def test_info_loads_the_robot_model_only() -> None:
     code, mods = _modules("info", "ur10")
     assert code == 0
     assert _loaded(mods, "pinocchio") and _loaded(mods, "pin_kpi_oed.oed.identifiability"), "info did not run"
-    heavy = [m for m in HEAVY + INFO_NEEDS_NOT if _loaded(mods, m)]
+    heavy = [m for m in HEAVY if _loaded(mods, m)]
     assert not heavy, f"pin-kpi-oed info ur10 loads {heavy}"
 
 

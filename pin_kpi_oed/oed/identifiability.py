@@ -161,12 +161,8 @@ def pivoted_qr_diagonal(A: np.ndarray) -> np.ndarray:
 
 
 def excitation(model: MeasurementModel, n: int = 200, seed: int = 0) -> np.ndarray:
-    """Rich random excitation: ``n`` configurations uniform within the joint limits (rad), those of
-    ``model.robot.random_q(numpy.random.default_rng(seed), n)`` bit for bit, drawn without loading ``numpy.random``
-    (:mod:`~pin_kpi_oed.oed.seeded_uniform`: ``info`` starts faster)."""
-    from pin_kpi_oed.oed.seeded_uniform import uniform_rows
-
-    return uniform_rows(seed, model.robot.q_lower, model.robot.q_upper, n)
+    """Rich random excitation: ``n`` configurations uniform within the joint limits (rad)."""
+    return model.robot.random_q(np.random.default_rng(seed), n)
 
 
 #: the residual share below which a parameter's effect on the measurements counts as reproduced by the kept
