@@ -199,14 +199,16 @@ def _search(f: MarginalLikelihood, theta0: np.ndarray, bounds: np.ndarray, max_i
     """One L-BFGS-B search of −log p from ``theta0`` (at most ``max_iter`` iterations), raced in ``race`` and recorded
     there: the optimiser's result, its ``fun`` inf when the race stopped it."""
     history: list[float] = []
+    stopped = False
 
     def watch(intermediate_result: Any) -> None:
+        nonlocal stopped
         history.append(-float(intermediate_result.fun))
         if race is not None and race.behind(len(history), history[-1]):
+            stopped = True
             raise StopIteration                                       # L-BFGS-B ends with the last iterate
     res = minimize(f, theta0, method="L-BFGS-B", jac=True, bounds=bounds, callback=watch,
                    options={"maxiter": int(max_iter)})
-    stopped = race is not None and len(history) == race.at and race.behind(race.at, history[-1])
     if race is not None:
         race.record(history, None if stopped else -float(res.fun))
     if stopped:
