@@ -152,10 +152,20 @@ def fit_capsule(points: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
     Raises:
         InputError: no points or non-finite points.
     """
+    P = _finite_points(points)
+    return _copy_caps(_CACHES.fit(_points_key("capsule", P), lambda: [_fit_capsule(P)]))[0]
+
+
+def _finite_points(points: np.ndarray) -> np.ndarray:
+    """``points`` as (k, 3) floats, at least one and all finite.
+
+    Raises:
+        InputError: no points, or a NaN / inf among them.
+    """
     P = np.asarray(points, float).reshape(-1, 3)
     if P.shape[0] == 0 or not np.all(np.isfinite(P)):
         raise InputError("fit_capsule: need finite points")
-    return _copy_caps(_CACHES.fit(_points_key("capsule", P), lambda: [_fit_capsule(P)]))[0]
+    return P
 
 
 def _fit_capsule(P: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
@@ -302,9 +312,7 @@ def fit_capsules(vertices: np.ndarray, faces: np.ndarray | None, max_radius: flo
     Raises:
         InputError: no finite vertices.
     """
-    V = np.asarray(vertices, float).reshape(-1, 3)
-    if V.shape[0] == 0 or not np.all(np.isfinite(V)):
-        raise InputError("fit_capsule: need finite points")
+    V = _finite_points(vertices)
     F = None if faces is None else np.asarray(faces, np.int64)
     key = _points_key("capsules", V, F, params=(float(max_radius), int(max_pieces)))
     return _copy_caps(_CACHES.fit(key, lambda: _fit_capsules(V, F, max_radius, max_pieces)))
