@@ -148,6 +148,45 @@ def test_monte_carlo_of_U_on_one_configuration(certified):
     assert mc["n"] == 2000 and all(abs(r - 1.0) < 0.05 for r in mc["ratio"]), "the page's own Monte-Carlo"
 
 
+def _monte_carlo_one_draw_at_a_time(cm, Q, n, seed):
+    """The sampled σ of ``camera_monte_carlo`` as it was computed before its draws were batched: the same random
+    numbers in the same order, each drawn truth's TCP by ``model.kpi``, one draw at a time."""
+    model, p0 = camera_model_of(cm)
+    P = cm.parameters
+    names = model.layout.names
+    col = [names.index(f"{model.frame_group}.{s.split('.', 1)[1]}" if s.startswith("tracker.") else s)
+           for s in P["names"]]
+    rng = np.random.default_rng(seed)
+    eps = rng.multivariate_normal(np.zeros(len(col)), np.asarray(P["covariance"], float), size=n, method="eigh")
+    held = P["held"]
+    hcol = [names.index(h) for h in held["names"]]
+    A = np.asarray(held["absorption"], float).reshape(len(col), len(hcol))
+    dN = rng.standard_normal((n, len(hcol))) * np.asarray(held["sigma"], float)
+    y0 = model.kpi(p0, Q)
+    E = np.empty((n, len(Q), 3))
+    for i in range(n):
+        p = p0.copy()
+        p[hcol] += dN[i]
+        p[col] -= A @ dN[i] + eps[i]
+        E[i] = model.kpi(p, Q) - y0
+    return np.sqrt(np.sum(np.var(E, axis=0, ddof=1), axis=1))
+
+
+@pytest.mark.xdist_group(GROUP)
+def test_the_batched_monte_carlo_is_the_one_draw_at_a_time(certified):
+    """``camera_monte_carlo`` (its draws through one batched pass of the kinematics) states the σ of the former
+    per-draw computation (same seed, same random numbers) to 1e-12 relative, at the cell's working configurations
+    (100 draws: the equality is per draw, not statistical)."""
+    from pin_kpi_oed.report.camera import camera_monte_carlo
+
+    d, cell, _ = certified
+    cm = load_model_file(d / "m.json")
+    Q = np.asarray(cell.q_work, float)
+    mc = camera_monte_carlo(cm, Q, n=100, seed=4)
+    ref = _monte_carlo_one_draw_at_a_time(cm, Q, 100, 4)
+    np.testing.assert_allclose(mc["sigma_m"], ref, rtol=1e-12, atol=0)
+    assert mc["n"] == 100 and np.all(ref > 1e-5)
+
 @pytest.mark.xdist_group(GROUP)
 def test_conformity_is_undetermined_when_U_exceeds_the_requirement(certified):
     d, _, _ = certified

@@ -15,7 +15,7 @@ from pin_kpi_oed.cli.app import main
 from pin_kpi_oed.data.measurements import MeasurementSet, read_measurements, write_measurements
 from pin_kpi_oed.report.iso9283 import goal_groups
 from pin_kpi_oed.report.iso_commanded import commanded_figures, commanded_positions
-from pin_kpi_oed.report.uncertainty import conformity
+from pin_kpi_oed.report.uncertainty import ball_coverage, conformity, linear_draws
 from tests._cache_render import A4_PX, GROUP, browser, browser_view, calibrated_folder, plain_certificate
 
 LAB = """organisation: Test Lab
@@ -254,3 +254,25 @@ def test_report_states_the_tcp_when_only_the_reflector_conforms(calibrated, tmp_
     assert con["verdict"] == "undetermined" and con["tcp_U_max_m"] == pytest.approx(U_tcp)
     assert cert["summary"]["verdict"]["kind"] == "undetermined" and "at the TCP" in cert["summary"]["verdict"]["text"]
     assert "not shown: its U (k = 2)" in html.read_text()
+
+
+def test_budget_draws_and_coverage_are_those_of_the_former_one_step_computations():
+    """The Monte-Carlo's draws D F z (``linear_draws``: D F formed once, then one product with the draws) equal the
+    former one-step contraction of D, F and z to 1e-12 relative, same generator; ``ball_coverage`` (each row's
+    eigenvalues in one batched call, the squared draws formed once) is bit for bit the former per-row loop."""
+    rng = np.random.default_rng(8)
+    D = rng.standard_normal((40, 3, 12)) * 1e-3
+    B = rng.standard_normal((12, 9))
+    C = B @ B.T  # rank 9: the clipped eigenvalues of a confounded covariance too
+    new = linear_draws(D, C, 500, np.random.default_rng(9))
+    w, V = np.linalg.eigh(C)
+    F = V * np.sqrt(np.maximum(w, 0.0))
+    old = np.einsum("map,pk,nk->nma", D, F, np.random.default_rng(9).standard_normal((500, 12)))
+    assert new.shape == (500, 40, 3) and np.abs(new - old).max() < 1e-12 * np.abs(old).max()
+    A = rng.standard_normal((60, 3, 3)) * 1e-4
+    Cs = A @ np.swapaxes(A, 1, 2)
+    U = rng.uniform(1.5, 2.5, 60) * np.sqrt(np.einsum("maa->m", Cs))
+    z = np.random.default_rng(0).standard_normal((20000, 3))
+    former = [np.mean((z ** 2) @ np.maximum(np.linalg.eigh(0.5 * (c + c.T))[0], 0.0) <= u ** 2) for c, u in zip(Cs, U)]
+    got = ball_coverage(Cs, U, seed=0)
+    assert np.array_equal(got, former) and 0.3 < got.min() < got.max() < 1.0

@@ -248,6 +248,37 @@ class MeasurementModel(ABC):
         self._kin_last = (key, kin)
         return kin
 
+    def sensor_points(self, P: np.ndarray, Q: np.ndarray, point_m: np.ndarray) -> np.ndarray:
+        """A tool point in the device frame at each of d parameter vectors (a Monte-Carlo's draws), without the
+        Jacobians of :meth:`sensor_point`: the robots' kinematics in one batched pass
+        (:meth:`~pin_kpi_oed.model.kinematics.Chain.tool_points`).
+
+        Args:
+            P: raw parameter vectors, (d, np).
+            Q: configurations, (m, n) (rad / m).
+            point_m: the point in the tool frame (m).
+
+        Returns:
+            (d, m, 3) m: row i is ``sensor_point(P[i], Q, point_m).Y`` to rounding (~1e-16 m).
+
+        Raises:
+            InputError: wrong parameter count or joint count.
+        """
+        P = np.atleast_2d(np.asarray(P, float))
+        if P.ndim != 2 or P.shape[1] != self.n_params:
+            raise InputError(f"parameter vectors must have {self.n_params} entries, got shape {P.shape}")
+        d, n = P.shape[0], len(self._nominal)
+        Rm, tm = np.empty((d, n, 3, 3)), np.empty((d, n, 3))
+        RT, tT = np.empty((d, 3, 3)), np.empty((d, 3))
+        for i, p in enumerate(P):
+            for k, M in enumerate(self._nominal):
+                Mk = M * pin.exp6(p[self.layout.joint_slice(k)])
+                Rm[i, k], tm[i, k] = Mk.rotation, Mk.translation
+            T = self.sensor_pose(p)
+            RT[i], tT[i] = T.rotation, T.translation
+        X = self._chain.tool_points(np.atleast_2d(np.asarray(Q, float)), point_m, Rm, tm)
+        return np.einsum("dab,dmb->dma", RT, X) + tT[:, None]
+
     def sensor_point(self, p: np.ndarray, Q: np.ndarray, point_m: np.ndarray, offset_group: str | None = None,
                      with_dq: bool = False) -> SensorPoint:
         """A tool point in the device frame, Y = T(p)·x(p, q), and its Jacobian w.r.t. all raw parameters.

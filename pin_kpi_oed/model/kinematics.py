@@ -308,6 +308,42 @@ class Chain:
             P = t + R @ point
         return Kinematics(P, R, fr.R_A, fr.t_A, fr.twist)
 
+    def tool_points(self, Q: np.ndarray, point_m: np.ndarray, rotations: np.ndarray, translations: np.ndarray
+                    ) -> np.ndarray:
+        """A point of the tool frame at every configuration under each of d sets of joint placements (base frame):
+        the robots of a Monte-Carlo's draws in one batched pass.
+
+        Args:
+            Q: configurations, (m, n) (rad / m).
+            point_m: the point in the tool frame, (3,) m.
+            rotations: each set's joint placements' rotations M_j, (d, n, 3, 3).
+            translations: their translations, (d, n, 3) m.
+
+        Returns:
+            (d, m, 3) m: set i's points, those of :meth:`tool_point` with set i's placements to rounding (~1e-16 m).
+
+        Raises:
+            InputError: Q does not have n columns, or placements not (d, n, 3, 3) and (d, n, 3).
+        """
+        Q = self._check(Q)
+        Rm, tm = np.asarray(rotations, float), np.asarray(translations, float)
+        m, n = Q.shape
+        if Rm.ndim != 4 or Rm.shape[1:] != (n, 3, 3) or tm.shape != (Rm.shape[0], n, 3):
+            raise InputError(f"joint placements of shapes {Rm.shape} and {tm.shape}: expected (d, {n}, 3, 3) and "
+                             f"(d, {n}, 3)")
+        Rc = np.broadcast_to(np.eye(3), (Rm.shape[0], m, 3, 3))
+        tc = np.zeros((Rm.shape[0], m, 3))
+        for k in range(n):
+            tc = tc + (Rc @ tm[:, None, k, :, None])[..., 0]
+            Rc = Rc @ Rm[:, None, k]
+            if self.revolute[k]:
+                s, c = np.sin(Q[:, k])[:, None, None], np.cos(Q[:, k])[:, None, None]
+                Rc = Rc @ (np.eye(3) + s * self._K[k] + (1.0 - c) * self._KK[k])
+            else:
+                tc = tc + (Rc @ self.lin[k]) * Q[None, :, k, None]
+        Mt = self.tool_placement
+        return tc + Rc @ Mt.translation + (Rc @ Mt.rotation) @ np.asarray(point_m, float)
+
 
 def placement_jacobian(kin: Kinematics) -> np.ndarray:
     """∂x/∂δ_j of the tool point w.r.t. every joint-placement error (base frame), (m, n, 3, 6).

@@ -140,7 +140,9 @@ def _tcp_uncertainty(cm: Any, Q: np.ndarray, where: str, mounted: str) -> dict:
 
 def camera_monte_carlo(cm: Any, Q: np.ndarray, n: int = 2000, seed: int = 0) -> dict:
     """Monte-Carlo check of the TCP's σ: truths drawn around the calibration and the TCP's error computed through the
-    camera's own kinematics (:meth:`~pin_kpi_oed.model.camera.CameraModel.kpi`, not the Jacobians the budget uses).
+    camera's own kinematics (the TCP of :meth:`~pin_kpi_oed.model.camera.CameraModel.kpi` at each drawn truth,
+    batched over the draws by :meth:`~pin_kpi_oed.model.device.MeasurementModel.sensor_points`; not the Jacobians the
+    budget uses).
 
     A draw: the held joint placements δN ~ N(0, Σ_N) (their tolerances), the fit's error ε ~ N(0, C_p); the truth is
     the fitted parameters with N += δN and the estimated ones −= A δN + ε (the fit moved its estimate by A δN, stored
@@ -170,12 +172,13 @@ def camera_monte_carlo(cm: Any, Q: np.ndarray, n: int = 2000, seed: int = 0) -> 
     dN = rng.standard_normal((n, len(hcol))) * np.asarray(held.get("sigma", []), float)
     Q = np.atleast_2d(np.asarray(Q, float))
     y0 = model.kpi(p0, Q)
+    Pd = np.repeat(p0[None], n, axis=0)  # the drawn truths, one row a draw
+    Pd[:, hcol] += dN
+    Pd[:, col] -= dN @ A.T + eps
     E = np.empty((n, len(Q), 3))
-    for i in range(n):
-        p = p0.copy()
-        p[hcol] += dN[i]
-        p[col] -= A @ dN[i] + eps[i]
-        E[i] = model.kpi(p, Q) - y0
+    step = max(1, 20000 // len(Q))  # draws per batched pass (bounded memory)
+    for i in range(0, n, step):
+        E[i:i + step] = model.sensor_points(Pd[i:i + step], Q, model.tcp_m) - y0
     s = np.sqrt(np.sum(np.var(E, axis=0, ddof=1), axis=1))
     ratio = s / tcp_sigma(cm, Q).sigma_m
     return {"n": int(n), "sigma_m": s.tolist(), "ratio": ratio.tolist(), "median_ratio": float(np.median(ratio))}

@@ -37,7 +37,7 @@ from typing import Any
 import numpy as np
 
 __all__ = ["COVERAGE_FACTOR", "THERMAL_EXPANSION_PER_K", "CONTRIBUTIONS", "budget", "ball_coverage",
-           "monte_carlo", "conformity", "budget_summary", "temperature_covariance"]
+           "monte_carlo", "linear_draws", "conformity", "budget_summary", "temperature_covariance"]
 
 #: The coverage factor of the expanded uncertainty.
 COVERAGE_FACTOR = 2.0
@@ -148,12 +148,12 @@ def budget(cm: Any, Q: np.ndarray, station: str | None = None, *, tcp_m: np.ndar
 def ball_coverage(C: np.ndarray, U: np.ndarray, n: int = 20000, seed: int = 0) -> np.ndarray:
     """P(‖e‖ ≤ U_i) for e ~ N(0, C_i), per row, by seeded draws (n per row; standard error ≤ 0.4 %)."""
     rng = np.random.default_rng(seed)
-    z = rng.standard_normal((n, 3))
+    z2 = rng.standard_normal((n, 3)) ** 2
+    C = np.asarray(C, float).reshape(-1, 3, 3)
+    W = np.maximum(np.linalg.eigh(0.5 * (C + np.swapaxes(C, 1, 2)))[0], 0.0)  # (rows, 3): each row's eigenvalues
     out = np.empty(len(C))
-    for i, (Ci, Ui) in enumerate(zip(np.asarray(C, float), np.asarray(U, float))):
-        w, V = np.linalg.eigh(0.5 * (Ci + Ci.T))
-        r2 = (z ** 2) @ np.maximum(w, 0.0)
-        out[i] = float(np.mean(r2 <= Ui ** 2))
+    for i, (w, Ui) in enumerate(zip(W, np.asarray(U, float))):
+        out[i] = float(np.mean(z2 @ w <= Ui ** 2))
     return out
 
 
@@ -181,7 +181,7 @@ def _parameter_draws(cm: Any, Q: np.ndarray, label: str, n: int, rng: np.random.
         if not fit.get("covariance_scaled") and chi2 is not None and np.isfinite(chi2):
             C = C * max(1.0, float(chi2))
         cols = [L.names.index(n_) for n_ in names]
-        return _draw(model.jacobian(p, Q)[:, :3, :][:, :, cols], C, n, rng)
+        return linear_draws(model.jacobian(p, Q)[:, :3, :][:, :, cols], C, n, rng)
     if d.param_cov is None and d.param_cov_ls is None:
         return None
     cols = [L.names.index(n_) for n_ in d.param_names]
@@ -201,7 +201,7 @@ def _parameter_draws(cm: Any, Q: np.ndarray, label: str, n: int, rng: np.random.
         D[:, :, :k] = J[mask][:, :, :k]
         if d.Bn is not None and C is d.param_cov:
             D -= np.einsum("ab,mbp->map", R, np.einsum("mz,zbp->mbp", d.kernel(Q[mask], d.Z), d.Bn))
-        out[:, mask] = _draw(D, C, n, rng)
+        out[:, mask] = linear_draws(D, C, n, rng)
     return st.sigma_scale * out
 
 
@@ -228,11 +228,24 @@ def _reregistered(cm: Any, label: str, Q: np.ndarray, cols: list[int]) -> np.nda
     return J[:, :, cols] - np.einsum("mak,kr->mar", J[:, :, sc] / norms, B)
 
 
-def _draw(D: np.ndarray, C: np.ndarray, n: int, rng: np.random.Generator) -> np.ndarray:
-    """(n, m, 3) draws of D β with β ~ N(0, C): D (m, 3, P), C (P, P)."""
+def linear_draws(D: np.ndarray, C: np.ndarray, n: int, rng: np.random.Generator) -> np.ndarray:
+    """Draws of D β with β ~ N(0, C), the parameters' errors through a linear map (:func:`monte_carlo`'s draws).
+
+    β = F z with F = V √w (C = V w Vᵀ, negative eigenvalues clipped) and z ~ N(0, I): D F is formed once, then one
+    matrix product with the n draws z (the numbers of contracting D, F and z in one step, to rounding: ~1e-15
+    relative, at a hundredth of its cost).
+
+    Args:
+        D: the map, (m, 3, P) (e.g. m per parameter unit); C: the covariance of β, (P, P).
+        n: draws; rng: the generator (n · P standard normal numbers are drawn from it).
+
+    Returns:
+        (n, m, 3): the draws.
+    """
     w, V = np.linalg.eigh(0.5 * (C + C.T))
     F = V * np.sqrt(np.maximum(w, 0.0))
-    return np.einsum("map,pk,nk->nma", D, F, rng.standard_normal((n, F.shape[1])))
+    DF = np.einsum("map,pk->mak", D, F).reshape(-1, F.shape[1])
+    return (rng.standard_normal((n, F.shape[1])) @ DF.T).reshape(n, D.shape[0], D.shape[1])
 
 
 def monte_carlo(cm: Any, Q: np.ndarray, bud: dict, n: int = 2000, seed: int = 0) -> dict:
