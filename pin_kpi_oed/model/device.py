@@ -256,10 +256,10 @@ class MeasurementModel(ABC):
         Args:
             P: raw parameter vectors, (d, np).
             Q: configurations, (m, n) (rad / m).
-            point_m: the point in the tool frame (m).
+            point_m: the point in the tool frame, (3,) m, or one per parameter vector, (d, 3) m.
 
         Returns:
-            (d, m, 3) m: row i is ``sensor_point(P[i], Q, point_m).Y`` to rounding (~1e-16 m).
+            (d, m, 3) m: row i is ``sensor_point(P[i], Q, point_m[i]).Y`` to rounding (~1e-16 m).
 
         Raises:
             InputError: wrong parameter count or joint count.

@@ -315,7 +315,7 @@ class Chain:
 
         Args:
             Q: configurations, (m, n) (rad / m).
-            point_m: the point in the tool frame, (3,) m.
+            point_m: the point in the tool frame, (3,) m, or one per set, (d, 3) m.
             rotations: each set's joint placements' rotations M_j, (d, n, 3, 3).
             translations: their translations, (d, n, 3) m.
 
@@ -323,7 +323,7 @@ class Chain:
             (d, m, 3) m: set i's points, those of :meth:`tool_point` with set i's placements to rounding (~1e-16 m).
 
         Raises:
-            InputError: Q does not have n columns, or placements not (d, n, 3, 3) and (d, n, 3).
+            InputError: Q does not have n columns, placements not (d, n, 3, 3) and (d, n, 3), or points not (d, 3).
         """
         Q = self._check(Q)
         Rm, tm = np.asarray(rotations, float), np.asarray(translations, float)
@@ -342,7 +342,13 @@ class Chain:
             else:
                 tc = tc + (Rc @ self.lin[k]) * Q[None, :, k, None]
         Mt = self.tool_placement
-        return tc + Rc @ Mt.translation + (Rc @ Mt.rotation) @ np.asarray(point_m, float)
+        point = np.asarray(point_m, float)
+        R = Rc @ Mt.rotation
+        if point.ndim == 2:
+            if point.shape != (Rm.shape[0], 3):
+                raise InputError(f"{point.shape[0]} tool points for {Rm.shape[0]} sets of joint placements")
+            return tc + Rc @ Mt.translation + (R @ point[:, None, :, None])[..., 0]
+        return tc + Rc @ Mt.translation + R @ point
 
 
 def placement_jacobian(kin: Kinematics) -> np.ndarray:
