@@ -325,11 +325,12 @@ def _fit(model: TrackerModel, data: MeasurementSet, inp: FitInputs, effects: Seq
     x = solution.x
     rpos, rrot = prob.evaluate(x)
     errors = np.linalg.norm(rpos, axis=1)
-    C, std, corr, chi2_red = fit_covariance(prob, x, fw, opts)
+    J_full = prob.jacobian_full(x)  # the weighted Jacobian at the fit, for its covariance and the held term
+    C, std, corr, chi2_red = fit_covariance(prob, x, fw, opts, J_full)
     P_hat, th_hat = prob.unpack(x)
     Qw = _working_configurations(model, data, inp, opts)
     Cu = C / chi2_red if opts.scale_covariance and chi2_red > 0 else C
-    tcp_sigma, tcp_held, held_term, contrib = tcp_std(prob, P_hat, C, Qw, x, Cu, opts.held_tolerances)
+    tcp_sigma, tcp_held, held_term, contrib = tcp_std(prob, P_hat, C, Qw, x, Cu, opts.held_tolerances, J_full)
     setups = _setups(prob, P_hat, errors, inp, data)
     first = setups[stations.labels[0]]
     sol = solution.sol

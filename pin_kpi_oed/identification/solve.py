@@ -134,10 +134,11 @@ def settle_outliers(prob: ResidualModel, solution: Solution, opts: IdentifyOptio
     return fw, we, outliers
 
 
-def fit_covariance(prob: ResidualModel, x: np.ndarray, fw: np.ndarray, opts: IdentifyOptions
-                ) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
-    """Step 6: C = (FᵀF + P)⁻¹ (optionally × reduced χ²), standard deviations, correlations, reduced χ²."""
-    F = prob.jacobian_full(x)[prob.mask].reshape(-1, prob.nx)
+def fit_covariance(prob: ResidualModel, x: np.ndarray, fw: np.ndarray, opts: IdentifyOptions,
+                   J_full: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
+    """Step 6: C = (FᵀF + P)⁻¹ (optionally × reduced χ²), standard deviations, correlations, reduced χ²;
+    ``J_full``: ``prob.jacobian_full(x)`` when computed already (:func:`tcp_std` reads the same)."""
+    F = (prob.jacobian_full(x) if J_full is None else J_full)[prob.mask].reshape(-1, prob.nx)
     chi2 = float(np.sum(fw[prob.mask] ** 2))
     dof = max(F.shape[0] + prob.prior_idx.size - prob.nx, 1)
     chi2_red = chi2 / dof
@@ -153,8 +154,8 @@ def fit_covariance(prob: ResidualModel, x: np.ndarray, fw: np.ndarray, opts: Ide
 
 
 def tcp_std(prob: ResidualModel, P: np.ndarray, C: np.ndarray, Qw: np.ndarray, x: np.ndarray | None = None,
-            C_unscaled: np.ndarray | None = None, tolerances: Tolerances | None = None
-            ) -> tuple[np.ndarray, np.ndarray, HeldTerm | None, np.ndarray]:
+            C_unscaled: np.ndarray | None = None, tolerances: Tolerances | None = None,
+            J_full: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, HeldTerm | None, np.ndarray]:
     """Step 7: the TCP's σ per working configuration, first station's tracker frame (m): sqrt(trace C_s) with
     C_s = E C Eᵀ + G Σ_N Gᵀ (:mod:`pin_kpi_oed.oed.held`): the fit's covariance and the joint-placement parameters
     it held at nominal under their tolerances, absorbed as this fit absorbed them (A = C_unscaled F_Bᵀ F_N on its
@@ -164,7 +165,8 @@ def tcp_std(prob: ResidualModel, P: np.ndarray, C: np.ndarray, Qw: np.ndarray, x
         prob: the residual model; P: the fitted global raw parameters; C: the fit's covariance (nx, nx);
         Qw: working configurations (t, n) rad; x: the fitted unknowns (None: no held term);
         C_unscaled: (FᵀF + P)⁻¹ before any χ² scaling (default C); tolerances: the held parameters' prior
-        (default :class:`~pin_kpi_oed.model.tolerances.Tolerances`).
+        (default :class:`~pin_kpi_oed.model.tolerances.Tolerances`); J_full: ``prob.jacobian_full(x)`` when
+        computed already (:func:`fit_covariance`'s; None: computed here).
 
     Returns:
         (σ with the held term (t,) m, σ of the held term alone (t,) m, the :class:`HeldTerm` or None, each held
@@ -181,7 +183,7 @@ def tcp_std(prob: ResidualModel, P: np.ndarray, C: np.ndarray, Qw: np.ndarray, x
     held = held_columns(model, [prob.layout.names[i] for i in prob.base]) if x is not None else np.zeros(0, int)
     if not held.size:
         return np.sqrt(np.clip(var, 0.0, None)), np.zeros(len(var)), None, np.zeros(0)
-    FB = prob.jacobian_full(x)[prob.mask].reshape(-1, prob.nx)
+    FB = (prob.jacobian_full(x) if J_full is None else J_full)[prob.mask].reshape(-1, prob.nx)
     FN = prob.held_jacobian(x, held)[prob.mask].reshape(-1, held.size)
     Cu = C if C_unscaled is None else C_unscaled
     term = HeldTerm([model.layout.names[i] for i in held], (tolerances or Tolerances()).sigma_vector(model)[held],
