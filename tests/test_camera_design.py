@@ -24,8 +24,21 @@ def problem():
     post = CapsuleSpec("post", np.array([0.3, -0.35, 0.0]), np.array([0.3, -0.35, 0.7]), 0.05)
     cell = camera_cell(cam.robot, obstacles=[post], half_spaces=[HalfSpace("table", np.array([0, 0, 1.0]), -0.01)],
                        skip_pairs=UR5_SKIP)
-    return CameraDesignProblem(cell, cam, ViewLimits(margin_px=20.0, max_angle_deg=45.0, near_m=0.2, far_m=1.0),
+    made = CameraDesignProblem(cell, cam, ViewLimits(margin_px=20.0, max_angle_deg=45.0, near_m=0.2, far_m=1.0),
                                Q0[None])
+    # the designs of the tests draw the same seeded pool (60 candidates, seed 0): sampled once, a copy each time
+    sample, pools = made.pool, {}
+
+    def pool(size, seed=0, **kw):
+        if kw:  # around / spread / max_tries: drawn as asked
+            return sample(size, seed, **kw)
+        if (size, seed) not in pools:
+            pools[size, seed] = sample(size, seed)
+        Q, drawn = pools[size, seed]
+        return Q.copy(), drawn
+
+    made.pool = pool
+    return made
 
 
 @pytest.mark.xdist_group(GROUP)

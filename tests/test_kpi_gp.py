@@ -186,13 +186,28 @@ def test_registered_and_evaluated_through_the_problem(problem):
     assert "default" in problem.discrepancy_prior().describe()
 
 
-def test_cli_design_with_default_discrepancy_curve_and_plateau(tmp_path, capsys):
+def test_cli_design_with_default_discrepancy_curve_and_plateau(tmp_path, capsys, monkeypatch):
     """design --criteria random,kpi_gp: the default discrepancy is stated, the honest σ is reported beside the
-    paper's, a target below the plateau is answered with the plateau, the curve goes to the JSON and a figure."""
+    paper's, a target below the plateau is answered with the plateau, the curve goes to the JSON and a figure.
+    The second run (a reachable target) asks the same designs (the same settings but the target and the curve,
+    asserted): the first run's designs are given to it instead of being optimised again (seeded, they are the same);
+    its target is answered by the command as ever."""
+    import dataclasses
     import json
 
     from pin_kpi_oed.cli.app import main
+    from pin_kpi_oed.design import runner
 
+    optimised, made = runner._optimised, []
+
+    def once(problem, s, m):  # the designs of one run's settings (the target and the curve apart), made once
+        key = (dataclasses.replace(s, target_sigma_m=None, poses_needed=False), m)
+        hit = next((r for k, r in made if k == key), None)
+        if hit is None:
+            made.append((key, optimised(problem, s, m)))
+        return hit if hit is not None else made[-1][1]
+
+    monkeypatch.setattr(runner, "_optimised", once)
     out_json, png = tmp_path / "d.json", tmp_path / "curve.png"
     assert main(["design", "--cell", "kr15", "--criteria", "random,kpi_gp", "--measurements", "20", "--starts", "1",
                  "--max-iter", "15", "--pool-size", "300", "--target-sigma", "1e-5", "--curve", str(png),
@@ -224,6 +239,7 @@ def test_cli_design_with_default_discrepancy_curve_and_plateau(tmp_path, capsys)
     assert main(["design", "--cell", "kr15", "--criteria", "random,kpi_gp", "--measurements", "20", "--starts", "1",
                  "--max-iter", "15", "--pool-size", "300", "--target-sigma", str(1.05 * des[-1]), "--quiet"]) == 0
     assert "designed pose(s) reach it" in capsys.readouterr().out
+    assert len(made) == 1  # the second run asked the first run's designs
 
 
 def test_lever_arm_factor_matches_monte_carlo():

@@ -282,6 +282,32 @@ def test_near_duplicate_pool_is_certified_on_every_candidate(pool, kind):
     assert sel.value <= base + 1e-3 * abs(base)
 
 
+@pytest.mark.parametrize("kind", ["kpi", "D"])
+def test_swap_gains_are_the_exact_change_and_each_call_its_own(pool, kind):
+    """A swap's gains (φ with chosen o taken out and candidate i added, by the Woodbury updates and the state's
+    work arrays) are φ of that set from scratch, whichever position was asked before: the work arrays one call
+    fills are not the next call's results."""
+    from pin_kpi_oed.oed.pool_search import InformationState
+
+    Fp, E = pool
+    K = E if kind == "kpi" else None
+    chosen = list(range(0, 120, 3))  # 40 of the 300
+    st = InformationState(Fp, K, None, chosen)
+    o1, o2 = chosen[5], chosen[17]
+    phi1, g1 = st.swap_gains(o1)
+    first = g1.copy()
+    phi2, g2 = st.without(o2).swap_gains(o2)
+    again = st.swap_gains(o1)[1]
+    assert not np.shares_memory(g1, g2) and not np.shares_memory(g1, again)
+    np.testing.assert_array_equal(g1, first)  # the second call left the first one's result alone
+    np.testing.assert_array_equal(again, first)
+    for o, phi_o, g in ((o1, phi1, g1), (o2, phi2, g2)):
+        rest = [c for c in chosen if c != o]
+        assert phi_o == pytest.approx(exact_phi(Fp, rest, K), rel=1e-9)
+        for i in (1, 2, 150, 299):
+            assert phi_o - g[i] == pytest.approx(exact_phi(Fp, rest + [i], K), rel=1e-9)
+
+
 def test_onto_capped_gives_a_capped_measure():
     """The warm start's projection: weights above the cap are cut, the measure stays a probability ≤ cap."""
     from pin_kpi_oed.oed.relaxation import onto_capped

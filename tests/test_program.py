@@ -202,8 +202,13 @@ def test_ur10_colliding_move_is_planned_by_ompl_and_passes_the_dense_check(ur10)
     assert check.clear and check.min_clearance_m >= 0.01 - 1e-9
 
 
-def test_ur10_route_is_the_same_in_one_process_or_two(ur10):
-    """OMPL is seeded per call: the same move gives the same route after other plans and in a fresh process."""
+def test_ur10_route_is_the_same_in_one_process_or_two(ur10, tmp_path):
+    """OMPL is seeded per call: the same move gives the same route after other plans and in a fresh process.
+
+    The fresh process reads this process's cell (pickled: the same cell, without fitting the UR10's mesh capsules a
+    second time, a second of CPU): what it checks is OMPL's state in a new interpreter, not the cell's reading. The
+    plan before the second call is another move, found (OMPL drew its random numbers)."""
+    import pickle
     import subprocess
     import sys
 
@@ -211,14 +216,18 @@ def test_ur10_route_is_the_same_in_one_process_or_two(ur10):
     first = TransitionChecker(ur10, 0.01).plan_route(qa, qb, seed=3, max_checks=60_000)
     assert first is not None and len(first) >= 1
     other = TransitionChecker(ur10, 0.01)
-    other.plan_route(qb, np.radians(UR10_POCKET), seed=3, max_checks=2_000)  # something else planned before
+    before = other.plan_route(qb, qa, seed=7, max_checks=60_000)  # something else planned before
+    assert before is not None and len(before) >= 1
     again = other.plan_route(qa, qb, seed=3, max_checks=60_000)
     assert len(again) == len(first) and all(np.array_equal(x, y) for x, y in zip(first, again))
-    code = ("import numpy as np; from pin_kpi_oed.cell.cell import load_cell; "
-            "from pin_kpi_oed.program.transitions import TransitionChecker; "
-            f"r = TransitionChecker(load_cell('ur10'), 0.01).plan_route(np.radians({UR10_A}), np.radians({UR10_B}), "
+    cell_file = tmp_path / "ur10.pickle"
+    cell_file.write_bytes(pickle.dumps(ur10))
+    code = ("import pickle, sys; import numpy as np; from pin_kpi_oed.program.transitions import TransitionChecker; "
+            "cell = pickle.loads(open(sys.argv[1], 'rb').read()); "
+            f"r = TransitionChecker(cell, 0.01).plan_route(np.radians({UR10_A}), np.radians({UR10_B}), "
             "seed=3, max_checks=60_000); print(np.array(r).tobytes().hex())")
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout.strip()
+    out = subprocess.run([sys.executable, "-c", code, str(cell_file)], capture_output=True, text=True,
+                         check=True).stdout.strip()
     assert out == np.array(first).tobytes().hex()
     other_seed = TransitionChecker(ur10, 0.01).plan_route(qa, qb, seed=4, max_checks=60_000)
     assert other_seed is not None and not (len(other_seed) == len(first)
@@ -385,25 +394,46 @@ def test_export_cli_writes_a_checked_program(small_design, tmp_path):
     np.testing.assert_allclose(Q, [w["q"] for w in doc["waypoints"]], atol=1e-6)
 
 
-def test_export_html_that_fails_writes_no_program(small_design, tmp_path, capsys, monkeypatch):
+def test_export_html_that_fails_writes_no_program_and_the_page_holds_every_measurement_point(small_design, tmp_path,
+                                                                                             capsys, monkeypatch):
     """The animation page is built before any file is written: when it fails (one line, exit 2), neither the program
-    nor the JSON is left behind; when it succeeds both files are written."""
+    nor the JSON is left behind; when it succeeds both files are written, and the page's animation holds every
+    measurement point: 12 increasing times, the last after the program's motion at the page's joint steps and frame
+    rate. The page fails in its first step (the scene), so the failing run draws nothing; the animation is the one
+    the successful run wrote (its inputs and times read as it was called)."""
     import pin_kpi_oed.viz.program_animation as anim
+    import pin_kpi_oed.viz.scene as scene_module
     from pin_kpi_oed.errors import InputError
 
     def broken(*_a, **_k):
         raise InputError("the scene cannot be drawn")
 
-    monkeypatch.setattr(anim, "animate_program", broken)
+    monkeypatch.setattr(scene_module, "build_scene", broken)
     out, page, js = tmp_path / "prog.script", tmp_path / "prog.html", tmp_path / "prog.json"
     assert main(["export", str(small_design), "--format", "urscript", "--out", str(out), "--html", str(page),
                  "--json", str(js), "--quiet"]) == 2
     assert "the scene cannot be drawn" in capsys.readouterr().err
     assert not out.exists() and not page.exists() and not js.exists()
     monkeypatch.undo()
+    real, calls = anim.animate_program, []
+
+    def recorded(scene, path, kinds, **kw):
+        times = real(scene, path, kinds, **kw)
+        calls.append((np.array(path), list(kinds), kw, times))
+        return times
+
+    monkeypatch.setattr(anim, "animate_program", recorded)
     assert main(["export", str(small_design), "--format", "urscript", "--out", str(out), "--html", str(page),
                  "--quiet"]) == 0
     assert out.read_text().startswith("# pin-kpi-oed") and "<html" in page.read_text()[:2000].lower()
+    assert page.stat().st_size > 100_000
+    [(path, kinds, kw, times)] = calls
+    assert kw == {} and kinds.count("measure") == 12  # the page's defaults: 3 deg steps, 24 frames/s, hold 6
+    assert len(times) == 12 and np.all(np.diff(times) > 0)
+    # frames: hold 6 per pose + one per 3 deg of the largest joint move, so the last pose comes after
+    # (sum over moves of ceil(max |dq| / 3 deg)) / fps seconds of motion
+    moves = sum(max(1, math.ceil(np.max(np.abs(b - a)) / math.radians(3.0))) for a, b in zip(path[:-1], path[1:]))
+    assert times[-1] < (moves + 6 * 12) / 24 and times[-1] > moves / 24 * 0.5
 
 
 def test_export_shows_progress_on_a_terminal_only(small_design, tmp_path, capsys, monkeypatch):
@@ -572,26 +602,6 @@ def test_ur10_capsules_enclose_its_collision_meshes():
     assert len(cell.robot_capsules) == len(gm.geometryObjects)
     rep = FeasibilityChecker(cell).check(cell.q_work)
     assert rep.collision_free.all()
-
-
-def test_program_animation_holds_every_measurement_point(small_design, tmp_path):
-    from pin_kpi_oed.design.design_file import load_design
-    from pin_kpi_oed.viz.program_animation import animate_program
-    from pin_kpi_oed.viz.scene import SceneOptions, build_scene
-
-    df = load_design(small_design, criteria=["random"])
-    prog = plan_program(df.cell, df.design("random").q_meas, ProgramOptions(time_limit_s=0.3))
-    scene = build_scene(df, SceneOptions(ghosts=False, animate=False))
-    times = animate_program(scene, prog.path, [w.kind for w in prog.waypoints], step_deg=5.0, fps=10)
-    assert len(times) == 12 and np.all(np.diff(times) > 0)
-    # frames: hold 6 per pose + one per 5 deg of the largest joint move, so the last pose comes after
-    # (sum over moves of ceil(max |dq| / 5 deg)) / fps seconds of motion
-    path = prog.path
-    moves = sum(max(1, math.ceil(np.max(np.abs(b - a)) / math.radians(5.0))) for a, b in zip(path[:-1], path[1:]))
-    assert times[-1] < (moves + 6 * 12) / 10 and times[-1] > moves / 10 * 0.5
-    out = tmp_path / "p.html"
-    scene.write_html(out)
-    assert out.stat().st_size > 100_000
 
 
 def test_design_header_states_the_cell_as_given(tmp_path, capsys):

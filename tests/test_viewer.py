@@ -635,6 +635,37 @@ def test_program_animation_passes_the_via_poses_and_draws_the_ordered_path():
     assert np.frombuffer(meas["array"].data, np.float32).size == 3 * 4
 
 
+def test_animation_keyframe_has_a_scale_exactly_where_numpy_calls_it_not_one():
+    """An animation keyframe carries a scale track where np.allclose(scale, 1.0) is false (the rule the keyframes
+    were written by), tested in Python on the few numbers: at and around the tolerance, NaN, inf, shrunk meshes."""
+    from meshcat.animation import AnimationClip
+
+    from pin_kpi_oed.viz.scene_parts import anim_set
+
+    class Node:
+        current_frame = 3
+
+        def __init__(self):
+            self.clip = AnimationClip()
+
+        def get_clip(self):
+            return self.clip
+
+    tol = 1e-8 + 1e-5
+    scales = [np.ones(3), [1.0, 1.0 + 0.99 * tol, 1.0 - 0.99 * tol], [1.0, 1.0 + 1.01 * tol, 1.0], [1.0 - 2 * tol] * 3,
+              [1.0, 1.0 + 1e-5 + 5e-9, 1.0], [1e-3] * 3, [1.0, np.nan, 1.0], [np.inf, 1.0, 1.0], [1.0, 2.0, 1.0],
+              np.array([1.0, 1.0 + tol, 1.0])]
+    M = pin.SE3(pin.rpy.rpyToMatrix(0.1, -0.2, 0.3), np.array([0.1, 0.2, 0.3]))
+    for scale in scales:
+        node = Node()
+        anim_set(node, M, np.asarray(scale, float))
+        tracks = node.clip.tracks
+        assert ("scale" in tracks) == (not np.allclose(np.asarray(scale, float), 1.0)), scale
+        assert tracks["position"].values == [[0.1, 0.2, 0.3]] and tracks["position"].frames == [3]
+        if "scale" in tracks:
+            np.testing.assert_array_equal(tracks["scale"].values, [np.asarray(scale, float)])
+
+
 def test_cli_view_states_the_tcp_sigma_design_states(design_dict, tmp_path, capsys):
     """The TCP sigma view prints is the design's: sqrt((tr(C_s) + held) / t) with the file's held_trace_m2 (what no
     measurement of the reflector determines), the number design writes as tcp_sigma_m, and one line says so."""

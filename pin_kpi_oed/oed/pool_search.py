@@ -292,6 +292,9 @@ class InformationState(PoolState):
         F = Fp[self.chosen].reshape(-1, self.nx)
         M = F.T @ F
         self.pending: tuple | None = None
+        #: work arrays of :meth:`swap_gains` (shared by the states :meth:`without` copies: never kept by one): a
+        #: fresh (nh, N, ns) product a call costs more than the product itself (new pages of memory every time)
+        self.scratch: dict[str, np.ndarray] = {}
         self.ridge = float(ridge)
         if ridge:
             M = M + self.ridge * np.eye(self.nx)
@@ -337,13 +340,22 @@ class InformationState(PoolState):
         except np.linalg.LinAlgError:
             return None
         LoiT = np.linalg.inv(Lo).T
-        D = (self.B.reshape(nh * self.N, self.nx) @ (self.Fp[o].T @ LoiT)).reshape(nh, self.N, nh)
+        D = np.matmul(self.B.reshape(nh * self.N, self.nx), self.Fp[o].T @ LoiT,
+                      out=self._work("D", (nh * self.N, nh))).reshape(nh, self.N, nh)
         s = {(a, b): v + (1.0 if a == b else 0.0) + np.einsum("nc,nc->n", D[a], D[b]) for (a, b), v in self.A.items()}
         if self.H is None:
             return self.phi - 2.0 * float(np.sum(np.log(np.diag(Lo)))), _block_gains(s, None, self.N, nh)
         W = LoiT.T @ self.H[:, o, :]  # L_o⁻¹ H_o, (nh, ns)
-        G = self.H + (D.reshape(nh * self.N, nh) @ W).reshape(nh, self.N, -1)
-        return self.phi + float(np.sum(W * W)), _block_gains(s, G, self.N, nh)
+        G = np.matmul(D.reshape(nh * self.N, nh), W, out=self._work("G", (nh * self.N, W.shape[1])))
+        G += self.H.reshape(G.shape)  # H + D W
+        return self.phi + float(np.sum(W * W)), _block_gains(s, G.reshape(self.H.shape), self.N, nh)
+
+    def _work(self, name: str, shape: tuple[int, ...]) -> np.ndarray:
+        """The work array ``name`` of :meth:`swap_gains` of that shape (made on the first call)."""
+        a = self.scratch.get(name)
+        if a is None or a.shape != shape:
+            a = self.scratch[name] = np.empty(shape)
+        return a
 
     def values(self, exclude: np.ndarray) -> np.ndarray:
         if self.pending is None:

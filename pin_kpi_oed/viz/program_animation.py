@@ -64,38 +64,31 @@ def animate_program(scene: Scene, path: np.ndarray, kinds: list[str], step_deg: 
     trk = df.world_T_tracker.translation
     anim = Animation(default_framerate=fps)
     times: list[float] = []
-    frame = 0
 
-    def key(q: np.ndarray, beam: bool) -> None:
+    path = np.atleast_2d(np.asarray(path, float))
+    keys: list[tuple[np.ndarray, bool]] = []  # every frame's configuration and beam, in order
+    for i in range(len(path)):
+        q = path[i]
+        if kinds[i] == "measure":
+            times.append((len(keys) + 0.5 * hold_frames) / fps)
+            keys += [(q, True)] * hold_frames
+        if i + 1 < len(path):
+            b = path[i + 1]
+            n = max(1, int(math.ceil(float(np.max(np.abs(b - q) / steps)))))
+            keys += [(q + s * (b - q), False) for s in np.linspace(0.0, 1.0, n + 1)[:-1]]
+    keys.append((path[-1], False))
+    refl_all = df.reflector_world(np.array([q for q, _ in keys]))  # every frame's reflector at once (m)
+    for frame, ((q, beam), refl) in enumerate(zip(keys, refl_all)):
         with anim.at_frame(scene.vis, frame) as f:
             for g, M in object_placements(model, data, visual, vdata, q, pin.SE3.Identity()):
                 anim_set(f[f"robot/visuals/{g.name}"], M, g.meshScale)
             if collision is not None:
                 for g, M in object_placements(model, data, collision, cdata, q, pin.SE3.Identity()):
                     anim_set(f[f"robot/collisions/{g.name}"], M, g.meshScale)
-            refl = df.reflector_world(q[None])[0]
             Tb = beam_matrix(trk, refl)
             length = float(np.linalg.norm(refl - trk)) if beam else 1e-6
             anim_set(f["beam"], pin.SE3(rot_y_to(refl - trk), Tb[:3, 3]), np.array([1.0, length, 1.0]))
-
-    path = np.atleast_2d(np.asarray(path, float))
-    trace = []
-    for i in range(len(path)):
-        q = path[i]
-        if kinds[i] == "measure":
-            times.append((frame + 0.5 * hold_frames) / fps)
-            for _ in range(hold_frames):
-                key(q, True)
-                frame += 1
-        if i + 1 < len(path):
-            b = path[i + 1]
-            n = max(1, int(math.ceil(float(np.max(np.abs(b - q) / steps)))))
-            for s in np.linspace(0.0, 1.0, n + 1)[:-1]:
-                key(q + s * (b - q), False)
-                trace.append(q + s * (b - q))
-                frame += 1
-    key(path[-1], False)
-    trace.append(path[-1])
+    trace = [q for q, beam in keys if not beam]
     scene.vis.set_animation(anim, play=False, repetitions=1)
     _draw_path(scene, df.reflector_world(np.array(trace)), df.reflector_world(path), list(kinds))
     return times

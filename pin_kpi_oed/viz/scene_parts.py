@@ -155,14 +155,19 @@ def default_camera(df: DesignFile) -> tuple[np.ndarray, np.ndarray]:
     return target, pos
 
 
+#: np.allclose's default tolerance of a value against 1 (atol + rtol · 1): a scale within it is no scale
+_UNIT_TOL = 1e-8 + 1e-5 * 1.0
+
+
 def anim_set(node, M: pin.SE3, scale: np.ndarray) -> None:
     """Position / quaternion (/ scale) keyframe of an animated node."""
     q = pin.Quaternion(M.rotation)
     clip = node.get_clip()
     clip.set_property(node.current_frame, "position", "vector3", [float(x) for x in M.translation])
     clip.set_property(node.current_frame, "quaternion", "quaternion", [float(q.x), float(q.y), float(q.z), float(q.w)])
-    if not np.allclose(scale, 1.0):
-        clip.set_property(node.current_frame, "scale", "vector3", [float(x) for x in scale])
+    values = [float(x) for x in scale]
+    if not all(abs(x - 1.0) <= _UNIT_TOL for x in values):  # np.allclose(scale, 1.0) of a few numbers, in Python
+        clip.set_property(node.current_frame, "scale", "vector3", values)
 
 
 def working_paths(vis: Any, mg: Any, df: DesignFile) -> int:
