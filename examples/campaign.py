@@ -125,10 +125,10 @@ def main(argv: list[str] | None = None) -> int:
     robot = SimulatedRobot(cell, seed=a.seed)
     W = cell.q_work
     refl = ",".join(f"{v:g}" for v in cell.tracker_model().reflector_m)
-    pool = ["--pool-size", "100" if QUICK else "1000"]
+    pool = ["--pool-size", "50" if QUICK else "1000"]
     knobs = ["--starts", "1", "--seed", str(a.seed)]
     if QUICK:  # the same commands, smaller: a start from the heuristic design, fewer iterations, a smaller region
-        knobs += ["--start", "random", "--max-iter", "12", "--work-samples", "15"]
+        knobs += ["--start", "random", "--max-iter", "6", "--work-samples", "10"]
 
     with tempfile.TemporaryDirectory(prefix="pin_kpi_oed_campaign_") as tmp:
         out = Path(a.out) if a.out else Path(tmp)
