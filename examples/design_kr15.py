@@ -29,9 +29,9 @@ cell = load_cell("kr15")  # or a path to your own cell YAML
 print(cell.summary())
 problem = DesignProblem(cell)
 # quick: a smaller pool for the first start and fewer Ipopt iterations (the full run: the defaults)
-opts = DesignOptions(pool_size=300, ipopt=ipopt_options(max_iter=20)) if QUICK else None
+opts = DesignOptions(pool_size=150, ipopt=ipopt_options(max_iter=20)) if QUICK else None
 results = run_designs(cell, ["random", "param", "kpi"], a.measurements, a.seed, opts, problem)
-cert = certify(problem, a.measurements, pool_size=1000 if QUICK else 5000, seed=a.seed,
+cert = certify(problem, a.measurements, pool_size=500 if QUICK else 5000, seed=a.seed,
                extra=[r.q_meas for r in results])
 heur = results[0]
 for r in results:

@@ -68,8 +68,8 @@ def main() -> int:
 
     # the KPI design of the KR 15 cell (60 poses), then simulated identifications of it
     cell = load_cell("kr15")
-    # quick: 30 poses, a pool of 300 candidates for the first start, at most 20 Ipopt iterations
-    opts = DesignOptions(pool_size=300, ipopt=ipopt_options(max_iter=20)) if QUICK else None
+    # quick: 30 poses, a pool of 150 candidates for the first start, at most 20 Ipopt iterations
+    opts = DesignOptions(pool_size=150, ipopt=ipopt_options(max_iter=20)) if QUICK else None
     kpi = run_designs(cell, ["kpi"], 30 if QUICK else 60, a.seed, opts)[-1]
     model = cell.tracker_model()
     model.noise = NoiseModel(sigma_xyz_m=(1e-5,) * 3)  # a 10 um tracker (ratios do not depend on sigma)
