@@ -21,8 +21,8 @@ held-out standardised RMS (1 = honest σ).
 
 Run:  python examples/campaign.py [--out folder] [--target-sigma 3.5e-5] [--batch 20]
 (--quick or PIN_KPI_OED_QUICK=1: the same commands on fewer held-out rows, smaller candidate pools, a working
-region of 15 samples, one IPOPT start from the heuristic design (``--start random``, no pool selection) of at most
-12 iterations, two batches)
+region of 10 samples, one IPOPT start from the heuristic design (``--start random``, no pool selection) of at most
+6 iterations, two batches)
 """
 
 from __future__ import annotations
