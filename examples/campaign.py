@@ -21,8 +21,8 @@ held-out standardised RMS (1 = honest σ).
 
 Run:  python examples/campaign.py [--out folder] [--target-sigma 3.5e-5] [--batch 20]
 (--quick or PIN_KPI_OED_QUICK=1: the same commands on fewer held-out rows, smaller candidate pools, a working
-region of 15 samples, one IPOPT start from the heuristic design (``--start random``, no pool selection) of at most
-12 iterations, two batches)
+region of 10 samples, one IPOPT start from the heuristic design (``--start random``, no pool selection) of at most
+6 iterations, two batches)
 """
 
 from __future__ import annotations
@@ -125,10 +125,10 @@ def main(argv: list[str] | None = None) -> int:
     robot = SimulatedRobot(cell, seed=a.seed)
     W = cell.q_work
     refl = ",".join(f"{v:g}" for v in cell.tracker_model().reflector_m)
-    pool = ["--pool-size", "100" if QUICK else "1000"]
+    pool = ["--pool-size", "50" if QUICK else "1000"]
     knobs = ["--starts", "1", "--seed", str(a.seed)]
     if QUICK:  # the same commands, smaller: a start from the heuristic design, fewer iterations, a smaller region
-        knobs += ["--start", "random", "--max-iter", "12", "--work-samples", "15"]
+        knobs += ["--start", "random", "--max-iter", "6", "--work-samples", "10"]
 
     with tempfile.TemporaryDirectory(prefix="pin_kpi_oed_campaign_") as tmp:
         out = Path(a.out) if a.out else Path(tmp)

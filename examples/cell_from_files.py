@@ -65,7 +65,7 @@ print(f"working target solved by IK: q = {np.round(np.degrees(q), 2).tolist()} d
 
 # 3. a KPI design in this cell; the independent check sees the bracket itself
 # quick: a smaller pool for the first start and fewer Ipopt iterations (the full run: the defaults)
-opts = DesignOptions(pool_size=300, ipopt=ipopt_options(max_iter=40)) if QUICK else None
+opts = DesignOptions(pool_size=150, ipopt=ipopt_options(max_iter=20)) if QUICK else None
 results = run_designs(cell, ["random", "kpi"], a.measurements, 0, opts)
 chk = FeasibilityChecker(cell)
 for r in results:

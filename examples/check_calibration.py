@@ -9,7 +9,7 @@ re-fitted change with its standard deviation. Ten rows near one pose are judged 
 ``monitor`` follows 300 rows measured during work while the tracker drifts by 20 µm per hour (each row predicted
 before it is used, the set-up filter's drift level estimated from the rows).
 
-Run:  python examples/check_calibration.py [--seed 0]   (``--quick`` or PIN_KPI_OED_QUICK=1: the same steps, 120 rows
+Run:  python examples/check_calibration.py [--seed 0]   (``--quick`` or PIN_KPI_OED_QUICK=1: the same steps, 60 rows
 monitored)
 (the same with the command line: ``pin-kpi-oed check design --model M --out poses.csv``, then
 ``pin-kpi-oed check --model M --data rows.csv --json verdict.json --model-out refit.json``)
@@ -41,7 +41,7 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--quick", action="store_true", help="smaller sizes, the same steps")
-    ap.add_argument("--monitored", type=int, default=120 if QUICK else 300, help="rows measured during work")
+    ap.add_argument("--monitored", type=int, default=60 if QUICK else 300, help="rows measured during work")
     args = ap.parse_args(argv)
     rb = load_robot("ur10")
     rng = np.random.default_rng(args.seed)

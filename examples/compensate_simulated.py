@@ -35,7 +35,7 @@ from pin_kpi_oed.oed.identifiability import analyse
 
 #: --quick (or PIN_KPI_OED_QUICK=1): smaller sizes, the same steps (the tests' run)
 QUICK = os.environ.get("PIN_KPI_OED_QUICK") == "1" or "--quick" in sys.argv[1:]
-N_TARGETS = 50 if QUICK else 200
+N_TARGETS = 25 if QUICK else 200
 SIGMA = 1e-5
 _HERE = Path(__file__).resolve()
 IPA = next((p / "shared" / "data" / "ipa_ur10" for p in (_HERE.parents[2], _HERE.parents[3])

@@ -21,7 +21,7 @@ QUICK = os.environ.get("PIN_KPI_OED_QUICK") == "1" or "--quick" in sys.argv[1:]
 
 ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
 ap.add_argument("--quick", action="store_true", help="smaller sizes, the same steps")
-ap.add_argument("--measurements", type=int, default=30 if QUICK else 60)
+ap.add_argument("--measurements", type=int, default=20 if QUICK else 60)
 ap.add_argument("--seed", type=int, default=0)
 a = ap.parse_args()
 
@@ -29,9 +29,9 @@ cell = load_cell("kr15")  # or a path to your own cell YAML
 print(cell.summary())
 problem = DesignProblem(cell)
 # quick: a smaller pool for the first start and fewer Ipopt iterations (the full run: the defaults)
-opts = DesignOptions(pool_size=300, ipopt=ipopt_options(max_iter=40)) if QUICK else None
+opts = DesignOptions(pool_size=150, ipopt=ipopt_options(max_iter=20)) if QUICK else None
 results = run_designs(cell, ["random", "param", "kpi"], a.measurements, a.seed, opts, problem)
-cert = certify(problem, a.measurements, pool_size=1000 if QUICK else 5000, seed=a.seed,
+cert = certify(problem, a.measurements, pool_size=500 if QUICK else 5000, seed=a.seed,
                extra=[r.q_meas for r in results])
 heur = results[0]
 for r in results:

@@ -31,7 +31,7 @@ from pin_kpi_oed.simulation.simulator import Tolerances, default_tracker_pose, r
 
 #: --quick (or PIN_KPI_OED_QUICK=1): smaller sizes, the same steps (the tests' run)
 QUICK = os.environ.get("PIN_KPI_OED_QUICK") == "1" or "--quick" in sys.argv[1:]
-N = 250 if QUICK else 800  # training = held-out measurements
+N = 150 if QUICK else 800  # training = held-out measurements
 SIGMA = 1e-5
 rng = np.random.default_rng(7)
 

@@ -20,7 +20,8 @@ Noise model (the files' std columns are the scatter of the averaged reading, not
 accuracy): Leica AT960 + T-Mac MPE ±(15 µm + 6 µm/m), σ = MPE/2 = 7.5 µm + 3 µm/m per axis.
 
 Run: python examples/diagnose_ur10.py   (about 3–5 min; PIN_KPI_OED_QUICK=1: the same steps on Series C alone,
-240 of its rows, table knots 0.2 rad apart, every 10th row of C and 5th of D, periodogram orders 1–10)
+240 of its rows, table knots 0.2 rad apart, every 10th row of C and 5th of D, periodogram orders 1–10, one
+residual-vs-regressor figure)
 Writes ur10_diagnosis.json and ur10_figures/ into the current folder.
 """
 
@@ -110,7 +111,7 @@ def run_series(rb, series: str, figures: Path) -> dict:
     model = TrackerModel(rb, reflector_m=REFLECTOR, noise=NOISE)
     print(f"\n===== {series}: {len(train)} training / {len(test)} held-out measurements (random disjoint halves)")
     rep = diagnose(model, train, test, weights="noise")
-    rep.figures = diagnosis_figures(rep, figures / series)
+    rep.figures = diagnosis_figures(rep, figures / series, n_top=1 if QUICK else 4)
     print(rep.summary())
     table = JointAngleTable.from_data(rb, train, step_rad=TABLE_STEP, joints=rb.joint_names[:5])
     rep_t = diagnose(model, train, test, weights="noise", effects=list(EFFECT_NAMES) + [table])

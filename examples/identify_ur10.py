@@ -14,7 +14,7 @@ ee_link's x does). That is the starting guess; the fit moves it to about (−0.0
 tool0, whatever the start (0, ±109 mm, ee_link frame: same held-out errors).
 
 Run:  python examples/identify_ur10.py [--series DIR] [--seed 0] [--out DIR]
-(``--quick`` or PIN_KPI_OED_QUICK=1: the same steps on 250 seeded random rows of each half, for the tests)
+(``--quick`` or PIN_KPI_OED_QUICK=1: the same steps on 120 seeded random rows of each half, for the tests)
 """
 
 from __future__ import annotations
@@ -37,7 +37,7 @@ _IPA = next((p / "shared" / "data" / "ipa_ur10" for p in (ROOT.parent, ROOT.pare
              if (p / "shared" / "data" / "ipa_ur10").is_dir()), ROOT.parent / "shared" / "data" / "ipa_ur10")
 SERIES_C = _IPA / "Series_C"
 SPLIT_SEED = 0  # documented seed of the random 50/50 split
-QUICK_ROWS = 250  # rows kept of each half by --quick
+QUICK_ROWS = 120  # rows kept of each half by --quick (>= twice the 60 rows a Gaussian process needs)
 
 
 def main(argv: list[str] | None = None) -> int:

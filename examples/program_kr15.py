@@ -41,8 +41,8 @@ a = ap.parse_args()
 cell = load_cell("kr15")
 design_cell = with_margins(cell, clearance_margin_m=0.02, incidence_margin_deg=1.0)
 problem = DesignProblem(design_cell)
-# quick: one start from a pool of 300 candidates, at most 40 Ipopt iterations
-opts = (DesignOptions(n_starts=1, pool_size=300, ipopt=ipopt_options(max_iter=40)) if QUICK
+# quick: one start from a pool of 150 candidates, at most 20 Ipopt iterations
+opts = (DesignOptions(n_starts=1, pool_size=150, ipopt=ipopt_options(max_iter=20)) if QUICK
         else DesignOptions(n_starts=2, ipopt=ipopt_options(max_iter=500)))
 kpi = run_designs(design_cell, ["kpi"], a.measurements, a.seed, opts, problem)[-1]
 rep = FeasibilityChecker(cell).check(kpi.q_meas)  # the true cell

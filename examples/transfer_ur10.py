@@ -27,7 +27,7 @@ Set-up as ``examples/identify_ur10.py``: robot ``ur10`` (CB3), T-Mac reflector ~
 the flange axis (start), uniform σ = 0.1 mm (only relative weights matter), position only.
 
 Run:  python examples/transfer_ur10.py [--data DIR] [--json out.json]   (about 2–4 min;
---quick or PIN_KPI_OED_QUICK=1: the same steps on 150 seeded rows of each series, orders 1–10, one
+--quick or PIN_KPI_OED_QUICK=1: the same steps on 100 seeded rows of each series, orders 1–10, one
 registration seed, the directed pair B→C and the two-series fit B+C→D)
 """
 
@@ -151,7 +151,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"IPA UR10 data not found ({data_dir}): nothing to do (pass --data DIR)")
         return 0
     seeds = [int(s) for s in a.reg_seeds.split(",")]
-    sub = 150 if QUICK else None
+    sub = 100 if QUICK else None
     S = {s: load(data_dir, s, sub) for s in "BCD"}
     model = TrackerModel(load_robot("ur10"), reflector_m=REFLECTOR, noise=NoiseModel(sigma_xyz_m=(SIGMA,) * 3))
     cols = list(["geometric", "selected", "selected+prior"])

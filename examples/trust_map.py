@@ -37,7 +37,7 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="smaller sizes, the same steps")
     ap.add_argument("--out", default=None, help="PNG to write (default: trust_map.png in a temporary folder)")
-    ap.add_argument("--n", type=int, default=150 if QUICK else 300, help="measured (training) rows")
+    ap.add_argument("--n", type=int, default=100 if QUICK else 300, help="measured (training) rows")
     a = ap.parse_args(argv)
 
     robot = load_robot("ur10")

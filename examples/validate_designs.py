@@ -44,7 +44,7 @@ def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="smaller sizes, the same steps")
     ap.add_argument("--splits", type=int, default=2 if QUICK else 20)
-    ap.add_argument("--reps", type=int, default=20 if QUICK else 200)
+    ap.add_argument("--reps", type=int, default=10 if QUICK else 200)
     ap.add_argument("--series", type=Path, default=SERIES_C)
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--json", type=Path, default=None)
@@ -68,8 +68,8 @@ def main() -> int:
 
     # the KPI design of the KR 15 cell (60 poses), then simulated identifications of it
     cell = load_cell("kr15")
-    # quick: 30 poses, a pool of 300 candidates for the first start, at most 40 Ipopt iterations
-    opts = DesignOptions(pool_size=300, ipopt=ipopt_options(max_iter=40)) if QUICK else None
+    # quick: 30 poses, a pool of 150 candidates for the first start, at most 20 Ipopt iterations
+    opts = DesignOptions(pool_size=150, ipopt=ipopt_options(max_iter=20)) if QUICK else None
     kpi = run_designs(cell, ["kpi"], 30 if QUICK else 60, a.seed, opts)[-1]
     model = cell.tracker_model()
     model.noise = NoiseModel(sigma_xyz_m=(1e-5,) * 3)  # a 10 um tracker (ratios do not depend on sigma)

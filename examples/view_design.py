@@ -33,9 +33,9 @@ else:
     try:  # the KPI design of the shipped KR 15 cell
         from pin_kpi_oed.cli.app import main as cli
 
-        m = 20 if quick else 60
+        m = 12 if quick else 60
         # quick: one IPOPT start from the heuristic design (no pool selection), fewer iterations
-        knobs = ["--starts", "1", "--start", "random", "--max-iter", "40"] if quick else []
+        knobs = ["--starts", "1", "--start", "random", "--max-iter", "15"] if quick else []
         rc = cli(["design", "--cell", "kr15", "--criteria", "random,param,kpi", "--measurements", str(m),
                   "--seed", "0", "--json", str(design_json), *knobs])
     except Exception as exc:  # the design optimiser is not available: preview random designs instead
