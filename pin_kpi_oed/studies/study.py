@@ -232,8 +232,9 @@ def _run_tasks_locked(tasks: list[Task], out_dir: Path, workers: int | None, sch
 
 #: What a local Dask cluster's workers are started without: Dask's default ``MALLOC_TRIM_THRESHOLD_`` (64 KiB) makes
 #: glibc return freed memory to the system at once and fixes the size above which it maps each allocation afresh,
-#: so that the arrays of a design are mapped, faulted in and unmapped again and again: a worker spent about 15 % more
-#: CPU on the same task with it, most of it system time (``python -m benchmarks.dask_worker``). The value None drops
+#: so that the arrays of a design are mapped, faulted in and unmapped again and again: with it a worker spent about
+#: 9 % more CPU on the same task (one arm of the notional study: 0.5 s of system time instead of 0.15 s; median of 6
+#: pairs, 6 of 6 with it, ``python -m benchmarks.dask_worker``). The value None drops
 #: the variable from Dask's ``distributed.nanny.pre-spawn-environ`` (which the nanny also writes into this process's
 #: environment, for every process it starts later); a value exported in the environment is still inherited.
 LOCAL_DASK_CONFIG = {"distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_": None}
