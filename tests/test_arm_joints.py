@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import json
 import subprocess
-import sys
 
 import numpy as np
 import pinocchio as pin
@@ -14,7 +13,7 @@ import pytest
 
 from pin_kpi_oed.model.robot import erd_root, load_robot
 
-from .conftest import REPO
+from .cli_run import run_cli_as_process
 
 TURN = 2.0 * np.pi
 
@@ -36,8 +35,9 @@ BAXTER = ("baxter_description/urdf/baxter.urdf", "right_gripper")
 
 
 def _info(*args: str) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "pin_kpi_oed", "info", *args], capture_output=True, text=True,
-                          cwd=REPO, timeout=300)
+    """``pin-kpi-oed info args...`` in this process (what it prints and its exit code are the point, not its
+    process: tests/test_cli_startup.py runs the real one)."""
+    return run_cli_as_process("info", *args)
 
 
 def test_continuous_joint_is_revolute_of_one_turn_with_the_urdf_numbers_exact(tmp_path):
@@ -82,6 +82,7 @@ def kinova_fit():
     return rb, tm, identify(tm, data, discrepancy="none")
 
 
+@pytest.mark.xdist_group("test_arm_joints_kinova_fit")
 def test_kinova_designs_on_its_continuous_joints(kinova_fit):
     """A tiny KPI design of the Kinova: IPOPT moves the continuous joints within ±2π rad and beats the random design
     it starts from."""
@@ -103,6 +104,7 @@ def test_kinova_designs_on_its_continuous_joints(kinova_fit):
     assert Q.shape == (12, 6) and np.all(Q >= rb.q_lower - 1e-9) and np.all(Q <= rb.q_upper + 1e-9)
 
 
+@pytest.mark.xdist_group("test_arm_joints_kinova_fit")
 def test_kinova_model_file_and_calibrated_urdf_round_trip(kinova_fit, tmp_path):
     """The fit's model file reads back to the same robot (joints, ±2π limits, note) and the same predictions with
     their σ; the calibrated URDF keeps the continuous type and reproduces the calibrated kinematics."""
@@ -134,6 +136,7 @@ def test_kinova_model_file_and_calibrated_urdf_round_trip(kinova_fit, tmp_path):
         assert np.abs(cal.oMtool(q).translation - rd.oMf[rb.tool_frame_id].translation).max() < 1e-9
 
 
+@pytest.mark.xdist_group("test_arm_joints_kinova_fit")
 def test_kinova_visual_model_has_the_robots_joints(kinova_fit):
     """The scene's visual model reads the continuous joints as the robot does: six joints, the URDF's meshes."""
     from pin_kpi_oed.viz.robot_geometry import visual_model

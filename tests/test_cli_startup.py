@@ -6,11 +6,15 @@ The import sets are pinned (the modules loaded), not times: the times are ``benc
 
 from __future__ import annotations
 
+import functools
 import json
 import os
+import resource
 import signal
 import subprocess
 import sys
+import tempfile
+import threading
 import time
 from pathlib import Path
 
@@ -114,43 +118,82 @@ def test_usage_errors_are_those_of_the_full_parser(capsys) -> None:
         assert lazy == (exc.value.code, capsys.readouterr().err) and lazy[0] == 2, argv
 
 
-def _interrupt_after(delay_s: float, argv: list[str], module: bool) -> tuple[int, str, float]:
-    """Run the command line, send SIGINT after ``delay_s``; (exit code, stderr, seconds it ran before the signal)."""
-    env = {**os.environ, "PYTHONPATH": str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", "")}
+#: The design of the interrupt tests: with collision avoidance and the pool start, it designs in Python and NumPy
+#: (the random design, the pool) after its first lines and only then in IPOPT; without both, IPOPT starts at once.
+DESIGN = ["design", "--cell", "kr15", "--measurements", "30", "--criteria", "kpi", "--starts", "3"]
+DESIGN_IN_IPOPT = [*DESIGN, "--no-collision", "--start", "random"]
+
+
+@functools.cache
+def _entry_cpu_s() -> float:
+    """CPU seconds a process spends until the command line's entry is loaded (interpreter start-up +
+    ``pin_kpi_oed.cli.app``): before it no code of the package runs, so no package can turn an interrupt there into
+    one line. Measured once per test process, in CPU time: the moments below are the child's CPU seconds, which do not
+    stretch when other work holds the cores (wall seconds do)."""
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
+    subprocess.run([sys.executable, "-c", "import pin_kpi_oed.cli.app"], check=True, env=_env())
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return (after.ru_utime + after.ru_stime) - (before.ru_utime + before.ru_stime)
+
+
+def _env() -> dict[str, str]:
+    return {**os.environ, "PYTHONPATH": str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""),
+            "PYTHONUNBUFFERED": "1"}  # each line reaches the test when printed: the work's first line is a moment
+
+
+def _interrupt_at(argv: list[str], module: bool, cpu_s: float, after_output: bool) -> tuple[int, str, bool]:
+    """Run the command line and send SIGINT once it has spent ``cpu_s`` CPU seconds (counted from its first line of
+    output when ``after_output``); (exit code, stderr, whether it had printed anything before the signal)."""
+    import psutil
+
     cmd = [sys.executable, "-m", "pin_kpi_oed", *argv] if module else \
         [sys.executable, "-c", "from pin_kpi_oed.cli import run; run()", *argv]  # as the console script
-    # SIGINT as Python sees it by default, whatever the test runner's shell did with it (a background job ignores it)
-    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env,
-                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
-    t0 = time.monotonic()
-    time.sleep(delay_s)
-    running = proc.poll() is None
-    proc.send_signal(signal.SIGINT)
-    _, err = proc.communicate(timeout=120)
+    printed = threading.Event()
+    with tempfile.TemporaryFile("w+") as err:
+        # SIGINT as Python sees it by default, whatever the test runner's shell did with it (a background job ignores
+        # it)
+        proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=err, text=True, env=_env(),
+                                preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+        reader = threading.Thread(target=lambda: [printed.set() for _ in proc.stdout], daemon=True)
+        reader.start()
+        child, start, deadline = psutil.Process(proc.pid), None, time.monotonic() + 120
+        while proc.poll() is None and time.monotonic() < deadline:
+            used = sum(child.cpu_times()[:2])
+            if start is None and (printed.is_set() or not after_output):
+                start = used
+            if start is not None and used - start >= cpu_s:
+                break
+            time.sleep(0.005)
+        running, had_printed = proc.poll() is None, printed.is_set()
+        proc.send_signal(signal.SIGINT)
+        proc.wait(timeout=120)
+        reader.join(timeout=10)
+        err.seek(0)
+        text = err.read()
     assert running, "the command ended before the interrupt: the test would prove nothing"
-    return proc.returncode, err, time.monotonic() - t0
+    return proc.returncode, text, had_printed
 
 
-def _entry_loaded_s() -> float:
-    """Wall seconds until the command line's entry is loaded (interpreter start-up + ``pin_kpi_oed.cli.app``): before
-    it no code of the package runs, so no package can turn an interrupt there into one line."""
-    t0 = time.monotonic()
-    subprocess.run([sys.executable, "-c", "import pin_kpi_oed.cli.app"], check=True,
-                   env={**os.environ, "PYTHONPATH": str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", "")})
-    return time.monotonic() - t0
+@pytest.mark.parametrize("moment, module", [("entry", True), ("imports", False), ("work", False), ("ipopt", True)])
+def test_an_interrupt_at_any_moment_is_one_line_and_130(moment: str, module: bool) -> None:
+    """``design`` imports the design stack and then designs: an interrupt in its imports or its work is one line and
+    exit code 130.
 
-
-@pytest.mark.parametrize("delay_s, module", [(0.2, True), (0.6, False), (1.5, False), (3.0, True)])
-def test_an_interrupt_at_any_moment_is_one_line_and_130(delay_s: float, module: bool) -> None:
-    """``design`` imports the design stack (seconds) and then designs: an interrupt in its imports or its work (0.2 s:
-    or as soon as the entry is loaded on a machine so busy that the interpreter takes longer to start).
-
-    The moments, 0.2, 0.6, 1.5 and 3.0 s, cover the start-up, the imports and the work, the two entries taking turns:
-    ``python -m pin_kpi_oed`` and the console script differ only in how the entry is loaded (``__main__``'s guard),
-    which the earliest moments of each test (0.2 s, 0.6 s); after it both run :func:`pin_kpi_oed.cli.app.run`, so
-    the later moments need one entry each (1.5 s: the console script, 3.0 s: ``-m``)."""
-    argv = ["design", "--cell", "kr15", "--measurements", "30", "--criteria", "kpi", "--starts", "3"]
-    rc, err, _ = _interrupt_after(max(delay_s, 1.2 * _entry_loaded_s()), argv, module)
+    The moments are the command's own CPU seconds, not wall seconds (which stretch when other work holds the cores:
+    3 s after the start is the work on an idle machine, still the imports on a busy one), each reached at the cost of
+    what the command spends before it: as soon as the entry is loaded (1.2 times what loading it costs); in the
+    imports (0.6 s, before the command's first line); in the work in Python (at its first line: the random design
+    and the pool start follow); in IPOPT, the Python code that IPOPT calls back (0.3 s after the first line of the
+    design without collision constraints and pool start, whose IPOPT starts 0.1 s after that line and runs for a
+    second). Whether the first line came before the interrupt is checked: each moment is the one it says. The two
+    entries take turns: ``python -m pin_kpi_oed`` and the console script differ only in how the entry is loaded
+    (``__main__``'s guard), which the earliest moment of each tests (the entry, the imports); after it both run
+    :func:`pin_kpi_oed.cli.app.run`, so the later moments need one entry each (the work: the console script, IPOPT:
+    ``-m``)."""
+    cpu_s, argv, after_output = {"entry": (1.2 * _entry_cpu_s(), DESIGN, False), "imports": (0.6, DESIGN, False),
+                                 "work": (0.0, DESIGN, True), "ipopt": (0.3, DESIGN_IN_IPOPT, True)}[moment]
+    rc, err, had_printed = _interrupt_at(argv, module, cpu_s, after_output)
+    assert had_printed == after_output, f"the interrupt came {'after' if had_printed else 'before'} the first line"
     assert "Traceback" not in err, err
     assert rc == 130 and err.strip().splitlines()[-1] == "interrupted", err
 

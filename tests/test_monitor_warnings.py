@@ -104,6 +104,22 @@ def test_monitor_exit_code_and_fail_on(setting, tmp_path, capsys, monkeypatch):
     capsys.readouterr()
 
 
+def test_the_poses_the_monitor_asks_for_are_check_designs(setting):
+    """The monitor asks for check design's poses without the poses the verdict needs (``size=False``, which it does
+    not use): the same poses, powers and selection as the full design, bit for bit; only ``poses_needed`` is left
+    out. A pool of 40 and 6 poses: the selection is the same code whatever the sizes, and the full design's
+    ``poses_needed`` is still found (8 poses: the size is computed, not skipped by chance)."""
+    from pin_kpi_oed.upkeep.check_design import design_check
+
+    model = setting[1]
+    kw = dict(m=6, tolerance_m=1e-4, pool_size=40, seed=0, n_random=1)
+    full, poses = design_check(model, **kw), design_check(model, **kw, size=False)
+    assert full.poses_needed > 0, "the full design found no size: the comparison would prove little"
+    assert np.array_equal(poses.Q, full.Q) and np.array_equal(poses.selection.indices, full.selection.indices)
+    assert poses.power == full.power and poses.verdict_power == full.verdict_power
+    assert poses.poses_needed == 0
+
+
 def test_a_followed_file_with_a_malformed_row_is_refused_naming_it(setting, tmp_path, capsys):
     rb, model, Q, Y = setting
     mp = tmp_path / "m.json"

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import subprocess
 import sys
 import textwrap
@@ -26,32 +27,78 @@ def _run(code: str, env_threads: str | None = None) -> str:
     return res.stdout.strip()
 
 
-PROBE = """
+#: One process with NumPy imported first, the three claims in the order their premises allow: SciPy's own BLAS
+#: loaded inside an entry point (before anything else loads SciPy); the limit holding when NumPy and its BLAS (given
+#: two threads) were there before the package; an entry point with its BLAS given two threads beforehand. One
+#: process instead of three: each costs the interpreter's, NumPy's and the package's imports, and no claim's premise
+#: is changed by the one before it (the first is the only one that needs SciPy not yet loaded).
+NUMPY_FIRST_PROBE = """
+    import json
     import numpy as np                      # the user's script imports NumPy first
     from threadpoolctl import threadpool_info, threadpool_limits
-    threadpool_limits(limits=2)             # and has (or gets by default) more than one BLAS thread
+    from pin_kpi_oed.threads import limited_threads
+    out = {}
+
+    def scipy_blas():
+        return [i["num_threads"] for i in threadpool_info() if "scipy.libs" in i["filepath"]]
+    with limited_threads():
+        import scipy.linalg                 # loaded inside an entry point (as the discrepancy fit does)
+        out["scipy_inside"] = max(scipy_blas())
+    out["scipy_after"] = max(scipy_blas())
+
     def blas_threads():
         return max(i["num_threads"] for i in threadpool_info() if i["user_api"] == "blas")
-    before = blas_threads()
-    from pin_kpi_oed.threads import limited_threads
+    threadpool_limits(limits=2)             # and has (or gets by default) more than one BLAS thread
+    out["before"] = blas_threads()
     with limited_threads():
-        inside = blas_threads()
-    after = blas_threads()
-    print(before, inside, after)
+        out["inside"] = blas_threads()
+    out["after"] = blas_threads()
+
+    threadpool_limits(limits=2)
+    import pin_kpi_oed.oed.pool as pool
+    seen = []
+    real = pool.approximate_design
+    def spy(*a, **k):
+        seen.append(blas_threads())
+        return real(*a, **k)
+    pool.approximate_design = spy
+    rng = np.random.default_rng(0)
+    F = rng.normal(size=(200, 3, 6))
+    pool.select(F, 12)
+    out["spy_calls"], out["spy_worst"] = len(seen), max(seen, default=0)
+    print(json.dumps(out))
 """
 
 
-def test_limit_holds_when_numpy_was_imported_first() -> None:
-    out = _run(PROBE)
-    before, inside, after = (int(x) for x in out.split())
-    assert before == 2, "the probe could not give BLAS two threads: the test would prove nothing"
-    assert inside == 1
-    assert after == before, "the limit must be lifted on exit"
+@pytest.fixture(scope="module")
+def numpy_first() -> dict:
+    """What :data:`NUMPY_FIRST_PROBE` saw, in a fresh process without the thread variables."""
+    return json.loads(_run(NUMPY_FIRST_PROBE))
 
 
-def test_user_can_allow_more_threads_by_environment() -> None:
-    out = _run(PROBE.replace("threadpool_limits(limits=2)", "threadpool_limits(limits=1)"), env_threads="2")
-    before, inside, _ = (int(x) for x in out.split())
+@pytest.mark.xdist_group("test_threads_numpy_first")
+def test_limit_holds_when_numpy_was_imported_first(numpy_first) -> None:
+    assert numpy_first["before"] == 2, "the probe could not give BLAS two threads: the test would prove nothing"
+    assert numpy_first["inside"] == 1, "the limit did not hold inside the context"
+    assert numpy_first["after"] == numpy_first["before"], "the limit must be lifted on exit"
+
+
+def test_user_can_allow_more_threads_by_environment(monkeypatch) -> None:
+    """``PIN_KPI_OED_THREADS`` is read when an entry point starts (not when the package is imported): in this
+    process as in a fresh one."""
+    from threadpoolctl import threadpool_info, threadpool_limits
+
+    from pin_kpi_oed import threads
+
+    def blas_threads():
+        return max(i["num_threads"] for i in threadpool_info() if i["user_api"] == "blas")
+
+    monkeypatch.setattr(threads, "_max_threads", None)
+    monkeypatch.setenv("PIN_KPI_OED_THREADS", "2")
+    with threadpool_limits(limits=1):
+        before = blas_threads()
+        with limited_threads():
+            inside = blas_threads()
     assert before == 1 and inside == 2
 
 
@@ -85,26 +132,10 @@ def test_nested_contexts_are_cheap_and_restore() -> None:
         assert blas() == before
 
 
-def test_entry_points_run_single_threaded_with_numpy_imported_first() -> None:
-    out = _run("""
-        import numpy as np
-        from threadpoolctl import threadpool_info, threadpool_limits
-        threadpool_limits(limits=2)
-        import pin_kpi_oed.oed.pool as pool
-        seen = []
-        real = pool.approximate_design
-        def spy(*a, **k):
-            seen.append(max(i["num_threads"] for i in threadpool_info() if i["user_api"] == "blas"))
-            return real(*a, **k)
-        pool.approximate_design = spy
-        rng = np.random.default_rng(0)
-        F = rng.normal(size=(200, 3, 6))
-        pool.select(F, 12)
-        print(len(seen), max(seen))
-    """)
-    calls, worst = (int(x) for x in out.split())
-    assert calls >= 1, "the spy was never called: the test would prove nothing"
-    assert worst == 1
+@pytest.mark.xdist_group("test_threads_numpy_first")
+def test_entry_points_run_single_threaded_with_numpy_imported_first(numpy_first) -> None:
+    assert numpy_first["spy_calls"] >= 1, "the spy was never called: the test would prove nothing"
+    assert numpy_first["spy_worst"] == 1, "an entry point ran BLAS with more than one thread"
 
 
 def test_cli_threads_option_sets_the_limit_and_rejects_nonsense(monkeypatch):
@@ -118,25 +149,11 @@ def test_cli_threads_option_sets_the_limit_and_rejects_nonsense(monkeypatch):
     threads.set_max_threads(None)
 
 
-SCIPY_PROBE = """
-    import numpy as np                      # NumPy loaded, SciPy's own BLAS not yet
-    from threadpoolctl import threadpool_info
-    from pin_kpi_oed.threads import limited_threads
-    def scipy_blas():
-        return [i["num_threads"] for i in threadpool_info() if "scipy.libs" in i["filepath"]]
-    with limited_threads():
-        import scipy.linalg                 # loaded inside an entry point (as the discrepancy fit does)
-        inside = scipy_blas()
-    print(max(inside), max(scipy_blas()))
-"""
-
-
-def test_limit_covers_scipy_blas_loaded_inside_an_entry_point() -> None:
-    out = _run(SCIPY_PROBE)
-    inside, after = (int(x) for x in out.split())
-    if after < 2:
+@pytest.mark.xdist_group("test_threads_numpy_first")
+def test_limit_covers_scipy_blas_loaded_inside_an_entry_point(numpy_first) -> None:
+    if numpy_first["scipy_after"] < 2:
         pytest.skip("SciPy's BLAS starts with one thread on this machine: the test would prove nothing")
-    assert inside == 1
+    assert numpy_first["scipy_inside"] == 1
 
 
 def test_process_limit_covers_libraries_loaded_later() -> None:

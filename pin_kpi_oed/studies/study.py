@@ -230,13 +230,39 @@ def _run_tasks_locked(tasks: list[Task], out_dir: Path, workers: int | None, sch
     return [done[t.key] for t in tasks], len(todo)
 
 
+#: What a local Dask cluster's workers are started without: Dask's default ``MALLOC_TRIM_THRESHOLD_`` (64 KiB) makes
+#: glibc return freed memory to the system at once and fixes the size above which it maps each allocation afresh,
+#: so that the arrays of a design are mapped, faulted in and unmapped again and again: with it a worker spent about
+#: 9 % more CPU on the same task (one arm of the notional study: 0.5 s of system time instead of 0.15 s; median of 6
+#: pairs, 6 of 6 with it, ``python -m benchmarks.dask_worker``). The value None drops
+#: the variable from Dask's ``distributed.nanny.pre-spawn-environ`` (which the nanny also writes into this process's
+#: environment, for every process it starts later); a value exported in the environment is still inherited.
+LOCAL_DASK_CONFIG = {"distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_": None}
+
+
+def local_dask_cluster(workers: int):
+    """The local Dask cluster of ``--scheduler local-dask``: ``workers`` processes of one thread each, no dashboard,
+    started with :data:`LOCAL_DASK_CONFIG`.
+
+    Args:
+        workers: worker processes.
+
+    Returns:
+        A started ``dask.distributed.LocalCluster`` (close it when done).
+    """
+    import dask
+    from dask.distributed import LocalCluster
+
+    with dask.config.set(LOCAL_DASK_CONFIG):  # read once by each worker's nanny, at its start: restarts keep it
+        return LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None)
+
+
 def _run_dask(todo: list[Task], out_dir: Path, scheduler: str, workers: int | None, desc: str) -> dict:
-    from dask.distributed import Client, LocalCluster, as_completed as dask_completed
+    from dask.distributed import Client, as_completed as dask_completed
 
     cluster = None
     if scheduler == "local-dask":
-        cluster = LocalCluster(n_workers=workers or 2, threads_per_worker=1, processes=True,
-                               dashboard_address=None)
+        cluster = local_dask_cluster(workers or 2)
         client = Client(cluster)
     else:
         try:

@@ -372,8 +372,10 @@ class Monitor:
         if self.design_Q is None:
             from pin_kpi_oed.upkeep.check_design import design_check
 
+            # the poses only: not the poses the verdict needs (``size``), which cost as much again as choosing them
             self.design_Q = design_check(self.model, m=10, tolerance_m=self.tolerance_m, alpha=self.alpha,
-                                         seed=self.seed, station=self.label, q_work=self.qw, n_random=1).Q
+                                         seed=self.seed, station=self.label, q_work=self.qw, n_random=1,
+                                         size=False).Q
         self.asks.append({"row": int(self.seen), "reason": reason, "poses": self.design_Q})
         what = (f"measure the {len(self.design_Q)} poses of 'check design' (in the JSON log)" if len(self.design_Q)
                 else "measure the poses of 'check design' (the model has no working configurations: give them)")
