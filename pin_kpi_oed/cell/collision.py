@@ -91,7 +91,8 @@ class CollisionModel:
         self.p0 = np.zeros(self.model.n_params)
         rm = self.robot.model
         self.n = self.robot.nq
-        self.fk = Chain(rm, self.robot.joint_ids)
+        # the measurement model's chain when it is this robot's: its remembered frames serve the incidence row too
+        self.fk = self.model.chain if self.model.robot is self.robot else Chain(rm, self.robot.joint_ids)
         jpos = {j: k + 1 for k, j in enumerate(self.robot.joint_ids)}  # pinocchio joint id -> chain index
         self.cos_max = float(np.cos(np.radians(cell.incidence_max_deg)))
         base_T_W = cell.W_T_base.inverse()
@@ -323,7 +324,7 @@ class CollisionModel:
         Returns:
             EA, EB (m, S, 3) m; JA, JB (m, S, 3, n) or None.
         """
-        EA, EB, V, W = self._endpoints(np.atleast_2d(np.asarray(Q, float)))
+        EA, EB, V, W = self._endpoints(np.atleast_2d(np.asarray(Q, float)), with_grad)
         if not with_grad:
             return EA, EB, None, None
         mA, mB = self._masks()
@@ -331,8 +332,8 @@ class CollisionModel:
         JB = (V[:, None] + cross(W[:, None], EB[:, :, None])) * mB[None, :, :, None]
         return EA, EB, np.swapaxes(JA, 2, 3), np.swapaxes(JB, 2, 3)
 
-    def _endpoints(self, Q: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        fr = self.fk.frames(Q)
+    def _endpoints(self, Q: np.ndarray, twists: bool = True) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        fr = self.fk.frames(Q, twists=twists)
         R, t, V, W = fr.R, fr.t, fr.V, fr.W
         j = np.where(self.seg_joint >= 0, self.seg_joint, 0)
         j[self.beam] = self.refl_joint
@@ -383,7 +384,7 @@ class CollisionModel:
         """
         Q = np.atleast_2d(np.asarray(Q, float))
         m, n = Q.shape
-        EA, EB, V, W = self._endpoints(Q)
+        EA, EB, V, W = self._endpoints(Q, with_grad)
         clr = self.cell.clearance_m
         gs, Gs = [], []
         mA, mB = self._masks()
@@ -517,7 +518,7 @@ class CollisionModel:
         """
         Q = np.atleast_2d(np.asarray(Q, float))
         m = Q.shape[0]
-        EA, EB, V, W = self._endpoints(Q)
+        EA, EB, V, W = self._endpoints(Q, False)
         clr = self.cell.clearance_m
         dmin = np.full(m, np.inf)
         if len(self.half):

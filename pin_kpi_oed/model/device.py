@@ -233,6 +233,10 @@ class MeasurementModel(ABC):
         Raises:
             InputError: wrong parameter count or joint count.
         """
+        return self._kinematics(p, Q, point_m, True)
+
+    def _kinematics(self, p: np.ndarray, Q: np.ndarray, point_m: np.ndarray, twists: bool) -> Kinematics:
+        """:meth:`kinematics`; without ``twists`` the world twists are not computed (zeros, or those remembered)."""
         self._apply(p)
         Q = np.atleast_2d(np.asarray(Q, float))
         if Q.shape[1] != self.robot.nq:
@@ -240,12 +244,12 @@ class MeasurementModel(ABC):
         point_m = np.asarray(point_m, float)
         key = (self._p_applied.tobytes(), Q.shape, Q.tobytes(), point_m.tobytes())
         last = getattr(self, "_kin_last", None)  # one read: safe when two threads ask at once
-        if last is not None and last[0] == key:
+        if last is not None and last[0] == key and (last[2] or not twists):
             return last[1]
-        kin = self._chain.tool_point(Q, point_m, self._placements)
+        kin = self._chain.tool_point(Q, point_m, self._placements, twists)
         for a in (kin.p, kin.R_tool, kin.R_A, kin.t_A, kin.twist):
             a.flags.writeable = False  # shared by the callers of the same p, Q and point
-        self._kin_last = (key, kin)
+        self._kin_last = (key, kin, twists)
         return kin
 
     def sensor_point(self, p: np.ndarray, Q: np.ndarray, point_m: np.ndarray, offset_group: str | None = None,

@@ -330,7 +330,7 @@ class TrackerModel(MeasurementModel):
         z = reflector axis (tool z) and g = unit beam from the reflector to the tracker.
         """
         p = np.asarray(p, float)
-        kin = self.kinematics(p, Q, self.points(p))
+        kin = self.kinematics(p, Q, self.points(p)) if with_grad else self._kinematics(p, Q, self.points(p), False)
         T = self.tracker_pose(p)
         RT = T.rotation
         y = kin.p @ RT.T + T.translation  # reflector in the tracker frame
