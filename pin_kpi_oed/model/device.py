@@ -295,13 +295,13 @@ class MeasurementModel(ABC):
             dJ = np.zeros((m, 3, self.n_params, n))
             Wsk = skew(np.moveaxis(w, 1, 2))  # (m, n, 3, 3) [ω_k]×
             Pdsk = skew(np.moveaxis(pdot, 1, 2))  # (m, n, 3, 3) [ṗ_k]×
-            before = np.tril(np.ones((n, n), bool), -1)  # before[j, k]: joint k precedes joint j
-            # k before j: the whole block rotates with joint k
-            D = (Wsk[:, None] @ blk[:, :, None]) * before[None, :, :, None, None]
-            # k >= j: only the rotational columns change, by -[ṗ_k]× R_A(j)
-            D[..., 3:] -= (Pdsk[:, None] @ kin.R_A[:, :, None]) * ~before[None, :, :, None, None]
             nj = 6 * n
-            dJ[:, :, :nj, :] = np.moveaxis(D, (1, 2, 3, 4), (2, 4, 1, 3)).reshape(m, 3, nj, n)
+            # a view (no copy): D[:, a, j, c, k] = ∂J[:, a, 6j + c]/∂q_k
+            D = np.reshape(dJ[:, :, :nj, :], (m, 3, n, 6, n), copy=False)
+            jb, kb = np.tril_indices(n, -1)  # joint k before joint j: the whole block rotates with joint k
+            D[:, :, jb, :, kb] = np.swapaxes(Wsk[:, kb] @ blk[:, jb], 0, 1)
+            ja, ka = np.triu_indices(n)  # k >= j: only the rotational columns change, by -[ṗ_k]× R_A(j)
+            D[:, :, ja, 3:, ka] = -np.swapaxes(Pdsk[:, ka] @ kin.R_A[:, ja], 0, 1)
             dJ[:, :, frame.start + 3:frame.stop, :] = -np.moveaxis(Pdsk, 1, 3)
             if offset is not None:
                 dJ[:, :, offset, :] = np.moveaxis(Wsk @ kin.R_tool[:, None], 1, 3)
