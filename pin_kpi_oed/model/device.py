@@ -233,24 +233,35 @@ class MeasurementModel(ABC):
         Raises:
             InputError: wrong parameter count or joint count.
         """
-        return self._kinematics(p, Q, point_m, True)
-
-    def _kinematics(self, p: np.ndarray, Q: np.ndarray, point_m: np.ndarray, twists: bool) -> Kinematics:
-        """:meth:`kinematics`; without ``twists`` the world twists are not computed (zeros, or those remembered)."""
         self._apply(p)
-        Q = np.atleast_2d(np.asarray(Q, float))
-        if Q.shape[1] != self.robot.nq:
-            raise InputError(f"configurations must have {self.robot.nq} joint values, got {Q.shape[1]}")
+        Q = self._checked_q(Q)
         point_m = np.asarray(point_m, float)
         key = (self._p_applied.tobytes(), Q.shape, Q.tobytes(), point_m.tobytes())
         last = getattr(self, "_kin_last", None)  # one read: safe when two threads ask at once
-        if last is not None and last[0] == key and (last[2] or not twists):
+        if last is not None and last[0] == key:
             return last[1]
-        kin = self._chain.tool_point(Q, point_m, self._placements, twists)
+        kin = self._chain.tool_point(Q, point_m, self._placements)
         for a in (kin.p, kin.R_tool, kin.R_A, kin.t_A, kin.twist):
             a.flags.writeable = False  # shared by the callers of the same p, Q and point
-        self._kin_last = (key, kin, twists)
+        self._kin_last = (key, kin)
         return kin
+
+    def _checked_q(self, Q: np.ndarray) -> np.ndarray:
+        Q = np.atleast_2d(np.asarray(Q, float))
+        if Q.shape[1] != self.robot.nq:
+            raise InputError(f"configurations must have {self.robot.nq} joint values, got {Q.shape[1]}")
+        return Q
+
+    def _tool_pose(self, p: np.ndarray, Q: np.ndarray, point_m: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The tool point and the tool rotation of :meth:`kinematics` (the same numbers), without the joint frames
+        and twists unless they are remembered: (m, 3) m, (m, 3, 3)."""
+        self._apply(p)
+        Q = self._checked_q(Q)
+        point_m = np.asarray(point_m, float)
+        last = getattr(self, "_kin_last", None)
+        if last is not None and last[0] == (self._p_applied.tobytes(), Q.shape, Q.tobytes(), point_m.tobytes()):
+            return last[1].p, last[1].R_tool
+        return self._chain.tool_pose(Q, point_m, self._placements)
 
     def sensor_point(self, p: np.ndarray, Q: np.ndarray, point_m: np.ndarray, offset_group: str | None = None,
                      with_dq: bool = False) -> SensorPoint:

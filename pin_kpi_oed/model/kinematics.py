@@ -292,9 +292,7 @@ class Chain:
         W = np.zeros((m, n, 3))
         R[:, 0], t[:, 0] = self._eye, 0.0
         rot, trans = H[:, :3, :3].copy(), H[:, :3, 3].copy()
-        # exp(S_j q_j) of the revolute joints (Rodrigues: I + sin q K + (1 − cos q) K²), (m, n, 3, 3)
-        X = (self._eye9 + np.sin(Q)[:, :, None] * self._K9 + (1.0 - np.cos(Q))[:, :, None] * self._KK9
-             ).reshape(m, n, 3, 3)
+        X = self._rodrigues(Q)
         Rc = np.tile(self._eye, (m, 1, 1))
         tc = np.zeros((m, 3))
         for k, rev in enumerate(self._rev):
@@ -317,6 +315,67 @@ class Chain:
             V[:, r] = -_cross(W[:, r], t_A[:, r])  # v_j = t_A,j × ω_j (the point at the world origin)
         return ChainFrames(R, t, R_A, t_A, V, W)
 
+    def _rodrigues(self, Q: np.ndarray) -> np.ndarray:
+        """exp(S_j q_j) of the revolute joints (I + sin q K + (1 − cos q) K²), (m, n, 3, 3)."""
+        m, n = Q.shape
+        return (self._eye9 + np.sin(Q)[:, :, None] * self._K9 + (1.0 - np.cos(Q))[:, :, None] * self._KK9
+                ).reshape(m, n, 3, 3)
+
+    def _tip(self, Q: np.ndarray, H: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The last joint's frame (R (m, 3, 3), t (m, 3) m) by the products of :meth:`_frames` (the same numbers),
+        without keeping the frames before it."""
+        m = Q.shape[0]
+        rot, trans = H[:, :3, :3].copy(), H[:, :3, 3].copy()
+        X = self._rodrigues(Q)
+        Rc = np.tile(self._eye, (m, 1, 1))
+        tc = np.zeros((m, 3))
+        for k, rev in enumerate(self._rev):
+            Rf = Rc.reshape(3 * m, 3)
+            tc = tc + (Rf @ trans[k]).reshape(m, 3)
+            Rc = (Rf @ rot[k]).reshape(m, 3, 3)
+            if rev:
+                Rc = Rc @ X[:, k]
+            else:
+                tc = tc + (Rc.reshape(3 * m, 3) @ self.lin[k]).reshape(m, 3) * Q[:, k:k + 1]
+        return Rc, tc
+
+    def tool_pose(self, Q: np.ndarray, point_m: np.ndarray, placements: Sequence[pin.SE3] | None = None
+                  ) -> tuple[np.ndarray, np.ndarray]:
+        """A point of the tool frame and the tool frame's rotation only (base frame): :meth:`tool_point`'s ``p`` and
+        ``R_tool``, the same numbers, without the joint frames and twists (a feasibility filter over many samples).
+
+        Args:
+            Q: configurations, (m, n) (rad / m).
+            point_m: the point in the tool frame, (3,) m, or one per configuration, (m, 3) m.
+            placements: joint placements to use (default the nominal ones).
+
+        Returns:
+            (point (m, 3) m, tool rotation (m, 3, 3)).
+        """
+        Q = self._check(Q)
+        M = self.placements if placements is None else placements
+        H = np.array([Mk.homogeneous for Mk in M])
+        last = self._frames_last
+        if last is not None and last[0] == (Q.shape, Q.tobytes(), H.tobytes()):
+            R_last, t_last = last[1].R[:, -1], last[1].t[:, -1]
+        else:
+            R_last, t_last = self._tip(Q, H)
+        return self._tool(R_last, t_last, point_m)
+
+    def _tool(self, R_last: np.ndarray, t_last: np.ndarray, point_m: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The tool point and rotation from the last joint's frame."""
+        Mt = self.tool_placement
+        m = R_last.shape[0]
+        R_last = np.ascontiguousarray(R_last).reshape(3 * m, 3)
+        t = t_last + (R_last @ Mt.translation).reshape(m, 3)
+        R = (R_last @ Mt.rotation).reshape(m, 3, 3)
+        point = np.asarray(point_m, float)
+        if point.ndim == 2:
+            if point.shape != t.shape:
+                raise InputError(f"{point.shape[0]} tool points for {t.shape[0]} configurations")
+            return t + np.einsum("mab,mb->ma", R, point), R
+        return t + (R.reshape(3 * m, 3) @ point).reshape(m, 3), R
+
     def tool_point(self, Q: np.ndarray, point_m: np.ndarray, placements: Sequence[pin.SE3] | None = None,
                    twists: bool = True) -> Kinematics:
         """Forward kinematics of a point of the tool frame for every configuration (base frame).
@@ -331,18 +390,7 @@ class Chain:
             The :class:`Kinematics` (point, tool rotation, joint frames before motion, world twists).
         """
         fr = self.frames(Q, placements, twists)
-        Mt = self.tool_placement
-        m = fr.R.shape[0]
-        R_last = np.ascontiguousarray(fr.R[:, -1]).reshape(3 * m, 3)
-        t = fr.t[:, -1] + (R_last @ Mt.translation).reshape(m, 3)
-        R = (R_last @ Mt.rotation).reshape(m, 3, 3)
-        point = np.asarray(point_m, float)
-        if point.ndim == 2:
-            if point.shape != t.shape:
-                raise InputError(f"{point.shape[0]} tool points for {t.shape[0]} configurations")
-            P = t + np.einsum("mab,mb->ma", R, point)
-        else:
-            P = t + (R.reshape(3 * m, 3) @ point).reshape(m, 3)
+        P, R = self._tool(fr.R[:, -1], fr.t[:, -1], point_m)
         return Kinematics(P, R, fr.R_A, fr.t_A, fr.twist)
 
 
