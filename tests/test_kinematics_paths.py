@@ -169,3 +169,21 @@ def test_collision_model_shares_the_measurement_models_remembered_frames() -> No
     remembered = coll.fk.frames(Q)
     kin = coll.model.kinematics(np.zeros(coll.model.n_params), Q, coll.model.reflector_m)
     assert kin.R_A is remembered.R_A, "the measurement model's kinematics used the frames the rows computed"
+
+
+def test_banded_pair_gradients_are_the_full_ones_on_the_near_pairs() -> None:
+    """With a band, the pair rows' gradients are computed only for the pairs near at some configuration: on the near
+    rows they equal the gradients of the run without a band (1e-12), elsewhere they are zero."""
+    cell = load_cell("kr15")
+    coll = CollisionModel(cell)
+    rng = np.random.default_rng(19)
+    Q = rng.uniform(cell.q_lower, cell.q_upper, (25, cell.q_lower.size))
+    g_full, G_full = coll.evaluate(Q, backend="geometry")
+    band = 0.05
+    g_band, G_band = coll.evaluate(Q, backend="geometry", band=band)
+    pair = coll.info.kind == 0
+    gp = g_full[:, pair]
+    near = gp <= gp.min(axis=1, keepdims=True) + band
+    assert 0 < near.sum() < near.size and np.array_equal(g_band, g_full)
+    assert _close(G_band[:, pair][near], G_full[:, pair][near]) and np.abs(G_full[:, pair][near]).max() > 0.01
+    assert not G_band[:, pair][~near].any()

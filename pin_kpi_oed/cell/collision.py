@@ -410,7 +410,6 @@ class CollisionModel:
                    ) -> tuple[np.ndarray, np.ndarray | None]:
         """Capsule-pair rows of :meth:`evaluate`: distance minus radii and clearance (m), gradient or None."""
         i1, i2 = self.pairs[:, 0], self.pairs[:, 1]
-        A1, B1, A2, B2 = EA[:, i1], EB[:, i1], EA[:, i2], EB[:, i2]
         far = None
         if backend == "geometry":
             if not hasattr(self, "_geometry"):
@@ -421,24 +420,35 @@ class CollisionModel:
             if backend == "coal":
                 s, t, w1, w2 = self._coal_witness(EA, EB, i1, i2)
             else:
-                s, t, w1, w2 = segment_closest(A1, B1, A2, B2)
+                s, t, w1, w2 = segment_closest(EA[:, i1], EB[:, i1], EA[:, i2], EB[:, i2])
             diff = w2 - w1
             dseg = np.sqrt(np.einsum("mpa,mpa->mp", diff, diff))
         g = dseg - self.radius[i1] - self.radius[i2] - clr
         if not with_grad:
             return g, None
-        nrm = diff / np.where(dseg > 0, dseg, 1.0)[..., None]
         VT, WT = np.swapaxes(V, 1, 2), np.swapaxes(W, 1, 2)  # (m, 3, n)
+        if far is None:
+            return g, self._pair_gradient(slice(None), EA, EB, diff, dseg, s, t, VT, WT, mA, mB)
+        # outside the band: not evaluated (see ``band``); pairs outside it at every configuration are not computed
+        c = np.flatnonzero(~far.all(axis=0))
+        Gp = np.zeros((Q.shape[0], len(i1), Q.shape[1]))
+        Gp[:, c] = self._pair_gradient(c, EA, EB, diff[:, c], dseg[:, c], s[:, c], t[:, c], VT, WT, mA, mB)
+        Gp[far] = 0.0
+        return g, Gp
+
+    def _pair_gradient(self, c: slice | np.ndarray, EA: np.ndarray, EB: np.ndarray, diff: np.ndarray, dseg: np.ndarray,
+                       s: np.ndarray, t: np.ndarray, VT: np.ndarray, WT: np.ndarray, mA: np.ndarray, mB: np.ndarray
+                       ) -> np.ndarray:
+        """∂/∂q of the pair rows ``c`` (:meth:`evaluate`'s witness-point form), (m, len(c), n)."""
+        i1, i2 = self.pairs[c, 0], self.pairs[c, 1]
+        nrm = diff / np.where(dseg > 0, dseg, 1.0)[..., None]
         nv = nrm @ VT  # (m, P, n)
 
         def side(P: np.ndarray, u: np.ndarray, mask: np.ndarray) -> np.ndarray:
             return u[..., None] * (nv + cross(P, nrm) @ WT) * mask[None]
 
-        Gp = (side(A2, 1.0 - t, mA[i2]) + side(B2, t, mB[i2])
-              - side(A1, 1.0 - s, mA[i1]) - side(B1, s, mB[i1]))
-        if far is not None:
-            Gp[far] = 0.0  # outside the band: not evaluated (see ``band``)
-        return g, Gp
+        return (side(EA[:, i2], 1.0 - t, mA[i2]) + side(EB[:, i2], t, mB[i2])
+                - side(EA[:, i1], 1.0 - s, mA[i1]) - side(EB[:, i1], s, mB[i1]))
 
     def _halfspace_rows(self, EA: np.ndarray, EB: np.ndarray, V: np.ndarray, W: np.ndarray, clr: float,
                         mA: np.ndarray, mB: np.ndarray, with_grad: bool) -> tuple[np.ndarray, np.ndarray | None]:
