@@ -6,6 +6,10 @@ The ``backend="geometry"`` path of :meth:`pin_kpi_oed.cell.collision.CollisionMo
 
 from __future__ import annotations
 
+from collections.abc import Iterable
+from itertools import compress
+from operator import attrgetter
+
 import numpy as np
 import pinocchio as pin
 
@@ -14,6 +18,8 @@ from pin_kpi_oed.cell.segment_model import SegmentModel
 
 
 __all__ = ["GeometryDistances", "beam_frames"]
+
+_MIN_DISTANCE = attrgetter("min_distance")
 
 
 def beam_frames(a: np.ndarray, B: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -96,7 +102,7 @@ class GeometryDistances:
         if self.uses_beam:
             Rb, cb, hb = beam_frames(self.tracker, EB[:, self.beam])
         model, data, gm, gd = self.model, self.data, self.gm, self.gd
-        se3, distances = pin.SE3, pin.computeDistances
+        se3, distances, pairs = pin.SE3, pin.computeDistances, range(P)
         rows: list[int] = []
         pts: list[np.ndarray] = []
         dists: list[list[float]] = []
@@ -105,13 +111,10 @@ class GeometryDistances:
                 beam_shape.halfLength = hb[i]
                 beam_obj.placement = se3(Rb[i], cb[i])
             distances(model, data, gm, gd, Q[i])  # forward kinematics, placements, then every pair's distance
-            di = [r.min_distance for r in res]
+            di = list(map(_MIN_DISTANCE, res))
             dists.append(di)
-            if band is None:
-                sel: range | list[int] = range(P)
-            else:
-                lim = min(di) + band
-                sel = [k for k, d in enumerate(di) if d <= lim]
+            # the pairs with d <= min + band (lim >= d: the same test, in C)
+            sel: Iterable[int] = pairs if band is None else compress(pairs, map((min(di) + band).__ge__, di))
             at = i * P
             for k in sel:
                 r = res[k]
