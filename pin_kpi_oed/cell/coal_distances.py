@@ -6,6 +6,10 @@ The ``backend="geometry"`` path of :meth:`pin_kpi_oed.cell.collision.CollisionMo
 
 from __future__ import annotations
 
+from collections.abc import Iterable
+from itertools import compress
+from operator import attrgetter
+
 import numpy as np
 import pinocchio as pin
 
@@ -14,6 +18,8 @@ from pin_kpi_oed.cell.segment_model import SegmentModel
 
 
 __all__ = ["GeometryDistances", "beam_frames"]
+
+_MIN_DISTANCE = attrgetter("min_distance")
 
 
 def beam_frames(a: np.ndarray, B: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -90,35 +96,34 @@ class GeometryDistances:
         m, P = Q.shape[0], len(self.pairs)
         near = np.zeros((m, P, 2, 3))
         far = np.ones(m * P, bool)
-        dist = np.empty((m, P))
         beam_obj = self.gm.geometryObjects[self.beam]
         beam_shape = beam_obj.geometry
         res = self.results
         if self.uses_beam:
             Rb, cb, hb = beam_frames(self.tracker, EB[:, self.beam])
         model, data, gm, gd = self.model, self.data, self.gm, self.gd
-        se3 = pin.SE3
-        rows, pts = [], []
+        se3, distances, pairs = pin.SE3, pin.computeDistances, range(P)
+        rows: list[int] = []
+        pts: list[np.ndarray] = []
+        dists: list[list[float]] = []
         for i in range(m):
             if self.uses_beam:
                 beam_shape.halfLength = hb[i]
                 beam_obj.placement = se3(Rb[i], cb[i])
-            pin.forwardKinematics(model, data, Q[i])
-            pin.updateGeometryPlacements(model, data, gm, gd)
-            pin.computeDistances(gm, gd)
-            di = [r.min_distance for r in res]
-            dist[i] = di
-            if band is None:
-                sel: range | list[int] = range(P)
-            else:
-                lim = min(di) + band
-                sel = [k for k in range(P) if di[k] <= lim]
+            distances(model, data, gm, gd, Q[i])  # forward kinematics, placements, then every pair's distance
+            di = list(map(_MIN_DISTANCE, res))
+            dists.append(di)
+            # the pairs with d <= min + band (lim >= d: the same test, in C)
+            sel: Iterable[int] = pairs if band is None else compress(pairs, map((min(di) + band).__ge__, di))
+            at = i * P
             for k in sel:
                 r = res[k]
-                rows.append(i * P + k)
-                pts.append((r.getNearestPoint1(), r.getNearestPoint2()))
+                rows.append(at + k)
+                pts.append(r.getNearestPoint1())
+                pts.append(r.getNearestPoint2())
+        dist = np.array(dists, float).reshape(m, P)
         if rows:
-            near.reshape(m * P, 2, 3)[rows] = pts
+            near.reshape(m * P, 2, 3)[rows] = np.reshape(pts, (-1, 2, 3))
             far[rows] = False
         i1, i2 = self.pairs[:, 0], self.pairs[:, 1]
 

@@ -91,7 +91,8 @@ class CollisionModel:
         self.p0 = np.zeros(self.model.n_params)
         rm = self.robot.model
         self.n = self.robot.nq
-        self.fk = Chain(rm, self.robot.joint_ids)
+        # the measurement model's chain when it is this robot's: its remembered frames serve the incidence row too
+        self.fk = self.model.chain if self.model.robot is self.robot else Chain(rm, self.robot.joint_ids)
         jpos = {j: k + 1 for k, j in enumerate(self.robot.joint_ids)}  # pinocchio joint id -> chain index
         self.cos_max = float(np.cos(np.radians(cell.incidence_max_deg)))
         base_T_W = cell.W_T_base.inverse()
@@ -323,7 +324,7 @@ class CollisionModel:
         Returns:
             EA, EB (m, S, 3) m; JA, JB (m, S, 3, n) or None.
         """
-        EA, EB, V, W = self._endpoints(np.atleast_2d(np.asarray(Q, float)))
+        EA, EB, V, W = self._endpoints(np.atleast_2d(np.asarray(Q, float)), with_grad)
         if not with_grad:
             return EA, EB, None, None
         mA, mB = self._masks()
@@ -331,8 +332,8 @@ class CollisionModel:
         JB = (V[:, None] + cross(W[:, None], EB[:, :, None])) * mB[None, :, :, None]
         return EA, EB, np.swapaxes(JA, 2, 3), np.swapaxes(JB, 2, 3)
 
-    def _endpoints(self, Q: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        fr = self.fk.frames(Q)
+    def _endpoints(self, Q: np.ndarray, twists: bool = True) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        fr = self.fk.frames(Q, twists=twists)
         R, t, V, W = fr.R, fr.t, fr.V, fr.W
         j = np.where(self.seg_joint >= 0, self.seg_joint, 0)
         j[self.beam] = self.refl_joint
@@ -383,7 +384,7 @@ class CollisionModel:
         """
         Q = np.atleast_2d(np.asarray(Q, float))
         m, n = Q.shape
-        EA, EB, V, W = self._endpoints(Q)
+        EA, EB, V, W = self._endpoints(Q, with_grad)
         clr = self.cell.clearance_m
         gs, Gs = [], []
         mA, mB = self._masks()
@@ -409,7 +410,6 @@ class CollisionModel:
                    ) -> tuple[np.ndarray, np.ndarray | None]:
         """Capsule-pair rows of :meth:`evaluate`: distance minus radii and clearance (m), gradient or None."""
         i1, i2 = self.pairs[:, 0], self.pairs[:, 1]
-        A1, B1, A2, B2 = EA[:, i1], EB[:, i1], EA[:, i2], EB[:, i2]
         far = None
         if backend == "geometry":
             if not hasattr(self, "_geometry"):
@@ -420,24 +420,35 @@ class CollisionModel:
             if backend == "coal":
                 s, t, w1, w2 = self._coal_witness(EA, EB, i1, i2)
             else:
-                s, t, w1, w2 = segment_closest(A1, B1, A2, B2)
+                s, t, w1, w2 = segment_closest(EA[:, i1], EB[:, i1], EA[:, i2], EB[:, i2])
             diff = w2 - w1
             dseg = np.sqrt(np.einsum("mpa,mpa->mp", diff, diff))
         g = dseg - self.radius[i1] - self.radius[i2] - clr
         if not with_grad:
             return g, None
-        nrm = diff / np.where(dseg > 0, dseg, 1.0)[..., None]
         VT, WT = np.swapaxes(V, 1, 2), np.swapaxes(W, 1, 2)  # (m, 3, n)
+        if far is None:
+            return g, self._pair_gradient(slice(None), EA, EB, diff, dseg, s, t, VT, WT, mA, mB)
+        # outside the band: not evaluated (see ``band``); pairs outside it at every configuration are not computed
+        c = np.flatnonzero(~far.all(axis=0))
+        Gp = np.zeros((Q.shape[0], len(i1), Q.shape[1]))
+        Gp[:, c] = self._pair_gradient(c, EA, EB, diff[:, c], dseg[:, c], s[:, c], t[:, c], VT, WT, mA, mB)
+        Gp[far] = 0.0
+        return g, Gp
+
+    def _pair_gradient(self, c: slice | np.ndarray, EA: np.ndarray, EB: np.ndarray, diff: np.ndarray, dseg: np.ndarray,
+                       s: np.ndarray, t: np.ndarray, VT: np.ndarray, WT: np.ndarray, mA: np.ndarray, mB: np.ndarray
+                       ) -> np.ndarray:
+        """∂/∂q of the pair rows ``c`` (:meth:`evaluate`'s witness-point form), (m, len(c), n)."""
+        i1, i2 = self.pairs[c, 0], self.pairs[c, 1]
+        nrm = diff / np.where(dseg > 0, dseg, 1.0)[..., None]
         nv = nrm @ VT  # (m, P, n)
 
         def side(P: np.ndarray, u: np.ndarray, mask: np.ndarray) -> np.ndarray:
             return u[..., None] * (nv + cross(P, nrm) @ WT) * mask[None]
 
-        Gp = (side(A2, 1.0 - t, mA[i2]) + side(B2, t, mB[i2])
-              - side(A1, 1.0 - s, mA[i1]) - side(B1, s, mB[i1]))
-        if far is not None:
-            Gp[far] = 0.0  # outside the band: not evaluated (see ``band``)
-        return g, Gp
+        return (side(EA[:, i2], 1.0 - t, mA[i2]) + side(EB[:, i2], t, mB[i2])
+                - side(EA[:, i1], 1.0 - s, mA[i1]) - side(EB[:, i1], s, mB[i1]))
 
     def _halfspace_rows(self, EA: np.ndarray, EB: np.ndarray, V: np.ndarray, W: np.ndarray, clr: float,
                         mA: np.ndarray, mB: np.ndarray, with_grad: bool) -> tuple[np.ndarray, np.ndarray | None]:
@@ -517,7 +528,7 @@ class CollisionModel:
         """
         Q = np.atleast_2d(np.asarray(Q, float))
         m = Q.shape[0]
-        EA, EB, V, W = self._endpoints(Q)
+        EA, EB, V, W = self._endpoints(Q, False)
         clr = self.cell.clearance_m
         dmin = np.full(m, np.inf)
         if len(self.half):

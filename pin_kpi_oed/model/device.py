@@ -234,9 +234,7 @@ class MeasurementModel(ABC):
             InputError: wrong parameter count or joint count.
         """
         self._apply(p)
-        Q = np.atleast_2d(np.asarray(Q, float))
-        if Q.shape[1] != self.robot.nq:
-            raise InputError(f"configurations must have {self.robot.nq} joint values, got {Q.shape[1]}")
+        Q = self._checked_q(Q)
         point_m = np.asarray(point_m, float)
         key = (self._p_applied.tobytes(), Q.shape, Q.tobytes(), point_m.tobytes())
         last = getattr(self, "_kin_last", None)  # one read: safe when two threads ask at once
@@ -278,6 +276,23 @@ class MeasurementModel(ABC):
             RT[i], tT[i] = T.rotation, T.translation
         X = self._chain.tool_points(np.atleast_2d(np.asarray(Q, float)), point_m, Rm, tm)
         return np.einsum("dab,dmb->dma", RT, X) + tT[:, None]
+
+    def _checked_q(self, Q: np.ndarray) -> np.ndarray:
+        Q = np.atleast_2d(np.asarray(Q, float))
+        if Q.shape[1] != self.robot.nq:
+            raise InputError(f"configurations must have {self.robot.nq} joint values, got {Q.shape[1]}")
+        return Q
+
+    def _tool_pose(self, p: np.ndarray, Q: np.ndarray, point_m: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The tool point and the tool rotation of :meth:`kinematics` (the same numbers), without the joint frames
+        and twists unless they are remembered: (m, 3) m, (m, 3, 3)."""
+        self._apply(p)
+        Q = self._checked_q(Q)
+        point_m = np.asarray(point_m, float)
+        last = getattr(self, "_kin_last", None)
+        if last is not None and last[0] == (self._p_applied.tobytes(), Q.shape, Q.tobytes(), point_m.tobytes()):
+            return last[1].p, last[1].R_tool
+        return self._chain.tool_pose(Q, point_m, self._placements)
 
     def sensor_point(self, p: np.ndarray, Q: np.ndarray, point_m: np.ndarray, offset_group: str | None = None,
                      with_dq: bool = False) -> SensorPoint:
@@ -322,13 +337,13 @@ class MeasurementModel(ABC):
             dJ = np.zeros((m, 3, self.n_params, n))
             Wsk = skew(np.moveaxis(w, 1, 2))  # (m, n, 3, 3) [ω_k]×
             Pdsk = skew(np.moveaxis(pdot, 1, 2))  # (m, n, 3, 3) [ṗ_k]×
-            before = np.tril(np.ones((n, n), bool), -1)  # before[j, k]: joint k precedes joint j
-            # k before j: the whole block rotates with joint k
-            D = (Wsk[:, None] @ blk[:, :, None]) * before[None, :, :, None, None]
-            # k >= j: only the rotational columns change, by -[ṗ_k]× R_A(j)
-            D[..., 3:] -= (Pdsk[:, None] @ kin.R_A[:, :, None]) * ~before[None, :, :, None, None]
             nj = 6 * n
-            dJ[:, :, :nj, :] = np.moveaxis(D, (1, 2, 3, 4), (2, 4, 1, 3)).reshape(m, 3, nj, n)
+            # a view (no copy): D[:, a, j, c, k] = ∂J[:, a, 6j + c]/∂q_k
+            D = np.reshape(dJ[:, :, :nj, :], (m, 3, n, 6, n), copy=False)
+            jb, kb = np.tril_indices(n, -1)  # joint k before joint j: the whole block rotates with joint k
+            D[:, :, jb, :, kb] = np.swapaxes(Wsk[:, kb] @ blk[:, jb], 0, 1)
+            ja, ka = np.triu_indices(n)  # k >= j: only the rotational columns change, by -[ṗ_k]× R_A(j)
+            D[:, :, ja, 3:, ka] = -np.swapaxes(Pdsk[:, ka] @ kin.R_A[:, ja], 0, 1)
             dJ[:, :, frame.start + 3:frame.stop, :] = -np.moveaxis(Pdsk, 1, 3)
             if offset is not None:
                 dJ[:, :, offset, :] = np.moveaxis(Wsk @ kin.R_tool[:, None], 1, 3)

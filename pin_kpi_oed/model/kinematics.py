@@ -62,6 +62,13 @@ def skew(v: np.ndarray) -> np.ndarray:
     return S
 
 
+def _cross(a: np.ndarray, b: np.ndarray, axis: int = -1) -> np.ndarray:
+    """``np.cross(a, b, axis=axis)`` of 3-vectors: the same products and differences, without its axis moves."""
+    a0, a1, a2 = np.moveaxis(a, axis, 0)
+    b0, b1, b2 = np.moveaxis(b, axis, 0)
+    return np.stack([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0], axis=axis)
+
+
 def se3_from_matrix(T: Any, where: str = "transform") -> pin.SE3:
     """A 4×4 homogeneous matrix (translation in m) -> ``pin.SE3``, checked to be a rigid transform.
 
@@ -218,6 +225,11 @@ class Chain:
                                else pin.SE3.Identity())
         K = skew(self.ang)
         self._K, self._KK = K, K @ K
+        self._eye, self._eye9 = np.eye(3), np.eye(3).ravel()
+        self._K9, self._KK9 = self._K.reshape(-1, 9), self._KK.reshape(-1, 9)
+        self._rev = [bool(r) for r in self.revolute]
+        self._rev_idx = np.flatnonzero(self.revolute)
+        self._frames_last: tuple[tuple, ChainFrames, bool] | None = None
 
     @classmethod
     def from_robot(cls, robot: Any) -> Chain:
@@ -239,20 +251,38 @@ class Chain:
                ) -> ChainFrames:
         """Joint frames and world twists for configurations Q (eq. 1).
 
+        The last result is remembered and returned again for the same configurations and placement values (a
+        design step asks for the frames of the same Q for its objective, its collision rows and its incidence
+        row). A product by a constant matrix is one matrix product over all configurations ((3m, 3) by (3, 3)):
+        the same numbers as the per-configuration products, at a fraction of their cost.
+
         Args:
             Q: configurations, (m, n) (rad for revolute, m for prismatic joints).
             placements: joint placements M_j to use (default the nominal ones), e.g. perturbed.
-            twists: compute the world twists (False: ``V`` and ``W`` are zeros, for callers that need the
-                frames only).
+            twists: compute the world twists (False: ``V`` and ``W`` are not computed — zeros, or the twists
+                remembered from an earlier call —, for callers that need the frames only).
 
         Returns:
-            The :class:`ChainFrames`.
+            The :class:`ChainFrames` (read-only arrays, shared by the callers of the same arguments).
 
         Raises:
             InputError: Q does not have n columns.
         """
         Q = self._check(Q)
         M = self.placements if placements is None else placements
+        H = np.array([Mk.homogeneous for Mk in M])
+        key = (Q.shape, Q.tobytes(), H.tobytes())
+        last = self._frames_last  # one read: safe when two threads ask at once
+        if last is not None and last[0] == key and (last[2] or not twists):
+            return last[1]
+        fr = self._frames(Q, H, twists)
+        for a in (fr.R, fr.t, fr.R_A, fr.t_A, fr.V, fr.W):
+            a.flags.writeable = False
+        self._frames_last = (key, fr, twists)
+        return fr
+
+    def _frames(self, Q: np.ndarray, H: np.ndarray, twists: bool) -> ChainFrames:
+        """:meth:`frames` computed: ``H`` the placements as 4×4 matrices (n, 4, 4)."""
         m, n = Q.shape
         R = np.empty((m, n + 1, 3, 3))
         t = np.empty((m, n + 1, 3))
@@ -260,31 +290,59 @@ class Chain:
         t_A = np.empty((m, n, 3))
         V = np.zeros((m, n, 3))
         W = np.zeros((m, n, 3))
-        R[:, 0], t[:, 0] = np.eye(3), 0.0
-        Rc = np.broadcast_to(np.eye(3), (m, 3, 3))
+        R[:, 0], t[:, 0] = self._eye, 0.0
+        rot, trans = H[:, :3, :3].copy(), H[:, :3, 3].copy()
+        X = self._rodrigues(Q)
+        Rc = np.tile(self._eye, (m, 1, 1))
         tc = np.zeros((m, 3))
-        for k in range(n):
-            Mk = M[k]
-            tc = tc + Rc @ Mk.translation
-            Rc = Rc @ Mk.rotation
+        for k, rev in enumerate(self._rev):
+            Rf = Rc.reshape(3 * m, 3)  # a product by a constant: one matrix product over all configurations
+            tc = tc + (Rf @ trans[k]).reshape(m, 3)
+            Rc = (Rf @ rot[k]).reshape(m, 3, 3)
             R_A[:, k], t_A[:, k] = Rc, tc
-            if self.revolute[k]:
+            if rev:
                 if twists:
-                    w = Rc @ self.ang[k]
-                    W[:, k] = w
-                    V[:, k] = -np.cross(w, tc)
-                s, c = np.sin(Q[:, k])[:, None, None], np.cos(Q[:, k])[:, None, None]
-                Rc = Rc @ (np.eye(3) + s * self._K[k] + (1.0 - c) * self._KK[k])
+                    W[:, k] = (Rc.reshape(3 * m, 3) @ self.ang[k]).reshape(m, 3)  # ω_j = R_A,j a_j
+                Rc = Rc @ X[:, k]
             else:
-                u = Rc @ self.lin[k]
-                V[:, k] = u if twists else 0.0
+                u = (Rc.reshape(3 * m, 3) @ self.lin[k]).reshape(m, 3)
+                if twists:
+                    V[:, k] = u
                 tc = tc + u * Q[:, k:k + 1]
             R[:, k + 1], t[:, k + 1] = Rc, tc
+        if twists and self._rev_idx.size:
+            r = self._rev_idx
+            V[:, r] = -_cross(W[:, r], t_A[:, r])  # v_j = t_A,j × ω_j (the point at the world origin)
         return ChainFrames(R, t, R_A, t_A, V, W)
 
-    def tool_point(self, Q: np.ndarray, point_m: np.ndarray, placements: Sequence[pin.SE3] | None = None
-                   ) -> Kinematics:
-        """Forward kinematics of a point of the tool frame for every configuration (base frame).
+    def _rodrigues(self, Q: np.ndarray) -> np.ndarray:
+        """exp(S_j q_j) of the revolute joints (I + sin q K + (1 − cos q) K²), (m, n, 3, 3)."""
+        m, n = Q.shape
+        return (self._eye9 + np.sin(Q)[:, :, None] * self._K9 + (1.0 - np.cos(Q))[:, :, None] * self._KK9
+                ).reshape(m, n, 3, 3)
+
+    def _tip(self, Q: np.ndarray, H: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The last joint's frame (R (m, 3, 3), t (m, 3) m) by the products of :meth:`_frames` (the same numbers),
+        without keeping the frames before it."""
+        m = Q.shape[0]
+        rot, trans = H[:, :3, :3].copy(), H[:, :3, 3].copy()
+        X = self._rodrigues(Q)
+        Rc = np.tile(self._eye, (m, 1, 1))
+        tc = np.zeros((m, 3))
+        for k, rev in enumerate(self._rev):
+            Rf = Rc.reshape(3 * m, 3)
+            tc = tc + (Rf @ trans[k]).reshape(m, 3)
+            Rc = (Rf @ rot[k]).reshape(m, 3, 3)
+            if rev:
+                Rc = Rc @ X[:, k]
+            else:
+                tc = tc + (Rc.reshape(3 * m, 3) @ self.lin[k]).reshape(m, 3) * Q[:, k:k + 1]
+        return Rc, tc
+
+    def tool_pose(self, Q: np.ndarray, point_m: np.ndarray, placements: Sequence[pin.SE3] | None = None
+                  ) -> tuple[np.ndarray, np.ndarray]:
+        """A point of the tool frame and the tool frame's rotation only (base frame): :meth:`tool_point`'s ``p`` and
+        ``R_tool``, the same numbers, without the joint frames and twists (a feasibility filter over many samples).
 
         Args:
             Q: configurations, (m, n) (rad / m).
@@ -292,20 +350,47 @@ class Chain:
             placements: joint placements to use (default the nominal ones).
 
         Returns:
-            The :class:`Kinematics` (point, tool rotation, joint frames before motion, world twists).
+            (point (m, 3) m, tool rotation (m, 3, 3)).
         """
-        fr = self.frames(Q, placements)
+        Q = self._check(Q)
+        M = self.placements if placements is None else placements
+        H = np.array([Mk.homogeneous for Mk in M])
+        last = self._frames_last
+        if last is not None and last[0] == (Q.shape, Q.tobytes(), H.tobytes()):
+            R_last, t_last = last[1].R[:, -1], last[1].t[:, -1]
+        else:
+            R_last, t_last = self._tip(Q, H)
+        return self._tool(R_last, t_last, point_m)
+
+    def _tool(self, R_last: np.ndarray, t_last: np.ndarray, point_m: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The tool point and rotation from the last joint's frame."""
         Mt = self.tool_placement
-        R_last, t_last = fr.R[:, -1], fr.t[:, -1]
-        t = t_last + R_last @ Mt.translation
-        R = R_last @ Mt.rotation
+        m = R_last.shape[0]
+        R_last = np.ascontiguousarray(R_last).reshape(3 * m, 3)
+        t = t_last + (R_last @ Mt.translation).reshape(m, 3)
+        R = (R_last @ Mt.rotation).reshape(m, 3, 3)
         point = np.asarray(point_m, float)
         if point.ndim == 2:
             if point.shape != t.shape:
                 raise InputError(f"{point.shape[0]} tool points for {t.shape[0]} configurations")
-            P = t + np.einsum("mab,mb->ma", R, point)
-        else:
-            P = t + R @ point
+            return t + np.einsum("mab,mb->ma", R, point), R
+        return t + (R.reshape(3 * m, 3) @ point).reshape(m, 3), R
+
+    def tool_point(self, Q: np.ndarray, point_m: np.ndarray, placements: Sequence[pin.SE3] | None = None,
+                   twists: bool = True) -> Kinematics:
+        """Forward kinematics of a point of the tool frame for every configuration (base frame).
+
+        Args:
+            Q: configurations, (m, n) (rad / m).
+            point_m: the point in the tool frame, (3,) m, or one per configuration, (m, 3) m.
+            placements: joint placements to use (default the nominal ones).
+            twists: compute the world twists (False: ``twist`` is not computed, as in :meth:`frames`).
+
+        Returns:
+            The :class:`Kinematics` (point, tool rotation, joint frames before motion, world twists).
+        """
+        fr = self.frames(Q, placements, twists)
+        P, R = self._tool(fr.R[:, -1], fr.t[:, -1], point_m)
         return Kinematics(P, R, fr.R_A, fr.t_A, fr.twist)
 
     def tool_points(self, Q: np.ndarray, point_m: np.ndarray, rotations: np.ndarray, translations: np.ndarray
@@ -363,4 +448,4 @@ def placement_jacobian(kin: Kinematics) -> np.ndarray:
 def point_velocity(kin: Kinematics) -> np.ndarray:
     """∂x/∂q of the tool point (base frame): ṗ_k = v_k + ω_k × x, (m, 3, n)."""
     v, w = kin.twist[:, :3, :], kin.twist[:, 3:, :]
-    return v + np.cross(w, kin.p[:, :, None], axis=1)
+    return v + _cross(w, kin.p[:, :, None], axis=1)

@@ -330,6 +330,9 @@ class TrackerModel(MeasurementModel):
         z = reflector axis (tool z) and g = unit beam from the reflector to the tracker.
         """
         p = np.asarray(p, float)
+        if not with_grad:  # the reflector and the tool axis only
+            P, R_tool = self._tool_pose(p, Q, self.points(p))
+            return self._incidence(p, P, R_tool)
         kin = self.kinematics(p, Q, self.points(p))
         T = self.tracker_pose(p)
         RT = T.rotation
@@ -337,8 +340,6 @@ class TrackerModel(MeasurementModel):
         z = np.einsum("ab,mb->ma", RT, kin.R_tool[:, :, 2])
         r = np.linalg.norm(y, axis=1)
         c = -np.einsum("ma,ma->m", z, y) / r
-        if not with_grad:
-            return c
         w = kin.twist[:, 3:, :]
         dy = np.einsum("ab,mbn->man", RT, point_velocity(kin))
         wT = np.einsum("ab,mbn->man", RT, w)
@@ -347,6 +348,13 @@ class TrackerModel(MeasurementModel):
         dc = (-(np.einsum("man,ma->mn", dz, y) + np.einsum("ma,man->mn", z, dy)) / r[:, None]
               + (zy / r ** 3)[:, None] * np.einsum("ma,man->mn", y, dy))
         return c, dc
+
+    def _incidence(self, p: np.ndarray, P: np.ndarray, R_tool: np.ndarray) -> np.ndarray:
+        """cos β of reflectors at P (m, 3) m (base frame) with tool rotations R_tool (m, 3, 3), (m,)."""
+        T = self.tracker_pose(p)
+        y = P @ T.rotation.T + T.translation  # reflector in the tracker frame
+        z = np.einsum("ab,mb->ma", T.rotation, R_tool[:, :, 2])
+        return -np.einsum("ma,ma->m", z, y) / np.linalg.norm(y, axis=1)
 
     # ------------------------------------------------------------------ notes
     def identifiability_notes(self) -> list[str]:

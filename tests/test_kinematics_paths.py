@@ -1,0 +1,189 @@
+"""The faster paths of the design stack give the numbers of the plain ones.
+
+``Chain.frames`` multiplies by the constant joint placements once over all configurations, remembers its last result
+and leaves out the twists when not asked; ``Chain.tool_pose`` walks the chain without keeping the joint frames; the
+incidence row without gradient reads the tool pose only; ``∂J/∂q`` computes only the joint pairs that enter it. Each
+is checked here against the per-configuration code it replaced (kept below as the reference), to 1e-12 relative (on
+the package's NumPy/OpenBLAS the numbers are bit for bit the same: ``pin-kpi-oed demo`` writes the same design file).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pinocchio as pin
+import pytest
+
+from pin_kpi_oed.cell.cell import load_cell
+from pin_kpi_oed.cell.collision import CollisionModel
+from pin_kpi_oed.model.kinematics import Chain, placement_jacobian, point_velocity, skew
+from pin_kpi_oed.model.robot import load_robot
+
+REL = 1e-12
+
+
+def _close(a: np.ndarray, b: np.ndarray) -> bool:
+    """Equal to 1e-12 relative to the larger magnitude of the two arrays (1 for arrays of zeros)."""
+    scale = max(np.abs(a).max(initial=0.0), np.abs(b).max(initial=0.0), 1.0)
+    return a.shape == b.shape and bool(np.abs(a - b).max(initial=0.0) <= REL * scale)
+
+
+def _reference_frames(chain: Chain, Q: np.ndarray, placements=None) -> dict:
+    """The per-configuration loop ``Chain.frames`` replaced: every product per configuration, twists always."""
+    M = chain.placements if placements is None else placements
+    m, n = Q.shape
+    R, t = np.empty((m, n + 1, 3, 3)), np.empty((m, n + 1, 3))
+    R_A, t_A = np.empty((m, n, 3, 3)), np.empty((m, n, 3))
+    V, W = np.zeros((m, n, 3)), np.zeros((m, n, 3))
+    R[:, 0], t[:, 0] = np.eye(3), 0.0
+    Rc, tc = np.broadcast_to(np.eye(3), (m, 3, 3)), np.zeros((m, 3))
+    K = skew(chain.ang)
+    for k in range(n):
+        tc = tc + Rc @ M[k].translation
+        Rc = Rc @ M[k].rotation
+        R_A[:, k], t_A[:, k] = Rc, tc
+        if chain.revolute[k]:
+            w = Rc @ chain.ang[k]
+            W[:, k], V[:, k] = w, -np.cross(w, tc)
+            s, c = np.sin(Q[:, k])[:, None, None], np.cos(Q[:, k])[:, None, None]
+            Rc = Rc @ (np.eye(3) + s * K[k] + (1.0 - c) * (K[k] @ K[k]))
+        else:
+            u = Rc @ chain.lin[k]
+            V[:, k] = u
+            tc = tc + u * Q[:, k:k + 1]
+        R[:, k + 1], t[:, k + 1] = Rc, tc
+    return {"R": R, "t": t, "R_A": R_A, "t_A": t_A, "V": V, "W": W}
+
+
+def _perturbed(chain: Chain, seed: int) -> list[pin.SE3]:
+    rng = np.random.default_rng(seed)
+    return [M * pin.exp6(rng.normal(0.0, 1e-3, 6)) for M in chain.placements]
+
+
+@pytest.mark.parametrize("name", ["kr15", "kr15_track", "panda"])
+def test_frames_equal_the_per_configuration_products(name: str) -> None:
+    """Frames, frames before motion and twists of revolute and prismatic chains (kr15_track: a linear track first),
+    one to 300 configurations, nominal and perturbed placements: the reference loop's numbers."""
+    robot = load_robot(name)
+    rng = np.random.default_rng(3)
+    for m in (1, 7, 300):
+        Q = rng.uniform(robot.q_lower, robot.q_upper, (m, robot.nq))
+        for placements in (None, _perturbed(Chain.from_robot(robot), m)):
+            chain = Chain.from_robot(robot)  # nothing remembered
+            ref = _reference_frames(chain, Q, placements)
+            fr = chain.frames(Q, placements)
+            for key, value in ref.items():
+                assert _close(getattr(fr, key), value), (name, m, key)
+            bare = Chain.from_robot(robot).frames(Q, placements, twists=False)
+            for key in ("R", "t", "R_A", "t_A"):
+                assert _close(getattr(bare, key), ref[key]), (name, m, key, "without twists")
+            assert not bare.V.any() and not bare.W.any(), "twists not asked for are not computed"
+
+
+def test_frames_are_remembered_by_value_read_only_and_twists_on_demand() -> None:
+    """The same configurations and placement values give the remembered result (read-only, shared); other
+    placements or configurations are computed anew; a call asking for twists after one without them computes them."""
+    robot = load_robot("kr15")
+    chain = Chain.from_robot(robot)
+    Q = np.random.default_rng(5).uniform(robot.q_lower, robot.q_upper, (20, robot.nq))
+    bare = chain.frames(Q, twists=False)
+    assert not bare.W.any()
+    full = chain.frames(Q)
+    assert full is not bare and _close(full.W, _reference_frames(chain, Q)["W"]) and full.W.any()
+    assert chain.frames(Q.copy(), [M.copy() for M in chain.placements]) is full, "equal values: remembered"
+    assert chain.frames(Q, twists=False) is full, "remembered twists serve a call without them"
+    with pytest.raises(ValueError):
+        full.R[0, 0, 0, 0] = 1.0
+    moved = chain.frames(Q, _perturbed(chain, 1))
+    assert moved is not full and not np.array_equal(moved.t, full.t)
+    Q2 = Q.copy()
+    Q2[3, 2] += 1e-9
+    again = chain.frames(Q2)
+    assert again is not full and not np.array_equal(again.t[3], full.t[3]) and np.array_equal(again.t[4], full.t[4])
+
+
+@pytest.mark.parametrize("name", ["ur5", "kr15_track"])
+def test_tool_pose_is_the_tool_point_of_the_full_chain(name: str) -> None:
+    """``tool_pose`` (no joint frames kept) gives ``tool_point``'s point and tool rotation, one point or one per
+    configuration, nominal and perturbed placements, computed afresh or from the remembered frames."""
+    robot = load_robot(name)
+    rng = np.random.default_rng(7)
+    Q = rng.uniform(robot.q_lower, robot.q_upper, (50, robot.nq))
+    for placements in (None, _perturbed(Chain.from_robot(robot), 2)):
+        for point in (np.array([0.01, -0.02, 0.05]), rng.normal(0.0, 0.05, (50, 3))):
+            kin = Chain.from_robot(robot).tool_point(Q, point, placements)
+            fresh = Chain.from_robot(robot)
+            P, R = fresh.tool_pose(Q, point, placements)
+            assert _close(P, kin.p) and _close(R, kin.R_tool)
+            fresh.frames(Q, placements)  # now from the remembered frames
+            P2, R2 = fresh.tool_pose(Q, point, placements)
+            assert _close(P2, kin.p) and _close(R2, kin.R_tool)
+
+
+def test_incidence_without_gradient_is_the_value_with_it() -> None:
+    """cos β read from the tool pose alone equals the value computed with its gradient, at nominal and perturbed
+    parameters (the rejection sampler's first stage and the optimiser's row decide alike)."""
+    cell = load_cell("kr15")
+    rng = np.random.default_rng(11)
+    Q = rng.uniform(cell.q_lower, cell.q_upper, (40, cell.q_lower.size))
+    for p in (np.zeros(cell.tracker_model().n_params), rng.normal(0.0, 1e-4, cell.tracker_model().n_params)):
+        c = cell.tracker_model().incidence_cos(p, Q)
+        c_grad, _ = cell.tracker_model().incidence_cos(p, Q, with_grad=True)
+        assert _close(c, c_grad)
+
+
+def _reference_dJ(model, p: np.ndarray, Q: np.ndarray) -> np.ndarray:
+    """∂J/∂q of the reflector rows by the masked products over every joint pair (the code the pair list replaced)."""
+    kin = model.kinematics(p, Q, model.points(p))
+    m, n = Q.shape
+    blk = placement_jacobian(kin)
+    Wsk = skew(np.moveaxis(kin.twist[:, 3:, :], 1, 2))
+    Pdsk = skew(np.moveaxis(point_velocity(kin), 1, 2))
+    before = np.tril(np.ones((n, n), bool), -1)
+    D = (Wsk[:, None] @ blk[:, :, None]) * before[None, :, :, None, None]
+    D[..., 3:] -= (Pdsk[:, None] @ kin.R_A[:, :, None]) * ~before[None, :, :, None, None]
+    return np.moveaxis(D, (1, 2, 3, 4), (2, 4, 1, 3)).reshape(m, 3, 6 * n, n)
+
+
+def test_dJ_dq_equals_the_masked_products_over_every_joint_pair() -> None:
+    """The joint-placement columns of ∂J/∂q (tracker frame) from the pairs that enter it equal the products over all
+    pairs masked by joint order, rotated into the tracker frame."""
+    cell = load_cell("kr15")
+    model = cell.tracker_model()
+    p = np.zeros(model.n_params)
+    Q = np.random.default_rng(13).uniform(cell.q_lower, cell.q_upper, (30, cell.q_lower.size))
+    _, _, dJ, _ = model.jacobian_dq(p, Q)
+    nj = 6 * model.layout.n_joints
+    RT = model.tracker_pose(p).rotation
+    ref = np.einsum("ab,mbjk->majk", RT, _reference_dJ(model, p, Q))
+    assert _close(dJ[:, :3, :nj, :], ref)
+    assert np.abs(ref).max() > 0.1, "the reference is not all zeros"
+
+
+def test_collision_model_shares_the_measurement_models_remembered_frames() -> None:
+    """The constraint rows and the incidence row at the same configurations read one chain's frames."""
+    cell = load_cell("kr15")
+    coll = CollisionModel(cell)
+    assert coll.fk is coll.model.chain
+    Q = np.random.default_rng(17).uniform(cell.q_lower, cell.q_upper, (10, cell.q_lower.size))
+    coll.evaluate(Q, with_grad=True)
+    remembered = coll.fk.frames(Q)
+    kin = coll.model.kinematics(np.zeros(coll.model.n_params), Q, coll.model.reflector_m)
+    assert kin.R_A is remembered.R_A, "the measurement model's kinematics used the frames the rows computed"
+
+
+def test_banded_pair_gradients_are_the_full_ones_on_the_near_pairs() -> None:
+    """With a band, the pair rows' gradients are computed only for the pairs near at some configuration: on the near
+    rows they equal the gradients of the run without a band (1e-12), elsewhere they are zero."""
+    cell = load_cell("kr15")
+    coll = CollisionModel(cell)
+    rng = np.random.default_rng(19)
+    Q = rng.uniform(cell.q_lower, cell.q_upper, (25, cell.q_lower.size))
+    g_full, G_full = coll.evaluate(Q, backend="geometry")
+    band = 0.05
+    g_band, G_band = coll.evaluate(Q, backend="geometry", band=band)
+    pair = coll.info.kind == 0
+    gp = g_full[:, pair]
+    near = gp <= gp.min(axis=1, keepdims=True) + band
+    assert 0 < near.sum() < near.size and np.array_equal(g_band, g_full)
+    assert _close(G_band[:, pair][near], G_full[:, pair][near]) and np.abs(G_full[:, pair][near]).max() > 0.01
+    assert not G_band[:, pair][~near].any()
