@@ -38,7 +38,7 @@ import pinocchio as pin
 
 from pin_kpi_oed.errors import InputError, RobotLoadError
 
-__all__ = ["skew", "se3_from_matrix", "joint_motion_axes", "revolute_mask", "joint_unit", "ChainFrames",
+__all__ = ["skew", "cross3", "se3_from_matrix", "joint_motion_axes", "revolute_mask", "joint_unit", "ChainFrames",
            "Kinematics", "Chain", "placement_jacobian", "point_velocity"]
 
 #: Tolerance on the motion axes of a pure revolute (unit angular, zero linear part) or prismatic joint.
@@ -60,6 +60,28 @@ def skew(v: np.ndarray) -> np.ndarray:
     S[..., 1, 0], S[..., 1, 2] = v[..., 2], -v[..., 0]
     S[..., 2, 0], S[..., 2, 1] = -v[..., 1], v[..., 0]
     return S
+
+
+def cross3(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Batched cross products a × b of float 3-vectors: ``np.cross(a, b)`` bit for bit (the same products and
+    differences, in its order) without its axis handling, which took two thirds of its time on a few rows.
+
+    Args:
+        a, b: vectors, (..., 3), broadcast against each other (float64).
+
+    Returns:
+        (..., 3).
+    """
+    a0, a1, a2 = a[..., 0], a[..., 1], a[..., 2]
+    b0, b1, b2 = b[..., 0], b[..., 1], b[..., 2]
+    out = np.empty(a.shape if a.shape == b.shape else np.broadcast_shapes(a.shape, b.shape))
+    np.multiply(a1, b2, out=out[..., 0])
+    out[..., 0] -= a2 * b1
+    np.multiply(a2, b0, out=out[..., 1])
+    out[..., 1] -= a0 * b2
+    np.multiply(a0, b1, out=out[..., 2])
+    out[..., 2] -= a1 * b0
+    return out
 
 
 def se3_from_matrix(T: Any, where: str = "transform") -> pin.SE3:
@@ -272,7 +294,7 @@ class Chain:
                 if twists:
                     w = Rc @ self.ang[k]
                     W[:, k] = w
-                    V[:, k] = -np.cross(w, tc)
+                    V[:, k] = -cross3(w, tc)
                 s, c = np.sin(Q[:, k])[:, None, None], np.cos(Q[:, k])[:, None, None]
                 Rc = Rc @ (np.eye(3) + s * self._K[k] + (1.0 - c) * self._KK[k])
             else:
