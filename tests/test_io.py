@@ -17,6 +17,7 @@ import pin_kpi_oed.data.measurements as pio
 from pin_kpi_oed.errors import InputError, PinKpiOedError
 from pin_kpi_oed.data.measurements import MeasurementSet, read_measurements, write_measurements
 from pin_kpi_oed.data.atomic import atomic_write_json, atomic_write_text
+from tests._cache_g import IPA_GROUP, ipa_series
 
 JOINTS = ["j1", "j2", "j3"]
 _HERE = Path(__file__).resolve()
@@ -489,10 +490,9 @@ def test_ipa_series_c() -> None:
 
 
 @needs_ipa
+@pytest.mark.xdist_group(IPA_GROUP)
 def test_ipa_series_a_time() -> None:
-    from pin_kpi_oed.data.ipa import import_ipa
-
-    ms = import_ipa(IPA_DIR / "Series_A")
+    ms = ipa_series(IPA_DIR / "Series_A")  # imported once with the other tests of Series A (tests/_cache_g.py)
     assert len(ms) == 11911 and ms.sigma_m is None
     t = ms.time_s
     assert t is not None and t[0] == 0.0 and t[1] == 20.0  # 16:39:04 -> 16:39:24
@@ -506,13 +506,12 @@ def test_ipa_series_a_time() -> None:
 
 
 @needs_ipa
-@pytest.mark.parametrize("series", ["Series_A", "Series_B", "Series_C", "Series_D"])
+@pytest.mark.parametrize("series", [pytest.param("Series_A", marks=pytest.mark.xdist_group(IPA_GROUP)), "Series_B",
+                                    "Series_C", "Series_D"])
 def test_ipa_euler_convention(series: str) -> None:
     """The angle between two measured orientations must match the nominal UR10 FK
     (it does not depend on the unknown tracker or probe frames)."""
-    from pin_kpi_oed.data.ipa import import_ipa
-
-    ms = import_ipa(IPA_DIR / series)
+    ms = ipa_series(IPA_DIR / series)
     alpha = [math.pi / 2, 0, 0, math.pi / 2, -math.pi / 2, 0]  # UR10 CB3 nominal DH
     R = Rotation.identity(len(ms))
     for k in range(6):
