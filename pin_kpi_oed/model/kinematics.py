@@ -282,8 +282,9 @@ class Chain:
         t_A = np.empty((m, n, 3))
         V = np.zeros((m, n, 3))
         W = np.zeros((m, n, 3))
-        R[:, 0], t[:, 0] = np.eye(3), 0.0
-        Rc = np.broadcast_to(np.eye(3), (m, 3, 3))
+        eye = np.eye(3)
+        R[:, 0], t[:, 0] = eye, 0.0
+        Rc = np.broadcast_to(eye, (m, 3, 3))
         tc = np.zeros((m, 3))
         for k in range(n):
             Mk = M[k]
@@ -296,7 +297,7 @@ class Chain:
                     W[:, k] = w
                     V[:, k] = -cross3(w, tc)
                 s, c = np.sin(Q[:, k])[:, None, None], np.cos(Q[:, k])[:, None, None]
-                Rc = Rc @ (np.eye(3) + s * self._K[k] + (1.0 - c) * self._KK[k])
+                Rc = Rc @ (eye + s * self._K[k] + (1.0 - c) * self._KK[k])
             else:
                 u = Rc @ self.lin[k]
                 V[:, k] = u if twists else 0.0
