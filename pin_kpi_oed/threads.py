@@ -68,6 +68,64 @@ def get_max_threads() -> int:
     return _parse(env, "PIN_KPI_OED_THREADS") if env else 1
 
 
+#: (the dynamic linker's counts of libraries loaded and unloaded, threadpoolctl's controller of the libraries then
+#: loaded): :func:`_controller`'s last scan
+_scanned: tuple[tuple[int, int], Any] | None = None
+
+
+@functools.cache
+def _linker_api() -> tuple[Any, Any, Any] | None:
+    """(``dl_iterate_phdr``, its callback type, the entry type) from the C library; None where it has none."""
+    import ctypes
+
+    class Info(ctypes.Structure):
+        _fields_ = [("addr", ctypes.c_void_p), ("name", ctypes.c_char_p), ("phdr", ctypes.c_void_p),
+                    ("phnum", ctypes.c_uint16), ("adds", ctypes.c_ulonglong), ("subs", ctypes.c_ulonglong)]
+
+    try:
+        iterate = ctypes.CDLL(None).dl_iterate_phdr
+    except (AttributeError, OSError):  # no dl_iterate_phdr (macOS, Windows)
+        return None
+    return iterate, ctypes.CFUNCTYPE(ctypes.c_int, ctypes.POINTER(Info), ctypes.c_size_t, ctypes.c_void_p), Info
+
+
+def _linker_counts() -> tuple[int, int] | None:
+    """How many times the dynamic linker loaded and unloaded a library in this process so far (glibc's
+    ``dl_iterate_phdr``: ``dlpi_adds``, ``dlpi_subs``); None where the C library does not say."""
+    import ctypes
+
+    api = _linker_api()
+    if api is None:
+        return None
+    iterate, callback_type, info_type = api
+    seen: list[tuple[int, int]] = []
+
+    def first(info: Any, size: int, _data: Any) -> int:
+        if size >= ctypes.sizeof(info_type):
+            seen.append((int(info.contents.adds), int(info.contents.subs)))
+        return 1  # the counts are the same in every entry: one is enough
+
+    iterate(callback_type(first), None)
+    return seen[0] if seen else None
+
+
+def _controller() -> Any:
+    """threadpoolctl's controller of the BLAS / OpenMP libraries loaded now, scanned again only when the dynamic
+    linker loaded or unloaded a library since the last scan: a scan reads the process's memory map (2 ms, paid by
+    every entry point and every command run in one process; a check of the linker's counts costs 1 µs)."""
+    global _scanned
+    from threadpoolctl import ThreadpoolController
+
+    counts = _linker_counts()
+    last = _scanned
+    if counts is not None and last is not None and last[0] == counts:
+        return last[1]
+    controller = ThreadpoolController()
+    if counts is not None:
+        _scanned = (counts, controller)  # the counts before the scan: a library loaded meanwhile scans again
+    return controller
+
+
 @contextmanager
 def limited_threads() -> Iterator[None]:
     """Context in which the loaded BLAS and OpenMP libraries use at most :func:`get_max_threads` threads.
@@ -85,9 +143,8 @@ def limited_threads() -> Iterator[None]:
     _depth = 1
     try:
         import scipy.linalg  # noqa: F401  (SciPy's own BLAS: loaded now, so the limit below covers it)
-        from threadpoolctl import threadpool_limits
 
-        with threadpool_limits(limits=get_max_threads()):
+        with _controller().limit(limits=get_max_threads()):
             yield
     finally:
         _depth = 0
@@ -126,6 +183,4 @@ def limit_process_threads() -> Any:
         import scipy.linalg  # noqa: F401
     elif not any(name in sys.modules for name in ("numpy", "scipy")):
         return nullcontext()  # every BLAS / OpenMP library loaded from now on reads the variables just set
-    from threadpoolctl import threadpool_limits
-
-    return threadpool_limits(limits=n)
+    return _controller().limit(limits=n)

@@ -8,17 +8,39 @@ package is parsed once for all of them.
 from __future__ import annotations
 
 import ast
+import contextlib
 import functools
+import gc
+from collections.abc import Iterator
 from pathlib import Path
 
 #: the xdist group of the tests that read the package's parsed source
 PARSED_GROUP = "misc_parsed_sources"
 
 
+@contextlib.contextmanager
+def _kept_out_of_collections() -> Iterator[None]:
+    """The objects made inside kept out of every later garbage collection (``gc.freeze``), none run inside: the trees
+    are cached for the whole process and hold no reference cycles, yet each pass of the collector scanned every tree
+    parsed so far (parsing the package, the tests, the benchmarks and the examples took 3.8-4.4 s CPU so, 1.6-2.0 s
+    without the passes: ``python -c`` over the 470 files). The objects alive at that moment besides the trees
+    (modules, pytest's state) are long-lived too; an object freed by its reference count is freed as before."""
+    enabled = gc.isenabled()
+    gc.disable()
+    try:
+        yield
+    finally:
+        gc.freeze()
+        if enabled:
+            gc.enable()
+
+
 @functools.cache
 def parsed(path: Path) -> ast.Module:
     """The parsed source of the file ``path`` (an absolute path; parsed on the first call only)."""
-    return ast.parse(Path(path).read_text())
+    text = Path(path).read_text()
+    with _kept_out_of_collections():
+        return ast.parse(text)
 
 
 #: id of a tree -> (the tree, kept alive so that its id names it alone; its nodes in ``ast.walk`` order)
@@ -29,5 +51,6 @@ def nodes(tree: ast.AST) -> tuple[ast.AST, ...]:
     """Every node of ``tree`` in ``ast.walk`` order, listed on the first call for that tree."""
     hit = _NODES.get(id(tree))
     if hit is None or hit[0] is not tree:
-        hit = _NODES[id(tree)] = (tree, tuple(ast.walk(tree)))
+        with _kept_out_of_collections():
+            hit = _NODES[id(tree)] = (tree, tuple(ast.walk(tree)))
     return hit[1]

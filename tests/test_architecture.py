@@ -27,14 +27,27 @@ def _tree(f: Path) -> ast.Module:
     return parsed(f.resolve())
 
 
+#: id of a tree -> (the tree, kept alive so that its id names it alone; its import statements, each with whether it
+#: sits under ``if TYPE_CHECKING:``)
+_IMPORTS: dict[int, tuple[ast.AST, list[tuple[ast.Import | ast.ImportFrom, bool]]]] = {}
+
+
+def _imports(tree: ast.AST) -> list[tuple[ast.Import | ast.ImportFrom, bool]]:
+    """Every import statement of ``tree`` in ``ast.walk`` order, with whether it is inside the body of an
+    ``if TYPE_CHECKING:`` (listed once per tree: the rules below read them several times)."""
+    hit = _IMPORTS.get(id(tree))
+    if hit is None or hit[0] is not tree:
+        typing_only = {id(n) for node in nodes(tree) if isinstance(node, ast.If)
+                       and "TYPE_CHECKING" in ast.unparse(node.test) for b in node.body for n in ast.walk(b)}
+        hit = _IMPORTS[id(tree)] = (tree, [(n, id(n) in typing_only) for n in nodes(tree)
+                                           if isinstance(n, (ast.Import, ast.ImportFrom))])
+    return hit[1]
+
+
 def _runtime_imports(tree: ast.AST):
     """(line, module) of every pin_kpi_oed import, lazy ones included, except under ``if TYPE_CHECKING:``."""
-    skip: set[int] = set()
-    for node in nodes(tree):
-        if isinstance(node, ast.If) and "TYPE_CHECKING" in ast.unparse(node.test):
-            skip.update(id(n) for b in node.body for n in ast.walk(b))
-    for node in nodes(tree):
-        if id(node) in skip:
+    for node, typing_only in _imports(tree):
+        if typing_only:
             continue
         if isinstance(node, ast.ImportFrom) and node.module and node.module.startswith("pin_kpi_oed."):
             yield node.lineno, node.module
@@ -77,12 +90,8 @@ def _import_graph(typing_too: bool = False) -> dict[str, set[str]]:
     files = {_module_name(f): f for f in PKG.rglob("*.py")}
     graph: dict[str, set[str]] = {m: set() for m in files}
     for m, f in files.items():
-        tree = _tree(f)
-        typing_only = set() if typing_too else {
-            id(n) for node in nodes(tree) if isinstance(node, ast.If)
-            and "TYPE_CHECKING" in ast.unparse(node.test) for b in node.body for n in ast.walk(b)}
-        for node in nodes(tree):
-            if id(node) in typing_only:
+        for node, typing_only in _imports(_tree(f)):
+            if typing_only and not typing_too:
                 continue
             if isinstance(node, ast.ImportFrom) and node.module and node.module.startswith("pin_kpi_oed"):
                 targets = [node.module] + [f"{node.module}.{a.name}" for a in node.names]
@@ -199,14 +208,15 @@ PUBLIC_UNDERSCORE = {"os._exit"}
 def _private_reaches(tree: ast.AST) -> list[tuple[int, str]]:
     """(line, text) of every private name imported from another module (``from m import _x``, ``m._x``) and every
     private attribute read on an object other than ``self`` / ``cls`` (``problem._kpi``)."""
-    skip = _annotation_nodes(tree)
+    reach = [node for node in nodes(tree) if isinstance(node, ast.ImportFrom) or isinstance(node, ast.Attribute)
+             and _private(node.attr) and not (isinstance(node.value, ast.Name) and node.value.id in ("self", "cls"))]
+    # the annotations' nodes listed only when a private attribute was read (most trees read none)
+    skip = _annotation_nodes(tree) if any(isinstance(n, ast.Attribute) for n in reach) else set()
     out = []
-    for node in nodes(tree):
+    for node in reach:
         if isinstance(node, ast.ImportFrom):
             out += [(node.lineno, f"from {node.module} import {a.name}") for a in node.names if _private(a.name)]
-        elif isinstance(node, ast.Attribute) and _private(node.attr) and id(node) not in skip \
-                and not (isinstance(node.value, ast.Name) and node.value.id in ("self", "cls")) \
-                and ast.unparse(node) not in PUBLIC_UNDERSCORE:
+        elif id(node) not in skip and ast.unparse(node) not in PUBLIC_UNDERSCORE:
             out.append((node.lineno, ast.unparse(node)))
     return out
 
@@ -236,8 +246,10 @@ def test_benchmarks_and_examples_use_the_public_api() -> None:
 def test_tests_import_no_private_name_of_the_package() -> None:
     """A test imports what it tests by its public name: no ``from pin_kpi_oed... import _x`` anywhere in tests/."""
     root = PKG.parent
-    bad = [f"{f.relative_to(root)}:{line} {text}" for f in sorted((root / "tests").rglob("*.py"))
-           for line, text in _private_reaches(_tree(f)) if text.startswith("from pin_kpi_oed")]
+    bad = [f"{f.relative_to(root)}:{node.lineno} from {node.module} import {a.name}"
+           for f in sorted((root / "tests").rglob("*.py")) for node in nodes(_tree(f))
+           if isinstance(node, ast.ImportFrom) and (node.module or "").startswith("pin_kpi_oed")
+           for a in node.names if _private(a.name)]
     assert not bad, "private names of the package imported by tests:\n" + "\n".join(bad)
 
 

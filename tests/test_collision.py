@@ -307,6 +307,24 @@ def test_missing_and_invalid_files(tmp_path):
     p.write_text("robot: [unclosed\n")
     with pytest.raises(InputError, match="invalid YAML"):
         load_cell(p)
+    p.write_text("robot: kr15: x\n")  # libyaml words it "not allowed in this context"
+    with pytest.raises(InputError, match=r"invalid YAML \(mapping values are not allowed here\)"):
+        load_cell(p)
+
+
+def test_cell_files_parse_alike_with_libyaml_and_pyyaml():
+    """load_cell parses with libyaml where PyYAML has it: every cell file of the package, the examples and the
+    benchmarks gives the values of PyYAML's own parser, and the cell built from it is the same."""
+    assert yaml.__with_libyaml__, "PyYAML without libyaml: nothing to compare (load_cell uses PyYAML's parser)"
+    root = CELL_DIR.parents[2]
+    files = sorted(CELL_DIR.glob("*.yaml")) + sorted((root / "examples").glob("*cell*.yaml")) \
+        + sorted((root / "benchmarks" / "data").glob("*cell*.yaml"))
+    assert len(files) >= 10
+    for f in files:
+        text = f.read_text()
+        assert yaml.load(text, Loader=yaml.CSafeLoader) == yaml.safe_load(text), f.name
+    d = yaml.safe_load((CELL_DIR / "kr15.yaml").read_text())
+    assert load_cell("kr15").to_dict() == cell_from_dict(d, str(CELL_DIR / "kr15.yaml"), CELL_DIR).to_dict()
 
 
 def test_geometry_backend_equals_closed_form(coll15_all):

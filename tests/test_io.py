@@ -17,6 +17,7 @@ import pin_kpi_oed.data.measurements as pio
 from pin_kpi_oed.errors import InputError, PinKpiOedError
 from pin_kpi_oed.data.measurements import MeasurementSet, read_measurements, write_measurements
 from pin_kpi_oed.data.atomic import atomic_write_json, atomic_write_text
+from tests._cache_g import IPA_GROUP, ipa_series
 
 JOINTS = ["j1", "j2", "j3"]
 _HERE = Path(__file__).resolve()
@@ -489,10 +490,9 @@ def test_ipa_series_c() -> None:
 
 
 @needs_ipa
+@pytest.mark.xdist_group(IPA_GROUP)
 def test_ipa_series_a_time() -> None:
-    from pin_kpi_oed.data.ipa import import_ipa
-
-    ms = import_ipa(IPA_DIR / "Series_A")
+    ms = ipa_series(IPA_DIR / "Series_A")  # imported once with the other tests of Series A (tests/_cache_g.py)
     assert len(ms) == 11911 and ms.sigma_m is None
     t = ms.time_s
     assert t is not None and t[0] == 0.0 and t[1] == 20.0  # 16:39:04 -> 16:39:24
@@ -506,13 +506,12 @@ def test_ipa_series_a_time() -> None:
 
 
 @needs_ipa
-@pytest.mark.parametrize("series", ["Series_A", "Series_B", "Series_C", "Series_D"])
+@pytest.mark.parametrize("series", [pytest.param("Series_A", marks=pytest.mark.xdist_group(IPA_GROUP)), "Series_B",
+                                    "Series_C", "Series_D"])
 def test_ipa_euler_convention(series: str) -> None:
     """The angle between two measured orientations must match the nominal UR10 FK
     (it does not depend on the unknown tracker or probe frames)."""
-    from pin_kpi_oed.data.ipa import import_ipa
-
-    ms = import_ipa(IPA_DIR / series)
+    ms = ipa_series(IPA_DIR / series)
     alpha = [math.pi / 2, 0, 0, math.pi / 2, -math.pi / 2, 0]  # UR10 CB3 nominal DH
     R = Rotation.identity(len(ms))
     for k in range(6):
@@ -576,3 +575,25 @@ def test_ipa_bad_inputs(tmp_path: Path) -> None:
         read_ipa_flange_transform(tmp_path)
     (tmp_path / "Trafo_TM_F_init.txt").write_text("1 0 0 0\n0 1 0 0\n0 0 1 0\n0 0 0 1")
     np.testing.assert_array_equal(read_ipa_flange_transform(tmp_path), np.eye(4))
+
+
+def test_ipa_cells_and_timestamps_read_as_the_cell_parser_and_strptime_read_them(tmp_path: Path) -> None:
+    """The decimal-comma cells (blanks, NUL padding, exponents) give float() of the cleaned text; the timestamps give
+    strptime's seconds, and a stamp strptime refuses is refused with its words (row and line named)."""
+    from pin_kpi_oed.data.ipa import UR10_JOINT_NAMES, import_ipa
+
+    header = ["Timestamp", *UR10_JOINT_NAMES, "measurement_x", "measurement_y", "measurement_z"]
+    cells = ["0", " 1,5 ", "-0,25\x00", "2,78E-05", "1e-3", "3", " 1000,125", "2000", "-3,5E+02 "]
+    f = tmp_path / "measurements_t.csv"
+    f.write_text(";".join(header) + "\n" + "\n".join(f"{t};" + ";".join(cells) for t in
+                                                     ("20200229235959", "20200301000004")) + "\n")
+    ms = import_ipa(f)
+    want = [float(c.strip().strip("\x00").strip().replace(",", ".")) for c in cells]
+    assert ms.q.tolist() == [want[:6]] * 2 and ms.position_m.tolist() == [[v * 1e-3 for v in want[6:]]] * 2
+    assert ms.time_s.tolist() == [0.0, 5.0]
+    for stamp, words in (("20200230000000", "day is out of range for month"),
+                         ("20201301120000", "unconverted data remains: 0")):
+        f.write_text(";".join(header) + "\n20200229235959;" + ";".join(cells) + f"\n{stamp};" + ";".join(cells) + "\n")
+        with pytest.raises(InputError, match=rf"row 2 \(line 3\): '{stamp}' is not a valid YYYYMMDDhhmmss time "
+                                             rf"\({words}\)"):
+            import_ipa(f)

@@ -156,3 +156,15 @@ def test_se3_from_matrix_checks_and_projects():
     bad[0, 0] = -1.0  # a reflection
     with pytest.raises(InputError, match="not a proper rotation"):
         se3_from_matrix(bad, "T")
+
+
+def test_cross3_is_np_cross_bit_for_bit():
+    """The chain's twists use cross3: np.cross's numbers exactly (the same bytes), broadcast as np.cross does."""
+    from pin_kpi_oed.model.kinematics import cross3
+
+    rng = np.random.default_rng(5)
+    for sa, sb in [((3,), (3,)), ((7, 3), (7, 3)), ((4, 5, 3), (5, 3)), ((1, 3), (6, 3))]:
+        a = rng.normal(size=sa) * 10.0 ** rng.integers(-8, 8, size=sa)
+        b = rng.normal(size=sb)
+        assert cross3(a, b).tobytes() == np.cross(a, b).tobytes(), (sa, sb)
+        assert cross3(a, b).shape == np.cross(a, b).shape

@@ -47,8 +47,12 @@ def _walk_nonfinite(v: Any, path: str) -> str | None:
     return None
 
 
-def _model_dict(n_par: int = 12, n_reg: int = 8, seed: int = 0) -> dict:
-    """A schema-valid model file content (SI units) with every numeric array the schema names."""
+def _model_dict(n_par: int = 6, n_reg: int = 4, seed: int = 0) -> dict:
+    """A schema-valid model file content (SI units) with every numeric array the schema names.
+
+    By default 6 parameters and 4 registration rows: every array keeps several rows and columns, so a first and a
+    last entry are distinct places; the 292 corruptions of 12 parameters and 8 rows reached the same 133 lines of
+    the checks (validation/schema.py) with the same 66 kinds of message as these, at a third more CPU."""
     rng = np.random.default_rng(seed)
     A = rng.normal(size=(n_par, n_par)) * 1e-4
     T = np.eye(4)
@@ -158,7 +162,7 @@ def test_numpy_checks_give_the_element_by_element_messages(element_by_element):
     assert len(refused) > 0.8 * len(cases) and len(set(refused)) > 60  # the battery reaches many message paths
     assert all(v.startswith("m.json: ") and "\n" not in v for v in refused)
     assert fast["stations/tr/registered_q_rad entry -1 bool"] == slow["stations/tr/registered_q_rad entry -1 bool"] \
-        == "m.json: model field stations.tr.registered_q_rad[7][5]: expected a number, got True"
+        == "m.json: model field stations.tr.registered_q_rad[3][5]: expected a number, got True"
     assert fast["geometry/parameters/covariance entry 0 nan"].startswith(
         "m.json: model field geometry.parameters.covariance[0][0]: not a finite number")
 

@@ -168,3 +168,28 @@ def test_process_limit_covers_libraries_loaded_later() -> None:
     libs, worst = (int(x) for x in out.split())
     assert libs >= 3, "NumPy's and SciPy's BLAS and an OpenMP runtime expected: the test would prove little"
     assert worst == 1
+
+
+def test_a_library_loaded_between_two_entry_points_is_limited_by_the_second() -> None:
+    """The scan of the loaded libraries is kept while the dynamic linker loads none (two entry points in a row share
+    it); scikit-learn's OpenMP runtime, loaded after the first entry point, is found and limited by the second."""
+    out = _run("""
+        import numpy as np
+        from threadpoolctl import threadpool_info, threadpool_limits
+        from pin_kpi_oed import threads
+        with threads.limited_threads():
+            pass
+        kept = threads._controller() is threads._controller()
+        import sklearn.gaussian_process          # its OpenMP runtime: loaded after the first scan
+        threadpool_limits(limits=2)
+        def omp():
+            return max(i["num_threads"] for i in threadpool_info() if i["user_api"] == "openmp")
+        before = omp()
+        with threads.limited_threads():
+            inside = omp()
+        print(kept, before, inside, omp())
+    """)
+    kept, before, inside, after = out.split()
+    assert kept == "True", "the scan was not kept between two entry points"
+    assert before == "2", "the OpenMP runtime could not be given two threads: the test would prove nothing"
+    assert inside == "1" and after == "2"

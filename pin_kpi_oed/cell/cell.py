@@ -472,10 +472,17 @@ def load_cell(spec: str | Path) -> Cell:
     if not path.exists():
         raise InputError(f"{path}: no such cell file (shipped cells: {', '.join(SHIPPED_CELLS)})")
     try:
-        d = yaml.safe_load(path.read_text())
+        text = path.read_text()
     except (OSError, UnicodeDecodeError) as exc:
         raise InputError(f"{path}: cannot read the cell file ({exc})") from None
-    except yaml.YAMLError as exc:
-        first = str(exc).strip().splitlines()[0]
-        raise InputError(f"{path}: invalid YAML ({first})") from None
+    try:
+        # libyaml's parser where PyYAML has it (a shipped cell: 1 ms instead of 11 ms; the same constructor, so the
+        # same values); a file it refuses is parsed again by PyYAML's own, whose message the refusal quotes as before
+        d = yaml.load(text, Loader=getattr(yaml, "CSafeLoader", yaml.SafeLoader))
+    except yaml.YAMLError:
+        try:
+            d = yaml.safe_load(text)
+        except yaml.YAMLError as exc:
+            first = str(exc).strip().splitlines()[0]
+            raise InputError(f"{path}: invalid YAML ({first})") from None
     return cell_from_dict(d, str(path), path.resolve().parent)

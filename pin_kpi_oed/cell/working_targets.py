@@ -21,6 +21,7 @@ configuration) is kept.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from collections.abc import Callable
 
@@ -60,11 +61,17 @@ def _skew(v: np.ndarray) -> np.ndarray:
 
 def _descend(robot, q: np.ndarray, p_t: np.ndarray, R_t: np.ndarray | None, tcp: np.ndarray,
              max_iter: int, damping: float) -> tuple[np.ndarray, float, float]:
-    """Damped least squares from q; returns (q, position error (m), orientation error (rad))."""
+    """Damped least squares from q; returns (q, position error (m), orientation error (rad)).
+
+    Written for the cost of its small NumPy calls (a cube's plan runs thousands of iterations): the norms as
+    ``sqrt(e·e)`` (what ``np.linalg.norm`` computes for a vector), the damping's diagonal made once, the largest step
+    by the array's own ``max``: the same numbers as the plain calls.
+    """
     model, data, fid = robot.model, robot.model.createData(), robot.tool_frame_id
     lo, hi = robot.q_lower, robot.q_upper
     q = np.clip(np.asarray(q, float), lo, hi)
     ep = er = np.inf
+    damp = {k: damping ** 2 * np.eye(k) for k in (3, 6)}
     for _ in range(max_iter):
         pin.framesForwardKinematics(model, data, q)
         M = data.oMf[fid]
@@ -73,21 +80,21 @@ def _descend(robot, q: np.ndarray, p_t: np.ndarray, R_t: np.ndarray | None, tcp:
         J6 = pin.computeFrameJacobian(model, data, q, fid, pin.LOCAL_WORLD_ALIGNED)
         J = J6[:3] - _skew(r) @ J6[3:]
         e = e_pos
-        ep = float(np.linalg.norm(e_pos))
+        ep = math.sqrt(e_pos.dot(e_pos))
         er = 0.0
         if R_t is not None:
             e_rot = pin.log3(R_t @ M.rotation.T)
-            er = float(np.linalg.norm(e_rot))
-            J = np.vstack([J, J6[3:]])
+            er = math.sqrt(e_rot.dot(e_rot))
+            J = np.concatenate([J, J6[3:]])
             e = np.concatenate([e_pos, e_rot])
         if ep < 1e-3 * IK_TOL_M and er < 1e-3 * IK_TOL_RAD:
             break
-        dq = J.T @ np.linalg.solve(J @ J.T + damping ** 2 * np.eye(J.shape[0]), e)
-        big = float(np.max(np.abs(dq)))
+        dq = J.T @ np.linalg.solve(J @ J.T + damp[J.shape[0]], e)
+        big = float(np.abs(dq).max())
         if big > 0.3:
             dq *= 0.3 / big
         q_new = np.clip(pin.integrate(model, q, dq), lo, hi)
-        if np.max(np.abs(q_new - q)) < 1e-14:
+        if np.abs(q_new - q).max() < 1e-14:
             break
         q = q_new
     return q, ep, er

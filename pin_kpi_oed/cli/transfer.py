@@ -197,13 +197,15 @@ def _camera_poses(args: argparse.Namespace, model: Any) -> Any:
             pixels: the TCP is what its model predicts), or whose joints are not the model's robot's.
     """
     from pin_kpi_oed.cli.camera_pipeline import is_camera_data
+
+    if not is_camera_data([args.data]):
+        return None
+    # the camera's modules only for a corners file: a tracker's prediction does not load them (0.3 s)
     from pin_kpi_oed.data.corner_measurements import read_corners
     from pin_kpi_oed.data.measurement_set import MeasurementSet
     from pin_kpi_oed.errors import InputError
     from pin_kpi_oed.identification.camera_identify import camera_device
 
-    if not is_camera_data([args.data]):
-        return None
     if camera_device(model) is None:
         raise InputError(f"{args.data}: a camera's corners file (pose, corner, u_px, v_px); {args.model} is a "
                          "tracker's calibration: give a measurement CSV (joints, x, y, z) or the joint values alone")

@@ -185,12 +185,15 @@ class PoseModel:
         """ΣΔq of the effects at Q, (m, n) rad."""
         return sum_joint_offsets(self.pairs, Q, aux)[0] if self.pairs else np.zeros_like(Q)
 
-    def pose(self, Q: np.ndarray, aux: Any = None) -> tuple[np.ndarray, np.ndarray]:
-        """TCP positions (m, 3) m and tool rotations (m, 3, 3) in the target frame at Q (rad)."""
+    def pose(self, Q: np.ndarray, aux: Any = None, rotations: bool = True) -> tuple[np.ndarray, np.ndarray]:
+        """TCP positions (m, 3) m and tool rotations (m, 3, 3) in the target frame at Q (rad); ``rotations``
+        False: the positions alone (the rotations an empty (m, 0, 0) array), for a position-only IK's residuals."""
         Q = np.atleast_2d(np.asarray(Q, float))
         pos = predict_with_effects(self.tm, self.p, Q, aux, self.pairs)[:, :3]
         if self.discrepancy is not None:  # the robot's discrepancy (base frame) at the commanded joints
             pos = pos + self.discrepancy.predict(Q, return_var=False)[0] @ self.T.rotation.T
+        if not rotations:
+            return pos, np.empty((Q.shape[0], 0, 0))
         Qe = Q + self.joint_offsets(Q, aux)
         R = np.empty((Q.shape[0], 3, 3))
         for i, q in enumerate(Qe):
@@ -250,11 +253,12 @@ def _solve_ik(pm: PoseModel, pos_t: np.ndarray, R_t: np.ndarray | None, Q0: np.n
     w = np.r_[np.ones(3), np.full(3, opt.length_m)] if rows6 else np.ones(3)
 
     def errors(Qx: np.ndarray) -> np.ndarray:
-        pos, R = pm.pose(Qx, aux)
+        pos, R = pm.pose(Qx, aux, rotations=rows6)
         e = pos_t - pos
         return np.hstack([e, _rot_error(R_t, R)]) if rows6 else e
 
     lam = np.full(len(Q), float(opt.damping))
+    eye = np.eye(nr)
     E = errors(Q)
     nit = 0
     for nit in range(1, opt.max_iter + 1):  # noqa: B007 (the count is read after the loop)
@@ -268,7 +272,7 @@ def _solve_ik(pm: PoseModel, pos_t: np.ndarray, R_t: np.ndarray | None, Q0: np.n
         Qn = Q.copy()
         for i in map(int, np.flatnonzero(todo)):
             J = pm.jacobian(Qe[i])[:nr] * w[:, None]
-            dq = J.T @ np.linalg.solve(J @ J.T + lam[i] ** 2 * np.eye(nr), E[i] * w)
+            dq = J.T @ np.linalg.solve(J @ J.T + lam[i] ** 2 * eye, E[i] * w)
             s = np.abs(dq).max()
             if s > opt.max_step_rad:
                 dq *= opt.max_step_rad / s

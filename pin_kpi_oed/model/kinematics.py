@@ -38,7 +38,7 @@ import pinocchio as pin
 
 from pin_kpi_oed.errors import InputError, RobotLoadError
 
-__all__ = ["skew", "se3_from_matrix", "joint_motion_axes", "revolute_mask", "joint_unit", "ChainFrames",
+__all__ = ["skew", "cross3", "se3_from_matrix", "joint_motion_axes", "revolute_mask", "joint_unit", "ChainFrames",
            "Kinematics", "Chain", "placement_jacobian", "point_velocity"]
 
 #: Tolerance on the motion axes of a pure revolute (unit angular, zero linear part) or prismatic joint.
@@ -62,8 +62,17 @@ def skew(v: np.ndarray) -> np.ndarray:
     return S
 
 
-def _cross(a: np.ndarray, b: np.ndarray, axis: int = -1) -> np.ndarray:
-    """``np.cross(a, b, axis=axis)`` of 3-vectors: the same products and differences, without its axis moves."""
+def cross3(a: np.ndarray, b: np.ndarray, axis: int = -1) -> np.ndarray:
+    """Batched cross products a × b of float 3-vectors: ``np.cross(a, b, axis=axis)`` bit for bit (the same products
+    and differences) without its axis handling, which took two thirds of its time on a few rows.
+
+    Args:
+        a, b: vectors, 3 along ``axis``, broadcast against each other (float64).
+        axis: the axis holding the vectors' components.
+
+    Returns:
+        The products, 3 along ``axis``.
+    """
     a0, a1, a2 = np.moveaxis(a, axis, 0)
     b0, b1, b2 = np.moveaxis(b, axis, 0)
     return np.stack([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0], axis=axis)
@@ -312,7 +321,7 @@ class Chain:
             R[:, k + 1], t[:, k + 1] = Rc, tc
         if twists and self._rev_idx.size:
             r = self._rev_idx
-            V[:, r] = -_cross(W[:, r], t_A[:, r])  # v_j = t_A,j × ω_j (the point at the world origin)
+            V[:, r] = -cross3(W[:, r], t_A[:, r])  # v_j = t_A,j × ω_j (the point at the world origin)
         return ChainFrames(R, t, R_A, t_A, V, W)
 
     def _rodrigues(self, Q: np.ndarray) -> np.ndarray:
@@ -448,4 +457,4 @@ def placement_jacobian(kin: Kinematics) -> np.ndarray:
 def point_velocity(kin: Kinematics) -> np.ndarray:
     """∂x/∂q of the tool point (base frame): ṗ_k = v_k + ω_k × x, (m, 3, n)."""
     v, w = kin.twist[:, :3, :], kin.twist[:, 3:, :]
-    return v + _cross(w, kin.p[:, :, None], axis=1)
+    return v + cross3(w, kin.p[:, :, None], axis=1)
