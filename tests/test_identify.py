@@ -463,11 +463,16 @@ def test_cli_simulate_identify(tmp_path, capsys):
 
 @needs_ipa
 def test_real_ur10_series_c(tmp_path, capsys):
-    """Real data: held-out mean error ≈ 0.9 mm nominal (+ fitted tracker/reflector) -> ≤ 0.45 mm calibrated."""
+    """Real data: held-out mean error ≈ 0.9 mm nominal (+ fitted tracker/reflector) -> ≤ 0.45 mm calibrated.
+
+    The claim is the geometric calibration's (0.444 mm): the fit carries no discrepancy (``--discrepancy none``),
+    whose Gaussian process on the 1,386 rows was half this test's cost and would take the held-out mean to 0.14 mm,
+    far inside the bound (the discrepancy on Series C is tests/test_orientation_sigma.py's and
+    tests/test_marginal_likelihood.py's)."""
     assert _cli("import-ipa", IPA_C, "--position-only", "--split", 0.5, "--seed", 0, "--train", tmp_path / "tr.csv",
                 "--test", tmp_path / "te.csv") == 0
     assert _cli("identify", "--robot", "ur10", "--data", tmp_path / "tr.csv", "--validate", tmp_path / "te.csv",
-                "--reflector", "0,0,0.109", "--json", tmp_path / "r.json", "--quiet") == 0
+                "--reflector", "0,0,0.109", "--discrepancy", "none", "--json", tmp_path / "r.json", "--quiet") == 0
     v = json.loads((tmp_path / "r.json").read_text())["validation"]
     assert 0.85e-3 < v["before"]["mean_m"] < 0.95e-3
     assert v["after"]["mean_m"] <= 0.45e-3
