@@ -21,12 +21,10 @@ from pin_kpi_oed.identification.identify import identify, predict, validate
 from pin_kpi_oed.simulation.simulator import Tolerances, default_tracker_pose, random_truth, simulate
 from pin_kpi_oed.oed.identifiability import analyse
 
+from tests._cache_real import ipa_series, needs_ipa
+
 SIGMA = 1e-5
 REFLECTOR = np.array([0.03, 0.02, 0.08])
-_here = Path(__file__).resolve()
-IPA = next((p / "shared" / "data" / "ipa_ur10" for p in (_here.parents[2], _here.parents[3])
-            if (p / "shared" / "data" / "ipa_ur10").is_dir()), _here.parents[2] / "shared" / "data" / "ipa_ur10")
-needs_ipa = pytest.mark.skipif(not IPA.is_dir(), reason=f"IPA data not found at {IPA}")
 
 
 def _aux(robot, m):
@@ -249,10 +247,9 @@ def test_real_ur10_compensated_predictions_match_held_out_rows():
     evenly over the series) compensated back: each an IK with a branch search, the test's whole cost; 200 still
     tell a share of 95 % "ok" from one of 90 % (the binomial standard error is 1.5 %), and the identity of the
     moved distance holds row by row."""
-    from pin_kpi_oed.data.ipa import import_ipa
     from pin_kpi_oed.upkeep.transfer import registration_split
 
-    ms = import_ipa(IPA / "Series_C")
+    ms = ipa_series("C")  # imported once per process (tests/_cache_real.py)
     ms = MeasurementSet(ms.joint_names, ms.q, ms.position_m, temperature_c=ms.temperature_c, source="C.csv")
     tr_idx, held_idx = registration_split(len(ms), len(ms) // 2, seed=0)
     robot = load_robot("ur10")
