@@ -443,7 +443,8 @@ def run_identify(args: argparse.Namespace) -> int:
         model.layout.set_joint_prior(*geometry_prior)
     result, opts = _fit(model, train, opts, effects)
     result.discrepancy = _discrepancy(args, result, train)
-    _restate_tcp_sigma(result, train, ct.tool.q_work)
+    if result.discrepancy is not None:  # without one, identify has stated this σ already (the same model and rows)
+        _restate_tcp_sigma(result, train, ct.tool.q_work)
     out = {"result": result.to_dict(), "data": list(args.data), "validate": args.validate,
            "reflector_nominal_m": reflector.tolist(),
            "reflector_nominal_source": "estimated" if estimated else ("given" if args.reflector else "cell/header"),
