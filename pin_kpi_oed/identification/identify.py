@@ -154,6 +154,7 @@ __all__ = [
     "ResidualModel",
     "identify",
     "restate_tcp_sigma",
+    "working_configurations",
     "validate",
     "format_validation",
     "predict",
@@ -266,7 +267,8 @@ def identify(model: TrackerModel, data: MeasurementSet, options: IdentifyOptions
                                 "keeps the plain fit)")
     result.coverage = JointCoverage.from_training(inp.Q, opts.seed, model.robot.periodic_joints)
     result.discrepancy = result_discrepancy(result, data, discrepancy_options(opts.discrepancy, opts.seed), inp.Q)
-    _state_tcp_sigma(result, Qw, data)  # the σ at the TCP, held parameters' term included (step 10)
+    if opts.tcp_sigma:
+        _state_tcp_sigma(result, Qw, data)  # the σ at the TCP, held parameters' term included (step 10)
     _gate(result, model, opts)
     result.time_s = time.perf_counter() - t_start
     return result
@@ -287,14 +289,31 @@ def restate_tcp_sigma(result: IdentificationResult, data: MeasurementSet, Q_work
 
 def _working_configurations(model: TrackerModel, data: MeasurementSet, inp: FitInputs, opts: IdentifyOptions
                             ) -> np.ndarray:
-    """Where the TCP's σ is stated: ``opts.Q_work``, else the data's tool header's working configurations, else
-    the measured configurations."""
-    if opts.Q_work is not None:
-        return model.robot.check_q(opts.Q_work, "Q_work")
+    """Where the TCP's σ is stated (:func:`working_configurations`), the data's joints already aligned."""
+    return working_configurations(model.robot, data, opts.Q_work, inp.Q)
+
+
+def working_configurations(robot: Any, data: MeasurementSet, Q_work: np.ndarray | None = None,
+                           Q: np.ndarray | None = None) -> np.ndarray:
+    """Where ``identify`` states the TCP's σ: ``Q_work``, else the data's tool header's working configurations, else
+    the measured configurations.
+
+    Args:
+        robot: the robot; data: the training rows; Q_work: the option ``IdentifyOptions.Q_work`` (rad / m) or None;
+        Q: the rows' joints in the robot's order if already aligned (default: aligned here).
+
+    Returns:
+        (t, n) rad / m.
+
+    Raises:
+        InputError: working configurations outside the limits or of the wrong shape.
+    """
+    if Q_work is not None:
+        return robot.check_q(Q_work, "Q_work")
     qw = getattr(data.tool, "q_work", None) if data.tool is not None else None
-    if qw is not None and np.shape(qw)[-1:] == (model.robot.nq,):
-        return model.robot.check_q(np.atleast_2d(np.asarray(qw, float)), "the tool header's working configurations")
-    return inp.Q
+    if qw is not None and np.shape(qw)[-1:] == (robot.nq,):
+        return robot.check_q(np.atleast_2d(np.asarray(qw, float)), "the tool header's working configurations")
+    return align_data(robot, data) if Q is None else Q
 
 
 def _state_tcp_sigma(result: IdentificationResult, Qw: np.ndarray, data: MeasurementSet) -> None:
