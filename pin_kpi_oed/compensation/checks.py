@@ -143,14 +143,14 @@ def nearest_to_reference(pm: Any, Q: np.ndarray, Q_ref: np.ndarray, pos_t: np.nd
         Q1 = np.clip(Q[rows] + D, lo, hi)
         back = np.ones(rows.size, bool)  # back onto the target (the null-space step leaves a second-order error)
         for _ in range(5):
-            k = np.flatnonzero(back)
-            if not k.size:
+            moving = np.flatnonzero(back)
+            if not moving.size:
                 break
-            E = task_errors(Q1[k], rows[k])
+            E = task_errors(Q1[moving], rows[moving])
             done = norms(E) <= 1e-10
-            back[k[done]] = False
-            for kk, e in zip(k[~done], E[~done]):
-                Q1[kk] = gauss_newton_step(Q1[kk], e)
+            back[moving[done]] = False
+            for k, e in zip(moving[~done], E[~done]):
+                Q1[k] = gauss_newton_step(Q1[k], e)
         worse = norms(task_errors(Q1, rows)) > tol_m
         worse |= norms(Q1 - Q_ref[rows]) >= norms(Q[rows] - Q_ref[rows])
         active[rows[worse]] = False
