@@ -21,12 +21,10 @@ from pin_kpi_oed.identification.identify import identify, predict, validate
 from pin_kpi_oed.simulation.simulator import Tolerances, default_tracker_pose, random_truth, simulate
 from pin_kpi_oed.oed.identifiability import analyse
 
+from tests._cache_real import ipa_series, needs_ipa
+
 SIGMA = 1e-5
 REFLECTOR = np.array([0.03, 0.02, 0.08])
-_here = Path(__file__).resolve()
-IPA = next((p / "shared" / "data" / "ipa_ur10" for p in (_here.parents[2], _here.parents[3])
-            if (p / "shared" / "data" / "ipa_ur10").is_dir()), _here.parents[2] / "shared" / "data" / "ipa_ur10")
-needs_ipa = pytest.mark.skipif(not IPA.is_dir(), reason=f"IPA data not found at {IPA}")
 
 
 def _aux(robot, m):
@@ -249,10 +247,9 @@ def test_real_ur10_compensated_predictions_match_held_out_rows():
     evenly over the series) compensated back: each an IK with a branch search, the test's whole cost; 200 still
     tell a share of 95 % "ok" from one of 90 % (the binomial standard error is 1.5 %), and the identity of the
     moved distance holds row by row."""
-    from pin_kpi_oed.data.ipa import import_ipa
     from pin_kpi_oed.upkeep.transfer import registration_split
 
-    ms = import_ipa(IPA / "Series_C")
+    ms = ipa_series("C")  # imported once per process (tests/_cache_real.py)
     ms = MeasurementSet(ms.joint_names, ms.q, ms.position_m, temperature_c=ms.temperature_c, source="C.csv")
     tr_idx, held_idx = registration_split(len(ms), len(ms) // 2, seed=0)
     robot = load_robot("ur10")
@@ -414,3 +411,58 @@ def test_base_frame_sigma_names_the_base_placement_apart_from_the_tool(world):
     line = next(s for s in b.summary().splitlines() if s.startswith("of which"))
     assert "base frame's own placement" in line and "--frame tracker" in line and "at the tool" in line
     assert b.to_dict()["base_unobservable_m"] == pytest.approx(b.base_unobservable_m.tolist())
+
+
+def _nearest_row_by_row(pm, Q, Q_ref, pos_t, weights, tol_m, iters=30):
+    """The null-space slide one row at a time, with one pose evaluation per step (what compensate did before the
+    rows shared their evaluations): the reference of the batched :func:`nearest_to_reference`."""
+    robot, nr = pm.robot, len(weights)
+    Q = np.array(Q, float)
+
+    def task_error(q, i):
+        return (pos_t[i] - pm.pose(q[None], None)[0][0]) * weights
+
+    for i in range(len(Q)):
+        q = Q[i]
+        for _ in range(iters):
+            J = pm.jacobian(q)[:nr] * weights[:, None]
+            d = (np.eye(robot.nq) - np.linalg.pinv(J) @ J) @ (Q_ref[i] - q)
+            if np.linalg.norm(d) < 1e-9:
+                break
+            q1 = np.clip(q + d, robot.q_lower, robot.q_upper)
+            for _ in range(5):
+                e = task_error(q1, i)
+                if np.linalg.norm(e) <= 1e-10:
+                    break
+                q1 = np.clip(q1 + np.linalg.pinv(pm.jacobian(q1)[:nr] * weights[:, None]) @ e, robot.q_lower,
+                             robot.q_upper)
+            if np.linalg.norm(task_error(q1, i)) > tol_m or \
+                    np.linalg.norm(q1 - Q_ref[i]) >= np.linalg.norm(q - Q_ref[i]):
+                break
+            q = q1
+        Q[i] = q
+    return Q
+
+
+def test_nearest_to_reference_batched_equals_row_by_row(world):
+    """Position-only targets on the 6-joint UR10 (a 3-D self-motion manifold): the rows slid towards their references
+    together equal the rows slid one at a time bit for bit (a row's pose does not depend on the rows evaluated with
+    it, and every stopping test compares the same numbers), each row ends nearer its reference and on its target."""
+    from pin_kpi_oed.compensation.checks import nearest_to_reference
+    from pin_kpi_oed.compensation.compensator import PoseModel
+
+    robot, _, _, _, cm, _, _ = world
+    pm = PoseModel(cm, "cell", nominal=True)
+    rng = np.random.default_rng(12)
+    Q = robot.random_q(rng, 12) * 0.8
+    Q_ref = np.clip(Q + rng.normal(0.0, 0.3, Q.shape), robot.q_lower, robot.q_upper)
+    pos_t = pm.pose(Q)[0]
+    w = np.ones(3)
+    got = nearest_to_reference(pm, Q, Q_ref, pos_t, None, w, 1e-6)
+    ref = _nearest_row_by_row(pm, Q, Q_ref, pos_t, w, 1e-6)
+    assert np.array_equal(got, ref), np.abs(got - ref).max()
+    moved = np.linalg.norm(got - Q, axis=1) > 1e-6
+    assert moved.sum() >= 6, "most rows must slide for the comparison to mean something"
+    assert np.all(np.linalg.norm(got - Q_ref, axis=1) <= np.linalg.norm(Q - Q_ref, axis=1))
+    assert np.abs(pm.pose(got)[0] - pos_t).max() < 1e-6
+

@@ -50,12 +50,15 @@ def test_given_class_overrides_the_name_and_an_unknown_class_is_refused():
 
 
 def test_cli_design_states_the_class_and_takes_robot_class(tmp_path, capsys):
+    """The design command states the discrepancy's class (from the robot's name, or given) and writes its scale. The
+    prior is chosen before any optimisation, so the design starts from the heuristic poses (``--start random``): the
+    pool selection of the default start (three quarters of each run's cost) does not change what is stated."""
     import json
 
     from pin_kpi_oed.cli.app import main
 
     args = ["design", "--cell", "ur10", "--criteria", "random,kpi_gp", "--measurements", "12", "--starts", "1",
-            "--max-iter", "5", "--work-samples", "10", "--quiet"]
+            "--max-iter", "5", "--work-samples", "10", "--start", "random", "--quiet"]
     assert main(args + ["--json", str(tmp_path / "a.json")]) == 0
     assert ("discrepancy (default for the collaborative class, from the name 'ur10': "
             "S = 0.25 mm") in capsys.readouterr().out

@@ -130,10 +130,11 @@ def test_fit_equals_the_scikit_learn_optimisation_on_a_series_c_subset(monkeypat
         pytest.skip("IPA UR10 data not found (PIN_KPI_OED_IPA_DATA)")
     from pin_kpi_oed import NoiseModel, TrackerModel, load_robot
     from pin_kpi_oed.data.ipa import import_ipa
+    from tests._cache_real import IPA, ipa_series
     from pin_kpi_oed.identification.discrepancy_fit import base_frame_residuals
     from pin_kpi_oed.identification.identify import identify
 
-    ms = import_ipa(folder / "Series_C")
+    ms = ipa_series("C") if folder == IPA else import_ipa(folder / "Series_C")  # tests/_cache_real.py: once
     data = ms.subset(np.sort(np.random.default_rng(0).permutation(len(ms.q))[:400]))
     model = TrackerModel(load_robot("ur10"), reflector_m=np.array([0.0, 0.0, 0.109]),
                          noise=NoiseModel(sigma_xyz_m=(1e-4,) * 3))

@@ -17,6 +17,7 @@ from pin_kpi_oed.simulation.simulator import simulate
 from pin_kpi_oed.report.content import SECTIONS
 from pin_kpi_oed.report.iso9283 import clusters, iso_figures, pose_accuracy, repeatability
 
+from tests._cache_real import ipa_series, needs_ipa
 from tests._cache_render import GROUP, SIGMA, browser_view, calibrated_folder, plain_certificate
 
 REPO = Path(__file__).resolve().parents[1]
@@ -293,21 +294,16 @@ def _root(parent, i):
     return i
 
 
-_IPA = next((p / "shared" / "data" / "ipa_ur10" for p in (REPO.parents[0], REPO.parents[1])
-             if (p / "shared" / "data" / "ipa_ur10").is_dir()), None)
-
-
-@pytest.mark.skipif(_IPA is None, reason="IPA UR10 data not found")
+@needs_ipa
 @pytest.mark.parametrize("series,cycles", [("D", 24), ("B", 0), ("A", 0)])
 def test_iso_groups_on_the_ipa_series_match_an_independent_computation(series, cycles):
     """Series D (ISO cube, centre repeated), B (154 positions x 10 configurations) and A: commanded positions (the
     rows whose goals lie within 1 mm of the goal of the first unassigned row, in file order) and configurations
     (joints within 1 mrad) by plain loops against the module's grouping; no position spans more than 2 mm; AP and vAP
     on the measured positions as residuals checked by hand; the cycle groups counted."""
-    from pin_kpi_oed.data.ipa import import_ipa
     from pin_kpi_oed.report.iso9283 import commanded_groups, direction_keys
 
-    ms = import_ipa(_IPA / f"Series_{series}")
+    ms = ipa_series(series)  # imported once per process (tests/_cache_real.py)
     goal = np.column_stack([ms.extra[k] for k in ("goal_x", "goal_y", "goal_z")])
     groups = commanded_groups(ms)
     free = np.ones(len(goal), bool)
@@ -351,16 +347,14 @@ def test_iso_groups_on_the_ipa_series_match_an_independent_computation(series, c
     assert (out.get("RP", {}).get("n_groups", 0)) == cycles
 
 
-@pytest.mark.skipif(_IPA is None, reason="IPA UR10 data not found")
+@needs_ipa
 def test_on_the_ipa_data_every_figure_equals_identify_validate(tmp_path, capsys):
     """Real UR10 rows (Series C: 400 to calibrate, 300 held out; Series D re-registered on 60 rows): identify
     --validate --json and report on its model give the same before / after figures and honest sigma."""
-    from pin_kpi_oed.data.ipa import import_ipa
-
-    c = import_ipa(_IPA / "Series_C")
+    c = ipa_series("C")
     write_measurements(c.subset(np.arange(400)), tmp_path / "train.csv")
     write_measurements(c.subset(np.arange(400, 700)), tmp_path / "test.csv")
-    write_measurements(import_ipa(_IPA / "Series_D"), tmp_path / "D.csv")
+    write_measurements(ipa_series("D"), tmp_path / "D.csv")
     for name, held, extra in (("c", "test.csv", []), ("d", "D.csv", ["--register-rows", "60", "--seed", "0"])):
         assert main(["identify", "--robot", "ur10", "--data", str(tmp_path / "train.csv"), "--validate",
                      str(tmp_path / held), "--reflector", "0,0,0.109", "--discrepancy", "none", *extra,

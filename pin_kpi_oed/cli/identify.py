@@ -427,9 +427,9 @@ def run_identify(args: argparse.Namespace) -> int:
     opts = IdentifyOptions(weights=weights, scale_covariance=scale, use_orientation=not args.position_only,
                            loss=args.loss or "auto", max_nfev=args.max_nfev, Q_work=ct.tool.q_work,
                            reflector_per_station=args.reflector_per_station,
-                           # the command runs the discrepancy (seeded by --seed) and the gate (with the validation
-                           # rows and --accept-poor-fit) itself, on the final fit
-                           discrepancy="none", on_poor_fit="ignore")
+                           # the command runs the discrepancy (seeded by --seed), the TCP σ with it and the gate (with
+                           # the validation rows and --accept-poor-fit) itself, on the final fit
+                           discrepancy="none", on_poor_fit="ignore", tcp_sigma=False)
     reflector, estimated = _nominal_reflector(args, robot, noise, train, opts, ct.tool)
     tcp = ct.tool.tcp_m if ct.tool.tcp_m is not None else np.zeros(3)
     # the nests the cell or the data's tool header lists (agreed by command_tool), moved with the nominal reflector

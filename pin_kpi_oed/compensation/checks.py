@@ -107,34 +107,54 @@ def nearest_to_reference(pm: Any, Q: np.ndarray, Q_ref: np.ndarray, pos_t: np.nd
     if robot.nq <= nr:
         return Q
     Q = np.array(Q, float)
+    lo, hi = robot.q_lower, robot.q_upper
 
-    def task_error(q: np.ndarray, i: int) -> np.ndarray:
-        pos, R = pm.pose(q[None], None)
-        e = pos_t[i] - pos[0]
+    def task_errors(Qr: np.ndarray, rows: np.ndarray) -> np.ndarray:
+        """The weighted task errors of configurations Qr (k, n) solving targets ``rows``: one pose evaluation."""
+        pos, R = pm.pose(Qr, None)
+        e = pos_t[rows] - pos
         if R_t is not None:
-            e = np.r_[e, pin.log3(R_t[i] @ R[0].T)]
+            e = np.hstack([e, np.array([pin.log3(R_t[i] @ Ri.T) for i, Ri in zip(rows, R)]).reshape(-1, 3)])
         return e * weights
 
-    for i in range(len(Q)):
-        q = Q[i]
-        for _ in range(iters):
-            J = pm.jacobian(q)[:nr] * weights[:, None]
-            Jp = np.linalg.pinv(J)
-            d = (np.eye(robot.nq) - Jp @ J) @ (Q_ref[i] - q)
-            if np.linalg.norm(d) < 1e-9:
+    def norms(X: np.ndarray) -> np.ndarray:
+        """Each row's norm as ``np.linalg.norm`` of that row alone (the same rounding as one row at a time: the
+        tests below compare near-equal norms)."""
+        return np.array([np.linalg.norm(x) for x in X])
+
+    def gauss_newton_step(q: np.ndarray, e: np.ndarray) -> np.ndarray:
+        return np.clip(q + np.linalg.pinv(pm.jacobian(q)[:nr] * weights[:, None]) @ e, lo, hi)
+
+    # every row takes the steps it took alone; the rows still moving share each pose evaluation
+    active = np.ones(len(Q), bool)
+    for _ in range(iters):
+        rows = np.flatnonzero(active)
+        if not rows.size:
+            break
+        D = np.empty((rows.size, robot.nq))
+        for k, i in enumerate(rows):
+            J = pm.jacobian(Q[i])[:nr] * weights[:, None]
+            D[k] = (np.eye(robot.nq) - np.linalg.pinv(J) @ J) @ (Q_ref[i] - Q[i])
+        still = norms(D) < 1e-9
+        active[rows[still]] = False
+        rows, D = rows[~still], D[~still]
+        if not rows.size:
+            break
+        Q1 = np.clip(Q[rows] + D, lo, hi)
+        back = np.ones(rows.size, bool)  # back onto the target (the null-space step leaves a second-order error)
+        for _ in range(5):
+            moving = np.flatnonzero(back)
+            if not moving.size:
                 break
-            q1 = np.clip(q + d, robot.q_lower, robot.q_upper)
-            for _ in range(5):  # back onto the target (the null-space step leaves a second-order error)
-                e = task_error(q1, i)
-                if np.linalg.norm(e) <= 1e-10:
-                    break
-                q1 = np.clip(q1 + np.linalg.pinv(pm.jacobian(q1)[:nr] * weights[:, None]) @ e, robot.q_lower,
-                             robot.q_upper)
-            if np.linalg.norm(task_error(q1, i)) > tol_m or \
-                    np.linalg.norm(q1 - Q_ref[i]) >= np.linalg.norm(q - Q_ref[i]):
-                break
-            q = q1
-        Q[i] = q
+            E = task_errors(Q1[moving], rows[moving])
+            done = norms(E) <= 1e-10
+            back[moving[done]] = False
+            for k, e in zip(moving[~done], E[~done]):
+                Q1[k] = gauss_newton_step(Q1[k], e)
+        worse = norms(task_errors(Q1, rows)) > tol_m
+        worse |= norms(Q1 - Q_ref[rows]) >= norms(Q[rows] - Q_ref[rows])
+        active[rows[worse]] = False
+        Q[rows[~worse]] = Q1[~worse]
     return Q
 
 

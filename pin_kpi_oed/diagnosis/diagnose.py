@@ -166,6 +166,14 @@ def name_low_orders(dominant: str, term_selection: dict, candidate_names: list[s
     return dominant
 
 
+def _state_tcp_sigma(fit: Any, train: MeasurementSet, opts: DiagnoseOptions) -> None:
+    """The TCP σ of the fit the report describes, as ``identify`` states it (the engine's many fits state none)."""
+    from pin_kpi_oed.identification.identify import restate_tcp_sigma, working_configurations
+
+    restate_tcp_sigma(fit, train, working_configurations(fit.model.robot, train,
+                                                         (opts.identify_options or {}).get("Q_work")))
+
+
 @limit_threads
 def diagnose(model: TrackerModel, train: MeasurementSet, validate: MeasurementSet | None = None,
              options: DiagnoseOptions | None = None, **overrides: Any) -> DiagnosisReport:
@@ -276,6 +284,8 @@ def _diagnose_steps(model: TrackerModel, train: MeasurementSet, validate: Measur
                      "are those of the last iterate")
     if res0.sigma_source == "data":
         notes.append("weights from the data's sigma columns: the gap test is only as good as they are")
+    model_fit = current.full.result if selected and current.full is not None else res0
+    _state_tcp_sigma(model_fit, train, opts)
     status = "mismatch" if validation_mismatch else ("gap" if gap["gap_detected"] else "no_gap")
     message = {"mismatch": "the validation data do not match the training set-up; no effect named",
                "gap": f"gap detected; dominant effect: {dominant}",
@@ -290,5 +300,5 @@ def _diagnose_steps(model: TrackerModel, train: MeasurementSet, validate: Measur
         validation_mismatch=validation_mismatch, mismatch=mismatch, notes=notes, geometry=geometry,
         registration=dict(plan.registration_info), term_selection=term_selection,
         transfer=transfer, plot_data={"residuals_m": geo.R, "regressors": regs},
-        model_fit=current.full.result if selected and current.full is not None else res0,
+        model_fit=model_fit,
         time_s=time.perf_counter() - t0)

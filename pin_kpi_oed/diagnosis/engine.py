@@ -86,7 +86,8 @@ class Engine:
 
         opts = {"raise_on_failure": False, **self.opts}
         res = identify(self.model, data, effects=list(effects), weights=self.weights, use_orientation=False,
-                       **{"discrepancy": "none", "on_poor_fit": "ignore", "loss": "linear", **opts})
+                       **{"discrepancy": "none", "on_poor_fit": "ignore", "loss": "linear", "tcp_sigma": False,
+                          **opts})  # the diagnosis reads no TCP σ of its fits
         self.n_fits += 1
         if not res.converged:
             self.unconverged.add(", ".join(e.name for e in effects) or "geometry")

@@ -141,7 +141,7 @@ from pin_kpi_oed.calibrated.model_file import Setup
 from pin_kpi_oed.calibrated.tcp_sigma import tcp_sigma
 from pin_kpi_oed.identification.quality import robust_loss_reason
 from pin_kpi_oed.identification.problem import (ResidualModel, align_data, effect_param_names, predict)
-from pin_kpi_oed.identification.solve import fit_covariance, settle_outliers, solve, tcp_std
+from pin_kpi_oed.identification.solve import fit_covariance, held_term, settle_outliers, solve
 from pin_kpi_oed.identification.tool_check import check_tool
 from pin_kpi_oed.identification.tracker_start import register_points, start_stations
 from pin_kpi_oed.model.tracker import TrackerModel
@@ -154,6 +154,7 @@ __all__ = [
     "ResidualModel",
     "identify",
     "restate_tcp_sigma",
+    "working_configurations",
     "validate",
     "format_validation",
     "predict",
@@ -256,6 +257,7 @@ def identify(model: TrackerModel, data: MeasurementSet, options: IdentifyOptions
     check_tool(model.robot, model.tcp_m, data)
     inp = check_inputs(model, data, opts)
     _check_effects_determined(effects, data)
+    Qw = _working_configurations(model, data, inp, opts)
     result, plain = _fit(model, data, inp, effects, replace(opts, loss="linear") if opts.loss == "auto" else opts,
                          t_start)
     why = robust_loss_reason(result) if opts.loss == "auto" else ""
@@ -265,7 +267,8 @@ def identify(model: TrackerModel, data: MeasurementSet, options: IdentifyOptions
                                 "keeps the plain fit)")
     result.coverage = JointCoverage.from_training(inp.Q, opts.seed, model.robot.periodic_joints)
     result.discrepancy = result_discrepancy(result, data, discrepancy_options(opts.discrepancy, opts.seed), inp.Q)
-    _state_tcp_sigma(result, _working_configurations(model, data, inp, opts), data)
+    if opts.tcp_sigma:
+        _state_tcp_sigma(result, Qw, data)  # the σ at the TCP, held parameters' term included (step 10)
     _gate(result, model, opts)
     result.time_s = time.perf_counter() - t_start
     return result
@@ -286,14 +289,31 @@ def restate_tcp_sigma(result: IdentificationResult, data: MeasurementSet, Q_work
 
 def _working_configurations(model: TrackerModel, data: MeasurementSet, inp: FitInputs, opts: IdentifyOptions
                             ) -> np.ndarray:
-    """Where the TCP's σ is stated: ``opts.Q_work``, else the data's tool header's working configurations, else
-    the measured configurations."""
-    if opts.Q_work is not None:
-        return model.robot.check_q(opts.Q_work, "Q_work")
+    """Where the TCP's σ is stated (:func:`working_configurations`), the data's joints already aligned."""
+    return working_configurations(model.robot, data, opts.Q_work, inp.Q)
+
+
+def working_configurations(robot: Any, data: MeasurementSet, Q_work: np.ndarray | None = None,
+                           Q: np.ndarray | None = None) -> np.ndarray:
+    """Where ``identify`` states the TCP's σ: ``Q_work``, else the data's tool header's working configurations, else
+    the measured configurations.
+
+    Args:
+        robot: the robot; data: the training rows; Q_work: the option ``IdentifyOptions.Q_work`` (rad / m) or None;
+        Q: the rows' joints in the robot's order if already aligned (default: aligned here).
+
+    Returns:
+        (t, n) rad / m.
+
+    Raises:
+        InputError: working configurations outside the limits or of the wrong shape.
+    """
+    if Q_work is not None:
+        return robot.check_q(Q_work, "Q_work")
     qw = getattr(data.tool, "q_work", None) if data.tool is not None else None
-    if qw is not None and np.shape(qw)[-1:] == (model.robot.nq,):
-        return model.robot.check_q(np.atleast_2d(np.asarray(qw, float)), "the tool header's working configurations")
-    return inp.Q
+    if qw is not None and np.shape(qw)[-1:] == (robot.nq,):
+        return robot.check_q(np.atleast_2d(np.asarray(qw, float)), "the tool header's working configurations")
+    return align_data(robot, data) if Q is None else Q
 
 
 def _state_tcp_sigma(result: IdentificationResult, Qw: np.ndarray, data: MeasurementSet) -> None:
@@ -325,12 +345,10 @@ def _fit(model: TrackerModel, data: MeasurementSet, inp: FitInputs, effects: Seq
     x = solution.x
     rpos, rrot = prob.evaluate(x)
     errors = np.linalg.norm(rpos, axis=1)
-    J_full = prob.jacobian_full(x)  # the weighted Jacobian at the fit, for its covariance and the held term
-    C, std, corr, chi2_red = fit_covariance(prob, x, fw, opts, J_full)
+    C, std, corr, chi2_red, F = fit_covariance(prob, x, fw, opts)
     P_hat, th_hat = prob.unpack(x)
-    Qw = _working_configurations(model, data, inp, opts)
     Cu = C / chi2_red if opts.scale_covariance and chi2_red > 0 else C
-    tcp_sigma, tcp_held, held_term, contrib = tcp_std(prob, P_hat, C, Qw, x, Cu, opts.held_tolerances, J_full)
+    held = held_term(prob, x, F, Cu, opts.held_tolerances)
     setups = _setups(prob, P_hat, errors, inp, data)
     first = setups[stations.labels[0]]
     sol = solution.sol
@@ -340,8 +358,8 @@ def _fit(model: TrackerModel, data: MeasurementSet, inp: FitInputs, effects: Seq
         nit=solution.nit, nfev=solution.nfev, solver_status=int(sol.status),
         names=prob.names, values=x.copy(), std=std, covariance=C, correlation=corr,
         p=stations.station_p(P_hat, 0), theta=th_hat, residuals_m=-rpos, residuals_rad=None if rrot is None else -rrot,
-        errors_m=errors, weighted_errors=we, outliers=outliers, tcp_std_m=tcp_sigma, tcp_held_m=tcp_held,
-        held_term=held_term, tcp_held_contrib_m=contrib, cost=float(sol.cost),
+        errors_m=errors, weighted_errors=we, outliers=outliers, tcp_std_m=np.zeros(0), held_term=held,
+        cost=float(sol.cost),
         chi2_reduced=chi2_red, tracker_T_base=first.tracker_T_base.copy(), tracker_T_base_init=T_init[0],
         reflector_m=first.reflector_m.copy(), probe_R=first.probe_R, model=stations.models[0],
         effects=list(effects), identifiability=ident, loss=opts.loss, f_scale=solution.f_scale,

@@ -79,6 +79,11 @@ class IdentifyOptions:
             True), ``raise`` (:class:`~pin_kpi_oed.errors.SolverError` with the verdict's line, as the command
             line's exit 2 without ``--accept-poor-fit``) or ``ignore`` (no gate: ``result.fit_quality`` None).
             The command line runs the gate itself, with the validation rows when given.
+        tcp_sigma: state the TCP's σ at the working configurations (``result.tcp_std_m``, its held part and each
+            held parameter's share: the calibrated model's own, step 10 of the module docstring). False leaves them
+            empty, for a caller that states them itself (the command line, once its discrepancy is fitted:
+            :func:`~pin_kpi_oed.identification.identify.restate_tcp_sigma`) or never reads them (the diagnosis's
+            many fits); the fit and the model it gives are the same.
     """
 
     p0: np.ndarray | None = None
@@ -105,6 +110,7 @@ class IdentifyOptions:
     held_effects: Sequence[tuple[Any, np.ndarray]] = ()
     discrepancy: Any = "auto"
     on_poor_fit: str = "flag"
+    tcp_sigma: bool = True
 
     def __post_init__(self) -> None:
         if self.effect_prior_rad is not None and not (np.isfinite(self.effect_prior_rad)

@@ -1,4 +1,5 @@
-"""Steps 4–7 of :func:`~pin_kpi_oed.identification.identify.identify`: solve, outliers, covariance, TCP σ."""
+"""Steps 4–7 of :func:`~pin_kpi_oed.identification.identify.identify`: solve, outliers, covariance, the held
+parameters' term of the TCP σ."""
 
 from __future__ import annotations
 
@@ -16,7 +17,7 @@ from pin_kpi_oed.model.tolerances import Tolerances, held_columns
 from pin_kpi_oed.oed.covariance import param_covariance
 from pin_kpi_oed.oed.held import HeldTerm
 
-__all__ = ["Solution", "solve", "settle_outliers", "fit_covariance", "tcp_std"]
+__all__ = ["Solution", "solve", "settle_outliers", "fit_covariance", "held_term"]
 
 
 @dataclass
@@ -134,11 +135,11 @@ def settle_outliers(prob: ResidualModel, solution: Solution, opts: IdentifyOptio
     return fw, we, outliers
 
 
-def fit_covariance(prob: ResidualModel, x: np.ndarray, fw: np.ndarray, opts: IdentifyOptions,
-                   J_full: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
-    """Step 6: C = (FᵀF + P)⁻¹ (optionally × reduced χ²), standard deviations, correlations, reduced χ²;
-    ``J_full``: ``prob.jacobian_full(x)`` when computed already (:func:`tcp_std` reads the same)."""
-    F = (prob.jacobian_full(x) if J_full is None else J_full)[prob.mask].reshape(-1, prob.nx)
+def fit_covariance(prob: ResidualModel, x: np.ndarray, fw: np.ndarray, opts: IdentifyOptions
+                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray, float, np.ndarray]:
+    """Step 6: C = (FᵀF + P)⁻¹ (optionally × reduced χ²), standard deviations, correlations, reduced χ², and F, the
+    weighted Jacobian on the rows in use (rows, nx), which :func:`held_term` reads again."""
+    F = prob.jacobian_full(x)[prob.mask].reshape(-1, prob.nx)
     chi2 = float(np.sum(fw[prob.mask] ** 2))
     dof = max(F.shape[0] + prob.prior_idx.size - prob.nx, 1)
     chi2_red = chi2 / dof
@@ -150,44 +151,28 @@ def fit_covariance(prob: ResidualModel, x: np.ndarray, fw: np.ndarray, opts: Ide
     std = np.sqrt(np.clip(np.diag(C), 0.0, None))
     with np.errstate(invalid="ignore", divide="ignore"):
         corr = C / np.outer(std, std)
-    return C, std, np.where(np.isfinite(corr), corr, 0.0), chi2_red
+    return C, std, np.where(np.isfinite(corr), corr, 0.0), chi2_red, F
 
 
-def tcp_std(prob: ResidualModel, P: np.ndarray, C: np.ndarray, Qw: np.ndarray, x: np.ndarray | None = None,
-            C_unscaled: np.ndarray | None = None, tolerances: Tolerances | None = None,
-            J_full: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, HeldTerm | None, np.ndarray]:
-    """Step 7: the TCP's σ per working configuration, first station's tracker frame (m): sqrt(trace C_s) with
-    C_s = E C Eᵀ + G Σ_N Gᵀ (:mod:`pin_kpi_oed.oed.held`): the fit's covariance and the joint-placement parameters
-    it held at nominal under their tolerances, absorbed as this fit absorbed them (A = C_unscaled F_Bᵀ F_N on its
-    rows in use).
+def held_term(prob: ResidualModel, x: np.ndarray, F: np.ndarray, C_unscaled: np.ndarray,
+              tolerances: Tolerances | None = None) -> HeldTerm | None:
+    """Step 7: the joint-placement parameters the fit held at nominal, under their tolerances, and how this fit
+    absorbed them (A = C_unscaled F_Bᵀ F_N on its rows in use, :mod:`pin_kpi_oed.oed.held`): what the calibrated
+    model's σ at the TCP adds for them (:func:`~pin_kpi_oed.calibrated.tcp_sigma.tcp_sigma`, which ``identify``
+    states at the working configurations).
 
     Args:
-        prob: the residual model; P: the fitted global raw parameters; C: the fit's covariance (nx, nx);
-        Qw: working configurations (t, n) rad; x: the fitted unknowns (None: no held term);
-        C_unscaled: (FᵀF + P)⁻¹ before any χ² scaling (default C); tolerances: the held parameters' prior
-        (default :class:`~pin_kpi_oed.model.tolerances.Tolerances`); J_full: ``prob.jacobian_full(x)`` when
-        computed already (:func:`fit_covariance`'s; None: computed here).
+        prob: the residual model; x: the fitted unknowns; F: its weighted Jacobian on the rows in use at ``x``,
+            (rows, nx), as :func:`fit_covariance` returns it; C_unscaled: (FᵀF + P)⁻¹ before any χ² scaling;
+        tolerances: the held parameters' prior (default :class:`~pin_kpi_oed.model.tolerances.Tolerances`).
 
     Returns:
-        (σ with the held term (t,) m, σ of the held term alone (t,) m, the :class:`HeldTerm` or None, each held
-        parameter's RMS σ at the TCP over the working configurations (k,) m).
+        The :class:`HeldTerm`, or None when the fit holds no joint-placement parameter.
     """
-    st = prob.stations
-    model, p0 = st.models[0], st.station_p(P, 0)
-    E0 = model.kpi_jacobian(p0, Qw)  # (3t, n_station)
-    cols = prob.x_columns[0]
-    E = np.zeros((E0.shape[0], prob.nx))
-    use = cols >= 0
-    E[:, cols[use]] = E0[:, use]
-    var = np.einsum("ij,jk,ik->i", E, C, E).reshape(-1, 3).sum(axis=1)
-    held = held_columns(model, [prob.layout.names[i] for i in prob.base]) if x is not None else np.zeros(0, int)
+    model = prob.stations.models[0]
+    held = held_columns(model, [prob.layout.names[i] for i in prob.base])
     if not held.size:
-        return np.sqrt(np.clip(var, 0.0, None)), np.zeros(len(var)), None, np.zeros(0)
-    FB = (prob.jacobian_full(x) if J_full is None else J_full)[prob.mask].reshape(-1, prob.nx)
+        return None
     FN = prob.held_jacobian(x, held)[prob.mask].reshape(-1, held.size)
-    Cu = C if C_unscaled is None else C_unscaled
-    term = HeldTerm([model.layout.names[i] for i in held], (tolerances or Tolerances()).sigma_vector(model)[held],
-                    list(prob.names), Cu @ (FB.T @ FN))
-    G = term.gain(E, E0[:, held]).reshape(len(Qw), 3, -1)
-    vh = np.einsum("maa->m", term.covariance(G))
-    return np.sqrt(np.clip(var + vh, 0.0, None)), np.sqrt(vh), term, term.contributions(G)
+    return HeldTerm([model.layout.names[i] for i in held], (tolerances or Tolerances()).sigma_vector(model)[held],
+                    list(prob.names), C_unscaled @ (F.T @ FN))

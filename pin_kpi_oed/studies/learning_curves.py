@@ -72,7 +72,7 @@ def calibrate_fixed(model: TrackerModel, data: MeasurementSet, prior: Discrepanc
     from pin_kpi_oed.identification.problem import align_data
 
     res = identify(model, data, use_orientation=False, raise_on_failure=False, discrepancy="none",
-                   on_poor_fit="ignore", loss="linear")
+                   on_poor_fit="ignore", loss="linear", tcp_sigma=False)  # the models carry no TCP σ of the fit
     plain = res.calibrated_model()
     if prior.kernel is None:
         return plain, plain
