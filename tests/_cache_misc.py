@@ -20,17 +20,15 @@ PARSED_GROUP = "misc_parsed_sources"
 
 @contextlib.contextmanager
 def _kept_out_of_collections() -> Iterator[None]:
-    """The objects made inside kept out of every later garbage collection (``gc.freeze``), none run inside: the trees
-    are cached for the whole process and hold no reference cycles, yet each pass of the collector scanned every tree
-    parsed so far (parsing the package, the tests, the benchmarks and the examples took 3.8-4.4 s CPU so, 1.6-2.0 s
-    without the passes: ``python -c`` over the 470 files). The objects alive at that moment besides the trees
-    (modules, pytest's state) are long-lived too; an object freed by its reference count is freed as before."""
+    """No garbage collection while a tree is made: a parse allocates many objects at once, and each pass of the
+    collector inside it would scan every tree parsed so far. Nothing is frozen (``gc.freeze`` would also keep the
+    unreachable cycles other tests of the process left, e.g. OMPL's objects, which nanobind then reports as leaked
+    at exit)."""
     enabled = gc.isenabled()
     gc.disable()
     try:
         yield
     finally:
-        gc.freeze()
         if enabled:
             gc.enable()
 
