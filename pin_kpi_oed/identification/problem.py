@@ -451,7 +451,19 @@ class ResidualModel:
             if rrot is not None:
                 R_model = Rotation.from_rotvec(Y[:, 3:]).as_matrix()
                 rrot[rows] = log3(R_model @ np.swapaxes(self.R_meas[rows], 1, 2))
+        if rrot is not None:  # the Jacobian at the same x reads them (a least-squares step asks for both)
+            self._last_rrot = (np.asarray(x, float).tobytes(), rrot.copy())
         return rpos, rrot
+
+    def _rotation_residuals(self, x: np.ndarray) -> np.ndarray:
+        """The orientation residuals of :meth:`evaluate` at x, (m, 3) rad: those of the last evaluation when it was
+        at the same x (the same numbers), else evaluated."""
+        last = getattr(self, "_last_rrot", None)
+        if last is not None and last[0] == np.asarray(x, float).tobytes():
+            return last[1]
+        rrot = self.evaluate(x)[1]
+        assert rrot is not None
+        return rrot
 
     def residual(self, x: np.ndarray) -> np.ndarray:
         """Weighted residual vector f(x) (rows: measurements in use, then priors)."""
@@ -512,8 +524,7 @@ class ResidualModel:
             if Js is not J:
                 J[rows] = Js
         if nh_ == 6:
-            _, rrot = self.evaluate(x)
-            J[:, 3:, :] = jl_inv(rrot) @ J[:, 3:, :]
+            J[:, 3:, :] = jl_inv(self._rotation_residuals(x)) @ J[:, 3:, :]
         return J * self.W[:, :, None]
 
     def held_jacobian(self, x: np.ndarray, cols: np.ndarray) -> np.ndarray:
@@ -529,7 +540,7 @@ class ResidualModel:
             Qe = Qs + sum_joint_offsets(pairs, Qs, self.aux[s])[0] if pairs else Qs
             J[rows] = model.jacobian(p, Qe)[:, :, cols]
         if self.nh == 6:
-            J[:, 3:, :] = jl_inv(self.evaluate(x)[1]) @ J[:, 3:, :]
+            J[:, 3:, :] = jl_inv(self._rotation_residuals(x)) @ J[:, 3:, :]
         return J * self.W[:, :, None]
 
     def jacobian(self, x: np.ndarray) -> np.ndarray:
