@@ -241,6 +241,32 @@ def test_pose6d_jacobian_reuses_the_last_orientation_residuals_bit_for_bit():
     assert np.array_equal(tm.predict(truth, data.q)[:, 3:], per_row)
 
 
+def test_jacobian_reused_at_the_same_solution_only():
+    """A station's device Jacobian is computed once per (parameters, effective joints): the Jacobians of the fit, of
+    its held parameters and after a step elsewhere are bit for bit those of a problem computing them afresh, an
+    effect's θ moves the joints it is taken at."""
+    robot, tm, _ = _setup("kr15")
+    truth = random_truth(tm, _tol(), seed=44)
+    eff = [JointCompliance()]
+    data = simulate(tm, robot.random_q(np.random.default_rng(5), 25), truth, [(eff[0], np.array([2e-3, -1e-3]))],
+                    seed=6)
+    base = analyse(tm).base
+    x = np.concatenate([truth[base], [2e-3, -1e-3]])
+    x_theta = x.copy()
+    x_theta[-1] += 1e-3  # the same geometry, other effective joints
+
+    def fresh():
+        return ResidualModel(tm, data, base, eff, p_ref=np.zeros(tm.n_params))
+
+    prob = fresh()
+    held = np.arange(3)
+    assert np.array_equal(prob.jacobian(x), fresh().jacobian(x))
+    assert np.array_equal(prob.held_jacobian(x, held), fresh().held_jacobian(x, held))
+    assert np.array_equal(prob.jacobian(x_theta), fresh().jacobian(x_theta))
+    assert not np.array_equal(prob.jacobian(x_theta), prob.jacobian(x))
+    assert np.array_equal(prob.held_jacobian(x, held), fresh().held_jacobian(x, held))
+
+
 def test_jl_inv_matches_pinocchio():
     rng = np.random.default_rng(0)
     phi = rng.normal(size=(20, 3)) * np.r_[np.full(10, 1.0), np.full(10, 1e-6)][:, None]

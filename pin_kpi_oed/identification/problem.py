@@ -498,6 +498,20 @@ class ResidualModel:
             out[:, 3:] = np.einsum("ab,mbn->man", RT, w) @ dQt
         return out
 
+    def _device_jacobian(self, s: int, model: TrackerModel, p: np.ndarray, Qe: np.ndarray) -> np.ndarray:
+        """Station s's device Jacobian dh/dp at (p, Qe), (ms, nh, np), read-only: the last one of the station again
+        when p and Qe are the same (the fit's last step, its covariance and the held parameters' absorption ask for
+        it at the same solution)."""
+        key = (p.tobytes(), Qe.shape, Qe.tobytes())
+        cache = self.__dict__.setdefault("_last_jh", {})
+        last = cache.get(s)
+        if last is not None and last[0] == key:
+            return last[1]
+        Jh = model.jacobian(p, Qe)
+        Jh.flags.writeable = False
+        cache[s] = (key, Jh)
+        return Jh
+
     def jacobian_full(self, x: np.ndarray) -> np.ndarray:
         """Weighted Jacobian of every measurement, (m, nh, nx)."""
         P, th = self.unpack(x)
@@ -513,7 +527,7 @@ class ResidualModel:
                 Qe = Qs + dQ
             else:
                 dq_ders, Qe = [], Qs
-            Jh = model.jacobian(p, Qe)
+            Jh = self._device_jacobian(s, model, p, Qe)
             cols = self.x_columns[s]
             use = cols >= 0
             Js = J if isinstance(rows, slice) else np.zeros((Qs.shape[0], nh_, self.nx))
@@ -538,7 +552,7 @@ class ResidualModel:
             model, p = self._models[s], self.stations.station_p(P, s)
             Qs = self._Qs[s]
             Qe = Qs + sum_joint_offsets(pairs, Qs, self.aux[s])[0] if pairs else Qs
-            J[rows] = model.jacobian(p, Qe)[:, :, cols]
+            J[rows] = self._device_jacobian(s, model, p, Qe)[:, :, cols]
         if self.nh == 6:
             J[:, 3:, :] = jl_inv(self._rotation_residuals(x)) @ J[:, 3:, :]
         return J * self.W[:, :, None]
