@@ -219,6 +219,54 @@ def test_residual_jacobian_matches_finite_differences(pose6d):
     assert np.abs(J - Jfd).max() <= 1e-5 * np.abs(Jfd).max(), np.abs(J - Jfd).max() / np.abs(Jfd).max()
 
 
+def test_pose6d_jacobian_reuses_the_last_orientation_residuals_bit_for_bit():
+    """The 6-D Jacobian reads the orientation residuals of the last evaluation at the same x: the same numbers as a
+    problem that never evaluated, and an evaluation at another x is not reused; the probe orientations come from the
+    rows' rotation products taken in one call, equal to the per-row products."""
+    robot, tm, _ = _setup("kr15", pose6d=True)
+    truth = random_truth(tm, _tol(), seed=43)
+    data = simulate(tm, robot.random_q(np.random.default_rng(3), 25), truth, seed=4)
+    base = analyse(tm).base
+    x = truth[base]
+    fresh = ResidualModel(tm, data, base, p_ref=np.zeros(tm.n_params)).jacobian(x)
+    prob = ResidualModel(tm, data, base, p_ref=np.zeros(tm.n_params))
+    prob.residual(x)
+    assert np.array_equal(prob.jacobian(x), fresh)
+    prob.residual(x + 1e-4)
+    assert np.array_equal(prob.jacobian(x), fresh)
+    assert not np.array_equal(prob.jacobian(x + 1e-4), fresh)
+    kin = tm.kinematics(truth, data.q, tm.points(truth))
+    T, R_probe = tm.tracker_pose(truth), tm.probe_R @ pin.exp3(truth[tm.layout.probe])
+    per_row = np.array([pin.log3(T.rotation @ Rt @ R_probe) for Rt in kin.R_tool])
+    assert np.array_equal(tm.predict(truth, data.q)[:, 3:], per_row)
+
+
+def test_jacobian_reused_at_the_same_solution_only():
+    """A station's device Jacobian is computed once per (parameters, effective joints): the Jacobians of the fit, of
+    its held parameters and after a step elsewhere are bit for bit those of a problem computing them afresh, an
+    effect's θ moves the joints it is taken at."""
+    robot, tm, _ = _setup("kr15")
+    truth = random_truth(tm, _tol(), seed=44)
+    eff = [JointCompliance()]
+    data = simulate(tm, robot.random_q(np.random.default_rng(5), 25), truth, [(eff[0], np.array([2e-3, -1e-3]))],
+                    seed=6)
+    base = analyse(tm).base
+    x = np.concatenate([truth[base], [2e-3, -1e-3]])
+    x_theta = x.copy()
+    x_theta[-1] += 1e-3  # the same geometry, other effective joints
+
+    def fresh():
+        return ResidualModel(tm, data, base, eff, p_ref=np.zeros(tm.n_params))
+
+    prob = fresh()
+    held = np.arange(3)
+    assert np.array_equal(prob.jacobian(x), fresh().jacobian(x))
+    assert np.array_equal(prob.held_jacobian(x, held), fresh().held_jacobian(x, held))
+    assert np.array_equal(prob.jacobian(x_theta), fresh().jacobian(x_theta))
+    assert not np.array_equal(prob.jacobian(x_theta), prob.jacobian(x))
+    assert np.array_equal(prob.held_jacobian(x, held), fresh().held_jacobian(x, held))
+
+
 def test_jl_inv_matches_pinocchio():
     rng = np.random.default_rng(0)
     phi = rng.normal(size=(20, 3)) * np.r_[np.full(10, 1.0), np.full(10, 1e-6)][:, None]

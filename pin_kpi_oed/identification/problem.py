@@ -451,7 +451,19 @@ class ResidualModel:
             if rrot is not None:
                 R_model = Rotation.from_rotvec(Y[:, 3:]).as_matrix()
                 rrot[rows] = log3(R_model @ np.swapaxes(self.R_meas[rows], 1, 2))
+        if rrot is not None:  # the Jacobian at the same x reads them (a least-squares step asks for both)
+            self._last_rrot = (np.asarray(x, float).tobytes(), rrot.copy())
         return rpos, rrot
+
+    def _rotation_residuals(self, x: np.ndarray) -> np.ndarray:
+        """The orientation residuals of :meth:`evaluate` at x, (m, 3) rad: those of the last evaluation when it was
+        at the same x (the same numbers), else evaluated."""
+        last = getattr(self, "_last_rrot", None)
+        if last is not None and last[0] == np.asarray(x, float).tobytes():
+            return last[1]
+        rrot = self.evaluate(x)[1]
+        assert rrot is not None
+        return rrot
 
     def residual(self, x: np.ndarray) -> np.ndarray:
         """Weighted residual vector f(x) (rows: measurements in use, then priors)."""
@@ -486,6 +498,20 @@ class ResidualModel:
             out[:, 3:] = np.einsum("ab,mbn->man", RT, w) @ dQt
         return out
 
+    def _device_jacobian(self, s: int, model: TrackerModel, p: np.ndarray, Qe: np.ndarray) -> np.ndarray:
+        """Station s's device Jacobian dh/dp at (p, Qe), (ms, nh, np), read-only: the last one of the station again
+        when p and Qe are the same (the fit's last step, its covariance and the held parameters' absorption ask for
+        it at the same solution)."""
+        key = (p.tobytes(), Qe.shape, Qe.tobytes())
+        cache = self.__dict__.setdefault("_last_jh", {})
+        last = cache.get(s)
+        if last is not None and last[0] == key:
+            return last[1]
+        Jh = model.jacobian(p, Qe)
+        Jh.flags.writeable = False
+        cache[s] = (key, Jh)
+        return Jh
+
     def jacobian_full(self, x: np.ndarray) -> np.ndarray:
         """Weighted Jacobian of every measurement, (m, nh, nx)."""
         P, th = self.unpack(x)
@@ -501,7 +527,7 @@ class ResidualModel:
                 Qe = Qs + dQ
             else:
                 dq_ders, Qe = [], Qs
-            Jh = model.jacobian(p, Qe)
+            Jh = self._device_jacobian(s, model, p, Qe)
             cols = self.x_columns[s]
             use = cols >= 0
             Js = J if isinstance(rows, slice) else np.zeros((Qs.shape[0], nh_, self.nx))
@@ -512,8 +538,7 @@ class ResidualModel:
             if Js is not J:
                 J[rows] = Js
         if nh_ == 6:
-            _, rrot = self.evaluate(x)
-            J[:, 3:, :] = jl_inv(rrot) @ J[:, 3:, :]
+            J[:, 3:, :] = jl_inv(self._rotation_residuals(x)) @ J[:, 3:, :]
         return J * self.W[:, :, None]
 
     def held_jacobian(self, x: np.ndarray, cols: np.ndarray) -> np.ndarray:
@@ -527,9 +552,9 @@ class ResidualModel:
             model, p = self._models[s], self.stations.station_p(P, s)
             Qs = self._Qs[s]
             Qe = Qs + sum_joint_offsets(pairs, Qs, self.aux[s])[0] if pairs else Qs
-            J[rows] = model.jacobian(p, Qe)[:, :, cols]
+            J[rows] = self._device_jacobian(s, model, p, Qe)[:, :, cols]
         if self.nh == 6:
-            J[:, 3:, :] = jl_inv(self.evaluate(x)[1]) @ J[:, 3:, :]
+            J[:, 3:, :] = jl_inv(self._rotation_residuals(x)) @ J[:, 3:, :]
         return J * self.W[:, :, None]
 
     def jacobian(self, x: np.ndarray) -> np.ndarray:

@@ -174,7 +174,7 @@ class TrackerModel(MeasurementModel):
         if not self.pose6d:
             return Y
         R_probe = self._probe_rotation(p)
-        W = np.array([pin.log3(T.rotation @ Rt @ R_probe) for Rt in kin.R_tool])
+        W = np.array([pin.log3(R) for R in T.rotation @ kin.R_tool @ R_probe])  # the rows' products in one call
         return np.hstack([Y, W])
 
     def kpi(self, p: np.ndarray, Q_work: np.ndarray) -> np.ndarray:
