@@ -415,3 +415,23 @@ def test_working_target_out_of_sight_is_solved_and_named(kr15, coll15):
     assert np.linalg.norm(M2.act(cell.tcp_m) - M.act(kr15.tcp_m)) <= 1e-6
     CollisionModel(cell)
     assert list(cell.hidden_work) == [0] and "out of the tracker's sight" in cell.summary()
+
+
+def test_beam_distances_are_coals_at_every_pose_whatever_the_order(kr15):
+    """The checker's beam columns (fixed targets' placements kept from its first pose) are Coal's distance of the
+    beam capsule to each target at that pose's placements, computed from scratch, in any order of poses."""
+    import coal
+
+    chk = FeasibilityChecker(kr15)
+    Q = np.random.default_rng(3).uniform(kr15.q_lower, kr15.q_upper, (4, kr15.robot.nq))
+    fresh = FeasibilityChecker(kr15)
+    for q in (Q[2], Q[0], Q[3], Q[1], Q[2]):
+        d = chk.distances(q[None])[0]
+        fresh.pair_distances(q)
+        refl = fresh.data.oMf[fresh.tool_id].act(fresh.reflector)
+        beam, Tb = coal_capsule(fresh.tracker, refl, kr15.beam_radius_m)
+        want = [coal.distance(beam, Tb, fresh.gm.geometryObjects[g].geometry,
+                              coal.Transform3s(fresh.gd.oMg[g].rotation, fresh.gd.oMg[g].translation),
+                              coal.DistanceRequest(), coal.DistanceResult()) for g in fresh.beam_targets]
+        assert len(want) > 5 and np.array_equal(d[chk.n_pairs:], want)
+        assert np.array_equal(d[:chk.n_pairs], fresh.pair_distances(q))
