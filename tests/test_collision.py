@@ -435,3 +435,11 @@ def test_beam_distances_are_coals_at_every_pose_whatever_the_order(kr15):
                               coal.DistanceRequest(), coal.DistanceResult()) for g in fresh.beam_targets]
         assert len(want) > 5 and np.array_equal(d[chk.n_pairs:], want)
         assert np.array_equal(d[:chk.n_pairs], fresh.pair_distances(q))
+
+
+def test_a_model_without_collision_rows_has_the_same_rows_pruned_or_not(kr15):
+    """Pruning drops only robot–obstacle and robot–half-space rows: without collision rows (the working targets'
+    check of the cell's own faults, a design with ``collision=False``) pruned and unpruned rows are the same."""
+    pruned, full = CollisionModel(kr15, collision=False), CollisionModel(kr15, collision=False, prune=False)
+    assert pruned.names == full.names == ["incidence"]
+    assert np.array_equal(pruned.pairs, full.pairs) and np.array_equal(pruned.half, full.half)

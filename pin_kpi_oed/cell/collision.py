@@ -168,7 +168,7 @@ class CollisionModel:
         pairs, hs, names, deps = [], [], [], []
         rob = range(nr)
         obst = range(nr, nr + self.n_obst)
-        bound = self._prune_bounds() if prune else None
+        bound = self._prune_bounds() if prune and collision else None  # only the collision rows are pruned
         clr = self.cell.clearance_m
         if collision:
             for a in rob:
