@@ -175,6 +175,29 @@ def test_pruned_rows_never_active(kr15, coll15, coll15_all):
     assert g[:, pruned].min() > 0
 
 
+def test_prune_bounds_beyond_joint_1_are_the_per_capsule_per_obstacle_sweep():
+    """In the UR10 cell (twenty obstacles), each capsule beyond joint 1 is bounded by the joint-2 origin's distance
+    to each obstacle over the sweep of joint 1, less the obstacle's radius, the capsule's reach R_k and the chord
+    error, computed capsule by capsule and obstacle by obstacle: the same numbers bit for bit."""
+    coll = CollisionModel(load_cell("ur10"))
+    b = coll._prune_bounds()["obst"]
+    lo, hi = coll.robot.q_lower[0], coll.robot.q_upper[0]
+    q1 = np.append(np.arange(lo, hi, np.radians(0.25)), hi)
+    Q = np.zeros((q1.size, coll.n))
+    Q[:, 0] = q1
+    fr = coll.fk.frames(Q)
+    o2 = fr.t[:, 1] + fr.R[:, 1] @ coll.fk.placements[1].translation
+    err = np.linalg.norm(np.cross(o2[0] - fr.t[0, 1], fr.R[0, 1] @ coll.fk.ang[0])) * np.radians(0.25) / 2
+    nr, far = coll.n_robot, [a for a in range(coll.n_robot) if coll.seg_joint[a] >= 2]
+    assert len(far) >= 4 and b.shape[1] >= 10
+    for a in far:
+        Rk = sum(np.linalg.norm(coll.fk.placements[j].translation) for j in range(2, coll.seg_joint[a]))
+        Rk += max(np.linalg.norm(coll.A_loc[a]), np.linalg.norm(coll.B_loc[a])) + coll.radius[a]
+        want = [(point_segment_distance(o2, coll.A_loc[nr + o], coll.B_loc[nr + o]) - coll.radius[nr + o] - Rk
+                 - err).min() for o in range(b.shape[1])]
+        assert np.array_equal(b[a], want)
+
+
 # ---------------------------------------------------------------------------------------------- independent check
 def test_independent_check_agrees_with_coal_and_fast_path(kr15, coll15_all):
     Q = _mixed_configs(coll15_all, 20, seed=13)
