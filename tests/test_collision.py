@@ -175,6 +175,29 @@ def test_pruned_rows_never_active(kr15, coll15, coll15_all):
     assert g[:, pruned].min() > 0
 
 
+def test_prune_bounds_beyond_joint_1_are_the_per_capsule_per_obstacle_sweep():
+    """In the UR10 cell (twenty obstacles), each capsule beyond joint 1 is bounded by the joint-2 origin's distance
+    to each obstacle over the sweep of joint 1, less the obstacle's radius, the capsule's reach R_k and the chord
+    error, computed capsule by capsule and obstacle by obstacle: the same numbers bit for bit."""
+    coll = CollisionModel(load_cell("ur10"))
+    b = coll._prune_bounds()["obst"]
+    lo, hi = coll.robot.q_lower[0], coll.robot.q_upper[0]
+    q1 = np.append(np.arange(lo, hi, np.radians(0.25)), hi)
+    Q = np.zeros((q1.size, coll.n))
+    Q[:, 0] = q1
+    fr = coll.fk.frames(Q)
+    o2 = fr.t[:, 1] + fr.R[:, 1] @ coll.fk.placements[1].translation
+    err = np.linalg.norm(np.cross(o2[0] - fr.t[0, 1], fr.R[0, 1] @ coll.fk.ang[0])) * np.radians(0.25) / 2
+    nr, far = coll.n_robot, [a for a in range(coll.n_robot) if coll.seg_joint[a] >= 2]
+    assert len(far) >= 4 and b.shape[1] >= 10
+    for a in far:
+        Rk = sum(np.linalg.norm(coll.fk.placements[j].translation) for j in range(2, coll.seg_joint[a]))
+        Rk += max(np.linalg.norm(coll.A_loc[a]), np.linalg.norm(coll.B_loc[a])) + coll.radius[a]
+        want = [(point_segment_distance(o2, coll.A_loc[nr + o], coll.B_loc[nr + o]) - coll.radius[nr + o] - Rk
+                 - err).min() for o in range(b.shape[1])]
+        assert np.array_equal(b[a], want)
+
+
 # ---------------------------------------------------------------------------------------------- independent check
 def test_independent_check_agrees_with_coal_and_fast_path(kr15, coll15_all):
     Q = _mixed_configs(coll15_all, 20, seed=13)
@@ -415,3 +438,31 @@ def test_working_target_out_of_sight_is_solved_and_named(kr15, coll15):
     assert np.linalg.norm(M2.act(cell.tcp_m) - M.act(kr15.tcp_m)) <= 1e-6
     CollisionModel(cell)
     assert list(cell.hidden_work) == [0] and "out of the tracker's sight" in cell.summary()
+
+
+def test_beam_distances_are_coals_at_every_pose_whatever_the_order(kr15):
+    """The checker's beam columns (fixed targets' placements kept from its first pose) are Coal's distance of the
+    beam capsule to each target at that pose's placements, computed from scratch, in any order of poses."""
+    import coal
+
+    chk = FeasibilityChecker(kr15)
+    Q = np.random.default_rng(3).uniform(kr15.q_lower, kr15.q_upper, (4, kr15.robot.nq))
+    fresh = FeasibilityChecker(kr15)
+    for q in (Q[2], Q[0], Q[3], Q[1], Q[2]):
+        d = chk.distances(q[None])[0]
+        fresh.pair_distances(q)
+        refl = fresh.data.oMf[fresh.tool_id].act(fresh.reflector)
+        beam, Tb = coal_capsule(fresh.tracker, refl, kr15.beam_radius_m)
+        want = [coal.distance(beam, Tb, fresh.gm.geometryObjects[g].geometry,
+                              coal.Transform3s(fresh.gd.oMg[g].rotation, fresh.gd.oMg[g].translation),
+                              coal.DistanceRequest(), coal.DistanceResult()) for g in fresh.beam_targets]
+        assert len(want) > 5 and np.array_equal(d[chk.n_pairs:], want)
+        assert np.array_equal(d[:chk.n_pairs], fresh.pair_distances(q))
+
+
+def test_a_model_without_collision_rows_has_the_same_rows_pruned_or_not(kr15):
+    """Pruning drops only robot–obstacle and robot–half-space rows: without collision rows (the working targets'
+    check of the cell's own faults, a design with ``collision=False``) pruned and unpruned rows are the same."""
+    pruned, full = CollisionModel(kr15, collision=False), CollisionModel(kr15, collision=False, prune=False)
+    assert pruned.names == full.names == ["incidence"]
+    assert np.array_equal(pruned.pairs, full.pairs) and np.array_equal(pruned.half, full.half)

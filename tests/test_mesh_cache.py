@@ -141,3 +141,30 @@ def test_fitted_capsules_are_the_computed_ones_and_copies():
     again[0][0][:] = 7.0
     assert np.array_equal(fit_capsules(plate.vertices, plate.faces, 0.08)[0][0], fresh[0][0])
     assert len(fit_capsules(plate.vertices, plate.faces, 0.3)) < len(fresh)  # other parameters: another fit
+
+
+def test_urdf_geometry_reloads_when_its_path_reaches_another_file_of_the_same_size_and_time(tmp_path):
+    """A symbolic link in the mesh's path pointed at another file (same byte size, same modification time): the
+    shared loader's check sees another file and the geometry is read from the new one."""
+    small, big = tmp_path / "small.stl", tmp_path / "big.stl"
+    _write_box(small, 0.1)
+    _write_box(big, 0.2)
+    t0 = (small.stat().st_mtime_ns // 1_000_000_000) * 1_000_000_000
+    for p in (small, big):
+        os.utime(p, ns=(t0, t0))
+    link = tmp_path / "part.stl"
+    link.symlink_to(small)
+    urdf = tmp_path / "part.urdf"
+    urdf.write_text(f"""<robot name="part"><link name="base"><collision><geometry><mesh filename="{link}"/>
+        </geometry></collision></link></robot>""")
+    model = pin.buildModelFromUrdf(str(urdf))
+
+    def half_side() -> float:
+        gm = build_geometry(model, urdf, pin.GeometryType.COLLISION, [str(tmp_path)])
+        return float(np.abs(np.asarray(gm.geometryObjects[0].geometry.vertices())).max())
+
+    clear_mesh_caches()
+    assert half_side() == pytest.approx(0.05)
+    link.unlink()
+    link.symlink_to(big)
+    assert half_side() == pytest.approx(0.1)

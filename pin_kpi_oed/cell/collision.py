@@ -168,7 +168,7 @@ class CollisionModel:
         pairs, hs, names, deps = [], [], [], []
         rob = range(nr)
         obst = range(nr, nr + self.n_obst)
-        bound = self._prune_bounds() if prune else None
+        bound = self._prune_bounds() if prune and collision else None  # only the collision rows are pruned
         clr = self.cell.clearance_m
         if collision:
             for a in rob:
@@ -272,6 +272,11 @@ class CollisionModel:
         obsA = self.A_loc[nr:nr + self.n_obst]
         obsB = self.B_loc[nr:nr + self.n_obst]
         obsr = self.radius[nr:nr + self.n_obst]
+        # the joint-2 origin's distances to each obstacle and its heights over each half-space: the same for every
+        # capsule beyond joint 1 (only its reach R_k differs), computed once
+        far_o = (np.stack([point_segment_distance(o2, obsA[o], obsB[o]) for o in range(self.n_obst)], axis=1)
+                 - obsr if self.n_obst else np.zeros((o2.shape[0], 0)))
+        far_h = [(o2 @ nv).min() - off for nv, off in self.halfspaces]
         for a in range(nr):
             k = self.seg_joint[a]
             if k < 1:
@@ -293,11 +298,9 @@ class CollisionModel:
             Rk = sum(np.linalg.norm(self.fk.placements[j].translation) for j in range(2, k))
             Rk += max(np.linalg.norm(self.A_loc[a]), np.linalg.norm(self.B_loc[a])) + self.radius[a]
             err = rho2 * step / 2
-            for o in range(self.n_obst):
-                d = point_segment_distance(o2, obsA[o], obsB[o]) - obsr[o] - Rk - err
-                out_o[a, o] = d.min()
-            for h, (nv, off) in enumerate(self.halfspaces):
-                out_h[a, h] = (o2 @ nv).min() - off - Rk - err
+            out_o[a] = (far_o - Rk - err).min(axis=0)
+            for h, base in enumerate(far_h):
+                out_h[a, h] = base - Rk - err
         return {"obst": out_o, "half": out_h}
 
     # ------------------------------------------------------------------ evaluation

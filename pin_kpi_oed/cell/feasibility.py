@@ -18,12 +18,16 @@ spheres, convex or BVH meshes), not as the optimiser's enclosing capsules. Dista
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
 import pinocchio as pin
 
 from pin_kpi_oed.cell.cell_model import Cell
+
+_Z_AXIS = np.array([0.0, 0.0, 1.0])
+_Z_AXIS.flags.writeable = False
 
 
 def coal_capsule(a: np.ndarray, b: np.ndarray, radius: float):
@@ -38,12 +42,11 @@ def coal_capsule(a: np.ndarray, b: np.ndarray, radius: float):
     """
     import coal
 
-    d = np.asarray(b, float) - np.asarray(a, float)
-    L = float(np.linalg.norm(d))
-    R = np.eye(3)
-    if L > 1e-12:
-        R = pin.Quaternion.FromTwoVectors(np.array([0.0, 0.0, 1.0]), d / L).matrix()
-    T = coal.Transform3s(R, 0.5 * (np.asarray(a, float) + np.asarray(b, float)))
+    a, b = np.asarray(a, float), np.asarray(b, float)
+    d = b - a
+    L = math.sqrt(d.dot(d))  # what np.linalg.norm computes for a vector, without its overhead
+    R = pin.Quaternion.FromTwoVectors(_Z_AXIS, d / L).matrix() if L > 1e-12 else np.eye(3)
+    T = coal.Transform3s(R, 0.5 * (a + b))
     return coal.Capsule(float(radius), L), T
 
 
@@ -156,6 +159,12 @@ class FeasibilityChecker:
         self.gd = pin.GeometryData(self.gm)
         self.beam_targets = [i for i in self.robot_ids + self.obst_ids + self.half_ids
                              if not any(x in self._keys(i) for x in cell.beam_skip)]
+        # the beam targets' shapes read once; the placements of the fixed ones (on the universe joint) made into
+        # Coal transforms once, at the first pose (the same numbers at every pose)
+        self._beam_shapes = [self.gm.geometryObjects[i].geometry for i in self.beam_targets]
+        self._beam_fixed = [self.gm.geometryObjects[i].parentJoint == 0 for i in self.beam_targets]
+        self._beam_T: list = []
+        self._distance_request = None
         self.tool_id = rb.tool_frame_id
         self.tracker = cell.tracker_in_base
         self.reflector = np.asarray(cell.reflector_m, float)
@@ -205,8 +214,8 @@ class FeasibilityChecker:
         """Names a skip entry may use for geometry object i (its own name, its link)."""
         return {x for x in self.labels[i] if x}
 
-    def _skipped(self, i: int, k: int) -> bool:
-        a, b = self._keys(i), self._keys(k)
+    def _skipped(self, i: int, k: int, keys: list[set[str]] | None = None) -> bool:
+        a, b = (self._keys(i), self._keys(k)) if keys is None else (keys[i], keys[k])
         return any((x in a and y in b) or (x in b and y in a) for x, y in self.cell.skip_pairs)
 
     def _collision_pairs(self) -> list[tuple[int, int]]:
@@ -216,13 +225,16 @@ class FeasibilityChecker:
         def adjacent(j1: int, j2: int) -> bool:
             return j1 == j2 or parents[j1] == j2 or parents[j2] == j1
 
+        keys = [self._keys(i) for i in range(len(self.labels))]  # every object's names, made once
+        skips = self.cell.skip_pairs
         pairs = []
         for x, i in enumerate(self.robot_ids):
             for y, k in enumerate(self.robot_ids):
-                if y > x and not adjacent(self.robot_joint[x], self.robot_joint[y]) and not self._skipped(i, k):
+                if y > x and not adjacent(self.robot_joint[x], self.robot_joint[y]) and \
+                        not (skips and self._skipped(i, k, keys)):
                     pairs.append((i, k))
             for k in self.obst_ids + self.half_ids:
-                if not self._skipped(i, k):
+                if not (skips and self._skipped(i, k, keys)):
                     pairs.append((i, k))
         return pairs
 
@@ -236,16 +248,32 @@ class FeasibilityChecker:
         oMt = self.data.oMf[self.tool_id]
         refl = oMt.act(self.reflector)
         beam, Tb = coal_capsule(self.tracker, refl, self.cell.beam_radius_m)
-        req = coal.DistanceRequest()
-        for k, gid in enumerate(self.beam_targets):
-            Mg = self.gd.oMg[gid]
-            d[self.n_pairs + k] = coal.distance(beam, Tb, self.gm.geometryObjects[gid].geometry,
-                                                coal.Transform3s(Mg.rotation, Mg.translation), req,
-                                                coal.DistanceResult())
+        req = self._distance_request
+        if req is None:
+            req = self._distance_request = coal.DistanceRequest()
+        for k, T in enumerate(self._beam_transforms()):
+            d[self.n_pairs + k] = coal.distance(beam, Tb, self._beam_shapes[k], T, req, coal.DistanceResult())
         if self.mesh_ids:
             beam_mesh_penetration(self, beam, Tb, d)
         g = self.tracker - refl
         return d, float(oMt.rotation[:, 2] @ g / np.linalg.norm(g))
+
+    def _beam_transforms(self) -> list:
+        """Coal transforms of the beam targets at the current placements (``gd.oMg``): the fixed ones' made once."""
+        import coal
+
+        oMg = self.gd.oMg
+        if not self._beam_T:
+            self._beam_T = [None] * len(self.beam_targets)
+            for k, gid in enumerate(self.beam_targets):
+                if self._beam_fixed[k]:
+                    self._beam_T[k] = coal.Transform3s(oMg[gid].rotation, oMg[gid].translation)
+        out = list(self._beam_T)
+        for k, gid in enumerate(self.beam_targets):
+            if out[k] is None:
+                Mg = oMg[gid]
+                out[k] = coal.Transform3s(Mg.rotation, Mg.translation)
+        return out
 
     def pair_distances(self, q: np.ndarray) -> np.ndarray:
         """Signed distances (m, radii subtracted) of the capsule / half-space pairs at one configuration.

@@ -11,14 +11,16 @@ beyond the ends.
 
 What is read from mesh files is kept per process (two cells of one robot in one process read its meshes
 once): the meshes Coal loads (one shared ``coal.CachedMeshLoader``, dropped as soon as a file it read
-changed), the vertices trimesh reads (keyed by :func:`file_stamp`: resolved path, size and modification
-time in ns) and the capsules fitted to a point set or mesh (keyed by the points' bytes). A changed file is
-read again; what a caller gets is a copy or a read-only array, never the cached object itself.
+changed: another file at its path, another size or modification time), the vertices trimesh reads (keyed by
+:func:`file_stamp`: resolved path, size and modification time in ns) and the capsules fitted to a point set or
+mesh (keyed by the points' bytes). A changed file is read again; what a caller gets is a copy or a read-only
+array, never the cached object itself.
 """
 
 from __future__ import annotations
 
 import hashlib
+import os
 from collections import OrderedDict
 from pathlib import Path
 from typing import Any
@@ -50,12 +52,23 @@ def file_stamp(path: str | Path) -> tuple[str, int, int] | None:
     return str(p), int(st.st_size), int(st.st_mtime_ns)
 
 
+def _loader_stamp(path: str) -> tuple[int, int, int, int] | None:
+    """What the shared Coal loader's check keys a mesh file on: the file the path reaches (device, inode), its size
+    and modification time in ns (one ``stat``, no resolution of the path's folders: this check runs for every
+    mesh read so far at every geometry built), or None when it cannot be stat'ed."""
+    try:
+        st = os.stat(path)
+    except (OSError, ValueError):
+        return None
+    return int(st.st_dev), int(st.st_ino), int(st.st_size), int(st.st_mtime_ns)
+
+
 class _MeshCaches:
     """The process's mesh caches (see the module docstring)."""
 
     def __init__(self) -> None:
         self.loader: Any = None                 # coal.CachedMeshLoader shared by every URDF geometry
-        self.loaded: dict[str, tuple[str, int, int] | None] = {}   # mesh file -> stamp when the loader read it
+        self.loaded: dict[str, tuple[int, int, int, int] | None] = {}   # mesh file -> stamp when the loader read it
         self.vertices: dict[str, tuple[tuple[str, int, int], np.ndarray]] = {}   # resolved path -> (stamp, V)
         self.fits: OrderedDict[tuple, Any] = OrderedDict()
 
@@ -63,7 +76,7 @@ class _MeshCaches:
         """The shared Coal loader, a new one when a mesh file it read has changed since."""
         import coal
 
-        if self.loader is None or any(file_stamp(f) != s for f, s in self.loaded.items()):
+        if self.loader is None or any(_loader_stamp(f) != s for f, s in self.loaded.items()):
             self.loader, self.loaded = coal.CachedMeshLoader(), {}
         return self.loader
 
@@ -71,7 +84,7 @@ class _MeshCaches:
         """Records the stamps of the mesh files of a geometry model built with :meth:`mesh_loader`."""
         for go in gm.geometryObjects:
             if go.meshPath and go.meshPath not in self.loaded:
-                self.loaded[go.meshPath] = file_stamp(go.meshPath)
+                self.loaded[go.meshPath] = _loader_stamp(go.meshPath)
 
     def fit(self, key: tuple, compute: Any) -> Any:
         """``compute()``, kept under ``key`` (least recently used dropped beyond :data:`FIT_CACHE_SIZE`)."""
