@@ -356,3 +356,25 @@ def test_cli_campaign_refits_the_discrepancy_on_the_measured_batch(tmp_path, cap
     alone = float(line.split("discrepancy ")[1].split(" um")[0]) * 1e-6
     for d in doc["designs"]:
         assert d["discrepancy"]["tcp_sigma_m"] < alone
+
+
+def test_a_set_downdated_below_identifiability_gives_no_swap_instead_of_an_error(problem):
+    """The exchange removes a chosen point before it tries each candidate in its place; from a set too small to
+    identify the parameters (3 poses: 9 equations for far more parameters), the information downdated is not
+    positive definite at working precision. Its values are then inf (no swap through that removal), never a
+    LinAlgError escaping as a traceback, and the full set's values stay those of a fresh state."""
+    Qp = problem.random_design(40, 8)[0]
+    d = default_discrepancy(6)
+    crit = DiscrepancyDesignCriterion(problem.model, problem.base, d, problem.cell.q_work, p=problem.p0)
+    Jp = crit.pool_jacobians(Qp)
+    st = GreedyState(Jp, Qp, crit.E, problem.cell.q_work, d, crit.prior_info, 0.0)
+    for i in range(3):
+        st.add(i)
+    assert 3 * 3 < problem.base.size
+    vals = st.without(0).values(np.zeros(len(Qp), bool))
+    assert vals.shape == (len(Qp),) and np.isinf(vals).all()
+    fresh = GreedyState(Jp, Qp, crit.E, problem.cell.q_work, d, crit.prior_info, 0.0)
+    for i in range(3):
+        fresh.add(i)
+    ex = np.zeros(len(Qp), bool)
+    assert np.array_equal(st.values(ex), fresh.values(ex), equal_nan=True)

@@ -186,7 +186,10 @@ class GreedyState(PoolState):
         R, Uc, g = self.Rc, self.Uc, self.kdiag + self.w
         if among is not None:
             R, Uc, g = R[:, among], Uc[:, among], g[among]
-        Rw, Hw = self.whitened(R, self.H)                        # R L⁻ᵀ (3, n, nb), H L⁻ᵀ (3, t, nb)
+        try:
+            Rw, Hw = self.whitened(R, self.H)                    # R L⁻ᵀ (3, n, nb), H L⁻ᵀ (3, t, nb)
+        except np.linalg.LinAlgError:  # a set downdated to an information not positive definite at working
+            return np.full(R.shape[1], np.inf)  # precision (a point removed from too few): no swap through it
         nb = Rw.shape[2]
         Hf = Hw.reshape(-1, nb)
         Nw = Hf.T @ Hf                                           # L⁻¹ N L⁻ᵀ: R D Rᵀ = R̃ Ñ R̃ᵀ
