@@ -80,6 +80,26 @@ def _gum() -> None:
           float(np.abs(np.asarray(a) - np.asarray(b)).max() / np.abs(np.asarray(a)).max()), "relative")
 
 
+def per_group_loo_log_density(Sigma: np.ndarray, Fs: np.ndarray, r: np.ndarray, groups: np.ndarray) -> np.ndarray:
+    """The former ``loo_log_density``: one pose group at a time (the reference the batched one is checked against,
+    here and in tests/test_joint_angle_sigma.py). Args as ``loo_log_density``; a group whose left-out covariance is
+    not positive definite is −inf."""
+    k = len(r)
+    H = Fs @ np.linalg.pinv(Fs, rcond=1e-12)
+    M = np.eye(k) - H
+    out = []
+    for g in np.unique(groups):
+        idx = (3 * np.flatnonzero(groups == g)[:, None] + np.arange(3)).reshape(-1)
+        B = np.linalg.pinv(np.eye(idx.size) - H[np.ix_(idx, idx)], rcond=1e-10)
+        A, e = B @ M[idx, :], B @ r[idx]
+        C = A @ Sigma @ A.T
+        C = 0.5 * (C + C.T) + 1e-12 * np.trace(C) / idx.size * np.eye(idx.size)
+        sign, logdet = np.linalg.slogdet(C)
+        out.append(-np.inf if sign <= 0 else
+                   -0.5 * (float(e @ np.linalg.solve(C, e)) + logdet + idx.size * np.log(2.0 * np.pi)))
+    return np.array(out)
+
+
 def _loo() -> None:
     rng = np.random.default_rng(4)
     n = 30
@@ -89,21 +109,7 @@ def _loo() -> None:
     r = rng.standard_normal(3 * n)
     groups = np.arange(n)
 
-    def former():
-        H = Fs @ np.linalg.pinv(Fs, rcond=1e-12)
-        M = np.eye(3 * n) - H
-        out = []
-        for g in np.unique(groups):
-            idx = (3 * np.flatnonzero(groups == g)[:, None] + np.arange(3)).reshape(-1)
-            Bg = np.linalg.pinv(np.eye(idx.size) - H[np.ix_(idx, idx)], rcond=1e-10)
-            A, e = Bg @ M[idx, :], Bg @ r[idx]
-            Cg = A @ Sigma @ A.T
-            Cg = 0.5 * (Cg + Cg.T) + 1e-12 * np.trace(Cg) / idx.size * np.eye(idx.size)
-            sign, logdet = np.linalg.slogdet(Cg)
-            out.append(-0.5 * (float(e @ np.linalg.solve(Cg, e)) + logdet + idx.size * np.log(2.0 * np.pi)))
-        return np.array(out)
-
-    old, a = _cpu(former, 10)
+    old, a = _cpu(lambda: per_group_loo_log_density(Sigma, Fs, r, groups), 10)
     new, b = _cpu(lambda: loo_log_density(Sigma, Fs, r, groups), 10)
     _line("leave-one-pose-out density of 30 poses", old, new,
           float(np.abs(np.asarray(a) - np.asarray(b)).max() / np.abs(np.asarray(a)).max()), "relative")
