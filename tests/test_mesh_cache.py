@@ -88,26 +88,33 @@ def test_a_changed_mesh_file_is_read_again_even_within_one_second(tmp_path, monk
     assert np.abs(file_vertices(path)).max() == pytest.approx(0.15) and len(calls) == 3
 
 
+def _one_mesh_urdf(folder: Path, mesh: Path, visual: bool) -> tuple[pin.Model, Path]:
+    """A one-link URDF in ``folder`` whose collision (with ``visual``, also visual) geometry is ``mesh``; its model."""
+    vis = f'<visual><geometry><mesh filename="{mesh}"/></geometry></visual>' if visual else ""
+    urdf = folder / "part.urdf"
+    urdf.write_text(f"""<robot name="part"><link name="base">{vis}<collision><geometry><mesh filename="{mesh}"/>
+        </geometry></collision></link></robot>""")
+    return pin.buildModelFromUrdf(str(urdf)), urdf
+
+
+def _half_side(model: pin.Model, urdf: Path, folder: Path) -> float:
+    """Half the side of the (box) collision mesh the geometry built now holds (m)."""
+    gm = build_geometry(model, urdf, pin.GeometryType.COLLISION, [str(folder)])
+    return float(np.abs(np.asarray(gm.geometryObjects[0].geometry.vertices())).max())
+
+
 def test_urdf_geometry_keeps_coals_meshes_and_reloads_a_changed_one(tmp_path):
     mesh = tmp_path / "part.stl"
     _write_box(mesh, 0.1)
     t0 = (mesh.stat().st_mtime_ns // 1_000_000_000) * 1_000_000_000
     os.utime(mesh, ns=(t0, t0))
-    urdf = tmp_path / "part.urdf"
-    urdf.write_text(f"""<robot name="part"><link name="base"><visual><geometry><mesh filename="{mesh}"/></geometry>
-        </visual><collision><geometry><mesh filename="{mesh}"/></geometry></collision></link></robot>""")
-    model = pin.buildModelFromUrdf(str(urdf))
-
-    def half_side() -> float:
-        gm = build_geometry(model, urdf, pin.GeometryType.COLLISION, [str(tmp_path)])
-        return float(np.abs(np.asarray(gm.geometryObjects[0].geometry.vertices())).max())
-
+    model, urdf = _one_mesh_urdf(tmp_path, mesh, visual=True)
     clear_mesh_caches()
-    assert half_side() == pytest.approx(0.05)
+    assert _half_side(model, urdf, tmp_path) == pytest.approx(0.05)
     _rewrite(mesh, 0.2, t0)  # unchanged stamp: Coal's mesh kept
-    assert half_side() == pytest.approx(0.05)
+    assert _half_side(model, urdf, tmp_path) == pytest.approx(0.05)
     _rewrite(mesh, 0.2, t0 + 100)  # 100 ns later (Coal's own check sees whole seconds): loaded again
-    assert half_side() == pytest.approx(0.1)
+    assert _half_side(model, urdf, tmp_path) == pytest.approx(0.1)
     gm = build_geometry(model, urdf, pin.GeometryType.VISUAL, [str(tmp_path)])
     gm.addGeometryObject(pin.GeometryObject("extra", 0, pin.SE3.Identity(), gm.geometryObjects[0].geometry))
     assert len(build_geometry(model, urdf, pin.GeometryType.VISUAL, [str(tmp_path)]).geometryObjects) == 1
@@ -154,17 +161,9 @@ def test_urdf_geometry_reloads_when_its_path_reaches_another_file_of_the_same_si
         os.utime(p, ns=(t0, t0))
     link = tmp_path / "part.stl"
     link.symlink_to(small)
-    urdf = tmp_path / "part.urdf"
-    urdf.write_text(f"""<robot name="part"><link name="base"><collision><geometry><mesh filename="{link}"/>
-        </geometry></collision></link></robot>""")
-    model = pin.buildModelFromUrdf(str(urdf))
-
-    def half_side() -> float:
-        gm = build_geometry(model, urdf, pin.GeometryType.COLLISION, [str(tmp_path)])
-        return float(np.abs(np.asarray(gm.geometryObjects[0].geometry.vertices())).max())
-
+    model, urdf = _one_mesh_urdf(tmp_path, link, visual=False)
     clear_mesh_caches()
-    assert half_side() == pytest.approx(0.05)
+    assert _half_side(model, urdf, tmp_path) == pytest.approx(0.05)
     link.unlink()
     link.symlink_to(big)
-    assert half_side() == pytest.approx(0.1)
+    assert _half_side(model, urdf, tmp_path) == pytest.approx(0.1)
