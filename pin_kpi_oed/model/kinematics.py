@@ -31,7 +31,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from typing import Any
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 
 import numpy as np
 import pinocchio as pin
@@ -300,24 +300,13 @@ class Chain:
         V = np.zeros((m, n, 3))
         W = np.zeros((m, n, 3))
         R[:, 0], t[:, 0] = self._eye, 0.0
-        rot, trans = H[:, :3, :3].copy(), H[:, :3, 3].copy()
-        X = self._rodrigues(Q)
-        Rc = np.tile(self._eye, (m, 1, 1))
-        tc = np.zeros((m, 3))
-        for k, rev in enumerate(self._rev):
-            Rf = Rc.reshape(3 * m, 3)  # a product by a constant: one matrix product over all configurations
-            tc = tc + (Rf @ trans[k]).reshape(m, 3)
-            Rc = (Rf @ rot[k]).reshape(m, 3, 3)
-            R_A[:, k], t_A[:, k] = Rc, tc
-            if rev:
-                if twists:
-                    W[:, k] = (Rc.reshape(3 * m, 3) @ self.ang[k]).reshape(m, 3)  # ω_j = R_A,j a_j
-                Rc = Rc @ X[:, k]
-            else:
-                u = (Rc.reshape(3 * m, 3) @ self.lin[k]).reshape(m, 3)
-                if twists:
+        for k, RA, tA, u, Rc, tc in self._walk(Q, H):
+            R_A[:, k], t_A[:, k] = RA, tA
+            if twists:
+                if u is None:
+                    W[:, k] = (RA.reshape(3 * m, 3) @ self.ang[k]).reshape(m, 3)  # ω_j = R_A,j a_j
+                else:
                     V[:, k] = u
-                tc = tc + u * Q[:, k:k + 1]
             R[:, k + 1], t[:, k + 1] = Rc, tc
         if twists and self._rev_idx.size:
             r = self._rev_idx
@@ -330,9 +319,11 @@ class Chain:
         return (self._eye9 + np.sin(Q)[:, :, None] * self._K9 + (1.0 - np.cos(Q))[:, :, None] * self._KK9
                 ).reshape(m, n, 3, 3)
 
-    def _tip(self, Q: np.ndarray, H: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """The last joint's frame (R (m, 3, 3), t (m, 3) m) by the products of :meth:`_frames` (the same numbers),
-        without keeping the frames before it."""
+    def _walk(self, Q: np.ndarray, H: np.ndarray
+              ) -> Iterator[tuple[int, np.ndarray, np.ndarray, np.ndarray | None, np.ndarray, np.ndarray]]:
+        """The chain walked base to tip: per joint k, (k, R_A (m, 3, 3), t_A (m, 3), u (the prismatic axis in the
+        world (m, 3), None for a revolute joint), R and t after its motion). A product by a constant is one matrix
+        product over all configurations ((3m, 3) by (3, 3)): the same numbers as the per-configuration products."""
         m = Q.shape[0]
         rot, trans = H[:, :3, :3].copy(), H[:, :3, 3].copy()
         X = self._rodrigues(Q)
@@ -341,12 +332,23 @@ class Chain:
         for k, rev in enumerate(self._rev):
             Rf = Rc.reshape(3 * m, 3)
             tc = tc + (Rf @ trans[k]).reshape(m, 3)
-            Rc = (Rf @ rot[k]).reshape(m, 3, 3)
+            RA = (Rf @ rot[k]).reshape(m, 3, 3)
+            tA, u = tc, None
             if rev:
-                Rc = Rc @ X[:, k]
+                Rc = RA @ X[:, k]
             else:
-                tc = tc + (Rc.reshape(3 * m, 3) @ self.lin[k]).reshape(m, 3) * Q[:, k:k + 1]
-        return Rc, tc
+                Rc = RA
+                u = (RA.reshape(3 * m, 3) @ self.lin[k]).reshape(m, 3)
+                tc = tc + u * Q[:, k:k + 1]
+            yield k, RA, tA, u, Rc, tc
+
+    def _tip(self, Q: np.ndarray, H: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The last joint's frame (R (m, 3, 3), t (m, 3) m) by the products of :meth:`_frames` (the same numbers),
+        without keeping the frames before it."""
+        last = (np.tile(self._eye, (Q.shape[0], 1, 1)), np.zeros((Q.shape[0], 3)))
+        for step in self._walk(Q, H):
+            last = step[4:]
+        return last
 
     def tool_pose(self, Q: np.ndarray, point_m: np.ndarray, placements: Sequence[pin.SE3] | None = None
                   ) -> tuple[np.ndarray, np.ndarray]:
@@ -425,14 +427,14 @@ class Chain:
         if Rm.ndim != 4 or Rm.shape[1:] != (n, 3, 3) or tm.shape != (Rm.shape[0], n, 3):
             raise InputError(f"joint placements of shapes {Rm.shape} and {tm.shape}: expected (d, {n}, 3, 3) and "
                              f"(d, {n}, 3)")
-        Rc = np.broadcast_to(np.eye(3), (Rm.shape[0], m, 3, 3))
+        X = self._rodrigues(Q)
+        Rc = np.broadcast_to(self._eye, (Rm.shape[0], m, 3, 3))
         tc = np.zeros((Rm.shape[0], m, 3))
         for k in range(n):
             tc = tc + (Rc @ tm[:, None, k, :, None])[..., 0]
             Rc = Rc @ Rm[:, None, k]
-            if self.revolute[k]:
-                s, c = np.sin(Q[:, k])[:, None, None], np.cos(Q[:, k])[:, None, None]
-                Rc = Rc @ (np.eye(3) + s * self._K[k] + (1.0 - c) * self._KK[k])
+            if self._rev[k]:
+                Rc = Rc @ X[None, :, k]
             else:
                 tc = tc + (Rc @ self.lin[k]) * Q[None, :, k, None]
         Mt = self.tool_placement
