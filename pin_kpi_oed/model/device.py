@@ -191,8 +191,12 @@ class MeasurementModel(ABC):
             raise InputError(f"parameter vector must have {self.n_params} entries, got shape {p.shape}")
         if self._p_applied is not None and np.array_equal(p, self._p_applied):
             return
-        self._placements = [M * pin.exp6(p[self.layout.joint_slice(k)]) for k, M in enumerate(self._nominal)]
+        self._placements = self._placements_at(p)
         self._p_applied = p.copy()
+
+    def _placements_at(self, p: np.ndarray) -> list[pin.SE3]:
+        """The joint placements M_j · exp6(δ_j) at raw parameters p (nothing cached)."""
+        return [M * pin.exp6(p[self.layout.joint_slice(k)]) for k, M in enumerate(self._nominal)]
 
     @property
     def chain(self) -> Chain:
@@ -269,8 +273,7 @@ class MeasurementModel(ABC):
         Rm, tm = np.empty((d, n, 3, 3)), np.empty((d, n, 3))
         RT, tT = np.empty((d, 3, 3)), np.empty((d, 3))
         for i, p in enumerate(P):
-            for k, M in enumerate(self._nominal):
-                Mk = M * pin.exp6(p[self.layout.joint_slice(k)])
+            for k, Mk in enumerate(self._placements_at(p)):
                 Rm[i, k], tm[i, k] = Mk.rotation, Mk.translation
             T = self.sensor_pose(p)
             RT[i], tT[i] = T.rotation, T.translation
