@@ -30,7 +30,7 @@ import numpy as np
 import pinocchio as pin
 
 __all__ = ["BRANCH_STARTS", "StartConfigurations", "start_configurations", "nearest_to_reference", "joint_limit_rows",
-           "collision_rows", "branch_step"]
+           "collision_rows", "branch_step", "rotation_errors"]
 
 #: Where a target's start configuration came from.
 BRANCH_STARTS = ("hint", "working", "neutral")
@@ -49,6 +49,11 @@ class StartConfigurations:
     Q: np.ndarray
     kind: list[str]
     index: np.ndarray
+
+
+def rotation_errors(R_target: np.ndarray, R: np.ndarray) -> np.ndarray:
+    """ω with exp(ω)·R = R_target for every row, (m, 3) rad."""
+    return np.array([pin.log3(Rt @ Ri.T) for Rt, Ri in zip(R_target, R)]).reshape(-1, 3)
 
 
 def start_configurations(pm0: Any, q_work: np.ndarray | None, Q_hint: np.ndarray | None, pos_t: np.ndarray,
@@ -114,7 +119,7 @@ def nearest_to_reference(pm: Any, Q: np.ndarray, Q_ref: np.ndarray, pos_t: np.nd
         pos, R = pm.pose(Qr, None)
         e = pos_t[rows] - pos
         if R_t is not None:
-            e = np.hstack([e, np.array([pin.log3(R_t[i] @ Ri.T) for i, Ri in zip(rows, R)]).reshape(-1, 3)])
+            e = np.hstack([e, rotation_errors(R_t[rows], R)])
         return e * weights
 
     def norms(X: np.ndarray) -> np.ndarray:

@@ -67,7 +67,7 @@ from pin_kpi_oed.data.targets import TargetSet
 from pin_kpi_oed.effects.library import predict_with_effects, sum_joint_offsets
 from pin_kpi_oed.errors import InputError
 from pin_kpi_oed.compensation.checks import (branch_step, collision_rows, joint_limit_rows,
-                                                          nearest_to_reference, start_configurations)
+                                                          nearest_to_reference, rotation_errors, start_configurations)
 from pin_kpi_oed.compensation.result import write_compensation
 from pin_kpi_oed.compensation.result import (HELD_SHARE_MAX, SENDABLE, STATUSES, CompensationResult,
                                             held_status_line)
@@ -212,11 +212,6 @@ class PoseModel:
         return np.vstack([self.T.rotation @ Jv, self.T.rotation @ J[3:]])
 
 
-def _rot_error(R_target: np.ndarray, R: np.ndarray) -> np.ndarray:
-    """ω with exp(ω)·R = R_target for every row, (m, 3) rad."""
-    return np.array([pin.log3(Rt @ Ri.T) for Rt, Ri in zip(R_target, R)])
-
-
 @dataclass
 class _IK:
     Q: np.ndarray
@@ -255,7 +250,7 @@ def _solve_ik(pm: PoseModel, pos_t: np.ndarray, R_t: np.ndarray | None, Q0: np.n
     def errors(Qx: np.ndarray) -> np.ndarray:
         pos, R = pm.pose(Qx, aux, rotations=rows6)
         e = pos_t - pos
-        return np.hstack([e, _rot_error(R_t, R)]) if rows6 else e
+        return np.hstack([e, rotation_errors(R_t, R)]) if rows6 else e
 
     lam = np.full(len(Q), float(opt.damping))
     eye = np.eye(nr)
