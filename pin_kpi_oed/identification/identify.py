@@ -257,7 +257,7 @@ def identify(model: TrackerModel, data: MeasurementSet, options: IdentifyOptions
     check_tool(model.robot, model.tcp_m, data)
     inp = check_inputs(model, data, opts)
     _check_effects_determined(effects, data)
-    Qw = _working_configurations(model, data, inp, opts)
+    Qw = working_configurations(model.robot, data, opts.Q_work, inp.Q)  # checked before the fit
     result, plain = _fit(model, data, inp, effects, replace(opts, loss="linear") if opts.loss == "auto" else opts,
                          t_start)
     why = robust_loss_reason(result) if opts.loss == "auto" else ""
@@ -285,12 +285,6 @@ def restate_tcp_sigma(result: IdentificationResult, data: MeasurementSet, Q_work
         Q_work: where the σ is stated, (t, n) rad / m (the working configurations, else the training poses).
     """
     _state_tcp_sigma(result, np.atleast_2d(np.asarray(Q_work, float)), data)
-
-
-def _working_configurations(model: TrackerModel, data: MeasurementSet, inp: FitInputs, opts: IdentifyOptions
-                            ) -> np.ndarray:
-    """Where the TCP's σ is stated (:func:`working_configurations`), the data's joints already aligned."""
-    return working_configurations(model.robot, data, opts.Q_work, inp.Q)
 
 
 def working_configurations(robot: Any, data: MeasurementSet, Q_work: np.ndarray | None = None,
