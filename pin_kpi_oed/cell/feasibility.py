@@ -214,8 +214,8 @@ class FeasibilityChecker:
         """Names a skip entry may use for geometry object i (its own name, its link)."""
         return {x for x in self.labels[i] if x}
 
-    def _skipped(self, i: int, k: int, keys: list[set[str]] | None = None) -> bool:
-        a, b = (self._keys(i), self._keys(k)) if keys is None else (keys[i], keys[k])
+    def _skipped(self, a: set[str], b: set[str]) -> bool:
+        """Whether a skip pair of the cell names two objects whose names are ``a`` and ``b``."""
         return any((x in a and y in b) or (x in b and y in a) for x, y in self.cell.skip_pairs)
 
     def _collision_pairs(self) -> list[tuple[int, int]]:
@@ -226,15 +226,14 @@ class FeasibilityChecker:
             return j1 == j2 or parents[j1] == j2 or parents[j2] == j1
 
         keys = [self._keys(i) for i in range(len(self.labels))]  # every object's names, made once
-        skips = self.cell.skip_pairs
         pairs = []
         for x, i in enumerate(self.robot_ids):
             for y, k in enumerate(self.robot_ids):
                 if y > x and not adjacent(self.robot_joint[x], self.robot_joint[y]) and \
-                        not (skips and self._skipped(i, k, keys)):
+                        not self._skipped(keys[i], keys[k]):
                     pairs.append((i, k))
             for k in self.obst_ids + self.half_ids:
-                if not (skips and self._skipped(i, k, keys)):
+                if not self._skipped(keys[i], keys[k]):
                     pairs.append((i, k))
         return pairs
 
