@@ -129,11 +129,16 @@ def _entry_cpu_s() -> float:
     """CPU seconds a process spends until the command line's entry is loaded (interpreter start-up +
     ``pin_kpi_oed.cli.app``): before it no code of the package runs, so no package can turn an interrupt there into
     one line. Measured once per test process, in CPU time: the moments below are the child's CPU seconds, which do not
-    stretch when other work holds the cores (wall seconds do)."""
-    before = resource.getrusage(resource.RUSAGE_CHILDREN)
-    subprocess.run([sys.executable, "-c", "import pin_kpi_oed.cli.app"], check=True, env=_env())
-    after = resource.getrusage(resource.RUSAGE_CHILDREN)
-    return (after.ru_utime + after.ru_stime) - (before.ru_utime + before.ru_stime)
+    stretch when other work holds the cores (wall seconds do). The largest of three runs: one process's start-up
+    varies by a fifth from run to run, and a moment taken from a fast run fell inside a slow child's interpreter
+    start (``typing`` imported by the package's ``__init__``, before any of its code could catch the interrupt)."""
+    costs = []
+    for _ in range(3):
+        before = resource.getrusage(resource.RUSAGE_CHILDREN)
+        subprocess.run([sys.executable, "-c", "import pin_kpi_oed.cli.app"], check=True, env=_env())
+        after = resource.getrusage(resource.RUSAGE_CHILDREN)
+        costs.append((after.ru_utime + after.ru_stime) - (before.ru_utime + before.ru_stime))
+    return max(costs)
 
 
 def _env() -> dict[str, str]:
@@ -181,7 +186,7 @@ def test_an_interrupt_at_any_moment_is_one_line_and_130(moment: str, module: boo
 
     The moments are the command's own CPU seconds, not wall seconds (which stretch when other work holds the cores:
     3 s after the start is the work on an idle machine, still the imports on a busy one), each reached at the cost of
-    what the command spends before it: as soon as the entry is loaded (1.2 times what loading it costs); in the
+    what the command spends before it: as soon as the entry is loaded (1.5 times what loading it costs); in the
     imports (0.6 s, before the command's first line); in the work in Python (at its first line: the random design
     and the pool start follow); in IPOPT, the Python code that IPOPT calls back (0.3 s after the first line of the
     design without collision constraints and pool start, whose IPOPT starts 0.1 s after that line and runs for a
@@ -190,7 +195,7 @@ def test_an_interrupt_at_any_moment_is_one_line_and_130(moment: str, module: boo
     (``__main__``'s guard), which the earliest moment of each tests (the entry, the imports); after it both run
     :func:`pin_kpi_oed.cli.app.run`, so the later moments need one entry each (the work: the console script, IPOPT:
     ``-m``)."""
-    cpu_s, argv, after_output = {"entry": (1.2 * _entry_cpu_s(), DESIGN, False), "imports": (0.6, DESIGN, False),
+    cpu_s, argv, after_output = {"entry": (1.5 * _entry_cpu_s(), DESIGN, False), "imports": (0.6, DESIGN, False),
                                  "work": (0.0, DESIGN, True), "ipopt": (0.3, DESIGN_IN_IPOPT, True)}[moment]
     rc, err, had_printed = _interrupt_at(argv, module, cpu_s, after_output)
     assert had_printed == after_output, f"the interrupt came {'after' if had_printed else 'before'} the first line"
