@@ -86,8 +86,10 @@ def test_a_tolerance_below_the_rounding_reproduces_the_failure_and_it_is_refused
     assert loose.rank > analyse(model).rank and RANK_TOL >= 1e-2
     rng = np.random.default_rng(3)
     Q, W = model.robot.random_q(rng, 35), model.robot.random_q(rng, 3)
-    with pytest.raises(IdentifiabilityError, match=r"singular information matrix: '[\w.]+' and '[\w.]+' move the "
-                                                   r"measurements alike in every measured pose \(the combination "):
+    # which rounding-induced columns a 1e-6 tolerance keeps is itself decided at rounding level: two or more are named
+    with pytest.raises(IdentifiabilityError, match=r"singular information matrix: '[\w.]+' and '[\w.]+'( \(and \d+ "
+                                                   r"more\))? move the measurements alike in every measured pose \(the "
+                                                   r"combination "):
         score_design(model, Q, W, ident=loose)
 
 

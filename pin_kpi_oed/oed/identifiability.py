@@ -141,6 +141,10 @@ def pivoted_qr_diagonal(A: np.ndarray) -> np.ndarray:
         (min(m, n),) the diagonal of R in absolute value, non-increasing up to rounding.
     """
     R = np.array(A, float, copy=True)
+    if R.shape[0] > R.shape[1]:
+        # A = Q₀R₀ (Householder, no pivoting; Q₀ orthonormal): every column norm and every projection the pivoted
+        # factorisation takes is the same on R₀ (n x n) as on A, so its |R_kk| are A's, at a fraction of the work
+        R = np.linalg.qr(R, mode="r")
     m, n = R.shape
     out = np.zeros(min(m, n))
     for k in range(min(m, n)):
@@ -182,17 +186,20 @@ def ordered_selection(Fs: np.ndarray, order: list[int], tol: float = RANK_TOL) -
     Returns:
         (kept column indices in visiting order, the residual share of every column in ``Fs``'s order).
     """
-    basis: list[np.ndarray] = []
+    F = np.asarray(Fs, float)
+    if F.shape[0] > F.shape[1]:
+        F = np.linalg.qr(F, mode="r")  # Fs = Q₀R₀: the residuals of R₀'s columns are those of Fs's (Q₀ orthonormal)
+    basis = np.zeros((len(order), F.shape[0]))  # the kept unit residuals, one per row
     kept: list[int] = []
-    resid = np.zeros(Fs.shape[1])
+    resid = np.zeros(F.shape[1])
     for c in order:
-        v = Fs[:, c].copy()
-        for _ in range(2):  # modified Gram-Schmidt, twice for stability
-            for b in basis:
-                v -= (b @ v) * b
+        v = F[:, c].copy()
+        B = basis[:len(kept)]
+        for _ in range(2):  # classical Gram-Schmidt, twice ("twice is enough" for orthogonality to rounding)
+            v -= B.T @ (B @ v)
         resid[c] = nv = float(np.linalg.norm(v))
         if nv > tol:
-            basis.append(v / nv)
+            basis[len(kept)] = v / nv
             kept.append(c)
     return kept, resid
 
