@@ -74,6 +74,33 @@ def process_cpu(argv: list[str], cwd: Path | None = None, root: Path = ROOT) -> 
     return (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
 
 
+#: What any command that loads a robot pays before the package's own work: the interpreter, NumPy with one BLAS
+#: thread (as the command line sets it) and Pinocchio, which loads the URDF.
+FLOOR = "import numpy, pinocchio"
+FLOOR_LABEL = "the import floor: python -c 'import numpy, pinocchio', one BLAS thread"
+
+
+def floor_cpu() -> float:
+    """CPU seconds (user + system) of a process that only imports :data:`FLOOR`, with the thread variables the
+    command line sets (those already set are kept)."""
+    env = {**os.environ, **{k: os.environ.get(k, "1") for k in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS",
+                                                               "MKL_NUM_THREADS")}}
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
+    subprocess.run([sys.executable, "-c", FLOOR], env=env, check=True)
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
+
+
+def info_and_floor(argv: list[str], repeat: int = 2 * REPEAT + 1) -> tuple[list[float], list[float]]:
+    """``repeat`` runs of the command and of the import floor (:func:`floor_cpu`), interleaved so that both see the
+    same machine: (the command's CPU seconds, the floor's)."""
+    runs, floors = [], []
+    for _ in range(repeat):
+        runs.append(process_cpu(argv))
+        floors.append(floor_cpu())
+    return runs, floors
+
+
 def median_cpu(argv: list[str], cwd: Path | None = None, repeat: int = REPEAT) -> float:
     """The median CPU seconds of ``repeat`` runs (:func:`process_cpu`)."""
     return float(np.median([process_cpu(argv, cwd) for _ in range(repeat)]))
@@ -147,7 +174,16 @@ def startup_figures(before: Path | None = None, identify_only: bool = False) -> 
         compileall.compile_dir(str(before / "pin_kpi_oed"), quiet=1)
     if not identify_only:
         for cmd, target in STARTUP:
-            figure(f"pin-kpi-oed {' '.join(cmd)} (CPU s, load {load_average():.1f})", median_cpu(cmd), target)
+            if cmd[0] != "info":
+                figure(f"pin-kpi-oed {' '.join(cmd)} (CPU s, load {load_average():.1f})", median_cpu(cmd), target)
+                continue
+            load = load_average()
+            runs, floors = info_and_floor(cmd)
+            figure(f"pin-kpi-oed {' '.join(cmd)} (CPU s, load {load:.1f})", float(np.median(runs)), target,
+                   baseline=float(np.median(floors)), baseline_label=FLOOR_LABEL)
+            print(f"  the package's own share (info minus the import floor, pair by pair): median "
+                  f"{np.median(np.subtract(runs, floors)):.3f} s; info {', '.join(f'{x:.2f}' for x in runs)} s, "
+                  f"floor {', '.join(f'{x:.2f}' for x in floors)} s", flush=True)
         figure(f"pool selection 1,000 -> 60, UR5, KPI, in process (CPU s, load {load_average():.1f})", pool_cpu(),
                POOL_TARGET)
     ipa = ipa_folder_or_say("C")
