@@ -56,6 +56,7 @@ rotation about that axis is invisible).
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import cast
 
 import numpy as np
 
@@ -144,7 +145,7 @@ def pivoted_qr_diagonal(A: np.ndarray) -> np.ndarray:
     if R.shape[0] > R.shape[1]:
         # A = Q₀R₀ (Householder, no pivoting; Q₀ orthonormal): every column norm and every projection the pivoted
         # factorisation takes is the same on R₀ (n x n) as on A, so its |R_kk| are A's, at a fraction of the work
-        R = np.linalg.qr(R, mode="r")
+        R = cast(np.ndarray, np.linalg.qr(R, mode="r"))  # mode "r": R alone (typed as the pair)
     m, n = R.shape
     out = np.zeros(min(m, n))
     for k in range(min(m, n)):
@@ -188,7 +189,8 @@ def ordered_selection(Fs: np.ndarray, order: list[int], tol: float = RANK_TOL) -
     """
     F = np.asarray(Fs, float)
     if F.shape[0] > F.shape[1]:
-        F = np.linalg.qr(F, mode="r")  # Fs = Q₀R₀: the residuals of R₀'s columns are those of Fs's (Q₀ orthonormal)
+        # Fs = Q₀R₀: the residuals of R₀'s columns are those of Fs's (Q₀ orthonormal); mode "r": R₀ alone
+        F = cast(np.ndarray, np.linalg.qr(F, mode="r"))
     basis = np.zeros((len(order), F.shape[0]))  # the kept unit residuals, one per row
     kept: list[int] = []
     resid = np.zeros(F.shape[1])
