@@ -466,3 +466,22 @@ def test_a_model_without_collision_rows_has_the_same_rows_pruned_or_not(kr15):
     pruned, full = CollisionModel(kr15, collision=False), CollisionModel(kr15, collision=False, prune=False)
     assert pruned.names == full.names == ["incidence"]
     assert np.array_equal(pruned.pairs, full.pairs) and np.array_equal(pruned.half, full.half)
+
+
+def test_pair_distances_read_each_poses_own_results(kr15):
+    """The checker keeps references into Coal's result vector; at every pose, in any order, they read that pose's
+    results: the same numbers as Coal's distance of each pair computed from scratch at the pose's placements, and
+    the smallest of them is :meth:`min_pair_distance`."""
+    import coal
+
+    chk = FeasibilityChecker(kr15)
+    Q = np.random.default_rng(5).uniform(kr15.q_lower, kr15.q_upper, (3, kr15.robot.nq))
+    go = chk.gm.geometryObjects
+    for q in (Q[1], Q[0], Q[2], Q[1]):
+        d = chk.pair_distances(q)
+        oMg = chk.gd.oMg
+        want = [coal.distance(go[i].geometry, coal.Transform3s(oMg[i].rotation, oMg[i].translation),
+                              go[k].geometry, coal.Transform3s(oMg[k].rotation, oMg[k].translation),
+                              coal.DistanceRequest(), coal.DistanceResult()) for i, k in chk.pairs]
+        assert len(want) > 10 and np.allclose(d, want, rtol=0, atol=1e-12)
+        assert chk.min_pair_distance(q) == d.min()
