@@ -21,12 +21,14 @@ bad entry: the messages are those of the element-by-element check, at a fraction
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from itertools import chain
 from typing import Any
 
 import numpy as np
 
 from pin_kpi_oed.errors import InputError
+from pin_kpi_oed.validation.conformance import compile_schema, pruned
 from pin_kpi_oed.validation.units import MAX_TOOL_OFFSET_M, check_sigma_m, check_sigma_rad
 
 __all__ = ["CELL_SCHEMA", "DESIGN_SCHEMA", "MODEL_SCHEMA", "validate_cell_dict", "validate_design_dict",
@@ -176,14 +178,25 @@ def _numeric_array(validator: Any, spec: dict, instance: Any, schema: dict) -> A
     """The schema keyword ``numeric_array``: passes a clean array (:func:`_clean_array`) of the stated shape and range
     at once; anything else is checked against ``spec["schema"]`` element by element (the same errors, paths and
     messages as that schema alone gives)."""
+    if not _clean_passes(spec, instance):
+        yield from validator.descend(instance, spec["schema"])
+
+
+def _clean_passes(spec: dict, instance: Any) -> bool:
+    """Whether ``instance`` passes the ``numeric_array`` keyword ``spec`` at once: ``null`` where nullable, or a clean
+    array (:func:`_clean_array`) of the stated shape and range."""
     if spec.get("nullable") and instance is None:
-        return
+        return True
     a = _clean_array(instance, spec["ndim"])
-    if a is not None and all(want is None or n == want for n, want in zip(a.shape, spec.get("shape") or a.shape)) \
-            and (not spec.get("nonempty") or min(a.shape) >= 1) \
-            and (spec.get("minimum") is None or bool(np.all(a >= spec["minimum"]))):
-        return
-    yield from validator.descend(instance, spec["schema"])
+    return a is not None and all(want is None or n == want for n, want in zip(a.shape, spec.get("shape") or a.shape)) \
+        and (not spec.get("nonempty") or min(a.shape) >= 1) \
+        and (spec.get("minimum") is None or bool(np.all(a >= spec["minimum"])))
+
+
+def _numeric_array_check(spec: dict) -> Callable[[Any], bool]:
+    """The ``numeric_array`` keyword as a predicate of :func:`~pin_kpi_oed.validation.conformance.compile_schema`."""
+    each = compile_schema(spec["schema"])
+    return lambda x: _clean_passes(spec, x) or each(x)
 
 
 def _numeric(schema: dict, ndim: int, shape: tuple | None = None, nonempty: bool = False,
@@ -204,16 +217,37 @@ def _numeric(schema: dict, ndim: int, shape: tuple | None = None, nonempty: bool
 
 
 _VALIDATORS: dict[int, Any] = {}
+#: id of a schema -> (the schema, kept alive so that its id stays its own; its predicate)
+_CONFORMS: dict[int, tuple[Any, Callable[[Any], bool]]] = {}
+
+
+def _conforms(instance: Any, schema: Any) -> bool:
+    """True only where ``jsonschema`` finds ``instance`` valid against ``schema`` (the compiled predicate of
+    :mod:`~pin_kpi_oed.validation.conformance`, made once per schema); False: ask ``jsonschema``."""
+    hit = _CONFORMS.get(id(schema))
+    if hit is None or hit[0] is not schema:
+        hit = _CONFORMS[id(schema)] = (schema, compile_schema(schema, _numeric_array_check))
+    return hit[1](instance)
 
 
 def _validate(d: Any, schema: dict, source: str, what: str) -> None:
+    """Refuse ``d`` with the first error ``jsonschema`` finds against ``schema``. A document the compiled predicate
+    accepts has none (:func:`_conforms`); a refused one is descended by ``jsonschema`` only where the predicate
+    refuses (:func:`~pin_kpi_oed.validation.conformance.pruned`): the same errors, in the same order.
+
+    Raises:
+        InputError: ``<source>: <what> field <path>: <message>``.
+    """
+    if _conforms(d, schema):
+        return
     import jsonschema
 
     validator = _VALIDATORS.get(id(schema))
     if validator is None:  # built once per schema (a few ms each)
         cls = jsonschema.validators.extend(jsonschema.Draft202012Validator, {"numeric_array": _numeric_array})
         validator = _VALIDATORS[id(schema)] = cls(schema)
-    errors = sorted(validator.iter_errors(d), key=lambda e: (len(list(e.absolute_path)), list(map(str, e.path))))
+    errors = sorted(validator.evolve(schema=pruned(d, validator.schema, _conforms)).iter_errors(d),
+                    key=lambda e: (len(list(e.absolute_path)), list(map(str, e.path))))
     if errors:
         e = errors[0]
         deepest = jsonschema.exceptions.best_match([e]) if e.context else e
