@@ -164,6 +164,21 @@ def solve_tcp_target(robot, W_T_base: pin.SE3, tcp_m: np.ndarray, xyz_W: np.ndar
 N_ALWAYS = 64
 
 
+def _blocked_in_all(chk: FeasibilityChecker, Q: np.ndarray, clearance_m: float) -> bool:
+    """Whether a pair or a beam target is closer than ``clearance_m`` (by more than 1e-9 m) in every configuration
+    of ``Q``: configuration by configuration, stopping at the first after which no column was close in all so far
+    (a cell without such a fault: after a few of them, not all)."""
+    alive: np.ndarray | None = None
+    for q in Q:
+        d = chk.distances(q[None])[0]
+        d[:chk.n_pairs] -= clearance_m
+        close = d < -1e-9
+        alive = close if alive is None else alive & close
+        if not alive.any():
+            return False
+    return alive is not None
+
+
 def _check_always_blocked(chk: FeasibilityChecker, cell, pre: str) -> None:
     """Refuse an obstacle that collides with a robot capsule, or blocks the beam, in each of :data:`N_ALWAYS` random
     configurations within the bounds (it overlaps the robot's base, or hides the tracker): no target is to blame.
@@ -172,12 +187,12 @@ def _check_always_blocked(chk: FeasibilityChecker, cell, pre: str) -> None:
         InputError: naming the obstacle, the robot capsule (or the beam) and the fix.
     """
     Q = np.random.default_rng(0).uniform(cell.q_lower, cell.q_upper, (N_ALWAYS, cell.robot.nq))
+    if not _blocked_in_all(chk, Q, cell.clearance_m):
+        return
     D = chk.distances(Q)
     D[:, :chk.n_pairs] -= cell.clearance_m
     ncols = chk.n_pairs + len(chk.beam_names)
     always = [k for k in range(min(ncols, D.shape[1])) if np.all(D[:, k] < -1e-9)]
-    if not always:
-        return
     k = always[0]
     a, b = chk.names[k].split("|", 1)
     worst = float(np.max(D[:, k])) * 1e3
