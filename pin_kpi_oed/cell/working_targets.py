@@ -21,6 +21,7 @@ configuration) is kept.
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 from collections.abc import Callable
@@ -55,6 +56,19 @@ class IkResult(Result):
     residual_rad: float
 
 
+#: the largest entry of a vector: ``ndarray.max``'s reduction without its wrapper
+_largest = np.maximum.reduce
+
+
+@functools.lru_cache(maxsize=8)
+def _damping(damping: float) -> dict[int, np.ndarray]:
+    """λ²I of the damped step for 3 and 6 rows (read-only, made once per λ)."""
+    out = {k: damping ** 2 * np.eye(k) for k in (3, 6)}
+    for a in out.values():
+        a.flags.writeable = False
+    return out
+
+
 def _skew(v: np.ndarray) -> np.ndarray:
     return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
 
@@ -64,20 +78,22 @@ def _descend(robot, q: np.ndarray, p_t: np.ndarray, R_t: np.ndarray | None, tcp:
     """Damped least squares from q; returns (q, position error (m), orientation error (rad)).
 
     Written for the cost of its small NumPy calls (a cube's plan runs thousands of iterations): the norms as
-    ``sqrt(e·e)`` (what ``np.linalg.norm`` computes for a vector), the damping's diagonal made once, the largest step
-    by the array's own ``max``: the same numbers as the plain calls.
+    ``sqrt(e·e)`` (what ``np.linalg.norm`` computes for a vector), the damping's diagonal made once per λ, the
+    largest step by ``np.maximum.reduce`` (``ndarray.max``'s reduction), the bounds by ``np.minimum(np.maximum(...))``
+    (``np.clip``'s numbers), the tool frame placed by the frame Jacobian's own forward pass (no second forward
+    kinematics): the same numbers as the plain calls (``tests/test_ik_descent.py`` keeps them as the reference).
     """
     model, data, fid = robot.model, robot.model.createData(), robot.tool_frame_id
     lo, hi = robot.q_lower, robot.q_upper
-    q = np.clip(np.asarray(q, float), lo, hi)
+    q = np.minimum(np.maximum(np.asarray(q, float), lo), hi)
     ep = er = np.inf
-    damp = {k: damping ** 2 * np.eye(k) for k in (3, 6)}
+    damp = _damping(damping)
     for _ in range(max_iter):
-        pin.framesForwardKinematics(model, data, q)
+        # the frame Jacobian's forward pass places the tool frame as forward kinematics does (the same products)
+        J6 = pin.computeFrameJacobian(model, data, q, fid, pin.LOCAL_WORLD_ALIGNED)
         M = data.oMf[fid]
         r = M.rotation @ tcp
         e_pos = p_t - (M.translation + r)
-        J6 = pin.computeFrameJacobian(model, data, q, fid, pin.LOCAL_WORLD_ALIGNED)
         J = J6[:3] - _skew(r) @ J6[3:]
         e = e_pos
         ep = math.sqrt(e_pos.dot(e_pos))
@@ -90,11 +106,11 @@ def _descend(robot, q: np.ndarray, p_t: np.ndarray, R_t: np.ndarray | None, tcp:
         if ep < 1e-3 * IK_TOL_M and er < 1e-3 * IK_TOL_RAD:
             break
         dq = J.T @ np.linalg.solve(J @ J.T + damp[J.shape[0]], e)
-        big = float(np.abs(dq).max())
+        big = float(_largest(np.abs(dq)))
         if big > 0.3:
             dq *= 0.3 / big
-        q_new = np.clip(pin.integrate(model, q, dq), lo, hi)
-        if np.abs(q_new - q).max() < 1e-14:
+        q_new = np.minimum(np.maximum(pin.integrate(model, q, dq), lo), hi)
+        if _largest(np.abs(q_new - q)) < 1e-14:
             break
         q = q_new
     return q, ep, er
