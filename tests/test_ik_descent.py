@@ -1,6 +1,6 @@
 """The damped least squares of the working targets (cell/working_targets.py) give, bit for bit, the numbers of the
-plain NumPy / Pinocchio calls it replaces (kept here as the reference): ``np.clip``, ``ndarray.max``, a damping
-diagonal made per call, forward kinematics before the frame Jacobian."""
+plain NumPy / Pinocchio calls it replaces (kept here as the reference): ``ndarray.max``, a damping diagonal made per
+call, forward kinematics before the frame Jacobian."""
 
 from __future__ import annotations
 

@@ -79,13 +79,13 @@ def _descend(robot, q: np.ndarray, p_t: np.ndarray, R_t: np.ndarray | None, tcp:
 
     Written for the cost of its small NumPy calls (a cube's plan runs thousands of iterations): the norms as
     ``sqrt(e·e)`` (what ``np.linalg.norm`` computes for a vector), the damping's diagonal made once per λ, the
-    largest step by ``np.maximum.reduce`` (``ndarray.max``'s reduction), the bounds by ``np.minimum(np.maximum(...))``
-    (``np.clip``'s numbers), the tool frame placed by the frame Jacobian's own forward pass (no second forward
-    kinematics): the same numbers as the plain calls (``tests/test_ik_descent.py`` keeps them as the reference).
+    largest step by ``np.maximum.reduce`` (``ndarray.max``'s reduction, without its wrapper), the tool frame placed
+    by the frame Jacobian's own forward pass (no second forward kinematics): the same numbers as the plain calls
+    (``tests/test_ik_descent.py`` keeps them as the reference).
     """
     model, data, fid = robot.model, robot.model.createData(), robot.tool_frame_id
     lo, hi = robot.q_lower, robot.q_upper
-    q = np.minimum(np.maximum(np.asarray(q, float), lo), hi)
+    q = np.clip(np.asarray(q, float), lo, hi)
     ep = er = np.inf
     damp = _damping(damping)
     for _ in range(max_iter):
@@ -109,7 +109,7 @@ def _descend(robot, q: np.ndarray, p_t: np.ndarray, R_t: np.ndarray | None, tcp:
         big = float(_largest(np.abs(dq)))
         if big > 0.3:
             dq *= 0.3 / big
-        q_new = np.minimum(np.maximum(pin.integrate(model, q, dq), lo), hi)
+        q_new = np.clip(pin.integrate(model, q, dq), lo, hi)
         if _largest(np.abs(q_new - q)) < 1e-14:
             break
         q = q_new
