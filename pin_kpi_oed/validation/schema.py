@@ -404,9 +404,10 @@ def _first_nonfinite(v: Any, path: str) -> str | None:
         return None if math.isfinite(v) else path
     if isinstance(v, dict):
         for k, x in v.items():
-            hit = _first_nonfinite(x, f"{path}.{k}" if path else str(k))
-            if hit:
-                return hit
+            if not _passes(x):
+                hit = _first_nonfinite(x, f"{path}.{k}" if path else str(k))
+                if hit:
+                    return hit
     if isinstance(v, list):
         ndim, x0 = 1, v[0] if v else None
         while type(x0) is list:  # the depth of the first entry's nesting: a clean array of that depth at once
@@ -416,10 +417,18 @@ def _first_nonfinite(v: Any, path: str) -> str | None:
             bad = np.argwhere(~np.isfinite(a))
             return None if not len(bad) else path + "".join(f"[{int(i)}]" for i in bad[0])
         for i, x in enumerate(v):
-            hit = _first_nonfinite(x, f"{path}[{i}]")
-            if hit:
-                return hit
+            if not _passes(x):
+                hit = _first_nonfinite(x, f"{path}[{i}]")
+                if hit:
+                    return hit
     return None
+
+
+def _passes(x: Any) -> bool:
+    """A leaf :func:`_first_nonfinite` passes at once (text, ``null``, a boolean, a finite float): the common entries
+    of a mapping or a list, judged without a call of the walk (False: walk it)."""
+    t = type(x)
+    return t is str or x is None or t is bool or (t is float and math.isfinite(x))
 
 
 def check_covariance(C: Any, what: str, n: int | None = None) -> np.ndarray:
