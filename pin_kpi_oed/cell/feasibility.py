@@ -313,9 +313,9 @@ class FeasibilityChecker:
         """
         if not self.n_pairs:
             return float("inf")
-        pin.framesForwardKinematics(self.model, self.data, np.asarray(q, float))
-        pin.updateGeometryPlacements(self.model, self.data, self.gm, self.gd)
-        k = pin.computeDistances(self.gm, self.gd)
+        # forward kinematics, the geometry's placements and every pair's distance in one call (no frame placements:
+        # nothing here reads them; :meth:`pair_distances` places the frames)
+        k = pin.computeDistances(self.model, self.data, self.gm, self.gd, np.asarray(q, float))
         d_min = float(self._results[k].min_distance)
         if not self.mesh_pairs or d_min > _MESH_CONTACT_M:
             return d_min
