@@ -491,19 +491,19 @@ def test_a_cell_text_parsed_before_is_a_fresh_copy_and_a_changed_text_is_parsed_
     """load_cell keeps each cell file's parse by its text: a text read again gives a copy equal to a fresh parse
     (changing it changes no later load), and a file rewritten at once with the same size (its stamp may not change)
     is parsed anew, its new values read; an alias's shared list is copied whole."""
-    from pin_kpi_oed.cell.cell import _parsed
+    from pin_kpi_oed.cell.cell import parse_cell_text
 
     text = (CELL_DIR / "kr15.yaml").read_text()
-    first = _parsed(text, tmp_path / "a.yaml")
-    again = _parsed(text, tmp_path / "b.yaml")
+    first = parse_cell_text(text, tmp_path / "a.yaml")
+    again = parse_cell_text(text, tmp_path / "b.yaml")
     assert again == first == yaml.safe_load(text) and again is not first
     again["tracker"]["xyz_m"][0] = 99.0
     again["measurements"] = 1
-    assert _parsed(text, tmp_path / "c.yaml") == yaml.safe_load(text)
+    assert parse_cell_text(text, tmp_path / "c.yaml") == yaml.safe_load(text)
     p = tmp_path / "cell.yaml"
     p.write_text(text)
     c1 = load_cell(p)
     p.write_text(text.replace("clearance_m: 0.0 ", "clearance_m: 0.2 "))
     assert load_cell(p).clearance_m == 0.2 != c1.clearance_m
     shared = "a: &x [1.0, 2.0]\nb: *x\n"
-    assert _parsed(shared, p) == _parsed(shared, p) == {"a": [1.0, 2.0], "b": [1.0, 2.0]}
+    assert parse_cell_text(shared, p) == parse_cell_text(shared, p) == {"a": [1.0, 2.0], "b": [1.0, 2.0]}

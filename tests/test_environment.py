@@ -416,7 +416,7 @@ def test_the_always_blocked_test_stops_early_with_the_full_matrixs_verdict():
     verdict is that of the full (64, columns) distance matrix."""
     import dataclasses
 
-    from pin_kpi_oed.cell.working_targets import N_ALWAYS, _blocked_in_all
+    from pin_kpi_oed.cell.working_targets import N_ALWAYS, blocked_in_all
 
     cell = load_cell("ur10")
     chk = FeasibilityChecker(dataclasses.replace(cell, environment=[]))
@@ -427,6 +427,6 @@ def test_the_always_blocked_test_stops_early_with_the_full_matrixs_verdict():
         full = D.copy()
         full[:, :chk.n_pairs] -= clearance
         want = bool(np.any(np.all(full < -1e-9, axis=0)))
-        assert _blocked_in_all(chk, Q, clearance) == want
+        assert blocked_in_all(chk, Q, clearance) == want
         verdicts.append(want)
     assert verdicts[0] is False and verdicts[-1] is True  # both verdicts reached

@@ -474,7 +474,7 @@ def load_cell(spec: str | Path) -> Cell:
         text = path.read_text()
     except (OSError, UnicodeDecodeError) as exc:
         raise InputError(f"{path}: cannot read the cell file ({exc})") from None
-    return cell_from_dict(_parsed(text, path), str(path), path.resolve().parent)
+    return cell_from_dict(parse_cell_text(text, path), str(path), path.resolve().parent)
 
 
 #: parsed cell files by their text, most recent last: a text parsed before in this process is not parsed again
@@ -501,9 +501,16 @@ def _is_plain(x: Any) -> bool:
     return type(x) in _PLAIN
 
 
-def _parsed(text: str, path: Path) -> Any:
+def parse_cell_text(text: str, path: Path) -> Any:
     """A cell file's text parsed (YAML), a text parsed before given as a copy of that parse (mappings and lists
     new: the caller may change them).
+
+    Args:
+        text: the file's text.
+        path: the file, for the message.
+
+    Returns:
+        The parsed document (a mapping for a cell file; whatever the YAML holds otherwise).
 
     Raises:
         InputError: invalid YAML (PyYAML's message, first line).

@@ -180,10 +180,19 @@ def solve_tcp_target(robot, W_T_base: pin.SE3, tcp_m: np.ndarray, xyz_W: np.ndar
 N_ALWAYS = 64
 
 
-def _blocked_in_all(chk: FeasibilityChecker, Q: np.ndarray, clearance_m: float) -> bool:
+def blocked_in_all(chk: FeasibilityChecker, Q: np.ndarray, clearance_m: float) -> bool:
     """Whether a pair or a beam target is closer than ``clearance_m`` (by more than 1e-9 m) in every configuration
     of ``Q``: configuration by configuration, stopping at the first after which no column was close in all so far
-    (a cell without such a fault: after a few of them, not all)."""
+    (a cell without such a fault: after a few of them, not all).
+
+    Args:
+        chk: the checker (its :meth:`~pin_kpi_oed.cell.feasibility.FeasibilityChecker.distances` columns).
+        Q: configurations (m, n) rad.
+        clearance_m: the required clearance of the pairs (m; the beam's columns are taken as they are).
+
+    Returns:
+        The verdict of the full (m, columns) distance matrix: some column below −1e-9 m in every row.
+    """
     alive: np.ndarray | None = None
     for q in Q:
         d = chk.distances(q[None])[0]
@@ -203,7 +212,7 @@ def _check_always_blocked(chk: FeasibilityChecker, cell, pre: str) -> None:
         InputError: naming the obstacle, the robot capsule (or the beam) and the fix.
     """
     Q = np.random.default_rng(0).uniform(cell.q_lower, cell.q_upper, (N_ALWAYS, cell.robot.nq))
-    if not _blocked_in_all(chk, Q, cell.clearance_m):
+    if not blocked_in_all(chk, Q, cell.clearance_m):
         return
     D = chk.distances(Q)
     D[:, :chk.n_pairs] -= cell.clearance_m

@@ -32,7 +32,7 @@ from pin_kpi_oed.validation.conformance import compile_schema, pruned
 from pin_kpi_oed.validation.units import MAX_TOOL_OFFSET_M, check_sigma_m, check_sigma_rad
 
 __all__ = ["CELL_SCHEMA", "DESIGN_SCHEMA", "MODEL_SCHEMA", "validate_cell_dict", "validate_design_dict",
-           "validate_model_dict", "check_covariance"]
+           "validate_model_dict", "check_covariance", "conforms"]
 
 #: largest plausible distance of the robot base or the tracker from the cell origin (m)
 MAX_CELL_M = 200.0
@@ -221,9 +221,17 @@ _VALIDATORS: dict[int, Any] = {}
 _CONFORMS: dict[int, tuple[Any, Callable[[Any], bool]]] = {}
 
 
-def _conforms(instance: Any, schema: Any) -> bool:
-    """True only where ``jsonschema`` finds ``instance`` valid against ``schema`` (the compiled predicate of
-    :mod:`~pin_kpi_oed.validation.conformance`, made once per schema); False: ask ``jsonschema``."""
+def conforms(instance: Any, schema: Any) -> bool:
+    """Whether ``instance`` passes ``schema`` by its compiled predicate (:mod:`~pin_kpi_oed.validation.conformance`,
+    made once per schema), True only where ``jsonschema`` finds no error.
+
+    Args:
+        instance: a parsed document or a part of it.
+        schema: one of this module's schemas or a part of it.
+
+    Returns:
+        True: valid; False: ask ``jsonschema`` (the document may still be valid).
+    """
     hit = _CONFORMS.get(id(schema))
     if hit is None or hit[0] is not schema:
         hit = _CONFORMS[id(schema)] = (schema, compile_schema(schema, _numeric_array_check))
@@ -232,13 +240,13 @@ def _conforms(instance: Any, schema: Any) -> bool:
 
 def _validate(d: Any, schema: dict, source: str, what: str) -> None:
     """Refuse ``d`` with the first error ``jsonschema`` finds against ``schema``. A document the compiled predicate
-    accepts has none (:func:`_conforms`); a refused one is descended by ``jsonschema`` only where the predicate
+    accepts has none (:func:`conforms`); a refused one is descended by ``jsonschema`` only where the predicate
     refuses (:func:`~pin_kpi_oed.validation.conformance.pruned`): the same errors, in the same order.
 
     Raises:
         InputError: ``<source>: <what> field <path>: <message>``.
     """
-    if _conforms(d, schema):
+    if conforms(d, schema):
         return
     import jsonschema
 
@@ -246,7 +254,7 @@ def _validate(d: Any, schema: dict, source: str, what: str) -> None:
     if validator is None:  # built once per schema (a few ms each)
         cls = jsonschema.validators.extend(jsonschema.Draft202012Validator, {"numeric_array": _numeric_array})
         validator = _VALIDATORS[id(schema)] = cls(schema)
-    errors = sorted(validator.evolve(schema=pruned(d, validator.schema, _conforms)).iter_errors(d),
+    errors = sorted(validator.evolve(schema=pruned(d, validator.schema, conforms)).iter_errors(d),
                     key=lambda e: (len(list(e.absolute_path)), list(map(str, e.path))))
     if errors:
         e = errors[0]
