@@ -95,7 +95,7 @@ CASES = {"cell kr15_seam": (lambda: _cell("kr15_seam"), schema_module.validate_c
 @pytest.mark.parametrize("case", sorted(CASES))
 def test_compiled_predicate_and_pruned_descent_give_jsonschemas_verdicts(case, monkeypatch):
     make, check, schema = CASES[case]
-    docs = _battery(make(), n=60)
+    docs = _battery(make(), n=40)
     fast = _verdicts(check, docs)
     accepted = [schema_module.conforms(d, schema) for d in docs]
     monkeypatch.setattr(schema_module, "conforms", lambda instance, sub: False)  # the full jsonschema descent
