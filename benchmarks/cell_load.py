@@ -3,13 +3,23 @@
 Each child process (one per checkout and repeat) loads every shipped cell twice (the first load reads the meshes
 and fits the capsules, the second finds them in the process's caches: what most callers pay), checks each cell's
 parsed file against its schema, loads a calibrated model file, and times ``FeasibilityChecker.pair_distances`` and
-``min_pair_distance`` over 200 seeded configurations of the kr15 and UR10 cells. Only public functions are called,
+``min_pair_distance`` over 1,000 seeded configurations of the kr15 and UR10 cells. Only public functions are called,
 so any checkout can be measured: with ``--before PATH`` the other checkout's package runs first on ``PYTHONPATH``,
 interleaved (before, after, before, ...) so both see the same load; the table gives the medians, the pairs in which
 the checkout was faster, and the sign test's two-sided p.
 
 The model file (a simulated UR10 with random geometric errors, 240 rows, identified with ``--model-out``) is made
 once per run by this checkout, in a temporary folder, and read by both.
+
+Measured (2 shared cores, load 3.9, 5 processes per checkout, interleaved with the checkout before the parse cache,
+the compiled schema check, the result references of the distances and the early stop of the always-blocked check;
+median CPU per call, before -> after; with 5 pairs the smallest two-sided sign-test p is 0.062): a cached load of
+kr15 9.9 -> 4.1 ms (5/5 pairs faster), kr300 7.0 -> 4.2 ms (4/5), kr500 7.0 -> 3.9 ms (5/5), ur10 44.9 -> 19.9 ms
+(5/5; working targets), kr15_seam 65 -> 50 ms (4/5; its path's IK is most of it); a first load (meshes read and
+fitted) of ur10 685 -> 618 ms (3/5: the fits are most of it); the ur10 cell's schema check 1.40 -> 0.18 ms (5/5);
+a model file's load 8.2 -> 5.8 ms (5/5; the rest is mostly the robot's model built from its URDF);
+``pair_distances`` kr15 38 -> 15 µs (5/5), ur10 175 -> 148 µs (4/5; Coal's mesh distances are most of it);
+``min_pair_distance`` kr15 7 -> 5 µs (5/5), ur10 209 -> 196 µs (2/5: Coal's work, unchanged).
 
 Run:  python -m benchmarks.cell_load [--repeat 5] [--before OTHER_CHECKOUT]
 """
@@ -55,7 +65,7 @@ cpu("load_model_file", lambda: load_model_file(sys.argv[1]), 20)
 for name in ("kr15", "ur10"):
     cell = load_cell(name)
     chk = FeasibilityChecker(cell)
-    Q = np.random.default_rng(0).uniform(cell.q_lower, cell.q_upper, (200, cell.robot.nq))
+    Q = np.random.default_rng(0).uniform(cell.q_lower, cell.q_upper, (1000, cell.robot.nq))
     cpu(f"pair_distances {name}", lambda: [chk.pair_distances(q) for q in Q])
     out[f"pair_distances {name}"] /= len(Q)
     cpu(f"min_pair_distance {name}", lambda: [chk.min_pair_distance(q) for q in Q])
