@@ -519,7 +519,10 @@ def parse_cell_text(text: str, path: Path) -> Any:
 
     hit = _PARSED.get(text)
     if hit is not None:
-        _PARSED.move_to_end(text)
+        try:
+            _PARSED.move_to_end(text)
+        except KeyError:  # dropped by another thread meanwhile: the parse in hand is still this text's
+            pass
         return _plain_copy(hit)
     try:
         # libyaml's parser where PyYAML has it (a shipped cell: 1 ms instead of 11 ms; the same constructor, so the
@@ -538,5 +541,8 @@ def parse_cell_text(text: str, path: Path) -> Any:
     if plain and d is not None:
         _PARSED[text] = _plain_copy(d)
         while len(_PARSED) > _PARSED_SIZE:
-            _PARSED.popitem(last=False)
+            try:
+                _PARSED.popitem(last=False)
+            except KeyError:  # emptied by another thread meanwhile
+                break
     return d
