@@ -466,3 +466,44 @@ def test_a_model_without_collision_rows_has_the_same_rows_pruned_or_not(kr15):
     pruned, full = CollisionModel(kr15, collision=False), CollisionModel(kr15, collision=False, prune=False)
     assert pruned.names == full.names == ["incidence"]
     assert np.array_equal(pruned.pairs, full.pairs) and np.array_equal(pruned.half, full.half)
+
+
+def test_pair_distances_read_each_poses_own_results(kr15):
+    """The checker keeps references into Coal's result vector; at every pose, in any order, they read that pose's
+    results: the same numbers as Coal's distance of each pair computed from scratch at the pose's placements, and
+    the smallest of them is :meth:`min_pair_distance`."""
+    import coal
+
+    chk = FeasibilityChecker(kr15)
+    Q = np.random.default_rng(5).uniform(kr15.q_lower, kr15.q_upper, (3, kr15.robot.nq))
+    go = chk.gm.geometryObjects
+    for q in (Q[1], Q[0], Q[2], Q[1]):
+        d = chk.pair_distances(q)
+        oMg = chk.gd.oMg
+        want = [coal.distance(go[i].geometry, coal.Transform3s(oMg[i].rotation, oMg[i].translation),
+                              go[k].geometry, coal.Transform3s(oMg[k].rotation, oMg[k].translation),
+                              coal.DistanceRequest(), coal.DistanceResult()) for i, k in chk.pairs]
+        assert len(want) > 10 and np.allclose(d, want, rtol=0, atol=1e-12)
+        assert chk.min_pair_distance(q) == d.min()
+
+
+def test_a_cell_text_parsed_before_is_a_fresh_copy_and_a_changed_text_is_parsed_again(tmp_path):
+    """load_cell keeps each cell file's parse by its text: a text read again gives a copy equal to a fresh parse
+    (changing it changes no later load), and a file rewritten at once with the same size (its stamp may not change)
+    is parsed anew, its new values read; an alias's shared list is copied whole."""
+    from pin_kpi_oed.cell.cell import parse_cell_text
+
+    text = (CELL_DIR / "kr15.yaml").read_text()
+    first = parse_cell_text(text, tmp_path / "a.yaml")
+    again = parse_cell_text(text, tmp_path / "b.yaml")
+    assert again == first == yaml.safe_load(text) and again is not first
+    again["tracker"]["xyz_m"][0] = 99.0
+    again["measurements"] = 1
+    assert parse_cell_text(text, tmp_path / "c.yaml") == yaml.safe_load(text)
+    p = tmp_path / "cell.yaml"
+    p.write_text(text)
+    c1 = load_cell(p)
+    p.write_text(text.replace("clearance_m: 0.0 ", "clearance_m: 0.2 "))
+    assert load_cell(p).clearance_m == 0.2 != c1.clearance_m
+    shared = "a: &x [1.0, 2.0]\nb: *x\n"
+    assert parse_cell_text(shared, p) == parse_cell_text(shared, p) == {"a": [1.0, 2.0], "b": [1.0, 2.0]}

@@ -408,3 +408,25 @@ def test_obstacle_on_the_base_and_tracker_in_an_obstacle_are_named_before_the_wo
     d["environment"].append({**plate, "max_radius_m": 0.05})  # strips 5 cm thick: the tracker is clear of them
     cell = cell_from_dict(d, str(tmp_path / "cell.yaml"), tmp_path)
     assert len(cell.environment[-1].capsules) > 1
+
+
+def test_the_always_blocked_test_stops_early_with_the_full_matrixs_verdict():
+    """The working targets' check of the cell's own faults goes configuration by configuration and stops once no
+    pair is close in all so far: at every clearance, from none close to many close in all 64 configurations, its
+    verdict is that of the full (64, columns) distance matrix."""
+    import dataclasses
+
+    from pin_kpi_oed.cell.working_targets import N_ALWAYS, blocked_in_all
+
+    cell = load_cell("ur10")
+    chk = FeasibilityChecker(dataclasses.replace(cell, environment=[]))
+    Q = np.random.default_rng(0).uniform(cell.q_lower, cell.q_upper, (N_ALWAYS, cell.robot.nq))
+    D = chk.distances(Q)
+    verdicts = []
+    for clearance in (0.0, 0.05, 0.2, 0.4, 0.8, 1.6):
+        full = D.copy()
+        full[:, :chk.n_pairs] -= clearance
+        want = bool(np.any(np.all(full < -1e-9, axis=0)))
+        assert blocked_in_all(chk, Q, clearance) == want
+        verdicts.append(want)
+    assert verdicts[0] is False and verdicts[-1] is True  # both verdicts reached

@@ -75,6 +75,7 @@ configuration, a robot mounted on its pedestal).
 from __future__ import annotations
 
 import math
+from collections import OrderedDict
 from pathlib import Path
 from typing import Any
 
@@ -466,8 +467,6 @@ def load_cell(spec: str | Path) -> Cell:
         InputError: missing/unreadable file, invalid YAML, or an invalid field (named with the file).
         RobotLoadError: the robot of the cell cannot be loaded.
     """
-    import yaml
-
     path = resolve_cell(spec)
     if not path.exists():
         raise InputError(f"{path}: no such cell file (shipped cells: {', '.join(SHIPPED_CELLS)})")
@@ -475,6 +474,56 @@ def load_cell(spec: str | Path) -> Cell:
         text = path.read_text()
     except (OSError, UnicodeDecodeError) as exc:
         raise InputError(f"{path}: cannot read the cell file ({exc})") from None
+    return cell_from_dict(parse_cell_text(text, path), str(path), path.resolve().parent)
+
+
+#: parsed cell files by their text, most recent last: a text parsed before in this process is not parsed again
+_PARSED: OrderedDict[str, Any] = OrderedDict()
+_PARSED_SIZE = 32
+_PLAIN = (str, int, float, bool, type(None))
+
+
+def _plain_copy(x: Any) -> Any:
+    """A copy of parsed YAML of mappings, lists and scalars: new mappings and lists, the (immutable) scalars shared."""
+    if type(x) is dict:
+        return {k: _plain_copy(v) for k, v in x.items()}
+    if type(x) is list:
+        return [_plain_copy(v) for v in x]
+    return x
+
+
+def _is_plain(x: Any) -> bool:
+    """Whether ``x`` holds only mappings (scalar keys), lists and scalars: what :func:`_plain_copy` copies whole."""
+    if type(x) is dict:
+        return all(type(k) in _PLAIN and _is_plain(v) for k, v in x.items())
+    if type(x) is list:
+        return all(map(_is_plain, x))
+    return type(x) in _PLAIN
+
+
+def parse_cell_text(text: str, path: Path) -> Any:
+    """A cell file's text parsed (YAML), a text parsed before given as a copy of that parse (mappings and lists
+    new: the caller may change them).
+
+    Args:
+        text: the file's text.
+        path: the file, for the message.
+
+    Returns:
+        The parsed document (a mapping for a cell file; whatever the YAML holds otherwise).
+
+    Raises:
+        InputError: invalid YAML (PyYAML's message, first line).
+    """
+    import yaml
+
+    hit = _PARSED.get(text)
+    if hit is not None:
+        try:
+            _PARSED.move_to_end(text)
+        except KeyError:  # dropped by another thread meanwhile: the parse in hand is still this text's
+            pass
+        return _plain_copy(hit)
     try:
         # libyaml's parser where PyYAML has it (a shipped cell: 1 ms instead of 11 ms; the same constructor, so the
         # same values); a file it refuses is parsed again by PyYAML's own, whose message the refusal quotes as before
@@ -485,4 +534,15 @@ def load_cell(spec: str | Path) -> Cell:
         except yaml.YAMLError as exc:
             first = str(exc).strip().splitlines()[0]
             raise InputError(f"{path}: invalid YAML ({first})") from None
-    return cell_from_dict(d, str(path), path.resolve().parent)
+    try:
+        plain = _is_plain(d)
+    except RecursionError:  # an alias holding itself
+        plain = False
+    if plain and d is not None:
+        _PARSED[text] = _plain_copy(d)
+        while len(_PARSED) > _PARSED_SIZE:
+            try:
+                _PARSED.popitem(last=False)
+            except KeyError:  # emptied by another thread meanwhile
+                break
+    return d

@@ -20,12 +20,14 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from operator import attrgetter
 
 import numpy as np
 import pinocchio as pin
 
 from pin_kpi_oed.cell.cell_model import Cell
 
+_MIN_DISTANCE = attrgetter("min_distance")
 _Z_AXIS = np.array([0.0, 0.0, 1.0])
 _Z_AXIS.flags.writeable = False
 
@@ -157,6 +159,9 @@ class FeasibilityChecker:
         for i, k in self.pairs:
             self.gm.addCollisionPair(pin.CollisionPair(i, k))
         self.gd = pin.GeometryData(self.gm)
+        # references into GeometryData's result vector, made once: iterating or indexing the vector's property wraps
+        # every result anew (several times Coal's own work); the references read the results of every later call
+        self._results = list(self.gd.distanceResults)
         self.beam_targets = [i for i in self.robot_ids + self.obst_ids + self.half_ids
                              if not any(x in self._keys(i) for x in cell.beam_skip)]
         # the beam targets' shapes read once; the placements of the fixed ones (on the universe joint) made into
@@ -289,8 +294,7 @@ class FeasibilityChecker:
         pin.framesForwardKinematics(self.model, self.data, np.asarray(q, float))
         pin.updateGeometryPlacements(self.model, self.data, self.gm, self.gd)
         pin.computeDistances(self.gm, self.gd)
-        res = self.gd.distanceResults  # one access: indexing the property each time copies the vector
-        d = np.array([r.min_distance for r in res])[:self.n_pairs]
+        d = np.array(list(map(_MIN_DISTANCE, self._results)))[:self.n_pairs]
         return mesh_penetration(self, d) if self.mesh_pairs else d
 
     def min_pair_distance(self, q: np.ndarray) -> float:
@@ -309,10 +313,10 @@ class FeasibilityChecker:
         """
         if not self.n_pairs:
             return float("inf")
-        pin.framesForwardKinematics(self.model, self.data, np.asarray(q, float))
-        pin.updateGeometryPlacements(self.model, self.data, self.gm, self.gd)
-        k = pin.computeDistances(self.gm, self.gd)
-        d_min = float(self.gd.distanceResults[k].min_distance)
+        # forward kinematics, the geometry's placements and every pair's distance in one call (no frame placements:
+        # nothing here reads them; :meth:`pair_distances` places the frames)
+        k = pin.computeDistances(self.model, self.data, self.gm, self.gd, np.asarray(q, float))
+        d_min = float(self._results[k].min_distance)
         if not self.mesh_pairs or d_min > _MESH_CONTACT_M:
             return d_min
         return float(self.pair_distances(q).min())

@@ -21,6 +21,7 @@ configuration) is kept.
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 from collections.abc import Callable
@@ -55,6 +56,19 @@ class IkResult(Result):
     residual_rad: float
 
 
+#: the largest entry of a vector: ``ndarray.max``'s reduction without its wrapper
+_largest = np.maximum.reduce
+
+
+@functools.lru_cache(maxsize=8)
+def _damping(damping: float) -> dict[int, np.ndarray]:
+    """λ²I of the damped step for 3 and 6 rows (read-only, made once per λ)."""
+    out = {k: damping ** 2 * np.eye(k) for k in (3, 6)}
+    for a in out.values():
+        a.flags.writeable = False
+    return out
+
+
 def _skew(v: np.ndarray) -> np.ndarray:
     return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
 
@@ -64,20 +78,22 @@ def _descend(robot, q: np.ndarray, p_t: np.ndarray, R_t: np.ndarray | None, tcp:
     """Damped least squares from q; returns (q, position error (m), orientation error (rad)).
 
     Written for the cost of its small NumPy calls (a cube's plan runs thousands of iterations): the norms as
-    ``sqrt(e·e)`` (what ``np.linalg.norm`` computes for a vector), the damping's diagonal made once, the largest step
-    by the array's own ``max``: the same numbers as the plain calls.
+    ``sqrt(e·e)`` (what ``np.linalg.norm`` computes for a vector), the damping's diagonal made once per λ, the
+    largest step by ``np.maximum.reduce`` (``ndarray.max``'s reduction, without its wrapper), the tool frame placed
+    by the frame Jacobian's own forward pass (no second forward kinematics): the same numbers as the plain calls
+    (``tests/test_ik_descent.py`` keeps them as the reference).
     """
     model, data, fid = robot.model, robot.model.createData(), robot.tool_frame_id
     lo, hi = robot.q_lower, robot.q_upper
     q = np.clip(np.asarray(q, float), lo, hi)
     ep = er = np.inf
-    damp = {k: damping ** 2 * np.eye(k) for k in (3, 6)}
+    damp = _damping(damping)
     for _ in range(max_iter):
-        pin.framesForwardKinematics(model, data, q)
+        # the frame Jacobian's forward pass places the tool frame as forward kinematics does (the same products)
+        J6 = pin.computeFrameJacobian(model, data, q, fid, pin.LOCAL_WORLD_ALIGNED)
         M = data.oMf[fid]
         r = M.rotation @ tcp
         e_pos = p_t - (M.translation + r)
-        J6 = pin.computeFrameJacobian(model, data, q, fid, pin.LOCAL_WORLD_ALIGNED)
         J = J6[:3] - _skew(r) @ J6[3:]
         e = e_pos
         ep = math.sqrt(e_pos.dot(e_pos))
@@ -90,11 +106,11 @@ def _descend(robot, q: np.ndarray, p_t: np.ndarray, R_t: np.ndarray | None, tcp:
         if ep < 1e-3 * IK_TOL_M and er < 1e-3 * IK_TOL_RAD:
             break
         dq = J.T @ np.linalg.solve(J @ J.T + damp[J.shape[0]], e)
-        big = float(np.abs(dq).max())
+        big = float(_largest(np.abs(dq)))
         if big > 0.3:
             dq *= 0.3 / big
         q_new = np.clip(pin.integrate(model, q, dq), lo, hi)
-        if np.abs(q_new - q).max() < 1e-14:
+        if _largest(np.abs(q_new - q)) < 1e-14:
             break
         q = q_new
     return q, ep, er
@@ -164,6 +180,30 @@ def solve_tcp_target(robot, W_T_base: pin.SE3, tcp_m: np.ndarray, xyz_W: np.ndar
 N_ALWAYS = 64
 
 
+def blocked_in_all(chk: FeasibilityChecker, Q: np.ndarray, clearance_m: float) -> bool:
+    """Whether a pair or a beam target is closer than ``clearance_m`` (by more than 1e-9 m) in every configuration
+    of ``Q``: configuration by configuration, stopping at the first after which no column was close in all so far
+    (a cell without such a fault: after a few of them, not all).
+
+    Args:
+        chk: the checker (its :meth:`~pin_kpi_oed.cell.feasibility.FeasibilityChecker.distances` columns).
+        Q: configurations (m, n) rad.
+        clearance_m: the required clearance of the pairs (m; the beam's columns are taken as they are).
+
+    Returns:
+        The verdict of the full (m, columns) distance matrix: some column below −1e-9 m in every row.
+    """
+    alive: np.ndarray | None = None
+    for q in Q:
+        d = chk.distances(q[None])[0]
+        d[:chk.n_pairs] -= clearance_m
+        close = d < -1e-9
+        alive = close if alive is None else alive & close
+        if not alive.any():
+            return False
+    return alive is not None
+
+
 def _check_always_blocked(chk: FeasibilityChecker, cell, pre: str) -> None:
     """Refuse an obstacle that collides with a robot capsule, or blocks the beam, in each of :data:`N_ALWAYS` random
     configurations within the bounds (it overlaps the robot's base, or hides the tracker): no target is to blame.
@@ -172,12 +212,12 @@ def _check_always_blocked(chk: FeasibilityChecker, cell, pre: str) -> None:
         InputError: naming the obstacle, the robot capsule (or the beam) and the fix.
     """
     Q = np.random.default_rng(0).uniform(cell.q_lower, cell.q_upper, (N_ALWAYS, cell.robot.nq))
+    if not blocked_in_all(chk, Q, cell.clearance_m):
+        return
     D = chk.distances(Q)
     D[:, :chk.n_pairs] -= cell.clearance_m
     ncols = chk.n_pairs + len(chk.beam_names)
     always = [k for k in range(min(ncols, D.shape[1])) if np.all(D[:, k] < -1e-9)]
-    if not always:
-        return
     k = always[0]
     a, b = chk.names[k].split("|", 1)
     worst = float(np.max(D[:, k])) * 1e3

@@ -21,16 +21,18 @@ bad entry: the messages are those of the element-by-element check, at a fraction
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from itertools import chain
 from typing import Any
 
 import numpy as np
 
 from pin_kpi_oed.errors import InputError
+from pin_kpi_oed.validation.conformance import compile_schema, pruned
 from pin_kpi_oed.validation.units import MAX_TOOL_OFFSET_M, check_sigma_m, check_sigma_rad
 
 __all__ = ["CELL_SCHEMA", "DESIGN_SCHEMA", "MODEL_SCHEMA", "validate_cell_dict", "validate_design_dict",
-           "validate_model_dict", "check_covariance"]
+           "validate_model_dict", "check_covariance", "conforms"]
 
 #: largest plausible distance of the robot base or the tracker from the cell origin (m)
 MAX_CELL_M = 200.0
@@ -176,14 +178,25 @@ def _numeric_array(validator: Any, spec: dict, instance: Any, schema: dict) -> A
     """The schema keyword ``numeric_array``: passes a clean array (:func:`_clean_array`) of the stated shape and range
     at once; anything else is checked against ``spec["schema"]`` element by element (the same errors, paths and
     messages as that schema alone gives)."""
+    if not _clean_passes(spec, instance):
+        yield from validator.descend(instance, spec["schema"])
+
+
+def _clean_passes(spec: dict, instance: Any) -> bool:
+    """Whether ``instance`` passes the ``numeric_array`` keyword ``spec`` at once: ``null`` where nullable, or a clean
+    array (:func:`_clean_array`) of the stated shape and range."""
     if spec.get("nullable") and instance is None:
-        return
+        return True
     a = _clean_array(instance, spec["ndim"])
-    if a is not None and all(want is None or n == want for n, want in zip(a.shape, spec.get("shape") or a.shape)) \
-            and (not spec.get("nonempty") or min(a.shape) >= 1) \
-            and (spec.get("minimum") is None or bool(np.all(a >= spec["minimum"]))):
-        return
-    yield from validator.descend(instance, spec["schema"])
+    return a is not None and all(want is None or n == want for n, want in zip(a.shape, spec.get("shape") or a.shape)) \
+        and (not spec.get("nonempty") or min(a.shape) >= 1) \
+        and (spec.get("minimum") is None or bool(np.all(a >= spec["minimum"])))
+
+
+def _numeric_array_check(spec: dict) -> Callable[[Any], bool]:
+    """The ``numeric_array`` keyword as a predicate of :func:`~pin_kpi_oed.validation.conformance.compile_schema`."""
+    each = compile_schema(spec["schema"])
+    return lambda x: _clean_passes(spec, x) or each(x)
 
 
 def _numeric(schema: dict, ndim: int, shape: tuple | None = None, nonempty: bool = False,
@@ -204,16 +217,45 @@ def _numeric(schema: dict, ndim: int, shape: tuple | None = None, nonempty: bool
 
 
 _VALIDATORS: dict[int, Any] = {}
+#: id of a schema -> (the schema, kept alive so that its id stays its own; its predicate)
+_CONFORMS: dict[int, tuple[Any, Callable[[Any], bool]]] = {}
+
+
+def conforms(instance: Any, schema: Any) -> bool:
+    """Whether ``instance`` passes ``schema`` by its compiled predicate (:mod:`~pin_kpi_oed.validation.conformance`,
+    made once per schema), True only where ``jsonschema`` finds no error.
+
+    Args:
+        instance: a parsed document or a part of it.
+        schema: one of this module's schemas or a part of it.
+
+    Returns:
+        True: valid; False: ask ``jsonschema`` (the document may still be valid).
+    """
+    hit = _CONFORMS.get(id(schema))
+    if hit is None or hit[0] is not schema:
+        hit = _CONFORMS[id(schema)] = (schema, compile_schema(schema, _numeric_array_check))
+    return hit[1](instance)
 
 
 def _validate(d: Any, schema: dict, source: str, what: str) -> None:
+    """Refuse ``d`` with the first error ``jsonschema`` finds against ``schema``. A document the compiled predicate
+    accepts has none (:func:`conforms`); a refused one is descended by ``jsonschema`` only where the predicate
+    refuses (:func:`~pin_kpi_oed.validation.conformance.pruned`): the same errors, in the same order.
+
+    Raises:
+        InputError: ``<source>: <what> field <path>: <message>``.
+    """
+    if conforms(d, schema):
+        return
     import jsonschema
 
     validator = _VALIDATORS.get(id(schema))
     if validator is None:  # built once per schema (a few ms each)
         cls = jsonschema.validators.extend(jsonschema.Draft202012Validator, {"numeric_array": _numeric_array})
         validator = _VALIDATORS[id(schema)] = cls(schema)
-    errors = sorted(validator.iter_errors(d), key=lambda e: (len(list(e.absolute_path)), list(map(str, e.path))))
+    errors = sorted(validator.evolve(schema=pruned(d, validator.schema, conforms)).iter_errors(d),
+                    key=lambda e: (len(list(e.absolute_path)), list(map(str, e.path))))
     if errors:
         e = errors[0]
         deepest = jsonschema.exceptions.best_match([e]) if e.context else e
@@ -370,9 +412,10 @@ def _first_nonfinite(v: Any, path: str) -> str | None:
         return None if math.isfinite(v) else path
     if isinstance(v, dict):
         for k, x in v.items():
-            hit = _first_nonfinite(x, f"{path}.{k}" if path else str(k))
-            if hit:
-                return hit
+            if not _passes(x):
+                hit = _first_nonfinite(x, f"{path}.{k}" if path else str(k))
+                if hit:
+                    return hit
     if isinstance(v, list):
         ndim, x0 = 1, v[0] if v else None
         while type(x0) is list:  # the depth of the first entry's nesting: a clean array of that depth at once
@@ -382,10 +425,18 @@ def _first_nonfinite(v: Any, path: str) -> str | None:
             bad = np.argwhere(~np.isfinite(a))
             return None if not len(bad) else path + "".join(f"[{int(i)}]" for i in bad[0])
         for i, x in enumerate(v):
-            hit = _first_nonfinite(x, f"{path}[{i}]")
-            if hit:
-                return hit
+            if not _passes(x):
+                hit = _first_nonfinite(x, f"{path}[{i}]")
+                if hit:
+                    return hit
     return None
+
+
+def _passes(x: Any) -> bool:
+    """A leaf :func:`_first_nonfinite` passes at once (text, ``null``, a boolean, a finite float): the common entries
+    of a mapping or a list, judged without a call of the walk (False: walk it)."""
+    t = type(x)
+    return t is str or x is None or t is bool or (t is float and math.isfinite(x))
 
 
 def check_covariance(C: Any, what: str, n: int | None = None) -> np.ndarray:
