@@ -393,3 +393,21 @@ def test_exchange_ends_once_every_position_was_tried_on_one_state_with_the_same_
     (new_sel_phi, new_counts, n_new), (old_sel_phi, old_counts, n_old) = runs
     assert new_sel_phi[0] == old_sel_phi[0] and new_sel_phi[1] == old_sel_phi[1]
     assert new_counts == old_counts and new_counts[0] > 0 and n_new < n_old
+
+
+def test_identity_pool_matrix_takes_b_as_h_with_the_products_very_gains(pool):
+    """A on C_p (K = I): the state takes H = F M⁻¹ Iᵀ as B = F M⁻¹ itself instead of a product with the identity;
+    adding and swapping give the product's gains bit for bit."""
+    from pin_kpi_oed.oed.pool_search import InformationState
+
+    Fp, _ = pool
+    nx = Fp.shape[-1]
+    chosen = list(range(0, 120, 3))
+    st = InformationState(Fp, np.eye(nx), None, chosen)
+    assert st.K_eye and st.H is st.B
+    ref = InformationState(Fp, np.eye(nx), None, chosen)
+    ref.H = (ref.B.reshape(-1, nx) @ np.eye(nx).T).reshape(ref.B.shape)  # the product, as for any other K
+    assert np.array_equal(st.add_gains(), ref.add_gains())
+    for o in chosen[::7]:
+        (phi, g), (phi_ref, g_ref) = st.swap_gains(o), ref.swap_gains(o)
+        assert phi == phi_ref and np.array_equal(g, g_ref)

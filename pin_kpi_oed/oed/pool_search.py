@@ -298,6 +298,8 @@ class InformationState(PoolState):
         self.Fp = Fp
         self.Fa = np.ascontiguousarray(Fp.transpose(1, 0, 2))  # (nh, N, nx)
         self.K = K
+        #: K is the identity (A on C_p): H_i = F_i M⁻¹ Kᵀ is B_i itself, no product
+        self.K_eye = K is not None and K.shape == (self.nx, self.nx) and bool(np.array_equal(K, np.eye(self.nx)))
         self.chosen = [int(i) for i in chosen]
         F = Fp[self.chosen].reshape(-1, self.nx)
         M = F.T @ F
@@ -331,7 +333,7 @@ class InformationState(PoolState):
             self.H = None
             self.phi = float(-2.0 * np.sum(np.log(np.diag(L))))
         else:
-            self.H = (self.B.reshape(nh * N, nx) @ self.K.T).reshape(nh, N, -1)
+            self.H = self.B if self.K_eye else (self.B.reshape(nh * N, nx) @ self.K.T).reshape(nh, N, -1)
             X = np.linalg.solve(L, self.K.T)
             self.phi = float(np.sum(X * X))
         return True
