@@ -339,3 +339,75 @@ def test_selection_efficiency_of_d_and_a_type(pool, selected):
     rnd = np.random.default_rng(4).choice(len(Fp), m, replace=False)
     bound = d_sel.approx.lower_bound - nb * np.log(m)
     assert np.exp(-(exact_phi(Fp, rnd, None) - bound) / nb) < eff
+
+
+def _exchange_every_pass(st, sel, exclude, cur, passes, rel_tol, abs_tol):
+    """The exchange as it ran before it stopped once every position had been tried on one state: full passes until
+    one without a swap (the reference of the test below)."""
+    swaps = sweeps = 0
+    for sweeps in range(1, passes + 1):  # noqa: B007
+        changed = False
+        for pos in range(len(sel)):
+            i = sel[pos]
+            down = st.without(i)
+            if down is None:
+                continue
+            ex = exclude.copy()
+            ex[i] = False
+            phi = down.values(ex)
+            j = int(np.argmin(phi))
+            if j != i and phi[j] < cur * (1 - rel_tol) - abs_tol:
+                exclude[i], exclude[j] = False, True
+                sel[pos] = j
+                down.add(j)
+                st = down
+                cur = st.settled(float(phi[j]))
+                swaps += 1
+                changed = True
+        if not changed:
+            break
+        st = st.rebuild(sel)
+    return sel, cur, swaps, sweeps
+
+
+def test_exchange_ends_once_every_position_was_tried_on_one_state_with_the_same_result(pool, monkeypatch):
+    """The exchange stops once every position has been tried on the same state: the same swaps, set, φ (bit for bit)
+    and passes as full passes until one without a swap, with fewer positions tried (DETMAX's random start; the KPI's
+    A form, the update with the most arithmetic)."""
+    from pin_kpi_oed.oed.pool_search import InformationState, exchange
+
+    Fp, E = pool
+    tried: list[int] = []
+    without = InformationState.without
+    monkeypatch.setattr(InformationState, "without", lambda self, i: (tried.append(i), without(self, i))[1])
+    start = np.random.default_rng(0).choice(len(Fp), 40, replace=False)
+    runs = []
+    for search in (exchange, _exchange_every_pass):
+        st = InformationState(Fp, E, None, start)
+        tried.clear()
+        excl = np.zeros(len(Fp), bool)
+        excl[start] = True
+        out = search(st, list(st.chosen), excl, st.phi, 50, 1e-10, 1e-300)
+        runs.append((out[1:3] if search is exchange else out[:2], out[-2:] if search is exchange else out[2:],
+                     len(tried)))
+    (new_sel_phi, new_counts, n_new), (old_sel_phi, old_counts, n_old) = runs
+    assert new_sel_phi[0] == old_sel_phi[0] and new_sel_phi[1] == old_sel_phi[1]
+    assert new_counts == old_counts and new_counts[0] > 0 and n_new < n_old
+
+
+def test_identity_pool_matrix_takes_b_as_h_with_the_products_very_gains(pool):
+    """A on C_p (K = I): the state takes H = F M⁻¹ Iᵀ as B = F M⁻¹ itself instead of a product with the identity;
+    adding and swapping give the product's gains bit for bit."""
+    from pin_kpi_oed.oed.pool_search import InformationState
+
+    Fp, _ = pool
+    nx = Fp.shape[-1]
+    chosen = list(range(0, 120, 3))
+    st = InformationState(Fp, np.eye(nx), None, chosen)
+    assert st.K_eye and st.H is st.B
+    ref = InformationState(Fp, np.eye(nx), None, chosen)
+    ref.H = (ref.B.reshape(-1, nx) @ np.eye(nx).T).reshape(ref.B.shape)  # the product, as for any other K
+    assert np.array_equal(st.add_gains(), ref.add_gains())
+    for o in chosen[::7]:
+        (phi, g), (phi_ref, g_ref) = st.swap_gains(o), ref.swap_gains(o)
+        assert phi == phi_ref and np.array_equal(g, g_ref)

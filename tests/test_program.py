@@ -184,6 +184,27 @@ def test_smallest_pair_distance_is_the_smallest_of_every_pair(ur10, kr15):
     assert FeasibilityChecker(ur10).mesh_pairs  # the mesh branch was taken
 
 
+def test_move_bound_call_is_the_smallest_pair_bound_and_the_cap_changes_nothing_below_it(ur10):
+    """The move check's bound of a configuration (the smallest over the segment rows, without the pair table) is the
+    smallest of its pair bounds, bit for bit, in a cell with soft pairs (the UR10's enclosing capsules of its table
+    mesh) and half-spaces; with a cap the closest points are computed only where the balls come closer than it: every
+    pair bound is at most the uncapped one (still a bound), the same below the cap and, for a cap > 0, at least the
+    cap above it (a cap ≤ 0, which a move colliding without early stop gives, keeps the per-row balls: a soft pair's
+    ball distance there may be ≤ 0, no bound)."""
+    bound = TransitionChecker(ur10, 0.01).bound
+    assert bound is not None and bound.soft_rows.size and bound.hard_rows.size and bound.H_pair.size
+    X = ur10.robot.random_q(np.random.default_rng(2), 120)
+    full = bound.pairs(X)
+    assert (full.min(axis=1) < 0.05).any() and (full.min(axis=1) > 0.05).any()
+    for cap in (None, -0.02, 0.0, 0.02, 0.1):
+        capped = bound.pairs(X, cap)
+        assert np.array_equal(bound(X, cap), capped.min(axis=1) - 1e-9)
+        if cap is not None:
+            below = full < cap
+            assert below.any() and np.array_equal(capped[below], full[below]) and np.all(capped <= full)
+            assert cap <= 0 or np.all(capped[~below] >= cap)
+
+
 def test_ur10_colliding_move_is_planned_by_ompl_and_passes_the_dense_check(ur10):
     tc = TransitionChecker(ur10, 0.01)
     qa, qb = np.radians(UR10_A), np.radians(UR10_B)

@@ -156,6 +156,10 @@ def exchange(st: PoolState, sel: list[int], exclude: np.ndarray, cur: float, pas
     """Exchange passes: each chosen candidate of ``sel`` in turn taken out and replaced by the one of least φ when that
     is below cur·(1 − rel_tol) − abs_tol.
 
+    Once every position has been tried on the same state (the positions after a pass's last swap and the next
+    pass's up to it) the search ends: trying a position again on that state repeats its answer (no swap), so the
+    passes a full run would go on with change nothing.
+
     Args:
         st: the state of ``fixed`` + ``sel``; sel: the swappable chosen candidates (updated in place).
         exclude: (N,) bool, the chosen ones (and any never to choose), updated in place.
@@ -168,11 +172,15 @@ def exchange(st: PoolState, sel: list[int], exclude: np.ndarray, cur: float, pas
         (state, sel, φ, swaps, passes run).
     """
     swaps = sweeps = 0
+    calm = 0  # positions tried in a row on the same state without a swap
     for sweeps in range(1, int(passes) + 1):  # noqa: B007 (the count is read after the loop)
         changed = False
         for pos in range(len(sel)):
+            if calm >= len(sel):  # every position was tried on this state: trying one again repeats its answer
+                break
             if deadline is not None and time.perf_counter() > deadline:
                 break
+            calm += 1
             i = sel[pos]
             down = st.without(i)
             if down is None:
@@ -188,10 +196,12 @@ def exchange(st: PoolState, sel: list[int], exclude: np.ndarray, cur: float, pas
                 st = down
                 cur = st.settled(float(phi[j]))
                 swaps += 1
-                changed = True
+                changed, calm = True, 0
         if not changed:
             break
-        st = st.rebuild(list(fixed) + sel)
+        rebuilt = st.rebuild(list(fixed) + sel)
+        if rebuilt is not st:  # a state from scratch may differ from the updated one in its last digits
+            st, calm = rebuilt, 0
     return st, sel, cur, swaps, sweeps
 
 
@@ -288,6 +298,8 @@ class InformationState(PoolState):
         self.Fp = Fp
         self.Fa = np.ascontiguousarray(Fp.transpose(1, 0, 2))  # (nh, N, nx)
         self.K = K
+        #: K is the identity (A on C_p): H_i = F_i M⁻¹ Kᵀ is B_i itself, no product
+        self.K_eye = K is not None and K.shape == (self.nx, self.nx) and bool(np.array_equal(K, np.eye(self.nx)))
         self.chosen = [int(i) for i in chosen]
         F = Fp[self.chosen].reshape(-1, self.nx)
         M = F.T @ F
@@ -321,7 +333,7 @@ class InformationState(PoolState):
             self.H = None
             self.phi = float(-2.0 * np.sum(np.log(np.diag(L))))
         else:
-            self.H = (self.B.reshape(nh * N, nx) @ self.K.T).reshape(nh, N, -1)
+            self.H = self.B if self.K_eye else (self.B.reshape(nh * N, nx) @ self.K.T).reshape(nh, N, -1)
             X = np.linalg.solve(L, self.K.T)
             self.phi = float(np.sum(X * X))
         return True

@@ -123,6 +123,10 @@ class MoveBound:
         self.flat_row = np.array([r for _, r in flat], int)
         self.starts = np.flatnonzero(np.r_[True, np.diff(self.flat_pair) != 0]) if flat else np.zeros(0, int)
         self.first_pair = self.flat_pair[self.starts] if flat else np.zeros(0, int)
+        #: the rows of the pairs bounded by their closest points, and those of the soft pairs (no bound when one
+        #: is not positive): what :meth:`__call__` takes its minimum over
+        self.hard_rows = np.unique(self.flat_row[~self.soft[self.flat_pair]]) if flat else np.zeros(0, int)
+        self.soft_rows = np.unique(self.flat_row[self.soft[self.flat_pair]]) if flat else np.zeros(0, int)
 
     def _verify(self, chk: FeasibilityChecker) -> bool:
         """The bound never exceeds the exact distances on seeded random configurations; constant pairs are."""
@@ -144,37 +148,85 @@ class MoveBound:
     def pairs(self, Q: np.ndarray, cap: float | None = None) -> np.ndarray:
         """(m, n_pairs) lower bounds of the pair distances (m); +inf for constant pairs.
 
-        With ``cap``, a segment pair whose enclosing balls keep at least ``cap`` apart at every configuration of Q
-        is bounded by the balls' distance (a weaker bound, ≥ cap) instead of its closest points: below ``cap`` the
-        smallest bound of a configuration is the same as without, and it costs a fraction.
+        With ``cap`` > 0, a segment pair whose enclosing balls keep at least ``cap`` apart at a configuration of Q
+        is bounded there by the balls' distance (a weaker bound, ≥ cap) instead of its closest points: below
+        ``cap`` the smallest bound of a configuration is the same as without, and the closest points are computed
+        only where the balls come closer than ``cap``. With ``cap`` ≤ 0 (a soft pair's ball distance may then be
+        ≤ 0 and above ``cap``) the balls stand in only for segment pairs that keep ``cap`` apart at every
+        configuration.
         """
-        Q = np.atleast_2d(np.asarray(Q, float))
-        Rs, ts = self._frames(Q)
-        Rj, tj = Rs[:, self.U_joint], ts[:, self.U_joint]
-        out = np.full((len(Q), self.n_pairs), np.inf)
-        d = np.empty((len(Q), len(self.U1)))
-        near = np.arange(len(self.U1))
-        if cap is not None and near.size:
-            C = np.einsum("msij,sj->msi", Rj, self.U_C) + tj
-            dC = C[:, self.U1] - C[:, self.U2]
-            d = np.sqrt(np.einsum("mri,mri->mr", dC, dC)) - self.R_ball
-            near = np.flatnonzero(np.any(d < cap, axis=0))
-        u1, u2 = self.U1[near], self.U2[near]
-        EA = np.einsum("msij,sj->msi", Rj, self.U_A) + tj  # every segment's end points, (m, S, 3): a few dozen
-        EB = np.einsum("msij,sj->msi", Rj, self.U_B) + tj
+        d, da, db = self._rows(Q, cap)
+        out = np.full((len(d), self.n_pairs), np.inf)
         if self.flat_row.size:
-            _, _, w1, w2 = self._closest(EA[:, u1], EB[:, u1], EA[:, u2], EB[:, u2])
-            w = w2 - w1
-            d[:, near] = np.sqrt(np.einsum("mri,mri->mr", w, w)) - self.R[near]
             out[:, self.first_pair] = np.minimum.reduceat(d[:, self.flat_row], self.starts, axis=1)
             soft = out[:, self.soft]
             out[:, self.soft] = np.where(soft > 0, soft, -np.inf)  # touching the enclosing capsules: no bound
         if self.H_pair.size:
-            da = np.einsum("mhi,hi->mh", EA[:, self.H_seg], self.H_n)
-            db = np.einsum("mhi,hi->mh", EB[:, self.H_seg], self.H_n)
             out[:, self.H_pair] = np.minimum(out[:, self.H_pair], np.minimum(da, db) - self.H_off)
         return out
 
     def __call__(self, Q: np.ndarray, cap: float | None = None) -> np.ndarray:
-        """(m,) lower bound of the smallest pair distance at each configuration (m); see :meth:`pairs` for ``cap``."""
-        return self.pairs(Q, cap).min(axis=1) - 1e-9
+        """(m,) lower bound of the smallest pair distance at each configuration (m); see :meth:`pairs` for ``cap``.
+
+        The smallest entry of each row of :meth:`pairs`, bit for bit, taken over the segment-pair rows directly
+        (without the (m, n_pairs) table): a pair's bound is the least of its rows' or its half-space value, a soft
+        pair's −inf when one of its rows is not positive.
+
+        Args:
+            Q: configurations (m, n) (rad for revolute joints, m for prismatic ones).
+            cap: see :meth:`pairs` (m).
+
+        Returns:
+            (m,) the bound minus 1e-9 m.
+        """
+        d, da, db = self._rows(Q, cap)
+        low = np.full(len(d), np.inf)
+        if self.hard_rows.size:
+            low = d[:, self.hard_rows].min(axis=1)
+        if self.soft_rows.size:  # a soft pair's row not positive (or NaN): no bound
+            soft = d[:, self.soft_rows]
+            low = np.minimum(low, np.where(np.any(~(soft > 0), axis=1), -np.inf, soft.min(axis=1)))
+        if self.H_pair.size:
+            low = np.minimum(low, (np.minimum(da, db) - self.H_off).min(axis=1))
+        return low - 1e-9
+
+    def _rows(self, Q: np.ndarray, cap: float | None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The bound of every segment-pair row at every configuration (m, rows) (see :meth:`pairs` for ``cap``)
+        and the signed distances of the half-space rows' two segment ends (m, H) each (m)."""
+        Q = np.atleast_2d(np.asarray(Q, float))
+        Rs, ts = self._frames(Q)
+        Rj, tj = Rs[:, self.U_joint], ts[:, self.U_joint]
+        EA = np.einsum("msij,sj->msi", Rj, self.U_A) + tj  # every segment's end points, (m, S, 3): a few dozen
+        EB = np.einsum("msij,sj->msi", Rj, self.U_B) + tj
+        d = np.zeros((len(Q), 0))
+        if self.flat_row.size:
+            if cap is None:
+                u1, u2 = self.U1, self.U2
+                d = self._closest_rows(EA[:, u1], EB[:, u1], EA[:, u2], EB[:, u2], self.R)
+            else:
+                C = np.einsum("msij,sj->msi", Rj, self.U_C) + tj
+                dC = C[:, self.U1] - C[:, self.U2]
+                d = np.sqrt(np.einsum("mri,mri->mr", dC, dC)) - self.R_ball
+                near = d < cap
+                if cap <= 0:  # no ball distance at or below 0 may stand in for a soft pair's closest points
+                    near[:] = np.any(near, axis=0)
+                mi, ri = np.nonzero(near)
+                if mi.size:  # the (configuration, row) entries the balls cannot settle, as one row of entries
+                    S = EA.shape[1]
+                    k1, k2 = mi * S + self.U1[ri], mi * S + self.U2[ri]
+                    A, B = EA.reshape(-1, 3), EB.reshape(-1, 3)
+                    d[mi, ri] = self._closest_rows(A[k1][None], B[k1][None], A[k2][None], B[k2][None],
+                                                   self.R[ri])[0]
+        da = db = np.zeros((len(Q), 0))
+        if self.H_pair.size:
+            da = np.einsum("mhi,hi->mh", EA[:, self.H_seg], self.H_n)
+            db = np.einsum("mhi,hi->mh", EB[:, self.H_seg], self.H_n)
+        return d, da, db
+
+    def _closest_rows(self, A1: np.ndarray, B1: np.ndarray, A2: np.ndarray, B2: np.ndarray, R: np.ndarray
+                      ) -> np.ndarray:
+        """Closest-point bounds of segment pairs [A1, B1], [A2, B2] (m, r, 3) whose radii sum to R (r,):
+        their distance minus R, (m, r) m."""
+        _, _, w1, w2 = self._closest(A1, B1, A2, B2)
+        w = w2 - w1
+        return np.sqrt(np.einsum("mri,mri->mr", w, w)) - R
