@@ -158,3 +158,53 @@ def test_design_figures_show_the_honest_covariance_when_the_file_has_it(design, 
     assert figures.design_figure_data(df0).sigma == "paper"      # nothing honest in the file: the paper's
     out = figures.design_figures(df, tmp_path, prefix="h")
     assert all(_png_size(p)[0] > 500 for p in out.values())
+
+
+def _pixels(data: bytes) -> np.ndarray:
+    from PIL import Image
+
+    with Image.open(io.BytesIO(data)) as im:
+        return np.asarray(im)
+
+
+def test_png_drawn_once_has_the_pixels_of_savefig():
+    """``write_png`` draws a figure once (the layout engine run inside that draw; a tight crop measured before it)
+    where ``savefig`` draws it twice: the pixels are those of ``savefig`` at the same dpi, exactly, for a constrained
+    figure with a legend, a colour bar and a title, and for a cropped one laid out by ``tight_layout``; the figure
+    keeps its dpi and layout engine."""
+    from pin_kpi_oed.report.figures import outside_legend
+
+    def constrained():
+        rng = np.random.default_rng(4)
+        fig = figures.agg_figure(5.0, 2.5)
+        ax1, ax2 = fig.subplots(1, 2)
+        ax1.plot(rng.normal(size=30).cumsum(), label="walk")
+        ax1.legend(loc="best")
+        sc = ax2.scatter(*rng.normal(size=(2, 40)), c=rng.random(40), cmap="viridis")
+        fig.colorbar(sc, ax=ax2, label="σ (mm)")
+        fig.suptitle("both ways")
+        return fig
+
+    def tight():
+        from matplotlib.backends.backend_agg import FigureCanvasAgg
+        from matplotlib.figure import Figure
+
+        rng = np.random.default_rng(5)
+        fig = Figure(figsize=(4.0, 2.5))
+        FigureCanvasAgg(fig)
+        ax = fig.subplots()
+        ax.hist(rng.normal(size=200), bins=20, label="rows")
+        outside_legend(ax)
+        fig.tight_layout()
+        return fig
+
+    for make, crop, dpi in ((constrained, False, 150), (tight, True, 90)):
+        fig = make()                                  # a fresh figure each way: no draw before the one measured
+        engine = fig.get_layout_engine()
+        out = io.BytesIO()
+        figures.write_png(fig, out, dpi, tight=crop)
+        assert fig.dpi == 100 and fig.get_layout_engine() is engine
+        ref = io.BytesIO()
+        make().savefig(ref, format="png", dpi=dpi, bbox_inches="tight" if crop else None)
+        a, b = _pixels(ref.getvalue()), _pixels(out.getvalue())
+        assert a.shape == b.shape and np.array_equal(a, b), make.__name__
