@@ -208,3 +208,27 @@ def test_png_drawn_once_has_the_pixels_of_savefig():
         make().savefig(ref, format="png", dpi=dpi, bbox_inches="tight" if crop else None)
         a, b = _pixels(ref.getvalue()), _pixels(out.getvalue())
         assert a.shape == b.shape and np.array_equal(a, b), make.__name__
+
+
+def test_shade_draws_what_fill_draws():
+    """The ellipsoid figure's shaded ellipses (``shade``: the polygon added without updating the data limits) have
+    the pixels of ``ax.fill`` with the same colour and opacity, on axes whose limits are set afterwards (as the
+    figure sets them)."""
+    P = figures.ellipse_points(np.array([[4.0, 1.5], [1.5, 1.0]]), 7.81)
+
+    def draw(use_fill: bool) -> np.ndarray:
+        fig = figures.agg_figure(2.5, 2.0)
+        ax = fig.subplots()
+        if use_fill:
+            ax.fill(P[:, 0], P[:, 1], color="#2ca02c", alpha=0.12)
+        else:
+            figures.shade(ax, P, "#2ca02c", 0.12)
+        ax.set_xlim(-7.0, 7.0)
+        ax.set_ylim(-7.0, 7.0)
+        buf = io.BytesIO()
+        fig.savefig(buf, format="png", dpi=120)
+        return _pixels(buf.getvalue())
+
+    a, b = draw(True), draw(False)
+    assert a.shape == b.shape and np.array_equal(a, b)
+    assert (a[..., :3] != 255).any(axis=-1).mean() > 0.05      # the ellipse covers part of the image

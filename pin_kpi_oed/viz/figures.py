@@ -136,6 +136,28 @@ def ellipse_points(C2: np.ndarray, k: float, n: int = 181) -> np.ndarray:
     return circle * np.sqrt(k * np.clip(w, 0.0, None)) @ V.T
 
 
+def shade(ax: Any, P: np.ndarray, colour: str, alpha: float) -> Any:
+    """Fill the polygon ``P`` on ``ax``: the patch ``ax.fill(P[:, 0], P[:, 1], color=colour, alpha=alpha)`` adds,
+    drawn alike, without updating the axes' data limits (for axes whose limits the caller sets: ``fill`` walks
+    every edge of the polygon for them, which costs more than the drawing).
+
+    Args:
+        ax: matplotlib axes.
+        P: the polygon's vertices (n, 2), data units.
+        colour: face and edge colour.
+        alpha: opacity in [0, 1].
+
+    Returns:
+        The :class:`matplotlib.patches.Polygon` added.
+    """
+    from matplotlib.patches import Polygon
+
+    patch = Polygon(P, closed=True)
+    patch.set(color=colour, alpha=alpha)
+    ax.add_artist(patch)
+    return patch
+
+
 def plot_ellipsoid_projections(covs: Mapping[str, np.ndarray], path: str | os.PathLike, *,
                                colours: Mapping[str, str] | None = None, labels: Mapping[str, str] | None = None,
                                level: float = 0.95, unit: str = "um", frame: str = "tracker frame",
@@ -178,7 +200,7 @@ def plot_ellipsoid_projections(covs: Mapping[str, np.ndarray], path: str | os.Pa
                 C2 = blocks[n][r][np.ix_([i, j], [i, j])] * s ** 2
                 P = ellipse_points(C2, k)
                 ax.plot(P[:, 0], P[:, 1], color=col[n], lw=2, label=lab[n])
-                ax.fill(P[:, 0], P[:, 1], color=col[n], alpha=0.12)
+                shade(ax, P, col[n], 0.12)
                 lim = max(lim, float(np.abs(P).max()))
             ax.plot([0], [0], marker="+", color="k", ms=8)
             ax.set_aspect("equal", adjustable="box")
