@@ -10,7 +10,8 @@ Each figure is drawn ``--pairs`` times by the current code and as many times by 
 pair after another, so that the machine's load falls on both alike): the reference writes the PNG with a plain
 ``fig.savefig(buf, format="png", dpi=dpi)`` (and ``bbox_inches="tight"`` for the certificate's figures), which
 draws a figure with a layout engine twice (once without output, for the layout) and compresses at zlib's default
-level. Printed per figure: the paired median CPU time (s) of both, the median of the per-pair ratios, how many
+level, and the ellipsoid figure shades its ellipses with ``ax.fill`` (which walks every polygon edge for the data
+limits). Printed per figure: the paired median CPU time (s) of both, the median of the per-pair ratios, how many
 pairs the current code won, and the sign test's two-sided p; then whether the pixels of both PNGs are equal.
 
 Measured (``nice -n 10 python -m benchmarks.figures --pairs 9``, the 2-core machine loaded by other work, 2026-11):
@@ -173,7 +174,8 @@ def _jobs(out: Path) -> dict[str, Callable[[], Any]]:
 
 @contextmanager
 def _reference():
-    """The figure modules write PNGs with a plain ``savefig`` (the reference) inside this block."""
+    """Inside this block the figure modules draw as before: PNGs written by a plain ``savefig``, the ellipsoid
+    figure's shading by ``ax.fill`` (the reference)."""
     from pin_kpi_oed.data.atomic import atomic_write_bytes
     from pin_kpi_oed.report import figures as report_figures
     from pin_kpi_oed.viz import figures, path_profile_plot, poses_needed, trust_map
@@ -189,17 +191,22 @@ def _reference():
         fig.savefig(buf, format="png", dpi=dpi, bbox_inches="tight")
         return buf.getvalue()
 
+    def shade(ax: Any, P: np.ndarray, colour: str, alpha: float) -> Any:
+        return ax.fill(P[:, 0], P[:, 1], color=colour, alpha=alpha)[0]
+
     mods = (figures, path_profile_plot, poses_needed, trust_map)
-    kept = [m.save_png for m in mods], report_figures.png_bytes
+    kept = [m.save_png for m in mods], report_figures.png_bytes, figures.shade
     for m in mods:
         m.save_png = save_png  # type: ignore[attr-defined]
     report_figures.png_bytes = png_bytes
+    figures.shade = shade
     try:
         yield
     finally:
         for m, f in zip(mods, kept[0]):
             m.save_png = f  # type: ignore[attr-defined]
         report_figures.png_bytes = kept[1]
+        figures.shade = kept[2]
 
 
 def _sign_p(wins: int, n: int) -> float:

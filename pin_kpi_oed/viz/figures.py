@@ -80,8 +80,9 @@ def write_png(fig: Any, out: Any, dpi: int = 150, tight: bool = False) -> None:
     leaves), or one cropped to ``"tight"``, twice: once without output to lay it out or measure it, then into the
     image. Here the Agg canvas draws it once at the output's dpi (``Figure.draw`` runs the layout engine itself,
     then draws); a tight crop is measured on the figure's extents (:meth:`Figure.get_tightbbox`) before that one
-    draw. The figure keeps its dpi and layout engine afterwards. A figure on another canvas, a constrained figure to
-    crop, or a ``savefig.facecolor`` / ``edgecolor`` set in the rc parameters is written by ``savefig`` as it stands.
+    draw. The figure keeps its dpi and layout engine afterwards. A figure on another canvas (a window's canvas among
+    them: changing its dpi would resize the window), a constrained figure to crop, or a ``savefig.facecolor`` /
+    ``edgecolor`` set in the rc parameters is written by ``savefig`` as it stands.
 
     Args:
         fig: a :class:`matplotlib.figure.Figure`.
@@ -96,7 +97,7 @@ def write_png(fig: Any, out: Any, dpi: int = 150, tight: bool = False) -> None:
     rc = matplotlib.rcParams
     pil = {"compress_level": PNG_COMPRESS_LEVEL}
     engine = fig.get_layout_engine()
-    plain = (not isinstance(fig.canvas, FigureCanvasAgg) or rc["savefig.facecolor"] != "auto"
+    plain = (type(fig.canvas) is not FigureCanvasAgg or rc["savefig.facecolor"] != "auto"
              or rc["savefig.edgecolor"] != "auto"
              or (tight and (rc["figure.autolayout"] or rc["figure.constrained_layout.use"]
                             or not (engine is None or isinstance(engine, PlaceHolderLayoutEngine)))))
