@@ -176,7 +176,7 @@ def test_png_drawn_once_has_the_pixels_of_savefig():
 
     def constrained():
         rng = np.random.default_rng(4)
-        fig = figures.agg_figure(5.0, 2.5)
+        fig = figures.agg_figure(4.0, 2.0)
         ax1, ax2 = fig.subplots(1, 2)
         ax1.plot(rng.normal(size=30).cumsum(), label="walk")
         ax1.legend(loc="best")
@@ -190,7 +190,7 @@ def test_png_drawn_once_has_the_pixels_of_savefig():
         from matplotlib.figure import Figure
 
         rng = np.random.default_rng(5)
-        fig = Figure(figsize=(4.0, 2.5))
+        fig = Figure(figsize=(3.0, 2.0))
         FigureCanvasAgg(fig)
         ax = fig.subplots()
         ax.hist(rng.normal(size=200), bins=20, label="rows")
@@ -198,7 +198,7 @@ def test_png_drawn_once_has_the_pixels_of_savefig():
         fig.tight_layout()
         return fig
 
-    for make, crop, dpi in ((constrained, False, 150), (tight, True, 90), (tight, False, 110)):
+    for make, crop, dpi in ((constrained, False, 120), (tight, True, 90), (tight, False, 110)):
         fig = make()                                  # a fresh figure each way: no draw before the one measured
         engine = fig.get_layout_engine()
         out = io.BytesIO()
