@@ -14,8 +14,23 @@ level, and the ellipsoid figure shades its ellipses with ``ax.fill`` (which walk
 limits). Printed per figure: the paired median CPU time (s) of both, the median of the per-pair ratios, how many
 pairs the current code won, and the sign test's two-sided p; then whether the pixels of both PNGs are equal.
 
-Measured (``nice -n 10 python -m benchmarks.figures --pairs 9``, the 2-core machine loaded by other work, 2026-11):
-see the report of the change introducing this file; on that run every figure's pixels were equal.
+Measured (``nice -n 10 python -m benchmarks.figures --pairs 7``, the 2-core machine at a load average of 3–4 from
+other work, so every time is inflated and noisy; s CPU, paired medians, current / reference):
+
+==================  =========  =======  =====  ====
+figure              reference  current  ratio  wins
+==================  =========  =======  =====  ====
+ellipsoids          1.591      1.139    0.85   7/7
+design_bars         0.356      0.270    0.91   6/7
+pose_quality        0.968      0.761    0.95   6/7
+trust_map           0.546      0.430    0.89   6/7
+path_profiles       1.356      1.028    0.78   6/7
+poses_needed        0.381      0.374    0.86   5/7
+certificate (3)     1.595      1.263    0.83   6/7
+all                 6.793      5.265    0.78
+==================  =========  =======  =====  ====
+
+Every figure's pixels equal in both ways.
 
 Run: ``python -m benchmarks.figures [--pairs N]``.
 """
