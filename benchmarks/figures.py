@@ -40,6 +40,7 @@ from __future__ import annotations
 import argparse
 import io
 import resource
+import sys
 import tempfile
 from collections.abc import Callable
 from contextlib import contextmanager
@@ -277,9 +278,10 @@ def run(pairs: int = 7) -> dict[str, dict]:
 
 
 def main(argv: list[str] | None = None) -> int:
+    """Print the table; ``argv``: this benchmark's options (none when ``python -m benchmarks figures`` runs it)."""
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--pairs", type=int, default=7)
-    args = ap.parse_args(argv)
+    args = ap.parse_args(argv or [])
     res = run(args.pairs)
     print(f"{'figure':17s} {'reference s':>11s} {'current s':>10s} {'ratio':>6s} {'wins':>6s} {'p':>7s}  pixels")
     for name, r in res.items():
@@ -292,4 +294,4 @@ def main(argv: list[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    raise SystemExit(main())
+    raise SystemExit(main(sys.argv[1:]))
