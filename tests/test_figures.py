@@ -158,3 +158,77 @@ def test_design_figures_show_the_honest_covariance_when_the_file_has_it(design, 
     assert figures.design_figure_data(df0).sigma == "paper"      # nothing honest in the file: the paper's
     out = figures.design_figures(df, tmp_path, prefix="h")
     assert all(_png_size(p)[0] > 500 for p in out.values())
+
+
+def _pixels(data: bytes) -> np.ndarray:
+    from PIL import Image
+
+    with Image.open(io.BytesIO(data)) as im:
+        return np.asarray(im)
+
+
+def test_png_drawn_once_has_the_pixels_of_savefig():
+    """``write_png`` draws a figure once (the layout engine run inside that draw; a tight crop measured before it)
+    where ``savefig`` draws it twice: the pixels are those of ``savefig`` at the same dpi, exactly, for a constrained
+    figure with a legend, a colour bar and a title, and for one laid out by ``tight_layout`` (the diagnosis figures),
+    cropped or not; the figure keeps its dpi and layout engine."""
+    from pin_kpi_oed.report.figures import outside_legend
+
+    def constrained():
+        rng = np.random.default_rng(4)
+        fig = figures.agg_figure(4.0, 2.0)
+        ax1, ax2 = fig.subplots(1, 2)
+        ax1.plot(rng.normal(size=30).cumsum(), label="walk")
+        ax1.legend(loc="best")
+        sc = ax2.scatter(*rng.normal(size=(2, 40)), c=rng.random(40), cmap="viridis")
+        fig.colorbar(sc, ax=ax2, label="σ (mm)")
+        fig.suptitle("both ways")
+        return fig
+
+    def tight():
+        from matplotlib.backends.backend_agg import FigureCanvasAgg
+        from matplotlib.figure import Figure
+
+        rng = np.random.default_rng(5)
+        fig = Figure(figsize=(3.0, 2.0))
+        FigureCanvasAgg(fig)
+        ax = fig.subplots()
+        ax.hist(rng.normal(size=200), bins=20, label="rows")
+        outside_legend(ax)
+        fig.tight_layout()
+        return fig
+
+    for make, crop, dpi in ((constrained, False, 120), (tight, True, 90), (tight, False, 110)):
+        fig = make()                                  # a fresh figure each way: no draw before the one measured
+        engine = fig.get_layout_engine()
+        out = io.BytesIO()
+        figures.write_png(fig, out, dpi, tight=crop)
+        assert fig.dpi == 100 and fig.get_layout_engine() is engine
+        ref = io.BytesIO()
+        make().savefig(ref, format="png", dpi=dpi, bbox_inches="tight" if crop else None)
+        a, b = _pixels(ref.getvalue()), _pixels(out.getvalue())
+        assert a.shape == b.shape and np.array_equal(a, b), make.__name__
+
+
+def test_shade_draws_what_fill_draws():
+    """The ellipsoid figure's shaded ellipses (``shade``: the polygon added without updating the data limits) have
+    the pixels of ``ax.fill`` with the same colour and opacity, on axes whose limits are set afterwards (as the
+    figure sets them)."""
+    P = figures.ellipse_points(np.array([[4.0, 1.5], [1.5, 1.0]]), 7.81)
+
+    def draw(use_fill: bool) -> np.ndarray:
+        fig = figures.agg_figure(2.5, 2.0)
+        ax = fig.subplots()
+        if use_fill:
+            ax.fill(P[:, 0], P[:, 1], color="#2ca02c", alpha=0.12)
+        else:
+            figures.shade(ax, P, "#2ca02c", 0.12)
+        ax.set_xlim(-7.0, 7.0)
+        ax.set_ylim(-7.0, 7.0)
+        buf = io.BytesIO()
+        fig.savefig(buf, format="png", dpi=120)
+        return _pixels(buf.getvalue())
+
+    a, b = draw(True), draw(False)
+    assert a.shape == b.shape and np.array_equal(a, b)
+    assert (a[..., :3] != 255).any(axis=-1).mean() > 0.05      # the ellipse covers part of the image

@@ -22,7 +22,7 @@ from pin_kpi_oed.calibrated.model_file import load_model_file
 from pin_kpi_oed.simulation.simulator import default_tracker_pose, simulate
 from pin_kpi_oed.viz.ellipsoids import confidence_ellipsoid
 from pin_kpi_oed.viz.scene import SceneOptions, build_scene
-from pin_kpi_oed.viz.trust_map import plot_trust_map
+from pin_kpi_oed.viz.trust_map import plot_trust_map, trust_map, trust_map_title
 
 
 @pytest.fixture(scope="module")
@@ -130,15 +130,19 @@ def test_design_with_model_writes_honest_blocks_and_the_viewer_draws_them(calibr
 
 
 def test_the_title_says_what_the_sigma_holds(calibrated, tmp_path):
-    """A Gaussian-process model says so; a white level alone or no block is never called 'discrepancy included'."""
+    """A Gaussian-process model says so; a white level alone or no block is never called 'discrepancy included'.
+    The three titles are :func:`trust_map_title`'s; one figure is drawn, to see that it carries that title (the
+    drawing does not depend on the discrepancy's kind)."""
     import dataclasses
 
     cm, Q, _ = calibrated
     white = Discrepancy("white", list(cm.robot.joint_names), np.full(3, 1e-4), np.zeros(3), 1.0, n_rows=40)
     titles = {}
     for tag, d in (("gp", cm.discrepancy), ("white", white), ("none", None)):
-        tm = plot_trust_map(dataclasses.replace(cm, discrepancy=d), Q[:5], out=tmp_path / f"{tag}.png")
-        titles[tag] = tm.figure._suptitle.get_text()
+        model = dataclasses.replace(cm, discrepancy=d)
+        titles[tag] = trust_map_title(model, trust_map(model, Q[:5]))
+    drawn = plot_trust_map(dataclasses.replace(cm, discrepancy=white), Q[:5], out=tmp_path / "white.png")
+    assert drawn.figure._suptitle.get_text() == titles["white"]
     assert "Gaussian-process discrepancy (exact, 40 rows)" in titles["gp"]
     assert "white residual level; no correlated discrepancy" in titles["white"]
     assert "no discrepancy (noise-only model)" in titles["none"]

@@ -31,9 +31,20 @@ def _fig(w: float, h: float):
 
 
 def png_bytes(fig: Any, dpi: int = DPI) -> bytes:
-    """A figure as PNG bytes."""
+    """A figure as PNG bytes, cropped to what it draws (``bbox_inches="tight"``), drawn once
+    (:func:`~pin_kpi_oed.viz.figures.write_png`).
+
+    Args:
+        fig: a :class:`matplotlib.figure.Figure`.
+        dpi: resolution (dots per inch).
+
+    Returns:
+        The PNG file's bytes.
+    """
+    from pin_kpi_oed.viz.figures import write_png
+
     buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=dpi, bbox_inches="tight")
+    write_png(fig, buf, dpi, tight=True)
     return buf.getvalue()
 
 

@@ -27,7 +27,7 @@ import numpy as np
 from pin_kpi_oed.errors import InputError
 from pin_kpi_oed.viz.figures import agg_figure, save_png
 
-__all__ = ["TrustMap", "trust_map", "plot_trust_map", "sigma_contents"]
+__all__ = ["TrustMap", "trust_map", "plot_trust_map", "sigma_contents", "trust_map_title"]
 
 #: Colour of the measured (training) configurations.
 TRAINING_COLOUR = "#9a9a9a"
@@ -117,6 +117,22 @@ def sigma_contents(model: Any) -> str:
     return "σ: " + contents(model)
 
 
+def trust_map_title(model: Any, tm: TrustMap) -> str:
+    """The trust map's default title: the robot, the number of rows, what the σ holds (:func:`sigma_contents`), the
+    median and largest σ (mm).
+
+    Args:
+        model: the :class:`~pin_kpi_oed.calibrated.model_file.CalibratedModel` the map was computed with.
+        tm: the map (:func:`trust_map`).
+
+    Returns:
+        The title text.
+    """
+    s_mm = tm.sigma_m * 1e3
+    return (f"{model.robot.name}: predicted TCP σ over {len(s_mm)} configurations ({sigma_contents(model)}); "
+            f"median {np.median(s_mm):.3f} mm, max {s_mm.max():.3f} mm")
+
+
 def plot_trust_map(model: Any, Q: np.ndarray, aux: Any = None, station: str | None = None, *,
                    out: str | os.PathLike, title: str | None = None, computed: TrustMap | None = None) -> TrustMap:
     """Write the trust map (PNG): top (x–y) and side (x–z) views of the rows' reflector positions, base frame,
@@ -125,7 +141,7 @@ def plot_trust_map(model: Any, Q: np.ndarray, aux: Any = None, station: str | No
     Args:
         model, Q, aux, station: as :func:`trust_map`.
         out: the PNG to write (atomically).
-        title: figure title (default: the robot and the number of rows).
+        title: figure title (default: :func:`trust_map_title`).
         computed: the :class:`TrustMap` of these arguments when the caller already has it (not computed again).
 
     Returns:
@@ -162,9 +178,7 @@ def plot_trust_map(model: Any, Q: np.ndarray, aux: Any = None, station: str | No
         ax.grid(True, alpha=0.3)
     axes[0].legend(loc="best", fontsize=7, framealpha=0.85)
     fig.colorbar(sc, ax=list(axes), label="predicted σ (mm)", shrink=0.9)
-    fig.suptitle(title or f"{model.robot.name}: predicted TCP σ over {len(P)} configurations "
-                          f"({sigma_contents(model)}); "
-                          f"median {np.median(s_mm):.3f} mm, max {s_mm.max():.3f} mm", fontsize=11)
+    fig.suptitle(title or trust_map_title(model, tm), fontsize=11)
     tm.path = save_png(fig, out)
     tm.figure = fig
     return tm
