@@ -9,14 +9,17 @@ the package's NumPy/OpenBLAS the numbers are bit for bit the same: ``pin-kpi-oed
 
 from __future__ import annotations
 
+import gc
+
 import numpy as np
 import pinocchio as pin
 import pytest
 
 from pin_kpi_oed.cell.cell import load_cell
 from pin_kpi_oed.cell.collision import CollisionModel
-from pin_kpi_oed.model.kinematics import Chain, placement_jacobian, point_velocity, skew
+from pin_kpi_oed.model.kinematics import Chain, cross3, placement_jacobian, point_velocity, skew
 from pin_kpi_oed.model.robot import load_robot
+from pin_kpi_oed.model.tracker import TrackerModel
 
 REL = 1e-12
 
@@ -187,3 +190,58 @@ def test_banded_pair_gradients_are_the_full_ones_on_the_near_pairs() -> None:
     assert 0 < near.sum() < near.size and np.array_equal(g_band, g_full)
     assert _close(G_band[:, pair][near], G_full[:, pair][near]) and np.abs(G_full[:, pair][near]).max() > 0.01
     assert not G_band[:, pair][~near].any()
+
+
+def test_cross3_is_numpys_cross_bit_for_bit() -> None:
+    """``cross3`` (components by basic indexing into one preallocated result) returns ``np.cross``'s numbers bit
+    for bit, for single vectors, rows, broadcast operands and the components on a middle axis."""
+    rng = np.random.default_rng(23)
+    cases = [((3,), (3,), -1), ((5, 3), (5, 3), -1), ((5, 3), (3,), -1), ((3,), (5, 3), -1), ((2, 4, 3), (4, 3), -1),
+             ((4, 3, 6), (4, 3, 1), 1), ((4, 3, 6), (3, 1), -2), ((4, 3, 6), (4, 3, 6), 1), ((7, 6, 3), (7, 6, 3), -1)]
+    for sa, sb, axis in cases:
+        a, b = rng.normal(size=sa), rng.normal(size=sb)
+        ref = np.cross(a, b, axis=axis)
+        out = cross3(a, b, axis)
+        assert out.shape == ref.shape and np.array_equal(out, ref), (sa, sb, axis)
+        assert np.abs(ref).max() > 0.1
+
+
+def _reference_sensor_jacobian(model, p: np.ndarray, Q: np.ndarray, point: np.ndarray, offset_group) -> np.ndarray:
+    """The device-frame Jacobian of a tool point assembled as ``sensor_point`` did before it wrote the joint blocks
+    through one reshaped view: a slice per joint and the device-frame columns concatenated."""
+    L = model.layout
+    kin = model.kinematics(p, Q, point)
+    T = model.sensor_pose(p)
+    m, n = kin.p.shape[0], L.n_joints
+    J = np.zeros((m, 3, model.n_params))
+    blk = placement_jacobian(kin)
+    for k in range(n):
+        J[:, :, L.joint_slice(k)] = blk[:, k]
+    J[:, :, L.group_slice(model.frame_group)] = np.concatenate([np.broadcast_to(np.eye(3), (m, 3, 3)),
+                                                               -skew(kin.p)], axis=-1)
+    if offset_group is not None:
+        J[:, :, L.group_slice(offset_group)] = kin.R_tool
+    return T.rotation @ J
+
+
+@pytest.mark.parametrize("name", ["kr15", "kr15_track"])
+def test_sensor_point_jacobian_and_lazy_velocity_are_the_former_numbers(name: str) -> None:
+    """``sensor_point``'s Jacobian equals the former per-joint assembly bit for bit; ∂Y/∂q computed on first read
+    (∂J/∂q not asked for) equals the one computed with ∂J/∂q bit for bit, after the device pose it was computed
+    from has been freed."""
+    robot = load_robot(name)
+    rng = np.random.default_rng(29)
+    model = TrackerModel(robot, tracker_T_base=pin.SE3(pin.rpy.rpyToMatrix(0.1, -0.2, 0.3), np.array([2.0, 0.4, 0.1])),
+                         reflector_m=np.array([0.02, -0.01, 0.08]))
+    for m in (1, 12):
+        Q = rng.uniform(robot.q_lower, robot.q_upper, (m, robot.nq))
+        p = rng.normal(0.0, 1e-3, model.n_params)
+        for offset_group in (None, "reflector"):
+            point = model.points(p)
+            sp = model.sensor_point(p, Q, point, offset_group)
+            assert sp.dJ is None
+            assert np.array_equal(sp.J, _reference_sensor_jacobian(model, p, Q, point, offset_group))
+            gc.collect()
+            _ = [np.full((3, 3), 7.0) for _ in range(100)]  # reuse freed memory
+            full = model.sensor_point(p, Q, point, offset_group, with_dq=True)
+            assert np.array_equal(sp.Ydq, full.Ydq) and np.array_equal(sp.J, full.J) and np.abs(sp.Ydq).max() > 0.1

@@ -64,7 +64,8 @@ def skew(v: np.ndarray) -> np.ndarray:
 
 def cross3(a: np.ndarray, b: np.ndarray, axis: int = -1) -> np.ndarray:
     """Batched cross products a × b of float 3-vectors: ``np.cross(a, b, axis=axis)`` bit for bit (the same products
-    and differences) without its axis handling, which took two thirds of its time on a few rows.
+    and differences) without its axis handling, which took two thirds of its time on a few rows; the components are
+    read by basic indexing and written into one preallocated result (no ``moveaxis``, no ``stack``).
 
     Args:
         a, b: vectors, 3 along ``axis``, broadcast against each other (float64).
@@ -73,9 +74,18 @@ def cross3(a: np.ndarray, b: np.ndarray, axis: int = -1) -> np.ndarray:
     Returns:
         The products, 3 along ``axis``.
     """
-    a0, a1, a2 = np.moveaxis(a, axis, 0)
-    b0, b1, b2 = np.moveaxis(b, axis, 0)
-    return np.stack([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0], axis=axis)
+    pa, pb = (slice(None),) * (axis % a.ndim), (slice(None),) * (axis % b.ndim)
+    a0, a1, a2 = a[pa + (0,)], a[pa + (1,)], a[pa + (2,)]
+    b0, b1, b2 = b[pb + (0,)], b[pb + (1,)], b[pb + (2,)]
+    c0 = a1 * b2 - a2 * b1
+    shape = np.shape(c0)
+    ax = axis % (len(shape) + 1)
+    out = np.empty(shape[:ax] + (3,) + shape[ax:], dtype=np.result_type(a, b))
+    po = (slice(None),) * ax
+    out[po + (0,)] = c0
+    out[po + (1,)] = a2 * b0 - a0 * b2
+    out[po + (2,)] = a0 * b1 - a1 * b0
+    return out
 
 
 def se3_from_matrix(T: Any, where: str = "transform") -> pin.SE3:
@@ -291,7 +301,10 @@ class Chain:
         return fr
 
     def _frames(self, Q: np.ndarray, H: np.ndarray, twists: bool) -> ChainFrames:
-        """:meth:`frames` computed: ``H`` the placements as 4×4 matrices (n, 4, 4)."""
+        """:meth:`frames` computed: ``H`` the placements as 4×4 matrices (n, 4, 4).
+
+        The products of :meth:`_walk`, written out in one loop (no generator step per joint); the twists of the
+        revolute joints (v_j = t_A,j × ω_j) in one product over the chain."""
         m, n = Q.shape
         R = np.empty((m, n + 1, 3, 3))
         t = np.empty((m, n + 1, 3))
@@ -300,17 +313,33 @@ class Chain:
         V = np.zeros((m, n, 3))
         W = np.zeros((m, n, 3))
         R[:, 0], t[:, 0] = self._eye, 0.0
-        for k, RA, tA, u, Rc, tc in self._walk(Q, H):
-            R_A[:, k], t_A[:, k] = RA, tA
-            if twists:
-                if u is None:
-                    W[:, k] = (RA.reshape(3 * m, 3) @ self.ang[k]).reshape(m, 3)  # ω_j = R_A,j a_j
-                else:
+        rot, trans = H[:, :3, :3].copy(), H[:, :3, 3].copy()
+        X = self._rodrigues(Q)
+        Rc = np.tile(self._eye, (m, 1, 1))
+        tc = np.zeros((m, 3))
+        m3, ang, lin = 3 * m, self.ang, self.lin
+        for k, rev in enumerate(self._rev):
+            Rf = Rc.reshape(m3, 3)
+            tc = tc + (Rf @ trans[k]).reshape(m, 3)
+            RA = (Rf @ rot[k]).reshape(m, 3, 3)
+            R_A[:, k], t_A[:, k] = RA, tc
+            if rev:
+                if twists:
+                    W[:, k] = (RA.reshape(m3, 3) @ ang[k]).reshape(m, 3)  # ω_j = R_A,j a_j
+                Rc = RA @ X[:, k]
+            else:
+                Rc = RA
+                u = (RA.reshape(m3, 3) @ lin[k]).reshape(m, 3)
+                if twists:
                     V[:, k] = u
+                tc = tc + u * Q[:, k:k + 1]
             R[:, k + 1], t[:, k + 1] = Rc, tc
         if twists and self._rev_idx.size:
-            r = self._rev_idx
-            V[:, r] = -cross3(W[:, r], t_A[:, r])  # v_j = t_A,j × ω_j (the point at the world origin)
+            if self._rev_idx.size == n:
+                V = -cross3(W, t_A)  # v_j = t_A,j × ω_j (the point at the world origin)
+            else:
+                r = self._rev_idx
+                V[:, r] = -cross3(W[:, r], t_A[:, r])
         return ChainFrames(R, t, R_A, t_A, V, W)
 
     def _rodrigues(self, Q: np.ndarray) -> np.ndarray:
