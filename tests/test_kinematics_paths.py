@@ -17,7 +17,7 @@ import pytest
 
 from pin_kpi_oed.cell.cell import load_cell
 from pin_kpi_oed.cell.collision import CollisionModel
-from pin_kpi_oed.model.kinematics import Chain, cross3, placement_jacobian, point_velocity, skew
+from pin_kpi_oed.model.kinematics import Chain, cross3, placement_jacobian, point_velocity, revolute_mask, skew
 from pin_kpi_oed.model.robot import load_robot
 from pin_kpi_oed.model.tracker import TrackerModel
 
@@ -245,3 +245,41 @@ def test_sensor_point_jacobian_and_lazy_velocity_are_the_former_numbers(name: st
             _ = [np.full((3, 3), 7.0) for _ in range(100)]  # reuse freed memory
             full = model.sensor_point(p, Q, point, offset_group, with_dq=True)
             assert np.array_equal(sp.Ydq, full.Ydq) and np.array_equal(sp.J, full.J) and np.abs(sp.Ydq).max() > 0.1
+
+
+def test_shared_chain_is_one_per_model_and_placements() -> None:
+    """Two measurement models of one robot read one chain (the joint axes read from Pinocchio once) that computes
+    what a chain of its own computes; after the robot's joint placements change, a new model gets a chain with the
+    new placements, and a chain's joint types come from its axes as ``revolute_mask`` says."""
+    robot = load_robot("kr15_track")
+    a, b = TrackerModel(robot), TrackerModel(robot)
+    assert a.chain is b.chain is Chain.shared(robot)
+    assert np.array_equal(a.chain.revolute, revolute_mask(robot.model, robot.joint_ids))
+    assert not a.chain.revolute.all() and a.chain.revolute.any()
+    Q = np.random.default_rng(31).uniform(robot.q_lower, robot.q_upper, (5, robot.nq))
+    own = Chain.from_robot(robot).frames(Q)
+    assert np.array_equal(a.chain.frames(Q).t, own.t) and np.array_equal(a.chain.frames(Q).V, own.V)
+    j = robot.joint_ids[2]
+    M = robot.model.jointPlacements[j].copy()  # this test's own robot (load_robot builds a new one per call)
+    robot.model.jointPlacements[j] = pin.SE3(M.rotation, M.translation + np.array([0.0, 0.0, 0.01]))
+    c = TrackerModel(robot)
+    assert c.chain is not a.chain
+    assert np.array_equal(c.chain.placements[2].translation, M.translation + np.array([0.0, 0.0, 0.01]))
+    assert not np.array_equal(c.chain.frames(Q).t, own.t)
+
+
+def test_right_jacobian_is_the_one_of_the_motions() -> None:
+    """The block-diagonal right Jacobian from ``pin.Jexp6`` of the parameter vectors equals the one from
+    ``pin.Jexp6`` of their ``pin.Motion`` (the former code) bit for bit, with a 6-DoF probe's rotation group."""
+    model = TrackerModel(load_robot("kr15"), pose6d=True)
+    p = np.random.default_rng(37).normal(0.0, 0.05, model.n_params)
+    L = model.layout
+    ref = np.eye(model.n_params)
+    for k in range(L.n_joints):
+        s = L.joint_slice(k)
+        ref[s, s] = pin.Jexp6(pin.Motion(p[s]))
+    ref[L.tracker, L.tracker] = pin.Jexp6(pin.Motion(p[L.tracker]))
+    ref[L.probe, L.probe] = pin.Jexp3(p[L.probe])
+    Jr = model.right_jacobian(p)
+    assert np.array_equal(Jr, ref) and np.abs(Jr - np.eye(model.n_params)).max() > 1e-3
+    assert np.array_equal(model.right_jacobian(np.zeros(model.n_params)), np.eye(model.n_params))

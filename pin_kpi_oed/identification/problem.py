@@ -61,7 +61,7 @@ from pin_kpi_oed.model.nests import nest_column
 from pin_kpi_oed.effects.library import predict_with_effects, sum_joint_offsets, sum_tool_offsets
 from pin_kpi_oed.errors import InputError
 from pin_kpi_oed.model.tracker import TrackerModel
-from pin_kpi_oed.model.kinematics import skew
+from pin_kpi_oed.model.kinematics import point_velocity, skew
 from pin_kpi_oed.model.measured_joints import align_data
 from pin_kpi_oed.model.parameters import STATION_SEP, ParameterLayout
 from pin_kpi_oed.oed.identifiability import Identifiability
@@ -491,11 +491,9 @@ class ResidualModel:
         dYt = np.concatenate([np.asarray(d, float).reshape(ms, 3, -1) for d in dy_ders], axis=2)
         RT = model.tracker_pose(p).rotation
         kin = model.kinematics(p, Qe, model.points(p))
-        v, w = kin.twist[:, :3, :], kin.twist[:, 3:, :]
-        pdot = v + np.cross(w, kin.p[:, :, None], axis=1)
-        out[:, :3] = np.einsum("ab,mbn->man", RT, pdot) @ dQt + dYt
+        out[:, :3] = np.einsum("ab,mbn->man", RT, point_velocity(kin)) @ dQt + dYt  # ṗ = v + ω × p
         if nh_ == 6:
-            out[:, 3:] = np.einsum("ab,mbn->man", RT, w) @ dQt
+            out[:, 3:] = np.einsum("ab,mbn->man", RT, kin.twist[:, 3:, :]) @ dQt
         return out
 
     def _device_jacobian(self, s: int, model: TrackerModel, p: np.ndarray, Qe: np.ndarray) -> np.ndarray:

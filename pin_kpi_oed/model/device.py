@@ -178,17 +178,16 @@ class MeasurementModel(ABC):
         Identity at the nominal model (p = 0) and for ``point`` groups.
         """
         L = self.layout
-        p = np.asarray(p, float)
+        p = np.ascontiguousarray(p, float)
         Jr = np.eye(self.n_params)
         if not np.any(p):
             return Jr
-        for k in range(L.n_joints):
-            s = L.joint_slice(k)
-            Jr[s, s] = pin.Jexp6(pin.Motion(p[s]))
+        for a in range(0, 6 * L.n_joints, 6):  # joint k's block at 6k (pin.Jexp6 of the vector: its Motion's numbers)
+            Jr[a:a + 6, a:a + 6] = pin.Jexp6(p[a:a + 6])
         for g, kind in L.setup:
             s = L.group_slice(g)
             if kind == "pose":
-                Jr[s, s] = pin.Jexp6(pin.Motion(p[s]))
+                Jr[s, s] = pin.Jexp6(p[s])
             elif kind == "rotation":
                 Jr[s, s] = pin.Jexp3(p[s])
         return Jr
@@ -199,9 +198,9 @@ class MeasurementModel(ABC):
 
         Args:
             chain: the robot's chain when it is already built (shared between models of one robot; only read);
-                None: built here.
+                None: the one :meth:`~pin_kpi_oed.model.kinematics.Chain.shared` gives for the robot.
         """
-        self._chain = Chain.from_robot(self.robot) if chain is None else chain
+        self._chain = Chain.shared(self.robot) if chain is None else chain
         self._nominal = [M.copy() for M in self._chain.placements]
         self._placements = list(self._nominal)
         self._p_applied: np.ndarray | None = None

@@ -29,6 +29,8 @@ Also here: :func:`skew`, :func:`se3_from_matrix` (a checked 4×4 → ``pin.SE3``
 
 from __future__ import annotations
 
+import threading
+from collections import OrderedDict
 from dataclasses import dataclass
 from typing import Any
 from collections.abc import Iterator, Sequence
@@ -40,6 +42,11 @@ from pin_kpi_oed.errors import InputError, RobotLoadError
 
 __all__ = ["skew", "cross3", "se3_from_matrix", "joint_motion_axes", "revolute_mask", "joint_unit", "ChainFrames",
            "Kinematics", "Chain", "placement_jacobian", "point_velocity"]
+
+#: The chains :meth:`Chain.shared` keeps (the least recently asked leave first), and the lock of their table.
+_SHARED_SIZE = 16
+_SHARED: OrderedDict[tuple, Chain] = OrderedDict()
+_SHARED_LOCK = threading.Lock()
 
 #: Tolerance on the motion axes of a pure revolute (unit angular, zero linear part) or prismatic joint.
 _AXIS_TOL = 1e-9
@@ -149,7 +156,11 @@ def revolute_mask(model: pin.Model, joint_ids: Sequence[int]) -> np.ndarray:
     Raises:
         RobotLoadError: a joint that is neither a pure rotation nor a pure translation (e.g. helical).
     """
-    lin, ang = joint_motion_axes(model, joint_ids)
+    return _revolute_from_axes(model, joint_ids, *joint_motion_axes(model, joint_ids))
+
+
+def _revolute_from_axes(model: pin.Model, joint_ids: Sequence[int], lin: np.ndarray, ang: np.ndarray) -> np.ndarray:
+    """:func:`revolute_mask` from the joints' motion axes (:func:`joint_motion_axes`)."""
     nl, na = np.linalg.norm(lin, axis=1), np.linalg.norm(ang, axis=1)
     rev = (np.abs(na - 1.0) < _AXIS_TOL) & (nl < _AXIS_TOL)
     pri = (np.abs(nl - 1.0) < _AXIS_TOL) & (na < _AXIS_TOL)
@@ -238,7 +249,7 @@ class Chain:
         self.model = model
         self.joint_ids = [int(j) for j in joint_ids]
         self.lin, self.ang = joint_motion_axes(model, self.joint_ids)
-        self.revolute = revolute_mask(model, self.joint_ids)
+        self.revolute = _revolute_from_axes(model, self.joint_ids, self.lin, self.ang)
         self.placements = [model.jointPlacements[j].copy() for j in self.joint_ids]
         self.tool_placement = (model.frames[tool_frame_id].placement.copy() if tool_frame_id is not None
                                else pin.SE3.Identity())
@@ -254,6 +265,36 @@ class Chain:
     def from_robot(cls, robot: Any) -> Chain:
         """The chain of a :class:`~pin_kpi_oed.model.robot.Robot` (joints base to tip, its tool frame)."""
         return cls(robot.model, robot.joint_ids, robot.tool_frame_id)
+
+    @classmethod
+    def shared(cls, robot: Any) -> Chain:
+        """The chain of a robot (:meth:`from_robot`) built once and shared by every caller of the same Pinocchio model
+        with the same joints, joint placements and tool frame (the last 16 kept): a measurement model made per
+        station, per nest or per fit does not read the joint axes from Pinocchio again. The shared chain is only
+        read by its users; a model whose placements were changed since gets a chain of its own.
+
+        Args:
+            robot: the :class:`~pin_kpi_oed.model.robot.Robot`.
+
+        Returns:
+            The chain.
+        """
+        model, tool = robot.model, robot.tool_frame_id
+        ids = tuple(int(j) for j in robot.joint_ids)
+        H = np.array([model.jointPlacements[j].homogeneous for j in ids])
+        Ht = b"" if tool is None else model.frames[tool].placement.homogeneous.tobytes()
+        key = (id(model), ids, tool, H.tobytes(), Ht)
+        with _SHARED_LOCK:
+            hit = _SHARED.get(key)
+            if hit is not None and hit.model is model:
+                _SHARED.move_to_end(key)
+                return hit
+        chain = cls(model, ids, tool)
+        with _SHARED_LOCK:
+            _SHARED[key] = chain  # the entry holds the model: its id is not reused while it is kept
+            while len(_SHARED) > _SHARED_SIZE:
+                _SHARED.popitem(last=False)
+        return chain
 
     @property
     def n(self) -> int:
