@@ -61,7 +61,7 @@ from pin_kpi_oed.model.nests import nest_column
 from pin_kpi_oed.effects.library import predict_with_effects, sum_joint_offsets, sum_tool_offsets
 from pin_kpi_oed.errors import InputError
 from pin_kpi_oed.model.tracker import TrackerModel
-from pin_kpi_oed.model.kinematics import point_velocity, skew
+from pin_kpi_oed.model.kinematics import skew
 from pin_kpi_oed.model.measured_joints import align_data
 from pin_kpi_oed.model.parameters import STATION_SEP, ParameterLayout
 from pin_kpi_oed.oed.identifiability import Identifiability
@@ -490,13 +490,15 @@ class ResidualModel:
         dYt = np.concatenate([np.asarray(d, float).reshape(ms, 3, -1) for d in dy_ders], axis=2)
         RT = model.tracker_pose(p).rotation
         kin = model.kinematics(p, Qe, model.points(p))
-        pos = np.einsum("ab,mbn->man", RT, point_velocity(kin)) @ dQt  # ṗ = v + ω × p
+        v, w = kin.twist[:, :3, :], kin.twist[:, 3:, :]
+        pdot = v + np.cross(w, kin.p[:, :, None], axis=1)  # ṗ = v + ω × p (np.cross: its result's layout kept)
+        pos = np.einsum("ab,mbn->man", RT, pdot) @ dQt
         pos += dYt  # in place: no third array of the rows' size (thousands of rows, hundreds of terms)
         if nh_ == 3:
             return pos
         out = np.empty((ms, nh_, self.k))
         out[:, :3] = pos
-        out[:, 3:] = np.einsum("ab,mbn->man", RT, kin.twist[:, 3:, :]) @ dQt
+        out[:, 3:] = np.einsum("ab,mbn->man", RT, w) @ dQt
         return out
 
     def _device_jacobian(self, s: int, model: TrackerModel, p: np.ndarray, Qe: np.ndarray) -> np.ndarray:
