@@ -386,8 +386,10 @@ class Chain:
     def _rodrigues(self, Q: np.ndarray) -> np.ndarray:
         """exp(S_j q_j) of the revolute joints (I + sin q K + (1 − cos q) K²), (m, n, 3, 3)."""
         m, n = Q.shape
-        return (self._eye9 + np.sin(Q)[:, :, None] * self._K9 + (1.0 - np.cos(Q))[:, :, None] * self._KK9
-                ).reshape(m, n, 3, 3)
+        X = np.sin(Q)[:, :, None] * self._K9
+        X += self._eye9  # I + sin q K (the sum of the same two numbers, in place: no third array of this size)
+        X += (1.0 - np.cos(Q))[:, :, None] * self._KK9
+        return X.reshape(m, n, 3, 3)
 
     def _walk(self, Q: np.ndarray, H: np.ndarray
               ) -> Iterator[tuple[int, np.ndarray, np.ndarray, np.ndarray | None, np.ndarray, np.ndarray]]:
