@@ -5,9 +5,16 @@ and leaves out the twists when not asked; ``Chain.tool_pose`` walks the chain wi
 incidence row without gradient reads the tool pose only; ``∂J/∂q`` computes only the joint pairs that enter it. Each
 is checked here against the per-configuration code it replaced (kept below as the reference), to 1e-12 relative (on
 the package's NumPy/OpenBLAS the numbers are bit for bit the same: ``pin-kpi-oed demo`` writes the same design file).
+
+The measurement model's hot path: ``cross3`` (no axis moves), the device-frame Jacobian written through one view, ∂Y/∂q
+computed on first read, the right Jacobian from ``pin.Jexp6`` of the vectors and one chain shared by the models of one
+robot are checked bit for bit against the code they replaced (``python -m benchmarks.kinematics_calls`` prints a digest
+of every call's numbers to compare two versions of the package).
 """
 
 from __future__ import annotations
+
+import gc
 
 import numpy as np
 import pinocchio as pin
@@ -15,8 +22,9 @@ import pytest
 
 from pin_kpi_oed.cell.cell import load_cell
 from pin_kpi_oed.cell.collision import CollisionModel
-from pin_kpi_oed.model.kinematics import Chain, placement_jacobian, point_velocity, skew
+from pin_kpi_oed.model.kinematics import Chain, cross3, placement_jacobian, point_velocity, revolute_mask, skew
 from pin_kpi_oed.model.robot import load_robot
+from pin_kpi_oed.model.tracker import TrackerModel
 
 REL = 1e-12
 
@@ -187,3 +195,96 @@ def test_banded_pair_gradients_are_the_full_ones_on_the_near_pairs() -> None:
     assert 0 < near.sum() < near.size and np.array_equal(g_band, g_full)
     assert _close(G_band[:, pair][near], G_full[:, pair][near]) and np.abs(G_full[:, pair][near]).max() > 0.01
     assert not G_band[:, pair][~near].any()
+
+
+def test_cross3_is_numpys_cross_bit_for_bit() -> None:
+    """``cross3`` (components by basic indexing into one preallocated result) returns ``np.cross``'s numbers bit
+    for bit, for single vectors, rows, broadcast operands and the components on a middle axis."""
+    rng = np.random.default_rng(23)
+    cases = [((3,), (3,), -1), ((5, 3), (5, 3), -1), ((5, 3), (3,), -1), ((3,), (5, 3), -1), ((2, 4, 3), (4, 3), -1),
+             ((4, 3, 6), (4, 3, 1), 1), ((4, 3, 6), (3, 1), -2), ((4, 3, 6), (4, 3, 6), 1), ((7, 6, 3), (7, 6, 3), -1)]
+    for sa, sb, axis in cases:
+        a, b = rng.normal(size=sa), rng.normal(size=sb)
+        ref = np.cross(a, b, axis=axis)
+        out = cross3(a, b, axis)
+        assert out.shape == ref.shape and np.array_equal(out, ref), (sa, sb, axis)
+        assert np.abs(ref).max() > 0.1
+
+
+def _reference_sensor_jacobian(model, p: np.ndarray, Q: np.ndarray, point: np.ndarray, offset_group) -> np.ndarray:
+    """The device-frame Jacobian of a tool point assembled as ``sensor_point`` did before it wrote the joint blocks
+    through one reshaped view: a slice per joint and the device-frame columns concatenated."""
+    L = model.layout
+    kin = model.kinematics(p, Q, point)
+    T = model.sensor_pose(p)
+    m, n = kin.p.shape[0], L.n_joints
+    J = np.zeros((m, 3, model.n_params))
+    blk = placement_jacobian(kin)
+    for k in range(n):
+        J[:, :, L.joint_slice(k)] = blk[:, k]
+    J[:, :, L.group_slice(model.frame_group)] = np.concatenate([np.broadcast_to(np.eye(3), (m, 3, 3)),
+                                                               -skew(kin.p)], axis=-1)
+    if offset_group is not None:
+        J[:, :, L.group_slice(offset_group)] = kin.R_tool
+    return T.rotation @ J
+
+
+@pytest.mark.parametrize("name", ["kr15", "kr15_track"])
+def test_sensor_point_jacobian_and_lazy_velocity_are_the_former_numbers(name: str) -> None:
+    """``sensor_point``'s Jacobian equals the former per-joint assembly bit for bit; ∂Y/∂q computed on first read
+    (∂J/∂q not asked for) equals the one computed with ∂J/∂q bit for bit, after the device pose it was computed
+    from has been freed."""
+    robot = load_robot(name)
+    rng = np.random.default_rng(29)
+    model = TrackerModel(robot, tracker_T_base=pin.SE3(pin.rpy.rpyToMatrix(0.1, -0.2, 0.3), np.array([2.0, 0.4, 0.1])),
+                         reflector_m=np.array([0.02, -0.01, 0.08]))
+    for m in (1, 12):
+        Q = rng.uniform(robot.q_lower, robot.q_upper, (m, robot.nq))
+        p = rng.normal(0.0, 1e-3, model.n_params)
+        for offset_group in (None, "reflector"):
+            point = model.points(p)
+            sp = model.sensor_point(p, Q, point, offset_group)
+            assert sp.dJ is None
+            assert np.array_equal(sp.J, _reference_sensor_jacobian(model, p, Q, point, offset_group))
+            gc.collect()
+            _ = [np.full((3, 3), 7.0) for _ in range(100)]  # reuse freed memory
+            full = model.sensor_point(p, Q, point, offset_group, with_dq=True)
+            assert np.array_equal(sp.Ydq, full.Ydq) and np.array_equal(sp.J, full.J) and np.abs(sp.Ydq).max() > 0.1
+
+
+def test_shared_chain_is_one_per_model_and_placements() -> None:
+    """Two measurement models of one robot read one chain (the joint axes read from Pinocchio once) that computes
+    what a chain of its own computes; after the robot's joint placements change, a new model gets a chain with the
+    new placements, and a chain's joint types come from its axes as ``revolute_mask`` says."""
+    robot = load_robot("kr15_track")
+    a, b = TrackerModel(robot), TrackerModel(robot)
+    assert a.chain is b.chain is Chain.shared(robot)
+    assert np.array_equal(a.chain.revolute, revolute_mask(robot.model, robot.joint_ids))
+    assert not a.chain.revolute.all() and a.chain.revolute.any()
+    Q = np.random.default_rng(31).uniform(robot.q_lower, robot.q_upper, (5, robot.nq))
+    own = Chain.from_robot(robot).frames(Q)
+    assert np.array_equal(a.chain.frames(Q).t, own.t) and np.array_equal(a.chain.frames(Q).V, own.V)
+    j = robot.joint_ids[2]
+    M = robot.model.jointPlacements[j].copy()  # this test's own robot (load_robot builds a new one per call)
+    robot.model.jointPlacements[j] = pin.SE3(M.rotation, M.translation + np.array([0.0, 0.0, 0.01]))
+    c = TrackerModel(robot)
+    assert c.chain is not a.chain
+    assert np.array_equal(c.chain.placements[2].translation, M.translation + np.array([0.0, 0.0, 0.01]))
+    assert not np.array_equal(c.chain.frames(Q).t, own.t)
+
+
+def test_right_jacobian_is_the_one_of_the_motions() -> None:
+    """The block-diagonal right Jacobian from ``pin.Jexp6`` of the parameter vectors equals the one from
+    ``pin.Jexp6`` of their ``pin.Motion`` (the former code) bit for bit, with a 6-DoF probe's rotation group."""
+    model = TrackerModel(load_robot("kr15"), pose6d=True)
+    p = np.random.default_rng(37).normal(0.0, 0.05, model.n_params)
+    L = model.layout
+    ref = np.eye(model.n_params)
+    for k in range(L.n_joints):
+        s = L.joint_slice(k)
+        ref[s, s] = pin.Jexp6(pin.Motion(p[s]))
+    ref[L.tracker, L.tracker] = pin.Jexp6(pin.Motion(p[L.tracker]))
+    ref[L.probe, L.probe] = pin.Jexp3(p[L.probe])
+    Jr = model.right_jacobian(p)
+    assert np.array_equal(Jr, ref) and np.abs(Jr - np.eye(model.n_params)).max() > 1e-3
+    assert np.array_equal(model.right_jacobian(np.zeros(model.n_params)), np.eye(model.n_params))

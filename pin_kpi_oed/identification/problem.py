@@ -484,18 +484,21 @@ class ResidualModel:
         """(ms, nh, k): ∂(model response)/∂θ of the estimated effects at station s."""
         ms, n = Qe.shape
         nh_ = self.nh
-        out = np.zeros((ms, nh_, self.k))
         if not self.k:
-            return out
+            return np.zeros((ms, nh_, self.k))
         dQt = np.concatenate([np.asarray(d, float).reshape(ms, n, -1) for d in dq_ders], axis=2)
         dYt = np.concatenate([np.asarray(d, float).reshape(ms, 3, -1) for d in dy_ders], axis=2)
         RT = model.tracker_pose(p).rotation
         kin = model.kinematics(p, Qe, model.points(p))
         v, w = kin.twist[:, :3, :], kin.twist[:, 3:, :]
-        pdot = v + np.cross(w, kin.p[:, :, None], axis=1)
-        out[:, :3] = np.einsum("ab,mbn->man", RT, pdot) @ dQt + dYt
-        if nh_ == 6:
-            out[:, 3:] = np.einsum("ab,mbn->man", RT, w) @ dQt
+        pdot = v + np.cross(w, kin.p[:, :, None], axis=1)  # ṗ = v + ω × p (np.cross: its result's layout kept)
+        pos = np.einsum("ab,mbn->man", RT, pdot) @ dQt
+        pos += dYt  # in place: no third array of the rows' size (thousands of rows, hundreds of terms)
+        if nh_ == 3:
+            return pos
+        out = np.empty((ms, nh_, self.k))
+        out[:, :3] = pos
+        out[:, 3:] = np.einsum("ab,mbn->man", RT, w) @ dQt
         return out
 
     def _device_jacobian(self, s: int, model: TrackerModel, p: np.ndarray, Qe: np.ndarray) -> np.ndarray:

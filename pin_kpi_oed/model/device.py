@@ -41,8 +41,9 @@ sets ``robot`` and ``layout = self.make_layout()`` and calls ``self.init_kinemat
 
 from __future__ import annotations
 
+import functools
 from abc import ABC, abstractmethod
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 import pinocchio as pin
@@ -54,6 +55,19 @@ from pin_kpi_oed.model.robot import Robot
 
 __all__ = ["MeasurementModel", "SensorPoint"]
 
+#: The identity, broadcast into the device-frame columns of every Jacobian (read-only).
+_EYE3 = np.eye(3)
+_EYE3.flags.writeable = False
+
+
+@functools.lru_cache(maxsize=16)
+def _joint_pairs(n: int) -> tuple[tuple[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]]:
+    """The joint pairs of ∂J/∂q for a chain of n joints: ((j, k) with k before j), ((j, k) with k ≥ j), read-only."""
+    before, after = np.tril_indices(n, -1), np.triu_indices(n)
+    for a in (*before, *after):
+        a.flags.writeable = False
+    return before, after
+
 
 @dataclass
 class SensorPoint:
@@ -64,15 +78,24 @@ class SensorPoint:
         J: ∂Y/∂p w.r.t. every raw parameter at the *tangent* coordinates (right Jacobians not
             applied; see :meth:`MeasurementModel.right_jacobian`), (m, 3, np).
         dJ: ∂J/∂q, (m, 3, np, n), or None.
-        Ydq: ∂Y/∂q, (m, 3, n).
         kin: the base-frame kinematics of the point.
+        RT: the device frame's rotation (the rotation of ``sensor_pose``), (3, 3).
+        Ydq: ∂Y/∂q, (m, 3, n) (property: computed on the first read when ∂J/∂q was not asked for).
     """
 
     Y: np.ndarray
     J: np.ndarray
     dJ: np.ndarray | None
-    Ydq: np.ndarray
     kin: Kinematics
+    RT: np.ndarray
+    ydq: np.ndarray | None = field(default=None, repr=False)
+
+    @property
+    def Ydq(self) -> np.ndarray:
+        """∂Y/∂q = R_T ṗ, (m, 3, n) m per joint unit."""
+        if self.ydq is None:
+            self.ydq = np.einsum("ab,mbn->man", self.RT, point_velocity(self.kin))
+        return self.ydq
 
 
 class MeasurementModel(ABC):
@@ -155,17 +178,16 @@ class MeasurementModel(ABC):
         Identity at the nominal model (p = 0) and for ``point`` groups.
         """
         L = self.layout
-        p = np.asarray(p, float)
+        p = np.ascontiguousarray(p, float)
         Jr = np.eye(self.n_params)
         if not np.any(p):
             return Jr
-        for k in range(L.n_joints):
-            s = L.joint_slice(k)
-            Jr[s, s] = pin.Jexp6(pin.Motion(p[s]))
+        for a in range(0, 6 * L.n_joints, 6):  # joint k's block at 6k (pin.Jexp6 of the vector: its Motion's numbers)
+            Jr[a:a + 6, a:a + 6] = pin.Jexp6(p[a:a + 6])
         for g, kind in L.setup:
             s = L.group_slice(g)
             if kind == "pose":
-                Jr[s, s] = pin.Jexp6(pin.Motion(p[s]))
+                Jr[s, s] = pin.Jexp6(p[s])
             elif kind == "rotation":
                 Jr[s, s] = pin.Jexp3(p[s])
         return Jr
@@ -176,9 +198,9 @@ class MeasurementModel(ABC):
 
         Args:
             chain: the robot's chain when it is already built (shared between models of one robot; only read);
-                None: built here.
+                None: the one :meth:`~pin_kpi_oed.model.kinematics.Chain.shared` gives for the robot.
         """
-        self._chain = Chain.from_robot(self.robot) if chain is None else chain
+        self._chain = Chain.shared(self.robot) if chain is None else chain
         self._nominal = [M.copy() for M in self._chain.placements]
         self._placements = list(self._nominal)
         self._p_applied: np.ndarray | None = None
@@ -319,39 +341,38 @@ class MeasurementModel(ABC):
         L = self.layout
         kin = self.kinematics(p, Q, point_m)
         T = self.sensor_pose(p)
-        RT = T.rotation
+        RT = T.rotation.copy(order="K")  # pin's view of T (which the lazy ``Ydq`` outlives) copied, its layout kept
         frame = L.group_slice(self.frame_group)
         m, n = kin.p.shape[0], L.n_joints
+        nj = 6 * n
         J = np.zeros((m, 3, self.n_params))
         blk = placement_jacobian(kin)  # (m, n, 3, 6)
-        for k in range(n):
-            J[:, :, L.joint_slice(k)] = blk[:, k]
-        J[:, :, frame] = np.concatenate([np.broadcast_to(np.eye(3), (m, 3, 3)), -skew(kin.p)], axis=-1)
+        np.reshape(J[:, :, :nj], (m, 3, n, 6), copy=False)[...] = np.swapaxes(blk, 1, 2)  # J[.., 6k:6k+6] = blk[:, k]
+        J[:, :, frame.start:frame.start + 3] = _EYE3
+        J[:, :, frame.start + 3:frame.stop] = -skew(kin.p)
         offset = L.group_slice(offset_group) if offset_group is not None else None
         if offset is not None:
             J[:, :, offset] = kin.R_tool
         J = RT @ J
+        Y = kin.p @ RT.T + T.translation
+        if not with_dq:
+            return SensorPoint(Y, J, None, kin, RT)
         w = kin.twist[:, 3:, :]  # (m, 3, n)
         pdot = point_velocity(kin)  # (m, 3, n)
         Ydq = np.einsum("ab,mbn->man", RT, pdot)
-        Y = kin.p @ RT.T + T.translation
-        dJ = None
-        if with_dq:
-            dJ = np.zeros((m, 3, self.n_params, n))
-            Wsk = skew(np.moveaxis(w, 1, 2))  # (m, n, 3, 3) [ω_k]×
-            Pdsk = skew(np.moveaxis(pdot, 1, 2))  # (m, n, 3, 3) [ṗ_k]×
-            nj = 6 * n
-            # a view (no copy): D[:, a, j, c, k] = ∂J[:, a, 6j + c]/∂q_k
-            D = np.reshape(dJ[:, :, :nj, :], (m, 3, n, 6, n), copy=False)
-            jb, kb = np.tril_indices(n, -1)  # joint k before joint j: the whole block rotates with joint k
-            D[:, :, jb, :, kb] = np.swapaxes(Wsk[:, kb] @ blk[:, jb], 0, 1)
-            ja, ka = np.triu_indices(n)  # k >= j: only the rotational columns change, by -[ṗ_k]× R_A(j)
-            D[:, :, ja, 3:, ka] = -np.swapaxes(Pdsk[:, ka] @ kin.R_A[:, ja], 0, 1)
-            dJ[:, :, frame.start + 3:frame.stop, :] = -np.moveaxis(Pdsk, 1, 3)
-            if offset is not None:
-                dJ[:, :, offset, :] = np.moveaxis(Wsk @ kin.R_tool[:, None], 1, 3)
-            dJ = (RT @ dJ.reshape(m, 3, -1)).reshape(dJ.shape)
-        return SensorPoint(Y, J, dJ, Ydq, kin)
+        dJ = np.zeros((m, 3, self.n_params, n))
+        Wsk = skew(np.moveaxis(w, 1, 2))  # (m, n, 3, 3) [ω_k]×
+        Pdsk = skew(np.moveaxis(pdot, 1, 2))  # (m, n, 3, 3) [ṗ_k]×
+        # a view (no copy): D[:, a, j, c, k] = ∂J[:, a, 6j + c]/∂q_k
+        D = np.reshape(dJ[:, :, :nj, :], (m, 3, n, 6, n), copy=False)
+        (jb, kb), (ja, ka) = _joint_pairs(n)
+        D[:, :, jb, :, kb] = np.swapaxes(Wsk[:, kb] @ blk[:, jb], 0, 1)  # k before j: the whole block rotates
+        D[:, :, ja, 3:, ka] = -np.swapaxes(Pdsk[:, ka] @ kin.R_A[:, ja], 0, 1)  # k >= j: -[ṗ_k]× R_A(j)
+        dJ[:, :, frame.start + 3:frame.stop, :] = -np.moveaxis(Pdsk, 1, 3)
+        if offset is not None:
+            dJ[:, :, offset, :] = np.moveaxis(Wsk @ kin.R_tool[:, None], 1, 3)
+        dJ = (RT @ dJ.reshape(m, 3, -1)).reshape(dJ.shape)
+        return SensorPoint(Y, J, dJ, kin, RT, Ydq)
 
     # ------------------------------------------------------------------ derived quantities
     def prediction_dq(self, p: np.ndarray, Q: np.ndarray) -> np.ndarray:

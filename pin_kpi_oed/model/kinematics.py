@@ -29,6 +29,8 @@ Also here: :func:`skew`, :func:`se3_from_matrix` (a checked 4×4 → ``pin.SE3``
 
 from __future__ import annotations
 
+import threading
+from collections import OrderedDict
 from dataclasses import dataclass
 from typing import Any
 from collections.abc import Iterator, Sequence
@@ -40,6 +42,11 @@ from pin_kpi_oed.errors import InputError, RobotLoadError
 
 __all__ = ["skew", "cross3", "se3_from_matrix", "joint_motion_axes", "revolute_mask", "joint_unit", "ChainFrames",
            "Kinematics", "Chain", "placement_jacobian", "point_velocity"]
+
+#: The chains :meth:`Chain.shared` keeps (the least recently asked leave first), and the lock of their table.
+_SHARED_SIZE = 16
+_SHARED: OrderedDict[tuple, Chain] = OrderedDict()
+_SHARED_LOCK = threading.Lock()
 
 #: Tolerance on the motion axes of a pure revolute (unit angular, zero linear part) or prismatic joint.
 _AXIS_TOL = 1e-9
@@ -64,7 +71,8 @@ def skew(v: np.ndarray) -> np.ndarray:
 
 def cross3(a: np.ndarray, b: np.ndarray, axis: int = -1) -> np.ndarray:
     """Batched cross products a × b of float 3-vectors: ``np.cross(a, b, axis=axis)`` bit for bit (the same products
-    and differences) without its axis handling, which took two thirds of its time on a few rows.
+    and differences) without its axis handling, which took two thirds of its time on a few rows; the components are
+    read by basic indexing and written into one preallocated result (no ``moveaxis``, no ``stack``).
 
     Args:
         a, b: vectors, 3 along ``axis``, broadcast against each other (float64).
@@ -73,9 +81,18 @@ def cross3(a: np.ndarray, b: np.ndarray, axis: int = -1) -> np.ndarray:
     Returns:
         The products, 3 along ``axis``.
     """
-    a0, a1, a2 = np.moveaxis(a, axis, 0)
-    b0, b1, b2 = np.moveaxis(b, axis, 0)
-    return np.stack([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0], axis=axis)
+    pa, pb = (slice(None),) * (axis % a.ndim), (slice(None),) * (axis % b.ndim)
+    a0, a1, a2 = a[pa + (0,)], a[pa + (1,)], a[pa + (2,)]
+    b0, b1, b2 = b[pb + (0,)], b[pb + (1,)], b[pb + (2,)]
+    c0 = a1 * b2 - a2 * b1
+    shape = np.shape(c0)
+    ax = axis % (len(shape) + 1)
+    out = np.empty(shape[:ax] + (3,) + shape[ax:], dtype=np.result_type(a, b))
+    po = (slice(None),) * ax
+    out[po + (0,)] = c0
+    out[po + (1,)] = a2 * b0 - a0 * b2
+    out[po + (2,)] = a0 * b1 - a1 * b0
+    return out
 
 
 def se3_from_matrix(T: Any, where: str = "transform") -> pin.SE3:
@@ -139,7 +156,11 @@ def revolute_mask(model: pin.Model, joint_ids: Sequence[int]) -> np.ndarray:
     Raises:
         RobotLoadError: a joint that is neither a pure rotation nor a pure translation (e.g. helical).
     """
-    lin, ang = joint_motion_axes(model, joint_ids)
+    return _revolute_from_axes(model, joint_ids, *joint_motion_axes(model, joint_ids))
+
+
+def _revolute_from_axes(model: pin.Model, joint_ids: Sequence[int], lin: np.ndarray, ang: np.ndarray) -> np.ndarray:
+    """:func:`revolute_mask` from the joints' motion axes (:func:`joint_motion_axes`)."""
     nl, na = np.linalg.norm(lin, axis=1), np.linalg.norm(ang, axis=1)
     rev = (np.abs(na - 1.0) < _AXIS_TOL) & (nl < _AXIS_TOL)
     pri = (np.abs(nl - 1.0) < _AXIS_TOL) & (na < _AXIS_TOL)
@@ -228,7 +249,7 @@ class Chain:
         self.model = model
         self.joint_ids = [int(j) for j in joint_ids]
         self.lin, self.ang = joint_motion_axes(model, self.joint_ids)
-        self.revolute = revolute_mask(model, self.joint_ids)
+        self.revolute = _revolute_from_axes(model, self.joint_ids, self.lin, self.ang)
         self.placements = [model.jointPlacements[j].copy() for j in self.joint_ids]
         self.tool_placement = (model.frames[tool_frame_id].placement.copy() if tool_frame_id is not None
                                else pin.SE3.Identity())
@@ -244,6 +265,36 @@ class Chain:
     def from_robot(cls, robot: Any) -> Chain:
         """The chain of a :class:`~pin_kpi_oed.model.robot.Robot` (joints base to tip, its tool frame)."""
         return cls(robot.model, robot.joint_ids, robot.tool_frame_id)
+
+    @classmethod
+    def shared(cls, robot: Any) -> Chain:
+        """The chain of a robot (:meth:`from_robot`) built once and shared by every caller of the same Pinocchio model
+        with the same joints, joint placements and tool frame (the last 16 kept): a measurement model made per
+        station, per nest or per fit does not read the joint axes from Pinocchio again. The shared chain is only
+        read by its users; a model whose placements were changed since gets a chain of its own.
+
+        Args:
+            robot: the :class:`~pin_kpi_oed.model.robot.Robot`.
+
+        Returns:
+            The chain.
+        """
+        model, tool = robot.model, robot.tool_frame_id
+        ids = tuple(int(j) for j in robot.joint_ids)
+        H = np.array([model.jointPlacements[j].homogeneous for j in ids])
+        Ht = b"" if tool is None else model.frames[tool].placement.homogeneous.tobytes()
+        key = (id(model), ids, tool, H.tobytes(), Ht)
+        with _SHARED_LOCK:
+            hit = _SHARED.get(key)
+            if hit is not None and hit.model is model:
+                _SHARED.move_to_end(key)
+                return hit
+        chain = cls(model, ids, tool)
+        with _SHARED_LOCK:
+            _SHARED[key] = chain  # the entry holds the model: its id is not reused while it is kept
+            while len(_SHARED) > _SHARED_SIZE:
+                _SHARED.popitem(last=False)
+        return chain
 
     @property
     def n(self) -> int:
@@ -291,7 +342,10 @@ class Chain:
         return fr
 
     def _frames(self, Q: np.ndarray, H: np.ndarray, twists: bool) -> ChainFrames:
-        """:meth:`frames` computed: ``H`` the placements as 4×4 matrices (n, 4, 4)."""
+        """:meth:`frames` computed: ``H`` the placements as 4×4 matrices (n, 4, 4).
+
+        The products of :meth:`_walk`, written out in one loop (no generator step per joint); the twists of the
+        revolute joints (v_j = t_A,j × ω_j) in one product over the chain."""
         m, n = Q.shape
         R = np.empty((m, n + 1, 3, 3))
         t = np.empty((m, n + 1, 3))
@@ -300,24 +354,42 @@ class Chain:
         V = np.zeros((m, n, 3))
         W = np.zeros((m, n, 3))
         R[:, 0], t[:, 0] = self._eye, 0.0
-        for k, RA, tA, u, Rc, tc in self._walk(Q, H):
-            R_A[:, k], t_A[:, k] = RA, tA
-            if twists:
-                if u is None:
-                    W[:, k] = (RA.reshape(3 * m, 3) @ self.ang[k]).reshape(m, 3)  # ω_j = R_A,j a_j
-                else:
+        rot, trans = H[:, :3, :3].copy(), H[:, :3, 3].copy()
+        X = self._rodrigues(Q)
+        Rc = np.tile(self._eye, (m, 1, 1))
+        tc = np.zeros((m, 3))
+        m3, ang, lin = 3 * m, self.ang, self.lin
+        for k, rev in enumerate(self._rev):
+            Rf = Rc.reshape(m3, 3)
+            tc = tc + (Rf @ trans[k]).reshape(m, 3)
+            RA = (Rf @ rot[k]).reshape(m, 3, 3)
+            R_A[:, k], t_A[:, k] = RA, tc
+            if rev:
+                if twists:
+                    W[:, k] = (RA.reshape(m3, 3) @ ang[k]).reshape(m, 3)  # ω_j = R_A,j a_j
+                Rc = RA @ X[:, k]
+            else:
+                Rc = RA
+                u = (RA.reshape(m3, 3) @ lin[k]).reshape(m, 3)
+                if twists:
                     V[:, k] = u
+                tc = tc + u * Q[:, k:k + 1]
             R[:, k + 1], t[:, k + 1] = Rc, tc
         if twists and self._rev_idx.size:
-            r = self._rev_idx
-            V[:, r] = -cross3(W[:, r], t_A[:, r])  # v_j = t_A,j × ω_j (the point at the world origin)
+            if self._rev_idx.size == n:
+                V = -cross3(W, t_A)  # v_j = t_A,j × ω_j (the point at the world origin)
+            else:
+                r = self._rev_idx
+                V[:, r] = -cross3(W[:, r], t_A[:, r])
         return ChainFrames(R, t, R_A, t_A, V, W)
 
     def _rodrigues(self, Q: np.ndarray) -> np.ndarray:
         """exp(S_j q_j) of the revolute joints (I + sin q K + (1 − cos q) K²), (m, n, 3, 3)."""
         m, n = Q.shape
-        return (self._eye9 + np.sin(Q)[:, :, None] * self._K9 + (1.0 - np.cos(Q))[:, :, None] * self._KK9
-                ).reshape(m, n, 3, 3)
+        X = np.sin(Q)[:, :, None] * self._K9
+        X += self._eye9  # I + sin q K (the sum of the same two numbers, in place: no third array of this size)
+        X += (1.0 - np.cos(Q))[:, :, None] * self._KK9
+        return X.reshape(m, n, 3, 3)
 
     def _walk(self, Q: np.ndarray, H: np.ndarray
               ) -> Iterator[tuple[int, np.ndarray, np.ndarray, np.ndarray | None, np.ndarray, np.ndarray]]:
