@@ -466,3 +466,35 @@ def test_a_model_without_collision_rows_has_the_same_rows_pruned_or_not(kr15):
     pruned, full = CollisionModel(kr15, collision=False), CollisionModel(kr15, collision=False, prune=False)
     assert pruned.names == full.names == ["incidence"]
     assert np.array_equal(pruned.pairs, full.pairs) and np.array_equal(pruned.half, full.half)
+
+
+def test_pair_gradient_is_bit_for_bit_the_witness_point_formula(coll15_all):
+    """The pair rows' gradient (formed in place in :meth:`CollisionModel.evaluate`) is, bit for bit, the
+    witness-point formula written out with temporaries: u (nᵀv + ωᵀ(P × n)) · mask summed over the four end points
+    (the in-place form reorders no operation, so the designs do not change)."""
+    from pin_kpi_oed.cell.collision import PAIR
+    from pin_kpi_oed.cell.segments import cross
+
+    coll = coll15_all
+    Q = coll.robot.random_q(np.random.default_rng(7), 400)  # enough poses that a reordered sum changes some bit
+    _, G = coll.evaluate(Q)
+    EA, EB = coll.endpoints(Q)[:2]
+    fr = coll.fk.frames(Q, twists=True)
+    V, W = fr.V, fr.W
+    i1, i2 = coll.pairs[:, 0], coll.pairs[:, 1]
+    s, t, w1, w2 = segment_closest(EA[:, i1], EB[:, i1], EA[:, i2], EB[:, i2])
+    diff = w2 - w1
+    dseg = np.sqrt(np.einsum("mpa,mpa->mp", diff, diff))
+    nrm = diff / np.where(dseg > 0, dseg, 1.0)[..., None]
+    VT, WT = np.swapaxes(V, 1, 2), np.swapaxes(W, 1, 2)
+    nv = nrm @ VT
+    mA, mB = coll._masks()
+
+    def side(P, u, mask):
+        return u[..., None] * (nv + cross(P, nrm) @ WT) * mask[None]
+
+    ref = (side(EA[:, i2], 1.0 - t, mA[i2]) + side(EB[:, i2], t, mB[i2])
+           - side(EA[:, i1], 1.0 - s, mA[i1]) - side(EB[:, i1], s, mB[i1]))
+    pair_rows = np.flatnonzero(coll.info.kind == PAIR)
+    assert pair_rows.size == len(coll.pairs) and np.any(ref != 0.0)
+    assert np.array_equal(G[:, pair_rows], ref)
