@@ -507,3 +507,35 @@ def test_a_cell_text_parsed_before_is_a_fresh_copy_and_a_changed_text_is_parsed_
     assert load_cell(p).clearance_m == 0.2 != c1.clearance_m
     shared = "a: &x [1.0, 2.0]\nb: *x\n"
     assert parse_cell_text(shared, p) == parse_cell_text(shared, p) == {"a": [1.0, 2.0], "b": [1.0, 2.0]}
+
+
+def test_pair_gradient_is_bit_for_bit_the_witness_point_formula(coll15_all):
+    """The pair rows' gradient (formed in place in :meth:`CollisionModel.evaluate`) is, bit for bit, the
+    witness-point formula written out with temporaries: u (nᵀv + ωᵀ(P × n)) · mask summed over the four end points
+    (the in-place form reorders no operation, so the designs do not change)."""
+    from pin_kpi_oed.cell.collision import PAIR
+    from pin_kpi_oed.cell.segments import cross
+
+    coll = coll15_all
+    Q = coll.robot.random_q(np.random.default_rng(7), 400)  # enough poses that a reordered sum changes some bit
+    _, G = coll.evaluate(Q)
+    EA, EB = coll.endpoints(Q)[:2]
+    fr = coll.fk.frames(Q, twists=True)
+    V, W = fr.V, fr.W
+    i1, i2 = coll.pairs[:, 0], coll.pairs[:, 1]
+    s, t, w1, w2 = segment_closest(EA[:, i1], EB[:, i1], EA[:, i2], EB[:, i2])
+    diff = w2 - w1
+    dseg = np.sqrt(np.einsum("mpa,mpa->mp", diff, diff))
+    nrm = diff / np.where(dseg > 0, dseg, 1.0)[..., None]
+    VT, WT = np.swapaxes(V, 1, 2), np.swapaxes(W, 1, 2)
+    nv = nrm @ VT
+    mA, mB = coll._masks()
+
+    def side(P, u, mask):
+        return u[..., None] * (nv + cross(P, nrm) @ WT) * mask[None]
+
+    ref = (side(EA[:, i2], 1.0 - t, mA[i2]) + side(EB[:, i2], t, mB[i2])
+           - side(EA[:, i1], 1.0 - s, mA[i1]) - side(EB[:, i1], s, mB[i1]))
+    pair_rows = np.flatnonzero(coll.info.kind == PAIR)
+    assert pair_rows.size == len(coll.pairs) and np.any(ref != 0.0)
+    assert np.array_equal(G[:, pair_rows], ref)

@@ -448,10 +448,18 @@ class CollisionModel:
         nv = nrm @ VT  # (m, P, n)
 
         def side(P: np.ndarray, u: np.ndarray, mask: np.ndarray) -> np.ndarray:
-            return u[..., None] * (nv + cross(P, nrm) @ WT) * mask[None]
+            # u (nv + (P × n) W) · mask, in place (the same operations on the same operands: the same bits)
+            r = cross(P, nrm) @ WT
+            r += nv
+            r *= u[..., None]
+            r *= mask
+            return r
 
-        return (side(EA[:, i2], 1.0 - t, mA[i2]) + side(EB[:, i2], t, mB[i2])
-                - side(EA[:, i1], 1.0 - s, mA[i1]) - side(EB[:, i1], s, mB[i1]))
+        out = side(EA[:, i2], 1.0 - t, mA[i2])
+        out += side(EB[:, i2], t, mB[i2])
+        out -= side(EA[:, i1], 1.0 - s, mA[i1])
+        out -= side(EB[:, i1], s, mB[i1])
+        return out
 
     def _halfspace_rows(self, EA: np.ndarray, EB: np.ndarray, V: np.ndarray, W: np.ndarray, clr: float,
                         mA: np.ndarray, mB: np.ndarray, with_grad: bool) -> tuple[np.ndarray, np.ndarray | None]:
