@@ -87,14 +87,13 @@ class GeometryDistances:
                 :meth:`~pin_kpi_oed.cell.collision.CollisionModel.endpoints`).
             band: if given (m), witness points only for the pairs within ``band`` of their
                 configuration's closest pair (reading a witness point from Python costs ~10× a
-                distance); the others are marked ``far`` (their s, t, w are meaningless).
+                distance); the others are marked ``far`` (their s, t, w are zeros, never to be read).
 
         Returns:
             dseg (m, P) segment distances (capsule distance + radii) m, (s, t) (m, P) in [0, 1], the
             witness points on the segments w1, w2 (m, P, 3) m, and far (m, P) bool.
         """
         m, P = Q.shape[0], len(self.pairs)
-        near = np.zeros((m, P, 2, 3))
         far = np.ones(m * P, bool)
         beam_obj = self.gm.geometryObjects[self.beam]
         beam_shape = beam_obj.geometry
@@ -122,17 +121,22 @@ class GeometryDistances:
                 pts.append(r.getNearestPoint1())
                 pts.append(r.getNearestPoint2())
         dist = np.array(dists, float).reshape(m, P)
-        if rows:
-            near.reshape(m * P, 2, 3)[rows] = np.reshape(pts, (-1, 2, 3))
-            far[rows] = False
         i1, i2 = self.pairs[:, 0], self.pairs[:, 1]
+        # the witness points projected on their segments for the rows read only (the far rows' are never read)
+        s, t = np.zeros(m * P), np.zeros(m * P)
+        w1, w2 = np.zeros((m * P, 3)), np.zeros((m * P, 3))
+        if rows:
+            far[rows] = False
+            near = np.reshape(pts, (-1, 2, 3))
+            ci, pi = np.divmod(np.asarray(rows), P)
 
-        def project(p: np.ndarray, A: np.ndarray, B: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-            d = B - A
-            L2 = np.einsum("mpa,mpa->mp", d, d)
-            u = np.clip(np.einsum("mpa,mpa->mp", p - A, d) / np.where(L2 > 0, L2, 1.0), 0.0, 1.0)
-            return u, A + u[..., None] * d
+            def project(p: np.ndarray, A: np.ndarray, B: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+                d = B - A
+                L2 = np.einsum("pa,pa->p", d, d)
+                u = np.clip(np.einsum("pa,pa->p", p - A, d) / np.where(L2 > 0, L2, 1.0), 0.0, 1.0)
+                return u, A + u[..., None] * d
 
-        s, w1 = project(near[:, :, 0], EA[:, i1], EB[:, i1])
-        t, w2 = project(near[:, :, 1], EA[:, i2], EB[:, i2])
-        return dist + self.radius[i1] + self.radius[i2], s, t, w1, w2, far.reshape(m, P)
+            s[rows], w1[rows] = project(near[:, 0], EA[ci, i1[pi]], EB[ci, i1[pi]])
+            t[rows], w2[rows] = project(near[:, 1], EA[ci, i2[pi]], EB[ci, i2[pi]])
+        return (dist + self.radius[i1] + self.radius[i2], s.reshape(m, P), t.reshape(m, P), w1.reshape(m, P, 3),
+                w2.reshape(m, P, 3), far.reshape(m, P))
