@@ -34,7 +34,6 @@ from __future__ import annotations
 import argparse
 import compileall
 import json
-import math
 import os
 import re
 import shlex
@@ -48,7 +47,7 @@ from pathlib import Path
 
 import numpy as np
 
-from benchmarks.common import figure, ipa_folder_or_say, load_average
+from benchmarks.common import figure, ipa_folder_or_say, load_average, sign_test_p
 
 ROOT = Path(__file__).resolve().parents[1]
 REPEAT = 3
@@ -312,13 +311,6 @@ def cell_text(rows: list[dict]) -> str:
     if failed:
         return f"failed ({len(failed)} of {len(rows)} runs, exit {failed[0]['rc']}): {failed[0]['error']}"
     return f"{np.median([r['cpu_s'] for r in rows]):.2f} / {np.median([r['wall_s'] for r in rows]):.2f}"
-
-
-def sign_test_p(wins: int, n: int) -> float:
-    """Two-sided sign test: the probability of a split at least as uneven as ``wins`` of ``n`` pairs under no
-    difference."""
-    k = min(wins, n - wins)
-    return min(1.0, 2.0 * sum(math.comb(n, i) for i in range(k + 1)) / 2.0 ** n) if n else 1.0
 
 
 def paired_wins(before: list[dict], after: list[dict]) -> tuple[int, int]:

@@ -26,9 +26,7 @@ Run:  python -m benchmarks.cell_load [--repeat 5] [--before OTHER_CHECKOUT]
 
 from __future__ import annotations
 
-import argparse
 import json
-import math
 import os
 import statistics
 import subprocess
@@ -36,7 +34,7 @@ import sys
 import tempfile
 from pathlib import Path
 
-from .common import cli_in_process, load_average
+from .common import checkout_roots, cli_in_process, load_average, sign_test_p
 
 #: the child process: {timing name: CPU s} as one JSON line; argv[1] is the model file
 CHILD = """
@@ -105,24 +103,13 @@ def run_once(root: Path, model: Path) -> dict[str, float]:
     return json.loads(res.stdout.strip().splitlines()[-1])
 
 
-def sign_p(wins: int, n: int) -> float:
-    """Two-sided sign test p of ``wins`` of ``n`` pairs (ties dropped by the caller)."""
-    k = min(wins, n - wins)
-    return min(1.0, 2 * sum(math.comb(n, i) for i in range(k + 1)) / 2 ** n) if n else 1.0
-
-
 def main(argv: list[str] | None = None) -> None:
     """Prints the median CPU times of the checkout (and of ``--before``'s, with the pairs won and the sign test).
 
     Args:
         argv: command-line arguments (``--repeat N``, ``--before PATH``).
     """
-    ap = argparse.ArgumentParser(prog="python -m benchmarks.cell_load")
-    ap.add_argument("--repeat", type=int, default=5)
-    ap.add_argument("--before", type=Path, default=None)
-    a = ap.parse_args(argv)
-    here = Path(__file__).resolve().parents[1]
-    roots = {"after": here} if a.before is None else {"before": a.before.resolve(), "after": here}
+    a, roots = checkout_roots("python -m benchmarks.cell_load", argv)
     runs: dict[str, list[dict[str, float]]] = {k: [] for k in roots}
     with tempfile.TemporaryDirectory() as tmp:
         model = make_model_file(Path(tmp))
@@ -140,7 +127,7 @@ def main(argv: list[str] | None = None) -> None:
             diffs = [b[key] - c[key] for b, c in zip(runs["before"], runs["after"]) if b[key] != c[key]]
             wins = sum(x > 0 for x in diffs)
             line += f"  {100 * (med['after'] / med['before'] - 1):+6.0f} %  {wins:>2}/{len(diffs):<2}  " \
-                    f"{sign_p(wins, len(diffs)):.3f}"
+                    f"{sign_test_p(wins, len(diffs)):.3f}"
         print(line)
     print(f"load average {load_average():.2f} at the end")
 

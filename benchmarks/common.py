@@ -2,10 +2,13 @@
 
 from __future__ import annotations
 
+import argparse
+import math
 import os
 import resource
 import time
 from contextlib import contextmanager
+from pathlib import Path
 from collections.abc import Callable, Iterator
 
 
@@ -271,3 +274,27 @@ class BusyCore:
     def __exit__(self, *exc: object) -> None:
         self.proc.kill()
         self.proc.wait()
+
+
+def sign_test_p(wins: int, n: int) -> float:
+    """Two-sided sign test: the probability of a split at least as uneven as ``wins`` of ``n`` pairs under no
+    difference."""
+    k = min(wins, n - wins)
+    return min(1.0, 2.0 * sum(math.comb(n, i) for i in range(k + 1)) / 2.0 ** n) if n else 1.0
+
+
+def checkout_roots(prog: str, argv: list[str] | None, repeat: int = 5) -> tuple[argparse.Namespace, dict[str, Path]]:
+    """The options of a before/after benchmark (``--repeat N``, ``--before PATH``) and the checkouts to run:
+    ``{"after": this one}``, with ``"before"`` first when given.
+
+    Args:
+        prog: the benchmark's command, for its help.
+        argv: command-line arguments (None: the process's).
+        repeat: the default of ``--repeat``.
+    """
+    ap = argparse.ArgumentParser(prog=prog)
+    ap.add_argument("--repeat", type=int, default=repeat)
+    ap.add_argument("--before", type=Path, default=None)
+    a = ap.parse_args(argv)
+    here = Path(__file__).resolve().parents[1]
+    return a, ({"after": here} if a.before is None else {"before": a.before.resolve(), "after": here})

@@ -44,11 +44,12 @@ import sys
 import tempfile
 from collections.abc import Callable
 from contextlib import contextmanager
-from math import comb
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+
+from benchmarks.common import sign_test_p
 
 
 def _cpu() -> float:
@@ -225,12 +226,6 @@ def _reference():
         figures.shade = kept[2]
 
 
-def _sign_p(wins: int, n: int) -> float:
-    """Two-sided sign test p of ``wins`` of ``n`` pairs."""
-    k = min(wins, n - wins)
-    return min(1.0, 2 * sum(comb(n, i) for i in range(k + 1)) / 2 ** n)
-
-
 def _same_pixels(a: Path, b: Path) -> bool:
     from PIL import Image
 
@@ -271,7 +266,7 @@ def run(pairs: int = 7) -> dict[str, dict]:
             c, r = np.array(tc), np.array(tr)
             wins = int(np.sum(c < r))
             out[name] = {"current_s": float(np.median(c)), "reference_s": float(np.median(r)),
-                         "ratio": float(np.median(c / r)), "wins": wins, "p": _sign_p(wins, pairs)}
+                         "ratio": float(np.median(c / r)), "wins": wins, "p": sign_test_p(wins, pairs)}
         for name in cur:
             out[name]["same_pixels"] = all(_same_pixels(cur_dir / f, ref_dir / f) for f in FILES[name])
     return out

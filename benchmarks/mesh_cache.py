@@ -15,7 +15,6 @@ Run:  python -m benchmarks.mesh_cache [--repeat 5] [--before OTHER_CHECKOUT]
 
 from __future__ import annotations
 
-import argparse
 import json
 import os
 import statistics
@@ -23,7 +22,7 @@ import subprocess
 import sys
 from pathlib import Path
 
-from .common import load_average
+from .common import checkout_roots, load_average
 
 #: the child process: the four timings (s) as one JSON line
 CHILD = """
@@ -54,12 +53,7 @@ def main(argv: list[str] | None = None) -> None:
     Args:
         argv: command-line arguments (``--repeat N``, ``--before PATH``).
     """
-    ap = argparse.ArgumentParser(prog="python -m benchmarks.mesh_cache")
-    ap.add_argument("--repeat", type=int, default=5)
-    ap.add_argument("--before", type=Path, default=None)
-    a = ap.parse_args(argv)
-    here = Path(__file__).resolve().parents[1]
-    roots = {"after": here} if a.before is None else {"before": a.before.resolve(), "after": here}
+    a, roots = checkout_roots("python -m benchmarks.mesh_cache", argv)
     runs: dict[str, list[dict[str, float]]] = {k: [] for k in roots}
     print(f"load average {load_average():.2f} at the start; {a.repeat} processes per checkout", flush=True)
     for _ in range(a.repeat):
