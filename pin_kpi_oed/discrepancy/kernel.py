@@ -121,6 +121,8 @@ def _value_blocks(X: np.ndarray, cY: np.ndarray, sY: np.ndarray, Y: np.ndarray |
     inv = 1.0 / ell ** 2
     K = (np.zeros if lower else np.empty)((X.shape[0], cY.shape[0]))
     T = np.empty((min(block, X.shape[0]), cY.shape[0]))
+    T2 = np.empty_like(T)                     # the sine products, summed into T
+    cXi, sXi = cX * inv, sX * inv             # each entry the product the block loop formed (the same bits)
     for b in range(0, X.shape[0], block):
         end = b + block if lower else cY.shape[0]  # the columns formed
         Kb = K[b:b + block, :end]
@@ -139,8 +141,10 @@ def _value_blocks(X: np.ndarray, cY: np.ndarray, sY: np.ndarray, Y: np.ndarray |
                 Tb *= Tb
                 Tb *= -0.5 * inv[j]
             else:                             # a_j² exp((cos Δ_j − 1)/ℓ_j²), cos Δ = cos x cos y + sin x sin y
-                np.multiply.outer(cX[b:b + block, j] * inv[j], cY[:end, j], out=Tb)
-                Tb += np.multiply.outer(sX[b:b + block, j] * inv[j], sY[:end, j])
+                np.multiply.outer(cXi[b:b + block, j], cY[:end, j], out=Tb)
+                T2b = T2[:Kb.shape[0], :Kb.shape[1]]
+                np.multiply.outer(sXi[b:b + block, j], sY[:end, j], out=T2b)
+                Tb += T2b
                 Tb -= inv[j]
                 np.minimum(Tb, 0.0, out=Tb)
             np.exp(Tb, out=Tb)

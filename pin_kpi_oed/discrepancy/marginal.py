@@ -166,21 +166,21 @@ class MarginalLikelihood:
         S = self.S
         Sf = S.reshape(-1, order="F")                                    # a view (column-major)
         Sf[self.flat] = K
-        Sf[::n + 1] = c ** 2 + float(np.sum(a ** 2)) + w + REGRESSOR_JITTER
+        Sf[::n + 1] = c ** 2 + float((a ** 2).sum()) + w + REGRESSOR_JITTER
         Lc, info = sla.lapack.dpotrf(S, lower=0, clean=0, overwrite_a=1)   # Σ = UᵀU
         if info != 0:
             return np.inf, np.zeros(len(theta))
         alpha, info = sla.lapack.dpotrs(Lc, self.Y, lower=0)
-        lml = -0.5 * float(np.sum(self.Y * alpha)) - m * float(np.sum(np.log(np.diag(Lc)))) \
+        lml = -0.5 * float((self.Y * alpha).sum()) - m * float(np.log(Lc.diagonal()).sum()) \
             - 0.5 * m * n * np.log(2.0 * np.pi)
         Si, info = sla.lapack.dpotri(Lc, lower=0, overwrite_c=1)               # Σ⁻¹ (upper triangle)
         if info != 0:
             return np.inf, np.zeros(len(theta))
         W = np.matmul(alpha, alpha.T, out=self._W)
-        Wd = float(np.trace(W) - m * np.trace(Si))                            # the diagonal's sum
+        Wd = float(W.trace() - m * Si.trace())                            # the diagonal's sum
         # W − mΣ⁻¹ at the pairs i < j only: the same operations on each pair as over the whole matrices
-        np.take(W.reshape(-1), self.flat_c, out=Wp)                           # (ααᵀ)_ij, W row-major
-        Sp = np.take(Si.reshape(-1, order="F"), self.flat, out=self._Sp)      # (Σ⁻¹)_ij, i < j: its upper triangle
+        W.reshape(-1).take(self.flat_c, out=Wp)                           # (ααᵀ)_ij, W row-major
+        Sp = Si.reshape(-1, order="F").take(self.flat, out=self._Sp)      # (Σ⁻¹)_ij, i < j: its upper triangle
         Sp *= m
         Wp -= Sp
         Wp *= 2.0                                                             # counted for both triangles
