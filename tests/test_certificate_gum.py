@@ -246,9 +246,10 @@ def test_report_states_the_tcp_when_only_the_reflector_conforms(calibrated, tmp_
     'undetermined' in the summary, the JSON and the page, naming the TCP's U. The required accuracy is twice the
     reflector's figure + U of the plain certificate (the same rows: a TCP moves no held-out figure, asserted), which
     lies between the two when the TCP's U exceeds 3 × that figure (asserted). The page's figures are left out
-    (``draw_figures`` draws none): they are the plain certificate's, checked by the legend and page-layout tests."""
-    monkeypatch.setattr(figures, "draw_figures", lambda *args, **kwargs: {})
+    (``draw_figures`` draws none): they are the plain certificate's, checked by the legend and page-layout tests. The
+    plain certificate is read first: made here with no figures, it would be the one the page tests read after."""
     plain = plain_certificate(calibrated).cert
+    monkeypatch.setattr(figures, "draw_figures", lambda *args, **kwargs: {})
     fig = plain["accuracy"]["after"]["p95_m"] + plain["uncertainty"]["figures"]["p95_m"]
     d = calibrated
     doc = json.loads((d / "model.json").read_text())  # the model with a TCP 15 cm out along the tool axis
