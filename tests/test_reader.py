@@ -237,3 +237,32 @@ def test_robot_unit_guard_takes_a_wrist_beyond_a_turn():
     q[0, 5] = 7.2
     with pytest.raises(InputError, match="wrist_3_joint.*beyond 7.081"):
         robot.check_units(q, "m.csv")
+
+
+def test_quoted_cells_and_blank_lines_keep_every_row_and_its_line():
+    """The table reader is the standard library's csv: a quoted cell holding the separator is one cell, a doubled
+    quote inside it is a quote, blank lines are skipped but counted, and a header after a blank line is read (a
+    pandas python-engine reader returned no table at all for the last case). A whitespace separator splits each
+    line's stripped text."""
+    from pin_kpi_oed.data.table import parse_text_table
+
+    text = '\nname,"x,y",z\n\n1,"2,5","say ""hi"""\n3,4\n'
+    header, line, rows, lines = parse_text_table(text, "t.csv")
+    assert (header, line) == (["name", "x,y", "z"], 2)
+    assert rows == [["1", "2,5", 'say "hi"'], ["3", "4"]] and lines == [4, 5]
+    assert parse_text_table("\na;\"x,y\"\n", "t.csv", sep=";")[:2] == (["a", "x,y"], 2)
+    assert parse_text_table("  a  b\tc\n 1 2  3\n", "t.txt", sep=r"\s+")[::2] == (["a", "b", "c"], [["1", "2", "3"]])
+
+
+def test_reading_a_measurement_file_loads_no_table_library(ur10_data, tmp_path):
+    """Reading measurements needs no pandas (its import alone cost every command that reads a measurement file
+    about 0.4 s of CPU): a fresh process reads a file and pandas is not among its modules."""
+    import subprocess
+    import sys
+
+    path = tmp_path / "m.csv"
+    write_measurements(ur10_data[1], path)
+    code = ("import sys; from pin_kpi_oed.data.measurements import read_measurements; "
+            f"ms = read_measurements({str(path)!r}); print(len(ms.q), 'pandas' in sys.modules)")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout.split()
+    assert int(out[0]) > 0 and out[1] == "False", out

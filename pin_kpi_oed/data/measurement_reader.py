@@ -13,7 +13,6 @@ from pathlib import Path
 from collections.abc import Callable, Sequence
 
 import numpy as np
-import pandas as pd
 
 from pin_kpi_oed.data.measurement_set import (NEST_COLUMN, PAYLOAD_COLUMN, POSITION_COLUMNS, RESERVED_COLUMNS,
                                               ROTVEC_COLUMNS,
@@ -49,9 +48,9 @@ def parse_numeric_table(rows: Sequence[Sequence[str]], lines: Sequence[int], hea
                         skip: Sequence[str] = ()) -> np.ndarray:
     """Parse the cells of a table into floats, naming the file, column, row and value of any bad cell.
 
-    The cells go into a :class:`pandas.DataFrame` and are converted column-block-wise by NumPy
-    (``astype(float)``: Python's correctly rounded parser, so ``repr`` floats read back bit-identical);
-    a custom ``parse`` (e.g. decimal commas) is mapped over the cells. Only when a conversion fails
+    The cells go into an object array and are converted at once by NumPy (``astype(float)``: Python's correctly
+    rounded ``float`` of each cell, which ignores surrounding whitespace, so ``repr`` floats read back
+    bit-identical); a custom ``parse`` (e.g. decimal commas) is mapped over the cells. Only when a conversion fails
     are the cells scanned, in row-major order, for the first bad one.
 
     Args:
@@ -78,12 +77,14 @@ def parse_numeric_table(rows: Sequence[Sequence[str]], lines: Sequence[int], hea
     data = np.full((len(rows), ncol), np.nan)
     if not rows or not cols:
         return data
-    text = pd.DataFrame(list(rows), dtype=object).iloc[:, cols]
+    cells = np.empty((len(rows), ncol), dtype=object)
+    cells[:] = rows  # rows of ncol cells (checked above); an object array keeps each cell a Python string
+    text = cells[:, cols]
     try:
         if parse is float or parse is _parse_float:
-            values = text.apply(lambda col: col.str.strip()).to_numpy().astype(float)
+            values = text.astype(float)
         else:
-            values = text.apply(lambda col: col.map(parse)).to_numpy(dtype=float)
+            values = np.array([[parse(c) for c in r] for r in text], dtype=float)
     except (ValueError, TypeError):
         values = None
     if values is None:  # find the first cell that is not a number (row-major), to name it
@@ -146,7 +147,7 @@ def read_measurement_tool(path: str | os.PathLike[str]) -> ToolSpec | None:
 
 def _read_table(p: Path, src: str) -> tuple[list[str], int, list[list[str]], list[int], ToolSpec | None]:
     """Step 1: the tool header, the column header and the data rows (cells as text) with their file line
-    numbers (pandas)."""
+    numbers (:func:`~pin_kpi_oed.data.table.parse_text_table`)."""
     comments, text, skipped = split_tool_header(read_text_file(p, src, "measurement file"))
     tool = parse_tool_header(comments, src)
     header, header_line, rows, row_lines = parse_text_table(text, src, "measurement file")

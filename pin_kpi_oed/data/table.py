@@ -1,10 +1,11 @@
-"""Tables as they come: pandas-based CSV reading, declared units and column mappings.
+"""Tables as they come: CSV reading, declared units and column mappings.
 
 Every reader of the package that takes a user's table (measurements, Cartesian targets,
 joint-space programs, tracker exports) goes through these helpers:
 
-* :func:`read_text_table` reads a delimited text file with :func:`pandas.read_csv` (UTF-8, a
-  byte-order mark accepted, quoting handled by pandas) as text cells, and returns the header,
+* :func:`read_text_table` reads a delimited text file with the standard library's :mod:`csv` (UTF-8, a
+  byte-order mark accepted, double-quoted cells; a whitespace separator splits each line's stripped text, without
+  quoting) as text cells, and returns the header,
   the data rows and the file line number of every row, so that errors can name them. Blank
   rows (all cells empty) are skipped; a row with more or fewer cells than the header is kept
   with its true cell count so the caller can refuse it with one line.
@@ -19,13 +20,13 @@ The numbers themselves are converted by :func:`parse_numeric_table` in
 
 from __future__ import annotations
 
+import csv
 import io
 import os
+import re
 from dataclasses import dataclass
 from pathlib import Path
-from collections.abc import Mapping
-
-import pandas as pd
+from collections.abc import Iterator, Mapping
 
 from pin_kpi_oed.errors import InputError
 
@@ -220,31 +221,19 @@ def parse_text_table(text: str, src: str, kind: str = "file", sep: str = ","
     """:func:`read_text_table` on text already read (same returns; lines count in ``text``).
 
     Raises:
-        InputError: text pandas cannot parse.
+        InputError: text the CSV reader cannot parse (a NUL character).
     """
     if not text.strip():
         return [], 0, [], []
-    long_rows: list[list[str]] = []
-
-    def too_many(cells: list[str]) -> list[str]:
-        long_rows.append(cells)
-        return [f"\x00{len(long_rows) - 1}"]
-
     try:
-        df = pd.read_csv(io.StringIO(text), header=None, dtype=str, na_filter=False, keep_default_na=False,
-                         skip_blank_lines=False, engine="python", sep=sep, on_bad_lines=too_many, quotechar='"')
-    except (pd.errors.ParserError, ValueError) as exc:
+        records = list(_records(text, sep))
+    except csv.Error as exc:
         raise InputError(f"{src}: cannot parse as {kind} ({str(exc).splitlines()[0]})") from None
     header: list[str] | None = None
     header_line = 0
     rows: list[list[str]] = []
     lines: list[int] = []
-    for i, raw in enumerate(df.itertuples(index=False, name=None)):
-        first = raw[0] if raw else None
-        if isinstance(first, str) and first.startswith("\x00") and first[1:].isdigit():
-            cells = [str(c) for c in long_rows[int(first[1:])]]
-        else:
-            cells = [c for c in raw if c is not None]
+    for i, cells in enumerate(records):
         if not cells or all(not str(c).strip() for c in cells):
             continue
         if header is None:
@@ -256,3 +245,16 @@ def parse_text_table(text: str, src: str, kind: str = "file", sep: str = ","
     if header is None:
         return [], 0, [], []
     return header, header_line, rows, lines
+
+
+def _records(text: str, sep: str) -> Iterator[list[str]]:
+    """The records of ``text``, each a list of its cells as text (a blank line: an empty or blank record, counted).
+    A one-character ``sep``: the :mod:`csv` reader (double quotes, a doubled quote inside them); a longer one is a
+    regular expression that splits each line's stripped text, without quoting (``\\s+``: whitespace-separated
+    exports)."""
+    if len(sep) == 1:
+        yield from csv.reader(io.StringIO(text), delimiter=sep, quotechar='"')
+        return
+    pattern = re.compile(sep)
+    for line in io.StringIO(text):
+        yield pattern.split(line.strip())
