@@ -77,9 +77,9 @@ def parse_numeric_table(rows: Sequence[Sequence[str]], lines: Sequence[int], hea
     data = np.full((len(rows), ncol), np.nan)
     if not rows or not cols:
         return data
-    cells = np.empty((len(rows), ncol), dtype=object)
-    cells[:] = rows  # rows of ncol cells (checked above); an object array keeps each cell a Python string
-    text = cells[:, cols]
+    grid = np.empty((len(rows), ncol), dtype=object)
+    grid[:] = rows  # rows of ncol cells (checked above); an object array keeps each cell a Python string
+    text = grid[:, cols]
     try:
         if parse is float or parse is _parse_float:
             values = text.astype(float)
