@@ -10,7 +10,8 @@ at every step although only the tracker pose moves. :class:`StationTracker` is a
 station model, keyed by what they depend on: the robot, the joint placements' parameters, the configurations and the
 tool point. A hit returns the very arrays the first call computed (read-only): every prediction and Jacobian is
 bit for bit the one computed without the table. Its chain (joint axes and types, nominal placements: read-only) is
-built once per robot, not once per station model.
+built once per robot, not once per station model (:meth:`~pin_kpi_oed.model.kinematics.Chain.shared`, as for every
+measurement model).
 
 What the model says about one configuration, kept per configuration: the discrepancy's posterior mean and variance
 at a configuration, and whether it lies outside the training's joint-space coverage, depend on that configuration
@@ -42,7 +43,7 @@ import numpy as np
 import scipy.linalg as sla
 
 from pin_kpi_oed.discrepancy.gp import JITTER
-from pin_kpi_oed.model.kinematics import Chain, Kinematics
+from pin_kpi_oed.model.kinematics import Kinematics
 from pin_kpi_oed.model.tracker import TrackerModel
 
 __all__ = ["StationTracker", "KINEMATICS_TABLE_SIZE", "KINEMATICS_TABLE_ROWS", "clear_shared_kinematics",
@@ -56,36 +57,18 @@ KINEMATICS_TABLE_SIZE = 32
 KINEMATICS_TABLE_ROWS = 20000
 
 _TABLE: OrderedDict[tuple, tuple[Any, Kinematics]] = OrderedDict()
-_CHAINS: OrderedDict[int, tuple[Any, Chain]] = OrderedDict()
 _LOCK = threading.Lock()        # the tables' bookkeeping (the kinematics themselves are computed outside it)
 
 
 def clear_shared_kinematics() -> None:
-    """Empty the shared table and the robots' chains (frees their arrays; results are unchanged either way)."""
+    """Empty the shared table (frees its arrays; results are unchanged either way)."""
     _TABLE.clear()
-    _CHAINS.clear()
 
 
 class StationTracker(TrackerModel):
     """A :class:`~pin_kpi_oed.model.tracker.TrackerModel` whose robot kinematics come from the table shared by all
-    station models of its robot (module docstring), its chain the one built for its robot; everything else is the
-    tracker model's."""
-
-    def init_kinematics(self, chain: Chain | None = None) -> None:
-        """:meth:`TrackerModel.init_kinematics` with the chain built once per robot (the eight robots used last)."""
-        if chain is not None:
-            super().init_kinematics(chain=chain)
-            return
-        with _LOCK:
-            entry = _CHAINS.get(id(self.robot))
-        if entry is None or entry[0] is not self.robot:
-            super().init_kinematics()
-            with _LOCK:
-                _CHAINS[id(self.robot)] = (self.robot, self.chain)
-                while len(_CHAINS) > 8:
-                    _CHAINS.popitem(last=False)
-            return
-        super().init_kinematics(chain=entry[1])
+    station models of its robot (module docstring); its chain is the one every measurement model of the robot shares
+    (:meth:`~pin_kpi_oed.model.kinematics.Chain.shared`); everything else is the tracker model's."""
 
     def at_nests(self, nest: np.ndarray | None) -> StationTracker:
         """:meth:`TrackerModel.at_nests`: the same model measuring each row at its nest, a station tracker too.
