@@ -330,31 +330,29 @@ class TrackerModel(MeasurementModel):
         z = reflector axis (tool z) and g = unit beam from the reflector to the tracker.
         """
         p = np.asarray(p, float)
-        if not with_grad:  # the reflector and the tool axis only
-            P, R_tool = self._tool_pose(p, Q, self.points(p))
-            return self._incidence(p, P, R_tool)
-        kin = self.kinematics(p, Q, self.points(p))
         T = self.tracker_pose(p)
+        if not with_grad:  # the reflector and the tool axis only
+            y, z = self._beam_ends(T, *self._tool_pose(p, Q, self.points(p)))
+            return -np.einsum("ma,ma->m", z, y) / np.linalg.norm(y, axis=1)
+        kin = self.kinematics(p, Q, self.points(p))
         RT = T.rotation
-        y = kin.p @ RT.T + T.translation  # reflector in the tracker frame
-        z = np.einsum("ab,mb->ma", RT, kin.R_tool[:, :, 2])
+        y, z = self._beam_ends(T, kin.p, kin.R_tool)
         r = np.linalg.norm(y, axis=1)
-        c = -np.einsum("ma,ma->m", z, y) / r
+        zy = np.einsum("ma,ma->m", z, y)
+        c = -zy / r
         w = kin.twist[:, 3:, :]
         dy = np.einsum("ab,mbn->man", RT, point_velocity(kin))
         wT = np.einsum("ab,mbn->man", RT, w)
         dz = np.cross(wT, z[:, :, None], axis=1)
-        zy = np.einsum("ma,ma->m", z, y)
         dc = (-(np.einsum("man,ma->mn", dz, y) + np.einsum("ma,man->mn", z, dy)) / r[:, None]
               + (zy / r ** 3)[:, None] * np.einsum("ma,man->mn", y, dy))
         return c, dc
 
-    def _incidence(self, p: np.ndarray, P: np.ndarray, R_tool: np.ndarray) -> np.ndarray:
-        """cos β of reflectors at P (m, 3) m (base frame) with tool rotations R_tool (m, 3, 3), (m,)."""
-        T = self.tracker_pose(p)
-        y = P @ T.rotation.T + T.translation  # reflector in the tracker frame
-        z = np.einsum("ab,mb->ma", T.rotation, R_tool[:, :, 2])
-        return -np.einsum("ma,ma->m", z, y) / np.linalg.norm(y, axis=1)
+    @staticmethod
+    def _beam_ends(T: pin.SE3, P: np.ndarray, R_tool: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The reflectors at P (m, 3) m (base frame) in the tracker frame T, and their axes (tool z of the rotations
+        R_tool (m, 3, 3)) there: (y (m, 3) m, z (m, 3))."""
+        return P @ T.rotation.T + T.translation, np.einsum("ab,mb->ma", T.rotation, R_tool[:, :, 2])
 
     # ------------------------------------------------------------------ notes
     def identifiability_notes(self) -> list[str]:
