@@ -259,10 +259,7 @@ class MeasurementModel(ABC):
         Raises:
             InputError: wrong parameter count or joint count.
         """
-        self._apply(p)
-        Q = self._checked_q(Q)
-        point_m = np.asarray(point_m, float)
-        key = (self._p_applied.tobytes(), Q.shape, Q.tobytes(), point_m.tobytes())
+        key, Q, point_m = self._kin_key(p, Q, point_m)
         last = getattr(self, "_kin_last", None)  # one read: safe when two threads ask at once
         if last is not None and last[0] == key:
             return last[1]
@@ -302,20 +299,22 @@ class MeasurementModel(ABC):
         X = self._chain.tool_points(np.atleast_2d(np.asarray(Q, float)), point_m, Rm, tm)
         return np.einsum("dab,dmb->dma", RT, X) + tT[:, None]
 
-    def _checked_q(self, Q: np.ndarray) -> np.ndarray:
+    def _kin_key(self, p: np.ndarray, Q: np.ndarray, point_m: np.ndarray) -> tuple[tuple, np.ndarray, np.ndarray]:
+        """p applied, Q checked: (the key of :meth:`kinematics`'s remembered result, Q (m, n), the point (3,) or
+        (m, 3) as floats)."""
+        self._apply(p)
         Q = np.atleast_2d(np.asarray(Q, float))
         if Q.shape[1] != self.robot.nq:
             raise InputError(f"configurations must have {self.robot.nq} joint values, got {Q.shape[1]}")
-        return Q
+        point_m = np.asarray(point_m, float)
+        return (self._p_applied.tobytes(), Q.shape, Q.tobytes(), point_m.tobytes()), Q, point_m
 
     def _tool_pose(self, p: np.ndarray, Q: np.ndarray, point_m: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The tool point and the tool rotation of :meth:`kinematics` (the same numbers), without the joint frames
         and twists unless they are remembered: (m, 3) m, (m, 3, 3)."""
-        self._apply(p)
-        Q = self._checked_q(Q)
-        point_m = np.asarray(point_m, float)
+        key, Q, point_m = self._kin_key(p, Q, point_m)
         last = getattr(self, "_kin_last", None)
-        if last is not None and last[0] == (self._p_applied.tobytes(), Q.shape, Q.tobytes(), point_m.tobytes()):
+        if last is not None and last[0] == key:
             return last[1].p, last[1].R_tool
         return self._chain.tool_pose(Q, point_m, self._placements)
 
