@@ -39,7 +39,6 @@ from __future__ import annotations
 
 import argparse
 import io
-import resource
 import sys
 import tempfile
 from collections.abc import Callable
@@ -49,12 +48,7 @@ from typing import Any
 
 import numpy as np
 
-from benchmarks.common import sign_test_p
-
-
-def _cpu() -> float:
-    r = resource.getrusage(resource.RUSAGE_SELF)
-    return r.ru_utime + r.ru_stime
+from benchmarks.common import cpu_time, sign_test_p
 
 
 def _covs() -> dict[str, np.ndarray]:
@@ -256,13 +250,13 @@ def run(pairs: int = 7) -> dict[str, dict]:
         for name in cur:
             tc, tr = [], []
             for _ in range(pairs):
-                t0 = _cpu()
+                t0 = cpu_time()
                 cur[name]()
-                tc.append(_cpu() - t0)
+                tc.append(cpu_time() - t0)
                 with _reference():
-                    t0 = _cpu()
+                    t0 = cpu_time()
                     ref[name]()
-                    tr.append(_cpu() - t0)
+                    tr.append(cpu_time() - t0)
             c, r = np.array(tc), np.array(tr)
             wins = int(np.sum(c < r))
             out[name] = {"current_s": float(np.median(c)), "reference_s": float(np.median(r)),
