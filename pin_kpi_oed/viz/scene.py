@@ -50,6 +50,7 @@ import pinocchio as pin
 
 from pin_kpi_oed.design.design_file import DesignEntry, DesignFile, load_design
 from pin_kpi_oed.errors import InputError
+from pin_kpi_oed.threads import limit_threads
 from pin_kpi_oed.viz.ellipsoids import DEFAULT_LEVEL, confidence_ellipsoid, fmt_factor, nice_factor
 from pin_kpi_oed.viz.scene_parts import (MESHCAT_FOV_DEG, anim_set, beam_matrix, default_camera, homogeneous,
                                          label_height, label_sprite, object_placements, place_camera, plane_frame,
@@ -552,6 +553,7 @@ class _SceneBuilder:
         return poses
 
 
+@limit_threads  # small eigen-decompositions and placements: one BLAS thread (pin_kpi_oed.threads)
 def build_scene(design: DesignFile | str | os.PathLike | Mapping, options: SceneOptions | None = None,
                 vis: Any = None) -> Scene:
     """Build the meshcat scene of a design file (see the module docstring for its nodes).
