@@ -191,11 +191,7 @@ def test_cli_design_with_default_discrepancy_curve_and_plateau(tmp_path, capsys,
     paper's, a target below the plateau is answered with the plateau, the curve goes to the JSON and a figure.
     The second run (a reachable target) asks the same designs (the same settings but the target and the curve,
     asserted): the first run's designs are given to it instead of being optimised again (seeded, they are the same);
-    its target is answered by the command as ever. The optimisation starts from the heuristic design (``--start
-    random``): nothing asserted here depends on the start (the curve has its own candidates, and the designed σ need
-    only beat the random design's), and the pool start of ``kpi_gp`` is run by
-    ``test_cli_design_takes_the_discrepancy_of_a_model_file`` and tests/test_design_model_sigma.py; here it cost 1.2
-    of the run's 1.8 s CPU."""
+    its target is answered by the command as ever."""
     import dataclasses
     import json
 
@@ -214,7 +210,7 @@ def test_cli_design_with_default_discrepancy_curve_and_plateau(tmp_path, capsys,
     monkeypatch.setattr(runner, "_optimised", once)
     out_json, png = tmp_path / "d.json", tmp_path / "curve.png"
     assert main(["design", "--cell", "kr15", "--criteria", "random,kpi_gp", "--measurements", "20", "--starts", "1",
-                 "--max-iter", "15", "--start", "random", "--target-sigma", "1e-5", "--curve", str(png),
+                 "--max-iter", "15", "--pool-size", "300", "--target-sigma", "1e-5", "--curve", str(png),
                  "--json", str(out_json), "--quiet"]) == 0
     out = capsys.readouterr().out
     assert "discrepancy (default for the industrial class, from the name 'kr15': S = 0.1 mm" in out
@@ -241,7 +237,7 @@ def test_cli_design_with_default_discrepancy_curve_and_plateau(tmp_path, capsys,
     assert "random + the designs' poses" in out   # the designs' own poses are candidates of the curve
     # a reachable target (the same designs, so the same candidates): the fewest designed poses, verified
     assert main(["design", "--cell", "kr15", "--criteria", "random,kpi_gp", "--measurements", "20", "--starts", "1",
-                 "--max-iter", "15", "--start", "random", "--target-sigma", str(1.05 * des[-1]), "--quiet"]) == 0
+                 "--max-iter", "15", "--pool-size", "300", "--target-sigma", str(1.05 * des[-1]), "--quiet"]) == 0
     assert "designed pose(s) reach it" in capsys.readouterr().out
     assert len(made) == 1  # the second run asked the first run's designs
 
