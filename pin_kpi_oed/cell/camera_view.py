@@ -202,7 +202,8 @@ class CameraView:
         f = self._frames(Q)
         moving = -1.0 if self.camera.eye_in_hand else 1.0
         vel = self._velocity(f["V"], f["W"], f["xb"])  # (m, N, 3, n) of the base-frame corners as if carried
-        Xdq = moving * np.einsum("mba,mnbj->mnaj", f["Rc"], vel)
+        # made contiguous first: the product over b then runs twice as fast (the same sums in the same order)
+        Xdq = moving * np.einsum("mba,mnbj->mnaj", f["Rc"], np.ascontiguousarray(vel))
         parts = [self._image(f["X"], Xdq, with_grad), self._depth(f["X"], Xdq, with_grad),
                  self._angle(f, with_grad)]
         if self.blockers.size:
