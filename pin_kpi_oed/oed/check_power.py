@@ -103,8 +103,22 @@ class CheckNull:
 
     def power(self, noncentrality: float, dof: float, alpha: float) -> float:
         """The probability the test detects a change of non-centrality λ (in the model's σ)."""
+        return float(self.powers(np.array([float(noncentrality)]), dof, alpha)[0])
+
+    def powers(self, noncentralities: np.ndarray, dof: float, alpha: float) -> np.ndarray:
+        """:meth:`power` of each non-centrality at once (one critical value, one χ'² survival over the array; each
+        entry equals :meth:`power` of it bit for bit).
+
+        Args:
+            noncentralities: (G,) non-centralities λ (in the model's σ, dimensionless).
+            dof: degrees of freedom of T; alpha: the test's level.
+
+        Returns:
+            (G,) detection probabilities.
+        """
         nu = dof / self.spread
-        return float(stats.ncx2.sf(stats.chi2.isf(alpha, nu), nu, max(float(noncentrality) / self.scale, 1e-12)))
+        lam = np.maximum(np.asarray(noncentralities, float) / self.scale, 1e-12)
+        return np.asarray(stats.ncx2.sf(stats.chi2.isf(alpha, nu), nu, lam), float).reshape(lam.shape)
 
 
 def test_threshold(dof: int, alpha: float) -> float:

@@ -63,7 +63,7 @@ def check_powers(crit: CheckPower, F: np.ndarray, tolerance_m: float, alpha: flo
     dof = F.shape[0] - crit.setup.size
     mu = crit.mu(F.T @ F)[0]
     law = null or CheckNull()
-    return {g.name: law.power(tolerance_m ** 2 * u, dof, alpha) for g, u in zip(crit.groups, mu)}
+    return {g.name: float(p) for g, p in zip(crit.groups, law.powers(tolerance_m ** 2 * mu, dof, alpha))}
 
 
 def verdict_powers(crit: CheckPower, F: np.ndarray, tolerance_m: float, alpha: float, null: CheckNull,
@@ -75,12 +75,10 @@ def verdict_powers(crit: CheckPower, F: np.ndarray, tolerance_m: float, alpha: f
     dof = F.shape[0] - crit.setup.size
     mu = np.maximum(crit.mu(F.T @ F)[0], 1e-300)
     z = float(stats.norm.isf(alpha))
-    out = {}
-    for g, u in zip(crit.groups, mu):
-        detect = null.power((factor * tolerance_m) ** 2 * u, dof, a1)
-        sd = null.factor / np.sqrt(u)
-        out[g.name] = float(detect * stats.norm.cdf((factor - 1.0) * tolerance_m / sd - z))
-    return out
+    detect = null.powers((factor * tolerance_m) ** 2 * mu, dof, a1)
+    sd = null.factor / np.sqrt(mu)
+    shown = stats.norm.cdf((factor - 1.0) * tolerance_m / sd - z)
+    return {g.name: float(d * s) for g, d, s in zip(crit.groups, detect, shown)}
 
 
 def check_group_name(crit: CheckPower, F: np.ndarray, z: np.ndarray, dof: int, alpha: float, null: CheckNull) -> dict:
