@@ -18,9 +18,9 @@ order that reach :data:`TARGET_POWER` (``poses_needed``; 0 when :data:`MAX_POSES
 from __future__ import annotations
 
 import time
-from collections.abc import Iterator
+from collections.abc import Iterable, Iterator
 from dataclasses import dataclass, field
-from itertools import islice
+from itertools import chain, islice
 
 import numpy as np
 
@@ -120,11 +120,22 @@ def select_check(crit: CheckPower, Fp: np.ndarray, m: int, seed: int = 0, exchan
         InputError: m larger than the pool or below 3.
     """
     t0 = time.perf_counter()
-    N = len(Fp)
+    _check_size(m, len(Fp))
+    Mi = np.einsum("nap,naq->npq", Fp, Fp)
+    return _exchanged(crit, Mi, list(islice(_greedy(crit, Mi, seed), m)), exchange, t0)
+
+
+def _check_size(m: int, N: int) -> None:
+    """Refuse m poses from a pool of N candidates unless 3 ≤ m ≤ N (InputError)."""
     if not 3 <= m <= N:
         raise InputError(f"check design: {m} poses from a pool of {N} candidates (3 to {N})")
-    Mi = np.einsum("nap,naq->npq", Fp, Fp)
-    steps = list(islice(_greedy(crit, Mi, seed), m))
+
+
+def _exchanged(crit: CheckPower, Mi: np.ndarray, steps: list[tuple[int, float, np.ndarray]], exchange: bool,
+               t0: float) -> PoolSelection:
+    """The selection of :func:`select_check` from its first greedy ``steps`` (:func:`_greedy`): one exchange pass
+    over them unless ``exchange`` is False; ``t0``: when the selection began (``time.perf_counter``, s)."""
+    N, m = len(Mi), len(steps)
     chosen = [i for i, _, _ in steps]
     path = [value for _, value, _ in steps]
     M = steps[-1][2]
@@ -249,7 +260,12 @@ def design_check(model: CalibratedModel, *, m: int = 10, tolerance_m: float = 1e
     sigma = np.median(model.predict_with_sigma(Q_pool, station=station)[1], axis=0)
     crit, wm, p = check_criterion(model, np.atleast_2d(qw), sigma, station, seed=seed)
     Fp = wm.weighted_jacobian(p, Q_pool)[:, :3, :]
-    sel = select_check(crit, Fp, m, seed)
+    t_sel = time.perf_counter()
+    _check_size(m, len(Fp))
+    Mi = np.einsum("nap,naq->npq", Fp, Fp)
+    greedy = _greedy(crit, Mi, seed)
+    steps = list(islice(greedy, m))     # the selection's greedy poses begin the sizing's order
+    sel = _exchanged(crit, Mi, steps, True, t_sel)
     null = check_null(model)
     power = check_powers(crit, Fp[sel.indices].reshape(-1, Fp.shape[2]), tolerance_m, alpha, null)
     rng = np.random.default_rng(seed + 1)
@@ -259,19 +275,22 @@ def design_check(model: CalibratedModel, *, m: int = 10, tolerance_m: float = 1e
     vp = verdict_powers(crit, Fp[sel.indices].reshape(-1, Fp.shape[2]), tolerance_m, alpha, null, SIZE_FACTOR)
     return CheckDesign(Q=Q_pool[sel.indices], selection=sel, power=power, power_random=power_random,
                        tolerance_m=tolerance_m, alpha=alpha, sigma_m=sigma, verdict_power=vp,
-                       poses_needed=_poses_needed(crit, Fp, tolerance_m, alpha, null, seed) if size else 0,
+                       poses_needed=_poses_needed(crit, Fp, tolerance_m, alpha, null, chain(steps, greedy))
+                       if size else 0,
                        feasible_in=getattr(cell, "name", "") if cell is not None else "", success=sel.success,
                        status="designed", message=sel.message, time_s=time.perf_counter() - t0)
 
 
-def _poses_needed(crit: CheckPower, Fp: np.ndarray, tolerance_m: float, alpha: float, null, seed: int) -> int:
-    """The fewest poses of the greedy order (no exchange) whose weakest verdict power reaches :data:`TARGET_POWER`
-    (0 when :data:`MAX_POSES` or the pool do not); the order is grown only as far as the answer."""
+def _poses_needed(crit: CheckPower, Fp: np.ndarray, tolerance_m: float, alpha: float, null,
+                  greedy: Iterable[tuple[int, float, np.ndarray]]) -> int:
+    """The fewest poses of the greedy order (no exchange; ``greedy``: its steps, :func:`_greedy`) whose weakest
+    verdict power reaches :data:`TARGET_POWER` (0 when :data:`MAX_POSES` or the pool do not); the order is grown only
+    as far as the answer."""
     n = min(MAX_POSES, len(Fp))
     if n < 3:
         return 0
     order: list[int] = []
-    for i, _, _ in islice(_greedy(crit, np.einsum("nap,naq->npq", Fp, Fp), seed), n):
+    for i, _, _ in islice(greedy, n):
         order.append(i)
         if len(order) < 3:
             continue
