@@ -162,3 +162,18 @@ def test_powers_of_many_changes_equal_the_scalar_formula_bit_for_bit():
             assert got.shape == lam.shape and got.tolist() == want
             assert null.power(float(lam[5]), dof, alpha) == want[5]
     assert 0.0 < want[0] < want[-1] < 1.0
+
+
+def test_thresholds_and_survivals_of_many_groups_equal_the_scalar_laws_bit_for_bit():
+    """``CheckNull.thresholds`` / ``sfs`` (the naming's laws of every group at once) give each entry exactly
+    :meth:`CheckNull.threshold` / :meth:`CheckNull.sf`; a number of degrees of freedom that is not positive gives
+    NaN (no group is named on it)."""
+    dofs = np.array([24, 23, 21, 18, 1, 0])
+    T = np.array([30.0, 2.5, 0.0, 41.7, 3.2, 1.0])
+    for null in (CheckNull(), CheckNull(1.3, 0.8)):
+        for alpha in (0.01, 0.05 / 5):
+            got = null.thresholds(dofs, alpha)
+            assert got[:-1].tolist() == [null.threshold(int(d), alpha) for d in dofs[:-1]] and np.isnan(got[-1])
+        got = null.sfs(T, dofs)
+        assert got[:-1].tolist() == [null.sf(float(t), int(d)) for t, d in zip(T[:-1], dofs[:-1])]
+        assert np.isnan(got[-1]) and 0.0 < got[0] < 1.0 and got[2] == 1.0

@@ -88,18 +88,22 @@ def check_group_name(crit: CheckPower, F: np.ndarray, z: np.ndarray, dof: int, a
     one-column group is not preferred when a three-column one fits far better)."""
     Gs = F[:, crit.setup]
     T = float(z @ z)
-    table, passing, gains = [], [], []
+    fits = []
     for g in crit.groups:
         A = np.hstack([Gs, F[:, g.cols] @ g.basis])
         x, *_ = np.linalg.lstsq(A, z, rcond=1e-6)
         sv = np.linalg.svd(A / np.maximum(np.linalg.norm(A, axis=0), 1e-300), compute_uv=False)
         det = bool(sv[-1] > 1e-6 * sv[0]) and A.shape[0] > A.shape[1]
         r = g.basis.shape[1] if det else max(int(np.sum(sv > 1e-6 * sv[0])) - Gs.shape[1], 0)
-        rem = float(np.sum((z - A @ x) ** 2))
+        fits.append((g, A, x, det, r, float(np.sum((z - A @ x) ** 2))))
+    rs = np.array([f[4] for f in fits], float)
+    limits = null.thresholds(dof - rs, alpha / FIT_SHARE)        # the laws of every group at once
+    gains = null.sfs(T - np.array([f[5] for f in fits], float), rs).tolist()
+    table, passing = [], []
+    for (g, A, x, det, r, rem), limit in zip(fits, limits.tolist()):
         # a group the rows do not determine may still explain them: named, with the poses that determine it
-        ok = r > 0 and rem <= null.threshold(dof - r, alpha / FIT_SHARE)
+        ok = r > 0 and rem <= limit
         table.append({"name": g.name, "chi2_remaining": rem, "dof": dof - r, "determined": det, "explains": ok})
-        gains.append(null.sf(T - rem, r))
         if ok:
             k = g.basis.shape[1]
             cov = np.linalg.pinv(A.T @ A, rcond=1e-12)[-k:, -k:]
