@@ -88,9 +88,9 @@ def poses_to_add(crit: CheckPower, wm, p: np.ndarray, F_given: np.ndarray, E_s: 
         # while no candidate determines the set-up at W, its σ there leads; then the check criterion (evaluated on
         # the candidates that determine it: no other's value is read)
         ok = regs <= limit
-        for j in np.flatnonzero(ok):
+        for c in np.flatnonzero(ok).tolist():
             try:
-                vals[j] = crit.value_M(M + Mi[order[j]] + ridge)
+                vals[c] = crit.value_M(M + Mi[order[c]] + ridge)
             except IdentifiabilityError:
                 pass
         k = int(order[int(np.argmin(np.where(ok, vals, np.inf)))] if ok.any() else order[int(np.argmin(regs))])
