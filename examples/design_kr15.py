@@ -28,8 +28,9 @@ a = ap.parse_args()
 cell = load_cell("kr15")  # or a path to your own cell YAML
 print(cell.summary())
 problem = DesignProblem(cell)
-# quick: a smaller pool for the first start and fewer Ipopt iterations (the full run: the defaults)
-opts = DesignOptions(pool_size=150, ipopt=ipopt_options(max_iter=20)) if QUICK else None
+# quick: the first start from the heuristic design (no pool selection) and fewer Ipopt iterations (the full run:
+# the defaults)
+opts = DesignOptions(start="random", ipopt=ipopt_options(max_iter=20)) if QUICK else None
 results = run_designs(cell, ["random", "param", "kpi"], a.measurements, a.seed, opts, problem)
 cert = certify(problem, a.measurements, pool_size=500 if QUICK else 5000, seed=a.seed,
                extra=[r.q_meas for r in results])

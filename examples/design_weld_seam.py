@@ -33,8 +33,9 @@ a = ap.parse_args()
 cell = load_cell("kr15_seam")
 print(cell.summary())
 problem = DesignProblem(cell)
-# quick: a smaller pool for the first start and fewer Ipopt iterations (the full run: the defaults)
-opts = DesignOptions(pool_size=150, ipopt=ipopt_options(max_iter=20)) if QUICK else None
+# quick: the first start from the heuristic design (no pool selection) and fewer Ipopt iterations (the full run:
+# the defaults)
+opts = DesignOptions(start="random", ipopt=ipopt_options(max_iter=20)) if QUICK else None
 results = run_designs(cell, ["random", "kpi", "kpi_path", "kpi6"], a.measurements, a.seed, opts, problem)
 for r in results:
     p = path_profile(problem, r.q_meas, cell.q_path, cell.orientation_length_m)

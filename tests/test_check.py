@@ -109,6 +109,26 @@ def test_designed_check_beats_random_poses(setting):
     assert d.selection.success and d.selection.indices.size == 8
 
 
+def test_poses_needed_is_the_first_length_of_the_whole_greedy_order(setting):
+    """The sizing grows the greedy order only until the verdict's weakest power reaches the target: the answer is the
+    one read off the whole order (every pose of a 30-candidate pool, no exchange) computed first, as it was."""
+    from pin_kpi_oed.upkeep.check import check_null, verdict_powers
+    from pin_kpi_oed.upkeep.check_design import SIZE_FACTOR, TARGET_POWER, check_pool, select_check
+
+    _, model, _ = setting
+    d = design_check(model, m=4, tolerance_m=1e-4, pool_size=30, seed=2, n_random=1)
+    Q_pool = check_pool(model, 30, 2)
+    sigma = np.median(model.predict_with_sigma(Q_pool)[1], axis=0)
+    crit, wm, p = check_criterion(model, model.q_work, sigma, seed=2)
+    Fp = wm.weighted_jacobian(p, Q_pool)[:, :3, :]
+    order = select_check(crit, Fp, 30, seed=2, exchange=False).indices
+    weakest = [min(verdict_powers(crit, Fp[order[:k]].reshape(-1, Fp.shape[2]), 1e-4, 0.05, check_null(model),
+                                  SIZE_FACTOR).values()) for k in range(3, 31)]
+    reached = [k for k, w in zip(range(3, 31), weakest) if w >= TARGET_POWER]
+    assert reached and 3 < reached[0] < 30      # the sizing stops inside the order
+    assert d.poses_needed == reached[0]
+
+
 def _write(path: Path, rb, Q, Y) -> str:
     write_measurements(MeasurementSet(list(rb.joint_names), Q, Y), path)
     return str(path)

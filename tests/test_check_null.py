@@ -146,3 +146,34 @@ def test_the_verdict_line_names_the_parts_together():
     assert "tool by [+0.200" in line and "or a change of wrist_3_joint (the check rows do not tell the two apart" \
         in line, line
     assert r.to_dict()["alike"] == ["wrist_3_joint"]
+
+
+def test_powers_of_many_changes_equal_the_scalar_formula_bit_for_bit():
+    """``CheckNull.powers`` (one critical value and one χ'² survival over the groups' non-centralities, what the check
+    and its design evaluate thousands of times) gives each entry exactly the scalar law P(χ'²(ν/c, max(λ/(f²c),
+    1e-12)) > χ²_{1−α}(ν/c)), tiny and zero non-centralities included."""
+    lam = np.concatenate([[0.0, 1e-14, 1e-3], np.random.default_rng(3).uniform(0.0, 60.0, 20)])
+    for null in (CheckNull(), CheckNull(1.3, 0.8), CheckNull(0.9, -0.2)):
+        for dof, alpha in ((24, 0.05), (7, 0.0253), (90, 0.2)):
+            nu = dof / null.spread
+            want = [float(stats.ncx2.sf(stats.chi2.isf(alpha, nu), nu, max(float(x) / null.scale, 1e-12)))
+                    for x in lam]
+            got = null.powers(lam, dof, alpha)
+            assert got.shape == lam.shape and got.tolist() == want
+            assert null.power(float(lam[5]), dof, alpha) == want[5]
+    assert 0.0 < want[0] < want[-1] < 1.0
+
+
+def test_thresholds_and_survivals_of_many_groups_equal_the_scalar_laws_bit_for_bit():
+    """``CheckNull.thresholds`` / ``sfs`` (the naming's laws of every group at once) give each entry exactly
+    :meth:`CheckNull.threshold` / :meth:`CheckNull.sf`; a number of degrees of freedom that is not positive gives
+    NaN (no group is named on it)."""
+    dofs = np.array([24, 23, 21, 18, 1, 0])
+    T = np.array([30.0, 2.5, 0.0, 41.7, 3.2, 1.0])
+    for null in (CheckNull(), CheckNull(1.3, 0.8)):
+        for alpha in (0.01, 0.05 / 5):
+            got = null.thresholds(dofs, alpha)
+            assert got[:-1].tolist() == [null.threshold(int(d), alpha) for d in dofs[:-1]] and np.isnan(got[-1])
+        got = null.sfs(T, dofs)
+        assert got[:-1].tolist() == [null.sf(float(t), int(d)) for t, d in zip(T[:-1], dofs[:-1])]
+        assert np.isnan(got[-1]) and 0.0 < got[0] < 1.0 and got[2] == 1.0

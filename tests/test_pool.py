@@ -308,6 +308,41 @@ def test_swap_gains_are_the_exact_change_and_each_call_its_own(pool, kind):
             assert phi_o - g[i] == pytest.approx(exact_phi(Fp, rest + [i], K), rel=1e-9)
 
 
+@pytest.mark.parametrize("K_kind", ["A", "D"])
+def test_blocks_of_more_than_three_rows_score_as_their_entries_one_by_one(K_kind):
+    """Blocks of nh > 3 rows (a camera image's square-root information) have S_i's entries made a row at a time:
+    the gains of adding and of swapping are, bit for bit, :func:`block_gains` of the entries made one by one
+    (I + F_i M⁻¹ F_iᵀ, with a swap's D_i D_iᵀ), and the swap's gains are φ of the set from scratch."""
+    from pin_kpi_oed.oed.pool_search import InformationState, block_gains
+
+    rng = np.random.default_rng(5)
+    N, nh, nx = 40, 5, 9
+    Fp = rng.standard_normal((N, nh, nx))
+    K = rng.standard_normal((3, nx)) if K_kind == "A" else None
+    chosen = [0, 7, 11, 20]
+    st = InformationState(Fp, K, None, chosen)
+    Fa = Fp.transpose(1, 0, 2)
+    Minv = np.linalg.inv(st.M)
+    B = (np.ascontiguousarray(Fa).reshape(nh * N, nx) @ (0.5 * (Minv + Minv.T))).reshape(nh, N, nx)
+    A = {(a, b): np.einsum("nk,nk->n", B[a], Fa[b]) for a in range(nh) for b in range(a, nh)}
+    H = None if K is None else B @ K.T
+    one_by_one = block_gains({k: v + (1.0 if k[0] == k[1] else 0.0) for k, v in A.items()}, None if H is None else
+                             H.transpose(1, 0, 2), N, nh)
+    np.testing.assert_array_equal(st.add_gains(), one_by_one)
+    o = chosen[2]
+    phi_o, g = st.swap_gains(o)
+    So = np.eye(nh) - np.array([[A[min(a, b), max(a, b)][o] for b in range(nh)] for a in range(nh)])
+    LoiT = np.linalg.inv(np.linalg.cholesky(So)).T
+    D = (B.reshape(nh * N, nx) @ (Fp[o].T @ LoiT)).reshape(nh, N, nh)
+    s = {(a, b): v + (1.0 if a == b else 0.0) + np.einsum("nc,nc->n", D[a], D[b]) for (a, b), v in A.items()}
+    G = None if H is None else (D.reshape(nh * N, nh) @ (LoiT.T @ H[:, o, :]) + H.reshape(nh * N, -1)
+                                ).reshape(H.shape).transpose(1, 0, 2)
+    np.testing.assert_array_equal(g, block_gains(s, G, N, nh))
+    rest = [c for c in chosen if c != o]
+    for i in (1, 30):
+        assert phi_o - g[i] == pytest.approx(exact_phi(Fp, rest + [i], K), rel=1e-9)
+
+
 def test_onto_capped_gives_a_capped_measure():
     """The warm start's projection: weights above the cap are cut, the measure stays a probability ≤ cap."""
     from pin_kpi_oed.oed.relaxation import onto_capped

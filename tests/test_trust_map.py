@@ -87,10 +87,15 @@ def test_cli_predict_figure_and_bad_paths(calibrated, tmp_path, capsys):
 
 
 def test_design_with_model_writes_honest_blocks_and_the_viewer_draws_them(calibrated, tmp_path, capsys):
+    """A design with a model file writes each design's honest C_s block; the viewer draws it (and the paper's).
+    The optimisation starts from the heuristic design (``--start random``): what is asserted holds for any poses (a
+    C_s block and its trace, the discrepancy widening every ellipsoid), and the pool start cost two thirds of the
+    design's CPU."""
     _, _, folder = calibrated
     d = tmp_path / "d.json"
     assert main(["design", "--cell", "ur10", "--model", str(folder / "m.json"), "--criteria", "random,kpi",
-                 "--measurements", "20", "--starts", "1", "--max-iter", "5", "--json", str(d), "--quiet"]) == 0
+                 "--measurements", "20", "--starts", "1", "--max-iter", "5", "--start", "random", "--json", str(d),
+                 "--quiet"]) == 0
     capsys.readouterr()
     doc = json.loads(d.read_text())
     t = len(doc["q_work"])

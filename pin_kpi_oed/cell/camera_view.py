@@ -187,6 +187,20 @@ class CameraView:
         """∂x/∂q of points carried by the last joint: v_j + ω_j × x, (m, k, 3, n) for x (m, k, 3)."""
         return np.swapaxes(V[:, None] + cross(W[:, None], x[:, :, None]), 2, 3)
 
+    @staticmethod
+    def _corner_velocity(V: np.ndarray, W: np.ndarray, x: np.ndarray) -> np.ndarray:
+        """:meth:`_velocity` (the same numbers: the same products and sums) laid out contiguous, each component
+        written in place instead of stacked and transposed: the camera rotation's product over it (``evaluate``)
+        runs twice as fast on it as on the transposed view, with the same sums in the same order."""
+        m, k, n = x.shape[0], x.shape[1], V.shape[1]
+        out = np.empty((m, k, 3, n))
+        w = [W[:, None, :, i] for i in range(3)]  # (m, 1, n)
+        y = [x[:, :, None, i] for i in range(3)]  # (m, k, 1)
+        for i in range(3):
+            a, b = (i + 1) % 3, (i + 2) % 3
+            np.add(V[:, None, :, i], w[a] * y[b] - w[b] * y[a], out=out[:, :, i])
+        return out
+
     # ------------------------------------------------------------------ rows
     def evaluate(self, Q: np.ndarray, with_grad: bool = True) -> tuple[np.ndarray, np.ndarray | None]:
         """Every raw row g(Q) ≥ 0 (module docstring) and ∂g/∂q.
@@ -201,7 +215,7 @@ class CameraView:
         Q = np.atleast_2d(np.asarray(Q, float))
         f = self._frames(Q)
         moving = -1.0 if self.camera.eye_in_hand else 1.0
-        vel = self._velocity(f["V"], f["W"], f["xb"])  # (m, N, 3, n) of the base-frame corners as if carried
+        vel = self._corner_velocity(f["V"], f["W"], f["xb"])  # (m, N, 3, n) of the base-frame corners as if carried
         Xdq = moving * np.einsum("mba,mnbj->mnaj", f["Rc"], vel)
         parts = [self._image(f["X"], Xdq, with_grad), self._depth(f["X"], Xdq, with_grad),
                  self._angle(f, with_grad)]

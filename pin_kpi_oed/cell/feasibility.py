@@ -302,8 +302,10 @@ class FeasibilityChecker:
 
         Coal computes every pair as in :meth:`pair_distances`; Pinocchio's ``computeDistances`` returns the index
         of the smallest, so only that result is read (reading all of them costs several times Coal's work). When
-        that smallest is within the contact tolerance of a non-convex mesh, every pair is read and re-tested as in
-        :meth:`pair_distances` (:func:`mesh_penetration` changes only pairs that close): the same value.
+        that smallest is within the contact tolerance of a non-convex mesh, every pair's result of that call is read
+        and re-tested as in :meth:`pair_distances` (:func:`mesh_penetration` changes only pairs that close): the
+        same value, but for the last digits of Coal's warm-started GJK pairs (a second call would start them
+        from this one's results; ~1e-16 m).
 
         Args:
             q: configuration (n,) rad (m for prismatic joints).
@@ -319,7 +321,8 @@ class FeasibilityChecker:
         d_min = float(self._results[k].min_distance)
         if not self.mesh_pairs or d_min > _MESH_CONTACT_M:
             return d_min
-        return float(self.pair_distances(q).min())
+        d = np.array(list(map(_MIN_DISTANCE, self._results)))[:self.n_pairs]  # placed and computed above
+        return float(mesh_penetration(self, d).min())
 
     def distances(self, Q: np.ndarray) -> np.ndarray:
         """Signed distances of every checked pair and beam target (columns named by :attr:`names`).

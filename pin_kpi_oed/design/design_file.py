@@ -54,6 +54,7 @@ from pin_kpi_oed.design.design_writer import design_document, write_design
 from pin_kpi_oed.errors import InputError, PinKpiOedError
 from pin_kpi_oed.model.tracker import TrackerModel
 from pin_kpi_oed.model.robot import Robot
+from pin_kpi_oed.threads import limit_threads
 from pin_kpi_oed.validation.schema import validate_design_dict
 
 __all__ = ["DESIGN_LABELS", "DesignEntry", "DesignFile", "load_design", "design_document", "write_design"]
@@ -350,6 +351,7 @@ def _read_designs(d: Mapping, cell: Cell, model: TrackerModel, where: str, crite
     return designs
 
 
+@limit_threads  # C_s recomputed (an identifiability analysis: QR, lstsq) with every BLAS thread on a busy machine
 def load_design(source: str | os.PathLike | Mapping, criteria: Sequence[str] | None = None,
                 compute_missing: bool = True) -> DesignFile:
     """Read a design JSON (or dict) tolerantly (see the module docstring).

@@ -101,10 +101,48 @@ class CheckNull:
         """P(T' > T) under no change."""
         return float(stats.chi2.sf(T / self.scale, dof / self.spread))
 
+    def thresholds(self, dofs: np.ndarray, alpha: float) -> np.ndarray:
+        """:meth:`threshold` of each number of degrees of freedom at once (each entry bit for bit; NaN where a
+        number is not positive).
+
+        Args:
+            dofs: (G,) degrees of freedom; alpha: the level.
+
+        Returns:
+            (G,) critical values of T (dimensionless).
+        """
+        return self.scale * np.asarray(stats.chi2.isf(alpha, np.asarray(dofs, float) / self.spread), float)
+
+    def sfs(self, T: np.ndarray, dofs: np.ndarray) -> np.ndarray:
+        """:meth:`sf` of each (T, dof) pair at once (each entry bit for bit; NaN where a dof is not positive).
+
+        Args:
+            T: (G,) statistics (dimensionless); dofs: (G,) their degrees of freedom.
+
+        Returns:
+            (G,) probabilities P(T' > T) under no change.
+        """
+        return np.asarray(stats.chi2.sf(np.asarray(T, float) / self.scale, np.asarray(dofs, float) / self.spread),
+                          float)
+
     def power(self, noncentrality: float, dof: float, alpha: float) -> float:
         """The probability the test detects a change of non-centrality λ (in the model's σ)."""
+        return float(self.powers(np.array([float(noncentrality)]), dof, alpha)[0])
+
+    def powers(self, noncentralities: np.ndarray, dof: float, alpha: float) -> np.ndarray:
+        """:meth:`power` of each non-centrality at once (one critical value, one χ'² survival over the array; each
+        entry equals :meth:`power` of it bit for bit).
+
+        Args:
+            noncentralities: (G,) non-centralities λ (in the model's σ, dimensionless).
+            dof: degrees of freedom of T; alpha: the test's level.
+
+        Returns:
+            (G,) detection probabilities.
+        """
         nu = dof / self.spread
-        return float(stats.ncx2.sf(stats.chi2.isf(alpha, nu), nu, max(float(noncentrality) / self.scale, 1e-12)))
+        lam = np.maximum(np.asarray(noncentralities, float) / self.scale, 1e-12)
+        return np.asarray(stats.ncx2.sf(stats.chi2.isf(alpha, nu), nu, lam), float).reshape(lam.shape)
 
 
 def test_threshold(dof: int, alpha: float) -> float:

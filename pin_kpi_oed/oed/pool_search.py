@@ -266,6 +266,28 @@ def block_gains(s: dict, G: np.ndarray | None, N: int, nh: int) -> np.ndarray:
     return out / det
 
 
+def _pair_dots(X: np.ndarray, Y: np.ndarray) -> np.ndarray:
+    """P (nh, nh, N) of X, Y (nh, N, k): P[a, b] = P[b, a] = Σ_k X[a, :, k] Y[b, :, k] for a ≤ b, one call per a
+    (the same sums as ``np.einsum("nk,nk->n", X[a], Y[b])`` entry by entry)."""
+    nh = X.shape[0]
+    P = np.empty((nh, nh, X.shape[1]))
+    for a in range(nh):
+        P[a, a:] = np.einsum("nk,bnk->bn", X[a], Y[a:])
+    lo, up = np.tril_indices(nh, -1)
+    P[lo, up] = P[up, lo]
+    return P
+
+
+def _full_gains(S: np.ndarray, G: np.ndarray | None) -> np.ndarray:
+    """:func:`block_gains` (nh > 3) of the blocks S_i given whole, S (nh, nh, N) symmetric, G (nh, N, ns) or None:
+    the same numbers as S_i's entries passed one by one."""
+    S = np.ascontiguousarray(S.transpose(2, 0, 1))
+    if G is None:
+        return np.linalg.slogdet(S)[1]
+    Gn = G.transpose(1, 0, 2)
+    return np.einsum("nas,nas->n", Gn, np.linalg.solve(S, Gn))
+
+
 def _block_gains(s: dict, G: np.ndarray | None, N: int, nh: int) -> np.ndarray:
     """:func:`block_gains` with G laid out (nh, N, ns)."""
     return block_gains(s, None if G is None else G.transpose(1, 0, 2), N, nh)
@@ -328,7 +350,11 @@ class InformationState(PoolState):
         Minv = np.linalg.inv(M)
         Minv = 0.5 * (Minv + Minv.T)
         self.B = (self.Fa.reshape(nh * N, nx) @ Minv).reshape(nh, N, nx)
-        self.A = {(a, b): np.einsum("nk,nk->n", self.B[a], self.Fa[b]) for a in range(nh) for b in range(a, nh)}
+        if nh > 3:  # the entries a row at a time, not one by one
+            self.A = {}
+            self.A_full = _pair_dots(self.B, self.Fa)
+        else:
+            self.A = {(a, b): np.einsum("nk,nk->n", self.B[a], self.Fa[b]) for a in range(nh) for b in range(a, nh)}
         if self.K is None:
             self.H = None
             self.phi = float(-2.0 * np.sum(np.log(np.diag(L))))
@@ -340,13 +366,18 @@ class InformationState(PoolState):
 
     def add_gains(self) -> np.ndarray:
         """−Δφ of adding each candidate to M, (N,)."""
+        if self.nh > 3:
+            return _full_gains(self.A_full + np.eye(self.nh)[:, :, None], self.H)
         s = {k: v + (1.0 if k[0] == k[1] else 0.0) for k, v in self.A.items()}
         return _block_gains(s, self.H, self.N, self.nh)
 
     def swap_gains(self, o: int) -> tuple[float, np.ndarray] | None:
         """(φ of M − F_oᵀF_o, −Δφ of adding each candidate to it), or None if it is singular."""
         nh = self.nh
-        So = np.eye(nh) - np.array([[self.A[min(a, b), max(a, b)][o] for b in range(nh)] for a in range(nh)])
+        if nh > 3:
+            So = np.eye(nh) - self.A_full[:, :, o]
+        else:
+            So = np.eye(nh) - np.array([[self.A[min(a, b), max(a, b)][o] for b in range(nh)] for a in range(nh)])
         try:
             Lo = np.linalg.cholesky(So)
         except np.linalg.LinAlgError:
@@ -354,13 +385,19 @@ class InformationState(PoolState):
         LoiT = np.linalg.inv(Lo).T
         D = np.matmul(self.B.reshape(nh * self.N, self.nx), self.Fp[o].T @ LoiT,
                       out=self._work("D", (nh * self.N, nh))).reshape(nh, self.N, nh)
-        s = {(a, b): v + (1.0 if a == b else 0.0) + np.einsum("nc,nc->n", D[a], D[b]) for (a, b), v in self.A.items()}
+        if nh > 3:  # S_i of every candidate at once, (nh, nh, N): the same sums as the entries' own calls below
+            S = self.A_full + np.eye(nh)[:, :, None] + _pair_dots(D, D)
+            gains: Callable[[np.ndarray | None], np.ndarray] = lambda G: _full_gains(S, G)  # noqa: E731
+        else:
+            s = {(a, b): v + (1.0 if a == b else 0.0) + np.einsum("nc,nc->n", D[a], D[b])
+                 for (a, b), v in self.A.items()}
+            gains = lambda G: _block_gains(s, G, self.N, nh)  # noqa: E731
         if self.H is None:
-            return self.phi - 2.0 * float(np.sum(np.log(np.diag(Lo)))), _block_gains(s, None, self.N, nh)
+            return self.phi - 2.0 * float(np.sum(np.log(np.diag(Lo)))), gains(None)
         W = LoiT.T @ self.H[:, o, :]  # L_o⁻¹ H_o, (nh, ns)
         G = np.matmul(D.reshape(nh * self.N, nh), W, out=self._work("G", (nh * self.N, W.shape[1])))
         G += self.H.reshape(G.shape)  # H + D W
-        return self.phi + float(np.sum(W * W)), _block_gains(s, G.reshape(self.H.shape), self.N, nh)
+        return self.phi + float(np.sum(W * W)), gains(G.reshape(self.H.shape))
 
     def _work(self, name: str, shape: tuple[int, ...]) -> np.ndarray:
         """The work array ``name`` of :meth:`swap_gains` of that shape (made on the first call)."""

@@ -18,7 +18,9 @@ order that reach :data:`TARGET_POWER` (``poses_needed``; 0 when :data:`MAX_POSES
 from __future__ import annotations
 
 import time
+from collections.abc import Iterable, Iterator
 from dataclasses import dataclass, field
+from itertools import chain, islice
 
 import numpy as np
 
@@ -118,23 +120,25 @@ def select_check(crit: CheckPower, Fp: np.ndarray, m: int, seed: int = 0, exchan
         InputError: m larger than the pool or below 3.
     """
     t0 = time.perf_counter()
-    N = len(Fp)
+    _check_size(m, len(Fp))
+    Mi = np.einsum("nap,naq->npq", Fp, Fp)
+    return _exchanged(crit, Mi, list(islice(_greedy(crit, Mi, seed), m)), exchange, t0)
+
+
+def _check_size(m: int, N: int) -> None:
+    """Refuse m poses from a pool of N candidates unless 3 ≤ m ≤ N (InputError)."""
     if not 3 <= m <= N:
         raise InputError(f"check design: {m} poses from a pool of {N} candidates (3 to {N})")
-    Mi = np.einsum("nap,naq->npq", Fp, Fp)
-    ridge = 1e-6 * np.mean(np.einsum("npp->np", Mi), axis=0).max() * np.eye(Mi.shape[1])
-    order = np.random.default_rng(seed).permutation(N)
 
-    chosen: list[int] = []
-    path = []
-    M = np.zeros_like(ridge)
-    for _ in range(m):
-        cand = np.array([i for i in order if i not in chosen])
-        vals = phi_batch(crit, M, Mi, cand, ridge)
-        j = int(np.argmin(vals))
-        chosen.append(int(cand[j]))
-        M = M + Mi[cand[j]]
-        path.append(float(vals[j]))
+
+def _exchanged(crit: CheckPower, Mi: np.ndarray, steps: list[tuple[int, float, np.ndarray]], exchange: bool,
+               t0: float) -> PoolSelection:
+    """The selection of :func:`select_check` from its first greedy ``steps`` (:func:`_greedy`): one exchange pass
+    over them unless ``exchange`` is False; ``t0``: when the selection began (``time.perf_counter``, s)."""
+    N, m = len(Mi), len(steps)
+    chosen = [i for i, _, _ in steps]
+    path = [value for _, value, _ in steps]
+    M = steps[-1][2]
     cur, swaps = _phi_one(crit, M), 0
     for pos in range(m if exchange else 0):
         base = M - Mi[chosen[pos]]
@@ -147,6 +151,30 @@ def select_check(crit: CheckPower, Fp: np.ndarray, m: int, seed: int = 0, exchan
     return PoolSelection(indices=np.array(chosen), value=float(cur), path=np.array(path), nit=swaps,
                          time_s=time.perf_counter() - t0, success=bool(np.isfinite(cur)), status="selected",
                          message=f"greedy + one exchange pass ({swaps} swaps) on the check criterion; no certificate")
+
+
+def _greedy(crit: CheckPower, Mi: np.ndarray, seed: int) -> Iterator[tuple[int, float, np.ndarray]]:
+    """The greedy forward order of :func:`select_check`, one pose at a time (a pose's choice does not depend on how
+    many follow, so a caller may stop at any length): the candidates in a seeded random order, a ridge of 1e-6 of the
+    mean information until the set-up is determined.
+
+    Args:
+        crit: the check criterion; Mi: (N, np, np) rank-3 information of each candidate; seed: the order's seed.
+
+    Yields:
+        (the pose chosen, φ with it (log units), the information of the poses chosen so far (np, np)).
+    """
+    ridge = 1e-6 * np.mean(np.einsum("npp->np", Mi), axis=0).max() * np.eye(Mi.shape[1])
+    order = np.random.default_rng(seed).permutation(len(Mi))
+    chosen: list[int] = []
+    M = np.zeros_like(ridge)
+    while len(chosen) < len(Mi):
+        cand = np.array([i for i in order if i not in chosen])
+        vals = phi_batch(crit, M, Mi, cand, ridge)
+        j = int(np.argmin(vals))
+        chosen.append(int(cand[j]))
+        M = M + Mi[cand[j]]
+        yield int(cand[j]), float(vals[j]), M
 
 
 def phi_batch(crit: CheckPower, base: np.ndarray, Mi: np.ndarray, idx: np.ndarray, ridge: np.ndarray | None = None,
@@ -232,7 +260,12 @@ def design_check(model: CalibratedModel, *, m: int = 10, tolerance_m: float = 1e
     sigma = np.median(model.predict_with_sigma(Q_pool, station=station)[1], axis=0)
     crit, wm, p = check_criterion(model, np.atleast_2d(qw), sigma, station, seed=seed)
     Fp = wm.weighted_jacobian(p, Q_pool)[:, :3, :]
-    sel = select_check(crit, Fp, m, seed)
+    t_sel = time.perf_counter()
+    _check_size(m, len(Fp))
+    Mi = np.einsum("nap,naq->npq", Fp, Fp)
+    greedy = _greedy(crit, Mi, seed)
+    steps = list(islice(greedy, m))     # the selection's greedy poses begin the sizing's order
+    sel = _exchanged(crit, Mi, steps, True, t_sel)
     null = check_null(model)
     power = check_powers(crit, Fp[sel.indices].reshape(-1, Fp.shape[2]), tolerance_m, alpha, null)
     rng = np.random.default_rng(seed + 1)
@@ -242,23 +275,29 @@ def design_check(model: CalibratedModel, *, m: int = 10, tolerance_m: float = 1e
     vp = verdict_powers(crit, Fp[sel.indices].reshape(-1, Fp.shape[2]), tolerance_m, alpha, null, SIZE_FACTOR)
     return CheckDesign(Q=Q_pool[sel.indices], selection=sel, power=power, power_random=power_random,
                        tolerance_m=tolerance_m, alpha=alpha, sigma_m=sigma, verdict_power=vp,
-                       poses_needed=_poses_needed(crit, Fp, tolerance_m, alpha, null, seed) if size else 0,
+                       poses_needed=_poses_needed(crit, Fp, tolerance_m, alpha, null, chain(steps, greedy))
+                       if size else 0,
                        feasible_in=getattr(cell, "name", "") if cell is not None else "", success=sel.success,
                        status="designed", message=sel.message, time_s=time.perf_counter() - t0)
 
 
-def _poses_needed(crit: CheckPower, Fp: np.ndarray, tolerance_m: float, alpha: float, null, seed: int) -> int:
-    """The fewest poses of the greedy order (no exchange) whose weakest verdict power reaches :data:`TARGET_POWER`
-    (0 when :data:`MAX_POSES` or the pool do not)."""
+def _poses_needed(crit: CheckPower, Fp: np.ndarray, tolerance_m: float, alpha: float, null,
+                  greedy: Iterable[tuple[int, float, np.ndarray]]) -> int:
+    """The fewest poses of the greedy order (no exchange; ``greedy``: its steps, :func:`_greedy`) whose weakest
+    verdict power reaches :data:`TARGET_POWER` (0 when :data:`MAX_POSES` or the pool do not); the order is grown only
+    as far as the answer."""
     n = min(MAX_POSES, len(Fp))
     if n < 3:
         return 0
-    order = select_check(crit, Fp, n, seed, exchange=False).indices
-    for k in range(3, n + 1):
-        F = Fp[order[:k]].reshape(-1, Fp.shape[2])
+    order: list[int] = []
+    for i, _, _ in islice(greedy, n):
+        order.append(i)
+        if len(order) < 3:
+            continue
+        F = Fp[order].reshape(-1, Fp.shape[2])
         try:
             if min(verdict_powers(crit, F, tolerance_m, alpha, null, SIZE_FACTOR).values()) >= TARGET_POWER:
-                return k
+                return len(order)
         except IdentifiabilityError:
             continue
     return 0

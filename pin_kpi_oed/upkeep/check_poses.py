@@ -83,15 +83,16 @@ def poses_to_add(crit: CheckPower, wm, p: np.ndarray, F_given: np.ndarray, E_s: 
     for _ in range(max_add):
         vals, regs = np.full(len(order), np.inf), np.full(len(order), np.inf)
         for j, i in enumerate(order):
-            if i in chosen:
-                continue
-            regs[j] = registration_sigma_m(E_s, (M + Mi[i])[np.ix_(s, s)])
+            if i not in chosen:
+                regs[j] = registration_sigma_m(E_s, (M + Mi[i])[np.ix_(s, s)])
+        # while no candidate determines the set-up at W, its σ there leads; then the check criterion (evaluated on
+        # the candidates that determine it: no other's value is read)
+        ok = regs <= limit
+        for c in np.flatnonzero(ok).tolist():
             try:
-                vals[j] = crit.value_M(M + Mi[i] + ridge)
+                vals[c] = crit.value_M(M + Mi[order[c]] + ridge)
             except IdentifiabilityError:
                 pass
-        # while no candidate determines the set-up at W, its σ there leads; then the check criterion
-        ok = regs <= limit
         k = int(order[int(np.argmin(np.where(ok, vals, np.inf)))] if ok.any() else order[int(np.argmin(regs))])
         chosen.append(k)
         M = M + Mi[k]

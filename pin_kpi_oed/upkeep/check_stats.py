@@ -63,7 +63,7 @@ def check_powers(crit: CheckPower, F: np.ndarray, tolerance_m: float, alpha: flo
     dof = F.shape[0] - crit.setup.size
     mu = crit.mu(F.T @ F)[0]
     law = null or CheckNull()
-    return {g.name: law.power(tolerance_m ** 2 * u, dof, alpha) for g, u in zip(crit.groups, mu)}
+    return {g.name: float(p) for g, p in zip(crit.groups, law.powers(tolerance_m ** 2 * mu, dof, alpha))}
 
 
 def verdict_powers(crit: CheckPower, F: np.ndarray, tolerance_m: float, alpha: float, null: CheckNull,
@@ -75,12 +75,10 @@ def verdict_powers(crit: CheckPower, F: np.ndarray, tolerance_m: float, alpha: f
     dof = F.shape[0] - crit.setup.size
     mu = np.maximum(crit.mu(F.T @ F)[0], 1e-300)
     z = float(stats.norm.isf(alpha))
-    out = {}
-    for g, u in zip(crit.groups, mu):
-        detect = null.power((factor * tolerance_m) ** 2 * u, dof, a1)
-        sd = null.factor / np.sqrt(u)
-        out[g.name] = float(detect * stats.norm.cdf((factor - 1.0) * tolerance_m / sd - z))
-    return out
+    detect = null.powers((factor * tolerance_m) ** 2 * mu, dof, a1)
+    sd = null.factor / np.sqrt(mu)
+    shown = stats.norm.cdf((factor - 1.0) * tolerance_m / sd - z)
+    return {g.name: float(d * s) for g, d, s in zip(crit.groups, detect, shown)}
 
 
 def check_group_name(crit: CheckPower, F: np.ndarray, z: np.ndarray, dof: int, alpha: float, null: CheckNull) -> dict:
@@ -90,18 +88,22 @@ def check_group_name(crit: CheckPower, F: np.ndarray, z: np.ndarray, dof: int, a
     one-column group is not preferred when a three-column one fits far better)."""
     Gs = F[:, crit.setup]
     T = float(z @ z)
-    table, passing, gains = [], [], []
+    fits = []
     for g in crit.groups:
         A = np.hstack([Gs, F[:, g.cols] @ g.basis])
         x, *_ = np.linalg.lstsq(A, z, rcond=1e-6)
         sv = np.linalg.svd(A / np.maximum(np.linalg.norm(A, axis=0), 1e-300), compute_uv=False)
         det = bool(sv[-1] > 1e-6 * sv[0]) and A.shape[0] > A.shape[1]
         r = g.basis.shape[1] if det else max(int(np.sum(sv > 1e-6 * sv[0])) - Gs.shape[1], 0)
-        rem = float(np.sum((z - A @ x) ** 2))
+        fits.append((g, A, x, det, r, float(np.sum((z - A @ x) ** 2))))
+    rs = np.array([f[4] for f in fits], float)
+    limits = null.thresholds(dof - rs, alpha / FIT_SHARE)        # the laws of every group at once
+    gains = null.sfs(T - np.array([f[5] for f in fits], float), rs).tolist()
+    table, passing = [], []
+    for (g, A, x, det, r, rem), limit in zip(fits, limits.tolist()):
         # a group the rows do not determine may still explain them: named, with the poses that determine it
-        ok = r > 0 and rem <= null.threshold(dof - r, alpha / FIT_SHARE)
+        ok = r > 0 and rem <= limit
         table.append({"name": g.name, "chi2_remaining": rem, "dof": dof - r, "determined": det, "explains": ok})
-        gains.append(null.sf(T - rem, r))
         if ok:
             k = g.basis.shape[1]
             cov = np.linalg.pinv(A.T @ A, rcond=1e-12)[-k:, -k:]

@@ -372,7 +372,8 @@ class Monitor:
         if self.design_Q is None:
             from pin_kpi_oed.upkeep.check_design import design_check
 
-            # the poses only: not the poses the verdict needs (``size``), which cost as much again as choosing them
+            # the poses only: not the poses the verdict needs (``size``: the greedy order grown on, the verdict's
+            # power at each length)
             self.design_Q = design_check(self.model, m=10, tolerance_m=self.tolerance_m, alpha=self.alpha,
                                          seed=self.seed, station=self.label, q_work=self.qw, n_random=1,
                                          size=False).Q

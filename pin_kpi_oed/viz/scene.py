@@ -50,13 +50,14 @@ import pinocchio as pin
 
 from pin_kpi_oed.design.design_file import DesignEntry, DesignFile, load_design
 from pin_kpi_oed.errors import InputError
+from pin_kpi_oed.threads import limit_threads
 from pin_kpi_oed.viz.ellipsoids import DEFAULT_LEVEL, confidence_ellipsoid, fmt_factor, nice_factor
 from pin_kpi_oed.viz.scene_parts import (MESHCAT_FOV_DEG, anim_set, beam_matrix, default_camera, homogeneous,
                                          label_height, label_sprite, object_placements, place_camera, plane_frame,
                                          rot_y_to, working_paths)
 from pin_kpi_oed.viz.recorder import SceneRecorder, import_meshcat
-from pin_kpi_oed.viz.robot_geometry import (add_reflector, capsule_geometry, is_primitive, slug, stick_geometry,
-                                            visual_model)
+from pin_kpi_oed.viz.robot_geometry import (add_reflector, capsule_geometry, capsule_mesh, is_primitive,
+                                            meshcat_visualizer, slug, stick_geometry, visual_model)
 from pin_kpi_oed.viz.style import BEAM_COLOUR, ROBOT_RGBA, design_colours, rgb
 
 #: Designs with more poses than this get no ghosts by default (the animation shows the current pose).
@@ -367,15 +368,13 @@ class _SceneBuilder:
 
     def obstacles(self) -> None:
         """Obstacle capsules (spheres when of length 0); environment files' capsules under their own toggle."""
-        from pinocchio.visualize.meshcat_visualizer import createCapsule
-
         mg = self.mg
         env_caps = self.df.cell.environment_capsule_names
         for o in self.df.obstacles:
             node = self.vis["cell/environment_capsules" if o.name in env_caps else "cell/obstacles"][slug(o.name)]
             mat = mg.MeshPhongMaterial(color=0x8899AA, opacity=0.8)
             L = float(np.linalg.norm(o.b - o.a))
-            node.set_object(createCapsule(max(L, 1e-6), o.radius) if L > 1e-9 else mg.Sphere(o.radius), mat)
+            node.set_object(capsule_mesh(max(L, 1e-6), o.radius) if L > 1e-9 else mg.Sphere(o.radius), mat)
             R = pin.Quaternion.FromTwoVectors(np.array([0.0, 0.0, 1.0]), (o.b - o.a) / L).toRotationMatrix() \
                 if L > 1e-9 else None
             node.set_transform(homogeneous(R, 0.5 * (o.a + o.b)))
@@ -399,10 +398,8 @@ class _SceneBuilder:
 
     def robot(self) -> None:
         """The robot through Pinocchio's meshcat visualiser, at the first working configuration."""
-        from pinocchio.visualize import MeshcatVisualizer
-
         vis = self.vis
-        self.viz = viz = MeshcatVisualizer(self.model, self.collision, self.visual)
+        self.viz = viz = meshcat_visualizer()(self.model, self.collision, self.visual)
         viz.initViewer(viewer=vis)
         viz.loadViewerModel(rootNodeName="robot")
         vis["robot"].set_transform(self.W.homogeneous)  # world placement of the robot
@@ -556,6 +553,7 @@ class _SceneBuilder:
         return poses
 
 
+@limit_threads  # small eigen-decompositions and placements: one BLAS thread (pin_kpi_oed.threads)
 def build_scene(design: DesignFile | str | os.PathLike | Mapping, options: SceneOptions | None = None,
                 vis: Any = None) -> Scene:
     """Build the meshcat scene of a design file (see the module docstring for its nodes).

@@ -8,6 +8,7 @@ text line at any zoom, always facing the camera.
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Sequence
 from typing import Any
 
@@ -65,7 +66,16 @@ def object_placements(model, data, gmodel, gdata, q, world: pin.SE3):
 
 
 def _text_png(lines: Sequence[tuple[str, str]], dpi: int = 150) -> tuple[bytes, float]:
-    """A transparent PNG of coloured text lines [(text, '#rrggbb')]; returns (png, width / height)."""
+    """A transparent PNG of coloured text lines [(text, '#rrggbb')]; returns (png, width / height).
+
+    The same lines are drawn once per process (a scene labels every working configuration alike, 40-60 ms a PNG):
+    the PNG's bytes are the same either way."""
+    return _text_png_of(tuple((str(text), str(colour)) for text, colour in lines), int(dpi))
+
+
+@functools.lru_cache(maxsize=64)
+def _text_png_of(lines: tuple[tuple[str, str], ...], dpi: int) -> tuple[bytes, float]:
+    """:func:`_text_png` of hashable lines (bytes and a float: nothing a caller can change)."""
     import io
     import struct
 
