@@ -92,10 +92,17 @@ class SelectionPath:
 
 @dataclass
 class _FoldGrams:
-    """Unit-scaled columns X̃ = X D⁻¹ of [A, groups] and their Gram sums per fold (training / held-out rows)."""
+    """Unit-scaled columns X̃ = X D⁻¹ of [A, groups] and their Gram sums per fold (training / held-out rows).
+
+    The held-out rows of each fold are kept as one contiguous block (``Xte``, ``bte``, ``sigte``): a fold's columns S
+    are then gathered from its block (:func:`_cv_exact`) instead of from rows scattered over all of X̃, the same
+    numbers at about a third of the cost."""
 
     b: np.ndarray
-    X: np.ndarray
+    Xte: list[np.ndarray]
+    bte: list[np.ndarray]
+    sigte: list[np.ndarray]
+    n_cols: int
     sc: np.ndarray
     cols: list[np.ndarray]
     by_size: dict[int, list[int]]
@@ -107,7 +114,6 @@ class _FoldGrams:
     bbte: list[float]
     Gtr: list[np.ndarray]
     htr: list[np.ndarray]
-    sig: np.ndarray
     n_meas: float
     ridge: float
 
@@ -137,12 +143,15 @@ def _fold_grams(b: np.ndarray, A: np.ndarray, groups: Sequence[np.ndarray], fold
     G = X.T @ X
     h = X.T @ b
     te_rows = [np.flatnonzero(fold == k) for k in range(K)]
-    Gte = [X[r].T @ X[r] for r in te_rows]
-    hte = [X[r].T @ b[r] for r in te_rows]
+    Xte = [X[r] for r in te_rows]                     # each fold's held-out rows, one contiguous block
+    Gte = [Xk.T @ X[r] for Xk, r in zip(Xte, te_rows)]  # two operands (gemm): the same sums as X[r].T @ X[r]
+    del X
+    hte = [Xk.T @ b[r] for Xk, r in zip(Xte, te_rows)]
     sig = np.ones(n) if row_sigma is None else np.asarray(row_sigma, float)
-    return _FoldGrams(b=b, X=X, sc=sc, cols=cols, by_size=by_size, G=G, h=h, te_rows=te_rows, Gte=Gte, hte=hte,
-                      bbte=[float(b[r] @ b[r]) for r in te_rows], Gtr=[G - Gk for Gk in Gte],
-                      htr=[h - hk for hk in hte], sig=sig, n_meas=n / rows_per_measurement, ridge=ridge)
+    return _FoldGrams(b=b, Xte=Xte, bte=[b[r] for r in te_rows], sigte=[sig[r] for r in te_rows],
+                      n_cols=int(sc.size), sc=sc, cols=cols, by_size=by_size, G=G, h=h, te_rows=te_rows, Gte=Gte,
+                      hte=hte, bbte=[float(b[r] @ b[r]) for r in te_rows], Gtr=[G - Gk for Gk in Gte],
+                      htr=[h - hk for hk in hte], n_meas=n / rows_per_measurement, ridge=ridge)
 
 
 def _cv_exact(fg: _FoldGrams, S: np.ndarray) -> tuple[float, float]:
@@ -150,10 +159,10 @@ def _cv_exact(fg: _FoldGrams, S: np.ndarray) -> tuple[float, float]:
     sse, sse_m = 0.0, 0.0
     for k in range(fg.K):
         M = fg.Gtr[k][np.ix_(S, S)] + fg.ridge * np.eye(S.size)
-        x = sla.solve(M, fg.htr[k][S], assume_a="pos")
-        r = fg.b[fg.te_rows[k]] - fg.X[np.ix_(fg.te_rows[k], S)] @ x
+        x = sla.solve(M, fg.htr[k][S], assume_a="pos", check_finite=False)
+        r = fg.bte[k] - fg.Xte[k].take(S, axis=1) @ x   # C-ordered, as X̃[np.ix_(rows, S)]: the same product
         sse += float(r @ r)
-        sse_m += float(np.sum((r * fg.sig[fg.te_rows[k]]) ** 2))
+        sse_m += float(np.sum((r * fg.sigte[k]) ** 2))
     return sse, float(np.sqrt(sse_m / fg.n_meas))
 
 
@@ -168,7 +177,7 @@ def _score_block(fg: _FoldGrams, k: int, S: np.ndarray, cf: Any, xS: np.ndarray,
     ng, s = C.shape
     p = S.size
     Bt = Gtr[np.ix_(S, C.ravel())]  # (p, ng*s)
-    Z = sla.cho_solve(cf, Bt).reshape(p, ng, s)
+    Z = sla.cho_solve(cf, Bt, check_finite=False).reshape(p, ng, s)
     Bt = Bt.reshape(p, ng, s)
     Sg = Gtr[C[:, :, None], C[:, None, :]] + fg.ridge * np.eye(s) - np.einsum("pgi,pgj->gij", Bt, Z)
     rhs = htr[C] - np.einsum("pgi,p->gi", Z, htr[S])
@@ -193,8 +202,8 @@ def _scores(fg: _FoldGrams, S: np.ndarray, remaining: np.ndarray, gmax: np.ndarr
     bad = np.zeros(n_groups, bool)
     rem = set(remaining.tolist())
     for k in range(fg.K):
-        cf = sla.cho_factor(fg.Gtr[k][np.ix_(S, S)] + fg.ridge * np.eye(S.size))
-        xS = sla.cho_solve(cf, fg.htr[k][S])
+        cf = sla.cho_factor(fg.Gtr[k][np.ix_(S, S)] + fg.ridge * np.eye(S.size), check_finite=False)
+        xS = sla.cho_solve(cf, fg.htr[k][S], check_finite=False)
         for gl in fg.by_size.values():
             gl = [g for g in gl if g in rem]
             if not gl:
@@ -293,6 +302,6 @@ def forward_select(b: np.ndarray, A: np.ndarray, groups: Sequence[np.ndarray], f
     gmax = np.full(len(groups), np.inf) if group_max is None else np.asarray(group_max, float)
     S, selected, path_sse, path_rms, stop = _greedy_path(fg, A.shape[1], gmax, cap, opts.min_rel_gain, desc,
                                                          opts.show_progress)
-    x = np.zeros(fg.X.shape[1])
+    x = np.zeros(fg.n_cols)
     x[S] = sla.solve(fg.G[np.ix_(S, S)] + opts.ridge * np.eye(S.size), fg.h[S], assume_a="pos")
     return SelectionPath(selected, path_sse, path_rms, x / fg.sc, stop)
