@@ -339,3 +339,31 @@ def test_cli_diagnose_transfer_section_reports_the_written_models_sigma(withheld
     ref = validate_transfer(load_model_file(m), read_measurements(tmp_path / "val.csv"), register_rows=40, seed=3)
     assert ms["z_rms"] == pytest.approx(ref["z_rms"], rel=1e-6) and ms["n"] == ref["n"] == 260
     assert 0.67 <= ms["z_rms"] <= 1.5 and "discrepancy" in ms["model"]
+
+
+def test_coverage_of_a_training_remembered_equals_the_one_computed():
+    """Every fit of a diagnosis states its training's coverage (and the discrepancy's fit again): the second time it is
+    remembered, every number equal to the one computed, with arrays of its own (changing one changes no later
+    coverage); a training forgotten after ``REMEMBERED`` others is computed again to the same numbers, and another
+    seed or periodic mask is another coverage."""
+    from pin_kpi_oed.discrepancy.coverage import REMEMBERED, JointCoverage
+
+    rng = np.random.default_rng(2024)
+    Q = rng.uniform(-3.0, 3.0, (2300, 6))                          # above MAX_STORED: the seed draws the subset
+    per = np.array([True, True, False, True, True, True])
+
+    def same(a, b):
+        return (np.array_equal(a.Z, b.Z) and a.radius_rad == b.radius_rad and a.n_rows == b.n_rows
+                and np.array_equal(a.joint_radius_rad, b.joint_radius_rad) and np.array_equal(a.periodic, b.periodic))
+    first = JointCoverage.from_training(Q, 3, per)
+    again = JointCoverage.from_training(Q.copy(), 3, per)
+    assert same(first, again) and again.Z is not first.Z
+    again.Z[:] = 0.0
+    again.joint_radius_rad[:] = 9.0
+    assert same(first, JointCoverage.from_training(Q, 3, per))
+    other_seed = JointCoverage.from_training(Q, 4, per)
+    assert not np.array_equal(other_seed.Z, first.Z)
+    assert not np.array_equal(JointCoverage.from_training(Q, 3, None).periodic, first.periodic)
+    for k in range(REMEMBERED):
+        JointCoverage.from_training(Q[k:k + 50], 3, per)
+    assert same(first, JointCoverage.from_training(Q, 3, per))      # computed again
