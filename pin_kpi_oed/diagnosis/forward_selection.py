@@ -194,28 +194,39 @@ def _score_block(fg: _FoldGrams, k: int, S: np.ndarray, cf: Any, xS: np.ndarray,
     return c, xg, dS
 
 
+def _stacked_bounds(chosen_pos: list[tuple[np.ndarray, float]]) -> list[tuple[np.ndarray, np.ndarray]]:
+    """The selected groups' positions in S and amplitude bounds, stacked by group size: [(positions (k, s), bounds
+    (k,))], so that one array expression checks every selected group of a size (:func:`_scores`)."""
+    by: dict[int, list[tuple[np.ndarray, float]]] = {}
+    for pos, mx in chosen_pos:
+        by.setdefault(pos.size, []).append((pos, mx))
+    return [(np.array([p for p, _ in v]), np.array([m for _, m in v], float)) for v in by.values()]
+
+
 def _scores(fg: _FoldGrams, S: np.ndarray, remaining: np.ndarray, gmax: np.ndarray,
             chosen_pos: list[tuple[np.ndarray, float]]) -> np.ndarray:
-    """CV(S ∪ g) of every remaining group g (inf: not remaining, or an implausible amplitude in some fold)."""
+    """CV(S ∪ g) of every remaining group g (inf: not remaining, or an implausible amplitude in some fold).
+
+    The remaining groups of each size (and their columns) and the selected groups' bounds are gathered once for all
+    folds; each selected group's amplitude is the norm over its own s columns, as one group at a time."""
     n_groups = len(fg.cols)
     tot = np.zeros(n_groups)
     bad = np.zeros(n_groups, bool)
     rem = set(remaining.tolist())
+    sized = [(gl, np.array([fg.cols[g] for g in gl])) for gl in ([g for g in gs if g in rem]
+                                                                    for gs in fg.by_size.values()) if gl]
+    bounds = _stacked_bounds(chosen_pos)
     for k in range(fg.K):
         cf = sla.cho_factor(fg.Gtr[k][np.ix_(S, S)] + fg.ridge * np.eye(S.size), check_finite=False)
         xS = sla.cho_solve(cf, fg.htr[k][S], check_finite=False)
-        for gl in fg.by_size.values():
-            gl = [g for g in gl if g in rem]
-            if not gl:
-                continue
-            C = np.array([fg.cols[g] for g in gl])  # (ng, s)
+        for gl, C in sized:  # C: (ng, s)
             c, xg, dS = _score_block(fg, k, S, cf, xS, C)
             tot[gl] += c
             # plausibility: the candidate's and the selected groups' amplitudes in this fold's fit
             over = np.sqrt(np.sum((xg / fg.sc[C]) ** 2, axis=1)) > gmax[gl]
-            for pos, mx in chosen_pos:
-                v = (xS[pos][None, :] + dS[:, pos]) / fg.sc[S[pos]]
-                over |= np.sqrt(np.sum(v ** 2, axis=1)) > mx
+            for P, mx in bounds:  # (k, s), (k,)
+                v = (xS[P][None, :, :] + dS[:, P]) / fg.sc[S[P]]
+                over |= np.any(np.sqrt(np.sum(v ** 2, axis=2)) > mx, axis=1)
             bad[np.asarray(gl)[over]] = True
     out = np.full(n_groups, np.inf)
     ok = remaining[~bad[remaining]]
