@@ -90,6 +90,30 @@ class SelectionPath:
     stop: str
 
 
+class _HeldColumns:
+    """A fold's held-out rows at the columns S of its last fit (:func:`_cv_exact`): the first |S| columns of a
+    buffer are X̃[rows][:, S]. Along the greedy path S only grows by appending a group, so only the new columns are
+    gathered; any other S is gathered whole. The product with the buffer's first |S| columns is the one with the
+    gathered block (the same numbers)."""
+
+    def __init__(self, rows: int, capacity: int = 64) -> None:
+        self.buf = np.empty((rows, capacity))
+        self.S = np.zeros(0, int)
+
+    def at(self, Xk: np.ndarray, S: np.ndarray) -> np.ndarray:
+        """X̃[rows][:, S] (a view of the buffer) for this fold's held-out block ``Xk``."""
+        have = self.S.size
+        if have > S.size or not np.array_equal(self.S, S[:have]):
+            have = 0
+        if S.size > self.buf.shape[1]:
+            grown = np.empty((Xk.shape[0], max(2 * self.buf.shape[1], S.size)))
+            grown[:, :have] = self.buf[:, :have]
+            self.buf = grown
+        self.buf[:, have:S.size] = Xk.take(S[have:], axis=1)
+        self.S = np.array(S, int)
+        return self.buf[:, :S.size]
+
+
 @dataclass
 class _FoldGrams:
     """Unit-scaled columns X̃ = X D⁻¹ of [A, groups] and their Gram sums per fold (training / held-out rows).
@@ -116,6 +140,7 @@ class _FoldGrams:
     htr: list[np.ndarray]
     n_meas: float
     ridge: float
+    held: list[_HeldColumns]
 
     @property
     def K(self) -> int:
@@ -151,7 +176,8 @@ def _fold_grams(b: np.ndarray, A: np.ndarray, groups: Sequence[np.ndarray], fold
     return _FoldGrams(b=b, Xte=Xte, bte=[b[r] for r in te_rows], sigte=[sig[r] for r in te_rows],
                       n_cols=int(sc.size), sc=sc, cols=cols, by_size=by_size, G=G, h=h, te_rows=te_rows, Gte=Gte,
                       hte=hte, bbte=[float(b[r] @ b[r]) for r in te_rows], Gtr=[G - Gk for Gk in Gte],
-                      htr=[h - hk for hk in hte], n_meas=n / rows_per_measurement, ridge=ridge)
+                      htr=[h - hk for hk in hte], n_meas=n / rows_per_measurement, ridge=ridge,
+                      held=[_HeldColumns(len(r)) for r in te_rows])
 
 
 def _cv_exact(fg: _FoldGrams, S: np.ndarray) -> tuple[float, float]:
@@ -160,7 +186,7 @@ def _cv_exact(fg: _FoldGrams, S: np.ndarray) -> tuple[float, float]:
     for k in range(fg.K):
         M = fg.Gtr[k][np.ix_(S, S)] + fg.ridge * np.eye(S.size)
         x = sla.solve(M, fg.htr[k][S], assume_a="pos", check_finite=False)
-        r = fg.bte[k] - fg.Xte[k].take(S, axis=1) @ x   # C-ordered, as X̃[np.ix_(rows, S)]: the same product
+        r = fg.bte[k] - fg.held[k].at(fg.Xte[k], S) @ x   # as X̃[np.ix_(rows, S)] @ x: the same product
         sse += float(r @ r)
         sse_m += float(np.sum((r * fg.sigte[k]) ** 2))
     return sse, float(np.sqrt(sse_m / fg.n_meas))
