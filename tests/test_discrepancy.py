@@ -68,6 +68,31 @@ def test_kernel_value_without_gradient_equals_the_chord_form():
     assert np.abs(K_other - k(X[::-1])).max() < 1e-12
 
 
+@pytest.mark.parametrize("per_joint", [(True, True, True), (False, True, False), (True, False, True)])
+def test_kernel_gradient_columns_equal_the_parts_formulas_to_the_last_bit(per_joint):
+    """dK/dlog θ written part by part into one array equals the parts' formulas concatenated in scikit-learn's order
+    (amplitude, joint amplitudes, joint length scales, length scales; a scalar hyper-parameter's column summed over
+    the joints) bit for bit, a linear joint included: the regressor compared with it takes the same steps."""
+    from pin_kpi_oed.discrepancy.kernel import chord_squared
+    rng = np.random.default_rng(11)
+    vec_a, vec_ell, vec_L = per_joint
+    lin = np.array([True, False, False, False, False, False])
+    k = JointKernel(0.7, rng.uniform(0.5, 2, 6) if vec_L else 1.3, rng.uniform(0.1, 0.5, 6) if vec_a else 0.2,
+                    rng.uniform(0.1, 1, 6) if vec_ell else 0.6, linear=lin)
+    X = rng.uniform(-3, 3, (30, 6))
+    c, L, a, ell = k.parts(6)
+    D = chord_squared(X, X, lin)
+    Dp, Da = D / L ** 2, D / ell ** 2
+    P = c ** 2 * np.exp(-0.5 * Dp.sum(-1))
+    A = a ** 2 * np.exp(-0.5 * Da)
+    want = np.concatenate([2.0 * P[..., None], 2.0 * A if vec_a else 2.0 * A.sum(-1, keepdims=True),
+                           A * Da if vec_ell else (A * Da).sum(-1, keepdims=True),
+                           P[..., None] * Dp if vec_L else (P * Dp.sum(-1))[..., None]], axis=-1)
+    K, G = k(X, eval_gradient=True)
+    assert G.shape == want.shape == (30, 30, len(k.theta))
+    assert np.array_equal(G, want) and np.array_equal(K, P + A.sum(-1))
+
+
 def test_kfold_by_block_inversion_equals_refitting_each_fold():
     """The exact K-fold check from one inverse equals building each fold's posterior without its rows."""
     from pin_kpi_oed.discrepancy.fit import kfold_split
@@ -339,3 +364,31 @@ def test_cli_diagnose_transfer_section_reports_the_written_models_sigma(withheld
     ref = validate_transfer(load_model_file(m), read_measurements(tmp_path / "val.csv"), register_rows=40, seed=3)
     assert ms["z_rms"] == pytest.approx(ref["z_rms"], rel=1e-6) and ms["n"] == ref["n"] == 260
     assert 0.67 <= ms["z_rms"] <= 1.5 and "discrepancy" in ms["model"]
+
+
+def test_coverage_of_a_training_remembered_equals_the_one_computed():
+    """Every fit of a diagnosis states its training's coverage (and the discrepancy's fit again): the second time it is
+    remembered, every number equal to the one computed, with arrays of its own (changing one changes no later
+    coverage); a training forgotten after ``REMEMBERED`` others is computed again to the same numbers, and another
+    seed or periodic mask is another coverage."""
+    from pin_kpi_oed.discrepancy.coverage import REMEMBERED, JointCoverage
+
+    rng = np.random.default_rng(2024)
+    Q = rng.uniform(-3.0, 3.0, (2300, 6))                          # above MAX_STORED: the seed draws the subset
+    per = np.array([True, True, False, True, True, True])
+
+    def same(a, b):
+        return (np.array_equal(a.Z, b.Z) and a.radius_rad == b.radius_rad and a.n_rows == b.n_rows
+                and np.array_equal(a.joint_radius_rad, b.joint_radius_rad) and np.array_equal(a.periodic, b.periodic))
+    first = JointCoverage.from_training(Q, 3, per)
+    again = JointCoverage.from_training(Q.copy(), 3, per)
+    assert same(first, again) and again.Z is not first.Z
+    again.Z[:] = 0.0
+    again.joint_radius_rad[:] = 9.0
+    assert same(first, JointCoverage.from_training(Q, 3, per))
+    other_seed = JointCoverage.from_training(Q, 4, per)
+    assert not np.array_equal(other_seed.Z, first.Z)
+    assert not np.array_equal(JointCoverage.from_training(Q, 3, None).periodic, first.periodic)
+    for k in range(REMEMBERED):
+        JointCoverage.from_training(Q[k:k + 50], 3, per)
+    assert same(first, JointCoverage.from_training(Q, 3, per))      # computed again

@@ -32,7 +32,9 @@ The training configurations kept for the measure are a seeded subset of at most 
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import threading
+from collections import OrderedDict
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -49,6 +51,43 @@ MIN_RADIUS_RAD = 0.05
 #: Most training configurations the measure keeps (a seeded subset above it).
 MAX_STORED = 2000
 _TWO_PI = 2.0 * np.pi
+#: Trainings whose coverage is remembered (:class:`_CoverageCache`).
+REMEMBERED = 4
+
+
+class _CoverageCache:
+    """The coverage of the last few trainings, keyed by their configurations' bytes, the seed and the periodic joints:
+    a diagnosis fits its training rows once per candidate effect, each fit states the same coverage (and the
+    discrepancy's fit states it again), which costs a k-d tree and a sort per joint each time. Each call returns a
+    fresh :class:`JointCoverage` with its own arrays, equal to the one computed (every number the same)."""
+
+    def __init__(self, size: int = REMEMBERED) -> None:
+        self.size = int(size)
+        self.entries: OrderedDict[bytes, JointCoverage] = OrderedDict()
+        self.lock = threading.Lock()
+
+    @staticmethod
+    def key(Q: np.ndarray, seed: int, periodic: np.ndarray | None) -> bytes:
+        """What the coverage depends on: Q's shape and values, the seed, the periodic joints."""
+        per = b"N" if periodic is None else b"P" + np.asarray(periodic, bool).tobytes()
+        return np.asarray(Q.shape, np.int64).tobytes() + int(seed).to_bytes(8, "little", signed=True) + per + \
+            np.ascontiguousarray(Q).tobytes()
+
+    def get(self, key: bytes) -> JointCoverage | None:
+        """A copy of the remembered coverage for ``key``, or None."""
+        with self.lock:
+            got = self.entries.get(key)
+            if got is not None:
+                self.entries.move_to_end(key)
+        return None if got is None else got.copy()
+
+    def put(self, key: bytes, cov: JointCoverage) -> None:
+        """Remember a copy of ``cov`` under ``key`` (the oldest forgotten beyond :attr:`size`)."""
+        with self.lock:
+            self.entries[key] = cov.copy()
+            self.entries.move_to_end(key)
+            while len(self.entries) > self.size:
+                self.entries.popitem(last=False)
 
 
 def joint_space_box(Q: np.ndarray, periodic: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
@@ -128,6 +167,17 @@ class JointCoverage:
                 :attr:`~pin_kpi_oed.model.robot.Robot.periodic_joints`); None: every joint.
         """
         Q = np.atleast_2d(np.asarray(Q, float))
+        key = _COVERAGES.key(Q, seed, periodic)
+        known = _COVERAGES.get(key)
+        if known is not None:
+            return known
+        out = cls._measured(Q, seed, periodic)
+        _COVERAGES.put(key, out)
+        return out
+
+    @classmethod
+    def _measured(cls, Q: np.ndarray, seed: int, periodic: np.ndarray | None) -> JointCoverage:
+        """:meth:`from_training` computed (Q already (n, d) float)."""
         W, box = joint_space_box(Q, periodic)
         per = box > 0
         _, first = np.unique(np.round(W, 9), axis=0, return_index=True)
@@ -145,6 +195,11 @@ class JointCoverage:
                     nn = _nearest_gap(a, bool(per[j]))
                     per_joint[j] = max(MIN_RADIUS_RAD, RADIUS_FACTOR * float(np.quantile(nn, 0.95)))
         return cls(U, float(radius), per_joint, int(len(Q)), per.copy())
+
+    def copy(self) -> JointCoverage:
+        """The same coverage with its own arrays."""
+        return replace(self, Z=self.Z.copy(), joint_radius_rad=self.joint_radius_rad.copy(),
+                       periodic=None if self.periodic is None else self.periodic.copy())
 
     def distance(self, Q: np.ndarray) -> np.ndarray:
         """(m,) joint-space distance (rad / m) of each configuration to its nearest training configuration."""
@@ -212,3 +267,7 @@ class JointCoverage:
                                 or not all(isinstance(v, bool) for v in per)):
             raise ValueError(f"{where}.periodic: must be {n_joints} true/false values, got {per!r}")
         return cls(Z, float(r), rj, int(n), None if per is None else np.array(per, bool))
+
+
+#: One shared cache: the trainings of the last few fits (:meth:`JointCoverage.from_training`).
+_COVERAGES = _CoverageCache()
