@@ -127,76 +127,38 @@ def is_primitive(visual: pin.GeometryModel) -> bool:
                for g in visual.geometryObjects)
 
 
-#: The capsule mesh's resolution: Pinocchio's ``createCapsule`` defaults (segments around, quarter-circle steps).
-CAPSULE_RADIAL, CAPSULE_CAP = 30, 10
+@functools.lru_cache(maxsize=64)
+def _capsule_arrays(length: float, radius: float) -> tuple[np.ndarray, np.ndarray]:
+    """The vertices and triangles of Pinocchio's ``createCapsule(length, radius)`` mesh as meshcat stores them
+    (float32, uint32), read-only: its Python loops take about 7 ms a capsule, and a scene draws the robot's capsules
+    once per pose it shows."""
+    from pinocchio.visualize.meshcat_visualizer import createCapsule
 
-
-@functools.lru_cache(maxsize=1)
-def _capsule_parts() -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """(cos θ_i, sin θ_i, cos φ_j, sin φ_j, faces) of Pinocchio's capsule mesh: the angles' cosines and sines by
-    the same scalar calls as ``createCapsule``, and its triangles (vertex indices as floats, as it builds them)."""
-    n0, n1 = CAPSULE_RADIAL, CAPSULE_CAP
-    theta = [(np.pi / 2 * i) / n1 for i in range(n1)]
-    phi = [(2 * np.pi * j) / n0 for j in range(n0)]
-    ct, st = np.array([np.cos(t) for t in theta]), np.array([np.sin(t) for t in theta])
-    cp, sp = np.array([np.cos(f) for f in phi]), np.array([np.sin(f) for f in phi])
-    stride, last = 2 * n1, n0 * 2 * n1 + 1
-    j = np.arange(n0)[:, None]
-    jn = (j + 1) % n0
-    i = np.arange(n1 - 1)[None, :]
-    ends = np.stack([np.hstack([jn * stride + n1, jn * stride, j * stride]),
-                     np.hstack([j * stride + n1, jn * stride + n1, j * stride]),
-                     np.hstack([j * stride + n1 - 1, jn * stride + n1 - 1, np.full_like(j, last - 1)]),
-                     np.hstack([jn * stride + 2 * n1 - 1, j * stride + 2 * n1 - 1, np.full_like(j, last)])], axis=1)
-    sides = np.stack([np.stack([jn * stride + i, jn * stride + i + 1, j * stride + i], axis=-1),
-                      np.stack([jn * stride + i + 1, j * stride + i + 1, j * stride + i], axis=-1),
-                      np.stack([jn * stride + n1 + i + 1, jn * stride + n1 + i, j * stride + n1 + i], axis=-1),
-                      np.stack([jn * stride + n1 + i + 1, j * stride + n1 + i, j * stride + n1 + i + 1], axis=-1)],
-                     axis=2).reshape(n0, 4 * (n1 - 1), 3)
-    faces = np.concatenate([ends, sides], axis=1).reshape(-1, 3).astype(float)
-    return ct, st, cp, sp, faces
-
-
-def capsule_arrays(length: float, radius: float) -> tuple[np.ndarray, np.ndarray]:
-    """The vertices and triangles of Pinocchio's capsule mesh (``createCapsule(length, radius)`` of
-    ``pinocchio.visualize.meshcat_visualizer``, whose Python loops took 7 ms a capsule), bit for bit, by array
-    operations.
-
-    Args:
-        length: the length of the capsule's segment (m); radius: its radius (m).
-
-    Returns:
-        (vertices (2·30·10 + 2, 3) m, triangles (30·(4·9 + 4), 3) vertex indices as floats).
-    """
-    ct, st, cp, sp, faces = _capsule_parts()
-    h, r = length, radius
-    V = np.empty((CAPSULE_RADIAL, 2, CAPSULE_CAP, 3))
-    V[:, :, :, 0] = (ct[None, :] * cp[:, None] * r)[:, None, :]
-    V[:, :, :, 1] = (ct[None, :] * sp[:, None] * r)[:, None, :]
-    V[:, 0, :, 2] = -h / 2 - st * r
-    V[:, 1, :, 2] = h / 2 + st * r
-    vertices = np.vstack([V.reshape(-1, 3), [[0.0, 0.0, -h / 2 - r], [0.0, 0.0, h / 2 + r]]])
-    return vertices, faces.copy()
+    mesh = createCapsule(length, radius)
+    V, F = np.array(mesh.vertices), np.array(mesh.faces)
+    V.flags.writeable = F.flags.writeable = False
+    return V, F
 
 
 def capsule_mesh(length: float, radius: float) -> Any:
-    """Pinocchio's capsule mesh as a meshcat geometry (:func:`capsule_arrays`).
+    """Pinocchio's capsule mesh (``createCapsule``) as a new meshcat geometry, its arrays made once per size.
 
     Args:
         length: the length of the capsule's segment (m); radius: its radius (m).
 
     Returns:
-        A ``meshcat.geometry.TriangularMeshGeometry``.
+        A ``meshcat.geometry.TriangularMeshGeometry`` of its own (its own uuid), sharing the read-only arrays.
     """
     import meshcat.geometry as mg
 
-    return mg.TriangularMeshGeometry(*capsule_arrays(length, radius))
+    return mg.TriangularMeshGeometry(*_capsule_arrays(float(length), float(radius)))
 
 
 @functools.lru_cache(maxsize=1)
 def meshcat_visualizer() -> type:
-    """Pinocchio's ``MeshcatVisualizer`` drawing Coal capsules with :func:`capsule_mesh` (the same mesh; a scene's
-    ghosts draw every capsule of the robot once per pose), every other geometry as Pinocchio draws it.
+    """Pinocchio's ``MeshcatVisualizer`` drawing Coal capsules with :func:`capsule_mesh` (Pinocchio's mesh, made
+    once per size: a scene's ghosts draw every capsule of the robot once per pose), every other geometry as
+    Pinocchio draws it.
 
     Returns:
         The visualiser class (a subclass of ``pinocchio.visualize.MeshcatVisualizer``).
