@@ -11,8 +11,10 @@ from pin_kpi_oed.viz.robot_geometry import capsule_mesh, meshcat_visualizer
 @pytest.mark.parametrize("length, radius", [(1e-6, 0.05), (0.3, 0.1), (1.2345, 0.0731),
                                             (np.float64(0.7), np.float64(0.12)), (2.0, 1e-3)])
 def test_capsule_mesh_is_pinocchios_and_each_geometry_its_own(length, radius):
+    cls = meshcat_visualizer()  # Pinocchio's visualiser imported as the scene imports it
     import pinocchio.visualize.meshcat_visualizer as pmv
 
+    assert cls.__mro__[1] is pmv.MeshcatVisualizer
     ref, a, b = pmv.createCapsule(length, radius), capsule_mesh(length, radius), capsule_mesh(length, radius)
     for mesh in (a, b):
         for got, want in ((mesh.vertices, ref.vertices), (mesh.faces, ref.faces)):
@@ -26,9 +28,9 @@ def test_capsule_mesh_is_pinocchios_and_each_geometry_its_own(length, radius):
 def test_the_scene_visualiser_draws_capsules_with_it_and_the_rest_as_pinocchio():
     import coal
     import pinocchio as pin
-    from pinocchio.visualize import MeshcatVisualizer
 
     cls = meshcat_visualizer()
+    from pinocchio.visualize import MeshcatVisualizer
     assert issubclass(cls, MeshcatVisualizer) and meshcat_visualizer() is cls
     viz = cls(pin.Model(), None, pin.GeometryModel())
     cap = pin.GeometryObject("c", 0, pin.SE3.Identity(), coal.Capsule(0.08, 0.4))

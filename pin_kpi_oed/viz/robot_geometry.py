@@ -18,6 +18,7 @@ from pin_kpi_oed.cell.meshes import build_geometry, package_dirs
 from pin_kpi_oed.errors import RobotLoadError
 from pin_kpi_oed.model.robot import Robot
 from pin_kpi_oed.model.urdf_joints import locked_posture, model_from_urdf_text
+from pin_kpi_oed.viz.recorder import import_meshcat
 from pin_kpi_oed.viz.style import CAPSULE_RGBA, ROBOT_RGBA
 
 
@@ -164,6 +165,8 @@ def meshcat_visualizer() -> type:
         The visualiser class (a subclass of ``pinocchio.visualize.MeshcatVisualizer``).
     """
     import coal
+
+    import_meshcat()  # before Pinocchio's visualiser imports it (pyzmq's DeprecationWarning left unsaid)
     import meshcat.geometry as mg
     from pinocchio.visualize import MeshcatVisualizer
 
