@@ -124,9 +124,9 @@ def _hedged(problem, cell, Q_pool: np.ndarray, Jp: np.ndarray, opts, t_kpi: floa
     t_pool = time.process_time() - t0
     r = run_designs(cell, ["kpi_gp"], 60, 0, opts, problem)[-1]
     ratio = r.time_s / t_kpi
-    print(f"  hedged over {len(h.members)} priors: pool 1000 -> 60 {t_pool:.2f} s CPU ({sel.exchanges} exchanges; "
+    print(f"  hedged over {len(h.members)} priors: pool 1000 -> 60 {t_pool:.2f} s CPU ({sel.nit} exchanges; "
           f"target <= 10 s); design {r.time_s:.2f} s {r.nit} it, hedged / kpi time = {ratio:.2f} (target <= 6)")
-    return {"members": len(h.members), "pool_cpu_s": t_pool, "exchanges": sel.exchanges, "design_time_s": r.time_s,
+    return {"members": len(h.members), "pool_cpu_s": t_pool, "exchanges": sel.nit, "design_time_s": r.time_s,
             "iterations": r.nit, "time_ratio_over_kpi": ratio, "feasible": r.feasible}
 
 
