@@ -63,7 +63,7 @@ def test_help_loads_neither_numpy_nor_any_command_module() -> None:
     heavy = [m for m in HEAVY + ("numpy", "pinocchio", "scipy") if _loaded(mods, m)]
     assert not heavy, f"pin-kpi-oed --help loads {heavy}"
     topics = sorted(m for m in mods if m.startswith("pin_kpi_oed.cli.") and m not in
-                    ("pin_kpi_oed.cli.app", "pin_kpi_oed.cli.commands"))
+                    ("pin_kpi_oed.cli.app", "pin_kpi_oed.cli.commands", "pin_kpi_oed.cli.interrupts"))
     assert not topics, f"pin-kpi-oed --help imports command modules {topics}"
 
 
@@ -255,5 +255,48 @@ def test_an_extension_interrupted_while_it_initialises_is_an_interrupt(monkeypat
         monkeypatch.setattr(app, "build_parser", broken)
         with pytest.raises(ImportError, match="no module named x"):
             app.main(["info", "ur10"])
+    finally:
+        signal.signal(signal.SIGINT, inherited)
+
+
+def test_an_interrupt_a_library_swallowed_is_still_an_interrupt_unless_the_command_ends_on_it(monkeypatch,
+                                                                                               capsys) -> None:
+    """A SIGINT whose KeyboardInterrupt a library caught (seen inside NumPy's lazy imports: the command then ran to
+    its end) is one line and 130; a command that ends on Ctrl-C by design (``check --follow``, ``view``'s server)
+    consumes it and keeps its own exit code; one swallowed in the imports stops the command before its work. Python's
+    own SIGINT handler is installed first, as above."""
+    from pin_kpi_oed.cli import app, interrupts
+
+    def swallowing(consumes: bool):
+        def run(_args):
+            try:
+                os.kill(os.getpid(), signal.SIGINT)
+                time.sleep(1.0)  # the handler raises here
+            except KeyboardInterrupt:
+                if consumes:
+                    interrupts.consume()
+            return 0
+        return run
+
+    inherited = signal.signal(signal.SIGINT, signal.default_int_handler)
+    try:
+        monkeypatch.setattr(app, "_run", swallowing(consumes=False))
+        assert app.main(["info", "ur10"]) == 130
+        assert capsys.readouterr().err == "interrupted\n"
+        monkeypatch.setattr(app, "_run", swallowing(consumes=True))
+        assert app.main(["info", "ur10"]) == 0
+        assert capsys.readouterr().err == ""
+        monkeypatch.undo()
+        real = app.build_parser
+
+        def swallowed_in_imports(*a, **k):
+            swallowing(consumes=False)(None)
+            return real(*a, **k)
+
+        monkeypatch.setattr(app, "build_parser", swallowed_in_imports)
+        assert app.main(["info", "ur10"]) == 130
+        out, err = capsys.readouterr()
+        assert out == "" and err == "interrupted\n", "the command's work ran after an interrupt in its imports"
+        assert signal.getsignal(signal.SIGINT) is signal.default_int_handler, "the handler must be restored"
     finally:
         signal.signal(signal.SIGINT, inherited)

@@ -16,8 +16,8 @@ import os
 import signal
 import sys
 from pathlib import Path
-from typing import Any
 
+from pin_kpi_oed.cli import interrupts
 from pin_kpi_oed.cli.commands import COMMANDS, command_in, topic_of
 from pin_kpi_oed.errors import InputError, PinKpiOedError
 from pin_kpi_oed.model.robot_names import ROBOT_HELP, TOOL_HELP
@@ -182,20 +182,22 @@ def main(argv: list[str] | None = None) -> int:
     :class:`PinKpiOedError` or an operating-system error becomes one line and exit code 2. An interrupt at any
     moment after this module is loaded (the command's imports included) prints ``interrupted`` and returns 130.
     """
-    previous = _watch_interrupts()
+    previous = interrupts.watch()
     try:
         from pin_kpi_oed.validation.options import join_negative_values
 
         given = list(sys.argv[1:] if argv is None else argv)
         args = build_parser(command_in(given), lazy=True).parse_args(join_negative_values(given))
         args.argv = given  # the command as given (model files record it)
-        return _run(args)
+        code = _run(args)
+        # an interrupt whose KeyboardInterrupt a library swallowed (seen inside NumPy's lazy imports) is still one
+        return _interrupted() if interrupts.SIGNALLED else code
     except KeyboardInterrupt:
         return _interrupted()
     except Exception:
         # a compiled module interrupted while it initialises reports another error ("initialization failed",
         # "could not import module datetime"): the interrupt is the cause when the signal came
-        if not _SIGNALLED:
+        if not interrupts.SIGNALLED:
             raise
         return _interrupted()
     finally:
@@ -203,28 +205,8 @@ def main(argv: list[str] | None = None) -> int:
             signal.signal(signal.SIGINT, previous)
 
 
-#: Set while :func:`main` runs when an interrupt (SIGINT) came; ``_INTERRUPTED`` when main ended on one (:func:`run`
-#: then leaves without the interpreter's exit path).
-_SIGNALLED: list[bool] = []
+#: Set when :func:`main` ended on an interrupt (:func:`run` then leaves without the interpreter's exit path).
 _INTERRUPTED: list[bool] = []
-
-
-def _on_interrupt(signum: int, frame: Any) -> None:
-    """SIGINT: recorded, then Python's own KeyboardInterrupt."""
-    _SIGNALLED.append(True)
-    raise KeyboardInterrupt
-
-
-def _watch_interrupts() -> Any:
-    """Record interrupts while the command runs (:data:`_SIGNALLED`), when SIGINT has Python's default handler and
-    this is the main thread; returns the handler to restore (None: nothing installed)."""
-    _SIGNALLED.clear()
-    try:
-        if signal.getsignal(signal.SIGINT) is not signal.default_int_handler:
-            return None
-        return signal.signal(signal.SIGINT, _on_interrupt)
-    except ValueError:  # not the main thread
-        return None
 
 
 def _interrupted() -> int:
@@ -264,6 +246,8 @@ def _run(args: argparse.Namespace) -> int:
         # the thread variables set before the option checks load NumPy: its BLAS starts with them (no threadpoolctl)
         with limit_process_threads():
             check_args(args)
+            if interrupts.SIGNALLED:  # swallowed in the imports so far: stop before the work
+                raise KeyboardInterrupt
             return int(args.func(args) or 0)
     except PinKpiOedError as exc:
         from pin_kpi_oed.cli.flags import in_flags

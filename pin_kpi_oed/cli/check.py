@@ -163,6 +163,9 @@ def _follow(mon, path: str, read: dict, poll_s: float, idle_s: float, quiet: boo
             else:
                 time.sleep(poll_s)
     except KeyboardInterrupt:
+        from pin_kpi_oed.cli.interrupts import consume
+
+        consume()  # Ctrl-C is how following ends: the command goes on to write what was seen
         if not quiet:
             print("monitor: stopped (Ctrl-C); writing what was seen", file=sys.stderr)
 

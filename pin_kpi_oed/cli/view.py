@@ -155,6 +155,9 @@ def _serve_until_stopped(scene: Scene, open_browser: bool) -> int:
         while True:
             time.sleep(3600)
     except KeyboardInterrupt:
+        from pin_kpi_oed.cli.interrupts import consume
+
+        consume()  # Ctrl-C (or SIGTERM) is how serving ends
         return 0
     finally:
         signal.signal(signal.SIGTERM, old)
