@@ -165,15 +165,18 @@ def test_powers_of_many_changes_equal_the_scalar_formula_bit_for_bit():
 
 
 def test_thresholds_and_survivals_of_many_groups_equal_the_scalar_laws_bit_for_bit():
-    """``CheckNull.thresholds`` / ``sfs`` (the naming's laws of every group at once) give each entry exactly
-    :meth:`CheckNull.threshold` / :meth:`CheckNull.sf`; a number of degrees of freedom that is not positive gives
-    NaN (no group is named on it)."""
+    """``CheckNull.thresholds`` / ``sfs`` (the naming's laws of every group at once; ``threshold`` / ``sf`` are them
+    of one) give each entry exactly the scalar laws f²c·χ²_{1−α}(ν/c) and P(χ²(ν/c) > T/(f²c)); a number of degrees
+    of freedom that is not positive gives NaN (no group is named on it)."""
     dofs = np.array([24, 23, 21, 18, 1, 0])
     T = np.array([30.0, 2.5, 0.0, 41.7, 3.2, 1.0])
     for null in (CheckNull(), CheckNull(1.3, 0.8)):
         for alpha in (0.01, 0.05 / 5):
+            want = [null.scale * float(stats.chi2.isf(alpha, int(d) / null.spread)) for d in dofs[:-1]]
             got = null.thresholds(dofs, alpha)
-            assert got[:-1].tolist() == [null.threshold(int(d), alpha) for d in dofs[:-1]] and np.isnan(got[-1])
+            assert got[:-1].tolist() == want and np.isnan(got[-1])
+            assert [null.threshold(int(d), alpha) for d in dofs[:-1]] == want
+        want = [float(stats.chi2.sf(float(t) / null.scale, int(d) / null.spread)) for t, d in zip(T[:-1], dofs[:-1])]
         got = null.sfs(T, dofs)
-        assert got[:-1].tolist() == [null.sf(float(t), int(d)) for t, d in zip(T[:-1], dofs[:-1])]
+        assert got[:-1].tolist() == want and [null.sf(float(t), int(d)) for t, d in zip(T[:-1], dofs[:-1])] == want
         assert np.isnan(got[-1]) and 0.0 < got[0] < 1.0 and got[2] == 1.0

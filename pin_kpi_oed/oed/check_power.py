@@ -94,16 +94,16 @@ class CheckNull:
         return 1.0 + max(float(self.kurtosis), 0.0) / 2.0
 
     def threshold(self, dof: float, alpha: float) -> float:
-        """The critical value of T on ``dof`` degrees of freedom at level α."""
-        return self.scale * float(stats.chi2.isf(alpha, dof / self.spread))
+        """The critical value of T on ``dof`` degrees of freedom at level α (:meth:`thresholds` of one)."""
+        return float(self.thresholds(np.array([float(dof)]), alpha)[0])
 
     def sf(self, T: float, dof: float) -> float:
-        """P(T' > T) under no change."""
-        return float(stats.chi2.sf(T / self.scale, dof / self.spread))
+        """P(T' > T) under no change (:meth:`sfs` of one)."""
+        return float(self.sfs(np.array([float(T)]), np.array([float(dof)]))[0])
 
     def thresholds(self, dofs: np.ndarray, alpha: float) -> np.ndarray:
-        """:meth:`threshold` of each number of degrees of freedom at once (each entry bit for bit; NaN where a
-        number is not positive).
+        """The critical value f²c·χ²_{1−α}(dof/c) of T on each number of degrees of freedom (NaN where a number is
+        not positive).
 
         Args:
             dofs: (G,) degrees of freedom; alpha: the level.
@@ -114,7 +114,7 @@ class CheckNull:
         return self.scale * np.asarray(stats.chi2.isf(alpha, np.asarray(dofs, float) / self.spread), float)
 
     def sfs(self, T: np.ndarray, dofs: np.ndarray) -> np.ndarray:
-        """:meth:`sf` of each (T, dof) pair at once (each entry bit for bit; NaN where a dof is not positive).
+        """P(χ²(dof/c) > T/(f²c)) of each (T, dof) pair under no change (NaN where a dof is not positive).
 
         Args:
             T: (G,) statistics (dimensionless); dofs: (G,) their degrees of freedom.
