@@ -119,16 +119,20 @@ def select_check(crit: CheckPower, Fp: np.ndarray, m: int, seed: int = 0, exchan
     Raises:
         InputError: m larger than the pool or below 3.
     """
+    return _select(crit, Fp, m, seed, exchange)[0]
+
+
+def _select(crit: CheckPower, Fp: np.ndarray, m: int, seed: int,
+            exchange: bool) -> tuple[PoolSelection, Iterator[tuple[int, float, np.ndarray]]]:
+    """:func:`select_check`'s selection and the whole greedy order it began with (its first m steps, then the
+    rest, made as they are read: :func:`_greedy`'s steps)."""
     t0 = time.perf_counter()
-    _check_size(m, len(Fp))
+    if not 3 <= m <= len(Fp):
+        raise InputError(f"check design: {m} poses from a pool of {len(Fp)} candidates (3 to {len(Fp)})")
     Mi = np.einsum("nap,naq->npq", Fp, Fp)
-    return _exchanged(crit, Mi, list(islice(_greedy(crit, Mi, seed), m)), exchange, t0)
-
-
-def _check_size(m: int, N: int) -> None:
-    """Refuse m poses from a pool of N candidates unless 3 ≤ m ≤ N (InputError)."""
-    if not 3 <= m <= N:
-        raise InputError(f"check design: {m} poses from a pool of {N} candidates (3 to {N})")
+    greedy = _greedy(crit, Mi, seed)
+    steps = list(islice(greedy, m))
+    return _exchanged(crit, Mi, steps, exchange, t0), chain(steps, greedy)
 
 
 def _exchanged(crit: CheckPower, Mi: np.ndarray, steps: list[tuple[int, float, np.ndarray]], exchange: bool,
@@ -260,12 +264,7 @@ def design_check(model: CalibratedModel, *, m: int = 10, tolerance_m: float = 1e
     sigma = np.median(model.predict_with_sigma(Q_pool, station=station)[1], axis=0)
     crit, wm, p = check_criterion(model, np.atleast_2d(qw), sigma, station, seed=seed)
     Fp = wm.weighted_jacobian(p, Q_pool)[:, :3, :]
-    t_sel = time.perf_counter()
-    _check_size(m, len(Fp))
-    Mi = np.einsum("nap,naq->npq", Fp, Fp)
-    greedy = _greedy(crit, Mi, seed)
-    steps = list(islice(greedy, m))     # the selection's greedy poses begin the sizing's order
-    sel = _exchanged(crit, Mi, steps, True, t_sel)
+    sel, greedy = _select(crit, Fp, m, seed, True)     # the selection's greedy poses begin the sizing's order
     null = check_null(model)
     power = check_powers(crit, Fp[sel.indices].reshape(-1, Fp.shape[2]), tolerance_m, alpha, null)
     rng = np.random.default_rng(seed + 1)
@@ -275,7 +274,7 @@ def design_check(model: CalibratedModel, *, m: int = 10, tolerance_m: float = 1e
     vp = verdict_powers(crit, Fp[sel.indices].reshape(-1, Fp.shape[2]), tolerance_m, alpha, null, SIZE_FACTOR)
     return CheckDesign(Q=Q_pool[sel.indices], selection=sel, power=power, power_random=power_random,
                        tolerance_m=tolerance_m, alpha=alpha, sigma_m=sigma, verdict_power=vp,
-                       poses_needed=_poses_needed(crit, Fp, tolerance_m, alpha, null, chain(steps, greedy))
+                       poses_needed=_poses_needed(crit, Fp, tolerance_m, alpha, null, greedy)
                        if size else 0,
                        feasible_in=getattr(cell, "name", "") if cell is not None else "", success=sel.success,
                        status="designed", message=sel.message, time_s=time.perf_counter() - t0)
