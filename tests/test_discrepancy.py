@@ -70,7 +70,7 @@ def test_kernel_value_without_gradient_equals_the_chord_form():
 
 @pytest.mark.parametrize("per_joint", [(True, True, True), (False, True, False), (True, False, True)])
 def test_kernel_gradient_columns_equal_the_parts_formulas_to_the_last_bit(per_joint):
-    """dK/dlog θ written part by part into one array equals the parts' formulas concatenated in scikit-learn's order
+    """dK/dlog θ equals the parts' formulas concatenated in scikit-learn's order
     (amplitude, joint amplitudes, joint length scales, length scales; a scalar hyper-parameter's column summed over
     the joints) bit for bit, a linear joint included: the regressor compared with it takes the same steps."""
     from pin_kpi_oed.discrepancy.kernel import chord_squared

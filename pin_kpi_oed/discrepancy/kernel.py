@@ -288,43 +288,21 @@ class JointKernel(HyperKernel):
         lin = self.linear_joints(X.shape[1])
         if not eval_gradient:
             return self._value(X, Yv, c, L, a, ell, lin=lin)
-        return self._with_gradient(_CHORDS(X, lin), c, L, a, ell)
-
-    def _with_gradient(self, D: np.ndarray, c: float, L: np.ndarray, a: np.ndarray, ell: np.ndarray
-                       ) -> tuple[np.ndarray, np.ndarray]:
-        """K and dK/dlog θ from the chords D (n, n, d): the gradient's parts written into their place of one array
-        (no concatenation, no array of a part's own), every entry the product the parts' formulas give (the same
-        bits: a product's factors commuted, nothing regrouped)."""
-        n, d = D.shape[0], D.shape[2]
+        D = _CHORDS(X, lin)
         Dp = D / L ** 2
         P = c ** 2 * np.exp(-0.5 * Dp.sum(-1))
         Da = D / ell ** 2
-        A = np.multiply(Da, -0.5)
-        np.exp(A, out=A)
-        A *= a ** 2                                   # a_j² exp(−D_j / 2ℓ_j²)
+        A = a ** 2 * np.exp(-0.5 * Da)
         K = P + A.sum(-1)
+        if not eval_gradient:
+            return K
         # scikit-learn orders the hyper-parameters by name: amplitude, joint_amplitude, joint_length_scale,
-        # length_scale (``dir`` order of the ``hyperparameter_*`` properties); a scalar hyper-parameter's column is
-        # the sum over the joints
-        per_joint = [np.size(self.joint_amplitude) > 1, np.size(self.joint_length_scale) > 1,
-                     np.size(self.length_scale) > 1]
-        G = np.empty((n, n, 1 + sum(d if v else 1 for v in per_joint)))
-        np.multiply(P, 2.0, out=G[..., 0])
-        if per_joint[0]:
-            np.multiply(A, 2.0, out=G[..., 1:1 + d])
-        else:
-            np.multiply(A.sum(-1), 2.0, out=G[..., 1])
-        at = 1 + (d if per_joint[0] else 1)
-        if per_joint[1]:
-            np.multiply(A, Da, out=G[..., at:at + d])
-        else:
-            G[..., at] = (A * Da).sum(-1)
-        at += d if per_joint[1] else 1
-        if per_joint[2]:
-            np.multiply(P[..., None], Dp, out=G[..., at:])
-        else:
-            G[..., at] = P * Dp.sum(-1)
-        return K, G
+        # length_scale (``dir`` order of the ``hyperparameter_*`` properties)
+        grads = [2.0 * P[..., None],
+                 2.0 * A if np.size(self.joint_amplitude) > 1 else 2.0 * A.sum(-1, keepdims=True),
+                 A * Da if np.size(self.joint_length_scale) > 1 else (A * Da).sum(-1, keepdims=True),
+                 P[..., None] * Dp if np.size(self.length_scale) > 1 else (P * Dp.sum(-1))[..., None]]
+        return K, np.concatenate(grads, axis=-1)
 
     def lower(self, X: np.ndarray) -> np.ndarray:
         """K(X, X)'s lower triangle (n, n), every entry to the last bit that of ``self(X)``, for a lower Cholesky
