@@ -294,6 +294,10 @@ class FeasibilityChecker:
         pin.framesForwardKinematics(self.model, self.data, np.asarray(q, float))
         pin.updateGeometryPlacements(self.model, self.data, self.gm, self.gd)
         pin.computeDistances(self.gm, self.gd)
+        return self._pairs_computed()
+
+    def _pairs_computed(self) -> np.ndarray:
+        """The pairs' signed distances (n_pairs,) m of the last ``computeDistances``, non-convex meshes re-tested."""
         d = np.array(list(map(_MIN_DISTANCE, self._results)))[:self.n_pairs]
         return mesh_penetration(self, d) if self.mesh_pairs else d
 
@@ -321,8 +325,7 @@ class FeasibilityChecker:
         d_min = float(self._results[k].min_distance)
         if not self.mesh_pairs or d_min > _MESH_CONTACT_M:
             return d_min
-        d = np.array(list(map(_MIN_DISTANCE, self._results)))[:self.n_pairs]  # placed and computed above
-        return float(mesh_penetration(self, d).min())
+        return float(self._pairs_computed().min())  # placed and computed above
 
     def distances(self, Q: np.ndarray) -> np.ndarray:
         """Signed distances of every checked pair and beam target (columns named by :attr:`names`).
