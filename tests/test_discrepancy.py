@@ -181,6 +181,26 @@ def fits(withheld):
             identify(model, train, discrepancy=DiscrepancyOptions(mode="auto", n_fit=300, seed=0)))
 
 
+@shares_fits
+def test_row_sandwich_equals_the_three_operand_einsum_on_a_fit(withheld, fits):
+    """Every σ carries the parameter covariance through each row's Jacobian with ``row_sandwich`` (matrix products):
+    on the fit's own Jacobian (400 rows, robot and set-up columns) and its covariance it equals the three-operand
+    einsum it replaced within 4e-15 relative, and is symmetric to rounding."""
+    from pin_kpi_oed.discrepancy.arrays import row_sandwich
+    from pin_kpi_oed.identification.discrepancy_fit import parameter_jacobian
+
+    _, train, _ = withheld
+    res = fits[1]
+    F, _ = parameter_jacobian(res, train.q)
+    d = res.discrepancy
+    C = d.param_cov if d.param_cov is not None else d.param_cov_ls
+    assert C is not None and C.shape[0] == F.shape[2] > 20
+    got, ref = row_sandwich(F, C), np.einsum("map,pq,mbq->mab", F, C, F)
+    assert got.shape == (len(train), 3, 3)
+    assert np.max(np.abs(got - ref)) <= 4e-15 * np.max(np.abs(ref))
+    assert np.max(np.abs(got - got.transpose(0, 2, 1))) <= 4e-15 * np.max(np.abs(ref))
+
+
 #: training rows of the command-line tests: 200 of the 400 (a Gaussian process's fit grows with the cube of its rows;
 #: 200 distinct poses are still more than three times the 60 the default needs to try one, and the withheld harmonic
 #: is learnt from them: the API tests use all 400)

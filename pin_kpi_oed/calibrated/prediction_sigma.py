@@ -55,6 +55,7 @@ import numpy as np
 
 from pin_kpi_oed.calibrated.shared_tables import discrepancy_at, outside_coverage, posterior_covariance_at, remembered
 from pin_kpi_oed.model.kinematics import skew
+from pin_kpi_oed.discrepancy.arrays import row_sandwich
 
 #: the length along the tool axis at which ``predict`` and ``compensate`` state the orientation's effect (m):
 #: "orientation at 200 mm", as a cell's ``orientation_length_m`` defaults to
@@ -263,7 +264,7 @@ def _fit_parametric(cm: Any, label: str, Q: np.ndarray, point: Any = None) -> np
     E = _robot_jacobian(cm, label, Q, names, point)
     if cm.setups[label].fitted_by != "identify":
         E = _registered(cm, label, Q, E, names, point)
-    return np.einsum("map,pq,mbq->mab", E, Cp * _chi2_factor(cm), E)
+    return row_sandwich(E, Cp * _chi2_factor(cm))
 
 
 def _orientation_informed(cm: Any, d: Any, point: Any) -> bool:
@@ -461,7 +462,7 @@ def orientation_sigma(cm: Any, Q: np.ndarray, aux: Any, station: str | None, lab
         if Cp is not None:
             cols = [model.layout.names.index(n) for n in names]
             Om = model.jacobian(p, Q[rows])[:, 3:6][:, :, cols]
-            C += np.einsum("map,pq,mbq->mab", Om, Cp * _chi2_factor(cm), Om)
+            C += row_sandwich(Om, Cp * _chi2_factor(cm))
         kin = model.kinematics(p, Q[rows], model.reflector(p))
         z = np.einsum("ab,mb->ma", model.tracker_pose(p).rotation, kin.R_tool[:, :, 2])
         Z = skew(z)

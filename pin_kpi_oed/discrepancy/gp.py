@@ -45,7 +45,7 @@ from collections.abc import Sequence
 import numpy as np
 from scipy import linalg as sla
 
-from pin_kpi_oed.discrepancy.arrays import decode_array, encode_array
+from pin_kpi_oed.discrepancy.arrays import decode_array, encode_array, row_sandwich
 from pin_kpi_oed.discrepancy.base import DiscrepancyModel
 from pin_kpi_oed.discrepancy.coverage import JointCoverage, joint_space_box
 from pin_kpi_oed.discrepancy.kernel import JointKernel
@@ -367,7 +367,7 @@ class Discrepancy(DiscrepancyModel):
             Kwq = self.kernel(np.atleast_2d(Q), self.Z)
             for a in range(3):
                 D[:, a, :] -= Kwq @ self.Bn[:, a, :]
-        return np.einsum("map,pq,mbq->mab", D, C, D)
+        return row_sandwich(D, C)
 
     def parametric_factor(self, Q: np.ndarray, E: np.ndarray, inside: np.ndarray) -> np.ndarray:
         """A factor A (m, 3, P) of the parametric part's covariance *between* rows: cov(row i axis a, row j axis b) =

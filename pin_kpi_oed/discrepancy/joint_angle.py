@@ -51,10 +51,11 @@ from typing import Any
 import numpy as np
 from scipy.optimize import minimize
 
-from pin_kpi_oed.discrepancy.arrays import decode_array, encode_array
+from pin_kpi_oed.discrepancy.arrays import decode_array, encode_array, row_sandwich
 
 __all__ = ["JointAngleTerm", "fit_joint_angle", "loo_log_density", "LENGTH_SCALE_RAD", "LENGTH_SCALES_RAD",
-           "LR_CRITICAL", "VETO_SE", "MAX_ROWS", "joint_angle_kernel", "restricted_space", "nll_and_grad"]
+           "LR_CRITICAL", "VETO_SE", "MAX_ROWS", "joint_angle_kernel", "restricted_space", "nll_and_grad",
+           "residual_basis", "loo_plan"]
 
 #: ℓ of κ (rad): the one-joint length scale of the design's prior kernel
 LENGTH_SCALE_RAD = 0.5
@@ -113,7 +114,7 @@ class JointAngleTerm:
         Cw = (self.Fplus * np.tile(w2, n3 // 3)) @ self.Fplus.T
         D = np.zeros((E.shape[0], 3, P))
         D[:, :, :E.shape[2]] = E
-        return np.einsum("map,pq,mbq->mab", D, Cw, D) + np.diag(w2)
+        return row_sandwich(D, Cw) + np.diag(w2)
 
     def covariance(self, Q: np.ndarray, Jq: np.ndarray, E: np.ndarray,
                    registration: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None) -> np.ndarray:
@@ -197,11 +198,20 @@ class JointAngleTerm:
                    param_cov, white)
 
 
-def restricted_space(K: np.ndarray, r: np.ndarray, Fs: np.ndarray) -> tuple[np.ndarray, np.ndarray, int]:
-    """(eigenvalues λ of NᵀKN, Vᵀ Nᵀ r, k) with N an orthonormal basis of what a fit of Fs leaves."""
+def residual_basis(Fs: np.ndarray) -> np.ndarray:
+    """N (3n, k): an orthonormal basis of what a least-squares fit of the columns of Fs (3n, P) leaves (the left
+    singular vectors beyond its rank, singular values above 1e-10 of the largest)."""
     U, s, _ = np.linalg.svd(Fs, full_matrices=True)
     rank = int(np.sum(s > 1e-10 * (s[0] if s.size else 1.0)))
-    N = U[:, rank:]
+    return U[:, rank:]
+
+
+def restricted_space(K: np.ndarray, r: np.ndarray, Fs: np.ndarray, N: np.ndarray | None = None
+                     ) -> tuple[np.ndarray, np.ndarray, int]:
+    """(eigenvalues λ of NᵀKN, Vᵀ Nᵀ r, k) with N an orthonormal basis of what a fit of Fs leaves
+    (:func:`residual_basis`; ``N`` that basis when already formed: the same numbers, one SVD for every kernel)."""
+    if N is None:
+        N = residual_basis(Fs)
     B = N.T @ K @ N
     lam, V = np.linalg.eigh(0.5 * (B + B.T))
     return np.maximum(lam, 0.0), V.T @ (N.T @ r), int(N.shape[1])
@@ -229,10 +239,11 @@ def nll_and_grad(x: np.ndarray, lam: np.ndarray, zt: np.ndarray) -> tuple[float,
     return 0.5 * float(np.sum(zt ** 2 / v + np.log(v))), np.array([a * float(w @ lam), b * float(np.sum(w))])
 
 
-def _fit_one(K: np.ndarray, r: np.ndarray, Fs: np.ndarray, floor: float) -> tuple[float, np.ndarray, float] | None:
-    """REML of (τ², σ_n²) for one kernel matrix K (normalised units): (−ℓ, x = (log τ², log σ_n²), 2 Δℓ against the
-    white level), or None when nothing lies above the floor."""
-    lam, zt, k = restricted_space(K, r, Fs)
+def _fit_one(K: np.ndarray, r: np.ndarray, N: np.ndarray, floor: float) -> tuple[float, np.ndarray, float] | None:
+    """REML of (τ², σ_n²) for one kernel matrix K (normalised units) in the residual space N
+    (:func:`residual_basis`): (−ℓ, x = (log τ², log σ_n²), 2 Δℓ against the white level), or None when nothing lies
+    above the floor."""
+    lam, zt, k = restricted_space(K, r, np.empty((0, 0)), N)
     white = float(np.sum(zt ** 2)) / max(k, 1)
     if k < 3 or white <= floor:
         return None
@@ -245,25 +256,38 @@ def _fit_one(K: np.ndarray, r: np.ndarray, Fs: np.ndarray, floor: float) -> tupl
     return float(best.fun), best.x, stat
 
 
-def loo_log_density(Sigma: np.ndarray, Fs: np.ndarray, r: np.ndarray, groups: np.ndarray) -> np.ndarray:
-    """Leave-one-pose-out log predictive density of the least-squares predictor's errors under the residual covariance
-    ``Sigma`` (3n, 3n): Σ_g log N(e_g; 0, A_g Σ A_gᵀ) with e_g = (I − H_gg)⁻¹ r_g the error of rows g predicted from
-    a fit without them (H = F F⁺, r = (I − H) y the fit's residuals) and A_g = (I − H_gg)⁻¹ (I − H)_g· (module
-    docstring). ``groups`` (n,): the pose group of each row (near-duplicates together). Returns the terms, one per
-    pose group (their sum is the density; −inf where a covariance is singular). The groups of one size are computed
-    together (stacked pseudo-inverses, covariances and solves: the per-group numbers to rounding, ~1e-15 relative)."""
+def loo_plan(Fs: np.ndarray, r: np.ndarray, groups: np.ndarray) -> tuple[int, list]:
+    """What :func:`loo_log_density` computes without the covariance: (the number of pose groups, per group size
+    (the groups' indices, the maps A_g stacked (b, k, 3n), the errors e_g stacked (b, k))). Args as there."""
     H = Fs @ np.linalg.pinv(Fs, rcond=1e-12)
     M = np.eye(len(r)) - H
     members = [np.flatnonzero(groups == g) for g in np.unique(groups)]
     sizes = np.array([m.size for m in members])
-    terms = np.empty(len(members))
+    parts = []
     for size in np.unique(sizes):
         which = np.flatnonzero(sizes == size)
         idx = np.array([(3 * members[w][:, None] + np.arange(3)).reshape(-1) for w in which])  # (b, 3 size)
         k = idx.shape[1]
         B = np.linalg.pinv(np.eye(k) - H[idx[:, :, None], idx[:, None, :]], rcond=1e-10)
-        A = B @ M[idx]
-        e = (B @ r[idx][..., None])[..., 0]
+        parts.append((which, B @ M[idx], (B @ r[idx][..., None])[..., 0]))
+    return len(members), parts
+
+
+def loo_log_density(Sigma: np.ndarray, Fs: np.ndarray, r: np.ndarray, groups: np.ndarray,
+                    plan: tuple[int, list] | None = None) -> np.ndarray:
+    """Leave-one-pose-out log predictive density of the least-squares predictor's errors under the residual covariance
+    ``Sigma`` (3n, 3n): Σ_g log N(e_g; 0, A_g Σ A_gᵀ) with e_g = (I − H_gg)⁻¹ r_g the error of rows g predicted from
+    a fit without them (H = F F⁺, r = (I − H) y the fit's residuals) and A_g = (I − H_gg)⁻¹ (I − H)_g· (module
+    docstring). ``groups`` (n,): the pose group of each row (near-duplicates together). Returns the terms, one per
+    pose group (their sum is the density; −inf where a covariance is singular). The groups of one size are computed
+    together (stacked pseudo-inverses, covariances and solves: the per-group numbers to rounding, ~1e-15 relative).
+    ``plan``: :func:`loo_plan` of (Fs, r, groups) when already formed (the same numbers: what does not depend on
+    Sigma, formed once for every Sigma of a fit)."""
+    if plan is None:
+        plan = loo_plan(Fs, r, groups)
+    terms = np.empty(plan[0])
+    for which, A, e in plan[1]:
+        k = A.shape[1]
         C = A @ Sigma @ np.swapaxes(A, 1, 2)
         C = 0.5 * (C + np.swapaxes(C, 1, 2)) + (1e-12 * np.trace(C, axis1=1, axis2=2) / k)[:, None, None] * np.eye(k)
         sign, logdet = np.linalg.slogdet(C)
@@ -301,17 +325,19 @@ def fit_joint_angle(Q: np.ndarray, R: np.ndarray, Jq: np.ndarray, F: np.ndarray,
     jn = max(float(np.sqrt(np.mean(np.sum(np.asarray(Jq) ** 2, axis=(1, 2))))), 1e-15)
     floor = 0.0 if floor_m is None else float(np.max(np.asarray(floor_m, float))) ** 2 / unit ** 2
     r = np.asarray(R, float).reshape(-1)
-    white = loo_log_density(np.diag(np.tile(np.asarray(white_var_m2, float).reshape(3), n)), Fs, r, groups)
+    plan = loo_plan(Fs, r, groups)                        # formed once: the same for every covariance below
+    white = loo_log_density(np.diag(np.tile(np.asarray(white_var_m2, float).reshape(3), n)), Fs, r, groups, plan)
+    N = residual_basis(Fs)                                 # one SVD for every length scale
     best = None
     for ell in length_scales_rad:
         K = joint_angle_kernel(Q, Jq, Q, Jq, float(ell)).reshape(3 * n, 3 * n)
-        got = _fit_one(K / jn ** 2, r / unit, Fs, floor)
+        got = _fit_one(K / jn ** 2, r / unit, N, floor)
         if got is None or got[2] <= LR_CRITICAL:                  # the restricted evidence does not support it
             continue
         tau2 = float(np.exp(got[1][0])) * unit ** 2 / jn ** 2 * widen ** 2
         sn2 = float(np.exp(got[1][1])) * unit ** 2 * widen ** 2
         S = tau2 * K + sn2 * np.eye(3 * n)
-        diff = loo_log_density(S, Fs, r, groups) - white
+        diff = loo_log_density(S, Fs, r, groups, plan) - white
         gain, se = float(np.sum(diff)), float(np.sqrt(diff.size * np.var(diff)))
         if not np.isfinite(gain) or gain < -VETO_SE * se:        # left-out poses: clearly worse than the white level
             continue
