@@ -351,14 +351,17 @@ def test_fit_quality_counts_the_discrepancy_but_never_excuses_a_poor_fit(withhel
     """Residuals three times the stated noise: suspect for the noise-only model, good when a Gaussian process with an
     honest K-fold σ explains them (said so); residuals six times the noise stay poor with or without it. (The
     Gaussian process's white level is never below the stated noise: at twice the noise that floor makes the K-fold
-    σ 1.5x too large, standardised RMS 0.67.)"""
+    σ 1.5x too large, standardised RMS 0.67.) The hyper-parameters are fitted on a seeded subset of 150 of the 400
+    rows (the K-fold check the verdict reads uses all 400): the claim is about the verdict, not the subset's size,
+    and the check's standardised RMS is 0.92 there (0.76 on 300 rows), both inside the verdict's [0.67, 1.5]; a
+    Gaussian process's fit grows with the cube of its subset."""
     from pin_kpi_oed.identification.quality import assess_fit
     model, train, _ = withheld
     r = np.sqrt(np.mean(fits[0].residuals_m ** 2))  # residual RMS per axis (m)
     for factor, plain_verdict, gp_verdict in [(3.0, "suspect", "good"), (6.0, "poor", "poor")]:
         data = dataclasses.replace(train, sigma_m=np.full((len(train), 3), r / factor))
         plain = assess_fit(identify(model, data, discrepancy="none"))
-        with_gp = assess_fit(identify(model, data, discrepancy=DiscrepancyOptions(mode="on", n_fit=300, seed=0)))
+        with_gp = assess_fit(identify(model, data, discrepancy=DiscrepancyOptions(mode="on", n_fit=150, seed=0)))
         assert plain.verdict == plain_verdict and "chi2" in plain.line(), plain.line()
         assert with_gp.verdict == gp_verdict, with_gp.line()
         if gp_verdict == "good":
