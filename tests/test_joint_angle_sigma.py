@@ -131,6 +131,30 @@ def test_loo_terms_of_groups_of_one_size_together_are_those_of_each_group():
     ok = np.isfinite(ref)
     assert np.array_equal(np.isfinite(got), ok) and np.abs(got[ok] - ref[ok]).max() < 1e-12 * np.abs(ref[ok]).max()
 
+def test_kernel_and_hoisted_fit_pieces_are_the_numbers_formed_each_time():
+    """The joint-angle kernel of a robot's Jacobians equals the three-operand einsum it replaced bit for bit (between
+    two sets of rows and within one); the restricted space from a residual basis formed once, and the
+    leave-one-pose-out terms from a plan formed once, equal those formed for each kernel bit for bit."""
+    from pin_kpi_oed.discrepancy.joint_angle import joint_angle_kernel, loo_plan, residual_basis, restricted_space
+
+    Q, Jq, F, _ = _toy(4, n=20)
+    n = len(F)
+    for a, b, ell in ((slice(0, n), slice(0, n), LENGTH_SCALE_RAD), (slice(0, 7), slice(3, n), 0.2)):
+        got = joint_angle_kernel(Q[a], Jq[a], Q[b], Jq[b], ell)
+        kappa = np.exp(-(2.0 - 2.0 * np.cos(Q[a][:, None, :] - Q[b][None, :, :])) / (2.0 * ell ** 2))
+        ref = np.einsum("iaj,ikj,kbj->iakb", Jq[a], kappa, Jq[b])
+        assert got.shape == ref.shape and np.array_equal(got, ref)
+    Fs = F.reshape(3 * n, -1)
+    K = joint_angle_kernel(Q[:n], Jq[:n], Q[:n], Jq[:n], 0.35).reshape(3 * n, 3 * n)
+    r = np.random.default_rng(2).standard_normal(3 * n)
+    once, each = restricted_space(K, r, Fs, residual_basis(Fs)), restricted_space(K, r, Fs)
+    assert all(np.array_equal(x, y) for x, y in zip(once, each)) and once[2] == 3 * n - Fs.shape[1]
+    groups = np.arange(n) // 2
+    S = K + 0.3 * np.eye(3 * n)
+    got, ref = loo_log_density(S, Fs, r, groups, loo_plan(Fs, r, groups)), loo_log_density(S, Fs, r, groups)
+    assert np.all(np.isfinite(ref)) and np.array_equal(got, ref)
+
+
 def test_restricted_likelihood_gradient_matches_finite_differences():
     """The restricted likelihood's analytic gradient in (log τ², log σ_n²) (the level's L-BFGS-B fit) against central
     differences, at points on both sides of its optimum, with eigenvalues and residuals of a real kernel matrix."""
