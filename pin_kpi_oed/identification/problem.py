@@ -542,7 +542,8 @@ class ResidualModel:
                 J[rows] = Js
         if nh_ == 6:
             J[:, 3:, :] = jl_inv(self._rotation_residuals(x)) @ J[:, 3:, :]
-        return J * self.W[:, :, None]
+        J *= self.W[:, :, None]  # in place: the same products, no second array of the Jacobian's size
+        return J
 
     def held_jacobian(self, x: np.ndarray, cols: np.ndarray) -> np.ndarray:
         """Weighted Jacobian of every measurement w.r.t. joint-placement parameters the fit holds (raw indices
@@ -562,7 +563,9 @@ class ResidualModel:
 
     def jacobian(self, x: np.ndarray) -> np.ndarray:
         """∂f/∂x, (rows, nx)."""
-        J = self.jacobian_full(x)[self.mask].reshape(-1, self.nx)
+        Jf = self.jacobian_full(x)
+        # every row in use (no outlier taken out): the rows as they are, without copying them
+        J = Jf.reshape(-1, self.nx) if self.mask.all() else Jf[self.mask].reshape(-1, self.nx)
         if self.prior_idx.size:
             Pm = np.zeros((self.prior_idx.size, self.nx))
             Pm[np.arange(self.prior_idx.size), self.prior_idx] = 1.0 / self.prior_sigma
