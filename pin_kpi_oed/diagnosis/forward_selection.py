@@ -205,16 +205,18 @@ def _score_block(fg: _FoldGrams, k: int, S: np.ndarray, cf: Any, xS: np.ndarray,
     Bt = Gtr[np.ix_(S, C.ravel())]  # (p, ng*s)
     Z = sla.cho_solve(cf, Bt, check_finite=False).reshape(p, ng, s)
     Bt = Bt.reshape(p, ng, s)
+    Zg = Z.transpose(1, 0, 2)  # (ng, p, s)
     Sg = Gtr[C[:, :, None], C[:, None, :]] + fg.ridge * np.eye(s) - np.einsum("pgi,pgj->gij", Bt, Z)
     rhs = htr[C] - np.einsum("pgi,p->gi", Z, htr[S])
     xg = np.linalg.solve(Sg, rhs[..., None])[..., 0]
-    dS = -np.einsum("pgi,gi->gp", Z, xg)  # change of x_S, (ng, p)
+    dS = -(Zg @ xg[:, :, None])[:, :, 0]  # change of x_S, (ng, p)
     # held-out cost of [xS + dS, xg]
     GteSS = Gte[np.ix_(S, S)]
     c = fg.bbte[k] - 2.0 * xS @ hte[S] - 2.0 * (dS @ hte[S] + np.sum(xg * hte[C], axis=1))
-    c += 2.0 * (dS @ (GteSS @ xS)) + np.einsum("gp,pq,gq->g", dS, GteSS, dS, optimize=True)
+    c += 2.0 * (dS @ (GteSS @ xS)) + np.sum((dS @ GteSS) * dS, axis=1)
     GteSC = Gte[np.ix_(S, C.ravel())].reshape(p, ng, s)
-    c += 2.0 * np.einsum("p,pgi,gi->g", xS, GteSC, xg) + 2.0 * np.einsum("gp,pgi,gi->g", dS, GteSC, xg)
+    T = (GteSC.transpose(1, 0, 2) @ xg[:, :, None])[:, :, 0]  # Gte,Sg x_g of every g, (ng, p)
+    c += 2.0 * (T @ xS) + 2.0 * np.sum(dS * T, axis=1)
     c += np.einsum("gi,gij,gj->g", xg, Gte[C[:, :, None], C[:, None, :]], xg)
     c += float(xS @ GteSS @ xS)
     return c, xg, dS
