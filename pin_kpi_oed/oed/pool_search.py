@@ -342,7 +342,7 @@ class InformationState(PoolState):
         #: a swap's A-form gains from the Gram matrices G_i G_iᵀ (nh×nh) instead of G_i (nh×ns) when K has more rows
         #: than a block (A on C_p: ns = nx), blocks of at most 3 rows
         self.gram = K is not None and K.shape[0] > self.nh and self.nh <= 3
-        self.HH: np.ndarray | None = None  # H_i H_iᵀ of every candidate, (nh, nh, N), when ``gram``
+        self.HH: np.ndarray | None = None  # H_i H_iᵀ of every candidate, (nh, nh, N), when ``gram``: made once per M
         self.chosen = [int(i) for i in chosen]
         F = Fp[self.chosen].reshape(-1, self.nx)
         M = F.T @ F
@@ -381,8 +381,7 @@ class InformationState(PoolState):
             self.phi = float(-2.0 * np.sum(np.log(np.diag(L))))
         else:
             self.H = self.B if self.K_eye else (self.B.reshape(nh * N, nx) @ self.K.T).reshape(nh, N, -1)
-            if self.gram:
-                self.HH = _pair_dots(self.H, self.H)
+            self.HH = None  # made by the first swap on this M (:meth:`_gram_swap`)
             X = np.linalg.solve(L, self.K.T)
             self.phi = float(np.sum(X * X))
         return True
@@ -438,7 +437,9 @@ class InformationState(PoolState):
             (φ of M − F_oᵀF_o, −Δφ of adding each candidate to it).
         """
         nh, N = self.nh, self.N
-        assert self.H is not None and self.K is not None and self.HH is not None
+        assert self.H is not None and self.K is not None
+        if self.HH is None:
+            self.HH = _pair_dots(self.H, self.H)
         W = LoiT.T @ self.H[:, o, :]  # (nh, ns)
         KW = W.T if self.K_eye else self.K.T @ W.T
         R = np.hstack([X, KW + X @ (0.5 * (W @ W.T))])  # (nx, 2 nh)
