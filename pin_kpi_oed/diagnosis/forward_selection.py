@@ -284,7 +284,8 @@ def _greedy_path(fg: _FoldGrams, p0: int, gmax: np.ndarray, max_groups: int, min
     best = sse0
     with progress(total=max_groups, desc=desc, unit="term", disable=show_progress is False) as bar:
         while len(selected) < max_groups:
-            remaining = np.array([g for g in range(n_groups) if g not in set(selected)], int)
+            taken = set(selected)
+            remaining = np.array([g for g in range(n_groups) if g not in taken], int)
             if remaining.size == 0:
                 stop = "every candidate selected"
                 break
