@@ -446,3 +446,35 @@ def test_identity_pool_matrix_takes_b_as_h_with_the_products_very_gains(pool):
     for o in chosen[::7]:
         (phi, g), (phi_ref, g_ref) = st.swap_gains(o), ref.swap_gains(o)
         assert phi == phi_ref and np.array_equal(g, g_ref)
+
+
+@pytest.mark.parametrize("kind", ["param", "kpi2"])
+def test_swap_gains_by_gram_matrices_equal_the_products_and_choose_alike(pool, kind):
+    """A pool matrix of more rows than a block (A on C_p; the KPI at two working configurations, 6 rows) scores a swap
+    by the blocks' Gram matrices G_i G_iᵀ: the gains of the product path G_i = H_i + D_i W within 1e-12 relative,
+    φ without o bit for bit, and the exchange from the same start chooses the same candidates."""
+    from pin_kpi_oed.oed.pool_search import InformationState, exchange
+
+    Fp, E = pool
+    model = make_model("kr15")
+    b = idf.analyse(model).base
+    K = np.eye(Fp.shape[-1]) if kind == "param" else \
+        model.kpi_jacobian(np.zeros(model.n_params), model.robot.random_q(np.random.default_rng(3), 2))[:, b]
+    chosen = list(range(0, 120, 3))
+    st, ref = InformationState(Fp, K, None, chosen), InformationState(Fp, K, None, chosen)
+    ref.gram = False  # the product path
+    assert st.gram and K.shape[0] > Fp.shape[1]
+    for o in chosen[::5]:
+        (phi, g), (phi_ref, g_ref) = st.swap_gains(o), ref.swap_gains(o)
+        assert phi == phi_ref
+        assert np.max(np.abs(g - g_ref)) <= 1e-12 * np.max(np.abs(g_ref))
+    start = np.random.default_rng(4).choice(len(Fp), 40, replace=False).tolist()
+    runs = []
+    for gram in (True, False):
+        s0 = InformationState(Fp, K, None, start)
+        s0.gram = gram
+        excl = np.zeros(len(Fp), bool)
+        excl[start] = True
+        runs.append(exchange(s0, list(start), excl, s0.phi, 50, 1e-10, 1e-300)[1:4])
+    assert runs[0][0] == runs[1][0] and runs[0][2] == runs[1][2] > 0  # the same swaps to the same set
+    assert runs[0][1] == pytest.approx(runs[1][1], rel=1e-12)

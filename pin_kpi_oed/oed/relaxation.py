@@ -161,10 +161,16 @@ def newton_parts(F2: np.ndarray, k: int, nh: int, w: np.ndarray, K: np.ndarray |
     ia, ib = np.triu_indices(nb)
     c = 2.0 * (lam[ia] + lam[ib]) / np.where(ia == ib, 2.0, 1.0)
     keep = c > 0
-    ia, ib = ia[keep], ib[keep]
-    X = G[:, 0, ia] * G[:, 0, ib]  # the kept entries of Vᵀ Ã_i V = Σ_h (G_i V)_h,a (G_i V)_h,b, (k, r)
-    for h in range(1, nh):
-        X += G[:, h, ia] * G[:, h, ib]
+    if keep.all():  # Vᵀ Ã_i V = Σ_h (G_i V)_h,a (G_i V)_h,b whole (k, nb, nb), then its upper triangle: the same sums
+        P = G[:, 0, :, None] * G[:, 0, None, :]
+        for h in range(1, nh):
+            P += G[:, h, :, None] * G[:, h, None, :]
+        X = P.reshape(k, nb * nb)[:, ia * nb + ib]
+    else:  # a KPI's few kept pairs, entry by entry
+        ia, ib = ia[keep], ib[keep]
+        X = G[:, 0, ia] * G[:, 0, ib]  # the kept entries of Vᵀ Ã_i V, (k, r)
+        for h in range(1, nh):
+            X += G[:, h, ia] * G[:, h, ib]
     X *= np.sqrt(c[keep])
     return phi, g, X
 
