@@ -293,3 +293,25 @@ def test_right_jacobian_is_the_one_of_the_motions() -> None:
     Jr = model.right_jacobian(p)
     assert np.array_equal(Jr, ref) and np.abs(Jr - np.eye(model.n_params)).max() > 1e-3
     assert np.array_equal(model.right_jacobian(np.zeros(model.n_params)), np.eye(model.n_params))
+
+
+@pytest.mark.parametrize("pose6d", [False, True])
+def test_jacobians_at_the_nominal_model_are_the_products_by_the_identity(pose6d: bool) -> None:
+    """At p = 0 the Jacobians skip the product by the right Jacobian (the identity): their numbers are those of the
+    product ``J @ I`` bit for bit (a zero of either sign becomes +0.0 in both), on a pool of real configurations;
+    away from p = 0 the product is made."""
+    model = TrackerModel(load_robot("kr15"), tracker_T_base=pin.SE3(pin.rpy.rpyToMatrix(0.1, -0.2, 0.3),
+                                                                      np.array([2.0, 0.5, 0.1])),
+                         reflector_m=np.array([0.01, 0.02, 0.1]), tcp_m=np.array([0.0, 0.01, 0.15]), pose6d=pose6d)
+    Q = model.robot.random_q(np.random.default_rng(41), 40)
+    zero, eye = np.zeros(model.n_params), np.eye(model.n_params)
+    J = model.jacobian_dq(zero, Q)[1]  # the tangent-coordinate Jacobian (no product at p = 0)
+    signed = J.copy()
+    signed[:, :, 0] = -0.0  # zeros of both signs
+    E = model.sensor_point(zero, Q, model.tcp_m).J
+    for a, b in ((model.jacobian(zero, Q), J @ eye), (model.at_parameters(signed, zero), signed @ eye),
+                 (model.kpi_jacobian(zero, Q), (E @ eye).reshape(-1, eye.shape[0]))):
+        assert a.shape == b.shape and a.tobytes() == b.tobytes()
+    assert not np.signbit(model.at_parameters(signed, zero)[:, :, 0]).any()
+    p = np.random.default_rng(43).normal(0.0, 1e-3, model.n_params)
+    assert np.array_equal(model.at_parameters(J, p), J @ model.right_jacobian(p))

@@ -322,7 +322,7 @@ class CameraModel(MeasurementModel):
         J = P @ JX  # (m, N, 2, np)
         if self.estimate_intrinsics:
             J[..., self.layout.group_slice("intrinsics")] = dk
-        return J.reshape(X.shape[0], -1, self.n_params) @ self.right_jacobian(p)
+        return self.at_parameters(J.reshape(X.shape[0], -1, self.n_params), p)
 
     def prediction_dq(self, p: np.ndarray, Q: np.ndarray) -> np.ndarray:
         """∂uv/∂q, (m, 2N, n) px per joint unit: a joint's world twist moves the camera or the board."""
@@ -369,7 +369,7 @@ class CameraModel(MeasurementModel):
     def kpi_jacobian(self, p: np.ndarray, Q_work: np.ndarray) -> np.ndarray:
         """E = ∂s/∂p of :meth:`kpi`, stacked over working configurations, (3t, np)."""
         p = np.asarray(p, float)
-        return (self.sensor_point(p, Q_work, self.tcp_m).J @ self.right_jacobian(p)).reshape(-1, self.n_params)
+        return self.at_parameters(self.sensor_point(p, Q_work, self.tcp_m).J, p).reshape(-1, self.n_params)
 
     # ------------------------------------------------------------------ what the camera can see
     def in_view(self, p: np.ndarray, Q: np.ndarray, margin_px: float = 20.0, max_angle_rad: float = np.radians(60),

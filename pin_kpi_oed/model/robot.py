@@ -42,6 +42,7 @@ import pinocchio as pin
 
 from pin_kpi_oed.errors import InputError, RobotLoadError
 from pin_kpi_oed.model.kinematics import joint_unit, revolute_mask
+from pin_kpi_oed.model.robot_cache import cached, keep, load_key
 from pin_kpi_oed.model.urdf_joints import continuous_as_revolute, locked_posture, model_from_urdf_text
 from pin_kpi_oed.model.robot_names import (ERD_ROBOTS, ROBOT_HELP, ROBOT_NAMES, SHIPPED_ROBOTS, TOOL_FRAME_HELP,  # noqa: F401
                                           TOOL_HELP, UR_E_SERIES, default_tool_frames)
@@ -346,13 +347,18 @@ def load_robot(spec: str | os.PathLike, tool_frame: str | None = None, kinematic
             ``ur_description``'s default kinematics without it (``ur10e`` needs the file).
 
     Returns:
-        The :class:`Robot`.
+        The :class:`Robot`: a copy of its own of a robot loaded before from the same file's bytes with the same
+        options (:mod:`pin_kpi_oed.model.robot_cache`; not with ``kinematics``).
 
     Raises:
         RobotLoadError: missing or malformed URDF, unknown tool frame, a
             multi-DoF joint on the chain (a free-flyer), a joint that is neither
             revolute nor prismatic, or a prismatic joint without finite limits (m).
     """
+    key = load_key(spec, tool_frame, resolve_robot(str(spec))[0]) if kinematics is None else None
+    hit = cached(key)  # the same file loaded before in this process: a copy of its robot
+    if hit is not None:
+        return hit
     kin = _ur_kinematics(str(spec), kinematics)
     text = None
     if kin is None or str(spec).lower() in ERD_ROBOTS:
@@ -394,6 +400,7 @@ def load_robot(spec: str | os.PathLike, tool_frame: str | None = None, kinematic
     if kin is not None and text is None:
         _take_ur_kinematics(robot, kin)
     check_robot_scale(robot.reach(), path)
+    keep(key, robot)
     return robot
 
 

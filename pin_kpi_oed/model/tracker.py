@@ -220,7 +220,7 @@ class TrackerModel(MeasurementModel):
         if self.pose6d:
             Jw, _ = self._rotation_jacobian(p, Q, with_dq=False)
             J = np.concatenate([J, Jw], axis=1)
-        return J @ self.right_jacobian(p)
+        return self.at_parameters(J, p)
 
     def base_jacobian(self, p: np.ndarray, Q: np.ndarray, cols: Sequence[int] | None = None) -> np.ndarray:
         """Jacobian of the reflector positions w.r.t. the raw parameters, rotated into the robot base frame.
@@ -267,7 +267,7 @@ class TrackerModel(MeasurementModel):
         """KPI sensitivity E = ds/dp (eq. 24e), stacked over working configurations, (3t, np)."""
         p = np.asarray(p, float)
         J = self.sensor_point(p, Q_work, self.tcp_m).J
-        return (J @ self.right_jacobian(p)).reshape(-1, self.n_params)
+        return self.at_parameters(J, p).reshape(-1, self.n_params)
 
     def kpi_rotation_jacobian(self, p: np.ndarray, Q_work: np.ndarray) -> np.ndarray:
         """Sensitivity of the tool frame's orientation (tracker frame, rotation vector) to the parameters at the
@@ -286,7 +286,7 @@ class TrackerModel(MeasurementModel):
         fs = L.group_slice(self.frame_group)
         J[:, :, fs.start + 3:fs.stop] = np.eye(3)
         J = np.einsum("ab,mbp->map", self.sensor_pose(p).rotation, J)
-        return (J @ self.right_jacobian(p)).reshape(-1, self.n_params)
+        return self.at_parameters(J, p).reshape(-1, self.n_params)
 
     # ------------------------------------------------------------------ weighting
     def sigma(self, p: np.ndarray, Q: np.ndarray, Y: np.ndarray | None = None) -> np.ndarray:
