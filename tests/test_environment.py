@@ -430,3 +430,32 @@ def test_the_always_blocked_test_stops_early_with_the_full_matrixs_verdict():
         assert blocked_in_all(chk, Q, clearance) == want
         verdicts.append(want)
     assert verdicts[0] is False and verdicts[-1] is True  # both verdicts reached
+
+
+def test_mesh_boxes_bound_the_mesh_pairs_and_the_smallest_distance_is_unchanged():
+    """The boxes around the UR10 cell's workpiece mesh bound every mesh pair from below (Coal's capsule–box distance
+    never above its capsule–mesh distance), and the smallest pair distance that leaves the far mesh pairs out is the
+    one with every pair computed, on configurations near and far from the mesh, colliding or clear: equal but for the
+    last digits Coal's warm-started GJK moves (a mesh pair computed at fewer configurations starts from older
+    results; ~1e-17 m)."""
+    cell = load_cell("ur10")
+    fast, full = FeasibilityChecker(cell), FeasibilityChecker(cell)
+    full.mesh_boxes = None  # every pair computed by Coal
+    assert fast.mesh_boxes is not None and len(fast.mesh_pairs) == 8
+    bgm, bgd, boxes = fast.mesh_boxes
+    X = cell.robot.random_q(np.random.default_rng(0), 400)
+    D = np.array([full.pair_distances(q) for q in X])
+    near = X[np.isin(D.argmin(axis=1), full.mesh_pairs) & (D.min(axis=1) > 1e-6)]  # a mesh pair the smallest, clear
+    assert len(near) >= 3
+    X = np.vstack([X[:100], near, *(np.linspace(a, b, 20) for a, b in zip(near[:-1], near[1:]))])
+    left_out = mesh_smallest = 0
+    for q in X:
+        d = full.pair_distances(q)
+        pin.updateGeometryPlacements(full.model, full.data, bgm, bgd)
+        pin.computeDistances(bgm, bgd)
+        low = np.array([r.min_distance for r in boxes])
+        assert np.all(low <= d[full.mesh_pairs] + 1e-9)
+        left_out += int(np.sum(low > d.min() + 1e-4))
+        mesh_smallest += int(d.min() > 1e-6 and int(np.argmin(d)) in full.mesh_pairs)
+        assert abs(fast.min_pair_distance(q) - d.min()) <= 1e-12
+    assert left_out > len(X) and mesh_smallest >= len(near)  # pairs left out; clear configurations a mesh decides
