@@ -355,7 +355,7 @@ class FeasibilityChecker:
         k = pin.computeDistances(self.model, self.data, self.gm, self.gd, q)
         res, gm, gd = self._results, self.gm, self.gd
         d_min = float(res[k].min_distance) if k < self.n_pairs else math.inf
-        bgm, bgd, bres = self.mesh_boxes  # type: ignore[misc]
+        bgm, bgd, bres = self.mesh_boxes
         pin.updateGeometryPlacements(self.model, self.data, bgm, bgd)
         kb = pin.computeDistances(bgm, bgd)
         if d_min > _MESH_CONTACT_M and bres[kb].min_distance > d_min + BOX_SLACK_M:
