@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 import yaml
 
-from pin_kpi_oed.cell.cell import CELL_DIR, cell_from_dict, load_cell
+from pin_kpi_oed.cell.cell import CELL_DIR, cell_from_dict, load_cell, parse_cell_text
 from pin_kpi_oed.cell.aggregate import AggregatedConstraints
 from pin_kpi_oed.cell.collision import INCID, CollisionModel
 from pin_kpi_oed.cell.sampling import random_feasible
@@ -20,7 +20,10 @@ from pin_kpi_oed.errors import InfeasibleError, InputError, PinKpiOedError
 
 
 def _cell_dict(name: str = "kr15") -> dict:
-    return yaml.safe_load((CELL_DIR / f"{name}.yaml").read_text())
+    """A shipped cell file as a fresh dict (the package's parse: libyaml's, which parses every shipped cell file as
+    PyYAML's own does, ``test_cell_files_parse_alike_with_libyaml_and_pyyaml``; a text parsed before is copied)."""
+    path = CELL_DIR / f"{name}.yaml"
+    return parse_cell_text(path.read_text(), path)
 
 
 @pytest.fixture(scope="module")
@@ -491,7 +494,6 @@ def test_a_cell_text_parsed_before_is_a_fresh_copy_and_a_changed_text_is_parsed_
     """load_cell keeps each cell file's parse by its text: a text read again gives a copy equal to a fresh parse
     (changing it changes no later load), and a file rewritten at once with the same size (its stamp may not change)
     is parsed anew, its new values read; an alias's shared list is copied whole."""
-    from pin_kpi_oed.cell.cell import parse_cell_text
 
     text = (CELL_DIR / "kr15.yaml").read_text()
     first = parse_cell_text(text, tmp_path / "a.yaml")

@@ -3,21 +3,30 @@ optimiser, the meshes themselves in the independent check) and working configura
 
 from __future__ import annotations
 
+import copy
+
 import numpy as np
 import pinocchio as pin
 import pytest
 import trimesh
 import yaml
 
-from pin_kpi_oed.cell.cell import CELL_DIR, cell_from_dict, load_cell
+from pin_kpi_oed.cell.cell import CELL_DIR, cell_from_dict, load_cell, parse_cell_text
 from pin_kpi_oed.cell.feasibility import FeasibilityChecker
 from pin_kpi_oed.cell.meshes import fit_capsules
 from pin_kpi_oed.cell.working_targets import solve_tcp_target
 from pin_kpi_oed.errors import InputError
 
 
+def _shipped(name: str) -> dict:
+    """A shipped cell file as a fresh dict (the package's parse, libyaml's: the same values as PyYAML's own,
+    ``tests/test_collision.py``; a text parsed before is copied)."""
+    path = CELL_DIR / f"{name}.yaml"
+    return parse_cell_text(path.read_text(), path)
+
+
 def _kr15_dict() -> dict:
-    d = yaml.safe_load((CELL_DIR / "kr15.yaml").read_text())
+    d = _shipped("kr15")
     d["robot"] = str(CELL_DIR.parents[2] / "urdf" / "kr15.urdf")
     return d
 
@@ -177,7 +186,7 @@ def test_shipped_ur10_cell_is_built_from_files_and_designs(tmp_path):
     env = cell.environment[0]
     assert env.kind == "urdf" and len(env.solids) == 6 and sum(not s.convex for s in env.solids) == 1  # the STL
     assert not any(c.name == "workpiece" for c in cell.obstacles)  # no hand-written environment capsule left
-    d = yaml.safe_load((CELL_DIR / "ur10.yaml").read_text())
+    d = _shipped("ur10")
     assert "working_configurations_deg" not in d and len(d["working_targets"]) == cell.q_work.shape[0] == 2
     for t, q in zip(d["working_targets"], cell.q_work):
         M = cell.W_T_base * cell.robot.oMtool(q)
@@ -378,12 +387,12 @@ def test_clearance_message_names_the_clearance_margin_option(tmp_path, capsys):
 def test_obstacle_on_the_base_and_tracker_in_an_obstacle_are_named_before_the_working_targets(tmp_path):
     """The UR10 cell (working targets solved by IK): an obstacle the shoulder hits at every configuration, or one
     around the tracker (a capsule or a box), is refused as the cell's fault, not as an unreachable working target."""
-    base = yaml.safe_load((CELL_DIR / "ur10.yaml").read_text())
+    base = _shipped("ur10")
     for f in ("ur10_table.urdf", "ur10_workpiece.stl"):
         (tmp_path / f).write_bytes((CELL_DIR / f).read_bytes())
 
     def refused(edit) -> str:
-        d = yaml.safe_load(yaml.safe_dump(base))
+        d = copy.deepcopy(base)
         edit(d)
         with pytest.raises(InputError) as e:
             cell_from_dict(d, str(tmp_path / "cell.yaml"), tmp_path)
@@ -404,7 +413,7 @@ def test_obstacle_on_the_base_and_tracker_in_an_obstacle_are_named_before_the_wo
              "max_radius_m": 1.0}
     msg = refused(lambda d: d["environment"].append(plate))
     assert "obstacle 'plate_0' (an enclosing capsule the optimiser uses for 'plate'" in msg and "max_radius_m" in msg
-    d = yaml.safe_load(yaml.safe_dump(base))
+    d = copy.deepcopy(base)
     d["environment"].append({**plate, "max_radius_m": 0.05})  # strips 5 cm thick: the tracker is clear of them
     cell = cell_from_dict(d, str(tmp_path / "cell.yaml"), tmp_path)
     assert len(cell.environment[-1].capsules) > 1
@@ -430,3 +439,32 @@ def test_the_always_blocked_test_stops_early_with_the_full_matrixs_verdict():
         assert blocked_in_all(chk, Q, clearance) == want
         verdicts.append(want)
     assert verdicts[0] is False and verdicts[-1] is True  # both verdicts reached
+
+
+def test_mesh_boxes_bound_the_mesh_pairs_and_the_smallest_distance_is_unchanged():
+    """The boxes around the UR10 cell's workpiece mesh bound every mesh pair from below (Coal's capsule–box distance
+    never above its capsule–mesh distance), and the smallest pair distance that leaves the far mesh pairs out is the
+    one with every pair computed, on configurations near and far from the mesh, colliding or clear: equal but for the
+    last digits Coal's warm-started GJK moves (a mesh pair computed at fewer configurations starts from older
+    results; ~1e-17 m)."""
+    cell = load_cell("ur10")
+    fast, full = FeasibilityChecker(cell), FeasibilityChecker(cell)
+    full.mesh_boxes = None  # every pair computed by Coal
+    assert fast.mesh_boxes is not None and len(fast.mesh_pairs) == 8
+    bgm, bgd, boxes = fast.mesh_boxes
+    X = cell.robot.random_q(np.random.default_rng(0), 400)
+    D = np.array([full.pair_distances(q) for q in X])
+    near = X[np.isin(D.argmin(axis=1), full.mesh_pairs) & (D.min(axis=1) > 1e-6)]  # a mesh pair the smallest, clear
+    assert len(near) >= 3
+    X = np.vstack([X[:100], near, *(np.linspace(a, b, 20) for a, b in zip(near[:-1], near[1:]))])
+    left_out = mesh_smallest = 0
+    for q in X:
+        d = full.pair_distances(q)
+        pin.updateGeometryPlacements(full.model, full.data, bgm, bgd)
+        pin.computeDistances(bgm, bgd)
+        low = np.array([r.min_distance for r in boxes])
+        assert np.all(low <= d[full.mesh_pairs] + 1e-9)
+        left_out += int(np.sum(low > d.min() + 1e-4))
+        mesh_smallest += int(d.min() > 1e-6 and int(np.argmin(d)) in full.mesh_pairs)
+        assert abs(fast.min_pair_distance(q) - d.min()) <= 1e-12
+    assert left_out > len(X) and mesh_smallest >= len(near)  # pairs left out; clear configurations a mesh decides

@@ -11,7 +11,7 @@ import pinocchio as pin
 import pytest
 import yaml
 
-from pin_kpi_oed.cell.cell import CELL_DIR, cell_from_dict, load_cell
+from pin_kpi_oed.cell.cell import CELL_DIR, cell_from_dict, load_cell, parse_cell_text
 from pin_kpi_oed.design.optimize import DesignProblem
 from pin_kpi_oed.errors import InputError
 from pin_kpi_oed.oed.covariance import information
@@ -31,7 +31,10 @@ def seam_problem(seam_cell):
 
 
 def _seam_dict():
-    return yaml.safe_load((CELL_DIR / "kr15_seam.yaml").read_text())
+    """The shipped seam cell as a fresh dict (the package's parse, libyaml's: the same values as PyYAML's own,
+    ``tests/test_collision.py``)."""
+    path = CELL_DIR / "kr15_seam.yaml"
+    return parse_cell_text(path.read_text(), path)
 
 
 def _fk(cell, q):

@@ -190,7 +190,14 @@ def test_move_bound_call_is_the_smallest_pair_bound_and_the_cap_changes_nothing_
     mesh) and half-spaces; with a cap the closest points are computed only where the balls come closer than it: every
     pair bound is at most the uncapped one (still a bound), the same below the cap and, for a cap > 0, at least the
     cap above it (a cap ≤ 0, which a move colliding without early stop gives, keeps the per-row balls: a soft pair's
-    ball distance there may be ≤ 0, no bound)."""
+    ball distance there may be ≤ 0, no bound). The move checks' cap just above the threshold that decides
+    (``ball_cap``) bounds every configuration the former wide cap (0.05 m above it) bounds below the threshold as that
+    one, bit for bit, and every other at or above it: a check evaluates exactly the configurations below its
+    threshold, in the order of their bounds, so the same ones in the same order (a cap that is not positive stays
+    wide).
+    """
+    from pin_kpi_oed.program.transitions import BALL_CAP_WIDE_M, ball_cap
+
     bound = TransitionChecker(ur10, 0.01).bound
     assert bound is not None and bound.soft_rows.size and bound.hard_rows.size and bound.H_pair.size
     X = ur10.robot.random_q(np.random.default_rng(2), 120)
@@ -203,6 +210,12 @@ def test_move_bound_call_is_the_smallest_pair_bound_and_the_cap_changes_nothing_
             below = full < cap
             assert below.any() and np.array_equal(capped[below], full[below]) and np.all(capped <= full)
             assert cap <= 0 or np.all(capped[~below] >= cap)
+    for threshold in (-0.1, 0.0, 0.01, 0.05):
+        wide, narrow = bound(X, threshold + BALL_CAP_WIDE_M), bound(X, ball_cap(threshold))
+        below = wide < threshold
+        assert np.array_equal(narrow[below], wide[below]) and np.all(narrow[~below] >= threshold)
+        assert below.any() and (~below).any()
+    assert ball_cap(0.01) < 0.01 + 1e-5 and ball_cap(-0.1) == -0.1 + BALL_CAP_WIDE_M
 
 
 def test_ur10_colliding_move_is_planned_by_ompl_and_passes_the_dense_check(ur10):

@@ -39,8 +39,30 @@ from pin_kpi_oed.errors import InputError
 from pin_kpi_oed.program.move_bound import MoveBound
 
 #: how far above a decision's threshold (m) the move-check bound may use a segment pair's enclosing balls instead
-#: of its closest points (:meth:`~pin_kpi_oed.program.move_bound.MoveBound.pairs`): the same decisions, cheaper
-BALL_CAP_M = 0.05
+#: of its closest points (:meth:`~pin_kpi_oed.program.move_bound.MoveBound.pairs`; :func:`ball_cap`): the same
+#: decisions, cheaper. A segment pair's closest points are never nearer than its balls, so a row the balls keep
+#: above the threshold is not the one that puts a sample below it: the samples below it keep their bound bit for
+#: bit, those above it stay above it (and are never evaluated)
+BALL_CAP_M = 1e-6
+
+#: the margin of a cap that is not positive (:func:`ball_cap`): such a cap keeps the balls per segment pair over
+#: all configurations (:meth:`~pin_kpi_oed.program.move_bound.MoveBound.pairs`), so it is left where it was
+BALL_CAP_WIDE_M = 0.05
+
+
+def ball_cap(threshold_m: float) -> float:
+    """The cap of the move-check bound for a decision at ``threshold_m`` (m, the cell's clearance included).
+
+    Args:
+        threshold_m: the smallest pair distance (m) that decides (a sample bounded at or above it is not evaluated).
+
+    Returns:
+        ``threshold_m + BALL_CAP_M``, at least ``BALL_CAP_M`` (m); ``threshold_m + BALL_CAP_WIDE_M`` when that is not
+        positive (a colliding move checked without early stop): the caps whose decisions, and exact evaluations,
+        are those of the closest points everywhere.
+    """
+    wide = threshold_m + BALL_CAP_WIDE_M
+    return wide if wide <= 0 else max(threshold_m + BALL_CAP_M, BALL_CAP_M)
 
 #: RRT-Connect's step, as a share of the joint space's extent (OMPL's default is 0.2: long edges that mostly
 #: collide in a cell, each a dense check of hundreds of samples; 0.05 plans the UR10 cell's routes in fewer checks)
@@ -191,7 +213,7 @@ class TransitionChecker:
             # and without early stop the smallest clearance) is the exact check's
             # the balls stand in for closest points only far above what can decide: the margin (early stop), else
             # the smallest clearance so far (samples bounded above it are never evaluated)
-            cap = self.cell.clearance_m + (max(need, self.margin_m) if stop_early else best) + BALL_CAP_M
+            cap = ball_cap(self.cell.clearance_m + (max(need, self.margin_m) if stop_early else best))
             lb = self.bound(S[1:-1], cap) - self.cell.clearance_m
             order = np.argsort(lb, kind="stable")
             for o in order:
@@ -257,7 +279,7 @@ class TransitionChecker:
             (k,) bool.
         """
         X = np.atleast_2d(np.asarray(X, float))
-        cap = self.cell.clearance_m + threshold + BALL_CAP_M
+        cap = ball_cap(self.cell.clearance_m + threshold)
         lb = ((self.bound(X, cap) - self.cell.clearance_m) if self.bound is not None and len(X)
               else np.full(len(X), -np.inf))
         out = np.zeros(len(X), bool)
