@@ -45,10 +45,26 @@ def parsed(path: Path) -> ast.Module:
 _NODES: dict[int, tuple[ast.AST, tuple[ast.AST, ...]]] = {}
 
 
+def walk(tree: ast.AST) -> list[ast.AST]:
+    """Every node of ``tree`` in the order of ``ast.walk`` (breadth first, each node's children in the order of
+    ``ast.iter_child_nodes``), listed by one loop over the nodes' fields instead of ``ast.walk``'s three nested
+    generators (half the time on the package's trees)."""
+    out: list[ast.AST] = [tree]
+    AST = ast.AST
+    for node in out:  # the list grows while it is read: breadth first
+        for name in node._fields:
+            value = getattr(node, name, None)
+            if isinstance(value, AST):
+                out.append(value)
+            elif isinstance(value, list):
+                out.extend(x for x in value if isinstance(x, AST))
+    return out
+
+
 def nodes(tree: ast.AST) -> tuple[ast.AST, ...]:
-    """Every node of ``tree`` in ``ast.walk`` order, listed on the first call for that tree."""
+    """Every node of ``tree`` in ``ast.walk`` order (:func:`walk`), listed on the first call for that tree."""
     hit = _NODES.get(id(tree))
     if hit is None or hit[0] is not tree:
         with _kept_out_of_collections():
-            hit = _NODES[id(tree)] = (tree, tuple(ast.walk(tree)))
+            hit = _NODES[id(tree)] = (tree, tuple(walk(tree)))
     return hit[1]

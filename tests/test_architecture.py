@@ -243,11 +243,43 @@ def test_benchmarks_and_examples_use_the_public_api() -> None:
     assert not bad, "private names used by benchmarks / examples:\n" + "\n".join(bad)
 
 
+def _statements(tree: ast.AST) -> list[ast.AST]:
+    """Every statement of ``tree`` (and the module, exception handlers and match cases holding them), found without
+    entering an expression: a statement (an import among them) sits only in a statement list — a body, ``orelse``,
+    ``finalbody``, ``handlers``, ``cases`` —, never inside an expression; a tree's expressions are most of its nodes."""
+    out: list[ast.AST] = [tree]
+    holders = (ast.stmt, ast.excepthandler, ast.match_case)
+    for node in out:  # the list grows while it is read
+        for name in node._fields:
+            value = getattr(node, name, None)
+            if isinstance(value, list):
+                out.extend(x for x in value if isinstance(x, holders))
+    return out
+
+
+def test_statement_walk_finds_every_import_the_full_walk_finds() -> None:
+    tree = ast.parse("import a\nfrom b import _c\nclass K:\n    from d import e\n    def f(self):\n"
+                     "        try:\n            from g import h\n        except ImportError:\n            import i\n"
+                     "        else:\n            from j import k\n        finally:\n            import m\n"
+                     "        match x:\n            case 1:\n                from n import _o\n"
+                     "        with p:\n            for q in r:\n                while s:\n"
+                     "                    if t:\n                        import u\n"
+                     "                    else:\n                        from v import w\n"
+                     "async def y():\n    async with z:\n        import aa\n")
+    imports = (ast.Import, ast.ImportFrom)
+    full = [n for n in ast.walk(tree) if isinstance(n, imports)]
+    assert len(full) == 11 and {id(n) for n in _statements(tree) if isinstance(n, imports)} == {id(n) for n in full}
+    this = _tree(Path(__file__))
+    assert {id(n) for n in _statements(this) if isinstance(n, imports)} == \
+        {id(n) for n in nodes(this) if isinstance(n, imports)}
+
+
 def test_tests_import_no_private_name_of_the_package() -> None:
-    """A test imports what it tests by its public name: no ``from pin_kpi_oed... import _x`` anywhere in tests/."""
+    """A test imports what it tests by its public name: no ``from pin_kpi_oed... import _x`` anywhere in tests/
+    (an import is a statement: the statements are walked, not the expressions, :func:`_statements`)."""
     root = PKG.parent
     bad = [f"{f.relative_to(root)}:{node.lineno} from {node.module} import {a.name}"
-           for f in sorted((root / "tests").rglob("*.py")) for node in nodes(_tree(f))
+           for f in sorted((root / "tests").rglob("*.py")) for node in _statements(_tree(f))
            if isinstance(node, ast.ImportFrom) and (node.module or "").startswith("pin_kpi_oed")
            for a in node.names if _private(a.name)]
     assert not bad, "private names of the package imported by tests:\n" + "\n".join(bad)
