@@ -651,3 +651,32 @@ def test_to_jsonable_gives_the_entry_by_entry_result():
                    else v for k, v in cert.items()}
     assert typed(to_jsonable(cert)) == typed(_jsonable_walk(cert)) == typed(cert)
     assert typed(to_jsonable(with_arrays)) == typed(_jsonable_walk(with_arrays))
+
+
+def test_an_ipa_file_read_again_gives_a_fresh_copy_of_the_same_set(tmp_path: Path) -> None:
+    """``import_ipa`` converts a file once per content: a second read gives a set equal to a fresh conversion (field
+    for field, of a copy of the file under another name: not from the cache), in arrays of its own; the same name
+    with other bytes of the same size, written within the same clock tick, is converted afresh."""
+    import dataclasses
+
+    from pin_kpi_oed.data.ipa import UR10_JOINT_NAMES, import_ipa
+
+    header = ["Timestamp", *UR10_JOINT_NAMES, "measurement_x", "measurement_y", "measurement_z"]
+    rows = ["20200229235959;0,1;0,2;0,3;0,4;0,5;0,6;1000,5;2000;-3,5E+02",
+            "20200301000004;1,1;1,2;1,3;1,4;1,5;1,6;1100,5;2100;-4,5E+02"]
+    f, other = tmp_path / "measurements_a.csv", tmp_path / "measurements_b.csv"
+    f.write_text(";".join(header) + "\n" + "\n".join(rows) + "\n")
+    other.write_bytes(f.read_bytes())
+
+    def fields(ms) -> dict:
+        return {k: (v.tolist() if isinstance(v, np.ndarray) else
+                    {n: a.tolist() for n, a in v.items()} if isinstance(v, dict) else v)
+                for k, v in dataclasses.asdict(ms).items() if k != "source"}
+
+    first, again, fresh = import_ipa(f), import_ipa(f), import_ipa(other)
+    assert fields(first) == fields(again) == fields(fresh) and again.source == first.source == str(f)
+    assert not np.shares_memory(first.q, again.q) and not np.shares_memory(first.time_s, again.time_s)
+    first.q[0, 0] = 99.0
+    assert import_ipa(f).q[0, 0] == 0.1
+    f.write_text(f.read_text().replace("0,1;0,2", "0,7;0,8"))  # the same size: only the bytes tell
+    assert import_ipa(f).q[0, :2].tolist() == [0.7, 0.8]
