@@ -19,7 +19,7 @@ PARSED_GROUP = "misc_parsed_sources"
 
 
 @contextlib.contextmanager
-def _kept_out_of_collections() -> Iterator[None]:
+def kept_out_of_collections() -> Iterator[None]:
     """No garbage collection while a tree is made: a parse allocates many objects at once, and each pass of the
     collector inside it would scan every tree parsed so far. Nothing is frozen (``gc.freeze`` would also keep the
     unreachable cycles other tests of the process left, e.g. OMPL's objects, which nanobind then reports as leaked
@@ -37,7 +37,7 @@ def _kept_out_of_collections() -> Iterator[None]:
 def parsed(path: Path) -> ast.Module:
     """The parsed source of the file ``path`` (an absolute path; parsed on the first call only)."""
     text = Path(path).read_text()
-    with _kept_out_of_collections():
+    with kept_out_of_collections():
         return ast.parse(text)
 
 
@@ -65,6 +65,6 @@ def nodes(tree: ast.AST) -> tuple[ast.AST, ...]:
     """Every node of ``tree`` in ``ast.walk`` order (:func:`walk`), listed on the first call for that tree."""
     hit = _NODES.get(id(tree))
     if hit is None or hit[0] is not tree:
-        with _kept_out_of_collections():
+        with kept_out_of_collections():
             hit = _NODES[id(tree)] = (tree, tuple(walk(tree)))
     return hit[1]

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import pytest
 
-from tests._cache_misc import PARSED_GROUP, nodes, parsed
+from tests._cache_misc import PARSED_GROUP, kept_out_of_collections, nodes, parsed, walk
 
 #: Upstream to downstream, as drawn in docs/ARCHITECTURE.md.
 ORDER = ["errors", "progress", "threads", "validation", "data", "results", "model", "effects", "discrepancy", "oed",
@@ -184,11 +184,11 @@ def _private(name: str) -> bool:
     return name.startswith("_") and not (name.startswith("__") and name.endswith("__"))
 
 
-def _annotation_nodes(tree: ast.AST) -> set[int]:
-    """ids of the nodes inside annotations (arguments, returns, annotated assignments): typing may name a
-    library's private class (``argparse._SubParsersAction``), the code may not use it."""
+def _annotation_nodes(every) -> set[int]:
+    """ids of the nodes inside annotations (arguments, returns, annotated assignments) among a tree's nodes
+    ``every``: typing may name a library's private class (``argparse._SubParsersAction``), the code may not use it."""
     out: set[int] = set()
-    for node in nodes(tree):
+    for node in every:
         anns: list[ast.AST | None] = []
         if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
             a = node.args
@@ -205,13 +205,15 @@ def _annotation_nodes(tree: ast.AST) -> set[int]:
 PUBLIC_UNDERSCORE = {"os._exit"}
 
 
-def _private_reaches(tree: ast.AST) -> list[tuple[int, str]]:
+def _private_reaches(tree: ast.AST, listed=nodes) -> list[tuple[int, str]]:
     """(line, text) of every private name imported from another module (``from m import _x``, ``m._x``) and every
-    private attribute read on an object other than ``self`` / ``cls`` (``problem._kpi``)."""
-    reach = [node for node in nodes(tree) if isinstance(node, ast.ImportFrom) or isinstance(node, ast.Attribute)
+    private attribute read on an object other than ``self`` / ``cls`` (``problem._kpi``); ``listed`` lists a tree's
+    nodes (:func:`~tests._cache_misc.nodes`: listed once and kept; :func:`~tests._cache_misc.walk`: not kept)."""
+    every = listed(tree)
+    reach = [node for node in every if isinstance(node, ast.ImportFrom) or isinstance(node, ast.Attribute)
              and _private(node.attr) and not (isinstance(node.value, ast.Name) and node.value.id in ("self", "cls"))]
     # the annotations' nodes listed only when a private attribute was read (most trees read none)
-    skip = _annotation_nodes(tree) if any(isinstance(n, ast.Attribute) for n in reach) else set()
+    skip = _annotation_nodes(every) if any(isinstance(n, ast.Attribute) for n in reach) else set()
     out = []
     for node in reach:
         if isinstance(node, ast.ImportFrom):
@@ -238,8 +240,10 @@ def test_benchmarks_and_examples_use_the_public_api() -> None:
     """The benchmarks and examples are users of the package: they import no private name of it and read no private
     attribute (what they need is public, documented API)."""
     root = PKG.parent
-    bad = [f"{f.relative_to(root)}:{line} {text}" for d in ("benchmarks", "examples")
-           for f in sorted((root / d).rglob("*.py")) for line, text in _private_reaches(_tree(f))]
+    with kept_out_of_collections():  # each tree dropped after its file: no other test reads them
+        bad = [f"{f.relative_to(root)}:{line} {text}" for d in ("benchmarks", "examples")
+               for f in sorted((root / d).rglob("*.py"))
+               for line, text in _private_reaches(ast.parse(f.read_text()), walk)]
     assert not bad, "private names used by benchmarks / examples:\n" + "\n".join(bad)
 
 
@@ -278,10 +282,11 @@ def test_tests_import_no_private_name_of_the_package() -> None:
     """A test imports what it tests by its public name: no ``from pin_kpi_oed... import _x`` anywhere in tests/
     (an import is a statement: the statements are walked, not the expressions, :func:`_statements`)."""
     root = PKG.parent
-    bad = [f"{f.relative_to(root)}:{node.lineno} from {node.module} import {a.name}"
-           for f in sorted((root / "tests").rglob("*.py")) for node in _statements(_tree(f))
-           if isinstance(node, ast.ImportFrom) and (node.module or "").startswith("pin_kpi_oed")
-           for a in node.names if _private(a.name)]
+    with kept_out_of_collections():  # each tree dropped after its file: no other test reads them
+        bad = [f"{f.relative_to(root)}:{node.lineno} from {node.module} import {a.name}"
+               for f in sorted((root / "tests").rglob("*.py")) for node in _statements(ast.parse(f.read_text()))
+               if isinstance(node, ast.ImportFrom) and (node.module or "").startswith("pin_kpi_oed")
+               for a in node.names if _private(a.name)]
     assert not bad, "private names of the package imported by tests:\n" + "\n".join(bad)
 
 

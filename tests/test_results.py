@@ -7,7 +7,10 @@ import ast
 import importlib
 from pathlib import Path
 
+import pytest
+
 from pin_kpi_oed.results import Result
+from tests._cache_misc import PARSED_GROUP, parsed
 
 PKG = Path(__file__).resolve().parents[1] / "pin_kpi_oed"
 #: results of a step whose class name does not end in "Result" (module under pin_kpi_oed, class)
@@ -23,12 +26,13 @@ def _result_classes() -> list[tuple[str, str]]:
     out = []
     for f in sorted(PKG.rglob("*.py")):
         rel = ".".join(f.relative_to(PKG).with_suffix("").parts)
-        for node in ast.parse(f.read_text()).body:
+        for node in parsed(f.resolve()).body:  # parsed once with the architecture tests (tests/_cache_misc.py)
             if isinstance(node, ast.ClassDef) and (node.name.endswith("Result") or (rel, node.name) in OTHER_RESULTS):
                 out.append(("pin_kpi_oed." + rel, node.name))
     return out
 
 
+@pytest.mark.xdist_group(PARSED_GROUP)
 def test_every_result_type_derives_from_result() -> None:
     found = _result_classes()
     assert {n for _, n in found} >= {n for _, n in OTHER_RESULTS} | {"IkResult", "EffectResult", "IdentificationResult"}
