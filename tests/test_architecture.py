@@ -9,7 +9,7 @@ from pathlib import Path
 
 import pytest
 
-from tests._cache_misc import PARSED_GROUP, kept_out_of_collections, nodes, parsed, walk
+from tests._cache_misc import PARSED_GROUP, kept_out_of_collections, nodes, parsed, release, walk
 
 #: Upstream to downstream, as drawn in docs/ARCHITECTURE.md.
 ORDER = ["errors", "progress", "threads", "validation", "data", "results", "model", "effects", "discrepancy", "oed",
@@ -20,6 +20,15 @@ PKG = Path(__file__).resolve().parents[1] / "pin_kpi_oed"
 
 #: the tests that read the parsed sources: on one xdist worker, so that each file is parsed once (tests/_cache_misc.py)
 shares_trees = pytest.mark.xdist_group(PARSED_GROUP)
+
+
+@pytest.fixture(scope="module", autouse=True)
+def _trees_dropped_after_the_module():
+    """The package's trees are kept while this module's tests read them, and dropped after its last test: kept, they
+    made every garbage collection of the tests that came after walk them."""
+    yield
+    _IMPORTS.clear()
+    release()
 
 
 def _tree(f: Path) -> ast.Module:

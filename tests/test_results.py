@@ -7,10 +7,8 @@ import ast
 import importlib
 from pathlib import Path
 
-import pytest
-
 from pin_kpi_oed.results import Result
-from tests._cache_misc import PARSED_GROUP, parsed
+from tests._cache_misc import kept_out_of_collections
 
 PKG = Path(__file__).resolve().parents[1] / "pin_kpi_oed"
 #: results of a step whose class name does not end in "Result" (module under pin_kpi_oed, class)
@@ -23,16 +21,19 @@ OTHER_RESULTS = {("oed.selection_result", "PoolSelection"), ("oed.relaxation", "
 
 
 def _result_classes() -> list[tuple[str, str]]:
+    """(module, class) of every result type the package declares at the top level of a module: each file parsed
+    without garbage collections and its tree dropped after it (kept trees slow down every later collection)."""
     out = []
-    for f in sorted(PKG.rglob("*.py")):
-        rel = ".".join(f.relative_to(PKG).with_suffix("").parts)
-        for node in parsed(f.resolve()).body:  # parsed once with the architecture tests (tests/_cache_misc.py)
-            if isinstance(node, ast.ClassDef) and (node.name.endswith("Result") or (rel, node.name) in OTHER_RESULTS):
-                out.append(("pin_kpi_oed." + rel, node.name))
+    with kept_out_of_collections():
+        for f in sorted(PKG.rglob("*.py")):
+            rel = ".".join(f.relative_to(PKG).with_suffix("").parts)
+            for node in ast.parse(f.read_text()).body:
+                if isinstance(node, ast.ClassDef) and (node.name.endswith("Result") or (rel, node.name) in
+                                                       OTHER_RESULTS):
+                    out.append(("pin_kpi_oed." + rel, node.name))
     return out
 
 
-@pytest.mark.xdist_group(PARSED_GROUP)
 def test_every_result_type_derives_from_result() -> None:
     found = _result_classes()
     assert {n for _, n in found} >= {n for _, n in OTHER_RESULTS} | {"IkResult", "EffectResult", "IdentificationResult"}
