@@ -15,6 +15,7 @@ import functools
 import gc
 from collections.abc import Iterator
 from pathlib import Path
+from typing import Any
 
 #: the xdist group of the tests that read the package's parsed source
 PARSED_GROUP = "misc_parsed_sources"
@@ -76,3 +77,20 @@ def release() -> None:
     """Drop every tree :func:`parsed` kept and every node list :func:`nodes` kept (a later call parses again)."""
     parsed.cache_clear()
     _NODES.clear()
+
+
+def read_later(request: Any) -> bool:
+    """Whether a test of another module that reads the package's trees (marked ``xdist_group(PARSED_GROUP)``) comes
+    after the module of ``request`` in this session's order: the group's tests run on one worker, in that order."""
+    items = request.session.items
+    here = [i for i, item in enumerate(items) if getattr(item, "module", None) is request.module]
+    return any(getattr(item, "module", None) is not request.module and any(m.args[:1] == (PARSED_GROUP,)
+                                                          for m in item.iter_markers("xdist_group"))
+               for item in items[max(here) + 1:] if here)
+
+
+def release_after_last_reader(request: Any) -> None:
+    """:func:`release` at the end of the module of ``request`` unless a later module reads the trees
+    (:func:`read_later`): the last module of the group drops them, the others hand them on."""
+    if not read_later(request):
+        release()

@@ -9,7 +9,8 @@ from pathlib import Path
 
 import pytest
 
-from tests._cache_misc import PARSED_GROUP, kept_out_of_collections, nodes, parsed, release, walk
+from tests._cache_misc import (PARSED_GROUP, kept_out_of_collections, nodes, parsed, release_after_last_reader,
+                               walk)
 
 #: Upstream to downstream, as drawn in docs/ARCHITECTURE.md.
 ORDER = ["errors", "progress", "threads", "validation", "data", "results", "model", "effects", "discrepancy", "oed",
@@ -23,12 +24,13 @@ shares_trees = pytest.mark.xdist_group(PARSED_GROUP)
 
 
 @pytest.fixture(scope="module", autouse=True)
-def _trees_dropped_after_the_module():
-    """The package's trees are kept while this module's tests read them, and dropped after its last test: kept, they
-    made every garbage collection of the tests that came after walk them."""
+def _trees_dropped_after_the_last_reader(request):
+    """The package's trees are kept while this module's tests read them, and dropped after its last test unless a
+    later module of the session reads them too (tests/test_route_count.py, which then drops them): kept, they made
+    every garbage collection of the tests that came after walk their 400,000 objects."""
     yield
     _IMPORTS.clear()
-    release()
+    release_after_last_reader(request)
 
 
 def _tree(f: Path) -> ast.Module:
