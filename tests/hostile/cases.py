@@ -507,9 +507,8 @@ def _build_issue24(d: Path, design: dict) -> None:
     table("reg_swap.csv", [r[:xi] + [r[yi], r[xi], r[zi]] + r[zi + 1:] for r in data[:20]])
     table("reg_negz.csv", [r[:zi] + [repr(-float(r[zi]))] + r[zi + 1:] for r in data[:20]])
     (d / "targets.csv").write_text("x,y,z\n" + "\n".join(",".join(f"{v:.6f}" for v in p) for p in P[:5]) + "\n")
-    # two targets out of reach ("all unreachable" of more than one; each costs the IK's every restart, 0.4 s)
     (d / "targets_far.csv").write_text("x,y,z\n" + "\n".join(",".join(f"{v + 6.0:.6f}" for v in p)
-                                                              for p in P[:2]) + "\n")
+                                                              for p in P[:3]) + "\n")
     (d / "prog.csv").write_text(",".join(f"joint_a{k}" for k in range(1, 7)) + "\n"
                                 + "\n".join(",".join(f"{v:.8f}" for v in q) for q in J[:5]) + "\n")
     with contextlib.redirect_stdout(io.StringIO()):
