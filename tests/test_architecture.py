@@ -9,7 +9,8 @@ from pathlib import Path
 
 import pytest
 
-from tests._cache_misc import PARSED_GROUP, nodes, parsed
+from tests._cache_misc import (PARSED_GROUP, kept_out_of_collections, nodes, parsed, release_after_last_reader,
+                               walk)
 
 #: Upstream to downstream, as drawn in docs/ARCHITECTURE.md.
 ORDER = ["errors", "progress", "threads", "validation", "data", "results", "model", "effects", "discrepancy", "oed",
@@ -20,6 +21,16 @@ PKG = Path(__file__).resolve().parents[1] / "pin_kpi_oed"
 
 #: the tests that read the parsed sources: on one xdist worker, so that each file is parsed once (tests/_cache_misc.py)
 shares_trees = pytest.mark.xdist_group(PARSED_GROUP)
+
+
+@pytest.fixture(scope="module", autouse=True)
+def _trees_dropped_after_the_last_reader(request):
+    """The package's trees are kept while this module's tests read them, and dropped after its last test unless a
+    later module of the session reads them too (tests/test_route_count.py, which then drops them): kept, they made
+    every garbage collection of the tests that came after walk their 400,000 objects."""
+    yield
+    _IMPORTS.clear()
+    release_after_last_reader(request)
 
 
 def _tree(f: Path) -> ast.Module:
@@ -184,11 +195,11 @@ def _private(name: str) -> bool:
     return name.startswith("_") and not (name.startswith("__") and name.endswith("__"))
 
 
-def _annotation_nodes(tree: ast.AST) -> set[int]:
-    """ids of the nodes inside annotations (arguments, returns, annotated assignments): typing may name a
-    library's private class (``argparse._SubParsersAction``), the code may not use it."""
+def _annotation_nodes(every) -> set[int]:
+    """ids of the nodes inside annotations (arguments, returns, annotated assignments) among a tree's nodes
+    ``every``: typing may name a library's private class (``argparse._SubParsersAction``), the code may not use it."""
     out: set[int] = set()
-    for node in nodes(tree):
+    for node in every:
         anns: list[ast.AST | None] = []
         if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
             a = node.args
@@ -205,13 +216,15 @@ def _annotation_nodes(tree: ast.AST) -> set[int]:
 PUBLIC_UNDERSCORE = {"os._exit"}
 
 
-def _private_reaches(tree: ast.AST) -> list[tuple[int, str]]:
+def _private_reaches(tree: ast.AST, listed=nodes) -> list[tuple[int, str]]:
     """(line, text) of every private name imported from another module (``from m import _x``, ``m._x``) and every
-    private attribute read on an object other than ``self`` / ``cls`` (``problem._kpi``)."""
-    reach = [node for node in nodes(tree) if isinstance(node, ast.ImportFrom) or isinstance(node, ast.Attribute)
+    private attribute read on an object other than ``self`` / ``cls`` (``problem._kpi``); ``listed`` lists a tree's
+    nodes (:func:`~tests._cache_misc.nodes`: listed once and kept; :func:`~tests._cache_misc.walk`: not kept)."""
+    every = listed(tree)
+    reach = [node for node in every if isinstance(node, ast.ImportFrom) or isinstance(node, ast.Attribute)
              and _private(node.attr) and not (isinstance(node.value, ast.Name) and node.value.id in ("self", "cls"))]
     # the annotations' nodes listed only when a private attribute was read (most trees read none)
-    skip = _annotation_nodes(tree) if any(isinstance(n, ast.Attribute) for n in reach) else set()
+    skip = _annotation_nodes(every) if any(isinstance(n, ast.Attribute) for n in reach) else set()
     out = []
     for node in reach:
         if isinstance(node, ast.ImportFrom):
@@ -238,18 +251,53 @@ def test_benchmarks_and_examples_use_the_public_api() -> None:
     """The benchmarks and examples are users of the package: they import no private name of it and read no private
     attribute (what they need is public, documented API)."""
     root = PKG.parent
-    bad = [f"{f.relative_to(root)}:{line} {text}" for d in ("benchmarks", "examples")
-           for f in sorted((root / d).rglob("*.py")) for line, text in _private_reaches(_tree(f))]
+    with kept_out_of_collections():  # each tree dropped after its file: no other test reads them
+        bad = [f"{f.relative_to(root)}:{line} {text}" for d in ("benchmarks", "examples")
+               for f in sorted((root / d).rglob("*.py"))
+               for line, text in _private_reaches(ast.parse(f.read_text()), walk)]
     assert not bad, "private names used by benchmarks / examples:\n" + "\n".join(bad)
 
 
+def _statements(tree: ast.AST) -> list[ast.AST]:
+    """Every statement of ``tree`` (and the module, exception handlers and match cases holding them), found without
+    entering an expression: a statement (an import among them) sits only in a statement list — a body, ``orelse``,
+    ``finalbody``, ``handlers``, ``cases`` —, never inside an expression; a tree's expressions are most of its nodes."""
+    out: list[ast.AST] = [tree]
+    holders = (ast.stmt, ast.excepthandler, ast.match_case)
+    for node in out:  # the list grows while it is read
+        for name in node._fields:
+            value = getattr(node, name, None)
+            if isinstance(value, list):
+                out.extend(x for x in value if isinstance(x, holders))
+    return out
+
+
+def test_statement_walk_finds_every_import_the_full_walk_finds() -> None:
+    tree = ast.parse("import a\nfrom b import _c\nclass K:\n    from d import e\n    def f(self):\n"
+                     "        try:\n            from g import h\n        except ImportError:\n            import i\n"
+                     "        else:\n            from j import k\n        finally:\n            import m\n"
+                     "        match x:\n            case 1:\n                from n import _o\n"
+                     "        with p:\n            for q in r:\n                while s:\n"
+                     "                    if t:\n                        import u\n"
+                     "                    else:\n                        from v import w\n"
+                     "async def y():\n    async with z:\n        import aa\n")
+    imports = (ast.Import, ast.ImportFrom)
+    full = [n for n in ast.walk(tree) if isinstance(n, imports)]
+    assert len(full) == 11 and {id(n) for n in _statements(tree) if isinstance(n, imports)} == {id(n) for n in full}
+    this = _tree(Path(__file__))
+    assert {id(n) for n in _statements(this) if isinstance(n, imports)} == \
+        {id(n) for n in nodes(this) if isinstance(n, imports)}
+
+
 def test_tests_import_no_private_name_of_the_package() -> None:
-    """A test imports what it tests by its public name: no ``from pin_kpi_oed... import _x`` anywhere in tests/."""
+    """A test imports what it tests by its public name: no ``from pin_kpi_oed... import _x`` anywhere in tests/
+    (an import is a statement: the statements are walked, not the expressions, :func:`_statements`)."""
     root = PKG.parent
-    bad = [f"{f.relative_to(root)}:{node.lineno} from {node.module} import {a.name}"
-           for f in sorted((root / "tests").rglob("*.py")) for node in nodes(_tree(f))
-           if isinstance(node, ast.ImportFrom) and (node.module or "").startswith("pin_kpi_oed")
-           for a in node.names if _private(a.name)]
+    with kept_out_of_collections():  # each tree dropped after its file: no other test reads them
+        bad = [f"{f.relative_to(root)}:{node.lineno} from {node.module} import {a.name}"
+               for f in sorted((root / "tests").rglob("*.py")) for node in _statements(ast.parse(f.read_text()))
+               if isinstance(node, ast.ImportFrom) and (node.module or "").startswith("pin_kpi_oed")
+               for a in node.names if _private(a.name)]
     assert not bad, "private names of the package imported by tests:\n" + "\n".join(bad)
 
 

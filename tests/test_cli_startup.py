@@ -300,3 +300,50 @@ def test_an_interrupt_a_library_swallowed_is_still_an_interrupt_unless_the_comma
         assert signal.getsignal(signal.SIGINT) is signal.default_int_handler, "the handler must be restored"
     finally:
         signal.signal(signal.SIGINT, inherited)
+
+
+def test_a_parser_shared_by_commands_carries_nothing_from_one_to_the_next(monkeypatch) -> None:
+    """:func:`main` parses each topic's commands with one parser (:func:`pin_kpi_oed.cli.app.parser_for`): commands
+    parsed in a row — the same command with and without its options, an ``append`` option given twice then once, two
+    commands of one topic, commands of other topics in between — get the namespaces fresh parsers give, and a command
+    that changes its namespace changes nothing of the next one's. Every default the parsers hold is an immutable
+    value (what makes the sharing safe)."""
+    import argparse
+    import copy
+
+    from pin_kpi_oed.cli import app
+    from pin_kpi_oed.validation.options import join_negative_values
+
+    seen: list[dict] = []
+
+    def capture(args: argparse.Namespace) -> int:
+        seen.append(copy.deepcopy(vars(args)))  # what the command got, before it changes anything
+        for value in vars(args).values():  # a handler changing its namespace and every list in it
+            if isinstance(value, list):
+                value.append("changed")
+        args.seed = "changed"
+        return 0
+
+    monkeypatch.setattr(app, "_run", capture)
+    runs = [["info", "ur10", "--seed", "3", "--json"], ["info", "ur5"],
+            ["identify", "--robot", "kr15", "--data", "a.csv", "--data", "b.csv", "--reflector", "-0.1,0,0.05"],
+            ["evaluate", "d.json"], ["identify", "--robot", "ur10", "--data", "c.csv"],
+            ["predict", "--model", "m.json", "--data", "t.csv", "--out", "p.csv"],
+            ["register", "--model", "m.json", "--data", "t.csv", "--model-out", "r.json"],
+            ["--threads", "2", "info", "kr15"], ["info", "kr15"]]
+    for argv in runs:
+        assert app.main(list(argv)) == 0
+    for argv, got in zip(runs, seen):
+        fresh = build_parser(command_in(argv), lazy=True).parse_args(join_negative_values(list(argv)))
+        assert got == {**vars(fresh), "argv": argv}, argv
+    assert [a["seed"] for a in seen if a["command"] == "info"] == [3, 0, 0, 0]
+    assert [a["data"] for a in seen if a["command"] == "identify"] == [["a.csv", "b.csv"], ["c.csv"]]
+    assert seen[2]["reflector"] == "-0.1,0,0.05" and seen[4]["reflector"] is None
+    assert seen[1]["reflector"] == "0.05,0.0,0.05"
+    assert seen[0]["json"] is True and seen[1]["json"] is False and seen[7]["threads"] == 2 and seen[8]["threads"] \
+        is None
+    assert app.parser_for("identify") is app.parser_for("simulate"), "one parser per topic module"
+    sub = next(a for a in build_parser()._actions if isinstance(a, argparse._SubParsersAction))
+    mutable = [f"{cmd} {a.dest}" for cmd, p in sub.choices.items() for a in p._actions
+               if not isinstance(a.default, (type(None), str, int, float, bool))]
+    assert not mutable, f"options whose default is a mutable value, shared between commands: {mutable}"

@@ -597,3 +597,86 @@ def test_ipa_cells_and_timestamps_read_as_the_cell_parser_and_strptime_read_them
         with pytest.raises(InputError, match=rf"row 2 \(line 3\): '{stamp}' is not a valid YYYYMMDDhhmmss time "
                                              rf"\({words}\)"):
             import_ipa(f)
+
+
+def _jsonable_walk(obj):
+    """Reference: the entry-by-entry JSON clean-up (every array through its ``tolist()`` walked value by value)."""
+    import os
+
+    if isinstance(obj, dict):
+        return {str(k): _jsonable_walk(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple, set, frozenset)):
+        return [_jsonable_walk(v) for v in (sorted(obj) if isinstance(obj, (set, frozenset)) else obj)]
+    if isinstance(obj, np.ndarray):
+        return _jsonable_walk(obj.tolist())
+    if isinstance(obj, (bool, np.bool_)):
+        return bool(obj)
+    if isinstance(obj, (int, np.integer)):
+        return int(obj)
+    if isinstance(obj, (float, np.floating)):
+        v = float(obj)
+        return v if np.isfinite(v) else None
+    if isinstance(obj, os.PathLike):
+        return os.fspath(obj)
+    return obj
+
+
+def test_to_jsonable_gives_the_entry_by_entry_result():
+    """Arrays of booleans, integers and finite floats go to lists at once: the result equals the entry-by-entry walk's
+    value for value and type for type (NaN / inf as None, float32, 0-d and empty arrays, NumPy scalars, sets, paths),
+    on a certificate the package wrote and on a document made of every kind of value."""
+    import json
+
+    from pin_kpi_oed.data.atomic import to_jsonable
+
+    def typed(x):  # the value with every entry's type, so that 1 == 1.0 == True do not pass for one another
+        if isinstance(x, dict):
+            return {k: typed(v) for k, v in x.items()}
+        if isinstance(x, list):
+            return [typed(v) for v in x]
+        return (type(x).__name__, x)
+
+    rng = np.random.default_rng(0)
+    a = rng.normal(size=(4, 3))
+    a[1, 2], a[3, 0] = np.nan, -np.inf
+    doc = {"f": rng.normal(size=(5, 4)), "f32": rng.normal(size=3).astype(np.float32), "nan": a,
+           "i": np.arange(6, dtype=np.int32).reshape(2, 3), "u": np.array([2**63], dtype=np.uint64),
+           "b": np.array([True, False]), "0d": np.array(2.5), "0d_nan": np.array(np.nan), "empty": np.zeros((0, 3)),
+           "scalars": [np.float64(1.5), np.float32(np.inf), np.int64(3), np.bool_(True), 1, 2.0, True, None, "x"],
+           "set": {3, 1, 2}, "path": Path("a/b.json"), 7: (np.ones(2), [np.zeros(1)]), "c": np.array([1 + 2j]),
+           "s": np.array(["a", "b"])}
+    assert typed(to_jsonable(doc)) == typed(_jsonable_walk(doc))
+    cert = json.loads((Path(__file__).resolve().parents[1] / "docs" / "certificates" / "ur5_cell.json").read_text())
+    with_arrays = {k: np.asarray(v) if isinstance(v, list) and v and all(isinstance(x, (int, float)) for x in v)
+                   else v for k, v in cert.items()}
+    assert typed(to_jsonable(cert)) == typed(_jsonable_walk(cert)) == typed(cert)
+    assert typed(to_jsonable(with_arrays)) == typed(_jsonable_walk(with_arrays))
+
+
+def test_an_ipa_file_read_again_gives_a_fresh_copy_of_the_same_set(tmp_path: Path) -> None:
+    """``import_ipa`` converts a file once per content: a second read gives a set equal to a fresh conversion (field
+    for field, of a copy of the file under another name: not from the cache), in arrays of its own; the same name
+    with other bytes of the same size, written within the same clock tick, is converted afresh."""
+    import dataclasses
+
+    from pin_kpi_oed.data.ipa import UR10_JOINT_NAMES, import_ipa
+
+    header = ["Timestamp", *UR10_JOINT_NAMES, "measurement_x", "measurement_y", "measurement_z"]
+    rows = ["20200229235959;0,1;0,2;0,3;0,4;0,5;0,6;1000,5;2000;-3,5E+02",
+            "20200301000004;1,1;1,2;1,3;1,4;1,5;1,6;1100,5;2100;-4,5E+02"]
+    f, other = tmp_path / "measurements_a.csv", tmp_path / "measurements_b.csv"
+    f.write_text(";".join(header) + "\n" + "\n".join(rows) + "\n")
+    other.write_bytes(f.read_bytes())
+
+    def fields(ms) -> dict:
+        return {k: (v.tolist() if isinstance(v, np.ndarray) else
+                    {n: a.tolist() for n, a in v.items()} if isinstance(v, dict) else v)
+                for k, v in dataclasses.asdict(ms).items() if k != "source"}
+
+    first, again, fresh = import_ipa(f), import_ipa(f), import_ipa(other)
+    assert fields(first) == fields(again) == fields(fresh) and again.source == first.source == str(f)
+    assert not np.shares_memory(first.q, again.q) and not np.shares_memory(first.time_s, again.time_s)
+    first.q[0, 0] = 99.0
+    assert import_ipa(f).q[0, 0] == 0.1
+    f.write_text(f.read_text().replace("0,1;0,2", "0,7;0,8"))  # the same size: only the bytes tell
+    assert import_ipa(f).q[0, :2].tolist() == [0.7, 0.8]

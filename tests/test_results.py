@@ -8,6 +8,7 @@ import importlib
 from pathlib import Path
 
 from pin_kpi_oed.results import Result
+from tests._cache_misc import kept_out_of_collections
 
 PKG = Path(__file__).resolve().parents[1] / "pin_kpi_oed"
 #: results of a step whose class name does not end in "Result" (module under pin_kpi_oed, class)
@@ -20,12 +21,16 @@ OTHER_RESULTS = {("oed.selection_result", "PoolSelection"), ("oed.relaxation", "
 
 
 def _result_classes() -> list[tuple[str, str]]:
+    """(module, class) of every result type the package declares at the top level of a module: each file parsed
+    without garbage collections and its tree dropped after it (kept trees slow down every later collection)."""
     out = []
-    for f in sorted(PKG.rglob("*.py")):
-        rel = ".".join(f.relative_to(PKG).with_suffix("").parts)
-        for node in ast.parse(f.read_text()).body:
-            if isinstance(node, ast.ClassDef) and (node.name.endswith("Result") or (rel, node.name) in OTHER_RESULTS):
-                out.append(("pin_kpi_oed." + rel, node.name))
+    with kept_out_of_collections():
+        for f in sorted(PKG.rglob("*.py")):
+            rel = ".".join(f.relative_to(PKG).with_suffix("").parts)
+            for node in ast.parse(f.read_text()).body:
+                if isinstance(node, ast.ClassDef) and (node.name.endswith("Result") or (rel, node.name) in
+                                                       OTHER_RESULTS):
+                    out.append(("pin_kpi_oed." + rel, node.name))
     return out
 
 

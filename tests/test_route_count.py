@@ -8,10 +8,18 @@ from pathlib import Path
 
 import pytest
 
-from tests._cache_misc import PARSED_GROUP
+from tests._cache_misc import PARSED_GROUP, release_after_last_reader
 from tests.route_count import route
 
 ROOT = Path(__file__).resolve().parents[1]
+
+
+@pytest.fixture(scope="module", autouse=True)
+def _trees_dropped_after_the_last_reader(request):
+    """The package's trees (tests/_cache_misc.py) dropped after this module unless a later module reads them: kept,
+    every garbage collection of the tests that come after walks them."""
+    yield
+    release_after_last_reader(request)
 
 
 @pytest.mark.xdist_group(PARSED_GROUP)  # the package's trees, parsed once with tests/test_architecture.py's

@@ -156,40 +156,56 @@ def test_limit_covers_scipy_blas_loaded_inside_an_entry_point(numpy_first) -> No
     assert numpy_first["scipy_inside"] == 1
 
 
-def test_process_limit_covers_libraries_loaded_later() -> None:
-    out = _run("""
-        import numpy as np
-        from threadpoolctl import threadpool_info
-        from pin_kpi_oed.threads import limit_process_threads
-        limit_process_threads()
-        import scipy.linalg, sklearn.gaussian_process   # SciPy's BLAS, scikit-learn's OpenMP: loaded after
-        print(len(threadpool_info()), max(i["num_threads"] for i in threadpool_info()))
-    """)
-    libs, worst = (int(x) for x in out.split())
-    assert libs >= 3, "NumPy's and SciPy's BLAS and an OpenMP runtime expected: the test would prove little"
-    assert worst == 1
+#: One process for the two claims about libraries loaded after an entry point, in the order their premises allow: the
+#: scan of the loaded libraries kept between two entry points while the dynamic linker loads none; the process limit
+#: (set while only NumPy is loaded) covering SciPy's BLAS and scikit-learn's OpenMP runtime loaded after it; that
+#: OpenMP runtime, loaded after the first entry point's scan, found and limited by the next entry point. One process
+#: instead of two (each pays the interpreter's, NumPy's, SciPy's and scikit-learn's imports, more than a second): the
+#: process limit's premise (the libraries not yet loaded when it is set) holds after the first entry point, which
+#: loads none, and the last claim gives the runtime its two threads itself (``threadpool_limits``), whatever the
+#: process limit's variables made it start with.
+LOADED_LATER_PROBE = """
+    import json
+    import numpy as np
+    from threadpoolctl import threadpool_info, threadpool_limits
+    from pin_kpi_oed import threads
+    out = {}
+    with threads.limited_threads():              # the first entry point: its scan sees NumPy's BLAS only
+        pass
+    out["kept"] = threads._controller() is threads._controller()
+    threads.limit_process_threads()
+    import scipy.linalg, sklearn.gaussian_process   # SciPy's BLAS, scikit-learn's OpenMP: loaded after both
+    out["libs"] = len(threadpool_info())
+    out["worst"] = max(i["num_threads"] for i in threadpool_info())
+    threadpool_limits(limits=2)
+    def omp():
+        return max(i["num_threads"] for i in threadpool_info() if i["user_api"] == "openmp")
+    out["before"] = omp()
+    with threads.limited_threads():              # the second entry point
+        out["inside"] = omp()
+    out["after"] = omp()
+    print(json.dumps(out))
+"""
 
 
-def test_a_library_loaded_between_two_entry_points_is_limited_by_the_second() -> None:
+@pytest.fixture(scope="module")
+def loaded_later() -> dict:
+    """What :data:`LOADED_LATER_PROBE` saw, in a fresh process without the thread variables."""
+    return json.loads(_run(LOADED_LATER_PROBE))
+
+
+@pytest.mark.xdist_group("test_threads_loaded_later")
+def test_process_limit_covers_libraries_loaded_later(loaded_later) -> None:
+    assert loaded_later["libs"] >= 3, "NumPy's and SciPy's BLAS and an OpenMP runtime expected: the test would " \
+                                      "prove little"
+    assert loaded_later["worst"] == 1
+
+
+@pytest.mark.xdist_group("test_threads_loaded_later")
+def test_a_library_loaded_between_two_entry_points_is_limited_by_the_second(loaded_later) -> None:
     """The scan of the loaded libraries is kept while the dynamic linker loads none (two entry points in a row share
     it); scikit-learn's OpenMP runtime, loaded after the first entry point, is found and limited by the second."""
-    out = _run("""
-        import numpy as np
-        from threadpoolctl import threadpool_info, threadpool_limits
-        from pin_kpi_oed import threads
-        with threads.limited_threads():
-            pass
-        kept = threads._controller() is threads._controller()
-        import sklearn.gaussian_process          # its OpenMP runtime: loaded after the first scan
-        threadpool_limits(limits=2)
-        def omp():
-            return max(i["num_threads"] for i in threadpool_info() if i["user_api"] == "openmp")
-        before = omp()
-        with threads.limited_threads():
-            inside = omp()
-        print(kept, before, inside, omp())
-    """)
-    kept, before, inside, after = out.split()
-    assert kept == "True", "the scan was not kept between two entry points"
-    assert before == "2", "the OpenMP runtime could not be given two threads: the test would prove nothing"
-    assert inside == "1" and after == "2"
+    assert loaded_later["kept"] is True, "the scan was not kept between two entry points"
+    assert loaded_later["before"] == 2, "the OpenMP runtime could not be given two threads: the test would prove " \
+                                        "nothing"
+    assert loaded_later["inside"] == 1 and loaded_later["after"] == 2

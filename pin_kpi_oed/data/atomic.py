@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import contextlib
 import json
+import math
 import os
 import time
 from pathlib import Path
@@ -149,7 +150,8 @@ def to_jsonable(obj: Any) -> Any:
     """Recursively JSON-safe copy of ``obj`` (the one JSON clean-up helper of the package).
 
     NumPy arrays become lists, NumPy scalars Python numbers, paths strings, sets sorted lists, and
-    non-finite floats ``None`` (JSON has no NaN).
+    non-finite floats ``None`` (JSON has no NaN). An array of booleans, integers or finite floats is its
+    ``tolist()`` at once (the same Python numbers the entry-by-entry walk gives).
 
     Args:
         obj: Nested dicts / lists / tuples of Python or NumPy values.
@@ -157,12 +159,19 @@ def to_jsonable(obj: Any) -> Any:
     Returns:
         The same structure built from ``dict``, ``list``, ``str``, ``int``, ``float``, ``bool`` and ``None``.
     """
+    t = type(obj)
+    if t is float:
+        return obj if math.isfinite(obj) else None
+    if t is str or t is int or t is bool or obj is None:
+        return obj
     if isinstance(obj, dict):
         return {str(k): to_jsonable(v) for k, v in obj.items()}
     if isinstance(obj, (list, tuple, set, frozenset)):
         vals = sorted(obj) if isinstance(obj, (set, frozenset)) else obj
         return [to_jsonable(v) for v in vals]
     if isinstance(obj, np.ndarray):
+        if obj.dtype.kind in "biu" or (obj.dtype.kind == "f" and bool(np.isfinite(obj).all())):
+            return obj.tolist()
         return to_jsonable(obj.tolist())
     if isinstance(obj, (bool, np.bool_)):
         return bool(obj)
@@ -170,7 +179,7 @@ def to_jsonable(obj: Any) -> Any:
         return int(obj)
     if isinstance(obj, (float, np.floating)):
         v = float(obj)
-        return v if np.isfinite(v) else None
+        return v if math.isfinite(v) else None
     if isinstance(obj, os.PathLike):
         return os.fspath(obj)
     return obj

@@ -65,7 +65,9 @@ line end. :func:`read_ipa_flange_transform` returns it with the translation in m
 
 from __future__ import annotations
 
+import copy
 import csv
+import hashlib
 import io as _stdio
 import math
 import os
@@ -129,7 +131,10 @@ def _parse_decimal_comma(cell: str) -> float:
 
 
 def _read_text(p: Path) -> str:
-    raw = p.read_bytes()
+    return _decoded(p.read_bytes())
+
+
+def _decoded(raw: bytes) -> str:
     try:
         return raw.decode("utf-8-sig")
     except UnicodeDecodeError:
@@ -148,8 +153,18 @@ def _resolve_measurement_file(p: Path) -> Path:
     return p
 
 
+#: (the file as named, SHA-256 of its bytes) -> the set imported from it: the last few series read in this process
+_IMPORTED: dict[tuple[str, bytes], MeasurementSet] = {}
+#: series kept in :data:`_IMPORTED` (the data set has four)
+_MAX_IMPORTED = 4
+
+
 def import_ipa(path: str | os.PathLike[str]) -> MeasurementSet:
     """Import one IPA UR10 measurement series and convert it to SI units.
+
+    A file read again with the same bytes (a series several commands or tests of one process read) is converted
+    once: the set is kept by the file's name and the SHA-256 of its bytes (the last four files) and each call gets
+    its own deep copy (a caller writing into its arrays changes no other's).
 
     Args:
         path: A ``measurements_*.csv`` file of the IPA data set, or a series
@@ -173,7 +188,20 @@ def import_ipa(path: str | os.PathLike[str]) -> MeasurementSet:
     src = str(p)
     if not p.is_file():
         raise InputError(f"IPA measurement file '{src}' does not exist")
-    header, rows, lines = _read_ipa_table(p, src)
+    raw = p.read_bytes()
+    key = (src, hashlib.sha256(raw).digest())
+    ms = _IMPORTED.pop(key, None)
+    if ms is None:
+        ms = _converted(_decoded(raw), src)
+        while len(_IMPORTED) >= _MAX_IMPORTED:
+            _IMPORTED.pop(next(iter(_IMPORTED)))
+    _IMPORTED[key] = ms  # the most recent last
+    return copy.deepcopy(ms)
+
+
+def _converted(text: str, src: str) -> MeasurementSet:
+    """The measurement set of the IPA file text ``text`` (named ``src`` in messages): see :func:`import_ipa`."""
+    header, rows, lines = _read_ipa_table(text, src)
     idx = {name: i for i, name in enumerate(header)}
     data = _numbers(header, rows, lines, src)
 
@@ -202,9 +230,9 @@ def import_ipa(path: str | os.PathLike[str]) -> MeasurementSet:
     )
 
 
-def _read_ipa_table(p: Path, src: str) -> tuple[list[str], list[list[str]], list[int]]:
+def _read_ipa_table(text: str, src: str) -> tuple[list[str], list[list[str]], list[int]]:
     """The header and the data rows (cells as text) with their line numbers; the required columns checked."""
-    reader = csv.reader(_stdio.StringIO(_read_text(p), newline=""), delimiter=";")
+    reader = csv.reader(_stdio.StringIO(text, newline=""), delimiter=";")
     header: list[str] | None = None
     rows: list[list[str]] = []
     lines: list[int] = []

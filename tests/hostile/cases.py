@@ -11,7 +11,6 @@ arm's model file, outputs onto inputs) are in :mod:`tests.hostile.surfaces`.
 
 from __future__ import annotations
 
-import argparse
 import contextlib
 import hashlib
 import io
@@ -574,21 +573,27 @@ _DIGESTS: dict[tuple[str, int, int], str] = {}
 
 def snapshot(d: Path) -> dict[str, str]:
     """Path (relative to ``d``, '/'-separated) -> SHA-256 of every file below ``d`` (symlinks by target), folders as
-    ``<dir>`` (a walk of plain strings: the cases take two snapshots each)."""
+    ``<dir>`` (a folder's symlink listed as a folder, not entered: ``os.walk``'s rule). One ``os.scandir`` per folder,
+    its entries' own paths and stats (the cases take two snapshots each: ``os.walk`` with a join and a stat per file
+    cost half as much again, 0.34 ms instead of 0.23 ms on a folder of 108 entries)."""
     out = {}
-    root = str(d)
-    for top, dirs, files in os.walk(root):
-        rel = os.path.relpath(top, root)
-        prefix = "" if rel == "." else rel.replace(os.sep, "/") + "/"
-        for name in dirs:
-            out[prefix + name] = "<dir>"
-        for name in files:
-            st = os.stat(os.path.join(top, name))
-            key = (prefix + name, st.st_size, st.st_mtime_ns)
-            if key not in _DIGESTS:
-                with open(os.path.join(top, name), "rb") as f:
-                    _DIGESTS[key] = hashlib.sha256(f.read()).hexdigest()
-            out[prefix + name] = _DIGESTS[key]
+    todo = [("", str(d))]
+    while todo:
+        prefix, top = todo.pop()
+        with os.scandir(top) as it:
+            for e in it:
+                rel = prefix + e.name
+                if e.is_dir():
+                    out[rel] = "<dir>"
+                    if not e.is_symlink():
+                        todo.append((rel + "/", e.path))
+                    continue
+                st = e.stat()
+                key = (rel, st.st_size, st.st_mtime_ns)
+                if key not in _DIGESTS:
+                    with open(e.path, "rb") as f:
+                        _DIGESTS[key] = hashlib.sha256(f.read()).hexdigest()
+                out[rel] = _DIGESTS[key]
     return out
 
 
@@ -719,31 +724,6 @@ def prepare(case: Case, base: Path, work: Path) -> None:
         _LINKED[work] = _entries(work)
 
 
-#: (command, lazy) -> the argument parser :func:`pin_kpi_oed.cli.app.build_parser` built for it
-_PARSERS: dict[tuple[str | None, bool], argparse.ArgumentParser] = {}
-
-
-@contextlib.contextmanager
-def _parsers_built_once():
-    """:func:`pin_kpi_oed.cli.app.main` with each command's parser built once for all cases (5 to 12 ms a case
-    otherwise): parsing makes a new namespace each time and changes nothing of the parser (no option of the command
-    line has a mutable default; ``append`` options start from a new list), so a case parses as with a fresh parser."""
-    from pin_kpi_oed.cli import app
-
-    build = app.build_parser
-
-    def cached(command: str | None = None, lazy: bool = False) -> argparse.ArgumentParser:
-        if (command, lazy) not in _PARSERS:
-            _PARSERS[command, lazy] = build(command, lazy)
-        return _PARSERS[command, lazy]
-
-    app.build_parser = cached
-    try:
-        yield
-    finally:
-        app.build_parser = build
-
-
 def run_case(case: Case, base: Path, work: Path) -> Outcome:
     """Give ``work`` the inputs ``base``, run the case in-process, compare the files before and after."""
     prepare(case, base, work)
@@ -754,7 +734,7 @@ def run_case(case: Case, base: Path, work: Path) -> Outcome:
     t0, c0 = time.perf_counter(), time.process_time()
     tb = False
     try:
-        with contextlib.redirect_stderr(err), contextlib.redirect_stdout(out), _parsers_built_once():
+        with contextlib.redirect_stderr(err), contextlib.redirect_stdout(out):
             rc = main(argv_of(case, work))
     except SystemExit as exc:  # argparse
         rc = int(exc.code or 0)
