@@ -175,37 +175,6 @@ def _add_core(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=cmd_demo)
 
 
-#: (the builder, the topic declared in full) -> the parser :func:`parser_for` built: one per topic module and one of
-#: the core's commands, so the bound (above the 14 there are) evicts only parsers of a builder replaced since
-_PARSERS: dict[tuple[object, str | None], argparse.ArgumentParser] = {}
-_MAX_PARSERS = 32
-
-
-def parser_for(command: str | None) -> argparse.ArgumentParser:
-    """The parser :func:`main` runs ``command`` with: ``build_parser(command, lazy=True)``, built once per topic module
-    in a process (5 to 12 ms each) and shared by the later commands of that topic.
-
-    Sharing changes nothing a command sees: parsing makes a new namespace each time and writes nothing into the parser
-    (its defaults are immutable values — ``None``, numbers, text, booleans —, ``append`` options start from a new
-    list, the handlers set by ``set_defaults`` are functions); ``tests/test_cli_startup.py`` pins both. A parser
-    built by a replaced :func:`build_parser` is kept apart from the real one's (the builder is part of the key).
-
-    Args:
-        command: the subcommand (:func:`~pin_kpi_oed.cli.commands.command_in`), or None.
-
-    Returns:
-        The lazy parser of ``command``'s topic (do not change it: it is shared).
-    """
-    key = (build_parser, topic_of(command) if command else None)
-    parser = _PARSERS.get(key)
-    if parser is None:
-        parser = build_parser(command, lazy=True)
-        if len(_PARSERS) >= _MAX_PARSERS:
-            _PARSERS.pop(next(iter(_PARSERS)))
-        _PARSERS[key] = parser
-    return parser
-
-
 def main(argv: list[str] | None = None) -> int:
     """Entry point of ``pin-kpi-oed``; returns the exit code.
 
@@ -218,7 +187,7 @@ def main(argv: list[str] | None = None) -> int:
         from pin_kpi_oed.validation.options import join_negative_values
 
         given = list(sys.argv[1:] if argv is None else argv)
-        args = parser_for(command_in(given)).parse_args(join_negative_values(given))
+        args = build_parser(command_in(given), lazy=True).parse_args(join_negative_values(given))
         args.argv = given  # the command as given (model files record it)
         code = _run(args)
         # an interrupt whose KeyboardInterrupt a library swallowed (seen inside NumPy's lazy imports) is still one
