@@ -49,6 +49,20 @@ def pytest_configure(config):
 
     limit_process_threads()
     config.pluginmanager.register(_GroupCheck(), "pin_kpi_oed_group_check")
+    _full_collections_rarer()
+
+
+def _full_collections_rarer() -> None:
+    """A full garbage collection after 100 young-generation sweeps instead of 10 (``gc.set_threshold``'s third
+    value; the first two as Python's defaults): a test worker holds millions of long-lived objects (NumPy, SciPy,
+    scikit-learn, matplotlib, the package's caches), and each full collection walks them all. Over ``make test``
+    a worker's collections took 4.2 s CPU (36 full ones, 3.3 s of it) with the defaults and 0.7-0.9 s (5 full ones)
+    with this; the young generations are collected as often as before, and a test that needs every object collected
+    calls ``gc.collect()`` itself."""
+    import gc
+
+    young, middle, _ = gc.get_threshold()
+    gc.set_threshold(young, middle, 100)
 
 
 # ---------------------------------------------------------------------- tests that share one fixture, one worker
