@@ -164,7 +164,8 @@ def _first_line_cpu_s() -> float:
 
 def _env() -> dict[str, str]:
     return {**os.environ, "PYTHONPATH": str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""),
-            "PYTHONUNBUFFERED": "1"}  # each line reaches the test when printed: the work's first line is a moment
+            "PYTHONUNBUFFERED": "1",  # each line reaches the test when printed: the work's first line is a moment
+            "PYTHONFAULTHANDLER": "1"}  # a command that crashes (a fatal signal) prints its Python stack to stderr
 
 
 def _interrupt_at(argv: list[str], module: bool, cpu_s: float, after_output: bool) -> tuple[int, str, bool]:
