@@ -249,13 +249,9 @@ def block_gains(s: dict, G: np.ndarray | None, N: int, nh: int) -> np.ndarray:
         if G is None:
             return np.linalg.slogdet(S)[1]
         return np.einsum("nas,nas->n", G, np.linalg.solve(S, G))
-    adj, det = _adjugate(s, N, nh)
     if G is None:
-        return np.log(det)
-    out = np.zeros(N)
-    for (a, b), v in adj.items():
-        out += (1.0 if a == b else 2.0) * v * np.einsum("ns,ns->n", G[:, a], G[:, b])
-    return out / det
+        return np.log(_adjugate(s, N, nh)[1])
+    return _gram_gains(s, {(a, b): np.einsum("ns,ns->n", G[:, a], G[:, b]) for a, b in s}, N, nh)
 
 
 def _adjugate(s: dict, N: int, nh: int) -> tuple[dict, np.ndarray]:
@@ -271,9 +267,10 @@ def _adjugate(s: dict, N: int, nh: int) -> tuple[dict, np.ndarray]:
     return adj, a_ * adj[0, 0] + b_ * adj[0, 1] + c_ * adj[0, 2]
 
 
-def _gram_gains(s: dict, P: np.ndarray, N: int, nh: int) -> np.ndarray:
-    """tr(S_i⁻¹ P_i) of blocks S_i (nh ≤ 3, entries ``s[a, b]``) and symmetric P_i = G_i G_iᵀ given whole, P (nh, nh,
-    N): the A-type gains of :func:`block_gains` from the nh×nh Gram matrices instead of G (nh, ns) itself."""
+def _gram_gains(s: dict, P: np.ndarray | dict, N: int, nh: int) -> np.ndarray:
+    """tr(S_i⁻¹ P_i) of blocks S_i (nh ≤ 3, entries ``s[a, b]``) and symmetric P_i = G_i G_iᵀ, P indexed ``P[a, b]``
+    for a ≤ b ((nh, nh, N), or a dict of the entries (N,)): the A-type gains of :func:`block_gains` from the nh×nh
+    Gram matrices instead of G (nh, ns) itself."""
     adj, det = _adjugate(s, N, nh)
     out = np.zeros(N)
     for (a, b), v in adj.items():
