@@ -186,7 +186,7 @@ def test_row_sandwich_equals_the_three_operand_einsum_on_a_fit(withheld, fits):
     """Every σ carries the parameter covariance through each row's Jacobian with ``row_sandwich`` (matrix products):
     on the fit's own Jacobian (400 rows, robot and set-up columns) and its covariance it equals the three-operand
     einsum it replaced within 4e-15 relative, and is symmetric to rounding."""
-    from pin_kpi_oed.discrepancy.arrays import row_sandwich
+    from pin_kpi_oed.discrepancy.sandwich import row_sandwich
     from pin_kpi_oed.identification.discrepancy_fit import parameter_jacobian
 
     _, train, _ = withheld

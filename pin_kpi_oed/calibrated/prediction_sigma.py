@@ -55,7 +55,7 @@ import numpy as np
 
 from pin_kpi_oed.calibrated.shared_tables import discrepancy_at, outside_coverage, posterior_covariance_at, remembered
 from pin_kpi_oed.model.kinematics import skew
-from pin_kpi_oed.discrepancy.arrays import row_sandwich
+from pin_kpi_oed.discrepancy.sandwich import row_sandwich
 
 #: the length along the tool axis at which ``predict`` and ``compensate`` state the orientation's effect (m):
 #: "orientation at 200 mm", as a cell's ``orientation_length_m`` defaults to

@@ -1,5 +1,4 @@
-"""Float arrays as plain JSON data (shape and base64 of little-endian float64 bytes): compact and exact; the
-per-row sandwich D C Dᵀ every σ of the package forms (:func:`row_sandwich`)."""
+"""Float arrays as plain JSON data (shape and base64 of little-endian float64 bytes): compact and exact."""
 
 from __future__ import annotations
 
@@ -9,7 +8,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
-__all__ = ["encode_array", "decode_array", "row_sandwich"]
+__all__ = ["encode_array", "decode_array"]
 
 
 def encode_array(a: np.ndarray) -> dict:
@@ -37,22 +36,3 @@ def decode_array(d: Any, where: str, shape: Sequence[int | None] | None = None) 
     if not np.all(np.isfinite(a)):
         raise ValueError(f"{where}: non-finite values")
     return a
-
-
-def row_sandwich(D: np.ndarray, C: np.ndarray) -> np.ndarray:
-    """D_i C D_iᵀ of every row i: a covariance C (P, P) carried through each row's Jacobian D_i (a, P).
-
-    The one matrix product (m a, P) × (P, P) and a batched (a, P) × (P, a) per row, instead of the three-operand
-    ``einsum("map,pq,mbq->mab", D, C, D)`` (no BLAS; 50× slower at 1,400 rows of 60 parameters): the same sums in
-    another order, equal to it within 4e-15 relative (``tests/test_discrepancy.py``).
-
-    Args:
-        D: (m, a, P), in the unit of the output per parameter unit.
-        C: (P, P), in parameter units squared.
-
-    Returns:
-        (m, a, a), the output's unit squared.
-    """
-    D = np.asarray(D, float)
-    m, a, P = D.shape
-    return np.matmul((D.reshape(m * a, P) @ np.asarray(C, float)).reshape(m, a, P), D.transpose(0, 2, 1))

@@ -45,7 +45,8 @@ from collections.abc import Sequence
 import numpy as np
 from scipy import linalg as sla
 
-from pin_kpi_oed.discrepancy.arrays import decode_array, encode_array, row_sandwich
+from pin_kpi_oed.discrepancy.arrays import decode_array, encode_array
+from pin_kpi_oed.discrepancy.sandwich import row_sandwich
 from pin_kpi_oed.discrepancy.base import DiscrepancyModel
 from pin_kpi_oed.discrepancy.coverage import JointCoverage, joint_space_box
 from pin_kpi_oed.discrepancy.kernel import JointKernel

@@ -51,7 +51,8 @@ from typing import Any
 import numpy as np
 from scipy.optimize import minimize
 
-from pin_kpi_oed.discrepancy.arrays import decode_array, encode_array, row_sandwich
+from pin_kpi_oed.discrepancy.arrays import decode_array, encode_array
+from pin_kpi_oed.discrepancy.sandwich import row_sandwich
 
 __all__ = ["JointAngleTerm", "fit_joint_angle", "loo_log_density", "LENGTH_SCALE_RAD", "LENGTH_SCALES_RAD",
            "LR_CRITICAL", "VETO_SE", "MAX_ROWS", "joint_angle_kernel", "restricted_space", "nll_and_grad",
