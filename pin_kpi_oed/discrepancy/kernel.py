@@ -294,8 +294,6 @@ class JointKernel(HyperKernel):
         Da = D / ell ** 2
         A = a ** 2 * np.exp(-0.5 * Da)
         K = P + A.sum(-1)
-        if not eval_gradient:
-            return K
         # scikit-learn orders the hyper-parameters by name: amplitude, joint_amplitude, joint_length_scale,
         # length_scale (``dir`` order of the ``hyperparameter_*`` properties)
         grads = [2.0 * P[..., None],
